@@ -1,0 +1,5 @@
+//! The `sculpt` program.
+
+fn main() {
+    println!("sculpt");
+}

@@ -1,0 +1,2 @@
+//! The sculpt function language.
+#![warn(missing_docs)]

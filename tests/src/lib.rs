@@ -1,0 +1,16 @@
+//! End-to-end scenarios across the sculpt crates, and the tidy checks that keep the workspace
+//! honest.
+//!
+//! This crate is not shipped: it only holds checks that span crates.
+//! [`tidy`] reads the dependency map written in `ARCHITECTURE.md` and compares it with the real
+//! dependency edges reported by `cargo metadata`, and checks that every source file opens with a
+//! `//!` header.
+//!
+//! ```
+//! let map = tests::tidy::parse_dependency_map("```tidy-deps\nfdsl ->\nrender -> fdsl\n```")
+//!     .unwrap();
+//! assert!(map["render"].contains("fdsl"));
+//! ```
+#![warn(missing_docs)]
+
+pub mod tidy;

@@ -1,0 +1,188 @@
+//! Workspace rules checked by a test: the dependency map and the `//!` file headers.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+/// Allowed edges: crate name -> the workspace crates it may depend on.
+pub type DependencyMap = BTreeMap<String, BTreeSet<String>>;
+
+/// The opening of the fenced block in `ARCHITECTURE.md` that holds the dependency map.
+pub const MAP_FENCE: &str = "```tidy-deps";
+
+/// Reads the dependency map from the fenced ```` ```tidy-deps ```` block of a Markdown text.
+///
+/// Each line is `crate -> dep dep ...`; a crate with no dependencies is written `crate ->`.
+pub fn parse_dependency_map(markdown: &str) -> Result<DependencyMap, String> {
+    let start = markdown
+        .find(MAP_FENCE)
+        .ok_or_else(|| format!("no `{MAP_FENCE}` block found"))?;
+    let body = &markdown[start + MAP_FENCE.len()..];
+    let end = body
+        .find("```")
+        .ok_or_else(|| "the dependency map block is not closed".to_string())?;
+    let mut map = DependencyMap::new();
+    for (line_idx, line) in body[..end].lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() {
+            continue;
+        }
+        let (from, to) = line
+            .split_once("->")
+            .ok_or_else(|| format!("map line {line_idx}: expected `crate -> deps`, got `{line}`"))?;
+        let deps = to.split_whitespace().map(str::to_string).collect();
+        if map.insert(from.trim().to_string(), deps).is_some() {
+            return Err(format!("map line {line_idx}: `{}` listed twice", from.trim()));
+        }
+    }
+    Ok(map)
+}
+
+/// The real edges between workspace members, from `cargo metadata --format-version 1` output.
+///
+/// Every dependency kind counts (normal, dev and build).
+pub fn workspace_edges(metadata: &serde_json::Value) -> Result<DependencyMap, String> {
+    let packages = metadata["packages"]
+        .as_array()
+        .ok_or("cargo metadata has no `packages` array")?;
+    let members: BTreeSet<&str> = metadata["workspace_members"]
+        .as_array()
+        .ok_or("cargo metadata has no `workspace_members` array")?
+        .iter()
+        .filter_map(|id| id.as_str())
+        .collect();
+    let member_names: BTreeSet<String> = packages
+        .iter()
+        .filter(|p| p["id"].as_str().is_some_and(|id| members.contains(id)))
+        .filter_map(|p| p["name"].as_str().map(str::to_string))
+        .collect();
+    let mut edges = DependencyMap::new();
+    for package in packages {
+        let Some(name) = package["name"].as_str() else { continue };
+        if !member_names.contains(name) {
+            continue;
+        }
+        let deps = package["dependencies"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter_map(|d| d["name"].as_str())
+            .filter(|d| member_names.contains(*d))
+            .map(str::to_string)
+            .collect();
+        edges.insert(name.to_string(), deps);
+    }
+    Ok(edges)
+}
+
+/// Every difference between the real edges and the allowed map, as readable lines.
+pub fn check_edges(allowed: &DependencyMap, actual: &DependencyMap) -> Vec<String> {
+    let mut problems = Vec::new();
+    for (krate, deps) in actual {
+        let Some(allowed_deps) = allowed.get(krate) else {
+            problems.push(format!("crate `{krate}` is missing from the dependency map"));
+            continue;
+        };
+        for dep in deps.difference(allowed_deps) {
+            problems.push(format!(
+                "`{krate}` depends on `{dep}`, which the dependency map in ARCHITECTURE.md does not allow"
+            ));
+        }
+    }
+    for krate in allowed.keys() {
+        if !actual.contains_key(krate) {
+            problems.push(format!("the dependency map names `{krate}`, which is not a workspace member"));
+        }
+    }
+    problems
+}
+
+/// Rust files under `root` (skipping `target` and hidden folders), sorted.
+pub fn rust_files(root: &Path) -> Vec<PathBuf> {
+    let mut files = Vec::new();
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&dir) else { continue };
+        for entry in entries.flatten() {
+            let path = entry.path();
+            let name = entry.file_name();
+            let name = name.to_string_lossy();
+            if path.is_dir() {
+                if name != "target" && !name.starts_with('.') && name != "out" {
+                    stack.push(path);
+                }
+            } else if name.ends_with(".rs") {
+                files.push(path);
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
+/// Whether a source text opens with a `//!` module header.
+pub fn has_module_header(source: &str) -> bool {
+    source.trim_start().starts_with("//!")
+}
+
+/// Files among `files` whose text does not open with a `//!` header.
+pub fn files_without_header(files: &[PathBuf]) -> Vec<PathBuf> {
+    files
+        .iter()
+        .filter(|f| std::fs::read_to_string(f).map_or(true, |s| !has_module_header(&s)))
+        .cloned()
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MAP: &str = "intro\n```tidy-deps\nfdsl ->\nrender -> fdsl\napp -> fdsl render\n```\n";
+
+    fn edges(pairs: &[(&str, &[&str])]) -> DependencyMap {
+        pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.iter().map(|s| s.to_string()).collect()))
+            .collect()
+    }
+
+    #[test]
+    fn allowed_edges_pass() {
+        let map = parse_dependency_map(MAP).unwrap();
+        let actual = edges(&[("fdsl", &[]), ("render", &["fdsl"]), ("app", &["render"])]);
+        assert_eq!(check_edges(&map, &actual), Vec::<String>::new());
+    }
+
+    #[test]
+    fn a_wrong_edge_fails() {
+        let map = parse_dependency_map(MAP).unwrap();
+        let actual = edges(&[("fdsl", &["render"]), ("render", &["fdsl"]), ("app", &[])]);
+        let problems = check_edges(&map, &actual);
+        assert_eq!(problems.len(), 1, "{problems:?}");
+        assert!(problems[0].contains("`fdsl` depends on `render`"), "{problems:?}");
+    }
+
+    #[test]
+    fn unknown_and_missing_crates_fail() {
+        let map = parse_dependency_map(MAP).unwrap();
+        let actual = edges(&[("fdsl", &[]), ("render", &["fdsl"]), ("extra", &[])]);
+        let problems = check_edges(&map, &actual);
+        assert!(problems.iter().any(|p| p.contains("`extra` is missing")), "{problems:?}");
+        assert!(problems.iter().any(|p| p.contains("names `app`")), "{problems:?}");
+    }
+
+    #[test]
+    fn malformed_maps_are_errors() {
+        assert!(parse_dependency_map("no block").is_err());
+        assert!(parse_dependency_map("```tidy-deps\nfdsl\n```").is_err());
+        assert!(parse_dependency_map("```tidy-deps\nfdsl ->\n").is_err());
+        assert!(parse_dependency_map("```tidy-deps\nfdsl ->\nfdsl ->\n```").is_err());
+    }
+
+    #[test]
+    fn headers() {
+        assert!(has_module_header("//! Text.\nfn f() {}"));
+        assert!(!has_module_header("// Text.\nfn f() {}"));
+        assert!(!has_module_header("fn f() {}"));
+    }
+}
