@@ -1,0 +1,236 @@
+//! Exact gradients by forward-mode differentiation: every register carries a value and its
+//! partial derivatives with respect to x, y and z.
+//!
+//! Where an operation is not differentiable (the crease of `min`, a step of `floor`), the
+//! derivative of the branch the value came from is used, which is what surface normals need.
+
+use super::real::Real;
+use crate::compile::{BinaryOp, TernaryOp, UnaryOp};
+use crate::tape::{Code, Operand, Tape};
+
+/// A value with its gradient.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct Grad<T> {
+    /// The value.
+    pub v: T,
+    /// d/dx.
+    pub dx: T,
+    /// d/dy.
+    pub dy: T,
+    /// d/dz.
+    pub dz: T,
+}
+
+impl<T: Real> Grad<T> {
+    fn constant(v: T) -> Self {
+        Grad { v, dx: T::ZERO, dy: T::ZERO, dz: T::ZERO }
+    }
+
+    /// The value with the gradient scaled by `k`.
+    fn chain(v: T, k: T, a: Self) -> Self {
+        Grad { v, dx: a.dx * k, dy: a.dy * k, dz: a.dz * k }
+    }
+
+    /// `ka * a' + kb * b'`.
+    fn chain2(v: T, ka: T, a: Self, kb: T, b: Self) -> Self {
+        Grad { v, dx: a.dx * ka + b.dx * kb, dy: a.dy * ka + b.dy * kb, dz: a.dz * ka + b.dz * kb }
+    }
+
+    /// The gradient as an array `[dx, dy, dz]`.
+    pub fn gradient(&self) -> [T; 3] {
+        [self.dx, self.dy, self.dz]
+    }
+}
+
+fn unary<T: Real>(op: UnaryOp, a: Grad<T>) -> Grad<T> {
+    let v = T::unary(op, a.v);
+    let two = T::ONE + T::ONE;
+    let k = match op {
+        UnaryOp::Neg => -T::ONE,
+        UnaryOp::Abs => {
+            if a.v < T::ZERO {
+                -T::ONE
+            } else {
+                T::ONE
+            }
+        }
+        UnaryOp::Sqrt => T::ONE / (two * v),
+        UnaryOp::Square => two * a.v,
+        UnaryOp::Sin => a.v.cos(),
+        UnaryOp::Cos => -a.v.sin(),
+        UnaryOp::Tan => {
+            let c = a.v.cos();
+            T::ONE / (c * c)
+        }
+        UnaryOp::Asin => T::ONE / (T::ONE - a.v * a.v).sqrt(),
+        UnaryOp::Acos => -T::ONE / (T::ONE - a.v * a.v).sqrt(),
+        UnaryOp::Atan => T::ONE / (T::ONE + a.v * a.v),
+        UnaryOp::Exp => v,
+        UnaryOp::Ln => T::ONE / a.v,
+        UnaryOp::Floor | UnaryOp::Ceil | UnaryOp::Sign | UnaryOp::Not => T::ZERO,
+    };
+    Grad::chain(v, k, a)
+}
+
+fn binary<T: Real>(op: BinaryOp, a: Grad<T>, b: Grad<T>) -> Grad<T> {
+    let v = T::binary(op, a.v, b.v);
+    let zero = T::ZERO;
+    let one = T::ONE;
+    match op {
+        BinaryOp::Add => Grad::chain2(v, one, a, one, b),
+        BinaryOp::Sub => Grad::chain2(v, one, a, -one, b),
+        BinaryOp::Mul => Grad::chain2(v, b.v, a, a.v, b),
+        BinaryOp::Div => Grad::chain2(v, one / b.v, a, -a.v / (b.v * b.v), b),
+        BinaryOp::Min => {
+            if a.v <= b.v || b.v.is_nan() {
+                Grad { v, ..a }
+            } else {
+                Grad { v, ..b }
+            }
+        }
+        BinaryOp::Max => {
+            if a.v >= b.v || b.v.is_nan() {
+                Grad { v, ..a }
+            } else {
+                Grad { v, ..b }
+            }
+        }
+        BinaryOp::Pow => {
+            let ka = if b.dx == zero && b.dy == zero && b.dz == zero {
+                b.v * T::binary(BinaryOp::Pow, a.v, b.v - one)
+            } else {
+                b.v * v / a.v
+            };
+            let kb = if b.dx == zero && b.dy == zero && b.dz == zero { zero } else { v * a.v.ln() };
+            Grad::chain2(v, ka, a, kb, b)
+        }
+        BinaryOp::Atan2 => {
+            let d = a.v * a.v + b.v * b.v;
+            Grad::chain2(v, b.v / d, a, -a.v / d, b)
+        }
+        BinaryOp::Mod => Grad::chain2(v, one, a, -(a.v / b.v).floor(), b),
+        BinaryOp::Lt | BinaryOp::Le | BinaryOp::Eq | BinaryOp::And | BinaryOp::Or => Grad::constant(v),
+        BinaryOp::RAnd | BinaryOp::ROr => {
+            let s = (a.v * a.v + b.v * b.v).sqrt();
+            let sign = if op == BinaryOp::RAnd { -one } else { one };
+            if s == zero {
+                Grad::chain2(v, one, a, one, b)
+            } else {
+                Grad::chain2(v, one + sign * a.v / s, a, one + sign * b.v / s, b)
+            }
+        }
+    }
+}
+
+fn ternary<T: Real>(op: TernaryOp, a: Grad<T>, b: Grad<T>, c: Grad<T>) -> Grad<T> {
+    match op {
+        TernaryOp::Select => {
+            if a.v != T::ZERO {
+                b
+            } else {
+                c
+            }
+        }
+        TernaryOp::BlendMin => blend_min(a, b, c),
+        TernaryOp::BlendMax => {
+            let neg = |g: Grad<T>| Grad { v: -g.v, dx: -g.dx, dy: -g.dy, dz: -g.dz };
+            neg(blend_min(neg(a), neg(b), c))
+        }
+    }
+}
+
+/// `min(a,b) - h^2 r / 4` with `h = max(r - |a-b|, 0) / r`.
+fn blend_min<T: Real>(a: Grad<T>, b: Grad<T>, r: Grad<T>) -> Grad<T> {
+    let v = T::ternary(TernaryOp::BlendMin, a.v, b.v, r.v);
+    let m = binary(BinaryOp::Min, a, b);
+    let diff = a.v - b.v;
+    let abs = if diff < T::ZERO { -diff } else { diff };
+    if !(abs < r.v) {
+        return Grad { v, ..m };
+    }
+    let s = if diff < T::ZERO { -T::ONE } else { T::ONE };
+    let h = (r.v - abs) / r.v;
+    let quarter = T::from_f64(0.25);
+    let two = T::ONE + T::ONE;
+    // dh = -s (da - db) / r + |a-b| dr / r^2
+    let dh = |da: T, db: T, dr: T| -s * (da - db) / r.v + abs * dr / (r.v * r.v);
+    let d = |dm: T, da: T, db: T, dr: T| dm - quarter * (two * h * r.v * dh(da, db, dr) + h * h * dr);
+    Grad { v, dx: d(m.dx, a.dx, b.dx, r.dx), dy: d(m.dy, a.dy, b.dy, r.dy), dz: d(m.dz, a.dz, b.dz, r.dz) }
+}
+
+fn run<T: Real>(tape: &Tape, regs: &mut [Grad<T>], p: [T; 4]) {
+    for (slot, reg) in tape.inputs().iter().enumerate() {
+        let Some(r) = reg else { continue };
+        let mut g = Grad::constant(p[slot]);
+        match slot {
+            0 => g.dx = T::ONE,
+            1 => g.dy = T::ONE,
+            2 => g.dz = T::ONE,
+            _ => {}
+        }
+        regs[*r as usize] = g;
+    }
+    for instr in tape.instrs() {
+        let get = |o: Operand| match o {
+            Operand::Reg(r) => regs[r as usize],
+            Operand::Const(c) => Grad::constant(T::from_f64(c)),
+        };
+        let [a, b, c] = instr.args;
+        regs[instr.out as usize] = match instr.code {
+            Code::Unary(op) => unary(op, get(a)),
+            Code::Binary(op) => binary(op, get(a), get(b)),
+            Code::Ternary(op) => ternary(op, get(a), get(b), get(c)),
+        };
+    }
+}
+
+fn output<T: Real>(tape: &Tape, regs: &[Grad<T>], idx: usize) -> Grad<T> {
+    match tape.outputs()[idx] {
+        Operand::Reg(r) => regs[r as usize],
+        Operand::Const(c) => Grad::constant(T::from_f64(c)),
+    }
+}
+
+/// Value and gradient at one point in f64 (for haptics).
+#[derive(Clone, Debug)]
+pub struct GradEval {
+    tape: Tape,
+    regs: Vec<Grad<f64>>,
+}
+
+impl GradEval {
+    /// An evaluator for `tape`.
+    pub fn new(tape: &Tape) -> GradEval {
+        GradEval { tape: tape.clone(), regs: vec![Grad::default(); tape.n_regs()] }
+    }
+
+    /// Value and gradient of the first output at `p = [x, y, z, t]`.
+    pub fn eval(&mut self, p: [f64; 4]) -> Grad<f64> {
+        run(&self.tape, &mut self.regs, p);
+        output(&self.tape, &self.regs, 0)
+    }
+}
+
+/// Values and gradients over slices of points in f32 (for surface normals).
+#[derive(Clone, Debug)]
+pub struct GradBulkEval {
+    tape: Tape,
+    regs: Vec<Grad<f32>>,
+}
+
+impl GradBulkEval {
+    /// An evaluator for `tape`.
+    pub fn new(tape: &Tape) -> GradBulkEval {
+        GradBulkEval { tape: tape.clone(), regs: vec![Grad::default(); tape.n_regs()] }
+    }
+
+    /// Value and gradient of the first output at each point, written to `out`.
+    pub fn eval(&mut self, x: &[f32], y: &[f32], z: &[f32], t: f32, out: &mut [Grad<f32>]) {
+        let n = x.len();
+        assert!(y.len() == n && z.len() == n && out.len() == n, "slices differ in length");
+        for i in 0..n {
+            run(&self.tape, &mut self.regs, [x[i], y[i], z[i], t]);
+            out[i] = output(&self.tape, &self.regs, 0);
+        }
+    }
+}

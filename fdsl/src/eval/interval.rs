@@ -1,0 +1,442 @@
+//! Interval arithmetic over a tape: conservative bounds of every output over a box, and the
+//! choices that let [`Tape::simplify`] drop what cannot matter in that box.
+//!
+//! Bounds are computed in f64 from the interval ends. Round-to-nearest is monotonic, so for
+//! monotonic operations the computed ends enclose the f64 point values inside; operations whose
+//! library implementations are not guaranteed monotonic are widened by a few ulps. A NaN end
+//! means the value may be undefined somewhere in the box.
+
+use std::f64::consts::{FRAC_PI_2, PI};
+
+use crate::compile::{BinaryOp, TernaryOp, UnaryOp};
+use crate::tape::{Choice, Code, Operand, Tape};
+
+/// A closed interval `[lo, hi]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Interval {
+    /// Lower bound.
+    pub lo: f64,
+    /// Upper bound.
+    pub hi: f64,
+}
+
+impl Interval {
+    /// `[lo, hi]`.
+    pub fn new(lo: f64, hi: f64) -> Interval {
+        Interval { lo, hi }
+    }
+
+    /// The single value `v`.
+    pub fn point(v: f64) -> Interval {
+        Interval { lo: v, hi: v }
+    }
+
+    /// Every real number.
+    pub const EVERYTHING: Interval = Interval { lo: f64::NEG_INFINITY, hi: f64::INFINITY };
+    const NAN: Interval = Interval { lo: f64::NAN, hi: f64::NAN };
+    const BOOL: Interval = Interval { lo: 0.0, hi: 1.0 };
+
+    /// Whether `v` lies inside (NaN ends contain nothing).
+    pub fn contains(&self, v: f64) -> bool {
+        self.lo <= v && v <= self.hi
+    }
+
+    /// Whether either end is NaN.
+    pub fn has_nan(&self) -> bool {
+        self.lo.is_nan() || self.hi.is_nan()
+    }
+
+    fn union(self, o: Interval) -> Interval {
+        if self.has_nan() || o.has_nan() {
+            return Interval::NAN;
+        }
+        Interval { lo: self.lo.min(o.lo), hi: self.hi.max(o.hi) }
+    }
+
+    fn definitely_true(self) -> bool {
+        !self.has_nan() && (self.lo > 0.0 || self.hi < 0.0)
+    }
+
+    fn definitely_false(self) -> bool {
+        self.lo == 0.0 && self.hi == 0.0
+    }
+
+    fn widen(self) -> Interval {
+        let w = |v: f64| v.abs() * 4.0 * f64::EPSILON + f64::MIN_POSITIVE;
+        Interval { lo: self.lo - w(self.lo), hi: self.hi + w(self.hi) }
+    }
+}
+
+/// Evaluates a tape over boxes and records the choices for simplification.
+#[derive(Clone, Debug)]
+pub struct IntervalEval {
+    tape: Tape,
+    regs: Vec<Interval>,
+    choices: Vec<Choice>,
+}
+
+impl IntervalEval {
+    /// An evaluator for `tape`.
+    pub fn new(tape: &Tape) -> IntervalEval {
+        IntervalEval {
+            tape: tape.clone(),
+            regs: vec![Interval::point(0.0); tape.n_regs()],
+            choices: vec![Choice::Both; tape.len()],
+        }
+    }
+
+    /// The tape this evaluator runs.
+    pub fn tape(&self) -> &Tape {
+        &self.tape
+    }
+
+    /// Bounds of the first output over the box `p = [x, y, z, t]`.
+    pub fn eval(&mut self, p: [Interval; 4]) -> Interval {
+        self.run(p);
+        self.output(0)
+    }
+
+    /// Bounds of output `idx` after the last [`IntervalEval::eval`].
+    pub fn output(&self, idx: usize) -> Interval {
+        match self.tape.outputs()[idx] {
+            Operand::Reg(r) => self.regs[r as usize],
+            Operand::Const(c) => Interval::point(c),
+        }
+    }
+
+    /// The choices of the last evaluation, one per instruction, for [`Tape::simplify`].
+    pub fn choices(&self) -> &[Choice] {
+        &self.choices
+    }
+
+    fn run(&mut self, p: [Interval; 4]) {
+        for (slot, reg) in self.tape.inputs().iter().enumerate() {
+            if let Some(r) = reg {
+                self.regs[*r as usize] = p[slot];
+            }
+        }
+        let regs = &mut self.regs;
+        for (i, instr) in self.tape.instrs().iter().enumerate() {
+            let get = |o: Operand| match o {
+                Operand::Reg(r) => regs[r as usize],
+                Operand::Const(c) => Interval::point(c),
+            };
+            let [a, b, c] = instr.args;
+            let (value, choice) = match instr.code {
+                Code::Unary(op) => (unary(op, get(a)), Choice::Both),
+                Code::Binary(op) => binary(op, get(a), get(b)),
+                Code::Ternary(op) => ternary(op, get(a), get(b), get(c)),
+            };
+            regs[instr.out as usize] = value;
+            self.choices[i] = choice;
+        }
+    }
+}
+
+fn monotone(a: Interval, f: impl Fn(f64) -> f64) -> Interval {
+    Interval { lo: f(a.lo), hi: f(a.hi) }
+}
+
+fn unary(op: UnaryOp, a: Interval) -> Interval {
+    if a.has_nan() {
+        return Interval::NAN;
+    }
+    match op {
+        UnaryOp::Neg => Interval { lo: -a.hi, hi: -a.lo },
+        UnaryOp::Abs => {
+            if a.lo >= 0.0 {
+                a
+            } else if a.hi <= 0.0 {
+                Interval { lo: -a.hi, hi: -a.lo }
+            } else {
+                Interval { lo: 0.0, hi: (-a.lo).max(a.hi) }
+            }
+        }
+        UnaryOp::Square => {
+            if a.lo >= 0.0 {
+                Interval { lo: a.lo * a.lo, hi: a.hi * a.hi }
+            } else if a.hi <= 0.0 {
+                Interval { lo: a.hi * a.hi, hi: a.lo * a.lo }
+            } else {
+                Interval { lo: 0.0, hi: (a.lo * a.lo).max(a.hi * a.hi) }
+            }
+        }
+        UnaryOp::Sqrt => {
+            if a.hi < 0.0 {
+                Interval::NAN
+            } else {
+                monotone(Interval { lo: a.lo.max(0.0), hi: a.hi }, f64::sqrt)
+            }
+        }
+        UnaryOp::Sin => periodic(a, f64::sin, FRAC_PI_2, -FRAC_PI_2),
+        UnaryOp::Cos => periodic(a, f64::cos, 0.0, PI),
+        UnaryOp::Tan => {
+            let k = ((a.lo - FRAC_PI_2) / PI).floor();
+            let next_pole = FRAC_PI_2 + (k + 1.0) * PI;
+            if a.hi - a.lo >= PI || a.hi >= next_pole || !a.lo.is_finite() || !a.hi.is_finite() {
+                Interval::EVERYTHING
+            } else {
+                monotone(a, f64::tan).widen()
+            }
+        }
+        UnaryOp::Asin | UnaryOp::Acos => {
+            if a.hi < -1.0 || a.lo > 1.0 {
+                return Interval::NAN;
+            }
+            let c = Interval { lo: a.lo.max(-1.0), hi: a.hi.min(1.0) };
+            if op == UnaryOp::Asin {
+                monotone(c, f64::asin).widen()
+            } else {
+                Interval { lo: c.hi.acos(), hi: c.lo.acos() }.widen()
+            }
+        }
+        UnaryOp::Atan => monotone(a, f64::atan).widen(),
+        UnaryOp::Exp => {
+            let r = monotone(a, f64::exp).widen();
+            Interval { lo: r.lo.max(0.0), hi: r.hi }
+        }
+        UnaryOp::Ln => {
+            if a.hi < 0.0 {
+                Interval::NAN
+            } else {
+                monotone(Interval { lo: a.lo.max(0.0), hi: a.hi }, f64::ln).widen()
+            }
+        }
+        UnaryOp::Floor => monotone(a, f64::floor),
+        UnaryOp::Ceil => monotone(a, f64::ceil),
+        UnaryOp::Sign => monotone(a, |v| UnaryOp::Sign.apply(v)),
+        UnaryOp::Not => {
+            if a.definitely_true() {
+                Interval::point(0.0)
+            } else if a.definitely_false() {
+                Interval::point(1.0)
+            } else {
+                Interval::BOOL
+            }
+        }
+    }
+}
+
+/// Bounds of a 2pi-periodic function with maxima at `max_at + 2k pi` and minima at
+/// `min_at + 2k pi`, with values in [-1, 1].
+fn periodic(a: Interval, f: fn(f64) -> f64, max_at: f64, min_at: f64) -> Interval {
+    if !(a.hi - a.lo < 2.0 * PI) {
+        return Interval { lo: -1.0, hi: 1.0 };
+    }
+    let contains = |at: f64| {
+        let k = ((a.lo - at) / (2.0 * PI)).ceil();
+        at + k * 2.0 * PI <= a.hi
+    };
+    let (fa, fb) = (f(a.lo), f(a.hi));
+    let lo = if contains(min_at) { -1.0 } else { fa.min(fb) };
+    let hi = if contains(max_at) { 1.0 } else { fa.max(fb) };
+    Interval { lo, hi }.widen().clamp_unit()
+}
+
+impl Interval {
+    fn clamp_unit(self) -> Interval {
+        Interval { lo: self.lo.max(-1.0), hi: self.hi.min(1.0) }
+    }
+}
+
+fn mul(a: Interval, b: Interval) -> Interval {
+    let p = [a.lo * b.lo, a.lo * b.hi, a.hi * b.lo, a.hi * b.hi];
+    if p.iter().any(|v| v.is_nan()) {
+        return Interval::EVERYTHING;
+    }
+    Interval { lo: p.iter().copied().fold(f64::INFINITY, f64::min), hi: p.iter().copied().fold(f64::NEG_INFINITY, f64::max) }
+}
+
+fn compare(definitely: bool, definitely_not: bool) -> Interval {
+    if definitely {
+        Interval::point(1.0)
+    } else if definitely_not {
+        Interval::point(0.0)
+    } else {
+        Interval::BOOL
+    }
+}
+
+/// Which argument decides `min(a, b)` over the box, exactly or by sign.
+fn min_choice(a: Interval, b: Interval) -> Choice {
+    if a.hi <= b.lo {
+        Choice::Left
+    } else if b.hi <= a.lo {
+        Choice::Right
+    } else if b.lo > 0.0 || a.hi < 0.0 {
+        Choice::SignLeft
+    } else if a.lo > 0.0 || b.hi < 0.0 {
+        Choice::SignRight
+    } else {
+        Choice::Both
+    }
+}
+
+/// Which argument decides `max(a, b)` over the box, exactly or by sign.
+fn max_choice(a: Interval, b: Interval) -> Choice {
+    if a.lo >= b.hi {
+        Choice::Left
+    } else if b.lo >= a.hi {
+        Choice::Right
+    } else if b.hi < 0.0 || a.lo > 0.0 {
+        Choice::SignLeft
+    } else if a.hi < 0.0 || b.lo > 0.0 {
+        Choice::SignRight
+    } else {
+        Choice::Both
+    }
+}
+
+/// The value interval of `min`/`max` given its choice.
+fn chosen(choice: Choice, a: Interval, b: Interval, both: Interval) -> Interval {
+    match choice {
+        Choice::Left => a,
+        Choice::Right => b,
+        _ => both,
+    }
+}
+
+/// R-functions decide by sign only: their value mixes both arguments everywhere.
+fn sign_only(choice: Choice) -> Choice {
+    match choice {
+        Choice::Left => Choice::SignLeft,
+        Choice::Right => Choice::SignRight,
+        c => c,
+    }
+}
+
+fn binary(op: BinaryOp, a: Interval, b: Interval) -> (Interval, Choice) {
+    if a.has_nan() || b.has_nan() {
+        return (Interval::NAN, Choice::Both);
+    }
+    let value = match op {
+        BinaryOp::Add => Interval { lo: a.lo + b.lo, hi: a.hi + b.hi },
+        BinaryOp::Sub => Interval { lo: a.lo - b.hi, hi: a.hi - b.lo },
+        BinaryOp::Mul => mul(a, b),
+        BinaryOp::Div => {
+            if b.lo > 0.0 || b.hi < 0.0 {
+                let p = [a.lo / b.lo, a.lo / b.hi, a.hi / b.lo, a.hi / b.hi];
+                if p.iter().any(|v| v.is_nan()) {
+                    Interval::EVERYTHING
+                } else {
+                    Interval {
+                        lo: p.iter().copied().fold(f64::INFINITY, f64::min),
+                        hi: p.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+                    }
+                }
+            } else {
+                Interval::EVERYTHING
+            }
+        }
+        BinaryOp::Min => {
+            let choice = min_choice(a, b);
+            let both = Interval { lo: a.lo.min(b.lo), hi: a.hi.min(b.hi) };
+            return (chosen(choice, a, b, both), choice);
+        }
+        BinaryOp::Max => {
+            let choice = max_choice(a, b);
+            let both = Interval { lo: a.lo.max(b.lo), hi: a.hi.max(b.hi) };
+            return (chosen(choice, a, b, both), choice);
+        }
+        BinaryOp::RAnd | BinaryOp::ROr => {
+            // Both are non-decreasing in each argument.
+            let value = Interval { lo: op.apply(a.lo, b.lo), hi: op.apply(a.hi, b.hi) };
+            let choice = if op == BinaryOp::RAnd { min_choice(a, b) } else { max_choice(a, b) };
+            let value = if value.has_nan() { Interval::EVERYTHING } else { value.widen() };
+            return (value, sign_only(choice));
+        }
+        BinaryOp::Pow => {
+            if a.lo > 0.0 {
+                let p = [a.lo.powf(b.lo), a.lo.powf(b.hi), a.hi.powf(b.lo), a.hi.powf(b.hi)];
+                if p.iter().any(|v| v.is_nan()) {
+                    Interval::EVERYTHING
+                } else {
+                    Interval {
+                        lo: p.iter().copied().fold(f64::INFINITY, f64::min),
+                        hi: p.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+                    }
+                    .widen()
+                }
+            } else {
+                Interval::EVERYTHING
+            }
+        }
+        BinaryOp::Atan2 => {
+            if b.lo > 0.0 && b.lo.is_finite() {
+                let p = [a.lo.atan2(b.lo), a.lo.atan2(b.hi), a.hi.atan2(b.lo), a.hi.atan2(b.hi)];
+                Interval {
+                    lo: p.iter().copied().fold(f64::INFINITY, f64::min),
+                    hi: p.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+                }
+                .widen()
+            } else {
+                Interval { lo: -PI, hi: PI }.widen()
+            }
+        }
+        BinaryOp::Mod => modulo(a, b),
+        BinaryOp::Lt => compare(a.hi < b.lo, a.lo >= b.hi),
+        BinaryOp::Le => compare(a.hi <= b.lo, a.lo > b.hi),
+        BinaryOp::Eq => compare(a.lo == a.hi && b.lo == b.hi && a.lo == b.lo, a.hi < b.lo || b.hi < a.lo),
+        BinaryOp::And => compare(
+            a.definitely_true() && b.definitely_true(),
+            a.definitely_false() || b.definitely_false(),
+        ),
+        BinaryOp::Or => compare(
+            a.definitely_true() || b.definitely_true(),
+            a.definitely_false() && b.definitely_false(),
+        ),
+    };
+    (value, Choice::Both)
+}
+
+fn modulo(a: Interval, b: Interval) -> Interval {
+    if b.lo == b.hi && b.lo != 0.0 && a.lo.is_finite() && a.hi.is_finite() {
+        let k_lo = (a.lo / b.lo).floor();
+        let k_hi = (a.hi / b.lo).floor();
+        if k_lo == k_hi {
+            return Interval { lo: a.lo - b.lo * k_lo, hi: a.hi - b.lo * k_lo }.widen();
+        }
+    }
+    if b.lo > 0.0 {
+        Interval { lo: 0.0, hi: b.hi }
+    } else if b.hi < 0.0 {
+        Interval { lo: b.lo, hi: 0.0 }
+    } else {
+        Interval { lo: b.lo.min(0.0), hi: b.hi.max(0.0) }
+    }
+}
+
+fn ternary(op: TernaryOp, a: Interval, b: Interval, c: Interval) -> (Interval, Choice) {
+    match op {
+        TernaryOp::Select => {
+            if a.definitely_true() {
+                (b, Choice::Left)
+            } else if a.definitely_false() {
+                (c, Choice::Right)
+            } else {
+                (b.union(c), Choice::Both)
+            }
+        }
+        TernaryOp::BlendMin | TernaryOp::BlendMax => {
+            if a.has_nan() || b.has_nan() || c.has_nan() || c.lo <= 0.0 {
+                return (Interval::EVERYTHING, Choice::Both);
+            }
+            let d = Interval { lo: a.lo - b.hi, hi: a.hi - b.lo };
+            let min = op == TernaryOp::BlendMin;
+            // Far apart, the blend is exactly min (or max).
+            if d.lo >= c.hi {
+                return if min { (b, Choice::Right) } else { (a, Choice::Left) };
+            }
+            if d.hi <= -c.hi {
+                return if min { (a, Choice::Left) } else { (b, Choice::Right) };
+            }
+            let bump = c.hi * 0.25;
+            let value = if min {
+                Interval { lo: a.lo.min(b.lo) - bump, hi: a.hi.min(b.hi) }
+            } else {
+                Interval { lo: a.lo.max(b.lo), hi: a.hi.max(b.hi) + bump }
+            };
+            (value.widen(), Choice::Both)
+        }
+    }
+}

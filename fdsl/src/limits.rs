@@ -1,0 +1,23 @@
+//! Named limits on everything that grows while reading and compiling a function.
+//!
+//! Function text comes from users and from remote peers, so every dimension of the work is
+//! bounded here; exceeding one is a diagnostic with a location, never a panic or a hang.
+
+/// The longest source text accepted, in bytes.
+pub const MAX_SOURCE_BYTES: usize = 64 * 1024;
+/// The deepest nesting of parentheses, blocks and operators the parser follows.
+pub const MAX_NESTING_DEPTH: usize = 96;
+/// The most nodes an expression graph may hold after deduplication.
+pub const MAX_GRAPH_NODES: usize = 200_000;
+/// The most iterations one loop may run when it is unrolled.
+pub const MAX_LOOP_TRIPS: usize = 1024;
+/// The most statements executed while unrolling a whole program (its fuel).
+pub const MAX_STATEMENT_FUEL: usize = 100_000;
+/// The most distinct variables a program may name.
+pub const MAX_VARIABLES: usize = 512;
+/// The most arguments one call may take (for the variadic `min` and `max`).
+pub const MAX_CALL_ARGS: usize = 64;
+/// The most outputs (assigned variables or functions) one program may define.
+pub const MAX_OUTPUTS: usize = 64;
+/// The most diagnostics reported for one source; later ones are dropped.
+pub const MAX_DIAGNOSTICS: usize = 32;
