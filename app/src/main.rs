@@ -54,7 +54,11 @@ fn run(args: &[String]) -> anyhow::Result<()> {
             match compiled.function {
                 Some(f) => {
                     let names: Vec<&str> = f.output_names().collect();
-                    println!("ok: outputs {}; {} operations", names.join(", "), f.graph_len());
+                    println!(
+                        "ok: outputs {}; {} operations",
+                        names.join(", "),
+                        f.graph_len()
+                    );
                     Ok(())
                 }
                 None => bail!("the function does not compile"),
@@ -64,7 +68,9 @@ fn run(args: &[String]) -> anyhow::Result<()> {
             let function = Function::parse(&source(args.get(1))?)?;
             let mut p = [0.0; 4];
             for (slot, arg) in args.iter().skip(2).take(4).enumerate() {
-                p[slot] = arg.parse().with_context(|| format!("`{arg}` is not a number"))?;
+                p[slot] = arg
+                    .parse()
+                    .with_context(|| format!("`{arg}` is not a number"))?;
             }
             for name in function.output_names() {
                 let tape = function.tape_for(&[name])?;
@@ -75,7 +81,9 @@ fn run(args: &[String]) -> anyhow::Result<()> {
         "slice" => {
             let function = Function::parse(&source(args.get(1))?)?;
             let number = |i: usize| -> anyhow::Result<f64> {
-                args.get(i).map_or(Ok(0.0), |a| a.parse().with_context(|| format!("`{a}` is not a number")))
+                args.get(i).map_or(Ok(0.0), |a| {
+                    a.parse().with_context(|| format!("`{a}` is not a number"))
+                })
             };
             print!("{}", slice(&function, number(2)?, number(3)?, 64, 32));
             Ok(())
@@ -102,7 +110,9 @@ fn slice(function: &Function, z: f64, t: f64, width: usize, height: usize) -> St
     let mut eval = BulkEval::new(&function.tape());
     let mut out = String::new();
     let mut row = vec![0.0f32; width];
-    let xs: Vec<f32> = (0..width).map(|i| (-1.2 + 2.4 * (i as f64 + 0.5) / width as f64) as f32).collect();
+    let xs: Vec<f32> = (0..width)
+        .map(|i| (-1.2 + 2.4 * (i as f64 + 0.5) / width as f64) as f32)
+        .collect();
     let zs = vec![z as f32; width];
     for j in 0..height {
         let y = (1.2 - 2.4 * (j as f64 + 0.5) / height as f64) as f32;

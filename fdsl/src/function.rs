@@ -44,7 +44,12 @@ pub struct CompileError {
 
 impl fmt::Display for CompileError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let errors: Vec<Diagnostic> = self.diagnostics.iter().filter(|d| d.is_error()).cloned().collect();
+        let errors: Vec<Diagnostic> = self
+            .diagnostics
+            .iter()
+            .filter(|d| d.is_error())
+            .cloned()
+            .collect();
         write!(f, "{}", render_all(&errors, &self.source).trim_end())
     }
 }
@@ -71,16 +76,28 @@ impl Function {
     pub fn compile_with(source: &str, options: Options) -> Compiled {
         let (program, mut diagnostics) = parser::parse(source);
         if diagnostics.iter().any(Diagnostic::is_error) {
-            return Compiled { function: None, diagnostics };
+            return Compiled {
+                function: None,
+                diagnostics,
+            };
         }
         let (lowered, more) = lower::lower(&program, options);
         diagnostics.extend(more);
-        let function = lowered.map(|Lowered { context, outputs, inputs_used }| Function {
-            context: Arc::new(context),
-            outputs,
-            inputs_used,
-        });
-        Compiled { function, diagnostics }
+        let function = lowered.map(
+            |Lowered {
+                 context,
+                 outputs,
+                 inputs_used,
+             }| Function {
+                context: Arc::new(context),
+                outputs,
+                inputs_used,
+            },
+        );
+        Compiled {
+            function,
+            diagnostics,
+        }
     }
 
     /// Compiles, turning errors into a [`CompileError`] (warnings are dropped).
@@ -98,9 +115,10 @@ impl Function {
     /// [`Function::parse`] with options.
     pub fn parse_with(source: &str, options: Options) -> Result<Function, CompileError> {
         let compiled = Function::compile_with(source, options);
-        compiled
-            .function
-            .ok_or_else(|| CompileError { source: source.to_string(), diagnostics: compiled.diagnostics })
+        compiled.function.ok_or_else(|| CompileError {
+            source: source.to_string(),
+            diagnostics: compiled.diagnostics,
+        })
     }
 
     /// The names of the outputs, in definition order.
@@ -130,7 +148,12 @@ impl Function {
 
     /// A tape for the main value: the `value` output if there is one, else the first output.
     pub fn tape(&self) -> Tape {
-        let node = self.outputs.iter().find(|(n, _)| n == "value").unwrap_or(&self.outputs[0]).1;
+        let node = self
+            .outputs
+            .iter()
+            .find(|(n, _)| n == "value")
+            .unwrap_or(&self.outputs[0])
+            .1;
         Tape::new(&self.context, &[node])
     }
 
@@ -142,8 +165,16 @@ impl Function {
             match self.outputs.iter().find(|(n, _)| n == name) {
                 Some((_, node)) => roots.push(*node),
                 None => {
-                    let available = self.outputs.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>().join(", ");
-                    return Err(MissingOutput { name: name.to_string(), available });
+                    let available = self
+                        .outputs
+                        .iter()
+                        .map(|(n, _)| n.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ");
+                    return Err(MissingOutput {
+                        name: name.to_string(),
+                        available,
+                    });
                 }
             }
         }

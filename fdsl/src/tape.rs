@@ -46,7 +46,8 @@ impl Instr {
     pub fn has_choice(&self) -> bool {
         matches!(
             self.code,
-            Code::Binary(BinaryOp::Min | BinaryOp::Max | BinaryOp::RAnd | BinaryOp::ROr) | Code::Ternary(_)
+            Code::Binary(BinaryOp::Min | BinaryOp::Max | BinaryOp::RAnd | BinaryOp::ROr)
+                | Code::Ternary(_)
         )
     }
 }
@@ -199,7 +200,11 @@ impl Tape {
                 SsaOp::Ternary(op, _, _, _) => Code::Ternary(op),
                 SsaOp::Input(_) | SsaOp::Const(_) => unreachable!("leaves were skipped"),
             };
-            instrs.push(Instr { code, out, args: operands });
+            instrs.push(Instr {
+                code,
+                out,
+                args: operands,
+            });
             instr_ssa.push(i as u32);
         }
         let outputs: Vec<Operand> = ssa_outputs
@@ -255,7 +260,11 @@ impl Tape {
     /// there. With [`Fidelity::Sign`] it may also replace operations by an argument of the same
     /// sign, where only the sign of the output is used.
     pub fn simplify(&self, choices: &[Choice], fidelity: Fidelity) -> Tape {
-        assert_eq!(choices.len(), self.instrs.len(), "one choice per instruction");
+        assert_eq!(
+            choices.len(),
+            self.instrs.len(),
+            "one choice per instruction"
+        );
         let n = self.ssa.len();
         let mut choice_of = vec![Choice::Both; n];
         for (i, &c) in choices.iter().enumerate() {
@@ -278,8 +287,16 @@ impl Tape {
                 (Choice::Right, SsaOp::Ternary(TernaryOp::Select, _, _, c)) => Some(*c),
                 (Choice::Left, SsaOp::Ternary(_, a, _, _)) => Some(*a),
                 (Choice::Right, SsaOp::Ternary(_, _, b, _)) => Some(*b),
-                (Choice::SignLeft, SsaOp::Binary(_, a, _)) if sign_context.get(i) == Some(&true) => Some(*a),
-                (Choice::SignRight, SsaOp::Binary(_, _, b)) if sign_context.get(i) == Some(&true) => Some(*b),
+                (Choice::SignLeft, SsaOp::Binary(_, a, _))
+                    if sign_context.get(i) == Some(&true) =>
+                {
+                    Some(*a)
+                }
+                (Choice::SignRight, SsaOp::Binary(_, _, b))
+                    if sign_context.get(i) == Some(&true) =>
+                {
+                    Some(*b)
+                }
                 _ => None,
             };
             if let Some(a) = pick {
@@ -343,8 +360,11 @@ impl Tape {
             let transparent = sign_only[i]
                 && matches!(
                     op,
-                    SsaOp::Binary(BinaryOp::Min | BinaryOp::Max | BinaryOp::RAnd | BinaryOp::ROr, _, _)
-                        | SsaOp::Unary(UnaryOp::Neg, _)
+                    SsaOp::Binary(
+                        BinaryOp::Min | BinaryOp::Max | BinaryOp::RAnd | BinaryOp::ROr,
+                        _,
+                        _
+                    ) | SsaOp::Unary(UnaryOp::Neg, _)
                 );
             let (args, k) = op.args();
             for &a in &args[..k] {

@@ -26,12 +26,15 @@ pub fn parse_dependency_map(markdown: &str) -> Result<DependencyMap, String> {
         if line.is_empty() {
             continue;
         }
-        let (from, to) = line
-            .split_once("->")
-            .ok_or_else(|| format!("map line {line_idx}: expected `crate -> deps`, got `{line}`"))?;
+        let (from, to) = line.split_once("->").ok_or_else(|| {
+            format!("map line {line_idx}: expected `crate -> deps`, got `{line}`")
+        })?;
         let deps = to.split_whitespace().map(str::to_string).collect();
         if map.insert(from.trim().to_string(), deps).is_some() {
-            return Err(format!("map line {line_idx}: `{}` listed twice", from.trim()));
+            return Err(format!(
+                "map line {line_idx}: `{}` listed twice",
+                from.trim()
+            ));
         }
     }
     Ok(map)
@@ -57,7 +60,9 @@ pub fn workspace_edges(metadata: &serde_json::Value) -> Result<DependencyMap, St
         .collect();
     let mut edges = DependencyMap::new();
     for package in packages {
-        let Some(name) = package["name"].as_str() else { continue };
+        let Some(name) = package["name"].as_str() else {
+            continue;
+        };
         if !member_names.contains(name) {
             continue;
         }
@@ -79,7 +84,9 @@ pub fn check_edges(allowed: &DependencyMap, actual: &DependencyMap) -> Vec<Strin
     let mut problems = Vec::new();
     for (krate, deps) in actual {
         let Some(allowed_deps) = allowed.get(krate) else {
-            problems.push(format!("crate `{krate}` is missing from the dependency map"));
+            problems.push(format!(
+                "crate `{krate}` is missing from the dependency map"
+            ));
             continue;
         };
         for dep in deps.difference(allowed_deps) {
@@ -90,7 +97,9 @@ pub fn check_edges(allowed: &DependencyMap, actual: &DependencyMap) -> Vec<Strin
     }
     for krate in allowed.keys() {
         if !actual.contains_key(krate) {
-            problems.push(format!("the dependency map names `{krate}`, which is not a workspace member"));
+            problems.push(format!(
+                "the dependency map names `{krate}`, which is not a workspace member"
+            ));
         }
     }
     problems
@@ -101,7 +110,9 @@ pub fn rust_files(root: &Path) -> Vec<PathBuf> {
     let mut files = Vec::new();
     let mut stack = vec![root.to_path_buf()];
     while let Some(dir) = stack.pop() {
-        let Ok(entries) = std::fs::read_dir(&dir) else { continue };
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
         for entry in entries.flatten() {
             let path = entry.path();
             let name = entry.file_name();
@@ -159,7 +170,10 @@ mod tests {
         let actual = edges(&[("fdsl", &["render"]), ("render", &["fdsl"]), ("app", &[])]);
         let problems = check_edges(&map, &actual);
         assert_eq!(problems.len(), 1, "{problems:?}");
-        assert!(problems[0].contains("`fdsl` depends on `render`"), "{problems:?}");
+        assert!(
+            problems[0].contains("`fdsl` depends on `render`"),
+            "{problems:?}"
+        );
     }
 
     #[test]
@@ -167,8 +181,14 @@ mod tests {
         let map = parse_dependency_map(MAP).unwrap();
         let actual = edges(&[("fdsl", &[]), ("render", &["fdsl"]), ("extra", &[])]);
         let problems = check_edges(&map, &actual);
-        assert!(problems.iter().any(|p| p.contains("`extra` is missing")), "{problems:?}");
-        assert!(problems.iter().any(|p| p.contains("names `app`")), "{problems:?}");
+        assert!(
+            problems.iter().any(|p| p.contains("`extra` is missing")),
+            "{problems:?}"
+        );
+        assert!(
+            problems.iter().any(|p| p.contains("names `app`")),
+            "{problems:?}"
+        );
     }
 
     #[test]

@@ -16,22 +16,50 @@ fn dependency_edges_follow_the_architecture_map() {
     let allowed = tidy::parse_dependency_map(&text).unwrap();
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let output = Command::new(cargo)
-        .args(["metadata", "--format-version", "1", "--no-deps", "--offline"])
+        .args([
+            "metadata",
+            "--format-version",
+            "1",
+            "--no-deps",
+            "--offline",
+        ])
         .current_dir(root())
         .output()
         .unwrap();
-    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
     let metadata: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     let actual = tidy::workspace_edges(&metadata).unwrap();
     let problems = tidy::check_edges(&allowed, &actual);
-    assert!(problems.is_empty(), "dependency map violations:\n{}", problems.join("\n"));
+    assert!(
+        problems.is_empty(),
+        "dependency map violations:\n{}",
+        problems.join("\n")
+    );
 }
 
 #[test]
 fn every_source_file_has_a_header() {
-    let members = ["fdsl", "replication", "haptic", "render", "app", "simulator", "tests"];
-    let files: Vec<_> = members.iter().flat_map(|m| tidy::rust_files(&root().join(m))).collect();
+    let members = [
+        "fdsl",
+        "replication",
+        "haptic",
+        "render",
+        "app",
+        "simulator",
+        "tests",
+    ];
+    let files: Vec<_> = members
+        .iter()
+        .flat_map(|m| tidy::rust_files(&root().join(m)))
+        .collect();
     assert!(files.len() >= members.len(), "found only {files:?}");
     let missing = tidy::files_without_header(&files);
-    assert!(missing.is_empty(), "files without a `//!` header: {missing:?}");
+    assert!(
+        missing.is_empty(),
+        "files without a `//!` header: {missing:?}"
+    );
 }

@@ -115,8 +115,12 @@ impl Context {
         match (op, self.op(a)) {
             (UnaryOp::Neg, Op::Unary(UnaryOp::Neg, inner)) => return Ok(inner),
             (UnaryOp::Abs, Op::Unary(UnaryOp::Abs | UnaryOp::Square, _)) => return Ok(a),
-            (UnaryOp::Abs, Op::Unary(UnaryOp::Neg, inner)) => return self.unary(UnaryOp::Abs, inner),
-            (UnaryOp::Square, Op::Unary(UnaryOp::Neg | UnaryOp::Abs, inner)) => return self.unary(UnaryOp::Square, inner),
+            (UnaryOp::Abs, Op::Unary(UnaryOp::Neg, inner)) => {
+                return self.unary(UnaryOp::Abs, inner);
+            }
+            (UnaryOp::Square, Op::Unary(UnaryOp::Neg | UnaryOp::Abs, inner)) => {
+                return self.unary(UnaryOp::Square, inner);
+            }
             _ => {}
         }
         self.intern(Op::Unary(op, a))
@@ -129,13 +133,13 @@ impl Context {
             return self.constant(op.apply(va, vb));
         }
         match (op, ca, cb) {
-            (BinaryOp::Add, Some(z), _) if z == 0.0 => return Ok(b),
-            (BinaryOp::Add | BinaryOp::Sub, _, Some(z)) if z == 0.0 => return Ok(a),
-            (BinaryOp::Sub, Some(z), _) if z == 0.0 => return self.unary(UnaryOp::Neg, b),
-            (BinaryOp::Mul, Some(one), _) if one == 1.0 => return Ok(b),
-            (BinaryOp::Mul | BinaryOp::Div, _, Some(one)) if one == 1.0 => return Ok(a),
-            (BinaryOp::Mul, Some(m), _) if m == -1.0 => return self.unary(UnaryOp::Neg, b),
-            (BinaryOp::Mul | BinaryOp::Div, _, Some(m)) if m == -1.0 => return self.unary(UnaryOp::Neg, a),
+            (BinaryOp::Add, Some(0.0), _) => return Ok(b),
+            (BinaryOp::Add | BinaryOp::Sub, _, Some(0.0)) => return Ok(a),
+            (BinaryOp::Sub, Some(0.0), _) => return self.unary(UnaryOp::Neg, b),
+            (BinaryOp::Mul, Some(1.0), _) => return Ok(b),
+            (BinaryOp::Mul | BinaryOp::Div, _, Some(1.0)) => return Ok(a),
+            (BinaryOp::Mul, Some(-1.0), _) => return self.unary(UnaryOp::Neg, b),
+            (BinaryOp::Mul | BinaryOp::Div, _, Some(-1.0)) => return self.unary(UnaryOp::Neg, a),
             (BinaryOp::Pow, _, Some(e)) => return self.power(a, e),
             _ => {}
         }
@@ -146,7 +150,11 @@ impl Context {
                 _ => {}
             }
         }
-        let (a, b) = if op.is_commutative() && b < a { (b, a) } else { (a, b) };
+        let (a, b) = if op.is_commutative() && b < a {
+            (b, a)
+        } else {
+            (a, b)
+        };
         self.intern(Op::Binary(op, a, b))
     }
 
@@ -178,12 +186,20 @@ impl Context {
         }
         let half = self.integer_power(a, n / 2)?;
         let square = self.unary(UnaryOp::Square, half)?;
-        if n % 2 == 1 { self.binary(BinaryOp::Mul, square, a) } else { Ok(square) }
+        if n % 2 == 1 {
+            self.binary(BinaryOp::Mul, square, a)
+        } else {
+            Ok(square)
+        }
     }
 
     /// A ternary operation, folded or simplified where possible.
     pub fn ternary(&mut self, op: TernaryOp, a: Node, b: Node, c: Node) -> Result<Node, GraphFull> {
-        let (ca, cb, cc) = (self.const_value(a), self.const_value(b), self.const_value(c));
+        let (ca, cb, cc) = (
+            self.const_value(a),
+            self.const_value(b),
+            self.const_value(c),
+        );
         if let (Some(va), Some(vb), Some(vc)) = (ca, cb, cc) {
             return self.constant(op.apply(va, vb, vc));
         }
@@ -222,7 +238,10 @@ impl Context {
                 }
             }
         }
-        (0..self.ops.len()).filter(|&i| live[i]).map(|i| Node(i as u32)).collect()
+        (0..self.ops.len())
+            .filter(|&i| live[i])
+            .map(|i| Node(i as u32))
+            .collect()
     }
 }
 
@@ -255,10 +274,14 @@ mod tests {
         let x = ctx.input(0).unwrap();
         let five = ctx.constant(5.0).unwrap();
         let p = ctx.binary(BinaryOp::Pow, x, five).unwrap();
-        let Op::Binary(BinaryOp::Mul, _, _) = ctx.op(p) else { panic!("{:?}", ctx.op(p)) };
+        let Op::Binary(BinaryOp::Mul, _, _) = ctx.op(p) else {
+            panic!("{:?}", ctx.op(p))
+        };
         let m2 = ctx.constant(-2.0).unwrap();
         let p = ctx.binary(BinaryOp::Pow, x, m2).unwrap();
-        let Op::Binary(BinaryOp::Div, _, _) = ctx.op(p) else { panic!("{:?}", ctx.op(p)) };
+        let Op::Binary(BinaryOp::Div, _, _) = ctx.op(p) else {
+            panic!("{:?}", ctx.op(p))
+        };
         let half = ctx.constant(0.25).unwrap();
         let p = ctx.binary(BinaryOp::Pow, x, half).unwrap();
         assert_eq!(ctx.op(p), Op::Binary(BinaryOp::Pow, x, half));

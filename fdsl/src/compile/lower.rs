@@ -11,7 +11,9 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use super::graph::{Context, GraphFull, Node};
 use super::ops::{BinaryOp, TernaryOp, UnaryOp};
-use crate::limits::{MAX_CALL_ARGS, MAX_LOOP_TRIPS, MAX_OUTPUTS, MAX_STATEMENT_FUEL, MAX_VARIABLES};
+use crate::limits::{
+    MAX_CALL_ARGS, MAX_LOOP_TRIPS, MAX_OUTPUTS, MAX_STATEMENT_FUEL, MAX_VARIABLES,
+};
 use crate::syntax::ast::{self, Expr, ExprKind, FunctionDef, Item, Program, Stmt};
 use crate::syntax::{Diagnostic, Span};
 
@@ -47,24 +49,70 @@ pub struct Lowered {
 }
 
 /// The built-in names of the coordinate slots outside functions.
-const INPUT_NAMES: [(&str, u8); 7] = [("x", 0), ("y", 1), ("z", 2), ("t", 3), ("u", 0), ("v", 1), ("w", 2)];
+const INPUT_NAMES: [(&str, u8); 7] = [
+    ("x", 0),
+    ("y", 1),
+    ("z", 2),
+    ("t", 3),
+    ("u", 0),
+    ("v", 1),
+    ("w", 2),
+];
 
 /// Names of the built-in functions, for suggestions.
 const FUNCTION_NAMES: &[&str] = &[
-    "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "sqrt", "abs", "exp", "log", "ln",
-    "log10", "pow", "min", "max", "floor", "ceil", "round", "mod", "sign", "clamp", "sqr", "r_and", "r_or", "r_sub",
-    "blend_and", "blend_or", "blend_sub", "step",
+    "sin",
+    "cos",
+    "tan",
+    "asin",
+    "acos",
+    "atan",
+    "atan2",
+    "sinh",
+    "cosh",
+    "tanh",
+    "sqrt",
+    "abs",
+    "exp",
+    "log",
+    "ln",
+    "log10",
+    "pow",
+    "min",
+    "max",
+    "floor",
+    "ceil",
+    "round",
+    "mod",
+    "sign",
+    "clamp",
+    "sqr",
+    "r_and",
+    "r_or",
+    "r_sub",
+    "blend_and",
+    "blend_or",
+    "blend_sub",
+    "step",
 ];
 
 /// Lowers a parsed program. Returns `None` when any error was reported.
 pub fn lower(program: &Program, options: Options) -> (Option<Lowered>, Vec<Diagnostic>) {
-    let mut lowerer = Lowerer { ctx: Context::new(), options, diagnostics: Vec::new(), fuel: 0, inputs_used: [false; 4] };
+    let mut lowerer = Lowerer {
+        ctx: Context::new(),
+        options,
+        diagnostics: Vec::new(),
+        fuel: 0,
+        inputs_used: [false; 4],
+    };
     let outputs = lowerer.program(program);
     let failed = lowerer.diagnostics.iter().any(Diagnostic::is_error);
     let lowered = match outputs {
-        Some(outputs) if !failed => {
-            Some(Lowered { context: lowerer.ctx, outputs, inputs_used: lowerer.inputs_used })
-        }
+        Some(outputs) if !failed => Some(Lowered {
+            context: lowerer.ctx,
+            outputs,
+            inputs_used: lowerer.inputs_used,
+        }),
         _ => None,
     };
     (lowered, lowerer.diagnostics)
@@ -119,7 +167,8 @@ impl Lowerer {
     fn full<T>(&mut self, span: Span, r: Result<T, GraphFull>) -> LResult<T> {
         match r {
             Ok(v) => Ok(v),
-            Err(e) => self.fail(Diagnostic::error(span, e.to_string()).with_hint("simplify the definition")),
+            Err(e) => self
+                .fail(Diagnostic::error(span, e.to_string()).with_hint("simplify the definition")),
         }
     }
 
@@ -147,20 +196,33 @@ impl Lowerer {
         let functions: Vec<&FunctionDef> = program
             .items
             .iter()
-            .filter_map(|i| if let Item::Function(f) = i { Some(f) } else { None })
+            .filter_map(|i| {
+                if let Item::Function(f) = i {
+                    Some(f)
+                } else {
+                    None
+                }
+            })
             .collect();
         let statements: Vec<&Stmt> = program
             .items
             .iter()
-            .filter_map(|i| if let Item::Statement(s) = i { Some(s) } else { None })
+            .filter_map(|i| {
+                if let Item::Statement(s) = i {
+                    Some(s)
+                } else {
+                    None
+                }
+            })
             .collect();
         if functions.is_empty() && statements.is_empty() {
             if self.diagnostics.iter().any(Diagnostic::is_error) {
                 return None;
             }
             self.report(
-                Diagnostic::error(Span::default(), "the definition is empty")
-                    .with_hint("write an expression such as `1-x^2-y^2-z^2`, or a constant such as `0.8`"),
+                Diagnostic::error(Span::default(), "the definition is empty").with_hint(
+                    "write an expression such as `1-x^2-y^2-z^2`, or a constant such as `0.8`",
+                ),
             );
             return None;
         }
@@ -208,11 +270,19 @@ impl Lowerer {
         let mut inputs = BTreeMap::new();
         for (slot, p) in f.params.iter().enumerate() {
             if inputs.insert(p.name.clone(), slot as u8).is_some() {
-                return self.fail(Diagnostic::error(p.span, format!("the parameter `{}` is named twice", p.name)));
+                return self.fail(Diagnostic::error(
+                    p.span,
+                    format!("the parameter `{}` is named twice", p.name),
+                ));
             }
         }
         let zero = self.constant(f.span, 0.0)?;
-        let mut env = Env { vars: BTreeMap::new(), done: zero, ret: None, inputs };
+        let mut env = Env {
+            vars: BTreeMap::new(),
+            done: zero,
+            ret: None,
+            inputs,
+        };
         self.block(&f.body, &mut env);
         if self.diagnostics.iter().any(Diagnostic::is_error) {
             return Err(Failed);
@@ -225,16 +295,27 @@ impl Lowerer {
                     .with_hint("end the function with `return <value>;`"),
             ),
             _ => self.fail(
-                Diagnostic::error(end, format!("`{}` can reach its end without returning", f.name.name))
-                    .with_hint("add a `return` after the `if`, or in every branch"),
+                Diagnostic::error(
+                    end,
+                    format!("`{}` can reach its end without returning", f.name.name),
+                )
+                .with_hint("add a `return` after the `if`, or in every branch"),
             ),
         }
     }
 
     fn statement_list(&mut self, statements: &[&Stmt]) -> Option<Vec<(String, Node)>> {
         let zero = self.constant(Span::default(), 0.0).ok()?;
-        let inputs = INPUT_NAMES.iter().map(|(n, s)| (n.to_string(), *s)).collect();
-        let mut env = Env { vars: BTreeMap::new(), done: zero, ret: None, inputs };
+        let inputs = INPUT_NAMES
+            .iter()
+            .map(|(n, s)| (n.to_string(), *s))
+            .collect();
+        let mut env = Env {
+            vars: BTreeMap::new(),
+            done: zero,
+            ret: None,
+            inputs,
+        };
         let mut order: Vec<String> = Vec::new();
         let mut value: Option<Node> = None;
         for (idx, s) in statements.iter().enumerate() {
@@ -271,8 +352,11 @@ impl Lowerer {
             let done_const = self.ctx.const_value(env.done);
             if done_const != Some(1.0) {
                 self.report(
-                    Diagnostic::error(statements[statements.len() - 1].span(), "the text can end without returning")
-                        .with_hint("add a `return` in every branch"),
+                    Diagnostic::error(
+                        statements[statements.len() - 1].span(),
+                        "the text can end without returning",
+                    )
+                    .with_hint("add a `return` in every branch"),
                 );
                 return None;
             }
@@ -282,7 +366,10 @@ impl Lowerer {
             outputs.insert(0, ("value".to_string(), v));
         }
         if outputs.len() > MAX_OUTPUTS {
-            self.report(Diagnostic::error(Span::default(), format!("the text defines more than {MAX_OUTPUTS} outputs")));
+            self.report(Diagnostic::error(
+                Span::default(),
+                format!("the text defines more than {MAX_OUTPUTS} outputs"),
+            ));
             return None;
         }
         if outputs.is_empty() {
@@ -314,8 +401,11 @@ impl Lowerer {
         if self.fuel > MAX_STATEMENT_FUEL {
             if self.fuel == MAX_STATEMENT_FUEL + 1 {
                 self.report(
-                    Diagnostic::error(s.span(), format!("the program runs more than {MAX_STATEMENT_FUEL} statements"))
-                        .with_hint("reduce the loop counts"),
+                    Diagnostic::error(
+                        s.span(),
+                        format!("the program runs more than {MAX_STATEMENT_FUEL} statements"),
+                    )
+                    .with_hint("reduce the loop counts"),
                 );
             }
             return;
@@ -327,7 +417,10 @@ impl Lowerer {
                     Err(Failed) => Value::Poisoned,
                 };
                 if !env.vars.contains_key(&name.name) && env.vars.len() >= MAX_VARIABLES {
-                    self.report(Diagnostic::error(name.span, format!("more than {MAX_VARIABLES} variables")));
+                    self.report(Diagnostic::error(
+                        name.span,
+                        format!("more than {MAX_VARIABLES} variables"),
+                    ));
                     return;
                 }
                 env.vars.insert(name.name.clone(), v);
@@ -351,10 +444,26 @@ impl Lowerer {
                     env.done = one;
                 }
             }
-            Stmt::If { cond, then, otherwise, .. } => self.if_statement(cond, then, otherwise.as_deref(), env),
-            Stmt::Loop { init, cond, step, body, span } => {
-                self.loop_statement(init.as_deref(), cond.as_ref(), step.as_deref(), body, *span, env)
-            }
+            Stmt::If {
+                cond,
+                then,
+                otherwise,
+                ..
+            } => self.if_statement(cond, then, otherwise.as_deref(), env),
+            Stmt::Loop {
+                init,
+                cond,
+                step,
+                body,
+                span,
+            } => self.loop_statement(
+                init.as_deref(),
+                cond.as_ref(),
+                step.as_deref(),
+                body,
+                *span,
+                env,
+            ),
             Stmt::Expr(e) => {
                 self.report(
                     Diagnostic::error(e.span, "a value on its own does nothing here")
@@ -412,7 +521,12 @@ impl Lowerer {
             (Some(x), None) | (None, Some(x)) => Some(x),
             (None, None) => None,
         };
-        Ok(Env { vars, done, ret, inputs: a.inputs })
+        Ok(Env {
+            vars,
+            done,
+            ret,
+            inputs: a.inputs,
+        })
     }
 
     fn loop_statement(
@@ -430,7 +544,9 @@ impl Lowerer {
         let errors_before = self.error_count();
         let mut symbolic_trips = 0;
         for trip in 0.. {
-            if self.ctx.const_value(env.done).is_some_and(|d| d != 0.0) || self.error_count() > errors_before {
+            if self.ctx.const_value(env.done).is_some_and(|d| d != 0.0)
+                || self.error_count() > errors_before
+            {
                 return;
             }
             let c = match cond {
@@ -449,8 +565,11 @@ impl Lowerer {
             }
             if trip >= MAX_LOOP_TRIPS {
                 self.report(
-                    Diagnostic::error(span, format!("this loop runs more than {MAX_LOOP_TRIPS} times"))
-                        .with_hint("loops must end after a bounded number of trips"),
+                    Diagnostic::error(
+                        span,
+                        format!("this loop runs more than {MAX_LOOP_TRIPS} times"),
+                    )
+                    .with_hint("loops must end after a bounded number of trips"),
                 );
                 return;
             }
@@ -518,11 +637,38 @@ impl Lowerer {
             A::Div => self.binary(span, BinaryOp::Div, a, b),
             A::Mod => self.binary(span, BinaryOp::Mod, a, b),
             A::Pow => self.binary(span, BinaryOp::Pow, a, b),
-            A::Intersect => self.binary(span, if r_functions { BinaryOp::RAnd } else { BinaryOp::Min }, a, b),
-            A::Union => self.binary(span, if r_functions { BinaryOp::ROr } else { BinaryOp::Max }, a, b),
+            A::Intersect => self.binary(
+                span,
+                if r_functions {
+                    BinaryOp::RAnd
+                } else {
+                    BinaryOp::Min
+                },
+                a,
+                b,
+            ),
+            A::Union => self.binary(
+                span,
+                if r_functions {
+                    BinaryOp::ROr
+                } else {
+                    BinaryOp::Max
+                },
+                a,
+                b,
+            ),
             A::Subtract => {
                 let nb = self.unary(span, UnaryOp::Neg, b)?;
-                self.binary(span, if r_functions { BinaryOp::RAnd } else { BinaryOp::Min }, a, nb)
+                self.binary(
+                    span,
+                    if r_functions {
+                        BinaryOp::RAnd
+                    } else {
+                        BinaryOp::Min
+                    },
+                    a,
+                    nb,
+                )
             }
             A::Lt => self.binary(span, BinaryOp::Lt, a, b),
             A::Le => self.binary(span, BinaryOp::Le, a, b),
@@ -544,8 +690,13 @@ impl Lowerer {
             Some(Value::Poisoned) => return Err(Failed),
             Some(Value::Partial) => {
                 return self.fail(
-                    Diagnostic::error(span, format!("`{name}` is not assigned on every path before this use"))
-                        .with_hint(format!("assign `{name}` before the `if`, or in every branch")),
+                    Diagnostic::error(
+                        span,
+                        format!("`{name}` is not assigned on every path before this use"),
+                    )
+                    .with_hint(format!(
+                        "assign `{name}` before the `if`, or in every branch"
+                    )),
                 );
             }
             None => {}
@@ -568,7 +719,9 @@ impl Lowerer {
             d = d.with_hint(format!("`{name}` is a function: write `{name}(...)`"));
         } else if let Some(best) = suggest(name, &candidates) {
             d = d.with_hint(format!("did you mean `{best}`?"));
-        } else if env.inputs.len() < INPUT_NAMES.len() && ["x", "y", "z", "t", "u", "v", "w"].contains(&name) {
+        } else if env.inputs.len() < INPUT_NAMES.len()
+            && ["x", "y", "z", "t", "u", "v", "w"].contains(&name)
+        {
             d = d.with_hint(format!("add `{name}` to the function's parameters"));
         } else {
             d = d.with_hint("assign it before use, e.g. `a = 1;`");
@@ -598,7 +751,10 @@ impl Lowerer {
             let plural = if expected == "1" { "" } else { "s" };
             return self.fail(Diagnostic::error(
                 span,
-                format!("`{f}` takes {expected} argument{plural}, but {} were given", args.len()),
+                format!(
+                    "`{f}` takes {expected} argument{plural}, but {} were given",
+                    args.len()
+                ),
             ));
         }
         let mut nodes = Vec::with_capacity(args.len());
@@ -648,7 +804,11 @@ impl Lowerer {
             "mod" => self.binary(span, BinaryOp::Mod, n[0], n[1]),
             "step" => self.binary(span, BinaryOp::Le, n[0], n[1]),
             "min" | "max" => {
-                let op = if f == "min" { BinaryOp::Min } else { BinaryOp::Max };
+                let op = if f == "min" {
+                    BinaryOp::Min
+                } else {
+                    BinaryOp::Max
+                };
                 let mut acc = n[0];
                 for &next in &n[1..] {
                     acc = self.binary(span, op, acc, next)?;
@@ -671,7 +831,10 @@ impl Lowerer {
                 let nb = self.unary(span, UnaryOp::Neg, n[1])?;
                 self.ternary(span, TernaryOp::BlendMin, n[0], nb, n[2])
             }
-            _ => self.fail(Diagnostic::error(span, format!("`{f}` has no implementation"))),
+            _ => self.fail(Diagnostic::error(
+                span,
+                format!("`{f}` has no implementation"),
+            )),
         }
     }
 
@@ -694,14 +857,19 @@ impl Lowerer {
 fn output_name(function: &str) -> String {
     match function {
         "frep" => "value".to_string(),
-        _ => function.strip_prefix("parametric_").unwrap_or(function).to_string(),
+        _ => function
+            .strip_prefix("parametric_")
+            .unwrap_or(function)
+            .to_string(),
     }
 }
 
 fn arity(f: &str) -> Option<(usize, usize)> {
     Some(match f {
-        "sin" | "cos" | "tan" | "asin" | "acos" | "atan" | "sinh" | "cosh" | "tanh" | "sqrt" | "abs" | "exp" | "log"
-        | "ln" | "log10" | "floor" | "ceil" | "round" | "sign" | "sqr" => (1, 1),
+        "sin" | "cos" | "tan" | "asin" | "acos" | "atan" | "sinh" | "cosh" | "tanh" | "sqrt"
+        | "abs" | "exp" | "log" | "ln" | "log10" | "floor" | "ceil" | "round" | "sign" | "sqr" => {
+            (1, 1)
+        }
         "atan2" | "pow" | "mod" | "r_and" | "r_or" | "r_sub" | "step" => (2, 2),
         "clamp" | "blend_and" | "blend_or" | "blend_sub" => (3, 3),
         "min" | "max" => (2, MAX_CALL_ARGS),

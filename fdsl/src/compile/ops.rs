@@ -139,7 +139,15 @@ impl BinaryOp {
     pub fn is_commutative(self) -> bool {
         matches!(
             self,
-            BinaryOp::Add | BinaryOp::Mul | BinaryOp::Min | BinaryOp::Max | BinaryOp::Eq | BinaryOp::And | BinaryOp::Or | BinaryOp::RAnd | BinaryOp::ROr
+            BinaryOp::Add
+                | BinaryOp::Mul
+                | BinaryOp::Min
+                | BinaryOp::Max
+                | BinaryOp::Eq
+                | BinaryOp::And
+                | BinaryOp::Or
+                | BinaryOp::RAnd
+                | BinaryOp::ROr
         )
     }
 }
@@ -168,12 +176,20 @@ fn blend_min(a: f64, b: f64, r: f64) -> f64 {
 
 /// `min` that propagates NaN (so that an undefined value is never hidden).
 pub fn min_nan(a: f64, b: f64) -> f64 {
-    if a.is_nan() || b.is_nan() { f64::NAN } else { a.min(b) }
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.min(b)
+    }
 }
 
 /// `max` that propagates NaN.
 pub fn max_nan(a: f64, b: f64) -> f64 {
-    if a.is_nan() || b.is_nan() { f64::NAN } else { a.max(b) }
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.max(b)
+    }
 }
 
 fn sign(a: f64) -> f64 {

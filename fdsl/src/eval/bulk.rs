@@ -47,16 +47,36 @@ impl BulkEval {
     }
 
     /// Several outputs at once: `outs[k][i]` receives output `k` at point `i`.
-    pub fn eval_outputs(&mut self, x: &[f32], y: &[f32], z: &[f32], t: f32, outs: &mut [&mut [f32]]) {
+    pub fn eval_outputs(
+        &mut self,
+        x: &[f32],
+        y: &[f32],
+        z: &[f32],
+        t: f32,
+        outs: &mut [&mut [f32]],
+    ) {
         let n = x.len();
-        assert!(y.len() == n && z.len() == n, "coordinate slices differ in length");
-        assert!(outs.len() <= self.tape.outputs().len(), "more output slices than outputs");
-        assert!(outs.iter().all(|o| o.len() == n), "output slices differ in length");
+        assert!(
+            y.len() == n && z.len() == n,
+            "coordinate slices differ in length"
+        );
+        assert!(
+            outs.len() <= self.tape.outputs().len(),
+            "more output slices than outputs"
+        );
+        assert!(
+            outs.iter().all(|o| o.len() == n),
+            "output slices differ in length"
+        );
         let inputs = self.tape.inputs();
         let mut start = 0;
         while start < n {
             let len = CHUNK.min(n - start);
-            let coords = [&x[start..start + len], &y[start..start + len], &z[start..start + len]];
+            let coords = [
+                &x[start..start + len],
+                &y[start..start + len],
+                &z[start..start + len],
+            ];
             for (slot, reg) in inputs.iter().enumerate() {
                 let Some(r) = reg else { continue };
                 let lanes = &mut self.regs[*r as usize];
@@ -69,7 +89,9 @@ impl BulkEval {
             self.run();
             for (k, out) in outs.iter_mut().enumerate() {
                 match self.tape.outputs()[k] {
-                    Operand::Reg(r) => out[start..start + len].copy_from_slice(&self.regs[r as usize][..len]),
+                    Operand::Reg(r) => {
+                        out[start..start + len].copy_from_slice(&self.regs[r as usize][..len])
+                    }
                     Operand::Const(c) => out[start..start + len].fill(c as f32),
                 }
             }
@@ -184,11 +206,17 @@ fn run_tape(instrs: &[Instr], regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
             continue;
         }
         let (below, rest) = regs.split_at_mut(out);
-        let Some((o, above)) = rest.split_first_mut() else { continue };
+        let Some((o, above)) = rest.split_first_mut() else {
+            continue;
+        };
         let src = |arg: Operand| match arg {
             Operand::Reg(r) => {
                 let r = r as usize;
-                Src::R(if r < out { &below[r] } else { &above[r - out - 1] })
+                Src::R(if r < out {
+                    &below[r]
+                } else {
+                    &above[r - out - 1]
+                })
             }
             Operand::Const(c) => Src::C(c as f32),
         };

@@ -23,22 +23,48 @@ pub struct Grad<T> {
 
 impl<T: Real> Grad<T> {
     fn constant(v: T) -> Self {
-        Grad { v, dx: T::ZERO, dy: T::ZERO, dz: T::ZERO }
+        Grad {
+            v,
+            dx: T::ZERO,
+            dy: T::ZERO,
+            dz: T::ZERO,
+        }
     }
 
     /// The value with the gradient scaled by `k`.
     fn chain(v: T, k: T, a: Self) -> Self {
-        Grad { v, dx: a.dx * k, dy: a.dy * k, dz: a.dz * k }
+        Grad {
+            v,
+            dx: scale(a.dx, k),
+            dy: scale(a.dy, k),
+            dz: scale(a.dz, k),
+        }
     }
 
     /// `ka * a' + kb * b'`.
     fn chain2(v: T, ka: T, a: Self, kb: T, b: Self) -> Self {
-        Grad { v, dx: a.dx * ka + b.dx * kb, dy: a.dy * ka + b.dy * kb, dz: a.dz * ka + b.dz * kb }
+        Grad {
+            v,
+            dx: scale(a.dx, ka) + scale(b.dx, kb),
+            dy: scale(a.dy, ka) + scale(b.dy, kb),
+            dz: scale(a.dz, ka) + scale(b.dz, kb),
+        }
     }
 
     /// The gradient as an array `[dx, dy, dz]`.
     pub fn gradient(&self) -> [T; 3] {
         [self.dx, self.dy, self.dz]
+    }
+}
+
+/// `d * k`, where a zero factor wins over an infinite one (the derivative of `sqrt` at 0 of a
+/// constant is 0, and so is the derivative of `sign` of anything).
+#[inline(always)]
+fn scale<T: Real>(d: T, k: T) -> T {
+    if d == T::ZERO || k == T::ZERO {
+        T::ZERO
+    } else {
+        d * k
     }
 }
 
@@ -101,7 +127,11 @@ fn binary<T: Real>(op: BinaryOp, a: Grad<T>, b: Grad<T>) -> Grad<T> {
             } else {
                 b.v * v / a.v
             };
-            let kb = if b.dx == zero && b.dy == zero && b.dz == zero { zero } else { v * a.v.ln() };
+            let kb = if b.dx == zero && b.dy == zero && b.dz == zero {
+                zero
+            } else {
+                v * a.v.ln()
+            };
             Grad::chain2(v, ka, a, kb, b)
         }
         BinaryOp::Atan2 => {
@@ -109,7 +139,9 @@ fn binary<T: Real>(op: BinaryOp, a: Grad<T>, b: Grad<T>) -> Grad<T> {
             Grad::chain2(v, b.v / d, a, -a.v / d, b)
         }
         BinaryOp::Mod => Grad::chain2(v, one, a, -(a.v / b.v).floor(), b),
-        BinaryOp::Lt | BinaryOp::Le | BinaryOp::Eq | BinaryOp::And | BinaryOp::Or => Grad::constant(v),
+        BinaryOp::Lt | BinaryOp::Le | BinaryOp::Eq | BinaryOp::And | BinaryOp::Or => {
+            Grad::constant(v)
+        }
         BinaryOp::RAnd | BinaryOp::ROr => {
             let s = (a.v * a.v + b.v * b.v).sqrt();
             let sign = if op == BinaryOp::RAnd { -one } else { one };
@@ -133,7 +165,12 @@ fn ternary<T: Real>(op: TernaryOp, a: Grad<T>, b: Grad<T>, c: Grad<T>) -> Grad<T
         }
         TernaryOp::BlendMin => blend_min(a, b, c),
         TernaryOp::BlendMax => {
-            let neg = |g: Grad<T>| Grad { v: -g.v, dx: -g.dx, dy: -g.dy, dz: -g.dz };
+            let neg = |g: Grad<T>| Grad {
+                v: -g.v,
+                dx: -g.dx,
+                dy: -g.dy,
+                dz: -g.dz,
+            };
             neg(blend_min(neg(a), neg(b), c))
         }
     }
@@ -145,7 +182,7 @@ fn blend_min<T: Real>(a: Grad<T>, b: Grad<T>, r: Grad<T>) -> Grad<T> {
     let m = binary(BinaryOp::Min, a, b);
     let diff = a.v - b.v;
     let abs = if diff < T::ZERO { -diff } else { diff };
-    if !(abs < r.v) {
+    if abs.partial_cmp(&r.v) != Some(std::cmp::Ordering::Less) {
         return Grad { v, ..m };
     }
     let s = if diff < T::ZERO { -T::ONE } else { T::ONE };
@@ -154,8 +191,14 @@ fn blend_min<T: Real>(a: Grad<T>, b: Grad<T>, r: Grad<T>) -> Grad<T> {
     let two = T::ONE + T::ONE;
     // dh = -s (da - db) / r + |a-b| dr / r^2
     let dh = |da: T, db: T, dr: T| -s * (da - db) / r.v + abs * dr / (r.v * r.v);
-    let d = |dm: T, da: T, db: T, dr: T| dm - quarter * (two * h * r.v * dh(da, db, dr) + h * h * dr);
-    Grad { v, dx: d(m.dx, a.dx, b.dx, r.dx), dy: d(m.dy, a.dy, b.dy, r.dy), dz: d(m.dz, a.dz, b.dz, r.dz) }
+    let d =
+        |dm: T, da: T, db: T, dr: T| dm - quarter * (two * h * r.v * dh(da, db, dr) + h * h * dr);
+    Grad {
+        v,
+        dx: d(m.dx, a.dx, b.dx, r.dx),
+        dy: d(m.dy, a.dy, b.dy, r.dy),
+        dz: d(m.dz, a.dz, b.dz, r.dz),
+    }
 }
 
 fn run<T: Real>(tape: &Tape, regs: &mut [Grad<T>], p: [T; 4]) {
@@ -201,7 +244,10 @@ pub struct GradEval {
 impl GradEval {
     /// An evaluator for `tape`.
     pub fn new(tape: &Tape) -> GradEval {
-        GradEval { tape: tape.clone(), regs: vec![Grad::default(); tape.n_regs()] }
+        GradEval {
+            tape: tape.clone(),
+            regs: vec![Grad::default(); tape.n_regs()],
+        }
     }
 
     /// Value and gradient of the first output at `p = [x, y, z, t]`.
@@ -221,13 +267,19 @@ pub struct GradBulkEval {
 impl GradBulkEval {
     /// An evaluator for `tape`.
     pub fn new(tape: &Tape) -> GradBulkEval {
-        GradBulkEval { tape: tape.clone(), regs: vec![Grad::default(); tape.n_regs()] }
+        GradBulkEval {
+            tape: tape.clone(),
+            regs: vec![Grad::default(); tape.n_regs()],
+        }
     }
 
     /// Value and gradient of the first output at each point, written to `out`.
     pub fn eval(&mut self, x: &[f32], y: &[f32], z: &[f32], t: f32, out: &mut [Grad<f32>]) {
         let n = x.len();
-        assert!(y.len() == n && z.len() == n && out.len() == n, "slices differ in length");
+        assert!(
+            y.len() == n && z.len() == n && out.len() == n,
+            "slices differ in length"
+        );
         for i in 0..n {
             run(&self.tape, &mut self.regs, [x[i], y[i], z[i], t]);
             out[i] = output(&self.tape, &self.regs, 0);

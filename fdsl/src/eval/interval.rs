@@ -11,46 +11,74 @@ use std::f64::consts::{FRAC_PI_2, PI};
 use crate::compile::{BinaryOp, TernaryOp, UnaryOp};
 use crate::tape::{Choice, Code, Operand, Tape};
 
-/// A closed interval `[lo, hi]`.
+/// A closed interval `[lo, hi]` of the values a function takes over a box, plus whether the
+/// function may be undefined (NaN) somewhere in the box.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Interval {
     /// Lower bound.
     pub lo: f64,
     /// Upper bound.
     pub hi: f64,
+    /// Whether the value may be NaN somewhere (for example `sqrt` of a range reaching below 0).
+    pub nan: bool,
 }
 
 impl Interval {
     /// `[lo, hi]`.
-    pub fn new(lo: f64, hi: f64) -> Interval {
-        Interval { lo, hi }
+    pub const fn new(lo: f64, hi: f64) -> Interval {
+        Interval { lo, hi, nan: false }
     }
 
     /// The single value `v`.
     pub fn point(v: f64) -> Interval {
-        Interval { lo: v, hi: v }
+        Interval {
+            lo: v,
+            hi: v,
+            nan: v.is_nan(),
+        }
     }
 
     /// Every real number.
-    pub const EVERYTHING: Interval = Interval { lo: f64::NEG_INFINITY, hi: f64::INFINITY };
-    const NAN: Interval = Interval { lo: f64::NAN, hi: f64::NAN };
-    const BOOL: Interval = Interval { lo: 0.0, hi: 1.0 };
+    pub const EVERYTHING: Interval = Interval::new(f64::NEG_INFINITY, f64::INFINITY);
+    const NAN: Interval = Interval {
+        lo: f64::NAN,
+        hi: f64::NAN,
+        nan: true,
+    };
+    const BOOL: Interval = Interval::new(0.0, 1.0);
 
-    /// Whether `v` lies inside (NaN ends contain nothing).
+    /// Whether `v` lies inside; NaN lies inside when the interval may be NaN.
     pub fn contains(&self, v: f64) -> bool {
-        self.lo <= v && v <= self.hi
+        if v.is_nan() {
+            self.nan
+        } else {
+            self.lo <= v && v <= self.hi
+        }
     }
 
-    /// Whether either end is NaN.
+    /// Whether the value may be NaN somewhere in the box.
     pub fn has_nan(&self) -> bool {
-        self.lo.is_nan() || self.hi.is_nan()
+        self.nan || self.lo.is_nan() || self.hi.is_nan()
+    }
+
+    fn with_nan(mut self, nan: bool) -> Interval {
+        self.nan |= nan;
+        self
     }
 
     fn union(self, o: Interval) -> Interval {
-        if self.has_nan() || o.has_nan() {
-            return Interval::NAN;
+        // An interval with NaN ends is NaN everywhere: it adds only the NaN flag.
+        if self.ends_nan() {
+            return o.with_nan(true);
         }
-        Interval { lo: self.lo.min(o.lo), hi: self.hi.max(o.hi) }
+        if o.ends_nan() {
+            return self.with_nan(true);
+        }
+        Interval {
+            lo: self.lo.min(o.lo),
+            hi: self.hi.max(o.hi),
+            nan: self.nan || o.nan,
+        }
     }
 
     fn definitely_true(self) -> bool {
@@ -58,12 +86,26 @@ impl Interval {
     }
 
     fn definitely_false(self) -> bool {
-        self.lo == 0.0 && self.hi == 0.0
+        !self.nan && self.lo == 0.0 && self.hi == 0.0
+    }
+
+    fn ends_nan(&self) -> bool {
+        self.lo.is_nan() || self.hi.is_nan()
     }
 
     fn widen(self) -> Interval {
-        let w = |v: f64| v.abs() * 4.0 * f64::EPSILON + f64::MIN_POSITIVE;
-        Interval { lo: self.lo - w(self.lo), hi: self.hi + w(self.hi) }
+        let w = |v: f64| {
+            if v.is_finite() {
+                v.abs() * 4.0 * f64::EPSILON + f64::MIN_POSITIVE
+            } else {
+                0.0
+            }
+        };
+        Interval {
+            lo: self.lo - w(self.lo),
+            hi: self.hi + w(self.hi),
+            nan: self.nan,
+        }
     }
 }
 
@@ -134,38 +176,50 @@ impl IntervalEval {
 }
 
 fn monotone(a: Interval, f: impl Fn(f64) -> f64) -> Interval {
-    Interval { lo: f(a.lo), hi: f(a.hi) }
+    Interval {
+        lo: f(a.lo),
+        hi: f(a.hi),
+        nan: a.nan,
+    }
 }
 
 fn unary(op: UnaryOp, a: Interval) -> Interval {
-    if a.has_nan() {
+    if a.ends_nan() {
         return Interval::NAN;
     }
+    if op == UnaryOp::Not && a.nan {
+        return Interval::BOOL;
+    }
+    unary_finite(op, a).with_nan(a.nan)
+}
+
+/// Bounds of a unary operation over an interval with numeric ends.
+fn unary_finite(op: UnaryOp, a: Interval) -> Interval {
     match op {
-        UnaryOp::Neg => Interval { lo: -a.hi, hi: -a.lo },
+        UnaryOp::Neg => Interval::new(-a.hi, -a.lo),
         UnaryOp::Abs => {
             if a.lo >= 0.0 {
                 a
             } else if a.hi <= 0.0 {
-                Interval { lo: -a.hi, hi: -a.lo }
+                Interval::new(-a.hi, -a.lo)
             } else {
-                Interval { lo: 0.0, hi: (-a.lo).max(a.hi) }
+                Interval::new(0.0, (-a.lo).max(a.hi))
             }
         }
         UnaryOp::Square => {
             if a.lo >= 0.0 {
-                Interval { lo: a.lo * a.lo, hi: a.hi * a.hi }
+                Interval::new(a.lo * a.lo, a.hi * a.hi)
             } else if a.hi <= 0.0 {
-                Interval { lo: a.hi * a.hi, hi: a.lo * a.lo }
+                Interval::new(a.hi * a.hi, a.lo * a.lo)
             } else {
-                Interval { lo: 0.0, hi: (a.lo * a.lo).max(a.hi * a.hi) }
+                Interval::new(0.0, (a.lo * a.lo).max(a.hi * a.hi))
             }
         }
         UnaryOp::Sqrt => {
             if a.hi < 0.0 {
                 Interval::NAN
             } else {
-                monotone(Interval { lo: a.lo.max(0.0), hi: a.hi }, f64::sqrt)
+                monotone(Interval::new(a.lo.max(0.0), a.hi), f64::sqrt).with_nan(a.lo < 0.0)
             }
         }
         UnaryOp::Sin => periodic(a, f64::sin, FRAC_PI_2, -FRAC_PI_2),
@@ -183,23 +237,28 @@ fn unary(op: UnaryOp, a: Interval) -> Interval {
             if a.hi < -1.0 || a.lo > 1.0 {
                 return Interval::NAN;
             }
-            let c = Interval { lo: a.lo.max(-1.0), hi: a.hi.min(1.0) };
+            let c =
+                Interval::new(a.lo.max(-1.0), a.hi.min(1.0)).with_nan(a.lo < -1.0 || a.hi > 1.0);
             if op == UnaryOp::Asin {
                 monotone(c, f64::asin).widen()
             } else {
-                Interval { lo: c.hi.acos(), hi: c.lo.acos() }.widen()
+                Interval::new(c.hi.acos(), c.lo.acos())
+                    .with_nan(c.nan)
+                    .widen()
             }
         }
         UnaryOp::Atan => monotone(a, f64::atan).widen(),
         UnaryOp::Exp => {
             let r = monotone(a, f64::exp).widen();
-            Interval { lo: r.lo.max(0.0), hi: r.hi }
+            Interval::new(r.lo.max(0.0), r.hi)
         }
         UnaryOp::Ln => {
             if a.hi < 0.0 {
                 Interval::NAN
             } else {
-                monotone(Interval { lo: a.lo.max(0.0), hi: a.hi }, f64::ln).widen()
+                monotone(Interval::new(a.lo.max(0.0), a.hi), f64::ln)
+                    .with_nan(a.lo < 0.0)
+                    .widen()
             }
         }
         UnaryOp::Floor => monotone(a, f64::floor),
@@ -220,8 +279,9 @@ fn unary(op: UnaryOp, a: Interval) -> Interval {
 /// Bounds of a 2pi-periodic function with maxima at `max_at + 2k pi` and minima at
 /// `min_at + 2k pi`, with values in [-1, 1].
 fn periodic(a: Interval, f: fn(f64) -> f64, max_at: f64, min_at: f64) -> Interval {
-    if !(a.hi - a.lo < 2.0 * PI) {
-        return Interval { lo: -1.0, hi: 1.0 };
+    let width = a.hi - a.lo;
+    if width >= 2.0 * PI || width.is_nan() {
+        return Interval::new(-1.0, 1.0);
     }
     let contains = |at: f64| {
         let k = ((a.lo - at) / (2.0 * PI)).ceil();
@@ -230,21 +290,33 @@ fn periodic(a: Interval, f: fn(f64) -> f64, max_at: f64, min_at: f64) -> Interva
     let (fa, fb) = (f(a.lo), f(a.hi));
     let lo = if contains(min_at) { -1.0 } else { fa.min(fb) };
     let hi = if contains(max_at) { 1.0 } else { fa.max(fb) };
-    Interval { lo, hi }.widen().clamp_unit()
+    Interval::new(lo, hi).widen().clamp_unit()
 }
 
 impl Interval {
     fn clamp_unit(self) -> Interval {
-        Interval { lo: self.lo.max(-1.0), hi: self.hi.min(1.0) }
+        Interval {
+            lo: self.lo.max(-1.0),
+            hi: self.hi.min(1.0),
+            nan: self.nan,
+        }
     }
 }
 
 fn mul(a: Interval, b: Interval) -> Interval {
-    let p = [a.lo * b.lo, a.lo * b.hi, a.hi * b.lo, a.hi * b.hi];
+    hull([a.lo * b.lo, a.lo * b.hi, a.hi * b.lo, a.hi * b.hi])
+}
+
+/// The smallest interval holding four corner values; a NaN corner (0 * inf, inf - inf) makes
+/// the result unbounded and maybe undefined.
+fn hull(p: [f64; 4]) -> Interval {
     if p.iter().any(|v| v.is_nan()) {
-        return Interval::EVERYTHING;
+        return Interval::EVERYTHING.with_nan(true);
     }
-    Interval { lo: p.iter().copied().fold(f64::INFINITY, f64::min), hi: p.iter().copied().fold(f64::NEG_INFINITY, f64::max) }
+    Interval::new(
+        p.iter().copied().fold(f64::INFINITY, f64::min),
+        p.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+    )
 }
 
 fn compare(definitely: bool, definitely_not: bool) -> Interval {
@@ -306,77 +378,102 @@ fn sign_only(choice: Choice) -> Choice {
 }
 
 fn binary(op: BinaryOp, a: Interval, b: Interval) -> (Interval, Choice) {
-    if a.has_nan() || b.has_nan() {
+    let nan = a.has_nan() || b.has_nan();
+    let logic = matches!(
+        op,
+        BinaryOp::Lt | BinaryOp::Le | BinaryOp::Eq | BinaryOp::And | BinaryOp::Or
+    );
+    if nan && logic {
+        // A comparison turns NaN into a number: anything is possible.
+        return (Interval::BOOL, Choice::Both);
+    }
+    if a.ends_nan() || b.ends_nan() {
         return (Interval::NAN, Choice::Both);
     }
+    let (value, choice) = binary_finite(op, a, b);
+    let value = if value.ends_nan() {
+        Interval::EVERYTHING.with_nan(true)
+    } else {
+        value
+    };
+    // NaN propagates through min and max, so neither argument alone decides.
+    (value.with_nan(nan), if nan { Choice::Both } else { choice })
+}
+
+/// Bounds and choice of a binary operation over intervals with numeric ends.
+fn binary_finite(op: BinaryOp, a: Interval, b: Interval) -> (Interval, Choice) {
     let value = match op {
-        BinaryOp::Add => Interval { lo: a.lo + b.lo, hi: a.hi + b.hi },
-        BinaryOp::Sub => Interval { lo: a.lo - b.hi, hi: a.hi - b.lo },
+        BinaryOp::Add => Interval::new(a.lo + b.lo, a.hi + b.hi),
+        BinaryOp::Sub => Interval::new(a.lo - b.hi, a.hi - b.lo),
         BinaryOp::Mul => mul(a, b),
         BinaryOp::Div => {
             if b.lo > 0.0 || b.hi < 0.0 {
-                let p = [a.lo / b.lo, a.lo / b.hi, a.hi / b.lo, a.hi / b.hi];
-                if p.iter().any(|v| v.is_nan()) {
-                    Interval::EVERYTHING
-                } else {
-                    Interval {
-                        lo: p.iter().copied().fold(f64::INFINITY, f64::min),
-                        hi: p.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-                    }
-                }
+                hull([a.lo / b.lo, a.lo / b.hi, a.hi / b.lo, a.hi / b.hi])
             } else {
-                Interval::EVERYTHING
+                // 0/0 is NaN; anything else over a range through 0 is unbounded.
+                Interval::EVERYTHING.with_nan(a.lo <= 0.0 && a.hi >= 0.0)
             }
         }
         BinaryOp::Min => {
             let choice = min_choice(a, b);
-            let both = Interval { lo: a.lo.min(b.lo), hi: a.hi.min(b.hi) };
+            let both = Interval::new(a.lo.min(b.lo), a.hi.min(b.hi));
             return (chosen(choice, a, b, both), choice);
         }
         BinaryOp::Max => {
             let choice = max_choice(a, b);
-            let both = Interval { lo: a.lo.max(b.lo), hi: a.hi.max(b.hi) };
+            let both = Interval::new(a.lo.max(b.lo), a.hi.max(b.hi));
             return (chosen(choice, a, b, both), choice);
         }
         BinaryOp::RAnd | BinaryOp::ROr => {
             // Both are non-decreasing in each argument.
-            let value = Interval { lo: op.apply(a.lo, b.lo), hi: op.apply(a.hi, b.hi) };
-            let choice = if op == BinaryOp::RAnd { min_choice(a, b) } else { max_choice(a, b) };
-            let value = if value.has_nan() { Interval::EVERYTHING } else { value.widen() };
+            let value = Interval::new(op.apply(a.lo, b.lo), op.apply(a.hi, b.hi));
+            let choice = if op == BinaryOp::RAnd {
+                min_choice(a, b)
+            } else {
+                max_choice(a, b)
+            };
+            let value = if value.ends_nan() {
+                Interval::EVERYTHING.with_nan(true)
+            } else {
+                value.widen()
+            };
             return (value, sign_only(choice));
         }
         BinaryOp::Pow => {
             if a.lo > 0.0 {
-                let p = [a.lo.powf(b.lo), a.lo.powf(b.hi), a.hi.powf(b.lo), a.hi.powf(b.hi)];
-                if p.iter().any(|v| v.is_nan()) {
-                    Interval::EVERYTHING
-                } else {
-                    Interval {
-                        lo: p.iter().copied().fold(f64::INFINITY, f64::min),
-                        hi: p.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-                    }
-                    .widen()
-                }
+                // For a positive base, a^b is monotonic in each argument: the corners bound it.
+                hull([
+                    a.lo.powf(b.lo),
+                    a.lo.powf(b.hi),
+                    a.hi.powf(b.lo),
+                    a.hi.powf(b.hi),
+                ])
+                .widen()
             } else {
-                Interval::EVERYTHING
+                // A negative base with a fractional exponent is NaN.
+                Interval::EVERYTHING.with_nan(true)
             }
         }
         BinaryOp::Atan2 => {
             if b.lo > 0.0 && b.lo.is_finite() {
-                let p = [a.lo.atan2(b.lo), a.lo.atan2(b.hi), a.hi.atan2(b.lo), a.hi.atan2(b.hi)];
-                Interval {
-                    lo: p.iter().copied().fold(f64::INFINITY, f64::min),
-                    hi: p.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-                }
+                hull([
+                    a.lo.atan2(b.lo),
+                    a.lo.atan2(b.hi),
+                    a.hi.atan2(b.lo),
+                    a.hi.atan2(b.hi),
+                ])
                 .widen()
             } else {
-                Interval { lo: -PI, hi: PI }.widen()
+                Interval::new(-PI, PI).widen()
             }
         }
         BinaryOp::Mod => modulo(a, b),
         BinaryOp::Lt => compare(a.hi < b.lo, a.lo >= b.hi),
         BinaryOp::Le => compare(a.hi <= b.lo, a.lo > b.hi),
-        BinaryOp::Eq => compare(a.lo == a.hi && b.lo == b.hi && a.lo == b.lo, a.hi < b.lo || b.hi < a.lo),
+        BinaryOp::Eq => compare(
+            a.lo == a.hi && b.lo == b.hi && a.lo == b.lo,
+            a.hi < b.lo || b.hi < a.lo,
+        ),
         BinaryOp::And => compare(
             a.definitely_true() && b.definitely_true(),
             a.definitely_false() || b.definitely_false(),
@@ -390,26 +487,33 @@ fn binary(op: BinaryOp, a: Interval, b: Interval) -> (Interval, Choice) {
 }
 
 fn modulo(a: Interval, b: Interval) -> Interval {
+    if b.lo <= 0.0 && b.hi >= 0.0 {
+        // `a mod 0` is NaN.
+        return Interval::EVERYTHING.with_nan(true);
+    }
     if b.lo == b.hi && b.lo != 0.0 && a.lo.is_finite() && a.hi.is_finite() {
         let k_lo = (a.lo / b.lo).floor();
         let k_hi = (a.hi / b.lo).floor();
         if k_lo == k_hi {
-            return Interval { lo: a.lo - b.lo * k_lo, hi: a.hi - b.lo * k_lo }.widen();
+            return Interval::new(a.lo - b.lo * k_lo, a.hi - b.lo * k_lo).widen();
         }
     }
+    // An infinite `a` has no remainder: NaN.
+    let nan = !a.lo.is_finite() || !a.hi.is_finite();
     if b.lo > 0.0 {
-        Interval { lo: 0.0, hi: b.hi }
-    } else if b.hi < 0.0 {
-        Interval { lo: b.lo, hi: 0.0 }
+        Interval::new(0.0, b.hi).with_nan(nan)
     } else {
-        Interval { lo: b.lo.min(0.0), hi: b.hi.max(0.0) }
+        Interval::new(b.lo, 0.0).with_nan(nan)
     }
 }
 
 fn ternary(op: TernaryOp, a: Interval, b: Interval, c: Interval) -> (Interval, Choice) {
     match op {
         TernaryOp::Select => {
-            if a.definitely_true() {
+            if a.ends_nan() || a.nan {
+                // A NaN condition counts as true (`NaN != 0`), so both branches stay possible.
+                (b.union(c), Choice::Both)
+            } else if a.definitely_true() {
                 (b, Choice::Left)
             } else if a.definitely_false() {
                 (c, Choice::Right)
@@ -419,22 +523,30 @@ fn ternary(op: TernaryOp, a: Interval, b: Interval, c: Interval) -> (Interval, C
         }
         TernaryOp::BlendMin | TernaryOp::BlendMax => {
             if a.has_nan() || b.has_nan() || c.has_nan() || c.lo <= 0.0 {
-                return (Interval::EVERYTHING, Choice::Both);
+                return (Interval::EVERYTHING.with_nan(true), Choice::Both);
             }
-            let d = Interval { lo: a.lo - b.hi, hi: a.hi - b.lo };
+            let d = Interval::new(a.lo - b.hi, a.hi - b.lo);
             let min = op == TernaryOp::BlendMin;
             // Far apart, the blend is exactly min (or max).
             if d.lo >= c.hi {
-                return if min { (b, Choice::Right) } else { (a, Choice::Left) };
+                return if min {
+                    (b, Choice::Right)
+                } else {
+                    (a, Choice::Left)
+                };
             }
             if d.hi <= -c.hi {
-                return if min { (a, Choice::Left) } else { (b, Choice::Right) };
+                return if min {
+                    (a, Choice::Left)
+                } else {
+                    (b, Choice::Right)
+                };
             }
             let bump = c.hi * 0.25;
             let value = if min {
-                Interval { lo: a.lo.min(b.lo) - bump, hi: a.hi.min(b.hi) }
+                Interval::new(a.lo.min(b.lo) - bump, a.hi.min(b.hi))
             } else {
-                Interval { lo: a.lo.max(b.lo), hi: a.hi.max(b.hi) + bump }
+                Interval::new(a.lo.max(b.lo), a.hi.max(b.hi) + bump)
             };
             (value.widen(), Choice::Both)
         }

@@ -12,7 +12,10 @@ pub struct PointEval {
 impl PointEval {
     /// An evaluator for `tape` (allocates its registers once).
     pub fn new(tape: &Tape) -> PointEval {
-        PointEval { tape: tape.clone(), regs: vec![0.0; tape.n_regs()] }
+        PointEval {
+            tape: tape.clone(),
+            regs: vec![0.0; tape.n_regs()],
+        }
     }
 
     /// The tape this evaluator runs.

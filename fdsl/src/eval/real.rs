@@ -16,7 +16,8 @@ const ROUND_MAGIC: f32 = 12_582_912.0;
 fn sin_cos_poly(r: f32) -> (f32, f32) {
     let r2 = r * r;
     let s = r + r * r2 * (-1.666_665_5e-1 + r2 * (8.332_161e-3 + r2 * -1.951_529_6e-4));
-    let c = 1.0 - 0.5 * r2 + r2 * r2 * (4.166_664_6e-2 + r2 * (-1.388_731_6e-3 + r2 * 2.443_315_7e-5));
+    let c =
+        1.0 - 0.5 * r2 + r2 * r2 * (4.166_664_6e-2 + r2 * (-1.388_731_6e-3 + r2 * 2.443_315_7e-5));
     (s, c)
 }
 
@@ -47,8 +48,14 @@ fn sin_quadrant(x: f32, shift: i32) -> f32 {
 }
 
 /// The operations the gradient evaluator needs, in f32 or f64.
-pub trait Real: Copy + PartialOrd + std::ops::Add<Output = Self> + std::ops::Sub<Output = Self>
-    + std::ops::Mul<Output = Self> + std::ops::Div<Output = Self> + std::ops::Neg<Output = Self>
+pub trait Real:
+    Copy
+    + PartialOrd
+    + std::ops::Add<Output = Self>
+    + std::ops::Sub<Output = Self>
+    + std::ops::Mul<Output = Self>
+    + std::ops::Div<Output = Self>
+    + std::ops::Neg<Output = Self>
 {
     /// 0.
     const ZERO: Self;

@@ -87,7 +87,10 @@ impl Stmt {
     pub fn span(&self) -> Span {
         match self {
             Stmt::Assign { name, value } => name.span.to(value.span),
-            Stmt::If { span, .. } | Stmt::Block(_, span) | Stmt::Return(_, span) | Stmt::Loop { span, .. } => *span,
+            Stmt::If { span, .. }
+            | Stmt::Block(_, span)
+            | Stmt::Return(_, span)
+            | Stmt::Loop { span, .. } => *span,
             Stmt::Expr(e) => e.span,
         }
     }

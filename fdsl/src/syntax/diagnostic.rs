@@ -16,12 +16,18 @@ impl Span {
     /// A span from byte offsets.
     pub fn new(start: usize, end: usize) -> Span {
         let clamp = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
-        Span { start: clamp(start), end: clamp(end.max(start)) }
+        Span {
+            start: clamp(start),
+            end: clamp(end.max(start)),
+        }
     }
 
     /// The smallest span covering both.
     pub fn to(self, other: Span) -> Span {
-        Span { start: self.start.min(other.start), end: self.end.max(other.end) }
+        Span {
+            start: self.start.min(other.start),
+            end: self.end.max(other.end),
+        }
     }
 
     /// The span as a `usize` range, clamped to a text of `len` bytes.
@@ -57,12 +63,22 @@ pub struct Diagnostic {
 impl Diagnostic {
     /// An error at `span`.
     pub fn error(span: Span, message: impl Into<String>) -> Diagnostic {
-        Diagnostic { severity: Severity::Error, span, message: message.into(), hint: None }
+        Diagnostic {
+            severity: Severity::Error,
+            span,
+            message: message.into(),
+            hint: None,
+        }
     }
 
     /// A warning at `span`.
     pub fn warning(span: Span, message: impl Into<String>) -> Diagnostic {
-        Diagnostic { severity: Severity::Warning, span, message: message.into(), hint: None }
+        Diagnostic {
+            severity: Severity::Warning,
+            span,
+            message: message.into(),
+            hint: None,
+        }
     }
 
     /// The same diagnostic with a hint.
@@ -103,7 +119,9 @@ impl Diagnostic {
         let end = floor_char_boundary(source, range.end).max(start);
         let (line, col) = self.line_col(source);
         let line_start = source[..start].rfind('\n').map_or(0, |i| i + 1);
-        let line_end = source[start..].find('\n').map_or(source.len(), |i| start + i);
+        let line_end = source[start..]
+            .find('\n')
+            .map_or(source.len(), |i| start + i);
         let text = &source[line_start..line_end];
         let width = source[start..end.min(line_end)].chars().count().max(1);
         let gutter = line.to_string().len();
@@ -116,7 +134,14 @@ impl Diagnostic {
         let _ = writeln!(out, "{:gutter$}--> {line}:{col}", "");
         let _ = writeln!(out, "{:gutter$} |", "");
         let _ = writeln!(out, "{line} | {text}");
-        let _ = writeln!(out, "{:gutter$} | {:pad$}{}", "", "", "^".repeat(width), pad = col - 1);
+        let _ = writeln!(
+            out,
+            "{:gutter$} | {:pad$}{}",
+            "",
+            "",
+            "^".repeat(width),
+            pad = col - 1
+        );
         if let Some(hint) = &self.hint {
             let _ = writeln!(out, "{:gutter$} = hint: {hint}", "");
         }
@@ -134,7 +159,11 @@ fn floor_char_boundary(s: &str, mut i: usize) -> usize {
 
 /// Renders every diagnostic in order, separated by blank lines.
 pub fn render_all(diagnostics: &[Diagnostic], source: &str) -> String {
-    diagnostics.iter().map(|d| d.render(source)).collect::<Vec<_>>().join("\n")
+    diagnostics
+        .iter()
+        .map(|d| d.render(source))
+        .collect::<Vec<_>>()
+        .join("\n")
 }
 
 #[cfg(test)]

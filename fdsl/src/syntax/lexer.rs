@@ -97,12 +97,16 @@ pub fn tokenize(source: &str) -> Vec<Token> {
             continue;
         }
         if c == b'/' && bytes.get(i + 1) == Some(&b'*') {
-            let end = source[i + 2..].find("*/").map_or(bytes.len(), |e| i + 2 + e + 2);
+            let end = source[i + 2..]
+                .find("*/")
+                .map_or(bytes.len(), |e| i + 2 + e + 2);
             i = end;
             continue;
         }
         let start = i;
-        let kind = if c.is_ascii_digit() || (c == b'.' && bytes.get(i + 1).is_some_and(u8::is_ascii_digit)) {
+        let kind = if c.is_ascii_digit()
+            || (c == b'.' && bytes.get(i + 1).is_some_and(u8::is_ascii_digit))
+        {
             i = number_end(bytes, i);
             // The text is made of ASCII digits, '.', 'e' and signs, so it always parses, but a
             // literal like `1e999` becomes infinity, which the parser reports.
@@ -150,9 +154,15 @@ pub fn tokenize(source: &str) -> Vec<Token> {
             i += ch.len_utf8();
             TokenKind::Unknown(ch)
         };
-        tokens.push(Token { kind, span: Span::new(start, i) });
+        tokens.push(Token {
+            kind,
+            span: Span::new(start, i),
+        });
     }
-    tokens.push(Token { kind: TokenKind::Eof, span: Span::new(bytes.len(), bytes.len()) });
+    tokens.push(Token {
+        kind: TokenKind::Eof,
+        span: Span::new(bytes.len(), bytes.len()),
+    });
     tokens
 }
 
@@ -191,11 +201,26 @@ mod tests {
 
     #[test]
     fn numbers_in_usual_notations() {
-        for (src, value) in [("1", 1.0), ("1.5", 1.5), (".5", 0.5), ("2.", 2.0), ("1e3", 1e3), ("1.5E-2", 0.015), ("3e+2", 300.0)] {
-            assert_eq!(kinds(src), vec![TokenKind::Number(value), TokenKind::Eof], "{src}");
+        for (src, value) in [
+            ("1", 1.0),
+            ("1.5", 1.5),
+            (".5", 0.5),
+            ("2.", 2.0),
+            ("1e3", 1e3),
+            ("1.5E-2", 0.015),
+            ("3e+2", 300.0),
+        ] {
+            assert_eq!(
+                kinds(src),
+                vec![TokenKind::Number(value), TokenKind::Eof],
+                "{src}"
+            );
         }
         // `2e` is the number 2 followed by the name `e`.
-        assert_eq!(kinds("2e"), vec![TokenKind::Number(2.0), TokenKind::Ident, TokenKind::Eof]);
+        assert_eq!(
+            kinds("2e"),
+            vec![TokenKind::Number(2.0), TokenKind::Ident, TokenKind::Eof]
+        );
     }
 
     #[test]
@@ -203,7 +228,10 @@ mod tests {
         use TokenKind::*;
         assert_eq!(
             kinds("a&&b || c <= d != e // tail\n/* block */ \\ & | ^ %"),
-            vec![Ident, AmpAmp, Ident, PipePipe, Ident, Le, Ident, Ne, Ident, Backslash, Amp, Pipe, Caret, Percent, Eof]
+            vec![
+                Ident, AmpAmp, Ident, PipePipe, Ident, Le, Ident, Ne, Ident, Backslash, Amp, Pipe,
+                Caret, Percent, Eof
+            ]
         );
     }
 

@@ -16,12 +16,22 @@ pub fn parse(source: &str) -> (Program, Vec<Diagnostic>) {
     if source.len() > MAX_SOURCE_BYTES {
         let d = Diagnostic::error(
             Span::new(MAX_SOURCE_BYTES, source.len()),
-            format!("the text is {} bytes long; the limit is {MAX_SOURCE_BYTES}", source.len()),
+            format!(
+                "the text is {} bytes long; the limit is {MAX_SOURCE_BYTES}",
+                source.len()
+            ),
         )
         .with_hint("split the model into several objects or properties");
         return (Program::default(), vec![d]);
     }
-    let mut parser = Parser { source, tokens: tokenize(source), pos: 0, depth: 0, diagnostics: Vec::new(), too_deep: false };
+    let mut parser = Parser {
+        source,
+        tokens: tokenize(source),
+        pos: 0,
+        depth: 0,
+        diagnostics: Vec::new(),
+        too_deep: false,
+    };
     let program = parser.program();
     (program, parser.diagnostics)
 }
@@ -95,11 +105,18 @@ impl<'a> Parser<'a> {
             return self.fail(unknown_char(token.span, c));
         }
         let found = self.describe(token);
-        self.fail(Diagnostic::error(token.span, format!("expected {expected}, found {found}")))
+        self.fail(Diagnostic::error(
+            token.span,
+            format!("expected {expected}, found {found}"),
+        ))
     }
 
     fn expect(&mut self, kind: TokenKind, expected: &str) -> PResult<Token> {
-        if self.peek().kind == kind { Ok(self.bump()) } else { self.unexpected(expected) }
+        if self.peek().kind == kind {
+            Ok(self.bump())
+        } else {
+            self.unexpected(expected)
+        }
     }
 
     fn enter(&mut self, span: Span) -> PResult<()> {
@@ -108,8 +125,11 @@ impl<'a> Parser<'a> {
             if !self.too_deep {
                 self.too_deep = true;
                 self.report(
-                    Diagnostic::error(span, format!("the text nests deeper than {MAX_NESTING_DEPTH} levels"))
-                        .with_hint("use intermediate variables to flatten the expression"),
+                    Diagnostic::error(
+                        span,
+                        format!("the text nests deeper than {MAX_NESTING_DEPTH} levels"),
+                    )
+                    .with_hint("use intermediate variables to flatten the expression"),
                 );
             }
             return Err(Failed);
@@ -155,7 +175,10 @@ impl<'a> Parser<'a> {
         if n >= 2 && self.is_word(self.tokens[n - 2], "END") {
             let end = self.tokens[n - 2];
             self.tokens.remove(n - 2);
-            self.report(Diagnostic::warning(end.span, "ignored the message wrapper `END`"));
+            self.report(Diagnostic::warning(
+                end.span,
+                "ignored the message wrapper `END`",
+            ));
         }
     }
 
@@ -190,10 +213,16 @@ impl<'a> Parser<'a> {
         }
         let name = self.text(token.span);
         if KEYWORDS.contains(&name) {
-            return self.fail(Diagnostic::error(token.span, format!("`{name}` is a keyword, not a name")));
+            return self.fail(Diagnostic::error(
+                token.span,
+                format!("`{name}` is a keyword, not a name"),
+            ));
         }
         self.bump();
-        Ok(Ident { name: name.to_string(), span: token.span })
+        Ok(Ident {
+            name: name.to_string(),
+            span: token.span,
+        })
     }
 
     fn function(&mut self) -> PResult<FunctionDef> {
@@ -217,7 +246,12 @@ impl<'a> Parser<'a> {
             return self.unexpected("`{` to open the function body");
         }
         let (body, body_span) = self.block()?;
-        Ok(FunctionDef { name, params, body, span: keyword.span.to(body_span) })
+        Ok(FunctionDef {
+            name,
+            params,
+            body,
+            span: keyword.span.to(body_span),
+        })
     }
 
     /// `{ statements }`, returning the statements and the span from brace to brace.
@@ -305,7 +339,12 @@ impl<'a> Parser<'a> {
             } else {
                 None
             };
-            return Ok(Stmt::If { cond, then, otherwise, span: token.span.to(end) });
+            return Ok(Stmt::If {
+                cond,
+                then,
+                otherwise,
+                span: token.span.to(end),
+            });
         }
         if self.is_word(token, "while") {
             self.bump();
@@ -314,15 +353,24 @@ impl<'a> Parser<'a> {
             self.expect(TokenKind::RParen, "`)` to close the condition")?;
             let body = Box::new(self.statement()?);
             let span = token.span.to(body.span());
-            return Ok(Stmt::Loop { init: None, cond: Some(cond), step: None, body, span });
+            return Ok(Stmt::Loop {
+                init: None,
+                cond: Some(cond),
+                step: None,
+                body,
+                span,
+            });
         }
         if self.is_word(token, "for") {
             return self.for_loop(token);
         }
         if self.is_word(token, "function") {
             return self.fail(
-                Diagnostic::error(token.span, "a function can only be defined at the top level")
-                    .with_hint("close the previous function with `}` first"),
+                Diagnostic::error(
+                    token.span,
+                    "a function can only be defined at the top level",
+                )
+                .with_hint("close the previous function with `}` first"),
             );
         }
         if self.is_word(token, "else") {
@@ -369,7 +417,8 @@ impl<'a> Parser<'a> {
                     .with_hint("write `name = expression;`"),
             ),
             TokenKind::RParen => self.fail(
-                Diagnostic::error(token.span, "this `)` has no matching `(`").with_hint("remove it or add `(` before"),
+                Diagnostic::error(token.span, "this `)` has no matching `(`")
+                    .with_hint("remove it or add `(` before"),
             ),
             _ => {
                 let found = self.describe(token);
@@ -377,8 +426,11 @@ impl<'a> Parser<'a> {
                     return self.fail(unknown_char(token.span, c));
                 }
                 self.fail(
-                    Diagnostic::error(token.span, format!("expected `;` or an operator, found {found}"))
-                        .with_hint("separate statements with `;`"),
+                    Diagnostic::error(
+                        token.span,
+                        format!("expected `;` or an operator, found {found}"),
+                    )
+                    .with_hint("separate statements with `;`"),
                 )
             }
         }
@@ -387,15 +439,33 @@ impl<'a> Parser<'a> {
     fn for_loop(&mut self, keyword: Token) -> PResult<Stmt> {
         self.bump();
         self.expect(TokenKind::LParen, "`(` after `for`")?;
-        let init = if self.peek().kind == TokenKind::Semi { None } else { Some(Box::new(self.simple_statement()?)) };
+        let init = if self.peek().kind == TokenKind::Semi {
+            None
+        } else {
+            Some(Box::new(self.simple_statement()?))
+        };
         self.expect(TokenKind::Semi, "`;` after the loop's start")?;
-        let cond = if self.peek().kind == TokenKind::Semi { None } else { Some(self.condition()?) };
+        let cond = if self.peek().kind == TokenKind::Semi {
+            None
+        } else {
+            Some(self.condition()?)
+        };
         self.expect(TokenKind::Semi, "`;` after the loop's condition")?;
-        let step = if self.peek().kind == TokenKind::RParen { None } else { Some(Box::new(self.simple_statement()?)) };
+        let step = if self.peek().kind == TokenKind::RParen {
+            None
+        } else {
+            Some(Box::new(self.simple_statement()?))
+        };
         self.expect(TokenKind::RParen, "`)` to close the loop header")?;
         let body = Box::new(self.statement()?);
         let span = keyword.span.to(body.span());
-        Ok(Stmt::Loop { init, cond, step, body, span })
+        Ok(Stmt::Loop {
+            init,
+            cond,
+            step,
+            body,
+            span,
+        })
     }
 
     /// A condition; `=` inside one is almost always a mistyped `==`.
@@ -425,15 +495,17 @@ impl<'a> Parser<'a> {
 
     fn binary_inner(&mut self, min_level: u8) -> PResult<Expr> {
         let mut lhs = self.unary()?;
-        loop {
-            let Some((op, level)) = binary_op(self.peek().kind) else { break };
+        while let Some((op, level)) = binary_op(self.peek().kind) {
             if level < min_level {
                 break;
             }
             self.bump();
             let rhs = self.binary(level + 1)?;
             let span = lhs.span.to(rhs.span);
-            lhs = Expr { kind: ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)), span };
+            lhs = Expr {
+                kind: ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)),
+                span,
+            };
         }
         Ok(lhs)
     }
@@ -453,8 +525,14 @@ impl<'a> Parser<'a> {
         let operand = operand?;
         let span = token.span.to(operand.span);
         Ok(match op {
-            Some(op) => Expr { kind: ExprKind::Unary(op, Box::new(operand)), span },
-            None => Expr { kind: operand.kind, span },
+            Some(op) => Expr {
+                kind: ExprKind::Unary(op, Box::new(operand)),
+                span,
+            },
+            None => Expr {
+                kind: operand.kind,
+                span,
+            },
         })
     }
 
@@ -467,7 +545,10 @@ impl<'a> Parser<'a> {
         self.bump();
         let exponent = self.unary()?;
         let span = base.span.to(exponent.span);
-        Ok(Expr { kind: ExprKind::Binary(BinaryOp::Pow, Box::new(base), Box::new(exponent)), span })
+        Ok(Expr {
+            kind: ExprKind::Binary(BinaryOp::Pow, Box::new(base), Box::new(exponent)),
+            span,
+        })
     }
 
     fn atom(&mut self) -> PResult<Expr> {
@@ -476,16 +557,25 @@ impl<'a> Parser<'a> {
             TokenKind::Number(value) => {
                 self.bump();
                 if !value.is_finite() {
-                    return self.fail(Diagnostic::error(token.span, "this number is too large to represent"));
+                    return self.fail(Diagnostic::error(
+                        token.span,
+                        "this number is too large to represent",
+                    ));
                 }
-                Ok(Expr { kind: ExprKind::Number(value), span: token.span })
+                Ok(Expr {
+                    kind: ExprKind::Number(value),
+                    span: token.span,
+                })
             }
             TokenKind::Ident => {
                 let name = self.ident("a name")?;
                 if self.peek().kind == TokenKind::LParen {
                     return self.call(name);
                 }
-                Ok(Expr { span: name.span, kind: ExprKind::Var(name.name) })
+                Ok(Expr {
+                    span: name.span,
+                    kind: ExprKind::Var(name.name),
+                })
             }
             TokenKind::LParen => {
                 self.bump();
@@ -494,12 +584,18 @@ impl<'a> Parser<'a> {
                 if close.kind != TokenKind::RParen {
                     let found = self.describe(close);
                     return self.fail(
-                        Diagnostic::error(token.span, format!("this `(` is not closed (found {found})"))
-                            .with_hint("add the missing `)`"),
+                        Diagnostic::error(
+                            token.span,
+                            format!("this `(` is not closed (found {found})"),
+                        )
+                        .with_hint("add the missing `)`"),
                     );
                 }
                 self.bump();
-                Ok(Expr { kind: inner.kind, span: token.span.to(close.span) })
+                Ok(Expr {
+                    kind: inner.kind,
+                    span: token.span.to(close.span),
+                })
             }
             TokenKind::Unknown(c) => self.fail(unknown_char(token.span, c)),
             TokenKind::Eof => self.fail(
@@ -527,13 +623,22 @@ impl<'a> Parser<'a> {
         if close.kind != TokenKind::RParen {
             let found = self.describe(close);
             return self.fail(
-                Diagnostic::error(open.span, format!("the arguments of `{}` are not closed (found {found})", name.name))
-                    .with_hint("separate arguments with `,` and close them with `)`"),
+                Diagnostic::error(
+                    open.span,
+                    format!(
+                        "the arguments of `{}` are not closed (found {found})",
+                        name.name
+                    ),
+                )
+                .with_hint("separate arguments with `,` and close them with `)`"),
             );
         }
         self.bump();
         let span = name.span.to(close.span);
-        Ok(Expr { kind: ExprKind::Call(name, args), span })
+        Ok(Expr {
+            kind: ExprKind::Call(name, args),
+            span,
+        })
     }
 }
 
@@ -561,7 +666,10 @@ fn binary_op(kind: TokenKind) -> Option<(BinaryOp, u8)> {
 }
 
 fn unknown_char(span: Span, c: char) -> Diagnostic {
-    let d = Diagnostic::error(span, format!("the character `{c}` is not part of the language"));
+    let d = Diagnostic::error(
+        span,
+        format!("the character `{c}` is not part of the language"),
+    );
     match c {
         '“' | '”' | '"' | '‘' | '’' | '\'' | '«' | '»' => {
             d.with_hint("remove the quotation marks: paste only the definition (the text between BEGIN and END)")

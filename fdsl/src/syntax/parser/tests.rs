@@ -6,7 +6,11 @@ fn sexpr(e: &Expr) -> String {
     match &e.kind {
         ExprKind::Number(v) => format!("{v}"),
         ExprKind::Var(n) => n.clone(),
-        ExprKind::Unary(op, a) => format!("({} {})", if *op == UnaryOp::Neg { "-" } else { "!" }, sexpr(a)),
+        ExprKind::Unary(op, a) => format!(
+            "({} {})",
+            if *op == UnaryOp::Neg { "-" } else { "!" },
+            sexpr(a)
+        ),
         ExprKind::Binary(op, a, b) => format!("({op:?} {} {})", sexpr(a), sexpr(b)),
         ExprKind::Call(name, args) => {
             let args: Vec<_> = args.iter().map(sexpr).collect();
@@ -18,13 +22,24 @@ fn sexpr(e: &Expr) -> String {
 fn stmt(s: &Stmt) -> String {
     match s {
         Stmt::Assign { name, value } => format!("{}={}", name.name, sexpr(value)),
-        Stmt::If { cond, then, otherwise, .. } => match otherwise {
+        Stmt::If {
+            cond,
+            then,
+            otherwise,
+            ..
+        } => match otherwise {
             Some(o) => format!("if {} {{{}}} else {{{}}}", sexpr(cond), stmt(then), stmt(o)),
             None => format!("if {} {{{}}}", sexpr(cond), stmt(then)),
         },
         Stmt::Block(body, _) => body.iter().map(stmt).collect::<Vec<_>>().join("; "),
         Stmt::Return(e, _) => format!("return {}", sexpr(e)),
-        Stmt::Loop { init, cond, step, body, .. } => format!(
+        Stmt::Loop {
+            init,
+            cond,
+            step,
+            body,
+            ..
+        } => format!(
             "loop [{}] [{}] [{}] {{{}}}",
             init.as_deref().map(stmt).unwrap_or_default(),
             cond.as_ref().map(sexpr).unwrap_or_default(),
@@ -45,7 +60,12 @@ fn check(src: &str) -> String {
             Item::Function(f) => {
                 let params: Vec<_> = f.params.iter().map(|p| p.name.as_str()).collect();
                 let body: Vec<_> = f.body.iter().map(stmt).collect();
-                format!("fn {}({}) {{{}}}", f.name.name, params.join(","), body.join("; "))
+                format!(
+                    "fn {}({}) {{{}}}",
+                    f.name.name,
+                    params.join(","),
+                    body.join("; ")
+                )
             }
             Item::Statement(s) => stmt(s),
         })
@@ -56,7 +76,10 @@ fn check(src: &str) -> String {
 
 #[test]
 fn arithmetic_precedence() {
-    assert_eq!(check("1-x^2-y^2-z^2"), "(Sub (Sub (Sub 1 (Pow x 2)) (Pow y 2)) (Pow z 2))");
+    assert_eq!(
+        check("1-x^2-y^2-z^2"),
+        "(Sub (Sub (Sub 1 (Pow x 2)) (Pow y 2)) (Pow z 2))"
+    );
     assert_eq!(check("-x^2"), "(- (Pow x 2))");
     assert_eq!(check("2^3^2"), "(Pow 2 (Pow 3 2))");
     assert_eq!(check("x^-2"), "(Pow x (- 2))");
@@ -66,9 +89,18 @@ fn arithmetic_precedence() {
 
 #[test]
 fn set_operators_bind_looser_than_arithmetic() {
-    assert_eq!(check("(2^2-x^2-z^2) &(y+5) & (5-y)"), "(Intersect (Intersect (Sub (Sub (Pow 2 2) (Pow x 2)) (Pow z 2)) (Add y 5)) (Sub 5 y))");
-    assert_eq!(check("a | b & c \\ d"), "(Union a (Subtract (Intersect b c) d))");
-    assert_eq!(check("a < b && c >= d || !e"), "(Or (And (Lt a b) (Ge c d)) (! e))");
+    assert_eq!(
+        check("(2^2-x^2-z^2) &(y+5) & (5-y)"),
+        "(Intersect (Intersect (Sub (Sub (Pow 2 2) (Pow x 2)) (Pow z 2)) (Add y 5)) (Sub 5 y))"
+    );
+    assert_eq!(
+        check("a | b & c \\ d"),
+        "(Union a (Subtract (Intersect b c) d))"
+    );
+    assert_eq!(
+        check("a < b && c >= d || !e"),
+        "(Or (And (Lt a b) (Ge c d)) (! e))"
+    );
 }
 
 #[test]
@@ -95,51 +127,117 @@ fn scripts_with_if_else_and_loops() {
 #[test]
 fn message_wrappers_are_recognised() {
     let out = check("BEGIN 0.2*x; END");
-    assert!(out.starts_with("(Mul 0.2 x)\nwarning: ignored the message wrapper `BEGIN`"), "{out}");
-    assert!(out.contains("warning: ignored the message wrapper `END`"), "{out}");
+    assert!(
+        out.starts_with("(Mul 0.2 x)\nwarning: ignored the message wrapper `BEGIN`"),
+        "{out}"
+    );
+    assert!(
+        out.contains("warning: ignored the message wrapper `END`"),
+        "{out}"
+    );
 }
 
 #[test]
 fn quotes_are_rejected_with_a_hint() {
     let out = check("“BEGIN 1-x^2 END”");
-    assert!(out.contains("error: the character `“` is not part of the language"), "{out}");
+    assert!(
+        out.contains("error: the character `“` is not part of the language"),
+        "{out}"
+    );
     assert!(out.contains("hint: remove the quotation marks"), "{out}");
 }
 
 #[test]
 fn every_error_path_has_a_message_and_location() {
     let cases: &[(&str, &str)] = &[
-        ("1 +", "error: the text ends where a value was expected\n --> 1:4"),
-        ("(1 + x", "error: this `(` is not closed (found the end of the text)\n --> 1:1"),
+        (
+            "1 +",
+            "error: the text ends where a value was expected\n --> 1:4",
+        ),
+        (
+            "(1 + x",
+            "error: this `(` is not closed (found the end of the text)\n --> 1:1",
+        ),
         ("sin(x", "error: the arguments of `sin` are not closed"),
-        ("1 + )", "error: expected a number, a name or `(`, found `)`"),
-        ("x = 1 y = 2", "error: expected `;` or an operator, found `y`"),
-        ("function f(x) { return x;", "error: this `{` is never closed"),
-        ("function (x) { }", "error: expected a function name after `function`, found `(`"),
-        ("function f x", "error: expected `(` after the function name, found `x`"),
-        ("function f(x, 1) {}", "error: expected a parameter name, found the number `1`"),
-        ("function f(x) x", "error: expected `{` to open the function body, found `x`"),
-        ("if x > 1 g = 1;", "error: expected `(` after `if`, found `x`"),
-        ("if (x = 1) g = 1;", "error: `=` assigns; a condition compares"),
-        ("if (x > 1 g = 1;", "error: expected `)` to close the condition, found `g`"),
+        (
+            "1 + )",
+            "error: expected a number, a name or `(`, found `)`",
+        ),
+        (
+            "x = 1 y = 2",
+            "error: expected `;` or an operator, found `y`",
+        ),
+        (
+            "function f(x) { return x;",
+            "error: this `{` is never closed",
+        ),
+        (
+            "function (x) { }",
+            "error: expected a function name after `function`, found `(`",
+        ),
+        (
+            "function f x",
+            "error: expected `(` after the function name, found `x`",
+        ),
+        (
+            "function f(x, 1) {}",
+            "error: expected a parameter name, found the number `1`",
+        ),
+        (
+            "function f(x) x",
+            "error: expected `{` to open the function body, found `x`",
+        ),
+        (
+            "if x > 1 g = 1;",
+            "error: expected `(` after `if`, found `x`",
+        ),
+        (
+            "if (x = 1) g = 1;",
+            "error: `=` assigns; a condition compares",
+        ),
+        (
+            "if (x > 1 g = 1;",
+            "error: expected `)` to close the condition, found `g`",
+        ),
         ("else g = 1;", "error: `else` without a matching `if`"),
-        ("for (i=0 i<3; i=i+1) {}", "error: expected `;` after the loop's start, found `i`"),
-        ("for (i=0; i<3 i=i+1) {}", "error: expected `;` after the loop's condition, found `i`"),
-        ("for (i=0; i<3; i=i+1 {}", "error: expected `)` to close the loop header, found `{`"),
+        (
+            "for (i=0 i<3; i=i+1) {}",
+            "error: expected `;` after the loop's start, found `i`",
+        ),
+        (
+            "for (i=0; i<3 i=i+1) {}",
+            "error: expected `;` after the loop's condition, found `i`",
+        ),
+        (
+            "for (i=0; i<3; i=i+1 {}",
+            "error: expected `)` to close the loop header, found `{`",
+        ),
         ("while x {}", "error: expected `(` after `while`, found `x`"),
         ("1e999", "error: this number is too large to represent"),
         ("x − 1", "hint: use the ASCII minus `-`"),
         ("2π", "hint: write `pi`"),
         ("Geometry: 1-x", "hint: remove a label such as `Geometry:`"),
-        ("x = 1 = 2", "error: only a variable name can stand left of `=`"),
+        (
+            "x = 1 = 2",
+            "error: only a variable name can stand left of `=`",
+        ),
         ("x + 1)", "error: this `)` has no matching `(`"),
         ("x = if + 1", "error: `if` is a keyword, not a name"),
-        ("{ function f() {} }", "error: a function can only be defined at the top level"),
-        ("x #", "error: the character `#` is not part of the language"),
+        (
+            "{ function f() {} }",
+            "error: a function can only be defined at the top level",
+        ),
+        (
+            "x #",
+            "error: the character `#` is not part of the language",
+        ),
     ];
     for (src, expected) in cases {
         let out = check(src);
-        assert!(out.contains(expected), "source {src:?}\nexpected {expected:?}\ngot:\n{out}");
+        assert!(
+            out.contains(expected),
+            "source {src:?}\nexpected {expected:?}\ngot:\n{out}"
+        );
     }
 }
 

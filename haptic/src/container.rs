@@ -1,0 +1,131 @@
+//! What the force renderer needs from a scene: haptic containers with optional physical
+//! properties, evaluated at world points.
+//!
+//! Sign convention (F-Rep): `f >= 0` is inside, `f = 0` the surface; the distance to the
+//! surface is estimated by the metric depth `f / |grad f|`. The lead implements
+//! [`Container`] for fdsl objects; tests use closed-form containers.
+
+use glam::DVec3;
+
+/// An axis-aligned box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    /// Smallest corner.
+    pub min: DVec3,
+    /// Largest corner.
+    pub max: DVec3,
+}
+
+impl Aabb {
+    /// A box from two corners (`min <= max` per axis).
+    pub fn new(min: DVec3, max: DVec3) -> Self {
+        assert!(min.cmple(max).all(), "Aabb::new: min {min} > max {max}");
+        Self { min, max }
+    }
+
+    /// The box centre.
+    pub fn center(&self) -> DVec3 {
+        (self.min + self.max) * 0.5
+    }
+
+    /// Edge lengths.
+    pub fn size(&self) -> DVec3 {
+        self.max - self.min
+    }
+
+    /// True when `p` is inside or on the box.
+    pub fn contains(&self, p: DVec3) -> bool {
+        p.cmpge(self.min).all() && p.cmple(self.max).all()
+    }
+
+    /// The nearest point of the box to `p`.
+    pub fn clamp(&self, p: DVec3) -> DVec3 {
+        p.clamp(self.min, self.max)
+    }
+}
+
+/// How a force field's domain and time are mapped (thesis 7.3, `FForce` `parameters`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FieldDomain {
+    /// The world box the field is defined over.
+    pub box_world: Aabb,
+    /// The (u, v, w) ranges the box maps to, e.g. `[-1,1] x [0,1] x [-1,1]`.
+    pub uvw: Aabb,
+    /// The field repeats with this period; 0 means it never repeats.
+    pub cycle_interval_secs: f64,
+    /// Within each cycle the field acts for this long; infinite means always.
+    pub time_span_secs: f64,
+}
+
+impl FieldDomain {
+    /// Maps a world point to the field's (u, v, w).
+    pub fn uvw_from_world(&self, p: DVec3) -> DVec3 {
+        let size = self.box_world.size().max(DVec3::splat(f64::MIN_POSITIVE));
+        let unit = (p - self.box_world.min) / size;
+        self.uvw.min + unit * self.uvw.size()
+    }
+
+    /// The field's own time at scene time `t_secs`, or `None` when it is not acting.
+    pub fn local_time(&self, t_secs: f64) -> Option<f64> {
+        let t_local = if self.cycle_interval_secs > 0.0 {
+            t_secs.rem_euclid(self.cycle_interval_secs)
+        } else {
+            t_secs
+        };
+        (t_local <= self.time_span_secs).then_some(t_local)
+    }
+}
+
+/// A haptic container: a solid (`f >= 0` inside) with optional surface, interior and field
+/// properties.
+///
+/// Methods take `&mut self` because evaluators keep scratch registers. They are called from
+/// the servo thread: they must not allocate, lock or block. A property that returns `None`
+/// is disabled.
+pub trait Container: Send {
+    /// Stable identity of the container across snapshots (the object id).
+    fn id(&self) -> u64;
+    /// A world box enclosing every point where `value_grad` is `>= 0`.
+    fn bounds(&self) -> Aabb;
+    /// The function value and its gradient at world point `p`, time `t_secs`.
+    fn value_grad(&mut self, p: DVec3, t_secs: f64) -> (f64, DVec3);
+    /// Surface tension in `[0, 1]` (fraction of the device's maximum stiffness).
+    fn tension(&mut self, p: DVec3, t_secs: f64) -> Option<f64>;
+    /// Surface friction coefficient in `[0, 1]`.
+    fn friction(&mut self, p: DVec3, t_secs: f64) -> Option<f64>;
+    /// Interior density in `[0, 1]` (fraction of the device's maximum damping).
+    fn density(&mut self, p: DVec3, t_secs: f64) -> Option<f64>;
+    /// Depth of the surface zone in world units at `p`.
+    fn zone_depth(&mut self, p: DVec3, t_secs: f64) -> f64;
+    /// The force field's domain and timing, `None` when the container has no field.
+    fn field_domain(&self) -> Option<FieldDomain>;
+    /// The force field at `uvw` (in the field domain) and field time `t_local_secs`; its
+    /// magnitude is a fraction of the device's maximum force (clamped to 1).
+    fn force_field(&mut self, uvw: DVec3, t_local_secs: f64) -> DVec3;
+}
+
+/// A scene snapshot as the servo sees it: an indexed set of containers.
+pub trait Scene: Send {
+    /// Number of containers.
+    fn n_containers(&self) -> usize;
+    /// The container at `idx` (`idx < n_containers()`).
+    fn container_mut(&mut self, idx: usize) -> &mut dyn Container;
+}
+
+impl<C: Container> Scene for Vec<C> {
+    fn n_containers(&self) -> usize {
+        self.len()
+    }
+    fn container_mut(&mut self, idx: usize) -> &mut dyn Container {
+        &mut self[idx]
+    }
+}
+
+impl Scene for Vec<Box<dyn Container>> {
+    fn n_containers(&self) -> usize {
+        self.len()
+    }
+    fn container_mut(&mut self, idx: usize) -> &mut dyn Container {
+        self[idx].as_mut()
+    }
+}

@@ -1,0 +1,140 @@
+//! Proves that `Servo::step` never allocates: a counting global allocator armed around ticks
+//! that cross containers, swap snapshots, stall and lose the device.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use glam::DVec3;
+use haptic::container::Aabb;
+use haptic::device::Capabilities;
+use haptic::device::sim::{HandModel, SimDevice};
+use haptic::device::trace::{Trace, TraceDevice};
+use haptic::force::zone::HapticZone;
+use haptic::force::{ForceParams, Rig};
+use haptic::servo::Servo;
+use haptic::shapes::{circle_waypoints, watermelon_grid};
+
+struct Counting;
+
+static N_ALLOCS: AtomicUsize = AtomicUsize::new(0);
+
+thread_local! {
+    static ARMED: Cell<bool> = const { Cell::new(false) };
+}
+
+#[expect(
+    unsafe_code,
+    reason = "a global allocator is an unsafe trait; it only counts"
+)]
+// SAFETY: every call forwards to `System` with the same arguments; counting has no effect on
+// the memory handed out.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if ARMED.with(Cell::get) {
+            N_ALLOCS.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: forwarded unchanged; the caller upholds `GlobalAlloc::alloc`'s contract.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        if ARMED.with(Cell::get) {
+            N_ALLOCS.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: forwarded unchanged; `ptr` came from `System.alloc` with this layout.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        if ARMED.with(Cell::get) {
+            N_ALLOCS.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: forwarded unchanged; the caller upholds `GlobalAlloc::realloc`'s contract.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// Runs `f` with allocation counting armed on this thread; returns allocations seen.
+fn count_allocs(f: impl FnOnce()) -> usize {
+    let before = N_ALLOCS.load(Ordering::Relaxed);
+    ARMED.with(|a| a.set(true));
+    f();
+    ARMED.with(|a| a.set(false));
+    N_ALLOCS.load(Ordering::Relaxed) - before
+}
+
+fn rig() -> Rig {
+    let caps = Capabilities::desktop_pen();
+    let world = Aabb::new(DVec3::splat(-1.6), DVec3::splat(1.6));
+    Rig {
+        caps,
+        zone: HapticZone::fit(caps.workspace_metres, world),
+        params: ForceParams::default(),
+    }
+}
+
+#[test]
+fn servo_step_never_allocates() {
+    // The counter works: an allocation while armed is seen.
+    assert_eq!(
+        count_allocs(|| drop(std::hint::black_box(vec![1u8; 16]))),
+        2
+    );
+
+    let caps = Capabilities::desktop_pen();
+    let device = SimDevice::new(
+        caps,
+        circle_waypoints(0.05, 0.5, 8),
+        HandModel::default(),
+        0.001,
+    )
+    .unwrap();
+    let (mut servo, link) = Servo::init(device, rig());
+    link.scenes.publish(Box::new(watermelon_grid(64)));
+    let mut n_allocs = 0;
+    let mut n_crossing_ticks = 0;
+    let mut last_top = None;
+    for round in 0..8 {
+        n_allocs += count_allocs(|| {
+            for tick in 0..500 {
+                // One long tick per round: the stall path, then the ramp back in.
+                let dt = if tick == 250 { 0.02 } else { 0.001 };
+                let out = servo.step(dt);
+                if out.top_id != last_top {
+                    n_crossing_ticks += 1;
+                    last_top = out.top_id;
+                }
+            }
+        });
+        // App side, allocation allowed: a new snapshot, collect the retired one.
+        link.scenes
+            .publish(Box::new(watermelon_grid(if round % 2 == 0 {
+                16
+            } else {
+                64
+            })));
+        link.collect_retired();
+    }
+    assert_eq!(n_allocs, 0, "Servo::step allocated");
+    assert!(
+        n_crossing_ticks > 20,
+        "the path crossed containers: {n_crossing_ticks}"
+    );
+    assert!(link.stats.snapshot().n_stalls >= 8);
+
+    // The device-failure path does not allocate either.
+    let trace = Trace {
+        caps,
+        events: vec![],
+    };
+    let (mut servo, _link) =
+        Servo::<_, Vec<haptic::shapes::Analytic>>::init(TraceDevice::new(&trace), rig());
+    assert_eq!(
+        count_allocs(|| for _ in 0..10 {
+            servo.step(0.001);
+        }),
+        0
+    );
+}

@@ -1,0 +1,215 @@
+//! Headless rendering: a private device draws a [`Scene`] into an RGBA image or a PNG file.
+
+use super::{PrepareError, Renderer};
+use crate::image::{PngError, RgbaImage};
+use crate::scene::Scene;
+use std::path::Path;
+
+/// Largest offscreen image side in pixels.
+pub const OFFSCREEN_SIDE_MAX: u32 = 8192;
+const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// Why an offscreen render failed.
+#[derive(Debug, thiserror::Error)]
+pub enum OffscreenError {
+    /// No GPU or software adapter exists; tests treat this as "skip".
+    #[error("no wgpu adapter: {0}")]
+    NoAdapter(String),
+    /// The adapter refused to create a device.
+    #[error("cannot create device: {0}")]
+    Device(String),
+    /// Width or height is zero or above [`OFFSCREEN_SIDE_MAX`].
+    #[error("image size {0}x{1} out of range")]
+    BadSize(u32, u32),
+    /// The scene could not be prepared.
+    #[error(transparent)]
+    Prepare(#[from] PrepareError),
+    /// Reading the image back from the GPU failed.
+    #[error("readback failed: {0}")]
+    Readback(String),
+    /// Writing the PNG failed.
+    #[error(transparent)]
+    Png(#[from] PngError),
+}
+
+/// A private device and renderer for offscreen frames; reuse it for many frames.
+pub struct Headless {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    renderer: Renderer,
+    adapter_info: wgpu::AdapterInfo,
+}
+
+impl Headless {
+    /// Creates a device on the default adapter (Vulkan on llvmpipe in CI).
+    pub fn new() -> Result<Self, OffscreenError> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter =
+            pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
+                .map_err(|e| OffscreenError::NoAdapter(e.to_string()))?;
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("render offscreen"),
+            required_limits: wgpu::Limits::downlevel_defaults(),
+            ..Default::default()
+        }))
+        .map_err(|e| OffscreenError::Device(e.to_string()))?;
+        let renderer = Renderer::new(&device, &queue, COLOUR_FORMAT, Some(DEPTH_FORMAT));
+        Ok(Self {
+            device,
+            queue,
+            renderer,
+            adapter_info: adapter.get_info(),
+        })
+    }
+
+    /// A one-line description of the adapter, for golden-image annotations.
+    pub fn adapter_description(&self) -> String {
+        let i = &self.adapter_info;
+        format!(
+            "{} ({:?}, driver {} {})",
+            i.name, i.backend, i.driver, i.driver_info
+        )
+    }
+
+    /// Renders `scene` at `width` x `height`.
+    pub fn render(
+        &mut self,
+        scene: &Scene,
+        width: u32,
+        height: u32,
+    ) -> Result<RgbaImage, OffscreenError> {
+        if width == 0 || height == 0 || width > OFFSCREEN_SIDE_MAX || height > OFFSCREEN_SIDE_MAX {
+            return Err(OffscreenError::BadSize(width, height));
+        }
+        self.renderer
+            .prepare(&self.device, &self.queue, scene, [width, height])?;
+        let size = wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        };
+        let target = |format, usage, label| {
+            self.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let colour = target(
+            COLOUR_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            "offscreen colour",
+        );
+        let depth = target(
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+            "offscreen depth",
+        );
+        let colour_view = colour.create_view(&Default::default());
+        let depth_view = depth.create_view(&Default::default());
+        let row_bytes = 4 * width;
+        let padded_row = row_bytes.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
+            * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+        let readback = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("offscreen readback"),
+            size: u64::from(padded_row) * u64::from(height),
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        let [r, g, b, a] = scene.background.map(f64::from);
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("offscreen"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &colour_view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color { r, g, b, a }),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth_view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(1.0),
+                        store: wgpu::StoreOp::Discard,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            self.renderer.paint(&mut pass);
+        }
+        encoder.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &colour,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &readback,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(padded_row),
+                    rows_per_image: Some(height),
+                },
+            },
+            size,
+        );
+        self.queue.submit([encoder.finish()]);
+        let slice = readback.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            // The receiver waits below; a failed send only means it gave up.
+            let _ = tx.send(r);
+        });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| OffscreenError::Readback(e.to_string()))?;
+        rx.recv()
+            .map_err(|e| OffscreenError::Readback(e.to_string()))?
+            .map_err(|e| OffscreenError::Readback(e.to_string()))?;
+        let mut pixels = Vec::with_capacity((row_bytes * height) as usize);
+        {
+            let view = slice
+                .get_mapped_range()
+                .map_err(|e| OffscreenError::Readback(e.to_string()))?;
+            for row in view.chunks_exact(padded_row as usize) {
+                pixels.extend_from_slice(&row[..row_bytes as usize]);
+            }
+        }
+        readback.unmap();
+        Ok(RgbaImage {
+            width,
+            height,
+            pixels,
+        })
+    }
+}
+
+/// Renders `scene` on a fresh headless device.
+pub fn render_to_rgba(scene: &Scene, width: u32, height: u32) -> Result<RgbaImage, OffscreenError> {
+    Headless::new()?.render(scene, width, height)
+}
+
+/// Renders `scene` on a fresh headless device and writes a PNG to `path`.
+pub fn render_png(
+    scene: &Scene,
+    width: u32,
+    height: u32,
+    path: &Path,
+) -> Result<(), OffscreenError> {
+    Ok(render_to_rgba(scene, width, height)?.save_png(path)?)
+}

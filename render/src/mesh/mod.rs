@@ -1,0 +1,363 @@
+//! Triangle meshes and the meshers that build them from functions.
+//!
+//! [`Mesh`] is the one mesh type every mesher returns and the renderer draws.
+//! [`octree`] meshes implicit solids (f >= 0 is inside) through the [`Field`] trait;
+//! [`parametric`] triangulates parametric surfaces p(u,v) and sweeps curves p(u) into tubes.
+
+pub mod field;
+pub mod octree;
+pub mod parametric;
+
+pub use field::Field;
+
+/// Largest number of vertices a [`Mesh`] may index (indices are `u32`).
+pub const MESH_VERTICES_MAX: usize = u32::MAX as usize;
+
+/// An axis-aligned box, `lo` to `hi` inclusive, in world units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    /// The corner with the smallest coordinates.
+    pub lo: [f32; 3],
+    /// The corner with the largest coordinates.
+    pub hi: [f32; 3],
+}
+
+impl Aabb {
+    /// The box from `lo` to `hi`.
+    pub fn new(lo: [f32; 3], hi: [f32; 3]) -> Self {
+        Self { lo, hi }
+    }
+
+    /// The centre of the box.
+    pub fn centre(&self) -> [f32; 3] {
+        std::array::from_fn(|a| 0.5 * (self.lo[a] + self.hi[a]))
+    }
+
+    /// The edge lengths of the box.
+    pub fn size(&self) -> [f32; 3] {
+        std::array::from_fn(|a| self.hi[a] - self.lo[a])
+    }
+
+    /// Whether `p` lies inside the box or on its boundary.
+    pub fn contains(&self, p: [f32; 3]) -> bool {
+        (0..3).all(|a| self.lo[a] <= p[a] && p[a] <= self.hi[a])
+    }
+}
+
+/// Why a mesh is not well formed.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum MeshError {
+    /// Normals or colours do not have one entry per position.
+    #[error("mesh has {n_positions} positions but {n_other} {what}")]
+    AttributeCount {
+        /// Number of positions.
+        n_positions: usize,
+        /// Number of entries in the other attribute.
+        n_other: usize,
+        /// Which attribute.
+        what: &'static str,
+    },
+    /// The index list is not a whole number of triangles.
+    #[error("index count {0} is not a multiple of 3")]
+    PartialTriangle(usize),
+    /// A triangle refers to a vertex that does not exist.
+    #[error("index {index} out of range for {n_positions} vertices")]
+    IndexOutOfRange {
+        /// The offending index.
+        index: u32,
+        /// Number of positions.
+        n_positions: usize,
+    },
+    /// More vertices than `u32` indices can address.
+    #[error("mesh has {0} vertices, more than {MESH_VERTICES_MAX}")]
+    TooManyVertices(usize),
+}
+
+/// An indexed triangle mesh with per-vertex normals and straight-alpha RGBA colours.
+///
+/// Triangles wind counter-clockwise seen from outside, so normals point out of the solid.
+/// Guarantees depend on the mesher; check them with [`Mesh::open_edges`] and
+/// [`Mesh::non_manifold_edges`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Mesh {
+    /// Vertex positions.
+    pub positions: Vec<[f32; 3]>,
+    /// Unit vertex normals, one per position.
+    pub normals: Vec<[f32; 3]>,
+    /// Vertex colours in linear RGBA 0..1, one per position.
+    pub colours: Vec<[f32; 4]>,
+    /// Three indices per triangle.
+    pub indices: Vec<u32>,
+}
+
+impl Mesh {
+    /// Number of vertices.
+    pub fn n_vertices(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Number of triangles.
+    pub fn n_triangles(&self) -> usize {
+        self.indices.len() / 3
+    }
+
+    /// Checks attribute counts and index ranges: use on meshes from files or peers.
+    pub fn validate(&self) -> Result<(), MeshError> {
+        let n_positions = self.positions.len();
+        if n_positions > MESH_VERTICES_MAX {
+            return Err(MeshError::TooManyVertices(n_positions));
+        }
+        for (n_other, what) in [
+            (self.normals.len(), "normals"),
+            (self.colours.len(), "colours"),
+        ] {
+            if n_other != n_positions {
+                return Err(MeshError::AttributeCount {
+                    n_positions,
+                    n_other,
+                    what,
+                });
+            }
+        }
+        if !self.indices.len().is_multiple_of(3) {
+            return Err(MeshError::PartialTriangle(self.indices.len()));
+        }
+        match self.indices.iter().find(|&&i| i as usize >= n_positions) {
+            Some(&index) => Err(MeshError::IndexOutOfRange { index, n_positions }),
+            None => Ok(()),
+        }
+    }
+
+    /// The triangles as index triples.
+    pub fn triangles(&self) -> impl Iterator<Item = [u32; 3]> + '_ {
+        self.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]])
+    }
+
+    /// The bounding box of the positions, `None` for an empty mesh.
+    pub fn bounds(&self) -> Option<Aabb> {
+        let first = *self.positions.first()?;
+        let mut b = Aabb::new(first, first);
+        for p in &self.positions {
+            b.lo = std::array::from_fn(|a| b.lo[a].min(p[a]));
+            b.hi = std::array::from_fn(|a| b.hi[a].max(p[a]));
+        }
+        Some(b)
+    }
+
+    /// Undirected edges with how many triangles use each, sorted by edge.
+    fn edge_uses(&self) -> Vec<((u32, u32), usize)> {
+        let mut edges: Vec<(u32, u32)> = self
+            .triangles()
+            .flat_map(|[a, b, c]| [(a, b), (b, c), (c, a)])
+            .map(|(a, b)| (a.min(b), a.max(b)))
+            .collect();
+        edges.sort_unstable();
+        let mut uses: Vec<((u32, u32), usize)> = Vec::new();
+        for e in edges {
+            match uses.last_mut() {
+                Some((last, n)) if *last == e => *n += 1,
+                _ => uses.push((e, 1)),
+            }
+        }
+        uses
+    }
+
+    /// Number of edges used by exactly one triangle: zero for a watertight mesh.
+    pub fn open_edges(&self) -> usize {
+        self.edge_uses().iter().filter(|(_, n)| *n == 1).count()
+    }
+
+    /// Number of edges used by more than two triangles: zero for a manifold mesh.
+    pub fn non_manifold_edges(&self) -> usize {
+        self.edge_uses().iter().filter(|(_, n)| *n > 2).count()
+    }
+
+    /// Number of triangles whose three corners are not distinct vertices.
+    pub fn degenerate_triangles(&self) -> usize {
+        self.triangles()
+            .filter(|[a, b, c]| a == b || b == c || c == a)
+            .count()
+    }
+
+    /// The signed volume enclosed (divergence theorem): positive when normals face out.
+    pub fn signed_volume(&self) -> f64 {
+        let p = |i: u32| self.positions[i as usize].map(f64::from);
+        self.triangles()
+            .map(|[a, b, c]| {
+                let (a, b, c) = (p(a), p(b), p(c));
+                let cross = [
+                    b[1] * c[2] - b[2] * c[1],
+                    b[2] * c[0] - b[0] * c[2],
+                    b[0] * c[1] - b[1] * c[0],
+                ];
+                (a[0] * cross[0] + a[1] * cross[1] + a[2] * cross[2]) / 6.0
+            })
+            .sum()
+    }
+
+    /// Sets every vertex colour from a function of its position.
+    pub fn colour_with(&mut self, mut colour: impl FnMut([f32; 3]) -> [f32; 4]) {
+        self.colours = self.positions.iter().map(|&p| colour(p)).collect();
+    }
+
+    /// Moves every vertex along its normal by `height(p)` (geometric texture); NaN counts as 0.
+    ///
+    /// Normals are recomputed from the displaced triangles afterwards.
+    pub fn displace_along_normals(&mut self, mut height: impl FnMut([f32; 3]) -> f32) {
+        for (p, n) in self.positions.iter_mut().zip(&self.normals) {
+            let h = height(*p);
+            let h = if h.is_finite() { h } else { 0.0 };
+            *p = std::array::from_fn(|k| p[k] + h * n[k]);
+        }
+        self.recompute_normals();
+    }
+
+    /// Appends `other`, renumbering its indices.
+    pub fn append(&mut self, other: &Mesh) -> Result<(), MeshError> {
+        let base = self.positions.len();
+        let total = base + other.positions.len();
+        let base = u32::try_from(base).map_err(|_| MeshError::TooManyVertices(total))?;
+        u32::try_from(total).map_err(|_| MeshError::TooManyVertices(total))?;
+        self.positions.extend_from_slice(&other.positions);
+        self.normals.extend_from_slice(&other.normals);
+        self.colours.extend_from_slice(&other.colours);
+        self.indices.extend(other.indices.iter().map(|i| i + base));
+        Ok(())
+    }
+
+    /// Recomputes normals as the area-weighted average of the adjacent triangles' normals.
+    pub fn recompute_normals(&mut self) {
+        let mut acc = vec![[0.0f32; 3]; self.positions.len()];
+        for [a, b, c] in self.triangles() {
+            let n = triangle_normal_unnormalised(
+                self.positions[a as usize],
+                self.positions[b as usize],
+                self.positions[c as usize],
+            );
+            for i in [a, b, c] {
+                for k in 0..3 {
+                    acc[i as usize][k] += n[k];
+                }
+            }
+        }
+        self.normals = acc.into_iter().map(normalise_or_up).collect();
+    }
+}
+
+/// The cross product (b - a) x (c - a): twice the area times the unit normal.
+pub(crate) fn triangle_normal_unnormalised(a: [f32; 3], b: [f32; 3], c: [f32; 3]) -> [f32; 3] {
+    let u: [f32; 3] = std::array::from_fn(|k| b[k] - a[k]);
+    let v: [f32; 3] = std::array::from_fn(|k| c[k] - a[k]);
+    [
+        u[1] * v[2] - u[2] * v[1],
+        u[2] * v[0] - u[0] * v[2],
+        u[0] * v[1] - u[1] * v[0],
+    ]
+}
+
+/// `v` scaled to unit length, or +z when it has no usable length.
+pub(crate) fn normalise_or_up(v: [f32; 3]) -> [f32; 3] {
+    let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    if len > f32::MIN_POSITIVE && len.is_finite() {
+        v.map(|c| c / len)
+    } else {
+        [0.0, 0.0, 1.0]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tetrahedron() -> Mesh {
+        let mut m = Mesh {
+            positions: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.0, 0.0, 1.0],
+            ],
+            indices: vec![0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3],
+            ..Mesh::default()
+        };
+        m.recompute_normals();
+        m.colour_with(|_| [1.0; 4]);
+        m
+    }
+
+    #[test]
+    fn closed_tetrahedron_has_no_open_or_non_manifold_edges() {
+        let m = tetrahedron();
+        assert_eq!(m.validate(), Ok(()));
+        assert_eq!(m.open_edges(), 0);
+        assert_eq!(m.non_manifold_edges(), 0);
+        assert!((m.signed_volume() - 1.0 / 6.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn removing_a_face_opens_three_edges_and_a_fin_is_non_manifold() {
+        let mut m = tetrahedron();
+        m.indices.truncate(9);
+        assert_eq!(m.open_edges(), 3);
+        let mut fin = tetrahedron();
+        fin.positions.push([1.0, 1.0, 1.0]);
+        fin.normals.push([0.0, 0.0, 1.0]);
+        fin.colours.push([1.0; 4]);
+        fin.indices.extend([1, 2, 4]);
+        assert_eq!(fin.non_manifold_edges(), 1);
+    }
+
+    #[test]
+    fn validate_rejects_bad_indices_and_counts() {
+        let mut m = tetrahedron();
+        m.indices.push(9);
+        assert_eq!(m.validate(), Err(MeshError::PartialTriangle(13)));
+        m.indices.extend([0, 1]);
+        assert_eq!(
+            m.validate(),
+            Err(MeshError::IndexOutOfRange {
+                index: 9,
+                n_positions: 4
+            })
+        );
+        let mut m = tetrahedron();
+        m.colours.pop();
+        assert!(matches!(
+            m.validate(),
+            Err(MeshError::AttributeCount {
+                what: "colours",
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn displacement_moves_vertices_along_normals_and_keeps_topology() {
+        let mut m = tetrahedron();
+        let (before, normals) = (m.positions.clone(), m.normals.clone());
+        m.displace_along_normals(|p| if p[0] > 0.5 { 0.25 } else { f32::NAN });
+        assert_eq!(m.open_edges(), 0);
+        for i in 0..4 {
+            let expect: [f32; 3] = if before[i][0] > 0.5 {
+                std::array::from_fn(|k| before[i][k] + 0.25 * normals[i][k])
+            } else {
+                before[i]
+            };
+            assert_eq!(m.positions[i], expect);
+        }
+        assert_ne!(m.normals, normals);
+    }
+
+    #[test]
+    fn append_renumbers_and_bounds_cover_both() {
+        let mut m = tetrahedron();
+        let mut other = tetrahedron();
+        for p in &mut other.positions {
+            p[0] += 2.0;
+        }
+        m.append(&other).unwrap();
+        assert_eq!(m.n_triangles(), 8);
+        assert_eq!(m.open_edges(), 0);
+        assert_eq!(m.bounds(), Some(Aabb::new([0.0; 3], [3.0, 1.0, 1.0])));
+    }
+}

@@ -1,0 +1,303 @@
+//! What to draw: objects (meshes with materials and transforms), lines, camera and light.
+
+use crate::camera::{Camera, Ray};
+use crate::mesh::{Aabb, Mesh};
+use glam::{Mat4, Vec3};
+use std::sync::Arc;
+
+/// How a surface reflects light; multiplies the per-vertex colour.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Material {
+    /// Ambient weight 0..1.
+    pub ambient: f32,
+    /// Diffuse (Lambert) weight 0..1.
+    pub diffuse: f32,
+    /// Specular (Blinn-Phong) weight 0..1.
+    pub specular: f32,
+    /// Specular exponent: larger is shinier.
+    pub shininess: f32,
+    /// Opacity 0..1 multiplied into the vertex alpha; below 1 the object is drawn transparent.
+    pub opacity: f32,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Self {
+            ambient: 0.2,
+            diffuse: 0.75,
+            specular: 0.3,
+            shininess: 32.0,
+            opacity: 1.0,
+        }
+    }
+}
+
+impl Material {
+    /// Whether the object needs the transparent pass.
+    pub fn is_transparent(&self) -> bool {
+        self.opacity < 1.0
+    }
+}
+
+/// One drawable object.
+#[derive(Clone, Debug)]
+pub struct SceneObject {
+    /// The mesh in object space; shared so that unchanged meshes are not uploaded again.
+    pub mesh: Arc<Mesh>,
+    /// World from object.
+    pub world_from_object: Mat4,
+    /// Lighting parameters.
+    pub material: Material,
+}
+
+impl SceneObject {
+    /// Whether any vertex alpha or the material opacity is below 1.
+    pub fn is_transparent(&self) -> bool {
+        self.material.is_transparent() || self.mesh.colours.iter().any(|c| c[3] < 1.0)
+    }
+}
+
+/// A line segment in world space with a straight-alpha RGBA colour.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Line {
+    /// Start.
+    pub from: Vec3,
+    /// End.
+    pub to: Vec3,
+    /// Colour, linear RGBA 0..1.
+    pub colour: [f32; 4],
+}
+
+/// Everything one frame shows.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// Objects, indexed by `object_idx` in [`PickHit`].
+    pub objects: Vec<SceneObject>,
+    /// Lines: arrows, boxes, cursors.
+    pub lines: Vec<Line>,
+    /// The viewpoint.
+    pub camera: Camera,
+    /// Direction towards the light, world space (need not be unit length).
+    pub light_towards: Vec3,
+    /// Clear colour, linear RGBA.
+    pub background: [f32; 4],
+}
+
+impl Default for Scene {
+    fn default() -> Self {
+        Self {
+            objects: Vec::new(),
+            lines: Vec::new(),
+            camera: Camera::default(),
+            light_towards: Vec3::new(0.4, -0.6, 1.0),
+            background: [0.08, 0.09, 0.11, 1.0],
+        }
+    }
+}
+
+/// Where a ray hits the scene.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PickHit {
+    /// Index into [`Scene::objects`].
+    pub object_idx: usize,
+    /// Index of the triangle within that object's mesh.
+    pub triangle_idx: usize,
+    /// The hit point in world space.
+    pub point_in_world: Vec3,
+    /// Distance along the ray.
+    pub distance: f32,
+}
+
+impl Scene {
+    /// Adds an object and returns its index.
+    pub fn add_object(
+        &mut self,
+        mesh: Arc<Mesh>,
+        world_from_object: Mat4,
+        material: Material,
+    ) -> usize {
+        self.objects.push(SceneObject {
+            mesh,
+            world_from_object,
+            material,
+        });
+        self.objects.len() - 1
+    }
+
+    /// Adds the twelve edges of a box (the haptic zone, a selection).
+    pub fn add_box(&mut self, b: Aabb, colour: [f32; 4]) {
+        let corner = |k: usize| {
+            Vec3::from_array(std::array::from_fn(|a| {
+                if k >> a & 1 == 1 { b.hi[a] } else { b.lo[a] }
+            }))
+        };
+        for k in 0..8usize {
+            for a in 0..3 {
+                if k >> a & 1 == 0 {
+                    self.lines.push(Line {
+                        from: corner(k),
+                        to: corner(k | 1 << a),
+                        colour,
+                    });
+                }
+            }
+        }
+    }
+
+    /// Adds an arrow from `from` to `to` with a four-line head (force-field vectors).
+    pub fn add_arrow(&mut self, from: Vec3, to: Vec3, colour: [f32; 4]) {
+        self.lines.push(Line { from, to, colour });
+        let d = to - from;
+        let len = d.length();
+        if len.is_nan() || len <= f32::EPSILON {
+            return;
+        }
+        let dir = d / len;
+        let side = dir.any_orthonormal_vector();
+        let up = dir.cross(side);
+        let head = 0.2 * len;
+        for s in [side, -side, up, -up] {
+            self.lines.push(Line {
+                from: to,
+                to: to - head * dir + 0.5 * head * s,
+                colour,
+            });
+        }
+    }
+
+    /// Adds a three-axis crosshair of half-size `size` at `centre` (the 3D cursor).
+    pub fn add_crosshair(&mut self, centre: Vec3, size: f32, colour: [f32; 4]) {
+        for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+            self.lines.push(Line {
+                from: centre - size * axis,
+                to: centre + size * axis,
+                colour,
+            });
+        }
+    }
+
+    /// The nearest triangle the ray hits, over all objects.
+    pub fn pick(&self, ray: &Ray) -> Option<PickHit> {
+        let mut best: Option<PickHit> = None;
+        for (object_idx, o) in self.objects.iter().enumerate() {
+            let m = &o.mesh;
+            let p = |i: u32| {
+                o.world_from_object
+                    .transform_point3(Vec3::from_array(m.positions[i as usize]))
+            };
+            for (triangle_idx, [a, b, c]) in m.triangles().enumerate() {
+                if [a, b, c].iter().any(|&i| i as usize >= m.positions.len()) {
+                    continue;
+                }
+                let Some(t) = ray_triangle(ray, p(a), p(b), p(c)) else {
+                    continue;
+                };
+                if best.is_none_or(|h| t < h.distance) {
+                    let point_in_world = ray.origin + t * ray.direction;
+                    best = Some(PickHit {
+                        object_idx,
+                        triangle_idx,
+                        point_in_world,
+                        distance: t,
+                    });
+                }
+            }
+        }
+        best
+    }
+}
+
+/// Möller-Trumbore: the distance along the ray to triangle (a, b, c), either side facing.
+pub fn ray_triangle(ray: &Ray, a: Vec3, b: Vec3, c: Vec3) -> Option<f32> {
+    let (e1, e2) = (b - a, c - a);
+    let p = ray.direction.cross(e2);
+    let det = e1.dot(p);
+    if det.abs() < f32::EPSILON * e1.length() * e2.length() {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let s = ray.origin - a;
+    let u = s.dot(p) * inv;
+    if !(0.0..=1.0).contains(&u) {
+        return None;
+    }
+    let q = s.cross(e1);
+    let v = ray.direction.dot(q) * inv;
+    if v < 0.0 || u + v > 1.0 {
+        return None;
+    }
+    let t = e2.dot(q) * inv;
+    (t >= 0.0).then_some(t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::parametric::{SurfaceSettings, UvDomain, triangulate_surface};
+
+    fn square(z: f32) -> Arc<Mesh> {
+        let settings = SurfaceSettings {
+            domain: UvDomain {
+                u: (-1.0, 1.0),
+                v: (-1.0, 1.0),
+            },
+            initial_divisions: 2,
+            tolerance: 0.1,
+            vertices_max: 100,
+        };
+        Arc::new(triangulate_surface(|uv| [uv[0], uv[1], z], |_, _| [1.0; 4], &settings).unwrap())
+    }
+
+    #[test]
+    fn pick_returns_the_nearest_object_and_the_point() {
+        let mut scene = Scene::default();
+        scene.add_object(square(0.0), Mat4::IDENTITY, Material::default());
+        scene.add_object(
+            square(0.0),
+            Mat4::from_translation(Vec3::new(0.0, 0.0, 0.5)),
+            Material::default(),
+        );
+        let ray = Ray {
+            origin: Vec3::new(0.25, -0.3, 5.0),
+            direction: Vec3::NEG_Z,
+        };
+        let hit = scene.pick(&ray).unwrap();
+        assert_eq!(hit.object_idx, 1);
+        assert!((hit.point_in_world - Vec3::new(0.25, -0.3, 0.5)).length() < 1e-5);
+        assert!((hit.distance - 4.5).abs() < 1e-5);
+        let miss = Ray {
+            origin: Vec3::new(3.0, 0.0, 5.0),
+            direction: Vec3::NEG_Z,
+        };
+        assert_eq!(scene.pick(&miss), None);
+    }
+
+    #[test]
+    fn pick_through_a_camera_pixel_finds_the_projected_point() {
+        let mut scene = Scene::default();
+        scene.add_object(square(0.2), Mat4::IDENTITY, Material::default());
+        let target = Vec3::new(0.3, 0.4, 0.2);
+        let size = [320, 240];
+        let px = scene.camera.project(target, size).unwrap();
+        let hit = scene
+            .pick(&scene.camera.ray_through_pixel(px, size))
+            .unwrap();
+        assert!((hit.point_in_world - target).length() < 1e-3, "{hit:?}");
+    }
+
+    #[test]
+    fn helpers_add_the_expected_lines() {
+        let mut scene = Scene::default();
+        scene.add_box(Aabb::new([0.0; 3], [1.0; 3]), [1.0; 4]);
+        assert_eq!(scene.lines.len(), 12);
+        assert!(
+            scene
+                .lines
+                .iter()
+                .all(|l| ((l.to - l.from).length() - 1.0).abs() < 1e-6)
+        );
+        scene.add_arrow(Vec3::ZERO, Vec3::X, [1.0; 4]);
+        scene.add_crosshair(Vec3::ZERO, 0.1, [1.0; 4]);
+        assert_eq!(scene.lines.len(), 12 + 5 + 3);
+    }
+}
