@@ -1,2 +1,309 @@
-//! placeholder
-fn main() {}
+//! Evaluation benchmarks: fdsl against the `fidget` crate (its bytecode VM and its JIT) in the
+//! same run, on the reference models of `tests/data/models/`.
+//!
+//! Workloads, each reported as items per second by divan:
+//! - `bulk_values`: f32 values at 65,536 scattered points;
+//! - `bulk_gradients`: f32 values and gradients at 16,384 points;
+//! - `interval`: bounds over 4,096 small boxes;
+//! - `pruned`: what a mesher does: an octree over [-1.2, 1.2]^3 to depth 5, interval
+//!   evaluation and tape simplification at each box, and 4^3 point values in each ambiguous
+//!   leaf. For the R-function models, compare `pruned` with their min/max twins.
+//!
+//! Run with `cargo bench -p fdsl --bench eval`.
+
+use divan::Bencher;
+use divan::counter::ItemsCount;
+use fdsl::Function;
+use fdsl::eval::{BulkEval, GradBulkEval, Interval, IntervalEval};
+use fdsl::tape::{Fidelity, Tape};
+use fidget::jit::JitShape;
+use fidget::shape::Shape;
+use fidget::vm::VmShape;
+
+mod fidget_peer;
+
+const MODELS: &[&str] =
+    &["sphere", "spheres100", "spheres100_rfunc", "gyroid_sphere", "watermelon", "watermelon_rfunc", "script_field"];
+
+fn source(model: &str) -> &'static str {
+    match model {
+        "sphere" => include_str!("../../tests/data/models/sphere.fdsl"),
+        "spheres100" => include_str!("../../tests/data/models/spheres100.fdsl"),
+        "spheres100_rfunc" => include_str!("../../tests/data/models/spheres100_rfunc.fdsl"),
+        "gyroid_sphere" => include_str!("../../tests/data/models/gyroid_sphere.fdsl"),
+        "watermelon" => include_str!("../../tests/data/models/watermelon.fdsl"),
+        "watermelon_rfunc" => include_str!("../../tests/data/models/watermelon_rfunc.fdsl"),
+        "script_field" => include_str!("../../tests/data/models/script_field.fdsl"),
+        _ => panic!("unknown model {model}"),
+    }
+}
+
+fn tape(model: &str) -> Tape {
+    Function::parse(source(model)).unwrap_or_else(|e| panic!("{model}: {e}")).tape()
+}
+
+/// Deterministic scattered points in [-1.2, 1.2]^3.
+fn points(n: usize) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.4 - 1.2
+    };
+    let mut xs = Vec::with_capacity(n);
+    let mut ys = Vec::with_capacity(n);
+    let mut zs = Vec::with_capacity(n);
+    for _ in 0..n {
+        xs.push(next());
+        ys.push(next());
+        zs.push(next());
+    }
+    (xs, ys, zs)
+}
+
+const N_VALUES: usize = 65_536;
+const N_GRADIENTS: usize = 16_384;
+const N_BOXES: usize = 4_096;
+const PRUNE_DEPTH: u32 = 5;
+const LEAF_SAMPLES: usize = 4;
+
+fn main() {
+    divan::main();
+}
+
+mod bulk_values {
+    use super::*;
+
+    #[divan::bench(args = MODELS)]
+    fn fdsl(bencher: Bencher, model: &str) {
+        let tape = tape(model);
+        let (xs, ys, zs) = points(N_VALUES);
+        let mut eval = BulkEval::new(&tape);
+        let mut out = vec![0.0; N_VALUES];
+        bencher.counter(ItemsCount::new(N_VALUES)).bench_local(|| {
+            eval.eval(&xs, &ys, &zs, 0.0, &mut out);
+            divan::black_box(&out);
+        });
+    }
+
+    fn peer<F: fidget::eval::Function + fidget::eval::MathFunction + Clone>(bencher: Bencher, model: &str) {
+        let (ctx, root) = fidget_peer::to_fidget(&tape(model));
+        let shape = Shape::<F>::new(&ctx, root).expect("fidget accepts the model");
+        let t = shape.float_slice_tape(Default::default());
+        let mut eval = Shape::<F>::new_float_slice_eval();
+        let (xs, ys, zs) = points(N_VALUES);
+        bencher.counter(ItemsCount::new(N_VALUES)).bench_local(|| {
+            divan::black_box(eval.eval(&t, &xs, &ys, &zs).expect("evaluates"));
+        });
+    }
+
+    #[divan::bench(args = MODELS)]
+    fn fidget_vm(bencher: Bencher, model: &str) {
+        peer::<fidget::vm::VmFunction>(bencher, model);
+    }
+
+    #[divan::bench(args = MODELS)]
+    fn fidget_jit(bencher: Bencher, model: &str) {
+        peer::<fidget::jit::JitFunction>(bencher, model);
+    }
+}
+
+mod bulk_gradients {
+    use super::*;
+
+    #[divan::bench(args = MODELS)]
+    fn fdsl(bencher: Bencher, model: &str) {
+        let tape = tape(model);
+        let (xs, ys, zs) = points(N_GRADIENTS);
+        let mut eval = GradBulkEval::new(&tape);
+        let mut out = vec![Default::default(); N_GRADIENTS];
+        bencher.counter(ItemsCount::new(N_GRADIENTS)).bench_local(|| {
+            eval.eval(&xs, &ys, &zs, 0.0, &mut out);
+            divan::black_box(&out);
+        });
+    }
+
+    fn peer<F: fidget::eval::Function + fidget::eval::MathFunction + Clone>(bencher: Bencher, model: &str) {
+        let (ctx, root) = fidget_peer::to_fidget(&tape(model));
+        let shape = Shape::<F>::new(&ctx, root).expect("fidget accepts the model");
+        let t = shape.grad_slice_tape(Default::default());
+        let mut eval = Shape::<F>::new_grad_slice_eval();
+        let (xs, ys, zs) = points(N_GRADIENTS);
+        let (xs, ys, zs): (Vec<fidget::types::Grad>, Vec<_>, Vec<_>) = (
+            xs.iter().map(|&v| fidget::types::Grad::new(v, 1.0, 0.0, 0.0)).collect(),
+            ys.iter().map(|&v| fidget::types::Grad::new(v, 0.0, 1.0, 0.0)).collect(),
+            zs.iter().map(|&v| fidget::types::Grad::new(v, 0.0, 0.0, 1.0)).collect(),
+        );
+        bencher.counter(ItemsCount::new(N_GRADIENTS)).bench_local(|| {
+            divan::black_box(eval.eval(&t, &xs, &ys, &zs).expect("evaluates"));
+        });
+    }
+
+    #[divan::bench(args = MODELS)]
+    fn fidget_vm(bencher: Bencher, model: &str) {
+        peer::<fidget::vm::VmFunction>(bencher, model);
+    }
+
+    #[divan::bench(args = MODELS)]
+    fn fidget_jit(bencher: Bencher, model: &str) {
+        peer::<fidget::jit::JitFunction>(bencher, model);
+    }
+}
+
+/// Small boxes at the scattered points.
+fn boxes() -> Vec<[f32; 3]> {
+    let (xs, ys, zs) = points(N_BOXES);
+    (0..N_BOXES).map(|i| [xs[i], ys[i], zs[i]]).collect()
+}
+
+const BOX_SIZE: f32 = 0.1;
+
+mod interval {
+    use super::*;
+
+    #[divan::bench(args = MODELS)]
+    fn fdsl(bencher: Bencher, model: &str) {
+        let tape = tape(model);
+        let mut eval = IntervalEval::new(&tape);
+        let boxes = boxes();
+        bencher.counter(ItemsCount::new(N_BOXES)).bench_local(|| {
+            for b in &boxes {
+                let i = |k: usize| Interval::new(b[k] as f64, (b[k] + BOX_SIZE) as f64);
+                divan::black_box(eval.eval([i(0), i(1), i(2), Interval::point(0.0)]));
+            }
+        });
+    }
+
+    fn peer<F: fidget::eval::Function + fidget::eval::MathFunction + Clone>(bencher: Bencher, model: &str) {
+        let (ctx, root) = fidget_peer::to_fidget(&tape(model));
+        let shape = Shape::<F>::new(&ctx, root).expect("fidget accepts the model");
+        let t = shape.interval_tape(Default::default());
+        let mut eval = Shape::<F>::new_interval_eval();
+        let boxes = boxes();
+        bencher.counter(ItemsCount::new(N_BOXES)).bench_local(|| {
+            for b in &boxes {
+                let i = |k: usize| fidget::types::Interval::new(b[k], b[k] + BOX_SIZE);
+                divan::black_box(eval.eval(&t, i(0), i(1), i(2)).expect("evaluates").0);
+            }
+        });
+    }
+
+    #[divan::bench(args = MODELS)]
+    fn fidget_vm(bencher: Bencher, model: &str) {
+        peer::<fidget::vm::VmFunction>(bencher, model);
+    }
+
+    #[divan::bench(args = MODELS)]
+    fn fidget_jit(bencher: Bencher, model: &str) {
+        peer::<fidget::jit::JitFunction>(bencher, model);
+    }
+}
+
+mod pruned {
+    use super::*;
+
+    /// Octree descent with interval pruning and sign-preserving simplification; returns the
+    /// number of point samples taken, so both sides can be checked to do the same work.
+    fn descend(tape: &Tape, lo: [f32; 3], size: f32, depth: u32, scratch: &mut Vec<f32>) -> usize {
+        let mut interval = IntervalEval::new(tape);
+        let i = |k: usize| Interval::new(lo[k] as f64, (lo[k] + size) as f64);
+        let bounds = interval.eval([i(0), i(1), i(2), Interval::point(0.0)]);
+        if !bounds.has_nan() && (bounds.lo > 0.0 || bounds.hi < 0.0) {
+            return 0;
+        }
+        let simpler = tape.simplify(interval.choices(), Fidelity::Sign);
+        if depth == 0 {
+            return sample(&simpler, lo, size, scratch);
+        }
+        let half = size / 2.0;
+        let mut n = 0;
+        for child in 0..8 {
+            let o = [(child & 1) as f32, ((child >> 1) & 1) as f32, ((child >> 2) & 1) as f32];
+            let child_lo = [lo[0] + o[0] * half, lo[1] + o[1] * half, lo[2] + o[2] * half];
+            n += descend(&simpler, child_lo, half, depth - 1, scratch);
+        }
+        n
+    }
+
+    fn grid(lo: [f32; 3], size: f32) -> [Vec<f32>; 3] {
+        let n = LEAF_SAMPLES;
+        let step = size / n as f32;
+        let mut g = [Vec::with_capacity(n * n * n), Vec::with_capacity(n * n * n), Vec::with_capacity(n * n * n)];
+        for k in 0..n {
+            for j in 0..n {
+                for i in 0..n {
+                    g[0].push(lo[0] + (i as f32 + 0.5) * step);
+                    g[1].push(lo[1] + (j as f32 + 0.5) * step);
+                    g[2].push(lo[2] + (k as f32 + 0.5) * step);
+                }
+            }
+        }
+        g
+    }
+
+    fn sample(tape: &Tape, lo: [f32; 3], size: f32, out: &mut Vec<f32>) -> usize {
+        let [xs, ys, zs] = grid(lo, size);
+        out.resize(xs.len(), 0.0);
+        BulkEval::new(tape).eval(&xs, &ys, &zs, 0.0, out);
+        divan::black_box(&out);
+        xs.len()
+    }
+
+    #[divan::bench(args = MODELS)]
+    fn fdsl(bencher: Bencher, model: &str) {
+        let tape = tape(model);
+        let mut scratch = Vec::new();
+        bencher.bench_local(|| descend(&tape, [-1.2; 3], 2.4, PRUNE_DEPTH, &mut scratch));
+    }
+
+    fn peer_descend<F: fidget::eval::Function + fidget::eval::MathFunction + Clone>(shape: &Shape<F>, lo: [f32; 3], size: f32, depth: u32) -> usize {
+        let mut interval = Shape::<F>::new_interval_eval();
+        let t = shape.interval_tape(Default::default());
+        let i = |k: usize| fidget::types::Interval::new(lo[k], lo[k] + size);
+        let (bounds, trace) = interval.eval(&t, i(0), i(1), i(2)).expect("evaluates");
+        if bounds.lower() > 0.0 || bounds.upper() < 0.0 {
+            return 0;
+        }
+        let simpler = match trace {
+            Some(trace) => {
+                shape.simplify(trace, Default::default(), &mut Default::default()).expect("simplifies")
+            }
+            None => shape.clone(),
+        };
+        if depth == 0 {
+            let [xs, ys, zs] = grid(lo, size);
+            let t = simpler.float_slice_tape(Default::default());
+            let mut eval = Shape::<F>::new_float_slice_eval();
+            divan::black_box(eval.eval(&t, &xs, &ys, &zs).expect("evaluates"));
+            return xs.len();
+        }
+        let half = size / 2.0;
+        let mut n = 0;
+        for child in 0..8 {
+            let o = [(child & 1) as f32, ((child >> 1) & 1) as f32, ((child >> 2) & 1) as f32];
+            let child_lo = [lo[0] + o[0] * half, lo[1] + o[1] * half, lo[2] + o[2] * half];
+            n += peer_descend(&simpler, child_lo, half, depth - 1);
+        }
+        n
+    }
+
+    fn peer<F: fidget::eval::Function + fidget::eval::MathFunction + Clone>(bencher: Bencher, model: &str) {
+        let (ctx, root) = fidget_peer::to_fidget(&tape(model));
+        let shape = Shape::<F>::new(&ctx, root).expect("fidget accepts the model");
+        bencher.bench_local(|| peer_descend(&shape, [-1.2; 3], 2.4, PRUNE_DEPTH));
+    }
+
+    #[divan::bench(args = MODELS)]
+    fn fidget_vm(bencher: Bencher, model: &str) {
+        peer::<fidget::vm::VmFunction>(bencher, model);
+    }
+
+    #[divan::bench(args = MODELS)]
+    fn fidget_jit(bencher: Bencher, model: &str) {
+        peer::<fidget::jit::JitFunction>(bencher, model);
+    }
+
+    #[allow(dead_code, reason = "type names used by the benchmark's documentation")]
+    type Peers = (VmShape, JitShape);
+}

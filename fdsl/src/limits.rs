@@ -6,7 +6,7 @@
 /// The longest source text accepted, in bytes.
 pub const MAX_SOURCE_BYTES: usize = 64 * 1024;
 /// The deepest nesting of parentheses, blocks and operators the parser follows.
-pub const MAX_NESTING_DEPTH: usize = 96;
+pub const MAX_NESTING_DEPTH: usize = 256;
 /// The most nodes an expression graph may hold after deduplication.
 pub const MAX_GRAPH_NODES: usize = 200_000;
 /// The most iterations one loop may run when it is unrolled.

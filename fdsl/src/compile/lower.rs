@@ -717,12 +717,12 @@ impl Lowerer {
         let mut d = Diagnostic::error(span, format!("unknown name `{name}`"));
         if FUNCTION_NAMES.contains(&name) {
             d = d.with_hint(format!("`{name}` is a function: write `{name}(...)`"));
-        } else if let Some(best) = suggest(name, &candidates) {
-            d = d.with_hint(format!("did you mean `{best}`?"));
         } else if env.inputs.len() < INPUT_NAMES.len()
             && ["x", "y", "z", "t", "u", "v", "w"].contains(&name)
         {
             d = d.with_hint(format!("add `{name}` to the function's parameters"));
+        } else if let Some(best) = suggest(name, &candidates) {
+            d = d.with_hint(format!("did you mean `{best}`?"));
         } else {
             d = d.with_hint("assign it before use, e.g. `a = 1;`");
         }
@@ -888,17 +888,26 @@ fn suggest<'a>(name: &str, candidates: &[&'a str]) -> Option<&'a str> {
         .map(|(_, c)| c)
 }
 
+/// Edit distance where swapping two neighbouring letters counts as one edit (`sni` -> `sin`).
 fn edit_distance(a: &str, b: &str) -> usize {
     let a: Vec<char> = a.chars().take(64).collect();
     let b: Vec<char> = b.chars().take(64).collect();
-    let mut prev: Vec<usize> = (0..=b.len()).collect();
-    for (i, ca) in a.iter().enumerate() {
-        let mut cur = vec![i + 1; b.len() + 1];
-        for (j, cb) in b.iter().enumerate() {
-            let cost = usize::from(ca != cb);
-            cur[j + 1] = (prev[j] + cost).min(prev[j + 1] + 1).min(cur[j] + 1);
-        }
-        prev = cur;
+    let mut d = vec![vec![0usize; b.len() + 1]; a.len() + 1];
+    for (i, row) in d.iter_mut().enumerate() {
+        row[0] = i;
     }
-    prev[b.len()]
+    for j in 0..=b.len() {
+        d[0][j] = j;
+    }
+    for i in 1..=a.len() {
+        for j in 1..=b.len() {
+            let cost = usize::from(a[i - 1] != b[j - 1]);
+            let mut best = (d[i - 1][j] + 1).min(d[i][j - 1] + 1).min(d[i - 1][j - 1] + cost);
+            if i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] {
+                best = best.min(d[i - 2][j - 2] + 1);
+            }
+            d[i][j] = best;
+        }
+    }
+    d[a.len()][b.len()]
 }
