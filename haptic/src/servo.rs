@@ -149,11 +149,13 @@ impl ServoStats {
     /// Reads everything (allocates: app side only).
     pub fn snapshot(&self) -> StatsSnapshot {
         let quantiles = |h: &Histogram| {
+            // Buckets report their upper edge, which can lie above the largest value seen.
+            let max = h.max_micros.load(Ordering::Relaxed);
             [
-                h.quantile_micros(0.5),
-                h.quantile_micros(0.99),
-                h.quantile_micros(0.999),
-                h.max_micros.load(Ordering::Relaxed),
+                h.quantile_micros(0.5).min(max),
+                h.quantile_micros(0.99).min(max),
+                h.quantile_micros(0.999).min(max),
+                max,
             ]
         };
         let vec3 = |bits: &[AtomicU64; 3]| {
