@@ -7,8 +7,10 @@
 pub mod field;
 pub mod octree;
 pub mod parametric;
+pub mod tape_field;
 
 pub use field::Field;
+pub use tape_field::TapeField;
 
 /// Largest number of vertices a [`Mesh`] may index (indices are `u32`).
 pub const MESH_VERTICES_MAX: usize = u32::MAX as usize;
