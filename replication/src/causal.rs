@@ -1,0 +1,154 @@
+//! Causal bookkeeping: version vectors (what a peer has) and the DAG's frontier (heads).
+
+use std::collections::BTreeMap;
+use std::collections::BTreeSet;
+
+use crate::identity::PeerId;
+use crate::op::OpId;
+
+/// Most authors a version vector on the wire may name.
+pub const MAX_VV_AUTHORS: usize = 4096;
+
+/// For each author, the highest sequence number such that all of that author's ops up to it
+/// are held. Because delivery is causal and per-author gapless, this names a set of ops
+/// exactly.
+#[derive(Clone, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct VersionVector {
+    seqs: BTreeMap<PeerId, u64>,
+}
+
+impl VersionVector {
+    /// An empty version vector.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The highest contiguous sequence number held for `author` (0 if none).
+    pub fn get(&self, author: &PeerId) -> u64 {
+        self.seqs.get(author).copied().unwrap_or(0)
+    }
+
+    /// Raises `author`'s entry to at least `seq`.
+    pub fn raise(&mut self, author: PeerId, seq: u64) {
+        if seq == 0 {
+            return;
+        }
+        let entry = self.seqs.entry(author).or_insert(0);
+        *entry = (*entry).max(seq);
+    }
+
+    /// Pointwise maximum with `other`.
+    pub fn join(&mut self, other: &VersionVector) {
+        for (author, seq) in &other.seqs {
+            self.raise(*author, *seq);
+        }
+    }
+
+    /// True if `self` includes everything `other` names.
+    pub fn dominates(&self, other: &VersionVector) -> bool {
+        other.seqs.iter().all(|(a, s)| self.get(a) >= *s)
+    }
+
+    /// Entries in author order.
+    pub fn iter(&self) -> impl Iterator<Item = (&PeerId, &u64)> {
+        self.seqs.iter()
+    }
+
+    /// Number of authors named.
+    pub fn len(&self) -> usize {
+        self.seqs.len()
+    }
+
+    /// True if no author is named.
+    pub fn is_empty(&self) -> bool {
+        self.seqs.is_empty()
+    }
+
+    /// Total number of ops named.
+    pub fn n_ops(&self) -> u64 {
+        self.seqs
+            .values()
+            .fold(0u64, |acc, s| acc.saturating_add(*s))
+    }
+}
+
+/// The frontier of the op DAG: delivered ops that no delivered op depends on yet.
+///
+/// New local ops depend on exactly these.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Frontier {
+    heads: BTreeSet<OpId>,
+}
+
+impl Frontier {
+    /// Records a delivered op. Causal delivery guarantees its dependencies were delivered
+    /// before it and that nothing delivered depends on it yet.
+    pub fn deliver(&mut self, id: OpId, deps: &[OpId]) {
+        for dep in deps {
+            self.heads.remove(dep);
+        }
+        self.heads.insert(id);
+    }
+
+    /// The heads in id order.
+    pub fn heads(&self) -> impl Iterator<Item = &OpId> {
+        self.heads.iter()
+    }
+
+    /// Number of heads.
+    pub fn len(&self) -> usize {
+        self.heads.len()
+    }
+
+    /// True before any op is delivered.
+    pub fn is_empty(&self) -> bool {
+        self.heads.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn vv(entries: &[(u8, u64)]) -> VersionVector {
+        let mut v = VersionVector::new();
+        for (a, s) in entries {
+            v.raise(PeerId([*a; 32]), *s);
+        }
+        v
+    }
+
+    #[test]
+    fn frontier_tracks_heads() {
+        let mut f = Frontier::default();
+        let (a, b, c) = (OpId([1; 32]), OpId([2; 32]), OpId([3; 32]));
+        f.deliver(a, &[]);
+        f.deliver(b, &[]);
+        assert_eq!(f.len(), 2);
+        f.deliver(c, &[a, b]);
+        assert_eq!(f.heads().copied().collect::<Vec<_>>(), vec![c]);
+    }
+
+    proptest! {
+        #![proptest_config(crate::test_config(64))]
+        #[test]
+        fn join_is_a_semilattice(
+            a in proptest::collection::vec((0u8..4, 0u64..5), 0..4),
+            b in proptest::collection::vec((0u8..4, 0u64..5), 0..4),
+            c in proptest::collection::vec((0u8..4, 0u64..5), 0..4),
+        ) {
+            let (a, b, c) = (vv(&a), vv(&b), vv(&c));
+            let mut ab = a.clone(); ab.join(&b);
+            let mut ba = b.clone(); ba.join(&a);
+            prop_assert_eq!(&ab, &ba);
+            let mut ab_c = ab.clone(); ab_c.join(&c);
+            let mut bc = b.clone(); bc.join(&c);
+            let mut a_bc = a.clone(); a_bc.join(&bc);
+            prop_assert_eq!(&ab_c, &a_bc);
+            let mut aa = a.clone(); aa.join(&a);
+            prop_assert_eq!(&aa, &a);
+            prop_assert!(ab.dominates(&a) && ab.dominates(&b));
+        }
+    }
+}

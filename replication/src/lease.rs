@@ -1,0 +1,355 @@
+//! Lease and undo rules, evaluated in the fold: given the state before an op in the linear
+//! order, decide whether the op is effective or rejected (and why), and update the state.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt;
+
+use crate::identity::PeerId;
+use crate::op::OpId;
+use crate::payload::{Effect, LeaseStrength, ObjectId};
+use crate::time::Timestamp;
+
+/// A lease on one object, as of some point in the linear order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Lease {
+    /// Who holds it.
+    pub holder: PeerId,
+    /// Weak or strong.
+    pub strength: LeaseStrength,
+    /// First timestamp at which it no longer holds.
+    pub expires_at: Timestamp,
+}
+
+impl Lease {
+    /// True if the lease still holds at `at`.
+    pub fn holds_at(&self, at: Timestamp) -> bool {
+        at < self.expires_at
+    }
+}
+
+/// Why an op was not effective. Rejected ops stay in history with their reason.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum RejectReason {
+    /// Another peer held the object's lease.
+    LeaseHeld {
+        /// The holder at that point of the order.
+        holder: PeerId,
+    },
+    /// A weak acquire met another peer's strong lease.
+    StrongLeaseHeld {
+        /// The holder at that point of the order.
+        holder: PeerId,
+    },
+    /// A release by a peer that did not hold the lease.
+    NotHolder,
+    /// An undo or redo of an op that is not earlier in the order.
+    UnknownTarget,
+    /// An undo or redo of another author's op.
+    NotOwnTarget,
+    /// An undo or redo of an op that is not an edit.
+    TargetNotEdit,
+    /// An undo or redo of an edit that was itself rejected.
+    TargetNotEffective,
+    /// An undo of an edit that is already undone.
+    AlreadyUndone,
+    /// A redo of an edit that is not undone.
+    NotUndone,
+}
+
+impl fmt::Display for RejectReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::LeaseHeld { holder } => write!(f, "{holder} held the lease"),
+            Self::StrongLeaseHeld { holder } => write!(f, "{holder} held a strong lease"),
+            Self::NotHolder => f.write_str("released a lease it did not hold"),
+            Self::UnknownTarget => f.write_str("undo/redo of an unknown op"),
+            Self::NotOwnTarget => f.write_str("undo/redo of another author's op"),
+            Self::TargetNotEdit => f.write_str("undo/redo of an op that is not an edit"),
+            Self::TargetNotEffective => f.write_str("undo/redo of a rejected edit"),
+            Self::AlreadyUndone => f.write_str("already undone"),
+            Self::NotUndone => f.write_str("redo of an edit that is not undone"),
+        }
+    }
+}
+
+/// The verdict on one op at its point of the linear order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Mark {
+    /// The op took effect.
+    Effective,
+    /// The op stays in history but had no effect.
+    Rejected(RejectReason),
+}
+
+/// What the fold knows about an undo/redo target that precedes the op in the order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TargetInfo {
+    /// The target's author.
+    pub author: PeerId,
+    /// The target's effect.
+    pub effect: Effect,
+    /// The target's mark.
+    pub mark: Mark,
+}
+
+/// The state the lease/undo fold carries from op to op: small, cloned into checkpoints.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct FoldState {
+    leases: BTreeMap<ObjectId, Lease>,
+    undone: BTreeSet<OpId>,
+}
+
+impl FoldState {
+    /// The lease on `object` as recorded (it may have expired).
+    pub fn lease(&self, object: ObjectId) -> Option<Lease> {
+        self.leases.get(&object).copied()
+    }
+
+    /// True if edit `id` is currently undone.
+    pub fn is_undone(&self, id: &OpId) -> bool {
+        self.undone.contains(id)
+    }
+
+    /// Who blocks `author` from changing `object` at `at`, if anyone.
+    fn blocker(&self, author: PeerId, object: ObjectId, at: Timestamp) -> Option<Lease> {
+        self.leases
+            .get(&object)
+            .copied()
+            .filter(|l| l.holds_at(at) && l.holder != author)
+    }
+
+    /// Evaluates one op and updates the state. `target` describes an undo/redo's target if it
+    /// precedes this op in the order.
+    pub fn apply(
+        &mut self,
+        author: PeerId,
+        at: Timestamp,
+        effect: Effect,
+        target: Option<TargetInfo>,
+    ) -> Mark {
+        let verdict = match effect {
+            Effect::Independent => Ok(()),
+            Effect::Edit { object } => self.check_free(author, object, at),
+            Effect::Acquire {
+                object,
+                strength,
+                ttl_micros,
+            } => self.acquire(author, at, object, strength, ttl_micros),
+            Effect::Release { object } => match self.leases.get(&object) {
+                Some(l) if l.holder == author && l.holds_at(at) => {
+                    self.leases.remove(&object);
+                    Ok(())
+                }
+                _ => Err(RejectReason::NotHolder),
+            },
+            Effect::Undo { target: id } => self.undo_redo(author, at, id, target, true),
+            Effect::Redo { target: id } => self.undo_redo(author, at, id, target, false),
+        };
+        match verdict {
+            Ok(()) => Mark::Effective,
+            Err(reason) => Mark::Rejected(reason),
+        }
+    }
+
+    fn check_free(
+        &self,
+        author: PeerId,
+        object: ObjectId,
+        at: Timestamp,
+    ) -> Result<(), RejectReason> {
+        match self.blocker(author, object, at) {
+            Some(l) => Err(RejectReason::LeaseHeld { holder: l.holder }),
+            None => Ok(()),
+        }
+    }
+
+    fn acquire(
+        &mut self,
+        author: PeerId,
+        at: Timestamp,
+        object: ObjectId,
+        strength: LeaseStrength,
+        ttl_micros: u64,
+    ) -> Result<(), RejectReason> {
+        if let Some(l) = self.blocker(author, object, at) {
+            match (strength, l.strength) {
+                // A weak acquire takes a weak lease over; the former holder loses it.
+                (LeaseStrength::Weak, LeaseStrength::Weak) => {}
+                (LeaseStrength::Weak, LeaseStrength::Strong) => {
+                    return Err(RejectReason::StrongLeaseHeld { holder: l.holder });
+                }
+                (LeaseStrength::Strong, _) => {
+                    return Err(RejectReason::LeaseHeld { holder: l.holder });
+                }
+            }
+        }
+        let expires_at = at.saturating_add_micros(ttl_micros);
+        self.leases.insert(
+            object,
+            Lease {
+                holder: author,
+                strength,
+                expires_at,
+            },
+        );
+        Ok(())
+    }
+
+    fn undo_redo(
+        &mut self,
+        author: PeerId,
+        at: Timestamp,
+        id: OpId,
+        target: Option<TargetInfo>,
+        undo: bool,
+    ) -> Result<(), RejectReason> {
+        let t = target.ok_or(RejectReason::UnknownTarget)?;
+        if t.author != author {
+            return Err(RejectReason::NotOwnTarget);
+        }
+        let Effect::Edit { object } = t.effect else {
+            return Err(RejectReason::TargetNotEdit);
+        };
+        if t.mark != Mark::Effective {
+            return Err(RejectReason::TargetNotEffective);
+        }
+        match (undo, self.undone.contains(&id)) {
+            (true, true) => return Err(RejectReason::AlreadyUndone),
+            (false, false) => return Err(RejectReason::NotUndone),
+            _ => {}
+        }
+        self.check_free(author, object, at)?;
+        if undo {
+            self.undone.insert(id);
+        } else {
+            self.undone.remove(&id);
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const A: PeerId = PeerId([1; 32]);
+    const B: PeerId = PeerId([2; 32]);
+    const OBJ: ObjectId = ObjectId(7);
+
+    fn acquire(strength: LeaseStrength, ttl_micros: u64) -> Effect {
+        Effect::Acquire {
+            object: OBJ,
+            strength,
+            ttl_micros,
+        }
+    }
+
+    #[test]
+    fn weak_takes_over_strong_does_not() {
+        let mut s = FoldState::default();
+        let edit = Effect::Edit { object: OBJ };
+        assert_eq!(
+            s.apply(B, Timestamp(0), edit, None),
+            Mark::Effective,
+            "free object"
+        );
+        assert_eq!(
+            s.apply(A, Timestamp(1), acquire(LeaseStrength::Weak, 100), None),
+            Mark::Effective
+        );
+        assert_eq!(
+            s.apply(B, Timestamp(2), edit, None),
+            Mark::Rejected(RejectReason::LeaseHeld { holder: A })
+        );
+        assert_eq!(
+            s.apply(B, Timestamp(3), acquire(LeaseStrength::Weak, 100), None),
+            Mark::Effective
+        );
+        assert_eq!(
+            s.apply(A, Timestamp(4), edit, None),
+            Mark::Rejected(RejectReason::LeaseHeld { holder: B })
+        );
+        assert_eq!(
+            s.apply(A, Timestamp(5), acquire(LeaseStrength::Strong, 100), None),
+            Mark::Rejected(RejectReason::LeaseHeld { holder: B })
+        );
+        assert_eq!(
+            s.apply(B, Timestamp(6), acquire(LeaseStrength::Strong, 10), None),
+            Mark::Effective
+        );
+        assert_eq!(
+            s.apply(A, Timestamp(7), acquire(LeaseStrength::Weak, 10), None),
+            Mark::Rejected(RejectReason::StrongLeaseHeld { holder: B })
+        );
+        // The strong lease expires at 16.
+        assert_eq!(s.apply(A, Timestamp(16), edit, None), Mark::Effective);
+        assert_eq!(
+            s.apply(B, Timestamp(17), Effect::Release { object: OBJ }, None),
+            Mark::Rejected(RejectReason::NotHolder)
+        );
+    }
+
+    #[test]
+    fn release_frees_the_object() {
+        let mut s = FoldState::default();
+        s.apply(A, Timestamp(1), acquire(LeaseStrength::Strong, 1000), None);
+        assert_eq!(
+            s.apply(A, Timestamp(2), Effect::Release { object: OBJ }, None),
+            Mark::Effective
+        );
+        assert_eq!(
+            s.apply(B, Timestamp(3), Effect::Edit { object: OBJ }, None),
+            Mark::Effective
+        );
+        assert_eq!(s.lease(OBJ), None);
+    }
+
+    #[test]
+    fn undo_rules() {
+        let mut s = FoldState::default();
+        let id = OpId([5; 32]);
+        let info = TargetInfo {
+            author: A,
+            effect: Effect::Edit { object: OBJ },
+            mark: Mark::Effective,
+        };
+        let undo = Effect::Undo { target: id };
+        let redo = Effect::Redo { target: id };
+        assert_eq!(
+            s.apply(A, Timestamp(1), redo, Some(info)),
+            Mark::Rejected(RejectReason::NotUndone)
+        );
+        assert_eq!(
+            s.apply(B, Timestamp(1), undo, Some(info)),
+            Mark::Rejected(RejectReason::NotOwnTarget)
+        );
+        assert_eq!(
+            s.apply(A, Timestamp(1), undo, None),
+            Mark::Rejected(RejectReason::UnknownTarget)
+        );
+        assert_eq!(s.apply(A, Timestamp(1), undo, Some(info)), Mark::Effective);
+        assert!(s.is_undone(&id));
+        assert_eq!(
+            s.apply(A, Timestamp(2), undo, Some(info)),
+            Mark::Rejected(RejectReason::AlreadyUndone)
+        );
+        s.apply(B, Timestamp(3), acquire(LeaseStrength::Weak, 100), None);
+        assert_eq!(
+            s.apply(A, Timestamp(4), redo, Some(info)),
+            Mark::Rejected(RejectReason::LeaseHeld { holder: B })
+        );
+        assert_eq!(
+            s.apply(A, Timestamp(200), redo, Some(info)),
+            Mark::Effective
+        );
+        assert!(!s.is_undone(&id));
+        let rejected = TargetInfo {
+            mark: Mark::Rejected(RejectReason::NotHolder),
+            ..info
+        };
+        assert_eq!(
+            s.apply(A, Timestamp(201), undo, Some(rejected)),
+            Mark::Rejected(RejectReason::TargetNotEffective)
+        );
+    }
+}

@@ -1,0 +1,515 @@
+//! The replicated op log: causal delivery through the pending buffer, the deterministic
+//! linear order (Lamport time, then author, then seq), and the lease/undo marks of every op,
+//! re-evaluated incrementally from checkpoints when a late op lands in the middle.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use crate::causal::{Frontier, VersionVector};
+use crate::identity::{Keypair, PeerId};
+use crate::lease::{FoldState, Lease, Mark, RejectReason, TargetInfo};
+use crate::op::{BuildError, Op, OpFields, OpId, VerifiedOp};
+use crate::payload::{Effect, ObjectId, Payload};
+use crate::pending::{DepKey, Evicted, Origin, Pending, PendingLimits};
+use crate::time::{HybridClock, Timestamp};
+
+/// The fold state is checkpointed every this many positions of the linear order, so a late
+/// op re-evaluates from the nearest checkpoint instead of from the start.
+pub const CHECKPOINT_INTERVAL: usize = 256;
+/// Most ops one log holds; past it, inserts fail (the store and sync stop growing it).
+pub const MAX_LOG_OPS: usize = 10_000_000;
+
+/// The [`Origin`] of ops this peer authors or loads from its own store.
+pub const LOCAL_ORIGIN: Origin = Origin(0);
+
+/// Why an op was refused outright (it is not stored, not even as rejected).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum InsertError {
+    /// The author already has a different op with this sequence number (a forked author).
+    #[error("author {author} equivocated at seq {seq}")]
+    Equivocation {
+        /// The author.
+        author: PeerId,
+        /// The sequence number used twice.
+        seq: u64,
+    },
+    /// The Lamport time is not above every dependency's and the author's previous op's.
+    #[error("lamport time {lamport} is not above its causal past ({floor})")]
+    BadLamport {
+        /// The op's Lamport time.
+        lamport: u64,
+        /// The highest Lamport time in its immediate past.
+        floor: u64,
+    },
+    /// The log is at [`MAX_LOG_OPS`].
+    #[error("log is full ({MAX_LOG_OPS} ops)")]
+    Full,
+}
+
+/// Why a local op could not be authored.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum AuthorError {
+    /// The op could not be built.
+    #[error(transparent)]
+    Build(#[from] BuildError),
+    /// The op could not be inserted.
+    #[error(transparent)]
+    Insert(#[from] InsertError),
+}
+
+/// What inserting one op did. Drain it: it is the only report of these facts.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Insertion {
+    /// Ops newly delivered, in delivery order (the op itself and any pending ops it freed).
+    pub delivered: Vec<OpId>,
+    /// True if the op was already known (delivered or pending): nothing changed.
+    pub duplicate: bool,
+    /// True if the op waits in the pending buffer for dependencies.
+    pub parked: bool,
+    /// Pending ops dropped to stay within limits.
+    pub evicted: Vec<Evicted>,
+    /// Freed pending ops that were refused when their turn came.
+    pub refused: Vec<(OpId, Origin, InsertError)>,
+    /// What the scene fold must redo, if anything changed.
+    pub refold: Option<Refold>,
+}
+
+/// Where the scene fold must restart after a change to the log.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Refold {
+    /// First position of the linear order whose op, mark or activity changed.
+    pub from: usize,
+    /// For each object touched, the first position from which its own fold must be redone
+    /// (an undo's target position counts for the target's object).
+    pub objects: BTreeMap<ObjectId, usize>,
+}
+
+/// One op in the linear order with its verdict.
+#[derive(Debug, Clone, Copy)]
+pub struct Entry<'a, P> {
+    /// The op.
+    pub op: &'a Op<P>,
+    /// Effective or rejected (with the reason), at its point of the order.
+    pub mark: Mark,
+    /// True if the op is effective and not undone by a later op: the scene folds these.
+    pub active: bool,
+}
+
+/// Counters of what the log refused or dropped.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LogStats {
+    /// Ops refused (equivocation, bad Lamport time, full).
+    pub n_refused: u64,
+    /// Pending ops evicted.
+    pub n_evicted: u64,
+}
+
+type OrderKey = (u64, PeerId, u64);
+
+/// The replicated log of one peer, generic over the payload.
+#[derive(Debug, Clone)]
+pub struct Log<P> {
+    ops: BTreeMap<OpId, Op<P>>,
+    /// The linear order: sorted by key; a topological order because Lamport times grow
+    /// along every dependency.
+    order: Vec<(OrderKey, OpId)>,
+    /// `marks[i]` is the verdict on `order[i]`.
+    marks: Vec<Mark>,
+    /// `checkpoints[k]` is the fold state before position `k * CHECKPOINT_INTERVAL`.
+    checkpoints: Vec<FoldState>,
+    /// The fold state after the last op.
+    state: FoldState,
+    by_author: BTreeMap<PeerId, Vec<OpId>>,
+    frontier: Frontier,
+    vv: VersionVector,
+    max_lamport: u64,
+    clock: HybridClock,
+    pending: Pending<P>,
+    stats: LogStats,
+}
+
+impl<P: Payload> Default for Log<P> {
+    fn default() -> Self {
+        Self::with_pending_limits(PendingLimits::default())
+    }
+}
+
+impl<P: Payload> Log<P> {
+    /// An empty log whose pending buffer has the given limits.
+    pub fn with_pending_limits(limits: PendingLimits) -> Self {
+        Self {
+            ops: BTreeMap::new(),
+            order: Vec::new(),
+            marks: Vec::new(),
+            checkpoints: vec![FoldState::default()],
+            state: FoldState::default(),
+            by_author: BTreeMap::new(),
+            frontier: Frontier::default(),
+            vv: VersionVector::new(),
+            max_lamport: 0,
+            clock: HybridClock::default(),
+            pending: Pending::with_limits(limits),
+            stats: LogStats::default(),
+        }
+    }
+
+    /// Authors, signs and inserts a new op by `keypair` that depends on the current heads.
+    pub fn author(
+        &mut self,
+        keypair: &Keypair,
+        now: Timestamp,
+        payload: P,
+    ) -> Result<(VerifiedOp<P>, Insertion), AuthorError> {
+        let me = keypair.peer_id();
+        let seq = self.vv.get(&me).checked_add(1).ok_or(InsertError::Full)?;
+        let lamport = self.max_lamport.checked_add(1).ok_or(InsertError::Full)?;
+        let fields = OpFields {
+            seq,
+            lamport,
+            timestamp: self.clock.tick(now),
+            deps: self.frontier.heads().copied().collect(),
+            payload,
+        };
+        let op = Op::sign(keypair, fields)?;
+        let insertion = self.insert(now, op.clone(), LOCAL_ORIGIN)?;
+        assert!(
+            insertion.delivered.first() == Some(&op.id()),
+            "a local op is delivered at once"
+        );
+        Ok((op, insertion))
+    }
+
+    /// Inserts a verified op from `origin`: delivers it if its causal past is here (and then
+    /// every pending op it frees), or parks it until then.
+    pub fn insert(
+        &mut self,
+        now: Timestamp,
+        op: VerifiedOp<P>,
+        origin: Origin,
+    ) -> Result<Insertion, InsertError> {
+        let op = op.into_op();
+        let mut out = Insertion::default();
+        if self.ops.contains_key(&op.id()) || self.pending.contains(&op.id()) {
+            out.duplicate = true;
+            return Ok(out);
+        }
+        let missing = self.missing(&op);
+        if !missing.is_empty() {
+            out.parked = true;
+            out.evicted = self.pending.insert(now, op, origin, missing);
+            self.stats.n_evicted += out.evicted.len() as u64;
+            return Ok(out);
+        }
+        let first_id = op.id();
+        let mut first_pos = self
+            .deliver(op)
+            .inspect_err(|_| self.stats.n_refused += 1)?;
+        let mut queue = std::collections::VecDeque::new();
+        self.free_waiters(first_id, &mut queue);
+        out.delivered.push(first_id);
+        while let Some((ready, ready_origin)) = queue.pop_front() {
+            let id = ready.id();
+            if !self.missing(&ready).is_empty() {
+                // Freed by one key but another (e.g. the previous seq) is still missing.
+                let missing = self.missing(&ready);
+                out.evicted
+                    .extend(self.pending.insert(now, ready, ready_origin, missing));
+                continue;
+            }
+            match self.deliver(ready) {
+                Ok(pos) => {
+                    first_pos = first_pos.min(pos);
+                    out.delivered.push(id);
+                    self.free_waiters(id, &mut queue);
+                }
+                Err(e) => {
+                    self.stats.n_refused += 1;
+                    out.refused.push((id, ready_origin, e));
+                }
+            }
+        }
+        self.stats.n_evicted += out.evicted.len() as u64;
+        let inserted: BTreeSet<OpId> = out.delivered.iter().copied().collect();
+        out.refold = Some(self.refold_from(first_pos, &inserted));
+        Ok(out)
+    }
+
+    /// Drops pending ops that waited too long; their senders offer them again on next sync.
+    pub fn expire_pending(&mut self, now: Timestamp) -> Vec<Evicted> {
+        let evicted = self.pending.expire(now);
+        self.stats.n_evicted += evicted.len() as u64;
+        evicted
+    }
+
+    /// When the next pending op expires, if any waits.
+    pub fn next_pending_expiry(&self) -> Option<Timestamp> {
+        self.pending.next_expiry()
+    }
+
+    /// Inserts every op of `other` (in its linear order, so causally).
+    pub fn merge(&mut self, now: Timestamp, other: &Log<P>) -> Result<(), InsertError> {
+        for (_, id) in &other.order {
+            if let Some(op) = other.ops.get(id) {
+                self.insert(now, VerifiedOp::trusted(op.clone()), LOCAL_ORIGIN)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn missing(&self, op: &Op<P>) -> BTreeSet<DepKey> {
+        let mut missing: BTreeSet<DepKey> = op
+            .deps()
+            .iter()
+            .filter(|d| !self.ops.contains_key(d))
+            .map(|d| DepKey::Op(*d))
+            .collect();
+        if op.seq() > 1 && self.vv.get(&op.author()) < op.seq() - 1 {
+            missing.insert(DepKey::Seq(op.author(), op.seq() - 1));
+        }
+        missing
+    }
+
+    fn free_waiters(&mut self, id: OpId, queue: &mut std::collections::VecDeque<(Op<P>, Origin)>) {
+        let Some(op) = self.ops.get(&id) else { return };
+        let keys = [DepKey::Op(id), DepKey::Seq(op.author(), op.seq())];
+        for key in keys {
+            queue.extend(self.pending.satisfy(key));
+        }
+    }
+
+    /// Adds an op whose causal past is delivered; returns its position in the order.
+    fn deliver(&mut self, op: Op<P>) -> Result<usize, InsertError> {
+        let author = op.author();
+        let held = self.vv.get(&author);
+        if held >= op.seq() {
+            return Err(InsertError::Equivocation {
+                author,
+                seq: op.seq(),
+            });
+        }
+        assert!(
+            held + 1 == op.seq(),
+            "delivery waits for the author's previous op"
+        );
+        if self.ops.len() >= MAX_LOG_OPS {
+            return Err(InsertError::Full);
+        }
+        let prev = self.by_author.get(&author).and_then(|ids| ids.last());
+        let floor = op
+            .deps()
+            .iter()
+            .chain(prev)
+            .filter_map(|d| self.ops.get(d))
+            .map(Op::lamport)
+            .max()
+            .unwrap_or(0);
+        if op.lamport() <= floor {
+            return Err(InsertError::BadLamport {
+                lamport: op.lamport(),
+                floor,
+            });
+        }
+        let key = (op.lamport(), author, op.seq());
+        let pos = self.order.partition_point(|(k, _)| *k < key);
+        let id = op.id();
+        self.order.insert(pos, (key, id));
+        self.marks.insert(pos, Mark::Effective);
+        self.by_author.entry(author).or_default().push(id);
+        self.vv.raise(author, op.seq());
+        self.frontier.deliver(id, op.deps());
+        self.max_lamport = self.max_lamport.max(op.lamport());
+        self.clock.observe(op.timestamp());
+        self.ops.insert(id, op);
+        Ok(pos)
+    }
+
+    /// Re-evaluates marks from `from` to the end, starting at the nearest checkpoint.
+    fn refold_from(&mut self, from: usize, inserted: &BTreeSet<OpId>) -> Refold {
+        // Checkpoints after `from` are stale (positions shifted); one may not exist yet.
+        let k = (from / CHECKPOINT_INTERVAL).min(self.checkpoints.len() - 1);
+        self.checkpoints.truncate(k + 1);
+        let mut state = self.checkpoints[k].clone();
+        let mut refold = Refold {
+            from,
+            objects: BTreeMap::new(),
+        };
+        // Marks at or after `from` were computed before the insertion (or are placeholders):
+        // compare against the old verdicts to find the objects that changed.
+        for pos in k * CHECKPOINT_INTERVAL..self.order.len() {
+            if pos % CHECKPOINT_INTERVAL == 0 && pos / CHECKPOINT_INTERVAL == self.checkpoints.len()
+            {
+                self.checkpoints.push(state.clone());
+            }
+            let id = self.order[pos].1;
+            let Some(op) = self.ops.get(&id) else {
+                continue;
+            };
+            let effect = op.payload().effect();
+            let target = self.target_info(effect, pos);
+            let mark = state.apply(op.author(), op.timestamp(), effect, target);
+            if pos >= from {
+                let object = match effect {
+                    Effect::Independent => None,
+                    Effect::Edit { object }
+                    | Effect::Acquire { object, .. }
+                    | Effect::Release { object } => Some((object, pos)),
+                    Effect::Undo { target } | Effect::Redo { target } => {
+                        self.target_object(&target).map(|(o, p)| (o, p.min(pos)))
+                    }
+                };
+                if let Some((object, at)) = object {
+                    let changed = self.marks[pos] != mark || inserted.contains(&id);
+                    if changed {
+                        let e = refold.objects.entry(object).or_insert(at);
+                        *e = (*e).min(at);
+                    }
+                }
+                self.marks[pos] = mark;
+            }
+        }
+        self.state = state;
+        // An undo or redo changes its target's activity, which may lie before `from`.
+        if let Some(first) = refold.objects.values().min() {
+            refold.from = refold.from.min(*first);
+        }
+        refold
+    }
+
+    fn position(&self, id: &OpId) -> Option<usize> {
+        let op = self.ops.get(id)?;
+        let key = (op.lamport(), op.author(), op.seq());
+        self.order.binary_search_by(|(k, _)| k.cmp(&key)).ok()
+    }
+
+    fn target_info(&self, effect: Effect, pos: usize) -> Option<TargetInfo> {
+        let (Effect::Undo { target } | Effect::Redo { target }) = effect else {
+            return None;
+        };
+        let target_pos = self.position(&target).filter(|p| *p < pos)?;
+        let op = self.ops.get(&target)?;
+        Some(TargetInfo {
+            author: op.author(),
+            effect: op.payload().effect(),
+            mark: self.marks[target_pos],
+        })
+    }
+
+    fn target_object(&self, target: &OpId) -> Option<(ObjectId, usize)> {
+        let op = self.ops.get(target)?;
+        match op.payload().effect() {
+            Effect::Edit { object } => Some((object, self.position(target)?)),
+            _ => None,
+        }
+    }
+}
+
+impl<P: Payload> Log<P> {
+    /// Number of delivered ops.
+    pub fn len(&self) -> usize {
+        self.ops.len()
+    }
+
+    /// True if no op is delivered.
+    pub fn is_empty(&self) -> bool {
+        self.ops.is_empty()
+    }
+
+    /// A delivered op by id.
+    pub fn get(&self, id: &OpId) -> Option<&Op<P>> {
+        self.ops.get(id)
+    }
+
+    /// True if `id` is delivered.
+    pub fn contains(&self, id: &OpId) -> bool {
+        self.ops.contains_key(id)
+    }
+
+    /// The author's op with sequence number `seq`, if delivered.
+    pub fn by_seq(&self, author: &PeerId, seq: u64) -> Option<&Op<P>> {
+        let idx = usize::try_from(seq.checked_sub(1)?).ok()?;
+        self.by_author
+            .get(author)?
+            .get(idx)
+            .and_then(|id| self.ops.get(id))
+    }
+
+    /// What this log holds, per author.
+    pub fn version_vector(&self) -> &VersionVector {
+        &self.vv
+    }
+
+    /// The DAG's heads: what a new local op depends on.
+    pub fn heads(&self) -> impl Iterator<Item = &OpId> {
+        self.frontier.heads()
+    }
+
+    /// Number of ops waiting on dependencies.
+    pub fn n_pending(&self) -> usize {
+        self.pending.len()
+    }
+
+    /// What was refused or evicted so far.
+    pub fn stats(&self) -> LogStats {
+        self.stats
+    }
+
+    /// The linear order with every op's mark and whether the scene folds it.
+    pub fn entries(&self) -> impl Iterator<Item = Entry<'_, P>> {
+        self.order
+            .iter()
+            .zip(&self.marks)
+            .filter_map(|((_, id), mark)| {
+                let op = self.ops.get(id)?;
+                let active = *mark == Mark::Effective && !self.state.is_undone(id);
+                Some(Entry {
+                    op,
+                    mark: *mark,
+                    active,
+                })
+            })
+    }
+
+    /// Op ids in the linear order.
+    pub fn linear_ids(&self) -> impl Iterator<Item = OpId> + '_ {
+        self.order.iter().map(|(_, id)| *id)
+    }
+
+    /// Ops with Lamport time `lamport` or more, in linear order; used to stream what a
+    /// remote lacks.
+    pub(crate) fn ops_from_lamport(&self, lamport: u64) -> impl Iterator<Item = &Op<P>> {
+        let start = self.order.partition_point(|((l, _, _), _)| *l < lamport);
+        self.order[start..]
+            .iter()
+            .filter_map(|(_, id)| self.ops.get(id))
+    }
+
+    /// The verdict on a delivered op.
+    pub fn mark(&self, id: &OpId) -> Option<Mark> {
+        self.position(id).map(|p| self.marks[p])
+    }
+
+    /// True if the op is effective and not undone.
+    pub fn is_active(&self, id: &OpId) -> bool {
+        self.mark(id) == Some(Mark::Effective) && !self.state.is_undone(id)
+    }
+
+    /// The author's rejected ops in linear order, with reasons, so their work can be re-applied.
+    pub fn rejected_by(&self, author: &PeerId) -> Vec<(OpId, RejectReason)> {
+        self.order
+            .iter()
+            .zip(&self.marks)
+            .filter(|(((_, a, _), _), _)| a == author)
+            .filter_map(|((_, id), mark)| match mark {
+                Mark::Rejected(reason) => Some((*id, *reason)),
+                Mark::Effective => None,
+            })
+            .collect()
+    }
+
+    /// The lease on `object` that holds at `now`, after every delivered op.
+    pub fn lease(&self, object: ObjectId, now: Timestamp) -> Option<Lease> {
+        self.state.lease(object).filter(|l| l.holds_at(now))
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,491 @@
+//! Signed ops: their canonical, versioned binary encoding, their ids (blake3 of the
+//! encoding) and signature checks.
+
+use std::fmt;
+
+use crate::codec::{DecodeError, Reader, put_varint};
+use crate::identity::{
+    Keypair, PEER_ID_BYTES, PeerId, SIGNATURE_BYTES, Signature, VerifyError, hex,
+};
+use crate::payload::{MAX_PAYLOAD_BYTES, Payload};
+use crate::time::Timestamp;
+
+/// Version byte that opens every encoded op.
+pub const OP_FORMAT_VERSION: u8 = 1;
+/// Most causal dependencies one op may name.
+pub const MAX_DEPS: usize = 32;
+/// Length of an op id in bytes.
+pub const OP_ID_BYTES: usize = 32;
+/// Largest possible encoded op in bytes: version, author, three varints, deps, payload,
+/// signature.
+pub const MAX_OP_BYTES: usize = 1
+    + PEER_ID_BYTES
+    + 3 * 10
+    + 10
+    + MAX_DEPS * OP_ID_BYTES
+    + 10
+    + MAX_PAYLOAD_BYTES
+    + SIGNATURE_BYTES;
+/// Domain separation for op signatures, so they can never be replayed as another message.
+const SIGNING_CONTEXT: &[u8] = b"sculpt/op/v1";
+
+/// An op's id: the blake3 hash of its canonical encoding (signature included).
+#[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct OpId(pub [u8; OP_ID_BYTES]);
+
+impl OpId {
+    /// Short hex display form.
+    pub fn short(&self) -> String {
+        hex(&self.0[..4])
+    }
+}
+
+impl fmt::Debug for OpId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "OpId({})", self.short())
+    }
+}
+
+impl fmt::Display for OpId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.short())
+    }
+}
+
+/// The unsigned fields of an op, as its author fills them in.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct OpFields<P> {
+    /// Per-author sequence number, starting at 1, without gaps.
+    pub seq: u64,
+    /// Lamport time: greater than the Lamport time of every dependency.
+    pub lamport: u64,
+    /// Hybrid wall-clock timestamp (display and lease expiry).
+    pub timestamp: Timestamp,
+    /// Ids of the ops this one depends on (the author's heads); sorted and deduplicated here.
+    pub deps: Vec<OpId>,
+    /// The object model's content.
+    pub payload: P,
+}
+
+/// Why an op could not be built.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum BuildError {
+    /// More dependencies than [`MAX_DEPS`].
+    #[error("{0} dependencies, over the limit {MAX_DEPS}")]
+    TooManyDeps(usize),
+    /// The payload does not decode back to itself (it breaks the [`Payload`] contract, for
+    /// example by exceeding one of its own limits).
+    #[error("payload does not round-trip through its encoding")]
+    PayloadNotCanonical,
+    /// The payload encodes to more than [`MAX_PAYLOAD_BYTES`].
+    #[error("payload is {0} bytes, over the limit {MAX_PAYLOAD_BYTES}")]
+    PayloadTooLarge(usize),
+    /// Sequence number or Lamport time was 0.
+    #[error("seq and lamport start at 1")]
+    ZeroCounter,
+}
+
+/// A signed op. Immutable: its id and encoding are computed once, when built or decoded.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Op<P> {
+    author: PeerId,
+    fields: OpFields<P>,
+    signature: Signature,
+    id: OpId,
+    encoded: Vec<u8>,
+}
+
+/// An op whose signature has been checked, or that this peer signed itself. Only these
+/// enter a [`crate::log::Log`], so each op's signature is checked once.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct VerifiedOp<P>(Op<P>);
+
+impl<P> VerifiedOp<P> {
+    /// The op.
+    pub fn op(&self) -> &Op<P> {
+        &self.0
+    }
+
+    /// The op, giving up the proof.
+    pub fn into_op(self) -> Op<P> {
+        self.0
+    }
+
+    /// Wraps an op the crate already verified (it is in a log, or was just signed).
+    pub(crate) fn trusted(op: Op<P>) -> Self {
+        Self(op)
+    }
+}
+
+impl<P> std::ops::Deref for VerifiedOp<P> {
+    type Target = Op<P>;
+    fn deref(&self) -> &Op<P> {
+        &self.0
+    }
+}
+
+impl<P: Payload> Op<P> {
+    /// Builds and signs an op by `keypair`'s peer.
+    pub fn sign(keypair: &Keypair, fields: OpFields<P>) -> Result<VerifiedOp<P>, BuildError> {
+        Self::build(keypair, fields).map(VerifiedOp)
+    }
+
+    fn build(keypair: &Keypair, mut fields: OpFields<P>) -> Result<Self, BuildError> {
+        fields.deps.sort_unstable();
+        fields.deps.dedup();
+        if fields.deps.len() > MAX_DEPS {
+            return Err(BuildError::TooManyDeps(fields.deps.len()));
+        }
+        if fields.seq == 0 || fields.lamport == 0 {
+            return Err(BuildError::ZeroCounter);
+        }
+        let author = keypair.peer_id();
+        let mut encoded = Vec::new();
+        encode_body(&mut encoded, &author, &fields)?;
+        let signature = keypair.sign(&signing_message(&encoded));
+        encoded.extend_from_slice(&signature.0);
+        assert!(
+            encoded.len() <= MAX_OP_BYTES,
+            "op encoding exceeds MAX_OP_BYTES"
+        );
+        let id = OpId(*blake3::hash(&encoded).as_bytes());
+        Ok(Self {
+            author,
+            fields,
+            signature,
+            id,
+            encoded,
+        })
+    }
+
+    /// Decodes an op from untrusted bytes. It checks the format, limits and canonical form,
+    /// but not the signature: call [`Op::verify`].
+    pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
+        if bytes.len() > MAX_OP_BYTES {
+            return Err(DecodeError::OverLimit {
+                offset: 0,
+                what: "op length",
+                value: bytes.len() as u64,
+                limit: MAX_OP_BYTES as u64,
+            });
+        }
+        let mut r = Reader::new(bytes);
+        let version = r.u8()?;
+        if version != OP_FORMAT_VERSION {
+            return Err(DecodeError::UnknownVersion { offset: 0, version });
+        }
+        let author = PeerId(r.array()?);
+        let counters_offset = r.offset();
+        let seq = r.varint()?;
+        let lamport = r.varint()?;
+        if seq == 0 || lamport == 0 {
+            return Err(DecodeError::Invalid {
+                offset: counters_offset,
+                what: "zero seq or lamport",
+            });
+        }
+        let timestamp = Timestamp(r.varint()?);
+        let deps = decode_deps(&mut r)?;
+        let payload_offset = r.offset();
+        let payload_bytes = r.bytes("payload length", MAX_PAYLOAD_BYTES as u64)?;
+        let payload_start = r.offset() - payload_bytes.len();
+        let payload = P::decode(payload_bytes).map_err(|e| e.shifted(payload_start))?;
+        let mut canonical = Vec::with_capacity(payload_bytes.len());
+        payload.encode(&mut canonical);
+        if canonical != payload_bytes {
+            return Err(DecodeError::Invalid {
+                offset: payload_offset,
+                what: "non-canonical payload",
+            });
+        }
+        let signature = Signature(r.array()?);
+        r.finish()?;
+        let id = OpId(*blake3::hash(bytes).as_bytes());
+        let fields = OpFields {
+            seq,
+            lamport,
+            timestamp,
+            deps,
+            payload,
+        };
+        Ok(Self {
+            author,
+            fields,
+            signature,
+            id,
+            encoded: bytes.to_vec(),
+        })
+    }
+
+    /// Checks the author's signature over the op's body.
+    pub fn verify(&self) -> Result<(), VerifyError> {
+        let body = &self.encoded[..self.encoded.len() - SIGNATURE_BYTES];
+        self.author.verify(&signing_message(body), &self.signature)
+    }
+
+    /// Checks the signature and returns the op as verified.
+    pub fn into_verified(self) -> Result<VerifiedOp<P>, VerifyError> {
+        self.verify()?;
+        Ok(VerifiedOp(self))
+    }
+}
+
+impl<P> Op<P> {
+    /// The op's id (blake3 of [`Op::encoded`]).
+    pub fn id(&self) -> OpId {
+        self.id
+    }
+    /// The author's peer id.
+    pub fn author(&self) -> PeerId {
+        self.author
+    }
+    /// Per-author sequence number.
+    pub fn seq(&self) -> u64 {
+        self.fields.seq
+    }
+    /// Lamport time.
+    pub fn lamport(&self) -> u64 {
+        self.fields.lamport
+    }
+    /// Hybrid wall-clock timestamp.
+    pub fn timestamp(&self) -> Timestamp {
+        self.fields.timestamp
+    }
+    /// Causal dependencies, sorted.
+    pub fn deps(&self) -> &[OpId] {
+        &self.fields.deps
+    }
+    /// The payload.
+    pub fn payload(&self) -> &P {
+        &self.fields.payload
+    }
+    /// The signature.
+    pub fn signature(&self) -> Signature {
+        self.signature
+    }
+    /// The canonical encoding (what is sent, stored and hashed).
+    pub fn encoded(&self) -> &[u8] {
+        &self.encoded
+    }
+}
+
+impl<P: fmt::Debug> fmt::Debug for Op<P> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Op")
+            .field("id", &self.id)
+            .field("author", &self.author)
+            .field("seq", &self.fields.seq)
+            .field("lamport", &self.fields.lamport)
+            .field("timestamp", &self.fields.timestamp)
+            .field("deps", &self.fields.deps)
+            .field("payload", &self.fields.payload)
+            .finish()
+    }
+}
+
+fn encode_body<P: Payload>(
+    out: &mut Vec<u8>,
+    author: &PeerId,
+    fields: &OpFields<P>,
+) -> Result<(), BuildError> {
+    out.push(OP_FORMAT_VERSION);
+    out.extend_from_slice(&author.0);
+    put_varint(out, fields.seq);
+    put_varint(out, fields.lamport);
+    put_varint(out, fields.timestamp.0);
+    put_varint(out, fields.deps.len() as u64);
+    for dep in &fields.deps {
+        out.extend_from_slice(&dep.0);
+    }
+    let mut payload = Vec::new();
+    fields.payload.encode(&mut payload);
+    if payload.len() > MAX_PAYLOAD_BYTES {
+        return Err(BuildError::PayloadTooLarge(payload.len()));
+    }
+    // What we sign must be what every peer will decode.
+    if P::decode(&payload).as_ref() != Ok(&fields.payload) {
+        return Err(BuildError::PayloadNotCanonical);
+    }
+    put_varint(out, payload.len() as u64);
+    out.extend_from_slice(&payload);
+    Ok(())
+}
+
+fn decode_deps(r: &mut Reader<'_>) -> Result<Vec<OpId>, DecodeError> {
+    let n_deps = r.bounded("dependency count", MAX_DEPS as u64)?;
+    let mut deps: Vec<OpId> = Vec::with_capacity(n_deps);
+    for _ in 0..n_deps {
+        let offset = r.offset();
+        let dep = OpId(r.array()?);
+        if deps.last().is_some_and(|last| *last >= dep) {
+            return Err(DecodeError::Invalid {
+                offset,
+                what: "unsorted or repeated dependency",
+            });
+        }
+        deps.push(dep);
+    }
+    Ok(deps)
+}
+
+fn signing_message(body: &[u8]) -> Vec<u8> {
+    let mut message = Vec::with_capacity(SIGNING_CONTEXT.len() + body.len());
+    message.extend_from_slice(SIGNING_CONTEXT);
+    message.extend_from_slice(body);
+    message
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::payload::test_payload::TestPayload;
+    use proptest::prelude::*;
+
+    fn payload_strategy() -> impl Strategy<Value = TestPayload> {
+        prop_oneof![
+            "[a-z ]{0,40}".prop_map(TestPayload::Chat),
+            (any::<u64>(), "[a-z0-9+*() ]{0,60}")
+                .prop_map(|(object, value)| TestPayload::Set { object, value }),
+            (any::<u64>(), any::<bool>(), any::<u64>()).prop_map(|(object, strong, ttl_micros)| {
+                TestPayload::Acquire {
+                    object,
+                    strong,
+                    ttl_micros,
+                }
+            }),
+            any::<u64>().prop_map(|object| TestPayload::Release { object }),
+            any::<[u8; 32]>().prop_map(|b| TestPayload::Undo(OpId(b))),
+            any::<[u8; 32]>().prop_map(|b| TestPayload::Redo(OpId(b))),
+        ]
+    }
+
+    fn sample(seed: u8) -> Op<TestPayload> {
+        let k = Keypair::from_seed([seed; 32]);
+        let fields = OpFields {
+            seq: 3,
+            lamport: 9,
+            timestamp: Timestamp(1_700_000_000_000_000),
+            deps: vec![OpId([2; 32]), OpId([1; 32])],
+            payload: TestPayload::Set {
+                object: 4,
+                value: "x*x+y*y-1".into(),
+            },
+        };
+        Op::sign(&k, fields).unwrap().into_op()
+    }
+
+    #[test]
+    fn build_sorts_deps_and_verifies() {
+        let op = sample(1);
+        assert_eq!(op.deps(), &[OpId([1; 32]), OpId([2; 32])]);
+        assert!(op.verify().is_ok());
+        assert_eq!(op.encoded()[0], OP_FORMAT_VERSION);
+        assert!(op.encoded().len() < 1024);
+    }
+
+    #[test]
+    fn tampering_breaks_signature_or_id() {
+        let op = sample(1);
+        // Swap the author for another peer: the signature no longer verifies.
+        let mut bytes = op.encoded().to_vec();
+        bytes[1..33].copy_from_slice(&Keypair::from_seed([2; 32]).peer_id().0);
+        let forged = Op::<TestPayload>::decode(&bytes).unwrap();
+        assert!(forged.verify().is_err());
+        assert_ne!(forged.id(), op.id());
+    }
+
+    #[test]
+    fn hostile_headers_are_rejected_with_offsets() {
+        let op = sample(1);
+        let mut bytes = op.encoded().to_vec();
+        bytes[0] = 9;
+        assert_eq!(
+            Op::<TestPayload>::decode(&bytes).unwrap_err(),
+            DecodeError::UnknownVersion {
+                offset: 0,
+                version: 9
+            }
+        );
+        let big = vec![1u8; MAX_OP_BYTES + 1];
+        assert_eq!(Op::<TestPayload>::decode(&big).unwrap_err().offset(), 0);
+        let cut = &op.encoded()[..op.encoded().len() - 1];
+        assert!(matches!(
+            Op::<TestPayload>::decode(cut),
+            Err(DecodeError::Truncated { .. })
+        ));
+        let mut long = op.encoded().to_vec();
+        long.push(0);
+        assert!(matches!(
+            Op::<TestPayload>::decode(&long),
+            Err(DecodeError::Trailing { .. })
+        ));
+    }
+
+    #[test]
+    fn limits_are_enforced_when_building() {
+        let k = Keypair::from_seed([1; 32]);
+        let deps = (0..=MAX_DEPS as u8).map(|i| OpId([i; 32])).collect();
+        let fields = OpFields {
+            seq: 1,
+            lamport: 1,
+            timestamp: Timestamp(0),
+            deps,
+            payload: TestPayload::Chat(String::new()),
+        };
+        assert_eq!(
+            Op::sign(&k, fields).unwrap_err(),
+            BuildError::TooManyDeps(MAX_DEPS + 1)
+        );
+        let long = OpFields {
+            seq: 1,
+            lamport: 1,
+            timestamp: Timestamp(0),
+            deps: vec![],
+            payload: TestPayload::Chat("x".repeat(300)),
+        };
+        assert_eq!(
+            Op::sign(&k, long).unwrap_err(),
+            BuildError::PayloadNotCanonical
+        );
+    }
+
+    proptest! {
+        #![proptest_config(crate::test_config(64))]
+        #[test]
+        fn encode_decode_round_trips(
+            seed in any::<u8>(), seq in 1u64.., lamport in 1u64.., ts in any::<u64>(),
+            deps in proptest::collection::vec(any::<[u8; 32]>(), 0..5),
+            payload in payload_strategy(),
+        ) {
+            let k = Keypair::from_seed([seed; 32]);
+            let deps = deps.into_iter().map(OpId).collect();
+            let op = Op::sign(&k, OpFields { seq, lamport, timestamp: Timestamp(ts), deps, payload }).unwrap().into_op();
+            let back = Op::<TestPayload>::decode(op.encoded()).unwrap();
+            prop_assert!(back.verify().is_ok());
+            prop_assert_eq!(back.id(), op.id());
+            prop_assert_eq!(back, op);
+        }
+
+        #[test]
+        fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..300)) {
+            if let Ok(op) = Op::<TestPayload>::decode(&bytes) {
+                // Whatever decodes is canonical: it re-encodes to the same bytes.
+                prop_assert_eq!(op.encoded(), &bytes[..]);
+                let _ = op.verify();
+            }
+        }
+
+        #[test]
+        fn mutated_ops_never_panic_and_report_offsets(idx in any::<usize>(), val in any::<u8>(), cut in any::<usize>()) {
+            let op = sample(3);
+            let mut bytes = op.encoded().to_vec();
+            let i = idx % bytes.len();
+            bytes[i] = val;
+            bytes.truncate(1 + cut % bytes.len());
+            match Op::<TestPayload>::decode(&bytes) {
+                Ok(decoded) => prop_assert!(decoded.verify().is_err() || decoded == op),
+                Err(e) => prop_assert!(e.offset() <= bytes.len()),
+            }
+        }
+    }
+}

@@ -1,0 +1,237 @@
+//! What the replication core needs to know about an op's payload, without knowing the
+//! object model: the [`Payload`] trait and the [`Effect`] an op has on leases and undo.
+
+use std::fmt;
+
+use crate::codec::DecodeError;
+use crate::op::OpId;
+
+/// Largest encoded payload accepted in an op, in bytes (typical ops are well under 1 KiB).
+pub const MAX_PAYLOAD_BYTES: usize = 16 * 1024;
+
+/// A shared object's id, chosen by the payload's object model (for example derived from the
+/// id of the op that created it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct ObjectId(pub u64);
+
+/// How strongly a lease is held.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum LeaseStrength {
+    /// Another peer may take the object over; the former holder loses it.
+    Weak,
+    /// Only granted when the object is free, expired or already the acquirer's.
+    Strong,
+}
+
+/// What an op means to the core: which object it touches and which lease or undo rule
+/// applies to it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Effect {
+    /// Needs no lease and touches no object's lease state (chat, for example): always effective.
+    Independent,
+    /// Changes `object` (create, set a property, tool edit, transform): effective only if the
+    /// author holds the object's lease, or it is free or expired, at this point of the order.
+    Edit {
+        /// The object changed.
+        object: ObjectId,
+    },
+    /// Acquires the lease on `object` until `ttl_micros` after the op's timestamp.
+    Acquire {
+        /// The object whose lease is acquired.
+        object: ObjectId,
+        /// Weak (takes over) or strong (only when free, expired or own).
+        strength: LeaseStrength,
+        /// Time to live in microseconds from the op's timestamp.
+        ttl_micros: u64,
+    },
+    /// Releases the author's lease on `object`.
+    Release {
+        /// The object whose lease is released.
+        object: ObjectId,
+    },
+    /// Undoes the author's own earlier effective edit `target`.
+    Undo {
+        /// The edit undone.
+        target: OpId,
+    },
+    /// Redoes the author's own earlier edit `target` that is currently undone.
+    Redo {
+        /// The edit redone.
+        target: OpId,
+    },
+}
+
+/// An op's payload: the object model's edits, encoded canonically.
+///
+/// The core is generic over it; `fdsl`'s edits implement it, tests use a small payload.
+pub trait Payload: Clone + fmt::Debug + PartialEq + Eq {
+    /// Appends the canonical encoding. It must be at most [`MAX_PAYLOAD_BYTES`] long and
+    /// `decode(encode(p)) == p`.
+    fn encode(&self, out: &mut Vec<u8>);
+
+    /// Decodes a payload from untrusted bytes (at most [`MAX_PAYLOAD_BYTES`] long), never
+    /// panicking; error offsets are relative to the start of `bytes`.
+    fn decode(bytes: &[u8]) -> Result<Self, DecodeError>;
+
+    /// What the core must know about this payload.
+    fn effect(&self) -> Effect;
+}
+
+/// A small payload for tests, examples and the simulator.
+pub mod test_payload {
+    use super::*;
+    use crate::codec::{Reader, put_bytes, put_varint};
+
+    /// Largest note in a [`TestPayload::Chat`] or [`TestPayload::Set`].
+    pub const MAX_TEST_TEXT_BYTES: usize = 256;
+
+    /// A toy object model: set a property string, lease ops, undo/redo, chat.
+    #[derive(Clone, Debug, PartialEq, Eq)]
+    pub enum TestPayload {
+        /// A chat line (independent of leases).
+        Chat(String),
+        /// Sets object `object`'s value (an edit needing the lease).
+        Set {
+            /// The object.
+            object: u64,
+            /// The new value.
+            value: String,
+        },
+        /// Acquires a lease.
+        Acquire {
+            /// The object.
+            object: u64,
+            /// Strong (true) or weak (false).
+            strong: bool,
+            /// Time to live in microseconds.
+            ttl_micros: u64,
+        },
+        /// Releases a lease.
+        Release {
+            /// The object.
+            object: u64,
+        },
+        /// Undoes an earlier edit.
+        Undo(OpId),
+        /// Redoes an undone edit.
+        Redo(OpId),
+    }
+
+    impl Payload for TestPayload {
+        fn encode(&self, out: &mut Vec<u8>) {
+            match self {
+                Self::Chat(text) => {
+                    out.push(0);
+                    put_bytes(out, text.as_bytes());
+                }
+                Self::Set { object, value } => {
+                    out.push(1);
+                    put_varint(out, *object);
+                    put_bytes(out, value.as_bytes());
+                }
+                Self::Acquire {
+                    object,
+                    strong,
+                    ttl_micros,
+                } => {
+                    out.push(2);
+                    put_varint(out, *object);
+                    out.push(u8::from(*strong));
+                    put_varint(out, *ttl_micros);
+                }
+                Self::Release { object } => {
+                    out.push(3);
+                    put_varint(out, *object);
+                }
+                Self::Undo(id) => {
+                    out.push(4);
+                    out.extend_from_slice(&id.0);
+                }
+                Self::Redo(id) => {
+                    out.push(5);
+                    out.extend_from_slice(&id.0);
+                }
+            }
+        }
+
+        fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
+            let mut r = Reader::new(bytes);
+            let tag_offset = r.offset();
+            let payload = match r.u8()? {
+                0 => Self::Chat(text(&mut r)?),
+                1 => Self::Set {
+                    object: r.varint()?,
+                    value: text(&mut r)?,
+                },
+                2 => {
+                    let object = r.varint()?;
+                    let flag_offset = r.offset();
+                    let strong = match r.u8()? {
+                        0 => false,
+                        1 => true,
+                        _ => {
+                            return Err(DecodeError::Invalid {
+                                offset: flag_offset,
+                                what: "flag",
+                            });
+                        }
+                    };
+                    Self::Acquire {
+                        object,
+                        strong,
+                        ttl_micros: r.varint()?,
+                    }
+                }
+                3 => Self::Release {
+                    object: r.varint()?,
+                },
+                4 => Self::Undo(OpId(r.array()?)),
+                5 => Self::Redo(OpId(r.array()?)),
+                _ => {
+                    return Err(DecodeError::Invalid {
+                        offset: tag_offset,
+                        what: "payload tag",
+                    });
+                }
+            };
+            r.finish()?;
+            Ok(payload)
+        }
+
+        fn effect(&self) -> Effect {
+            match self {
+                Self::Chat(_) => Effect::Independent,
+                Self::Set { object, .. } => Effect::Edit {
+                    object: ObjectId(*object),
+                },
+                Self::Acquire {
+                    object,
+                    strong,
+                    ttl_micros,
+                } => Effect::Acquire {
+                    object: ObjectId(*object),
+                    strength: if *strong {
+                        LeaseStrength::Strong
+                    } else {
+                        LeaseStrength::Weak
+                    },
+                    ttl_micros: *ttl_micros,
+                },
+                Self::Release { object } => Effect::Release {
+                    object: ObjectId(*object),
+                },
+                Self::Undo(target) => Effect::Undo { target: *target },
+                Self::Redo(target) => Effect::Redo { target: *target },
+            }
+        }
+    }
+
+    fn text(r: &mut Reader<'_>) -> Result<String, DecodeError> {
+        let offset = r.offset();
+        let bytes = r.bytes("text length", MAX_TEST_TEXT_BYTES as u64)?;
+        String::from_utf8(bytes.to_vec()).map_err(|_| DecodeError::Invalid {
+            offset,
+            what: "utf-8",
+        })
+    }
+}

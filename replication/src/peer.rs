@@ -1,0 +1,281 @@
+//! One peer: its key, its log and one [`SyncState`] per connection, behind a single sans-IO
+//! surface that routes inputs and drains outputs (what the app and the simulator drive).
+
+use std::collections::{BTreeMap, VecDeque};
+
+use crate::identity::{Keypair, PeerId};
+use crate::log::{AuthorError, Insertion, Log};
+use crate::op::VerifiedOp;
+use crate::payload::Payload;
+use crate::pending::Origin;
+use crate::sync::message::SessionId;
+use crate::sync::state::{EphemeralError, Event, SyncConfig, SyncState};
+use crate::time::Timestamp;
+
+/// Most simultaneous connections one peer keeps.
+pub const MAX_CONNECTIONS: usize = 64;
+
+/// A connection's id, chosen by the caller (the transport or the simulator).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct ConnId(pub u64);
+
+/// Why a connection could not be opened.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum ConnectError {
+    /// Already [`MAX_CONNECTIONS`] connections.
+    #[error("already {MAX_CONNECTIONS} connections")]
+    TooMany,
+    /// This id is in use.
+    #[error("connection {0:?} already open")]
+    InUse(ConnId),
+    /// The id cannot be mapped to an origin (it is `u64::MAX`).
+    #[error("connection id {0:?} out of range")]
+    OutOfRange(ConnId),
+}
+
+/// A peer: key pair, log and its connections.
+#[derive(Debug)]
+pub struct Peer<P> {
+    keypair: Keypair,
+    session_id: SessionId,
+    log: Log<P>,
+    connections: BTreeMap<ConnId, SyncState<P>>,
+    events: VecDeque<(ConnId, Event)>,
+}
+
+impl<P: Payload> Peer<P> {
+    /// A peer in session `session_id` with an existing (for example reloaded) log.
+    pub fn new(keypair: Keypair, session_id: SessionId, log: Log<P>) -> Self {
+        Self {
+            keypair,
+            session_id,
+            log,
+            connections: BTreeMap::new(),
+            events: VecDeque::new(),
+        }
+    }
+
+    /// This peer's id.
+    pub fn peer_id(&self) -> PeerId {
+        self.keypair.peer_id()
+    }
+
+    /// The log.
+    pub fn log(&self) -> &Log<P> {
+        &self.log
+    }
+
+    /// Open connections, in id order.
+    pub fn connections(&self) -> impl Iterator<Item = (&ConnId, &SyncState<P>)> {
+        self.connections.iter()
+    }
+
+    /// Authors a local op; every connection streams it out on its next `poll_transmit`.
+    pub fn author(
+        &mut self,
+        now: Timestamp,
+        payload: P,
+    ) -> Result<(VerifiedOp<P>, Insertion), AuthorError> {
+        self.log.author(&self.keypair, now, payload)
+    }
+
+    /// Opens a connection (state is built afresh for every connection).
+    pub fn connect(&mut self, now: Timestamp, conn: ConnId) -> Result<(), ConnectError> {
+        if self.connections.contains_key(&conn) {
+            return Err(ConnectError::InUse(conn));
+        }
+        if self.connections.len() >= MAX_CONNECTIONS {
+            return Err(ConnectError::TooMany);
+        }
+        // Origin 0 is the local peer; connection n is origin n + 1.
+        let origin = Origin(
+            conn.0
+                .checked_add(1)
+                .ok_or(ConnectError::OutOfRange(conn))?,
+        );
+        let config = SyncConfig {
+            session_id: self.session_id,
+            local: self.peer_id(),
+            origin,
+        };
+        self.connections.insert(conn, SyncState::new(now, config));
+        Ok(())
+    }
+
+    /// Forgets a connection (the transport lost it); nothing acknowledged is lost.
+    pub fn disconnect(&mut self, conn: ConnId) {
+        self.connections.remove(&conn);
+    }
+
+    /// Handles bytes received on `conn`; unknown connections are ignored.
+    pub fn handle_input(&mut self, now: Timestamp, conn: ConnId, bytes: &[u8]) {
+        if let Some(sync) = self.connections.get_mut(&conn) {
+            sync.handle_input(now, bytes, &mut self.log);
+            drain(conn, sync, &mut self.events);
+        }
+    }
+
+    /// Handles the passing of time on every connection.
+    pub fn handle_timeout(&mut self, now: Timestamp) {
+        for (conn, sync) in &mut self.connections {
+            if sync.poll_timeout(&self.log).is_some_and(|t| t <= now) {
+                sync.handle_timeout(now, &mut self.log);
+                drain(*conn, sync, &mut self.events);
+            }
+        }
+    }
+
+    /// Sends the latest value on an ephemeral channel to every connection.
+    pub fn send_ephemeral(&mut self, channel: u32, value: &[u8]) -> Result<(), EphemeralError> {
+        for sync in self.connections.values_mut() {
+            sync.send_ephemeral(channel, value.to_vec())?;
+        }
+        Ok(())
+    }
+
+    /// The next message to send and its connection.
+    pub fn poll_transmit(&mut self, now: Timestamp) -> Option<(ConnId, Vec<u8>)> {
+        self.connections.iter_mut().find_map(|(conn, sync)| {
+            sync.poll_transmit(now, &self.log)
+                .map(|bytes| (*conn, bytes))
+        })
+    }
+
+    /// The next event and the connection it came from.
+    pub fn poll_event(&mut self) -> Option<(ConnId, Event)> {
+        self.events.pop_front()
+    }
+
+    /// When [`Peer::handle_timeout`] should next be called.
+    pub fn poll_timeout(&self) -> Option<Timestamp> {
+        self.connections
+            .values()
+            .filter_map(|s| s.poll_timeout(&self.log))
+            .min()
+    }
+}
+
+fn drain<P: Payload>(
+    conn: ConnId,
+    sync: &mut SyncState<P>,
+    events: &mut VecDeque<(ConnId, Event)>,
+) {
+    while let Some(event) = sync.poll_event() {
+        events.push_back((conn, event));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::payload::test_payload::TestPayload;
+
+    type TPeer = Peer<TestPayload>;
+
+    /// Delivers every queued message at once, in order, until nothing moves.
+    fn pump(peers: &mut [TPeer], links: &[(usize, ConnId, usize, ConnId)], now: Timestamp) {
+        let mut route = BTreeMap::new();
+        for &(a, a_conn, b, b_conn) in links {
+            route.insert((a, a_conn), (b, b_conn));
+            route.insert((b, b_conn), (a, a_conn));
+        }
+        for _ in 0..1000 {
+            let mut moved = false;
+            for from in 0..peers.len() {
+                while let Some((conn, bytes)) = peers[from].poll_transmit(now) {
+                    let (to, to_conn) = route[&(from, conn)];
+                    peers[to].handle_input(now, to_conn, &bytes);
+                    moved = true;
+                }
+            }
+            for p in peers.iter_mut() {
+                while p.poll_event().is_some() {}
+            }
+            if !moved {
+                return;
+            }
+        }
+        panic!("the sync did not quiesce");
+    }
+
+    fn observe(p: &TPeer) -> Vec<(crate::op::OpId, crate::lease::Mark, bool)> {
+        p.log()
+            .entries()
+            .map(|e| (e.op.id(), e.mark, e.active))
+            .collect()
+    }
+
+    #[test]
+    fn ops_and_lease_verdicts_relay_along_a_line() {
+        let session = [3; 16];
+        let mut peers: Vec<TPeer> = (1..=3)
+            .map(|i| Peer::new(Keypair::from_seed([i; 32]), session, Log::default()))
+            .collect();
+        // Offline: A and C both take object 1 and edit it; B chats.
+        let now = Timestamp(1_000);
+        for (i, p) in peers.iter_mut().enumerate() {
+            let object = 1;
+            p.author(
+                now,
+                TestPayload::Acquire {
+                    object,
+                    strong: false,
+                    ttl_micros: 10_000_000,
+                },
+            )
+            .unwrap();
+            p.author(
+                now,
+                TestPayload::Set {
+                    object,
+                    value: format!("peer {i}"),
+                },
+            )
+            .unwrap();
+        }
+        // A - B - C: A and C never talk directly.
+        let links = [(0, ConnId(1), 1, ConnId(1)), (1, ConnId(2), 2, ConnId(1))];
+        peers[0].connect(now, ConnId(1)).unwrap();
+        peers[1].connect(now, ConnId(1)).unwrap();
+        peers[1].connect(now, ConnId(2)).unwrap();
+        peers[2].connect(now, ConnId(1)).unwrap();
+        assert_eq!(
+            peers[1].connect(now, ConnId(2)),
+            Err(ConnectError::InUse(ConnId(2)))
+        );
+        pump(&mut peers, &links, now);
+        assert_eq!(peers[0].log().len(), 6);
+        assert_eq!(observe(&peers[0]), observe(&peers[1]));
+        assert_eq!(observe(&peers[0]), observe(&peers[2]));
+        // Exactly one peer's edit of object 1 won; the others are rejected, not lost.
+        let n_active_sets = peers[0]
+            .log()
+            .entries()
+            .filter(|e| matches!(e.op.payload(), TestPayload::Set { .. }) && e.active)
+            .count();
+        assert_eq!(n_active_sets, 1);
+        let n_rejected: usize = peers
+            .iter()
+            .map(|p| peers[0].log().rejected_by(&p.peer_id()).len())
+            .sum();
+        assert!(n_rejected >= 2, "{n_rejected}");
+        // Live: a new op by C reaches A through B.
+        let (live, _) = peers[2]
+            .author(Timestamp(2_000), TestPayload::Chat("hello".into()))
+            .unwrap();
+        pump(&mut peers, &links, Timestamp(2_000));
+        assert!(peers[0].log().contains(&live.id()));
+        // Ephemeral values go to every connection and are not stored.
+        peers[1].send_ephemeral(4, b"pose").unwrap();
+        let mut n_ephemeral = 0;
+        while let Some((conn, bytes)) = peers[1].poll_transmit(Timestamp(3_000)) {
+            let to = if conn == ConnId(1) { 0 } else { 2 };
+            peers[to].handle_input(Timestamp(3_000), ConnId(1), &bytes);
+            while let Some((_, e)) = peers[to].poll_event() {
+                n_ephemeral += usize::from(matches!(e, Event::Ephemeral { channel: 4, .. }));
+            }
+        }
+        assert_eq!(n_ephemeral, 2);
+        assert_eq!(peers[0].log().len(), 7);
+    }
+}

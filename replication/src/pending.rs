@@ -1,0 +1,359 @@
+//! The bounded buffer of ops that arrived before their dependencies.
+//!
+//! Limits are named constants; when one is exceeded an op is evicted and reported, never
+//! silently dropped. Eviction picks the source holding the most pending ops, so a peer flooding
+//! the buffer with ops whose dependencies never come evicts its own ops first.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use crate::identity::PeerId;
+use crate::op::{Op, OpId};
+use crate::time::Timestamp;
+
+/// Most ops waiting for dependencies at once.
+pub const MAX_PENDING_OPS: usize = 4096;
+/// Most encoded bytes waiting for dependencies at once.
+pub const MAX_PENDING_BYTES: usize = 8 * 1024 * 1024;
+/// How long an op may wait for its dependencies before it is evicted (5 minutes).
+pub const PENDING_TTL_MICROS: u64 = 5 * 60 * 1_000_000;
+
+/// Where an op came from: the local peer, the store, or one remote connection.
+///
+/// Chosen by the caller; it is used for fair eviction and to attribute rejections.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Origin(pub u64);
+
+/// Something a pending op waits for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum DepKey {
+    /// A named dependency.
+    Op(OpId),
+    /// The author's previous op (per-author sequence numbers have no gaps).
+    Seq(PeerId, u64),
+}
+
+/// Why a pending op was evicted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EvictReason {
+    /// The buffer was over [`MAX_PENDING_OPS`] or [`MAX_PENDING_BYTES`].
+    Full,
+    /// It waited longer than [`PENDING_TTL_MICROS`].
+    Expired,
+}
+
+/// A pending op that was dropped; its sender will offer it again on the next sync.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Evicted {
+    /// The op.
+    pub id: OpId,
+    /// Where it came from.
+    pub origin: Origin,
+    /// Why it was dropped.
+    pub reason: EvictReason,
+}
+
+/// The pending buffer's limits; [`PendingLimits::default`] uses the named constants.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PendingLimits {
+    /// Most ops waiting at once.
+    pub max_ops: usize,
+    /// Most encoded bytes waiting at once.
+    pub max_bytes: usize,
+    /// How long an op may wait, in microseconds.
+    pub ttl_micros: u64,
+}
+
+impl Default for PendingLimits {
+    fn default() -> Self {
+        Self {
+            max_ops: MAX_PENDING_OPS,
+            max_bytes: MAX_PENDING_BYTES,
+            ttl_micros: PENDING_TTL_MICROS,
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+struct Entry<P> {
+    op: Op<P>,
+    origin: Origin,
+    arrived: Timestamp,
+    arrival_no: u64,
+    missing: BTreeSet<DepKey>,
+}
+
+/// Ops waiting on dependencies, indexed by what they wait for.
+#[derive(Clone, Debug)]
+pub struct Pending<P> {
+    entries: BTreeMap<OpId, Entry<P>>,
+    waiters: BTreeMap<DepKey, BTreeSet<OpId>>,
+    per_origin: BTreeMap<Origin, BTreeSet<(u64, OpId)>>,
+    n_bytes: usize,
+    next_arrival_no: u64,
+    limits: PendingLimits,
+}
+
+impl<P> Default for Pending<P> {
+    fn default() -> Self {
+        Self {
+            entries: BTreeMap::new(),
+            waiters: BTreeMap::new(),
+            per_origin: BTreeMap::new(),
+            n_bytes: 0,
+            next_arrival_no: 0,
+            limits: PendingLimits::default(),
+        }
+    }
+}
+
+impl<P: Clone> Pending<P> {
+    /// An empty buffer with the given limits.
+    pub fn with_limits(limits: PendingLimits) -> Self {
+        Self {
+            limits,
+            ..Self::default()
+        }
+    }
+
+    /// Number of ops waiting.
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// True if nothing waits.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// Encoded bytes waiting.
+    pub fn n_bytes(&self) -> usize {
+        self.n_bytes
+    }
+
+    /// True if `id` is waiting.
+    pub fn contains(&self, id: &OpId) -> bool {
+        self.entries.contains_key(id)
+    }
+
+    /// Number of ops waiting that came from `origin`.
+    pub fn n_from(&self, origin: Origin) -> usize {
+        self.per_origin.get(&origin).map_or(0, BTreeSet::len)
+    }
+
+    /// Parks `op` until every key in `missing` is satisfied; returns what had to be evicted
+    /// to stay within limits (possibly `op` itself).
+    pub fn insert(
+        &mut self,
+        now: Timestamp,
+        op: Op<P>,
+        origin: Origin,
+        missing: BTreeSet<DepKey>,
+    ) -> Vec<Evicted> {
+        assert!(
+            !missing.is_empty(),
+            "a pending op must be missing something"
+        );
+        let id = op.id();
+        if self.entries.contains_key(&id) {
+            return Vec::new();
+        }
+        for key in &missing {
+            self.waiters.entry(*key).or_default().insert(id);
+        }
+        let arrival_no = self.next_arrival_no;
+        self.next_arrival_no += 1;
+        self.per_origin
+            .entry(origin)
+            .or_default()
+            .insert((arrival_no, id));
+        self.n_bytes += op.encoded().len();
+        self.entries.insert(
+            id,
+            Entry {
+                op,
+                origin,
+                arrived: now,
+                arrival_no,
+                missing,
+            },
+        );
+        let mut evicted = Vec::new();
+        while self.entries.len() > self.limits.max_ops || self.n_bytes > self.limits.max_bytes {
+            match self.evict_one() {
+                Some(e) => evicted.push(e),
+                None => break,
+            }
+        }
+        evicted
+    }
+
+    /// Evicts the newest op of the origin holding the most pending ops.
+    fn evict_one(&mut self) -> Option<Evicted> {
+        let (&origin, _) = self
+            .per_origin
+            .iter()
+            .max_by_key(|(o, ids)| (ids.len(), *o))?;
+        let &(_, id) = self.per_origin.get(&origin)?.iter().next_back()?;
+        self.remove(&id).map(|entry| Evicted {
+            id,
+            origin: entry.origin,
+            reason: EvictReason::Full,
+        })
+    }
+
+    fn remove(&mut self, id: &OpId) -> Option<Entry<P>> {
+        let entry = self.entries.remove(id)?;
+        for key in &entry.missing {
+            if let Some(set) = self.waiters.get_mut(key) {
+                set.remove(id);
+                if set.is_empty() {
+                    self.waiters.remove(key);
+                }
+            }
+        }
+        if let Some(set) = self.per_origin.get_mut(&entry.origin) {
+            set.remove(&(entry.arrival_no, *id));
+            if set.is_empty() {
+                self.per_origin.remove(&entry.origin);
+            }
+        }
+        self.n_bytes -= entry.op.encoded().len();
+        Some(entry)
+    }
+
+    /// Marks `key` as satisfied; returns the ops that now miss nothing, removed from the
+    /// buffer, with their origins, in arrival order.
+    pub fn satisfy(&mut self, key: DepKey) -> Vec<(Op<P>, Origin)> {
+        let Some(ids) = self.waiters.remove(&key) else {
+            return Vec::new();
+        };
+        let mut ready = Vec::new();
+        for id in ids {
+            let now_ready = match self.entries.get_mut(&id) {
+                Some(entry) => {
+                    entry.missing.remove(&key);
+                    entry.missing.is_empty()
+                }
+                None => false,
+            };
+            if now_ready && let Some(entry) = self.remove(&id) {
+                ready.push((entry.arrival_no, entry.op, entry.origin));
+            }
+        }
+        ready.sort_by_key(|(n, _, _)| *n);
+        ready
+            .into_iter()
+            .map(|(_, op, origin)| (op, origin))
+            .collect()
+    }
+
+    /// Evicts every op that has waited its time to live or longer at `now`.
+    pub fn expire(&mut self, now: Timestamp) -> Vec<Evicted> {
+        let old: Vec<OpId> = self
+            .entries
+            .iter()
+            .filter(|(_, e)| e.arrived.saturating_add_micros(self.limits.ttl_micros) <= now)
+            .map(|(id, _)| *id)
+            .collect();
+        old.iter()
+            .filter_map(|id| {
+                self.remove(id).map(|e| Evicted {
+                    id: *id,
+                    origin: e.origin,
+                    reason: EvictReason::Expired,
+                })
+            })
+            .collect()
+    }
+
+    /// When the oldest pending op expires, if any waits.
+    pub fn next_expiry(&self) -> Option<Timestamp> {
+        let ttl = self.limits.ttl_micros;
+        self.entries
+            .values()
+            .map(|e| e.arrived.saturating_add_micros(ttl))
+            .min()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::identity::Keypair;
+    use crate::op::OpFields;
+    use crate::payload::test_payload::TestPayload;
+
+    fn op(seed: u8, seq: u64) -> Op<TestPayload> {
+        let fields = OpFields {
+            seq,
+            lamport: seq,
+            timestamp: Timestamp(0),
+            deps: vec![],
+            payload: TestPayload::Chat(format!("{seq}")),
+        };
+        Op::sign(&Keypair::from_seed([seed; 32]), fields)
+            .unwrap()
+            .into_op()
+    }
+
+    #[test]
+    fn satisfied_ops_come_out_once_all_keys_arrive() {
+        let mut p = Pending::default();
+        let a = OpId([1; 32]);
+        let b = OpId([2; 32]);
+        let o = op(1, 1);
+        let missing = [DepKey::Op(a), DepKey::Op(b)].into_iter().collect();
+        assert!(
+            p.insert(Timestamp(0), o.clone(), Origin(1), missing)
+                .is_empty()
+        );
+        assert!(p.satisfy(DepKey::Op(a)).is_empty());
+        assert_eq!(p.len(), 1);
+        let ready = p.satisfy(DepKey::Op(b));
+        assert_eq!(ready, vec![(o, Origin(1))]);
+        assert!(p.is_empty());
+        assert_eq!(p.n_bytes(), 0);
+    }
+
+    #[test]
+    fn flooding_origin_is_evicted_first() {
+        let limits = PendingLimits {
+            max_ops: 20,
+            ..PendingLimits::default()
+        };
+        let mut p = Pending::with_limits(limits);
+        let missing: BTreeSet<DepKey> = [DepKey::Op(OpId([9; 32]))].into_iter().collect();
+        let honest = op(1, 1);
+        assert!(
+            p.insert(Timestamp(0), honest.clone(), Origin(1), missing.clone())
+                .is_empty()
+        );
+        let mut evicted = Vec::new();
+        for seq in 1..=(limits.max_ops as u64 + 10) {
+            evicted.extend(p.insert(Timestamp(0), op(2, seq), Origin(2), missing.clone()));
+        }
+        assert_eq!(evicted.len(), 11);
+        assert!(
+            evicted
+                .iter()
+                .all(|e| e.origin == Origin(2) && e.reason == EvictReason::Full)
+        );
+        assert!(p.contains(&honest.id()));
+        assert_eq!(p.len(), limits.max_ops);
+    }
+
+    #[test]
+    fn old_ops_expire() {
+        let mut p = Pending::default();
+        let missing: BTreeSet<DepKey> = [DepKey::Op(OpId([9; 32]))].into_iter().collect();
+        p.insert(Timestamp(10), op(1, 1), Origin(1), missing.clone());
+        p.insert(Timestamp(20), op(1, 2), Origin(1), missing);
+        assert_eq!(p.next_expiry(), Some(Timestamp(10 + PENDING_TTL_MICROS)));
+        assert!(p.expire(Timestamp(10 + PENDING_TTL_MICROS - 1)).is_empty());
+        let gone = p.expire(Timestamp(15 + PENDING_TTL_MICROS));
+        assert_eq!(gone.len(), 1);
+        assert_eq!(gone[0].reason, EvictReason::Expired);
+        assert_eq!(p.len(), 1);
+        assert!(p.satisfy(DepKey::Op(OpId([9; 32]))).len() == 1);
+    }
+}

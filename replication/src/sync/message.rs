@@ -1,0 +1,325 @@
+//! Sync wire messages and their versioned binary encoding. The only wire types of the crate
+//! besides the op encoding.
+//!
+//! Every message is `[SYNC_WIRE_VERSION][tag][fields...]`, integers as LEB128 varints, byte
+//! strings length-prefixed; counts and lengths are checked against named limits before
+//! anything is allocated.
+
+use crate::causal::{MAX_VV_AUTHORS, VersionVector};
+use crate::codec::{DecodeError, Reader, put_bytes, put_varint};
+use crate::identity::PeerId;
+use crate::op::MAX_OP_BYTES;
+
+/// Version byte that opens every sync message.
+pub const SYNC_WIRE_VERSION: u8 = 1;
+/// Protocol version announced in [`Message::Hello`]; peers with another version disconnect.
+pub const PROTOCOL_VERSION: u64 = 1;
+/// Length of a session id.
+pub const SESSION_ID_BYTES: usize = 16;
+/// Most ops in one [`Message::Ops`] batch.
+pub const MAX_BATCH_OPS: usize = 64;
+/// Largest encoded message in bytes.
+pub const MAX_MESSAGE_BYTES: usize = 256 * 1024;
+/// Largest ephemeral value in bytes (a pose or a presence record).
+pub const MAX_EPHEMERAL_BYTES: usize = 1024;
+
+/// A session's id (derived from its invite by the transport).
+pub type SessionId = [u8; SESSION_ID_BYTES];
+
+/// One sync message.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Message {
+    /// Opens a connection; resent until the remote's hello arrives.
+    Hello {
+        /// The sender's [`PROTOCOL_VERSION`].
+        protocol_version: u64,
+        /// The session both sides must share.
+        session_id: SessionId,
+        /// The sender's peer id.
+        peer: PeerId,
+        /// True if the sender has already received the receiver's hello.
+        hello_seen: bool,
+    },
+    /// What the sender holds, so the receiver sends only what it lacks.
+    Have(VersionVector),
+    /// A batch of encoded ops, in the sender's linear order.
+    Ops {
+        /// Sender's batch number, echoed by [`Message::Ack`].
+        batch_no: u64,
+        /// Encoded ops ([`crate::op::Op::encoded`]), each decoded and checked on its own.
+        ops: Vec<Vec<u8>>,
+    },
+    /// Acknowledges a batch with everything the receiver now holds.
+    Ack {
+        /// The batch acknowledged.
+        batch_no: u64,
+        /// The receiver's version vector after the batch.
+        have: VersionVector,
+    },
+    /// A latest-value-wins ephemeral value (pose, presence); never stored.
+    Ephemeral {
+        /// The stream.
+        channel: u32,
+        /// Sender's sequence number on this connection; older values are dropped.
+        seq: u64,
+        /// The value.
+        value: Vec<u8>,
+    },
+}
+
+const TAG_HELLO: u8 = 1;
+const TAG_HAVE: u8 = 2;
+const TAG_OPS: u8 = 3;
+const TAG_ACK: u8 = 4;
+const TAG_EPHEMERAL: u8 = 5;
+
+impl Message {
+    /// The encoded message.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut out = vec![SYNC_WIRE_VERSION];
+        match self {
+            Self::Hello {
+                protocol_version,
+                session_id,
+                peer,
+                hello_seen,
+            } => {
+                out.push(TAG_HELLO);
+                put_varint(&mut out, *protocol_version);
+                out.extend_from_slice(session_id);
+                out.extend_from_slice(&peer.0);
+                out.push(u8::from(*hello_seen));
+            }
+            Self::Have(vv) => {
+                out.push(TAG_HAVE);
+                put_vv(&mut out, vv);
+            }
+            Self::Ops { batch_no, ops } => {
+                out.push(TAG_OPS);
+                put_varint(&mut out, *batch_no);
+                put_varint(&mut out, ops.len() as u64);
+                for op in ops {
+                    put_bytes(&mut out, op);
+                }
+            }
+            Self::Ack { batch_no, have } => {
+                out.push(TAG_ACK);
+                put_varint(&mut out, *batch_no);
+                put_vv(&mut out, have);
+            }
+            Self::Ephemeral {
+                channel,
+                seq,
+                value,
+            } => {
+                out.push(TAG_EPHEMERAL);
+                put_varint(&mut out, u64::from(*channel));
+                put_varint(&mut out, *seq);
+                put_bytes(&mut out, value);
+            }
+        }
+        out
+    }
+
+    /// Decodes one message from untrusted bytes, never panicking and never allocating past
+    /// the named limits.
+    pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
+        if bytes.len() > MAX_MESSAGE_BYTES {
+            return Err(DecodeError::OverLimit {
+                offset: 0,
+                what: "message length",
+                value: bytes.len() as u64,
+                limit: MAX_MESSAGE_BYTES as u64,
+            });
+        }
+        let mut r = Reader::new(bytes);
+        let version = r.u8()?;
+        if version != SYNC_WIRE_VERSION {
+            return Err(DecodeError::UnknownVersion { offset: 0, version });
+        }
+        let tag_offset = r.offset();
+        let message = match r.u8()? {
+            TAG_HELLO => {
+                let protocol_version = r.varint()?;
+                let session_id = r.array()?;
+                let peer = PeerId(r.array()?);
+                let flag_offset = r.offset();
+                let hello_seen = match r.u8()? {
+                    0 => false,
+                    1 => true,
+                    _ => {
+                        return Err(DecodeError::Invalid {
+                            offset: flag_offset,
+                            what: "flag",
+                        });
+                    }
+                };
+                Self::Hello {
+                    protocol_version,
+                    session_id,
+                    peer,
+                    hello_seen,
+                }
+            }
+            TAG_HAVE => Self::Have(read_vv(&mut r)?),
+            TAG_OPS => {
+                let batch_no = r.varint()?;
+                let n_ops = r.bounded("batch op count", MAX_BATCH_OPS as u64)?;
+                let mut ops = Vec::with_capacity(n_ops);
+                for _ in 0..n_ops {
+                    ops.push(r.bytes("op length", MAX_OP_BYTES as u64)?.to_vec());
+                }
+                Self::Ops { batch_no, ops }
+            }
+            TAG_ACK => Self::Ack {
+                batch_no: r.varint()?,
+                have: read_vv(&mut r)?,
+            },
+            TAG_EPHEMERAL => {
+                let channel = r.bounded("channel", u64::from(u32::MAX))? as u32;
+                let seq = r.varint()?;
+                let value = r
+                    .bytes("ephemeral length", MAX_EPHEMERAL_BYTES as u64)?
+                    .to_vec();
+                Self::Ephemeral {
+                    channel,
+                    seq,
+                    value,
+                }
+            }
+            _ => {
+                return Err(DecodeError::Invalid {
+                    offset: tag_offset,
+                    what: "message tag",
+                });
+            }
+        };
+        r.finish()?;
+        Ok(message)
+    }
+}
+
+fn put_vv(out: &mut Vec<u8>, vv: &VersionVector) {
+    put_varint(out, vv.len() as u64);
+    for (author, seq) in vv.iter() {
+        out.extend_from_slice(&author.0);
+        put_varint(out, *seq);
+    }
+}
+
+fn read_vv(r: &mut Reader<'_>) -> Result<VersionVector, DecodeError> {
+    let n = r.bounded("version vector length", MAX_VV_AUTHORS as u64)?;
+    let mut vv = VersionVector::new();
+    let mut last: Option<PeerId> = None;
+    for _ in 0..n {
+        let offset = r.offset();
+        let author = PeerId(r.array()?);
+        if last.is_some_and(|l| l >= author) {
+            return Err(DecodeError::Invalid {
+                offset,
+                what: "unsorted version vector",
+            });
+        }
+        let seq_offset = r.offset();
+        let seq = r.varint()?;
+        if seq == 0 {
+            return Err(DecodeError::Invalid {
+                offset: seq_offset,
+                what: "zero seq",
+            });
+        }
+        vv.raise(author, seq);
+        last = Some(author);
+    }
+    Ok(vv)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn message_strategy() -> impl Strategy<Value = Message> {
+        let vv = proptest::collection::btree_map(any::<[u8; 32]>(), 1u64.., 0..4).prop_map(|m| {
+            let mut vv = VersionVector::new();
+            for (a, s) in m {
+                vv.raise(PeerId(a), s);
+            }
+            vv
+        });
+        prop_oneof![
+            (
+                any::<u64>(),
+                any::<[u8; 16]>(),
+                any::<[u8; 32]>(),
+                any::<bool>()
+            )
+                .prop_map(|(protocol_version, session_id, p, hello_seen)| {
+                    Message::Hello {
+                        protocol_version,
+                        session_id,
+                        peer: PeerId(p),
+                        hello_seen,
+                    }
+                }),
+            vv.clone().prop_map(Message::Have),
+            (
+                any::<u64>(),
+                proptest::collection::vec(proptest::collection::vec(any::<u8>(), 0..40), 0..5)
+            )
+                .prop_map(|(batch_no, ops)| Message::Ops { batch_no, ops }),
+            (any::<u64>(), vv).prop_map(|(batch_no, have)| Message::Ack { batch_no, have }),
+            (
+                any::<u32>(),
+                any::<u64>(),
+                proptest::collection::vec(any::<u8>(), 0..40)
+            )
+                .prop_map(|(channel, seq, value)| Message::Ephemeral {
+                    channel,
+                    seq,
+                    value
+                }),
+        ]
+    }
+
+    #[test]
+    fn hostile_counts_are_refused_before_allocating() {
+        let mut bytes = vec![SYNC_WIRE_VERSION, TAG_OPS, 0];
+        put_varint(&mut bytes, MAX_BATCH_OPS as u64 + 1);
+        let err = Message::decode(&bytes).unwrap_err();
+        assert!(
+            matches!(err, DecodeError::OverLimit { offset: 3, .. }),
+            "{err:?}"
+        );
+        let mut bytes = vec![SYNC_WIRE_VERSION, TAG_HAVE];
+        put_varint(&mut bytes, u64::MAX);
+        assert!(matches!(
+            Message::decode(&bytes),
+            Err(DecodeError::OverLimit { offset: 2, .. })
+        ));
+        assert_eq!(
+            Message::decode(&[7, TAG_HAVE, 0]),
+            Err(DecodeError::UnknownVersion {
+                offset: 0,
+                version: 7
+            })
+        );
+        assert!(Message::decode(&vec![SYNC_WIRE_VERSION; MAX_MESSAGE_BYTES + 1]).is_err());
+    }
+
+    proptest! {
+        #![proptest_config(crate::test_config(128))]
+        #[test]
+        fn round_trips(m in message_strategy()) {
+            prop_assert_eq!(Message::decode(&m.encode()), Ok(m));
+        }
+
+        #[test]
+        fn arbitrary_bytes_never_panic(mut bytes in proptest::collection::vec(any::<u8>(), 0..200)) {
+            if !bytes.is_empty() { bytes[0] = SYNC_WIRE_VERSION; }
+            if let Ok(m) = Message::decode(&bytes) {
+                prop_assert_eq!(m.encode(), bytes);
+            }
+        }
+    }
+}

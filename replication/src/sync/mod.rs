@@ -1,0 +1,5 @@
+//! The sync protocol: wire messages ([`message`]) and the sans-IO per-remote-peer state
+//! machine ([`state`]).
+
+pub mod message;
+pub mod state;

@@ -1,0 +1,683 @@
+//! The sans-IO sync state machine for one connection to one remote peer.
+//!
+//! Inputs are `handle_*(now, ..)`; outputs are [`SyncState::poll_transmit`],
+//! [`SyncState::poll_event`] and [`SyncState::poll_timeout`]. Drain every `poll_*` after each
+//! input. The state is rebuilt on every connection: the remote's version vector is learnt
+//! from its hello-time [`Message::Have`] and from acks, and anything not acknowledged within
+//! [`RESEND_AFTER_MICROS`] is sent again, so a lost or duplicated message can neither stall
+//! nor loop a sync.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::marker::PhantomData;
+
+use crate::causal::VersionVector;
+use crate::identity::PeerId;
+use crate::log::{InsertError, Insertion, Log};
+use crate::op::{MAX_OP_BYTES, Op};
+use crate::payload::Payload;
+use crate::pending::{EvictReason, Origin};
+use crate::sync::message::{
+    MAX_BATCH_OPS, MAX_EPHEMERAL_BYTES, MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION, SessionId,
+};
+use crate::time::Timestamp;
+
+/// Most op batches sent and not yet acknowledged (flow control).
+pub const MAX_IN_FLIGHT_BATCHES: usize = 4;
+/// Most op bytes in one batch we send (well under [`MAX_MESSAGE_BYTES`]).
+pub const MAX_BATCH_BYTES: usize = 64 * 1024;
+/// Unacknowledged batches and unanswered hellos are sent again after this long (1 s).
+pub const RESEND_AFTER_MICROS: u64 = 1_000_000;
+/// Messages a remote may send per second on average before they are dropped.
+pub const MAX_MESSAGES_PER_SEC: u64 = 2_000;
+/// Messages a remote may send in a burst.
+pub const MAX_MESSAGE_BURST: u64 = 512;
+/// Most ephemeral channels buffered for sending.
+pub const MAX_EPHEMERAL_CHANNELS: usize = 64;
+
+const MICROS_PER_SEC: u64 = 1_000_000;
+const _: () = assert!(MAX_BATCH_BYTES + MAX_BATCH_OPS * 10 + 32 <= MAX_MESSAGE_BYTES);
+const _: () = assert!(MAX_OP_BYTES <= MAX_BATCH_BYTES);
+
+/// What kind of bad or unwanted input was dropped. Each is counted and reported.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum RejectKind {
+    /// Bytes that are not a well-formed message.
+    Malformed,
+    /// A message or op format version this build does not know.
+    UnknownVersion,
+    /// A message over [`MAX_MESSAGE_BYTES`] or a count over its limit.
+    Oversized,
+    /// A hello with another protocol version.
+    WrongProtocol,
+    /// A hello for another session.
+    WrongSession,
+    /// A hello from a different peer than earlier on this connection.
+    WrongPeer,
+    /// Data before the remote's hello.
+    BeforeHello,
+    /// An op that does not decode.
+    MalformedOp,
+    /// An op whose signature does not verify under its author (forged or wrong author).
+    BadSignature,
+    /// An op the log refused (equivocation, bad Lamport time, full).
+    RefusedOp,
+    /// A pending op from this remote evicted because the buffer was full.
+    PendingFull,
+    /// A pending op from this remote whose dependencies never came.
+    PendingExpired,
+    /// A message over the remote's rate limit.
+    RateLimited,
+    /// An ephemeral value over [`MAX_EPHEMERAL_BYTES`] or too many channels.
+    EphemeralTooLarge,
+}
+
+/// Why the connection closed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CloseReason {
+    /// The remote speaks another protocol version.
+    WrongProtocol,
+    /// The remote is in another session.
+    WrongSession,
+}
+
+/// Something the application should know.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Event {
+    /// The remote's hello arrived.
+    Connected {
+        /// The remote's claimed peer id.
+        peer: PeerId,
+    },
+    /// Ops from the remote were inserted; the scene must refold as the insertion says.
+    Delivered(Insertion),
+    /// Bad input was dropped.
+    Rejected {
+        /// What kind.
+        kind: RejectKind,
+        /// A plain description.
+        detail: String,
+    },
+    /// The remote's latest value on an ephemeral channel.
+    Ephemeral {
+        /// The stream.
+        channel: u32,
+        /// The value.
+        value: Vec<u8>,
+    },
+    /// The remote has acknowledged everything this peer holds.
+    UpToDate,
+    /// The connection is over; drop this state.
+    Closed(CloseReason),
+}
+
+/// Why an ephemeral value was not queued.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum EphemeralError {
+    /// Over [`MAX_EPHEMERAL_BYTES`].
+    #[error("ephemeral value of {0} bytes, over the limit {MAX_EPHEMERAL_BYTES}")]
+    TooLarge(usize),
+    /// Over [`MAX_EPHEMERAL_CHANNELS`].
+    #[error("more than {MAX_EPHEMERAL_CHANNELS} ephemeral channels")]
+    TooManyChannels,
+}
+
+/// Counters for one connection.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SyncStats {
+    /// Rejections by kind.
+    pub rejected: BTreeMap<RejectKind, u64>,
+    /// Messages received (accepted or not).
+    pub n_messages_in: u64,
+    /// Messages sent.
+    pub n_messages_out: u64,
+    /// Bytes received.
+    pub n_bytes_in: u64,
+    /// Bytes sent.
+    pub n_bytes_out: u64,
+    /// Ops sent (resends included).
+    pub n_ops_out: u64,
+    /// Ops received (duplicates included).
+    pub n_ops_in: u64,
+}
+
+impl SyncStats {
+    /// Total rejections of every kind.
+    pub fn n_rejected(&self) -> u64 {
+        self.rejected.values().sum()
+    }
+}
+
+/// A token bucket measured in messages, refilled from the `now` passed in. Tokens are kept in
+/// millionths so that refill is exact integer arithmetic.
+#[derive(Clone, Debug)]
+struct TokenBucket {
+    tokens_micros: u64,
+    last: Timestamp,
+    rate_per_sec: u64,
+    capacity: u64,
+}
+
+impl TokenBucket {
+    fn new(now: Timestamp, rate_per_sec: u64, burst: u64) -> Self {
+        let capacity = burst * MICROS_PER_SEC;
+        Self {
+            tokens_micros: capacity,
+            last: now,
+            rate_per_sec,
+            capacity,
+        }
+    }
+
+    fn refill(&mut self, now: Timestamp) {
+        let elapsed = now.0.saturating_sub(self.last.0);
+        self.last = self.last.max(now);
+        let refill = elapsed.saturating_mul(self.rate_per_sec);
+        self.tokens_micros = self.tokens_micros.saturating_add(refill).min(self.capacity);
+    }
+
+    fn has_token(&self) -> bool {
+        self.tokens_micros >= MICROS_PER_SEC
+    }
+
+    fn spend(&mut self) {
+        self.tokens_micros = self.tokens_micros.saturating_sub(MICROS_PER_SEC);
+    }
+
+    /// Refills and takes one token if there is one.
+    fn take(&mut self, now: Timestamp) -> bool {
+        self.refill(now);
+        let ok = self.has_token();
+        if ok {
+            self.spend();
+        }
+        ok
+    }
+
+    /// When the next token is available.
+    fn ready_at(&self) -> Timestamp {
+        let missing = MICROS_PER_SEC.saturating_sub(self.tokens_micros);
+        self.last
+            .saturating_add_micros(missing.div_ceil(self.rate_per_sec.max(1)))
+    }
+}
+
+/// Settings for one connection.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SyncConfig {
+    /// The session both peers must share.
+    pub session_id: SessionId,
+    /// This peer's id.
+    pub local: PeerId,
+    /// The origin tag for ops from this remote (unique per connection).
+    pub origin: Origin,
+}
+
+/// Sync with one remote peer over one connection.
+#[derive(Debug)]
+pub struct SyncState<P> {
+    config: SyncConfig,
+    remote: Option<PeerId>,
+    closed: bool,
+    /// The remote has confirmed it saw our hello.
+    hello_confirmed: bool,
+    hello_sent_at: Option<Timestamp>,
+    /// What the remote is known to hold (join of its Have and Acks).
+    remote_vv: VersionVector,
+    /// What we sent on this connection (at least `remote_vv`).
+    sent_vv: VersionVector,
+    in_flight: BTreeMap<u64, Timestamp>,
+    next_batch_no: u64,
+    up_to_date: bool,
+    control: VecDeque<Message>,
+    events: VecDeque<Event>,
+    eph_out: BTreeMap<u32, Vec<u8>>,
+    eph_out_seq: u64,
+    eph_in: BTreeMap<u32, u64>,
+    /// Limits what the remote may send us.
+    bucket: TokenBucket,
+    /// Paces what we send, at half the remote's limit, leaving room for its acks.
+    send_bucket: TokenBucket,
+    stats: SyncStats,
+    payload: PhantomData<P>,
+}
+
+impl<P: Payload> SyncState<P> {
+    /// Starts a connection: queues our hello.
+    pub fn new(now: Timestamp, config: SyncConfig) -> Self {
+        let mut state = Self {
+            config,
+            remote: None,
+            closed: false,
+            hello_confirmed: false,
+            hello_sent_at: None,
+            remote_vv: VersionVector::new(),
+            sent_vv: VersionVector::new(),
+            in_flight: BTreeMap::new(),
+            next_batch_no: 1,
+            up_to_date: false,
+            control: VecDeque::new(),
+            events: VecDeque::new(),
+            eph_out: BTreeMap::new(),
+            eph_out_seq: 0,
+            eph_in: BTreeMap::new(),
+            bucket: TokenBucket::new(now, MAX_MESSAGES_PER_SEC, MAX_MESSAGE_BURST),
+            send_bucket: TokenBucket::new(now, MAX_MESSAGES_PER_SEC / 2, MAX_MESSAGE_BURST / 2),
+            stats: SyncStats::default(),
+            payload: PhantomData,
+        };
+        state.queue_hello(now);
+        state
+    }
+
+    /// The remote's peer id, once its hello arrived.
+    pub fn remote(&self) -> Option<PeerId> {
+        self.remote
+    }
+
+    /// True once the connection was closed.
+    pub fn is_closed(&self) -> bool {
+        self.closed
+    }
+
+    /// What the remote is known to hold.
+    pub fn remote_version_vector(&self) -> &VersionVector {
+        &self.remote_vv
+    }
+
+    /// Counters for this connection.
+    pub fn stats(&self) -> &SyncStats {
+        &self.stats
+    }
+
+    fn queue_hello(&mut self, now: Timestamp) {
+        self.control.push_back(Message::Hello {
+            protocol_version: PROTOCOL_VERSION,
+            session_id: self.config.session_id,
+            peer: self.config.local,
+            hello_seen: self.remote.is_some(),
+        });
+        self.hello_sent_at = Some(now);
+    }
+
+    fn reject(&mut self, kind: RejectKind, detail: String) {
+        *self.stats.rejected.entry(kind).or_insert(0) += 1;
+        self.events.push_back(Event::Rejected { kind, detail });
+    }
+
+    fn close(&mut self, reason: CloseReason) {
+        self.closed = true;
+        self.control.clear();
+        self.events.push_back(Event::Closed(reason));
+    }
+
+    /// Queues the latest value on an ephemeral channel, replacing any unsent older value.
+    pub fn send_ephemeral(&mut self, channel: u32, value: Vec<u8>) -> Result<(), EphemeralError> {
+        if value.len() > MAX_EPHEMERAL_BYTES {
+            return Err(EphemeralError::TooLarge(value.len()));
+        }
+        if !self.eph_out.contains_key(&channel) && self.eph_out.len() >= MAX_EPHEMERAL_CHANNELS {
+            return Err(EphemeralError::TooManyChannels);
+        }
+        self.eph_out.insert(channel, value);
+        Ok(())
+    }
+
+    /// Handles one message received from the remote.
+    pub fn handle_input(&mut self, now: Timestamp, bytes: &[u8], log: &mut Log<P>) {
+        if self.closed {
+            return;
+        }
+        self.stats.n_messages_in += 1;
+        self.stats.n_bytes_in += bytes.len() as u64;
+        if !self.bucket.take(now) {
+            self.reject(
+                RejectKind::RateLimited,
+                format!("{} bytes dropped", bytes.len()),
+            );
+            return;
+        }
+        let message = match Message::decode(bytes) {
+            Ok(m) => m,
+            Err(e) => {
+                let kind = match e {
+                    crate::codec::DecodeError::UnknownVersion { .. } => RejectKind::UnknownVersion,
+                    crate::codec::DecodeError::OverLimit { .. } => RejectKind::Oversized,
+                    _ => RejectKind::Malformed,
+                };
+                self.reject(kind, e.to_string());
+                return;
+            }
+        };
+        match message {
+            Message::Hello {
+                protocol_version,
+                session_id,
+                peer,
+                hello_seen,
+            } => {
+                self.on_hello(now, protocol_version, session_id, peer, hello_seen, log);
+            }
+            _ if self.remote.is_none() => {
+                self.reject(RejectKind::BeforeHello, "data before hello".into());
+            }
+            Message::Have(vv) => {
+                self.hello_confirmed = true;
+                self.learn_remote(&vv, log);
+            }
+            Message::Ops { batch_no, ops } => {
+                self.hello_confirmed = true;
+                self.on_ops(now, batch_no, ops, log);
+            }
+            Message::Ack { batch_no, have } => {
+                self.hello_confirmed = true;
+                self.in_flight.remove(&batch_no);
+                self.learn_remote(&have, log);
+            }
+            Message::Ephemeral {
+                channel,
+                seq,
+                value,
+            } => {
+                let last = self.eph_in.get(&channel).copied();
+                let fresh = last.is_none_or(|l| seq > l);
+                if fresh && (last.is_some() || self.eph_in.len() < MAX_EPHEMERAL_CHANNELS) {
+                    self.eph_in.insert(channel, seq);
+                    self.events.push_back(Event::Ephemeral { channel, value });
+                } else if !fresh {
+                    // An older or duplicated value: latest wins, so it is simply dropped.
+                } else {
+                    self.reject(
+                        RejectKind::EphemeralTooLarge,
+                        "too many ephemeral channels".into(),
+                    );
+                }
+            }
+        }
+    }
+
+    fn on_hello(
+        &mut self,
+        now: Timestamp,
+        protocol_version: u64,
+        session_id: SessionId,
+        peer: PeerId,
+        hello_seen: bool,
+        log: &Log<P>,
+    ) {
+        if protocol_version != PROTOCOL_VERSION {
+            self.reject(
+                RejectKind::WrongProtocol,
+                format!("protocol {protocol_version}"),
+            );
+            self.close(CloseReason::WrongProtocol);
+            return;
+        }
+        if session_id != self.config.session_id {
+            self.reject(RejectKind::WrongSession, "another session".into());
+            self.close(CloseReason::WrongSession);
+            return;
+        }
+        match self.remote {
+            Some(known) if known != peer => {
+                self.reject(RejectKind::WrongPeer, format!("{peer} after {known}"));
+                return;
+            }
+            Some(_) => {}
+            None => {
+                self.remote = Some(peer);
+                self.events.push_back(Event::Connected { peer });
+            }
+        }
+        // Every hello is answered with a Have: it tells the remote what we hold and confirms
+        // we saw its hello (so it stops resending). A Have is never answered, so this cannot
+        // loop.
+        self.control
+            .push_back(Message::Have(log.version_vector().clone()));
+        self.hello_confirmed |= hello_seen;
+        if !hello_seen {
+            // The remote has not seen our hello yet: answer once (its resend timer repeats).
+            self.queue_hello(now);
+        }
+    }
+
+    fn learn_remote(&mut self, vv: &VersionVector, log: &Log<P>) {
+        self.remote_vv.join(vv);
+        self.sent_vv.join(vv);
+        self.update_up_to_date(log);
+    }
+
+    fn update_up_to_date(&mut self, log: &Log<P>) {
+        let now_up_to_date = self.remote_vv.dominates(log.version_vector());
+        if now_up_to_date && !self.up_to_date {
+            self.events.push_back(Event::UpToDate);
+        }
+        self.up_to_date = now_up_to_date;
+    }
+
+    fn on_ops(&mut self, now: Timestamp, batch_no: u64, ops: Vec<Vec<u8>>, log: &mut Log<P>) {
+        for bytes in ops {
+            self.stats.n_ops_in += 1;
+            self.on_op(now, &bytes, log);
+        }
+        self.control.push_back(Message::Ack {
+            batch_no,
+            have: log.version_vector().clone(),
+        });
+        self.update_up_to_date(log);
+    }
+
+    fn on_op(&mut self, now: Timestamp, bytes: &[u8], log: &mut Log<P>) {
+        let op = match Op::<P>::decode(bytes) {
+            Ok(op) => op,
+            Err(e) => {
+                let kind = match e {
+                    crate::codec::DecodeError::UnknownVersion { .. } => RejectKind::UnknownVersion,
+                    _ => RejectKind::MalformedOp,
+                };
+                return self.reject(kind, e.to_string());
+            }
+        };
+        // Known ops skip the (costly) signature check.
+        if log.contains(&op.id()) {
+            return;
+        }
+        let op = match op.into_verified() {
+            Ok(op) => op,
+            Err(e) => return self.reject(RejectKind::BadSignature, e.to_string()),
+        };
+        match log.insert(now, op, self.config.origin) {
+            Ok(insertion) => self.on_insertion(insertion),
+            Err(e) => self.reject_refused(&e),
+        }
+    }
+
+    fn reject_refused(&mut self, e: &InsertError) {
+        self.reject(RejectKind::RefusedOp, e.to_string());
+    }
+
+    fn on_insertion(&mut self, insertion: Insertion) {
+        for evicted in &insertion.evicted {
+            if evicted.origin == self.config.origin {
+                let kind = match evicted.reason {
+                    EvictReason::Full => RejectKind::PendingFull,
+                    EvictReason::Expired => RejectKind::PendingExpired,
+                };
+                self.reject(kind, format!("pending op {} evicted", evicted.id));
+            }
+        }
+        for (id, origin, e) in &insertion.refused {
+            if *origin == self.config.origin {
+                self.reject(RejectKind::RefusedOp, format!("{id}: {e}"));
+            }
+        }
+        if !insertion.delivered.is_empty() {
+            self.events.push_back(Event::Delivered(insertion));
+        }
+    }
+
+    /// Handles the passing of time: resends unanswered hellos and unacknowledged batches,
+    /// and expires pending ops whose dependencies never came.
+    pub fn handle_timeout(&mut self, now: Timestamp, log: &mut Log<P>) {
+        if self.closed {
+            return;
+        }
+        for evicted in log.expire_pending(now) {
+            if evicted.origin == self.config.origin {
+                self.reject(
+                    RejectKind::PendingExpired,
+                    format!("pending op {} expired", evicted.id),
+                );
+            }
+        }
+        let hello_due = self
+            .hello_sent_at
+            .map(|t| t.saturating_add_micros(RESEND_AFTER_MICROS));
+        if (self.remote.is_none() || !self.hello_confirmed) && hello_due.is_some_and(|d| d <= now) {
+            self.queue_hello(now);
+        }
+        let oldest = self.in_flight.values().min().copied();
+        if oldest.is_some_and(|t| t.saturating_add_micros(RESEND_AFTER_MICROS) <= now) {
+            // Rewind to what the remote acknowledged; everything after it goes out again.
+            self.in_flight.clear();
+            self.sent_vv = self.remote_vv.clone();
+        }
+    }
+
+    /// When [`SyncState::handle_timeout`] should next be called.
+    pub fn poll_timeout(&self, log: &Log<P>) -> Option<Timestamp> {
+        if self.closed {
+            return None;
+        }
+        let hello = self
+            .hello_sent_at
+            .filter(|_| self.remote.is_none() || !self.hello_confirmed)
+            .map(|t| t.saturating_add_micros(RESEND_AFTER_MICROS));
+        let resend = self
+            .in_flight
+            .values()
+            .min()
+            .map(|t| t.saturating_add_micros(RESEND_AFTER_MICROS));
+        let pace =
+            (self.remote.is_some() && self.data_waiting(log) && !self.send_bucket.has_token())
+                .then(|| self.send_bucket.ready_at());
+        [hello, resend, pace, log.next_pending_expiry()]
+            .into_iter()
+            .flatten()
+            .min()
+    }
+
+    /// True if ephemeral values or ops wait to be sent and the window has room.
+    fn data_waiting(&self, log: &Log<P>) -> bool {
+        !self.eph_out.is_empty()
+            || (self.in_flight.len() < MAX_IN_FLIGHT_BATCHES
+                && !self.sent_vv.dominates(log.version_vector()))
+    }
+
+    /// The next event, if any.
+    pub fn poll_event(&mut self) -> Option<Event> {
+        self.events.pop_front()
+    }
+
+    /// The next message to send, if any: control first, then ephemeral values, then op
+    /// batches within the flow-control window.
+    pub fn poll_transmit(&mut self, now: Timestamp, log: &Log<P>) -> Option<Vec<u8>> {
+        if self.closed {
+            return None;
+        }
+        let message = self.next_message(now, log)?;
+        let bytes = message.encode();
+        assert!(
+            bytes.len() <= MAX_MESSAGE_BYTES,
+            "outgoing message over MAX_MESSAGE_BYTES"
+        );
+        self.stats.n_messages_out += 1;
+        self.stats.n_bytes_out += bytes.len() as u64;
+        Some(bytes)
+    }
+
+    fn next_message(&mut self, now: Timestamp, log: &Log<P>) -> Option<Message> {
+        if let Some(m) = self.control.pop_front() {
+            return Some(m);
+        }
+        // Nothing but control messages goes out before the remote's hello.
+        self.remote?;
+        // Data is paced so an honest peer stays within the remote's rate limit.
+        self.send_bucket.refill(now);
+        if !self.send_bucket.has_token() {
+            return None;
+        }
+        if let Some((channel, value)) = self.eph_out.pop_first() {
+            self.send_bucket.spend();
+            self.eph_out_seq += 1;
+            return Some(Message::Ephemeral {
+                channel,
+                seq: self.eph_out_seq,
+                value,
+            });
+        }
+        if self.in_flight.len() >= MAX_IN_FLIGHT_BATCHES {
+            return None;
+        }
+        let ops = self.next_batch(log);
+        if ops.is_empty() {
+            return None;
+        }
+        self.send_bucket.spend();
+        let batch_no = self.next_batch_no;
+        self.next_batch_no += 1;
+        self.in_flight.insert(batch_no, now);
+        self.stats.n_ops_out += ops.len() as u64;
+        Some(Message::Ops { batch_no, ops })
+    }
+
+    /// Ops the remote lacks and we have not sent, in linear order (so causally), bounded.
+    fn next_batch(&mut self, log: &Log<P>) -> Vec<Vec<u8>> {
+        // The first unsent op of each author bounds where the scan starts.
+        let start = log
+            .version_vector()
+            .iter()
+            .filter(|(author, seq)| self.sent_vv.get(author) < **seq)
+            .filter_map(|(author, _)| log.by_seq(author, self.sent_vv.get(author) + 1))
+            .map(Op::lamport)
+            .min();
+        let Some(start) = start else {
+            return Vec::new();
+        };
+        let mut batch = Vec::new();
+        let mut n_bytes = 0;
+        for op in log.ops_from_lamport(start) {
+            if op.seq() <= self.sent_vv.get(&op.author()) {
+                continue;
+            }
+            if batch.len() == MAX_BATCH_OPS || n_bytes + op.encoded().len() > MAX_BATCH_BYTES {
+                break;
+            }
+            n_bytes += op.encoded().len();
+            batch.push(op.encoded().to_vec());
+            self.sent_vv.raise(op.author(), op.seq());
+        }
+        batch
+    }
+}
+
+#[cfg(test)]
+mod tests;
+
+#[cfg(test)]
+mod bucket_tests {
+    use super::*;
+
+    #[test]
+    fn bucket_bursts_then_paces() {
+        let mut b = TokenBucket::new(Timestamp(0), 1000, 3);
+        assert!((0..3).all(|_| b.take(Timestamp(0))));
+        assert!(!b.take(Timestamp(0)));
+        // One token per millisecond at 1000 per second.
+        assert_eq!(b.ready_at(), Timestamp(1000));
+        assert!(!b.take(Timestamp(999)));
+        assert!(b.take(Timestamp(1000)));
+        // Refill is capped at the burst.
+        assert!((0..3).all(|_| b.take(Timestamp(1_000_000))));
+        assert!(!b.take(Timestamp(1_000_000)));
+    }
+}

@@ -1,0 +1,459 @@
+//! Tests of the sync state machine: two peers over a lossy, duplicating, reordering in-test
+//! link driven by a seeded RNG, and every kind of hostile input.
+
+use super::*;
+use crate::identity::Keypair;
+use crate::log::LOCAL_ORIGIN;
+use crate::op::{OpFields, OpId, VerifiedOp};
+use crate::payload::test_payload::TestPayload;
+use crate::pending::PENDING_TTL_MICROS;
+use rand_chacha::ChaCha20Rng;
+use rand_core::{RngCore, SeedableRng};
+
+type TLog = Log<TestPayload>;
+const SESSION: SessionId = [7; 16];
+const MILLI: u64 = 1000;
+
+struct Node {
+    key: Keypair,
+    log: TLog,
+    sync: SyncState<TestPayload>,
+    events: Vec<Event>,
+}
+
+impl Node {
+    fn new(seed: u8, remote_origin: u64) -> Self {
+        let key = Keypair::from_seed([seed; 32]);
+        let config = SyncConfig {
+            session_id: SESSION,
+            local: key.peer_id(),
+            origin: Origin(remote_origin),
+        };
+        Self {
+            sync: SyncState::new(Timestamp(0), config),
+            key,
+            log: TLog::default(),
+            events: Vec::new(),
+        }
+    }
+
+    fn author(&mut self, now: u64, text: String) -> VerifiedOp<TestPayload> {
+        self.log
+            .author(
+                &self.key,
+                Timestamp(now),
+                TestPayload::Set {
+                    object: now % 3,
+                    value: text,
+                },
+            )
+            .unwrap()
+            .0
+    }
+
+    fn drain_events(&mut self) {
+        while let Some(e) = self.sync.poll_event() {
+            self.events.push(e);
+        }
+    }
+}
+
+/// A link that loses, duplicates and delays (so reorders) messages, all from one seeded RNG.
+struct Link {
+    rng: ChaCha20Rng,
+    loss_per_mille: u32,
+    dup_per_mille: u32,
+    in_transit: Vec<(u64, usize, Vec<u8>)>,
+}
+
+impl Link {
+    fn send(&mut self, now: u64, to: usize, bytes: Vec<u8>) {
+        if self.rng.next_u32() % 1000 < self.loss_per_mille {
+            return;
+        }
+        let copies = if self.rng.next_u32() % 1000 < self.dup_per_mille {
+            2
+        } else {
+            1
+        };
+        for _ in 0..copies {
+            let delay = 2 * MILLI + u64::from(self.rng.next_u32()) % (20 * MILLI);
+            self.in_transit.push((now + delay, to, bytes.clone()));
+        }
+    }
+}
+
+/// Runs one millisecond tick: outputs onto the link, due messages into the nodes, timers.
+fn tick(now: u64, nodes: &mut [Node; 2], link: &mut Link) {
+    for (i, node) in nodes.iter_mut().enumerate() {
+        while let Some(bytes) = node.sync.poll_transmit(Timestamp(now), &node.log) {
+            link.send(now, 1 - i, bytes);
+        }
+    }
+    let (due, later): (Vec<_>, Vec<_>) = link.in_transit.drain(..).partition(|(t, _, _)| *t <= now);
+    link.in_transit = later;
+    for (_, to, bytes) in due {
+        let node = &mut nodes[to];
+        node.sync
+            .handle_input(Timestamp(now), &bytes, &mut node.log);
+        node.drain_events();
+    }
+    for node in nodes.iter_mut() {
+        if node
+            .sync
+            .poll_timeout(&node.log)
+            .is_some_and(|t| t.0 <= now)
+        {
+            node.sync.handle_timeout(Timestamp(now), &mut node.log);
+            node.drain_events();
+        }
+    }
+}
+
+fn ids(log: &TLog) -> Vec<(OpId, crate::lease::Mark)> {
+    log.entries().map(|e| (e.op.id(), e.mark)).collect()
+}
+
+fn converge(seed: u64, loss_per_mille: u32, dup_per_mille: u32) {
+    let mut nodes = [Node::new(1, 2), Node::new(2, 1)];
+    // Divergent offline histories, one longer than many batches.
+    for i in 0..(MAX_BATCH_OPS as u64 + 40) {
+        nodes[0].author(i, format!("a{i}"));
+    }
+    for i in 0..25 {
+        nodes[1].author(i, format!("b{i}"));
+    }
+    let mut link = Link {
+        rng: ChaCha20Rng::seed_from_u64(seed),
+        loss_per_mille,
+        dup_per_mille,
+        in_transit: Vec::new(),
+    };
+    let mut now = 1_000_000;
+    let mut live_left = 10;
+    for _ in 0..60_000 {
+        now += MILLI;
+        // Live edits while syncing.
+        if live_left > 0 && now % (50 * MILLI) == 0 {
+            live_left -= 1;
+            let who = usize::from(live_left % 2 == 0);
+            nodes[who].author(now, format!("live{live_left}"));
+        }
+        tick(now, &mut nodes, &mut link);
+        if live_left == 0 && link.in_transit.is_empty() && ids(&nodes[0].log) == ids(&nodes[1].log)
+        {
+            break;
+        }
+    }
+    // Lost acks are recovered by resends: wait until no timer is armed (nothing stalls),
+    // then check that the sync stays quiet (nothing loops).
+    let mut n_ticks = 0;
+    let settled = |nodes: &[Node; 2], link: &Link| {
+        link.in_transit.is_empty()
+            && nodes.iter().all(|n| {
+                n.sync.poll_timeout(&n.log).is_none()
+                    && n.sync
+                        .remote_version_vector()
+                        .dominates(n.log.version_vector())
+            })
+    };
+    while !settled(&nodes, &link) {
+        assert!(n_ticks < 120_000, "seed {seed}: acknowledgements stalled");
+        n_ticks += 1;
+        now += MILLI;
+        tick(now, &mut nodes, &mut link);
+    }
+    // Replies to the last inputs may still be queued: let them out and land.
+    for _ in 0..50 {
+        now += MILLI;
+        tick(now, &mut nodes, &mut link);
+    }
+    let sent_before: Vec<u64> = nodes
+        .iter()
+        .map(|n| n.sync.stats().n_messages_out)
+        .collect();
+    for _ in 0..(3 * RESEND_AFTER_MICROS / MILLI) {
+        now += MILLI;
+        tick(now, &mut nodes, &mut link);
+    }
+    let sent_after: Vec<u64> = nodes
+        .iter()
+        .map(|n| n.sync.stats().n_messages_out)
+        .collect();
+    assert_eq!(
+        sent_before, sent_after,
+        "seed {seed}: the sync keeps talking after it is done"
+    );
+    for node in &nodes {
+        assert!(
+            node.sync
+                .remote_version_vector()
+                .dominates(node.log.version_vector()),
+            "seed {seed}"
+        );
+        assert!(node.events.contains(&Event::UpToDate), "seed {seed}");
+        assert_eq!(
+            node.sync.poll_timeout(&node.log),
+            None,
+            "seed {seed}: a timer is still armed"
+        );
+    }
+    assert_eq!(
+        nodes[0].log.len(),
+        MAX_BATCH_OPS + 40 + 25 + 10,
+        "seed {seed}"
+    );
+    assert_eq!(ids(&nodes[0].log), ids(&nodes[1].log), "seed {seed}");
+    for node in &nodes {
+        // On a lossy link data may overtake a lost hello; nothing else is rejected.
+        let stats = node.sync.stats();
+        let before_hello = stats
+            .rejected
+            .get(&RejectKind::BeforeHello)
+            .copied()
+            .unwrap_or(0);
+        assert_eq!(stats.n_rejected(), before_hello, "seed {seed}: {stats:?}");
+        assert!(
+            node.events
+                .iter()
+                .any(|e| matches!(e, Event::Connected { peer } if *peer != node.key.peer_id()))
+        );
+    }
+    // The long history went out in several bounded batches.
+    assert!(nodes[0].sync.stats().n_ops_out > MAX_BATCH_OPS as u64);
+}
+
+#[test]
+fn two_peers_converge_over_a_perfect_link() {
+    converge(1, 0, 0);
+}
+
+#[test]
+fn two_peers_converge_over_a_lossy_duplicating_link() {
+    for seed in 10..13 {
+        converge(seed, 250, 150);
+    }
+}
+
+/// Hands `bytes` to `node` and returns the rejection kinds it reported.
+fn feed(node: &mut Node, now: u64, bytes: &[u8]) -> Vec<RejectKind> {
+    node.sync.handle_input(Timestamp(now), bytes, &mut node.log);
+    let mut kinds = Vec::new();
+    while let Some(e) = node.sync.poll_event() {
+        if let Event::Rejected { kind, .. } = e {
+            kinds.push(kind);
+        }
+    }
+    kinds
+}
+
+fn hello(peer: PeerId, session_id: SessionId, protocol_version: u64) -> Vec<u8> {
+    Message::Hello {
+        protocol_version,
+        session_id,
+        peer,
+        hello_seen: true,
+    }
+    .encode()
+}
+
+#[test]
+fn hostile_inputs_are_counted_and_honest_ops_survive() {
+    let mut b = Node::new(2, 1);
+    let mallory = Keypair::from_seed([9; 32]);
+    let honest_key = Keypair::from_seed([1; 32]);
+    let mut source = TLog::default();
+    let honest = source
+        .author(&honest_key, Timestamp(5), TestPayload::Chat("hi".into()))
+        .unwrap()
+        .0;
+
+    assert_eq!(
+        feed(&mut b, 1, &[0xff, 0x00, 0x12]),
+        vec![RejectKind::UnknownVersion]
+    );
+    assert_eq!(
+        feed(&mut b, 1, &[SYNC_VERSION_FOR_TEST, 99]),
+        vec![RejectKind::Malformed]
+    );
+    let early = Message::Ops {
+        batch_no: 1,
+        ops: vec![honest.encoded().to_vec()],
+    }
+    .encode();
+    assert_eq!(feed(&mut b, 1, &early), vec![RejectKind::BeforeHello]);
+    assert!(
+        feed(
+            &mut b,
+            2,
+            &hello(mallory.peer_id(), SESSION, PROTOCOL_VERSION)
+        )
+        .is_empty()
+    );
+    assert_eq!(
+        feed(
+            &mut b,
+            2,
+            &hello(honest_key.peer_id(), SESSION, PROTOCOL_VERSION)
+        ),
+        vec![RejectKind::WrongPeer]
+    );
+
+    // A forged op (author swapped), a malformed op and an honest op in one batch.
+    let mut forged = honest.encoded().to_vec();
+    forged[1..33].copy_from_slice(&mallory.peer_id().0);
+    let mut bad_version = honest.encoded().to_vec();
+    bad_version[0] = 42;
+    let batch = Message::Ops {
+        batch_no: 1,
+        ops: vec![
+            forged,
+            vec![1, 2, 3],
+            bad_version,
+            honest.encoded().to_vec(),
+        ],
+    };
+    let kinds = feed(&mut b, 3, &batch.encode());
+    assert_eq!(
+        kinds,
+        vec![
+            RejectKind::BadSignature,
+            RejectKind::MalformedOp,
+            RejectKind::UnknownVersion
+        ]
+    );
+    assert!(
+        b.log.contains(&honest.id()),
+        "the honest op is delivered despite the hostile ones"
+    );
+
+    // An oversized batch is refused whole.
+    let mut big = vec![SYNC_VERSION_FOR_TEST, 3, 1];
+    crate::codec::put_varint(&mut big, MAX_BATCH_OPS as u64 + 1);
+    assert_eq!(feed(&mut b, 4, &big), vec![RejectKind::Oversized]);
+
+    // An op whose dependency never comes waits, then expires and is reported.
+    let orphan = Op::sign(
+        &mallory,
+        OpFields {
+            seq: 1,
+            lamport: 5,
+            timestamp: Timestamp(6),
+            deps: vec![OpId([3; 32])],
+            payload: TestPayload::Chat("x".into()),
+        },
+    )
+    .unwrap();
+    let batch = Message::Ops {
+        batch_no: 2,
+        ops: vec![orphan.encoded().to_vec()],
+    };
+    assert!(feed(&mut b, 5, &batch.encode()).is_empty());
+    assert_eq!(b.log.n_pending(), 1);
+    let expiry = b.sync.poll_timeout(&b.log).unwrap();
+    assert!(expiry.0 <= 5 + PENDING_TTL_MICROS);
+    b.sync
+        .handle_timeout(Timestamp(5 + PENDING_TTL_MICROS), &mut b.log);
+    b.drain_events();
+    assert!(b.events.iter().any(|e| matches!(
+        e,
+        Event::Rejected {
+            kind: RejectKind::PendingExpired,
+            ..
+        }
+    )));
+    assert_eq!(b.log.n_pending(), 0);
+
+    let stats = b.sync.stats();
+    assert_eq!(stats.rejected.get(&RejectKind::BadSignature), Some(&1));
+    assert_eq!(stats.rejected.get(&RejectKind::PendingExpired), Some(&1));
+    assert_eq!(stats.n_rejected(), 9);
+    // Acks were queued for both batches and nothing panicked.
+    assert!(!b.sync.is_closed());
+}
+
+const SYNC_VERSION_FOR_TEST: u8 = crate::sync::message::SYNC_WIRE_VERSION;
+
+#[test]
+fn wrong_session_or_protocol_closes() {
+    let other = Keypair::from_seed([5; 32]).peer_id();
+    for (session, version, reason) in [
+        ([8; 16], PROTOCOL_VERSION, CloseReason::WrongSession),
+        (SESSION, PROTOCOL_VERSION + 1, CloseReason::WrongProtocol),
+    ] {
+        let mut b = Node::new(2, 1);
+        b.sync
+            .handle_input(Timestamp(1), &hello(other, session, version), &mut b.log);
+        b.drain_events();
+        assert!(b.events.contains(&Event::Closed(reason)));
+        assert!(b.sync.is_closed());
+        assert_eq!(b.sync.poll_transmit(Timestamp(2), &b.log), None);
+    }
+}
+
+#[test]
+fn flooding_is_rate_limited() {
+    let mut b = Node::new(2, 1);
+    let peer = Keypair::from_seed([1; 32]).peer_id();
+    feed(&mut b, 1, &hello(peer, SESSION, PROTOCOL_VERSION));
+    let have = Message::Have(VersionVector::new()).encode();
+    let mut limited = 0;
+    for _ in 0..(MAX_MESSAGE_BURST + 10) {
+        limited += feed(&mut b, 1, &have)
+            .iter()
+            .filter(|k| **k == RejectKind::RateLimited)
+            .count();
+    }
+    assert_eq!(limited, 11, "burst plus hello used the bucket");
+    // After a second, the bucket has refilled.
+    assert!(feed(&mut b, 1 + 1_000_000, &have).is_empty());
+}
+
+#[test]
+fn ephemeral_values_are_latest_wins_and_never_stored() {
+    let mut nodes = [Node::new(1, 2), Node::new(2, 1)];
+    let mut link = Link {
+        rng: ChaCha20Rng::seed_from_u64(3),
+        loss_per_mille: 0,
+        dup_per_mille: 0,
+        in_transit: Vec::new(),
+    };
+    for now in 1..50 {
+        tick(now * MILLI, &mut nodes, &mut link);
+    }
+    nodes[0].sync.send_ephemeral(1, b"pose-1".to_vec()).unwrap();
+    nodes[0].sync.send_ephemeral(1, b"pose-2".to_vec()).unwrap();
+    let first = nodes[0]
+        .sync
+        .poll_transmit(Timestamp(60 * MILLI), &nodes[0].log)
+        .unwrap();
+    nodes[0].sync.send_ephemeral(1, b"pose-3".to_vec()).unwrap();
+    let second = nodes[0]
+        .sync
+        .poll_transmit(Timestamp(61 * MILLI), &nodes[0].log)
+        .unwrap();
+    // Delivered out of order and duplicated: only the newest shows, once.
+    let b = &mut nodes[1];
+    for bytes in [&second, &first, &second] {
+        b.sync
+            .handle_input(Timestamp(70 * MILLI), bytes, &mut b.log);
+    }
+    b.drain_events();
+    let values: Vec<_> = b
+        .events
+        .iter()
+        .filter_map(|e| match e {
+            Event::Ephemeral { channel: 1, value } => Some(value.clone()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(values, vec![b"pose-3".to_vec()]);
+    assert!(b.log.is_empty());
+    assert_eq!(
+        nodes[0]
+            .sync
+            .send_ephemeral(2, vec![0; MAX_EPHEMERAL_BYTES + 1]),
+        Err(EphemeralError::TooLarge(MAX_EPHEMERAL_BYTES + 1))
+    );
+    let _ = LOCAL_ORIGIN;
+}
