@@ -22,8 +22,15 @@ use fidget::vm::VmShape;
 
 mod fidget_peer;
 
-const MODELS: &[&str] =
-    &["sphere", "spheres100", "spheres100_rfunc", "gyroid_sphere", "watermelon", "watermelon_rfunc", "script_field"];
+const MODELS: &[&str] = &[
+    "sphere",
+    "spheres100",
+    "spheres100_rfunc",
+    "gyroid_sphere",
+    "watermelon",
+    "watermelon_rfunc",
+    "script_field",
+];
 
 fn source(model: &str) -> &'static str {
     match model {
@@ -39,7 +46,9 @@ fn source(model: &str) -> &'static str {
 }
 
 fn tape(model: &str) -> Tape {
-    Function::parse(source(model)).unwrap_or_else(|e| panic!("{model}: {e}")).tape()
+    Function::parse(source(model))
+        .unwrap_or_else(|e| panic!("{model}: {e}"))
+        .tape()
 }
 
 /// Deterministic scattered points in [-1.2, 1.2]^3.
@@ -87,7 +96,10 @@ mod bulk_values {
         });
     }
 
-    fn peer<F: fidget::eval::Function + fidget::eval::MathFunction + Clone>(bencher: Bencher, model: &str) {
+    fn peer<F: fidget::eval::Function + fidget::eval::MathFunction + Clone>(
+        bencher: Bencher,
+        model: &str,
+    ) {
         let (ctx, root) = fidget_peer::to_fidget(&tape(model));
         let shape = Shape::<F>::new(&ctx, root).expect("fidget accepts the model");
         let t = shape.float_slice_tape(Default::default());
@@ -118,26 +130,39 @@ mod bulk_gradients {
         let (xs, ys, zs) = points(N_GRADIENTS);
         let mut eval = GradBulkEval::new(&tape);
         let mut out = vec![Default::default(); N_GRADIENTS];
-        bencher.counter(ItemsCount::new(N_GRADIENTS)).bench_local(|| {
-            eval.eval(&xs, &ys, &zs, 0.0, &mut out);
-            divan::black_box(&out);
-        });
+        bencher
+            .counter(ItemsCount::new(N_GRADIENTS))
+            .bench_local(|| {
+                eval.eval(&xs, &ys, &zs, 0.0, &mut out);
+                divan::black_box(&out);
+            });
     }
 
-    fn peer<F: fidget::eval::Function + fidget::eval::MathFunction + Clone>(bencher: Bencher, model: &str) {
+    fn peer<F: fidget::eval::Function + fidget::eval::MathFunction + Clone>(
+        bencher: Bencher,
+        model: &str,
+    ) {
         let (ctx, root) = fidget_peer::to_fidget(&tape(model));
         let shape = Shape::<F>::new(&ctx, root).expect("fidget accepts the model");
         let t = shape.grad_slice_tape(Default::default());
         let mut eval = Shape::<F>::new_grad_slice_eval();
         let (xs, ys, zs) = points(N_GRADIENTS);
         let (xs, ys, zs): (Vec<fidget::types::Grad>, Vec<_>, Vec<_>) = (
-            xs.iter().map(|&v| fidget::types::Grad::new(v, 1.0, 0.0, 0.0)).collect(),
-            ys.iter().map(|&v| fidget::types::Grad::new(v, 0.0, 1.0, 0.0)).collect(),
-            zs.iter().map(|&v| fidget::types::Grad::new(v, 0.0, 0.0, 1.0)).collect(),
+            xs.iter()
+                .map(|&v| fidget::types::Grad::new(v, 1.0, 0.0, 0.0))
+                .collect(),
+            ys.iter()
+                .map(|&v| fidget::types::Grad::new(v, 0.0, 1.0, 0.0))
+                .collect(),
+            zs.iter()
+                .map(|&v| fidget::types::Grad::new(v, 0.0, 0.0, 1.0))
+                .collect(),
         );
-        bencher.counter(ItemsCount::new(N_GRADIENTS)).bench_local(|| {
-            divan::black_box(eval.eval(&t, &xs, &ys, &zs).expect("evaluates"));
-        });
+        bencher
+            .counter(ItemsCount::new(N_GRADIENTS))
+            .bench_local(|| {
+                divan::black_box(eval.eval(&t, &xs, &ys, &zs).expect("evaluates"));
+            });
     }
 
     #[divan::bench(args = MODELS)]
@@ -175,7 +200,10 @@ mod interval {
         });
     }
 
-    fn peer<F: fidget::eval::Function + fidget::eval::MathFunction + Clone>(bencher: Bencher, model: &str) {
+    fn peer<F: fidget::eval::Function + fidget::eval::MathFunction + Clone>(
+        bencher: Bencher,
+        model: &str,
+    ) {
         let (ctx, root) = fidget_peer::to_fidget(&tape(model));
         let shape = Shape::<F>::new(&ctx, root).expect("fidget accepts the model");
         let t = shape.interval_tape(Default::default());
@@ -219,8 +247,16 @@ mod pruned {
         let half = size / 2.0;
         let mut n = 0;
         for child in 0..8 {
-            let o = [(child & 1) as f32, ((child >> 1) & 1) as f32, ((child >> 2) & 1) as f32];
-            let child_lo = [lo[0] + o[0] * half, lo[1] + o[1] * half, lo[2] + o[2] * half];
+            let o = [
+                (child & 1) as f32,
+                ((child >> 1) & 1) as f32,
+                ((child >> 2) & 1) as f32,
+            ];
+            let child_lo = [
+                lo[0] + o[0] * half,
+                lo[1] + o[1] * half,
+                lo[2] + o[2] * half,
+            ];
             n += descend(&simpler, child_lo, half, depth - 1, scratch);
         }
         n
@@ -229,7 +265,11 @@ mod pruned {
     fn grid(lo: [f32; 3], size: f32) -> [Vec<f32>; 3] {
         let n = LEAF_SAMPLES;
         let step = size / n as f32;
-        let mut g = [Vec::with_capacity(n * n * n), Vec::with_capacity(n * n * n), Vec::with_capacity(n * n * n)];
+        let mut g = [
+            Vec::with_capacity(n * n * n),
+            Vec::with_capacity(n * n * n),
+            Vec::with_capacity(n * n * n),
+        ];
         for k in 0..n {
             for j in 0..n {
                 for i in 0..n {
@@ -257,7 +297,12 @@ mod pruned {
         bencher.bench_local(|| descend(&tape, [-1.2; 3], 2.4, PRUNE_DEPTH, &mut scratch));
     }
 
-    fn peer_descend<F: fidget::eval::Function + fidget::eval::MathFunction + Clone>(shape: &Shape<F>, lo: [f32; 3], size: f32, depth: u32) -> usize {
+    fn peer_descend<F: fidget::eval::Function + fidget::eval::MathFunction + Clone>(
+        shape: &Shape<F>,
+        lo: [f32; 3],
+        size: f32,
+        depth: u32,
+    ) -> usize {
         let mut interval = Shape::<F>::new_interval_eval();
         let t = shape.interval_tape(Default::default());
         let i = |k: usize| fidget::types::Interval::new(lo[k], lo[k] + size);
@@ -266,9 +311,9 @@ mod pruned {
             return 0;
         }
         let simpler = match trace {
-            Some(trace) => {
-                shape.simplify(trace, Default::default(), &mut Default::default()).expect("simplifies")
-            }
+            Some(trace) => shape
+                .simplify(trace, Default::default(), &mut Default::default())
+                .expect("simplifies"),
             None => shape.clone(),
         };
         if depth == 0 {
@@ -281,14 +326,25 @@ mod pruned {
         let half = size / 2.0;
         let mut n = 0;
         for child in 0..8 {
-            let o = [(child & 1) as f32, ((child >> 1) & 1) as f32, ((child >> 2) & 1) as f32];
-            let child_lo = [lo[0] + o[0] * half, lo[1] + o[1] * half, lo[2] + o[2] * half];
+            let o = [
+                (child & 1) as f32,
+                ((child >> 1) & 1) as f32,
+                ((child >> 2) & 1) as f32,
+            ];
+            let child_lo = [
+                lo[0] + o[0] * half,
+                lo[1] + o[1] * half,
+                lo[2] + o[2] * half,
+            ];
             n += peer_descend(&simpler, child_lo, half, depth - 1);
         }
         n
     }
 
-    fn peer<F: fidget::eval::Function + fidget::eval::MathFunction + Clone>(bencher: Bencher, model: &str) {
+    fn peer<F: fidget::eval::Function + fidget::eval::MathFunction + Clone>(
+        bencher: Bencher,
+        model: &str,
+    ) {
         let (ctx, root) = fidget_peer::to_fidget(&tape(model));
         let shape = Shape::<F>::new(&ctx, root).expect("fidget accepts the model");
         bencher.bench_local(|| peer_descend(&shape, [-1.2; 3], 2.4, PRUNE_DEPTH));

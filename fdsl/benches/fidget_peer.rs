@@ -20,7 +20,9 @@ pub fn to_fidget(tape: &Tape) -> (Context, Node) {
     }
     for instr in tape.instrs() {
         let arg = |ctx: &mut Context, o: Operand| match o {
-            Operand::Reg(r) => regs[r as usize].expect("registers are written before they are read"),
+            Operand::Reg(r) => {
+                regs[r as usize].expect("registers are written before they are read")
+            }
             Operand::Const(c) => ctx.constant(c as f32),
         };
         let [a, b, c] = instr.args;
@@ -106,7 +108,11 @@ fn binary(ctx: &mut Context, op: BinaryOp, a: Node, b: Node) -> Node {
             let s = ctx.add(a2, b2).expect("node");
             let root = ctx.sqrt(s).expect("node");
             let sum = ctx.add(a, b).expect("node");
-            if op == BinaryOp::RAnd { ctx.sub(sum, root) } else { ctx.add(sum, root) }
+            if op == BinaryOp::RAnd {
+                ctx.sub(sum, root)
+            } else {
+                ctx.add(sum, root)
+            }
         }
     };
     r.expect("nodes of this context")
@@ -117,7 +123,10 @@ fn ternary(ctx: &mut Context, op: TernaryOp, a: Node, b: Node, c: Node) -> Node 
         TernaryOp::Select => ctx.if_nonzero_else(a, b, c).expect("node"),
         TernaryOp::BlendMin | TernaryOp::BlendMax => {
             let sign = if op == TernaryOp::BlendMin { 1.0 } else { -1.0 };
-            let (a, b) = (ctx.mul(a, sign).expect("node"), ctx.mul(b, sign).expect("node"));
+            let (a, b) = (
+                ctx.mul(a, sign).expect("node"),
+                ctx.mul(b, sign).expect("node"),
+            );
             let d = ctx.sub(a, b).expect("node");
             let ad = ctx.abs(d).expect("node");
             let gap = ctx.sub(c, ad).expect("node");

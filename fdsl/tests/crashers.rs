@@ -16,7 +16,11 @@ fn every_checked_in_crasher_is_rejected() {
         let text = String::from_utf8_lossy(&bytes);
         let compiled = fdsl::Function::compile(&text);
         assert!(compiled.function.is_none(), "{} compiled", path.display());
-        assert!(compiled.diagnostics.iter().any(|d| d.is_error()), "{} has no error", path.display());
+        assert!(
+            compiled.diagnostics.iter().any(|d| d.is_error()),
+            "{} has no error",
+            path.display()
+        );
         for d in &compiled.diagnostics {
             assert!(!d.render(&text).is_empty());
         }

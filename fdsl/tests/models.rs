@@ -1,7 +1,10 @@
 //! The reference models compile, evaluate where we know their values, agree with the `fidget`
 //! crate (the benchmark peer) within f32 tolerance, and prune as a mesher needs.
 
-#![allow(clippy::unwrap_used, reason = "test helpers unwrap what a test expects to succeed")]
+#![allow(
+    clippy::unwrap_used,
+    reason = "test helpers unwrap what a test expects to succeed"
+)]
 
 use fdsl::Function;
 use fdsl::eval::{BulkEval, Interval, IntervalEval, PointEval};
@@ -12,13 +15,34 @@ use fidget::shape::Shape;
 mod fidget_peer;
 
 const MODELS: &[(&str, &str)] = &[
-    ("sphere", include_str!("../../tests/data/models/sphere.fdsl")),
-    ("spheres100", include_str!("../../tests/data/models/spheres100.fdsl")),
-    ("spheres100_rfunc", include_str!("../../tests/data/models/spheres100_rfunc.fdsl")),
-    ("gyroid_sphere", include_str!("../../tests/data/models/gyroid_sphere.fdsl")),
-    ("watermelon", include_str!("../../tests/data/models/watermelon.fdsl")),
-    ("watermelon_rfunc", include_str!("../../tests/data/models/watermelon_rfunc.fdsl")),
-    ("script_field", include_str!("../../tests/data/models/script_field.fdsl")),
+    (
+        "sphere",
+        include_str!("../../tests/data/models/sphere.fdsl"),
+    ),
+    (
+        "spheres100",
+        include_str!("../../tests/data/models/spheres100.fdsl"),
+    ),
+    (
+        "spheres100_rfunc",
+        include_str!("../../tests/data/models/spheres100_rfunc.fdsl"),
+    ),
+    (
+        "gyroid_sphere",
+        include_str!("../../tests/data/models/gyroid_sphere.fdsl"),
+    ),
+    (
+        "watermelon",
+        include_str!("../../tests/data/models/watermelon.fdsl"),
+    ),
+    (
+        "watermelon_rfunc",
+        include_str!("../../tests/data/models/watermelon_rfunc.fdsl"),
+    ),
+    (
+        "script_field",
+        include_str!("../../tests/data/models/script_field.fdsl"),
+    ),
 ];
 
 fn grid() -> (Vec<f32>, Vec<f32>, Vec<f32>) {
@@ -78,8 +102,14 @@ fn values_agree_with_fidget() {
             // Stated tolerance: 1e-5 relative to the value's scale per 10 operations, as f32
             // rounding errors accumulate (100 chained R-function unions cancel large terms).
             let tolerance = 1e-6 * (1.0 + exact.abs()) * tape.len() as f64;
-            assert!((a - exact).abs() <= tolerance, "{name} at {i}: fdsl {a} vs f64 {exact}");
-            assert!((b - exact).abs() <= tolerance, "{name} at {i}: fidget {b} vs f64 {exact}");
+            assert!(
+                (a - exact).abs() <= tolerance,
+                "{name} at {i}: fdsl {a} vs f64 {exact}"
+            );
+            assert!(
+                (b - exact).abs() <= tolerance,
+                "{name} at {i}: fidget {b} vs f64 {exact}"
+            );
         }
     }
 }
@@ -100,7 +130,16 @@ fn prune(tape: &fdsl::Tape, lo: [f64; 3], size: f64, depth: u32) -> (usize, usiz
     let mut total = (0, 0);
     for c in 0..8 {
         let o = [(c & 1) as f64, ((c >> 1) & 1) as f64, ((c >> 2) & 1) as f64];
-        let (n, len) = prune(&simpler, [lo[0] + o[0] * half, lo[1] + o[1] * half, lo[2] + o[2] * half], half, depth - 1);
+        let (n, len) = prune(
+            &simpler,
+            [
+                lo[0] + o[0] * half,
+                lo[1] + o[1] * half,
+                lo[2] + o[2] * half,
+            ],
+            half,
+            depth - 1,
+        );
         total = (total.0 + n, total.1 + len);
     }
     total
@@ -113,12 +152,28 @@ fn r_function_models_prune_like_their_min_max_twins() {
         let m = Function::parse(MODELS[minmax].1).unwrap().tape();
         let (r_leaves, r_len) = prune(&r, [-1.2; 3], 2.4, 4);
         let (m_leaves, m_len) = prune(&m, [-1.2; 3], 2.4, 4);
-        let (r_mean, m_mean) = (r_len as f64 / r_leaves as f64, m_len as f64 / m_leaves as f64);
+        let (r_mean, m_mean) = (
+            r_len as f64 / r_leaves as f64,
+            m_len as f64 / m_leaves as f64,
+        );
         // The same surface, so about the same leaves; and the pruned tapes are as short, up to
         // the R-function's own few operations.
         let leaves_ratio = r_leaves as f64 / m_leaves as f64;
-        assert!((0.9..1.5).contains(&leaves_ratio), "{}: {r_leaves} vs {m_leaves} leaves", MODELS[rfunc].0);
-        assert!(r_mean <= 1.5 * m_mean + 6.0, "{}: mean tape {r_mean} vs {m_mean}", MODELS[rfunc].0);
-        assert!(r_mean < r.len() as f64 / 2.0, "{}: pruning left {r_mean} of {}", MODELS[rfunc].0, r.len());
+        assert!(
+            (0.9..1.5).contains(&leaves_ratio),
+            "{}: {r_leaves} vs {m_leaves} leaves",
+            MODELS[rfunc].0
+        );
+        assert!(
+            r_mean <= 1.5 * m_mean + 6.0,
+            "{}: mean tape {r_mean} vs {m_mean}",
+            MODELS[rfunc].0
+        );
+        assert!(
+            r_mean < r.len() as f64 / 2.0,
+            "{}: pruning left {r_mean} of {}",
+            MODELS[rfunc].0,
+            r.len()
+        );
     }
 }
