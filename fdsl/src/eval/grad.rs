@@ -4,6 +4,7 @@
 //! Where an operation is not differentiable (the crease of `min`, a step of `floor`), the
 //! derivative of the branch the value came from is used, which is what surface normals need.
 
+use super::CHUNK;
 use super::real::Real;
 use crate::compile::{BinaryOp, TernaryOp, UnaryOp};
 use crate::tape::{Code, Operand, Tape};
@@ -68,6 +69,7 @@ fn scale<T: Real>(d: T, k: T) -> T {
     }
 }
 
+#[inline(always)]
 fn unary<T: Real>(op: UnaryOp, a: Grad<T>) -> Grad<T> {
     let v = T::unary(op, a.v);
     let two = T::ONE + T::ONE;
@@ -98,6 +100,7 @@ fn unary<T: Real>(op: UnaryOp, a: Grad<T>) -> Grad<T> {
     Grad::chain(v, k, a)
 }
 
+#[inline(always)]
 fn binary<T: Real>(op: BinaryOp, a: Grad<T>, b: Grad<T>) -> Grad<T> {
     let v = T::binary(op, a.v, b.v);
     let zero = T::ZERO;
@@ -154,6 +157,7 @@ fn binary<T: Real>(op: BinaryOp, a: Grad<T>, b: Grad<T>) -> Grad<T> {
     }
 }
 
+#[inline(always)]
 fn ternary<T: Real>(op: TernaryOp, a: Grad<T>, b: Grad<T>, c: Grad<T>) -> Grad<T> {
     match op {
         TernaryOp::Select => {
@@ -177,6 +181,7 @@ fn ternary<T: Real>(op: TernaryOp, a: Grad<T>, b: Grad<T>, c: Grad<T>) -> Grad<T
 }
 
 /// `min(a,b) - h^2 r / 4` with `h = max(r - |a-b|, 0) / r`.
+#[inline(always)]
 fn blend_min<T: Real>(a: Grad<T>, b: Grad<T>, r: Grad<T>) -> Grad<T> {
     let v = T::ternary(TernaryOp::BlendMin, a.v, b.v, r.v);
     let m = binary(BinaryOp::Min, a, b);
@@ -258,31 +263,96 @@ impl GradEval {
 }
 
 /// Values and gradients over slices of points in f32 (for surface normals).
+///
+/// Like [`super::BulkEval`], it runs one instruction at a time over a chunk of
+/// [`CHUNK`] points, so the tape is interpreted once per chunk rather than once per point.
 #[derive(Clone, Debug)]
 pub struct GradBulkEval {
     tape: Tape,
-    regs: Vec<Grad<f32>>,
+    regs: Vec<[Grad<f32>; CHUNK]>,
 }
+
+type GradLanes = [Grad<f32>; CHUNK];
 
 impl GradBulkEval {
     /// An evaluator for `tape`.
     pub fn new(tape: &Tape) -> GradBulkEval {
-        GradBulkEval {
-            tape: tape.clone(),
-            regs: vec![Grad::default(); tape.n_regs()],
-        }
+        GradBulkEval { tape: tape.clone(), regs: vec![[Grad::default(); CHUNK]; tape.n_regs()] }
     }
 
     /// Value and gradient of the first output at each point, written to `out`.
     pub fn eval(&mut self, x: &[f32], y: &[f32], z: &[f32], t: f32, out: &mut [Grad<f32>]) {
         let n = x.len();
-        assert!(
-            y.len() == n && z.len() == n && out.len() == n,
-            "slices differ in length"
-        );
-        for i in 0..n {
-            run(&self.tape, &mut self.regs, [x[i], y[i], z[i], t]);
-            out[i] = output(&self.tape, &self.regs, 0);
+        assert!(y.len() == n && z.len() == n && out.len() == n, "slices differ in length");
+        let mut start = 0;
+        while start < n {
+            let len = CHUNK.min(n - start);
+            let coords = [&x[start..start + len], &y[start..start + len], &z[start..start + len]];
+            for (slot, reg) in self.tape.inputs().iter().enumerate() {
+                let Some(r) = reg else { continue };
+                let lanes = &mut self.regs[*r as usize];
+                for (i, g) in lanes.iter_mut().enumerate() {
+                    let v = if slot == 3 { t } else { coords[slot].get(i).copied().unwrap_or(0.0) };
+                    *g = Grad::constant(v);
+                    match slot {
+                        0 => g.dx = 1.0,
+                        1 => g.dy = 1.0,
+                        2 => g.dz = 1.0,
+                        _ => {}
+                    }
+                }
+            }
+            for instr in self.tape.instrs() {
+                run_instr(instr, &mut self.regs);
+            }
+            match self.tape.outputs()[0] {
+                Operand::Reg(r) => out[start..start + len].copy_from_slice(&self.regs[r as usize][..len]),
+                Operand::Const(c) => out[start..start + len].fill(Grad::constant(c as f32)),
+            }
+            start += len;
         }
     }
+}
+
+/// One instruction over a chunk. The operation is matched once, outside the lane loop, so
+/// each loop body is the scalar rule specialised to that operation.
+fn run_instr(instr: &crate::tape::Instr, regs: &mut [GradLanes]) {
+    let lane = |regs: &[GradLanes], o: Operand, i: usize| match o {
+        Operand::Reg(r) => regs[r as usize][i],
+        Operand::Const(c) => Grad::constant(c as f32),
+    };
+    let [a, b, c] = instr.args;
+    let out = instr.out as usize;
+    let mut result = [Grad::default(); CHUNK];
+    macro_rules! each {
+        ($f:expr) => {
+            for (i, r) in result.iter_mut().enumerate() {
+                *r = $f(i);
+            }
+        };
+    }
+    match instr.code {
+        Code::Unary(op) => {
+            macro_rules! u {
+                ($($v:ident),*) => {
+                    match op {
+                        $(UnaryOp::$v => each!(|i| unary(UnaryOp::$v, lane(regs, a, i))),)*
+                    }
+                };
+            }
+            u!(Neg, Abs, Sqrt, Square, Sin, Cos, Tan, Asin, Acos, Atan, Exp, Ln, Floor, Ceil, Sign, Not)
+        }
+        Code::Binary(op) => {
+            macro_rules! b {
+                ($($v:ident),*) => {
+                    match op {
+                        $(BinaryOp::$v => each!(|i| binary(BinaryOp::$v, lane(regs, a, i), lane(regs, b, i))),)*
+                    }
+                };
+            }
+            b!(Add, Sub, Mul, Div, Min, Max, Pow, Atan2, Mod, Lt, Le, Eq, And, Or, RAnd, ROr)
+        }
+        Code::Ternary(op) => each!(|i| ternary(op, lane(regs, a, i), lane(regs, b, i), lane(regs, c, i))),
+    }
+    regs[out] = result;
 }

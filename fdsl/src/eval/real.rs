@@ -128,12 +128,29 @@ macro_rules! impl_real {
                 match op {
                     U::Sin => $sin(a),
                     U::Cos => $cos(a),
+                    U::Neg => -a,
+                    U::Abs => a.abs(),
+                    U::Sqrt => a.sqrt(),
+                    U::Square => a * a,
+                    U::Floor => a.floor(),
+                    U::Ceil => a.ceil(),
                     _ => op.apply(a as f64) as $t,
                 }
             }
             #[inline(always)]
             fn binary(op: crate::compile::BinaryOp, a: Self, b: Self) -> Self {
-                op.apply(a as f64, b as f64) as $t
+                use crate::compile::BinaryOp as B;
+                match op {
+                    B::Add => a + b,
+                    B::Sub => a - b,
+                    B::Mul => a * b,
+                    B::Div => a / b,
+                    B::Min => if a.is_nan() || b.is_nan() { <$t>::NAN } else { a.min(b) },
+                    B::Max => if a.is_nan() || b.is_nan() { <$t>::NAN } else { a.max(b) },
+                    B::RAnd => a + b - (a * a + b * b).sqrt(),
+                    B::ROr => a + b + (a * a + b * b).sqrt(),
+                    _ => op.apply(a as f64, b as f64) as $t,
+                }
             }
             #[inline(always)]
             fn ternary(op: crate::compile::TernaryOp, a: Self, b: Self, c: Self) -> Self {
