@@ -277,22 +277,36 @@ type GradLanes = [Grad<f32>; CHUNK];
 impl GradBulkEval {
     /// An evaluator for `tape`.
     pub fn new(tape: &Tape) -> GradBulkEval {
-        GradBulkEval { tape: tape.clone(), regs: vec![[Grad::default(); CHUNK]; tape.n_regs()] }
+        GradBulkEval {
+            tape: tape.clone(),
+            regs: vec![[Grad::default(); CHUNK]; tape.n_regs()],
+        }
     }
 
     /// Value and gradient of the first output at each point, written to `out`.
     pub fn eval(&mut self, x: &[f32], y: &[f32], z: &[f32], t: f32, out: &mut [Grad<f32>]) {
         let n = x.len();
-        assert!(y.len() == n && z.len() == n && out.len() == n, "slices differ in length");
+        assert!(
+            y.len() == n && z.len() == n && out.len() == n,
+            "slices differ in length"
+        );
         let mut start = 0;
         while start < n {
             let len = CHUNK.min(n - start);
-            let coords = [&x[start..start + len], &y[start..start + len], &z[start..start + len]];
+            let coords = [
+                &x[start..start + len],
+                &y[start..start + len],
+                &z[start..start + len],
+            ];
             for (slot, reg) in self.tape.inputs().iter().enumerate() {
                 let Some(r) = reg else { continue };
                 let lanes = &mut self.regs[*r as usize];
                 for (i, g) in lanes.iter_mut().enumerate() {
-                    let v = if slot == 3 { t } else { coords[slot].get(i).copied().unwrap_or(0.0) };
+                    let v = if slot == 3 {
+                        t
+                    } else {
+                        coords[slot].get(i).copied().unwrap_or(0.0)
+                    };
                     *g = Grad::constant(v);
                     match slot {
                         0 => g.dx = 1.0,
@@ -306,7 +320,9 @@ impl GradBulkEval {
                 run_instr(instr, &mut self.regs);
             }
             match self.tape.outputs()[0] {
-                Operand::Reg(r) => out[start..start + len].copy_from_slice(&self.regs[r as usize][..len]),
+                Operand::Reg(r) => {
+                    out[start..start + len].copy_from_slice(&self.regs[r as usize][..len])
+                }
                 Operand::Const(c) => out[start..start + len].fill(Grad::constant(c as f32)),
             }
             start += len;
@@ -340,7 +356,10 @@ fn run_instr(instr: &crate::tape::Instr, regs: &mut [GradLanes]) {
                     }
                 };
             }
-            u!(Neg, Abs, Sqrt, Square, Sin, Cos, Tan, Asin, Acos, Atan, Exp, Ln, Floor, Ceil, Sign, Not)
+            u!(
+                Neg, Abs, Sqrt, Square, Sin, Cos, Tan, Asin, Acos, Atan, Exp, Ln, Floor, Ceil,
+                Sign, Not
+            )
         }
         Code::Binary(op) => {
             macro_rules! b {
@@ -350,9 +369,13 @@ fn run_instr(instr: &crate::tape::Instr, regs: &mut [GradLanes]) {
                     }
                 };
             }
-            b!(Add, Sub, Mul, Div, Min, Max, Pow, Atan2, Mod, Lt, Le, Eq, And, Or, RAnd, ROr)
+            b!(
+                Add, Sub, Mul, Div, Min, Max, Pow, Atan2, Mod, Lt, Le, Eq, And, Or, RAnd, ROr
+            )
         }
-        Code::Ternary(op) => each!(|i| ternary(op, lane(regs, a, i), lane(regs, b, i), lane(regs, c, i))),
+        Code::Ternary(op) => {
+            each!(|i| ternary(op, lane(regs, a, i), lane(regs, b, i), lane(regs, c, i)))
+        }
     }
     regs[out] = result;
 }

@@ -145,8 +145,20 @@ macro_rules! impl_real {
                     B::Sub => a - b,
                     B::Mul => a * b,
                     B::Div => a / b,
-                    B::Min => if a.is_nan() || b.is_nan() { <$t>::NAN } else { a.min(b) },
-                    B::Max => if a.is_nan() || b.is_nan() { <$t>::NAN } else { a.max(b) },
+                    B::Min => {
+                        if a.is_nan() || b.is_nan() {
+                            <$t>::NAN
+                        } else {
+                            a.min(b)
+                        }
+                    }
+                    B::Max => {
+                        if a.is_nan() || b.is_nan() {
+                            <$t>::NAN
+                        } else {
+                            a.max(b)
+                        }
+                    }
                     B::RAnd => a + b - (a * a + b * b).sqrt(),
                     B::ROr => a + b + (a * a + b * b).sqrt(),
                     _ => op.apply(a as f64, b as f64) as $t,
