@@ -16,9 +16,7 @@ use divan::counter::ItemsCount;
 use fdsl::Function;
 use fdsl::eval::{BulkEval, GradBulkEval, Interval, IntervalEval};
 use fdsl::tape::{Fidelity, Tape};
-use fidget::jit::JitShape;
 use fidget::shape::Shape;
-use fidget::vm::VmShape;
 
 mod fidget_peer;
 
@@ -359,7 +357,4 @@ mod pruned {
     fn fidget_jit(bencher: Bencher, model: &str) {
         peer::<fidget::jit::JitFunction>(bencher, model);
     }
-
-    #[allow(dead_code, reason = "type names used by the benchmark's documentation")]
-    type Peers = (VmShape, JitShape);
 }

@@ -245,10 +245,12 @@ impl Lowerer {
         for f in functions {
             let name = output_name(&f.name.name);
             if let Some(first) = seen.get(&name) {
-                let (line_hint, _) = (first.start, ());
                 self.report(
                     Diagnostic::error(f.name.span, format!("`{}` is defined twice", f.name.name))
-                        .with_hint(format!("the first definition starts at byte {line_hint}")),
+                        .with_hint(format!(
+                            "the first definition starts at byte {}",
+                            first.start
+                        )),
                 );
                 continue;
             }
@@ -706,10 +708,8 @@ impl Lowerer {
             let r = self.ctx.input(slot);
             return self.full(span, r);
         }
-        match name {
-            "pi" | "PI" => return self.constant(span, std::f64::consts::PI),
-            "e" | "E" if !env.inputs.contains_key(name) => {}
-            _ => {}
+        if name == "pi" || name == "PI" {
+            return self.constant(span, std::f64::consts::PI);
         }
         let mut candidates: Vec<&str> = env.vars.keys().map(String::as_str).collect();
         candidates.extend(env.inputs.keys().map(String::as_str));

@@ -225,7 +225,7 @@ fn run_tape(instrs: &[Instr], regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
                 let a = match src(instr.args[0]) {
                     Src::R(a) => a,
                     Src::C(c) => {
-                        o.fill(Real32::unary(op, c));
+                        o.fill(<f32 as super::real::Real>::unary(op, c));
                         continue;
                     }
                 };
@@ -234,14 +234,6 @@ fn run_tape(instrs: &[Instr], regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
             Code::Binary(op) => binary(op, o, src(instr.args[0]), src(instr.args[1])),
             Code::Ternary(_) => {}
         }
-    }
-}
-
-struct Real32;
-
-impl Real32 {
-    fn unary(op: UnaryOp, a: f32) -> f32 {
-        <f32 as super::real::Real>::unary(op, a)
     }
 }
 
