@@ -37,10 +37,14 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod bvh;
 pub mod compile;
 pub mod eval;
 mod function;
 pub mod limits;
+pub mod mesh;
+pub mod object;
+pub mod scene;
 pub mod syntax;
 pub mod tape;
 

@@ -1,0 +1,381 @@
+//! Sculpting edits: adding, carving or intersecting with a tool swept along a stroke, and
+//! painting a property inside the tool's volume; and the set operations (sharp or blended)
+//! that fold them into an object's value, gradient and interval.
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+use super::ObjectError;
+use super::appearance::Rgb;
+use super::tool::{Axis, CompiledTool, Pose, ToolShape};
+use crate::bvh::Aabb;
+use crate::eval::Interval;
+
+/// A property an edit can paint.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub enum Paintable {
+    /// Diffuse colour.
+    Color,
+    /// Transparency.
+    Transparency,
+    /// Shininess.
+    Shininess,
+    /// Surface tension.
+    Tension,
+    /// Surface friction.
+    Friction,
+    /// Surface-zone depth.
+    ZoneDepth,
+    /// Interior density.
+    Density,
+}
+
+impl Paintable {
+    /// Every paintable property.
+    pub const ALL: [Paintable; 7] = [
+        Paintable::Color,
+        Paintable::Transparency,
+        Paintable::Shininess,
+        Paintable::Tension,
+        Paintable::Friction,
+        Paintable::ZoneDepth,
+        Paintable::Density,
+    ];
+}
+
+/// The value painted inside the tool.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum PaintValue {
+    /// A scalar (tension, friction, density, depth, transparency, shininess).
+    Scalar(f64),
+    /// A colour.
+    Color(Rgb),
+}
+
+/// What an edit does.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum EditOp {
+    /// Adds the tool's volume.
+    Union,
+    /// Carves the tool's volume away.
+    Subtract,
+    /// Keeps only what lies inside the tool.
+    Intersect,
+    /// Inside the tool, `property` takes `value`; outside it keeps what it had.
+    Paint {
+        /// The property painted.
+        property: Paintable,
+        /// Its new value inside the tool.
+        value: PaintValue,
+    },
+}
+
+/// One sculpting edit: a tool swept along a stroke (one pose for a single stamp).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Edit {
+    /// Union, subtraction, intersection or painting.
+    pub op: EditOp,
+    /// The tool's solid.
+    pub tool: ToolShape,
+    /// The stroke: the tool's poses in object coordinates, in drawing order.
+    pub path: Vec<Pose>,
+    /// Smooth blending radius for set operations (0 is sharp).
+    pub blend_radius: f64,
+    /// Also apply the edit mirrored in this plane.
+    pub mirror: Option<Axis>,
+}
+
+impl Edit {
+    /// A single stamp of `tool` at `pose`.
+    pub fn stamp(op: EditOp, tool: ToolShape, pose: Pose) -> Edit {
+        Edit {
+            op,
+            tool,
+            path: vec![pose],
+            blend_radius: 0.0,
+            mirror: None,
+        }
+    }
+
+    /// A stroke along `path`.
+    pub fn stroke(op: EditOp, tool: ToolShape, path: Vec<Pose>) -> Edit {
+        Edit {
+            op,
+            tool,
+            path,
+            blend_radius: 0.0,
+            mirror: None,
+        }
+    }
+}
+
+/// An edit ready to evaluate.
+#[derive(Clone, Debug)]
+pub struct CompiledEdit {
+    edit: Edit,
+    tool: CompiledTool,
+    /// One box, or two with a mirror: outside them the edit changes nothing that matters.
+    boxes: [Aabb; 2],
+}
+
+impl CompiledEdit {
+    /// Validates and compiles an edit.
+    pub fn new(edit: Edit) -> Result<CompiledEdit, ObjectError> {
+        let blend = edit.blend_radius;
+        if !(blend.is_finite() && blend >= 0.0) {
+            return Err(ObjectError::BadStroke {
+                reason: "the blend radius must be finite and not negative",
+            });
+        }
+        if let EditOp::Paint { value, .. } = edit.op {
+            let ok = match value {
+                PaintValue::Scalar(v) => v.is_finite(),
+                PaintValue::Color(c) => c.iter().all(|v| (0.0..=1.0).contains(v)),
+            };
+            if !ok {
+                return Err(ObjectError::BadPaint);
+            }
+        }
+        let tool = CompiledTool::new(edit.tool, &edit.path, blend)?;
+        let bounds = tool.bounds();
+        let boxes = match edit.mirror {
+            Some(axis) => [bounds, axis.reflect_box(&bounds)],
+            None => [bounds, Aabb::EMPTY],
+        };
+        Ok(CompiledEdit { edit, tool, boxes })
+    }
+
+    /// The edit as given.
+    pub fn edit(&self) -> &Edit {
+        &self.edit
+    }
+
+    /// The boxes outside which the edit is inert (the second is empty without a mirror).
+    pub fn boxes(&self) -> &[Aabb; 2] {
+        &self.boxes
+    }
+
+    /// The box around everything the edit can touch.
+    pub fn bounds(&self) -> Aabb {
+        self.boxes[0].union(&self.boxes[1])
+    }
+
+    /// Whether `p` lies in the edit's region.
+    #[inline]
+    pub fn touches(&self, p: DVec3) -> bool {
+        self.boxes[0].contains(p) || self.boxes[1].contains(p)
+    }
+
+    /// Whether `region` lies entirely in one of the edit's boxes.
+    pub(crate) fn covers(&self, region: &Aabb) -> bool {
+        self.boxes[0].contains_box(region) || self.boxes[1].contains_box(region)
+    }
+
+    /// Number of primitive stamps the stroke compiled to.
+    pub fn n_stamps(&self) -> usize {
+        self.tool.n_stamps()
+    }
+
+    /// Whether the edit is a set operation (not painting).
+    pub fn is_geometric(&self) -> bool {
+        !matches!(self.edit.op, EditOp::Paint { .. })
+    }
+
+    /// The tool's value (positive inside) and gradient at `p`, mirror included.
+    #[inline]
+    pub(crate) fn tool_eval(&self, p: DVec3) -> (f64, DVec3) {
+        let direct = self.tool.eval(p);
+        match self.edit.mirror {
+            Some(axis) => {
+                let (v, g) = self.tool.eval(axis.reflect(p));
+                if v > direct.0 {
+                    (v, axis.reflect(g))
+                } else {
+                    direct
+                }
+            }
+            None => direct,
+        }
+    }
+
+    /// The tool's exact value at `p`, mirror included, without the clamp at the margin and
+    /// visiting every stamp: the definition [`CompiledEdit`]'s fast paths must agree with.
+    pub fn raw_tool_value(&self, p: DVec3) -> f64 {
+        let direct = self.tool.raw_value(p);
+        match self.edit.mirror {
+            Some(axis) => direct.max(self.tool.raw_value(axis.reflect(p))),
+            None => direct,
+        }
+    }
+
+    /// The tool's value at `p`.
+    #[inline]
+    pub(crate) fn tool_value(&self, p: DVec3) -> f64 {
+        let direct = self.tool.value(p);
+        match self.edit.mirror {
+            Some(axis) => direct.max(self.tool.value(axis.reflect(p))),
+            None => direct,
+        }
+    }
+
+    /// An interval of the tool's values over `region`.
+    pub(crate) fn tool_interval(&self, region: &Aabb) -> Interval {
+        let direct = self.tool.interval(region);
+        match self.edit.mirror {
+            Some(axis) => {
+                let m = self.tool.interval(&axis.reflect_box(region));
+                Interval::new(direct.lo.max(m.lo), direct.hi.max(m.hi))
+            }
+            None => direct,
+        }
+    }
+
+    /// Whether `p` is inside the tool (painting applies).
+    #[inline]
+    pub(crate) fn paints(&self, p: DVec3) -> bool {
+        self.touches(p) && self.tool_value(p) >= 0.0
+    }
+
+    /// The value after this edit, given the value `f` before it, at `p`.
+    #[inline]
+    pub(crate) fn apply_value(&self, f: f64, p: DVec3) -> f64 {
+        let g = self.tool_value(p);
+        let b = self.edit.blend_radius;
+        match self.edit.op {
+            EditOp::Union => smooth_max(f, g, b),
+            EditOp::Subtract => smooth_min(f, -g, b),
+            EditOp::Intersect => smooth_min(f, g, b),
+            EditOp::Paint { .. } => f,
+        }
+    }
+
+    /// Value and gradient after this edit.
+    #[inline]
+    pub(crate) fn apply_grad(&self, f: (f64, DVec3), p: DVec3) -> (f64, DVec3) {
+        let (g, dg) = self.tool_eval(p);
+        let b = self.edit.blend_radius;
+        match self.edit.op {
+            EditOp::Union => smooth_max_grad(f, (g, dg), b),
+            EditOp::Subtract => smooth_min_grad(f, (-g, -dg), b),
+            EditOp::Intersect => smooth_min_grad(f, (g, dg), b),
+            EditOp::Paint { .. } => f,
+        }
+    }
+
+    /// Interval after this edit over `region`, which the edit's boxes may cover only in part
+    /// (then the edit is inert over the rest).
+    pub(crate) fn apply_interval(&self, f: Interval, region: &Aabb) -> Interval {
+        let g = self.tool_interval(region);
+        let b = self.edit.blend_radius;
+        let applied = match self.edit.op {
+            EditOp::Union => Interval::new(f.lo.max(g.lo), f.hi.max(g.hi) + b * 0.25),
+            EditOp::Subtract => Interval::new(f.lo.min(-g.hi) - b * 0.25, f.hi.min(-g.lo)),
+            EditOp::Intersect => Interval::new(f.lo.min(g.lo) - b * 0.25, f.hi.min(g.hi)),
+            EditOp::Paint { .. } => f,
+        };
+        let applied = Interval {
+            nan: f.nan,
+            ..applied
+        };
+        if self.covers(region) {
+            return applied;
+        }
+        // Over the part of the region outside the boxes, unions and subtractions leave `f`
+        // and an intersection leaves its outside value.
+        let rest = match self.edit.op {
+            EditOp::Intersect => Interval::point(self.outside_value()),
+            _ => f,
+        };
+        Interval {
+            lo: applied.lo.min(rest.lo),
+            hi: applied.hi.max(rest.hi),
+            nan: f.nan,
+        }
+    }
+
+    /// The value an intersection leaves outside its region: empty space (a tool's support is
+    /// its region; an intersection with nothing is nothing).
+    pub(crate) fn outside_value(&self) -> f64 {
+        super::NOTHING
+    }
+}
+
+/// Smooth maximum with blending radius `k` (the plain maximum for `k = 0`); it exceeds the
+/// maximum by at most `k / 4`.
+#[inline]
+pub fn smooth_max(a: f64, b: f64, k: f64) -> f64 {
+    if k <= 0.0 {
+        return a.max(b);
+    }
+    let h = 0.5 + 0.5 * (a - b) / k;
+    // Outside the blend the result is exactly one of the operands (no cancellation when one
+    // of them is NOTHING).
+    if h >= 1.0 {
+        a
+    } else if h <= 0.0 {
+        b
+    } else {
+        b + (a - b) * h + k * h * (1.0 - h)
+    }
+}
+
+/// Smooth minimum, the mirror of [`smooth_max`].
+#[inline]
+pub fn smooth_min(a: f64, b: f64, k: f64) -> f64 {
+    -smooth_max(-a, -b, k)
+}
+
+#[inline]
+fn smooth_max_grad(a: (f64, DVec3), b: (f64, DVec3), k: f64) -> (f64, DVec3) {
+    if k <= 0.0 {
+        return if a.0 >= b.0 { a } else { b };
+    }
+    let h = 0.5 + 0.5 * (a.0 - b.0) / k;
+    if h >= 1.0 {
+        a
+    } else if h <= 0.0 {
+        b
+    } else {
+        let v = b.0 + (a.0 - b.0) * h + k * h * (1.0 - h);
+        (v, b.1.lerp(a.1, h))
+    }
+}
+
+#[inline]
+fn smooth_min_grad(a: (f64, DVec3), b: (f64, DVec3), k: f64) -> (f64, DVec3) {
+    let (v, g) = smooth_max_grad((-a.0, -a.1), (-b.0, -b.1), k);
+    (-v, -g)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn smooth_operations_stay_within_a_quarter_radius() {
+        for (a, b) in [(0.0, 0.0), (0.1, -0.2), (1.0, 0.9), (-0.5, 0.5)] {
+            for k in [0.0, 0.1, 0.5] {
+                let m = smooth_max(a, b, k);
+                assert!(m >= a.max(b) && m <= a.max(b) + k / 4.0 + 1e-15);
+                let n = smooth_min(a, b, k);
+                assert!(n <= a.min(b) && n >= a.min(b) - k / 4.0 - 1e-15);
+            }
+        }
+        assert_eq!(smooth_max(0.0, 1.0, 0.1), 1.0);
+    }
+
+    #[test]
+    fn mirrored_edits_act_on_both_sides() {
+        let mut edit = Edit::stamp(
+            EditOp::Union,
+            ToolShape::Sphere { radius: 0.1 },
+            Pose::at(DVec3::new(0.5, 0.0, 0.0)),
+        );
+        edit.mirror = Some(Axis::X);
+        let e = CompiledEdit::new(edit).unwrap();
+        assert!(e.paints(DVec3::new(0.5, 0.0, 0.0)));
+        assert!(e.paints(DVec3::new(-0.5, 0.05, 0.0)));
+        assert!(!e.paints(DVec3::ZERO));
+        assert_eq!(e.apply_value(-1.0, DVec3::new(-0.5, 0.0, 0.0)), 0.1);
+    }
+}

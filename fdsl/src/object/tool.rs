@@ -1,0 +1,594 @@
+//! Sculpting tools: a bounded solid ([`ToolShape`]) placed at [`Pose`]s. A stroke, the tool
+//! swept along a path, compiles to primitive stamps (capsules for a sphere, densified posed
+//! copies for other shapes) indexed by their own [`Bvh`], so a point visits only the stamps
+//! near it however long the stroke.
+//!
+//! Tool values follow the F-Rep sign (positive inside) and are distances, or bounds of
+//! distances, so an interval over a box follows from one value at its centre and the
+//! Lipschitz constant.
+
+use glam::{DQuat, DVec3};
+use serde::{Deserialize, Serialize};
+
+use super::ObjectError;
+use crate::bvh::{Aabb, Bvh};
+use crate::eval::Interval;
+use crate::limits::{MAX_STROKE_POSES, MAX_STROKE_STAMPS, MAX_TOOL_SIZE};
+
+/// Strokes with more stamps than this get their own index.
+const STAMP_INDEX_MIN: usize = 8;
+
+/// The tool's solid, in its own coordinates (centred on the origin).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum ToolShape {
+    /// A ball.
+    Sphere {
+        /// Its radius.
+        radius: f64,
+    },
+    /// A box with rounded edges.
+    Box {
+        /// Half the edge lengths.
+        half_extents: DVec3,
+        /// Edge rounding radius (at most the smallest half extent).
+        rounding: f64,
+    },
+    /// A cylinder along the local y axis.
+    Cylinder {
+        /// Its radius.
+        radius: f64,
+        /// Half its height.
+        half_height: f64,
+    },
+}
+
+impl ToolShape {
+    /// Half the edge lengths of the box around the shape.
+    pub fn half_extents(&self) -> DVec3 {
+        match *self {
+            ToolShape::Sphere { radius } => DVec3::splat(radius),
+            ToolShape::Box { half_extents, .. } => half_extents,
+            ToolShape::Cylinder {
+                radius,
+                half_height,
+            } => DVec3::new(radius, half_height, radius),
+        }
+    }
+
+    fn validate(&self) -> Result<(), ObjectError> {
+        let h = self.half_extents();
+        let ok = h.is_finite() && h.min_element() > 0.0 && h.max_element() <= MAX_TOOL_SIZE;
+        let rounding_ok = match *self {
+            ToolShape::Box {
+                rounding,
+                half_extents,
+            } => rounding.is_finite() && rounding >= 0.0 && rounding <= half_extents.min_element(),
+            _ => true,
+        };
+        if ok && rounding_ok {
+            Ok(())
+        } else {
+            Err(ObjectError::BadTool {
+                reason: "tool sizes must be positive, finite and at most MAX_TOOL_SIZE",
+            })
+        }
+    }
+}
+
+/// Where a tool is: position, orientation and a uniform scale, in object coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Pose {
+    /// The tool's centre.
+    pub position: DVec3,
+    /// Its orientation (normalised when compiled).
+    pub rotation: DQuat,
+    /// Uniform scale (positive).
+    pub scale: f64,
+}
+
+impl Pose {
+    /// A pose at `position`, unrotated and unscaled.
+    pub fn at(position: DVec3) -> Pose {
+        Pose {
+            position,
+            rotation: DQuat::IDENTITY,
+            scale: 1.0,
+        }
+    }
+
+    fn is_valid(&self) -> bool {
+        self.position.is_finite()
+            && self.position.abs().max_element() <= MAX_TOOL_SIZE
+            && self.rotation.is_finite()
+            && self.rotation.length_squared() > 1e-12
+            && self.scale.is_finite()
+            && self.scale > 0.0
+            && self.scale <= MAX_TOOL_SIZE
+    }
+}
+
+/// One primitive of a compiled tool.
+#[derive(Clone, Copy, Debug)]
+enum Stamp {
+    /// Points within a linearly varying radius of the segment `a`-`b`.
+    Capsule {
+        a: DVec3,
+        b: DVec3,
+        radius_a: f64,
+        radius_b: f64,
+    },
+    /// A box or cylinder at a pose.
+    Posed {
+        shape: ToolShape,
+        position: DVec3,
+        rotation: DQuat,
+        scale: f64,
+    },
+}
+
+impl Stamp {
+    fn aabb(&self) -> Aabb {
+        match *self {
+            Stamp::Capsule {
+                a,
+                b,
+                radius_a,
+                radius_b,
+            } => Aabb::new(a, b).expand(radius_a.max(radius_b)),
+            Stamp::Posed {
+                shape,
+                position,
+                rotation,
+                scale,
+            } => {
+                let half = shape.half_extents() * scale;
+                let m = glam::DMat3::from_quat(rotation);
+                let extent = DVec3::new(
+                    m.row(0).abs().dot(half),
+                    m.row(1).abs().dot(half),
+                    m.row(2).abs().dot(half),
+                );
+                Aabb::around(position, extent)
+            }
+        }
+    }
+
+    /// A bound of how fast the value changes with distance.
+    fn lipschitz(&self) -> f64 {
+        match *self {
+            Stamp::Capsule {
+                a,
+                b,
+                radius_a,
+                radius_b,
+            } => {
+                let len = a.distance(b);
+                if len > 0.0 {
+                    1.0 + (radius_b - radius_a).abs() / len
+                } else {
+                    1.0
+                }
+            }
+            Stamp::Posed { .. } => 1.0,
+        }
+    }
+
+    /// Value (positive inside) and gradient at `p`.
+    #[inline]
+    fn eval(&self, p: DVec3) -> (f64, DVec3) {
+        match *self {
+            Stamp::Capsule {
+                a,
+                b,
+                radius_a,
+                radius_b,
+            } => {
+                let ab = b - a;
+                let len2 = ab.length_squared();
+                let s = if len2 > 0.0 {
+                    ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                let c = a + ab * s;
+                let r = radius_a + (radius_b - radius_a) * s;
+                let d = p - c;
+                let len = d.length();
+                let mut grad = if len > 0.0 { -d / len } else { DVec3::ZERO };
+                if s > 0.0 && s < 1.0 {
+                    // The radius varies with the closest point's parameter.
+                    grad += ab * ((radius_b - radius_a) / len2);
+                }
+                (r - len, grad)
+            }
+            Stamp::Posed {
+                shape,
+                position,
+                rotation,
+                scale,
+            } => {
+                let q = rotation.inverse() * (p - position) / scale;
+                let (sd, g) = local_sdf(shape, q);
+                (-sd * scale, -(rotation * g))
+            }
+        }
+    }
+}
+
+/// Signed distance (negative inside) and its gradient, for boxes and cylinders.
+fn local_sdf(shape: ToolShape, q: DVec3) -> (f64, DVec3) {
+    match shape {
+        ToolShape::Box {
+            half_extents,
+            rounding,
+        } => {
+            let d = q.abs() - (half_extents - DVec3::splat(rounding));
+            let outside = d.max(DVec3::ZERO);
+            let len = outside.length();
+            if len > 0.0 {
+                (len - rounding, q.signum() * outside / len)
+            } else {
+                let axis = d.max_position();
+                let mut g = DVec3::ZERO;
+                g[axis] = q[axis].signum();
+                (d[axis] - rounding, g)
+            }
+        }
+        ToolShape::Cylinder {
+            radius,
+            half_height,
+        } => {
+            let radial = (q.x * q.x + q.z * q.z).sqrt();
+            let dr = radial - radius;
+            let dy = q.y.abs() - half_height;
+            let radial_dir = if radial > 0.0 {
+                DVec3::new(q.x / radial, 0.0, q.z / radial)
+            } else {
+                DVec3::X
+            };
+            let axial_dir = DVec3::new(0.0, q.y.signum(), 0.0);
+            if dr > 0.0 && dy > 0.0 {
+                let len = (dr * dr + dy * dy).sqrt();
+                (len, (radial_dir * dr + axial_dir * dy) / len)
+            } else if dr > dy {
+                (dr, radial_dir)
+            } else {
+                (dy, axial_dir)
+            }
+        }
+        ToolShape::Sphere { radius } => {
+            let len = q.length();
+            let g = if len > 0.0 { q / len } else { DVec3::ZERO };
+            (len - radius, g)
+        }
+    }
+}
+
+/// A tool swept along a path, ready to evaluate.
+#[derive(Clone, Debug)]
+pub(crate) struct CompiledTool {
+    stamps: Vec<Stamp>,
+    /// Stamp boxes grown by the margin, indexed when there are many stamps.
+    stamp_index: Option<Bvh>,
+    stamp_boxes: Vec<Aabb>,
+    /// Beyond each stamp's grown box its value is below `-margin`; values are clamped there.
+    margin: f64,
+    /// The box around all stamps, grown by the margin.
+    bounds: Aabb,
+    lipschitz: f64,
+}
+
+impl CompiledTool {
+    /// Compiles `shape` swept along `path`; `extra_margin` (a blend radius) widens the band
+    /// in which values are exact.
+    pub(crate) fn new(
+        shape: ToolShape,
+        path: &[Pose],
+        extra_margin: f64,
+    ) -> Result<CompiledTool, ObjectError> {
+        shape.validate()?;
+        if path.is_empty() || path.len() > MAX_STROKE_POSES {
+            return Err(ObjectError::BadStroke {
+                reason: "a stroke needs 1 to MAX_STROKE_POSES poses",
+            });
+        }
+        if !path.iter().all(Pose::is_valid) {
+            return Err(ObjectError::BadStroke {
+                reason: "poses must be finite, with positive scale and a non-zero rotation",
+            });
+        }
+        let poses: Vec<Pose> = path
+            .iter()
+            .map(|p| Pose {
+                rotation: p.rotation.normalize(),
+                ..*p
+            })
+            .collect();
+        let stamps = stamps_along(shape, &poses)?;
+        let size = poses
+            .iter()
+            .map(|p| shape.half_extents().max_element() * p.scale)
+            .fold(0.0, f64::max);
+        let margin = 0.5 * size + extra_margin;
+        let stamp_boxes: Vec<Aabb> = stamps.iter().map(|s| s.aabb().expand(margin)).collect();
+        let bounds = stamp_boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(b));
+        let stamp_index = (stamps.len() > STAMP_INDEX_MIN).then(|| Bvh::build(&stamp_boxes));
+        let lipschitz = stamps.iter().map(Stamp::lipschitz).fold(1.0, f64::max);
+        Ok(CompiledTool {
+            stamps,
+            stamp_index,
+            stamp_boxes,
+            margin,
+            bounds,
+            lipschitz,
+        })
+    }
+
+    /// The box outside which the tool's value is below `-margin`.
+    pub(crate) fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    /// The band half-width within which values are exact.
+    pub(crate) fn margin(&self) -> f64 {
+        self.margin
+    }
+
+    /// Number of primitive stamps.
+    pub(crate) fn n_stamps(&self) -> usize {
+        self.stamps.len()
+    }
+
+    /// Value and gradient at `p`, clamped below at `-margin`.
+    #[inline]
+    pub(crate) fn eval(&self, p: DVec3) -> (f64, DVec3) {
+        let mut best = (-self.margin, DVec3::ZERO);
+        let take = |i: u32| {
+            let i = i as usize;
+            if self.stamp_boxes[i].contains(p) {
+                let v = self.stamps[i].eval(p);
+                if v.0 > best.0 {
+                    best = v;
+                }
+            }
+        };
+        match &self.stamp_index {
+            Some(bvh) => bvh.visit_point(p, take),
+            None => (0..self.stamps.len() as u32).for_each(take),
+        }
+        best
+    }
+
+    /// The exact value at `p`, unclamped, visiting every stamp (for checks, not for speed).
+    pub(crate) fn raw_value(&self, p: DVec3) -> f64 {
+        self.stamps
+            .iter()
+            .map(|s| s.eval(p).0)
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+
+    /// Value only.
+    #[inline]
+    pub(crate) fn value(&self, p: DVec3) -> f64 {
+        self.eval(p).0
+    }
+
+    /// An interval holding every value over `region`.
+    pub(crate) fn interval(&self, region: &Aabb) -> Interval {
+        let center = region.center();
+        let half_diagonal = region.size().length() * 0.5;
+        let v = self.value(center);
+        let spread = half_diagonal * self.lipschitz;
+        Interval::new(
+            (v - spread).max(-self.margin),
+            (v + spread).max(-self.margin),
+        )
+    }
+}
+
+/// Primitive stamps for `shape` along `poses`.
+fn stamps_along(shape: ToolShape, poses: &[Pose]) -> Result<Vec<Stamp>, ObjectError> {
+    let too_long = ObjectError::BadStroke {
+        reason: "the stroke expands to more than MAX_STROKE_STAMPS stamps",
+    };
+    if let ToolShape::Sphere { radius } = shape {
+        let capsule = |a: &Pose, b: &Pose| Stamp::Capsule {
+            a: a.position,
+            b: b.position,
+            radius_a: radius * a.scale,
+            radius_b: radius * b.scale,
+        };
+        if poses.len() == 1 {
+            return Ok(vec![capsule(&poses[0], &poses[0])]);
+        }
+        return Ok(poses.windows(2).map(|w| capsule(&w[0], &w[1])).collect());
+    }
+    let posed = |p: &Pose| Stamp::Posed {
+        shape,
+        position: p.position,
+        rotation: p.rotation,
+        scale: p.scale,
+    };
+    let mut stamps = vec![posed(&poses[0])];
+    for w in poses.windows(2) {
+        let (a, b) = (&w[0], &w[1]);
+        // Keep consecutive copies within half the tool's smallest half-size of each other.
+        let spacing = 0.5 * shape.half_extents().min_element() * a.scale.min(b.scale);
+        let steps = (a.position.distance(b.position) / spacing).ceil().max(1.0);
+        if !steps.is_finite() || stamps.len() as f64 + steps > MAX_STROKE_STAMPS as f64 {
+            return Err(too_long);
+        }
+        let steps = steps as usize;
+        for k in 1..=steps {
+            let s = k as f64 / steps as f64;
+            stamps.push(posed(&Pose {
+                position: a.position.lerp(b.position, s),
+                rotation: a.rotation.slerp(b.rotation, s),
+                scale: a.scale + (b.scale - a.scale) * s,
+            }));
+        }
+    }
+    Ok(stamps)
+}
+
+/// The mirror plane of a symmetric edit: through the object's origin, normal to an axis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Axis {
+    /// Normal along x (the plane x = 0).
+    X,
+    /// Normal along y.
+    Y,
+    /// Normal along z.
+    Z,
+}
+
+impl Axis {
+    /// Reflects `p` in the plane.
+    #[inline]
+    pub fn reflect(self, mut p: DVec3) -> DVec3 {
+        p[self as usize] = -p[self as usize];
+        p
+    }
+
+    /// Reflects a box.
+    pub fn reflect_box(self, b: &Aabb) -> Aabb {
+        Aabb::new(self.reflect(b.lo), self.reflect(b.hi))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn finite_difference(tool: &CompiledTool, p: DVec3) -> DVec3 {
+        let h = 1e-6;
+        DVec3::new(
+            tool.value(p + DVec3::X * h) - tool.value(p - DVec3::X * h),
+            tool.value(p + DVec3::Y * h) - tool.value(p - DVec3::Y * h),
+            tool.value(p + DVec3::Z * h) - tool.value(p - DVec3::Z * h),
+        ) / (2.0 * h)
+    }
+
+    #[test]
+    fn sphere_stroke_is_a_chain_of_capsules() {
+        let path = [
+            Pose::at(DVec3::ZERO),
+            Pose::at(DVec3::X),
+            Pose::at(DVec3::new(1.0, 1.0, 0.0)),
+        ];
+        let tool = CompiledTool::new(ToolShape::Sphere { radius: 0.1 }, &path, 0.0).unwrap();
+        assert_eq!(tool.n_stamps(), 2);
+        assert!((tool.value(DVec3::new(0.5, 0.05, 0.0)) - 0.05).abs() < 1e-12);
+        assert!((tool.value(DVec3::new(1.0, 0.5, 0.08)) - 0.02).abs() < 1e-12);
+        // Far away the value is clamped at minus the margin.
+        assert_eq!(tool.value(DVec3::splat(10.0)), -tool.margin());
+        let p = DVec3::new(0.3, 0.07, 0.02);
+        let g = tool.eval(p).1;
+        assert!((g - finite_difference(&tool, p)).length() < 1e-6);
+    }
+
+    #[test]
+    fn box_and_cylinder_stamps_have_distance_values_and_gradients() {
+        let rotation = DQuat::from_rotation_z(0.3);
+        for shape in [
+            ToolShape::Box {
+                half_extents: DVec3::new(0.2, 0.1, 0.3),
+                rounding: 0.02,
+            },
+            ToolShape::Cylinder {
+                radius: 0.15,
+                half_height: 0.2,
+            },
+        ] {
+            let pose = Pose {
+                position: DVec3::new(0.1, 0.2, 0.3),
+                rotation,
+                scale: 1.5,
+            };
+            let tool = CompiledTool::new(shape, &[pose], 0.0).unwrap();
+            assert!(
+                tool.value(pose.position) > 0.0,
+                "{shape:?} centre is inside"
+            );
+            for p in [
+                DVec3::new(0.3, 0.25, 0.31),
+                DVec3::new(0.15, 0.5, 0.2),
+                DVec3::new(-0.1, 0.2, 0.45),
+            ] {
+                let (v, g) = tool.eval(p);
+                if v > -tool.margin() + 1e-3 {
+                    let fd = finite_difference(&tool, p);
+                    assert!((g - fd).length() < 1e-5, "{shape:?} at {p}: {g} vs {fd}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn long_strokes_are_indexed_and_agree_with_brute_force() {
+        let path: Vec<Pose> = (0..200)
+            .map(|i| {
+                let a = i as f64 * 0.05;
+                Pose::at(DVec3::new(a.cos(), a.sin(), a * 0.1))
+            })
+            .collect();
+        let shape = ToolShape::Box {
+            half_extents: DVec3::splat(0.05),
+            rounding: 0.0,
+        };
+        let tool = CompiledTool::new(shape, &path, 0.0).unwrap();
+        assert!(tool.stamp_index.is_some());
+        for i in 0..300 {
+            let a = i as f64 * 0.0371;
+            let p = DVec3::new(a.cos() * 1.02, a.sin(), a * 0.1 + 0.01);
+            let brute = tool
+                .stamps
+                .iter()
+                .map(|s| s.eval(p).0)
+                .fold(-tool.margin(), f64::max);
+            assert_eq!(tool.value(p), brute, "at {p}");
+        }
+    }
+
+    #[test]
+    fn intervals_enclose_values() {
+        let tool = CompiledTool::new(
+            ToolShape::Sphere { radius: 0.3 },
+            &[Pose::at(DVec3::ZERO), Pose::at(DVec3::new(0.5, 0.0, 0.0))],
+            0.1,
+        )
+        .unwrap();
+        let region = Aabb::new(DVec3::new(0.1, 0.1, 0.1), DVec3::new(0.4, 0.3, 0.2));
+        let iv = tool.interval(&region);
+        for i in 0..=10 {
+            let s = i as f64 / 10.0;
+            let p = region.lo.lerp(region.hi, s);
+            assert!(iv.contains(tool.value(p)), "{iv:?} at {p}");
+        }
+    }
+
+    #[test]
+    fn bad_tools_and_strokes_are_errors() {
+        let sphere = ToolShape::Sphere { radius: 0.1 };
+        assert!(CompiledTool::new(sphere, &[], 0.0).is_err());
+        assert!(
+            CompiledTool::new(
+                ToolShape::Sphere { radius: -1.0 },
+                &[Pose::at(DVec3::ZERO)],
+                0.0
+            )
+            .is_err()
+        );
+        let nan = Pose::at(DVec3::new(f64::NAN, 0.0, 0.0));
+        assert!(CompiledTool::new(sphere, &[nan], 0.0).is_err());
+        let tiny_box = ToolShape::Box {
+            half_extents: DVec3::splat(1e-9),
+            rounding: 0.0,
+        };
+        let far = [Pose::at(DVec3::ZERO), Pose::at(DVec3::splat(1000.0))];
+        assert!(matches!(
+            CompiledTool::new(tiny_box, &far, 0.0),
+            Err(ObjectError::BadStroke { .. })
+        ));
+    }
+}

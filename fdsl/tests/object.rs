@@ -1,0 +1,620 @@
+//! The object model: edits fold as set operations, painting and undo obey their laws, the
+//! index changes nothing but speed, samplers agree with each other, and the canonical
+//! encoding round-trips.
+#![allow(clippy::unwrap_used, reason = "test helpers outside #[test] functions")]
+
+use fdsl::bvh::Aabb;
+use fdsl::object::codec;
+use fdsl::object::{
+    Appearance, Axis, ColorDef, ColorMap, Domain, Edit, EditOp, Field, Formula, Geometry, Motion,
+    Object, ObjectData, PaintValue, Paintable, Physics, Pose, Property, Timing, ToolShape,
+    Transform,
+};
+use fdsl::scene::{Group, GroupId, ObjectId, Scene};
+use glam::{DQuat, DVec3};
+use proptest::prelude::*;
+
+const SPHERE: &str = "1 - x^2 - y^2 - z^2";
+
+fn op_strategy() -> impl Strategy<Value = EditOp> {
+    prop_oneof![
+        4 => Just(EditOp::Union),
+        4 => Just(EditOp::Subtract),
+        1 => Just(EditOp::Intersect),
+        2 => (0.0..5.0f64).prop_map(|v| EditOp::Paint {
+            property: Paintable::Density,
+            value: PaintValue::Scalar(v),
+        }),
+        2 => (0.0..1.0f32).prop_map(|r| EditOp::Paint {
+            property: Paintable::Color,
+            value: PaintValue::Color([r, 0.5, 1.0 - r]),
+        }),
+    ]
+}
+
+fn tool_strategy() -> impl Strategy<Value = ToolShape> {
+    prop_oneof![
+        (0.05..0.4f64).prop_map(|radius| ToolShape::Sphere { radius }),
+        (0.05..0.3f64, 0.05..0.3f64, 0.05..0.3f64).prop_map(|(a, b, c)| ToolShape::Box {
+            half_extents: DVec3::new(a, b, c),
+            rounding: 0.01,
+        }),
+        (0.05..0.3f64, 0.05..0.3f64).prop_map(|(radius, half_height)| ToolShape::Cylinder {
+            radius,
+            half_height
+        }),
+    ]
+}
+
+fn point() -> impl Strategy<Value = DVec3> {
+    (-1.3..1.3f64, -1.3..1.3f64, -1.3..1.3f64).prop_map(|(x, y, z)| DVec3::new(x, y, z))
+}
+
+fn pose() -> impl Strategy<Value = Pose> {
+    (point(), -3.0..3.0f64, 0.5..1.5f64).prop_map(|(position, angle, scale)| Pose {
+        position,
+        rotation: DQuat::from_rotation_y(angle),
+        scale,
+    })
+}
+
+fn edit_strategy() -> impl Strategy<Value = Edit> {
+    (
+        op_strategy(),
+        tool_strategy(),
+        prop::collection::vec(pose(), 1..6),
+        prop_oneof![3 => Just(0.0), 1 => 0.0..0.2f64],
+        prop_oneof![3 => Just(None), 1 => Just(Some(Axis::X))],
+    )
+        .prop_map(|(op, tool, path, blend_radius, mirror)| Edit {
+            op,
+            tool,
+            path,
+            blend_radius,
+            mirror,
+        })
+}
+
+/// The fold by definition: every active edit in order, each tool with bounded support (its
+/// exact value inside its region, empty space outside), no index, no clamping.
+fn reference_value(object: &Object, p: DVec3) -> f64 {
+    let mut sampler = Object::implicit(SPHERE).unwrap().sampler();
+    let mut v = sampler.value(p, 0.0);
+    for e in object.history().entries() {
+        if !e.active {
+            continue;
+        }
+        let edit = e.edit.edit();
+        let g = if e.edit.touches(p) {
+            e.edit.raw_tool_value(p)
+        } else {
+            fdsl::object::NOTHING
+        };
+        let b = edit.blend_radius;
+        v = match edit.op {
+            EditOp::Union => fdsl::object::edit::smooth_max(v, g, b),
+            EditOp::Subtract => fdsl::object::edit::smooth_min(v, -g, b),
+            EditOp::Intersect => fdsl::object::edit::smooth_min(v, g, b),
+            EditOp::Paint { .. } => v,
+        };
+    }
+    v
+}
+
+/// The tool's exact value at `p`.
+fn raw_tool_value(edit: &Edit, p: DVec3) -> f64 {
+    fdsl::object::CompiledEdit::new(edit.clone())
+        .unwrap()
+        .raw_tool_value(p)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// The index and the clamping never change the sign, and near surfaces not the value.
+    #[test]
+    fn edits_fold_as_set_operations(
+        edits in prop::collection::vec(edit_strategy(), 1..12),
+        points in prop::collection::vec(point(), 16),
+    ) {
+        let mut object = Object::implicit(SPHERE).unwrap();
+        for e in &edits {
+            object.apply(e.clone()).unwrap();
+        }
+        object.prepare();
+        let mut sampler = object.sampler();
+        for p in points {
+            let v = sampler.value(p, 0.0);
+            let r = reference_value(&object, p);
+            prop_assert!(v.is_finite());
+            if r.abs() > 1e-9 {
+                prop_assert_eq!(v > 0.0, r > 0.0, "sign at {} : {} vs {}", p, v, r);
+            }
+            if r.abs() < 0.02 {
+                prop_assert!((v - r).abs() < 1e-9, "value at {}: {} vs {}", p, v, r);
+            }
+        }
+    }
+
+    /// Painting: inside the tool the property takes the tool's value, outside it keeps the
+    /// old one.
+    #[test]
+    fn painting_changes_only_the_inside_of_the_tool(
+        tool in tool_strategy(),
+        at in pose(),
+        value in 0.0..10.0f64,
+        points in prop::collection::vec(point(), 32),
+    ) {
+        let mut object = Object::implicit(SPHERE).unwrap();
+        object
+            .set(Field::Density(Some(Property::new(Formula::new("x + 2").unwrap()))))
+            .unwrap();
+        let before = object.sampler();
+        let paint = Edit::stamp(
+            EditOp::Paint { property: Paintable::Density, value: PaintValue::Scalar(value) },
+            tool,
+            at,
+        );
+        object.apply(paint.clone()).unwrap();
+        let mut after = object.sampler();
+        let mut before = before;
+        for p in points {
+            let inside = raw_tool_value(&paint, p) >= 0.0;
+            let d = after.scalar(Paintable::Density, p, 0.0).unwrap();
+            if inside {
+                prop_assert_eq!(d, value);
+            } else {
+                prop_assert_eq!(d, before.scalar(Paintable::Density, p, 0.0).unwrap());
+            }
+            // Painting leaves the geometry alone.
+            prop_assert_eq!(after.value(p, 0.0), before.value(p, 0.0));
+        }
+    }
+
+    /// Undo removes an edit from the fold: undoing a subset equals never applying it, and
+    /// undo n times then redo n times returns the same object.
+    #[test]
+    fn undo_removes_edits_from_the_fold(
+        edits in prop::collection::vec(edit_strategy(), 1..10),
+        undone in prop::collection::vec(any::<bool>(), 10),
+        points in prop::collection::vec(point(), 16),
+    ) {
+        let mut object = Object::implicit(SPHERE).unwrap();
+        let mut kept = Object::implicit(SPHERE).unwrap();
+        for (i, e) in edits.iter().enumerate() {
+            let idx = object.apply(e.clone()).unwrap();
+            if undone[i] {
+                object.undo(idx);
+            } else {
+                kept.apply(e.clone()).unwrap();
+            }
+        }
+        let (mut a, mut b) = (object.sampler(), kept.sampler());
+        for p in &points {
+            prop_assert_eq!(a.value(*p, 0.0), b.value(*p, 0.0));
+            prop_assert_eq!(a.diffuse(*p, 0.0), b.diffuse(*p, 0.0));
+            prop_assert_eq!(
+                a.scalar(Paintable::Density, *p, 0.0),
+                b.scalar(Paintable::Density, *p, 0.0)
+            );
+        }
+        let original = object.clone();
+        let n = object.history().len();
+        for idx in (0..n).rev() {
+            object.undo(idx);
+        }
+        for idx in 0..n {
+            object.redo(idx);
+        }
+        // Every edit active now; the original had some undone, so compare with all redone.
+        let mut all = original.clone();
+        for idx in 0..n {
+            all.redo(idx);
+        }
+        prop_assert!(object == all);
+    }
+
+    /// Intervals hold every value in their box; gradients match finite differences.
+    #[test]
+    fn intervals_enclose_and_gradients_match(
+        edits in prop::collection::vec(edit_strategy(), 0..8),
+        center in point(),
+        half in 0.01..0.3f64,
+    ) {
+        let mut object = Object::implicit(SPHERE).unwrap();
+        for e in &edits {
+            object.apply(e.clone()).unwrap();
+        }
+        let mut s = object.sampler();
+        let region = Aabb::around(center, DVec3::splat(half));
+        let iv = s.interval(&region, 0.0);
+        for i in 0..27 {
+            let k = DVec3::new((i % 3) as f64, ((i / 3) % 3) as f64, (i / 9) as f64) * 0.5;
+            let p = region.lo + region.size() * k;
+            let v = s.value(p, 0.0);
+            prop_assert!(iv.lo <= v + 1e-9 && v <= iv.hi + 1e-9, "{:?} misses {} at {}", iv, v, p);
+        }
+        let (v, g) = s.gradient(center, 0.0);
+        prop_assert_eq!(v, s.value(center, 0.0));
+        let h = 1e-6;
+        let fd = DVec3::new(
+            s.value(center + DVec3::X * h, 0.0) - s.value(center - DVec3::X * h, 0.0),
+            s.value(center + DVec3::Y * h, 0.0) - s.value(center - DVec3::Y * h, 0.0),
+            s.value(center + DVec3::Z * h, 0.0) - s.value(center - DVec3::Z * h, 0.0),
+        ) / (2.0 * h);
+        // Creases (min/max switching) make finite differences meaningless right on them.
+        let smooth = [DVec3::X, DVec3::Y, DVec3::Z].iter().all(|d| {
+            let a = s.value(center + *d * 1e-4, 0.0) - v;
+            let b = v - s.value(center - *d * 1e-4, 0.0);
+            (a - b).abs() < 1e-6
+        });
+        if smooth {
+            prop_assert!((g - fd).length() < 1e-4, "{} vs {}", g, fd);
+        }
+    }
+
+    /// Encoding round-trips edits and whole objects.
+    #[test]
+    fn encoding_round_trips(edits in prop::collection::vec(edit_strategy(), 0..8), undo in 0usize..8) {
+        for e in &edits {
+            let bytes = codec::encode_edit(e);
+            let back = codec::decode_edit(&bytes).unwrap();
+            prop_assert_eq!(back.edit(), e);
+        }
+        let mut object = rich_object();
+        for e in &edits {
+            object.apply(e.clone()).unwrap();
+        }
+        object.undo(undo);
+        let bytes = codec::encode_object(&object);
+        let back = codec::decode_object(&bytes).unwrap();
+        prop_assert!(back == object);
+        prop_assert_eq!(codec::encode_object(&back), bytes);
+    }
+
+    /// Arbitrary bytes never panic the decoders.
+    #[test]
+    fn decoders_survive_garbage(bytes in prop::collection::vec(any::<u8>(), 0..300)) {
+        let _ = codec::decode_edit(&bytes);
+        let _ = codec::decode_object(&bytes);
+        let _ = Scene::decode(&bytes);
+        let mut versioned = vec![codec::VERSION];
+        versioned.extend_from_slice(&bytes);
+        let _ = codec::decode_edit(&versioned);
+        let _ = codec::decode_object(&versioned);
+        let _ = Scene::decode(&versioned);
+    }
+}
+
+/// An object using every part of the model.
+fn rich_object() -> Object {
+    let f = |s: &str| Formula::new(s).unwrap();
+    Object::new(ObjectData {
+        name: "melon".into(),
+        geometry: Some(Geometry::implicit_in(
+            f(SPHERE),
+            Domain::new(DVec3::ZERO, DVec3::splat(2.2)),
+        )),
+        appearance: Appearance {
+            diffuse: Some(ColorDef::Map {
+                formula: f("sqrt(x^2+y^2+z^2)"),
+                map: ColorMap {
+                    keys: vec![
+                        (0.0, [1.0, 0.1, 0.1]),
+                        (0.9, [1.0, 0.3, 0.3]),
+                        (0.95, [0.1, 0.6, 0.1]),
+                    ],
+                },
+            }),
+            specular: Some(ColorDef::Rgb(f("r = 1; g = x; b = 0.5"))),
+            transparency: Some(f("0.1")),
+            displacement: Some(f("0.01*sin(20*x)")),
+            ..Appearance::default()
+        },
+        physics: Physics {
+            tension: Some(Property::new(f("1"))),
+            friction: Some(Property {
+                formula: f("0.3"),
+                enabled: false,
+            }),
+            density: Some(Property::new(f("2 + y"))),
+            ..Physics::default()
+        },
+        transform: Transform::from_trs(
+            DVec3::new(1.0, 0.0, 0.0),
+            DQuat::from_rotation_z(0.5),
+            DVec3::ONE,
+        ),
+        motion: Some(Motion {
+            translation: Some(f("x = 0; y = sin(t); z = 0")),
+            axis: DVec3::Y,
+            angle: Some(f("t")),
+            timing: Timing {
+                cycle_interval_secs: 4.0,
+                time_span: None,
+            },
+        }),
+    })
+    .unwrap()
+}
+
+#[test]
+fn sculpting_from_nothing_builds_what_the_strokes_draw() {
+    let mut object = Object::new(ObjectData::default()).unwrap();
+    let path: Vec<Pose> = (0..=100)
+        .map(|i| Pose::at(DVec3::new(i as f64 / 100.0, 0.0, 0.0)))
+        .collect();
+    object
+        .apply(Edit::stroke(
+            EditOp::Union,
+            ToolShape::Sphere { radius: 0.1 },
+            path,
+        ))
+        .unwrap();
+    let mut s = object.sampler();
+    assert!(s.value(DVec3::new(0.5, 0.05, 0.0), 0.0) > 0.0);
+    assert!(s.value(DVec3::new(0.5, 0.15, 0.0), 0.0) < 0.0);
+    assert!(s.value(DVec3::new(1.2, 0.0, 0.0), 0.0) < 0.0);
+    assert!(s.value(DVec3::new(5.0, 5.0, 5.0), 0.0) < 0.0);
+    let b = object.bounds().unwrap();
+    assert!(b.contains(DVec3::new(1.05, 0.0, 0.0)) && !b.contains(DVec3::new(2.0, 0.0, 0.0)));
+}
+
+#[test]
+fn blended_union_fills_the_crease() {
+    let make = |blend| {
+        let mut o = Object::implicit("-y").unwrap();
+        let mut e = Edit::stamp(
+            EditOp::Union,
+            ToolShape::Sphere { radius: 0.3 },
+            Pose::at(DVec3::new(0.0, 0.2, 0.0)),
+        );
+        e.blend_radius = blend;
+        o.apply(e).unwrap();
+        o.sampler()
+    };
+    // Just outside the crease where the ball meets the plane.
+    let p = DVec3::new(0.3, 0.02, 0.0);
+    assert!(make(0.0).value(p, 0.0) < 0.0);
+    assert!(make(0.2).value(p, 0.0) > 0.0);
+}
+
+#[test]
+fn intersection_keeps_only_the_tool() {
+    let mut o = Object::implicit(SPHERE).unwrap();
+    o.apply(Edit::stamp(
+        EditOp::Intersect,
+        ToolShape::Box {
+            half_extents: DVec3::splat(0.5),
+            rounding: 0.0,
+        },
+        Pose::at(DVec3::ZERO),
+    ))
+    .unwrap();
+    let mut s = o.sampler();
+    assert!(s.value(DVec3::new(0.4, 0.0, 0.0), 0.0) > 0.0);
+    assert!(s.value(DVec3::new(0.7, 0.0, 0.0), 0.0) < 0.0);
+    assert!(
+        s.value(DVec3::new(0.95, 0.0, 0.0), 0.0) < 0.0,
+        "outside the tool's box"
+    );
+    let far = Aabb::around(DVec3::new(0.0, 0.0, 0.97), DVec3::splat(0.01));
+    assert!(s.interval(&far, 0.0).hi < 0.0);
+}
+
+#[test]
+fn properties_colors_fields_and_motion_come_from_their_formulas() {
+    let mut o = rich_object();
+    let mut s = o.sampler();
+    let c = s.diffuse(DVec3::ZERO, 0.0);
+    assert_eq!(c, [1.0, 0.1, 0.1]);
+    assert_eq!(s.diffuse(DVec3::new(2.0, 0.0, 0.0), 0.0), [0.1, 0.6, 0.1]);
+    assert_eq!(
+        s.scalar(Paintable::Density, DVec3::new(0.0, 0.5, 0.0), 0.0),
+        Some(2.5)
+    );
+    assert_eq!(
+        s.scalar(Paintable::Friction, DVec3::ZERO, 0.0),
+        None,
+        "disabled"
+    );
+    assert_eq!(
+        s.scalar(Paintable::Transparency, DVec3::ZERO, 0.0),
+        Some(0.1)
+    );
+    assert!(
+        (s.displacement(DVec3::new(0.1, 0.0, 0.0), 0.0).unwrap() - 0.01 * 2f64.sin()).abs() < 1e-12
+    );
+    // Motion: t = 1 within a 4 s cycle is local time 0.25.
+    let at = s.placement(1.0).point(DVec3::ZERO);
+    let want = Transform::from_trs(
+        DVec3::new(0.0, 0.25f64.sin(), 0.0),
+        DQuat::from_axis_angle(DVec3::Y, 0.25),
+        DVec3::ONE,
+    )
+    .then(&o.data().transform)
+    .point(DVec3::ZERO);
+    assert!((at - want).length() < 1e-12);
+    // Painting a colour overrides the map inside the tool only.
+    o.apply(Edit::stamp(
+        EditOp::Paint {
+            property: Paintable::Color,
+            value: PaintValue::Color([0.0, 0.0, 1.0]),
+        },
+        ToolShape::Sphere { radius: 0.2 },
+        Pose::at(DVec3::ZERO),
+    ))
+    .unwrap();
+    let mut s = o.sampler();
+    assert_eq!(s.diffuse(DVec3::ZERO, 0.0), [0.0, 0.0, 1.0]);
+    let b = s.diffuse(DVec3::new(0.5, 0.0, 0.0), 0.0)[2];
+    assert!((b - (0.1 + 0.2 * 0.5 / 0.9) as f32).abs() < 1e-6, "{b}");
+}
+
+#[test]
+fn force_fields_map_the_container_box_onto_their_parameters() {
+    // The thesis's Figure 7.4 cylinder and helical field.
+    let f = |s: &str| Formula::new(s).unwrap();
+    let field = "function parametric_x (u, v, w) {d=-0.1; x=w+d*u; y=d*v; z=-u+d*w; return x/sqrt(x^2+y^2+z^2) ;}
+                 function parametric_y (u, v, w) {d=-0.1; x=w+d*u; y=d*v; z=-u+d*w; return y/sqrt(x^2+y^2+z^2) ;}
+                 function parametric_z (u, v, w) {d=-0.1; x=w+d*u; y=d*v; z=-u+d*w; return z/sqrt(x^2+y^2+z^2) ;}";
+    let o = Object::new(ObjectData {
+        geometry: Some(Geometry::implicit_in(
+            f("(1.6^2-x^2-z^2) &y& (0.7-y)"),
+            Domain::new(DVec3::new(0.0, 0.35, 0.0), DVec3::new(3.2, 0.7, 3.2)),
+        )),
+        physics: Physics {
+            force: Some(fdsl::object::ForceField {
+                formula: f(field),
+                parameters: [[-1.0, 1.0], [0.0, 1.0], [-1.0, 1.0]],
+                timing: Timing::default(),
+                enabled: true,
+            }),
+            ..Physics::default()
+        },
+        ..ObjectData::default()
+    })
+    .unwrap();
+    let mut s = o.sampler();
+    // The box's +x face centre maps to u = 1, v = 0.5, w = 0.
+    let force = s.force(DVec3::new(1.6, 0.35, 0.0), 0.0).unwrap();
+    let (x, y, z) = (0.0 + -0.1 * 1.0, -0.1 * 0.5, -1.0 + -0.1 * 0.0);
+    let n = (x * x + y * y + z * z as f64).sqrt();
+    assert!(
+        (force - DVec3::new(x / n, y / n, z / n)).length() < 1e-12,
+        "{force}"
+    );
+    assert!((force.length() - 1.0).abs() < 1e-12);
+}
+
+#[test]
+fn bad_descriptions_are_errors_that_name_the_property() {
+    let err = Object::implicit("1 - x^2 -").unwrap_err();
+    assert!(err.to_string().starts_with("geometry:"), "{err}");
+    let mut o = Object::implicit(SPHERE).unwrap();
+    let err = o
+        .set(Field::Diffuse(Some(ColorDef::Rgb(
+            Formula::new("x + 1").unwrap(),
+        ))))
+        .unwrap_err();
+    assert!(
+        err.to_string().contains("diffuse colour") && err.to_string().contains("`r`"),
+        "{err}"
+    );
+    assert!(
+        o.data().appearance.diffuse.is_none(),
+        "a failed set changes nothing"
+    );
+    let bad_map = ColorDef::Map {
+        formula: Formula::new("x").unwrap(),
+        map: ColorMap {
+            keys: vec![(1.0, [0.0; 3]), (0.0, [1.0; 3])],
+        },
+    };
+    assert!(o.set(Field::Diffuse(Some(bad_map))).is_err());
+    let flat = Transform::from_trs(DVec3::ZERO, DQuat::IDENTITY, DVec3::new(1.0, 0.0, 1.0));
+    assert!(o.set(Field::Transform(flat)).is_err());
+    assert!(Formula::new("x".repeat(fdsl::limits::MAX_SOURCE_BYTES + 1)).is_err());
+    let nan_edit = Edit::stamp(
+        EditOp::Union,
+        ToolShape::Sphere { radius: f64::NAN },
+        Pose::at(DVec3::ZERO),
+    );
+    assert!(o.apply(nan_edit).is_err());
+    assert_eq!(o.history().len(), 0);
+}
+
+#[test]
+fn scenes_place_objects_through_groups_and_round_trip() {
+    let mut scene = Scene::new();
+    scene
+        .set_group(
+            GroupId(1),
+            Group {
+                name: "table".into(),
+                parent: None,
+                transform: Transform::translate(DVec3::new(0.0, 1.0, 0.0)),
+            },
+        )
+        .unwrap();
+    scene
+        .set_group(
+            GroupId(2),
+            Group {
+                name: "tray".into(),
+                parent: Some(GroupId(1)),
+                transform: Transform::translate(DVec3::new(2.0, 0.0, 0.0)),
+            },
+        )
+        .unwrap();
+    assert!(
+        scene
+            .set_group(
+                GroupId(1),
+                Group {
+                    parent: Some(GroupId(2)),
+                    ..Group::default()
+                }
+            )
+            .is_err(),
+        "a cycle"
+    );
+    scene
+        .insert_object(
+            ObjectId(7),
+            Object::implicit(SPHERE).unwrap(),
+            Some(GroupId(2)),
+        )
+        .unwrap();
+    scene
+        .insert_object(ObjectId(8), rich_object(), None)
+        .unwrap();
+    assert!(
+        scene
+            .insert_object(ObjectId(7), rich_object(), None)
+            .is_err()
+    );
+    scene
+        .apply(
+            ObjectId(7),
+            Edit::stamp(
+                EditOp::Subtract,
+                ToolShape::Sphere { radius: 0.5 },
+                Pose::at(DVec3::ZERO),
+            ),
+        )
+        .unwrap();
+    let mut s = scene.sampler();
+    // The sphere sits at (2, 1, 0) with a hollow of radius 0.5.
+    assert!(
+        s.value(ObjectId(7), DVec3::new(2.8, 1.0, 0.0), 0.0)
+            .unwrap()
+            > 0.0
+    );
+    assert!(
+        s.value(ObjectId(7), DVec3::new(2.0, 1.0, 0.0), 0.0)
+            .unwrap()
+            < 0.0
+    );
+    assert!(
+        s.value(ObjectId(7), DVec3::new(0.0, 0.0, 0.0), 0.0)
+            .unwrap()
+            < 0.0
+    );
+    let (_, g) = s
+        .gradient(ObjectId(7), DVec3::new(2.9, 1.0, 0.0), 0.0)
+        .unwrap();
+    assert!(g.x < 0.0 && g.y.abs() < 1e-9);
+    let bytes = scene.encode();
+    let back = Scene::decode(&bytes).unwrap();
+    assert_eq!(back, scene);
+    assert_eq!(back.encode(), bytes);
+    scene.remove_group(GroupId(1));
+    let mut s = scene.sampler();
+    assert!(
+        s.value(ObjectId(7), DVec3::new(2.8, 1.0, 0.0), 0.0)
+            .unwrap()
+            > 0.0,
+        "placement kept"
+    );
+}
