@@ -172,23 +172,20 @@ impl Bvh {
     /// Calls `visit(item)` for every item whose leaf box contains `p` (the caller tests the
     /// item's own box if leaves hold several).
     #[inline]
-    pub fn visit_point(&self, p: DVec3, mut visit: impl FnMut(u32)) {
-        self.traverse(|b| b.contains(p), |item| visit(item));
+    pub fn visit_point(&self, p: DVec3, visit: impl FnMut(u32)) {
+        self.traverse(|b| b.contains(p), visit);
     }
 
     /// Calls `visit(item)` for every item in leaves overlapping `region`.
-    pub fn visit_box(&self, region: &Aabb, mut visit: impl FnMut(u32)) {
-        self.traverse(|b| b.overlaps(region), |item| visit(item));
+    pub fn visit_box(&self, region: &Aabb, visit: impl FnMut(u32)) {
+        self.traverse(|b| b.overlaps(region), visit);
     }
 
     /// Calls `visit(item)` for every item in leaves the ray `origin + t * dir`, `0 <= t <=
     /// t_max`, passes through.
-    pub fn visit_ray(&self, origin: DVec3, dir: DVec3, t_max: f64, mut visit: impl FnMut(u32)) {
+    pub fn visit_ray(&self, origin: DVec3, dir: DVec3, t_max: f64, visit: impl FnMut(u32)) {
         let inv = dir.recip();
-        self.traverse(
-            |b| b.ray_interval(origin, inv, t_max).is_some(),
-            |item| visit(item),
-        );
+        self.traverse(|b| b.ray_interval(origin, inv, t_max).is_some(), visit);
     }
 
     /// The item nearest to `p` by `item_distance` (the distance from `p` to the item, e.g. to

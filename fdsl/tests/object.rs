@@ -478,8 +478,8 @@ fn force_fields_map_the_container_box_onto_their_parameters() {
     let mut s = o.sampler();
     // The box's +x face centre maps to u = 1, v = 0.5, w = 0.
     let force = s.force(DVec3::new(1.6, 0.35, 0.0), 0.0).unwrap();
-    let (x, y, z) = (0.0 + -0.1 * 1.0, -0.1 * 0.5, -1.0 + -0.1 * 0.0);
-    let n = (x * x + y * y + z * z as f64).sqrt();
+    let (x, y, z): (f64, f64, f64) = (-0.1, -0.05, -1.0);
+    let n: f64 = (x * x + y * y + z * z).sqrt();
     assert!(
         (force - DVec3::new(x / n, y / n, z / n)).length() < 1e-12,
         "{force}"

@@ -2,8 +2,15 @@
 //! properties, evaluated at world points.
 //!
 //! Sign convention (F-Rep): `f >= 0` is inside, `f = 0` the surface; the distance to the
-//! surface is estimated by the metric depth `f / |grad f|`. The lead implements
-//! [`Container`] for fdsl objects; tests use closed-form containers.
+//! surface is estimated by the metric depth `f / |grad f|`.
+//!
+//! Implementations: [`function::FunctionContainer`] (fdsl functions over a box),
+//! [`mesh::MeshContainer`] (closed triangle meshes located by haptic rays), both with
+//! [`properties::Properties`]; and the closed-form [`crate::shapes::Analytic`] for tests.
+
+pub mod function;
+pub mod mesh;
+pub mod properties;
 
 use glam::DVec3;
 
@@ -102,6 +109,13 @@ pub trait Container: Send {
     /// The force field at `uvw` (in the field domain) and field time `t_local_secs`; its
     /// magnitude is a fraction of the device's maximum force (clamped to 1).
     fn force_field(&mut self, uvw: DVec3, t_local_secs: f64) -> DVec3;
+    /// Where the segment `p0 -> p1` first crosses the surface, as a fraction of its length,
+    /// when the container can tell faster than by bisecting `value_grad` (a mesh casts the
+    /// segment as one ray). `None` means "bisect".
+    fn first_crossing(&mut self, p0: DVec3, p1: DVec3, t_secs: f64) -> Option<f64> {
+        let _ = (p0, p1, t_secs);
+        None
+    }
 }
 
 /// A scene snapshot as the servo sees it: an indexed set of containers.

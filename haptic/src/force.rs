@@ -18,8 +18,7 @@
 //! Guarantees: no allocation, no locks, no clock; output magnitude `<= force_newtons_max`;
 //! `|F(k) - F(k-1)| <= force_step_fraction_max * force_newtons_max` except when dropping to
 //! zero on a stall. Non-guarantees: two crossings of the same container within one tick are
-//! not seen (at 1 kHz a tick moves well under a millimetre); mesh containers (inside test by
-//! several haptic rays) are not implemented yet.
+//! not seen (at 1 kHz a tick moves well under a millimetre).
 
 pub mod coupling;
 pub mod stack;
@@ -41,6 +40,9 @@ pub const CONTAINERS_MAX: usize = 256;
 pub const ROOT_BISECTION_STEPS: usize = 30;
 /// Gradients shorter than this have no usable normal (e.g. the centre of a sphere).
 pub const GRADIENT_NORM_MIN: f64 = 1e-9;
+/// Filtered velocity components below this are zero (see `render`; BENCHMARKS.md has the
+/// measurement), metres per second.
+pub const VELOCITY_FLUSH_METRES_PER_SEC: f64 = 1e-12;
 /// Dissipated energy the passivity observer may bank, joules; a bounded reserve keeps old
 /// dissipation from hiding new injection.
 pub const ENERGY_RESERVE_JOULES_MAX: f64 = 0.01;
@@ -245,7 +247,17 @@ pub fn render<S: Scene + ?Sized>(
         Some(prev) => {
             let step = sample.position_metres - prev.position_device;
             let alpha = filter_alpha(dt_device, params.velocity_cutoff_hz);
-            state.velocity_device = state.velocity_device.lerp(step / dt_device, alpha);
+            let velocity = state.velocity_device.lerp(step / dt_device, alpha);
+            // Flush speeds no sensor resolves: at rest the filter's geometric decay would
+            // otherwise reach subnormal numbers and stay there (the smallest subnormal times
+            // `1 - alpha` rounds back to itself), which doubles the cost of a tick.
+            state.velocity_device = DVec3::select(
+                velocity
+                    .abs()
+                    .cmplt(DVec3::splat(VELOCITY_FLUSH_METRES_PER_SEC)),
+                DVec3::ZERO,
+                velocity,
+            );
             // Work done on the environment by the hand over the last tick, against the
             // passive part of the force that was acting.
             let passive = state.force_out - state.field_out;
@@ -472,8 +484,9 @@ fn update_stack<S: Scene + ?Sized>(
         if inside == was_inside {
             continue;
         }
-        let f0 = container.value_grad(p0, t_secs).0;
-        let s = if (f0 >= 0.0) == inside {
+        let s = if let Some(s) = container.first_crossing(p0, p1, t_secs) {
+            s.clamp(0.0, 1.0)
+        } else if (container.value_grad(p0, t_secs).0 >= 0.0) == inside {
             // No sign change along the segment: the shape moved under the HIP.
             1.0
         } else {

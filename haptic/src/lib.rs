@@ -11,11 +11,15 @@
 //!   paced 1 kHz thread, fed through the lock-free [`handoff`];
 //! - [`device::HapticDevice`] with a simulated device, a mouse-driven device, a trace
 //!   recorder and replayer, and HID drivers (3D mouse input, HID PID force output);
-//! - [`force::coupling`]: a shared tool held by several devices through spring-dampers.
+//! - [`force::coupling`]: a shared tool held by several devices through spring-dampers;
+//! - haptic containers: [`container::function::FunctionContainer`] (fdsl geometry and
+//!   properties: tension, friction, zone depth, density, force field) and
+//!   [`container::mesh::MeshContainer`] (closed triangle meshes located by multiple haptic
+//!   rays over a BVH), both built off the servo thread and sampled without allocating.
 //!
-//! What it is not: it does not compile or evaluate fdsl (the app implements
-//! [`container::Container`] for fdsl objects), never sees the op log, draws nothing and reads
-//! no clock outside the servo's pacing. Mesh containers (haptic rays) are not implemented.
+//! What it is not: it does not parse scene files or know the object model's history (the app
+//! turns objects into containers), never sees the op log, draws nothing and reads no clock
+//! outside the servo's pacing.
 //!
 //! Conventions: `f >= 0` is inside; distance to the surface is the metric depth
 //! `f / |grad f|`; device positions are metres and forces newtons in the device frame; the

@@ -1,11 +1,18 @@
-//! Closed-form containers (spheres, the watermelon, the whirlpool cylinder) for tests,
-//! benchmarks and demos, before fdsl objects implement [`Container`].
+//! Reference containers for tests, benchmarks and demos: closed-form solids (spheres, the
+//! watermelon, the whirlpool cylinder), the same scenes as fdsl [`FunctionContainer`]s (the
+//! watermelon's properties, the thesis's Figure 7.4 whirlpool), and triangle meshes (a cube,
+//! an icosphere) for [`crate::container::mesh::MeshContainer`].
 //!
-//! Each solid uses a distance-like function (`f >= 0` inside) so the metric depth
+//! Each closed-form solid uses a distance-like function (`f >= 0` inside) so the metric depth
 //! `f / |grad f|` is close to the true distance to the surface.
 
 use glam::DVec3;
 
+use fdsl::Function;
+
+use crate::container::function::{FunctionContainer, FunctionContainerError, Placement};
+use crate::container::mesh::{MeshContainer, MeshError, RayParams};
+use crate::container::properties::{FieldSpec, PropertySpec, Scalar};
 use crate::container::{Aabb, Container, FieldDomain};
 
 /// A closed-form solid.
@@ -243,19 +250,24 @@ impl Container for Analytic {
 /// `n` watermelons on a square grid in the plane `z = 0` inside `[-1.6, 1.6]^2`, ids `1..=n`:
 /// the shared scene of the step benchmark and the zero-allocation test.
 pub fn watermelon_grid(n: usize) -> Vec<Analytic> {
+    grid_placements(n)
+        .map(|(id, center, radius)| Analytic::watermelon(id, center, radius))
+        .collect()
+}
+
+/// Ids, centres and radii of [`watermelon_grid`].
+pub fn grid_placements(n: usize) -> impl Iterator<Item = (u64, DVec3, f64)> {
     let per_row = (n as f64).sqrt().ceil().max(1.0) as usize;
     let spacing = 3.2 / per_row as f64;
-    (0..n)
-        .map(|k| {
-            let (row, col) = (k / per_row, k % per_row);
-            let center = DVec3::new(
-                -1.6 + spacing * (col as f64 + 0.5),
-                -1.6 + spacing * (row as f64 + 0.5),
-                0.0,
-            );
-            Analytic::watermelon(k as u64 + 1, center, spacing * 0.45)
-        })
-        .collect()
+    (0..n).map(move |k| {
+        let (row, col) = (k / per_row, k % per_row);
+        let center = DVec3::new(
+            -1.6 + spacing * (col as f64 + 0.5),
+            -1.6 + spacing * (row as f64 + 0.5),
+            0.0,
+        );
+        (k as u64 + 1, center, spacing * 0.45)
+    })
 }
 
 /// Waypoints of a tip circling the device workspace centre in the x-y plane, `n_loops` times
@@ -273,6 +285,224 @@ pub fn circle_waypoints(
                 t_secs: period_secs * k as f64 / N_PER_LOOP as f64,
                 position_metres: DVec3::new(angle.cos(), angle.sin(), 0.0) * radius_metres,
             }
+        })
+        .collect()
+}
+
+/// A triangle mesh as vertices and counter-clockwise (outward) index triples.
+pub type TriangleMesh = (Vec<[f32; 3]>, Vec<[u32; 3]>);
+
+/// The closed cube `[center - half, center + half]`, 12 outward triangles.
+pub fn cube_mesh(center: DVec3, half: f64) -> TriangleMesh {
+    let vertices = (0..8)
+        .map(|k| {
+            let corner = DVec3::new(
+                if k & 1 == 0 { -half } else { half },
+                if k & 2 == 0 { -half } else { half },
+                if k & 4 == 0 { -half } else { half },
+            ) + center;
+            corner.as_vec3().to_array()
+        })
+        .collect();
+    // Each face as a quad (a, b, c, d) going round it; `outward` fixes the winding.
+    let quads = [
+        [0, 2, 6, 4], // -x
+        [1, 5, 7, 3], // +x
+        [0, 4, 5, 1], // -y
+        [2, 3, 7, 6], // +y
+        [0, 1, 3, 2], // -z
+        [4, 6, 7, 5], // +z
+    ];
+    let triangles: Vec<[u32; 3]> = quads
+        .iter()
+        .flat_map(|&[a, b, c, d]| [[a, b, c], [a, c, d]])
+        .collect();
+    outward(vertices, triangles, center)
+}
+
+/// Winds every triangle of a mesh that is star-shaped about `center` counter-clockwise seen
+/// from outside.
+fn outward(vertices: Vec<[f32; 3]>, mut triangles: Vec<[u32; 3]>, center: DVec3) -> TriangleMesh {
+    let at = |i: u32| DVec3::from_array(vertices[i as usize].map(f64::from));
+    for tri in &mut triangles {
+        let [a, b, c] = tri.map(at);
+        if (b - a).cross(c - a).dot((a + b + c) / 3.0 - center) < 0.0 {
+            tri.swap(1, 2);
+        }
+    }
+    (vertices, triangles)
+}
+
+/// A sphere of `radius` about `center`: an icosahedron subdivided `n_subdivisions` times
+/// (`20 * 4^n` outward triangles), vertices on the sphere.
+pub fn icosphere(center: DVec3, radius: f64, n_subdivisions: u32) -> TriangleMesh {
+    let phi = (1.0 + 5f64.sqrt()) / 2.0;
+    let mut points: Vec<DVec3> = [
+        (-1.0, phi, 0.0),
+        (1.0, phi, 0.0),
+        (-1.0, -phi, 0.0),
+        (1.0, -phi, 0.0),
+        (0.0, -1.0, phi),
+        (0.0, 1.0, phi),
+        (0.0, -1.0, -phi),
+        (0.0, 1.0, -phi),
+        (phi, 0.0, -1.0),
+        (phi, 0.0, 1.0),
+        (-phi, 0.0, -1.0),
+        (-phi, 0.0, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| DVec3::new(x, y, z).normalize())
+    .collect();
+    let mut triangles: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..n_subdivisions {
+        let mut midpoints = std::collections::BTreeMap::new();
+        let mut midpoint = |a: u32, b: u32, points: &mut Vec<DVec3>| {
+            *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                points.push((points[a as usize] + points[b as usize]).normalize());
+                (points.len() - 1) as u32
+            })
+        };
+        let mut finer = Vec::with_capacity(triangles.len() * 4);
+        for [a, b, c] in triangles {
+            let ab = midpoint(a, b, &mut points);
+            let bc = midpoint(b, c, &mut points);
+            let ca = midpoint(c, a, &mut points);
+            finer.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+        }
+        triangles = finer;
+    }
+    let vertices = points
+        .iter()
+        .map(|&p| (center + p * radius).as_vec3().to_array())
+        .collect();
+    outward(vertices, triangles, center)
+}
+
+/// The thesis's Figure 7.4 container: an invisible cylinder, as printed.
+pub const WHIRLPOOL_GEOMETRY: &str = "(1.6^2-x^2-z^2) & y & (0.7-y)";
+/// The thesis's Figure 7.4 helical force field, as printed (less the typographic quotes).
+pub const WHIRLPOOL_FIELD: &str = "
+    function parametric_x (u, v, w) {d=-0.1; x=w+d*u; y=d*v; z=-u+d*w; return x/sqrt(x^2+y^2+z^2) ;}
+    function parametric_y (u, v, w) {d=-0.1; x=w+d*u; y=d*v; z=-u+d*w; return y/sqrt(x^2+y^2+z^2) ;}
+    function parametric_z (u, v, w) {d=-0.1; x=w+d*u; y=d*v; z=-u+d*w; return z/sqrt(x^2+y^2+z^2) ;}";
+/// The watermelon's crunchy flesh: layers of density every tenth of the radius, in object
+/// coordinates of a unit watermelon (the same as [`Density::Crunchy`] of
+/// [`Analytic::watermelon`]).
+pub const WATERMELON_DENSITY: &str = "0.5 + 0.4*sin(2*pi*sqrt(x^2+y^2+z^2)/0.1)";
+
+/// Why a reference fdsl container could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum FdslShapeError {
+    /// A reference text did not compile.
+    #[error("{0}")]
+    Compile(#[from] fdsl::CompileError),
+    /// The container rejected it.
+    #[error(transparent)]
+    Container(#[from] FunctionContainerError),
+}
+
+/// The watermelon's properties as fdsl functions (object coordinates of a unit watermelon):
+/// a tense rind with friction in a surface zone 0.05 deep, then crunchy density.
+pub fn watermelon_properties() -> Result<PropertySpec, fdsl::CompileError> {
+    Ok(PropertySpec {
+        tension: Some(Scalar::Function(Function::parse("0.8")?)),
+        friction: Some(Scalar::Function(Function::parse("0.3")?)),
+        density: Some(Scalar::Function(Function::parse(WATERMELON_DENSITY)?)),
+        zone_depth: Some(Scalar::Constant(0.05)),
+        field: None,
+    })
+}
+
+/// A watermelon whose geometry is `geometry` (a unit-radius model such as
+/// `tests/data/models/watermelon.fdsl`), placed at `center` with `radius`.
+pub fn fdsl_watermelon(
+    id: u64,
+    geometry: &Function,
+    center: DVec3,
+    radius: f64,
+) -> Result<FunctionContainer, FdslShapeError> {
+    let placement = Placement::new(center, radius).ok_or(FunctionContainerError::BadBounds {
+        min: center,
+        max: center,
+    })?;
+    Ok(FunctionContainer::new_placed(
+        id,
+        geometry,
+        (DVec3::splat(-1.0), DVec3::ONE),
+        placement,
+        &watermelon_properties()?,
+    )?)
+}
+
+/// [`watermelon_grid`] with fdsl watermelons of the given geometry.
+pub fn fdsl_watermelon_grid(
+    geometry: &Function,
+    n: usize,
+) -> Result<Vec<FunctionContainer>, FdslShapeError> {
+    grid_placements(n)
+        .map(|(id, center, radius)| fdsl_watermelon(id, geometry, center, radius))
+        .collect()
+}
+
+/// The thesis's Figure 7.4 whirlpool from its printed texts: bbox centre `0 0.35 0`, size
+/// `3.2 0.7 3.2`, friction disabled, field parameters `[-1 1 0 1 -1 1]`.
+pub fn fdsl_whirlpool(id: u64) -> Result<FunctionContainer, FdslShapeError> {
+    let (center, size) = (DVec3::new(0.0, 0.35, 0.0), DVec3::new(3.2, 0.7, 3.2));
+    let props = PropertySpec {
+        field: Some(FieldSpec::always(
+            Function::parse(WHIRLPOOL_FIELD)?,
+            Aabb::new(DVec3::new(-1.0, 0.0, -1.0), DVec3::new(1.0, 1.0, 1.0)),
+        )),
+        ..PropertySpec::default()
+    };
+    Ok(FunctionContainer::new(
+        id,
+        &Function::parse(WHIRLPOOL_GEOMETRY)?,
+        (center - size / 2.0, center + size / 2.0),
+        &props,
+    )?)
+}
+
+/// Icospheres (`20 * 4^n_subdivisions` triangles each) at the places of [`watermelon_grid`],
+/// with the watermelon's properties as constants: the mesh counterpart of the grid.
+pub fn mesh_grid(n: usize, n_subdivisions: u32) -> Result<Vec<MeshContainer>, MeshError> {
+    let props = PropertySpec {
+        tension: Some(Scalar::Constant(0.8)),
+        friction: Some(Scalar::Constant(0.3)),
+        density: Some(Scalar::Constant(0.5)),
+        zone_depth: Some(Scalar::Constant(0.05)),
+        field: None,
+    };
+    grid_placements(n)
+        .map(|(id, center, radius)| {
+            let (vertices, triangles) = icosphere(center, radius, n_subdivisions);
+            let props = PropertySpec {
+                zone_depth: Some(Scalar::Constant(0.05 * radius)),
+                ..props.clone()
+            };
+            MeshContainer::new(id, &vertices, &triangles, &props, RayParams::default())
         })
         .collect()
 }

@@ -1,26 +1,41 @@
 //! Proves that `Servo::step` never allocates: a counting global allocator armed around ticks
-//! that cross containers, swap snapshots, stall and lose the device.
+//! that cross containers (closed-form, fdsl functions with properties and fields, meshes
+//! located by haptic rays), swap snapshots, stall and lose the device.
+#![allow(
+    clippy::unwrap_used,
+    reason = "test helpers outside #[test] fns unwrap"
+)]
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use glam::DVec3;
 use haptic::container::Aabb;
+use haptic::container::Container;
+use haptic::container::mesh::{MeshContainer, RayParams};
+use haptic::container::properties::{PropertySpec, Scalar};
 use haptic::device::Capabilities;
 use haptic::device::sim::{HandModel, SimDevice};
 use haptic::device::trace::{Trace, TraceDevice};
 use haptic::force::zone::HapticZone;
 use haptic::force::{ForceParams, Rig};
 use haptic::servo::Servo;
-use haptic::shapes::{circle_waypoints, watermelon_grid};
+use haptic::shapes::{
+    circle_waypoints, fdsl_watermelon_grid, fdsl_whirlpool, icosphere, watermelon_grid,
+};
 
 struct Counting;
 
-static N_ALLOCS: AtomicUsize = AtomicUsize::new(0);
-
 thread_local! {
     static ARMED: Cell<bool> = const { Cell::new(false) };
+    // Per thread, so that tests running in parallel do not count each other.
+    static N_ALLOCS: Cell<usize> = const { Cell::new(0) };
+}
+
+fn count_one() {
+    if ARMED.with(Cell::get) {
+        N_ALLOCS.with(|n| n.set(n.get() + 1));
+    }
 }
 
 #[expect(
@@ -31,23 +46,17 @@ thread_local! {
 // the memory handed out.
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if ARMED.with(Cell::get) {
-            N_ALLOCS.fetch_add(1, Ordering::Relaxed);
-        }
+        count_one();
         // SAFETY: forwarded unchanged; the caller upholds `GlobalAlloc::alloc`'s contract.
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        if ARMED.with(Cell::get) {
-            N_ALLOCS.fetch_add(1, Ordering::Relaxed);
-        }
+        count_one();
         // SAFETY: forwarded unchanged; `ptr` came from `System.alloc` with this layout.
         unsafe { System.dealloc(ptr, layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if ARMED.with(Cell::get) {
-            N_ALLOCS.fetch_add(1, Ordering::Relaxed);
-        }
+        count_one();
         // SAFETY: forwarded unchanged; the caller upholds `GlobalAlloc::realloc`'s contract.
         unsafe { System.realloc(ptr, layout, new_size) }
     }
@@ -58,11 +67,11 @@ static GLOBAL: Counting = Counting;
 
 /// Runs `f` with allocation counting armed on this thread; returns allocations seen.
 fn count_allocs(f: impl FnOnce()) -> usize {
-    let before = N_ALLOCS.load(Ordering::Relaxed);
+    let before = N_ALLOCS.with(Cell::get);
     ARMED.with(|a| a.set(true));
     f();
     ARMED.with(|a| a.set(false));
-    N_ALLOCS.load(Ordering::Relaxed) - before
+    N_ALLOCS.with(Cell::get) - before
 }
 
 fn rig() -> Rig {
@@ -137,4 +146,74 @@ fn servo_step_never_allocates() {
         }),
         0
     );
+}
+
+/// A mixed scene: 64 fdsl watermelons, the fdsl whirlpool (a force field) and two mesh spheres
+/// on the circle the tip follows.
+fn mixed_scene(n_melons: usize) -> Vec<Box<dyn Container>> {
+    let geometry =
+        fdsl::Function::parse(include_str!("../../tests/data/models/watermelon.fdsl")).unwrap();
+    let mut scene: Vec<Box<dyn Container>> = fdsl_watermelon_grid(&geometry, n_melons)
+        .unwrap()
+        .into_iter()
+        .map(|c| Box::new(c) as Box<dyn Container>)
+        .collect();
+    scene.push(Box::new(fdsl_whirlpool(1000).unwrap()));
+    let props = PropertySpec {
+        tension: Some(Scalar::Constant(0.5)),
+        zone_depth: Some(Scalar::Constant(0.05)),
+        density: Some(Scalar::Function(
+            fdsl::Function::parse("0.3 + 0.2*x").unwrap(),
+        )),
+        ..PropertySpec::default()
+    };
+    for (k, x) in [(0u64, 1.0), (1, -1.0)] {
+        let (vertices, triangles) = icosphere(DVec3::new(x, 0.0, 0.0), 0.3, 3);
+        let mesh = MeshContainer::new(
+            2000 + k,
+            &vertices,
+            &triangles,
+            &props,
+            RayParams::default(),
+        )
+        .unwrap();
+        scene.push(Box::new(mesh));
+    }
+    scene
+}
+
+#[test]
+fn servo_step_over_fdsl_and_mesh_containers_never_allocates() {
+    let caps = Capabilities::desktop_pen();
+    let device = SimDevice::new(
+        caps,
+        circle_waypoints(0.05, 0.5, 8),
+        HandModel::default(),
+        0.001,
+    )
+    .unwrap();
+    let (mut servo, link) = Servo::init(device, rig());
+    link.scenes.publish(Box::new(mixed_scene(64)));
+    let mut n_allocs = 0;
+    // Ids seen on top; a fixed array, since inserting into a set would allocate while armed.
+    let mut seen = [false; 2048];
+    for round in 0..8 {
+        n_allocs += count_allocs(|| {
+            for tick in 0..500 {
+                let dt = if tick == 250 { 0.02 } else { 0.001 };
+                let out = servo.step(dt);
+                if let Some(top) = out.top_id {
+                    seen[top as usize % seen.len()] = true;
+                }
+            }
+        });
+        link.scenes
+            .publish(Box::new(mixed_scene(if round % 2 == 0 { 16 } else { 64 })));
+        link.collect_retired();
+    }
+    assert_eq!(n_allocs, 0, "Servo::step allocated");
+    // The path went through fdsl watermelons and both mesh spheres.
+    let n_melons_touched = seen[1..=64].iter().filter(|&&s| s).count();
+    assert!(n_melons_touched >= 4, "{n_melons_touched}");
+    assert!(seen[2000] && seen[2001], "both mesh spheres");
 }

@@ -16,7 +16,7 @@ use crate::eval::Interval;
 use crate::limits::{MAX_STROKE_POSES, MAX_STROKE_STAMPS, MAX_TOOL_SIZE};
 
 /// Strokes with more stamps than this get their own index.
-const STAMP_INDEX_MIN: usize = 8;
+const STAMP_INDEX_MIN: usize = 32;
 
 /// The tool's solid, in its own coordinates (centred on the origin).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -267,10 +267,11 @@ fn local_sdf(shape: ToolShape, q: DVec3) -> (f64, DVec3) {
 /// A tool swept along a path, ready to evaluate.
 #[derive(Clone, Debug)]
 pub(crate) struct CompiledTool {
-    stamps: Vec<Stamp>,
-    /// Stamp boxes grown by the margin, indexed when there are many stamps.
+    /// Each stamp with its box grown by the margin, side by side so that a scan reads one
+    /// contiguous array.
+    stamps: Vec<(Aabb, Stamp)>,
+    /// An index over the boxes when there are many stamps.
     stamp_index: Option<Bvh>,
-    stamp_boxes: Vec<Aabb>,
     /// Beyond each stamp's grown box its value is below `-margin`; values are clamped there.
     margin: f64,
     /// The box around all stamps, grown by the margin.
@@ -314,10 +315,10 @@ impl CompiledTool {
         let bounds = stamp_boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(b));
         let stamp_index = (stamps.len() > STAMP_INDEX_MIN).then(|| Bvh::build(&stamp_boxes));
         let lipschitz = stamps.iter().map(Stamp::lipschitz).fold(1.0, f64::max);
+        let stamps = stamp_boxes.into_iter().zip(stamps).collect();
         Ok(CompiledTool {
             stamps,
             stamp_index,
-            stamp_boxes,
             margin,
             bounds,
             lipschitz,
@@ -330,6 +331,7 @@ impl CompiledTool {
     }
 
     /// The band half-width within which values are exact.
+    #[cfg(test)]
     pub(crate) fn margin(&self) -> f64 {
         self.margin
     }
@@ -345,8 +347,9 @@ impl CompiledTool {
         let mut best = (-self.margin, DVec3::ZERO);
         let take = |i: u32| {
             let i = i as usize;
-            if self.stamp_boxes[i].contains(p) {
-                let v = self.stamps[i].eval(p);
+            let (bounds, stamp) = &self.stamps[i];
+            if bounds.contains(p) {
+                let v = stamp.eval(p);
                 if v.0 > best.0 {
                     best = v;
                 }
@@ -363,7 +366,7 @@ impl CompiledTool {
     pub(crate) fn raw_value(&self, p: DVec3) -> f64 {
         self.stamps
             .iter()
-            .map(|s| s.eval(p).0)
+            .map(|(_, s)| s.eval(p).0)
             .fold(f64::NEG_INFINITY, f64::max)
     }
 
@@ -544,7 +547,7 @@ mod tests {
             let brute = tool
                 .stamps
                 .iter()
-                .map(|s| s.eval(p).0)
+                .map(|(_, s)| s.eval(p).0)
                 .fold(-tool.margin(), f64::max);
             assert_eq!(tool.value(p), brute, "at {p}");
         }

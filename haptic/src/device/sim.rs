@@ -135,6 +135,11 @@ impl SimDevice {
                 .is_none_or(|w| self.time_secs() >= w.t_secs)
     }
 
+    /// The tip position of the last sample, metres, device frame.
+    pub fn tip_metres(&self) -> DVec3 {
+        self.tip_metres
+    }
+
     /// The force last commanded, newtons.
     pub fn force_newtons(&self) -> DVec3 {
         self.force_newtons

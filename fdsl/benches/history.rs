@@ -1,0 +1,140 @@
+//! History-independent cost: evaluation rate of an object with 10 to 10^5 small random edits
+//! (union and carve strokes of small balls and boxes, some paint), at the same random points.
+//! The goal is the rate at 10^5 edits within 2x of the rate at 10.
+//!
+//! `cargo bench -p fdsl --bench history`
+
+use divan::{Bencher, black_box};
+use fdsl::bvh::Aabb;
+use fdsl::object::{Edit, EditOp, Object, PaintValue, Paintable, Pose, ToolShape};
+use glam::DVec3;
+
+fn main() {
+    divan::main();
+}
+
+const EDIT_COUNTS: [usize; 4] = [10, 1_000, 10_000, 100_000];
+const N_POINTS: usize = 4096;
+
+/// A small deterministic generator (xorshift64*), so every run sees the same object.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn in_cube(&mut self, half: f64) -> DVec3 {
+        DVec3::new(self.next(), self.next(), self.next()) * (2.0 * half) - DVec3::splat(half)
+    }
+}
+
+fn object_with_edits(n: usize) -> Object {
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let mut object = Object::implicit("1 - x^2 - y^2 - z^2").expect("sphere compiles");
+    for i in 0..n {
+        let start = rng.in_cube(1.0);
+        let path: Vec<Pose> = (0..4)
+            .map(|k| Pose::at(start + DVec3::new(0.01 * k as f64, 0.005 * k as f64, 0.0)))
+            .collect();
+        let op = match i % 5 {
+            0 | 1 => EditOp::Union,
+            2 | 3 => EditOp::Subtract,
+            _ => EditOp::Paint {
+                property: Paintable::Color,
+                value: PaintValue::Color([1.0, 0.0, 0.0]),
+            },
+        };
+        let tool = if i % 2 == 0 {
+            ToolShape::Sphere { radius: 0.01 }
+        } else {
+            ToolShape::Box {
+                half_extents: DVec3::splat(0.008),
+                rounding: 0.002,
+            }
+        };
+        object
+            .apply(Edit::stroke(op, tool, path))
+            .expect("edits are valid");
+    }
+    object.prepare();
+    object
+}
+
+fn points() -> Vec<DVec3> {
+    let mut rng = Rng(0x1234_5678);
+    (0..N_POINTS).map(|_| rng.in_cube(1.1)).collect()
+}
+
+#[divan::bench(args = EDIT_COUNTS, sample_count = 20)]
+fn value(bencher: Bencher, n_edits: usize) {
+    let mut sampler = object_with_edits(n_edits).sampler();
+    let points = points();
+    bencher
+        .counter(divan::counter::ItemsCount::new(N_POINTS))
+        .bench_local(|| {
+            let mut sum = 0.0;
+            for p in &points {
+                sum += sampler.value(*p, 0.0);
+            }
+            black_box(sum)
+        });
+}
+
+#[divan::bench(args = EDIT_COUNTS, sample_count = 20)]
+fn gradient(bencher: Bencher, n_edits: usize) {
+    let mut sampler = object_with_edits(n_edits).sampler();
+    let points = points();
+    bencher
+        .counter(divan::counter::ItemsCount::new(N_POINTS))
+        .bench_local(|| {
+            let mut sum = DVec3::ZERO;
+            for p in &points {
+                sum += sampler.gradient(*p, 0.0).1;
+            }
+            black_box(sum)
+        });
+}
+
+#[divan::bench(args = EDIT_COUNTS, sample_count = 20)]
+fn color(bencher: Bencher, n_edits: usize) {
+    let mut sampler = object_with_edits(n_edits).sampler();
+    let points = points();
+    bencher
+        .counter(divan::counter::ItemsCount::new(N_POINTS))
+        .bench_local(|| {
+            let mut sum = 0.0;
+            for p in &points {
+                sum += sampler.diffuse(*p, 0.0)[0];
+            }
+            black_box(sum)
+        });
+}
+
+/// Boxes of an octree's finer levels (edge 1/64 of the object).
+#[divan::bench(args = EDIT_COUNTS, sample_count = 20)]
+fn interval(bencher: Bencher, n_edits: usize) {
+    let mut sampler = object_with_edits(n_edits).sampler();
+    let boxes: Vec<Aabb> = points()
+        .into_iter()
+        .map(|p| Aabb::around(p, DVec3::splat(1.0 / 64.0)))
+        .collect();
+    bencher
+        .counter(divan::counter::ItemsCount::new(N_POINTS))
+        .bench_local(|| {
+            let mut sum = 0.0;
+            for b in &boxes {
+                sum += sampler.interval(b, 0.0).hi;
+            }
+            black_box(sum)
+        });
+}
+
+/// Applying edits (compile the stroke and append; indexing happens on `prepare`).
+#[divan::bench(sample_count = 20)]
+fn apply_and_index_10k(bencher: Bencher) {
+    bencher.bench_local(|| black_box(object_with_edits(10_000).history().len()));
+}
