@@ -618,3 +618,41 @@ fn scenes_place_objects_through_groups_and_round_trip() {
         "placement kept"
     );
 }
+
+#[test]
+fn rays_find_the_first_surface_through_edits() {
+    let mut o = Object::implicit(SPHERE).unwrap();
+    let mut s = o.sampler();
+    let hit = s
+        .ray_hit(DVec3::new(-3.0, 0.0, 0.0), DVec3::X, 10.0, 0.0)
+        .unwrap();
+    assert!((hit - 2.0).abs() < 1e-6, "{hit}");
+    assert!(
+        s.ray_hit(DVec3::new(-3.0, 2.0, 0.0), DVec3::X, 10.0, 0.0)
+            .is_none()
+    );
+    // Carve a tunnel along the x axis: the ray now meets the sphere's far side from inside
+    // the tunnel's end only where the tunnel stops.
+    o.apply(Edit::stroke(
+        EditOp::Subtract,
+        ToolShape::Sphere { radius: 0.2 },
+        vec![
+            Pose::at(DVec3::new(-1.5, 0.0, 0.0)),
+            Pose::at(DVec3::new(0.5, 0.0, 0.0)),
+        ],
+    ))
+    .unwrap();
+    let mut s = o.sampler();
+    let hit = s
+        .ray_hit(DVec3::new(-3.0, 0.0, 0.0), DVec3::X, 10.0, 0.0)
+        .unwrap();
+    assert!(
+        (hit - 3.7).abs() < 1e-6,
+        "the tunnel ends at x = 0.7: {hit}"
+    );
+    // From inside the solid the first crossing is where it leaves.
+    let out = s
+        .ray_hit(DVec3::new(0.0, 0.6, 0.0), DVec3::Y, 10.0, 0.0)
+        .unwrap();
+    assert!((out - 0.4).abs() < 1e-6, "{out}");
+}

@@ -15,6 +15,12 @@ use super::{CompiledColor, CompiledShape, NOTHING, Object};
 use crate::bvh::Aabb;
 use crate::eval::{GradEval, Interval, IntervalEval, PointEval};
 
+/// Ray hits are located to this fraction of the ray's length.
+pub const RAY_TOLERANCE: f64 = 1e-9;
+
+/// The most hits a new sampler reserves room for.
+pub const MAX_RESERVED_HITS: usize = 4096;
+
 /// The grey of an object without a diffuse colour.
 pub const DEFAULT_DIFFUSE: Rgb = [0.8, 0.8, 0.8];
 
@@ -183,7 +189,9 @@ impl Sampler {
             feels: [0, 1, 2, 3].map(|i| point(&parts.feels[i])),
             force: point(&parts.force),
             motion,
-            hits: Vec::with_capacity(64),
+            // Room for every edit overlapping one point or box in practice, so the haptic
+            // loop does not allocate; more overlap grows it once.
+            hits: Vec::with_capacity(object.history().len().clamp(64, MAX_RESERVED_HITS)),
             object,
         }
     }
@@ -267,6 +275,53 @@ impl Sampler {
             }
         }
         v
+    }
+
+    /// The first point where the ray `origin + s * dir`, `0 <= s <= s_max`, crosses the
+    /// solid's surface (either way), as `s`; `None` if it does not within `s_max`. It splits
+    /// the ray into pieces whose intervals may hold zero (each interval visits only the edits
+    /// near its piece) and bisects the first sign change to `RAY_TOLERANCE` of `s_max`.
+    pub fn ray_hit(&mut self, origin: DVec3, dir: DVec3, s_max: f64, t: f64) -> Option<f64> {
+        if !(origin.is_finite() && dir.is_finite() && s_max.is_finite() && s_max > 0.0) {
+            return None;
+        }
+        let at = |s: f64| origin + dir * s;
+        let tolerance = s_max * RAY_TOLERANCE;
+        // Pieces to visit, nearest on top; a halving stack is at most 64 deep.
+        let mut stack = [(0.0f64, 0.0f64); 64];
+        stack[0] = (0.0, s_max);
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let (a, b) = stack[top];
+            let iv = self.interval(&Aabb::new(at(a), at(b)), t);
+            if !iv.nan && (iv.lo > 0.0 || iv.hi < 0.0) {
+                continue;
+            }
+            if b - a <= tolerance * 64.0 || top + 2 > stack.len() {
+                // Short enough: look for a sign change by sampling, then bisect it.
+                let (mut lo, mut hi) = (a, b);
+                let (va, vb) = (self.value(at(a), t), self.value(at(b), t));
+                if (va >= 0.0) == (vb >= 0.0) {
+                    continue;
+                }
+                let inside_at_lo = va >= 0.0;
+                while hi - lo > tolerance {
+                    let mid = 0.5 * (lo + hi);
+                    if (self.value(at(mid), t) >= 0.0) == inside_at_lo {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                return Some(hi);
+            }
+            let mid = 0.5 * (a + b);
+            stack[top] = (mid, b);
+            stack[top + 1] = (a, mid);
+            top += 2;
+        }
+        None
     }
 
     /// The newest painting of `property` that covers `p`.

@@ -1,0 +1,406 @@
+//! The fdsl payload: ops over the shared object model ([`ShapePayload`]), and the scene they
+//! fold into ([`ShapeScene`], a [`Materialize`] over [`fdsl::scene::Scene`]).
+//!
+//! Every op names the object it changes, so leases and per-object re-folds apply. Properties
+//! are written whole per [`fdsl::object::Slot`]: concurrent writes to one slot resolve by the
+//! linear order (the last writer wins); sculpting edits all apply, in the order. A payload is
+//! validated when decoded (formulas compiled, numbers checked), so an op that reaches the fold
+//! describes a valid change; a change to an object that does not exist (deleted, or created by
+//! an op that lost a race) changes nothing and stays in history.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use fdsl::object::codec as object_codec;
+use fdsl::object::{CompiledEdit, Edit, Field, Object, ObjectData};
+use fdsl::scene::{self, Group, GroupId, Scene};
+use serde::{Deserialize, Serialize};
+
+use crate::codec::DecodeError;
+use crate::identity::PeerId;
+use crate::log::OrderKey;
+use crate::materialize::{FoldEntry, MAX_SCENE_SNAPSHOT_BYTES, Materialize, SceneHash};
+use crate::op::OpId;
+use crate::payload::{Effect, LeaseStrength, MAX_PAYLOAD_BYTES, ObjectId, Payload};
+
+/// Longest chat message, in bytes.
+pub const MAX_CHAT_BYTES: usize = 2048;
+
+/// Groups share the lease space of objects with the top bit set.
+const GROUP_LEASE_BIT: u64 = 1 << 63;
+
+/// One change to the shared scene.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum ShapePayload {
+    /// Creates object `object` (ids are chosen by the author, e.g. from its key and a counter).
+    Create {
+        /// The new object's id.
+        object: u64,
+        /// Its description.
+        data: ObjectData,
+        /// The group it hangs from.
+        group: Option<u64>,
+    },
+    /// Deletes an object.
+    Delete {
+        /// The object.
+        object: u64,
+    },
+    /// Sets one property of an object.
+    Set {
+        /// The object.
+        object: u64,
+        /// The property and its value.
+        field: Field,
+    },
+    /// A sculpting edit (union, carve, intersect or paint, possibly a whole stroke).
+    Edit {
+        /// The object.
+        object: u64,
+        /// The edit.
+        edit: Edit,
+    },
+    /// Adds, changes (`Some`) or removes (`None`) a group.
+    SetGroup {
+        /// The group.
+        group: u64,
+        /// Its new description.
+        value: Option<Group>,
+    },
+    /// Moves an object into a group (or to the top).
+    Move {
+        /// The object.
+        object: u64,
+        /// The new group.
+        group: Option<u64>,
+    },
+    /// Takes the object's lease.
+    Acquire {
+        /// The object.
+        object: u64,
+        /// Strong (only when free, expired or own) or weak (takes over).
+        strong: bool,
+        /// Time to live in microseconds.
+        ttl_micros: u64,
+    },
+    /// Gives the lease back.
+    Release {
+        /// The object.
+        object: u64,
+    },
+    /// Undoes one of the author's earlier edits.
+    Undo(#[serde(with = "op_id")] OpId),
+    /// Redoes an undone edit.
+    Redo(#[serde(with = "op_id")] OpId),
+    /// A chat message.
+    Chat(String),
+}
+
+// Payloads are validated on decode (no NaN reaches one), so equality is reflexive.
+impl Eq for ShapePayload {}
+
+mod op_id {
+    use super::OpId;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    pub fn serialize<S: Serializer>(id: &OpId, s: S) -> Result<S::Ok, S::Error> {
+        id.0.serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<OpId, D::Error> {
+        <[u8; 32]>::deserialize(d).map(OpId)
+    }
+}
+
+impl ShapePayload {
+    /// Checks what decoding cannot: formulas compile, numbers are valid, text is short.
+    pub fn validate(&self) -> Result<(), String> {
+        match self {
+            ShapePayload::Create { data, .. } => Object::new(data.clone())
+                .map(|_| ())
+                .map_err(|e| e.to_string()),
+            ShapePayload::Set { field, .. } => {
+                let mut data = ObjectData::default();
+                field.clone().apply_to(&mut data);
+                Object::new(data).map(|_| ()).map_err(|e| e.to_string())
+            }
+            ShapePayload::Edit { edit, .. } => CompiledEdit::new(edit.clone())
+                .map(|_| ())
+                .map_err(|e| e.to_string()),
+            ShapePayload::SetGroup { value: Some(g), .. } => {
+                if g.transform.inverse().is_none() || g.name.len() > fdsl::object::MAX_NAME_BYTES {
+                    return Err("group transform not invertible or name too long".into());
+                }
+                Ok(())
+            }
+            ShapePayload::Chat(text) if text.len() > MAX_CHAT_BYTES => {
+                Err(format!("chat message longer than {MAX_CHAT_BYTES} bytes"))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+impl Payload for ShapePayload {
+    fn encode(&self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&object_codec::encode(self));
+    }
+
+    fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
+        if bytes.len() > MAX_PAYLOAD_BYTES {
+            return Err(DecodeError::OverLimit {
+                offset: 0,
+                what: "shape payload length",
+                value: bytes.len() as u64,
+                limit: MAX_PAYLOAD_BYTES as u64,
+            });
+        }
+        let payload: ShapePayload =
+            object_codec::decode("shape payload", bytes).map_err(|_| DecodeError::Invalid {
+                offset: 0,
+                what: "shape payload encoding",
+            })?;
+        payload.validate().map_err(|_| DecodeError::Invalid {
+            offset: 0,
+            what: "shape payload contents (a formula, number or text is not valid)",
+        })?;
+        Ok(payload)
+    }
+
+    fn effect(&self) -> Effect {
+        let object = |id: u64| ObjectId(id & !GROUP_LEASE_BIT);
+        match *self {
+            ShapePayload::Create { object: o, .. }
+            | ShapePayload::Delete { object: o }
+            | ShapePayload::Set { object: o, .. }
+            | ShapePayload::Edit { object: o, .. }
+            | ShapePayload::Move { object: o, .. } => Effect::Edit { object: object(o) },
+            ShapePayload::SetGroup { group, .. } => Effect::Edit {
+                object: ObjectId(group | GROUP_LEASE_BIT),
+            },
+            ShapePayload::Acquire {
+                object: o,
+                strong,
+                ttl_micros,
+            } => Effect::Acquire {
+                object: object(o),
+                strength: if strong {
+                    LeaseStrength::Strong
+                } else {
+                    LeaseStrength::Weak
+                },
+                ttl_micros,
+            },
+            ShapePayload::Release { object: o } => Effect::Release { object: object(o) },
+            ShapePayload::Undo(target) => Effect::Undo { target },
+            ShapePayload::Redo(target) => Effect::Redo { target },
+            ShapePayload::Chat(_) => Effect::Independent,
+        }
+    }
+}
+
+/// A chat line in the scene.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ChatLine {
+    /// Lamport time, author and sequence: where the line sits in the order.
+    pub lamport: u64,
+    /// Who wrote it.
+    pub author: [u8; 32],
+    /// The author's sequence number.
+    pub seq: u64,
+    /// The text.
+    pub text: String,
+}
+
+/// The materialised scene of [`ShapePayload`] ops.
+#[derive(Clone, Debug, Default)]
+pub struct ShapeScene {
+    scene: Scene,
+    /// Chat lines in linear order.
+    chat: Vec<ChatLine>,
+    /// Compiled edits by the op that made them, so a re-fold does not recompile strokes.
+    compiled: BTreeMap<OpId, Arc<CompiledEdit>>,
+    /// For each object, the op of each history entry (to map undo targets to edits).
+    edit_ops: BTreeMap<u64, Vec<OpId>>,
+}
+
+impl ShapeScene {
+    /// The scene (objects and groups).
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The chat, in linear order.
+    pub fn chat(&self) -> &[ChatLine] {
+        &self.chat
+    }
+
+    /// The op that made each entry of an object's edit history.
+    pub fn edit_ops(&self, object: u64) -> &[OpId] {
+        self.edit_ops.get(&object).map_or(&[], Vec::as_slice)
+    }
+
+    /// Indexes recent edits of every object (call after a batch, before sampling).
+    pub fn prepare(&mut self) {
+        self.scene.prepare();
+    }
+
+    fn encode(&self) -> Vec<u8> {
+        let edit_ops: Vec<(u64, Vec<[u8; 32]>)> = self
+            .edit_ops
+            .iter()
+            .map(|(o, ids)| (*o, ids.iter().map(|id| id.0).collect()))
+            .collect();
+        object_codec::encode(&(self.scene.encode(), &self.chat, edit_ops))
+    }
+}
+
+impl PartialEq for ShapeScene {
+    fn eq(&self, other: &Self) -> bool {
+        self.scene == other.scene && self.chat == other.chat
+    }
+}
+
+impl Materialize<ShapePayload> for ShapeScene {
+    fn reset_object(&mut self, object: ObjectId) {
+        if object.0 & GROUP_LEASE_BIT != 0 {
+            // Groups are re-folded by re-applying their ops; removing first keeps the fold
+            // from-scratch equal.
+            self.scene
+                .remove_group(GroupId(object.0 & !GROUP_LEASE_BIT));
+        } else {
+            self.scene.remove_object(scene::ObjectId(object.0));
+            self.edit_ops.remove(&object.0);
+        }
+    }
+
+    fn apply(&mut self, entry: FoldEntry<'_, ShapePayload>) {
+        let id = entry.op.id();
+        match entry.op.payload() {
+            ShapePayload::Create {
+                object,
+                data,
+                group,
+            } => {
+                let object = scene::ObjectId(*object);
+                if self.scene.object(object).is_none() {
+                    // Valid by decode; a missing group puts the object at the top.
+                    let group = group
+                        .map(GroupId)
+                        .filter(|g| self.scene.group(*g).is_some());
+                    let _ = self.scene.create(object, data.clone(), group);
+                }
+            }
+            ShapePayload::Delete { object } => {
+                self.scene.remove_object(scene::ObjectId(*object));
+                self.edit_ops.remove(object);
+            }
+            ShapePayload::Set { object, field } => {
+                if let Some(o) = self.scene.object_mut(scene::ObjectId(*object)) {
+                    let _ = o.set(field.clone());
+                }
+            }
+            ShapePayload::Edit { object, edit } => {
+                let Some(o) = self.scene.object_mut(scene::ObjectId(*object)) else {
+                    return;
+                };
+                let compiled = match self.compiled.get(&id) {
+                    Some(c) => c.clone(),
+                    None => match CompiledEdit::new(edit.clone()) {
+                        Ok(c) => {
+                            let c = Arc::new(c);
+                            self.compiled.insert(id, c.clone());
+                            c
+                        }
+                        Err(_) => return,
+                    },
+                };
+                if o.apply_compiled(compiled).is_ok() {
+                    self.edit_ops.entry(*object).or_default().push(id);
+                }
+            }
+            ShapePayload::SetGroup { group, value } => {
+                let g = GroupId(*group);
+                match value {
+                    Some(v) => {
+                        let _ = self.scene.set_group(g, v.clone());
+                    }
+                    None => {
+                        self.scene.remove_group(g);
+                    }
+                }
+            }
+            ShapePayload::Move { object, group } => {
+                let _ = self
+                    .scene
+                    .set_object_group(scene::ObjectId(*object), group.map(GroupId));
+            }
+            ShapePayload::Chat(text) => {
+                let key = entry.key;
+                let line = ChatLine {
+                    lamport: key.lamport,
+                    author: key.author.0,
+                    seq: key.seq,
+                    text: text.clone(),
+                };
+                let order = |l: &ChatLine| (l.lamport, l.author, l.seq);
+                let at = self.chat.partition_point(|l| order(l) < order(&line));
+                if self.chat.get(at).is_none_or(|l| order(l) != order(&line)) {
+                    self.chat.insert(at, line);
+                }
+            }
+            ShapePayload::Acquire { .. }
+            | ShapePayload::Release { .. }
+            | ShapePayload::Undo(_)
+            | ShapePayload::Redo(_) => {}
+        }
+    }
+
+    fn scene_hash(&self) -> SceneHash {
+        SceneHash::of(&self.encode())
+    }
+
+    fn encode_snapshot(&self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.encode());
+    }
+
+    fn decode_snapshot(bytes: &[u8]) -> Result<Self, DecodeError> {
+        if bytes.len() > MAX_SCENE_SNAPSHOT_BYTES {
+            return Err(DecodeError::OverLimit {
+                offset: 0,
+                what: "scene snapshot length",
+                value: bytes.len() as u64,
+                limit: MAX_SCENE_SNAPSHOT_BYTES as u64,
+            });
+        }
+        let invalid = |_| DecodeError::Invalid {
+            offset: 0,
+            what: "shape scene snapshot",
+        };
+        type Record = (Vec<u8>, Vec<ChatLine>, Vec<(u64, Vec<[u8; 32]>)>);
+        let (scene_bytes, chat, edit_ops): Record =
+            object_codec::decode("shape scene snapshot", bytes).map_err(invalid)?;
+        let scene = Scene::decode(&scene_bytes).map_err(|_| DecodeError::Invalid {
+            offset: 0,
+            what: "shape scene snapshot's scene",
+        })?;
+        Ok(ShapeScene {
+            scene,
+            chat,
+            compiled: BTreeMap::new(),
+            edit_ops: edit_ops
+                .into_iter()
+                .map(|(o, ids)| (o, ids.into_iter().map(OpId).collect()))
+                .collect(),
+        })
+    }
+}
+
+/// The order key of a chat line (for callers matching lines to ops).
+pub fn chat_key(line: &ChatLine) -> OrderKey {
+    OrderKey {
+        lamport: line.lamport,
+        author: PeerId(line.author),
+        seq: line.seq,
+    }
+}
