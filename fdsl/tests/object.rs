@@ -656,3 +656,36 @@ fn rays_find_the_first_surface_through_edits() {
         .unwrap();
     assert!((out - 0.4).abs() < 1e-6, "{out}");
 }
+
+#[test]
+fn imported_meshes_are_solids_that_sculpt_and_round_trip() {
+    use std::sync::Arc;
+    let ball = fdsl::mesh::shapes::icosphere(1.0, 3);
+    let mut o = Object::new(ObjectData {
+        geometry: Some(Geometry {
+            shape: fdsl::object::Shape::Mesh(Arc::new(ball)),
+            domain: None,
+            transform: Transform::translate(DVec3::new(0.0, 2.0, 0.0)),
+        }),
+        ..ObjectData::default()
+    })
+    .unwrap();
+    o.apply(Edit::stamp(
+        EditOp::Subtract,
+        ToolShape::Sphere { radius: 0.5 },
+        Pose::at(DVec3::new(0.0, 3.0, 0.0)),
+    ))
+    .unwrap();
+    let mut s = o.sampler();
+    assert!(s.value(DVec3::new(0.0, 2.0, 0.0), 0.0) > 0.9);
+    assert!(s.value(DVec3::new(0.0, 2.9, 0.0), 0.0) < 0.0, "carved");
+    assert!(s.value(DVec3::new(0.0, 0.0, 0.0), 0.0) < 0.0);
+    let (_, g) = s.gradient(DVec3::new(0.8, 2.0, 0.0), 0.0);
+    assert!(g.x < -0.9, "points inwards: {g}");
+    let region = Aabb::around(DVec3::new(0.0, 2.0, 0.0), DVec3::splat(0.1));
+    assert!(s.interval(&region, 0.0).lo > 0.0);
+    let b = o.bounds().unwrap();
+    assert!(b.contains(DVec3::new(0.0, 2.99, 0.0)) && !b.contains(DVec3::new(0.0, 3.2, 0.0)));
+    let bytes = codec::encode_object(&o);
+    assert!(codec::decode_object(&bytes).unwrap() == o);
+}

@@ -1,10 +1,13 @@
 //! An object's geometry: an F-Rep solid, a parametric curve, surface or solid, or an imported
 //! triangle mesh, in its own domain and placed by its own instance transform.
 
+use std::sync::Arc;
+
 use serde::{Deserialize, Serialize};
 
 use super::space::{Domain, Transform};
 use super::{Formula, ObjectError, Slot};
+use crate::mesh::TriMesh;
 
 /// What a parametric definition sweeps: its formula has outputs `x`, `y`, `z` of `u` (curve),
 /// `u, v` (surface) or `u, v, w` (solid), and `t`.
@@ -44,6 +47,30 @@ pub enum Shape {
         /// `[lo, hi]` of `u`, `v`, `w` (unused ones are ignored).
         parameters: [[f64; 2]; 3],
     },
+    /// An imported triangle mesh: inside by ray parity, value the signed distance (positive
+    /// inside).
+    Mesh(#[serde(with = "mesh_serde")] Arc<TriMesh>),
+}
+
+/// A mesh travels as its vertices and triangles and is validated again when read.
+mod mesh_serde {
+    use std::sync::Arc;
+
+    use serde::de::Error;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    use crate::mesh::TriMesh;
+
+    pub fn serialize<S: Serializer>(mesh: &Arc<TriMesh>, s: S) -> Result<S::Ok, S::Error> {
+        (mesh.positions(), mesh.triangles()).serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Arc<TriMesh>, D::Error> {
+        let (positions, triangles) = <(Vec<[f32; 3]>, Vec<[u32; 3]>)>::deserialize(d)?;
+        TriMesh::new(positions, triangles)
+            .map(Arc::new)
+            .map_err(D::Error::custom)
+    }
 }
 
 /// Geometry: a shape in its own domain, mapped into the object's space.

@@ -11,7 +11,8 @@
 //!   when created.
 //! - [`codec`] is the canonical, versioned binary form of objects and edits.
 //!
-//! Sign convention: `f >= 0` is inside. An object with no geometry, or with parametric
+//! Sign convention: `f >= 0` is inside (an imported mesh's value is its signed distance). An
+//! object with no geometry, or with parametric
 //! geometry (which has no field; its surface is meshed from its parameters), starts from
 //! [`NOTHING`] and is what its union edits add.
 
@@ -370,6 +371,7 @@ impl Field {
 #[derive(Clone, Debug)]
 pub(crate) struct CompiledShape {
     pub(crate) tape: Option<Tape>,
+    pub(crate) mesh: Option<Arc<crate::mesh::TriMesh>>,
     pub(crate) domain: Option<Domain>,
     /// Object space to shape space.
     pub(crate) local_from_object: Transform,
@@ -378,15 +380,17 @@ pub(crate) struct CompiledShape {
 impl CompiledShape {
     fn new(geometry: &Geometry, slot: Slot) -> Result<CompiledShape, ObjectError> {
         geometry.validate(slot)?;
-        let tape = match &geometry.shape {
-            Shape::Implicit(f) => Some(f.tape(slot, &[])?),
+        let (tape, mesh) = match &geometry.shape {
+            Shape::Implicit(f) => (Some(f.tape(slot, &[])?), None),
             Shape::Parametric { formula, .. } => {
                 formula.tape(slot, &["x", "y", "z"])?;
-                None
+                (None, None)
             }
+            Shape::Mesh(m) => (None, Some(m.clone())),
         };
         Ok(CompiledShape {
             tape,
+            mesh,
             domain: geometry.domain,
             local_from_object: geometry
                 .transform
@@ -608,11 +612,11 @@ impl Object {
     /// every active union edit. `None` when unbounded (an implicit solid without a domain).
     pub fn bounds(&self) -> Option<Aabb> {
         let mut b = match (&self.data.geometry, &self.parts.geometry) {
-            (Some(g), Some(c)) => match (c.tape.is_some(), &g.domain) {
-                (true, Some(d)) => g.transform.aabb(&d.aabb()),
-                (true, None) => return None,
-                (false, Some(d)) => g.transform.aabb(&d.aabb()),
-                (false, None) => Aabb::EMPTY,
+            (Some(g), Some(c)) => match (&c.mesh, c.tape.is_some(), &g.domain) {
+                (_, _, Some(d)) => g.transform.aabb(&d.aabb()),
+                (Some(m), _, None) => g.transform.aabb(&m.bounds()),
+                (None, true, None) => return None,
+                (None, false, None) => Aabb::EMPTY,
             },
             _ => Aabb::EMPTY,
         };

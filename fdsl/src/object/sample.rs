@@ -52,11 +52,12 @@ impl Shape {
     }
 
     fn value(&mut self, p: DVec3, t: f64) -> f64 {
-        let Some(e) = &mut self.eval else {
-            return NOTHING;
-        };
         let q = self.compiled.local_from_object.point(p);
-        let f = e.point.eval([q.x, q.y, q.z, t]);
+        let f = match (&mut self.eval, &self.compiled.mesh) {
+            (Some(e), _) => e.point.eval([q.x, q.y, q.z, t]),
+            (None, Some(m)) => m.signed_distance(q),
+            (None, None) => return NOTHING,
+        };
         match &self.compiled.domain {
             Some(d) => f.min(d.signed_distance(q)),
             None => f,
@@ -64,12 +65,15 @@ impl Shape {
     }
 
     fn gradient(&mut self, p: DVec3, t: f64) -> (f64, DVec3) {
-        let Some(e) = &mut self.eval else {
-            return (NOTHING, DVec3::ZERO);
-        };
         let q = self.compiled.local_from_object.point(p);
-        let g = e.grad.eval([q.x, q.y, q.z, t]);
-        let mut out = (g.v, DVec3::new(g.dx, g.dy, g.dz));
+        let mut out = match (&mut self.eval, &self.compiled.mesh) {
+            (Some(e), _) => {
+                let g = e.grad.eval([q.x, q.y, q.z, t]);
+                (g.v, DVec3::new(g.dx, g.dy, g.dz))
+            }
+            (None, Some(m)) => m.value_gradient(q),
+            (None, None) => return (NOTHING, DVec3::ZERO),
+        };
         if let Some(d) = &self.compiled.domain {
             let dv = d.signed_distance(q);
             if dv < out.0 {
@@ -86,17 +90,23 @@ impl Shape {
     }
 
     fn interval(&mut self, region: &Aabb, t: f64) -> Interval {
-        let Some(e) = &mut self.eval else {
-            return Interval::point(NOTHING);
-        };
         let local = self.compiled.local_from_object.aabb(region);
         let iv = |lo: f64, hi: f64| Interval::new(lo, hi);
-        let f = e.interval.eval([
-            iv(local.lo.x, local.hi.x),
-            iv(local.lo.y, local.hi.y),
-            iv(local.lo.z, local.hi.z),
-            Interval::point(t),
-        ]);
+        let f = match (&mut self.eval, &self.compiled.mesh) {
+            (Some(e), _) => e.interval.eval([
+                iv(local.lo.x, local.hi.x),
+                iv(local.lo.y, local.hi.y),
+                iv(local.lo.z, local.hi.z),
+                Interval::point(t),
+            ]),
+            (None, Some(m)) => {
+                // A signed distance changes by at most the distance moved.
+                let c = m.signed_distance(local.center());
+                let r = local.size().length() * 0.5;
+                Interval::new(c - r, c + r)
+            }
+            (None, None) => return Interval::point(NOTHING),
+        };
         match &self.compiled.domain {
             Some(d) => {
                 let c = d.signed_distance(local.center());

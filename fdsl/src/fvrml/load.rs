@@ -1,0 +1,569 @@
+//! A [`Document`] to a [`Scene`]: shapes become objects, `Transform`, `Group` and `FTransform`
+//! become groups, `DEF`/`USE` make copies, `Inline` files are read through the caller's
+//! resolver. Ids are given in document order.
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+use super::document::{Document, Node, NodeRef, Pos, Value};
+use super::read::{Fields, Reader, Scope, address};
+use super::{
+    Issue, Issues, MAX_INLINE_DEPTH, MAX_INLINE_FILES, MAX_LOAD_STEPS,
+    MAX_NESTING_DEPTH, MAX_TOTAL_BYTES, parser,
+};
+use crate::object::{Motion, Object, ObjectError, Slot, Transform};
+use crate::scene::{Group, GroupId, ObjectId, Scene, SceneError};
+
+/// How to load.
+#[derive(Clone, Debug, Default)]
+pub struct LoadOptions {
+    /// The id of the first object; the others follow in document order.
+    pub first_object_id: u64,
+    /// The id of the first group; the others follow in document order.
+    pub first_group_id: u64,
+    /// The path of the text being loaded, in the resolver's terms: `Inline` urls are relative
+    /// to its directory. Empty: relative to the resolver's root.
+    pub path: String,
+}
+
+/// A loaded scene.
+#[derive(Debug)]
+pub struct Loaded {
+    /// The objects and groups.
+    pub scene: Scene,
+    /// What was skipped or read leniently, in file order.
+    pub warnings: Vec<Issue>,
+    /// The id after the last object's (to add more objects).
+    pub next_object_id: u64,
+    /// The id after the last group's.
+    pub next_group_id: u64,
+}
+
+/// The text cannot be loaded: at least one issue is an error.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub struct LoadError {
+    /// Every issue, errors and warnings, in file order.
+    pub issues: Vec<Issue>,
+}
+
+impl LoadError {
+    /// The errors alone.
+    pub fn errors(&self) -> impl Iterator<Item = &Issue> {
+        self.issues.iter().filter(|i| i.is_error())
+    }
+}
+
+impl fmt::Display for LoadError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let mut first = true;
+        for issue in self.errors() {
+            if !first {
+                writeln!(f)?;
+            }
+            first = false;
+            write!(f, "{issue}")?;
+        }
+        Ok(())
+    }
+}
+
+/// Reads FVRML text into a scene. `resolve` gets the path of each local `Inline` (relative
+/// to [`LoadOptions::path`]'s directory, normalised, with `/` separators) and returns its
+/// text or why not; remote urls are not fetched (a warning says so).
+pub fn load(
+    text: &str,
+    options: &LoadOptions,
+    resolve: &mut dyn FnMut(&str) -> Result<String, String>,
+) -> Result<Loaded, LoadError> {
+    let mut issues = Issues::default();
+    let doc = parser::parse(text, None, &mut issues);
+    run(&doc, issues, text.len(), options, resolve)
+}
+
+/// [`load`] of a document already parsed (or built in code).
+pub fn load_document(
+    doc: &Document,
+    options: &LoadOptions,
+    resolve: &mut dyn FnMut(&str) -> Result<String, String>,
+) -> Result<Loaded, LoadError> {
+    run(doc, Issues::default(), 0, options, resolve)
+}
+
+fn run(
+    doc: &Document,
+    issues: Issues,
+    n_bytes: usize,
+    options: &LoadOptions,
+    resolve: &mut dyn FnMut(&str) -> Result<String, String>,
+) -> Result<Loaded, LoadError> {
+    let mut loader = Loader {
+        resolve,
+        issues,
+        scene: Scene::new(),
+        next_object: options.first_object_id,
+        next_group: options.first_group_id,
+        steps: 0,
+        stopped: false,
+        total_bytes: n_bytes,
+        n_files: 0,
+        root_path: options.path.clone(),
+        inline_stack: Vec::new(),
+        cache: BTreeMap::new(),
+    };
+    let scope = Scope::new(doc, 0, None);
+    let place = Place {
+        group: None,
+        moving: None,
+        depth: 0,
+    };
+    for r in &doc.nodes {
+        loader.visit(&scope, r, &place);
+    }
+    if loader.issues.has_errors() {
+        return Err(LoadError {
+            issues: loader.issues.finish(),
+        });
+    }
+    Ok(Loaded {
+        scene: loader.scene,
+        warnings: loader.issues.finish(),
+        next_object_id: loader.next_object,
+        next_group_id: loader.next_group,
+    })
+}
+
+/// Where the nodes being visited go.
+#[derive(Clone)]
+struct Place {
+    group: Option<GroupId>,
+    /// Inside an `FTransform` with motion: the transform from nested (flattened) groups to
+    /// the moving group, and the motion.
+    moving: Option<Moving>,
+    depth: usize,
+}
+
+#[derive(Clone)]
+struct Moving {
+    transform: Transform,
+    motion: Motion,
+    /// Where the motion's formulas were written.
+    pos: Pos,
+}
+
+struct Loader<'r> {
+    resolve: &'r mut dyn FnMut(&str) -> Result<String, String>,
+    issues: Issues,
+    scene: Scene,
+    next_object: u64,
+    next_group: u64,
+    steps: usize,
+    stopped: bool,
+    total_bytes: usize,
+    n_files: usize,
+    root_path: String,
+    /// The `Inline` paths being read, outermost first.
+    inline_stack: Vec<String>,
+    /// Converted shapes by (file serial, node address): `USE` copies reuse them.
+    cache: BTreeMap<(usize, usize), Option<Object>>,
+}
+
+impl Loader<'_> {
+    fn error(&mut self, scope: &Scope<'_>, pos: Pos, message: impl Into<String>) {
+        self.issues.error(pos, scope.file.as_deref(), message);
+    }
+
+    fn warning(&mut self, scope: &Scope<'_>, pos: Pos, message: impl Into<String>) {
+        self.issues.warning(pos, scope.file.as_deref(), message);
+    }
+
+    fn visit<'d>(&mut self, scope: &Scope<'d>, r: &'d NodeRef, place: &Place) {
+        if self.stopped {
+            return;
+        }
+        self.steps += 1;
+        let node = match scope.resolve(r) {
+            Ok(Some(node)) => node,
+            Ok(None) => return,
+            Err(message) => {
+                let pos = match r {
+                    NodeRef::Use { pos, .. } => *pos,
+                    _ => Pos::default(),
+                };
+                self.error(scope, pos, message);
+                return;
+            }
+        };
+        if self.steps > MAX_LOAD_STEPS {
+            self.error(
+                scope,
+                node.pos,
+                format!("loading visits more than {MAX_LOAD_STEPS} nodes (USE of USE?); stopped"),
+            );
+            self.stopped = true;
+            return;
+        }
+        if place.depth > MAX_NESTING_DEPTH {
+            self.error(
+                scope,
+                node.pos,
+                format!("groups nest deeper than the limit of {MAX_NESTING_DEPTH}"),
+            );
+            return;
+        }
+        match node.type_name.as_str() {
+            "FShape" | "Shape" => self.object(scope, node, place),
+            "Transform" | "Group" | "FTransform" => self.group(scope, node, place),
+            "Inline" => self.inline(scope, node, place),
+            other => {
+                let message = format!(
+                    "a `{other}` cannot stand here (a shape, a group or an Inline can); ignored"
+                );
+                self.warning(scope, node.pos, message);
+            }
+        }
+    }
+
+    /// The object of a shape node, converted once per node.
+    fn converted<'d>(&mut self, scope: &Scope<'d>, node: &'d Node) -> Option<Object> {
+        let key = (scope.serial, address(node));
+        if let Some(object) = self.cache.get(&key) {
+            return object.clone();
+        }
+        let mut reader = Reader {
+            issues: &mut self.issues,
+            scope,
+            positions: BTreeMap::new(),
+        };
+        let data = reader.object(node);
+        let positions = reader.positions;
+        let object = data.and_then(|data| match Object::new(data) {
+            Ok(object) => Some(object),
+            Err(e) => {
+                let pos = slot_of(&e)
+                    .and_then(|slot| positions.get(&slot).copied())
+                    .unwrap_or(node.pos);
+                self.error(scope, pos, e.to_string());
+                None
+            }
+        });
+        self.cache.insert(key, object.clone());
+        object
+    }
+
+    fn object<'d>(&mut self, scope: &Scope<'d>, node: &'d Node, place: &Place) {
+        let Some(mut object) = self.converted(scope, node) else {
+            return;
+        };
+        if let Some(moving) = &place.moving {
+            let mut data = object.data().clone();
+            if data.motion.is_some() {
+                self.warning(
+                    scope,
+                    node.pos,
+                    "this shape's own motion is replaced by the enclosing FTransform's",
+                );
+            }
+            data.transform = moving.transform.then(&data.transform);
+            data.motion = Some(moving.motion.clone());
+            match Object::new(data) {
+                Ok(o) => object = o,
+                Err(e) => {
+                    let pos = if slot_of(&e) == Some(Slot::Motion) {
+                        moving.pos
+                    } else {
+                        node.pos
+                    };
+                    self.error(scope, pos, e.to_string());
+                    return;
+                }
+            }
+        }
+        let id = self.next_object;
+        match self.scene.insert_object(ObjectId(id), object, place.group) {
+            Ok(()) => match id.checked_add(1) {
+                Some(next) => self.next_object = next,
+                None => {
+                    self.error(scope, node.pos, "object ids run out");
+                    self.stopped = true;
+                }
+            },
+            Err(e) => self.scene_error(scope, node.pos, &e),
+        }
+    }
+
+    fn scene_error(&mut self, scope: &Scope<'_>, pos: Pos, e: &SceneError) {
+        self.error(scope, pos, e.to_string());
+        if matches!(e, SceneError::Full(_)) {
+            self.stopped = true;
+        }
+    }
+
+    fn group<'d>(&mut self, scope: &Scope<'d>, node: &'d Node, place: &Place) {
+        let mut reader = Reader {
+            issues: &mut self.issues,
+            scope,
+            positions: BTreeMap::new(),
+        };
+        let mut fields = Fields::new(node);
+        let name = reader.name(&mut fields);
+        let transform = if node.type_name == "Group" {
+            Transform::IDENTITY
+        } else {
+            reader.transform(&mut fields)
+        };
+        let motion = if node.type_name == "FTransform" {
+            reader.motion(&mut fields)
+        } else {
+            None
+        };
+        // VRML's bounding-box hints: nothing to do with them.
+        fields.get("bboxCenter");
+        fields.get("bboxSize");
+        let children = fields.all("children");
+        let motion_pos = reader.positions.get(&Slot::Motion).copied().unwrap_or(node.pos);
+        reader.finish(fields);
+        if transform.inverse().is_none() {
+            let message = format!(
+                "the transform of this `{}` is not invertible (a scale of 0?)",
+                node.type_name
+            );
+            self.error(scope, node.pos, message);
+            return;
+        }
+        let inner = match &place.moving {
+            Some(moving) => {
+                if motion.is_some() {
+                    self.warning(
+                        scope,
+                        node.pos,
+                        "an FTransform inside a moving FTransform: its motion is ignored \
+                         (motions do not compose)",
+                    );
+                }
+                Place {
+                    group: place.group,
+                    moving: Some(Moving {
+                        transform: moving.transform.then(&transform),
+                        ..moving.clone()
+                    }),
+                    depth: place.depth + 1,
+                }
+            }
+            None => {
+                let id = GroupId(self.next_group);
+                let group = Group {
+                    name,
+                    parent: place.group,
+                    transform,
+                };
+                if let Err(e) = self.scene.set_group(id, group) {
+                    self.scene_error(scope, node.pos, &e);
+                    return;
+                }
+                let Some(next) = self.next_group.checked_add(1) else {
+                    self.error(scope, node.pos, "group ids run out");
+                    self.stopped = true;
+                    return;
+                };
+                self.next_group = next;
+                Place {
+                    group: Some(id),
+                    moving: motion.map(|motion| Moving {
+                        transform: Transform::IDENTITY,
+                        motion,
+                        pos: motion_pos,
+                    }),
+                    depth: place.depth + 1,
+                }
+            }
+        };
+        for field in children {
+            match &field.value {
+                Value::NodeList(list) => {
+                    for r in list {
+                        self.visit(scope, r, &inner);
+                    }
+                }
+                Value::Node(r) => self.visit(scope, r, &inner),
+                Value::EmptyList => {}
+                _ => self.error(scope, field.value_pos, "`children` should be a list of nodes"),
+            }
+        }
+    }
+
+    fn inline<'d>(&mut self, scope: &Scope<'d>, node: &'d Node, place: &Place) {
+        let mut reader = Reader {
+            issues: &mut self.issues,
+            scope,
+            positions: BTreeMap::new(),
+        };
+        let mut fields = Fields::new(node);
+        let url_field = fields.get("url");
+        let urls = url_field.and_then(|f| reader.strings(f)).unwrap_or_default();
+        fields.get("bboxCenter");
+        fields.get("bboxSize");
+        reader.finish(fields);
+        let pos = url_field.map_or(node.pos, |f| f.value_pos);
+        let mut failures = Vec::new();
+        for url in urls {
+            let url = url.trim();
+            match classify(url) {
+                Url::Remote => {
+                    self.warning(scope, pos, format!("remote url not fetched: {url}"));
+                }
+                Url::Other => self.warning(
+                    scope,
+                    pos,
+                    format!("url not followed (only relative paths are read): {url}"),
+                ),
+                Url::Relative(relative) => {
+                    let base = scope.file.as_deref().unwrap_or(&self.root_path);
+                    let path = join(base, relative);
+                    match self.read_inline(scope, &path, pos, place) {
+                        Ok(()) => {
+                            for message in failures {
+                                self.warning(scope, pos, message);
+                            }
+                            return;
+                        }
+                        Err(Some(message)) => failures.push(message),
+                        Err(None) => return,
+                    }
+                }
+            }
+        }
+        for message in failures {
+            self.error(scope, pos, message);
+        }
+    }
+
+    /// Reads one `Inline` file into `place`. `Err(Some)`: it could not be read (another url
+    /// may be tried); `Err(None)`: an error already reported.
+    fn read_inline(
+        &mut self,
+        scope: &Scope<'_>,
+        path: &str,
+        pos: Pos,
+        place: &Place,
+    ) -> Result<(), Option<String>> {
+        if self.inline_stack.iter().any(|p| p == path) {
+            let root = if self.root_path.is_empty() {
+                "<input>"
+            } else {
+                &self.root_path
+            };
+            let chain: Vec<&str> = std::iter::once(root)
+                .chain(self.inline_stack.iter().map(String::as_str))
+                .chain(std::iter::once(path))
+                .collect();
+            let message = format!("Inline cycle: {}", chain.join(" -> "));
+            self.error(scope, pos, message);
+            return Err(None);
+        }
+        if self.inline_stack.len() >= MAX_INLINE_DEPTH {
+            let message =
+                format!("Inline files nest deeper than the limit of {MAX_INLINE_DEPTH}: {path}");
+            self.error(scope, pos, message);
+            return Err(None);
+        }
+        if self.n_files >= MAX_INLINE_FILES {
+            let message = format!("more than {MAX_INLINE_FILES} Inline files; {path} not read");
+            self.error(scope, pos, message);
+            self.stopped = true;
+            return Err(None);
+        }
+        let text = (self.resolve)(path).map_err(|e| Some(format!("cannot read Inline `{path}`: {e}")))?;
+        self.total_bytes = self.total_bytes.saturating_add(text.len());
+        if self.total_bytes > MAX_TOTAL_BYTES {
+            let message = format!("the files read exceed {MAX_TOTAL_BYTES} bytes; {path} not read");
+            self.error(scope, pos, message);
+            self.stopped = true;
+            return Err(None);
+        }
+        self.n_files += 1;
+        let doc = parser::parse(&text, Some(path), &mut self.issues);
+        let inner_scope = Scope::new(&doc, self.n_files, Some(path.to_string()));
+        let inner = Place {
+            depth: place.depth + 1,
+            ..place.clone()
+        };
+        self.inline_stack.push(path.to_string());
+        for r in &doc.nodes {
+            self.visit(&inner_scope, r, &inner);
+        }
+        self.inline_stack.pop();
+        Ok(())
+    }
+}
+
+/// The slot an object error is about.
+fn slot_of(e: &ObjectError) -> Option<Slot> {
+    match e {
+        ObjectError::Compile { slot, .. }
+        | ObjectError::MissingOutput { slot, .. }
+        | ObjectError::BadDomain { slot }
+        | ObjectError::BadTransform { slot }
+        | ObjectError::BadTiming { slot }
+        | ObjectError::BadParameters { slot }
+        | ObjectError::BadColorMap { slot, .. } => Some(*slot),
+        _ => None,
+    }
+}
+
+enum Url<'u> {
+    Remote,
+    Other,
+    Relative(&'u str),
+}
+
+fn classify(url: &str) -> Url<'_> {
+    let lower = url.to_ascii_lowercase();
+    if ["http://", "https://", "ftp://"]
+        .iter()
+        .any(|s| lower.starts_with(s))
+    {
+        return Url::Remote;
+    }
+    let scheme = url
+        .find(':')
+        .is_some_and(|i| !url[..i].contains(['/', '\\']));
+    if url.is_empty() || scheme || url.starts_with(['/', '\\']) {
+        return Url::Other;
+    }
+    // A fragment names a node inside the file; the whole file is read.
+    Url::Relative(url.split('#').next().unwrap_or(url))
+}
+
+/// `relative` against the directory of `base`, with `.` and `..` resolved where possible.
+fn join(base: &str, relative: &str) -> String {
+    let mut parts: Vec<&str> = base.split(['/', '\\']).collect();
+    parts.pop();
+    parts.retain(|p| !p.is_empty() && *p != ".");
+    for part in relative.split(['/', '\\']) {
+        match part {
+            "" | "." => {}
+            ".." if parts.last().is_some_and(|p| *p != "..") => {
+                parts.pop();
+            }
+            part => parts.push(part),
+        }
+    }
+    parts.join("/")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn joins_relative_paths() {
+        assert_eq!(join("", "a.wrl"), "a.wrl");
+        assert_eq!(join("scenes/root.wrl", "sub/b.wrl"), "scenes/sub/b.wrl");
+        assert_eq!(join("scenes/sub/b.wrl", "../c.wrl"), "scenes/c.wrl");
+        assert_eq!(join("a.wrl", "../x/./y.wrl"), "../x/y.wrl");
+        assert!(matches!(classify("HTTP://x/y.wrl"), Url::Remote));
+        assert!(matches!(classify("file:///etc/passwd"), Url::Other));
+        assert!(matches!(classify("/etc/passwd"), Url::Other));
+        assert!(matches!(classify("c.wrl#Node"), Url::Relative("c.wrl")));
+    }
+}
