@@ -41,6 +41,7 @@ pub mod bvh;
 pub mod compile;
 pub mod eval;
 mod function;
+pub mod fvrml;
 pub mod limits;
 pub mod mesh;
 pub mod object;

@@ -35,7 +35,10 @@ fn load_err(text: &str) -> Vec<Issue> {
 }
 
 fn objects(scene: &Scene) -> Vec<(ObjectId, Option<GroupId>, &Object)> {
-    scene.objects().map(|(id, o)| (id, o.group, &o.object)).collect()
+    scene
+        .objects()
+        .map(|(id, o)| (id, o.group, &o.object))
+        .collect()
 }
 
 /// The warning containing `text`, with its line.
@@ -99,7 +102,12 @@ fn figure_7_4_loads_as_printed() {
     let force = data.physics.force.as_ref().unwrap();
     assert!(force.enabled);
     assert_eq!(force.parameters, [[-1.0, 1.0], [0.0, 1.0], [-1.0, 1.0]]);
-    assert!(force.formula.as_str().contains("function parametric_z (u, v, w)"));
+    assert!(
+        force
+            .formula
+            .as_str()
+            .contains("function parametric_z (u, v, w)")
+    );
     // The helical field is a unit vector everywhere in the cylinder.
     for p in [
         DVec3::new(0.3, 0.1, -0.4),
@@ -118,7 +126,10 @@ fn figure_7_4_loads_as_printed() {
     let w = &loaded.warnings;
     assert!(w.iter().all(|i| i.severity == Severity::Warning));
     assert_eq!(
-        warning_line(w, "remote url not fetched: http://......MovieTextureWhirlpool.wrl"),
+        warning_line(
+            w,
+            "remote url not fetched: http://......MovieTextureWhirlpool.wrl"
+        ),
         20
     );
     assert_eq!(warning_line(w, "typographic quotes"), 3);
@@ -138,7 +149,10 @@ fn figure_7_8_loads_as_printed() {
     assert_eq!(in_group, Some(gid));
     let data = object.data();
     let geometry = data.geometry.as_ref().unwrap();
-    assert_eq!(geometry.shape, Shape::Implicit(fdsl::object::Formula::new("0").unwrap()));
+    assert_eq!(
+        geometry.shape,
+        Shape::Implicit(fdsl::object::Formula::new("0").unwrap())
+    );
     let tension = data.physics.tension.as_ref().unwrap();
     assert!(tension.enabled);
     assert_eq!(tension.formula.as_str(), "1");
@@ -167,7 +181,7 @@ fn figure_7_8_loads_as_printed() {
     assert_eq!(lines_of(w, "`Script` node skipped"), vec![27, 33, 38, 43]);
     assert_eq!(warning_line(w, "`TextToSpeech` node skipped"), 36);
     // The Script after a PROTO without a body is still found: nothing else went wrong.
-    assert_eq!(w.len(), 15, "{w:#?}");
+    assert_eq!(w.len(), 16, "{w:#?}");
     assert_round_trip(&loaded.scene);
 }
 
@@ -206,7 +220,9 @@ fn hand_written_watermelon_loads_and_round_trips() {
     // Red at the centre, green on the rind.
     let centre = s.color(ColorSlot::Diffuse, DVec3::ZERO, 0.0).unwrap();
     assert!(centre[0] > 0.8 && centre[1] < 0.2, "{centre:?}");
-    let rind = s.color(ColorSlot::Diffuse, DVec3::new(0.0, -0.995, 0.0), 0.0).unwrap();
+    let rind = s
+        .color(ColorSlot::Diffuse, DVec3::new(0.0, -0.995, 0.0), 0.0)
+        .unwrap();
     assert!(rind[1] > rind[0] && rind[1] > rind[2], "{rind:?}");
     assert_eq!(s.scalar(Paintable::Tension, DVec3::X, 0.0), Some(1.0));
     assert_eq!(s.scalar(Paintable::Friction, DVec3::X, 0.0), Some(0.1));
@@ -214,7 +230,9 @@ fn hand_written_watermelon_loads_and_round_trips() {
         s.scalar(Paintable::Density, DVec3::new(0.0, -0.9, 0.0), 0.0),
         Some(0.8)
     );
-    let inner = s.scalar(Paintable::Density, DVec3::new(0.01, -0.2, 0.03), 0.0).unwrap();
+    let inner = s
+        .scalar(Paintable::Density, DVec3::new(0.01, -0.2, 0.03), 0.0)
+        .unwrap();
     assert!((0.1..=0.5).contains(&inner), "{inner}");
     assert_round_trip(&loaded.scene);
 }
@@ -286,7 +304,9 @@ fn transforms_follow_vrml_order_and_nest() {
     let p = world.point(DVec3::ZERO);
     assert!((p - DVec3::new(3.0, 1.0, 10.0)).length() < 1e-12, "{p}");
     let mut sampler = loaded.scene.sampler();
-    let v = sampler.value(ObjectId(0), DVec3::new(3.0, 1.0, 10.0), 0.0).unwrap();
+    let v = sampler
+        .value(ObjectId(0), DVec3::new(3.0, 1.0, 10.0), 0.0)
+        .unwrap();
     assert!((v - 1.0).abs() < 1e-12);
     assert_round_trip(&loaded.scene);
 }
@@ -307,18 +327,28 @@ fn ftransform_motion_moves_its_shapes() {
         USE Ball
     "#;
     let loaded = load(text);
-    assert_eq!(loaded.scene.groups().count(), 1, "nested groups are flattened under motion");
+    assert_eq!(
+        loaded.scene.groups().count(),
+        1,
+        "nested groups are flattened under motion"
+    );
     let objs = objects(&loaded.scene);
     assert_eq!(objs.len(), 2);
     let moving = objs[0].2.data();
     let motion = moving.motion.as_ref().unwrap();
     assert_eq!(motion.timing.cycle_interval_secs, 4.0);
     assert_eq!(motion.axis, DVec3::Y);
-    assert!(objs[1].2.data().motion.is_none(), "USE outside keeps the plain shape");
+    assert!(
+        objs[1].2.data().motion.is_none(),
+        "USE outside keeps the plain shape"
+    );
     assert_eq!(objs[1].2.data().name, "Ball");
     let mut sampler = loaded.scene.sampler();
     // At t = 2 s the cycle is half done: local t = 0.5, so the ball is at (0.5, 1, 2).
-    let at = sampler.world_from_object(ObjectId(0), 2.0).unwrap().point(DVec3::ZERO);
+    let at = sampler
+        .world_from_object(ObjectId(0), 2.0)
+        .unwrap()
+        .point(DVec3::ZERO);
     assert!((at - DVec3::new(0.5, 1.0, 2.0)).length() < 1e-12, "{at}");
     assert_round_trip(&loaded.scene);
 }
@@ -333,7 +363,11 @@ fn def_and_use_copy_shapes_and_groups() {
         Transform { translation 0 5 0 children [ USE G ] }
     "#;
     let loaded = load(text);
-    let groups: Vec<_> = loaded.scene.groups().map(|(id, g)| (id, g.clone())).collect();
+    let groups: Vec<_> = loaded
+        .scene
+        .groups()
+        .map(|(id, g)| (id, g.clone()))
+        .collect();
     // G, its Transform, the outer Transform, and the copy of G with its Transform.
     assert_eq!(groups.len(), 5);
     assert_eq!(groups[3].1.name, "G");
@@ -344,7 +378,12 @@ fn def_and_use_copy_shapes_and_groups() {
     assert!(objs.iter().all(|o| o.2.data() == objs[0].2.data()));
     assert_eq!(
         objs.iter().map(|o| o.1).collect::<Vec<_>>(),
-        vec![Some(GroupId(0)), Some(GroupId(1)), Some(GroupId(3)), Some(GroupId(4))]
+        vec![
+            Some(GroupId(0)),
+            Some(GroupId(1)),
+            Some(GroupId(3)),
+            Some(GroupId(4))
+        ]
     );
     assert_round_trip(&loaded.scene);
 
@@ -377,14 +416,20 @@ fn inline_reads_local_files_through_the_resolver() {
         ),
         ("scenes/sub/deeper.wrl", "FShape { geometry Box { } }"),
         ("scenes/loop_a.wrl", "Inline { url \"loop_b.wrl\" }"),
-        ("scenes/loop_b.wrl", "Group { children Inline { url [\"loop_a.wrl\"] } }"),
-        ("scenes/bad.wrl", "FShape {\n geometry FGeometry { definition \"1-x^\" } }"),
+        (
+            "scenes/loop_b.wrl",
+            "Group { children Inline { url [\"loop_a.wrl\"] } }",
+        ),
+        (
+            "scenes/bad.wrl",
+            "FShape {\n geometry FGeometry { definition \"1-x^\" } }",
+        ),
     ]
     .into_iter()
     .collect();
-    let mut asked = Vec::new();
+    let asked = std::cell::RefCell::new(Vec::new());
     let mut resolve = |path: &str| {
-        asked.push(path.to_string());
+        asked.borrow_mut().push(path.to_string());
         files
             .get(path)
             .map(|s| (*s).to_string())
@@ -397,21 +442,34 @@ fn inline_reads_local_files_through_the_resolver() {
     let text = "Transform { translation 1 0 0 children [ Inline { url [\"http://x/y.wrl\" \"missing.wrl\" \"parts/ball.wrl\"] } ] }";
     let loaded = fvrml::load(text, &options, &mut resolve).unwrap();
     assert_eq!(
-        asked,
-        vec!["scenes/missing.wrl", "scenes/parts/ball.wrl", "scenes/sub/deeper.wrl"]
+        *asked.borrow(),
+        vec![
+            "scenes/missing.wrl",
+            "scenes/parts/ball.wrl",
+            "scenes/sub/deeper.wrl"
+        ]
     );
     let objs = objects(&loaded.scene);
     assert_eq!(objs.len(), 2);
     assert!(objs.iter().all(|o| o.1 == Some(GroupId(0))));
-    assert_eq!(warning_line(&loaded.warnings, "remote url not fetched: http://x/y.wrl"), 1);
-    assert_eq!(warning_line(&loaded.warnings, "cannot read Inline `scenes/missing.wrl`"), 1);
+    assert_eq!(
+        warning_line(&loaded.warnings, "remote url not fetched: http://x/y.wrl"),
+        1
+    );
+    assert_eq!(
+        warning_line(&loaded.warnings, "cannot read Inline `scenes/missing.wrl`"),
+        1
+    );
 
     // A cycle is an error naming the chain.
     let issues = match fvrml::load("Inline { url \"loop_a.wrl\" }", &options, &mut resolve) {
         Err(e) => e.issues,
         Ok(_) => panic!("a cycle must fail"),
     };
-    let cycle = issues.iter().find(|i| i.message.contains("Inline cycle")).unwrap();
+    let cycle = issues
+        .iter()
+        .find(|i| i.message.contains("Inline cycle"))
+        .unwrap();
     assert_eq!(
         cycle.message,
         "Inline cycle: scenes/root.wrl -> scenes/loop_a.wrl -> scenes/loop_b.wrl -> scenes/loop_a.wrl"
@@ -425,24 +483,41 @@ fn inline_reads_local_files_through_the_resolver() {
     };
     let error = issues.iter().find(|i| i.is_error()).unwrap();
     assert_eq!(error.location.file.as_deref(), Some("scenes/bad.wrl"));
-    assert_eq!((error.location.line, error.location.column), (2, 33));
+    assert_eq!((error.location.line, error.location.column), (2, 34));
 
     // Without a resolver that knows the file, the load fails with the reason.
     let issues = load_err("Inline { url \"nowhere.wrl\" }");
-    assert!(issues[0].message.contains("cannot read Inline `nowhere.wrl`: no file nowhere.wrl"));
+    assert!(
+        issues[0]
+            .message
+            .contains("cannot read Inline `nowhere.wrl`: no file nowhere.wrl")
+    );
 }
 
 #[test]
 fn inline_depth_is_limited() {
     let mut resolve = |path: &str| {
-        let n: usize = path.trim_end_matches(".wrl").trim_start_matches('f').parse().unwrap();
+        let n: usize = path
+            .trim_end_matches(".wrl")
+            .trim_start_matches('f')
+            .parse()
+            .unwrap();
         Ok(format!("Inline {{ url \"f{}.wrl\" }}", n + 1))
     };
-    let issues = match fvrml::load("Inline { url \"f0.wrl\" }", &LoadOptions::default(), &mut resolve) {
+    let issues = match fvrml::load(
+        "Inline { url \"f0.wrl\" }",
+        &LoadOptions::default(),
+        &mut resolve,
+    ) {
         Err(e) => e.issues,
         Ok(_) => panic!("too deep must fail"),
     };
-    assert!(issues[0].message.contains("Inline files nest deeper than the limit of 8"), "{issues:#?}");
+    assert!(
+        issues[0]
+            .message
+            .contains("Inline files nest deeper than the limit of 8"),
+        "{issues:#?}"
+    );
 }
 
 #[test]
@@ -458,14 +533,25 @@ fn formula_errors_point_into_the_file() {
     assert!(e.message.contains("1 - x^2 -"), "{}", e.message);
     assert!(e.message.contains('^'), "{}", e.message);
     let shown = e.to_string();
-    assert!(shown.starts_with("<input>:2:35: error: geometry:"), "{shown}");
+    assert!(
+        shown.starts_with("<input>:2:35: error: geometry:"),
+        "{shown}"
+    );
 
     let issues = load_err(
         "FShape { appearance FAppearance { material FMaterial {\n diffuseColor \"x+y\" } } }",
     );
     assert_eq!(issues[0].location.line, 2);
-    assert!(issues[0].message.contains("diffuse colour"), "{}", issues[0].message);
-    assert!(issues[0].message.contains("no output `r`"), "{}", issues[0].message);
+    assert!(
+        issues[0].message.contains("diffuse colour"),
+        "{}",
+        issues[0].message
+    );
+    assert!(
+        issues[0].message.contains("no output `r`"),
+        "{}",
+        issues[0].message
+    );
 }
 
 #[test]
@@ -486,7 +572,7 @@ fn parametric_geometry_kinds() {
         Shape::Parametric {
             kind, parameters, ..
         } => Some((*kind, *parameters)),
-        Shape::Implicit(_) => None,
+        _ => None,
     };
     assert_eq!(
         kind(&shapes[0]),
@@ -494,30 +580,65 @@ fn parametric_geometry_kinds() {
     );
     assert_eq!(
         kind(&shapes[1]),
-        Some((ParametricKind::Surface, [[-1.0, 1.0], [-1.0, 1.0], [0.0, 1.0]]))
+        Some((
+            ParametricKind::Surface,
+            [[-1.0, 1.0], [-1.0, 1.0], [0.0, 1.0]]
+        ))
     );
     assert_eq!(kind(&shapes[2]).map(|k| k.0), Some(ParametricKind::Solid));
     assert_eq!(
         kind(&shapes[3]),
-        Some((ParametricKind::Surface, [[0.0, 2.0], [0.0, 1.0], [0.0, 1.0]]))
+        Some((
+            ParametricKind::Surface,
+            [[0.0, 2.0], [0.0, 1.0], [0.0, 1.0]]
+        ))
     );
     assert_eq!(kind(&shapes[4]), None);
     assert_round_trip(&loaded.scene);
 }
 
 #[test]
-fn polygon_meshes_are_reported_and_skipped() {
-    let text = "Shape {\n geometry IndexedFaceSet { coord Coordinate { point [0 0 0, 1 0 0, 0 1 0] } coordIndex [0 1 2 -1] } }\nShape { geometry Sphere { } }";
-    let loaded = load(text);
-    assert_eq!(loaded.scene.len(), 1);
-    assert_eq!(
-        warning_line(&loaded.warnings, "polygon meshes are not yet part of the object model"),
-        2
+fn indexed_face_sets_become_meshes() {
+    // A tetrahedron, faces counter-clockwise seen from outside, one face a quad split in two.
+    let text = "Shape {\n geometry IndexedFaceSet { coord Coordinate { point [0 0 0, 1 0 0, 0 1 0, 0 0 1] }
+          coordIndex [0 2 1 -1 0 1 3 -1 0 3 2 -1 1 2 3] solid TRUE } }
+        FShape { geometry FGeometry { mesh IndexedFaceSet { ccw FALSE coord Coordinate { point [0 0 0, 1 0 0, 0 1 0, 0 0 1] }
+          coordIndex [0 1 2 -1 0 3 1 -1 0 2 3 -1 1 3 2 -1] } translation 5 0 0 bboxSize 4 4 4 } }
+        Shape { geometry IndexedFaceSet { coord Coordinate { point [0 0 0] } coordIndex [0 0 7] } }";
+    let issues = load_err(text);
+    assert_eq!(issues.len(), 1, "{issues:#?}");
+    assert!(
+        issues[0].message.contains("`coordIndex` holds 7"),
+        "{issues:#?}"
     );
-    // The document keeps the mesh for whoever reads it.
-    let parsed = fvrml::parse(text);
-    let written = fvrml::write(&parsed.document);
-    assert!(written.contains("IndexedFaceSet"), "{written}");
+    assert_eq!(issues[0].location.line, 6);
+
+    let text = text.rsplit_once("Shape {").unwrap().0;
+    let loaded = load(text);
+    let objs = objects(&loaded.scene);
+    assert_eq!(objs.len(), 2);
+    let (a, b) = (objs[0].2.data(), objs[1].2.data());
+    let (Some(Shape::Mesh(ma)), Some(Shape::Mesh(mb))) = (
+        a.geometry.as_ref().map(|g| &g.shape),
+        b.geometry.as_ref().map(|g| &g.shape),
+    ) else {
+        panic!("meshes expected");
+    };
+    assert_eq!(
+        ma.triangles(),
+        mb.triangles(),
+        "ccw FALSE turns the faces over"
+    );
+    assert!(ma.is_closed());
+    let mut s = objs[0].2.sampler();
+    assert!(s.value(DVec3::splat(0.1), 0.0) > 0.0);
+    assert!(s.value(DVec3::splat(1.0), 0.0) < 0.0);
+    let mut s = objs[1].2.sampler();
+    assert!(s.value(DVec3::new(5.1, 0.1, 0.1), 0.0) > 0.0);
+    assert_round_trip(&loaded.scene);
+    let written = fvrml::write(&fvrml::save(&loaded.scene));
+    assert!(written.contains("geometry IndexedFaceSet {"), "{written}");
+    assert!(written.contains("mesh IndexedFaceSet {"), "{written}");
 }
 
 #[test]

@@ -222,10 +222,10 @@ impl Document {
                     Value::Numbers(v) if v.is_empty() => {
                         return Err(InvalidDocument::EmptyNumbers(field.name.clone()));
                     }
-                    Value::Numbers(v) | Value::NumberList(v) => {
-                        if !v.iter().all(|x| x.is_finite()) {
-                            return Err(InvalidDocument::NotFinite(field.name.clone()));
-                        }
+                    Value::Numbers(v) | Value::NumberList(v)
+                        if !v.iter().all(|x| x.is_finite()) =>
+                    {
+                        return Err(InvalidDocument::NotFinite(field.name.clone()));
                     }
                     Value::Node(r) => stack.push(r),
                     Value::NodeList(list) => stack.extend(list),

@@ -231,7 +231,9 @@ impl<'a> Lexer<'a> {
                 i += 1;
             }
         }
-        let mantissa_digits = self.text[digits_from..i].bytes().any(|b| b.is_ascii_digit());
+        let mantissa_digits = self.text[digits_from..i]
+            .bytes()
+            .any(|b| b.is_ascii_digit());
         if !mantissa_digits {
             // A lone sign (or sign and dot).
             self.advance_to(i.max(start + 1));

@@ -5,11 +5,11 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
-use super::document::{Document, Node, NodeRef, Pos, Value};
+use super::document::{Document, Field, Node, NodeRef, Pos, Value};
 use super::read::{Fields, Reader, Scope, address};
 use super::{
-    Issue, Issues, MAX_INLINE_DEPTH, MAX_INLINE_FILES, MAX_LOAD_STEPS,
-    MAX_NESTING_DEPTH, MAX_TOTAL_BYTES, parser,
+    Issue, Issues, MAX_INLINE_DEPTH, MAX_INLINE_FILES, MAX_LOAD_STEPS, MAX_NESTING_DEPTH,
+    MAX_TOTAL_BYTES, parser,
 };
 use crate::object::{Motion, Object, ObjectError, Slot, Transform};
 use crate::scene::{Group, GroupId, ObjectId, Scene, SceneError};
@@ -150,6 +150,14 @@ struct Moving {
     pos: Pos,
 }
 
+/// What a group node says.
+struct GroupNode<'d> {
+    name: String,
+    transform: Transform,
+    motion: Option<(Motion, Pos)>,
+    children: Vec<&'d Field>,
+}
+
 struct Loader<'r> {
     resolve: &'r mut dyn FnMut(&str) -> Result<String, String>,
     issues: Issues,
@@ -236,7 +244,7 @@ impl Loader<'_> {
         };
         let data = reader.object(node);
         let positions = reader.positions;
-        let object = data.and_then(|data| match Object::new(data) {
+        let object = match Object::new(data) {
             Ok(object) => Some(object),
             Err(e) => {
                 let pos = slot_of(&e)
@@ -245,7 +253,7 @@ impl Loader<'_> {
                 self.error(scope, pos, e.to_string());
                 None
             }
-        });
+        };
         self.cache.insert(key, object.clone());
         object
     }
@@ -299,6 +307,31 @@ impl Loader<'_> {
     }
 
     fn group<'d>(&mut self, scope: &Scope<'d>, node: &'d Node, place: &Place) {
+        let group = self.read_group(scope, node);
+        let children = group.children.clone();
+        let Some(inner) = self.enter(scope, node, place, group) else {
+            return;
+        };
+        for field in children {
+            match &field.value {
+                Value::NodeList(list) => {
+                    for r in list {
+                        self.visit(scope, r, &inner);
+                    }
+                }
+                Value::Node(r) => self.visit(scope, r, &inner),
+                Value::EmptyList => {}
+                _ => self.error(
+                    scope,
+                    field.value_pos,
+                    "`children` should be a list of nodes",
+                ),
+            }
+        }
+    }
+
+    /// The fields of a `Group`, `Transform` or `FTransform`.
+    fn read_group<'d>(&mut self, scope: &Scope<'d>, node: &'d Node) -> GroupNode<'d> {
         let mut reader = Reader {
             issues: &mut self.issues,
             scope,
@@ -320,75 +353,80 @@ impl Loader<'_> {
         fields.get("bboxCenter");
         fields.get("bboxSize");
         let children = fields.all("children");
-        let motion_pos = reader.positions.get(&Slot::Motion).copied().unwrap_or(node.pos);
+        let motion_pos = reader
+            .positions
+            .get(&Slot::Motion)
+            .copied()
+            .unwrap_or(node.pos);
         reader.finish(fields);
-        if transform.inverse().is_none() {
+        GroupNode {
+            name,
+            transform,
+            motion: motion.map(|m| (m, motion_pos)),
+            children,
+        }
+    }
+
+    /// Makes the group (or, under a moving `FTransform`, folds its transform into the
+    /// motion's frame); returns where its children go.
+    fn enter(
+        &mut self,
+        scope: &Scope<'_>,
+        node: &Node,
+        place: &Place,
+        group: GroupNode<'_>,
+    ) -> Option<Place> {
+        if group.transform.inverse().is_none() {
             let message = format!(
                 "the transform of this `{}` is not invertible (a scale of 0?)",
                 node.type_name
             );
             self.error(scope, node.pos, message);
-            return;
+            return None;
         }
-        let inner = match &place.moving {
-            Some(moving) => {
-                if motion.is_some() {
-                    self.warning(
-                        scope,
-                        node.pos,
-                        "an FTransform inside a moving FTransform: its motion is ignored \
-                         (motions do not compose)",
-                    );
-                }
-                Place {
-                    group: place.group,
-                    moving: Some(Moving {
-                        transform: moving.transform.then(&transform),
-                        ..moving.clone()
-                    }),
-                    depth: place.depth + 1,
-                }
+        if let Some(moving) = &place.moving {
+            if group.motion.is_some() {
+                self.warning(
+                    scope,
+                    node.pos,
+                    "an FTransform inside a moving FTransform: its motion is ignored \
+                     (motions do not compose)",
+                );
             }
-            None => {
-                let id = GroupId(self.next_group);
-                let group = Group {
-                    name,
-                    parent: place.group,
-                    transform,
-                };
-                if let Err(e) = self.scene.set_group(id, group) {
-                    self.scene_error(scope, node.pos, &e);
-                    return;
-                }
-                let Some(next) = self.next_group.checked_add(1) else {
-                    self.error(scope, node.pos, "group ids run out");
-                    self.stopped = true;
-                    return;
-                };
-                self.next_group = next;
-                Place {
-                    group: Some(id),
-                    moving: motion.map(|motion| Moving {
-                        transform: Transform::IDENTITY,
-                        motion,
-                        pos: motion_pos,
-                    }),
-                    depth: place.depth + 1,
-                }
-            }
+            return Some(Place {
+                group: place.group,
+                moving: Some(Moving {
+                    transform: moving.transform.then(&group.transform),
+                    ..moving.clone()
+                }),
+                depth: place.depth + 1,
+            });
+        }
+        let id = GroupId(self.next_group);
+        let scene_group = Group {
+            name: group.name,
+            parent: place.group,
+            transform: group.transform,
         };
-        for field in children {
-            match &field.value {
-                Value::NodeList(list) => {
-                    for r in list {
-                        self.visit(scope, r, &inner);
-                    }
-                }
-                Value::Node(r) => self.visit(scope, r, &inner),
-                Value::EmptyList => {}
-                _ => self.error(scope, field.value_pos, "`children` should be a list of nodes"),
-            }
+        if let Err(e) = self.scene.set_group(id, scene_group) {
+            self.scene_error(scope, node.pos, &e);
+            return None;
         }
+        let Some(next) = self.next_group.checked_add(1) else {
+            self.error(scope, node.pos, "group ids run out");
+            self.stopped = true;
+            return None;
+        };
+        self.next_group = next;
+        Some(Place {
+            group: Some(id),
+            moving: group.motion.map(|(motion, pos)| Moving {
+                transform: Transform::IDENTITY,
+                motion,
+                pos,
+            }),
+            depth: place.depth + 1,
+        })
     }
 
     fn inline<'d>(&mut self, scope: &Scope<'d>, node: &'d Node, place: &Place) {
@@ -399,7 +437,9 @@ impl Loader<'_> {
         };
         let mut fields = Fields::new(node);
         let url_field = fields.get("url");
-        let urls = url_field.and_then(|f| reader.strings(f)).unwrap_or_default();
+        let urls = url_field
+            .and_then(|f| reader.strings(f))
+            .unwrap_or_default();
         fields.get("bboxCenter");
         fields.get("bboxSize");
         reader.finish(fields);
@@ -472,7 +512,8 @@ impl Loader<'_> {
             self.stopped = true;
             return Err(None);
         }
-        let text = (self.resolve)(path).map_err(|e| Some(format!("cannot read Inline `{path}`: {e}")))?;
+        let text =
+            (self.resolve)(path).map_err(|e| Some(format!("cannot read Inline `{path}`: {e}")))?;
         self.total_bytes = self.total_bytes.saturating_add(text.len());
         if self.total_bytes > MAX_TOTAL_BYTES {
             let message = format!("the files read exceed {MAX_TOTAL_BYTES} bytes; {path} not read");

@@ -17,8 +17,12 @@
 //! FVRML text does not carry (the binary codec, [`Scene::encode`], does), and except that
 //! ids are those the loader assigns (see [`LoadOptions`]).
 //!
-//! The dialect (node and field names, extensions, limits) is described in
-//! `/work/notes/fvrml-docs.md` and on the types below.
+//! The dialect (node and field names, our extensions, limits) is described in the `fdsl`
+//! section of `ARCHITECTURE.md` and on the items below. In short: the thesis's `FShape`,
+//! `FGeometry`, `FAppearance`, `FMaterial`, `FTexture3D`, `FPhysics`, `FSurface`,
+//! `FTension`, `FFriction`, `FDensity`, `FForce` and `FTransform`; our `FColorMap` and
+//! `FDepth`; VRML97's `Shape`, `Appearance`, `Material`, `Box`, `Sphere`, `Cylinder`,
+//! `Cone`, `IndexedFaceSet`, `Coordinate`, `Transform`, `Group` and `Inline`.
 //!
 //! ```
 //! use fdsl::fvrml::{self, LoadOptions};

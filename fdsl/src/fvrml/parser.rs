@@ -162,7 +162,10 @@ impl<'a> Parser<'a, '_> {
                 .node(type_name.to_string(), None, pos, depth)
                 .map(|n| NodeRef::Node(Box::new(n))),
             Tok::LBrace | Tok::LBracket => {
-                self.error(pos, format!("expected a node, found {}", describe(&token.tok)));
+                self.error(
+                    pos,
+                    format!("expected a node, found {}", describe(&token.tok)),
+                );
                 self.skip_balanced(token.tok == Tok::LBrace, pos);
                 None
             }
@@ -184,7 +187,10 @@ impl<'a> Parser<'a, '_> {
             }
             ref tok => {
                 let found = describe(tok);
-                self.error(pos, format!("expected a name after `{after}`, found {found}"));
+                self.error(
+                    pos,
+                    format!("expected a name after `{after}`, found {found}"),
+                );
                 None
             }
         }
@@ -218,7 +224,10 @@ impl<'a> Parser<'a, '_> {
         let open = self.peek(0).pos;
         if self.peek(0).tok != Tok::LBrace {
             let found = describe(&self.peek(0).tok);
-            self.error(open, format!("expected `{{` after `{type_name}`, found {found}"));
+            self.error(
+                open,
+                format!("expected `{{` after `{type_name}`, found {found}"),
+            );
             return None;
         }
         if !is_known(&type_name) {
@@ -229,7 +238,9 @@ impl<'a> Parser<'a, '_> {
         if depth >= MAX_NESTING_DEPTH {
             self.error(
                 pos,
-                format!("nodes nest deeper than the limit of {MAX_NESTING_DEPTH}; this one is skipped"),
+                format!(
+                    "nodes nest deeper than the limit of {MAX_NESTING_DEPTH}; this one is skipped"
+                ),
             );
             self.skip_balanced(true, open);
             return None;
@@ -377,13 +388,19 @@ impl<'a> Parser<'a, '_> {
             Tok::LBracket => self.list(field, depth),
             Tok::RBrace | Tok::Eof | Tok::Ident(_) => {
                 let found = describe(&self.peek(0).tok);
-                self.error(pos, format!("the field `{field}` has no value (found {found})"));
+                self.error(
+                    pos,
+                    format!("the field `{field}` has no value (found {found})"),
+                );
                 None
             }
             _ => {
                 let token = self.next();
                 let found = describe(&token.tok);
-                self.error(pos, format!("the field `{field}` has no value (found {found})"));
+                self.error(
+                    pos,
+                    format!("the field `{field}` has no value (found {found})"),
+                );
                 None
             }
         }
@@ -424,12 +441,11 @@ impl<'a> Parser<'a, '_> {
         let mut n_items = 0usize;
         while !self.stopped {
             let pos = self.peek(0).pos;
-            let item = match self.peek(0).tok {
-                Tok::RBracket => {
-                    self.next();
-                    return Some(value);
-                }
-                Tok::Eof => {
+            let item = match self.list_item(depth) {
+                ListStep::Item(item) => item,
+                ListStep::Skipped => continue,
+                ListStep::Closed => return Some(value),
+                ListStep::End => {
                     let message = format!(
                         "the `[` of `{field}` at {}:{} is never closed",
                         open.line, open.column
@@ -437,44 +453,14 @@ impl<'a> Parser<'a, '_> {
                     self.error(pos, message);
                     return Some(value);
                 }
-                Tok::Number(v) => {
-                    self.next();
-                    Value::Numbers(vec![v])
-                }
-                Tok::Ident("TRUE") => {
-                    self.next();
-                    Value::Bool(true)
-                }
-                Tok::Ident("FALSE") => {
-                    self.next();
-                    Value::Bool(false)
-                }
-                Tok::Str(_) => match self.next().tok {
-                    Tok::Str(s) => Value::String(s),
-                    _ => continue,
-                },
-                Tok::Ident(_) => match self.statement(depth + 1) {
-                    Some(r) => Value::Node(r),
-                    None => continue,
-                },
-                Tok::LBrace | Tok::LBracket => {
-                    let brace = self.next().tok == Tok::LBrace;
-                    self.error(pos, "lists cannot hold lists or bare `{ }`".into());
-                    self.skip_balanced(brace, pos);
-                    continue;
-                }
-                _ => {
-                    let token = self.next();
-                    let found = describe(&token.tok);
-                    self.error(pos, format!("a list cannot hold {found}"));
-                    continue;
-                }
             };
             n_items += 1;
             if n_items > MAX_LIST_ITEMS {
                 self.error(
                     pos,
-                    format!("the list holds more than {MAX_LIST_ITEMS} items; the rest are dropped"),
+                    format!(
+                        "the list holds more than {MAX_LIST_ITEMS} items; the rest are dropped"
+                    ),
                 );
                 self.skip_rest(1, open);
                 return Some(value);
@@ -484,6 +470,45 @@ impl<'a> Parser<'a, '_> {
             }
         }
         Some(value)
+    }
+
+    /// The next item of a list.
+    fn list_item(&mut self, depth: usize) -> ListStep {
+        let pos = self.peek(0).pos;
+        let item = match self.peek(0).tok {
+            Tok::RBracket => {
+                self.next();
+                return ListStep::Closed;
+            }
+            Tok::Eof => return ListStep::End,
+            Tok::Number(v) => Value::Numbers(vec![v]),
+            Tok::Ident("TRUE") => Value::Bool(true),
+            Tok::Ident("FALSE") => Value::Bool(false),
+            Tok::Str(_) => match self.next().tok {
+                Tok::Str(s) => return ListStep::Item(Value::String(s)),
+                _ => return ListStep::Skipped,
+            },
+            Tok::Ident(_) => {
+                return match self.statement(depth + 1) {
+                    Some(r) => ListStep::Item(Value::Node(r)),
+                    None => ListStep::Skipped,
+                };
+            }
+            Tok::LBrace | Tok::LBracket => {
+                let brace = self.next().tok == Tok::LBrace;
+                self.error(pos, "lists cannot hold lists or bare `{ }`".into());
+                self.skip_balanced(brace, pos);
+                return ListStep::Skipped;
+            }
+            _ => {
+                let token = self.next();
+                let found = describe(&token.tok);
+                self.error(pos, format!("a list cannot hold {found}"));
+                return ListStep::Skipped;
+            }
+        };
+        self.next();
+        ListStep::Item(item)
     }
 
     /// Skips a `{ ... }` or `[ ... ]` whose opening token was just taken or is next.
@@ -550,7 +575,10 @@ impl<'a> Parser<'a, '_> {
 
     /// `ROUTE a.b TO c.d`.
     fn skip_route(&mut self, pos: Pos) {
-        self.warning(pos, "ROUTE is not read (events are not supported); skipped".into());
+        self.warning(
+            pos,
+            "ROUTE is not read (events are not supported); skipped".into(),
+        );
         for _ in 0..7 {
             match self.peek(0).tok {
                 Tok::Ident(word) if !matches!(word, "DEF" | "USE" | "PROTO" | "EXTERNPROTO") => {
@@ -566,6 +594,18 @@ impl<'a> Parser<'a, '_> {
             }
         }
     }
+}
+
+/// What the next token of a list gave.
+enum ListStep {
+    /// A value.
+    Item(Value),
+    /// Something that was reported and passed over.
+    Skipped,
+    /// The closing `]`.
+    Closed,
+    /// The end of the text.
+    End,
 }
 
 /// Adds one item to a list value, keeping the list of one kind.

@@ -24,14 +24,15 @@ impl<'d> Reader<'_, 'd> {
         let translation = fields.get("translation").and_then(|f| self.vec3(f));
         let rotation = fields.get("rotation").and_then(|f| self.rotation(f));
         let scale = fields.get("scale").and_then(|f| self.vec3(f));
-        let orientation = fields.get("scaleOrientation").and_then(|f| self.rotation(f));
+        let orientation = fields
+            .get("scaleOrientation")
+            .and_then(|f| self.rotation(f));
         let center = fields.get("center").and_then(|f| self.vec3(f));
         if let Some(field) = fields.get("matrix") {
             let Some(m) = self.fixed(field, 12) else {
                 return Transform::IDENTITY;
             };
-            if translation.is_some() || rotation.is_some() || scale.is_some() || center.is_some()
-            {
+            if translation.is_some() || rotation.is_some() || scale.is_some() || center.is_some() {
                 self.warning(
                     field.pos,
                     "`matrix` replaces `translation`, `rotation`, `scale` and `center`, which are ignored",
@@ -77,7 +78,10 @@ impl<'d> Reader<'_, 'd> {
         let axis = DVec3::new(v[0], v[1], v[2]);
         if axis.length() <= 1e-12 {
             if v[3] != 0.0 {
-                self.warning(field.value_pos, "a rotation about a zero axis is no rotation");
+                self.warning(
+                    field.value_pos,
+                    "a rotation about a zero axis is no rotation",
+                );
             }
             return Some(DQuat::IDENTITY);
         }

@@ -6,9 +6,9 @@ use std::collections::BTreeMap;
 
 use glam::DVec3;
 
+use super::Issues;
 use super::document::{Document, Field, Node, NodeRef, Pos, Value};
 use super::writer::format_number;
-use super::Issues;
 use crate::object::{Formula, Slot};
 
 /// The names `DEF`ined in one file, to resolve `USE`s: a name refers to the last node of
@@ -54,7 +54,9 @@ impl<'d> Scope<'d> {
                     for field in node.fields.iter().rev() {
                         match &field.value {
                             Value::Node(r) => stack.push(Step::Enter(r)),
-                            Value::NodeList(list) => stack.extend(list.iter().rev().map(Step::Enter)),
+                            Value::NodeList(list) => {
+                                stack.extend(list.iter().rev().map(Step::Enter))
+                            }
                             _ => {}
                         }
                     }
@@ -76,7 +78,11 @@ impl<'d> Scope<'d> {
             NodeRef::Null => Ok(None),
             NodeRef::Use { name, .. } => {
                 let at = self.uses.get(&address(r)).copied().unwrap_or(u64::MAX);
-                let defs = self.defs.get(name.as_str()).map(Vec::as_slice).unwrap_or(&[]);
+                let defs = self
+                    .defs
+                    .get(name.as_str())
+                    .map(Vec::as_slice)
+                    .unwrap_or(&[]);
                 let before = defs.partition_point(|(ordinal, _)| *ordinal < at);
                 match before.checked_sub(1).and_then(|i| defs.get(i)) {
                     Some((_, node)) => Ok(Some(node)),
@@ -159,14 +165,20 @@ impl<'d> Reader<'_, 'd> {
             if !fields.used[i] {
                 self.warning(
                     field.pos,
-                    format!("`{}` has no field `{}` that FVRML reads; ignored", node.type_name, field.name),
+                    format!(
+                        "`{}` has no field `{}` that FVRML reads; ignored",
+                        node.type_name, field.name
+                    ),
                 );
             } else if field.name != "children"
                 && node.fields[i + 1..].iter().any(|f| f.name == field.name)
             {
                 self.warning(
                     field.pos,
-                    format!("the field `{}` is given again later; the last one counts", field.name),
+                    format!(
+                        "the field `{}` is given again later; the last one counts",
+                        field.name
+                    ),
                 );
             }
         }
@@ -185,7 +197,11 @@ impl<'d> Reader<'_, 'd> {
         if v.len() == n {
             Some(v)
         } else {
-            let what = if n == 1 { "one number".to_string() } else { format!("{n} numbers") };
+            let what = if n == 1 {
+                "one number".to_string()
+            } else {
+                format!("{n} numbers")
+            };
             self.wrong_type(field, &what);
             None
         }

@@ -7,6 +7,7 @@ use std::collections::BTreeMap;
 use super::document::{Document, Field, Node, NodeRef, Value};
 use super::placement::{numbers, write_domain, write_motion, write_timing, write_transform};
 use super::shape::parametric_by_outputs;
+use crate::mesh::TriMesh;
 use crate::object::{
     Appearance, ColorDef, ColorMap, ForceField, Formula, Geometry, ObjectData, ParametricKind,
     Physics, Property, Shape,
@@ -151,6 +152,13 @@ fn shape(data: &ObjectData) -> Node {
 fn geometry(g: &Geometry) -> Node {
     let mut fields = Vec::new();
     match &g.shape {
+        Shape::Mesh(mesh) => {
+            let faces = mesh_node(mesh);
+            if g.domain.is_none() && g.transform.is_identity() {
+                return faces;
+            }
+            fields.push(node_field("mesh", faces));
+        }
         Shape::Implicit(f) => {
             fields.push(string("definition", f));
             if parametric_by_outputs(f).is_some() {
@@ -177,6 +185,35 @@ fn geometry(g: &Geometry) -> Node {
     }
     write_transform(&g.transform, &mut fields);
     Node::new("FGeometry", fields)
+}
+
+/// A mesh as VRML's `IndexedFaceSet`, one triangle per `-1`-ended polygon.
+fn mesh_node(mesh: &TriMesh) -> Node {
+    let list = |v: Vec<f64>| {
+        if v.is_empty() {
+            Value::EmptyList
+        } else {
+            Value::NumberList(v)
+        }
+    };
+    let points = mesh
+        .positions()
+        .iter()
+        .flat_map(|p| p.map(f32_value))
+        .collect();
+    let indices = mesh
+        .triangles()
+        .iter()
+        .flat_map(|t| [f64::from(t[0]), f64::from(t[1]), f64::from(t[2]), -1.0])
+        .collect();
+    let coord = Node::new("Coordinate", vec![Field::new("point", list(points))]);
+    Node::new(
+        "IndexedFaceSet",
+        vec![
+            node_field("coord", coord),
+            Field::new("coordIndex", list(indices)),
+        ],
+    )
 }
 
 fn ranges(parameters: &[[f64; 2]; 3]) -> Field {
@@ -249,7 +286,6 @@ fn color_map(map: &ColorMap) -> Node {
 /// written `0.8`, not `0.800000011920929`).
 fn f32_value(v: f32) -> f64 {
     let short: f64 = format!("{v}").parse().unwrap_or(f64::from(v));
-    #[expect(clippy::cast_possible_truncation, reason = "checking the round trip")]
     let same = short as f32 == v;
     if same { short } else { f64::from(v) }
 }

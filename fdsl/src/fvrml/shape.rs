@@ -3,15 +3,18 @@
 //! `FMaterial`, `FColorMap`, `FTexture3D`, VRML's `Appearance` and `Material`) and physics
 //! (`FPhysics`, `FSurface`, `FTension`, `FFriction`, `FDepth`, `FDensity`, `FForce`).
 
+use std::sync::Arc;
+
 use glam::DVec3;
 
-use super::document::{Field, Node, Value};
+use super::document::{Field, Node, Pos, Value};
 use super::read::{Fields, Reader};
 use super::writer::format_number;
 use crate::Function;
+use crate::mesh::TriMesh;
 use crate::object::{
     Appearance, ColorDef, ColorMap, Domain, ForceField, Formula, Geometry, ObjectData,
-    ParametricKind, Physics, Property, Rgb, Shape, Slot,
+    ParametricKind, Physics, Property, Rgb, Shape, Slot, Transform,
 };
 
 /// Node types that can be a geometry.
@@ -29,19 +32,10 @@ pub(super) const DEFAULT_RANGE: [f64; 2] = [0.0, 1.0];
 
 const KIND_MESSAGE: &str = "`kind` is \"implicit\", \"curve\", \"surface\" or \"solid\"";
 
-/// What a geometry node gave.
-pub(super) enum Read<T> {
-    /// A value.
-    Value(T),
-    /// Nothing usable (already reported).
-    Nothing,
-    /// Something the object model cannot hold yet: the shape is skipped (already reported).
-    Unsupported,
-}
-
 impl<'d> Reader<'_, 'd> {
-    /// An object from an `FShape` or `Shape`; `None` when it cannot be represented.
-    pub(super) fn object(&mut self, node: &'d Node) -> Option<ObjectData> {
+    /// An object from an `FShape` or `Shape` (what could not be read is reported and left
+    /// out).
+    pub(super) fn object(&mut self, node: &'d Node) -> ObjectData {
         let mut fields = Fields::new(node);
         let mut data = ObjectData {
             name: self.name(&mut fields),
@@ -52,128 +46,242 @@ impl<'d> Reader<'_, 'd> {
             data.transform = self.transform(&mut fields);
             data.motion = self.motion(&mut fields);
         }
-        if let Some(field) = fields.get("geometry") {
-            if let Some(g) = self.node_of(field, GEOMETRY_TYPES) {
-                match self.geometry(g, Slot::Geometry) {
-                    Read::Value(g) => data.geometry = Some(g),
-                    Read::Nothing => {}
-                    Read::Unsupported => {
-                        self.finish(fields);
-                        return None;
-                    }
-                }
-            }
+        if let Some(field) = fields.get("geometry")
+            && let Some(g) = self.node_of(field, GEOMETRY_TYPES)
+        {
+            data.geometry = self.geometry(g, Slot::Geometry);
         }
-        if let Some(field) = fields.get("appearance") {
-            if let Some(a) = self.node_of(field, &["FAppearance", "Appearance"]) {
-                data.appearance = self.appearance(a);
-            }
+        if let Some(field) = fields.get("appearance")
+            && let Some(a) = self.node_of(field, &["FAppearance", "Appearance"])
+        {
+            data.appearance = self.appearance(a);
         }
-        if function_shape {
-            if let Some(field) = fields.get("physics") {
-                if let Some(p) = self.node_of(field, &["FPhysics"]) {
-                    data.physics = self.physics(p);
-                }
-            }
+        if function_shape
+            && let Some(field) = fields.get("physics")
+            && let Some(p) = self.node_of(field, &["FPhysics"])
+        {
+            data.physics = self.physics(p);
         }
         self.finish(fields);
-        Some(data)
+        data
     }
 
     /// The `name` field (our extension), else the `DEF` name, else empty.
     pub(super) fn name(&mut self, fields: &mut Fields<'d>) -> String {
-        if let Some(field) = fields.get("name") {
-            if let Some(v) = self.strings(field) {
-                if let [name] = v.as_slice() {
-                    return (*name).to_string();
-                }
-                self.error(field.value_pos, "the field `name` should be one string");
+        if let Some(field) = fields.get("name")
+            && let Some(v) = self.strings(field)
+        {
+            if let [name] = v.as_slice() {
+                return (*name).to_string();
             }
+            self.error(field.value_pos, "the field `name` should be one string");
         }
         fields.node.def.clone().unwrap_or_default()
     }
 
     /// A geometry node, for `slot` (the geometry or the haptic container).
-    pub(super) fn geometry(&mut self, node: &'d Node, slot: Slot) -> Read<Geometry> {
-        self.positions.entry(slot).or_insert(node.pos);
+    pub(super) fn geometry(&mut self, node: &'d Node, slot: Slot) -> Option<Geometry> {
         let mut fields = Fields::new(node);
         let read = match node.type_name.as_str() {
             "FGeometry" => self.function_geometry(&mut fields, slot),
-            "IndexedFaceSet" => {
-                self.warning(
-                    node.pos,
-                    "polygon meshes are not yet part of the object model; this shape is skipped",
-                );
-                // Every field of a mesh is left alone on purpose: the warning covers them.
-                return Read::Unsupported;
-            }
+            "IndexedFaceSet" => self.mesh(&mut fields).map(|mesh| Geometry {
+                shape: Shape::Mesh(Arc::new(mesh)),
+                domain: None,
+                transform: Transform::IDENTITY,
+            }),
             _ => self.primitive(&mut fields),
         };
+        // Errors in a shape without a formula of its own point at the node.
+        self.positions.entry(slot).or_insert(node.pos);
         self.finish(fields);
         read
     }
 
-    fn function_geometry(&mut self, fields: &mut Fields<'d>, slot: Slot) -> Read<Geometry> {
+    fn function_geometry(&mut self, fields: &mut Fields<'d>, slot: Slot) -> Option<Geometry> {
+        if let Some(field) = fields.get("mesh") {
+            return self.placed_mesh(fields, field);
+        }
         let Some(field) = fields.get("definition") else {
-            self.error(fields.node.pos, "`FGeometry` needs a `definition`");
-            return Read::Nothing;
+            self.error(
+                fields.node.pos,
+                "`FGeometry` needs a `definition` (or a `mesh`)",
+            );
+            return None;
         };
-        let Some(formula) = self.formula_for(field, slot) else {
-            return Read::Nothing;
-        };
+        let formula = self.formula_for(field, slot)?;
         let domain = self.domain(fields);
         let transform = self.transform(fields);
-        let kind = fields.get("kind");
-        let parameters = fields.get("parameters");
-        let shape = if kind.is_some() || parameters.is_some() {
-            let implicit = kind.is_some_and(|f| matches!(&f.value, Value::String(s) if s == "implicit"));
-            if implicit {
-                if let Some(p) = parameters {
-                    self.warning(p.pos, "`parameters` are ignored for `kind \"implicit\"`");
-                }
-                return Read::Value(Geometry {
-                    shape: Shape::Implicit(formula),
-                    domain,
-                    transform,
-                });
-            }
-            let ranges = parameters.and_then(|f| self.ranges(f));
-            let kind = match kind {
-                Some(f) => self.kind(f),
-                None => ranges.as_ref().and_then(|(_, n)| match n {
-                    1 => Some(ParametricKind::Curve),
-                    2 => Some(ParametricKind::Surface),
-                    3 => Some(ParametricKind::Solid),
-                    _ => None,
-                }),
-            };
-            let Some(kind) = kind else {
-                self.error(
-                    fields.node.pos,
-                    "a parametric `FGeometry` needs one to three `parameters` ranges or a `kind`",
-                );
-                return Read::Nothing;
-            };
-            let parameters = ranges.map_or([DEFAULT_RANGE; 3], |(r, _)| r);
-            Shape::Parametric {
-                formula,
-                kind,
-                parameters,
-            }
-        } else {
-            parametric_by_outputs(&formula).map_or(Shape::Implicit(formula.clone()), |kind| {
-                Shape::Parametric {
-                    formula,
-                    kind,
-                    parameters: [DEFAULT_RANGE; 3],
-                }
-            })
-        };
-        Read::Value(Geometry {
+        let shape = self.function_shape(fields, formula)?;
+        Some(Geometry {
             shape,
             domain,
             transform,
         })
+    }
+
+    /// Our extension: `FGeometry { mesh IndexedFaceSet { ... } }`, a mesh placed in its own
+    /// domain and frame.
+    fn placed_mesh(&mut self, fields: &mut Fields<'d>, field: &'d Field) -> Option<Geometry> {
+        let mesh = self.node_of(field, &["IndexedFaceSet"]).and_then(|node| {
+            let mut mesh_fields = Fields::new(node);
+            let mesh = self.mesh(&mut mesh_fields);
+            self.finish(mesh_fields);
+            mesh
+        });
+        if let Some(d) = fields.get("definition") {
+            self.warning(d.pos, "`definition` is ignored next to `mesh`");
+        }
+        let domain = self.domain(fields);
+        let transform = self.transform(fields);
+        mesh.map(|mesh| Geometry {
+            shape: Shape::Mesh(Arc::new(mesh)),
+            domain,
+            transform,
+        })
+    }
+
+    /// Implicit or parametric: `kind` says, else the number of `parameters` ranges, else
+    /// the definition's outputs.
+    fn function_shape(&mut self, fields: &mut Fields<'d>, formula: Formula) -> Option<Shape> {
+        let kind = fields.get("kind");
+        let parameters = fields.get("parameters");
+        if kind.is_none() && parameters.is_none() {
+            return Some(match parametric_by_outputs(&formula) {
+                Some(kind) => Shape::Parametric {
+                    formula,
+                    kind,
+                    parameters: [DEFAULT_RANGE; 3],
+                },
+                None => Shape::Implicit(formula),
+            });
+        }
+        if kind.is_some_and(|f| matches!(&f.value, Value::String(s) if s == "implicit")) {
+            if let Some(p) = parameters {
+                self.warning(p.pos, "`parameters` are ignored for `kind \"implicit\"`");
+            }
+            return Some(Shape::Implicit(formula));
+        }
+        let ranges = parameters.and_then(|f| self.ranges(f));
+        let kind = match kind {
+            Some(f) => self.kind(f),
+            None => ranges.as_ref().and_then(|(_, n)| match n {
+                1 => Some(ParametricKind::Curve),
+                2 => Some(ParametricKind::Surface),
+                3 => Some(ParametricKind::Solid),
+                _ => None,
+            }),
+        };
+        let Some(kind) = kind else {
+            self.error(
+                fields.node.pos,
+                "a parametric `FGeometry` needs one to three `parameters` ranges or a `kind`",
+            );
+            return None;
+        };
+        Some(Shape::Parametric {
+            formula,
+            kind,
+            parameters: ranges.map_or([DEFAULT_RANGE; 3], |(r, _)| r),
+        })
+    }
+
+    /// VRML's `IndexedFaceSet`: `coord Coordinate { point [...] }` and `coordIndex` polygons
+    /// ended by `-1`, fanned into triangles (turned over with `ccw FALSE`).
+    fn mesh(&mut self, fields: &mut Fields<'d>) -> Option<TriMesh> {
+        let node = fields.node;
+        let mut points: &[f64] = &[];
+        if let Some(field) = fields.get("coord")
+            && let Some(coord) = self.node_of(field, &["Coordinate"])
+        {
+            let mut coord_fields = Fields::new(coord);
+            if let Some(f) = coord_fields.get("point") {
+                points = self.numbers_of(f).unwrap_or(&[]);
+                if !points.len().is_multiple_of(3) {
+                    self.error(f.value_pos, "`point` should hold three numbers per point");
+                    points = &[];
+                }
+            }
+            self.finish(coord_fields);
+        }
+        let n_points = points.len() / 3;
+        let index_field = fields.get("coordIndex");
+        let indices = index_field.and_then(|f| self.numbers_of(f)).unwrap_or(&[]);
+        let ccw = fields
+            .get("ccw")
+            .and_then(|f| self.boolean(f))
+            .unwrap_or(true);
+        // Hints for renderers; a solid is read as it is.
+        for hint in ["solid", "convex", "creaseAngle"] {
+            fields.get(hint);
+        }
+        for name in [
+            "normal",
+            "normalIndex",
+            "normalPerVertex",
+            "color",
+            "colorIndex",
+            "colorPerVertex",
+            "texCoord",
+            "texCoordIndex",
+        ] {
+            if let Some(f) = fields.get(name) {
+                self.warning(f.pos, format!("`{name}` is ignored (meshes carry no colours, normals or texture coordinates)"));
+            }
+        }
+        let pos = index_field.map_or(node.pos, |f| f.value_pos);
+        let triangles = self.triangles(indices, n_points, ccw, pos)?;
+        let positions = points
+            .chunks_exact(3)
+            .map(|p| [p[0] as f32, p[1] as f32, p[2] as f32])
+            .collect();
+        match TriMesh::new(positions, triangles) {
+            Ok(mesh) => Some(mesh),
+            Err(e) => {
+                self.error(node.pos, e.to_string());
+                None
+            }
+        }
+    }
+
+    fn triangles(
+        &mut self,
+        indices: &[f64],
+        n_points: usize,
+        ccw: bool,
+        pos: Pos,
+    ) -> Option<Vec<[u32; 3]>> {
+        let mut triangles = Vec::new();
+        let mut polygon: Vec<u32> = Vec::new();
+        let mut n_degenerate = 0usize;
+        for (k, &i) in indices.iter().chain(std::iter::once(&-1.0)).enumerate() {
+            if i == -1.0 {
+                if polygon.len() < 3 && !(polygon.is_empty() && k == indices.len()) {
+                    n_degenerate += 1;
+                }
+                for w in 1..polygon.len().saturating_sub(1) {
+                    let (a, b, c) = (polygon[0], polygon[w], polygon[w + 1]);
+                    triangles.push(if ccw { [a, b, c] } else { [a, c, b] });
+                }
+                polygon.clear();
+                continue;
+            }
+            let in_range = i.fract() == 0.0 && i >= 0.0 && i < n_points as f64;
+            if !in_range {
+                self.error(
+                    pos,
+                    format!("`coordIndex` holds {i}, not a point index (0 to {n_points}) or -1"),
+                );
+                return None;
+            }
+            polygon.push(i as u32);
+        }
+        if n_degenerate > 0 {
+            self.warning(
+                pos,
+                format!("{n_degenerate} polygons with fewer than three points are skipped"),
+            );
+        }
+        Some(triangles)
     }
 
     /// `parameters [lo hi ...]`: one to three ranges; the rest are [`DEFAULT_RANGE`].
@@ -212,7 +320,7 @@ impl<'d> Reader<'_, 'd> {
     }
 
     /// VRML's `Box`, `Sphere`, `Cylinder` and `Cone` as exact F-Rep solids in their boxes.
-    fn primitive(&mut self, fields: &mut Fields<'d>) -> Read<Geometry> {
+    fn primitive(&mut self, fields: &mut Fields<'d>) -> Option<Geometry> {
         let node = fields.node;
         let mut positive = |reader: &mut Self, name: &str, default: f64| -> Option<f64> {
             let Some(field) = fields.get(name) else {
@@ -226,8 +334,7 @@ impl<'d> Reader<'_, 'd> {
                 None
             }
         };
-        let n = format_number;
-        let solid = match node.type_name.as_str() {
+        let primitive = match node.type_name.as_str() {
             "Box" => {
                 let size = match fields.get("size") {
                     Some(f) => self.vec3(f),
@@ -235,59 +342,34 @@ impl<'d> Reader<'_, 'd> {
                 };
                 let Some(size) = size.filter(|s| s.is_finite() && s.min_element() > 0.0) else {
                     self.error(node.pos, "a `Box` needs a positive `size`");
-                    return Read::Nothing;
+                    return None;
                 };
-                let h = size * 0.5;
-                Some((
-                    format!("min({}-abs(x), {}-abs(y), {}-abs(z))", n(h.x), n(h.y), n(h.z)),
-                    size,
-                ))
+                Some(Primitive::Box(size))
             }
-            "Sphere" => positive(self, "radius", 1.0)
-                .map(|r| (format!("{}-sqrt(x^2+y^2+z^2)", n(r)), DVec3::splat(2.0 * r))),
+            "Sphere" => positive(self, "radius", 1.0).map(Primitive::Sphere),
             "Cylinder" => {
                 let r = positive(self, "radius", 1.0);
                 let h = positive(self, "height", 2.0);
                 self.closed(fields, &["side", "top", "bottom"]);
-                r.zip(h).map(|(r, h)| {
-                    (
-                        format!("min({}-sqrt(x^2+z^2), {}-abs(y))", n(r), n(h * 0.5)),
-                        DVec3::new(2.0 * r, h, 2.0 * r),
-                    )
-                })
+                r.zip(h).map(|(r, h)| Primitive::Cylinder(r, h))
             }
             "Cone" => {
                 let r = positive(self, "bottomRadius", 1.0);
                 let h = positive(self, "height", 2.0);
                 self.closed(fields, &["side", "bottom"]);
-                // The slanted side's distance, positive inside: the radius at height y is
-                // r/2 - (r/h) y (zero at the apex y = h/2), scaled by the side's cosine.
-                r.zip(h).map(|(r, h)| {
-                    (
-                        format!(
-                            "min(({}-{}*y-sqrt(x^2+z^2))*{}, y+{})",
-                            n(r * 0.5),
-                            n(r / h),
-                            n(h / r.hypot(h)),
-                            n(h * 0.5)
-                        ),
-                        DVec3::new(2.0 * r, h, 2.0 * r),
-                    )
-                })
+                r.zip(h).map(|(r, h)| Primitive::Cone(r, h))
             }
             _ => None,
         };
-        let Some((text, size)) = solid else {
-            return Read::Nothing;
-        };
+        let (text, size) = primitive?.solid();
         match Formula::new(text) {
-            Ok(formula) => Read::Value(Geometry::implicit_in(
+            Ok(formula) => Some(Geometry::implicit_in(
                 formula,
                 Domain::new(DVec3::ZERO, size),
             )),
             Err(e) => {
                 self.error(node.pos, e.to_string());
-                Read::Nothing
+                None
             }
         }
     }
@@ -295,13 +377,13 @@ impl<'d> Reader<'_, 'd> {
     /// Warns when a part of a cylinder or cone is switched off: solids are always closed.
     fn closed(&mut self, fields: &mut Fields<'d>, parts: &[&str]) {
         for part in parts {
-            if let Some(field) = fields.get(part) {
-                if self.boolean(field) == Some(false) {
-                    self.warning(
-                        field.pos,
-                        format!("`{part} FALSE` is ignored: the solid is read closed"),
-                    );
-                }
+            if let Some(field) = fields.get(part)
+                && self.boolean(field) == Some(false)
+            {
+                self.warning(
+                    field.pos,
+                    format!("`{part} FALSE` is ignored: the solid is read closed"),
+                );
             }
         }
     }
@@ -309,29 +391,32 @@ impl<'d> Reader<'_, 'd> {
     fn appearance(&mut self, node: &'d Node) -> Appearance {
         let mut fields = Fields::new(node);
         let mut appearance = Appearance::default();
-        if let Some(field) = fields.get("material") {
-            if let Some(m) = self.node_of(field, &["FMaterial", "Material"]) {
-                if m.type_name == "FMaterial" {
-                    self.function_material(m, &mut appearance);
-                } else {
-                    self.material(m, &mut appearance);
-                }
+        if let Some(field) = fields.get("material")
+            && let Some(m) = self.node_of(field, &["FMaterial", "Material"])
+        {
+            if m.type_name == "FMaterial" {
+                self.function_material(m, &mut appearance);
+            } else {
+                self.material(m, &mut appearance);
             }
         }
-        if let Some(field) = fields.get("texture") {
-            if let Some(t) = self.node_of(field, &["FTexture3D"]) {
-                let mut texture = Fields::new(t);
-                if let Some(f) = texture.get("definition") {
-                    appearance.displacement = self.formula_for(f, Slot::Displacement);
-                }
-                self.finish(texture);
+        if let Some(field) = fields.get("texture")
+            && let Some(t) = self.node_of(field, &["FTexture3D"])
+        {
+            let mut texture = Fields::new(t);
+            if let Some(f) = texture.get("definition") {
+                appearance.displacement = self.formula_for(f, Slot::Displacement);
             }
+            self.finish(texture);
         }
         if node.type_name == "FAppearance" {
             appearance.domain = self.domain(&mut fields);
             appearance.transform = self.transform(&mut fields);
         } else if let Some(field) = fields.get("textureTransform") {
-            self.warning(field.pos, "`textureTransform` is ignored (image textures are not read)");
+            self.warning(
+                field.pos,
+                "`textureTransform` is ignored (image textures are not read)",
+            );
         }
         self.finish(fields);
         appearance
@@ -372,7 +457,10 @@ impl<'d> Reader<'_, 'd> {
         self.positions.entry(slot).or_insert(field.value_pos);
         if let Value::Numbers(v) | Value::NumberList(v) = &field.value {
             if map.is_some() {
-                self.warning(field.pos, format!("`{map_name}` is ignored for a constant colour"));
+                self.warning(
+                    field.pos,
+                    format!("`{map_name}` is ignored for a constant colour"),
+                );
             }
             return self.rgb(field, v).map(ColorDef::Constant);
         }
@@ -385,7 +473,6 @@ impl<'d> Reader<'_, 'd> {
 
     fn rgb(&mut self, field: &Field, v: &[f64]) -> Option<Rgb> {
         if let [r, g, b] = v {
-            #[expect(clippy::cast_possible_truncation, reason = "colours are f32")]
             Some([*r as f32, *g as f32, *b as f32])
         } else {
             self.error(
@@ -416,7 +503,6 @@ impl<'d> Reader<'_, 'd> {
             );
             return None;
         }
-        #[expect(clippy::cast_possible_truncation, reason = "colours are f32")]
         let keys = key
             .iter()
             .zip(values.chunks_exact(3))
@@ -436,21 +522,23 @@ impl<'d> Reader<'_, 'd> {
         };
         let diffuse = constant(self, "diffuseColor", Slot::Diffuse);
         let specular = constant(self, "specularColor", Slot::Specular);
-        if let Some(e) = constant(self, "emissiveColor", Slot::Diffuse) {
-            if e != [0.0; 3] {
-                let pos = fields.get("emissiveColor").map_or(node.pos, |f| f.pos);
-                self.warning(pos, "`emissiveColor` is ignored (the object model has no emission)");
-            }
+        if let Some(e) = constant(self, "emissiveColor", Slot::Diffuse)
+            && e != [0.0; 3]
+        {
+            let pos = fields.get("emissiveColor").map_or(node.pos, |f| f.pos);
+            self.warning(
+                pos,
+                "`emissiveColor` is ignored (the object model has no emission)",
+            );
         }
         a.diffuse = diffuse.map(ColorDef::Constant);
         a.specular = specular.map(ColorDef::Constant);
-        if let Some(field) = fields.get("ambientIntensity") {
-            if let Some(k) = self.number(field) {
-                let base = diffuse.unwrap_or([0.8; 3]);
-                #[expect(clippy::cast_possible_truncation, reason = "colours are f32")]
-                let k = k.clamp(0.0, 1.0) as f32;
-                a.ambient = Some(ColorDef::Constant(base.map(|c| c * k)));
-            }
+        if let Some(field) = fields.get("ambientIntensity")
+            && let Some(k) = self.number(field)
+        {
+            let base = diffuse.unwrap_or([0.8; 3]);
+            let k = k.clamp(0.0, 1.0) as f32;
+            a.ambient = Some(ColorDef::Constant(base.map(|c| c * k)));
         }
         a.transparency = fields
             .get("transparency")
@@ -464,31 +552,29 @@ impl<'d> Reader<'_, 'd> {
     fn physics(&mut self, node: &'d Node) -> Physics {
         let mut fields = Fields::new(node);
         let mut p = Physics::default();
-        if let Some(field) = fields.get("surface") {
-            if let Some(s) = self.node_of(field, &["FSurface"]) {
-                let mut surface = Fields::new(s);
-                self.surface(&mut surface, &mut p);
-                self.finish(surface);
-            }
+        if let Some(field) = fields.get("surface")
+            && let Some(s) = self.node_of(field, &["FSurface"])
+        {
+            let mut surface = Fields::new(s);
+            self.surface(&mut surface, &mut p);
+            self.finish(surface);
         }
         // The thesis's Figure 7.4 writes `friction` straight under `FPhysics`.
         self.surface(&mut fields, &mut p);
-        if let Some(field) = fields.get("density") {
-            if let Some(d) = self.node_of(field, &["FDensity"]) {
-                p.density = self.property(d, Slot::Density);
-            }
+        if let Some(field) = fields.get("density")
+            && let Some(d) = self.node_of(field, &["FDensity"])
+        {
+            p.density = self.property(d, Slot::Density);
         }
-        if let Some(field) = fields.get("force") {
-            if let Some(f) = self.node_of(field, &["FForce"]) {
-                p.force = self.force(f);
-            }
+        if let Some(field) = fields.get("force")
+            && let Some(f) = self.node_of(field, &["FForce"])
+        {
+            p.force = self.force(f);
         }
-        if let Some(field) = fields.get("container") {
-            if let Some(g) = self.node_of(field, GEOMETRY_TYPES) {
-                if let Read::Value(g) = self.geometry(g, Slot::Container) {
-                    p.container = Some(g);
-                }
-            }
+        if let Some(field) = fields.get("container")
+            && let Some(g) = self.node_of(field, GEOMETRY_TYPES)
+        {
+            p.container = self.geometry(g, Slot::Container);
         }
         p.domain = self.domain(&mut fields);
         p.transform = self.transform(&mut fields);
@@ -518,7 +604,9 @@ impl<'d> Reader<'_, 'd> {
             if target.is_some() {
                 self.warning(
                     field.pos,
-                    format!("`{name}` is given both in `FSurface` and in `FPhysics`; this one counts"),
+                    format!(
+                        "`{name}` is given both in `FSurface` and in `FPhysics`; this one counts"
+                    ),
                 );
             }
             *target = property;
@@ -539,7 +627,10 @@ impl<'d> Reader<'_, 'd> {
             None => {
                 self.error(
                     node.pos,
-                    format!("`{}` needs a `definition` (or `enable FALSE`)", node.type_name),
+                    format!(
+                        "`{}` needs a `definition` (or `enable FALSE`)",
+                        node.type_name
+                    ),
                 );
                 None
             }
@@ -563,7 +654,10 @@ impl<'d> Reader<'_, 'd> {
             Some(f) => self.formula_for(f, Slot::Force),
             None if !enabled => Formula::new("0").ok(),
             None => {
-                self.error(node.pos, "`FForce` needs a `definition` (or `enable FALSE`)");
+                self.error(
+                    node.pos,
+                    "`FForce` needs a `definition` (or `enable FALSE`)",
+                );
                 None
             }
         };
@@ -582,12 +676,60 @@ impl<'d> Reader<'_, 'd> {
     }
 }
 
+/// VRML's solid primitives, centred at the origin with their axis along y.
+enum Primitive {
+    /// Edge lengths.
+    Box(DVec3),
+    /// Radius.
+    Sphere(f64),
+    /// Radius and height.
+    Cylinder(f64, f64),
+    /// Bottom radius and height (apex up).
+    Cone(f64, f64),
+}
+
+impl Primitive {
+    /// The exact F-Rep (a signed distance inside, a lower bound of it outside) and the box.
+    fn solid(self) -> (String, DVec3) {
+        let n = format_number;
+        match self {
+            Primitive::Box(size) => {
+                let h = size * 0.5;
+                let text = format!(
+                    "min({}-abs(x), {}-abs(y), {}-abs(z))",
+                    n(h.x),
+                    n(h.y),
+                    n(h.z)
+                );
+                (text, size)
+            }
+            Primitive::Sphere(r) => (format!("{}-sqrt(x^2+y^2+z^2)", n(r)), DVec3::splat(2.0 * r)),
+            Primitive::Cylinder(r, h) => (
+                format!("min({}-sqrt(x^2+z^2), {}-abs(y))", n(r), n(h * 0.5)),
+                DVec3::new(2.0 * r, h, 2.0 * r),
+            ),
+            // The slanted side's distance, positive inside: the radius at height y is
+            // r/2 - (r/h) y (zero at the apex y = h/2), scaled by the side's cosine.
+            Primitive::Cone(r, h) => (
+                format!(
+                    "min(({}-{}*y-sqrt(x^2+z^2))*{}, y+{})",
+                    n(r * 0.5),
+                    n(r / h),
+                    n(h / r.hypot(h)),
+                    n(h * 0.5)
+                ),
+                DVec3::new(2.0 * r, h, 2.0 * r),
+            ),
+        }
+    }
+}
+
 /// The kind of a definition without `parameters` or `kind`: parametric when it defines `x`,
 /// `y` and `z` and no single value, by the last of `u`, `v`, `w` it reads.
 pub(super) fn parametric_by_outputs(formula: &Formula) -> Option<ParametricKind> {
     let function = Function::parse(formula.as_str()).ok()?;
-    let parametric = ["x", "y", "z"].iter().all(|o| function.has_output(o))
-        && !function.has_output("value");
+    let parametric =
+        ["x", "y", "z"].iter().all(|o| function.has_output(o)) && !function.has_output("value");
     if !parametric {
         return None;
     }

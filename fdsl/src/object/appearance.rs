@@ -123,8 +123,8 @@ impl Appearance {
             }
         }
         if let Some(d) = &self.domain {
-            d.validate(Slot::Diffuse)?;
+            d.validate(Slot::AppearanceSpace)?;
         }
-        self.transform.validate(Slot::Diffuse)
+        self.transform.validate(Slot::AppearanceSpace)
     }
 }

@@ -458,18 +458,20 @@ impl CompiledParts {
                 .transpose()
         };
         let scalar = |f: &Option<Formula>, slot| f.as_ref().map(|f| f.tape(slot, &[])).transpose();
-        let feel = |prop: &Option<Property>, slot| {
-            prop.as_ref()
-                .filter(|p| p.enabled)
-                .map(|p| p.formula.tape(slot, &[]))
-                .transpose()
+        // Disabled properties are compiled too (a broken one is an error now, not when it is
+        // enabled later) but not kept.
+        let feel = |prop: &Option<Property>, slot| -> Result<Option<Tape>, ObjectError> {
+            let Some(prop) = prop else { return Ok(None) };
+            let tape = prop.formula.tape(slot, &[])?;
+            Ok(prop.enabled.then_some(tape))
         };
-        let force = p
-            .force
-            .as_ref()
-            .filter(|f| f.enabled)
-            .map(|f| f.formula.tape(Slot::Force, &["x", "y", "z"]))
-            .transpose()?;
+        let force = match &p.force {
+            Some(f) => {
+                let tape = f.formula.tape(Slot::Force, &["x", "y", "z"])?;
+                f.enabled.then_some(tape)
+            }
+            None => None,
+        };
         let motion = match &data.motion {
             Some(m) => {
                 m.timing.validate(Slot::Motion)?;

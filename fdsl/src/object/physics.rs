@@ -79,8 +79,8 @@ impl Physics {
             }
         }
         if let Some(d) = &self.domain {
-            d.validate(Slot::Tension)?;
+            d.validate(Slot::PhysicsSpace)?;
         }
-        self.transform.validate(Slot::Tension)
+        self.transform.validate(Slot::PhysicsSpace)
     }
 }
