@@ -15,8 +15,28 @@ pub const SHORT_ID_HEX_DIGITS: usize = 8;
 /// A peer's identity: its ed25519 public key.
 ///
 /// Ordering is by key bytes; it is the tie-break after Lamport time in the linear order.
-#[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
 pub struct PeerId(pub [u8; PEER_ID_BYTES]);
+
+/// Byte-wise (lexicographic) order of 32-byte ids, comparing the first 8 bytes as one
+/// big-endian integer first: the same order as comparing the arrays, without a `memcmp`
+/// call in the common case (ids are hashes or keys, so they differ early).
+pub(crate) fn cmp_id_bytes(a: &[u8; 32], b: &[u8; 32]) -> std::cmp::Ordering {
+    let head = |x: &[u8; 32]| u64::from_be_bytes([x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7]]);
+    head(a).cmp(&head(b)).then_with(|| a.cmp(b))
+}
+
+impl Ord for PeerId {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        cmp_id_bytes(&self.0, &other.0)
+    }
+}
+
+impl PartialOrd for PeerId {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
 
 /// An ed25519 signature over an op's signed body.
 #[derive(Clone, Copy, PartialEq, Eq, Hash)]

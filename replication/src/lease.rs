@@ -4,6 +4,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
 
+use crate::codec::{DecodeError, Reader, put_varint};
 use crate::identity::PeerId;
 use crate::op::OpId;
 use crate::payload::{Effect, LeaseStrength, ObjectId};
@@ -108,6 +109,80 @@ impl FoldState {
     /// True if edit `id` is currently undone.
     pub fn is_undone(&self, id: &OpId) -> bool {
         self.undone.contains(id)
+    }
+
+    /// Most leases or undone edits a decoded state may hold.
+    pub const MAX_DECODED_ENTRIES: usize = crate::log::MAX_LOG_OPS;
+
+    /// Appends the canonical encoding: `[n][object][holder 32][strong 0/1][expires]*`
+    /// `[n][undone id 32]*`, both sorted.
+    pub fn encode(&self, out: &mut Vec<u8>) {
+        put_varint(out, self.leases.len() as u64);
+        for (object, lease) in &self.leases {
+            put_varint(out, object.0);
+            out.extend_from_slice(&lease.holder.0);
+            out.push(u8::from(lease.strength == LeaseStrength::Strong));
+            put_varint(out, lease.expires_at.0);
+        }
+        put_varint(out, self.undone.len() as u64);
+        for id in &self.undone {
+            out.extend_from_slice(&id.0);
+        }
+    }
+
+    /// Decodes [`FoldState::encode`]'s output from untrusted bytes (sorted, bounded).
+    pub fn decode(r: &mut Reader<'_>) -> Result<Self, DecodeError> {
+        // Each lease takes at least 35 bytes and each id 32: bound counts by what is left.
+        let limit = |r: &Reader<'_>, each: usize| {
+            (r.remaining() / each).min(Self::MAX_DECODED_ENTRIES) as u64
+        };
+        let n_leases = r.bounded("lease count", limit(r, 35))?;
+        let mut leases = BTreeMap::new();
+        for _ in 0..n_leases {
+            let offset = r.offset();
+            let object = ObjectId(r.varint()?);
+            if leases.last_key_value().is_some_and(|(o, _)| *o >= object) {
+                return Err(DecodeError::Invalid {
+                    offset,
+                    what: "unsorted leases",
+                });
+            }
+            let holder = PeerId(r.array()?);
+            let flag_offset = r.offset();
+            let strength = match r.u8()? {
+                0 => LeaseStrength::Weak,
+                1 => LeaseStrength::Strong,
+                _ => {
+                    return Err(DecodeError::Invalid {
+                        offset: flag_offset,
+                        what: "flag",
+                    });
+                }
+            };
+            let expires_at = Timestamp(r.varint()?);
+            leases.insert(
+                object,
+                Lease {
+                    holder,
+                    strength,
+                    expires_at,
+                },
+            );
+        }
+        let n_undone = r.bounded("undone count", limit(r, 32))?;
+        let mut undone = BTreeSet::new();
+        for _ in 0..n_undone {
+            let offset = r.offset();
+            let id = OpId(r.array()?);
+            if undone.last().is_some_and(|last| *last >= id) {
+                return Err(DecodeError::Invalid {
+                    offset,
+                    what: "unsorted undone ids",
+                });
+            }
+            undone.insert(id);
+        }
+        Ok(Self { leases, undone })
     }
 
     /// Who blocks `author` from changing `object` at `at`, if anyone.

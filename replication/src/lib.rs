@@ -1,12 +1,13 @@
 //! The collaboration core of sculpt: a replicated log of signed operations, their causal order,
 //! per-object leases and undo, a sans-IO sync protocol, and a crash-safe on-disk store.
 //!
-//! It is **not** a network server, a transport or a scene editor. The core ([`log`], [`sync`],
-//! [`lease`], ...) takes time (`now`) and randomness (a seeded RNG) as arguments and never
-//! touches sockets, files, clocks or threads; the [`store`] adapter does file IO and the core
-//! never imports it. The core is generic over the op [`Payload`]: the object model (`fdsl`'s
-//! edits) plugs in through that trait, and [`payload::test_payload::TestPayload`] is a small
-//! stand-in for tests and simulation.
+//! The core ([`log`], [`sync`], [`lease`], ...) takes time (`now`) and randomness (a seeded
+//! RNG) as arguments and never touches sockets, files, clocks or threads. Two adapters do IO
+//! and the core never imports them: [`store`] (the on-disk log) and `net` (QUIC transport with
+//! invite admission, a discovery server and LAN discovery). The core is generic over the op
+//! [`Payload`]: [`shape::ShapePayload`] carries the object model (`fdsl`'s objects, properties
+//! and sculpting edits) and folds into [`shape::ShapeScene`];
+//! [`payload::test_payload::TestPayload`] is a small stand-in for tests.
 //!
 //! # Key types
 //!
@@ -19,6 +20,11 @@
 //!   verdict ([`Mark`]) of every op. Same op set, any delivery order: same order, same marks.
 //!   Inserting a late op reports a [`log::Refold`]: where the scene fold must restart, per
 //!   object.
+//! - [`materialize::Materialize`] / [`materialize::Materialized`]: the payload's scene and the
+//!   driver that keeps it in step with the log, re-folding only the objects a late op
+//!   affects; [`materialize::SceneHash`] is equal on every peer with the same op set.
+//! - [`snapshot::Snapshot`]: the scene and lease state at a stable cut; a new peer joins from
+//!   one and syncs only the ops after the cut.
 //! - [`SyncState`]: the sans-IO state machine for one connection (`handle_input`,
 //!   `handle_timeout`; drain `poll_transmit`, `poll_event`, `poll_timeout` after each).
 //! - [`store::OpStore`]: checksummed append-only file with fsync; torn tails are cut on open.
@@ -32,6 +38,9 @@
 //!   connection from version vectors, so nothing else needs saving.
 //! - [`Peer`] bundles a key, a log and one [`SyncState`] per connection for the app and the
 //!   simulator.
+//! - Hand every [`log::Insertion`] (from [`Log::author`], [`Log::insert`] or an
+//!   [`Event::Delivered`]) to [`materialize::Materialized::apply_insertion`], in the order
+//!   they came; batching them is fine.
 //!
 //! # Guarantees and non-guarantees
 //!
@@ -57,6 +66,7 @@
 //!   Have `[vv]`, Ops `[batch_no][n ≤ 64][op bytes]*`, Ack `[batch_no][vv]`,
 //!   Ephemeral `[channel][seq][value ≤ 1 KiB]`; a vv is `[n][author 32][seq]*` sorted.
 //! - Store file: `SCULPTOPS` `[1]`, then records `[u32 LE len][blake3 of len+body, 16][body]`.
+//! - Snapshot: see [`snapshot`] (`SCULPTSNAP` `[1]` ... `[blake3 32]`).
 //!
 //! # Example
 //!
@@ -96,10 +106,14 @@ pub mod codec;
 pub mod identity;
 pub mod lease;
 pub mod log;
+pub mod materialize;
+pub mod net;
 pub mod op;
 pub mod payload;
 pub mod peer;
 pub mod pending;
+pub mod shape;
+pub mod snapshot;
 pub mod store;
 pub mod sync;
 pub mod time;

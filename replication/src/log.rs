@@ -12,6 +12,11 @@ use crate::payload::{Effect, ObjectId, Payload};
 use crate::pending::{DepKey, Evicted, Origin, Pending, PendingLimits};
 use crate::time::{HybridClock, Timestamp};
 
+mod base;
+
+pub use base::CutError;
+pub(crate) use base::{Base, BaseAuthor, BaseKind, BaseOp};
+
 /// The fold state is checkpointed every this many positions of the linear order, so a late
 /// op re-evaluates from the nearest checkpoint instead of from the start.
 pub const CHECKPOINT_INTERVAL: usize = 256;
@@ -43,6 +48,16 @@ pub enum InsertError {
     /// The log is at [`MAX_LOG_OPS`].
     #[error("log is full ({MAX_LOG_OPS} ops)")]
     Full,
+    /// The log was joined from a snapshot, and the op belongs before the snapshot's cut but
+    /// is not in it (an author the snapshot's producer did not know, working offline). This
+    /// log cannot place it: rebuild from full history (see [`crate::snapshot`]).
+    #[error("lamport time {lamport} is at or before the snapshot cut {cut_lamport}")]
+    BeforeBase {
+        /// The op's Lamport time.
+        lamport: u64,
+        /// The Lamport time of the cut.
+        cut_lamport: u64,
+    },
 }
 
 /// Why a local op could not be authored.
@@ -73,6 +88,29 @@ pub struct Insertion {
     pub refold: Option<Refold>,
 }
 
+/// An op's place in the linear order: Lamport time, then author, then seq. Stable: unlike a
+/// position, it does not shift when a late op lands before it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct OrderKey {
+    /// Lamport time.
+    pub lamport: u64,
+    /// Author.
+    pub author: PeerId,
+    /// Per-author sequence number.
+    pub seq: u64,
+}
+
+impl OrderKey {
+    /// The key of `op`.
+    pub fn of<P>(op: &Op<P>) -> Self {
+        Self {
+            lamport: op.lamport(),
+            author: op.author(),
+            seq: op.seq(),
+        }
+    }
+}
+
 /// Where the scene fold must restart after a change to the log.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Refold {
@@ -81,6 +119,37 @@ pub struct Refold {
     /// For each object touched, the first position from which its own fold must be redone
     /// (an undo's target position counts for the target's object).
     pub objects: BTreeMap<ObjectId, usize>,
+    /// Objects whose edits *inside the base* (the part of the order a log joined from a
+    /// snapshot holds no ops for) changed activity, through an undo or redo: their fold must be
+    /// redone from the object's start. Always empty for a log without a base.
+    pub base_objects: BTreeSet<ObjectId>,
+    /// The same first changed entries as [`Refold::objects`], as order keys. Positions shift
+    /// when later ops land before them; keys do not, so a driver that applies an insertion
+    /// after later ones were inserted (events drained in a batch) must use these.
+    pub object_keys: BTreeMap<ObjectId, OrderKey>,
+}
+
+/// The ops one insertion delivered, for membership tests (usually one op).
+enum Inserted<'a> {
+    Few(&'a [OpId]),
+    Many(BTreeSet<OpId>),
+}
+
+impl<'a> Inserted<'a> {
+    fn new(ids: &'a [OpId]) -> Self {
+        if ids.len() <= 16 {
+            Self::Few(ids)
+        } else {
+            Self::Many(ids.iter().copied().collect())
+        }
+    }
+
+    fn contains(&self, id: &OpId) -> bool {
+        match self {
+            Self::Few(ids) => ids.contains(id),
+            Self::Many(set) => set.contains(id),
+        }
+    }
 }
 
 /// One op in the linear order with its verdict.
@@ -103,8 +172,6 @@ pub struct LogStats {
     pub n_evicted: u64,
 }
 
-type OrderKey = (u64, PeerId, u64);
-
 /// The replicated log of one peer, generic over the payload.
 #[derive(Debug, Clone)]
 pub struct Log<P> {
@@ -116,9 +183,15 @@ pub struct Log<P> {
     marks: Vec<Mark>,
     /// `checkpoints[k]` is the fold state before position `k * CHECKPOINT_INTERVAL`.
     checkpoints: Vec<FoldState>,
-    /// The fold state after the last op.
+    /// The fold state after the first `n_folded` positions (all of them between calls).
     state: FoldState,
+    n_folded: usize,
+    /// Each author's held ops in seq order (after the base's, if any).
     by_author: BTreeMap<PeerId, Vec<OpId>>,
+    /// Each object's held edits (ops whose effect is [`Effect::Edit`]) in linear order.
+    by_object: BTreeMap<ObjectId, Vec<OrderKey>>,
+    /// What a log joined from a snapshot knows of the ops before the cut.
+    base: Option<Box<Base<P>>>,
     frontier: Frontier,
     vv: VersionVector,
     max_lamport: u64,
@@ -142,7 +215,10 @@ impl<P: Payload> Log<P> {
             marks: Vec::new(),
             checkpoints: vec![FoldState::default()],
             state: FoldState::default(),
+            n_folded: 0,
             by_author: BTreeMap::new(),
+            by_object: BTreeMap::new(),
+            base: None,
             frontier: Frontier::default(),
             vv: VersionVector::new(),
             max_lamport: 0,
@@ -188,9 +264,18 @@ impl<P: Payload> Log<P> {
     ) -> Result<Insertion, InsertError> {
         let op = op.into_op();
         let mut out = Insertion::default();
-        if self.ops.contains_key(&op.id()) || self.pending.contains(&op.id()) {
+        if self.contains(&op.id()) || self.pending.contains(&op.id()) {
             out.duplicate = true;
             return Ok(out);
+        }
+        if let Some(base) = &self.base
+            && op.lamport() <= base.lamport
+        {
+            self.stats.n_refused += 1;
+            return Err(InsertError::BeforeBase {
+                lamport: op.lamport(),
+                cut_lamport: base.lamport,
+            });
         }
         let missing = self.missing(&op);
         if !missing.is_empty() {
@@ -228,8 +313,7 @@ impl<P: Payload> Log<P> {
             }
         }
         self.stats.n_evicted += out.evicted.len() as u64;
-        let inserted: BTreeSet<OpId> = out.delivered.iter().copied().collect();
-        out.refold = Some(self.refold_from(first_pos, &inserted));
+        out.refold = Some(self.refold_from(first_pos, &Inserted::new(&out.delivered)));
         Ok(out)
     }
 
@@ -259,7 +343,7 @@ impl<P: Payload> Log<P> {
         let mut missing: BTreeSet<DepKey> = op
             .deps()
             .iter()
-            .filter(|d| !self.ops.contains_key(d))
+            .filter(|d| !self.contains(d))
             .map(|d| DepKey::Op(*d))
             .collect();
         if op.seq() > 1 && self.vv.get(&op.author()) < op.seq() - 1 {
@@ -294,6 +378,8 @@ impl<P: Payload> Log<P> {
             return Err(InsertError::Full);
         }
         let prev = self.by_author.get(&author).and_then(|ids| ids.last());
+        // Deps and previous ops inside a base have Lamport times at or below its cut, and
+        // `insert` refused every op at or below the cut, so held ones set the floor.
         let floor = op
             .deps()
             .iter()
@@ -308,12 +394,26 @@ impl<P: Payload> Log<P> {
                 floor,
             });
         }
-        let key = (op.lamport(), author, op.seq());
-        let pos = self.order.partition_point(|(k, _)| *k < key);
+        let key = OrderKey::of(&op);
+        // Most ops arrive in order: append without searching.
+        let pos = if self.order.last().is_none_or(|(k, _)| *k < key) {
+            self.order.len()
+        } else {
+            self.order.partition_point(|(k, _)| *k < key)
+        };
         let id = op.id();
         self.order.insert(pos, (key, id));
         self.marks.insert(pos, Mark::Effective);
         self.by_author.entry(author).or_default().push(id);
+        if let Effect::Edit { object } = op.payload().effect() {
+            let keys = self.by_object.entry(object).or_default();
+            if keys.last().is_none_or(|k| *k < key) {
+                keys.push(key);
+            } else {
+                let at = keys.partition_point(|k| *k < key);
+                keys.insert(at, key);
+            }
+        }
         self.vv.raise(author, op.seq());
         self.frontier.deliver(id, op.deps());
         self.max_lamport = self.max_lamport.max(op.lamport());
@@ -322,19 +422,25 @@ impl<P: Payload> Log<P> {
         Ok(pos)
     }
 
-    /// Re-evaluates marks from `from` to the end, starting at the nearest checkpoint.
-    fn refold_from(&mut self, from: usize, inserted: &BTreeSet<OpId>) -> Refold {
-        // Checkpoints after `from` are stale (positions shifted); one may not exist yet.
-        let k = (from / CHECKPOINT_INTERVAL).min(self.checkpoints.len() - 1);
-        self.checkpoints.truncate(k + 1);
-        let mut state = self.checkpoints[k].clone();
+    /// Re-evaluates marks from `from` to the end, starting at the nearest checkpoint (or at
+    /// the current state, when everything changed lies after what was folded: the common case
+    /// of ops arriving in order).
+    fn refold_from(&mut self, from: usize, inserted: &Inserted<'_>) -> Refold {
+        let (start, mut state) = if from >= self.n_folded {
+            (self.n_folded, std::mem::take(&mut self.state))
+        } else {
+            // Checkpoints after `from` are stale (positions shifted); one may not exist yet.
+            let k = (from / CHECKPOINT_INTERVAL).min(self.checkpoints.len() - 1);
+            self.checkpoints.truncate(k + 1);
+            (k * CHECKPOINT_INTERVAL, self.checkpoints[k].clone())
+        };
         let mut refold = Refold {
             from,
-            objects: BTreeMap::new(),
+            ..Refold::default()
         };
         // Marks at or after `from` were computed before the insertion (or are placeholders):
         // compare against the old verdicts to find the objects that changed.
-        for pos in k * CHECKPOINT_INTERVAL..self.order.len() {
+        for pos in start..self.order.len() {
             if pos % CHECKPOINT_INTERVAL == 0 && pos / CHECKPOINT_INTERVAL == self.checkpoints.len()
             {
                 self.checkpoints.push(state.clone());
@@ -347,26 +453,15 @@ impl<P: Payload> Log<P> {
             let target = self.target_info(effect, pos);
             let mark = state.apply(op.author(), op.timestamp(), effect, target);
             if pos >= from {
-                let object = match effect {
-                    Effect::Independent => None,
-                    Effect::Edit { object }
-                    | Effect::Acquire { object, .. }
-                    | Effect::Release { object } => Some((object, pos)),
-                    Effect::Undo { target } | Effect::Redo { target } => {
-                        self.target_object(&target).map(|(o, p)| (o, p.min(pos)))
-                    }
-                };
-                if let Some((object, at)) = object {
-                    let changed = self.marks[pos] != mark || inserted.contains(&id);
-                    if changed {
-                        let e = refold.objects.entry(object).or_insert(at);
-                        *e = (*e).min(at);
-                    }
+                let changed = self.marks[pos] != mark || inserted.contains(&id);
+                if changed {
+                    self.report_change(&mut refold, effect, pos);
                 }
                 self.marks[pos] = mark;
             }
         }
         self.state = state;
+        self.n_folded = self.order.len();
         // An undo or redo changes its target's activity, which may lie before `from`.
         if let Some(first) = refold.objects.values().min() {
             refold.from = refold.from.min(*first);
@@ -374,16 +469,51 @@ impl<P: Payload> Log<P> {
         refold
     }
 
+    /// Records in `refold` the object whose fold the changed op at `pos` affects.
+    fn report_change(&self, refold: &mut Refold, effect: Effect, pos: usize) {
+        let (object, at) = match effect {
+            Effect::Independent => return,
+            Effect::Edit { object }
+            | Effect::Acquire { object, .. }
+            | Effect::Release { object } => (object, pos),
+            Effect::Undo { target } | Effect::Redo { target } => {
+                match self.target_object(&target) {
+                    Some((object, Some(target_pos))) => (object, target_pos.min(pos)),
+                    Some((object, None)) => {
+                        refold.base_objects.insert(object);
+                        (object, pos)
+                    }
+                    None => return,
+                }
+            }
+        };
+        let e = refold.objects.entry(object).or_insert(at);
+        *e = (*e).min(at);
+        let key = self.order[at].0;
+        let k = refold.object_keys.entry(object).or_insert(key);
+        *k = (*k).min(key);
+    }
+
     fn position(&self, id: &OpId) -> Option<usize> {
         let op = self.ops.get(id)?;
-        let key = (op.lamport(), op.author(), op.seq());
-        self.order.binary_search_by(|(k, _)| k.cmp(&key)).ok()
+        self.position_of_key(&OrderKey::of(op))
+    }
+
+    fn position_of_key(&self, key: &OrderKey) -> Option<usize> {
+        // Live ops are looked up right after they were appended.
+        if self.order.last().is_some_and(|(k, _)| k == key) {
+            return Some(self.order.len() - 1);
+        }
+        self.order.binary_search_by(|(k, _)| k.cmp(key)).ok()
     }
 
     fn target_info(&self, effect: Effect, pos: usize) -> Option<TargetInfo> {
         let (Effect::Undo { target } | Effect::Redo { target }) = effect else {
             return None;
         };
+        if let Some(info) = self.base.as_ref().and_then(|b| b.target_info(&target)) {
+            return Some(info);
+        }
         let target_pos = self.position(&target).filter(|p| *p < pos)?;
         let op = self.ops.get(&target)?;
         Some(TargetInfo {
@@ -393,39 +523,46 @@ impl<P: Payload> Log<P> {
         })
     }
 
-    fn target_object(&self, target: &OpId) -> Option<(ObjectId, usize)> {
+    /// The object of edit `target` and its position (`None` inside the base).
+    fn target_object(&self, target: &OpId) -> Option<(ObjectId, Option<usize>)> {
+        if let Some(object) = self.base.as_ref().and_then(|b| b.edit_object(target)) {
+            return Some((object, None));
+        }
         let op = self.ops.get(target)?;
         match op.payload().effect() {
-            Effect::Edit { object } => Some((object, self.position(target)?)),
+            Effect::Edit { object } => Some((object, Some(self.position(target)?))),
             _ => None,
         }
     }
 }
 
 impl<P: Payload> Log<P> {
-    /// Number of delivered ops.
+    /// Number of delivered ops (those inside a snapshot's base included).
     pub fn len(&self) -> usize {
-        self.ops.len()
+        self.ops.len() + self.n_base()
     }
 
     /// True if no op is delivered.
     pub fn is_empty(&self) -> bool {
-        self.ops.is_empty()
+        self.len() == 0
     }
 
-    /// A delivered op by id.
+    /// A delivered op by id: any held op, or an effective edit inside the base.
     pub fn get(&self, id: &OpId) -> Option<&Op<P>> {
-        self.ops.get(id)
+        self.ops
+            .get(id)
+            .or_else(|| self.base.as_ref().and_then(|b| b.edits.get(id)))
     }
 
-    /// True if `id` is delivered.
+    /// True if `id` is delivered (held, or inside the base).
     pub fn contains(&self, id: &OpId) -> bool {
-        self.ops.contains_key(id)
+        self.ops.contains_key(id) || self.base.as_ref().is_some_and(|b| b.contains(id))
     }
 
-    /// The author's op with sequence number `seq`, if delivered.
+    /// The author's held op with sequence number `seq` (`None` inside the base).
     pub fn by_seq(&self, author: &PeerId, seq: u64) -> Option<&Op<P>> {
-        let idx = usize::try_from(seq.checked_sub(1)?).ok()?;
+        let base_seq = self.base.as_ref().map_or(0, |b| b.seq(author));
+        let idx = usize::try_from(seq.checked_sub(1 + base_seq)?).ok()?;
         self.by_author
             .get(author)?
             .get(idx)
@@ -468,6 +605,35 @@ impl<P: Payload> Log<P> {
             })
     }
 
+    /// The order key at held position `pos`.
+    pub fn key_at(&self, pos: usize) -> Option<OrderKey> {
+        self.order.get(pos).map(|(k, _)| *k)
+    }
+
+    /// The held entry with order key `key`.
+    pub fn entry_at_key(&self, key: &OrderKey) -> Option<Entry<'_, P>> {
+        let pos = self.position_of_key(key)?;
+        let id = self.order[pos].1;
+        let op = self.ops.get(&id)?;
+        let mark = self.marks[pos];
+        Some(Entry {
+            op,
+            mark,
+            active: mark == Mark::Effective && !self.state.is_undone(&id),
+        })
+    }
+
+    /// The order keys of `object`'s held edits (ops whose effect is an edit of it), in linear
+    /// order, active or not.
+    pub fn object_edit_keys(&self, object: ObjectId) -> &[OrderKey] {
+        self.by_object.get(&object).map_or(&[], Vec::as_slice)
+    }
+
+    /// The lease and undo state after every delivered op.
+    pub fn fold_state(&self) -> &FoldState {
+        &self.state
+    }
+
     /// Op ids in the linear order.
     pub fn linear_ids(&self) -> impl Iterator<Item = OpId> + '_ {
         self.order.iter().map(|(_, id)| *id)
@@ -476,7 +642,7 @@ impl<P: Payload> Log<P> {
     /// Ops with Lamport time `lamport` or more, in linear order; used to stream what a
     /// remote lacks.
     pub(crate) fn ops_from_lamport(&self, lamport: u64) -> impl Iterator<Item = &Op<P>> {
-        let start = self.order.partition_point(|((l, _, _), _)| *l < lamport);
+        let start = self.order.partition_point(|(k, _)| k.lamport < lamport);
         self.order[start..]
             .iter()
             .filter_map(|(_, id)| self.ops.get(id))
@@ -487,9 +653,14 @@ impl<P: Payload> Log<P> {
         self.position(id).map(|p| self.marks[p])
     }
 
-    /// True if the op is effective and not undone.
+    /// True if the op is effective and not undone (inside the base: an effective edit not
+    /// undone).
     pub fn is_active(&self, id: &OpId) -> bool {
-        self.mark(id) == Some(Mark::Effective) && !self.state.is_undone(id)
+        let effective = match self.mark(id) {
+            Some(mark) => mark == Mark::Effective,
+            None => self.base.as_ref().is_some_and(|b| b.edits.contains_key(id)),
+        };
+        effective && !self.state.is_undone(id)
     }
 
     /// The author's rejected ops in linear order, with reasons, so their work can be re-applied.
@@ -497,7 +668,7 @@ impl<P: Payload> Log<P> {
         self.order
             .iter()
             .zip(&self.marks)
-            .filter(|(((_, a, _), _), _)| a == author)
+            .filter(|((k, _), _)| k.author == *author)
             .filter_map(|((_, id), mark)| match mark {
                 Mark::Rejected(reason) => Some((*id, *reason)),
                 Mark::Effective => None,
@@ -512,4 +683,4 @@ impl<P: Payload> Log<P> {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

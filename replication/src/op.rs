@@ -30,8 +30,21 @@ pub const MAX_OP_BYTES: usize = 1
 const SIGNING_CONTEXT: &[u8] = b"sculpt/op/v1";
 
 /// An op's id: the blake3 hash of its canonical encoding (signature included).
-#[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
 pub struct OpId(pub [u8; OP_ID_BYTES]);
+
+/// Byte-wise order (see [`crate::identity`]'s fast comparison).
+impl Ord for OpId {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        crate::identity::cmp_id_bytes(&self.0, &other.0)
+    }
+}
+
+impl PartialOrd for OpId {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
 
 impl OpId {
     /// Short hex display form.

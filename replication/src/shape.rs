@@ -37,7 +37,7 @@ pub enum ShapePayload {
         /// The new object's id.
         object: u64,
         /// Its description.
-        data: ObjectData,
+        data: Box<ObjectData>,
         /// The group it hangs from.
         group: Option<u64>,
     },
@@ -116,7 +116,7 @@ impl ShapePayload {
     /// Checks what decoding cannot: formulas compile, numbers are valid, text is short.
     pub fn validate(&self) -> Result<(), String> {
         match self {
-            ShapePayload::Create { data, .. } => Object::new(data.clone())
+            ShapePayload::Create { data, .. } => Object::new((**data).clone())
                 .map(|_| ())
                 .map_err(|e| e.to_string()),
             ShapePayload::Set { field, .. } => {
@@ -288,7 +288,7 @@ impl Materialize<ShapePayload> for ShapeScene {
                     let group = group
                         .map(GroupId)
                         .filter(|g| self.scene.group(*g).is_some());
-                    let _ = self.scene.create(object, data.clone(), group);
+                    let _ = self.scene.create(object, (**data).clone(), group);
                 }
             }
             ShapePayload::Delete { object } => {

@@ -61,7 +61,7 @@ fn concurrent_workload(n_peers: u8, per_peer: usize) -> Vec<VerifiedOp<ShapePayl
             Timestamp(1),
             ShapePayload::Create {
                 object: 1,
-                data: sphere_data(),
+                data: Box::new(sphere_data()),
                 group: None,
             },
         )
@@ -188,7 +188,7 @@ fn undo_then_redo_restores_the_scene_and_snapshots_round_trip() {
         &mut scene,
         ShapePayload::Create {
             object: 1,
-            data: sphere_data(),
+            data: Box::new(sphere_data()),
             group: None,
         },
     );
@@ -246,7 +246,7 @@ fn a_weak_takeover_rejects_the_former_holders_edits() {
     let mut log = SLog::default();
     let create = ShapePayload::Create {
         object: 1,
-        data: sphere_data(),
+        data: Box::new(sphere_data()),
         group: None,
     };
     log.author(&a, Timestamp(1), create).unwrap();
@@ -282,7 +282,7 @@ fn payloads_are_small_and_hostile_bytes_are_refused() {
     let mut create = Vec::new();
     ShapePayload::Create {
         object: 1,
-        data: sphere_data(),
+        data: Box::new(sphere_data()),
         group: None,
     }
     .encode(&mut create);

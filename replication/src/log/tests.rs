@@ -7,20 +7,20 @@ use proptest::prelude::*;
 use rand_chacha::ChaCha20Rng;
 use rand_core::{RngCore, SeedableRng};
 
-type TLog = Log<TestPayload>;
+pub(crate) type TLog = Log<TestPayload>;
 
-fn key(i: u8) -> Keypair {
+pub(crate) fn key(i: u8) -> Keypair {
     Keypair::from_seed([i + 1; 32])
 }
 
-fn set(object: u64, value: &str) -> TestPayload {
+pub(crate) fn set(object: u64, value: &str) -> TestPayload {
     TestPayload::Set {
         object,
         value: value.into(),
     }
 }
 
-fn weak(object: u64, ttl_micros: u64) -> TestPayload {
+pub(crate) fn weak(object: u64, ttl_micros: u64) -> TestPayload {
     TestPayload::Acquire {
         object,
         strong: false,
@@ -37,7 +37,7 @@ fn observe(log: &TLog) -> Vec<(OpId, Mark, bool)> {
 
 /// A random workload by `n_authors` replicas that author ops and merge each other at random,
 /// so ops are concurrent in many ways. Returns every op, each author's in seq order.
-fn workload(seed: u64, n_authors: u8, n_steps: usize) -> Vec<VerifiedOp<TestPayload>> {
+pub(crate) fn workload(seed: u64, n_authors: u8, n_steps: usize) -> Vec<VerifiedOp<TestPayload>> {
     let mut rng = ChaCha20Rng::seed_from_u64(seed);
     let keys: Vec<Keypair> = (0..n_authors).map(key).collect();
     let mut replicas: Vec<TLog> = (0..n_authors).map(|_| TLog::default()).collect();
@@ -79,7 +79,7 @@ fn workload(seed: u64, n_authors: u8, n_steps: usize) -> Vec<VerifiedOp<TestPayl
     all
 }
 
-fn deliver_all(ops: &[VerifiedOp<TestPayload>]) -> TLog {
+pub(crate) fn deliver_all(ops: &[VerifiedOp<TestPayload>]) -> TLog {
     let mut log = TLog::default();
     for op in ops {
         log.insert(Timestamp(0), op.clone(), Origin(1)).unwrap();
@@ -87,7 +87,7 @@ fn deliver_all(ops: &[VerifiedOp<TestPayload>]) -> TLog {
     log
 }
 
-fn shuffled(ops: &[VerifiedOp<TestPayload>], seed: u64) -> Vec<VerifiedOp<TestPayload>> {
+pub(crate) fn shuffled(ops: &[VerifiedOp<TestPayload>], seed: u64) -> Vec<VerifiedOp<TestPayload>> {
     let mut rng = ChaCha20Rng::seed_from_u64(seed);
     let mut v = ops.to_vec();
     for i in (1..v.len()).rev() {

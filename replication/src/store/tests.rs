@@ -73,6 +73,12 @@ fn reopen_restores_exactly_and_loads_into_a_log() {
     let mut log = Log::default();
     OpStore::<TestPayload>::open_into(&path, Timestamp(0), &mut log).unwrap();
     assert_eq!(log.len(), 10);
+    let mut trusted = Log::default();
+    OpStore::<TestPayload>::open_into_trusted(&path, Timestamp(0), &mut trusted).unwrap();
+    assert_eq!(
+        trusted.linear_ids().collect::<Vec<_>>(),
+        log.linear_ids().collect::<Vec<_>>()
+    );
     let _ = std::fs::remove_dir_all(path.parent().unwrap());
 }
 

@@ -1,0 +1,115 @@
+//! Shared workload for the replication benches: an in-order history of signed `TestPayload`
+//! ops by four authors taking turns (edits of 64 objects, some lease traffic, chat), and an
+//! in-memory sync pump between two `SyncState`s.
+
+#![allow(dead_code, reason = "each bench binary uses part of this module")]
+
+use replication::materialize::Materialized;
+use replication::materialize::test_scene::TestScene;
+use replication::payload::test_payload::TestPayload;
+use replication::pending::Origin;
+use replication::sync::state::Event;
+use replication::{Keypair, Log, SyncConfig, SyncState, Timestamp, VerifiedOp};
+
+pub type TLog = Log<TestPayload>;
+pub type TScene = Materialized<TestPayload, TestScene>;
+
+/// The largest history the benches use.
+pub const N_HISTORY: usize = 100_000;
+
+/// The four authors.
+pub fn keys() -> Vec<Keypair> {
+    (1..=4).map(|i| Keypair::from_seed([i; 32])).collect()
+}
+
+/// An in-order history of `n` ops, each depending on the one before.
+pub fn history(n: usize) -> Vec<VerifiedOp<TestPayload>> {
+    let keys = keys();
+    let mut log = TLog::default();
+    let mut out = Vec::with_capacity(n);
+    for i in 0..n {
+        let object = (i % 64) as u64;
+        let payload = match i % 50 {
+            0 => TestPayload::Chat(format!("line {i}")),
+            1 => TestPayload::Acquire {
+                object,
+                strong: false,
+                ttl_micros: 20_000,
+            },
+            2 => TestPayload::Release { object: 1 },
+            _ => TestPayload::Set {
+                object,
+                value: format!("x*x+y*y-{i}"),
+            },
+        };
+        let (op, _) = log
+            .author(&keys[i % keys.len()], Timestamp(i as u64 * 1000), payload)
+            .expect("a valid op");
+        out.push(op);
+    }
+    out
+}
+
+/// A log holding `ops`, delivered in order, and its scene.
+pub fn build(ops: &[VerifiedOp<TestPayload>]) -> (TLog, TScene) {
+    let mut log = TLog::default();
+    let mut scene = TScene::fold(&log).expect("an empty scene");
+    for op in ops {
+        let ins = log
+            .insert(Timestamp(0), op.clone(), Origin(1))
+            .expect("in-order ops are accepted");
+        scene.apply_insertion(&log, &ins);
+    }
+    (log, scene)
+}
+
+/// One end of an in-memory connection.
+pub struct Side {
+    pub log: TLog,
+    pub scene: TScene,
+    pub sync: SyncState<TestPayload>,
+}
+
+impl Side {
+    pub fn new(log: TLog, scene: TScene, seed: u8, origin: u64) -> Self {
+        let config = SyncConfig {
+            session_id: [1; 16],
+            local: Keypair::from_seed([seed; 32]).peer_id(),
+            origin: Origin(origin),
+        };
+        Self {
+            sync: SyncState::new(Timestamp(0), config),
+            log,
+            scene,
+        }
+    }
+
+    fn drain(&mut self) {
+        while let Some(event) = self.sync.poll_event() {
+            if let Event::Delivered(ins) = event {
+                self.scene.apply_insertion(&self.log, &ins);
+            }
+        }
+    }
+}
+
+/// Exchanges messages until `b` holds what `a` holds, advancing virtual time 1 ms a round
+/// (the send pacing allows 1,000 messages a second); returns the bytes sent both ways.
+pub fn catch_up(a: &mut Side, b: &mut Side) -> u64 {
+    let mut now = 0;
+    for _ in 0..10_000_000 {
+        while let Some(bytes) = a.sync.poll_transmit(Timestamp(now), &a.log) {
+            b.sync.handle_input(Timestamp(now), &bytes, &mut b.log);
+        }
+        while let Some(bytes) = b.sync.poll_transmit(Timestamp(now), &b.log) {
+            a.sync.handle_input(Timestamp(now), &bytes, &mut a.log);
+        }
+        a.drain();
+        b.drain();
+        if b.log.version_vector() == a.log.version_vector() {
+            return a.sync.stats().n_bytes_out + b.sync.stats().n_bytes_out;
+        }
+        now += 1000;
+    }
+    panic!("the catch-up did not finish");
+}

@@ -1,0 +1,356 @@
+//! The base of a log joined from a snapshot: what it keeps of the ops before the cut (ids for
+//! causal checks, the lease/undo state at the cut, and the effective edits whole, because a
+//! later undo or redo may still toggle them), and how a full log computes a base at a cut.
+//!
+//! A cut at Lamport time `L` holds exactly the ops with Lamport time `L` or less. It is
+//! *stable* when no op outside it can ever sort before it: see [`Log::stable_lamport`].
+
+use std::collections::BTreeMap;
+
+use super::{CHECKPOINT_INTERVAL, Log, OrderKey};
+use crate::causal::{Frontier, VersionVector};
+use crate::identity::PeerId;
+use crate::lease::{FoldState, Mark, RejectReason, TargetInfo};
+use crate::op::{Op, OpId};
+use crate::payload::{Effect, ObjectId, Payload};
+use crate::pending::{Pending, PendingLimits};
+use crate::time::Timestamp;
+
+/// What the base knows of one op before the cut.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum BaseKind {
+    /// Not an edit (lease, undo, redo, independent).
+    Other,
+    /// An edit that was rejected: it can never become active.
+    RejectedEdit,
+    /// An effective edit (active, or undone at the cut); kept whole in [`Base::edits`].
+    EffectiveEdit,
+}
+
+/// One op before the cut.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct BaseOp {
+    pub(crate) id: OpId,
+    /// Index into [`Base::authors`].
+    pub(crate) author_idx: u32,
+    pub(crate) kind: BaseKind,
+}
+
+/// Per author: the last seq and the Lamport time of that op, inside the base.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct BaseAuthor {
+    pub(crate) author: PeerId,
+    pub(crate) seq: u64,
+    pub(crate) lamport: u64,
+}
+
+/// What a log keeps of the ops at or before its cut.
+#[derive(Clone, Debug)]
+pub(crate) struct Base<P> {
+    /// The cut: every op with this Lamport time or less is in the base, and no other.
+    pub(crate) lamport: u64,
+    /// Sorted by author.
+    pub(crate) authors: Vec<BaseAuthor>,
+    /// Every op of the base, sorted by id.
+    pub(crate) ops: Vec<BaseOp>,
+    /// The effective edits, whole (a later undo or redo may toggle them).
+    pub(crate) edits: BTreeMap<OpId, Op<P>>,
+    /// The effective edits of each object in linear order.
+    pub(crate) edits_by_object: BTreeMap<ObjectId, Vec<(OrderKey, OpId)>>,
+    /// The DAG's heads at the cut.
+    pub(crate) heads: Vec<OpId>,
+    /// The latest op timestamp in the base.
+    pub(crate) max_timestamp: Timestamp,
+    /// The lease and undo state at the cut.
+    pub(crate) state: FoldState,
+    /// The scene at the cut, in the scene's own snapshot encoding.
+    pub(crate) scene: Vec<u8>,
+}
+
+/// Why a base could not be cut at a Lamport time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum CutError {
+    /// Ops at or before the cut may still arrive: it is above [`Log::stable_lamport`].
+    #[error("cut {cut} is above the stable Lamport time {stable}")]
+    NotStable {
+        /// The cut asked for.
+        cut: u64,
+        /// The highest stable cut.
+        stable: u64,
+    },
+    /// The cut is below the log's own base cut.
+    #[error("cut {cut} is below the log's base cut {base}")]
+    BelowBase {
+        /// The cut asked for.
+        cut: u64,
+        /// The base's cut.
+        base: u64,
+    },
+}
+
+impl<P> Base<P> {
+    fn find(&self, id: &OpId) -> Option<&BaseOp> {
+        self.ops
+            .binary_search_by(|o| o.id.cmp(id))
+            .ok()
+            .map(|i| &self.ops[i])
+    }
+
+    pub(crate) fn contains(&self, id: &OpId) -> bool {
+        self.find(id).is_some()
+    }
+
+    pub(crate) fn seq(&self, author: &PeerId) -> u64 {
+        self.authors
+            .binary_search_by(|a| a.author.cmp(author))
+            .map_or(0, |i| self.authors[i].seq)
+    }
+
+    /// What the undo/redo fold needs to know of a target inside the base.
+    pub(crate) fn target_info(&self, id: &OpId) -> Option<TargetInfo>
+    where
+        P: Payload,
+    {
+        let op = self.find(id)?;
+        let author = self.authors.get(op.author_idx as usize)?.author;
+        let (effect, mark) = match op.kind {
+            BaseKind::Other => (Effect::Independent, Mark::Effective),
+            // The fold reads only "not effective" from a rejected target; its object and the
+            // reason are not kept.
+            BaseKind::RejectedEdit => (
+                Effect::Edit {
+                    object: ObjectId(0),
+                },
+                Mark::Rejected(RejectReason::TargetNotEffective),
+            ),
+            BaseKind::EffectiveEdit => (self.edits.get(id)?.payload().effect(), Mark::Effective),
+        };
+        Some(TargetInfo {
+            author,
+            effect,
+            mark,
+        })
+    }
+
+    /// The object of an effective edit inside the base.
+    pub(crate) fn edit_object(&self, id: &OpId) -> Option<ObjectId>
+    where
+        P: Payload,
+    {
+        match self.edits.get(id)?.payload().effect() {
+            Effect::Edit { object } => Some(object),
+            _ => None,
+        }
+    }
+
+    pub(crate) fn max_lamport(&self) -> u64 {
+        self.authors
+            .iter()
+            .map(|a| a.lamport)
+            .max()
+            .unwrap_or(0)
+            .max(self.lamport)
+    }
+}
+
+impl<P: Payload> Log<P> {
+    /// A log that starts from `base` (a decoded snapshot) instead of from nothing.
+    pub(crate) fn from_base(base: Base<P>, limits: PendingLimits) -> Self {
+        let mut frontier = Frontier::default();
+        for head in &base.heads {
+            frontier.deliver(*head, &[]);
+        }
+        let mut vv = VersionVector::new();
+        for a in &base.authors {
+            vv.raise(a.author, a.seq);
+        }
+        let mut clock = crate::time::HybridClock::default();
+        clock.observe(base.max_timestamp);
+        Self {
+            ops: BTreeMap::new(),
+            order: Vec::new(),
+            marks: Vec::new(),
+            checkpoints: vec![base.state.clone()],
+            state: base.state.clone(),
+            n_folded: 0,
+            by_author: BTreeMap::new(),
+            by_object: BTreeMap::new(),
+            frontier,
+            vv,
+            // New local ops must land after the cut.
+            max_lamport: base.max_lamport(),
+            clock,
+            pending: Pending::with_limits(limits),
+            stats: super::LogStats::default(),
+            base: Some(Box::new(base)),
+        }
+    }
+
+    pub(crate) fn base(&self) -> Option<&Base<P>> {
+        self.base.as_deref()
+    }
+
+    /// The Lamport time of the base's cut, for a log joined from a snapshot.
+    pub fn base_lamport(&self) -> Option<u64> {
+        self.base.as_ref().map(|b| b.lamport)
+    }
+
+    /// Number of ops inside the base (0 without one); [`Log::len`] counts them too.
+    pub fn n_base(&self) -> usize {
+        self.base.as_ref().map_or(0, |b| b.ops.len())
+    }
+
+    /// Number of ops held whole in the linear order (those after the base's cut).
+    pub fn n_held(&self) -> usize {
+        self.ops.len()
+    }
+
+    /// The highest Lamport time `L` such that every op with Lamport time `L` or less by an
+    /// author this log knows is already here.
+    ///
+    /// An author's ops have growing Lamport times, so once the log holds an op of every known
+    /// author at `L` or later, none of their missing ops can sort at or before `L`. An author
+    /// never heard of, who worked offline before ever syncing, can still break it: a log
+    /// joined at such a cut refuses that author's early ops with [`InsertError::BeforeBase`].
+    ///
+    /// [`InsertError::BeforeBase`]: super::InsertError::BeforeBase
+    pub fn stable_lamport(&self) -> u64 {
+        let base_floor = self.base.as_ref().map_or(0, |b| b.lamport);
+        self.vv
+            .iter()
+            .map(|(author, _)| self.last_lamport(author))
+            .min()
+            .unwrap_or(0)
+            .max(base_floor)
+    }
+
+    /// The Lamport time of the author's latest op here (0 if none).
+    fn last_lamport(&self, author: &PeerId) -> u64 {
+        if let Some(op) = self
+            .by_author
+            .get(author)
+            .and_then(|ids| ids.last())
+            .and_then(|id| self.ops.get(id))
+        {
+            return op.lamport();
+        }
+        self.base
+            .as_ref()
+            .and_then(|b| {
+                b.authors
+                    .binary_search_by(|a| a.author.cmp(author))
+                    .ok()
+                    .map(|i| b.authors[i].lamport)
+            })
+            .unwrap_or(0)
+    }
+
+    /// The number of held positions at or before Lamport time `cut`.
+    pub(crate) fn prefix_len(&self, cut: u64) -> usize {
+        self.order.partition_point(|(k, _)| k.lamport <= cut)
+    }
+
+    /// The lease/undo state after the first `n` positions.
+    pub(crate) fn state_at(&self, n: usize) -> FoldState {
+        if n >= self.n_folded {
+            return self.state.clone();
+        }
+        let k = (n / CHECKPOINT_INTERVAL).min(self.checkpoints.len() - 1);
+        let mut state = self.checkpoints[k].clone();
+        for pos in k * CHECKPOINT_INTERVAL..n {
+            let Some(op) = self.ops.get(&self.order[pos].1) else {
+                continue;
+            };
+            let effect = op.payload().effect();
+            let target = self.target_info(effect, pos);
+            state.apply(op.author(), op.timestamp(), effect, target);
+        }
+        state
+    }
+
+    /// The base of this log at Lamport time `cut` (without the scene, which the caller folds):
+    /// every held op at or before the cut joins the existing base, if any.
+    pub(crate) fn base_at(&self, cut: u64) -> Result<(Base<P>, usize), CutError> {
+        let stable = self.stable_lamport();
+        if cut > stable {
+            return Err(CutError::NotStable { cut, stable });
+        }
+        let old = self.base.as_deref();
+        if let Some(b) = old
+            && cut < b.lamport
+        {
+            return Err(CutError::BelowBase {
+                cut,
+                base: b.lamport,
+            });
+        }
+        let n = self.prefix_len(cut);
+        let mut frontier = Frontier::default();
+        let mut authors: BTreeMap<PeerId, (u64, u64)> = BTreeMap::new();
+        let mut max_timestamp = Timestamp::default();
+        let mut edits = BTreeMap::new();
+        let mut edits_by_object: BTreeMap<ObjectId, Vec<(OrderKey, OpId)>> = BTreeMap::new();
+        let mut kinds: Vec<(OpId, PeerId, BaseKind)> = Vec::new();
+        if let Some(b) = old {
+            for head in &b.heads {
+                frontier.deliver(*head, &[]);
+            }
+            for a in &b.authors {
+                authors.insert(a.author, (a.seq, a.lamport));
+            }
+            max_timestamp = b.max_timestamp;
+            edits = b.edits.clone();
+            edits_by_object = b.edits_by_object.clone();
+            kinds.extend(b.ops.iter().filter_map(|o| {
+                Some((o.id, b.authors.get(o.author_idx as usize)?.author, o.kind))
+            }));
+        }
+        for (pos, (key, id)) in self.order[..n].iter().enumerate() {
+            let Some(op) = self.ops.get(id) else { continue };
+            frontier.deliver(*id, op.deps());
+            authors.insert(key.author, (key.seq, key.lamport));
+            max_timestamp = max_timestamp.max(op.timestamp());
+            let kind = match (op.payload().effect(), self.marks[pos]) {
+                (Effect::Edit { object }, Mark::Effective) => {
+                    edits.insert(*id, op.clone());
+                    edits_by_object.entry(object).or_default().push((*key, *id));
+                    BaseKind::EffectiveEdit
+                }
+                (Effect::Edit { .. }, Mark::Rejected(_)) => BaseKind::RejectedEdit,
+                _ => BaseKind::Other,
+            };
+            kinds.push((*id, key.author, kind));
+        }
+        let authors: Vec<BaseAuthor> = authors
+            .into_iter()
+            .map(|(author, (seq, lamport))| BaseAuthor {
+                author,
+                seq,
+                lamport,
+            })
+            .collect();
+        let mut ops: Vec<BaseOp> = kinds
+            .into_iter()
+            .map(|(id, author, kind)| BaseOp {
+                id,
+                author_idx: authors
+                    .binary_search_by(|a| a.author.cmp(&author))
+                    .map_or(u32::MAX, |i| i as u32),
+                kind,
+            })
+            .collect();
+        ops.sort_unstable_by_key(|o| o.id);
+        let base = Base {
+            lamport: cut,
+            authors,
+            ops,
+            edits,
+            edits_by_object,
+            heads: frontier.heads().copied().collect(),
+            max_timestamp,
+            state: self.state_at(n),
+            scene: Vec::new(),
+        };
+        Ok((base, n))
+    }
+}

@@ -1,0 +1,384 @@
+//! Materialisation: how a payload's object model folds the log's active entries into a scene,
+//! per object, and the driver ([`Materialized`]) that keeps a scene in step with a [`Log`] by
+//! re-folding only the objects an insertion changed.
+//!
+//! The scene is a function of the active entries alone: for each object, the fold of its
+//! active edits in linear order; plus the independent entries (chat) in linear order. Lease,
+//! release, undo and redo ops never reach the scene directly: they decide which edits are
+//! active. So the same op set gives the same scene, and the same [`SceneHash`], on every peer.
+
+use std::collections::BTreeMap;
+use std::marker::PhantomData;
+
+use crate::codec::DecodeError;
+use crate::lease::{FoldState, Mark};
+use crate::log::{Insertion, Log, OrderKey, Refold};
+use crate::op::{Op, OpId};
+use crate::payload::{Effect, ObjectId, Payload};
+
+/// Largest scene snapshot a [`Materialize::decode_snapshot`] is given, in bytes.
+pub const MAX_SCENE_SNAPSHOT_BYTES: usize = 64 * 1024 * 1024;
+/// Length of a [`SceneHash`].
+pub const SCENE_HASH_BYTES: usize = 32;
+
+/// The blake3 hash of a scene's canonical encoding: equal on every peer with the same op set.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct SceneHash(pub [u8; SCENE_HASH_BYTES]);
+
+impl SceneHash {
+    /// The hash of `bytes` (a scene's canonical encoding).
+    pub fn of(bytes: &[u8]) -> Self {
+        Self(*blake3::hash(bytes).as_bytes())
+    }
+}
+
+/// One active entry handed to the scene.
+#[derive(Debug, Clone, Copy)]
+pub struct FoldEntry<'a, P> {
+    /// Its place in the linear order (stable across peers and insertions).
+    pub key: OrderKey,
+    /// The op.
+    pub op: &'a Op<P>,
+}
+
+/// A payload's object model as a scene that the log's active entries fold into.
+///
+/// The driver calls, for each object, [`Materialize::reset_object`] and then
+/// [`Materialize::apply`] with the object's active edits in linear order; after a late op it
+/// resets and re-folds only the objects whose fold changed, or appends to an object when the
+/// change lies after everything applied to it. Independent entries ([`Effect::Independent`])
+/// are applied exactly once each, usually in linear order; a late one arrives after entries
+/// that follow it, and the scene places it by its key (a chat list sorted by key).
+/// Leases, releases, undos and redos are never applied: they only decide which edits are
+/// active.
+pub trait Materialize<P: Payload> {
+    /// Forgets everything folded into `object`: its fold starts again.
+    fn reset_object(&mut self, object: ObjectId);
+
+    /// Folds one active entry: an edit of one object, or an independent entry.
+    fn apply(&mut self, entry: FoldEntry<'_, P>);
+
+    /// The blake3 hash of the scene's canonical encoding.
+    fn scene_hash(&self) -> SceneHash;
+
+    /// Appends the scene's snapshot encoding: a version byte first, canonical (equal scenes
+    /// encode to equal bytes), at most [`MAX_SCENE_SNAPSHOT_BYTES`].
+    fn encode_snapshot(&self, out: &mut Vec<u8>);
+
+    /// Decodes a snapshot from untrusted bytes (at most [`MAX_SCENE_SNAPSHOT_BYTES`]), never
+    /// panicking and allocating only within named limits.
+    fn decode_snapshot(bytes: &[u8]) -> Result<Self, DecodeError>
+    where
+        Self: Sized;
+}
+
+/// What a [`Materialized`] did, to measure how much a refold costs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FoldStats {
+    /// Entries applied to the scene.
+    pub n_applied: u64,
+    /// Objects reset and re-folded from their start.
+    pub n_object_refolds: u64,
+    /// Objects appended to without a reset.
+    pub n_object_appends: u64,
+}
+
+/// A scene kept in step with a log.
+///
+/// Feed it every [`Insertion`] the log (or a [`crate::SyncState`] event) reports, in the order
+/// they were reported; it may lag the log (keys, not positions, say what changed).
+#[derive(Debug, Clone)]
+pub struct Materialized<P, M> {
+    scene: M,
+    /// Per object, the key of the last held edit applied since its last reset.
+    last_applied: BTreeMap<ObjectId, OrderKey>,
+    stats: FoldStats,
+    payload: PhantomData<P>,
+}
+
+impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
+    /// A driver around `scene`, which must already hold the fold of what the log holds (a
+    /// scene decoded from a snapshot, for a log joined from it).
+    pub(crate) fn from_scene(scene: M) -> Self {
+        Self {
+            scene,
+            last_applied: BTreeMap::new(),
+            stats: FoldStats::default(),
+            payload: PhantomData,
+        }
+    }
+
+    /// Folds every active entry of `log` into `scene` (a new scene, or for a log joined from a
+    /// snapshot, the one its snapshot decodes to: see [`Materialized::fold`]).
+    fn fold_onto(log: &Log<P>, scene: M) -> Self {
+        let mut out = Self::from_scene(scene);
+        out.fold_prefix(log, log.n_held(), log.fold_state());
+        out
+    }
+
+    /// The scene of `log`, folded from scratch (for a log joined from a snapshot, from the
+    /// snapshot's scene).
+    pub fn fold(log: &Log<P>) -> Result<Self, DecodeError>
+    where
+        M: Default,
+    {
+        let scene = match log.base() {
+            Some(base) => M::decode_snapshot(&base.scene)?,
+            None => M::default(),
+        };
+        Ok(Self::fold_onto(log, scene))
+    }
+
+    /// Applies the first `n` held entries as active under `state` onto a scene that holds the
+    /// base's scene at its cut (or nothing): objects whose base edits `state` toggled since
+    /// the cut are re-folded from their start first.
+    pub(crate) fn fold_prefix(&mut self, log: &Log<P>, n: usize, state: &FoldState) {
+        if let Some(base) = log.base() {
+            for (object, edits) in &base.edits_by_object {
+                let toggled = edits
+                    .iter()
+                    .any(|(_, id)| base.state.is_undone(id) != state.is_undone(id));
+                if !toggled {
+                    continue;
+                }
+                self.scene.reset_object(*object);
+                self.stats.n_object_refolds += 1;
+                for (key, id) in edits {
+                    if let Some(op) = base.edits.get(id).filter(|_| !state.is_undone(id)) {
+                        self.scene.apply(FoldEntry { key: *key, op });
+                        self.stats.n_applied += 1;
+                    }
+                }
+            }
+        }
+        for entry in log.entries().take(n) {
+            if entry.mark != Mark::Effective || state.is_undone(&entry.op.id()) {
+                continue;
+            }
+            let key = OrderKey::of(entry.op);
+            if let Effect::Edit { object } = entry.op.payload().effect() {
+                self.last_applied.insert(object, key);
+            }
+            self.scene.apply(FoldEntry { key, op: entry.op });
+            self.stats.n_applied += 1;
+        }
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &M {
+        &self.scene
+    }
+
+    /// The scene's hash.
+    pub fn scene_hash(&self) -> SceneHash {
+        self.scene.scene_hash()
+    }
+
+    /// What the driver did so far.
+    pub fn stats(&self) -> FoldStats {
+        self.stats
+    }
+
+    /// Brings the scene up to date with what `insertion` changed in `log`.
+    pub fn apply_insertion(&mut self, log: &Log<P>, insertion: &Insertion) {
+        if let Some(refold) = &insertion.refold {
+            self.apply_refold(log, &insertion.delivered, refold);
+        }
+    }
+
+    /// Re-folds what `refold` names and applies the `delivered` independent entries.
+    pub fn apply_refold(&mut self, log: &Log<P>, delivered: &[OpId], refold: &Refold) {
+        for (object, from) in &refold.object_keys {
+            let full = refold.base_objects.contains(object)
+                || self
+                    .last_applied
+                    .get(object)
+                    .is_some_and(|last| last >= from);
+            if full {
+                self.refold_object(log, *object);
+            } else {
+                self.append_object(log, *object, from);
+            }
+        }
+        for id in delivered {
+            let Some(op) = log.get(id) else { continue };
+            if op.payload().effect() == Effect::Independent {
+                self.scene.apply(FoldEntry {
+                    key: OrderKey::of(op),
+                    op,
+                });
+                self.stats.n_applied += 1;
+            }
+        }
+    }
+
+    /// Resets `object` and folds all of its active edits: the base's, then the held ones.
+    fn refold_object(&mut self, log: &Log<P>, object: ObjectId) {
+        self.scene.reset_object(object);
+        self.stats.n_object_refolds += 1;
+        self.last_applied.remove(&object);
+        if let Some(base) = log.base()
+            && let Some(edits) = base.edits_by_object.get(&object)
+        {
+            for (key, id) in edits {
+                if let Some(op) = base.edits.get(id).filter(|_| log.is_active(id)) {
+                    self.scene.apply(FoldEntry { key: *key, op });
+                    self.stats.n_applied += 1;
+                }
+            }
+        }
+        self.apply_held_edits(log, object, 0);
+    }
+
+    /// Applies `object`'s active held edits from key `from` on, after what was applied.
+    fn append_object(&mut self, log: &Log<P>, object: ObjectId, from: &OrderKey) {
+        self.stats.n_object_appends += 1;
+        let start = log.object_edit_keys(object).partition_point(|k| k < from);
+        self.apply_held_edits(log, object, start);
+    }
+
+    fn apply_held_edits(&mut self, log: &Log<P>, object: ObjectId, start: usize) {
+        for key in &log.object_edit_keys(object)[start..] {
+            let Some(entry) = log.entry_at_key(key).filter(|e| e.active) else {
+                continue;
+            };
+            self.scene.apply(FoldEntry {
+                key: *key,
+                op: entry.op,
+            });
+            self.last_applied.insert(object, *key);
+            self.stats.n_applied += 1;
+        }
+    }
+}
+
+/// A toy scene for [`crate::payload::test_payload::TestPayload`]: each object's value (the
+/// last active `Set`) and the chat list in linear order.
+pub mod test_scene {
+    use super::*;
+    use crate::codec::{Reader, put_bytes, put_varint};
+    use crate::identity::PeerId;
+    use crate::payload::test_payload::{MAX_TEST_TEXT_BYTES, TestPayload};
+
+    /// Version byte of the test scene's snapshot encoding.
+    pub const TEST_SCENE_FORMAT_VERSION: u8 = 1;
+    /// Most objects or chat lines a decoded test scene may hold.
+    pub const MAX_TEST_SCENE_ITEMS: usize = 1 << 20;
+
+    /// Object values and the chat list.
+    #[derive(Clone, Debug, Default, PartialEq, Eq)]
+    pub struct TestScene {
+        /// Object -> value of its last active `Set`.
+        pub objects: BTreeMap<u64, String>,
+        /// Chat lines sorted by order key.
+        pub chat: Vec<(OrderKey, String)>,
+    }
+
+    impl Materialize<TestPayload> for TestScene {
+        fn reset_object(&mut self, object: ObjectId) {
+            self.objects.remove(&object.0);
+        }
+
+        fn apply(&mut self, entry: FoldEntry<'_, TestPayload>) {
+            match entry.op.payload() {
+                TestPayload::Set { object, value } => match self.objects.get_mut(object) {
+                    // Reuses the old value's buffer.
+                    Some(old) => old.clone_from(value),
+                    None => {
+                        self.objects.insert(*object, value.clone());
+                    }
+                },
+                TestPayload::Chat(text) => {
+                    let at = self.chat.partition_point(|(k, _)| *k < entry.key);
+                    // Applying a line twice changes nothing.
+                    if self.chat.get(at).is_none_or(|(k, _)| *k != entry.key) {
+                        self.chat.insert(at, (entry.key, text.clone()));
+                    }
+                }
+                _ => {}
+            }
+        }
+
+        fn scene_hash(&self) -> SceneHash {
+            let mut bytes = Vec::new();
+            self.encode_snapshot(&mut bytes);
+            SceneHash::of(&bytes)
+        }
+
+        fn encode_snapshot(&self, out: &mut Vec<u8>) {
+            out.push(TEST_SCENE_FORMAT_VERSION);
+            put_varint(out, self.objects.len() as u64);
+            for (object, value) in &self.objects {
+                put_varint(out, *object);
+                put_bytes(out, value.as_bytes());
+            }
+            put_varint(out, self.chat.len() as u64);
+            for (key, text) in &self.chat {
+                put_varint(out, key.lamport);
+                out.extend_from_slice(&key.author.0);
+                put_varint(out, key.seq);
+                put_bytes(out, text.as_bytes());
+            }
+        }
+
+        fn decode_snapshot(bytes: &[u8]) -> Result<Self, DecodeError> {
+            if bytes.len() > MAX_SCENE_SNAPSHOT_BYTES {
+                return Err(DecodeError::OverLimit {
+                    offset: 0,
+                    what: "scene snapshot length",
+                    value: bytes.len() as u64,
+                    limit: MAX_SCENE_SNAPSHOT_BYTES as u64,
+                });
+            }
+            let mut r = Reader::new(bytes);
+            let version = r.u8()?;
+            if version != TEST_SCENE_FORMAT_VERSION {
+                return Err(DecodeError::UnknownVersion { offset: 0, version });
+            }
+            let n_objects = r.bounded("object count", MAX_TEST_SCENE_ITEMS as u64)?;
+            let mut objects = BTreeMap::new();
+            for _ in 0..n_objects {
+                let offset = r.offset();
+                let object = r.varint()?;
+                if objects.last_key_value().is_some_and(|(o, _)| *o >= object) {
+                    return Err(DecodeError::Invalid {
+                        offset,
+                        what: "unsorted objects",
+                    });
+                }
+                objects.insert(object, text(&mut r)?);
+            }
+            let n_chat = r.bounded("chat count", MAX_TEST_SCENE_ITEMS as u64)?;
+            let mut chat: Vec<(OrderKey, String)> = Vec::new();
+            for _ in 0..n_chat {
+                let offset = r.offset();
+                let key = OrderKey {
+                    lamport: r.varint()?,
+                    author: PeerId(r.array()?),
+                    seq: r.varint()?,
+                };
+                if chat.last().is_some_and(|(k, _)| *k >= key) {
+                    return Err(DecodeError::Invalid {
+                        offset,
+                        what: "unsorted chat",
+                    });
+                }
+                chat.push((key, text(&mut r)?));
+            }
+            r.finish()?;
+            Ok(Self { objects, chat })
+        }
+    }
+
+    fn text(r: &mut Reader<'_>) -> Result<String, DecodeError> {
+        let offset = r.offset();
+        let bytes = r.bytes("text length", MAX_TEST_TEXT_BYTES as u64)?;
+        String::from_utf8(bytes.to_vec()).map_err(|_| DecodeError::Invalid {
+            offset,
+            what: "utf-8",
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests;

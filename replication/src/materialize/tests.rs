@@ -1,0 +1,305 @@
+//! Tests of materialisation: delivery-order independence of the scene hash, incremental
+//! refold against a fold from scratch, merge laws on scenes, undo/redo with concurrent
+//! authors, and the lease rules checked against a naive reference fold.
+
+use super::test_scene::TestScene;
+use super::*;
+use crate::identity::PeerId;
+use crate::lease::RejectReason;
+use crate::log::tests::{TLog, deliver_all, key, set, shuffled, weak, workload};
+use crate::op::VerifiedOp;
+use crate::payload::test_payload::TestPayload;
+use crate::pending::Origin;
+use crate::time::Timestamp;
+use proptest::prelude::*;
+
+type TScene = Materialized<TestPayload, TestScene>;
+
+fn from_scratch(log: &TLog) -> TScene {
+    TScene::fold(log).unwrap()
+}
+
+/// Delivers `ops` one by one, keeping a scene in step with every insertion.
+fn deliver_incrementally(ops: &[VerifiedOp<TestPayload>]) -> (TLog, TScene) {
+    let mut log = TLog::default();
+    let mut scene = from_scratch(&log);
+    for op in ops {
+        let ins = log.insert(Timestamp(0), op.clone(), Origin(1)).unwrap();
+        scene.apply_insertion(&log, &ins);
+    }
+    (log, scene)
+}
+
+/// The scene a naive fold gives: each object's last active `Set`, chat in order.
+fn naive_scene(log: &TLog) -> TestScene {
+    let mut scene = TestScene::default();
+    for e in log.entries().filter(|e| e.active) {
+        match e.op.payload() {
+            TestPayload::Set { object, value } => {
+                scene.objects.insert(*object, value.clone());
+            }
+            TestPayload::Chat(text) => scene.chat.push((OrderKey::of(e.op), text.clone())),
+            _ => {}
+        }
+    }
+    scene
+}
+
+#[test]
+fn scene_snapshot_round_trips_and_rejects_garbage() {
+    let ops = workload(5, 3, 60);
+    let scene = from_scratch(&deliver_all(&ops));
+    let mut bytes = Vec::new();
+    scene.scene().encode_snapshot(&mut bytes);
+    let back = TestScene::decode_snapshot(&bytes).unwrap();
+    assert_eq!(&back, scene.scene());
+    assert_eq!(back.scene_hash(), scene.scene_hash());
+    let mut wrong_version = bytes.clone();
+    wrong_version[0] = 9;
+    assert!(matches!(
+        TestScene::decode_snapshot(&wrong_version),
+        Err(DecodeError::UnknownVersion { .. })
+    ));
+    for cut in 0..bytes.len() {
+        assert!(TestScene::decode_snapshot(&bytes[..cut]).is_err());
+    }
+}
+
+#[test]
+fn late_op_refolds_only_the_objects_it_affects() {
+    let (a, b) = (key(0), key(1));
+    // B, offline, takes object 1 at Lamport time 1.
+    let mut offline = TLog::default();
+    let (b_acquire, _) = offline
+        .author(&b, Timestamp(5), weak(1, 1_000_000))
+        .unwrap();
+    let mut log = TLog::default();
+    let mut scene = from_scratch(&log);
+    for i in 0..50 {
+        let (_, ins) = log
+            .author(&a, Timestamp(10 + i), set(i % 5, &format!("{i}")))
+            .unwrap();
+        scene.apply_insertion(&log, &ins);
+    }
+    let before = scene.stats();
+    assert_eq!(before.n_object_refolds, 0, "in-order ops only append");
+    let ins = log.insert(Timestamp(100), b_acquire, Origin(1)).unwrap();
+    scene.apply_insertion(&log, &ins);
+    let after = scene.stats();
+    assert_eq!(after.n_object_refolds - before.n_object_refolds, 1);
+    // Object 1's ten edits are re-examined; the nine whose author lost the lease are gone.
+    assert!(after.n_applied - before.n_applied <= 10);
+    assert_eq!(scene.scene(), from_scratch(&log).scene());
+    assert!(!scene.scene().objects.contains_key(&1));
+}
+
+#[test]
+fn insertions_applied_after_later_ones_still_converge() {
+    // A sync batch reports one insertion per op; the app drains them together.
+    let ops = workload(11, 3, 120);
+    let mut log = TLog::default();
+    let mut scene = from_scratch(&log);
+    let mut queued = Vec::new();
+    for (i, op) in shuffled(&ops, 3).into_iter().enumerate() {
+        queued.push(log.insert(Timestamp(0), op, Origin(1)).unwrap());
+        if i % 7 == 6 {
+            for ins in queued.drain(..) {
+                scene.apply_insertion(&log, &ins);
+            }
+        }
+    }
+    for ins in queued.drain(..) {
+        scene.apply_insertion(&log, &ins);
+    }
+    assert_eq!(scene.scene(), from_scratch(&log).scene());
+}
+
+/// Authors A and B: A edits objects 0 and 1 under a lease and undoes and redoes its last `n`
+/// edits, while B edits objects 1 and 2 and chats, concurrently, without leases.
+fn undo_redo_ops(
+    n_edits: usize,
+    n_undo: usize,
+    seed: u64,
+) -> (Vec<VerifiedOp<TestPayload>>, Vec<OpId>) {
+    let (a, b) = (key(0), key(1));
+    let mut la = TLog::default();
+    let mut lb = TLog::default();
+    let mut undo_redo = Vec::new();
+    let mut t = 0;
+    let mut tick = || {
+        t += 10;
+        Timestamp(t)
+    };
+    la.author(&a, tick(), weak(0, 1_000_000_000)).unwrap();
+    let mut edits = Vec::new();
+    for i in 0..n_edits {
+        let (op, _) = la
+            .author(&a, tick(), set(i as u64 % 2, &format!("a{i}")))
+            .unwrap();
+        edits.push(op.id());
+        let (bop, _) = lb
+            .author(&b, tick(), set(1 + (i as u64 % 2), &format!("b{i}")))
+            .unwrap();
+        let _ = bop;
+        if (seed >> i) & 1 == 1 {
+            lb.merge(tick(), &la).unwrap();
+        }
+    }
+    let n = n_undo.min(n_edits);
+    for id in edits.iter().rev().take(n) {
+        undo_redo.push(
+            la.author(&a, tick(), TestPayload::Undo(*id))
+                .unwrap()
+                .0
+                .id(),
+        );
+        lb.author(&b, tick(), TestPayload::Chat("meanwhile".into()))
+            .unwrap();
+    }
+    for id in edits
+        .iter()
+        .rev()
+        .take(n)
+        .collect::<Vec<_>>()
+        .into_iter()
+        .rev()
+    {
+        undo_redo.push(
+            la.author(&a, tick(), TestPayload::Redo(*id))
+                .unwrap()
+                .0
+                .id(),
+        );
+        lb.author(&b, tick(), set(2, "late")).unwrap();
+    }
+    let mut all = la.clone();
+    all.merge(tick(), &lb).unwrap();
+    let ops = all
+        .linear_ids()
+        .filter_map(|id| all.get(&id))
+        .map(|op| VerifiedOp::trusted(op.clone()))
+        .collect();
+    (ops, undo_redo)
+}
+
+/// Checks every verdict against a naive lease model: an effective edit's author held the
+/// object's lease or nobody else held it unexpired; a `LeaseHeld` rejection names a holder
+/// that did hold it.
+fn check_lease_rules(log: &TLog) {
+    let mut held: BTreeMap<u64, (PeerId, bool, u64)> = BTreeMap::new();
+    for e in log.entries() {
+        let (author, at) = (e.op.author(), e.op.timestamp().0);
+        let blocker = |object: &u64| {
+            held.get(object)
+                .filter(|(h, _, until)| *h != author && at < *until)
+                .copied()
+        };
+        match e.op.payload() {
+            TestPayload::Set { object, .. } => match e.mark {
+                Mark::Effective => assert!(blocker(object).is_none(), "edit under another's lease"),
+                Mark::Rejected(RejectReason::LeaseHeld { holder }) => {
+                    assert_eq!(blocker(object).map(|b| b.0), Some(holder));
+                }
+                Mark::Rejected(other) => panic!("edit rejected for {other:?}"),
+            },
+            TestPayload::Acquire {
+                object,
+                strong,
+                ttl_micros,
+            } => {
+                let ok = match blocker(object) {
+                    None => true,
+                    Some((_, held_strong, _)) => !*strong && !held_strong,
+                };
+                assert_eq!(e.mark == Mark::Effective, ok, "acquire verdict");
+                if ok {
+                    held.insert(*object, (author, *strong, at.saturating_add(*ttl_micros)));
+                }
+            }
+            TestPayload::Release { object } => {
+                let ok = held
+                    .get(object)
+                    .is_some_and(|(h, _, until)| *h == author && at < *until);
+                assert_eq!(e.mark == Mark::Effective, ok, "release verdict");
+                if ok {
+                    held.remove(object);
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(crate::test_config(32))]
+
+    #[test]
+    fn any_delivery_order_gives_the_same_scene(seed in any::<u64>(), perm in any::<u64>()) {
+        let ops = workload(seed, 3, 40);
+        let (in_order_log, in_order) = deliver_incrementally(&ops);
+        let (log, shuffled_scene) = deliver_incrementally(&shuffled(&ops, perm));
+        prop_assert_eq!(shuffled_scene.scene_hash(), in_order.scene_hash());
+        prop_assert_eq!(from_scratch(&log).scene_hash(), in_order.scene_hash());
+        prop_assert_eq!(from_scratch(&in_order_log).scene().clone(), naive_scene(&in_order_log));
+    }
+
+    #[test]
+    fn incremental_refold_equals_fold_from_scratch(seed in any::<u64>(), perm in any::<u64>()) {
+        let ops = shuffled(&workload(seed, 3, 30), perm);
+        let mut log = TLog::default();
+        let mut scene = from_scratch(&log);
+        for op in ops {
+            let ins = log.insert(Timestamp(0), op, Origin(1)).unwrap();
+            scene.apply_insertion(&log, &ins);
+            prop_assert_eq!(scene.scene().clone(), from_scratch(&log).scene().clone());
+        }
+        prop_assert_eq!(scene.scene(), &naive_scene(&log));
+    }
+
+    #[test]
+    fn merged_scenes_are_commutative_associative_idempotent(seed in any::<u64>(), cuts in any::<[u64; 3]>()) {
+        let ops = workload(seed, 3, 24);
+        let subset = |salt: u64| -> TLog {
+            let picked: Vec<_> = shuffled(&ops, salt).into_iter().take((salt % 24) as usize).collect();
+            deliver_all(&picked)
+        };
+        let (x, y, z) = (subset(cuts[0]), subset(cuts[1]), subset(cuts[2]));
+        let merged = |parts: &[&TLog]| -> SceneHash {
+            let mut out = TLog::default();
+            for p in parts { out.merge(Timestamp(0), p).unwrap(); }
+            from_scratch(&out).scene_hash()
+        };
+        prop_assert_eq!(merged(&[&x, &y]), merged(&[&y, &x]));
+        let mut xy = TLog::default();
+        xy.merge(Timestamp(0), &x).unwrap();
+        xy.merge(Timestamp(0), &y).unwrap();
+        let mut yz = TLog::default();
+        yz.merge(Timestamp(0), &y).unwrap();
+        yz.merge(Timestamp(0), &z).unwrap();
+        prop_assert_eq!(merged(&[&xy, &z]), merged(&[&x, &yz]));
+        prop_assert_eq!(merged(&[&x, &x]), from_scratch(&x).scene_hash());
+    }
+
+    #[test]
+    fn undo_n_then_redo_n_restores_the_scene_with_concurrent_authors(
+        n_edits in 1usize..8, n_undo in 0usize..8, seed in any::<u64>(), perm in any::<u64>(),
+    ) {
+        let (ops, undo_redo) = undo_redo_ops(n_edits, n_undo, seed);
+        let (log, scene) = deliver_incrementally(&shuffled(&ops, perm));
+        for id in &undo_redo {
+            prop_assert_eq!(log.mark(id), Some(Mark::Effective));
+        }
+        let without: Vec<_> = ops.iter().filter(|op| !undo_redo.contains(&op.id())).cloned().collect();
+        let (_, reference) = deliver_incrementally(&without);
+        prop_assert_eq!(scene.scene_hash(), reference.scene_hash());
+    }
+
+    #[test]
+    fn lease_rules_hold_in_the_fold(seed in any::<u64>(), perm in any::<u64>()) {
+        let ops = workload(seed, 3, 40);
+        let log = deliver_all(&shuffled(&ops, perm));
+        check_lease_rules(&log);
+        // The scene shows exactly the active edits: the last one of each object.
+        prop_assert_eq!(from_scratch(&log).scene().clone(), naive_scene(&log));
+    }
+}

@@ -1,0 +1,295 @@
+//! Discovery wire messages (version 1), one per UDP datagram.
+//!
+//! Every message opens with `"SCD"`, the version byte and a tag:
+//!
+//! - Register (tag 1): `[discovery id 16][peer id 32][QUIC port u16 BE]`, then zero padding up
+//!   to exactly [`REGISTER_BYTES`]. The padding makes every request at least as large as any
+//!   reply, so a spoofed source address cannot turn the server into an amplifier.
+//! - Peers (tag 2): `[n ≤ MAX_PEERS_PER_REPLY]` then per peer `[peer id 32][family 4|6]`
+//!   `[IPv4 4 | IPv6 16][port u16 BE]`.
+//! - Announce (tag 3, LAN multicast): `[discovery id 16][peer id 32][QUIC port u16 BE]`.
+//!
+//! Decoding never panics and checks every length before use.
+
+use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
+
+use crate::codec::{DecodeError, Reader};
+use crate::identity::PeerId;
+use crate::net::session::DiscoveryId;
+
+/// The bytes that open every discovery message.
+pub const MAGIC: &[u8; 3] = b"SCD";
+/// The discovery wire version.
+pub const DISCOVERY_WIRE_VERSION: u8 = 1;
+/// Largest datagram a discovery endpoint reads; anything longer is refused.
+pub const MAX_DATAGRAM_BYTES: usize = 1200;
+/// Most peers in one reply.
+pub const MAX_PEERS_PER_REPLY: usize = 16;
+/// Header bytes: magic, version, tag.
+const HEADER_BYTES: usize = MAGIC.len() + 2;
+/// Largest reply: header, count, and [`MAX_PEERS_PER_REPLY`] IPv6 entries.
+pub const MAX_REPLY_BYTES: usize = HEADER_BYTES + 1 + MAX_PEERS_PER_REPLY * (32 + 1 + 16 + 2);
+/// Exact size of a register request (padded).
+pub const REGISTER_BYTES: usize = 1024;
+
+const _: () = assert!(REGISTER_BYTES >= MAX_REPLY_BYTES);
+const _: () = assert!(REGISTER_BYTES <= MAX_DATAGRAM_BYTES);
+
+const TAG_REGISTER: u8 = 1;
+const TAG_PEERS: u8 = 2;
+const TAG_ANNOUNCE: u8 = 3;
+
+/// A peer found by discovery: whom to dial, and where.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct DiscoveredPeer {
+    /// The peer's claimed id (proven only at admission).
+    pub peer: PeerId,
+    /// Its QUIC address.
+    pub addr: SocketAddr,
+}
+
+/// One discovery message.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum DiscoveryMessage {
+    /// A peer asks the server to list it under a session and to name the others.
+    Register {
+        /// The session.
+        discovery_id: DiscoveryId,
+        /// The registering peer.
+        peer: PeerId,
+        /// Its QUIC port (the address is the datagram's source address).
+        port: u16,
+    },
+    /// The server's answer: the other peers of the session.
+    Peers(Vec<DiscoveredPeer>),
+    /// A LAN announcement.
+    Announce {
+        /// The session.
+        discovery_id: DiscoveryId,
+        /// The announcing peer.
+        peer: PeerId,
+        /// Its QUIC port (the address is the datagram's source address).
+        port: u16,
+    },
+}
+
+impl DiscoveryMessage {
+    /// The encoded message (a Peers list is cut at [`MAX_PEERS_PER_REPLY`]).
+    pub fn encode(&self) -> Vec<u8> {
+        let mut out = MAGIC.to_vec();
+        out.push(DISCOVERY_WIRE_VERSION);
+        match self {
+            Self::Register {
+                discovery_id,
+                peer,
+                port,
+            } => {
+                out.push(TAG_REGISTER);
+                put_entry(&mut out, discovery_id, peer, *port);
+                out.resize(REGISTER_BYTES, 0);
+            }
+            Self::Peers(peers) => {
+                out.push(TAG_PEERS);
+                let peers = &peers[..peers.len().min(MAX_PEERS_PER_REPLY)];
+                out.push(peers.len() as u8);
+                for d in peers {
+                    out.extend_from_slice(&d.peer.0);
+                    match d.addr.ip() {
+                        IpAddr::V4(ip) => {
+                            out.push(4);
+                            out.extend_from_slice(&ip.octets());
+                        }
+                        IpAddr::V6(ip) => {
+                            out.push(6);
+                            out.extend_from_slice(&ip.octets());
+                        }
+                    }
+                    out.extend_from_slice(&d.addr.port().to_be_bytes());
+                }
+            }
+            Self::Announce {
+                discovery_id,
+                peer,
+                port,
+            } => {
+                out.push(TAG_ANNOUNCE);
+                put_entry(&mut out, discovery_id, peer, *port);
+            }
+        }
+        out
+    }
+
+    /// Decodes one message from untrusted bytes.
+    pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
+        if bytes.len() > MAX_DATAGRAM_BYTES {
+            return Err(DecodeError::OverLimit {
+                offset: 0,
+                what: "discovery datagram length",
+                value: bytes.len() as u64,
+                limit: MAX_DATAGRAM_BYTES as u64,
+            });
+        }
+        let mut r = Reader::new(bytes);
+        if r.array::<3>()? != *MAGIC {
+            return Err(DecodeError::Invalid {
+                offset: 0,
+                what: "discovery magic",
+            });
+        }
+        let version = r.u8()?;
+        if version != DISCOVERY_WIRE_VERSION {
+            return Err(DecodeError::UnknownVersion {
+                offset: MAGIC.len(),
+                version,
+            });
+        }
+        let tag_offset = r.offset();
+        let message = match r.u8()? {
+            TAG_REGISTER => {
+                if bytes.len() != REGISTER_BYTES {
+                    return Err(DecodeError::Invalid {
+                        offset: 0,
+                        what: "register length",
+                    });
+                }
+                let (discovery_id, peer, port) = read_entry(&mut r)?;
+                let padding_offset = r.offset();
+                if r.take(r.remaining())?.iter().any(|&b| b != 0) {
+                    return Err(DecodeError::Invalid {
+                        offset: padding_offset,
+                        what: "register padding",
+                    });
+                }
+                Self::Register {
+                    discovery_id,
+                    peer,
+                    port,
+                }
+            }
+            TAG_PEERS => Self::Peers(read_peers(&mut r)?),
+            TAG_ANNOUNCE => {
+                let (discovery_id, peer, port) = read_entry(&mut r)?;
+                Self::Announce {
+                    discovery_id,
+                    peer,
+                    port,
+                }
+            }
+            _ => {
+                return Err(DecodeError::Invalid {
+                    offset: tag_offset,
+                    what: "discovery tag",
+                });
+            }
+        };
+        r.finish()?;
+        Ok(message)
+    }
+}
+
+fn put_entry(out: &mut Vec<u8>, discovery_id: &DiscoveryId, peer: &PeerId, port: u16) {
+    out.extend_from_slice(discovery_id);
+    out.extend_from_slice(&peer.0);
+    out.extend_from_slice(&port.to_be_bytes());
+}
+
+fn read_entry(r: &mut Reader<'_>) -> Result<(DiscoveryId, PeerId, u16), DecodeError> {
+    let discovery_id = r.array()?;
+    let peer = PeerId(r.array()?);
+    let port = u16::from_be_bytes(r.array()?);
+    Ok((discovery_id, peer, port))
+}
+
+fn read_peers(r: &mut Reader<'_>) -> Result<Vec<DiscoveredPeer>, DecodeError> {
+    let count_offset = r.offset();
+    let n = usize::from(r.u8()?);
+    if n > MAX_PEERS_PER_REPLY {
+        return Err(DecodeError::OverLimit {
+            offset: count_offset,
+            what: "peers in a reply",
+            value: n as u64,
+            limit: MAX_PEERS_PER_REPLY as u64,
+        });
+    }
+    let mut peers = Vec::with_capacity(n);
+    for _ in 0..n {
+        let peer = PeerId(r.array()?);
+        let family_offset = r.offset();
+        let ip = match r.u8()? {
+            4 => IpAddr::V4(Ipv4Addr::from(r.array::<4>()?)),
+            6 => IpAddr::V6(Ipv6Addr::from(r.array::<16>()?)),
+            _ => {
+                return Err(DecodeError::Invalid {
+                    offset: family_offset,
+                    what: "address family",
+                });
+            }
+        };
+        let port = u16::from_be_bytes(r.array()?);
+        peers.push(DiscoveredPeer {
+            peer,
+            addr: SocketAddr::new(ip, port),
+        });
+    }
+    Ok(peers)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn messages_round_trip_and_replies_fit_in_a_request() {
+        let peers: Vec<DiscoveredPeer> = (0..MAX_PEERS_PER_REPLY as u8)
+            .map(|i| DiscoveredPeer {
+                peer: PeerId([i; 32]),
+                addr: SocketAddr::new(IpAddr::V6(Ipv6Addr::LOCALHOST), 1000 + u16::from(i)),
+            })
+            .collect();
+        let reply = DiscoveryMessage::Peers(peers);
+        let bytes = reply.encode();
+        assert_eq!(bytes.len(), MAX_REPLY_BYTES);
+        assert_eq!(DiscoveryMessage::decode(&bytes), Ok(reply));
+        let register = DiscoveryMessage::Register {
+            discovery_id: [3; 16],
+            peer: PeerId([4; 32]),
+            port: 4433,
+        };
+        let bytes = register.encode();
+        assert_eq!(bytes.len(), REGISTER_BYTES);
+        assert_eq!(DiscoveryMessage::decode(&bytes), Ok(register));
+        // Unpadded or dirty-padded registrations are refused.
+        assert!(DiscoveryMessage::decode(&bytes[..REGISTER_BYTES - 1]).is_err());
+        let mut dirty = bytes.clone();
+        dirty[REGISTER_BYTES - 1] = 1;
+        assert!(DiscoveryMessage::decode(&dirty).is_err());
+        let mut newer = bytes;
+        newer[3] = 2;
+        assert!(matches!(
+            DiscoveryMessage::decode(&newer),
+            Err(DecodeError::UnknownVersion { version: 2, .. })
+        ));
+        let announce = DiscoveryMessage::Announce {
+            discovery_id: [5; 16],
+            peer: PeerId([6; 32]),
+            port: 1,
+        };
+        assert_eq!(DiscoveryMessage::decode(&announce.encode()), Ok(announce));
+    }
+
+    proptest! {
+        #![proptest_config(crate::test_config(256))]
+        #[test]
+        fn arbitrary_bytes_never_panic(mut bytes in proptest::collection::vec(any::<u8>(), 0..1300), tag in 1u8..4) {
+            if bytes.len() >= 5 {
+                bytes[..3].copy_from_slice(MAGIC);
+                bytes[3] = DISCOVERY_WIRE_VERSION;
+                bytes[4] = tag;
+            }
+            if let Ok(m) = DiscoveryMessage::decode(&bytes) {
+                prop_assert_eq!(m.encode(), bytes);
+            }
+        }
+    }
+}

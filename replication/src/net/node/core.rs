@@ -1,0 +1,472 @@
+//! The node's core task: owns the [`Peer`] and the store, reads the wall clock, feeds the
+//! sans-IO core with frames, datagrams, commands and timeouts, and after every step drains
+//! its events (storing delivered ops first) and then its transmits.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use tokio::sync::{mpsc, oneshot};
+
+use super::{
+    CloseCode, Command, ConnStats, DialError, DisconnectReason, Input, MAX_QUEUED_FRAMES_PER_CONN,
+    MAX_REJECTIONS_PER_CONN, NodeAuthorError, NodeEvent, NodeStats, RefusalKind, Shared, conn,
+};
+use crate::identity::PeerId;
+use crate::log::Log;
+use crate::net::admission::Role;
+use crate::net::clock::{duration_until, wall_clock_now};
+use crate::op::OpId;
+use crate::payload::Payload;
+use crate::peer::{ConnId, ConnectError, Peer};
+use crate::store::OpStore;
+use crate::sync::message::Message;
+use crate::sync::state::Event;
+use crate::time::Timestamp;
+
+/// One admitted connection.
+struct Live {
+    peer: PeerId,
+    role: Role,
+    connection: quinn::Connection,
+    frames: mpsc::Sender<Vec<u8>>,
+}
+
+pub(super) struct Core<P> {
+    peer: Peer<P>,
+    store: Option<OpStore<P>>,
+    endpoint: quinn::Endpoint,
+    shared: Arc<Shared>,
+    conns: BTreeMap<ConnId, Live>,
+    dials: BTreeMap<ConnId, oneshot::Sender<Result<ConnId, DialError>>>,
+    events: mpsc::Sender<NodeEvent>,
+    stats: NodeStats,
+    /// The first bytes of every encoded ephemeral message (version and tag).
+    ephemeral_prefix: [u8; 2],
+    running: bool,
+}
+
+/// The version and tag bytes that open an encoded [`Message::Ephemeral`], learnt from the
+/// core's own encoder so the transport never hard-codes the wire format.
+fn ephemeral_prefix() -> [u8; 2] {
+    let bytes = Message::Ephemeral {
+        channel: 0,
+        seq: 0,
+        value: Vec::new(),
+    }
+    .encode();
+    [bytes[0], bytes[1]]
+}
+
+/// Appends the delivered ops to the store (fsync) before anything more is sent.
+fn persist<P: Payload>(
+    store: &mut Option<OpStore<P>>,
+    log: &Log<P>,
+    ids: &[OpId],
+) -> Result<(), String> {
+    let Some(store) = store else {
+        return Ok(());
+    };
+    let ops: Vec<_> = ids.iter().filter_map(|id| log.get(id)).collect();
+    assert_eq!(
+        ops.len(),
+        ids.len(),
+        "a delivered op is missing from the log"
+    );
+    store.append(&ops).map_err(|e| e.to_string())
+}
+
+impl<P: Payload + Send + 'static> Core<P> {
+    pub(super) fn new(
+        peer: Peer<P>,
+        store: Option<OpStore<P>>,
+        endpoint: quinn::Endpoint,
+        shared: Arc<Shared>,
+        events: mpsc::Sender<NodeEvent>,
+    ) -> Self {
+        Self {
+            peer,
+            store,
+            endpoint,
+            shared,
+            conns: BTreeMap::new(),
+            dials: BTreeMap::new(),
+            events,
+            stats: NodeStats::default(),
+            ephemeral_prefix: ephemeral_prefix(),
+            running: true,
+        }
+    }
+
+    pub(super) async fn run(
+        mut self,
+        mut commands: mpsc::Receiver<Command<P>>,
+        mut inputs: mpsc::Receiver<Input>,
+    ) {
+        while self.running {
+            let now = wall_clock_now();
+            let wait = self.peer.poll_timeout().map(|t| duration_until(now, t));
+            tokio::select! {
+                // The app's commands first, then due timers, then the network: a busy network
+                // neither delays a local edit nor starves the resend and pacing timers.
+                biased;
+                command = commands.recv() => match command {
+                    Some(command) => self.on_command(command),
+                    // Every handle is gone: nobody can use the node any more.
+                    None => self.running = false,
+                },
+                () = tokio::time::sleep(wait.unwrap_or_default()), if wait.is_some() => {
+                    self.peer.handle_timeout(wall_clock_now());
+                }
+                Some(input) = inputs.recv() => self.on_input(input),
+            }
+            self.settle(wall_clock_now());
+        }
+        let conns: Vec<ConnId> = self.conns.keys().copied().collect();
+        for conn in conns {
+            self.drop_conn(conn, CloseCode::Shutdown, None);
+        }
+        self.endpoint
+            .close(CloseCode::Shutdown.var_int(), b"shutdown");
+    }
+
+    fn emit(&mut self, event: NodeEvent) {
+        if self.events.try_send(event).is_err() {
+            self.stats.n_events_dropped += 1;
+        }
+    }
+
+    fn on_command(&mut self, command: Command<P>) {
+        match command {
+            Command::Dial { addr, reply } => {
+                let conn = self.shared.next_conn_id();
+                self.dials.insert(conn, reply);
+                tokio::spawn(conn::dial(
+                    self.shared.clone(),
+                    self.endpoint.clone(),
+                    conn,
+                    addr,
+                ));
+            }
+            Command::Author { payload, reply } => {
+                let result = self.author(payload);
+                let _ = reply.send(result);
+            }
+            Command::Ephemeral {
+                channel,
+                value,
+                reply,
+            } => {
+                let _ = reply.send(self.peer.send_ephemeral(channel, &value));
+            }
+            Command::Close { conn, reply } => {
+                let open = self.conns.contains_key(&conn);
+                self.drop_conn(conn, CloseCode::Closed, Some(DisconnectReason::Closed));
+                let _ = reply.send(open);
+            }
+            Command::Peers { reply } => {
+                let peers = self.conns.iter().map(|(c, l)| (*c, l.peer)).collect();
+                let _ = reply.send(peers);
+            }
+            Command::Stats { reply } => {
+                let _ = reply.send(self.stats_snapshot());
+            }
+            Command::Query(query) => query(&self.peer),
+            Command::Shutdown { reply } => {
+                self.running = false;
+                let _ = reply.send(());
+            }
+        }
+    }
+
+    fn author(&mut self, payload: P) -> Result<OpId, NodeAuthorError> {
+        let (op, insertion) = self.peer.author(wall_clock_now(), payload)?;
+        if let Err(error) = persist(&mut self.store, self.peer.log(), &insertion.delivered) {
+            self.stop(error.clone());
+            return Err(NodeAuthorError::Store(error));
+        }
+        Ok(op.op().id())
+    }
+
+    /// Stops the node: an op that cannot be stored must never be sent.
+    fn stop(&mut self, error: String) {
+        self.running = false;
+        self.emit(NodeEvent::Stopped { error });
+    }
+
+    fn on_input(&mut self, input: Input) {
+        match input {
+            Input::Admitted {
+                conn,
+                role,
+                connection,
+                peer,
+                send,
+            } => self.on_admitted(conn, role, connection, peer, send),
+            Input::AdmissionFailed {
+                conn,
+                addr,
+                error,
+                kind,
+            } => {
+                *self.stats.failed_admissions.entry(kind).or_insert(0) += 1;
+                if let Some(reply) = conn.and_then(|c| self.dials.remove(&c)) {
+                    let _ = reply.send(Err(DialError::Admission(error.clone())));
+                }
+                self.emit(NodeEvent::AdmissionFailed { addr, error });
+            }
+            Input::Frame { conn, bytes } => {
+                self.peer.handle_input(wall_clock_now(), conn, &bytes);
+            }
+            Input::Datagram { conn, bytes } => {
+                if bytes.starts_with(&self.ephemeral_prefix) {
+                    self.peer.handle_input(wall_clock_now(), conn, &bytes);
+                } else {
+                    self.stats.n_bad_datagrams += 1;
+                }
+            }
+            Input::OversizedFrame { conn, len } => {
+                self.stats.n_oversized_frames += 1;
+                let reason = DisconnectReason::OversizedFrame { len };
+                self.drop_conn(conn, CloseCode::Protocol, Some(reason));
+            }
+            Input::Lost { conn, reason } => {
+                self.drop_conn(
+                    conn,
+                    CloseCode::Closed,
+                    Some(DisconnectReason::Lost(reason)),
+                );
+            }
+        }
+    }
+
+    fn refuse(
+        &mut self,
+        connection: &quinn::Connection,
+        reply: Option<oneshot::Sender<Result<ConnId, DialError>>>,
+        kind: RefusalKind,
+        error: DialError,
+    ) {
+        connection.close(CloseCode::Refused.var_int(), error.to_string().as_bytes());
+        *self.stats.failed_admissions.entry(kind).or_insert(0) += 1;
+        if let Some(reply) = reply {
+            let _ = reply.send(Err(error));
+        }
+    }
+
+    fn on_admitted(
+        &mut self,
+        conn: ConnId,
+        role: Role,
+        connection: quinn::Connection,
+        peer: PeerId,
+        send: quinn::SendStream,
+    ) {
+        let reply = self.dials.remove(&conn);
+        let me = self.peer.peer_id();
+        if peer == me {
+            let kind = RefusalKind::SelfConnection;
+            return self.refuse(&connection, reply, kind, DialError::SelfConnection);
+        }
+        // Two connections to one peer (both dialed at once, or a redial): both sides keep
+        // the one whose dialer has the smaller id, and the newer one when the dialer is the
+        // same (a redial means the dialer believes the old one is dead).
+        let dialer = |role: Role| if role == Role::Dialer { me } else { peer };
+        let existing = self.conns.iter().find(|(_, l)| l.peer == peer);
+        if let Some((&old, live)) = existing {
+            if dialer(role) <= dialer(live.role) {
+                self.stats.n_duplicates += 1;
+                self.drop_conn(old, CloseCode::Duplicate, Some(DisconnectReason::Duplicate));
+            } else {
+                self.stats.n_duplicates += 1;
+                connection.close(CloseCode::Duplicate.var_int(), b"duplicate");
+                if let Some(reply) = reply {
+                    let _ = reply.send(Ok(old));
+                }
+                return;
+            }
+        }
+        match self.peer.connect(wall_clock_now(), conn) {
+            Ok(()) => {}
+            Err(ConnectError::TooMany) => {
+                let kind = RefusalKind::TooManyConnections;
+                return self.refuse(&connection, reply, kind, DialError::TooManyConnections);
+            }
+            Err(e @ (ConnectError::InUse(_) | ConnectError::OutOfRange(_))) => {
+                // Ids come from one counter that starts at 1: neither can happen.
+                unreachable!("connection id from the node's counter refused: {e}");
+            }
+        }
+        let (frames, queue) = mpsc::channel(MAX_QUEUED_FRAMES_PER_CONN);
+        tokio::spawn(conn::write_frames(send, queue));
+        self.conns.insert(
+            conn,
+            Live {
+                peer,
+                role,
+                connection,
+                frames,
+            },
+        );
+        self.stats.n_admitted += 1;
+        if let Some(reply) = reply {
+            let _ = reply.send(Ok(conn));
+        }
+    }
+
+    /// Closes and forgets a connection; `reason` None means no event (shutdown).
+    fn drop_conn(&mut self, conn: ConnId, code: CloseCode, reason: Option<DisconnectReason>) {
+        let Some(live) = self.conns.remove(&conn) else {
+            return;
+        };
+        let text = reason
+            .as_ref()
+            .map(|r| format!("{r:?}"))
+            .unwrap_or_default();
+        live.connection.close(code.var_int(), text.as_bytes());
+        self.peer.disconnect(conn);
+        self.stats.n_disconnected += 1;
+        if let Some(reason) = reason {
+            self.emit(NodeEvent::Disconnected {
+                conn,
+                peer: live.peer,
+                reason,
+            });
+        }
+    }
+
+    /// After every step: events (and storage) first, then limits, then transmits.
+    fn settle(&mut self, now: Timestamp) {
+        self.drain_events();
+        if !self.running {
+            return;
+        }
+        self.enforce_rejection_limit();
+        self.drain_transmits(now);
+    }
+
+    fn drain_events(&mut self) {
+        while let Some((conn, event)) = self.peer.poll_event() {
+            let Some(peer) = self.conns.get(&conn).map(|l| l.peer) else {
+                continue;
+            };
+            let event = match event {
+                Event::Connected { peer: claimed } if claimed != peer => {
+                    self.stats.n_identity_mismatches += 1;
+                    let reason = DisconnectReason::IdentityMismatch;
+                    self.drop_conn(conn, CloseCode::Protocol, Some(reason));
+                    continue;
+                }
+                Event::Connected { .. } => {
+                    let Some(live) = self.conns.get(&conn) else {
+                        continue;
+                    };
+                    NodeEvent::Connected {
+                        conn,
+                        peer,
+                        addr: live.connection.remote_address(),
+                        role: live.role,
+                    }
+                }
+                Event::Delivered(insertion) => {
+                    let stored = persist(&mut self.store, self.peer.log(), &insertion.delivered);
+                    if let Err(error) = stored {
+                        return self.stop(error);
+                    }
+                    NodeEvent::Delivered {
+                        conn,
+                        peer,
+                        insertion,
+                    }
+                }
+                Event::Rejected { kind, detail } => NodeEvent::Rejected {
+                    conn,
+                    peer,
+                    kind,
+                    detail,
+                },
+                Event::Ephemeral { channel, value } => NodeEvent::Ephemeral {
+                    conn,
+                    peer,
+                    channel,
+                    value,
+                },
+                Event::UpToDate => NodeEvent::UpToDate { conn, peer },
+                Event::Closed(reason) => {
+                    let reason = DisconnectReason::Sync(reason);
+                    self.drop_conn(conn, CloseCode::Sync, Some(reason));
+                    continue;
+                }
+            };
+            self.emit(event);
+        }
+    }
+
+    fn enforce_rejection_limit(&mut self) {
+        let over: Vec<(ConnId, u64)> = self
+            .peer
+            .connections()
+            .map(|(conn, sync)| (*conn, sync.stats().n_rejected()))
+            .filter(|(_, n)| *n > MAX_REJECTIONS_PER_CONN)
+            .collect();
+        for (conn, n_rejected) in over {
+            self.stats.n_cut_off += 1;
+            let reason = DisconnectReason::CutOff { n_rejected };
+            self.drop_conn(conn, CloseCode::Protocol, Some(reason));
+        }
+    }
+
+    fn drain_transmits(&mut self, now: Timestamp) {
+        let mut slow = Vec::new();
+        while let Some((conn, bytes)) = self.peer.poll_transmit(now) {
+            let Some(live) = self.conns.get(&conn) else {
+                continue;
+            };
+            if bytes.starts_with(&self.ephemeral_prefix) {
+                let fits = live
+                    .connection
+                    .max_datagram_size()
+                    .is_some_and(|max| bytes.len() <= max);
+                if !fits || live.connection.send_datagram(bytes.into()).is_err() {
+                    self.stats.n_datagrams_dropped += 1;
+                }
+                continue;
+            }
+            match live.frames.try_send(bytes) {
+                Ok(()) => {}
+                Err(mpsc::error::TrySendError::Full(_)) => slow.push(conn),
+                // The writer ended with the connection; its reader reports the loss.
+                Err(mpsc::error::TrySendError::Closed(_)) => {}
+            }
+        }
+        for conn in slow {
+            if self.conns.contains_key(&conn) {
+                self.stats.n_slow_readers += 1;
+                self.drop_conn(conn, CloseCode::Slow, Some(DisconnectReason::SlowReader));
+            }
+        }
+    }
+
+    fn stats_snapshot(&self) -> NodeStats {
+        let mut stats = self.stats.clone();
+        stats.connections = self
+            .peer
+            .connections()
+            .filter_map(|(conn, sync)| {
+                let live = self.conns.get(conn)?;
+                let quic = live.connection.stats();
+                Some(ConnStats {
+                    conn: *conn,
+                    peer: live.peer,
+                    addr: live.connection.remote_address(),
+                    role: live.role,
+                    sync: sync.stats().clone(),
+                    udp_bytes_sent: quic.udp_tx.bytes,
+                    udp_bytes_received: quic.udp_rx.bytes,
+                    rtt_micros: u64::try_from(live.connection.rtt().as_micros())
+                        .unwrap_or(u64::MAX),
+                })
+            })
+            .collect();
+        stats
+    }
+}

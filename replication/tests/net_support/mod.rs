@@ -1,0 +1,149 @@
+//! Helpers shared by the `net_*` integration tests: nodes on 127.0.0.1, polling with a
+//! deadline, and op-set comparison.
+
+#![allow(
+    dead_code,
+    reason = "each test binary uses a different subset of the helpers"
+)]
+
+use std::collections::BTreeSet;
+use std::future::Future;
+use std::time::Duration;
+
+use replication::net::node::NodeEvent;
+use replication::net::{Node, NodeConfig, NodeHandle, SessionKeys};
+use replication::payload::test_payload::TestPayload;
+use replication::{Keypair, Log, OpId};
+
+/// The invite every honest test node uses.
+pub const INVITE: &str = "7c1d-0a9e-55b2-e46f-93d8-2b7a-c0f1-6e35";
+
+/// How long a test may wait for anything before it fails.
+pub const PATIENCE: Duration = Duration::from_secs(20);
+
+pub type TNode = Node<TestPayload>;
+pub type THandle = NodeHandle<TestPayload>;
+
+/// A node with key `seed` in the session of `invite`, listening on 127.0.0.1.
+pub fn node_with(seed: u8, invite: &str, log: Log<TestPayload>) -> TNode {
+    Node::spawn(NodeConfig {
+        keypair: Keypair::from_seed([seed; 32]),
+        keys: SessionKeys::from_invite(invite).expect("test invite"),
+        listen: "127.0.0.1:0".parse().expect("loopback address"),
+        log,
+        store: None,
+    })
+    .expect("node starts")
+}
+
+/// A node with key `seed` in the honest test session, with an empty log.
+pub fn node(seed: u8) -> TNode {
+    node_with(seed, INVITE, Log::default())
+}
+
+/// Polls `check` every few milliseconds until it returns true; panics with `what` after
+/// [`PATIENCE`].
+pub async fn eventually<F, Fut>(what: &str, mut check: F)
+where
+    F: FnMut() -> Fut,
+    Fut: Future<Output = bool>,
+{
+    let polling = async {
+        while !check().await {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+    };
+    if tokio::time::timeout(PATIENCE, polling).await.is_err() {
+        panic!("timed out waiting until {what}");
+    }
+}
+
+/// Waits for the first event that `pick` maps to `Some`, skipping the others.
+pub async fn next_event<T>(
+    events: &mut tokio::sync::mpsc::Receiver<NodeEvent>,
+    what: &str,
+    mut pick: impl FnMut(&NodeEvent) -> Option<T>,
+) -> T {
+    let waiting = async {
+        loop {
+            let event = events.recv().await.expect("node running");
+            if let Some(found) = pick(&event) {
+                return found;
+            }
+        }
+    };
+    match tokio::time::timeout(PATIENCE, waiting).await {
+        Ok(found) => found,
+        Err(_) => panic!("timed out waiting for {what}"),
+    }
+}
+
+/// The ids of every op in the node's log, with their verdicts, in linear order.
+pub async fn observe(handle: &THandle) -> Vec<(OpId, replication::Mark, bool)> {
+    handle
+        .with_peer(|p| {
+            p.log()
+                .entries()
+                .map(|e| (e.op.id(), e.mark, e.active))
+                .collect()
+        })
+        .await
+        .expect("node running")
+}
+
+/// The set of op ids in the node's log.
+pub async fn op_ids(handle: &THandle) -> BTreeSet<OpId> {
+    handle
+        .with_peer(|p| p.log().entries().map(|e| e.op.id()).collect())
+        .await
+        .expect("node running")
+}
+
+/// Number of ops in the node's log.
+pub async fn n_ops(handle: &THandle) -> usize {
+    handle
+        .with_peer(|p| p.log().len())
+        .await
+        .expect("node running")
+}
+
+/// Waits until every node holds exactly `n_expected` ops and they all agree on the order and
+/// the verdicts.
+pub async fn converge(handles: &[&THandle], n_expected: usize) {
+    eventually(
+        &format!("{} nodes converge on {n_expected} ops", handles.len()),
+        || async {
+            let mut views = Vec::new();
+            for h in handles {
+                views.push(observe(h).await);
+            }
+            views.iter().all(|v| v.len() == n_expected) && views.windows(2).all(|w| w[0] == w[1])
+        },
+    )
+    .await;
+}
+
+/// Authors a few ops: a lease on `object`, two edits of it, and a chat line.
+pub async fn author_some(handle: &THandle, object: u64, tag: &str) -> Vec<OpId> {
+    let payloads = [
+        TestPayload::Acquire {
+            object,
+            strong: false,
+            ttl_micros: 60_000_000,
+        },
+        TestPayload::Set {
+            object,
+            value: format!("{tag} first"),
+        },
+        TestPayload::Set {
+            object,
+            value: format!("{tag} second"),
+        },
+        TestPayload::Chat(format!("{tag} says hi")),
+    ];
+    let mut ids = Vec::new();
+    for payload in payloads {
+        ids.push(handle.author(payload).await.expect("authoring works"));
+    }
+    ids
+}

@@ -1,0 +1,233 @@
+//! Nodes syncing over real QUIC sockets on 127.0.0.1: convergence of two and three nodes,
+//! admission by invite, ephemeral datagrams, and reconnection in the middle of a sync.
+
+#![allow(clippy::unwrap_used, reason = "test helpers")]
+
+mod net_support;
+
+use net_support::*;
+use replication::net::admission::AdmissionError;
+use replication::net::node::{DialError, DisconnectReason, NodeEvent, RefusalKind};
+use replication::payload::test_payload::TestPayload;
+use replication::{Keypair, Log, Timestamp};
+
+#[tokio::test]
+async fn two_nodes_converge_on_the_same_op_set() {
+    let a = node(1);
+    let b = node(2);
+    author_some(&a.handle, 1, "alice").await;
+    author_some(&b.handle, 2, "bob").await;
+    let conn = b.handle.dial(a.handle.local_addr()).await.unwrap();
+    converge(&[&a.handle, &b.handle], 8).await;
+    // Live ops after the initial catch-up flow too.
+    let late = a
+        .handle
+        .author(TestPayload::Chat("late".into()))
+        .await
+        .unwrap();
+    converge(&[&a.handle, &b.handle], 9).await;
+    assert!(op_ids(&b.handle).await.contains(&late));
+    let peers = b.handle.connected_peers().await.unwrap();
+    assert_eq!(peers, vec![(conn, a.handle.peer_id())]);
+    let stats = a.handle.stats().await.unwrap();
+    assert_eq!(stats.n_admitted, 1);
+    assert_eq!(stats.n_failed_admissions(), 0);
+    assert_eq!(stats.connections[0].sync.n_rejected(), 0);
+}
+
+#[tokio::test]
+async fn three_nodes_converge_through_a_line() {
+    let (a, b, c) = (node(1), node(2), node(3));
+    // Everyone edits object 7 offline: exactly one lease wins everywhere.
+    for (h, tag) in [(&a.handle, "a"), (&b.handle, "b"), (&c.handle, "c")] {
+        author_some(h, 7, tag).await;
+    }
+    // A - B - C: A and C never talk directly.
+    b.handle.dial(a.handle.local_addr()).await.unwrap();
+    c.handle.dial(b.handle.local_addr()).await.unwrap();
+    converge(&[&a.handle, &b.handle, &c.handle], 12).await;
+    let view = observe(&a.handle).await;
+    let n_active_sets = view.iter().filter(|(_, _, active)| *active).count();
+    assert!(
+        n_active_sets < 12,
+        "some edits must lose the lease: {view:?}"
+    );
+    let live = c
+        .handle
+        .author(TestPayload::Chat("from c".into()))
+        .await
+        .unwrap();
+    converge(&[&a.handle, &b.handle, &c.handle], 13).await;
+    assert!(op_ids(&a.handle).await.contains(&live));
+    assert!(a.handle.connected_peers().await.unwrap().len() == 1);
+}
+
+#[tokio::test]
+async fn a_node_with_the_wrong_invite_is_refused() {
+    let mut a = node(1);
+    author_some(&a.handle, 1, "alice").await;
+    let intruder = node_with(9, "not the invite", Log::default());
+    let refused = intruder.handle.dial(a.handle.local_addr()).await;
+    assert!(
+        matches!(
+            refused,
+            Err(DialError::Admission(AdmissionError::RefusedByRemote(_)))
+        ),
+        "{refused:?}"
+    );
+    let error = next_event(&mut a.events, "the refusal event", |e| match e {
+        NodeEvent::AdmissionFailed { error, .. } => Some(error.clone()),
+        _ => None,
+    })
+    .await;
+    assert_eq!(error, AdmissionError::WrongInvite);
+    let stats = a.handle.stats().await.unwrap();
+    assert_eq!(
+        stats.failed_admissions.get(&RefusalKind::WrongInvite),
+        Some(&1)
+    );
+    assert_eq!(stats.n_admitted, 0);
+    assert!(stats.connections.is_empty());
+    let intruder_stats = intruder.handle.stats().await.unwrap();
+    assert_eq!(
+        intruder_stats
+            .failed_admissions
+            .get(&RefusalKind::RefusedByRemote),
+        Some(&1)
+    );
+    assert_eq!(
+        n_ops(&intruder.handle).await,
+        0,
+        "nothing leaked to the intruder"
+    );
+    // An honest node still gets in afterwards.
+    let b = node(2);
+    b.handle.dial(a.handle.local_addr()).await.unwrap();
+    converge(&[&a.handle, &b.handle], 4).await;
+}
+
+#[tokio::test]
+async fn dialing_oneself_is_refused() {
+    let a = node(1);
+    let result = a.handle.dial(a.handle.local_addr()).await;
+    assert_eq!(result, Err(DialError::SelfConnection));
+    // Both ends of the looped connection are this node, and both refuse it.
+    let stats = a.handle.stats().await.unwrap();
+    assert_eq!(
+        stats.failed_admissions.get(&RefusalKind::SelfConnection),
+        Some(&2)
+    );
+    assert!(stats.connections.is_empty());
+}
+
+#[tokio::test]
+async fn an_ephemeral_value_arrives_as_a_datagram_and_is_not_stored() {
+    let a = node(1);
+    let mut b = node(2);
+    author_some(&a.handle, 1, "alice").await;
+    b.handle.dial(a.handle.local_addr()).await.unwrap();
+    converge(&[&a.handle, &b.handle], 4).await;
+    a.handle
+        .send_ephemeral(5, b"pose 1 2 3".to_vec())
+        .await
+        .unwrap();
+    let (peer, value) = next_event(&mut b.events, "the ephemeral value", |e| match e {
+        NodeEvent::Ephemeral {
+            peer,
+            channel: 5,
+            value,
+            ..
+        } => Some((*peer, value.clone())),
+        _ => None,
+    })
+    .await;
+    assert_eq!(peer, a.handle.peer_id());
+    assert_eq!(value, b"pose 1 2 3");
+    assert_eq!(
+        n_ops(&b.handle).await,
+        4,
+        "ephemeral values never enter the log"
+    );
+    let stats = a.handle.stats().await.unwrap();
+    assert_eq!(stats.n_datagrams_dropped, 0);
+    // Too large for the core: refused at the source, nothing sent.
+    let big = vec![0; replication::sync::message::MAX_EPHEMERAL_BYTES + 1];
+    assert!(a.handle.send_ephemeral(5, big).await.is_err());
+}
+
+#[tokio::test]
+async fn a_connection_killed_mid_sync_reconnects_and_converges() {
+    // Several batches of at most 64, so the kill lands in the middle; few in a debug build,
+    // which verifies only about 40 signatures per second.
+    const N_OPS: usize = if cfg!(debug_assertions) { 150 } else { 5_000 };
+    let mut log = Log::default();
+    let alice = Keypair::from_seed([1; 32]);
+    for i in 0..N_OPS {
+        let payload = TestPayload::Chat(format!("line {i}"));
+        log.author(&alice, Timestamp(1_000 + i as u64), payload)
+            .unwrap();
+    }
+    let a = node_with(1, INVITE, log);
+    let mut b = node(2);
+    let first = b.handle.dial(a.handle.local_addr()).await.unwrap();
+    // Kill the connection as soon as the first batch lands.
+    next_event(&mut b.events, "the first batch", |e| {
+        matches!(e, NodeEvent::Delivered { .. }).then_some(())
+    })
+    .await;
+    assert!(b.handle.close(first).await.unwrap());
+    let n_at_kill = n_ops(&b.handle).await;
+    assert!(
+        n_at_kill > 0 && n_at_kill < N_OPS,
+        "the kill must land mid-sync: {n_at_kill} of {N_OPS}"
+    );
+    let reason = next_event(&mut b.events, "the disconnect", |e| match e {
+        NodeEvent::Disconnected { reason, .. } => Some(reason.clone()),
+        _ => None,
+    })
+    .await;
+    assert_eq!(reason, DisconnectReason::Closed);
+    eventually("A notices the loss", || async {
+        a.handle.connected_peers().await.unwrap().is_empty()
+    })
+    .await;
+    // A fresh connection starts a fresh sync state and finishes the job.
+    let second = b.handle.dial(a.handle.local_addr()).await.unwrap();
+    assert_ne!(first, second);
+    converge(&[&a.handle, &b.handle], N_OPS).await;
+}
+
+/// A scratch file path for this test, removed first.
+fn scratch_store(name: &str) -> std::path::PathBuf {
+    let path = std::env::temp_dir().join(format!("sculpt-net-{}-{name}.ops", std::process::id()));
+    let _ = std::fs::remove_file(&path);
+    path
+}
+
+#[tokio::test]
+async fn a_node_with_a_store_persists_authored_and_received_ops() {
+    use replication::store::OpStore;
+    let path = scratch_store("persist");
+    let (store, _, _) = OpStore::<TestPayload>::open(&path).unwrap();
+    let b = replication::net::Node::spawn(replication::net::NodeConfig {
+        keypair: Keypair::from_seed([2; 32]),
+        keys: replication::net::SessionKeys::from_invite(INVITE).unwrap(),
+        listen: "127.0.0.1:0".parse().unwrap(),
+        log: Log::default(),
+        store: Some(store),
+    })
+    .unwrap();
+    let a = node(1);
+    author_some(&a.handle, 1, "alice").await;
+    author_some(&b.handle, 2, "bob").await;
+    b.handle.dial(a.handle.local_addr()).await.unwrap();
+    converge(&[&a.handle, &b.handle], 8).await;
+    let held = op_ids(&b.handle).await;
+    b.handle.shutdown().await.unwrap();
+    // Reopened, the store holds every op B authored or received, signatures checked.
+    let mut reloaded = Log::<TestPayload>::default();
+    OpStore::open_into(&path, Timestamp(0), &mut reloaded).unwrap();
+    let stored: std::collections::BTreeSet<_> = reloaded.entries().map(|e| e.op.id()).collect();
+    assert_eq!(stored, held);
+    std::fs::remove_file(&path).unwrap();
+}
