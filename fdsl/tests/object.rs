@@ -85,11 +85,7 @@ fn reference_value(object: &Object, p: DVec3) -> f64 {
             continue;
         }
         let edit = e.edit.edit();
-        let g = if e.edit.touches(p) {
-            e.edit.raw_tool_value(p)
-        } else {
-            fdsl::object::NOTHING
-        };
+        let g = e.edit.raw_tool_value(p);
         let b = edit.blend_radius;
         v = match edit.op {
             EditOp::Union => fdsl::object::edit::smooth_max(v, g, b),

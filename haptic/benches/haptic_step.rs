@@ -4,19 +4,26 @@
 //! Three scene kinds in the same run: closed-form watermelons (the peer: the cheapest possible
 //! container), the same watermelons as fdsl functions (`tests/data/models/watermelon.fdsl`
 //! geometry, tension, friction and crunchy density as fdsl functions), and icosphere meshes
-//! located by haptic rays (320 triangles each). Budget: well under 1 ms per tick (the 1 kHz period); the goal for
+//! located by haptic rays (320 triangles each), and the fdsl watermelons as objects of the
+//! shared object model (`ObjectContainer` over `fdsl::object::Sampler`), plain and carved
+//! with 10^4 small dents each (history-independent cost: a point visits only the edits
+//! whose box holds it). Budget: well under 1 ms per tick (the 1 kHz period); the goal for
 //! 64 fdsl objects is a p99.9 of 100 us or less (percentiles come from
 //! `examples/tick_timing.rs`, divan reports medians and means). Must show 0 allocations under
 //! `divan::AllocProfiler`.
 
 use glam::DVec3;
+use haptic::container::object::ObjectContainer;
 use haptic::container::{Aabb, Scene};
 use haptic::device::Capabilities;
 use haptic::device::sim::{HandModel, SimDevice};
 use haptic::force::zone::HapticZone;
 use haptic::force::{ForceParams, Rig};
 use haptic::servo::Servo;
-use haptic::shapes::{circle_waypoints, fdsl_watermelon_grid, mesh_grid, watermelon_grid};
+use haptic::shapes::{
+    circle_waypoints, fdsl_watermelon_grid, mesh_grid, object_watermelon_scene, sphere_dents,
+    watermelon_grid,
+};
 
 #[global_allocator]
 static ALLOC: divan::AllocProfiler = divan::AllocProfiler::system();
@@ -65,5 +72,26 @@ fn haptic_step_fdsl(bencher: divan::Bencher, n_objects: usize) {
 #[divan::bench(args = [1, 16, 64])]
 fn haptic_step_mesh(bencher: divan::Bencher, n_objects: usize) {
     let mut servo = servo(mesh_grid(n_objects, 2).expect("valid meshes"));
+    bencher.bench_local(|| servo.step(divan::black_box(0.001)));
+}
+
+fn object_grid(n_objects: usize, n_dents: usize) -> Vec<ObjectContainer> {
+    let dents = sphere_dents(n_dents, 0.02).expect("valid dents");
+    let scene = object_watermelon_scene(WATERMELON, n_objects, &dents).expect("valid objects");
+    let (containers, refused) = ObjectContainer::from_scene(&scene);
+    assert!(refused.is_empty(), "{refused:?}");
+    containers
+}
+
+#[divan::bench(args = [1, 16, 64])]
+fn haptic_step_object(bencher: divan::Bencher, n_objects: usize) {
+    let mut servo = servo(object_grid(n_objects, 0));
+    bencher.bench_local(|| servo.step(divan::black_box(0.001)));
+}
+
+/// 64 objects with 10^4 edits each.
+#[divan::bench(args = [64])]
+fn haptic_step_object_10k_edits(bencher: divan::Bencher, n_objects: usize) {
+    let mut servo = servo(object_grid(n_objects, 10_000));
     bencher.bench_local(|| servo.step(divan::black_box(0.001)));
 }

@@ -9,12 +9,16 @@
 //! cargo run --release -p haptic --example tick_timing -- denormals
 //! ```
 //!
-//! `kind` is `closed-form`, `fdsl` or `mesh`. `ticks` runs the servo without reading the clock,
+//! `kind` is `closed-form`, `fdsl`, `mesh`, `object` (the fdsl watermelons as objects of the
+//! object model), `object-10k` (the same, each carved with 10^4 dents all over) or
+//! `object-10k-far` (10^4 dents each, all where the tip never goes: the cost of a long
+//! history alone). `ticks` runs the servo without reading the clock,
 //! for `valgrind --tool=callgrind` (see BENCHMARKS.md).
 
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
+use haptic::container::object::ObjectContainer;
 use haptic::container::{Aabb, Container, Scene};
 use haptic::device::sim::{HandModel, SimDevice};
 use haptic::device::{Capabilities, DeviceSample};
@@ -22,7 +26,8 @@ use haptic::force::zone::HapticZone;
 use haptic::force::{ForceParams, ProxyState, Rig, render};
 use haptic::servo::{Servo, ServoConfig, spawn};
 use haptic::shapes::{
-    circle_waypoints, fdsl_watermelon, fdsl_watermelon_grid, mesh_grid, watermelon_grid,
+    circle_waypoints, fdsl_watermelon, fdsl_watermelon_grid, mesh_grid, object_watermelon_scene,
+    sphere_dents, watermelon_grid,
 };
 
 const WATERMELON: &str = include_str!("../../tests/data/models/watermelon.fdsl");
@@ -72,8 +77,39 @@ fn scene(kind: &str, n_objects: usize) -> Vec<Box<dyn Container>> {
             boxed(fdsl_watermelon_grid(&geometry, n_objects).expect("valid containers"))
         }
         "mesh" => boxed(mesh_grid(n_objects, 2).expect("valid meshes")),
-        other => panic!("unknown scene kind {other:?}: closed-form, fdsl or mesh"),
+        "object" | "object-10k" | "object-10k-far" => {
+            let dents = match kind {
+                "object" => vec![],
+                "object-10k" => sphere_dents(10_000, 0.02).expect("valid dents"),
+                _ => far_dents(10_000),
+            };
+            let scene =
+                object_watermelon_scene(WATERMELON, n_objects, &dents).expect("valid objects");
+            let (containers, refused) = ObjectContainer::from_scene(&scene);
+            assert!(refused.is_empty(), "{refused:?}");
+            boxed(containers)
+        }
+        other => {
+            panic!("unknown scene kind {other:?}: closed-form, fdsl, mesh, object or object-10k")
+        }
     }
+}
+
+/// `n` dents of radius 0.02 on the caps `|z| > 0.6` of the unit sphere, which the tip
+/// (circling in the plane `z = 0` through the watermelons' centres) never comes near.
+fn far_dents(n: usize) -> Vec<std::sync::Arc<fdsl::object::CompiledEdit>> {
+    use fdsl::object::{CompiledEdit, Edit, EditOp, Pose, ToolShape};
+    (0..n)
+        .map(|k| {
+            let z = if k % 2 == 0 { 1.0 } else { -1.0 } * (0.7 + 0.3 * (k as f64 / n as f64));
+            let angle = k as f64 * 2.399_963;
+            let ring = (1.0 - z * z).sqrt();
+            let at = DVec3::new(ring * angle.cos(), ring * angle.sin(), z);
+            let tool = ToolShape::Sphere { radius: 0.02 };
+            let edit = Edit::stamp(EditOp::Subtract, tool, Pose::at(at));
+            std::sync::Arc::new(CompiledEdit::new(edit).expect("a valid dent"))
+        })
+        .collect()
 }
 
 fn servo<S: Scene>(scene: S) -> Servo<SimDevice, S> {
@@ -95,8 +131,21 @@ fn compute(n_ticks: usize) {
     println!("per-tick compute, {n_ticks} ticks each (tip circling through the grid)");
     println!("| scene | objects | median | p99 | p99.9 | max |");
     println!("|---|---|---|---|---|---|");
-    for kind in ["closed-form", "fdsl", "mesh"] {
-        for n_objects in [1, 16, 64] {
+    let kinds = [
+        "closed-form",
+        "fdsl",
+        "mesh",
+        "object",
+        "object-10k",
+        "object-10k-far",
+    ];
+    for kind in kinds {
+        let sizes: &[usize] = if kind.starts_with("object-10k") {
+            &[64]
+        } else {
+            &[1, 16, 64]
+        };
+        for &n_objects in sizes {
             let mut servo = servo(scene(kind, n_objects));
             let mut times = Vec::with_capacity(n_ticks);
             for _ in 0..n_ticks {

@@ -6,10 +6,13 @@
 //!
 //! Implementations: [`function::FunctionContainer`] (fdsl functions over a box),
 //! [`mesh::MeshContainer`] (closed triangle meshes located by haptic rays), both with
-//! [`properties::Properties`]; and the closed-form [`crate::shapes::Analytic`] for tests.
+//! [`properties::Properties`]; [`object::ObjectContainer`] (an object of the shared object
+//! model, sculpting edits and painted properties included); and the closed-form
+//! [`crate::shapes::Analytic`] for tests.
 
 pub mod function;
 pub mod mesh;
+pub mod object;
 pub mod properties;
 
 use glam::DVec3;
@@ -104,11 +107,28 @@ pub trait Container: Send {
     fn density(&mut self, p: DVec3, t_secs: f64) -> Option<f64>;
     /// Depth of the surface zone in world units at `p`.
     fn zone_depth(&mut self, p: DVec3, t_secs: f64) -> f64;
-    /// The force field's domain and timing, `None` when the container has no field.
-    fn field_domain(&self) -> Option<FieldDomain>;
+    /// The force field's domain and timing, `None` when the container has no field mapped
+    /// through a [`FieldDomain`] (the default; see [`Container::field_at`]).
+    fn field_domain(&self) -> Option<FieldDomain> {
+        None
+    }
     /// The force field at `uvw` (in the field domain) and field time `t_local_secs`; its
-    /// magnitude is a fraction of the device's maximum force (clamped to 1).
-    fn force_field(&mut self, uvw: DVec3, t_local_secs: f64) -> DVec3;
+    /// magnitude is a fraction of the device's maximum force (clamped to 1). Only called
+    /// through the default [`Container::field_at`], when `field_domain` is `Some`.
+    fn force_field(&mut self, uvw: DVec3, t_local_secs: f64) -> DVec3 {
+        let _ = (uvw, t_local_secs);
+        DVec3::ZERO
+    }
+    /// The force field at world point `p` and scene time `t_secs`, in world axes, as a
+    /// fraction of the device's maximum force (the renderer clamps its length to 1); `None`
+    /// where no field acts. The default maps `p` and `t_secs` through
+    /// [`Container::field_domain`] and evaluates [`Container::force_field`]; a container
+    /// whose field has its own mapping (an object of `fdsl::object`) answers here directly.
+    fn field_at(&mut self, p: DVec3, t_secs: f64) -> Option<DVec3> {
+        let domain = self.field_domain()?;
+        let t_local = domain.local_time(t_secs)?;
+        Some(self.force_field(domain.uvw_from_world(p), t_local))
+    }
     /// Where the segment `p0 -> p1` first crosses the surface, as a fraction of its length,
     /// when the container can tell faster than by bisecting `value_grad` (a mesh casts the
     /// segment as one ray). `None` means "bisect".

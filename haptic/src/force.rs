@@ -419,12 +419,8 @@ fn effect_force<S: Scene + ?Sized>(
         }
     };
     let field = container
-        .field_domain()
-        .and_then(|domain| {
-            let t_local = domain.local_time(t_secs)?;
-            let v = container.force_field(domain.uvw_from_world(hip), t_local);
-            v.is_finite().then_some(v)
-        })
+        .field_at(hip, t_secs)
+        .filter(|v| v.is_finite())
         .map_or(DVec3::ZERO, |v| {
             rig.zone.device_from_world_dir(v.clamp_length_max(1.0)) * caps.force_newtons_max
         });

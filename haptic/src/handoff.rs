@@ -9,15 +9,22 @@
 //! lock, no allocation on the servo side. When the ring is full, `retire` hands the value
 //! back and the servo keeps it until there is room.
 //!
-//! TODO(haptic): model-check with loom behind a `crate::sync` switch (needs a loom dependency).
+//! The atomics come from `crate::sync`: `tests/loom.rs` model-checks this module with loom
+//! (`RUSTFLAGS="--cfg loom"`, see ARCHITECTURE.md).
 
 use std::marker::PhantomData;
 use std::ptr;
-use std::sync::atomic::{AtomicPtr, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Mutex;
+
+use crate::sync::{Arc, AtomicPtr, Ordering};
 
 /// Slots in the retired ring: how many values the servo may retire before the app collects.
+#[cfg(not(loom))]
 pub const RETIRED_RING_LEN: usize = 16;
+/// Slots in the retired ring; two under loom, so that the model reaches a full ring and its
+/// interleavings stay few enough to enumerate.
+#[cfg(loom)]
+pub const RETIRED_RING_LEN: usize = 2;
 
 struct Shared<T> {
     incoming: AtomicPtr<T>,
@@ -27,15 +34,20 @@ struct Shared<T> {
 }
 
 impl<T> Shared<T> {
+    /// Takes ownership of what a slot held.
     #[expect(
         unsafe_code,
         reason = "turning pointers made by Box::into_raw back into boxes"
     )]
-    fn drain(slot: &AtomicPtr<T>) -> Option<Box<T>> {
-        let raw = slot.swap(ptr::null_mut(), Ordering::AcqRel);
+    fn owned(raw: *mut T) -> Option<Box<T>> {
         // SAFETY: every non-null pointer stored in a slot came from `Box::into_raw` and is
-        // owned by the slot; swapping null in transfers that ownership to us exactly once.
+        // owned by the slot; callers got `raw` by swapping it out of its slot (or out of the
+        // mailbox), which transfers that ownership to them exactly once.
         (!raw.is_null()).then(|| unsafe { Box::from_raw(raw) })
+    }
+
+    fn drain(slot: &AtomicPtr<T>) -> Option<Box<T>> {
+        Self::owned(slot.swap(ptr::null_mut(), Ordering::AcqRel))
     }
 }
 
@@ -80,10 +92,7 @@ impl<T: Send> Publisher<T> {
     pub fn publish(&self, value: Box<T>) {
         let raw = Box::into_raw(value);
         let old = self.shared.incoming.swap(raw, Ordering::AcqRel);
-        if !old.is_null() {
-            let slot = AtomicPtr::new(old);
-            drop(Shared::drain(&slot));
-        }
+        drop(Shared::owned(old));
     }
 
     /// Frees the values the servo has retired; returns how many.
@@ -105,21 +114,22 @@ impl<T: Send> Receiver<T> {
 
     /// Returns `value` to the app without freeing it here; gives it back when the ring is full.
     ///
-    /// Only this receiver fills ring slots (`&mut self`), and the app only empties them, so a
-    /// slot seen empty stays empty until it is filled here.
+    /// Only this receiver fills ring slots (`&mut self`), and the app only empties them. A slot is claimed by compare-exchange from null, so every access to a slot is a
+    /// read-modify-write (the app empties slots by swap) and no claim can overwrite a value.
+    /// This also keeps loom's model exact: loom mis-orders a plain store that races a swap on
+    /// the same atomic (tokio-rs/loom#254), which a load-then-store claim would hit.
     pub fn retire(&mut self, value: Box<T>) -> Result<(), Box<T>> {
-        let empty = self
-            .shared
-            .retired
-            .iter()
-            .find(|slot| slot.load(Ordering::Acquire).is_null());
-        match empty {
-            Some(slot) => {
-                slot.store(Box::into_raw(value), Ordering::Release);
-                Ok(())
+        let raw = Box::into_raw(value);
+        for slot in &self.shared.retired {
+            if slot
+                .compare_exchange(ptr::null_mut(), raw, Ordering::AcqRel, Ordering::Relaxed)
+                .is_ok()
+            {
+                return Ok(());
             }
-            None => Err(value),
         }
+        // Every slot is full: `raw` was never stored, so it is still ours alone.
+        Err(Shared::owned(raw).expect("Box::into_raw never gives null"))
     }
 
     /// True when a retire would succeed now.
@@ -131,7 +141,8 @@ impl<T: Send> Receiver<T> {
     }
 }
 
-#[cfg(test)]
+// Plain threads: under `--cfg loom` the atomics only work inside `loom::model`.
+#[cfg(all(test, not(loom)))]
 mod tests {
     use super::*;
     use std::sync::atomic::AtomicUsize;

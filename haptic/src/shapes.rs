@@ -1,7 +1,9 @@
 //! Reference containers for tests, benchmarks and demos: closed-form solids (spheres, the
 //! watermelon, the whirlpool cylinder), the same scenes as fdsl [`FunctionContainer`]s (the
-//! watermelon's properties, the thesis's Figure 7.4 whirlpool), and triangle meshes (a cube,
-//! an icosphere) for [`crate::container::mesh::MeshContainer`].
+//! watermelon's properties, the thesis's Figure 7.4 whirlpool), as objects of the shared
+//! object model for [`crate::container::object::ObjectContainer`] (with optional sculpted
+//! dents), and triangle meshes (a cube, an icosphere) for
+//! [`crate::container::mesh::MeshContainer`].
 //!
 //! Each closed-form solid uses a distance-like function (`f >= 0` inside) so the metric depth
 //! `f / |grad f|` is close to the true distance to the surface.
@@ -483,6 +485,88 @@ pub fn fdsl_whirlpool(id: u64) -> Result<FunctionContainer, FdslShapeError> {
         (center - size / 2.0, center + size / 2.0),
         &props,
     )?)
+}
+
+/// Edge of the domain box of [`object_watermelon`], object units: the unit watermelon plus a
+/// tenth on every side. The object model clips a solid to its domain by value (`min(f, box
+/// distance)`), and where the sphere nearly touches a face of a tight box the face's value
+/// would win within the surface zone and pop the membrane early; the margin keeps the clip
+/// out of the zone.
+pub const OBJECT_WATERMELON_DOMAIN_SIZE: f64 = 2.2;
+
+/// A watermelon as an object of the object model: `geometry` (a unit-radius model such as
+/// `tests/data/models/watermelon.fdsl`) in a domain of [`OBJECT_WATERMELON_DOMAIN_SIZE`],
+/// placed at `center` scaled by `radius`, with [`watermelon_properties`]'s tension, friction
+/// and crunchy density (object coordinates) and a surface zone `0.05 * radius` deep (scene
+/// units): what [`fdsl_watermelon`] builds as a function container.
+pub fn object_watermelon(
+    geometry: &str,
+    center: DVec3,
+    radius: f64,
+) -> Result<fdsl::object::Object, fdsl::object::ObjectError> {
+    use fdsl::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property};
+    let property = |text: &str| Formula::new(text).map(|f| Some(Property::new(f)));
+    Object::new(ObjectData {
+        name: "watermelon".into(),
+        geometry: Some(Geometry::implicit_in(
+            Formula::new(geometry)?,
+            Domain::new(DVec3::ZERO, DVec3::splat(OBJECT_WATERMELON_DOMAIN_SIZE)),
+        )),
+        physics: Physics {
+            tension: property("0.8")?,
+            friction: property("0.3")?,
+            density: property(WATERMELON_DENSITY)?,
+            zone_depth: property(&format!("{}", 0.05 * radius))?,
+            ..Physics::default()
+        },
+        transform: fdsl::object::Transform::from_trs(
+            center,
+            glam::DQuat::IDENTITY,
+            DVec3::splat(radius),
+        ),
+        ..ObjectData::default()
+    })
+}
+
+/// `n_dents` small spherical dents of `radius` (object units) carved into the unit sphere's
+/// surface at points of a Fibonacci spiral (about evenly spread, deterministic): a long
+/// sculpting history whose edits each touch a small region. Compiled once, to share between
+/// objects with [`fdsl::object::Object::apply_compiled`].
+pub fn sphere_dents(
+    n_dents: usize,
+    radius: f64,
+) -> Result<Vec<std::sync::Arc<fdsl::object::CompiledEdit>>, fdsl::object::ObjectError> {
+    use fdsl::object::{CompiledEdit, Edit, EditOp, Pose, ToolShape};
+    let golden_angle = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    (0..n_dents)
+        .map(|k| {
+            let y = 1.0 - 2.0 * (k as f64 + 0.5) / n_dents as f64;
+            let ring = (1.0 - y * y).max(0.0).sqrt();
+            let phi = golden_angle * k as f64;
+            let at = DVec3::new(ring * phi.cos(), y, ring * phi.sin());
+            let edit = Edit::stamp(EditOp::Subtract, ToolShape::Sphere { radius }, Pose::at(at));
+            CompiledEdit::new(edit).map(std::sync::Arc::new)
+        })
+        .collect()
+}
+
+/// [`watermelon_grid`] as an object-model scene (object ids `1..=n`), each watermelon carved
+/// with the same `dents` (see [`sphere_dents`]), histories indexed.
+pub fn object_watermelon_scene(
+    geometry: &str,
+    n: usize,
+    dents: &[std::sync::Arc<fdsl::object::CompiledEdit>],
+) -> Result<fdsl::scene::Scene, fdsl::scene::SceneError> {
+    let mut scene = fdsl::scene::Scene::new();
+    for (id, center, radius) in grid_placements(n) {
+        let mut object = object_watermelon(geometry, center, radius)?;
+        for dent in dents {
+            object.apply_compiled(std::sync::Arc::clone(dent))?;
+        }
+        scene.insert_object(fdsl::scene::ObjectId(id), object, None)?;
+    }
+    scene.prepare();
+    Ok(scene)
 }
 
 /// Icospheres (`20 * 4^n_subdivisions` triangles each) at the places of [`watermelon_grid`],

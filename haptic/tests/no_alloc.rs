@@ -1,6 +1,7 @@
 //! Proves that `Servo::step` never allocates: a counting global allocator armed around ticks
 //! that cross containers (closed-form, fdsl functions with properties and fields, meshes
-//! located by haptic rays), swap snapshots, stall and lose the device.
+//! located by haptic rays, objects of the object model with 10^4 sculpting edits each, a
+//! moving object with a force field), swap snapshots, stall and lose the device.
 #![allow(
     clippy::unwrap_used,
     reason = "test helpers outside #[test] fns unwrap"
@@ -13,6 +14,7 @@ use glam::DVec3;
 use haptic::container::Aabb;
 use haptic::container::Container;
 use haptic::container::mesh::{MeshContainer, RayParams};
+use haptic::container::object::ObjectContainer;
 use haptic::container::properties::{PropertySpec, Scalar};
 use haptic::device::Capabilities;
 use haptic::device::sim::{HandModel, SimDevice};
@@ -21,7 +23,8 @@ use haptic::force::zone::HapticZone;
 use haptic::force::{ForceParams, Rig};
 use haptic::servo::Servo;
 use haptic::shapes::{
-    circle_waypoints, fdsl_watermelon_grid, fdsl_whirlpool, icosphere, watermelon_grid,
+    circle_waypoints, fdsl_watermelon_grid, fdsl_whirlpool, icosphere, object_watermelon_scene,
+    sphere_dents, watermelon_grid,
 };
 
 struct Counting;
@@ -216,4 +219,94 @@ fn servo_step_over_fdsl_and_mesh_containers_never_allocates() {
     let n_melons_touched = seen[1..=64].iter().filter(|&&s| s).count();
     assert!(n_melons_touched >= 4, "{n_melons_touched}");
     assert!(seen[2000] && seen[2001], "both mesh spheres");
+}
+
+/// A ball of radius 0.25 on the tip's circle, swaying along x, with a force field along +z.
+fn moving_field_ball() -> ObjectContainer {
+    use fdsl::object::{
+        Domain, ForceField, Formula, Geometry, Motion, Object, ObjectData, Physics, Timing,
+        Transform,
+    };
+    let formula = |text: &str| Formula::new(text).unwrap();
+    let object = Object::new(ObjectData {
+        geometry: Some(Geometry::implicit_in(
+            formula("0.25 - sqrt(x^2 + y^2 + z^2)"),
+            Domain::new(DVec3::ZERO, DVec3::splat(0.6)),
+        )),
+        physics: Physics {
+            force: Some(ForceField {
+                formula: formula("x = 0; y = 0; z = 0.5 * u;"),
+                parameters: [[0.0, 1.0]; 3],
+                timing: Timing::default(),
+                enabled: true,
+            }),
+            ..Physics::default()
+        },
+        transform: Transform::translate(DVec3::new(0.0, 1.0, 0.0)),
+        motion: Some(Motion {
+            translation: Some(formula("x = 0.1 * sin(t); y = 0; z = 0;")),
+            axis: DVec3::Y,
+            angle: None,
+            timing: Timing::default(),
+        }),
+        ..ObjectData::default()
+    })
+    .unwrap();
+    ObjectContainer::from_object(3000, &object, Transform::IDENTITY).unwrap()
+}
+
+/// The containers of an object-model scene, and the moving field ball.
+fn object_containers(scene: &fdsl::scene::Scene) -> Vec<ObjectContainer> {
+    let (mut containers, refused) = ObjectContainer::from_scene(scene);
+    assert!(refused.is_empty());
+    containers.push(moving_field_ball());
+    containers
+}
+
+#[test]
+fn servo_step_over_object_containers_never_allocates() {
+    // 64 watermelons carved with 10^4 dents each, and 16 plain ones.
+    let geometry = include_str!("../../tests/data/models/watermelon.fdsl");
+    let dents = sphere_dents(10_000, 0.02).unwrap();
+    let dented = object_watermelon_scene(geometry, 64, &dents).unwrap();
+    assert_eq!(
+        dented
+            .object(fdsl::scene::ObjectId(1))
+            .unwrap()
+            .history()
+            .len(),
+        10_000
+    );
+    let plain = object_watermelon_scene(geometry, 16, &[]).unwrap();
+    let caps = Capabilities::desktop_pen();
+    let device = SimDevice::new(
+        caps,
+        circle_waypoints(0.05, 0.5, 8),
+        HandModel::default(),
+        0.001,
+    )
+    .unwrap();
+    let (mut servo, link) = Servo::init(device, rig());
+    link.scenes.publish(Box::new(object_containers(&dented)));
+    let mut n_allocs = 0;
+    let mut seen = [false; 4096];
+    for round in 0..8 {
+        n_allocs += count_allocs(|| {
+            for tick in 0..500 {
+                let dt = if tick == 250 { 0.02 } else { 0.001 };
+                let out = servo.step(dt);
+                if let Some(top) = out.top_id {
+                    seen[top as usize % seen.len()] = true;
+                }
+            }
+        });
+        // Every other snapshot has no edits: swapping histories of different lengths.
+        let next = if round % 2 == 0 { &plain } else { &dented };
+        link.scenes.publish(Box::new(object_containers(next)));
+        link.collect_retired();
+    }
+    assert_eq!(n_allocs, 0, "Servo::step allocated");
+    let n_melons_touched = seen[1..=64].iter().filter(|&&s| s).count();
+    assert!(n_melons_touched >= 4, "{n_melons_touched}");
+    assert!(seen[3000], "the moving field ball");
 }

@@ -7,6 +7,9 @@
 //! (b) The watermelon of `tests/data/models/watermelon.fdsl`: tension, pop-through, crunchy
 //!     density.
 //! (c) The thesis's Figure 7.4: a helical field inside an invisible cylinder.
+//! (d) Objects of the shared object model (`ObjectContainer`): the watermelon feels the same
+//!     as its function container, a carved sphere is hollow, painted density is felt where
+//!     it was painted only.
 #![allow(
     clippy::unwrap_used,
     reason = "test helpers outside #[test] fns unwrap"
@@ -14,6 +17,7 @@
 
 use glam::DVec3;
 use haptic::container::function::FunctionContainer;
+use haptic::container::object::ObjectContainer;
 use haptic::container::properties::{PropertySpec, Scalar};
 use haptic::container::{Aabb, Scene};
 use haptic::device::sim::{HandModel, SimDevice, Waypoint};
@@ -21,7 +25,7 @@ use haptic::device::{Capabilities, DeviceSample};
 use haptic::force::zone::HapticZone;
 use haptic::force::{ForceParams, ProxyState, Region, Rig, render};
 use haptic::servo::Servo;
-use haptic::shapes::{Analytic, fdsl_watermelon, fdsl_whirlpool};
+use haptic::shapes::{Analytic, fdsl_watermelon, fdsl_whirlpool, object_watermelon};
 
 const DT: f64 = 0.001;
 const WATERMELON: &str = include_str!("../../tests/data/models/watermelon.fdsl");
@@ -358,4 +362,163 @@ fn fdsl_whirlpool_field_matches_the_closed_form_and_pulls_the_hand_round() {
         "the hand yields to the field"
     );
     assert_continuous(&ticks, &rig.caps);
+}
+
+#[test]
+fn object_model_watermelon_feels_like_its_function_container() {
+    let rig = rig(1.6);
+    let (center, radius) = (DVec3::new(0.3, -0.2, 0.1), 0.8);
+    let path = watermelon_path().map(|(t, p)| (t, center + p * radius));
+    let function = vec![fdsl_watermelon(7, &parse(WATERMELON), center, radius).unwrap()];
+    let object = object_watermelon(WATERMELON, center, radius).unwrap();
+    let objects = vec![ObjectContainer::from_object(7, &object, Default::default()).unwrap()];
+    let a = run_servo(function, &rig, &path, 5400);
+    let b = run_servo(objects, &rig, &path, 5400);
+    let mut n_regions = [0; 3];
+    for (k, (a, b)) in a.iter().zip(&b).enumerate() {
+        assert!(
+            (a.force_newtons - b.force_newtons).length() < 1e-6,
+            "tick {k}: {} vs {}",
+            a.force_newtons,
+            b.force_newtons
+        );
+        assert_eq!((a.top_id, a.region), (b.top_id, b.region), "tick {k}");
+        n_regions[a.region as usize] += 1;
+    }
+    // The trace went through every region: free, the rind's zone and the flesh.
+    assert!(n_regions.iter().all(|&n| n > 100), "{n_regions:?}");
+    let peak = b.iter().map(|t| t.force_newtons.y).fold(0.0, f64::max);
+    assert!(peak > 1.0, "the rind pushes back: {peak} N");
+}
+
+/// A unit ball (`1 - |p|`) with a tense surface and some density, in a domain.
+fn ball_object() -> fdsl::object::Object {
+    use fdsl::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property};
+    let property = |text: &str| Some(Property::new(Formula::new(text).unwrap()));
+    Object::new(ObjectData {
+        geometry: Some(Geometry::implicit_in(
+            Formula::new("1 - sqrt(x^2 + y^2 + z^2)").unwrap(),
+            Domain::new(DVec3::ZERO, DVec3::splat(2.2)),
+        )),
+        physics: Physics {
+            tension: property("0.8"),
+            zone_depth: property("0.05"),
+            density: property("0.3"),
+            ..Physics::default()
+        },
+        ..ObjectData::default()
+    })
+    .unwrap()
+}
+
+#[test]
+fn carved_object_is_hollow_where_carved() {
+    use fdsl::object::{Edit, EditOp, Pose, ToolShape};
+    let rig = rig(1.6);
+    let solid = ball_object();
+    let mut carved = solid.clone();
+    carved
+        .apply(Edit::stamp(
+            EditOp::Subtract,
+            ToolShape::Sphere { radius: 0.5 },
+            Pose::at(DVec3::ZERO),
+        ))
+        .unwrap();
+    // From the centre out through the cavity wall into the shell, and out of the ball.
+    let path = [
+        (0.0, DVec3::ZERO),
+        (0.5, DVec3::ZERO),
+        (2.0, DVec3::new(0.6, 0.0, 0.0)),
+        (2.5, DVec3::new(0.6, 0.0, 0.0)),
+        (3.5, DVec3::new(1.3, 0.0, 0.0)),
+    ];
+    let scene = |object: &fdsl::object::Object| {
+        vec![ObjectContainer::from_object(3, object, Default::default()).unwrap()]
+    };
+    let solid_ticks = run_servo(scene(&solid), &rig, &path, 3600);
+    assert_eq!(
+        (solid_ticks[400].top_id, solid_ticks[400].region),
+        (Some(3), Region::Interior),
+        "uncarved, the centre is inside"
+    );
+    let ticks = run_servo(scene(&carved), &rig, &path, 3600);
+    let mut n_cavity = 0;
+    let mut n_shell = 0;
+    for (k, tick) in ticks.iter().enumerate() {
+        let r = tick.hip_world.length();
+        if r < 0.48 {
+            assert_eq!(tick.top_id, None, "tick {k}: hollow at r = {r}");
+            n_cavity += 1;
+        } else if (0.52..0.98).contains(&r) {
+            assert_eq!(tick.top_id, Some(3), "tick {k}: shell at r = {r}");
+            n_shell += 1;
+        }
+    }
+    assert!(n_cavity > 1000 && n_shell > 200, "{n_cavity} {n_shell}");
+    // Pressing into the cavity wall from inside, tension pushes back towards the centre.
+    let push = ticks
+        .iter()
+        .filter(|t| t.region == Region::Surface && t.hip_world.x < 0.6)
+        .map(|t| t.force_newtons.x)
+        .fold(0.0, f64::min);
+    assert!(push < -0.5, "the wall pushes back: {push} N");
+    assert_continuous(&ticks, &rig.caps);
+}
+
+#[test]
+fn painted_density_is_felt_inside_the_painted_region_only() {
+    use fdsl::object::{Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData};
+    use fdsl::object::{PaintValue, Paintable, Pose, ToolShape};
+    let rig = rig(1.6);
+    // No density of its own: only the paint defines one.
+    let mut object = Object::new(ObjectData {
+        geometry: Some(Geometry::implicit_in(
+            Formula::new("1 - sqrt(x^2 + y^2 + z^2)").unwrap(),
+            Domain::new(DVec3::ZERO, DVec3::splat(2.2)),
+        )),
+        ..ObjectData::default()
+    })
+    .unwrap();
+    let (paint_center, paint_radius) = (DVec3::new(0.4, 0.0, 0.0), 0.3);
+    object
+        .apply(Edit::stamp(
+            EditOp::Paint {
+                property: Paintable::Density,
+                value: PaintValue::Scalar(0.9),
+            },
+            ToolShape::Sphere {
+                radius: paint_radius,
+            },
+            Pose::at(paint_center),
+        ))
+        .unwrap();
+    let scene = vec![ObjectContainer::from_object(4, &object, Default::default()).unwrap()];
+    let path = [
+        (0.0, DVec3::new(-1.3, 0.0, 0.0)),
+        (3.0, DVec3::new(1.3, 0.0, 0.0)),
+        (3.2, DVec3::new(1.3, 0.0, 0.0)),
+    ];
+    let ticks = run_servo(scene, &rig, &path, 3200);
+    let (mut n_painted, mut n_plain) = (0, 0);
+    for (k, tick) in ticks.iter().enumerate().skip(300) {
+        let x = tick.hip_world.x;
+        let to_paint = (tick.hip_world - paint_center).length() - paint_radius;
+        if tick.top_id != Some(4) || (x.abs() - 1.0).abs() < 0.05 || to_paint.abs() < 0.05 {
+            continue;
+        }
+        let density = if to_paint < 0.0 { 0.9 } else { 0.0 };
+        let expected = -tick.velocity_device * density * rig.caps.damping_newton_secs_per_metre_max;
+        assert!(
+            (tick.force_newtons - expected).length() < 0.02,
+            "tick {k} at x = {x}: {} vs {expected}",
+            tick.force_newtons
+        );
+        if to_paint < 0.0 {
+            assert!(expected.length() > 0.1, "tick {k}: felt {expected}");
+            n_painted += 1;
+        } else {
+            n_plain += 1;
+        }
+    }
+    assert!(n_painted > 200 && n_plain > 500, "{n_painted} {n_plain}");
 }

@@ -198,8 +198,9 @@ impl CompiledEdit {
         }
     }
 
-    /// The tool's exact value at `p`, mirror included, without the clamp at the margin and
-    /// visiting every stamp: the definition [`CompiledEdit`]'s fast paths must agree with.
+    /// The tool's value at `p` by definition, mirror included, visiting every stamp without an
+    /// index: the best stamp whose grown box holds `p`, else empty space. The fast paths must
+    /// agree with it.
     pub fn raw_tool_value(&self, p: DVec3) -> f64 {
         let direct = self.tool.raw_value(p);
         match self.edit.mirror {

@@ -10,7 +10,7 @@
 use glam::{DQuat, DVec3};
 use serde::{Deserialize, Serialize};
 
-use super::ObjectError;
+use super::{NOTHING, ObjectError};
 use crate::bvh::{Aabb, Bvh};
 use crate::eval::Interval;
 use crate::limits::{MAX_STROKE_POSES, MAX_STROKE_STAMPS, MAX_TOOL_SIZE};
@@ -341,10 +341,11 @@ impl CompiledTool {
         self.stamps.len()
     }
 
-    /// Value and gradient at `p`, clamped below at `-margin`.
+    /// Value and gradient at `p`: the best of the stamps whose grown boxes hold `p`, and
+    /// empty space ([`NOTHING`]) where none does (a tool's support is its stamps' boxes).
     #[inline]
     pub(crate) fn eval(&self, p: DVec3) -> (f64, DVec3) {
-        let mut best = (-self.margin, DVec3::ZERO);
+        let mut best = (NOTHING, DVec3::ZERO);
         let take = |i: u32| {
             let i = i as usize;
             let (bounds, stamp) = &self.stamps[i];
@@ -362,12 +363,13 @@ impl CompiledTool {
         best
     }
 
-    /// The exact value at `p`, unclamped, visiting every stamp (for checks, not for speed).
+    /// The value by definition, visiting every stamp without the index (for checks).
     pub(crate) fn raw_value(&self, p: DVec3) -> f64 {
         self.stamps
             .iter()
+            .filter(|(b, _)| b.contains(p))
             .map(|(_, s)| s.eval(p).0)
-            .fold(f64::NEG_INFINITY, f64::max)
+            .fold(NOTHING, f64::max)
     }
 
     /// Value only.
@@ -379,13 +381,25 @@ impl CompiledTool {
     /// An interval holding every value over `region`.
     pub(crate) fn interval(&self, region: &Aabb) -> Interval {
         let center = region.center();
-        let half_diagonal = region.size().length() * 0.5;
-        let v = self.value(center);
-        let spread = half_diagonal * self.lipschitz;
-        Interval::new(
-            (v - spread).max(-self.margin),
-            (v + spread).max(-self.margin),
-        )
+        let spread = region.size().length() * 0.5 * self.lipschitz;
+        // Over the region each stamp whose box meets it is within `spread` of its value at the
+        // centre; where no stamp box holds a point the tool is empty space.
+        let (mut lo, mut hi) = (NOTHING, NOTHING);
+        let take = |i: u32| {
+            let (bounds, stamp) = &self.stamps[i as usize];
+            if bounds.overlaps(region) {
+                let v = stamp.eval(center).0;
+                hi = hi.max(v + spread);
+                if bounds.contains_box(region) {
+                    lo = lo.max(v - spread);
+                }
+            }
+        };
+        match &self.stamp_index {
+            Some(bvh) => bvh.visit_box(region, take),
+            None => (0..self.stamps.len() as u32).for_each(take),
+        }
+        Interval::new(lo, hi)
     }
 }
 
@@ -483,8 +497,9 @@ mod tests {
         assert_eq!(tool.n_stamps(), 2);
         assert!((tool.value(DVec3::new(0.5, 0.05, 0.0)) - 0.05).abs() < 1e-12);
         assert!((tool.value(DVec3::new(1.0, 0.5, 0.08)) - 0.02).abs() < 1e-12);
-        // Far away the value is clamped at minus the margin.
-        assert_eq!(tool.value(DVec3::splat(10.0)), -tool.margin());
+        // Away from every stamp the tool is empty space.
+        assert_eq!(tool.value(DVec3::splat(10.0)), NOTHING);
+        assert!(tool.margin() > 0.0);
         let p = DVec3::new(0.3, 0.07, 0.02);
         let g = tool.eval(p).1;
         assert!((g - finite_difference(&tool, p)).length() < 1e-6);
@@ -519,7 +534,7 @@ mod tests {
                 DVec3::new(-0.1, 0.2, 0.45),
             ] {
                 let (v, g) = tool.eval(p);
-                if v > -tool.margin() + 1e-3 {
+                if v > -tool.margin() + 1e-3 && v > NOTHING {
                     let fd = finite_difference(&tool, p);
                     assert!((g - fd).length() < 1e-5, "{shape:?} at {p}: {g} vs {fd}");
                 }
@@ -544,11 +559,7 @@ mod tests {
         for i in 0..300 {
             let a = i as f64 * 0.0371;
             let p = DVec3::new(a.cos() * 1.02, a.sin(), a * 0.1 + 0.01);
-            let brute = tool
-                .stamps
-                .iter()
-                .map(|(_, s)| s.eval(p).0)
-                .fold(-tool.margin(), f64::max);
+            let brute = tool.raw_value(p);
             assert_eq!(tool.value(p), brute, "at {p}");
         }
     }

@@ -24,11 +24,11 @@
 //! lower bounds there); a thin feature between rays can be missed by the distance (never by
 //! the sign, which every single ray decides alone for a closed mesh).
 //!
-//! Nothing here allocates after [`MeshContainer::new`]: the BVH is built once and traversal
-//! uses a fixed stack. Crossings of the segment travelled in one tick are found by casting that
+//! Nothing here allocates after [`MeshContainer::new`]: the triangles are indexed once by
+//! fdsl's shared [`fdsl::bvh::Bvh`] ([`ray::RayIndex`]), whose traversal uses a fixed stack. Crossings of the segment travelled in one tick are found by casting that
 //! segment as one ray ([`Container::first_crossing`]) instead of bisecting.
 
-pub mod bvh;
+pub mod ray;
 #[cfg(test)]
 mod tests;
 
@@ -37,7 +37,7 @@ use glam::DVec3;
 use super::function::checked_box;
 use super::properties::{Properties, PropertyError, PropertySpec};
 use super::{Aabb, Container, FieldDomain};
-use bvh::{Bvh, Triangle};
+use ray::{RayIndex, Triangle};
 
 /// The most triangles one mesh container may hold.
 pub const TRIANGLES_MAX: usize = 1 << 22;
@@ -137,7 +137,7 @@ impl Side {
 #[derive(Clone, Debug)]
 pub struct MeshContainer {
     id: u64,
-    bvh: Bvh,
+    index: RayIndex,
     bounds: Aabb,
     props: Properties,
     rays: RayParams,
@@ -224,7 +224,7 @@ impl MeshContainer {
         let bounds = checked_box(lo, hi).ok_or(MeshError::Empty)?;
         Ok(Self {
             id,
-            bvh: Bvh::build(tris),
+            index: RayIndex::build(tris),
             bounds,
             props: Properties::new(props, bounds)?,
             rays,
@@ -242,7 +242,7 @@ impl MeshContainer {
 
     /// The number of triangles kept (degenerate ones dropped).
     pub fn n_triangles(&self) -> usize {
-        self.bvh.triangles().len()
+        self.index.triangles().len()
     }
 
     /// Casts one set of rays from `p`; returns (inside side, outside side, sign of the
@@ -256,10 +256,10 @@ impl MeshContainer {
         let (mut inside, mut outside) = (Side::NONE, Side::NONE);
         let mut nearest = (f64::INFINITY, 0i8);
         for &dir in dirs {
-            let Some(hit) = self.bvh.nearest_hit(p, dir, length) else {
+            let Some(hit) = self.index.nearest_hit(p, dir, length) else {
                 continue;
             };
-            let tri = &self.bvh.triangles()[hit.tri_idx as usize];
+            let tri = &self.index.triangles()[hit.tri_idx as usize];
             let g = dir.dot(tri.normal);
             let side = if g > 0.0 {
                 &mut inside
@@ -294,10 +294,10 @@ impl MeshContainer {
         for _ in 0..PROBE_RAYS {
             let dir = nearest.1 * facing;
             self.stats.n_rays += 1;
-            let Some(hit) = self.bvh.nearest_hit(p, dir, length) else {
+            let Some(hit) = self.index.nearest_hit(p, dir, length) else {
                 break;
             };
-            let tri = &self.bvh.triangles()[hit.tri_idx as usize];
+            let tri = &self.index.triangles()[hit.tri_idx as usize];
             let plane_distance = (tri.v0 - p).dot(tri.normal).abs();
             if dir.dot(tri.normal) * facing <= 0.0 || plane_distance >= nearest.0 {
                 break;
@@ -366,7 +366,7 @@ impl Container for MeshContainer {
         if dir == DVec3::ZERO || !dir.is_finite() {
             return None;
         }
-        self.bvh.nearest_hit(p0, dir, 1.0).map(|hit| hit.t)
+        self.index.nearest_hit(p0, dir, 1.0).map(|hit| hit.t)
     }
 
     fn tension(&mut self, p: DVec3, t_secs: f64) -> Option<f64> {

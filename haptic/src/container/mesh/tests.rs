@@ -1,10 +1,10 @@
 //! Mesh containers against analytic answers: a cube and an icosphere, points inside, outside
-//! and near edges and corners; the BVH against brute force; forces against the closed-form
+//! and near edges and corners; nearest hits over the shared BVH against brute force; forces against the closed-form
 //! sphere.
 
 use glam::DVec3;
 
-use super::bvh::Hit;
+use super::ray::Hit;
 use super::*;
 use crate::container::properties::Scalar;
 use crate::shapes::{cube_mesh, icosphere};
@@ -48,7 +48,7 @@ fn bvh_nearest_hit_equals_brute_force() {
         let dir = rng.vec(-1.0, 1.0);
         let t_max = rng.next(0.1, 4.0);
         let brute = c
-            .bvh
+            .index
             .triangles()
             .iter()
             .enumerate()
@@ -59,7 +59,7 @@ fn bvh_nearest_hit_equals_brute_force() {
                 })
             })
             .min_by(|a, b| a.t.total_cmp(&b.t));
-        let fast = c.bvh.nearest_hit(origin, dir, t_max);
+        let fast = c.index.nearest_hit(origin, dir, t_max);
         assert_eq!(fast.map(|h| h.t), brute.map(|h| h.t), "{origin} {dir}");
         n_hits += usize::from(fast.is_some());
     }

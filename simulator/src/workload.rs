@@ -1,0 +1,217 @@
+//! Scripted users: each honest peer's user creates objects, sets colours and formulas,
+//! carves and paints, undoes its own edits, chats and fights over leases, all drawn from the
+//! run's RNG.
+
+use fdsl::object::{
+    ColorDef, Edit, EditOp, Field, Formula, Geometry, ObjectData, PaintValue, Paintable, Pose,
+    ToolShape,
+};
+use replication::OpId;
+use replication::shape::ShapePayload;
+
+use crate::rng::SimRng;
+
+/// The object every user fights over (created by peer 0 at the start).
+pub const HOT_OBJECT: u64 = 1;
+/// Most own edits a user remembers for undo.
+pub const MAX_UNDO_HISTORY: usize = 64;
+/// Lease time to live used by the users.
+pub const LEASE_TTL_MICROS: u64 = 2_000_000;
+
+/// Formulas users type for geometry.
+const SHAPES: [&str; 4] = [
+    "1 - x^2 - y^2 - z^2",
+    "min(1 - abs(x), min(1 - abs(y), 1 - abs(z)))",
+    "0.8 - sqrt(x^2 + z^2) & (1 - abs(y))",
+    "1 - x^2 - y^2 - z^2 + 0.1*sin(5*x)",
+];
+
+/// Colour formulas (outputs `r g b`).
+const COLOURS: [&str; 3] = [
+    "r = 0.5 + 0.5*sin(x); g = 0.3; b = abs(z);",
+    "r = 1; g = abs(y); b = 0.2;",
+    "r = t; g = 0.5; b = 0.5;",
+];
+
+/// What one user remembers between actions.
+#[derive(Debug, Default, Clone)]
+pub struct User {
+    /// Objects this user created.
+    created: u64,
+    /// Its own edits, most recent last (for undo).
+    edits: Vec<OpId>,
+}
+
+/// An object id unique to `(peer_idx, n)`: peer index in the high bits.
+fn object_id(peer_idx: usize, n: u64) -> u64 {
+    ((peer_idx as u64 + 1) << 32) | n
+}
+
+fn shape_data(rng: &mut SimRng, name: String) -> Option<ObjectData> {
+    let formula = Formula::new(SHAPES[rng.index(SHAPES.len())]).ok()?;
+    Some(ObjectData {
+        name,
+        geometry: Some(Geometry::implicit(formula)),
+        ..ObjectData::default()
+    })
+}
+
+/// The payload that creates the hot object.
+pub fn hot_object(rng: &mut SimRng) -> Option<ShapePayload> {
+    Some(ShapePayload::Create {
+        object: HOT_OBJECT,
+        data: shape_data(rng, "hot".into())?.into(),
+        group: None,
+    })
+}
+
+impl User {
+    /// Draws the next action of the user of peer `peer_idx`; `known` are the objects it may
+    /// touch (the hot one and the ones created so far by anyone).
+    pub fn next(
+        &mut self,
+        rng: &mut SimRng,
+        peer_idx: usize,
+        known: &[u64],
+    ) -> Option<ShapePayload> {
+        let target = if rng.chance(400) || known.is_empty() {
+            HOT_OBJECT
+        } else {
+            known[rng.index(known.len())]
+        };
+        let roll = rng.below(100);
+        let payload = match roll {
+            0..=7 => {
+                self.created += 1;
+                let object = object_id(peer_idx, self.created);
+                ShapePayload::Create {
+                    object,
+                    data: shape_data(rng, format!("p{peer_idx}-{}", self.created))?.into(),
+                    group: None,
+                }
+            }
+            8..=17 => ShapePayload::Set {
+                object: target,
+                field: Field::Diffuse(Some(ColorDef::Constant([
+                    rng.unit() as f32,
+                    rng.unit() as f32,
+                    rng.unit() as f32,
+                ]))),
+            },
+            18..=22 => ShapePayload::Set {
+                object: target,
+                field: Field::Diffuse(Some(ColorDef::Rgb(
+                    Formula::new(COLOURS[rng.index(COLOURS.len())]).ok()?,
+                ))),
+            },
+            23..=27 => ShapePayload::Set {
+                object: target,
+                field: Field::Geometry(Some(Geometry::implicit(
+                    Formula::new(SHAPES[rng.index(SHAPES.len())]).ok()?,
+                ))),
+            },
+            28..=52 => {
+                let op = if rng.chance(700) {
+                    EditOp::Subtract
+                } else {
+                    EditOp::Union
+                };
+                let at = [
+                    rng.range_f64(-1.0, 1.0),
+                    rng.range_f64(-1.0, 1.0),
+                    rng.range_f64(-1.0, 1.0),
+                ];
+                let n_poses = 1 + rng.index(4);
+                let path = (0..n_poses)
+                    .map(|i| Pose::at([at[0] + 0.05 * i as f64, at[1], at[2]].into()))
+                    .collect();
+                ShapePayload::Edit {
+                    object: target,
+                    edit: Edit::stroke(
+                        op,
+                        ToolShape::Sphere {
+                            radius: rng.range_f64(0.05, 0.4),
+                        },
+                        path,
+                    ),
+                }
+            }
+            53..=64 => ShapePayload::Edit {
+                object: target,
+                edit: Edit::stamp(
+                    EditOp::Paint {
+                        property: Paintable::Color,
+                        value: PaintValue::Color([
+                            rng.unit() as f32,
+                            rng.unit() as f32,
+                            rng.unit() as f32,
+                        ]),
+                    },
+                    ToolShape::Sphere {
+                        radius: rng.range_f64(0.1, 0.5),
+                    },
+                    Pose::at([rng.range_f64(-1.0, 1.0), 0.0, 0.0].into()),
+                ),
+            },
+            65..=72 => match self.edits.len() {
+                0 => ShapePayload::Chat(format!("nothing to undo from {peer_idx}")),
+                n => ShapePayload::Undo(self.edits[rng.index(n)]),
+            },
+            73..=80 => ShapePayload::Chat(format!("hello from {peer_idx} ({roll})")),
+            81..=92 => ShapePayload::Acquire {
+                object: HOT_OBJECT,
+                strong: rng.chance(500),
+                ttl_micros: LEASE_TTL_MICROS,
+            },
+            _ => ShapePayload::Release { object: HOT_OBJECT },
+        };
+        Some(payload)
+    }
+
+    /// Takes note of an authored op (edits become undoable).
+    pub fn authored(&mut self, payload: &ShapePayload, id: OpId) {
+        if matches!(payload, ShapePayload::Edit { .. }) {
+            if self.edits.len() >= MAX_UNDO_HISTORY {
+                self.edits.remove(0);
+            }
+            self.edits.push(id);
+        }
+    }
+
+    /// Object ids created by `peer_idx`'s user so far.
+    pub fn created_ids(&self, peer_idx: usize) -> impl Iterator<Item = u64> {
+        (1..=self.created).map(move |n| object_id(peer_idx, n))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use replication::Payload;
+
+    #[test]
+    fn every_drawn_payload_validates_and_round_trips() {
+        let mut rng = SimRng::new(3);
+        let mut user = User::default();
+        let mut kinds = std::collections::BTreeSet::new();
+        for i in 0..400 {
+            let p = user.next(&mut rng, 2, &[HOT_OBJECT]).unwrap();
+            p.validate().unwrap();
+            let mut bytes = Vec::new();
+            p.encode(&mut bytes);
+            assert_eq!(ShapePayload::decode(&bytes).unwrap(), p);
+            kinds.insert(match &p {
+                ShapePayload::Create { .. } => "create",
+                ShapePayload::Set { .. } => "set",
+                ShapePayload::Edit { .. } => "edit",
+                ShapePayload::Undo(_) => "undo",
+                ShapePayload::Chat(_) => "chat",
+                ShapePayload::Acquire { .. } => "acquire",
+                ShapePayload::Release { .. } => "release",
+                _ => "other",
+            });
+            user.authored(&p, OpId([i as u8; 32]));
+        }
+        assert_eq!(kinds.len(), 7, "{kinds:?}");
+    }
+}
