@@ -171,6 +171,12 @@ impl CompiledEdit {
         self.boxes[0].contains_box(region) || self.boxes[1].contains_box(region)
     }
 
+    /// How far beyond the tool's solid its stamps' boxes reach (half the tool's size plus the
+    /// blend radius): values are exact within this band.
+    pub fn margin(&self) -> f64 {
+        self.tool.margin()
+    }
+
     /// Number of primitive stamps the stroke compiled to.
     pub fn n_stamps(&self) -> usize {
         self.tool.n_stamps()

@@ -331,7 +331,6 @@ impl CompiledTool {
     }
 
     /// The band half-width within which values are exact.
-    #[cfg(test)]
     pub(crate) fn margin(&self) -> f64 {
         self.margin
     }
