@@ -1,12 +1,27 @@
-//! Benchmark `mesh_octree`: dual contouring of closed-form fields through the `Field` trait.
+//! Benchmark `mesh_octree`: dual contouring through the `Field` trait, on closed-form fields
+//! and on the reference models against `fidget`'s mesher at equal depth.
 //!
-//! Run with `cargo bench -p render --bench mesh_octree`. The same workloads will be meshed by
-//! `fidget`'s mesher once `fdsl` implements `Field` over its tapes.
+//! Run with `cargo bench -p render --bench mesh_octree`; `-- reference_models` runs only the
+//! comparison with fidget. Before the benchmarks it prints, per model and depth, the
+//! triangle counts and the open and non-manifold edges of both meshers' output.
+//!
+//! Both meshers run on one thread over [-1.2, 1.2]^3 with 2^depth cells along each axis:
+//! ours as [`TapeField`] over an fdsl tape, fidget's `Octree::build` + `walk_dual` on the same
+//! function converted by `fdsl/benches/fidget_peer.rs` (negated: fidget's inside is negative)
+//! and scaled by 1.2, since fidget meshes [-1, 1]^3.
 
+use divan::Bencher;
+use fidget::context::Tree;
+use fidget::shape::Shape;
 use render::mesh::octree::{MeshSettings, OctreeMesher, mesh};
-use render::mesh::{Aabb, Field};
+use render::mesh::{Aabb, Field, Mesh, TapeField};
+
+#[path = "../../fdsl/benches/fidget_peer.rs"]
+#[allow(dead_code, reason = "shared with fdsl's benches, which use more of it")]
+mod fidget_peer;
 
 fn main() {
+    print_triangle_counts();
     divan::main();
 }
 
@@ -67,7 +82,7 @@ fn union_of_eight_spheres(depth: u8) -> usize {
 
 /// Remeshing the box of one small edit on a mesh already built.
 #[divan::bench(args = [6, 7])]
-fn remesh_edit(bencher: divan::Bencher, depth: u8) {
+fn remesh_edit(bencher: Bencher, depth: u8) {
     let base = vec![([0.0; 3], 0.7)];
     let mut mesher = OctreeMesher::new(&settings(depth)).expect("valid settings");
     let _ = mesher.remesh(&mut Spheres(base.clone()), settings(depth).bounds);
@@ -78,4 +93,153 @@ fn remesh_edit(bencher: divan::Bencher, depth: u8) {
         let _ = mesher.remesh(&mut Spheres(edited.clone()), edit);
         mesher.mesh().map_or(0, |m| m.n_triangles())
     });
+}
+
+/// The reference models with a surface (script_field is a density without one).
+const MODELS: &[&str] = &[
+    "sphere",
+    "spheres100",
+    "spheres100_rfunc",
+    "gyroid_sphere",
+    "watermelon",
+    "watermelon_rfunc",
+];
+
+/// Half the side of the meshed cube.
+const HALF_SIDE: f32 = 1.2;
+
+/// Model `name`'s source text.
+fn source(name: &str) -> &'static str {
+    match name {
+        "sphere" => include_str!("../../tests/data/models/sphere.fdsl"),
+        "spheres100" => include_str!("../../tests/data/models/spheres100.fdsl"),
+        "spheres100_rfunc" => include_str!("../../tests/data/models/spheres100_rfunc.fdsl"),
+        "gyroid_sphere" => include_str!("../../tests/data/models/gyroid_sphere.fdsl"),
+        "watermelon" => include_str!("../../tests/data/models/watermelon.fdsl"),
+        "watermelon_rfunc" => include_str!("../../tests/data/models/watermelon_rfunc.fdsl"),
+        _ => panic!("unknown model {name}"),
+    }
+}
+
+fn tape(name: &str) -> fdsl::Tape {
+    fdsl::Function::parse(source(name))
+        .expect("reference models compile")
+        .tape()
+}
+
+fn ours(name: &str, depth: u8) -> Mesh {
+    let settings = MeshSettings {
+        bounds: Aabb::new([-HALF_SIDE; 3], [HALF_SIDE; 3]),
+        depth,
+    };
+    mesh(&mut TapeField::new(&tape(name), 0.0), &settings).expect("meshes")
+}
+
+/// fidget's shape for model `name`, stretched from [-1.2, 1.2]^3 onto its [-1, 1]^3.
+fn peer_shape<F: fidget::eval::MathFunction>(name: &str) -> Shape<F> {
+    let (ctx, root) = fidget_peer::to_fidget(&tape(name));
+    let tree = ctx.export(root).expect("a node of this context");
+    let s = HALF_SIDE;
+    Shape::from(tree.remap_xyz(Tree::x() * s, Tree::y() * s, Tree::z() * s))
+}
+
+fn peer<F>(shape: &Shape<F>, depth: u8) -> fidget::mesh::Mesh
+where
+    F: fidget::eval::Function + fidget::eval::MathFunction + fidget::render::RenderHints + Clone,
+{
+    let bound = shape.clone().try_into().expect("no variables but x, y, z");
+    let settings = fidget::mesh::Settings {
+        depth,
+        threads: None,
+        ..Default::default()
+    };
+    fidget::mesh::Octree::build(&bound, &settings)
+        .expect("not cancelled")
+        .walk_dual()
+}
+
+/// fidget's mesh in our type (scaled back to [-1.2, 1.2]^3), for the edge checks.
+fn to_mesh(m: &fidget::mesh::Mesh) -> Mesh {
+    Mesh {
+        positions: m
+            .vertices
+            .iter()
+            .map(|v| [v.x, v.y, v.z].map(|c| c * HALF_SIDE))
+            .collect(),
+        indices: m
+            .triangles
+            .iter()
+            .flat_map(|t| [t.x, t.y, t.z].map(|i| u32::try_from(i).unwrap_or(u32::MAX)))
+            .collect(),
+        ..Mesh::default()
+    }
+}
+
+fn print_triangle_counts() {
+    // Under `cargo test` benches run once as tests: skip the table there.
+    if std::env::args().any(|a| a == "--test") {
+        return;
+    }
+    println!(
+        "model              depth  triangles ours (open, non-manifold)  fidget (open, non-manifold)"
+    );
+    for depth in [6u8, 7] {
+        for name in MODELS {
+            let a = ours(name, depth);
+            let b = to_mesh(&peer(&peer_shape::<fidget::vm::VmFunction>(name), depth));
+            println!(
+                "{name:18} {depth:5}  {:>9} ({}, {})  {:>9} ({}, {})",
+                a.n_triangles(),
+                a.open_edges(),
+                a.non_manifold_edges(),
+                b.n_triangles(),
+                b.open_edges(),
+                b.non_manifold_edges()
+            );
+        }
+    }
+}
+
+mod reference_models {
+    use super::*;
+
+    const ARGS: &[(&str, u8)] = &[
+        ("sphere", 6),
+        ("spheres100", 6),
+        ("spheres100_rfunc", 6),
+        ("gyroid_sphere", 6),
+        ("watermelon", 6),
+        ("watermelon_rfunc", 6),
+        ("sphere", 7),
+        ("spheres100", 7),
+        ("spheres100_rfunc", 7),
+        ("gyroid_sphere", 7),
+        ("watermelon", 7),
+        ("watermelon_rfunc", 7),
+    ];
+
+    #[divan::bench(args = ARGS, sample_count = 5, sample_size = 1)]
+    fn render(bencher: Bencher, arg: (&str, u8)) {
+        let (name, depth) = arg;
+        let tape = tape(name);
+        let settings = MeshSettings {
+            bounds: Aabb::new([-HALF_SIDE; 3], [HALF_SIDE; 3]),
+            depth,
+        };
+        bencher.bench_local(|| {
+            let m = mesh(&mut TapeField::new(&tape, 0.0), &settings).expect("meshes");
+            m.n_triangles()
+        });
+    }
+
+    #[divan::bench(args = ARGS, sample_count = 5, sample_size = 1)]
+    fn fidget_vm(bencher: Bencher, arg: (&str, u8)) {
+        let (name, depth) = arg;
+        let shape = peer_shape::<fidget::vm::VmFunction>(name);
+        bencher.bench_local(|| peer(&shape, depth).triangles.len());
+    }
+
+    // fidget's JIT is left out: its mesher compiles every simplified tape, which took 10.9 to
+    // 17.1 s for gyroid_sphere at depth 6 (5 samples), about 100 times its VM; the VM is the
+    // fairer peer for meshing, as for fdsl's pruned-octree benchmark.
 }

@@ -2,9 +2,13 @@
 //!
 //! What it is:
 //! - [`mesh`]: the [`Mesh`](mesh::Mesh) type with watertight/manifold checks, the
-//!   [`octree`](mesh::octree) dual-contouring mesher for implicit solids (f >= 0 is inside)
+//!   [`octree`](mesh::octree) dual-contouring mesher for implicit solids (f >= 0 is inside,
+//!   watertight and edge-manifold output)
 //!   written against the [`Field`](mesh::Field) trait, and [`parametric`](mesh::parametric)
 //!   triangulation of surfaces p(u,v) (with `spade`) and tubes around curves p(u);
+//! - [`appearance`]: an `fdsl::object::Appearance` applied to a mesh at time t (vertex
+//!   colours from parametric RGB or a colour map, transparency as alpha, displacement along
+//!   normals, shininess into the [`Material`](scene::Material));
 //! - [`scene`] and [`camera`]: what to draw ([`Scene`](scene::Scene), objects with
 //!   [`Material`](scene::Material)s, lines for arrows, boxes and cursors), an orbit
 //!   [`Camera`](camera::Camera), and CPU picking (`Scene::pick`);
@@ -44,6 +48,7 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod appearance;
 pub mod camera;
 pub mod gpu;
 pub mod image;

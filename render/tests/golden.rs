@@ -1,17 +1,27 @@
 //! Golden-image tests: offscreen renders compared with checked-in PNGs within a tolerance.
 //!
-//! The goldens were rendered on Mesa 22.3.6 llvmpipe through wgpu's GL backend (the machine
-//! had no Vulkan driver); other GPUs and backends may differ by more than the tolerance along
-//! silhouettes, and a failure prints the adapter used. With no adapter at all the tests print
-//! a note and pass.
+//! `coloured_sphere` and `transparent_box_over_opaque` were rendered on Mesa 22.3.6 llvmpipe
+//! through wgpu's GL backend; the appearance goldens (`watermelon_colour_map`,
+//! `parametric_torus`, `textured_sphere`, `glass_ball_before_box`) on the same llvmpipe
+//! through Vulkan, which also passes the first two. Other GPUs and backends may differ by
+//! more than the tolerance (10/255 per channel on at most 0.5% of pixels) along silhouettes;
+//! a failure prints the adapter used and where the actual and diff PNGs were written. With
+//! no adapter at all the tests print a note and pass.
 //! `UPDATE_SNAPSHOTS=1 cargo test -p render --test golden` rewrites them.
+#![allow(
+    clippy::unwrap_used,
+    reason = "scene builders outside #[test] fns unwrap fixed, known-good inputs"
+)]
 
+use fdsl::object::{Appearance, ColorDef, ColorMap, Formula};
 use glam::{Mat4, Vec3};
+use render::appearance::CompiledAppearance;
 use render::camera::Camera;
 use render::gpu::offscreen::{Headless, OffscreenError};
 use render::image::RgbaImage;
 use render::mesh::octree::{MeshSettings, mesh};
-use render::mesh::{Aabb, Field, Mesh};
+use render::mesh::parametric::{SurfaceSettings, UvDomain, triangulate_surface};
+use render::mesh::{Aabb, Field, Mesh, TapeField};
 use render::scene::{Material, Scene};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -281,4 +291,294 @@ fn a_changed_picture_fails_and_writes_actual_and_diff() {
     assert!(err.contains("2.08% of pixels"), "{err}");
     assert!(diff_dir().join("coloured_sphere.diff.png").exists());
     assert!(diff_dir().join("coloured_sphere.actual.png").exists());
+}
+
+/// Width and height of the appearance goldens, larger than the others to show texture.
+const APPEARANCE_SIZE: (u32, u32) = (240, 180);
+
+fn formula(text: &str) -> Formula {
+    Formula::new(text).unwrap()
+}
+
+/// Meshes an fdsl solid over [-1.1, 1.1]^3 at depth 6.
+fn mesh_fdsl(source: &str) -> Mesh {
+    let tape = fdsl::Function::parse(source).unwrap().tape();
+    let m = mesh(
+        &mut TapeField::new(&tape, 0.0),
+        &MeshSettings {
+            bounds: Aabb::new([-1.1; 3], [1.1; 3]),
+            depth: 6,
+        },
+    )
+    .unwrap();
+    assert_eq!((m.open_edges(), m.non_manifold_edges()), (0, 0));
+    m
+}
+
+/// Applies `appearance` at t = 0 and adds the object to `scene`.
+fn add_with_appearance(scene: &mut Scene, mut m: Mesh, appearance: &Appearance, at: Mat4) {
+    let mut compiled = CompiledAppearance::new(appearance).unwrap();
+    compiled.apply(&mut m, 0.0);
+    let material = compiled.material(&m, 0.0, Material::default());
+    scene.add_object(Arc::new(m), at, material);
+}
+
+/// The eye on the (+x, +y, +z) side, where the watermelon's slice is cut away.
+fn camera_into_the_cut() -> Camera {
+    Camera {
+        yaw: 2.4,
+        pitch: 0.62,
+        distance: 3.6,
+        ..Camera::default()
+    }
+}
+
+/// The thesis's watermelon: green rind, a pale band, red flesh, by distance from the centre.
+fn watermelon_colour_map() -> Scene {
+    let m = mesh_fdsl(include_str!("../../tests/data/models/watermelon.fdsl"));
+    let map = ColorMap {
+        keys: vec![
+            (0.0, [0.85, 0.05, 0.10]),
+            (0.78, [0.95, 0.20, 0.25]),
+            (0.86, [0.95, 0.92, 0.70]),
+            (0.93, [0.45, 0.80, 0.30]),
+            (1.0, [0.08, 0.40, 0.10]),
+        ],
+    };
+    let appearance = Appearance {
+        diffuse: Some(ColorDef::Map {
+            formula: formula("sqrt(x^2+y^2+z^2)"),
+            map,
+        }),
+        shininess: Some(formula("0.4")),
+        ..Appearance::default()
+    };
+    let mut scene = Scene {
+        camera: camera_into_the_cut(),
+        ..Scene::default()
+    };
+    add_with_appearance(&mut scene, m, &appearance, Mat4::IDENTITY);
+    scene
+}
+
+/// A torus from `parametric_x/_y/_z` coloured by a parametric RGB function of x, y, z.
+fn parametric_torus() -> Scene {
+    let source = "
+        function parametric_x(u,v,w,t) { return (0.7+0.3*cos(2*pi*v))*cos(2*pi*u); }
+        function parametric_y(u,v,w,t) { return (0.7+0.3*cos(2*pi*v))*sin(2*pi*u); }
+        function parametric_z(u,v,w,t) { return 0.3*sin(2*pi*v); }";
+    let tape = fdsl::Function::parse(source)
+        .unwrap()
+        .tape_for(&["x", "y", "z"])
+        .unwrap();
+    let mut point = fdsl::eval::PointEval::new(&tape);
+    let mut xyz = [0.0f64; 3];
+    let m = triangulate_surface(
+        |[u, v]| {
+            point.eval_all([u.into(), v.into(), 0.0, 0.0], &mut xyz);
+            xyz.map(|c| c as f32)
+        },
+        |_, _| [1.0; 4],
+        &SurfaceSettings {
+            domain: UvDomain {
+                u: (0.0, 1.0),
+                v: (0.0, 1.0),
+            },
+            initial_divisions: 24,
+            tolerance: 0.002,
+            vertices_max: 20_000,
+        },
+    )
+    .unwrap();
+    let appearance = Appearance {
+        diffuse: Some(ColorDef::Rgb(formula(
+            "r = 0.5+0.5*cos(3*atan2(y,x)); g = 0.5+0.5*sin(3*atan2(y,x)); b = 0.5+z/0.6;",
+        ))),
+        ..Appearance::default()
+    };
+    let mut scene = Scene {
+        camera: Camera {
+            yaw: 0.3,
+            pitch: 0.9,
+            distance: 3.2,
+            ..Camera::default()
+        },
+        ..Scene::default()
+    };
+    add_with_appearance(&mut scene, m, &appearance, Mat4::IDENTITY);
+    scene
+}
+
+/// The displacement texture of [`textured_sphere`].
+const BUMPS: &str = "0.06*sin(10*x)*sin(10*y)*sin(10*z)";
+
+/// A ball with a geometric texture: bumps displaced along the normal, coloured by height.
+fn textured_sphere() -> (Scene, Mesh) {
+    let m = mesh_fdsl("0.8-sqrt(x^2+y^2+z^2)");
+    let appearance = Appearance {
+        displacement: Some(formula(BUMPS)),
+        diffuse: Some(ColorDef::Map {
+            // At the displaced points the radius is 0.8 plus the bump's height.
+            formula: formula("sqrt(x^2+y^2+z^2)"),
+            map: ColorMap {
+                keys: vec![(0.74, [0.15, 0.2, 0.6]), (0.86, [0.95, 0.85, 0.4])],
+            },
+        }),
+        ..Appearance::default()
+    };
+    let mut scene = Scene {
+        camera: camera(),
+        ..Scene::default()
+    };
+    let mut displaced = m;
+    let mut compiled = CompiledAppearance::new(&appearance).unwrap();
+    compiled.apply(&mut displaced, 0.0);
+    scene.add_object(
+        Arc::new(displaced.clone()),
+        Mat4::IDENTITY,
+        Material::default(),
+    );
+    (scene, displaced)
+}
+
+/// A glass ball (transparency 0.6 from its appearance) in front of an opaque red box.
+fn glass_ball_before_box() -> Scene {
+    let mut scene = Scene {
+        camera: Camera {
+            yaw: 0.0,
+            pitch: 0.3,
+            distance: 4.0,
+            ..Camera::default()
+        },
+        ..Scene::default()
+    };
+    let opaque = Appearance {
+        diffuse: Some(ColorDef::Constant([0.9, 0.2, 0.1])),
+        ..Appearance::default()
+    };
+    add_with_appearance(
+        &mut scene,
+        mesh_of(&mut Cube(0.5)),
+        &opaque,
+        Mat4::from_translation(Vec3::new(0.3, 0.6, 0.0)),
+    );
+    let glass = Appearance {
+        diffuse: Some(ColorDef::Constant([0.3, 0.6, 1.0])),
+        transparency: Some(formula("0.6")),
+        shininess: Some(formula("0.8")),
+        specular: Some(ColorDef::Constant([0.8, 0.8, 0.8])),
+        ..Appearance::default()
+    };
+    add_with_appearance(
+        &mut scene,
+        mesh_of(&mut Sphere(0.6)),
+        &glass,
+        Mat4::from_translation(Vec3::new(-0.3, -0.6, 0.0)),
+    );
+    scene
+}
+
+fn render_appearance(gpu: &mut Headless, scene: &Scene) -> RgbaImage {
+    gpu.render(scene, APPEARANCE_SIZE.0, APPEARANCE_SIZE.1)
+        .unwrap()
+}
+
+/// Pixels of `image` for which `pred` holds (given RGBA as i32), as a fraction of all pixels.
+fn fraction_where(image: &RgbaImage, pred: impl Fn([i32; 4]) -> bool) -> f64 {
+    let n = image
+        .pixels
+        .chunks_exact(4)
+        .filter(|p| pred([p[0], p[1], p[2], p[3]].map(i32::from)))
+        .count();
+    n as f64 / (image.width * image.height) as f64
+}
+
+#[test]
+fn watermelon_colour_map_matches_golden() {
+    let Some(mut gpu) = headless() else { return };
+    let image = render_appearance(&mut gpu, &watermelon_colour_map());
+    // Red flesh shows in the cut and green rind around it.
+    let red = fraction_where(&image, |p| {
+        p[0] > 120 && p[0] > p[1] + 60 && p[0] > p[2] + 60
+    });
+    let green = fraction_where(&image, |p| {
+        p[1] > 60 && p[1] > p[0] + 20 && p[1] > p[2] + 20
+    });
+    assert!(red > 0.03 && green > 0.1, "red {red}, green {green}");
+    compare("watermelon_colour_map", &image, &gpu.adapter_description()).unwrap();
+}
+
+#[test]
+fn parametric_torus_matches_golden() {
+    let Some(mut gpu) = headless() else { return };
+    let scene = parametric_torus();
+    let image = render_appearance(&mut gpu, &scene);
+    // The hole shows the background; the ring shows several hues.
+    let bg = image.pixel(0, 0).unwrap();
+    let centre = image
+        .pixel(APPEARANCE_SIZE.0 / 2, APPEARANCE_SIZE.1 / 2)
+        .unwrap();
+    assert_eq!(centre, bg, "the torus's hole");
+    let magenta = fraction_where(&image, |p| p[0] > p[1] + 60 && p[2] > p[1] + 60);
+    let cyan = fraction_where(&image, |p| p[1] > p[0] + 60 && p[2] > p[0] + 60);
+    assert!(
+        magenta > 0.01 && cyan > 0.01,
+        "magenta {magenta}, cyan {cyan}"
+    );
+    compare("parametric_torus", &image, &gpu.adapter_description()).unwrap();
+}
+
+#[test]
+fn textured_sphere_matches_golden() {
+    let (scene, displaced) = textured_sphere();
+    // The texture moved the vertices off the radius-0.8 sphere by up to its amplitude.
+    let radii: Vec<f32> = displaced
+        .positions
+        .iter()
+        .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
+        .collect();
+    let (lo, hi) = radii
+        .iter()
+        .fold((f32::INFINITY, 0.0f32), |(l, h), &r| (l.min(r), h.max(r)));
+    assert!(
+        lo < 0.76 && hi > 0.84 && lo > 0.73 && hi < 0.87,
+        "{lo}..{hi}"
+    );
+    assert_eq!(displaced.open_edges(), 0);
+    let Some(mut gpu) = headless() else { return };
+    let image = render_appearance(&mut gpu, &scene);
+    compare("textured_sphere", &image, &gpu.adapter_description()).unwrap();
+}
+
+#[test]
+fn glass_ball_before_box_matches_golden() {
+    let scene = glass_ball_before_box();
+    assert!(scene.objects[1].is_transparent() && !scene.objects[0].is_transparent());
+    let Some(mut gpu) = headless() else { return };
+    let image = render_appearance(&mut gpu, &scene);
+    // Where the ball covers the box, both show: more red than the ball over the background,
+    // more blue than the bare box.
+    let mut alone = scene.clone();
+    alone.objects.truncate(1);
+    let bare = render_appearance(&mut gpu, &alone);
+    let (mut n_blended, mut n_box) = (0, 0);
+    for (p, q) in image
+        .pixels
+        .chunks_exact(4)
+        .zip(bare.pixels.chunks_exact(4))
+    {
+        let (p, q) = (
+            p.iter().map(|&c| i32::from(c)),
+            q.iter().map(|&c| i32::from(c)),
+        );
+        let (p, q): (Vec<i32>, Vec<i32>) = (p.collect(), q.collect());
+        let box_here = q[0] > 100 && q[0] > 2 * q[2];
+        n_box += usize::from(box_here);
+        n_blended += usize::from(box_here && p != q && p[0] > p[1] && p[2] > q[2] + 20);
+    }
+    assert!(
+        n_box > 1000 && n_blended > 200,
+        "box {n_box}, seen through glass {n_blended}"
+    );
+    compare("glass_ball_before_box", &image, &gpu.adapter_description()).unwrap();
 }

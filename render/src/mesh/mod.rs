@@ -174,6 +174,17 @@ impl Mesh {
         self.edge_uses().iter().filter(|(_, n)| *n > 2).count()
     }
 
+    /// Number of directed edges that two or more triangles traverse the same way: zero when
+    /// neighbouring triangles wind consistently (an orientable, consistently wound mesh).
+    pub fn misoriented_edges(&self) -> usize {
+        let mut directed: Vec<(u32, u32)> = self
+            .triangles()
+            .flat_map(|[a, b, c]| [(a, b), (b, c), (c, a)])
+            .collect();
+        directed.sort_unstable();
+        directed.windows(2).filter(|w| w[0] == w[1]).count()
+    }
+
     /// Number of triangles whose three corners are not distinct vertices.
     pub fn degenerate_triangles(&self) -> usize {
         self.triangles()
@@ -206,8 +217,15 @@ impl Mesh {
     ///
     /// Normals are recomputed from the displaced triangles afterwards.
     pub fn displace_along_normals(&mut self, mut height: impl FnMut([f32; 3]) -> f32) {
-        for (p, n) in self.positions.iter_mut().zip(&self.normals) {
-            let h = height(*p);
+        let heights: Vec<f32> = self.positions.iter().map(|&p| height(p)).collect();
+        self.displace_by(&heights);
+    }
+
+    /// Moves vertex i along its normal by `heights[i]` (missing or NaN heights count as 0),
+    /// then recomputes the normals from the displaced triangles.
+    pub fn displace_by(&mut self, heights: &[f32]) {
+        for (i, (p, n)) in self.positions.iter_mut().zip(&self.normals).enumerate() {
+            let h = heights.get(i).copied().unwrap_or(0.0);
             let h = if h.is_finite() { h } else { 0.0 };
             *p = std::array::from_fn(|k| p[k] + h * n[k]);
         }
@@ -307,6 +325,10 @@ mod tests {
         fin.colours.push([1.0; 4]);
         fin.indices.extend([1, 2, 4]);
         assert_eq!(fin.non_manifold_edges(), 1);
+        assert_eq!(tetrahedron().misoriented_edges(), 0);
+        let mut flipped = tetrahedron();
+        flipped.indices.swap(0, 1);
+        assert_eq!(flipped.misoriented_edges(), 3);
     }
 
     #[test]

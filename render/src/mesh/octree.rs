@@ -8,23 +8,41 @@
 //! error function of the edge crossings and their normals: sharp edges and corners are kept.
 //! Each sign-changing grid edge emits a quad joining the vertices of its four cells.
 //!
-//! Guarantees: when the surface lies strictly inside the box, the mesh is watertight, its
-//! triangles wind counter-clockwise seen from outside, and each vertex lies in its cell.
-//! Non-guarantees: triangles may self-intersect near sharp features thinner than a cell;
-//! features smaller than a cell may be missed; cells are not collapsed where the surface is
-//! flat (the resolution near the surface is uniform). Where the surface leaves the box the
-//! mesh is open along the box, which is what stitching a remeshed region needs.
+//! Watertightness rests on one rule: every grid value is computed once, by the block that
+//! owns the point (a block owns the points of its upper faces; the lowest blocks also own the
+//! grid's lower faces), and every cell reads it from there. A pruned block owns a constant
+//! of the sign its interval proved. So two cells sharing a face always see the same corner
+//! values, whatever field (simplified tape) each block was evaluated with, and decide the
+//! face alike. A pruned block whose lower neighbour's values still disagree in sign (interval
+//! arithmetic in f64 against bulk values in f32 near zero) gets cells like any other.
+//! Manifoldness rests on splitting the vertex of a patch that crosses one face twice (see
+//! `octree/topology.rs`): the pieces are joined by gap polygons across the face and a polygon inside
+//! the cell.
+//!
+//! Guarantees: when the surface lies strictly inside the box, the mesh is watertight and
+//! edge-manifold, its triangles wind counter-clockwise seen from outside, and each vertex lies
+//! in its cell. Non-guarantees: vertices may be non-manifold (two sheets may share a vertex
+//! where a thin feature pinches); triangles may self-intersect near sharp features thinner
+//! than a cell; features smaller than a cell may be missed; cells are not collapsed where the
+//! surface is flat (the resolution near the surface is uniform). Where the surface leaves the
+//! box the mesh is open along the box, which is what stitching a remeshed region needs.
+
+mod qef;
+mod topology;
 
 use super::field::Field;
 use super::{Aabb, MESH_VERTICES_MAX, Mesh, normalise_or_up};
+use qef::{Bracket, refine_crossings, solve_qef};
 use std::collections::BTreeMap;
+use topology::{
+    N_FACES, PATCHES_MAX, Patch, cell_patches, corner_offset, edge_across, edge_corners,
+    edge_index, face_segments, inside, quad_cells, quad_runs_to, split_patch,
+};
 
 /// Deepest octree allowed: 2^10 = 1024 cells along each axis.
 pub const OCTREE_DEPTH_MAX: u8 = 10;
 /// Cells along each axis of a leaf block evaluated in one bulk call.
 pub const BLOCK_CELLS: u32 = 8;
-/// Tikhonov weight pulling a vertex towards its crossings' mean, in cell units.
-const QEF_REGULARISATION: f32 = 0.01;
 /// Marker for "no vertex" in cell tables.
 const NONE: u32 = u32::MAX;
 
@@ -60,6 +78,8 @@ pub struct MeshStats {
     pub blocks_evaluated: usize,
     /// Number of times [`Field::simplify`] returned a simplified field.
     pub fields_simplified: usize,
+    /// Surface patches given several vertices to stay manifold.
+    pub patches_split: usize,
 }
 
 /// Meshes the surface f = 0 of `field` inside `settings.bounds`.
@@ -79,14 +99,19 @@ pub fn mesh_with_stats<F: Field>(
 
 /// A mesher that keeps its evaluated blocks, so that only an edit's box is meshed again.
 ///
-/// [`OctreeMesher::remesh`] drops every block whose closed box meets the dirty box and
-/// evaluates those again; all other blocks are kept. A block's vertices depend only on its
-/// own grid values, and quads are emitted from kept and new blocks alike, so the remeshed
-/// region stitches with its surroundings exactly: the result equals meshing the edited
-/// field from scratch.
+/// [`OctreeMesher::remesh`] evaluates again every block whose closed box meets the dirty box,
+/// and recomputes the cells (not the values) of the blocks just above them, which read those
+/// values; all other blocks are kept. The result is watertight and manifold like a full mesh
+/// of the edited field, and equal to it wherever pruning made the same decisions (always,
+/// for fields whose interval bounds do not depend on far-away parts of the field).
 pub struct OctreeMesher {
     grid: Grid,
-    /// Evaluated blocks that the surface crosses, by block coordinates.
+    /// Blocks along each axis.
+    n_blocks: u32,
+    /// Per block (x fastest), the value of all the grid points it owns when it has no record:
+    /// plus or minus [`Grid::rep`], the sign its interval proved or its values showed.
+    reps: Vec<f32>,
+    /// Blocks with a record: those with crossed cells, and evaluated blocks kept by a remesh.
     blocks: BTreeMap<[u32; 3], Block>,
 }
 
@@ -108,8 +133,13 @@ impl OctreeMesher {
             n_cells,
             block: BLOCK_CELLS.min(n_cells),
         };
+        let n_blocks = n_cells / grid.block;
+        // Until a block is visited it counts as outside.
+        let reps = vec![-grid.rep(); (n_blocks * n_blocks * n_blocks) as usize];
         Ok(Self {
             grid,
+            n_blocks,
+            reps,
             blocks: BTreeMap::new(),
         })
     }
@@ -126,18 +156,24 @@ impl OctreeMesher {
         let Some(range) = self.grid.blocks_touching(dirty) else {
             return Ok(stats);
         };
+        let last = self.n_blocks - 1;
+        let wide = BlockRange {
+            lo: range.lo,
+            hi: range.hi.map(|h| (h + 1).min(last)),
+        };
         self.blocks.retain(|k, _| !range.contains(*k));
         let mut visit = Visit {
-            grid: self.grid,
+            mesher: self,
             range,
-            blocks: &mut self.blocks,
+            wide,
             stats: &mut stats,
         };
-        visit.node(field, [0; 3], self.grid.n_cells)?;
+        let n_cells = visit.mesher.grid.n_cells;
+        visit.node(field, [0; 3], n_cells);
         Ok(stats)
     }
 
-    /// Number of kept blocks, all of which the surface crosses.
+    /// Number of kept blocks with a record (crossed by the surface, or kept by a remesh).
     pub fn n_blocks(&self) -> usize {
         self.blocks.len()
     }
@@ -157,10 +193,22 @@ impl OctreeMesher {
             return Err(OctreeMeshError::TooManyVertices);
         }
         mesh.colours = vec![[1.0; 4]; mesh.positions.len()];
-        for block in self.blocks.values() {
-            self.emit_quads(block, &offsets, &mut mesh);
+        for (key, block) in &self.blocks {
+            let offset = offsets.get(key).copied().unwrap_or(0);
+            self.emit_quads(block, offset, &offsets, &mut mesh);
+            self.emit_gaps(block, offset, &offsets, &mut mesh);
+            for central in &block.centrals {
+                for k in 1..central.len().saturating_sub(1) {
+                    mesh.indices
+                        .extend([central[0], central[k], central[k + 1]].map(|v| v + offset));
+                }
+            }
         }
         Ok(mesh)
+    }
+
+    fn block_idx(&self, k: [u32; 3]) -> usize {
+        (k[0] + self.n_blocks * (k[1] + self.n_blocks * k[2])) as usize
     }
 }
 
@@ -191,6 +239,33 @@ impl Grid {
         std::array::from_fn(|a| self.lo[a] + i[a] as f32 * self.step[a])
     }
 
+    /// The mean cell size.
+    fn h(&self) -> f32 {
+        (self.step[0] + self.step[1] + self.step[2]) / 3.0
+    }
+
+    /// The magnitude that stands for the values of a block without a record: a cell size,
+    /// about what a distance field has one cell away from its surface.
+    fn rep(&self) -> f32 {
+        self.h()
+    }
+
+    /// Grid points along an axis of a block with a (bc + 1)-point lattice.
+    fn lattice(&self) -> u32 {
+        self.block + 1
+    }
+
+    /// Index of lattice point `l` within a block's values.
+    fn at(&self, l: [u32; 3]) -> usize {
+        let np = self.lattice();
+        (l[0] + np * (l[1] + np * l[2])) as usize
+    }
+
+    /// The first lattice index a block owns along each axis: 1, or 0 at the grid's low faces.
+    fn owned_from(&self, key: [u32; 3]) -> [u32; 3] {
+        key.map(|k| u32::from(k > 0))
+    }
+
     /// The blocks whose closed boxes meet `b`, widened by a cell against rounding.
     fn blocks_touching(&self, b: Aabb) -> Option<BlockRange> {
         let n = i64::from(self.n_cells);
@@ -216,254 +291,62 @@ impl Grid {
     }
 }
 
-/// One evaluated leaf block that the surface crosses.
+/// One block with a record: its lattice values and the vertices of its crossed cells.
 struct Block {
     origin: [u32; 3],
-    /// (block + 1)^3 grid values, x fastest.
+    /// (block + 1)^3 lattice values, x fastest: the block's own where it owns the point,
+    /// copied from the owning neighbour on its lower faces.
     values: Vec<f32>,
     /// Per cell (x fastest), an index into `cells` or `NONE`.
     cell_entry: Vec<u32>,
     /// Per crossed cell, the block-local vertex of each of its 12 edges (`NONE` if uncrossed).
     cells: Vec<[u32; 12]>,
+    /// Per crossed cell, its position in the block.
+    cell_local: Vec<[u32; 3]>,
+    /// Crossed cells (indices into `cells`) with a patch split into several vertices.
+    split_cells: Vec<u32>,
+    /// Polygons (block-local vertices, wound outwards) joining the pieces of a patch split
+    /// into three or more vertices.
+    centrals: Vec<Vec<u32>>,
     positions: Vec<[f32; 3]>,
     normals: Vec<[f32; 3]>,
 }
 
-/// One octree traversal restricted to the blocks of `range`.
+/// Where the values a block owns come from.
+enum Owned<'a> {
+    /// A record's lattice values.
+    Values(&'a [f32]),
+    /// One value for every point.
+    Rep(f32),
+}
+
+/// One octree traversal: blocks in `range` are evaluated again; blocks in `wide` (the range
+/// and the blocks just above it, which read its values) get their cells recomputed.
 struct Visit<'a> {
-    grid: Grid,
+    mesher: &'a mut OctreeMesher,
     range: BlockRange,
-    blocks: &'a mut BTreeMap<[u32; 3], Block>,
+    wide: BlockRange,
     stats: &'a mut MeshStats,
-}
-
-/// Corner `k` of a cell has offset bit a of k along axis a.
-fn corner_offset(k: usize) -> [u32; 3] {
-    [(k & 1) as u32, ((k >> 1) & 1) as u32, ((k >> 2) & 1) as u32]
-}
-
-/// Cell edge along axis `d` whose low end has the offset `low` within the cell.
-fn edge_index(d: usize, low: [u32; 3]) -> usize {
-    d * 4 + low[(d + 1) % 3] as usize + 2 * low[(d + 2) % 3] as usize
-}
-
-/// The two corners (low, high) of cell edge `e`.
-fn edge_corners(e: usize) -> (usize, usize) {
-    let d = e / 4;
-    let mut low = [0u32; 3];
-    low[(d + 1) % 3] = (e & 1) as u32;
-    low[(d + 2) % 3] = ((e >> 1) & 1) as u32;
-    let k = (low[0] + 2 * low[1] + 4 * low[2]) as usize;
-    (k, k | (1 << d))
-}
-
-fn inside(v: f32) -> bool {
-    v >= 0.0
-}
-
-/// Groups the crossed edges of a cell into surface patches: returns a patch id per edge.
-fn cell_patches(v: &[f32; 8]) -> ([u8; 12], u8) {
-    let mut parent: [u8; 12] = std::array::from_fn(|i| i as u8);
-    fn find(parent: &mut [u8; 12], mut i: u8) -> u8 {
-        while parent[i as usize] != i {
-            i = parent[i as usize];
-        }
-        i
-    }
-    let crossed: [bool; 12] = std::array::from_fn(|e| {
-        let (a, b) = edge_corners(e);
-        inside(v[a]) != inside(v[b])
-    });
-    for f in 0..3 {
-        for s in 0..2u32 {
-            let (ua, va) = ((f + 1) % 3, (f + 2) % 3);
-            // Face corners in cyclic order q00, q10, q11, q01, as cell-relative offsets.
-            let q: [[u32; 3]; 4] = [[0, 0], [1, 0], [1, 1], [0, 1]].map(|[u, w]| {
-                let mut o = [0u32; 3];
-                o[f] = s;
-                o[ua] = u;
-                o[va] = w;
-                o
-            });
-            let val = q.map(|o| v[(o[0] + 2 * o[1] + 4 * o[2]) as usize]);
-            // Edge i joins corner i and corner i+1.
-            let edges: [usize; 4] = std::array::from_fn(|i| {
-                let (p, r) = (q[i], q[(i + 1) % 4]);
-                let d = if p[ua] != r[ua] { ua } else { va };
-                let low: [u32; 3] = std::array::from_fn(|a| p[a].min(r[a]));
-                edge_index(d, low)
-            });
-            let on: Vec<usize> = edges.iter().copied().filter(|&e| crossed[e]).collect();
-            let pairs: Vec<(usize, usize)> = match on.len() {
-                2 => vec![(on[0], on[1])],
-                4 => {
-                    let denom = val[0] + val[2] - val[1] - val[3];
-                    let saddle = if denom != 0.0 {
-                        (val[0] * val[2] - val[1] * val[3]) / denom
-                    } else {
-                        val[0]
-                    };
-                    let inside_connected = inside(saddle);
-                    // Cut off corners 0 and 2, or corners 1 and 3.
-                    let cut_even = inside(val[0]) != inside_connected;
-                    if cut_even {
-                        vec![(edges[3], edges[0]), (edges[1], edges[2])]
-                    } else {
-                        vec![(edges[0], edges[1]), (edges[2], edges[3])]
-                    }
-                }
-                _ => Vec::new(),
-            };
-            for (a, b) in pairs {
-                let (ra, rb) = (find(&mut parent, a as u8), find(&mut parent, b as u8));
-                parent[ra as usize] = rb;
-            }
-        }
-    }
-    let mut patch = [u8::MAX; 12];
-    let mut root_patch = [u8::MAX; 12];
-    let mut n_patches = 0u8;
-    for e in 0..12 {
-        if crossed[e] {
-            let r = find(&mut parent, e as u8) as usize;
-            if root_patch[r] == u8::MAX {
-                root_patch[r] = n_patches;
-                n_patches += 1;
-            }
-            patch[e] = root_patch[r];
-        }
-    }
-    (patch, n_patches)
-}
-
-/// Bisection steps that locate each edge crossing before the final linear interpolation.
-///
-/// Linear interpolation alone misplaces crossings where f has a kink along the edge (near
-/// CSG edges), which would round off sharp features; 6 steps bound the error by 1/64 cell.
-const CROSSING_BISECTIONS: usize = 6;
-
-/// A sign change of f on the segment `pa..pb`, bracketed in `t.0..t.1` with values `f`.
-struct Bracket {
-    pa: [f32; 3],
-    pb: [f32; 3],
-    t: (f32, f32),
-    f: (f32, f32),
-}
-
-impl Bracket {
-    fn at(&self, t: f32) -> [f32; 3] {
-        std::array::from_fn(|a| self.pa[a] + t * (self.pb[a] - self.pa[a]))
-    }
-
-    /// The crossing by linear interpolation inside the bracket.
-    fn crossing(&self) -> [f32; 3] {
-        let s = self.f.0 / (self.f.0 - self.f.1);
-        let s = if s.is_finite() {
-            s.clamp(0.0, 1.0)
-        } else {
-            0.5
-        };
-        self.at(self.t.0 + s * (self.t.1 - self.t.0))
-    }
-}
-
-/// Narrows every bracket by bisection, evaluating all midpoints of a round in one bulk call.
-fn refine_crossings<F: Field>(field: &mut F, brackets: &mut [Bracket]) {
-    let n = brackets.len();
-    let (mut xs, mut ys, mut zs) = (vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]);
-    let mut out = vec![0.0f32; n];
-    for _ in 0..CROSSING_BISECTIONS {
-        for (i, b) in brackets.iter().enumerate() {
-            let p = b.at(0.5 * (b.t.0 + b.t.1));
-            (xs[i], ys[i], zs[i]) = (p[0], p[1], p[2]);
-        }
-        field.values(&xs, &ys, &zs, &mut out);
-        for (b, &fm) in brackets.iter_mut().zip(&out) {
-            let tm = 0.5 * (b.t.0 + b.t.1);
-            if inside(fm) == inside(b.f.0) {
-                (b.t.0, b.f.0) = (tm, fm);
-            } else {
-                (b.t.1, b.f.1) = (tm, fm);
-            }
-        }
-    }
-}
-
-/// Minimises the sum of squared distances to the planes (p_i, n_i), regularised towards the
-/// mean of the p_i, and clamps the result into the cell `lo..=hi`.
-fn solve_qef(
-    points: &[[f32; 3]],
-    normals: &[[f32; 3]],
-    lo: [f32; 3],
-    hi: [f32; 3],
-    h: f32,
-) -> [f32; 3] {
-    let n_points = points.len().max(1) as f32;
-    let c: [f32; 3] = std::array::from_fn(|a| points.iter().map(|p| p[a]).sum::<f32>() / n_points);
-    let mut ata = [[0.0f32; 3]; 3];
-    let mut atb = [0.0f32; 3];
-    for (p, g) in points.iter().zip(normals) {
-        let len = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
-        if !(len > f32::MIN_POSITIVE && len.is_finite()) {
-            continue;
-        }
-        let n = g.map(|x| x / len);
-        let b = (0..3).map(|a| n[a] * (p[a] - c[a])).sum::<f32>() / h;
-        for r in 0..3 {
-            for k in 0..3 {
-                ata[r][k] += n[r] * n[k];
-            }
-            atb[r] += n[r] * b;
-        }
-    }
-    for (r, row) in ata.iter_mut().enumerate() {
-        row[r] += QEF_REGULARISATION;
-    }
-    let y = solve3(ata, atb).unwrap_or([0.0; 3]);
-    std::array::from_fn(|a| (c[a] + h * y[a]).clamp(lo[a], hi[a]))
-}
-
-/// Solves the 3x3 system m x = b by Cramer's rule.
-fn solve3(m: [[f32; 3]; 3], b: [f32; 3]) -> Option<[f32; 3]> {
-    let det = |m: [[f32; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let d = det(m);
-    if !(d.abs() > f32::MIN_POSITIVE && d.is_finite()) {
-        return None;
-    }
-    let x: [f32; 3] = std::array::from_fn(|col| {
-        let mut mc = m;
-        for (r, row) in mc.iter_mut().enumerate() {
-            row[col] = b[r];
-        }
-        det(mc) / d
-    });
-    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 impl Visit<'_> {
     /// Visits the octree node of `size` cells at `origin`, pruning or evaluating it.
-    fn node<F: Field>(
-        &mut self,
-        field: &mut F,
-        origin: [u32; 3],
-        size: u32,
-    ) -> Result<(), OctreeMeshError> {
-        let bc = self.grid.block;
+    fn node<F: Field>(&mut self, field: &mut F, origin: [u32; 3], size: u32) {
+        let grid = self.mesher.grid;
+        let bc = grid.block;
         let first = origin.map(|o| o / bc);
         let last = origin.map(|o| (o + size) / bc - 1);
-        if (0..3).any(|a| last[a] < self.range.lo[a] || first[a] > self.range.hi[a]) {
-            return Ok(());
+        if (0..3).any(|a| last[a] < self.wide.lo[a] || first[a] > self.wide.hi[a]) {
+            return;
         }
-        let lo = self.grid.point(origin);
-        let hi = self.grid.point(origin.map(|o| o + size));
+        let lo = grid.point(origin);
+        let hi = grid.point(origin.map(|o| o + size));
         let (f_lo, f_hi) = field.interval(lo, hi);
         if f_lo > 0.0 || f_hi < 0.0 {
             self.stats.nodes_pruned += 1;
-            return Ok(());
+            let rep = if f_lo > 0.0 { grid.rep() } else { -grid.rep() };
+            self.prune(field, first, last, rep);
+            return;
         }
         let mut simplified = field.simplify(lo, hi);
         let field: &mut F = match simplified.as_mut() {
@@ -474,153 +357,348 @@ impl Visit<'_> {
             None => field,
         };
         if size <= bc {
-            self.stats.blocks_evaluated += 1;
-            if let Some(block) = evaluate_block(&self.grid, field, origin) {
-                self.blocks.insert(first, block);
-            }
-            return Ok(());
+            self.leaf(field, first);
+            return;
         }
         let half = size / 2;
         for k in 0..8 {
             let child = std::array::from_fn(|a| origin[a] + corner_offset(k)[a] * half);
-            self.node(field, child, half)?;
+            self.node(field, child, half);
         }
-        Ok(())
     }
-}
 
-/// A crossed cell of a block and where its crossings start in the block's crossing list.
-struct Crossed {
-    cell_local: [u32; 3],
-    patch: [u8; 12],
-    n_patches: u8,
-    first_crossing: usize,
-}
-
-/// Evaluates a leaf block's grid and places the vertices of its crossed cells; `None` when
-/// the surface does not cross it.
-fn evaluate_block<F: Field>(grid: &Grid, field: &mut F, origin: [u32; 3]) -> Option<Block> {
-    let bc = grid.block;
-    let np = bc + 1;
-    let n_points = (np * np * np) as usize;
-    let (mut xs, mut ys, mut zs) = (
-        Vec::with_capacity(n_points),
-        Vec::with_capacity(n_points),
-        Vec::with_capacity(n_points),
-    );
-    for z in 0..np {
-        for y in 0..np {
-            for x in 0..np {
-                let p = grid.point([origin[0] + x, origin[1] + y, origin[2] + z]);
-                xs.push(p[0]);
-                ys.push(p[1]);
-                zs.push(p[2]);
+    /// Records a pruned node's blocks `first..=last`, then gives cells to those of its blocks
+    /// that a neighbour's disagreeing values or a kept record may have left crossed.
+    fn prune<F: Field>(&mut self, field: &mut F, first: [u32; 3], last: [u32; 3], rep: f32) {
+        let lo: [u32; 3] = std::array::from_fn(|a| first[a].max(self.wide.lo[a]));
+        let hi: [u32; 3] = std::array::from_fn(|a| last[a].min(self.wide.hi[a]));
+        let keys = || {
+            (lo[2]..=hi[2]).flat_map(move |z| {
+                (lo[1]..=hi[1]).flat_map(move |y| (lo[0]..=hi[0]).map(move |x| [x, y, z]))
+            })
+        };
+        for k in keys() {
+            if self.range.contains(k) {
+                let idx = self.mesher.block_idx(k);
+                self.mesher.reps[idx] = rep;
+            }
+        }
+        for k in keys() {
+            let on_lower_face = (0..3).any(|a| k[a] == first[a] && k[a] > 0);
+            if on_lower_face || !self.range.contains(k) {
+                self.finish(field, k, None);
             }
         }
     }
-    let mut values = vec![0.0f32; n_points];
-    field.values(&xs, &ys, &zs, &mut values);
-    let at = |l: [u32; 3]| (l[0] + np * (l[1] + np * l[2])) as usize;
 
-    // Crossings of every crossed cell edge, refined and given gradients in bulk.
+    /// Evaluates (inside `range`) or revisits (in `wide` only) the leaf block `key`.
+    fn leaf<F: Field>(&mut self, field: &mut F, key: [u32; 3]) {
+        if !self.range.contains(key) {
+            self.finish(field, key, None);
+            return;
+        }
+        self.stats.blocks_evaluated += 1;
+        let grid = self.mesher.grid;
+        let np = grid.lattice();
+        let from = grid.owned_from(key);
+        let origin = key.map(|k| k * grid.block);
+        let n_points = (0..3).map(|a| (np - from[a]) as usize).product::<usize>();
+        let (mut xs, mut ys, mut zs) = (
+            Vec::with_capacity(n_points),
+            Vec::with_capacity(n_points),
+            Vec::with_capacity(n_points),
+        );
+        for z in from[2]..np {
+            for y in from[1]..np {
+                for x in from[0]..np {
+                    let p = grid.point([origin[0] + x, origin[1] + y, origin[2] + z]);
+                    xs.push(p[0]);
+                    ys.push(p[1]);
+                    zs.push(p[2]);
+                }
+            }
+        }
+        let mut owned = vec![0.0f32; n_points];
+        field.values(&xs, &ys, &zs, &mut owned);
+        let mut values = vec![0.0f32; (np * np * np) as usize];
+        let mut next = owned.iter();
+        for z in from[2]..np {
+            for y in from[1]..np {
+                for x in from[0]..np {
+                    values[grid.at([x, y, z])] = next.next().copied().unwrap_or(f32::NAN);
+                }
+            }
+        }
+        self.finish(field, key, Some(values));
+    }
+
+    /// The values block `key` owns: its record's, or its representative.
+    fn owned(&self, key: [u32; 3]) -> Owned<'_> {
+        match self.mesher.blocks.get(&key) {
+            Some(b) => Owned::Values(&b.values),
+            None => Owned::Rep(self.mesher.reps[self.mesher.block_idx(key)]),
+        }
+    }
+
+    /// Completes block `key`'s lattice (its own values `fresh`, else those it owns already,
+    /// plus its lower faces from their owners), then builds its cells or drops its record.
+    fn finish<F: Field>(&mut self, field: &mut F, key: [u32; 3], fresh: Option<Vec<f32>>) {
+        let grid = self.mesher.grid;
+        let (bc, np) = (grid.block, grid.lattice());
+        let from = grid.owned_from(key);
+        let kept = fresh.is_none() && self.mesher.blocks.contains_key(&key);
+        let mut values = match fresh {
+            Some(v) => v,
+            None => {
+                let mut v = vec![0.0f32; (np * np * np) as usize];
+                self.copy_owned(key, from, &mut v);
+                v
+            }
+        };
+        for mask in 1..8usize {
+            let axes: [bool; 3] = std::array::from_fn(|a| mask >> a & 1 == 1);
+            if (0..3).any(|a| axes[a] && key[a] == 0) {
+                continue;
+            }
+            let owner: [u32; 3] = std::array::from_fn(|a| key[a] - u32::from(axes[a]));
+            let lo: [u32; 3] = std::array::from_fn(|a| if axes[a] { 0 } else { from[a] });
+            let shift: [u32; 3] = std::array::from_fn(|a| if axes[a] { bc } else { 0 });
+            // Region: lattice index 0 along the mask's axes, the owned range along the others.
+            let hi: [u32; 3] = std::array::from_fn(|a| if axes[a] { 0 } else { bc });
+            let source = self.owned(owner);
+            for z in lo[2]..=hi[2] {
+                for y in lo[1]..=hi[1] {
+                    for x in lo[0]..=hi[0] {
+                        let l = [x, y, z];
+                        values[grid.at(l)] = match source {
+                            Owned::Values(v) => {
+                                v[grid.at(std::array::from_fn(|a| l[a] + shift[a]))]
+                            }
+                            Owned::Rep(r) => r,
+                        };
+                    }
+                }
+            }
+        }
+        let origin = key.map(|k| k * bc);
+        let block = build_block(&grid, field, origin, values, self.stats);
+        let idx = self.mesher.block_idx(key);
+        match block {
+            Ok(block) => {
+                self.mesher.blocks.insert(key, block);
+            }
+            // A kept record keeps its values: blocks above it read them.
+            Err(values) if kept => {
+                let block = Block::without_cells(origin, values);
+                self.mesher.blocks.insert(key, block);
+            }
+            Err(values) => {
+                self.mesher.blocks.remove(&key);
+                let sign = if inside(values[0]) { 1.0 } else { -1.0 };
+                self.mesher.reps[idx] = sign * grid.rep();
+            }
+        }
+    }
+
+    /// Copies the values block `key` owns (lattice indices `from..=block`) into `out`.
+    fn copy_owned(&self, key: [u32; 3], from: [u32; 3], out: &mut [f32]) {
+        let grid = self.mesher.grid;
+        let bc = grid.block;
+        let source = self.owned(key);
+        for z in from[2]..=bc {
+            for y in from[1]..=bc {
+                for x in from[0]..=bc {
+                    let i = grid.at([x, y, z]);
+                    out[i] = match source {
+                        Owned::Values(v) => v[i],
+                        Owned::Rep(r) => r,
+                    };
+                }
+            }
+        }
+    }
+}
+
+/// A crossed cell of a block: its patches, and where the indices of its crossings start in
+/// the block's list of crossing references (patch by patch, in polygon order).
+struct Crossed {
+    cell_local: [u32; 3],
+    corner_values: [f32; 8],
+    patches: [Patch; PATCHES_MAX],
+    n_patches: usize,
+    first_ref: usize,
+}
+
+impl Block {
+    fn without_cells(origin: [u32; 3], values: Vec<f32>) -> Block {
+        Block {
+            origin,
+            values,
+            cell_entry: Vec::new(),
+            cells: Vec::new(),
+            cell_local: Vec::new(),
+            split_cells: Vec::new(),
+            centrals: Vec::new(),
+            positions: Vec::new(),
+            normals: Vec::new(),
+        }
+    }
+
+    /// The record's entry for block-local cell `l`, if crossed.
+    fn cell(&self, bc: u32, l: [u32; 3]) -> Option<&[u32; 12]> {
+        let entry = *self
+            .cell_entry
+            .get((l[0] + bc * (l[1] + bc * l[2])) as usize)?;
+        self.cells.get(entry as usize)
+    }
+}
+
+/// Finds the crossed cells of a block's complete lattice and places their vertices; gives
+/// the values back when no cell is crossed.
+fn build_block<F: Field>(
+    grid: &Grid,
+    field: &mut F,
+    origin: [u32; 3],
+    values: Vec<f32>,
+    stats: &mut MeshStats,
+) -> Result<Block, Vec<f32>> {
+    let bc = grid.block;
     let mut crossed_cells = Vec::new();
+    // One bracket per crossed grid edge, shared by the up to four cells around it.
     let mut brackets: Vec<Bracket> = Vec::new();
+    let mut bracket_of_edge = vec![NONE; 3 * values.len()];
+    let mut refs: Vec<u32> = Vec::new();
     for z in 0..bc {
         for y in 0..bc {
             for x in 0..bc {
                 let l = [x, y, z];
                 let v: [f32; 8] = std::array::from_fn(|k| {
-                    values[at(std::array::from_fn(|a| l[a] + corner_offset(k)[a]))]
+                    values[grid.at(std::array::from_fn(|a| l[a] + corner_offset(k)[a]))]
                 });
                 let n_in = v.iter().filter(|&&f| inside(f)).count();
                 if n_in == 0 || n_in == 8 {
                     continue;
                 }
-                let (patch, n_patches) = cell_patches(&v);
-                let first_crossing = brackets.len();
+                let (patches, n_patches) = cell_patches(&v);
+                let first_ref = refs.len();
                 let cell: [u32; 3] = std::array::from_fn(|a| origin[a] + l[a]);
-                for (e, _) in patch.iter().enumerate().filter(|(_, p)| **p != u8::MAX) {
-                    let (ka, kb) = edge_corners(e);
-                    let corner = |k: usize| {
-                        grid.point(std::array::from_fn(|a| cell[a] + corner_offset(k)[a]))
-                    };
-                    let (pa, pb) = (corner(ka), corner(kb));
-                    brackets.push(Bracket {
-                        pa,
-                        pb,
-                        t: (0.0, 1.0),
-                        f: (v[ka], v[kb]),
-                    });
+                let corner =
+                    |k: usize| grid.point(std::array::from_fn(|a| cell[a] + corner_offset(k)[a]));
+                for p in &patches[..n_patches] {
+                    for &e in &p.edges[..p.len as usize] {
+                        let (ka, kb) = edge_corners(e as usize);
+                        let edge_key = 3 * grid
+                            .at(std::array::from_fn(|a| l[a] + corner_offset(ka)[a]))
+                            + (e as usize) / 4;
+                        if bracket_of_edge[edge_key] == NONE {
+                            bracket_of_edge[edge_key] = brackets.len() as u32;
+                            brackets.push(Bracket {
+                                pa: corner(ka),
+                                pb: corner(kb),
+                                t: (0.0, 1.0),
+                                f: (v[ka], v[kb]),
+                            });
+                        }
+                        refs.push(bracket_of_edge[edge_key]);
+                    }
                 }
                 crossed_cells.push(Crossed {
                     cell_local: l,
-                    patch,
+                    corner_values: v,
+                    patches,
                     n_patches,
-                    first_crossing,
+                    first_ref,
                 });
             }
         }
     }
     if crossed_cells.is_empty() {
-        return None;
+        return Err(values);
     }
     refine_crossings(field, &mut brackets);
     let crossings: Vec<[f32; 3]> = brackets.iter().map(Bracket::crossing).collect();
-    let grads = gradients_at(field, &crossings);
+    let mut grads = vec![[0.0f32; 3]; crossings.len()];
+    gradients_at(field, &crossings, &mut grads);
 
-    let h = (grid.step[0] + grid.step[1] + grid.step[2]) / 3.0;
-    let mut cell_entry = vec![NONE; (bc * bc * bc) as usize];
-    let mut cells = Vec::with_capacity(crossed_cells.len());
-    let mut positions = Vec::new();
+    let h = grid.h();
+    let mut block = Block::without_cells(origin, values);
+    block.cell_entry = vec![NONE; (bc * bc * bc) as usize];
+    block.cells.reserve(crossed_cells.len());
     for c in &crossed_cells {
         let cell: [u32; 3] = std::array::from_fn(|a| origin[a] + c.cell_local[a]);
         let (lo, hi) = (grid.point(cell), grid.point(cell.map(|i| i + 1)));
         let mut entry = [NONE; 12];
-        // Crossings are stored in edge order for the crossed edges only.
-        let crossing_of: Vec<(u8, usize)> = c
-            .patch
-            .iter()
-            .filter(|&&p| p != u8::MAX)
-            .enumerate()
-            .map(|(i, &p)| (p, c.first_crossing + i))
-            .collect();
-        for patch in 0..c.n_patches {
-            let mine = crossing_of.iter().filter(|(p, _)| *p == patch);
-            let pts: Vec<[f32; 3]> = mine.clone().map(|&(_, i)| crossings[i]).collect();
-            let nrm: Vec<[f32; 3]> = mine.map(|&(_, i)| grads[i]).collect();
-            let vertex = positions.len() as u32;
-            positions.push(solve_qef(&pts, &nrm, lo, hi, h));
-            for (slot, _) in entry.iter_mut().zip(c.patch).filter(|(_, p)| *p == patch) {
-                *slot = vertex;
+        let mut split = false;
+        let mut crossing = c.first_ref;
+        let (mut pts, mut nrm) = (Vec::with_capacity(12), Vec::with_capacity(12));
+        for p in &c.patches[..c.n_patches] {
+            let m = p.len as usize;
+            let (groups, n_groups) = split_patch(p);
+            let first_vertex = block.positions.len() as u32;
+            for g in 0..n_groups as u8 {
+                pts.clear();
+                nrm.clear();
+                for k in (0..m).filter(|&k| groups[k] == g) {
+                    let i = refs[crossing + k] as usize;
+                    pts.push(crossings[i]);
+                    nrm.push(grads[i]);
+                }
+                block.positions.push(solve_qef(&pts, &nrm, lo, hi, h));
             }
+            for k in 0..m {
+                entry[p.edges[k] as usize] = first_vertex + u32::from(groups[k]);
+            }
+            if n_groups > 1 {
+                split = true;
+                stats.patches_split += 1;
+            }
+            if n_groups > 2 {
+                block
+                    .centrals
+                    .push(central_polygon(p, c.corner_values, first_vertex, n_groups));
+            }
+            crossing += m;
         }
         let l = c.cell_local;
-        cell_entry[(l[0] + bc * (l[1] + bc * l[2])) as usize] = cells.len() as u32;
-        cells.push(entry);
+        block.cell_entry[(l[0] + bc * (l[1] + bc * l[2])) as usize] = block.cells.len() as u32;
+        if split {
+            block.split_cells.push(block.cells.len() as u32);
+        }
+        block.cells.push(entry);
+        block.cell_local.push(l);
     }
     // Outward normals are minus the gradient.
-    let normals = gradients_at(field, &positions)
+    let mut grads = vec![[0.0f32; 3]; block.positions.len()];
+    gradients_at(field, &block.positions, &mut grads);
+    block.normals = grads
         .into_iter()
         .map(|g| normalise_or_up(g.map(|c| -c)))
         .collect();
-    Some(Block {
-        origin,
-        values,
-        cell_entry,
-        cells,
-        positions,
-        normals,
-    })
+    Ok(block)
 }
 
-/// The gradients of `field` at `points`, in one bulk call.
-fn gradients_at<F: Field>(field: &mut F, points: &[[f32; 3]]) -> Vec<[f32; 3]> {
+/// The polygon joining the vertices of a patch split into one vertex per polygon corner
+/// (`n_groups` > 2, group k at corner k), wound like the quads around it.
+fn central_polygon(p: &Patch, v: [f32; 8], first_vertex: u32, n_groups: usize) -> Vec<u32> {
+    // The gap polygon at the side between corners 0 and 1 runs from group 0 to group 1 when
+    // the quad of corner 0 runs into the neighbour across that side; the central polygon
+    // must then run the other way.
+    let e = p.edges[0] as usize;
+    let low_inside = inside(v[edge_corners(e).0]);
+    let forward = !quad_runs_to(e, p.side_faces[0] as usize, low_inside);
+    let mut polygon: Vec<u32> = (0..n_groups as u32).map(|g| first_vertex + g).collect();
+    if !forward {
+        polygon.reverse();
+    }
+    polygon
+}
+
+/// Writes the gradients of `field` at `points` to `out`, in one bulk call.
+fn gradients_at<F: Field>(field: &mut F, points: &[[f32; 3]], out: &mut [[f32; 3]]) {
     let xs: Vec<f32> = points.iter().map(|p| p[0]).collect();
     let ys: Vec<f32> = points.iter().map(|p| p[1]).collect();
     let zs: Vec<f32> = points.iter().map(|p| p[2]).collect();
-    let mut g = vec![[0.0f32; 3]; points.len()];
-    field.gradients(&xs, &ys, &zs, &mut g);
-    g
+    field.gradients(&xs, &ys, &zs, out);
 }
 
 impl OctreeMesher {
@@ -633,27 +711,32 @@ impl OctreeMesher {
     ) -> Option<u32> {
         let bc = self.grid.block;
         let key = cell.map(|c| c / bc);
-        let block = self.blocks.get(&key)?;
-        let l = cell.map(|c| c % bc);
-        let entry = block.cell_entry[(l[0] + bc * (l[1] + bc * l[2])) as usize];
-        let v = block.cells.get(entry as usize)?[e];
+        let v = self.blocks.get(&key)?.cell(bc, cell.map(|c| c % bc))?[e];
         (v != NONE)
             .then(|| offsets.get(&key).map(|o| o + v))
             .flatten()
     }
 
     /// Emits two triangles for every crossed grid edge that `block` owns.
-    fn emit_quads(&self, block: &Block, offsets: &BTreeMap<[u32; 3], u32>, mesh: &mut Mesh) {
-        let bc = self.grid.block;
-        let n = self.grid.n_cells;
-        let np = bc + 1;
-        let at = |l: [u32; 3]| (l[0] + np * (l[1] + np * l[2])) as usize;
+    fn emit_quads(
+        &self,
+        block: &Block,
+        offset: u32,
+        offsets: &BTreeMap<[u32; 3], u32>,
+        mesh: &mut Mesh,
+    ) {
+        let grid = &self.grid;
+        let bc = grid.block;
+        let n = grid.n_cells;
+        if block.cells.is_empty() {
+            return;
+        }
         for z in 0..bc {
             for y in 0..bc {
                 for x in 0..bc {
                     let l = [x, y, z];
                     let p: [u32; 3] = std::array::from_fn(|a| block.origin[a] + l[a]);
-                    let f0 = block.values[at(l)];
+                    let f0 = block.values[grid.at(l)];
                     for d in 0..3 {
                         let (a1, a2) = ((d + 1) % 3, (d + 2) % 3);
                         if p[a1] == 0 || p[a2] == 0 || p[a1] >= n || p[a2] >= n {
@@ -661,33 +744,110 @@ impl OctreeMesher {
                         }
                         let mut l1 = l;
                         l1[d] += 1;
-                        if inside(f0) == inside(block.values[at(l1)]) {
+                        if inside(f0) == inside(block.values[grid.at(l1)]) {
                             continue;
                         }
-                        // The four cells around the edge, counter-clockwise about +d.
-                        let quad = [(1, 1), (0, 1), (0, 0), (1, 0)].map(|(o1, o2)| {
-                            let mut cell = p;
-                            cell[a1] -= o1;
-                            cell[a2] -= o2;
+                        // The four cells around the edge, wound so the normal points out.
+                        let quad = quad_cells(inside(f0)).map(|(o1, o2)| {
                             let mut low = [0u32; 3];
                             low[a1] = o1;
                             low[a2] = o2;
-                            self.cell_vertex(offsets, cell, edge_index(d, low))
+                            let e = edge_index(d, low);
+                            if l[a1] >= o1 && l[a2] >= o2 {
+                                // The cell lies in this block: no map lookup.
+                                let mut lc = l;
+                                lc[a1] -= o1;
+                                lc[a2] -= o2;
+                                let v = block.cell(bc, lc)?[e];
+                                return (v != NONE).then_some(offset + v);
+                            }
+                            let mut cell = p;
+                            cell[a1] -= o1;
+                            cell[a2] -= o2;
+                            self.cell_vertex(offsets, cell, e)
                         });
                         let [Some(q0), Some(q1), Some(q2), Some(q3)] = quad else {
                             continue;
                         };
-                        // Inside at the low end means the outward normal is +d.
-                        let q = if inside(f0) {
-                            [q0, q1, q2, q3]
-                        } else {
-                            [q3, q2, q1, q0]
-                        };
-                        mesh.indices.extend(split_quad(&mesh.positions, q));
+                        mesh.indices
+                            .extend(split_quad(&mesh.positions, [q0, q1, q2, q3]));
                     }
                 }
             }
         }
+    }
+
+    /// Emits the gap polygons across the faces of `block`'s split cells: where the cells on
+    /// the two sides of a face segment give its two ends different vertices.
+    fn emit_gaps(
+        &self,
+        block: &Block,
+        offset: u32,
+        offsets: &BTreeMap<[u32; 3], u32>,
+        mesh: &mut Mesh,
+    ) {
+        let grid = &self.grid;
+        for &ci in &block.split_cells {
+            let (entry, l) = (block.cells[ci as usize], block.cell_local[ci as usize]);
+            let v: [f32; 8] = std::array::from_fn(|k| {
+                block.values[grid.at(std::array::from_fn(|a| l[a] + corner_offset(k)[a]))]
+            });
+            let cell: [u32; 3] = std::array::from_fn(|a| block.origin[a] + l[a]);
+            for face in 0..N_FACES {
+                let (f, upper) = (face / 2, face % 2 == 1);
+                let across = if upper {
+                    cell[f].checked_add(1).filter(|&c| c < grid.n_cells)
+                } else {
+                    cell[f].checked_sub(1)
+                };
+                let Some(across) = across else {
+                    continue;
+                };
+                let mut other = cell;
+                other[f] = across;
+                let (segments, n) = face_segments(&v, face);
+                for &[ea, eb] in &segments[..n] {
+                    if entry[ea] == entry[eb] {
+                        continue;
+                    }
+                    let (Some(bl), Some(br)) = (
+                        self.cell_vertex(offsets, other, edge_across(ea, face)),
+                        self.cell_vertex(offsets, other, edge_across(eb, face)),
+                    ) else {
+                        continue;
+                    };
+                    // Across a lower face, a cell split there too emits the polygon.
+                    if !upper && bl != br {
+                        continue;
+                    }
+                    let (al, ar) = (offset + entry[ea], offset + entry[eb]);
+                    let low_inside = inside(v[edge_corners(ea).0]);
+                    let cycle = if quad_runs_to(ea, face, low_inside) {
+                        [bl, al, ar, br]
+                    } else {
+                        [al, bl, br, ar]
+                    };
+                    emit_polygon(&mesh.positions, cycle, &mut mesh.indices);
+                }
+            }
+        }
+    }
+}
+
+/// Emits a quad whose consecutive corners may coincide: a quad, a triangle or nothing.
+fn emit_polygon(positions: &[[f32; 3]], q: [u32; 4], indices: &mut Vec<u32>) {
+    let mut distinct = [0u32; 4];
+    let mut n = 0;
+    for k in 0..4 {
+        if q[k] != q[(k + 1) % 4] {
+            distinct[n] = q[k];
+            n += 1;
+        }
+    }
+    match n {
+        4 => indices.extend(split_quad(positions, q)),
+        3 => indices.extend(&distinct[..3]),
+        _ => {}
     }
 }
 

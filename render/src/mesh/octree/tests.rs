@@ -124,6 +124,8 @@ fn assert_closed_manifold(m: &Mesh) {
     assert_eq!(m.open_edges(), 0, "open edges");
     assert_eq!(m.non_manifold_edges(), 0, "non-manifold edges");
     assert_eq!(m.degenerate_triangles(), 0, "degenerate triangles");
+    assert_eq!(m.misoriented_edges(), 0, "inconsistent winding");
+    assert!(m.signed_volume() > 0.0, "normals face inwards");
 }
 
 #[test]
@@ -397,4 +399,120 @@ fn remeshing_an_edit_box_equals_meshing_from_scratch() {
         mesher.remesh(&mut edited, outside).unwrap(),
         MeshStats::default()
     );
+}
+
+/// Thin gyroid sheets inside a ball: tunnels through cells, so patches must be split.
+struct GyroidShell {
+    frequency: f32,
+    thickness: f32,
+}
+
+impl Field for GyroidShell {
+    fn interval(&mut self, lo: [f32; 3], hi: [f32; 3]) -> (f32, f32) {
+        // The gyroid term lies in [-1.5, 1.5]; the ball term bounds the rest.
+        let mut ball = Sphere {
+            centre: [0.0; 3],
+            radius: 0.9,
+        };
+        let (b_lo, b_hi) = ball.interval(lo, hi);
+        (
+            (self.thickness - 1.5 / self.frequency).min(b_lo),
+            self.thickness.min(b_hi),
+        )
+    }
+    fn values(&mut self, xs: &[f32], ys: &[f32], zs: &[f32], out: &mut [f32]) {
+        let k = self.frequency;
+        for i in 0..xs.len() {
+            let (x, y, z) = (xs[i] * k, ys[i] * k, zs[i] * k);
+            let g = x.sin() * y.cos() + y.sin() * z.cos() + z.sin() * x.cos();
+            let r = (xs[i] * xs[i] + ys[i] * ys[i] + zs[i] * zs[i]).sqrt();
+            out[i] = (self.thickness - g.abs() / k).min(0.9 - r);
+        }
+    }
+}
+
+#[test]
+fn thin_gyroid_sheets_are_closed_and_manifold_with_split_patches() {
+    let mut n_split = 0;
+    for depth in [4, 5, 6] {
+        let mut g = GyroidShell {
+            frequency: 9.0,
+            thickness: 0.02,
+        };
+        let settings = MeshSettings {
+            bounds: unit_box(),
+            depth,
+        };
+        let (m, stats) = mesh_with_stats(&mut g, &settings).unwrap();
+        assert_closed_manifold(&m);
+        n_split += stats.patches_split;
+    }
+    assert!(n_split > 0, "no tunnel was met: the split path is untested");
+}
+
+/// An axis-aligned cube whose faces pass exactly through grid points, and whose simplified
+/// copies (one per octree node) disagree with each other in value and at exact zeros, as
+/// differently simplified tapes may: a positive bias on some boxes, a negative one on others.
+///
+/// With `widen` = 0 and the faces just off the grid points, interval arithmetic prunes boxes
+/// whose faces a neighbour's biased values put inside: the f64-against-f32 disagreement.
+#[derive(Clone)]
+struct Disagreeing {
+    half: f32,
+    widen: f32,
+    bias: f32,
+    depth: u32,
+}
+
+impl Field for Disagreeing {
+    fn interval(&mut self, lo: [f32; 3], hi: [f32; 3]) -> (f32, f32) {
+        let mut c = Cuboid {
+            centre: [0.0; 3],
+            half: [self.half; 3],
+        };
+        let (l, h) = c.interval(lo, hi);
+        (l - self.widen, h + self.widen)
+    }
+    fn values(&mut self, xs: &[f32], ys: &[f32], zs: &[f32], out: &mut [f32]) {
+        for i in 0..xs.len() {
+            let m = xs[i].abs().max(ys[i].abs()).max(zs[i].abs());
+            // Values scaled per box too, so that saddles differ between blocks.
+            out[i] = (self.half - m) * (1.0 + self.depth as f32) + self.bias;
+        }
+    }
+    fn simplify(&mut self, lo: [f32; 3], hi: [f32; 3]) -> Option<Self> {
+        // Neighbouring boxes of one size have opposite parities.
+        let size = hi[0] - lo[0];
+        let parity = ((lo[0] + lo[1] + lo[2]) / size).round() as i64 % 2;
+        Some(Disagreeing {
+            bias: if parity == 0 { 1e-6 } else { -1e-6 },
+            depth: self.depth + 1,
+            ..*self
+        })
+    }
+}
+
+#[test]
+fn blocks_whose_fields_disagree_near_zero_still_stitch() {
+    for (half, widen) in [(0.5, 1e-3), (0.5 - 1e-7, 0.0)] {
+        for depth in [5, 6] {
+            let settings = MeshSettings {
+                bounds: unit_box(),
+                depth,
+            };
+            let mut f = Disagreeing {
+                half,
+                widen,
+                bias: 0.0,
+                depth: 0,
+            };
+            let (m, stats) = mesh_with_stats(&mut f, &settings).unwrap();
+            assert!(stats.fields_simplified > 0);
+            // Faces just off the grid points let interval arithmetic prune next to them.
+            assert!(widen > 0.0 || stats.nodes_pruned > 0, "{stats:?}");
+            assert_closed_manifold(&m);
+            let volume = m.signed_volume();
+            assert!((volume - 1.0).abs() < 0.02, "{half} {widen}: {volume}");
+        }
+    }
 }

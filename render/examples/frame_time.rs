@@ -1,0 +1,106 @@
+//! Frame-time benchmark: a scene of about 10^6 triangles rendered offscreen, camera orbiting.
+//!
+//! Run with `cargo run -p render --release --example frame_time -- --frames 20`.
+//! Options: `--frames N` (default 20), `--width W --height H` (default 1280 x 720),
+//! `--depth D` (mesher depth for the gyroid ball, default 8: about 1.2 million triangles).
+//! Each frame is `Headless::render`: it creates the colour and depth targets, draws, copies
+//! the picture back and waits for it, so it is the whole cost of one offscreen frame. The
+//! meshes are uploaded once, before the first timed frame. Prints the median, fastest and
+//! slowest frame and the adapter.
+
+use glam::{Mat4, Vec3};
+use render::camera::Camera;
+use render::gpu::offscreen::Headless;
+use render::mesh::octree::{MeshSettings, mesh};
+use render::mesh::{Aabb, TapeField};
+use render::scene::{Material, Scene};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Reads the one clock this example uses.
+#[allow(
+    clippy::disallowed_methods,
+    reason = "a benchmark program measures wall time"
+)]
+fn now() -> std::time::Instant {
+    std::time::Instant::now()
+}
+
+fn arg(name: &str, default: u32) -> u32 {
+    let args: Vec<String> = std::env::args().collect();
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+fn main() {
+    let (frames, width, height) = (
+        arg("--frames", 20),
+        arg("--width", 1280),
+        arg("--height", 720),
+    );
+    let depth = u8::try_from(arg("--depth", 8)).unwrap_or(8);
+    let tape = fdsl::Function::parse(include_str!("../../tests/data/models/gyroid_sphere.fdsl"))
+        .expect("the model compiles")
+        .tape();
+    let started = now();
+    let mut m = mesh(
+        &mut TapeField::new(&tape, 0.0),
+        &MeshSettings {
+            bounds: Aabb::new([-1.2; 3], [1.2; 3]),
+            depth,
+        },
+    )
+    .expect("meshes");
+    println!(
+        "meshed gyroid_sphere at depth {depth}: {} triangles, {} vertices in {:.2?}",
+        m.n_triangles(),
+        m.n_vertices(),
+        started.elapsed()
+    );
+    m.colour_with(|p| [0.5 + 0.4 * p[0], 0.5 + 0.4 * p[1], 0.5 + 0.4 * p[2], 1.0]);
+    let mut scene = Scene {
+        camera: Camera {
+            distance: 3.2,
+            ..Camera::default()
+        },
+        ..Scene::default()
+    };
+    scene.add_object(Arc::new(m), Mat4::IDENTITY, Material::default());
+    scene.add_box(Aabb::new([-1.0; 3], [1.0; 3]), [1.0; 4]);
+    scene.add_crosshair(Vec3::ZERO, 0.2, [1.0, 1.0, 0.0, 1.0]);
+
+    let mut gpu = match Headless::new() {
+        Ok(g) => g,
+        Err(e) => {
+            println!("no GPU adapter: {e}");
+            return;
+        }
+    };
+    println!("adapter: {}", gpu.adapter_description());
+    let first = now();
+    if let Err(e) = gpu.render(&scene, width, height) {
+        println!("render failed: {e}");
+        return;
+    }
+    println!("first frame (uploads the mesh): {:.2?}", first.elapsed());
+    let mut times: Vec<Duration> = Vec::with_capacity(frames as usize);
+    for k in 0..frames {
+        scene.camera.yaw = 0.6 + 0.05 * k as f32;
+        let t0 = now();
+        if let Err(e) = gpu.render(&scene, width, height) {
+            println!("render failed: {e}");
+            return;
+        }
+        times.push(t0.elapsed());
+    }
+    times.sort_unstable();
+    if let (Some(fastest), Some(slowest)) = (times.first(), times.last()) {
+        println!(
+            "{frames} frames at {width}x{height}: median {:.1?}, fastest {fastest:.1?}, slowest {slowest:.1?}",
+            times[times.len() / 2]
+        );
+    }
+}

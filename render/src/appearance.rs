@@ -1,0 +1,357 @@
+//! Appearance on meshes: colour, transparency, shininess and geometric texture from an
+//! object's [`fdsl::object::Appearance`], evaluated in bulk at a mesh's vertices at time `t`.
+//!
+//! - Diffuse colour becomes the vertex colour: a constant, a parametric RGB function (a
+//!   statement list with outputs `r`, `g`, `b`), or a scalar function through a
+//!   [`ColorMap`] (linear between keys, clamped at the ends). Components are clamped to
+//!   `[0, 1]`; NaN becomes 0. No diffuse colour gives [`DEFAULT_DIFFUSE`].
+//! - Transparency (0 opaque, 1 clear) becomes vertex alpha, so one object may be partly
+//!   transparent; the renderer draws any object with an alpha below 1 in its transparent pass.
+//! - Shininess (0..1) sets the [`Material`]'s Blinn-Phong exponent (VRML's convention: times
+//!   128), and the specular colour's mean luminance its specular weight, both averaged over
+//!   the vertices: the shader has one material per object.
+//! - Displacement is a geometric texture: each vertex moves by d(p) along its normal, then
+//!   normals are recomputed. It runs before the colours, which see the displaced points.
+//!
+//! Every function is evaluated in the appearance's own space (through the inverse of its
+//! transform), at the mesh's object-space vertices, in one bulk call per function.
+//! Not done here: the ambient colour (the shader's ambient term uses the diffuse colour) and
+//! the appearance's domain, which fdsl documents as informative.
+
+use crate::mesh::Mesh;
+use crate::scene::Material;
+use fdsl::eval::BulkEval;
+use fdsl::object::{Appearance, ColorDef, ColorMap, DEFAULT_DIFFUSE, Formula};
+use glam::{DAffine3, DVec3};
+
+/// Shininess 1 maps to this Blinn-Phong exponent (VRML's `shininess` times 128).
+pub const SHININESS_EXPONENT_MAX: f32 = 128.0;
+
+/// Why an appearance could not be compiled.
+#[derive(Debug, thiserror::Error)]
+pub enum AppearanceError {
+    /// A formula does not compile.
+    #[error("{slot}: {source}")]
+    Compile {
+        /// Which part of the appearance.
+        slot: &'static str,
+        /// The compiler's diagnostics.
+        source: fdsl::CompileError,
+    },
+    /// A parametric colour lacks one of `r`, `g`, `b`.
+    #[error("{slot}: {source}")]
+    MissingOutput {
+        /// Which part of the appearance.
+        slot: &'static str,
+        /// The missing output.
+        source: fdsl::MissingOutput,
+    },
+    /// The appearance transform cannot be inverted.
+    #[error("the appearance transform is not invertible")]
+    BadTransform,
+}
+
+/// A colour definition compiled for bulk evaluation.
+#[derive(Clone, Debug)]
+enum Colour {
+    Constant([f32; 3]),
+    /// Outputs r, g, b.
+    Rgb(BulkEval),
+    /// A scalar through a map.
+    Map(BulkEval, ColorMap),
+}
+
+/// An [`Appearance`] with every formula compiled, ready to apply to meshes.
+#[derive(Clone, Debug)]
+pub struct CompiledAppearance {
+    diffuse: Option<Colour>,
+    specular: Option<Colour>,
+    transparency: Option<BulkEval>,
+    shininess: Option<BulkEval>,
+    displacement: Option<BulkEval>,
+    appearance_from_object: DAffine3,
+}
+
+fn compile(formula: &Formula, slot: &'static str) -> Result<fdsl::Function, AppearanceError> {
+    fdsl::Function::parse(formula.as_str())
+        .map_err(|source| AppearanceError::Compile { slot, source })
+}
+
+fn scalar(
+    formula: &Option<Formula>,
+    slot: &'static str,
+) -> Result<Option<BulkEval>, AppearanceError> {
+    formula
+        .as_ref()
+        .map(|f| compile(f, slot).map(|function| BulkEval::new(&function.tape())))
+        .transpose()
+}
+
+fn colour(def: &Option<ColorDef>, slot: &'static str) -> Result<Option<Colour>, AppearanceError> {
+    let Some(def) = def else {
+        return Ok(None);
+    };
+    Ok(Some(match def {
+        ColorDef::Constant(c) => Colour::Constant(c.map(clamp_unit)),
+        ColorDef::Rgb(f) => {
+            let tape = compile(f, slot)?
+                .tape_for(&["r", "g", "b"])
+                .map_err(|source| AppearanceError::MissingOutput { slot, source })?;
+            Colour::Rgb(BulkEval::new(&tape))
+        }
+        ColorDef::Map { formula, map } => {
+            Colour::Map(BulkEval::new(&compile(formula, slot)?.tape()), map.clone())
+        }
+    }))
+}
+
+/// `v` clamped to `[0, 1]`, NaN as 0.
+fn clamp_unit(v: f32) -> f32 {
+    if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }
+}
+
+/// Points in structure-of-arrays form, as the bulk evaluator takes them.
+struct Points {
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+    zs: Vec<f32>,
+}
+
+impl Points {
+    fn len(&self) -> usize {
+        self.xs.len()
+    }
+}
+
+impl Colour {
+    /// The colour at every point, written to `out`.
+    fn eval(&mut self, p: &Points, t: f32, out: &mut [[f32; 3]]) {
+        let n = p.len();
+        match self {
+            Colour::Constant(c) => out.fill(*c),
+            Colour::Rgb(eval) => {
+                let (mut r, mut g, mut b) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+                eval.eval_outputs(&p.xs, &p.ys, &p.zs, t, &mut [&mut r, &mut g, &mut b]);
+                for (i, o) in out.iter_mut().enumerate() {
+                    *o = [r[i], g[i], b[i]].map(clamp_unit);
+                }
+            }
+            Colour::Map(eval, map) => {
+                let mut s = vec![0.0; n];
+                eval.eval(&p.xs, &p.ys, &p.zs, t, &mut s);
+                for (o, &v) in out.iter_mut().zip(&s) {
+                    *o = map.color(f64::from(v)).map(clamp_unit);
+                }
+            }
+        }
+    }
+}
+
+impl CompiledAppearance {
+    /// Compiles every formula of `appearance`.
+    pub fn new(appearance: &Appearance) -> Result<CompiledAppearance, AppearanceError> {
+        let object_from_appearance = appearance
+            .transform
+            .inverse()
+            .ok_or(AppearanceError::BadTransform)?;
+        Ok(CompiledAppearance {
+            diffuse: colour(&appearance.diffuse, "diffuse colour")?,
+            specular: colour(&appearance.specular, "specular colour")?,
+            transparency: scalar(&appearance.transparency, "transparency")?,
+            shininess: scalar(&appearance.shininess, "shininess")?,
+            displacement: scalar(&appearance.displacement, "displacement")?,
+            appearance_from_object: object_from_appearance.parent_from_child,
+        })
+    }
+}
+
+impl Points {
+    /// `mesh`'s vertices mapped by `appearance_from_object`.
+    fn of(mesh: &Mesh, appearance_from_object: DAffine3) -> Points {
+        let n = mesh.n_vertices();
+        let mut p = Points {
+            xs: Vec::with_capacity(n),
+            ys: Vec::with_capacity(n),
+            zs: Vec::with_capacity(n),
+        };
+        for v in &mesh.positions {
+            let q = appearance_from_object.transform_point3(DVec3::new(
+                v[0].into(),
+                v[1].into(),
+                v[2].into(),
+            ));
+            p.xs.push(q.x as f32);
+            p.ys.push(q.y as f32);
+            p.zs.push(q.z as f32);
+        }
+        p
+    }
+}
+
+impl CompiledAppearance {
+    /// Displaces `mesh` by the geometric texture, then sets its vertex colours (diffuse colour
+    /// and transparency as alpha), all at time `t`.
+    pub fn apply(&mut self, mesh: &mut Mesh, t: f32) {
+        if let Some(eval) = &mut self.displacement {
+            let p = Points::of(mesh, self.appearance_from_object);
+            let mut heights = vec![0.0; p.len()];
+            eval.eval(&p.xs, &p.ys, &p.zs, t, &mut heights);
+            mesh.displace_by(&heights);
+        }
+        let p = Points::of(mesh, self.appearance_from_object);
+        let mut rgb = vec![DEFAULT_DIFFUSE; p.len()];
+        if let Some(c) = &mut self.diffuse {
+            c.eval(&p, t, &mut rgb);
+        }
+        let mut alpha = vec![0.0; p.len()];
+        if let Some(eval) = &mut self.transparency {
+            eval.eval(&p.xs, &p.ys, &p.zs, t, &mut alpha);
+        }
+        mesh.colours = rgb
+            .iter()
+            .zip(&alpha)
+            .map(|(c, &a)| [c[0], c[1], c[2], 1.0 - clamp_unit(a)])
+            .collect();
+    }
+
+    /// `base` with the appearance's shininess and specular weight, averaged over `mesh`'s
+    /// vertices at time `t` (parts the appearance leaves out keep `base`'s values).
+    pub fn material(&mut self, mesh: &Mesh, t: f32, base: Material) -> Material {
+        let p = Points::of(mesh, self.appearance_from_object);
+        let n = p.len();
+        if n == 0 {
+            return base;
+        }
+        let mut material = base;
+        if let Some(eval) = &mut self.shininess {
+            let mut s = vec![0.0; n];
+            eval.eval(&p.xs, &p.ys, &p.zs, t, &mut s);
+            let mean = s.iter().map(|&v| clamp_unit(v)).sum::<f32>() / n as f32;
+            material.shininess = (mean * SHININESS_EXPONENT_MAX).max(1.0);
+        }
+        if let Some(c) = &mut self.specular {
+            let mut rgb = vec![[0.0; 3]; n];
+            c.eval(&p, t, &mut rgb);
+            let luminance = |c: &[f32; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+            material.specular = rgb.iter().map(luminance).sum::<f32>() / n as f32;
+        }
+        material
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fdsl::object::Transform;
+
+    fn formula(text: &str) -> Formula {
+        Formula::new(text).unwrap()
+    }
+
+    /// A strip of two triangles along x from 0 to 2 at z = 0, normals +z.
+    fn strip() -> Mesh {
+        let mut m = Mesh {
+            positions: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [2.0, 0.0, 0.0],
+                [1.0, 1.0, 0.0],
+            ],
+            normals: vec![[0.0, 0.0, 1.0]; 4],
+            colours: vec![[1.0; 4]; 4],
+            indices: vec![0, 1, 3, 1, 2, 3],
+        };
+        m.normals = vec![[0.0, 0.0, 1.0]; 4];
+        m
+    }
+
+    #[test]
+    fn colour_map_interpolates_between_keys_and_clamps_at_the_ends() {
+        let map = ColorMap {
+            keys: vec![(0.5, [1.0, 0.0, 0.0]), (1.5, [0.0, 0.0, 1.0])],
+        };
+        let mut a = CompiledAppearance::new(&Appearance {
+            diffuse: Some(ColorDef::Map {
+                formula: formula("x"),
+                map,
+            }),
+            ..Appearance::default()
+        })
+        .unwrap();
+        let mut m = strip();
+        a.apply(&mut m, 0.0);
+        assert_eq!(m.colours[0], [1.0, 0.0, 0.0, 1.0], "below the first key");
+        assert_eq!(m.colours[1], [0.5, 0.0, 0.5, 1.0], "halfway");
+        assert_eq!(m.colours[2], [0.0, 0.0, 1.0, 1.0], "above the last key");
+    }
+
+    #[test]
+    fn parametric_rgb_depends_on_time_and_is_clamped() {
+        let mut a = CompiledAppearance::new(&Appearance {
+            diffuse: Some(ColorDef::Rgb(formula("r = t; g = x - 0.5; b = 2*y;"))),
+            transparency: Some(formula("0.25*x")),
+            ..Appearance::default()
+        })
+        .unwrap();
+        let mut m = strip();
+        a.apply(&mut m, 0.75);
+        assert_eq!(m.colours[0], [0.75, 0.0, 0.0, 1.0]);
+        assert_eq!(m.colours[2], [0.75, 1.0, 0.0, 0.5]);
+        assert_eq!(m.colours[3], [0.75, 0.5, 1.0, 0.75]);
+        a.apply(&mut m, 2.0);
+        assert_eq!(m.colours[0][0], 1.0);
+    }
+
+    #[test]
+    fn displacement_moves_along_normals_in_appearance_space() {
+        // Appearance space sits at +1 along x in object space, so object x is appearance
+        // x - 1 and d = 0.1 * (x_object - 1).
+        let mut a = CompiledAppearance::new(&Appearance {
+            displacement: Some(formula("0.1*x")),
+            transform: Transform::translate(DVec3::new(1.0, 0.0, 0.0)),
+            ..Appearance::default()
+        })
+        .unwrap();
+        let mut m = strip();
+        a.apply(&mut m, 0.0);
+        let z: Vec<f32> = m.positions.iter().map(|p| p[2]).collect();
+        assert_eq!(z, vec![-0.1, 0.0, 0.1, 0.0]);
+        assert_eq!(m.colours[0], [0.8, 0.8, 0.8, 1.0], "default diffuse");
+    }
+
+    #[test]
+    fn material_takes_mean_shininess_and_specular() {
+        let mut a = CompiledAppearance::new(&Appearance {
+            shininess: Some(formula("0.5")),
+            specular: Some(ColorDef::Constant([1.0, 1.0, 1.0])),
+            ..Appearance::default()
+        })
+        .unwrap();
+        let m = a.material(&strip(), 0.0, Material::default());
+        assert_eq!(m.shininess, 64.0);
+        assert!((m.specular - 1.0).abs() < 1e-6);
+        assert_eq!(m.opacity, 1.0);
+    }
+
+    #[test]
+    fn bad_formulas_are_errors_naming_the_slot() {
+        let err = CompiledAppearance::new(&Appearance {
+            diffuse: Some(ColorDef::Rgb(formula("r = x; g = y;"))),
+            ..Appearance::default()
+        })
+        .unwrap_err();
+        assert!(err.to_string().starts_with("diffuse colour"), "{err}");
+        let err = CompiledAppearance::new(&Appearance {
+            displacement: Some(formula("sin(")),
+            ..Appearance::default()
+        })
+        .unwrap_err();
+        assert!(matches!(
+            err,
+            AppearanceError::Compile {
+                slot: "displacement",
+                ..
+            }
+        ));
+    }
+}
