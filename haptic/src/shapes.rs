@@ -294,112 +294,23 @@ pub fn circle_waypoints(
 /// A triangle mesh as vertices and counter-clockwise (outward) index triples.
 pub type TriangleMesh = (Vec<[f32; 3]>, Vec<[u32; 3]>);
 
-/// The closed cube `[center - half, center + half]`, 12 outward triangles.
+/// The closed cube `[center - half, center + half]`, 12 outward triangles
+/// (`fdsl::mesh::shapes::cube`).
 pub fn cube_mesh(center: DVec3, half: f64) -> TriangleMesh {
-    let vertices = (0..8)
-        .map(|k| {
-            let corner = DVec3::new(
-                if k & 1 == 0 { -half } else { half },
-                if k & 2 == 0 { -half } else { half },
-                if k & 4 == 0 { -half } else { half },
-            ) + center;
-            corner.as_vec3().to_array()
-        })
-        .collect();
-    // Each face as a quad (a, b, c, d) going round it; `outward` fixes the winding.
-    let quads = [
-        [0, 2, 6, 4], // -x
-        [1, 5, 7, 3], // +x
-        [0, 4, 5, 1], // -y
-        [2, 3, 7, 6], // +y
-        [0, 1, 3, 2], // -z
-        [4, 6, 7, 5], // +z
-    ];
-    let triangles: Vec<[u32; 3]> = quads
-        .iter()
-        .flat_map(|&[a, b, c, d]| [[a, b, c], [a, c, d]])
-        .collect();
-    outward(vertices, triangles, center)
-}
-
-/// Winds every triangle of a mesh that is star-shaped about `center` counter-clockwise seen
-/// from outside.
-fn outward(vertices: Vec<[f32; 3]>, mut triangles: Vec<[u32; 3]>, center: DVec3) -> TriangleMesh {
-    let at = |i: u32| DVec3::from_array(vertices[i as usize].map(f64::from));
-    for tri in &mut triangles {
-        let [a, b, c] = tri.map(at);
-        if (b - a).cross(c - a).dot((a + b + c) / 3.0 - center) < 0.0 {
-            tri.swap(1, 2);
-        }
-    }
-    (vertices, triangles)
+    fdsl::mesh::shapes::cube(center - DVec3::splat(half), center + DVec3::splat(half)).into_parts()
 }
 
 /// A sphere of `radius` about `center`: an icosahedron subdivided `n_subdivisions` times
-/// (`20 * 4^n` outward triangles), vertices on the sphere.
+/// (`20 * 4^n` outward triangles; `fdsl::mesh::shapes::icosphere`, at most
+/// `MAX_ICOSPHERE_SUBDIVISIONS`), vertices on the sphere.
 pub fn icosphere(center: DVec3, radius: f64, n_subdivisions: u32) -> TriangleMesh {
-    let phi = (1.0 + 5f64.sqrt()) / 2.0;
-    let mut points: Vec<DVec3> = [
-        (-1.0, phi, 0.0),
-        (1.0, phi, 0.0),
-        (-1.0, -phi, 0.0),
-        (1.0, -phi, 0.0),
-        (0.0, -1.0, phi),
-        (0.0, 1.0, phi),
-        (0.0, -1.0, -phi),
-        (0.0, 1.0, -phi),
-        (phi, 0.0, -1.0),
-        (phi, 0.0, 1.0),
-        (-phi, 0.0, -1.0),
-        (-phi, 0.0, 1.0),
-    ]
-    .iter()
-    .map(|&(x, y, z)| DVec3::new(x, y, z).normalize())
-    .collect();
-    let mut triangles: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..n_subdivisions {
-        let mut midpoints = std::collections::BTreeMap::new();
-        let mut midpoint = |a: u32, b: u32, points: &mut Vec<DVec3>| {
-            *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                points.push((points[a as usize] + points[b as usize]).normalize());
-                (points.len() - 1) as u32
-            })
-        };
-        let mut finer = Vec::with_capacity(triangles.len() * 4);
-        for [a, b, c] in triangles {
-            let ab = midpoint(a, b, &mut points);
-            let bc = midpoint(b, c, &mut points);
-            let ca = midpoint(c, a, &mut points);
-            finer.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-        }
-        triangles = finer;
+    let (mut vertices, triangles) =
+        fdsl::mesh::shapes::icosphere(radius, n_subdivisions).into_parts();
+    let offset = center.as_vec3();
+    for v in &mut vertices {
+        *v = (glam::Vec3::from_array(*v) + offset).to_array();
     }
-    let vertices = points
-        .iter()
-        .map(|&p| (center + p * radius).as_vec3().to_array())
-        .collect();
-    outward(vertices, triangles, center)
+    (vertices, triangles)
 }
 
 /// The thesis's Figure 7.4 container: an invisible cylinder, as printed.
