@@ -27,8 +27,9 @@ impl Property {
     }
 }
 
-/// A force field: three functions of `u, v, w, t` (outputs `x`, `y`, `z`, newtons) over the
-/// container's normalised domain: the container's box maps onto the parameter ranges.
+/// A force field: three functions of `u, v, w, t` (outputs `x`, `y`, `z`) over the container's
+/// normalised domain: the container's box maps onto the parameter ranges. Values are device
+/// independent: the haptic crate reads them as fractions of the device's largest force.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ForceField {
     /// Outputs `x`, `y`, `z` of `u, v, w, t`.
@@ -46,8 +47,8 @@ pub struct ForceField {
 pub struct Physics {
     /// The haptic container; `None` uses the object's geometry. It may be invisible.
     pub container: Option<Geometry>,
-    /// Force needed to push into the surface (newtons per unit of depth scale), within the
-    /// surface zone.
+    /// Resistance to pushing into the surface within the surface zone, as a fraction of the
+    /// device's largest force (how the haptic crate reads it).
     pub tension: Option<Property>,
     /// Friction coefficient against motion along the surface.
     pub friction: Option<Property>,

@@ -178,6 +178,9 @@ pub struct Sampler {
     /// Tension, friction, zone depth, density.
     feels: [Option<PointEval>; 4],
     force: Option<PointEval>,
+    /// The field's domain, its space from object space, and its space's linear part into
+    /// object space (computed once: the haptic loop asks every tick).
+    force_space: (super::Domain, Transform, DMat3),
     motion: [Option<PointEval>; 2],
     hits: Vec<u32>,
 }
@@ -191,7 +194,14 @@ impl Sampler {
             Some([a, b]) => [point(a), point(b)],
             None => [None, None],
         };
+        let (domain, object_from_field) = field_domain(&object);
+        let force_space = (
+            domain,
+            object_from_field.inverse().unwrap_or(Transform::IDENTITY),
+            object_from_field.linear(),
+        );
         Sampler {
+            force_space,
             geometry: parts.geometry.as_ref().map(Shape::new),
             container: parts.container.as_ref().map(Shape::new),
             colors: [0, 1, 2].map(|i| parts.colors[i].as_ref().map(Color::new)),
@@ -215,9 +225,9 @@ impl Sampler {
         self.geometry.as_mut().map_or(NOTHING, |g| g.value(p, t))
     }
 
-    /// The solid's value at `p` (object space) and time `t`: positive inside. Exact within
-    /// each edit's margin band around its surface; far from every edit's tool the value is
-    /// the geometry's, so the sign is always right.
+    /// The solid's value at `p` (object space) and time `t`: positive inside. It is the fold
+    /// of the active edits whose support holds `p` over the geometry's value (each tool is
+    /// empty space outside its stamps' grown boxes), so it visits only the edits near `p`.
     pub fn value(&mut self, p: DVec3, t: f64) -> f64 {
         let history = self.object.history();
         history.collect_point(p, &mut self.hits);
@@ -430,37 +440,24 @@ impl Sampler {
     /// The box, in object space, over which the force field's parameters range: the
     /// container's domain, else the geometry's, else the physics domain, else `[-1, 1]^3`.
     pub fn field_domain(&self) -> (super::Domain, Transform) {
-        let data = self.object.data();
-        let shape = data
-            .physics
-            .container
-            .as_ref()
-            .or(data.geometry.as_ref())
-            .filter(|g| g.domain.is_some());
-        match shape {
-            Some(g) => (g.domain.unwrap_or(super::Domain::UNIT), g.transform),
-            None => (
-                data.physics.domain.unwrap_or(super::Domain::UNIT),
-                data.physics.transform,
-            ),
-        }
+        field_domain(&self.object)
     }
 
-    /// The force field at `p` (object space, newtons), if the object has an enabled one.
+    /// The force field at `p` (in object axes, in the field's own units: fractions of a
+    /// device's largest force for the haptic crate), if the object has an enabled one.
     pub fn force(&mut self, p: DVec3, t: f64) -> Option<DVec3> {
         let field = self.object.data().physics.force.as_ref()?;
         let (parameters, timing) = (field.parameters, field.timing);
-        let (domain, transform) = self.field_domain();
+        let (domain, field_from_object, linear) = &self.force_space;
         let eval = self.force.as_mut()?;
-        let local = transform.inverse().map_or(p, |inv| inv.point(p));
-        let n = domain.normalise(local);
+        let n = domain.normalise(field_from_object.point(p));
         let u = [0, 1, 2].map(|i| {
             let [lo, hi] = parameters[i];
             lo + n[i] * (hi - lo)
         });
         let mut out = [0.0; 3];
         eval.eval_all([u[0], u[1], u[2], timing.local(t)], &mut out);
-        Some(transform.linear() * DVec3::from_array(out))
+        Some(*linear * DVec3::from_array(out))
     }
 
     /// The object's placement at scene time `t`: object space to its parent's space, its
@@ -488,5 +485,23 @@ impl Sampler {
             offset = DVec3::ZERO;
         }
         Transform::from_trs(offset, rotation, DVec3::ONE).then(&data.transform)
+    }
+}
+
+/// The force field's domain and its space (see [`Sampler::field_domain`]).
+fn field_domain(object: &Object) -> (super::Domain, Transform) {
+    let data = object.data();
+    let shape = data
+        .physics
+        .container
+        .as_ref()
+        .or(data.geometry.as_ref())
+        .filter(|g| g.domain.is_some());
+    match shape {
+        Some(g) => (g.domain.unwrap_or(super::Domain::UNIT), g.transform),
+        None => (
+            data.physics.domain.unwrap_or(super::Domain::UNIT),
+            data.physics.transform,
+        ),
     }
 }

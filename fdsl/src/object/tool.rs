@@ -5,7 +5,8 @@
 //!
 //! Tool values follow the F-Rep sign (positive inside) and are distances, or bounds of
 //! distances, so an interval over a box follows from one value at its centre and the
-//! Lipschitz constant.
+//! Lipschitz constant. A tool's support is its stamps' boxes grown by a margin: outside them
+//! the tool is empty space ([`NOTHING`]).
 
 use glam::{DQuat, DVec3};
 use serde::{Deserialize, Serialize};
@@ -272,7 +273,8 @@ pub(crate) struct CompiledTool {
     stamps: Vec<(Aabb, Stamp)>,
     /// An index over the boxes when there are many stamps.
     stamp_index: Option<Bvh>,
-    /// Beyond each stamp's grown box its value is below `-margin`; values are clamped there.
+    /// How far each stamp's box is grown: beyond it the stamp's distance is at least this, and
+    /// the tool counts as empty space there.
     margin: f64,
     /// The box around all stamps, grown by the margin.
     bounds: Aabb,
@@ -325,7 +327,7 @@ impl CompiledTool {
         })
     }
 
-    /// The box outside which the tool's value is below `-margin`.
+    /// The box around the tool's support (outside it the tool is empty space).
     pub(crate) fn bounds(&self) -> Aabb {
         self.bounds
     }
