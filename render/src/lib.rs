@@ -51,7 +51,8 @@
 pub mod appearance;
 pub mod camera;
 pub mod gpu;
-pub mod image;
 pub mod mesh;
-pub mod plot;
 pub mod scene;
+
+pub use plot;
+pub use plot::image;
