@@ -169,6 +169,7 @@ fn drain<P: Payload>(
 mod tests {
     use super::*;
     use crate::payload::test_payload::TestPayload;
+    use crate::sync::state::{RELAY_AFTER_MICROS, RESEND_AFTER_MICROS};
 
     type TPeer = Peer<TestPayload>;
 
@@ -196,6 +197,26 @@ mod tests {
             }
         }
         panic!("the sync did not quiesce");
+    }
+
+    /// Advances time in 100 ms steps from `t` (timeouts, then delivery) until `done`; returns
+    /// the time then. It must come within ten relay delays.
+    fn settle(
+        peers: &mut [TPeer],
+        links: &[(usize, ConnId, usize, ConnId)],
+        mut t: u64,
+        done: impl Fn(&[TPeer]) -> bool,
+    ) -> u64 {
+        let start = t;
+        while !done(peers) {
+            assert!(t < start + 10 * RELAY_AFTER_MICROS, "not relayed by {t}");
+            t += 100_000;
+            for p in peers.iter_mut() {
+                p.handle_timeout(Timestamp(t));
+            }
+            pump(peers, links, Timestamp(t));
+        }
+        t
     }
 
     fn observe(p: &TPeer) -> Vec<(crate::op::OpId, crate::lease::Mark, bool)> {
@@ -244,6 +265,11 @@ mod tests {
             Err(ConnectError::InUse(ConnId(2)))
         );
         pump(&mut peers, &links, now);
+        // A and C hear each other's offline ops through B once B has held them for the relay
+        // delay.
+        assert_eq!(peers[0].log().len(), 4);
+        let t = settle(&mut peers, &links, now.0, |p| p[0].log().len() == 6);
+        assert!(t >= now.0 + RELAY_AFTER_MICROS, "relayed early at {t}");
         assert_eq!(peers[0].log().len(), 6);
         assert_eq!(observe(&peers[0]), observe(&peers[1]));
         assert_eq!(observe(&peers[0]), observe(&peers[2]));
@@ -264,7 +290,11 @@ mod tests {
             .author(Timestamp(2_000), TestPayload::Chat("hello".into()))
             .unwrap();
         pump(&mut peers, &links, Timestamp(2_000));
-        assert!(peers[0].log().contains(&live.id()));
+        assert!(!peers[0].log().contains(&live.id()));
+        let t = settle(&mut peers, &links, 2_000, |p| {
+            p[0].log().contains(&live.id())
+        });
+        assert!(t >= 2_000 + RELAY_AFTER_MICROS, "relayed early at {t}");
         // Ephemeral values go to every connection and are not stored.
         peers[1].send_ephemeral(4, b"pose").unwrap();
         let mut n_ephemeral = 0;
@@ -277,5 +307,87 @@ mod tests {
         }
         assert_eq!(n_ephemeral, 2);
         assert_eq!(peers[0].log().len(), 7);
+    }
+
+    /// Every pair of `n` peers connected; peer `i` reaches peer `j` on `ConnId(j)`.
+    fn full_mesh(n: u8, now: Timestamp) -> (Vec<TPeer>, Vec<(usize, ConnId, usize, ConnId)>) {
+        let mut peers: Vec<TPeer> = (1..=n)
+            .map(|i| Peer::new(Keypair::from_seed([i; 32]), [5; 16], Log::default()))
+            .collect();
+        let mut links = Vec::new();
+        for a in 0..peers.len() {
+            for b in a + 1..peers.len() {
+                peers[a].connect(now, ConnId(b as u64)).unwrap();
+                peers[b].connect(now, ConnId(a as u64)).unwrap();
+                links.push((a, ConnId(b as u64), b, ConnId(a as u64)));
+            }
+        }
+        (peers, links)
+    }
+
+    fn n_ops_sent(peers: &[TPeer]) -> u64 {
+        peers
+            .iter()
+            .flat_map(|p| p.connections().map(|(_, s)| s.stats().n_ops_out))
+            .sum()
+    }
+
+    #[test]
+    fn a_full_mesh_sends_each_op_over_each_link_once() {
+        let (mut peers, links) = full_mesh(5, Timestamp(0));
+        pump(&mut peers, &links, Timestamp(0));
+        let mut t = 0;
+        for round in 0..6 {
+            for p in peers.iter_mut() {
+                for k in 0..3 {
+                    p.author(Timestamp(t), TestPayload::Chat(format!("{round} {k}")))
+                        .unwrap();
+                }
+            }
+            // Three relay delays of ticks: every relay snapshot matures meanwhile.
+            for _ in 0..3 * RELAY_AFTER_MICROS / 100_000 {
+                t += 100_000;
+                for p in peers.iter_mut() {
+                    p.handle_timeout(Timestamp(t));
+                }
+                pump(&mut peers, &links, Timestamp(t));
+            }
+        }
+        let n_ops = 5 * 6 * 3;
+        assert!(peers.iter().all(|p| p.log().len() == n_ops));
+        // Authors reach everyone directly and haves arrive before relays mature, so nobody
+        // relays: each op went over each of the 4 links from its author once.
+        assert_eq!(n_ops_sent(&peers), n_ops as u64 * 4);
+    }
+
+    #[test]
+    fn a_silent_remote_gets_a_backed_off_trickle_and_a_prompt_resend_when_it_speaks() {
+        let (mut peers, links) = full_mesh(2, Timestamp(0));
+        pump(&mut peers, &links, Timestamp(0));
+        peers[0]
+            .author(Timestamp(0), TestPayload::Chat("into the void".into()))
+            .unwrap();
+        // Peer 1 hears nothing and says nothing for two minutes.
+        let mut n_sent = 0;
+        let mut t = 0;
+        while t < 120_000_000 {
+            t += 100_000;
+            peers[0].handle_timeout(Timestamp(t));
+            while peers[0].poll_transmit(Timestamp(t)).is_some() {
+                n_sent += 1;
+            }
+        }
+        // One send, then resends after 1, 2, 4, 8, 16, 32 and 32 s, plus one have.
+        assert!(n_sent <= 10, "{n_sent} messages to a silent remote");
+        assert!(n_sent >= 7, "{n_sent}: no resends");
+        assert_eq!(peers[1].log().len(), 0);
+        // Peer 1 speaks (its periodic have after authoring): peer 0 resends within the base
+        // interval, not after the backed-off 32 s.
+        peers[1]
+            .author(Timestamp(t), TestPayload::Chat("back".into()))
+            .unwrap();
+        let start = t;
+        let done = settle(&mut peers, &links, t, |p| p[1].log().len() == 2);
+        assert!(done - start <= 2 * RESEND_AFTER_MICROS, "{}", done - start);
     }
 }

@@ -40,7 +40,9 @@ pub enum Message {
         /// True if the sender has already received the receiver's hello.
         hello_seen: bool,
     },
-    /// What the sender holds, so the receiver sends only what it lacks.
+    /// What the sender holds, so the receiver sends only what it lacks: all of it in answer
+    /// to a hello, later only the entries that grew since the sender's previous have (the
+    /// receiver joins them, so a lost or stale have only costs a redundant send).
     Have(VersionVector),
     /// A batch of encoded ops, in the sender's linear order.
     Ops {
@@ -49,11 +51,11 @@ pub enum Message {
         /// Encoded ops ([`crate::op::Op::encoded`]), each decoded and checked on its own.
         ops: Vec<Vec<u8>>,
     },
-    /// Acknowledges a batch with everything the receiver now holds.
+    /// Acknowledges a batch with what the receiver now holds of the batch's authors.
     Ack {
         /// The batch acknowledged.
         batch_no: u64,
-        /// The receiver's version vector after the batch.
+        /// The receiver's version-vector entries for the batch's authors after the batch.
         have: VersionVector,
     },
     /// A latest-value-wins ephemeral value (pose, presence); never stored.

@@ -3,10 +3,19 @@
 //! Inputs are `handle_*(now, ..)`; outputs are [`SyncState::poll_transmit`],
 //! [`SyncState::poll_event`] and [`SyncState::poll_timeout`]. Drain every `poll_*` after each
 //! input. The state is rebuilt on every connection: the remote's version vector is learnt
-//! from its hello-time [`Message::Have`] and from acks, and anything not acknowledged within
-//! [`RESEND_AFTER_MICROS`] is sent again, so a lost or duplicated message can neither stall
-//! nor loop a sync.
+//! from its hello-time [`Message::Have`], from the changes it announces at most every
+//! [`HAVE_EVERY_MICROS`] and from acks, and anything not acknowledged is sent again after
+//! [`RESEND_AFTER_MICROS`], backing off to [`RESEND_AFTER_MAX_MICROS`] while the remote stays
+//! silent, so a lost or duplicated message can neither stall nor loop a sync.
+//!
+//! Traffic in a full mesh of n peers: a peer sends its own ops to every remote at once, but
+//! relays a third peer's ops only after holding them for [`RELAY_AFTER_MICROS`], and only
+//! those the remote still lacks by then (what it held when the connection opened goes out at
+//! once). Over healthy links the author's own send gets there first, so each op crosses each
+//! link about once instead of once per relaying peer; relays carry what partitions, losses
+//! and absent authors hold back.
 
+use std::cell::Cell;
 use std::collections::{BTreeMap, VecDeque};
 use std::marker::PhantomData;
 
@@ -25,8 +34,16 @@ use crate::time::Timestamp;
 pub const MAX_IN_FLIGHT_BATCHES: usize = 4;
 /// Most op bytes in one batch we send (well under [`MAX_MESSAGE_BYTES`]).
 pub const MAX_BATCH_BYTES: usize = 64 * 1024;
-/// Unacknowledged batches and unanswered hellos are sent again after this long (1 s).
+/// Unacknowledged batches and unanswered hellos are first sent again after this long (1 s).
 pub const RESEND_AFTER_MICROS: u64 = 1_000_000;
+/// The resend interval doubles while the remote stays silent, up to this (32 s), so a dead or
+/// hostile remote that never answers costs a bounded trickle.
+pub const RESEND_AFTER_MAX_MICROS: u64 = 32_000_000;
+/// A third peer's op is relayed to the remote only once this peer has held it this long (2 s):
+/// time for the author's direct send and for the remote's next have to arrive first.
+pub const RELAY_AFTER_MICROS: u64 = 2_000_000;
+/// A peer tells each remote what it has gained at most this often (1 s), as a delta.
+pub const HAVE_EVERY_MICROS: u64 = 1_000_000;
 /// Messages a remote may send per second on average before they are dropped.
 pub const MAX_MESSAGES_PER_SEC: u64 = 2_000;
 /// Messages a remote may send in a burst.
@@ -221,11 +238,30 @@ pub struct SyncState<P> {
     /// The remote has confirmed it saw our hello.
     hello_confirmed: bool,
     hello_sent_at: Option<Timestamp>,
+    /// Current hello resend interval (doubles while unanswered).
+    hello_resend_micros: u64,
     /// What the remote is known to hold (join of its Have and Acks).
     remote_vv: VersionVector,
     /// What we sent on this connection (at least `remote_vv`).
     sent_vv: VersionVector,
     in_flight: BTreeMap<u64, Timestamp>,
+    /// Current batch resend interval (doubles on each resend without an ack in between).
+    resend_micros: u64,
+    /// Third peers' ops up to here may be relayed (held for at least [`RELAY_AFTER_MICROS`]).
+    relay_vv: VersionVector,
+    /// What this peer held at `relay_next_at`; it joins `relay_vv` [`RELAY_AFTER_MICROS`] later.
+    relay_next_vv: VersionVector,
+    relay_next_at: Timestamp,
+    /// `relay_vv.n_ops()`, kept so that polling is cheap.
+    relay_n_ops: u64,
+    /// Whether an op may go out, for the log length it was computed at; cleared whenever
+    /// `sent_vv` or `relay_vv` change. Polling asks on every event of every connection, and a
+    /// scan of the version vectors there dominated a 32-peer simulation.
+    sendable_cache: Cell<Option<(usize, bool)>>,
+    /// What this peer last told the remote it holds, and how many ops that was.
+    have_sent_vv: VersionVector,
+    have_sent_len: usize,
+    have_sent_at: Timestamp,
     next_batch_no: u64,
     up_to_date: bool,
     control: VecDeque<Message>,
@@ -250,9 +286,19 @@ impl<P: Payload> SyncState<P> {
             closed: false,
             hello_confirmed: false,
             hello_sent_at: None,
+            hello_resend_micros: RESEND_AFTER_MICROS,
             remote_vv: VersionVector::new(),
             sent_vv: VersionVector::new(),
             in_flight: BTreeMap::new(),
+            resend_micros: RESEND_AFTER_MICROS,
+            relay_vv: VersionVector::new(),
+            relay_next_vv: VersionVector::new(),
+            relay_next_at: now,
+            relay_n_ops: 0,
+            sendable_cache: Cell::new(None),
+            have_sent_vv: VersionVector::new(),
+            have_sent_len: 0,
+            have_sent_at: now,
             next_batch_no: 1,
             up_to_date: false,
             control: VecDeque::new(),
@@ -360,6 +406,20 @@ impl<P: Payload> SyncState<P> {
             _ if self.remote.is_none() => {
                 self.reject(RejectKind::BeforeHello, "data before hello".into());
             }
+            message => {
+                // The remote speaks, maybe again after a partition healed: what it has not
+                // acknowledged goes out again on the base interval, not a backed-off one.
+                self.resend_micros = RESEND_AFTER_MICROS;
+                self.handle_message(now, message, log);
+            }
+        }
+    }
+
+    /// Handles a decoded message other than a hello, once the remote's hello has arrived.
+    fn handle_message(&mut self, now: Timestamp, message: Message, log: &mut Log<P>) {
+        match message {
+            // Hellos are handled by `handle_input` before the remote is known.
+            Message::Hello { .. } => {}
             Message::Have(vv) => {
                 self.hello_confirmed = true;
                 self.learn_remote(&vv, log);
@@ -370,7 +430,9 @@ impl<P: Payload> SyncState<P> {
             }
             Message::Ack { batch_no, have } => {
                 self.hello_confirmed = true;
-                self.in_flight.remove(&batch_no);
+                if self.in_flight.remove(&batch_no).is_some() {
+                    self.resend_micros = RESEND_AFTER_MICROS;
+                }
                 self.learn_remote(&have, log);
             }
             Message::Ephemeral {
@@ -426,13 +488,23 @@ impl<P: Payload> SyncState<P> {
             None => {
                 self.remote = Some(peer);
                 self.events.push_back(Event::Connected { peer });
+                // What we hold now may go out at once: a peer (re)joining catches up without
+                // waiting, at the price of hearing a backlog from each peer it connects to.
+                self.relay_vv = log.version_vector().clone();
+                self.relay_n_ops = self.relay_vv.n_ops();
+                self.sendable_cache.set(None);
+                self.relay_next_vv = log.version_vector().clone();
+                self.relay_next_at = now;
             }
         }
-        // Every hello is answered with a Have: it tells the remote what we hold and confirms
-        // we saw its hello (so it stops resending). A Have is never answered, so this cannot
-        // loop.
+        // Every hello is answered with a full Have: it tells the remote what we hold and
+        // confirms we saw its hello (so it stops resending). A Have is never answered, so this
+        // cannot loop.
         self.control
             .push_back(Message::Have(log.version_vector().clone()));
+        self.have_sent_vv = log.version_vector().clone();
+        self.have_sent_len = log.len();
+        self.have_sent_at = now;
         self.hello_confirmed |= hello_seen;
         if !hello_seen {
             // The remote has not seen our hello yet: answer once (its resend timer repeats).
@@ -443,6 +515,7 @@ impl<P: Payload> SyncState<P> {
     fn learn_remote(&mut self, vv: &VersionVector, log: &Log<P>) {
         self.remote_vv.join(vv);
         self.sent_vv.join(vv);
+        self.sendable_cache.set(None);
         self.update_up_to_date(log);
     }
 
@@ -455,18 +528,27 @@ impl<P: Payload> SyncState<P> {
     }
 
     fn on_ops(&mut self, now: Timestamp, batch_no: u64, ops: Vec<Vec<u8>>, log: &mut Log<P>) {
+        // The ack names only the batch's authors: what the sender needs to move on, in
+        // bytes that do not grow with the number of peers.
+        let mut authors = Vec::new();
         for bytes in ops {
             self.stats.n_ops_in += 1;
-            self.on_op(now, &bytes, log);
+            if let Some(author) = self.on_op(now, &bytes, log)
+                && !authors.contains(&author)
+            {
+                authors.push(author);
+            }
         }
-        self.control.push_back(Message::Ack {
-            batch_no,
-            have: log.version_vector().clone(),
-        });
+        let mut have = VersionVector::new();
+        for author in authors {
+            have.raise(author, log.version_vector().get(&author));
+        }
+        self.control.push_back(Message::Ack { batch_no, have });
         self.update_up_to_date(log);
     }
 
-    fn on_op(&mut self, now: Timestamp, bytes: &[u8], log: &mut Log<P>) {
+    /// Handles one received op; returns its author if it decoded.
+    fn on_op(&mut self, now: Timestamp, bytes: &[u8], log: &mut Log<P>) -> Option<PeerId> {
         let op = match Op::<P>::decode(bytes) {
             Ok(op) => op,
             Err(e) => {
@@ -474,21 +556,27 @@ impl<P: Payload> SyncState<P> {
                     crate::codec::DecodeError::UnknownVersion { .. } => RejectKind::UnknownVersion,
                     _ => RejectKind::MalformedOp,
                 };
-                return self.reject(kind, e.to_string());
+                self.reject(kind, e.to_string());
+                return None;
             }
         };
+        let author = op.author();
         // Known ops skip the (costly) signature check.
         if log.contains(&op.id()) {
-            return;
+            return Some(author);
         }
         let op = match op.into_verified() {
             Ok(op) => op,
-            Err(e) => return self.reject(RejectKind::BadSignature, e.to_string()),
+            Err(e) => {
+                self.reject(RejectKind::BadSignature, e.to_string());
+                return None;
+            }
         };
         match log.insert(now, op, self.config.origin) {
             Ok(insertion) => self.on_insertion(insertion),
             Err(e) => self.reject_refused(&e),
         }
+        Some(author)
     }
 
     fn reject_refused(&mut self, e: &InsertError) {
@@ -529,18 +617,62 @@ impl<P: Payload> SyncState<P> {
                 );
             }
         }
-        let hello_due = self
-            .hello_sent_at
-            .map(|t| t.saturating_add_micros(RESEND_AFTER_MICROS));
-        if (self.remote.is_none() || !self.hello_confirmed) && hello_due.is_some_and(|d| d <= now) {
+        if self.hello_due().is_some_and(|d| d <= now) {
             self.queue_hello(now);
+            self.hello_resend_micros = (self.hello_resend_micros * 2).min(RESEND_AFTER_MAX_MICROS);
         }
-        let oldest = self.in_flight.values().min().copied();
-        if oldest.is_some_and(|t| t.saturating_add_micros(RESEND_AFTER_MICROS) <= now) {
+        if self.resend_due().is_some_and(|d| d <= now) {
             // Rewind to what the remote acknowledged; everything after it goes out again.
             self.in_flight.clear();
             self.sent_vv = self.remote_vv.clone();
+            self.sendable_cache.set(None);
+            self.resend_micros = (self.resend_micros * 2).min(RESEND_AFTER_MAX_MICROS);
         }
+        if self.relay_due(log).is_some_and(|d| d <= now) {
+            self.relay_vv.join(&self.relay_next_vv);
+            self.relay_n_ops = self.relay_vv.n_ops();
+            self.sendable_cache.set(None);
+            self.relay_next_vv = log.version_vector().clone();
+            self.relay_next_at = now;
+        }
+        if self.have_due(log).is_some_and(|d| d <= now) {
+            let mut delta = VersionVector::new();
+            for (author, seq) in log.version_vector().iter() {
+                // The remote knows what it holds of its own.
+                if Some(*author) != self.remote && self.have_sent_vv.get(author) < *seq {
+                    delta.raise(*author, *seq);
+                }
+            }
+            self.control.push_back(Message::Have(delta));
+            self.have_sent_vv = log.version_vector().clone();
+            self.have_sent_len = log.len();
+            self.have_sent_at = now;
+        }
+    }
+
+    fn hello_due(&self) -> Option<Timestamp> {
+        self.hello_sent_at
+            .filter(|_| self.remote.is_none() || !self.hello_confirmed)
+            .map(|t| t.saturating_add_micros(self.hello_resend_micros))
+    }
+
+    fn resend_due(&self) -> Option<Timestamp> {
+        self.in_flight
+            .values()
+            .min()
+            .map(|t| t.saturating_add_micros(self.resend_micros))
+    }
+
+    /// When the relay snapshot should move on: only while something is not yet relayable.
+    fn relay_due(&self, log: &Log<P>) -> Option<Timestamp> {
+        (self.remote.is_some() && self.relay_n_ops < log.len() as u64)
+            .then(|| self.relay_next_at.saturating_add_micros(RELAY_AFTER_MICROS))
+    }
+
+    /// When to announce what this peer gained since its last have, if it gained anything.
+    fn have_due(&self, log: &Log<P>) -> Option<Timestamp> {
+        (self.remote.is_some() && self.hello_confirmed && self.have_sent_len < log.len())
+            .then(|| self.have_sent_at.saturating_add_micros(HAVE_EVERY_MICROS))
     }
 
     /// When [`SyncState::handle_timeout`] should next be called.
@@ -548,29 +680,26 @@ impl<P: Payload> SyncState<P> {
         if self.closed {
             return None;
         }
-        let hello = self
-            .hello_sent_at
-            .filter(|_| self.remote.is_none() || !self.hello_confirmed)
-            .map(|t| t.saturating_add_micros(RESEND_AFTER_MICROS));
-        let resend = self
-            .in_flight
-            .values()
-            .min()
-            .map(|t| t.saturating_add_micros(RESEND_AFTER_MICROS));
         let pace =
             (self.remote.is_some() && self.data_waiting(log) && !self.send_bucket.has_token())
                 .then(|| self.send_bucket.ready_at());
-        [hello, resend, pace, log.next_pending_expiry()]
-            .into_iter()
-            .flatten()
-            .min()
+        [
+            self.hello_due(),
+            self.resend_due(),
+            self.relay_due(log),
+            self.have_due(log),
+            pace,
+            log.next_pending_expiry(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
     }
 
     /// True if ephemeral values or ops wait to be sent and the window has room.
     fn data_waiting(&self, log: &Log<P>) -> bool {
         !self.eph_out.is_empty()
-            || (self.in_flight.len() < MAX_IN_FLIGHT_BATCHES
-                && !self.sent_vv.dominates(log.version_vector()))
+            || (self.in_flight.len() < MAX_IN_FLIGHT_BATCHES && self.sendable(log))
     }
 
     /// The next event, if any.
@@ -630,13 +759,48 @@ impl<P: Payload> SyncState<P> {
         Some(Message::Ops { batch_no, ops })
     }
 
+    /// How far `author`'s ops may go out on this connection: all of our own, a third peer's
+    /// up to what has been held for [`RELAY_AFTER_MICROS`].
+    fn send_limit(&self, author: &PeerId, held: u64) -> u64 {
+        if *author == self.config.local {
+            held
+        } else {
+            held.min(self.relay_vv.get(author))
+        }
+    }
+
+    /// True if some op may go out that the remote is not known to hold or was not sent.
+    fn sendable(&self, log: &Log<P>) -> bool {
+        let sendable = match self.sendable_cache.get() {
+            Some((len, sendable)) if len == log.len() => return sendable,
+            // Growth of the log alone cannot take back what may go out, and of the ops it
+            // added only our own may go out before the relay snapshot moves (which clears
+            // the cache).
+            Some((_, true)) => true,
+            Some((_, false)) => {
+                let me = &self.config.local;
+                self.sent_vv.get(me) < log.version_vector().get(me)
+            }
+            None => log
+                .version_vector()
+                .iter()
+                .any(|(author, seq)| self.sent_vv.get(author) < self.send_limit(author, *seq)),
+        };
+        self.sendable_cache.set(Some((log.len(), sendable)));
+        sendable
+    }
+
     /// Ops the remote lacks and we have not sent, in linear order (so causally), bounded.
     fn next_batch(&mut self, log: &Log<P>) -> Vec<Vec<u8>> {
+        if !self.sendable(log) {
+            return Vec::new();
+        }
+        self.sendable_cache.set(None);
         // The first unsent op of each author bounds where the scan starts.
         let start = log
             .version_vector()
             .iter()
-            .filter(|(author, seq)| self.sent_vv.get(author) < **seq)
+            .filter(|(author, seq)| self.sent_vv.get(author) < self.send_limit(author, **seq))
             .filter_map(|(author, _)| log.by_seq(author, self.sent_vv.get(author) + 1))
             .map(Op::lamport)
             .min();
@@ -646,7 +810,10 @@ impl<P: Payload> SyncState<P> {
         let mut batch = Vec::new();
         let mut n_bytes = 0;
         for op in log.ops_from_lamport(start) {
-            if op.seq() <= self.sent_vv.get(&op.author()) {
+            let author = op.author();
+            if op.seq() <= self.sent_vv.get(&author)
+                || op.seq() > self.send_limit(&author, op.seq())
+            {
                 continue;
             }
             if batch.len() == MAX_BATCH_OPS || n_bytes + op.encoded().len() > MAX_BATCH_BYTES {
