@@ -309,8 +309,11 @@ mod tests {
         assert_eq!(peers[0].log().len(), 7);
     }
 
+    /// A link: peer, its connection id, the other peer, its connection id.
+    type Link = (usize, ConnId, usize, ConnId);
+
     /// Every pair of `n` peers connected; peer `i` reaches peer `j` on `ConnId(j)`.
-    fn full_mesh(n: u8, now: Timestamp) -> (Vec<TPeer>, Vec<(usize, ConnId, usize, ConnId)>) {
+    fn full_mesh(n: u8, now: Timestamp) -> (Vec<TPeer>, Vec<Link>) {
         let mut peers: Vec<TPeer> = (1..=n)
             .map(|i| Peer::new(Keypair::from_seed([i; 32]), [5; 16], Log::default()))
             .collect();
