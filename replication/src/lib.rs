@@ -63,7 +63,7 @@
 //!   `[payload len ≤ 16 KiB][payload][ed25519 signature 64]`, deps sorted and distinct; the
 //!   signature covers `"sculpt/op/v1"` + everything before it; the id is blake3 of all of it.
 //! - Sync message: `[1][tag]` then Hello `[protocol][session 16][peer 32][hello_seen]`,
-//!   Have `[vv]`, Ops `[batch_no][n ≤ 64][op bytes]*`, Ack `[batch_no][vv]`,
+//!   Have `[vv]`, Want `[vv]`, Ops `[batch_no][n ≤ 64][op bytes]*`, Ack `[batch_no][vv]`,
 //!   Ephemeral `[channel][seq][value ≤ 1 KiB]`; a vv is `[n][author 32][seq]*` sorted.
 //! - Store file: `SCULPTOPS` `[1]`, then records `[u32 LE len][blake3 of len+body, 16][body]`.
 //! - Snapshot: see [`snapshot`] (`SCULPTSNAP` `[1]` ... `[blake3 32]`).

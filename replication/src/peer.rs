@@ -1,16 +1,30 @@
 //! One peer: its key, its log and one [`SyncState`] per connection, behind a single sans-IO
 //! surface that routes inputs and drains outputs (what the app and the simulator drive).
+//!
+//! Across connections the peer decides whom to ask for what it lacks: when some remote's
+//! version vector shows ops of an author this peer does not hold, it sends one
+//! [`Message::Want`](crate::sync::message::Message::Want) to one holder (right away if the
+//! author is not connected, after [`RELAY_AFTER_MICROS`] if it is and so should deliver them
+//! itself), and asks the next holder only if nothing arrived for [`WANT_RETRY_MICROS`].
 
 use std::collections::{BTreeMap, VecDeque};
 
+use crate::causal::VersionVector;
 use crate::identity::{Keypair, PeerId};
 use crate::log::{AuthorError, Insertion, Log};
 use crate::op::VerifiedOp;
 use crate::payload::Payload;
 use crate::pending::Origin;
 use crate::sync::message::SessionId;
-use crate::sync::state::{EphemeralError, Event, SyncConfig, SyncState};
+use crate::sync::state::{
+    EphemeralError, Event, RELAY_AFTER_MICROS, RESEND_AFTER_MICROS, SyncConfig, SyncState,
+};
 use crate::time::Timestamp;
+
+/// A want that brought nothing for this long (2 s) goes to the next holder.
+pub const WANT_RETRY_MICROS: u64 = 2 * RESEND_AFTER_MICROS;
+/// Wants are reconsidered at most this often (100 ms) after something changed.
+pub const WANT_CHECK_MICROS: u64 = 100_000;
 
 /// Most simultaneous connections one peer keeps.
 pub const MAX_CONNECTIONS: usize = 64;
@@ -41,6 +55,23 @@ pub struct Peer<P> {
     log: Log<P>,
     connections: BTreeMap<ConnId, SyncState<P>>,
     events: VecDeque<(ConnId, Event)>,
+    /// Authors whose ops some remote holds and this peer lacks (at most one entry per author
+    /// named in a connection's version vector, so bounded by the connections' limits).
+    wants: BTreeMap<PeerId, WantState>,
+    /// Set by input; wants are reconsidered at `want_check_at` while set or while any is open.
+    wants_dirty: bool,
+    want_check_at: Timestamp,
+}
+
+/// What this peer asked for one author's ops.
+#[derive(Clone, Copy, Debug)]
+struct WantState {
+    /// When the lack was first seen.
+    since: Timestamp,
+    /// When, where and at what held seq it was last asked for, if it was.
+    asked: Option<(Timestamp, ConnId, u64)>,
+    /// How many holders were asked so far (picks the next).
+    n_asked: usize,
 }
 
 impl<P: Payload> Peer<P> {
@@ -52,6 +83,9 @@ impl<P: Payload> Peer<P> {
             log,
             connections: BTreeMap::new(),
             events: VecDeque::new(),
+            wants: BTreeMap::new(),
+            wants_dirty: false,
+            want_check_at: Timestamp(0),
         }
     }
 
@@ -112,6 +146,7 @@ impl<P: Payload> Peer<P> {
         if let Some(sync) = self.connections.get_mut(&conn) {
             sync.handle_input(now, bytes, &mut self.log);
             drain(conn, sync, &mut self.events);
+            self.wants_dirty = true;
         }
     }
 
@@ -121,6 +156,78 @@ impl<P: Payload> Peer<P> {
             if sync.poll_timeout(&self.log).is_some_and(|t| t <= now) {
                 sync.handle_timeout(now, &mut self.log);
                 drain(*conn, sync, &mut self.events);
+            }
+        }
+        if self.want_due().is_some_and(|t| t <= now) {
+            self.update_wants(now);
+        }
+    }
+
+    fn want_due(&self) -> Option<Timestamp> {
+        (self.wants_dirty || !self.wants.is_empty()).then_some(self.want_check_at)
+    }
+
+    /// Asks one holder for each author's ops this peer lacks (see the module docs).
+    fn update_wants(&mut self, now: Timestamp) {
+        self.wants_dirty = false;
+        self.want_check_at = now.saturating_add_micros(WANT_CHECK_MICROS);
+        let held = self.log.version_vector();
+        // The most any remote holds of each author this peer lacks.
+        let mut lacking = VersionVector::new();
+        let mut direct = Vec::new();
+        for sync in self.connections.values() {
+            if let Some(remote) = sync.remote() {
+                direct.push(remote);
+            }
+            for (author, seq) in sync.remote_version_vector().iter() {
+                if *seq > held.get(author) {
+                    lacking.raise(*author, *seq);
+                }
+            }
+        }
+        self.wants.retain(|author, _| lacking.get(author) > 0);
+        let mut asks: BTreeMap<ConnId, VersionVector> = BTreeMap::new();
+        for (author, _) in lacking.iter() {
+            let have = held.get(author);
+            let want = self.wants.entry(*author).or_insert(WantState {
+                since: now,
+                asked: None,
+                n_asked: 0,
+            });
+            let wait = if direct.contains(author) {
+                RELAY_AFTER_MICROS
+            } else {
+                0
+            };
+            if now < want.since.saturating_add_micros(wait) {
+                continue;
+            }
+            if let Some((at, conn, had)) = want.asked {
+                if have > had {
+                    // The holder is delivering: give it more time.
+                    want.asked = Some((now, conn, have));
+                    continue;
+                }
+                if now < at.saturating_add_micros(WANT_RETRY_MICROS) {
+                    continue;
+                }
+            }
+            let holders: Vec<(ConnId, u64)> = self
+                .connections
+                .iter()
+                .map(|(c, s)| (*c, s.remote_version_vector().get(author)))
+                .filter(|(_, seq)| *seq > have)
+                .collect();
+            let Some(&(conn, seq)) = holders.get(want.n_asked % holders.len().max(1)) else {
+                continue;
+            };
+            want.asked = Some((now, conn, have));
+            want.n_asked += 1;
+            asks.entry(conn).or_default().raise(*author, seq);
+        }
+        for (conn, vv) in asks {
+            if let Some(sync) = self.connections.get_mut(&conn) {
+                sync.want(vv);
             }
         }
     }
@@ -151,6 +258,7 @@ impl<P: Payload> Peer<P> {
         self.connections
             .values()
             .filter_map(|s| s.poll_timeout(&self.log))
+            .chain(self.want_due())
             .min()
     }
 }
@@ -169,7 +277,7 @@ fn drain<P: Payload>(
 mod tests {
     use super::*;
     use crate::payload::test_payload::TestPayload;
-    use crate::sync::state::{RELAY_AFTER_MICROS, RESEND_AFTER_MICROS};
+    use crate::sync::state::HAVE_EVERY_MICROS;
 
     type TPeer = Peer<TestPayload>;
 
@@ -265,11 +373,13 @@ mod tests {
             Err(ConnectError::InUse(ConnId(2)))
         );
         pump(&mut peers, &links, now);
-        // A and C hear each other's offline ops through B once B has held them for the relay
-        // delay.
+        // A and C hear each other's offline ops through B as soon as they ask: B's haves show
+        // them, and their author is not connected to them.
         assert_eq!(peers[0].log().len(), 4);
-        let t = settle(&mut peers, &links, now.0, |p| p[0].log().len() == 6);
-        assert!(t >= now.0 + RELAY_AFTER_MICROS, "relayed early at {t}");
+        let t = settle(&mut peers, &links, now.0, |p| {
+            p.iter().all(|p| p.log().len() == 6)
+        });
+        assert!(t <= now.0 + 2 * HAVE_EVERY_MICROS, "relayed late at {t}");
         assert_eq!(peers[0].log().len(), 6);
         assert_eq!(observe(&peers[0]), observe(&peers[1]));
         assert_eq!(observe(&peers[0]), observe(&peers[2]));
@@ -286,21 +396,20 @@ mod tests {
             .sum();
         assert!(n_rejected >= 2, "{n_rejected}");
         // Live: a new op by C reaches A through B.
+        let t0 = t;
         let (live, _) = peers[2]
-            .author(Timestamp(2_000), TestPayload::Chat("hello".into()))
+            .author(Timestamp(t0), TestPayload::Chat("hello".into()))
             .unwrap();
-        pump(&mut peers, &links, Timestamp(2_000));
+        pump(&mut peers, &links, Timestamp(t0));
         assert!(!peers[0].log().contains(&live.id()));
-        let t = settle(&mut peers, &links, 2_000, |p| {
-            p[0].log().contains(&live.id())
-        });
-        assert!(t >= 2_000 + RELAY_AFTER_MICROS, "relayed early at {t}");
+        let t = settle(&mut peers, &links, t0, |p| p[0].log().contains(&live.id()));
+        assert!(t <= t0 + 2 * HAVE_EVERY_MICROS, "relayed late at {t}");
         // Ephemeral values go to every connection and are not stored.
         peers[1].send_ephemeral(4, b"pose").unwrap();
         let mut n_ephemeral = 0;
-        while let Some((conn, bytes)) = peers[1].poll_transmit(Timestamp(3_000)) {
+        while let Some((conn, bytes)) = peers[1].poll_transmit(Timestamp(t)) {
             let to = if conn == ConnId(1) { 0 } else { 2 };
-            peers[to].handle_input(Timestamp(3_000), ConnId(1), &bytes);
+            peers[to].handle_input(Timestamp(t), ConnId(1), &bytes);
             while let Some((_, e)) = peers[to].poll_event() {
                 n_ephemeral += usize::from(matches!(e, Event::Ephemeral { channel: 4, .. }));
             }

@@ -20,6 +20,8 @@ struct Side {
     log: TLog,
     scene: TScene,
     sync: SyncState<TestPayload>,
+    /// What was last asked of the remote.
+    wanted: Option<crate::causal::VersionVector>,
 }
 
 impl Side {
@@ -31,6 +33,7 @@ impl Side {
         };
         Self {
             sync: SyncState::new(Timestamp(0), config),
+            wanted: None,
             log,
             scene,
         }
@@ -65,6 +68,16 @@ fn pump(a: &mut Side, b: &mut Side, now: &mut u64) {
         }
         a.drain();
         b.drain();
+        // A lone connection asks its remote for everything it lacks (a `Peer` would choose
+        // among its connections).
+        for side in [&mut *a, &mut *b] {
+            let lacking = side.sync.lacking(&side.log);
+            if !lacking.is_empty() && side.wanted.as_ref() != Some(&lacking) {
+                side.sync.want(lacking.clone());
+                side.wanted = Some(lacking);
+                moved = true;
+            }
+        }
         *now += 1000;
         let done = a.log.version_vector() == b.log.version_vector();
         if !moved && done {

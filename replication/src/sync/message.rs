@@ -13,7 +13,7 @@ use crate::op::MAX_OP_BYTES;
 /// Version byte that opens every sync message.
 pub const SYNC_WIRE_VERSION: u8 = 1;
 /// Protocol version announced in [`Message::Hello`]; peers with another version disconnect.
-pub const PROTOCOL_VERSION: u64 = 1;
+pub const PROTOCOL_VERSION: u64 = 2;
 /// Length of a session id.
 pub const SESSION_ID_BYTES: usize = 16;
 /// Most ops in one [`Message::Ops`] batch.
@@ -58,6 +58,9 @@ pub enum Message {
         /// The receiver's version-vector entries for the batch's authors after the batch.
         have: VersionVector,
     },
+    /// Asks the receiver to relay third peers' ops up to these entries (the sender lacks them
+    /// and chose this receiver among those whose haves show them).
+    Want(VersionVector),
     /// A latest-value-wins ephemeral value (pose, presence); never stored.
     Ephemeral {
         /// The stream.
@@ -74,6 +77,7 @@ const TAG_HAVE: u8 = 2;
 const TAG_OPS: u8 = 3;
 const TAG_ACK: u8 = 4;
 const TAG_EPHEMERAL: u8 = 5;
+const TAG_WANT: u8 = 6;
 
 impl Message {
     /// The encoded message.
@@ -108,6 +112,10 @@ impl Message {
                 out.push(TAG_ACK);
                 put_varint(&mut out, *batch_no);
                 put_vv(&mut out, have);
+            }
+            Self::Want(vv) => {
+                out.push(TAG_WANT);
+                put_vv(&mut out, vv);
             }
             Self::Ephemeral {
                 channel,
@@ -164,6 +172,7 @@ impl Message {
                 }
             }
             TAG_HAVE => Self::Have(read_vv(&mut r)?),
+            TAG_WANT => Self::Want(read_vv(&mut r)?),
             TAG_OPS => {
                 let batch_no = r.varint()?;
                 let n_ops = r.bounded("batch op count", MAX_BATCH_OPS as u64)?;
@@ -265,6 +274,7 @@ mod tests {
                     }
                 }),
             vv.clone().prop_map(Message::Have),
+            vv.clone().prop_map(Message::Want),
             (
                 any::<u64>(),
                 proptest::collection::vec(proptest::collection::vec(any::<u8>(), 0..40), 0..5)

@@ -9,10 +9,10 @@
 //! silent, so a lost or duplicated message can neither stall nor loop a sync.
 //!
 //! Traffic in a full mesh of n peers: a peer sends its own ops to every remote at once, but
-//! relays a third peer's ops only after holding them for [`RELAY_AFTER_MICROS`], and only
-//! those the remote still lacks by then (what it held when the connection opened goes out at
-//! once). Over healthy links the author's own send gets there first, so each op crosses each
-//! link about once instead of once per relaying peer; relays carry what partitions, losses
+//! relays a third peer's ops only when the remote asks with a [`Message::Want`]. The
+//! [`Peer`](crate::peer::Peer) asks one connection at a time for what it lacks, after
+//! [`RELAY_AFTER_MICROS`] when the author itself is connected, so each op crosses each link
+//! about once instead of once per relaying peer; wants carry what partitions, losses, crashes
 //! and absent authors hold back.
 
 use std::cell::Cell;
@@ -39,11 +39,14 @@ pub const RESEND_AFTER_MICROS: u64 = 1_000_000;
 /// The resend interval doubles while the remote stays silent, up to this (32 s), so a dead or
 /// hostile remote that never answers costs a bounded trickle.
 pub const RESEND_AFTER_MAX_MICROS: u64 = 32_000_000;
-/// A third peer's op is relayed to the remote only once this peer has held it this long (2 s):
-/// time for the author's direct send and for the remote's next have to arrive first.
+/// A peer asks a third peer for an author's ops only after lacking them this long (2 s) while
+/// the author itself is connected: time for the author's own send (and its resend) to arrive.
 pub const RELAY_AFTER_MICROS: u64 = 2_000_000;
 /// A peer tells each remote what it has gained at most this often (1 s), as a delta.
 pub const HAVE_EVERY_MICROS: u64 = 1_000_000;
+/// ... and everything it holds at most this often (10 s) while that changed, which repairs
+/// lost deltas.
+pub const HAVE_FULL_EVERY_MICROS: u64 = 10_000_000;
 /// Messages a remote may send per second on average before they are dropped.
 pub const MAX_MESSAGES_PER_SEC: u64 = 2_000;
 /// Messages a remote may send in a burst.
@@ -247,13 +250,8 @@ pub struct SyncState<P> {
     in_flight: BTreeMap<u64, Timestamp>,
     /// Current batch resend interval (doubles on each resend without an ack in between).
     resend_micros: u64,
-    /// Third peers' ops up to here may be relayed (held for at least [`RELAY_AFTER_MICROS`]).
+    /// Third peers' ops up to here may be relayed: what the remote asked for.
     relay_vv: VersionVector,
-    /// What this peer held at `relay_next_at`; it joins `relay_vv` [`RELAY_AFTER_MICROS`] later.
-    relay_next_vv: VersionVector,
-    relay_next_at: Timestamp,
-    /// `relay_vv.n_ops()`, kept so that polling is cheap.
-    relay_n_ops: u64,
     /// Whether an op may go out, for the log length it was computed at; cleared whenever
     /// `sent_vv` or `relay_vv` change. Polling asks on every event of every connection, and a
     /// scan of the version vectors there dominated a 32-peer simulation.
@@ -262,6 +260,9 @@ pub struct SyncState<P> {
     have_sent_vv: VersionVector,
     have_sent_len: usize,
     have_sent_at: Timestamp,
+    /// The log's length and the time at the last full have.
+    full_have_len: usize,
+    full_have_at: Timestamp,
     next_batch_no: u64,
     up_to_date: bool,
     control: VecDeque<Message>,
@@ -292,13 +293,12 @@ impl<P: Payload> SyncState<P> {
             in_flight: BTreeMap::new(),
             resend_micros: RESEND_AFTER_MICROS,
             relay_vv: VersionVector::new(),
-            relay_next_vv: VersionVector::new(),
-            relay_next_at: now,
-            relay_n_ops: 0,
             sendable_cache: Cell::new(None),
             have_sent_vv: VersionVector::new(),
             have_sent_len: 0,
             have_sent_at: now,
+            full_have_len: 0,
+            full_have_at: now,
             next_batch_no: 1,
             up_to_date: false,
             control: VecDeque::new(),
@@ -354,6 +354,25 @@ impl<P: Payload> SyncState<P> {
         self.closed = true;
         self.control.clear();
         self.events.push_back(Event::Closed(reason));
+    }
+
+    /// What the remote is known to hold that `log` lacks: what a lone connection would
+    /// [`SyncState::want`] ([`Peer`](crate::peer::Peer) chooses among its connections instead).
+    pub fn lacking(&self, log: &Log<P>) -> VersionVector {
+        let mut lacking = VersionVector::new();
+        for (author, seq) in self.remote_vv.iter() {
+            if *seq > log.version_vector().get(author) {
+                lacking.raise(*author, *seq);
+            }
+        }
+        lacking
+    }
+
+    /// Asks the remote to relay third peers' ops up to `vv`.
+    pub fn want(&mut self, vv: VersionVector) {
+        if self.remote.is_some() && !self.closed && !vv.is_empty() {
+            self.control.push_back(Message::Want(vv));
+        }
     }
 
     /// Queues the latest value on an ephemeral channel, replacing any unsent older value.
@@ -424,6 +443,18 @@ impl<P: Payload> SyncState<P> {
                 self.hello_confirmed = true;
                 self.learn_remote(&vv, log);
             }
+            Message::Want(vv) => {
+                self.hello_confirmed = true;
+                // Asking again means what was sent did not arrive: send it again.
+                for (author, seq) in vv.iter() {
+                    if self.sent_vv.get(author) >= *seq && self.remote_vv.get(author) < *seq {
+                        self.sent_vv = self.remote_vv.clone();
+                        break;
+                    }
+                }
+                self.relay_vv.join(&vv);
+                self.sendable_cache.set(None);
+            }
             Message::Ops { batch_no, ops } => {
                 self.hello_confirmed = true;
                 self.on_ops(now, batch_no, ops, log);
@@ -488,13 +519,6 @@ impl<P: Payload> SyncState<P> {
             None => {
                 self.remote = Some(peer);
                 self.events.push_back(Event::Connected { peer });
-                // What we hold now may go out at once: a peer (re)joining catches up without
-                // waiting, at the price of hearing a backlog from each peer it connects to.
-                self.relay_vv = log.version_vector().clone();
-                self.relay_n_ops = self.relay_vv.n_ops();
-                self.sendable_cache.set(None);
-                self.relay_next_vv = log.version_vector().clone();
-                self.relay_next_at = now;
             }
         }
         // Every hello is answered with a full Have: it tells the remote what we hold and
@@ -505,6 +529,8 @@ impl<P: Payload> SyncState<P> {
         self.have_sent_vv = log.version_vector().clone();
         self.have_sent_len = log.len();
         self.have_sent_at = now;
+        self.full_have_len = log.len();
+        self.full_have_at = now;
         self.hello_confirmed |= hello_seen;
         if !hello_seen {
             // The remote has not seen our hello yet: answer once (its resend timer repeats).
@@ -628,25 +654,26 @@ impl<P: Payload> SyncState<P> {
             self.sendable_cache.set(None);
             self.resend_micros = (self.resend_micros * 2).min(RESEND_AFTER_MAX_MICROS);
         }
-        if self.relay_due(log).is_some_and(|d| d <= now) {
-            self.relay_vv.join(&self.relay_next_vv);
-            self.relay_n_ops = self.relay_vv.n_ops();
-            self.sendable_cache.set(None);
-            self.relay_next_vv = log.version_vector().clone();
-            self.relay_next_at = now;
-        }
         if self.have_due(log).is_some_and(|d| d <= now) {
-            let mut delta = VersionVector::new();
+            let full = self
+                .full_have_at
+                .saturating_add_micros(HAVE_FULL_EVERY_MICROS)
+                <= now;
+            let mut have = VersionVector::new();
             for (author, seq) in log.version_vector().iter() {
-                // The remote knows what it holds of its own.
-                if Some(*author) != self.remote && self.have_sent_vv.get(author) < *seq {
-                    delta.raise(*author, *seq);
+                // The remote learns what it holds of its own from its acks.
+                if Some(*author) != self.remote && (full || self.have_sent_vv.get(author) < *seq) {
+                    have.raise(*author, *seq);
                 }
             }
-            self.control.push_back(Message::Have(delta));
+            self.control.push_back(Message::Have(have));
             self.have_sent_vv = log.version_vector().clone();
             self.have_sent_len = log.len();
             self.have_sent_at = now;
+            if full {
+                self.full_have_len = log.len();
+                self.full_have_at = now;
+            }
         }
     }
 
@@ -663,16 +690,20 @@ impl<P: Payload> SyncState<P> {
             .map(|t| t.saturating_add_micros(self.resend_micros))
     }
 
-    /// When the relay snapshot should move on: only while something is not yet relayable.
-    fn relay_due(&self, log: &Log<P>) -> Option<Timestamp> {
-        (self.remote.is_some() && self.relay_n_ops < log.len() as u64)
-            .then(|| self.relay_next_at.saturating_add_micros(RELAY_AFTER_MICROS))
-    }
-
     /// When to announce what this peer gained since its last have, if it gained anything.
     fn have_due(&self, log: &Log<P>) -> Option<Timestamp> {
-        (self.remote.is_some() && self.hello_confirmed && self.have_sent_len < log.len())
-            .then(|| self.have_sent_at.saturating_add_micros(HAVE_EVERY_MICROS))
+        if self.remote.is_none() || !self.hello_confirmed {
+            None
+        } else if self.have_sent_len < log.len() {
+            Some(self.have_sent_at.saturating_add_micros(HAVE_EVERY_MICROS))
+        } else if self.full_have_len < log.len() {
+            Some(
+                self.full_have_at
+                    .saturating_add_micros(HAVE_FULL_EVERY_MICROS),
+            )
+        } else {
+            None
+        }
     }
 
     /// When [`SyncState::handle_timeout`] should next be called.
@@ -686,7 +717,6 @@ impl<P: Payload> SyncState<P> {
         [
             self.hello_due(),
             self.resend_due(),
-            self.relay_due(log),
             self.have_due(log),
             pace,
             log.next_pending_expiry(),
@@ -760,7 +790,7 @@ impl<P: Payload> SyncState<P> {
     }
 
     /// How far `author`'s ops may go out on this connection: all of our own, a third peer's
-    /// up to what has been held for [`RELAY_AFTER_MICROS`].
+    /// up to what the remote asked for.
     fn send_limit(&self, author: &PeerId, held: u64) -> u64 {
         if *author == self.config.local {
             held
@@ -774,8 +804,8 @@ impl<P: Payload> SyncState<P> {
         let sendable = match self.sendable_cache.get() {
             Some((len, sendable)) if len == log.len() => return sendable,
             // Growth of the log alone cannot take back what may go out, and of the ops it
-            // added only our own may go out before the relay snapshot moves (which clears
-            // the cache).
+            // added only our own may go out before the remote asks again (which clears the
+            // cache).
             Some((_, true)) => true,
             Some((_, false)) => {
                 let me = &self.config.local;
