@@ -88,6 +88,9 @@ pub struct Pending<P> {
     entries: BTreeMap<OpId, Entry<P>>,
     waiters: BTreeMap<DepKey, BTreeSet<OpId>>,
     per_origin: BTreeMap<Origin, BTreeSet<(u64, OpId)>>,
+    /// Entries by arrival time, so expiry is found and done without a scan (every connection
+    /// asks on every poll).
+    by_arrival: BTreeSet<(Timestamp, u64, OpId)>,
     n_bytes: usize,
     next_arrival_no: u64,
     limits: PendingLimits,
@@ -99,6 +102,7 @@ impl<P> Default for Pending<P> {
             entries: BTreeMap::new(),
             waiters: BTreeMap::new(),
             per_origin: BTreeMap::new(),
+            by_arrival: BTreeSet::new(),
             n_bytes: 0,
             next_arrival_no: 0,
             limits: PendingLimits::default(),
@@ -166,6 +170,7 @@ impl<P: Clone> Pending<P> {
             .entry(origin)
             .or_default()
             .insert((arrival_no, id));
+        self.by_arrival.insert((now, arrival_no, id));
         self.n_bytes += op.encoded().len();
         self.entries.insert(
             id,
@@ -217,6 +222,8 @@ impl<P: Clone> Pending<P> {
                 self.per_origin.remove(&entry.origin);
             }
         }
+        self.by_arrival
+            .remove(&(entry.arrived, entry.arrival_no, *id));
         self.n_bytes -= entry.op.encoded().len();
         Some(entry)
     }
@@ -249,11 +256,12 @@ impl<P: Clone> Pending<P> {
 
     /// Evicts every op that has waited its time to live or longer at `now`.
     pub fn expire(&mut self, now: Timestamp) -> Vec<Evicted> {
+        let ttl = self.limits.ttl_micros;
         let old: Vec<OpId> = self
-            .entries
+            .by_arrival
             .iter()
-            .filter(|(_, e)| e.arrived.saturating_add_micros(self.limits.ttl_micros) <= now)
-            .map(|(id, _)| *id)
+            .take_while(|(arrived, _, _)| arrived.saturating_add_micros(ttl) <= now)
+            .map(|(_, _, id)| *id)
             .collect();
         old.iter()
             .filter_map(|id| {
@@ -269,10 +277,9 @@ impl<P: Clone> Pending<P> {
     /// When the oldest pending op expires, if any waits.
     pub fn next_expiry(&self) -> Option<Timestamp> {
         let ttl = self.limits.ttl_micros;
-        self.entries
-            .values()
-            .map(|e| e.arrived.saturating_add_micros(ttl))
-            .min()
+        self.by_arrival
+            .first()
+            .map(|(arrived, _, _)| arrived.saturating_add_micros(ttl))
     }
 }
 
