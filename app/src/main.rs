@@ -17,6 +17,8 @@ usage:
                                print every output of a function at a point
   sculpt slice <text|@file> [Z] [T]
                                draw the solid's cross-section at height Z as text
+  sculpt render <scene.wrl> --out <dir> [--size WxH] [--depth N] [--t SECS]
+                               picture an FVRML scene offscreen as PNG files, one per view
 ";
 
 /// The demo scene: the thesis's watermelon, a sphere with a wedge cut out.
@@ -88,6 +90,7 @@ fn run(args: &[String]) -> anyhow::Result<()> {
             print!("{}", slice(&function, number(2)?, number(3)?, 64, 32));
             Ok(())
         }
+        "render" => render_command(&args[1..]),
         "help" | "--help" | "-h" => {
             print!("{USAGE}");
             Ok(())
@@ -122,4 +125,107 @@ fn slice(function: &Function, z: f64, t: f64, width: usize, height: usize) -> St
         out.push('\n');
     }
     out
+}
+
+/// `sculpt render <scene.wrl> --out <dir> [--size WxH] [--depth N] [--t SECS]`: loads the
+/// FVRML file (local `Inline`s relative to it), pictures it from the default views with
+/// `render::snapshot` and writes `<dir>/<file stem>_<view>.png`, printing what it drew and
+/// wrote. Load errors are reported with their file, line and column.
+fn render_command(args: &[String]) -> anyhow::Result<()> {
+    use fdsl::fvrml::{self, LoadOptions, MAX_FILE_BYTES};
+    use render::snapshot::{SnapshotSettings, snapshot};
+    use std::path::{Path, PathBuf};
+
+    let mut settings = SnapshotSettings::default();
+    let (mut scene_path, mut out_dir) = (None, None);
+    let mut rest = args.iter();
+    while let Some(arg) = rest.next() {
+        let mut value = |name: &str| rest.next().with_context(|| format!("{name} needs a value"));
+        match arg.as_str() {
+            "--out" => out_dir = Some(PathBuf::from(value("--out")?)),
+            "--size" => {
+                let v = value("--size")?;
+                let (w, h) = v
+                    .split_once('x')
+                    .with_context(|| format!("--size `{v}` is not WxH"))?;
+                settings.width = w.parse().with_context(|| format!("bad width `{w}`"))?;
+                settings.height = h.parse().with_context(|| format!("bad height `{h}`"))?;
+            }
+            "--depth" => {
+                let v = value("--depth")?;
+                settings.depth = v.parse().with_context(|| format!("bad depth `{v}`"))?;
+            }
+            "--t" => {
+                let v = value("--t")?;
+                settings.t_secs = v.parse().with_context(|| format!("bad time `{v}`"))?;
+            }
+            flag if flag.starts_with("--") => bail!("unknown option `{flag}`\n\n{USAGE}"),
+            path if scene_path.is_none() => scene_path = Some(PathBuf::from(path)),
+            extra => bail!("unexpected argument `{extra}`\n\n{USAGE}"),
+        }
+    }
+    let scene_path = scene_path.context("give a scene file (.wrl)")?;
+    let out_dir = out_dir.context("give an output directory with --out")?;
+    let read = |path: &Path| -> Result<String, String> {
+        let len = std::fs::metadata(path)
+            .map_err(|e| format!("{}: {e}", path.display()))?
+            .len();
+        if len > MAX_FILE_BYTES as u64 {
+            return Err(format!(
+                "{}: {len} bytes, more than the limit of {MAX_FILE_BYTES}",
+                path.display()
+            ));
+        }
+        std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))
+    };
+    let text = read(&scene_path).map_err(anyhow::Error::msg)?;
+    let dir = scene_path.parent().unwrap_or(Path::new("")).to_path_buf();
+    let mut resolve = |inline: &str| read(&dir.join(inline));
+    let shown = scene_path.display().to_string();
+    let located = |issue: &fvrml::Issue| {
+        let file = issue.location.file.as_deref().unwrap_or(&shown);
+        let severity = if issue.is_error() { "error" } else { "warning" };
+        let (line, column) = (issue.location.line, issue.location.column);
+        format!("{file}:{line}:{column}: {severity}: {}", issue.message)
+    };
+    let loaded = fvrml::load(&text, &LoadOptions::default(), &mut resolve).map_err(|e| {
+        let errors: Vec<String> = e.errors().map(located).collect();
+        anyhow::anyhow!("{}\n{shown}: cannot load the scene", errors.join("\n"))
+    })?;
+    for w in &loaded.warnings {
+        eprintln!("{}", located(w));
+    }
+    let (images, objects) = snapshot(&loaded.scene, &settings)?;
+    for o in &objects {
+        let name = if o.name.is_empty() {
+            "(unnamed)"
+        } else {
+            &o.name
+        };
+        let drawn = format!("{} triangles, {} force arrows", o.n_triangles, o.n_arrows);
+        match &o.skipped {
+            Some(why) => println!("object {} {name}: {drawn}; not drawn: {why}", o.id.0),
+            None => println!("object {} {name}: {drawn}", o.id.0),
+        }
+    }
+    if objects.is_empty() {
+        println!("the scene has no objects to draw");
+    }
+    std::fs::create_dir_all(&out_dir)
+        .with_context(|| format!("cannot create {}", out_dir.display()))?;
+    let stem = scene_path
+        .file_stem()
+        .map_or("scene".into(), |s| s.to_string_lossy());
+    for (view, image) in images {
+        let path = out_dir.join(format!("{stem}_{view}.png"));
+        image.save_png(&path)?;
+        println!(
+            "wrote {} ({}x{}, view {view}, t = {:?} s)",
+            path.display(),
+            image.width,
+            image.height,
+            settings.t_secs
+        );
+    }
+    Ok(())
 }

@@ -17,14 +17,18 @@ use haptic::force::zone::HapticZone;
 use haptic::force::{ForceParams, Region, Rig};
 use haptic::servo::Servo;
 use haptic::shapes::{FdslShapeError, fdsl_watermelon};
+use plot::font::{draw_text, text_width};
+use plot::image::RgbaImage;
+use plot::series::{LinePlot, Series};
 use tiny_skia::{
-    Color, LineCap, LineJoin, Paint, PathBuilder, Pixmap, Rect, Stroke, StrokeDash, Transform,
+    Color, IntSize, LineJoin, Mask, Paint, PathBuilder, Pixmap, PixmapPaint, Rect, Stroke,
+    StrokeDash, Transform,
 };
 
 const WATERMELON: &str = include_str!("../../tests/data/models/watermelon.fdsl");
 const DT_SECS: f64 = 0.001;
-const WIDTH: u32 = 1400;
-const HEIGHT: u32 = 820;
+const WIDTH: u32 = 1100;
+const HEIGHT: u32 = 640;
 
 /// One servo tick of the trace.
 #[derive(Clone, Copy, Debug)]
@@ -56,9 +60,12 @@ pub enum TraceError {
     /// The canvas could not be made.
     #[error("cannot make a {WIDTH}x{HEIGHT} canvas")]
     Canvas,
+    /// The line plot could not be drawn.
+    #[error("plot: {0}")]
+    Plot(#[from] plot::PlotError),
     /// Writing the PNG failed.
     #[error("writing the PNG: {0}")]
-    Png(String),
+    Png(#[from] plot::image::PngError),
 }
 
 /// The hand's script in world units: down through the rind, across the flesh, back out.
@@ -129,139 +136,13 @@ pub fn phases(trace: &[TraceSample]) -> Vec<(usize, Option<u64>, Region, usize)>
 }
 
 // ---- Plotting -------------------------------------------------------------------------
-
-/// Strokes of a glyph on a 4 x 6 grid (y down): polylines separated by `|`, points `xy`.
-fn glyph(c: char) -> &'static str {
-    match c.to_ascii_uppercase() {
-        '0' => "00 40 46 06 00",
-        '1' => "11 20 26|06 46",
-        '2' => "00 40 43 03 06 46",
-        '3' => "00 40 46 06|03 43",
-        '4' => "00 03 43|40 46",
-        '5' => "40 00 03 43 46 06",
-        '6' => "40 00 06 46 43 03",
-        '7' => "00 40 26",
-        '8' => "00 40 46 06 00|03 43",
-        '9' => "43 03 00 40 46 06",
-        'A' => "06 01 10 30 41 46|03 43",
-        'B' => "00 30 41 42 33 03|33 44 45 36 06 00",
-        'C' => "40 00 06 46",
-        'D' => "00 30 41 45 36 06 00",
-        'E' => "40 00 06 46|03 33",
-        'F' => "40 00 06|03 33",
-        'G' => "40 00 06 46 43 23",
-        'H' => "00 06|40 46|03 43",
-        'I' => "10 30|20 26|16 36",
-        'K' => "00 06|40 03 46",
-        'L' => "00 06 46",
-        'M' => "06 00 23 40 46",
-        'N' => "06 00 46 40",
-        'O' => "00 40 46 06 00",
-        'P' => "06 00 40 43 03",
-        'R' => "06 00 40 43 03 46",
-        'S' => "40 00 03 43 46 06",
-        'T' => "00 40|20 26",
-        'U' => "00 06 46 40",
-        'V' => "00 26 40",
-        'W' => "00 06 23 46 40",
-        'X' => "00 46|40 06",
-        'Y' => "00 23 40|23 26",
-        'Z' => "00 40 06 46",
-        '.' => "25 26",
-        ',' => "25 16",
-        '-' => "13 33",
-        '+' => "13 33|22 24",
-        ':' => "21 22|24 25",
-        '/' => "06 40",
-        '(' => "30 11 15 36",
-        ')' => "10 31 35 16",
-        '|' => "20 26",
-        '=' => "02 42|04 44",
-        ' ' => "",
-        _ => "00 40 42 22 23|25 26",
-    }
-}
-
-/// Draws `text` with its top-left corner at `(x, y)`, `size` pixels tall; rotated by 90 degrees
-/// counter-clockwise when `vertical`.
-fn text(pixmap: &mut Pixmap, s: &str, (x, y): (f32, f32), size: f32, color: Color, vertical: bool) {
-    let unit = size / 6.0;
-    let mut pb = PathBuilder::new();
-    for (idx, c) in s.chars().enumerate() {
-        let origin = idx as f32 * 6.0 * unit;
-        for stroke in glyph(c).split('|') {
-            let points: Vec<(f32, f32)> = stroke
-                .split_whitespace()
-                .filter_map(|p| {
-                    let mut digits = p.chars().filter_map(|d| d.to_digit(10));
-                    Some((digits.next()? as f32, digits.next()? as f32))
-                })
-                .collect();
-            for (k, &(gx, gy)) in points.iter().enumerate() {
-                let (px, py) = (origin + gx * unit, gy * unit);
-                if k == 0 {
-                    pb.move_to(px, py);
-                } else {
-                    pb.line_to(px, py);
-                }
-            }
-            if points.len() == 1 {
-                pb.line_to(origin + points[0].0 * unit + 0.1, points[0].1 * unit);
-            }
-        }
-    }
-    let Some(path) = pb.finish() else { return };
-    let transform = if vertical {
-        Transform::from_row(0.0, -1.0, 1.0, 0.0, x, y)
-    } else {
-        Transform::from_translate(x, y)
-    };
-    let stroke = Stroke {
-        width: (size / 9.0).max(1.2),
-        line_cap: LineCap::Round,
-        line_join: LineJoin::Round,
-        ..Stroke::default()
-    };
-    pixmap.stroke_path(&path, &paint(color), &stroke, transform, None);
-}
-
-fn text_width(s: &str, size: f32) -> f32 {
-    s.chars().count() as f32 * size - size / 3.0
-}
-
-fn paint(color: Color) -> Paint<'static> {
-    let mut p = Paint::default();
-    p.set_color(color);
-    p.anti_alias = true;
-    p
-}
-
-fn rgb(r: u8, g: u8, b: u8) -> Color {
-    Color::from_rgba8(r, g, b, 255)
-}
-
-fn line(pixmap: &mut Pixmap, points: &[(f32, f32)], color: Color, width: f32, dash: bool) {
-    let mut pb = PathBuilder::new();
-    for (k, &(x, y)) in points.iter().enumerate() {
-        if k == 0 {
-            pb.move_to(x, y);
-        } else {
-            pb.line_to(x, y);
-        }
-    }
-    let Some(path) = pb.finish() else { return };
-    let stroke = Stroke {
-        width,
-        line_join: LineJoin::Round,
-        dash: if dash {
-            StrokeDash::new(vec![8.0, 6.0], 0.0)
-        } else {
-            None
-        },
-        ..Stroke::default()
-    };
-    pixmap.stroke_path(&path, &paint(color), &stroke, Transform::identity(), None);
-}
+//
+// The axes, ticks, series and their legend are a `plot::series::LinePlot`. The plot crate
+// has no region shading, dashed lines, per-series widths or vertical text, so those are drawn
+// here over the finished picture with tiny-skia. Shading, the wide magnitude line and the
+// markers paint only "paper" pixels (background, grid, light grey fringes; see `paper_mask`),
+// so that they sit under the series as if drawn first. The font has no `|`, so the magnitude
+// is named in words.
 
 fn region_name(region: Region) -> &'static str {
     match region {
@@ -271,19 +152,45 @@ fn region_name(region: Region) -> &'static str {
     }
 }
 
-/// A plotted series: legend name, colour, line width, the value taken from the force.
-type Series = (&'static str, Color, f32, fn(DVec3) -> f64);
+/// 8-bit colours of the series (the test looks for them on the canvas).
+const MAGNITUDE_RGB: [u8; 3] = [100, 100, 100];
+const FX_RGB: [u8; 3] = [214, 39, 40];
+const FY_RGB: [u8; 3] = [44, 160, 44];
+const FZ_RGB: [u8; 3] = [31, 119, 180];
+/// Region shading, 8-bit RGBA.
+const SURFACE_RGBA: [u8; 4] = [255, 214, 102, 90];
+const INTERIOR_RGBA: [u8; 4] = [120, 200, 120, 70];
+const MARKER_RGB: [u8; 3] = [90, 90, 160];
+const INK_RGB: [u8; 3] = [20, 20, 20];
+/// Cap height of the labels drawn here, pixels (the plot's own labels are 9).
+const LABEL_PX: f32 = 10.0;
+/// Width of the magnitude drawn under the components, pixels (the plot draws every series 2).
+const MAGNITUDE_UNDERLAY_PX: f32 = 5.0;
 
-/// The plot area in pixels: left, top, right, bottom.
-const AREA: (f32, f32, f32, f32) = (100.0, 70.0, 1370.0, 690.0);
+/// An 8-bit colour as the plot's RGBA 0..1.
+fn linear([r, g, b]: [u8; 3]) -> [f32; 4] {
+    [
+        f32::from(r) / 255.0,
+        f32::from(g) / 255.0,
+        f32::from(b) / 255.0,
+        1.0,
+    ]
+}
 
-/// Plots the trace: |F| and Fx, Fy, Fz over time, regions shaded, stack changes marked.
-pub fn plot(trace: &[TraceSample], path: &Path) -> Result<(), TraceError> {
-    let mut pixmap = Pixmap::new(WIDTH, HEIGHT).ok_or(TraceError::Canvas)?;
-    pixmap.fill(Color::WHITE);
-    let (left, top, right, bottom) = AREA;
-    let t_max = trace.last().map_or(1.0, |s| s.t_secs).max(1e-3);
-    // Force axis: from the lowest component to the largest magnitude, in half newtons.
+fn paint([r, g, b, a]: [u8; 4]) -> Paint<'static> {
+    let mut p = Paint::default();
+    p.set_color(Color::from_rgba8(r, g, b, a));
+    p.anti_alias = true;
+    p
+}
+
+fn opaque([r, g, b]: [u8; 3]) -> [u8; 4] {
+    [r, g, b, 255]
+}
+
+/// The line plot of |f| and its components over time; the force axis runs from the lowest
+/// component to the largest magnitude, rounded out to half newtons.
+fn line_plot(trace: &[TraceSample]) -> LinePlot {
     let f_max = (trace
         .iter()
         .map(|s| s.force_newtons.length())
@@ -298,175 +205,224 @@ pub fn plot(trace: &[TraceSample], path: &Path) -> Result<(), TraceError> {
         * 2.0)
         .floor()
         / 2.0;
-    let x_of = |t: f64| left + (right - left) * (t / t_max) as f32;
-    let y_of = |f: f64| bottom - (bottom - top) * ((f - f_min) / (f_max - f_min)) as f32;
+    let t_max = trace.last().map_or(1.0, |s| s.t_secs).max(1e-3);
+    let series = |name: &str, rgb: [u8; 3], value: fn(DVec3) -> f64| Series {
+        name: name.to_owned(),
+        colour: linear(rgb),
+        points: trace
+            .iter()
+            .map(|s| [s.t_secs, value(s.force_newtons)])
+            .collect(),
+    };
+    LinePlot {
+        title: "watermelon force trace (fdsl container, simulated hand)".to_owned(),
+        x_label: "time (s)".to_owned(),
+        y_label: "force (N)".to_owned(),
+        series: vec![
+            series("magnitude", MAGNITUDE_RGB, DVec3::length),
+            series("fx", FX_RGB, |f| f.x),
+            series("fy", FY_RGB, |f| f.y),
+            series("fz", FZ_RGB, |f| f.z),
+        ],
+        x_range: Some((0.0, t_max)),
+        y_range: Some((f_min, f_max)),
+    }
+}
+
+/// Plots the trace: |f| and fx, fy, fz over time, regions shaded, stack changes marked.
+pub fn plot(trace: &[TraceSample], path: &Path) -> Result<(), TraceError> {
+    let picture = line_plot(trace).render(WIDTH, HEIGHT)?;
+    let size = IntSize::from_wh(WIDTH, HEIGHT).ok_or(TraceError::Canvas)?;
+    // The plot is opaque, so its straight-alpha pixels are already premultiplied.
+    let mut pixmap =
+        Pixmap::from_vec(picture.image.pixels.clone(), size).ok_or(TraceError::Canvas)?;
+    let paper = paper_mask(&pixmap).ok_or(TraceError::Canvas)?;
+    let area = picture.area;
+    let x_of = |t: f64| picture.data_to_pixel([t, 0.0])[0];
     let phases = phases(trace);
-    // Region bands.
     for (k, &(start, _, region, _)) in phases.iter().enumerate() {
         let end = phases.get(k + 1).map_or(trace.len(), |p| p.0);
-        let color = match region {
+        let rgba = match region {
             Region::Free => continue,
-            Region::Surface => Color::from_rgba8(255, 214, 102, 70),
-            Region::Interior => Color::from_rgba8(120, 200, 120, 55),
+            Region::Surface => SURFACE_RGBA,
+            Region::Interior => INTERIOR_RGBA,
         };
         let (x0, x1) = (
             x_of(trace[start].t_secs - DT_SECS),
             x_of(trace[end - 1].t_secs),
         );
-        if let Some(rect) = Rect::from_ltrb(x0, top, x1.max(x0 + 1.0), bottom) {
-            pixmap.fill_rect(rect, &paint(color), Transform::identity(), None);
+        if let Some(rect) = Rect::from_ltrb(x0, area.y, x1.max(x0 + 1.0), area.y + area.h) {
+            pixmap.fill_rect(rect, &paint(rgba), Transform::identity(), Some(&paper));
         }
     }
-    // Grid, ticks and tick labels.
-    let grey = rgb(215, 215, 215);
-    let ink = rgb(30, 30, 30);
-    let t_step = if t_max > 2.0 { 0.5 } else { 0.25 };
-    let mut t = 0.0;
-    while t <= t_max + 1e-9 {
-        line(
-            &mut pixmap,
-            &[(x_of(t), top), (x_of(t), bottom)],
-            grey,
-            1.0,
-            false,
-        );
-        line(
-            &mut pixmap,
-            &[(x_of(t), bottom), (x_of(t), bottom + 8.0)],
-            ink,
-            1.5,
-            false,
-        );
-        let label = format!("{t:.1}");
-        text(
-            &mut pixmap,
-            &label,
-            (x_of(t) - text_width(&label, 14.0) / 2.0, bottom + 14.0),
-            14.0,
-            ink,
-            false,
-        );
-        t += t_step;
-    }
-    let f_step = 0.5;
-    let mut f = f_min;
-    while f <= f_max + 1e-9 {
-        let color = if f.abs() < 1e-9 {
-            rgb(120, 120, 120)
-        } else {
-            grey
-        };
-        line(
-            &mut pixmap,
-            &[(left, y_of(f)), (right, y_of(f))],
-            color,
-            1.0,
-            false,
-        );
-        line(
-            &mut pixmap,
-            &[(left - 8.0, y_of(f)), (left, y_of(f))],
-            ink,
-            1.5,
-            false,
-        );
-        let label = format!("{f:.1}");
-        text(
-            &mut pixmap,
-            &label,
-            (left - 14.0 - text_width(&label, 14.0), y_of(f) - 7.0),
-            14.0,
-            ink,
-            false,
-        );
-        f += f_step;
-    }
-    // Stack-change markers, labelled unless too close to the previous label.
+    // The magnitude again, wide, under the components.
+    let magnitude: Vec<[f32; 2]> = trace
+        .iter()
+        .map(|s| picture.data_to_pixel([s.t_secs, s.force_newtons.length()]))
+        .collect();
+    stroke(
+        &mut pixmap,
+        &magnitude,
+        opaque(MAGNITUDE_RGB),
+        MAGNITUDE_UNDERLAY_PX,
+        None,
+        Some(&paper),
+    );
+    // Stack changes: dashed lines, labelled unless too close to the previous label.
     let mut last_label_x = f32::NEG_INFINITY;
     for &(start, id, region, _) in phases.iter().skip(1) {
         let x = x_of(trace[start].t_secs);
-        line(
+        let dash = StrokeDash::new(vec![8.0, 6.0], 0.0);
+        let marker = [[x, area.y], [x, area.y + area.h]];
+        stroke(
             &mut pixmap,
-            &[(x, top), (x, bottom)],
-            rgb(90, 90, 160),
+            &marker,
+            opaque(MARKER_RGB),
             1.5,
-            true,
+            dash,
+            Some(&paper),
         );
-        if x - last_label_x < 20.0 {
+        if x - last_label_x < 2.0 * LABEL_PX {
             continue;
         }
         last_label_x = x;
         let label = match id {
             Some(id) => format!("{id}: {}", region_name(region)),
-            None => "free".to_string(),
+            None => "free".to_owned(),
         };
-        let at = (x + 4.0, top + 8.0 + text_width(&label, 13.0));
-        text(&mut pixmap, &label, at, 13.0, rgb(60, 60, 140), true);
+        let bottom = area.y + 6.0 + text_width(&label, LABEL_PX);
+        vertical_text(&mut pixmap, &label, x + 3.0, bottom, opaque(MARKER_RGB));
     }
-    // Series: the magnitude wide and grey underneath, components on top.
-    let series: [Series; 4] = [
-        ("|f|", rgb(110, 110, 110), 4.0, |f| f.length()),
-        ("fx", rgb(214, 39, 40), 1.8, |f| f.x),
-        ("fy", rgb(44, 160, 44), 1.8, |f| f.y),
-        ("fz", rgb(31, 119, 180), 1.8, |f| f.z),
-    ];
-    for &(_, color, width, component) in &series {
-        let points: Vec<(f32, f32)> = trace
-            .iter()
-            .map(|s| (x_of(s.t_secs), y_of(component(s.force_newtons))))
-            .collect();
-        line(&mut pixmap, &points, color, width, false);
+    draw_key(&mut pixmap, area.x + 6.0, area.y + area.h - 6.0);
+    Ok(RgbaImage::from_pixmap(&pixmap).save_png(path)?)
+}
+
+/// Where the picture is background, grid or the anti-aliased fringe of a grey line (neutral
+/// and lighter than the magnitude's grey): what layers "under" the series may paint.
+fn paper_mask(pixmap: &Pixmap) -> Option<Mask> {
+    let mut mask = Mask::new(pixmap.width(), pixmap.height())?;
+    for (m, p) in mask.data_mut().iter_mut().zip(pixmap.pixels()) {
+        let (lo, hi) = (
+            p.red().min(p.green()).min(p.blue()),
+            p.red().max(p.green()).max(p.blue()),
+        );
+        *m = if lo > MAGNITUDE_RGB[0] + 10 && hi - lo <= 16 {
+            255
+        } else {
+            0
+        };
     }
-    // Frame, title, axis labels, legend (two rows).
-    let frame = [
-        (left, top),
-        (right, top),
-        (right, bottom),
-        (left, bottom),
-        (left, top),
-    ];
-    line(&mut pixmap, &frame, ink, 1.5, false);
-    let title = "watermelon force trace (fdsl container, simulated hand)";
-    text(&mut pixmap, title, (left, 30.0), 20.0, ink, false);
-    let x_label = "time (s)";
-    let at = (
-        (left + right) / 2.0 - text_width(x_label, 16.0) / 2.0,
-        bottom + 40.0,
-    );
-    text(&mut pixmap, x_label, at, 16.0, ink, false);
-    let y_label = "force (n)";
-    let at = (14.0, (top + bottom) / 2.0 + text_width(y_label, 16.0) / 2.0);
-    text(&mut pixmap, y_label, at, 16.0, ink, true);
-    let mut legend_x = left;
-    let row = bottom + 68.0;
-    for &(name, color, width, _) in &series {
-        let sample = [(legend_x, row + 7.0), (legend_x + 40.0, row + 7.0)];
-        line(&mut pixmap, &sample, color, width, false);
-        text(&mut pixmap, name, (legend_x + 50.0, row), 14.0, ink, false);
-        legend_x += 130.0;
-    }
-    let mut legend_x = left;
-    let row = row + 26.0;
-    for (name, color) in [
-        (
-            "surface zone (tension)",
-            Color::from_rgba8(255, 214, 102, 140),
-        ),
-        ("interior (density)", Color::from_rgba8(120, 200, 120, 120)),
-    ] {
-        if let Some(rect) = Rect::from_xywh(legend_x, row, 40.0, 14.0) {
-            pixmap.fill_rect(rect, &paint(color), Transform::identity(), None);
+    Some(mask)
+}
+
+fn stroke(
+    pixmap: &mut Pixmap,
+    points: &[[f32; 2]],
+    rgba: [u8; 4],
+    width: f32,
+    dash: Option<StrokeDash>,
+    mask: Option<&Mask>,
+) {
+    let mut pb = PathBuilder::new();
+    for (k, &[x, y]) in points.iter().enumerate() {
+        if k == 0 {
+            pb.move_to(x, y);
+        } else {
+            pb.line_to(x, y);
         }
-        text(&mut pixmap, name, (legend_x + 50.0, row), 14.0, ink, false);
-        legend_x += 80.0 + text_width(name, 14.0);
     }
-    let sample = [(legend_x, row + 7.0), (legend_x + 40.0, row + 7.0)];
-    line(&mut pixmap, &sample, rgb(90, 90, 160), 1.5, true);
-    let name = "stack change (container: region)";
-    text(&mut pixmap, name, (legend_x + 50.0, row), 14.0, ink, false);
-    pixmap
-        .save_png(path)
-        .map_err(|e| TraceError::Png(e.to_string()))
+    let Some(path) = pb.finish() else { return };
+    let stroke = Stroke {
+        width,
+        line_join: LineJoin::Round,
+        dash,
+        ..Stroke::default()
+    };
+    pixmap.stroke_path(&path, &paint(rgba), &stroke, Transform::identity(), mask);
+}
+
+/// Draws `text` turned 90 degrees counter-clockwise, reading upwards from `(x, bottom)`.
+fn vertical_text(pixmap: &mut Pixmap, text: &str, x: f32, bottom: f32, rgba: [u8; 4]) {
+    let (w, h) = (text_width(text, LABEL_PX) + 4.0, LABEL_PX + 4.0);
+    let Some(mut label) = Pixmap::new(w.ceil() as u32, h.ceil() as u32) else {
+        return;
+    };
+    let [r, g, b, a] = rgba;
+    draw_text(
+        &mut label,
+        text,
+        2.0,
+        2.0,
+        LABEL_PX,
+        Color::from_rgba8(r, g, b, a),
+    );
+    // (u, v) in the label goes to (x + v, bottom - u).
+    let turn = Transform::from_row(0.0, -1.0, 1.0, 0.0, x - 2.0, bottom + 2.0);
+    pixmap.draw_pixmap(0, 0, label.as_ref(), &PixmapPaint::default(), turn, None);
+}
+
+/// The key to what the line plot's legend does not show: shading and markers, in a box whose
+/// lower-left corner is `(x, bottom)`.
+fn draw_key(pixmap: &mut Pixmap, x: f32, bottom: f32) {
+    let rows: [(&str, [u8; 4], bool); 3] = [
+        ("surface zone (tension)", [255, 214, 102, 160], false),
+        ("interior (density)", [120, 200, 120, 140], false),
+        ("stack change (container: region)", opaque(MARKER_RGB), true),
+    ];
+    let row_px = LABEL_PX + 8.0;
+    let name_px = rows
+        .iter()
+        .map(|r| text_width(r.0, LABEL_PX))
+        .fold(0.0, f32::max);
+    let (w, h) = (
+        4.0 + 28.0 + 6.0 + name_px + 6.0,
+        4.0 + rows.len() as f32 * row_px,
+    );
+    let top = bottom - h;
+    if let Some(rect) = Rect::from_xywh(x, top, w, h) {
+        pixmap.fill_rect(
+            rect,
+            &paint([255, 255, 255, 235]),
+            Transform::identity(),
+            None,
+        );
+        let frame = [
+            [x, top],
+            [x + w, top],
+            [x + w, bottom],
+            [x, bottom],
+            [x, top],
+        ];
+        stroke(pixmap, &frame, [120, 120, 120, 255], 1.0, None, None);
+    }
+    for (i, &(name, rgba, dashed)) in rows.iter().enumerate() {
+        let y = top + 4.0 + i as f32 * row_px;
+        if dashed {
+            let sample = [
+                [x + 4.0, y + LABEL_PX / 2.0],
+                [x + 32.0, y + LABEL_PX / 2.0],
+            ];
+            stroke(
+                pixmap,
+                &sample,
+                rgba,
+                1.5,
+                StrokeDash::new(vec![8.0, 6.0], 0.0),
+                None,
+            );
+        } else if let Some(rect) = Rect::from_xywh(x + 4.0, y, 28.0, LABEL_PX) {
+            pixmap.fill_rect(rect, &paint(rgba), Transform::identity(), None);
+        }
+        let [r, g, b] = INK_RGB;
+        draw_text(
+            pixmap,
+            name,
+            x + 38.0,
+            y,
+            LABEL_PX,
+            Color::from_rgba8(r, g, b, 255),
+        );
+    }
 }
 
 fn main() -> Result<(), TraceError> {
@@ -530,22 +486,27 @@ mod tests {
         let path =
             std::env::temp_dir().join(format!("force_trace_test_{}.png", std::process::id()));
         plot(&trace, &path).unwrap();
-        let png = Pixmap::load_png(&path).unwrap();
+        let png = RgbaImage::from_png(&std::fs::read(&path).unwrap()).unwrap();
         std::fs::remove_file(&path).unwrap();
-        assert_eq!((png.width(), png.height()), (WIDTH, HEIGHT));
+        assert_eq!((png.width, png.height), (WIDTH, HEIGHT));
         // Each series left its colour on the canvas.
-        let count = |r: u8, g: u8, b: u8| {
-            png.pixels()
-                .iter()
-                .filter(|p| p.alpha() == 255 && (p.red(), p.green(), p.blue()) == (r, g, b))
+        let count = |rgb: [u8; 3]| {
+            png.pixels
+                .chunks_exact(4)
+                .filter(|p| p[..] == opaque(rgb))
                 .count()
         };
-        for (name, (r, g, b)) in [
-            ("fx", (214, 39, 40)),
-            ("fy", (44, 160, 44)),
-            ("fz", (31, 119, 180)),
-        ] {
-            assert!(count(r, g, b) > 200, "{name} drawn: {}", count(r, g, b));
+        for (name, rgb) in [("fx", FX_RGB), ("fy", FY_RGB), ("fz", FZ_RGB)] {
+            assert!(count(rgb) > 200, "{name} drawn: {}", count(rgb));
         }
+        // Both regions are shaded under the series: the interior band's tint shows at the
+        // middle of the flesh phase, on the paper above the curves.
+        let pic = line_plot(&trace).render(WIDTH, HEIGHT).unwrap();
+        let [x, y] = pic.data_to_pixel([2.2, 2.3]);
+        let p = png.pixel(x as u32, y as u32).unwrap();
+        assert!(
+            p[1] > p[0] + 20 && p[1] > p[2] + 20,
+            "interior shading: {p:?}"
+        );
     }
 }

@@ -7,6 +7,12 @@
 //!   `[0, 1]`; NaN becomes 0. No diffuse colour gives [`DEFAULT_DIFFUSE`].
 //! - Transparency (0 opaque, 1 clear) becomes vertex alpha, so one object may be partly
 //!   transparent; the renderer draws any object with an alpha below 1 in its transparent pass.
+//! - Ambient colour becomes the vertex ambient colour ([`Mesh::ambient`]), evaluated like the
+//!   diffuse one. It is the ambient reflectance already scaled by its intensity (fdsl reads
+//!   VRML's `ambientIntensity` k as k times the diffuse colour), so an object with an ambient
+//!   colour gets the [`Material`] ambient weight 1: the shader's ambient term is weight times
+//!   ambient colour. Without one the term is the default weight 0.2 (VRML's default
+//!   `ambientIntensity`) times the diffuse colour, the same picture as `ambientIntensity 0.2`.
 //! - Shininess (0..1) sets the [`Material`]'s Blinn-Phong exponent (VRML's convention: times
 //!   128), and the specular colour's mean luminance its specular weight, both averaged over
 //!   the vertices: the shader has one material per object.
@@ -15,8 +21,7 @@
 //!
 //! Every function is evaluated in the appearance's own space (through the inverse of its
 //! transform), at the mesh's object-space vertices, in one bulk call per function.
-//! Not done here: the ambient colour (the shader's ambient term uses the diffuse colour) and
-//! the appearance's domain, which fdsl documents as informative.
+//! Not done here: the appearance's domain, which fdsl documents as informative.
 
 use crate::mesh::Mesh;
 use crate::scene::Material;
@@ -26,6 +31,9 @@ use glam::{DAffine3, DVec3};
 
 /// Shininess 1 maps to this Blinn-Phong exponent (VRML's `shininess` times 128).
 pub const SHININESS_EXPONENT_MAX: f32 = 128.0;
+/// The material's ambient weight for an object with an ambient colour (see the module
+/// documentation).
+pub const AMBIENT_WEIGHT_WITH_COLOUR: f32 = 1.0;
 
 /// Why an appearance could not be compiled.
 #[derive(Debug, thiserror::Error)]
@@ -65,6 +73,7 @@ enum Colour {
 #[derive(Clone, Debug)]
 pub struct CompiledAppearance {
     diffuse: Option<Colour>,
+    ambient: Option<Colour>,
     specular: Option<Colour>,
     transparency: Option<BulkEval>,
     shininess: Option<BulkEval>,
@@ -156,6 +165,7 @@ impl CompiledAppearance {
             .ok_or(AppearanceError::BadTransform)?;
         Ok(CompiledAppearance {
             diffuse: colour(&appearance.diffuse, "diffuse colour")?,
+            ambient: colour(&appearance.ambient, "ambient colour")?,
             specular: colour(&appearance.specular, "specular colour")?,
             transparency: scalar(&appearance.transparency, "transparency")?,
             shininess: scalar(&appearance.shininess, "shininess")?,
@@ -190,7 +200,8 @@ impl Points {
 
 impl CompiledAppearance {
     /// Displaces `mesh` by the geometric texture, then sets its vertex colours (diffuse colour
-    /// and transparency as alpha), all at time `t`.
+    /// and transparency as alpha) and ambient colours (none without an ambient colour), all
+    /// at time `t`.
     pub fn apply(&mut self, mesh: &mut Mesh, t: f32) {
         if let Some(eval) = &mut self.displacement {
             let p = Points::of(mesh, self.appearance_from_object);
@@ -212,17 +223,26 @@ impl CompiledAppearance {
             .zip(&alpha)
             .map(|(c, &a)| [c[0], c[1], c[2], 1.0 - clamp_unit(a)])
             .collect();
+        mesh.ambient.clear();
+        if let Some(c) = &mut self.ambient {
+            mesh.ambient = vec![[0.0; 3]; p.len()];
+            c.eval(&p, t, &mut mesh.ambient);
+        }
     }
 
     /// `base` with the appearance's shininess and specular weight, averaged over `mesh`'s
-    /// vertices at time `t` (parts the appearance leaves out keep `base`'s values).
+    /// vertices at time `t`, and with [`AMBIENT_WEIGHT_WITH_COLOUR`] when it has an ambient
+    /// colour (parts the appearance leaves out keep `base`'s values).
     pub fn material(&mut self, mesh: &Mesh, t: f32, base: Material) -> Material {
+        let mut material = base;
+        if self.ambient.is_some() {
+            material.ambient = AMBIENT_WEIGHT_WITH_COLOUR;
+        }
         let p = Points::of(mesh, self.appearance_from_object);
         let n = p.len();
         if n == 0 {
-            return base;
+            return material;
         }
-        let mut material = base;
         if let Some(eval) = &mut self.shininess {
             let mut s = vec![0.0; n];
             eval.eval(&p.xs, &p.ys, &p.zs, t, &mut s);
@@ -259,6 +279,7 @@ mod tests {
             ],
             normals: vec![[0.0, 0.0, 1.0]; 4],
             colours: vec![[1.0; 4]; 4],
+            ambient: Vec::new(),
             indices: vec![0, 1, 3, 1, 2, 3],
         };
         m.normals = vec![[0.0, 0.0, 1.0]; 4];
@@ -317,6 +338,29 @@ mod tests {
         let z: Vec<f32> = m.positions.iter().map(|p| p[2]).collect();
         assert_eq!(z, vec![-0.1, 0.0, 0.1, 0.0]);
         assert_eq!(m.colours[0], [0.8, 0.8, 0.8, 1.0], "default diffuse");
+    }
+
+    #[test]
+    fn ambient_colour_goes_to_the_vertices_and_sets_the_ambient_weight() {
+        let mut plain = CompiledAppearance::new(&Appearance::default()).unwrap();
+        let mut m = strip();
+        plain.apply(&mut m, 0.0);
+        assert!(m.ambient.is_empty());
+        assert_eq!(plain.material(&m, 0.0, Material::default()).ambient, 0.2);
+        let mut a = CompiledAppearance::new(&Appearance {
+            diffuse: Some(ColorDef::Constant([1.0, 1.0, 1.0])),
+            ambient: Some(ColorDef::Rgb(formula("r = 0; g = 0.1*x; b = 0.2;"))),
+            ..Appearance::default()
+        })
+        .unwrap();
+        a.apply(&mut m, 0.0);
+        assert_eq!(m.validate(), Ok(()));
+        assert_eq!(m.ambient[2], [0.0, 0.2, 0.2]);
+        assert_eq!(m.colours[2], [1.0; 4], "the diffuse colour is unchanged");
+        assert_eq!(
+            a.material(&m, 0.0, Material::default()).ambient,
+            AMBIENT_WEIGHT_WITH_COLOUR
+        );
     }
 
     #[test]

@@ -14,6 +14,10 @@
 //!   [`Camera`](camera::Camera), and CPU picking (`Scene::pick`);
 //! - [`gpu`]: the wgpu [`Renderer`](gpu::Renderer) with `prepare`/`paint` for embedding, and
 //!   [`offscreen`](gpu::offscreen) rendering to RGBA or PNG on a private headless device;
+//! - [`animation`]: a scene kept up to date with time, meshing shapes of time again each
+//!   frame within a budget, recolouring and moving only what time changes;
+//! - [`snapshot`]: a whole `fdsl` scene (say, an FVRML file) meshed, coloured, placed and
+//!   pictured offscreen from cameras that frame it (the `sculpt render` command);
 //! - [`plot`]: tiny-skia heat-map slices with legends and time-series line plots;
 //! - [`image`]: the [`RgbaImage`](image::RgbaImage) both produce, with PNG encode and decode.
 //!
@@ -48,11 +52,13 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod animation;
 pub mod appearance;
 pub mod camera;
 pub mod gpu;
 pub mod mesh;
 pub mod scene;
+pub mod snapshot;
 
 pub use plot;
 pub use plot::image;

@@ -1,7 +1,10 @@
-//! What to draw: objects (meshes with materials and transforms), lines, camera and light.
+//! What to draw: objects (meshes with materials and transforms), lines (boxes such as the
+//! haptic zone, arrows such as force-field vectors, crosshair cursors, tool avatars), camera
+//! and light.
 
 use crate::camera::{Camera, Ray};
 use crate::mesh::{Aabb, Mesh};
+use fdsl::object::{Pose, ToolShape};
 use glam::{Mat4, Vec3};
 use std::sync::Arc;
 
@@ -176,6 +179,57 @@ impl Scene {
         }
     }
 
+    /// Adds a wireframe of a sculpting tool (the tool avatar) placed by `world_from_tool`
+    /// (see [`pose_matrix`]): a ball as three great circles, a box as its twelve edges (its
+    /// rounding left out), a cylinder (along its local y) as its two rims and four sides.
+    pub fn add_tool(&mut self, tool: &ToolShape, world_from_tool: Mat4, colour: [f32; 4]) {
+        let mut segment = |a: Vec3, b: Vec3| {
+            self.lines.push(Line {
+                from: world_from_tool.transform_point3(a),
+                to: world_from_tool.transform_point3(b),
+                colour,
+            });
+        };
+        // A circle of `radius` about `axis` through `centre`, as TOOL_CIRCLE_SEGMENTS chords.
+        let mut circle = |centre: Vec3, axis: Vec3, radius: f32| {
+            let u = axis.any_orthonormal_vector();
+            let v = axis.cross(u);
+            let at = |k: u32| {
+                let a = std::f32::consts::TAU * k as f32 / TOOL_CIRCLE_SEGMENTS as f32;
+                centre + radius * (a.cos() * u + a.sin() * v)
+            };
+            for k in 0..TOOL_CIRCLE_SEGMENTS {
+                segment(at(k), at(k + 1));
+            }
+        };
+        match *tool {
+            ToolShape::Sphere { radius } => {
+                for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+                    circle(Vec3::ZERO, axis, radius as f32);
+                }
+            }
+            ToolShape::Box { half_extents, .. } => {
+                let h = half_extents.as_vec3();
+                let mut edges = Scene::default();
+                edges.add_box(Aabb::new((-h).to_array(), h.to_array()), colour);
+                for l in edges.lines {
+                    segment(l.from, l.to);
+                }
+            }
+            ToolShape::Cylinder {
+                radius,
+                half_height,
+            } => {
+                let (r, h) = (radius as f32, half_height as f32);
+                circle(Vec3::new(0.0, -h, 0.0), Vec3::Y, r);
+                circle(Vec3::new(0.0, h, 0.0), Vec3::Y, r);
+                for side in [Vec3::X, -Vec3::X, Vec3::Z, -Vec3::Z] {
+                    segment(side * r - Vec3::Y * h, side * r + Vec3::Y * h);
+                }
+            }
+        }
+    }
+
     /// The nearest triangle the ray hits, over all objects.
     pub fn pick(&self, ray: &Ray) -> Option<PickHit> {
         let mut best: Option<PickHit> = None;
@@ -205,6 +259,19 @@ impl Scene {
         }
         best
     }
+}
+
+/// Chords per circle of a tool avatar's wireframe.
+pub const TOOL_CIRCLE_SEGMENTS: u32 = 32;
+
+/// The map from a tool's own space to its parent's for an fdsl [`Pose`]: scale, then
+/// rotate, then move to the position.
+pub fn pose_matrix(pose: &Pose) -> Mat4 {
+    Mat4::from_scale_rotation_translation(
+        Vec3::splat(pose.scale as f32),
+        pose.rotation.normalize().as_quat(),
+        pose.position.as_vec3(),
+    )
 }
 
 /// Möller-Trumbore: the distance along the ray to triangle (a, b, c), either side facing.
@@ -299,5 +366,47 @@ mod tests {
         scene.add_arrow(Vec3::ZERO, Vec3::X, [1.0; 4]);
         scene.add_crosshair(Vec3::ZERO, 0.1, [1.0; 4]);
         assert_eq!(scene.lines.len(), 12 + 5 + 3);
+    }
+
+    #[test]
+    fn tool_avatars_are_wireframes_of_the_tool_at_its_pose() {
+        let pose = Pose {
+            position: glam::DVec3::new(1.0, 2.0, 3.0),
+            rotation: glam::DQuat::from_rotation_z(0.7),
+            scale: 2.0,
+        };
+        let at = pose_matrix(&pose);
+        let centre = Vec3::new(1.0, 2.0, 3.0);
+        let mut scene = Scene::default();
+        scene.add_tool(&ToolShape::Sphere { radius: 0.1 }, at, [1.0; 4]);
+        let n = TOOL_CIRCLE_SEGMENTS as usize;
+        assert_eq!(scene.lines.len(), 3 * n);
+        for l in &scene.lines {
+            // Radius 0.1 scaled by 2.
+            assert!(((l.from - centre).length() - 0.2).abs() < 1e-5, "{l:?}");
+        }
+        let mut scene = Scene::default();
+        let half_extents = glam::DVec3::new(0.1, 0.2, 0.3);
+        let boxed = ToolShape::Box {
+            half_extents,
+            rounding: 0.01,
+        };
+        scene.add_tool(&boxed, Mat4::IDENTITY, [1.0; 4]);
+        assert_eq!(scene.lines.len(), 12);
+        assert!(scene.lines.iter().all(|l| {
+            let d = (l.from.abs() - half_extents.as_vec3()).abs();
+            d.max_element() < 1e-6
+        }));
+        let mut scene = Scene::default();
+        let cylinder = ToolShape::Cylinder {
+            radius: 0.1,
+            half_height: 0.5,
+        };
+        scene.add_tool(&cylinder, Mat4::IDENTITY, [1.0; 4]);
+        assert_eq!(scene.lines.len(), 2 * n + 4);
+        assert!(scene.lines.iter().all(|l| {
+            let radial = Vec3::new(l.from.x, 0.0, l.from.z).length();
+            (radial - 0.1).abs() < 1e-6 && (l.from.y.abs() - 0.5).abs() < 1e-6
+        }));
     }
 }

@@ -2,8 +2,10 @@
 //!
 //! `coloured_sphere` and `transparent_box_over_opaque` were rendered on Mesa 22.3.6 llvmpipe
 //! through wgpu's GL backend; the appearance goldens (`watermelon_colour_map`,
-//! `parametric_torus`, `textured_sphere`, `glass_ball_before_box`) on the same llvmpipe
-//! through Vulkan, which also passes the first two. Other GPUs and backends may differ by
+//! `parametric_torus`, `textured_sphere`, `glass_ball_before_box`), the scene-file goldens
+//! (`scene_watermelon_*`, `scene_figure_7_4_*`, `parametric_helix_tube`, through
+//! `render::snapshot` as `sculpt render` draws them), `ambient_blue_shadow` and
+//! `lines_overlay` on the same llvmpipe through Vulkan, which also passes the first two. Other GPUs and backends may differ by
 //! more than the tolerance (10/255 per channel on at most 0.5% of pixels) along silhouettes;
 //! a failure prints the adapter used and where the actual and diff PNGs were written. With
 //! no adapter at all the tests print a note and pass.
@@ -23,6 +25,7 @@ use render::mesh::octree::{MeshSettings, mesh};
 use render::mesh::parametric::{SurfaceSettings, UvDomain, triangulate_surface};
 use render::mesh::{Aabb, Field, Mesh, TapeField};
 use render::scene::{Material, Scene};
+use render::snapshot::{self, SnapshotSettings};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -581,4 +584,224 @@ fn glass_ball_before_box_matches_golden() {
         "box {n_box}, seen through glass {n_blended}"
     );
     compare("glass_ball_before_box", &image, &gpu.adapter_description()).unwrap();
+}
+
+/// Size of the scene-file goldens.
+const SCENE_SIZE: (u32, u32) = (240, 180);
+
+/// The FVRML scene `name` from `tests/data/scenes`, loaded as `sculpt render` loads it.
+fn scene_file(name: &str) -> fdsl::scene::Scene {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../tests/data/scenes")
+        .join(format!("{name}.wrl"));
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut no_files = |path: &str| Err(format!("no file {path}"));
+    fdsl::fvrml::load(&text, &fdsl::fvrml::LoadOptions::default(), &mut no_files)
+        .unwrap()
+        .scene
+}
+
+/// Pictures scene file `name` from the default views at depth 6 and compares each view with
+/// the golden `scene_<name>_<view>.png`; returns the images by view.
+fn check_scene_file(name: &str, force_arrows: u32) -> Option<Vec<(String, RgbaImage)>> {
+    let settings = SnapshotSettings {
+        width: SCENE_SIZE.0,
+        height: SCENE_SIZE.1,
+        depth: 6,
+        force_arrows,
+        ..SnapshotSettings::default()
+    };
+    let built = snapshot::build(&scene_file(name), &settings).unwrap();
+    assert!(
+        built.objects.iter().all(|o| o.skipped.is_none()),
+        "{:?}",
+        built.objects
+    );
+    let mut gpu = headless()?;
+    let images = snapshot::draw(&mut gpu, &built, &settings).unwrap();
+    for (view, image) in &images {
+        compare(
+            &format!("scene_{name}_{view}"),
+            image,
+            &gpu.adapter_description(),
+        )
+        .unwrap();
+    }
+    Some(images)
+}
+
+#[test]
+fn watermelon_scene_file_matches_golden() {
+    let Some(images) = check_scene_file("watermelon", 0) else {
+        return;
+    };
+    // From the corner the cut shows the flesh (reds through white); from the front the rind
+    // (greens) covers most of the ball.
+    let (front, corner) = (&images[0].1, &images[1].1);
+    let red = |p: [i32; 4]| p[0] > 120 && p[0] > p[1] + 60 && p[0] > p[2] + 40;
+    let green = |p: [i32; 4]| p[1] > 40 && p[1] > p[0] + 20 && p[1] > p[2] + 10;
+    assert!(fraction_where(corner, red) > 0.03, "no flesh in the cut");
+    assert!(fraction_where(front, green) > 0.2, "no rind from the front");
+}
+
+#[test]
+fn figure_7_4_whirlpool_scene_file_matches_golden() {
+    let Some(images) = check_scene_file("figure_7_4", 7) else {
+        return;
+    };
+    // The helical field's arrows (orange-yellow lines) show through the translucent cylinder.
+    let arrow = |p: [i32; 4]| p[0] > p[2] + 50 && p[1] > p[2] + 20;
+    for (view, image) in &images {
+        assert!(fraction_where(image, arrow) > 0.005, "{view}: no arrows");
+    }
+}
+
+/// A white ball lit from its left, with an ambient colour (or none): where the light does not
+/// reach, only the ambient term shows.
+fn ambient_ball(ambient: Option<[f32; 3]>) -> Scene {
+    let mut scene = Scene {
+        camera: camera(),
+        light_towards: Vec3::new(-1.0, -0.3, 0.4),
+        ..Scene::default()
+    };
+    let appearance = Appearance {
+        diffuse: Some(ColorDef::Constant([0.9, 0.9, 0.9])),
+        ambient: ambient.map(ColorDef::Constant),
+        ..Appearance::default()
+    };
+    add_with_appearance(
+        &mut scene,
+        mesh_of(&mut Sphere(1.0)),
+        &appearance,
+        Mat4::IDENTITY,
+    );
+    scene
+}
+
+#[test]
+fn ambient_colour_lights_the_shadowed_side() {
+    let Some(mut gpu) = headless() else { return };
+    let blue = ambient_ball(Some([0.1, 0.2, 0.7]));
+    let with = gpu.render(&blue, WIDTH, HEIGHT).unwrap();
+    let without = gpu.render(&ambient_ball(None), WIDTH, HEIGHT).unwrap();
+    // A point of the ball that faces the eye but not the light.
+    let (eye, light) = (
+        blue.camera.eye().normalize(),
+        blue.light_towards.normalize(),
+    );
+    let p = (eye - light).normalize();
+    assert!(p.dot(light) < -0.2 && p.dot(eye) > 0.2);
+    let px = blue.camera.project(p, [WIDTH, HEIGHT]).unwrap();
+    let (x, y) = (px[0] as u32, px[1] as u32);
+    let c = with.pixel(x, y).unwrap().map(i32::from);
+    let g = without.pixel(x, y).unwrap().map(i32::from);
+    // Ambient only: 0.7 blue against 0.2 * 0.9 grey (sRGB-encoded in the image).
+    assert!(
+        c[2] > c[0] + 80 && c[2] > c[1] + 60,
+        "shadow with ambient {c:?}"
+    );
+    assert!(
+        (g[0] - g[2]).abs() < 6 && g[2] < 140,
+        "shadow without {g:?}"
+    );
+    // The lit side is the white diffuse colour in both.
+    let lit = (eye + light).normalize();
+    let px = blue.camera.project(lit, [WIDTH, HEIGHT]).unwrap();
+    let l = with
+        .pixel(px[0] as u32, px[1] as u32)
+        .unwrap()
+        .map(i32::from);
+    assert!(l[0] > 150 && l[1] > 150, "lit side {l:?}");
+    compare("ambient_blue_shadow", &with, &gpu.adapter_description()).unwrap();
+}
+
+/// Every kind of line at once: the whirlpool's force-field arrows (Figure 7.4) in its
+/// translucent cylinder, the haptic zone as a white box around it, a ball tool's avatar as a
+/// cyan wireframe above the water, and a magenta crosshair at the tool's centre.
+fn lines_overlay() -> Scene {
+    let settings = SnapshotSettings {
+        depth: 5,
+        force_arrows: 7,
+        ..SnapshotSettings::default()
+    };
+    let built = snapshot::build(&scene_file("figure_7_4"), &settings).unwrap();
+    let mut scene = built.scene;
+    let turn = snapshot::render_from_scene();
+    let zone = Aabb::new([-2.0, -2.0, -0.3], [2.0, 2.0, 1.6]);
+    scene.add_box(zone, [1.0, 1.0, 1.0, 1.0]);
+    let pose = fdsl::object::Pose::at(glam::DVec3::new(0.6, 1.1, 0.5));
+    let tool = fdsl::object::ToolShape::Sphere { radius: 0.3 };
+    scene.add_tool(
+        &tool,
+        turn * render::scene::pose_matrix(&pose),
+        [0.2, 1.0, 1.0, 1.0],
+    );
+    let tip = turn.transform_point3(pose.position.as_vec3());
+    scene.add_crosshair(tip, 0.45, [1.0, 0.2, 1.0, 1.0]);
+    let view = &SnapshotSettings::default().views[1];
+    let sphere = (
+        Vec3::from_array(zone.centre()),
+        0.5 * Vec3::from_array(zone.size()).length(),
+    );
+    scene.camera = snapshot::frame(Some(sphere), view, SCENE_SIZE.0, SCENE_SIZE.1);
+    scene
+}
+
+#[test]
+fn lines_overlay_matches_golden() {
+    let scene = lines_overlay();
+    let Some(mut gpu) = headless() else { return };
+    let image = gpu.render(&scene, SCENE_SIZE.0, SCENE_SIZE.1).unwrap();
+    let white = |p: [i32; 4]| p[0] > 200 && p[1] > 200 && p[2] > 200;
+    let cyan = |p: [i32; 4]| p[1] > p[0] + 80 && p[2] > p[0] + 80;
+    let magenta = |p: [i32; 4]| p[0] > p[1] + 80 && p[2] > p[1] + 80;
+    let arrow = |p: [i32; 4]| p[0] > p[2] + 50 && p[1] > p[2] + 20;
+    for (what, colour) in [
+        ("zone box", &white as &dyn Fn([i32; 4]) -> bool),
+        ("tool avatar", &cyan),
+        ("crosshair", &magenta),
+        ("force arrows", &arrow),
+    ] {
+        let f = fraction_where(&image, colour);
+        assert!(f > 0.0005, "{what}: {f}");
+    }
+    compare("lines_overlay", &image, &gpu.adapter_description()).unwrap();
+}
+
+/// A parametric curve (a helix, coloured from red at the bottom to blue at the top) drawn as
+/// a tube, through the scene-file path.
+#[test]
+fn parametric_helix_is_drawn_as_a_tube() {
+    let text = r#"
+        DEF Spring FShape {
+          geometry FGeometry {
+            definition "x = 0.6*cos(8*pi*u); y = 1.6*u - 0.8; z = 0.6*sin(8*pi*u);"
+            parameters [0 1]
+          }
+          appearance FAppearance { material FMaterial {
+            diffuseColor "r = 0.5-0.6*y; g = 0.25; b = 0.5+0.6*y;"
+          } }
+        }"#;
+    let mut no_files = |path: &str| Err(format!("no file {path}"));
+    let scene = fdsl::fvrml::load(text, &fdsl::fvrml::LoadOptions::default(), &mut no_files)
+        .unwrap()
+        .scene;
+    let settings = SnapshotSettings {
+        width: SCENE_SIZE.0,
+        height: SCENE_SIZE.1,
+        ..SnapshotSettings::default()
+    };
+    let built = snapshot::build(&scene, &settings).unwrap();
+    let tube = &built.scene.objects[0].mesh;
+    // A closed tube around the whole curve: 4 turns of radius 0.6, 1.6 tall.
+    assert_eq!((tube.open_edges(), tube.non_manifold_edges()), (0, 0));
+    let b = built.bounds.unwrap();
+    assert!(b.size()[2] > 1.6 && b.size()[2] < 1.7, "{b:?}");
+    let Some(mut gpu) = headless() else { return };
+    let images = snapshot::draw(&mut gpu, &built, &settings).unwrap();
+    let (_, front) = &images[0];
+    let red = fraction_where(front, |p| p[0] > p[2] + 60);
+    let blue = fraction_where(front, |p| p[2] > p[0] + 60);
+    assert!(red > 0.01 && blue > 0.01, "red {red}, blue {blue}");
+    compare("parametric_helix_tube", front, &gpu.adapter_description()).unwrap();
 }

@@ -45,6 +45,8 @@ struct MeshVertex {
     position: [f32; 3],
     normal: [f32; 3],
     colour: [f32; 4],
+    /// The mesh's ambient colour, or the vertex colour when it has none.
+    ambient: [f32; 3],
 }
 
 #[repr(C)]
@@ -208,7 +210,9 @@ impl Renderer {
             bind_group_layouts: &[Some(&globals_layout)],
             immediate_size: 0,
         });
-        let mesh_attrs = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x4];
+        let mesh_attrs = wgpu::vertex_attr_array![
+            0 => Float32x3, 1 => Float32x3, 2 => Float32x4, 3 => Float32x3
+        ];
         let mesh_buffers = [Some(wgpu::VertexBufferLayout {
             array_stride: std::mem::size_of::<MeshVertex>() as u64,
             step_mode: wgpu::VertexStepMode::Vertex,
@@ -370,6 +374,13 @@ impl Renderer {
                 position: mesh.positions[i],
                 normal: mesh.normals[i],
                 colour: mesh.colours[i],
+                ambient: match mesh.ambient.get(i) {
+                    Some(a) => *a,
+                    None => {
+                        let c = mesh.colours[i];
+                        [c[0], c[1], c[2]]
+                    }
+                },
             })
             .collect();
         // wgpu rejects empty buffers; a zero-length draw needs none of the content.

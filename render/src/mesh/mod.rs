@@ -2,14 +2,17 @@
 //!
 //! [`Mesh`] is the one mesh type every mesher returns and the renderer draws.
 //! [`octree`] meshes implicit solids (f >= 0 is inside) through the [`Field`] trait;
-//! [`parametric`] triangulates parametric surfaces p(u,v) and sweeps curves p(u) into tubes.
+//! [`parametric`] triangulates parametric surfaces p(u,v) and sweeps curves p(u) into tubes;
+//! [`TapeField`] and [`ObjectField`] plug fdsl functions and objects into the mesher.
 
 pub mod field;
+pub mod object_field;
 pub mod octree;
 pub mod parametric;
 pub mod tape_field;
 
 pub use field::Field;
+pub use object_field::ObjectField;
 pub use tape_field::TapeField;
 
 /// Largest number of vertices a [`Mesh`] may index (indices are `u32`).
@@ -86,8 +89,11 @@ pub struct Mesh {
     pub positions: Vec<[f32; 3]>,
     /// Unit vertex normals, one per position.
     pub normals: Vec<[f32; 3]>,
-    /// Vertex colours in linear RGBA 0..1, one per position.
+    /// Vertex colours in linear RGBA 0..1, one per position: the diffuse colour and alpha.
     pub colours: Vec<[f32; 4]>,
+    /// Ambient colours in linear RGB 0..1, one per position, or none: then the ambient term
+    /// uses the vertex colour (see [`crate::appearance`]).
+    pub ambient: Vec<[f32; 3]>,
     /// Three indices per triangle.
     pub indices: Vec<u32>,
 }
@@ -120,6 +126,13 @@ impl Mesh {
                     what,
                 });
             }
+        }
+        if !(self.ambient.is_empty() || self.ambient.len() == n_positions) {
+            return Err(MeshError::AttributeCount {
+                n_positions,
+                n_other: self.ambient.len(),
+                what: "ambient colours",
+            });
         }
         if !self.indices.len().is_multiple_of(3) {
             return Err(MeshError::PartialTriangle(self.indices.len()));
@@ -238,6 +251,18 @@ impl Mesh {
         let total = base + other.positions.len();
         let base = u32::try_from(base).map_err(|_| MeshError::TooManyVertices(total))?;
         u32::try_from(total).map_err(|_| MeshError::TooManyVertices(total))?;
+        if !(self.ambient.is_empty() && other.ambient.is_empty()) {
+            // One of the two has ambient colours: the other's are its vertex colours.
+            if self.ambient.is_empty() {
+                self.ambient = self.colours.iter().map(|c| [c[0], c[1], c[2]]).collect();
+            }
+            if other.ambient.is_empty() {
+                let own = other.colours.iter().map(|c| [c[0], c[1], c[2]]);
+                self.ambient.extend(own);
+            } else {
+                self.ambient.extend_from_slice(&other.ambient);
+            }
+        }
         self.positions.extend_from_slice(&other.positions);
         self.normals.extend_from_slice(&other.normals);
         self.colours.extend_from_slice(&other.colours);
@@ -370,6 +395,27 @@ mod tests {
             assert_eq!(m.positions[i], expect);
         }
         assert_ne!(m.normals, normals);
+    }
+
+    #[test]
+    fn ambient_colours_are_optional_and_appended_with_the_vertex_colours() {
+        let mut m = tetrahedron();
+        assert_eq!(m.validate(), Ok(()));
+        let mut blue = tetrahedron();
+        blue.ambient = vec![[0.0, 0.0, 1.0]; 4];
+        assert_eq!(blue.validate(), Ok(()));
+        m.append(&blue).unwrap();
+        assert_eq!(m.ambient.len(), 8);
+        assert_eq!(m.ambient[0], [1.0; 3], "the first mesh's vertex colour");
+        assert_eq!(m.ambient[7], [0.0, 0.0, 1.0]);
+        m.ambient.pop();
+        assert!(matches!(
+            m.validate(),
+            Err(MeshError::AttributeCount {
+                what: "ambient colours",
+                ..
+            })
+        ));
     }
 
     #[test]

@@ -80,6 +80,9 @@ pub struct MeshStats {
     pub fields_simplified: usize,
     /// Surface patches given several vertices to stay manifold.
     pub patches_split: usize,
+    /// Blocks next to a remeshed range whose lattice values did not change, so their cells
+    /// were kept rather than built again.
+    pub blocks_unchanged: usize,
 }
 
 /// Meshes the surface f = 0 of `field` inside `settings.bounds`.
@@ -95,6 +98,38 @@ pub fn mesh_with_stats<F: Field>(
     let mut mesher = OctreeMesher::new(settings)?;
     let stats = mesher.remesh(field, settings.bounds)?;
     Ok((mesher.mesh()?, stats))
+}
+
+/// The number of leaf blocks [`mesh`] evaluates for `field` and `settings`
+/// ([`MeshStats::blocks_evaluated`]), found by interval arithmetic alone: the same octree
+/// descent, pruning and [`Field::simplify`] calls as meshing, without evaluating any block.
+/// Callers with a budget use it to choose a depth before they mesh.
+pub fn count_blocks<F: Field>(
+    field: &mut F,
+    settings: &MeshSettings,
+) -> Result<usize, OctreeMeshError> {
+    fn node<F: Field>(grid: &Grid, field: &mut F, origin: [u32; 3], size: u32) -> usize {
+        let lo = grid.point(origin);
+        let hi = grid.point(origin.map(|o| o + size));
+        let (f_lo, f_hi) = field.interval(lo, hi);
+        if f_lo > 0.0 || f_hi < 0.0 {
+            return 0;
+        }
+        let mut simplified = field.simplify(lo, hi);
+        let field: &mut F = simplified.as_mut().unwrap_or(field);
+        if size <= grid.block {
+            return 1;
+        }
+        let half = size / 2;
+        (0..8)
+            .map(|k| {
+                let child = std::array::from_fn(|a| origin[a] + corner_offset(k)[a] * half);
+                node(grid, field, child, half)
+            })
+            .sum()
+    }
+    let grid = Grid::new(settings)?;
+    Ok(node(&grid, field, [0; 3], grid.n_cells))
 }
 
 /// A mesher that keeps its evaluated blocks, so that only an edit's box is meshed again.
@@ -118,22 +153,8 @@ pub struct OctreeMesher {
 impl OctreeMesher {
     /// An empty mesher for `settings`; call [`OctreeMesher::remesh`] with the whole bounds.
     pub fn new(settings: &MeshSettings) -> Result<Self, OctreeMeshError> {
-        if settings.depth > OCTREE_DEPTH_MAX {
-            return Err(OctreeMeshError::DepthTooLarge(settings.depth));
-        }
-        let b = settings.bounds;
-        let sane = (0..3).all(|a| b.lo[a].is_finite() && b.hi[a].is_finite() && b.lo[a] < b.hi[a]);
-        if !sane {
-            return Err(OctreeMeshError::BadBounds(b));
-        }
-        let n_cells = 1u32 << settings.depth;
-        let grid = Grid {
-            lo: b.lo,
-            step: std::array::from_fn(|a| (b.hi[a] - b.lo[a]) / n_cells as f32),
-            n_cells,
-            block: BLOCK_CELLS.min(n_cells),
-        };
-        let n_blocks = n_cells / grid.block;
+        let grid = Grid::new(settings)?;
+        let n_blocks = grid.n_cells / grid.block;
         // Until a block is visited it counts as outside.
         let reps = vec![-grid.rep(); (n_blocks * n_blocks * n_blocks) as usize];
         Ok(Self {
@@ -180,23 +201,29 @@ impl OctreeMesher {
 
     /// Assembles the mesh of all kept blocks.
     pub fn mesh(&self) -> Result<Mesh, OctreeMeshError> {
-        let mut offsets = BTreeMap::new();
+        // Dense tables by block index: lookups across block faces are the inner loop.
+        let mut offsets = vec![NONE; self.reps.len()];
+        let mut records: Vec<Option<&Block>> = vec![None; self.reps.len()];
         let mut mesh = Mesh::default();
+        let n_vertices: usize = self.blocks.values().map(|b| b.positions.len()).sum();
+        if n_vertices >= NONE as usize {
+            return Err(OctreeMeshError::TooManyVertices);
+        }
+        mesh.positions.reserve(n_vertices);
+        mesh.normals.reserve(n_vertices);
         for (key, block) in &self.blocks {
-            let offset = u32::try_from(mesh.positions.len())
-                .map_err(|_| OctreeMeshError::TooManyVertices)?;
-            offsets.insert(*key, offset);
+            let idx = self.block_idx(*key);
+            offsets[idx] = mesh.positions.len() as u32;
+            records[idx] = Some(block);
             mesh.positions.extend_from_slice(&block.positions);
             mesh.normals.extend_from_slice(&block.normals);
         }
-        if mesh.positions.len() >= NONE as usize {
-            return Err(OctreeMeshError::TooManyVertices);
-        }
         mesh.colours = vec![[1.0; 4]; mesh.positions.len()];
+        let assembly = Assembly { offsets, records };
         for (key, block) in &self.blocks {
-            let offset = offsets.get(key).copied().unwrap_or(0);
-            self.emit_quads(block, offset, &offsets, &mut mesh);
-            self.emit_gaps(block, offset, &offsets, &mut mesh);
+            let offset = assembly.offsets[self.block_idx(*key)];
+            self.emit_quads(block, offset, &assembly, &mut mesh);
+            self.emit_gaps(block, offset, &assembly, &mut mesh);
             for central in &block.centrals {
                 for k in 1..central.len().saturating_sub(1) {
                     mesh.indices
@@ -235,6 +262,25 @@ struct Grid {
 }
 
 impl Grid {
+    /// The lattice of `settings`, checked.
+    fn new(settings: &MeshSettings) -> Result<Grid, OctreeMeshError> {
+        if settings.depth > OCTREE_DEPTH_MAX {
+            return Err(OctreeMeshError::DepthTooLarge(settings.depth));
+        }
+        let b = settings.bounds;
+        let sane = (0..3).all(|a| b.lo[a].is_finite() && b.hi[a].is_finite() && b.lo[a] < b.hi[a]);
+        if !sane {
+            return Err(OctreeMeshError::BadBounds(b));
+        }
+        let n_cells = 1u32 << settings.depth;
+        Ok(Grid {
+            lo: b.lo,
+            step: std::array::from_fn(|a| (b.hi[a] - b.lo[a]) / n_cells as f32),
+            n_cells,
+            block: BLOCK_CELLS.min(n_cells),
+        })
+    }
+
     fn point(&self, i: [u32; 3]) -> [f32; 3] {
         std::array::from_fn(|a| self.lo[a] + i[a] as f32 * self.step[a])
     }
@@ -480,6 +526,21 @@ impl Visit<'_> {
                 }
             }
         }
+        if kept && !self.range.contains(key) {
+            // A block outside the dirty range sees the field as before; with the same lattice
+            // values its record would be built again bit for bit.
+            let same = self.mesher.blocks.get(&key).is_some_and(|b| {
+                b.values.len() == values.len()
+                    && b.values
+                        .iter()
+                        .zip(&values)
+                        .all(|(a, v)| a.to_bits() == v.to_bits())
+            });
+            if same {
+                self.stats.blocks_unchanged += 1;
+                return;
+            }
+        }
         let origin = key.map(|k| k * bc);
         let block = build_block(&grid, field, origin, values, self.stats);
         let idx = self.mesher.block_idx(key);
@@ -703,89 +764,70 @@ fn gradients_at<F: Field>(field: &mut F, points: &[[f32; 3]], out: &mut [[f32; 3
 
 impl OctreeMesher {
     /// The global index of the vertex that cell `cell` has on its edge `e`, if any.
-    fn cell_vertex(
-        &self,
-        offsets: &BTreeMap<[u32; 3], u32>,
-        cell: [u32; 3],
-        e: usize,
-    ) -> Option<u32> {
+    fn cell_vertex(&self, assembly: &Assembly<'_>, cell: [u32; 3], e: usize) -> Option<u32> {
         let bc = self.grid.block;
-        let key = cell.map(|c| c / bc);
-        let v = self.blocks.get(&key)?.cell(bc, cell.map(|c| c % bc))?[e];
-        (v != NONE)
-            .then(|| offsets.get(&key).map(|o| o + v))
-            .flatten()
+        let idx = self.block_idx(cell.map(|c| c / bc));
+        let v = assembly
+            .records
+            .get(idx)
+            .copied()
+            .flatten()?
+            .cell(bc, cell.map(|c| c % bc))?[e];
+        (v != NONE).then(|| assembly.offsets[idx] + v)
     }
 
     /// Emits two triangles for every crossed grid edge that `block` owns.
-    fn emit_quads(
-        &self,
-        block: &Block,
-        offset: u32,
-        offsets: &BTreeMap<[u32; 3], u32>,
-        mesh: &mut Mesh,
-    ) {
+    fn emit_quads(&self, block: &Block, offset: u32, assembly: &Assembly<'_>, mesh: &mut Mesh) {
         let grid = &self.grid;
         let bc = grid.block;
         let n = grid.n_cells;
-        if block.cells.is_empty() {
-            return;
-        }
-        for z in 0..bc {
-            for y in 0..bc {
-                for x in 0..bc {
-                    let l = [x, y, z];
-                    let p: [u32; 3] = std::array::from_fn(|a| block.origin[a] + l[a]);
-                    let f0 = block.values[grid.at(l)];
-                    for d in 0..3 {
-                        let (a1, a2) = ((d + 1) % 3, (d + 2) % 3);
-                        if p[a1] == 0 || p[a2] == 0 || p[a1] >= n || p[a2] >= n {
-                            continue;
-                        }
-                        let mut l1 = l;
-                        l1[d] += 1;
-                        if inside(f0) == inside(block.values[grid.at(l1)]) {
-                            continue;
-                        }
-                        // The four cells around the edge, wound so the normal points out.
-                        let quad = quad_cells(inside(f0)).map(|(o1, o2)| {
-                            let mut low = [0u32; 3];
-                            low[a1] = o1;
-                            low[a2] = o2;
-                            let e = edge_index(d, low);
-                            if l[a1] >= o1 && l[a2] >= o2 {
-                                // The cell lies in this block: no map lookup.
-                                let mut lc = l;
-                                lc[a1] -= o1;
-                                lc[a2] -= o2;
-                                let v = block.cell(bc, lc)?[e];
-                                return (v != NONE).then_some(offset + v);
-                            }
-                            let mut cell = p;
-                            cell[a1] -= o1;
-                            cell[a2] -= o2;
-                            self.cell_vertex(offsets, cell, e)
-                        });
-                        let [Some(q0), Some(q1), Some(q2), Some(q3)] = quad else {
-                            continue;
-                        };
-                        mesh.indices
-                            .extend(split_quad(&mesh.positions, [q0, q1, q2, q3]));
-                    }
+        // A crossed grid edge starting at lattice point l of the block is an edge of the cell
+        // at l, which is then crossed: visiting the crossed cells (in the order the block
+        // found them, z then y then x) visits every quad the block owns.
+        for &l in &block.cell_local {
+            let p: [u32; 3] = std::array::from_fn(|a| block.origin[a] + l[a]);
+            let f0 = block.values[grid.at(l)];
+            for d in 0..3 {
+                let (a1, a2) = ((d + 1) % 3, (d + 2) % 3);
+                if p[a1] == 0 || p[a2] == 0 || p[a1] >= n || p[a2] >= n {
+                    continue;
                 }
+                let mut l1 = l;
+                l1[d] += 1;
+                if inside(f0) == inside(block.values[grid.at(l1)]) {
+                    continue;
+                }
+                // The four cells around the edge, wound so the normal points out.
+                let quad = quad_cells(inside(f0)).map(|(o1, o2)| {
+                    let mut low = [0u32; 3];
+                    low[a1] = o1;
+                    low[a2] = o2;
+                    let e = edge_index(d, low);
+                    if l[a1] >= o1 && l[a2] >= o2 {
+                        // The cell lies in this block: no map lookup.
+                        let mut lc = l;
+                        lc[a1] -= o1;
+                        lc[a2] -= o2;
+                        let v = block.cell(bc, lc)?[e];
+                        return (v != NONE).then_some(offset + v);
+                    }
+                    let mut cell = p;
+                    cell[a1] -= o1;
+                    cell[a2] -= o2;
+                    self.cell_vertex(assembly, cell, e)
+                });
+                let [Some(q0), Some(q1), Some(q2), Some(q3)] = quad else {
+                    continue;
+                };
+                mesh.indices
+                    .extend(split_quad(&mesh.positions, [q0, q1, q2, q3]));
             }
         }
     }
 
     /// Emits the gap polygons across the faces of `block`'s split cells: where the cells on
     /// the two sides of a face segment give its two ends different vertices.
-    fn emit_gaps(
-        &self,
-        block: &Block,
-        offset: u32,
-        offsets: &BTreeMap<[u32; 3], u32>,
-        mesh: &mut Mesh,
-    ) {
+    fn emit_gaps(&self, block: &Block, offset: u32, assembly: &Assembly<'_>, mesh: &mut Mesh) {
         let grid = &self.grid;
         for &ci in &block.split_cells {
             let (entry, l) = (block.cells[ci as usize], block.cell_local[ci as usize]);
@@ -811,8 +853,8 @@ impl OctreeMesher {
                         continue;
                     }
                     let (Some(bl), Some(br)) = (
-                        self.cell_vertex(offsets, other, edge_across(ea, face)),
-                        self.cell_vertex(offsets, other, edge_across(eb, face)),
+                        self.cell_vertex(assembly, other, edge_across(ea, face)),
+                        self.cell_vertex(assembly, other, edge_across(eb, face)),
                     ) else {
                         continue;
                     };
@@ -832,6 +874,13 @@ impl OctreeMesher {
             }
         }
     }
+}
+
+/// Per block index, the first global vertex of its record and the record (blocks without
+/// one: `NONE` and `None`), while a mesh is assembled.
+struct Assembly<'a> {
+    offsets: Vec<u32>,
+    records: Vec<Option<&'a Block>>,
 }
 
 /// Emits a quad whose consecutive corners may coincide: a quad, a triangle or nothing.

@@ -160,9 +160,9 @@ pub fn triangulate_surface(
         .collect();
     let mut mesh = Mesh {
         positions,
-        normals: Vec::new(),
         colours,
         indices,
+        ..Mesh::default()
     };
     mesh.recompute_normals();
     Ok(mesh)

@@ -43,7 +43,7 @@ impl TapeField {
 }
 
 /// Rounds an f64 bound outwards to f32, so the f32 range still encloses every value.
-fn outward(lo: f64, hi: f64) -> (f32, f32) {
+pub(crate) fn outward(lo: f64, hi: f64) -> (f32, f32) {
     let mut l = lo as f32;
     if l as f64 > lo {
         l = l.next_down();

@@ -1,4 +1,5 @@
-// Lit meshes: per-vertex colour times material, ambient + Lambert + Blinn-Phong, two-sided.
+// Lit meshes: ambient (vertex ambient colour times the ambient weight) + Lambert (vertex colour)
+// + Blinn-Phong (white), two-sided.
 
 struct Globals {
     view_proj: mat4x4<f32>,
@@ -22,6 +23,7 @@ struct VertexIn {
     @location(0) position: vec3<f32>,
     @location(1) normal: vec3<f32>,
     @location(2) colour: vec4<f32>,
+    @location(3) ambient: vec3<f32>,
 };
 
 struct VertexOut {
@@ -29,6 +31,7 @@ struct VertexOut {
     @location(0) world: vec3<f32>,
     @location(1) normal: vec3<f32>,
     @location(2) colour: vec4<f32>,
+    @location(3) ambient: vec3<f32>,
 };
 
 @vertex
@@ -39,6 +42,7 @@ fn vs_main(v: VertexIn) -> VertexOut {
     out.world = world.xyz;
     out.normal = (object.normal_matrix * vec4<f32>(v.normal, 0.0)).xyz;
     out.colour = v.colour;
+    out.ambient = v.ambient;
     return out;
 }
 
@@ -54,6 +58,6 @@ fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) ve
     let m = object.material;
     let lambert = max(dot(n, l), 0.0);
     let spec = select(0.0, pow(max(dot(n, h), 0.0), m.w), lambert > 0.0);
-    let rgb = in.colour.rgb * (m.x + m.y * lambert) + vec3<f32>(m.z * spec);
+    let rgb = in.ambient * m.x + in.colour.rgb * (m.y * lambert) + vec3<f32>(m.z * spec);
     return vec4<f32>(rgb, in.colour.a * object.opacity.x);
 }

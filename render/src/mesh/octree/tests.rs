@@ -516,3 +516,38 @@ fn blocks_whose_fields_disagree_near_zero_still_stitch() {
         }
     }
 }
+
+#[test]
+fn counting_blocks_by_intervals_gives_the_blocks_meshing_evaluates() {
+    let spheres = Union {
+        parts: vec![
+            Sphere {
+                centre: [-0.3, 0.01, 0.02],
+                radius: 0.45,
+            },
+            Sphere {
+                centre: [0.35, -0.02, 0.01],
+                radius: 0.4,
+            },
+        ],
+        simplifying: true,
+    };
+    for depth in [3, 5, 6] {
+        let settings = MeshSettings {
+            bounds: unit_box(),
+            depth,
+        };
+        let (_, stats) = mesh_with_stats(&mut spheres.clone(), &settings).unwrap();
+        let counted = count_blocks(&mut spheres.clone(), &settings).unwrap();
+        assert_eq!(counted, stats.blocks_evaluated, "depth {depth}");
+        assert!(counted > 0);
+    }
+    let bad = MeshSettings {
+        bounds: unit_box(),
+        depth: 11,
+    };
+    assert_eq!(
+        count_blocks(&mut spheres.clone(), &bad),
+        Err(OctreeMeshError::DepthTooLarge(11))
+    );
+}

@@ -1,0 +1,95 @@
+//! End to end: `sculpt render` turns a scene file into PNG files, and reports a bad file's
+//! errors with their location instead of panicking.
+#![allow(
+    clippy::unwrap_used,
+    reason = "helpers outside #[test] fns unwrap process output"
+)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn sculpt(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sculpt"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+#[test]
+fn render_writes_one_png_per_view_of_the_watermelon() {
+    let out = scratch("render_watermelon");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/scenes/watermelon.wrl");
+    let run = sculpt(&[
+        "render",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--size",
+        "64x48",
+        "--depth",
+        "4",
+    ]);
+    let (stdout, stderr) = (text(&run.stdout), text(&run.stderr));
+    if !run.status.success() && stderr.contains("no wgpu adapter") {
+        println!("skipping: {stderr}");
+        return;
+    }
+    assert!(run.status.success(), "{stdout}\n{stderr}");
+    assert!(stdout.contains("Watermelon:"), "{stdout}");
+    for view in ["front", "corner"] {
+        let path = out.join(format!("watermelon_{view}.png"));
+        assert!(
+            stdout.contains(&format!("wrote {}", path.display())),
+            "{stdout}"
+        );
+        let image = render::image::RgbaImage::from_png(&std::fs::read(&path).unwrap()).unwrap();
+        assert_eq!((image.width, image.height), (64, 48));
+        // The watermelon fills the middle; the corner is background.
+        assert_ne!(image.pixel(32, 24), image.pixel(0, 0), "{view}");
+    }
+}
+
+#[test]
+fn render_reports_a_bad_file_with_its_location_and_bad_arguments_clearly() {
+    let dir = scratch("render_bad");
+    let bad = dir.join("bad.wrl");
+    std::fs::write(
+        &bad,
+        "#VRML V2.0 utf8\nFShape {\n  geometry FGeometry { definition \"1-x^\" }\n}\n",
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let run = sculpt(&[
+        "render",
+        bad.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = text(&run.stderr);
+    assert!(!run.status.success());
+    assert!(
+        stderr.contains(&format!("{}:3:", bad.display())) && stderr.contains("error"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!out.exists(), "nothing is written for a bad file");
+
+    let missing = sculpt(&["render", "no/such/file.wrl", "--out", out.to_str().unwrap()]);
+    assert!(!missing.status.success());
+    assert!(text(&missing.stderr).contains("no/such/file.wrl"));
+    let no_out = sculpt(&["render", bad.to_str().unwrap()]);
+    assert!(text(&no_out.stderr).contains("--out"));
+    let bad_size = sculpt(&["render", "x.wrl", "--out", "o", "--size", "big"]);
+    assert!(text(&bad_size.stderr).contains("WxH"));
+}

@@ -1,0 +1,636 @@
+//! [`ObjectField`]: an [`fdsl::object::Object`] (its geometry folded with its edit history)
+//! as a [`Field`] for the octree mesher, and the boxes an edit dirties, for
+//! [`OctreeMesher::remesh`](super::octree::OctreeMesher::remesh).
+//!
+//! An object with edits goes through fdsl's [`Sampler`]: values and gradients point by point
+//! (fdsl has no bulk entry point over an object, so `values` is a loop of f64 point
+//! evaluations, each visiting only the edits whose boxes hold the point), and intervals over
+//! boxes (which visit the edits overlapping the box). There is no simplification per box
+//! there: `Sampler` offers no way to restrict an object to a box. An implicit geometry
+//! without edits is evaluated in bulk instead, through its tape (see [`ObjectField::new`]).
+//!
+//! Incremental meshing rests on a property of the fold: an edit changes the solid only inside
+//! its boxes ([`CompiledEdit::boxes`], which include the tool's margin and blend radius),
+//! except an intersection, which empties everything outside its tool. So after a union or a
+//! subtraction only the blocks those boxes touch are evaluated again
+//! ([`dirty_boxes`]); after an intersection, the whole object is.
+
+use fdsl::object::{CompiledEdit, Domain, EditOp, Object, Sampler, Shape};
+use glam::{DAffine3, DVec3};
+
+use super::Aabb;
+use super::field::Field;
+use super::tape_field::{TapeField, outward};
+
+/// An object's solid at a fixed time `t`, in object space, f >= 0 inside.
+pub struct ObjectField {
+    inner: Inner,
+}
+
+enum Inner {
+    /// Geometry and edits, through fdsl's sampler, one point at a time.
+    Sampler { sampler: Box<Sampler>, t: f64 },
+    /// An implicit geometry without edits, through fdsl's bulk evaluators.
+    Shape(Box<ShapeField>),
+}
+
+impl ObjectField {
+    /// A field over `object` as it is now (later edits do not reach it) at time `t_secs`.
+    ///
+    /// An implicit geometry without active shape edits is evaluated in bulk (f32, fdsl's
+    /// `BulkEval`, with tape simplification per box), like [`TapeField`],
+    /// through its transform and clipped by its domain as fdsl's `Sampler` does; anything
+    /// else goes through the sampler (f64, one point at a time). The two agree to f32
+    /// rounding, so keep one object on one path while remeshing it incrementally.
+    pub fn new(object: &Object, t_secs: f64) -> ObjectField {
+        let bulk = ShapeField::of(object, t_secs).map(|s| Inner::Shape(Box::new(s)));
+        ObjectField {
+            inner: bulk.unwrap_or_else(|| Inner::Sampler {
+                sampler: Box::new(object.sampler()),
+                t: t_secs,
+            }),
+        }
+    }
+
+    /// A field over the object `sampler` evaluates (always through the sampler), at time
+    /// `t_secs`.
+    pub fn from_sampler(sampler: Sampler, t_secs: f64) -> ObjectField {
+        ObjectField {
+            inner: Inner::Sampler {
+                sampler: Box::new(sampler),
+                t: t_secs,
+            },
+        }
+    }
+
+    /// Whether values come from fdsl's bulk evaluators (else from the sampler).
+    pub fn is_bulk(&self) -> bool {
+        matches!(self.inner, Inner::Shape(_))
+    }
+}
+
+fn point(x: f32, y: f32, z: f32) -> DVec3 {
+    DVec3::new(x.into(), y.into(), z.into())
+}
+
+impl Field for ObjectField {
+    fn interval(&mut self, lo: [f32; 3], hi: [f32; 3]) -> (f32, f32) {
+        let (sampler, t) = match &mut self.inner {
+            Inner::Shape(s) => return s.interval(lo, hi),
+            Inner::Sampler { sampler, t } => (sampler, *t),
+        };
+        let region = fdsl::bvh::Aabb::new(point(lo[0], lo[1], lo[2]), point(hi[0], hi[1], hi[2]));
+        let iv = sampler.interval(&region, t);
+        if iv.nan || iv.lo.is_nan() || iv.hi.is_nan() {
+            (f32::NAN, f32::NAN)
+        } else {
+            outward(iv.lo, iv.hi)
+        }
+    }
+
+    fn values(&mut self, xs: &[f32], ys: &[f32], zs: &[f32], out: &mut [f32]) {
+        let (sampler, t) = match &mut self.inner {
+            Inner::Shape(s) => return s.values(xs, ys, zs, out),
+            Inner::Sampler { sampler, t } => (sampler, *t),
+        };
+        for (i, o) in out.iter_mut().enumerate().take(xs.len()) {
+            *o = sampler.value(point(xs[i], ys[i], zs[i]), t) as f32;
+        }
+    }
+
+    fn gradients(&mut self, xs: &[f32], ys: &[f32], zs: &[f32], out: &mut [[f32; 3]]) {
+        let (sampler, t) = match &mut self.inner {
+            Inner::Shape(s) => return s.gradients(xs, ys, zs, out),
+            Inner::Sampler { sampler, t } => (sampler, *t),
+        };
+        for (i, o) in out.iter_mut().enumerate().take(xs.len()) {
+            let (_, g) = sampler.gradient(point(xs[i], ys[i], zs[i]), t);
+            *o = g.to_array().map(|c| c as f32);
+        }
+    }
+
+    fn simplify(&mut self, lo: [f32; 3], hi: [f32; 3]) -> Option<Self> {
+        match &mut self.inner {
+            Inner::Shape(s) => s.simplify(lo, hi).map(|s| ObjectField {
+                inner: Inner::Shape(Box::new(s)),
+            }),
+            Inner::Sampler { .. } => None,
+        }
+    }
+}
+
+/// An implicit geometry's tape in its own space, mapped from object space by the inverse of
+/// its transform and clipped by its domain: `min(f(q), domain distance(q))`, `q` the local
+/// point, as fdsl's sampler evaluates a shape.
+struct ShapeField {
+    tape: TapeField,
+    local_from_object: DAffine3,
+    identity: bool,
+    domain: Option<Domain>,
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+    zs: Vec<f32>,
+}
+
+impl ShapeField {
+    /// The bulk field of `object`'s geometry when it is implicit and no active edit changes
+    /// its shape; `None` otherwise.
+    fn of(object: &Object, t: f64) -> Option<ShapeField> {
+        let geometry = object.data().geometry.as_ref()?;
+        let Shape::Implicit(formula) = &geometry.shape else {
+            return None;
+        };
+        let edited = object
+            .history()
+            .entries()
+            .iter()
+            .any(|e| e.active && e.edit.is_geometric());
+        if edited {
+            return None;
+        }
+        let tape = fdsl::Function::parse(formula.as_str()).ok()?.tape();
+        let local_from_object = geometry.transform.inverse()?.parent_from_child;
+        Some(ShapeField {
+            tape: TapeField::new(&tape, t as f32),
+            identity: local_from_object == DAffine3::IDENTITY,
+            local_from_object,
+            domain: geometry.domain,
+            xs: Vec::new(),
+            ys: Vec::new(),
+            zs: Vec::new(),
+        })
+    }
+
+    /// Maps the points into local space, into the scratch vectors.
+    fn map_to_local(&mut self, xs: &[f32], ys: &[f32], zs: &[f32]) {
+        self.xs.clear();
+        self.ys.clear();
+        self.zs.clear();
+        for i in 0..xs.len() {
+            let q = self
+                .local_from_object
+                .transform_point3(point(xs[i], ys[i], zs[i]));
+            self.xs.push(q.x as f32);
+            self.ys.push(q.y as f32);
+            self.zs.push(q.z as f32);
+        }
+    }
+
+    /// The local box around the object-space box `lo..=hi`.
+    fn local_box(&self, lo: [f32; 3], hi: [f32; 3]) -> ([f32; 3], [f32; 3]) {
+        if self.identity {
+            return (lo, hi);
+        }
+        let region = fdsl::bvh::Aabb::new(point(lo[0], lo[1], lo[2]), point(hi[0], hi[1], hi[2]));
+        let local = fdsl::object::Transform {
+            parent_from_child: self.local_from_object,
+        }
+        .aabb(&region);
+        (
+            local.lo.to_array().map(|v| (v as f32).next_down()),
+            local.hi.to_array().map(|v| (v as f32).next_up()),
+        )
+    }
+
+    fn interval(&mut self, lo: [f32; 3], hi: [f32; 3]) -> (f32, f32) {
+        let (llo, lhi) = self.local_box(lo, hi);
+        let (f_lo, f_hi) = self.tape.interval(llo, lhi);
+        match &self.domain {
+            Some(d) if !(f_lo.is_nan() || f_hi.is_nan()) => {
+                // As fdsl bounds the domain term: its distance changes by at most the distance
+                // moved from the box's centre.
+                let (clo, chi) = (point(llo[0], llo[1], llo[2]), point(lhi[0], lhi[1], lhi[2]));
+                let c = d.signed_distance(0.5 * (clo + chi));
+                let r = 0.5 * (chi - clo).length();
+                let (d_lo, d_hi) = outward(c - r, c + r);
+                (f_lo.min(d_lo), f_hi.min(d_hi))
+            }
+            _ => (f_lo, f_hi),
+        }
+    }
+
+    fn values(&mut self, xs: &[f32], ys: &[f32], zs: &[f32], out: &mut [f32]) {
+        if self.identity && self.domain.is_none() {
+            return self.tape.values(xs, ys, zs, out);
+        }
+        self.map_to_local(xs, ys, zs);
+        self.tape.values(&self.xs, &self.ys, &self.zs, out);
+        if let Some(d) = &self.domain {
+            for (i, o) in out.iter_mut().enumerate() {
+                let q = point(self.xs[i], self.ys[i], self.zs[i]);
+                *o = o.min(d.signed_distance(q) as f32);
+            }
+        }
+    }
+
+    fn gradients(&mut self, xs: &[f32], ys: &[f32], zs: &[f32], out: &mut [[f32; 3]]) {
+        self.map_to_local(xs, ys, zs);
+        let n = xs.len();
+        self.tape.gradients(&self.xs, &self.ys, &self.zs, out);
+        if let Some(d) = self.domain {
+            let mut f = vec![0.0f32; n];
+            self.tape.values(&self.xs, &self.ys, &self.zs, &mut f);
+            let h = 1e-6 * d.size.max_element();
+            for (i, g) in out.iter_mut().enumerate() {
+                let q = point(self.xs[i], self.ys[i], self.zs[i]);
+                if d.signed_distance(q) < f64::from(f[i]) {
+                    let axis = |a: DVec3| {
+                        (d.signed_distance(q + a * h) - d.signed_distance(q - a * h)) / (2.0 * h)
+                    };
+                    *g = [axis(DVec3::X), axis(DVec3::Y), axis(DVec3::Z)].map(|c| c as f32);
+                }
+            }
+        }
+        if !self.identity {
+            // The chain rule: the object-space gradient is J^T times the local one.
+            let jt = self.local_from_object.matrix3.transpose();
+            for g in out.iter_mut() {
+                let v = jt * DVec3::from_array(g.map(f64::from));
+                *g = v.to_array().map(|c| c as f32);
+            }
+        }
+    }
+
+    fn simplify(&mut self, lo: [f32; 3], hi: [f32; 3]) -> Option<ShapeField> {
+        let (llo, lhi) = self.local_box(lo, hi);
+        let tape = self.tape.simplify(llo, lhi)?;
+        Some(ShapeField {
+            tape,
+            local_from_object: self.local_from_object,
+            identity: self.identity,
+            domain: self.domain,
+            xs: Vec::new(),
+            ys: Vec::new(),
+            zs: Vec::new(),
+        })
+    }
+}
+
+/// The box `b` in single precision, rounded outwards; `None` when empty or not finite.
+pub fn to_f32_box(b: &fdsl::bvh::Aabb) -> Option<Aabb> {
+    if b.is_empty() || !(b.lo.is_finite() && b.hi.is_finite()) {
+        return None;
+    }
+    let lo = b.lo.to_array().map(|v| (v as f32).next_down());
+    let hi = b.hi.to_array().map(|v| (v as f32).next_up());
+    Some(Aabb::new(lo, hi))
+}
+
+/// Where the solid may have changed when `edit` was applied, undone or redone.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Dirty {
+    /// Only inside these boxes (none for a painting, which changes colours, not the shape).
+    Boxes(Vec<Aabb>),
+    /// Anywhere: an intersection empties everything outside its tool.
+    Everywhere,
+}
+
+/// The region `edit` changes (see [`Dirty`]); remesh each box in turn.
+pub fn dirty_boxes(edit: &CompiledEdit) -> Dirty {
+    match edit.edit().op {
+        EditOp::Intersect => Dirty::Everywhere,
+        EditOp::Paint { .. } => Dirty::Boxes(Vec::new()),
+        EditOp::Union | EditOp::Subtract => {
+            Dirty::Boxes(edit.boxes().iter().filter_map(to_f32_box).collect())
+        }
+    }
+}
+
+/// A box to mesh `object` in at octree `depth`: its bounds (domain and union edits, object
+/// space) grown by about two and a half cells, so that a surface clipped by the domain lies
+/// strictly inside and the mesh is closed. `None` for an unbounded solid (an implicit
+/// formula without a domain) or an empty one.
+pub fn mesh_bounds(object: &Object, depth: u8) -> Option<Aabb> {
+    let b = to_f32_box(&object.bounds()?)?;
+    let side = b.size().into_iter().fold(0.0f32, f32::max);
+    if !(side.is_finite() && side > 0.0) {
+        return None;
+    }
+    let n_cells = (1u32 << depth.min(super::octree::OCTREE_DEPTH_MAX)) as f32;
+    // Solving side + 2m = n * (m / 2.5) for the margin m keeps 2.5 cells of the grown box.
+    let margin = 2.5 * side / (n_cells - 5.0).max(1.0);
+    Some(Aabb::new(
+        b.lo.map(|v| v - margin),
+        b.hi.map(|v| v + margin),
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::octree::{MeshSettings, OctreeMesher, mesh_with_stats};
+    use crate::mesh::{Mesh, octree};
+    use fdsl::object::{Edit, Formula, Geometry, ObjectData, Pose, ToolShape};
+    use std::sync::Arc;
+
+    /// The unit ball clipped to a domain (so its bounds are finite).
+    fn ball() -> Object {
+        Object::new(ObjectData {
+            geometry: Some(Geometry::implicit_in(
+                Formula::new("1-sqrt(x^2+y^2+z^2)").unwrap(),
+                Domain::new(DVec3::ZERO, DVec3::splat(2.2)),
+            )),
+            ..ObjectData::default()
+        })
+        .unwrap()
+    }
+
+    /// Edit `k` of `n`: a carve (or every fifth a blob added) on the unit sphere along a
+    /// golden-angle spiral, alternating single stamps and short strokes.
+    fn edit(k: usize, n: usize) -> Edit {
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        let y = 1.0 - 2.0 * (k as f64 + 0.5) / n as f64;
+        let ring = (1.0 - y * y).max(0.0).sqrt();
+        let phi = golden * k as f64;
+        let at = DVec3::new(ring * phi.cos(), y, ring * phi.sin());
+        let op = if k % 5 == 4 {
+            EditOp::Union
+        } else {
+            EditOp::Subtract
+        };
+        let tool = ToolShape::Sphere { radius: 0.09 };
+        if k.is_multiple_of(2) {
+            Edit::stamp(op, tool, Pose::at(at))
+        } else {
+            let side = at.any_orthonormal_vector() * 0.08;
+            Edit::stroke(op, tool, vec![Pose::at(at - side), Pose::at(at + side)])
+        }
+    }
+
+    fn settings(depth: u8) -> MeshSettings {
+        MeshSettings {
+            bounds: Aabb::new([-1.25; 3], [1.25; 3]),
+            depth,
+        }
+    }
+
+    fn assert_closed(m: &Mesh, what: &str) {
+        assert!(m.n_triangles() > 0, "{what}: empty");
+        assert_eq!(m.open_edges(), 0, "{what}: open edges");
+        assert_eq!(m.non_manifold_edges(), 0, "{what}: non-manifold edges");
+        assert_eq!(m.misoriented_edges(), 0, "{what}: inconsistent winding");
+    }
+
+    /// Remeshes the boxes `dirty` with `field`; returns the blocks evaluated again and those
+    /// kept unchanged next to them.
+    fn remesh(mesher: &mut OctreeMesher, field: &mut ObjectField, dirty: &Dirty) -> (usize, usize) {
+        let boxes = match dirty {
+            Dirty::Boxes(boxes) => boxes.clone(),
+            Dirty::Everywhere => vec![settings(6).bounds],
+        };
+        boxes.iter().fold((0, 0), |(e, u), b| {
+            let stats = mesher.remesh(field, *b).unwrap();
+            (e + stats.blocks_evaluated, u + stats.blocks_unchanged)
+        })
+    }
+
+    /// Whether two meshes have the same triangles over vertices within `tolerance`.
+    fn same_surface(a: &Mesh, b: &Mesh, tolerance: f32) -> bool {
+        a.n_triangles() == b.n_triangles()
+            && a.n_vertices() == b.n_vertices()
+            && a.indices == b.indices
+            && a.positions
+                .iter()
+                .zip(&b.positions)
+                .all(|(p, q)| (0..3).all(|k| (p[k] - q[k]).abs() <= tolerance))
+    }
+
+    #[test]
+    fn object_field_agrees_with_the_sampler_and_bounds_it() {
+        let mut object = ball();
+        for k in 0..50 {
+            object.apply(edit(k, 50)).unwrap();
+        }
+        object.prepare();
+        let mut field = ObjectField::new(&object, 0.0);
+        let mut sampler = object.sampler();
+        let xs: Vec<f32> = (0..64).map(|i| -1.1 + 2.2 * i as f32 / 63.0).collect();
+        let ys: Vec<f32> = xs.iter().map(|x| 0.3 * x).collect();
+        let zs: Vec<f32> = xs.iter().map(|x| 0.5 - 0.2 * x).collect();
+        let mut out = vec![0.0; 64];
+        field.values(&xs, &ys, &zs, &mut out);
+        for i in 0..64 {
+            let p = point(xs[i], ys[i], zs[i]);
+            assert_eq!(out[i], sampler.value(p, 0.0) as f32);
+        }
+        let (lo, hi) = field.interval([-0.2, 0.1, 0.7], [0.1, 0.4, 1.05]);
+        for i in 0..64 {
+            let p = [
+                -0.2 + 0.3 * (i % 4) as f32 / 3.0,
+                0.1 + 0.3 * (i / 16) as f32 / 3.0,
+                0.7,
+            ];
+            let mut v = [0.0];
+            field.values(&[p[0]], &[p[1]], &[p[2]], &mut v);
+            assert!(lo <= v[0] && v[0] <= hi, "{v:?} outside {lo}..{hi}");
+        }
+        let mut grads = vec![[0.0; 3]; 1];
+        field.gradients(&[0.0], &[0.0], &[0.5], &mut grads);
+        assert!((grads[0][2] + 1.0).abs() < 1e-3, "{grads:?}");
+    }
+
+    #[test]
+    fn an_unedited_implicit_geometry_is_evaluated_in_bulk_like_the_sampler() {
+        use fdsl::object::Transform;
+        // A squashed, turned and moved ball clipped by a domain that cuts it.
+        let object = Object::new(ObjectData {
+            geometry: Some(Geometry {
+                shape: Shape::Implicit(Formula::new("0.8-sqrt(x^2+y^2+z^2)").unwrap()),
+                domain: Some(Domain::new(DVec3::new(0.0, 0.3, 0.0), DVec3::splat(1.6))),
+                transform: Transform::from_trs(
+                    DVec3::new(0.2, -0.1, 0.05),
+                    glam::DQuat::from_rotation_z(0.6),
+                    DVec3::new(1.0, 0.7, 1.2),
+                ),
+            }),
+            ..ObjectData::default()
+        })
+        .unwrap();
+        let mut bulk = ObjectField::new(&object, 0.0);
+        let mut slow = ObjectField::from_sampler(object.sampler(), 0.0);
+        assert!(bulk.is_bulk() && !slow.is_bulk());
+        let n = 200;
+        let xs: Vec<f32> = (0..n)
+            .map(|i| -1.0 + 2.0 * (i as f32 * 0.618).fract())
+            .collect();
+        let ys: Vec<f32> = (0..n)
+            .map(|i| -1.0 + 2.0 * (i as f32 * 0.414).fract())
+            .collect();
+        let zs: Vec<f32> = (0..n)
+            .map(|i| -1.0 + 2.0 * (i as f32 * 0.732).fract())
+            .collect();
+        let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+        bulk.values(&xs, &ys, &zs, &mut a);
+        slow.values(&xs, &ys, &zs, &mut b);
+        let (mut ga, mut gb) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+        bulk.gradients(&xs, &ys, &zs, &mut ga);
+        slow.gradients(&xs, &ys, &zs, &mut gb);
+        for i in 0..n {
+            assert!((a[i] - b[i]).abs() < 1e-5, "{i}: {} vs {}", a[i], b[i]);
+            for k in 0..3 {
+                assert!(
+                    (ga[i][k] - gb[i][k]).abs() < 1e-3,
+                    "{i}: {:?} vs {:?}",
+                    ga[i],
+                    gb[i]
+                );
+            }
+        }
+        let (lo, hi) = bulk.interval([-0.5, -0.2, 0.1], [0.1, 0.4, 0.6]);
+        for i in 0..n {
+            let p = [
+                -0.5 + 0.6 * xs[i].abs(),
+                -0.2 + 0.6 * ys[i].abs(),
+                0.1 + 0.5 * zs[i].abs(),
+            ];
+            let mut v = [0.0];
+            bulk.values(&[p[0]], &[p[1]], &[p[2]], &mut v);
+            assert!(lo <= v[0] && v[0] <= hi, "{v:?} outside {lo}..{hi}");
+        }
+        // Both mesh to the same closed solid.
+        let settings = settings(5);
+        let m_bulk = octree::mesh(&mut bulk, &settings).unwrap();
+        let m_slow = octree::mesh(&mut slow, &settings).unwrap();
+        assert_closed(&m_bulk, "bulk");
+        assert_closed(&m_slow, "sampler");
+        let (va, vb) = (m_bulk.signed_volume(), m_slow.signed_volume());
+        assert!((va - vb).abs() < 1e-3 * vb, "{va} vs {vb}");
+        // An edit sends the object through the sampler.
+        let mut edited = object.clone();
+        edited.apply(edit(0, 10)).unwrap();
+        assert!(!ObjectField::new(&edited, 0.0).is_bulk());
+    }
+
+    /// After one more edit on an object of 200, remeshing the edit's boxes gives exactly the
+    /// mesh that meshing the whole edited object gives; remeshing only the centre of the
+    /// edit's box does not, so the comparison catches blocks a remesh misses. Depth 6, since
+    /// at depth 5 one block (8 cells, 0.625 units) holds most of an edit's box.
+    #[test]
+    fn remeshing_an_edit_of_a_200_edit_object_equals_a_full_remesh() {
+        let depth = 6;
+        let mut object = ball();
+        let n = 200;
+        for k in 0..n {
+            object.apply(edit(k, n)).unwrap();
+        }
+        object.prepare();
+        let mut mesher = OctreeMesher::new(&settings(depth)).unwrap();
+        let full_before = mesher
+            .remesh(&mut ObjectField::new(&object, 0.0), settings(depth).bounds)
+            .unwrap();
+        let before = mesher.mesh().unwrap();
+        assert_closed(&before, "before");
+
+        // A deep carve between two earlier edits, and a blob added elsewhere.
+        let extra = [
+            Edit::stroke(
+                EditOp::Subtract,
+                ToolShape::Sphere { radius: 0.15 },
+                vec![
+                    Pose::at(DVec3::new(0.55, 0.55, 0.55)),
+                    Pose::at(DVec3::new(0.7, 0.45, 0.4)),
+                ],
+            ),
+            Edit::stamp(
+                EditOp::Union,
+                ToolShape::Box {
+                    half_extents: DVec3::new(0.12, 0.1, 0.14),
+                    rounding: 0.03,
+                },
+                Pose::at(DVec3::new(-0.3, -0.95, 0.1)),
+            ),
+        ];
+        let mut previous = before;
+        for e in extra {
+            let idx = object.apply(e).unwrap();
+            object.prepare();
+            let dirty = dirty_boxes(&object.history().entries()[idx].edit);
+            assert!(matches!(&dirty, Dirty::Boxes(b) if b.len() == 1));
+
+            // Too small a box: only the centre of the edit's box.
+            let Dirty::Boxes(boxes) = &dirty else {
+                unreachable!()
+            };
+            let centre = boxes[0].centre();
+            let too_small = Aabb::new(centre, centre);
+
+            let mut field = ObjectField::new(&object, 0.0);
+            let (full, full_stats) = mesh_with_stats(&mut field, &settings(depth)).unwrap();
+            assert_closed(&full, "full");
+            assert!(
+                !same_surface(&full, &previous, 1e-6),
+                "the edit must change the mesh"
+            );
+
+            let mut wrong = OctreeMesher::new(&settings(depth)).unwrap();
+            let mut old = object.clone();
+            old.undo(idx);
+            wrong
+                .remesh(&mut ObjectField::new(&old, 0.0), settings(depth).bounds)
+                .unwrap();
+            wrong
+                .remesh(&mut ObjectField::new(&object, 0.0), too_small)
+                .unwrap();
+            assert!(
+                !same_surface(&wrong.mesh().unwrap(), &full, 1e-6),
+                "a remesh of part of the edit's box must differ from the full mesh"
+            );
+
+            let (n_evaluated, n_unchanged) = remesh(&mut mesher, &mut field, &dirty);
+            // Some blocks above the range read none of its changed values: kept as they were.
+            assert!(n_unchanged > 0, "no block was kept");
+            let remeshed = mesher.mesh().unwrap();
+            assert_closed(&remeshed, "remeshed");
+            assert!(
+                n_evaluated < full_stats.blocks_evaluated && n_evaluated > 0,
+                "{n_evaluated} blocks evaluated again of {} ({full_before:?})",
+                full_stats.blocks_evaluated
+            );
+            assert!(
+                same_surface(&remeshed, &full, 1e-6),
+                "remeshed {} triangles, full {}",
+                remeshed.n_triangles(),
+                full.n_triangles()
+            );
+            previous = remeshed;
+        }
+        // Undoing an edit is remeshed through the same boxes.
+        let last = object.history().len() - 1;
+        let dirty = dirty_boxes(&object.history().entries()[last].edit);
+        object.undo(last);
+        remesh(&mut mesher, &mut ObjectField::new(&object, 0.0), &dirty);
+        let full = octree::mesh(&mut ObjectField::new(&object, 0.0), &settings(depth)).unwrap();
+        assert!(same_surface(&mesher.mesh().unwrap(), &full, 1e-6));
+    }
+
+    #[test]
+    fn dirty_regions_by_operation() {
+        let tool = ToolShape::Sphere { radius: 0.1 };
+        let compiled =
+            |op| Arc::new(CompiledEdit::new(Edit::stamp(op, tool, Pose::at(DVec3::X))).unwrap());
+        let Dirty::Boxes(b) = dirty_boxes(&compiled(EditOp::Subtract)) else {
+            panic!("a carve dirties its box")
+        };
+        assert_eq!(b.len(), 1);
+        assert!(b[0].contains([1.0, 0.0, 0.0]) && b[0].contains([1.09, 0.09, -0.09]));
+        assert_eq!(dirty_boxes(&compiled(EditOp::Intersect)), Dirty::Everywhere);
+        let paint = EditOp::Paint {
+            property: fdsl::object::Paintable::Color,
+            value: fdsl::object::PaintValue::Color([1.0, 0.0, 0.0]),
+        };
+        assert_eq!(dirty_boxes(&compiled(paint)), Dirty::Boxes(Vec::new()));
+    }
+
+    #[test]
+    fn mesh_bounds_hold_the_domain_with_a_margin_and_unbounded_solids_have_none() {
+        let b = mesh_bounds(&ball(), 6).unwrap();
+        let cell = b.size()[0] / 64.0;
+        assert!(
+            b.lo[0] < -1.1 - 2.0 * cell && b.hi[0] > 1.1 + 2.0 * cell,
+            "{b:?}"
+        );
+        assert!(b.hi[0] < 1.1 + 3.0 * cell, "{b:?}");
+        let unbounded = Object::implicit("1-x^2-y^2-z^2").unwrap();
+        assert_eq!(mesh_bounds(&unbounded, 6), None);
+    }
+}
