@@ -37,6 +37,15 @@ impl VersionVector {
         *entry = (*entry).max(seq);
     }
 
+    /// Sets `author`'s entry to exactly `seq` (0 removes it), lowering it if need be.
+    pub fn set(&mut self, author: PeerId, seq: u64) {
+        if seq == 0 {
+            self.seqs.remove(&author);
+        } else {
+            self.seqs.insert(author, seq);
+        }
+    }
+
     /// Pointwise maximum with `other`.
     pub fn join(&mut self, other: &VersionVector) {
         for (author, seq) in &other.seqs {

@@ -445,11 +445,12 @@ impl<P: Payload> SyncState<P> {
             }
             Message::Want(vv) => {
                 self.hello_confirmed = true;
-                // Asking again means what was sent did not arrive: send it again.
+                // Asking for what was sent means it did not arrive: that author's ops go out
+                // again from what the remote holds (and only that author's).
                 for (author, seq) in vv.iter() {
-                    if self.sent_vv.get(author) >= *seq && self.remote_vv.get(author) < *seq {
-                        self.sent_vv = self.remote_vv.clone();
-                        break;
+                    let held = self.remote_vv.get(author);
+                    if self.sent_vv.get(author) >= *seq && held < *seq {
+                        self.sent_vv.set(*author, held);
                     }
                 }
                 self.relay_vv.join(&vv);
