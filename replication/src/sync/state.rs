@@ -4,9 +4,11 @@
 //! [`SyncState::poll_event`] and [`SyncState::poll_timeout`]. Drain every `poll_*` after each
 //! input. The state is rebuilt on every connection: the remote's version vector is learnt
 //! from its hello-time [`Message::Have`], from the changes it announces at most every
-//! [`HAVE_EVERY_MICROS`] and from acks, and anything not acknowledged is sent again after
-//! [`RESEND_AFTER_MICROS`], backing off to [`RESEND_AFTER_MAX_MICROS`] while the remote stays
-//! silent, so a lost or duplicated message can neither stall nor loop a sync.
+//! [`HAVE_EVERY_MICROS`] and from acks, and anything not acknowledged is sent again after a
+//! timeout estimated from the round trips of acknowledged batches (between
+//! [`RESEND_AFTER_MIN_MICROS`] and [`RESEND_AFTER_MICROS`]), backing off to
+//! [`RESEND_AFTER_MAX_MICROS`] while the remote stays silent, so a lost or duplicated message
+//! can neither stall nor loop a sync.
 //!
 //! Traffic in a full mesh of n peers: a peer sends its own ops to every remote at once, but
 //! relays a third peer's ops only when the remote asks with a [`Message::Want`]. The
@@ -34,8 +36,11 @@ use crate::time::Timestamp;
 pub const MAX_IN_FLIGHT_BATCHES: usize = 4;
 /// Most op bytes in one batch we send (well under [`MAX_MESSAGE_BYTES`]).
 pub const MAX_BATCH_BYTES: usize = 64 * 1024;
-/// Unacknowledged batches and unanswered hellos are first sent again after this long (1 s).
+/// Unacknowledged batches and unanswered hellos are first sent again after this long (1 s);
+/// batches sooner once round trips have been measured.
 pub const RESEND_AFTER_MICROS: u64 = 1_000_000;
+/// The shortest batch resend timeout, however short the round trips (100 ms).
+pub const RESEND_AFTER_MIN_MICROS: u64 = 100_000;
 /// The resend interval doubles while the remote stays silent, up to this (32 s), so a dead or
 /// hostile remote that never answers costs a bounded trickle.
 pub const RESEND_AFTER_MAX_MICROS: u64 = 32_000_000;
@@ -250,6 +255,8 @@ pub struct SyncState<P> {
     in_flight: BTreeMap<u64, Timestamp>,
     /// Current batch resend interval (doubles on each resend without an ack in between).
     resend_micros: u64,
+    /// Smoothed round trip and its mean deviation from acked batches (RFC 6298), if measured.
+    rtt_micros: Option<(u64, u64)>,
     /// Third peers' ops up to here may be relayed: what the remote asked for.
     relay_vv: VersionVector,
     /// Whether an op may go out, for the log length it was computed at; cleared whenever
@@ -292,6 +299,7 @@ impl<P: Payload> SyncState<P> {
             sent_vv: VersionVector::new(),
             in_flight: BTreeMap::new(),
             resend_micros: RESEND_AFTER_MICROS,
+            rtt_micros: None,
             relay_vv: VersionVector::new(),
             sendable_cache: Cell::new(None),
             have_sent_vv: VersionVector::new(),
@@ -428,7 +436,7 @@ impl<P: Payload> SyncState<P> {
             message => {
                 // The remote speaks, maybe again after a partition healed: what it has not
                 // acknowledged goes out again on the base interval, not a backed-off one.
-                self.resend_micros = RESEND_AFTER_MICROS;
+                self.resend_micros = self.base_resend_micros();
                 self.handle_message(now, message, log);
             }
         }
@@ -462,8 +470,9 @@ impl<P: Payload> SyncState<P> {
             }
             Message::Ack { batch_no, have } => {
                 self.hello_confirmed = true;
-                if self.in_flight.remove(&batch_no).is_some() {
-                    self.resend_micros = RESEND_AFTER_MICROS;
+                if let Some(sent_at) = self.in_flight.remove(&batch_no) {
+                    self.measure_rtt(now.0.saturating_sub(sent_at.0));
+                    self.resend_micros = self.base_resend_micros();
                 }
                 self.learn_remote(&have, log);
             }
@@ -676,6 +685,26 @@ impl<P: Payload> SyncState<P> {
                 self.full_have_at = now;
             }
         }
+    }
+
+    /// Folds one round-trip sample into the estimate (a batch acked without a resend in
+    /// between: resends clear what is in flight, so later acks of old batches are not found).
+    fn measure_rtt(&mut self, sample: u64) {
+        self.rtt_micros = Some(match self.rtt_micros {
+            None => (sample, sample / 2),
+            Some((srtt, var)) => (
+                (7 * srtt + sample) / 8,
+                (3 * var + srtt.abs_diff(sample)) / 4,
+            ),
+        });
+    }
+
+    /// The resend timeout before any backoff: four deviations above the smoothed round trip.
+    fn base_resend_micros(&self) -> u64 {
+        self.rtt_micros.map_or(RESEND_AFTER_MICROS, |(srtt, var)| {
+            srtt.saturating_add(var.saturating_mul(4))
+                .clamp(RESEND_AFTER_MIN_MICROS, RESEND_AFTER_MICROS)
+        })
     }
 
     fn hello_due(&self) -> Option<Timestamp> {
