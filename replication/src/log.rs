@@ -7,7 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use crate::causal::{Frontier, VersionVector};
 use crate::identity::{Keypair, PeerId};
 use crate::lease::{FoldState, Lease, Mark, RejectReason, TargetInfo};
-use crate::op::{BuildError, Op, OpFields, OpId, VerifiedOp};
+use crate::op::{BuildError, MAX_DEPS, Op, OpFields, OpId, VerifiedOp};
 use crate::payload::{Effect, ObjectId, Payload};
 use crate::pending::{DepKey, Evicted, Origin, Pending, PendingLimits};
 use crate::time::{HybridClock, Timestamp};
@@ -242,7 +242,7 @@ impl<P: Payload> Log<P> {
             seq,
             lamport,
             timestamp: self.clock.tick(now),
-            deps: self.frontier.heads().copied().collect(),
+            deps: self.author_deps(),
             payload,
         };
         let op = Op::sign(keypair, fields)?;
@@ -252,6 +252,20 @@ impl<P: Payload> Log<P> {
             "a local op is delivered at once"
         );
         Ok((op, insertion))
+    }
+
+    /// The heads a new op depends on: all of them, or when more than [`MAX_DEPS`] peers wrote
+    /// concurrently, the [`MAX_DEPS`] latest by Lamport time. Leaving older heads out only
+    /// weakens the op's causal claim (its Lamport time still follows everything seen); the
+    /// heads left out stay heads, and the next op names them.
+    fn author_deps(&self) -> Vec<OpId> {
+        let mut heads: Vec<OpId> = self.frontier.heads().copied().collect();
+        if heads.len() > MAX_DEPS {
+            heads.sort_by_key(|id| std::cmp::Reverse((self.get(id).map_or(0, Op::lamport), *id)));
+            heads.truncate(MAX_DEPS);
+            heads.sort();
+        }
+        heads
     }
 
     /// Inserts a verified op from `origin`: delivers it if its causal past is here (and then

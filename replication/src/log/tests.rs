@@ -391,3 +391,29 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn more_concurrent_heads_than_max_deps_still_author() {
+    // 40 peers write at once; a 41st has seen all their ops, so its frontier has 40 heads.
+    let mut log = TLog::default();
+    for i in 0..40 {
+        let mut theirs = TLog::default();
+        let (op, _) = theirs
+            .author(&key(i), Timestamp(1), set(u64::from(i), "x"))
+            .unwrap();
+        log.insert(Timestamp(1), op, Origin(1)).unwrap();
+    }
+    assert_eq!(log.heads().count(), 40);
+    let (first, _) = log
+        .author(&key(200), Timestamp(2), set(0, "after all"))
+        .unwrap();
+    assert_eq!(first.deps().len(), MAX_DEPS);
+    assert_eq!(first.lamport(), 2, "it still follows everything seen");
+    // The heads left out stay heads, and the next op names them.
+    assert_eq!(log.heads().count(), 40 - MAX_DEPS + 1);
+    let (second, _) = log
+        .author(&key(200), Timestamp(3), set(0, "and the rest"))
+        .unwrap();
+    assert_eq!(second.deps().len(), 40 - MAX_DEPS + 1);
+    assert_eq!(log.heads().count(), 1);
+}
