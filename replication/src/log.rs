@@ -22,6 +22,11 @@ pub(crate) use base::{Base, BaseAuthor, BaseKind, BaseOp};
 pub const CHECKPOINT_INTERVAL: usize = 256;
 /// Most ops one log holds; past it, inserts fail (the store and sync stop growing it).
 pub const MAX_LOG_OPS: usize = 10_000_000;
+/// Most an op's Lamport time may exceed the highest of its dependencies' and its author's
+/// previous op's (2^32). Honest ops exceed it by one (more only after a snapshot join, whose
+/// base ops are not looked up), and `u64::MAX / MAX_LAMPORT_JUMP` is far above
+/// [`MAX_LOG_OPS`], so no member can exhaust the Lamport clock before the log fills.
+pub const MAX_LAMPORT_JUMP: u64 = 1 << 32;
 
 /// The [`Origin`] of ops this peer authors or loads from its own store.
 pub const LOCAL_ORIGIN: Origin = Origin(0);
@@ -40,6 +45,18 @@ pub enum InsertError {
     /// The Lamport time is not above every dependency's and the author's previous op's.
     #[error("lamport time {lamport} is not above its causal past ({floor})")]
     BadLamport {
+        /// The op's Lamport time.
+        lamport: u64,
+        /// The highest Lamport time in its immediate past.
+        floor: u64,
+    },
+    /// The Lamport time leaps more than [`MAX_LAMPORT_JUMP`] past its causal past: honest
+    /// peers step by one, and a member leaping to near `u64::MAX` would leave nobody able to
+    /// author again.
+    #[error(
+        "lamport time {lamport} leaps past its causal past ({floor}) by over {MAX_LAMPORT_JUMP}"
+    )]
+    LamportJump {
         /// The op's Lamport time.
         lamport: u64,
         /// The highest Lamport time in its immediate past.
@@ -404,6 +421,12 @@ impl<P: Payload> Log<P> {
             .unwrap_or(0);
         if op.lamport() <= floor {
             return Err(InsertError::BadLamport {
+                lamport: op.lamport(),
+                floor,
+            });
+        }
+        if op.lamport() - floor > MAX_LAMPORT_JUMP {
+            return Err(InsertError::LamportJump {
                 lamport: op.lamport(),
                 floor,
             });

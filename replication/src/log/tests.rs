@@ -417,3 +417,34 @@ fn more_concurrent_heads_than_max_deps_still_author() {
     assert_eq!(second.deps().len(), 40 - MAX_DEPS + 1);
     assert_eq!(log.heads().count(), 1);
 }
+
+#[test]
+fn a_lamport_leap_towards_exhaustion_is_refused() {
+    let mut log = TLog::default();
+    let (first, _) = log.author(&key(1), Timestamp(1), set(1, "x")).unwrap();
+    let leap = |lamport| {
+        Op::sign(
+            &key(2),
+            OpFields {
+                seq: 1,
+                lamport,
+                timestamp: Timestamp(2),
+                deps: vec![first.id()],
+                payload: set(2, "y"),
+            },
+        )
+        .unwrap()
+    };
+    let far = first.lamport() + MAX_LAMPORT_JUMP + 1;
+    assert!(matches!(
+        log.insert(Timestamp(2), leap(far), Origin(1)),
+        Err(InsertError::LamportJump { .. })
+    ));
+    assert!(matches!(
+        log.insert(Timestamp(2), leap(u64::MAX), Origin(1)),
+        Err(InsertError::LamportJump { .. })
+    ));
+    // The largest leap allowed is accepted, and authoring goes on after it.
+    log.insert(Timestamp(2), leap(far - 1), Origin(1)).unwrap();
+    log.author(&key(1), Timestamp(3), set(1, "z")).unwrap();
+}
