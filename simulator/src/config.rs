@@ -1,7 +1,10 @@
 //! What one simulation run is: seed, size, fault mix, hostile peer and (for testing the
-//! checkers) a deliberate sabotage, plus the command line that replays it.
+//! checkers) a deliberate sabotage, plus the command line that replays it. A shrunk run also
+//! names the fault kinds it switched off and the workload actions it kept.
 
 use std::fmt;
+
+use crate::rng::SimRng;
 
 /// Fewest honest peers in a run.
 pub const MIN_PEERS: usize = 2;
@@ -10,8 +13,11 @@ pub const MIN_PEERS: usize = 2;
 pub const MAX_PEERS: usize = 63;
 /// Most user ops in a run.
 pub const MAX_OPS: usize = 1_000_000;
+/// The stream of the seed that draws a `swarm` run's fault mix.
+const SWARM_STREAM: u64 = 77;
 
-/// The network's behaviour: latency, jitter, loss, duplication, partitions, peers offline.
+/// The network's and the peers' misbehaviour: latency, jitter, loss, duplication,
+/// bandwidth, partitions, peers offline, crashes, late joins and the hostile peer's tricks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Faults {
     /// The preset's name (what `--faults` takes).
@@ -24,27 +30,136 @@ pub struct Faults {
     pub loss_per_mille: u64,
     /// Messages delivered twice, per thousand.
     pub dup_per_mille: u64,
+    /// Bytes per second each directed link carries (0: unlimited); messages queue behind
+    /// each other and are dropped when the queue holds more than
+    /// [`crate::sim::MAX_LINK_QUEUE_MICROS`] of traffic.
+    pub bandwidth_bytes_per_sec: u64,
     /// Whether partitions (some asymmetric) come and go during the workload.
     pub partitions: bool,
     /// Whether peers go offline (all connections dropped) and come back.
     pub offline: bool,
-    /// Whether peers crash (losing connections, pending ops and their scene) and restart
-    /// from their store.
+    /// Whether peers crash (losing connections, pending ops, their scene and every op not
+    /// yet synced to disk, possibly leaving a torn record) and restart from their store.
     pub crashes: bool,
+    /// Whether some peers start late, with an empty log or from a snapshot.
+    pub late_joins: bool,
+    /// Whether the hostile peer forges ops (bad signatures) and authors well-formed ops of
+    /// its own (it is a member: it knows the invite).
+    pub forgery: bool,
+    /// Whether the hostile peer floods a peer with messages far over the rate limit.
+    pub flood: bool,
+}
+
+/// One kind of fault, as `--without` names it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum FaultKind {
+    /// Jitter (and so reordering).
+    Jitter,
+    /// Random loss.
+    Loss,
+    /// Duplicates.
+    Duplication,
+    /// Bandwidth limits.
+    Bandwidth,
+    /// Partitions.
+    Partitions,
+    /// Peers offline.
+    Offline,
+    /// Crashes and restarts.
+    Crashes,
+    /// Late joins.
+    LateJoins,
+    /// Forged and hostile-authored ops.
+    Forgery,
+    /// Floods.
+    Flood,
+}
+
+impl FaultKind {
+    /// Every kind, in the order the shrinker tries switching them off.
+    pub const ALL: [FaultKind; 10] = [
+        FaultKind::Crashes,
+        FaultKind::LateJoins,
+        FaultKind::Partitions,
+        FaultKind::Offline,
+        FaultKind::Forgery,
+        FaultKind::Flood,
+        FaultKind::Bandwidth,
+        FaultKind::Loss,
+        FaultKind::Duplication,
+        FaultKind::Jitter,
+    ];
+
+    /// The name `--without` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            FaultKind::Jitter => "jitter",
+            FaultKind::Loss => "loss",
+            FaultKind::Duplication => "dup",
+            FaultKind::Bandwidth => "bandwidth",
+            FaultKind::Partitions => "partitions",
+            FaultKind::Offline => "offline",
+            FaultKind::Crashes => "crashes",
+            FaultKind::LateJoins => "late-joins",
+            FaultKind::Forgery => "forgery",
+            FaultKind::Flood => "flood",
+        }
+    }
+
+    /// The kind called `name`.
+    pub fn named(name: &str) -> Option<FaultKind> {
+        Self::ALL.into_iter().find(|k| k.name() == name)
+    }
+
+    fn bit(self) -> u32 {
+        1 << (self as u32)
+    }
+}
+
+/// A set of [`FaultKind`]s (what a run switched off).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FaultSet(u32);
+
+impl FaultSet {
+    /// True if `kind` is in the set.
+    pub fn contains(self, kind: FaultKind) -> bool {
+        self.0 & kind.bit() != 0
+    }
+
+    /// The set with `kind` added.
+    pub fn with(self, kind: FaultKind) -> FaultSet {
+        FaultSet(self.0 | kind.bit())
+    }
+
+    /// True if empty.
+    pub fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+
+    /// The kinds in the set.
+    pub fn iter(self) -> impl Iterator<Item = FaultKind> {
+        FaultKind::ALL
+            .into_iter()
+            .filter(move |k| self.contains(*k))
+    }
 }
 
 impl Faults {
-    /// Every preset, mildest first.
-    pub const PRESETS: [Faults; 4] = [
+    /// Every preset, mildest first (`swarm` draws a mix per seed from `chaos`).
+    pub const PRESETS: [Faults; 5] = [
         Faults {
             name: "none",
             latency_micros: 20_000,
             jitter_micros: 0,
             loss_per_mille: 0,
             dup_per_mille: 0,
+            bandwidth_bytes_per_sec: 0,
             partitions: false,
             offline: false,
             crashes: false,
+            late_joins: false,
+            forgery: false,
+            flood: false,
         },
         Faults {
             name: "lan",
@@ -52,9 +167,13 @@ impl Faults {
             jitter_micros: 1_000,
             loss_per_mille: 10,
             dup_per_mille: 10,
+            bandwidth_bytes_per_sec: 12_500_000,
             partitions: false,
             offline: false,
             crashes: false,
+            late_joins: false,
+            forgery: true,
+            flood: true,
         },
         Faults {
             name: "wan",
@@ -62,9 +181,13 @@ impl Faults {
             jitter_micros: 30_000,
             loss_per_mille: 50,
             dup_per_mille: 20,
+            bandwidth_bytes_per_sec: 1_000_000,
             partitions: true,
             offline: false,
             crashes: false,
+            late_joins: true,
+            forgery: true,
+            flood: true,
         },
         Faults {
             name: "chaos",
@@ -72,15 +195,55 @@ impl Faults {
             jitter_micros: 50_000,
             loss_per_mille: 150,
             dup_per_mille: 50,
+            bandwidth_bytes_per_sec: 250_000,
             partitions: true,
             offline: true,
             crashes: true,
+            late_joins: true,
+            forgery: true,
+            flood: true,
+        },
+        Faults {
+            name: "swarm",
+            latency_micros: 60_000,
+            jitter_micros: 50_000,
+            loss_per_mille: 150,
+            dup_per_mille: 50,
+            bandwidth_bytes_per_sec: 250_000,
+            partitions: true,
+            offline: true,
+            crashes: true,
+            late_joins: true,
+            forgery: true,
+            flood: true,
         },
     ];
 
     /// The preset called `name`.
     pub fn named(name: &str) -> Option<Faults> {
         Self::PRESETS.iter().copied().find(|f| f.name == name)
+    }
+
+    /// These faults with `kind` switched off.
+    pub fn without(mut self, kind: FaultKind) -> Faults {
+        match kind {
+            FaultKind::Jitter => self.jitter_micros = 0,
+            FaultKind::Loss => self.loss_per_mille = 0,
+            FaultKind::Duplication => self.dup_per_mille = 0,
+            FaultKind::Bandwidth => self.bandwidth_bytes_per_sec = 0,
+            FaultKind::Partitions => self.partitions = false,
+            FaultKind::Offline => self.offline = false,
+            FaultKind::Crashes => self.crashes = false,
+            FaultKind::LateJoins => self.late_joins = false,
+            FaultKind::Forgery => self.forgery = false,
+            FaultKind::Flood => self.flood = false,
+        }
+        self
+    }
+
+    /// True if `kind` is on.
+    pub fn has(&self, kind: FaultKind) -> bool {
+        self.without(kind) != *self
     }
 }
 
@@ -93,45 +256,59 @@ pub enum Sabotage {
     DropEveryTenthInsertion,
     /// Peer 1's scene is folded in reverse linear order.
     ReverseFold,
+    /// The checkers read peer 0's first lease-rejected op as effective.
+    FlipLeaseVerdict,
+    /// Peers send before what they appended is synced (breaking the store rule).
+    SendUnsynced,
 }
 
 impl Sabotage {
+    /// Every sabotage.
+    pub const ALL: [Sabotage; 5] = [
+        Sabotage::None,
+        Sabotage::DropEveryTenthInsertion,
+        Sabotage::ReverseFold,
+        Sabotage::FlipLeaseVerdict,
+        Sabotage::SendUnsynced,
+    ];
+
     /// The name `--sabotage` takes.
     pub fn name(self) -> &'static str {
         match self {
             Sabotage::None => "none",
             Sabotage::DropEveryTenthInsertion => "drop-insertions",
             Sabotage::ReverseFold => "reverse-fold",
+            Sabotage::FlipLeaseVerdict => "flip-lease",
+            Sabotage::SendUnsynced => "send-unsynced",
         }
     }
 
     /// The sabotage called `name`.
     pub fn named(name: &str) -> Option<Sabotage> {
-        [
-            Sabotage::None,
-            Sabotage::DropEveryTenthInsertion,
-            Sabotage::ReverseFold,
-        ]
-        .into_iter()
-        .find(|s| s.name() == name)
+        Self::ALL.into_iter().find(|s| s.name() == name)
     }
 }
 
 /// One run.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Config {
-    /// Seeds the one RNG everything draws from.
+    /// Seeds the run's RNG streams (keys, workload, fault schedule, network).
     pub seed: u64,
     /// Honest peers.
     pub n_peers: usize,
-    /// User ops to author, over all peers.
+    /// User actions the workload draws (over all peers); each authors one op.
     pub n_ops: usize,
-    /// The network.
+    /// The fault preset.
     pub faults: Faults,
-    /// Whether a hostile peer sends malformed, oversized and replayed messages.
+    /// Fault kinds switched off (by `--without` or the shrinker).
+    pub without: FaultSet,
+    /// Whether a hostile peer sends malformed, oversized, replayed, forged and flooding
+    /// messages.
     pub hostile: bool,
     /// A planted bug (tests of the checkers only).
     pub sabotage: Sabotage,
+    /// The indices of the workload's actions that run, ascending (`None`: all of them).
+    pub actions: Option<Vec<u32>>,
 }
 
 /// Why a [`Config`] is not runnable.
@@ -143,6 +320,9 @@ pub enum ConfigError {
     /// Too many ops.
     #[error("{0} ops: at most {MAX_OPS}")]
     Ops(usize),
+    /// An action index out of range or out of order.
+    #[error("action list: index {0} out of range or not ascending")]
+    Actions(u32),
 }
 
 impl Config {
@@ -153,8 +333,10 @@ impl Config {
             n_peers,
             n_ops,
             faults,
+            without: FaultSet::default(),
             hostile: true,
             sabotage: Sabotage::None,
+            actions: None,
         }
     }
 
@@ -166,13 +348,83 @@ impl Config {
         if self.n_ops > MAX_OPS {
             return Err(ConfigError::Ops(self.n_ops));
         }
+        if let Some(actions) = &self.actions {
+            let mut last = None;
+            for &a in actions {
+                if a as usize >= self.n_ops || last.is_some_and(|l| l >= a) {
+                    return Err(ConfigError::Actions(a));
+                }
+                last = Some(a);
+            }
+        }
         Ok(())
+    }
+
+    /// The faults in force: the preset (for `swarm`, a mix drawn from the seed) less
+    /// [`Config::without`].
+    pub fn effective_faults(&self) -> Faults {
+        let mut faults = self.faults;
+        if faults.name == "swarm" {
+            let mut rng = SimRng::stream(self.seed, SWARM_STREAM);
+            for kind in FaultKind::ALL {
+                if rng.chance(400) {
+                    faults = faults.without(kind);
+                }
+            }
+        }
+        self.without.iter().fold(faults, Faults::without)
+    }
+
+    /// Number of actions that run.
+    pub fn n_actions(&self) -> usize {
+        self.actions.as_ref().map_or(self.n_ops, Vec::len)
     }
 
     /// The command that replays this run exactly.
     pub fn replay_command(&self) -> String {
         self.to_string()
     }
+}
+
+/// Writes ascending indices compactly: `0-3,7,9-12`.
+pub fn format_ranges(indices: &[u32]) -> String {
+    let mut out = String::new();
+    let mut i = 0;
+    while i < indices.len() {
+        let start = indices[i];
+        let mut end = start;
+        while i + 1 < indices.len() && indices[i + 1] == end + 1 {
+            i += 1;
+            end += 1;
+        }
+        if !out.is_empty() {
+            out.push(',');
+        }
+        if end == start {
+            out.push_str(&start.to_string());
+        } else {
+            out.push_str(&format!("{start}-{end}"));
+        }
+        i += 1;
+    }
+    out
+}
+
+/// Reads [`format_ranges`]' output (at most `limit` indices).
+pub fn parse_ranges(text: &str, limit: usize) -> Result<Vec<u32>, String> {
+    let mut out = Vec::new();
+    for part in text.split(',').filter(|p| !p.is_empty()) {
+        let number = |s: &str| s.parse::<u32>().map_err(|e| format!("{s}: {e}"));
+        let (lo, hi) = match part.split_once('-') {
+            Some((lo, hi)) => (number(lo)?, number(hi)?),
+            None => (number(part)?, number(part)?),
+        };
+        if hi < lo || out.len() + (hi - lo) as usize >= limit {
+            return Err(format!("bad or too long range {part}"));
+        }
+        out.extend(lo..=hi);
+    }
+    Ok(out)
 }
 
 impl fmt::Display for Config {
@@ -182,12 +434,57 @@ impl fmt::Display for Config {
             "cargo run -p simulator --release -- --seed {} --peers {} --ops {} --faults {}",
             self.seed, self.n_peers, self.n_ops, self.faults.name
         )?;
+        if !self.without.is_empty() {
+            let names: Vec<_> = self.without.iter().map(FaultKind::name).collect();
+            write!(f, " --without {}", names.join(","))?;
+        }
         if !self.hostile {
             write!(f, " --no-hostile")?;
         }
         if self.sabotage != Sabotage::None {
             write!(f, " --sabotage {}", self.sabotage.name())?;
         }
+        if let Some(actions) = &self.actions {
+            write!(f, " --actions '{}'", format_ranges(actions))?;
+        }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ranges_round_trip_and_faults_switch_off() {
+        let xs = vec![0, 1, 2, 3, 7, 9, 10];
+        assert_eq!(format_ranges(&xs), "0-3,7,9-10");
+        assert_eq!(parse_ranges("0-3,7,9-10", 100).unwrap(), xs);
+        assert!(parse_ranges("5-2", 100).is_err());
+        assert!(parse_ranges("0-1000", 100).is_err());
+        assert_eq!(parse_ranges("", 100).unwrap(), Vec::<u32>::new());
+        let chaos = Faults::named("chaos").unwrap();
+        for kind in FaultKind::ALL {
+            assert!(chaos.has(kind), "{kind:?}");
+            assert!(!chaos.without(kind).has(kind), "{kind:?}");
+            assert_eq!(FaultKind::named(kind.name()), Some(kind));
+        }
+        let config = Config {
+            without: FaultSet::default().with(FaultKind::Crashes),
+            actions: Some(vec![1, 2, 5]),
+            ..Config::new(3, 2, 10, chaos)
+        };
+        assert!(!config.effective_faults().crashes);
+        assert!(config.validate().is_ok());
+        assert!(
+            config
+                .to_string()
+                .ends_with("--without crashes --actions '1-2,5'")
+        );
+        let swarm = |seed| Config::new(seed, 2, 10, Faults::named("swarm").unwrap());
+        let mixes: std::collections::BTreeSet<_> = (0..20)
+            .map(|s| format!("{:?}", swarm(s).effective_faults()))
+            .collect();
+        assert!(mixes.len() > 5, "{mixes:?}");
     }
 }

@@ -2,15 +2,23 @@
 //! one seeded RNG and a virtual clock.
 //!
 //! It is not a benchmark of real sockets: it runs the real sans-IO core
-//! ([`replication::Peer`] over [`replication::shape::ShapePayload`]) over a simulated link.
+//! ([`replication::Peer`] over [`replication::shape::ShapePayload`]) over a simulated link
+//! and disk.
 //!
-//! - [`config`]: a run (seed, peers, ops, [`config::Faults`] preset, hostile peer, planted bug)
-//!   and the command line that replays it.
+//! - [`config`]: a run (seed, peers, ops, [`config::Faults`] preset less the switched-off
+//!   [`config::FaultKind`]s, hostile peer, planted bug, kept actions) and the command line
+//!   that replays it.
 //! - [`sim`]: the event queue ordered by (virtual time, sequence number), the network model
-//!   (per-link latency, jitter, loss, duplication, reordering, partitions including
-//!   asymmetric ones, peers offline and back) and the hostile peer; then the checkers.
-//! - [`workload`]: scripted users drawn from the RNG.
-//! - [`report::Report`]: counters, convergence after healing, trace hash, failures.
+//!   (per-link latency, jitter, loss, duplication, bandwidth, partitions including asymmetric
+//!   ones, peers offline and back), crashes, late joins (empty, or from a snapshot: `join.rs`);
+//!   [`store`]: the disk (fsync delays, crash images recovered by the real store);
+//!   [`hostile`]: garbage, replays, forged and member-authored ops, floods.
+//! - [`workload`]: scripted users as a list of [`workload::Action`]s drawn up front.
+//! - Checkers (run at the end): convergence, causal delivery, scene folds, the
+//!   [`reference`] lease rules, durable and lost ops, forged ops, rate limits, and
+//!   [`memory`] per peer (a counting allocator).
+//! - [`report::Report`]: counters, convergence after healing, memory, op sizes, samples;
+//!   [`plots`]: PNG plots; [`shrink`]: failing runs cut down to small reproducers.
 //!
 //! ```
 //! use simulator::config::{Config, Faults};
@@ -20,9 +28,17 @@
 //! ```
 #![warn(missing_docs)]
 
+mod check;
 pub mod config;
+pub mod hostile;
+mod join;
+pub mod memory;
+pub mod plots;
+pub mod reference;
 pub mod report;
 pub mod rng;
+pub mod shrink;
 pub mod sim;
+pub mod store;
 pub mod trace;
 pub mod workload;

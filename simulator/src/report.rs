@@ -1,5 +1,6 @@
-//! What a run found: counters, convergence after healing, hashes, and the checkers' failures
-//! with the command that replays them.
+//! What a run found: counters, convergence after healing, memory per peer, op sizes by kind,
+//! samples over virtual time (for [`crate::plots`]), hashes, and the checkers' failures with
+//! the command that replays them.
 
 use std::fmt;
 
@@ -7,6 +8,56 @@ use replication::materialize::SceneHash;
 
 use crate::config::Config;
 use crate::sim::{Stats, short_hash};
+
+/// One peer at one sample time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PeerSample {
+    /// Ops in its log.
+    pub n_ops_held: u64,
+    /// Messages it sent so far.
+    pub n_messages_sent: u64,
+    /// Bytes it sent so far.
+    pub n_bytes_sent: u64,
+    /// Heap bytes its calls hold (0 without the counting allocator).
+    pub live_bytes: i64,
+}
+
+/// Every honest peer at one virtual time.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Sample {
+    /// Virtual µs since the start.
+    pub at_micros: u64,
+    /// Per honest peer.
+    pub peers: Vec<PeerSample>,
+}
+
+/// Heap bytes held per peer, from [`crate::memory`] (sampled; the peak is over samples).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Memory {
+    /// Largest peak of any peer.
+    pub peak_bytes_max: i64,
+    /// Mean over peers of their peak.
+    pub peak_bytes_mean: f64,
+    /// Mean over peers at the end.
+    pub final_bytes_mean: f64,
+    /// Largest ratio of a peer's peak to the ops it held at the end.
+    pub peak_bytes_per_op_max: f64,
+    /// Mean over peers of final bytes per op held.
+    pub final_bytes_per_op_mean: f64,
+}
+
+/// Sizes of the ops of one kind in the final log.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct OpKindBytes {
+    /// The kind (what the user did).
+    pub kind: &'static str,
+    /// Ops of this kind.
+    pub n_ops: u64,
+    /// Their encoded bytes (header, deps, payload, signature).
+    pub n_op_bytes: u64,
+    /// Their payload bytes.
+    pub n_payload_bytes: u64,
+}
 
 /// The outcome of one run.
 #[derive(Debug, Clone)]
@@ -25,8 +76,28 @@ pub struct Report {
     pub mean_rtt_micros: u64,
     /// Virtual time the run lasted.
     pub virtual_end_micros: u64,
+    /// Virtual time of healing (since the start).
+    pub heal_micros: u64,
     /// FNV-1a over every delivered message and event: equal for two runs of one seed.
     pub trace_hash: u64,
+    /// Samples over virtual time, for plots.
+    pub samples: Vec<Sample>,
+    /// Memory per peer, if the counting allocator is installed.
+    pub memory: Option<Memory>,
+    /// Op sizes by kind, in peer 0's final log.
+    pub op_bytes: Vec<OpKindBytes>,
+    /// Lease/undo verdicts compared with the reference rules (summed over peers checked).
+    pub n_lease_verdicts_checked: usize,
+    /// Ops the reference rules reject (in peer 0's log).
+    pub n_lease_rejected: usize,
+    /// Ops some peer synced to disk.
+    pub n_durable_ops: usize,
+    /// Own ops peers lost in crashes before syncing them (so never sent: gone for good).
+    pub n_lost_own_ops: usize,
+    /// The hostile member's own ops in peer 0's final log.
+    pub n_hostile_ops_accepted: usize,
+    /// Most messages of one flood an honest peer accepted (the rest were rate limited).
+    pub n_flood_accepted_max: u64,
     /// What the checkers found; empty when the run passed.
     pub failures: Vec<String>,
 }
@@ -42,34 +113,18 @@ impl Report {
         self.stats.n_bytes as f64 / self.stats.n_ops_authored.max(1) as f64
     }
 
+    /// Messages honest peers sent each other per authored op.
+    pub fn messages_per_op(&self) -> f64 {
+        self.stats.n_messages as f64 / self.stats.n_ops_authored.max(1) as f64
+    }
+
     /// Convergence time in mean round trips.
     pub fn convergence_round_trips(&self) -> f64 {
         self.convergence_micros as f64 / self.mean_rtt_micros.max(1) as f64
     }
-}
 
-impl fmt::Display for Report {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let c = &self.config;
+    fn fmt_traffic(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let s = &self.stats;
-        writeln!(
-            f,
-            "seed {} | {} peers | {} ops | faults {} | hostile {} | sabotage {}",
-            c.seed,
-            c.n_peers,
-            c.n_ops,
-            c.faults.name,
-            c.hostile,
-            c.sabotage.name()
-        )?;
-        writeln!(
-            f,
-            "  ops authored {} (refused {}), log {} ops, scene {}",
-            s.n_ops_authored,
-            s.n_author_errors,
-            self.n_log_ops,
-            self.scene_hash.as_ref().map_or("-".into(), short_hash)
-        )?;
         writeln!(
             f,
             "  convergence after healing: {:.1} virtual ms = {:.1} round trips (mean RTT {:.1} ms)",
@@ -79,25 +134,115 @@ impl fmt::Display for Report {
         )?;
         writeln!(
             f,
-            "  sent {} messages, {} bytes ({:.0} bytes/op); delivered {}, lost {}, duplicated {}, partitioned {}, stale {}",
+            "  sent {} messages ({:.1}/op), {} bytes ({:.0} bytes/op); delivered {}, lost {}, \
+             duplicated {}, partitioned {}, queue-dropped {}, stale {}",
             s.n_messages,
+            self.messages_per_op(),
             s.n_bytes,
             self.bytes_per_op(),
             s.n_delivered,
             s.n_lost,
             s.n_duplicated,
             s.n_partition_drops,
+            s.n_queue_drops,
             s.n_stale_drops
         )?;
         writeln!(
             f,
-            "  hostile sent {}, rejected {}; honest peers sent it {}; rejects on honest links {:?}",
-            s.n_hostile_messages, s.n_hostile_rejects, s.n_messages_to_hostile, s.honest_rejects
+            "  hostile sent {} (forged ops {}, own ops {} of which {} accepted, flood {} \
+             delivered / {} accepted), rejected {:?}; honest peers sent it {}; rejects on \
+             honest links {:?}",
+            s.n_hostile_messages,
+            s.n_forged_ops,
+            s.n_hostile_ops,
+            self.n_hostile_ops_accepted,
+            s.n_flood_delivered,
+            s.n_flood_accepted,
+            s.hostile_rejects,
+            s.n_messages_to_hostile,
+            s.honest_rejects
+        )
+    }
+
+    fn fmt_sizes(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.memory {
+            Some(m) => writeln!(
+                f,
+                "  memory per peer: peak max {:.1} KiB, peak mean {:.1} KiB, final mean {:.1} \
+                 KiB ({:.0} bytes/op held; peak max {:.0} bytes/op)",
+                m.peak_bytes_max as f64 / 1024.0,
+                m.peak_bytes_mean / 1024.0,
+                m.final_bytes_mean / 1024.0,
+                m.final_bytes_per_op_mean,
+                m.peak_bytes_per_op_max
+            )?,
+            None => writeln!(f, "  memory per peer: not measured (no counting allocator)")?,
+        }
+        write!(
+            f,
+            "  op bytes by kind (n, mean op bytes, mean payload bytes):"
+        )?;
+        for k in &self.op_bytes {
+            let n = k.n_ops.max(1) as f64;
+            write!(
+                f,
+                " {} {} {:.0} {:.0};",
+                k.kind,
+                k.n_ops,
+                k.n_op_bytes as f64 / n,
+                k.n_payload_bytes as f64 / n
+            )?;
+        }
+        writeln!(f)
+    }
+}
+
+impl fmt::Display for Report {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let c = &self.config;
+        let s = &self.stats;
+        writeln!(
+            f,
+            "seed {} | {} peers | {} actions of {} | faults {} | hostile {} | sabotage {}",
+            c.seed,
+            c.n_peers,
+            c.n_actions(),
+            c.n_ops,
+            c.faults.name,
+            c.hostile,
+            c.sabotage.name()
         )?;
         writeln!(
             f,
-            "  crashes {}, virtual time {:.1} s, {} events, trace {:016x}",
+            "  ops authored {} (refused {} {:?}, skipped {}), log {} ops, scene {}; lease \
+             verdicts checked {} ({} rejected by the rules)",
+            s.n_ops_authored,
+            s.n_author_errors,
+            s.author_errors,
+            s.n_actions_skipped,
+            self.n_log_ops,
+            self.scene_hash.as_ref().map_or("-".into(), short_hash),
+            self.n_lease_verdicts_checked,
+            self.n_lease_rejected
+        )?;
+        self.fmt_traffic(f)?;
+        writeln!(
+            f,
+            "  crashes {} (lost unsynced ops {}, {} of them own, torn tails cut {}), fsyncs {}, \
+             durable ops {}, late joins {} + {} from snapshots",
             s.n_crashes,
+            s.n_lost_unsynced,
+            self.n_lost_own_ops,
+            s.n_torn_tails,
+            s.n_fsyncs,
+            self.n_durable_ops,
+            s.n_late_joins,
+            s.n_snapshot_joins
+        )?;
+        self.fmt_sizes(f)?;
+        writeln!(
+            f,
+            "  virtual time {:.1} s, {} events, trace {:016x}",
             self.virtual_end_micros as f64 / 1e6,
             s.n_events,
             self.trace_hash

@@ -1,57 +1,77 @@
 //! The simulation proper: honest peers running the real [`Peer`] core, one hostile peer, a
-//! modelled network and a virtual clock. Events sit in one queue ordered by (virtual time,
-//! sequence number); every random choice comes from the run's one [`SimRng`].
+//! modelled network and disk, and a virtual clock. Events sit in one queue ordered by
+//! (virtual time, sequence number); every random choice comes from one of the seed's streams
+//! ([`SimRng::stream`]): keys, the workload ([`workload::actions`]), the fault schedule
+//! (drawn up front, with the same number of draws whatever is switched off, so a shrunk run
+//! keeps its faults' times) and the network (loss, jitter, fsync delays, crash images,
+//! hostile messages).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::panic::{self, AssertUnwindSafe};
 
-use replication::log::{LOCAL_ORIGIN, OrderKey};
-use replication::materialize::{FoldEntry, Materialize, Materialized, SceneHash};
+use replication::materialize::{Materialized, SceneHash};
 use replication::shape::{ShapePayload, ShapeScene};
-use replication::sync::message::MAX_MESSAGE_BYTES;
 use replication::{ConnId, Event, Keypair, Log, OpId, Peer, Timestamp};
 
-use crate::config::{Config, ConfigError, Sabotage};
-use crate::report::Report;
+use crate::config::{Config, ConfigError, Faults};
+use crate::hostile::Hostile;
+use crate::memory;
+use crate::report::{PeerSample, Report, Sample};
 use crate::rng::SimRng;
+use crate::store::Disk;
 use crate::trace::TraceHash;
-use crate::workload::{self, HOT_OBJECT, User};
+use crate::workload::{self, Action, HOT_OBJECT, User};
 
 /// The virtual clock's start (µs); op timestamps are virtual times.
 pub const START_MICROS: u64 = 1_000_000_000;
 /// The session every peer joins.
 pub const SESSION_ID: [u8; 16] = *b"sculpt-simulator";
 /// Mean virtual time between two user ops (over all peers).
-pub const MEAN_OP_GAP_MICROS: u64 = 20_000;
+pub const MEAN_OP_GAP_MICROS: u64 = workload::MEAN_ACTION_GAP_MICROS;
 /// How long after healing the network may take to go quiet before the run counts as stuck.
 pub const QUIESCENCE_LIMIT_MICROS: u64 = 600_000_000;
-/// Most messages the hostile peer keeps for replays.
-pub const MAX_CAPTURED_MESSAGES: usize = 256;
 /// Most events one run handles (a live-lock guard).
 pub const MAX_EVENTS: u64 = 200_000_000;
 /// How often, after healing, the harness looks for quiescence.
 pub const PROBE_INTERVAL_MICROS: u64 = 50_000;
 /// Most messages drained from one peer in one go (a live-lock guard).
 pub const MAX_DRAIN: usize = 1_000_000;
+/// A bandwidth-limited link drops a message that would wait longer than this to be sent.
+pub const MAX_LINK_QUEUE_MICROS: u64 = 2_000_000;
+/// Shortest simulated fsync.
+pub const FSYNC_MIN_MICROS: u64 = 200;
+/// Longest simulated fsync.
+pub const FSYNC_MAX_MICROS: u64 = 3_000;
+/// Most samples a run keeps for its plots (past it, every other one is dropped and the
+/// interval doubles).
+pub const MAX_SAMPLES: usize = 1024;
 
-type Scene = Materialized<ShapePayload, ShapeScene>;
+const KEYS_STREAM: u64 = 1;
+const SCHEDULE_STREAM: u64 = 3;
+const NET_STREAM: u64 = 4;
+const HOT_STREAM: u64 = 5;
+
+pub(crate) type Scene = Materialized<ShapePayload, ShapeScene>;
 
 /// What can happen at a virtual instant.
 #[derive(Debug)]
-enum Ev {
+pub(crate) enum Ev {
     Deliver {
         from: usize,
         to: usize,
         epoch: u64,
         bytes: Vec<u8>,
+        /// The flood it belongs to, if any.
+        flood: Option<usize>,
     },
     Wake {
         peer: usize,
     },
     User {
-        peer: usize,
+        action_idx: usize,
     },
     Hostile,
+    Flood,
     PartitionStart {
         cut: Vec<(usize, usize)>,
     },
@@ -64,39 +84,80 @@ enum Ev {
     Online {
         peer: usize,
     },
-    /// The peer crashes and restarts from its store; it comes back with an [`Ev::Online`].
+    /// The peer crashes (now, or at its next write if it has nothing unsynced) and restarts
+    /// from its store; it comes back online `restart_micros` after the crash.
     Crash {
         peer: usize,
+        restart_micros: u64,
+    },
+    /// A late peer starts, with an empty log or from a snapshot.
+    Join {
+        peer: usize,
+        snapshot: bool,
+    },
+    /// The remote end of a connection to a crashed peer notices the crash and closes.
+    Unlinger {
+        to: usize,
+        from: usize,
+        epoch: u64,
+    },
+    /// An fsync of the peer's store completes.
+    FsyncDone {
+        peer: usize,
+        generation: u64,
     },
     Heal,
     /// After healing: stop once honest peers agree and nothing is in flight between them.
     Probe,
+    /// Records a sample for the plots (not part of the trace).
+    Sample,
 }
 
 /// One honest peer and what the harness knows about it.
-struct Honest {
+pub(crate) struct Honest {
     /// The key's seed (a restart rebuilds the key from it).
-    key_seed: [u8; 32],
-    peer: Peer<ShapePayload>,
+    pub(crate) key_seed: [u8; 32],
+    pub(crate) peer: Peer<ShapePayload>,
     /// Kept up to date incrementally from every insertion, as the app does.
-    scene: Scene,
-    user: User,
+    pub(crate) scene: Scene,
+    pub(crate) user: User,
     /// Ops delivered so far, to check that every op's deps came before it.
-    seen: BTreeSet<[u8; 32]>,
-    n_received_insertions: u64,
-    panicked: Option<String>,
-    offline_depth: u32,
-    wake_at: Option<u64>,
-    n_causal_violations: u64,
-    authored: Vec<OpId>,
+    pub(crate) seen: BTreeSet<OpId>,
+    pub(crate) n_received_insertions: u64,
+    pub(crate) panicked: Option<String>,
+    pub(crate) offline_depth: u32,
+    /// False until a late peer joins.
+    pub(crate) started: bool,
+    pub(crate) wake_at: Option<u64>,
+    pub(crate) n_causal_violations: u64,
+    pub(crate) authored: Vec<OpId>,
+    pub(crate) disk: Disk,
+    /// Memory slot ([`memory`]) its calls are charged to.
+    pub(crate) slot: usize,
+    pub(crate) slot_baseline: i64,
+    pub(crate) peak_live_bytes: i64,
+    pub(crate) n_messages_sent: u64,
+    pub(crate) n_bytes_sent: u64,
+    /// The snapshot cut it joined at, if it joined from one.
+    pub(crate) snapshot_cut: Option<u64>,
+    /// A crash waiting for the next write (its restart delay, and whether it waits for an
+    /// op of the peer's own).
+    pub(crate) crash_armed: Option<(u64, bool)>,
+}
+
+impl Honest {
+    /// Heap bytes its calls hold now (0 without the counting allocator).
+    pub(crate) fn live_bytes(&self) -> i64 {
+        memory::live_bytes(self.slot) - self.slot_baseline
+    }
 }
 
 /// Connection state of an unordered pair of nodes.
 #[derive(Debug, Clone, Copy, Default)]
-struct Pair {
-    connected: bool,
+pub(crate) struct Pair {
+    pub(crate) connected: bool,
     /// Bumped on every connect and disconnect: messages of an older epoch are dropped.
-    epoch: u64,
+    pub(crate) epoch: u64,
 }
 
 /// Counters a run reports.
@@ -106,12 +167,15 @@ pub struct Stats {
     pub n_ops_authored: u64,
     /// Ops the core refused to author.
     pub n_author_errors: u64,
+    /// Why, by error.
+    pub author_errors: BTreeMap<String, u64>,
+    /// Actions of peers that had not joined yet (skipped).
+    pub n_actions_skipped: u64,
     /// Messages honest peers sent to honest peers.
     pub n_messages: u64,
     /// Bytes honest peers sent to honest peers.
     pub n_bytes: u64,
-    /// Messages honest peers sent to the hostile peer (which never answers, so hellos and
-    /// batches to it are resent every second until the run ends).
+    /// Messages honest peers sent to the hostile peer.
     pub n_messages_to_hostile: u64,
     /// Messages handed to an honest peer.
     pub n_delivered: u64,
@@ -121,90 +185,129 @@ pub struct Stats {
     pub n_duplicated: u64,
     /// Messages dropped by a partition.
     pub n_partition_drops: u64,
+    /// Messages dropped because their link's queue was full (bandwidth).
+    pub n_queue_drops: u64,
     /// Messages that arrived after their connection was gone.
     pub n_stale_drops: u64,
-    /// Messages the hostile peer sent.
+    /// Messages the hostile peer sent (floods included).
     pub n_hostile_messages: u64,
+    /// Forged ops (signature not matching the claimed author) the hostile peer sent.
+    pub n_forged_ops: u64,
+    /// Well-formed ops the hostile peer authored under its own key.
+    pub n_hostile_ops: u64,
+    /// Flood messages delivered to an honest peer.
+    pub n_flood_delivered: u64,
+    /// Flood messages an honest peer accepted (not rate limited).
+    pub n_flood_accepted: u64,
     /// Rejections honest peers reported about honest connections, by kind.
     pub honest_rejects: BTreeMap<String, u64>,
+    /// Rejections honest peers reported about the hostile connection, by kind.
+    pub hostile_rejects: BTreeMap<String, u64>,
     /// Rejections honest peers reported about the hostile connection.
     pub n_hostile_rejects: u64,
     /// Events handled.
     pub n_events: u64,
     /// Crashes and restarts.
     pub n_crashes: u64,
+    /// Fsyncs completed.
+    pub n_fsyncs: u64,
+    /// Ops appended but lost in crashes (not synced); the crashed peer's own among them are
+    /// gone for good, the others come back from their authors.
+    pub n_lost_unsynced: u64,
+    /// Crashes that left a torn record for recovery to cut.
+    pub n_torn_tails: u64,
+    /// Peers that joined late with an empty log.
+    pub n_late_joins: u64,
+    /// Peers that joined late from a snapshot.
+    pub n_snapshot_joins: u64,
 }
 
 /// A run in progress.
 pub struct Simulation {
-    config: Config,
-    rng: SimRng,
-    now: u64,
+    pub(crate) config: Config,
+    pub(crate) faults: Faults,
+    pub(crate) net: SimRng,
+    pub(crate) now: u64,
     seq: u64,
     queue: BTreeMap<(u64, u64), Ev>,
-    honest: Vec<Honest>,
+    pub(crate) honest: Vec<Honest>,
+    pub(crate) hostile: Option<Hostile>,
+    actions: Vec<Action>,
     /// One-way base latency per directed link, `[from][to]`.
-    latency_micros: Vec<Vec<u64>>,
+    pub(crate) latency_micros: Vec<Vec<u64>>,
+    /// When each directed link is free to send again (bandwidth).
+    link_free_at: Vec<Vec<u64>>,
     /// Pair state, `[min][max]`.
     pairs: Vec<Vec<Pair>>,
+    /// Connections whose other end crashed, still open at `to` (keyed `(to, from)`): messages
+    /// the crashed peer sent before the crash, of epoch `.0`, are still delivered until `.1`.
+    lingering: BTreeMap<(usize, usize), (u64, u64)>,
     blocked: BTreeMap<(usize, usize), u32>,
-    captured: Vec<Vec<u8>>,
-    objects: Vec<u64>,
-    stats: Stats,
-    trace: TraceHash,
-    heal_at: u64,
-    last_delivery_at: u64,
-    timed_out: bool,
+    pub(crate) objects: Vec<u64>,
+    pub(crate) stats: Stats,
+    pub(crate) trace: TraceHash,
+    pub(crate) heal_at: u64,
+    pub(crate) last_delivery_at: u64,
+    pub(crate) timed_out: bool,
     /// Messages between honest peers on the network now.
     n_in_flight: u64,
     quiet: bool,
-    /// What went wrong at restarts (checked at the end).
-    restart_failures: Vec<String>,
+    /// What went wrong at restarts and joins (checked at the end).
+    pub(crate) restart_failures: Vec<String>,
+    /// Ops some peer synced to disk (acknowledged as durable).
+    pub(crate) durable: BTreeSet<OpId>,
+    /// Own ops a crash lost before they were synced (so before they were ever sent).
+    pub(crate) lost_own: BTreeSet<OpId>,
+    /// Per flood: (messages delivered, messages accepted).
+    pub(crate) floods: Vec<(u64, u64)>,
+    pub(crate) samples: Vec<Sample>,
+    sample_interval_micros: u64,
 }
 
 impl Simulation {
     /// Sets up a run: keys, peers, the full mesh of connections and every scheduled event.
     pub fn new(config: Config) -> Result<Simulation, ConfigError> {
         config.validate()?;
-        let mut rng = SimRng::new(config.seed);
+        let faults = config.effective_faults();
         let n = config.n_peers;
         let n_nodes = n + usize::from(config.hostile);
+        let mut keys = SimRng::stream(config.seed, KEYS_STREAM);
+        let first_slot = memory::reserve_slots(n);
         let mut honest = Vec::with_capacity(n);
         for i in 0..n {
-            let mut seed = [0u8; 32];
-            rng.fill(&mut seed);
-            let keypair = Keypair::from_seed(seed);
-            let log = Log::default();
-            let scene = Scene::fold(&log).map_err(|_| ConfigError::Peers(i))?;
-            honest.push(Honest {
-                key_seed: seed,
-                peer: Peer::new(keypair, SESSION_ID, log),
-                scene,
-                user: User::default(),
-                seen: BTreeSet::new(),
-                n_received_insertions: 0,
-                panicked: None,
-                offline_depth: 0,
-                wake_at: None,
-                n_causal_violations: 0,
-                authored: Vec::new(),
-            });
+            let mut key_seed = [0u8; 32];
+            keys.fill(&mut key_seed);
+            let slot = memory::slot(first_slot, i);
+            honest.push(new_honest(key_seed, Log::default(), slot).ok_or(ConfigError::Peers(i))?);
         }
-        let lat = config.faults.latency_micros;
+        let hostile = config.hostile.then(|| {
+            let mut key_seed = [0u8; 32];
+            for _ in n..crate::config::MAX_PEERS {
+                keys.fill(&mut key_seed);
+            }
+            keys.fill(&mut key_seed);
+            Hostile::new(Keypair::from_seed(key_seed))
+        });
+        let mut net = SimRng::stream(config.seed, NET_STREAM);
+        let lat = faults.latency_micros;
         let latency_micros = (0..n_nodes)
-            .map(|_| (0..n_nodes).map(|_| lat / 2 + rng.below(lat + 1)).collect())
+            .map(|_| (0..n_nodes).map(|_| lat / 2 + net.below(lat + 1)).collect())
             .collect();
+        let actions = workload::actions(config.seed, config.n_ops, START_MICROS);
         let mut sim = Simulation {
-            config,
-            rng,
+            faults,
+            net,
             now: START_MICROS,
             seq: 0,
             queue: BTreeMap::new(),
             honest,
+            hostile,
+            actions,
             latency_micros,
+            link_free_at: vec![vec![0; n_nodes]; n_nodes],
             pairs: vec![vec![Pair::default(); n_nodes]; n_nodes],
+            lingering: BTreeMap::new(),
             blocked: BTreeMap::new(),
-            captured: Vec::new(),
             objects: vec![HOT_OBJECT],
             stats: Stats::default(),
             trace: TraceHash::default(),
@@ -214,92 +317,147 @@ impl Simulation {
             n_in_flight: 0,
             quiet: false,
             restart_failures: Vec::new(),
+            durable: BTreeSet::new(),
+            lost_own: BTreeSet::new(),
+            floods: Vec::new(),
+            samples: Vec::new(),
+            sample_interval_micros: 0,
+            config,
         };
         sim.schedule_all();
         Ok(sim)
     }
 
-    fn n_nodes(&self) -> usize {
+    pub(crate) fn n_nodes(&self) -> usize {
         self.pairs.len()
     }
 
-    fn hostile_idx(&self) -> Option<usize> {
+    pub(crate) fn hostile_idx(&self) -> Option<usize> {
         self.config.hostile.then_some(self.config.n_peers)
     }
 
-    fn push(&mut self, at: u64, ev: Ev) {
+    pub(crate) fn push(&mut self, at: u64, ev: Ev) {
         self.seq += 1;
         self.queue.insert((at, self.seq), ev);
     }
 
     fn schedule_all(&mut self) {
-        let n = self.config.n_peers;
+        let work_end = self.actions.last().map_or(START_MICROS, |a| a.at_micros);
+        let span = (work_end - START_MICROS).max(1);
+        let mut sched = SimRng::stream(self.config.seed, SCHEDULE_STREAM);
+        self.schedule_joins(&mut sched, span);
         // Peer 0 creates the object everyone fights over, before anyone connects.
-        if let Some(create) = workload::hot_object(&mut self.rng) {
+        if let Some(create) =
+            workload::hot_object(&mut SimRng::stream(self.config.seed, HOT_STREAM))
+        {
             self.author(0, create);
         }
         for a in 0..self.n_nodes() {
             for b in a + 1..self.n_nodes() {
-                self.connect_pair(a, b);
+                if self.online(a) && self.online(b) {
+                    self.connect_pair(a, b);
+                }
             }
         }
-        let mut t = START_MICROS;
-        for _ in 0..self.config.n_ops {
-            t += 1 + self.rng.below(2 * MEAN_OP_GAP_MICROS);
-            let peer = self.rng.index(n);
-            self.push(t, Ev::User { peer });
+        let selected: Vec<usize> = match &self.config.actions {
+            Some(keep) => keep.iter().map(|&i| i as usize).collect(),
+            None => (0..self.actions.len()).collect(),
+        };
+        for action_idx in selected {
+            let at = self.actions[action_idx].at_micros;
+            self.push(at, Ev::User { action_idx });
         }
-        let work_end = t;
-        let span = work_end - START_MICROS;
-        if self.config.hostile {
-            for _ in 0..self.config.n_ops / 5 + 1 {
-                let at = START_MICROS + self.rng.below(span);
+        self.schedule_faults(&mut sched, span);
+        self.push(work_end + 1, Ev::Heal);
+        self.sample_interval_micros = (span / 256).max(10_000);
+        self.push(START_MICROS + self.sample_interval_micros, Ev::Sample);
+    }
+
+    /// Late joiners (decided before anyone connects). Draws the same whatever is switched off.
+    fn schedule_joins(&mut self, sched: &mut SimRng, span: u64) {
+        let n = self.config.n_peers;
+        for _ in 0..1 + self.config.n_ops / 400 {
+            let (draw, at, snapshot) = (
+                sched.next_u64(),
+                sched.below(span * 6 / 10),
+                sched.chance(500),
+            );
+            if !self.faults.late_joins {
+                continue;
+            }
+            // Peer 0 always starts: it authors the hot object and is the checkers' reference.
+            let peer = 1 + (draw % (n as u64 - 1)) as usize;
+            if self.honest[peer].started {
+                self.honest[peer].started = false;
+                self.push(START_MICROS + at, Ev::Join { peer, snapshot });
+            }
+        }
+    }
+
+    /// Hostile traffic, partitions, peers offline and crashes. Every draw happens whatever is
+    /// switched off, so switching one kind off keeps the others' times.
+    fn schedule_faults(&mut self, sched: &mut SimRng, span: u64) {
+        let n = self.config.n_peers;
+        let n_ops = self.config.n_ops;
+        let faults = self.faults;
+        let hostile = self.config.hostile;
+        for _ in 0..n_ops / 5 + 1 {
+            let at = START_MICROS + sched.below(span);
+            if hostile {
                 self.push(at, Ev::Hostile);
             }
         }
-        let faults = self.config.faults;
-        if faults.partitions {
-            for _ in 0..1 + self.config.n_ops / 150 {
-                let start = START_MICROS + self.rng.below(span);
-                let duration = 300_000 + self.rng.below(3_000_000);
-                let side: Vec<bool> = (0..n).map(|_| self.rng.chance(500)).collect();
-                let asymmetric = self.rng.chance(300);
-                let mut cut = Vec::new();
-                for a in 0..n {
-                    for b in 0..n {
-                        if side[a] && !side[b] {
-                            cut.push((a, b));
-                            if !asymmetric {
-                                cut.push((b, a));
-                            }
+        for _ in 0..1 + n_ops / 500 {
+            let at = START_MICROS + sched.below(span);
+            if hostile && faults.flood {
+                self.push(at, Ev::Flood);
+            }
+        }
+        for _ in 0..1 + n_ops / 150 {
+            let start = START_MICROS + sched.below(span);
+            let duration = 300_000 + sched.below(3_000_000);
+            let (sides, asymmetric) = (sched.next_u64(), sched.chance(300));
+            let side = |p: usize| sides >> p & 1 == 1;
+            let mut cut = Vec::new();
+            for a in 0..n {
+                for b in 0..n {
+                    if side(a) && !side(b) {
+                        cut.push((a, b));
+                        if !asymmetric {
+                            cut.push((b, a));
                         }
                     }
                 }
-                if !cut.is_empty() {
-                    self.push(start, Ev::PartitionStart { cut: cut.clone() });
-                    self.push(start + duration, Ev::PartitionEnd { cut });
-                }
+            }
+            if faults.partitions && !cut.is_empty() {
+                self.push(start, Ev::PartitionStart { cut: cut.clone() });
+                self.push(start + duration, Ev::PartitionEnd { cut });
             }
         }
-        if faults.offline {
-            for _ in 0..1 + self.config.n_ops / 200 {
-                let peer = self.rng.index(n);
-                let start = START_MICROS + self.rng.below(span);
-                let duration = 500_000 + self.rng.below(5_000_000);
+        for _ in 0..1 + n_ops / 200 {
+            let (draw, start) = (sched.next_u64(), START_MICROS + sched.below(span));
+            let duration = 500_000 + sched.below(5_000_000);
+            let peer = (draw % n as u64) as usize;
+            if faults.offline {
                 self.push(start, Ev::Offline { peer });
                 self.push(start + duration, Ev::Online { peer });
             }
         }
-        if faults.crashes {
-            for _ in 0..1 + self.config.n_ops / 300 {
-                let peer = self.rng.index(n);
-                let start = START_MICROS + self.rng.below(span);
-                let restart = 200_000 + self.rng.below(2_000_000);
-                self.push(start, Ev::Crash { peer });
-                self.push(start + restart, Ev::Online { peer });
+        for _ in 0..1 + n_ops / 300 {
+            let (draw, start) = (sched.next_u64(), START_MICROS + sched.below(span));
+            let restart = 200_000 + sched.below(2_000_000);
+            let peer = (draw % n as u64) as usize;
+            if faults.crashes {
+                let restart_micros = restart;
+                self.push(
+                    start,
+                    Ev::Crash {
+                        peer,
+                        restart_micros,
+                    },
+                );
             }
         }
-        self.push(work_end + 1, Ev::Heal);
     }
 
     /// Runs to quiescence (or the limit) and checks the outcome.
@@ -317,13 +475,16 @@ impl Simulation {
                 break;
             }
             self.now = at;
-            self.trace.u64(at);
+            if !matches!(ev, Ev::Sample) {
+                self.trace.u64(at);
+            }
             self.handle(ev);
             if self.quiet {
                 break;
             }
         }
-        self.finish()
+        self.sample();
+        crate::check::finish(self)
     }
 
     fn handle(&mut self, ev: Ev) {
@@ -333,7 +494,8 @@ impl Simulation {
                 to,
                 epoch,
                 bytes,
-            } => self.deliver(from, to, epoch, &bytes),
+                flood,
+            } => self.deliver(from, to, epoch, &bytes, flood),
             Ev::Wake { peer } => {
                 self.trace.u64(1);
                 let now = self.now;
@@ -344,19 +506,17 @@ impl Simulation {
                 guarded(h, |p| p.handle_timeout(Timestamp(now)));
                 self.flush(peer);
             }
-            Ev::User { peer } => {
+            Ev::User { action_idx } => {
                 self.trace.u64(2);
-                let payload = self.honest[peer]
-                    .user
-                    .next(&mut self.rng, peer, &self.objects);
-                match payload {
-                    Some(payload) => self.author(peer, payload),
-                    None => self.stats.n_author_errors += 1,
-                }
+                self.user_action(action_idx);
             }
             Ev::Hostile => {
                 self.trace.u64(3);
                 self.hostile_send();
+            }
+            Ev::Flood => {
+                self.trace.u64(14);
+                self.hostile_flood();
             }
             Ev::PartitionStart { cut } => {
                 self.trace.u64(4);
@@ -379,39 +539,48 @@ impl Simulation {
                 self.trace.u64(6);
                 self.go_offline(peer);
             }
-            Ev::Crash { peer } => {
+            Ev::Crash {
+                peer,
+                restart_micros,
+            } => {
                 self.trace.u64(9);
-                self.go_offline(peer);
-                self.restart(peer);
+                let h = &mut self.honest[peer];
+                // Most crashes wait for the peer's next write (half of them for an op of its
+                // own: a crash while saving an edit), so they lose unsynced ops and tear
+                // records; the others strike whenever they come.
+                if !h.started || h.panicked.is_some() {
+                } else if h.disk.n_unsynced() == 0 && self.net.chance(700) {
+                    h.crash_armed = Some((restart_micros, self.net.chance(500)));
+                } else {
+                    self.crash(peer, restart_micros);
+                }
             }
             Ev::Online { peer } => {
                 self.trace.u64(7);
-                let h = &mut self.honest[peer];
-                if h.offline_depth > 0 {
-                    h.offline_depth -= 1;
-                    if h.offline_depth == 0 {
-                        for other in 0..self.n_nodes() {
-                            if other != peer && self.online(other) {
-                                self.connect_pair(peer, other);
-                            }
-                        }
-                    }
+                self.come_online(peer);
+            }
+            Ev::Join { peer, snapshot } => {
+                self.trace.u64(15);
+                self.join(peer, snapshot);
+            }
+            Ev::Unlinger { to, from, epoch } => {
+                self.trace.u64(17);
+                if self
+                    .lingering
+                    .get(&(to, from))
+                    .is_some_and(|l| l.0 == epoch)
+                {
+                    self.lingering.remove(&(to, from));
+                    guarded(&mut self.honest[to], |p| p.disconnect(ConnId(from as u64)));
                 }
+            }
+            Ev::FsyncDone { peer, generation } => {
+                self.trace.u64(16);
+                self.fsync_done(peer, generation);
             }
             Ev::Heal => {
                 self.trace.u64(8);
-                self.blocked.clear();
-                for h in &mut self.honest {
-                    h.offline_depth = 0;
-                }
-                for a in 0..self.n_nodes() {
-                    for b in a + 1..self.n_nodes() {
-                        self.connect_pair(a, b);
-                    }
-                }
-                self.heal_at = self.now;
-                self.last_delivery_at = self.now;
-                self.push(self.now + PROBE_INTERVAL_MICROS, Ev::Probe);
+                self.heal();
             }
             Ev::Probe => {
                 if self.n_in_flight == 0 && self.agreed() {
@@ -420,7 +589,74 @@ impl Simulation {
                     self.push(self.now + PROBE_INTERVAL_MICROS, Ev::Probe);
                 }
             }
+            Ev::Sample => {
+                self.sample();
+                self.push(self.now + self.sample_interval_micros, Ev::Sample);
+            }
         }
+    }
+
+    fn user_action(&mut self, action_idx: usize) {
+        let action = self.actions[action_idx];
+        let peer = action.peer(self.config.n_peers);
+        if !self.honest[peer].started {
+            self.stats.n_actions_skipped += 1;
+            return;
+        }
+        let mut rng = SimRng::new(action.seed);
+        let payload = self.honest[peer].user.next(&mut rng, peer, &self.objects);
+        match payload {
+            Some(payload) => self.author(peer, payload),
+            None => self.stats.n_author_errors += 1,
+        }
+    }
+
+    /// The peer crashes: its connections die with it, but the other ends notice only later
+    /// (a transport's idle timeout), so what it sent before the crash still arrives.
+    fn crash(&mut self, peer: usize, restart_micros: u64) {
+        self.honest[peer].crash_armed = None;
+        let linger = 2 * self.faults.latency_micros + 2 * self.faults.jitter_micros + 1;
+        for other in 0..self.honest.len() {
+            let pair = *self.pair(peer, other);
+            if other == peer || !pair.connected {
+                continue;
+            }
+            let until = self.now + linger + MAX_LINK_QUEUE_MICROS;
+            self.lingering.insert((other, peer), (pair.epoch, until));
+            let p = self.pair(peer, other);
+            p.connected = false;
+            p.epoch += 1;
+            let epoch = pair.epoch;
+            self.push(
+                until,
+                Ev::Unlinger {
+                    to: other,
+                    from: peer,
+                    epoch,
+                },
+            );
+        }
+        self.go_offline(peer);
+        self.restart(peer);
+        self.push(self.now + restart_micros, Ev::Online { peer });
+    }
+
+    fn heal(&mut self) {
+        self.blocked.clear();
+        for h in &mut self.honest {
+            h.offline_depth = 0;
+            h.crash_armed = None;
+        }
+        for a in 0..self.n_nodes() {
+            for b in a + 1..self.n_nodes() {
+                if self.online(a) && self.online(b) {
+                    self.connect_pair(a, b);
+                }
+            }
+        }
+        self.heal_at = self.now;
+        self.last_delivery_at = self.now;
+        self.push(self.now + PROBE_INTERVAL_MICROS, Ev::Probe);
     }
 
     fn go_offline(&mut self, peer: usize) {
@@ -434,9 +670,73 @@ impl Simulation {
         }
     }
 
-    /// Restarts a crashed peer from its store. The store holds every op the log delivered
-    /// (the driver appends each before the next transmit), so it is modelled as those ops in
-    /// linear order; pending ops, connection state and the scene are lost.
+    fn come_online(&mut self, peer: usize) {
+        let h = &mut self.honest[peer];
+        if h.offline_depth == 0 {
+            return;
+        }
+        h.offline_depth -= 1;
+        if h.offline_depth == 0 && h.started {
+            self.connect_all(peer);
+        }
+    }
+
+    fn connect_all(&mut self, peer: usize) {
+        for other in 0..self.n_nodes() {
+            if other != peer && self.online(other) {
+                self.connect_pair(peer, other);
+            }
+        }
+    }
+
+    /// A late peer starts: from a snapshot of peer 0's log when that is safe, else empty.
+    fn join(&mut self, idx: usize, snapshot: bool) {
+        let mut joined = false;
+        if snapshot && self.snapshot_safe(idx) {
+            match crate::join::from_snapshot(&self.honest[0], &self.honest[idx]) {
+                Ok((bytes, cut, peer, scene)) => {
+                    let h = &mut self.honest[idx];
+                    h.peer = peer;
+                    h.scene = scene;
+                    h.disk.snapshot = Some(bytes);
+                    h.snapshot_cut = Some(cut);
+                    self.stats.n_snapshot_joins += 1;
+                    joined = true;
+                }
+                Err(e) => self
+                    .restart_failures
+                    .push(format!("peer {idx}: snapshot join failed: {e}")),
+            }
+        }
+        if !joined {
+            self.stats.n_late_joins += 1;
+        }
+        self.honest[idx].started = true;
+        if self.honest[idx].offline_depth == 0 {
+            self.connect_all(idx);
+        }
+        self.flush(idx);
+    }
+
+    /// A snapshot cut at the producer's stable Lamport time is safe only if no op can later
+    /// sort before it: every other peer that may author must already be a known author of
+    /// the producer (an author it never heard of could still write below the cut, and a log
+    /// joined from the snapshot would refuse that op forever). The hostile member authors at
+    /// Lamport times of its choosing, so with forgery on, joins are never from snapshots.
+    fn snapshot_safe(&self, joiner: usize) -> bool {
+        let producer = &self.honest[0];
+        if producer.panicked.is_some() || (self.hostile.is_some() && self.faults.forgery) {
+            return false;
+        }
+        let vv = producer.peer.log().version_vector();
+        self.honest
+            .iter()
+            .enumerate()
+            .all(|(i, h)| i == joiner || (h.started && vv.get(&h.peer.peer_id()) > 0))
+    }
+
+    /// Restarts a crashed peer from what its store kept (see [`crate::store`]); pending ops,
+    /// connection state and the scene are lost.
     fn restart(&mut self, idx: usize) {
         self.stats.n_crashes += 1;
         let now = Timestamp(self.now);
@@ -444,44 +744,40 @@ impl Simulation {
         if h.panicked.is_some() {
             return;
         }
-        let old = h.peer.log();
-        let stored: Vec<_> = old.entries().map(|e| e.op.clone()).collect();
-        let (n_before, vv_before) = (old.len(), old.version_vector().clone());
-        let reloaded = panic::catch_unwind(AssertUnwindSafe(|| {
-            let mut log = Log::default();
-            let mut n_refused = 0usize;
-            for op in stored {
-                match op.into_verified() {
-                    Ok(op) => {
-                        if log.insert(now, op, LOCAL_ORIGIN).is_err() {
-                            n_refused += 1;
-                        }
-                    }
-                    Err(_) => n_refused += 1,
-                }
+        let recovered = memory::with_slot(h.slot, || {
+            panic::catch_unwind(AssertUnwindSafe(|| {
+                h.disk.crash(h.peer.log(), &mut self.net, now)
+            }))
+        });
+        let recovered = match recovered {
+            Ok(Ok(r)) => r,
+            Ok(Err(e)) => {
+                self.restart_failures.push(format!("peer {idx}: {e}"));
+                return;
             }
-            (log, n_refused)
-        }));
-        let (log, n_refused) = match reloaded {
-            Ok(r) => r,
             Err(e) => {
                 h.panicked = Some(panic_text(e.as_ref()));
                 return;
             }
         };
-        if n_refused > 0 || log.len() != n_before || *log.version_vector() != vv_before {
-            self.restart_failures.push(format!(
-                "peer {idx}: restart reloaded {} of {n_before} ops ({n_refused} refused)",
-                log.len()
-            ));
+        self.stats.n_lost_unsynced += recovered.lost.len() as u64;
+        self.stats.n_torn_tails += u64::from(recovered.n_truncated_bytes > 0);
+        let me = h.peer.peer_id();
+        for id in &recovered.lost {
+            if h.peer.log().get(id).is_some_and(|op| op.author() == me) {
+                self.lost_own.insert(*id);
+            }
         }
-        match Scene::fold(&log) {
+        h.authored.retain(|id| !self.lost_own.contains(id));
+        let log = recovered.log;
+        match memory::with_slot(h.slot, || Scene::fold(&log)) {
             Ok(scene) => h.scene = scene,
             Err(e) => self
                 .restart_failures
                 .push(format!("peer {idx}: reloaded log does not fold: {e}")),
         }
-        h.peer = Peer::new(Keypair::from_seed(h.key_seed), SESSION_ID, log);
+        let key = Keypair::from_seed(h.key_seed);
+        h.peer = memory::with_slot(h.slot, || Peer::new(key, SESSION_ID, log));
         h.wake_at = None;
     }
 
@@ -496,11 +792,13 @@ impl Simulation {
             && live.all(|h| h.peer.log().n_pending() == 0 && h.peer.log().version_vector() == vv)
     }
 
-    fn online(&self, node: usize) -> bool {
-        self.honest.get(node).is_none_or(|h| h.offline_depth == 0)
+    pub(crate) fn online(&self, node: usize) -> bool {
+        self.honest
+            .get(node)
+            .is_none_or(|h| h.offline_depth == 0 && h.started)
     }
 
-    fn pair(&mut self, a: usize, b: usize) -> &mut Pair {
+    pub(crate) fn pair(&mut self, a: usize, b: usize) -> &mut Pair {
         let (lo, hi) = if a < b { (a, b) } else { (b, a) };
         &mut self.pairs[lo][hi]
     }
@@ -511,6 +809,10 @@ impl Simulation {
         }
         let now = Timestamp(self.now);
         for (x, y) in [(a, b), (b, a)] {
+            // A new connection replaces one still open from before the other end crashed.
+            if self.lingering.remove(&(x, y)).is_some() {
+                guarded(&mut self.honest[x], |p| p.disconnect(ConnId(y as u64)));
+            }
             if let Some(h) = self.honest.get_mut(x) {
                 // A refused connect (too many, id in use) leaves the pair unusable from this
                 // side; honest runs never hit it, and the checkers would see the divergence.
@@ -552,29 +854,36 @@ impl Simulation {
                 h.user.authored(&payload, op.id());
                 h.authored.push(op.id());
                 note_delivered(h, &insertion.delivered);
-                let Honest { peer, scene, .. } = h;
-                scene.apply_insertion(peer.log(), &insertion);
+                h.disk.append(&insertion.delivered);
+                let Honest {
+                    peer, scene, slot, ..
+                } = h;
+                memory::with_slot(*slot, || scene.apply_insertion(peer.log(), &insertion));
                 if let ShapePayload::Create { object, .. } = payload
                     && !self.objects.contains(&object)
                 {
                     self.objects.push(object);
                 }
             }
-            Some(Err(_)) | None => self.stats.n_author_errors += 1,
+            Some(Err(e)) => {
+                self.stats.n_author_errors += 1;
+                let what = e
+                    .to_string()
+                    .split_whitespace()
+                    .take(3)
+                    .collect::<Vec<_>>()
+                    .join(" ");
+                *self.stats.author_errors.entry(what).or_default() += 1;
+            }
+            None => self.stats.n_author_errors += 1,
         }
         self.flush(peer);
     }
 
-    /// Drains a peer's transmissions and events, then schedules its next wake-up.
-    fn flush(&mut self, idx: usize) {
+    /// Drains a peer's events (appending delivered ops to its store), then, once everything
+    /// appended is synced, its transmissions; then schedules its next wake-up.
+    pub(crate) fn flush(&mut self, idx: usize) {
         let now = self.now;
-        for _ in 0..MAX_DRAIN {
-            let out = guarded(&mut self.honest[idx], |p| p.poll_transmit(Timestamp(now)));
-            match out {
-                Some(Some((conn, bytes))) => self.send(idx, conn, bytes),
-                _ => break,
-            }
-        }
         for _ in 0..MAX_DRAIN {
             let ev = guarded(&mut self.honest[idx], |p| p.poll_event());
             match ev {
@@ -582,15 +891,66 @@ impl Simulation {
                 _ => break,
             }
         }
+        let delay = FSYNC_MIN_MICROS + self.net.below(FSYNC_MAX_MICROS - FSYNC_MIN_MICROS);
+        let h = &mut self.honest[idx];
+        if let Some(done) = h.disk.start_sync(now, delay) {
+            let generation = h.disk.generation;
+            self.push(
+                done,
+                Ev::FsyncDone {
+                    peer: idx,
+                    generation,
+                },
+            );
+        }
+        let synced = self.honest[idx].disk.n_unsynced() == 0;
+        if synced || self.config.sabotage == crate::config::Sabotage::SendUnsynced {
+            for _ in 0..MAX_DRAIN {
+                let out = guarded(&mut self.honest[idx], |p| p.poll_transmit(Timestamp(now)));
+                match out {
+                    Some(Some((conn, bytes))) => self.send(idx, conn, bytes),
+                    _ => break,
+                }
+            }
+        }
+        // An armed crash strikes while something appended is not yet synced.
+        let h = &self.honest[idx];
+        if let Some((restart_micros, own_only)) = h.crash_armed
+            && !synced
+            && (!own_only
+                || h.authored
+                    .last()
+                    .is_some_and(|id| !self.durable.contains(id)))
+        {
+            self.crash(idx, restart_micros);
+            return;
+        }
         let next = guarded(&mut self.honest[idx], |p| p.poll_timeout()).flatten();
         if let Some(t) = next {
-            let at = t.0.max(now + 1);
+            // While unsynced, nothing can go out before the fsync completes anyway.
+            let floor = if synced {
+                now + 1
+            } else {
+                now + FSYNC_MAX_MICROS
+            };
+            let at = t.0.max(floor);
             let h = &mut self.honest[idx];
             if h.wake_at.is_none_or(|w| at < w) {
                 h.wake_at = Some(at);
                 self.push(at, Ev::Wake { peer: idx });
             }
         }
+    }
+
+    fn fsync_done(&mut self, idx: usize, generation: u64) {
+        let h = &mut self.honest[idx];
+        if h.disk.generation != generation {
+            return;
+        }
+        self.stats.n_fsyncs += 1;
+        let newly = h.disk.complete_sync();
+        self.durable.extend(newly.iter().copied());
+        self.flush(idx);
     }
 
     fn on_event(&mut self, idx: usize, conn: ConnId, event: Event) {
@@ -606,16 +966,21 @@ impl Simulation {
                 let sabotage = self.config.sabotage;
                 let h = &mut self.honest[idx];
                 note_delivered(h, &insertion.delivered);
+                h.disk.append(&insertion.delivered);
                 h.n_received_insertions += 1;
-                let skip = sabotage == Sabotage::DropEveryTenthInsertion
+                let skip = sabotage == crate::config::Sabotage::DropEveryTenthInsertion
                     && idx == 0
                     && h.n_received_insertions.is_multiple_of(10);
                 if !skip {
-                    let Honest { peer, scene, .. } = h;
+                    let Honest {
+                        peer, scene, slot, ..
+                    } = h;
                     let log = peer.log();
-                    let applied = panic::catch_unwind(AssertUnwindSafe(|| {
-                        scene.apply_insertion(log, &insertion);
-                    }));
+                    let applied = memory::with_slot(*slot, || {
+                        panic::catch_unwind(AssertUnwindSafe(|| {
+                            scene.apply_insertion(log, &insertion);
+                        }))
+                    });
                     if let Err(e) = applied {
                         h.panicked = Some(panic_text(e.as_ref()));
                     }
@@ -623,14 +988,12 @@ impl Simulation {
             }
             Event::Rejected { kind, .. } => {
                 self.trace.u64(11);
+                let kind = format!("{kind:?}");
                 if Some(conn.0 as usize) == self.hostile_idx() {
                     self.stats.n_hostile_rejects += 1;
+                    *self.stats.hostile_rejects.entry(kind).or_default() += 1;
                 } else {
-                    *self
-                        .stats
-                        .honest_rejects
-                        .entry(format!("{kind:?}"))
-                        .or_default() += 1;
+                    *self.stats.honest_rejects.entry(kind).or_default() += 1;
                 }
             }
             Event::Closed(_) => {
@@ -650,13 +1013,19 @@ impl Simulation {
     /// Puts one honest message on the network.
     fn send(&mut self, from: usize, conn: ConnId, bytes: Vec<u8>) {
         let to = conn.0 as usize;
+        // The network holds its own copy: traffic in flight is not the sender's memory.
+        let bytes = if memory::installed() {
+            bytes.as_slice().to_vec()
+        } else {
+            bytes
+        };
+        let h = &mut self.honest[from];
+        h.n_messages_sent += 1;
+        h.n_bytes_sent += bytes.len() as u64;
         if Some(to) == self.hostile_idx() {
             self.stats.n_messages_to_hostile += 1;
-            if self.captured.len() < MAX_CAPTURED_MESSAGES {
-                self.captured.push(bytes);
-            } else {
-                let slot = self.rng.index(MAX_CAPTURED_MESSAGES);
-                self.captured[slot] = bytes;
+            if let Some(hostile) = &mut self.hostile {
+                hostile.capture(bytes, &mut self.net);
             }
             return;
         }
@@ -669,46 +1038,56 @@ impl Simulation {
             self.stats.n_partition_drops += 1;
             return;
         }
-        let faults = self.config.faults;
-        if self.rng.chance(faults.loss_per_mille) {
+        let faults = self.faults;
+        if self.net.chance(faults.loss_per_mille) {
             self.stats.n_lost += 1;
             return;
         }
+        let Some(departs) = self.transmit_slot(from, to, bytes.len()) else {
+            self.stats.n_queue_drops += 1;
+            return;
+        };
         let epoch = self.pair(from, to).epoch;
         let base = self.latency_micros[from][to];
-        let at = self.now + base + self.rng.below(faults.jitter_micros + 1);
+        let at = departs + base + self.net.below(faults.jitter_micros + 1);
         self.n_in_flight += 1;
-        if self.rng.chance(faults.dup_per_mille) {
+        if self.net.chance(faults.dup_per_mille) {
             self.stats.n_duplicated += 1;
             self.n_in_flight += 1;
-            let again = self.now + base + self.rng.below(2 * faults.jitter_micros + 1);
-            self.push(
-                again,
-                Ev::Deliver {
-                    from,
-                    to,
-                    epoch,
-                    bytes: bytes.clone(),
-                },
-            );
+            let again = departs + base + self.net.below(2 * faults.jitter_micros + 1);
+            let copy = bytes.clone();
+            self.push(again, deliver(from, to, epoch, copy, None));
         }
-        self.push(
-            at,
-            Ev::Deliver {
-                from,
-                to,
-                epoch,
-                bytes,
-            },
-        );
+        self.push(at, deliver(from, to, epoch, bytes, None));
     }
 
-    fn deliver(&mut self, from: usize, to: usize, epoch: u64, bytes: &[u8]) {
+    /// When a message of `n_bytes` has left the link `from -> to`, given what is queued on
+    /// it; `None` if the queue is full.
+    fn transmit_slot(&mut self, from: usize, to: usize, n_bytes: usize) -> Option<u64> {
+        let bandwidth = self.faults.bandwidth_bytes_per_sec;
+        if bandwidth == 0 {
+            return Some(self.now);
+        }
+        let free = &mut self.link_free_at[from][to];
+        let start = (*free).max(self.now);
+        if start - self.now > MAX_LINK_QUEUE_MICROS {
+            return None;
+        }
+        *free = start + (n_bytes as u64 * 1_000_000).div_ceil(bandwidth);
+        Some(*free)
+    }
+
+    fn deliver(&mut self, from: usize, to: usize, epoch: u64, bytes: &[u8], flood: Option<usize>) {
         if from < self.honest.len() {
             self.n_in_flight -= 1;
         }
         let pair = *self.pair(from, to);
-        if !pair.connected || pair.epoch != epoch || !self.online(to) || to >= self.honest.len() {
+        let current = pair.connected && pair.epoch == epoch;
+        let lingering = self
+            .lingering
+            .get(&(to, from))
+            .is_some_and(|l| l.0 == epoch && self.now <= l.1);
+        if !(current || lingering) || !self.online(to) || to >= self.honest.len() {
             self.stats.n_stale_drops += 1;
             return;
         }
@@ -716,163 +1095,104 @@ impl Simulation {
         self.trace.u64(to as u64);
         self.trace.bytes(bytes);
         self.stats.n_delivered += 1;
+        let rate_limited_before = self.stats.hostile_rejects.get("RateLimited").copied();
         let now = Timestamp(self.now);
         guarded(&mut self.honest[to], |p| {
             p.handle_input(now, ConnId(from as u64), bytes);
         });
         self.flush(to);
+        if let Some(f) = flood {
+            let limited =
+                self.stats.hostile_rejects.get("RateLimited").copied() != rate_limited_before;
+            self.stats.n_flood_delivered += 1;
+            self.stats.n_flood_accepted += u64::from(!limited);
+            if let Some(counts) = self.floods.get_mut(f) {
+                counts.0 += 1;
+                counts.1 += u64::from(!limited);
+            }
+        }
     }
 
-    /// The hostile peer sends garbage, an oversized message or a replay to a random peer.
-    fn hostile_send(&mut self) {
-        let Some(h) = self.hostile_idx() else { return };
-        let targets: Vec<usize> = (0..self.config.n_peers)
-            .filter(|t| self.online(*t) && self.pair(*t, h).connected)
-            .collect();
-        if targets.is_empty() {
-            return;
+    /// Records one sample of every peer for the plots, thinning when there are too many.
+    fn sample(&mut self) {
+        if self.samples.len() >= MAX_SAMPLES {
+            let kept: Vec<Sample> = self.samples.iter().step_by(2).cloned().collect();
+            self.samples = kept;
+            self.sample_interval_micros *= 2;
         }
-        let to = targets[self.rng.index(targets.len())];
-        let kind = if self.captured.is_empty() {
-            self.rng.below(2)
-        } else {
-            self.rng.below(5)
-        };
-        let bytes = match kind {
-            0 => {
-                let mut b = vec![0u8; 1 + self.rng.index(512)];
-                self.rng.fill(&mut b);
-                b
-            }
-            1 => {
-                let mut b = vec![1u8; MAX_MESSAGE_BYTES + 1 + self.rng.index(1024)];
-                self.rng.fill(&mut b[1..64]);
-                b
-            }
-            2 => self.captured[self.rng.index(self.captured.len())].clone(),
-            3 => {
-                let mut b = self.captured[self.rng.index(self.captured.len())].clone();
-                let i = self.rng.index(b.len());
-                if let Some(x) = b.get_mut(i) {
-                    *x ^= 1 << self.rng.below(8);
-                }
-                b
-            }
-            _ => {
-                let mut b = self.captured[self.rng.index(self.captured.len())].clone();
-                let keep = self.rng.index(b.len());
-                b.truncate(keep);
-                b
-            }
-        };
-        self.stats.n_hostile_messages += 1;
-        let epoch = self.pair(h, to).epoch;
-        let at = self.now + self.latency_micros[h][to];
-        self.push(
-            at,
-            Ev::Deliver {
-                from: h,
-                to,
-                epoch,
-                bytes,
-            },
-        );
-    }
-
-    fn finish(self) -> Report {
-        let mut failures = Vec::new();
-        if self.timed_out {
-            failures.push(format!(
-                "no quiescence within {} s of virtual time after healing",
-                QUIESCENCE_LIMIT_MICROS / 1_000_000
-            ));
-        }
-        failures.extend(self.restart_failures.iter().cloned());
-        let mut reference: Option<(usize, SceneHash)> = None;
-        let all_authored: Vec<OpId> = self
+        let peers = self
             .honest
-            .iter()
-            .flat_map(|h| h.authored.iter().copied())
-            .collect();
-        for (i, h) in self.honest.iter().enumerate() {
-            if let Some(p) = &h.panicked {
-                failures.push(format!("peer {i} panicked: {p}"));
-                continue;
-            }
-            if h.n_causal_violations > 0 {
-                failures.push(format!(
-                    "peer {i}: {} ops delivered before their dependencies",
-                    h.n_causal_violations
-                ));
-            }
-            let log = h.peer.log();
-            if log.n_pending() > 0 {
-                failures.push(format!("peer {i}: {} ops still pending", log.n_pending()));
-            }
-            let n_missing = all_authored.iter().filter(|id| !log.contains(id)).count();
-            if n_missing > 0 {
-                failures.push(format!("peer {i}: {n_missing} authored ops missing"));
-            }
-            let fresh = if self.config.sabotage == Sabotage::ReverseFold && i == 1 {
-                Some(reversed_fold_hash(log))
-            } else {
-                Scene::fold(log).ok().map(|s| s.scene_hash())
-            };
-            let Some(fresh) = fresh else {
-                failures.push(format!("peer {i}: its log does not fold"));
-                continue;
-            };
-            if h.scene.scene_hash() != fresh {
-                failures.push(format!(
-                    "peer {i}: incremental scene {} differs from a fresh fold {}",
-                    short_hash(&h.scene.scene_hash()),
-                    short_hash(&fresh)
-                ));
-            }
-            match reference {
-                None => reference = Some((i, fresh)),
-                Some((r, hash)) => {
-                    let rlog = self.honest[r].peer.log();
-                    if rlog.version_vector() != log.version_vector() {
-                        failures.push(format!(
-                            "peer {i}: version vector ({} ops) differs from peer {r}'s ({} ops)",
-                            log.version_vector().n_ops(),
-                            rlog.version_vector().n_ops()
-                        ));
-                    } else if !rlog.linear_ids().eq(log.linear_ids()) {
-                        failures.push(format!("peer {i}: linear order differs from peer {r}'s"));
-                    } else if !rlog
-                        .entries()
-                        .map(|e| e.active)
-                        .eq(log.entries().map(|e| e.active))
-                    {
-                        failures.push(format!(
-                            "peer {i}: lease/undo verdicts differ from peer {r}'s"
-                        ));
-                    }
-                    if hash != fresh {
-                        failures.push(format!(
-                            "peer {i}: scene hash {} differs from peer {r}'s {}",
-                            short_hash(&fresh),
-                            short_hash(&hash)
-                        ));
-                    }
+            .iter_mut()
+            .map(|h| {
+                let live_bytes = h.live_bytes();
+                h.peak_live_bytes = h.peak_live_bytes.max(live_bytes);
+                PeerSample {
+                    n_ops_held: h.peer.log().len() as u64,
+                    n_messages_sent: h.n_messages_sent,
+                    n_bytes_sent: h.n_bytes_sent,
+                    live_bytes,
                 }
-            }
-        }
-        let mean_latency = mean_latency_micros(&self.latency_micros, self.config.n_peers);
-        Report {
-            config: self.config,
-            n_log_ops: self.honest.first().map_or(0, |h| h.peer.log().len()),
-            scene_hash: reference.map(|(_, h)| h),
-            convergence_micros: self.last_delivery_at.saturating_sub(self.heal_at),
-            mean_rtt_micros: 2 * mean_latency + self.config.faults.jitter_micros,
-            virtual_end_micros: self.now - START_MICROS,
-            trace_hash: self.trace.value(),
-            stats: self.stats,
-            failures,
-        }
+            })
+            .collect();
+        self.samples.push(Sample {
+            at_micros: self.now - START_MICROS,
+            peers,
+        });
     }
+}
+
+pub(crate) fn deliver(
+    from: usize,
+    to: usize,
+    epoch: u64,
+    bytes: Vec<u8>,
+    flood: Option<usize>,
+) -> Ev {
+    Ev::Deliver {
+        from,
+        to,
+        epoch,
+        bytes,
+        flood,
+    }
+}
+
+/// A fresh honest peer with `log` (charged to memory slot `slot`).
+pub(crate) fn new_honest(
+    key_seed: [u8; 32],
+    log: Log<ShapePayload>,
+    slot: usize,
+) -> Option<Honest> {
+    let slot_baseline = memory::live_bytes(slot);
+    let (peer, scene) = memory::with_slot(slot, || {
+        let scene = Scene::fold(&log).ok()?;
+        Some((
+            Peer::new(Keypair::from_seed(key_seed), SESSION_ID, log),
+            scene,
+        ))
+    })?;
+    Some(Honest {
+        key_seed,
+        peer,
+        scene,
+        user: User::default(),
+        seen: BTreeSet::new(),
+        n_received_insertions: 0,
+        panicked: None,
+        offline_depth: 0,
+        started: true,
+        wake_at: None,
+        n_causal_violations: 0,
+        authored: Vec::new(),
+        disk: Disk::default(),
+        slot,
+        slot_baseline,
+        peak_live_bytes: 0,
+        n_messages_sent: 0,
+        n_bytes_sent: 0,
+        snapshot_cut: None,
+        crash_armed: None,
+    })
 }
 
 /// Runs `config` to the end.
@@ -880,23 +1200,47 @@ pub fn run(config: Config) -> Result<Report, ConfigError> {
     Ok(Simulation::new(config)?.run())
 }
 
-/// Records ops as delivered at a peer, checking that each one's deps came first.
+/// Records ops as delivered at a peer, checking that each one's deps came first (deps
+/// inside a snapshot it joined from count as delivered).
 fn note_delivered(h: &mut Honest, delivered: &[OpId]) {
     for id in delivered {
         if let Some(op) = h.peer.log().get(id) {
-            let early = op.deps().iter().filter(|d| !h.seen.contains(&d.0)).count();
+            let early = op
+                .deps()
+                .iter()
+                .filter(|d| !h.seen.contains(*d) && !inside_base(h, d))
+                .count();
             h.n_causal_violations += early as u64;
         }
-        h.seen.insert(id.0);
+        h.seen.insert(*id);
     }
 }
 
+/// True if `d` lies inside the snapshot the peer joined from (delivered before every op
+/// after the cut).
+fn inside_base(h: &Honest, d: &OpId) -> bool {
+    let Some(cut) = h.snapshot_cut else {
+        return false;
+    };
+    let log = h.peer.log();
+    // Base ops are not held, except effective edits kept whole (at or below the cut).
+    log.contains(d) && log.get(d).is_none_or(|op| op.lamport() <= cut)
+}
+
 /// Calls into a peer unless it already panicked; a panic is recorded, never propagated.
-fn guarded<R>(h: &mut Honest, f: impl FnOnce(&mut Peer<ShapePayload>) -> R) -> Option<R> {
+/// Memory the call allocates is charged to the peer's slot.
+pub(crate) fn guarded<R>(
+    h: &mut Honest,
+    f: impl FnOnce(&mut Peer<ShapePayload>) -> R,
+) -> Option<R> {
     if h.panicked.is_some() {
         return None;
     }
-    match panic::catch_unwind(AssertUnwindSafe(|| f(&mut h.peer))) {
+    let slot = h.slot;
+    let result = memory::with_slot(slot, || {
+        panic::catch_unwind(AssertUnwindSafe(|| f(&mut h.peer)))
+    });
+    match result {
         Ok(r) => Some(r),
         Err(e) => {
             h.panicked = Some(panic_text(e.as_ref()));
@@ -905,38 +1249,11 @@ fn guarded<R>(h: &mut Honest, f: impl FnOnce(&mut Peer<ShapePayload>) -> R) -> O
     }
 }
 
-fn panic_text(e: &(dyn std::any::Any + Send)) -> String {
+pub(crate) fn panic_text(e: &(dyn std::any::Any + Send)) -> String {
     e.downcast_ref::<&str>()
         .map(|s| (*s).to_owned())
         .or_else(|| e.downcast_ref::<String>().cloned())
         .unwrap_or_else(|| "non-text panic".into())
-}
-
-/// The deliberately wrong fold of [`Sabotage::ReverseFold`]: active entries, last first.
-fn reversed_fold_hash(log: &Log<ShapePayload>) -> SceneHash {
-    let mut scene = ShapeScene::default();
-    let entries: Vec<_> = log.entries().filter(|e| e.active).collect();
-    for e in entries.iter().rev() {
-        scene.apply(FoldEntry {
-            key: OrderKey::of(e.op),
-            op: e.op,
-        });
-    }
-    scene.scene_hash()
-}
-
-fn mean_latency_micros(latency: &[Vec<u64>], n_honest: usize) -> u64 {
-    let mut sum = 0u64;
-    let mut n = 0u64;
-    for (a, row) in latency.iter().enumerate().take(n_honest) {
-        for (b, l) in row.iter().enumerate().take(n_honest) {
-            if a != b {
-                sum += l;
-                n += 1;
-            }
-        }
-    }
-    sum.checked_div(n).unwrap_or(0)
 }
 
 /// The first 8 bytes of a scene hash in hex.

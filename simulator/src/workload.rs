@@ -1,6 +1,12 @@
 //! Scripted users: each honest peer's user creates objects, sets colours and formulas,
-//! carves and paints, undoes its own edits, chats and fights over leases, all drawn from the
-//! run's RNG.
+//! carves and paints, undoes its own edits, chats and fights over leases.
+//!
+//! The workload is a list of [`Action`]s drawn up front from the seed's workload stream: a
+//! virtual time, a raw peer draw (the peer is `peer_draw % n_peers`, so the same list runs
+//! with fewer peers) and a seed for the action's own choices. What the action authors is
+//! drawn when it runs, from its seed and the user's state then (the objects known, its own
+//! edits for undo), so any subset of the list is a valid workload: this is what the
+//! shrinker cuts down.
 
 use fdsl::object::{
     ColorDef, Edit, EditOp, Field, Formula, Geometry, ObjectData, PaintValue, Paintable, Pose,
@@ -32,6 +38,45 @@ const COLOURS: [&str; 3] = [
     "r = 1; g = abs(y); b = 0.2;",
     "r = t; g = 0.5; b = 0.5;",
 ];
+
+/// The stream of the seed that draws the workload.
+pub const WORKLOAD_STREAM: u64 = 2;
+/// Mean virtual time between two user actions (over all peers).
+pub const MEAN_ACTION_GAP_MICROS: u64 = 20_000;
+
+/// One scripted user action.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Action {
+    /// When it happens (virtual µs).
+    pub at_micros: u64,
+    /// Which peer acts: `peer_draw % n_peers`.
+    pub peer_draw: u64,
+    /// Seeds what the action does.
+    pub seed: u64,
+}
+
+impl Action {
+    /// The acting peer among `n_peers`.
+    pub fn peer(&self, n_peers: usize) -> usize {
+        (self.peer_draw % n_peers.max(1) as u64) as usize
+    }
+}
+
+/// The `n_actions` actions of `seed`, starting after `start_micros`, in time order.
+pub fn actions(seed: u64, n_actions: usize, start_micros: u64) -> Vec<Action> {
+    let mut rng = SimRng::stream(seed, WORKLOAD_STREAM);
+    let mut at_micros = start_micros;
+    (0..n_actions)
+        .map(|_| {
+            at_micros += 1 + rng.below(2 * MEAN_ACTION_GAP_MICROS);
+            Action {
+                at_micros,
+                peer_draw: rng.next_u64(),
+                seed: rng.next_u64(),
+            }
+        })
+        .collect()
+}
 
 /// What one user remembers between actions.
 #[derive(Debug, Default, Clone)]
@@ -188,6 +233,16 @@ impl User {
 mod tests {
     use super::*;
     use replication::Payload;
+
+    #[test]
+    fn actions_are_a_pure_function_of_the_seed() {
+        let a = actions(5, 50, 1000);
+        assert_eq!(a, actions(5, 50, 1000));
+        assert_eq!(a[..20], actions(5, 20, 1000)[..]);
+        assert!(a.windows(2).all(|w| w[0].at_micros < w[1].at_micros));
+        assert!(a.iter().all(|x| x.peer(3) < 3));
+        assert_ne!(a, actions(6, 50, 1000));
+    }
 
     #[test]
     fn every_drawn_payload_validates_and_round_trips() {

@@ -1,36 +1,62 @@
 //! Fixed seeds under each fault mix converge and pass every checker; a seed replays to the same
-//! trace; planted bugs in the merge path are caught by the checkers.
+//! trace; planted bugs are caught by the checkers and shrink to small reproducers.
 //!
-//! Each run is 8 peers and 500 ops plus a hostile peer (a few seconds in a debug build); the CLI
-//! runs larger ones.
+//! The convergence runs are 8 peers and 500 actions plus a hostile peer (a few seconds each in
+//! a debug build); the CLI runs larger ones and campaigns. The counting allocator is installed
+//! here, so memory per peer is measured and its bound checked.
 
-use simulator::config::{Config, Faults, Sabotage};
+use simulator::config::{Config, FaultKind, FaultSet, Faults, Sabotage};
+use simulator::memory::CountingAlloc;
+use simulator::report::Report;
+use simulator::shrink::{MAX_SHRINK_RUNS, shrink};
 use simulator::sim::run;
+
+#[global_allocator]
+static ALLOC: CountingAlloc = CountingAlloc;
 
 fn faults(name: &str) -> Faults {
     Faults::named(name).expect("a preset")
 }
 
-fn checked(config: Config) -> simulator::report::Report {
+fn checked(config: Config) -> Report {
     run(config).expect("a valid config")
 }
 
 /// One fixed seed under `name`: every checker passes and the faults really happened.
-fn converges(seed: u64, name: &str) {
+fn converges(seed: u64, name: &str) -> Report {
     let report = checked(Config::new(seed, 8, 500, faults(name)));
+    let s = &report.stats;
     assert!(report.passed(), "{report}");
-    assert_eq!(report.stats.n_ops_authored, 501, "{report}");
-    assert_eq!(report.n_log_ops, 501, "{report}");
-    assert!(report.stats.n_hostile_messages > 0, "{report}");
-    assert!(report.stats.n_hostile_rejects > 0, "{report}");
+    // Every action authored (or its peer had not joined yet), plus the hot object.
+    assert_eq!(
+        s.n_ops_authored + s.n_actions_skipped + s.n_author_errors,
+        501,
+        "{report}"
+    );
+    assert_eq!(
+        report.n_log_ops as u64,
+        s.n_ops_authored - report.n_lost_own_ops as u64 + report.n_hostile_ops_accepted as u64,
+        "{report}"
+    );
+    assert!(s.n_hostile_rejects > 0 && s.n_forged_ops > 0, "{report}");
+    assert!(
+        s.hostile_rejects.get("BadSignature").copied().unwrap_or(0) > 0,
+        "{report}"
+    );
+    assert!(report.n_hostile_ops_accepted > 0, "{report}");
+    // The flood went three times over the burst; exactly a burst's worth got through.
+    assert_eq!(report.n_flood_accepted_max, 512, "{report}");
+    assert!(
+        report.n_lease_verdicts_checked > 500 && report.n_lease_rejected > 0,
+        "{report}"
+    );
+    let memory = report.memory.expect("the counting allocator is installed");
+    assert!(memory.peak_bytes_max > 100_000, "{report}");
     if name != "lan" {
-        assert!(report.stats.n_lost > 0, "{report}");
-        assert!(report.stats.n_partition_drops > 0, "{report}");
+        assert!(s.n_lost > 0 && s.n_partition_drops > 0, "{report}");
+        assert!(s.n_late_joins + s.n_snapshot_joins > 0, "{report}");
     }
-    if name == "chaos" {
-        assert!(report.stats.n_crashes > 0, "{report}");
-        assert!(report.stats.n_stale_drops > 0, "{report}");
-    }
+    report
 }
 
 #[test]
@@ -39,19 +65,58 @@ fn a_fixed_seed_converges_on_a_lan() {
 }
 
 #[test]
-fn a_fixed_seed_converges_over_a_wan_with_partitions() {
+fn a_fixed_seed_converges_over_a_wan_with_partitions_and_late_joins() {
     converges(12, "wan");
 }
 
 #[test]
-fn a_fixed_seed_converges_under_chaos_with_peers_offline() {
-    converges(13, "chaos");
+fn a_fixed_seed_converges_under_chaos_with_crashes() {
+    let report = converges(13, "chaos");
+    let s = &report.stats;
+    assert!(s.n_crashes > 0 && s.n_stale_drops > 0, "{report}");
+}
+
+/// Runs `n` consecutive seeds from `first`; every one must pass.
+fn passing_runs(first: u64, n: u64, config: Config) -> Vec<Report> {
+    (first..first + n)
+        .map(|seed| {
+            let report = checked(Config {
+                seed,
+                ..config.clone()
+            });
+            assert!(report.passed(), "{report}");
+            report
+        })
+        .collect()
+}
+
+#[test]
+fn crashes_lose_only_unsynced_ops_and_recovery_cuts_torn_tails() {
+    let reports = passing_runs(100, 8, Config::new(0, 4, 300, faults("chaos")));
+    let sum = |f: fn(&Report) -> u64| reports.iter().map(f).sum::<u64>();
+    assert!(sum(|r| r.stats.n_crashes) > 0);
+    assert!(
+        sum(|r| r.stats.n_lost_unsynced) > 0,
+        "no crash lost an unsynced op"
+    );
+    assert!(sum(|r| r.stats.n_torn_tails) > 0, "no crash tore a record");
+}
+
+#[test]
+fn late_peers_join_from_snapshots_and_converge() {
+    let config = Config {
+        without: FaultSet::default().with(FaultKind::Forgery),
+        ..Config::new(0, 6, 400, faults("wan"))
+    };
+    let reports = passing_runs(14, 6, config);
+    let n_snapshot_joins: u64 = reports.iter().map(|r| r.stats.n_snapshot_joins).sum();
+    assert!(n_snapshot_joins > 0, "no run joined from a snapshot");
 }
 
 #[test]
 fn a_seed_replays_to_the_same_trace_and_another_seed_does_not() {
     let config = Config::new(21, 4, 80, faults("chaos"));
-    let (a, b) = (checked(config), checked(config));
+    let (a, b) = (checked(config.clone()), checked(config.clone()));
     assert!(a.passed(), "{a}");
     assert_eq!(a.trace_hash, b.trace_hash);
     assert_eq!(a.scene_hash, b.scene_hash);
@@ -60,41 +125,107 @@ fn a_seed_replays_to_the_same_trace_and_another_seed_does_not() {
     assert_ne!(a.trace_hash, other.trace_hash);
 }
 
+/// `config` fails with a failure starting `what`; it shrinks to a reproducer that still fails
+/// the same way, with 2 peers, no hostile peer and at most `max_actions` actions.
+fn caught_and_shrunk(config: Config, what: &str, max_actions: usize) {
+    let report = checked(config.clone());
+    assert!(!report.passed(), "the planted bug went unnoticed: {report}");
+    assert!(
+        report.failures.iter().any(|f| f.starts_with(what)),
+        "{report}"
+    );
+    let shrunk = shrink(&config, MAX_SHRINK_RUNS)
+        .expect("a valid config")
+        .expect("it fails");
+    let text = format!("{}", shrunk.report);
+    assert!(!shrunk.report.passed(), "{text}");
+    assert!(
+        shrunk.report.failures.iter().any(|f| f.starts_with(what)),
+        "{text}"
+    );
+    assert_eq!(shrunk.config.n_peers, 2, "{text}");
+    assert!(!shrunk.config.hostile, "{text}");
+    assert!(shrunk.config.n_actions() <= max_actions, "{text}");
+    assert!(shrunk.config.n_actions() * 4 < config.n_ops, "{text}");
+    // The printed command replays it: same config, same failure, same trace.
+    assert!(text.contains("--actions"), "{text}");
+    let again = checked(shrunk.config.clone());
+    assert_eq!(again.trace_hash, shrunk.report.trace_hash);
+    assert_eq!(again.failures, shrunk.report.failures);
+}
+
+/// The first seed from `first` (of ten) whose run of `config` fails.
+fn first_failing(first: u64, config: &Config) -> Config {
+    (first..first + 10)
+        .map(|seed| Config {
+            seed,
+            ..config.clone()
+        })
+        .find(|c| !checked(c.clone()).passed())
+        .expect("the planted bug went unnoticed on ten seeds")
+}
+
 #[test]
-fn dropping_every_tenth_received_insertion_is_caught() {
+fn dropping_every_tenth_received_insertion_is_caught_and_shrunk() {
     let config = Config {
         sabotage: Sabotage::DropEveryTenthInsertion,
         ..Config::new(31, 4, 120, faults("lan"))
     };
-    let report = checked(config);
-    assert!(!report.passed(), "the planted bug went unnoticed: {report}");
-    assert!(
-        report.failures.iter().any(|f| f.starts_with("peer 0:")),
-        "{report}"
+    let failing = first_failing(31, &config);
+    let text = checked(failing.clone()).to_string();
+    let replay = format!(
+        "--seed {} --peers 4 --ops 120 --faults lan --sabotage drop-insertions",
+        failing.seed
     );
-    let text = report.to_string();
-    assert!(
-        text.contains("--seed 31 --peers 4 --ops 120 --faults lan --sabotage drop-insertions"),
-        "{text}"
-    );
+    assert!(text.contains(&replay), "{text}");
+    caught_and_shrunk(failing, "peer 0:", 25);
 }
 
 #[test]
-fn a_fold_in_reverse_order_is_caught() {
+fn a_fold_in_reverse_order_is_caught_and_shrunk() {
     let config = Config {
         sabotage: Sabotage::ReverseFold,
         ..Config::new(41, 3, 80, faults("wan"))
     };
-    let report = checked(config);
-    assert!(!report.passed(), "the planted bug went unnoticed: {report}");
-    assert!(
-        report.failures.iter().any(|f| f.starts_with("peer 1:")),
-        "{report}"
-    );
+    caught_and_shrunk(config, "peer 1:", 3);
+}
+
+#[test]
+fn a_wrong_lease_verdict_is_caught_by_the_reference_rules_and_shrunk() {
+    let config = Config {
+        sabotage: Sabotage::FlipLeaseVerdict,
+        ..Config::new(51, 4, 120, faults("wan"))
+    };
+    caught_and_shrunk(config, "peer 0: 1 lease/undo verdicts differ", 4);
+}
+
+#[test]
+fn sending_before_the_store_synced_is_caught() {
+    let config = Config {
+        sabotage: Sabotage::SendUnsynced,
+        ..Config::new(1, 4, 200, faults("chaos"))
+    };
+    let failing = first_failing(1, &config);
+    let clean = checked(Config {
+        sabotage: Sabotage::None,
+        ..failing
+    });
+    assert!(clean.passed(), "{clean}");
+}
+
+#[test]
+fn a_passing_run_does_not_shrink() {
+    let config = Config::new(5, 2, 20, faults("lan"));
+    assert!(shrink(&config, 10).expect("a valid config").is_none());
 }
 
 #[test]
 fn out_of_range_configs_are_refused() {
     assert!(run(Config::new(1, 1, 10, faults("none"))).is_err());
     assert!(run(Config::new(1, 64, 10, faults("none"))).is_err());
+    let bad_actions = Config {
+        actions: Some(vec![3, 2]),
+        ..Config::new(1, 2, 10, faults("none"))
+    };
+    assert!(run(bad_actions).is_err());
 }

@@ -1,0 +1,355 @@
+//! The checkers, run once the network is quiet: every honest peer against the rules, against
+//! its own history and against peer 0 (the reference, which never joins late).
+
+use replication::Log;
+use replication::log::OrderKey;
+use replication::materialize::{FoldEntry, Materialize, SceneHash};
+use replication::shape::{ShapePayload, ShapeScene};
+use replication::sync::state::MAX_MESSAGE_BURST;
+use replication::{OpId, Payload};
+
+use crate::config::Sabotage;
+use crate::memory;
+use crate::reference;
+use crate::report::{Memory, OpKindBytes, Report};
+use crate::sim::{Honest, QUIESCENCE_LIMIT_MICROS, START_MICROS, Scene, Simulation, short_hash};
+
+/// Heap bytes a peer may hold besides its ops: twice the pending buffer's byte limit (its
+/// encoded ops plus their decoded form), plus room for connections and an empty scene.
+pub const MEMORY_FIXED_BYTES_MAX: i64 = 2 * replication::pending::MAX_PENDING_BYTES as i64;
+/// Heap bytes a peer may hold per op in its log (op, order, marks, indexes, its share of the
+/// scene), at its peak. Campaigns measure about 2.3 KiB; this leaves a factor of 7.
+pub const MEMORY_BYTES_PER_OP_MAX: i64 = 16 * 1024;
+
+/// Runs every checker and builds the report.
+pub(crate) fn finish(sim: Simulation) -> Report {
+    let mut failures = Vec::new();
+    if sim.timed_out {
+        failures.push(format!(
+            "no quiescence within {} s of virtual time after healing",
+            QUIESCENCE_LIMIT_MICROS / 1_000_000
+        ));
+    }
+    failures.extend(sim.restart_failures.iter().cloned());
+    if sim.stats.n_author_errors > 0 {
+        // A user's edit the core would not author is an edit lost.
+        failures.push(format!(
+            "the core refused {} user ops: {:?}",
+            sim.stats.n_author_errors, sim.stats.author_errors
+        ));
+    }
+    let all_authored: Vec<OpId> = sim
+        .honest
+        .iter()
+        .flat_map(|h| h.authored.iter().copied())
+        .collect();
+    let forged: Vec<OpId> = sim
+        .hostile
+        .as_ref()
+        .map_or(Vec::new(), |h| h.forged.clone());
+    let mut reference_hash = None;
+    let mut n_lease_checked = 0;
+    for (i, h) in sim.honest.iter().enumerate() {
+        if let Some(p) = &h.panicked {
+            failures.push(format!("peer {i} panicked: {p}"));
+            continue;
+        }
+        check_history(&sim, i, h, &all_authored, &forged, &mut failures);
+        if h.snapshot_cut.is_none() {
+            let flip = sim.config.sabotage == Sabotage::FlipLeaseVerdict && i == 0;
+            let lease = reference::check(h.peer.log(), flip);
+            n_lease_checked += lease.n_checked;
+            if lease.n_mismatches > 0 {
+                failures.push(format!(
+                    "peer {i}: {} lease/undo verdicts differ from the reference rules: {}",
+                    lease.n_mismatches,
+                    lease.mismatches.join("; ")
+                ));
+            }
+        }
+        let Some(fresh) = fresh_hash(&sim, i, h, &mut failures) else {
+            continue;
+        };
+        match reference_hash {
+            None => reference_hash = Some((i, fresh)),
+            Some((r, hash)) => {
+                compare(&sim.honest[r], r, h, i, &mut failures);
+                if hash != fresh {
+                    failures.push(format!(
+                        "peer {i}: scene hash {} differs from peer {r}'s {}",
+                        short_hash(&fresh),
+                        short_hash(&hash)
+                    ));
+                }
+            }
+        }
+    }
+    check_floods(&sim, &mut failures);
+    let memory = memory_figures(&sim, &mut failures);
+    build_report(
+        sim,
+        failures,
+        reference_hash.map(|(_, h)| h),
+        memory,
+        n_lease_checked,
+    )
+}
+
+/// Per-peer history: panics, causal order, pending, authored and durable ops present, ops
+/// lost before they were synced and forged ops absent.
+fn check_history(
+    sim: &Simulation,
+    i: usize,
+    h: &Honest,
+    all_authored: &[OpId],
+    forged: &[OpId],
+    failures: &mut Vec<String>,
+) {
+    if h.n_causal_violations > 0 {
+        failures.push(format!(
+            "peer {i}: {} ops delivered before their dependencies",
+            h.n_causal_violations
+        ));
+    }
+    let log = h.peer.log();
+    if log.n_pending() > 0 {
+        failures.push(format!("peer {i}: {} ops still pending", log.n_pending()));
+    }
+    let count = |ids: &mut dyn Iterator<Item = &OpId>, present: bool| {
+        ids.filter(|id| log.contains(id) == present).count()
+    };
+    let checks = [
+        (
+            count(&mut all_authored.iter(), false),
+            "authored ops missing",
+        ),
+        (
+            count(&mut sim.durable.iter(), false),
+            "ops missing that a peer had synced to disk",
+        ),
+        (
+            count(&mut sim.lost_own.iter(), true),
+            "ops present that their author lost unsynced in a crash (sent before durable)",
+        ),
+        (count(&mut forged.iter(), true), "forged ops accepted"),
+    ];
+    for (n, what) in checks {
+        if n > 0 {
+            failures.push(format!("peer {i}: {n} {what}"));
+        }
+    }
+}
+
+/// A fresh fold of the peer's log, compared with its incremental scene.
+fn fresh_hash(
+    sim: &Simulation,
+    i: usize,
+    h: &Honest,
+    failures: &mut Vec<String>,
+) -> Option<SceneHash> {
+    let log = h.peer.log();
+    let fresh = if sim.config.sabotage == Sabotage::ReverseFold && i == 1 {
+        Some(reversed_fold_hash(log))
+    } else {
+        memory::with_slot(0, || Scene::fold(log).ok().map(|s| s.scene_hash()))
+    };
+    let Some(fresh) = fresh else {
+        failures.push(format!("peer {i}: its log does not fold"));
+        return None;
+    };
+    if h.scene.scene_hash() != fresh {
+        failures.push(format!(
+            "peer {i}: incremental scene {} differs from a fresh fold {}",
+            short_hash(&h.scene.scene_hash()),
+            short_hash(&fresh)
+        ));
+    }
+    Some(fresh)
+}
+
+/// Peer `i` against the reference `r`: version vectors, linear order and activity (for a peer
+/// joined from a snapshot, of the ops after its cut).
+fn compare(reference: &Honest, r: usize, h: &Honest, i: usize, failures: &mut Vec<String>) {
+    let (rlog, log) = (reference.peer.log(), h.peer.log());
+    if rlog.version_vector() != log.version_vector() {
+        failures.push(format!(
+            "peer {i}: version vector ({} ops) differs from peer {r}'s ({} ops)",
+            log.version_vector().n_ops(),
+            rlog.version_vector().n_ops()
+        ));
+        return;
+    }
+    let cut = h.snapshot_cut.unwrap_or(0);
+    let expected = rlog
+        .entries()
+        .filter(|e| e.op.lamport() > cut)
+        .map(|e| (e.op.id(), e.active));
+    let actual = log.entries().map(|e| (e.op.id(), e.active));
+    let (expected, actual): (Vec<_>, Vec<_>) = (expected.collect(), actual.collect());
+    let ids = |v: &[(OpId, bool)]| v.iter().map(|x| x.0).collect::<Vec<_>>();
+    if ids(&expected) != ids(&actual) {
+        failures.push(format!("peer {i}: linear order differs from peer {r}'s"));
+    } else if expected != actual {
+        failures.push(format!(
+            "peer {i}: lease/undo verdicts differ from peer {r}'s"
+        ));
+    }
+}
+
+/// The rate limit held: no flood got more than a burst's worth of messages accepted.
+fn check_floods(sim: &Simulation, failures: &mut Vec<String>) {
+    for (f, (delivered, accepted)) in sim.floods.iter().enumerate() {
+        if *accepted > MAX_MESSAGE_BURST {
+            failures.push(format!(
+                "flood {f}: {accepted} of {delivered} messages accepted at one instant, over \
+                 the burst limit {MAX_MESSAGE_BURST}"
+            ));
+        }
+    }
+}
+
+/// Memory per peer, checked against the named bounds (only with the counting allocator).
+fn memory_figures(sim: &Simulation, failures: &mut Vec<String>) -> Option<Memory> {
+    if !memory::installed() || sim.honest.is_empty() {
+        return None;
+    }
+    let n = sim.honest.len() as f64;
+    let mut m = Memory {
+        peak_bytes_max: 0,
+        peak_bytes_mean: 0.0,
+        final_bytes_mean: 0.0,
+        peak_bytes_per_op_max: 0.0,
+        final_bytes_per_op_mean: 0.0,
+    };
+    for (i, h) in sim.honest.iter().enumerate() {
+        let n_ops = h.peer.log().len().max(1) as i64;
+        let (peak, last) = (h.peak_live_bytes, h.live_bytes());
+        m.peak_bytes_max = m.peak_bytes_max.max(peak);
+        m.peak_bytes_mean += peak as f64 / n;
+        m.final_bytes_mean += last as f64 / n;
+        m.peak_bytes_per_op_max = m.peak_bytes_per_op_max.max(peak as f64 / n_ops as f64);
+        m.final_bytes_per_op_mean += last as f64 / n_ops as f64 / n;
+        let bound = MEMORY_FIXED_BYTES_MAX + MEMORY_BYTES_PER_OP_MAX * n_ops;
+        if peak > bound {
+            failures.push(format!(
+                "peer {i}: held {peak} heap bytes at its peak, over the bound {bound} \
+                 ({MEMORY_FIXED_BYTES_MAX} + {MEMORY_BYTES_PER_OP_MAX} per op for {n_ops} ops)"
+            ));
+        }
+    }
+    Some(m)
+}
+
+fn build_report(
+    sim: Simulation,
+    failures: Vec<String>,
+    scene_hash: Option<SceneHash>,
+    memory: Option<Memory>,
+    n_lease_verdicts_checked: usize,
+) -> Report {
+    let log0 = sim.honest.first().map(|h| h.peer.log());
+    let n_hostile_ops_accepted = match (&sim.hostile, log0) {
+        (Some(hostile), Some(log)) => hostile.own_ids.iter().filter(|id| log.contains(id)).count(),
+        _ => 0,
+    };
+    let n_lease_rejected = log0.map_or(0, |l| reference::check(l, false).n_rejected);
+    let mean_latency = mean_latency_micros(&sim.latency_micros, sim.config.n_peers);
+    Report {
+        n_log_ops: log0.map_or(0, Log::len),
+        op_bytes: log0.map_or(Vec::new(), op_bytes),
+        scene_hash,
+        convergence_micros: sim.last_delivery_at.saturating_sub(sim.heal_at),
+        mean_rtt_micros: 2 * mean_latency + sim.faults.jitter_micros,
+        virtual_end_micros: sim.now - START_MICROS,
+        heal_micros: sim.heal_at - START_MICROS,
+        trace_hash: sim.trace.value(),
+        memory,
+        n_lease_verdicts_checked,
+        n_lease_rejected,
+        n_durable_ops: sim.durable.len(),
+        n_lost_own_ops: sim.lost_own.len(),
+        n_hostile_ops_accepted,
+        n_flood_accepted_max: sim.floods.iter().map(|f| f.1).max().unwrap_or(0),
+        failures,
+        samples: sim.samples,
+        stats: sim.stats,
+        config: sim.config,
+    }
+}
+
+/// What the user did, from the payload.
+fn kind(p: &ShapePayload) -> &'static str {
+    use fdsl::object::{ColorDef, Field};
+    match p {
+        ShapePayload::Create { .. } => "create (geometry formula)",
+        ShapePayload::Set {
+            field: Field::Diffuse(Some(ColorDef::Rgb(_))),
+            ..
+        } => "set colour formula",
+        ShapePayload::Set {
+            field: Field::Geometry(_),
+            ..
+        } => "set geometry formula",
+        ShapePayload::Set { .. } => "set constant",
+        ShapePayload::Edit { .. } => "tool edit",
+        ShapePayload::Undo(_) | ShapePayload::Redo(_) => "undo",
+        ShapePayload::Chat(_) => "chat",
+        ShapePayload::Acquire { .. } | ShapePayload::Release { .. } => "lease",
+        _ => "other",
+    }
+}
+
+/// Op sizes by kind in `log`.
+fn op_bytes(log: &Log<ShapePayload>) -> Vec<OpKindBytes> {
+    let mut out: Vec<OpKindBytes> = Vec::new();
+    let mut payload = Vec::new();
+    for e in log.entries() {
+        let k = kind(e.op.payload());
+        payload.clear();
+        e.op.payload().encode(&mut payload);
+        let at = match out.iter().position(|x| x.kind == k) {
+            Some(at) => at,
+            None => {
+                out.push(OpKindBytes {
+                    kind: k,
+                    n_ops: 0,
+                    n_op_bytes: 0,
+                    n_payload_bytes: 0,
+                });
+                out.len() - 1
+            }
+        };
+        out[at].n_ops += 1;
+        out[at].n_op_bytes += e.op.encoded().len() as u64;
+        out[at].n_payload_bytes += payload.len() as u64;
+    }
+    out.sort_by_key(|k| k.kind);
+    out
+}
+
+/// The deliberately wrong fold of [`Sabotage::ReverseFold`]: active entries, last first.
+fn reversed_fold_hash(log: &Log<ShapePayload>) -> SceneHash {
+    let mut scene = ShapeScene::default();
+    let entries: Vec<_> = log.entries().filter(|e| e.active).collect();
+    for e in entries.iter().rev() {
+        scene.apply(FoldEntry {
+            key: OrderKey::of(e.op),
+            op: e.op,
+        });
+    }
+    scene.scene_hash()
+}
+
+fn mean_latency_micros(latency: &[Vec<u64>], n_honest: usize) -> u64 {
+    let mut sum = 0u64;
+    let mut n = 0u64;
+    for (a, row) in latency.iter().enumerate().take(n_honest) {
+        for (b, l) in row.iter().enumerate().take(n_honest) {
+            if a != b {
+                sum += l;
+                n += 1;
+            }
+        }
+    }
+    sum.checked_div(n).unwrap_or(0)
+}

@@ -1,0 +1,248 @@
+//! The hostile peer: connected to every honest peer, it never runs the protocol honestly.
+//!
+//! It captures what honest peers send it and sends back random garbage, messages over
+//! `MAX_MESSAGE_BYTES`, verbatim replays (another peer's hello or op batches) and bit-flipped
+//! or truncated replays. With [`crate::config::Faults::forgery`] it also speaks the protocol:
+//! a hello under its own id followed by
+//!
+//! - forged ops: well-formed, signed by its key, with the author field set to an honest peer's
+//!   id, so the signature does not match the claimed author (every honest peer must refuse
+//!   them: they must never enter a log);
+//! - ops of its own, well-formed and signed by its own key, with Lamport times it picks low
+//!   (a member with a stale clock) and lease fights on the hot object. The hostile peer knows
+//!   the invite, so admission lets it in: these are a member's ops, accepted and replicated
+//!   like any other, and the checkers require every honest peer to agree on them (at most
+//!   [`MAX_HOSTILE_OPS`], all resent every time, so none waits on a lost predecessor).
+//!
+//! With [`crate::config::Faults::flood`] it sends a burst of [`FLOOD_MESSAGES`] at one
+//! instant to one peer, far over the per-connection rate limit, which must hold.
+
+use replication::op::OpFields;
+use replication::shape::ShapePayload;
+use replication::sync::message::{MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION};
+use replication::sync::state::MAX_MESSAGE_BURST;
+use replication::{Keypair, Op, OpId, PeerId, Timestamp};
+
+use crate::rng::SimRng;
+use crate::sim::{SESSION_ID, Simulation, deliver};
+use crate::workload::{HOT_OBJECT, User};
+
+/// Most messages the hostile peer keeps for replays.
+pub const MAX_CAPTURED_MESSAGES: usize = 256;
+/// Most ops the hostile peer authors under its own key.
+pub const MAX_HOSTILE_OPS: usize = 32;
+/// Messages in one flood: three times the burst the rate limit allows.
+pub const FLOOD_MESSAGES: usize = 3 * MAX_MESSAGE_BURST as usize;
+/// The workload index the hostile's user acts as (its object ids do not clash).
+const HOSTILE_USER_IDX: usize = 62;
+
+/// The hostile peer's state.
+pub(crate) struct Hostile {
+    key: Keypair,
+    captured: Vec<Vec<u8>>,
+    /// Its own ops, encoded, in seq order.
+    own: Vec<Vec<u8>>,
+    pub(crate) own_ids: Vec<OpId>,
+    own_lamport: u64,
+    user: User,
+    next_batch_no: u64,
+    /// Ids of the forged ops it sent.
+    pub(crate) forged: Vec<OpId>,
+}
+
+impl Hostile {
+    pub(crate) fn new(key: Keypair) -> Hostile {
+        Hostile {
+            key,
+            captured: Vec::new(),
+            own: Vec::new(),
+            own_ids: Vec::new(),
+            own_lamport: 0,
+            user: User::default(),
+            next_batch_no: 1,
+            forged: Vec::new(),
+        }
+    }
+
+    /// Keeps a message an honest peer sent it (a random one is replaced when full).
+    pub(crate) fn capture(&mut self, bytes: Vec<u8>, rng: &mut SimRng) {
+        if self.captured.len() < MAX_CAPTURED_MESSAGES {
+            self.captured.push(bytes);
+        } else {
+            let slot = rng.index(MAX_CAPTURED_MESSAGES);
+            self.captured[slot] = bytes;
+        }
+    }
+
+    fn hello(&self) -> Vec<u8> {
+        Message::Hello {
+            protocol_version: PROTOCOL_VERSION,
+            session_id: SESSION_ID,
+            peer: self.key.peer_id(),
+            hello_seen: true,
+        }
+        .encode()
+    }
+
+    fn batch(&mut self, ops: Vec<Vec<u8>>) -> Vec<u8> {
+        self.next_batch_no += 1;
+        Message::Ops {
+            batch_no: self.next_batch_no,
+            ops,
+        }
+        .encode()
+    }
+
+    /// An op signed by its key whose author field names `victim` instead.
+    fn forge(&mut self, rng: &mut SimRng, victim: PeerId, now: u64) -> Option<Vec<u8>> {
+        let fields = OpFields {
+            seq: 1 + rng.below(1000),
+            lamport: 1 + rng.below(1000),
+            timestamp: Timestamp(now),
+            deps: Vec::new(),
+            payload: ShapePayload::Chat("forged".into()),
+        };
+        let op = Op::sign(&self.key, fields).ok()?;
+        let mut bytes = op.encoded().to_vec();
+        bytes.get_mut(1..33)?.copy_from_slice(&victim.0);
+        let forged = Op::<ShapePayload>::decode(&bytes).ok()?;
+        self.forged.push(forged.id());
+        Some(bytes)
+    }
+
+    /// Authors its next own op (a member with a stale Lamport clock); false when it is done.
+    fn author(&mut self, rng: &mut SimRng, now: u64) -> bool {
+        if self.own.len() >= MAX_HOSTILE_OPS {
+            return false;
+        }
+        let payload = if rng.chance(500) {
+            ShapePayload::Acquire {
+                object: HOT_OBJECT,
+                strong: rng.chance(500),
+                ttl_micros: 1 + rng.below(5_000_000),
+            }
+        } else {
+            match self.user.next(rng, HOSTILE_USER_IDX, &[HOT_OBJECT]) {
+                Some(p) => p,
+                None => return false,
+            }
+        };
+        self.own_lamport += 1 + rng.below(50);
+        let fields = OpFields {
+            seq: self.own.len() as u64 + 1,
+            lamport: self.own_lamport,
+            timestamp: Timestamp(now),
+            deps: Vec::new(),
+            payload: payload.clone(),
+        };
+        let Ok(op) = Op::sign(&self.key, fields) else {
+            return false;
+        };
+        self.user.authored(&payload, op.id());
+        self.own_ids.push(op.id());
+        self.own.push(op.encoded().to_vec());
+        true
+    }
+}
+
+impl Simulation {
+    /// Honest peers the hostile peer can reach now.
+    fn hostile_targets(&mut self, h: usize) -> Vec<usize> {
+        (0..self.config.n_peers)
+            .filter(|t| self.online(*t) && self.pair(*t, h).connected)
+            .collect()
+    }
+
+    /// The hostile peer sends one of its tricks to a random reachable peer.
+    pub(crate) fn hostile_send(&mut self) {
+        let Some(h) = self.hostile_idx() else { return };
+        let targets = self.hostile_targets(h);
+        if targets.is_empty() {
+            return;
+        }
+        let to = targets[self.net.index(targets.len())];
+        let n_kinds = if self.faults.forgery { 7 } else { 5 };
+        let kind = self.net.below(n_kinds);
+        let messages = match self.hostile_messages(kind) {
+            Some(m) => m,
+            None => vec![self.garbage()],
+        };
+        let epoch = self.pair(h, to).epoch;
+        let at = self.now + self.latency_micros[h][to];
+        for bytes in messages {
+            self.stats.n_hostile_messages += 1;
+            self.push(at, deliver(h, to, epoch, bytes, None));
+        }
+    }
+
+    fn garbage(&mut self) -> Vec<u8> {
+        let mut b = vec![0u8; 1 + self.net.index(512)];
+        self.net.fill(&mut b);
+        b
+    }
+
+    /// The messages of trick `kind` (`None` if it has nothing for that trick yet).
+    fn hostile_messages(&mut self, kind: u64) -> Option<Vec<Vec<u8>>> {
+        let hostile = self.hostile.as_mut()?;
+        let rng = &mut self.net;
+        let n_captured = hostile.captured.len();
+        let captured = |rng: &mut SimRng, hostile: &Hostile| {
+            (n_captured > 0).then(|| hostile.captured[rng.index(n_captured)].clone())
+        };
+        Some(match kind {
+            0 => return None,
+            1 => {
+                let mut b = vec![1u8; MAX_MESSAGE_BYTES + 1 + rng.index(1024)];
+                rng.fill(&mut b[1..64]);
+                vec![b]
+            }
+            2 => vec![captured(rng, hostile)?],
+            3 => {
+                let mut b = captured(rng, hostile)?;
+                let i = rng.index(b.len());
+                if let Some(x) = b.get_mut(i) {
+                    *x ^= 1 << rng.below(8);
+                }
+                vec![b]
+            }
+            4 => {
+                let mut b = captured(rng, hostile)?;
+                b.truncate(rng.index(b.len()));
+                vec![b]
+            }
+            5 => {
+                let victim = self.honest[rng.index(self.honest.len())].peer.peer_id();
+                let op = hostile.forge(rng, victim, self.now)?;
+                self.stats.n_forged_ops += 1;
+                vec![hostile.hello(), hostile.batch(vec![op])]
+            }
+            _ => {
+                if hostile.author(rng, self.now) {
+                    self.stats.n_hostile_ops += 1;
+                }
+                let ops = hostile.own.clone();
+                vec![hostile.hello(), hostile.batch(ops)]
+            }
+        })
+    }
+
+    /// Floods one reachable peer with [`FLOOD_MESSAGES`] small messages at one instant.
+    pub(crate) fn hostile_flood(&mut self) {
+        let Some(h) = self.hostile_idx() else { return };
+        let targets = self.hostile_targets(h);
+        if targets.is_empty() {
+            return;
+        }
+        let to = targets[self.net.index(targets.len())];
+        let epoch = self.pair(h, to).epoch;
+        let at = self.now + self.latency_micros[h][to];
+        let flood = self.floods.len();
+        self.floods.push((0, 0));
+        for _ in 0..FLOOD_MESSAGES {
+            let mut b = vec![0u8; 8];
+            self.net.fill(&mut b);
+            self.stats.n_hostile_messages += 1;
+            self.push(at, deliver(h, to, epoch, b, Some(flood)));
+        }
+    }
+}

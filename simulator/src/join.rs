@@ -1,0 +1,34 @@
+//! Late joins from a snapshot: the producer captures its log at its stable Lamport time with
+//! the real [`Snapshot::capture`], encodes it; the joiner decodes those bytes (so the codec
+//! is exercised too) and joins with [`Snapshot::join`], then syncs only the ops after the cut.
+
+use replication::pending::PendingLimits;
+use replication::shape::{ShapePayload, ShapeScene};
+use replication::snapshot::Snapshot;
+use replication::{Keypair, Peer};
+
+use crate::memory;
+use crate::sim::{Honest, SESSION_ID, Scene};
+
+/// What a snapshot join gives the joiner: the snapshot's bytes (kept beside its store), the
+/// cut, the peer and its scene.
+pub(crate) type Joined = (Vec<u8>, u64, Peer<ShapePayload>, Scene);
+
+/// Joins `joiner` from a snapshot of `producer`'s log.
+pub(crate) fn from_snapshot(producer: &Honest, joiner: &Honest) -> Result<Joined, String> {
+    let log = producer.peer.log();
+    let cut = log.stable_lamport();
+    let snapshot = Snapshot::<ShapePayload>::capture::<ShapeScene>(log, cut)
+        .map_err(|e| format!("capture at {cut}: {e}"))?;
+    let bytes = snapshot.encode().map_err(|e| format!("encode: {e}"))?;
+    let (peer, scene) = memory::with_slot(joiner.slot, || {
+        let decoded =
+            Snapshot::<ShapePayload>::decode(&bytes).map_err(|e| format!("decode: {e}"))?;
+        let (log, scene) = decoded
+            .join::<ShapeScene>(PendingLimits::default())
+            .map_err(|e| format!("join: {e}"))?;
+        let key = Keypair::from_seed(joiner.key_seed);
+        Ok::<_, String>((Peer::new(key, SESSION_ID, log), scene))
+    })?;
+    Ok((bytes, cut, peer, scene))
+}

@@ -1,0 +1,284 @@
+//! An independent, naive reference of the lease and undo rules, replayed over a peer's final
+//! linear order and compared with the peer's own verdicts.
+//!
+//! The core evaluates the rules incrementally (checkpoints, refolds when a late op lands in
+//! the middle) through [`replication::Payload::effect`]. This reference reads the
+//! [`ShapePayload`] variants itself and walks the final order once from the start with plain
+//! maps, as the rules are written in `ARCHITECTURE.md`:
+//!
+//! - an edit of an object is effective unless another peer holds a lease on it that has not
+//!   expired at the edit's timestamp;
+//! - a weak acquire takes over another peer's live weak lease but not a strong one; a strong
+//!   acquire needs the object free, expired or its own; an effective acquire sets the lease
+//!   to expire `ttl` after its timestamp;
+//! - a release is effective only by the live holder;
+//! - an undo (redo) is effective only on an earlier, own, effective edit that is not (is)
+//!   undone, and only if the edit's object is free for the author; an edit is active when it
+//!   is effective and not undone at the end.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use replication::shape::ShapePayload;
+use replication::{Log, Mark, OpId, PeerId, RejectReason};
+
+/// Group ids share lease space with objects under this bit (as `replication::shape` does).
+const GROUP_LEASE_BIT: u64 = 1 << 63;
+
+/// What the reference found on one log.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct LeaseCheck {
+    /// Ops whose verdict was compared.
+    pub n_checked: usize,
+    /// Ops the rules reject.
+    pub n_rejected: usize,
+    /// Ops whose verdict or activity differs from the reference (the first few, described).
+    pub mismatches: Vec<String>,
+    /// Number of mismatches in all.
+    pub n_mismatches: usize,
+}
+
+/// Most mismatches described per log.
+const MAX_DESCRIBED: usize = 5;
+
+#[derive(Clone, Copy)]
+struct Lease {
+    holder: PeerId,
+    strong: bool,
+    expires_micros: u64,
+}
+
+#[derive(Clone, Copy)]
+struct Seen {
+    author: PeerId,
+    edit_of: Option<u64>,
+    effective: bool,
+}
+
+#[derive(Default)]
+struct Rules {
+    leases: BTreeMap<u64, Lease>,
+    undone: BTreeSet<OpId>,
+    earlier: BTreeMap<OpId, Seen>,
+}
+
+enum Kind {
+    Edit(u64),
+    Acquire { object: u64, strong: bool, ttl: u64 },
+    Release(u64),
+    Undo(OpId),
+    Redo(OpId),
+    Independent,
+}
+
+fn kind(p: &ShapePayload) -> Kind {
+    let obj = |o: u64| o & !GROUP_LEASE_BIT;
+    match p {
+        ShapePayload::Create { object, .. }
+        | ShapePayload::Delete { object }
+        | ShapePayload::Set { object, .. }
+        | ShapePayload::Edit { object, .. }
+        | ShapePayload::Move { object, .. } => Kind::Edit(obj(*object)),
+        ShapePayload::SetGroup { group, .. } => Kind::Edit(group | GROUP_LEASE_BIT),
+        ShapePayload::Acquire {
+            object,
+            strong,
+            ttl_micros,
+        } => Kind::Acquire {
+            object: obj(*object),
+            strong: *strong,
+            ttl: *ttl_micros,
+        },
+        ShapePayload::Release { object } => Kind::Release(obj(*object)),
+        ShapePayload::Undo(t) => Kind::Undo(*t),
+        ShapePayload::Redo(t) => Kind::Redo(*t),
+        ShapePayload::Chat(_) => Kind::Independent,
+    }
+}
+
+impl Rules {
+    /// The live lease of another peer on `object` at `at`.
+    fn blocker(&self, author: PeerId, object: u64, at: u64) -> Option<Lease> {
+        self.leases
+            .get(&object)
+            .filter(|l| at < l.expires_micros && l.holder != author)
+            .copied()
+    }
+
+    fn verdict(&mut self, author: PeerId, at: u64, k: &Kind) -> Result<(), RejectReason> {
+        match *k {
+            Kind::Independent => Ok(()),
+            Kind::Edit(object) => match self.blocker(author, object, at) {
+                Some(l) => Err(RejectReason::LeaseHeld { holder: l.holder }),
+                None => Ok(()),
+            },
+            Kind::Acquire {
+                object,
+                strong,
+                ttl,
+            } => {
+                if let Some(l) = self.blocker(author, object, at) {
+                    if strong {
+                        return Err(RejectReason::LeaseHeld { holder: l.holder });
+                    }
+                    if l.strong {
+                        return Err(RejectReason::StrongLeaseHeld { holder: l.holder });
+                    }
+                }
+                let lease = Lease {
+                    holder: author,
+                    strong,
+                    expires_micros: at.saturating_add(ttl),
+                };
+                self.leases.insert(object, lease);
+                Ok(())
+            }
+            Kind::Release(object) => match self.leases.get(&object) {
+                Some(l) if l.holder == author && at < l.expires_micros => {
+                    self.leases.remove(&object);
+                    Ok(())
+                }
+                _ => Err(RejectReason::NotHolder),
+            },
+            Kind::Undo(target) => self.toggle(author, at, target, true),
+            Kind::Redo(target) => self.toggle(author, at, target, false),
+        }
+    }
+
+    fn toggle(
+        &mut self,
+        author: PeerId,
+        at: u64,
+        target: OpId,
+        undo: bool,
+    ) -> Result<(), RejectReason> {
+        let seen = self
+            .earlier
+            .get(&target)
+            .copied()
+            .ok_or(RejectReason::UnknownTarget)?;
+        if seen.author != author {
+            return Err(RejectReason::NotOwnTarget);
+        }
+        let object = seen.edit_of.ok_or(RejectReason::TargetNotEdit)?;
+        if !seen.effective {
+            return Err(RejectReason::TargetNotEffective);
+        }
+        let undone = self.undone.contains(&target);
+        if undo && undone {
+            return Err(RejectReason::AlreadyUndone);
+        }
+        if !undo && !undone {
+            return Err(RejectReason::NotUndone);
+        }
+        if let Some(l) = self.blocker(author, object, at) {
+            return Err(RejectReason::LeaseHeld { holder: l.holder });
+        }
+        if undo {
+            self.undone.insert(target);
+        } else {
+            self.undone.remove(&target);
+        }
+        Ok(())
+    }
+}
+
+/// Replays `log`'s linear order (a log with every op since the start, not one joined from a
+/// snapshot) through the reference rules and compares every verdict and activity flag. With
+/// `flip_first_rejected` the peer's first lease-rejected op is read as effective (the
+/// checker's planted-bug test).
+pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
+    let mut rules = Rules::default();
+    let mut out = LeaseCheck::default();
+    let mut observed = Vec::new();
+    let mut flipped = !flip_first_rejected;
+    for entry in log.entries() {
+        let op = entry.op;
+        let k = kind(op.payload());
+        let expected = match rules.verdict(op.author(), op.timestamp().0, &k) {
+            Ok(()) => Mark::Effective,
+            Err(reason) => Mark::Rejected(reason),
+        };
+        let mut mark = entry.mark;
+        if !flipped && matches!(mark, Mark::Rejected(RejectReason::LeaseHeld { .. })) {
+            mark = Mark::Effective;
+            flipped = true;
+        }
+        let edit_of = match k {
+            Kind::Edit(object) => Some(object),
+            _ => None,
+        };
+        let seen = Seen {
+            author: op.author(),
+            edit_of,
+            effective: expected == Mark::Effective,
+        };
+        rules.earlier.insert(op.id(), seen);
+        out.n_checked += 1;
+        out.n_rejected += usize::from(expected != Mark::Effective);
+        if mark != expected {
+            out.note(format!(
+                "op {} by {}: verdict {mark:?}, the rules say {expected:?}",
+                op.id(),
+                op.author()
+            ));
+        }
+        observed.push((op.id(), expected, entry.active));
+    }
+    for (id, expected, active) in observed {
+        let should = expected == Mark::Effective && !rules.undone.contains(&id);
+        if active != should {
+            out.note(format!("op {id}: active {active}, the rules say {should}"));
+        }
+    }
+    out
+}
+
+impl LeaseCheck {
+    fn note(&mut self, what: String) {
+        self.n_mismatches += 1;
+        if self.mismatches.len() < MAX_DESCRIBED {
+            self.mismatches.push(what);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use replication::{Keypair, Timestamp};
+
+    fn acquire(strong: bool) -> ShapePayload {
+        ShapePayload::Acquire {
+            object: 1,
+            strong,
+            ttl_micros: 100,
+        }
+    }
+
+    #[test]
+    fn the_reference_agrees_with_the_core_on_a_lease_fight() {
+        let (a, b) = (Keypair::from_seed([1; 32]), Keypair::from_seed([2; 32]));
+        let mut log = Log::<ShapePayload>::default();
+        let chat = |s: &str| ShapePayload::Chat(s.into());
+        let script: Vec<(&Keypair, u64, ShapePayload)> = vec![
+            (&a, 1000, acquire(false)),
+            (&b, 1010, chat("x")),
+            (&b, 1020, ShapePayload::Release { object: 1 }),
+            (&b, 1030, acquire(false)),
+            (&a, 1040, acquire(true)),
+            (&b, 1050, acquire(true)),
+            (&a, 1060, acquire(false)),
+            (&a, 2000, acquire(true)),
+            (&a, 2010, ShapePayload::Release { object: 1 }),
+        ];
+        for (key, at, p) in script {
+            log.author(key, Timestamp(at), p).unwrap();
+        }
+        let report = check(&log, false);
+        assert_eq!(report.n_checked, 9);
+        assert!(report.n_rejected >= 3, "{report:?}");
+        assert_eq!(report.n_mismatches, 0, "{report:?}");
+        let flipped = check(&log, true);
+        assert!(flipped.n_mismatches >= 1, "{flipped:?}");
+    }
+}
