@@ -144,6 +144,23 @@ impl FaultSet {
     }
 }
 
+/// Everything at once: slow, jittery, lossy links, partitions, peers offline, crashes,
+/// late joins, forgery and floods.
+const CHAOS: Faults = Faults {
+    name: "chaos",
+    latency_micros: 60_000,
+    jitter_micros: 50_000,
+    loss_per_mille: 150,
+    dup_per_mille: 50,
+    bandwidth_bytes_per_sec: 250_000,
+    partitions: true,
+    offline: true,
+    crashes: true,
+    late_joins: true,
+    forgery: true,
+    flood: true,
+};
+
 impl Faults {
     /// Every preset, mildest first (`swarm` draws a mix per seed from `chaos`).
     pub const PRESETS: [Faults; 5] = [
@@ -189,33 +206,11 @@ impl Faults {
             forgery: true,
             flood: true,
         },
-        Faults {
-            name: "chaos",
-            latency_micros: 60_000,
-            jitter_micros: 50_000,
-            loss_per_mille: 150,
-            dup_per_mille: 50,
-            bandwidth_bytes_per_sec: 250_000,
-            partitions: true,
-            offline: true,
-            crashes: true,
-            late_joins: true,
-            forgery: true,
-            flood: true,
-        },
+        CHAOS,
+        // A mix of chaos's fault kinds drawn per seed (see `Config::effective_faults`).
         Faults {
             name: "swarm",
-            latency_micros: 60_000,
-            jitter_micros: 50_000,
-            loss_per_mille: 150,
-            dup_per_mille: 50,
-            bandwidth_bytes_per_sec: 250_000,
-            partitions: true,
-            offline: true,
-            crashes: true,
-            late_joins: true,
-            forgery: true,
-            flood: true,
+            ..CHAOS
         },
     ];
 
