@@ -21,8 +21,8 @@ use crate::sync::state::{
 };
 use crate::time::Timestamp;
 
-/// A want that brought nothing for this long (2 s) goes to the next holder.
-pub const WANT_RETRY_MICROS: u64 = 2 * RESEND_AFTER_MICROS;
+/// A want that brought nothing for this long (1 s) goes to the next holder.
+pub const WANT_RETRY_MICROS: u64 = RESEND_AFTER_MICROS;
 /// Wants are reconsidered at most this often (100 ms) after something changed.
 pub const WANT_CHECK_MICROS: u64 = 100_000;
 
@@ -212,13 +212,19 @@ impl<P: Payload> Peer<P> {
                     continue;
                 }
             }
-            let holders: Vec<(ConnId, u64)> = self
+            // Holders that delivered the most so far are asked first: a remote that only claims
+            // to hold ops (a replayed have) and sends none is tried last.
+            let mut holders: Vec<(u64, ConnId, u64)> = self
                 .connections
                 .iter()
-                .map(|(c, s)| (*c, s.remote_version_vector().get(author)))
-                .filter(|(_, seq)| *seq > have)
+                .map(|(c, s)| {
+                    let seq = s.remote_version_vector().get(author);
+                    (s.stats().n_ops_delivered, *c, seq)
+                })
+                .filter(|(_, _, seq)| *seq > have)
                 .collect();
-            let Some(&(conn, seq)) = holders.get(want.n_asked % holders.len().max(1)) else {
+            holders.sort_by_key(|&(delivered, conn, _)| (std::cmp::Reverse(delivered), conn));
+            let Some(&(_, conn, seq)) = holders.get(want.n_asked % holders.len().max(1)) else {
                 continue;
             };
             want.asked = Some((now, conn, have));

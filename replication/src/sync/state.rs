@@ -44,9 +44,10 @@ pub const RESEND_AFTER_MIN_MICROS: u64 = 100_000;
 /// The resend interval doubles while the remote stays silent, up to this (32 s), so a dead or
 /// hostile remote that never answers costs a bounded trickle.
 pub const RESEND_AFTER_MAX_MICROS: u64 = 32_000_000;
-/// A peer asks a third peer for an author's ops only after lacking them this long (2 s) while
-/// the author itself is connected: time for the author's own send (and its resend) to arrive.
-pub const RELAY_AFTER_MICROS: u64 = 2_000_000;
+/// A peer asks a third peer for an author's ops only after lacking them this long (500 ms)
+/// while the author itself is connected: time for the author's own send (and a resend at the
+/// measured round trip) to arrive.
+pub const RELAY_AFTER_MICROS: u64 = 500_000;
 /// A peer tells each remote what it has gained at most this often (1 s), as a delta.
 pub const HAVE_EVERY_MICROS: u64 = 1_000_000;
 /// ... and everything it holds at most this often (10 s) while that changed, which repairs
@@ -163,6 +164,8 @@ pub struct SyncStats {
     pub n_ops_out: u64,
     /// Ops received (duplicates included).
     pub n_ops_in: u64,
+    /// Ops delivered to the log by this connection's input (including pending ops it freed).
+    pub n_ops_delivered: u64,
 }
 
 impl SyncStats {
@@ -635,6 +638,7 @@ impl<P: Payload> SyncState<P> {
             }
         }
         if !insertion.delivered.is_empty() {
+            self.stats.n_ops_delivered += insertion.delivered.len() as u64;
             self.events.push_back(Event::Delivered(insertion));
         }
     }
