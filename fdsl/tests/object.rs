@@ -654,6 +654,31 @@ fn rays_find_the_first_surface_through_edits() {
 }
 
 #[test]
+fn a_ray_along_a_zero_function_gives_up_within_its_budget() {
+    // "0" is ambiguous on every piece of every ray: without a budget the search visits all
+    // 10^7 pieces of the tolerance (seconds in release, minutes here).
+    let o = Object::implicit("0").unwrap();
+    let mut s = o.sampler();
+    #[allow(
+        clippy::disallowed_methods,
+        reason = "the budget is the point: 65,536 pieces take milliseconds, 10^7 take seconds"
+    )]
+    let start = std::time::Instant::now();
+    assert_eq!(
+        s.ray_hit(DVec3::new(-3.0, 0.0, 0.0), DVec3::X, 10.0, 0.0),
+        None
+    );
+    let elapsed = start.elapsed();
+    assert!(elapsed.as_millis() < 250, "{elapsed:?}");
+    // A real surface is still found within the budget, also far along a long ray.
+    let mut s = Object::implicit(SPHERE).unwrap().sampler();
+    let hit = s
+        .ray_hit(DVec3::new(-1e6, 0.0, 0.0), DVec3::X, 2e6, 0.0)
+        .unwrap();
+    assert!((hit - (1e6 - 1.0)).abs() < 1e-2, "{hit}");
+}
+
+#[test]
 fn imported_meshes_are_solids_that_sculpt_and_round_trip() {
     use std::sync::Arc;
     let ball = fdsl::mesh::shapes::icosphere(1.0, 3);

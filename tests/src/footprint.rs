@@ -479,9 +479,9 @@ impl SplitMix64 {
 /// The first point from `from` towards `to` where the solid's value changes sign, found by
 /// marching [`MARCH_STEPS`] steps and bisecting the first step that changes sign.
 ///
-/// This does not use [`Sampler::ray_hit`], whose interval bisection visits every piece of
-/// the ray down to its tolerance when the value is zero along it (Figure 7.8's geometry is
-/// the constant "0"), which takes minutes.
+/// The recorded figures were taken with this march, from before [`Sampler::ray_hit`] had a
+/// budget of pieces (on Figure 7.8's constant "0" it used to visit all 10^7 pieces of its
+/// tolerance); a march also places strokes the same way on every build.
 fn first_crossing(sampler: &mut Sampler, from: DVec3, to: DVec3) -> Option<DVec3> {
     let at = |k: f64| from + (to - from) * (k / MARCH_STEPS as f64);
     let inside = |sampler: &mut Sampler, p: DVec3| sampler.value(p, 0.0) >= 0.0;

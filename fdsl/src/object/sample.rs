@@ -17,6 +17,10 @@ use crate::eval::{GradEval, Interval, IntervalEval, PointEval};
 
 /// Ray hits are located to this fraction of the ray's length.
 pub const RAY_TOLERANCE: f64 = 1e-9;
+/// Most pieces of one ray whose interval is evaluated (65,536). A surface-like function along
+/// the ray (the constant 0, a tangent plane) keeps every piece ambiguous; past this the ray
+/// counts as missing instead of visiting all 10^7 pieces of `RAY_TOLERANCE`.
+pub const MAX_RAY_PIECES: usize = 1 << 16;
 
 /// The most hits a new sampler reserves room for.
 pub const MAX_RESERVED_HITS: usize = 4096;
@@ -300,7 +304,8 @@ impl Sampler {
     /// The first point where the ray `origin + s * dir`, `0 <= s <= s_max`, crosses the
     /// solid's surface (either way), as `s`; `None` if it does not within `s_max`. It splits
     /// the ray into pieces whose intervals may hold zero (each interval visits only the edits
-    /// near its piece) and bisects the first sign change to `RAY_TOLERANCE` of `s_max`.
+    /// near its piece) and bisects the first sign change to `RAY_TOLERANCE` of `s_max`,
+    /// giving up (`None`) after [`MAX_RAY_PIECES`] pieces.
     pub fn ray_hit(&mut self, origin: DVec3, dir: DVec3, s_max: f64, t: f64) -> Option<f64> {
         if !(origin.is_finite() && dir.is_finite() && s_max.is_finite() && s_max > 0.0) {
             return None;
@@ -311,8 +316,10 @@ impl Sampler {
         let mut stack = [(0.0f64, 0.0f64); 64];
         stack[0] = (0.0, s_max);
         let mut top = 1;
-        while top > 0 {
+        let mut n_pieces = 0;
+        while top > 0 && n_pieces < MAX_RAY_PIECES {
             top -= 1;
+            n_pieces += 1;
             let (a, b) = stack[top];
             let iv = self.interval(&Aabb::new(at(a), at(b)), t);
             if !iv.nan && (iv.lo > 0.0 || iv.hi < 0.0) {
