@@ -31,16 +31,7 @@ const MODELS: &[&str] = &[
 ];
 
 fn source(model: &str) -> &'static str {
-    match model {
-        "sphere" => include_str!("../../tests/data/models/sphere.fdsl"),
-        "spheres100" => include_str!("../../tests/data/models/spheres100.fdsl"),
-        "spheres100_rfunc" => include_str!("../../tests/data/models/spheres100_rfunc.fdsl"),
-        "gyroid_sphere" => include_str!("../../tests/data/models/gyroid_sphere.fdsl"),
-        "watermelon" => include_str!("../../tests/data/models/watermelon.fdsl"),
-        "watermelon_rfunc" => include_str!("../../tests/data/models/watermelon_rfunc.fdsl"),
-        "script_field" => include_str!("../../tests/data/models/script_field.fdsl"),
-        _ => panic!("unknown model {model}"),
-    }
+    fdsl::models::reference_model(model).expect("a reference model")
 }
 
 fn tape(model: &str) -> Tape {

@@ -44,6 +44,7 @@ mod function;
 pub mod fvrml;
 pub mod limits;
 pub mod mesh;
+pub mod models;
 pub mod object;
 pub mod scene;
 pub mod syntax;

@@ -14,36 +14,7 @@ use fidget::shape::Shape;
 #[path = "../benches/fidget_peer.rs"]
 mod fidget_peer;
 
-const MODELS: &[(&str, &str)] = &[
-    (
-        "sphere",
-        include_str!("../../tests/data/models/sphere.fdsl"),
-    ),
-    (
-        "spheres100",
-        include_str!("../../tests/data/models/spheres100.fdsl"),
-    ),
-    (
-        "spheres100_rfunc",
-        include_str!("../../tests/data/models/spheres100_rfunc.fdsl"),
-    ),
-    (
-        "gyroid_sphere",
-        include_str!("../../tests/data/models/gyroid_sphere.fdsl"),
-    ),
-    (
-        "watermelon",
-        include_str!("../../tests/data/models/watermelon.fdsl"),
-    ),
-    (
-        "watermelon_rfunc",
-        include_str!("../../tests/data/models/watermelon_rfunc.fdsl"),
-    ),
-    (
-        "script_field",
-        include_str!("../../tests/data/models/script_field.fdsl"),
-    ),
-];
+const MODELS: &[(&str, &str)] = &fdsl::models::REFERENCE_MODELS;
 
 fn grid() -> (Vec<f32>, Vec<f32>, Vec<f32>) {
     let n = 17;

@@ -110,15 +110,7 @@ const HALF_SIDE: f32 = 1.2;
 
 /// Model `name`'s source text.
 fn source(name: &str) -> &'static str {
-    match name {
-        "sphere" => include_str!("../../tests/data/models/sphere.fdsl"),
-        "spheres100" => include_str!("../../tests/data/models/spheres100.fdsl"),
-        "spheres100_rfunc" => include_str!("../../tests/data/models/spheres100_rfunc.fdsl"),
-        "gyroid_sphere" => include_str!("../../tests/data/models/gyroid_sphere.fdsl"),
-        "watermelon" => include_str!("../../tests/data/models/watermelon.fdsl"),
-        "watermelon_rfunc" => include_str!("../../tests/data/models/watermelon_rfunc.fdsl"),
-        _ => panic!("unknown model {name}"),
-    }
+    fdsl::models::reference_model(name).expect("a reference model")
 }
 
 fn tape(name: &str) -> fdsl::Tape {

@@ -5,33 +5,6 @@
 use render::mesh::octree::{MeshSettings, mesh_with_stats};
 use render::mesh::{Aabb, TapeField};
 
-const MODELS: &[(&str, &str)] = &[
-    (
-        "sphere",
-        include_str!("../../tests/data/models/sphere.fdsl"),
-    ),
-    (
-        "spheres100",
-        include_str!("../../tests/data/models/spheres100.fdsl"),
-    ),
-    (
-        "spheres100_rfunc",
-        include_str!("../../tests/data/models/spheres100_rfunc.fdsl"),
-    ),
-    (
-        "gyroid_sphere",
-        include_str!("../../tests/data/models/gyroid_sphere.fdsl"),
-    ),
-    (
-        "watermelon",
-        include_str!("../../tests/data/models/watermelon.fdsl"),
-    ),
-    (
-        "watermelon_rfunc",
-        include_str!("../../tests/data/models/watermelon_rfunc.fdsl"),
-    ),
-];
-
 /// A [`TapeField`] that never simplifies, to tell simplification defects from others.
 struct Plain(TapeField);
 
@@ -58,7 +31,7 @@ fn main() {
     } else {
         depths
     } {
-        for (name, src) in MODELS {
+        for (name, src) in fdsl::models::surface_models() {
             let Ok(function) = fdsl::Function::parse(src) else {
                 println!("{name}: does not parse");
                 continue;

@@ -30,27 +30,7 @@ use replication::shape::{ShapePayload, ShapeScene};
 use replication::{Keypair, Log, Timestamp};
 
 /// The reference models (`tests/data/models/*.fdsl`), name and source.
-pub const MODELS: [(&str, &str); 7] = [
-    ("sphere", include_str!("../data/models/sphere.fdsl")),
-    ("spheres100", include_str!("../data/models/spheres100.fdsl")),
-    (
-        "spheres100_rfunc",
-        include_str!("../data/models/spheres100_rfunc.fdsl"),
-    ),
-    (
-        "gyroid_sphere",
-        include_str!("../data/models/gyroid_sphere.fdsl"),
-    ),
-    ("watermelon", include_str!("../data/models/watermelon.fdsl")),
-    (
-        "watermelon_rfunc",
-        include_str!("../data/models/watermelon_rfunc.fdsl"),
-    ),
-    (
-        "script_field",
-        include_str!("../data/models/script_field.fdsl"),
-    ),
-];
+pub use fdsl::models::REFERENCE_MODELS as MODELS;
 
 /// The FVRML scenes (`tests/data/scenes/*.wrl`), file name and text.
 pub const SCENES: [(&str, &str); 4] = [

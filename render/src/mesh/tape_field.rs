@@ -92,33 +92,6 @@ mod tests {
     use crate::mesh::Aabb;
     use crate::mesh::octree::{MeshSettings, OctreeMesher, mesh_with_stats};
 
-    const MODELS: &[(&str, &str)] = &[
-        (
-            "sphere",
-            include_str!("../../../tests/data/models/sphere.fdsl"),
-        ),
-        (
-            "spheres100",
-            include_str!("../../../tests/data/models/spheres100.fdsl"),
-        ),
-        (
-            "spheres100_rfunc",
-            include_str!("../../../tests/data/models/spheres100_rfunc.fdsl"),
-        ),
-        (
-            "gyroid_sphere",
-            include_str!("../../../tests/data/models/gyroid_sphere.fdsl"),
-        ),
-        (
-            "watermelon",
-            include_str!("../../../tests/data/models/watermelon.fdsl"),
-        ),
-        (
-            "watermelon_rfunc",
-            include_str!("../../../tests/data/models/watermelon_rfunc.fdsl"),
-        ),
-    ];
-
     /// Stated depths for the mesh checks: 2^6 and 2^7 cells along each axis of [-1.2, 1.2]^3.
     const DEPTHS: [u8; 2] = [6, 7];
 
@@ -134,7 +107,7 @@ mod tests {
         ($($test:ident: $name:literal),* $(,)?) => {$(
             #[test]
             fn $test() {
-                let src = MODELS.iter().find(|m| m.0 == $name).unwrap().1;
+                let src = fdsl::models::reference_model($name).unwrap();
                 for depth in DEPTHS {
                     check_model($name, src, depth);
                 }
@@ -206,12 +179,7 @@ mod tests {
     /// function from scratch: same triangle and vertex counts, closed and manifold.
     #[test]
     fn remesh_after_an_edit_matches_a_full_mesh_of_the_edited_function() {
-        let base = MODELS
-            .iter()
-            .find(|m| m.0 == "watermelon")
-            .unwrap()
-            .1
-            .trim();
+        let base = fdsl::models::reference_model("watermelon").unwrap().trim();
         // A ball of radius 0.3 added at (0.75, 0.2, -0.1), and a gyroid carved near it.
         let edits = [
             format!("({base}) | (0.3-sqrt((x-0.75)^2+(y-0.2)^2+(z+0.1)^2))"),
