@@ -304,6 +304,12 @@ impl Interval {
 }
 
 fn mul(a: Interval, b: Interval) -> Interval {
+    // The corners miss 0 * inf when the zero lies inside one factor and the other is unbounded.
+    let unbounded = |i: Interval| i.lo.is_infinite() || i.hi.is_infinite();
+    let holds_zero = |i: Interval| i.lo <= 0.0 && i.hi >= 0.0;
+    if (unbounded(a) && holds_zero(b)) || (unbounded(b) && holds_zero(a)) {
+        return Interval::EVERYTHING.with_nan(true);
+    }
     hull([a.lo * b.lo, a.lo * b.hi, a.hi * b.lo, a.hi * b.hi])
 }
 
