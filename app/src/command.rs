@@ -1,0 +1,362 @@
+//! The command/chat line: plain text is chat; `shape:`, `colour:`, `new:`, `undo` and `redo`
+//! change the selected object (or make one). A line becomes at most one op, and only when every
+//! formula in it compiles: otherwise the error, with fdsl's caret under the culprit, is what
+//! the line gives, and nothing is authored.
+
+use fdsl::Function;
+use fdsl::object::{ColorDef, Domain, Field, Formula, Geometry, ObjectData, Shape, Transform};
+use glam::DVec3;
+use replication::shape::ShapePayload;
+
+use crate::session::Session;
+
+/// Edge of the domain box of an object made with `new:` (scene units).
+pub const NEW_OBJECT_SIZE: f64 = 2.2;
+/// How far apart along x objects made with `new:` are placed (scene units).
+pub const NEW_OBJECT_SPACING: f64 = 2.5;
+/// The diffuse colour of an object made with `new:`.
+pub const NEW_OBJECT_COLOUR: [f32; 3] = [0.55, 0.7, 0.95];
+
+/// What a line asks for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Command<'a> {
+    /// Plain text: a chat message.
+    Chat(&'a str),
+    /// `shape: <formula>`: the selected object's implicit geometry.
+    Shape(&'a str),
+    /// `colour: <r>, <g>, <b>` (formulas or numbers), `colour: r=..; g=..; b=..;`, or one
+    /// scalar formula for an object coloured through a colour map.
+    Colour(&'a str),
+    /// `new: <formula>`: a new object.
+    New(&'a str),
+    /// `undo`: this peer's latest effective edit of the selected object.
+    Undo,
+    /// `redo`: the edit this peer's latest undo of the selected object took back.
+    Redo,
+}
+
+/// Reads a line; `None` for an empty one.
+pub fn parse(line: &str) -> Option<Command<'_>> {
+    let line = line.trim();
+    if line.is_empty() {
+        return None;
+    }
+    if line.eq_ignore_ascii_case("undo") {
+        return Some(Command::Undo);
+    }
+    if line.eq_ignore_ascii_case("redo") {
+        return Some(Command::Redo);
+    }
+    if let Some((keyword, rest)) = line.split_once(':') {
+        let rest = rest.trim();
+        match keyword.trim().to_ascii_lowercase().as_str() {
+            "shape" => return Some(Command::Shape(rest)),
+            "colour" | "color" => return Some(Command::Colour(rest)),
+            "new" => return Some(Command::New(rest)),
+            _ => {}
+        }
+    }
+    Some(Command::Chat(line))
+}
+
+/// The op a command authors, and a line saying what it does.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Planned {
+    /// The op's payload.
+    pub payload: ShapePayload,
+    /// What it does, for the status line.
+    pub summary: String,
+    /// The object it selects afterwards (a new object), if any.
+    pub select: Option<u64>,
+}
+
+/// Turns a command into an op for `session`, or into the error to show under the input.
+pub fn plan(
+    command: Command<'_>,
+    session: &Session,
+    selected: Option<u64>,
+) -> Result<Planned, String> {
+    let selected_object = || {
+        let id = selected.ok_or("select an object first (click it in the view or the list)")?;
+        session
+            .scene()
+            .object(fdsl::scene::ObjectId(id))
+            .map(|o| (id, o))
+            .ok_or_else(|| format!("{} is not in the scene", session.object_label(id)))
+    };
+    let planned = |payload, summary: String| Planned {
+        payload,
+        summary,
+        select: None,
+    };
+    match command {
+        Command::Chat(text) => {
+            let payload = ShapePayload::Chat(text.to_string());
+            payload.validate()?;
+            Ok(planned(payload, "sent".into()))
+        }
+        Command::Shape(text) => {
+            let (id, object) = selected_object()?;
+            check_formula("shape", text)?;
+            let formula = Formula::new(text).map_err(|e| format!("shape: {e}"))?;
+            let current = object.data().geometry.as_ref();
+            let geometry = Geometry {
+                shape: Shape::Implicit(formula),
+                domain: current.and_then(|g| g.domain).or(Some(new_object_domain())),
+                transform: current.map_or(Transform::IDENTITY, |g| g.transform),
+            };
+            let payload = ShapePayload::Set {
+                object: id,
+                field: Field::Geometry(Some(geometry)),
+            };
+            payload.validate().map_err(|e| format!("shape: {e}"))?;
+            let summary = format!("set the shape of {}", session.object_label(id));
+            Ok(planned(payload, summary))
+        }
+        Command::Colour(text) => {
+            let (id, object) = selected_object()?;
+            let current = object.data().appearance.diffuse.as_ref();
+            let payload = ShapePayload::Set {
+                object: id,
+                field: Field::Diffuse(Some(colour_def(text, current)?)),
+            };
+            payload.validate().map_err(|e| format!("colour: {e}"))?;
+            let summary = format!("set the colour of {}", session.object_label(id));
+            Ok(planned(payload, summary))
+        }
+        Command::New(text) => {
+            check_formula("new", text)?;
+            let formula = Formula::new(text).map_err(|e| format!("new: {e}"))?;
+            let object = session.next_object_id();
+            let n_objects = session.scene().len();
+            let name = format!("object {}", object & 0xffff_ffff);
+            let data = ObjectData {
+                name: name.clone(),
+                geometry: Some(Geometry::implicit_in(formula, new_object_domain())),
+                transform: Transform::translate(DVec3::new(
+                    NEW_OBJECT_SPACING * n_objects as f64,
+                    0.0,
+                    0.0,
+                )),
+                appearance: fdsl::object::Appearance {
+                    diffuse: Some(ColorDef::Constant(NEW_OBJECT_COLOUR)),
+                    ..Default::default()
+                },
+                ..ObjectData::default()
+            };
+            let payload = ShapePayload::Create {
+                object,
+                data: Box::new(data),
+                group: None,
+            };
+            payload.validate().map_err(|e| format!("new: {e}"))?;
+            Ok(Planned {
+                payload,
+                summary: format!("created {name}"),
+                select: Some(object),
+            })
+        }
+        Command::Undo => {
+            let (id, _) = selected_object()?;
+            let target = session.undo_target(id).ok_or_else(|| {
+                format!("nothing of yours to undo on {}", session.object_label(id))
+            })?;
+            let summary = format!("undid your last edit of {}", session.object_label(id));
+            Ok(planned(ShapePayload::Undo(target), summary))
+        }
+        Command::Redo => {
+            let (id, _) = selected_object()?;
+            let target = session.redo_target(id).ok_or_else(|| {
+                format!("nothing of yours to redo on {}", session.object_label(id))
+            })?;
+            let summary = format!(
+                "redid your last undone edit of {}",
+                session.object_label(id)
+            );
+            Ok(planned(ShapePayload::Redo(target), summary))
+        }
+    }
+}
+
+fn new_object_domain() -> Domain {
+    Domain::new(DVec3::ZERO, DVec3::splat(NEW_OBJECT_SIZE))
+}
+
+/// Compiles `text`; the error is every error diagnostic rendered with its caret, under a line
+/// naming `what`.
+fn check_formula(what: &str, text: &str) -> Result<Function, String> {
+    if text.trim().is_empty() {
+        return Err(format!("{what}: give a formula after the colon"));
+    }
+    let compiled = Function::compile(text);
+    let rendered: Vec<String> = compiled
+        .diagnostics
+        .iter()
+        .filter(|d| d.is_error())
+        .map(|d| d.render(text))
+        .collect();
+    match compiled.function {
+        Some(f) if rendered.is_empty() => Ok(f),
+        _ => Err(format!(
+            "{what}: the formula does not compile\n{}",
+            rendered.join("\n")
+        )),
+    }
+}
+
+/// Splits at commas outside brackets, so `atan2(x, z)` stays one part.
+fn split_top_level(text: &str) -> Vec<&str> {
+    let mut parts = Vec::new();
+    let (mut depth, mut start) = (0i32, 0);
+    for (i, c) in text.char_indices() {
+        match c {
+            '(' | '[' | '{' => depth += 1,
+            ')' | ']' | '}' => depth -= 1,
+            ',' if depth == 0 => {
+                parts.push(text[start..i].trim());
+                start = i + 1;
+            }
+            _ => {}
+        }
+    }
+    parts.push(text[start..].trim());
+    parts
+}
+
+/// The colour a `colour:` line describes (see [`Command::Colour`]).
+fn colour_def(text: &str, current: Option<&ColorDef>) -> Result<ColorDef, String> {
+    let parts = split_top_level(text);
+    match parts.as_slice() {
+        [r, g, b] => {
+            let numbers: Vec<f32> = parts.iter().filter_map(|p| p.parse().ok()).collect();
+            if numbers.len() == 3 {
+                if !numbers.iter().all(|v| (0.0..=1.0).contains(v)) {
+                    return Err("colour: numbers must lie between 0 and 1".into());
+                }
+                return Ok(ColorDef::Constant([numbers[0], numbers[1], numbers[2]]));
+            }
+            for (name, part) in [("r", r), ("g", g), ("b", b)] {
+                check_formula(&format!("colour ({name})"), part)?;
+            }
+            let formula = Formula::new(format!("r = {r}; g = {g}; b = {b};"))
+                .map_err(|e| format!("colour: {e}"))?;
+            Ok(ColorDef::Rgb(formula))
+        }
+        [one] => {
+            let function = check_formula("colour", one)?;
+            let formula = Formula::new(*one).map_err(|e| format!("colour: {e}"))?;
+            if ["r", "g", "b"].iter().all(|o| function.has_output(o)) {
+                return Ok(ColorDef::Rgb(formula));
+            }
+            match current {
+                Some(ColorDef::Map { map, .. }) => Ok(ColorDef::Map {
+                    formula,
+                    map: map.clone(),
+                }),
+                _ => Err(
+                    "colour: give r, g, b (three formulas or numbers from 0 to 1), or \
+                          r = ...; g = ...; b = ...; (one formula through a colour map works \
+                          only for an object that has one)"
+                        .into(),
+                ),
+            }
+        }
+        _ => Err(format!(
+            "colour: give r, g, b (three formulas or numbers), not {} parts",
+            parts.len()
+        )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use replication::Timestamp;
+
+    #[test]
+    fn lines_are_commands_or_chat() {
+        assert_eq!(parse("  "), None);
+        assert_eq!(parse("Undo"), Some(Command::Undo));
+        assert_eq!(parse("redo "), Some(Command::Redo));
+        assert_eq!(parse("shape: 1-x^2"), Some(Command::Shape("1-x^2")));
+        assert_eq!(parse("Color:0,1,0"), Some(Command::Colour("0,1,0")));
+        assert_eq!(parse("new: x"), Some(Command::New("x")));
+        assert_eq!(
+            parse("note: looks good"),
+            Some(Command::Chat("note: looks good"))
+        );
+        assert_eq!(
+            parse("undo it please"),
+            Some(Command::Chat("undo it please"))
+        );
+    }
+
+    #[test]
+    fn commas_inside_brackets_do_not_split_a_colour() {
+        assert_eq!(
+            split_top_level("atan2(x, z), max(y, 0), 1"),
+            vec!["atan2(x, z)", "max(y, 0)", "1"]
+        );
+    }
+
+    fn session(name: &str) -> (Session, u64, std::path::PathBuf) {
+        let dir =
+            std::env::temp_dir().join(format!("sculpt-command-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let s = Session::open(&dir, Timestamp(1_000_000));
+        let id = s.scene().objects().next().unwrap().0.0;
+        (s, id, dir)
+    }
+
+    #[test]
+    fn a_bad_formula_gives_the_caret_diagnostic_and_no_op() {
+        let (s, id, dir) = session("bad");
+        let err = plan(Command::Shape("1-x^2-sni(y)"), &s, Some(id)).unwrap_err();
+        assert!(err.contains("sni"), "{err}");
+        assert!(err.contains('^'), "{err}");
+        let err = plan(Command::Colour("x, y +, 1"), &s, Some(id)).unwrap_err();
+        assert!(err.starts_with("colour (g)"), "{err}");
+        assert!(plan(Command::Shape("x"), &s, None).is_err());
+        assert!(
+            plan(Command::Undo, &s, Some(id))
+                .unwrap_err()
+                .contains("nothing")
+        );
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn colours_take_numbers_formulas_or_a_scalar_through_the_map() {
+        let (s, id, dir) = session("colour");
+        let colour = |text| match plan(Command::Colour(text), &s, Some(id)).unwrap().payload {
+            ShapePayload::Set {
+                field: Field::Diffuse(Some(def)),
+                ..
+            } => def,
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(colour("0.2, 0.4, 1"), ColorDef::Constant([0.2, 0.4, 1.0]));
+        assert!(matches!(colour("abs(x), y*y, 0.5"), ColorDef::Rgb(_)));
+        assert!(matches!(colour("r=x; g=y; b=z;"), ColorDef::Rgb(_)));
+        // The watermelon is coloured through a colour map: one scalar keeps the map.
+        assert!(matches!(colour("sqrt(x^2+y^2+z^2)"), ColorDef::Map { .. }));
+        assert!(plan(Command::Colour("2, 0, 0"), &s, Some(id)).is_err());
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn new_objects_get_fresh_ids_beside_the_others() {
+        let (s, _, dir) = session("new");
+        let planned = plan(Command::New("0.8-sqrt(x^2+y^2+z^2)"), &s, None).unwrap();
+        let ShapePayload::Create { object, data, .. } = &planned.payload else {
+            panic!("{planned:?}");
+        };
+        assert_eq!(planned.select, Some(*object));
+        assert_eq!(
+            data.transform,
+            Transform::translate(DVec3::new(2.5, 0.0, 0.0))
+        );
+        assert!(s.scene().object(fdsl::scene::ObjectId(*object)).is_none());
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}

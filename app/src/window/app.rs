@@ -1,0 +1,365 @@
+//! `SculptApp`, the eframe app: the solo session, the objects sent to the mesher and drawn, the
+//! camera, the selection and the command line. Panels are drawn by `panel.rs`, the viewport
+//! by `viewport.rs`; test hooks (scripted commands, screenshot, state dump) by `hooks.rs`.
+
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use eframe::egui;
+use fdsl::scene::ObjectId;
+use glam::Vec3;
+use render::mesh::Aabb;
+use render::scene::{Line, PickHit, Scene, SceneObject};
+use render::snapshot::render_from_scene;
+
+use super::hooks::Hooks;
+use super::mesher::{MeshJob, Mesher};
+use super::viewport::{ViewState, ViewportReport, viewport_ui};
+use crate::clock::{self, Now};
+use crate::command;
+use crate::session::{ChatRow, HistoryRow, Session};
+
+/// Frames whose times are kept for the statistics.
+pub const FRAME_SAMPLES_MAX: usize = 600;
+/// Edit-to-mesh times kept.
+pub const EDIT_SAMPLES_MAX: usize = 100;
+/// Colour of the selected object's box.
+const SELECTION_COLOUR: [f32; 4] = [1.0, 0.85, 0.2, 1.0];
+
+/// One scene object as the app tracks it: what was sent to the mesher, what is drawn.
+#[derive(Default)]
+pub struct Tracked {
+    /// The object (with its group) as last sent to be meshed.
+    sent: Option<fdsl::scene::SceneObject>,
+    /// Counts jobs for this object.
+    pub generation: u64,
+    /// The generation now drawn.
+    pub drawn_generation: u64,
+    /// A job the mesher's queue had no room for.
+    pending: Option<Box<MeshJob>>,
+    /// The drawable object, once meshed.
+    pub drawn: Option<SceneObject>,
+    /// Its force-field arrows.
+    pub lines: Vec<Line>,
+    /// Triangles in its mesh.
+    pub n_triangles: usize,
+    /// Why it is (partly) not drawn.
+    pub skipped: Option<String>,
+    /// Seconds its last mesh took on the worker.
+    pub mesh_secs: f64,
+}
+
+/// Frame and meshing times, for the status line and the state dump.
+#[derive(Default)]
+pub struct Stats {
+    /// Frames run.
+    pub n_frames: u64,
+    /// Milliseconds spent building each frame's UI (CPU, this thread).
+    pub ui_ms: Vec<f64>,
+    /// Milliseconds between the starts of successive frames (includes painting).
+    pub frame_interval_ms: Vec<f64>,
+    /// Milliseconds from an edit being authored to its object's new mesh being drawn.
+    pub edit_to_mesh_ms: Vec<f64>,
+    last_frame_start: Option<Instant>,
+}
+
+fn push_bounded(samples: &mut Vec<f64>, value: f64, max: usize) {
+    if samples.len() >= max {
+        samples.remove(0);
+    }
+    samples.push(value);
+}
+
+/// The window's state.
+pub struct SculptApp {
+    pub(super) session: Session,
+    mesher: Mesher,
+    depth: u8,
+    pub(super) objects: BTreeMap<ObjectId, Tracked>,
+    /// The scene changed since objects were last compared with what was sent.
+    dirty: bool,
+    /// When the last edit was authored (for edit-to-mesh times).
+    last_edit_at: Option<Instant>,
+    pub(super) view: ViewState,
+    pub(super) viewport: Arc<Mutex<ViewportReport>>,
+    pub(super) selected: Option<u64>,
+    pub(super) input: String,
+    pub(super) input_error: Option<String>,
+    pub(super) status: String,
+    pub(super) pick_status: String,
+    pub(super) chat: Vec<ChatRow>,
+    pub(super) history: Vec<HistoryRow>,
+    rows_at_n_ops: Option<usize>,
+    pub(super) hooks: Hooks,
+    pub(super) stats: Stats,
+}
+
+impl SculptApp {
+    /// The app over an opened session; `wake` is how the mesher asks for a frame.
+    pub fn new(
+        session: Session,
+        depth: u8,
+        hooks: Hooks,
+        wake: impl Fn() + Send + 'static,
+    ) -> std::io::Result<SculptApp> {
+        let selected = session.scene().objects().next().map(|(id, _)| id.0);
+        let status = match session.n_loaded() {
+            0 => "new store: the demo scene was authored".to_string(),
+            n => format!("loaded {n} ops from the store"),
+        };
+        Ok(SculptApp {
+            session,
+            mesher: Mesher::start(wake)?,
+            depth,
+            objects: BTreeMap::new(),
+            dirty: true,
+            last_edit_at: None,
+            view: ViewState::default(),
+            viewport: Arc::new(Mutex::new(ViewportReport::default())),
+            selected,
+            input: String::new(),
+            input_error: None,
+            status,
+            pick_status: "click an object to pick it".into(),
+            chat: Vec::new(),
+            history: Vec::new(),
+            rows_at_n_ops: None,
+            hooks,
+            stats: Stats::default(),
+        })
+    }
+
+    /// Sends every object that changed since it was last sent to the mesher (only those: an
+    /// edit re-meshes its own object), and forgets objects that are gone.
+    fn sync_objects(&mut self, now: Now) {
+        if self.dirty {
+            self.dirty = false;
+            let scene = self.session.scene();
+            self.objects.retain(|id, _| scene.object(*id).is_some());
+            for (id, entry) in scene.objects() {
+                let tracked = self.objects.entry(id).or_default();
+                if tracked.sent.as_ref() == Some(entry) {
+                    continue;
+                }
+                tracked.sent = Some(entry.clone());
+                tracked.generation += 1;
+                tracked.pending = Some(Box::new(MeshJob {
+                    id,
+                    object: entry.object.clone(),
+                    world_from_group: scene.world_from_group(entry.group),
+                    generation: tracked.generation,
+                    depth: self.depth,
+                    requested_at: self.last_edit_at.unwrap_or(now.instant),
+                }));
+            }
+        }
+        for tracked in self.objects.values_mut() {
+            if let Some(job) = tracked.pending.take() {
+                tracked.pending = self.mesher.try_send(job).err();
+            }
+        }
+    }
+
+    /// Takes finished meshes; stale ones (an edit came since) are dropped.
+    fn receive_meshes(&mut self, now: Now) {
+        while let Some(done) = self.mesher.try_recv() {
+            let Some(tracked) = self.objects.get_mut(&done.id) else {
+                continue;
+            };
+            if done.generation != tracked.generation {
+                continue;
+            }
+            tracked.drawn_generation = done.generation;
+            tracked.drawn = done.object;
+            tracked.lines = done.lines;
+            tracked.n_triangles = done.n_triangles;
+            tracked.skipped = done.skipped;
+            tracked.mesh_secs = done.mesh_secs;
+            if self.last_edit_at.is_some() {
+                let ms = now.instant.duration_since(done.requested_at).as_secs_f64() * 1e3;
+                push_bounded(&mut self.stats.edit_to_mesh_ms, ms, EDIT_SAMPLES_MAX);
+            }
+        }
+    }
+
+    /// Whether every object is drawn as the scene now has it.
+    pub fn is_idle(&self) -> bool {
+        !self.dirty
+            && self
+                .objects
+                .values()
+                .all(|t| t.pending.is_none() && t.drawn_generation == t.generation)
+    }
+
+    /// Objects waiting for a mesh.
+    pub fn n_meshing(&self) -> usize {
+        self.objects
+            .values()
+            .filter(|t| t.drawn_generation != t.generation)
+            .count()
+    }
+
+    /// Runs one line of the command/chat input: authors its op, or shows its error.
+    pub fn submit(&mut self, line: &str, now: Now) {
+        let Some(command) = command::parse(line) else {
+            return;
+        };
+        let planned = match command::plan(command, &self.session, self.selected) {
+            Ok(planned) => planned,
+            Err(error) => {
+                self.input_error = Some(error);
+                return;
+            }
+        };
+        match self.session.author(now.wall, planned.payload) {
+            Ok(_) => {
+                self.input_error = None;
+                self.input.clear();
+                self.status = planned.summary;
+                if planned.select.is_some() {
+                    self.selected = planned.select;
+                }
+                self.last_edit_at = Some(now.instant);
+                self.dirty = true;
+            }
+            Err(e) => self.input_error = Some(e.to_string()),
+        }
+    }
+
+    /// Chat and history rows, recomputed only when the log grew.
+    fn refresh_rows(&mut self) {
+        let n_ops = self.session.n_ops();
+        if self.rows_at_n_ops != Some(n_ops) {
+            self.chat = self.session.chat();
+            self.history = self.session.history();
+            self.rows_at_n_ops = Some(n_ops);
+        }
+    }
+
+    /// What the viewport draws: objects in id order (their ids alongside, for picking), arrows
+    /// and the selection box.
+    pub(super) fn drawn_scene(&self) -> (Scene, Vec<ObjectId>) {
+        let mut scene = Scene::default();
+        let mut ids = Vec::new();
+        for (id, tracked) in &self.objects {
+            if let Some(o) = &tracked.drawn {
+                scene.objects.push(o.clone());
+                ids.push(*id);
+                if self.selected == Some(id.0)
+                    && let Some(b) = world_box(o)
+                {
+                    scene.add_box(b, SELECTION_COLOUR);
+                }
+            }
+            scene.lines.extend_from_slice(&tracked.lines);
+        }
+        (scene, ids)
+    }
+
+    /// Shows what a click hit in the status line and selects the object.
+    pub(super) fn picked(&mut self, hit: Option<PickHit>, ids: &[ObjectId]) {
+        let Some(hit) = hit else {
+            self.pick_status = "nothing there".into();
+            return;
+        };
+        let Some(id) = ids.get(hit.object_idx) else {
+            return;
+        };
+        self.selected = Some(id.0);
+        // The renderer's world is +z up; formulas live in the scene's +y-up space.
+        let p = render_from_scene()
+            .inverse()
+            .transform_point3(hit.point_in_world);
+        self.pick_status = format!(
+            "picked {} at ({:.3}, {:.3}, {:.3}) (scene coordinates)",
+            self.session.object_label(id.0),
+            p.x,
+            p.y,
+            p.z
+        );
+    }
+
+    fn central_ui(&mut self, ui: &mut egui::Ui) {
+        let (scene, ids) = self.drawn_scene();
+        let sphere = bounding_sphere(&scene);
+        let input = viewport_ui(ui, &mut self.view, &scene, sphere, &self.viewport);
+        if input.picked.is_some() || input.missed {
+            self.picked(input.picked, &ids);
+        }
+        if let Some(at) = self.hooks.take_pick_if_ready(self.is_idle()) {
+            let size_px = input.size_px;
+            let px = [at[0] * size_px[0] as f32, at[1] * size_px[1] as f32];
+            let ray = self.view.camera.ray_through_pixel(px, size_px);
+            let hit = scene.pick(&ray);
+            self.picked(hit, &ids);
+        }
+    }
+}
+
+/// A box around an object's mesh in the renderer's world.
+fn world_box(o: &SceneObject) -> Option<Aabb> {
+    let b = o.mesh.bounds()?;
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for k in 0..8usize {
+        let corner = Vec3::from_array(std::array::from_fn(|a| {
+            if k >> a & 1 == 1 { b.hi[a] } else { b.lo[a] }
+        }));
+        let p = o.world_from_object.transform_point3(corner);
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    Some(Aabb::new(lo.to_array(), hi.to_array()))
+}
+
+/// A sphere around every drawn object (centre, radius), for framing the camera.
+pub fn bounding_sphere(scene: &Scene) -> Option<(Vec3, f32)> {
+    let boxes: Vec<Aabb> = scene.objects.iter().filter_map(world_box).collect();
+    let lo = boxes
+        .iter()
+        .map(|b| Vec3::from_array(b.lo))
+        .reduce(Vec3::min)?;
+    let hi = boxes
+        .iter()
+        .map(|b| Vec3::from_array(b.hi))
+        .reduce(Vec3::max)?;
+    let centre = 0.5 * (lo + hi);
+    Some((centre, 0.5 * (hi - lo).length()))
+}
+
+impl eframe::App for SculptApp {
+    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        let now = clock::now();
+        if let Some(last) = self.stats.last_frame_start {
+            let ms = now.instant.duration_since(last).as_secs_f64() * 1e3;
+            push_bounded(&mut self.stats.frame_interval_ms, ms, FRAME_SAMPLES_MAX);
+        }
+        self.stats.last_frame_start = Some(now.instant);
+        self.stats.n_frames += 1;
+
+        self.receive_meshes(now);
+        self.sync_objects(now);
+        self.refresh_rows();
+        self.run_hooks(ui.ctx(), now);
+
+        egui::Panel::top("sculpt-top").show(ui, |ui| self.top_ui(ui));
+        egui::Panel::bottom("sculpt-status").show(ui, |ui| self.status_ui(ui));
+        egui::Panel::right("sculpt-side")
+            .default_size(400.0)
+            .resizable(true)
+            .show(ui, |ui| self.side_ui(ui, now));
+        egui::CentralPanel::no_frame().show(ui, |ui| self.central_ui(ui));
+
+        // An edit made this frame is sent to the mesher at the start of the next one.
+        if self.dirty {
+            ui.ctx().request_repaint();
+        }
+        let ui_ms = clock::now()
+            .instant
+            .duration_since(now.instant)
+            .as_secs_f64()
+            * 1e3;
+        push_bounded(&mut self.stats.ui_ms, ui_ms, FRAME_SAMPLES_MAX);
+    }
+}

@@ -1,0 +1,251 @@
+//! Test hooks, set from the command line: scripted command lines (`--command`), a scripted
+//! pick (`--pick`), a screenshot of the real window once everything is meshed
+//! (`--screenshot`), closing when idle (`--exit-when-idle`) or after a number of frames
+//! (`--exit-after-frames`), and a JSON dump of what the window shows (`--dump-state`).
+//!
+//! Each scripted step waits until every object is drawn as the scene has it, so a screenshot
+//! shows the result of every command before it. A hook that cannot finish (a screenshot that
+//! cannot be saved, a frame limit reached first) is an error the process exits non-zero with.
+
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::sync::mpsc::{Receiver, channel};
+use std::sync::{Arc, Mutex};
+
+use eframe::egui;
+use render::image::RgbaImage;
+use serde_json::{Value, json};
+
+use super::app::SculptApp;
+use crate::clock::Now;
+
+/// Frames every object must have been drawn as the scene has it before a scripted step runs
+/// (one frame paints the new meshes, the next can be captured).
+const IDLE_FRAMES_BEFORE_STEP: u32 = 2;
+
+/// The hooks asked for, and their progress.
+#[derive(Default)]
+pub struct Hooks {
+    /// Command lines to run, in order, as if typed.
+    pub script: VecDeque<String>,
+    /// A click to simulate, as fractions of the viewport's width and height.
+    pub pick: Option<[f32; 2]>,
+    /// Where to save a screenshot of the window once the script has run.
+    pub screenshot: Option<PathBuf>,
+    /// Close once the script has run (and the screenshot is saved).
+    pub exit_when_idle: bool,
+    /// Close after this many frames whatever happened (an error if a hook is unfinished).
+    pub exit_after_frames: Option<u64>,
+    /// Where to write the state as JSON when the window closes through a hook.
+    pub dump_state: Option<PathBuf>,
+    /// Set when a hook failed; the process exits non-zero with it.
+    pub failure: Arc<Mutex<Option<String>>>,
+    idle_frames: u32,
+    screenshot_rx: Option<Receiver<Result<(), String>>>,
+    screenshot_done: bool,
+    closing: bool,
+}
+
+impl Hooks {
+    /// Whether any hook drives the window (then it repaints continuously).
+    pub fn active(&self) -> bool {
+        !self.script.is_empty()
+            || self.pick.is_some()
+            || self.screenshot.is_some()
+            || self.exit_when_idle
+            || self.exit_after_frames.is_some()
+    }
+
+    /// The scripted pick, once the script has run and everything is drawn.
+    pub fn take_pick_if_ready(&mut self, idle: bool) -> Option<[f32; 2]> {
+        if idle && self.script.is_empty() && self.idle_frames >= IDLE_FRAMES_BEFORE_STEP {
+            self.pick.take()
+        } else {
+            None
+        }
+    }
+
+    fn fail(&self, message: String) {
+        if let Ok(mut failure) = self.failure.lock()
+            && failure.is_none()
+        {
+            *failure = Some(message);
+        }
+    }
+}
+
+impl SculptApp {
+    /// Advances the hooks by one frame.
+    pub(super) fn run_hooks(&mut self, ctx: &egui::Context, now: Now) {
+        if !self.hooks.active() || self.hooks.closing {
+            return;
+        }
+        ctx.request_repaint();
+        if let Some(limit) = self.hooks.exit_after_frames
+            && self.stats.n_frames >= limit
+        {
+            if !self.hooks.script.is_empty()
+                || (self.hooks.screenshot.is_some() && !self.hooks.screenshot_done)
+            {
+                self.hooks.fail(format!(
+                    "gave up after {limit} frames: {} scripted commands left, screenshot {}, \
+                     {} objects still meshing",
+                    self.hooks.script.len(),
+                    if self.hooks.screenshot_done {
+                        "saved"
+                    } else {
+                        "not taken"
+                    },
+                    self.n_meshing()
+                ));
+            }
+            self.close(ctx);
+            return;
+        }
+        if let Some(rx) = &self.hooks.screenshot_rx
+            && let Ok(saved) = rx.try_recv()
+        {
+            self.hooks.screenshot_rx = None;
+            self.hooks.screenshot_done = true;
+            if let Err(e) = saved {
+                self.hooks.fail(e);
+            }
+            self.close(ctx);
+            return;
+        }
+        if self.is_idle() {
+            self.hooks.idle_frames = self.hooks.idle_frames.saturating_add(1);
+        } else {
+            self.hooks.idle_frames = 0;
+        }
+        if self.hooks.idle_frames < IDLE_FRAMES_BEFORE_STEP || self.hooks.screenshot_rx.is_some() {
+            return;
+        }
+        if let Some(line) = self.hooks.script.pop_front() {
+            println!("sculpt: scripted command: {line}");
+            // As if typed: a line that fails stays in the input, above its error.
+            self.input.clone_from(&line);
+            self.submit(&line, now);
+            if let Some(error) = &self.input_error {
+                println!("sculpt: command error:\n{error}");
+            }
+            self.hooks.idle_frames = 0;
+            return;
+        }
+        if self.hooks.pick.is_some() {
+            // The viewport takes it this frame.
+            return;
+        }
+        if let Some(path) = self.hooks.screenshot.clone()
+            && !self.hooks.screenshot_done
+        {
+            let (tx, rx) = channel();
+            self.hooks.screenshot_rx = Some(rx);
+            let waker = ctx.clone();
+            ctx.request_screenshot(move |image| {
+                // The receiver lives as long as the app; a failed send means it is closing.
+                let _ = tx.send(save_screenshot(&image, &path));
+                waker.request_repaint();
+            });
+            return;
+        }
+        if self.hooks.exit_when_idle || self.hooks.screenshot.is_some() {
+            self.close(ctx);
+        }
+    }
+
+    fn close(&mut self, ctx: &egui::Context) {
+        self.hooks.closing = true;
+        if let Some(path) = &self.hooks.dump_state {
+            let text = match serde_json::to_string_pretty(&self.state_json()) {
+                Ok(text) => text,
+                Err(e) => format!("{{\"error\": \"{e}\"}}"),
+            };
+            if let Err(e) = std::fs::write(path, text) {
+                self.hooks
+                    .fail(format!("cannot write the state to {}: {e}", path.display()));
+            }
+        }
+        ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+    }
+
+    /// What the window shows, as JSON (the `--dump-state` hook).
+    pub fn state_json(&self) -> Value {
+        let objects: Vec<Value> = self
+            .session
+            .scene()
+            .objects()
+            .map(|(id, entry)| {
+                let data = entry.object.data();
+                let tracked = self.objects.get(&id);
+                json!({
+                    "id": id.0,
+                    "name": self.session.object_label(id.0),
+                    "geometry": data.geometry.as_ref().map(|g| format!("{:?}", g.shape)),
+                    "diffuse": data.appearance.diffuse.as_ref().map(|c| format!("{c:?}")),
+                    "n_triangles": tracked.map(|t| t.n_triangles),
+                    "skipped": tracked.and_then(|t| t.skipped.clone()),
+                    "mesh_secs": tracked.map(|t| t.mesh_secs),
+                })
+            })
+            .collect();
+        let rows = |rows: Vec<Value>| Value::Array(rows);
+        json!({
+            "peer": self.session.peer_id().short(),
+            "store": self.session.dir().display().to_string(),
+            "store_error": self.session.store_error(),
+            "notices": self.session.notices(),
+            "n_ops": self.session.n_ops(),
+            "n_loaded": self.session.n_loaded(),
+            "scene_hash": self.session.scene_hash_hex(),
+            "selected": self.selected.map(|id| self.session.object_label(id)),
+            "objects": objects,
+            "chat": rows(self.chat.iter().map(|c| json!({
+                "author": c.author, "time": c.time, "text": c.text,
+            })).collect()),
+            "history": rows(self.history.iter().map(|h| json!({
+                "author": h.author, "time": h.time, "what": h.what, "status": h.status,
+            })).collect()),
+            "input_error": self.input_error,
+            "status": self.status,
+            "pick": self.pick_status,
+            "viewport_error": self.viewport.lock().ok().and_then(|r| r.error.clone()),
+            "prepare_ms": self.viewport.lock().ok().map(|r| summary(&r.prepare_ms)),
+            "frames": self.stats.n_frames,
+            "ui_ms": summary(&self.stats.ui_ms),
+            "frame_interval_ms": summary(&self.stats.frame_interval_ms),
+            "edit_to_mesh_ms": self.stats.edit_to_mesh_ms,
+        })
+    }
+}
+
+/// Mean, median, 95th percentile and maximum of some samples.
+fn summary(samples: &[f64]) -> Value {
+    if samples.is_empty() {
+        return Value::Null;
+    }
+    let mut sorted = samples.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let at = |q: f64| sorted[((sorted.len() - 1) as f64 * q).round() as usize];
+    json!({
+        "n": sorted.len(),
+        "mean": sorted.iter().sum::<f64>() / sorted.len() as f64,
+        "p50": at(0.5),
+        "p95": at(0.95),
+        "max": at(1.0),
+    })
+}
+
+/// Writes egui's screenshot as a PNG.
+fn save_screenshot(image: &egui::ColorImage, path: &std::path::Path) -> Result<(), String> {
+    let [width, height] = image.size;
+    let picture = RgbaImage {
+        width: width as u32,
+        height: height as u32,
+        pixels: image.pixels.iter().flat_map(|c| c.to_array()).collect(),
+    };
+    picture
+        .save_png(path)
+        .map(|()| println!("sculpt: screenshot saved to {}", path.display()))
+        .map_err(|e| format!("cannot save the screenshot to {}: {e}", path.display()))
+}

@@ -1,0 +1,416 @@
+//! The 3D viewport: render's `Renderer` embedded in egui's frame through an `egui_wgpu` paint
+//! callback, the orbit camera's mouse handling, and picking.
+//!
+//! Why two steps: the renderer writes linear colour and relies on an sRGB target to encode it
+//! (as render's offscreen path does), while egui draws into a non-sRGB surface. So
+//! `prepare` renders the scene into the callback's own sRGB texture (with its own depth
+//! buffer), and `paint` copies that texture into egui's pass, reading the encoded bytes as
+//! they are. The picture in the window then matches `sculpt render`'s pictures.
+
+use std::sync::{Arc, Mutex};
+
+use eframe::egui;
+use eframe::egui_wgpu::{self, CallbackResources, CallbackTrait, ScreenDescriptor};
+use render::camera::Camera;
+use render::gpu::Renderer;
+use render::scene::{PickHit, Scene};
+use render::snapshot::{View, frame};
+
+use crate::clock;
+
+/// Where the renderer draws (encodes linear colour to sRGB on write).
+const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+/// The same bytes read without decoding, for a non-sRGB surface.
+const COLOUR_BYTES_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// Largest viewport side in pixels (the texture is this big at most).
+pub const VIEWPORT_SIDE_MAX: u32 = 8192;
+/// Radians of orbit per point dragged.
+const ORBIT_RADIANS_PER_POINT: f32 = 0.01;
+/// Zoom factor per point of scroll, as an exponent.
+const ZOOM_PER_SCROLL_POINT: f32 = 0.002;
+
+const BLIT_SHADER: &str = r"
+@group(0) @binding(0) var picture: texture_2d<f32>;
+@group(0) @binding(1) var picture_sampler: sampler;
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) uv: vec2<f32>,
+};
+
+// One triangle that covers the viewport.
+@vertex
+fn vs_main(@builtin(vertex_index) i: u32) -> VertexOut {
+    let uv = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u));
+    var out: VertexOut;
+    out.clip = vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, 0.0, 1.0);
+    out.uv = uv;
+    return out;
+}
+
+@fragment
+fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
+    return textureSample(picture, picture_sampler, in.uv);
+}
+";
+
+/// The picture texture at the viewport's size.
+struct Target {
+    size_px: [u32; 2],
+    render_view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+    bind_group: wgpu::BindGroup,
+}
+
+/// What the callback keeps between frames, in egui_wgpu's `CallbackResources`.
+pub struct ViewportResources {
+    renderer: Renderer,
+    blit: wgpu::RenderPipeline,
+    blit_layout: wgpu::BindGroupLayout,
+    sampler: wgpu::Sampler,
+    /// The format `paint` reads the picture as: raw bytes for a non-sRGB surface, decoded
+    /// colour for an sRGB one (which encodes again on write).
+    read_format: wgpu::TextureFormat,
+    target: Option<Target>,
+}
+
+impl ViewportResources {
+    /// Pipelines for egui's surface format `surface`.
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, surface: wgpu::TextureFormat) -> Self {
+        let renderer = Renderer::new(device, queue, COLOUR_FORMAT, Some(DEPTH_FORMAT));
+        let blit_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("sculpt viewport picture"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+            ],
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("sculpt viewport picture"),
+            bind_group_layouts: &[Some(&blit_layout)],
+            immediate_size: 0,
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("sculpt viewport picture"),
+            source: wgpu::ShaderSource::Wgsl(BLIT_SHADER.into()),
+        });
+        let blit = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("sculpt viewport picture"),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: None,
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: surface,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("sculpt viewport picture"),
+            ..Default::default()
+        });
+        let read_format = if surface.is_srgb() {
+            COLOUR_FORMAT
+        } else {
+            COLOUR_BYTES_FORMAT
+        };
+        Self {
+            renderer,
+            blit,
+            blit_layout,
+            sampler,
+            read_format,
+            target: None,
+        }
+    }
+
+    fn ensure_target(&mut self, device: &wgpu::Device, size_px: [u32; 2]) {
+        if self.target.as_ref().is_none_or(|t| t.size_px != size_px) {
+            let size = wgpu::Extent3d {
+                width: size_px[0],
+                height: size_px[1],
+                depth_or_array_layers: 1,
+            };
+            let texture = |label, format, usage, view_formats: &[wgpu::TextureFormat]| {
+                device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size,
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage,
+                    view_formats,
+                })
+            };
+            let colour = texture(
+                "sculpt viewport colour",
+                COLOUR_FORMAT,
+                wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+                &[COLOUR_BYTES_FORMAT],
+            );
+            let depth = texture(
+                "sculpt viewport depth",
+                DEPTH_FORMAT,
+                wgpu::TextureUsages::RENDER_ATTACHMENT,
+                &[],
+            );
+            let read_view = colour.create_view(&wgpu::TextureViewDescriptor {
+                format: Some(self.read_format),
+                ..Default::default()
+            });
+            let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("sculpt viewport picture"),
+                layout: &self.blit_layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: wgpu::BindingResource::TextureView(&read_view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::Sampler(&self.sampler),
+                    },
+                ],
+            });
+            self.target = Some(Target {
+                size_px,
+                render_view: colour.create_view(&Default::default()),
+                depth_view: depth.create_view(&Default::default()),
+                bind_group,
+            });
+        }
+    }
+}
+
+/// What the paint callback tells the UI: why the scene could not be drawn, and how long
+/// preparing each frame took (the renderer's `prepare` and recording its pass, on the CPU).
+#[derive(Debug, Default)]
+pub struct ViewportReport {
+    /// Why the last frame could not be prepared.
+    pub error: Option<String>,
+    /// Milliseconds per frame, the latest [`PREPARE_SAMPLES_MAX`].
+    pub prepare_ms: Vec<f64>,
+}
+
+/// Frames whose prepare times are kept.
+pub const PREPARE_SAMPLES_MAX: usize = 600;
+
+/// One frame's draw of the viewport: the scene (meshes are shared `Arc`s, so this is cheap)
+/// and the viewport's size in pixels.
+pub struct ViewportCallback {
+    /// What to draw.
+    pub scene: Scene,
+    /// The viewport in physical pixels.
+    pub size_px: [u32; 2],
+    /// Where failures and times are reported to the UI.
+    pub report: Arc<Mutex<ViewportReport>>,
+}
+
+impl CallbackTrait for ViewportCallback {
+    fn prepare(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        _screen: &ScreenDescriptor,
+        encoder: &mut wgpu::CommandEncoder,
+        resources: &mut CallbackResources,
+    ) -> Vec<wgpu::CommandBuffer> {
+        let Some(res) = resources.get_mut::<ViewportResources>() else {
+            return Vec::new();
+        };
+        let start = clock::now().instant;
+        let prepared = res
+            .renderer
+            .prepare(device, queue, &self.scene, self.size_px);
+        if let Ok(mut report) = self.report.lock() {
+            report.error = prepared.as_ref().err().map(ToString::to_string);
+        }
+        if prepared.is_err() {
+            res.target = None;
+            return Vec::new();
+        }
+        res.ensure_target(device, self.size_px);
+        let Some(target) = &res.target else {
+            return Vec::new();
+        };
+        let [r, g, b, a] = self.scene.background.map(f64::from);
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("sculpt viewport"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &target.render_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color { r, g, b, a }),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &target.depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        res.renderer.paint(&mut pass);
+        drop(pass);
+        let ms = clock::now().instant.duration_since(start).as_secs_f64() * 1e3;
+        if let Ok(mut report) = self.report.lock() {
+            if report.prepare_ms.len() >= PREPARE_SAMPLES_MAX {
+                report.prepare_ms.remove(0);
+            }
+            report.prepare_ms.push(ms);
+        }
+        Vec::new()
+    }
+
+    fn paint(
+        &self,
+        _info: egui::PaintCallbackInfo,
+        pass: &mut wgpu::RenderPass<'static>,
+        resources: &CallbackResources,
+    ) {
+        let Some(res) = resources.get::<ViewportResources>() else {
+            return;
+        };
+        let Some(target) = res.target.as_ref().filter(|t| t.size_px == self.size_px) else {
+            return;
+        };
+        pass.set_pipeline(&res.blit);
+        pass.set_bind_group(0, &target.bind_group, &[]);
+        pass.draw(0..3, 0..1);
+    }
+}
+
+/// The camera and how the user has moved it.
+#[derive(Clone, Debug, Default)]
+pub struct ViewState {
+    /// The current camera.
+    pub camera: Camera,
+    /// Whether the user moved it (then new meshes no longer re-frame the view).
+    pub moved: bool,
+}
+
+/// The view the camera starts from and returns to.
+pub fn home_view() -> View {
+    View {
+        name: "home".into(),
+        yaw: 0.78,
+        pitch: 0.45,
+    }
+}
+
+/// What the user did in the viewport this frame.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ViewportInput {
+    /// A click hit this (object index into the drawn scene, point).
+    pub picked: Option<PickHit>,
+    /// A click that hit nothing.
+    pub missed: bool,
+    /// Double-click (or `F`): frame everything again.
+    pub reset: bool,
+    /// The viewport's size in pixels.
+    pub size_px: [u32; 2],
+}
+
+/// Draws the viewport over the rest of `ui` and handles orbit (drag), zoom (scroll), reset
+/// (double-click or `F`) and picking (click).
+pub fn viewport_ui(
+    ui: &mut egui::Ui,
+    view: &mut ViewState,
+    scene: &Scene,
+    sphere: Option<(glam::Vec3, f32)>,
+    report: &Arc<Mutex<ViewportReport>>,
+) -> ViewportInput {
+    let (rect, response) =
+        ui.allocate_exact_size(ui.available_size(), egui::Sense::click_and_drag());
+    let ppp = ui.ctx().pixels_per_point();
+    let size_px = [
+        ((rect.width() * ppp).round() as u32).clamp(1, VIEWPORT_SIDE_MAX),
+        ((rect.height() * ppp).round() as u32).clamp(1, VIEWPORT_SIDE_MAX),
+    ];
+    let mut input = ViewportInput {
+        size_px,
+        ..ViewportInput::default()
+    };
+    if response.dragged_by(egui::PointerButton::Primary) {
+        let d = response.drag_delta();
+        if d != egui::Vec2::ZERO {
+            view.camera.orbit(
+                -d.x * ORBIT_RADIANS_PER_POINT,
+                d.y * ORBIT_RADIANS_PER_POINT,
+            );
+            view.moved = true;
+        }
+    }
+    if response.hovered() {
+        let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+        if scroll != 0.0 {
+            view.camera.zoom((-scroll * ZOOM_PER_SCROLL_POINT).exp());
+            view.moved = true;
+        }
+    }
+    let key_reset =
+        !ui.ctx().egui_wants_keyboard_input() && ui.input(|i| i.key_pressed(egui::Key::F));
+    if response.double_clicked() || key_reset {
+        input.reset = true;
+        view.moved = false;
+    }
+    if !view.moved {
+        view.camera = frame(sphere, &home_view(), size_px[0], size_px[1]);
+    }
+    if response.clicked()
+        && let Some(pos) = response.interact_pointer_pos()
+    {
+        let px = [(pos.x - rect.min.x) * ppp, (pos.y - rect.min.y) * ppp];
+        let ray = view.camera.ray_through_pixel(px, size_px);
+        input.picked = scene.pick(&ray);
+        input.missed = input.picked.is_none();
+    }
+    let mut drawn = scene.clone();
+    drawn.camera = view.camera;
+    ui.painter().add(egui_wgpu::Callback::new_paint_callback(
+        rect,
+        ViewportCallback {
+            scene: drawn,
+            size_px,
+            report: Arc::clone(report),
+        },
+    ));
+    input
+}

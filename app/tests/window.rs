@@ -1,0 +1,409 @@
+//! End to end: the real `sculpt` binary in a real window under Xvfb (llvmpipe), driven by its
+//! test hooks. It shows the watermelon; a scripted `shape:` edit changes the picture and is
+//! still there after a restart on the same store (the op came back from the store); a bad
+//! formula authors nothing and shows fdsl's caret diagnostic; `undo` brings the old shape
+//! back; a corrupt store is reported and left as it was; with no display the binary says so
+//! and exits non-zero.
+//!
+//! Pictures are compared by coarse colour statistics, never byte for byte: the driver is a
+//! software rasteriser whose output may shift by a pixel between versions.
+//!
+//! When `DISPLAY` is set (scripts/test.sh starts Xvfb), the tests use it; otherwise each
+//! starts its own Xvfb on a free display number and fails with a clear message if Xvfb is not
+//! installed.
+#![allow(
+    clippy::unwrap_used,
+    reason = "helpers outside #[test] fns unwrap process output and files"
+)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::Duration;
+
+use render::image::RgbaImage;
+use serde_json::Value;
+
+/// Longest one run of the binary may take before the test kills it.
+const RUN_SECS_MAX: u64 = 90;
+/// Frames after which a run gives up (its hooks then report an error).
+const FRAMES_MAX: &str = "3000";
+/// The window's size in points (the side panel is about 400 wide, the bars about 25 high).
+const WINDOW: &str = "900x600";
+
+/// The watermelon's geometry with its wedge, and the same sphere without it.
+const SPHERE: &str = "1-x^2-y^2-z^2";
+
+/// An X display for the binary: the one in `DISPLAY`, or an Xvfb this guard started.
+struct Display {
+    name: String,
+    xvfb: Option<Child>,
+}
+
+impl Drop for Display {
+    fn drop(&mut self) {
+        if let Some(xvfb) = &mut self.xvfb {
+            let _ = xvfb.kill();
+            let _ = xvfb.wait();
+        }
+    }
+}
+
+/// Display numbers handed out to this process's Xvfbs, so parallel tests take different ones.
+static NEXT_DISPLAY: AtomicU32 = AtomicU32::new(0);
+
+fn display() -> Display {
+    if let Some(name) = std::env::var("DISPLAY").ok().filter(|d| !d.is_empty()) {
+        return Display { name, xvfb: None };
+    }
+    let base = 140 + (std::process::id() % 50) * 4;
+    for _ in 0..40 {
+        let n = base + NEXT_DISPLAY.fetch_add(1, Ordering::SeqCst) % 200;
+        if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists()
+            || Path::new(&format!("/tmp/.X{n}-lock")).exists()
+        {
+            continue;
+        }
+        let spawned = Command::new("Xvfb")
+            .args([
+                &format!(":{n}"),
+                "-screen",
+                "0",
+                "1280x800x24",
+                "-nolisten",
+                "tcp",
+            ])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn();
+        let mut xvfb = match spawned {
+            Ok(child) => child,
+            Err(e) => panic!(
+                "DISPLAY is unset and Xvfb cannot be started ({e}): install it with \
+                 `bash scripts/setup.sh` (Debian package xvfb), or run under scripts/test.sh"
+            ),
+        };
+        // Ready when its socket appears; gone when another server took the number first.
+        for _ in 0..100 {
+            if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
+                return Display {
+                    name: format!(":{n}"),
+                    xvfb: Some(xvfb),
+                };
+            }
+            if xvfb.try_wait().unwrap().is_some() {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let _ = xvfb.kill();
+        let _ = xvfb.wait();
+    }
+    panic!("no free display number for Xvfb");
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("window")
+        .join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Runs `sculpt` with `args` on `display` (`None`: no `DISPLAY` at all) and waits for it,
+/// killing it after [`RUN_SECS_MAX`].
+fn sculpt(display: Option<&str>, args: &[&str]) -> Output {
+    let runtime = scratch("xdg-runtime");
+    let mut command = Command::new(env!("CARGO_BIN_EXE_sculpt"));
+    command
+        .args(args)
+        .env_remove("WAYLAND_DISPLAY")
+        .env("XDG_RUNTIME_DIR", &runtime)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    match display {
+        Some(name) => command.env("DISPLAY", name),
+        None => command.env_remove("DISPLAY"),
+    };
+    let mut child = command.spawn().unwrap();
+    for _ in 0..RUN_SECS_MAX * 20 {
+        if child.try_wait().unwrap().is_some() {
+            return child.wait_with_output().unwrap();
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let _ = child.kill();
+    let output = child.wait_with_output().unwrap();
+    panic!(
+        "sculpt {args:?} ran over {RUN_SECS_MAX} s\n{}\n{}",
+        text(&output.stdout),
+        text(&output.stderr)
+    );
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// One window run on `store` with the given commands: the screenshot and the state dump.
+struct Run {
+    picture: RgbaImage,
+    state: Value,
+    stdout: String,
+}
+
+fn window_run(display: &Display, dir: &Path, name: &str, commands: &[&str]) -> Run {
+    let store = dir.join("store");
+    let shot = dir.join(format!("{name}.png"));
+    let dump = dir.join(format!("{name}.json"));
+    let mut args = vec![
+        "--store",
+        store.to_str().unwrap(),
+        "--size",
+        WINDOW,
+        "--screenshot",
+        shot.to_str().unwrap(),
+        "--dump-state",
+        dump.to_str().unwrap(),
+        "--exit-after-frames",
+        FRAMES_MAX,
+    ];
+    for c in commands {
+        args.extend(["--command", c]);
+    }
+    let run = sculpt(Some(&display.name), &args);
+    let (stdout, stderr) = (text(&run.stdout), text(&run.stderr));
+    assert!(run.status.success(), "{name}: {stdout}\n{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let picture = RgbaImage::from_png(&std::fs::read(&shot).unwrap()).unwrap();
+    let state: Value = serde_json::from_str(&std::fs::read_to_string(&dump).unwrap()).unwrap();
+    Run {
+        picture,
+        state,
+        stdout,
+    }
+}
+
+/// Fractions of the viewport's middle that are watermelon flesh (red), rind (green), and
+/// background-like grey.
+#[derive(Debug)]
+struct Colours {
+    red: f64,
+    green: f64,
+    grey: f64,
+}
+
+fn colours(picture: &RgbaImage) -> Colours {
+    // The viewport is the window's left part, left of the ~400-point side panel.
+    let viewport_width = picture.width.saturating_sub(400);
+    let (x0, x1) = (viewport_width / 4, viewport_width * 3 / 4);
+    let (y0, y1) = (picture.height / 4, picture.height * 3 / 4);
+    let (mut red, mut green, mut grey, mut n) = (0, 0, 0, 0);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let [r, g, b, _] = picture.pixel(x, y).unwrap().map(i32::from);
+            n += 1;
+            if r > g + 40 && r > b + 40 {
+                red += 1;
+            } else if g > r + 40 && g > b + 20 {
+                green += 1;
+            } else if (r - g).abs() < 20 && (g - b).abs() < 25 {
+                grey += 1;
+            }
+        }
+    }
+    let f = |k: i32| f64::from(k) / f64::from(n);
+    Colours {
+        red: f(red),
+        green: f(green),
+        grey: f(grey),
+    }
+}
+
+fn object_geometry(state: &Value) -> String {
+    state["objects"][0]["geometry"]
+        .as_str()
+        .unwrap()
+        .to_string()
+}
+
+#[test]
+fn the_window_shows_the_watermelon_and_an_edit_survives_a_restart() {
+    let display = display();
+    let dir = scratch("restart");
+    let ops = dir.join("store").join("ops.sculpt");
+
+    // A new store: the demo is authored and shown, red flesh inside green rind.
+    let first = window_run(&display, &dir, "first", &[]);
+    let c = colours(&first.picture);
+    assert!(c.red > 0.05 && c.green > 0.15, "{c:?}");
+    assert!(c.grey < 0.7, "the viewport is not background: {c:?}");
+    assert_eq!(first.state["n_loaded"], 0);
+    assert_eq!(first.state["objects"].as_array().unwrap().len(), 1);
+    assert!(first.state["objects"][0]["n_triangles"].as_u64().unwrap() > 1000);
+    assert_eq!(first.state["viewport_error"], Value::Null);
+
+    // The wedge filled in: a whole sphere, green all round.
+    let shape = format!("shape: {SPHERE}");
+    let edited = window_run(&display, &dir, "edited", &[&shape]);
+    let c = colours(&edited.picture);
+    assert!(c.red < 0.01 && c.green > 0.2, "{c:?}");
+    assert_eq!(
+        edited.state["input_error"],
+        Value::Null,
+        "{}",
+        edited.stdout
+    );
+    assert_eq!(edited.state["n_ops"], 2);
+    assert!(edited.state["edit_to_mesh_ms"].as_array().unwrap().len() == 1);
+
+    // Restarted on the same store, with a formula that does not compile: the sphere came
+    // back from the store, the bad line authored nothing and shows the caret diagnostic.
+    let stored = std::fs::read(&ops).unwrap();
+    let bad = window_run(&display, &dir, "restarted", &["shape: 1-x^2-sni(y)"]);
+    assert_eq!(bad.state["n_loaded"], 2);
+    assert!(
+        object_geometry(&bad.state).contains(SPHERE),
+        "{}",
+        bad.state
+    );
+    let c = colours(&bad.picture);
+    assert!(c.red < 0.01 && c.green > 0.2, "{c:?}");
+    let error = bad.state["input_error"].as_str().unwrap();
+    assert!(
+        error.contains("unknown function `sni`") && error.contains("^^^"),
+        "{error}"
+    );
+    assert!(
+        bad.stdout.contains("unknown function `sni`"),
+        "{}",
+        bad.stdout
+    );
+    assert_eq!(
+        std::fs::read(&ops).unwrap(),
+        stored,
+        "a bad formula stores nothing"
+    );
+
+    // Undo takes the edit back: the flesh shows again.
+    let undone = window_run(&display, &dir, "undone", &["undo", "the wedge is back"]);
+    let c = colours(&undone.picture);
+    assert!(c.red > 0.05, "{c:?}");
+    assert_eq!(undone.state["n_ops"], 4);
+    let history = undone.state["history"].as_array().unwrap();
+    assert_eq!(history[1]["status"], "undone", "{history:?}");
+    assert_eq!(undone.state["chat"][0]["text"], "the wedge is back");
+}
+
+#[test]
+fn a_click_picks_the_object_and_the_point() {
+    let display = display();
+    let dir = scratch("pick");
+    let store = dir.join("store");
+    let dump = dir.join("pick.json");
+    let run = sculpt(
+        Some(&display.name),
+        &[
+            "--store",
+            store.to_str().unwrap(),
+            "--size",
+            WINDOW,
+            "--pick",
+            "0.5,0.5",
+            "--exit-when-idle",
+            "--exit-after-frames",
+            FRAMES_MAX,
+            "--dump-state",
+            dump.to_str().unwrap(),
+        ],
+    );
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    let state: Value = serde_json::from_str(&std::fs::read_to_string(&dump).unwrap()).unwrap();
+    let pick = state["pick"].as_str().unwrap();
+    assert!(pick.starts_with("picked Watermelon at ("), "{pick}");
+    // The middle of the view looks at the watermelon's centre, inside its unit sphere.
+    let numbers: Vec<f64> = pick
+        .split(['(', ')', ','])
+        .filter_map(|s| s.trim().parse().ok())
+        .collect();
+    assert_eq!(numbers.len(), 3, "{pick}");
+    assert!(numbers.iter().map(|v| v * v).sum::<f64>() < 1.0, "{pick}");
+}
+
+#[test]
+fn a_corrupt_store_is_shown_as_an_error_and_left_as_it_was() {
+    let display = display();
+    let dir = scratch("corrupt");
+    let store = dir.join("store");
+    std::fs::create_dir_all(&store).unwrap();
+    let garbage = b"SCULPTOPS\x07 not what a store holds".to_vec();
+    std::fs::write(store.join("ops.sculpt"), &garbage).unwrap();
+    let dump = dir.join("corrupt.json");
+    let run = sculpt(
+        Some(&display.name),
+        &[
+            "--store",
+            store.to_str().unwrap(),
+            "--size",
+            WINDOW,
+            "--command",
+            "shape: 0.5-x^2-y^2-z^2",
+            "--exit-when-idle",
+            "--exit-after-frames",
+            FRAMES_MAX,
+            "--dump-state",
+            dump.to_str().unwrap(),
+        ],
+    );
+    let stderr = text(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("store error") && stderr.contains("ops.sculpt"),
+        "{stderr}"
+    );
+    let state: Value = serde_json::from_str(&std::fs::read_to_string(&dump).unwrap()).unwrap();
+    assert!(
+        state["store_error"]
+            .as_str()
+            .unwrap()
+            .contains("cannot be opened"),
+        "{state}"
+    );
+    // The demo still shows (in memory) and takes edits; the file is untouched.
+    assert!(
+        object_geometry(&state).contains("0.5-x^2-y^2-z^2"),
+        "{state}"
+    );
+    assert_eq!(std::fs::read(store.join("ops.sculpt")).unwrap(), garbage);
+}
+
+#[test]
+fn without_a_display_the_window_says_so_and_points_at_the_headless_commands() {
+    let dir = scratch("nodisplay");
+    let store = dir.join("store");
+    let unset = sculpt(None, &["--store", store.to_str().unwrap()]);
+    let stderr = text(&unset.stderr);
+    assert!(!unset.status.success());
+    assert!(stderr.contains("no display"), "{stderr}");
+    assert!(stderr.contains("sculpt render"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+
+    // A display that nothing serves: a number no X server holds.
+    let free = (600..700)
+        .find(|n| !Path::new(&format!("/tmp/.X11-unix/X{n}")).exists())
+        .unwrap();
+    let nobody = sculpt(
+        Some(&format!(":{free}")),
+        &["demo", "--store", store.to_str().unwrap()],
+    );
+    let stderr = text(&nobody.stderr);
+    assert!(!nobody.status.success());
+    assert!(stderr.contains("cannot open its window"), "{stderr}");
+    assert!(stderr.contains("sculpt render"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        !store.exists(),
+        "a window that never opened leaves no store"
+    );
+}
