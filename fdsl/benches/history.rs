@@ -2,6 +2,11 @@
 //! (union and carve strokes of small balls and boxes, some paint), at the same random points.
 //! The goal is the rate at 10^5 edits within 2x of the rate at 10.
 //!
+//! `block_values_point` and `block_values_bulk` compare the two ways to evaluate a mesher's
+//! blocks (lattices of 9^3 points in boxes of edge 1/8): the sampler point by point, and the
+//! sampler restricted to each box (`Sampler::restrict`, its cost included) evaluating the
+//! box's lattice in one call.
+//!
 //! `cargo bench -p fdsl --bench history`
 
 use divan::{Bencher, black_box};
@@ -128,6 +133,61 @@ fn interval(bencher: Bencher, n_edits: usize) {
             let mut sum = 0.0;
             for b in &boxes {
                 sum += sampler.interval(b, 0.0).hi;
+            }
+            black_box(sum)
+        });
+}
+
+/// Boxes of edge 1/8 (a mesher block at depth 7 over 2.5 units is 0.156) with their 9^3
+/// lattice points.
+fn blocks() -> Vec<(Aabb, Vec<DVec3>)> {
+    let mut rng = Rng(0x5eed_b10c);
+    (0..N_BLOCKS)
+        .map(|_| {
+            let region = Aabb::around(rng.in_cube(0.9), DVec3::splat(1.0 / 16.0));
+            let step = region.size() / 8.0;
+            let lattice = (0..729)
+                .map(|i| {
+                    let k = DVec3::new((i % 9) as f64, ((i / 9) % 9) as f64, (i / 81) as f64);
+                    (region.lo + step * k).min(region.hi)
+                })
+                .collect();
+            (region, lattice)
+        })
+        .collect()
+}
+
+const N_BLOCKS: usize = 8;
+
+#[divan::bench(args = EDIT_COUNTS, sample_count = 20)]
+fn block_values_point(bencher: Bencher, n_edits: usize) {
+    let mut sampler = object_with_edits(n_edits).sampler();
+    let blocks = blocks();
+    bencher
+        .counter(divan::counter::ItemsCount::new(N_BLOCKS * 729))
+        .bench_local(|| {
+            let mut sum = 0.0;
+            for (_, lattice) in &blocks {
+                for p in lattice {
+                    sum += sampler.value(*p, 0.0);
+                }
+            }
+            black_box(sum)
+        });
+}
+
+#[divan::bench(args = EDIT_COUNTS, sample_count = 20)]
+fn block_values_bulk(bencher: Bencher, n_edits: usize) {
+    let sampler = object_with_edits(n_edits).sampler();
+    let blocks = blocks();
+    let mut out = vec![0.0; 729];
+    bencher
+        .counter(divan::counter::ItemsCount::new(N_BLOCKS * 729))
+        .bench_local(|| {
+            let mut sum = 0.0;
+            for (region, lattice) in &blocks {
+                sampler.restrict(region, 0.0).values(lattice, &mut out);
+                sum += out.iter().sum::<f64>();
             }
             black_box(sum)
         });

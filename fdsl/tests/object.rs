@@ -710,3 +710,309 @@ fn imported_meshes_are_solids_that_sculpt_and_round_trip() {
     let bytes = codec::encode_object(&o);
     assert!(codec::decode_object(&bytes).unwrap() == o);
 }
+
+/// Geometry for the bulk-versus-point comparisons: none, implicit formulas (with `min`,
+/// selects and blends the box sampler may simplify), with or without a domain and a
+/// transform, an imported mesh, a parametric surface.
+fn geometry_strategy() -> impl Strategy<Value = Option<Geometry>> {
+    const FORMULAS: [&str; 5] = [
+        SPHERE,
+        "min(1 - x^2 - y^2 - z^2, 0.6 - y)",
+        "blend_and(1 - x^2 - y^2 - z^2, 0.5 - x, 0.2)",
+        "function frep(x,y,z,t){ if (x > 0.2) g = 0.8 - x^2 - y^2 - z^2; else g = 1 - x^2 - y^2 - z^2; return g; }",
+        "max(0.7 - sqrt(x^2 + z^2), 0.3 - abs(y)) + 0.05*sin(5*x)",
+    ];
+    let transform = prop_oneof![
+        Just(Transform::IDENTITY),
+        (point(), -1.0..1.0f64, 0.7..1.4f64).prop_map(|(at, angle, s)| Transform::from_trs(
+            at * 0.3,
+            DQuat::from_rotation_z(angle),
+            DVec3::new(s, 1.0, 1.0 / s),
+        )),
+    ];
+    let domain = prop_oneof![
+        Just(None),
+        (0.8..2.4f64).prop_map(|s| Some(Domain::new(DVec3::new(0.1, 0.0, 0.0), DVec3::splat(s)))),
+    ];
+    prop_oneof![
+        1 => Just(None),
+        6 => (0..FORMULAS.len(), domain, transform).prop_map(|(k, domain, transform)| {
+            Some(Geometry {
+                shape: fdsl::object::Shape::Implicit(Formula::new(FORMULAS[k]).unwrap()),
+                domain,
+                transform,
+            })
+        }),
+        1 => Just(Some(Geometry {
+            shape: fdsl::object::Shape::Mesh(std::sync::Arc::new(
+                fdsl::mesh::shapes::icosphere(0.9, 1),
+            )),
+            domain: None,
+            transform: Transform::translate(DVec3::new(0.1, 0.0, 0.0)),
+        })),
+        1 => Just(Some(Geometry {
+            shape: fdsl::object::Shape::Parametric {
+                formula: Formula::new("x = cos(u); y = sin(u); z = v").unwrap(),
+                kind: fdsl::object::ParametricKind::Surface,
+                parameters: [[0.0, 6.3], [-1.0, 1.0], [0.0, 0.0]],
+            },
+            domain: None,
+            transform: Transform::IDENTITY,
+        })),
+    ]
+}
+
+/// Points to compare in `region`: random ones, its corners, edge and face centres, points on
+/// the faces of the edits' boxes, and a few just outside.
+fn region_points(object: &Object, region: &Aabb, fractions: &[DVec3]) -> Vec<DVec3> {
+    let pick = |k: usize, a: usize| match k {
+        0 => region.lo[a],
+        1 => 0.5 * (region.lo[a] + region.hi[a]),
+        _ => region.hi[a],
+    };
+    let mut points: Vec<DVec3> = fractions
+        .iter()
+        .map(|f| region.lo + region.size() * *f)
+        .map(|p| p.clamp(region.lo, region.hi))
+        .collect();
+    for i in 0..27 {
+        let k = [i % 3, (i / 3) % 3, i / 9];
+        points.push(DVec3::new(pick(k[0], 0), pick(k[1], 1), pick(k[2], 2)));
+    }
+    for e in object.history().entries() {
+        for b in e.edit.boxes().iter().filter(|b| !b.is_empty()) {
+            for (a, face) in [(0, b.lo.x), (1, b.hi.y), (2, b.lo.z), (0, b.hi.x)] {
+                let mut p = region.center();
+                p[a] = face;
+                if region.contains(p) {
+                    points.push(p);
+                }
+            }
+        }
+    }
+    points.push(region.hi + DVec3::splat(0.01));
+    points.push(region.lo - DVec3::new(0.0, 0.02, 0.0));
+    points
+}
+
+/// The box sampler's values, gradients and intervals equal the point path's bit for bit.
+fn assert_bulk_equals_points(object: &Object, region: &Aabb, fractions: &[DVec3], t: f64) {
+    let mut point = object.sampler();
+    let mut bulk = point.restrict(region, t);
+    let points = region_points(object, region, fractions);
+    let mut values = vec![0.0; points.len()];
+    bulk.values(&points, &mut values);
+    let mut grads = vec![(0.0, DVec3::ZERO); points.len()];
+    bulk.gradients(&points, &mut grads);
+    for (i, p) in points.iter().enumerate() {
+        let v = point.value(*p, t);
+        assert_eq!(
+            values[i].to_bits(),
+            v.to_bits(),
+            "value at {p}: {} vs {v}",
+            values[i]
+        );
+        let (gv, g) = point.gradient(*p, t);
+        assert_eq!(
+            grads[i].0.to_bits(),
+            gv.to_bits(),
+            "gradient's value at {p}"
+        );
+        for a in 0..3 {
+            assert_eq!(
+                grads[i].1[a].to_bits(),
+                g[a].to_bits(),
+                "gradient at {p}: {g}"
+            );
+        }
+    }
+    // Intervals over the box, a sub-box, and a box reaching outside.
+    let sub = Aabb::new(
+        region.lo + region.size() * fractions[0] * 0.5,
+        region.hi - region.size() * fractions[1] * 0.5,
+    );
+    for b in [*region, sub, region.expand(0.05)] {
+        let (x, y) = (bulk.interval(&b), point.interval(&b, t));
+        assert_eq!(
+            (x.lo.to_bits(), x.hi.to_bits(), x.nan),
+            (y.lo.to_bits(), y.hi.to_bits(), y.nan),
+            "interval over {b:?}: {x:?} vs {y:?}"
+        );
+    }
+    // A restriction of the restriction folds the same.
+    let mut inner = bulk.restrict(&sub);
+    assert!(inner.n_edits() <= bulk.n_edits());
+    let inside: Vec<DVec3> = points
+        .iter()
+        .copied()
+        .filter(|p| sub.contains(*p))
+        .collect();
+    let mut inner_values = vec![0.0; inside.len()];
+    inner.values(&inside, &mut inner_values);
+    for (p, v) in inside.iter().zip(&inner_values) {
+        assert_eq!(
+            v.to_bits(),
+            point.value(*p, t).to_bits(),
+            "inner value at {p}"
+        );
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(96))]
+
+    /// A box sampler gives the point path's values, gradients and intervals bit for bit, on
+    /// any geometry, with undone edits, paintings and intersections, on the box's faces and
+    /// the edits' box faces.
+    #[test]
+    fn box_sampler_equals_the_point_path_bit_for_bit(
+        geometry in geometry_strategy(),
+        edits in prop::collection::vec(edit_strategy(), 0..12),
+        undone in prop::collection::vec(any::<bool>(), 12),
+        prepare in any::<bool>(),
+        center in point(),
+        half in (0.02..0.6f64, 0.02..0.6f64, 0.02..0.6f64),
+        fractions in prop::collection::vec(
+            (0.0..1.0f64, 0.0..1.0f64, 0.0..1.0f64).prop_map(|(a, b, c)| DVec3::new(a, b, c)),
+            40,
+        ),
+        t in prop_oneof![Just(0.0), -1.0..1.0f64],
+    ) {
+        let mut object = Object::new(ObjectData { geometry, ..ObjectData::default() }).unwrap();
+        for (i, e) in edits.iter().enumerate() {
+            let idx = object.apply(e.clone()).unwrap();
+            if undone[i] && i % 3 == 0 {
+                object.undo(idx);
+            }
+        }
+        if prepare {
+            object.prepare();
+        }
+        let region = Aabb::around(center, DVec3::new(half.0, half.1, half.2));
+        assert_bulk_equals_points(&object, &region, &fractions, t);
+    }
+}
+
+#[test]
+fn box_sampler_equals_the_point_path_on_a_long_history() {
+    // More edits than `SCAN_EDITS_MAX` overlap the large boxes, so restrictions and intervals
+    // go through the history's index there and through the parent's list below.
+    let mut object = Object::new(ObjectData {
+        geometry: Some(Geometry::implicit_in(
+            Formula::new(SPHERE).unwrap(),
+            Domain::new(DVec3::ZERO, DVec3::splat(2.2)),
+        )),
+        ..ObjectData::default()
+    })
+    .unwrap();
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    let n = 600;
+    for k in 0..n {
+        let y = 1.0 - 2.0 * (k as f64 + 0.5) / n as f64;
+        let ring = (1.0 - y * y).sqrt();
+        let at = DVec3::new(
+            ring * (golden * k as f64).cos(),
+            y,
+            ring * (golden * k as f64).sin(),
+        );
+        let op = match k % 7 {
+            3 => EditOp::Union,
+            5 => EditOp::Paint {
+                property: Paintable::Color,
+                value: PaintValue::Color([1.0, 0.0, 0.0]),
+            },
+            _ => EditOp::Subtract,
+        };
+        let idx = object
+            .apply(Edit::stamp(
+                op,
+                ToolShape::Sphere { radius: 0.12 },
+                Pose::at(at),
+            ))
+            .unwrap();
+        if k % 11 == 0 {
+            object.undo(idx);
+        }
+    }
+    object.prepare();
+    let fractions: Vec<DVec3> = (0..64)
+        .map(|i| {
+            let a = i as f64;
+            DVec3::new((a * 0.37).sin(), (a * 0.73).cos(), (a * 1.11).sin()) * 0.5 + 0.5
+        })
+        .collect();
+    let whole = Aabb::around(DVec3::ZERO, DVec3::splat(1.2));
+    assert!(object.sampler().restrict(&whole, 0.0).n_edits() > fdsl::object::SCAN_EDITS_MAX);
+    assert_bulk_equals_points(&object, &whole, &fractions, 0.0);
+    for c in [DVec3::new(0.9, 0.3, 0.1), DVec3::new(-0.2, -0.95, 0.3)] {
+        let region = Aabb::around(c, DVec3::splat(0.15));
+        assert_bulk_equals_points(&object, &region, &fractions, 0.0);
+    }
+    // An intersection leaves the far side of the ball empty, in bulk as point by point.
+    object
+        .apply(Edit::stamp(
+            EditOp::Intersect,
+            ToolShape::Box {
+                half_extents: DVec3::splat(0.6),
+                rounding: 0.05,
+            },
+            Pose::at(DVec3::new(0.5, 0.0, 0.0)),
+        ))
+        .unwrap();
+    object.prepare();
+    for c in [
+        DVec3::new(0.9, 0.3, 0.1),
+        DVec3::new(-0.8, 0.0, 0.0),
+        DVec3::ZERO,
+    ] {
+        let region = Aabb::around(c, DVec3::splat(0.2));
+        assert_bulk_equals_points(&object, &region, &fractions, 0.0);
+    }
+}
+
+#[test]
+fn box_samplers_simplify_selects_and_blends_but_not_min_and_max() {
+    let select =
+        "function frep(x,y,z,t){ if (x > 0.2) g = 0.8 - x^2; else g = 1 - x^2; return g; }";
+    let blend = "blend_and(1 - x^2 - y^2 - z^2, 0.5 - x, 0.2)";
+    let minimum = "min(1 - x^2 - y^2 - z^2, 0.6 - y)";
+    let far = Aabb::new(DVec3::new(0.4, -0.1, -0.1), DVec3::new(0.6, 0.1, 0.1));
+    let across = Aabb::around(DVec3::new(0.2, 0.0, 0.0), DVec3::splat(0.1));
+    let high = Aabb::new(DVec3::new(-0.1, 0.9, -0.1), DVec3::new(0.1, 1.0, 0.1));
+    for (formula, region, simplified) in [
+        (select, far, true),
+        (select, across, false),
+        (
+            blend,
+            Aabb::around(DVec3::new(-1.2, 0.0, 0.0), DVec3::splat(0.1)),
+            true,
+        ),
+        (
+            blend,
+            Aabb::around(DVec3::new(1.35, 0.0, 0.0), DVec3::splat(0.05)),
+            false,
+        ),
+        (minimum, high, false),
+    ] {
+        let sampler = Object::implicit(formula).unwrap().sampler();
+        let mut bulk = sampler.restrict(&region, 0.0);
+        assert_eq!(
+            bulk.is_simplified(),
+            simplified,
+            "{formula} over {region:?}"
+        );
+        let points: Vec<DVec3> = (0..=20)
+            .map(|i| region.lo.lerp(region.hi, i as f64 / 20.0))
+            .collect();
+        let mut values = vec![0.0; points.len()];
+        bulk.values(&points, &mut values);
+        let mut point = Object::implicit(formula).unwrap().sampler();
+        for (p, v) in points.iter().zip(&values) {
+            assert_eq!(
+                v.to_bits(),
+                point.value(*p, 0.0).to_bits(),
+                "{formula} at {p}"
+            );
+        }
+    }
+}

@@ -8,7 +8,8 @@
 //!   resolves concurrent writes per slot).
 //! - [`Sampler`] evaluates an object (value, gradient, interval over a box, colour, each
 //!   physical property, force field) at object-space points and scene time, allocating only
-//!   when created.
+//!   when created. [`BoxSampler`] (from [`Sampler::restrict`]) is the same object restricted
+//!   to a box, evaluating many points at once with the sampler's values bit for bit.
 //! - [`codec`] is the canonical, versioned binary form of objects and edits.
 //!
 //! Sign convention: `f >= 0` is inside (an imported mesh's value is its signed distance). An
@@ -17,12 +18,14 @@
 //! [`NOTHING`] and is what its union edits add.
 
 pub mod appearance;
+mod box_sampler;
 pub mod codec;
 pub mod edit;
 pub mod geometry;
 pub mod history;
 pub mod physics;
 mod sample;
+mod slice_eval;
 pub mod space;
 pub mod tool;
 
@@ -32,6 +35,7 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 
 pub use appearance::{Appearance, ColorDef, ColorMap, Rgb};
+pub use box_sampler::{BoxSampler, SCAN_EDITS_MAX};
 pub use edit::{CompiledEdit, Edit, EditOp, PaintValue, Paintable};
 pub use geometry::{Geometry, ParametricKind, Shape};
 pub use history::History;

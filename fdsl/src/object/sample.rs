@@ -9,6 +9,7 @@ use std::sync::Arc;
 use glam::{DMat3, DQuat, DVec3};
 
 use super::appearance::Rgb;
+use super::box_sampler::BoxSampler;
 use super::edit::{EditOp, PaintValue, Paintable};
 use super::space::Transform;
 use super::{CompiledColor, CompiledShape, NOTHING, Object};
@@ -29,21 +30,23 @@ pub const MAX_RESERVED_HITS: usize = 4096;
 pub const DEFAULT_DIFFUSE: Rgb = [0.8, 0.8, 0.8];
 
 /// Evaluators for one shape.
-struct ShapeEval {
+pub(super) struct ShapeEval {
     point: PointEval,
     grad: GradEval,
-    interval: IntervalEval,
+    pub(super) interval: IntervalEval,
 }
 
-struct Shape {
-    eval: Option<ShapeEval>,
-    compiled: CompiledShape,
+/// A shape's evaluators and placement: the point path, which the box-restricted sampler
+/// shares for gradients and intervals.
+pub(super) struct Shape {
+    pub(super) eval: Option<ShapeEval>,
+    pub(super) compiled: CompiledShape,
     /// Transposed linear part of object -> shape space, for the chain rule.
     jacobian_t: DMat3,
 }
 
 impl Shape {
-    fn new(compiled: &CompiledShape) -> Shape {
+    pub(super) fn new(compiled: &CompiledShape) -> Shape {
         Shape {
             eval: compiled.tape.as_ref().map(|t| ShapeEval {
                 point: PointEval::new(t),
@@ -68,7 +71,7 @@ impl Shape {
         }
     }
 
-    fn gradient(&mut self, p: DVec3, t: f64) -> (f64, DVec3) {
+    pub(super) fn gradient(&mut self, p: DVec3, t: f64) -> (f64, DVec3) {
         let q = self.compiled.local_from_object.point(p);
         let mut out = match (&mut self.eval, &self.compiled.mesh) {
             (Some(e), _) => {
@@ -93,7 +96,7 @@ impl Shape {
         (out.0, self.jacobian_t * out.1)
     }
 
-    fn interval(&mut self, region: &Aabb, t: f64) -> Interval {
+    pub(super) fn interval(&mut self, region: &Aabb, t: f64) -> Interval {
         let local = self.compiled.local_from_object.aabb(region);
         let iv = |lo: f64, hi: f64| Interval::new(lo, hi);
         let f = match (&mut self.eval, &self.compiled.mesh) {
@@ -223,6 +226,12 @@ impl Sampler {
     /// The object sampled.
     pub fn object(&self) -> &Arc<Object> {
         &self.object
+    }
+
+    /// The object restricted to `region` at time `t`, to evaluate many points of the region
+    /// at once (see [`BoxSampler`]); it gathers the edits that reach the region once.
+    pub fn restrict(&self, region: &Aabb, t: f64) -> BoxSampler {
+        BoxSampler::new(self.object.clone(), region, t)
     }
 
     fn base_value(&mut self, p: DVec3, t: f64) -> f64 {

@@ -2,12 +2,16 @@
 //! as a [`Field`] for the octree mesher, and the boxes an edit dirties, for
 //! [`OctreeMesher::remesh`](super::octree::OctreeMesher::remesh).
 //!
-//! An object with edits goes through fdsl's [`Sampler`]: values and gradients point by point
-//! (fdsl has no bulk entry point over an object, so `values` is a loop of f64 point
-//! evaluations, each visiting only the edits whose boxes hold the point), and intervals over
-//! boxes (which visit the edits overlapping the box). There is no simplification per box
-//! there: `Sampler` offers no way to restrict an object to a box. An implicit geometry
-//! without edits is evaluated in bulk instead, through its tape (see [`ObjectField::new`]).
+//! An object with edits goes through fdsl's [`Sampler`], restricted to each octree node the
+//! mesher visits: [`Field::simplify`] hands each node a field over fdsl's [`BoxSampler`] for
+//! the node's box (the edits whose boxes overlap it, gathered once from the history's index or
+//! from the parent node's list; the geometry's tape simplified for the box where that is
+//! exact), whose `values` and `gradients` fold each edit over the whole batch of points and
+//! run the geometry's tape over all of them at once. Its values are the sampler's bit for bit
+//! (f64, rounded to f32 here), so a remesh may mix restricted and unrestricted fields. Before
+//! the first restriction (the root's interval) the field asks the sampler directly. An
+//! implicit geometry without edits is evaluated in f32 in bulk instead, through its tape (see
+//! [`ObjectField::new`]).
 //!
 //! Incremental meshing rests on a property of the fold: an edit changes the solid only inside
 //! its boxes ([`CompiledEdit::boxes`], which include the tool's margin and blend radius),
@@ -15,7 +19,7 @@
 //! subtraction only the blocks those boxes touch are evaluated again
 //! ([`dirty_boxes`]); after an intersection, the whole object is.
 
-use fdsl::object::{CompiledEdit, Domain, EditOp, Object, Sampler, Shape};
+use fdsl::object::{BoxSampler, CompiledEdit, Domain, EditOp, Object, Sampler, Shape};
 use glam::{DAffine3, DVec3};
 
 use super::Aabb;
@@ -30,6 +34,8 @@ pub struct ObjectField {
 enum Inner {
     /// Geometry and edits, through fdsl's sampler, one point at a time.
     Sampler { sampler: Box<Sampler>, t: f64 },
+    /// Geometry and edits restricted to an octree node's box, in bulk.
+    Region(Box<RegionField>),
     /// An implicit geometry without edits, through fdsl's bulk evaluators.
     Shape(Box<ShapeField>),
 }
@@ -40,8 +46,9 @@ impl ObjectField {
     /// An implicit geometry without active shape edits is evaluated in bulk (f32, fdsl's
     /// `BulkEval`, with tape simplification per box), like [`TapeField`],
     /// through its transform and clipped by its domain as fdsl's `Sampler` does; anything
-    /// else goes through the sampler (f64, one point at a time). The two agree to f32
-    /// rounding, so keep one object on one path while remeshing it incrementally.
+    /// else goes through the sampler (f64), restricted to each octree node's box by
+    /// [`Field::simplify`] (see the module documentation). The two agree to f32 rounding, so
+    /// keep one object on one path while remeshing it incrementally.
     pub fn new(object: &Object, t_secs: f64) -> ObjectField {
         let bulk = ShapeField::of(object, t_secs).map(|s| Inner::Shape(Box::new(s)));
         ObjectField {
@@ -52,8 +59,8 @@ impl ObjectField {
         }
     }
 
-    /// A field over the object `sampler` evaluates (always through the sampler), at time
-    /// `t_secs`.
+    /// A field over the object `sampler` evaluates (always through the sampler, restricted to
+    /// boxes by [`Field::simplify`]), at time `t_secs`.
     pub fn from_sampler(sampler: Sampler, t_secs: f64) -> ObjectField {
         ObjectField {
             inner: Inner::Sampler {
@@ -75,12 +82,12 @@ fn point(x: f32, y: f32, z: f32) -> DVec3 {
 
 impl Field for ObjectField {
     fn interval(&mut self, lo: [f32; 3], hi: [f32; 3]) -> (f32, f32) {
-        let (sampler, t) = match &mut self.inner {
+        let region = f64_box(lo, hi);
+        let iv = match &mut self.inner {
             Inner::Shape(s) => return s.interval(lo, hi),
-            Inner::Sampler { sampler, t } => (sampler, *t),
+            Inner::Sampler { sampler, t } => sampler.interval(&region, *t),
+            Inner::Region(r) => r.sampler.interval(&region),
         };
-        let region = fdsl::bvh::Aabb::new(point(lo[0], lo[1], lo[2]), point(hi[0], hi[1], hi[2]));
-        let iv = sampler.interval(&region, t);
         if iv.nan || iv.lo.is_nan() || iv.hi.is_nan() {
             (f32::NAN, f32::NAN)
         } else {
@@ -91,6 +98,7 @@ impl Field for ObjectField {
     fn values(&mut self, xs: &[f32], ys: &[f32], zs: &[f32], out: &mut [f32]) {
         let (sampler, t) = match &mut self.inner {
             Inner::Shape(s) => return s.values(xs, ys, zs, out),
+            Inner::Region(r) => return r.values(xs, ys, zs, out),
             Inner::Sampler { sampler, t } => (sampler, *t),
         };
         for (i, o) in out.iter_mut().enumerate().take(xs.len()) {
@@ -101,6 +109,7 @@ impl Field for ObjectField {
     fn gradients(&mut self, xs: &[f32], ys: &[f32], zs: &[f32], out: &mut [[f32; 3]]) {
         let (sampler, t) = match &mut self.inner {
             Inner::Shape(s) => return s.gradients(xs, ys, zs, out),
+            Inner::Region(r) => return r.gradients(xs, ys, zs, out),
             Inner::Sampler { sampler, t } => (sampler, *t),
         };
         for (i, o) in out.iter_mut().enumerate().take(xs.len()) {
@@ -114,7 +123,61 @@ impl Field for ObjectField {
             Inner::Shape(s) => s.simplify(lo, hi).map(|s| ObjectField {
                 inner: Inner::Shape(Box::new(s)),
             }),
-            Inner::Sampler { .. } => None,
+            Inner::Sampler { sampler, t } => {
+                let restricted = sampler.restrict(&f64_box(lo, hi), *t);
+                Some(RegionField::field(restricted))
+            }
+            Inner::Region(r) => Some(RegionField::field(r.sampler.restrict(&f64_box(lo, hi)))),
+        }
+    }
+}
+
+/// The box `lo..=hi` in double precision (exactly).
+fn f64_box(lo: [f32; 3], hi: [f32; 3]) -> fdsl::bvh::Aabb {
+    fdsl::bvh::Aabb::new(point(lo[0], lo[1], lo[2]), point(hi[0], hi[1], hi[2]))
+}
+
+/// The object restricted to an octree node's box, with scratch space for batches of points.
+struct RegionField {
+    sampler: BoxSampler,
+    points: Vec<DVec3>,
+    values: Vec<f64>,
+    gradients: Vec<(f64, DVec3)>,
+}
+
+impl RegionField {
+    fn field(sampler: BoxSampler) -> ObjectField {
+        ObjectField {
+            inner: Inner::Region(Box::new(RegionField {
+                sampler,
+                points: Vec::new(),
+                values: Vec::new(),
+                gradients: Vec::new(),
+            })),
+        }
+    }
+
+    fn load(&mut self, xs: &[f32], ys: &[f32], zs: &[f32]) {
+        self.points.clear();
+        self.points
+            .extend((0..xs.len()).map(|i| point(xs[i], ys[i], zs[i])));
+    }
+
+    fn values(&mut self, xs: &[f32], ys: &[f32], zs: &[f32], out: &mut [f32]) {
+        self.load(xs, ys, zs);
+        self.values.resize(self.points.len(), 0.0);
+        self.sampler.values(&self.points, &mut self.values);
+        for (o, v) in out.iter_mut().zip(&self.values) {
+            *o = *v as f32;
+        }
+    }
+
+    fn gradients(&mut self, xs: &[f32], ys: &[f32], zs: &[f32], out: &mut [[f32; 3]]) {
+        self.load(xs, ys, zs);
+        self.gradients.resize(self.points.len(), (0.0, DVec3::ZERO));
+        self.sampler.gradients(&self.points, &mut self.gradients);
+        for (o, (_, g)) in out.iter_mut().zip(&self.gradients) {
+            *o = g.to_array().map(|c| c as f32);
         }
     }
 }
@@ -427,6 +490,49 @@ mod tests {
         let mut grads = vec![[0.0; 3]; 1];
         field.gradients(&[0.0], &[0.0], &[0.5], &mut grads);
         assert!((grads[0][2] + 1.0).abs() < 1e-3, "{grads:?}");
+    }
+
+    #[test]
+    fn a_field_restricted_to_a_box_gives_the_sampler_values_bit_for_bit() {
+        let mut object = ball();
+        for k in 0..300 {
+            object.apply(edit(k, 300)).unwrap();
+        }
+        object.prepare();
+        let mut sampler = object.sampler();
+        let mut field = ObjectField::new(&object, 0.0);
+        // The root, then a node of it, as the mesher simplifies them.
+        let (lo, hi) = ([0.3f32, 0.2, 0.5], [0.8f32, 0.7, 1.0]);
+        let mut node = field.simplify([-1.25; 3], [1.25; 3]).unwrap();
+        let mut block = node.simplify(lo, hi).unwrap();
+        let n = 9;
+        let at = |i: usize, a: usize| lo[a] + (hi[a] - lo[a]) * ((i * (a + 2)) % n) as f32 / 8.0;
+        // Lattice points of the box, its corners, and two points outside it.
+        let mut xs: Vec<f32> = (0..n * n).map(|i| at(i, 0)).collect();
+        let mut ys: Vec<f32> = (0..n * n).map(|i| at(i / n, 1)).collect();
+        let mut zs: Vec<f32> = (0..n * n).map(|i| at(i % 7, 2)).collect();
+        xs.extend([lo[0], hi[0], 1.2, 0.0]);
+        ys.extend([lo[1], hi[1], 0.0, -0.9]);
+        zs.extend([lo[2], hi[2], 0.1, 0.3]);
+        let m = xs.len();
+        let mut values = vec![0.0; m];
+        block.values(&xs, &ys, &zs, &mut values);
+        let mut grads = vec![[0.0; 3]; m];
+        block.gradients(&xs, &ys, &zs, &mut grads);
+        for i in 0..m {
+            let p = point(xs[i], ys[i], zs[i]);
+            assert_eq!(
+                values[i].to_bits(),
+                (sampler.value(p, 0.0) as f32).to_bits()
+            );
+            let g = sampler.gradient(p, 0.0).1.to_array().map(|c| c as f32);
+            assert_eq!(grads[i], g, "at {p}");
+        }
+        let (sub_lo, sub_hi) = ([0.4, 0.3, 0.6], [0.6, 0.5, 0.8]);
+        assert_eq!(
+            block.interval(sub_lo, sub_hi),
+            field.interval(sub_lo, sub_hi)
+        );
     }
 
     #[test]
