@@ -216,76 +216,6 @@ impl Stamp {
     }
 }
 
-impl Stamp {
-    /// The value of [`Stamp::eval`] alone, by the same arithmetic (so the same bits), without
-    /// the gradient.
-    #[inline]
-    fn value(&self, p: DVec3) -> f64 {
-        match *self {
-            Stamp::Capsule {
-                a,
-                b,
-                radius_a,
-                radius_b,
-            } => {
-                let ab = b - a;
-                let len2 = ab.length_squared();
-                let s = if len2 > 0.0 {
-                    ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                let c = a + ab * s;
-                let r = radius_a + (radius_b - radius_a) * s;
-                r - (p - c).length()
-            }
-            Stamp::Posed {
-                shape,
-                position,
-                rotation,
-                scale,
-            } => {
-                let q = rotation.inverse() * (p - position) / scale;
-                -local_sd(shape, q) * scale
-            }
-        }
-    }
-}
-
-/// The distance of [`local_sdf`] alone, by the same arithmetic.
-fn local_sd(shape: ToolShape, q: DVec3) -> f64 {
-    match shape {
-        ToolShape::Box {
-            half_extents,
-            rounding,
-        } => {
-            let d = q.abs() - (half_extents - DVec3::splat(rounding));
-            let len = d.max(DVec3::ZERO).length();
-            if len > 0.0 {
-                len - rounding
-            } else {
-                d[d.max_position()] - rounding
-            }
-        }
-        ToolShape::Cylinder {
-            radius,
-            half_height,
-        } => {
-            let radial = (q.x * q.x + q.z * q.z).sqrt();
-            let dr = radial - radius;
-            let dy = q.y.abs() - half_height;
-            if dr > 0.0 && dy > 0.0 {
-                (dr * dr + dy * dy).sqrt()
-            } else if dr > dy {
-                dr
-            } else {
-                dy
-            }
-        }
-        ToolShape::Sphere { radius } => q.length() - radius,
-    }
-}
-
 /// Signed distance (negative inside) and its gradient, for boxes and cylinders.
 fn local_sdf(shape: ToolShape, q: DVec3) -> (f64, DVec3) {
     match shape {
@@ -443,24 +373,10 @@ impl CompiledTool {
             .fold(NOTHING, f64::max)
     }
 
-    /// Value only: [`CompiledTool::eval`]'s value, bit for bit, without the gradients.
+    /// Value only.
     #[inline]
     pub(crate) fn value(&self, p: DVec3) -> f64 {
-        let mut best = NOTHING;
-        let take = |i: u32| {
-            let (bounds, stamp) = &self.stamps[i as usize];
-            if bounds.contains(p) {
-                let v = stamp.value(p);
-                if v > best {
-                    best = v;
-                }
-            }
-        };
-        match &self.stamp_index {
-            Some(bvh) => bvh.visit_point(p, take),
-            None => (0..self.stamps.len() as u32).for_each(take),
-        }
-        best
+        self.eval(p).0
     }
 
     /// An interval holding every value over `region`.
@@ -622,44 +538,6 @@ mod tests {
                 if v > -tool.margin() + 1e-3 && v > NOTHING {
                     let fd = finite_difference(&tool, p);
                     assert!((g - fd).length() < 1e-5, "{shape:?} at {p}: {g} vs {fd}");
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn values_alone_are_the_values_of_value_and_gradient_bit_for_bit() {
-        let shapes = [
-            ToolShape::Sphere { radius: 0.2 },
-            ToolShape::Box {
-                half_extents: DVec3::new(0.2, 0.1, 0.3),
-                rounding: 0.02,
-            },
-            ToolShape::Cylinder {
-                radius: 0.15,
-                half_height: 0.2,
-            },
-        ];
-        let path = [
-            Pose {
-                position: DVec3::new(0.1, 0.2, 0.3),
-                rotation: DQuat::from_rotation_z(0.3),
-                scale: 1.5,
-            },
-            Pose::at(DVec3::new(0.3, -0.1, 0.2)),
-        ];
-        for shape in shapes {
-            for n in [1, 2] {
-                let tool = CompiledTool::new(shape, &path[..n], 0.05).unwrap();
-                for i in 0..2000 {
-                    let a = i as f64;
-                    let p = DVec3::new((a * 0.37).sin(), (a * 0.73).cos(), (a * 1.1).sin()) * 0.6;
-                    let (v, _) = tool.eval(p);
-                    assert_eq!(tool.value(p).to_bits(), v.to_bits(), "{shape:?} at {p}");
-                }
-                // On the axes and at the centre, where ties and zero lengths happen.
-                for p in [DVec3::ZERO, path[0].position, DVec3::new(0.1, 0.2, 0.0)] {
-                    assert_eq!(tool.value(p).to_bits(), tool.eval(p).0.to_bits());
                 }
             }
         }
