@@ -15,7 +15,7 @@
 //!   [`hostile`]: garbage, replays, forged and member-authored ops, floods.
 //! - [`workload`]: scripted users as a list of [`workload::Action`]s drawn up front.
 //! - Checkers (run at the end): convergence, causal delivery, scene folds, the
-//!   [`reference`] lease rules, durable and lost ops, forged ops, rate limits, and
+//!   [`reference`](mod@reference) lease rules, durable and lost ops, forged ops, rate limits, and
 //!   [`memory`] per peer (a counting allocator).
 //! - [`report::Report`]: counters, convergence after healing, memory, op sizes, samples;
 //!   [`plots`]: PNG plots; [`shrink`]: failing runs cut down to small reproducers.

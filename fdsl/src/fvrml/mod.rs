@@ -11,7 +11,7 @@
 //!    and groups. `Inline` files are read through a resolver callback the caller provides, so
 //!    this module does no IO.
 //!
-//! Writing is the reverse: [`save`] turns a scene into a [`Document`] and [`write`] prints a
+//! Writing is the reverse: [`save`] turns a scene into a [`Document`] and [`write()`] prints a
 //! document as canonical text that [`parse`] reads back equal (numbers bit-identical).
 //! `load(save(scene))` gives back the scene, except for the objects' edit histories, which
 //! FVRML text does not carry (the binary codec, [`Scene::encode`], does), and except that

@@ -40,7 +40,7 @@ pub use edit::{CompiledEdit, Edit, EditOp, PaintValue, Paintable};
 pub use geometry::{Geometry, ParametricKind, Shape};
 pub use history::History;
 pub use physics::{ForceField, Physics, Property};
-pub use sample::{ColorSlot, DEFAULT_DIFFUSE, Sampler};
+pub use sample::{ColorSlot, DEFAULT_DIFFUSE, MAX_RAY_PIECES, Sampler};
 pub use space::{Domain, Motion, Timing, Transform};
 pub use tool::{Axis, Pose, ToolShape};
 

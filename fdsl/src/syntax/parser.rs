@@ -1,4 +1,4 @@
-//! The parser: tokens to [`ast::Program`], with diagnostics instead of failure.
+//! The parser: tokens to [`Program`], with diagnostics instead of failure.
 //!
 //! Precedence, loosest first: `||`, `&&`, `|` (union), `&` and `\` (intersection,
 //! difference), comparisons, `+ -`, `* / %`, prefix `- + !`, then `^` (right-associative,
