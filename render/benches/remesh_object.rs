@@ -2,7 +2,8 @@
 //! object with 10^4 edits, against meshing the whole object from scratch at the same depth.
 //!
 //! Run with `cargo bench -p render --bench remesh_object`. Before the benchmarks it prints the
-//! object, the mesh sizes and, per depth, one edit's latency split into its steps.
+//! object, the mesh sizes and, per depth, one edit's latency split into its steps, with the
+//! whole assembly and the patched one timed on the same remeshed state.
 //!
 //! The object is the unit ball (in a 2.2-unit domain) carved by 10^4 edits spread over its
 //! surface along a golden-angle spiral: ball tools of radius 0.04, every second edit a short
@@ -14,6 +15,9 @@
 //!   `Object::prepare`, a new `ObjectField` (the sampler's snapshot of the object), remesh of
 //!   the edit's boxes (`OctreeMesher::remesh`), then `OctreeMesher::mesh` (the whole mesh
 //!   assembled again, as the renderer needs it). The history grows by one edit per iteration.
+//! - `edit_to_patched_mesh`: the same, but `OctreeMesher::mesh_update` patches the previous
+//!   mesh instead: only the changed blocks' vertices and the triangles that read them are
+//!   written (now and then, when unreferenced vertices pile up, the whole mesh is assembled).
 //! - `full_mesh`: meshing the same object from scratch (`mesh`) at the same depth.
 
 use divan::Bencher;
@@ -21,7 +25,7 @@ use fdsl::object::{Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData, 
 use glam::DVec3;
 use render::mesh::object_field::{Dirty, dirty_boxes};
 use render::mesh::octree::{MeshSettings, OctreeMesher, mesh};
-use render::mesh::{Aabb, ObjectField};
+use render::mesh::{Aabb, Mesh, ObjectField};
 
 /// Edits in the object before the benchmark adds more.
 const N_EDITS: usize = 10_000;
@@ -124,6 +128,22 @@ fn edit_to_mesh(bencher: Bencher, depth: u8) {
     });
 }
 
+#[divan::bench(args = DEPTHS, sample_count = 20, sample_size = 5)]
+fn edit_to_patched_mesh(bencher: Bencher, depth: u8) {
+    let mut object = object();
+    let mut mesher = meshed(&object, depth);
+    let mut patched = Mesh::default();
+    mesher.mesh_update(&mut patched).expect("assembles");
+    let mut k = 0;
+    bencher.bench_local(|| {
+        k += 1;
+        apply_and_remesh(&mut object, &mut mesher, k, depth);
+        mesher
+            .mesh_update(&mut patched)
+            .map_or(0, |p| p.n_triangles)
+    });
+}
+
 #[divan::bench(args = DEPTHS, sample_count = 5, sample_size = 1)]
 fn full_mesh(bencher: Bencher, depth: u8) {
     let object = object();
@@ -159,14 +179,23 @@ fn print_breakdown() {
         let full = started.elapsed();
         let m = mesher.mesh().expect("assembles");
         println!(
-            "depth {depth}: full mesh {full:.1?}, {} triangles, {} open and {} non-manifold edges",
+            "depth {depth}: full mesh {full:.1?}, {} triangles, {} vertices, {} open and {} non-manifold edges",
             m.n_triangles(),
+            m.n_vertices(),
             m.open_edges(),
             m.non_manifold_edges()
         );
+        let started = now();
+        let mut patched = Mesh::default();
+        mesher.mesh_update(&mut patched).expect("assembles");
+        println!(
+            "  first patch (the whole mesh and its layout): {:.1?}",
+            started.elapsed()
+        );
         // Median over 21 edits of each step.
-        let mut steps: Vec<[f64; 4]> = Vec::new();
+        let mut steps: Vec<[f64; 5]> = Vec::new();
         let mut n_blocks = Vec::new();
+        let (mut written, mut n_full) = (Vec::new(), 0);
         for k in 1..=21 {
             let t0 = now();
             let idx = object
@@ -187,9 +216,19 @@ fn print_breakdown() {
             let t3 = now();
             let n = mesher.mesh().map_or(0, |m| m.n_triangles());
             let t4 = now();
-            assert!(n > 0);
+            let patch = mesher.mesh_update(&mut patched).expect("patches");
+            let t5 = now();
+            assert!(n > 0 && patch.n_triangles == n);
+            n_full += usize::from(patch.full);
+            written.push((
+                patch.n_triangles_written(),
+                patch.n_vertices_written(),
+                patch.triangle_ranges.len(),
+                patch.vertex_ranges.len(),
+            ));
             n_blocks.push(blocks);
-            steps.push([t1 - t0, t2 - t1, t3 - t2, t4 - t3].map(|d| d.as_secs_f64() * 1e3));
+            steps
+                .push([t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4].map(|d| d.as_secs_f64() * 1e3));
         }
         let median = |i: usize| {
             let mut v: Vec<f64> = steps.iter().map(|s| s[i]).collect();
@@ -197,13 +236,22 @@ fn print_breakdown() {
             v[v.len() / 2]
         };
         n_blocks.sort_unstable();
+        written.sort_unstable();
+        let (triangles_written, vertices_written, triangle_ranges, vertex_ranges) =
+            written[written.len() / 2];
         println!(
-            "  one edit, medians of 21 (ms): apply+prepare {:.3}, sampler snapshot {:.3}, remesh {:.3} ({} blocks evaluated), assemble mesh {:.3}",
+            "  one edit, medians of 21 (ms): apply+prepare {:.3}, sampler snapshot {:.3}, remesh {:.3} ({} blocks evaluated), assemble mesh {:.3}, patch mesh {:.3} ({} triangles in {} ranges and {} vertices in {} ranges written, {} of 21 patches whole)",
             median(0),
             median(1),
             median(2),
             n_blocks[n_blocks.len() / 2],
-            median(3)
+            median(3),
+            median(4),
+            triangles_written,
+            triangle_ranges,
+            vertices_written,
+            vertex_ranges,
+            n_full
         );
     }
 }

@@ -709,6 +709,257 @@ mod tests {
         assert!(same_surface(&mesher.mesh().unwrap(), &full, 1e-6));
     }
 
+    /// A small seeded generator (xorshift64) for random edit sequences.
+    struct Rng(u64);
+
+    impl Rng {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            self.0
+        }
+
+        /// Uniform in 0..1.
+        fn unit(&mut self) -> f64 {
+            (self.next() >> 11) as f64 / (1u64 << 53) as f64
+        }
+
+        /// A point on the sphere of radius `r`.
+        fn on_sphere(&mut self, r: f64) -> DVec3 {
+            let y = 2.0 * self.unit() - 1.0;
+            let phi = std::f64::consts::TAU * self.unit();
+            let ring = (1.0 - y * y).max(0.0).sqrt();
+            r * DVec3::new(ring * phi.cos(), y, ring * phi.sin())
+        }
+    }
+
+    /// One random step of a sculpting session on `object`: mostly carves and added blobs
+    /// (stamps and strokes, balls and boxes), sometimes a painting, an undo or a redo of an
+    /// earlier edit. Returns what to remesh and what the step was.
+    fn random_step(object: &mut Object, rng: &mut Rng) -> (Dirty, &'static str) {
+        let roll = rng.next() % 10;
+        let n = object.history().len();
+        if roll == 0 {
+            let idx = (rng.next() % n as u64) as usize;
+            let entry = &object.history().entries()[idx];
+            let (dirty, active) = (dirty_boxes(&entry.edit), entry.active);
+            if active {
+                object.undo(idx);
+            } else {
+                object.redo(idx);
+            }
+            object.prepare();
+            return (dirty, if active { "undo" } else { "redo" });
+        }
+        let r = 0.9 + 0.15 * rng.unit();
+        let at = rng.on_sphere(r);
+        let (op, what) = match roll {
+            1 => (
+                EditOp::Paint {
+                    property: fdsl::object::Paintable::Color,
+                    value: fdsl::object::PaintValue::Color([1.0, 0.2, 0.1]),
+                },
+                "paint",
+            ),
+            2 | 3 => (EditOp::Union, "union"),
+            _ => (EditOp::Subtract, "carve"),
+        };
+        let tool = if rng.next().is_multiple_of(3) {
+            ToolShape::Box {
+                half_extents: DVec3::new(0.08, 0.06, 0.1) * (0.5 + rng.unit()),
+                rounding: 0.02,
+            }
+        } else {
+            ToolShape::Sphere {
+                radius: 0.04 + 0.12 * rng.unit(),
+            }
+        };
+        let e = if rng.next().is_multiple_of(2) {
+            Edit::stamp(op, tool, Pose::at(at))
+        } else {
+            let side = at.any_orthonormal_vector() * (0.2 * rng.unit());
+            Edit::stroke(op, tool, vec![Pose::at(at - side), Pose::at(at + side)])
+        };
+        let idx = object.apply(e).unwrap();
+        object.prepare();
+        (dirty_boxes(&object.history().entries()[idx].edit), what)
+    }
+
+    /// The triangles of `m` as their corners (position, normal, colour), each triangle
+    /// starting at its smallest corner (winding kept), sorted: equal for meshes with the same
+    /// triangles in any order over any numbering of the vertices.
+    fn canonical_triangles(m: &Mesh) -> Vec<[[f32; 10]; 3]> {
+        let corner = |i: u32| -> [f32; 10] {
+            let (p, n, c) = (
+                m.positions[i as usize],
+                m.normals[i as usize],
+                m.colours[i as usize],
+            );
+            [p[0], p[1], p[2], n[0], n[1], n[2], c[0], c[1], c[2], c[3]]
+        };
+        let cmp = |a: &[f32; 10], b: &[f32; 10]| {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| x.total_cmp(y))
+                .find(|o| o.is_ne())
+                .unwrap_or(std::cmp::Ordering::Equal)
+        };
+        let mut out: Vec<[[f32; 10]; 3]> = m
+            .triangles()
+            .map(|t| {
+                let c = t.map(corner);
+                let first = (0..3).min_by(|&i, &j| cmp(&c[i], &c[j])).unwrap();
+                std::array::from_fn(|k| c[(first + k) % 3])
+            })
+            .collect();
+        out.sort_by(|a, b| {
+            (0..3)
+                .map(|k| cmp(&a[k], &b[k]))
+                .find(|o| o.is_ne())
+                .unwrap_or(std::cmp::Ordering::Equal)
+        });
+        out
+    }
+
+    /// Whether `a` and `b` have the same triangles (corners within `tolerance`), whatever
+    /// their order and vertex numbering.
+    fn same_triangles(a: &Mesh, b: &Mesh, tolerance: f32) -> bool {
+        let (ta, tb) = (canonical_triangles(a), canonical_triangles(b));
+        ta.len() == tb.len()
+            && ta.iter().zip(&tb).all(|(x, y)| {
+                (0..3).all(|k| (0..10).all(|c| (x[k][c] - y[k][c]).abs() <= tolerance))
+            })
+    }
+
+    /// What a renderer holding `uploaded` (the mesh before the patch) has after copying
+    /// only the patch's ranges from `mesh`.
+    fn upload(uploaded: &mut Mesh, mesh: &Mesh, patch: &octree::MeshPatch) {
+        // Anything the ranges do not cover keeps this mark and breaks the comparison.
+        let mark = [-7.0f32; 3];
+        uploaded.positions.resize(patch.n_vertices, mark);
+        uploaded.normals.resize(patch.n_vertices, mark);
+        uploaded.colours.resize(patch.n_vertices, [-7.0; 4]);
+        uploaded.indices.resize(3 * patch.n_triangles, u32::MAX);
+        for r in &patch.vertex_ranges {
+            uploaded.positions[r.clone()].copy_from_slice(&mesh.positions[r.clone()]);
+            uploaded.normals[r.clone()].copy_from_slice(&mesh.normals[r.clone()]);
+            uploaded.colours[r.clone()].copy_from_slice(&mesh.colours[r.clone()]);
+        }
+        for r in &patch.triangle_ranges {
+            let r = 3 * r.start..3 * r.end;
+            uploaded.indices[r.clone()].copy_from_slice(&mesh.indices[r]);
+        }
+    }
+
+    /// Remeshes what one random step of a session dirtied, for `steps` steps from a
+    /// 200-edit object at depth 6, patching a mesh with `patch` after each; returns how many
+    /// patched meshes had other triangles than [`OctreeMesher::mesh`] or were not closed.
+    fn patched_session(
+        seed: u64,
+        steps: usize,
+        mut patch: impl FnMut(&mut OctreeMesher, &mut Mesh) -> octree::MeshPatch,
+    ) -> usize {
+        let depth = 6;
+        let mut object = ball();
+        for k in 0..200 {
+            object.apply(edit(k, 200)).unwrap();
+        }
+        object.prepare();
+        let mut mesher = OctreeMesher::new(&settings(depth)).unwrap();
+        mesher
+            .remesh(&mut ObjectField::new(&object, 0.0), settings(depth).bounds)
+            .unwrap();
+        let mut patched = Mesh::default();
+        let first = patch(&mut mesher, &mut patched);
+        assert!(first.full, "the first patch assembles everything");
+        assert!(same_triangles(&patched, &mesher.mesh().unwrap(), 0.0));
+        let (mut rng, mut n_wrong, mut n_partial) = (Rng(seed), 0, 0);
+        for step in 0..steps {
+            // An intersection midway: it dirties everything, so the patch is whole again.
+            let (dirty, what) = if step == steps / 2 {
+                let e = Edit::stamp(
+                    EditOp::Intersect,
+                    ToolShape::Sphere { radius: 1.02 },
+                    Pose::at(DVec3::new(0.1, 0.0, 0.0)),
+                );
+                let idx = object.apply(e).unwrap();
+                object.prepare();
+                (
+                    dirty_boxes(&object.history().entries()[idx].edit),
+                    "intersect",
+                )
+            } else {
+                random_step(&mut object, &mut rng)
+            };
+            remesh(&mut mesher, &mut ObjectField::new(&object, 0.0), &dirty);
+            let mut uploaded = patched.clone();
+            let p = patch(&mut mesher, &mut patched);
+            let full = mesher.mesh().unwrap();
+            assert_eq!(patched.validate(), Ok(()), "step {step} ({what})");
+            let right = same_triangles(&patched, &full, 1e-6)
+                && patched.open_edges() == 0
+                && patched.non_manifold_edges() == 0
+                && patched.misoriented_edges() == 0;
+            n_wrong += usize::from(!right);
+            // The ranges hold everything that changed: a renderer copying only them has it.
+            upload(&mut uploaded, &patched, &p);
+            assert!(
+                uploaded == patched,
+                "step {step} ({what}): ranges miss a change"
+            );
+            assert_eq!(p.full, what == "intersect", "step {step} ({what}): {p:?}");
+            if what == "paint" {
+                assert_eq!(p.n_triangles_written() + p.n_vertices_written(), 0);
+            }
+            if !p.full && p.n_triangles_written() > 0 {
+                n_partial += 1;
+                assert!(
+                    p.n_triangles_written() < p.n_triangles / 2,
+                    "step {step} ({what}): {} of {} triangles written",
+                    p.n_triangles_written(),
+                    p.n_triangles
+                );
+            }
+            // Unreferenced vertices stay bounded.
+            let mut used = patched.indices.clone();
+            used.sort_unstable();
+            used.dedup();
+            assert!(
+                2 * patched.n_vertices() <= 3 * used.len() + 2,
+                "step {step}: {} vertices, {} used",
+                patched.n_vertices(),
+                used.len()
+            );
+        }
+        assert!(n_partial > steps / 2, "{n_partial} partial patches");
+        n_wrong
+    }
+
+    /// After each of many random edits, undos and redos (and paintings and an intersection)
+    /// on a 200-edit object, the patched mesh has exactly the triangles of a whole assembly,
+    /// is closed and manifold, and its patch's ranges hold every change.
+    #[test]
+    fn a_patched_mesh_equals_the_whole_assembly_after_each_random_edit() {
+        let n_wrong = patched_session(0x5eed_2026, 40, |mesher, mesh| {
+            mesher.mesh_update(mesh).unwrap()
+        });
+        assert_eq!(
+            n_wrong, 0,
+            "patched meshes that differ from a whole assembly"
+        );
+    }
+
+    /// The comparison above catches a patch that emits only the changed blocks' triangles
+    /// and forgets the quads and gap polygons its neighbours own across the seams.
+    #[test]
+    fn a_patch_that_forgets_the_seams_is_caught() {
+        let n_wrong = patched_session(0x5eed_2026, 8, |mesher, mesh| {
+            mesher.mesh_update_forgetting_seams(mesh).unwrap()
+        });
+        assert!(n_wrong > 0, "no step showed the stale seams");
+    }
+
     #[test]
     fn dirty_regions_by_operation() {
         let tool = ToolShape::Sphere { radius: 0.1 };

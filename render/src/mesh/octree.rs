@@ -27,8 +27,11 @@
 //! surface is flat (the resolution near the surface is uniform). Where the surface leaves the
 //! box the mesh is open along the box, which is what stitching a remeshed region needs.
 
+mod assembly;
 mod qef;
 mod topology;
+
+pub use assembly::MeshPatch;
 
 use super::field::Field;
 use super::{Aabb, MESH_VERTICES_MAX, Mesh, normalise_or_up};
@@ -139,6 +142,10 @@ pub fn count_blocks<F: Field>(
 /// values; all other blocks are kept. The result is watertight and manifold like a full mesh
 /// of the edited field, and equal to it wherever pruning made the same decisions (always,
 /// for fields whose interval bounds do not depend on far-away parts of the field).
+///
+/// [`OctreeMesher::mesh`] assembles the whole mesh from the kept blocks;
+/// [`OctreeMesher::mesh_update`] patches the mesh it handed out last, writing only the
+/// changed blocks' vertices and the triangles that read them, and says which ranges changed.
 pub struct OctreeMesher {
     grid: Grid,
     /// Blocks along each axis.
@@ -148,6 +155,37 @@ pub struct OctreeMesher {
     reps: Vec<f32>,
     /// Blocks with a record: those with crossed cells, and evaluated blocks kept by a remesh.
     blocks: BTreeMap<[u32; 3], Block>,
+    /// Blocks whose records a remesh replaced or dropped since the last
+    /// [`OctreeMesher::mesh_update`].
+    changes: Changes,
+    /// Where each block's vertices and triangles lie in the mesh that
+    /// [`OctreeMesher::mesh_update`] last handed out.
+    assembled: Option<assembly::Assembled>,
+}
+
+/// Blocks changed since the mesh was last patched.
+#[derive(Default)]
+struct Changes {
+    /// Block indices, possibly repeated; at most the number of blocks (then `all` is set).
+    blocks: Vec<u32>,
+    /// Every block may have changed: the next patch assembles the whole mesh.
+    all: bool,
+}
+
+impl Changes {
+    /// Notes that block `idx` (of `n_blocks_total`) changed.
+    fn push(&mut self, idx: usize, n_blocks_total: usize) {
+        if self.all {
+            return;
+        }
+        if self.blocks.len() >= n_blocks_total {
+            // A bounded log: past one entry per block, patching saves nothing.
+            self.blocks.clear();
+            self.all = true;
+            return;
+        }
+        self.blocks.push(idx as u32);
+    }
 }
 
 impl OctreeMesher {
@@ -162,6 +200,11 @@ impl OctreeMesher {
             n_blocks,
             reps,
             blocks: BTreeMap::new(),
+            changes: Changes {
+                blocks: Vec::new(),
+                all: true,
+            },
+            assembled: None,
         })
     }
 
@@ -183,6 +226,7 @@ impl OctreeMesher {
             hi: range.hi.map(|h| (h + 1).min(last)),
         };
         self.blocks.retain(|k, _| !range.contains(*k));
+        self.note_changed(range);
         let mut visit = Visit {
             mesher: self,
             range,
@@ -194,6 +238,27 @@ impl OctreeMesher {
         Ok(stats)
     }
 
+    /// Notes every block of `range` as changed (blocks just above it are noted by
+    /// `Visit::finish` when their cells change).
+    fn note_changed(&mut self, range: BlockRange) {
+        let n_total = self.reps.len();
+        let n_range: usize = (0..3)
+            .map(|a| (range.hi[a] - range.lo[a] + 1) as usize)
+            .product();
+        if n_range >= n_total {
+            self.changes.blocks.clear();
+            self.changes.all = true;
+            return;
+        }
+        for z in range.lo[2]..=range.hi[2] {
+            for y in range.lo[1]..=range.hi[1] {
+                for x in range.lo[0]..=range.hi[0] {
+                    self.changes.push(self.block_idx([x, y, z]), n_total);
+                }
+            }
+        }
+    }
+
     /// Number of kept blocks with a record (crossed by the surface, or kept by a remesh).
     pub fn n_blocks(&self) -> usize {
         self.blocks.len()
@@ -201,10 +266,22 @@ impl OctreeMesher {
 
     /// Assembles the mesh of all kept blocks.
     pub fn mesh(&self) -> Result<Mesh, OctreeMeshError> {
+        let mut mesh = Mesh::default();
+        self.assemble_into(&mut mesh, |_| {})?;
+        Ok(mesh)
+    }
+
+    /// Assembles the mesh of all kept blocks into `mesh` (emptied first), block after block in
+    /// key order; tells `placed` where each block's vertices and triangles went.
+    fn assemble_into(
+        &self,
+        mesh: &mut Mesh,
+        mut placed: impl FnMut(Placed),
+    ) -> Result<(), OctreeMeshError> {
         // Dense tables by block index: lookups across block faces are the inner loop.
         let mut offsets = vec![NONE; self.reps.len()];
         let mut records: Vec<Option<&Block>> = vec![None; self.reps.len()];
-        let mut mesh = Mesh::default();
+        *mesh = Mesh::default();
         let n_vertices: usize = self.blocks.values().map(|b| b.positions.len()).sum();
         if n_vertices >= NONE as usize {
             return Err(OctreeMeshError::TooManyVertices);
@@ -219,19 +296,42 @@ impl OctreeMesher {
             mesh.normals.extend_from_slice(&block.normals);
         }
         mesh.colours = vec![[1.0; 4]; mesh.positions.len()];
-        let assembly = Assembly { offsets, records };
+        let assembly = Assembly {
+            offsets: &offsets,
+            records: Records::Dense(records),
+        };
         for (key, block) in &self.blocks {
-            let offset = assembly.offsets[self.block_idx(*key)];
-            self.emit_quads(block, offset, &assembly, &mut mesh);
-            self.emit_gaps(block, offset, &assembly, &mut mesh);
-            for central in &block.centrals {
-                for k in 1..central.len().saturating_sub(1) {
-                    mesh.indices
-                        .extend([central[0], central[k], central[k + 1]].map(|v| v + offset));
-                }
+            let idx = self.block_idx(*key);
+            let first_triangle = mesh.indices.len() / 3;
+            self.emit_block(block, &assembly, &mesh.positions, &mut mesh.indices, idx);
+            placed(Placed {
+                block_idx: idx,
+                first_vertex: offsets[idx],
+                n_vertices: block.positions.len(),
+                triangles: first_triangle..mesh.indices.len() / 3,
+            });
+        }
+        Ok(())
+    }
+
+    /// Appends to `out` every triangle block `block` (index `idx`) owns: the quads of the grid
+    /// edges it owns, the gap polygons across its split cells' faces, its central polygons.
+    fn emit_block(
+        &self,
+        block: &Block,
+        assembly: &Assembly<'_>,
+        positions: &[[f32; 3]],
+        out: &mut Vec<u32>,
+        idx: usize,
+    ) {
+        let offset = assembly.offsets[idx];
+        self.emit_quads(block, offset, assembly, positions, out);
+        self.emit_gaps(block, offset, assembly, positions, out);
+        for central in &block.centrals {
+            for k in 1..central.len().saturating_sub(1) {
+                out.extend([central[0], central[k], central[k + 1]].map(|v| v + offset));
             }
         }
-        Ok(mesh)
     }
 
     fn block_idx(&self, k: [u32; 3]) -> usize {
@@ -544,6 +644,10 @@ impl Visit<'_> {
         let origin = key.map(|k| k * bc);
         let block = build_block(&grid, field, origin, values, self.stats);
         let idx = self.mesher.block_idx(key);
+        if !self.range.contains(key) {
+            let n_total = self.mesher.reps.len();
+            self.mesher.changes.push(idx, n_total);
+        }
         match block {
             Ok(block) => {
                 self.mesher.blocks.insert(key, block);
@@ -766,18 +870,25 @@ impl OctreeMesher {
     /// The global index of the vertex that cell `cell` has on its edge `e`, if any.
     fn cell_vertex(&self, assembly: &Assembly<'_>, cell: [u32; 3], e: usize) -> Option<u32> {
         let bc = self.grid.block;
-        let idx = self.block_idx(cell.map(|c| c / bc));
-        let v = assembly
-            .records
-            .get(idx)
-            .copied()
-            .flatten()?
-            .cell(bc, cell.map(|c| c % bc))?[e];
+        let key = cell.map(|c| c / bc);
+        let idx = self.block_idx(key);
+        let record = match &assembly.records {
+            Records::Dense(records) => records.get(idx).copied().flatten(),
+            Records::Sparse(blocks) => blocks.get(&key),
+        };
+        let v = record?.cell(bc, cell.map(|c| c % bc))?[e];
         (v != NONE).then(|| assembly.offsets[idx] + v)
     }
 
     /// Emits two triangles for every crossed grid edge that `block` owns.
-    fn emit_quads(&self, block: &Block, offset: u32, assembly: &Assembly<'_>, mesh: &mut Mesh) {
+    fn emit_quads(
+        &self,
+        block: &Block,
+        offset: u32,
+        assembly: &Assembly<'_>,
+        positions: &[[f32; 3]],
+        out: &mut Vec<u32>,
+    ) {
         let grid = &self.grid;
         let bc = grid.block;
         let n = grid.n_cells;
@@ -819,15 +930,21 @@ impl OctreeMesher {
                 let [Some(q0), Some(q1), Some(q2), Some(q3)] = quad else {
                     continue;
                 };
-                mesh.indices
-                    .extend(split_quad(&mesh.positions, [q0, q1, q2, q3]));
+                out.extend(split_quad(positions, [q0, q1, q2, q3]));
             }
         }
     }
 
     /// Emits the gap polygons across the faces of `block`'s split cells: where the cells on
     /// the two sides of a face segment give its two ends different vertices.
-    fn emit_gaps(&self, block: &Block, offset: u32, assembly: &Assembly<'_>, mesh: &mut Mesh) {
+    fn emit_gaps(
+        &self,
+        block: &Block,
+        offset: u32,
+        assembly: &Assembly<'_>,
+        positions: &[[f32; 3]],
+        out: &mut Vec<u32>,
+    ) {
         let grid = &self.grid;
         for &ci in &block.split_cells {
             let (entry, l) = (block.cells[ci as usize], block.cell_local[ci as usize]);
@@ -869,18 +986,34 @@ impl OctreeMesher {
                     } else {
                         [al, bl, br, ar]
                     };
-                    emit_polygon(&mesh.positions, cycle, &mut mesh.indices);
+                    emit_polygon(positions, cycle, out);
                 }
             }
         }
     }
 }
 
-/// Per block index, the first global vertex of its record and the record (blocks without
-/// one: `NONE` and `None`), while a mesh is assembled.
+/// Per block index, the first global vertex of its record, and the records, while a mesh is
+/// assembled.
 struct Assembly<'a> {
-    offsets: Vec<u32>,
-    records: Vec<Option<&'a Block>>,
+    offsets: &'a [u32],
+    records: Records<'a>,
+}
+
+/// The records an assembly reads vertices of neighbouring blocks from.
+enum Records<'a> {
+    /// By block index (`None` without a record): a whole mesh reads every block.
+    Dense(Vec<Option<&'a Block>>),
+    /// The mesher's map: a patch reads a few blocks.
+    Sparse(&'a BTreeMap<[u32; 3], Block>),
+}
+
+/// Where a whole assembly put one block's vertices and triangles.
+struct Placed {
+    block_idx: usize,
+    first_vertex: u32,
+    n_vertices: usize,
+    triangles: std::ops::Range<usize>,
 }
 
 /// Emits a quad whose consecutive corners may coincide: a quad, a triangle or nothing.
