@@ -263,32 +263,13 @@ impl CallbackTrait for ViewportCallback {
         let Some(target) = &res.target else {
             return Vec::new();
         };
-        let [r, g, b, a] = self.scene.background.map(f64::from);
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("sculpt viewport"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &target.render_view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color { r, g, b, a }),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &target.depth_view,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Discard,
-                }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        res.renderer.paint(&mut pass);
-        drop(pass);
+        res.renderer.draw_into(
+            encoder,
+            "sculpt viewport",
+            &target.render_view,
+            &target.depth_view,
+            self.scene.background,
+        );
         let ms = clock::now().instant.duration_since(start).as_secs_f64() * 1e3;
         if let Ok(mut report) = self.report.lock() {
             if report.prepare_ms.len() >= PREPARE_SAMPLES_MAX {

@@ -473,6 +473,44 @@ impl Renderer {
         });
     }
 
+    /// Records into `encoder` one pass that clears `colour` to `background` and `depth` to
+    /// the far plane, then draws the last prepared scene: what the offscreen path and an
+    /// embedding window both do with their own targets.
+    pub fn draw_into(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        label: &str,
+        colour: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        background: [f32; 4],
+    ) {
+        let [r, g, b, a] = background.map(f64::from);
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some(label),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: colour,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color { r, g, b, a }),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        self.paint(&mut pass);
+    }
+
     /// Records the draws of the last prepared scene into `pass`.
     pub fn paint(&self, pass: &mut wgpu::RenderPass<'_>) {
         pass.set_bind_group(0, &self.globals_bind_group, &[]);
