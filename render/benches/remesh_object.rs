@@ -19,13 +19,23 @@
 //!   mesh instead: only the changed blocks' vertices and the triangles that read them are
 //!   written (now and then, when unreferenced vertices pile up, the whole mesh is assembled).
 //! - `full_mesh`: meshing the same object from scratch (`mesh`) at the same depth.
+//!
+//! The printed breakdown also uploads each edit's mesh to a headless wgpu device (as
+//! `render::gpu::offscreen` makes it: Vulkan on llvmpipe here) with two renderers on one
+//! scene: one handed each edit's patch (`Renderer::patch_object`, so `prepare` writes only the
+//! patch's ranges) and one not (`prepare` uploads the new mesh whole). It times `prepare`
+//! followed by an empty submit and a wait for the device (so the copies are done) and counts
+//! the bytes each wrote.
 
 use divan::Bencher;
 use fdsl::object::{Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData, Pose, ToolShape};
 use glam::DVec3;
+use render::gpu::Renderer;
 use render::mesh::object_field::{Dirty, dirty_boxes};
 use render::mesh::octree::{MeshSettings, OctreeMesher, mesh};
 use render::mesh::{Aabb, Mesh, ObjectField};
+use render::scene::{Material, Scene};
+use std::sync::Arc;
 
 /// Edits in the object before the benchmark adds more.
 const N_EDITS: usize = 10_000;
@@ -161,6 +171,75 @@ fn now() -> std::time::Instant {
     std::time::Instant::now()
 }
 
+/// A headless device as `render::gpu::offscreen::Headless` makes it, or `None` without an
+/// adapter.
+fn device() -> Option<(wgpu::Device, wgpu::Queue)> {
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let adapter =
+        pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
+            .ok()?;
+    println!("device: {:?}", adapter.get_info().name);
+    pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("remesh_object bench"),
+        required_limits: wgpu::Limits::downlevel_defaults(),
+        ..Default::default()
+    }))
+    .ok()
+}
+
+/// Two renderers on one device drawing `scene`: the first is handed patches, the second
+/// uploads each new mesh whole.
+struct Uploads {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    patched: Renderer,
+    whole: Renderer,
+}
+
+impl Uploads {
+    fn new() -> Option<Self> {
+        let (device, queue) = device()?;
+        let renderer = || {
+            Renderer::new(
+                &device,
+                &queue,
+                wgpu::TextureFormat::Rgba8UnormSrgb,
+                Some(wgpu::TextureFormat::Depth32Float),
+            )
+        };
+        let (patched, whole) = (renderer(), renderer());
+        Some(Self {
+            device,
+            queue,
+            patched,
+            whole,
+        })
+    }
+
+    /// Prepares `scene` with `renderer` and waits for the device; returns milliseconds and
+    /// bytes written.
+    fn prepare(&mut self, patched: bool, scene: &Scene) -> (f64, u64) {
+        let renderer = if patched {
+            &mut self.patched
+        } else {
+            &mut self.whole
+        };
+        let started = now();
+        renderer
+            .prepare(&self.device, &self.queue, scene, [640, 480])
+            .expect("a valid mesh");
+        self.queue.submit([]);
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .expect("the device finishes");
+        (
+            started.elapsed().as_secs_f64() * 1e3,
+            renderer.mesh_bytes_uploaded(),
+        )
+    }
+}
+
 fn print_breakdown() {
     // Under `cargo test` benches run once as tests: skip the breakdown there.
     if std::env::args().any(|a| a == "--test") {
@@ -187,16 +266,38 @@ fn print_breakdown() {
         );
         let started = now();
         let mut patched = Mesh::default();
-        mesher.mesh_update(&mut patched).expect("assembles");
+        let first_patch = mesher.mesh_update(&mut patched).expect("assembles");
         println!(
             "  first patch (the whole mesh and its layout): {:.1?}",
             started.elapsed()
         );
+        let mut current = Arc::new(patched);
+        let mut scene = Scene::default();
+        scene.add_object(
+            Arc::clone(&current),
+            glam::Mat4::IDENTITY,
+            Material::default(),
+        );
+        let mut uploads = Uploads::new();
+        if let Some(u) = uploads.as_mut() {
+            let empty = Arc::new(Mesh::default());
+            u.patched
+                .patch_object(0, &empty, &current, &first_patch)
+                .expect("a patch of this mesh");
+            u.prepare(true, &scene);
+            u.prepare(false, &scene);
+        } else {
+            println!("  no wgpu adapter: uploads not measured");
+        }
+        // Per edit: milliseconds and bytes of the patched and of the whole upload.
+        let mut gpu_steps: Vec<[f64; 4]> = Vec::new();
         // Median over 21 edits of each step.
         let mut steps: Vec<[f64; 5]> = Vec::new();
         let mut n_blocks = Vec::new();
         let (mut written, mut n_full) = (Vec::new(), 0);
         for k in 1..=21 {
+            // The renderers hold `current`: the patch goes into a copy (not timed).
+            let mut patched = Mesh::clone(&current);
             let t0 = now();
             let idx = object
                 .apply(edit(k * 104_729, N_EDITS, 1.5))
@@ -219,6 +320,22 @@ fn print_breakdown() {
             let patch = mesher.mesh_update(&mut patched).expect("patches");
             let t5 = now();
             assert!(n > 0 && patch.n_triangles == n);
+            let next = Arc::new(patched);
+            if let Some(u) = uploads.as_mut() {
+                u.patched
+                    .patch_object(0, &current, &next, &patch)
+                    .expect("a patch of the uploaded mesh");
+                scene.objects[0].mesh = Arc::clone(&next);
+                let (patched_ms, patched_bytes) = u.prepare(true, &scene);
+                let (whole_ms, whole_bytes) = u.prepare(false, &scene);
+                gpu_steps.push([
+                    patched_ms,
+                    patched_bytes as f64,
+                    whole_ms,
+                    whole_bytes as f64,
+                ]);
+            }
+            current = next;
             n_full += usize::from(patch.full);
             written.push((
                 patch.n_triangles_written(),
@@ -253,5 +370,20 @@ fn print_breakdown() {
             vertex_ranges,
             n_full
         );
+        if !gpu_steps.is_empty() {
+            let gpu_median = |i: usize| {
+                let mut v: Vec<f64> = gpu_steps.iter().map(|s| s[i]).collect();
+                v.sort_by(f64::total_cmp);
+                v[v.len() / 2]
+            };
+            let (patched_ms, whole_ms) = (gpu_median(0), gpu_median(2));
+            println!(
+                "  upload, medians of 21 (prepare + device wait): patched {patched_ms:.3} ms, {:.0} bytes; whole {whole_ms:.3} ms, {:.0} bytes; whole / patched: {:.1} in time, {:.0} in bytes",
+                gpu_median(1),
+                gpu_median(3),
+                whole_ms / patched_ms,
+                gpu_median(3) / gpu_median(1),
+            );
+        }
     }
 }

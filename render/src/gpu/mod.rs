@@ -4,14 +4,22 @@
 //! [`Renderer::prepare`] before the pass and [`Renderer::paint`] inside it. It knows nothing
 //! of egui; the app wraps it in an `egui_wgpu` callback. [`offscreen`] creates its own
 //! headless device and renders a [`Scene`] to RGBA or PNG.
+//!
+//! An object's mesh is uploaded whole when its `Arc<Mesh>` changes, unless the caller handed
+//! [`Renderer::patch_object`] the [`MeshPatch`] that turned the uploaded mesh into the new
+//! one: then [`Renderer::prepare`] writes only the patch's vertex and triangle ranges into the
+//! object's buffers, which patched objects get with spare room.
 
 pub mod offscreen;
 
 use crate::mesh::Mesh;
 use crate::mesh::MeshError;
+use crate::mesh::octree::MeshPatch;
 use crate::scene::Scene;
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
+use std::collections::BTreeMap;
+use std::ops::Range;
 use std::sync::Arc;
 use wgpu::util::DeviceExt;
 
@@ -19,6 +27,47 @@ use wgpu::util::DeviceExt;
 pub const OBJECTS_MAX: usize = 1 << 16;
 /// Most line segments one frame may draw.
 pub const LINES_MAX: usize = 1 << 20;
+
+/// Spare room a patched object's buffers get beyond its mesh, as a divisor of its length
+/// (a quarter more): patches that move grown blocks to the end of the mesh fit for a while
+/// before the buffers are allocated and uploaded again.
+pub const PATCH_SPARE_DIVISOR: usize = 4;
+/// Least spare room, in vertices and in triangles, a patched object's buffers get.
+pub const PATCH_SPARE_MIN: usize = 1024;
+
+/// Why [`Renderer::patch_object`] refused a patch.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum PatchError {
+    /// The object index is not below [`OBJECTS_MAX`].
+    #[error("object {0} is beyond the limit {OBJECTS_MAX}")]
+    ObjectIndex(usize),
+    /// The patch's lengths are not the mesh's.
+    #[error(
+        "the patch has {patch_vertices} vertices and {patch_triangles} triangles, the mesh {mesh_vertices} and {mesh_triangles}"
+    )]
+    Lengths {
+        /// `MeshPatch::n_vertices`.
+        patch_vertices: usize,
+        /// `MeshPatch::n_triangles`.
+        patch_triangles: usize,
+        /// The mesh's vertices.
+        mesh_vertices: usize,
+        /// The mesh's triangles.
+        mesh_triangles: usize,
+    },
+    /// A range is reversed, out of order, overlaps the one before or runs past the mesh.
+    #[error("{what} range {start}..{end} is out of order or beyond {len}")]
+    Range {
+        /// "vertex" or "triangle".
+        what: &'static str,
+        /// Its start.
+        start: usize,
+        /// Its end.
+        end: usize,
+        /// The mesh's vertices or triangles.
+        len: usize,
+    },
+}
 
 /// Why a scene could not be prepared for drawing.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -78,9 +127,24 @@ struct GpuObject {
     mesh: Arc<Mesh>,
     vertices: wgpu::Buffer,
     indices: wgpu::Buffer,
+    /// Vertices `vertices` holds room for.
+    vertex_capacity: usize,
+    /// Triangles `indices` holds room for.
+    triangle_capacity: usize,
     n_indices: u32,
     uniform: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
+}
+
+/// What an object's next upload may be: the patches handed in since the last prepare, merged.
+struct PendingPatch {
+    /// The mesh the first patch was made from: the buffers must hold it.
+    base: Arc<Mesh>,
+    /// The mesh the last patch made.
+    mesh: Arc<Mesh>,
+    full: bool,
+    vertex_ranges: Vec<Range<usize>>,
+    triangle_ranges: Vec<Range<usize>>,
 }
 
 /// Draws [`Scene`]s into a host's render pass.
@@ -97,6 +161,10 @@ pub struct Renderer {
     draw_order: Vec<usize>,
     n_opaque: usize,
     line_buffer: Option<(wgpu::Buffer, u32)>,
+    /// Per object index, the patches handed in since the last prepare.
+    pending: BTreeMap<usize, PendingPatch>,
+    /// Mesh bytes (vertices and indices) the last prepare wrote.
+    mesh_bytes_uploaded: u64,
 }
 
 fn uniform_layout(device: &wgpu::Device, label: &str) -> wgpu::BindGroupLayout {
@@ -304,12 +372,78 @@ impl Renderer {
             draw_order: Vec::new(),
             n_opaque: 0,
             line_buffer: None,
+            pending: BTreeMap::new(),
+            mesh_bytes_uploaded: 0,
         }
+    }
+
+    /// Hands in the patch that turned object `object_idx`'s mesh `base` into `mesh` (what
+    /// [`crate::mesh::octree::OctreeMesher::mesh_update`] returns), for the next
+    /// [`Renderer::prepare`] whose scene holds `mesh` at that index.
+    ///
+    /// That prepare writes only the patch's ranges when the object's buffers hold `base` and
+    /// have room for the new lengths; otherwise (a `full` patch, a mesh that outgrew the
+    /// buffers, buffers holding another mesh, a scene holding another mesh) it uploads `mesh`
+    /// whole, into buffers with spare room ([`PATCH_SPARE_DIVISOR`]). Several patches before
+    /// one prepare are merged when each starts from the last one's `mesh`. Patches not used by
+    /// the next prepare are dropped.
+    pub fn patch_object(
+        &mut self,
+        object_idx: usize,
+        base: &Arc<Mesh>,
+        mesh: &Arc<Mesh>,
+        patch: &MeshPatch,
+    ) -> Result<(), PatchError> {
+        if object_idx >= OBJECTS_MAX {
+            return Err(PatchError::ObjectIndex(object_idx));
+        }
+        let (n_vertices, n_triangles) = (mesh.n_vertices(), mesh.n_triangles());
+        if patch.n_vertices != n_vertices || patch.n_triangles != n_triangles {
+            return Err(PatchError::Lengths {
+                patch_vertices: patch.n_vertices,
+                patch_triangles: patch.n_triangles,
+                mesh_vertices: n_vertices,
+                mesh_triangles: n_triangles,
+            });
+        }
+        check_ranges("vertex", &patch.vertex_ranges, n_vertices)?;
+        check_ranges("triangle", &patch.triangle_ranges, n_triangles)?;
+        let next = match self.pending.remove(&object_idx) {
+            Some(p) if Arc::ptr_eq(&p.mesh, base) => PendingPatch {
+                base: p.base,
+                mesh: Arc::clone(mesh),
+                full: p.full || patch.full,
+                vertex_ranges: union(&p.vertex_ranges, &patch.vertex_ranges, n_vertices),
+                triangle_ranges: union(&p.triangle_ranges, &patch.triangle_ranges, n_triangles),
+            },
+            // A patch from a mesh the pending ones did not make: nothing to chain, whole.
+            Some(p) => PendingPatch {
+                full: true,
+                mesh: Arc::clone(mesh),
+                ..p
+            },
+            None => PendingPatch {
+                base: Arc::clone(base),
+                mesh: Arc::clone(mesh),
+                full: patch.full,
+                vertex_ranges: patch.vertex_ranges.clone(),
+                triangle_ranges: patch.triangle_ranges.clone(),
+            },
+        };
+        self.pending.insert(object_idx, next);
+        Ok(())
+    }
+
+    /// Mesh bytes (vertices and indices) the last [`Renderer::prepare`] wrote to the GPU.
+    pub fn mesh_bytes_uploaded(&self) -> u64 {
+        self.mesh_bytes_uploaded
     }
 
     /// Uploads what changed in `scene` for a target of `size_px` pixels and sorts the draws.
     ///
-    /// Meshes are uploaded again only when an object's `Arc<Mesh>` is a different allocation.
+    /// Meshes are uploaded again only when an object's `Arc<Mesh>` is a different allocation,
+    /// and then only the ranges of a patch handed to [`Renderer::patch_object`] where one
+    /// applies.
     pub fn prepare(
         &mut self,
         device: &wgpu::Device,
@@ -323,10 +457,18 @@ impl Renderer {
         if scene.lines.len() > LINES_MAX {
             return Err(PrepareError::TooManyLines(scene.lines.len()));
         }
+        // A mesh already uploaded was validated then: only new allocations are checked, so a
+        // frame that changes nothing does not scan every mesh again.
         for (object_idx, o) in scene.objects.iter().enumerate() {
-            o.mesh
-                .validate()
-                .map_err(|source| PrepareError::Mesh { object_idx, source })?;
+            let uploaded = self
+                .objects
+                .get(object_idx)
+                .is_some_and(|g| Arc::ptr_eq(&g.mesh, &o.mesh));
+            if !uploaded {
+                o.mesh
+                    .validate()
+                    .map_err(|source| PrepareError::Mesh { object_idx, source })?;
+            }
         }
         let aspect = size_px[0].max(1) as f32 / size_px[1].max(1) as f32;
         let eye = scene.camera.eye();
@@ -337,17 +479,28 @@ impl Renderer {
         };
         queue.write_buffer(&self.globals, 0, bytemuck::bytes_of(&g));
         self.objects.truncate(scene.objects.len());
+        self.mesh_bytes_uploaded = 0;
+        let mut pending = std::mem::take(&mut self.pending);
         for (i, o) in scene.objects.iter().enumerate() {
             let fresh = self
                 .objects
                 .get(i)
                 .is_none_or(|g| !Arc::ptr_eq(&g.mesh, &o.mesh));
             if fresh {
-                let gpu = self.upload(device, &o.mesh);
-                if i < self.objects.len() {
-                    self.objects[i] = gpu;
-                } else {
-                    self.objects.push(gpu);
+                let patch = pending.remove(&i).filter(|p| Arc::ptr_eq(&p.mesh, &o.mesh));
+                let patched = patch.as_ref().is_some_and(|p| {
+                    self.objects.get_mut(i).is_some_and(|gpu| {
+                        write_patch(queue, gpu, p, &mut self.mesh_bytes_uploaded)
+                    })
+                });
+                if !patched {
+                    let spare = patch.is_some();
+                    let gpu = self.upload(device, queue, &o.mesh, spare);
+                    if i < self.objects.len() {
+                        self.objects[i] = gpu;
+                    } else {
+                        self.objects.push(gpu);
+                    }
                 }
             }
             let u = ObjectUniform {
@@ -368,42 +521,49 @@ impl Renderer {
         Ok(())
     }
 
-    fn upload(&self, device: &wgpu::Device, mesh: &Arc<Mesh>) -> GpuObject {
-        let vertices: Vec<MeshVertex> = (0..mesh.n_vertices())
-            .map(|i| MeshVertex {
-                position: mesh.positions[i],
-                normal: mesh.normals[i],
-                colour: mesh.colours[i],
-                ambient: match mesh.ambient.get(i) {
-                    Some(a) => *a,
-                    None => {
-                        let c = mesh.colours[i];
-                        [c[0], c[1], c[2]]
-                    }
-                },
-            })
-            .collect();
+    /// Uploads `mesh` whole into new buffers, with spare room when `spare` (for an object
+    /// that is patched).
+    fn upload(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        mesh: &Arc<Mesh>,
+        spare: bool,
+    ) -> GpuObject {
+        let (n_vertices, n_triangles) = (mesh.n_vertices(), mesh.n_triangles());
+        let room = |n: usize| {
+            if spare {
+                n + (n / PATCH_SPARE_DIVISOR).max(PATCH_SPARE_MIN)
+            } else {
+                n
+            }
+        };
+        let (vertex_capacity, triangle_capacity) = (room(n_vertices), room(n_triangles));
+        let vertices = mesh_vertices(mesh, 0..n_vertices);
+        let vertex_bytes: &[u8] = bytemuck::cast_slice(&vertices);
+        let index_bytes: &[u8] = bytemuck::cast_slice(&mesh.indices);
         // wgpu rejects empty buffers; a zero-length draw needs none of the content.
-        let vertex_bytes: &[u8] = if vertices.is_empty() {
-            &[0; 4]
-        } else {
-            bytemuck::cast_slice(&vertices)
+        let buffer = |label, usage, bytes: usize| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: (bytes as u64).max(wgpu::COPY_BUFFER_ALIGNMENT),
+                usage: usage | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
         };
-        let index_bytes: &[u8] = if mesh.indices.is_empty() {
-            &[0; 4]
-        } else {
-            bytemuck::cast_slice(&mesh.indices)
-        };
-        let vertex_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("render vertices"),
-            contents: vertex_bytes,
-            usage: wgpu::BufferUsages::VERTEX,
-        });
-        let index_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("render indices"),
-            contents: index_bytes,
-            usage: wgpu::BufferUsages::INDEX,
-        });
+        let vertex_buf = buffer(
+            "render vertices",
+            wgpu::BufferUsages::VERTEX,
+            vertex_capacity * std::mem::size_of::<MeshVertex>(),
+        );
+        let index_buf = buffer(
+            "render indices",
+            wgpu::BufferUsages::INDEX,
+            triangle_capacity * TRIANGLE_BYTES,
+        );
+        queue.write_buffer(&vertex_buf, 0, vertex_bytes);
+        queue.write_buffer(&index_buf, 0, index_bytes);
+        self.mesh_bytes_uploaded += (vertex_bytes.len() + index_bytes.len()) as u64;
         let uniform = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("render object"),
             size: std::mem::size_of::<ObjectUniform>() as u64,
@@ -422,6 +582,8 @@ impl Renderer {
             mesh: Arc::clone(mesh),
             vertices: vertex_buf,
             indices: index_buf,
+            vertex_capacity,
+            triangle_capacity,
             n_indices: mesh.indices.len() as u32,
             uniform,
             bind_group,
@@ -543,5 +705,133 @@ impl Renderer {
     /// The object indexes in the order the last [`Renderer::paint`] draws them.
     pub fn draw_order(&self) -> &[usize] {
         &self.draw_order
+    }
+}
+
+/// Bytes of one triangle in an index buffer.
+const TRIANGLE_BYTES: usize = 3 * std::mem::size_of::<u32>();
+
+/// The GPU vertices of `mesh`'s vertices `range`.
+fn mesh_vertices(mesh: &Mesh, range: Range<usize>) -> Vec<MeshVertex> {
+    range
+        .map(|i| MeshVertex {
+            position: mesh.positions[i],
+            normal: mesh.normals[i],
+            colour: mesh.colours[i],
+            ambient: match mesh.ambient.get(i) {
+                Some(a) => *a,
+                None => {
+                    let c = mesh.colours[i];
+                    [c[0], c[1], c[2]]
+                }
+            },
+        })
+        .collect()
+}
+
+/// Writes `patch`'s ranges of its mesh into `gpu`'s buffers and counts the bytes into
+/// `uploaded`; returns false, writing nothing, when the patch does not apply (it is whole,
+/// the buffers hold another mesh than its base, or the new lengths exceed their room).
+fn write_patch(
+    queue: &wgpu::Queue,
+    gpu: &mut GpuObject,
+    patch: &PendingPatch,
+    uploaded: &mut u64,
+) -> bool {
+    let mesh = &patch.mesh;
+    let (n_vertices, n_triangles) = (mesh.n_vertices(), mesh.n_triangles());
+    if patch.full
+        || !Arc::ptr_eq(&gpu.mesh, &patch.base)
+        || n_vertices > gpu.vertex_capacity
+        || n_triangles > gpu.triangle_capacity
+    {
+        return false;
+    }
+    let vertex_bytes = std::mem::size_of::<MeshVertex>();
+    for r in &patch.vertex_ranges {
+        let vertices = mesh_vertices(mesh, r.clone());
+        let bytes: &[u8] = bytemuck::cast_slice(&vertices);
+        queue.write_buffer(&gpu.vertices, (r.start * vertex_bytes) as u64, bytes);
+        *uploaded += bytes.len() as u64;
+    }
+    for r in &patch.triangle_ranges {
+        let bytes: &[u8] = bytemuck::cast_slice(&mesh.indices[3 * r.start..3 * r.end]);
+        queue.write_buffer(&gpu.indices, (r.start * TRIANGLE_BYTES) as u64, bytes);
+        *uploaded += bytes.len() as u64;
+    }
+    gpu.mesh = Arc::clone(mesh);
+    gpu.n_indices = (3 * n_triangles) as u32;
+    true
+}
+
+/// Checks that `ranges` are ascending, disjoint and within `len`.
+fn check_ranges(what: &'static str, ranges: &[Range<usize>], len: usize) -> Result<(), PatchError> {
+    let mut end_before = 0;
+    for r in ranges {
+        if r.start > r.end || r.start < end_before || r.end > len {
+            return Err(PatchError::Range {
+                what,
+                start: r.start,
+                end: r.end,
+                len,
+            });
+        }
+        end_before = r.end;
+    }
+    Ok(())
+}
+
+/// The union of two lists of ascending ranges, cut at `len`, ascending with touching ranges
+/// merged.
+fn union(a: &[Range<usize>], b: &[Range<usize>], len: usize) -> Vec<Range<usize>> {
+    let mut all: Vec<Range<usize>> = a
+        .iter()
+        .chain(b)
+        .map(|r| r.start.min(len)..r.end.min(len))
+        .filter(|r| !r.is_empty())
+        .collect();
+    all.sort_unstable_by_key(|r| r.start);
+    let mut out: Vec<Range<usize>> = Vec::with_capacity(all.len());
+    for r in all {
+        match out.last_mut() {
+            Some(last) if r.start <= last.end => last.end = last.end.max(r.end),
+            _ => out.push(r),
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn union_merges_overlapping_and_touching_ranges_and_cuts_at_the_length() {
+        assert_eq!(
+            union(&[0..2, 5..7, 20..30], &[1..3, 7..9, 12..13], 25),
+            vec![0..3, 5..9, 12..13, 20..25]
+        );
+        assert_eq!(
+            union(&[26..28, 29..30], &[], 25),
+            Vec::<Range<usize>>::new()
+        );
+    }
+
+    #[test]
+    fn ranges_out_of_order_or_beyond_the_mesh_are_refused() {
+        assert_eq!(check_ranges("vertex", &[0..2, 2..5], 5), Ok(()));
+        let err = |start, end| {
+            Err(PatchError::Range {
+                what: "vertex",
+                start,
+                end,
+                len: 5,
+            })
+        };
+        assert_eq!(check_ranges("vertex", &[0..2, 1..3], 5), err(1, 3));
+        assert_eq!(check_ranges("vertex", &[0..1, 3..6], 5), err(3, 6));
+        #[expect(clippy::reversed_empty_ranges, reason = "the case under test")]
+        let reversed = [0..1, 4..2];
+        assert_eq!(check_ranges("vertex", &reversed, 5), err(4, 2));
     }
 }
