@@ -5,8 +5,8 @@
 //!
 //! The session is the unit ball with 40 carves and blobs meshed at depth 6 through
 //! `ObjectField` and `OctreeMesher`, then edited near the point facing the camera with remesh
-//! and `mesh_update` after each edit. Both renderers share one headless device (Vulkan on
-//! llvmpipe in CI) and draw the same vertex and index data, so the pictures must be equal to
+//! and `mesh_update` after each edit. Each renderer is a `Headless` of its own (Vulkan on
+//! llvmpipe in CI); they draw the same vertex and index data, so the pictures must be equal to
 //! the byte. With no adapter at all the test prints a note and passes, as the goldens do.
 #![allow(
     clippy::unwrap_used,
@@ -16,7 +16,7 @@
 use fdsl::object::{Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData, Pose, ToolShape};
 use glam::{DVec3, Mat4};
 use render::camera::Camera;
-use render::gpu::Renderer;
+use render::gpu::offscreen::{Headless, OffscreenError};
 use render::mesh::object_field::{Dirty, dirty_boxes};
 use render::mesh::octree::{MeshPatch, MeshSettings, OctreeMesher};
 use render::mesh::{Aabb, Mesh, ObjectField};
@@ -26,109 +26,22 @@ use std::sync::Arc;
 const WIDTH: u32 = 192;
 const HEIGHT: u32 = 144;
 const DEPTH: u8 = 6;
-const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
-const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
-/// A headless device, as `render::gpu::offscreen::Headless` makes it, shared by renderers.
-struct Device {
-    device: wgpu::Device,
-    queue: wgpu::Queue,
+/// A headless device and renderer, or `None` (with a note) where there is no adapter.
+fn headless() -> Option<Headless> {
+    match Headless::new() {
+        Ok(h) => Some(h),
+        Err(e @ (OffscreenError::NoAdapter(_) | OffscreenError::Device(_))) => {
+            println!("no wgpu adapter: patched uploads not drawn ({e})");
+            None
+        }
+        Err(e) => panic!("headless setup failed: {e}"),
+    }
 }
 
-impl Device {
-    fn new() -> Option<Self> {
-        let instance =
-            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let Ok(adapter) =
-            pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
-        else {
-            eprintln!("no wgpu adapter: patched uploads not drawn");
-            return None;
-        };
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("patch upload test"),
-            required_limits: wgpu::Limits::downlevel_defaults(),
-            ..Default::default()
-        }))
-        .unwrap();
-        Some(Self { device, queue })
-    }
-
-    fn renderer(&self) -> Renderer {
-        Renderer::new(&self.device, &self.queue, COLOUR_FORMAT, Some(DEPTH_FORMAT))
-    }
-
-    /// Prepares `scene` with `renderer`, draws it and reads the RGBA pixels back.
-    fn draw(&self, renderer: &mut Renderer, scene: &Scene) -> Vec<u8> {
-        renderer
-            .prepare(&self.device, &self.queue, scene, [WIDTH, HEIGHT])
-            .unwrap();
-        let size = wgpu::Extent3d {
-            width: WIDTH,
-            height: HEIGHT,
-            depth_or_array_layers: 1,
-        };
-        let target = |format, usage| {
-            self.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("patch upload target"),
-                size,
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
-        };
-        let colour = target(
-            COLOUR_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-        );
-        let depth = target(DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT);
-        // 192 * 4 bytes is a multiple of COPY_BYTES_PER_ROW_ALIGNMENT: rows need no padding.
-        let row_bytes = 4 * WIDTH;
-        assert_eq!(row_bytes % wgpu::COPY_BYTES_PER_ROW_ALIGNMENT, 0);
-        let readback = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("patch upload readback"),
-            size: u64::from(row_bytes * HEIGHT),
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        renderer.draw_into(
-            &mut encoder,
-            "patch upload",
-            &colour.create_view(&Default::default()),
-            &depth.create_view(&Default::default()),
-            scene.background,
-        );
-        encoder.copy_texture_to_buffer(
-            wgpu::TexelCopyTextureInfo {
-                texture: &colour,
-                mip_level: 0,
-                origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::All,
-            },
-            wgpu::TexelCopyBufferInfo {
-                buffer: &readback,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(row_bytes),
-                    rows_per_image: Some(HEIGHT),
-                },
-            },
-            size,
-        );
-        self.queue.submit([encoder.finish()]);
-        let slice = readback.slice(..);
-        slice.map_async(wgpu::MapMode::Read, |r| r.unwrap());
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .unwrap();
-        let pixels = slice.get_mapped_range().unwrap().to_vec();
-        readback.unmap();
-        pixels
-    }
+/// Prepares `scene` with `h`'s renderer, draws it and reads the RGBA pixels back.
+fn draw(h: &mut Headless, scene: &Scene) -> Vec<u8> {
+    h.render(scene, WIDTH, HEIGHT).unwrap().pixels
 }
 
 fn ball() -> Object {
@@ -240,7 +153,9 @@ fn whole_bytes(m: &Mesh) -> u64 {
 
 #[test]
 fn patched_uploads_draw_the_whole_upload_picture_after_each_edit() {
-    let Some(gpu) = Device::new() else {
+    let (Some(mut patched), Some(mut skipping), Some(mut whole)) =
+        (headless(), headless(), headless())
+    else {
         return;
     };
     let mut object = ball();
@@ -267,10 +182,9 @@ fn patched_uploads_draw_the_whole_upload_picture_after_each_edit() {
 
     // `patched` gets every patch, `skipping` every patch less its longest triangle range,
     // `whole` none: it uploads each new mesh whole.
-    let (mut patched, mut skipping, mut whole) = (gpu.renderer(), gpu.renderer(), gpu.renderer());
-    let before = gpu.draw(&mut patched, &scene);
-    assert_eq!(before, gpu.draw(&mut skipping, &scene));
-    assert_eq!(before, gpu.draw(&mut whole, &scene));
+    let before = draw(&mut patched, &scene);
+    assert_eq!(before, draw(&mut skipping, &scene));
+    assert_eq!(before, draw(&mut whole, &scene));
     let background = &before[..4];
     let n_object_pixels = before.chunks_exact(4).filter(|p| p != &background).count();
     assert!(
@@ -288,22 +202,31 @@ fn patched_uploads_draw_the_whole_upload_picture_after_each_edit() {
             visible_edit(k, towards_eye),
         );
         let next = Arc::new(next);
-        patched.patch_object(0, &base, &next, &patch).unwrap();
+        patched
+            .renderer_mut()
+            .patch_object(0, &base, &next, &patch)
+            .unwrap();
         let skipped = without_longest_range(&patch).unwrap_or_else(|| patch.clone());
-        skipping.patch_object(0, &base, &next, &skipped).unwrap();
+        skipping
+            .renderer_mut()
+            .patch_object(0, &base, &next, &skipped)
+            .unwrap();
         scene.objects[0].mesh = Arc::clone(&next);
 
-        let expected = gpu.draw(&mut whole, &scene);
-        assert_eq!(whole.mesh_bytes_uploaded(), whole_bytes(&next));
+        let expected = draw(&mut whole, &scene);
+        assert_eq!(
+            whole.renderer_mut().mesh_bytes_uploaded(),
+            whole_bytes(&next)
+        );
         let changed = n_differing_pixels(&expected, &before);
         assert!(changed > 0, "edit {k} does not show");
-        let actual = gpu.draw(&mut patched, &scene);
+        let actual = draw(&mut patched, &scene);
         let wrong = n_differing_pixels(&actual, &expected);
         assert_eq!(
             wrong, 0,
             "edit {k}: {wrong} pixels differ from the whole upload ({patch:?})"
         );
-        let bytes = patched.mesh_bytes_uploaded();
+        let bytes = patched.renderer_mut().mesh_bytes_uploaded();
         // The first patch outgrows the exact buffers of the first, unpatched upload: whole.
         if k == 0 || patch.full {
             assert_eq!(bytes, whole_bytes(&next), "edit {k}");
@@ -315,7 +238,7 @@ fn patched_uploads_draw_the_whole_upload_picture_after_each_edit() {
                 whole_bytes(&next)
             );
         }
-        let drawn_skipping = gpu.draw(&mut skipping, &scene);
+        let drawn_skipping = draw(&mut skipping, &scene);
         n_skipping_wrong += usize::from(n_differing_pixels(&drawn_skipping, &expected) > 0);
     }
     assert!(n_patched >= 5, "{n_patched} edits uploaded as patches");
@@ -327,7 +250,7 @@ fn patched_uploads_draw_the_whole_upload_picture_after_each_edit() {
 
 #[test]
 fn a_patch_from_another_mesh_or_with_wrong_lengths_is_refused_or_uploaded_whole() {
-    let Some(gpu) = Device::new() else {
+    let Some(mut headless) = headless() else {
         return;
     };
     let mut object = ball();
@@ -342,14 +265,17 @@ fn a_patch_from_another_mesh_or_with_wrong_lengths_is_refused_or_uploaded_whole(
     let first = Arc::new(first);
     let mut scene = Scene::default();
     scene.add_object(Arc::clone(&first), Mat4::IDENTITY, Material::default());
-    let mut renderer = gpu.renderer();
     // Handed in as a (whole) patch, the first upload gets buffers with spare room.
     let empty = Arc::new(Mesh::default());
-    renderer
+    headless
+        .renderer_mut()
         .patch_object(0, &empty, &first, &whole_patch)
         .unwrap();
-    gpu.draw(&mut renderer, &scene);
-    assert_eq!(renderer.mesh_bytes_uploaded(), whole_bytes(&first));
+    draw(&mut headless, &scene);
+    assert_eq!(
+        headless.renderer_mut().mesh_bytes_uploaded(),
+        whole_bytes(&first)
+    );
 
     let towards_eye = scene.camera.eye().normalize().as_dvec3();
     let (next, patch) = edit_and_patch(
@@ -363,7 +289,9 @@ fn a_patch_from_another_mesh_or_with_wrong_lengths_is_refused_or_uploaded_whole(
     let mut short = patch.clone();
     short.n_triangles -= 1;
     assert!(matches!(
-        renderer.patch_object(0, &first, &next, &short),
+        headless
+            .renderer_mut()
+            .patch_object(0, &first, &next, &short),
         Err(render::gpu::PatchError::Lengths { .. })
     ));
     let mut beyond = patch.clone();
@@ -371,16 +299,24 @@ fn a_patch_from_another_mesh_or_with_wrong_lengths_is_refused_or_uploaded_whole(
         .vertex_ranges
         .push(patch.n_vertices..patch.n_vertices + 1);
     assert!(matches!(
-        renderer.patch_object(0, &first, &next, &beyond),
+        headless
+            .renderer_mut()
+            .patch_object(0, &first, &next, &beyond),
         Err(render::gpu::PatchError::Range { .. })
     ));
     // A patch said to start from a copy of the uploaded mesh, not the uploaded one: the
     // renderer cannot know what its buffers lack, so it uploads the mesh whole.
     let copy = Arc::new((*first).clone());
-    renderer.patch_object(0, &copy, &next, &patch).unwrap();
+    headless
+        .renderer_mut()
+        .patch_object(0, &copy, &next, &patch)
+        .unwrap();
     scene.objects[0].mesh = Arc::clone(&next);
-    gpu.draw(&mut renderer, &scene);
-    assert_eq!(renderer.mesh_bytes_uploaded(), whole_bytes(&next));
+    draw(&mut headless, &scene);
+    assert_eq!(
+        headless.renderer_mut().mesh_bytes_uploaded(),
+        whole_bytes(&next)
+    );
     // The next patch, from the uploaded mesh, fits the spare room: only its ranges go up.
     let (last, patch) = edit_and_patch(
         &mut object,
@@ -390,9 +326,12 @@ fn a_patch_from_another_mesh_or_with_wrong_lengths_is_refused_or_uploaded_whole(
     );
     assert!(!patch.full);
     let last = Arc::new(last);
-    renderer.patch_object(0, &next, &last, &patch).unwrap();
+    headless
+        .renderer_mut()
+        .patch_object(0, &next, &last, &patch)
+        .unwrap();
     scene.objects[0].mesh = Arc::clone(&last);
-    gpu.draw(&mut renderer, &scene);
-    let bytes = renderer.mesh_bytes_uploaded();
+    draw(&mut headless, &scene);
+    let bytes = headless.renderer_mut().mesh_bytes_uploaded();
     assert!(bytes > 0 && 4 * bytes < whole_bytes(&last), "{bytes} bytes");
 }

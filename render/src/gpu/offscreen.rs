@@ -64,6 +64,12 @@ impl Headless {
         })
     }
 
+    /// The renderer behind the frames, for what [`Headless::render`] does not cover, such as
+    /// handing it a mesh patch ([`Renderer::patch_object`]) before the next frame.
+    pub fn renderer_mut(&mut self) -> &mut Renderer {
+        &mut self.renderer
+    }
+
     /// A one-line description of the adapter, for golden-image annotations.
     pub fn adapter_description(&self) -> String {
         let i = &self.adapter_info;
