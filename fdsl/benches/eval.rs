@@ -20,15 +20,12 @@ use fidget::shape::Shape;
 
 mod fidget_peer;
 
-const MODELS: &[&str] = &[
-    "sphere",
-    "spheres100",
-    "spheres100_rfunc",
-    "gyroid_sphere",
-    "watermelon",
-    "watermelon_rfunc",
-    "script_field",
-];
+/// The names of the reference models, the benchmarks' arguments.
+fn models() -> impl Iterator<Item = &'static str> {
+    fdsl::models::REFERENCE_MODELS
+        .into_iter()
+        .map(|(name, _)| name)
+}
 
 fn source(model: &str) -> &'static str {
     fdsl::models::reference_model(model).expect("a reference model")
@@ -73,7 +70,7 @@ fn main() {
 mod bulk_values {
     use super::*;
 
-    #[divan::bench(args = MODELS)]
+    #[divan::bench(args = models())]
     fn fdsl(bencher: Bencher, model: &str) {
         let tape = tape(model);
         let (xs, ys, zs) = points(N_VALUES);
@@ -99,12 +96,12 @@ mod bulk_values {
         });
     }
 
-    #[divan::bench(args = MODELS)]
+    #[divan::bench(args = models())]
     fn fidget_vm(bencher: Bencher, model: &str) {
         peer::<fidget::vm::VmFunction>(bencher, model);
     }
 
-    #[divan::bench(args = MODELS)]
+    #[divan::bench(args = models())]
     fn fidget_jit(bencher: Bencher, model: &str) {
         peer::<fidget::jit::JitFunction>(bencher, model);
     }
@@ -113,7 +110,7 @@ mod bulk_values {
 mod bulk_gradients {
     use super::*;
 
-    #[divan::bench(args = MODELS)]
+    #[divan::bench(args = models())]
     fn fdsl(bencher: Bencher, model: &str) {
         let tape = tape(model);
         let (xs, ys, zs) = points(N_GRADIENTS);
@@ -154,12 +151,12 @@ mod bulk_gradients {
             });
     }
 
-    #[divan::bench(args = MODELS)]
+    #[divan::bench(args = models())]
     fn fidget_vm(bencher: Bencher, model: &str) {
         peer::<fidget::vm::VmFunction>(bencher, model);
     }
 
-    #[divan::bench(args = MODELS)]
+    #[divan::bench(args = models())]
     fn fidget_jit(bencher: Bencher, model: &str) {
         peer::<fidget::jit::JitFunction>(bencher, model);
     }
@@ -176,7 +173,7 @@ const BOX_SIZE: f32 = 0.1;
 mod interval {
     use super::*;
 
-    #[divan::bench(args = MODELS)]
+    #[divan::bench(args = models())]
     fn fdsl(bencher: Bencher, model: &str) {
         let tape = tape(model);
         let mut eval = IntervalEval::new(&tape);
@@ -206,12 +203,12 @@ mod interval {
         });
     }
 
-    #[divan::bench(args = MODELS)]
+    #[divan::bench(args = models())]
     fn fidget_vm(bencher: Bencher, model: &str) {
         peer::<fidget::vm::VmFunction>(bencher, model);
     }
 
-    #[divan::bench(args = MODELS)]
+    #[divan::bench(args = models())]
     fn fidget_jit(bencher: Bencher, model: &str) {
         peer::<fidget::jit::JitFunction>(bencher, model);
     }
@@ -279,7 +276,7 @@ mod pruned {
         xs.len()
     }
 
-    #[divan::bench(args = MODELS)]
+    #[divan::bench(args = models())]
     fn fdsl(bencher: Bencher, model: &str) {
         let tape = tape(model);
         let mut scratch = Vec::new();
@@ -339,12 +336,12 @@ mod pruned {
         bencher.bench_local(|| peer_descend(&shape, [-1.2; 3], 2.4, PRUNE_DEPTH));
     }
 
-    #[divan::bench(args = MODELS)]
+    #[divan::bench(args = models())]
     fn fidget_vm(bencher: Bencher, model: &str) {
         peer::<fidget::vm::VmFunction>(bencher, model);
     }
 
-    #[divan::bench(args = MODELS)]
+    #[divan::bench(args = models())]
     fn fidget_jit(bencher: Bencher, model: &str) {
         peer::<fidget::jit::JitFunction>(bencher, model);
     }

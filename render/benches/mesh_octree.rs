@@ -95,16 +95,6 @@ fn remesh_edit(bencher: Bencher, depth: u8) {
     });
 }
 
-/// The reference models with a surface (script_field is a density without one).
-const MODELS: &[&str] = &[
-    "sphere",
-    "spheres100",
-    "spheres100_rfunc",
-    "gyroid_sphere",
-    "watermelon",
-    "watermelon_rfunc",
-];
-
 /// Half the side of the meshed cube.
 const HALF_SIDE: f32 = 1.2;
 
@@ -176,7 +166,7 @@ fn print_triangle_counts() {
         "model              depth  triangles ours (open, non-manifold)  fidget (open, non-manifold)"
     );
     for depth in [6u8, 7] {
-        for name in MODELS {
+        for (name, _) in fdsl::models::surface_models() {
             let a = ours(name, depth);
             let b = to_mesh(&peer(&peer_shape::<fidget::vm::VmFunction>(name), depth));
             println!(
@@ -195,22 +185,14 @@ fn print_triangle_counts() {
 mod reference_models {
     use super::*;
 
-    const ARGS: &[(&str, u8)] = &[
-        ("sphere", 6),
-        ("spheres100", 6),
-        ("spheres100_rfunc", 6),
-        ("gyroid_sphere", 6),
-        ("watermelon", 6),
-        ("watermelon_rfunc", 6),
-        ("sphere", 7),
-        ("spheres100", 7),
-        ("spheres100_rfunc", 7),
-        ("gyroid_sphere", 7),
-        ("watermelon", 7),
-        ("watermelon_rfunc", 7),
-    ];
+    /// Every surface model at depths 6 and 7.
+    fn args() -> impl Iterator<Item = (&'static str, u8)> {
+        [6, 7]
+            .into_iter()
+            .flat_map(|depth| fdsl::models::surface_models().map(move |(name, _)| (name, depth)))
+    }
 
-    #[divan::bench(args = ARGS, sample_count = 5, sample_size = 1)]
+    #[divan::bench(args = args(), sample_count = 5, sample_size = 1)]
     fn render(bencher: Bencher, arg: (&str, u8)) {
         let (name, depth) = arg;
         let tape = tape(name);
@@ -224,7 +206,7 @@ mod reference_models {
         });
     }
 
-    #[divan::bench(args = ARGS, sample_count = 5, sample_size = 1)]
+    #[divan::bench(args = args(), sample_count = 5, sample_size = 1)]
     fn fidget_vm(bencher: Bencher, arg: (&str, u8)) {
         let (name, depth) = arg;
         let shape = peer_shape::<fidget::vm::VmFunction>(name);
