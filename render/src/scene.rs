@@ -56,7 +56,7 @@ pub struct SceneObject {
 impl SceneObject {
     /// Whether any vertex alpha or the material opacity is below 1.
     pub fn is_transparent(&self) -> bool {
-        self.material.is_transparent() || self.mesh.colours.iter().any(|c| c[3] < 1.0)
+        self.material.is_transparent() || self.mesh.has_translucent_vertices()
     }
 }
 

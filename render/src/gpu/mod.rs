@@ -125,6 +125,8 @@ struct ObjectUniform {
 /// GPU copies of one object's mesh and uniforms.
 struct GpuObject {
     mesh: Arc<Mesh>,
+    /// What the draw order needs of `mesh`, found once per uploaded mesh, not per frame.
+    layout: MeshLayout,
     vertices: wgpu::Buffer,
     indices: wgpu::Buffer,
     /// Vertices `vertices` holds room for.
@@ -134,6 +136,27 @@ struct GpuObject {
     n_indices: u32,
     uniform: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
+}
+
+/// What sorting the draws needs of a mesh: scanned when the mesh is uploaded, so a frame that
+/// changes nothing reads two fields instead of every vertex.
+#[derive(Clone, Copy, Debug)]
+struct MeshLayout {
+    /// Some vertex colour is less than opaque.
+    translucent_vertices: bool,
+    /// The centre of the mesh's bounds, in object space (the origin for an empty mesh).
+    centre: Vec3,
+}
+
+impl MeshLayout {
+    fn of(mesh: &Mesh) -> MeshLayout {
+        MeshLayout {
+            translucent_vertices: mesh.has_translucent_vertices(),
+            centre: mesh
+                .bounds()
+                .map_or(Vec3::ZERO, |b| Vec3::from_array(b.centre())),
+        }
+    }
 }
 
 /// What an object's next upload may be: the patches handed in since the last prepare, merged.
@@ -580,6 +603,7 @@ impl Renderer {
         });
         GpuObject {
             mesh: Arc::clone(mesh),
+            layout: MeshLayout::of(mesh),
             vertices: vertex_buf,
             indices: index_buf,
             vertex_capacity,
@@ -592,16 +616,17 @@ impl Renderer {
 
     /// Opaque objects first, then transparent ones from the farthest centre to the nearest.
     fn sort_draws(&mut self, scene: &Scene, eye: Vec3) {
+        // `prepare` has uploaded every object, so `self.objects[i]` holds object i's mesh.
         let depth = |i: usize| {
-            let o = &scene.objects[i];
-            let c = o
-                .mesh
-                .bounds()
-                .map_or(Vec3::ZERO, |b| Vec3::from_array(b.centre()));
-            (o.world_from_object.transform_point3(c) - eye).length()
+            let c = self.objects[i].layout.centre;
+            (scene.objects[i].world_from_object.transform_point3(c) - eye).length()
+        };
+        let transparent = |i: usize| {
+            scene.objects[i].material.is_transparent()
+                || self.objects[i].layout.translucent_vertices
         };
         let (opaque, mut transparent): (Vec<usize>, Vec<usize>) =
-            (0..scene.objects.len()).partition(|&i| !scene.objects[i].is_transparent());
+            (0..scene.objects.len()).partition(|&i| !transparent(i));
         transparent.sort_by(|&a, &b| depth(b).total_cmp(&depth(a)).then(a.cmp(&b)));
         self.n_opaque = opaque.len();
         self.draw_order = opaque;
@@ -760,6 +785,7 @@ fn write_patch(
         *uploaded += bytes.len() as u64;
     }
     gpu.mesh = Arc::clone(mesh);
+    gpu.layout = MeshLayout::of(mesh);
     gpu.n_indices = (3 * n_triangles) as u32;
     true
 }

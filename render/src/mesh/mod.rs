@@ -148,6 +148,11 @@ impl Mesh {
         self.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]])
     }
 
+    /// Whether some vertex colour is less than opaque (the mesh then draws with blending).
+    pub fn has_translucent_vertices(&self) -> bool {
+        self.colours.iter().any(|c| c[3] < 1.0)
+    }
+
     /// The bounding box of the positions, `None` for an empty mesh.
     pub fn bounds(&self) -> Option<Aabb> {
         let first = *self.positions.first()?;
