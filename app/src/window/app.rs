@@ -40,6 +40,9 @@ pub struct Tracked {
     pending: Option<Box<MeshJob>>,
     /// The drawable object, once meshed.
     pub drawn: Option<SceneObject>,
+    /// Its box in the renderer's world, found once when its mesh arrives (frames read it to
+    /// frame the camera and box the selection without scanning the mesh).
+    pub drawn_box: Option<Aabb>,
     /// Its force-field arrows.
     pub lines: Vec<Line>,
     /// Triangles in its mesh.
@@ -171,6 +174,7 @@ impl SculptApp {
                 continue;
             }
             tracked.drawn_generation = done.generation;
+            tracked.drawn_box = done.object.as_ref().and_then(world_box);
             tracked.drawn = done.object;
             tracked.lines = done.lines;
             tracked.n_triangles = done.n_triangles;
@@ -247,7 +251,7 @@ impl SculptApp {
                 scene.objects.push(o.clone());
                 ids.push(*id);
                 if self.selected == Some(id.0)
-                    && let Some(b) = world_box(o)
+                    && let Some(b) = tracked.drawn_box
                 {
                     scene.add_box(b, SELECTION_COLOUR);
                 }
@@ -282,7 +286,7 @@ impl SculptApp {
 
     fn central_ui(&mut self, ui: &mut egui::Ui) {
         let (scene, ids) = self.drawn_scene();
-        let sphere = bounding_sphere(&scene);
+        let sphere = bounding_sphere(self.objects.values().filter_map(|t| t.drawn_box));
         let input = viewport_ui(ui, &mut self.view, &scene, sphere, &self.viewport);
         if input.picked.is_some() || input.missed {
             self.picked(input.picked, &ids);
@@ -313,19 +317,12 @@ fn world_box(o: &SceneObject) -> Option<Aabb> {
     Some(Aabb::new(lo.to_array(), hi.to_array()))
 }
 
-/// A sphere around every drawn object (centre, radius), for framing the camera.
-pub fn bounding_sphere(scene: &Scene) -> Option<(Vec3, f32)> {
-    let boxes: Vec<Aabb> = scene.objects.iter().filter_map(world_box).collect();
-    let lo = boxes
-        .iter()
-        .map(|b| Vec3::from_array(b.lo))
-        .reduce(Vec3::min)?;
-    let hi = boxes
-        .iter()
-        .map(|b| Vec3::from_array(b.hi))
-        .reduce(Vec3::max)?;
-    let centre = 0.5 * (lo + hi);
-    Some((centre, 0.5 * (hi - lo).length()))
+/// A sphere around the drawn objects' world `boxes` (centre, radius), for framing the camera.
+pub fn bounding_sphere(boxes: impl Iterator<Item = Aabb>) -> Option<(Vec3, f32)> {
+    let (lo, hi) = boxes
+        .map(|b| (Vec3::from_array(b.lo), Vec3::from_array(b.hi)))
+        .reduce(|(lo, hi), (l, h)| (lo.min(l), hi.max(h)))?;
+    Some((0.5 * (lo + hi), 0.5 * (hi - lo).length()))
 }
 
 impl eframe::App for SculptApp {
