@@ -121,9 +121,15 @@ impl Disk {
             .last()
             .filter(|_| torn)
             .map(|op| 1 + rng.index(RECORD_HEAD_BYTES + op.encoded().len() - 1));
-        let path = temp_path();
-        let result = write_and_recover(&path, &ops, torn_keep, self.snapshot.as_deref(), now);
-        let _ = std::fs::remove_file(&path);
+        let dir = temp_dir();
+        let result = std::fs::create_dir_all(&dir)
+            .map_err(|e| format!("store directory: {e}"))
+            .and_then(|()| {
+                let path = dir.join("ops.sculpt");
+                write_and_recover(&path, &ops, torn_keep, self.snapshot.as_deref(), now)
+            });
+        // The store's lock file and any torn tail it set aside go with the directory.
+        let _ = std::fs::remove_dir_all(&dir);
         let (log, n_records, n_truncated_bytes) = result?;
         let n_expected = self.n_durable + n_survivors;
         if n_records != n_expected || n_truncated_bytes != torn_keep.unwrap_or(0) as u64 {
@@ -145,9 +151,11 @@ impl Disk {
     }
 }
 
-fn temp_path() -> PathBuf {
+/// A fresh directory for one crash image (the store puts its lock and torn tails beside the
+/// op file).
+fn temp_dir() -> PathBuf {
     let n = N_FILES.fetch_add(1, Ordering::Relaxed);
-    std::env::temp_dir().join(format!("sculpt-sim-{}-{n}.ops", std::process::id()))
+    std::env::temp_dir().join(format!("sculpt-sim-{}-{n}", std::process::id()))
 }
 
 /// Writes `ops` through the real store, cuts the last record to `torn_keep` bytes if given,

@@ -1,14 +1,26 @@
 //! The crash-safe on-disk op store: an IO adapter around the core. The core never imports it.
 //!
 //! Ops are kept in a checksummed append-only file ([`record::RecordFile`]); an op is
-//! acknowledged once [`OpStore::append`] returns, after `fsync`. On open, a torn or corrupt
-//! tail (from a crash mid-write) is detected by length and checksum and cut off, so a
-//! restarted peer loses no acknowledged op and accepts no torn one.
+//! acknowledged once [`OpStore::append`] returns, after `fsync`. Opening:
+//!
+//! - locks the store ([`lock`]): a second opener, in this process or another, gets
+//!   [`OpenError::Locked`] naming the holder, and nothing is read or written;
+//! - reads and checks every record (time in proportion to the file; it is never copied);
+//! - refuses, with [`OpenError::Corrupt`] and without modifying the file, a damaged record
+//!   that a valid record follows: that is damage, not a crash;
+//! - sets a torn tail (a damaged last record, which a crash during an append leaves) aside in
+//!   `<ops file>.torn-<offset>-<checksum>`, durably, and only then cuts it off; its path is in
+//!   [`Recovery::torn_tail`].
+//!
+//! So a restarted peer loses no acknowledged op, accepts no torn one, and no byte that
+//! opening removes from the file is lost.
 
+pub mod lock;
 pub mod record;
 
+use std::ffi::OsString;
 use std::marker::PhantomData;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::codec::DecodeError;
 use crate::log::{InsertError, LOCAL_ORIGIN, Log};
@@ -20,9 +32,40 @@ use record::{RecordError, RecordFile, Recovery};
 /// Why the store could not be opened or loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum OpenError {
-    /// The record file could not be read.
+    /// The record file could not be read, or the lock or torn-tail file not written.
     #[error(transparent)]
     Record(#[from] RecordError),
+    /// Another open store (in this process or another) holds the store's lock. Nothing was
+    /// read or written.
+    #[error(
+        "the store {} is in use by another sculpt process{}; close it first",
+        .path.display(),
+        in_parentheses(.holder)
+    )]
+    Locked {
+        /// The store's op file.
+        path: PathBuf,
+        /// The holder as its lock file names it (`pid 1234, /path/to/exe`), if it could be read.
+        holder: Option<String>,
+    },
+    /// A record before the end of the file is damaged (bad checksum or impossible length)
+    /// while a valid record follows it: damage, not the torn tail of an interrupted append.
+    /// The file was left exactly as it was.
+    #[error(
+        "the store {} is damaged: the record at byte {offset} fails its check, but a valid \
+         record follows at byte {next_valid_offset}, so this is not an interrupted write; the \
+         file was left as it was. Keep it, and restore the store from a backup or rejoin the \
+         session with a new store",
+        .path.display()
+    )]
+    Corrupt {
+        /// The store's op file.
+        path: PathBuf,
+        /// Byte offset in the file of the first damaged record.
+        offset: u64,
+        /// Byte offset of the first valid record after it.
+        next_valid_offset: u64,
+    },
     /// A record passed its checksum but is not an op this build can decode.
     #[error("record {record_idx} is not a valid op: {error}")]
     Decode {
@@ -47,7 +90,21 @@ pub enum OpenError {
     },
 }
 
-/// An append-only store of encoded ops.
+/// ` (holder)`, or nothing.
+fn in_parentheses(holder: &Option<String>) -> String {
+    holder
+        .as_ref()
+        .map_or_else(String::new, |holder| format!(" ({holder})"))
+}
+
+/// `path` with `suffix` appended to its file name: a sibling file of the store.
+fn sibling(path: &Path, suffix: &str) -> PathBuf {
+    let mut name = OsString::from(path.as_os_str());
+    name.push(suffix);
+    PathBuf::from(name)
+}
+
+/// An append-only store of encoded ops, locked for as long as it lives.
 #[derive(Debug)]
 pub struct OpStore<P> {
     file: RecordFile,
@@ -55,8 +112,16 @@ pub struct OpStore<P> {
 }
 
 impl<P: Payload> OpStore<P> {
-    /// Opens (or creates) the store at `path`, cutting off a torn tail; returns the stored ops
-    /// in append order (not yet signature-checked) and what recovery did.
+    /// Opens (or creates) the store at `path`, locking it and setting a torn tail aside before
+    /// cutting it off (see the [module docs](self)); returns the stored ops in append order
+    /// (not yet signature-checked) and what recovery did.
+    ///
+    /// # Errors
+    ///
+    /// [`OpenError::Locked`] while another [`OpStore`] has it open; [`OpenError::Corrupt`] for
+    /// a damaged record in the middle (the file is not modified); [`OpenError::Record`] for IO
+    /// errors and files that are not stores; [`OpenError::Decode`] for a record that is not an
+    /// op.
     pub fn open(path: &Path) -> Result<(Self, Vec<Op<P>>, Recovery), OpenError> {
         let (file, records, recovery) = RecordFile::open(path)?;
         let ops = records

@@ -8,6 +8,8 @@ use std::fs::{File, OpenOptions};
 use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
+use super::lock::StoreLock;
+use super::{OpenError, sibling};
 use crate::op::MAX_OP_BYTES;
 
 /// Magic bytes that open the file.
@@ -20,6 +22,8 @@ pub const MAX_RECORD_BYTES: usize = MAX_OP_BYTES;
 pub const MAX_STORE_BYTES: u64 = 4 * 1024 * 1024 * 1024;
 /// Bytes of checksum per record.
 pub const CHECKSUM_BYTES: usize = 16;
+/// Bytes of the cut bytes' blake3 hash, in hex, in a torn-tail file's name.
+const TORN_NAME_HASH_BYTES: usize = 8;
 
 const HEADER_BYTES: usize = MAGIC.len() + 1;
 const RECORD_HEAD_BYTES: usize = 4 + CHECKSUM_BYTES;
@@ -47,21 +51,30 @@ pub enum RecordError {
 }
 
 /// What opening found.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Recovery {
     /// Records accepted.
     pub n_records: usize,
-    /// Bytes of torn or corrupt tail cut off (0 after a clean shutdown).
+    /// Bytes of torn tail cut off (0 after a clean shutdown).
     pub n_truncated_bytes: u64,
+    /// The file that holds the cut bytes, byte for byte (written and synced before the cut):
+    /// `<ops file>.torn-<offset>-<hash>`, where `offset` is where the file was cut and `hash`
+    /// starts the cut bytes' blake3 hash. `None` when nothing was cut, or only a partial
+    /// header (a prefix of [`MAGIC`], which holds nothing to keep). Usually at most one record;
+    /// more when a multi-record append was torn.
+    pub torn_tail: Option<PathBuf>,
 }
 
-/// An open record file, positioned at its end.
+/// An open record file, positioned at its end, and its lock.
 #[derive(Debug)]
 pub struct RecordFile {
     file: File,
     path: PathBuf,
     /// End of the last durable record.
     end: u64,
+    /// Held while the file is open; declared last so that it is released after the file is
+    /// closed.
+    _lock: StoreLock,
 }
 
 fn checksum(body: &[u8]) -> [u8; CHECKSUM_BYTES] {
@@ -73,84 +86,190 @@ fn checksum(body: &[u8]) -> [u8; CHECKSUM_BYTES] {
     out
 }
 
-/// Splits `bytes` (after the header) into valid records; returns them and where the valid
-/// prefix ends. Parsing stops at the first short, oversized or mismatching record.
+fn header() -> [u8; HEADER_BYTES] {
+    let mut header = [0u8; HEADER_BYTES];
+    header[..MAGIC.len()].copy_from_slice(MAGIC);
+    header[MAGIC.len()] = RECORD_FORMAT_VERSION;
+    header
+}
+
+/// The body of the record starting at `at` in `bytes`, if one is there: its length is at most
+/// [`MAX_RECORD_BYTES`], its body fits in `bytes`, and its checksum matches.
+fn record_at(bytes: &[u8], at: usize) -> Option<&[u8]> {
+    let head = bytes.get(at..at.checked_add(RECORD_HEAD_BYTES)?)?;
+    let mut len_bytes = [0u8; 4];
+    len_bytes.copy_from_slice(&head[..4]);
+    let len = u32::from_le_bytes(len_bytes) as usize;
+    if len > MAX_RECORD_BYTES {
+        return None;
+    }
+    let start = at + RECORD_HEAD_BYTES;
+    let body = bytes.get(start..start + len)?;
+    (head[4..] == checksum(body)).then_some(body)
+}
+
+/// Splits the whole file's `bytes` (header included) into the valid records after the header;
+/// returns them and where the valid prefix ends. Parsing stops at the first short, oversized
+/// or mismatching record.
 fn parse(bytes: &[u8]) -> (Vec<Vec<u8>>, usize) {
     let mut records = Vec::new();
-    let mut at = 0;
-    while let Some(head) = bytes.get(at..at + RECORD_HEAD_BYTES) {
-        let mut len_bytes = [0u8; 4];
-        len_bytes.copy_from_slice(&head[..4]);
-        let len = u32::from_le_bytes(len_bytes) as usize;
-        if len > MAX_RECORD_BYTES {
-            break;
-        }
-        let Some(body) = bytes.get(at + RECORD_HEAD_BYTES..at + RECORD_HEAD_BYTES + len) else {
-            break;
-        };
-        if head[4..] != checksum(body) {
-            break;
-        }
+    let mut at = HEADER_BYTES;
+    while let Some(body) = record_at(bytes, at) {
         records.push(body.to_vec());
-        at += RECORD_HEAD_BYTES + len;
+        at += RECORD_HEAD_BYTES + body.len();
     }
     (records, at)
 }
 
+/// The first position after `bad` where a valid record starts, if any. Every position up to
+/// the end of the file is tried (the scan is bounded by the file's length): a position costs
+/// O(1) unless its length field is possible, and then one checksum of at most
+/// [`MAX_RECORD_BYTES`], so the scan is O(bytes after `bad`). After a torn append that is at
+/// most a record or a batch; in the middle of a file the next valid record is usually within
+/// a record or two.
+fn first_record_after(bytes: &[u8], bad: usize) -> Option<usize> {
+    let last_start = bytes.len().checked_sub(RECORD_HEAD_BYTES)?;
+    (bad + 1..=last_start).find(|&at| record_at(bytes, at).is_some())
+}
+
+/// Makes `path`'s directory entry durable by syncing its directory.
+fn sync_parent_dir(path: &Path) -> std::io::Result<()> {
+    match path.parent().filter(|dir| !dir.as_os_str().is_empty()) {
+        Some(dir) => File::open(dir)?.sync_all(),
+        None => File::open(".")?.sync_all(),
+    }
+}
+
+/// Writes `tail`, the bytes of the store at `path` from `offset` on, to
+/// `<ops file>.torn-<offset>-<hash>` and makes it durable (file and directory entry); returns
+/// its path. The bytes go to a `.partial` file first and are renamed into place once synced,
+/// so a file of the final name is always whole; since the name carries the bytes' hash, one
+/// left by an earlier open that crashed before it cut the tail holds the same bytes and is
+/// replaced by an equal copy.
+fn set_tail_aside(path: &Path, offset: usize, tail: &[u8]) -> Result<PathBuf, RecordError> {
+    let hash = blake3::hash(tail);
+    let hash_hex = crate::identity::hex(&hash.as_bytes()[..TORN_NAME_HASH_BYTES]);
+    let torn = sibling(path, &format!(".torn-{offset}-{hash_hex}"));
+    let partial = sibling(&torn, ".partial");
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| RecordError::Io { path, source }
+    };
+    let mut file = OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .open(&partial)
+        .map_err(io(&partial))?;
+    file.write_all(tail)
+        .and_then(|()| file.sync_all())
+        .map_err(io(&partial))?;
+    drop(file);
+    std::fs::rename(&partial, &torn).map_err(io(&torn))?;
+    sync_parent_dir(&torn).map_err(io(&torn))?;
+    Ok(torn)
+}
+
 impl RecordFile {
-    /// Opens or creates the file, cuts off any torn tail (and syncs the cut), and returns the
-    /// valid records.
-    pub fn open(path: &Path) -> Result<(Self, Vec<Vec<u8>>, Recovery), RecordError> {
+    /// Opens or creates the file after taking its lock ([`super::lock`]); if its last record
+    /// is torn, sets it aside and cuts it off (and syncs the cut); returns the valid records.
+    ///
+    /// # Errors
+    ///
+    /// [`OpenError::Locked`] if the store is open elsewhere, [`OpenError::Corrupt`] if a
+    /// damaged record has a valid one after it (the file is then not modified), and
+    /// [`OpenError::Record`] for IO errors, files over [`MAX_STORE_BYTES`] and files that do
+    /// not start with the header (or a prefix of it).
+    pub fn open(path: &Path) -> Result<(Self, Vec<Vec<u8>>, Recovery), OpenError> {
+        let lock = StoreLock::acquire(path)?;
         let io = |source| RecordError::Io {
             path: path.to_path_buf(),
             source,
         };
-        let file = OpenOptions::new()
+        let mut file = OpenOptions::new()
             .read(true)
             .write(true)
             .create(true)
             .truncate(false)
             .open(path)
             .map_err(io)?;
-        let len = file.metadata().map_err(io)?.len();
-        if len > MAX_STORE_BYTES {
-            return Err(RecordError::TooLarge(path.to_path_buf()));
+        let mut bytes = Vec::new();
+        (&mut file)
+            .take(MAX_STORE_BYTES + 1)
+            .read_to_end(&mut bytes)
+            .map_err(io)?;
+        if bytes.len() as u64 > MAX_STORE_BYTES {
+            return Err(RecordError::TooLarge(path.to_path_buf()).into());
         }
         let mut store = Self {
             file,
             path: path.to_path_buf(),
             end: HEADER_BYTES as u64,
+            _lock: lock,
         };
-        if len < HEADER_BYTES as u64 {
-            // New, or a crash while writing the header: nothing was ever acknowledged.
-            store.write_header()?;
-            return Ok((
-                store,
-                Vec::new(),
-                Recovery {
-                    n_records: 0,
-                    n_truncated_bytes: len,
-                },
-            ));
+        if bytes.len() < HEADER_BYTES {
+            return store.start_after_partial_header(&bytes);
         }
-        let mut bytes = Vec::new();
-        store.file.read_to_end(&mut bytes).map_err(io)?;
-        if bytes[..MAGIC.len()] != MAGIC[..] || bytes[MAGIC.len()] != RECORD_FORMAT_VERSION {
-            return Err(RecordError::BadHeader(path.to_path_buf()));
+        if bytes[..HEADER_BYTES] != header() {
+            return Err(RecordError::BadHeader(path.to_path_buf()).into());
         }
-        let (records, valid) = parse(&bytes[HEADER_BYTES..]);
-        let end = (HEADER_BYTES + valid) as u64;
+        let (records, end) = parse(&bytes);
+        let torn_tail = if end < bytes.len() {
+            Some(store.cut_torn_tail(&bytes, end)?)
+        } else {
+            None
+        };
+        store.file.seek(SeekFrom::Start(end as u64)).map_err(io)?;
+        store.end = end as u64;
         let recovery = Recovery {
             n_records: records.len(),
-            n_truncated_bytes: len - end,
+            n_truncated_bytes: (bytes.len() - end) as u64,
+            torn_tail,
         };
-        if end < len {
-            store.file.set_len(end).map_err(io)?;
-            store.file.sync_all().map_err(io)?;
-        }
-        store.file.seek(SeekFrom::Start(end)).map_err(io)?;
-        store.end = end;
         Ok((store, records, recovery))
+    }
+
+    /// Handles a file shorter than the header: new, or a crash while writing the header, when
+    /// nothing was ever acknowledged; anything else is not a store and is left alone.
+    fn start_after_partial_header(
+        mut self,
+        bytes: &[u8],
+    ) -> Result<(Self, Vec<Vec<u8>>, Recovery), OpenError> {
+        if bytes[..] != header()[..bytes.len()] {
+            return Err(RecordError::BadHeader(self.path.clone()).into());
+        }
+        self.write_header()?;
+        let recovery = Recovery {
+            n_records: 0,
+            n_truncated_bytes: bytes.len() as u64,
+            torn_tail: None,
+        };
+        Ok((self, Vec::new(), recovery))
+    }
+
+    /// Given the whole file's `bytes`, whose valid records end at `end`: refuses a damaged
+    /// record that a valid one follows; otherwise the damage is a torn tail, which is set
+    /// aside, then cut off and synced. Returns the set-aside file.
+    fn cut_torn_tail(&mut self, bytes: &[u8], end: usize) -> Result<PathBuf, OpenError> {
+        assert!(
+            end < bytes.len(),
+            "a torn tail needs bytes after the valid records"
+        );
+        if let Some(next) = first_record_after(bytes, end) {
+            return Err(OpenError::Corrupt {
+                path: self.path.clone(),
+                offset: end as u64,
+                next_valid_offset: next as u64,
+            });
+        }
+        let torn = set_tail_aside(&self.path, end, &bytes[end..])?;
+        let io = |source| RecordError::Io {
+            path: self.path.clone(),
+            source,
+        };
+        self.file.set_len(end as u64).map_err(io)?;
+        self.file.sync_all().map_err(io)?;
+        Ok(torn)
     }
 
     fn write_header(&mut self) -> Result<(), RecordError> {
@@ -160,14 +279,10 @@ impl RecordFile {
         };
         self.file.set_len(0).map_err(io)?;
         self.file.seek(SeekFrom::Start(0)).map_err(io)?;
-        let mut header = MAGIC.to_vec();
-        header.push(RECORD_FORMAT_VERSION);
-        self.file.write_all(&header).map_err(io)?;
+        self.file.write_all(&header()).map_err(io)?;
         self.file.sync_all().map_err(io)?;
         // Make the new file's directory entry durable too.
-        if let Some(dir) = self.path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            File::open(dir).and_then(|d| d.sync_all()).map_err(io)?;
-        }
+        sync_parent_dir(&self.path).map_err(io)?;
         Ok(())
     }
 

@@ -1,5 +1,5 @@
-//! Store tests: exact reopen, torn and corrupt tails, and a writer child process killed with
-//! SIGKILL mid-write many times.
+//! Store tests: exact reopen, the lock, torn tails set aside and cut, damaged middle records
+//! refused, and a writer child process killed with SIGKILL mid-write many times.
 
 use super::*;
 use crate::identity::Keypair;
@@ -7,10 +7,13 @@ use crate::op::{OpFields, OpId, VerifiedOp};
 use crate::payload::test_payload::TestPayload;
 use rand_chacha::ChaCha20Rng;
 use rand_core::{RngCore, SeedableRng};
+use record::MAGIC;
 use std::collections::BTreeSet;
+use std::fs::{File, OpenOptions, TryLockError};
 use std::io::{BufRead, BufReader, Write};
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
+use std::sync::{PoisonError, RwLock, RwLockReadGuard};
 
 /// Set in the child process: the store path it appends to until killed.
 const CHILD_ENV: &str = "SCULPT_STORE_KILL9_CHILD";
@@ -20,6 +23,18 @@ const CHILD_ENV: &str = "SCULPT_STORE_KILL9_CHILD";
 const CHILD_BLOCK_ENV: &str = "SCULPT_STORE_KILL9_BLOCK";
 /// Kill rounds in the crash test.
 const N_KILL_ROUNDS: u64 = 12;
+
+/// Keeps child processes from being spawned while a test has stores open. A child shares the
+/// parent's open files from fork until exec, a store's lock included (an `flock` belongs to the
+/// open file description), so a test that drops a store and reopens it in that window would
+/// find its own lock still held. Tests that open stores hold a read guard ([`no_spawn`]); the
+/// kill test takes the write guard around each spawn.
+static SPAWN: RwLock<()> = RwLock::new(());
+
+/// Held for the whole of a test that opens stores in this process.
+fn no_spawn() -> RwLockReadGuard<'static, ()> {
+    SPAWN.read().unwrap_or_else(PoisonError::into_inner)
+}
 
 fn temp_path(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("sculpt-store-{}-{name}", std::process::id()));
@@ -45,6 +60,7 @@ fn next_op(key: &Keypair, prev: Option<&Op<TestPayload>>, pad: usize) -> Verifie
 
 #[test]
 fn reopen_restores_exactly_and_loads_into_a_log() {
+    let _no_spawn = no_spawn();
     let path = temp_path("reopen");
     let key = Keypair::from_seed([4; 32]);
     let mut written: Vec<VerifiedOp<TestPayload>> = Vec::new();
@@ -63,7 +79,8 @@ fn reopen_restores_exactly_and_loads_into_a_log() {
         recovery,
         Recovery {
             n_records: 10,
-            n_truncated_bytes: 0
+            n_truncated_bytes: 0,
+            torn_tail: None,
         }
     );
     assert_eq!(
@@ -84,6 +101,7 @@ fn reopen_restores_exactly_and_loads_into_a_log() {
 
 #[test]
 fn torn_or_corrupt_tails_are_cut_and_never_accepted() {
+    let _no_spawn = no_spawn();
     let path = temp_path("torn");
     let key = Keypair::from_seed([5; 32]);
     let mut ops: Vec<VerifiedOp<TestPayload>> = Vec::new();
@@ -139,11 +157,235 @@ fn torn_or_corrupt_tails_are_cut_and_never_accepted() {
     let _ = std::fs::remove_dir_all(path.parent().unwrap());
 }
 
+/// Writes `n` ops (of different sizes) to a new store at `path`; returns them and the file's
+/// length after each append (so record `i` spans `ends[i - 1]..ends[i]`, record 0 starts
+/// after the header).
+fn write_ops(path: &Path, key: &Keypair, n: usize) -> (Vec<VerifiedOp<TestPayload>>, Vec<u64>) {
+    let mut ops: Vec<VerifiedOp<TestPayload>> = Vec::new();
+    let mut ends = Vec::new();
+    let (mut store, _, _) = OpStore::<TestPayload>::open(path).unwrap();
+    for i in 0..n {
+        let op = next_op(key, ops.last().map(|o| o.op()), 20 + 9 * i);
+        store.append(&[op.op()]).unwrap();
+        ops.push(op);
+        ends.push(std::fs::metadata(path).unwrap().len());
+    }
+    (ops, ends)
+}
+
+/// The names of the files in `path`'s directory other than the store and its lock file.
+fn other_files(path: &Path) -> Vec<String> {
+    let store = path.file_name().unwrap().to_string_lossy().into_owned();
+    let lock = format!("{store}.lock");
+    let mut names: Vec<String> = std::fs::read_dir(path.parent().unwrap())
+        .unwrap()
+        .map(|entry| entry.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|name| *name != store && *name != lock)
+        .collect();
+    names.sort();
+    names
+}
+
+/// The lock relies on `flock` locks belonging to an open file description: a second open of
+/// the same file in the same process must conflict with the first. Checked here on the OS the
+/// tests run on, with std alone.
+#[test]
+fn two_opens_of_one_file_in_one_process_conflict_on_try_lock() {
+    let _no_spawn = no_spawn();
+    let path = temp_path("flock").with_extension("lock");
+    let open = || {
+        OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .unwrap()
+    };
+    let first: File = open();
+    let second: File = open();
+    first.try_lock().unwrap();
+    assert!(matches!(second.try_lock(), Err(TryLockError::WouldBlock)));
+    drop(first);
+    second.try_lock().unwrap();
+    let _ = std::fs::remove_dir_all(path.parent().unwrap());
+}
+
+#[test]
+fn a_second_open_is_locked_out_and_names_the_holder_until_the_first_is_dropped() {
+    let _no_spawn = no_spawn();
+    let path = temp_path("locked");
+    let key = Keypair::from_seed([7; 32]);
+    let (_, ends) = write_ops(&path, &key, 2);
+    let (first, ops, _) = OpStore::<TestPayload>::open(&path).unwrap();
+    assert_eq!(ops.len(), 2);
+    let pid = format!("pid {}", std::process::id());
+    let Err(error) = OpStore::<TestPayload>::open(&path) else {
+        panic!("a second open of a held store succeeded");
+    };
+    let message = error.to_string();
+    let OpenError::Locked {
+        path: locked,
+        holder,
+    } = error
+    else {
+        panic!("expected Locked, got {error:?}");
+    };
+    assert_eq!(locked, path);
+    let holder = holder.expect("the holder wrote its pid into the lock file");
+    assert!(
+        holder.starts_with(&format!("{pid}, ")),
+        "holder {holder:?} should name {pid} and the executable"
+    );
+    assert!(
+        message.contains(&format!("is in use by another sculpt process ({pid}"))
+            && message.ends_with("; close it first"),
+        "{message}"
+    );
+    // Refused before reading or writing: the store is as it was.
+    assert_eq!(std::fs::metadata(&path).unwrap().len(), ends[1]);
+    let lock = std::fs::read_to_string(lock::lock_path(&path)).unwrap();
+    assert!(lock.starts_with(&pid), "{lock:?}");
+    drop(first);
+    let (_, ops, recovery) = OpStore::<TestPayload>::open(&path).unwrap();
+    assert_eq!((ops.len(), recovery.n_truncated_bytes), (2, 0));
+    let _ = std::fs::remove_dir_all(path.parent().unwrap());
+}
+
+#[test]
+fn a_damaged_record_before_a_valid_one_is_refused_and_the_file_left_alone() {
+    let _no_spawn = no_spawn();
+    let path = temp_path("corrupt");
+    let key = Keypair::from_seed([8; 32]);
+    let (_, ends) = write_ops(&path, &key, 3);
+    let full = std::fs::read(&path).unwrap();
+    let header_bytes = (MAGIC.len() + 1) as u64;
+    let starts = [header_bytes, ends[0], ends[1]];
+    // Every single-bit flip of the first and the middle record (length, checksum and body):
+    // the record is damaged but the last one is still valid after it.
+    for record_idx in 0..2 {
+        for flip in starts[record_idx]..ends[record_idx] {
+            let mut bad = full.clone();
+            bad[flip as usize] ^= 0x10;
+            std::fs::write(&path, &bad).unwrap();
+            let error = OpStore::<TestPayload>::open(&path).unwrap_err();
+            let message = error.to_string();
+            let OpenError::Corrupt {
+                path: damaged,
+                offset,
+                next_valid_offset,
+            } = error
+            else {
+                panic!("flip at {flip}: expected Corrupt, got {error:?}");
+            };
+            assert_eq!(damaged, path);
+            assert_eq!(offset, starts[record_idx], "flip at {flip}");
+            assert_eq!(next_valid_offset, ends[record_idx], "flip at {flip}");
+            assert!(
+                message.contains(&format!("at byte {offset}"))
+                    && message.contains("the file was left as it was"),
+                "{message}"
+            );
+            assert!(
+                std::fs::read(&path).unwrap() == bad,
+                "flip at {flip}: the file was modified"
+            );
+        }
+    }
+    assert_eq!(
+        other_files(&path),
+        Vec::<String>::new(),
+        "nothing set aside"
+    );
+    // The refusal held no lock: once repaired, the store opens whole.
+    std::fs::write(&path, &full).unwrap();
+    let (_, ops, recovery) = OpStore::<TestPayload>::open(&path).unwrap();
+    assert_eq!((ops.len(), recovery.n_truncated_bytes), (3, 0));
+    let _ = std::fs::remove_dir_all(path.parent().unwrap());
+}
+
+#[test]
+fn a_torn_last_record_is_set_aside_byte_for_byte_then_cut() {
+    let _no_spawn = no_spawn();
+    let path = temp_path("set-aside");
+    let key = Keypair::from_seed([9; 32]);
+    let (ops, ends) = write_ops(&path, &key, 3);
+    let full = std::fs::read(&path).unwrap();
+    let cut_at = ends[1] as usize;
+    let torn = &full[..full.len() - 5];
+    std::fs::write(&path, torn).unwrap();
+    let (mut store, got, recovery) = OpStore::<TestPayload>::open(&path).unwrap();
+    assert_eq!(got.len(), 2);
+    assert_eq!(recovery.n_truncated_bytes, (torn.len() - cut_at) as u64);
+    let set_aside = recovery.torn_tail.clone().expect("the cut bytes were kept");
+    let name = set_aside
+        .file_name()
+        .unwrap()
+        .to_string_lossy()
+        .into_owned();
+    assert!(
+        name.starts_with(&format!("ops.log.torn-{cut_at}-")),
+        "{name}"
+    );
+    assert_eq!(set_aside.parent(), path.parent());
+    assert!(std::fs::read(&set_aside).unwrap() == torn[cut_at..]);
+    assert_eq!(std::fs::metadata(&path).unwrap().len(), ends[1]);
+    assert_eq!(
+        other_files(&path),
+        vec![name.clone()],
+        "no partial file left"
+    );
+    // The cut store takes the op again and reopens clean, keeping the set-aside file.
+    store.append(&[ops[2].op()]).unwrap();
+    drop(store);
+    let (_, got, recovery) = OpStore::<TestPayload>::open(&path).unwrap();
+    assert_eq!(got, ops.iter().map(|o| o.op().clone()).collect::<Vec<_>>());
+    assert_eq!(recovery.torn_tail, None);
+    assert!(std::fs::read(&set_aside).unwrap() == torn[cut_at..]);
+    // The same tail again (as after a crash between setting aside and cutting) goes to the
+    // same file, with the same bytes.
+    std::fs::write(&path, torn).unwrap();
+    let (_, _, again) = OpStore::<TestPayload>::open(&path).unwrap();
+    assert_eq!(again.torn_tail, Some(set_aside.clone()));
+    assert!(std::fs::read(&set_aside).unwrap() == torn[cut_at..]);
+    assert_eq!(other_files(&path), vec![name]);
+    let _ = std::fs::remove_dir_all(path.parent().unwrap());
+}
+
+#[test]
+fn a_partial_header_is_rewritten_but_a_short_other_file_is_refused() {
+    let _no_spawn = no_spawn();
+    let path = temp_path("short");
+    std::fs::write(&path, &MAGIC[..4]).unwrap();
+    let (_, ops, recovery) = OpStore::<TestPayload>::open(&path).unwrap();
+    assert!(ops.is_empty());
+    assert_eq!(
+        recovery,
+        Recovery {
+            n_records: 0,
+            n_truncated_bytes: 4,
+            torn_tail: None
+        }
+    );
+    assert_eq!(
+        std::fs::metadata(&path).unwrap().len(),
+        MAGIC.len() as u64 + 1
+    );
+    std::fs::write(&path, b"notes").unwrap();
+    assert!(matches!(
+        OpStore::<TestPayload>::open(&path),
+        Err(OpenError::Record(RecordError::BadHeader(_)))
+    ));
+    assert_eq!(std::fs::read(&path).unwrap(), b"notes", "not overwritten");
+    let _ = std::fs::remove_dir_all(path.parent().unwrap());
+}
+
 /// In the child (with [`CHILD_ENV`] set) this appends ops forever, printing `ack <id>` after
 /// each durable append, until the parent kills it. Run plainly, it checks the same writer
 /// loop for a few ops in-process.
 #[test]
 fn kill9_child_writer() {
+    let _no_spawn = no_spawn();
     match std::env::var(CHILD_ENV) {
         Ok(path) => {
             let block_after = std::env::var(CHILD_BLOCK_ENV)
@@ -246,7 +488,10 @@ fn kill9_never_loses_acknowledged_ops_nor_accepts_torn_ones() {
         if round % 2 == 0 {
             command.env(CHILD_BLOCK_ENV, wanted.to_string());
         }
-        let child = command.spawn().unwrap();
+        let child = {
+            let _spawning = SPAWN.write().unwrap_or_else(PoisonError::into_inner);
+            command.spawn().unwrap()
+        };
         let mut child = KillOnDrop(child);
         let stdout = child.0.stdout.take().unwrap();
         let mut lines = BufReader::new(stdout).lines();
