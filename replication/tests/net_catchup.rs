@@ -60,9 +60,7 @@ fn authored_log(n_ops: usize) -> Log<TestPayload> {
 /// Returns the time and the sync bytes sent by the holder.
 fn in_memory_catch_up(log: Log<TestPayload>) -> (Duration, u64) {
     let n_ops = log.len();
-    let session = replication::net::SessionKeys::from_invite(INVITE)
-        .unwrap()
-        .session_id();
+    let session = session_keys(INVITE).session_id();
     let mut a = Peer::new(Keypair::from_seed([1; 32]), session, log);
     let mut b = Peer::<TestPayload>::new(Keypair::from_seed([2; 32]), session, Log::default());
     let start = stopwatch();

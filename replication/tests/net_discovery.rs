@@ -12,7 +12,6 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use net_support::*;
-use replication::net::SessionKeys;
 use replication::net::discovery::lan::{self, LanConfig, LanDiscovery};
 use replication::net::discovery::message::{DiscoveryMessage, REGISTER_BYTES};
 use replication::net::discovery::{self, DiscoveredPeer, DiscoveryServer};
@@ -28,7 +27,7 @@ async fn two_nodes_find_each_other_through_the_discovery_server_and_sync() {
         .spawn(move || server.run(&flag))
         .unwrap();
 
-    let keys = SessionKeys::from_invite(INVITE).unwrap();
+    let keys = session_keys(INVITE);
     let a = node(1);
     let b = node(2);
     author_some(&a.handle, 1, "alice").await;
@@ -44,7 +43,7 @@ async fn two_nodes_find_each_other_through_the_discovery_server_and_sync() {
     .unwrap();
     assert!(found.is_empty(), "A is the first: {found:?}");
     // Another session registered at the same server stays invisible to ours.
-    let other = SessionKeys::from_invite("another session").unwrap();
+    let other = session_keys(OTHER_INVITE);
     let found = discovery::register(server_addr, other.discovery_id(), [9; 32].into_peer(), 9)
         .await
         .unwrap();
@@ -167,7 +166,7 @@ fn lan_multicast_discovery_finds_peers_that_then_sync() {
 }
 
 async fn lan_in_namespace() {
-    let keys = SessionKeys::from_invite(INVITE).unwrap();
+    let keys = session_keys(INVITE);
     let config = LanConfig {
         interface: Ipv4Addr::LOCALHOST,
         ..LanConfig::default()
@@ -187,7 +186,7 @@ async fn lan_in_namespace() {
     };
     // First by hand: A's announcement reaches B (and A's own socket, which skips it).
     let (mut lan_a, mut lan_b) = (bind(&a.handle), bind(&b.handle));
-    let other = SessionKeys::from_invite("another session").unwrap();
+    let other = session_keys(OTHER_INVITE);
     let mut lan_other =
         LanDiscovery::bind(config, other.discovery_id(), [3; 32].into_peer(), 3).unwrap();
     lan_other.announce().await.unwrap();

@@ -12,7 +12,7 @@ use net_support::*;
 use replication::Keypair;
 use replication::net::admission::{self, ADMISSION_FRAME_BYTES};
 use replication::net::node::{CloseCode, MAX_REJECTIONS_PER_CONN, RefusalKind};
-use replication::net::{SessionKeys, frame, tls};
+use replication::net::{frame, tls};
 use replication::payload::test_payload::TestPayload;
 
 /// A raw QUIC connection to `addr` that has passed the TLS handshake only.
@@ -28,7 +28,7 @@ async fn raw_connection(addr: SocketAddr) -> quinn::Connection {
 /// A raw connection admitted with the real invite under key `seed`.
 async fn admitted(addr: SocketAddr, seed: u8) -> (quinn::Connection, admission::Admitted) {
     let connection = raw_connection(addr).await;
-    let keys = SessionKeys::from_invite(INVITE).unwrap();
+    let keys = session_keys(INVITE);
     let admitted = admission::admit_dialer(&connection, &keys, &Keypair::from_seed([seed; 32]))
         .await
         .unwrap();

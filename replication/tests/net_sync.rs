@@ -66,7 +66,7 @@ async fn three_nodes_converge_through_a_line() {
 async fn a_node_with_the_wrong_invite_is_refused() {
     let mut a = node(1);
     author_some(&a.handle, 1, "alice").await;
-    let intruder = node_with(9, "not the invite", Log::default());
+    let intruder = node_with(9, OTHER_INVITE, Log::default());
     let refused = intruder.handle.dial(a.handle.local_addr()).await;
     assert!(
         matches!(
@@ -211,7 +211,7 @@ async fn a_node_with_a_store_persists_authored_and_received_ops() {
     let (store, _, _) = OpStore::<TestPayload>::open(&path).unwrap();
     let b = replication::net::Node::spawn(replication::net::NodeConfig {
         keypair: Keypair::from_seed([2; 32]),
-        keys: replication::net::SessionKeys::from_invite(INVITE).unwrap(),
+        keys: session_keys(INVITE),
         listen: "127.0.0.1:0".parse().unwrap(),
         log: Log::default(),
         store: Some(store),

@@ -291,16 +291,21 @@ pub fn admission_timeout() -> Duration {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use rand_chacha::ChaCha20Rng;
+    use rand_core::SeedableRng;
 
-    fn keys(invite: &str) -> SessionKeys {
-        SessionKeys::from_invite(invite).unwrap()
+    use super::*;
+    use crate::net::invite::Invite;
+
+    /// The keys of the session of the invite drawn from seed `seed`.
+    fn keys(seed: u64) -> SessionKeys {
+        SessionKeys::from_invite(&Invite::generate(&mut ChaCha20Rng::seed_from_u64(seed)))
     }
 
     #[test]
     fn proofs_verify_only_with_the_invite_the_exporter_and_the_role() {
         let alice = Keypair::from_seed([1; 32]);
-        let session = keys("right invite");
+        let session = keys(1);
         let exporter = [7; EXPORTER_BYTES];
         let proof = AdmissionFrame::prove(&session, &alice, Role::Dialer, &exporter);
         let decoded = AdmissionFrame::decode(&proof.encode()).unwrap();
@@ -316,7 +321,7 @@ mod tests {
         );
         // Another session, or a relayed proof from another connection.
         assert_eq!(
-            decoded.verify(&keys("wrong invite"), Role::Acceptor, &exporter),
+            decoded.verify(&keys(2), Role::Acceptor, &exporter),
             Err(AdmissionError::WrongInvite)
         );
         assert_eq!(
@@ -338,7 +343,7 @@ mod tests {
     #[test]
     fn decode_refuses_bad_frames() {
         let frame = AdmissionFrame::prove(
-            &keys("x"),
+            &keys(3),
             &Keypair::from_seed([1; 32]),
             Role::Acceptor,
             &[0; 32],

@@ -7,8 +7,11 @@
 //!
 //! # Key types
 //!
-//! - [`SessionKeys`]: derived from an invite code ([`generate_invite`] makes one): the sync
-//!   session id, the admission key and the discovery id.
+//! - [`Invite`]: an invite code, the session's one secret: 130 random bits in 7 groups of 5
+//!   characters a person can read aloud, with a check character per group so that a typo is
+//!   reported at its group ([`Invite::generate`] makes one, [`Invite::parse`] reads one).
+//! - [`SessionKeys`]: derived from an [`Invite`]: the sync session id, the admission key and
+//!   the discovery id.
 //! - [`Node`] / [`NodeHandle`] / [`NodeEvent`]: one QUIC endpoint (quinn, rustls with *ring*)
 //!   that accepts and dials, admits peers that prove the invite and their ed25519 id, and runs
 //!   the peer's sans-IO core on one tokio task, the only place that reads the wall clock.
@@ -26,18 +29,22 @@
 //! relay neither. An admitted peer is trusted with nothing else: the core verifies every op's
 //! signature, rate-limits and bounds every message, and the node cuts off a connection after
 //! [`node::MAX_REJECTIONS_PER_CONN`] rejections or one oversized frame. Anyone who holds the
-//! invite can join under their own id, so an invite is a bearer secret: keep it long and
-//! random, as discovery servers and fake listeners can test guesses offline.
+//! invite can join under their own id, so an invite is a bearer secret: it must be random, as
+//! discovery servers and fake listeners can test guesses offline, and [`Invite::parse`]
+//! refuses codes made up by hand.
 //!
 //! # Example
 //!
 //! ```no_run
-//! use replication::net::{Node, NodeConfig, SessionKeys};
+//! use replication::net::{Invite, Node, NodeConfig, SessionKeys};
 //! use replication::payload::test_payload::TestPayload;
 //! use replication::{Keypair, Log};
 //!
 //! # async fn demo() -> Result<(), Box<dyn std::error::Error>> {
-//! let keys = SessionKeys::from_invite("4f2a-9c1e-77d0-3b58-a6e1-0c9d-52f7-e813")?;
+//! # use rand_core::SeedableRng;
+//! # let code = Invite::generate(&mut rand_chacha::ChaCha20Rng::seed_from_u64(1)).to_string();
+//! // `code` is an invite as a person typed it.
+//! let keys = SessionKeys::from_invite(&Invite::parse(&code)?);
 //! let config = |seed| NodeConfig::<TestPayload> {
 //!     keypair: Keypair::from_seed([seed; 32]),
 //!     keys: keys.clone(),
@@ -59,9 +66,11 @@ pub mod admission;
 mod clock;
 pub mod discovery;
 pub mod frame;
+pub mod invite;
 pub mod node;
 pub mod session;
 pub mod tls;
 
+pub use invite::{Invite, InviteError};
 pub use node::{Node, NodeConfig, NodeEvent, NodeHandle, NodeStats};
-pub use session::{SessionKeys, generate_invite};
+pub use session::SessionKeys;

@@ -1,21 +1,17 @@
 //! Session keys: everything the transport and discovery derive from an invite code.
 //!
-//! One invite yields three independent values (blake3 `derive_key` with distinct contexts):
-//! the sync session id the core checks in every hello, the admission key whose MACs prove
-//! knowledge of the invite during the QUIC handshake, and the discovery id that discovery
-//! servers and LAN announcements see. None of them reveals another or the invite.
+//! One invite yields three independent values (blake3 `derive_key` with distinct contexts,
+//! over the invite's canonical text): the sync session id the core checks in every hello, the
+//! admission key whose MACs prove knowledge of the invite during the QUIC handshake, and the
+//! discovery id that discovery servers and LAN announcements see. None of them reveals
+//! another or the invite.
 
 use std::fmt;
 
-use rand_core::CryptoRngCore;
-
 use crate::identity::hex;
+use crate::net::invite::Invite;
 use crate::sync::message::{SESSION_ID_BYTES, SessionId};
 
-/// Longest invite code accepted, in bytes (after trimming surrounding whitespace).
-pub const MAX_INVITE_BYTES: usize = 256;
-/// Random bytes in an invite made by [`generate_invite`] (128 bits).
-pub const INVITE_RANDOM_BYTES: usize = 16;
 /// Length of a [`DiscoveryId`].
 pub const DISCOVERY_ID_BYTES: usize = 16;
 
@@ -26,17 +22,6 @@ const SESSION_ID_CONTEXT: &str = "sculpt 2026 replication session id v1";
 const ADMISSION_KEY_CONTEXT: &str = "sculpt 2026 replication admission key v1";
 const DISCOVERY_ID_CONTEXT: &str = "sculpt 2026 replication discovery id v1";
 
-/// Why an invite code was refused.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum InviteError {
-    /// Nothing but whitespace.
-    #[error("the invite code is empty")]
-    Empty,
-    /// Over [`MAX_INVITE_BYTES`].
-    #[error("the invite code is {0} bytes, over the limit {MAX_INVITE_BYTES}")]
-    TooLong(usize),
-}
-
 /// The keys of one session, derived from its invite code.
 #[derive(Clone, PartialEq, Eq)]
 pub struct SessionKeys {
@@ -46,30 +31,23 @@ pub struct SessionKeys {
 }
 
 impl SessionKeys {
-    /// Derives the keys of the session that `invite` opens. Surrounding whitespace is ignored
-    /// so that a code pasted with a newline still works.
+    /// Derives the keys of the session that `invite` opens, from its canonical text, so that
+    /// every accepted spelling of one code gives the same keys.
     ///
-    /// The invite is the only secret: it should be long and random (see [`generate_invite`]),
-    /// because a discovery server or a fake listener that sees the derived values can test
-    /// guesses offline.
-    pub fn from_invite(invite: &str) -> Result<Self, InviteError> {
-        let invite = invite.trim();
-        if invite.is_empty() {
-            return Err(InviteError::Empty);
-        }
-        if invite.len() > MAX_INVITE_BYTES {
-            return Err(InviteError::TooLong(invite.len()));
-        }
-        let derive = |context| blake3::derive_key(context, invite.as_bytes());
+    /// The invite is the only secret. A discovery server or a fake listener that sees the
+    /// derived values can test guesses offline, which is why an [`Invite`] carries 130 random
+    /// bits and refuses codes made up by hand.
+    pub fn from_invite(invite: &Invite) -> Self {
         let mut session_id = [0; SESSION_ID_BYTES];
-        session_id.copy_from_slice(&derive(SESSION_ID_CONTEXT)[..SESSION_ID_BYTES]);
+        session_id.copy_from_slice(&invite.derive_key(SESSION_ID_CONTEXT)[..SESSION_ID_BYTES]);
         let mut discovery_id = [0; DISCOVERY_ID_BYTES];
-        discovery_id.copy_from_slice(&derive(DISCOVERY_ID_CONTEXT)[..DISCOVERY_ID_BYTES]);
-        Ok(Self {
+        discovery_id
+            .copy_from_slice(&invite.derive_key(DISCOVERY_ID_CONTEXT)[..DISCOVERY_ID_BYTES]);
+        Self {
             session_id,
-            admission_key: derive(ADMISSION_KEY_CONTEXT),
+            admission_key: invite.derive_key(ADMISSION_KEY_CONTEXT),
             discovery_id,
-        })
+        }
     }
 
     /// The session id every sync hello carries.
@@ -95,14 +73,6 @@ impl fmt::Debug for SessionKeys {
     }
 }
 
-/// A new random invite code, `xxxx-xxxx-...` (32 hex digits, 128 bits), from the RNG the
-/// caller passes in.
-pub fn generate_invite(rng: &mut impl CryptoRngCore) -> String {
-    let mut bytes = [0; INVITE_RANDOM_BYTES];
-    rng.fill_bytes(&mut bytes);
-    bytes.chunks(2).map(hex).collect::<Vec<_>>().join("-")
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -110,28 +80,18 @@ mod tests {
     use rand_core::SeedableRng;
 
     #[test]
-    fn keys_are_independent_and_whitespace_insensitive() {
-        let a = SessionKeys::from_invite("abcd-efgh").unwrap();
-        assert_eq!(a, SessionKeys::from_invite("  abcd-efgh\n").unwrap());
-        assert_ne!(a, SessionKeys::from_invite("abcd-efgi").unwrap());
+    fn keys_are_independent_and_spelling_insensitive() {
+        let invite = Invite::generate(&mut ChaCha20Rng::seed_from_u64(1));
+        let a = SessionKeys::from_invite(&invite);
+        let typed = format!(
+            "  {}\n",
+            invite.to_string().to_uppercase().replace('-', " ")
+        );
+        assert_eq!(a, SessionKeys::from_invite(&Invite::parse(&typed).unwrap()));
+        let other = Invite::generate(&mut ChaCha20Rng::seed_from_u64(2));
+        assert_ne!(a, SessionKeys::from_invite(&other));
         assert_ne!(&a.session_id()[..], &a.discovery_id()[..]);
         assert_ne!(&a.admission_key()[..16], &a.discovery_id()[..]);
         assert!(!format!("{a:?}").contains(&hex(a.admission_key())));
-        assert_eq!(SessionKeys::from_invite(" \t"), Err(InviteError::Empty));
-        let long = "x".repeat(MAX_INVITE_BYTES + 1);
-        assert_eq!(
-            SessionKeys::from_invite(&long),
-            Err(InviteError::TooLong(MAX_INVITE_BYTES + 1))
-        );
-    }
-
-    #[test]
-    fn generated_invites_are_random_and_well_formed() {
-        let mut rng = ChaCha20Rng::seed_from_u64(1);
-        let a = generate_invite(&mut rng);
-        let b = generate_invite(&mut rng);
-        assert_ne!(a, b);
-        assert_eq!(a.len(), 32 + 7, "{a}");
-        assert!(SessionKeys::from_invite(&a).is_ok());
     }
 }

@@ -11,12 +11,14 @@ use std::future::Future;
 use std::time::Duration;
 
 use replication::net::node::NodeEvent;
-use replication::net::{Node, NodeConfig, NodeHandle, SessionKeys};
+use replication::net::{Invite, Node, NodeConfig, NodeHandle, SessionKeys};
 use replication::payload::test_payload::TestPayload;
 use replication::{Keypair, Log, OpId};
 
 /// The invite every honest test node uses.
-pub const INVITE: &str = "7c1d-0a9e-55b2-e46f-93d8-2b7a-c0f1-6e35";
+pub const INVITE: &str = "7m6ev-tzwff-057jy-6w0z1-mdsgb-ppr41-n5kh6";
+/// The invite of another session.
+pub const OTHER_INVITE: &str = "jjx9f-k1qqv-xv5sj-z7vzr-sgty0-1e832-6vb7f";
 
 /// How long a test may wait for anything before it fails.
 pub const PATIENCE: Duration = Duration::from_secs(20);
@@ -28,12 +30,17 @@ pub type THandle = NodeHandle<TestPayload>;
 pub fn node_with(seed: u8, invite: &str, log: Log<TestPayload>) -> TNode {
     Node::spawn(NodeConfig {
         keypair: Keypair::from_seed([seed; 32]),
-        keys: SessionKeys::from_invite(invite).expect("test invite"),
+        keys: session_keys(invite),
         listen: "127.0.0.1:0".parse().expect("loopback address"),
         log,
         store: None,
     })
     .expect("node starts")
+}
+
+/// The keys of the session of `invite` (one of the test invites above).
+pub fn session_keys(invite: &str) -> SessionKeys {
+    SessionKeys::from_invite(&Invite::parse(invite).expect("test invite"))
 }
 
 /// A node with key `seed` in the honest test session, with an empty log.
