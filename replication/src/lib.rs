@@ -4,7 +4,9 @@
 //! The core ([`log`], [`sync`], [`lease`], ...) takes time (`now`) and randomness (a seeded
 //! RNG) as arguments and never touches sockets, files, clocks or threads. Two adapters do IO
 //! and the core never imports them: [`store`] (the on-disk log) and `net` (QUIC transport with
-//! invite admission, a discovery server and LAN discovery). The core is generic over the op
+//! invite admission, a discovery server and LAN discovery), which is built only with the `net`
+//! feature, so the compiler keeps the core and the simulator free of sockets and an async
+//! runtime. The core is generic over the op
 //! [`Payload`]: [`shape::ShapePayload`] carries the object model (`fdsl`'s objects, properties
 //! and sculpting edits) and folds into [`shape::ShapeScene`];
 //! [`payload::test_payload::TestPayload`] is a small stand-in for tests.
@@ -107,6 +109,7 @@ pub mod identity;
 pub mod lease;
 pub mod log;
 pub mod materialize;
+#[cfg(feature = "net")]
 pub mod net;
 pub mod op;
 pub mod payload;

@@ -63,3 +63,40 @@ fn every_source_file_has_a_header() {
         "files without a `//!` header: {missing:?}"
     );
 }
+
+/// The sans-IO core builds without sockets or an async runtime: the simulator (which drives
+/// the core alone) has no tokio or quinn in its normal dependency tree, while the app (which
+/// enables `replication`'s `net` feature) does. The second half shows the check can fail.
+#[test]
+fn the_simulator_builds_without_the_network_adapter() {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let tree = |package: &str| {
+        let output = Command::new(&cargo)
+            .args([
+                "tree",
+                "--offline",
+                "-e",
+                "normal",
+                "--prefix",
+                "none",
+                "-p",
+            ])
+            .arg(package)
+            .current_dir(root())
+            .output()
+            .unwrap();
+        assert!(
+            output.status.success(),
+            "{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        String::from_utf8(output.stdout).unwrap()
+    };
+    let has = |tree: &str, krate: &str| tree.lines().any(|l| l.starts_with(&format!("{krate} v")));
+    let simulator = tree("simulator");
+    for krate in ["tokio", "quinn", "socket2", "rcgen"] {
+        assert!(!has(&simulator, krate), "the simulator depends on {krate}");
+    }
+    let app = tree("app");
+    assert!(has(&app, "tokio") && has(&app, "quinn"), "{app}");
+}

@@ -9,7 +9,8 @@ use tokio::sync::{mpsc, oneshot};
 
 use super::{
     CloseCode, Command, ConnStats, DialError, DisconnectReason, Input, MAX_QUEUED_FRAMES_PER_CONN,
-    MAX_REJECTIONS_PER_CONN, NodeAuthorError, NodeEvent, NodeStats, RefusalKind, Shared, conn,
+    MAX_REJECTIONS_PER_CONN, NodeAuthorError, NodeEvent, NodeStats, Observer, RefusalKind, Shared,
+    conn,
 };
 use crate::identity::PeerId;
 use crate::log::Log;
@@ -33,6 +34,9 @@ struct Live {
 
 pub(super) struct Core<P> {
     peer: Peer<P>,
+    observer: Option<Box<dyn Observer<P>>>,
+    /// True when the log changed since the observer last saw a settled step.
+    changed: bool,
     store: Option<OpStore<P>>,
     endpoint: quinn::Endpoint,
     shared: Arc<Shared>,
@@ -78,6 +82,7 @@ fn persist<P: Payload>(
 impl<P: Payload + Send + 'static> Core<P> {
     pub(super) fn new(
         peer: Peer<P>,
+        observer: Option<Box<dyn Observer<P>>>,
         store: Option<OpStore<P>>,
         endpoint: quinn::Endpoint,
         shared: Arc<Shared>,
@@ -85,6 +90,9 @@ impl<P: Payload + Send + 'static> Core<P> {
     ) -> Self {
         Self {
             peer,
+            observer,
+            // The observer hears of the log it starts from at the first settled step.
+            changed: true,
             store,
             endpoint,
             shared,
@@ -184,6 +192,7 @@ impl<P: Payload + Send + 'static> Core<P> {
             self.stop(error.clone());
             return Err(NodeAuthorError::Store(error));
         }
+        self.observe(&insertion);
         Ok(op.op().id())
     }
 
@@ -342,6 +351,20 @@ impl<P: Payload + Send + 'static> Core<P> {
         }
         self.enforce_rejection_limit();
         self.drain_transmits(now);
+        if let Some(observer) = &mut self.observer {
+            observer.settled(&self.peer, std::mem::take(&mut self.changed));
+        }
+    }
+
+    /// Shows the observer a stored insertion.
+    fn observe(&mut self, insertion: &crate::log::Insertion) {
+        if insertion.delivered.is_empty() && insertion.refold.is_none() {
+            return;
+        }
+        self.changed = true;
+        if let Some(observer) = &mut self.observer {
+            observer.inserted(self.peer.log(), insertion);
+        }
     }
 
     fn drain_events(&mut self) {
@@ -372,6 +395,7 @@ impl<P: Payload + Send + 'static> Core<P> {
                     if let Err(error) = stored {
                         return self.stop(error);
                     }
+                    self.observe(&insertion);
                     NodeEvent::Delivered {
                         conn,
                         peer,

@@ -357,6 +357,22 @@ impl NodeStats {
 
 type Query<P> = Box<dyn FnOnce(&Peer<P>) + Send>;
 
+/// Sees the node's log change, inside the core task: the way a driver keeps a scene folded
+/// (for example a `Materialized` view) without copying the log or racing the node.
+///
+/// Both methods run on the node's core task between network steps, so they must be quick;
+/// the node sends nothing while they run.
+pub trait Observer<P>: Send + 'static {
+    /// Ops were authored or delivered and are already in the store (if the node has one).
+    /// Insertions come in the order the log made them; hand each to the fold as it comes.
+    fn inserted(&mut self, log: &Log<P>, insertion: &Insertion);
+
+    /// The node finished a step (inputs handled, events stored, transmits queued).
+    /// `changed` is true when [`Observer::inserted`] was called since the last settled step,
+    /// and at the first step (so the observer sees the log it starts from).
+    fn settled(&mut self, peer: &Peer<P>, changed: bool);
+}
+
 /// A request from a handle to the core task.
 enum Command<P> {
     Dial {
@@ -443,6 +459,14 @@ pub struct Node<P> {
 impl<P: Payload + Send + 'static> Node<P> {
     /// Binds the endpoint and starts the node's tasks on the current tokio runtime.
     pub fn spawn(config: NodeConfig<P>) -> Result<Self, NodeError> {
+        Self::spawn_observed(config, None)
+    }
+
+    /// [`Node::spawn`], with an [`Observer`] that sees every change of the log.
+    pub fn spawn_observed(
+        config: NodeConfig<P>,
+        observer: Option<Box<dyn Observer<P>>>,
+    ) -> Result<Self, NodeError> {
         tokio::runtime::Handle::try_current().map_err(|_| NodeError::NoRuntime)?;
         let NodeConfig {
             keypair,
@@ -476,7 +500,7 @@ impl<P: Payload + Send + 'static> Node<P> {
         });
         let peer = Peer::new(keypair, keys.session_id(), log);
         tokio::spawn(conn::accept_loop(endpoint.clone(), shared.clone()));
-        let core = core::Core::new(peer, store, endpoint, shared, event_tx);
+        let core = core::Core::new(peer, observer, store, endpoint, shared, event_tx);
         tokio::spawn(core.run(command_rx, input_rx));
         Ok(Self {
             handle: NodeHandle {
