@@ -101,7 +101,10 @@ pub enum RejectKind {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CloseReason {
     /// The remote speaks another protocol version.
-    WrongProtocol,
+    WrongProtocol {
+        /// The version the remote's hello names.
+        remote: u64,
+    },
     /// The remote is in another session.
     WrongSession,
 }
@@ -515,7 +518,9 @@ impl<P: Payload> SyncState<P> {
                 RejectKind::WrongProtocol,
                 format!("protocol {protocol_version}"),
             );
-            self.close(CloseReason::WrongProtocol);
+            self.close(CloseReason::WrongProtocol {
+                remote: protocol_version,
+            });
             return;
         }
         if session_id != self.config.session_id {

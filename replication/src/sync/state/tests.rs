@@ -379,7 +379,13 @@ fn wrong_session_or_protocol_closes() {
     let other = Keypair::from_seed([5; 32]).peer_id();
     for (session, version, reason) in [
         ([8; 16], PROTOCOL_VERSION, CloseReason::WrongSession),
-        (SESSION, PROTOCOL_VERSION + 1, CloseReason::WrongProtocol),
+        (
+            SESSION,
+            PROTOCOL_VERSION + 1,
+            CloseReason::WrongProtocol {
+                remote: PROTOCOL_VERSION + 1,
+            },
+        ),
     ] {
         let mut b = Node::new(2, 1);
         b.sync
