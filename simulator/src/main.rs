@@ -14,11 +14,68 @@ use simulator::shrink::{MAX_SHRINK_RUNS, shrink};
 #[global_allocator]
 static ALLOC: CountingAlloc = CountingAlloc;
 
-const USAGE: &str = "usage: simulator [--seed N] [--seeds N] [--peers P] [--ops K] \
-[--faults none|lan|wan|chaos|swarm] [--without KIND,...] [--no-hostile] \
-[--sabotage none|drop-insertions|reverse-fold|flip-lease] [--actions RANGES] \
-[--determinism] [--shrink] [--shrink-runs N] [--plot DIR] [--quiet]
-  KIND: jitter loss dup bandwidth partitions offline crashes late-joins forgery flood";
+/// Simulates N peers of the real replication core over a modelled network, from one seed,
+/// and checks that they converge. A failure prints the command that replays it.
+#[derive(clap::Parser, Debug)]
+#[command(name = "simulator", version)]
+struct Cli {
+    /// The first seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Seeds to run, from --seed on (a campaign).
+    #[arg(long, default_value_t = 1)]
+    seeds: u64,
+    /// Honest peers.
+    #[arg(long, default_value_t = 8)]
+    peers: usize,
+    /// User actions in the workload.
+    #[arg(long, default_value_t = 500)]
+    ops: usize,
+    /// The fault preset: none, lan, wan, chaos or swarm.
+    #[arg(long, default_value = "chaos", value_parser = parse_faults)]
+    faults: Faults,
+    /// Fault kinds to switch off, comma-separated: jitter loss dup bandwidth partitions
+    /// offline crashes late-joins forgery flood.
+    #[arg(long, value_name = "KIND,...", value_delimiter = ',', value_parser = parse_fault_kind)]
+    without: Vec<FaultKind>,
+    /// No hostile member.
+    #[arg(long)]
+    no_hostile: bool,
+    /// A planted bug, to test the checkers: none, drop-insertions, reverse-fold, flip-lease
+    /// or send-unsynced.
+    #[arg(long, default_value = "none", value_parser = parse_sabotage)]
+    sabotage: Sabotage,
+    /// Only these workload actions (ranges such as 0-9,12), as a shrunk replay names them.
+    #[arg(long, value_name = "RANGES")]
+    actions: Option<String>,
+    /// Run each seed twice and compare the trace hashes.
+    #[arg(long)]
+    determinism: bool,
+    /// Shrink each failure to a small replay command.
+    #[arg(long)]
+    shrink: bool,
+    /// Most runs one shrink may take.
+    #[arg(long, default_value_t = MAX_SHRINK_RUNS)]
+    shrink_runs: usize,
+    /// Write PNG plots of convergence, traffic and memory here.
+    #[arg(long, value_name = "DIR")]
+    plot: Option<PathBuf>,
+    /// Print only failures and the campaign summary.
+    #[arg(long)]
+    quiet: bool,
+}
+
+fn parse_faults(name: &str) -> Result<Faults, String> {
+    Faults::named(name).ok_or(format!("unknown faults {name}"))
+}
+
+fn parse_fault_kind(name: &str) -> Result<FaultKind, String> {
+    FaultKind::named(name).ok_or(format!("unknown fault {name}"))
+}
+
+fn parse_sabotage(name: &str) -> Result<Sabotage, String> {
+    Sabotage::named(name).ok_or(format!("unknown sabotage {name}"))
+}
 
 /// Parsed arguments.
 struct Args {
@@ -31,56 +88,26 @@ struct Args {
     quiet: bool,
 }
 
-fn parse(mut args: impl Iterator<Item = String>) -> Result<Args, String> {
-    let mut a = Args {
-        config: Config::new(1, 8, 500, Faults::PRESETS[2]),
-        n_seeds: 1,
-        determinism: false,
-        shrink: false,
-        shrink_runs: MAX_SHRINK_RUNS,
-        plot_dir: None,
-        quiet: false,
-    };
-    let mut actions = None;
-    while let Some(arg) = args.next() {
-        let mut value = || args.next().ok_or_else(|| format!("{arg} needs a value"));
-        let number = |v: String| v.parse::<u64>().map_err(|e| format!("{v}: {e}"));
-        let c = &mut a.config;
-        match arg.as_str() {
-            "--seed" => c.seed = number(value()?)?,
-            "--seeds" => a.n_seeds = number(value()?)?,
-            "--peers" => c.n_peers = number(value()?)? as usize,
-            "--ops" => c.n_ops = number(value()?)? as usize,
-            "--faults" => {
-                let v = value()?;
-                c.faults = Faults::named(&v).ok_or(format!("unknown faults {v}"))?;
-            }
-            "--without" => {
-                for name in value()?.split(',').filter(|n| !n.is_empty()) {
-                    let kind = FaultKind::named(name).ok_or(format!("unknown fault {name}"))?;
-                    c.without = c.without.with(kind);
-                }
-            }
-            "--sabotage" => {
-                let v = value()?;
-                c.sabotage = Sabotage::named(&v).ok_or(format!("unknown sabotage {v}"))?;
-            }
-            "--actions" => actions = Some(value()?),
-            "--no-hostile" => c.hostile = false,
-            "--determinism" => a.determinism = true,
-            "--shrink" => a.shrink = true,
-            "--shrink-runs" => a.shrink_runs = number(value()?)? as usize,
-            "--plot" => a.plot_dir = Some(PathBuf::from(value()?)),
-            "--quiet" => a.quiet = true,
-            "--help" | "-h" => return Err(String::new()),
-            other => return Err(format!("unknown argument {other}")),
-        }
+fn args(cli: Cli) -> Result<Args, String> {
+    let mut config = Config::new(cli.seed, cli.peers, cli.ops, cli.faults);
+    for kind in cli.without {
+        config.without = config.without.with(kind);
     }
-    if let Some(text) = actions {
-        a.config.actions = Some(parse_ranges(&text, MAX_OPS)?);
+    config.sabotage = cli.sabotage;
+    config.hostile = !cli.no_hostile;
+    if let Some(text) = &cli.actions {
+        config.actions = Some(parse_ranges(text, MAX_OPS)?);
     }
-    a.config.validate().map_err(|e| e.to_string())?;
-    Ok(a)
+    config.validate().map_err(|e| e.to_string())?;
+    Ok(Args {
+        config,
+        n_seeds: cli.seeds,
+        determinism: cli.determinism,
+        shrink: cli.shrink,
+        shrink_runs: cli.shrink_runs,
+        plot_dir: cli.plot,
+        quiet: cli.quiet,
+    })
 }
 
 /// Figures over a campaign.
@@ -247,13 +274,10 @@ fn one(args: &Args, config: Config, summary: &mut Summary) -> Result<bool, Strin
 }
 
 fn main() -> ExitCode {
-    let args = match parse(std::env::args().skip(1)) {
+    let args = match args(<Cli as clap::Parser>::parse()) {
         Ok(a) => a,
         Err(e) => {
-            if !e.is_empty() {
-                eprintln!("{e}");
-            }
-            eprintln!("{USAGE}");
+            eprintln!("simulator: {e}");
             return ExitCode::from(2);
         }
     };
