@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Installs what is missing, builds sculpt in release and opens its window on the demo scene (the
-# thesis's watermelon), solo, with its edits kept in a local store (~/.local/share/sculpt, or
+# thesis's watermelon), solo, with its edits kept in a local store (~/.local/share/sculpt/sessions/demo, or
 # --store DIR). With no display at all it says so and pictures the demo scene headless instead.
 set -euo pipefail
 cd "$(dirname "$0")/.."

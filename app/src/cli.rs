@@ -1,76 +1,370 @@
-//! The command-line subcommands for headless use: `check`, `eval`, `slice`, `render`.
+//! The subcommands for headless use: `peer` (a headless peer), `discovery`, `invite`,
+//! `sessions`, and `check`, `eval`, `slice`, `render` for functions and scenes.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
+use app::engine::{Engine, EngineConfig, Network, lock, store};
 use fdsl::Function;
 use fdsl::eval::{BulkEval, PointEval};
+use replication::net::invite::Invite;
 
-use crate::USAGE;
+/// How often a headless peer looks at its view to print what changed.
+const PEER_POLL_MILLIS: u64 = 100;
 
-/// Runs one headless subcommand; `args[0]` names it.
-pub fn run(args: &[String]) -> anyhow::Result<()> {
-    let Some(command) = args.first() else {
-        print!("{USAGE}");
-        return Ok(());
-    };
-    match command.as_str() {
-        "check" => {
-            let text = source(args.get(1))?;
-            let compiled = Function::compile(&text);
-            for d in &compiled.diagnostics {
-                eprint!("{}", d.render(&text));
-            }
-            match compiled.function {
-                Some(f) => {
-                    let names: Vec<&str> = f.output_names().collect();
-                    println!(
-                        "ok: outputs {}; {} operations",
-                        names.join(", "),
-                        f.graph_len()
-                    );
-                    Ok(())
-                }
-                None => bail!("the function does not compile"),
-            }
+/// The network flags the window and the headless peer share.
+#[derive(clap::Args, Clone, Debug)]
+pub struct NetArgs {
+    /// Join the session of this invite (from `sculpt invite` or a window's Share).
+    #[arg(long, value_name = "CODE", value_parser = parse_invite)]
+    pub invite: Option<Invite>,
+    /// The UDP address to listen on for peers (port 0 picks a free one).
+    #[arg(long, value_name = "ADDR", default_value = "0.0.0.0:0")]
+    pub listen: SocketAddr,
+    /// Dial this peer, and again whenever not connected (repeatable).
+    #[arg(long, value_name = "ADDR")]
+    pub dial: Vec<SocketAddr>,
+    /// Register with this discovery node to find the session's peers.
+    #[arg(long, value_name = "ADDR")]
+    pub discovery: Option<SocketAddr>,
+    /// Do not announce on or listen to the local network.
+    #[arg(long)]
+    pub no_lan: bool,
+    /// The name other peers see beside your pointer and edits (default: your short id).
+    #[arg(long, value_name = "NAME")]
+    pub name: Option<String>,
+}
+
+impl NetArgs {
+    /// The engine's network settings.
+    pub fn network(&self) -> Network {
+        Network {
+            listen: self.listen,
+            dial: self.dial.clone(),
+            discovery: self.discovery,
+            lan: !self.no_lan,
         }
-        "eval" => {
-            let function = Function::parse(&source(args.get(1))?)?;
-            let mut p = [0.0; 4];
-            for (slot, arg) in args.iter().skip(2).take(4).enumerate() {
-                p[slot] = arg
-                    .parse()
-                    .with_context(|| format!("`{arg}` is not a number"))?;
-            }
-            for name in function.output_names() {
-                let tape = function.tape_for(&[name])?;
-                println!("{name} = {}", PointEval::new(&tape).eval(p));
-            }
-            Ok(())
-        }
-        "slice" => {
-            let function = Function::parse(&source(args.get(1))?)?;
-            let number = |i: usize| -> anyhow::Result<f64> {
-                args.get(i).map_or(Ok(0.0), |a| {
-                    a.parse().with_context(|| format!("`{a}` is not a number"))
-                })
-            };
-            print!("{}", slice(&function, number(2)?, number(3)?, 64, 32));
-            Ok(())
-        }
-        "render" => render_command(&args[1..]),
-        "help" | "--help" | "-h" => {
-            print!("{USAGE}");
-            Ok(())
-        }
-        other => bail!("unknown command `{other}`\n\n{USAGE}"),
     }
 }
 
+fn parse_invite(text: &str) -> Result<Invite, String> {
+    Invite::parse(text).map_err(|e| e.to_string())
+}
+
+/// `sculpt peer`.
+#[derive(clap::Args, Debug)]
+pub struct PeerArgs {
+    /// The session's store directory (made if missing).
+    #[arg(long, value_name = "DIR")]
+    pub store: PathBuf,
+    #[command(flatten)]
+    pub net: NetArgs,
+    /// A line of the window's command language, run once at start (repeatable).
+    #[arg(long, value_name = "LINE")]
+    pub command: Vec<String>,
+    /// Print one JSON object per line whenever the peer's state changes.
+    #[arg(long)]
+    pub json: bool,
+    /// Show other peers a pointer at X,Y,Z (the renderer's world, +z up), as a window's
+    /// pointer on a surface would be (for tests and demonstrations).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_point)]
+    pub pointer: Option<[f32; 3]>,
+}
+
+fn parse_point(text: &str) -> Result<[f32; 3], String> {
+    let parts: Vec<f32> = text
+        .split(',')
+        .map(|p| p.trim().parse::<f32>().map_err(|e| format!("`{p}`: {e}")))
+        .collect::<Result<_, _>>()?;
+    match parts[..] {
+        [x, y, z] if parts.iter().all(|v| v.is_finite()) => Ok([x, y, z]),
+        _ => Err(format!("`{text}` is not X,Y,Z")),
+    }
+}
+
+/// `sculpt discovery`.
+#[derive(clap::Args, Debug)]
+pub struct DiscoveryArgs {
+    /// The UDP address to answer on.
+    #[arg(long, value_name = "ADDR")]
+    pub listen: SocketAddr,
+}
+
+/// `sculpt sessions`.
+#[derive(clap::Args, Debug)]
+pub struct SessionsArgs {
+    /// The directory holding session stores (default: $XDG_DATA_HOME/sculpt/sessions).
+    #[arg(long, value_name = "DIR")]
+    pub root: Option<PathBuf>,
+}
+
+/// `sculpt check`.
+#[derive(clap::Args, Debug)]
+pub struct CheckArgs {
+    /// The function's text, or @file.
+    pub text: String,
+}
+
+/// `sculpt eval`.
+#[derive(clap::Args, Debug)]
+pub struct EvalArgs {
+    /// The function's text, or @file.
+    pub text: String,
+    /// X Y Z and optionally T.
+    #[arg(num_args = 3..=4, allow_negative_numbers = true, required = true)]
+    pub point: Vec<f64>,
+}
+
+/// `sculpt slice`.
+#[derive(clap::Args, Debug)]
+pub struct SliceArgs {
+    /// The function's text, or @file.
+    pub text: String,
+    /// The height of the section.
+    #[arg(allow_negative_numbers = true, default_value_t = 0.0)]
+    pub z: f64,
+    /// The time.
+    #[arg(allow_negative_numbers = true, default_value_t = 0.0)]
+    pub t: f64,
+}
+
+/// `sculpt render`.
+#[derive(clap::Args, Debug)]
+pub struct RenderArgs {
+    /// The FVRML scene file (.wrl).
+    pub scene: PathBuf,
+    /// The directory to write the PNG files to.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Image size in pixels.
+    #[arg(long, value_name = "WxH", value_parser = parse_size)]
+    pub size: Option<(u32, u32)>,
+    /// Octree depth of implicit objects.
+    #[arg(long)]
+    pub depth: Option<u8>,
+    /// The time of the picture, in seconds.
+    #[arg(long, value_name = "SECS")]
+    pub t: Option<f64>,
+}
+
+fn parse_size(text: &str) -> Result<(u32, u32), String> {
+    let (w, h) = text.split_once('x').ok_or("not WxH")?;
+    let side = |s: &str| s.parse::<u32>().map_err(|e| format!("`{s}`: {e}"));
+    Ok((side(w)?, side(h)?))
+}
+
+/// `sculpt invite`: a fresh invite, for a new session.
+pub fn invite() -> anyhow::Result<()> {
+    let invite = Invite::generate(&mut store::entropy_rng()?);
+    println!("{invite}");
+    Ok(())
+}
+
+/// `sculpt sessions`: the session stores under the root, one line each.
+pub fn sessions(args: &SessionsArgs) -> anyhow::Result<()> {
+    let root = match &args.root {
+        Some(root) => root.clone(),
+        None => crate::window::default_data_dir()
+            .context("no data directory: set HOME or XDG_DATA_HOME, or give --root DIR")?
+            .join("sessions"),
+    };
+    let found = match store::list_sessions(&root) {
+        Ok(found) => found,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => return Err(e).with_context(|| format!("cannot list {}", root.display())),
+    };
+    if found.is_empty() {
+        println!("no sessions under {}", root.display());
+    }
+    for dir in found {
+        let ops = std::fs::metadata(dir.join(store::OPS_FILE)).map_or(0, |m| m.len());
+        let name = dir
+            .file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+        println!("{name}\t{}\t{ops} bytes of ops", dir.display());
+    }
+    Ok(())
+}
+
+/// `sculpt discovery --listen ADDR`: serves until interrupted, saying what it does.
+pub fn discovery(args: &DiscoveryArgs) -> anyhow::Result<()> {
+    use replication::net::discovery::server::DiscoveryServer;
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let server = DiscoveryServer::bind(args.listen)?;
+    let addr = server.local_addr()?;
+    println!("discovery node listening on {addr}; it stores no ops and relays none");
+    let shutdown = Arc::new(AtomicBool::new(false));
+    let flag = shutdown.clone();
+    std::thread::Builder::new()
+        .name("sculpt-signals".into())
+        .spawn(move || {
+            let runtime = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build();
+            if let Ok(runtime) = runtime {
+                runtime.block_on(wait_for_stop());
+            }
+            flag.store(true, Ordering::Relaxed);
+        })?;
+    let stats = server.run(&shutdown)?;
+    println!("discovery node stopped: {stats:?}");
+    Ok(())
+}
+
+/// Waits for Ctrl-C or SIGTERM.
+async fn wait_for_stop() {
+    use tokio::signal::unix::{SignalKind, signal};
+    match signal(SignalKind::terminate()) {
+        Ok(mut term) => {
+            tokio::select! {
+                _ = tokio::signal::ctrl_c() => {}
+                _ = term.recv() => {}
+            }
+        }
+        Err(_) => {
+            let _ = tokio::signal::ctrl_c().await;
+        }
+    }
+}
+
+/// `sculpt peer`: a headless peer. Runs its `--command` lines once, then syncs until
+/// interrupted (Ctrl-C or SIGTERM: a clean stop with every op on disk).
+pub fn peer(args: PeerArgs) -> anyhow::Result<()> {
+    let config = EngineConfig {
+        store: args.store.clone(),
+        invite: args.net.invite.clone(),
+        network: args.net.network(),
+        demo: false,
+        memory_fallback: false,
+        name: args.net.name.clone(),
+    };
+    let engine = Engine::start(config, app::clock::now().wall)?;
+    for notice in lock(engine.view()).notices() {
+        log::warn!("{notice}");
+    }
+    run_commands(&engine, &args.command)?;
+    if let Some(at) = args.pointer {
+        let mut presence = engine.presence();
+        presence.pointer = Some(at);
+        engine.set_presence(presence)?;
+    }
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    runtime.block_on(async {
+        let mut printed = None;
+        let mut tick = tokio::time::interval(std::time::Duration::from_millis(PEER_POLL_MILLIS));
+        let stop = wait_for_stop();
+        tokio::pin!(stop);
+        loop {
+            tokio::select! {
+                () = &mut stop => break,
+                _ = tick.tick() => {
+                    let state = peer_state(&engine);
+                    if args.json && printed.as_ref() != Some(&state) {
+                        println!("{state}");
+                        printed = Some(state);
+                    }
+                }
+            }
+        }
+    });
+    engine.shutdown();
+    Ok(())
+}
+
+/// Runs command lines as the window would, each after the previous one is stored; a line
+/// that fails stops the peer with its error.
+fn run_commands(engine: &Engine, lines: &[String]) -> anyhow::Result<()> {
+    let mut selected = lock(engine.view())
+        .scene()
+        .objects()
+        .last()
+        .map(|(id, _)| id.0);
+    for line in lines {
+        let Some(command) = app::command::parse(line) else {
+            continue;
+        };
+        let planned = app::command::plan(command, &lock(engine.view()), selected)
+            .map_err(|e| anyhow::anyhow!("--command `{line}`: {e}"))?;
+        engine
+            .author(planned.payload)?
+            .wait()
+            .map_err(|e| anyhow::anyhow!("--command `{line}`: {e}"))?;
+        if planned.select.is_some() {
+            selected = planned.select;
+        }
+        log::info!("{}", planned.summary);
+    }
+    Ok(())
+}
+
+/// The peer's state as one JSON object.
+fn peer_state(engine: &Engine) -> serde_json::Value {
+    let mut view = lock(engine.view());
+    let (to_send, to_receive) = view.progress();
+    serde_json::json!({
+        "peer": view.peer_id().short(),
+        "listen": view.listen_addr().map(|a| a.to_string()),
+        "ops": view.n_ops(),
+        "objects": view.scene().len(),
+        "scene_hash": view.scene_hash_hex(),
+        "peers": view.peers().len(),
+        "to_send": to_send,
+        "to_receive": to_receive,
+        "store_error": view.store_error(),
+    })
+}
+
+/// `sculpt check`.
+pub fn check(args: &CheckArgs) -> anyhow::Result<()> {
+    let text = source(&args.text)?;
+    let compiled = Function::compile(&text);
+    for d in &compiled.diagnostics {
+        eprint!("{}", d.render(&text));
+    }
+    match compiled.function {
+        Some(f) => {
+            let names: Vec<&str> = f.output_names().collect();
+            println!(
+                "ok: outputs {}; {} operations",
+                names.join(", "),
+                f.graph_len()
+            );
+            Ok(())
+        }
+        None => bail!("the function does not compile"),
+    }
+}
+
+/// `sculpt eval`.
+pub fn eval(args: &EvalArgs) -> anyhow::Result<()> {
+    let function = Function::parse(&source(&args.text)?)?;
+    let mut p = [0.0; 4];
+    for (slot, v) in args.point.iter().take(4).enumerate() {
+        p[slot] = *v;
+    }
+    for name in function.output_names() {
+        let tape = function.tape_for(&[name])?;
+        println!("{name} = {}", PointEval::new(&tape).eval(p));
+    }
+    Ok(())
+}
+
+/// `sculpt slice`.
+pub fn slice_command(args: &SliceArgs) -> anyhow::Result<()> {
+    let function = Function::parse(&source(&args.text)?)?;
+    print!("{}", slice(&function, args.z, args.t, 64, 32));
+    Ok(())
+}
+
 /// The text of a function: the argument itself, or the file named after `@`.
-fn source(arg: Option<&String>) -> anyhow::Result<String> {
-    let arg = arg.context("give a function text, or @file")?;
+fn source(arg: &str) -> anyhow::Result<String> {
     match arg.strip_prefix('@') {
         Some(path) => std::fs::read_to_string(path).with_context(|| format!("cannot read {path}")),
-        None => Ok(arg.clone()),
+        None => Ok(arg.to_string()),
     }
 }
 
@@ -97,41 +391,23 @@ fn slice(function: &Function, z: f64, t: f64, width: usize, height: usize) -> St
 /// FVRML file (local `Inline`s relative to it), pictures it from the default views with
 /// `render::snapshot` and writes `<dir>/<file stem>_<view>.png`, printing what it drew and
 /// wrote. Load errors are reported with their file, line and column.
-fn render_command(args: &[String]) -> anyhow::Result<()> {
+pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
     use fdsl::fvrml::{self, LoadOptions, MAX_FILE_BYTES};
     use render::snapshot::{SnapshotSettings, snapshot};
-    use std::path::{Path, PathBuf};
+    use std::path::Path;
 
     let mut settings = SnapshotSettings::default();
-    let (mut scene_path, mut out_dir) = (None, None);
-    let mut rest = args.iter();
-    while let Some(arg) = rest.next() {
-        let mut value = |name: &str| rest.next().with_context(|| format!("{name} needs a value"));
-        match arg.as_str() {
-            "--out" => out_dir = Some(PathBuf::from(value("--out")?)),
-            "--size" => {
-                let v = value("--size")?;
-                let (w, h) = v
-                    .split_once('x')
-                    .with_context(|| format!("--size `{v}` is not WxH"))?;
-                settings.width = w.parse().with_context(|| format!("bad width `{w}`"))?;
-                settings.height = h.parse().with_context(|| format!("bad height `{h}`"))?;
-            }
-            "--depth" => {
-                let v = value("--depth")?;
-                settings.depth = v.parse().with_context(|| format!("bad depth `{v}`"))?;
-            }
-            "--t" => {
-                let v = value("--t")?;
-                settings.t_secs = v.parse().with_context(|| format!("bad time `{v}`"))?;
-            }
-            flag if flag.starts_with("--") => bail!("unknown option `{flag}`\n\n{USAGE}"),
-            path if scene_path.is_none() => scene_path = Some(PathBuf::from(path)),
-            extra => bail!("unexpected argument `{extra}`\n\n{USAGE}"),
-        }
+    if let Some((w, h)) = args.size {
+        settings.width = w;
+        settings.height = h;
     }
-    let scene_path = scene_path.context("give a scene file (.wrl)")?;
-    let out_dir = out_dir.context("give an output directory with --out")?;
+    if let Some(depth) = args.depth {
+        settings.depth = depth;
+    }
+    if let Some(t) = args.t {
+        settings.t_secs = t;
+    }
+    let (scene_path, out_dir) = (&args.scene, &args.out);
     let read = |path: &Path| -> Result<String, String> {
         let len = std::fs::metadata(path)
             .map_err(|e| format!("{}: {e}", path.display()))?
@@ -144,7 +420,7 @@ fn render_command(args: &[String]) -> anyhow::Result<()> {
         }
         std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))
     };
-    let text = read(&scene_path).map_err(anyhow::Error::msg)?;
+    let text = read(scene_path).map_err(anyhow::Error::msg)?;
     let dir = scene_path.parent().unwrap_or(Path::new("")).to_path_buf();
     let mut resolve = |inline: &str| read(&dir.join(inline));
     let shown = scene_path.display().to_string();
@@ -177,7 +453,7 @@ fn render_command(args: &[String]) -> anyhow::Result<()> {
     if objects.is_empty() {
         println!("the scene has no objects to draw");
     }
-    std::fs::create_dir_all(&out_dir)
+    std::fs::create_dir_all(out_dir)
         .with_context(|| format!("cannot create {}", out_dir.display()))?;
     let stem = scene_path
         .file_stem()

@@ -8,7 +8,7 @@ use fdsl::object::{ColorDef, Domain, Field, Formula, Geometry, ObjectData, Shape
 use glam::DVec3;
 use replication::shape::ShapePayload;
 
-use crate::session::Session;
+use crate::engine::View;
 
 /// Edge of the domain box of an object made with `new:` (scene units).
 pub const NEW_OBJECT_SIZE: f64 = 2.2;
@@ -70,10 +70,11 @@ pub struct Planned {
     pub select: Option<u64>,
 }
 
-/// Turns a command into an op for `session`, or into the error to show under the input.
+/// Turns a command into an op against the engine's `session` view, or into the error to
+/// show under the input.
 pub fn plan(
     command: Command<'_>,
-    session: &Session,
+    session: &View,
     selected: Option<u64>,
 ) -> Result<Planned, String> {
     let selected_object = || {
@@ -299,18 +300,23 @@ mod tests {
         );
     }
 
-    fn session(name: &str) -> (Session, u64, std::path::PathBuf) {
-        let dir =
-            std::env::temp_dir().join(format!("sculpt-command-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let s = Session::open(&dir, Timestamp(1_000_000));
+    /// A view of a log holding the demo scene, its one object, and nothing to clean up.
+    fn session() -> (View, u64) {
+        let keypair = replication::Keypair::from_seed([3; 32]);
+        let mut log = replication::Log::default();
+        let me = keypair.peer_id();
+        let first = View::new(me, &log).unwrap().next_object_id();
+        for payload in crate::engine::demo_payloads_from(first).unwrap() {
+            log.author(&keypair, Timestamp(1_000_000), payload).unwrap();
+        }
+        let s = View::new(me, &log).unwrap();
         let id = s.scene().objects().next().unwrap().0.0;
-        (s, id, dir)
+        (s, id)
     }
 
     #[test]
     fn a_bad_formula_gives_the_caret_diagnostic_and_no_op() {
-        let (s, id, dir) = session("bad");
+        let (s, id) = session();
         let err = plan(Command::Shape("1-x^2-sni(y)"), &s, Some(id)).unwrap_err();
         assert!(err.contains("sni"), "{err}");
         assert!(err.contains('^'), "{err}");
@@ -322,12 +328,11 @@ mod tests {
                 .unwrap_err()
                 .contains("nothing")
         );
-        let _ = std::fs::remove_dir_all(dir);
     }
 
     #[test]
     fn colours_take_numbers_formulas_or_a_scalar_through_the_map() {
-        let (s, id, dir) = session("colour");
+        let (s, id) = session();
         let colour = |text| match plan(Command::Colour(text), &s, Some(id)).unwrap().payload {
             ShapePayload::Set {
                 field: Field::Diffuse(Some(def)),
@@ -341,12 +346,11 @@ mod tests {
         // The watermelon is coloured through a colour map: one scalar keeps the map.
         assert!(matches!(colour("sqrt(x^2+y^2+z^2)"), ColorDef::Map { .. }));
         assert!(plan(Command::Colour("2, 0, 0"), &s, Some(id)).is_err());
-        let _ = std::fs::remove_dir_all(dir);
     }
 
     #[test]
     fn new_objects_get_fresh_ids_beside_the_others() {
-        let (s, _, dir) = session("new");
+        let (s, _) = session();
         let planned = plan(Command::New("0.8-sqrt(x^2+y^2+z^2)"), &s, None).unwrap();
         let ShapePayload::Create { object, data, .. } = &planned.payload else {
             panic!("{planned:?}");
@@ -357,6 +361,5 @@ mod tests {
             Transform::translate(DVec3::new(2.5, 0.0, 0.0))
         );
         assert!(s.scene().object(fdsl::scene::ObjectId(*object)).is_none());
-        let _ = std::fs::remove_dir_all(dir);
     }
 }

@@ -1,57 +1,72 @@
 //! The `sculpt` program: with no subcommand (or `demo`) the desktop window on the demo scene,
-//! solo, with an embedded local store; otherwise a headless subcommand.
+//! solo, with an embedded local store; otherwise a subcommand (a headless peer, the discovery
+//! node, invites, pictures and checks of functions).
 
 mod cli;
-mod clock;
-mod command;
-mod session;
 mod window;
 
 use std::process::ExitCode;
 
-const USAGE: &str = "\
-sculpt: sculpt 3D objects defined by functions
+use clap::{Parser, Subcommand};
 
-usage:
-  sculpt [demo] [--store DIR] [--depth N] [--size WxH]
-                               open the window on the demo scene (the thesis's watermelon),
-                               solo, with its ops kept in DIR (default
-                               $XDG_DATA_HOME/sculpt or ~/.local/share/sculpt)
-  sculpt check <text|@file>    compile a function and report problems with their location
-  sculpt eval <text|@file> X Y Z [T]
-                               print every output of a function at a point
-  sculpt slice <text|@file> [Z] [T]
-                               draw the solid's cross-section at height Z as text
-  sculpt render <scene.wrl> --out <dir> [--size WxH] [--depth N] [--t SECS]
-                               picture an FVRML scene offscreen as PNG files, one per view
-
-window test hooks:
-  --command LINE               run LINE as if typed in the command line (repeatable)
-  --pick X,Y                   click the viewport at fractions X, Y of its size
-  --screenshot PATH            save a PNG of the window once everything is drawn, then close
-  --exit-when-idle             close once the commands have run and everything is drawn
-  --exit-after-frames N        close after N frames (an error if a hook is unfinished)
-  --dump-state PATH            write what the window shows as JSON when a hook closes it
-";
-
-fn main() -> ExitCode {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    match run(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("{e:#}");
-            ExitCode::FAILURE
-        }
-    }
+/// sculpt: sculpt 3D objects defined by functions, together.
+#[derive(Parser, Debug)]
+#[command(name = "sculpt", version, args_conflicts_with_subcommands = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Cmd>,
+    #[command(flatten)]
+    window: window::WindowArgs,
+    /// Log level on stderr: off, error, warn, info, debug or trace.
+    #[arg(long, global = true, default_value = "info", value_name = "LEVEL")]
+    log: log::LevelFilter,
 }
 
-fn run(args: &[String]) -> anyhow::Result<()> {
-    match args.first().map(String::as_str) {
-        None => window::run(window::parse_options(&[])?),
-        Some("demo") => window::run(window::parse_options(&args[1..])?),
-        Some(flag) if flag.starts_with("--") && flag != "--help" => {
-            window::run(window::parse_options(args)?)
+#[derive(Subcommand, Debug)]
+enum Cmd {
+    /// Open the window on the demo scene (what `sculpt` alone does).
+    Demo(window::WindowArgs),
+    /// Run a headless peer that keeps a session's store and syncs with its peers.
+    Peer(cli::PeerArgs),
+    /// Run a discovery node: it introduces peers to each other and never sees an op.
+    Discovery(cli::DiscoveryArgs),
+    /// Print a fresh invite code for a new session.
+    Invite,
+    /// List the session stores under a directory.
+    Sessions(cli::SessionsArgs),
+    /// Compile a function and report problems with their location.
+    Check(cli::CheckArgs),
+    /// Print every output of a function at a point.
+    Eval(cli::EvalArgs),
+    /// Draw the solid's cross-section at height Z as text.
+    Slice(cli::SliceArgs),
+    /// Picture an FVRML scene offscreen as PNG files, one per view.
+    Render(cli::RenderArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    env_logger::Builder::new()
+        .filter_level(cli.log)
+        .format_target(false)
+        .init();
+    let result = match cli.command {
+        None => window::run(cli.window),
+        Some(Cmd::Demo(args)) => window::run(args),
+        Some(Cmd::Peer(args)) => cli::peer(args),
+        Some(Cmd::Discovery(args)) => cli::discovery(&args),
+        Some(Cmd::Invite) => cli::invite(),
+        Some(Cmd::Sessions(args)) => cli::sessions(&args),
+        Some(Cmd::Check(args)) => cli::check(&args),
+        Some(Cmd::Eval(args)) => cli::eval(&args),
+        Some(Cmd::Slice(args)) => cli::slice_command(&args),
+        Some(Cmd::Render(args)) => cli::render_command(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("sculpt: {e:#}");
+            ExitCode::FAILURE
         }
-        Some(_) => cli::run(args),
     }
 }

@@ -407,3 +407,174 @@ fn without_a_display_the_window_says_so_and_points_at_the_headless_commands() {
         "a window that never opened leaves no store"
     );
 }
+
+/// A `sculpt peer` process whose JSON state lines are read by a thread.
+struct HeadlessPeer {
+    child: Child,
+    lines: std::sync::mpsc::Receiver<Value>,
+    last: Value,
+}
+
+impl HeadlessPeer {
+    fn spawn(args: &[&str]) -> HeadlessPeer {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_sculpt"))
+            .arg("peer")
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let stdout = child.stdout.take().unwrap();
+        let (tx, lines) = std::sync::mpsc::channel();
+        std::thread::Builder::new()
+            .name("sculpt-test-pipe".into())
+            .spawn(move || {
+                use std::io::BufRead as _;
+                for line in std::io::BufReader::new(stdout).lines() {
+                    let Ok(line) = line else { break };
+                    if let Ok(v) = serde_json::from_str::<Value>(&line)
+                        && tx.send(v).is_err()
+                    {
+                        break;
+                    }
+                }
+            })
+            .unwrap();
+        HeadlessPeer {
+            child,
+            lines,
+            last: Value::Null,
+        }
+    }
+
+    /// Waits until the latest state satisfies `done`, at most [`RUN_SECS_MAX`].
+    fn wait_for(&mut self, what: &str, done: impl Fn(&Value) -> bool) {
+        let deadline = app::clock::now().instant + Duration::from_secs(RUN_SECS_MAX);
+        while !done(&self.last) {
+            let left = deadline.saturating_duration_since(app::clock::now().instant);
+            match self.lines.recv_timeout(left) {
+                Ok(v) => self.last = v,
+                Err(_) => panic!("the headless peer never reached {what}: {}", self.last),
+            }
+        }
+    }
+}
+
+impl Drop for HeadlessPeer {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Fraction of the viewport's middle that is deep blue (the peer's ball), not the pale blue
+/// of the window's own new objects.
+fn deep_blue(picture: &RgbaImage) -> f64 {
+    let viewport_width = picture.width.saturating_sub(400);
+    let (mut blue, mut n) = (0, 0);
+    for y in picture.height / 4..picture.height * 3 / 4 {
+        for x in viewport_width / 4..viewport_width * 3 / 4 {
+            let [r, g, b, _] = picture.pixel(x, y).unwrap().map(i32::from);
+            n += 1;
+            if b > 110 && r < 90 && b > g + 50 {
+                blue += 1;
+            }
+        }
+    }
+    f64::from(blue) / f64::from(n)
+}
+
+#[test]
+fn a_headless_peers_edits_and_pointer_show_in_the_window_and_the_windows_edit_reaches_it() {
+    let display = display();
+    let dir = scratch("together");
+    let invite = sculpt(None, &["invite"]);
+    assert!(invite.status.success());
+    let code = text(&invite.stdout).trim().to_string();
+    let peer_store = dir.join("peer");
+    let mut peer = HeadlessPeer::spawn(&[
+        "--store",
+        peer_store.to_str().unwrap(),
+        "--invite",
+        &code,
+        "--no-lan",
+        "--listen",
+        "127.0.0.1:0",
+        "--json",
+        "--name",
+        "Bo",
+        "--pointer",
+        "0,0,0",
+        "--command",
+        "new: 0.8-sqrt(x^2+y^2+z^2)",
+        "--command",
+        "colour: 0.05, 0.1, 1",
+        "--command",
+        "hello from the peer",
+    ]);
+    peer.wait_for("its three ops", |v| v["ops"] == 3);
+    let addr = peer.last["listen"].as_str().unwrap().to_string();
+    let me = peer.last["peer"].as_str().unwrap().to_string();
+
+    let store = dir.join("window");
+    let (shot, dump) = (dir.join("together.png"), dir.join("together.json"));
+    let run = sculpt(
+        Some(&display.name),
+        &[
+            "--store",
+            store.to_str().unwrap(),
+            "--invite",
+            &code,
+            "--no-lan",
+            "--listen",
+            "127.0.0.1:0",
+            "--dial",
+            &addr,
+            "--wait-ops",
+            "3",
+            "--wait-presence",
+            "1",
+            "--command",
+            "new: 0.3-sqrt(x^2+y^2+z^2)",
+            "--size",
+            WINDOW,
+            "--screenshot",
+            shot.to_str().unwrap(),
+            "--dump-state",
+            dump.to_str().unwrap(),
+            "--exit-after-frames",
+            FRAMES_MAX,
+        ],
+    );
+    let (stdout, stderr) = (text(&run.stdout), text(&run.stderr));
+    assert!(run.status.success(), "{stdout}\n{stderr}");
+    let state: Value = serde_json::from_str(&std::fs::read_to_string(&dump).unwrap()).unwrap();
+    // The peer's edits are in the window's history under the peer's id, and its ball shows.
+    let history = state["history"].as_array().unwrap();
+    let by_peer = |what: &str| {
+        history
+            .iter()
+            .any(|h| h["author"] == me.as_str() && h["what"].as_str().unwrap().contains(what))
+    };
+    assert!(by_peer("created object"), "{state}");
+    assert!(by_peer("hello from the peer"), "{state}");
+    assert_eq!(state["chat"][0]["text"], "hello from the peer", "{state}");
+    let picture = RgbaImage::from_png(&std::fs::read(&shot).unwrap()).unwrap();
+    let blue = deep_blue(&picture);
+    assert!(
+        blue > 0.05,
+        "the peer's blue ball covers {blue} of the view"
+    );
+    // Its presence (name and pointer) arrived and is drawn.
+    let presence = &state["presence"][0];
+    assert_eq!(presence["name"], "Bo", "{state}");
+    assert_eq!(
+        presence["pointer"],
+        serde_json::json!([0.0, 0.0, 0.0]),
+        "{state}"
+    );
+    assert_eq!(state["peers"][0]["online"], true, "{state}");
+    // The window's own edit reached the peer.
+    peer.wait_for("the window's edit", |v| v["ops"] == 4 && v["objects"] == 2);
+}

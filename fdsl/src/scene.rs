@@ -108,6 +108,11 @@ impl Scene {
         self.objects.get(&id).map(|o| &o.object)
     }
 
+    /// An object with the group it hangs from.
+    pub fn scene_object(&self, id: ObjectId) -> Option<&SceneObject> {
+        self.objects.get(&id)
+    }
+
     /// An object, to change.
     pub fn object_mut(&mut self, id: ObjectId) -> Option<&mut Object> {
         self.objects.get_mut(&id).map(|o| &mut o.object)

@@ -16,22 +16,27 @@ use render::snapshot::render_from_scene;
 use super::hooks::Hooks;
 use super::mesher::{MeshJob, Mesher};
 use super::viewport::{ViewState, ViewportReport, viewport_ui};
-use crate::clock::{self, Now};
-use crate::command;
-use crate::session::{ChatRow, HistoryRow, Session};
+use ::app::clock::{self, Now};
+use ::app::command::{self, Planned};
+use ::app::engine::{
+    CameraPose, ChatRow, Engine, EngineConfig, HistoryRow, PeerRow, Pending, Presence, lock,
+};
+use replication::PeerId;
 
 /// Frames whose times are kept for the statistics.
 pub const FRAME_SAMPLES_MAX: usize = 600;
 /// Edit-to-mesh times kept.
 pub const EDIT_SAMPLES_MAX: usize = 100;
+/// Half the size of another peer's pointer cross, in world units.
+const PRESENCE_CROSS_SIZE: f32 = 0.06;
 /// Colour of the selected object's box.
 const SELECTION_COLOUR: [f32; 4] = [1.0, 0.85, 0.2, 1.0];
 
 /// One scene object as the app tracks it: what was sent to the mesher, what is drawn.
 #[derive(Default)]
 pub struct Tracked {
-    /// The object (with its group) as last sent to be meshed.
-    sent: Option<fdsl::scene::SceneObject>,
+    /// The engine said it changed since it was last sent to be meshed.
+    stale: bool,
     /// Counts jobs for this object.
     pub generation: u64,
     /// The generation now drawn.
@@ -76,7 +81,7 @@ fn push_bounded(samples: &mut Vec<f64>, value: f64, max: usize) {
 
 /// The window's state.
 pub struct SculptApp {
-    pub(super) session: Session,
+    pub(super) engine: Engine,
     mesher: Mesher,
     depth: u8,
     pub(super) objects: BTreeMap<ObjectId, Tracked>,
@@ -93,7 +98,32 @@ pub struct SculptApp {
     pub(super) pick_status: String,
     pub(super) chat: Vec<ChatRow>,
     pub(super) history: Vec<HistoryRow>,
-    rows_at_n_ops: Option<usize>,
+    pub(super) peers: Vec<PeerRow>,
+    pub(super) n_online: usize,
+    /// Asks for a frame (a new engine after Join is given it too).
+    waker: Option<std::sync::Arc<dyn Fn() + Send + Sync>>,
+    pub(super) news: Vec<String>,
+    news_next: u64,
+    /// The view generation the rows were copied at.
+    rows_at: Option<u64>,
+    /// A command's op on its way to the store, with what it does.
+    pending: Option<(Pending, Planned)>,
+    /// The invite is shown (after "Share").
+    pub(super) show_invite: bool,
+    /// The session was shared or joined: no peers then means offline, not solo.
+    pub(super) shared: bool,
+    /// How the engine was started (a Join starts another from it).
+    pub(super) config: EngineConfig,
+    /// The invite typed into "Join", and why it was refused.
+    pub(super) join_input: Option<(String, Option<String>)>,
+    /// The peer whose camera this window follows.
+    pub(super) following: Option<PeerId>,
+    /// The surface point under the pointer, in the renderer's world.
+    pointer: Option<Vec3>,
+    /// The presence last handed to the engine.
+    presence_sent: Option<Presence>,
+    /// The window title last set.
+    title: String,
     pub(super) hooks: Hooks,
     pub(super) stats: Stats,
 }
@@ -101,19 +131,30 @@ pub struct SculptApp {
 impl SculptApp {
     /// The app over an opened session; `wake` is how the mesher asks for a frame.
     pub fn new(
-        session: Session,
+        engine: Engine,
+        config: EngineConfig,
         depth: u8,
         hooks: Hooks,
-        wake: impl Fn() + Send + 'static,
+        wake: std::sync::Arc<dyn Fn() + Send + Sync>,
     ) -> std::io::Result<SculptApp> {
-        let selected = session.scene().objects().next().map(|(id, _)| id.0);
-        let status = match session.n_loaded() {
-            0 => "new store: the demo scene was authored".to_string(),
-            n => format!("loaded {n} ops from the store"),
+        let engine_wake = wake.clone();
+        lock(engine.view()).set_waker(Box::new(move || engine_wake()));
+        let mesher_wake = wake.clone();
+        let shared = config.invite.is_some()
+            || !config.network.dial.is_empty()
+            || config.network.discovery.is_some();
+        let (selected, status) = {
+            let view = lock(engine.view());
+            let selected = view.scene().objects().next().map(|(id, _)| id.0);
+            let status = match view.n_loaded() {
+                0 => "new store: the demo scene was authored".to_string(),
+                n => format!("loaded {n} ops from the store"),
+            };
+            (selected, status)
         };
         Ok(SculptApp {
-            session,
-            mesher: Mesher::start(wake)?,
+            engine,
+            mesher: Mesher::start(move || mesher_wake())?,
             depth,
             objects: BTreeMap::new(),
             dirty: true,
@@ -127,28 +168,55 @@ impl SculptApp {
             pick_status: "click an object to pick it".into(),
             chat: Vec::new(),
             history: Vec::new(),
-            rows_at_n_ops: None,
+            peers: Vec::new(),
+            n_online: 0,
+            waker: Some(wake),
+            news: Vec::new(),
+            news_next: 0,
+            rows_at: None,
+            pending: None,
+            show_invite: false,
+            shared,
+            config,
+            join_input: None,
+            following: None,
+            pointer: None,
+            presence_sent: None,
+            title: String::new(),
             hooks,
             stats: Stats::default(),
         })
     }
 
-    /// Sends every object that changed since it was last sent to the mesher (only those: an
-    /// edit re-meshes its own object), and forgets objects that are gone.
+    /// Sends the objects the engine says changed to the mesher (only those: an edit
+    /// re-meshes its own object), and forgets objects that are gone.
     fn sync_objects(&mut self, now: Now) {
+        let mut view = lock(self.engine.view());
+        if let Some(changes) = view.take_changes() {
+            self.dirty |= !changes.is_empty();
+            for id in changes {
+                self.objects.entry(id).or_default().stale = true;
+            }
+        } else {
+            self.dirty = true;
+            for (id, _) in view.scene().objects() {
+                self.objects.entry(id).or_default().stale = true;
+            }
+        }
         if self.dirty {
             self.dirty = false;
-            let scene = self.session.scene();
+            let scene = view.scene();
             self.objects.retain(|id, _| scene.object(*id).is_some());
-            for (id, entry) in scene.objects() {
-                let tracked = self.objects.entry(id).or_default();
-                if tracked.sent.as_ref() == Some(entry) {
+            for (id, tracked) in &mut self.objects {
+                if !std::mem::take(&mut tracked.stale) {
                     continue;
                 }
-                tracked.sent = Some(entry.clone());
+                let Some(entry) = scene.scene_object(*id) else {
+                    continue;
+                };
                 tracked.generation += 1;
                 tracked.pending = Some(Box::new(MeshJob {
-                    id,
+                    id: *id,
                     object: entry.object.clone(),
                     world_from_group: scene.world_from_group(entry.group),
                     generation: tracked.generation,
@@ -157,6 +225,7 @@ impl SculptApp {
                 }));
             }
         }
+        drop(view);
         for tracked in self.objects.values_mut() {
             if let Some(job) = tracked.pending.take() {
                 tracked.pending = self.mesher.try_send(job).err();
@@ -190,6 +259,7 @@ impl SculptApp {
     /// Whether every object is drawn as the scene now has it.
     pub fn is_idle(&self) -> bool {
         !self.dirty
+            && self.pending.is_none()
             && self
                 .objects
                 .values()
@@ -204,19 +274,39 @@ impl SculptApp {
             .count()
     }
 
-    /// Runs one line of the command/chat input: authors its op, or shows its error.
-    pub fn submit(&mut self, line: &str, now: Now) {
+    /// Runs one line of the command/chat input: hands its op to the engine, or shows its
+    /// error. One line at a time: the next waits until this one's op is stored.
+    pub fn submit(&mut self, line: &str) {
         let Some(command) = command::parse(line) else {
             return;
         };
-        let planned = match command::plan(command, &self.session, self.selected) {
+        if self.pending.is_some() {
+            self.input_error = Some("the last command is still being saved; try again".into());
+            return;
+        }
+        let planned = command::plan(command, &lock(self.engine.view()), self.selected);
+        let planned = match planned {
             Ok(planned) => planned,
             Err(error) => {
                 self.input_error = Some(error);
                 return;
             }
         };
-        match self.session.author(now.wall, planned.payload) {
+        match self.engine.author(planned.payload.clone()) {
+            Ok(pending) => self.pending = Some((pending, planned)),
+            Err(e) => self.input_error = Some(e.to_string()),
+        }
+    }
+
+    /// Takes the reply to the pending command, if it came.
+    fn receive_reply(&mut self, now: Now) {
+        let Some(reply) = self.pending.as_ref().and_then(|(p, _)| p.try_take()) else {
+            return;
+        };
+        let Some((_, planned)) = self.pending.take() else {
+            return;
+        };
+        match reply {
             Ok(_) => {
                 self.input_error = None;
                 self.input.clear();
@@ -227,18 +317,29 @@ impl SculptApp {
                 self.last_edit_at = Some(now.instant);
                 self.dirty = true;
             }
-            Err(e) => self.input_error = Some(e.to_string()),
+            Err(e) => self.input_error = Some(e),
         }
     }
 
-    /// Chat and history rows, recomputed only when the log grew.
+    /// Chat, history and peer rows, copied from the engine's view when it changed.
     fn refresh_rows(&mut self) {
-        let n_ops = self.session.n_ops();
-        if self.rows_at_n_ops != Some(n_ops) {
-            self.chat = self.session.chat();
-            self.history = self.session.history();
-            self.rows_at_n_ops = Some(n_ops);
+        let view = lock(self.engine.view());
+        if self.rows_at != Some(view.generation()) {
+            self.chat = view.chat().to_vec();
+            self.history = view.history().to_vec();
+            self.rows_at = Some(view.generation());
         }
+        self.peers = view.peers().to_vec();
+        self.n_online = view.n_online();
+        drop(view);
+        let (lines, next) = self.engine.news_since(self.news_next);
+        self.news_next = next;
+        self.news.extend(lines);
+        let excess = self
+            .news
+            .len()
+            .saturating_sub(::app::engine::MAX_NEWS_LINES);
+        self.news.drain(..excess);
     }
 
     /// What the viewport draws: objects in id order (their ids alongside, for picking), arrows
@@ -258,7 +359,102 @@ impl SculptApp {
             }
             scene.lines.extend_from_slice(&tracked.lines);
         }
+        self.draw_presence(&mut scene);
         (scene, ids)
+    }
+
+    /// Other peers' pointers (a cross) and selections (a box) in their colours.
+    fn draw_presence(&self, scene: &mut Scene) {
+        let view = lock(self.engine.view());
+        for p in view.presence().values() {
+            let [r, g, b] = p.colour.map(|c| f32::from(c) / 255.0);
+            let colour = [r, g, b, 1.0];
+            if let Some(at) = p.pointer {
+                scene.add_crosshair(Vec3::from_array(at), PRESENCE_CROSS_SIZE, colour);
+            }
+            if let Some(b) = p
+                .selected
+                .and_then(|id| self.objects.get(&ObjectId(id)))
+                .and_then(|t| t.drawn_box)
+            {
+                scene.add_box(b, colour);
+            }
+        }
+    }
+
+    /// Hands this window's presence to the engine when it changed.
+    fn publish_presence(&mut self) {
+        let mut presence = self.engine.presence();
+        presence.pointer = self.pointer.map(|p| p.to_array());
+        presence.selected = self.selected;
+        let c = &self.view.camera;
+        presence.camera = Some(CameraPose {
+            target: c.target.to_array(),
+            orbit: [c.yaw, c.pitch, c.distance],
+        });
+        if self.presence_sent.as_ref() != Some(&presence)
+            && self.engine.set_presence(presence.clone()).is_ok()
+        {
+            self.presence_sent = Some(presence);
+        }
+    }
+
+    /// Copies the followed peer's camera, while it is connected.
+    fn follow(&mut self) {
+        let Some(peer) = self.following else {
+            return;
+        };
+        let camera = lock(self.engine.view())
+            .presence()
+            .get(&peer)
+            .map(|p| p.camera);
+        match camera {
+            Some(Some(pose)) => {
+                let c = &mut self.view.camera;
+                c.target = Vec3::from_array(pose.target);
+                [c.yaw, c.pitch, c.distance] = pose.orbit;
+                self.view.moved = true;
+            }
+            Some(None) => {}
+            None => self.following = None,
+        }
+    }
+
+    /// Leaves this session and joins the one `invite` opens, in its own store directory
+    /// beside this one.
+    pub(super) fn join(&mut self, text: &str) -> Result<(), String> {
+        let invite = replication::net::invite::Invite::parse(text).map_err(|e| e.to_string())?;
+        let keys = replication::net::SessionKeys::from_invite(&invite);
+        let name: String = keys.discovery_id()[..6]
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        let base = self.config.store.parent().map_or_else(
+            || std::path::PathBuf::from("."),
+            std::path::Path::to_path_buf,
+        );
+        let mut config = self.config.clone();
+        config.store = base.join(format!("joined-{name}"));
+        config.invite = Some(invite);
+        config.demo = false;
+        let engine = Engine::start(config.clone(), clock::now().wall).map_err(|e| e.to_string())?;
+        if let Some(waker) = &self.waker {
+            let waker = waker.clone();
+            lock(engine.view()).set_waker(Box::new(move || waker()));
+        }
+        self.engine = engine;
+        self.config = config;
+        self.shared = true;
+        self.objects.clear();
+        self.selected = None;
+        self.rows_at = None;
+        self.news.clear();
+        self.news_next = 0;
+        self.following = None;
+        self.presence_sent = None;
+        self.dirty = true;
+        self.status = "joined the session; syncing".into();
+        Ok(())
     }
 
     /// Shows what a click hit in the status line and selects the object.
@@ -277,7 +473,7 @@ impl SculptApp {
             .transform_point3(hit.point_in_world);
         self.pick_status = format!(
             "picked {} at ({:.3}, {:.3}, {:.3}) (scene coordinates)",
-            self.session.object_label(id.0),
+            ::app::engine::lock(self.engine.view()).object_label(id.0),
             p.x,
             p.y,
             p.z
@@ -290,6 +486,13 @@ impl SculptApp {
         let input = viewport_ui(ui, &mut self.view, &scene, sphere, &self.viewport);
         if input.picked.is_some() || input.missed {
             self.picked(input.picked, &ids);
+        }
+        if input.moved {
+            self.following = None;
+        }
+        if let Some(px) = input.hover_px {
+            let ray = self.view.camera.ray_through_pixel(px, input.size_px);
+            self.pointer = scene.pick(&ray).map(|hit| hit.point_in_world);
         }
         if let Some(at) = self.hooks.take_pick_if_ready(self.is_idle()) {
             let size_px = input.size_px;
@@ -336,9 +539,18 @@ impl eframe::App for SculptApp {
         self.stats.n_frames += 1;
 
         self.receive_meshes(now);
+        self.receive_reply(now);
         self.sync_objects(now);
         self.refresh_rows();
-        self.run_hooks(ui.ctx(), now);
+        self.follow();
+        self.run_hooks(ui.ctx());
+        self.publish_presence();
+        let title = format!("sculpt — {}", self.presence_text());
+        if title != self.title {
+            ui.ctx()
+                .send_viewport_cmd(egui::ViewportCommand::Title(title.clone()));
+            self.title = title;
+        }
 
         egui::Panel::top("sculpt-top").show(ui, |ui| self.top_ui(ui));
         egui::Panel::bottom("sculpt-status").show(ui, |ui| self.status_ui(ui));

@@ -17,7 +17,7 @@ use render::image::RgbaImage;
 use serde_json::{Value, json};
 
 use super::app::SculptApp;
-use crate::clock::Now;
+use ::app::engine::lock;
 
 /// Frames every object must have been drawn as the scene has it before a scripted step runs
 /// (one frame paints the new meshes, the next can be captured).
@@ -38,6 +38,10 @@ pub struct Hooks {
     pub exit_after_frames: Option<u64>,
     /// Where to write the state as JSON when the window closes through a hook.
     pub dump_state: Option<PathBuf>,
+    /// Scripted steps wait until the session holds this many ops.
+    pub wait_ops: Option<usize>,
+    /// Scripted steps wait until this many other peers' presence is known.
+    pub wait_presence: usize,
     /// Set when a hook failed; the process exits non-zero with it.
     pub failure: Arc<Mutex<Option<String>>>,
     idle_frames: u32,
@@ -76,7 +80,7 @@ impl Hooks {
 
 impl SculptApp {
     /// Advances the hooks by one frame.
-    pub(super) fn run_hooks(&mut self, ctx: &egui::Context, now: Now) {
+    pub(super) fn run_hooks(&mut self, ctx: &egui::Context) {
         if !self.hooks.active() || self.hooks.closing {
             return;
         }
@@ -113,7 +117,12 @@ impl SculptApp {
             self.close(ctx);
             return;
         }
-        if self.is_idle() {
+        let synced = {
+            let view = lock(self.engine.view());
+            self.hooks.wait_ops.is_none_or(|n| view.n_ops() >= n)
+                && view.presence().len() >= self.hooks.wait_presence
+        };
+        if self.is_idle() && synced {
             self.hooks.idle_frames = self.hooks.idle_frames.saturating_add(1);
         } else {
             self.hooks.idle_frames = 0;
@@ -125,7 +134,7 @@ impl SculptApp {
             println!("sculpt: scripted command: {line}");
             // As if typed: a line that fails stays in the input, above its error.
             self.input.clone_from(&line);
-            self.submit(&line, now);
+            self.submit(&line);
             if let Some(error) = &self.input_error {
                 println!("sculpt: command error:\n{error}");
             }
@@ -171,8 +180,8 @@ impl SculptApp {
 
     /// What the window shows, as JSON (the `--dump-state` hook).
     pub fn state_json(&self) -> Value {
-        let objects: Vec<Value> = self
-            .session
+        let mut view = lock(self.engine.view());
+        let objects: Vec<Value> = view
             .scene()
             .objects()
             .map(|(id, entry)| {
@@ -180,7 +189,7 @@ impl SculptApp {
                 let tracked = self.objects.get(&id);
                 json!({
                     "id": id.0,
-                    "name": self.session.object_label(id.0),
+                    "name": view.object_label(id.0),
                     "geometry": data.geometry.as_ref().map(|g| format!("{:?}", g.shape)),
                     "diffuse": data.appearance.diffuse.as_ref().map(|c| format!("{c:?}")),
                     "n_triangles": tracked.map(|t| t.n_triangles),
@@ -191,14 +200,24 @@ impl SculptApp {
             .collect();
         let rows = |rows: Vec<Value>| Value::Array(rows);
         json!({
-            "peer": self.session.peer_id().short(),
-            "store": self.session.dir().display().to_string(),
-            "store_error": self.session.store_error(),
-            "notices": self.session.notices(),
-            "n_ops": self.session.n_ops(),
-            "n_loaded": self.session.n_loaded(),
-            "scene_hash": self.session.scene_hash_hex(),
-            "selected": self.selected.map(|id| self.session.object_label(id)),
+            "peer": view.peer_id().short(),
+            "store": self.engine.store_dir().display().to_string(),
+            "store_error": view.store_error(),
+            "notices": view.notices(),
+            "n_ops": view.n_ops(),
+            "n_loaded": view.n_loaded(),
+            "scene_hash": view.scene_hash_hex(),
+            "selected": self.selected.map(|id| view.object_label(id)),
+            "peers": rows(view.peers().iter().map(|p| json!({
+                "peer": p.peer.short(), "name": p.name, "online": p.online,
+                "addr": p.addr, "how": p.how,
+                "rtt_micros": p.rtt_micros, "to_send": p.to_send, "to_receive": p.to_receive,
+            })).collect()),
+            "news": self.news,
+            "presence": rows(view.presence().iter().map(|(peer, p)| json!({
+                "peer": peer.short(), "name": p.name, "colour": p.colour,
+                "pointer": p.pointer, "selected": p.selected,
+            })).collect()),
             "objects": objects,
             "chat": rows(self.chat.iter().map(|c| json!({
                 "author": c.author, "time": c.time, "text": c.text,

@@ -16,7 +16,7 @@ use glam::{DMat4, Mat4};
 use render::scene::{Line, SceneObject};
 use render::snapshot::{SnapshotSettings, build, render_from_scene};
 
-use crate::clock;
+use ::app::clock;
 
 /// Most jobs waiting for the worker.
 pub const JOBS_QUEUED_MAX: usize = 64;

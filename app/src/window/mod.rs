@@ -12,9 +12,9 @@ use std::path::PathBuf;
 use anyhow::{Context as _, bail};
 use eframe::egui;
 
-use crate::clock;
-use crate::session::Session;
-use app::SculptApp;
+use self::app::SculptApp;
+use ::app::clock;
+use ::app::engine::{Engine, EngineConfig, lock};
 use hooks::Hooks;
 use viewport::ViewportResources;
 
@@ -34,20 +34,67 @@ Without a display, use the headless subcommands:
   sculpt slice <formula> [Z]            print a cross-section as text
   sculpt help                           list every subcommand";
 
-/// How to run the window.
-pub struct WindowOptions {
-    /// The store directory.
-    pub store: PathBuf,
+/// The window's flags (`sculpt [demo] ...`).
+#[derive(clap::Args, Debug)]
+pub struct WindowArgs {
+    /// The session's store directory (default: $XDG_DATA_HOME/sculpt/sessions/demo, or
+    /// ~/.local/share/sculpt/sessions/demo).
+    #[arg(long, value_name = "DIR")]
+    pub store: Option<PathBuf>,
     /// Octree depth for implicit objects.
+    #[arg(long, default_value_t = DEFAULT_DEPTH, value_parser = clap::value_parser!(u8).range(0..=i64::from(DEPTH_MAX)))]
     pub depth: u8,
-    /// Inner size in points.
-    pub size_points: [f32; 2],
-    /// Test hooks.
-    hooks: Hooks,
+    /// The window's inner size in points.
+    #[arg(long, value_name = "WxH", value_parser = parse_size_points)]
+    pub size: Option<[f32; 2]>,
+    #[command(flatten)]
+    pub net: crate::cli::NetArgs,
+    /// Test hook: run LINE as if typed in the command line (repeatable).
+    #[arg(long, value_name = "LINE")]
+    pub command: Vec<String>,
+    /// Test hook: click the viewport at fractions X, Y of its size.
+    #[arg(long, value_name = "X,Y", value_parser = parse_fractions)]
+    pub pick: Option<[f32; 2]>,
+    /// Test hook: save a PNG of the window once everything is drawn, then close.
+    #[arg(long, value_name = "PATH")]
+    pub screenshot: Option<PathBuf>,
+    /// Test hook: close once the commands have run and everything is drawn.
+    #[arg(long)]
+    pub exit_when_idle: bool,
+    /// Test hook: close after N frames (an error if a hook is unfinished).
+    #[arg(long, value_name = "N")]
+    pub exit_after_frames: Option<u64>,
+    /// Test hook: before each scripted step, wait until the session holds at least N ops.
+    #[arg(long, value_name = "N")]
+    pub wait_ops: Option<usize>,
+    /// Test hook: before each scripted step, wait until N other peers' presence is known.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub wait_presence: usize,
+    /// Test hook: write what the window shows as JSON when a hook closes it.
+    #[arg(long, value_name = "PATH")]
+    pub dump_state: Option<PathBuf>,
 }
 
-/// The default store: `$XDG_DATA_HOME/sculpt`, else `~/.local/share/sculpt`.
-pub fn default_store() -> Option<PathBuf> {
+fn parse_size_points(text: &str) -> Result<[f32; 2], String> {
+    let side = |s: &str| {
+        s.parse::<f32>()
+            .ok()
+            .filter(|x| (1.0..=SIZE_POINTS_MAX).contains(x))
+    };
+    text.split_once('x')
+        .and_then(|(w, h)| Some([side(w)?, side(h)?]))
+        .ok_or_else(|| format!("`{text}` is not WxH (each side 1 to {SIZE_POINTS_MAX})"))
+}
+
+fn parse_fractions(text: &str) -> Result<[f32; 2], String> {
+    let fraction = |s: &str| s.parse::<f32>().ok().filter(|f| (0.0..=1.0).contains(f));
+    text.split_once(',')
+        .and_then(|(x, y)| Some([fraction(x)?, fraction(y)?]))
+        .ok_or_else(|| format!("`{text}` is not X,Y (fractions of the viewport, 0 to 1)"))
+}
+
+/// The program's data directory: `$XDG_DATA_HOME/sculpt`, else `~/.local/share/sculpt`.
+pub fn default_data_dir() -> Option<PathBuf> {
     let non_empty = |name| std::env::var_os(name).filter(|v| !v.is_empty());
     if let Some(data) = non_empty("XDG_DATA_HOME") {
         return Some(PathBuf::from(data).join("sculpt"));
@@ -55,79 +102,8 @@ pub fn default_store() -> Option<PathBuf> {
     non_empty("HOME").map(|home| PathBuf::from(home).join(".local/share/sculpt"))
 }
 
-/// Reads the window's options (everything after `sculpt` or `sculpt demo`).
-pub fn parse_options(args: &[String]) -> anyhow::Result<WindowOptions> {
-    let mut store = None;
-    let mut depth = DEFAULT_DEPTH;
-    let mut size_points = DEFAULT_SIZE_POINTS;
-    let mut hooks = Hooks::default();
-    let mut rest = args.iter();
-    while let Some(arg) = rest.next() {
-        let mut value = |name: &str| rest.next().with_context(|| format!("{name} needs a value"));
-        match arg.as_str() {
-            "--store" => store = Some(PathBuf::from(value("--store")?)),
-            "--depth" => {
-                let v = value("--depth")?;
-                depth = v
-                    .parse()
-                    .ok()
-                    .filter(|d| *d <= DEPTH_MAX)
-                    .with_context(|| {
-                        format!("--depth `{v}` is not a number from 0 to {DEPTH_MAX}")
-                    })?;
-            }
-            "--size" => {
-                let v = value("--size")?;
-                let parsed = v.split_once('x').and_then(|(w, h)| {
-                    let side = |s: &str| {
-                        s.parse::<f32>()
-                            .ok()
-                            .filter(|x| (1.0..=SIZE_POINTS_MAX).contains(x))
-                    };
-                    Some([side(w)?, side(h)?])
-                });
-                size_points = parsed.with_context(|| format!("--size `{v}` is not WxH"))?;
-            }
-            "--command" => hooks.script.push_back(value("--command")?.clone()),
-            "--pick" => {
-                let v = value("--pick")?;
-                let parsed = v.split_once(',').and_then(|(x, y)| {
-                    let fraction =
-                        |s: &str| s.parse::<f32>().ok().filter(|f| (0.0..=1.0).contains(f));
-                    Some([fraction(x)?, fraction(y)?])
-                });
-                hooks.pick = Some(parsed.with_context(|| {
-                    format!("--pick `{v}` is not X,Y (fractions of the viewport, 0 to 1)")
-                })?);
-            }
-            "--screenshot" => hooks.screenshot = Some(PathBuf::from(value("--screenshot")?)),
-            "--exit-when-idle" => hooks.exit_when_idle = true,
-            "--exit-after-frames" => {
-                let v = value("--exit-after-frames")?;
-                hooks.exit_after_frames = Some(
-                    v.parse()
-                        .with_context(|| format!("bad frame count `{v}`"))?,
-                );
-            }
-            "--dump-state" => hooks.dump_state = Some(PathBuf::from(value("--dump-state")?)),
-            other => bail!("unknown option `{other}`\n\n{}", crate::USAGE),
-        }
-    }
-    let store = match store {
-        Some(store) => store,
-        None => default_store()
-            .context("no store directory: set HOME or XDG_DATA_HOME, or give --store DIR")?,
-    };
-    Ok(WindowOptions {
-        store,
-        depth,
-        size_points,
-        hooks,
-    })
-}
-
 /// Opens the window and runs until it is closed.
-pub fn run(options: WindowOptions) -> anyhow::Result<()> {
+pub fn run(args: WindowArgs) -> anyhow::Result<()> {
     let display = std::env::var("DISPLAY").unwrap_or_default();
     let wayland = std::env::var("WAYLAND_DISPLAY").unwrap_or_default();
     if display.is_empty() && wayland.is_empty() {
@@ -136,12 +112,31 @@ pub fn run(options: WindowOptions) -> anyhow::Result<()> {
              are both unset).\n{HEADLESS_HINT}"
         );
     }
-    let WindowOptions {
+    let store = match &args.store {
+        Some(store) => store.clone(),
+        None => default_data_dir()
+            .context("no store directory: set HOME or XDG_DATA_HOME, or give --store DIR")?
+            .join("sessions/demo"),
+    };
+    let depth = args.depth;
+    let size_points = args.size.unwrap_or(DEFAULT_SIZE_POINTS);
+    let mut hooks = Hooks::default();
+    hooks.script = args.command.iter().cloned().collect();
+    hooks.pick = args.pick;
+    hooks.screenshot.clone_from(&args.screenshot);
+    hooks.exit_when_idle = args.exit_when_idle;
+    hooks.exit_after_frames = args.exit_after_frames;
+    hooks.dump_state.clone_from(&args.dump_state);
+    hooks.wait_ops = args.wait_ops;
+    hooks.wait_presence = args.wait_presence;
+    let engine_config = EngineConfig {
         store,
-        depth,
-        size_points,
-        hooks,
-    } = options;
+        invite: args.net.invite.clone(),
+        network: args.net.network(),
+        demo: true,
+        memory_fallback: true,
+        name: args.net.name.clone(),
+    };
     let failure = std::sync::Arc::clone(&hooks.failure);
     let native = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
@@ -163,16 +158,19 @@ pub fn run(options: WindowOptions) -> anyhow::Result<()> {
                 .callback_resources
                 .insert(ViewportResources::new(&state.device, &state.queue, state.target_format));
             // The store is opened once the window is up, so that a failed start leaves none.
-            let session = Session::open(&store, clock::now().wall);
-            if let Some(error) = session.store_error() {
-                eprintln!("sculpt: store error: {error}");
-                eprintln!("sculpt: nothing stored was changed; edits in this window are not saved");
-            }
-            for notice in session.notices() {
-                eprintln!("sculpt: {notice}");
+            let engine = Engine::start(engine_config.clone(), clock::now().wall)?;
+            {
+                let view = lock(engine.view());
+                if let Some(error) = view.store_error() {
+                    eprintln!("sculpt: store error: {error}");
+                }
+                for notice in view.notices() {
+                    eprintln!("sculpt: {notice}");
+                }
             }
             let ctx = cc.egui_ctx.clone();
-            let app = SculptApp::new(session, depth, hooks, move || ctx.request_repaint())?;
+            let wake = std::sync::Arc::new(move || ctx.request_repaint());
+            let app = SculptApp::new(engine, engine_config, depth, hooks, wake)?;
             Ok(Box::new(app))
         }),
     )

@@ -4,12 +4,17 @@
 use eframe::egui;
 
 use super::app::SculptApp;
-use crate::clock::Now;
+use ::app::clock::Now;
+use ::app::engine::lock;
 
 /// Colour of errors.
 const ERROR_COLOUR: egui::Color32 = egui::Color32::from_rgb(255, 110, 100);
 /// Colour of notices.
 const NOTICE_COLOUR: egui::Color32 = egui::Color32::from_rgb(240, 200, 90);
+/// Ops still to receive from which the catch-up bar shows.
+const CATCH_UP_SHOWN_MIN: u64 = 50;
+/// News lines the peers panel shows (the latest).
+const NEWS_SHOWN_MAX: usize = 20;
 /// Height of the chat list, in points.
 const CHAT_HEIGHT_POINTS: f32 = 180.0;
 
@@ -22,30 +27,125 @@ plain text is chat; commands change the selected object:
   undo / redo               your last edit of it";
 
 impl SculptApp {
+    /// Solo, N peers, or offline with edits waiting: what the title bar says.
+    pub(super) fn presence_text(&self) -> String {
+        let view = lock(self.engine.view());
+        let (to_send, to_receive) = view.progress();
+        match self.n_online {
+            0 if self.shared => format!("offline · {} ops kept, waiting for peers", view.n_ops()),
+            0 => "solo".to_string(),
+            n if to_send + to_receive > 0 => {
+                format!("{n} peer(s) · syncing: {to_send} to send, {to_receive} to receive")
+            }
+            n => format!("{n} peer(s) · in sync"),
+        }
+    }
+
     pub(super) fn top_ui(&mut self, ui: &mut egui::Ui) {
+        let presence = self.presence_text();
         ui.horizontal(|ui| {
             ui.strong("sculpt");
+            let view = lock(self.engine.view());
             ui.label(format!(
-                "solo peer {} · store {} · {} ops",
-                self.session.peer_id().short(),
-                self.session.dir().display(),
-                self.session.n_ops()
+                "peer {} · {presence} · store {} · {} ops",
+                view.peer_id().short(),
+                self.engine.store_dir().display(),
+                view.n_ops()
             ));
+            drop(view);
+            if ui
+                .button("Share…")
+                .on_hover_text("show this session's invite, to give to whoever should join")
+                .clicked()
+            {
+                self.show_invite = !self.show_invite;
+                self.shared = true;
+            }
+            if ui
+                .button("Join…")
+                .on_hover_text("join another session with its invite")
+                .clicked()
+            {
+                self.join_input = match self.join_input {
+                    Some(_) => None,
+                    None => Some((String::new(), None)),
+                };
+            }
         });
-        if let Some(error) = self.session.store_error() {
-            ui.colored_label(ERROR_COLOUR, format!("Store error: {error}"));
-            ui.colored_label(
-                ERROR_COLOUR,
-                "Nothing stored was changed or deleted; edits in this window are not saved.",
+        self.join_ui(ui);
+        self.catch_up_ui(ui);
+        if self.show_invite {
+            ui.horizontal(|ui| {
+                ui.label("Invite (a secret: give it only to who should join):");
+                let code = self.engine.invite().to_string();
+                ui.monospace(&code);
+                if ui.button("Copy").clicked() {
+                    ui.ctx().copy_text(code);
+                }
+            });
+            ui.weak(
+                "They run: sculpt --invite CODE (same LAN), or add --dial ADDR / --discovery ADDR",
             );
         }
-        for notice in self.session.notices() {
+        let view = lock(self.engine.view());
+        if let Some(error) = view.store_error() {
+            ui.colored_label(ERROR_COLOUR, format!("Store error: {error}"));
+        }
+        for notice in view.notices() {
             ui.colored_label(NOTICE_COLOUR, notice);
         }
+        drop(view);
         let viewport_error = self.viewport.lock().ok().and_then(|r| r.error.clone());
         if let Some(error) = viewport_error {
             ui.colored_label(ERROR_COLOUR, format!("Cannot draw the scene: {error}"));
         }
+    }
+
+    /// The invite field of "Join…", with the reason a code was refused (its column).
+    fn join_ui(&mut self, ui: &mut egui::Ui) {
+        let Some((mut text, error)) = self.join_input.take() else {
+            return;
+        };
+        let mut error = error;
+        ui.horizontal(|ui| {
+            ui.label("Invite:");
+            let response = ui.add(
+                egui::TextEdit::singleline(&mut text)
+                    .hint_text("xxxxx-xxxxx-...")
+                    .font(egui::TextStyle::Monospace)
+                    .desired_width(360.0),
+            );
+            let entered = response.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+            if ui.button("Join").clicked() || entered {
+                match self.join(&text) {
+                    Ok(()) => {
+                        self.join_input = None;
+                        return;
+                    }
+                    Err(e) => error = Some(e),
+                }
+            }
+            self.join_input = Some((text.clone(), error.clone()));
+        });
+        if let Some(e) = self.join_input.as_ref().and_then(|(_, e)| e.as_ref()) {
+            ui.colored_label(ERROR_COLOUR, e);
+        }
+    }
+
+    /// A progress bar while this peer receives a large catch-up.
+    fn catch_up_ui(&mut self, ui: &mut egui::Ui) {
+        let view = lock(self.engine.view());
+        let (_, to_receive) = view.progress();
+        if to_receive < CATCH_UP_SHOWN_MIN {
+            return;
+        }
+        let have = view.n_ops() as u64;
+        let total = have + to_receive;
+        drop(view);
+        ui.add(
+            egui::ProgressBar::new(have as f32 / total.max(1) as f32)
+                .text(format!("catching up: {have} of {total} ops")),
+        );
     }
 
     pub(super) fn status_ui(&mut self, ui: &mut egui::Ui) {
@@ -69,11 +169,62 @@ impl SculptApp {
         });
     }
 
-    pub(super) fn side_ui(&mut self, ui: &mut egui::Ui, now: Now) {
+    /// The peers panel: each connected peer with how it was reached, its round trip and
+    /// what is still to sync, then the latest network news.
+    fn peers_ui(&mut self, ui: &mut egui::Ui) {
+        ui.heading(format!("Peers ({} online)", self.n_online));
+        if self.peers.is_empty() {
+            ui.weak("nobody met yet");
+        }
+        let mut follow = None;
+        for p in &self.peers {
+            let [r, g, b] = p.colour;
+            let colour = egui::Color32::from_rgb(r, g, b);
+            ui.horizontal(|ui| {
+                ui.colored_label(colour, "●");
+                ui.strong(&p.name);
+                ui.weak(p.peer.short());
+                if !p.online {
+                    ui.weak("offline");
+                    return;
+                }
+                let rtt = p
+                    .rtt_micros
+                    .map_or_else(|| "?".to_string(), |r| format!("{:.1} ms", r as f64 / 1e3));
+                ui.label(format!(
+                    "{} · {} · rtt {rtt} · {} to send, {} to receive",
+                    p.how, p.addr, p.to_send, p.to_receive
+                ));
+                let following = self.following == Some(p.peer);
+                if ui.selectable_label(following, "follow").clicked() {
+                    follow = Some((!following).then_some(p.peer));
+                }
+            });
+        }
+        if let Some(f) = follow {
+            self.following = f;
+        }
+        egui::CollapsingHeader::new("network news")
+            .id_salt("news")
+            .show(ui, |ui| {
+                for line in self.news.iter().rev().take(NEWS_SHOWN_MAX) {
+                    ui.small(line);
+                }
+            });
+    }
+
+    pub(super) fn side_ui(&mut self, ui: &mut egui::Ui, _now: Now) {
+        self.peers_ui(ui);
+        ui.separator();
         ui.heading("Objects");
-        let ids: Vec<u64> = self.session.scene().objects().map(|(id, _)| id.0).collect();
-        for id in ids {
-            let label = self.session.object_label(id);
+        let labels: Vec<(u64, String)> = {
+            let view = lock(self.engine.view());
+            view.scene()
+                .objects()
+                .map(|(id, _)| (id.0, view.object_label(id.0)))
+                .collect()
+        };
+        for (id, label) in labels {
             let detail =
                 self.objects
                     .get(&fdsl::scene::ObjectId(id))
@@ -105,7 +256,7 @@ impl SculptApp {
             });
         let target = self.selected.map_or_else(
             || "nothing selected".into(),
-            |id| self.session.object_label(id),
+            |id| lock(self.engine.view()).object_label(id),
         );
         ui.label(format!("selected: {target}"));
         let response = ui.add(
@@ -116,7 +267,7 @@ impl SculptApp {
         );
         if response.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter)) {
             let line = self.input.clone();
-            self.submit(&line, now);
+            self.submit(&line);
             response.request_focus();
         }
         if let Some(error) = &self.input_error {

@@ -16,7 +16,7 @@ use render::gpu::Renderer;
 use render::scene::{PickHit, Scene};
 use render::snapshot::{View, frame};
 
-use crate::clock;
+use ::app::clock;
 
 /// Where the renderer draws (encodes linear colour to sRGB on write).
 const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
@@ -327,6 +327,10 @@ pub struct ViewportInput {
     pub reset: bool,
     /// The viewport's size in pixels.
     pub size_px: [u32; 2],
+    /// Where the pointer hovers, in pixels of the viewport, when it moved this frame.
+    pub hover_px: Option<[f32; 2]>,
+    /// The user dragged or zoomed the camera this frame.
+    pub moved: bool,
 }
 
 /// Draws the viewport over the rest of `ui` and handles orbit (drag), zoom (scroll), reset
@@ -357,6 +361,7 @@ pub fn viewport_ui(
                 d.y * ORBIT_RADIANS_PER_POINT,
             );
             view.moved = true;
+            input.moved = true;
         }
     }
     if response.hovered() {
@@ -364,6 +369,12 @@ pub fn viewport_ui(
         if scroll != 0.0 {
             view.camera.zoom((-scroll * ZOOM_PER_SCROLL_POINT).exp());
             view.moved = true;
+            input.moved = true;
+        }
+        if let Some(pos) = response.hover_pos()
+            && ui.input(|i| i.pointer.is_moving())
+        {
+            input.hover_px = Some([(pos.x - rect.min.x) * ppp, (pos.y - rect.min.y) * ppp]);
         }
     }
     let key_reset =

@@ -1,0 +1,852 @@
+//! The session engine: the one driver under every face of the program (the window, the
+//! headless peer, tests).
+//!
+//! It owns this peer's identity, the store directory, the QUIC node (`replication::net`)
+//! and the fold of the log into a scene. All IO (sockets, fsync) runs on one named thread,
+//! `sculpt-engine`, with a current-thread tokio runtime; faces talk to it through
+//! [`Engine`] (requests on a bounded queue) and read the published [`View`] under a short
+//! lock. The view is folded by the node's observer as each insertion is stored, and names the
+//! objects each change touched, so a face re-meshes or re-feels only those.
+
+pub mod presence;
+pub mod store;
+pub mod view;
+
+use std::collections::VecDeque;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::mpsc as std_mpsc;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use replication::net::admission::AdmissionError;
+use replication::net::discovery::{client, lan};
+use replication::net::invite::Invite;
+use replication::net::node::{DialError, DisconnectReason, NodeConfig, NodeEvent, NodeHandle};
+use replication::net::{Node, SessionKeys};
+use replication::shape::ShapePayload;
+use replication::sync::state::CloseReason;
+use replication::{Log, OpId, PeerId, Timestamp};
+
+pub use presence::{CameraPose, Presence};
+pub use view::{ChatRow, HistoryRow, PeerRow, SharedView, View, lock};
+
+/// Requests queued from faces to the engine thread before `try_*` calls report it busy.
+pub const MAX_QUEUED_REQUESTS: usize = 256;
+/// Lines of network news a view keeps (the latest ones).
+pub const MAX_NEWS_LINES: usize = 200;
+/// How often a `--dial` address that is not connected is dialed again.
+pub const DIAL_RETRY_MILLIS: u64 = 2_000;
+/// How often peers' round-trip times and addresses are refreshed in the view.
+pub const PEER_REFRESH_MILLIS: u64 = 500;
+/// Peers kept in the view after they left (the oldest offline ones are forgotten first).
+pub const MAX_PEER_ROWS: usize = 64;
+/// How often this peer's presence is sent again even when unchanged (for peers that
+/// connected since), in milliseconds.
+pub const PRESENCE_REPEAT_MILLIS: u64 = 1_000;
+/// How long a shutdown waits for connected peers to receive what they lack.
+pub const SHUTDOWN_FLUSH_MILLIS: u64 = 2_000;
+/// How long [`Engine::start`] waits for the engine thread to bind its socket.
+pub const START_TIMEOUT_SECS: u64 = 20;
+/// The demo scene authored into a new session: the thesis's watermelon.
+pub const DEMO_SCENE: &str = include_str!("../../../tests/data/scenes/watermelon.wrl");
+
+/// How the engine reaches other peers.
+#[derive(Clone, Debug)]
+pub struct Network {
+    /// The UDP address the QUIC node binds (port 0 picks one).
+    pub listen: SocketAddr,
+    /// Peers to dial, and dial again whenever not connected.
+    pub dial: Vec<SocketAddr>,
+    /// A discovery node to register with.
+    pub discovery: Option<SocketAddr>,
+    /// Announce on and listen to the LAN.
+    pub lan: bool,
+}
+
+impl Default for Network {
+    fn default() -> Self {
+        Self {
+            listen: (std::net::Ipv4Addr::UNSPECIFIED, 0).into(),
+            dial: Vec::new(),
+            discovery: None,
+            lan: false,
+        }
+    }
+}
+
+/// What the engine needs to start.
+#[derive(Clone, Debug)]
+pub struct EngineConfig {
+    /// The session's store directory.
+    pub store: PathBuf,
+    /// The session to join; `None` opens the store's own session (or makes a new one).
+    pub invite: Option<Invite>,
+    /// How to reach other peers.
+    pub network: Network,
+    /// Author the demo scene when this start makes a new session.
+    pub demo: bool,
+    /// When the store cannot be used, run in memory with the error in the view (the window)
+    /// instead of failing (a headless peer).
+    pub memory_fallback: bool,
+    /// The name other peers see (at most [`presence::MAX_NAME_BYTES`]); `None`: the short id.
+    pub name: Option<String>,
+}
+
+/// Why the engine did not start.
+#[derive(Debug, thiserror::Error)]
+pub enum StartError {
+    /// The store directory cannot be used.
+    #[error(transparent)]
+    Store(#[from] store::StoreError),
+    /// The listening socket could not be bound.
+    #[error("cannot listen on {addr}: {reason}")]
+    Listen {
+        /// The address.
+        addr: SocketAddr,
+        /// Why (for example: the port is in use).
+        reason: String,
+    },
+    /// The engine thread could not start or did not answer.
+    #[error("the engine thread failed: {0}")]
+    Thread(String),
+}
+
+/// Why a request did not reach the engine.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RequestError {
+    /// The engine has stopped.
+    #[error("the session engine has stopped")]
+    Stopped,
+    /// Too many requests are queued.
+    #[error("the session engine is busy; try again")]
+    Busy,
+}
+
+/// A request from a face.
+enum Request {
+    Author {
+        payload: ShapePayload,
+        reply: std_mpsc::Sender<Result<OpId, String>>,
+    },
+    Ephemeral {
+        channel: u32,
+        value: Vec<u8>,
+    },
+    Dial(SocketAddr),
+    Presence(Presence),
+    Shutdown,
+}
+
+/// The reply to an authoring request, read once it comes.
+pub struct Pending(std_mpsc::Receiver<Result<OpId, String>>);
+
+impl Pending {
+    /// The reply if it came (`Some(Err)` also when the engine stopped first).
+    pub fn try_take(&self) -> Option<Result<OpId, String>> {
+        match self.0.try_recv() {
+            Ok(reply) => Some(reply),
+            Err(std_mpsc::TryRecvError::Empty) => None,
+            Err(std_mpsc::TryRecvError::Disconnected) => {
+                Some(Err(RequestError::Stopped.to_string()))
+            }
+        }
+    }
+
+    /// Waits for the reply.
+    pub fn wait(self) -> Result<OpId, String> {
+        self.0
+            .recv()
+            .unwrap_or_else(|_| Err(RequestError::Stopped.to_string()))
+    }
+}
+
+/// A running engine.
+pub struct Engine {
+    requests: tokio::sync::mpsc::Sender<Request>,
+    view: SharedView,
+    news: Arc<Mutex<News>>,
+    invite: Invite,
+    store_dir: PathBuf,
+    local_presence: Arc<Mutex<Presence>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+/// Network news for the faces: lines in order, numbered.
+#[derive(Default)]
+pub struct News {
+    lines: VecDeque<(u64, String)>,
+    next: u64,
+}
+
+impl News {
+    fn push(&mut self, line: String) {
+        if self.lines.len() >= MAX_NEWS_LINES {
+            self.lines.pop_front();
+        }
+        self.lines.push_back((self.next, line));
+        self.next += 1;
+    }
+
+    /// The lines numbered `from` and later (as many as are still kept), and the next number.
+    pub fn since(&self, from: u64) -> (Vec<String>, u64) {
+        let lines = self
+            .lines
+            .iter()
+            .filter(|(n, _)| *n >= from)
+            .map(|(_, l)| l.clone())
+            .collect();
+        (lines, self.next)
+    }
+}
+
+impl Engine {
+    /// Opens the store, starts the node on the engine thread and waits until it listens.
+    pub fn start(config: EngineConfig, now: Timestamp) -> Result<Engine, StartError> {
+        let (keypair, invite, new_session, store, log, notices, store_error) =
+            match store::open(&config.store, config.invite.as_ref(), now) {
+                Ok(o) => (
+                    o.keypair,
+                    o.invite,
+                    o.new_session,
+                    Some(o.store),
+                    o.log,
+                    o.notices,
+                    None,
+                ),
+                Err(e) if config.memory_fallback => {
+                    let invite = match &config.invite {
+                        Some(i) => i.clone(),
+                        None => Invite::generate(&mut store::entropy_rng()?),
+                    };
+                    let error = format!("{e}; nothing stored was changed, and edits are not saved");
+                    let keypair = store::memory_keypair(now);
+                    (
+                        keypair,
+                        invite,
+                        true,
+                        None,
+                        Log::default(),
+                        Vec::new(),
+                        Some(error),
+                    )
+                }
+                Err(e) => return Err(e.into()),
+            };
+        let me = keypair.peer_id();
+        let mut view = View::new(me, &log).map_err(StartError::Thread)?;
+        view.notices = notices;
+        view.store_error = store_error;
+        let view: SharedView = Arc::new(Mutex::new(view));
+        let news = Arc::new(Mutex::new(News::default()));
+        let demo = (config.demo && new_session && log.is_empty())
+            .then(|| demo_payloads_from(lock(&view).next_object_id()));
+        let (requests, inbox) = tokio::sync::mpsc::channel(MAX_QUEUED_REQUESTS);
+        let (ready_tx, ready_rx) = std_mpsc::channel();
+        let node_config = NodeConfig {
+            keypair,
+            keys: SessionKeys::from_invite(&invite),
+            listen: config.network.listen,
+            log,
+            store,
+        };
+        let local_presence = Arc::new(Mutex::new(Presence {
+            name: config.name.clone().unwrap_or_else(|| me.short()),
+            colour: presence::default_colour(&me.0),
+            pointer: None,
+            selected: None,
+            camera: None,
+        }));
+        let worker = Worker {
+            view: view.clone(),
+            news: news.clone(),
+            network: config.network.clone(),
+            discovery_id: SessionKeys::from_invite(&invite).discovery_id(),
+            presence: local_presence.clone(),
+            dialed: Arc::default(),
+        };
+        let thread = std::thread::Builder::new()
+            .name("sculpt-engine".into())
+            .spawn(move || worker.run(node_config, demo, inbox, ready_tx))
+            .map_err(|e| StartError::Thread(e.to_string()))?;
+        match ready_rx.recv_timeout(Duration::from_secs(START_TIMEOUT_SECS)) {
+            Ok(Ok(addr)) => lock(&view).listen = Some(addr),
+            Ok(Err(e)) => {
+                let _ = thread.join();
+                return Err(e);
+            }
+            Err(_) => {
+                return Err(StartError::Thread(
+                    "no answer from the engine thread".into(),
+                ));
+            }
+        }
+        Ok(Engine {
+            requests,
+            view,
+            news,
+            invite,
+            store_dir: config.store,
+            local_presence,
+            thread: Some(thread),
+        })
+    }
+
+    /// The published view.
+    pub fn view(&self) -> &SharedView {
+        &self.view
+    }
+
+    /// Network news since line `from`, and the number to ask from next time.
+    pub fn news_since(&self, from: u64) -> (Vec<String>, u64) {
+        self.news
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .since(from)
+    }
+
+    /// The session's invite (a secret: show it only to the user who asks to share).
+    pub fn invite(&self) -> &Invite {
+        &self.invite
+    }
+
+    /// The store directory.
+    pub fn store_dir(&self) -> &std::path::Path {
+        &self.store_dir
+    }
+
+    /// This peer's id.
+    pub fn peer_id(&self) -> PeerId {
+        lock(&self.view).peer_id()
+    }
+
+    fn request(&self, request: Request) -> Result<(), RequestError> {
+        self.requests.try_send(request).map_err(|e| match e {
+            tokio::sync::mpsc::error::TrySendError::Full(_) => RequestError::Busy,
+            tokio::sync::mpsc::error::TrySendError::Closed(_) => RequestError::Stopped,
+        })
+    }
+
+    /// Authors an op (validated, stored, then sent); the reply comes on the returned
+    /// [`Pending`]. The view shows the op once it is stored.
+    /// A payload that does not validate is answered at once with the reason.
+    pub fn author(&self, payload: ShapePayload) -> Result<Pending, RequestError> {
+        let (reply, answer) = std_mpsc::channel();
+        match payload.validate() {
+            Ok(()) => self.request(Request::Author { payload, reply })?,
+            Err(e) => {
+                let _ = reply.send(Err(e));
+            }
+        }
+        Ok(Pending(answer))
+    }
+
+    /// Sends the latest value on an ephemeral channel to every connected peer (never
+    /// stored; latest value wins).
+    pub fn send_ephemeral(&self, channel: u32, value: Vec<u8>) -> Result<(), RequestError> {
+        self.request(Request::Ephemeral { channel, value })
+    }
+
+    /// Publishes this peer's presence (name, colour, pointer, selection, camera); it is sent
+    /// to every connected peer at most [`presence::PRESENCE_RATE_HZ`] times a second.
+    pub fn set_presence(&self, presence: Presence) -> Result<(), RequestError> {
+        self.request(Request::Presence(presence))
+    }
+
+    /// This peer's presence as last set (its name and colour at start).
+    pub fn presence(&self) -> Presence {
+        self.local_presence
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone()
+    }
+
+    /// Dials a peer once.
+    pub fn dial(&self, addr: SocketAddr) -> Result<(), RequestError> {
+        self.request(Request::Dial(addr))
+    }
+
+    /// Closes every connection, syncs the store and stops the engine thread.
+    pub fn shutdown(mut self) {
+        self.stop();
+    }
+
+    fn stop(&mut self) {
+        let _ = self.requests.try_send(Request::Shutdown);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+impl Drop for Engine {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+/// The engine thread's state.
+struct Worker {
+    view: SharedView,
+    news: Arc<Mutex<News>>,
+    network: Network,
+    discovery_id: replication::net::session::DiscoveryId,
+    /// This peer's presence, as the faces last set it.
+    presence: Arc<Mutex<Presence>>,
+    /// How this engine reached the addresses it dialed (for the peers panel).
+    dialed: Dialed,
+}
+
+/// How this engine reached the addresses it dialed (at most [`MAX_DIALED`] are kept).
+type Dialed = Arc<Mutex<std::collections::BTreeMap<SocketAddr, &'static str>>>;
+
+/// Addresses whose way of dialing is remembered for the peers panel.
+pub const MAX_DIALED: usize = 256;
+
+fn note_dialed(dialed: &Dialed, addr: SocketAddr, how: &'static str) {
+    let mut map = dialed
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if map.len() < MAX_DIALED || map.contains_key(&addr) {
+        map.insert(addr, how);
+    }
+}
+
+impl Worker {
+    fn run(
+        self,
+        node_config: NodeConfig<ShapePayload>,
+        demo: Option<Result<Vec<ShapePayload>, String>>,
+        inbox: tokio::sync::mpsc::Receiver<Request>,
+        ready: std_mpsc::Sender<Result<SocketAddr, StartError>>,
+    ) {
+        let runtime = match tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+        {
+            Ok(r) => r,
+            Err(e) => {
+                let _ = ready.send(Err(StartError::Thread(e.to_string())));
+                return;
+            }
+        };
+        runtime.block_on(self.serve(node_config, demo, inbox, ready));
+    }
+
+    fn say(&self, line: String) {
+        log::info!("{line}");
+        self.news
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .push(line);
+    }
+
+    async fn serve(
+        self,
+        node_config: NodeConfig<ShapePayload>,
+        demo: Option<Result<Vec<ShapePayload>, String>>,
+        mut inbox: tokio::sync::mpsc::Receiver<Request>,
+        ready: std_mpsc::Sender<Result<SocketAddr, StartError>>,
+    ) {
+        let listen = node_config.listen;
+        let folder = view::Folder {
+            view: self.view.clone(),
+        };
+        let node = match Node::spawn_observed(node_config, Some(Box::new(folder))) {
+            Ok(node) => node,
+            Err(e) => {
+                let reason = match &e {
+                    replication::net::node::NodeError::Bind { source, .. }
+                        if source.kind() == std::io::ErrorKind::AddrInUse =>
+                    {
+                        "the port is in use (another sculpt peer?); give another --listen \
+                         address, or port 0 to pick a free one"
+                            .to_string()
+                    }
+                    other => other.to_string(),
+                };
+                let _ = ready.send(Err(StartError::Listen {
+                    addr: listen,
+                    reason,
+                }));
+                return;
+            }
+        };
+        let Node { handle, mut events } = node;
+        let _ = ready.send(Ok(handle.local_addr()));
+        self.say(format!(
+            "peer {} listening on {}",
+            handle.peer_id().short(),
+            handle.local_addr()
+        ));
+        match demo {
+            Some(Ok(payloads)) => {
+                for payload in payloads {
+                    if let Err(e) = handle.author(payload).await {
+                        self.say(format!("the demo scene could not be authored: {e}"));
+                    }
+                }
+            }
+            Some(Err(e)) => self.say(format!("the demo scene could not be authored: {e}")),
+            None => {}
+        }
+        let news = NewsSink {
+            news: self.news.clone(),
+        };
+        self.start_finders(&handle, &news);
+        let mut refresh = tokio::time::interval(Duration::from_millis(PEER_REFRESH_MILLIS));
+        let mut presence_tick =
+            tokio::time::interval(Duration::from_millis(1_000 / presence::PRESENCE_RATE_HZ));
+        let (mut presence_due, mut presence_sent_at) = (true, tokio::time::Instant::now());
+        loop {
+            tokio::select! {
+                request = inbox.recv() => match request {
+                    Some(Request::Author { payload, reply }) => {
+                        let result = handle.author(payload).await.map_err(|e| e.to_string());
+                        let _ = reply.send(result);
+                    }
+                    Some(Request::Ephemeral { channel, value }) => {
+                        let _ = handle.send_ephemeral(channel, value).await;
+                    }
+                    Some(Request::Presence(presence)) => {
+                        *self.presence.lock().unwrap_or_else(std::sync::PoisonError::into_inner) =
+                            presence;
+                        presence_due = true;
+                    }
+                    Some(Request::Dial(addr)) => {
+                        self.note_dialed(addr, "direct");
+                        let handle = handle.clone();
+                        let news = news.clone();
+                        tokio::spawn(async move {
+                            if let Err(e) = handle.dial(addr).await {
+                                news.say(dial_failure(addr, &e));
+                            }
+                        });
+                    }
+                    Some(Request::Shutdown) | None => break,
+                },
+                Some(event) = events.recv() => {
+                    // A new peer hears this peer's presence at once.
+                    presence_due |= matches!(event, NodeEvent::Connected { .. });
+                    self.on_event(event);
+                }
+                _ = refresh.tick() => self.refresh_peers(&handle).await,
+                _ = presence_tick.tick() => {
+                    let repeat = presence_sent_at.elapsed()
+                        >= Duration::from_millis(PRESENCE_REPEAT_MILLIS);
+                    if presence_due || repeat {
+                        let value = self
+                            .presence
+                            .lock()
+                            .unwrap_or_else(std::sync::PoisonError::into_inner)
+                            .encode();
+                        let _ = handle.send_ephemeral(presence::PRESENCE_CHANNEL, value).await;
+                        presence_due = false;
+                        presence_sent_at = tokio::time::Instant::now();
+                    }
+                }
+            }
+        }
+        // Give connected peers what they lack first (bounded): closing a window right after
+        // an edit should not leave the edit behind until the next meeting.
+        let deadline = tokio::time::Instant::now() + Duration::from_millis(SHUTDOWN_FLUSH_MILLIS);
+        while lock(&self.view).progress().0 > 0 && tokio::time::Instant::now() < deadline {
+            tokio::select! {
+                Some(event) = events.recv() => self.on_event(event),
+                () = tokio::time::sleep(Duration::from_millis(20)) => {}
+            }
+        }
+        let _ = handle.shutdown().await;
+        self.say("stopped; every op is on disk".into());
+    }
+
+    /// Starts the tasks that find and dial peers: `--dial` addresses, a discovery node, the LAN.
+    fn start_finders(&self, handle: &NodeHandle<ShapePayload>, news: &NewsSink) {
+        for addr in self.network.dial.clone() {
+            self.note_dialed(addr, "direct");
+            tokio::spawn(keep_dialing(handle.clone(), addr, news.clone()));
+        }
+        if let Some(server) = self.network.discovery {
+            tokio::spawn(stay_registered(
+                server,
+                self.discovery_id,
+                handle.clone(),
+                news.clone(),
+                self.dialed.clone(),
+            ));
+        }
+        if self.network.lan {
+            let port = handle.local_addr().port();
+            match lan::LanDiscovery::bind(
+                lan::LanConfig::default(),
+                self.discovery_id,
+                handle.peer_id(),
+                port,
+            ) {
+                Ok(finder) => {
+                    tokio::spawn(lan::announce_and_dial(finder, handle.clone()));
+                }
+                Err(e) => news.say(format!("LAN discovery is off: {e}")),
+            }
+        }
+    }
+
+    fn on_event(&self, event: NodeEvent) {
+        match event {
+            NodeEvent::Connected {
+                peer, addr, role, ..
+            } => {
+                let how = match role {
+                    replication::net::admission::Role::Dialer => self
+                        .dialed
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner)
+                        .get(&addr)
+                        .copied()
+                        .unwrap_or("LAN"),
+                    _ => "it dialed us",
+                };
+                self.say(format!("connected to {} at {addr} ({how})", peer.short()));
+                let mut view = lock(&self.view);
+                let row = PeerRow {
+                    peer,
+                    online: true,
+                    name: peer.short(),
+                    colour: presence::default_colour(&peer.0),
+                    addr: addr.to_string(),
+                    how,
+                    rtt_micros: None,
+                    to_send: 0,
+                    to_receive: 0,
+                };
+                match view.peers.iter_mut().find(|p| p.peer == peer) {
+                    Some(old) => {
+                        *old = PeerRow {
+                            name: old.name.clone(),
+                            colour: old.colour,
+                            ..row
+                        };
+                    }
+                    None => view.peers.push(row),
+                }
+                if view.peers.len() > MAX_PEER_ROWS
+                    && let Some(i) = view.peers.iter().position(|p| !p.online)
+                {
+                    view.peers.remove(i);
+                }
+            }
+            NodeEvent::Disconnected { peer, reason, .. } => {
+                if reason == DisconnectReason::Duplicate {
+                    return;
+                }
+                self.say(format!(
+                    "{} left: {}",
+                    peer.short(),
+                    disconnect_text(&reason)
+                ));
+                let mut view = lock(&self.view);
+                view.presence.remove(&peer);
+                for row in view.peers.iter_mut().filter(|p| p.peer == peer) {
+                    row.online = false;
+                    row.rtt_micros = None;
+                }
+            }
+            NodeEvent::Ephemeral {
+                peer,
+                channel,
+                value,
+                ..
+            } if channel == presence::PRESENCE_CHANNEL => {
+                let mut view = lock(&self.view);
+                match Presence::decode(&value) {
+                    Ok(p) => {
+                        for row in view.peers.iter_mut().filter(|r| r.peer == peer) {
+                            row.name.clone_from(&p.name);
+                            row.colour = p.colour;
+                        }
+                        view.presence.insert(peer, p);
+                    }
+                    Err(e) => {
+                        view.n_bad_presence += 1;
+                        log::debug!("bad presence from {}: {e}", peer.short());
+                    }
+                }
+            }
+            NodeEvent::AdmissionFailed { addr, error } => {
+                self.say(format!(
+                    "a connection with {addr} was refused: {}",
+                    admission_text(&error)
+                ));
+            }
+            NodeEvent::Stopped { error } => {
+                let line = format!("the store failed, so the node stopped: {error}");
+                log::error!("{line}");
+                lock(&self.view).store_error = Some(line);
+            }
+            NodeEvent::Rejected { peer, detail, .. } => {
+                log::debug!("dropped bad input from {}: {detail}", peer.short());
+            }
+            NodeEvent::Delivered { .. }
+            | NodeEvent::Ephemeral { .. }
+            | NodeEvent::UpToDate { .. } => {}
+        }
+    }
+
+    fn note_dialed(&self, addr: SocketAddr, how: &'static str) {
+        note_dialed(&self.dialed, addr, how);
+    }
+
+    async fn refresh_peers(&self, handle: &NodeHandle<ShapePayload>) {
+        let Ok(stats) = handle.stats().await else {
+            return;
+        };
+        let mut view = lock(&self.view);
+        for row in &mut view.peers {
+            if let Some(c) = stats.connections.iter().find(|c| c.peer == row.peer) {
+                row.rtt_micros = Some(c.rtt_micros);
+                row.addr = c.addr.to_string();
+            }
+        }
+    }
+}
+
+/// Where background tasks put their news.
+#[derive(Clone)]
+struct NewsSink {
+    news: Arc<Mutex<News>>,
+}
+
+impl NewsSink {
+    fn say(&self, line: String) {
+        log::info!("{line}");
+        self.news
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .push(line);
+    }
+}
+
+/// Dials `addr` whenever no connection to it is open, every [`DIAL_RETRY_MILLIS`], until the
+/// node stops; says so when the outcome changes.
+async fn keep_dialing(handle: NodeHandle<ShapePayload>, addr: SocketAddr, news: NewsSink) {
+    let mut last_failure = None;
+    loop {
+        let Ok(stats) = handle.stats().await else {
+            return;
+        };
+        if !stats.connections.iter().any(|c| c.addr == addr) {
+            match handle.dial(addr).await {
+                Ok(_) => last_failure = None,
+                Err(DialError::Gone) => return,
+                Err(e) => {
+                    let line = dial_failure(addr, &e);
+                    if last_failure.as_ref() != Some(&line) {
+                        news.say(line.clone());
+                        last_failure = Some(line);
+                    }
+                }
+            }
+        }
+        tokio::time::sleep(Duration::from_millis(DIAL_RETRY_MILLIS)).await;
+    }
+}
+
+/// Keeps the node registered with a discovery server and dials whom it learns; says when the
+/// server cannot be reached (LAN and direct dialing go on meanwhile).
+async fn stay_registered(
+    server: SocketAddr,
+    discovery_id: replication::net::session::DiscoveryId,
+    handle: NodeHandle<ShapePayload>,
+    news: NewsSink,
+    dialed: Dialed,
+) {
+    let port = handle.local_addr().port();
+    let mut reachable = None;
+    loop {
+        match client::register(server, discovery_id, handle.peer_id(), port).await {
+            Ok(found) => {
+                if reachable != Some(true) {
+                    news.say(format!("registered with the discovery node {server}"));
+                    reachable = Some(true);
+                }
+                for peer in &found {
+                    note_dialed(&dialed, peer.addr, "via discovery");
+                }
+                for (peer, outcome) in handle.dial_discovered(&found).await {
+                    if let Err(e) = outcome {
+                        news.say(dial_failure(peer.addr, &e));
+                    }
+                }
+            }
+            Err(e) => {
+                if reachable != Some(false) {
+                    news.say(format!(
+                        "the discovery node {server} is unreachable ({e}); LAN and direct \
+                         dialing still work, and it is tried again"
+                    ));
+                    reachable = Some(false);
+                }
+            }
+        }
+        tokio::time::sleep(Duration::from_millis(client::REFRESH_INTERVAL_MILLIS)).await;
+        if handle.stats().await.is_err() {
+            return;
+        }
+    }
+}
+
+/// A dial failure in words a person can act on.
+fn dial_failure(addr: SocketAddr, e: &DialError) -> String {
+    match e {
+        DialError::Admission(a) => format!("{addr} refused the connection: {}", admission_text(a)),
+        DialError::SelfConnection => format!("{addr} is this peer itself"),
+        other => format!("cannot connect to {addr}: {other}"),
+    }
+}
+
+/// An admission failure in words a person can act on.
+fn admission_text(e: &AdmissionError) -> String {
+    match e {
+        AdmissionError::WrongInvite | AdmissionError::RefusedByRemote(_) => {
+            format!("{e}: the invites differ (a mistyped code, or another session's invite)")
+        }
+        AdmissionError::Timeout | AdmissionError::Connection(_) => {
+            format!("{e}: is a sculpt peer listening there?")
+        }
+        other => other.to_string(),
+    }
+}
+
+/// A disconnection reason in words.
+fn disconnect_text(reason: &DisconnectReason) -> String {
+    match reason {
+        DisconnectReason::Sync(CloseReason::WrongProtocol { remote }) => format!(
+            "it runs sync protocol {remote}, this build speaks {}; update the older one",
+            replication::sync::message::PROTOCOL_VERSION
+        ),
+        DisconnectReason::Sync(CloseReason::WrongSession) => "it is in another session".into(),
+        DisconnectReason::Lost(why) => format!("connection lost ({why})"),
+        other => format!("{other:?}"),
+    }
+}
+
+/// The demo scene's objects as create ops with ids from `first_id` on.
+pub fn demo_payloads_from(first_id: u64) -> Result<Vec<ShapePayload>, String> {
+    use fdsl::fvrml::{LoadOptions, load};
+    let mut no_inline = |url: &str| Err(format!("the demo scene has no inline files ({url})"));
+    let loaded = load(DEMO_SCENE, &LoadOptions::default(), &mut no_inline)
+        .map_err(|e| format!("the demo scene does not load: {e}"))?;
+    Ok(loaded
+        .scene
+        .objects()
+        .zip(first_id..)
+        .map(|((_, entry), object)| ShapePayload::Create {
+            object,
+            data: Box::new(entry.object.data().clone()),
+            group: None,
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,257 @@
+//! Presence: who is here and what they point at, sent on the ephemeral channel (never stored,
+//! latest value wins).
+//!
+//! Each peer sends its display name and colour, the point of the surface under its pointer,
+//! its selected object and its camera, whenever one of them changes (at most
+//! [`PRESENCE_RATE_HZ`] times a second). Receivers draw the pointer and outline the selection
+//! in the sender's colour, and may follow its camera. Values come from peers: the decoder
+//! bounds every length and refuses non-finite numbers.
+
+/// The ephemeral channel presence travels on.
+pub const PRESENCE_CHANNEL: u32 = 1;
+/// Most presence values a peer sends per second.
+pub const PRESENCE_RATE_HZ: u64 = 20;
+/// Longest display name, in bytes.
+pub const MAX_NAME_BYTES: usize = 32;
+/// The encoding's version byte.
+const VERSION: u8 = 1;
+
+/// An orbit camera in the renderer's world (+z up): what it looks at and from where.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraPose {
+    /// The point looked at.
+    pub target: [f32; 3],
+    /// Yaw and pitch in radians, and the distance from the target.
+    pub orbit: [f32; 3],
+}
+
+/// One peer's presence.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Presence {
+    /// The name the user chose (at most [`MAX_NAME_BYTES`]).
+    pub name: String,
+    /// The user's colour (sRGB).
+    pub colour: [u8; 3],
+    /// The surface point under the pointer (the renderer's world, +z up), if any.
+    pub pointer: Option<[f32; 3]>,
+    /// The selected object.
+    pub selected: Option<u64>,
+    /// The camera.
+    pub camera: Option<CameraPose>,
+}
+
+/// Why a presence value was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PresenceError {
+    /// Another version of the encoding.
+    #[error("presence version {0} is not {VERSION}")]
+    Version(u8),
+    /// The bytes end early.
+    #[error("presence value cut short at byte {0}")]
+    Short(usize),
+    /// A name over the limit or not UTF-8.
+    #[error("presence name at byte {0} is over {MAX_NAME_BYTES} bytes or not UTF-8")]
+    Name(usize),
+    /// A coordinate that is not finite.
+    #[error("presence value has a non-finite number at byte {0}")]
+    NotFinite(usize),
+    /// Bytes after the value.
+    #[error("presence value has {0} extra bytes")]
+    Trailing(usize),
+}
+
+/// The colour a peer gets until its user picks one: from its id, so it is stable.
+pub fn default_colour(peer: &[u8; 32]) -> [u8; 3] {
+    const PALETTE: [[u8; 3]; 8] = [
+        [230, 80, 70],
+        [70, 160, 230],
+        [90, 200, 110],
+        [240, 180, 50],
+        [180, 110, 220],
+        [60, 200, 200],
+        [240, 120, 180],
+        [160, 160, 160],
+    ];
+    PALETTE[usize::from(peer[0]) % PALETTE.len()]
+}
+
+impl Presence {
+    /// `[1][name len][name][r g b][flags][pointer 3×f32][target 3×f32][orbit 3×f32][selected u64]`,
+    /// little-endian; the optional parts are present when their flag bit is set.
+    pub fn encode(&self) -> Vec<u8> {
+        let name = truncate(&self.name, MAX_NAME_BYTES);
+        let mut out = Vec::with_capacity(64 + name.len());
+        out.push(VERSION);
+        out.push(name.len() as u8);
+        out.extend_from_slice(name.as_bytes());
+        out.extend_from_slice(&self.colour);
+        let flags = u8::from(self.pointer.is_some())
+            | u8::from(self.selected.is_some()) << 1
+            | u8::from(self.camera.is_some()) << 2;
+        out.push(flags);
+        let mut put = |v: &[f32; 3]| v.iter().for_each(|x| out.extend(x.to_le_bytes()));
+        if let Some(p) = &self.pointer {
+            put(p);
+        }
+        if let Some(c) = &self.camera {
+            put(&c.target);
+            put(&c.orbit);
+        }
+        if let Some(s) = self.selected {
+            out.extend(s.to_le_bytes());
+        }
+        out
+    }
+
+    /// Reads what [`Presence::encode`] wrote; anything else is an error.
+    pub fn decode(bytes: &[u8]) -> Result<Self, PresenceError> {
+        let mut r = Reader { bytes, at: 0 };
+        let version = r.byte()?;
+        if version != VERSION {
+            return Err(PresenceError::Version(version));
+        }
+        let len = usize::from(r.byte()?);
+        let at = r.at;
+        let name = std::str::from_utf8(r.take(len)?)
+            .ok()
+            .filter(|_| len <= MAX_NAME_BYTES)
+            .ok_or(PresenceError::Name(at))?
+            .to_string();
+        let colour = [r.byte()?, r.byte()?, r.byte()?];
+        let flags = r.byte()?;
+        let pointer = if flags & 1 != 0 {
+            Some(r.vec3()?)
+        } else {
+            None
+        };
+        let camera = if flags & 4 != 0 {
+            Some(CameraPose {
+                target: r.vec3()?,
+                orbit: r.vec3()?,
+            })
+        } else {
+            None
+        };
+        let selected = if flags & 2 != 0 {
+            let mut b = [0u8; 8];
+            b.copy_from_slice(r.take(8)?);
+            Some(u64::from_le_bytes(b))
+        } else {
+            None
+        };
+        if r.at != bytes.len() {
+            return Err(PresenceError::Trailing(bytes.len() - r.at));
+        }
+        Ok(Self {
+            name,
+            colour,
+            pointer,
+            selected,
+            camera,
+        })
+    }
+}
+
+/// At most `max` bytes of `text`, cut at a character boundary.
+fn truncate(text: &str, max: usize) -> &str {
+    let mut end = text.len().min(max);
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    &text[..end]
+}
+
+struct Reader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize) -> Result<&'a [u8], PresenceError> {
+        let end = self.at.checked_add(n).filter(|e| *e <= self.bytes.len());
+        let end = end.ok_or(PresenceError::Short(self.at))?;
+        let out = &self.bytes[self.at..end];
+        self.at = end;
+        Ok(out)
+    }
+
+    fn byte(&mut self) -> Result<u8, PresenceError> {
+        Ok(self.take(1)?[0])
+    }
+
+    fn vec3(&mut self) -> Result<[f32; 3], PresenceError> {
+        let mut v = [0.0f32; 3];
+        for x in &mut v {
+            let at = self.at;
+            let mut b = [0u8; 4];
+            b.copy_from_slice(self.take(4)?);
+            *x = f32::from_le_bytes(b);
+            if !x.is_finite() {
+                return Err(PresenceError::NotFinite(at));
+            }
+        }
+        Ok(v)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> Presence {
+        Presence {
+            name: "Ada".into(),
+            colour: [10, 20, 30],
+            pointer: Some([0.5, -1.0, 2.0]),
+            selected: Some(0x1234_5678_9abc),
+            camera: Some(CameraPose {
+                target: [0.0, 0.0, 0.0],
+                orbit: [0.7, 0.4, 5.0],
+            }),
+        }
+    }
+
+    #[test]
+    fn values_round_trip_with_and_without_their_optional_parts() {
+        let full = sample();
+        assert_eq!(Presence::decode(&full.encode()), Ok(full.clone()));
+        let bare = Presence {
+            pointer: None,
+            selected: None,
+            camera: None,
+            ..full
+        };
+        assert_eq!(Presence::decode(&bare.encode()), Ok(bare));
+    }
+
+    #[test]
+    fn long_names_are_cut_at_a_character_boundary() {
+        let long = Presence {
+            name: "é".repeat(40),
+            ..sample()
+        };
+        let back = Presence::decode(&long.encode()).unwrap();
+        assert_eq!(back.name, "é".repeat(16));
+    }
+
+    #[test]
+    fn every_truncation_and_bad_value_is_an_error() {
+        let bytes = sample().encode();
+        for n in 0..bytes.len() {
+            assert!(Presence::decode(&bytes[..n]).is_err(), "cut at {n}");
+        }
+        let mut extra = bytes.clone();
+        extra.push(0);
+        assert_eq!(Presence::decode(&extra), Err(PresenceError::Trailing(1)));
+        let mut nan = bytes.clone();
+        let at = 2 + 3 + 3 + 1;
+        nan[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+        assert_eq!(Presence::decode(&nan), Err(PresenceError::NotFinite(at)));
+        let mut version = bytes.clone();
+        version[0] = 9;
+        assert_eq!(Presence::decode(&version), Err(PresenceError::Version(9)));
+        let mut long_name = bytes;
+        long_name[1] = 200;
+        assert!(Presence::decode(&long_name).is_err());
+    }
+}

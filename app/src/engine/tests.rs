@@ -1,0 +1,341 @@
+//! Unit tests of the engine: a store directory opened, reloaded and refused as it should be,
+//! undo and redo targets, and two engines on loopback whose changes and presence travel.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use fdsl::object::{Field, Formula, Geometry, Shape};
+use replication::Timestamp;
+
+use super::*;
+
+const T0: Timestamp = Timestamp(1_795_355_107_000_000);
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("sculpt-engine-{}-{name}", std::process::id()));
+    let _ = fs::remove_dir_all(&dir);
+    dir
+}
+
+fn config(store: &Path) -> EngineConfig {
+    EngineConfig {
+        store: store.to_path_buf(),
+        invite: None,
+        network: Network {
+            listen: (std::net::Ipv4Addr::LOCALHOST, 0).into(),
+            ..Network::default()
+        },
+        demo: true,
+        memory_fallback: true,
+        name: None,
+    }
+}
+
+fn set_shape(object: u64, formula: &str) -> ShapePayload {
+    ShapePayload::Set {
+        object,
+        field: Field::Geometry(Some(Geometry::implicit(Formula::new(formula).unwrap()))),
+    }
+}
+
+fn only_object(engine: &Engine) -> u64 {
+    let view = lock(engine.view());
+    let ids: Vec<u64> = view.scene().objects().map(|(id, _)| id.0).collect();
+    assert_eq!(ids.len(), 1, "{ids:?}");
+    ids[0]
+}
+
+fn geometry_formula(engine: &Engine, object: u64) -> String {
+    let view = lock(engine.view());
+    let o = view.scene().object(fdsl::scene::ObjectId(object)).unwrap();
+    match &o.data().geometry.as_ref().unwrap().shape {
+        Shape::Implicit(f) => f.as_str().to_string(),
+        other => panic!("{other:?}"),
+    }
+}
+
+fn author(engine: &Engine, payload: ShapePayload) -> OpId {
+    engine.author(payload).unwrap().wait().unwrap()
+}
+
+/// Waits (at most 20 s) until `done` holds for the view.
+fn wait_view(engine: &Engine, what: &str, done: impl Fn(&mut View) -> bool) {
+    let deadline = crate::clock::now().instant + Duration::from_secs(20);
+    while !done(&mut lock(engine.view())) {
+        assert!(crate::clock::now().instant < deadline, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+#[test]
+fn a_new_store_gets_the_demo_once_and_a_reopened_one_shows_the_same_scene() {
+    let dir = scratch("reopen");
+    let first = Engine::start(config(&dir), T0).unwrap();
+    assert_eq!(lock(first.view()).store_error(), None);
+    assert_eq!(lock(first.view()).n_loaded(), 0);
+    wait_view(&first, "the demo", |v| v.n_ops() == 1);
+    let melon = only_object(&first);
+    assert_eq!(lock(first.view()).object_label(melon), "Watermelon");
+    let (id, hash, invite) = (
+        first.peer_id(),
+        lock(first.view()).scene_hash_hex(),
+        first.invite().clone(),
+    );
+    first.shutdown();
+
+    let second = Engine::start(config(&dir), T0).unwrap();
+    assert_eq!(lock(second.view()).n_loaded(), 1);
+    assert_eq!(second.peer_id(), id, "the identity key is kept");
+    assert_eq!(second.invite(), &invite, "the session is kept");
+    assert_eq!(lock(second.view()).scene_hash_hex(), hash);
+    author(&second, set_shape(melon, "1-x^2-y^2-z^2"));
+    author(&second, ShapePayload::Chat("hello".into()));
+    // A payload that does not validate is answered at once and authors nothing.
+    let long = ShapePayload::Chat("x".repeat(1 << 20));
+    assert!(second.author(long).unwrap().wait().is_err());
+    second.shutdown();
+
+    let third = Engine::start(config(&dir), T0).unwrap();
+    let view = lock(third.view());
+    assert_eq!(view.n_loaded(), 3);
+    assert_eq!(view.chat().len(), 1);
+    assert_eq!(view.chat()[0].text, "hello");
+    assert_eq!(view.chat()[0].author, id.short());
+    let history = view.history();
+    assert_eq!(history.len(), 3);
+    assert!(history[1].what.contains("1-x^2-y^2-z^2"), "{history:?}");
+    assert!(history.iter().all(|h| h.status == "effective" && h.mine));
+    drop(view);
+    assert_eq!(geometry_formula(&third, melon), "1-x^2-y^2-z^2");
+    drop(third);
+    let _ = fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn undo_and_redo_pick_this_peers_latest_edit_of_the_object() {
+    let dir = scratch("undo");
+    let s = Engine::start(config(&dir), T0).unwrap();
+    wait_view(&s, "the demo", |v| v.n_ops() == 1);
+    let melon = only_object(&s);
+    let original = geometry_formula(&s, melon);
+    let a = author(&s, set_shape(melon, "1-x^2-y^2-z^2"));
+    let b = author(&s, set_shape(melon, "0.5-abs(x)"));
+    let targets = |s: &Engine| {
+        let v = lock(s.view());
+        (v.undo_target(melon), v.redo_target(melon))
+    };
+    assert_eq!(targets(&s), (Some(b), None));
+    author(&s, ShapePayload::Undo(b));
+    assert_eq!(geometry_formula(&s, melon), "1-x^2-y^2-z^2");
+    assert_eq!(targets(&s), (Some(a), Some(b)));
+    author(&s, ShapePayload::Undo(a));
+    assert_eq!(geometry_formula(&s, melon), original);
+    assert_eq!(targets(&s).1, Some(a), "the latest undo is redone first");
+    author(&s, ShapePayload::Redo(a));
+    assert_eq!(targets(&s).1, Some(b));
+    assert_eq!(geometry_formula(&s, melon), "1-x^2-y^2-z^2");
+    let view = lock(s.view());
+    let statuses: Vec<&str> = view.history().iter().map(|h| h.status.as_str()).collect();
+    assert_eq!(statuses[1], "effective");
+    assert_eq!(statuses[2], "undone");
+    assert!(view.next_object_id() > melon);
+    drop(view);
+    drop(s);
+    let _ = fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_corrupt_store_is_reported_and_left_byte_for_byte() {
+    let dir = scratch("corrupt");
+    fs::create_dir_all(&dir).unwrap();
+    let ops = dir.join(store::OPS_FILE);
+    let garbage = b"this is not a sculpt op store at all".to_vec();
+    fs::write(&ops, &garbage).unwrap();
+    let s = Engine::start(config(&dir), T0).unwrap();
+    let error = lock(s.view()).store_error().unwrap().to_string();
+    assert!(error.contains("cannot be opened"), "{error}");
+    assert!(error.contains(store::OPS_FILE), "{error}");
+    // The window still shows the demo, in memory; the file is as it was.
+    wait_view(&s, "the demo in memory", |v| v.scene().len() == 1);
+    drop(s);
+    assert_eq!(fs::read(&ops).unwrap(), garbage);
+    // A headless peer refuses to run on it instead.
+    let strict = EngineConfig {
+        memory_fallback: false,
+        ..config(&dir)
+    };
+    assert!(matches!(
+        Engine::start(strict, T0),
+        Err(StartError::Store(store::StoreError::Open(_)))
+    ));
+    assert_eq!(fs::read(&ops).unwrap(), garbage);
+    let _ = fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_torn_tail_is_cut_and_its_bytes_are_kept_aside() {
+    let dir = scratch("torn");
+    let first = Engine::start(config(&dir), T0).unwrap();
+    wait_view(&first, "the demo", |v| v.n_ops() == 1);
+    first.shutdown();
+    let ops = dir.join(store::OPS_FILE);
+    let mut bytes = fs::read(&ops).unwrap();
+    let tail = [200, 0, 0, 0, 1, 2, 3];
+    bytes.extend_from_slice(&tail);
+    fs::write(&ops, &bytes).unwrap();
+    let s = Engine::start(config(&dir), T0).unwrap();
+    let view = lock(s.view());
+    assert_eq!(view.store_error(), None);
+    assert_eq!(view.n_loaded(), 1);
+    let notice = view.notices()[0].clone();
+    drop(view);
+    assert!(notice.contains("7 bytes"), "{notice}");
+    let kept: Vec<PathBuf> = fs::read_dir(&dir)
+        .unwrap()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.to_string_lossy().contains(".torn-"))
+        .collect();
+    assert_eq!(kept.len(), 1, "{kept:?}");
+    assert_eq!(fs::read(&kept[0]).unwrap(), tail);
+    assert!(notice.contains(&kept[0].display().to_string()), "{notice}");
+    drop(s);
+    let _ = fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_bad_key_another_sessions_store_or_an_unusable_directory_is_refused_not_replaced() {
+    let dir = scratch("badkey");
+    fs::create_dir_all(&dir).unwrap();
+    fs::write(dir.join(store::KEY_FILE), b"short").unwrap();
+    let s = Engine::start(config(&dir), T0).unwrap();
+    let error = lock(s.view()).store_error().unwrap().to_string();
+    assert!(error.contains("5 bytes"), "{error}");
+    drop(s);
+    assert_eq!(fs::read(dir.join(store::KEY_FILE)).unwrap(), b"short");
+
+    let file = dir.join("plain-file");
+    fs::write(&file, b"x").unwrap();
+    let s = Engine::start(config(&file.join("store")), T0).unwrap();
+    let error = lock(s.view()).store_error().unwrap().to_string();
+    assert!(error.contains("cannot create"), "{error}");
+    wait_view(&s, "the demo in memory", |v| v.scene().len() == 1);
+    drop(s);
+
+    let mine = scratch("session-a");
+    let a = Engine::start(config(&mine), T0).unwrap();
+    let stored = a.invite().clone();
+    a.shutdown();
+    let other = replication::net::invite::Invite::generate(&mut store::entropy_rng().unwrap());
+    let join = EngineConfig {
+        invite: Some(other),
+        memory_fallback: false,
+        ..config(&mine)
+    };
+    let refused = Engine::start(join, T0).err().unwrap().to_string();
+    assert!(refused.contains("another session"), "{refused}");
+    let text = fs::read_to_string(mine.join(store::INVITE_FILE)).unwrap();
+    assert_eq!(text.trim(), stored.to_string());
+    let _ = fs::remove_dir_all(&dir);
+    let _ = fs::remove_dir_all(&mine);
+}
+
+#[cfg(unix)]
+#[test]
+fn secrets_are_private_and_a_second_engine_on_a_store_is_refused() {
+    use std::os::unix::fs::PermissionsExt as _;
+    let dir = scratch("private");
+    let first = Engine::start(config(&dir), T0).unwrap();
+    let mode = |p: &Path| fs::metadata(p).unwrap().permissions().mode() & 0o777;
+    assert_eq!(mode(&dir), 0o700);
+    assert_eq!(mode(&dir.join(store::KEY_FILE)), 0o600);
+    assert_eq!(mode(&dir.join(store::INVITE_FILE)), 0o600);
+    let strict = EngineConfig {
+        memory_fallback: false,
+        ..config(&dir)
+    };
+    let refused = Engine::start(strict, T0).err().unwrap().to_string();
+    assert!(
+        refused.contains(&std::process::id().to_string()),
+        "{refused}"
+    );
+    drop(first);
+    let _ = fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn an_edit_on_one_engine_reaches_the_other_as_a_change_of_that_object_with_presence() {
+    let (da, db) = (scratch("pair-a"), scratch("pair-b"));
+    let a = Engine::start(config(&da), T0).unwrap();
+    wait_view(&a, "the demo", |v| v.n_ops() == 1);
+    let melon = only_object(&a);
+    let addr = lock(a.view()).listen_addr().unwrap();
+    let b_config = EngineConfig {
+        invite: Some(a.invite().clone()),
+        demo: true,
+        network: Network {
+            dial: vec![addr],
+            ..config(&db).network
+        },
+        name: Some("Bea".into()),
+        ..config(&db)
+    };
+    let b = Engine::start(b_config, T0).unwrap();
+    wait_view(&b, "the demo from a", |v| v.n_ops() == 1);
+    assert_eq!(
+        lock(b.view()).n_loaded(),
+        0,
+        "a joining peer authors no demo"
+    );
+    let _ = lock(b.view()).take_changes();
+    author(&a, set_shape(melon, "0.5-x^2-y^2-z^2"));
+    wait_view(&b, "a's edit", |v| v.n_ops() == 2);
+    let changes = lock(b.view()).take_changes();
+    assert_eq!(
+        changes,
+        Some([fdsl::scene::ObjectId(melon)].into_iter().collect()),
+        "the change names the edited object only"
+    );
+    assert_eq!(geometry_formula(&b, melon), "0.5-x^2-y^2-z^2");
+    assert_eq!(
+        lock(a.view()).scene_hash_hex(),
+        lock(b.view()).scene_hash_hex()
+    );
+    // B's presence (its name, then a pointer) reaches A.
+    let mut presence = b.presence();
+    presence.pointer = Some([0.1, 0.2, 0.3]);
+    b.set_presence(presence).unwrap();
+    wait_view(&a, "b's presence", |v| {
+        v.presence()
+            .values()
+            .any(|p| p.name == "Bea" && p.pointer == Some([0.1, 0.2, 0.3]))
+    });
+    let rows = lock(a.view()).peers().to_vec();
+    assert_eq!(rows.len(), 1);
+    assert!(rows[0].online && rows[0].name == "Bea", "{rows:?}");
+    assert_eq!(rows[0].how, "it dialed us");
+    assert_eq!(lock(b.view()).peers()[0].how, "direct");
+    b.shutdown();
+    wait_view(&a, "b to be offline", |v| v.n_online() == 0);
+    assert!(lock(a.view()).presence().is_empty());
+    drop(a);
+    let _ = fs::remove_dir_all(&da);
+    let _ = fs::remove_dir_all(&db);
+}
+
+#[test]
+fn news_keeps_the_latest_lines_and_disconnections_read_as_actions() {
+    let mut news = News::default();
+    for i in 0..MAX_NEWS_LINES + 5 {
+        news.push(format!("line {i}"));
+    }
+    let (lines, next) = news.since(0);
+    assert_eq!(lines.len(), MAX_NEWS_LINES);
+    assert_eq!(lines[0], "line 5");
+    assert_eq!(next, MAX_NEWS_LINES as u64 + 5);
+    assert!(news.since(next).0.is_empty());
+    let text = disconnect_text(&DisconnectReason::Sync(CloseReason::WrongProtocol {
+        remote: 3,
+    }));
+    assert!(text.contains("protocol 3, this build speaks 2"), "{text}");
+}

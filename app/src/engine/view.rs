@@ -1,0 +1,520 @@
+//! What the engine publishes to its faces: the folded scene, what changed in it (from the
+//! fold's per-object refold reports, never by comparing scenes), the history and chat rows,
+//! the undo and redo targets, and the peers with their progress.
+//!
+//! The view is kept by [`Folder`], the node's [`Observer`]: it runs on the engine thread
+//! inside the node's core task, folds each insertion as the log makes it, and refreshes the
+//! derived rows once per settled step. Faces read it under a short lock.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use fdsl::object::{ColorDef, Field, Shape};
+use fdsl::scene::{ObjectId, Scene};
+use replication::log::Insertion;
+use replication::materialize::Materialized;
+use replication::net::node::Observer;
+use replication::shape::{ShapePayload, ShapeScene};
+use replication::{Effect, Log, Mark, OpId, Payload as _, Peer, PeerId};
+
+use super::presence::Presence;
+use crate::clock::time_of_day_utc;
+
+/// Most history rows a view holds (the latest ones).
+pub const MAX_HISTORY_ROWS: usize = 500;
+/// Most chat rows a view holds (the latest ones).
+pub const MAX_CHAT_ROWS: usize = 500;
+/// Most characters of a formula or chat text quoted in a history row.
+pub const MAX_QUOTE_CHARS: usize = 60;
+/// The bit that marks a group's id among the objects a refold names (as `ShapePayload` sets
+/// it for group edits): a group change touches every object under it.
+const GROUP_BIT: u64 = 1 << 63;
+
+/// One chat line.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChatRow {
+    /// Short id of the author.
+    pub author: String,
+    /// `HH:MM:SS` UTC of the op's timestamp.
+    pub time: String,
+    /// The text.
+    pub text: String,
+}
+
+/// One op of the history.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HistoryRow {
+    /// Short id of the author.
+    pub author: String,
+    /// True when this peer wrote it.
+    pub mine: bool,
+    /// `HH:MM:SS` UTC of the op's timestamp.
+    pub time: String,
+    /// What it does, in words.
+    pub what: String,
+    /// `effective`, `undone` or `rejected: <reason>`.
+    pub status: String,
+}
+
+/// One peer of the session met since start, as the node and its sync state see it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PeerRow {
+    /// Its id.
+    pub peer: PeerId,
+    /// Connected now.
+    pub online: bool,
+    /// The name its user chose (from its presence), else its short id.
+    pub name: String,
+    /// Its user's colour (from its presence), else one from its id.
+    pub colour: [u8; 3],
+    /// Its address.
+    pub addr: String,
+    /// How it was reached: `direct` (dialed by address), `via discovery`, `LAN` or
+    /// `it dialed us`.
+    pub how: &'static str,
+    /// Round-trip time, when the transport has measured one.
+    pub rtt_micros: Option<u64>,
+    /// Ops this peer holds that the remote is not known to hold.
+    pub to_send: u64,
+    /// Ops the remote holds that this peer lacks.
+    pub to_receive: u64,
+}
+
+/// The engine's published state.
+pub struct View {
+    me: PeerId,
+    scene: Materialized<ShapePayload, ShapeScene>,
+    n_ops: usize,
+    history: Vec<HistoryRow>,
+    chat: Vec<ChatRow>,
+    undo: BTreeMap<u64, OpId>,
+    redo: BTreeMap<u64, OpId>,
+    next_object: u64,
+    changed: BTreeSet<ObjectId>,
+    all_changed: bool,
+    generation: u64,
+    hash: Option<(u64, String)>,
+    pub(super) peers: Vec<PeerRow>,
+    pub(super) presence: BTreeMap<PeerId, Presence>,
+    pub(super) n_bad_presence: u64,
+    pub(super) notices: Vec<String>,
+    pub(super) store_error: Option<String>,
+    pub(super) n_loaded: usize,
+    pub(super) listen: Option<std::net::SocketAddr>,
+    waker: Option<Box<dyn Fn() + Send>>,
+}
+
+impl View {
+    /// The view of `log` for peer `me`. Fails when the log does not fold (only a log joined
+    /// from a snapshot can, and the engine never makes one).
+    pub fn new(me: PeerId, log: &Log<ShapePayload>) -> Result<Self, String> {
+        let scene = Materialized::fold(log).map_err(|e| e.to_string())?;
+        let mut view = Self {
+            me,
+            scene,
+            n_ops: 0,
+            history: Vec::new(),
+            chat: Vec::new(),
+            undo: BTreeMap::new(),
+            redo: BTreeMap::new(),
+            next_object: 0,
+            changed: BTreeSet::new(),
+            all_changed: true,
+            generation: 0,
+            hash: None,
+            peers: Vec::new(),
+            presence: BTreeMap::new(),
+            n_bad_presence: 0,
+            notices: Vec::new(),
+            store_error: None,
+            n_loaded: log.len(),
+            listen: None,
+            waker: None,
+        };
+        view.refresh(log);
+        Ok(view)
+    }
+
+    /// Folds one insertion and notes the objects it changed.
+    pub fn apply(&mut self, log: &Log<ShapePayload>, insertion: &Insertion) {
+        self.scene.apply_insertion(log, insertion);
+        if let Some(refold) = &insertion.refold {
+            for object in refold.object_keys.keys().chain(&refold.base_objects) {
+                if object.0 & GROUP_BIT != 0 {
+                    self.all_changed = true;
+                } else {
+                    self.changed.insert(ObjectId(object.0));
+                }
+            }
+        }
+        self.generation += 1;
+    }
+
+    /// Recomputes the rows and targets that depend on the whole log.
+    pub fn refresh(&mut self, log: &Log<ShapePayload>) {
+        self.n_ops = log.len();
+        self.history = history(log, self.me, self.scene.scene().scene());
+        self.chat = self.chat_rows(log);
+        let (undo, redo) = targets(log, self.me);
+        self.undo = undo;
+        self.redo = redo;
+        self.next_object = next_object_id(log, self.me);
+    }
+
+    /// Sets what the engine calls after each change of the view (a window asks for a frame).
+    pub fn set_waker(&mut self, waker: Box<dyn Fn() + Send>) {
+        self.waker = Some(waker);
+    }
+
+    /// This peer's id.
+    pub fn peer_id(&self) -> PeerId {
+        self.me
+    }
+
+    /// The folded scene.
+    pub fn scene(&self) -> &Scene {
+        self.scene.scene().scene()
+    }
+
+    /// Ops in the log.
+    pub fn n_ops(&self) -> usize {
+        self.n_ops
+    }
+
+    /// Ops loaded from the store at start.
+    pub fn n_loaded(&self) -> usize {
+        self.n_loaded
+    }
+
+    /// Counts changes of the scene; equal counts mean an equal scene.
+    pub fn generation(&self) -> u64 {
+        self.generation
+    }
+
+    /// The objects changed since the last call (`None`: every object may have changed, as
+    /// after a group edit or at start), and forgets them.
+    pub fn take_changes(&mut self) -> Option<BTreeSet<ObjectId>> {
+        let changed = std::mem::take(&mut self.changed);
+        (!std::mem::take(&mut self.all_changed)).then_some(changed)
+    }
+
+    /// The scene hash in hex (equal on every peer with the same ops), computed at most once
+    /// per change of the scene.
+    pub fn scene_hash_hex(&mut self) -> String {
+        match &self.hash {
+            Some((generation, hex)) if *generation == self.generation => hex.clone(),
+            _ => {
+                let hex: String = self
+                    .scene
+                    .scene_hash()
+                    .0
+                    .iter()
+                    .take(8)
+                    .map(|b| format!("{b:02x}"))
+                    .collect();
+                self.hash = Some((self.generation, hex.clone()));
+                hex
+            }
+        }
+    }
+
+    /// The latest [`MAX_HISTORY_ROWS`] ops, oldest first, with what became of them.
+    pub fn history(&self) -> &[HistoryRow] {
+        &self.history
+    }
+
+    /// The latest [`MAX_CHAT_ROWS`] chat lines, in linear order.
+    pub fn chat(&self) -> &[ChatRow] {
+        &self.chat
+    }
+
+    /// The peers met since start, online or not, in the order they were first met.
+    pub fn peers(&self) -> &[PeerRow] {
+        &self.peers
+    }
+
+    /// Peers connected now.
+    pub fn n_online(&self) -> usize {
+        self.peers.iter().filter(|p| p.online).count()
+    }
+
+    /// Ops still to send to and to receive from the connected peers (the largest over them).
+    pub fn progress(&self) -> (u64, u64) {
+        let online = || self.peers.iter().filter(|p| p.online);
+        let send = online().map(|p| p.to_send).max().unwrap_or(0);
+        let receive = online().map(|p| p.to_receive).max().unwrap_or(0);
+        (send, receive)
+    }
+
+    /// The latest presence of each connected peer.
+    pub fn presence(&self) -> &BTreeMap<PeerId, Presence> {
+        &self.presence
+    }
+
+    /// Presence values refused as malformed.
+    pub fn n_bad_presence(&self) -> u64 {
+        self.n_bad_presence
+    }
+
+    /// Things the user should know (a damaged store tail kept aside, a new identity).
+    pub fn notices(&self) -> &[String] {
+        &self.notices
+    }
+
+    /// Why edits are not being saved, if they are not.
+    pub fn store_error(&self) -> Option<&str> {
+        self.store_error.as_deref()
+    }
+
+    /// The address the node listens on.
+    pub fn listen_addr(&self) -> Option<std::net::SocketAddr> {
+        self.listen
+    }
+
+    /// The latest of this peer's changes to `object` that is in effect: what `undo` undoes.
+    /// Its creation is not one (undoing it would make the object vanish).
+    pub fn undo_target(&self, object: u64) -> Option<OpId> {
+        self.undo.get(&object).copied()
+    }
+
+    /// The edit of `object` that this peer's latest effective undo took back and that is
+    /// still undone: what `redo` redoes.
+    pub fn redo_target(&self, object: u64) -> Option<OpId> {
+        self.redo.get(&object).copied()
+    }
+
+    /// A fresh object id: this peer's 31-bit prefix, then one more than its highest counter.
+    pub fn next_object_id(&self) -> u64 {
+        self.next_object
+    }
+
+    /// An object's name, or `object N` when it has none (or is gone).
+    pub fn object_label(&self, object: u64) -> String {
+        object_label(self.scene(), object)
+    }
+
+    fn chat_rows(&self, log: &Log<ShapePayload>) -> Vec<ChatRow> {
+        let lines = self.scene.scene().chat();
+        let skip = lines.len().saturating_sub(MAX_CHAT_ROWS);
+        lines[skip..]
+            .iter()
+            .map(|line| {
+                let author = PeerId(line.author);
+                let time = log
+                    .by_seq(&author, line.seq)
+                    .map_or_else(String::new, |op| time_of_day_utc(op.timestamp()));
+                ChatRow {
+                    author: author.short(),
+                    time,
+                    text: line.text.clone(),
+                }
+            })
+            .collect()
+    }
+}
+
+/// The view shared between the engine thread and its faces.
+pub type SharedView = Arc<Mutex<View>>;
+
+/// Locks a shared view; a face that panicked while holding it leaves the view as it was,
+/// which is still consistent (every update is applied whole under the lock).
+pub fn lock(view: &SharedView) -> MutexGuard<'_, View> {
+    view.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// The node's observer: keeps a [`SharedView`] folded.
+pub struct Folder {
+    pub(super) view: SharedView,
+}
+
+impl Observer<ShapePayload> for Folder {
+    fn inserted(&mut self, log: &Log<ShapePayload>, insertion: &Insertion) {
+        lock(&self.view).apply(log, insertion);
+    }
+
+    fn settled(&mut self, peer: &Peer<ShapePayload>, changed: bool) {
+        let mut view = lock(&self.view);
+        if changed {
+            view.refresh(peer.log());
+            if let Some(wake) = &view.waker {
+                wake();
+            }
+        }
+        let mine = peer.log().version_vector();
+        for row in view.peers.iter_mut().filter(|r| r.online) {
+            let Some((_, sync)) = peer
+                .connections()
+                .find(|(_, s)| s.remote() == Some(row.peer))
+            else {
+                continue;
+            };
+            let theirs = sync.remote_version_vector();
+            row.to_send = mine
+                .iter()
+                .map(|(a, seq)| seq.saturating_sub(theirs.get(a)))
+                .sum();
+            row.to_receive = theirs
+                .iter()
+                .map(|(a, seq)| seq.saturating_sub(mine.get(a)))
+                .sum();
+        }
+    }
+}
+
+/// The latest [`MAX_HISTORY_ROWS`] ops of `log`, oldest first.
+fn history(log: &Log<ShapePayload>, me: PeerId, scene: &Scene) -> Vec<HistoryRow> {
+    let skip = log.len().saturating_sub(MAX_HISTORY_ROWS);
+    log.entries()
+        .skip(skip)
+        .map(|entry| {
+            let payload = entry.op.payload();
+            let status = match entry.mark {
+                Mark::Rejected(reason) => format!("rejected: {reason}"),
+                Mark::Effective
+                    if !entry.active && matches!(payload.effect(), Effect::Edit { .. }) =>
+                {
+                    "undone".to_string()
+                }
+                Mark::Effective => "effective".to_string(),
+            };
+            HistoryRow {
+                author: entry.op.author().short(),
+                mine: entry.op.author() == me,
+                time: time_of_day_utc(entry.op.timestamp()),
+                what: describe(log, scene, payload),
+                status,
+            }
+        })
+        .collect()
+}
+
+/// Per object, this peer's latest active change (what `undo` undoes; creations excluded),
+/// and the edit its latest effective undo still holds back (what `redo` redoes).
+fn targets(log: &Log<ShapePayload>, me: PeerId) -> (BTreeMap<u64, OpId>, BTreeMap<u64, OpId>) {
+    let mut undo = BTreeMap::new();
+    let mut redo = BTreeMap::new();
+    let entries: Vec<_> = log.entries().filter(|e| e.op.author() == me).collect();
+    for e in entries.iter().rev() {
+        match e.op.payload() {
+            ShapePayload::Create { .. } => {}
+            ShapePayload::Undo(target) => {
+                let Some(object) = log.get(target).and_then(|op| edited_object(op.payload()))
+                else {
+                    continue;
+                };
+                // The latest effective undo whose edit is still held back names the target.
+                let held_back = !log.is_active(target) && log.mark(target) == Some(Mark::Effective);
+                if e.mark == Mark::Effective && held_back {
+                    redo.entry(object).or_insert(*target);
+                }
+            }
+            payload => {
+                if let Some(object) = edited_object(payload)
+                    && e.active
+                {
+                    undo.entry(object).or_insert_with(|| e.op.id());
+                }
+            }
+        }
+    }
+    (undo, redo)
+}
+
+/// The object an edit changes, if the payload is an edit of an object.
+fn edited_object(payload: &ShapePayload) -> Option<u64> {
+    match payload.effect() {
+        Effect::Edit { object } if object.0 & GROUP_BIT == 0 => Some(object.0),
+        _ => None,
+    }
+}
+
+/// This peer's 31-bit key prefix, then one more than the highest counter it used.
+fn next_object_id(log: &Log<ShapePayload>, me: PeerId) -> u64 {
+    let prefix =
+        u64::from(u32::from_le_bytes([me.0[0], me.0[1], me.0[2], me.0[3]]) & 0x7fff_ffff) << 32;
+    let highest = log
+        .entries()
+        .filter(|e| e.op.author() == me)
+        .filter_map(|e| match e.op.payload() {
+            ShapePayload::Create { object, .. } if object & !0xffff_ffff == prefix => {
+                Some(object & 0xffff_ffff)
+            }
+            _ => None,
+        })
+        .max()
+        .unwrap_or(0);
+    prefix | (highest + 1).min(0xffff_ffff)
+}
+
+/// An object's name, or `object N` when it has none (or is gone).
+pub fn object_label(scene: &Scene, object: u64) -> String {
+    match scene.object(ObjectId(object)) {
+        Some(o) if !o.data().name.is_empty() => o.data().name.clone(),
+        _ => format!("object {}", object & 0xffff_ffff),
+    }
+}
+
+/// What a payload does, in words.
+fn describe(log: &Log<ShapePayload>, scene: &Scene, payload: &ShapePayload) -> String {
+    let label = |object: u64| object_label(scene, object);
+    let describe_op = |id: &OpId| match log.get(id) {
+        // An undo names an edit, never another undo: one level of description is enough.
+        Some(op) => match op.payload() {
+            ShapePayload::Undo(_) | ShapePayload::Redo(_) => format!("op {}", id.short()),
+            other => describe(log, scene, other),
+        },
+        None => format!("op {}", id.short()),
+    };
+    match payload {
+        ShapePayload::Create { object, data, .. } => {
+            let name = if data.name.is_empty() {
+                format!("object {}", object & 0xffff_ffff)
+            } else {
+                data.name.clone()
+            };
+            format!("created {name}")
+        }
+        ShapePayload::Delete { object } => format!("deleted {}", label(*object)),
+        ShapePayload::Set { object, field } => format!(
+            "set the {} of {}{}",
+            field.slot(),
+            label(*object),
+            field_text(field)
+        ),
+        ShapePayload::Edit { object, .. } => format!("sculpted {}", label(*object)),
+        ShapePayload::SetGroup { group, .. } => format!("changed group {group}"),
+        ShapePayload::Move { object, .. } => format!("moved {}", label(*object)),
+        ShapePayload::Acquire { object, .. } => format!("took the lease of {}", label(*object)),
+        ShapePayload::Release { object } => format!("released {}", label(*object)),
+        ShapePayload::Undo(target) => format!("undo: {}", describe_op(target)),
+        ShapePayload::Redo(target) => format!("redo: {}", describe_op(target)),
+        ShapePayload::Chat(text) => format!("said \"{}\"", quote(text)),
+    }
+}
+
+/// The text a history row quotes for a property.
+fn field_text(field: &Field) -> String {
+    match field {
+        Field::Geometry(Some(g)) => match &g.shape {
+            Shape::Implicit(f) => format!(" to {}", quote(f.as_str())),
+            Shape::Parametric { formula, .. } => format!(" to {}", quote(formula.as_str())),
+            Shape::Mesh(_) => " to a mesh".into(),
+        },
+        Field::Diffuse(Some(ColorDef::Constant(c))) => format!(" to {c:?}"),
+        Field::Diffuse(Some(ColorDef::Rgb(f))) => format!(" to {}", quote(f.as_str())),
+        Field::Diffuse(Some(ColorDef::Map { formula, .. })) => {
+            format!(" to {} through its map", quote(formula.as_str()))
+        }
+        _ => String::new(),
+    }
+}
+
+/// At most [`MAX_QUOTE_CHARS`] characters of `text`, with an ellipsis when cut.
+pub fn quote(text: &str) -> String {
+    let mut out: String = text.chars().take(MAX_QUOTE_CHARS).collect();
+    if text.chars().count() > MAX_QUOTE_CHARS {
+        out.push('…');
+    }
+    out
+}

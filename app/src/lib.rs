@@ -1,0 +1,34 @@
+//! The library under the `sculpt` program: the session engine and what every face of the
+//! program shares (the window, the headless peer, the command line, tests).
+//!
+//! - [`engine`]: [`engine::Engine`], the one driver of a session: identity, the store
+//!   directory (locked), the QUIC node with its discovery, and the fold of the log into a
+//!   published [`engine::View`] that names what each change touched. All IO runs on the
+//!   engine's own thread.
+//! - [`command`]: the command/chat language (`shape:`, `colour:`, `new:`, `undo`, ...),
+//!   planned into ops against a view.
+//! - [`clock`]: the program's one read of the clock.
+//!
+//! What it is not: the window (egui) and the argument parsing live in the binary; the
+//! replication, object model, rendering and haptic libraries live in their own crates.
+//!
+//! ```no_run
+//! use app::engine::{Engine, EngineConfig, Network, lock};
+//!
+//! let config = EngineConfig {
+//!     store: "/tmp/sculpt-example".into(),
+//!     invite: None,
+//!     network: Network::default(),
+//!     demo: true,
+//!     memory_fallback: false,
+//!     name: None,
+//! };
+//! let engine = Engine::start(config, app::clock::now().wall).unwrap();
+//! println!("{} objects", lock(engine.view()).scene().len());
+//! engine.shutdown();
+//! ```
+#![warn(missing_docs)]
+
+pub mod clock;
+pub mod command;
+pub mod engine;

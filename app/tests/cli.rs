@@ -1,0 +1,98 @@
+//! The command line follows the usual conventions: every subcommand has a generated `--help`
+//! that exits 0, a usage error exits 2, and errors a person can act on say what to do (a weak
+//! or mistyped invite, a port in use, a directory that is not a session store).
+#![allow(
+    clippy::unwrap_used,
+    reason = "helpers outside #[test] fns unwrap process output"
+)]
+
+use std::process::{Command, Output};
+
+fn sculpt(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sculpt"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+#[test]
+fn every_subcommand_has_help_that_exits_zero() {
+    let subcommands = [
+        "demo",
+        "peer",
+        "discovery",
+        "invite",
+        "sessions",
+        "check",
+        "eval",
+        "slice",
+        "render",
+    ];
+    for sub in subcommands {
+        let run = sculpt(&[sub, "--help"]);
+        assert!(run.status.success(), "{sub}: {}", text(&run.stderr));
+        assert!(text(&run.stdout).contains("Usage: sculpt"), "{sub}");
+    }
+    let top = sculpt(&["--help"]);
+    assert!(top.status.success());
+    for sub in subcommands {
+        assert!(text(&top.stdout).contains(sub), "{sub} missing from --help");
+    }
+    let bad = sculpt(&["peer", "--no-such-flag"]);
+    assert_eq!(bad.status.code(), Some(2), "{}", text(&bad.stderr));
+}
+
+#[test]
+fn weak_and_mistyped_invites_are_refused_with_what_to_do() {
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli-invite");
+    let store = dir.to_str().unwrap();
+    let weak = sculpt(&["peer", "--store", store, "--invite", "password"]);
+    assert_eq!(weak.status.code(), Some(2));
+    assert!(
+        text(&weak.stderr).contains("sculpt invite"),
+        "{}",
+        text(&weak.stderr)
+    );
+    let good = text(&sculpt(&["invite"]).stdout).trim().to_string();
+    // One wrong character: the error names its group.
+    let mut typo: Vec<char> = good.chars().collect();
+    typo[7] = if typo[7] == 'a' { 'b' } else { 'a' };
+    let typo: String = typo.into_iter().collect();
+    let run = sculpt(&["peer", "--store", store, "--invite", &typo]);
+    assert_eq!(run.status.code(), Some(2));
+    assert!(
+        text(&run.stderr).contains("group 2"),
+        "{}",
+        text(&run.stderr)
+    );
+    assert!(!dir.exists(), "nothing was created for a refused invite");
+}
+
+#[test]
+fn a_port_in_use_is_named_with_what_to_do() {
+    let blocker = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let addr = blocker.local_addr().unwrap().to_string();
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli-port");
+    let _ = std::fs::remove_dir_all(&dir);
+    let invite = text(&sculpt(&["invite"]).stdout).trim().to_string();
+    let run = sculpt(&[
+        "peer",
+        "--store",
+        dir.to_str().unwrap(),
+        "--invite",
+        &invite,
+        "--no-lan",
+        "--listen",
+        &addr,
+    ]);
+    assert!(!run.status.success());
+    let said = text(&run.stderr);
+    assert!(
+        said.contains("in use") && said.contains("--listen"),
+        "{said}"
+    );
+}
