@@ -126,7 +126,7 @@ pub enum RequestError {
 /// A request from a face.
 enum Request {
     Author {
-        payload: ShapePayload,
+        payload: Box<ShapePayload>,
         reply: std_mpsc::Sender<Result<OpId, String>>,
     },
     Ephemeral {
@@ -134,7 +134,6 @@ enum Request {
         value: Vec<u8>,
     },
     Dial(SocketAddr),
-    Presence(Presence),
     Shutdown,
 }
 
@@ -169,6 +168,7 @@ pub struct Engine {
     invite: Invite,
     store_dir: PathBuf,
     local_presence: Arc<Mutex<Presence>>,
+    presence_changed: Arc<std::sync::atomic::AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
@@ -257,7 +257,9 @@ impl Engine {
             selected: None,
             camera: None,
         }));
+        let presence_changed = Arc::new(std::sync::atomic::AtomicBool::new(true));
         let worker = Worker {
+            presence_changed: presence_changed.clone(),
             view: view.clone(),
             news: news.clone(),
             network: config.network.clone(),
@@ -288,6 +290,7 @@ impl Engine {
             invite,
             store_dir: config.store,
             local_presence,
+            presence_changed,
             thread: Some(thread),
         })
     }
@@ -333,7 +336,10 @@ impl Engine {
     pub fn author(&self, payload: ShapePayload) -> Result<Pending, RequestError> {
         let (reply, answer) = std_mpsc::channel();
         match payload.validate() {
-            Ok(()) => self.request(Request::Author { payload, reply })?,
+            Ok(()) => self.request(Request::Author {
+                payload: Box::new(payload),
+                reply,
+            })?,
             Err(e) => {
                 let _ = reply.send(Err(e));
             }
@@ -350,7 +356,18 @@ impl Engine {
     /// Publishes this peer's presence (name, colour, pointer, selection, camera); it is sent
     /// to every connected peer at most [`presence::PRESENCE_RATE_HZ`] times a second.
     pub fn set_presence(&self, presence: Presence) -> Result<(), RequestError> {
-        self.request(Request::Presence(presence))
+        if self.requests.is_closed() {
+            return Err(RequestError::Stopped);
+        }
+        *self
+            .local_presence
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = presence;
+        // A flag, not a request: a pointer moving every frame must never fill the queue that
+        // carries edits.
+        self.presence_changed
+            .store(true, std::sync::atomic::Ordering::Release);
+        Ok(())
     }
 
     /// This peer's presence as last set (its name and colour at start).
@@ -393,6 +410,8 @@ struct Worker {
     discovery_id: replication::net::session::DiscoveryId,
     /// This peer's presence, as the faces last set it.
     presence: Arc<Mutex<Presence>>,
+    /// Set by a face when the presence changed.
+    presence_changed: Arc<std::sync::atomic::AtomicBool>,
     /// How this engine reached the addresses it dialed (for the peers panel).
     dialed: Dialed,
 }
@@ -502,16 +521,11 @@ impl Worker {
             tokio::select! {
                 request = inbox.recv() => match request {
                     Some(Request::Author { payload, reply }) => {
-                        let result = handle.author(payload).await.map_err(|e| e.to_string());
+                        let result = handle.author(*payload).await.map_err(|e| e.to_string());
                         let _ = reply.send(result);
                     }
                     Some(Request::Ephemeral { channel, value }) => {
                         let _ = handle.send_ephemeral(channel, value).await;
-                    }
-                    Some(Request::Presence(presence)) => {
-                        *self.presence.lock().unwrap_or_else(std::sync::PoisonError::into_inner) =
-                            presence;
-                        presence_due = true;
                     }
                     Some(Request::Dial(addr)) => {
                         self.note_dialed(addr, "direct");
@@ -534,6 +548,9 @@ impl Worker {
                 _ = presence_tick.tick() => {
                     let repeat = presence_sent_at.elapsed()
                         >= Duration::from_millis(PRESENCE_REPEAT_MILLIS);
+                    presence_due |= self
+                        .presence_changed
+                        .swap(false, std::sync::atomic::Ordering::AcqRel);
                     if presence_due || repeat {
                         let value = self
                             .presence

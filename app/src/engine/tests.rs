@@ -63,7 +63,10 @@ fn author(engine: &Engine, payload: ShapePayload) -> OpId {
 fn wait_view(engine: &Engine, what: &str, done: impl Fn(&mut View) -> bool) {
     let deadline = crate::clock::now().instant + Duration::from_secs(20);
     while !done(&mut lock(engine.view())) {
-        assert!(crate::clock::now().instant < deadline, "timed out waiting for {what}");
+        assert!(
+            crate::clock::now().instant < deadline,
+            "timed out waiting for {what}"
+        );
         std::thread::sleep(Duration::from_millis(10));
     }
 }
@@ -287,10 +290,10 @@ fn an_edit_on_one_engine_reaches_the_other_as_a_change_of_that_object_with_prese
         0,
         "a joining peer authors no demo"
     );
-    let _ = lock(b.view()).take_changes();
+    let (_, cursor) = lock(b.view()).changes_since(0);
     author(&a, set_shape(melon, "0.5-x^2-y^2-z^2"));
     wait_view(&b, "a's edit", |v| v.n_ops() == 2);
-    let changes = lock(b.view()).take_changes();
+    let (changes, _) = lock(b.view()).changes_since(cursor);
     assert_eq!(
         changes,
         Some([fdsl::scene::ObjectId(melon)].into_iter().collect()),

@@ -90,8 +90,7 @@ pub struct View {
     undo: BTreeMap<u64, OpId>,
     redo: BTreeMap<u64, OpId>,
     next_object: u64,
-    changed: BTreeSet<ObjectId>,
-    all_changed: bool,
+    changes: ChangeLog,
     generation: u64,
     hash: Option<(u64, String)>,
     pub(super) peers: Vec<PeerRow>,
@@ -118,8 +117,7 @@ impl View {
             undo: BTreeMap::new(),
             redo: BTreeMap::new(),
             next_object: 0,
-            changed: BTreeSet::new(),
-            all_changed: true,
+            changes: ChangeLog::default(),
             generation: 0,
             hash: None,
             peers: Vec::new(),
@@ -140,11 +138,11 @@ impl View {
         self.scene.apply_insertion(log, insertion);
         if let Some(refold) = &insertion.refold {
             for object in refold.object_keys.keys().chain(&refold.base_objects) {
-                if object.0 & GROUP_BIT != 0 {
-                    self.all_changed = true;
+                self.changes.push(if object.0 & GROUP_BIT != 0 {
+                    Change::All
                 } else {
-                    self.changed.insert(ObjectId(object.0));
-                }
+                    Change::Object(ObjectId(object.0))
+                });
             }
         }
         self.generation += 1;
@@ -191,11 +189,12 @@ impl View {
         self.generation
     }
 
-    /// The objects changed since the last call (`None`: every object may have changed, as
-    /// after a group edit or at start), and forgets them.
-    pub fn take_changes(&mut self) -> Option<BTreeSet<ObjectId>> {
-        let changed = std::mem::take(&mut self.changed);
-        (!std::mem::take(&mut self.all_changed)).then_some(changed)
+    /// What changed since `cursor` (0 at first): the objects, or `None` when every object
+    /// may have changed (a group edit, or a cursor older than the kept changes), and the
+    /// cursor to ask from next time. Each consumer (the window's mesher feed, a haptic feed,
+    /// a test) keeps its own cursor.
+    pub fn changes_since(&self, cursor: u64) -> (Option<BTreeSet<ObjectId>>, u64) {
+        self.changes.since(cursor)
     }
 
     /// The scene hash in hex (equal on every peer with the same ops), computed at most once
@@ -310,6 +309,63 @@ impl View {
                 }
             })
             .collect()
+    }
+}
+
+/// One change of the scene, as the refold reports name it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Change {
+    /// One object must be looked at again.
+    Object(ObjectId),
+    /// Every object (a group changed).
+    All,
+}
+
+/// The latest [`MAX_CHANGES`] changes, numbered from 1; cursor 0 means "nothing seen yet",
+/// which reads as "everything changed".
+#[derive(Default)]
+struct ChangeLog {
+    /// The number of the first kept change.
+    first: u64,
+    kept: std::collections::VecDeque<Change>,
+}
+
+/// Changes a view keeps for consumers that read them late; one further behind sees
+/// "everything changed".
+pub const MAX_CHANGES: usize = 4096;
+
+impl ChangeLog {
+    fn push(&mut self, change: Change) {
+        if self.first == 0 {
+            self.first = 1;
+        }
+        if self.kept.len() >= MAX_CHANGES {
+            self.kept.pop_front();
+            self.first += 1;
+        }
+        self.kept.push_back(change);
+    }
+
+    fn next(&self) -> u64 {
+        self.first.max(1) + self.kept.len() as u64
+    }
+
+    fn since(&self, cursor: u64) -> (Option<BTreeSet<ObjectId>>, u64) {
+        let next = self.next();
+        if cursor == 0 || cursor < self.first {
+            return (None, next);
+        }
+        let skip = usize::try_from(cursor - self.first.max(1)).unwrap_or(usize::MAX);
+        let mut objects = BTreeSet::new();
+        for change in self.kept.iter().skip(skip) {
+            match change {
+                Change::Object(id) => {
+                    objects.insert(*id);
+                }
+                Change::All => return (None, next),
+            }
+        }
+        (Some(objects), next)
     }
 }
 
@@ -517,4 +573,38 @@ pub fn quote(text: &str) -> String {
         out.push('…');
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_consumer_reads_the_changes_since_its_own_cursor() {
+        let mut log = ChangeLog::default();
+        let (all, start) = log.since(0);
+        assert_eq!(all, None, "a new consumer sees everything");
+        log.push(Change::Object(ObjectId(1)));
+        log.push(Change::Object(ObjectId(2)));
+        let (first, a) = log.since(start);
+        assert_eq!(first, Some([ObjectId(1), ObjectId(2)].into()));
+        log.push(Change::Object(ObjectId(2)));
+        assert_eq!(log.since(a).0, Some([ObjectId(2)].into()));
+        assert_eq!(
+            log.since(start).0.map(|s| s.len()),
+            Some(2),
+            "another cursor"
+        );
+        log.push(Change::All);
+        assert_eq!(log.since(a).0, None, "a group change touches everything");
+        let (_, end) = log.since(a);
+        assert_eq!(log.since(end).0, Some(BTreeSet::new()));
+        for i in 0..MAX_CHANGES as u64 + 10 {
+            log.push(Change::Object(ObjectId(i)));
+        }
+        assert_eq!(log.since(end).0, None, "a cursor older than what is kept");
+        let (_, now) = log.since(0);
+        log.push(Change::Object(ObjectId(7)));
+        assert_eq!(log.since(now).0, Some([ObjectId(7)].into()));
+    }
 }

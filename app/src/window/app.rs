@@ -85,6 +85,8 @@ pub struct SculptApp {
     mesher: Mesher,
     depth: u8,
     pub(super) objects: BTreeMap<ObjectId, Tracked>,
+    /// Where this window is in the engine's change stream.
+    changes_cursor: u64,
     /// The scene changed since objects were last compared with what was sent.
     dirty: bool,
     /// When the last edit was authored (for edit-to-mesh times).
@@ -100,6 +102,8 @@ pub struct SculptApp {
     pub(super) history: Vec<HistoryRow>,
     pub(super) peers: Vec<PeerRow>,
     pub(super) n_online: usize,
+    /// Display names by short peer id (this peer's and the peers met).
+    pub(super) names: BTreeMap<String, String>,
     /// Asks for a frame (a new engine after Join is given it too).
     waker: Option<std::sync::Arc<dyn Fn() + Send + Sync>>,
     pub(super) news: Vec<String>,
@@ -157,6 +161,7 @@ impl SculptApp {
             mesher: Mesher::start(move || mesher_wake())?,
             depth,
             objects: BTreeMap::new(),
+            changes_cursor: 0,
             dirty: true,
             last_edit_at: None,
             view: ViewState::default(),
@@ -170,6 +175,7 @@ impl SculptApp {
             history: Vec::new(),
             peers: Vec::new(),
             n_online: 0,
+            names: BTreeMap::new(),
             waker: Some(wake),
             news: Vec::new(),
             news_next: 0,
@@ -191,8 +197,10 @@ impl SculptApp {
     /// Sends the objects the engine says changed to the mesher (only those: an edit
     /// re-meshes its own object), and forgets objects that are gone.
     fn sync_objects(&mut self, now: Now) {
-        let mut view = lock(self.engine.view());
-        if let Some(changes) = view.take_changes() {
+        let view = lock(self.engine.view());
+        let (changes, cursor) = view.changes_since(self.changes_cursor);
+        self.changes_cursor = cursor;
+        if let Some(changes) = changes {
             self.dirty |= !changes.is_empty();
             for id in changes {
                 self.objects.entry(id).or_default().stale = true;
@@ -331,7 +339,14 @@ impl SculptApp {
         }
         self.peers = view.peers().to_vec();
         self.n_online = view.n_online();
+        let me = view.peer_id().short();
         drop(view);
+        self.names = self
+            .peers
+            .iter()
+            .map(|p| (p.peer.short(), p.name.clone()))
+            .chain([(me, self.engine.presence().name)])
+            .collect();
         let (lines, next) = self.engine.news_since(self.news_next);
         self.news_next = next;
         self.news.extend(lines);
@@ -446,6 +461,7 @@ impl SculptApp {
         self.config = config;
         self.shared = true;
         self.objects.clear();
+        self.changes_cursor = 0;
         self.selected = None;
         self.rows_at = None;
         self.news.clear();

@@ -169,10 +169,35 @@ impl SculptApp {
         });
     }
 
+    /// The name a user chose for the author with this short id, with the id: `Bo
+    /// (7b3c0dc8)`; just the id when no name is known.
+    fn display_name(&self, short: &str) -> String {
+        match self.names.get(short) {
+            Some(name) if name != short => format!("{name} ({short})"),
+            _ => short.to_string(),
+        }
+    }
+
     /// The peers panel: each connected peer with how it was reached, its round trip and
     /// what is still to sync, then the latest network news.
     fn peers_ui(&mut self, ui: &mut egui::Ui) {
         ui.heading(format!("Peers ({} online)", self.n_online));
+        let mut me = self.engine.presence();
+        let before = me.clone();
+        ui.horizontal(|ui| {
+            ui.label("You:");
+            ui.color_edit_button_srgb(&mut me.colour)
+                .on_hover_text("the colour others see your pointer and selection in");
+            ui.add(
+                egui::TextEdit::singleline(&mut me.name)
+                    .desired_width(120.0)
+                    .char_limit(::app::engine::presence::MAX_NAME_BYTES),
+            )
+            .on_hover_text("the name others see");
+        });
+        if me != before {
+            let _ = self.engine.set_presence(me);
+        }
         if self.peers.is_empty() {
             ui.weak("nobody met yet");
         }
@@ -181,7 +206,8 @@ impl SculptApp {
             let [r, g, b] = p.colour;
             let colour = egui::Color32::from_rgb(r, g, b);
             ui.horizontal(|ui| {
-                ui.colored_label(colour, "●");
+                let (dot, _) = ui.allocate_exact_size(egui::vec2(10.0, 10.0), egui::Sense::hover());
+                ui.painter().circle_filled(dot.center(), 5.0, colour);
                 ui.strong(&p.name);
                 ui.weak(p.peer.short());
                 if !p.online {
@@ -251,7 +277,8 @@ impl SculptApp {
                     ui.weak("no messages yet");
                 }
                 for row in &self.chat {
-                    ui.label(format!("[{}] {}: {}", row.time, row.author, row.text));
+                    let who = self.display_name(&row.author);
+                    ui.label(format!("[{}] {who}: {}", row.time, row.text));
                 }
             });
         let target = self.selected.map_or_else(
@@ -285,7 +312,10 @@ impl SculptApp {
                 for row in &self.history {
                     let text = format!(
                         "[{}] {}: {} — {}",
-                        row.time, row.author, row.what, row.status
+                        row.time,
+                        self.display_name(&row.author),
+                        row.what,
+                        row.status
                     );
                     if row.status.starts_with("rejected") {
                         ui.colored_label(ERROR_COLOUR, text);
