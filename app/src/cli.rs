@@ -146,6 +146,9 @@ pub struct RenderArgs {
     /// The time of the picture, in seconds.
     #[arg(long, value_name = "SECS")]
     pub t: Option<f64>,
+    /// Let `Inline` files come from anywhere inside DIR (default: the scene's own folder).
+    #[arg(long, value_name = "DIR")]
+    pub inline_root: Option<PathBuf>,
 }
 
 fn parse_size(text: &str) -> Result<(u32, u32), String> {
@@ -392,7 +395,7 @@ fn slice(function: &Function, z: f64, t: f64, width: usize, height: usize) -> St
 /// `render::snapshot` and writes `<dir>/<file stem>_<view>.png`, printing what it drew and
 /// wrote. Load errors are reported with their file, line and column.
 pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
-    use fdsl::fvrml::{self, LoadOptions, MAX_FILE_BYTES};
+    use fdsl::fvrml::{self, LoadOptions};
     use render::snapshot::{SnapshotSettings, snapshot};
     use std::path::Path;
 
@@ -408,21 +411,11 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
         settings.t_secs = t;
     }
     let (scene_path, out_dir) = (&args.scene, &args.out);
-    let read = |path: &Path| -> Result<String, String> {
-        let len = std::fs::metadata(path)
-            .map_err(|e| format!("{}: {e}", path.display()))?
-            .len();
-        if len > MAX_FILE_BYTES as u64 {
-            return Err(format!(
-                "{}: {len} bytes, more than the limit of {MAX_FILE_BYTES}",
-                path.display()
-            ));
-        }
-        std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))
-    };
-    let text = read(scene_path).map_err(anyhow::Error::msg)?;
+    let text = app::files::read_scene_text(scene_path).map_err(anyhow::Error::msg)?;
     let dir = scene_path.parent().unwrap_or(Path::new("")).to_path_buf();
-    let mut resolve = |inline: &str| read(&dir.join(inline));
+    let root = args.inline_root.clone().unwrap_or_else(|| dir.clone());
+    let inlines = app::files::InlineResolver::new(&dir, &root).map_err(anyhow::Error::msg)?;
+    let mut resolve = |inline: &str| inlines.read(inline);
     let shown = scene_path.display().to_string();
     let located = |issue: &fvrml::Issue| {
         let file = issue.location.file.as_deref().unwrap_or(&shown);

@@ -7,6 +7,8 @@
 //!   engine's own thread.
 //! - [`command`]: the command/chat language (`shape:`, `colour:`, `new:`, `undo`, ...),
 //!   planned into ops against a view.
+//! - [`files`]: scene files a user opens, their `Inline` files confined to the scene's
+//!   folder.
 //! - [`clock`]: the program's one read of the clock.
 //!
 //! What it is not: the window (egui) and the argument parsing live in the binary; the
@@ -32,3 +34,4 @@
 pub mod clock;
 pub mod command;
 pub mod engine;
+pub mod files;

@@ -93,3 +93,49 @@ fn render_reports_a_bad_file_with_its_location_and_bad_arguments_clearly() {
     let bad_size = sculpt(&["render", "x.wrl", "--out", "o", "--size", "big"]);
     assert!(text(&bad_size.stderr).contains("WxH"));
 }
+
+#[test]
+fn an_inline_outside_the_scenes_folder_is_refused_unless_allowed() {
+    let dir = scratch("render_inline");
+    let scenes = dir.join("scenes");
+    std::fs::create_dir_all(&scenes).unwrap();
+    // A file outside the scene's folder that a hostile scene tries to pull in.
+    std::fs::write(
+        dir.join("outside.wrl"),
+        "#VRML V2.0 utf8\nFShape { geometry FGeometry { definition \"1-x^2-y^2-z^2\" } }\n",
+    )
+    .unwrap();
+    let scene = scenes.join("scene.wrl");
+    std::fs::write(
+        &scene,
+        "#VRML V2.0 utf8\nInline { url \"../outside.wrl\" }\n",
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let args = [
+        "render",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--size",
+        "32x24",
+        "--depth",
+        "3",
+    ];
+    let refused = sculpt(&args);
+    let stderr = text(&refused.stderr);
+    assert!(!refused.status.success(), "{stderr}");
+    assert!(stderr.contains("leaves the scene's folder"), "{stderr}");
+    assert!(stderr.contains("--inline-root"), "{stderr}");
+    assert!(!out.exists());
+    let mut allowed: Vec<&str> = args.to_vec();
+    allowed.extend(["--inline-root", dir.to_str().unwrap()]);
+    let run = sculpt(&allowed);
+    let (stdout, stderr) = (text(&run.stdout), text(&run.stderr));
+    if !run.status.success() && stderr.contains("no wgpu adapter") {
+        println!("skipping the allowed half: {stderr}");
+        return;
+    }
+    assert!(run.status.success(), "{stdout}\n{stderr}");
+    assert!(stdout.contains("triangles"), "{stdout}");
+}
