@@ -720,3 +720,26 @@ fn saving_a_rich_scene_keeps_everything() {
     );
     assert_round_trip(&loaded.scene);
 }
+
+/// The thesis mixes straight and typographic quotes in one string (`"0.8”`): either closes it,
+/// with the one typographic-quote warning, and the values are exactly the printed ones.
+#[test]
+fn strings_opened_straight_and_closed_typographic_read_as_printed() {
+    let text = "FShape {\n  geometry FGeometry { definition \"1-x^2-y^2-z^2” }\n  \
+                physics FPhysics { tension FTension { definition \"0.8” } }\n}\n";
+    let loaded = load(text);
+    assert_eq!(loaded.warnings.len(), 1, "{:#?}", loaded.warnings);
+    assert!(
+        loaded.warnings[0].message.contains("typographic"),
+        "{:#?}",
+        loaded.warnings
+    );
+    let objs = objects(&loaded.scene);
+    let data = objs[0].2.data();
+    let Some(Shape::Implicit(formula)) = data.geometry.as_ref().map(|g| &g.shape) else {
+        panic!("implicit geometry expected");
+    };
+    assert_eq!(formula.as_str(), "1-x^2-y^2-z^2");
+    let tension = data.physics.tension.as_ref().unwrap();
+    assert_eq!(tension.formula.as_str(), "0.8");
+}

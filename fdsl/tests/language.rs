@@ -282,3 +282,41 @@ fn time_dependence_is_known() {
         [true, false, true, false]
     );
 }
+
+/// The thesis's printed code, taken as printed where the intent is clear (issue: printed-code
+/// tolerance): a dash for minus, and a chain of set operations compared with zero.
+#[test]
+fn printed_code_reads_as_its_author_meant() {
+    // The en dash, em dash, minus sign and figure dash read as minus, with one warning.
+    for dash in ['\u{2013}', '\u{2014}', '\u{2212}', '\u{2012}'] {
+        let src = format!("1 {dash} x^2 {dash}y^2");
+        check(&src, [0.5, 0.25, 0.0, 0.0], 1.0 - 0.25 - 0.0625);
+        let compiled = Function::compile(&src);
+        let warnings: Vec<_> = compiled
+            .diagnostics
+            .iter()
+            .filter(|d| !d.is_error())
+            .collect();
+        assert_eq!(warnings.len(), 1, "{src}");
+        assert!(warnings[0].render(&src).contains("minus sign"), "{src}");
+    }
+    check("\u{2013}x", [0.5, 0.0, 0.0, 0.0], -0.5);
+    // `a & b & c >= 0` compares the whole intersection with zero: true inside the cylinder
+    // of radius 2 and height 2 only. (It used to read `a & b & (c >= 0)`, whose value is the
+    // intersection's, not a truth value, outside the solid.)
+    let cylinder = "(2^2-x^2-z^2) & (y+1) & (1-y) >= 0";
+    check(cylinder, [0.0, 0.0, 0.0, 0.0], 1.0);
+    check(cylinder, [1.9, 0.9, 0.0, 0.0], 1.0);
+    check(cylinder, [3.0, 0.0, 0.0, 0.0], 0.0);
+    check(cylinder, [0.0, 1.5, 0.0, 0.0], 0.0);
+    check("x | y > 0", [-1.0, 2.0, 0.0, 0.0], 1.0);
+    check("x | y > 0", [-1.0, -2.0, 0.0, 0.0], 0.0);
+    // The thesis's script with that test inside an `if`.
+    let script = "function frep(x,y,z,t) { h = 1; r = 2; g = -1; \
+                  if ((r^2-x^2-z^2) & (y+h) & (h-y) >= 0) g = 0.5; return g; }";
+    check(script, [0.0, 0.0, 0.0, 0.0], 0.5);
+    check(script, [3.0, 0.0, 0.0, 0.0], -1.0);
+    // Logic keeps binding looser than comparisons.
+    check("x > 0 && y > 0", [1.0, 1.0, 0.0, 0.0], 1.0);
+    check("x > 0 && y > 0", [1.0, -1.0, 0.0, 0.0], 0.0);
+}

@@ -2,8 +2,10 @@
 //!
 //! White space is VRML's (space, tab, line breaks, commas) plus the no-break space and a
 //! byte-order mark. Comments run from `#` or `//` to the end of the line (the thesis's
-//! figures use `//`). Strings are `"..."` with `\"` and `\\` escapes, or the typographic
-//! `“...”` the thesis prints (opened by `“` or `”`, closed by either); they may span lines.
+//! figures use `//`). Strings are `"..."` with `\"`, `\\`, `\“` and `\”` escapes, or the
+//! typographic `“...”` the thesis prints (opened by `“` or `”`, closed by either), and the
+//! mixed `"0.8”` it also prints (a straight quote closed by a typographic one); they may span
+//! lines.
 //! Never fails: what cannot be read becomes an [`Tok::Error`] token with a message.
 
 use super::document::Pos;
@@ -198,9 +200,17 @@ impl<'a> Lexer<'a> {
                     );
                 }
                 Some('"') => return Tok::Str(out),
-                Some(LEFT_QUOTE | RIGHT_QUOTE) if typographic => return Tok::Str(out),
+                // The thesis mixes straight and typographic quotes in one string (`"0.8”`):
+                // either closes it. A typographic quote inside a straight-quoted string is
+                // therefore not possible; no field of the dialect needs one.
+                Some(LEFT_QUOTE | RIGHT_QUOTE) => {
+                    if !typographic && self.typographic_quote.is_none() {
+                        self.typographic_quote = Some(self.here());
+                    }
+                    return Tok::Str(out);
+                }
                 Some('\\') => match self.peek_char() {
-                    Some(e @ ('"' | '\\')) => {
+                    Some(e @ ('"' | '\\' | LEFT_QUOTE | RIGHT_QUOTE)) => {
                         self.bump();
                         out.push(e);
                     }

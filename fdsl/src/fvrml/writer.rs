@@ -1,7 +1,7 @@
 //! A [`Document`] to canonical text: the `#VRML V2.0 utf8` header, two spaces of indentation
 //! per level, one field per line, numbers in Rust's shortest round-trip form (so they read
-//! back bit-identical), strings in straight quotes with `"` and `\` escaped. Iterative, so
-//! any depth of document is written without recursion.
+//! back bit-identical), strings in straight quotes with `"`, `\` and the typographic quotes
+//! `“` `”` escaped. Iterative, so any depth of document is written without recursion.
 
 use std::fmt::Write as _;
 
@@ -216,6 +216,11 @@ impl<'d> Writer<'d> {
             match c {
                 '"' => self.out.push_str("\\\""),
                 '\\' => self.out.push_str("\\\\"),
+                // Typographic quotes close a string when read, so they are escaped too.
+                '\u{201C}' | '\u{201D}' => {
+                    self.out.push('\\');
+                    self.out.push(c);
+                }
                 c => self.out.push(c),
             }
         }

@@ -77,6 +77,12 @@ pub struct Token {
     pub span: Span,
 }
 
+/// Dashes that documents print for a minus sign (thesis formulas use the en dash): read as
+/// `-`, with a warning from the parser.
+pub const PRINTED_MINUS: [char; 6] = [
+    '\u{2010}', '\u{2011}', '\u{2012}', '\u{2013}', '\u{2014}', '\u{2212}',
+];
+
 /// Splits `source` into tokens, ending with [`TokenKind::Eof`].
 ///
 /// Comments (`// ...` to the end of the line and `/* ... */`) and white space are skipped.
@@ -149,10 +155,15 @@ pub fn tokenize(source: &str) -> Vec<Token> {
             i += len;
             kind
         } else {
-            // A multi-byte character: report it whole.
+            // A multi-byte character: a dash printed for a minus sign reads as one (the parser
+            // warns); anything else is reported whole.
             let ch = source[i..].chars().next().unwrap_or('\u{FFFD}');
             i += ch.len_utf8();
-            TokenKind::Unknown(ch)
+            if PRINTED_MINUS.contains(&ch) {
+                TokenKind::Minus
+            } else {
+                TokenKind::Unknown(ch)
+            }
         };
         tokens.push(Token {
             kind,

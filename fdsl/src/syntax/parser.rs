@@ -1,9 +1,13 @@
 //! The parser: tokens to [`Program`], with diagnostics instead of failure.
 //!
-//! Precedence, loosest first: `||`, `&&`, `|` (union), `&` and `\` (intersection,
-//! difference), comparisons, `+ -`, `* / %`, prefix `- + !`, then `^` (right-associative,
+//! Precedence, loosest first: `||`, `&&`, comparisons, `|` (union), `&` and `\`
+//! (intersection, difference), `+ -`, `* / %`, prefix `- + !`, then `^` (right-associative,
 //! binding tighter than a prefix minus: `-x^2` is `-(x^2)`). Set operators bind looser than
-//! arithmetic so that `(2^2-x^2-z^2) & (y+5) & (5-y)` means what its author meant.
+//! arithmetic so that `(2^2-x^2-z^2) & (y+5) & (5-y)` means what its author meant, and
+//! tighter than comparisons, so that the thesis's `(r^2-x^2-z^2) & (y+h) & (h-y) >= 0`
+//! compares the whole intersection with zero.
+//!
+//! Dashes printed for a minus sign (the thesis's en dash) read as `-` with a warning.
 
 use super::ast::*;
 use super::lexer::{Token, TokenKind, tokenize};
@@ -32,6 +36,22 @@ pub fn parse(source: &str) -> (Program, Vec<Diagnostic>) {
         diagnostics: Vec::new(),
         too_deep: false,
     };
+    // One warning for the first printed dash read as a minus (a thesis formula has many).
+    if let Some(dash) = parser
+        .tokens
+        .iter()
+        .find(|t| t.kind == TokenKind::Minus && t.span.end - t.span.start > 1)
+    {
+        let d = Diagnostic::warning(
+            dash.span,
+            format!(
+                "read the printed dash `{}` as a minus sign `-`",
+                &source[dash.span.start as usize..dash.span.end as usize]
+            ),
+        )
+        .with_hint("type `-` for minus");
+        parser.report(d);
+    }
     let program = parser.program();
     (program, parser.diagnostics)
 }
@@ -647,15 +667,15 @@ fn binary_op(kind: TokenKind) -> Option<(BinaryOp, u8)> {
     Some(match kind {
         TokenKind::PipePipe => (Or, 1),
         TokenKind::AmpAmp => (And, 2),
-        TokenKind::Pipe => (Union, 3),
-        TokenKind::Amp => (Intersect, 4),
-        TokenKind::Backslash => (Subtract, 4),
-        TokenKind::Lt => (Lt, 5),
-        TokenKind::Le => (Le, 5),
-        TokenKind::Gt => (Gt, 5),
-        TokenKind::Ge => (Ge, 5),
-        TokenKind::EqEq => (Eq, 5),
-        TokenKind::Ne => (Ne, 5),
+        TokenKind::Lt => (Lt, 3),
+        TokenKind::Le => (Le, 3),
+        TokenKind::Gt => (Gt, 3),
+        TokenKind::Ge => (Ge, 3),
+        TokenKind::EqEq => (Eq, 3),
+        TokenKind::Ne => (Ne, 3),
+        TokenKind::Pipe => (Union, 4),
+        TokenKind::Amp => (Intersect, 5),
+        TokenKind::Backslash => (Subtract, 5),
         TokenKind::Plus => (Add, 6),
         TokenKind::Minus => (Sub, 6),
         TokenKind::Star => (Mul, 7),
@@ -674,7 +694,6 @@ fn unknown_char(span: Span, c: char) -> Diagnostic {
         '“' | '”' | '"' | '‘' | '’' | '\'' | '«' | '»' => {
             d.with_hint("remove the quotation marks: paste only the definition (the text between BEGIN and END)")
         }
-        '−' | '–' | '—' => d.with_hint("use the ASCII minus `-`"),
         '×' | '·' | '∙' => d.with_hint("use `*` to multiply"),
         '÷' => d.with_hint("use `/` to divide"),
         'π' => d.with_hint("write `pi`"),

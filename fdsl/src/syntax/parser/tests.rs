@@ -214,7 +214,10 @@ fn every_error_path_has_a_message_and_location() {
         ),
         ("while x {}", "error: expected `(` after `while`, found `x`"),
         ("1e999", "error: this number is too large to represent"),
-        ("x − 1", "hint: use the ASCII minus `-`"),
+        (
+            "x − 1",
+            "warning: read the printed dash `−` as a minus sign `-`",
+        ),
         ("2π", "hint: write `pi`"),
         ("Geometry: 1-x", "hint: remove a label such as `Geometry:`"),
         (
