@@ -1,10 +1,15 @@
-//! The command/chat line: plain text is chat; `shape:`, `colour:`, `new:`, `undo` and `redo`
-//! change the selected object (or make one). A line becomes at most one op, and only when every
-//! formula in it compiles: otherwise the error, with fdsl's caret under the culprit, is what
-//! the line gives, and nothing is authored.
+//! The command/chat line: plain text is chat; commands change the selected object (or make
+//! one): `shape:`, `colour:`, `new:`, the properties (`density:`, `tension:`, `friction:`,
+//! `depth:`, `transparency:`, `shininess:`, `texture:`, `force:`), `name:`, the lease
+//! (`lease`, `hold`, `release`), `undo` and `redo`. A line becomes at most one op, and only
+//! when every formula in it compiles: otherwise the error, with fdsl's caret under the
+//! culprit, is what the line gives, and nothing is authored.
 
 use fdsl::Function;
-use fdsl::object::{ColorDef, Domain, Field, Formula, Geometry, ObjectData, Shape, Transform};
+use fdsl::object::{
+    ColorDef, Domain, Field, ForceField, Formula, Geometry, ObjectData, Property, Shape, Timing,
+    Transform, fit_domain,
+};
 use glam::DVec3;
 use replication::shape::ShapePayload;
 
@@ -17,9 +22,91 @@ pub const NEW_OBJECT_SPACING: f64 = 2.5;
 /// The diffuse colour of an object made with `new:`.
 pub const NEW_OBJECT_COLOUR: [f32; 3] = [0.55, 0.7, 0.95];
 
+/// How long a lease taken from the command line lasts (it is taken again by editing on).
+pub const LEASE_TTL_SECS: u64 = 300;
+
+/// A property set by a formula (or switched off with `off`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PropertyKind {
+    /// `density:` interior density (a fraction of the device's maximum).
+    Density,
+    /// `tension:` surface tension.
+    Tension,
+    /// `friction:` surface friction.
+    Friction,
+    /// `depth:` the surface zone's depth.
+    ZoneDepth,
+    /// `transparency:` 0 opaque to 1 clear.
+    Transparency,
+    /// `shininess:` 0 to 1.
+    Shininess,
+    /// `texture:` a displacement of the surface along its normal.
+    Texture,
+    /// `force:` a force field `x = ..; y = ..; z = ..;` of `u v w t`.
+    Force,
+}
+
+impl PropertyKind {
+    const ALL: [(&'static str, PropertyKind); 8] = [
+        ("density", PropertyKind::Density),
+        ("tension", PropertyKind::Tension),
+        ("friction", PropertyKind::Friction),
+        ("depth", PropertyKind::ZoneDepth),
+        ("transparency", PropertyKind::Transparency),
+        ("shininess", PropertyKind::Shininess),
+        ("texture", PropertyKind::Texture),
+        ("force", PropertyKind::Force),
+    ];
+
+    /// The keyword.
+    pub fn name(self) -> &'static str {
+        Self::ALL
+            .iter()
+            .find(|(_, k)| *k == self)
+            .map_or("property", |(n, _)| n)
+    }
+
+    /// The field a formula (or `None`: off) sets.
+    fn field(self, formula: Option<Formula>) -> Field {
+        let property = |f: Option<Formula>| f.map(Property::new);
+        match self {
+            Self::Density => Field::Density(property(formula)),
+            Self::Tension => Field::Tension(property(formula)),
+            Self::Friction => Field::Friction(property(formula)),
+            Self::ZoneDepth => Field::ZoneDepth(property(formula)),
+            Self::Transparency => Field::Transparency(formula),
+            Self::Shininess => Field::Shininess(formula),
+            Self::Texture => Field::Displacement(formula),
+            Self::Force => Field::Force(formula.map(|formula| ForceField {
+                formula,
+                parameters: [[0.0, 1.0]; 3],
+                timing: Timing::default(),
+                enabled: true,
+            })),
+        }
+    }
+}
+
+/// Which lease a line asks for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LeaseKind {
+    /// `lease`: take the object over (a weak lease: others may take it back).
+    Weak,
+    /// `hold`: take it only if free (a strong lease).
+    Strong,
+    /// `release`: give it back.
+    Release,
+}
+
 /// What a line asks for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Command<'a> {
+    /// `density: <formula>`, `tension: off`, ...: one property of the selected object.
+    Property(PropertyKind, &'a str),
+    /// `name: <text>`: the selected object's name.
+    Name(&'a str),
+    /// `lease`, `hold` or `release` the selected object.
+    Lease(LeaseKind),
     /// Plain text: a chat message.
     Chat(&'a str),
     /// `shape: <formula>`: the selected object's implicit geometry.
@@ -47,13 +134,27 @@ pub fn parse(line: &str) -> Option<Command<'_>> {
     if line.eq_ignore_ascii_case("redo") {
         return Some(Command::Redo);
     }
+    for (word, kind) in [
+        ("lease", LeaseKind::Weak),
+        ("hold", LeaseKind::Strong),
+        ("release", LeaseKind::Release),
+    ] {
+        if line.eq_ignore_ascii_case(word) {
+            return Some(Command::Lease(kind));
+        }
+    }
     if let Some((keyword, rest)) = line.split_once(':') {
         let rest = rest.trim();
         match keyword.trim().to_ascii_lowercase().as_str() {
             "shape" => return Some(Command::Shape(rest)),
             "colour" | "color" => return Some(Command::Colour(rest)),
             "new" => return Some(Command::New(rest)),
-            _ => {}
+            "name" => return Some(Command::Name(rest)),
+            other => {
+                if let Some((_, kind)) = PropertyKind::ALL.iter().find(|(n, _)| *n == other) {
+                    return Some(Command::Property(*kind, rest));
+                }
+            }
         }
     }
     Some(Command::Chat(line))
@@ -98,12 +199,17 @@ pub fn plan(
         }
         Command::Shape(text) => {
             let (id, object) = selected_object()?;
-            check_formula("shape", text)?;
+            let function = check_formula("shape", text)?;
             let formula = Formula::new(text).map_err(|e| format!("shape: {e}"))?;
             let current = object.data().geometry.as_ref();
+            // A bounded solid gets a domain that fits it; an unbounded one (a half-space that
+            // carves) keeps the object's box, which clips it as before.
+            let fitted = fit_domain(&function.tape(), 0.0).ok();
             let geometry = Geometry {
                 shape: Shape::Implicit(formula),
-                domain: current.and_then(|g| g.domain).or(Some(new_object_domain())),
+                domain: fitted
+                    .or_else(|| current.and_then(|g| g.domain))
+                    .or(Some(new_object_domain())),
                 transform: current.map_or(Transform::IDENTITY, |g| g.transform),
             };
             let payload = ShapePayload::Set {
@@ -126,14 +232,15 @@ pub fn plan(
             Ok(planned(payload, summary))
         }
         Command::New(text) => {
-            check_formula("new", text)?;
+            let function = check_formula("new", text)?;
+            let domain = fit_domain(&function.tape(), 0.0).map_err(|e| format!("new: {e}"))?;
             let formula = Formula::new(text).map_err(|e| format!("new: {e}"))?;
             let object = session.next_object_id();
             let n_objects = session.scene().len();
             let name = format!("object {}", object & 0xffff_ffff);
             let data = ObjectData {
                 name: name.clone(),
-                geometry: Some(Geometry::implicit_in(formula, new_object_domain())),
+                geometry: Some(Geometry::implicit_in(formula, domain)),
                 transform: Transform::translate(DVec3::new(
                     NEW_OBJECT_SPACING * n_objects as f64,
                     0.0,
@@ -156,6 +263,61 @@ pub fn plan(
                 summary: format!("created {name}"),
                 select: Some(object),
             })
+        }
+        Command::Property(kind, text) => {
+            let (id, _) = selected_object()?;
+            let what = kind.name();
+            let formula = if text.eq_ignore_ascii_case("off") {
+                None
+            } else {
+                let function = check_formula(what, text)?;
+                if kind == PropertyKind::Force
+                    && !["x", "y", "z"].iter().all(|o| function.has_output(o))
+                {
+                    return Err(
+                        "force: give x = ...; y = ...; z = ...; (functions of u, v, w, t)".into(),
+                    );
+                }
+                Some(Formula::new(text).map_err(|e| format!("{what}: {e}"))?)
+            };
+            let payload = ShapePayload::Set {
+                object: id,
+                field: kind.field(formula),
+            };
+            payload.validate().map_err(|e| format!("{what}: {e}"))?;
+            let summary = format!("set the {what} of {}", session.object_label(id));
+            Ok(planned(payload, summary))
+        }
+        Command::Name(text) => {
+            let (id, _) = selected_object()?;
+            let payload = ShapePayload::Set {
+                object: id,
+                field: Field::Name(text.to_string()),
+            };
+            payload.validate().map_err(|e| format!("name: {e}"))?;
+            Ok(planned(
+                payload,
+                format!("named object {} {text}", id & 0xffff_ffff),
+            ))
+        }
+        Command::Lease(kind) => {
+            let (id, _) = selected_object()?;
+            let label = session.object_label(id);
+            let (payload, summary) = match kind {
+                LeaseKind::Release => (
+                    ShapePayload::Release { object: id },
+                    format!("released {label}"),
+                ),
+                strong => (
+                    ShapePayload::Acquire {
+                        object: id,
+                        strong: strong == LeaseKind::Strong,
+                        ttl_micros: LEASE_TTL_SECS * 1_000_000,
+                    },
+                    format!("took the lease of {label} for {LEASE_TTL_SECS} s"),
+                ),
+            };
+            Ok(planned(payload, summary))
         }
         Command::Undo => {
             let (id, _) = selected_object()?;
@@ -283,6 +445,17 @@ mod tests {
         assert_eq!(parse("Color:0,1,0"), Some(Command::Colour("0,1,0")));
         assert_eq!(parse("new: x"), Some(Command::New("x")));
         assert_eq!(
+            parse("Density: 0.5+x"),
+            Some(Command::Property(PropertyKind::Density, "0.5+x"))
+        );
+        assert_eq!(
+            parse("tension: off"),
+            Some(Command::Property(PropertyKind::Tension, "off"))
+        );
+        assert_eq!(parse("HOLD"), Some(Command::Lease(LeaseKind::Strong)));
+        assert_eq!(parse("release"), Some(Command::Lease(LeaseKind::Release)));
+        assert_eq!(parse("name: melon"), Some(Command::Name("melon")));
+        assert_eq!(
             parse("note: looks good"),
             Some(Command::Chat("note: looks good"))
         );
@@ -361,5 +534,48 @@ mod tests {
             Transform::translate(DVec3::new(2.5, 0.0, 0.0))
         );
         assert!(s.scene().object(fdsl::scene::ObjectId(*object)).is_none());
+    }
+
+    #[test]
+    fn every_property_is_a_command_with_caret_errors() {
+        let (s, id) = session();
+        for (name, kind) in PropertyKind::ALL {
+            let text = if kind == PropertyKind::Force {
+                "x = -v; y = u; z = 0;"
+            } else {
+                "0.5+0.1*x"
+            };
+            let planned = plan(Command::Property(kind, text), &s, Some(id)).unwrap();
+            let ShapePayload::Set { object, field } = &planned.payload else {
+                panic!("{planned:?}");
+            };
+            assert_eq!(*object, id);
+            assert_eq!(field.slot(), kind.field(None).slot(), "{name}");
+            let off = plan(Command::Property(kind, "off"), &s, Some(id)).unwrap();
+            assert!(off.summary.contains(name));
+            let err = plan(Command::Property(kind, "0.5+"), &s, Some(id)).unwrap_err();
+            assert!(err.starts_with(name) && err.contains('^'), "{err}");
+        }
+        let err = plan(Command::Property(PropertyKind::Force, "0.5"), &s, Some(id)).unwrap_err();
+        assert!(err.contains("x = ..."), "{err}");
+        let lease = plan(Command::Lease(LeaseKind::Weak), &s, Some(id)).unwrap();
+        assert!(matches!(
+            lease.payload,
+            ShapePayload::Acquire { strong: false, .. }
+        ));
+    }
+
+    #[test]
+    fn a_new_object_gets_a_domain_that_fits_and_an_unbounded_one_is_refused() {
+        let (s, _) = session();
+        let planned = plan(Command::New("0.3-sqrt((x-1)^2+y^2+z^2)"), &s, None).unwrap();
+        let ShapePayload::Create { data, .. } = &planned.payload else {
+            panic!("{planned:?}");
+        };
+        let b = data.geometry.as_ref().unwrap().domain.unwrap().aabb();
+        // The old fixed 2.2 box cut this ball flat at x = 1.1.
+        assert!(b.lo.x <= 0.7 && b.hi.x >= 1.3, "{b:?}");
+        let err = plan(Command::New("x"), &s, None).unwrap_err();
+        assert!(err.contains("unbounded"), "{err}");
     }
 }

@@ -23,7 +23,12 @@ const COMMAND_HELP: &str = "\
 plain text is chat; commands change the selected object:
   shape: <formula>          its solid (f >= 0 inside)
   colour: <r>, <g>, <b>     formulas or numbers 0..1 (or r=..; g=..; b=..;)
-  new: <formula>            a new object
+  new: <formula>            a new object (its box is fitted to the solid)
+  density: / tension: / friction: / depth: <formula or off>
+  transparency: / shininess: / texture: <formula or off>
+  force: x=..; y=..; z=..;  a force field of u, v, w, t
+  name: <text>              rename it
+  lease / hold / release    take it over, take it if free, give it back
   undo / redo               your last edit of it";
 
 impl SculptApp {

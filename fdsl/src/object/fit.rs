@@ -1,0 +1,157 @@
+//! A domain that fits a solid, found from its function by interval evaluation, so that an
+//! object made from a formula alone is never silently cut off by a guessed box.
+//!
+//! The search covers the cube `±MAX_FIT_HALF_SIZE` and keeps the cells where the function may
+//! be `>= 0` (its interval's upper bound, or a possible NaN), splitting them down to
+//! [`FIT_DEPTH`] levels; cells where the function is surely `>= 0` are kept whole. The box of
+//! the kept cells, grown by one finest cell, is the domain. Interval bounds enclose the true
+//! values, so the solid lies inside the domain; they may be loose, so the domain may be
+//! larger than the solid. A solid that reaches the search cube's faces is unbounded; one with
+//! no cell kept is empty.
+
+use glam::DVec3;
+
+use super::space::Domain;
+use crate::eval::{Interval, IntervalEval};
+use crate::tape::Tape;
+
+/// Half the edge of the cube searched for the solid (scene units).
+pub const MAX_FIT_HALF_SIZE: f64 = 64.0;
+/// Levels of splitting: the finest cell is `2 * MAX_FIT_HALF_SIZE / 2^FIT_DEPTH` wide.
+pub const FIT_DEPTH: u32 = 11;
+/// Cells evaluated at most; a function whose boundary needs more is refused.
+pub const MAX_FIT_CELLS: usize = 400_000;
+
+/// Why no domain fits.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum FitError {
+    /// The solid reaches the search cube's faces.
+    #[error(
+        "the solid reaches ±{MAX_FIT_HALF_SIZE} (it is unbounded, like a half-space); bound it, \
+         for example `(...) & ({MAX_FIT_HALF_SIZE}-abs(x))`, or give the object a domain"
+    )]
+    Unbounded,
+    /// The function is below zero everywhere searched.
+    #[error("the solid is empty: the function is below 0 everywhere within ±{MAX_FIT_HALF_SIZE}")]
+    Empty,
+    /// The boundary needed more than [`MAX_FIT_CELLS`] cells.
+    #[error("the solid's boundary is too intricate to bound within {MAX_FIT_CELLS} cells")]
+    TooComplex,
+}
+
+/// The domain of the solid `tape >= 0` at time `t` (the tape's first output is the value).
+pub fn fit_domain(tape: &Tape, t: f64) -> Result<Domain, FitError> {
+    let mut eval = IntervalEval::new(tape);
+    let finest = 2.0 * MAX_FIT_HALF_SIZE / f64::from(1u32 << FIT_DEPTH);
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    let mut cells = vec![(
+        DVec3::splat(-MAX_FIT_HALF_SIZE),
+        2.0 * MAX_FIT_HALF_SIZE,
+        0u32,
+    )];
+    let mut n_evaluated = 0usize;
+    while let Some((corner, edge, depth)) = cells.pop() {
+        n_evaluated += 1;
+        if n_evaluated > MAX_FIT_CELLS {
+            return Err(FitError::TooComplex);
+        }
+        let axis = |a: usize| Interval::new(corner[a], corner[a] + edge);
+        let v = eval.eval([axis(0), axis(1), axis(2), Interval::point(t)]);
+        let maybe_inside = v.hi >= 0.0 || v.has_nan();
+        if !maybe_inside {
+            continue;
+        }
+        let surely_inside = v.lo >= 0.0 && !v.has_nan();
+        if surely_inside || depth == FIT_DEPTH {
+            let far = corner + DVec3::splat(edge);
+            let touches_edge = corner.min_element() <= -MAX_FIT_HALF_SIZE
+                || far.max_element() >= MAX_FIT_HALF_SIZE;
+            if touches_edge {
+                return Err(FitError::Unbounded);
+            }
+            lo = lo.min(corner);
+            hi = hi.max(far);
+            continue;
+        }
+        let half = edge / 2.0;
+        for k in 0..8u32 {
+            let offset = DVec3::new(
+                f64::from(k & 1) * half,
+                f64::from(k >> 1 & 1) * half,
+                f64::from(k >> 2 & 1) * half,
+            );
+            cells.push((corner + offset, half, depth + 1));
+        }
+    }
+    if lo.x > hi.x {
+        return Err(FitError::Empty);
+    }
+    let (lo, hi) = (lo - DVec3::splat(finest), hi + DVec3::splat(finest));
+    Ok(Domain::new((lo + hi) / 2.0, hi - lo))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Function;
+
+    fn fit(src: &str) -> Result<Domain, FitError> {
+        fit_domain(&Function::parse(src).unwrap().tape(), 0.0)
+    }
+
+    #[test]
+    fn a_ball_off_centre_gets_a_domain_around_it_and_inside_the_solid_is_kept() {
+        // The issue's example: `new:` used to cut this flat at x = 1.1.
+        let d = fit("0.3-sqrt((x-1)^2+y^2+z^2)").unwrap();
+        let b = d.aabb();
+        assert!(b.lo.x <= 0.7 && b.hi.x >= 1.3, "{d:?}");
+        assert!(b.lo.y <= -0.3 && b.hi.y >= 0.3, "{d:?}");
+        assert!(b.hi.x < 1.6 && b.lo.x > 0.4, "tight enough: {d:?}");
+        let big = fit("5-sqrt(x^2+y^2+z^2)").unwrap().aabb();
+        assert!(big.lo.x <= -5.0 && big.hi.z >= 5.0, "{big:?}");
+        let slab = fit("min(1-abs(x), min(2-abs(y), 3-abs(z-10)))")
+            .unwrap()
+            .aabb();
+        assert!(
+            slab.lo.z <= 7.0 && slab.hi.z >= 13.0 && slab.hi.x < 1.5,
+            "{slab:?}"
+        );
+    }
+
+    #[test]
+    fn every_reference_solid_fits_inside_its_domain() {
+        for (name, src) in crate::models::surface_models() {
+            let f = Function::parse(src).unwrap();
+            let d = fit_domain(&f.tape(), 0.0).unwrap_or_else(|e| panic!("{name}: {e}"));
+            // Points sampled on the domain's faces are outside the solid.
+            let b = d.aabb();
+            let mut eval = crate::eval::PointEval::new(&f.tape());
+            for i in 0..=8 {
+                for j in 0..=8 {
+                    let (u, v) = (f64::from(i) / 8.0, f64::from(j) / 8.0);
+                    let lerp = |a: f64, b: f64, t: f64| a + (b - a) * t;
+                    for p in [
+                        [b.lo.x, lerp(b.lo.y, b.hi.y, u), lerp(b.lo.z, b.hi.z, v)],
+                        [b.hi.x, lerp(b.lo.y, b.hi.y, u), lerp(b.lo.z, b.hi.z, v)],
+                        [lerp(b.lo.x, b.hi.x, u), b.lo.y, lerp(b.lo.z, b.hi.z, v)],
+                        [lerp(b.lo.x, b.hi.x, u), lerp(b.lo.y, b.hi.y, v), b.hi.z],
+                    ] {
+                        let value = eval.eval([p[0], p[1], p[2], 0.0]);
+                        assert!(value < 0.0, "{name}: {value} at {p:?} on {d:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn unbounded_and_empty_solids_are_refused_with_a_reason() {
+        assert_eq!(fit("x"), Err(FitError::Unbounded));
+        assert_eq!(fit("1"), Err(FitError::Unbounded));
+        assert_eq!(fit("-1"), Err(FitError::Empty));
+        assert_eq!(fit("-1-x^2"), Err(FitError::Empty));
+        let message = FitError::Unbounded.to_string();
+        assert!(message.contains("abs(x)"), "{message}");
+    }
+}
