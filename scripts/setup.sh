@@ -4,11 +4,12 @@
 set -euo pipefail
 
 # Software Vulkan (llvmpipe) and GL for headless rendering, the X libraries winit loads at run
-# time, Xvfb for window tests, and FUSE for the fake HID devices of the haptic tests.
+# time, Xvfb for window tests, FUSE for the fake HID devices of the haptic tests, and ip and
+# nft for the network-namespace tests of NAT traversal.
 PACKAGES=(
   mesa-vulkan-drivers libvulkan1 libegl1 libegl-mesa0 libgl1-mesa-dri
   libx11-6 libx11-xcb1 libxcursor1 libxi6 libxrandr2 libxkbcommon-x11-0 xvfb xauth
-  python3-fusepy libfuse2 fuse3
+  python3-fusepy libfuse2 fuse3 iproute2 nftables
 )
 
 missing=()

@@ -1,18 +1,16 @@
 //! Discovery over real sockets: two nodes find each other through a discovery server on
-//! 127.0.0.1 and sync; the server counts bad input; and LAN multicast discovery, run inside
-//! a private network namespace so that multicast never leaves this test.
+//! 127.0.0.1 and sync, and the server counts bad input. (LAN discovery by DNS-SD is tested in
+//! `net_dnssd.rs`, inside a private network namespace.)
 
 #![allow(clippy::unwrap_used, reason = "test helpers")]
 
 mod net_support;
 
-use std::net::{Ipv4Addr, UdpSocket};
-use std::process::Command;
+use std::net::UdpSocket;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use net_support::*;
-use replication::net::discovery::lan::{self, LanConfig, LanDiscovery};
 use replication::net::discovery::message::{DiscoveryMessage, REGISTER_BYTES};
 use replication::net::discovery::{self, DiscoveredPeer, DiscoveryServer};
 
@@ -111,112 +109,4 @@ impl IntoPeer for [u8; 32] {
     fn into_peer(self) -> replication::PeerId {
         replication::PeerId(self)
     }
-}
-
-/// Set in the child process that runs inside the private network namespace.
-const IN_NAMESPACE: &str = "SCULPT_NET_TEST_IN_NAMESPACE";
-
-#[test]
-fn lan_multicast_discovery_finds_peers_that_then_sync() {
-    if std::env::var_os(IN_NAMESPACE).is_some() {
-        let runtime = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-            .unwrap();
-        return runtime.block_on(lan_in_namespace());
-    }
-    // Multicast is sent only inside a network namespace of our own (loopback only), never
-    // on the machine's real interfaces: the test re-runs itself there.
-    let usable = Command::new("unshare")
-        .args(["-rn", "ip", "link", "set", "lo", "up"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !usable {
-        eprintln!(
-            "skipped: `unshare -rn` or `ip` is not available, so LAN multicast is untested here"
-        );
-        return;
-    }
-    let exe = std::env::current_exe().unwrap();
-    let output = Command::new("unshare")
-        .args(["-rn", "sh", "-c", "ip link set lo up && exec \"$0\" \"$@\""])
-        .arg(exe)
-        .args([
-            "lan_multicast_discovery_finds_peers_that_then_sync",
-            "--exact",
-            "--nocapture",
-            "--test-threads=1",
-        ])
-        .env(IN_NAMESPACE, "1")
-        .output()
-        .unwrap();
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    );
-    assert!(
-        output.status.success(),
-        "the namespaced run failed:\n{text}"
-    );
-    assert!(
-        text.contains("1 passed"),
-        "the namespaced run ran no test:\n{text}"
-    );
-}
-
-async fn lan_in_namespace() {
-    let keys = session_keys(INVITE);
-    let config = LanConfig {
-        interface: Ipv4Addr::LOCALHOST,
-        ..LanConfig::default()
-    };
-    let a = node(1);
-    let b = node(2);
-    author_some(&a.handle, 1, "alice").await;
-    author_some(&b.handle, 2, "bob").await;
-    let bind = |h: &THandle| {
-        LanDiscovery::bind(
-            config,
-            keys.discovery_id(),
-            h.peer_id(),
-            h.local_addr().port(),
-        )
-        .unwrap()
-    };
-    // First by hand: A's announcement reaches B (and A's own socket, which skips it).
-    let (mut lan_a, mut lan_b) = (bind(&a.handle), bind(&b.handle));
-    let other = session_keys(OTHER_INVITE);
-    let mut lan_other =
-        LanDiscovery::bind(config, other.discovery_id(), [3; 32].into_peer(), 3).unwrap();
-    lan_other.announce().await.unwrap();
-    lan_a.announce().await.unwrap();
-    let found = tokio::time::timeout(PATIENCE, lan_b.recv())
-        .await
-        .unwrap()
-        .unwrap();
-    assert_eq!(
-        found,
-        DiscoveredPeer {
-            peer: a.handle.peer_id(),
-            addr: a.handle.local_addr()
-        }
-    );
-    assert_eq!(lan_b.stats().n_other_sessions, 1);
-    let quiet = std::time::Duration::from_millis(300);
-    let found = tokio::time::timeout(quiet, lan_a.recv()).await;
-    assert!(
-        found.is_err(),
-        "A hears only itself and the other session: {found:?}"
-    );
-    assert_eq!(lan_a.stats().n_own, 1);
-    // Then the loops: both announce, both hear each other, both dial; one connection stays.
-    tokio::spawn(lan::announce_and_dial(lan_a, a.handle.clone()));
-    tokio::spawn(lan::announce_and_dial(lan_b, b.handle.clone()));
-    converge(&[&a.handle, &b.handle], 8).await;
-    eventually("a single connection remains", || async {
-        a.handle.connected_peers().await.unwrap().len() == 1
-            && b.handle.connected_peers().await.unwrap().len() == 1
-    })
-    .await;
 }

@@ -69,6 +69,7 @@ pub mod frame;
 pub mod invite;
 pub mod node;
 pub mod session;
+pub mod socket;
 pub mod tls;
 
 pub use invite::{Invite, InviteError};

@@ -1,5 +1,8 @@
-//! The discovery client: registers with a discovery server and learns the session's other
-//! peers, plus a loop that keeps a node registered and dials whom it learns.
+//! The discovery client's older half and its constants: [`register`] sends a registration
+//! from a separate UDP socket, naming the node's QUIC port, which is right only where the
+//! host's address is public (a NAT maps that socket, not the node's). Nodes use
+//! [`NodeHandle::register_with`] instead (see [`super::rendezvous`]), which registers from
+//! the node's own socket and punches through NATs; [`stay_registered`] runs it.
 
 use std::io;
 use std::net::{Ipv4Addr, Ipv6Addr, SocketAddr};
@@ -17,7 +20,8 @@ use crate::payload::Payload;
 pub const REGISTER_ATTEMPTS: u32 = 3;
 /// How long each attempt waits for the reply.
 pub const REGISTER_REPLY_TIMEOUT_MILLIS: u64 = 700;
-/// How often [`stay_registered`] registers again (well within the server's 60 s expiry).
+/// How often a node registers again (well within the server's 60 s expiry, and often
+/// enough to keep a NAT's mapping of the node's socket towards the server open).
 pub const REFRESH_INTERVAL_MILLIS: u64 = 20_000;
 
 /// Why registration failed.
@@ -82,13 +86,19 @@ async fn receive_peers(
 }
 
 /// Keeps `node` registered with `server` under `discovery_id` and dials every peer it
-/// learns, every [`REFRESH_INTERVAL_MILLIS`], until the node stops. Registration failures
-/// are retried at the next refresh.
+/// learns, until the node stops: [`NodeHandle::register_with`], with its events drained.
+/// If the node's socket is already registered elsewhere (or cannot reach the server's
+/// address family), it falls back to [`register`] from a separate socket every
+/// [`REFRESH_INTERVAL_MILLIS`] and [`NodeHandle::dial_discovered`].
 pub async fn stay_registered<P: Payload + Send + 'static>(
     server: SocketAddr,
     discovery_id: DiscoveryId,
     node: NodeHandle<P>,
 ) {
+    if let Ok(mut rendezvous) = node.register_with(server, discovery_id) {
+        while rendezvous.events.recv().await.is_some() {}
+        return;
+    }
     let port = node.local_addr().port();
     loop {
         if let Ok(found) = register(server, discovery_id, node.peer_id(), port).await {

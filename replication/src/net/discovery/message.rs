@@ -4,10 +4,30 @@
 //!
 //! - Register (tag 1): `[discovery id 16][peer id 32][QUIC port u16 BE]`, then zero padding up
 //!   to exactly [`REGISTER_BYTES`]. The padding makes every request at least as large as any
-//!   reply, so a spoofed source address cannot turn the server into an amplifier.
+//!   reply, so a spoofed source address cannot turn the server into an amplifier. The server
+//!   lists the datagram's source IP with the claimed port: right for a separate socket on a
+//!   host with a public address, useless behind a NAT (the port is not the mapped one).
 //! - Peers (tag 2): `[n ≤ MAX_PEERS_PER_REPLY]` then per peer `[peer id 32][family 4|6]`
 //!   `[IPv4 4 | IPv6 16][port u16 BE]`.
-//! - Announce (tag 3, LAN multicast): `[discovery id 16][peer id 32][QUIC port u16 BE]`.
+//! - Announce (tag 3, the retired LAN multicast announcement, replaced by DNS-SD; still
+//!   decoded so that servers count it as unexpected): `[discovery id 16][peer id 32]`
+//!   `[QUIC port u16 BE]`.
+//! - RegisterMapped (tag 4): `[discovery id 16][peer id 32]`, zero-padded to exactly
+//!   [`REGISTER_BYTES`] like Register. Sent from the QUIC endpoint's own socket, so the server
+//!   lists the datagram's whole source address, which behind a NAT is the router's public
+//!   address and the port it mapped for that socket: the address other peers must dial.
+//!   The server answers with Peers and introduces the sender to peers already registered
+//!   this way (Introduce).
+//! - Introduce (tag 5): `[discovery id 16][peer id 32][family 4|6][IPv4 4 | IPv6 16]`
+//!   `[port u16 BE]`, at most [`INTRODUCE_BYTES`]: from the server to a peer registered with
+//!   RegisterMapped, naming a peer that just registered (or refreshed) in its session, so both
+//!   dial each other at once and each NAT sees outgoing packets before the other's arrive
+//!   (hole punching). The server sends them only within the bytes of the request that caused
+//!   them (see `registry`).
+//!
+//! Tags 4 and 5 were added to version 1 without a version bump: every earlier message is
+//! unchanged, and a server that predates them counts them as malformed and stays silent,
+//! which a client sees as no answer.
 //!
 //! Decoding never panics and checks every length before use.
 
@@ -27,10 +47,14 @@ pub const MAX_DATAGRAM_BYTES: usize = 1200;
 pub const MAX_PEERS_PER_REPLY: usize = 16;
 /// Header bytes: magic, version, tag.
 const HEADER_BYTES: usize = MAGIC.len() + 2;
+/// Bytes of one peer in a Peers list or an Introduce, at most: id, family, IPv6 address, port.
+const PEER_ENTRY_BYTES_MAX: usize = 32 + 1 + 16 + 2;
 /// Largest reply: header, count, and [`MAX_PEERS_PER_REPLY`] IPv6 entries.
-pub const MAX_REPLY_BYTES: usize = HEADER_BYTES + 1 + MAX_PEERS_PER_REPLY * (32 + 1 + 16 + 2);
-/// Exact size of a register request (padded).
+pub const MAX_REPLY_BYTES: usize = HEADER_BYTES + 1 + MAX_PEERS_PER_REPLY * PEER_ENTRY_BYTES_MAX;
+/// Exact size of a register request (padded), either kind.
 pub const REGISTER_BYTES: usize = 1024;
+/// Largest introduction: header, discovery id and one IPv6 peer entry.
+pub const INTRODUCE_BYTES: usize = HEADER_BYTES + 16 + PEER_ENTRY_BYTES_MAX;
 
 const _: () = assert!(REGISTER_BYTES >= MAX_REPLY_BYTES);
 const _: () = assert!(REGISTER_BYTES <= MAX_DATAGRAM_BYTES);
@@ -38,6 +62,8 @@ const _: () = assert!(REGISTER_BYTES <= MAX_DATAGRAM_BYTES);
 const TAG_REGISTER: u8 = 1;
 const TAG_PEERS: u8 = 2;
 const TAG_ANNOUNCE: u8 = 3;
+const TAG_REGISTER_MAPPED: u8 = 4;
+const TAG_INTRODUCE: u8 = 5;
 
 /// A peer found by discovery: whom to dial, and where.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -71,6 +97,30 @@ pub enum DiscoveryMessage {
         /// Its QUIC port (the address is the datagram's source address).
         port: u16,
     },
+    /// A peer asks the server to list it at the datagram's source address (IP and port, as
+    /// its NAT mapped them), which must be its QUIC socket, and to name the others.
+    RegisterMapped {
+        /// The session.
+        discovery_id: DiscoveryId,
+        /// The registering peer.
+        peer: PeerId,
+    },
+    /// The server tells a registered peer about another peer of its session that just
+    /// registered (or refreshed), so that both dial each other at once.
+    Introduce {
+        /// The session.
+        discovery_id: DiscoveryId,
+        /// The newcomer and its public address.
+        peer: DiscoveredPeer,
+    },
+}
+
+impl DiscoveryMessage {
+    /// True for the messages a server sends to peers (Peers, Introduce): what a node's socket
+    /// takes out of the QUIC traffic for its discovery client.
+    pub fn is_reply(&self) -> bool {
+        matches!(self, Self::Peers(_) | Self::Introduce { .. })
+    }
 }
 
 impl DiscoveryMessage {
@@ -93,18 +143,7 @@ impl DiscoveryMessage {
                 let peers = &peers[..peers.len().min(MAX_PEERS_PER_REPLY)];
                 out.push(peers.len() as u8);
                 for d in peers {
-                    out.extend_from_slice(&d.peer.0);
-                    match d.addr.ip() {
-                        IpAddr::V4(ip) => {
-                            out.push(4);
-                            out.extend_from_slice(&ip.octets());
-                        }
-                        IpAddr::V6(ip) => {
-                            out.push(6);
-                            out.extend_from_slice(&ip.octets());
-                        }
-                    }
-                    out.extend_from_slice(&d.addr.port().to_be_bytes());
+                    put_peer(&mut out, d);
                 }
             }
             Self::Announce {
@@ -114,6 +153,17 @@ impl DiscoveryMessage {
             } => {
                 out.push(TAG_ANNOUNCE);
                 put_entry(&mut out, discovery_id, peer, *port);
+            }
+            Self::RegisterMapped { discovery_id, peer } => {
+                out.push(TAG_REGISTER_MAPPED);
+                out.extend_from_slice(discovery_id);
+                out.extend_from_slice(&peer.0);
+                out.resize(REGISTER_BYTES, 0);
+            }
+            Self::Introduce { discovery_id, peer } => {
+                out.push(TAG_INTRODUCE);
+                out.extend_from_slice(discovery_id);
+                put_peer(&mut out, peer);
             }
         }
         out
@@ -146,20 +196,9 @@ impl DiscoveryMessage {
         let tag_offset = r.offset();
         let message = match r.u8()? {
             TAG_REGISTER => {
-                if bytes.len() != REGISTER_BYTES {
-                    return Err(DecodeError::Invalid {
-                        offset: 0,
-                        what: "register length",
-                    });
-                }
+                check_register_length(bytes)?;
                 let (discovery_id, peer, port) = read_entry(&mut r)?;
-                let padding_offset = r.offset();
-                if r.take(r.remaining())?.iter().any(|&b| b != 0) {
-                    return Err(DecodeError::Invalid {
-                        offset: padding_offset,
-                        what: "register padding",
-                    });
-                }
+                read_padding(&mut r)?;
                 Self::Register {
                     discovery_id,
                     peer,
@@ -175,6 +214,18 @@ impl DiscoveryMessage {
                     port,
                 }
             }
+            TAG_REGISTER_MAPPED => {
+                check_register_length(bytes)?;
+                let discovery_id = r.array()?;
+                let peer = PeerId(r.array()?);
+                read_padding(&mut r)?;
+                Self::RegisterMapped { discovery_id, peer }
+            }
+            TAG_INTRODUCE => {
+                let discovery_id = r.array()?;
+                let peer = read_peer(&mut r)?;
+                Self::Introduce { discovery_id, peer }
+            }
             _ => {
                 return Err(DecodeError::Invalid {
                     offset: tag_offset,
@@ -185,6 +236,42 @@ impl DiscoveryMessage {
         r.finish()?;
         Ok(message)
     }
+}
+
+fn check_register_length(bytes: &[u8]) -> Result<(), DecodeError> {
+    if bytes.len() != REGISTER_BYTES {
+        return Err(DecodeError::Invalid {
+            offset: 0,
+            what: "register length",
+        });
+    }
+    Ok(())
+}
+
+fn read_padding(r: &mut Reader<'_>) -> Result<(), DecodeError> {
+    let padding_offset = r.offset();
+    if r.take(r.remaining())?.iter().any(|&b| b != 0) {
+        return Err(DecodeError::Invalid {
+            offset: padding_offset,
+            what: "register padding",
+        });
+    }
+    Ok(())
+}
+
+fn put_peer(out: &mut Vec<u8>, d: &DiscoveredPeer) {
+    out.extend_from_slice(&d.peer.0);
+    match d.addr.ip() {
+        IpAddr::V4(ip) => {
+            out.push(4);
+            out.extend_from_slice(&ip.octets());
+        }
+        IpAddr::V6(ip) => {
+            out.push(6);
+            out.extend_from_slice(&ip.octets());
+        }
+    }
+    out.extend_from_slice(&d.addr.port().to_be_bytes());
 }
 
 fn put_entry(out: &mut Vec<u8>, discovery_id: &DiscoveryId, peer: &PeerId, port: u16) {
@@ -213,25 +300,29 @@ fn read_peers(r: &mut Reader<'_>) -> Result<Vec<DiscoveredPeer>, DecodeError> {
     }
     let mut peers = Vec::with_capacity(n);
     for _ in 0..n {
-        let peer = PeerId(r.array()?);
-        let family_offset = r.offset();
-        let ip = match r.u8()? {
-            4 => IpAddr::V4(Ipv4Addr::from(r.array::<4>()?)),
-            6 => IpAddr::V6(Ipv6Addr::from(r.array::<16>()?)),
-            _ => {
-                return Err(DecodeError::Invalid {
-                    offset: family_offset,
-                    what: "address family",
-                });
-            }
-        };
-        let port = u16::from_be_bytes(r.array()?);
-        peers.push(DiscoveredPeer {
-            peer,
-            addr: SocketAddr::new(ip, port),
-        });
+        peers.push(read_peer(r)?);
     }
     Ok(peers)
+}
+
+fn read_peer(r: &mut Reader<'_>) -> Result<DiscoveredPeer, DecodeError> {
+    let peer = PeerId(r.array()?);
+    let family_offset = r.offset();
+    let ip = match r.u8()? {
+        4 => IpAddr::V4(Ipv4Addr::from(r.array::<4>()?)),
+        6 => IpAddr::V6(Ipv6Addr::from(r.array::<16>()?)),
+        _ => {
+            return Err(DecodeError::Invalid {
+                offset: family_offset,
+                what: "address family",
+            });
+        }
+    };
+    let port = u16::from_be_bytes(r.array()?);
+    Ok(DiscoveredPeer {
+        peer,
+        addr: SocketAddr::new(ip, port),
+    })
 }
 
 #[cfg(test)]
@@ -278,10 +369,59 @@ mod tests {
         assert_eq!(DiscoveryMessage::decode(&announce.encode()), Ok(announce));
     }
 
+    #[test]
+    fn mapped_registrations_and_introductions_round_trip() {
+        let register = DiscoveryMessage::RegisterMapped {
+            discovery_id: [7; 16],
+            peer: PeerId([8; 32]),
+        };
+        let bytes = register.encode();
+        assert_eq!(bytes.len(), REGISTER_BYTES);
+        assert_eq!(DiscoveryMessage::decode(&bytes), Ok(register));
+        assert!(!DiscoveryMessage::decode(&bytes).unwrap().is_reply());
+        assert!(DiscoveryMessage::decode(&bytes[..REGISTER_BYTES - 1]).is_err());
+        let mut dirty = bytes;
+        dirty[REGISTER_BYTES - 1] = 1;
+        assert!(DiscoveryMessage::decode(&dirty).is_err());
+        for ip in [
+            IpAddr::V6(Ipv6Addr::LOCALHOST),
+            IpAddr::V4(Ipv4Addr::new(198, 51, 100, 1)),
+        ] {
+            let introduce = DiscoveryMessage::Introduce {
+                discovery_id: [9; 16],
+                peer: DiscoveredPeer {
+                    peer: PeerId([10; 32]),
+                    addr: SocketAddr::new(ip, 40_000),
+                },
+            };
+            let bytes = introduce.encode();
+            assert!(bytes.len() <= INTRODUCE_BYTES);
+            assert_eq!(DiscoveryMessage::decode(&bytes), Ok(introduce.clone()));
+            assert!(introduce.is_reply());
+            // Truncated or extended introductions are refused.
+            assert!(DiscoveryMessage::decode(&bytes[..bytes.len() - 1]).is_err());
+            let mut longer = bytes;
+            longer.push(0);
+            assert!(DiscoveryMessage::decode(&longer).is_err());
+        }
+        assert_eq!(
+            DiscoveryMessage::Introduce {
+                discovery_id: [0; 16],
+                peer: DiscoveredPeer {
+                    peer: PeerId([0; 32]),
+                    addr: SocketAddr::new(IpAddr::V6(Ipv6Addr::LOCALHOST), 1),
+                },
+            }
+            .encode()
+            .len(),
+            INTRODUCE_BYTES
+        );
+    }
+
     proptest! {
         #![proptest_config(crate::test_config(256))]
         #[test]
-        fn arbitrary_bytes_never_panic(mut bytes in proptest::collection::vec(any::<u8>(), 0..1300), tag in 1u8..4) {
+        fn arbitrary_bytes_never_panic(mut bytes in proptest::collection::vec(any::<u8>(), 0..1300), tag in 1u8..6) {
             if bytes.len() >= 5 {
                 bytes[..3].copy_from_slice(MAGIC);
                 bytes[3] = DISCOVERY_WIRE_VERSION;

@@ -1,5 +1,6 @@
 //! The discovery server's socket loop (`sculpt discovery --listen ADDR`): a blocking UDP
-//! socket around the sans-IO [`Registry`]. It needs no async runtime.
+//! socket around the sans-IO [`Registry`], which answers registrations and sends the
+//! introductions they cause. It needs no async runtime.
 
 use std::io;
 use std::net::{SocketAddr, UdpSocket};
@@ -55,8 +56,8 @@ impl DiscoveryServer {
         self.socket.local_addr()
     }
 
-    /// Answers registrations until `shutdown` is set (checked at least every
-    /// [`SHUTDOWN_POLL_MILLIS`]); returns the counters.
+    /// Answers registrations and sends the introductions they cause until `shutdown` is set
+    /// (checked at least every [`SHUTDOWN_POLL_MILLIS`]); returns the counters.
     pub fn run(mut self, shutdown: &AtomicBool) -> Result<RegistryStats, ServeError> {
         // One byte more than the limit, so an oversized datagram is seen as such rather than
         // silently truncated to a valid length.
@@ -75,6 +76,13 @@ impl DiscoveryServer {
                         && self.socket.send_to(&reply, from).is_err()
                     {
                         self.registry.count_send_failure();
+                    }
+                    // Introductions of the peer that just registered, to the session's peers
+                    // (within the request's bytes, see the registry).
+                    while let Some((to, introduction)) = self.registry.poll_transmit() {
+                        if self.socket.send_to(&introduction, to).is_err() {
+                            self.registry.count_send_failure();
+                        }
                     }
                 }
                 // Timeouts let the loop see the shutdown flag; the others are ICMP news

@@ -5,6 +5,7 @@
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
+use std::time::Duration;
 
 use tokio::sync::mpsc;
 
@@ -100,18 +101,23 @@ async fn accept_one(shared: Arc<Shared>, incoming: quinn::Incoming, slot: Admiss
 }
 
 /// Dials `addr` as connection `conn`; the core task answers the dial when it hears back.
+/// The QUIC handshake may take `handshake_timeout`, the whole admission
+/// [`admission::admission_timeout`].
 pub(super) async fn dial(
     shared: Arc<Shared>,
     endpoint: quinn::Endpoint,
     conn: ConnId,
     addr: SocketAddr,
+    handshake_timeout: Duration,
 ) {
     let attempt = async {
         let connecting = endpoint
             .connect(addr, SERVER_NAME)
             .map_err(|e| AdmissionError::Connection(e.to_string()))?;
-        let connection = connecting
+        // Dropping an unfinished handshake abandons it; a punch then starts a fresh one.
+        let connection = tokio::time::timeout(handshake_timeout, connecting)
             .await
+            .map_err(|_| AdmissionError::Timeout)?
             .map_err(|e| AdmissionError::Connection(e.to_string()))?;
         match admission::admit_dialer(&connection, &shared.keys, &shared.keypair).await {
             Ok(admitted) => Ok((connection, admitted)),

@@ -8,9 +8,9 @@ use std::sync::Arc;
 use tokio::sync::{mpsc, oneshot};
 
 use super::{
-    CloseCode, Command, ConnStats, DialError, DisconnectReason, Input, MAX_QUEUED_FRAMES_PER_CONN,
-    MAX_REJECTIONS_PER_CONN, NodeAuthorError, NodeEvent, NodeStats, Observer, RefusalKind, Shared,
-    conn,
+    CloseCode, Command, ConnStats, Counters, DialError, DisconnectReason, Input,
+    MAX_QUEUED_FRAMES_PER_CONN, MAX_REJECTIONS_PER_CONN, NodeAuthorError, NodeEvent, NodeStats,
+    Observer, RefusalKind, Shared, conn,
 };
 use crate::identity::PeerId;
 use crate::log::Log;
@@ -44,6 +44,8 @@ pub(super) struct Core<P> {
     dials: BTreeMap<ConnId, oneshot::Sender<Result<ConnId, DialError>>>,
     events: mpsc::Sender<NodeEvent>,
     stats: NodeStats,
+    /// Counted outside this task (socket, rendezvous, punches); read into the stats.
+    counters: Arc<Counters>,
     /// The first bytes of every encoded ephemeral message (version and tag).
     ephemeral_prefix: [u8; 2],
     running: bool,
@@ -87,6 +89,7 @@ impl<P: Payload + Send + 'static> Core<P> {
         endpoint: quinn::Endpoint,
         shared: Arc<Shared>,
         events: mpsc::Sender<NodeEvent>,
+        counters: Arc<Counters>,
     ) -> Self {
         Self {
             peer,
@@ -100,6 +103,7 @@ impl<P: Payload + Send + 'static> Core<P> {
             dials: BTreeMap::new(),
             events,
             stats: NodeStats::default(),
+            counters,
             ephemeral_prefix: ephemeral_prefix(),
             running: true,
         }
@@ -145,7 +149,11 @@ impl<P: Payload + Send + 'static> Core<P> {
 
     fn on_command(&mut self, command: Command<P>) {
         match command {
-            Command::Dial { addr, reply } => {
+            Command::Dial {
+                addr,
+                handshake_timeout,
+                reply,
+            } => {
                 let conn = self.shared.next_conn_id();
                 self.dials.insert(conn, reply);
                 tokio::spawn(conn::dial(
@@ -153,6 +161,7 @@ impl<P: Payload + Send + 'static> Core<P> {
                     self.endpoint.clone(),
                     conn,
                     addr,
+                    handshake_timeout,
                 ));
             }
             Command::Author { payload, reply } => {
@@ -472,6 +481,7 @@ impl<P: Payload + Send + 'static> Core<P> {
 
     fn stats_snapshot(&self) -> NodeStats {
         let mut stats = self.stats.clone();
+        self.counters.fill(&mut stats);
         stats.connections = self
             .peer
             .connections()

@@ -12,22 +12,36 @@
 //! receives [`NodeEvent`]s on a bounded channel. Events are hints for the UI: when the app
 //! does not keep up, events are dropped and counted ([`NodeStats::n_events_dropped`]), and
 //! the log read through [`NodeHandle::with_peer`] stays the truth.
+//!
+//! The endpoint's UDP socket is a [`DemuxSocket`]: discovery replies are taken out of the
+//! QUIC traffic for the node's discovery client, so that [`NodeHandle::register_with`]
+//! registers from the socket peers must dial (behind a NAT, the server sees and lists that
+//! socket's public mapping), and [`NodeHandle::punch`] dials a discovered peer with the
+//! retries hole punching needs.
 
 mod conn;
 mod core;
+mod punch;
+
+pub use punch::{
+    MAX_PUNCH_ATTEMPTS, PUNCH_HANDSHAKE_TIMEOUT_MILLIS, PunchError, Punched, Unreachable,
+};
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, AtomicUsize};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
 
 use tokio::sync::{mpsc, oneshot};
 
 use crate::identity::{Keypair, PeerId};
 use crate::log::{AuthorError, Insertion, Log};
-use crate::net::admission::{AdmissionError, Role};
+use crate::net::admission::{self, AdmissionError, Role};
 use crate::net::discovery::DiscoveredPeer;
-use crate::net::session::SessionKeys;
+use crate::net::discovery::rendezvous::{self, RegisterError, Rendezvous};
+use crate::net::session::{DiscoveryId, SessionKeys};
+use crate::net::socket::{DemuxSocket, DiscoveryPort, SocketCounters};
 use crate::net::tls::{self, TlsError};
 use crate::op::OpId;
 use crate::payload::Payload;
@@ -344,6 +358,31 @@ pub struct NodeStats {
     pub n_datagrams_dropped: u64,
     /// Events dropped because the app did not read them in time.
     pub n_events_dropped: u64,
+    /// Discovery replies the socket took out of the QUIC traffic for the discovery client.
+    pub n_discovery_replies: u64,
+    /// Discovery replies dropped because
+    /// [`crate::net::socket::MAX_QUEUED_DISCOVERY_REPLIES`] waited unread.
+    pub n_discovery_replies_dropped: u64,
+    /// Registrations answered by the discovery server ([`NodeHandle::register_with`]).
+    pub n_registrations: u64,
+    /// Registrations left unanswered after every attempt.
+    pub n_registrations_unanswered: u64,
+    /// Introductions of newcomers received from the discovery server.
+    pub n_introductions: u64,
+    /// Discovery replies ignored: not from the server, or another session's introductions.
+    pub n_stray_discovery: u64,
+    /// Punches started ([`NodeHandle::punch`] on a peer not connected yet).
+    pub n_punches: u64,
+    /// Punches that ended with a connection to the peer.
+    pub n_punched: u64,
+    /// Punches that ended without one after [`MAX_PUNCH_ATTEMPTS`] ([`Unreachable`]).
+    pub n_unreachable: u64,
+    /// Discovered peers not punched because [`rendezvous::MAX_PUNCHES_IN_PROGRESS`] were
+    /// under way or [`rendezvous::MAX_INTRODUCTIONS_PER_REFRESH`] were acted on (tried at the
+    /// next refresh).
+    pub n_punches_skipped: u64,
+    /// Rendezvous events dropped because the app did not read them in time.
+    pub n_rendezvous_events_dropped: u64,
     /// Live connections, in id order.
     pub connections: Vec<ConnStats>,
 }
@@ -352,6 +391,44 @@ impl NodeStats {
     /// Failed admissions of every kind.
     pub fn n_failed_admissions(&self) -> u64 {
         self.failed_admissions.values().sum()
+    }
+}
+
+/// Counters kept outside the core task (by the socket, the rendezvous and punches), read
+/// into [`NodeStats`].
+#[derive(Debug, Default)]
+pub(crate) struct Counters {
+    pub(crate) socket: Arc<SocketCounters>,
+    pub(crate) n_registrations: AtomicU64,
+    pub(crate) n_registrations_unanswered: AtomicU64,
+    pub(crate) n_introductions: AtomicU64,
+    pub(crate) n_stray_discovery: AtomicU64,
+    pub(crate) n_punches: AtomicU64,
+    pub(crate) n_punched: AtomicU64,
+    pub(crate) n_unreachable: AtomicU64,
+    pub(crate) n_punches_skipped: AtomicU64,
+    pub(crate) n_rendezvous_events_dropped: AtomicU64,
+}
+
+impl Counters {
+    /// Counts one.
+    pub(crate) fn add(counter: &AtomicU64) {
+        counter.fetch_add(1, Ordering::Relaxed);
+    }
+
+    fn fill(&self, stats: &mut NodeStats) {
+        let get = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        stats.n_discovery_replies = self.socket.n_replies();
+        stats.n_discovery_replies_dropped = self.socket.n_replies_dropped();
+        stats.n_registrations = get(&self.n_registrations);
+        stats.n_registrations_unanswered = get(&self.n_registrations_unanswered);
+        stats.n_introductions = get(&self.n_introductions);
+        stats.n_stray_discovery = get(&self.n_stray_discovery);
+        stats.n_punches = get(&self.n_punches);
+        stats.n_punched = get(&self.n_punched);
+        stats.n_unreachable = get(&self.n_unreachable);
+        stats.n_punches_skipped = get(&self.n_punches_skipped);
+        stats.n_rendezvous_events_dropped = get(&self.n_rendezvous_events_dropped);
     }
 }
 
@@ -377,6 +454,9 @@ pub trait Observer<P>: Send + 'static {
 enum Command<P> {
     Dial {
         addr: SocketAddr,
+        /// How long the QUIC handshake may take (admission as a whole is bounded by
+        /// [`admission::ADMISSION_TIMEOUT_MILLIS`]).
+        handshake_timeout: Duration,
         reply: oneshot::Sender<Result<ConnId, DialError>>,
     },
     Author {
@@ -467,7 +547,7 @@ impl<P: Payload + Send + 'static> Node<P> {
         config: NodeConfig<P>,
         observer: Option<Box<dyn Observer<P>>>,
     ) -> Result<Self, NodeError> {
-        tokio::runtime::Handle::try_current().map_err(|_| NodeError::NoRuntime)?;
+        let runtime = tokio::runtime::Handle::try_current().map_err(|_| NodeError::NoRuntime)?;
         let NodeConfig {
             keypair,
             keys,
@@ -475,14 +555,8 @@ impl<P: Payload + Send + 'static> Node<P> {
             log,
             store,
         } = config;
-        let mut endpoint =
-            quinn::Endpoint::server(tls::server_config()?, listen).map_err(|source| {
-                NodeError::Bind {
-                    addr: listen,
-                    source,
-                }
-            })?;
-        endpoint.set_default_client_config(tls::client_config()?);
+        let counters = Arc::new(Counters::default());
+        let (endpoint, discovery) = bind_endpoint(listen, counters.socket.clone())?;
         let local_addr = endpoint.local_addr().map_err(|source| NodeError::Bind {
             addr: listen,
             source,
@@ -500,17 +574,65 @@ impl<P: Payload + Send + 'static> Node<P> {
         });
         let peer = Peer::new(keypair, keys.session_id(), log);
         tokio::spawn(conn::accept_loop(endpoint.clone(), shared.clone()));
-        let core = core::Core::new(peer, observer, store, endpoint, shared, event_tx);
+        let core = core::Core::new(
+            peer,
+            observer,
+            store,
+            endpoint,
+            shared,
+            event_tx,
+            counters.clone(),
+        );
         tokio::spawn(core.run(command_rx, input_rx));
         Ok(Self {
             handle: NodeHandle {
                 commands: command_tx,
                 local_addr,
                 peer_id,
+                shared: Arc::new(HandleShared {
+                    discovery: Mutex::new(Some(discovery)),
+                    runtime,
+                    counters,
+                }),
             },
             events: event_rx,
         })
     }
+}
+
+/// Binds `listen` and builds the QUIC endpoint over a [`DemuxSocket`], so that the discovery
+/// client shares the endpoint's socket (and its NAT mapping).
+fn bind_endpoint(
+    listen: SocketAddr,
+    counters: Arc<SocketCounters>,
+) -> Result<(quinn::Endpoint, DiscoveryPort), NodeError> {
+    let bind_error = |source| NodeError::Bind {
+        addr: listen,
+        source,
+    };
+    let socket = std::net::UdpSocket::bind(listen).map_err(bind_error)?;
+    let runtime: Arc<dyn quinn::Runtime> = Arc::new(quinn::TokioRuntime);
+    let inner = runtime.wrap_udp_socket(socket).map_err(bind_error)?;
+    let (demux, discovery) = DemuxSocket::new(inner, counters);
+    let mut endpoint = quinn::Endpoint::new_with_abstract_socket(
+        quinn::EndpointConfig::default(),
+        Some(tls::server_config()?),
+        demux,
+        runtime,
+    )
+    .map_err(bind_error)?;
+    endpoint.set_default_client_config(tls::client_config()?);
+    Ok((endpoint, discovery))
+}
+
+/// What every clone of a [`NodeHandle`] shares.
+#[derive(Debug)]
+struct HandleShared {
+    /// The discovery client's end of the socket, until [`NodeHandle::register_with`] takes it.
+    discovery: Mutex<Option<DiscoveryPort>>,
+    /// The runtime the node runs on (the rendezvous task runs there too).
+    runtime: tokio::runtime::Handle,
+    counters: Arc<Counters>,
 }
 
 /// Commands to a running node; cheap to clone.
@@ -519,6 +641,7 @@ pub struct NodeHandle<P> {
     commands: mpsc::Sender<Command<P>>,
     local_addr: SocketAddr,
     peer_id: PeerId,
+    shared: Arc<HandleShared>,
 }
 
 impl<P> Clone for NodeHandle<P> {
@@ -527,6 +650,7 @@ impl<P> Clone for NodeHandle<P> {
             commands: self.commands.clone(),
             local_addr: self.local_addr,
             peer_id: self.peer_id,
+            shared: self.shared.clone(),
         }
     }
 }
@@ -557,9 +681,80 @@ impl<P: Payload + Send + 'static> NodeHandle<P> {
     /// Dials `addr` and waits for the handshake and admission. If a connection to the same
     /// peer already exists and is kept instead, its id is returned.
     pub async fn dial(&self, addr: SocketAddr) -> Result<ConnId, DialError> {
-        self.request(|reply| Command::Dial { addr, reply })
-            .await
-            .map_err(|_| DialError::Gone)?
+        self.dial_within(addr, admission::admission_timeout()).await
+    }
+
+    /// [`NodeHandle::dial`], giving up on the QUIC handshake after `handshake_timeout`.
+    async fn dial_within(
+        &self,
+        addr: SocketAddr,
+        handshake_timeout: Duration,
+    ) -> Result<ConnId, DialError> {
+        self.request(|reply| Command::Dial {
+            addr,
+            handshake_timeout,
+            reply,
+        })
+        .await
+        .map_err(|_| DialError::Gone)?
+    }
+
+    /// The connection to `peer`, if there is one.
+    async fn connection_to(&self, peer: PeerId) -> Result<Option<ConnId>, NodeGone> {
+        let peers = self.connected_peers().await?;
+        Ok(peers.into_iter().find(|(_, p)| *p == peer).map(|(c, _)| c))
+    }
+
+    /// Registers this node with the discovery server `server` under `discovery_id`, from the
+    /// node's own UDP socket, and keeps it registered (every
+    /// [`crate::net::discovery::client::REFRESH_INTERVAL_MILLIS`]) until the node stops.
+    ///
+    /// Behind a NAT the server sees, and lists, the public address the NAT mapped for this
+    /// socket: the one other peers can reach. Every peer the server names (in its reply, or
+    /// in an introduction of a newcomer, which arrives as soon as the newcomer registers) is
+    /// dialed at once with [`NodeHandle::punch`], so both sides of a pair dial each other at
+    /// about the same time and each NAT lets the other's packets in. Outcomes arrive on the
+    /// returned [`Rendezvous`]'s events and are counted in [`NodeStats`].
+    ///
+    /// One server per node: the node's socket has one discovery client. The rendezvous
+    /// holds a handle, so the node then runs until [`NodeHandle::shutdown`].
+    pub fn register_with(
+        &self,
+        server: SocketAddr,
+        discovery_id: DiscoveryId,
+    ) -> Result<Rendezvous, RegisterError> {
+        let unreachable_family =
+            server.is_ipv6() && self.local_addr.is_ipv4() && server.ip().to_canonical().is_ipv6();
+        if unreachable_family {
+            return Err(RegisterError::AddressFamily {
+                server,
+                local: self.local_addr,
+            });
+        }
+        let port = self
+            .shared
+            .discovery
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .take()
+            .ok_or(RegisterError::AlreadyRegistered)?;
+        Ok(rendezvous::spawn(
+            &self.shared.runtime,
+            self.clone(),
+            port,
+            server,
+            discovery_id,
+        ))
+    }
+
+    /// The counters shared with the socket, the rendezvous and punches.
+    pub(crate) fn counters(&self) -> &Counters {
+        &self.shared.counters
+    }
+
+    /// Resolves when the node has stopped (its core task is gone).
+    pub(crate) async fn stopped(&self) {
+        self.commands.closed().await;
     }
 
     /// Dials every discovered peer that is not this node and not connected yet, all at once,
@@ -579,6 +774,7 @@ impl<P: Payload + Send + 'static> NodeHandle<P> {
                 .commands
                 .send(Command::Dial {
                     addr: d.addr,
+                    handshake_timeout: admission::admission_timeout(),
                     reply,
                 })
                 .await;
