@@ -287,11 +287,15 @@ impl<P: Payload + Send + 'static> Core<P> {
         }
         // Two connections to one peer (both dialed at once, or a redial): both sides keep
         // the one whose dialer has the smaller id, and the newer one when the dialer is the
-        // same (a redial means the dialer believes the old one is dead).
+        // same (a redial means the dialer believes the old one is dead). A connection from
+        // another address of the peer (a restarted process on a new port, a NAT rebinding)
+        // replaces the old one: only the peer's key could open it, and the old path is most
+        // likely dead, while simultaneous dials always share both sockets' addresses.
         let dialer = |role: Role| if role == Role::Dialer { me } else { peer };
         let existing = self.conns.iter().find(|(_, l)| l.peer == peer);
         if let Some((&old, live)) = existing {
-            if dialer(role) <= dialer(live.role) {
+            let moved = live.connection.remote_address() != connection.remote_address();
+            if moved || dialer(role) <= dialer(live.role) {
                 self.stats.n_duplicates += 1;
                 self.drop_conn(old, CloseCode::Duplicate, Some(DisconnectReason::Duplicate));
             } else {
