@@ -34,6 +34,9 @@ pub struct NetArgs {
     /// The name other peers see beside your pointer and edits (default: your short id).
     #[arg(long, value_name = "NAME")]
     pub name: Option<String>,
+    /// The session's name as the LAN lists it (default: the store directory's name).
+    #[arg(long, value_name = "NAME")]
+    pub session_name: Option<String>,
 }
 
 impl NetArgs {
@@ -242,6 +245,7 @@ pub fn peer(args: PeerArgs) -> anyhow::Result<()> {
         demo: false,
         memory_fallback: false,
         name: args.net.name.clone(),
+        session_name: args.net.session_name.clone(),
     };
     let engine = Engine::start(config, app::clock::now().wall)?;
     for notice in lock(engine.view()).notices() {
@@ -318,6 +322,7 @@ fn peer_state(engine: &Engine) -> serde_json::Value {
         "to_send": to_send,
         "to_receive": to_receive,
         "store_error": view.store_error(),
+        "lan": view.lan_sessions().iter().map(|s| s.name.clone()).collect::<Vec<_>>(),
     })
 }
 

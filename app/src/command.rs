@@ -107,6 +107,9 @@ pub enum Command<'a> {
     Name(&'a str),
     /// `lease`, `hold` or `release` the selected object.
     Lease(LeaseKind),
+    /// `tool: carve ball radius 0.2 ...`: the brush a drag sculpts with (no op; see
+    /// [`crate::brush::Brush::parse`]).
+    Tool(&'a str),
     /// Plain text: a chat message.
     Chat(&'a str),
     /// `shape: <formula>`: the selected object's implicit geometry.
@@ -150,6 +153,7 @@ pub fn parse(line: &str) -> Option<Command<'_>> {
             "colour" | "color" => return Some(Command::Colour(rest)),
             "new" => return Some(Command::New(rest)),
             "name" => return Some(Command::Name(rest)),
+            "tool" => return Some(Command::Tool(rest)),
             other => {
                 if let Some((_, kind)) = PropertyKind::ALL.iter().find(|(n, _)| *n == other) {
                     return Some(Command::Property(*kind, rest));
@@ -319,6 +323,7 @@ pub fn plan(
             };
             Ok(planned(payload, summary))
         }
+        Command::Tool(_) => Err("tool: is a brush setting, not an op; the window sets it".into()),
         Command::Undo => {
             let (id, _) = selected_object()?;
             let target = session.undo_target(id).ok_or_else(|| {

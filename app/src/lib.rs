@@ -5,6 +5,8 @@
 //!   directory (locked), the QUIC node with its discovery, and the fold of the log into a
 //!   published [`engine::View`] that names what each change touched. All IO runs on the
 //!   engine's own thread.
+//! - [`brush`]: brushes (add, carve, paint a property; shape, size, blend, mirror) and the
+//!   strokes a drag draws with them, one op each.
 //! - [`command`]: the command/chat language (`shape:`, `colour:`, `new:`, `undo`, ...),
 //!   planned into ops against a view.
 //! - [`files`]: scene files a user opens, their `Inline` files confined to the scene's
@@ -24,6 +26,7 @@
 //!     demo: true,
 //!     memory_fallback: false,
 //!     name: None,
+//!     session_name: None,
 //! };
 //! let engine = Engine::start(config, app::clock::now().wall).unwrap();
 //! println!("{} objects", lock(engine.view()).scene().len());
@@ -31,6 +34,7 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod brush;
 pub mod clock;
 pub mod command;
 pub mod engine;

@@ -144,12 +144,24 @@ impl Drop for Proc {
 
 /// Waits until `done` holds for the processes' latest states.
 fn wait(procs: &mut [&mut Proc], what: &str, done: impl Fn(&[&mut Proc]) -> bool) {
-    let deadline = app::clock::now().instant + WAIT;
+    wait_within(procs, what, WAIT, done);
+}
+
+/// [`wait`], failing after `limit`.
+fn wait_within(
+    procs: &mut [&mut Proc],
+    what: &str,
+    limit: Duration,
+    done: impl Fn(&[&mut Proc]) -> bool,
+) {
+    let started = app::clock::now().instant;
+    let deadline = app::clock::now().instant + limit;
     loop {
         for p in procs.iter_mut() {
             p.drain();
         }
         if done(procs) {
+            println!("{what}: {:.2} s", started.elapsed().as_secs_f64());
             return;
         }
         if app::clock::now().instant > deadline {
@@ -255,7 +267,12 @@ fn peers_meet_through_discovery_survive_a_kill_and_sync_offline_edits() {
         &code,
         &[
             &with_discovery[..],
-            &["--command", "new: 0.5-abs(x)", "--command", "hello from b"],
+            &[
+                "--command",
+                "new: (0.5-abs(x)) & (0.5-abs(y)) & (0.5-abs(z))",
+                "--command",
+                "hello from b",
+            ],
         ]
         .concat(),
     );

@@ -578,3 +578,90 @@ fn a_headless_peers_edits_and_pointer_show_in_the_window_and_the_windows_edit_re
     // The window's own edit reached the peer.
     peer.wait_for("the window's edit", |v| v["ops"] == 4 && v["objects"] == 2);
 }
+
+/// Mean absolute difference of two pictures' RGB inside the box `[x0, y0, x1, y1]` (fractions
+/// of the viewport, the window's left part).
+fn difference(a: &RgbaImage, b: &RgbaImage, [x0, y0, x1, y1]: [f32; 4]) -> f64 {
+    let viewport_width = a.width.saturating_sub(400) as f32;
+    let height = a.height as f32;
+    let (mut sum, mut n) = (0.0, 0.0);
+    let ys = (y0 * height) as u32..(y1 * height) as u32;
+    for y in ys {
+        for x in (x0 * viewport_width) as u32..(x1 * viewport_width) as u32 {
+            let (pa, pb) = (a.pixel(x, y).unwrap(), b.pixel(x, y).unwrap());
+            for c in 0..3 {
+                sum += f64::from(pa[c].abs_diff(pb[c]));
+            }
+            n += 3.0;
+        }
+    }
+    sum / n
+}
+
+/// A drag across the watermelon's lower-left rind, as fractions of the viewport.
+const DRAG: &str = "0.32,0.66:0.52,0.72";
+/// A box around that drag, and one far from it.
+const NEAR_DRAG: [f32; 4] = [0.28, 0.6, 0.56, 0.78];
+const FAR_FROM_DRAG: [f32; 4] = [0.55, 0.3, 0.75, 0.45];
+
+#[test]
+fn a_carve_stroke_is_one_op_shows_where_dragged_survives_a_restart_and_undoes() {
+    let display = display();
+    let dir = scratch("carve");
+    let before = window_run(&display, &dir.join("plain"), "plain", &[]);
+    let carved = window_run(
+        &display,
+        &dir,
+        "carved",
+        &["tool: carve ball radius 0.12", &format!("drag: {DRAG}")],
+    );
+    let objects = &carved.state["objects"];
+    assert_eq!(objects[0]["n_edits"], 1, "{}", carved.state);
+    let history = carved.state["history"].as_array().unwrap();
+    assert_eq!(
+        history.len(),
+        2,
+        "exactly one op for the whole drag: {history:?}"
+    );
+    assert!(history[1]["what"].as_str().unwrap().contains("sculpted"));
+    let near = difference(&before.picture, &carved.picture, NEAR_DRAG);
+    let far = difference(&before.picture, &carved.picture, FAR_FROM_DRAG);
+    assert!(
+        near > 8.0 && far < 2.0,
+        "the picture changed {near} near the drag, {far} away"
+    );
+    // A restart shows the same carved object, from the store.
+    let again = window_run(&display, &dir, "again", &[]);
+    assert_eq!(again.state["n_loaded"], 2, "{}", again.state);
+    assert_eq!(again.state["objects"][0]["n_edits"], 1);
+    assert!(difference(&carved.picture, &again.picture, NEAR_DRAG) < 2.0);
+    // Undo (the shortcut) brings the surface back.
+    let undone = window_run(&display, &dir, "undone", &["key: undo"]);
+    assert_eq!(undone.state["objects"][0]["n_edits"], 0, "{}", undone.state);
+    let back = difference(&before.picture, &undone.picture, NEAR_DRAG);
+    assert!(back < 2.0, "after undo the drag's box differs by {back}");
+}
+
+#[test]
+fn a_paint_stroke_of_density_changes_the_density_where_it_went() {
+    let display = display();
+    let dir = scratch("paint");
+    let run = window_run(
+        &display,
+        &dir,
+        "painted",
+        &[
+            "tool: paint density 0.95 ball radius 0.2",
+            &format!("drag: {DRAG}"),
+        ],
+    );
+    let state = &run.state;
+    assert_eq!(state["objects"][0]["n_edits"], 1, "{state}");
+    let probes = state["probes"].as_array().unwrap();
+    assert!(probes.len() >= 3, "{state}");
+    for probe in probes {
+        assert_eq!(probe["density"], 0.95, "{probe}");
+        // Painting leaves the solid alone: the stroke's points are still on its surface.
+        assert!(probe["value"].as_f64().unwrap().abs() < 0.05, "{probe}");
+    }
+}

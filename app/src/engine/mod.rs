@@ -20,7 +20,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use replication::net::admission::AdmissionError;
-use replication::net::discovery::{client, lan};
+use replication::net::discovery::dnssd::{self, Announcement, DnsSd, DnsSdConfig, LanSession};
 use replication::net::invite::Invite;
 use replication::net::node::{DialError, DisconnectReason, NodeConfig, NodeEvent, NodeHandle};
 use replication::net::{Node, SessionKeys};
@@ -91,6 +91,8 @@ pub struct EngineConfig {
     pub memory_fallback: bool,
     /// The name other peers see (at most [`presence::MAX_NAME_BYTES`]); `None`: the short id.
     pub name: Option<String>,
+    /// The session's name on the LAN (`None`: the store directory's name).
+    pub session_name: Option<String>,
 }
 
 /// Why the engine did not start.
@@ -134,6 +136,8 @@ enum Request {
         value: Vec<u8>,
     },
     Dial(SocketAddr),
+    /// Announce the session on the LAN and dial the peers found there.
+    Share,
     Shutdown,
 }
 
@@ -266,6 +270,19 @@ impl Engine {
             discovery_id: SessionKeys::from_invite(&invite).discovery_id(),
             presence: local_presence.clone(),
             dialed: Arc::default(),
+            shared: tokio::sync::watch::channel(
+                config.invite.is_some()
+                    || !config.network.dial.is_empty()
+                    || config.network.discovery.is_some(),
+            )
+            .0,
+            session_name: config.session_name.clone().unwrap_or_else(|| {
+                config.store.file_name().map_or_else(
+                    || "sculpt".to_string(),
+                    |n| n.to_string_lossy().into_owned(),
+                )
+            }),
+            lan: Mutex::new(None),
         };
         let thread = std::thread::Builder::new()
             .name("sculpt-engine".into())
@@ -378,6 +395,12 @@ impl Engine {
             .clone()
     }
 
+    /// Announces the session on the LAN (DNS-SD) and dials its peers found there; a session
+    /// started with an invite, a dial or a discovery node is shared from the start.
+    pub fn share(&self) -> Result<(), RequestError> {
+        self.request(Request::Share)
+    }
+
     /// Dials a peer once.
     pub fn dial(&self, addr: SocketAddr) -> Result<(), RequestError> {
         self.request(Request::Dial(addr))
@@ -414,6 +437,12 @@ struct Worker {
     presence_changed: Arc<std::sync::atomic::AtomicBool>,
     /// How this engine reached the addresses it dialed (for the peers panel).
     dialed: Dialed,
+    /// Whether the session is announced on the LAN.
+    shared: tokio::sync::watch::Sender<bool>,
+    /// The session's name on the LAN.
+    session_name: String,
+    /// The LAN's sessions, as DNS-SD lists them.
+    lan: Mutex<Option<tokio::sync::watch::Receiver<Vec<LanSession>>>>,
 }
 
 /// How this engine reached the addresses it dialed (at most [`MAX_DIALED`] are kept).
@@ -527,6 +556,9 @@ impl Worker {
                     Some(Request::Ephemeral { channel, value }) => {
                         let _ = handle.send_ephemeral(channel, value).await;
                     }
+                    Some(Request::Share) => {
+                        self.shared.send_replace(true);
+                    }
                     Some(Request::Dial(addr)) => {
                         self.note_dialed(addr, "direct");
                         let handle = handle.clone();
@@ -584,24 +616,43 @@ impl Worker {
             tokio::spawn(keep_dialing(handle.clone(), addr, news.clone()));
         }
         if let Some(server) = self.network.discovery {
-            tokio::spawn(stay_registered(
+            stay_registered(
                 server,
                 self.discovery_id,
-                handle.clone(),
+                handle,
                 news.clone(),
                 self.dialed.clone(),
-            ));
+            );
         }
         if self.network.lan {
-            let port = handle.local_addr().port();
-            match lan::LanDiscovery::bind(
-                lan::LanConfig::default(),
-                self.discovery_id,
-                handle.peer_id(),
-                port,
-            ) {
+            match DnsSd::start(DnsSdConfig::default()) {
                 Ok(finder) => {
-                    tokio::spawn(lan::announce_and_dial(finder, handle.clone()));
+                    let announcement = Announcement {
+                        discovery_id: self.discovery_id,
+                        session_name: self.session_name.clone(),
+                        peer: handle.peer_id(),
+                        quic_addr: handle.local_addr(),
+                        n_peers: 0,
+                    };
+                    let (sessions, listed) = tokio::sync::watch::channel(Vec::new());
+                    *self
+                        .lan
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(listed);
+                    let (handle, shared, news) =
+                        (handle.clone(), self.shared.subscribe(), news.clone());
+                    tokio::spawn(async move {
+                        let driving = dnssd::announce_and_dial(
+                            finder,
+                            handle,
+                            announcement,
+                            shared,
+                            sessions,
+                        );
+                        if let Err(e) = driving.await {
+                            news.say(format!("LAN discovery stopped: {e}"));
+                        }
+                    });
                 }
                 Err(e) => news.say(format!("LAN discovery is off: {e}")),
             }
@@ -717,7 +768,26 @@ impl Worker {
         let Ok(stats) = handle.stats().await else {
             return;
         };
+        let lan: Option<Vec<LanSession>> = self
+            .lan
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .as_ref()
+            .map(|r| r.borrow().clone());
         let mut view = lock(&self.view);
+        if let Some(lan) = lan {
+            view.lan_sessions = lan
+                .into_iter()
+                .filter(|s| s.peer != handle.peer_id())
+                .map(|s| view::LanRow {
+                    ours: s.discovery_id == self.discovery_id,
+                    name: s.name,
+                    host: s.host,
+                    n_peers: s.n_peers,
+                })
+                .collect();
+        }
+        view.shared = *self.shared.borrow();
         for row in &mut view.peers {
             if let Some(c) = stats.connections.iter().find(|c| c.peer == row.peer) {
                 row.rtt_micros = Some(c.rtt_micros);
@@ -768,48 +838,55 @@ async fn keep_dialing(handle: NodeHandle<ShapePayload>, addr: SocketAddr, news: 
     }
 }
 
-/// Keeps the node registered with a discovery server and dials whom it learns; says when the
-/// server cannot be reached (LAN and direct dialing go on meanwhile).
-async fn stay_registered(
+/// Keeps the node registered with a discovery server through the node's own socket (so the
+/// server sees its public address), punches through NATs to whom it learns, and says when the
+/// server cannot be reached (LAN and direct dialing go on meanwhile) or a peer cannot be
+/// reached directly.
+fn stay_registered(
     server: SocketAddr,
     discovery_id: replication::net::session::DiscoveryId,
-    handle: NodeHandle<ShapePayload>,
+    handle: &NodeHandle<ShapePayload>,
     news: NewsSink,
     dialed: Dialed,
 ) {
-    let port = handle.local_addr().port();
-    let mut reachable = None;
-    loop {
-        match client::register(server, discovery_id, handle.peer_id(), port).await {
-            Ok(found) => {
-                if reachable != Some(true) {
-                    news.say(format!("registered with the discovery node {server}"));
-                    reachable = Some(true);
-                }
-                for peer in &found {
-                    note_dialed(&dialed, peer.addr, "via discovery");
-                }
-                for (peer, outcome) in handle.dial_discovered(&found).await {
-                    if let Err(e) = outcome {
-                        news.say(dial_failure(peer.addr, &e));
+    use replication::net::discovery::RendezvousEvent;
+    let mut rendezvous = match handle.register_with(server, discovery_id) {
+        Ok(r) => r,
+        Err(e) => return news.say(format!("discovery is off: {e}")),
+    };
+    tokio::spawn(async move {
+        let mut reachable = None;
+        while let Some(event) = rendezvous.events.recv().await {
+            match event {
+                RendezvousEvent::Registered { server, found } => {
+                    for peer in &found {
+                        note_dialed(&dialed, peer.addr, "via discovery");
+                    }
+                    if reachable != Some(true) {
+                        news.say(format!("registered with the discovery node {server}"));
+                        reachable = Some(true);
                     }
                 }
-            }
-            Err(e) => {
-                if reachable != Some(false) {
-                    news.say(format!(
-                        "the discovery node {server} is unreachable ({e}); LAN and direct \
-                         dialing still work, and it is tried again"
-                    ));
-                    reachable = Some(false);
+                RendezvousEvent::NoAnswer { server, .. } => {
+                    if reachable != Some(false) {
+                        news.say(format!(
+                            "the discovery node {server} is unreachable; LAN and direct dialing \
+                             still work, and it is tried again"
+                        ));
+                        reachable = Some(false);
+                    }
+                }
+                RendezvousEvent::Introduced { peer } => {
+                    note_dialed(&dialed, peer.addr, "via discovery");
+                }
+                RendezvousEvent::Connected { .. } => {}
+                RendezvousEvent::Unreachable(u) => news.say(u.to_string()),
+                RendezvousEvent::DialFailed { peer, error } => {
+                    news.say(dial_failure(peer.addr, &error));
                 }
             }
         }
-        tokio::time::sleep(Duration::from_millis(client::REFRESH_INTERVAL_MILLIS)).await;
-        if handle.stats().await.is_err() {
-            return;
-        }
-    }
+    });
 }
 
 /// A dial failure in words a person can act on.

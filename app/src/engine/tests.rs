@@ -29,6 +29,7 @@ fn config(store: &Path) -> EngineConfig {
         demo: true,
         memory_fallback: true,
         name: None,
+        session_name: None,
     }
 }
 

@@ -15,7 +15,7 @@ use replication::log::Insertion;
 use replication::materialize::Materialized;
 use replication::net::node::Observer;
 use replication::shape::{ShapePayload, ShapeScene};
-use replication::{Effect, Log, Mark, OpId, Payload as _, Peer, PeerId};
+use replication::{Effect, Log, Mark, OpId, Payload as _, Peer, PeerId, Timestamp};
 
 use super::presence::Presence;
 use crate::clock::time_of_day_utc;
@@ -24,6 +24,8 @@ use crate::clock::time_of_day_utc;
 pub const MAX_HISTORY_ROWS: usize = 500;
 /// Most chat rows a view holds (the latest ones).
 pub const MAX_CHAT_ROWS: usize = 500;
+/// This peer's rejected ops a view lists (the latest ones).
+pub const MAX_REJECTIONS_SHOWN: usize = 20;
 /// Most characters of a formula or chat text quoted in a history row.
 pub const MAX_QUOTE_CHARS: usize = 60;
 /// The bit that marks a group's id among the objects a refold names (as `ShapePayload` sets
@@ -54,6 +56,10 @@ pub struct HistoryRow {
     pub what: String,
     /// `effective`, `undone` or `rejected: <reason>`.
     pub status: String,
+    /// The op.
+    pub op: OpId,
+    /// This peer's own edit, in effect: it can be undone from the history.
+    pub undoable: bool,
 }
 
 /// One peer of the session met since start, as the node and its sync state see it.
@@ -80,6 +86,19 @@ pub struct PeerRow {
     pub to_receive: u64,
 }
 
+/// A session announced on the LAN.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LanRow {
+    /// Its name.
+    pub name: String,
+    /// The announcing peer's host.
+    pub host: String,
+    /// Peers it says it is connected to.
+    pub n_peers: u16,
+    /// This peer's own session.
+    pub ours: bool,
+}
+
 /// The engine's published state.
 pub struct View {
     me: PeerId,
@@ -91,10 +110,14 @@ pub struct View {
     redo: BTreeMap<u64, OpId>,
     next_object: u64,
     changes: ChangeLog,
+    leases: BTreeMap<u64, replication::lease::Lease>,
+    my_rejections: Vec<(OpId, String)>,
     generation: u64,
     hash: Option<(u64, String)>,
     pub(super) peers: Vec<PeerRow>,
     pub(super) presence: BTreeMap<PeerId, Presence>,
+    pub(super) lan_sessions: Vec<LanRow>,
+    pub(super) shared: bool,
     pub(super) n_bad_presence: u64,
     pub(super) notices: Vec<String>,
     pub(super) store_error: Option<String>,
@@ -118,10 +141,14 @@ impl View {
             redo: BTreeMap::new(),
             next_object: 0,
             changes: ChangeLog::default(),
+            leases: BTreeMap::new(),
+            my_rejections: Vec::new(),
             generation: 0,
             hash: None,
             peers: Vec::new(),
             presence: BTreeMap::new(),
+            lan_sessions: Vec::new(),
+            shared: false,
             n_bad_presence: 0,
             notices: Vec::new(),
             store_error: None,
@@ -157,6 +184,39 @@ impl View {
         self.undo = undo;
         self.redo = redo;
         self.next_object = next_object_id(log, self.me);
+        // Every lease as the fold left it; a face compares `expires_at` with its clock.
+        let ids: Vec<u64> = self.scene().objects().map(|(id, _)| id.0).collect();
+        self.leases = ids
+            .into_iter()
+            .filter_map(|id| {
+                let lease = log.lease(replication::ObjectId(id), Timestamp(0))?;
+                Some((id, lease))
+            })
+            .collect();
+        self.my_rejections = log
+            .rejected_by(&self.me)
+            .into_iter()
+            .rev()
+            .take(MAX_REJECTIONS_SHOWN)
+            .map(|(id, reason)| {
+                let what = log
+                    .get(&id)
+                    .map_or_else(String::new, |op| describe(log, self.scene(), op.payload()));
+                (id, format!("{what}: {reason}"))
+            })
+            .collect();
+    }
+
+    /// The lease on `object` as the fold left it (it may have expired since: compare
+    /// `expires_at` with the clock).
+    pub fn lease(&self, object: u64) -> Option<&replication::lease::Lease> {
+        self.leases.get(&object)
+    }
+
+    /// This peer's latest rejected ops (newest first, at most [`MAX_REJECTIONS_SHOWN`]), with
+    /// what they did and why they were rejected.
+    pub fn my_rejections(&self) -> &[(OpId, String)] {
+        &self.my_rejections
     }
 
     /// Sets what the engine calls after each change of the view (a window asks for a frame).
@@ -248,6 +308,16 @@ impl View {
     /// The latest presence of each connected peer.
     pub fn presence(&self) -> &BTreeMap<PeerId, Presence> {
         &self.presence
+    }
+
+    /// The sessions announced on the LAN by other peers (this one's own included, marked).
+    pub fn lan_sessions(&self) -> &[LanRow] {
+        &self.lan_sessions
+    }
+
+    /// Whether the session is announced on the LAN.
+    pub fn is_shared(&self) -> bool {
+        self.shared
     }
 
     /// Presence values refused as malformed.
@@ -434,9 +504,14 @@ fn history(log: &Log<ShapePayload>, me: PeerId, scene: &Scene) -> Vec<HistoryRow
                 }
                 Mark::Effective => "effective".to_string(),
             };
+            let mine = entry.op.author() == me;
+            let edits = matches!(payload.effect(), Effect::Edit { .. })
+                && !matches!(payload, ShapePayload::Create { .. });
             HistoryRow {
                 author: entry.op.author().short(),
-                mine: entry.op.author() == me,
+                mine,
+                op: entry.op.id(),
+                undoable: mine && edits && entry.active,
                 time: time_of_day_utc(entry.op.timestamp()),
                 what: describe(log, scene, payload),
                 status,

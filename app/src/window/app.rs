@@ -15,7 +15,8 @@ use render::snapshot::render_from_scene;
 
 use super::hooks::Hooks;
 use super::mesher::{MeshJob, Mesher};
-use super::viewport::{ViewState, ViewportReport, viewport_ui};
+use super::viewport::{StrokeEvent, StrokePhase, ViewState, ViewportReport, viewport_ui};
+use ::app::brush::{Brush, Stroke};
 use ::app::clock::{self, Now};
 use ::app::command::{self, Planned};
 use ::app::engine::{
@@ -27,6 +28,10 @@ use replication::PeerId;
 pub const FRAME_SAMPLES_MAX: usize = 600;
 /// Edit-to-mesh times kept.
 pub const EDIT_SAMPLES_MAX: usize = 100;
+/// Colour of the brush outline and the stroke being drawn.
+const BRUSH_COLOUR: [f32; 4] = [1.0, 1.0, 1.0, 1.0];
+/// Milliseconds between preview meshes of a stroke being drawn.
+const PREVIEW_MILLIS: u64 = 120;
 /// Half the size of another peer's pointer cross, in world units.
 const PRESENCE_CROSS_SIZE: f32 = 0.06;
 /// Colour of the selected object's box.
@@ -120,6 +125,16 @@ pub struct SculptApp {
     pub(super) config: EngineConfig,
     /// The invite typed into "Join", and why it was refused.
     pub(super) join_input: Option<(String, Option<String>)>,
+    /// The brush a drag sculpts with.
+    pub(super) brush: Brush,
+    /// A drag on a surface sculpts (otherwise it orbits).
+    pub(super) sculpting: bool,
+    /// The stroke being drawn.
+    stroke: Option<Stroke>,
+    /// When the stroke's last preview was sent to the mesher.
+    preview_at: Option<Instant>,
+    /// The last stroke's points (scene coordinates), for the state dump.
+    pub(super) last_stroke: Option<Vec<glam::DVec3>>,
     /// The peer whose camera this window follows.
     pub(super) following: Option<PeerId>,
     /// The surface point under the pointer, in the renderer's world.
@@ -186,6 +201,11 @@ impl SculptApp {
             config,
             join_input: None,
             following: None,
+            brush: Brush::default(),
+            sculpting: false,
+            stroke: None,
+            preview_at: None,
+            last_stroke: None,
             pointer: None,
             presence_sent: None,
             title: String::new(),
@@ -200,6 +220,10 @@ impl SculptApp {
         let view = lock(self.engine.view());
         let (changes, cursor) = view.changes_since(self.changes_cursor);
         self.changes_cursor = cursor;
+        if self.selected.is_none() {
+            // The first object to appear (the demo, or a joined session's) is selected.
+            self.selected = view.scene().objects().next().map(|(id, _)| id.0);
+        }
         if let Some(changes) = changes {
             self.dirty |= !changes.is_empty();
             for id in changes {
@@ -268,6 +292,7 @@ impl SculptApp {
     pub fn is_idle(&self) -> bool {
         !self.dirty
             && self.pending.is_none()
+            && self.stroke.is_none()
             && self
                 .objects
                 .values()
@@ -288,6 +313,19 @@ impl SculptApp {
         let Some(command) = command::parse(line) else {
             return;
         };
+        if let command::Command::Tool(text) = command {
+            match self.brush.parse(text) {
+                Ok(brush) => {
+                    self.brush = brush;
+                    self.sculpting = true;
+                    self.input_error = None;
+                    self.input.clear();
+                    self.status = format!("tool: {} (drag on a surface)", brush.describe());
+                }
+                Err(e) => self.input_error = Some(e),
+            }
+            return;
+        }
         if self.pending.is_some() {
             self.input_error = Some("the last command is still being saved; try again".into());
             return;
@@ -497,10 +535,24 @@ impl SculptApp {
     }
 
     fn central_ui(&mut self, ui: &mut egui::Ui) {
-        let (scene, ids) = self.drawn_scene();
+        let (mut scene, ids) = self.drawn_scene();
+        self.draw_brush(&mut scene);
         let sphere = bounding_sphere(self.objects.values().filter_map(|t| t.drawn_box));
-        let input = viewport_ui(ui, &mut self.view, &scene, sphere, &self.viewport);
-        if input.picked.is_some() || input.missed {
+        let sculpting = self.sculpting;
+        let mut input = viewport_ui(
+            ui,
+            sculpting,
+            &mut self.view,
+            &scene,
+            sphere,
+            &self.viewport,
+        );
+        if let Some(event) = self.hooks.scripted_stroke(input.size_px, self.is_idle()) {
+            input.stroke = Some(event);
+        }
+        if let Some(event) = input.stroke {
+            self.stroke_event(event, input.size_px, &scene, &ids);
+        } else if input.picked.is_some() || input.missed {
             self.picked(input.picked, &ids);
         }
         if input.moved {
@@ -517,6 +569,194 @@ impl SculptApp {
             let hit = scene.pick(&ray);
             self.picked(hit, &ids);
         }
+    }
+
+    /// The brush's outline where it would act (under the pointer) and the stroke drawn so far.
+    fn draw_brush(&self, scene: &mut Scene) {
+        if !self.sculpting {
+            return;
+        }
+        let tool = self.brush.tool();
+        if let Some(p) = self.pointer {
+            let at = glam::Mat4::from_translation(p) * render_from_scene();
+            scene.add_tool(&tool, at, BRUSH_COLOUR);
+        }
+        if let Some(stroke) = &self.stroke {
+            let to_world = render_from_scene();
+            let points: Vec<Vec3> = stroke
+                .scene_points()
+                .iter()
+                .map(|p| to_world.transform_point3(p.as_vec3()))
+                .collect();
+            for pair in points.windows(2) {
+                scene.lines.push(render::scene::Line {
+                    from: pair[0],
+                    to: pair[1],
+                    colour: BRUSH_COLOUR,
+                });
+            }
+        }
+    }
+
+    /// One frame of a sculpting drag: begin on the surface under the pointer, follow the
+    /// surface, author one op at the end; a preview of the stroke is meshed meanwhile.
+    fn stroke_event(
+        &mut self,
+        event: StrokeEvent,
+        size_px: [u32; 2],
+        scene: &Scene,
+        ids: &[ObjectId],
+    ) {
+        let ray = self.view.camera.ray_through_pixel(event.px, size_px);
+        let hit = scene.pick(&ray);
+        let at_scene = hit.map(|h| {
+            render_from_scene()
+                .inverse()
+                .transform_point3(h.point_in_world)
+                .as_dvec3()
+        });
+        match event.phase {
+            StrokePhase::Begin => {
+                let (Some(hit), Some(at)) = (hit, at_scene) else {
+                    self.status = "start a stroke on an object's surface".into();
+                    return;
+                };
+                let Some(id) = ids.get(hit.object_idx) else {
+                    return;
+                };
+                let view = lock(self.engine.view());
+                match Stroke::begin(&view, id.0, self.brush, at) {
+                    Ok(stroke) => {
+                        self.selected = Some(id.0);
+                        self.stroke = Some(stroke);
+                        self.preview_at = None;
+                    }
+                    Err(e) => self.status = e,
+                }
+            }
+            StrokePhase::Move => {
+                if let (Some(stroke), Some(at)) = (&mut self.stroke, at_scene) {
+                    stroke.push(at);
+                    self.preview_stroke();
+                }
+            }
+            StrokePhase::End => {
+                let Some(mut stroke) = self.stroke.take() else {
+                    return;
+                };
+                if let Some(at) = at_scene {
+                    stroke.push(at);
+                }
+                let planned = stroke.finish(&lock(self.engine.view()));
+                self.last_stroke = Some(stroke.scene_points().to_vec());
+                match planned {
+                    Ok(planned) => match self.engine.author(planned.payload.clone()) {
+                        Ok(pending) => self.pending = Some((pending, planned)),
+                        Err(e) => self.status = e.to_string(),
+                    },
+                    Err(e) => self.status = e,
+                }
+            }
+        }
+    }
+
+    /// Runs a named shortcut (also what the keyboard does): undo, redo, sculpt, navigate.
+    pub(super) fn shortcut_named(&mut self, name: &str) -> Result<(), String> {
+        match name.to_ascii_lowercase().as_str() {
+            "undo" | "ctrl+z" => self.submit("undo"),
+            "redo" | "ctrl+y" | "ctrl+shift+z" => self.submit("redo"),
+            "sculpt" | "b" => self.sculpting = true,
+            "navigate" | "escape" => {
+                self.sculpting = false;
+                self.stroke = None;
+            }
+            other => {
+                return Err(format!(
+                    "unknown shortcut `{other}` (undo, redo, sculpt, navigate)"
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Keyboard shortcuts, unless a text field has the keyboard.
+    fn shortcuts(&mut self, ctx: &egui::Context) {
+        if ctx.egui_wants_keyboard_input() {
+            return;
+        }
+        let pressed = |key| ctx.input(|i| i.key_pressed(key));
+        let (command, shift) = ctx.input(|i| (i.modifiers.command, i.modifiers.shift));
+        let action = if command && shift && pressed(egui::Key::Z) {
+            Some("redo")
+        } else if command && pressed(egui::Key::Z) {
+            Some("undo")
+        } else if command && pressed(egui::Key::Y) {
+            Some("redo")
+        } else if pressed(egui::Key::Escape) {
+            Some("navigate")
+        } else if pressed(egui::Key::B) {
+            Some("sculpt")
+        } else {
+            None
+        };
+        if let Some(action) = action {
+            let _ = self.shortcut_named(action);
+        }
+    }
+
+    /// Undoes one of this peer's own ops chosen in the history list.
+    pub(super) fn undo_op(&mut self, op: replication::OpId) {
+        if self.pending.is_some() {
+            return;
+        }
+        let payload = replication::shape::ShapePayload::Undo(op);
+        let planned = Planned {
+            payload: payload.clone(),
+            summary: "undid an edit chosen in the history".into(),
+            select: None,
+        };
+        match self.engine.author(payload) {
+            Ok(pending) => self.pending = Some((pending, planned)),
+            Err(e) => self.status = e.to_string(),
+        }
+    }
+
+    /// Meshes the stroked object with the stroke so far, at most every [`PREVIEW_MILLIS`].
+    fn preview_stroke(&mut self) {
+        let now = clock::now().instant;
+        if self
+            .preview_at
+            .is_some_and(|t| now.duration_since(t).as_millis() < u128::from(PREVIEW_MILLIS))
+        {
+            return;
+        }
+        let Some(stroke) = &self.stroke else {
+            return;
+        };
+        let id = ObjectId(stroke.object);
+        let job = {
+            let view = lock(self.engine.view());
+            let scene = view.scene();
+            let Some(entry) = scene.scene_object(id) else {
+                return;
+            };
+            let mut object = entry.object.clone();
+            if object.apply(stroke.edit()).is_err() {
+                return;
+            }
+            (object, scene.world_from_group(entry.group))
+        };
+        let tracked = self.objects.entry(id).or_default();
+        tracked.generation += 1;
+        tracked.pending = Some(Box::new(MeshJob {
+            id,
+            object: job.0,
+            world_from_group: job.1,
+            generation: tracked.generation,
+            depth: self.depth,
+            requested_at: now,
+        }));
+        self.preview_at = Some(now);
     }
 }
 
@@ -559,6 +799,7 @@ impl eframe::App for SculptApp {
         self.sync_objects(now);
         self.refresh_rows();
         self.follow();
+        self.shortcuts(ui.ctx());
         self.run_hooks(ui.ctx());
         self.publish_presence();
         let title = format!("sculpt — {}", self.presence_text());

@@ -17,7 +17,11 @@ use render::image::RgbaImage;
 use serde_json::{Value, json};
 
 use super::app::SculptApp;
+use super::viewport::{StrokeEvent, StrokePhase};
 use ::app::engine::lock;
+
+/// Frames a scripted drag takes from its start to its end.
+const DRAG_FRAMES: u32 = 12;
 
 /// Frames every object must have been drawn as the scene has it before a scripted step runs
 /// (one frame paints the new meshes, the next can be captured).
@@ -38,6 +42,8 @@ pub struct Hooks {
     pub exit_after_frames: Option<u64>,
     /// Where to write the state as JSON when the window closes through a hook.
     pub dump_state: Option<PathBuf>,
+    /// A scripted drag in progress: from and to (fractions of the viewport), and the frame.
+    drag: Option<([[f32; 2]; 2], u32)>,
     /// Scripted steps wait until the session holds this many ops.
     pub wait_ops: Option<usize>,
     /// Scripted steps wait until this many other peers' presence is known.
@@ -67,6 +73,20 @@ impl Hooks {
         } else {
             None
         }
+    }
+
+    /// This frame's event of a scripted drag (`drag: X0,Y0:X1,Y1` in the script), if one runs.
+    pub fn scripted_stroke(&mut self, size_px: [u32; 2], _idle: bool) -> Option<StrokeEvent> {
+        let ([from, to], frame) = self.drag?;
+        let t = (frame as f32 / DRAG_FRAMES as f32).min(1.0);
+        let at = [0, 1].map(|a| (from[a] + (to[a] - from[a]) * t) * size_px[a] as f32);
+        let phase = match frame {
+            0 => StrokePhase::Begin,
+            f if f > DRAG_FRAMES => StrokePhase::End,
+            _ => StrokePhase::Move,
+        };
+        self.drag = (frame <= DRAG_FRAMES).then_some(([from, to], frame + 1));
+        Some(StrokeEvent { phase, px: at })
     }
 
     fn fail(&self, message: String) {
@@ -130,7 +150,29 @@ impl SculptApp {
         if self.hooks.idle_frames < IDLE_FRAMES_BEFORE_STEP || self.hooks.screenshot_rx.is_some() {
             return;
         }
+        if self.hooks.drag.is_some() {
+            return;
+        }
         if let Some(line) = self.hooks.script.pop_front() {
+            if let Some(spec) = line.strip_prefix("drag:") {
+                match parse_drag(spec.trim()) {
+                    Ok(drag) => {
+                        println!("sculpt: scripted drag: {spec}");
+                        self.hooks.drag = Some((drag, 0));
+                    }
+                    Err(e) => self.hooks.fail(format!("bad scripted drag `{spec}`: {e}")),
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
+            if let Some(key) = line.strip_prefix("key:") {
+                println!("sculpt: scripted key: {key}");
+                if let Err(e) = self.shortcut_named(key.trim()) {
+                    self.hooks.fail(e);
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
             println!("sculpt: scripted command: {line}");
             // As if typed: a line that fails stays in the input, above its error.
             self.input.clone_from(&line);
@@ -187,9 +229,13 @@ impl SculptApp {
             .map(|(id, entry)| {
                 let data = entry.object.data();
                 let tracked = self.objects.get(&id);
+                let history = entry.object.history();
                 json!({
                     "id": id.0,
                     "name": view.object_label(id.0),
+                    "n_edits": history.len(),
+                    "n_active_edits": history.entries().iter().filter(|e| e.active).count(),
+                    "lease_holder": view.lease(id.0).map(|l| l.holder.short()),
                     "geometry": data.geometry.as_ref().map(|g| format!("{:?}", g.shape)),
                     "diffuse": data.appearance.diffuse.as_ref().map(|c| format!("{c:?}")),
                     "n_triangles": tracked.map(|t| t.n_triangles),
@@ -214,6 +260,13 @@ impl SculptApp {
                 "rtt_micros": p.rtt_micros, "to_send": p.to_send, "to_receive": p.to_receive,
             })).collect()),
             "news": self.news,
+            "tool": self.brush.describe(),
+            "sculpting": self.sculpting,
+            "last_stroke": self.last_stroke.as_ref().map(|points| {
+                points.iter().map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>()
+            }),
+            "probes": self.probes(&view),
+            "my_rejections": view.my_rejections().iter().map(|(_, why)| why.clone()).collect::<Vec<_>>(),
             "presence": rows(view.presence().iter().map(|(peer, p)| json!({
                 "peer": peer.short(), "name": p.name, "colour": p.colour,
                 "pointer": p.pointer, "selected": p.selected,
@@ -236,6 +289,58 @@ impl SculptApp {
             "edit_to_mesh_ms": self.stats.edit_to_mesh_ms,
         })
     }
+}
+
+impl SculptApp {
+    /// The selected object's value and scalar properties at the last stroke's points (scene
+    /// coordinates), for tests that check what a stroke did through the engine.
+    fn probes(&self, view: &::app::engine::View) -> Value {
+        use fdsl::object::Paintable;
+        let (Some(points), Some(id)) = (&self.last_stroke, self.selected) else {
+            return Value::Null;
+        };
+        let scene = view.scene();
+        let Some(entry) = scene.scene_object(fdsl::scene::ObjectId(id)) else {
+            return Value::Null;
+        };
+        let scene_from_object = scene
+            .world_from_group(entry.group)
+            .then(&entry.object.data().transform);
+        let Some(object_from_scene) = scene_from_object.inverse() else {
+            return Value::Null;
+        };
+        let mut sampler = entry.object.sampler();
+        let rows: Vec<Value> = points
+            .iter()
+            .map(|p| {
+                let q = object_from_scene.point(*p);
+                json!({
+                    "at": [p.x, p.y, p.z],
+                    "value": sampler.value(q, 0.0),
+                    "density": sampler.scalar(Paintable::Density, q, 0.0),
+                    "tension": sampler.scalar(Paintable::Tension, q, 0.0),
+                })
+            })
+            .collect();
+        Value::Array(rows)
+    }
+}
+
+/// `X0,Y0:X1,Y1`, fractions of the viewport.
+pub fn parse_drag(text: &str) -> Result<[[f32; 2]; 2], String> {
+    let point = |p: &str| -> Result<[f32; 2], String> {
+        let (x, y) = p.split_once(',').ok_or("a point is X,Y")?;
+        let f = |v: &str| {
+            v.trim()
+                .parse::<f32>()
+                .ok()
+                .filter(|f| (0.0..=1.0).contains(f))
+                .ok_or(format!("`{v}` is not a fraction from 0 to 1"))
+        };
+        Ok([f(x)?, f(y)?])
+    };
+    let (a, b) = text.split_once(':').ok_or("a drag is X0,Y0:X1,Y1")?;
+    Ok([point(a)?, point(b)?])
 }
 
 /// Mean, median, 95th percentile and maximum of some samples.

@@ -52,6 +52,15 @@ pub struct WindowArgs {
     /// Test hook: run LINE as if typed in the command line (repeatable).
     #[arg(long, value_name = "LINE")]
     pub command: Vec<String>,
+    /// Test hook: drag across the viewport with the current tool, from X0,Y0 to X1,Y1
+    /// (fractions of its size), after the commands (repeatable). A command line
+    /// `drag: X0,Y0:X1,Y1` does the same at its place in the script.
+    #[arg(long, value_name = "X0,Y0:X1,Y1", value_parser = hooks::parse_drag)]
+    pub drag: Vec<[[f32; 2]; 2]>,
+    /// Test hook: press a shortcut after the commands (repeatable): undo, redo, sculpt,
+    /// navigate; a command line `key: NAME` does the same at its place in the script.
+    #[arg(long, value_name = "NAME")]
+    pub key: Vec<String>,
     /// Test hook: click the viewport at fractions X, Y of its size.
     #[arg(long, value_name = "X,Y", value_parser = parse_fractions)]
     pub pick: Option<[f32; 2]>,
@@ -122,6 +131,12 @@ pub fn run(args: WindowArgs) -> anyhow::Result<()> {
     let size_points = args.size.unwrap_or(DEFAULT_SIZE_POINTS);
     let mut hooks = Hooks::default();
     hooks.script = args.command.iter().cloned().collect();
+    for [[x0, y0], [x1, y1]] in &args.drag {
+        hooks.script.push_back(format!("drag: {x0},{y0}:{x1},{y1}"));
+    }
+    for key in &args.key {
+        hooks.script.push_back(format!("key: {key}"));
+    }
     hooks.pick = args.pick;
     hooks.screenshot.clone_from(&args.screenshot);
     hooks.exit_when_idle = args.exit_when_idle;
@@ -136,6 +151,7 @@ pub fn run(args: WindowArgs) -> anyhow::Result<()> {
         demo: true,
         memory_fallback: true,
         name: args.net.name.clone(),
+        session_name: args.net.session_name.clone(),
     };
     let failure = std::sync::Arc::clone(&hooks.failure);
     let native = eframe::NativeOptions {

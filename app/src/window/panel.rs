@@ -4,7 +4,7 @@
 use eframe::egui;
 
 use super::app::SculptApp;
-use ::app::clock::Now;
+use ::app::clock::{self, Now};
 use ::app::engine::lock;
 
 /// Colour of errors.
@@ -65,6 +65,9 @@ impl SculptApp {
             {
                 self.show_invite = !self.show_invite;
                 self.shared = true;
+                if let Err(e) = self.engine.share() {
+                    self.status = e.to_string();
+                }
             }
             if ui
                 .button("Join…")
@@ -174,6 +177,80 @@ impl SculptApp {
         });
     }
 
+    /// The tool panel: navigate or sculpt, what the brush does, its shape, size, blend and
+    /// mirror plane.
+    fn tool_ui(&mut self, ui: &mut egui::Ui) {
+        use ::app::brush::{BrushOp, BrushShape};
+        use fdsl::object::{Axis, PaintValue, Paintable};
+        ui.heading("Tool");
+        ui.horizontal(|ui| {
+            ui.selectable_value(&mut self.sculpting, false, "Navigate")
+                .on_hover_text("drag orbits (Esc)");
+            ui.selectable_value(&mut self.sculpting, true, "Sculpt")
+                .on_hover_text("drag on a surface sculpts, right-drag orbits (B)");
+        });
+        if !self.sculpting {
+            return;
+        }
+        let b = &mut self.brush;
+        ui.horizontal(|ui| {
+            ui.selectable_value(&mut b.op, BrushOp::Add, "add");
+            ui.selectable_value(&mut b.op, BrushOp::Carve, "carve");
+            let painting = matches!(b.op, BrushOp::Paint(..));
+            if ui.selectable_label(painting, "paint").clicked() && !painting {
+                b.op = BrushOp::Paint(Paintable::Density, PaintValue::Scalar(0.8));
+            }
+        });
+        if let BrushOp::Paint(property, value) = &mut b.op {
+            ui.horizontal(|ui| {
+                egui::ComboBox::from_id_salt("paint-property")
+                    .selected_text(::app::brush::paint_name(*property))
+                    .show_ui(ui, |ui| {
+                        for p in Paintable::ALL {
+                            ui.selectable_value(property, p, ::app::brush::paint_name(p));
+                        }
+                    });
+                match (*property, &mut *value) {
+                    (Paintable::Color, PaintValue::Color(c)) => {
+                        ui.color_edit_button_rgb(c);
+                    }
+                    (Paintable::Color, v) => *v = PaintValue::Color([1.0, 0.2, 0.2]),
+                    (_, PaintValue::Scalar(x)) => {
+                        ui.add(egui::Slider::new(x, 0.0..=1.0).text("value"));
+                    }
+                    (_, v) => *v = PaintValue::Scalar(0.8),
+                }
+            });
+        }
+        ui.horizontal(|ui| {
+            ui.selectable_value(&mut b.shape, BrushShape::Ball, "ball");
+            ui.selectable_value(&mut b.shape, BrushShape::Box, "box");
+            ui.selectable_value(&mut b.shape, BrushShape::Cylinder, "cylinder");
+            ui.label("mirror");
+            egui::ComboBox::from_id_salt("mirror")
+                .selected_text(match b.mirror {
+                    None => "off",
+                    Some(Axis::X) => "x",
+                    Some(Axis::Y) => "y",
+                    Some(Axis::Z) => "z",
+                })
+                .show_ui(ui, |ui| {
+                    ui.selectable_value(&mut b.mirror, None, "off");
+                    ui.selectable_value(&mut b.mirror, Some(Axis::X), "x");
+                    ui.selectable_value(&mut b.mirror, Some(Axis::Y), "y");
+                    ui.selectable_value(&mut b.mirror, Some(Axis::Z), "z");
+                });
+        });
+        let [lo, hi] = ::app::brush::RADIUS_RANGE;
+        ui.add(
+            egui::Slider::new(&mut b.radius, lo..=1.0_f64.min(hi))
+                .logarithmic(true)
+                .text("radius"),
+        );
+        let blend_max = b.radius * 2.0;
+        ui.add(egui::Slider::new(&mut b.blend, 0.0..=blend_max).text("blend"));
+    }
+
     /// The name a user chose for the author with this short id, with the id: `Bo
     /// (7b3c0dc8)`; just the id when no name is known.
     fn display_name(&self, short: &str) -> String {
@@ -235,6 +312,22 @@ impl SculptApp {
         if let Some(f) = follow {
             self.following = f;
         }
+        let lan = lock(self.engine.view()).lan_sessions().to_vec();
+        egui::CollapsingHeader::new(format!("on this network ({})", lan.len()))
+            .id_salt("lan")
+            .show(ui, |ui| {
+                if lan.is_empty() {
+                    ui.weak("no sessions announced here (found by DNS-SD, no server needed)");
+                }
+                for s in &lan {
+                    let whose = if s.ours { " · this session" } else { "" };
+                    ui.label(format!(
+                        "{} · {} · {} peer(s){whose}",
+                        s.name, s.host, s.n_peers
+                    ))
+                    .on_hover_text("to join, ask for its invite and use Join…");
+                }
+            });
         egui::CollapsingHeader::new("network news")
             .id_salt("news")
             .show(ui, |ui| {
@@ -247,15 +340,24 @@ impl SculptApp {
     pub(super) fn side_ui(&mut self, ui: &mut egui::Ui, _now: Now) {
         self.peers_ui(ui);
         ui.separator();
+        self.tool_ui(ui);
+        ui.separator();
         ui.heading("Objects");
-        let labels: Vec<(u64, String)> = {
+        let now = clock::now().wall;
+        let rows: Vec<(u64, String, Option<String>)> = {
             let view = lock(self.engine.view());
             view.scene()
                 .objects()
-                .map(|(id, _)| (id.0, view.object_label(id.0)))
+                .map(|(id, _)| {
+                    let holder = view
+                        .lease(id.0)
+                        .filter(|l| l.holds_at(now))
+                        .map(|l| self.display_name(&l.holder.short()));
+                    (id.0, view.object_label(id.0), holder)
+                })
                 .collect()
         };
-        for (id, label) in labels {
+        for (id, label, holder) in rows {
             let detail =
                 self.objects
                     .get(&fdsl::scene::ObjectId(id))
@@ -263,13 +365,34 @@ impl SculptApp {
                         Some(why) => format!(" (not drawn: {why})"),
                         None => String::new(),
                     });
+            let held = holder.map_or_else(String::new, |h| format!(" · held by {h}"));
             let selected = self.selected == Some(id);
-            if ui
-                .selectable_label(selected, format!("{label}{detail}"))
-                .clicked()
-            {
-                self.selected = Some(id);
-            }
+            ui.horizontal(|ui| {
+                if ui
+                    .selectable_label(selected, format!("{label}{detail}{held}"))
+                    .clicked()
+                {
+                    self.selected = Some(id);
+                }
+                if selected {
+                    for (word, tip) in [
+                        ("lease", "take it over (others may take it back)"),
+                        ("hold", "take it only if nobody holds it"),
+                        ("release", "give it back"),
+                    ] {
+                        if ui.small_button(word).on_hover_text(tip).clicked() {
+                            self.submit(word);
+                        }
+                    }
+                }
+            });
+        }
+        let rejected = lock(self.engine.view()).my_rejections().first().cloned();
+        if let Some((_, why)) = rejected {
+            ui.colored_label(ERROR_COLOUR, format!("Your last rejected edit: {why}"))
+                .on_hover_text(
+                    "it stays in the history, marked rejected; take the lease and redo it",
+                );
         }
         ui.separator();
         ui.heading("Chat and commands");
@@ -314,6 +437,7 @@ impl SculptApp {
             .id_salt("history")
             .stick_to_bottom(true)
             .show(ui, |ui| {
+                let mut undo = None;
                 for row in &self.history {
                     let text = format!(
                         "[{}] {}: {} — {}",
@@ -322,13 +446,26 @@ impl SculptApp {
                         row.what,
                         row.status
                     );
-                    if row.status.starts_with("rejected") {
-                        ui.colored_label(ERROR_COLOUR, text);
-                    } else if row.status == "undone" {
-                        ui.weak(text);
-                    } else {
-                        ui.label(text);
-                    }
+                    ui.horizontal(|ui| {
+                        if row.status.starts_with("rejected") {
+                            ui.colored_label(ERROR_COLOUR, text);
+                        } else if row.status == "undone" {
+                            ui.weak(text);
+                        } else {
+                            ui.label(text);
+                        }
+                        if row.undoable
+                            && ui
+                                .small_button("undo")
+                                .on_hover_text("undo this edit of yours")
+                                .clicked()
+                        {
+                            undo = Some(row.op);
+                        }
+                    });
+                }
+                if let Some(op) = undo {
+                    self.undo_op(op);
                 }
             });
     }

@@ -331,12 +331,35 @@ pub struct ViewportInput {
     pub hover_px: Option<[f32; 2]>,
     /// The user dragged or zoomed the camera this frame.
     pub moved: bool,
+    /// A sculpting drag (primary button while a tool is active): where, and which phase.
+    pub stroke: Option<StrokeEvent>,
+}
+
+/// One frame of a sculpting drag.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StrokeEvent {
+    /// Begin, move or end.
+    pub phase: StrokePhase,
+    /// The pointer, in pixels of the viewport.
+    pub px: [f32; 2],
+}
+
+/// The phases of a drag.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StrokePhase {
+    /// The button went down on the viewport.
+    Begin,
+    /// The pointer moved with the button down.
+    Move,
+    /// The button came up.
+    End,
 }
 
 /// Draws the viewport over the rest of `ui` and handles orbit (drag), zoom (scroll), reset
 /// (double-click or `F`) and picking (click).
 pub fn viewport_ui(
     ui: &mut egui::Ui,
+    sculpting: bool,
     view: &mut ViewState,
     scene: &Scene,
     sphere: Option<(glam::Vec3, f32)>,
@@ -353,7 +376,29 @@ pub fn viewport_ui(
         size_px,
         ..ViewportInput::default()
     };
-    if response.dragged_by(egui::PointerButton::Primary) {
+    let at_px = |pos: egui::Pos2| [(pos.x - rect.min.x) * ppp, (pos.y - rect.min.y) * ppp];
+    if sculpting && let Some(pos) = response.interact_pointer_pos() {
+        let phase = if response.drag_started_by(egui::PointerButton::Primary) {
+            Some(StrokePhase::Begin)
+        } else if response.drag_stopped_by(egui::PointerButton::Primary) {
+            Some(StrokePhase::End)
+        } else if response.dragged_by(egui::PointerButton::Primary) {
+            Some(StrokePhase::Move)
+        } else {
+            None
+        };
+        input.stroke = phase.map(|phase| StrokeEvent {
+            phase,
+            px: at_px(pos),
+        });
+    }
+    let orbiting = if sculpting {
+        response.dragged_by(egui::PointerButton::Secondary)
+    } else {
+        response.dragged_by(egui::PointerButton::Primary)
+            || response.dragged_by(egui::PointerButton::Secondary)
+    };
+    if orbiting {
         let d = response.drag_delta();
         if d != egui::Vec2::ZERO {
             view.camera.orbit(
@@ -374,7 +419,7 @@ pub fn viewport_ui(
         if let Some(pos) = response.hover_pos()
             && ui.input(|i| i.pointer.is_moving())
         {
-            input.hover_px = Some([(pos.x - rect.min.x) * ppp, (pos.y - rect.min.y) * ppp]);
+            input.hover_px = Some(at_px(pos));
         }
     }
     let key_reset =
@@ -389,7 +434,7 @@ pub fn viewport_ui(
     if response.clicked()
         && let Some(pos) = response.interact_pointer_pos()
     {
-        let px = [(pos.x - rect.min.x) * ppp, (pos.y - rect.min.y) * ppp];
+        let px = at_px(pos);
         let ray = view.camera.ray_through_pixel(px, size_px);
         input.picked = scene.pick(&ray);
         input.missed = input.picked.is_none();
