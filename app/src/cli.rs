@@ -69,6 +69,10 @@ pub struct PeerArgs {
     /// Print one JSON object per line whenever the peer's state changes.
     #[arg(long)]
     pub json: bool,
+    /// Before the --command lines, wait until the session holds at least N ops (synced from
+    /// the others), for at most a minute.
+    #[arg(long, value_name = "N")]
+    pub wait_ops: Option<usize>,
     /// Show other peers a pointer at X,Y,Z (the renderer's world, +z up), as a window's
     /// pointer on a surface would be (for tests and demonstrations).
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_point)]
@@ -251,6 +255,9 @@ pub fn peer(args: PeerArgs) -> anyhow::Result<()> {
     for notice in lock(engine.view()).notices() {
         log::warn!("{notice}");
     }
+    if let Some(n) = args.wait_ops {
+        wait_for_ops(&engine, n)?;
+    }
     run_commands(&engine, &args.command)?;
     if let Some(at) = args.pointer {
         let mut presence = engine.presence();
@@ -279,6 +286,24 @@ pub fn peer(args: PeerArgs) -> anyhow::Result<()> {
         }
     });
     engine.shutdown();
+    Ok(())
+}
+
+/// Longest `--wait-ops` waits.
+const MAX_WAIT_OPS_SECS: u64 = 60;
+
+/// Waits until the engine's view holds at least `n` ops.
+fn wait_for_ops(engine: &Engine, n: usize) -> anyhow::Result<()> {
+    let start = app::clock::now().instant;
+    while lock(engine.view()).n_ops() < n {
+        if start.elapsed().as_secs() >= MAX_WAIT_OPS_SECS {
+            bail!(
+                "--wait-ops {n}: only {} ops after {MAX_WAIT_OPS_SECS} s",
+                lock(engine.view()).n_ops()
+            );
+        }
+        std::thread::sleep(std::time::Duration::from_millis(PEER_POLL_MILLIS / 4));
+    }
     Ok(())
 }
 
@@ -323,6 +348,7 @@ fn peer_state(engine: &Engine) -> serde_json::Value {
         "to_receive": to_receive,
         "store_error": view.store_error(),
         "lan": view.lan_sessions().iter().map(|s| s.name.clone()).collect::<Vec<_>>(),
+        "rejected": view.history().iter().filter(|h| h.status.starts_with("rejected")).count(),
     })
 }
 

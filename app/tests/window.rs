@@ -461,6 +461,14 @@ impl HeadlessPeer {
     }
 }
 
+impl HeadlessPeer {
+    /// The peer's short id, once a state line has named it.
+    fn last_peer(&mut self) -> Value {
+        self.wait_for("its first state", |v| v["peer"].is_string());
+        self.last["peer"].clone()
+    }
+}
+
 impl Drop for HeadlessPeer {
     fn drop(&mut self) {
         let _ = self.child.kill();
@@ -664,4 +672,98 @@ fn a_paint_stroke_of_density_changes_the_density_where_it_went() {
         // Painting leaves the solid alone: the stroke's points are still on its surface.
         assert!(probe["value"].as_f64().unwrap().abs() < 0.05, "{probe}");
     }
+}
+
+#[test]
+fn a_weak_takeover_by_another_peer_rejects_the_next_stroke_and_both_sides_say_so() {
+    let display = display();
+    let dir = scratch("takeover");
+    let invite = text(&sculpt(None, &["invite"]).stdout).trim().to_string();
+    // The window listens on a port the test picks, so the headless peer can dial it.
+    let port = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let listen = format!("127.0.0.1:{port}");
+    let peer_store = dir.join("peer");
+    // The peer waits for the window's object and lease (2 ops), then takes it over.
+    let mut peer = HeadlessPeer::spawn(&[
+        "--store",
+        peer_store.to_str().unwrap(),
+        "--invite",
+        &invite,
+        "--no-lan",
+        "--listen",
+        "127.0.0.1:0",
+        "--dial",
+        &listen,
+        "--json",
+        "--wait-ops",
+        "2",
+        "--command",
+        "lease",
+    ]);
+    let store = dir.join("window");
+    let (shot, dump) = (dir.join("takeover.png"), dir.join("takeover.json"));
+    let drag = "drag: 0.4,0.5:0.6,0.55";
+    let run = sculpt(
+        Some(&display.name),
+        &[
+            "--store",
+            store.to_str().unwrap(),
+            "--invite",
+            &invite,
+            "--no-lan",
+            "--listen",
+            &listen,
+            "--command",
+            "new: 0.8-sqrt(x^2+y^2+z^2)",
+            "--command",
+            "lease",
+            "--command",
+            "wait-ops: 3",
+            "--command",
+            "tool: carve ball radius 0.12",
+            "--command",
+            drag,
+            "--size",
+            WINDOW,
+            "--screenshot",
+            shot.to_str().unwrap(),
+            "--dump-state",
+            dump.to_str().unwrap(),
+            "--exit-after-frames",
+            FRAMES_MAX,
+        ],
+    );
+    let (stdout, stderr) = (text(&run.stdout), text(&run.stderr));
+    assert!(run.status.success(), "{stdout}\n{stderr}");
+    let state: Value = serde_json::from_str(&std::fs::read_to_string(&dump).unwrap()).unwrap();
+    // The window: the stroke is in the history, rejected because the peer holds the lease,
+    // and the window names it.
+    let last = state["history"].as_array().unwrap().last().unwrap().clone();
+    assert!(
+        last["what"].as_str().unwrap().contains("sculpted"),
+        "{state}"
+    );
+    assert!(
+        last["status"].as_str().unwrap().starts_with("rejected"),
+        "{state}"
+    );
+    let why = state["my_rejections"][0].as_str().unwrap();
+    assert!(why.contains("sculpted") && why.contains("lease"), "{why}");
+    assert_eq!(
+        state["objects"][0]["n_edits"], 0,
+        "the rejected stroke changed nothing"
+    );
+    assert_eq!(
+        state["objects"][0]["lease_holder"],
+        peer.last_peer(),
+        "{state}"
+    );
+    // The peer: the same op is rejected in its history too.
+    peer.wait_for("the window's rejected stroke", |v| {
+        v["ops"] == 4 && v["rejected"] == 1
+    });
 }

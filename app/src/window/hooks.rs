@@ -42,6 +42,8 @@ pub struct Hooks {
     pub exit_after_frames: Option<u64>,
     /// Where to write the state as JSON when the window closes through a hook.
     pub dump_state: Option<PathBuf>,
+    /// A `wait-ops: N` step: later steps wait until the session holds N ops.
+    step_ops: Option<usize>,
     /// A scripted drag in progress: from and to (fractions of the viewport), and the frame.
     drag: Option<([[f32; 2]; 2], u32)>,
     /// Scripted steps wait until the session holds this many ops.
@@ -140,6 +142,7 @@ impl SculptApp {
         let synced = {
             let view = lock(self.engine.view());
             self.hooks.wait_ops.is_none_or(|n| view.n_ops() >= n)
+                && self.hooks.step_ops.is_none_or(|n| view.n_ops() >= n)
                 && view.presence().len() >= self.hooks.wait_presence
         };
         if self.is_idle() && synced {
@@ -161,6 +164,14 @@ impl SculptApp {
                         self.hooks.drag = Some((drag, 0));
                     }
                     Err(e) => self.hooks.fail(format!("bad scripted drag `{spec}`: {e}")),
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
+            if let Some(n) = line.strip_prefix("wait-ops:") {
+                match n.trim().parse::<usize>() {
+                    Ok(n) => self.hooks.step_ops = Some(n),
+                    Err(e) => self.hooks.fail(format!("bad `wait-ops: {n}`: {e}")),
                 }
                 self.hooks.idle_frames = 0;
                 return;
