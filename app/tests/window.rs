@@ -185,6 +185,32 @@ fn window_run(display: &Display, dir: &Path, name: &str, commands: &[&str]) -> R
     }
 }
 
+/// Runs the window with `args` plus a screenshot and a state dump named `name` in `dir`, and
+/// returns the state (the run must succeed).
+fn window_with(display: &Display, dir: &Path, name: &str, args: &[&str]) -> (Value, RgbaImage) {
+    let (shot, dump) = (
+        dir.join(format!("{name}.png")),
+        dir.join(format!("{name}.json")),
+    );
+    let mut all: Vec<&str> = args.to_vec();
+    all.extend([
+        "--size",
+        WINDOW,
+        "--screenshot",
+        shot.to_str().unwrap(),
+        "--dump-state",
+        dump.to_str().unwrap(),
+        "--exit-after-frames",
+        FRAMES_MAX,
+    ]);
+    let run = sculpt(Some(&display.name), &all);
+    let (stdout, stderr) = (text(&run.stdout), text(&run.stderr));
+    assert!(run.status.success(), "{name}: {stdout}\n{stderr}");
+    let state = serde_json::from_str(&std::fs::read_to_string(&dump).unwrap()).unwrap();
+    let picture = RgbaImage::from_png(&std::fs::read(&shot).unwrap()).unwrap();
+    (state, picture)
+}
+
 /// Fractions of the viewport's middle that are watermelon flesh (red), rind (green), and
 /// background-like grey.
 #[derive(Debug)]
@@ -526,9 +552,10 @@ fn a_headless_peers_edits_and_pointer_show_in_the_window_and_the_windows_edit_re
     let me = peer.last["peer"].as_str().unwrap().to_string();
 
     let store = dir.join("window");
-    let (shot, dump) = (dir.join("together.png"), dir.join("together.json"));
-    let run = sculpt(
-        Some(&display.name),
+    let (state, picture) = window_with(
+        &display,
+        &dir,
+        "together",
         &[
             "--store",
             store.to_str().unwrap(),
@@ -545,19 +572,8 @@ fn a_headless_peers_edits_and_pointer_show_in_the_window_and_the_windows_edit_re
             "1",
             "--command",
             "new: 0.3-sqrt(x^2+y^2+z^2)",
-            "--size",
-            WINDOW,
-            "--screenshot",
-            shot.to_str().unwrap(),
-            "--dump-state",
-            dump.to_str().unwrap(),
-            "--exit-after-frames",
-            FRAMES_MAX,
         ],
     );
-    let (stdout, stderr) = (text(&run.stdout), text(&run.stderr));
-    assert!(run.status.success(), "{stdout}\n{stderr}");
-    let state: Value = serde_json::from_str(&std::fs::read_to_string(&dump).unwrap()).unwrap();
     // The peer's edits are in the window's history under the peer's id, and its ball shows.
     let history = state["history"].as_array().unwrap();
     let by_peer = |what: &str| {
@@ -568,7 +584,6 @@ fn a_headless_peers_edits_and_pointer_show_in_the_window_and_the_windows_edit_re
     assert!(by_peer("created object"), "{state}");
     assert!(by_peer("hello from the peer"), "{state}");
     assert_eq!(state["chat"][0]["text"], "hello from the peer", "{state}");
-    let picture = RgbaImage::from_png(&std::fs::read(&shot).unwrap()).unwrap();
     let blue = deep_blue(&picture);
     assert!(
         blue > 0.05,
@@ -705,10 +720,11 @@ fn a_weak_takeover_by_another_peer_rejects_the_next_stroke_and_both_sides_say_so
         "lease",
     ]);
     let store = dir.join("window");
-    let (shot, dump) = (dir.join("takeover.png"), dir.join("takeover.json"));
     let drag = "drag: 0.4,0.5:0.6,0.55";
-    let run = sculpt(
-        Some(&display.name),
+    let (state, _) = window_with(
+        &display,
+        &dir,
+        "takeover",
         &[
             "--store",
             store.to_str().unwrap(),
@@ -727,19 +743,8 @@ fn a_weak_takeover_by_another_peer_rejects_the_next_stroke_and_both_sides_say_so
             "tool: carve ball radius 0.12",
             "--command",
             drag,
-            "--size",
-            WINDOW,
-            "--screenshot",
-            shot.to_str().unwrap(),
-            "--dump-state",
-            dump.to_str().unwrap(),
-            "--exit-after-frames",
-            FRAMES_MAX,
         ],
     );
-    let (stdout, stderr) = (text(&run.stdout), text(&run.stderr));
-    assert!(run.status.success(), "{stdout}\n{stderr}");
-    let state: Value = serde_json::from_str(&std::fs::read_to_string(&dump).unwrap()).unwrap();
     // The window: the stroke is in the history, rejected because the peer holds the lease,
     // and the window names it.
     let last = state["history"].as_array().unwrap().last().unwrap().clone();

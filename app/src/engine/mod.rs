@@ -482,11 +482,10 @@ impl Worker {
     }
 
     fn say(&self, line: String) {
-        log::info!("{line}");
-        self.news
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .push(line);
+        NewsSink {
+            news: self.news.clone(),
+        }
+        .say(line);
     }
 
     async fn serve(
