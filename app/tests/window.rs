@@ -155,29 +155,11 @@ struct Run {
 
 fn window_run(display: &Display, dir: &Path, name: &str, commands: &[&str]) -> Run {
     let store = dir.join("store");
-    let shot = dir.join(format!("{name}.png"));
-    let dump = dir.join(format!("{name}.json"));
-    let mut args = vec![
-        "--store",
-        store.to_str().unwrap(),
-        "--size",
-        WINDOW,
-        "--screenshot",
-        shot.to_str().unwrap(),
-        "--dump-state",
-        dump.to_str().unwrap(),
-        "--exit-after-frames",
-        FRAMES_MAX,
-    ];
+    let mut args = vec!["--store", store.to_str().unwrap()];
     for c in commands {
         args.extend(["--command", c]);
     }
-    let run = sculpt(Some(&display.name), &args);
-    let (stdout, stderr) = (text(&run.stdout), text(&run.stderr));
-    assert!(run.status.success(), "{name}: {stdout}\n{stderr}");
-    assert!(!stderr.contains("panicked"), "{stderr}");
-    let picture = RgbaImage::from_png(&std::fs::read(&shot).unwrap()).unwrap();
-    let state: Value = serde_json::from_str(&std::fs::read_to_string(&dump).unwrap()).unwrap();
+    let (state, picture, stdout) = window_with(display, dir, name, &args);
     Run {
         picture,
         state,
@@ -187,7 +169,12 @@ fn window_run(display: &Display, dir: &Path, name: &str, commands: &[&str]) -> R
 
 /// Runs the window with `args` plus a screenshot and a state dump named `name` in `dir`, and
 /// returns the state (the run must succeed).
-fn window_with(display: &Display, dir: &Path, name: &str, args: &[&str]) -> (Value, RgbaImage) {
+fn window_with(
+    display: &Display,
+    dir: &Path,
+    name: &str,
+    args: &[&str],
+) -> (Value, RgbaImage, String) {
     let (shot, dump) = (
         dir.join(format!("{name}.png")),
         dir.join(format!("{name}.json")),
@@ -206,9 +193,10 @@ fn window_with(display: &Display, dir: &Path, name: &str, args: &[&str]) -> (Val
     let run = sculpt(Some(&display.name), &all);
     let (stdout, stderr) = (text(&run.stdout), text(&run.stderr));
     assert!(run.status.success(), "{name}: {stdout}\n{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
     let state = serde_json::from_str(&std::fs::read_to_string(&dump).unwrap()).unwrap();
     let picture = RgbaImage::from_png(&std::fs::read(&shot).unwrap()).unwrap();
-    (state, picture)
+    (state, picture, stdout)
 }
 
 /// Fractions of the viewport's middle that are watermelon flesh (red), rind (green), and
@@ -552,7 +540,7 @@ fn a_headless_peers_edits_and_pointer_show_in_the_window_and_the_windows_edit_re
     let me = peer.last["peer"].as_str().unwrap().to_string();
 
     let store = dir.join("window");
-    let (state, picture) = window_with(
+    let (state, picture, _) = window_with(
         &display,
         &dir,
         "together",
@@ -721,7 +709,7 @@ fn a_weak_takeover_by_another_peer_rejects_the_next_stroke_and_both_sides_say_so
     ]);
     let store = dir.join("window");
     let drag = "drag: 0.4,0.5:0.6,0.55";
-    let (state, _) = window_with(
+    let (state, _, _) = window_with(
         &display,
         &dir,
         "takeover",
