@@ -197,8 +197,12 @@ pub fn sessions(args: &SessionsArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// How often `sculpt discovery` says what it has done.
+const REPORT_EVERY_MICROS: u64 = 60_000_000;
+
 /// `sculpt discovery --listen ADDR`: serves until interrupted, saying what it does.
 pub fn discovery(args: &DiscoveryArgs) -> anyhow::Result<()> {
+    use replication::net::discovery::registry::RegistryStats;
     use replication::net::discovery::server::DiscoveryServer;
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
@@ -218,8 +222,24 @@ pub fn discovery(args: &DiscoveryArgs) -> anyhow::Result<()> {
             }
             flag.store(true, Ordering::Relaxed);
         })?;
-    let stats = server.run(&shutdown)?;
-    println!("discovery node stopped: {stats:?}");
+    let report = |stats: &RegistryStats, held: usize| {
+        println!(
+            "discovery node: {held} registrations held; {} registered, {} introductions \
+             and replies sent ({} bytes), {} bad datagrams, {} rate-limited, {} refused when full",
+            stats.n_registered,
+            stats.n_replies,
+            stats.n_bytes_sent,
+            stats.n_bad_input(),
+            stats.n_rate_limited,
+            stats.n_full
+        );
+    };
+    let stats = server.run_reporting(&shutdown, REPORT_EVERY_MICROS, report)?;
+    println!(
+        "discovery node stopped after {} registrations and {} bad datagrams",
+        stats.n_registered,
+        stats.n_bad_input()
+    );
     Ok(())
 }
 

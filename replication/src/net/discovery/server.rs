@@ -58,7 +58,19 @@ impl DiscoveryServer {
 
     /// Answers registrations and sends the introductions they cause until `shutdown` is set
     /// (checked at least every [`SHUTDOWN_POLL_MILLIS`]); returns the counters.
-    pub fn run(mut self, shutdown: &AtomicBool) -> Result<RegistryStats, ServeError> {
+    pub fn run(self, shutdown: &AtomicBool) -> Result<RegistryStats, ServeError> {
+        self.run_reporting(shutdown, u64::MAX, |_, _| {})
+    }
+
+    /// [`DiscoveryServer::run`], calling `report` with the counters and the number of
+    /// registrations held every `every_micros` (what `sculpt discovery` prints).
+    pub fn run_reporting(
+        mut self,
+        shutdown: &AtomicBool,
+        every_micros: u64,
+        mut report: impl FnMut(&RegistryStats, usize),
+    ) -> Result<RegistryStats, ServeError> {
+        let mut next_report = wall_clock_now().saturating_add_micros(every_micros);
         // One byte more than the limit, so an oversized datagram is seen as such rather than
         // silently truncated to a valid length.
         let mut buf = vec![0; MAX_DATAGRAM_BYTES + 1];
@@ -69,6 +81,10 @@ impl DiscoveryServer {
             if now >= next_sweep {
                 self.registry.expire(now);
                 next_sweep = now.saturating_add_micros(EXPIRE_EVERY_MICROS);
+            }
+            if now >= next_report {
+                report(self.registry.stats(), self.registry.n_registrations());
+                next_report = now.saturating_add_micros(every_micros);
             }
             match received {
                 Ok((n, from)) => {
