@@ -96,3 +96,43 @@ fn a_port_in_use_is_named_with_what_to_do() {
         "{said}"
     );
 }
+
+#[test]
+fn sessions_lists_the_stores_under_a_root() {
+    use app::engine::{Engine, EngineConfig, Network};
+    let root = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli-sessions");
+    let _ = std::fs::remove_dir_all(&root);
+    let empty = sculpt(&["sessions", "--root", root.to_str().unwrap()]);
+    assert!(empty.status.success());
+    assert!(
+        text(&empty.stdout).contains("no sessions"),
+        "{}",
+        text(&empty.stdout)
+    );
+    for name in ["design-review", "classroom"] {
+        let config = EngineConfig {
+            store: root.join(name),
+            invite: None,
+            network: Network {
+                listen: (std::net::Ipv4Addr::LOCALHOST, 0).into(),
+                ..Network::default()
+            },
+            demo: true,
+            memory_fallback: false,
+            name: None,
+            session_name: None,
+        };
+        Engine::start(config, app::clock::now().wall)
+            .unwrap()
+            .shutdown();
+    }
+    std::fs::create_dir_all(root.join("not-a-session")).unwrap();
+    let listed = sculpt(&["sessions", "--root", root.to_str().unwrap()]);
+    let out = text(&listed.stdout);
+    assert!(listed.status.success(), "{out}");
+    assert!(
+        out.contains("design-review") && out.contains("classroom"),
+        "{out}"
+    );
+    assert!(!out.contains("not-a-session"), "{out}");
+}
