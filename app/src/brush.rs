@@ -193,7 +193,16 @@ impl Brush {
             BrushShape::Box => "box",
             BrushShape::Cylinder => "cylinder",
         };
-        format!("{what} {shape} radius {} blend {}", self.radius, self.blend)
+        let mirror = match self.mirror {
+            None => "",
+            Some(Axis::X) => " mirror x",
+            Some(Axis::Y) => " mirror y",
+            Some(Axis::Z) => " mirror z",
+        };
+        format!(
+            "{what} {shape} radius {} blend {}{mirror}",
+            self.radius, self.blend
+        )
     }
 }
 

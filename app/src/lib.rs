@@ -11,6 +11,7 @@
 //!   planned into ops against a view.
 //! - [`files`]: scene files a user opens, their `Inline` files confined to the scene's
 //!   folder.
+//! - [`settings`]: the name, colour and brush a user expects to find again.
 //! - [`clock`]: the program's one read of the clock.
 //!
 //! What it is not: the window (egui) and the argument parsing live in the binary; the
@@ -39,3 +40,4 @@ pub mod clock;
 pub mod command;
 pub mod engine;
 pub mod files;
+pub mod settings;

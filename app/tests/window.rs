@@ -114,12 +114,22 @@ fn scratch(name: &str) -> PathBuf {
 /// Runs `sculpt` with `args` on `display` (`None`: no `DISPLAY` at all) and waits for it,
 /// killing it after [`RUN_SECS_MAX`].
 fn sculpt(display: Option<&str>, args: &[&str]) -> Output {
+    // Kept settings go to a data directory of this test process, never the user's.
+    let data = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("window")
+        .join(format!("xdg-data-{}", std::process::id()));
+    sculpt_with_data(display, args, &data)
+}
+
+/// [`sculpt`] with `data` as its data directory (where settings are kept).
+fn sculpt_with_data(display: Option<&str>, args: &[&str], data: &Path) -> Output {
     let runtime = scratch("xdg-runtime");
     let mut command = Command::new(env!("CARGO_BIN_EXE_sculpt"));
     command
         .args(args)
         .env_remove("WAYLAND_DISPLAY")
         .env("XDG_RUNTIME_DIR", &runtime)
+        .env("XDG_DATA_HOME", data)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
     match display {
@@ -759,4 +769,44 @@ fn a_weak_takeover_by_another_peer_rejects_the_next_stroke_and_both_sides_say_so
     peer.wait_for("the window's rejected stroke", |v| {
         v["ops"] == 4 && v["rejected"] == 1
     });
+}
+
+#[test]
+fn the_brush_and_the_name_are_kept_between_runs() {
+    let display = display();
+    let dir = scratch("settings");
+    let data = dir.join("data");
+    let store = dir.join("store");
+    let run = |extra: &[&str], name: &str| {
+        let dump = dir.join(format!("{name}.json"));
+        let mut args = vec![
+            "--store",
+            store.to_str().unwrap(),
+            "--no-lan",
+            "--size",
+            WINDOW,
+            "--exit-when-idle",
+            "--exit-after-frames",
+            FRAMES_MAX,
+            "--dump-state",
+            dump.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        let out = sculpt_with_data(Some(&display.name), &args, &data);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        serde_json::from_str::<Value>(&std::fs::read_to_string(&dump).unwrap()).unwrap()
+    };
+    let first = run(
+        &[
+            "--name",
+            "Ada",
+            "--command",
+            "tool: paint tension 0.4 box radius 0.3",
+        ],
+        "first",
+    );
+    assert_eq!(first["tool"], "paint tension 0.4 box radius 0.3 blend 0");
+    let second = run(&[], "second");
+    assert_eq!(second["tool"], first["tool"], "{second}");
+    assert_eq!(second["name"], "Ada", "{second}");
 }

@@ -3,6 +3,7 @@
 //! by `viewport.rs`; test hooks (scripted commands, screenshot, state dump) by `hooks.rs`.
 
 use std::collections::BTreeMap;
+use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -143,6 +144,8 @@ pub struct SculptApp {
     presence_sent: Option<Presence>,
     /// The window title last set.
     title: String,
+    /// Where the brush, name and colour are kept between runs.
+    settings_path: Option<PathBuf>,
     pub(super) hooks: Hooks,
     pub(super) stats: Stats,
 }
@@ -209,6 +212,7 @@ impl SculptApp {
             pointer: None,
             presence_sent: None,
             title: String::new(),
+            settings_path: None,
             hooks,
             stats: Stats::default(),
         })
@@ -784,7 +788,50 @@ pub fn bounding_sphere(boxes: impl Iterator<Item = Aabb>) -> Option<(Vec3, f32)>
     Some((0.5 * (lo + hi), 0.5 * (hi - lo).length()))
 }
 
+impl SculptApp {
+    /// Applies kept settings: the brush, and the name and colour unless flags gave them.
+    pub fn apply_settings(&mut self, settings: &::app::settings::Settings, path: PathBuf) {
+        if let Some(brush) = settings.brush {
+            self.brush = brush;
+        }
+        let mut presence = self.engine.presence();
+        if self.config.name.is_none()
+            && let Some(name) = &settings.name
+        {
+            presence.name.clone_from(name);
+        }
+        if let Some(colour) = settings.colour {
+            presence.colour = colour;
+        }
+        let _ = self.engine.set_presence(presence);
+        self.settings_path = Some(path);
+    }
+
+    /// Keeps the brush, name and colour for the next run.
+    fn save_settings(&self) {
+        let Some(path) = &self.settings_path else {
+            return;
+        };
+        let presence = self.engine.presence();
+        // A name the user never chose (the short id) is not kept: it would follow the user
+        // into another store under another id.
+        let chosen = presence.name != self.engine.peer_id().short();
+        let settings = ::app::settings::Settings {
+            name: chosen.then_some(presence.name),
+            colour: Some(presence.colour),
+            brush: Some(self.brush),
+        };
+        if let Err(e) = settings.save(path) {
+            log::warn!("cannot keep the settings in {}: {e}", path.display());
+        }
+    }
+}
+
 impl eframe::App for SculptApp {
+    fn on_exit(&mut self) {
+        self.save_settings();
+    }
+
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         let now = clock::now();
         if let Some(last) = self.stats.last_frame_start {

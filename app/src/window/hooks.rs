@@ -272,6 +272,7 @@ impl SculptApp {
             })).collect()),
             "news": self.news,
             "tool": self.brush.describe(),
+            "name": self.engine.presence().name,
             "sculpting": self.sculpting,
             "last_stroke": self.last_stroke.as_ref().map(|points| {
                 points.iter().map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>()

@@ -186,7 +186,15 @@ pub fn run(args: WindowArgs) -> anyhow::Result<()> {
             }
             let ctx = cc.egui_ctx.clone();
             let wake = std::sync::Arc::new(move || ctx.request_repaint());
-            let app = SculptApp::new(engine, engine_config, depth, hooks, wake)?;
+            let mut app = SculptApp::new(engine, engine_config, depth, hooks, wake)?;
+            if let Some(dir) = default_data_dir() {
+                let path = dir.join(::app::settings::SETTINGS_FILE);
+                let (settings, notice) = ::app::settings::Settings::load(&path);
+                if let Some(notice) = notice {
+                    eprintln!("sculpt: settings: {notice}");
+                }
+                app.apply_settings(&settings, path);
+            }
             Ok(Box::new(app))
         }),
     )

@@ -46,7 +46,76 @@ impl SculptApp {
         }
     }
 
+    /// The menu bar: what every button and shortcut does, in one place to find it.
+    fn menu_ui(&mut self, ui: &mut egui::Ui) {
+        egui::MenuBar::new().ui(ui, |ui| {
+            ui.menu_button("Edit", |ui| {
+                if ui
+                    .button("Undo your last edit of the selection   Ctrl+Z")
+                    .clicked()
+                {
+                    self.submit("undo");
+                }
+                if ui.button("Redo   Ctrl+Y").clicked() {
+                    self.submit("redo");
+                }
+            });
+            ui.menu_button("View", |ui| {
+                if ui.button("Frame everything   F or double-click").clicked() {
+                    self.view.moved = false;
+                }
+                if self.following.is_some() && ui.button("Stop following").clicked() {
+                    self.following = None;
+                }
+            });
+            ui.menu_button("Tool", |ui| {
+                if ui.button("Navigate   Esc").clicked() {
+                    let _ = self.shortcut_named("navigate");
+                }
+                if ui.button("Sculpt   B").clicked() {
+                    let _ = self.shortcut_named("sculpt");
+                }
+                ui.separator();
+                for (word, line) in [
+                    ("Add", "add"),
+                    ("Carve", "carve"),
+                    ("Paint density", "paint density 0.9"),
+                    ("Paint tension", "paint tension 0.9"),
+                    ("Paint colour", "paint colour 1 0.3 0.3"),
+                ] {
+                    if ui.button(word).clicked() {
+                        self.submit(&format!("tool: {line}"));
+                    }
+                }
+            });
+            ui.menu_button("Object", |ui| {
+                for (word, line) in [
+                    ("Take it over (weak lease)", "lease"),
+                    ("Hold it (strong lease)", "hold"),
+                    ("Release it", "release"),
+                ] {
+                    if ui.button(word).clicked() {
+                        self.submit(line);
+                    }
+                }
+            });
+            ui.menu_button("Session", |ui| {
+                if ui.button("Share…").clicked() {
+                    self.show_invite = true;
+                    self.shared = true;
+                    if let Err(e) = self.engine.share() {
+                        self.status = e.to_string();
+                    }
+                }
+                if ui.button("Join…").clicked() {
+                    self.join_input = Some((String::new(), None));
+                }
+            });
+        });
+    }
+
     pub(super) fn top_ui(&mut self, ui: &mut egui::Ui) {
+        self.menu_ui(ui);
         let presence = self.presence_text();
         ui.horizontal(|ui| {
             ui.strong("sculpt");

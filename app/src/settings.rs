@@ -1,0 +1,133 @@
+//! What a user chose and expects to find again: the name and colour others see, and the
+//! brush. Kept as a small JSON file in the program's data directory, written whole to a
+//! temporary file and renamed into place; a missing or unreadable file gives the defaults and
+//! a notice, never an error that stops the program.
+
+use std::path::Path;
+
+use serde_json::{Value, json};
+
+use crate::brush::Brush;
+
+/// The settings file's name in the data directory.
+pub const SETTINGS_FILE: &str = "settings.json";
+/// Longest settings file read.
+pub const MAX_SETTINGS_BYTES: u64 = 64 * 1024;
+
+/// The kept settings.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Settings {
+    /// The name other peers see.
+    pub name: Option<String>,
+    /// The colour other peers see (sRGB).
+    pub colour: Option<[u8; 3]>,
+    /// The brush.
+    pub brush: Option<Brush>,
+}
+
+impl Settings {
+    /// Reads the settings at `path`: the defaults when there is no file, and the defaults with
+    /// the reason when it cannot be read.
+    pub fn load(path: &Path) -> (Settings, Option<String>) {
+        let text = match std::fs::metadata(path) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return (Settings::default(), None);
+            }
+            Err(e) => {
+                return (
+                    Settings::default(),
+                    Some(format!("{}: {e}", path.display())),
+                );
+            }
+            Ok(m) if m.len() > MAX_SETTINGS_BYTES => {
+                let why = format!("{}: over {MAX_SETTINGS_BYTES} bytes", path.display());
+                return (Settings::default(), Some(why));
+            }
+            Ok(_) => std::fs::read_to_string(path),
+        };
+        let parsed = text
+            .map_err(|e| e.to_string())
+            .and_then(|t| serde_json::from_str::<Value>(&t).map_err(|e| e.to_string()));
+        match parsed {
+            Ok(v) => Settings::from_json(&v),
+            Err(e) => (
+                Settings::default(),
+                Some(format!("{}: {e}; using the defaults", path.display())),
+            ),
+        }
+    }
+
+    fn from_json(v: &Value) -> (Settings, Option<String>) {
+        let name = v["name"].as_str().map(str::to_string);
+        let colour = v["colour"].as_array().and_then(|c| {
+            let c: Vec<u8> = c
+                .iter()
+                .filter_map(|x| x.as_u64().and_then(|x| u8::try_from(x).ok()))
+                .collect();
+            <[u8; 3]>::try_from(c).ok()
+        });
+        let (brush, notice) = match v["brush"].as_str() {
+            Some(text) => match Brush::default().parse(text) {
+                Ok(b) => (Some(b), None),
+                Err(e) => (
+                    None,
+                    Some(format!("the kept brush is not understood ({e})")),
+                ),
+            },
+            None => (None, None),
+        };
+        (
+            Settings {
+                name,
+                colour,
+                brush,
+            },
+            notice,
+        )
+    }
+
+    /// Writes the settings to `path` (a temporary file beside it, then a rename).
+    pub fn save(&self, path: &Path) -> std::io::Result<()> {
+        let value = json!({
+            "name": self.name,
+            "colour": self.colour,
+            "brush": self.brush.map(|b| b.describe()),
+        });
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir)?;
+        }
+        let tmp = path.with_extension(format!("json.tmp-{}", std::process::id()));
+        std::fs::write(&tmp, serde_json::to_string_pretty(&value)?)?;
+        std::fs::rename(&tmp, path)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::brush::BrushOp;
+
+    #[test]
+    fn settings_round_trip_and_a_bad_file_gives_the_defaults() {
+        let dir = std::env::temp_dir().join(format!("sculpt-settings-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let path = dir.join(SETTINGS_FILE);
+        assert_eq!(Settings::load(&path), (Settings::default(), None));
+        let brush = Brush::default()
+            .parse("paint colour 1 0.5 0 box radius 0.3 blend 0.1 mirror y")
+            .unwrap();
+        let kept = Settings {
+            name: Some("Ada".into()),
+            colour: Some([10, 200, 30]),
+            brush: Some(brush),
+        };
+        kept.save(&path).unwrap();
+        assert_eq!(Settings::load(&path), (kept, None));
+        assert!(matches!(brush.op, BrushOp::Paint(..)));
+        std::fs::write(&path, "{ not json").unwrap();
+        let (defaults, notice) = Settings::load(&path);
+        assert_eq!(defaults, Settings::default());
+        assert!(notice.unwrap().contains("using the defaults"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
