@@ -1,5 +1,6 @@
 //! The subcommands for headless use: `peer` (a headless peer), `discovery`, `invite`,
-//! `sessions`, and `check`, `eval`, `slice`, `render` for functions and scenes.
+//! `sessions`, `import` and `export` (files in and out of a session's store), and `check`,
+//! `eval`, `slice`, `render` for functions and scenes.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -156,6 +157,40 @@ pub struct RenderArgs {
     /// Let `Inline` files come from anywhere inside DIR (default: the scene's own folder).
     #[arg(long, value_name = "DIR")]
     pub inline_root: Option<PathBuf>,
+}
+
+/// `sculpt import`.
+#[derive(clap::Args, Debug)]
+pub struct ImportArgs {
+    /// The session's store directory (made, as a new session, if missing).
+    #[arg(long, value_name = "DIR")]
+    pub store: PathBuf,
+    /// The files to import, in order: FVRML scenes (.wrl; `Inline`s only from the file's own
+    /// folder) and meshes (.stl, .obj, .glb; one object each, at most one op's size).
+    #[arg(required = true, value_name = "FILE")]
+    pub files: Vec<PathBuf>,
+    /// Let `Inline` files come from anywhere inside DIR (default: each scene's own folder).
+    #[arg(long, value_name = "DIR")]
+    pub inline_root: Option<PathBuf>,
+}
+
+/// `sculpt export`.
+#[derive(clap::Args, Debug)]
+pub struct ExportArgs {
+    /// The session's store directory.
+    #[arg(long, value_name = "DIR")]
+    pub store: PathBuf,
+    /// Export only this object: its id as `sculpt import` prints it, or its number in the
+    /// window (`object N`). Default: every object, merged.
+    #[arg(long, value_name = "ID")]
+    pub object: Option<u64>,
+    /// Octree depth for implicit and sculpted objects (2^N cells along a side; default 7).
+    #[arg(long, value_name = "N")]
+    pub depth: Option<u8>,
+    /// The file to write: .stl (binary), .obj, .glb (meshes in scene coordinates, +y up) or
+    /// .wrl (FVRML, without edit histories). Written whole or not at all.
+    #[arg(value_name = "OUT")]
+    pub out: PathBuf,
 }
 
 fn parse_size(text: &str) -> Result<(u32, u32), String> {
@@ -514,4 +549,138 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// An engine on `store` that reaches no one: loopback, no dialing, no discovery, no LAN.
+fn local_engine(store: &std::path::Path) -> anyhow::Result<Engine> {
+    let config = EngineConfig {
+        store: store.to_path_buf(),
+        invite: None,
+        network: Network {
+            listen: (std::net::Ipv4Addr::LOCALHOST, 0).into(),
+            dial: Vec::new(),
+            discovery: None,
+            lan: false,
+        },
+        demo: false,
+        memory_fallback: false,
+        name: None,
+        session_name: None,
+    };
+    let engine = Engine::start(config, app::clock::now().wall)?;
+    for notice in lock(engine.view()).notices() {
+        log::warn!("{notice}");
+    }
+    Ok(engine)
+}
+
+/// `sculpt import --store DIR FILE...`: every file is read and planned before anything is
+/// authored (the first time before the store is even opened), so a bad file leaves the store
+/// as it was; then each op is authored in order and waited for, and what it made printed.
+pub fn import_command(args: &ImportArgs) -> anyhow::Result<()> {
+    use app::transfer;
+    let plan = |path: &PathBuf, next_id| match &args.inline_root {
+        Some(root) => transfer::import_within(path, next_id, root),
+        None => transfer::import(path, next_id),
+    };
+    // A dry run with provisional ids: a bad file is refused without opening the store.
+    for path in &args.files {
+        plan(path, 0)?;
+    }
+    let engine = local_engine(&args.store)?;
+    let mut next_id = lock(engine.view()).next_object_id();
+    let mut planned = Vec::with_capacity(args.files.len());
+    for path in &args.files {
+        // Dropping the engine on an error shuts it down, every op on disk.
+        let imported = plan(path, next_id)?;
+        next_id = imported.next_id;
+        planned.push((path, imported));
+    }
+    let result = author_imports(&engine, planned);
+    engine.shutdown();
+    result
+}
+
+fn author_imports(
+    engine: &Engine,
+    planned: Vec<(&PathBuf, app::transfer::Imported)>,
+) -> anyhow::Result<()> {
+    for (path, imported) in planned {
+        for warning in &imported.warnings {
+            eprintln!("{warning}");
+        }
+        for (payload, made) in imported.payloads.into_iter().zip(&imported.made) {
+            engine
+                .author(payload)?
+                .wait()
+                .map_err(|e| anyhow::anyhow!("{}: {made}: {e}", path.display()))?;
+            println!("{}: {made}", path.display());
+        }
+    }
+    Ok(())
+}
+
+/// `sculpt export --store DIR [--object ID] [--depth N] OUT`: reads the session's scene
+/// through the engine (nothing is authored) and writes it, or one object, to OUT.
+pub fn export_command(args: &ExportArgs) -> anyhow::Result<()> {
+    use app::transfer;
+    if !args.store.join(store::OPS_FILE).is_file() {
+        bail!(
+            "{} is not a session store (it holds no {}); give the --store of a session",
+            args.store.display(),
+            store::OPS_FILE
+        );
+    }
+    if transfer::FileFormat::of(&args.out).is_none() {
+        bail!(
+            "{}: unknown file type; export writes .stl, .obj, .glb and .wrl",
+            args.out.display()
+        );
+    }
+    let engine = local_engine(&args.store)?;
+    let scene = lock(engine.view()).scene().clone();
+    engine.shutdown();
+    let object = args
+        .object
+        .map(|id| object_by_number(&scene, id))
+        .transpose()?;
+    let depth = args
+        .depth
+        .unwrap_or(render::snapshot::SnapshotSettings::default().depth);
+    let report = transfer::export(&scene, object, &args.out, depth)?;
+    print!("{report}");
+    Ok(())
+}
+
+/// The object `id` names: its full id, or the number the window shows (`object N`, the id's
+/// low 32 bits) when exactly one object has it.
+fn object_by_number(scene: &fdsl::scene::Scene, id: u64) -> anyhow::Result<fdsl::scene::ObjectId> {
+    use fdsl::scene::ObjectId;
+    if scene.object(ObjectId(id)).is_some() {
+        return Ok(ObjectId(id));
+    }
+    let matching: Vec<ObjectId> = scene
+        .objects()
+        .map(|(o, _)| o)
+        .filter(|o| o.0 & 0xffff_ffff == id)
+        .collect();
+    match matching[..] {
+        [one] => Ok(one),
+        [] => {
+            let known: Vec<String> = scene
+                .objects()
+                .take(20)
+                .map(|(o, entry)| format!("{} \"{}\"", o.0, entry.object.data().name))
+                .collect();
+            bail!(
+                "no object {id} in the session; its objects: {}",
+                if known.is_empty() {
+                    "none".into()
+                } else {
+                    known.join(", ")
+                }
+            )
+        }
+        _ => bail!("several objects are numbered {id}; give the full id"),
+    }
 }

@@ -11,6 +11,8 @@
 //!   planned into ops against a view.
 //! - [`files`]: scene files a user opens, their `Inline` files confined to the scene's
 //!   folder.
+//! - [`transfer`]: files in and out of a session: FVRML scenes and STL, OBJ and glTF meshes
+//!   imported as planned ops, a scene or one object exported as the renderer meshes it.
 //! - [`settings`]: the name, colour and brush a user expects to find again.
 //! - [`clock`]: the program's one read of the clock.
 //!
@@ -41,3 +43,4 @@ pub mod command;
 pub mod engine;
 pub mod files;
 pub mod settings;
+pub mod transfer;

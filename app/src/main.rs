@@ -42,6 +42,10 @@ enum Cmd {
     Slice(cli::SliceArgs),
     /// Picture an FVRML scene offscreen as PNG files, one per view.
     Render(cli::RenderArgs),
+    /// Add the objects of scene (.wrl) and mesh (.stl, .obj, .glb) files to a session's store.
+    Import(cli::ImportArgs),
+    /// Write a session's objects, or one, as a mesh (.stl, .obj, .glb) or FVRML (.wrl).
+    Export(cli::ExportArgs),
 }
 
 fn main() -> ExitCode {
@@ -61,6 +65,8 @@ fn main() -> ExitCode {
         Some(Cmd::Eval(args)) => cli::eval(&args),
         Some(Cmd::Slice(args)) => cli::slice_command(&args),
         Some(Cmd::Render(args)) => cli::render_command(&args),
+        Some(Cmd::Import(args)) => cli::import_command(&args),
+        Some(Cmd::Export(args)) => cli::export_command(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -31,6 +31,8 @@ fn every_subcommand_has_help_that_exits_zero() {
         "eval",
         "slice",
         "render",
+        "import",
+        "export",
     ];
     for sub in subcommands {
         let run = sculpt(&[sub, "--help"]);

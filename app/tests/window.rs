@@ -810,3 +810,32 @@ fn the_brush_and_the_name_are_kept_between_runs() {
     assert_eq!(second["tool"], first["tool"], "{second}");
     assert_eq!(second["name"], "Ada", "{second}");
 }
+
+#[test]
+fn the_file_menu_imports_a_mesh_and_exports_the_selection_closed() {
+    let display = display();
+    let dir = scratch("files");
+    let cube = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/meshes/cube.obj");
+    let out = dir.join("melon.stl");
+    let run = window_run(
+        &display,
+        &dir,
+        "files",
+        &[
+            &format!("export: {}", out.display()),
+            &format!("import: {}", cube.display()),
+        ],
+    );
+    let objects = run.state["objects"].as_array().unwrap();
+    assert_eq!(
+        objects.len(),
+        2,
+        "the watermelon and the imported cube: {}",
+        run.state
+    );
+    let mesh = fdsl::mesh::MeshFormat::StlBinary
+        .read(&std::fs::read(&out).unwrap())
+        .unwrap();
+    let n = mesh.triangles().len();
+    assert!(mesh.is_closed() && n > 1000, "{n} triangles");
+}

@@ -413,6 +413,10 @@ impl Engine {
 
     fn stop(&mut self) {
         let _ = self.requests.try_send(Request::Shutdown);
+        // Drop this handle's sender too: should the queue be full, the engine thread still
+        // ends once it has drained it, instead of waiting for a request that cannot come.
+        let (closed, _) = tokio::sync::mpsc::channel(1);
+        drop(std::mem::replace(&mut self.requests, closed));
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }

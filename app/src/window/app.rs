@@ -29,6 +29,15 @@ use replication::PeerId;
 pub const FRAME_SAMPLES_MAX: usize = 600;
 /// Edit-to-mesh times kept.
 pub const EDIT_SAMPLES_MAX: usize = 100;
+/// What the File menu's path field does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FileAction {
+    /// Bring a scene or mesh file into the session.
+    Import,
+    /// Write the selection (or the scene) to a file.
+    Export,
+}
+
 /// Colour of the brush outline and the stroke being drawn.
 const BRUSH_COLOUR: [f32; 4] = [1.0, 1.0, 1.0, 1.0];
 /// Milliseconds between preview meshes of a stroke being drawn.
@@ -146,6 +155,12 @@ pub struct SculptApp {
     title: String,
     /// Where the brush, name and colour are kept between runs.
     settings_path: Option<PathBuf>,
+    /// The File menu's path field: import or export, the path typed, and the last error.
+    pub(super) file_input: Option<(FileAction, String, Option<String>)>,
+    /// Ops of an import still to author, one at a time.
+    import_queue: std::collections::VecDeque<replication::shape::ShapePayload>,
+    /// An export running on its own thread.
+    export: Option<std::sync::mpsc::Receiver<Result<String, String>>>,
     pub(super) hooks: Hooks,
     pub(super) stats: Stats,
 }
@@ -213,6 +228,9 @@ impl SculptApp {
             presence_sent: None,
             title: String::new(),
             settings_path: None,
+            file_input: None,
+            import_queue: std::collections::VecDeque::new(),
+            export: None,
             hooks,
             stats: Stats::default(),
         })
@@ -296,6 +314,8 @@ impl SculptApp {
     pub fn is_idle(&self) -> bool {
         !self.dirty
             && self.pending.is_none()
+            && self.import_queue.is_empty()
+            && self.export.is_none()
             && self.stroke.is_none()
             && self
                 .objects
@@ -807,6 +827,97 @@ impl SculptApp {
         self.settings_path = Some(path);
     }
 
+    /// Plans the ops of a scene or mesh file and queues them; nothing is authored when the
+    /// file is refused.
+    pub(super) fn import_file(&mut self, path: &std::path::Path) -> Result<(), String> {
+        let next = lock(self.engine.view()).next_object_id();
+        let imported = ::app::transfer::import(path, next).map_err(|e| e.to_string())?;
+        self.status = format!(
+            "importing {} ({} ops)",
+            path.display(),
+            imported.payloads.len()
+        );
+        self.import_queue.extend(imported.payloads);
+        Ok(())
+    }
+
+    /// Authors the next queued import op once the last one is stored.
+    fn author_imports(&mut self) {
+        if self.pending.is_some() {
+            return;
+        }
+        let Some(payload) = self.import_queue.pop_front() else {
+            return;
+        };
+        let planned = Planned {
+            payload: payload.clone(),
+            summary: format!("imported; {} ops to go", self.import_queue.len()),
+            select: None,
+        };
+        match self.engine.author(payload) {
+            Ok(pending) => self.pending = Some((pending, planned)),
+            Err(e) => {
+                self.status = format!("import stopped: {e}");
+                self.import_queue.clear();
+            }
+        }
+    }
+
+    /// Exports the selected object (or the whole scene) to `path` on a thread of its own.
+    pub(super) fn export_file(&mut self, path: PathBuf) -> Result<(), String> {
+        if self.export.is_some() {
+            return Err("an export is still running".into());
+        }
+        if ::app::transfer::FileFormat::of(&path).is_none() {
+            return Err(format!(
+                "export to {}: give a file ending in {}",
+                path.display(),
+                ::app::transfer::EXTENSIONS.join(", ")
+            ));
+        }
+        let scene = lock(self.engine.view()).scene().clone();
+        let object = self.selected.map(ObjectId);
+        let depth = self.depth;
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::Builder::new()
+            .name("sculpt-export".into())
+            .spawn(move || {
+                let result = ::app::transfer::export(&scene, object, &path, depth)
+                    .map(|report| report.to_string())
+                    .map_err(|e| e.to_string());
+                let _ = tx.send(result);
+            })
+            .map_err(|e| e.to_string())?;
+        self.export = Some(rx);
+        self.status = "exporting…".into();
+        Ok(())
+    }
+
+    /// Files dropped on the window are imported; an export's result reaches the status line.
+    fn files(&mut self, ctx: &egui::Context) {
+        let dropped: Vec<PathBuf> = ctx.input(|i| {
+            i.raw
+                .dropped_files
+                .iter()
+                .map(|f| f.path().to_path_buf())
+                .filter(|p| !p.as_os_str().is_empty())
+                .collect()
+        });
+        for path in dropped {
+            if let Err(e) = self.import_file(&path) {
+                self.status = e;
+            }
+        }
+        self.author_imports();
+        if let Some(result) = self.export.as_ref().and_then(|rx| rx.try_recv().ok()) {
+            self.export = None;
+            self.status = match result {
+                Ok(report) => report.lines().next().unwrap_or("exported").to_string(),
+                Err(e) => format!("export failed: {e}"),
+            };
+        }
+    }
+
     /// Keeps the brush, name and colour for the next run.
     fn save_settings(&self) {
         let Some(path) = &self.settings_path else {
@@ -847,6 +958,7 @@ impl eframe::App for SculptApp {
         self.refresh_rows();
         self.follow();
         self.shortcuts(ui.ctx());
+        self.files(ui.ctx());
         self.run_hooks(ui.ctx());
         self.publish_presence();
         let title = format!("sculpt — {}", self.presence_text());

@@ -176,6 +176,22 @@ impl SculptApp {
                 self.hooks.idle_frames = 0;
                 return;
             }
+            if let Some(path) = line.strip_prefix("import:") {
+                println!("sculpt: scripted import: {path}");
+                if let Err(e) = self.import_file(std::path::Path::new(path.trim())) {
+                    self.hooks.fail(e);
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
+            if let Some(path) = line.strip_prefix("export:") {
+                println!("sculpt: scripted export: {path}");
+                if let Err(e) = self.export_file(PathBuf::from(path.trim())) {
+                    self.hooks.fail(e);
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
             if let Some(key) = line.strip_prefix("key:") {
                 println!("sculpt: scripted key: {key}");
                 if let Err(e) = self.shortcut_named(key.trim()) {

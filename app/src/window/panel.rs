@@ -3,7 +3,7 @@
 
 use eframe::egui;
 
-use super::app::SculptApp;
+use super::app::{FileAction, SculptApp};
 use ::app::clock::{self, Now};
 use ::app::engine::lock;
 
@@ -49,6 +49,20 @@ impl SculptApp {
     /// The menu bar: what every button and shortcut does, in one place to find it.
     fn menu_ui(&mut self, ui: &mut egui::Ui) {
         egui::MenuBar::new().ui(ui, |ui| {
+            ui.menu_button("File", |ui| {
+                if ui
+                    .button("Import a scene or mesh… (.wrl .stl .obj .glb, or drop it here)")
+                    .clicked()
+                {
+                    self.file_input = Some((FileAction::Import, String::new(), None));
+                }
+                if ui
+                    .button("Export the selection… (.stl .obj .glb .wrl)")
+                    .clicked()
+                {
+                    self.file_input = Some((FileAction::Export, String::new(), None));
+                }
+            });
             ui.menu_button("Edit", |ui| {
                 if ui
                     .button("Undo your last edit of the selection   Ctrl+Z")
@@ -150,6 +164,7 @@ impl SculptApp {
             }
         });
         self.join_ui(ui);
+        self.file_ui(ui);
         self.catch_up_ui(ui);
         if self.show_invite {
             ui.horizontal(|ui| {
@@ -206,6 +221,46 @@ impl SculptApp {
         });
         if let Some(e) = self.join_input.as_ref().and_then(|(_, e)| e.as_ref()) {
             ui.colored_label(ERROR_COLOUR, e);
+        }
+    }
+
+    /// The File menu's path field.
+    fn file_ui(&mut self, ui: &mut egui::Ui) {
+        let Some((action, mut text, mut error)) = self.file_input.take() else {
+            return;
+        };
+        let mut done = false;
+        ui.horizontal(|ui| {
+            ui.label(match action {
+                FileAction::Import => "Import file:",
+                FileAction::Export => "Export to:",
+            });
+            let response = ui.add(
+                egui::TextEdit::singleline(&mut text)
+                    .hint_text("/path/to/file")
+                    .desired_width(360.0),
+            );
+            let entered = response.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+            if ui.button("OK").clicked() || entered {
+                let path = std::path::PathBuf::from(text.trim());
+                let result = match action {
+                    FileAction::Import => self.import_file(&path),
+                    FileAction::Export => self.export_file(path),
+                };
+                match result {
+                    Ok(()) => done = true,
+                    Err(e) => error = Some(e),
+                }
+            }
+            if ui.button("Cancel").clicked() {
+                done = true;
+            }
+        });
+        if let Some(e) = &error {
+            ui.colored_label(ERROR_COLOUR, e);
+        }
+        if !done {
+            self.file_input = Some((action, text, error));
         }
     }
 
