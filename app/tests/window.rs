@@ -839,3 +839,83 @@ fn the_file_menu_imports_a_mesh_and_exports_the_selection_closed() {
     let n = mesh.triangles().len();
     assert!(mesh.is_closed() && n > 1000, "{n} triangles");
 }
+
+#[test]
+fn join_leaves_the_demo_for_another_session_found_through_a_discovery_node() {
+    let display = display();
+    let dir = scratch("join");
+    let mut discovery = Command::new(env!("CARGO_BIN_EXE_sculpt"))
+        .args(["discovery", "--listen", "127.0.0.1:0"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let first_line = {
+        use std::io::BufRead as _;
+        let mut line = String::new();
+        std::io::BufReader::new(discovery.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        line
+    };
+    let server = first_line
+        .split_whitespace()
+        .find(|w| w.starts_with("127.0.0.1:"))
+        .unwrap()
+        .trim_end_matches(';')
+        .to_string();
+    let invite = text(&sculpt(None, &["invite"]).stdout).trim().to_string();
+    let peer_store = dir.join("peer");
+    let mut peer = HeadlessPeer::spawn(&[
+        "--store",
+        peer_store.to_str().unwrap(),
+        "--invite",
+        &invite,
+        "--no-lan",
+        "--listen",
+        "127.0.0.1:0",
+        "--discovery",
+        &server,
+        "--json",
+        "--command",
+        "new: 0.7-sqrt(x^2+y^2+z^2)",
+        "--command",
+        "colour: 0.05, 0.1, 1",
+    ]);
+    peer.wait_for("its object", |v| v["ops"] == 2);
+    let join = format!("join: {invite}");
+    let (state, picture, _) = window_with(
+        &display,
+        &dir,
+        "joined",
+        &[
+            "--store",
+            dir.join("sessions").join("demo").to_str().unwrap(),
+            "--no-lan",
+            "--listen",
+            "127.0.0.1:0",
+            "--discovery",
+            &server,
+            "--command",
+            &join,
+            "--command",
+            "wait-ops: 2",
+        ],
+    );
+    let _ = discovery.kill();
+    let _ = discovery.wait();
+    // The window now shows the joined session (the peer's blue ball), kept in a store of its
+    // own beside the demo's, and not the watermelon.
+    let objects = state["objects"].as_array().unwrap();
+    assert_eq!(objects.len(), 1, "{state}");
+    assert!(
+        objects[0]["diffuse"].as_str().unwrap().contains("0.05"),
+        "{state}"
+    );
+    assert!(
+        state["store"].as_str().unwrap().contains("joined-"),
+        "{state}"
+    );
+    assert!(deep_blue(&picture) > 0.05);
+    assert_eq!(peer.last_peer(), state["peers"][0]["peer"]);
+}

@@ -274,6 +274,17 @@ pub fn memory_keypair(now: Timestamp) -> Keypair {
     }
 }
 
+/// The name of the store directory a joined session gets by default: `joined-` and the first
+/// bytes of its discovery id (public, unlike the invite), so each session has its own.
+pub fn joined_dir_name(invite: &Invite) -> String {
+    let keys = replication::net::SessionKeys::from_invite(invite);
+    let hex: String = keys.discovery_id()[..6]
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    format!("joined-{hex}")
+}
+
 /// The session store directories under `root` (each holding an invite file), sorted.
 pub fn list_sessions(root: &Path) -> std::io::Result<Vec<PathBuf>> {
     let mut found: Vec<PathBuf> = fs::read_dir(root)?

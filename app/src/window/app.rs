@@ -501,19 +501,16 @@ impl SculptApp {
     /// beside this one.
     pub(super) fn join(&mut self, text: &str) -> Result<(), String> {
         let invite = replication::net::invite::Invite::parse(text).map_err(|e| e.to_string())?;
-        let keys = replication::net::SessionKeys::from_invite(&invite);
-        let name: String = keys.discovery_id()[..6]
-            .iter()
-            .map(|b| format!("{b:02x}"))
-            .collect();
         let base = self.config.store.parent().map_or_else(
             || std::path::PathBuf::from("."),
             std::path::Path::to_path_buf,
         );
         let mut config = self.config.clone();
-        config.store = base.join(format!("joined-{name}"));
+        config.store = base.join(::app::engine::store::joined_dir_name(&invite));
         config.invite = Some(invite);
         config.demo = false;
+        // The session left is still listening while the new one starts.
+        config.network.listen.set_port(0);
         let engine = Engine::start(config.clone(), clock::now().wall).map_err(|e| e.to_string())?;
         if let Some(waker) = &self.waker {
             let waker = waker.clone();

@@ -192,6 +192,14 @@ impl SculptApp {
                 self.hooks.idle_frames = 0;
                 return;
             }
+            if let Some(code) = line.strip_prefix("join:") {
+                println!("sculpt: scripted join");
+                if let Err(e) = self.join(code.trim()) {
+                    self.hooks.fail(e);
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
             if let Some(key) = line.strip_prefix("key:") {
                 println!("sculpt: scripted key: {key}");
                 if let Err(e) = self.shortcut_named(key.trim()) {

@@ -121,11 +121,18 @@ pub fn run(args: WindowArgs) -> anyhow::Result<()> {
              are both unset).\n{HEADLESS_HINT}"
         );
     }
+    // Each session has its own store: the demo's, or one per joined session.
     let store = match &args.store {
         Some(store) => store.clone(),
-        None => default_data_dir()
-            .context("no store directory: set HOME or XDG_DATA_HOME, or give --store DIR")?
-            .join("sessions/demo"),
+        None => {
+            let sessions = default_data_dir()
+                .context("no store directory: set HOME or XDG_DATA_HOME, or give --store DIR")?
+                .join("sessions");
+            match &args.net.invite {
+                Some(invite) => sessions.join(::app::engine::store::joined_dir_name(invite)),
+                None => sessions.join("demo"),
+            }
+        }
     };
     let depth = args.depth;
     let size_points = args.size.unwrap_or(DEFAULT_SIZE_POINTS);

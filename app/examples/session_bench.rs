@@ -1,0 +1,769 @@
+//! The collaboration path measured end to end: real QUIC on 127.0.0.1 through
+//! `app::engine::Engine` (each engine with its own store directory, no LAN, peers connected
+//! with `dial`), and the discovery node's memory.
+//!
+//! 1. Edit to visible: engine A authors `shape:` edits (the `command` module's plan, as the
+//!    window and `sculpt peer` author them) of objects created at start; the time until B's
+//!    view holds the edit, and until B's scene hash equals A's. B's view wakes a channel.
+//! 2. Join: A holds 10^4 ops authored through its engine; a fresh engine B dials A; the time
+//!    to B's first object, and to all ops with A's scene hash; the first object is meshed
+//!    once as the window's mesher does.
+//! 3. Bytes per op: the same join again, through a UDP relay in this process that counts
+//!    every datagram both ways (QUIC headers, TLS, acks, the handshake and presence
+//!    included). The engine does not expose the node's counters; the relay sees exactly
+//!    what the engine sends.
+//! 4. The discovery registry (`replication::net::discovery::registry::Registry`, sans-IO)
+//!    fed Register datagrams for 10^4 sessions; its live heap is counted by this program's
+//!    global allocator, and `VmRSS` is read as a second figure.
+//!
+//! `cargo run -p app --release --example session_bench` (about a minute of work plus the
+//! build; `-- --quick` runs a small version in seconds). Every wait is bounded; the program
+//! exits non-zero when anything fails to converge in time.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::collections::VecDeque;
+use std::net::{SocketAddr, UdpSocket};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, sync_channel};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context as _, bail, ensure};
+use app::clock;
+use app::command;
+use app::engine::{Engine, EngineConfig, Network, Pending, RequestError, lock, store};
+use fdsl::scene::Scene;
+use replication::net::discovery::message::DiscoveryMessage;
+use replication::net::discovery::registry::{self, Registry};
+use replication::net::invite::Invite;
+use replication::shape::ShapePayload;
+use replication::{PeerId, Timestamp};
+
+/// Counts live heap bytes (allocated minus freed).
+struct Counting;
+
+static LIVE_BYTES: AtomicUsize = AtomicUsize::new(0);
+
+#[expect(unsafe_code, reason = "a global allocator is an unsafe trait")]
+// SAFETY: every method forwards to `System` with the caller's arguments unchanged, so the
+// allocator contract is `System`'s; the counter is only arithmetic on the side.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        LIVE_BYTES.fetch_add(layout.size(), Ordering::Relaxed);
+        // SAFETY: forwarded unchanged (see the impl).
+        unsafe { System.alloc(layout) }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        LIVE_BYTES.fetch_sub(layout.size(), Ordering::Relaxed);
+        // SAFETY: forwarded unchanged (see the impl).
+        unsafe { System.dealloc(ptr, layout) }
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        LIVE_BYTES.fetch_add(new_size, Ordering::Relaxed);
+        LIVE_BYTES.fetch_sub(layout.size(), Ordering::Relaxed);
+        // SAFETY: forwarded unchanged (see the impl).
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static ALLOC: Counting = Counting;
+
+/// Objects A creates before the edits (each `shape:` edit goes to the next one in turn).
+const N_OBJECTS: usize = 4;
+/// The window's default octree depth (`window::DEFAULT_DEPTH`, in the binary).
+const WINDOW_DEPTH: u8 = 6;
+/// Longest wait for one edit to show on B.
+const EDIT_PATIENCE: Duration = Duration::from_secs(20);
+/// Longest wait for a join of the whole history.
+const JOIN_PATIENCE: Duration = Duration::from_secs(300);
+/// Longest wait for authoring the whole history on A.
+const AUTHOR_PATIENCE: Duration = Duration::from_secs(1_200);
+/// Authoring requests in flight at once (the engine queues at most
+/// `MAX_QUEUED_REQUESTS`).
+const AUTHOR_WINDOW: usize = 128;
+/// The pause between two measured edits, so that each one meets quiet connections.
+const EDIT_GAP: Duration = Duration::from_millis(5);
+
+struct Sizes {
+    n_edits: usize,
+    n_history_ops: usize,
+    n_sessions: usize,
+}
+
+fn main() -> anyhow::Result<()> {
+    let quick = std::env::args().any(|a| a == "--quick");
+    let sizes = if quick {
+        Sizes {
+            n_edits: 50,
+            n_history_ops: 1_000,
+            n_sessions: 1_000,
+        }
+    } else {
+        Sizes {
+            n_edits: 500,
+            n_history_ops: 10_000,
+            n_sessions: 10_000,
+        }
+    };
+    let args: Vec<String> = std::env::args().collect();
+    let mut sizes = sizes;
+    if let Some(n) = args
+        .iter()
+        .position(|a| a == "--ops")
+        .and_then(|i| args.get(i + 1))
+    {
+        sizes.n_history_ops = n.parse().context("--ops N")?;
+    }
+    let started = clock::now().instant;
+    // Before any engine starts: the allocator and VmRSS then see the registry alone.
+    discovery_memory(sizes.n_sessions)?;
+    let root = Scratch::new()?;
+    sessions(&root.0, &sizes)?;
+    println!(
+        "session_bench: done in {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// Removes its directory when dropped, also on failure.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new() -> anyhow::Result<Scratch> {
+        let dir = std::env::temp_dir().join(format!("sculpt-session-bench-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        Ok(Scratch(dir))
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Parts 1 to 3: one engine A, then three engines B in turn.
+fn sessions(root: &Path, sizes: &Sizes) -> anyhow::Result<()> {
+    let a = start(&root.join("a"), None, Vec::new())?;
+    let a_addr = lock(a.view())
+        .listen_addr()
+        .context("A has no listening address")?;
+    let objects = create_objects(&a)?;
+    edit_latency(&a, a_addr, &root.join("b-edits"), &objects, sizes.n_edits)?;
+    fill_history(&a, &objects, sizes.n_history_ops)?;
+    let n_ops = lock(a.view()).n_ops();
+    let hash = lock(a.view()).scene_hash_hex();
+    let direct = join(&a, &root.join("b-join"), a_addr, n_ops, &hash)?;
+    println!(
+        "join {n_ops} ops, B dials A: engine started {:.1} ms, connected {:.1} ms, first object \
+         {:.1} ms, all ops with A's scene hash {:.1} ms ({:.0} ops/s)",
+        ms(direct.started),
+        ms(direct.connected),
+        ms(direct.first_object),
+        ms(direct.all),
+        n_ops as f64 / direct.all.as_secs_f64(),
+    );
+    direct.engine.shutdown();
+    mesh_first_object(&direct.first_scene)?;
+    let op_bytes = mean_stored_op_bytes(&root.join("a"), n_ops)?;
+    let relay = Relay::start(a_addr)?;
+    let relayed = join(&a, &root.join("b-relay"), relay.front, n_ops, &hash)?;
+    // The catch-up ends when A knows B holds everything (B's acks reached A), as in
+    // replication's own catch-up figure.
+    let b_id = relayed.engine.peer_id();
+    wait_view(&a, "A to hear B's acks", JOIN_PATIENCE, |v| {
+        v.peers()
+            .iter()
+            .any(|p| p.peer == b_id && p.online && p.to_send == 0)
+    })?;
+    let acked = relayed.t0.elapsed();
+    let (to_a, to_b) = (relay.to_a.read(), relay.to_b.read());
+    relayed.engine.shutdown();
+    relay.stop();
+    let total = to_a.1 + to_b.1;
+    println!(
+        "join {n_ops} ops through a counting UDP relay: all ops with A's scene hash {:.1} ms, \
+         acknowledged to A {:.1} ms; UDP payload bytes B->A {} ({} datagrams), A->B {} ({} \
+         datagrams); {:.1} bytes per op both ways, {:.3} per byte of encoded op (mean op {:.1} B)",
+        ms(relayed.all),
+        ms(acked),
+        to_a.1,
+        to_a.0,
+        to_b.1,
+        to_b.0,
+        total as f64 / n_ops as f64,
+        total as f64 / (op_bytes * n_ops as f64),
+        op_bytes,
+    );
+    a.shutdown();
+    Ok(())
+}
+
+fn start(dir: &Path, invite: Option<Invite>, dial: Vec<SocketAddr>) -> anyhow::Result<Engine> {
+    let config = EngineConfig {
+        store: dir.to_path_buf(),
+        invite,
+        network: Network {
+            listen: (std::net::Ipv4Addr::LOCALHOST, 0).into(),
+            dial,
+            discovery: None,
+            lan: false,
+        },
+        demo: false,
+        memory_fallback: false,
+        name: None,
+        session_name: None,
+    };
+    Ok(Engine::start(config, clock::now().wall)?)
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+/// Waits, at most `patience`, until `done` holds for the engine's view, polling.
+fn wait_view(
+    engine: &Engine,
+    what: &str,
+    patience: Duration,
+    mut done: impl FnMut(&mut app::engine::View) -> bool,
+) -> anyhow::Result<()> {
+    let deadline = clock::now().instant + patience;
+    while !done(&mut lock(engine.view())) {
+        if clock::now().instant > deadline {
+            bail!("timed out after {patience:?} waiting for {what}");
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    Ok(())
+}
+
+/// Waits, at most until `deadline`, for the engine's reply to an authoring request.
+fn reply(pending: &Pending, deadline: Instant) -> anyhow::Result<()> {
+    loop {
+        match pending.try_take() {
+            Some(Ok(_)) => return Ok(()),
+            Some(Err(e)) => bail!("authoring failed: {e}"),
+            None if clock::now().instant > deadline => bail!("no authoring reply in time"),
+            None => std::thread::sleep(Duration::from_micros(200)),
+        }
+    }
+}
+
+/// Plans one command line against A's view, as `sculpt peer --command` does.
+fn plan(engine: &Engine, line: &str, selected: Option<u64>) -> anyhow::Result<ShapePayload> {
+    let parsed = command::parse(line).context("an empty line")?;
+    let view = lock(engine.view());
+    command::plan(parsed, &view, selected)
+        .map(|p| p.payload)
+        .map_err(|e| anyhow::anyhow!("{line}: {e}"))
+}
+
+/// `new:` objects on A, each waited for (the next object id comes from the view).
+fn create_objects(a: &Engine) -> anyhow::Result<Vec<u64>> {
+    for i in 0..N_OBJECTS {
+        let line = format!("new: 0.{}-sqrt(x^2+y^2+z^2)", 5 + i);
+        let payload = plan(a, &line, None)?;
+        reply(&a.author(payload)?, clock::now().instant + EDIT_PATIENCE)?;
+        wait_view(a, "A's new object", EDIT_PATIENCE, |v| v.n_ops() == i + 1)?;
+    }
+    let objects: Vec<u64> = lock(a.view())
+        .scene()
+        .objects()
+        .map(|(id, _)| id.0)
+        .collect();
+    ensure!(
+        objects.len() == N_OBJECTS,
+        "A has {} objects",
+        objects.len()
+    );
+    Ok(objects)
+}
+
+/// A channel woken by each engine after each change of its view (coalesced: at most one
+/// signal waits), so that a wait ends as soon as either view changes.
+fn wake_on_change(engines: &[&Engine]) -> Receiver<()> {
+    let (tx, rx) = sync_channel(1);
+    for engine in engines {
+        let tx = tx.clone();
+        lock(engine.view()).set_waker(Box::new(move || {
+            let _ = tx.try_send(());
+        }));
+    }
+    rx
+}
+
+/// Waits for the next wake, but at most `poll` (for changes no waker reports, such as a
+/// new connection); false when `deadline` passed.
+fn next_wake(wakes: &Receiver<()>, deadline: Instant, poll: Duration) -> anyhow::Result<bool> {
+    let now = clock::now().instant;
+    if now > deadline {
+        return Ok(false);
+    }
+    match wakes.recv_timeout(poll.min(deadline - now)) {
+        Ok(()) | Err(RecvTimeoutError::Timeout) => Ok(true),
+        Err(RecvTimeoutError::Disconnected) => bail!("the engine stopped"),
+    }
+}
+
+/// Nearest-rank percentiles and the maximum, in milliseconds.
+fn summary(mut samples: Vec<Duration>) -> String {
+    samples.sort();
+    let n = samples.len();
+    let rank = |p: f64| samples[((p * n as f64).ceil() as usize).clamp(1, n) - 1];
+    format!(
+        "p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms",
+        ms(rank(0.50)),
+        ms(rank(0.99)),
+        ms(samples[n - 1]),
+    )
+}
+
+#[derive(Default)]
+struct EditTimes {
+    on_a: Vec<Duration>,
+    on_b: Vec<Duration>,
+    same_hash: Vec<Duration>,
+}
+
+/// Part 1: `n_edits` geometry edits on A, each timed until B shows it.
+fn edit_latency(
+    a: &Engine,
+    a_addr: SocketAddr,
+    dir: &Path,
+    objects: &[u64],
+    n_edits: usize,
+) -> anyhow::Result<()> {
+    let b = start(dir, Some(a.invite().clone()), vec![a_addr])?;
+    let first = lock(a.view()).scene_hash_hex();
+    wait_view(&b, "B to hold A's objects", JOIN_PATIENCE, |v| {
+        v.n_ops() == N_OBJECTS && v.scene_hash_hex() == first
+    })?;
+    let wakes = wake_on_change(&[a, &b]);
+    let mut times = EditTimes::default();
+    for edit_idx in 0..n_edits {
+        let object = objects[edit_idx % objects.len()];
+        let line = format!("shape: 0.{:03}-sqrt(x^2+y^2+z^2)", 400 + edit_idx % 500);
+        let payload = plan(a, &line, Some(object))?;
+        one_edit(a, &b, &wakes, payload, &mut times)?;
+        std::thread::sleep(EDIT_GAP);
+    }
+    println!(
+        "edit to visible on B ({n_edits} shape: edits; B's view holds the op): {}",
+        summary(times.on_b)
+    );
+    println!(
+        "edit to the same scene hash on B as on A ({n_edits} edits): {}",
+        summary(times.same_hash)
+    );
+    println!(
+        "edit to visible on A itself (validated, signed, fsynced, folded; {n_edits} edits): {}",
+        summary(times.on_a)
+    );
+    b.shutdown();
+    Ok(())
+}
+
+/// One edit: authored on A, timed until A's view, then B's view, hold it, and until B's
+/// scene hash equals A's.
+fn one_edit(
+    a: &Engine,
+    b: &Engine,
+    wakes: &Receiver<()>,
+    payload: ShapePayload,
+    times: &mut EditTimes,
+) -> anyhow::Result<()> {
+    let (a_before, b_before) = (lock(a.view()).n_ops(), lock(b.view()).n_ops());
+    while wakes.try_recv().is_ok() {}
+    let t0 = clock::now().instant;
+    let deadline = t0 + EDIT_PATIENCE;
+    let pending = a.author(payload)?;
+    let (mut on_a, mut on_b) = (None, None);
+    loop {
+        if on_a.is_none() && lock(a.view()).n_ops() > a_before {
+            on_a = Some(t0.elapsed());
+        }
+        if on_b.is_none() && lock(b.view()).n_ops() > b_before {
+            on_b = Some(t0.elapsed());
+        }
+        if let (Some(on_a), Some(on_b)) = (on_a, on_b) {
+            times.on_a.push(on_a);
+            times.on_b.push(on_b);
+            break;
+        }
+        ensure!(
+            next_wake(wakes, deadline, EDIT_PATIENCE)?,
+            "an edit did not reach both views in time"
+        );
+    }
+    reply(&pending, deadline)?;
+    let target = lock(a.view()).scene_hash_hex();
+    while lock(b.view()).scene_hash_hex() != target {
+        ensure!(
+            next_wake(wakes, deadline, EDIT_PATIENCE)?,
+            "B's scene hash did not reach A's in time"
+        );
+    }
+    times.same_hash.push(t0.elapsed());
+    Ok(())
+}
+
+/// Authors ops on A until it holds `n_total`: nine in ten are `shape:` or `colour:` edits of
+/// the objects in turn, one in ten a chat line; up to [`AUTHOR_WINDOW`] requests in flight.
+fn fill_history(a: &Engine, objects: &[u64], n_total: usize) -> anyhow::Result<()> {
+    let n_have = lock(a.view()).n_ops();
+    let t0 = clock::now().instant;
+    let deadline = t0 + AUTHOR_PATIENCE;
+    let mut in_flight = VecDeque::with_capacity(AUTHOR_WINDOW);
+    for op_idx in n_have..n_total {
+        let line = match op_idx % 10 {
+            9 => format!("line {op_idx} of the chat, about the handle on the left"),
+            4 => format!("colour: 0.{}, 0.3, 0.2", op_idx % 10),
+            _ => format!("shape: 0.{:03}-sqrt(x^2+y^2+z^2)", 400 + op_idx % 500),
+        };
+        let payload = plan(a, &line, Some(objects[op_idx % objects.len()]))?;
+        if in_flight.len() == AUTHOR_WINDOW
+            && let Some(oldest) = in_flight.pop_front()
+        {
+            reply(&oldest, deadline)?;
+        }
+        match a.author(payload) {
+            Ok(pending) => in_flight.push_back(pending),
+            Err(RequestError::Busy) => bail!("the engine's queue is full"),
+            Err(e) => bail!("{e}"),
+        }
+    }
+    for pending in in_flight {
+        reply(&pending, deadline)?;
+    }
+    wait_view(a, "A's history", EDIT_PATIENCE, |v| v.n_ops() == n_total)?;
+    let secs = t0.elapsed().as_secs_f64();
+    let n_authored = n_total - n_have;
+    println!(
+        "authoring {n_authored} ops through A's engine (plan, validate, sign, fsync, fold): \
+         {secs:.1} s, {:.0} ops/s",
+        n_authored as f64 / secs
+    );
+    Ok(())
+}
+
+/// The mean encoded op in A's store file: its size less the file header (`SCULPTOPS` and a
+/// version byte) and each record's head (`[u32 len][blake3/16]`), per op.
+fn mean_stored_op_bytes(dir: &Path, n_ops: usize) -> anyhow::Result<f64> {
+    const FILE_HEADER_BYTES: u64 = 10;
+    const RECORD_HEAD_BYTES: u64 = 20;
+    let path = dir.join(store::OPS_FILE);
+    let len = std::fs::metadata(&path)
+        .with_context(|| format!("reading {}", path.display()))?
+        .len();
+    let ops = len - FILE_HEADER_BYTES - RECORD_HEAD_BYTES * n_ops as u64;
+    Ok(ops as f64 / n_ops as f64)
+}
+
+struct Joined {
+    engine: Engine,
+    /// When B was started.
+    t0: Instant,
+    started: Duration,
+    connected: Duration,
+    first_object: Duration,
+    first_scene: Scene,
+    all: Duration,
+}
+
+/// Parts 2 and 3: a fresh engine B dials `dial` (A, or the relay in front of it); times to
+/// its first object and to A's whole history with A's scene hash. B is returned running.
+fn join(
+    a: &Engine,
+    dir: &Path,
+    dial: SocketAddr,
+    n_ops: usize,
+    hash: &str,
+) -> anyhow::Result<Joined> {
+    let t0 = clock::now().instant;
+    let deadline = t0 + JOIN_PATIENCE;
+    let b = start(dir, Some(a.invite().clone()), vec![dial])?;
+    let started = t0.elapsed();
+    let cpu0 = thread_cpu();
+    let wakes = wake_on_change(&[&b]);
+    let (mut connected, mut first) = (None, None);
+    let all = loop {
+        {
+            let mut view = lock(b.view());
+            if connected.is_none() && view.n_online() > 0 {
+                connected = Some(t0.elapsed());
+            }
+            if std::env::var_os("SB_TRACE").is_some() {
+                eprintln!("{:9.1} ms n_ops {}", ms(t0.elapsed()), view.n_ops());
+            }
+            if first.is_none() && view.scene().len() > 0 {
+                first = Some((t0.elapsed(), view.scene().clone()));
+            }
+            // The hash only once every op is there: it would hold B's view lock meanwhile.
+            if view.n_ops() == n_ops && view.scene_hash_hex() == hash {
+                break t0.elapsed();
+            }
+        }
+        // The waker reports scene changes, not the connection: poll for that every ms.
+        ensure!(
+            next_wake(&wakes, deadline, Duration::from_millis(1))?,
+            "B did not catch up within {JOIN_PATIENCE:?}"
+        );
+    };
+    if std::env::var_os("SB_TRACE").is_some() {
+        let cpu1 = thread_cpu();
+        for (k, v) in &cpu1 {
+            eprintln!("cpu {k}: {} ticks", v - cpu0.get(k).copied().unwrap_or(0));
+        }
+    }
+    let (first_object, first_scene) = first.context("B never showed an object")?;
+    Ok(Joined {
+        engine: b,
+        t0,
+        started,
+        connected: connected.context("B never showed a connection")?,
+        first_object,
+        first_scene,
+        all,
+    })
+}
+
+/// Meshes one object of the first scene B showed, as the window's mesher does (a one-object
+/// scene through `render::snapshot::build` at the window's default depth).
+fn mesh_first_object(scene: &Scene) -> anyhow::Result<()> {
+    let (id, entry) = scene.objects().next().context("no object to mesh")?;
+    let mut object = entry.object.clone();
+    let t0 = clock::now().instant;
+    object.prepare();
+    let mut one = Scene::new();
+    one.insert_object(id, object, None)?;
+    let settings = render::snapshot::SnapshotSettings {
+        depth: WINDOW_DEPTH,
+        ..render::snapshot::SnapshotSettings::default()
+    };
+    let built = render::snapshot::build(&one, &settings)?;
+    let secs = t0.elapsed().as_secs_f64();
+    let n_triangles: usize = built.objects.iter().map(|o| o.n_triangles).sum();
+    ensure!(n_triangles > 0, "the first object meshed to nothing");
+    println!(
+        "meshing B's first object at depth {WINDOW_DEPTH} (render::snapshot::build, as the \
+         window's mesher): {:.1} ms, {n_triangles} triangles",
+        secs * 1e3
+    );
+    Ok(())
+}
+
+/// Datagrams and bytes one way through the relay.
+#[derive(Default)]
+struct Count {
+    datagrams: AtomicU64,
+    bytes: AtomicU64,
+}
+
+impl Count {
+    fn add(&self, bytes: usize) {
+        self.datagrams.fetch_add(1, Ordering::Relaxed);
+        self.bytes.fetch_add(bytes as u64, Ordering::Relaxed);
+    }
+
+    fn read(&self) -> (u64, u64) {
+        (
+            self.datagrams.load(Ordering::Relaxed),
+            self.bytes.load(Ordering::Relaxed),
+        )
+    }
+}
+
+/// A UDP relay on 127.0.0.1 in front of A for one client: what reaches `front` goes to A
+/// from `upstream`, and A's answers go back to the client; every datagram is counted.
+struct Relay {
+    front: SocketAddr,
+    to_a: Arc<Count>,
+    to_b: Arc<Count>,
+    stop: Arc<AtomicBool>,
+    threads: Vec<std::thread::JoinHandle<()>>,
+}
+
+/// How often a relay thread looks at its stop flag.
+const RELAY_POLL: Duration = Duration::from_millis(50);
+/// Larger than any UDP datagram.
+const RELAY_BUFFER_BYTES: usize = 65_536;
+
+impl Relay {
+    fn start(a: SocketAddr) -> anyhow::Result<Relay> {
+        let front = UdpSocket::bind("127.0.0.1:0")?;
+        let upstream = UdpSocket::bind("127.0.0.1:0")?;
+        upstream.connect(a)?;
+        for socket in [&front, &upstream] {
+            socket.set_read_timeout(Some(RELAY_POLL))?;
+        }
+        let client = Arc::new(std::sync::Mutex::new(None::<SocketAddr>));
+        let (to_a, to_b) = (Arc::new(Count::default()), Arc::new(Count::default()));
+        let stop = Arc::new(AtomicBool::new(false));
+        let forward_up = {
+            let (front, upstream) = (front.try_clone()?, upstream.try_clone()?);
+            let (client, count, stop) = (client.clone(), to_a.clone(), stop.clone());
+            move || {
+                let mut buf = vec![0; RELAY_BUFFER_BYTES];
+                while !stop.load(Ordering::Relaxed) {
+                    if let Ok((n, from)) = front.recv_from(&mut buf) {
+                        *client.lock().unwrap_or_else(|e| e.into_inner()) = Some(from);
+                        count.add(n);
+                        let _ = upstream.send(&buf[..n]);
+                    }
+                }
+            }
+        };
+        let forward_down = {
+            let front_send = front.try_clone()?;
+            let (count, stop) = (to_b.clone(), stop.clone());
+            move || {
+                let mut buf = vec![0; RELAY_BUFFER_BYTES];
+                while !stop.load(Ordering::Relaxed) {
+                    if let Ok(n) = upstream.recv(&mut buf) {
+                        let to = *client.lock().unwrap_or_else(|e| e.into_inner());
+                        if let Some(to) = to {
+                            count.add(n);
+                            let _ = front_send.send_to(&buf[..n], to);
+                        }
+                    }
+                }
+            }
+        };
+        let threads = vec![
+            std::thread::Builder::new()
+                .name("relay-to-a".into())
+                .spawn(forward_up)?,
+            std::thread::Builder::new()
+                .name("relay-to-b".into())
+                .spawn(forward_down)?,
+        ];
+        Ok(Relay {
+            front: front.local_addr()?,
+            to_a,
+            to_b,
+            stop,
+            threads,
+        })
+    }
+
+    fn stop(self) {
+        self.stop.store(true, Ordering::Relaxed);
+        for thread in self.threads {
+            let _ = thread.join();
+        }
+    }
+}
+
+/// Resident memory of this process in KiB, from `/proc/self/status` (Linux).
+fn vm_rss_kib() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmRSS:"))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}
+
+/// Part 4: Register datagrams for `n_sessions` sessions (one peer, or two in every other
+/// session), each from its own source IP, 1 ms apart, into a discovery registry; its heap
+/// and the process's resident memory before and after.
+fn discovery_memory(n_sessions: usize) -> anyhow::Result<()> {
+    let t0 = Timestamp(1_795_355_107_000_000);
+    let mut registry = Registry::default();
+    let (heap_before, rss_before) = (LIVE_BYTES.load(Ordering::Relaxed), vm_rss_kib());
+    let mut n_datagrams: u32 = 0;
+    for session_idx in 0..n_sessions {
+        let mut discovery_id = [0xd1; 16];
+        discovery_id[..8].copy_from_slice(&(session_idx as u64).to_le_bytes());
+        for peer_idx in 0..1 + session_idx % 2 {
+            let mut peer = [0x5e; 32];
+            peer[..8].copy_from_slice(&(session_idx as u64).to_be_bytes());
+            peer[8] = peer_idx as u8;
+            let datagram = DiscoveryMessage::Register {
+                discovery_id,
+                peer: PeerId(peer),
+                port: 7_000 + peer_idx as u16,
+            }
+            .encode();
+            // 10.0.0.1 and up: one source per datagram, so no source's rate limit is reached.
+            let from =
+                SocketAddr::from((std::net::Ipv4Addr::from(0x0a00_0001 + n_datagrams), 40_000));
+            let now = t0.saturating_add_micros(u64::from(n_datagrams) * 1_000);
+            ensure!(
+                registry.handle_datagram(now, from, &datagram).is_some(),
+                "the registry did not answer a Register ({:?})",
+                registry.stats()
+            );
+            while registry.poll_transmit().is_some() {}
+            n_datagrams += 1;
+        }
+    }
+    let end = t0.saturating_add_micros(u64::from(n_datagrams) * 1_000);
+    let heap_held = LIVE_BYTES.load(Ordering::Relaxed) - heap_before;
+    let rss_held = vm_rss_kib()
+        .zip(rss_before)
+        .map(|(after, before)| after - before);
+    let n_held = n_sessions.min(registry::MAX_SESSIONS);
+    let n_registrations: usize = (0..n_held).map(|i| 1 + i % 2).sum();
+    let stats = registry.stats().clone();
+    ensure!(
+        registry.n_registrations() == n_registrations,
+        "the registry holds {} registrations, not {n_registrations} ({stats:?})",
+        registry.n_registrations()
+    );
+    // Rate-limit state idles out 2 s after a source's last request; registrations live 60 s.
+    registry.expire(end.saturating_add_micros(3_000_000));
+    let heap_sessions = LIVE_BYTES.load(Ordering::Relaxed) - heap_before;
+    println!(
+        "discovery registry: {n_sessions} sessions offered ({n_datagrams} Register datagrams, \
+         each from its own source IP), {n_held} sessions held (MAX_SESSIONS = {}), \
+         {n_registrations} registrations; {} registrations refused as full (answered), {} rate \
+         limited, {} dropped for MAX_SOURCES",
+        registry::MAX_SESSIONS,
+        stats.n_full,
+        stats.n_rate_limited,
+        stats.n_sources_full,
+    );
+    println!(
+        "discovery registry heap: {heap_held} bytes with the sources' rate-limit state = {:.0} \
+         bytes per held session; {heap_sessions} bytes once idle sources are dropped = {:.0} \
+         bytes per held session ({:.0} per registration); VmRSS grew {} KiB = {:.0} bytes per \
+         held session",
+        heap_held as f64 / n_held as f64,
+        heap_sessions as f64 / n_held as f64,
+        heap_sessions as f64 / n_registrations as f64,
+        rss_held.map_or_else(|| "?".into(), |k| k.to_string()),
+        rss_held.map_or(f64::NAN, |k| k as f64 * 1024.0 / n_held as f64),
+    );
+    Ok(())
+}
+
+fn thread_cpu() -> std::collections::BTreeMap<String, u64> {
+    let mut out = std::collections::BTreeMap::new();
+    for e in std::fs::read_dir("/proc/self/task")
+        .into_iter()
+        .flatten()
+        .flatten()
+    {
+        let Ok(stat) = std::fs::read_to_string(e.path().join("stat")) else {
+            continue;
+        };
+        let Some(open) = stat.find('(') else { continue };
+        let Some(close) = stat.rfind(')') else {
+            continue;
+        };
+        let name = format!(
+            "{}-{}",
+            &stat[open + 1..close],
+            e.file_name().to_string_lossy()
+        );
+        let f: Vec<&str> = stat[close + 2..].split_whitespace().collect();
+        let t = f[11].parse::<u64>().unwrap_or(0) + f[12].parse::<u64>().unwrap_or(0);
+        out.insert(name, t);
+    }
+    out
+}
