@@ -3,11 +3,14 @@
 //! with `dial`), and the discovery node's memory.
 //!
 //! 1. Edit to visible: engine A authors `shape:` edits (the `command` module's plan, as the
-//!    window and `sculpt peer` author them) of objects created at start; the time until B's
-//!    view holds the edit, and until B's scene hash equals A's. B's view wakes a channel.
-//! 2. Join: A holds 10^4 ops authored through its engine; a fresh engine B dials A; the time
-//!    to B's first object, and to all ops with A's scene hash; the first object is meshed
-//!    once as the window's mesher does.
+//!    window and `sculpt peer` author them) of objects created at start; the time until A's
+//!    own view, then B's, holds the edit, and until B's scene hash equals A's. Both views
+//!    wake one channel through `View::set_waker`.
+//! 2. Join: A holds 10^4 ops authored through its engine (nine in ten `shape:` or `colour:`
+//!    edits of four objects, one in ten chat); a fresh engine B dials A; the time to B's
+//!    connection, its first object, each quarter of the ops, and all ops with A's scene
+//!    hash, and the CPU time of B's engine thread; the first object is meshed once as the
+//!    window's mesher does.
 //! 3. Bytes per op: the same join again, through a UDP relay in this process that counts
 //!    every datagram both ways (QUIC headers, TLS, acks, the handshake and presence
 //!    included). The engine does not expose the node's counters; the relay sees exactly
@@ -16,9 +19,11 @@
 //!    fed Register datagrams for 10^4 sessions; its live heap is counted by this program's
 //!    global allocator, and `VmRSS` is read as a second figure.
 //!
-//! `cargo run -p app --release --example session_bench` (about a minute of work plus the
-//! build; `-- --quick` runs a small version in seconds). Every wait is bounded; the program
-//! exits non-zero when anything fails to converge in time.
+//! `cargo run -p app --release --example session_bench` (about four minutes on the project's
+//! 2-core machine, most of it the two joins; `-- --quick` runs 50 edits, 10^3 ops and 10^3
+//! sessions in seconds; `-- --ops N` sets the history's length). Every wait is bounded; the
+//! program exits non-zero when anything fails to converge in time. The stores live in a
+//! fresh directory under the system's temporary directory, removed at the end.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::collections::VecDeque;
@@ -79,7 +84,7 @@ const WINDOW_DEPTH: u8 = 6;
 /// Longest wait for one edit to show on B.
 const EDIT_PATIENCE: Duration = Duration::from_secs(20);
 /// Longest wait for a join of the whole history.
-const JOIN_PATIENCE: Duration = Duration::from_secs(300);
+const JOIN_PATIENCE: Duration = Duration::from_secs(600);
 /// Longest wait for authoring the whole history on A.
 const AUTHOR_PATIENCE: Duration = Duration::from_secs(1_200);
 /// Authoring requests in flight at once (the engine queues at most
@@ -94,30 +99,33 @@ struct Sizes {
     n_sessions: usize,
 }
 
-fn main() -> anyhow::Result<()> {
-    let quick = std::env::args().any(|a| a == "--quick");
-    let sizes = if quick {
-        Sizes {
-            n_edits: 50,
-            n_history_ops: 1_000,
-            n_sessions: 1_000,
+impl Sizes {
+    /// The sizes the arguments ask for: `--quick`, and `--ops N`.
+    fn from_args() -> anyhow::Result<Sizes> {
+        let args: Vec<String> = std::env::args().skip(1).collect();
+        let quick = args.iter().any(|a| a == "--quick");
+        let mut sizes = Sizes {
+            n_edits: if quick { 50 } else { 500 },
+            n_history_ops: if quick { 1_000 } else { 10_000 },
+            n_sessions: if quick { 1_000 } else { 10_000 },
+        };
+        if let Some(i) = args.iter().position(|a| a == "--ops") {
+            let n = args.get(i + 1).context("--ops needs a number")?;
+            sizes.n_history_ops = n.parse().context("--ops needs a number")?;
         }
-    } else {
-        Sizes {
-            n_edits: 500,
-            n_history_ops: 10_000,
-            n_sessions: 10_000,
+        if let Some(other) = args
+            .iter()
+            .enumerate()
+            .find(|(i, a)| *a != "--quick" && *a != "--ops" && (*i == 0 || args[i - 1] != "--ops"))
+        {
+            bail!("unknown argument {:?}; use --quick and --ops N", other.1);
         }
-    };
-    let args: Vec<String> = std::env::args().collect();
-    let mut sizes = sizes;
-    if let Some(n) = args
-        .iter()
-        .position(|a| a == "--ops")
-        .and_then(|i| args.get(i + 1))
-    {
-        sizes.n_history_ops = n.parse().context("--ops N")?;
+        Ok(sizes)
     }
+}
+
+fn main() -> anyhow::Result<()> {
+    let sizes = Sizes::from_args()?;
     let started = clock::now().instant;
     // Before any engine starts: the allocator and VmRSS then see the registry alone.
     discovery_memory(sizes.n_sessions)?;
@@ -161,13 +169,8 @@ fn sessions(root: &Path, sizes: &Sizes) -> anyhow::Result<()> {
     let hash = lock(a.view()).scene_hash_hex();
     let direct = join(&a, &root.join("b-join"), a_addr, n_ops, &hash)?;
     println!(
-        "join {n_ops} ops, B dials A: engine started {:.1} ms, connected {:.1} ms, first object \
-         {:.1} ms, all ops with A's scene hash {:.1} ms ({:.0} ops/s)",
-        ms(direct.started),
-        ms(direct.connected),
-        ms(direct.first_object),
-        ms(direct.all),
-        n_ops as f64 / direct.all.as_secs_f64(),
+        "join {n_ops} ops, B dials A: {}",
+        join_times(&direct, n_ops)
     );
     direct.engine.shutdown();
     mesh_first_object(&direct.first_scene)?;
@@ -184,14 +187,17 @@ fn sessions(root: &Path, sizes: &Sizes) -> anyhow::Result<()> {
     })?;
     let acked = relayed.t0.elapsed();
     let (to_a, to_b) = (relay.to_a.read(), relay.to_b.read());
+    println!(
+        "join {n_ops} ops through a counting UDP relay: {}",
+        join_times(&relayed, n_ops)
+    );
     relayed.engine.shutdown();
     relay.stop();
     let total = to_a.1 + to_b.1;
     println!(
-        "join {n_ops} ops through a counting UDP relay: all ops with A's scene hash {:.1} ms, \
-         acknowledged to A {:.1} ms; UDP payload bytes B->A {} ({} datagrams), A->B {} ({} \
-         datagrams); {:.1} bytes per op both ways, {:.3} per byte of encoded op (mean op {:.1} B)",
-        ms(relayed.all),
+        "UDP payload bytes of that join until A heard B's last ack ({:.0} ms): B->A {} ({} \
+         datagrams), A->B {} ({} datagrams); {:.1} bytes per op both ways, {:.3} per byte of \
+         encoded op (mean op {:.1} B in A's store)",
         ms(acked),
         to_a.1,
         to_a.0,
@@ -474,7 +480,11 @@ struct Joined {
     connected: Duration,
     first_object: Duration,
     first_scene: Scene,
+    /// When B held a quarter, half and three quarters of the ops.
+    quarters: [Duration; 3],
     all: Duration,
+    /// CPU seconds of B's engine thread during the join (Linux).
+    cpu_secs: Option<f64>,
 }
 
 /// Parts 2 and 3: a fresh engine B dials `dial` (A, or the relay in front of it); times to
@@ -486,24 +496,27 @@ fn join(
     n_ops: usize,
     hash: &str,
 ) -> anyhow::Result<Joined> {
+    let engine_threads = engine_thread_cpu();
     let t0 = clock::now().instant;
     let deadline = t0 + JOIN_PATIENCE;
     let b = start(dir, Some(a.invite().clone()), vec![dial])?;
     let started = t0.elapsed();
-    let cpu0 = thread_cpu();
     let wakes = wake_on_change(&[&b]);
     let (mut connected, mut first) = (None, None);
+    let mut quarters = [None; 3];
     let all = loop {
         {
             let mut view = lock(b.view());
             if connected.is_none() && view.n_online() > 0 {
                 connected = Some(t0.elapsed());
             }
-            if std::env::var_os("SB_TRACE").is_some() {
-                eprintln!("{:9.1} ms n_ops {}", ms(t0.elapsed()), view.n_ops());
-            }
-            if first.is_none() && view.scene().len() > 0 {
+            if first.is_none() && !view.scene().is_empty() {
                 first = Some((t0.elapsed(), view.scene().clone()));
+            }
+            for (quarter_idx, at) in quarters.iter_mut().enumerate() {
+                if at.is_none() && view.n_ops() * 4 >= n_ops * (quarter_idx + 1) {
+                    *at = Some(t0.elapsed());
+                }
             }
             // The hash only once every op is there: it would hold B's view lock meanwhile.
             if view.n_ops() == n_ops && view.scene_hash_hex() == hash {
@@ -516,12 +529,11 @@ fn join(
             "B did not catch up within {JOIN_PATIENCE:?}"
         );
     };
-    if std::env::var_os("SB_TRACE").is_some() {
-        let cpu1 = thread_cpu();
-        for (k, v) in &cpu1 {
-            eprintln!("cpu {k}: {} ticks", v - cpu0.get(k).copied().unwrap_or(0));
-        }
-    }
+    // B's engine thread is the one that was not there before.
+    let cpu_secs = engine_thread_cpu()
+        .into_iter()
+        .find(|(tid, _)| !engine_threads.iter().any(|(old, _)| old == tid))
+        .map(|(_, secs)| secs);
     let (first_object, first_scene) = first.context("B never showed an object")?;
     Ok(Joined {
         engine: b,
@@ -530,8 +542,28 @@ fn join(
         connected: connected.context("B never showed a connection")?,
         first_object,
         first_scene,
+        quarters: quarters.map(|q| q.unwrap_or(all)),
         all,
+        cpu_secs,
     })
+}
+
+/// A join in words: its times, and the CPU its engine thread used.
+fn join_times(joined: &Joined, n_ops: usize) -> String {
+    let [q1, q2, q3] = joined.quarters.map(ms);
+    let cpu = joined.cpu_secs.map_or_else(String::new, |s| {
+        format!("; B's engine thread used {s:.1} s of CPU")
+    });
+    format!(
+        "engine started {:.1} ms, connected {:.1} ms, first object {:.1} ms, 1/4 of the ops \
+         {q1:.0} ms, 1/2 {q2:.0} ms, 3/4 {q3:.0} ms, all ops with A's scene hash {:.0} ms \
+         ({:.0} ops/s){cpu}",
+        ms(joined.started),
+        ms(joined.connected),
+        ms(joined.first_object),
+        ms(joined.all),
+        n_ops as f64 / joined.all.as_secs_f64(),
+    )
 }
 
 /// Meshes one object of the first scene B showed, as the window's mesher does (a one-object
@@ -668,13 +700,14 @@ fn vm_rss_kib() -> Option<u64> {
     line.split_whitespace().nth(1)?.parse().ok()
 }
 
-/// Part 4: Register datagrams for `n_sessions` sessions (one peer, or two in every other
-/// session), each from its own source IP, 1 ms apart, into a discovery registry; its heap
-/// and the process's resident memory before and after.
-fn discovery_memory(n_sessions: usize) -> anyhow::Result<()> {
-    let t0 = Timestamp(1_795_355_107_000_000);
-    let mut registry = Registry::default();
-    let (heap_before, rss_before) = (LIVE_BYTES.load(Ordering::Relaxed), vm_rss_kib());
+/// The first timestamp the registry sees.
+const REGISTRY_T0: Timestamp = Timestamp(1_795_355_107_000_000);
+/// Between two Register datagrams.
+const REGISTER_GAP_MICROS: u64 = 1_000;
+
+/// Registers `n_sessions` sessions (one peer, or two in every other session), each datagram
+/// from its own source IP, [`REGISTER_GAP_MICROS`] apart; returns the datagrams sent.
+fn register_sessions(registry: &mut Registry, n_sessions: usize) -> anyhow::Result<u32> {
     let mut n_datagrams: u32 = 0;
     for session_idx in 0..n_sessions {
         let mut discovery_id = [0xd1; 16];
@@ -692,7 +725,8 @@ fn discovery_memory(n_sessions: usize) -> anyhow::Result<()> {
             // 10.0.0.1 and up: one source per datagram, so no source's rate limit is reached.
             let from =
                 SocketAddr::from((std::net::Ipv4Addr::from(0x0a00_0001 + n_datagrams), 40_000));
-            let now = t0.saturating_add_micros(u64::from(n_datagrams) * 1_000);
+            let now =
+                REGISTRY_T0.saturating_add_micros(u64::from(n_datagrams) * REGISTER_GAP_MICROS);
             ensure!(
                 registry.handle_datagram(now, from, &datagram).is_some(),
                 "the registry did not answer a Register ({:?})",
@@ -702,7 +736,16 @@ fn discovery_memory(n_sessions: usize) -> anyhow::Result<()> {
             n_datagrams += 1;
         }
     }
-    let end = t0.saturating_add_micros(u64::from(n_datagrams) * 1_000);
+    Ok(n_datagrams)
+}
+
+/// Part 4: a discovery registry fed `n_sessions` sessions; its heap and the process's
+/// resident memory before and after.
+fn discovery_memory(n_sessions: usize) -> anyhow::Result<()> {
+    let mut registry = Registry::default();
+    let (heap_before, rss_before) = (LIVE_BYTES.load(Ordering::Relaxed), vm_rss_kib());
+    let n_datagrams = register_sessions(&mut registry, n_sessions)?;
+    let end = REGISTRY_T0.saturating_add_micros(u64::from(n_datagrams) * REGISTER_GAP_MICROS);
     let heap_held = LIVE_BYTES.load(Ordering::Relaxed) - heap_before;
     let rss_held = vm_rss_kib()
         .zip(rss_before)
@@ -742,28 +785,33 @@ fn discovery_memory(n_sessions: usize) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn thread_cpu() -> std::collections::BTreeMap<String, u64> {
-    let mut out = std::collections::BTreeMap::new();
-    for e in std::fs::read_dir("/proc/self/task")
-        .into_iter()
-        .flatten()
-        .flatten()
-    {
-        let Ok(stat) = std::fs::read_to_string(e.path().join("stat")) else {
+/// CPU seconds used so far by each thread named `sculpt-engine`, by thread id, from
+/// `/proc/self/task/*/stat` (user and system time in the kernel's fixed 100 Hz ticks);
+/// empty where that is not readable.
+fn engine_thread_cpu() -> Vec<(String, f64)> {
+    const TICKS_PER_SEC: f64 = 100.0;
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for task in tasks.flatten() {
+        let Ok(stat) = std::fs::read_to_string(task.path().join("stat")) else {
             continue;
         };
-        let Some(open) = stat.find('(') else { continue };
-        let Some(close) = stat.rfind(')') else {
+        // `pid (comm) state ...`: the name may hold spaces, so split after its last ')'.
+        let Some((head, rest)) = stat.rsplit_once(')') else {
             continue;
         };
-        let name = format!(
-            "{}-{}",
-            &stat[open + 1..close],
-            e.file_name().to_string_lossy()
-        );
-        let f: Vec<&str> = stat[close + 2..].split_whitespace().collect();
-        let t = f[11].parse::<u64>().unwrap_or(0) + f[12].parse::<u64>().unwrap_or(0);
-        out.insert(name, t);
+        if !head.ends_with("(sculpt-engine") {
+            continue;
+        }
+        let fields: Vec<&str> = rest.split_whitespace().collect();
+        let ticks = |i: usize| fields.get(i).and_then(|f| f.parse::<u64>().ok());
+        // utime and stime are fields 14 and 15 of the line, 12 and 13 after the name.
+        if let (Some(user), Some(system)) = (ticks(11), ticks(12)) {
+            let tid = task.file_name().to_string_lossy().into_owned();
+            out.push((tid, (user + system) as f64 / TICKS_PER_SEC));
+        }
     }
     out
 }

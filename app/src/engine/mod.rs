@@ -500,9 +500,7 @@ impl Worker {
         ready: std_mpsc::Sender<Result<SocketAddr, StartError>>,
     ) {
         let listen = node_config.listen;
-        let folder = view::Folder {
-            view: self.view.clone(),
-        };
+        let folder = view::Folder::new(self.view.clone());
         let node = match Node::spawn_observed(node_config, Some(Box::new(folder))) {
             Ok(node) => node,
             Err(e) => {

@@ -202,6 +202,11 @@ impl<P: Payload + Send + 'static> Core<P> {
             return Err(NodeAuthorError::Store(error));
         }
         self.observe(&insertion);
+        // The author hears back only once the observer has seen its op settled (a face reads
+        // its own edit in the view as soon as the reply comes).
+        if let Some(observer) = &mut self.observer {
+            observer.settled(&self.peer, std::mem::take(&mut self.changed));
+        }
         Ok(op.op().id())
     }
 

@@ -441,10 +441,13 @@ type Query<P> = Box<dyn FnOnce(&Peer<P>) + Send>;
 /// the node sends nothing while they run.
 pub trait Observer<P>: Send + 'static {
     /// Ops were authored or delivered and are already in the store (if the node has one).
-    /// Insertions come in the order the log made them; hand each to the fold as it comes.
+    /// Insertions come in the order the log made them. Those of one received batch come once
+    /// the whole batch is in the log: a fold should merge them and apply them at
+    /// [`Observer::settled`], not one by one against a log that already holds the later ones.
     fn inserted(&mut self, log: &Log<P>, insertion: &Insertion);
 
-    /// The node finished a step (inputs handled, events stored, transmits queued).
+    /// The node finished a step (inputs handled, events stored, transmits queued), or authored
+    /// an op (before the author hears back).
     /// `changed` is true when [`Observer::inserted`] was called since the last settled step,
     /// and at the first step (so the observer sees the log it starts from).
     fn settled(&mut self, peer: &Peer<P>, changed: bool);
