@@ -123,7 +123,16 @@ impl<P: Payload> OpStore<P> {
     /// errors and files that are not stores; [`OpenError::Decode`] for a record that is not an
     /// op.
     pub fn open(path: &Path) -> Result<(Self, Vec<Op<P>>, Recovery), OpenError> {
-        let (file, records, recovery) = RecordFile::open(path)?;
+        Self::open_with_limit(path, record::MAX_STORE_BYTES)
+    }
+
+    /// [`OpStore::open`] for a store that may grow to `max_bytes` (at most
+    /// [`record::MAX_STORE_BYTES`]; a small device may want less).
+    pub fn open_with_limit(
+        path: &Path,
+        max_bytes: u64,
+    ) -> Result<(Self, Vec<Op<P>>, Recovery), OpenError> {
+        let (file, records, recovery) = RecordFile::open_with_limit(path, max_bytes)?;
         let ops = records
             .iter()
             .enumerate()
@@ -175,7 +184,19 @@ impl<P: Payload> OpStore<P> {
         Ok((store, recovery))
     }
 
-    /// Appends ops and syncs them to disk; they are acknowledged when this returns `Ok`.
+    /// Appends synced since the store was opened (one `fsync` each).
+    pub fn n_syncs(&self) -> u64 {
+        self.file.n_syncs()
+    }
+
+    /// Bytes in the store's file.
+    pub fn len_bytes(&self) -> u64 {
+        self.file.len_bytes()
+    }
+
+    /// Appends ops in one write and syncs them to disk (one `fsync` for the lot); they are
+    /// acknowledged when this returns `Ok`. A store that would pass its limit refuses the
+    /// whole append ([`RecordError::Full`]) and keeps everything it held.
     pub fn append(&mut self, ops: &[&Op<P>]) -> Result<(), RecordError> {
         let records: Vec<&[u8]> = ops.iter().map(|op| op.encoded()).collect();
         self.file.append(&records)

@@ -18,7 +18,8 @@ pub const MAGIC: &[u8; 9] = b"SCULPTOPS";
 pub const RECORD_FORMAT_VERSION: u8 = 1;
 /// Largest record body accepted.
 pub const MAX_RECORD_BYTES: usize = MAX_OP_BYTES;
-/// Largest store file read on open (4 GiB).
+/// Largest store file: appends that would pass it are refused ([`RecordError::Full`]), so a
+/// store always opens at every size it accepted (4 GiB).
 pub const MAX_STORE_BYTES: u64 = 4 * 1024 * 1024 * 1024;
 /// Bytes of checksum per record.
 pub const CHECKSUM_BYTES: usize = 16;
@@ -42,9 +43,25 @@ pub enum RecordError {
     /// The file does not start with the header (not a store, or another version).
     #[error("{0}: not a sculpt op store of format {RECORD_FORMAT_VERSION}")]
     BadHeader(PathBuf),
-    /// The file is larger than [`MAX_STORE_BYTES`].
-    #[error("{0}: larger than {MAX_STORE_BYTES} bytes")]
+    /// The file is larger than its limit ([`MAX_STORE_BYTES`]): not a file this store wrote.
+    #[error("{0}: larger than the store's limit")]
     TooLarge(PathBuf),
+    /// Appending would take the file past its limit ([`MAX_STORE_BYTES`]); nothing was
+    /// written, and everything stored before is kept.
+    #[error(
+        "{}: the store is full ({size} bytes; {needed} more would pass its limit of {limit})",
+        .path.display()
+    )]
+    Full {
+        /// The file.
+        path: PathBuf,
+        /// Its size now.
+        size: u64,
+        /// The bytes the refused append needed.
+        needed: u64,
+        /// The store's limit.
+        limit: u64,
+    },
     /// A record to append is larger than [`MAX_RECORD_BYTES`].
     #[error("record of {0} bytes, over the limit {MAX_RECORD_BYTES}")]
     RecordTooLarge(usize),
@@ -72,6 +89,10 @@ pub struct RecordFile {
     path: PathBuf,
     /// End of the last durable record.
     end: u64,
+    /// The largest size the file may reach (at most [`MAX_STORE_BYTES`]).
+    max_bytes: u64,
+    /// Appends synced since the file was opened.
+    n_syncs: u64,
     /// Held while the file is open; declared last so that it is released after the file is
     /// closed.
     _lock: StoreLock,
@@ -181,6 +202,16 @@ impl RecordFile {
     /// [`OpenError::Record`] for IO errors, files over [`MAX_STORE_BYTES`] and files that do
     /// not start with the header (or a prefix of it).
     pub fn open(path: &Path) -> Result<(Self, Vec<Vec<u8>>, Recovery), OpenError> {
+        Self::open_with_limit(path, MAX_STORE_BYTES)
+    }
+
+    /// [`RecordFile::open`] for a file that may grow to `max_bytes` (at most
+    /// [`MAX_STORE_BYTES`]): a file over it is refused, an append that would pass it is too.
+    pub fn open_with_limit(
+        path: &Path,
+        max_bytes: u64,
+    ) -> Result<(Self, Vec<Vec<u8>>, Recovery), OpenError> {
+        let max_bytes = max_bytes.min(MAX_STORE_BYTES);
         let lock = StoreLock::acquire(path)?;
         let io = |source| RecordError::Io {
             path: path.to_path_buf(),
@@ -195,16 +226,18 @@ impl RecordFile {
             .map_err(io)?;
         let mut bytes = Vec::new();
         (&mut file)
-            .take(MAX_STORE_BYTES + 1)
+            .take(max_bytes + 1)
             .read_to_end(&mut bytes)
             .map_err(io)?;
-        if bytes.len() as u64 > MAX_STORE_BYTES {
+        if bytes.len() as u64 > max_bytes {
             return Err(RecordError::TooLarge(path.to_path_buf()).into());
         }
         let mut store = Self {
             file,
             path: path.to_path_buf(),
             end: HEADER_BYTES as u64,
+            max_bytes,
+            n_syncs: 0,
             _lock: lock,
         };
         if bytes.len() < HEADER_BYTES {
@@ -286,7 +319,19 @@ impl RecordFile {
         Ok(())
     }
 
+    /// Appends synced since the file was opened: one per successful [`RecordFile::append`].
+    pub fn n_syncs(&self) -> u64 {
+        self.n_syncs
+    }
+
+    /// Bytes in the file: the header and every durable record.
+    pub fn len_bytes(&self) -> u64 {
+        self.end
+    }
+
     /// Appends records in one write and syncs; they are durable when this returns `Ok`.
+    /// Appending nothing writes and syncs nothing. An append that would take the file past
+    /// its limit is refused whole ([`RecordError::Full`]) and writes nothing.
     pub fn append(&mut self, bodies: &[&[u8]]) -> Result<(), RecordError> {
         let buf = encode_records(bodies)?;
         self.write_durably(&buf, buf.len(), &mut || {})
@@ -311,6 +356,17 @@ impl RecordFile {
         split_at: usize,
         mid: &mut dyn FnMut(),
     ) -> Result<(), RecordError> {
+        if buf.is_empty() {
+            return Ok(());
+        }
+        if self.end + buf.len() as u64 > self.max_bytes {
+            return Err(RecordError::Full {
+                path: self.path.clone(),
+                size: self.end,
+                needed: buf.len() as u64,
+                limit: self.max_bytes,
+            });
+        }
         let io = |source| RecordError::Io {
             path: self.path.clone(),
             source,
@@ -331,6 +387,7 @@ impl RecordFile {
             return Err(io(source));
         }
         self.end += buf.len() as u64;
+        self.n_syncs += 1;
         Ok(())
     }
 }

@@ -541,3 +541,68 @@ fn kill9_never_loses_acknowledged_ops_nor_accepts_torn_ones() {
     assert!(ops.iter().all(|op| op.verify().is_ok()));
     let _ = std::fs::remove_dir_all(path.parent().unwrap());
 }
+
+#[test]
+fn a_full_store_refuses_the_append_keeps_what_it_held_and_still_opens() {
+    let _no_spawn = no_spawn();
+    let path = temp_path("full");
+    let key = Keypair::from_seed([9; 32]);
+    let limit = 2_000;
+    let mut written: Vec<VerifiedOp<TestPayload>> = Vec::new();
+    let full = {
+        let (mut store, _, _) = OpStore::<TestPayload>::open_with_limit(&path, limit).unwrap();
+        loop {
+            let op = next_op(&key, written.last().map(|o| o.op()), 100);
+            let before = store.len_bytes();
+            match store.append(&[op.op()]) {
+                Ok(()) => written.push(op),
+                Err(error) => {
+                    assert_eq!(store.len_bytes(), before, "a refused append wrote nothing");
+                    break error;
+                }
+            }
+        }
+    };
+    let RecordError::Full { size, needed, .. } = full else {
+        panic!("expected a full store, got {full}");
+    };
+    assert!(size <= limit && size + needed > limit);
+    assert!(written.len() >= 5, "{} ops fitted", written.len());
+    assert_eq!(std::fs::metadata(&path).unwrap().len(), size);
+    // Every size the store accepted opens again, with every op it acknowledged.
+    let (mut store, ops, recovery) = OpStore::<TestPayload>::open_with_limit(&path, limit).unwrap();
+    assert_eq!(recovery.n_truncated_bytes, 0);
+    assert_eq!(
+        ops,
+        written.iter().map(|o| o.op().clone()).collect::<Vec<_>>()
+    );
+    let op = next_op(&key, written.last().map(|o| o.op()), 100);
+    assert!(matches!(
+        store.append(&[op.op()]),
+        Err(RecordError::Full { .. })
+    ));
+    drop(store);
+    let _ = std::fs::remove_dir_all(path.parent().unwrap());
+}
+
+#[test]
+fn one_append_of_many_ops_is_one_sync_and_an_empty_one_is_none() {
+    let _no_spawn = no_spawn();
+    let path = temp_path("syncs");
+    let key = Keypair::from_seed([10; 32]);
+    let (mut store, _, _) = OpStore::<TestPayload>::open(&path).unwrap();
+    let mut ops: Vec<VerifiedOp<TestPayload>> = Vec::new();
+    for _ in 0..64 {
+        ops.push(next_op(&key, ops.last().map(|o| o.op()), 10));
+    }
+    store.append(&[]).unwrap();
+    assert_eq!(store.n_syncs(), 0);
+    store
+        .append(&ops.iter().map(|o| o.op()).collect::<Vec<_>>())
+        .unwrap();
+    assert_eq!(store.n_syncs(), 1);
+    drop(store);
+    let (_, reopened, _) = OpStore::<TestPayload>::open(&path).unwrap();
+    assert_eq!(reopened.len(), 64);
+    let _ = std::fs::remove_dir_all(path.parent().unwrap());
+}
