@@ -202,7 +202,7 @@ impl Invite {
     }
 
     /// The canonical code as ASCII bytes: lowercase, dashes between groups.
-    fn canonical(&self) -> [u8; CODE_TEXT_CHARS] {
+    pub(crate) fn canonical(&self) -> [u8; CODE_TEXT_CHARS] {
         let mut text = [b'-'; CODE_TEXT_CHARS];
         for (char_idx, &symbol) in self.symbols.iter().enumerate() {
             text[char_idx + char_idx / GROUP_CHARS] = ALPHABET[usize::from(symbol)];

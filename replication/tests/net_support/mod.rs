@@ -6,8 +6,9 @@
     reason = "each test binary uses a different subset of the helpers"
 )]
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::future::Future;
+use std::sync::{Mutex, PoisonError};
 use std::time::Duration;
 
 use replication::net::node::NodeEvent;
@@ -38,9 +39,14 @@ pub fn node_with(seed: u8, invite: &str, log: Log<TestPayload>) -> TNode {
     .expect("node starts")
 }
 
-/// The keys of the session of `invite` (one of the test invites above).
+/// The keys of the session of `invite` (one of the test invites above), derived once per
+/// test binary: the discovery id's stretch is slow on purpose.
 pub fn session_keys(invite: &str) -> SessionKeys {
-    SessionKeys::from_invite(&Invite::parse(invite).expect("test invite"))
+    static KEYS: Mutex<BTreeMap<String, SessionKeys>> = Mutex::new(BTreeMap::new());
+    let mut keys = KEYS.lock().unwrap_or_else(PoisonError::into_inner);
+    keys.entry(invite.to_owned())
+        .or_insert_with(|| SessionKeys::from_invite(&Invite::parse(invite).expect("test invite")))
+        .clone()
 }
 
 /// A node with key `seed` in the honest test session, with an empty log.
