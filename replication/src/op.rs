@@ -172,8 +172,66 @@ impl<P: Payload> Op<P> {
     }
 
     /// Decodes an op from untrusted bytes. It checks the format, limits and canonical form,
-    /// but not the signature: call [`Op::verify`].
+    /// but not the signature: call [`Op::verify`], or use [`Op::decode_verified`], which checks
+    /// the signature before the payload's (costlier) validation.
     pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
+        Envelope::parse(bytes)?.into_op()
+    }
+
+    /// Decodes an op from untrusted bytes, cheapest check first: the envelope (format and
+    /// limits), then the signature, and only then the payload, whose validation may compile
+    /// formulas. A forged op costs a hash and a signature check, never a compile.
+    pub fn decode_verified(bytes: &[u8]) -> Result<VerifiedOp<P>, ReceiveError> {
+        Envelope::parse(bytes)?.into_verified()
+    }
+
+    /// Checks the author's signature over the op's body.
+    pub fn verify(&self) -> Result<(), VerifyError> {
+        let body = &self.encoded[..self.encoded.len() - SIGNATURE_BYTES];
+        self.author.verify(&signing_message(body), &self.signature)
+    }
+
+    /// Checks the signature and returns the op as verified.
+    pub fn into_verified(self) -> Result<VerifiedOp<P>, VerifyError> {
+        self.verify()?;
+        Ok(VerifiedOp(self))
+    }
+}
+
+/// Why a received op was refused by [`Op::decode_verified`].
+#[derive(Debug, thiserror::Error)]
+pub enum ReceiveError {
+    /// The bytes are not a valid op.
+    #[error(transparent)]
+    Decode(#[from] DecodeError),
+    /// The signature does not verify against the author.
+    #[error(transparent)]
+    Verify(#[from] VerifyError),
+}
+
+/// An op's envelope read from untrusted bytes: every field but the payload decoded, its
+/// format and limits checked, its id computed. Enough to skip a known op or a forged one
+/// before the payload is decoded.
+#[derive(Debug)]
+pub struct Envelope<'a> {
+    bytes: &'a [u8],
+    id: OpId,
+    author: PeerId,
+    seq: u64,
+    lamport: u64,
+    timestamp: Timestamp,
+    deps: Vec<OpId>,
+    /// Where the payload's length prefix starts, and the payload itself.
+    payload_offset: usize,
+    payload_start: usize,
+    payload_bytes: &'a [u8],
+    signature: Signature,
+}
+
+impl<'a> Envelope<'a> {
+    /// Reads the envelope: version, author, counters, deps, the payload's length and the
+    /// signature, with no trailing bytes.
+    pub fn parse(bytes: &'a [u8]) -> Result<Self, DecodeError> {
         if bytes.len() > MAX_OP_BYTES {
             return Err(DecodeError::OverLimit {
                 offset: 0,
@@ -202,44 +260,69 @@ impl<P: Payload> Op<P> {
         let payload_offset = r.offset();
         let payload_bytes = r.bytes("payload length", MAX_PAYLOAD_BYTES as u64)?;
         let payload_start = r.offset() - payload_bytes.len();
-        let payload = P::decode(payload_bytes).map_err(|e| e.shifted(payload_start))?;
-        let mut canonical = Vec::with_capacity(payload_bytes.len());
-        payload.encode(&mut canonical);
-        if canonical != payload_bytes {
-            return Err(DecodeError::Invalid {
-                offset: payload_offset,
-                what: "non-canonical payload",
-            });
-        }
         let signature = Signature(r.array()?);
         r.finish()?;
-        let id = OpId(*blake3::hash(bytes).as_bytes());
-        let fields = OpFields {
+        Ok(Self {
+            bytes,
+            id: OpId(*blake3::hash(bytes).as_bytes()),
+            author,
             seq,
             lamport,
             timestamp,
             deps,
-            payload,
-        };
-        Ok(Self {
-            author,
-            fields,
+            payload_offset,
+            payload_start,
+            payload_bytes,
             signature,
-            id,
-            encoded: bytes.to_vec(),
         })
     }
 
-    /// Checks the author's signature over the op's body.
+    /// The op's id.
+    pub fn id(&self) -> OpId {
+        self.id
+    }
+
+    /// The claimed author.
+    pub fn author(&self) -> PeerId {
+        self.author
+    }
+
+    /// Checks the author's signature over the body.
     pub fn verify(&self) -> Result<(), VerifyError> {
-        let body = &self.encoded[..self.encoded.len() - SIGNATURE_BYTES];
+        let body = &self.bytes[..self.bytes.len() - SIGNATURE_BYTES];
         self.author.verify(&signing_message(body), &self.signature)
     }
 
-    /// Checks the signature and returns the op as verified.
-    pub fn into_verified(self) -> Result<VerifiedOp<P>, VerifyError> {
+    /// Checks the signature, then decodes the payload: the op, verified.
+    pub fn into_verified<P: Payload>(self) -> Result<VerifiedOp<P>, ReceiveError> {
         self.verify()?;
-        Ok(VerifiedOp(self))
+        Ok(VerifiedOp(self.into_op()?))
+    }
+
+    /// Decodes and validates the payload (which must be in canonical form) into the op.
+    pub fn into_op<P: Payload>(self) -> Result<Op<P>, DecodeError> {
+        let payload = P::decode(self.payload_bytes).map_err(|e| e.shifted(self.payload_start))?;
+        let mut canonical = Vec::with_capacity(self.payload_bytes.len());
+        payload.encode(&mut canonical);
+        if canonical != self.payload_bytes {
+            return Err(DecodeError::Invalid {
+                offset: self.payload_offset,
+                what: "non-canonical payload",
+            });
+        }
+        Ok(Op {
+            author: self.author,
+            fields: OpFields {
+                seq: self.seq,
+                lamport: self.lamport,
+                timestamp: self.timestamp,
+                deps: self.deps,
+                payload,
+            },
+            signature: self.signature,
+            id: self.id,
+            encoded: self.bytes.to_vec(),
+        })
     }
 }
 
@@ -370,6 +453,63 @@ mod tests {
             any::<[u8; 32]>().prop_map(|b| TestPayload::Undo(OpId(b))),
             any::<[u8; 32]>().prop_map(|b| TestPayload::Redo(OpId(b))),
         ]
+    }
+
+    /// Decodes counted, to show which checks run before the payload is decoded.
+    static PAYLOAD_DECODES: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+    #[derive(Clone, Debug, PartialEq, Eq)]
+    struct Counted(TestPayload);
+
+    impl Payload for Counted {
+        fn encode(&self, out: &mut Vec<u8>) {
+            self.0.encode(out);
+        }
+        fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
+            PAYLOAD_DECODES.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+            TestPayload::decode(bytes).map(Counted)
+        }
+        fn effect(&self) -> crate::payload::Effect {
+            self.0.effect()
+        }
+    }
+
+    #[test]
+    fn a_forged_op_is_refused_before_its_payload_is_decoded() {
+        let k = Keypair::from_seed([7; 32]);
+        let fields = OpFields {
+            seq: 1,
+            lamport: 1,
+            timestamp: Timestamp(5),
+            deps: vec![],
+            payload: Counted(TestPayload::Chat("a formula to compile".into())),
+        };
+        let op = Op::sign(&k, fields).unwrap();
+        let mut forged = op.encoded().to_vec();
+        let last = forged.len() - 1;
+        forged[last] ^= 1;
+        let before = PAYLOAD_DECODES.load(std::sync::atomic::Ordering::SeqCst);
+        let refused = Op::<Counted>::decode_verified(&forged);
+        assert!(
+            matches!(refused, Err(ReceiveError::Verify(_))),
+            "{refused:?}"
+        );
+        let after = PAYLOAD_DECODES.load(std::sync::atomic::Ordering::SeqCst);
+        assert_eq!(after, before, "a forged op's payload was decoded");
+        // The honest op decodes (its payload once) and verifies.
+        let honest = Op::<Counted>::decode_verified(op.encoded()).unwrap();
+        assert_eq!(honest.id(), op.id());
+        assert_eq!(
+            PAYLOAD_DECODES.load(std::sync::atomic::Ordering::SeqCst),
+            after + 1
+        );
+        // Its envelope alone names it, for the duplicate check, without decoding anything.
+        let envelope = Envelope::parse(op.encoded()).unwrap();
+        assert_eq!((envelope.id(), envelope.author()), (op.id(), op.author()));
+        assert_eq!(
+            PAYLOAD_DECODES.load(std::sync::atomic::Ordering::SeqCst),
+            after + 1
+        );
     }
 
     fn sample(seed: u8) -> Op<TestPayload> {

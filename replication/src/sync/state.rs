@@ -22,9 +22,10 @@ use std::collections::{BTreeMap, VecDeque};
 use std::marker::PhantomData;
 
 use crate::causal::VersionVector;
+use crate::codec::DecodeError;
 use crate::identity::PeerId;
 use crate::log::{InsertError, Insertion, Log};
-use crate::op::{MAX_OP_BYTES, Op};
+use crate::op::{Envelope, MAX_OP_BYTES, Op, ReceiveError};
 use crate::payload::Payload;
 use crate::pending::{EvictReason, Origin};
 use crate::sync::message::{
@@ -593,26 +594,28 @@ impl<P: Payload> SyncState<P> {
 
     /// Handles one received op; returns its author if it decoded.
     fn on_op(&mut self, now: Timestamp, bytes: &[u8], log: &mut Log<P>) -> Option<PeerId> {
-        let op = match Op::<P>::decode(bytes) {
-            Ok(op) => op,
+        // Cheapest check first: the envelope and its id (a hash), then a known op is skipped,
+        // then the signature, and only a signed op's payload is decoded and validated (which
+        // may compile formulas). A forged or replayed op never costs a compile.
+        let envelope = match Envelope::parse(bytes) {
+            Ok(envelope) => envelope,
             Err(e) => {
-                let kind = match e {
-                    crate::codec::DecodeError::UnknownVersion { .. } => RejectKind::UnknownVersion,
-                    _ => RejectKind::MalformedOp,
-                };
-                self.reject(kind, e.to_string());
+                self.reject(decode_reject_kind(&e), e.to_string());
                 return None;
             }
         };
-        let author = op.author();
-        // Known ops skip the (costly) signature check.
-        if log.contains(&op.id()) {
+        let author = envelope.author();
+        if log.contains(&envelope.id()) {
             return Some(author);
         }
-        let op = match op.into_verified() {
+        let op = match envelope.into_verified::<P>() {
             Ok(op) => op,
-            Err(e) => {
+            Err(ReceiveError::Verify(e)) => {
                 self.reject(RejectKind::BadSignature, e.to_string());
+                return None;
+            }
+            Err(ReceiveError::Decode(e)) => {
+                self.reject(decode_reject_kind(&e), e.to_string());
                 return None;
             }
         };
@@ -893,6 +896,14 @@ impl<P: Payload> SyncState<P> {
             self.sent_vv.raise(op.author(), op.seq());
         }
         batch
+    }
+}
+
+/// The rejection a received op's decode error counts as.
+fn decode_reject_kind(e: &DecodeError) -> RejectKind {
+    match e {
+        DecodeError::UnknownVersion { .. } => RejectKind::UnknownVersion,
+        _ => RejectKind::MalformedOp,
     }
 }
 
