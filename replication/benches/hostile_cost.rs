@@ -1,0 +1,325 @@
+//! What a hostile member's bytes cost a receiver: CPU time per received byte of op, for the
+//! costliest inputs within the limits, against honest edits in the same run.
+//!
+//! Each op goes through what a node does with a received op: `Op::decode_verified` after the
+//! duplicate check (as `SyncState` does), `Log::insert`, and the scene fold
+//! (`Materialized::apply_insertion`, as the app's engine folds). Every op is authored by one
+//! member, signed, and within every limit unless the workload says otherwise.
+//!
+//! Run: `cargo bench -p replication --bench hostile_cost` (add `-- --quick` for a short run).
+
+use std::hint::black_box;
+use std::time::{Duration, Instant};
+
+use fdsl::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
+use glam::DVec3;
+use replication::materialize::Materialized;
+use replication::pending::Origin;
+use replication::shape::{ShapePayload, ShapeScene};
+use replication::{Keypair, Log, Timestamp};
+
+type SLog = Log<ShapePayload>;
+type SScene = Materialized<ShapePayload, ShapeScene>;
+
+/// One workload: encoded ops as a receiver gets them, after `setup` (ops it already holds).
+struct Workload {
+    name: String,
+    /// Receive the way nodes did before the signature was checked first: decode the whole
+    /// op (payload validation included), then verify.
+    decode_first: bool,
+    setup: Vec<Vec<u8>>,
+    received: Vec<Vec<u8>>,
+}
+
+fn main() {
+    let quick = std::env::args().any(|a| a == "--quick");
+    let n = if quick { 20 } else { 200 };
+    let workloads = [
+        honest(n),
+        forged(n),
+        Workload {
+            name: "forged, as received before: payload validated before the signature".into(),
+            decode_first: true,
+            ..forged(n)
+        },
+        replayed(n),
+        compile_bomb(n),
+        stroke_bomb(n),
+        backdated(n, if quick { 200 } else { 2_000 }),
+    ];
+    println!("| workload | ops | bytes | CPU | per op | per KiB | vs honest (per byte) |");
+    println!("|---|---|---|---|---|---|---|");
+    let mut honest_per_byte = None;
+    for workload in &workloads {
+        let (bytes, time) = measure(workload);
+        let per_byte = time.as_secs_f64() / bytes as f64;
+        let baseline = *honest_per_byte.get_or_insert(per_byte);
+        println!(
+            "| {} | {} | {} | {:.1} ms | {:.1} µs | {:.1} µs | {:.1} |",
+            workload.name,
+            workload.received.len(),
+            bytes,
+            time.as_secs_f64() * 1e3,
+            time.as_secs_f64() * 1e6 / workload.received.len() as f64,
+            per_byte * 1024.0 * 1e6,
+            per_byte / baseline,
+        );
+    }
+}
+
+/// Feeds the workload's ops to a fresh receiver (after its setup) and returns the bytes
+/// received and the CPU time (the best of three runs: this is one thread, no IO).
+fn measure(workload: &Workload) -> (usize, Duration) {
+    let bytes: usize = workload.received.iter().map(Vec::len).sum();
+    let best = (0..3)
+        .map(|_| {
+            let (mut log, mut scene) = receiver();
+            for op in &workload.setup {
+                receive(&mut log, &mut scene, op);
+            }
+            let start = Instant::now();
+            for op in &workload.received {
+                if workload.decode_first {
+                    receive_decoding_first(&mut log, &mut scene, op);
+                } else {
+                    receive(&mut log, &mut scene, op);
+                }
+            }
+            let time = start.elapsed();
+            black_box(scene.scene_hash());
+            time
+        })
+        .min()
+        .unwrap_or_default();
+    (bytes, best)
+}
+
+fn receiver() -> (SLog, SScene) {
+    let log = SLog::default();
+    let scene = SScene::fold(&log).expect("an empty scene folds");
+    (log, scene)
+}
+
+/// What a node does with one received op; refusals are counted by the real code, dropped here.
+fn receive(log: &mut SLog, scene: &mut SScene, bytes: &[u8]) {
+    let Ok(envelope) = replication::op::Envelope::parse(bytes) else {
+        return;
+    };
+    if log.contains(&envelope.id()) {
+        return;
+    }
+    let Ok(op) = envelope.into_verified::<ShapePayload>() else {
+        return;
+    };
+    if let Ok(insertion) = log.insert(Timestamp(u64::MAX / 2), op, Origin(1)) {
+        scene.apply_insertion(log, &insertion);
+    }
+}
+
+/// [`receive`] in the order nodes used before: the payload decoded and validated first.
+fn receive_decoding_first(log: &mut SLog, scene: &mut SScene, bytes: &[u8]) {
+    let Ok(op) = replication::Op::<ShapePayload>::decode(bytes) else {
+        return;
+    };
+    if log.contains(&op.id()) {
+        return;
+    }
+    let Ok(op) = op.into_verified() else {
+        return;
+    };
+    if let Ok(insertion) = log.insert(Timestamp(u64::MAX / 2), op, Origin(1)) {
+        scene.apply_insertion(log, &insertion);
+    }
+}
+
+/// The member's ops, authored in order on its own log; returns their encodings.
+fn authored(key: &Keypair, payloads: impl IntoIterator<Item = ShapePayload>) -> Vec<Vec<u8>> {
+    let mut log = SLog::default();
+    payloads
+        .into_iter()
+        .enumerate()
+        .map(|(i, payload)| {
+            let (op, _) = log
+                .author(key, Timestamp(1_000_000 + i as u64), payload)
+                .expect("a valid op");
+            op.encoded().to_vec()
+        })
+        .collect()
+}
+
+fn create(object: u64, formula: &str) -> ShapePayload {
+    ShapePayload::Create {
+        object,
+        data: Box::new(ObjectData {
+            geometry: Some(Geometry::implicit(formula_of(formula))),
+            ..ObjectData::default()
+        }),
+        group: None,
+    }
+}
+
+fn set_geometry(object: u64, formula: &str) -> ShapePayload {
+    ShapePayload::Set {
+        object,
+        field: Field::Geometry(Some(Geometry::implicit(formula_of(formula)))),
+    }
+}
+
+fn formula_of(text: &str) -> Formula {
+    Formula::new(text).expect("a formula within the limits")
+}
+
+/// Honest traffic: short geometry formulas, as a person types them.
+fn honest(n: usize) -> Workload {
+    let key = Keypair::from_seed([1; 32]);
+    let payloads = std::iter::once(create(1, "1-sqrt(x^2+y^2+z^2)")).chain((1..n).map(|i| {
+        set_geometry(
+            1,
+            &format!("{}-sqrt(x^2+y^2/{i}+z^2)&(y+0.5)", 1.0 + i as f64 / 100.0),
+        )
+    }));
+    Workload {
+        name: "honest: short formulas".into(),
+        setup: Vec::new(),
+        received: authored(&key, payloads),
+        decode_first: false,
+    }
+}
+
+/// The longest formula a payload holds (about 16 KiB), in ops whose signature is broken.
+fn forged(n: usize) -> Workload {
+    let key = Keypair::from_seed([2; 32]);
+    let long = long_formula();
+    let payloads = std::iter::once(create(1, &long)).chain((1..n).map(|_| set_geometry(1, &long)));
+    let mut received = authored(&key, payloads);
+    for op in &mut received {
+        let last = op.len() - 1;
+        op[last] ^= 1;
+    }
+    Workload {
+        name: "forged: 16 KiB formulas, bad signature".into(),
+        setup: Vec::new(),
+        received,
+        decode_first: false,
+    }
+}
+
+/// Ops the receiver already holds, sent again.
+fn replayed(n: usize) -> Workload {
+    let key = Keypair::from_seed([3; 32]);
+    let long = long_formula();
+    let payloads = std::iter::once(create(1, &long)).chain((1..n).map(|_| set_geometry(1, &long)));
+    let ops = authored(&key, payloads);
+    Workload {
+        name: "replayed: 16 KiB ops already held".into(),
+        setup: ops.clone(),
+        received: ops,
+        decode_first: false,
+    }
+}
+
+/// Signed formulas that compile to the most work per byte: a short loop unrolled to the
+/// graph's limits.
+fn compile_bomb(n: usize) -> Workload {
+    let key = Keypair::from_seed([4; 32]);
+    let bomb = "s = x; for (i = 0; i < 1000; i = i + 1) { s = sin(s + i*y) * cos(s - i*z) + s; } s";
+    let payloads = std::iter::once(create(1, bomb)).chain((1..n).map(|_| set_geometry(1, bomb)));
+    Workload {
+        name: "compile bomb: a loop unrolled 1000 times (82 B formula)".into(),
+        setup: Vec::new(),
+        received: authored(&key, payloads),
+        decode_first: false,
+    }
+}
+
+/// Signed strokes with as many poses as a payload holds, mirrored.
+fn stroke_bomb(n: usize) -> Workload {
+    let key = Keypair::from_seed([5; 32]);
+    let poses: Vec<Pose> = (0..220)
+        .map(|i| {
+            Pose::at(DVec3::new(
+                (i as f64 * 0.37).sin(),
+                (i as f64 * 0.11).cos(),
+                i as f64 * 0.003,
+            ))
+        })
+        .collect();
+    let edit = Edit {
+        op: EditOp::Subtract,
+        tool: ToolShape::Sphere { radius: 0.2 },
+        path: poses,
+        blend_radius: 0.05,
+        mirror: Some(Axis::X),
+    };
+    let payloads = std::iter::once(create(1, "1-sqrt(x^2+y^2+z^2)")).chain((1..n).map(|_| {
+        ShapePayload::Edit {
+            object: 1,
+            edit: edit.clone(),
+        }
+    }));
+    Workload {
+        name: "stroke bomb: 220-pose mirrored strokes (the most a payload holds)".into(),
+        setup: Vec::new(),
+        received: authored(&key, payloads),
+        decode_first: false,
+    }
+}
+
+/// An object with a long history, then edits backdated before all of it (Lamport 1, no
+/// dependencies, each from a fresh key), each making the receiver refold the object.
+fn backdated(n: usize, history: usize) -> Workload {
+    let owner = Keypair::from_seed([6; 32]);
+    let setup = authored(
+        &owner,
+        std::iter::once(create(1, "1-sqrt(x^2+y^2+z^2)")).chain((1..history).map(|i| {
+            ShapePayload::Edit {
+                object: 1,
+                edit: Edit::stamp(
+                    EditOp::Union,
+                    ToolShape::Sphere { radius: 0.1 },
+                    Pose::at(DVec3::new((i as f64).sin(), (i as f64).cos(), 0.0)),
+                ),
+            }
+        })),
+    );
+    let received = (0..n)
+        .map(|i| {
+            let key = Keypair::from_seed(seed(7, i));
+            authored(
+                &key,
+                [ShapePayload::Edit {
+                    object: 1,
+                    edit: Edit::stamp(
+                        EditOp::Subtract,
+                        ToolShape::Sphere { radius: 0.1 },
+                        Pose::at(DVec3::new(0.0, 0.0, i as f64 * 0.01)),
+                    ),
+                }],
+            )
+            .remove(0)
+        })
+        .collect();
+    Workload {
+        name: format!("backdated: edits sorted before a {history}-edit history, fresh keys"),
+        setup,
+        received,
+        decode_first: false,
+    }
+}
+
+fn seed(tag: u8, i: usize) -> [u8; 32] {
+    let mut seed = [tag; 32];
+    seed[..8].copy_from_slice(&(i as u64).to_le_bytes());
+    seed
+}
+
+/// A formula of about 16 KiB (a sum of many small terms) that compiles.
+fn long_formula() -> String {
+    let mut text = String::from("1");
+    let mut i = 0;
+    while text.len() < 15_000 {
+        text.push_str(&format!("-{}*x*y", 1 + i % 97));
+        i += 1;
+    }
+    text
+}
