@@ -1,28 +1,87 @@
 //! Hostile clients against a node over real QUIC on 127.0.0.1: garbage admission, garbage
 //! frames, an oversized frame and stray datagrams are cut off and counted, while an honest
-//! node keeps syncing with the same node.
+//! node keeps syncing with the same node. Attackers that hold connection slots send from
+//! 127.0.0.2 (Linux routes all of 127/8 to loopback), honest nodes from 127.0.0.1.
 
 #![allow(clippy::unwrap_used, reason = "test helpers")]
 
 mod net_support;
 
+use std::collections::BTreeSet;
 use std::net::SocketAddr;
+use std::time::Duration;
 
 use net_support::*;
 use replication::Keypair;
-use replication::net::admission::{self, ADMISSION_FRAME_BYTES};
-use replication::net::node::{CloseCode, MAX_REJECTIONS_PER_CONN, RefusalKind};
+use replication::net::admission::{self, ADMISSION_FRAME_BYTES, ADMISSION_TIMEOUT_MILLIS};
+use replication::net::node::{
+    ACCEPT_TIMEOUT_MILLIS, CloseCode, MAX_ADMISSIONS_IN_PROGRESS,
+    MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS, MAX_REJECTIONS_PER_CONN, RefusalKind,
+};
 use replication::net::{frame, tls};
 use replication::payload::test_payload::TestPayload;
 
+/// Where attackers send from: another loopback address than the honest nodes' 127.0.0.1.
+const ATTACKER_IP: &str = "127.0.0.2";
+
 /// A raw QUIC connection to `addr` that has passed the TLS handshake only.
 async fn raw_connection(addr: SocketAddr) -> quinn::Connection {
-    let endpoint = quinn::Endpoint::client("127.0.0.1:0".parse().unwrap()).unwrap();
+    raw_connection_from("127.0.0.1", addr).await.unwrap()
+}
+
+/// A QUIC client endpoint on `ip`, any port.
+fn client_endpoint(ip: &str) -> quinn::Endpoint {
+    quinn::Endpoint::client(SocketAddr::new(ip.parse().unwrap(), 0)).unwrap()
+}
+
+/// A raw QUIC connection from `ip` to `addr`: the TLS handshake only, or why it failed.
+async fn raw_connection_from(
+    ip: &str,
+    addr: SocketAddr,
+) -> Result<quinn::Connection, quinn::ConnectionError> {
+    connect(&client_endpoint(ip), addr).await
+}
+
+async fn connect(
+    endpoint: &quinn::Endpoint,
+    addr: SocketAddr,
+) -> Result<quinn::Connection, quinn::ConnectionError> {
     endpoint
         .connect_with(tls::client_config().unwrap(), addr, tls::SERVER_NAME)
         .unwrap()
         .await
-        .unwrap()
+}
+
+/// `n` QUIC Initial packets with distinct connection ids, as a real client sends them first:
+/// captured by a plain UDP socket standing in for a server, to be replayed at a node by a
+/// sender that never answers (half-open connections).
+async fn initial_packets(n: usize) -> Vec<Vec<u8>> {
+    let sink = tokio::net::UdpSocket::bind((ATTACKER_IP, 0)).await.unwrap();
+    let endpoint = client_endpoint(ATTACKER_IP);
+    let config = tls::client_config().unwrap();
+    let connecting: Vec<_> = (0..n)
+        .map(|_| {
+            endpoint
+                .connect_with(config.clone(), sink.local_addr().unwrap(), tls::SERVER_NAME)
+                .unwrap()
+        })
+        .collect();
+    let mut seen = BTreeSet::new();
+    let mut packets = Vec::new();
+    let mut buf = vec![0; 2048];
+    while packets.len() < n {
+        let (len, _) = tokio::time::timeout(PATIENCE, sink.recv_from(&mut buf))
+            .await
+            .expect("the client sends its Initial packets")
+            .unwrap();
+        // Long header: flags, version (4), destination connection id length, the id.
+        let dcid_len = usize::from(buf[5]);
+        if seen.insert(buf[6..6 + dcid_len].to_vec()) {
+            packets.push(buf[..len].to_vec());
+        }
+    }
+    drop(connecting);
+    packets
 }
 
 /// A raw connection admitted with the real invite under key `seed`.
@@ -108,4 +167,86 @@ async fn hostile_clients_are_cut_off_and_counted_while_honest_sync_continues() {
     assert_eq!(stats.connections.len(), 1, "only the honest node is left");
     assert_eq!(stats.connections[0].peer, honest.handle.peer_id());
     assert_eq!(stats.connections[0].sync.n_rejected(), 0);
+}
+
+#[tokio::test]
+async fn half_open_and_never_admitting_connections_from_one_address_leave_honest_peers_in() {
+    let a = node(1);
+    author_some(&a.handle, 1, "alice").await;
+    let addr = a.handle.local_addr();
+    let n_attempts = MAX_ADMISSIONS_IN_PROGRESS + 4;
+
+    // 1. Half-open: first packets of handshakes that nobody will finish, replayed from a
+    // socket that never answers. Each is answered with a stateless retry and holds nothing.
+    let spoofer = std::net::UdpSocket::bind((ATTACKER_IP, 0)).unwrap();
+    for packet in initial_packets(n_attempts).await {
+        spoofer.send_to(&packet, addr).unwrap();
+    }
+    // The node reads its socket in order: the replays are handled before this dial.
+    let honest = node(2);
+    honest
+        .handle
+        .dial(addr)
+        .await
+        .expect("an honest dial gets in");
+    converge(&[&a.handle, &honest.handle], 4).await;
+    let n_retries = a.handle.stats().await.unwrap().n_retries;
+    assert!(n_retries > n_attempts as u64, "{n_retries} retries");
+
+    // 2. Never admitting: handshakes finished from 127.0.0.2, admission frames never sent.
+    // That address holds at most its share of admission slots, the others are refused.
+    let attacker = client_endpoint(ATTACKER_IP);
+    let mut attempts = tokio::task::JoinSet::new();
+    for _ in 0..n_attempts {
+        let attacker = attacker.clone();
+        attempts.spawn(async move { connect(&attacker, addr).await });
+    }
+    let mut held = Vec::new();
+    while let Some(attempt) = attempts.join_next().await {
+        if let Ok(connection) = attempt.unwrap() {
+            held.push(connection);
+        }
+    }
+    assert!(
+        (1..=MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS).contains(&held.len()),
+        "{} of {n_attempts} never-admitting connections held a slot",
+        held.len()
+    );
+    // Meanwhile an honest node dials and syncs.
+    let late = node(3);
+    late.handle
+        .dial(addr)
+        .await
+        .expect("an honest dial gets in");
+    let from_late = late
+        .handle
+        .author(TestPayload::Chat("made it".into()))
+        .await
+        .unwrap();
+    converge(&[&a.handle, &honest.handle, &late.handle], 5).await;
+    assert!(op_ids(&a.handle).await.contains(&from_late));
+    let stats = a.handle.stats().await.unwrap();
+    let n_refused = stats.failed_admissions.get(&RefusalKind::AddressBusy);
+    assert!(
+        n_refused >= Some(&((n_attempts - held.len()) as u64)),
+        "{stats:?}"
+    );
+    assert_eq!(stats.failed_admissions.get(&RefusalKind::Busy), None);
+
+    // A never-admitting connection frees its slot at the accept deadline, well before the
+    // dialer's own admission timeout.
+    for connection in &held {
+        tokio::time::timeout(PATIENCE, connection.closed())
+            .await
+            .unwrap();
+    }
+    let idle = connect(&attacker, addr).await.unwrap();
+    let opened = tokio::time::Instant::now();
+    tokio::time::timeout(PATIENCE, idle.closed()).await.unwrap();
+    let lasted = opened.elapsed();
+    assert!(
+        lasted < Duration::from_millis(ACCEPT_TIMEOUT_MILLIS + 1_000)
+            && lasted < Duration::from_millis(ADMISSION_TIMEOUT_MILLIS),
+        "a never-admitting connection lasted {lasted:?}"
+    );
 }

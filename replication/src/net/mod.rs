@@ -68,6 +68,7 @@ pub mod discovery;
 pub mod frame;
 pub mod invite;
 pub mod node;
+pub mod prefix;
 pub mod session;
 pub mod socket;
 pub mod tls;

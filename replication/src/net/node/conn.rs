@@ -2,16 +2,21 @@
 //! frame reader, a datagram reader and a frame writer. They move bytes; every decision is
 //! taken by the core task.
 
+use std::collections::BTreeMap;
 use std::net::SocketAddr;
-use std::sync::Arc;
 use std::sync::atomic::Ordering;
+use std::sync::{Arc, MutexGuard, PoisonError};
 use std::time::Duration;
 
 use tokio::sync::mpsc;
 
-use super::{CloseCode, Input, MAX_ADMISSIONS_IN_PROGRESS, RefusalKind, Shared};
+use super::{
+    ACCEPT_TIMEOUT_MILLIS, CloseCode, Counters, Input, MAX_ADMISSIONS_IN_PROGRESS,
+    MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS, RefusalKind, Shared,
+};
 use crate::net::admission::{self, AdmissionError, Admitted, Role};
 use crate::net::frame::{self, FrameError};
+use crate::net::prefix::AddressPrefix;
 use crate::net::tls::SERVER_NAME;
 use crate::peer::ConnId;
 
@@ -35,38 +40,121 @@ impl Shared {
     }
 }
 
-/// Holds one of the [`MAX_ADMISSIONS_IN_PROGRESS`] slots until dropped.
-struct AdmissionSlot(Arc<Shared>);
+/// What the accepting side holds: connections in admission, in all and by source address.
+#[derive(Debug, Default)]
+pub(super) struct AcceptLoad {
+    n_admitting: usize,
+    /// An entry goes when its count is zero, so there are at most as many as admissions.
+    per_address: BTreeMap<AddressPrefix, AddressLoad>,
+}
+
+/// What one source address holds of the accepting side.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct AddressLoad {
+    n_admitting: usize,
+}
+
+impl AcceptLoad {
+    /// Takes an admission slot for `prefix`, or says which limit is reached.
+    fn reserve(&mut self, prefix: AddressPrefix) -> Result<(), RefusalKind> {
+        if self.n_admitting >= MAX_ADMISSIONS_IN_PROGRESS {
+            return Err(RefusalKind::Busy);
+        }
+        let load = self.per_address.entry(prefix).or_default();
+        let full = load.n_admitting >= MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS;
+        if full {
+            self.forget_if_idle(prefix);
+            return Err(RefusalKind::AddressBusy);
+        }
+        load.n_admitting += 1;
+        self.n_admitting += 1;
+        Ok(())
+    }
+
+    /// Ends an admission of `prefix`.
+    fn end_admission(&mut self, prefix: AddressPrefix) {
+        self.n_admitting -= 1;
+        let load = self.per_address.entry(prefix).or_default();
+        load.n_admitting -= 1;
+        self.forget_if_idle(prefix);
+    }
+
+    fn forget_if_idle(&mut self, prefix: AddressPrefix) {
+        if self.per_address.get(&prefix) == Some(&AddressLoad::default()) {
+            self.per_address.remove(&prefix);
+        }
+    }
+}
+
+impl Shared {
+    fn accepting(&self) -> MutexGuard<'_, AcceptLoad> {
+        // The counts stay consistent whatever panicked while holding the lock: every change
+        // is one step.
+        self.accepting
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+/// Holds one admission slot of an address until dropped.
+struct AdmissionSlot {
+    shared: Arc<Shared>,
+    prefix: AddressPrefix,
+}
+
+impl AdmissionSlot {
+    fn reserve(shared: &Arc<Shared>, prefix: AddressPrefix) -> Result<Self, RefusalKind> {
+        shared.accepting().reserve(prefix)?;
+        Ok(Self {
+            shared: shared.clone(),
+            prefix,
+        })
+    }
+}
 
 impl Drop for AdmissionSlot {
     fn drop(&mut self) {
-        self.0
-            .admissions_in_progress
-            .fetch_sub(1, Ordering::Relaxed);
+        self.shared.accepting().end_admission(self.prefix);
     }
 }
 
 /// Accepts incoming connections until the endpoint closes.
+///
+/// A first packet whose source address is not validated yet is answered with a stateless
+/// retry: the node keeps nothing, and a dialer that really sends from that address echoes
+/// the token at the cost of one round trip. Only a validated attempt takes an admission slot
+/// and counts against its address, so a spoofer cannot use up a victim's share, and a source
+/// that never completes holds its slots for at most [`ACCEPT_TIMEOUT_MILLIS`].
 pub(super) async fn accept_loop(endpoint: quinn::Endpoint, shared: Arc<Shared>) {
     while let Some(incoming) = endpoint.accept().await {
         let addr = incoming.remote_address();
-        let in_progress = shared
-            .admissions_in_progress
-            .fetch_add(1, Ordering::Relaxed);
-        let slot = AdmissionSlot(shared.clone());
-        if in_progress >= MAX_ADMISSIONS_IN_PROGRESS {
-            incoming.refuse();
-            drop(slot);
-            // Never block the accept loop on a busy core: a lost count is better.
-            let _ = shared.inputs.try_send(Input::AdmissionFailed {
-                conn: None,
-                addr,
-                error: AdmissionError::Connection("too many admissions in progress".into()),
-                kind: RefusalKind::Busy,
-            });
+        if !incoming.remote_address_validated() {
+            match incoming.retry() {
+                Ok(()) => Counters::add(&shared.counters.n_retries),
+                // Only a validated attempt cannot be retried, which was checked above.
+                Err(refused) => refused.into_incoming().ignore(),
+            }
             continue;
         }
-        tokio::spawn(accept_one(shared.clone(), incoming, slot));
+        match AdmissionSlot::reserve(&shared, AddressPrefix::of(addr.ip())) {
+            Ok(slot) => {
+                tokio::spawn(accept_one(shared.clone(), incoming, slot));
+            }
+            Err(kind) => {
+                incoming.refuse();
+                let reason = match kind {
+                    RefusalKind::Busy => "too many admissions in progress",
+                    _ => "too many admissions in progress from this address",
+                };
+                // Never block the accept loop on a busy core: a lost count is better.
+                let _ = shared.inputs.try_send(Input::AdmissionFailed {
+                    conn: None,
+                    addr,
+                    error: AdmissionError::Connection(reason.into()),
+                    kind,
+                });
+            }
+        }
     }
 }
 
@@ -84,7 +172,8 @@ async fn accept_one(shared: Arc<Shared>, incoming: quinn::Incoming, slot: Admiss
             }
         }
     };
-    let outcome = tokio::time::timeout(admission::admission_timeout(), attempt).await;
+    let deadline = Duration::from_millis(ACCEPT_TIMEOUT_MILLIS);
+    let outcome = tokio::time::timeout(deadline, attempt).await;
     drop(slot);
     match outcome {
         Ok(Ok((connection, admitted))) => {
@@ -95,7 +184,7 @@ async fn accept_one(shared: Arc<Shared>, incoming: quinn::Incoming, slot: Admiss
         Err(_) => {
             shared
                 .report_failure(None, addr, AdmissionError::Timeout)
-                .await
+                .await;
         }
     }
 }

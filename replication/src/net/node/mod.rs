@@ -29,7 +29,7 @@ pub use punch::{
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
@@ -63,7 +63,16 @@ pub const MAX_QUEUED_FRAMES_PER_CONN: usize = 256;
 /// is cut off.
 pub const MAX_REJECTIONS_PER_CONN: u64 = 32;
 /// Incoming connections in handshake or admission at once; more are refused.
-pub const MAX_ADMISSIONS_IN_PROGRESS: usize = 16;
+pub const MAX_ADMISSIONS_IN_PROGRESS: usize = 64;
+/// Incoming connections in handshake or admission at once from one source address (an IPv4
+/// address or an IPv6 /64, see [`crate::net::prefix::AddressPrefix`]); more from there are refused, so one
+/// source holds at most this many of the [`MAX_ADMISSIONS_IN_PROGRESS`] slots.
+pub const MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS: usize = 4;
+/// How long an accepted connection may take, from its validated first packet, to finish the
+/// QUIC handshake and send a valid admission frame (a few round trips and one lost packet's
+/// resend). Shorter than the dialer's [`admission::ADMISSION_TIMEOUT_MILLIS`], so that a
+/// connection that never admits frees its slot soon.
+pub const ACCEPT_TIMEOUT_MILLIS: u64 = 2_000;
 
 /// QUIC application close codes this node sends.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -216,6 +225,9 @@ pub enum RefusalKind {
     RefusedByRemote,
     /// Too many admissions in progress ([`MAX_ADMISSIONS_IN_PROGRESS`]).
     Busy,
+    /// Too many admissions in progress from the remote's address
+    /// ([`MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS`]).
+    AddressBusy,
     /// The remote is this node.
     SelfConnection,
     /// Already [`crate::peer::MAX_CONNECTIONS`] connections.
@@ -340,6 +352,10 @@ pub struct NodeStats {
     pub failed_admissions: BTreeMap<RefusalKind, u64>,
     /// Connections admitted.
     pub n_admitted: u64,
+    /// Stateless retries sent to connection attempts whose source address was not validated
+    /// yet (the dialer echoes the token from its address, and only then does this node keep
+    /// any state or count the attempt against the address).
+    pub n_retries: u64,
     /// Connections ended.
     pub n_disconnected: u64,
     /// Connections cut off for too many sync rejections.
@@ -408,6 +424,7 @@ pub(crate) struct Counters {
     pub(crate) n_unreachable: AtomicU64,
     pub(crate) n_punches_skipped: AtomicU64,
     pub(crate) n_rendezvous_events_dropped: AtomicU64,
+    pub(crate) n_retries: AtomicU64,
 }
 
 impl Counters {
@@ -429,6 +446,7 @@ impl Counters {
         stats.n_unreachable = get(&self.n_unreachable);
         stats.n_punches_skipped = get(&self.n_punches_skipped);
         stats.n_rendezvous_events_dropped = get(&self.n_rendezvous_events_dropped);
+        stats.n_retries = get(&self.n_retries);
     }
 }
 
@@ -527,7 +545,9 @@ struct Shared {
     keypair: Keypair,
     inputs: mpsc::Sender<Input>,
     next_conn: AtomicU64,
-    admissions_in_progress: AtomicUsize,
+    /// Accepted connections in admission, in all and by source address.
+    accepting: Mutex<conn::AcceptLoad>,
+    counters: Arc<Counters>,
 }
 
 /// A running node: its handle and its event stream.
@@ -573,7 +593,8 @@ impl<P: Payload + Send + 'static> Node<P> {
             keys: keys.clone(),
             inputs: input_tx,
             next_conn: AtomicU64::new(1),
-            admissions_in_progress: AtomicUsize::new(0),
+            accepting: Mutex::new(conn::AcceptLoad::default()),
+            counters: counters.clone(),
         });
         let peer = Peer::new(keypair, keys.session_id(), log);
         tokio::spawn(conn::accept_loop(endpoint.clone(), shared.clone()));
