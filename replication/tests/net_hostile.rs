@@ -16,7 +16,8 @@ use replication::Keypair;
 use replication::net::admission::{self, ADMISSION_FRAME_BYTES, ADMISSION_TIMEOUT_MILLIS};
 use replication::net::node::{
     ACCEPT_TIMEOUT_MILLIS, CloseCode, MAX_ADMISSIONS_IN_PROGRESS,
-    MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS, MAX_REJECTIONS_PER_CONN, RefusalKind,
+    MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS, MAX_CONNECTIONS_PER_ADDRESS, MAX_REJECTIONS_PER_CONN,
+    RefusalKind,
 };
 use replication::net::{frame, tls};
 use replication::payload::test_payload::TestPayload;
@@ -249,4 +250,52 @@ async fn half_open_and_never_admitting_connections_from_one_address_leave_honest
             && lasted < Duration::from_millis(ADMISSION_TIMEOUT_MILLIS),
         "a never-admitting connection lasted {lasted:?}"
     );
+}
+
+#[tokio::test]
+async fn one_invite_holder_gets_at_most_its_address_share_of_connections() {
+    let a = node(1);
+    author_some(&a.handle, 1, "alice").await;
+    let addr = a.handle.local_addr();
+    let keys = session_keys(INVITE);
+    // New keys, one connection each, all from one address.
+    let attacker = client_endpoint(ATTACKER_IP);
+    let n_identities = MAX_CONNECTIONS_PER_ADDRESS + 4;
+    let mut admitted = Vec::new();
+    for seed in 0..n_identities {
+        let Ok(connection) = connect(&attacker, addr).await else {
+            continue;
+        };
+        let keypair = Keypair::from_seed([100 + seed as u8; 32]);
+        if let Ok(proof) = admission::admit_dialer(&connection, &keys, &keypair).await {
+            admitted.push((connection, proof));
+        }
+    }
+    assert_eq!(admitted.len(), MAX_CONNECTIONS_PER_ADDRESS);
+    let stats = a.handle.stats().await.unwrap();
+    assert_eq!(
+        stats.failed_admissions.get(&RefusalKind::AddressBusy),
+        Some(&((n_identities - MAX_CONNECTIONS_PER_ADDRESS) as u64)),
+        "{stats:?}"
+    );
+    // An honest peer from another address still gets in and syncs.
+    let honest = node(2);
+    honest
+        .handle
+        .dial(addr)
+        .await
+        .expect("an honest dial gets in");
+    converge(&[&a.handle, &honest.handle], 4).await;
+    // A slot of that address frees when one of its connections ends.
+    let (first, _) = admitted.remove(0);
+    first.close(0u32.into(), b"bye");
+    eventually("the closed connection is gone", || async {
+        a.handle.stats().await.unwrap().connections.len() == MAX_CONNECTIONS_PER_ADDRESS
+    })
+    .await;
+    let again = connect(&attacker, addr).await.unwrap();
+    let keypair = Keypair::from_seed([99; 32]);
+    admission::admit_dialer(&again, &keys, &keypair)
+        .await
+        .expect("a freed slot admits again");
 }

@@ -12,7 +12,7 @@ use tokio::sync::mpsc;
 
 use super::{
     ACCEPT_TIMEOUT_MILLIS, CloseCode, Counters, Input, MAX_ADMISSIONS_IN_PROGRESS,
-    MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS, RefusalKind, Shared,
+    MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS, MAX_CONNECTIONS_PER_ADDRESS, RefusalKind, Shared,
 };
 use crate::net::admission::{self, AdmissionError, Admitted, Role};
 use crate::net::frame::{self, FrameError};
@@ -40,11 +40,13 @@ impl Shared {
     }
 }
 
-/// What the accepting side holds: connections in admission, in all and by source address.
+/// What the accepting side holds: connections in admission, in all and by source address,
+/// and admitted connections by source address.
 #[derive(Debug, Default)]
 pub(super) struct AcceptLoad {
     n_admitting: usize,
-    /// An entry goes when its count is zero, so there are at most as many as admissions.
+    /// An entry goes when both of its counts are zero, so there are at most as many as
+    /// accepted connections alive.
     per_address: BTreeMap<AddressPrefix, AddressLoad>,
 }
 
@@ -52,6 +54,7 @@ pub(super) struct AcceptLoad {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct AddressLoad {
     n_admitting: usize,
+    n_admitted: usize,
 }
 
 impl AcceptLoad {
@@ -61,7 +64,8 @@ impl AcceptLoad {
             return Err(RefusalKind::Busy);
         }
         let load = self.per_address.entry(prefix).or_default();
-        let full = load.n_admitting >= MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS;
+        let full = load.n_admitting >= MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS
+            || load.n_admitting + load.n_admitted >= MAX_CONNECTIONS_PER_ADDRESS;
         if full {
             self.forget_if_idle(prefix);
             return Err(RefusalKind::AddressBusy);
@@ -71,11 +75,21 @@ impl AcceptLoad {
         Ok(())
     }
 
-    /// Ends an admission of `prefix`.
-    fn end_admission(&mut self, prefix: AddressPrefix) {
+    /// Ends an admission of `prefix`; when `admitted`, the connection goes on counting
+    /// against its address until [`AcceptLoad::release_admitted`].
+    fn end_admission(&mut self, prefix: AddressPrefix, admitted: bool) {
         self.n_admitting -= 1;
         let load = self.per_address.entry(prefix).or_default();
         load.n_admitting -= 1;
+        if admitted {
+            load.n_admitted += 1;
+        }
+        self.forget_if_idle(prefix);
+    }
+
+    fn release_admitted(&mut self, prefix: AddressPrefix) {
+        let load = self.per_address.entry(prefix).or_default();
+        load.n_admitted -= 1;
         self.forget_if_idle(prefix);
     }
 
@@ -96,10 +110,13 @@ impl Shared {
     }
 }
 
-/// Holds one admission slot of an address until dropped.
+/// Holds one admission slot of an address until dropped or turned into a
+/// [`ConnectionSlot`].
 struct AdmissionSlot {
     shared: Arc<Shared>,
     prefix: AddressPrefix,
+    /// Set once [`AdmissionSlot::admitted`] has handed the slot on.
+    done: bool,
 }
 
 impl AdmissionSlot {
@@ -108,13 +125,39 @@ impl AdmissionSlot {
         Ok(Self {
             shared: shared.clone(),
             prefix,
+            done: false,
         })
+    }
+
+    /// The connection is admitted: it keeps counting against its address while it lives.
+    fn admitted(mut self) -> ConnectionSlot {
+        self.done = true;
+        self.shared.accepting().end_admission(self.prefix, true);
+        ConnectionSlot {
+            shared: self.shared.clone(),
+            prefix: self.prefix,
+        }
     }
 }
 
 impl Drop for AdmissionSlot {
     fn drop(&mut self) {
-        self.shared.accepting().end_admission(self.prefix);
+        if !self.done {
+            self.shared.accepting().end_admission(self.prefix, false);
+        }
+    }
+}
+
+/// One of an address's [`MAX_CONNECTIONS_PER_ADDRESS`], held while an accepted connection
+/// lives.
+struct ConnectionSlot {
+    shared: Arc<Shared>,
+    prefix: AddressPrefix,
+}
+
+impl Drop for ConnectionSlot {
+    fn drop(&mut self) {
+        self.shared.accepting().release_admitted(self.prefix);
     }
 }
 
@@ -144,7 +187,7 @@ pub(super) async fn accept_loop(endpoint: quinn::Endpoint, shared: Arc<Shared>) 
                 incoming.refuse();
                 let reason = match kind {
                     RefusalKind::Busy => "too many admissions in progress",
-                    _ => "too many admissions in progress from this address",
+                    _ => "too many connections from this address",
                 };
                 // Never block the accept loop on a busy core: a lost count is better.
                 let _ = shared.inputs.try_send(Input::AdmissionFailed {
@@ -174,14 +217,18 @@ async fn accept_one(shared: Arc<Shared>, incoming: quinn::Incoming, slot: Admiss
     };
     let deadline = Duration::from_millis(ACCEPT_TIMEOUT_MILLIS);
     let outcome = tokio::time::timeout(deadline, attempt).await;
-    drop(slot);
     match outcome {
         Ok(Ok((connection, admitted))) => {
+            let _slot = slot.admitted();
             let conn = shared.next_conn_id();
             run_connection(shared, conn, Role::Acceptor, connection, admitted).await;
         }
-        Ok(Err(error)) => shared.report_failure(None, addr, error).await,
+        Ok(Err(error)) => {
+            drop(slot);
+            shared.report_failure(None, addr, error).await;
+        }
         Err(_) => {
+            drop(slot);
             shared
                 .report_failure(None, addr, AdmissionError::Timeout)
                 .await;

@@ -68,6 +68,11 @@ pub const MAX_ADMISSIONS_IN_PROGRESS: usize = 64;
 /// address or an IPv6 /64, see [`crate::net::prefix::AddressPrefix`]); more from there are refused, so one
 /// source holds at most this many of the [`MAX_ADMISSIONS_IN_PROGRESS`] slots.
 pub const MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS: usize = 4;
+/// Accepted connections (admitted or in admission) from one source address at once, whatever
+/// peer ids they prove: an invite holder who makes new keys gets no more than this many of
+/// the [`crate::peer::MAX_CONNECTIONS`] slots from one address. Connections this node dialed
+/// are not counted.
+pub const MAX_CONNECTIONS_PER_ADDRESS: usize = 8;
 /// How long an accepted connection may take, from its validated first packet, to finish the
 /// QUIC handshake and send a valid admission frame (a few round trips and one lost packet's
 /// resend). Shorter than the dialer's [`admission::ADMISSION_TIMEOUT_MILLIS`], so that a
@@ -225,8 +230,8 @@ pub enum RefusalKind {
     RefusedByRemote,
     /// Too many admissions in progress ([`MAX_ADMISSIONS_IN_PROGRESS`]).
     Busy,
-    /// Too many admissions in progress from the remote's address
-    /// ([`MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS`]).
+    /// Too many admissions in progress or connections from the remote's address
+    /// ([`MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS`], [`MAX_CONNECTIONS_PER_ADDRESS`]).
     AddressBusy,
     /// The remote is this node.
     SelfConnection,
@@ -545,7 +550,7 @@ struct Shared {
     keypair: Keypair,
     inputs: mpsc::Sender<Input>,
     next_conn: AtomicU64,
-    /// Accepted connections in admission, in all and by source address.
+    /// Accepted connections in admission and admitted, in all and by source address.
     accepting: Mutex<conn::AcceptLoad>,
     counters: Arc<Counters>,
 }
