@@ -6,7 +6,8 @@ use std::collections::BTreeSet;
 use crate::identity::PeerId;
 use crate::op::OpId;
 
-/// Most authors a version vector on the wire may name.
+/// Most authors one version vector on the wire may name. A longer one (a log may hold any
+/// number of authors) goes out as several messages: see [`VersionVector::split`].
 pub const MAX_VV_AUTHORS: usize = 4096;
 
 /// For each author, the highest sequence number such that all of that author's ops up to it
@@ -73,6 +74,22 @@ impl VersionVector {
         self.seqs.is_empty()
     }
 
+    /// The entries in author order as version vectors of at most `max_authors` entries each,
+    /// whose join is `self`; always at least one (empty if `self` is).
+    pub fn split(&self, max_authors: usize) -> Vec<VersionVector> {
+        assert!(max_authors > 0, "a version vector split into empty parts");
+        let mut parts = vec![VersionVector::new()];
+        for (author, seq) in &self.seqs {
+            if parts.last().is_some_and(|p| p.len() == max_authors) {
+                parts.push(VersionVector::new());
+            }
+            if let Some(part) = parts.last_mut() {
+                part.seqs.insert(*author, *seq);
+            }
+        }
+        parts
+    }
+
     /// Total number of ops named.
     pub fn n_ops(&self) -> u64 {
         self.seqs
@@ -137,6 +154,22 @@ mod tests {
         assert_eq!(f.len(), 2);
         f.deliver(c, &[a, b]);
         assert_eq!(f.heads().copied().collect::<Vec<_>>(), vec![c]);
+    }
+
+    #[test]
+    fn split_parts_are_bounded_and_join_to_the_whole() {
+        assert_eq!(VersionVector::new().split(2), vec![VersionVector::new()]);
+        let whole = vv(&[(1, 1), (2, 5), (3, 2), (4, 9), (5, 1)]);
+        let parts = whole.split(2);
+        assert_eq!(
+            parts.iter().map(VersionVector::len).collect::<Vec<_>>(),
+            [2, 2, 1]
+        );
+        let mut joined = VersionVector::new();
+        for part in &parts {
+            joined.join(part);
+        }
+        assert_eq!(joined, whole);
     }
 
     proptest! {

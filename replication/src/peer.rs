@@ -161,6 +161,17 @@ impl<P: Payload> Peer<P> {
         if self.want_due().is_some_and(|t| t <= now) {
             self.update_wants(now);
         }
+        // Ops from the future wait for the clock; their delivery is reported on a live
+        // connection (without one they wait for the next insertion).
+        if let Some(&conn) = self.connections.keys().next()
+            && self.log.next_due().is_some_and(|t| t <= now)
+        {
+            let insertion = self.log.release_due(now);
+            if !insertion.delivered.is_empty() || !insertion.refused.is_empty() {
+                self.events.push_back((conn, Event::Delivered(insertion)));
+                self.wants_dirty = true;
+            }
+        }
     }
 
     fn want_due(&self) -> Option<Timestamp> {
@@ -265,6 +276,7 @@ impl<P: Payload> Peer<P> {
             .values()
             .filter_map(|s| s.poll_timeout(&self.log))
             .chain(self.want_due())
+            .chain(self.log.next_due().filter(|_| !self.connections.is_empty()))
             .min()
     }
 }
@@ -507,5 +519,172 @@ mod tests {
         let start = t;
         let done = settle(&mut peers, &links, t, |p| p[1].log().len() == 2);
         assert!(done - start <= 2 * RESEND_AFTER_MICROS, "{}", done - start);
+    }
+
+    use crate::causal::MAX_VV_AUTHORS;
+    use crate::sync::message::{MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION};
+    use crate::sync::state::MAX_REMOTE_UNKNOWN_AUTHORS;
+    use crate::sync::state::tests::log_of_many_authors;
+
+    fn hello_from(peer: PeerId, session_id: SessionId) -> Vec<u8> {
+        Message::Hello {
+            protocol_version: PROTOCOL_VERSION,
+            session_id,
+            peer,
+            hello_seen: true,
+        }
+        .encode()
+    }
+
+    /// Everything `peer` sends at `now`, each message checked against the wire limits.
+    fn transmit_checked(peer: &mut TPeer, now: Timestamp) -> Vec<Message> {
+        let mut out = Vec::new();
+        while let Some((_, bytes)) = peer.poll_transmit(now) {
+            assert!(bytes.len() <= MAX_MESSAGE_BYTES, "{} bytes", bytes.len());
+            out.push(Message::decode(&bytes).unwrap());
+        }
+        while peer.poll_event().is_some() {}
+        out
+    }
+
+    /// `vv` as haves of at most `chunk` authors each.
+    fn haves(vv: &VersionVector, chunk: usize) -> Vec<Vec<u8>> {
+        let entries: Vec<(PeerId, u64)> = vv.iter().map(|(a, s)| (*a, *s)).collect();
+        entries
+            .chunks(chunk)
+            .map(|c| {
+                let mut part = VersionVector::new();
+                for (a, s) in c {
+                    part.raise(*a, *s);
+                }
+                Message::Have(part).encode()
+            })
+            .collect()
+    }
+
+    /// Issue 17: two haves of 4,096 made-up authors each, then a timeout, panicked the peer
+    /// (one want named all 8,192 and tripped the outgoing-size assertion).
+    #[test]
+    fn haves_of_thousands_of_made_up_authors_cost_bounded_memory_and_no_panic() {
+        let session = [5; 16];
+        let mut a = TPeer::new(Keypair::from_seed([1; 32]), session, Log::default());
+        a.connect(Timestamp(0), ConnId(1)).unwrap();
+        let mallory = Keypair::from_seed([9; 32]).peer_id();
+        a.handle_input(Timestamp(0), ConnId(1), &hello_from(mallory, session));
+        for round in 0..2u8 {
+            let mut vv = VersionVector::new();
+            for i in 0..MAX_VV_AUTHORS as u32 {
+                let mut id = [round; 32];
+                id[..4].copy_from_slice(&i.to_be_bytes());
+                vv.raise(PeerId(id), 1);
+            }
+            a.handle_input(Timestamp(1), ConnId(1), &Message::Have(vv).encode());
+        }
+        a.handle_timeout(Timestamp(2));
+        let mut n_wanted = 0;
+        for message in transmit_checked(&mut a, Timestamp(2)) {
+            if let Message::Want(vv) = message {
+                n_wanted += vv.len();
+            }
+        }
+        // What the connection keeps of the claims is bounded; the rest is counted.
+        let (_, sync) = a.connections().next().unwrap();
+        assert_eq!(
+            sync.remote_version_vector().len(),
+            MAX_REMOTE_UNKNOWN_AUTHORS
+        );
+        assert_eq!(
+            sync.stats().n_claims_dropped,
+            (2 * MAX_VV_AUTHORS - MAX_REMOTE_UNKNOWN_AUTHORS) as u64
+        );
+        assert_eq!(n_wanted, MAX_REMOTE_UNKNOWN_AUTHORS);
+        assert!(a.wants.len() <= MAX_REMOTE_UNKNOWN_AUTHORS);
+        // Nothing arrives: the peer does not ask the remote for its full have again, and more
+        // strangers are still dropped.
+        for t in 1..=5 {
+            a.handle_timeout(Timestamp(t * RELAY_AFTER_MICROS));
+            let messages = transmit_checked(&mut a, Timestamp(t * RELAY_AFTER_MICROS));
+            assert!(
+                !messages.iter().any(|m| matches!(m, Message::Hello { .. })),
+                "{messages:?}"
+            );
+        }
+        let mut vv = VersionVector::new();
+        vv.raise(PeerId([7; 32]), 1);
+        a.handle_input(Timestamp(3_000_000), ConnId(1), &Message::Have(vv).encode());
+        let (_, sync) = a.connections().next().unwrap();
+        assert_eq!(
+            sync.remote_version_vector().len(),
+            MAX_REMOTE_UNKNOWN_AUTHORS
+        );
+    }
+
+    /// Issue 17: a peer lacking more authors' ops than one want can name sent them in one
+    /// want, over the message size limit. Its wants are now split.
+    #[test]
+    fn wants_for_more_authors_than_one_message_names_are_split() {
+        let session = [5; 16];
+        let log = log_of_many_authors(8_000);
+        let mut claims = VersionVector::new();
+        for (author, seq) in log.version_vector().iter() {
+            claims.raise(*author, seq + 1);
+        }
+        let mut a = TPeer::new(Keypair::from_seed([1; 32]), session, log);
+        a.connect(Timestamp(0), ConnId(1)).unwrap();
+        let remote = Keypair::from_seed([9; 32]).peer_id();
+        a.handle_input(Timestamp(0), ConnId(1), &hello_from(remote, session));
+        for have in haves(&claims, 4_000) {
+            a.handle_input(Timestamp(1), ConnId(1), &have);
+        }
+        a.handle_timeout(Timestamp(2));
+        let mut wanted = VersionVector::new();
+        let mut n_wants = 0;
+        for message in transmit_checked(&mut a, Timestamp(2)) {
+            if let Message::Want(vv) = message {
+                wanted.join(&vv);
+                n_wants += 1;
+            }
+        }
+        assert_eq!(wanted, claims);
+        assert!(n_wants >= 2, "{n_wants} wants");
+    }
+
+    /// Issue 17: a peer joins a peer whose log names more authors than one version-vector
+    /// message can, and gets all of it.
+    #[test]
+    fn a_peer_syncs_fully_with_a_log_of_more_authors_than_a_message_names() {
+        let session = [5; 16];
+        let mut peers = vec![
+            TPeer::new(
+                Keypair::from_seed([1; 32]),
+                session,
+                log_of_many_authors(5_000),
+            ),
+            TPeer::new(Keypair::from_seed([2; 32]), session, Log::default()),
+        ];
+        let links = [(0, ConnId(1), 1, ConnId(1))];
+        for p in peers.iter_mut() {
+            p.connect(Timestamp(0), ConnId(1)).unwrap();
+        }
+        pump(&mut peers, &links, Timestamp(0));
+        let mut t = 0;
+        while peers[1].log().version_vector() != peers[0].log().version_vector() {
+            assert!(
+                t < 30_000_000,
+                "not synced by {t}: {} ops",
+                peers[1].log().len()
+            );
+            t += 100_000;
+            for p in peers.iter_mut() {
+                p.handle_timeout(Timestamp(t));
+            }
+            pump(&mut peers, &links, Timestamp(t));
+        }
+        assert_eq!(observe(&peers[0]), observe(&peers[1]));
+        // More strangers than a connection keeps: the joiner dropped some claims at first and
+        // learnt them again after fetching the rest.
+        let (_, sync) = peers[1].connections().next().unwrap();
+        assert!(sync.stats().n_claims_dropped > 0);
+        assert!(t <= 5_000_000, "synced at {t}");
     }
 }

@@ -19,11 +19,11 @@
 //! from a peer you trust; compare [`crate::materialize::SceneHash`]es with other peers later.
 //!
 //! Format (version 1), integers as varints: `SCULPTSNAP [1] [cut lamport] [max timestamp]`
-//! `[n ≤ 4096][author 32][seq][lamport]*` (sorted) `[n][id 32][author idx][kind 0/1/2]*`
+//! `[n ≤ MAX_SNAPSHOT_AUTHORS][author 32][seq][lamport]*` (sorted) `[n][id 32][author idx][kind 0/1/2]*`
 //! (sorted by id) `[n][head id 32]*` `[fold state]` `[n][len][op]*` (the effective edits in
 //! linear order) `[len][scene snapshot]` `[blake3 of everything before, 32]`.
 
-use crate::causal::{MAX_VV_AUTHORS, VersionVector};
+use crate::causal::VersionVector;
 use crate::codec::{DecodeError, Reader, put_bytes, put_varint};
 use crate::identity::PeerId;
 use crate::lease::FoldState;
@@ -44,6 +44,14 @@ pub const SNAPSHOT_FORMAT_VERSION: u8 = 1;
 pub const MAX_SNAPSHOT_BYTES: usize = 256 * 1024 * 1024;
 /// Bytes of checksum at the end of a snapshot.
 pub const SNAPSHOT_CHECKSUM_BYTES: usize = 32;
+/// Most authors a snapshot names: as many as a log can hold (every author has at least one op
+/// in it), so any log can be captured whatever its number of authors (within
+/// [`MAX_SNAPSHOT_BYTES`]).
+pub const MAX_SNAPSHOT_AUTHORS: usize = MAX_LOG_OPS;
+/// The fewest bytes an author entry takes: id, seq and Lamport time of one byte each.
+const MIN_AUTHOR_BYTES: usize = 32 + 1 + 1;
+// Ops name their author by a `u32` index.
+const _: () = assert!(MAX_SNAPSHOT_AUTHORS <= u32::MAX as usize);
 
 /// Why a snapshot could not be captured.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -247,7 +255,9 @@ impl<P: Payload> Log<P> {
 }
 
 fn read_authors(r: &mut Reader<'_>, cut: u64) -> Result<Vec<BaseAuthor>, DecodeError> {
-    let n = r.bounded("author count", MAX_VV_AUTHORS as u64)?;
+    // Bounded by what is left as well, so a hostile count allocates nothing it cannot fill.
+    let limit = (r.remaining() / MIN_AUTHOR_BYTES).min(MAX_SNAPSHOT_AUTHORS) as u64;
+    let n = r.bounded("author count", limit)?;
     let mut authors: Vec<BaseAuthor> = Vec::with_capacity(n);
     for _ in 0..n {
         let offset = r.offset();

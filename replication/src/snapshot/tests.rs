@@ -238,3 +238,30 @@ fn corrupt_truncated_or_hostile_snapshots_are_refused() {
     assert!(TSnapshot::decode(&body).is_err());
     assert!(TSnapshot::decode(&vec![0; MAX_SNAPSHOT_BYTES + 1]).is_err());
 }
+
+/// Issue 17: a snapshot could name at most 4,096 authors, fewer than a log holds; one of a
+/// log with more did not decode.
+#[test]
+fn a_snapshot_holds_more_authors_than_a_version_vector_message_names() {
+    let log = crate::sync::state::tests::log_of_many_authors(5_000);
+    let snapshot = TSnapshot::capture::<TestScene>(&log, log.stable_lamport()).unwrap();
+    let bytes = snapshot.encode().unwrap();
+    let decoded = TSnapshot::decode(&bytes).unwrap();
+    assert_eq!(&decoded.version_vector(), log.version_vector());
+    assert_eq!(decoded.n_ops(), 5_000);
+    assert_eq!(decoded.encode().unwrap(), bytes, "canonical encoding");
+    // A count of authors the bytes cannot hold is refused before anything is allocated.
+    let mut body = SNAPSHOT_MAGIC.to_vec();
+    body.push(SNAPSHOT_FORMAT_VERSION);
+    body.extend_from_slice(&[1, 1]);
+    put_varint(&mut body, MAX_SNAPSHOT_AUTHORS as u64);
+    body.extend_from_slice(blake3::hash(&body).as_bytes());
+    assert!(matches!(
+        TSnapshot::decode(&body),
+        Err(DecodeError::OverLimit {
+            what: "author count",
+            limit: 0,
+            ..
+        })
+    ));
+}

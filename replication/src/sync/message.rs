@@ -4,10 +4,15 @@
 //! Every message is `[SYNC_WIRE_VERSION][tag][fields...]`, integers as LEB128 varints, byte
 //! strings length-prefixed; counts and lengths are checked against named limits before
 //! anything is allocated.
+//!
+//! A version vector names at most [`MAX_VV_AUTHORS`] authors per message, and one that names
+//! that many always fits in [`MAX_MESSAGE_BYTES`]. A sender with more to say sends several
+//! [`Message::Have`]s or [`Message::Want`]s (the receiver joins them, so they are independent
+//! and may arrive in any order); an [`Message::Ack`] names at most a batch's authors.
 
 use crate::causal::{MAX_VV_AUTHORS, VersionVector};
-use crate::codec::{DecodeError, Reader, put_bytes, put_varint};
-use crate::identity::PeerId;
+use crate::codec::{DecodeError, MAX_VARINT_BYTES, Reader, put_bytes, put_varint};
+use crate::identity::{PEER_ID_BYTES, PeerId};
 use crate::op::MAX_OP_BYTES;
 
 /// Version byte that opens every sync message.
@@ -22,6 +27,14 @@ pub const MAX_BATCH_OPS: usize = 64;
 pub const MAX_MESSAGE_BYTES: usize = 256 * 1024;
 /// Largest ephemeral value in bytes (a pose or a presence record).
 pub const MAX_EPHEMERAL_BYTES: usize = 1024;
+
+/// The largest encoding of a version vector of [`MAX_VV_AUTHORS`] entries (count, then author
+/// and seq each).
+const MAX_VV_BYTES: usize = MAX_VARINT_BYTES + MAX_VV_AUTHORS * (PEER_ID_BYTES + MAX_VARINT_BYTES);
+// A Have, Want or Ack of a full version vector fits in a message with room for its header.
+const _: () = assert!(2 + MAX_VARINT_BYTES + MAX_VV_BYTES <= MAX_MESSAGE_BYTES);
+// An ack names at most one batch's authors.
+const _: () = assert!(MAX_BATCH_OPS <= MAX_VV_AUTHORS);
 
 /// A session's id (derived from its invite by the transport).
 pub type SessionId = [u8; SESSION_ID_BYTES];
@@ -317,6 +330,38 @@ mod tests {
             })
         );
         assert!(Message::decode(&vec![SYNC_WIRE_VERSION; MAX_MESSAGE_BYTES + 1]).is_err());
+    }
+
+    #[test]
+    fn the_largest_version_vector_fits_in_a_message_and_one_more_author_is_refused() {
+        let mut vv = VersionVector::new();
+        for i in 0..=MAX_VV_AUTHORS as u32 {
+            let mut author = [0xff; 32];
+            author[..4].copy_from_slice(&i.to_be_bytes());
+            vv.raise(PeerId(author), u64::MAX);
+        }
+        let parts = vv.split(MAX_VV_AUTHORS);
+        assert_eq!(parts.len(), 2);
+        let (full, batch_no) = (&parts[0], u64::MAX);
+        for m in [
+            Message::Have(full.clone()),
+            Message::Want(full.clone()),
+            Message::Ack {
+                batch_no,
+                have: full.clone(),
+            },
+        ] {
+            let bytes = m.encode();
+            assert!(bytes.len() <= MAX_MESSAGE_BYTES, "{} bytes", bytes.len());
+            assert_eq!(Message::decode(&bytes), Ok(m));
+        }
+        assert!(matches!(
+            Message::decode(&Message::Have(vv).encode()),
+            Err(DecodeError::OverLimit {
+                what: "version vector length",
+                ..
+            })
+        ));
     }
 
     proptest! {

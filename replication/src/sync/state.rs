@@ -10,6 +10,17 @@
 //! [`RESEND_AFTER_MAX_MICROS`] while the remote stays silent, so a lost or duplicated message
 //! can neither stall nor loop a sync.
 //!
+//! **Bounds.** Every version vector goes out in parts of at most [`MAX_VV_AUTHORS`] authors
+//! (a have's first part at once, its others paced like data; wants as control), so no log is
+//! too large to announce. What a remote
+//! claims is believed only within bounds: of authors the local log does not hold, a connection
+//! remembers at most [`MAX_REMOTE_UNKNOWN_AUTHORS`] (the rest are counted in
+//! [`SyncStats::n_claims_dropped`]), and a want names only authors the local log holds, so a
+//! connection's memory is bounded by the local log plus that constant, whatever the remote
+//! sends. An honest remote with more authors than that is not cut short: once most of what
+//! was kept has been fetched, the connection sends its hello again, which every peer answers
+//! with its full have, and learns the next part.
+//!
 //! Traffic in a full mesh of n peers: a peer sends its own ops to every remote at once, but
 //! relays a third peer's ops only when the remote asks with a [`Message::Want`]. The
 //! [`Peer`](crate::peer::Peer) asks one connection at a time for what it lacks, after
@@ -21,7 +32,7 @@ use std::cell::Cell;
 use std::collections::{BTreeMap, VecDeque};
 use std::marker::PhantomData;
 
-use crate::causal::VersionVector;
+use crate::causal::{MAX_VV_AUTHORS, VersionVector};
 use crate::codec::DecodeError;
 use crate::identity::PeerId;
 use crate::log::{InsertError, Insertion, Log};
@@ -60,6 +71,13 @@ pub const MAX_MESSAGES_PER_SEC: u64 = 2_000;
 pub const MAX_MESSAGE_BURST: u64 = 512;
 /// Most ephemeral channels buffered for sending.
 pub const MAX_EPHEMERAL_CHANNELS: usize = 64;
+/// Most authors the local log does not hold that one connection remembers from the remote's
+/// haves and acks. Such a claim is only good for asking the remote to relay the author's ops,
+/// so the excess is dropped (and counted) rather than stored; it is learnt again later.
+pub const MAX_REMOTE_UNKNOWN_AUTHORS: usize = MAX_VV_AUTHORS;
+/// A connection that dropped some of the remote's claims checks this often (1 s) whether
+/// enough of what it kept has arrived to ask for the remote's full have again.
+pub const RELEARN_CHECK_MICROS: u64 = HAVE_EVERY_MICROS;
 
 const MICROS_PER_SEC: u64 = 1_000_000;
 const _: () = assert!(MAX_BATCH_BYTES + MAX_BATCH_OPS * 10 + 32 <= MAX_MESSAGE_BYTES);
@@ -170,6 +188,10 @@ pub struct SyncStats {
     pub n_ops_in: u64,
     /// Ops delivered to the log by this connection's input (including pending ops it freed).
     pub n_ops_delivered: u64,
+    /// Version-vector entries from the remote that were not kept: claims on authors the local
+    /// log does not hold beyond [`MAX_REMOTE_UNKNOWN_AUTHORS`], and wants for authors it does
+    /// not hold (an honest remote wants only what this peer's haves named).
+    pub n_claims_dropped: u64,
 }
 
 impl SyncStats {
@@ -255,8 +277,19 @@ pub struct SyncState<P> {
     hello_sent_at: Option<Timestamp>,
     /// Current hello resend interval (doubles while unanswered).
     hello_resend_micros: u64,
-    /// What the remote is known to hold (join of its Have and Acks).
+    /// What the remote is known to hold (join of its Have and Acks), within the bound on
+    /// authors the log does not hold.
     remote_vv: VersionVector,
+    /// An upper bound on the entries of `remote_vv` naming authors the log does not hold
+    /// (exact when counted; authors only become known), and the log's author count then.
+    n_unknown_claimed: usize,
+    unknown_counted_at: usize,
+    /// Some of the remote's claims were dropped since it last sent its full have.
+    claims_dropped: bool,
+    /// A hello went out to ask again for the remote's full have and no have came since.
+    relearn_asked: bool,
+    /// When to next check whether to ask again.
+    relearn_check_at: Timestamp,
     /// What we sent on this connection (at least `remote_vv`).
     sent_vv: VersionVector,
     in_flight: BTreeMap<u64, Timestamp>,
@@ -277,6 +310,9 @@ pub struct SyncState<P> {
     /// The log's length and the time at the last full have.
     full_have_len: usize,
     full_have_at: Timestamp,
+    /// Parts of haves after the first not yet sent (each at most [`MAX_VV_AUTHORS`]); at most
+    /// one full have's worth, since a have queued behind unsent parts goes out full instead.
+    have_out: VecDeque<VersionVector>,
     next_batch_no: u64,
     up_to_date: bool,
     control: VecDeque<Message>,
@@ -303,6 +339,11 @@ impl<P: Payload> SyncState<P> {
             hello_sent_at: None,
             hello_resend_micros: RESEND_AFTER_MICROS,
             remote_vv: VersionVector::new(),
+            n_unknown_claimed: 0,
+            unknown_counted_at: 0,
+            claims_dropped: false,
+            relearn_asked: false,
+            relearn_check_at: now,
             sent_vv: VersionVector::new(),
             in_flight: BTreeMap::new(),
             resend_micros: RESEND_AFTER_MICROS,
@@ -314,6 +355,7 @@ impl<P: Payload> SyncState<P> {
             have_sent_at: now,
             full_have_len: 0,
             full_have_at: now,
+            have_out: VecDeque::new(),
             next_batch_no: 1,
             up_to_date: false,
             control: VecDeque::new(),
@@ -383,10 +425,11 @@ impl<P: Payload> SyncState<P> {
         lacking
     }
 
-    /// Asks the remote to relay third peers' ops up to `vv`.
+    /// Asks the remote to relay third peers' ops up to `vv`, in as many wants as it takes.
     pub fn want(&mut self, vv: VersionVector) {
         if self.remote.is_some() && !self.closed && !vv.is_empty() {
-            self.control.push_back(Message::Want(vv));
+            self.control
+                .extend(vv.split(MAX_VV_AUTHORS).into_iter().map(Message::Want));
         }
     }
 
@@ -456,20 +499,14 @@ impl<P: Payload> SyncState<P> {
             Message::Hello { .. } => {}
             Message::Have(vv) => {
                 self.hello_confirmed = true;
-                self.learn_remote(&vv, log);
+                // Taken as the answer to a hello sent to relearn (a have crossing it on the
+                // way only delays the relearning until the remote's next full have).
+                self.relearn_asked = false;
+                self.learn_remote(now, &vv, log);
             }
             Message::Want(vv) => {
                 self.hello_confirmed = true;
-                // Asking for what was sent means it did not arrive: that author's ops go out
-                // again from what the remote holds (and only that author's).
-                for (author, seq) in vv.iter() {
-                    let held = self.remote_vv.get(author);
-                    if self.sent_vv.get(author) >= *seq && held < *seq {
-                        self.sent_vv.set(*author, held);
-                    }
-                }
-                self.relay_vv.join(&vv);
-                self.sendable_cache.set(None);
+                self.on_want(&vv, log);
             }
             Message::Ops { batch_no, ops } => {
                 self.hello_confirmed = true;
@@ -481,7 +518,7 @@ impl<P: Payload> SyncState<P> {
                     self.measure_rtt(now.0.saturating_sub(sent_at.0));
                     self.resend_micros = self.base_resend_micros();
                 }
-                self.learn_remote(&have, log);
+                self.learn_remote(now, &have, log);
             }
             Message::Ephemeral {
                 channel,
@@ -543,8 +580,7 @@ impl<P: Payload> SyncState<P> {
         // Every hello is answered with a full Have: it tells the remote what we hold and
         // confirms we saw its hello (so it stops resending). A Have is never answered, so this
         // cannot loop.
-        self.control
-            .push_back(Message::Have(log.version_vector().clone()));
+        self.queue_have(log.version_vector(), true);
         self.have_sent_vv = log.version_vector().clone();
         self.have_sent_len = log.len();
         self.have_sent_at = now;
@@ -557,11 +593,106 @@ impl<P: Payload> SyncState<P> {
         }
     }
 
-    fn learn_remote(&mut self, vv: &VersionVector, log: &Log<P>) {
-        self.remote_vv.join(vv);
-        self.sent_vv.join(vv);
+    /// Queues a have in parts; a full one replaces parts not yet sent. The first part goes
+    /// out at once as control (it may confirm a hello); the others are paced like data, so a
+    /// log of any size is announced within the remote's rate limit.
+    fn queue_have(&mut self, have: &VersionVector, full: bool) {
+        if full {
+            self.control.retain(|m| !matches!(m, Message::Have(_)));
+            self.have_out.clear();
+        }
+        let mut parts = have.split(MAX_VV_AUTHORS).into_iter();
+        if let Some(first) = parts.next() {
+            self.control.push_back(Message::Have(first));
+        }
+        self.have_out.extend(parts);
+    }
+
+    /// Joins what the remote says it holds into what it is known to hold, keeping at most
+    /// [`MAX_REMOTE_UNKNOWN_AUTHORS`] authors the log does not hold.
+    fn learn_remote(&mut self, now: Timestamp, vv: &VersionVector, log: &Log<P>) {
+        let held = log.version_vector();
+        let mut n_dropped = 0u64;
+        for (author, seq) in vv.iter() {
+            let unknown = held.get(author) == 0 && self.remote_vv.get(author) == 0;
+            if unknown && !self.room_for_unknown(held) {
+                n_dropped += 1;
+                continue;
+            }
+            self.n_unknown_claimed += usize::from(unknown);
+            self.remote_vv.raise(*author, *seq);
+            self.sent_vv.raise(*author, *seq);
+        }
+        if n_dropped > 0 {
+            self.stats.n_claims_dropped += n_dropped;
+            if !self.claims_dropped {
+                self.claims_dropped = true;
+                self.relearn_check_at = now.saturating_add_micros(RELEARN_CHECK_MICROS);
+            }
+        }
         self.sendable_cache.set(None);
         self.update_up_to_date(log);
+    }
+
+    /// True if `remote_vv` may name one more author the log does not hold. Recounts only when
+    /// the log gained authors since the last count (only that can lower the count), so a
+    /// remote that keeps claiming strangers costs one scan per author the log gains.
+    fn room_for_unknown(&mut self, held: &VersionVector) -> bool {
+        if self.n_unknown_claimed >= MAX_REMOTE_UNKNOWN_AUTHORS
+            && self.unknown_counted_at != held.len()
+        {
+            self.unknown_counted_at = held.len();
+            self.n_unknown_claimed = self
+                .remote_vv
+                .iter()
+                .filter(|(author, _)| held.get(author) == 0)
+                .count();
+        }
+        self.n_unknown_claimed < MAX_REMOTE_UNKNOWN_AUTHORS
+    }
+
+    /// The remote asks for third peers' ops. Only authors the log holds are kept: those are
+    /// all an honest remote asks for (it saw them in this peer's haves).
+    fn on_want(&mut self, vv: &VersionVector, log: &Log<P>) {
+        for (author, seq) in vv.iter() {
+            if log.version_vector().get(author) == 0 {
+                self.stats.n_claims_dropped += 1;
+                continue;
+            }
+            // Asking for what was sent means it did not arrive: that author's ops go out
+            // again from what the remote holds (and only that author's).
+            let remote_held = self.remote_vv.get(author);
+            if self.sent_vv.get(author) >= *seq && remote_held < *seq {
+                self.sent_vv.set(*author, remote_held);
+            }
+            self.relay_vv.raise(*author, *seq);
+        }
+        self.sendable_cache.set(None);
+    }
+
+    /// After dropping claims, once at most half of [`MAX_REMOTE_UNKNOWN_AUTHORS`] kept claims
+    /// are still missing here, asks for the remote's full have again by sending a hello (every
+    /// hello is answered with one), and asks again each check until a have comes.
+    fn relearn(&mut self, now: Timestamp, log: &Log<P>) {
+        self.relearn_check_at = now.saturating_add_micros(RELEARN_CHECK_MICROS);
+        let mut ask = self.relearn_asked;
+        if self.claims_dropped {
+            // Counting here finds what arrived; a later claim may then need a recount.
+            let held = log.version_vector();
+            self.room_for_unknown(held);
+            if self.n_unknown_claimed <= MAX_REMOTE_UNKNOWN_AUTHORS / 2 {
+                self.claims_dropped = false;
+                ask = true;
+            }
+        }
+        if ask {
+            self.relearn_asked = true;
+            self.queue_hello(now);
+        }
+    }
+
+    fn relearn_due(&self) -> Option<Timestamp> {
+        (self.claims_dropped || self.relearn_asked).then_some(self.relearn_check_at)
     }
 
     fn update_up_to_date(&mut self, log: &Log<P>) {
@@ -676,11 +807,17 @@ impl<P: Payload> SyncState<P> {
             self.sendable_cache.set(None);
             self.resend_micros = (self.resend_micros * 2).min(RESEND_AFTER_MAX_MICROS);
         }
+        if self.relearn_due().is_some_and(|d| d <= now) {
+            self.relearn(now, log);
+        }
         if self.have_due(log).is_some_and(|d| d <= now) {
-            let full = self
-                .full_have_at
-                .saturating_add_micros(HAVE_FULL_EVERY_MICROS)
-                <= now;
+            // Parts of an earlier have still queued: a full have replaces them, so the queue
+            // never holds more than one full have.
+            let full = !self.have_out.is_empty()
+                || self
+                    .full_have_at
+                    .saturating_add_micros(HAVE_FULL_EVERY_MICROS)
+                    <= now;
             let mut have = VersionVector::new();
             for (author, seq) in log.version_vector().iter() {
                 // The remote learns what it holds of its own from its acks.
@@ -688,7 +825,7 @@ impl<P: Payload> SyncState<P> {
                     have.raise(*author, *seq);
                 }
             }
-            self.control.push_back(Message::Have(have));
+            self.queue_have(&have, full);
             self.have_sent_vv = log.version_vector().clone();
             self.have_sent_len = log.len();
             self.have_sent_at = now;
@@ -760,6 +897,7 @@ impl<P: Payload> SyncState<P> {
             self.hello_due(),
             self.resend_due(),
             self.have_due(log),
+            self.relearn_due(),
             pace,
             log.next_pending_expiry(),
         ]
@@ -768,9 +906,10 @@ impl<P: Payload> SyncState<P> {
         .min()
     }
 
-    /// True if ephemeral values or ops wait to be sent and the window has room.
+    /// True if haves, ephemeral values or ops wait to be sent and the window has room.
     fn data_waiting(&self, log: &Log<P>) -> bool {
-        !self.eph_out.is_empty()
+        !self.have_out.is_empty()
+            || !self.eph_out.is_empty()
             || (self.in_flight.len() < MAX_IN_FLIGHT_BATCHES && self.sendable(log))
     }
 
@@ -779,8 +918,8 @@ impl<P: Payload> SyncState<P> {
         self.events.pop_front()
     }
 
-    /// The next message to send, if any: control first, then ephemeral values, then op
-    /// batches within the flow-control window.
+    /// The next message to send, if any: control first, then parts of haves, then ephemeral
+    /// values, then op batches within the flow-control window.
     pub fn poll_transmit(&mut self, now: Timestamp, log: &Log<P>) -> Option<Vec<u8>> {
         if self.closed {
             return None;
@@ -806,6 +945,10 @@ impl<P: Payload> SyncState<P> {
         self.send_bucket.refill(now);
         if !self.send_bucket.has_token() {
             return None;
+        }
+        if let Some(have) = self.have_out.pop_front() {
+            self.send_bucket.spend();
+            return Some(Message::Have(have));
         }
         if let Some((channel, value)) = self.eph_out.pop_first() {
             self.send_bucket.spend();
@@ -908,7 +1051,7 @@ fn decode_reject_kind(e: &DecodeError) -> RejectKind {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
 
 #[cfg(test)]
 mod bucket_tests {

@@ -463,3 +463,105 @@ fn ephemeral_values_are_latest_wins_and_never_stored() {
     );
     let _ = LOCAL_ORIGIN;
 }
+
+/// A log of `n_authors` concurrent ops (Lamport time 1, no dependencies), one by each of as
+/// many seeded keys: more authors than one version-vector message can name, cheaply.
+pub(crate) fn log_of_many_authors(n_authors: u32) -> TLog {
+    let mut ops: Vec<VerifiedOp<TestPayload>> = (0..n_authors)
+        .map(|i| {
+            let mut seed = [0xa5; 32];
+            seed[..4].copy_from_slice(&i.to_le_bytes());
+            let fields = OpFields {
+                seq: 1,
+                lamport: 1,
+                timestamp: Timestamp(1),
+                deps: Vec::new(),
+                payload: TestPayload::Chat(String::new()),
+            };
+            Op::sign(&Keypair::from_seed(seed), fields).unwrap()
+        })
+        .collect();
+    // In linear order, so each insertion appends.
+    ops.sort_by_key(|op| crate::log::OrderKey::of(op));
+    let mut log = TLog::default();
+    for op in ops {
+        log.insert(Timestamp(1), op, LOCAL_ORIGIN).unwrap();
+    }
+    assert_eq!(log.version_vector().len(), n_authors as usize);
+    log
+}
+
+/// Every message `node` sends over `duration_micros` of 1 ms ticks, each checked against the
+/// wire limits and decoded.
+fn drain_checked(node: &mut Node, start: u64, duration_micros: u64) -> Vec<Message> {
+    let mut out = Vec::new();
+    let mut now = start;
+    while now <= start + duration_micros {
+        if node
+            .sync
+            .poll_timeout(&node.log)
+            .is_some_and(|t| t.0 <= now)
+        {
+            node.sync.handle_timeout(Timestamp(now), &mut node.log);
+        }
+        while let Some(bytes) = node.sync.poll_transmit(Timestamp(now), &node.log) {
+            assert!(bytes.len() <= MAX_MESSAGE_BYTES, "{} bytes", bytes.len());
+            out.push(Message::decode(&bytes).unwrap());
+        }
+        now += MILLI;
+    }
+    node.drain_events();
+    out
+}
+
+/// Issue 17: a log with more authors than one version-vector message can name answered every
+/// hello by tripping the outgoing-size assertion. The answer is now several haves, each within
+/// the limits, that together name everything held.
+#[test]
+fn a_hello_to_a_log_of_many_authors_is_answered_with_split_haves() {
+    let mut b = Node::new(2, 1);
+    b.log = log_of_many_authors(8_000);
+    let peer = Keypair::from_seed([1; 32]).peer_id();
+    assert!(feed(&mut b, 1, &hello(peer, SESSION, PROTOCOL_VERSION)).is_empty());
+    // Hellos repeated before the parts went out replace them: one full have is queued.
+    for _ in 0..10 {
+        feed(&mut b, 1, &hello(peer, SESSION, PROTOCOL_VERSION));
+    }
+    let n_queued = b.sync.have_out.len()
+        + b.sync
+            .control
+            .iter()
+            .filter(|m| matches!(m, Message::Have(_)))
+            .count();
+    assert_eq!(n_queued, 8_000usize.div_ceil(MAX_VV_AUTHORS));
+    let mut told = VersionVector::new();
+    let mut n_haves = 0;
+    for message in drain_checked(&mut b, 1, 100 * MILLI) {
+        if let Message::Have(vv) = message {
+            told.join(&vv);
+            n_haves += 1;
+        }
+    }
+    assert_eq!(&told, b.log.version_vector());
+    assert!(n_haves >= 2, "{n_haves} haves");
+}
+
+/// Issue 17: a want naming authors this peer does not hold was kept whole, so a remote could
+/// grow the connection's memory at will. Only held authors are kept; the rest are counted.
+#[test]
+fn wants_for_authors_not_held_are_dropped_and_counted() {
+    let mut b = Node::new(2, 1);
+    let mine = b.author(5, "mine".into());
+    let peer = Keypair::from_seed([1; 32]).peer_id();
+    feed(&mut b, 1, &hello(peer, SESSION, PROTOCOL_VERSION));
+    let mut vv = VersionVector::new();
+    for i in 1..MAX_VV_AUTHORS as u32 {
+        let mut id = [3; 32];
+        id[..4].copy_from_slice(&i.to_be_bytes());
+        vv.raise(PeerId(id), 1);
+    }
+    vv.raise(mine.author(), 1);
+    assert_eq!(feed(&mut b, 2, &Message::Want(vv).encode()), vec![]);
+    assert_eq!(b.sync.relay_vv.len(), 1);
+    assert_eq!(b.sync.stats().n_claims_dropped, MAX_VV_AUTHORS as u64 - 1);
+}
