@@ -5,8 +5,11 @@
 //! Surviving leaves are blocks of [`BLOCK_CELLS`]^3 cells whose grid values are evaluated in
 //! one bulk call. Each cell crossed by the surface gets one vertex per surface patch (so
 //! ambiguous cells stay manifold, as in dual marching cubes), placed by minimising a quadric
-//! error function of the edge crossings and their normals: sharp edges and corners are kept.
-//! Each sign-changing grid edge emits a quad joining the vertices of its four cells.
+//! error function of the edge crossings' tangent planes (from f and its gradient there),
+//! over the cell: sharp edges and corners are kept, and a vertex on a crease or a corner
+//! takes the mean of its faces' normals, not whichever face the gradient of a `min` picks
+//! (see `octree/qef.rs`). Each sign-changing grid edge emits a quad joining the vertices of
+//! its four cells.
 //!
 //! Watertightness rests on one rule: every grid value is computed once, by the block that
 //! owns the point (a block owns the points of its upper faces; the lowest blocks also own the
@@ -21,11 +24,21 @@
 //!
 //! Guarantees: when the surface lies strictly inside the box, the mesh is watertight and
 //! edge-manifold, its triangles wind counter-clockwise seen from outside, and each vertex lies
-//! in its cell. Non-guarantees: vertices may be non-manifold (two sheets may share a vertex
-//! where a thin feature pinches); triangles may self-intersect near sharp features thinner
-//! than a cell; features smaller than a cell may be missed; cells are not collapsed where the
-//! surface is flat (the resolution near the surface is uniform). Where the surface leaves the
-//! box the mesh is open along the box, which is what stitching a remeshed region needs.
+//! in its cell, or within half a cell of it (and inside the box) where it follows a crease or
+//! a corner of flat faces that meet just outside. A vertex whose crossings lie on flat faces
+//! lies where their planes meet (on the face, the crease or the corner, to 1e-3 of a cell)
+//! when that point is in its cell or, for such a feature, within that half cell; on curved
+//! faces, within about the sagitta of a cell. A vertex and its normal depend only on its
+//! cell's values and on the block's field at points of the cell, so a remeshed block places
+//! them as a whole mesh does.
+//! Non-guarantees: vertices may be non-manifold (two sheets may share a vertex where a thin
+//! feature pinches); triangles may self-intersect near sharp features thinner than a cell,
+//! and a few tiny ones may turn over where a crease passes within rounding of grid points;
+//! features smaller than a cell may be missed; cells are not collapsed where the surface is
+//! flat (the resolution near the surface is uniform); a vertex has one normal, so the shading
+//! of the triangles either side of a crease blends towards the crease vertices' mean normal
+//! (a soft band about a cell wide, not a sharp line). Where the surface leaves the box the
+//! mesh is open along the box, which is what stitching a remeshed region needs.
 
 mod assembly;
 mod qef;
@@ -35,11 +48,11 @@ pub use assembly::MeshPatch;
 
 use super::field::Field;
 use super::{Aabb, MESH_VERTICES_MAX, Mesh, normalise_or_up};
-use qef::{Bracket, refine_crossings, solve_qef};
+use qef::{Bracket, FEATURE_REACH_CELLS, Hermite, feature, refine_crossings, solve_qef};
 use std::collections::BTreeMap;
 use topology::{
-    N_FACES, PATCHES_MAX, Patch, cell_patches, corner_offset, edge_across, edge_corners,
-    edge_index, face_segments, inside, quad_cells, quad_runs_to, split_patch,
+    N_FACES, PATCH_EDGES_MAX, PATCHES_MAX, Patch, cell_patches, corner_offset, edge_across,
+    edge_corners, edge_index, face_segments, inside, quad_cells, quad_runs_to, split_patch,
 };
 
 /// Deepest octree allowed: 2^10 = 1024 cells along each axis.
@@ -383,6 +396,17 @@ impl Grid {
 
     fn point(&self, i: [u32; 3]) -> [f32; 3] {
         std::array::from_fn(|a| self.lo[a] + i[a] as f32 * self.step[a])
+    }
+
+    /// The box a vertex of the cell `lo..=hi` may move to to follow a sharp feature: the cell
+    /// grown by [`FEATURE_REACH_CELLS`], within the grid.
+    fn reach(&self, lo: [f32; 3], hi: [f32; 3]) -> [[f32; 3]; 2] {
+        let end = self.point([self.n_cells; 3]);
+        let margin = self.step.map(|s| FEATURE_REACH_CELLS * s);
+        [
+            std::array::from_fn(|a| (lo[a] - margin[a]).max(self.lo[a])),
+            std::array::from_fn(|a| (hi[a] + margin[a]).min(end[a])),
+        ]
     }
 
     /// The mean cell size.
@@ -781,34 +805,118 @@ fn build_block<F: Field>(
         return Err(values);
     }
     refine_crossings(field, &mut brackets);
-    let crossings: Vec<[f32; 3]> = brackets.iter().map(Bracket::crossing).collect();
-    let mut grads = vec![[0.0f32; 3]; crossings.len()];
-    gradients_at(field, &crossings, &mut grads);
-
-    let h = grid.h();
+    let placement = Placement {
+        grid,
+        origin,
+        refs: &refs,
+        hermite: hermite_data(field, &brackets),
+    };
     let mut block = Block::without_cells(origin, values);
+    // Per vertex, its normal when it lies on a sharp feature.
+    let mut features: Vec<Option<[f32; 3]>> = Vec::new();
     block.cell_entry = vec![NONE; (bc * bc * bc) as usize];
     block.cells.reserve(crossed_cells.len());
     for c in &crossed_cells {
-        let cell: [u32; 3] = std::array::from_fn(|a| origin[a] + c.cell_local[a]);
-        let (lo, hi) = (grid.point(cell), grid.point(cell.map(|i| i + 1)));
+        let (entry, split) = placement.place(c, &mut block, &mut features, stats);
+        let l = c.cell_local;
+        block.cell_entry[(l[0] + bc * (l[1] + bc * l[2])) as usize] = block.cells.len() as u32;
+        if split {
+            block.split_cells.push(block.cells.len() as u32);
+        }
+        block.cells.push(entry);
+        block.cell_local.push(l);
+    }
+    // Outward normals are minus the gradient, except on sharp features (whose vertices may
+    // lie outside the block's box, where a simplified field may differ).
+    let smooth: Vec<[f32; 3]> = (block.positions.iter().zip(&features))
+        .filter(|(_, feature)| feature.is_none())
+        .map(|(p, _)| *p)
+        .collect();
+    let mut grads = vec![[0.0f32; 3]; smooth.len()];
+    gradients_at(field, &smooth, &mut grads);
+    let mut grads = grads.into_iter();
+    block.normals = features
+        .into_iter()
+        .map(|feature| match feature {
+            Some(normal) => normal,
+            None => normalise_or_up(grads.next().unwrap_or_default().map(|c| -c)),
+        })
+        .collect();
+    Ok(block)
+}
+
+/// The Hermite data of every bracketed crossing: its point, f there and the gradient there,
+/// in two bulk calls.
+fn hermite_data<F: Field>(field: &mut F, brackets: &[Bracket]) -> Vec<Hermite> {
+    let points: Vec<[f32; 3]> = brackets.iter().map(Bracket::crossing).collect();
+    let xs: Vec<f32> = points.iter().map(|p| p[0]).collect();
+    let ys: Vec<f32> = points.iter().map(|p| p[1]).collect();
+    let zs: Vec<f32> = points.iter().map(|p| p[2]).collect();
+    let mut values = vec![0.0f32; points.len()];
+    field.values(&xs, &ys, &zs, &mut values);
+    let mut grads = vec![[0.0f32; 3]; points.len()];
+    field.gradients(&xs, &ys, &zs, &mut grads);
+    (0..points.len())
+        .map(|i| Hermite {
+            point: points[i],
+            value: values[i],
+            gradient: grads[i],
+        })
+        .collect()
+}
+
+/// What the vertices of a block's crossed cells are placed from.
+struct Placement<'a> {
+    grid: &'a Grid,
+    origin: [u32; 3],
+    /// Per crossed cell, patch by patch, the index into `hermite` of each crossed edge.
+    refs: &'a [u32],
+    hermite: Vec<Hermite>,
+}
+
+impl Placement<'_> {
+    /// Places the vertices of crossed cell `c` at the end of `block.positions` (one per patch,
+    /// or per piece of a split patch; their feature normals to `features`), adds the central
+    /// polygons of patches split in three or more, and returns the cell's entry (the
+    /// block-local vertex of each crossed edge) and whether a patch was split.
+    fn place(
+        &self,
+        c: &Crossed,
+        block: &mut Block,
+        features: &mut Vec<Option<[f32; 3]>>,
+        stats: &mut MeshStats,
+    ) -> ([u32; 12], bool) {
+        let grid = self.grid;
+        let cell: [u32; 3] = std::array::from_fn(|a| self.origin[a] + c.cell_local[a]);
+        let bounds = [grid.point(cell), grid.point(cell.map(|i| i + 1))];
+        let reach = grid.reach(bounds[0], bounds[1]);
         let mut entry = [NONE; 12];
         let mut split = false;
         let mut crossing = c.first_ref;
-        let (mut pts, mut nrm) = (Vec::with_capacity(12), Vec::with_capacity(12));
+        let mut group = [Hermite::default(); PATCH_EDGES_MAX];
         for p in &c.patches[..c.n_patches] {
             let m = p.len as usize;
             let (groups, n_groups) = split_patch(p);
             let first_vertex = block.positions.len() as u32;
             for g in 0..n_groups as u8 {
-                pts.clear();
-                nrm.clear();
+                let mut n = 0;
                 for k in (0..m).filter(|&k| groups[k] == g) {
-                    let i = refs[crossing + k] as usize;
-                    pts.push(crossings[i]);
-                    nrm.push(grads[i]);
+                    group[n] = self.hermite[self.refs[crossing + k] as usize];
+                    n += 1;
                 }
-                block.positions.push(solve_qef(&pts, &nrm, lo, hi, h));
+                let data = &group[..n];
+                let feature = feature(data);
+                // Only an open feature's vertex may leave its cell: its normal comes from its
+                // crossings, so nothing is evaluated outside the block's box, where a
+                // simplified field may differ.
+                let reach = match feature {
+                    Some(f) if f.open => reach,
+                    _ => bounds,
+                };
+                block
+                    .positions
+                    .push(solve_qef(data, bounds, reach, grid.h()));
+                features.push(feature.map(|f| f.normal));
             }
             for k in 0..m {
                 entry[p.edges[k] as usize] = first_vertex + u32::from(groups[k]);
@@ -824,22 +932,8 @@ fn build_block<F: Field>(
             }
             crossing += m;
         }
-        let l = c.cell_local;
-        block.cell_entry[(l[0] + bc * (l[1] + bc * l[2])) as usize] = block.cells.len() as u32;
-        if split {
-            block.split_cells.push(block.cells.len() as u32);
-        }
-        block.cells.push(entry);
-        block.cell_local.push(l);
+        (entry, split)
     }
-    // Outward normals are minus the gradient.
-    let mut grads = vec![[0.0f32; 3]; block.positions.len()];
-    gradients_at(field, &block.positions, &mut grads);
-    block.normals = grads
-        .into_iter()
-        .map(|g| normalise_or_up(g.map(|c| -c)))
-        .collect();
-    Ok(block)
 }
 
 /// The polygon joining the vertices of a patch split into one vertex per polygon corner

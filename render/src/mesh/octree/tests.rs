@@ -2,6 +2,8 @@
 
 use super::*;
 
+mod sharp;
+
 /// Interval of |x - c| for x in lo..=hi.
 fn abs_interval(lo: f32, hi: f32, c: f32) -> (f32, f32) {
     let (a, b) = (lo - c, hi - c);
