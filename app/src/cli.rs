@@ -1,6 +1,6 @@
 //! The subcommands for headless use: `peer` (a headless peer), `discovery`, `invite`,
 //! `sessions`, `import` and `export` (files in and out of a session's store), and `check`,
-//! `eval`, `slice`, `render` for functions and scenes.
+//! `eval`, `slice`, `render` and `touch` for functions and scenes.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -154,6 +154,33 @@ pub struct RenderArgs {
     /// The time of the picture, in seconds.
     #[arg(long, value_name = "SECS")]
     pub t: Option<f64>,
+    /// Let `Inline` files come from anywhere inside DIR (default: the scene's own folder).
+    #[arg(long, value_name = "DIR")]
+    pub inline_root: Option<PathBuf>,
+}
+
+/// `sculpt touch`.
+#[derive(clap::Args, Debug)]
+pub struct TouchArgs {
+    /// The FVRML scene file (.wrl).
+    pub scene: PathBuf,
+    /// The path to follow: CSV with the header `t,x,y,z,button` (seconds; the haptic
+    /// interface point in the scene's own coordinates; button 0 or 1), rows at any rate,
+    /// interpolated to 1 kHz.
+    #[arg(long, value_name = "IN.csv")]
+    pub trace: PathBuf,
+    /// Where to write the forces: CSV with the header `t,fx,fy,fz` (newtons), one row per
+    /// tick.
+    #[arg(long, value_name = "OUT.csv")]
+    pub out: PathBuf,
+    /// The device whose limits the forces are rendered for.
+    #[arg(long, value_enum, default_value_t = app::touch::DeviceModel::Falcon)]
+    pub device: app::touch::DeviceModel,
+    /// Scene units per device metre (default: the device's workspace spans the scene's
+    /// bounded objects). Stiffness is per device metre, so this scales how hard surfaces
+    /// feel.
+    #[arg(long, value_name = "S")]
+    pub world_per_metre: Option<f64>,
     /// Let `Inline` files come from anywhere inside DIR (default: the scene's own folder).
     #[arg(long, value_name = "DIR")]
     pub inline_root: Option<PathBuf>,
@@ -481,9 +508,7 @@ fn slice(function: &Function, z: f64, t: f64, width: usize, height: usize) -> St
 /// `render::snapshot` and writes `<dir>/<file stem>_<view>.png`, printing what it drew and
 /// wrote. Load errors are reported with their file, line and column.
 pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
-    use fdsl::fvrml::{self, LoadOptions};
     use render::snapshot::{SnapshotSettings, snapshot};
-    use std::path::Path;
 
     let mut settings = SnapshotSettings::default();
     if let Some((w, h)) = args.size {
@@ -497,26 +522,8 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
         settings.t_secs = t;
     }
     let (scene_path, out_dir) = (&args.scene, &args.out);
-    let text = app::files::read_scene_text(scene_path).map_err(anyhow::Error::msg)?;
-    let dir = scene_path.parent().unwrap_or(Path::new("")).to_path_buf();
-    let root = args.inline_root.clone().unwrap_or_else(|| dir.clone());
-    let inlines = app::files::InlineResolver::new(&dir, &root).map_err(anyhow::Error::msg)?;
-    let mut resolve = |inline: &str| inlines.read(inline);
-    let shown = scene_path.display().to_string();
-    let located = |issue: &fvrml::Issue| {
-        let file = issue.location.file.as_deref().unwrap_or(&shown);
-        let severity = if issue.is_error() { "error" } else { "warning" };
-        let (line, column) = (issue.location.line, issue.location.column);
-        format!("{file}:{line}:{column}: {severity}: {}", issue.message)
-    };
-    let loaded = fvrml::load(&text, &LoadOptions::default(), &mut resolve).map_err(|e| {
-        let errors: Vec<String> = e.errors().map(located).collect();
-        anyhow::anyhow!("{}\n{shown}: cannot load the scene", errors.join("\n"))
-    })?;
-    for w in &loaded.warnings {
-        eprintln!("{}", located(w));
-    }
-    let (images, objects) = snapshot(&loaded.scene, &settings)?;
+    let scene = load_scene(scene_path, args.inline_root.as_deref())?;
+    let (images, objects) = snapshot(&scene, &settings)?;
     for o in &objects {
         let name = if o.name.is_empty() {
             "(unnamed)"
@@ -548,6 +555,101 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
             settings.t_secs
         );
     }
+    Ok(())
+}
+
+/// Loads an FVRML scene file (local `Inline`s from its folder, or from `inline_root`),
+/// printing warnings on stderr; errors name their file, line and column.
+fn load_scene(
+    scene_path: &std::path::Path,
+    inline_root: Option<&std::path::Path>,
+) -> anyhow::Result<fdsl::scene::Scene> {
+    use fdsl::fvrml::{self, LoadOptions};
+    use std::path::Path;
+
+    let text = app::files::read_scene_text(scene_path).map_err(anyhow::Error::msg)?;
+    let dir = scene_path.parent().unwrap_or(Path::new("")).to_path_buf();
+    let root = inline_root.map_or_else(|| dir.clone(), Path::to_path_buf);
+    let inlines = app::files::InlineResolver::new(&dir, &root).map_err(anyhow::Error::msg)?;
+    let mut resolve = |inline: &str| inlines.read(inline);
+    let shown = scene_path.display().to_string();
+    let located = |issue: &fvrml::Issue| {
+        let file = issue.location.file.as_deref().unwrap_or(&shown);
+        let severity = if issue.is_error() { "error" } else { "warning" };
+        let (line, column) = (issue.location.line, issue.location.column);
+        format!("{file}:{line}:{column}: {severity}: {}", issue.message)
+    };
+    let loaded = fvrml::load(&text, &LoadOptions::default(), &mut resolve).map_err(|e| {
+        let errors: Vec<String> = e.errors().map(located).collect();
+        anyhow::anyhow!("{}\n{shown}: cannot load the scene", errors.join("\n"))
+    })?;
+    for w in &loaded.warnings {
+        eprintln!("{}", located(w));
+    }
+    Ok(loaded.scene)
+}
+
+/// `sculpt touch <scene.wrl> --trace IN.csv --out OUT.csv [--device D] [--world-per-metre
+/// S]`: the haptic servo run headless over the scene along the path, one force per tick.
+/// A bad scene or path is an error naming its file, line and column, and writes nothing.
+pub fn touch_command(args: &TouchArgs) -> anyhow::Result<()> {
+    use app::touch::path::{MAX_PATH_FILE_BYTES, TouchPath};
+    use haptic::container::object::ObjectContainer;
+
+    if let Some(s) = args.world_per_metre
+        && !(s.is_finite() && s > 0.0)
+    {
+        bail!("--world-per-metre must be positive and finite, got {s}");
+    }
+    let scene = load_scene(&args.scene, args.inline_root.as_deref())?;
+    let trace = &args.trace;
+    let len = std::fs::metadata(trace)
+        .with_context(|| format!("cannot read {}", trace.display()))?
+        .len();
+    if len > MAX_PATH_FILE_BYTES {
+        bail!(
+            "{}: {len} bytes, more than the limit of {MAX_PATH_FILE_BYTES}",
+            trace.display()
+        );
+    }
+    let text = std::fs::read_to_string(trace)
+        .with_context(|| format!("cannot read {}", trace.display()))?;
+    let path = TouchPath::parse(&text).map_err(|e| anyhow::anyhow!("{}:{e}", trace.display()))?;
+    let (containers, refused) = ObjectContainer::from_scene(&scene);
+    for (id, why) in &refused {
+        eprintln!("{}: object {}: not felt: {why}", args.scene.display(), id.0);
+    }
+    let caps = args.device.capabilities();
+    let zone = app::touch::zone_for(
+        &caps,
+        app::touch::bounds_of(&containers),
+        args.world_per_metre,
+    );
+    let n_felt = containers.len();
+    let replay = app::touch::replay(containers, app::touch::rig(args.device, zone), path);
+    std::fs::write(&args.out, replay.to_csv())
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    let peak = replay
+        .forces_newtons
+        .iter()
+        .map(|f| f.length())
+        .fold(0.0, f64::max);
+    let c = zone.center_world;
+    println!(
+        "device {:?}: {} N, {} N/m; zone: {} scene units per device metre around ({}, {}, {})",
+        args.device,
+        caps.force_newtons_max,
+        caps.stiffness_newtons_per_metre_max,
+        zone.world_per_device_metre,
+        c.x,
+        c.y,
+        c.z
+    );
+    println!(
+        "{n_felt} objects felt; wrote {} ({} ticks, peak {peak:.3} N)",
+        args.out.display(),
+        replay.forces_newtons.len()
+    );
     Ok(())
 }
 

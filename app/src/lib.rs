@@ -13,6 +13,8 @@
 //!   folder.
 //! - [`transfer`]: files in and out of a session: FVRML scenes and STL, OBJ and glTF meshes
 //!   imported as planned ops, a scene or one object exported as the renderer meshes it.
+//! - [`touch`]: the haptic servo on the app's scenes, replayed headless over a CSV path
+//!   (`sculpt touch`).
 //! - [`settings`]: the name, colour and brush a user expects to find again.
 //! - [`clock`]: the program's one read of the clock.
 //!
@@ -43,4 +45,5 @@ pub mod command;
 pub mod engine;
 pub mod files;
 pub mod settings;
+pub mod touch;
 pub mod transfer;

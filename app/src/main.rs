@@ -42,6 +42,9 @@ enum Cmd {
     Slice(cli::SliceArgs),
     /// Picture an FVRML scene offscreen as PNG files, one per view.
     Render(cli::RenderArgs),
+    /// Run the haptic servo headless over a scene along a recorded or scripted path (CSV)
+    /// and write the force of every 1 kHz tick (CSV).
+    Touch(cli::TouchArgs),
     /// Add the objects of scene (.wrl) and mesh (.stl, .obj, .glb) files to a session's store.
     Import(cli::ImportArgs),
     /// Write a session's objects, or one, as a mesh (.stl, .obj, .glb) or FVRML (.wrl).
@@ -65,6 +68,7 @@ fn main() -> ExitCode {
         Some(Cmd::Eval(args)) => cli::eval(&args),
         Some(Cmd::Slice(args)) => cli::slice_command(&args),
         Some(Cmd::Render(args)) => cli::render_command(&args),
+        Some(Cmd::Touch(args)) => cli::touch_command(&args),
         Some(Cmd::Import(args)) => cli::import_command(&args),
         Some(Cmd::Export(args)) => cli::export_command(&args),
     };

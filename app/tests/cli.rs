@@ -31,6 +31,7 @@ fn every_subcommand_has_help_that_exits_zero() {
         "eval",
         "slice",
         "render",
+        "touch",
         "import",
         "export",
     ];

@@ -270,6 +270,12 @@ impl<D: HapticDevice, S: Scene> Servo<D, S> {
         &self.device
     }
 
+    /// Sets the scene time, seconds: the next `step(dt_secs)` renders at `t_secs + dt_secs`
+    /// (a replay whose path starts at a given scene time sets it once before stepping).
+    pub fn set_time_secs(&mut self, t_secs: f64) {
+        self.t_secs = t_secs;
+    }
+
     /// The proxy state.
     pub fn state(&self) -> &ProxyState {
         &self.state
@@ -634,6 +640,34 @@ mod tests {
         assert_eq!(stats.n_ticks, 4);
         assert_eq!(stats.top_id, None);
         assert!((stats.hip_world.x - 5.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_scene_clock_starts_where_it_is_set() {
+        // A field that acts for the first second of scene time only.
+        let timed = || {
+            let mut pool = Analytic::whirlpool(4);
+            if let Some((_, domain)) = &mut pool.field {
+                domain.time_span_secs = 1.0;
+            }
+            vec![pool]
+        };
+        let inside = DVec3::new(0.8, 0.35, 0.0) / rig().zone.world_per_device_metre;
+        let first_force = |start: Option<f64>| {
+            let (mut servo, link) = Servo::init(still_device(inside), rig());
+            link.scenes.publish(Box::new(timed()));
+            if let Some(t) = start {
+                servo.set_time_secs(t);
+            }
+            // Past the cross-fade of the first entry.
+            (0..20).map(|_| servo.step(0.001)).last().unwrap()
+        };
+        let early = first_force(None);
+        assert_eq!(early.top_id, Some(4));
+        assert!(early.force_newtons.length() > 0.01, "{early:?}");
+        let late = first_force(Some(5.0));
+        assert_eq!(late.top_id, Some(4));
+        assert_eq!(late.force_newtons, DVec3::ZERO, "the field's span is over");
     }
 
     #[test]

@@ -47,6 +47,21 @@ impl Capabilities {
         }
     }
 
+    /// A Falcon-class desktop device (Novint Falcon): 8 N, 3000 N/m and 20 N s/m, the
+    /// limits CHAI3D states for it, in its 4-inch (about 0.1 m) cubic workspace; 3 degrees
+    /// of freedom in and out, 4 buttons.
+    pub fn falcon() -> Self {
+        Self {
+            n_dof_input: 3,
+            n_dof_output: 3,
+            force_newtons_max: 8.0,
+            stiffness_newtons_per_metre_max: 3_000.0,
+            damping_newton_secs_per_metre_max: 20.0,
+            workspace_metres: Aabb::new(DVec3::splat(-0.05), DVec3::splat(0.05)),
+            n_buttons: 4,
+        }
+    }
+
     /// True when the device can output a force at all.
     pub fn has_force_output(&self) -> bool {
         self.n_dof_output > 0 && self.force_newtons_max > 0.0

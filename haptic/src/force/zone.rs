@@ -58,6 +58,12 @@ impl HapticZone {
                 * ((p_device - self.workspace_center_device) * self.world_per_device_metre)
     }
 
+    /// A world point in device coordinates: the inverse of [`HapticZone::world_from_device`].
+    pub fn device_from_world(&self, p_world: DVec3) -> DVec3 {
+        self.workspace_center_device
+            + self.rotation.inverse() * (p_world - self.center_world) / self.world_per_device_metre
+    }
+
     /// A world direction (or force) in device axes.
     pub fn device_from_world_dir(&self, v_world: DVec3) -> DVec3 {
         self.rotation.inverse() * v_world
@@ -112,5 +118,12 @@ mod tests {
             DVec3::new(3.5, 1.5, 4.5)
         );
         assert_eq!(moved.device_metres(0.5), 0.1);
+        let turned = HapticZone {
+            rotation: DQuat::from_rotation_y(0.7),
+            ..moved
+        };
+        let p = DVec3::new(0.03, -0.02, 0.05);
+        let back = turned.device_from_world(turned.world_from_device(p));
+        assert!((back - p).length() < 1e-12, "{back} vs {p}");
     }
 }
