@@ -10,6 +10,10 @@ use crate::op::OpId;
 use crate::payload::{Effect, LeaseStrength, ObjectId};
 use crate::time::Timestamp;
 
+/// Longest a lease may hold (one hour). An acquire asking for more is clamped to it in the
+/// fold, on every peer alike, so a lease taken with `ttl u64::MAX` still ends.
+pub const MAX_LEASE_TTL_MICROS: u64 = 60 * 60 * 1_000_000;
+
 /// A lease on one object, as of some point in the linear order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Lease {
@@ -258,7 +262,7 @@ impl FoldState {
                 }
             }
         }
-        let expires_at = at.saturating_add_micros(ttl_micros);
+        let expires_at = at.saturating_add_micros(ttl_micros.min(MAX_LEASE_TTL_MICROS));
         self.leases.insert(
             object,
             Lease {

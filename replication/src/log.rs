@@ -10,7 +10,7 @@ use crate::lease::{FoldState, Lease, Mark, RejectReason, TargetInfo};
 use crate::op::{BuildError, MAX_DEPS, Op, OpFields, OpId, VerifiedOp};
 use crate::payload::{Effect, ObjectId, Payload};
 use crate::pending::{DepKey, Evicted, Origin, Pending, PendingLimits};
-use crate::time::{HybridClock, Timestamp};
+use crate::time::{HybridClock, MAX_CLOCK_SKEW_MICROS, Timestamp};
 
 mod base;
 
@@ -60,6 +60,16 @@ pub enum InsertError {
         /// The op's Lamport time.
         lamport: u64,
         /// The highest Lamport time in its immediate past.
+        floor: u64,
+    },
+    /// The timestamp is earlier than one in its causal past (a dependency's or the author's
+    /// previous op's): honest clocks observe every op they depend on, so only a member
+    /// backdating an op writes this.
+    #[error("timestamp {timestamp} is before its causal past ({floor})")]
+    BadTimestamp {
+        /// The op's timestamp, in microseconds.
+        timestamp: u64,
+        /// The latest timestamp in its immediate past.
         floor: u64,
     },
     /// The log is at [`MAX_LOG_OPS`].
@@ -255,15 +265,20 @@ impl<P: Payload> Log<P> {
         let me = keypair.peer_id();
         let seq = self.vv.get(&me).checked_add(1).ok_or(InsertError::Full)?;
         let lamport = self.max_lamport.checked_add(1).ok_or(InsertError::Full)?;
+        if let Some(base) = &self.base {
+            // The heads inside the base are not held: stamp after everything in it.
+            self.clock.observe(base.max_timestamp, now);
+        }
+        let timestamp = self.clock.tick(now);
         let fields = OpFields {
             seq,
             lamport,
-            timestamp: self.clock.tick(now),
-            deps: self.author_deps(),
+            timestamp,
+            deps: self.author_deps(timestamp),
             payload,
         };
         let op = Op::sign(keypair, fields)?;
-        let insertion = self.insert(now, op.clone(), LOCAL_ORIGIN)?;
+        let insertion = self.insert_from(now, op.clone(), LOCAL_ORIGIN, false)?;
         assert!(
             insertion.delivered.first() == Some(&op.id()),
             "a local op is delivered at once"
@@ -274,9 +289,20 @@ impl<P: Payload> Log<P> {
     /// The heads a new op depends on: all of them, or when more than [`MAX_DEPS`] peers wrote
     /// concurrently, the [`MAX_DEPS`] latest by Lamport time. Leaving older heads out only
     /// weakens the op's causal claim (its Lamport time still follows everything seen); the
-    /// heads left out stay heads, and the next op names them.
-    fn author_deps(&self) -> Vec<OpId> {
-        let mut heads: Vec<OpId> = self.frontier.heads().copied().collect();
+    /// heads left out stay heads, and the next op names them. Heads stamped after `timestamp`
+    /// (ops from a store that arrived before the clock bound existed) are left out the same way
+    /// until the clock passes them, so this peer's op is never before its causal past.
+    fn author_deps(&self, timestamp: Timestamp) -> Vec<OpId> {
+        let mut heads: Vec<OpId> = self
+            .frontier
+            .heads()
+            .filter(|id| {
+                self.ops
+                    .get(id)
+                    .is_none_or(|op| op.timestamp() <= timestamp)
+            })
+            .copied()
+            .collect();
         if heads.len() > MAX_DEPS {
             heads.sort_by_key(|id| std::cmp::Reverse((self.get(id).map_or(0, Op::lamport), *id)));
             heads.truncate(MAX_DEPS);
@@ -286,17 +312,34 @@ impl<P: Payload> Log<P> {
     }
 
     /// Inserts a verified op from `origin`: delivers it if its causal past is here (and then
-    /// every pending op it frees), or parks it until then.
+    /// every pending op it frees), or parks it until then. An op from a remote origin whose
+    /// timestamp runs more than [`MAX_CLOCK_SKEW_MICROS`] ahead of `now` also waits, until the
+    /// clock catches up ([`Log::release_due`]); where it lands in the order does not depend on
+    /// when. Pending ops whose time came are delivered along the way.
     pub fn insert(
         &mut self,
         now: Timestamp,
         op: VerifiedOp<P>,
         origin: Origin,
     ) -> Result<Insertion, InsertError> {
+        self.insert_from(now, op, origin, true)
+    }
+
+    /// [`Log::insert`]; `clocked` is false only for an op this log's author just stamped
+    /// (several in one microsecond may step a little past the skew bound). Ops from
+    /// [`LOCAL_ORIGIN`] (this peer's store) never wait for the clock either.
+    fn insert_from(
+        &mut self,
+        now: Timestamp,
+        op: VerifiedOp<P>,
+        origin: Origin,
+        clocked: bool,
+    ) -> Result<Insertion, InsertError> {
         let op = op.into_op();
         let mut out = Insertion::default();
         if self.contains(&op.id()) || self.pending.contains(&op.id()) {
             out.duplicate = true;
+            self.deliver_queue(now, std::collections::VecDeque::new(), None, &mut out);
             return Ok(out);
         }
         if let Some(base) = &self.base
@@ -308,32 +351,62 @@ impl<P: Payload> Log<P> {
                 cut_lamport: base.lamport,
             });
         }
-        let missing = self.missing(&op);
+        let mut missing = self.missing(&op, now);
+        if !clocked || origin == LOCAL_ORIGIN {
+            missing.retain(|key| !matches!(key, DepKey::Clock(_)));
+        }
         if !missing.is_empty() {
             out.parked = true;
             out.evicted = self.pending.insert(now, op, origin, missing);
-            self.stats.n_evicted += out.evicted.len() as u64;
+            self.deliver_queue(now, std::collections::VecDeque::new(), None, &mut out);
             return Ok(out);
         }
         let first_id = op.id();
-        let mut first_pos = self
-            .deliver(op)
+        let first_pos = self
+            .deliver(op, now)
             .inspect_err(|_| self.stats.n_refused += 1)?;
         let mut queue = std::collections::VecDeque::new();
         self.free_waiters(first_id, &mut queue);
         out.delivered.push(first_id);
+        self.deliver_queue(now, queue, Some(first_pos), &mut out);
+        Ok(out)
+    }
+
+    /// Delivers the pending ops whose timestamps the clock `now` has caught up with (and every
+    /// op they free). Drivers call it when [`Log::next_due`] has passed.
+    pub fn release_due(&mut self, now: Timestamp) -> Insertion {
+        let mut out = Insertion::default();
+        self.deliver_queue(now, std::collections::VecDeque::new(), None, &mut out);
+        out
+    }
+
+    /// When the earliest op waiting for the clock may be delivered, if any waits.
+    pub fn next_due(&self) -> Option<Timestamp> {
+        self.pending.next_due()
+    }
+
+    /// Delivers `queue` (freed ops), then the pending ops due at `now`, and everything they
+    /// free; records it all in `out` with the refold from the first changed position.
+    fn deliver_queue(
+        &mut self,
+        now: Timestamp,
+        mut queue: std::collections::VecDeque<(Op<P>, Origin)>,
+        mut first_pos: Option<usize>,
+        out: &mut Insertion,
+    ) {
+        queue.extend(self.pending.due(now));
         while let Some((ready, ready_origin)) = queue.pop_front() {
             let id = ready.id();
-            if !self.missing(&ready).is_empty() {
+            let missing = self.missing(&ready, now);
+            if !missing.is_empty() {
                 // Freed by one key but another (e.g. the previous seq) is still missing.
-                let missing = self.missing(&ready);
                 out.evicted
                     .extend(self.pending.insert(now, ready, ready_origin, missing));
                 continue;
             }
-            match self.deliver(ready) {
+            match self.deliver(ready, now) {
                 Ok(pos) => {
-                    first_pos = first_pos.min(pos);
+                    first_pos = Some(first_pos.map_or(pos, |f| f.min(pos)));
                     out.delivered.push(id);
                     self.free_waiters(id, &mut queue);
                 }
@@ -344,8 +417,9 @@ impl<P: Payload> Log<P> {
             }
         }
         self.stats.n_evicted += out.evicted.len() as u64;
-        out.refold = Some(self.refold_from(first_pos, &Inserted::new(&out.delivered)));
-        Ok(out)
+        if let Some(first_pos) = first_pos {
+            out.refold = Some(self.refold_from(first_pos, &Inserted::new(&out.delivered)));
+        }
     }
 
     /// Drops pending ops that waited too long; their senders offer them again on next sync.
@@ -370,7 +444,7 @@ impl<P: Payload> Log<P> {
         Ok(())
     }
 
-    fn missing(&self, op: &Op<P>) -> BTreeSet<DepKey> {
+    fn missing(&self, op: &Op<P>, now: Timestamp) -> BTreeSet<DepKey> {
         let mut missing: BTreeSet<DepKey> = op
             .deps()
             .iter()
@@ -379,6 +453,15 @@ impl<P: Payload> Log<P> {
             .collect();
         if op.seq() > 1 && self.vv.get(&op.author()) < op.seq() - 1 {
             missing.insert(DepKey::Seq(op.author(), op.seq() - 1));
+        }
+        // Ops from this peer's store are not held back (an insertion from `LOCAL_ORIGIN` drops
+        // this key): the store has them because they were delivered before. One stored before
+        // this bound existed cannot pin the clock (`HybridClock::observe` is bounded) nor make
+        // a local op precede it (`Log::author_deps` leaves it out until the clock passes it).
+        if op.timestamp() > now.saturating_add_micros(MAX_CLOCK_SKEW_MICROS) {
+            missing.insert(DepKey::Clock(Timestamp(
+                op.timestamp().0 - MAX_CLOCK_SKEW_MICROS,
+            )));
         }
         missing
     }
@@ -392,7 +475,7 @@ impl<P: Payload> Log<P> {
     }
 
     /// Adds an op whose causal past is delivered; returns its position in the order.
-    fn deliver(&mut self, op: Op<P>) -> Result<usize, InsertError> {
+    fn deliver(&mut self, op: Op<P>, now: Timestamp) -> Result<usize, InsertError> {
         let author = op.author();
         let held = self.vv.get(&author);
         if held >= op.seq() {
@@ -411,14 +494,10 @@ impl<P: Payload> Log<P> {
         let prev = self.by_author.get(&author).and_then(|ids| ids.last());
         // Deps and previous ops inside a base have Lamport times at or below its cut, and
         // `insert` refused every op at or below the cut, so held ones set the floor.
-        let floor = op
-            .deps()
-            .iter()
-            .chain(prev)
-            .filter_map(|d| self.ops.get(d))
-            .map(Op::lamport)
-            .max()
-            .unwrap_or(0);
+        // Timestamps inside a base are not kept per op: a joined log checks held ones only.
+        let past = || op.deps().iter().chain(prev).filter_map(|d| self.ops.get(d));
+        let floor = past().map(Op::lamport).max().unwrap_or(0);
+        let floor_ts = past().map(Op::timestamp).max().unwrap_or_default();
         if op.lamport() <= floor {
             return Err(InsertError::BadLamport {
                 lamport: op.lamport(),
@@ -429,6 +508,12 @@ impl<P: Payload> Log<P> {
             return Err(InsertError::LamportJump {
                 lamport: op.lamport(),
                 floor,
+            });
+        }
+        if op.timestamp() < floor_ts {
+            return Err(InsertError::BadTimestamp {
+                timestamp: op.timestamp().0,
+                floor: floor_ts.0,
             });
         }
         let key = OrderKey::of(&op);
@@ -454,7 +539,7 @@ impl<P: Payload> Log<P> {
         self.vv.raise(author, op.seq());
         self.frontier.deliver(id, op.deps());
         self.max_lamport = self.max_lamport.max(op.lamport());
-        self.clock.observe(op.timestamp());
+        self.clock.observe(op.timestamp(), now);
         self.ops.insert(id, op);
         Ok(pos)
     }

@@ -30,6 +30,9 @@ pub enum DepKey {
     Op(OpId),
     /// The author's previous op (per-author sequence numbers have no gaps).
     Seq(PeerId, u64),
+    /// The receiver's wall clock reaching this time: the op's timestamp runs ahead of it by
+    /// more than [`crate::time::MAX_CLOCK_SKEW_MICROS`] until then.
+    Clock(Timestamp),
 }
 
 /// Why a pending op was evicted.
@@ -252,6 +255,28 @@ impl<P: Clone> Pending<P> {
             .into_iter()
             .map(|(_, op, origin)| (op, origin))
             .collect()
+    }
+
+    /// Marks every clock wait due at `now` as satisfied; returns the ops that now miss nothing,
+    /// removed from the buffer, with their origins, in order of due time then arrival.
+    pub fn due(&mut self, now: Timestamp) -> Vec<(Op<P>, Origin)> {
+        let keys: Vec<DepKey> = self
+            .waiters
+            .range(DepKey::Clock(Timestamp(0))..=DepKey::Clock(now))
+            .map(|(key, _)| *key)
+            .collect();
+        keys.into_iter().flat_map(|key| self.satisfy(key)).collect()
+    }
+
+    /// The earliest time at which an op waiting for the clock is due, if any waits.
+    pub fn next_due(&self) -> Option<Timestamp> {
+        self.waiters
+            .range(DepKey::Clock(Timestamp(0))..)
+            .next()
+            .and_then(|(key, _)| match key {
+                DepKey::Clock(at) => Some(*at),
+                _ => None,
+            })
     }
 
     /// Evicts every op that has waited its time to live or longer at `now`.

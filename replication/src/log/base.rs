@@ -164,8 +164,9 @@ impl<P: Payload> Log<P> {
         for a in &base.authors {
             vv.raise(a.author, a.seq);
         }
-        let mut clock = crate::time::HybridClock::default();
-        clock.observe(base.max_timestamp);
+        // The clock observes the base's latest timestamp when this log authors (`Log::author`),
+        // bounded by the wall clock then.
+        let clock = crate::time::HybridClock::default();
         Self {
             ops: BTreeMap::new(),
             order: Vec::new(),

@@ -448,3 +448,140 @@ fn a_lamport_leap_towards_exhaustion_is_refused() {
     log.insert(Timestamp(2), leap(far - 1), Origin(1)).unwrap();
     log.author(&key(1), Timestamp(3), set(1, "z")).unwrap();
 }
+
+/// An op signed by `key` with the given fields.
+pub(crate) fn signed(
+    key: &Keypair,
+    seq: u64,
+    lamport: u64,
+    timestamp: u64,
+    deps: Vec<OpId>,
+    payload: TestPayload,
+) -> VerifiedOp<TestPayload> {
+    let fields = OpFields {
+        seq,
+        lamport,
+        timestamp: Timestamp(timestamp),
+        deps,
+        payload,
+    };
+    Op::sign(key, fields).unwrap()
+}
+
+#[test]
+fn a_lease_asking_for_more_than_the_max_ttl_ends_at_the_max() {
+    let (a, b) = (key(0), key(1));
+    let mut log = TLog::default();
+    let strong_forever = TestPayload::Acquire {
+        object: 1,
+        strong: true,
+        ttl_micros: u64::MAX,
+    };
+    log.author(&a, Timestamp(1000), strong_forever).unwrap();
+    let (held, _) = log.author(&b, Timestamp(2000), set(1, "x")).unwrap();
+    assert!(matches!(log.mark(&held.id()), Some(Mark::Rejected(_))));
+    let end = 1000 + crate::lease::MAX_LEASE_TTL_MICROS;
+    assert_eq!(
+        log.lease(ObjectId(1), Timestamp(0)).map(|l| l.expires_at),
+        Some(Timestamp(end))
+    );
+    let (after, _) = log.author(&b, Timestamp(end), set(1, "y")).unwrap();
+    assert_eq!(log.mark(&after.id()), Some(Mark::Effective));
+}
+
+#[test]
+fn an_op_stamped_before_its_causal_past_is_refused() {
+    let mut log = TLog::default();
+    let (first, _) = log.author(&key(0), Timestamp(5000), set(1, "x")).unwrap();
+    let backdated = signed(&key(1), 1, 2, 4999, vec![first.id()], set(1, "y"));
+    assert_eq!(
+        log.insert(Timestamp(6000), backdated, Origin(1)),
+        Err(InsertError::BadTimestamp {
+            timestamp: 4999,
+            floor: 5000
+        })
+    );
+    let same_time = signed(&key(1), 1, 2, 5000, vec![first.id()], set(1, "y"));
+    log.insert(Timestamp(6000), same_time, Origin(1)).unwrap();
+}
+
+#[test]
+fn an_op_from_the_far_future_waits_then_lands_in_the_same_place_on_two_peers() {
+    use crate::time::MAX_CLOCK_SKEW_MICROS;
+    let now = 1_000_000_000u64;
+    let ahead = now + MAX_CLOCK_SKEW_MICROS + 5_000_000;
+    let (a, b, c) = (key(0), key(1), key(2));
+    let base = signed(&a, 1, 1, now, vec![], set(1, "a"));
+    let future = signed(&b, 1, 2, ahead, vec![base.id()], set(1, "future"));
+    // b's next op depends on the future one and waits with it.
+    let after = signed(&b, 2, 3, ahead + 1, vec![future.id()], set(1, "after"));
+    // c's op is concurrent and sorts after the future one.
+    let concurrent = signed(&c, 1, 2, now + 10, vec![base.id()], set(1, "c"));
+    let mut x = TLog::default();
+    let mut y = TLog::default();
+    for op in [&base, &future, &after, &concurrent] {
+        x.insert(Timestamp(now), op.clone(), Origin(1)).unwrap();
+    }
+    for op in [&after, &concurrent, &future, &base] {
+        y.insert(Timestamp(now + 1000), op.clone(), Origin(2))
+            .unwrap();
+    }
+    for log in [&x, &y] {
+        assert_eq!(log.len(), 2, "the future op and its dependent wait");
+        assert_eq!(log.n_pending(), 2);
+        assert!(!log.contains(&future.id()));
+    }
+    let due = ahead - MAX_CLOCK_SKEW_MICROS;
+    assert_eq!(x.next_due(), Some(Timestamp(due)));
+    assert!(x.release_due(Timestamp(due - 1)).delivered.is_empty());
+    assert_eq!(x.release_due(Timestamp(due)).delivered, vec![future.id()]);
+    let released = x.release_due(Timestamp(due + 1));
+    assert_eq!(released.delivered, vec![after.id()]);
+    assert!(released.refold.is_some());
+    // y's clock passes it later, and an insertion (a duplicate here) delivers it.
+    let ins = y
+        .insert(Timestamp(due + 7), concurrent.clone(), Origin(2))
+        .unwrap();
+    assert!(ins.duplicate);
+    assert_eq!(ins.delivered, vec![future.id(), after.id()]);
+    assert_eq!(x.next_due(), None);
+    assert_eq!(observe(&x), observe(&y));
+    let ids: Vec<OpId> = x.linear_ids().collect();
+    assert_eq!(
+        ids[1],
+        future.id(),
+        "placed by its order key, not its arrival"
+    );
+}
+
+#[test]
+fn a_stored_far_future_op_does_not_pin_the_clock() {
+    use crate::time::MAX_CLOCK_SKEW_MICROS;
+    let now = 1_700_000_000_000_000u64;
+    let mut log = TLog::default();
+    // A store written before the bound may hold such an op: on reopening it loads, but moves
+    // the clock only to the bound, and local ops leave it out of their deps meanwhile.
+    let far = signed(&key(1), 1, 1, u64::MAX - 1, vec![], set(1, "far"));
+    let far_id = far.id();
+    let loaded = log.insert(Timestamp(now), far, LOCAL_ORIGIN).unwrap();
+    assert_eq!(loaded.delivered, vec![far_id]);
+    let (mine, _) = log.author(&key(0), Timestamp(now), set(2, "x")).unwrap();
+    assert_eq!(mine.timestamp(), Timestamp(now + MAX_CLOCK_SKEW_MICROS + 1));
+    assert!(mine.deps().is_empty());
+    assert!(log.heads().any(|h| *h == far_id));
+    // From a remote, the same op waits instead of moving the clock at all.
+    let mut log = TLog::default();
+    let far = signed(&key(1), 1, 1, u64::MAX - 1, vec![], set(1, "far"));
+    assert!(log.insert(Timestamp(now), far, Origin(1)).unwrap().parked);
+    let (mine, _) = log.author(&key(0), Timestamp(now), set(2, "x")).unwrap();
+    assert_eq!(mine.timestamp(), Timestamp(now));
+    // One just past the bound, delivered once the clock allows, moves the clock no further
+    // than the bound.
+    let near = now + MAX_CLOCK_SKEW_MICROS;
+    let soon = signed(&key(2), 1, 3, near + 1000, vec![mine.id()], set(1, "soon"));
+    assert!(log.insert(Timestamp(now), soon, Origin(1)).unwrap().parked);
+    let later = Timestamp(now + 1000);
+    assert_eq!(log.release_due(later).delivered.len(), 1);
+    let (next, _) = log.author(&key(0), later, set(2, "y")).unwrap();
+    assert_eq!(next.timestamp(), Timestamp(near + 1001));
+}
