@@ -22,6 +22,13 @@ pub(crate) use base::{Base, BaseAuthor, BaseKind, BaseOp};
 pub const CHECKPOINT_INTERVAL: usize = 256;
 /// Most ops one log holds; past it, inserts fail (the store and sync stop growing it).
 pub const MAX_LOG_OPS: usize = 10_000_000;
+/// Most bytes of encoded ops one log holds (3.5 GiB): below the store's limit with room for
+/// every record's framing, so a store never fills with ops its log accepted.
+pub const MAX_LOG_BYTES: u64 = 7 * 512 * 1024 * 1024;
+/// Most bytes of encoded ops one author may have in a log (256 MiB, about 10^6 ordinary
+/// edits). Judged along the author's own chain of ops, so every full log refuses the same op,
+/// and one member cannot fill every peer's memory and store on its own.
+pub const MAX_AUTHOR_BYTES: u64 = 256 * 1024 * 1024;
 /// Most an op's Lamport time may exceed the highest of its dependencies' and its author's
 /// previous op's (2^32). Honest ops exceed it by one (more only after a snapshot join, whose
 /// base ops are not looked up), and `u64::MAX / MAX_LAMPORT_JUMP` is far above
@@ -72,9 +79,17 @@ pub enum InsertError {
         /// The latest timestamp in its immediate past.
         floor: u64,
     },
-    /// The log is at [`MAX_LOG_OPS`].
-    #[error("log is full ({MAX_LOG_OPS} ops)")]
+    /// The log is at [`MAX_LOG_OPS`] ops or [`MAX_LOG_BYTES`] bytes.
+    #[error("log is full ({MAX_LOG_OPS} ops or {MAX_LOG_BYTES} bytes)")]
     Full,
+    /// The op would take its author past its quota ([`MAX_AUTHOR_BYTES`] of encoded ops).
+    #[error("author {author} is over its quota of {limit} bytes of ops")]
+    AuthorQuota {
+        /// The author.
+        author: PeerId,
+        /// The quota.
+        limit: u64,
+    },
     /// The log was joined from a snapshot, and the op belongs before the snapshot's cut but
     /// is not in it (an author the snapshot's producer did not know, working offline). This
     /// log cannot place it: rebuild from full history (see [`crate::snapshot`]).
@@ -225,6 +240,11 @@ pub struct Log<P> {
     clock: HybridClock,
     pending: Pending<P>,
     stats: LogStats,
+    /// Bytes of encoded ops held, in all and per author.
+    n_bytes: u64,
+    author_bytes: BTreeMap<PeerId, u64>,
+    /// [`MAX_AUTHOR_BYTES`], lowered by tests only.
+    author_quota: u64,
 }
 
 impl<P: Payload> Default for Log<P> {
@@ -252,7 +272,30 @@ impl<P: Payload> Log<P> {
             clock: HybridClock::default(),
             pending: Pending::with_limits(limits),
             stats: LogStats::default(),
+            n_bytes: 0,
+            author_bytes: BTreeMap::new(),
+            author_quota: MAX_AUTHOR_BYTES,
         }
+    }
+
+    /// An empty log whose authors' quota is `quota` bytes instead of [`MAX_AUTHOR_BYTES`].
+    #[cfg(test)]
+    pub(crate) fn with_author_quota(quota: u64) -> Self {
+        Self {
+            author_quota: quota,
+            ..Self::default()
+        }
+    }
+
+    /// Bytes of encoded ops held.
+    pub fn n_bytes(&self) -> u64 {
+        self.n_bytes
+    }
+
+    /// Bytes of encoded ops held by `author` (of the ops after a snapshot's cut, in a joined
+    /// log).
+    pub fn author_bytes(&self, author: &PeerId) -> u64 {
+        self.author_bytes.get(author).copied().unwrap_or(0)
     }
 
     /// Authors, signs and inserts a new op by `keypair` that depends on the current heads.
@@ -516,6 +559,17 @@ impl<P: Payload> Log<P> {
                 floor: floor_ts.0,
             });
         }
+        let n_bytes = op.encoded().len() as u64;
+        let author_bytes = self.author_bytes(&author) + n_bytes;
+        if author_bytes > self.author_quota {
+            return Err(InsertError::AuthorQuota {
+                author,
+                limit: self.author_quota,
+            });
+        }
+        if self.n_bytes + n_bytes > MAX_LOG_BYTES {
+            return Err(InsertError::Full);
+        }
         let key = OrderKey::of(&op);
         // Most ops arrive in order: append without searching.
         let pos = if self.order.last().is_none_or(|(k, _)| *k < key) {
@@ -541,6 +595,8 @@ impl<P: Payload> Log<P> {
         self.max_lamport = self.max_lamport.max(op.lamport());
         self.clock.observe(op.timestamp(), now);
         self.ops.insert(id, op);
+        self.n_bytes += n_bytes;
+        self.author_bytes.insert(author, author_bytes);
         Ok(pos)
     }
 

@@ -184,6 +184,11 @@ impl<P: Payload> Log<P> {
             pending: Pending::with_limits(limits),
             stats: super::LogStats::default(),
             base: Some(Box::new(base)),
+            // Ops inside the base are not counted: a joined log judges quotas on the ops
+            // after its cut only (a non-guarantee, as for timestamps).
+            n_bytes: 0,
+            author_bytes: BTreeMap::new(),
+            author_quota: super::MAX_AUTHOR_BYTES,
         }
     }
 

@@ -585,3 +585,62 @@ fn a_stored_far_future_op_does_not_pin_the_clock() {
     let (next, _) = log.author(&key(0), later, set(2, "y")).unwrap();
     assert_eq!(next.timestamp(), Timestamp(near + 1001));
 }
+
+#[test]
+fn an_author_over_its_quota_is_refused_the_same_on_every_log_and_others_go_on() {
+    let mut author_log = TLog::default();
+    let mut ops = Vec::new();
+    for i in 0..12u64 {
+        let (op, _) = author_log
+            .author(&key(2), Timestamp(10 + i), set(1, &"v".repeat(200)))
+            .unwrap();
+        ops.push(op);
+    }
+    // A quota that holds the first ten ops and half of the eleventh.
+    let ten: u64 = ops[..10].iter().map(|op| op.encoded().len() as u64).sum();
+    let quota = ten + ops[10].encoded().len() as u64 / 2;
+    // Two logs receiving the member's ops in different orders refuse the same one: the
+    // eleventh, the first past the quota along its author's chain.
+    let mut outcomes = Vec::new();
+    for order in [ops.clone(), ops.iter().rev().cloned().collect()] {
+        let mut log = TLog::with_author_quota(quota);
+        let mut refused = Vec::new();
+        for op in order {
+            match log.insert(Timestamp(100), op.clone(), Origin(1)) {
+                Ok(insertion) => {
+                    refused.extend(insertion.refused.iter().map(|(id, _, e)| (*id, e.clone())))
+                }
+                Err(e) => refused.push((op.id(), e)),
+            }
+        }
+        assert_eq!(log.len(), 10);
+        assert!(log.author_bytes(&key(2).peer_id()) <= quota);
+        assert_eq!(log.n_bytes(), ten);
+        let (first_refused, error) = refused.first().cloned().unwrap();
+        assert_eq!(first_refused, ops[10].id());
+        assert!(matches!(error, InsertError::AuthorQuota { .. }), "{error}");
+        // Another author is not held back by the member's quota.
+        log.author(&key(3), Timestamp(200), set(2, "honest"))
+            .unwrap();
+        outcomes.push(observe(&log));
+    }
+    assert_eq!(outcomes[0], outcomes[1]);
+}
+
+#[test]
+fn a_local_author_over_its_quota_gets_an_error_and_the_log_is_unchanged() {
+    let mut log = TLog::with_author_quota(1_000);
+    let mut n = 0;
+    let error = loop {
+        match log.author(&key(1), Timestamp(1 + n), set(1, &"w".repeat(100))) {
+            Ok(_) => n += 1,
+            Err(e) => break e,
+        }
+    };
+    assert!(matches!(
+        error,
+        AuthorError::Insert(InsertError::AuthorQuota { limit: 1_000, .. })
+    ));
+    assert_eq!(log.len() as u64, n);
+    assert!(log.n_bytes() <= 1_000);
+}
