@@ -11,7 +11,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use net_support::*;
-use replication::net::discovery::message::{DiscoveryMessage, REGISTER_BYTES};
+use replication::Keypair;
+use replication::net::discovery::message::{DiscoveryMessage, NO_COOKIE, REGISTER_BYTES};
 use replication::net::discovery::{self, DiscoveredPeer, DiscoveryServer};
 
 #[tokio::test]
@@ -31,18 +32,16 @@ async fn two_nodes_find_each_other_through_the_discovery_server_and_sync() {
     author_some(&a.handle, 1, "alice").await;
     author_some(&b.handle, 2, "bob").await;
     let port = |h: &THandle| h.local_addr().port();
-    let found = discovery::register(
-        server_addr,
-        keys.discovery_id(),
-        a.handle.peer_id(),
-        port(&a.handle),
-    )
-    .await
-    .unwrap();
+    let alice = Keypair::from_seed([1; 32]);
+    assert_eq!(alice.peer_id(), a.handle.peer_id());
+    let found = discovery::register(server_addr, keys.discovery_id(), &alice, port(&a.handle))
+        .await
+        .unwrap();
     assert!(found.is_empty(), "A is the first: {found:?}");
     // Another session registered at the same server stays invisible to ours.
     let other = session_keys(OTHER_INVITE);
-    let found = discovery::register(server_addr, other.discovery_id(), [9; 32].into_peer(), 9)
+    let stranger = Keypair::from_seed([9; 32]);
+    let found = discovery::register(server_addr, other.discovery_id(), &stranger, 9)
         .await
         .unwrap();
     assert!(found.is_empty());
@@ -54,14 +53,9 @@ async fn two_nodes_find_each_other_through_the_discovery_server_and_sync() {
     ));
     converge(&[&a.handle, &b.handle], 8).await;
     // Now A learns B too, at the address B's QUIC endpoint listens on.
-    let found = discovery::register(
-        server_addr,
-        keys.discovery_id(),
-        a.handle.peer_id(),
-        port(&a.handle),
-    )
-    .await
-    .unwrap();
+    let found = discovery::register(server_addr, keys.discovery_id(), &alice, port(&a.handle))
+        .await
+        .unwrap();
     assert_eq!(
         found,
         vec![DiscoveredPeer {
@@ -77,36 +71,29 @@ async fn two_nodes_find_each_other_through_the_discovery_server_and_sync() {
     prober
         .send_to(b"GET / HTTP/1.1\r\n\r\n", server_addr)
         .unwrap();
-    let mut short = DiscoveryMessage::Register {
-        discovery_id: keys.discovery_id(),
-        peer: a.handle.peer_id(),
-        port: 1,
-    }
-    .encode();
+    let mut short = DiscoveryMessage::register(&alice, keys.discovery_id(), 1, NO_COOKIE).encode();
     short.truncate(REGISTER_BYTES / 2);
     prober.send_to(&short, server_addr).unwrap();
     prober
         .send_to(&DiscoveryMessage::Peers(Vec::new()).encode(), server_addr)
         .unwrap();
     // A last good request, answered, proves the server read the three before it.
-    discovery::register(server_addr, other.discovery_id(), [8; 32].into_peer(), 8)
-        .await
-        .unwrap();
+    discovery::register(
+        server_addr,
+        other.discovery_id(),
+        &Keypair::from_seed([8; 32]),
+        8,
+    )
+    .await
+    .unwrap();
     shutdown.store(true, Ordering::Relaxed);
     let stats = serving.join().unwrap().unwrap();
     assert_eq!(stats.n_malformed, 2, "{stats:?}");
     assert_eq!(stats.n_unexpected, 1, "{stats:?}");
     assert!(stats.n_registered >= 4, "{stats:?}");
     assert_eq!(stats.n_replies, stats.n_registered, "{stats:?}");
-}
-
-/// Converts test bytes into a peer id.
-trait IntoPeer {
-    fn into_peer(self) -> replication::PeerId;
-}
-
-impl IntoPeer for [u8; 32] {
-    fn into_peer(self) -> replication::PeerId {
-        replication::PeerId(self)
-    }
+    // Every registration went through one challenge round trip (the node's rendezvous keeps
+    // its cookie between refreshes), and nothing was answered with more than it sent.
+    assert!(stats.n_challenged >= 4, "{stats:?}");
+    assert!(stats.n_bytes_sent <= stats.n_bytes_received, "{stats:?}");
 }

@@ -4,9 +4,9 @@
 //! registration leaves from the very socket QUIC uses: the server then sees (and lists) the
 //! NAT's mapping of that socket, the one address through which the peer can be reached.
 //! [`DemuxSocket`] wraps the endpoint's socket for quinn: it hands quinn every datagram except
-//! discovery replies (Peers and Introduce, see [`DiscoveryMessage::is_reply`]), which it
-//! passes to the node's [`DiscoveryPort`] on a bounded queue; the port sends discovery
-//! datagrams through the same socket.
+//! discovery replies (Peers, Introduce and Challenge, see [`DiscoveryMessage::is_reply`]),
+//! which it passes to the node's [`DiscoveryPort`] on a bounded queue; the port sends
+//! discovery datagrams through the same socket.
 //!
 //! A datagram that opens like a discovery message but does not decode, or decodes to a
 //! message a server receives rather than sends, goes to quinn, which drops what is not QUIC.
@@ -308,10 +308,11 @@ mod tests {
         };
         let mut undecodable = peers_reply(1).encode();
         undecodable.push(0);
-        let register = DiscoveryMessage::RegisterMapped {
-            discovery_id: [2; 16],
-            peer: PeerId([4; 32]),
-        }
+        let register = DiscoveryMessage::register_mapped(
+            &crate::identity::Keypair::from_seed([4; 32]),
+            [2; 16],
+            crate::net::discovery::message::NO_COOKIE,
+        )
         .encode();
         let quic_like = vec![0xc0, 0, 0, 0, 1, 8, 1, 2, 3, 4, 5, 6, 7, 8];
         let datagrams = [
@@ -378,10 +379,11 @@ mod tests {
     async fn the_port_sends_from_the_same_socket_as_quinn() {
         let (demux, mut port, _) = demux();
         let receiver = tokio::net::UdpSocket::bind("127.0.0.1:0").await.unwrap();
-        let message = DiscoveryMessage::RegisterMapped {
-            discovery_id: [5; 16],
-            peer: PeerId([6; 32]),
-        };
+        let message = DiscoveryMessage::register_mapped(
+            &crate::identity::Keypair::from_seed([6; 32]),
+            [5; 16],
+            crate::net::discovery::message::NO_COOKIE,
+        );
         port.send(&message, receiver.local_addr().unwrap())
             .await
             .unwrap();

@@ -48,6 +48,18 @@ fn provider() -> Arc<CryptoProvider> {
     Arc::new(rustls::crypto::ring::default_provider())
 }
 
+/// `N` bytes from the operating system's secure random source (through the TLS provider,
+/// *ring*): for secrets that the net adapter makes itself, such as a discovery server's
+/// cookie key.
+pub(crate) fn secure_random<const N: usize>() -> Result<[u8; N], rustls::Error> {
+    let mut out = [0; N];
+    provider()
+        .secure_random
+        .fill(&mut out)
+        .map_err(|_| rustls::Error::FailedToGetRandomBytes)?;
+    Ok(out)
+}
+
 /// The QUIC transport settings shared by both sides of a connection: one bidirectional
 /// stream, no unidirectional streams, datagrams on, keep-alives and an idle timeout.
 pub fn transport_config() -> Arc<quinn::TransportConfig> {

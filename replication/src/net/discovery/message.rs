@@ -1,46 +1,63 @@
-//! Discovery wire messages (version 1), one per UDP datagram.
+//! Discovery wire messages (version 2), one per UDP datagram.
 //!
 //! Every message opens with `"SCD"`, the version byte and a tag:
 //!
-//! - Register (tag 1): `[discovery id 16][peer id 32][QUIC port u16 BE]`, then zero padding up
-//!   to exactly [`REGISTER_BYTES`]. The padding makes every request at least as large as any
-//!   reply, so a spoofed source address cannot turn the server into an amplifier. The server
-//!   lists the datagram's source IP with the claimed port: right for a separate socket on a
-//!   host with a public address, useless behind a NAT (the port is not the mapped one).
+//! - Register (tag 1): `[discovery id 16][peer id 32][QUIC port u16 BE][cookie 16]`
+//!   `[ed25519 signature 64]`, then zero padding up to exactly [`REGISTER_BYTES`]. The padding
+//!   makes every request at least as large as any reply, so a spoofed source address cannot
+//!   turn the server into an amplifier. The server lists the datagram's source IP with the
+//!   claimed port: right for a separate socket on a host with a public address, useless
+//!   behind a NAT (the port is not the mapped one).
 //! - Peers (tag 2): `[n ≤ MAX_PEERS_PER_REPLY]` then per peer `[peer id 32][family 4|6]`
 //!   `[IPv4 4 | IPv6 16][port u16 BE]`.
 //! - Announce (tag 3, the retired LAN multicast announcement, replaced by DNS-SD; still
 //!   decoded so that servers count it as unexpected): `[discovery id 16][peer id 32]`
 //!   `[QUIC port u16 BE]`.
-//! - RegisterMapped (tag 4): `[discovery id 16][peer id 32]`, zero-padded to exactly
-//!   [`REGISTER_BYTES`] like Register. Sent from the QUIC endpoint's own socket, so the server
-//!   lists the datagram's whole source address, which behind a NAT is the router's public
-//!   address and the port it mapped for that socket: the address other peers must dial.
-//!   The server answers with Peers and introduces the sender to peers already registered
-//!   this way (Introduce).
+//! - RegisterMapped (tag 4): `[discovery id 16][peer id 32][cookie 16][ed25519 signature 64]`,
+//!   zero-padded to exactly [`REGISTER_BYTES`] like Register. Sent from the QUIC endpoint's
+//!   own socket, so the server lists the datagram's whole source address, which behind a NAT
+//!   is the router's public address and the port it mapped for that socket: the address
+//!   other peers must dial. The server answers with Peers and introduces the sender to peers
+//!   already registered this way (Introduce).
 //! - Introduce (tag 5): `[discovery id 16][peer id 32][family 4|6][IPv4 4 | IPv6 16]`
 //!   `[port u16 BE]`, at most [`INTRODUCE_BYTES`]: from the server to a peer registered with
 //!   RegisterMapped, naming a peer that just registered (or refreshed) in its session, so both
 //!   dial each other at once and each NAT sees outgoing packets before the other's arrive
 //!   (hole punching). The server sends them only within the bytes of the request that caused
 //!   them (see `registry`).
+//! - Challenge (tag 6): `[cookie 16]`, [`CHALLENGE_BYTES`] in all: the server's answer to a
+//!   registration whose cookie is missing (all zero), stale or made for another address. The
+//!   client sends the registration again with this cookie, which proves that it receives
+//!   at the address it registers from (a stateless, keyed MAC of that address and a time
+//!   window, like a QUIC retry token).
 //!
-//! Tags 4 and 5 were added to version 1 without a version bump: every earlier message is
-//! unchanged, and a server that predates them counts them as malformed and stays silent,
-//! which a client sees as no answer.
+//! A registration's signature is the peer's ed25519 signature over [`REGISTER_CONTEXT`], the
+//! tag, the discovery id, the peer id, the port (zero for RegisterMapped) and the cookie: it
+//! proves that the registrant owns the peer id, for this address (through the cookie) and
+//! session.
+//!
+//! Version 2 added the cookie, the signature and Challenge; a server or client of version 1
+//! counts the other's messages as another version and stays silent, which the other sees as
+//! no answer.
 //!
 //! Decoding never panics and checks every length before use.
 
 use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
 
 use crate::codec::{DecodeError, Reader};
-use crate::identity::PeerId;
+use crate::identity::{Keypair, PeerId, SIGNATURE_BYTES, Signature};
 use crate::net::session::DiscoveryId;
 
 /// The bytes that open every discovery message.
 pub const MAGIC: &[u8; 3] = b"SCD";
 /// The discovery wire version.
-pub const DISCOVERY_WIRE_VERSION: u8 = 1;
+pub const DISCOVERY_WIRE_VERSION: u8 = 2;
+/// Length of the address cookie a server issues in a Challenge.
+pub const COOKIE_BYTES: usize = 16;
+/// The cookie a first registration carries, before the server issued one.
+pub const NO_COOKIE: Cookie = [0; COOKIE_BYTES];
+/// What a registration's signature covers, first.
+pub const REGISTER_CONTEXT: &[u8] = b"sculpt/discovery/register/v2";
 /// Largest datagram a discovery endpoint reads; anything longer is refused.
 pub const MAX_DATAGRAM_BYTES: usize = 1200;
 /// Most peers in one reply.
@@ -55,15 +72,24 @@ pub const MAX_REPLY_BYTES: usize = HEADER_BYTES + 1 + MAX_PEERS_PER_REPLY * PEER
 pub const REGISTER_BYTES: usize = 1024;
 /// Largest introduction: header, discovery id and one IPv6 peer entry.
 pub const INTRODUCE_BYTES: usize = HEADER_BYTES + 16 + PEER_ENTRY_BYTES_MAX;
+/// Exact size of a Challenge.
+pub const CHALLENGE_BYTES: usize = HEADER_BYTES + COOKIE_BYTES;
+
+/// A server's proof-of-address cookie (see [`DiscoveryMessage::Challenge`]).
+pub type Cookie = [u8; COOKIE_BYTES];
 
 const _: () = assert!(REGISTER_BYTES >= MAX_REPLY_BYTES);
 const _: () = assert!(REGISTER_BYTES <= MAX_DATAGRAM_BYTES);
+const _: () = assert!(REGISTER_BYTES >= CHALLENGE_BYTES);
+const _: () =
+    assert!(HEADER_BYTES + 16 + 32 + 2 + COOKIE_BYTES + SIGNATURE_BYTES <= REGISTER_BYTES);
 
 const TAG_REGISTER: u8 = 1;
 const TAG_PEERS: u8 = 2;
 const TAG_ANNOUNCE: u8 = 3;
 const TAG_REGISTER_MAPPED: u8 = 4;
 const TAG_INTRODUCE: u8 = 5;
+const TAG_CHALLENGE: u8 = 6;
 
 /// A peer found by discovery: whom to dial, and where.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -85,6 +111,10 @@ pub enum DiscoveryMessage {
         peer: PeerId,
         /// Its QUIC port (the address is the datagram's source address).
         port: u16,
+        /// The cookie of the server's last Challenge to this address, or [`NO_COOKIE`].
+        cookie: Cookie,
+        /// The peer's signature (see the module's documentation).
+        signature: Signature,
     },
     /// The server's answer: the other peers of the session.
     Peers(Vec<DiscoveredPeer>),
@@ -104,6 +134,10 @@ pub enum DiscoveryMessage {
         discovery_id: DiscoveryId,
         /// The registering peer.
         peer: PeerId,
+        /// The cookie of the server's last Challenge to this address, or [`NO_COOKIE`].
+        cookie: Cookie,
+        /// The peer's signature (see the module's documentation).
+        signature: Signature,
     },
     /// The server tells a registered peer about another peer of its session that just
     /// registered (or refreshed), so that both dial each other at once.
@@ -113,14 +147,98 @@ pub enum DiscoveryMessage {
         /// The newcomer and its public address.
         peer: DiscoveredPeer,
     },
+    /// The server asks a registrant to prove its address: register again with this cookie.
+    Challenge {
+        /// The cookie to echo.
+        cookie: Cookie,
+    },
 }
 
 impl DiscoveryMessage {
-    /// True for the messages a server sends to peers (Peers, Introduce): what a node's socket
-    /// takes out of the QUIC traffic for its discovery client.
+    /// True for the messages a server sends to peers (Peers, Introduce, Challenge): what a
+    /// node's socket takes out of the QUIC traffic for its discovery client.
     pub fn is_reply(&self) -> bool {
-        matches!(self, Self::Peers(_) | Self::Introduce { .. })
+        matches!(
+            self,
+            Self::Peers(_) | Self::Introduce { .. } | Self::Challenge { .. }
+        )
     }
+
+    /// A signed Register of `keypair`'s peer id, reachable on `port` at the source IP.
+    pub fn register(
+        keypair: &Keypair,
+        discovery_id: DiscoveryId,
+        port: u16,
+        cookie: Cookie,
+    ) -> Self {
+        let peer = keypair.peer_id();
+        let signed = signed_bytes(TAG_REGISTER, &discovery_id, &peer, port, &cookie);
+        Self::Register {
+            discovery_id,
+            peer,
+            port,
+            cookie,
+            signature: keypair.sign(&signed),
+        }
+    }
+
+    /// A signed RegisterMapped of `keypair`'s peer id.
+    pub fn register_mapped(keypair: &Keypair, discovery_id: DiscoveryId, cookie: Cookie) -> Self {
+        let peer = keypair.peer_id();
+        let signed = signed_bytes(TAG_REGISTER_MAPPED, &discovery_id, &peer, 0, &cookie);
+        Self::RegisterMapped {
+            discovery_id,
+            peer,
+            cookie,
+            signature: keypair.sign(&signed),
+        }
+    }
+
+    /// True when this is a registration signed by the peer it names.
+    pub fn signature_holds(&self) -> bool {
+        let (tag, discovery_id, peer, port, cookie, signature) = match self {
+            Self::Register {
+                discovery_id,
+                peer,
+                port,
+                cookie,
+                signature,
+            } => (TAG_REGISTER, discovery_id, peer, *port, cookie, signature),
+            Self::RegisterMapped {
+                discovery_id,
+                peer,
+                cookie,
+                signature,
+            } => (
+                TAG_REGISTER_MAPPED,
+                discovery_id,
+                peer,
+                0,
+                cookie,
+                signature,
+            ),
+            _ => return false,
+        };
+        let signed = signed_bytes(tag, discovery_id, peer, port, cookie);
+        peer.verify(&signed, signature).is_ok()
+    }
+}
+
+/// What a registration's signature covers.
+fn signed_bytes(
+    tag: u8,
+    discovery_id: &DiscoveryId,
+    peer: &PeerId,
+    port: u16,
+    cookie: &Cookie,
+) -> Vec<u8> {
+    let mut out = REGISTER_CONTEXT.to_vec();
+    out.push(tag);
+    out.extend_from_slice(discovery_id);
+    out.extend_from_slice(&peer.0);
+    out.extend_from_slice(&port.to_be_bytes());
+    out.extend_from_slice(cookie);
+    out
 }
 
 impl DiscoveryMessage {
@@ -133,9 +251,13 @@ impl DiscoveryMessage {
                 discovery_id,
                 peer,
                 port,
+                cookie,
+                signature,
             } => {
                 out.push(TAG_REGISTER);
                 put_entry(&mut out, discovery_id, peer, *port);
+                out.extend_from_slice(cookie);
+                out.extend_from_slice(&signature.0);
                 out.resize(REGISTER_BYTES, 0);
             }
             Self::Peers(peers) => {
@@ -154,16 +276,27 @@ impl DiscoveryMessage {
                 out.push(TAG_ANNOUNCE);
                 put_entry(&mut out, discovery_id, peer, *port);
             }
-            Self::RegisterMapped { discovery_id, peer } => {
+            Self::RegisterMapped {
+                discovery_id,
+                peer,
+                cookie,
+                signature,
+            } => {
                 out.push(TAG_REGISTER_MAPPED);
                 out.extend_from_slice(discovery_id);
                 out.extend_from_slice(&peer.0);
+                out.extend_from_slice(cookie);
+                out.extend_from_slice(&signature.0);
                 out.resize(REGISTER_BYTES, 0);
             }
             Self::Introduce { discovery_id, peer } => {
                 out.push(TAG_INTRODUCE);
                 out.extend_from_slice(discovery_id);
                 put_peer(&mut out, peer);
+            }
+            Self::Challenge { cookie } => {
+                out.push(TAG_CHALLENGE);
+                out.extend_from_slice(cookie);
             }
         }
         out
@@ -198,11 +331,15 @@ impl DiscoveryMessage {
             TAG_REGISTER => {
                 check_register_length(bytes)?;
                 let (discovery_id, peer, port) = read_entry(&mut r)?;
+                let cookie = r.array()?;
+                let signature = Signature(r.array()?);
                 read_padding(&mut r)?;
                 Self::Register {
                     discovery_id,
                     peer,
                     port,
+                    cookie,
+                    signature,
                 }
             }
             TAG_PEERS => Self::Peers(read_peers(&mut r)?),
@@ -218,14 +355,22 @@ impl DiscoveryMessage {
                 check_register_length(bytes)?;
                 let discovery_id = r.array()?;
                 let peer = PeerId(r.array()?);
+                let cookie = r.array()?;
+                let signature = Signature(r.array()?);
                 read_padding(&mut r)?;
-                Self::RegisterMapped { discovery_id, peer }
+                Self::RegisterMapped {
+                    discovery_id,
+                    peer,
+                    cookie,
+                    signature,
+                }
             }
             TAG_INTRODUCE => {
                 let discovery_id = r.array()?;
                 let peer = read_peer(&mut r)?;
                 Self::Introduce { discovery_id, peer }
             }
+            TAG_CHALLENGE => Self::Challenge { cookie: r.array()? },
             _ => {
                 return Err(DecodeError::Invalid {
                     offset: tag_offset,
@@ -342,11 +487,9 @@ mod tests {
         let bytes = reply.encode();
         assert_eq!(bytes.len(), MAX_REPLY_BYTES);
         assert_eq!(DiscoveryMessage::decode(&bytes), Ok(reply));
-        let register = DiscoveryMessage::Register {
-            discovery_id: [3; 16],
-            peer: PeerId([4; 32]),
-            port: 4433,
-        };
+        let keypair = Keypair::from_seed([4; 32]);
+        let register = DiscoveryMessage::register(&keypair, [3; 16], 4433, [5; COOKIE_BYTES]);
+        assert!(register.signature_holds());
         let bytes = register.encode();
         assert_eq!(bytes.len(), REGISTER_BYTES);
         assert_eq!(DiscoveryMessage::decode(&bytes), Ok(register));
@@ -356,10 +499,10 @@ mod tests {
         dirty[REGISTER_BYTES - 1] = 1;
         assert!(DiscoveryMessage::decode(&dirty).is_err());
         let mut newer = bytes;
-        newer[3] = 2;
+        newer[3] = 3;
         assert!(matches!(
             DiscoveryMessage::decode(&newer),
-            Err(DecodeError::UnknownVersion { version: 2, .. })
+            Err(DecodeError::UnknownVersion { version: 3, .. })
         ));
         let announce = DiscoveryMessage::Announce {
             discovery_id: [5; 16],
@@ -371,10 +514,9 @@ mod tests {
 
     #[test]
     fn mapped_registrations_and_introductions_round_trip() {
-        let register = DiscoveryMessage::RegisterMapped {
-            discovery_id: [7; 16],
-            peer: PeerId([8; 32]),
-        };
+        let register =
+            DiscoveryMessage::register_mapped(&Keypair::from_seed([8; 32]), [7; 16], NO_COOKIE);
+        assert!(register.signature_holds());
         let bytes = register.encode();
         assert_eq!(bytes.len(), REGISTER_BYTES);
         assert_eq!(DiscoveryMessage::decode(&bytes), Ok(register));
@@ -418,10 +560,55 @@ mod tests {
         );
     }
 
+    #[test]
+    fn challenges_are_small_and_signatures_bind_every_field() {
+        let challenge = DiscoveryMessage::Challenge {
+            cookie: [7; COOKIE_BYTES],
+        };
+        let bytes = challenge.encode();
+        assert_eq!(bytes.len(), CHALLENGE_BYTES);
+        assert!(bytes.len() < REGISTER_BYTES);
+        assert_eq!(DiscoveryMessage::decode(&bytes), Ok(challenge.clone()));
+        assert!(challenge.is_reply());
+        assert!(DiscoveryMessage::decode(&bytes[..CHALLENGE_BYTES - 1]).is_err());
+        let keypair = Keypair::from_seed([1; 32]);
+        let mallory = Keypair::from_seed([2; 32]);
+        let cookie = [3; COOKIE_BYTES];
+        let signed = DiscoveryMessage::register_mapped(&keypair, [4; 16], cookie);
+        // Another cookie, session or peer id under the same signature does not hold.
+        let DiscoveryMessage::RegisterMapped { signature, .. } = signed.clone() else {
+            unreachable!()
+        };
+        for (discovery_id, peer, cookie) in [
+            ([4; 16], keypair.peer_id(), [9; COOKIE_BYTES]),
+            ([5; 16], keypair.peer_id(), cookie),
+            ([4; 16], mallory.peer_id(), cookie),
+        ] {
+            let forged = DiscoveryMessage::RegisterMapped {
+                discovery_id,
+                peer,
+                cookie,
+                signature,
+            };
+            assert!(!forged.signature_holds());
+        }
+        // A mapped registration's signature does not hold as a plain one.
+        let plain = DiscoveryMessage::Register {
+            discovery_id: [4; 16],
+            peer: keypair.peer_id(),
+            port: 0,
+            cookie,
+            signature,
+        };
+        assert!(!plain.signature_holds());
+        assert!(signed.signature_holds());
+        assert!(!challenge.signature_holds());
+    }
+
     proptest! {
         #![proptest_config(crate::test_config(256))]
         #[test]
-        fn arbitrary_bytes_never_panic(mut bytes in proptest::collection::vec(any::<u8>(), 0..1300), tag in 1u8..6) {
+        fn arbitrary_bytes_never_panic(mut bytes in proptest::collection::vec(any::<u8>(), 0..1300), tag in 1u8..8) {
             if bytes.len() >= 5 {
                 bytes[..3].copy_from_slice(MAGIC);
                 bytes[3] = DISCOVERY_WIRE_VERSION;

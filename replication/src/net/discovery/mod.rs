@@ -5,7 +5,8 @@
 //!   [`serve`]). Nodes register `(discovery id, peer id)` from their QUIC socket and the
 //!   server lists the request's source address (behind a NAT: the router's public address
 //!   and the port it mapped), answers with the session's other peers, and introduces the
-//!   newcomer to them so that both sides dial at once (hole punching). The older
+//!   newcomer to them so that both sides dial at once (hole punching), once the source has
+//!   echoed the server's address cookie and signed with its peer key. The older
 //!   registration `(discovery id, peer id, QUIC port)` from a separate socket is still
 //!   answered (source IP with that port). Entries expire after
 //!   [`registry::REGISTRATION_TTL_MICROS`]; sources are rate-limited; the reply and the
@@ -20,13 +21,20 @@
 //!   browsers (avahi-browse) see too: announce this peer, list the sessions, dial our own.
 //! - [`message`]: the versioned, size-limited wire format shared by all three.
 //!
-//! Non-guarantees: registrations and announcements are not authenticated (the server cannot
-//! check an invite it never sees). Someone who learns a session's discovery id can list
-//! fake peers in it, up to [`registry::MAX_PEERS_PER_SESSION`], which wastes dials but
-//! admits no one; an entry can only be moved to another IP after it expires. Hole punching
-//! needs NATs that map one socket to one public port whatever the destination; behind a
-//! symmetric NAT on both sides (or a NAT that drops the pair's packets) no direct
-//! connection forms, which is reported as [`crate::net::node::Unreachable`]; nothing relays.
+//! Who is listed: a registration is listed only after its source echoed the server's
+//! address cookie (a Challenge answers it first) and only when it is signed by the peer id it
+//! names, so nobody lists a third party's address or another peer's id, and a peer that
+//! moves re-registers from its new address at once. One source (an IPv4 address or an IPv6
+//! /64) holds at most [`registry::MAX_PEERS_PER_SOURCE_PER_SESSION`] entries of a session.
+//!
+//! Non-guarantees: registrations and announcements prove an address and a peer id, not
+//! membership (the server cannot check an invite it never sees). Someone who learns a
+//! session's discovery id can list peer ids of its own in it, up to
+//! [`registry::MAX_PEERS_PER_SOURCE_PER_SESSION`] per source, which wastes dials but admits
+//! no one. Hole punching needs NATs that map one socket to one public port whatever the
+//! destination; behind a symmetric NAT on both sides (or a NAT that drops the pair's
+//! packets) no direct connection forms, which is reported as
+//! [`crate::net::node::Unreachable`]; nothing relays.
 //! Two peers behind the same NAT are told each other's public address, which works only if
 //! the router loops packets back (hairpinning); LAN discovery finds them directly.
 

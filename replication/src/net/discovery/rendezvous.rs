@@ -1,9 +1,12 @@
 //! The node-integrated discovery client ([`NodeHandle::register_with`]): registration from
 //! the node's own UDP socket, introductions, and hole punching.
 //!
-//! The task registers (RegisterMapped, through the node's [`DiscoveryPort`]) at once and
-//! every [`REFRESH_INTERVAL_MILLIS`], retrying an unanswered request
-//! [`REGISTER_ATTEMPTS`] times. Every peer the server names, in a reply or in an
+//! The task registers (RegisterMapped, signed by the node's key, through the node's
+//! [`DiscoveryPort`]) at once and every [`REFRESH_INTERVAL_MILLIS`], retrying an unanswered
+//! request [`REGISTER_ATTEMPTS`] times. It keeps the server's last cookie: the first
+//! registration is answered with a Challenge and sent again at once with the cookie (at most
+//! [`MAX_CHALLENGES_PER_REGISTER`] times a round); a refresh reuses the cookie, which stays
+//! valid longer than the refresh interval, and costs one round trip. Every peer the server names, in a reply or in an
 //! introduction of a newcomer, is punched at once ([`NodeHandle::punch`]), at most
 //! [`MAX_PUNCHES_IN_PROGRESS`] at a time and at most [`MAX_INTRODUCTIONS_PER_REFRESH`]
 //! introductions per refresh interval. The app sees [`RendezvousEvent`]s on a bounded
@@ -27,9 +30,10 @@ use tokio::task::JoinSet;
 
 use crate::identity::PeerId;
 use crate::net::discovery::client::{
-    REFRESH_INTERVAL_MILLIS, REGISTER_ATTEMPTS, REGISTER_REPLY_TIMEOUT_MILLIS,
+    MAX_CHALLENGES_PER_REGISTER, REFRESH_INTERVAL_MILLIS, REGISTER_ATTEMPTS,
+    REGISTER_REPLY_TIMEOUT_MILLIS,
 };
-use crate::net::discovery::message::{DiscoveredPeer, DiscoveryMessage};
+use crate::net::discovery::message::{Cookie, DiscoveredPeer, DiscoveryMessage, NO_COOKIE};
 use crate::net::node::{Counters, DialError, NodeHandle, PunchError, Punched, Unreachable};
 use crate::net::session::DiscoveryId;
 use crate::net::socket::{DiscoveryPort, DiscoveryReply};
@@ -138,6 +142,7 @@ pub(crate) fn spawn<P: Payload + Send + 'static>(
         reported: BTreeSet::new(),
         punches: JoinSet::new(),
         n_introduced: 0,
+        cookie: NO_COOKIE,
     };
     runtime.spawn(task.run());
     Rendezvous { events: queue }
@@ -159,6 +164,18 @@ struct Task<P> {
     punches: JoinSet<PunchOutcome>,
     /// Introductions acted on since the last refresh.
     n_introduced: usize,
+    /// The server's last cookie for this socket ([`NO_COOKIE`] before the first challenge).
+    cookie: Cookie,
+}
+
+/// What a reply means for the registration round.
+enum Heard {
+    /// The registration was answered: the round is over.
+    Answered,
+    /// The server issued a cookie: register again with it.
+    Challenged,
+    /// Nothing for the round.
+    Other,
 }
 
 fn sleep_millis(millis: u64) -> Pin<Box<tokio::time::Sleep>> {
@@ -171,6 +188,8 @@ impl<P: Payload + Send + 'static> Task<P> {
         refresh.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         // Requests sent in the current round, while it waits for the answer.
         let mut n_sent: Option<u32> = None;
+        // Challenges answered in the current round.
+        let mut n_challenges = 0;
         let mut reply_timer = sleep_millis(0);
         loop {
             tokio::select! {
@@ -179,6 +198,7 @@ impl<P: Payload + Send + 'static> Task<P> {
                     self.n_introduced = 0;
                     self.send_register().await;
                     n_sent = Some(1);
+                    n_challenges = 0;
                     reply_timer = sleep_millis(REGISTER_REPLY_TIMEOUT_MILLIS);
                 }
                 () = &mut reply_timer, if n_sent.is_some() => {
@@ -195,11 +215,19 @@ impl<P: Payload + Send + 'static> Task<P> {
                     }
                 }
                 reply = self.port.recv() => match reply {
-                    Some(reply) => {
-                        if self.on_reply(reply) {
-                            n_sent = None;
+                    Some(reply) => match self.on_reply(reply) {
+                        Heard::Answered => n_sent = None,
+                        // Answered at once, within the round; a challenge outside a round, or
+                        // past the limit, waits for the next request.
+                        Heard::Challenged
+                            if n_sent.is_some() && n_challenges < MAX_CHALLENGES_PER_REGISTER =>
+                        {
+                            n_challenges += 1;
+                            self.send_register().await;
+                            reply_timer = sleep_millis(REGISTER_REPLY_TIMEOUT_MILLIS);
                         }
-                    }
+                        Heard::Challenged | Heard::Other => {}
+                    },
                     // The node's socket is gone.
                     None => return,
                 },
@@ -216,10 +244,8 @@ impl<P: Payload + Send + 'static> Task<P> {
     }
 
     async fn send_register(&mut self) {
-        let request = DiscoveryMessage::RegisterMapped {
-            discovery_id: self.discovery_id,
-            peer: self.me,
-        };
+        let request =
+            DiscoveryMessage::register_mapped(self.node.keypair(), self.discovery_id, self.cookie);
         // A failed send is an unanswered attempt: the reply timer retries it.
         let _ = self.port.send(&request, self.server).await;
     }
@@ -230,12 +256,12 @@ impl<P: Payload + Send + 'static> Task<P> {
         }
     }
 
-    /// Handles one reply; true when it answers a registration.
-    fn on_reply(&mut self, reply: DiscoveryReply) -> bool {
+    /// Handles one reply.
+    fn on_reply(&mut self, reply: DiscoveryReply) -> Heard {
         let counters = self.node.counters();
         if reply.from != self.server {
             Counters::add(&counters.n_stray_discovery);
-            return false;
+            return Heard::Other;
         }
         match reply.message {
             DiscoveryMessage::Peers(found) => {
@@ -245,7 +271,11 @@ impl<P: Payload + Send + 'static> Task<P> {
                 }
                 let server = self.server;
                 self.emit(RendezvousEvent::Registered { server, found });
-                true
+                Heard::Answered
+            }
+            DiscoveryMessage::Challenge { cookie } => {
+                self.cookie = cookie;
+                Heard::Challenged
             }
             DiscoveryMessage::Introduce { discovery_id, peer }
                 if discovery_id == self.discovery_id =>
@@ -253,16 +283,16 @@ impl<P: Payload + Send + 'static> Task<P> {
                 Counters::add(&counters.n_introductions);
                 if self.n_introduced >= MAX_INTRODUCTIONS_PER_REFRESH {
                     Counters::add(&counters.n_punches_skipped);
-                    return false;
+                    return Heard::Other;
                 }
                 self.n_introduced += 1;
                 self.start_punch(peer);
                 self.emit(RendezvousEvent::Introduced { peer });
-                false
+                Heard::Other
             }
             _ => {
                 Counters::add(&counters.n_stray_discovery);
-                false
+                Heard::Other
             }
         }
     }

@@ -1,6 +1,7 @@
 //! The discovery server's socket loop (`sculpt discovery --listen ADDR`): a blocking UDP
-//! socket around the sans-IO [`Registry`], which answers registrations and sends the
-//! introductions they cause. It needs no async runtime.
+//! socket around the sans-IO [`Registry`], which challenges and answers registrations and
+//! sends the introductions they cause. It needs no async runtime. The registry's cookie key
+//! is drawn here, from the operating system, once per run.
 
 use std::io;
 use std::net::{SocketAddr, UdpSocket};
@@ -10,6 +11,7 @@ use std::time::Duration;
 use crate::net::clock::wall_clock_now;
 use crate::net::discovery::message::MAX_DATAGRAM_BYTES;
 use crate::net::discovery::registry::{Registry, RegistryStats};
+use crate::net::tls;
 use crate::time::Timestamp;
 
 /// How often the loop checks the shutdown flag while no datagram arrives.
@@ -31,6 +33,9 @@ pub enum ServeError {
     /// The socket failed.
     #[error("discovery socket failed: {0}")]
     Io(#[from] io::Error),
+    /// No secure random bytes for the cookie key.
+    #[error("no secure random bytes for the discovery cookie key: {0}")]
+    Random(quinn::rustls::Error),
 }
 
 /// A bound discovery server, not yet running.
@@ -45,9 +50,12 @@ impl DiscoveryServer {
     pub fn bind(addr: SocketAddr) -> Result<Self, ServeError> {
         let socket = UdpSocket::bind(addr).map_err(|source| ServeError::Bind { addr, source })?;
         socket.set_read_timeout(Some(Duration::from_millis(SHUTDOWN_POLL_MILLIS)))?;
+        // A fresh key per run: cookies of an earlier run fail, and the client simply answers
+        // the new challenge.
+        let cookie_key = tls::secure_random().map_err(ServeError::Random)?;
         Ok(Self {
             socket,
-            registry: Registry::default(),
+            registry: Registry::new(cookie_key),
         })
     }
 

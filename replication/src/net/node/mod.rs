@@ -590,6 +590,7 @@ impl<P: Payload + Send + 'static> Node<P> {
             source,
         })?;
         let peer_id = keypair.peer_id();
+        let keypair_seed = keypair.seed();
         let (input_tx, input_rx) = mpsc::channel(MAX_QUEUED_INPUTS);
         let (command_tx, command_rx) = mpsc::channel(MAX_QUEUED_COMMANDS);
         let (event_tx, event_rx) = mpsc::channel(MAX_QUEUED_EVENTS);
@@ -622,6 +623,7 @@ impl<P: Payload + Send + 'static> Node<P> {
                     discovery: Mutex::new(Some(discovery)),
                     runtime,
                     counters,
+                    keypair: Keypair::from_seed(keypair_seed),
                 }),
             },
             events: event_rx,
@@ -662,6 +664,8 @@ struct HandleShared {
     /// The runtime the node runs on (the rendezvous task runs there too).
     runtime: tokio::runtime::Handle,
     counters: Arc<Counters>,
+    /// A copy of the node's key pair, which signs its discovery registrations.
+    keypair: Keypair,
 }
 
 /// Commands to a running node; cheap to clone.
@@ -774,6 +778,11 @@ impl<P: Payload + Send + 'static> NodeHandle<P> {
             server,
             discovery_id,
         ))
+    }
+
+    /// The node's key pair, which signs discovery registrations.
+    pub(crate) fn keypair(&self) -> &Keypair {
+        &self.shared.keypair
     }
 
     /// The counters shared with the socket, the rendezvous and punches.
