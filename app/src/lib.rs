@@ -13,8 +13,8 @@
 //!   folder.
 //! - [`transfer`]: files in and out of a session: FVRML scenes and STL, OBJ and glTF meshes
 //!   imported as planned ops, a scene or one object exported as the renderer meshes it.
-//! - [`touch`]: the haptic servo on the app's scenes, replayed headless over a CSV path
-//!   (`sculpt touch`).
+//! - [`touch`]: the haptic servo on the app's scenes: replayed headless over a CSV path
+//!   (`sculpt touch`), and fed the live scene's changed objects as snapshots.
 //! - [`settings`]: the name, colour and brush a user expects to find again.
 //! - [`clock`]: the program's one read of the clock.
 //!

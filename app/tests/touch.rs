@@ -1,6 +1,7 @@
 //! Touch in the app: `sculpt touch` run as a process over the thesis's scenes writes the
 //! forces the haptic crate's own containers give along the same path (the closed-form
-//! whirlpool, the watermelon of its trace tests), and refuses bad files with their location.
+//! whirlpool, the watermelon of its trace tests), and refuses bad files with their location;
+//! the live feed gives a running servo a peer's edit within one snapshot.
 #![allow(
     clippy::unwrap_used,
     reason = "helpers outside #[test] fns unwrap process output"
@@ -310,3 +311,240 @@ fn bad_paths_and_scenes_are_errors_with_their_location_and_write_nothing() {
     assert!(stderr.contains("missing.csv"), "{stderr}");
 }
 
+mod live {
+    //! Two engines on loopback; peer B runs the servo on its live scene through the feed.
+
+    use std::sync::{Arc, Mutex};
+    use std::time::{Duration, Instant};
+
+    use app::engine::{Engine, EngineConfig, Network, lock};
+    use app::touch::feed::Feed;
+    use app::touch::{DeviceModel, rig, zone_for};
+    use fdsl::object::{Domain, Edit, EditOp, Field, Formula, Geometry, ObjectData, Physics};
+    use fdsl::object::{Pose, Property, ToolShape};
+    use glam::DVec3;
+    use haptic::container::Aabb;
+    use haptic::device::sim::{HandModel, SimDevice, Waypoint};
+    use haptic::servo::{Servo, ServoConfig, ServoLink, StatsSnapshot};
+    use replication::shape::ShapePayload;
+
+    const T0: replication::Timestamp = replication::Timestamp(1_795_355_107_000_000);
+
+    fn config(store: &std::path::Path) -> EngineConfig {
+        EngineConfig {
+            store: store.to_path_buf(),
+            invite: None,
+            network: Network {
+                listen: (std::net::Ipv4Addr::LOCALHOST, 0).into(),
+                ..Network::default()
+            },
+            demo: false,
+            memory_fallback: false,
+            name: None,
+            session_name: None,
+        }
+    }
+
+    fn now() -> Instant {
+        app::clock::now().instant
+    }
+
+    /// Waits (at most 20 s) until `done` holds.
+    fn wait(what: &str, mut done: impl FnMut() -> bool) {
+        let deadline = now() + Duration::from_secs(20);
+        while !done() {
+            assert!(now() < deadline, "timed out waiting for {what}");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    fn author(engine: &Engine, payload: ShapePayload) {
+        engine.author(payload).unwrap().wait().unwrap();
+    }
+
+    /// A ball of `radius` at `(x, 0, 0)` with a tense surface zone 0.1 deep.
+    fn ball(x: f64, radius: f64) -> ObjectData {
+        let property = |text: &str| Some(Property::new(Formula::new(text).unwrap()));
+        let formula = format!("{radius} - sqrt((x - {x})^2 + y^2 + z^2)");
+        ObjectData {
+            name: "ball".into(),
+            geometry: Some(Geometry::implicit_in(
+                Formula::new(&formula).unwrap(),
+                Domain::new(DVec3::new(x, 0.0, 0.0), DVec3::splat(2.2 * radius)),
+            )),
+            physics: Physics {
+                tension: property("0.8"),
+                zone_depth: property("0.1"),
+                ..Physics::default()
+            },
+            ..ObjectData::default()
+        }
+    }
+
+    /// Authors `payload` on A and waits until B's servo shows `felt`; returns the time from
+    /// the op's arrival in B's view (B's view waker) to that tick being seen, and the
+    /// servo's statistics then.
+    fn edit_and_feel(
+        a: &Engine,
+        payload: ShapePayload,
+        arrivals: &Mutex<Vec<Instant>>,
+        stats: &haptic::servo::ServoStats,
+        felt: impl Fn(&StatsSnapshot) -> bool,
+    ) -> (Duration, StatsSnapshot, StatsSnapshot) {
+        let n_arrivals = arrivals.lock().unwrap().len();
+        let before = stats.snapshot();
+        assert!(!felt(&before), "{before:?}");
+        author(a, payload);
+        let deadline = now() + Duration::from_secs(20);
+        let (seen, after) = loop {
+            let s = stats.snapshot();
+            if felt(&s) {
+                break (now(), s);
+            }
+            assert!(now() < deadline, "never felt: {s:?}");
+            std::thread::yield_now();
+        };
+        let arrived = arrivals.lock().unwrap()[n_arrivals];
+        (seen.duration_since(arrived), before, after)
+    }
+
+    #[test]
+    fn a_peers_edit_is_felt_by_the_servo_within_one_snapshot() {
+        let (da, db) = (super::scratch("live-a"), super::scratch("live-b"));
+        let a = Engine::start(config(&da), T0).unwrap();
+        // The ball B's hand will rest in, and another one far from it.
+        let object = lock(a.view()).next_object_id();
+        for (id, x, radius) in [(object, 0.0, 1.0), (object + 1, 3.0, 0.5)] {
+            let data = Box::new(ball(x, radius));
+            author(
+                &a,
+                ShapePayload::Create {
+                    object: id,
+                    data,
+                    group: None,
+                },
+            );
+        }
+        let addr = lock(a.view()).listen_addr().unwrap();
+        let b_config = EngineConfig {
+            invite: Some(a.invite().clone()),
+            network: Network {
+                dial: vec![addr],
+                ..config(&db).network
+            },
+            ..config(&db)
+        };
+        let b = Engine::start(b_config, T0).unwrap();
+        wait("the balls on b", || lock(b.view()).scene().len() == 2);
+
+        // B's servo: a Falcon-class device held by a firm simulated hand that rests 0.05
+        // deep in the ball's 0.1-deep surface zone, at the top.
+        let caps = DeviceModel::Falcon.capabilities();
+        let ball_box = Aabb::new(DVec3::splat(-1.1), DVec3::splat(1.1));
+        let zone = zone_for(&caps, Some(ball_box), None);
+        let rest = DVec3::new(0.0, 0.95, 0.0);
+        let hand = HandModel {
+            stiffness_newtons_per_metre: 3_000.0,
+            damping_newton_secs_per_metre: 40.0,
+            ..HandModel::default()
+        };
+        let waypoints = vec![Waypoint {
+            t_secs: 0.0,
+            position_metres: zone.device_from_world(rest),
+        }];
+        let device = SimDevice::new(caps, waypoints, hand, 0.001).unwrap();
+        // A loaded test machine may pause the (normal-priority) servo thread for longer
+        // than the 5 ms after which a real device is treated as stalled; allow 100 ms.
+        let mut servo_rig = rig(DeviceModel::Falcon, zone);
+        servo_rig.params.stall_secs = 0.1;
+        let (servo, link) = Servo::init(device, servo_rig);
+        let ServoLink { scenes, stats, .. } = link;
+        let feed = Feed::spawn(Arc::clone(b.view()), scenes).unwrap();
+        let arrivals: Arc<Mutex<Vec<Instant>>> = Arc::default();
+        let (noted, wake_feed) = (Arc::clone(&arrivals), feed.waker());
+        lock(b.view()).set_waker(Box::new(move || {
+            noted.lock().unwrap().push(app::clock::now().instant);
+            wake_feed();
+        }));
+        let config = ServoConfig {
+            realtime_priority: false,
+            thread_name: "haptic-servo-live-test".into(),
+            ..ServoConfig::default()
+        };
+        let handle = haptic::servo::spawn(servo, &config).unwrap();
+        // Ramped in and settled: the rind holds the hand out with a steady force.
+        wait("the rind to push back", || {
+            let s = stats.snapshot();
+            s.n_ticks > 1_000 && s.top_id == Some(object) && s.force_newtons.y > 1.5
+        });
+        std::thread::sleep(Duration::from_millis(300));
+        let steady = stats.snapshot().force_newtons;
+        assert_eq!(feed.stats().n_snapshots, 1, "one snapshot so far");
+        assert_eq!(feed.stats().n_rebuilt, 2);
+
+        // A slackens the ball's surface: B's hand sinks deeper and is pushed less.
+        let tension = ShapePayload::Set {
+            object,
+            field: Field::Tension(Some(Property::new(Formula::new("0.2").unwrap()))),
+        };
+        let taken = stats.snapshot().n_scenes_taken;
+        let (slack_latency, before, after) = edit_and_feel(&a, tension, &arrivals, &stats, |s| {
+            s.n_scenes_taken > taken && s.force_newtons.y < steady.y - 0.3
+        });
+        assert_eq!(
+            after.n_scenes_taken,
+            before.n_scenes_taken + 1,
+            "felt within one snapshot"
+        );
+        assert_eq!(after.top_id, Some(object));
+        assert!(
+            after.force_newtons.y < steady.y,
+            "{:?}",
+            after.force_newtons
+        );
+        std::thread::sleep(Duration::from_millis(300));
+
+        // A carves a hole where B's device rests: B's hand is in free space at once.
+        let carve = ShapePayload::Edit {
+            object,
+            edit: Edit::stamp(
+                EditOp::Subtract,
+                ToolShape::Sphere { radius: 0.3 },
+                Pose::at(rest),
+            ),
+        };
+        let taken = stats.snapshot().n_scenes_taken;
+        let (carve_latency, before, after) = edit_and_feel(&a, carve, &arrivals, &stats, |s| {
+            s.n_scenes_taken > taken && s.top_id.is_none()
+        });
+        assert_eq!(after.n_scenes_taken, before.n_scenes_taken + 1);
+        wait("the force to fade out", || {
+            stats.snapshot().force_newtons == DVec3::ZERO
+        });
+        let feed_stats = feed.stats();
+        assert_eq!(feed_stats.n_snapshots, 3);
+        assert_eq!(
+            feed_stats.n_rebuilt, 4,
+            "each edit rebuilt its own object only"
+        );
+        assert_eq!(feed_stats.n_objects, 2);
+        // A deletes the other ball: the next snapshot leaves it out and rebuilds nothing.
+        author(&a, ShapePayload::Delete { object: object + 1 });
+        wait("the deletion", || feed.stats().n_snapshots == 4);
+        assert_eq!((feed.stats().n_objects, feed.stats().n_rebuilt), (1, 4));
+        eprintln!(
+            "remote edit arrival to felt: tension {} us, carve {} us; feed build {} us",
+            slack_latency.as_micros(),
+            carve_latency.as_micros(),
+            feed_stats.last_build_micros
+        );
+        assert!(slack_latency < Duration::from_secs(2) && carve_latency < Duration::from_secs(2));
+        let servo = handle.stop().unwrap();
+        feed.stop();
+        assert_eq!(servo.state().stack().entries().len(), 0);
+        b.shutdown();
+        a.shutdown();
+        let _ = std::fs::remove_dir_all(&da);
+        let _ = std::fs::remove_dir_all(&db);
+    }
+}

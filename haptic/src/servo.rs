@@ -94,6 +94,7 @@ pub struct ServoStats {
     n_overruns: AtomicU64,
     n_device_errors: AtomicU64,
     n_stalls: AtomicU64,
+    n_scenes_taken: AtomicU64,
     force_bits: [AtomicU64; 3],
     tip_bits: [AtomicU64; 3],
     top_id: AtomicU64,
@@ -110,6 +111,8 @@ pub struct StatsSnapshot {
     pub n_device_errors: u64,
     /// Ticks rendered as stalls (zero force).
     pub n_stalls: u64,
+    /// Scene snapshots the servo has taken from the handoff (each replaces the one before).
+    pub n_scenes_taken: u64,
     /// Tick period percentiles (50, 99, 99.9) and maximum, microseconds.
     pub period_micros: [u64; 4],
     /// Tick compute percentiles (50, 99, 99.9) and maximum, microseconds.
@@ -131,6 +134,7 @@ impl ServoStats {
             n_overruns: AtomicU64::new(0),
             n_device_errors: AtomicU64::new(0),
             n_stalls: AtomicU64::new(0),
+            n_scenes_taken: AtomicU64::new(0),
             force_bits: Default::default(),
             tip_bits: Default::default(),
             top_id: AtomicU64::new(u64::MAX),
@@ -170,6 +174,7 @@ impl ServoStats {
             n_overruns: self.n_overruns.load(Ordering::Relaxed),
             n_device_errors: self.n_device_errors.load(Ordering::Relaxed),
             n_stalls: self.n_stalls.load(Ordering::Relaxed),
+            n_scenes_taken: self.n_scenes_taken.load(Ordering::Relaxed),
             period_micros: quantiles(&self.period),
             compute_micros: quantiles(&self.compute),
             force_newtons: vec3(&self.force_bits),
@@ -288,9 +293,11 @@ impl<D: HapticDevice, S: Scene> Servo<D, S> {
         }
         if self.retiring_scene.is_none()
             && let Some(next) = self.scenes.take()
-            && let Some(old) = self.scene.replace(next)
         {
-            self.retiring_scene = self.scenes.retire(old).err();
+            self.stats.n_scenes_taken.fetch_add(1, Ordering::Relaxed);
+            if let Some(old) = self.scene.replace(next) {
+                self.retiring_scene = self.scenes.retire(old).err();
+            }
         }
         if let Some(old) = self.retiring_rig.take() {
             self.retiring_rig = self.rigs.retire(old).err();
@@ -638,6 +645,10 @@ mod tests {
         assert_eq!(link.collect_retired(), 1);
         let stats = link.stats.snapshot();
         assert_eq!(stats.n_ticks, 4);
+        assert_eq!(
+            stats.n_scenes_taken, 2,
+            "two snapshots were published and taken"
+        );
         assert_eq!(stats.top_id, None);
         assert!((stats.hip_world.x - 5.0).abs() < 1e-9);
     }

@@ -5,6 +5,9 @@
 //!   path ([`PathDevice`]); what `sculpt touch <scene.wrl> --trace IN.csv --out OUT.csv`
 //!   runs. The scene's objects become haptic containers through the haptic crate's own
 //!   `ObjectContainer::from_scene`, exactly as its trace tests build them.
+//! - [`feed`]: the live scene: the engine's per-object changes become new haptic snapshots,
+//!   rebuilding only the changed objects, handed to a running servo through the haptic
+//!   crate's lock-free handoff.
 //!
 //! Units and frames: a path gives the haptic interface point (HIP) in the scene's own
 //! coordinates (+y up); the [`HapticZone`] maps the device's workspace onto the scene, by
@@ -12,6 +15,7 @@
 //! are newtons of the chosen [`DeviceModel`] in device axes (the same axes as the scene's:
 //! the zone does not rotate).
 
+pub mod feed;
 pub mod path;
 
 use glam::{DQuat, DVec3};
