@@ -663,6 +663,64 @@ fn a_carve_stroke_is_one_op_shows_where_dragged_survives_a_restart_and_undoes() 
     assert!(back < 2.0, "after undo the drag's box differs by {back}");
 }
 
+/// Carve strokes across the watermelon's side facing the camera, one op each.
+const CARVES: [&str; 5] = [
+    "0.32,0.66:0.52,0.72",
+    "0.3,0.42:0.42,0.36",
+    "0.58,0.62:0.68,0.52",
+    "0.44,0.3:0.58,0.32",
+    "0.36,0.52:0.5,0.56",
+];
+/// The watermelon's part of the viewport.
+const MELON: [f32; 4] = [0.2, 0.2, 0.8, 0.8];
+
+#[test]
+fn carve_strokes_patch_the_mesh_and_upload_the_patch_drawing_what_a_whole_mesh_draws() {
+    let display = display();
+    let dir = scratch("patched");
+    let drags: Vec<String> = CARVES.iter().map(|d| format!("drag: {d}")).collect();
+    let mut commands = vec!["tool: carve ball radius 0.08"];
+    commands.extend(drags.iter().map(String::as_str));
+    let carved = window_run(&display, &dir, "carved", &commands);
+    let state = &carved.state;
+    let object = &state["objects"][0];
+    assert_eq!(object["n_edits"], CARVES.len(), "{state}");
+    // The first mesh was whole; every stroke (previews and the op) was a patch.
+    assert_eq!(object["mesh_kind"], "patch", "{state}");
+    assert_eq!(state["meshes"]["whole"], 1, "{state}");
+    let n_patched = state["meshes"]["patched"].as_u64().unwrap();
+    assert!(n_patched >= CARVES.len() as u64, "{state}");
+    // The renderer took every patch and wrote a fraction of the whole mesh's bytes (about 38
+    // per triangle: 12 of indices and half a 52-byte vertex).
+    assert_eq!(state["patches_refused"], 0, "{state}");
+    let n_triangles = object["n_triangles"].as_u64().unwrap();
+    let uploaded = state["last_upload_bytes"].as_u64().unwrap();
+    assert!(
+        uploaded > 0 && uploaded * 3 < 38 * n_triangles,
+        "{uploaded} bytes uploaded for a mesh of {n_triangles} triangles"
+    );
+    // A restart meshes the stored object whole: the same picture within the tolerance.
+    let again = window_run(&display, &dir, "again", &[]);
+    assert_eq!(
+        again.state["objects"][0]["mesh_kind"], "whole",
+        "{}",
+        again.state
+    );
+    assert_eq!(again.state["objects"][0]["n_edits"], CARVES.len());
+    let before = window_run(&display, &dir.join("plain"), "plain", &[]);
+    assert!(difference(&before.picture, &carved.picture, MELON) > 1.0);
+    let apart = difference(&carved.picture, &again.picture, MELON);
+    assert!(apart < 2.0, "patched and whole pictures differ by {apart}");
+    // A property change meshes whole; a stroke after it patches again.
+    let recoloured = window_run(&display, &dir, "recoloured", &["colour: 0.2, 0.4, 0.9"]);
+    assert_eq!(recoloured.state["objects"][0]["mesh_kind"], "whole");
+    assert_eq!(
+        recoloured.state["meshes"]["whole"], 2,
+        "{}",
+        recoloured.state
+    );
+}
+
 #[test]
 fn a_paint_stroke_of_density_changes_the_density_where_it_went() {
     let display = display();

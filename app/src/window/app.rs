@@ -10,12 +10,13 @@ use std::time::Instant;
 use eframe::egui;
 use fdsl::scene::ObjectId;
 use glam::Vec3;
-use render::mesh::Aabb;
+use render::mesh::octree::MeshPatch;
+use render::mesh::{Aabb, Mesh};
 use render::scene::{Line, PickHit, Scene, SceneObject};
 use render::snapshot::render_from_scene;
 
 use super::hooks::Hooks;
-use super::mesher::{MeshJob, Mesher};
+use super::mesher::{MeshJob, MeshKind, Mesher};
 use super::viewport::{StrokeEvent, StrokePhase, ViewState, ViewportReport, viewport_ui};
 use ::app::brush::{Brush, Stroke};
 use ::app::clock::{self, Now};
@@ -46,6 +47,14 @@ const PREVIEW_MILLIS: u64 = 120;
 const PRESENCE_CROSS_SIZE: f32 = 0.06;
 /// Colour of the selected object's box.
 const SELECTION_COLOUR: [f32; 4] = [1.0, 0.85, 0.2, 1.0];
+/// Patches kept for the viewport between its draws.
+pub const PATCHES_KEPT_MAX: usize = 256;
+/// Meshing that has run this long shows in the title ("meshing N…").
+pub const MESHING_SHOWN_MILLIS: u64 = 200;
+
+/// A patch for `Renderer::patch_object`: the object, the mesh it starts from, the mesh it
+/// makes, and the ranges written.
+pub type PatchForRenderer = (ObjectId, Arc<Mesh>, Arc<Mesh>, MeshPatch);
 
 /// One scene object as the app tracks it: what was sent to the mesher, what is drawn.
 #[derive(Default)]
@@ -71,6 +80,10 @@ pub struct Tracked {
     pub skipped: Option<String>,
     /// Seconds its last mesh took on the worker.
     pub mesh_secs: f64,
+    /// How its drawn mesh was made.
+    pub kind: Option<MeshKind>,
+    /// Since when it has waited for a mesh (none while drawn as the scene has it).
+    pub meshing_since: Option<Instant>,
 }
 
 /// Frame and meshing times, for the status line and the state dump.
@@ -84,6 +97,9 @@ pub struct Stats {
     pub frame_interval_ms: Vec<f64>,
     /// Milliseconds from an edit being authored to its object's new mesh being drawn.
     pub edit_to_mesh_ms: Vec<f64>,
+    /// Meshes drawn, by how they were made.
+    pub n_patched: u64,
+    pub n_whole: u64,
     last_frame_start: Option<Instant>,
 }
 
@@ -98,6 +114,8 @@ fn push_bounded(samples: &mut Vec<f64>, value: f64, max: usize) {
 pub struct SculptApp {
     pub(super) engine: Engine,
     mesher: Mesher,
+    /// Patches of meshes swapped in since the viewport last took them.
+    pub(super) patches: Vec<PatchForRenderer>,
     depth: u8,
     pub(super) objects: BTreeMap<ObjectId, Tracked>,
     /// Where this window is in the engine's change stream.
@@ -192,6 +210,7 @@ impl SculptApp {
         Ok(SculptApp {
             engine,
             mesher: Mesher::start(move || mesher_wake())?,
+            patches: Vec::new(),
             depth,
             objects: BTreeMap::new(),
             changes_cursor: 0,
@@ -260,7 +279,14 @@ impl SculptApp {
         if self.dirty {
             self.dirty = false;
             let scene = view.scene();
-            self.objects.retain(|id, _| scene.object(*id).is_some());
+            let mesher = &self.mesher;
+            self.objects.retain(|id, _| {
+                let kept = scene.object(*id).is_some();
+                if !kept {
+                    mesher.forget(*id);
+                }
+                kept
+            });
             for (id, tracked) in &mut self.objects {
                 if !std::mem::take(&mut tracked.stale) {
                     continue;
@@ -269,6 +295,7 @@ impl SculptApp {
                     continue;
                 };
                 tracked.generation += 1;
+                tracked.meshing_since.get_or_insert(now.instant);
                 tracked.pending = Some(Box::new(MeshJob {
                     id: *id,
                     object: entry.object.clone(),
@@ -287,16 +314,35 @@ impl SculptApp {
         }
     }
 
-    /// Takes finished meshes; stale ones (an edit came since) are dropped.
+    /// Takes finished meshes. One of an older job than the latest is still drawn when newer
+    /// than what is drawn (the workers mesh each object's jobs in order and drop superseded
+    /// ones before they start), so each patch starts from the mesh drawn.
     fn receive_meshes(&mut self, now: Now) {
         while let Some(done) = self.mesher.try_recv() {
             let Some(tracked) = self.objects.get_mut(&done.id) else {
                 continue;
             };
-            if done.generation != tracked.generation {
+            if done.generation <= tracked.drawn_generation {
                 continue;
             }
+            if let (Some((base, patch)), Some(o)) = (done.patch, &done.object) {
+                if self.patches.len() >= PATCHES_KEPT_MAX {
+                    // The viewport has not drawn for a while: it uploads whole meshes then.
+                    self.patches.clear();
+                }
+                self.patches
+                    .push((done.id, base, Arc::clone(&o.mesh), patch));
+            }
+            match done.kind {
+                MeshKind::Patch => self.stats.n_patched += 1,
+                MeshKind::Whole => self.stats.n_whole += 1,
+                MeshKind::Unchanged => {}
+            }
+            tracked.kind = Some(done.kind);
             tracked.drawn_generation = done.generation;
+            if tracked.drawn_generation == tracked.generation {
+                tracked.meshing_since = None;
+            }
             tracked.drawn_box = done.object.as_ref().and_then(world_box);
             tracked.drawn = done.object;
             tracked.lines = done.lines;
@@ -321,6 +367,19 @@ impl SculptApp {
                 .objects
                 .values()
                 .all(|t| t.pending.is_none() && t.drawn_generation == t.generation)
+    }
+
+    /// Objects that have waited for a mesh longer than [`MESHING_SHOWN_MILLIS`] (the title
+    /// shows them; a frame is asked for while any waits, so the title changes in time).
+    pub fn n_meshing_long(&self, now: Instant) -> usize {
+        let shown = std::time::Duration::from_millis(MESHING_SHOWN_MILLIS);
+        self.objects
+            .values()
+            .filter(|t| {
+                t.meshing_since
+                    .is_some_and(|s| now.duration_since(s) >= shown)
+            })
+            .count()
     }
 
     /// Objects waiting for a mesh.
@@ -560,11 +619,20 @@ impl SculptApp {
         self.draw_brush(&mut scene);
         let sphere = bounding_sphere(self.objects.values().filter_map(|t| t.drawn_box));
         let sculpting = self.sculpting;
+        // Each patch goes to the renderer with the object's index in the drawn scene.
+        let patches = std::mem::take(&mut self.patches)
+            .into_iter()
+            .filter_map(|(id, base, mesh, patch)| {
+                let idx = ids.iter().position(|i| *i == id)?;
+                Some((idx, base, mesh, patch))
+            })
+            .collect();
         let mut input = viewport_ui(
             ui,
             sculpting,
             &mut self.view,
             &scene,
+            patches,
             sphere,
             &self.viewport,
         );
@@ -769,6 +837,7 @@ impl SculptApp {
         };
         let tracked = self.objects.entry(id).or_default();
         tracked.generation += 1;
+        tracked.meshing_since.get_or_insert(now);
         tracked.pending = Some(Box::new(MeshJob {
             id,
             object: job.0,
@@ -958,7 +1027,10 @@ impl eframe::App for SculptApp {
         self.files(ui.ctx());
         self.run_hooks(ui.ctx());
         self.publish_presence();
-        let title = format!("sculpt — {}", self.presence_text());
+        let title = match self.n_meshing_long(now.instant) {
+            0 => format!("sculpt — {}", self.presence_text()),
+            n => format!("sculpt — meshing {n}… — {}", self.presence_text()),
+        };
         if title != self.title {
             ui.ctx()
                 .send_viewport_cmd(egui::ViewportCommand::Title(title.clone()));
@@ -976,6 +1048,11 @@ impl eframe::App for SculptApp {
         // An edit made this frame is sent to the mesher at the start of the next one.
         if self.dirty {
             ui.ctx().request_repaint();
+        }
+        if self.n_meshing() > 0 {
+            // So that the title says "meshing" once it has taken long, without other input.
+            ui.ctx()
+                .request_repaint_after(std::time::Duration::from_millis(MESHING_SHOWN_MILLIS));
         }
         let ui_ms = clock::now()
             .instant

@@ -276,6 +276,7 @@ impl SculptApp {
                     "n_triangles": tracked.map(|t| t.n_triangles),
                     "skipped": tracked.and_then(|t| t.skipped.clone()),
                     "mesh_secs": tracked.map(|t| t.mesh_secs),
+                    "mesh_kind": tracked.and_then(|t| t.kind).map(|k| k.name()),
                 })
             })
             .collect();
@@ -323,6 +324,12 @@ impl SculptApp {
             "ui_ms": summary(&self.stats.ui_ms),
             "frame_interval_ms": summary(&self.stats.frame_interval_ms),
             "edit_to_mesh_ms": self.stats.edit_to_mesh_ms,
+            "meshes": json!({
+                "patched": self.stats.n_patched,
+                "whole": self.stats.n_whole,
+            }),
+            "last_upload_bytes": self.viewport.lock().ok().map(|r| r.last_upload_bytes),
+            "patches_refused": self.viewport.lock().ok().map(|r| r.n_patches_refused),
         })
     }
 }

@@ -13,6 +13,8 @@ use eframe::egui;
 use eframe::egui_wgpu::{self, CallbackResources, CallbackTrait, ScreenDescriptor};
 use render::camera::Camera;
 use render::gpu::Renderer;
+use render::mesh::Mesh;
+use render::mesh::octree::MeshPatch;
 use render::scene::{PickHit, Scene};
 use render::snapshot::{View, frame};
 
@@ -220,6 +222,10 @@ pub struct ViewportReport {
     pub error: Option<String>,
     /// Milliseconds per frame, the latest [`PREPARE_SAMPLES_MAX`].
     pub prepare_ms: Vec<f64>,
+    /// Mesh bytes the last prepare that uploaded any wrote (`Renderer::mesh_bytes_uploaded`).
+    pub last_upload_bytes: u64,
+    /// Patches the renderer refused (it uploads those meshes whole).
+    pub n_patches_refused: u64,
 }
 
 /// Frames whose prepare times are kept.
@@ -230,6 +236,9 @@ pub const PREPARE_SAMPLES_MAX: usize = 600;
 pub struct ViewportCallback {
     /// What to draw.
     pub scene: Scene,
+    /// Patches of meshes swapped in since the last frame, by index into `scene.objects`, for
+    /// `Renderer::patch_object`.
+    pub patches: Vec<(usize, Arc<Mesh>, Arc<Mesh>, MeshPatch)>,
     /// The viewport in physical pixels.
     pub size_px: [u32; 2],
     /// Where failures and times are reported to the UI.
@@ -249,11 +258,21 @@ impl CallbackTrait for ViewportCallback {
             return Vec::new();
         };
         let start = clock::now().instant;
+        let mut n_refused = 0;
+        for (idx, base, mesh, patch) in &self.patches {
+            // A refused patch costs only its upload: the mesh then goes up whole.
+            n_refused += u64::from(res.renderer.patch_object(*idx, base, mesh, patch).is_err());
+        }
         let prepared = res
             .renderer
             .prepare(device, queue, &self.scene, self.size_px);
         if let Ok(mut report) = self.report.lock() {
             report.error = prepared.as_ref().err().map(ToString::to_string);
+            report.n_patches_refused += n_refused;
+            let uploaded = res.renderer.mesh_bytes_uploaded();
+            if uploaded > 0 {
+                report.last_upload_bytes = uploaded;
+            }
         }
         if prepared.is_err() {
             res.target = None;
@@ -362,6 +381,7 @@ pub fn viewport_ui(
     sculpting: bool,
     view: &mut ViewState,
     scene: &Scene,
+    patches: Vec<(usize, Arc<Mesh>, Arc<Mesh>, MeshPatch)>,
     sphere: Option<(glam::Vec3, f32)>,
     report: &Arc<Mutex<ViewportReport>>,
 ) -> ViewportInput {
@@ -445,6 +465,7 @@ pub fn viewport_ui(
         rect,
         ViewportCallback {
             scene: drawn,
+            patches,
             size_px,
             report: Arc::clone(report),
         },
