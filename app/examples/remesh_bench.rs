@@ -1,0 +1,243 @@
+//! Stroke released to pixels updated, as the window does it, for an object with 10^4 edits at
+//! octree depths 7 and 8: the window's incremental path against today's whole remesh, in the
+//! same run.
+//!
+//! The object is render's `remesh_object` benchmark object: the unit ball (in a 2.2-unit
+//! domain) carved by 10^4 edits spread over its surface along a golden-angle spiral (ball
+//! tools of radius 0.04, every second edit a short stroke, every fifth adding instead of
+//! carving). Each measured step is one more stroke (at a new place), as an op released in the
+//! window leaves the object.
+//!
+//! - incremental: the window's own mesher (`src/window/mesher.rs`, compiled into this program)
+//!   is handed the object; its worker remeshes the stroke's boxes, patches the last mesh and
+//!   recolours the vertices written; the patch goes to the renderer (`Renderer::patch_object`)
+//!   and a frame is drawn and read back (`Headless::render`: prepare, draw, copy to the CPU).
+//! - whole: what the window did before: `render::snapshot::build` of a one-object scene
+//!   (octree mesh of everything, appearance), the new mesh uploaded whole and the same frame
+//!   drawn and read back.
+//!
+//! The clock starts when the edited object is handed over and stops when the frame's pixels
+//! are back. Medians are printed per depth, with the ratio whole / incremental.
+//!
+//! `cargo run -p app --release --example remesh_bench` (`-- --quick` for 10^3 edits and
+//! fewer samples). With no wgpu adapter it says so and exits non-zero.
+
+use std::time::Duration;
+
+use anyhow::{Context as _, bail, ensure};
+use fdsl::object::Transform;
+use fdsl::object::{Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData, Pose, ToolShape};
+use fdsl::scene::ObjectId;
+use glam::DVec3;
+use render::camera::Camera;
+use render::gpu::offscreen::Headless;
+use render::scene::Scene;
+use render::snapshot::{SnapshotSettings, build};
+
+#[allow(
+    dead_code,
+    reason = "the window's mesher compiled in whole; this program uses part of it"
+)]
+#[path = "../src/window/mesher.rs"]
+mod mesher;
+
+use mesher::{MeshJob, MeshKind, Mesher};
+
+/// Edits in the object before the benchmark adds strokes.
+const N_EDITS: usize = 10_000;
+/// Radius of the ball tool.
+const TOOL_RADIUS: f64 = 0.04;
+/// Depths measured.
+const DEPTHS: [u8; 2] = [7, 8];
+/// Strokes measured per depth on the incremental path.
+const N_INCREMENTAL: usize = 21;
+/// Strokes measured per depth with the whole remesh.
+const N_WHOLE: usize = 5;
+/// The frame drawn after each stroke.
+const FRAME_PX: [u32; 2] = [640, 480];
+/// Longest wait for one mesh.
+const MESH_WAIT_SECS: u64 = 600;
+
+fn main() -> anyhow::Result<()> {
+    let quick = std::env::args().any(|a| a == "--quick");
+    let (n_edits, n_incremental, n_whole) = if quick {
+        (N_EDITS / 10, 5, 2)
+    } else {
+        (N_EDITS, N_INCREMENTAL, N_WHOLE)
+    };
+    let mut gpu = Headless::new().context("no wgpu adapter: pixels cannot be measured")?;
+    println!("device: {}", gpu.adapter_description());
+    let started = app::clock::now().instant;
+    let base = object(n_edits)?;
+    println!(
+        "object: unit ball with {} edits, built in {:.1?}",
+        base.history().len(),
+        started.elapsed()
+    );
+    for depth in DEPTHS {
+        let mut object = base.clone();
+        let mut next_stroke = 0;
+        let mut stroke = |object: &mut Object| -> anyhow::Result<()> {
+            next_stroke += 1;
+            object.apply(spiral_edit(next_stroke * 7919, n_edits, 0.5))?;
+            Ok(())
+        };
+
+        // The window's incremental path: the first mesh is whole, then one patch per stroke.
+        let mesher = Mesher::with_threads(1, || {})?;
+        let mut scene = Scene {
+            camera: Camera {
+                distance: 3.2,
+                ..Camera::default()
+            },
+            ..Scene::default()
+        };
+        let mut generation = 0;
+        let mut incremental_ms = Vec::new();
+        let mut first = None;
+        let (mut n_patched, mut n_triangles_written, mut n_triangles) = (0, Vec::new(), 0);
+        for k in 0..=n_incremental {
+            if k > 0 {
+                stroke(&mut object)?;
+            }
+            generation += 1;
+            let t0 = app::clock::now().instant;
+            let done = mesh_with(&mesher, &object, depth, generation)?;
+            let drawn = done.object.context("the object has a mesh")?;
+            if let Some((base, patch)) = &done.patch {
+                gpu.renderer_mut()
+                    .patch_object(0, base, &drawn.mesh, patch)?;
+                n_triangles_written.push(patch.n_triangles_written());
+            }
+            n_patched += usize::from(done.kind == MeshKind::Patch);
+            n_triangles = drawn.mesh.n_triangles();
+            scene.objects.clear();
+            scene.objects.push(drawn);
+            gpu.render(&scene, FRAME_PX[0], FRAME_PX[1])?;
+            let ms = t0.elapsed().as_secs_f64() * 1e3;
+            if k == 0 {
+                first = Some(ms);
+            } else {
+                incremental_ms.push(ms);
+            }
+        }
+        ensure!(
+            n_patched == n_incremental,
+            "only {n_patched} of {n_incremental} strokes were patched"
+        );
+        n_triangles_written.sort_unstable();
+
+        // Today's path: each stroke meshed whole through `snapshot::build`, uploaded whole.
+        let mut whole_gpu = Headless::new()?;
+        let mut whole_ms = Vec::new();
+        for _ in 0..n_whole {
+            stroke(&mut object)?;
+            let t0 = app::clock::now().instant;
+            let mut one = fdsl::scene::Scene::new();
+            let mut o = object.clone();
+            o.prepare();
+            one.insert_object(ObjectId(1), o, None)?;
+            let built = build(
+                &one,
+                &SnapshotSettings {
+                    depth,
+                    ..SnapshotSettings::default()
+                },
+            )?;
+            let Some(drawn) = built.scene.objects.into_iter().next() else {
+                bail!("the whole mesh is empty");
+            };
+            scene.objects.clear();
+            scene.objects.push(drawn);
+            whole_gpu.render(&scene, FRAME_PX[0], FRAME_PX[1])?;
+            whole_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+        }
+        let (inc, whole) = (median(&mut incremental_ms), median(&mut whole_ms));
+        println!(
+            "depth {depth}: {n_triangles} triangles; first mesh (whole, with patch state) {:.0} ms",
+            first.unwrap_or(0.0)
+        );
+        println!(
+            "  stroke released -> pixels, medians: incremental {inc:.1} ms (of {n_incremental}, \
+             {} triangles written), whole {whole:.1} ms (of {n_whole}); whole / incremental {:.1}",
+            n_triangles_written
+                .get(n_triangles_written.len() / 2)
+                .copied()
+                .unwrap_or(0),
+            whole / inc
+        );
+    }
+    Ok(())
+}
+
+/// Hands `object` to the mesher and waits for its result.
+fn mesh_with(
+    mesher: &Mesher,
+    object: &Object,
+    depth: u8,
+    generation: u64,
+) -> anyhow::Result<mesher::Meshed> {
+    let job = Box::new(MeshJob {
+        id: ObjectId(1),
+        object: object.clone(),
+        world_from_group: Transform::IDENTITY,
+        generation,
+        depth,
+        requested_at: app::clock::now().instant,
+    });
+    if mesher.try_send(job).is_err() {
+        bail!("the mesher's queue is full");
+    }
+    let done = mesher
+        .recv_timeout(Duration::from_secs(MESH_WAIT_SECS))
+        .context("no mesh in time")?;
+    ensure!(done.generation == generation, "a result of another job");
+    if let Some(reason) = &done.skipped {
+        bail!("not meshed: {reason}");
+    }
+    Ok(done)
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+/// Edit `k` of a spiral of `n` over the unit sphere, turned by `phase` radians (render's
+/// `remesh_object` benchmark).
+fn spiral_edit(k: usize, n: usize, phase: f64) -> Edit {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    let y = 1.0 - 2.0 * ((k % n) as f64 + 0.5) / n as f64;
+    let ring = (1.0 - y * y).max(0.0).sqrt();
+    let phi = golden * k as f64 + phase;
+    let at = DVec3::new(ring * phi.cos(), y, ring * phi.sin());
+    let op = if k % 5 == 4 {
+        EditOp::Union
+    } else {
+        EditOp::Subtract
+    };
+    let tool = ToolShape::Sphere {
+        radius: TOOL_RADIUS,
+    };
+    if k.is_multiple_of(2) {
+        Edit::stamp(op, tool, Pose::at(at))
+    } else {
+        let side = at.any_orthonormal_vector() * 0.03;
+        Edit::stroke(op, tool, vec![Pose::at(at - side), Pose::at(at + side)])
+    }
+}
+
+fn object(n_edits: usize) -> anyhow::Result<Object> {
+    let mut object = Object::new(ObjectData {
+        geometry: Some(Geometry::implicit_in(
+            Formula::new("1-sqrt(x^2+y^2+z^2)")?,
+            Domain::new(DVec3::ZERO, DVec3::splat(2.2)),
+        )),
+        ..ObjectData::default()
+    })?;
+    for k in 0..n_edits {
+        object.apply(spiral_edit(k, n_edits, 0.0))?;
+    }
+    object.prepare();
+    Ok(object)
+}
