@@ -247,9 +247,12 @@ impl Engine {
             .then(|| demo_payloads_from(lock(&view).next_object_id()));
         let (requests, inbox) = tokio::sync::mpsc::channel(MAX_QUEUED_REQUESTS);
         let (ready_tx, ready_rx) = std_mpsc::channel();
+        // The discovery id takes a slow derivation (argon2id): once per start.
+        let keys = SessionKeys::from_invite(&invite);
+        let discovery_id = keys.discovery_id();
         let node_config = NodeConfig {
             keypair,
-            keys: SessionKeys::from_invite(&invite),
+            keys,
             listen: config.network.listen,
             log,
             store,
@@ -267,7 +270,7 @@ impl Engine {
             view: view.clone(),
             news: news.clone(),
             network: config.network.clone(),
-            discovery_id: SessionKeys::from_invite(&invite).discovery_id(),
+            discovery_id,
             presence: local_presence.clone(),
             dialed: Arc::default(),
             shared: tokio::sync::watch::channel(

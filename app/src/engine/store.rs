@@ -275,13 +275,15 @@ pub fn memory_keypair(now: Timestamp) -> Keypair {
 }
 
 /// The name of the store directory a joined session gets by default: `joined-` and the first
-/// bytes of its discovery id (public, unlike the invite), so each session has its own.
+/// bytes of a hash of its invite under a context of its own, so each session has its own. It
+/// is not the discovery id, which takes a slow derivation (about 0.1 s and 64 MiB) to compute;
+/// a directory name is only ever local, and the directory holds the invite anyway.
 pub fn joined_dir_name(invite: &Invite) -> String {
-    let keys = replication::net::SessionKeys::from_invite(invite);
-    let hex: String = keys.discovery_id()[..6]
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect();
+    let hash = blake3::derive_key(
+        "sculpt 2026-11-24 the store directory of a joined session",
+        invite.to_string().as_bytes(),
+    );
+    let hex: String = hash[..6].iter().map(|b| format!("{b:02x}")).collect();
     format!("joined-{hex}")
 }
 

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use fdsl::object::{Field, Formula, Geometry, Shape};
+use rand_core::SeedableRng;
 use replication::Timestamp;
 
 use super::*;
@@ -342,4 +343,31 @@ fn news_keeps_the_latest_lines_and_disconnections_read_as_actions() {
         remote: 3,
     }));
     assert!(text.contains("protocol 3, this build speaks 2"), "{text}");
+}
+
+#[test]
+fn a_joined_sessions_directory_is_named_by_its_invite_without_revealing_it() {
+    let a = replication::net::invite::Invite::generate(&mut rand_chacha::ChaCha20Rng::from_seed(
+        [1; 32],
+    ));
+    let b = replication::net::invite::Invite::generate(&mut rand_chacha::ChaCha20Rng::from_seed(
+        [2; 32],
+    ));
+    let name = store::joined_dir_name(&a);
+    assert_eq!(
+        name,
+        store::joined_dir_name(&a),
+        "the same invite, the same directory"
+    );
+    assert_ne!(name, store::joined_dir_name(&b));
+    assert!(name.starts_with("joined-") && name.len() == "joined-".len() + 12);
+    let code = a.to_string().replace('-', "");
+    assert!(
+        !code.contains(&name["joined-".len()..]),
+        "the name is not part of the code"
+    );
+    // Not the discovery id (which is public on the LAN, and slow to derive).
+    let discovery = replication::net::SessionKeys::from_invite(&a).discovery_id();
+    let discovery_hex: String = discovery[..6].iter().map(|b| format!("{b:02x}")).collect();
+    assert_ne!(&name["joined-".len()..], discovery_hex);
 }
