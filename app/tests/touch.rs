@@ -224,34 +224,41 @@ fn the_watermelons_rind_pushes_out_harder_with_depth_then_pops_as_in_the_trace_t
 }
 
 #[test]
-fn the_watermelon_scene_file_has_no_surface_zone_so_its_rind_only_resists_motion() {
-    // TODO(touch): `tests/data/scenes/watermelon.wrl` (the demo) enables tension but gives no
-    // `FDepth`, so its surface zone is 0 deep and the rind is never felt as a membrane: a hand
-    // resting in the rind feels nothing. This asserts that behaviour; giving the file a depth
-    // (the haptic crate's watermelon has 0.05) should turn it into the test above.
+fn the_demo_watermelons_rind_holds_a_resting_hand_then_pops() {
+    // The demo scene (`tests/data/scenes/watermelon.wrl`): tension 1 over a surface zone 0.05
+    // deep. A hand comes down onto the rind, rests 0.03 inside it, then pushes on to 0.12 and
+    // rests in the flesh.
     let dir = scratch("watermelon-wrl");
+    let (x, z) = (-0.2, -0.2);
+    let at_radius = |r: f64| DVec3::new(x, (r * r - x * x - z * z).sqrt(), z);
     let rows = [
-        (0.0, DVec3::new(-0.2, 1.2, -0.2)),
-        (0.3, DVec3::new(-0.2, 1.2, -0.2)),
-        (2.3, DVec3::new(-0.2, 0.9, -0.2)),
-        (2.8, DVec3::new(-0.2, 0.9, -0.2)),
+        (0.0, at_radius(1.2)),
+        (0.3, at_radius(1.2)),
+        (2.3, at_radius(0.97)),
+        (2.8, at_radius(0.97)),
+        (4.8, at_radius(0.88)),
+        (5.3, at_radius(0.88)),
     ];
     let path_csv = csv(&rows);
     let forces = touch(&dir, &scene_file("watermelon.wrl"), &path_csv, &[]);
-    let hips = points(&path_csv);
-    let inside = |k: usize| hips[k].length() < 0.995;
-    let moving_in: Vec<DVec3> = (0..2300)
-        .filter(|&k| k > 1700 && inside(k - 30))
-        .map(|k| forces[k].1)
-        .collect();
-    assert!(moving_in.len() > 300);
-    // Density 0.8 of the Falcon's 20 N s/m against 0.15 scene units per second (about 7 mm/s
-    // of device at 22 units per metre): a small upward drag.
-    for f in &moving_in {
-        assert!(f.y > 0.05 && f.y < 0.3, "{f}");
-    }
-    // Resting in the rind: no membrane pushes back.
-    assert!(forces[2790].1.length() < 1e-3, "{}", forces[2790].1);
+    let outward = |k: usize| forces[k].1.dot(points(&path_csv)[k].normalize());
+    // Resting in the rind, inside its zone: the membrane pushes the hand back out.
+    // (4.2 N when this was written, of the Falcon's 8 N.)
+    let resting = outward(2790);
+    assert!(resting > 2.0, "resting in the rind: {resting} N");
+    assert!(
+        resting > 0.95 * forces[2790].1.length(),
+        "the push is along the rind's normal: {}",
+        forces[2790].1
+    );
+    // Pushed through the zone: the membrane popped; resting in the flesh nothing pushes.
+    let popped = forces[5290].1;
+    let peak = (2800..4800).map(outward).fold(f64::MIN, f64::max);
+    assert!(popped.length() < 1e-3, "resting in the flesh: {popped}");
+    assert!(
+        peak >= resting,
+        "the push grows until it pops: {peak} after {resting}"
+    );
 }
 
 #[test]

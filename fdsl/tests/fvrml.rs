@@ -226,6 +226,7 @@ fn hand_written_watermelon_loads_and_round_trips() {
     assert!(rind[1] > rind[0] && rind[1] > rind[2], "{rind:?}");
     assert_eq!(s.scalar(Paintable::Tension, DVec3::X, 0.0), Some(1.0));
     assert_eq!(s.scalar(Paintable::Friction, DVec3::X, 0.0), Some(0.1));
+    assert_eq!(s.scalar(Paintable::ZoneDepth, DVec3::X, 0.0), Some(0.05));
     assert_eq!(
         s.scalar(Paintable::Density, DVec3::new(0.0, -0.9, 0.0), 0.0),
         Some(0.8)
