@@ -9,6 +9,22 @@ pub const MAX_SOURCE_BYTES: usize = 64 * 1024;
 pub const MAX_NESTING_DEPTH: usize = 256;
 /// The most nodes an expression graph may hold after deduplication.
 pub const MAX_GRAPH_NODES: usize = 200_000;
+/// An object's formula may unroll to at most this many graph nodes plus
+/// [`MAX_FORMULA_NODES_PER_BYTE`] per byte of its text ([`formula_node_budget`]): formulas
+/// travel between peers, and a short loop that unrolls to [`MAX_GRAPH_NODES`] would make every
+/// receiver compile a hundred times more per byte than a typed expression does.
+pub const MAX_FORMULA_NODES_BASE: usize = 256;
+/// See [`MAX_FORMULA_NODES_BASE`]. Typed expressions need less than one node per byte (the
+/// reference models 0.14 to 0.86).
+pub const MAX_FORMULA_NODES_PER_BYTE: usize = 16;
+
+/// The most graph nodes an object's formula of `source_bytes` may unroll to.
+pub fn formula_node_budget(source_bytes: usize) -> usize {
+    MAX_FORMULA_NODES_BASE
+        .saturating_add(MAX_FORMULA_NODES_PER_BYTE.saturating_mul(source_bytes))
+        .min(MAX_GRAPH_NODES)
+}
+
 /// The most iterations one loop may run when it is unrolled.
 pub const MAX_LOOP_TRIPS: usize = 1024;
 /// The most statements executed while unrolling a whole program (its fuel).

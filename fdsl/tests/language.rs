@@ -115,6 +115,7 @@ fn r_function_mode_changes_set_operators() {
     let p = [0.2, 0.4, 0.1, 0.0];
     let options = fdsl::Options {
         set_ops: fdsl::SetOps::RFunction,
+        ..fdsl::Options::default()
     };
     let f = Function::parse_with("(1-x^2-y^2-z^2) & (0.5 - x)", options).unwrap();
     let v = PointEval::new(&f.tape()).eval(p);

@@ -222,14 +222,23 @@ fn replayed(n: usize) -> Workload {
     }
 }
 
-/// Signed formulas that compile to the most work per byte: a short loop unrolled to the
-/// graph's limits.
+/// Signed formulas that compile to the most work per byte: a short loop unrolled to just
+/// under the budget an object's formula has (`fdsl::limits::formula_node_budget`).
 fn compile_bomb(n: usize) -> Workload {
     let key = Keypair::from_seed([4; 32]);
-    let bomb = "s = x; for (i = 0; i < 1000; i = i + 1) { s = sin(s + i*y) * cos(s - i*z) + s; } s";
+    let bomb = "s = x; for (i = 0; i < 172; i = i + 1) { s = sin(s + i*y) * cos(s - i*z) + s; } s";
+    let nodes = fdsl::Function::parse(bomb).expect("compiles").graph_len();
+    let budget = fdsl::limits::formula_node_budget(bomb.len());
+    assert!(
+        nodes <= budget && nodes + 100 > budget,
+        "{nodes} of {budget}"
+    );
     let payloads = std::iter::once(create(1, bomb)).chain((1..n).map(|_| set_geometry(1, bomb)));
     Workload {
-        name: "compile bomb: a loop unrolled 1000 times (82 B formula)".into(),
+        name: format!(
+            "compile bomb: a loop unrolled to {nodes} nodes, budget {budget} ({} B formula)",
+            bomb.len()
+        ),
         setup: Vec::new(),
         received: authored(&key, payloads),
         decode_first: false,

@@ -35,22 +35,41 @@ pub enum Op {
     Ternary(TernaryOp, Node, Node, Node),
 }
 
-/// The graph grew past [`MAX_GRAPH_NODES`].
+/// The graph grew past its limit (at most [`MAX_GRAPH_NODES`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("the expression needs more than {MAX_GRAPH_NODES} operations")]
-pub struct GraphFull;
+#[error("the expression needs more than {limit} operations")]
+pub struct GraphFull {
+    /// The graph's limit.
+    pub limit: usize,
+}
 
 /// An arena of operations with deduplication.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct Context {
     ops: Vec<Op>,
     dedup: BTreeMap<Op, Node>,
+    limit: usize,
+}
+
+impl Default for Context {
+    fn default() -> Context {
+        Context::with_limit(MAX_GRAPH_NODES)
+    }
 }
 
 impl Context {
     /// An empty graph.
     pub fn new() -> Context {
         Context::default()
+    }
+
+    /// An empty graph that may hold `limit` nodes (at most [`MAX_GRAPH_NODES`]).
+    pub fn with_limit(limit: usize) -> Context {
+        Context {
+            ops: Vec::new(),
+            dedup: BTreeMap::new(),
+            limit: limit.min(MAX_GRAPH_NODES),
+        }
     }
 
     /// How many distinct operations the graph holds.
@@ -85,8 +104,8 @@ impl Context {
         if let Some(&node) = self.dedup.get(&op) {
             return Ok(node);
         }
-        if self.ops.len() >= MAX_GRAPH_NODES {
-            return Err(GraphFull);
+        if self.ops.len() >= self.limit {
+            return Err(GraphFull { limit: self.limit });
         }
         let node = Node(self.ops.len() as u32);
         self.ops.push(op);
@@ -316,7 +335,12 @@ mod tests {
                 Err(_) => break,
             }
         }
-        assert_eq!(result, Err(GraphFull));
+        assert_eq!(
+            result,
+            Err(GraphFull {
+                limit: MAX_GRAPH_NODES
+            })
+        );
         assert_eq!(ctx.len(), MAX_GRAPH_NODES);
     }
 }

@@ -35,6 +35,10 @@ pub enum SetOps {
 pub struct Options {
     /// What `& | \` mean.
     pub set_ops: SetOps,
+    /// The most graph nodes the program may unroll to, below
+    /// [`crate::limits::MAX_GRAPH_NODES`] (`None`: that limit); objects' formulas use
+    /// [`crate::limits::formula_node_budget`].
+    pub max_graph_nodes: Option<usize>,
 }
 
 /// A lowered program: the graph and its named outputs.
@@ -99,7 +103,11 @@ const FUNCTION_NAMES: &[&str] = &[
 /// Lowers a parsed program. Returns `None` when any error was reported.
 pub fn lower(program: &Program, options: Options) -> (Option<Lowered>, Vec<Diagnostic>) {
     let mut lowerer = Lowerer {
-        ctx: Context::new(),
+        ctx: Context::with_limit(
+            options
+                .max_graph_nodes
+                .unwrap_or(crate::limits::MAX_GRAPH_NODES),
+        ),
         options,
         diagnostics: Vec::new(),
         fuel: 0,
@@ -167,6 +175,14 @@ impl Lowerer {
     fn full<T>(&mut self, span: Span, r: Result<T, GraphFull>) -> LResult<T> {
         match r {
             Ok(v) => Ok(v),
+            Err(e) if e.limit < crate::limits::MAX_GRAPH_NODES => {
+                self.fail(Diagnostic::error(span, e.to_string()).with_hint(format!(
+                    "an object's formula may unroll to {} operations plus {} per character \
+                     of its text: run loops fewer times",
+                    crate::limits::MAX_FORMULA_NODES_BASE,
+                    crate::limits::MAX_FORMULA_NODES_PER_BYTE
+                )))
+            }
             Err(e) => self
                 .fail(Diagnostic::error(span, e.to_string()).with_hint("simplify the definition")),
         }

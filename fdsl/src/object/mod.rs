@@ -87,10 +87,15 @@ impl Formula {
     /// Compiles the formula and takes a tape of `outputs` (or the main value when empty).
     fn tape(&self, slot: Slot, outputs: &[&str]) -> Result<Tape, ObjectError> {
         self.check_len()?;
-        let function = Function::parse(&self.0).map_err(|error| ObjectError::Compile {
-            slot,
-            error: Box::new(error),
-        })?;
+        let options = crate::Options {
+            max_graph_nodes: Some(crate::limits::formula_node_budget(self.0.len())),
+            ..crate::Options::default()
+        };
+        let function =
+            Function::parse_with(&self.0, options).map_err(|error| ObjectError::Compile {
+                slot,
+                error: Box::new(error),
+            })?;
         if outputs.is_empty() {
             return Ok(function.tape());
         }
