@@ -231,3 +231,39 @@ async fn a_node_with_a_store_persists_authored_and_received_ops() {
     assert_eq!(stored, held);
     std::fs::remove_file(&path).unwrap();
 }
+
+#[tokio::test]
+async fn a_received_batch_of_ops_costs_one_fsync_not_one_per_op() {
+    use replication::store::OpStore;
+    let path = scratch_store("batched-fsync");
+    let (store, _, _) = OpStore::<TestPayload>::open(&path).unwrap();
+    let b = replication::net::Node::spawn(replication::net::NodeConfig {
+        keypair: Keypair::from_seed([2; 32]),
+        keys: session_keys(INVITE),
+        listen: "127.0.0.1:0".parse().unwrap(),
+        log: Log::default(),
+        store: Some(store),
+    })
+    .unwrap();
+    let a = node(1);
+    let n_ops = 320;
+    for i in 0..n_ops {
+        a.handle
+            .author(TestPayload::Chat(format!("line {i}")))
+            .await
+            .unwrap();
+    }
+    b.handle.dial(a.handle.local_addr()).await.unwrap();
+    converge(&[&a.handle, &b.handle], n_ops).await;
+    let syncs = b.handle.stats().await.unwrap().n_store_syncs;
+    // Batches carry up to 64 ops; a step may deliver one or several.
+    assert!(
+        (1..=n_ops as u64 / 8).contains(&syncs),
+        "{syncs} fsyncs for {n_ops} received ops"
+    );
+    b.handle.shutdown().await.unwrap();
+    let mut reloaded = Log::<TestPayload>::default();
+    OpStore::open_into(&path, Timestamp(0), &mut reloaded).unwrap();
+    assert_eq!(reloaded.len(), n_ops);
+    std::fs::remove_file(&path).unwrap();
+}

@@ -502,6 +502,7 @@ impl<P: Payload + Send + 'static> Core<P> {
     fn stats_snapshot(&self) -> NodeStats {
         let mut stats = self.stats.clone();
         self.counters.fill(&mut stats);
+        stats.n_store_syncs = self.store.as_ref().map_or(0, OpStore::n_syncs);
         stats.connections = self
             .peer
             .connections()

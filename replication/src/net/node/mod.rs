@@ -361,6 +361,9 @@ pub struct NodeStats {
     /// yet (the dialer echoes the token from its address, and only then does this node keep
     /// any state or count the attempt against the address).
     pub n_retries: u64,
+    /// Store appends synced (one `fsync` each) since the node started: one per settled step
+    /// that delivered ops, not one per op.
+    pub n_store_syncs: u64,
     /// Connections ended.
     pub n_disconnected: u64,
     /// Connections cut off for too many sync rejections.
