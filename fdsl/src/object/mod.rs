@@ -20,6 +20,7 @@
 pub mod appearance;
 mod box_sampler;
 pub mod codec;
+pub mod compiled;
 pub mod edit;
 pub mod fit;
 pub mod geometry;
@@ -87,21 +88,23 @@ impl Formula {
     /// Compiles the formula and takes a tape of `outputs` (or the main value when empty).
     fn tape(&self, slot: Slot, outputs: &[&str]) -> Result<Tape, ObjectError> {
         self.check_len()?;
-        let options = crate::Options {
-            max_graph_nodes: Some(crate::limits::formula_node_budget(self.0.len())),
-            ..crate::Options::default()
-        };
-        let function =
-            Function::parse_with(&self.0, options).map_err(|error| ObjectError::Compile {
-                slot,
-                error: Box::new(error),
-            })?;
-        if outputs.is_empty() {
-            return Ok(function.tape());
-        }
-        function
-            .tape_for(outputs)
-            .map_err(|error| ObjectError::MissingOutput { slot, error })
+        compiled::tape(&self.0, outputs, || {
+            let options = crate::Options {
+                max_graph_nodes: Some(crate::limits::formula_node_budget(self.0.len())),
+                ..crate::Options::default()
+            };
+            let function =
+                Function::parse_with(&self.0, options).map_err(|error| ObjectError::Compile {
+                    slot,
+                    error: Box::new(error),
+                })?;
+            if outputs.is_empty() {
+                return Ok(function.tape());
+            }
+            function
+                .tape_for(outputs)
+                .map_err(|error| ObjectError::MissingOutput { slot, error })
+        })
     }
 }
 

@@ -1,0 +1,152 @@
+//! Compiled formulas kept per process, keyed by their text and the outputs taken: a formula is
+//! compiled once however many times objects holding it are built (a received op is validated,
+//! then folded; a scene is reloaded; an object is copied for the mesher or the servo).
+//!
+//! The cache holds at most [`MAX_CACHED_TAPES`] tapes and [`MAX_CACHED_INSTRUCTIONS`]
+//! instructions in all; past either, the oldest entries go first. Failures are not kept (a
+//! formula that fails stops at its budget, see [`crate::limits::formula_node_budget`]).
+
+use std::cell::Cell;
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::{Mutex, PoisonError};
+
+use crate::tape::Tape;
+
+/// Most tapes kept.
+pub const MAX_CACHED_TAPES: usize = 4096;
+/// Most instructions kept over all tapes (a few tens of MB at most).
+pub const MAX_CACHED_INSTRUCTIONS: usize = 2_000_000;
+
+/// The formula's text and the outputs its tape takes (empty: the main value).
+type Key = (String, Vec<String>);
+
+struct Cache {
+    tapes: BTreeMap<Key, Tape>,
+    /// Keys in insertion order, oldest first.
+    order: VecDeque<Key>,
+    n_instructions: usize,
+}
+
+static CACHE: Mutex<Cache> = Mutex::new(Cache {
+    tapes: BTreeMap::new(),
+    order: VecDeque::new(),
+    n_instructions: 0,
+});
+
+thread_local! {
+    /// Formulas compiled on this thread (cache misses).
+    static N_COMPILED: Cell<u64> = const { Cell::new(0) };
+}
+
+/// How many formulas this thread has compiled for objects (each a cache miss): what a test
+/// reads to show a formula is compiled once.
+pub fn n_compiled_on_this_thread() -> u64 {
+    N_COMPILED.with(Cell::get)
+}
+
+/// The tape of `outputs` of the formula `text`, from the cache or from `compile` (then kept).
+pub(crate) fn tape<E>(
+    text: &str,
+    outputs: &[&str],
+    compile: impl FnOnce() -> Result<Tape, E>,
+) -> Result<Tape, E> {
+    let key: Key = (
+        text.to_owned(),
+        outputs.iter().map(|&o| o.to_owned()).collect(),
+    );
+    if let Some(tape) = lock().tapes.get(&key) {
+        return Ok(tape.clone());
+    }
+    // Compiled outside the lock: another thread may compile the same formula meanwhile, and
+    // both results are the same.
+    N_COMPILED.with(|n| n.set(n.get() + 1));
+    let tape = compile()?;
+    let mut cache = lock();
+    if tape.len() <= MAX_CACHED_INSTRUCTIONS && !cache.tapes.contains_key(&key) {
+        while cache.tapes.len() >= MAX_CACHED_TAPES
+            || cache.n_instructions + tape.len() > MAX_CACHED_INSTRUCTIONS
+        {
+            let Some(oldest) = cache.order.pop_front() else {
+                break;
+            };
+            if let Some(old) = cache.tapes.remove(&oldest) {
+                cache.n_instructions -= old.len();
+            }
+        }
+        cache.n_instructions += tape.len();
+        cache.order.push_back(key.clone());
+        cache.tapes.insert(key, tape.clone());
+    }
+    Ok(tape)
+}
+
+fn lock() -> std::sync::MutexGuard<'static, Cache> {
+    CACHE.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Drops every cached tape (what a process that built formulas it will not see again, or a
+/// benchmark that must start cold, calls).
+pub fn clear() {
+    let mut cache = lock();
+    cache.tapes.clear();
+    cache.order.clear();
+    cache.n_instructions = 0;
+}
+
+/// Tapes and instructions held now.
+pub fn cached() -> (usize, usize) {
+    let cache = lock();
+    (cache.tapes.len(), cache.n_instructions)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::object::{Formula, Geometry, Object, ObjectData};
+
+    fn object(text: &str) -> Object {
+        Object::new(ObjectData {
+            geometry: Some(Geometry::implicit(Formula::new(text).unwrap())),
+            ..ObjectData::default()
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn a_formula_is_compiled_once_however_many_objects_hold_it() {
+        let text = "0.7071 - sqrt(x^2 + y^2 + z^2) /* compiled once */";
+        let before = n_compiled_on_this_thread();
+        let a = object(text);
+        assert_eq!(n_compiled_on_this_thread(), before + 1);
+        let b = object(text);
+        let c = a.clone();
+        assert_eq!(
+            n_compiled_on_this_thread(),
+            before + 1,
+            "the second object compiled again"
+        );
+        // The cached tape computes what a fresh compile does.
+        let p = glam::DVec3::new(0.1, 0.2, 0.3);
+        assert_eq!(a.sampler().value(p, 0.0), b.sampler().value(p, 0.0));
+        assert_eq!(c.sampler().value(p, 0.0), b.sampler().value(p, 0.0));
+        // Another text is another compile.
+        object("0.7072 - sqrt(x^2 + y^2 + z^2)");
+        assert_eq!(n_compiled_on_this_thread(), before + 2);
+    }
+
+    #[test]
+    fn the_cache_stays_within_its_limits() {
+        for i in 0..MAX_CACHED_TAPES + 50 {
+            object(&format!("{i}.5 - x^2 - y^2 - z^2"));
+        }
+        let (n_tapes, n_instructions) = cached();
+        assert!(n_tapes <= MAX_CACHED_TAPES, "{n_tapes}");
+        assert!(n_instructions <= MAX_CACHED_INSTRUCTIONS);
+        // The newest stay, the oldest went.
+        let before = n_compiled_on_this_thread();
+        object(&format!("{}.5 - x^2 - y^2 - z^2", MAX_CACHED_TAPES + 49));
+        assert_eq!(n_compiled_on_this_thread(), before);
+        object("0.5 - x^2 - y^2 - z^2");
+        assert_eq!(n_compiled_on_this_thread(), before + 1);
+    }
+}
