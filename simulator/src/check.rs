@@ -6,7 +6,9 @@ use replication::log::OrderKey;
 use replication::materialize::{FoldEntry, Materialize, SceneHash};
 use replication::shape::{ShapePayload, ShapeScene};
 use replication::sync::state::MAX_MESSAGE_BURST;
-use replication::{OpId, Payload};
+use std::collections::{BTreeMap, BTreeSet};
+
+use replication::{Mark, Op, OpId, Payload, PeerId, RejectReason};
 
 use crate::config::Sabotage;
 use crate::memory;
@@ -47,6 +49,11 @@ pub(crate) fn finish(sim: Simulation) -> Report {
         .hostile
         .as_ref()
         .map_or(Vec::new(), |h| h.forged.clone());
+    let must_refuse: Vec<OpId> = sim
+        .hostile
+        .as_ref()
+        .and_then(|h| h.byzantine.as_ref())
+        .map_or(Vec::new(), |b| b.must_refuse.clone());
     let mut reference_hash = None;
     let mut n_lease_checked = 0;
     for (i, h) in sim.honest.iter().enumerate() {
@@ -55,6 +62,14 @@ pub(crate) fn finish(sim: Simulation) -> Report {
             continue;
         }
         check_history(&sim, i, h, &all_authored, &forged, &mut failures);
+        let refused = must_refuse.iter().filter(|id| h.peer.log().contains(id));
+        let n_refused = refused.count();
+        if n_refused > 0 {
+            failures.push(format!(
+                "peer {i}: {n_refused} hostile ops accepted that are stamped before their \
+                 causal past"
+            ));
+        }
         if h.snapshot_cut.is_none() {
             let flip = sim.config.sabotage == Sabotage::FlipLeaseVerdict && i == 0;
             let lease = reference::check(h.peer.log(), flip);
@@ -85,6 +100,9 @@ pub(crate) fn finish(sim: Simulation) -> Report {
         }
     }
     check_floods(&sim, &mut failures);
+    if sim.hostile.as_ref().is_some_and(|h| h.byzantine.is_some()) {
+        check_erasure(&sim, &mut failures);
+    }
     let memory = memory_figures(&sim, &mut failures);
     build_report(
         sim,
@@ -194,6 +212,170 @@ fn compare(reference: &Honest, r: usize, h: &Honest, i: usize, failures: &mut Ve
             "peer {i}: lease/undo verdicts differ from peer {r}'s"
         ));
     }
+}
+
+/// Who erased an honest op.
+#[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Debug)]
+enum Culprit {
+    /// A lease of a hostile member's key.
+    HostileLease,
+    /// A delete by a hostile member's key.
+    HostileDelete,
+    /// A concurrent lease of an honest peer.
+    HonestLease,
+    /// A concurrent delete by an honest peer.
+    HonestDelete,
+    /// Any other verdict (a release after a takeover, an undo made void, an op inactive
+    /// without its own undo).
+    Other,
+}
+
+impl Culprit {
+    fn by_hostile(self) -> bool {
+        matches!(self, Culprit::HostileLease | Culprit::HostileDelete)
+    }
+}
+
+/// No honest op that was effective at its author's peer is, at the end on any honest peer,
+/// rejected, inactive or deleted by an op that did not have it in its causal past. A verdict
+/// depends only on the ops before it in the linear order, and those never have it in their
+/// causal past (Lamport times grow along it), so an effective op must stay effective, may be
+/// inactive only through an undo that has it in its causal past (its author's), and its object
+/// may be deleted only by a delete that has its creation in its causal past.
+fn check_erasure(sim: &Simulation, failures: &mut Vec<String>) {
+    let honest_ids: BTreeSet<PeerId> = sim.honest.iter().map(|h| h.peer.peer_id()).collect();
+    let checked: Vec<OpId> = sim
+        .honest
+        .iter()
+        .flat_map(|h| h.effective_at_author.iter().copied())
+        .filter(|id| !sim.lost_own.contains(id))
+        .collect();
+    for (i, h) in sim.honest.iter().enumerate() {
+        if h.panicked.is_some() {
+            continue;
+        }
+        let log = h.peer.log();
+        // Active deletes per object, with their positions in the linear order.
+        let mut deletes: BTreeMap<u64, Vec<(usize, &Op<ShapePayload>)>> = BTreeMap::new();
+        let mut position = BTreeMap::new();
+        for (pos, e) in log.entries().enumerate() {
+            position.insert(e.op.id(), pos);
+            if let ShapePayload::Delete { object } = e.op.payload()
+                && e.active
+            {
+                deletes.entry(*object).or_default().push((pos, e.op));
+            }
+        }
+        let mut found: Vec<(Culprit, String)> = Vec::new();
+        for id in &checked {
+            let (Some(mark), Some(op)) = (log.mark(id), log.get(id)) else {
+                continue;
+            };
+            let honest = |author: &PeerId| honest_ids.contains(author);
+            let verdict = match mark {
+                Mark::Rejected(
+                    RejectReason::LeaseHeld { holder } | RejectReason::StrongLeaseHeld { holder },
+                ) => Some(if honest(&holder) {
+                    Culprit::HonestLease
+                } else {
+                    Culprit::HostileLease
+                }),
+                Mark::Rejected(_) => Some(Culprit::Other),
+                Mark::Effective if !log.is_active(id) && !undone_by_successor(log, op) => {
+                    Some(Culprit::Other)
+                }
+                Mark::Effective => None,
+            };
+            if let Some(culprit) = verdict {
+                found.push((culprit, format!("op {id} by {}: {mark:?}", op.author())));
+                continue;
+            }
+            let (ShapePayload::Create { object, .. }, Some(&at)) = (op.payload(), position.get(id))
+            else {
+                continue;
+            };
+            let erasing = deletes
+                .get(object)
+                .into_iter()
+                .flatten()
+                .find(|(pos, d)| *pos > at && !in_causal_past(log, d, op));
+            if let Some((_, d)) = erasing {
+                let culprit = if honest(&d.author()) {
+                    Culprit::HonestDelete
+                } else {
+                    Culprit::HostileDelete
+                };
+                let what = format!("create {id} by {}: deleted by {}", op.author(), d.id());
+                found.push((culprit, what));
+            }
+        }
+        for hostile in [true, false] {
+            let mine: Vec<&(Culprit, String)> = found
+                .iter()
+                .filter(|(c, _)| c.by_hostile() == hostile)
+                .collect();
+            let Some((_, first)) = mine.first() else {
+                continue;
+            };
+            let mut kinds: BTreeMap<Culprit, usize> = BTreeMap::new();
+            for (c, _) in &mine {
+                *kinds.entry(*c).or_default() += 1;
+            }
+            let by = if hostile {
+                "hostile members' ops"
+            } else {
+                "honest peers' concurrent ops (or other verdicts)"
+            };
+            failures.push(format!(
+                "peer {i}: {} honest ops effective at their authors erased by {by} without them \
+                 in their causal past {kinds:?}; first: {first}",
+                mine.len()
+            ));
+        }
+    }
+}
+
+/// True if an effective undo of `target` in `log` has it in its causal past.
+fn undone_by_successor(log: &Log<ShapePayload>, target: &Op<ShapePayload>) -> bool {
+    log.entries().any(|e| {
+        e.mark == Mark::Effective
+            && matches!(e.op.payload(), ShapePayload::Undo(t) if *t == target.id())
+            && in_causal_past(log, e.op, target)
+    })
+}
+
+/// True if `target` is in `op`'s causal past: reachable through dependencies and each
+/// author's previous op (sequence numbers chain an author's ops).
+fn in_causal_past(
+    log: &Log<ShapePayload>,
+    op: &Op<ShapePayload>,
+    target: &Op<ShapePayload>,
+) -> bool {
+    let parents = |op: &Op<ShapePayload>| {
+        let prev = op
+            .seq()
+            .checked_sub(1)
+            .and_then(|s| log.by_seq(&op.author(), s))
+            .map(Op::id);
+        op.deps().iter().copied().chain(prev).collect::<Vec<_>>()
+    };
+    let mut seen = BTreeSet::new();
+    let mut stack = parents(op);
+    while let Some(id) = stack.pop() {
+        if id == target.id() {
+            return true;
+        }
+        if !seen.insert(id) {
+            continue;
+        }
+        // Ancestors have lower Lamport times: below the target's, it cannot be reached.
+        if let Some(p) = log.get(&id)
+            && p.lamport() > target.lamport()
+        {
+            stack.extend(parents(p));
+        }
+    }
+    false
 }
 
 /// The rate limit held: no flood got more than a burst's worth of messages accepted.

@@ -48,6 +48,15 @@ pub struct Faults {
     pub forgery: bool,
     /// Whether the hostile peer floods a peer with messages far over the rate limit.
     pub flood: bool,
+    /// Whether the hostile member runs the real core and sends crafted ops and messages
+    /// ([`crate::byzantine`]): backdated and far-past or far-future ops, Sybil keys, giant
+    /// version vectors, oversized batches and cost bombs within the limits.
+    pub byzantine: bool,
+    /// Whether it also hoards leases: strong acquires with `ttl u64::MAX`, some backdated to
+    /// Lamport 1 under fresh keys.
+    pub lease_attacks: bool,
+    /// Whether it also equivocates: two ops under one key with one sequence number.
+    pub forks: bool,
 }
 
 /// One kind of fault, as `--without` names it.
@@ -73,11 +82,17 @@ pub enum FaultKind {
     Forgery,
     /// Floods.
     Flood,
+    /// Crafted ops and messages of a hostile member running the core.
+    Byzantine,
+    /// Lease hoarding, backdated or not.
+    LeaseAttacks,
+    /// Equivocation (forks).
+    Forks,
 }
 
 impl FaultKind {
     /// Every kind, in the order the shrinker tries switching them off.
-    pub const ALL: [FaultKind; 10] = [
+    pub const ALL: [FaultKind; 13] = [
         FaultKind::Crashes,
         FaultKind::LateJoins,
         FaultKind::Partitions,
@@ -88,6 +103,10 @@ impl FaultKind {
         FaultKind::Loss,
         FaultKind::Duplication,
         FaultKind::Jitter,
+        // Last, so `swarm`'s draws for the kinds above do not move.
+        FaultKind::Forks,
+        FaultKind::LeaseAttacks,
+        FaultKind::Byzantine,
     ];
 
     /// The name `--without` takes.
@@ -103,6 +122,9 @@ impl FaultKind {
             FaultKind::LateJoins => "late-joins",
             FaultKind::Forgery => "forgery",
             FaultKind::Flood => "flood",
+            FaultKind::Byzantine => "byzantine",
+            FaultKind::LeaseAttacks => "lease-attacks",
+            FaultKind::Forks => "forks",
         }
     }
 
@@ -159,11 +181,25 @@ const CHAOS: Faults = Faults {
     late_joins: true,
     forgery: true,
     flood: true,
+    byzantine: false,
+    lease_attacks: false,
+    forks: false,
+};
+
+/// Chaos plus every hostile-member attack that replication is meant to withstand today
+/// (issue 17): crafted ops, Sybil keys, giant version vectors, cost bombs, lease hoarding.
+const BYZANTINE: Faults = Faults {
+    name: "byzantine",
+    byzantine: true,
+    lease_attacks: true,
+    ..CHAOS
 };
 
 impl Faults {
-    /// Every preset, mildest first (`swarm` draws a mix per seed from `chaos`).
-    pub const PRESETS: [Faults; 5] = [
+    /// Every preset, mildest first (`swarm` draws a mix per seed from `chaos`;
+    /// `byzantine-forks` is `byzantine` with equivocation, which replication does not handle
+    /// yet: a known failure).
+    pub const PRESETS: [Faults; 7] = [
         Faults {
             name: "none",
             latency_micros: 20_000,
@@ -177,6 +213,9 @@ impl Faults {
             late_joins: false,
             forgery: false,
             flood: false,
+            byzantine: false,
+            lease_attacks: false,
+            forks: false,
         },
         Faults {
             name: "lan",
@@ -191,6 +230,9 @@ impl Faults {
             late_joins: false,
             forgery: true,
             flood: true,
+            byzantine: false,
+            lease_attacks: false,
+            forks: false,
         },
         Faults {
             name: "wan",
@@ -205,12 +247,21 @@ impl Faults {
             late_joins: true,
             forgery: true,
             flood: true,
+            byzantine: false,
+            lease_attacks: false,
+            forks: false,
         },
         CHAOS,
         // A mix of chaos's fault kinds drawn per seed (see `Config::effective_faults`).
         Faults {
             name: "swarm",
             ..CHAOS
+        },
+        BYZANTINE,
+        Faults {
+            name: "byzantine-forks",
+            forks: true,
+            ..BYZANTINE
         },
     ];
 
@@ -232,6 +283,9 @@ impl Faults {
             FaultKind::LateJoins => self.late_joins = false,
             FaultKind::Forgery => self.forgery = false,
             FaultKind::Flood => self.flood = false,
+            FaultKind::Byzantine => self.byzantine = false,
+            FaultKind::LeaseAttacks => self.lease_attacks = false,
+            FaultKind::Forks => self.forks = false,
         }
         self
     }
@@ -459,9 +513,10 @@ mod tests {
         assert!(parse_ranges("0-1000", 100).is_err());
         assert_eq!(parse_ranges("", 100).unwrap(), Vec::<u32>::new());
         let chaos = Faults::named("chaos").unwrap();
+        let all = Faults::named("byzantine-forks").unwrap();
         for kind in FaultKind::ALL {
-            assert!(chaos.has(kind), "{kind:?}");
-            assert!(!chaos.without(kind).has(kind), "{kind:?}");
+            assert!(all.has(kind), "{kind:?}");
+            assert!(!all.without(kind).has(kind), "{kind:?}");
             assert_eq!(FaultKind::named(kind.name()), Some(kind));
         }
         let config = Config {

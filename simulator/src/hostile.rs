@@ -23,6 +23,7 @@ use replication::sync::message::{MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION};
 use replication::sync::state::MAX_MESSAGE_BURST;
 use replication::{Keypair, Op, OpId, PeerId, Timestamp};
 
+use crate::byzantine::Byzantine;
 use crate::rng::SimRng;
 use crate::sim::{SESSION_ID, Simulation, deliver};
 use crate::workload::{HOT_OBJECT, User};
@@ -48,6 +49,8 @@ pub(crate) struct Hostile {
     next_batch_no: u64,
     /// Ids of the forged ops it sent.
     pub(crate) forged: Vec<OpId>,
+    /// Its core and crafted attacks, with [`crate::config::Faults::byzantine`].
+    pub(crate) byzantine: Option<Byzantine>,
 }
 
 impl Hostile {
@@ -61,7 +64,19 @@ impl Hostile {
             user: User::default(),
             next_batch_no: 1,
             forged: Vec::new(),
+            byzantine: None,
         }
+    }
+
+    /// Its peer id.
+    pub(crate) fn peer_id(&self) -> PeerId {
+        self.key.peer_id()
+    }
+
+    /// A fresh batch number for a message of its own.
+    pub(crate) fn next_batch_no(&mut self) -> u64 {
+        self.next_batch_no += 1;
+        self.next_batch_no
     }
 
     /// Keeps a message an honest peer sent it (a random one is replaced when full).
@@ -158,6 +173,14 @@ impl Simulation {
         let Some(h) = self.hostile_idx() else { return };
         let targets = self.hostile_targets(h);
         if targets.is_empty() {
+            return;
+        }
+        // Half of a byzantine member's tricks are crafted attacks (other presets draw nothing
+        // here, so their runs are unchanged).
+        if self.hostile.as_ref().is_some_and(|x| x.byzantine.is_some())
+            && self.net.chance(500)
+            && self.byzantine_send(h, &targets)
+        {
             return;
         }
         let to = targets[self.net.index(targets.len())];

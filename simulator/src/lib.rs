@@ -12,7 +12,8 @@
 //!   (per-link latency, jitter, loss, duplication, bandwidth, partitions including asymmetric
 //!   ones, peers offline and back), crashes, late joins (empty, or from a snapshot: `join.rs`);
 //!   [`store`]: the disk (fsync delays, crash images recovered by the real store);
-//!   [`hostile`]: garbage, replays, forged and member-authored ops, floods.
+//!   [`hostile`]: garbage, replays, forged and member-authored ops, floods;
+//!   [`byzantine`]: a hostile member running the real core and crafting attacks.
 //! - [`workload`]: scripted users as a list of [`workload::Action`]s drawn up front.
 //! - Checkers (run at the end): convergence, causal delivery, scene folds, the
 //!   [`reference`](mod@reference) lease rules, durable and lost ops, forged ops, rate limits, and
@@ -28,6 +29,7 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod byzantine;
 mod check;
 pub mod config;
 pub mod hostile;

@@ -31,11 +31,12 @@ struct Cli {
     /// User actions in the workload.
     #[arg(long, default_value_t = 500)]
     ops: usize,
-    /// The fault preset: none, lan, wan, chaos or swarm.
+    /// The fault preset: none, lan, wan, chaos, swarm, byzantine (chaos plus a hostile member
+    /// running the core and crafting attacks) or byzantine-forks (plus equivocation).
     #[arg(long, default_value = "chaos", value_parser = parse_faults)]
     faults: Faults,
     /// Fault kinds to switch off, comma-separated: jitter loss dup bandwidth partitions
-    /// offline crashes late-joins forgery flood.
+    /// offline crashes late-joins forgery flood byzantine lease-attacks forks.
     #[arg(long, value_name = "KIND,...", value_delimiter = ',', value_parser = parse_fault_kind)]
     without: Vec<FaultKind>,
     /// No hostile member.

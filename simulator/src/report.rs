@@ -161,7 +161,11 @@ impl Report {
             s.hostile_rejects,
             s.n_messages_to_hostile,
             s.honest_rejects
-        )
+        )?;
+        if !s.byzantine.is_empty() {
+            writeln!(f, "  byzantine attacks sent: {:?}", s.byzantine)?;
+        }
+        Ok(())
     }
 
     fn fmt_sizes(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {

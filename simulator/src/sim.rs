@@ -13,6 +13,7 @@ use replication::materialize::{Materialized, SceneHash};
 use replication::shape::{ShapePayload, ShapeScene};
 use replication::{ConnId, Event, Keypair, Log, OpId, Peer, Timestamp};
 
+use crate::byzantine::Byzantine;
 use crate::config::{Config, ConfigError, Faults};
 use crate::hostile::Hostile;
 use crate::memory;
@@ -50,6 +51,7 @@ const KEYS_STREAM: u64 = 1;
 const SCHEDULE_STREAM: u64 = 3;
 const NET_STREAM: u64 = 4;
 const HOT_STREAM: u64 = 5;
+const BYZANTINE_STREAM: u64 = 6;
 
 pub(crate) type Scene = Materialized<ShapePayload, ShapeScene>;
 
@@ -71,6 +73,8 @@ pub(crate) enum Ev {
         action_idx: usize,
     },
     Hostile,
+    /// The byzantine member's core times out.
+    HostileWake,
     Flood,
     PartitionStart {
         cut: Vec<(usize, usize)>,
@@ -131,6 +135,8 @@ pub(crate) struct Honest {
     pub(crate) wake_at: Option<u64>,
     pub(crate) n_causal_violations: u64,
     pub(crate) authored: Vec<OpId>,
+    /// Its own ops that were effective when it authored them (the causal-erasure checker's).
+    pub(crate) effective_at_author: Vec<OpId>,
     pub(crate) disk: Disk,
     /// Memory slot ([`memory`]) its calls are charged to.
     pub(crate) slot: usize,
@@ -220,6 +226,8 @@ pub struct Stats {
     pub n_late_joins: u64,
     /// Peers that joined late from a snapshot.
     pub n_snapshot_joins: u64,
+    /// The byzantine member's crafted attacks sent, by kind.
+    pub byzantine: BTreeMap<&'static str, u64>,
 }
 
 /// A run in progress.
@@ -286,7 +294,12 @@ impl Simulation {
                 keys.fill(&mut key_seed);
             }
             keys.fill(&mut key_seed);
-            Hostile::new(Keypair::from_seed(key_seed))
+            let mut hostile = Hostile::new(Keypair::from_seed(key_seed));
+            if faults.byzantine || faults.lease_attacks || faults.forks {
+                let stream = SimRng::stream(config.seed, BYZANTINE_STREAM);
+                hostile.byzantine = Some(Byzantine::new(Keypair::from_seed(key_seed), stream));
+            }
+            hostile
         });
         let mut net = SimRng::stream(config.seed, NET_STREAM);
         let lat = faults.latency_micros;
@@ -513,6 +526,10 @@ impl Simulation {
             Ev::Hostile => {
                 self.trace.u64(3);
                 self.hostile_send();
+            }
+            Ev::HostileWake => {
+                self.trace.u64(18);
+                self.byzantine_wake();
             }
             Ev::Flood => {
                 self.trace.u64(14);
@@ -822,6 +839,9 @@ impl Simulation {
         let pair = self.pair(a, b);
         pair.connected = true;
         pair.epoch += 1;
+        if let Some(other) = self.other_than_hostile(a, b) {
+            self.byzantine_link(other, true);
+        }
         for x in [a, b] {
             if x < self.honest.len() {
                 self.flush(x);
@@ -841,6 +861,15 @@ impl Simulation {
         let pair = self.pair(a, b);
         pair.connected = false;
         pair.epoch += 1;
+        if let Some(other) = self.other_than_hostile(a, b) {
+            self.byzantine_link(other, false);
+        }
+    }
+
+    /// The honest end of the pair `(a, b)` if the other end is the hostile member.
+    fn other_than_hostile(&self, a: usize, b: usize) -> Option<usize> {
+        let h = self.hostile_idx()?;
+        (a == h).then_some(b).or((b == h).then_some(a))
     }
 
     fn author(&mut self, peer: usize, payload: ShapePayload) {
@@ -853,6 +882,9 @@ impl Simulation {
                 self.trace.bytes(&op.id().0);
                 h.user.authored(&payload, op.id());
                 h.authored.push(op.id());
+                if h.peer.log().mark(&op.id()) == Some(replication::Mark::Effective) {
+                    h.effective_at_author.push(op.id());
+                }
                 note_delivered(h, &insertion.delivered);
                 h.disk.append(&insertion.delivered);
                 let Honest {
@@ -1025,7 +1057,11 @@ impl Simulation {
         if Some(to) == self.hostile_idx() {
             self.stats.n_messages_to_hostile += 1;
             if let Some(hostile) = &mut self.hostile {
+                let copy = hostile.byzantine.is_some().then(|| bytes.clone());
                 hostile.capture(bytes, &mut self.net);
+                if let Some(copy) = copy {
+                    self.byzantine_receive(from, &copy);
+                }
             }
             return;
         }
@@ -1184,6 +1220,7 @@ pub(crate) fn new_honest(
         wake_at: None,
         n_causal_violations: 0,
         authored: Vec::new(),
+        effective_at_author: Vec::new(),
         disk: Disk::default(),
         slot,
         slot_baseline,
@@ -1244,6 +1281,24 @@ pub(crate) fn guarded<R>(
         Ok(r) => Some(r),
         Err(e) => {
             h.panicked = Some(panic_text(e.as_ref()));
+            None
+        }
+    }
+}
+
+/// Calls into a core unless it already panicked; a panic is recorded in `panicked`.
+pub(crate) fn guarded_call<R>(
+    panicked: &mut Option<String>,
+    peer: &mut Peer<ShapePayload>,
+    f: impl FnOnce(&mut Peer<ShapePayload>) -> R,
+) -> Option<R> {
+    if panicked.is_some() {
+        return None;
+    }
+    match panic::catch_unwind(AssertUnwindSafe(|| f(peer))) {
+        Ok(r) => Some(r),
+        Err(e) => {
+            *panicked = Some(panic_text(e.as_ref()));
             None
         }
     }

@@ -1,0 +1,644 @@
+//! The byzantine member ([`crate::config::Faults::byzantine`]): the hostile peer holds the
+//! invite and runs the real core ([`Peer`]) on its connections, so it learns the session's ops
+//! like any member, and uses what it learnt to craft ops signed with its own keys through the
+//! public API ([`Op::sign`] with [`OpFields`] it fills in itself) and messages the core would
+//! never send:
+//!
+//! - backdated ops: fresh keys at Lamport 1 stamped at time 0 or [`BACKDATE_MICROS`] ago,
+//!   with no dependencies (deletes, edits, chat; with `lease_attacks` strong acquires with
+//!   `ttl u64::MAX`), which sort before everything honest;
+//! - far-future ops (stamped `u64::MAX - 1`, or a little past the receivers' skew bound) and
+//!   far-past ops (stamped 0 after recent dependencies: every peer must refuse those);
+//! - Sybil bursts: up to [`SYBIL_BURST`] fresh keys in one batch, at most [`MAX_SYBIL_KEYS`]
+//!   in a run;
+//! - giant version vectors: a hello, then two haves and a want of
+//!   [`MAX_VV_AUTHORS`] made-up authors each;
+//! - oversized batches: [`MAX_BATCH_OPS`] + 1 ops in one message;
+//! - cost bombs within the limits: a loop that compiles to a large graph, a formula of about
+//!   16 KiB, a stroke with as many mirrored poses as a payload holds;
+//! - with `lease_attacks`, lease hoarding: strong acquires with `ttl u64::MAX` from a chain
+//!   that sees everything (so honest ops authored after them are refused by design, and those
+//!   authored concurrently must not be);
+//! - with `forks`, equivocation: two ops of one fresh key with sequence number 1, sent to two
+//!   different peers.
+
+use fdsl::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
+use replication::causal::MAX_VV_AUTHORS;
+use replication::op::{MAX_DEPS, OpFields};
+use replication::shape::ShapePayload;
+use replication::sync::message::{MAX_BATCH_OPS, Message};
+use replication::time::MAX_CLOCK_SKEW_MICROS;
+use replication::{ConnId, Keypair, Op, OpId, Peer, PeerId, Timestamp, VersionVector};
+
+use crate::rng::SimRng;
+use crate::sim::{Ev, SESSION_ID, Simulation, deliver, guarded_call};
+
+/// Most fresh keys the byzantine member makes in one run.
+pub const MAX_SYBIL_KEYS: usize = 512;
+/// Fresh keys in one Sybil burst (one batch).
+pub const SYBIL_BURST: usize = 32;
+/// Most cost bombs in one run.
+pub const MAX_COST_BOMBS: usize = 12;
+/// How far back a backdated op is stamped when not at time 0.
+pub const BACKDATE_MICROS: u64 = 10 * 60 * 1_000_000;
+/// Object ids the byzantine member creates (above every honest user's).
+const BOMB_OBJECT_BASE: u64 = 64 << 32;
+/// The compile bomb: a short loop, unrolled as far as an object's formula may
+/// (`fdsl::limits::formula_node_budget`); the trip count is searched, so it stays at the
+/// limit whatever the budget.
+fn compile_bomb(trips: usize) -> String {
+    format!(
+        "s = x; for (i = 0; i < {trips}; i = i + 1) {{ s = sin(s + i*y) * cos(s - i*z) + s; }} s"
+    )
+}
+
+/// Most loop trips the compile bomb tries.
+const MAX_BOMB_TRIPS: usize = fdsl::limits::MAX_LOOP_TRIPS;
+
+/// The compile bomb with the most trips that still compiles (`None` if not even one does).
+fn largest_compile_bomb() -> Option<String> {
+    // What a receiver checks: the payload's validation (an object's formula budget).
+    let compiles = |trips: usize| {
+        cost_bomb(0, BOMB_OBJECT_BASE, &compile_bomb(trips)).is_some_and(|p| p.validate().is_ok())
+    };
+    if !compiles(1) {
+        return None;
+    }
+    let (mut lo, mut hi) = (1, MAX_BOMB_TRIPS);
+    while lo < hi {
+        let mid = (lo + hi).div_ceil(2);
+        if compiles(mid) {
+            lo = mid;
+        } else {
+            hi = mid - 1;
+        }
+    }
+    Some(compile_bomb(lo))
+}
+
+/// Poses in a stroke bomb (mirrored), about what one payload holds.
+const STROKE_BOMB_POSES: usize = 220;
+
+/// The attacks, as the report counts them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Attack {
+    Backdated,
+    BackdatedLease,
+    Hoard,
+    FarFuture,
+    FarPast,
+    Sybil,
+    GiantVersionVectors,
+    OversizedBatch,
+    CostBomb,
+    Fork,
+}
+
+impl Attack {
+    fn name(self) -> &'static str {
+        match self {
+            Attack::Backdated => "backdated",
+            Attack::BackdatedLease => "backdated-lease",
+            Attack::Hoard => "hoard",
+            Attack::FarFuture => "far-future",
+            Attack::FarPast => "far-past",
+            Attack::Sybil => "sybil",
+            Attack::GiantVersionVectors => "giant-vv",
+            Attack::OversizedBatch => "oversized-batch",
+            Attack::CostBomb => "cost-bomb",
+            Attack::Fork => "fork",
+        }
+    }
+}
+
+/// A key with a chain of ops (the hoarder's), so each op extends the previous one.
+struct Chain {
+    key: Keypair,
+    next_seq: u64,
+    lamport: u64,
+    timestamp: u64,
+}
+
+/// The byzantine member's state.
+pub(crate) struct Byzantine {
+    /// Its real core: connected to every honest peer it reaches, it learns the session.
+    pub(crate) core: Peer<ShapePayload>,
+    pub(crate) panicked: Option<String>,
+    pub(crate) wake_at: Option<u64>,
+    keys: SimRng,
+    n_sybil_keys: usize,
+    n_bombs: usize,
+    hoarder: Chain,
+    /// The compile bomb's text, searched once.
+    bomb: Option<Option<String>>,
+    /// Ops every honest peer must refuse (stamped before their causal past).
+    pub(crate) must_refuse: Vec<OpId>,
+    /// Pairs of ops that equivocate (same key, same sequence number).
+    pub(crate) forks: Vec<(OpId, OpId)>,
+}
+
+/// What the core knows now: its heads (at most [`MAX_DEPS`]) and their highest Lamport time
+/// and timestamp.
+struct Frontier {
+    heads: Vec<OpId>,
+    lamport: u64,
+    timestamp: u64,
+}
+
+impl Byzantine {
+    pub(crate) fn new(key: Keypair, keys: SimRng) -> Byzantine {
+        let mut keys = keys;
+        let hoarder = Chain {
+            key: fresh_key(&mut keys),
+            next_seq: 1,
+            lamport: 0,
+            timestamp: 0,
+        };
+        Byzantine {
+            core: Peer::new(key, SESSION_ID, replication::Log::default()),
+            panicked: None,
+            wake_at: None,
+            keys,
+            n_sybil_keys: 0,
+            n_bombs: 0,
+            hoarder,
+            bomb: None,
+            must_refuse: Vec::new(),
+            forks: Vec::new(),
+        }
+    }
+
+    fn frontier(&self) -> Frontier {
+        let log = self.core.log();
+        let heads: Vec<OpId> = log.heads().copied().take(MAX_DEPS).collect();
+        let ops = || heads.iter().filter_map(|id| log.get(id));
+        Frontier {
+            lamport: ops().map(|op| op.lamport()).max().unwrap_or(0),
+            timestamp: ops().map(|op| op.timestamp().0).max().unwrap_or(0),
+            heads: heads.clone(),
+        }
+    }
+
+    fn sybil(&mut self) -> Option<Keypair> {
+        (self.n_sybil_keys < MAX_SYBIL_KEYS).then(|| {
+            self.n_sybil_keys += 1;
+            fresh_key(&mut self.keys)
+        })
+    }
+}
+
+fn fresh_key(rng: &mut SimRng) -> Keypair {
+    let mut seed = [0u8; 32];
+    rng.fill(&mut seed);
+    Keypair::from_seed(seed)
+}
+
+/// Signs an op with the fields given; `None` if the core's builder refuses them.
+fn sign(
+    key: &Keypair,
+    seq: u64,
+    lamport: u64,
+    timestamp: u64,
+    deps: Vec<OpId>,
+    payload: ShapePayload,
+) -> Option<(OpId, Vec<u8>)> {
+    let fields = OpFields {
+        seq,
+        lamport,
+        timestamp: Timestamp(timestamp),
+        deps,
+        payload,
+    };
+    let op = Op::sign(key, fields).ok()?;
+    Some((op.id(), op.encoded().to_vec()))
+}
+
+fn hello(peer: PeerId) -> Vec<u8> {
+    Message::Hello {
+        protocol_version: replication::sync::message::PROTOCOL_VERSION,
+        session_id: SESSION_ID,
+        peer,
+        hello_seen: true,
+    }
+    .encode()
+}
+
+fn batch(batch_no: u64, ops: Vec<Vec<u8>>) -> Vec<u8> {
+    Message::Ops { batch_no, ops }.encode()
+}
+
+fn stamp_edit(rng: &mut SimRng, object: u64) -> ShapePayload {
+    ShapePayload::Edit {
+        object,
+        edit: Edit::stamp(
+            EditOp::Subtract,
+            ToolShape::Sphere {
+                radius: rng.range_f64(0.05, 0.3),
+            },
+            Pose::at([rng.range_f64(-1.0, 1.0), 0.0, 0.0].into()),
+        ),
+    }
+}
+
+fn hoard(object: u64) -> ShapePayload {
+    ShapePayload::Acquire {
+        object,
+        strong: true,
+        ttl_micros: u64::MAX,
+    }
+}
+
+/// A version vector of `n` made-up authors with large sequence numbers.
+fn made_up_vv(rng: &mut SimRng, n: usize) -> VersionVector {
+    let mut vv = VersionVector::new();
+    for _ in 0..n {
+        let mut id = [0u8; 32];
+        rng.fill(&mut id);
+        vv.raise(PeerId(id), 1 + rng.below(1 << 40));
+    }
+    vv
+}
+
+/// A formula of about 15 KiB that compiles (a sum of many small terms).
+fn long_formula() -> String {
+    let mut text = String::from("1");
+    let mut i = 0;
+    while text.len() < 15_000 {
+        text.push_str(&format!("-{}*x*y", 1 + i % 97));
+        i += 1;
+    }
+    text
+}
+
+fn stroke_bomb(object: u64) -> ShapePayload {
+    let path = (0..STROKE_BOMB_POSES)
+        .map(|i| {
+            let i = i as f64;
+            Pose::at([(i * 0.37).sin(), (i * 0.11).cos(), i * 0.003].into())
+        })
+        .collect();
+    ShapePayload::Edit {
+        object,
+        edit: Edit {
+            op: EditOp::Subtract,
+            tool: ToolShape::Sphere { radius: 0.2 },
+            path,
+            blend_radius: 0.05,
+            mirror: Some(Axis::X),
+        },
+    }
+}
+
+/// Cost bomb `kind`: 0 creates `object` with the formula `text`, 1 sets its geometry to it,
+/// 2 is a stroke bomb on it.
+fn cost_bomb(kind: u64, object: u64, text: &str) -> Option<ShapePayload> {
+    let geometry = || Some(Geometry::implicit(Formula::new(text).ok()?));
+    Some(match kind {
+        0 => ShapePayload::Create {
+            object,
+            data: Box::new(ObjectData {
+                geometry: Some(geometry()?),
+                ..ObjectData::default()
+            }),
+            group: None,
+        },
+        1 => ShapePayload::Set {
+            object,
+            field: Field::Geometry(Some(geometry()?)),
+        },
+        _ => stroke_bomb(object),
+    })
+}
+
+/// Messages for one attack: to a random target, or (forks) one to each of two targets.
+type Sends = Vec<(usize, Vec<u8>)>;
+
+impl Simulation {
+    /// The byzantine member sends one crafted attack to the reachable peers `targets` (not
+    /// empty); false if it had nothing to send.
+    pub(crate) fn byzantine_send(&mut self, h: usize, targets: &[usize]) -> bool {
+        let faults = self.faults;
+        let mut menu = Vec::new();
+        if faults.byzantine {
+            menu.extend([
+                Attack::Backdated,
+                Attack::FarFuture,
+                Attack::FarPast,
+                Attack::Sybil,
+                Attack::GiantVersionVectors,
+                Attack::OversizedBatch,
+                Attack::CostBomb,
+            ]);
+        }
+        if faults.lease_attacks {
+            menu.extend([Attack::BackdatedLease, Attack::Hoard]);
+        }
+        if faults.forks {
+            menu.push(Attack::Fork);
+        }
+        if menu.is_empty() {
+            return false;
+        }
+        let attack = menu[self.net.index(menu.len())];
+        let to = targets[self.net.index(targets.len())];
+        let Some(sends) = self.craft(attack, to, targets) else {
+            return false;
+        };
+        *self.stats.byzantine.entry(attack.name()).or_default() += 1;
+        for (to, bytes) in sends {
+            let epoch = self.pair(h, to).epoch;
+            let at = self.now + self.latency_micros[h][to];
+            self.stats.n_hostile_messages += 1;
+            self.push(at, deliver(h, to, epoch, bytes, None));
+        }
+        true
+    }
+
+    fn craft(&mut self, attack: Attack, to: usize, targets: &[usize]) -> Option<Sends> {
+        let now = self.now;
+        let objects = self.objects.clone();
+        let hostile = self.hostile.as_mut()?;
+        let me = hostile.peer_id();
+        let batch_no = hostile.next_batch_no();
+        let byz = hostile.byzantine.as_mut()?;
+        let rng = &mut self.net;
+        let f = byz.frontier();
+        let object = objects[rng.index(objects.len())];
+        let one = |op: Option<(OpId, Vec<u8>)>| {
+            let (_, bytes) = op?;
+            Some(vec![(to, hello(me)), (to, batch(batch_no, vec![bytes]))])
+        };
+        match attack {
+            Attack::Backdated | Attack::BackdatedLease => {
+                let key = byz.sybil()?;
+                let at = if rng.chance(500) {
+                    0
+                } else {
+                    now.saturating_sub(BACKDATE_MICROS)
+                };
+                let payload = match (attack, rng.below(3)) {
+                    (Attack::BackdatedLease, _) => hoard(object),
+                    (_, 0) => ShapePayload::Delete { object },
+                    (_, 1) => stamp_edit(rng, object),
+                    _ => ShapePayload::Chat("backdated".into()),
+                };
+                one(sign(&key, 1, 1, at, Vec::new(), payload))
+            }
+            Attack::Hoard => {
+                let chain = &mut byz.hoarder;
+                let lamport = f.lamport.max(chain.lamport) + 1;
+                let timestamp = now.max(f.timestamp).max(chain.timestamp);
+                let op = sign(
+                    &chain.key,
+                    chain.next_seq,
+                    lamport,
+                    timestamp,
+                    f.heads,
+                    hoard(object),
+                )?;
+                chain.next_seq += 1;
+                chain.lamport = lamport;
+                chain.timestamp = timestamp;
+                one(Some(op))
+            }
+            Attack::FarFuture => {
+                let key = byz.sybil()?;
+                let at = if rng.chance(300) {
+                    u64::MAX - 1
+                } else {
+                    now + MAX_CLOCK_SKEW_MICROS + 1 + rng.below(2 * MAX_CLOCK_SKEW_MICROS)
+                };
+                let payload = if rng.chance(500) {
+                    stamp_edit(rng, object)
+                } else {
+                    ShapePayload::Chat("from the future".into())
+                };
+                one(sign(&key, 1, f.lamport + 1, at, f.heads, payload))
+            }
+            Attack::FarPast => {
+                if f.timestamp == 0 {
+                    return None;
+                }
+                let key = byz.sybil()?;
+                let op = sign(&key, 1, f.lamport + 1, 0, f.heads, stamp_edit(rng, object))?;
+                byz.must_refuse.push(op.0);
+                one(Some(op))
+            }
+            Attack::Sybil => {
+                let mut ops = Vec::new();
+                for _ in 0..SYBIL_BURST {
+                    let Some(key) = byz.sybil() else { break };
+                    let payload = if rng.chance(500) {
+                        stamp_edit(rng, object)
+                    } else {
+                        ShapePayload::Chat("sybil".into())
+                    };
+                    let timestamp = now.max(f.timestamp);
+                    let deps = f.heads.clone();
+                    if let Some((_, bytes)) = sign(&key, 1, f.lamport + 1, timestamp, deps, payload)
+                    {
+                        ops.push(bytes);
+                    }
+                }
+                (!ops.is_empty()).then(|| vec![(to, hello(me)), (to, batch(batch_no, ops))])
+            }
+            Attack::GiantVersionVectors => {
+                let mut out = vec![(to, hello(me))];
+                for _ in 0..2 {
+                    let vv = made_up_vv(rng, MAX_VV_AUTHORS);
+                    out.push((to, Message::Have(vv).encode()));
+                }
+                let vv = made_up_vv(rng, MAX_VV_AUTHORS);
+                out.push((to, Message::Want(vv).encode()));
+                Some(out)
+            }
+            Attack::OversizedBatch => {
+                let key = byz.sybil()?;
+                let timestamp = now.max(f.timestamp);
+                let mut ops = Vec::new();
+                let mut deps = f.heads.clone();
+                for seq in 1..=MAX_BATCH_OPS as u64 + 1 {
+                    let payload = ShapePayload::Chat(format!("batch {seq}"));
+                    let (id, bytes) = sign(&key, seq, f.lamport + seq, timestamp, deps, payload)?;
+                    deps = vec![id];
+                    ops.push(bytes);
+                }
+                Some(vec![(to, hello(me)), (to, batch(batch_no, ops))])
+            }
+            Attack::CostBomb => {
+                if byz.n_bombs >= MAX_COST_BOMBS {
+                    return None;
+                }
+                byz.n_bombs += 1;
+                let key = byz.sybil()?;
+                let payload = match rng.below(3) {
+                    0 => {
+                        let text = byz.bomb.get_or_insert_with(largest_compile_bomb).clone()?;
+                        cost_bomb(0, BOMB_OBJECT_BASE + byz.n_bombs as u64, &text)?
+                    }
+                    1 => cost_bomb(1, object, &long_formula())?,
+                    _ => cost_bomb(2, object, "")?,
+                };
+                let timestamp = now.max(f.timestamp);
+                one(sign(&key, 1, f.lamport + 1, timestamp, f.heads, payload))
+            }
+            Attack::Fork => {
+                let key = byz.sybil()?;
+                // Another peer than `to`, when there is one.
+                let others: Vec<usize> = targets.iter().copied().filter(|t| *t != to).collect();
+                let other = others
+                    .get(rng.index(others.len().max(1)))
+                    .copied()
+                    .unwrap_or(to);
+                let timestamp = now.max(f.timestamp);
+                let fork = |text: &str| {
+                    let payload = ShapePayload::Chat(text.into());
+                    sign(&key, 1, f.lamport + 1, timestamp, f.heads.clone(), payload)
+                };
+                let (a, b) = (fork("fork a")?, fork("fork b")?);
+                byz.forks.push((a.0, b.0));
+                Some(vec![
+                    (to, hello(me)),
+                    (to, batch(batch_no, vec![a.1])),
+                    (other, hello(me)),
+                    (other, batch(batch_no, vec![b.1])),
+                ])
+            }
+        }
+    }
+
+    /// Hands a message an honest peer sent the hostile member to its core.
+    pub(crate) fn byzantine_receive(&mut self, from: usize, bytes: &[u8]) {
+        let now = Timestamp(self.now);
+        let Some(byz) = self.byzantine_mut() else {
+            return;
+        };
+        guarded_call(&mut byz.panicked, &mut byz.core, |p| {
+            p.handle_input(now, ConnId(from as u64), bytes);
+        });
+        self.byzantine_flush();
+    }
+
+    /// The core's connection to honest peer `other` opened (`true`) or closed.
+    pub(crate) fn byzantine_link(&mut self, other: usize, open: bool) {
+        let now = Timestamp(self.now);
+        let Some(byz) = self.byzantine_mut() else {
+            return;
+        };
+        guarded_call(&mut byz.panicked, &mut byz.core, |p| {
+            if open {
+                // Refused only over the connection limit, which the mesh stays under.
+                let _ = p.connect(now, ConnId(other as u64));
+            } else {
+                p.disconnect(ConnId(other as u64));
+            }
+        });
+        if open {
+            self.byzantine_flush();
+        }
+    }
+
+    /// The core's timer.
+    pub(crate) fn byzantine_wake(&mut self) {
+        let now = self.now;
+        let Some(byz) = self.byzantine_mut() else {
+            return;
+        };
+        if byz.wake_at == Some(now) {
+            byz.wake_at = None;
+        }
+        guarded_call(&mut byz.panicked, &mut byz.core, |p| {
+            p.handle_timeout(Timestamp(now));
+        });
+        self.byzantine_flush();
+    }
+
+    fn byzantine_mut(&mut self) -> Option<&mut Byzantine> {
+        self.hostile.as_mut()?.byzantine.as_mut()
+    }
+
+    /// Drains the core's events and transmissions (onto the network, like an honest peer's,
+    /// but never lost: the hostile member's links are its own) and arms its timer.
+    fn byzantine_flush(&mut self) {
+        let Some(h) = self.hostile_idx() else { return };
+        let now = self.now;
+        let mut out = Vec::new();
+        let next = {
+            let Some(byz) = self.byzantine_mut() else {
+                return;
+            };
+            for _ in 0..crate::sim::MAX_DRAIN {
+                match guarded_call(&mut byz.panicked, &mut byz.core, |p| p.poll_event()) {
+                    Some(Some(_)) => {}
+                    _ => break,
+                }
+            }
+            for _ in 0..crate::sim::MAX_DRAIN {
+                let sent = guarded_call(&mut byz.panicked, &mut byz.core, |p| {
+                    p.poll_transmit(Timestamp(now))
+                });
+                match sent {
+                    Some(Some((conn, bytes))) => out.push((conn.0 as usize, bytes)),
+                    _ => break,
+                }
+            }
+            let next = guarded_call(&mut byz.panicked, &mut byz.core, |p| p.poll_timeout())
+                .flatten()
+                .map(|t| t.0.max(now + 1));
+            match next {
+                Some(at) if byz.wake_at.is_none_or(|w| at < w) => {
+                    byz.wake_at = Some(at);
+                    Some(at)
+                }
+                _ => None,
+            }
+        };
+        for (to, bytes) in out {
+            if to < self.honest.len() && self.pair(h, to).connected {
+                let epoch = self.pair(h, to).epoch;
+                let at = now + self.latency_micros[h][to];
+                self.push(at, deliver(h, to, epoch, bytes, None));
+            }
+        }
+        if let Some(at) = next {
+            self.push(at, Ev::HostileWake);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use replication::Payload;
+    use replication::payload::MAX_PAYLOAD_BYTES;
+
+    #[test]
+    fn cost_bombs_sit_at_the_limits_and_validate() {
+        let bomb = largest_compile_bomb().expect("a one-trip loop compiles");
+        let trips = |text: &str| {
+            let digits = text.split("i < ").nth(1).and_then(|t| t.split(';').next());
+            digits
+                .and_then(|d| d.parse::<usize>().ok())
+                .expect("a trip count")
+        };
+        let n = trips(&bomb);
+        // One more trip is refused (unless the loop limit itself was reached).
+        let refused = |text: &str| cost_bomb(0, 7, text).is_none_or(|p| p.validate().is_err());
+        assert!(n == MAX_BOMB_TRIPS || refused(&compile_bomb(n + 1)), "{n}");
+        assert!(n > 1, "{n}");
+        for (kind, text) in [(0, bomb.as_str()), (1, &long_formula()), (2, "")] {
+            let payload = cost_bomb(kind, 7, text).expect("a bomb within the limits");
+            payload.validate().expect("a bomb every peer accepts");
+            let mut bytes = Vec::new();
+            payload.encode(&mut bytes);
+            assert!(bytes.len() <= MAX_PAYLOAD_BYTES, "{kind}: {}", bytes.len());
+            if kind > 0 {
+                assert!(
+                    bytes.len() * 4 > MAX_PAYLOAD_BYTES,
+                    "{kind}: {}",
+                    bytes.len()
+                );
+            }
+        }
+    }
+}
