@@ -18,6 +18,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
+use replication::lease::MAX_LEASE_TTL_MICROS;
 use replication::shape::ShapePayload;
 use replication::{Log, Mark, OpId, PeerId, RejectReason};
 
@@ -127,7 +128,7 @@ impl Rules {
                 let lease = Lease {
                     holder: author,
                     strong,
-                    expires_micros: at.saturating_add(ttl),
+                    expires_micros: at.saturating_add(ttl.min(MAX_LEASE_TTL_MICROS)),
                 };
                 self.leases.insert(object, lease);
                 Ok(())
@@ -280,5 +281,23 @@ mod tests {
         assert_eq!(report.n_mismatches, 0, "{report:?}");
         let flipped = check(&log, true);
         assert!(flipped.n_mismatches >= 1, "{flipped:?}");
+    }
+
+    #[test]
+    fn a_lease_asked_for_forever_ends_after_the_longest_ttl_as_in_the_core() {
+        let (a, b) = (Keypair::from_seed([1; 32]), Keypair::from_seed([2; 32]));
+        let mut log = Log::<ShapePayload>::default();
+        let hoard = ShapePayload::Acquire {
+            object: 1,
+            strong: true,
+            ttl_micros: u64::MAX,
+        };
+        log.author(&a, Timestamp(1000), hoard).unwrap();
+        let late = Timestamp(1000 + MAX_LEASE_TTL_MICROS + 10);
+        log.author(&b, late, ShapePayload::Delete { object: 1 })
+            .unwrap();
+        let report = check(&log, false);
+        assert_eq!((report.n_checked, report.n_rejected), (2, 0), "{report:?}");
+        assert_eq!(report.n_mismatches, 0, "{report:?}");
     }
 }
