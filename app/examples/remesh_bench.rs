@@ -27,7 +27,7 @@ use std::time::Duration;
 
 use anyhow::{Context as _, bail, ensure};
 use fdsl::object::Transform;
-use fdsl::object::{Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData, Pose, ToolShape};
+use fdsl::object::{Domain, Edit, Formula, Geometry, Object, ObjectData};
 use fdsl::scene::ObjectId;
 use glam::DVec3;
 use render::camera::Camera;
@@ -213,28 +213,10 @@ fn median(v: &mut [f64]) -> f64 {
     v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
-/// Edit `k` of a spiral of `n` over the unit sphere, turned by `phase` radians (render's
-/// `remesh_object` benchmark).
+/// Edit `k` of the spiral render's `remesh_object` benchmark sculpts
+/// ([`fdsl::models::spiral_edit`]).
 fn spiral_edit(k: usize, n: usize, phase: f64) -> Edit {
-    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    let y = 1.0 - 2.0 * ((k % n) as f64 + 0.5) / n as f64;
-    let ring = (1.0 - y * y).max(0.0).sqrt();
-    let phi = golden * k as f64 + phase;
-    let at = DVec3::new(ring * phi.cos(), y, ring * phi.sin());
-    let op = if k % 5 == 4 {
-        EditOp::Union
-    } else {
-        EditOp::Subtract
-    };
-    let tool = ToolShape::Sphere {
-        radius: TOOL_RADIUS,
-    };
-    if k.is_multiple_of(2) {
-        Edit::stamp(op, tool, Pose::at(at))
-    } else {
-        let side = at.any_orthonormal_vector() * 0.03;
-        Edit::stroke(op, tool, vec![Pose::at(at - side), Pose::at(at + side)])
-    }
+    fdsl::models::spiral_edit(k, n, phase, TOOL_RADIUS)
 }
 
 fn object(n_edits: usize) -> anyhow::Result<Object> {

@@ -28,7 +28,7 @@
 //! the bytes each wrote.
 
 use divan::Bencher;
-use fdsl::object::{Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData, Pose, ToolShape};
+use fdsl::object::{Domain, Edit, Formula, Geometry, Object, ObjectData};
 use glam::DVec3;
 use render::gpu::Renderer;
 use render::mesh::object_field::{Dirty, dirty_boxes};
@@ -49,27 +49,9 @@ fn main() {
     divan::main();
 }
 
-/// Edit `k` of a spiral of `n` over the unit sphere, turned by `phase` radians.
+/// Edit `k` of the shared spiral workload ([`fdsl::models::spiral_edit`]).
 fn edit(k: usize, n: usize, phase: f64) -> Edit {
-    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    let y = 1.0 - 2.0 * ((k % n) as f64 + 0.5) / n as f64;
-    let ring = (1.0 - y * y).max(0.0).sqrt();
-    let phi = golden * k as f64 + phase;
-    let at = DVec3::new(ring * phi.cos(), y, ring * phi.sin());
-    let op = if k % 5 == 4 {
-        EditOp::Union
-    } else {
-        EditOp::Subtract
-    };
-    let tool = ToolShape::Sphere {
-        radius: TOOL_RADIUS,
-    };
-    if k.is_multiple_of(2) {
-        Edit::stamp(op, tool, Pose::at(at))
-    } else {
-        let side = at.any_orthonormal_vector() * 0.03;
-        Edit::stroke(op, tool, vec![Pose::at(at - side), Pose::at(at + side)])
-    }
+    fdsl::models::spiral_edit(k, n, phase, TOOL_RADIUS)
 }
 
 fn object() -> Object {

@@ -204,19 +204,24 @@ fn scratch_store(name: &str) -> std::path::PathBuf {
     path
 }
 
-#[tokio::test]
-async fn a_node_with_a_store_persists_authored_and_received_ops() {
-    use replication::store::OpStore;
-    let path = scratch_store("persist");
-    let (store, _, _) = OpStore::<TestPayload>::open(&path).unwrap();
-    let b = replication::net::Node::spawn(replication::net::NodeConfig {
-        keypair: Keypair::from_seed([2; 32]),
+/// A node of the test session whose ops go to a new store at `path`.
+fn node_with_store(seed: u8, path: &std::path::Path) -> TNode {
+    let (store, _, _) = replication::store::OpStore::<TestPayload>::open(path).unwrap();
+    replication::net::Node::spawn(replication::net::NodeConfig {
+        keypair: Keypair::from_seed([seed; 32]),
         keys: session_keys(INVITE),
         listen: "127.0.0.1:0".parse().unwrap(),
         log: Log::default(),
         store: Some(store),
     })
-    .unwrap();
+    .unwrap()
+}
+
+#[tokio::test]
+async fn a_node_with_a_store_persists_authored_and_received_ops() {
+    use replication::store::OpStore;
+    let path = scratch_store("persist");
+    let b = node_with_store(2, &path);
     let a = node(1);
     author_some(&a.handle, 1, "alice").await;
     author_some(&b.handle, 2, "bob").await;
@@ -236,15 +241,7 @@ async fn a_node_with_a_store_persists_authored_and_received_ops() {
 async fn a_received_batch_of_ops_costs_one_fsync_not_one_per_op() {
     use replication::store::OpStore;
     let path = scratch_store("batched-fsync");
-    let (store, _, _) = OpStore::<TestPayload>::open(&path).unwrap();
-    let b = replication::net::Node::spawn(replication::net::NodeConfig {
-        keypair: Keypair::from_seed([2; 32]),
-        keys: session_keys(INVITE),
-        listen: "127.0.0.1:0".parse().unwrap(),
-        log: Log::default(),
-        store: Some(store),
-    })
-    .unwrap();
+    let b = node_with_store(2, &path);
     let a = node(1);
     let n_ops = 320;
     for i in 0..n_ops {
