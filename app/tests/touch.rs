@@ -50,10 +50,8 @@ fn csv(rows: &[(f64, DVec3)]) -> String {
     out
 }
 
-/// Runs `sculpt touch` and reads the forces it wrote, one per tick.
-fn touch(dir: &Path, scene: &Path, path_csv: &str, extra: &[&str]) -> Vec<(f64, DVec3)> {
-    let (input, output) = (dir.join("in.csv"), dir.join("out.csv"));
-    std::fs::write(&input, path_csv).unwrap();
+/// Runs `sculpt touch SCENE --trace INPUT --out OUTPUT EXTRA...`.
+fn sculpt_touch(scene: &Path, input: &Path, output: &Path, extra: &[&str]) -> Output {
     let mut args = vec![
         "touch",
         scene.to_str().unwrap(),
@@ -63,7 +61,14 @@ fn touch(dir: &Path, scene: &Path, path_csv: &str, extra: &[&str]) -> Vec<(f64, 
         output.to_str().unwrap(),
     ];
     args.extend_from_slice(extra);
-    let run = sculpt(&args);
+    sculpt(&args)
+}
+
+/// Runs `sculpt touch` and reads the forces it wrote, one per tick.
+fn touch(dir: &Path, scene: &Path, path_csv: &str, extra: &[&str]) -> Vec<(f64, DVec3)> {
+    let (input, output) = (dir.join("in.csv"), dir.join("out.csv"));
+    std::fs::write(&input, path_csv).unwrap();
+    let run = sculpt_touch(scene, &input, &output, extra);
     assert!(run.status.success(), "{}", text(&run.stderr));
     let written = std::fs::read_to_string(&output).unwrap();
     let mut lines = written.lines();
@@ -267,16 +272,7 @@ fn bad_paths_and_scenes_are_errors_with_their_location_and_write_nothing() {
     let (input, output) = (dir.join("in.csv"), dir.join("out.csv"));
     let scene = scene_file("figure_7_4.wrl");
     let run = |input: &Path, scene: &Path, extra: &[&str]| {
-        let mut args = vec![
-            "touch",
-            scene.to_str().unwrap(),
-            "--trace",
-            input.to_str().unwrap(),
-            "--out",
-            output.to_str().unwrap(),
-        ];
-        args.extend_from_slice(extra);
-        let out = sculpt(&args);
+        let out = sculpt_touch(scene, input, &output, extra);
         assert!(!out.status.success());
         let stderr = text(&out.stderr);
         assert!(!stderr.contains("panicked"), "{stderr}");
@@ -338,18 +334,7 @@ mod live {
     const T0: replication::Timestamp = replication::Timestamp(1_795_355_107_000_000);
 
     fn config(store: &std::path::Path) -> EngineConfig {
-        EngineConfig {
-            store: store.to_path_buf(),
-            invite: None,
-            network: Network {
-                listen: (std::net::Ipv4Addr::LOCALHOST, 0).into(),
-                ..Network::default()
-            },
-            demo: false,
-            memory_fallback: false,
-            name: None,
-            session_name: None,
-        }
+        EngineConfig::on_loopback(store)
     }
 
     fn now() -> Instant {

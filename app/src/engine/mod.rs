@@ -95,6 +95,25 @@ pub struct EngineConfig {
     pub session_name: Option<String>,
 }
 
+impl EngineConfig {
+    /// A session of its own in `store`, listening on a free port of the loopback interface,
+    /// no demo, no memory fallback, no LAN: what tests and benchmarks start engines with.
+    pub fn on_loopback(store: &std::path::Path) -> EngineConfig {
+        EngineConfig {
+            store: store.to_path_buf(),
+            invite: None,
+            network: Network {
+                listen: (std::net::Ipv4Addr::LOCALHOST, 0).into(),
+                ..Network::default()
+            },
+            demo: false,
+            memory_fallback: false,
+            name: None,
+            session_name: None,
+        }
+    }
+}
+
 /// Why the engine did not start.
 #[derive(Debug, thiserror::Error)]
 pub enum StartError {

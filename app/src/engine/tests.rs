@@ -21,16 +21,9 @@ fn scratch(name: &str) -> PathBuf {
 
 fn config(store: &Path) -> EngineConfig {
     EngineConfig {
-        store: store.to_path_buf(),
-        invite: None,
-        network: Network {
-            listen: (std::net::Ipv4Addr::LOCALHOST, 0).into(),
-            ..Network::default()
-        },
         demo: true,
         memory_fallback: true,
-        name: None,
-        session_name: None,
+        ..EngineConfig::on_loopback(store)
     }
 }
 
