@@ -37,7 +37,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context as _, bail, ensure};
 use app::clock;
 use app::command;
-use app::engine::{Engine, EngineConfig, Network, Pending, RequestError, lock, store};
+use app::engine::{Engine, EngineConfig, Pending, RequestError, lock, store};
 use fdsl::scene::Scene;
 use replication::net::discovery::message::{DiscoveryMessage, NO_COOKIE};
 use replication::net::discovery::registry::{self, Registry};
@@ -212,20 +212,9 @@ fn sessions(root: &Path, sizes: &Sizes) -> anyhow::Result<()> {
 }
 
 fn start(dir: &Path, invite: Option<Invite>, dial: Vec<SocketAddr>) -> anyhow::Result<Engine> {
-    let config = EngineConfig {
-        store: dir.to_path_buf(),
-        invite,
-        network: Network {
-            listen: (std::net::Ipv4Addr::LOCALHOST, 0).into(),
-            dial,
-            discovery: None,
-            lan: false,
-        },
-        demo: false,
-        memory_fallback: false,
-        name: None,
-        session_name: None,
-    };
+    let mut config = EngineConfig::on_loopback(dir);
+    config.invite = invite;
+    config.network.dial = dial;
     Ok(Engine::start(config, clock::now().wall)?)
 }
 

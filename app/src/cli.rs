@@ -655,21 +655,7 @@ pub fn touch_command(args: &TouchArgs) -> anyhow::Result<()> {
 
 /// An engine on `store` that reaches no one: loopback, no dialing, no discovery, no LAN.
 fn local_engine(store: &std::path::Path) -> anyhow::Result<Engine> {
-    let config = EngineConfig {
-        store: store.to_path_buf(),
-        invite: None,
-        network: Network {
-            listen: (std::net::Ipv4Addr::LOCALHOST, 0).into(),
-            dial: Vec::new(),
-            discovery: None,
-            lan: false,
-        },
-        demo: false,
-        memory_fallback: false,
-        name: None,
-        session_name: None,
-    };
-    let engine = Engine::start(config, app::clock::now().wall)?;
+    let engine = Engine::start(EngineConfig::on_loopback(store), app::clock::now().wall)?;
     for notice in lock(engine.view()).notices() {
         log::warn!("{notice}");
     }

@@ -10,7 +10,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use app::engine::{Engine, EngineConfig, Network, lock, store};
+use app::engine::{Engine, EngineConfig, lock, store};
 use fdsl::mesh::{MeshFormat, TriMesh};
 use fdsl::object::{Domain, Edit, EditOp, Formula, Geometry, ObjectData, Pose, ToolShape};
 use fdsl::scene::{ObjectId, Scene};
@@ -65,19 +65,7 @@ fn refused(args: &[&str]) -> String {
 
 /// An engine on `dir` that reaches no one.
 fn engine(dir: &Path) -> Engine {
-    let config = EngineConfig {
-        store: dir.to_path_buf(),
-        invite: None,
-        network: Network {
-            listen: (std::net::Ipv4Addr::LOCALHOST, 0).into(),
-            ..Network::default()
-        },
-        demo: false,
-        memory_fallback: false,
-        name: None,
-        session_name: None,
-    };
-    Engine::start(config, app::clock::now().wall).unwrap()
+    Engine::start(EngineConfig::on_loopback(dir), app::clock::now().wall).unwrap()
 }
 
 /// The scene a store holds, read through the engine.
