@@ -11,7 +11,7 @@ if [ -z "${DISPLAY:-}" ] && [ -z "${WAYLAND_DISPLAY:-}" ]; then
   out="$(mktemp -d /tmp/sculpt-demo.XXXXXX)"
   echo "demo: no display (DISPLAY and WAYLAND_DISPLAY are unset), so no window;"
   echo "demo: drawing the demo scene headless with \`sculpt render\` instead"
-  cargo run --release --locked -p app --bin sculpt -- render tests/data/scenes/watermelon.wrl --out "$out"
+  cargo run --release --locked -p app --bin sculpt -- render scenes/watermelon.wrl --out "$out"
   echo "demo: the pictures of the demo scene are in $out"
   exit 0
 fi

@@ -328,7 +328,7 @@ pub fn peer(args: PeerArgs) -> anyhow::Result<()> {
         store: args.store.clone(),
         invite: args.net.invite.clone(),
         network: args.net.network(),
-        demo: false,
+        demo: None,
         memory_fallback: false,
         name: args.net.name.clone(),
         session_name: args.net.session_name.clone(),

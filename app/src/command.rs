@@ -484,7 +484,7 @@ mod tests {
         let mut log = replication::Log::default();
         let me = keypair.peer_id();
         let first = View::new(me, &log).unwrap().next_object_id();
-        for payload in crate::engine::demo_payloads_from(first).unwrap() {
+        for payload in crate::engine::demo_payloads_from(&crate::demos::DEMOS[0], first).unwrap() {
             log.author(&keypair, Timestamp(1_000_000), payload).unwrap();
         }
         let s = View::new(me, &log).unwrap();

@@ -15,6 +15,8 @@
 //!   imported as planned ops, a scene or one object exported as the renderer meshes it.
 //! - [`touch`]: the haptic servo on the app's scenes: replayed headless over a CSV path
 //!   (`sculpt touch`), and fed the live scene's changed objects as snapshots.
+//! - [`demos`]: the thesis's applications as scene files built into the program
+//!   (`sculpt demo NAME`).
 //! - [`settings`]: the name, colour and brush a user expects to find again.
 //! - [`clock`]: the program's one read of the clock.
 //!
@@ -28,7 +30,7 @@
 //!     store: "/tmp/sculpt-example".into(),
 //!     invite: None,
 //!     network: Network::default(),
-//!     demo: true,
+//!     demo: app::demos::find(app::demos::DEFAULT_DEMO).ok(),
 //!     memory_fallback: false,
 //!     name: None,
 //!     session_name: None,
@@ -42,6 +44,7 @@
 pub mod brush;
 pub mod clock;
 pub mod command;
+pub mod demos;
 pub mod engine;
 pub mod files;
 pub mod settings;

@@ -24,8 +24,9 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Cmd {
-    /// Open the window on the demo scene (what `sculpt` alone does).
-    Demo(window::WindowArgs),
+    /// Open the window on a demo scene (`sculpt` alone opens the watermelon); --list names
+    /// them all.
+    Demo(window::DemoArgs),
     /// Run a headless peer that keeps a session's store and syncs with its peers.
     Peer(cli::PeerArgs),
     /// Run a discovery node: it introduces peers to each other and never sees an op.
@@ -58,8 +59,10 @@ fn main() -> ExitCode {
         .format_target(false)
         .init();
     let result = match cli.command {
-        None => window::run(cli.window),
-        Some(Cmd::Demo(args)) => window::run(args),
+        None => app::demos::find(app::demos::DEFAULT_DEMO)
+            .map_err(anyhow::Error::msg)
+            .and_then(|demo| window::run(cli.window, demo)),
+        Some(Cmd::Demo(args)) => window::demo(args),
         Some(Cmd::Peer(args)) => cli::peer(args),
         Some(Cmd::Discovery(args)) => cli::discovery(&args),
         Some(Cmd::Invite) => cli::invite(),

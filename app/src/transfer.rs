@@ -266,7 +266,11 @@ fn located(issue: &fvrml::Issue, shown: &str) -> String {
 }
 
 /// The payloads of a loaded scene: groups parents first, then objects, ids from `next_id`.
-fn scene_payloads(path: &Path, scene: &Scene, next_id: u64) -> Result<Imported, ImportError> {
+pub(crate) fn scene_payloads(
+    path: &Path,
+    scene: &Scene,
+    next_id: u64,
+) -> Result<Imported, ImportError> {
     let too_many = |what, count, limit| ImportError::TooMany {
         path: path.into(),
         what,

@@ -50,6 +50,31 @@ fn every_subcommand_has_help_that_exits_zero() {
 }
 
 #[test]
+fn demo_lists_the_scenes_and_names_them_when_one_is_unknown() {
+    let list = sculpt(&["demo", "--list"]);
+    assert!(list.status.success(), "{}", text(&list.stderr));
+    let stdout = text(&list.stdout);
+    let names: Vec<&str> = stdout
+        .lines()
+        .filter_map(|l| l.split_whitespace().next())
+        .collect();
+    let expected: Vec<&str> = app::demos::DEMOS.iter().map(|d| d.name).collect();
+    assert_eq!(names, expected, "{stdout}");
+    assert!(
+        stdout.contains("wind  ") && stdout.contains("invisible cone"),
+        "{stdout}"
+    );
+    // An unknown name fails before any window opens, listing the names there are.
+    let unknown = sculpt(&["demo", "shark-tank"]);
+    assert!(!unknown.status.success());
+    let stderr = text(&unknown.stderr);
+    assert!(
+        stderr.contains("no demo is called `shark-tank`; there are: watermelon, wind"),
+        "{stderr}"
+    );
+}
+
+#[test]
 fn weak_and_mistyped_invites_are_refused_with_what_to_do() {
     let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli-invite");
     let store = dir.to_str().unwrap();
@@ -120,7 +145,7 @@ fn sessions_lists_the_stores_under_a_root() {
                 listen: (std::net::Ipv4Addr::LOCALHOST, 0).into(),
                 ..Network::default()
             },
-            demo: true,
+            demo: app::demos::find(app::demos::DEFAULT_DEMO).ok(),
             memory_fallback: false,
             name: None,
             session_name: None,

@@ -29,7 +29,7 @@ fn text(bytes: &[u8]) -> String {
 #[test]
 fn render_writes_one_png_per_view_of_the_watermelon() {
     let out = scratch("render_watermelon");
-    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/scenes/watermelon.wrl");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/watermelon.wrl");
     let run = sculpt(&[
         "render",
         scene.to_str().unwrap(),

@@ -37,8 +37,15 @@ fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
 
+/// A file of the repository, by its path from the repository's root.
+fn repo_file(relative: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(relative)
+}
+
 fn scene_file(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../tests/data/scenes/{name}"))
+    repo_file(&format!("tests/data/scenes/{name}"))
 }
 
 /// A path as CSV from `(t, point)` rows, button up.
@@ -230,7 +237,7 @@ fn the_watermelons_rind_pushes_out_harder_with_depth_then_pops_as_in_the_trace_t
 
 #[test]
 fn the_demo_watermelons_rind_holds_a_resting_hand_then_pops() {
-    // The demo scene (`tests/data/scenes/watermelon.wrl`): tension 1 over a surface zone 0.05
+    // The demo scene (`scenes/watermelon.wrl`): tension 1 over a surface zone 0.05
     // deep. A hand comes down onto the rind, rests 0.03 inside it, then pushes on to 0.12 and
     // rests in the flesh.
     let dir = scratch("watermelon-wrl");
@@ -245,7 +252,7 @@ fn the_demo_watermelons_rind_holds_a_resting_hand_then_pops() {
         (5.3, at_radius(0.88)),
     ];
     let path_csv = csv(&rows);
-    let forces = touch(&dir, &scene_file("watermelon.wrl"), &path_csv, &[]);
+    let forces = touch(&dir, &repo_file("scenes/watermelon.wrl"), &path_csv, &[]);
     let outward = |k: usize| forces[k].1.dot(points(&path_csv)[k].normalize());
     // Resting in the rind, inside its zone: the membrane pushes the hand back out.
     // (4.2 N when this was written, of the Falcon's 8 N.)
@@ -539,4 +546,141 @@ mod live {
         let _ = std::fs::remove_dir_all(&da);
         let _ = std::fs::remove_dir_all(&db);
     }
+}
+
+// The demo scenes (`scenes/`): what the thesis says the user feels in each.
+
+/// Mean force over ticks `range`.
+fn mean_force(forces: &[(f64, DVec3)], range: std::ops::Range<usize>) -> DVec3 {
+    let n = range.len() as f64;
+    range.map(|k| forces[k].1).sum::<DVec3>() / n
+}
+
+#[test]
+fn the_wind_pushes_along_the_cones_axis_fading_with_distance_and_stops_outside_it() {
+    let dir = scratch("demo-wind");
+    // The cone's apex is at z = 0.1 in front of the fan, its axis +z, radius 0.9 at z = 2.5.
+    let rows = [
+        (0.0, DVec3::new(0.0, 0.0, 0.5)),
+        (1.0, DVec3::new(0.0, 0.0, 0.5)),
+        (2.0, DVec3::new(0.0, 0.0, 2.2)),
+        (3.0, DVec3::new(0.0, 0.0, 2.2)),
+        (4.0, DVec3::new(0.0, 1.2, 2.2)),
+        (5.0, DVec3::new(0.0, 1.2, 2.2)),
+    ];
+    let forces = touch(&dir, &repo_file("scenes/wind.wrl"), &csv(&rows), &[]);
+    let near = mean_force(&forces, 500..1000);
+    let far = mean_force(&forces, 2500..3000);
+    // Along the axis, away from the fan (0.6 of the Falcon's 8 N at the apex).
+    assert!(
+        near.z > 3.0 && near.z > 0.98 * near.length(),
+        "near: {near}"
+    );
+    assert!(far.z > 0.5 && far.z > 0.98 * far.length(), "far: {far}");
+    assert!(
+        far.z < 0.5 * near.z,
+        "fades with distance: {far} after {near}"
+    );
+    // Above the cone (its radius is 0.79 there) there is no wind at all.
+    for (k, (_, f)) in forces.iter().enumerate().skip(4300) {
+        assert_eq!(*f, DVec3::ZERO, "tick {k}: outside the cone");
+    }
+}
+
+#[test]
+fn the_demo_whirlpool_pulls_round_in_and_down() {
+    let dir = scratch("demo-whirlpool");
+    let mut rows = vec![(0.0, DVec3::new(0.8, 0.35, 0.0))];
+    for k in 0..=100 {
+        let angle = f64::from(k) * 0.03;
+        rows.push((
+            0.5 + f64::from(k) * 0.01,
+            DVec3::new(0.8 * angle.cos(), 0.35, 0.8 * angle.sin()),
+        ));
+    }
+    let path_csv = csv(&rows);
+    let forces = touch(&dir, &repo_file("scenes/whirlpool.wrl"), &path_csv, &[]);
+    let hips = points(&path_csv);
+    for k in 300..1500 {
+        let (f, hip) = (forces[k].1, hips[k]);
+        let radial = DVec3::new(hip.x, 0.0, hip.z).normalize();
+        let round = DVec3::Y.cross(radial);
+        assert!(f.dot(round) > 3.0 * f.dot(radial).abs(), "tick {k}: {f}");
+        assert!(f.dot(radial) < 0.0, "tick {k}: in towards the axis: {f}");
+        assert!(f.y < 0.0, "tick {k}: down: {f}");
+    }
+}
+
+#[test]
+fn the_campus_walls_are_solid_and_the_lawn_is_softer() {
+    let dir = scratch("demo-campus");
+    // The library's east wall is the plane x = -0.7 (from y 0 to 1.2, z -1.4 to 0.2); a hand
+    // comes from the east and rests 0.02 inside it, then goes down onto the lawn (y = 0) in
+    // the open and rests 0.02 inside the ground.
+    let rows = [
+        (0.0, DVec3::new(-0.3, 0.6, -0.6)),
+        (0.5, DVec3::new(-0.3, 0.6, -0.6)),
+        (1.5, DVec3::new(-0.72, 0.6, -0.6)),
+        (2.0, DVec3::new(-0.72, 0.6, -0.6)),
+        (2.5, DVec3::new(-0.3, 0.6, -0.6)),
+        (3.0, DVec3::new(-0.3, 0.6, 1.5)),
+        (4.0, DVec3::new(-0.3, -0.02, 1.5)),
+        (4.5, DVec3::new(-0.3, -0.02, 1.5)),
+    ];
+    let forces = touch(&dir, &repo_file("scenes/campus.wrl"), &csv(&rows), &[]);
+    let wall = mean_force(&forces, 1800..2000);
+    let lawn = mean_force(&forces, 4300..4500);
+    // The wall pushes the hand straight back out, east.
+    assert!(
+        wall.x > 1.0 && wall.x > 0.95 * wall.length(),
+        "wall: {wall}"
+    );
+    // The lawn pushes up, with less than a third of the wall's stiffness (0.3 against 1).
+    assert!(
+        lawn.y > 0.2 && lawn.y > 0.95 * lawn.length(),
+        "lawn: {lawn}"
+    );
+    assert!(
+        lawn.y < 0.5 * wall.x,
+        "the lawn is softer: {lawn} against {wall}"
+    );
+    // In the open, above the lawn, nothing.
+    assert_eq!(forces[2900].1, DVec3::ZERO);
+}
+
+/// The femur's resistance to a hand moving at 0.5 units a second along `rows`, averaged over
+/// ticks `range`.
+fn femur_drag(dir: &Path, rows: &[(f64, DVec3)], range: std::ops::Range<usize>) -> DVec3 {
+    let forces = touch(dir, &repo_file("scenes/femur.wrl"), &csv(rows), &[]);
+    mean_force(&forces, range)
+}
+
+#[test]
+fn the_femurs_marrow_is_softer_than_its_bone() {
+    // Into the femoral head (bone through and through: a ball of radius 0.3 at
+    // (-0.5, 1.5, 0)) from above, and into the shaft's marrow (radius 0.12) from the side,
+    // both at 0.5 units a second; the drag is measured 0.1 to 0.2 below each surface zone.
+    let head = [
+        (0.0, DVec3::new(-0.5, 2.0, 0.0)),
+        (0.5, DVec3::new(-0.5, 2.0, 0.0)),
+        (1.5, DVec3::new(-0.5, 1.5, 0.0)),
+    ];
+    let bone = femur_drag(&scratch("demo-femur-head"), &head, 1140..1340);
+    let shaft = [
+        (0.0, DVec3::new(0.5, 0.0, 0.0)),
+        (0.5, DVec3::new(0.5, 0.0, 0.0)),
+        (1.5, DVec3::new(0.0, 0.0, 0.0)),
+    ];
+    let marrow = femur_drag(&scratch("demo-femur-shaft"), &shaft, 1240..1440);
+    // Both resist the motion (the hand moves -y into the head and -x into the shaft).
+    assert!(bone.y > 0.0 && bone.y > 0.9 * bone.length(), "bone: {bone}");
+    assert!(
+        marrow.x > 0.0 && marrow.x > 0.9 * marrow.length(),
+        "marrow: {marrow}"
+    );
+    // Density 0.85 against 0.2.
+    assert!(
+        bone.length() > 3.0 * marrow.length(),
+        "bone {bone} against marrow {marrow}"
+    );
 }

@@ -162,7 +162,7 @@ fn each_mesh_file_becomes_an_object_with_the_files_signed_distance() {
 fn the_watermelon_scene_is_imported_as_its_object() {
     let dir = scratch("transfer_watermelon");
     let store_dir = dir.join("store");
-    let file = data("scenes/watermelon.wrl");
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/watermelon.wrl");
     let stdout = ok(&["import", "--store", arg(&store_dir), arg(&file)]);
     assert!(
         stdout.contains("\"Watermelon\": implicit solid"),

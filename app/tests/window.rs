@@ -321,6 +321,55 @@ fn the_window_shows_the_watermelon_and_an_edit_survives_a_restart() {
 }
 
 #[test]
+fn a_demo_opens_in_its_own_session_and_the_scenes_menu_switches_to_another() {
+    let display = display();
+    let dir = scratch("demos");
+    let names = |state: &Value| -> Vec<String> {
+        let mut names: Vec<String> = state["objects"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|o| o["name"].as_str().unwrap().to_string())
+            .collect();
+        names.sort();
+        names
+    };
+    // `sculpt demo femur`: the femur's four objects, meshed and drawn.
+    let store = dir.join("femur");
+    let args = ["demo", "femur", "--store", store.to_str().unwrap()];
+    let (state, picture, stdout) = window_with(&display, &dir, "femur", &args);
+    assert_eq!(
+        names(&state),
+        ["Bone", "Marrow", "Plate", "Screw"],
+        "{stdout}"
+    );
+    assert!(state["objects"][0]["n_triangles"].as_u64().unwrap() > 1000);
+    let ivory = (0..picture.height)
+        .flat_map(|y| (0..picture.width).map(move |x| (x, y)))
+        .filter(|&(x, y)| {
+            let [r, g, b, _] = picture.pixel(x, y).unwrap().map(i32::from);
+            r > 150 && r >= b && g >= b && r - b < 80
+        })
+        .count();
+    assert!(ivory > 2000, "the bone is drawn: {ivory} ivory pixels");
+    // The Scenes menu's whirlpool (scripted as `demo: whirlpool`): its own store beside the
+    // femur's, made with the whirlpool's objects; the femur's store keeps its own.
+    let (state, _, stdout) = window_with(
+        &display,
+        &dir,
+        "whirlpool",
+        &[&args[..], &["--command", "demo: whirlpool"]].concat(),
+    );
+    assert_eq!(names(&state), ["Basin", "Whirlpool"], "{stdout}");
+    assert_eq!(
+        state["store"].as_str().unwrap(),
+        dir.join("demo-whirlpool").display().to_string()
+    );
+    assert!(dir.join("demo-whirlpool").join("ops.sculpt").exists());
+    assert!(stdout.contains("scripted demo: whirlpool"), "{stdout}");
+}
+
+#[test]
 fn a_click_picks_the_object_and_the_point() {
     let display = display();
     let dir = scratch("pick");

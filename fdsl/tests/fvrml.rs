@@ -13,7 +13,7 @@ use glam::DVec3;
 const FIGURE_7_4: &str = include_str!("../../tests/data/scenes/figure_7_4.wrl");
 const FIGURE_7_8: &str = include_str!("../../tests/data/scenes/figure_7_8.wrl");
 const FIGURE_7_14: &str = include_str!("../../tests/data/scenes/figure_7_14.wrl");
-const WATERMELON: &str = include_str!("../../tests/data/scenes/watermelon.wrl");
+const WATERMELON: &str = include_str!("../../scenes/watermelon.wrl");
 const WATERMELON_FDSL: &str = include_str!("../../tests/data/models/watermelon.fdsl");
 
 fn no_files(path: &str) -> Result<String, String> {

@@ -17,7 +17,7 @@ const FIGURES: [&str; 4] = [
     include_str!("../../tests/data/scenes/figure_7_4.wrl"),
     include_str!("../../tests/data/scenes/figure_7_8.wrl"),
     include_str!("../../tests/data/scenes/figure_7_14.wrl"),
-    include_str!("../../tests/data/scenes/watermelon.wrl"),
+    include_str!("../../scenes/watermelon.wrl"),
 ];
 
 /// Loads with a resolver that serves `inline` for every path; checks that every issue has

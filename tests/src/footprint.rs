@@ -48,7 +48,7 @@ pub const SCENES: [(&str, &str); 4] = [
     ),
     (
         "watermelon.wrl",
-        include_str!("../data/scenes/watermelon.wrl"),
+        include_str!("../../scenes/watermelon.wrl"),
     ),
 ];
 

@@ -48,8 +48,6 @@ pub const PRESENCE_REPEAT_MILLIS: u64 = 1_000;
 pub const SHUTDOWN_FLUSH_MILLIS: u64 = 2_000;
 /// How long [`Engine::start`] waits for the engine thread to bind its socket.
 pub const START_TIMEOUT_SECS: u64 = 20;
-/// The demo scene authored into a new session: the thesis's watermelon.
-pub const DEMO_SCENE: &str = include_str!("../../../tests/data/scenes/watermelon.wrl");
 
 /// How the engine reaches other peers.
 #[derive(Clone, Debug)]
@@ -84,8 +82,8 @@ pub struct EngineConfig {
     pub invite: Option<Invite>,
     /// How to reach other peers.
     pub network: Network,
-    /// Author the demo scene when this start makes a new session.
-    pub demo: bool,
+    /// The demo scene to author when this start makes a new session.
+    pub demo: Option<&'static crate::demos::Demo>,
     /// When the store cannot be used, run in memory with the error in the view (the window)
     /// instead of failing (a headless peer).
     pub memory_fallback: bool,
@@ -106,7 +104,7 @@ impl EngineConfig {
                 listen: (std::net::Ipv4Addr::LOCALHOST, 0).into(),
                 ..Network::default()
             },
-            demo: false,
+            demo: None,
             memory_fallback: false,
             name: None,
             session_name: None,
@@ -262,8 +260,10 @@ impl Engine {
         view.store_error = store_error;
         let view: SharedView = Arc::new(Mutex::new(view));
         let news = Arc::new(Mutex::new(News::default()));
-        let demo = (config.demo && new_session && log.is_empty())
-            .then(|| demo_payloads_from(lock(&view).next_object_id()));
+        let demo = config
+            .demo
+            .filter(|_| new_session && log.is_empty())
+            .map(|demo| demo_payloads_from(demo, lock(&view).next_object_id()));
         let (requests, inbox) = tokio::sync::mpsc::channel(MAX_QUEUED_REQUESTS);
         let (ready_tx, ready_rx) = std_mpsc::channel();
         // The discovery id takes a slow derivation (argon2id): once per start.
@@ -947,22 +947,16 @@ fn disconnect_text(reason: &DisconnectReason) -> String {
     }
 }
 
-/// The demo scene's objects as create ops with ids from `first_id` on.
-pub fn demo_payloads_from(first_id: u64) -> Result<Vec<ShapePayload>, String> {
-    use fdsl::fvrml::{LoadOptions, load};
-    let mut no_inline = |url: &str| Err(format!("the demo scene has no inline files ({url})"));
-    let loaded = load(DEMO_SCENE, &LoadOptions::default(), &mut no_inline)
-        .map_err(|e| format!("the demo scene does not load: {e}"))?;
-    Ok(loaded
-        .scene
-        .objects()
-        .zip(first_id..)
-        .map(|((_, entry), object)| ShapePayload::Create {
-            object,
-            data: Box::new(entry.object.data().clone()),
-            group: None,
-        })
-        .collect())
+/// A demo scene's ops, as an import of its file plans them: its groups (parents first), then
+/// its objects in their groups, with ids from `first_id` on.
+pub fn demo_payloads_from(
+    demo: &crate::demos::Demo,
+    first_id: u64,
+) -> Result<Vec<ShapePayload>, String> {
+    let loaded = demo.load(&fdsl::fvrml::LoadOptions::default())?;
+    crate::transfer::scene_payloads(std::path::Path::new(demo.file), &loaded.scene, first_id)
+        .map(|imported| imported.payloads)
+        .map_err(|e| e.to_string())
 }
 
 #[cfg(test)]

@@ -21,7 +21,7 @@ fn scratch(name: &str) -> PathBuf {
 
 fn config(store: &Path) -> EngineConfig {
     EngineConfig {
-        demo: true,
+        demo: crate::demos::find(crate::demos::DEFAULT_DEMO).ok(),
         memory_fallback: true,
         ..EngineConfig::on_loopback(store)
     }
@@ -270,7 +270,7 @@ fn an_edit_on_one_engine_reaches_the_other_as_a_change_of_that_object_with_prese
     let addr = lock(a.view()).listen_addr().unwrap();
     let b_config = EngineConfig {
         invite: Some(a.invite().clone()),
-        demo: true,
+        demo: crate::demos::find(crate::demos::DEFAULT_DEMO).ok(),
         network: Network {
             dial: vec![addr],
             ..config(&db).network

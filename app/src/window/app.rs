@@ -567,7 +567,31 @@ impl SculptApp {
         let mut config = self.config.clone();
         config.store = base.join(::app::engine::store::joined_dir_name(&invite));
         config.invite = Some(invite);
-        config.demo = false;
+        config.demo = None;
+        self.switch_session(config, true)?;
+        self.status = "joined the session; syncing".into();
+        Ok(())
+    }
+
+    /// Leaves this session and opens `demo`'s own, in its store directory beside this one
+    /// (made and given the demo's objects the first time).
+    pub(super) fn open_demo(&mut self, demo: &'static ::app::demos::Demo) -> Result<(), String> {
+        let base = self.config.store.parent().map_or_else(
+            || std::path::PathBuf::from("."),
+            std::path::Path::to_path_buf,
+        );
+        let mut config = self.config.clone();
+        config.store = base.join(demo.store_dir_name());
+        config.invite = None;
+        config.demo = Some(demo);
+        self.switch_session(config, false)?;
+        self.status = format!("{}: {}", demo.title, demo.about);
+        Ok(())
+    }
+
+    /// Starts an engine on `config` and puts it in the place of this one (which stops), with
+    /// the window's per-session state cleared.
+    fn switch_session(&mut self, mut config: EngineConfig, shared: bool) -> Result<(), String> {
         // The session left is still listening while the new one starts.
         config.network.listen.set_port(0);
         let engine = Engine::start(config.clone(), clock::now().wall).map_err(|e| e.to_string())?;
@@ -577,7 +601,7 @@ impl SculptApp {
         }
         self.engine = engine;
         self.config = config;
-        self.shared = true;
+        self.shared = shared;
         self.objects.clear();
         self.changes_cursor = 0;
         self.selected = None;
@@ -587,7 +611,6 @@ impl SculptApp {
         self.following = None;
         self.presence_sent = None;
         self.dirty = true;
-        self.status = "joined the session; syncing".into();
         Ok(())
     }
 

@@ -200,6 +200,16 @@ impl SculptApp {
                 self.hooks.idle_frames = 0;
                 return;
             }
+            if let Some(name) = line.strip_prefix("demo:") {
+                let name = name.trim();
+                println!("sculpt: scripted demo: {name}");
+                let opened = ::app::demos::find(name).and_then(|demo| self.open_demo(demo));
+                if let Err(e) = opened {
+                    self.hooks.fail(e);
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
             if let Some(key) = line.strip_prefix("key:") {
                 println!("sculpt: scripted key: {key}");
                 if let Err(e) = self.shortcut_named(key.trim()) {

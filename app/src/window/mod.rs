@@ -37,8 +37,8 @@ Without a display, use the headless subcommands:
 /// The window's flags (`sculpt [demo] ...`).
 #[derive(clap::Args, Debug)]
 pub struct WindowArgs {
-    /// The session's store directory (default: $XDG_DATA_HOME/sculpt/sessions/demo, or
-    /// ~/.local/share/sculpt/sessions/demo).
+    /// The session's store directory (default: the demo's own, $XDG_DATA_HOME/sculpt/sessions/
+    /// demo for the watermelon and demo-NAME for the others, or ~/.local/share/sculpt/...).
     #[arg(long, value_name = "DIR")]
     pub store: Option<PathBuf>,
     /// Octree depth for implicit objects.
@@ -111,8 +111,32 @@ pub fn default_data_dir() -> Option<PathBuf> {
     non_empty("HOME").map(|home| PathBuf::from(home).join(".local/share/sculpt"))
 }
 
-/// Opens the window and runs until it is closed.
-pub fn run(args: WindowArgs) -> anyhow::Result<()> {
+/// `sculpt demo`: a demo scene in the window, or the list of them.
+#[derive(clap::Args, Debug)]
+pub struct DemoArgs {
+    /// The demo to open (see --list).
+    #[arg(id = "demo", value_name = "NAME", default_value = ::app::demos::DEFAULT_DEMO)]
+    pub demo: String,
+    /// Print the demo scenes, one per line, and exit.
+    #[arg(long)]
+    pub list: bool,
+    #[command(flatten)]
+    pub window: WindowArgs,
+}
+
+/// `sculpt demo [NAME] [--list]`.
+pub fn demo(args: DemoArgs) -> anyhow::Result<()> {
+    if args.list {
+        print!("{}", ::app::demos::list_text());
+        return Ok(());
+    }
+    let demo = ::app::demos::find(&args.demo).map_err(anyhow::Error::msg)?;
+    run(args.window, demo)
+}
+
+/// Opens the window on `demo`'s session (unless an invite or a store says otherwise) and
+/// runs until it is closed.
+pub fn run(args: WindowArgs, demo: &'static ::app::demos::Demo) -> anyhow::Result<()> {
     let display = std::env::var("DISPLAY").unwrap_or_default();
     let wayland = std::env::var("WAYLAND_DISPLAY").unwrap_or_default();
     if display.is_empty() && wayland.is_empty() {
@@ -130,7 +154,7 @@ pub fn run(args: WindowArgs) -> anyhow::Result<()> {
                 .join("sessions");
             match &args.net.invite {
                 Some(invite) => sessions.join(::app::engine::store::joined_dir_name(invite)),
-                None => sessions.join("demo"),
+                None => sessions.join(demo.store_dir_name()),
             }
         }
     };
@@ -155,7 +179,7 @@ pub fn run(args: WindowArgs) -> anyhow::Result<()> {
         store,
         invite: args.net.invite.clone(),
         network: args.net.network(),
-        demo: true,
+        demo: Some(demo),
         memory_fallback: true,
         name: args.net.name.clone(),
         session_name: args.net.session_name.clone(),

@@ -113,6 +113,15 @@ impl SculptApp {
                     }
                 }
             });
+            ui.menu_button("Scenes", |ui| {
+                for demo in ::app::demos::DEMOS {
+                    if ui.button(demo.title).on_hover_text(demo.about).clicked()
+                        && let Err(e) = self.open_demo(demo)
+                    {
+                        self.status = e;
+                    }
+                }
+            });
             ui.menu_button("Session", |ui| {
                 if ui.button("Share…").clicked() {
                     self.show_invite = true;

@@ -296,14 +296,14 @@ impl Watermelon {
 /// Points within 1.5 cells of the corners where creases meet are left out (the corner's
 /// vertex stands for them).
 ///
-/// The mesh is the one `sculpt render` draws of `tests/data/scenes/watermelon.wrl`: the
+/// The mesh is the one `sculpt render` draws of `scenes/watermelon.wrl`: the
 /// object's field ([`ObjectField`]) inside [`mesh_bounds`]. Before, the vertices nearest the
 /// straight creases strayed up to 0.033 cells (depth 5) and 0.11 cells (depth 6) from them,
 /// and those nearest the arcs 0.12 cells at depth 6 (now 0.024; 0.045 at depth 5, where the
 /// bound is 0.069): a saw-tooth along the cut.
 #[test]
 fn watermelon_cut_vertices_lie_on_its_creases() {
-    let text = include_str!("../../../../../tests/data/scenes/watermelon.wrl");
+    let text = include_str!("../../../../../scenes/watermelon.wrl");
     let mut no_files = |path: &str| Err(format!("no file {path}"));
     let scene = fdsl::fvrml::load(text, &fdsl::fvrml::LoadOptions::default(), &mut no_files)
         .unwrap()
