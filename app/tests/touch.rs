@@ -659,7 +659,8 @@ fn femur_drag(dir: &Path, rows: &[(f64, DVec3)], range: std::ops::Range<usize>) 
 fn the_femurs_marrow_is_softer_than_its_bone() {
     // Into the femoral head (bone through and through: a ball of radius 0.3 at
     // (-0.5, 1.5, 0)) from above, and into the shaft's marrow (radius 0.12) from the side,
-    // both at 0.5 units a second; the drag is measured 0.1 to 0.2 below each surface zone.
+    // both at 0.5 units a second; the drag is measured 0.1 to 0.2 below the head's surface
+    // zone and across the marrow's middle (x from 0.1 to 0.01).
     let head = [
         (0.0, DVec3::new(-0.5, 2.0, 0.0)),
         (0.5, DVec3::new(-0.5, 2.0, 0.0)),
@@ -671,14 +672,14 @@ fn the_femurs_marrow_is_softer_than_its_bone() {
         (0.5, DVec3::new(0.5, 0.0, 0.0)),
         (1.5, DVec3::new(0.0, 0.0, 0.0)),
     ];
-    let marrow = femur_drag(&scratch("demo-femur-shaft"), &shaft, 1240..1440);
+    let marrow = femur_drag(&scratch("demo-femur-shaft"), &shaft, 1300..1480);
     // Both resist the motion (the hand moves -y into the head and -x into the shaft).
     assert!(bone.y > 0.0 && bone.y > 0.9 * bone.length(), "bone: {bone}");
     assert!(
         marrow.x > 0.0 && marrow.x > 0.9 * marrow.length(),
         "marrow: {marrow}"
     );
-    // Density 0.85 against 0.2.
+    // Density 0.85 against 0.2: 0.24 N against 0.057 N when this was written.
     assert!(
         bone.length() > 3.0 * marrow.length(),
         "bone {bone} against marrow {marrow}"
