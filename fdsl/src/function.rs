@@ -74,6 +74,7 @@ impl Function {
 
     /// Compiles a source text.
     pub fn compile_with(source: &str, options: Options) -> Compiled {
+        crate::object::compiled::count_compilation();
         let (program, mut diagnostics) = parser::parse(source);
         if diagnostics.iter().any(Diagnostic::is_error) {
             return Compiled {

@@ -34,14 +34,20 @@ static CACHE: Mutex<Cache> = Mutex::new(Cache {
 });
 
 thread_local! {
-    /// Formulas compiled on this thread (cache misses).
+    /// Texts compiled on this thread (every [`crate::Function::compile_with`]).
     static N_COMPILED: Cell<u64> = const { Cell::new(0) };
 }
 
-/// How many formulas this thread has compiled for objects (each a cache miss): what a test
-/// reads to show a formula is compiled once.
+/// How many texts this thread has compiled: every [`crate::Function::compile`], through this
+/// cache (a miss) or not. What a test reads to show that a formula is compiled once, and that
+/// nothing downstream (render, haptic) compiles an object's text again.
 pub fn n_compiled_on_this_thread() -> u64 {
     N_COMPILED.with(Cell::get)
+}
+
+/// Counts one compilation on this thread (called by [`crate::Function::compile_with`]).
+pub(crate) fn count_compilation() {
+    N_COMPILED.with(|n| n.set(n.get() + 1));
 }
 
 /// The tape of `outputs` of the formula `text`, from the cache or from `compile` (then kept).
@@ -59,7 +65,6 @@ pub(crate) fn tape<E>(
     }
     // Compiled outside the lock: another thread may compile the same formula meanwhile, and
     // both results are the same.
-    N_COMPILED.with(|n| n.set(n.get() + 1));
     let tape = compile()?;
     let mut cache = lock();
     if tape.len() <= MAX_CACHED_INSTRUCTIONS && !cache.tapes.contains_key(&key) {
@@ -132,6 +137,88 @@ mod tests {
         // Another text is another compile.
         object("0.7072 - sqrt(x^2 + y^2 + z^2)");
         assert_eq!(n_compiled_on_this_thread(), before + 2);
+    }
+
+    #[test]
+    fn objects_hand_out_their_compiled_tapes_without_compiling_again() {
+        use crate::eval::PointEval;
+        use crate::object::{
+            ColorDef, ColorMap, ColorSlot, CompiledColor, ForceField, ParametricKind, Physics,
+            Property, Shape, Slot, Timing, Transform,
+        };
+        let f = |text: &str| Formula::new(text).unwrap();
+        let data = ObjectData {
+            geometry: Some(Geometry {
+                shape: Shape::Parametric {
+                    formula: f("x = u; y = v*t; z = 0; /* tapes */"),
+                    kind: ParametricKind::Surface,
+                    parameters: [[0.0, 1.0]; 3],
+                },
+                domain: None,
+                transform: Transform::IDENTITY,
+            }),
+            appearance: crate::object::Appearance {
+                diffuse: Some(ColorDef::Rgb(f("r = x; g = 0.5; b = y; /* tapes */"))),
+                ambient: Some(ColorDef::Map {
+                    formula: f("z + 1 /* tapes */"),
+                    map: ColorMap {
+                        keys: vec![(0.0, [0.0; 3])],
+                    },
+                }),
+                specular: Some(ColorDef::Constant([1.0; 3])),
+                shininess: Some(f("0.25 /* tapes */")),
+                ..Default::default()
+            },
+            physics: Physics {
+                tension: Some(Property {
+                    formula: f("0.5 /* tapes, disabled */"),
+                    enabled: false,
+                }),
+                density: Some(Property::new(f("x*y /* tapes */"))),
+                force: Some(ForceField {
+                    formula: f("x = u; y = v; z = w + t; /* tapes */"),
+                    parameters: [[0.0, 1.0]; 3],
+                    timing: Timing::default(),
+                    enabled: true,
+                }),
+                ..Physics::default()
+            },
+            ..ObjectData::default()
+        };
+        let object = Object::new(data).unwrap();
+        let before = n_compiled_on_this_thread();
+        let n_outputs = |slot| object.tape(slot).map(|t| t.outputs().len());
+        assert_eq!(n_outputs(Slot::Geometry), Some(3), "parametric x y z");
+        assert_eq!(n_outputs(Slot::Diffuse), Some(3), "r g b");
+        assert_eq!(n_outputs(Slot::Ambient), Some(1), "the map's scalar");
+        assert_eq!(n_outputs(Slot::Specular), None, "a constant colour");
+        assert_eq!(n_outputs(Slot::Shininess), Some(1));
+        assert_eq!(n_outputs(Slot::Transparency), None, "not set");
+        assert_eq!(n_outputs(Slot::Tension), None, "disabled");
+        assert_eq!(n_outputs(Slot::Density), Some(1));
+        assert_eq!(n_outputs(Slot::Force), Some(3));
+        assert_eq!(n_outputs(Slot::Motion), None);
+        assert!(matches!(
+            object.color(ColorSlot::Ambient),
+            Some(CompiledColor::Map(_, map)) if map.keys.len() == 1
+        ));
+        assert!(matches!(
+            object.color(ColorSlot::Specular),
+            Some(CompiledColor::Constant([1.0, 1.0, 1.0]))
+        ));
+        // The tapes compute what the texts say.
+        let mut out = [0.0; 3];
+        PointEval::new(object.tape(Slot::Geometry).unwrap())
+            .eval_all([0.5, 2.0, 0.0, 3.0], &mut out);
+        assert_eq!(out, [0.5, 6.0, 0.0]);
+        let density =
+            PointEval::new(object.tape(Slot::Density).unwrap()).eval([2.0, 3.0, 0.0, 0.0]);
+        assert_eq!(density, 6.0);
+        assert_eq!(
+            n_compiled_on_this_thread(),
+            before,
+            "handing out tapes compiled"
+        );
     }
 
     #[test]

@@ -385,6 +385,8 @@ impl Field {
 #[derive(Clone, Debug)]
 pub(crate) struct CompiledShape {
     pub(crate) tape: Option<Tape>,
+    /// A parametric shape's outputs `x`, `y`, `z` (render triangulates it; it has no field).
+    pub(crate) parametric: Option<Tape>,
     pub(crate) mesh: Option<Arc<crate::mesh::TriMesh>>,
     pub(crate) domain: Option<Domain>,
     /// Object space to shape space.
@@ -394,16 +396,16 @@ pub(crate) struct CompiledShape {
 impl CompiledShape {
     fn new(geometry: &Geometry, slot: Slot) -> Result<CompiledShape, ObjectError> {
         geometry.validate(slot)?;
-        let (tape, mesh) = match &geometry.shape {
-            Shape::Implicit(f) => (Some(f.tape(slot, &[])?), None),
+        let (tape, parametric, mesh) = match &geometry.shape {
+            Shape::Implicit(f) => (Some(f.tape(slot, &[])?), None, None),
             Shape::Parametric { formula, .. } => {
-                formula.tape(slot, &["x", "y", "z"])?;
-                (None, None)
+                (None, Some(formula.tape(slot, &["x", "y", "z"])?), None)
             }
-            Shape::Mesh(m) => (None, Some(m.clone())),
+            Shape::Mesh(m) => (None, None, Some(m.clone())),
         };
         Ok(CompiledShape {
             tape,
+            parametric,
             mesh,
             domain: geometry.domain,
             local_from_object: geometry
@@ -414,11 +416,15 @@ impl CompiledShape {
     }
 }
 
-/// A compiled colour.
+/// A colour definition ([`ColorDef`]) compiled: what [`Object::color`] hands to evaluators
+/// (fdsl's [`Sampler`], render's appearance) so that they do not compile its text again.
 #[derive(Clone, Debug)]
-pub(crate) enum CompiledColor {
+pub enum CompiledColor {
+    /// One colour everywhere.
     Constant(Rgb),
+    /// A tape with the outputs `r`, `g`, `b`, in that order.
     Rgb(Tape),
+    /// A scalar tape and the colour map it goes through.
     Map(Tape, ColorMap),
 }
 
@@ -665,6 +671,67 @@ impl Object {
 
     pub(crate) fn parts(&self) -> &CompiledParts {
         &self.parts
+    }
+
+    /// The compiled tape of the formula in `slot`, compiled when the formula was set (through
+    /// [`compiled`], the per-process cache): what render and haptic evaluate instead of
+    /// compiling the object's text again. Tapes read `x, y, z, t` in the slot's own space
+    /// (geometry, container, appearance or physics space; `u, v, w, t` for parametric shapes
+    /// and the force field).
+    /// - [`Slot::Geometry`], [`Slot::Container`]: an implicit shape's value, or a parametric
+    ///   shape's outputs `x`, `y`, `z`; `None` for an imported mesh or no shape.
+    /// - [`Slot::Diffuse`], [`Slot::Ambient`], [`Slot::Specular`]: a parametric colour's
+    ///   outputs `r`, `g`, `b`, or a colour map's scalar; `None` for a constant colour (see
+    ///   [`Object::color`] for the whole definition).
+    /// - [`Slot::Transparency`], [`Slot::Shininess`], [`Slot::Displacement`]: the scalar.
+    /// - [`Slot::Tension`], [`Slot::Friction`], [`Slot::ZoneDepth`], [`Slot::Density`]: the
+    ///   scalar; `None` when the property is disabled.
+    /// - [`Slot::Force`]: outputs `x`, `y`, `z`; `None` when the field is disabled.
+    /// - [`Slot::Motion`] has two formulas and is `None` here ([`Sampler::placement`]
+    ///   evaluates them); the slots without formulas are `None`.
+    pub fn tape(&self, slot: Slot) -> Option<&Tape> {
+        fn shape(s: &Option<CompiledShape>) -> Option<&Tape> {
+            s.as_ref()
+                .and_then(|s| s.tape.as_ref().or(s.parametric.as_ref()))
+        }
+        fn color(c: &Option<CompiledColor>) -> Option<&Tape> {
+            match c {
+                Some(CompiledColor::Rgb(tape) | CompiledColor::Map(tape, _)) => Some(tape),
+                Some(CompiledColor::Constant(_)) | None => None,
+            }
+        }
+        let parts = &*self.parts;
+        match slot {
+            Slot::Geometry => shape(&parts.geometry),
+            Slot::Container => shape(&parts.container),
+            Slot::Diffuse => color(&parts.colors[ColorSlot::Diffuse as usize]),
+            Slot::Ambient => color(&parts.colors[ColorSlot::Ambient as usize]),
+            Slot::Specular => color(&parts.colors[ColorSlot::Specular as usize]),
+            Slot::Transparency => parts.looks[0].as_ref(),
+            Slot::Shininess => parts.looks[1].as_ref(),
+            Slot::Displacement => parts.looks[2].as_ref(),
+            Slot::Tension => parts.feels[0].as_ref(),
+            Slot::Friction => parts.feels[1].as_ref(),
+            Slot::ZoneDepth => parts.feels[2].as_ref(),
+            Slot::Density => parts.feels[3].as_ref(),
+            Slot::Force => parts.force.as_ref(),
+            Slot::Name
+            | Slot::AppearanceSpace
+            | Slot::PhysicsSpace
+            | Slot::Transform
+            | Slot::Motion => None,
+        }
+    }
+
+    /// The compiled colour in `slot`; `None` when the appearance has none there.
+    pub fn color(&self, slot: ColorSlot) -> Option<&CompiledColor> {
+        self.parts.colors[slot as usize].as_ref()
+    }
+
+    /// Object space to appearance space (the inverse of the appearance's transform, checked
+    /// when it was set).
+    pub fn appearance_from_object(&self) -> Transform {
+        self.parts.appearance_from_object
     }
 }
 
