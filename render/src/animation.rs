@@ -24,7 +24,8 @@
 
 use std::sync::Arc;
 
-use fdsl::object::{Appearance, ColorDef, Formula, Object, Shape};
+use fdsl::Tape;
+use fdsl::object::{Object, Slot};
 use fdsl::scene::ObjectId;
 use glam::Mat4;
 
@@ -69,7 +70,7 @@ struct Animated {
     object: Object,
     sampler: fdsl::object::Sampler,
     world_from_group: fdsl::object::Transform,
-    appearance: Option<CompiledAppearance>,
+    appearance: CompiledAppearance,
     timed_shape: bool,
     timed_look: bool,
     moving: bool,
@@ -88,25 +89,28 @@ pub struct Animator {
     scene: Scene,
 }
 
-fn formula_reads_time(f: &Formula) -> bool {
-    fdsl::Function::parse(f.as_str()).is_ok_and(|f| f.depends_on_time())
+/// Whether a compiled formula reads `t` (the object's tapes: nothing is compiled here).
+fn reads_time(tape: &Tape) -> bool {
+    tape.inputs()[3].is_some()
 }
 
-fn colour_reads_time(c: &Option<ColorDef>) -> bool {
-    match c {
-        Some(ColorDef::Rgb(f) | ColorDef::Map { formula: f, .. }) => formula_reads_time(f),
-        _ => false,
-    }
+/// Whether `object`'s shape (implicit or parametric) reads `t`.
+fn shape_reads_time(object: &Object) -> bool {
+    object.tape(Slot::Geometry).is_some_and(reads_time)
 }
 
-fn look_reads_time(a: &Appearance) -> bool {
-    [&a.diffuse, &a.ambient, &a.specular]
-        .into_iter()
-        .any(colour_reads_time)
-        || [&a.transparency, &a.shininess, &a.displacement]
-            .into_iter()
-            .flatten()
-            .any(formula_reads_time)
+/// Whether any colour, transparency, shininess or texture formula of `object` reads `t`.
+fn look_reads_time(object: &Object) -> bool {
+    [
+        Slot::Diffuse,
+        Slot::Ambient,
+        Slot::Specular,
+        Slot::Transparency,
+        Slot::Shininess,
+        Slot::Displacement,
+    ]
+    .into_iter()
+    .any(|slot| object.tape(slot).is_some_and(reads_time))
 }
 
 impl Animator {
@@ -125,20 +129,15 @@ impl Animator {
         for (id, entry) in scene.objects() {
             let object = entry.object.clone();
             let data = object.data();
-            let timed_shape = match data.geometry.as_ref().map(|g| &g.shape) {
-                Some(Shape::Implicit(f) | Shape::Parametric { formula: f, .. }) => {
-                    formula_reads_time(f)
-                }
-                _ => false,
-            };
+            let timed_shape = shape_reads_time(&object);
             let built = object_mesh(&object, settings.depth, settings.t_secs);
             let animated = Animated {
                 id,
                 sampler: object.sampler(),
                 world_from_group: scene.world_from_group(entry.group),
-                appearance: CompiledAppearance::new(&data.appearance).ok(),
+                appearance: CompiledAppearance::of(&object),
                 timed_shape,
-                timed_look: look_reads_time(&data.appearance),
+                timed_look: look_reads_time(&object),
                 moving: data.motion.is_some(),
                 has_force: data.physics.force.as_ref().is_some_and(|f| f.enabled),
                 base: Arc::new(built.mesh),
@@ -252,11 +251,7 @@ impl Animator {
     /// Applies object `i`'s appearance at time `t` to its base mesh.
     fn recolour(&mut self, i: usize, t: f64) {
         let o = &mut self.objects[i];
-        let Some(appearance) = o.appearance.as_mut() else {
-            self.scene.objects[i].mesh = Arc::clone(&o.base);
-            return;
-        };
-        let (mesh, mut material) = colour(&o.object, appearance, (*o.base).clone(), t);
+        let (mesh, mut material) = colour(&o.object, &mut o.appearance, (*o.base).clone(), t);
         if o.has_force && self.settings.force_arrows > 0 {
             material.opacity = material.opacity.min(FORCE_CONTAINER_OPACITY_MAX);
         }

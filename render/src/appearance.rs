@@ -22,11 +22,19 @@
 //! Every function is evaluated in the appearance's own space (through the inverse of its
 //! transform), at the mesh's object-space vertices, in one bulk call per function.
 //! Not done here: the appearance's domain, which fdsl documents as informative.
+//!
+//! Nothing here compiles text: [`CompiledAppearance::of`] takes the tapes the
+//! [`Object`] compiled when its appearance was set, and [`CompiledAppearance::new`] builds
+//! an object from a bare [`Appearance`] (through fdsl's per-process cache of compiled
+//! formulas, so a formula already seen is not compiled again).
 
 use crate::mesh::Mesh;
 use crate::scene::Material;
 use fdsl::eval::BulkEval;
-use fdsl::object::{Appearance, ColorDef, ColorMap, DEFAULT_DIFFUSE, Formula};
+use fdsl::object::{
+    Appearance, ColorMap, ColorSlot, CompiledColor, DEFAULT_DIFFUSE, Object, ObjectData,
+    ObjectError, Slot,
+};
 use glam::{DAffine3, DVec3};
 
 /// Shininess 1 maps to this Blinn-Phong exponent (VRML's `shininess` times 128).
@@ -57,6 +65,37 @@ pub enum AppearanceError {
     /// The appearance transform cannot be inverted.
     #[error("the appearance transform is not invertible")]
     BadTransform,
+    /// Another part of the appearance is not valid (a colour map, a colour, the domain, a
+    /// formula's length), as fdsl's object model checks it.
+    #[error(transparent)]
+    Invalid(ObjectError),
+}
+
+impl AppearanceError {
+    /// The error of building an object that holds only the appearance.
+    fn of_object(error: ObjectError) -> AppearanceError {
+        let slot = |slot: Slot| match slot {
+            Slot::Diffuse => "diffuse colour",
+            Slot::Ambient => "ambient colour",
+            Slot::Specular => "specular colour",
+            Slot::Transparency => "transparency",
+            Slot::Shininess => "shininess",
+            Slot::Displacement => "displacement",
+            _ => "appearance",
+        };
+        match error {
+            ObjectError::Compile { slot: s, error } => AppearanceError::Compile {
+                slot: slot(s),
+                source: *error,
+            },
+            ObjectError::MissingOutput { slot: s, error } => AppearanceError::MissingOutput {
+                slot: slot(s),
+                source: error,
+            },
+            ObjectError::BadTransform { .. } => AppearanceError::BadTransform,
+            other => AppearanceError::Invalid(other),
+        }
+    }
 }
 
 /// A colour definition compiled for bulk evaluation.
@@ -81,37 +120,15 @@ pub struct CompiledAppearance {
     appearance_from_object: DAffine3,
 }
 
-fn compile(formula: &Formula, slot: &'static str) -> Result<fdsl::Function, AppearanceError> {
-    fdsl::Function::parse(formula.as_str())
-        .map_err(|source| AppearanceError::Compile { slot, source })
-}
-
-fn scalar(
-    formula: &Option<Formula>,
-    slot: &'static str,
-) -> Result<Option<BulkEval>, AppearanceError> {
-    formula
-        .as_ref()
-        .map(|f| compile(f, slot).map(|function| BulkEval::new(&function.tape())))
-        .transpose()
-}
-
-fn colour(def: &Option<ColorDef>, slot: &'static str) -> Result<Option<Colour>, AppearanceError> {
-    let Some(def) = def else {
-        return Ok(None);
-    };
-    Ok(Some(match def {
-        ColorDef::Constant(c) => Colour::Constant(c.map(clamp_unit)),
-        ColorDef::Rgb(f) => {
-            let tape = compile(f, slot)?
-                .tape_for(&["r", "g", "b"])
-                .map_err(|source| AppearanceError::MissingOutput { slot, source })?;
-            Colour::Rgb(BulkEval::new(&tape))
-        }
-        ColorDef::Map { formula, map } => {
-            Colour::Map(BulkEval::new(&compile(formula, slot)?.tape()), map.clone())
-        }
-    }))
+impl Colour {
+    /// The compiled colour `slot` of `object`, for bulk evaluation.
+    fn of(object: &Object, slot: ColorSlot) -> Option<Colour> {
+        Some(match object.color(slot)? {
+            CompiledColor::Constant(c) => Colour::Constant(c.map(clamp_unit)),
+            CompiledColor::Rgb(tape) => Colour::Rgb(BulkEval::new(tape)),
+            CompiledColor::Map(tape, map) => Colour::Map(BulkEval::new(tape), map.clone()),
+        })
+    }
 }
 
 /// `v` clamped to `[0, 1]`, NaN as 0.
@@ -157,21 +174,30 @@ impl Colour {
 }
 
 impl CompiledAppearance {
-    /// Compiles every formula of `appearance`.
+    /// `object`'s appearance, from the tapes the object compiled (nothing is compiled here).
+    pub fn of(object: &Object) -> CompiledAppearance {
+        let scalar = |slot| object.tape(slot).map(BulkEval::new);
+        CompiledAppearance {
+            diffuse: Colour::of(object, ColorSlot::Diffuse),
+            ambient: Colour::of(object, ColorSlot::Ambient),
+            specular: Colour::of(object, ColorSlot::Specular),
+            transparency: scalar(Slot::Transparency),
+            shininess: scalar(Slot::Shininess),
+            displacement: scalar(Slot::Displacement),
+            appearance_from_object: object.appearance_from_object().parent_from_child,
+        }
+    }
+
+    /// A bare `appearance`, validated and compiled as an object holding only it (formulas
+    /// come from fdsl's per-process cache when already compiled). Prefer
+    /// [`CompiledAppearance::of`] for an object's appearance.
     pub fn new(appearance: &Appearance) -> Result<CompiledAppearance, AppearanceError> {
-        let object_from_appearance = appearance
-            .transform
-            .inverse()
-            .ok_or(AppearanceError::BadTransform)?;
-        Ok(CompiledAppearance {
-            diffuse: colour(&appearance.diffuse, "diffuse colour")?,
-            ambient: colour(&appearance.ambient, "ambient colour")?,
-            specular: colour(&appearance.specular, "specular colour")?,
-            transparency: scalar(&appearance.transparency, "transparency")?,
-            shininess: scalar(&appearance.shininess, "shininess")?,
-            displacement: scalar(&appearance.displacement, "displacement")?,
-            appearance_from_object: object_from_appearance.parent_from_child,
+        let object = Object::new(ObjectData {
+            appearance: appearance.clone(),
+            ..ObjectData::default()
         })
+        .map_err(AppearanceError::of_object)?;
+        Ok(CompiledAppearance::of(&object))
     }
 }
 
@@ -262,7 +288,7 @@ impl CompiledAppearance {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fdsl::object::Transform;
+    use fdsl::object::{ColorDef, Formula, Transform};
 
     fn formula(text: &str) -> Formula {
         Formula::new(text).unwrap()

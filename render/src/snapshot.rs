@@ -22,7 +22,7 @@
 
 use std::sync::Arc;
 
-use fdsl::object::{EditOp, Object, ParametricKind, Shape};
+use fdsl::object::{EditOp, Object, ParametricKind, Shape, Slot};
 use fdsl::scene::ObjectId;
 use glam::{DAffine3, DMat4, DVec3, Mat4, Vec3};
 
@@ -217,9 +217,7 @@ pub fn build(
             .world_from_group(entry.group)
             .then(&sampler.placement(settings.t_secs));
         let world_from_object = turn * to_mat4(scene_from_object.parent_from_child);
-        let ObjectMesh {
-            mesh, mut skipped, ..
-        } = object_mesh(object, settings.depth, settings.t_secs);
+        let ObjectMesh { mesh, skipped, .. } = object_mesh(object, settings.depth, settings.t_secs);
         let mut report = ObjectReport {
             id,
             name: object.data().name.clone(),
@@ -238,19 +236,14 @@ pub fn build(
             built.scene.lines.extend(lines);
         }
         if mesh.n_triangles() > 0 {
-            match CompiledAppearance::new(&object.data().appearance) {
-                Ok(mut appearance) => {
-                    let (mesh, mut material) =
-                        colour(object, &mut appearance, mesh, settings.t_secs);
-                    if report.n_arrows > 0 {
-                        material.opacity = material.opacity.min(FORCE_CONTAINER_OPACITY_MAX);
-                    }
-                    built
-                        .scene
-                        .add_object(Arc::new(mesh), world_from_object, material);
-                }
-                Err(e) => skipped = Some(e.to_string()),
+            let mut appearance = CompiledAppearance::of(object);
+            let (mesh, mut material) = colour(object, &mut appearance, mesh, settings.t_secs);
+            if report.n_arrows > 0 {
+                material.opacity = material.opacity.min(FORCE_CONTAINER_OPACITY_MAX);
             }
+            built
+                .scene
+                .add_object(Arc::new(mesh), world_from_object, material);
         }
         report.skipped = skipped;
         built.objects.push(report);
@@ -368,10 +361,11 @@ pub(crate) fn object_mesh(object: &Object, depth: u8, t_secs: f64) -> ObjectMesh
     if let Some(g) = geometry {
         let part = match &g.shape {
             Shape::Parametric {
-                formula,
-                kind,
-                parameters,
-            } => parametric_mesh(formula.as_str(), *kind, parameters, t_secs),
+                kind, parameters, ..
+            } => match object.tape(Slot::Geometry) {
+                Some(tape) => parametric_mesh(tape, *kind, parameters, t_secs),
+                None => Err("a parametric shape without its compiled x, y, z".into()),
+            },
             Shape::Mesh(m) if !field_part => Ok(tri_mesh(m)),
             _ => Ok(Mesh::default()),
         };
@@ -460,18 +454,15 @@ fn transform_mesh(mesh: &mut Mesh, m: DAffine3) {
     }
 }
 
-/// Triangulates a parametric shape at time `t` in its geometry space.
+/// Triangulates a parametric shape, whose compiled outputs `x`, `y`, `z` are `tape`, at time
+/// `t` in its geometry space.
 fn parametric_mesh(
-    formula: &str,
+    tape: &fdsl::Tape,
     kind: ParametricKind,
     parameters: &[[f64; 2]; 3],
     t: f64,
 ) -> Result<Mesh, String> {
-    let tape = fdsl::Function::parse(formula)
-        .map_err(|e| e.to_string())?
-        .tape_for(&["x", "y", "z"])
-        .map_err(|e| e.to_string())?;
-    let mut eval = fdsl::eval::PointEval::new(&tape);
+    let mut eval = fdsl::eval::PointEval::new(tape);
     let mut xyz = [0.0f64; 3];
     let mut at = |uvw: [f64; 3]| -> [f32; 3] {
         eval.eval_all([uvw[0], uvw[1], uvw[2], t], &mut xyz);

@@ -19,7 +19,7 @@
 //! subtraction only the blocks those boxes touch are evaluated again
 //! ([`dirty_boxes`]); after an intersection, the whole object is.
 
-use fdsl::object::{BoxSampler, CompiledEdit, Domain, EditOp, Object, Sampler, Shape};
+use fdsl::object::{BoxSampler, CompiledEdit, Domain, EditOp, Object, Sampler, Shape, Slot};
 use glam::{DAffine3, DVec3};
 
 use super::Aabb;
@@ -200,9 +200,9 @@ impl ShapeField {
     /// its shape; `None` otherwise.
     fn of(object: &Object, t: f64) -> Option<ShapeField> {
         let geometry = object.data().geometry.as_ref()?;
-        let Shape::Implicit(formula) = &geometry.shape else {
+        if !matches!(geometry.shape, Shape::Implicit(_)) {
             return None;
-        };
+        }
         let edited = object
             .history()
             .entries()
@@ -211,10 +211,11 @@ impl ShapeField {
         if edited {
             return None;
         }
-        let tape = fdsl::Function::parse(formula.as_str()).ok()?.tape();
+        // The tape the object compiled when its geometry was set: nothing is compiled here.
+        let tape = object.tape(Slot::Geometry)?;
         let local_from_object = geometry.transform.inverse()?.parent_from_child;
         Some(ShapeField {
-            tape: TapeField::new(&tape, t as f32),
+            tape: TapeField::new(tape, t as f32),
             identity: local_from_object == DAffine3::IDENTITY,
             local_from_object,
             domain: geometry.domain,
