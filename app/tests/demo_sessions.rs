@@ -26,10 +26,10 @@ fn scratch(name: &str) -> PathBuf {
 
 /// Waits (at most 30 s) until `done` holds for the engine's view.
 fn wait_view(engine: &Engine, what: &str, done: impl Fn(&View) -> bool) {
-    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    let deadline = app::clock::now().instant + Duration::from_secs(30);
     while !done(&lock(engine.view())) {
         assert!(
-            std::time::Instant::now() < deadline,
+            app::clock::now().instant < deadline,
             "timed out waiting for {what}"
         );
         std::thread::sleep(Duration::from_millis(10));

@@ -48,6 +48,9 @@ pub const PARAMETRIC_VERTICES_PER_OBJECT_MAX: usize = 200_000;
 pub const FORCE_CONTAINER_OPACITY_MAX: f32 = 0.35;
 /// Colour of force-field arrows.
 pub const FORCE_ARROW_COLOUR: [f32; 4] = [1.0, 0.75, 0.1, 1.0];
+/// Imported meshes are drawn flat across edges whose faces meet at more than this angle
+/// (degrees), smooth across gentler ones (`Mesh::split_creases`).
+pub const CREASE_DEGREES: f32 = 40.0;
 
 /// A named camera direction around the scene's centre.
 #[derive(Clone, Debug, PartialEq)]
@@ -366,7 +369,9 @@ pub(crate) fn object_mesh(object: &Object, depth: u8, t_secs: f64) -> ObjectMesh
                 Some(tape) => parametric_mesh(tape, *kind, parameters, t_secs),
                 None => Err("a parametric shape without its compiled x, y, z".into()),
             },
-            Shape::Mesh(m) if !field_part => Ok(tri_mesh(m)),
+            Shape::Mesh(m) if !field_part => {
+                Ok(tri_mesh(m, object.data().appearance.displacement.is_none()))
+            }
             _ => Ok(Mesh::default()),
         };
         match part {
@@ -421,13 +426,20 @@ fn append(out: &mut Mesh, m: &Mesh, skipped: &mut Option<String>) {
 }
 
 /// An imported mesh with normals from its faces.
-fn tri_mesh(m: &fdsl::mesh::TriMesh) -> Mesh {
+/// An imported mesh's triangles with faceted normals: split at creases sharper than
+/// [`CREASE_DEGREES`] (a polygon model's box keeps its edges) unless a displacement will move
+/// its vertices, which would crack it there.
+fn tri_mesh(m: &fdsl::mesh::TriMesh, faceted: bool) -> Mesh {
     let mut out = Mesh {
         positions: m.positions().to_vec(),
         indices: m.triangles().iter().flatten().copied().collect(),
         ..Mesh::default()
     };
-    out.recompute_normals();
+    if faceted {
+        out.split_creases(CREASE_DEGREES);
+    } else {
+        out.recompute_normals();
+    }
     out.colours = vec![[1.0; 4]; out.n_vertices()];
     out
 }

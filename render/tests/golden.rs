@@ -697,7 +697,8 @@ fn whirlpool_demo_matches_golden() {
 #[test]
 fn campus_demo_matches_golden() {
     // Looked at by eye: three buildings (brick library, pale hall, blue-grey tower) standing
-    // on a green lawn; the function containers over them are invisible.
+    // on a green lawn, flat-faced with straight edges (their polygons' normals are split at
+    // the creases); the function containers over them are invisible.
     let Some(images) = check_scene_file("campus", 0) else {
         return;
     };

@@ -275,6 +275,86 @@ impl Mesh {
         Ok(())
     }
 
+    /// Normals for a faceted model (a polygon scene, a CAD part): each corner's normal is the
+    /// area-weighted average of the triangles at its vertex whose normals lie within
+    /// `crease_degrees` of its own triangle's, and a vertex whose corners end up with different
+    /// normals is split into one vertex per normal (positions, colours and ambient colours
+    /// copied). A box keeps flat faces and straight edges; a finely triangulated smooth
+    /// surface keeps its shared vertices. Splits open the mesh along creases, so displacing
+    /// it afterwards (`displace_by`) would crack it there.
+    pub fn split_creases(&mut self, crease_degrees: f32) {
+        let cos_max = crease_degrees.to_radians().cos();
+        let n_vertices = self.positions.len();
+        let faces: Vec<[f32; 3]> = self
+            .triangles()
+            .map(|[a, b, c]| {
+                triangle_normal_unnormalised(
+                    self.positions[a as usize],
+                    self.positions[b as usize],
+                    self.positions[c as usize],
+                )
+            })
+            .collect();
+        let unit: Vec<[f32; 3]> = faces.iter().map(|&n| normalise_or_up(n)).collect();
+        // The triangles around each vertex (compressed rows).
+        let mut start = vec![0u32; n_vertices + 1];
+        for &i in &self.indices {
+            start[i as usize + 1] += 1;
+        }
+        for v in 0..n_vertices {
+            start[v + 1] += start[v];
+        }
+        let mut fill = start.clone();
+        let mut around = vec![0u32; self.indices.len()];
+        for (corner, &i) in self.indices.iter().enumerate() {
+            around[fill[i as usize] as usize] = (corner / 3) as u32;
+            fill[i as usize] += 1;
+        }
+        let (mut positions, mut normals) = (Vec::with_capacity(n_vertices), Vec::new());
+        let mut colours = Vec::new();
+        let mut ambient = Vec::new();
+        // One new vertex per (old vertex, normal).
+        let mut made: std::collections::BTreeMap<(u32, [u32; 3]), u32> =
+            std::collections::BTreeMap::new();
+        let mut indices = Vec::with_capacity(self.indices.len());
+        for (corner, &i) in self.indices.iter().enumerate() {
+            let own = unit[corner / 3];
+            let mut sum = [0.0f32; 3];
+            for &t in &around[start[i as usize] as usize..start[i as usize + 1] as usize] {
+                let u = unit[t as usize];
+                if u[0] * own[0] + u[1] * own[1] + u[2] * own[2] >= cos_max {
+                    let n = faces[t as usize];
+                    sum = std::array::from_fn(|k| sum[k] + n[k]);
+                }
+            }
+            let normal = normalise_or_up(sum);
+            let v = *made
+                .entry((i, normal.map(f32::to_bits)))
+                .or_insert_with(|| {
+                    positions.push(self.positions[i as usize]);
+                    normals.push(normal);
+                    if let Some(c) = self.colours.get(i as usize) {
+                        colours.push(*c);
+                    }
+                    if let Some(a) = self.ambient.get(i as usize) {
+                        ambient.push(*a);
+                    }
+                    // Fewer new vertices than corners, and corners are indexed by u32.
+                    (positions.len() - 1) as u32
+                });
+            indices.push(v);
+        }
+        self.positions = positions;
+        self.normals = normals;
+        if !self.colours.is_empty() {
+            self.colours = colours;
+        }
+        if !self.ambient.is_empty() {
+            self.ambient = ambient;
+        }
+        self.indices = indices;
+    }
+
     /// Recomputes normals as the area-weighted average of the adjacent triangles' normals.
     pub fn recompute_normals(&mut self) {
         let mut acc = vec![[0.0f32; 3]; self.positions.len()];
@@ -333,6 +413,37 @@ mod tests {
         m.recompute_normals();
         m.colour_with(|_| [1.0; 4]);
         m
+    }
+
+    #[test]
+    fn split_creases_gives_flat_faces_to_a_tetrahedron_and_keeps_a_smooth_fan_shared() {
+        let mut m = tetrahedron();
+        m.split_creases(40.0);
+        assert_eq!(m.validate(), Ok(()));
+        // Every dihedral angle of the tetrahedron is a crease: 4 faces x 3 corners.
+        assert_eq!(m.n_vertices(), 12);
+        for t in m.indices.chunks_exact(3) {
+            let n = m.normals[t[0] as usize];
+            assert!(t.iter().all(|&i| m.normals[i as usize] == n), "{t:?}");
+        }
+        assert!(
+            (m.signed_volume() - 1.0 / 6.0).abs() < 1e-9,
+            "same triangles"
+        );
+        // A gently folded fan (10 degrees between neighbours) stays one smooth sheet.
+        let mut fan = Mesh {
+            positions: vec![[0.0, 0.0, 0.0]],
+            ..Mesh::default()
+        };
+        for k in 0..4 {
+            let a = (k as f32) * 0.5;
+            fan.positions.push([a.cos(), a.sin(), 0.05 * k as f32]);
+        }
+        fan.indices = vec![0, 1, 2, 0, 2, 3, 0, 3, 4];
+        fan.recompute_normals();
+        let smooth = fan.clone();
+        fan.split_creases(40.0);
+        assert_eq!(fan.n_vertices(), smooth.n_vertices());
     }
 
     #[test]
