@@ -685,3 +685,28 @@ fn the_femurs_marrow_is_softer_than_its_bone() {
         "bone {bone} against marrow {marrow}"
     );
 }
+
+#[test]
+fn a_shape_without_physics_does_not_hide_the_container_it_overlaps() {
+    // A felt ball, then a plain VRML sphere of the same size over it (a polygon model's
+    // stand-in): entered at once, the plain one used to be on top of the haptic stack and
+    // the hand felt nothing. Objects without physics are seen, not felt.
+    let dir = scratch("plain-over-felt");
+    let scene = dir.join("scene.wrl");
+    std::fs::write(
+        &scene,
+        "FShape { geometry Sphere { radius 1 }\n  physics FPhysics { surface FSurface {\n    \
+         tension FTension { definition \"1\" } depth FDepth { definition \"0.05\" } } } }\n\
+         Shape { geometry Sphere { radius 1 } }\n",
+    )
+    .unwrap();
+    let rows = [
+        (0.0, DVec3::new(0.0, 1.3, 0.0)),
+        (0.3, DVec3::new(0.0, 1.3, 0.0)),
+        (1.3, DVec3::new(0.0, 0.98, 0.0)),
+        (1.6, DVec3::new(0.0, 0.98, 0.0)),
+    ];
+    let forces = touch(&dir, &scene, &csv(&rows), &[]);
+    let resting = mean_force(&forces, 1400..1600);
+    assert!(resting.y > 1.0, "the felt ball pushes back: {resting}");
+}

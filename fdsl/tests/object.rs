@@ -1016,3 +1016,60 @@ fn box_samplers_simplify_selects_and_blends_but_not_min_and_max() {
         }
     }
 }
+
+#[test]
+fn an_object_is_tangible_only_with_physics_or_painted_physics() {
+    let f = |s: &str| Formula::new(s).unwrap();
+    let plain = ObjectData {
+        geometry: Some(Geometry::implicit_in(
+            f(SPHERE),
+            Domain::new(DVec3::ZERO, DVec3::splat(2.2)),
+        )),
+        ..ObjectData::default()
+    };
+    let mut object = Object::new(plain.clone()).unwrap();
+    assert!(!object.is_tangible(), "a plain shape is seen, not felt");
+    // A painted colour does not make it tangible; a painted density does, until undone.
+    let paint = |property, value| {
+        Edit::stroke(
+            EditOp::Paint { property, value },
+            ToolShape::Sphere { radius: 0.3 },
+            vec![Pose::at(DVec3::ZERO)],
+        )
+    };
+    object
+        .apply(paint(Paintable::Color, PaintValue::Color([1.0, 0.0, 0.0])))
+        .unwrap();
+    assert!(!object.is_tangible());
+    let idx = object
+        .apply(paint(Paintable::Density, PaintValue::Scalar(0.5)))
+        .unwrap();
+    assert!(object.is_tangible());
+    object.undo(idx);
+    assert!(!object.is_tangible(), "an undone painting is not felt");
+    // Any enabled property or force field makes it tangible; a disabled one does not.
+    let with = |physics: Physics| {
+        Object::new(ObjectData {
+            physics,
+            ..plain.clone()
+        })
+        .unwrap()
+        .is_tangible()
+    };
+    assert!(with(Physics {
+        tension: Some(Property::new(f("1"))),
+        ..Physics::default()
+    }));
+    assert!(with(Physics {
+        density: Some(Property::new(f("0.2"))),
+        ..Physics::default()
+    }));
+    assert!(!with(Physics {
+        friction: Some(Property {
+            formula: f("0.3"),
+            enabled: false,
+        }),
+        ..Physics::default()
+    }));
+    assert!(rich_object().is_tangible());
+}

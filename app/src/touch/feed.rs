@@ -89,7 +89,8 @@ impl Snapshotter {
         }
         let mut scene = Vec::with_capacity(self.prepared.len());
         let mut refused = Vec::new();
-        for (id, p) in &self.prepared {
+        // Objects without physics are seen, not felt (`Object::is_tangible`).
+        for (id, p) in self.prepared.iter().filter(|(_, p)| p.object.is_tangible()) {
             let sampler = Sampler::new(Arc::clone(&p.object));
             match ObjectContainer::new(id.0, sampler, p.world_from_group) {
                 Ok(container) => scene.push(container),

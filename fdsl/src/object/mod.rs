@@ -609,6 +609,33 @@ impl Object {
         self.history.set_active(idx, true)
     }
 
+    /// Whether touch can feel anything of the object: an enabled tension, friction, zone
+    /// depth or density, an enabled force field, or an active painting of one of those. An
+    /// object with none (a plain VRML `Shape`, an imported polygon model) is seen, not felt:
+    /// the haptic crate leaves it out, so it never hides the containers it overlaps.
+    pub fn is_tangible(&self) -> bool {
+        let p = &self.data.physics;
+        let enabled = |q: &Option<Property>| q.as_ref().is_some_and(|q| q.enabled);
+        let physical = |what: Paintable| {
+            matches!(
+                what,
+                Paintable::Tension
+                    | Paintable::Friction
+                    | Paintable::ZoneDepth
+                    | Paintable::Density
+            )
+        };
+        enabled(&p.tension)
+            || enabled(&p.friction)
+            || enabled(&p.zone_depth)
+            || enabled(&p.density)
+            || p.force.as_ref().is_some_and(|f| f.enabled)
+            || self.history.entries().iter().any(|e| {
+                e.active
+                    && matches!(e.edit.edit().op, EditOp::Paint { property, .. } if physical(property))
+            })
+    }
+
     /// The edit history.
     pub fn history(&self) -> &History {
         &self.history

@@ -165,15 +165,17 @@ impl ObjectContainer {
         )
     }
 
-    /// The containers of every object of `scene`, by id (`ObjectId(n)` becomes id `n`), in
-    /// id order: a snapshot for the servo. Objects whose placement is degenerate are left
-    /// out and returned with their error. Allocates: call it off the servo thread.
+    /// The containers of every tangible object of `scene` (`Object::is_tangible`: objects
+    /// without physics are seen, not felt, and must not hide the containers they overlap),
+    /// by id (`ObjectId(n)` becomes id `n`), in id order: a snapshot for the servo. Objects
+    /// whose placement is degenerate are left out and returned with their error. Allocates:
+    /// call it off the servo thread.
     pub fn from_scene(
         scene: &fdsl::scene::Scene,
     ) -> (Vec<ObjectContainer>, Vec<(ObjectId, ObjectContainerError)>) {
         let mut containers = Vec::with_capacity(scene.len());
         let mut refused = Vec::new();
-        for (id, entry) in scene.objects() {
+        for (id, entry) in scene.objects().filter(|(_, e)| e.object.is_tangible()) {
             let world_from_group = scene.world_from_group(entry.group);
             match Self::from_object(id.0, &entry.object, world_from_group) {
                 Ok(container) => containers.push(container),

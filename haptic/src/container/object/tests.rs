@@ -214,6 +214,17 @@ fn scenes_become_containers_by_id_with_group_placements() {
     let mut skewed_data = ball_data(Some(Domain::UNIT));
     skewed_data.transform = skewed();
     scene.create(ObjectId(3), skewed_data, None).unwrap();
+    // Felt objects have physics; one without is seen, not felt, and left out.
+    let felt = |id: u64, scene: &mut Scene| {
+        let tension = fdsl::object::Property::new(formula("1"));
+        let object = scene.object_mut(ObjectId(id)).unwrap();
+        object
+            .set(fdsl::object::Field::Tension(Some(tension)))
+            .unwrap();
+    };
+    felt(7, &mut scene);
+    felt(3, &mut scene);
+    scene.create(ObjectId(5), ball_data(None), None).unwrap();
     let (mut containers, refused) = ObjectContainer::from_scene(&scene);
     assert!(refused.is_empty());
     let ids: Vec<u64> = containers.iter().map(|c| c.id()).collect();
