@@ -22,6 +22,7 @@
 
 pub mod coupling;
 pub mod stack;
+pub mod wave;
 pub mod zone;
 
 #[cfg(test)]
