@@ -41,9 +41,66 @@ pub fn time_of_day_utc(t: Timestamp) -> String {
     )
 }
 
+/// The scene's time, which motions, fields and time-dependent shapes read: it runs with the
+/// monotonic clock while playing and stands still while paused. Instants are arguments.
+#[derive(Clone, Copy, Debug)]
+pub struct SceneClock {
+    /// Seconds of scene time at `since`.
+    at_since_secs: f64,
+    since: Instant,
+    playing: bool,
+}
+
+impl SceneClock {
+    /// Scene time 0 at `now`, playing.
+    pub fn new(now: Instant) -> SceneClock {
+        SceneClock {
+            at_since_secs: 0.0,
+            since: now,
+            playing: true,
+        }
+    }
+
+    /// The scene time at `now`, seconds.
+    pub fn secs(&self, now: Instant) -> f64 {
+        if self.playing {
+            self.at_since_secs + now.saturating_duration_since(self.since).as_secs_f64()
+        } else {
+            self.at_since_secs
+        }
+    }
+
+    /// Whether time runs.
+    pub fn playing(&self) -> bool {
+        self.playing
+    }
+
+    /// Runs or stops time at `now`, keeping the scene time reached.
+    pub fn set_playing(&mut self, playing: bool, now: Instant) {
+        self.at_since_secs = self.secs(now);
+        self.since = now;
+        self.playing = playing;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scene_time_runs_while_playing_and_holds_while_paused() {
+        let start = now().instant;
+        let at = |secs: f64| start + std::time::Duration::from_secs_f64(secs);
+        let mut clock = SceneClock::new(start);
+        assert_eq!(clock.secs(at(1.5)), 1.5);
+        clock.set_playing(false, at(2.0));
+        assert!(!clock.playing());
+        assert_eq!(clock.secs(at(9.0)), 2.0);
+        clock.set_playing(true, at(10.0));
+        assert_eq!(clock.secs(at(10.25)), 2.25);
+        // An instant before the last change (a stale frame) reads the time of the change.
+        assert_eq!(clock.secs(at(5.0)), 2.0);
+    }
 
     #[test]
     fn time_of_day_counts_from_midnight_utc() {

@@ -369,6 +369,84 @@ fn a_demo_opens_in_its_own_session_and_the_scenes_menu_switches_to_another() {
     assert!(stdout.contains("scripted demo: whirlpool"), "{stdout}");
 }
 
+/// The drawn placement of the object called `name` in a state dump, and the dump's time.
+fn placement_of(state: &Value, name: &str) -> (glam::Mat4, f64) {
+    let object = state["objects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|o| o["name"] == name)
+        .unwrap();
+    let cols: Vec<f32> = object["world_from_object"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap() as f32)
+        .collect();
+    let t = state["time_secs"].as_f64().unwrap();
+    (glam::Mat4::from_cols_slice(&cols), t)
+}
+
+#[test]
+fn time_runs_the_wind_demos_fan_and_pausing_holds_it() {
+    let display = display();
+    let dir = scratch("time");
+    // Where the object model puts the fan's blades at scene time t, in the renderer's world.
+    let demo = app::demos::find("wind").unwrap();
+    let scene = demo
+        .load(&fdsl::fvrml::LoadOptions::default())
+        .unwrap()
+        .scene;
+    let (_, blades) = scene
+        .objects()
+        .find(|(_, e)| e.object.data().name == "Blades")
+        .unwrap();
+    let expected = |t: f64| {
+        let placement = scene
+            .world_from_group(blades.group)
+            .then(&blades.object.sampler().placement(t));
+        render::snapshot::render_from_scene()
+            * glam::DMat4::from(placement.parent_from_child).as_mat4()
+    };
+    let close = |a: glam::Mat4, b: glam::Mat4| {
+        a.to_cols_array()
+            .iter()
+            .zip(b.to_cols_array())
+            .all(|(x, y)| (x - y).abs() < 1e-4)
+    };
+    // Playing (the default): the blades are drawn turned as their motion says at the
+    // frame's time.
+    let store = dir.join("store");
+    let store = store.to_str().unwrap();
+    let (state, _, stdout) = window_with(
+        &display,
+        &dir,
+        "playing",
+        &["demo", "wind", "--store", store],
+    );
+    assert_eq!(state["playing"], true, "{stdout}");
+    let (drawn, t) = placement_of(&state, "Blades");
+    assert!(t > 0.0, "time ran: {t}");
+    assert!(
+        close(drawn, expected(t)),
+        "at {t} s: {drawn} vs {}",
+        expected(t)
+    );
+    // Paused from the first frames: time holds, and the blades are where it holds them.
+    let args = ["demo", "wind", "--store", store, "--key", "pause"];
+    let (state, _, stdout) = window_with(&display, &dir, "paused", &args);
+    assert_eq!(state["playing"], false, "{stdout}");
+    let (held, t_held) = placement_of(&state, "Blades");
+    assert!(t_held < t, "paused at {t_held} s, played to {t} s");
+    assert!(close(held, expected(t_held)), "at {t_held} s: {held}");
+    // Objects without a motion keep the placement they were meshed with.
+    let (stand, _) = placement_of(&state, "Stand");
+    assert!(
+        close(stand, render::snapshot::render_from_scene()),
+        "{stand}"
+    );
+}
+
 #[test]
 fn a_click_picks_the_object_and_the_point() {
     let display = display();

@@ -661,7 +661,11 @@ fn describe(log: &Log<ShapePayload>, scene: &Scene, payload: &ShapePayload) -> S
             field_text(field)
         ),
         ShapePayload::Edit { object, .. } => format!("sculpted {}", label(*object)),
-        ShapePayload::SetGroup { group, .. } => format!("changed group {group}"),
+        ShapePayload::SetGroup { value: Some(g), .. } if !g.name.is_empty() => {
+            format!("set group \"{}\"", quote(&g.name))
+        }
+        ShapePayload::SetGroup { value: Some(_), .. } => "set a group".into(),
+        ShapePayload::SetGroup { value: None, .. } => "removed a group".into(),
         ShapePayload::Move { object, .. } => format!("moved {}", label(*object)),
         ShapePayload::Acquire { object, .. } => format!("took the lease of {}", label(*object)),
         ShapePayload::Release { object } => format!("released {}", label(*object)),

@@ -51,6 +51,8 @@ const SELECTION_COLOUR: [f32; 4] = [1.0, 0.85, 0.2, 1.0];
 pub const PATCHES_KEPT_MAX: usize = 256;
 /// Meshing that has run this long shows in the title ("meshing N…").
 pub const MESHING_SHOWN_MILLIS: u64 = 200;
+/// While time runs and something moves, a frame at least this often (60 per second).
+pub const ANIMATION_FRAME_MILLIS: u64 = 16;
 
 /// A patch for `Renderer::patch_object`: the object, the mesh it starts from, the mesh it
 /// makes, and the ranges written.
@@ -84,6 +86,45 @@ pub struct Tracked {
     pub kind: Option<MeshKind>,
     /// Since when it has waited for a mesh (none while drawn as the scene has it).
     pub meshing_since: Option<Instant>,
+    /// Its motion, for an object that moves with the scene's time.
+    pub moving: Option<Box<Moving>>,
+}
+
+/// What places a moving object at the scene's time: its motion (through a sampler of the
+/// object as meshed) and its group's transform. Meshes are made at time 0; frames only move
+/// them (the renderer keeps the uploaded buffers).
+pub struct Moving {
+    sampler: fdsl::object::Sampler,
+    world_from_group: fdsl::object::Transform,
+    /// Renderer world from object at time 0 and at the time of the last frame.
+    world_at_zero: glam::Mat4,
+    /// At the last frame's scene time.
+    pub world_now: glam::Mat4,
+}
+
+impl Moving {
+    fn new(object: &fdsl::object::Object, world_from_group: fdsl::object::Transform) -> Moving {
+        let mut moving = Moving {
+            sampler: object.sampler(),
+            world_from_group,
+            world_at_zero: glam::Mat4::IDENTITY,
+            world_now: glam::Mat4::IDENTITY,
+        };
+        moving.world_at_zero = moving.world_at(0.0);
+        moving.world_now = moving.world_at_zero;
+        moving
+    }
+
+    /// Renderer world from object at scene time `t_secs` (as the mesher places it at 0).
+    fn world_at(&mut self, t_secs: f64) -> glam::Mat4 {
+        let scene_from_object = self.world_from_group.then(&self.sampler.placement(t_secs));
+        render_from_scene() * glam::DMat4::from(scene_from_object.parent_from_child).as_mat4()
+    }
+
+    /// Where what was drawn at time 0 is now (force arrows, the drawn box).
+    fn since_zero(&self) -> glam::Mat4 {
+        self.world_now * self.world_at_zero.inverse()
+    }
 }
 
 /// Frame and meshing times, for the status line and the state dump.
@@ -155,6 +196,10 @@ pub struct SculptApp {
     pub(super) join_input: Option<(String, Option<String>)>,
     /// The brush a drag sculpts with.
     pub(super) brush: Brush,
+    /// The scene's time (motions), playing or paused.
+    pub(super) scene_clock: clock::SceneClock,
+    /// The scene time this frame placed moving objects at, seconds.
+    pub(super) frame_time_secs: f64,
     /// A drag on a surface sculpts (otherwise it orbits).
     pub(super) sculpting: bool,
     /// The stroke being drawn.
@@ -240,6 +285,8 @@ impl SculptApp {
             following: None,
             brush: Brush::default(),
             sculpting: false,
+            scene_clock: clock::SceneClock::new(clock::now().instant),
+            frame_time_secs: 0.0,
             stroke: None,
             preview_at: None,
             last_stroke: None,
@@ -296,10 +343,17 @@ impl SculptApp {
                 };
                 tracked.generation += 1;
                 tracked.meshing_since.get_or_insert(now.instant);
+                let world_from_group = scene.world_from_group(entry.group);
+                tracked.moving = entry
+                    .object
+                    .data()
+                    .motion
+                    .is_some()
+                    .then(|| Box::new(Moving::new(&entry.object, world_from_group)));
                 tracked.pending = Some(Box::new(MeshJob {
                     id: *id,
                     object: entry.object.clone(),
-                    world_from_group: scene.world_from_group(entry.group),
+                    world_from_group,
                     generation: tracked.generation,
                     depth: self.depth,
                     requested_at: self.last_edit_at.unwrap_or(now.instant),
@@ -484,16 +538,34 @@ impl SculptApp {
         let mut scene = Scene::default();
         let mut ids = Vec::new();
         for (id, tracked) in &self.objects {
+            let moved = tracked
+                .moving
+                .as_ref()
+                .map(|m| (m.world_now, m.since_zero()));
             if let Some(o) = &tracked.drawn {
-                scene.objects.push(o.clone());
+                let mut o = o.clone();
+                if let Some((world_now, _)) = moved {
+                    o.world_from_object = world_now;
+                }
+                scene.objects.push(o);
                 ids.push(*id);
                 if self.selected == Some(id.0)
                     && let Some(b) = tracked.drawn_box
                 {
-                    scene.add_box(b, SELECTION_COLOUR);
+                    scene.add_box(
+                        moved.map_or(b, |(_, m)| moved_box(&b, &m)),
+                        SELECTION_COLOUR,
+                    );
                 }
             }
-            scene.lines.extend_from_slice(&tracked.lines);
+            match moved {
+                None => scene.lines.extend_from_slice(&tracked.lines),
+                Some((_, m)) => scene.lines.extend(tracked.lines.iter().map(|l| Line {
+                    from: m.transform_point3(l.from),
+                    to: m.transform_point3(l.to),
+                    colour: l.colour,
+                })),
+            }
         }
         self.draw_presence(&mut scene);
         (scene, ids)
@@ -778,13 +850,16 @@ impl SculptApp {
             "undo" | "ctrl+z" => self.submit("undo"),
             "redo" | "ctrl+y" | "ctrl+shift+z" => self.submit("redo"),
             "sculpt" | "b" => self.sculpting = true,
+            "play" => self.set_playing(true),
+            "pause" => self.set_playing(false),
+            "space" => self.set_playing(!self.scene_clock.playing()),
             "navigate" | "escape" => {
                 self.sculpting = false;
                 self.stroke = None;
             }
             other => {
                 return Err(format!(
-                    "unknown shortcut `{other}` (undo, redo, sculpt, navigate)"
+                    "unknown shortcut `{other}` (undo, redo, sculpt, navigate, play, pause, space)"
                 ));
             }
         }
@@ -808,12 +883,32 @@ impl SculptApp {
             Some("navigate")
         } else if pressed(egui::Key::B) {
             Some("sculpt")
+        } else if pressed(egui::Key::Space) {
+            Some("space")
         } else {
             None
         };
         if let Some(action) = action {
             let _ = self.shortcut_named(action);
         }
+    }
+
+    /// Places the moving objects at the scene's time for this frame; returns whether any
+    /// object moves (so that frames keep coming while time runs).
+    fn place_moving(&mut self, now: Instant) -> bool {
+        let t = self.scene_clock.secs(now);
+        self.frame_time_secs = t;
+        let mut any = false;
+        for moving in self.objects.values_mut().filter_map(|t| t.moving.as_mut()) {
+            moving.world_now = moving.world_at(t);
+            any = true;
+        }
+        any
+    }
+
+    /// Runs or stops the scene's time.
+    pub(super) fn set_playing(&mut self, playing: bool) {
+        self.scene_clock.set_playing(playing, clock::now().instant);
     }
 
     /// Undoes one of this peer's own ops chosen in the history list.
@@ -1050,6 +1145,7 @@ impl eframe::App for SculptApp {
         self.files(ui.ctx());
         self.run_hooks(ui.ctx());
         self.publish_presence();
+        let animating = self.place_moving(now.instant) && self.scene_clock.playing();
         let title = match self.n_meshing_long(now.instant) {
             0 => format!("sculpt — {}", self.presence_text()),
             n => format!("sculpt — meshing {n}… — {}", self.presence_text()),
@@ -1068,6 +1164,10 @@ impl eframe::App for SculptApp {
             .show(ui, |ui| self.side_ui(ui, now));
         egui::CentralPanel::no_frame().show(ui, |ui| self.central_ui(ui));
 
+        if animating {
+            ui.ctx()
+                .request_repaint_after(std::time::Duration::from_millis(ANIMATION_FRAME_MILLIS));
+        }
         // An edit made this frame is sent to the mesher at the start of the next one.
         if self.dirty {
             ui.ctx().request_repaint();
@@ -1084,4 +1184,27 @@ impl eframe::App for SculptApp {
             * 1e3;
         push_bounded(&mut self.stats.ui_ms, ui_ms, FRAME_SAMPLES_MAX);
     }
+}
+
+/// The box around `b` moved by `m` (its eight corners'), for a moving object's selection.
+fn moved_box(b: &Aabb, m: &glam::Mat4) -> Aabb {
+    let corners = (0..8).map(|k| {
+        let pick = |axis: usize| {
+            if k & (1 << axis) == 0 {
+                b.lo[axis]
+            } else {
+                b.hi[axis]
+            }
+        };
+        m.transform_point3(glam::Vec3::new(pick(0), pick(1), pick(2)))
+    });
+    let (mut lo, mut hi) = (
+        glam::Vec3::splat(f32::INFINITY),
+        glam::Vec3::splat(f32::NEG_INFINITY),
+    );
+    for c in corners {
+        lo = lo.min(c);
+        hi = hi.max(c);
+    }
+    Aabb::new(lo.to_array(), hi.to_array())
 }

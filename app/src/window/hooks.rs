@@ -287,6 +287,10 @@ impl SculptApp {
                     "skipped": tracked.and_then(|t| t.skipped.clone()),
                     "mesh_secs": tracked.map(|t| t.mesh_secs),
                     "mesh_kind": tracked.and_then(|t| t.kind).map(|k| k.name()),
+                    "world_from_object": tracked.and_then(|t| {
+                        let drawn = t.drawn.as_ref()?.world_from_object;
+                        Some(t.moving.as_ref().map_or(drawn, |m| m.world_now).to_cols_array())
+                    }),
                 })
             })
             .collect();
@@ -299,6 +303,8 @@ impl SculptApp {
             "n_ops": view.n_ops(),
             "n_loaded": view.n_loaded(),
             "scene_hash": view.scene_hash_hex(),
+            "time_secs": self.frame_time_secs,
+            "playing": self.scene_clock.playing(),
             "selected": self.selected.map(|id| view.object_label(id)),
             "peers": rows(view.peers().iter().map(|p| json!({
                 "peer": p.peer.short(), "name": p.name, "online": p.online,

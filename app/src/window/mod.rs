@@ -58,7 +58,8 @@ pub struct WindowArgs {
     #[arg(long, value_name = "X0,Y0:X1,Y1", value_parser = hooks::parse_drag)]
     pub drag: Vec<[[f32; 2]; 2]>,
     /// Test hook: press a shortcut after the commands (repeatable): undo, redo, sculpt,
-    /// navigate; a command line `key: NAME` does the same at its place in the script.
+    /// navigate, play, pause, space; a command line `key: NAME` does the same at its place in
+    /// the script.
     #[arg(long, value_name = "NAME")]
     pub key: Vec<String>,
     /// Test hook: click the viewport at fractions X, Y of its size.

@@ -78,6 +78,15 @@ impl SculptApp {
                 if ui.button("Frame everything   F or double-click").clicked() {
                     self.view.moved = false;
                 }
+                let playing = self.scene_clock.playing();
+                let word = if playing {
+                    "Pause time   Space"
+                } else {
+                    "Run time   Space"
+                };
+                if ui.button(word).clicked() {
+                    self.set_playing(!playing);
+                }
                 if self.following.is_some() && ui.button("Stop following").clicked() {
                     self.following = None;
                 }
@@ -150,6 +159,17 @@ impl SculptApp {
                 view.n_ops()
             ));
             drop(view);
+            let now = ::app::clock::now().instant;
+            let playing = self.scene_clock.playing();
+            ui.label(format!("time {:.1} s", self.scene_clock.secs(now)));
+            let (word, tip) = if playing {
+                ("Pause", "pause the scene's time (motions, fields)   Space")
+            } else {
+                ("Play", "run the scene's time (motions, fields)   Space")
+            };
+            if ui.button(word).on_hover_text(tip).clicked() {
+                self.set_playing(!playing);
+            }
             if ui
                 .button("Share…")
                 .on_hover_text("show this session's invite, to give to whoever should join")
