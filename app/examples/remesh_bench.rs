@@ -194,6 +194,7 @@ fn mesh_with(
         generation,
         depth,
         requested_at: app::clock::now().instant,
+        t_secs: 0.0,
     });
     if mesher.try_send(job).is_err() {
         bail!("the mesher's queue is full");

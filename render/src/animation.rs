@@ -113,6 +113,14 @@ fn look_reads_time(object: &Object) -> bool {
     .any(|slot| object.tape(slot).is_some_and(reads_time))
 }
 
+/// Whether anything `snapshot` draws of `object` changes with time: its shape, its look, or
+/// its force field's arrows (a motion only moves it: see `Object::data().motion`).
+pub fn object_reads_time(object: &Object) -> bool {
+    shape_reads_time(object)
+        || look_reads_time(object)
+        || object.tape(Slot::Force).is_some_and(reads_time)
+}
+
 impl Animator {
     /// Meshes every object of `scene` at `settings.t_secs` and `settings.depth` (this first
     /// build is not bounded by a budget).

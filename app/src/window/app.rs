@@ -53,6 +53,8 @@ pub const PATCHES_KEPT_MAX: usize = 256;
 pub const MESHING_SHOWN_MILLIS: u64 = 200;
 /// While time runs and something moves, a frame at least this often (60 per second).
 pub const ANIMATION_FRAME_MILLIS: u64 = 16;
+/// While time runs, an object whose drawing reads `t` is meshed again at most this often.
+pub const ANIMATION_REMESH_MILLIS: u64 = 100;
 
 /// A patch for `Renderer::patch_object`: the object, the mesh it starts from, the mesh it
 /// makes, and the ranges written.
@@ -88,6 +90,20 @@ pub struct Tracked {
     pub meshing_since: Option<Instant>,
     /// Its motion, for an object that moves with the scene's time.
     pub moving: Option<Box<Moving>>,
+    /// Something drawn of it reads `t` (shape, colours, field): meshed again as time runs.
+    pub timed: bool,
+    /// The scene time its drawn mesh was made at.
+    pub drawn_t_secs: f64,
+    /// When a mesh for a later time was last asked for, while none is in flight.
+    time_job: Option<TimeJob>,
+}
+
+/// A mesh asked for because time ran (not because the object changed): it keeps the
+/// object's generation, so waiting for it is not "meshing" and does not hold up idleness.
+#[derive(Clone, Copy)]
+struct TimeJob {
+    asked_at: Instant,
+    done: bool,
 }
 
 /// What places a moving object at the scene's time: its motion (through a sampler of the
@@ -96,8 +112,9 @@ pub struct Tracked {
 pub struct Moving {
     sampler: fdsl::object::Sampler,
     world_from_group: fdsl::object::Transform,
-    /// Renderer world from object at time 0 and at the time of the last frame.
-    world_at_zero: glam::Mat4,
+    /// Renderer world from object at the time the drawn mesh was made (where the mesher
+    /// placed it and its arrows).
+    world_at_drawn: glam::Mat4,
     /// At the last frame's scene time.
     pub world_now: glam::Mat4,
 }
@@ -107,11 +124,11 @@ impl Moving {
         let mut moving = Moving {
             sampler: object.sampler(),
             world_from_group,
-            world_at_zero: glam::Mat4::IDENTITY,
+            world_at_drawn: glam::Mat4::IDENTITY,
             world_now: glam::Mat4::IDENTITY,
         };
-        moving.world_at_zero = moving.world_at(0.0);
-        moving.world_now = moving.world_at_zero;
+        moving.world_at_drawn = moving.world_at(0.0);
+        moving.world_now = moving.world_at_drawn;
         moving
     }
 
@@ -121,9 +138,9 @@ impl Moving {
         render_from_scene() * glam::DMat4::from(scene_from_object.parent_from_child).as_mat4()
     }
 
-    /// Where what was drawn at time 0 is now (force arrows, the drawn box).
-    fn since_zero(&self) -> glam::Mat4 {
-        self.world_now * self.world_at_zero.inverse()
+    /// Where what was drawn at the mesh's time is now (force arrows, the drawn box).
+    fn since_drawn(&self) -> glam::Mat4 {
+        self.world_now * self.world_at_drawn.inverse()
     }
 }
 
@@ -305,6 +322,7 @@ impl SculptApp {
     /// Sends the objects the engine says changed to the mesher (only those: an edit
     /// re-meshes its own object), and forgets objects that are gone.
     fn sync_objects(&mut self, now: Now) {
+        let scene_t = self.scene_clock.secs(now.instant);
         let view = lock(self.engine.view());
         let (changes, cursor) = view.changes_since(self.changes_cursor);
         self.changes_cursor = cursor;
@@ -350,6 +368,8 @@ impl SculptApp {
                     .motion
                     .is_some()
                     .then(|| Box::new(Moving::new(&entry.object, world_from_group)));
+                tracked.timed = render::animation::object_reads_time(&entry.object);
+                tracked.time_job = None;
                 tracked.pending = Some(Box::new(MeshJob {
                     id: *id,
                     object: entry.object.clone(),
@@ -357,6 +377,37 @@ impl SculptApp {
                     generation: tracked.generation,
                     depth: self.depth,
                     requested_at: self.last_edit_at.unwrap_or(now.instant),
+                    t_secs: scene_t,
+                }));
+            }
+        }
+        // Time ran: what reads `t` is meshed again at the new time, one job at a time per
+        // object and at most every ANIMATION_REMESH_MILLIS.
+        if self.scene_clock.playing() {
+            let scene = view.scene();
+            let every = std::time::Duration::from_millis(ANIMATION_REMESH_MILLIS);
+            for (id, tracked) in &mut self.objects {
+                let due = tracked.timed
+                    && tracked.pending.is_none()
+                    && tracked.drawn_generation == tracked.generation
+                    && tracked
+                        .time_job
+                        .is_none_or(|j| j.done && now.instant.duration_since(j.asked_at) >= every);
+                let Some(entry) = scene.scene_object(*id).filter(|_| due) else {
+                    continue;
+                };
+                tracked.time_job = Some(TimeJob {
+                    asked_at: now.instant,
+                    done: false,
+                });
+                tracked.pending = Some(Box::new(MeshJob {
+                    id: *id,
+                    object: entry.object.clone(),
+                    world_from_group: scene.world_from_group(entry.group),
+                    generation: tracked.generation,
+                    depth: self.depth,
+                    requested_at: now.instant,
+                    t_secs: scene_t,
                 }));
             }
         }
@@ -376,7 +427,11 @@ impl SculptApp {
             let Some(tracked) = self.objects.get_mut(&done.id) else {
                 continue;
             };
-            if done.generation <= tracked.drawn_generation {
+            // Newer: a later job, or the same object meshed at a later scene time.
+            let newer = done.generation > tracked.drawn_generation
+                || (done.generation == tracked.drawn_generation
+                    && done.t_secs > tracked.drawn_t_secs);
+            if !newer {
                 continue;
             }
             if let (Some((base, patch)), Some(o)) = (done.patch, &done.object) {
@@ -394,6 +449,10 @@ impl SculptApp {
             }
             tracked.kind = Some(done.kind);
             tracked.drawn_generation = done.generation;
+            tracked.drawn_t_secs = done.t_secs;
+            if let Some(job) = tracked.time_job.as_mut() {
+                job.done = true;
+            }
             if tracked.drawn_generation == tracked.generation {
                 tracked.meshing_since = None;
             }
@@ -541,7 +600,7 @@ impl SculptApp {
             let moved = tracked
                 .moving
                 .as_ref()
-                .map(|m| (m.world_now, m.since_zero()));
+                .map(|m| (m.world_now, m.since_drawn()));
             if let Some(o) = &tracked.drawn {
                 let mut o = o.clone();
                 if let Some((world_now, _)) = moved {
@@ -894,14 +953,18 @@ impl SculptApp {
     }
 
     /// Places the moving objects at the scene's time for this frame; returns whether any
-    /// object moves (so that frames keep coming while time runs).
+    /// object moves or changes with time (so that frames keep coming while time runs).
     fn place_moving(&mut self, now: Instant) -> bool {
         let t = self.scene_clock.secs(now);
         self.frame_time_secs = t;
         let mut any = false;
-        for moving in self.objects.values_mut().filter_map(|t| t.moving.as_mut()) {
-            moving.world_now = moving.world_at(t);
-            any = true;
+        for tracked in self.objects.values_mut() {
+            any |= tracked.timed;
+            if let Some(moving) = tracked.moving.as_mut() {
+                moving.world_now = moving.world_at(t);
+                moving.world_at_drawn = moving.world_at(tracked.drawn_t_secs);
+                any = true;
+            }
         }
         any
     }
@@ -963,6 +1026,7 @@ impl SculptApp {
             generation: tracked.generation,
             depth: self.depth,
             requested_at: now,
+            t_secs: self.scene_clock.secs(now),
         }));
         self.preview_at = Some(now);
     }

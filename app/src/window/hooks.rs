@@ -20,6 +20,9 @@ use super::app::SculptApp;
 use super::viewport::{StrokeEvent, StrokePhase};
 use ::app::engine::lock;
 
+/// Longest `wait-secs:` step a script may ask for.
+const MAX_WAIT_SECS: f64 = 60.0;
+
 /// Frames a scripted drag takes from its start to its end.
 const DRAG_FRAMES: u32 = 12;
 
@@ -44,6 +47,8 @@ pub struct Hooks {
     pub dump_state: Option<PathBuf>,
     /// A `wait-ops: N` step: later steps wait until the session holds N ops.
     step_ops: Option<usize>,
+    /// A `wait-secs: S` step: later steps wait until then (the scene's time runs on).
+    step_until: Option<std::time::Instant>,
     /// A scripted drag in progress: from and to (fractions of the viewport), and the frame.
     drag: Option<([[f32; 2]; 2], u32)>,
     /// Scripted steps wait until the session holds this many ops.
@@ -144,6 +149,10 @@ impl SculptApp {
             self.hooks.wait_ops.is_none_or(|n| view.n_ops() >= n)
                 && self.hooks.step_ops.is_none_or(|n| view.n_ops() >= n)
                 && view.presence().len() >= self.hooks.wait_presence
+                && self
+                    .hooks
+                    .step_until
+                    .is_none_or(|t| ::app::clock::now().instant >= t)
         };
         if self.is_idle() && synced {
             self.hooks.idle_frames = self.hooks.idle_frames.saturating_add(1);
@@ -172,6 +181,19 @@ impl SculptApp {
                 match n.trim().parse::<usize>() {
                     Ok(n) => self.hooks.step_ops = Some(n),
                     Err(e) => self.hooks.fail(format!("bad `wait-ops: {n}`: {e}")),
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
+            if let Some(secs) = line.strip_prefix("wait-secs:") {
+                match secs.trim().parse::<f64>() {
+                    Ok(s) if (0.0..=MAX_WAIT_SECS).contains(&s) => {
+                        let wait = std::time::Duration::from_secs_f64(s);
+                        self.hooks.step_until = Some(::app::clock::now().instant + wait);
+                    }
+                    _ => self.hooks.fail(format!(
+                        "bad `wait-secs: {secs}`: a number of seconds up to {MAX_WAIT_SECS}"
+                    )),
                 }
                 self.hooks.idle_frames = 0;
                 return;
@@ -287,6 +309,7 @@ impl SculptApp {
                     "skipped": tracked.and_then(|t| t.skipped.clone()),
                     "mesh_secs": tracked.map(|t| t.mesh_secs),
                     "mesh_kind": tracked.and_then(|t| t.kind).map(|k| k.name()),
+                    "mesh_t_secs": tracked.map(|t| t.drawn_t_secs),
                     "world_from_object": tracked.and_then(|t| {
                         let drawn = t.drawn.as_ref()?.world_from_object;
                         Some(t.moving.as_ref().map_or(drawn, |m| m.world_now).to_cols_array())

@@ -66,6 +66,8 @@ pub struct MeshJob {
     pub depth: u8,
     /// When the change that asked for it was made (for edit-to-mesh times).
     pub requested_at: Instant,
+    /// The scene time to mesh at (shapes, colours and fields that read `t`).
+    pub t_secs: f64,
 }
 
 /// How a result was made.
@@ -108,6 +110,9 @@ pub struct Meshed {
     pub mesh_secs: f64,
     /// From the job.
     pub requested_at: Instant,
+    /// The scene time it was meshed and placed at: the job's for a mesh through `snapshot`,
+    /// 0 for the incremental path (which meshes nothing that reads `t` and places at 0).
+    pub t_secs: f64,
     /// How it was made.
     pub kind: MeshKind,
     /// For `Renderer::patch_object`: the mesh this object's previous result carried, and the
@@ -316,6 +321,7 @@ fn mesh(
         generation,
         depth,
         requested_at,
+        t_secs,
     } = *job;
     object.prepare();
     let mut out = Meshed {
@@ -327,6 +333,7 @@ fn mesh(
         skipped: None,
         mesh_secs: 0.0,
         requested_at,
+        t_secs,
         kind: MeshKind::Whole,
         patch: None,
     };
@@ -359,11 +366,12 @@ fn mesh(
             }
         },
         None => {
-            snapshot(id, object, world_from_group, depth, &mut out);
+            snapshot(id, object, world_from_group, depth, t_secs, &mut out);
             None
         }
     };
     if let Some(state) = &state {
+        out.t_secs = 0.0;
         out.n_triangles = state.mesh.n_triangles();
         out.object = (out.n_triangles > 0).then(|| SceneObject {
             mesh: Arc::clone(&state.mesh),
@@ -385,7 +393,10 @@ fn patchable(object: &Object) -> bool {
         .as_ref()
         .is_some_and(|g| matches!(g.shape, Shape::Implicit(_)));
     let force = data.physics.force.as_ref().is_some_and(|f| f.enabled);
-    implicit && data.appearance.displacement.is_none() && !force
+    implicit
+        && data.appearance.displacement.is_none()
+        && !force
+        && !render::animation::object_reads_time(object)
 }
 
 enum Patched {
@@ -606,11 +617,13 @@ fn snapshot(
     object: Object,
     world_from_group: Transform,
     depth: u8,
+    t_secs: f64,
     out: &mut Meshed,
 ) {
     let mut scene = fdsl::scene::Scene::new();
     let settings = SnapshotSettings {
         depth,
+        t_secs,
         ..SnapshotSettings::default()
     };
     let built = scene
@@ -682,6 +695,7 @@ mod tests {
             generation,
             depth,
             requested_at: clock::now().instant,
+            t_secs: 0.0,
         })
     }
 
