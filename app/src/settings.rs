@@ -1,5 +1,5 @@
-//! What a user chose and expects to find again: the name and colour others see, and the
-//! brush. Kept as a small JSON file in the program's data directory, written whole to a
+//! What a user chose and expects to find again: the name and colour others see, the brush,
+//! and the window's layout (its size and the side panel's width). Kept as a small JSON file in the program's data directory, written whole to a
 //! temporary file and renamed into place; a missing or unreadable file gives the defaults and
 //! a notice, never an error that stops the program.
 
@@ -13,6 +13,10 @@ use crate::brush::Brush;
 pub const SETTINGS_FILE: &str = "settings.json";
 /// Longest settings file read.
 pub const MAX_SETTINGS_BYTES: u64 = 64 * 1024;
+/// Window sides kept, in points: smaller or larger ones (a broken file) are not restored.
+pub const WINDOW_POINTS_RANGE: [f32; 2] = [200.0, 8192.0];
+/// Side panel widths kept, in points.
+pub const SIDE_PANEL_POINTS_RANGE: [f32; 2] = [150.0, 4096.0];
 
 /// The kept settings.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -23,6 +27,10 @@ pub struct Settings {
     pub colour: Option<[u8; 3]>,
     /// The brush.
     pub brush: Option<Brush>,
+    /// The window's inner size, points.
+    pub window_points: Option<[f32; 2]>,
+    /// The side panel's width, points.
+    pub side_panel_points: Option<f32>,
 }
 
 impl Settings {
@@ -76,11 +84,27 @@ impl Settings {
             },
             None => (None, None),
         };
+        let within = |x: f64, [lo, hi]: [f32; 2]| {
+            let x = x as f32;
+            (x.is_finite() && (lo..=hi).contains(&x)).then_some(x)
+        };
+        let window_points = v["window"].as_array().and_then(|w| match w.as_slice() {
+            [a, b] => Some([
+                within(a.as_f64()?, WINDOW_POINTS_RANGE)?,
+                within(b.as_f64()?, WINDOW_POINTS_RANGE)?,
+            ]),
+            _ => None,
+        });
+        let side_panel_points = v["side_panel"]
+            .as_f64()
+            .and_then(|w| within(w, SIDE_PANEL_POINTS_RANGE));
         (
             Settings {
                 name,
                 colour,
                 brush,
+                window_points,
+                side_panel_points,
             },
             notice,
         )
@@ -92,6 +116,8 @@ impl Settings {
             "name": self.name,
             "colour": self.colour,
             "brush": self.brush.map(|b| b.describe()),
+            "window": self.window_points,
+            "side_panel": self.side_panel_points,
         });
         if let Some(dir) = path.parent() {
             std::fs::create_dir_all(dir)?;
@@ -120,6 +146,8 @@ mod tests {
             name: Some("Ada".into()),
             colour: Some([10, 200, 30]),
             brush: Some(brush),
+            window_points: Some([1000.0, 640.0]),
+            side_panel_points: Some(320.5),
         };
         kept.save(&path).unwrap();
         assert_eq!(Settings::load(&path), (kept, None));
@@ -128,6 +156,13 @@ mod tests {
         let (defaults, notice) = Settings::load(&path);
         assert_eq!(defaults, Settings::default());
         assert!(notice.unwrap().contains("using the defaults"));
+        // A layout out of range (a window of 0 or 10^9 points) is not restored.
+        std::fs::write(&path, r#"{"window": [0, 1e9], "side_panel": -5}"#).unwrap();
+        let (read, notice) = Settings::load(&path);
+        assert_eq!(
+            (read.window_points, read.side_panel_points, notice),
+            (None, None, None)
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -972,7 +972,7 @@ fn a_weak_takeover_by_another_peer_rejects_the_next_stroke_and_both_sides_say_so
 }
 
 #[test]
-fn the_brush_and_the_name_are_kept_between_runs() {
+fn the_brush_the_name_and_the_layout_are_kept_between_runs() {
     let display = display();
     let dir = scratch("settings");
     let data = dir.join("data");
@@ -983,8 +983,6 @@ fn the_brush_and_the_name_are_kept_between_runs() {
             "--store",
             store.to_str().unwrap(),
             "--no-lan",
-            "--size",
-            WINDOW,
             "--exit-when-idle",
             "--exit-after-frames",
             FRAMES_MAX,
@@ -1002,13 +1000,19 @@ fn the_brush_and_the_name_are_kept_between_runs() {
             "Ada",
             "--command",
             "tool: paint tension 0.4 box radius 0.3",
+            "--size",
+            "1000x640",
         ],
         "first",
     );
     assert_eq!(first["tool"], "paint tension 0.4 box radius 0.3 blend 0");
+    assert_eq!(first["window_points"], serde_json::json!([1000.0, 640.0]));
+    // Without --size the window opens at the size it was left at.
     let second = run(&[], "second");
     assert_eq!(second["tool"], first["tool"], "{second}");
     assert_eq!(second["name"], "Ada", "{second}");
+    assert_eq!(second["window_points"], first["window_points"], "{second}");
+    assert_eq!(second["side_panel_points"], first["side_panel_points"]);
 }
 
 #[test]

@@ -53,6 +53,8 @@ pub const PATCHES_KEPT_MAX: usize = 256;
 pub const MESHING_SHOWN_MILLIS: u64 = 200;
 /// While time runs and something moves, a frame at least this often (60 per second).
 pub const ANIMATION_FRAME_MILLIS: u64 = 16;
+/// The side panel's width until the user resizes it, points.
+pub const SIDE_PANEL_POINTS: f32 = 400.0;
 /// While time runs, an object whose drawing reads `t` is meshed again at most this often.
 pub const ANIMATION_REMESH_MILLIS: u64 = 100;
 
@@ -96,6 +98,23 @@ pub struct Tracked {
     pub drawn_t_secs: f64,
     /// When a mesh for a later time was last asked for, while none is in flight.
     time_job: Option<TimeJob>,
+}
+
+/// The window's layout: what the settings keep of it.
+pub struct Layout {
+    /// The window's inner size, points (once a frame has read it).
+    pub window_points: Option<[f32; 2]>,
+    /// The side panel's width, points.
+    pub side_panel_points: f32,
+}
+
+impl Default for Layout {
+    fn default() -> Self {
+        Layout {
+            window_points: None,
+            side_panel_points: SIDE_PANEL_POINTS,
+        }
+    }
 }
 
 /// A mesh asked for because time ran (not because the object changed): it keeps the
@@ -213,6 +232,8 @@ pub struct SculptApp {
     pub(super) join_input: Option<(String, Option<String>)>,
     /// The brush a drag sculpts with.
     pub(super) brush: Brush,
+    /// The window's layout as last drawn (kept between runs).
+    pub(super) layout: Layout,
     /// The scene's time (motions), playing or paused.
     pub(super) scene_clock: clock::SceneClock,
     /// The scene time this frame placed moving objects at, seconds.
@@ -303,6 +324,7 @@ impl SculptApp {
             brush: Brush::default(),
             sculpting: false,
             scene_clock: clock::SceneClock::new(clock::now().instant),
+            layout: Layout::default(),
             frame_time_secs: 0.0,
             stroke: None,
             preview_at: None,
@@ -1062,6 +1084,9 @@ impl SculptApp {
         if let Some(brush) = settings.brush {
             self.brush = brush;
         }
+        if let Some(width) = settings.side_panel_points {
+            self.layout.side_panel_points = width;
+        }
         let mut presence = self.engine.presence();
         if self.config.name.is_none()
             && let Some(name) = &settings.name
@@ -1179,6 +1204,8 @@ impl SculptApp {
             name: chosen.then_some(presence.name),
             colour: Some(presence.colour),
             brush: Some(self.brush),
+            window_points: self.layout.window_points,
+            side_panel_points: Some(self.layout.side_panel_points),
         };
         if let Err(e) = settings.save(path) {
             log::warn!("cannot keep the settings in {}: {e}", path.display());
@@ -1222,10 +1249,15 @@ impl eframe::App for SculptApp {
 
         egui::Panel::top("sculpt-top").show(ui, |ui| self.top_ui(ui));
         egui::Panel::bottom("sculpt-status").show(ui, |ui| self.status_ui(ui));
-        egui::Panel::right("sculpt-side")
-            .default_size(400.0)
+        let side = egui::Panel::right("sculpt-side")
+            .default_size(self.layout.side_panel_points)
             .resizable(true)
             .show(ui, |ui| self.side_ui(ui, now));
+        self.layout.side_panel_points = side.response.rect.width();
+        self.layout.window_points = ui
+            .ctx()
+            .input(|i| i.viewport().inner_rect)
+            .map(|r| [r.width(), r.height()]);
         egui::CentralPanel::no_frame().show(ui, |ui| self.central_ui(ui));
 
         if animating {

@@ -327,6 +327,8 @@ impl SculptApp {
             "n_loaded": view.n_loaded(),
             "scene_hash": view.scene_hash_hex(),
             "time_secs": self.frame_time_secs,
+            "window_points": self.layout.window_points,
+            "side_panel_points": self.layout.side_panel_points,
             "playing": self.scene_clock.playing(),
             "selected": self.selected.map(|id| view.object_label(id)),
             "peers": rows(view.peers().iter().map(|p| json!({

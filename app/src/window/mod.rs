@@ -160,7 +160,19 @@ pub fn run(args: WindowArgs, demo: &'static ::app::demos::Demo) -> anyhow::Resul
         }
     };
     let depth = args.depth;
-    let size_points = args.size.unwrap_or(DEFAULT_SIZE_POINTS);
+    // The settings are read before the window opens: it opens at the size it was left at.
+    let settings = default_data_dir().map(|dir| {
+        let path = dir.join(::app::settings::SETTINGS_FILE);
+        let (settings, notice) = ::app::settings::Settings::load(&path);
+        if let Some(notice) = notice {
+            eprintln!("sculpt: settings: {notice}");
+        }
+        (settings, path)
+    });
+    let size_points = args
+        .size
+        .or_else(|| settings.as_ref().and_then(|(s, _)| s.window_points))
+        .unwrap_or(DEFAULT_SIZE_POINTS);
     let mut hooks = Hooks::default();
     hooks.script = args.command.iter().cloned().collect();
     for [[x0, y0], [x1, y1]] in &args.drag {
@@ -219,12 +231,7 @@ pub fn run(args: WindowArgs, demo: &'static ::app::demos::Demo) -> anyhow::Resul
             let ctx = cc.egui_ctx.clone();
             let wake = std::sync::Arc::new(move || ctx.request_repaint());
             let mut app = SculptApp::new(engine, engine_config, depth, hooks, wake)?;
-            if let Some(dir) = default_data_dir() {
-                let path = dir.join(::app::settings::SETTINGS_FILE);
-                let (settings, notice) = ::app::settings::Settings::load(&path);
-                if let Some(notice) = notice {
-                    eprintln!("sculpt: settings: {notice}");
-                }
+            if let Some((settings, path)) = settings {
                 app.apply_settings(&settings, path);
             }
             Ok(Box::new(app))
