@@ -609,6 +609,30 @@ impl Object {
         self.history.set_active(idx, true)
     }
 
+    /// Tape instructions one haptic sample of the object runs: its container's geometry (or
+    /// its own) and every enabled physics property and force field, once each. What the
+    /// haptic crate weighs against its tick budget; the edits' folds come on top (indexed,
+    /// so bounded by the edits near the point).
+    pub fn touch_instructions(&self) -> usize {
+        let shape = if self.data.physics.container.is_some() {
+            Slot::Container
+        } else {
+            Slot::Geometry
+        };
+        [
+            shape,
+            Slot::Tension,
+            Slot::Friction,
+            Slot::ZoneDepth,
+            Slot::Density,
+            Slot::Force,
+        ]
+        .into_iter()
+        .filter_map(|slot| self.tape(slot))
+        .map(Tape::len)
+        .sum()
+    }
+
     /// Whether touch can feel anything of the object: an enabled tension, friction, zone
     /// depth or density, an enabled force field, or an active painting of one of those. An
     /// object with none (a plain VRML `Shape`, an imported polygon model) is seen, not felt:

@@ -44,7 +44,28 @@ pub enum ObjectContainerError {
         /// The container id.
         id: u64,
     },
+    /// Its formulas cost more per sample than a servo tick can pay
+    /// ([`MAX_TOUCH_INSTRUCTIONS`]): it is seen but not felt, and the tick keeps its budget.
+    #[error(
+        "object {id} is too costly to feel: {instructions} instructions a sample, the servo \
+         pays at most {max}; it is drawn but not felt (simplify its formulas)"
+    )]
+    TooCostly {
+        /// The container id.
+        id: u64,
+        /// `Object::touch_instructions`.
+        instructions: usize,
+        /// [`MAX_TOUCH_INSTRUCTIONS`].
+        max: usize,
+    },
 }
+
+/// Most tape instructions one sample of a container may run (`Object::touch_instructions`):
+/// a tick samples a touched container up to about 36 times (a gradient, the bisection of a
+/// crossing, the properties, the field), and the point evaluator runs an instruction in a
+/// few nanoseconds, so this keeps one container well under the 1 ms tick. A formula a peer
+/// may send can unroll to `fdsl::limits::MAX_GRAPH_NODES`, 25 times more.
+pub const MAX_TOUCH_INSTRUCTIONS: usize = 8192;
 
 /// The object's placement at one time: what maps world points and vectors into it and back.
 #[derive(Clone, Copy, Debug)]
@@ -118,6 +139,14 @@ impl ObjectContainer {
         mut sampler: Sampler,
         world_from_parent: Transform,
     ) -> Result<ObjectContainer, ObjectContainerError> {
+        let instructions = sampler.object().touch_instructions();
+        if instructions > MAX_TOUCH_INSTRUCTIONS {
+            return Err(ObjectContainerError::TooCostly {
+                id,
+                instructions,
+                max: MAX_TOUCH_INSTRUCTIONS,
+            });
+        }
         let world_from_object = world_from_parent.then(&sampler.placement(0.0));
         let frame =
             Frame::new(&world_from_object, 0.0).ok_or(ObjectContainerError::BadPlacement { id })?;

@@ -278,3 +278,54 @@ fn a_separate_container_is_felt_instead_of_the_geometry() {
     );
     assert!(c.value_grad(DVec3::new(1.2, 2.0, 0.0), 0.0).0 < 0.0);
 }
+
+/// A formula a peer may send that unrolls to tens of thousands of instructions: a loop of
+/// 1000 trips, padded with spaces to 2 KiB so that the object model's unrolling budget
+/// (`fdsl::limits::formula_node_budget`) admits it.
+fn costly_ball() -> ObjectData {
+    let mut text = String::from(
+        "function frep(x,y,z,t) { s = 0; for (i = 0; i < 1000; i = i + 1) { \
+         s = s + sin(x*i + y)*cos(z*i - x) + sqrt(abs(y*i + z)); } \
+         return 1 - sqrt(x^2+y^2+z^2) + 1e-9*s; }",
+    );
+    text.push_str(&" ".repeat(2048 - text.len()));
+    let mut data = ball_data(Some(Domain::UNIT));
+    data.geometry = Some(Geometry {
+        domain: Some(Domain::UNIT),
+        ..Geometry::implicit(formula(&text))
+    });
+    data.physics.tension = Some(Property::new(formula("1")));
+    data
+}
+
+#[test]
+fn an_object_too_costly_for_the_tick_is_refused_by_name_and_the_rest_is_felt() {
+    let costly = Object::new(costly_ball()).unwrap();
+    let instructions = costly.touch_instructions();
+    assert!(
+        instructions > super::MAX_TOUCH_INSTRUCTIONS,
+        "{instructions}"
+    );
+    let mut scene = Scene::new();
+    scene.create(ObjectId(1), costly_ball(), None).unwrap();
+    let mut cheap = ball_data(Some(Domain::UNIT));
+    cheap.physics.tension = Some(Property::new(formula("1")));
+    scene.create(ObjectId(2), cheap, None).unwrap();
+    let (containers, refused) = ObjectContainer::from_scene(&scene);
+    assert_eq!(containers.iter().map(|c| c.id()).collect::<Vec<_>>(), [2]);
+    assert_eq!(refused.len(), 1);
+    let (id, why) = &refused[0];
+    assert_eq!(*id, ObjectId(1));
+    assert!(
+        matches!(why, ObjectContainerError::TooCostly { instructions: n, .. } if *n == instructions)
+    );
+    let message = why.to_string();
+    assert!(message.contains("too costly to feel"), "{message}");
+    // Every reference model is well within the budget.
+    for (name, source) in fdsl::models::REFERENCE_MODELS {
+        let mut data = ball_data(Some(Domain::UNIT));
+        data.geometry = Some(Geometry::implicit(formula(source)));
+        let n = Object::new(data).unwrap().touch_instructions();
+        assert!(n * 4 < super::MAX_TOUCH_INSTRUCTIONS, "{name}: {n}");
+    }
+}
