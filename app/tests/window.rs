@@ -463,6 +463,33 @@ fn time_runs_the_wind_demos_fan_and_pausing_holds_it() {
 }
 
 #[test]
+fn touching_with_the_mouse_runs_the_servo_on_the_scene_and_the_rind_pushes_back() {
+    let display = display();
+    let dir = scratch("touch");
+    // On the demo watermelon's whole side, 0.02 into its rind (zone 0.05 deep).
+    let y = (0.98f64 * 0.98 - 0.08).sqrt();
+    let at = format!("touch-at: -0.2,{y},-0.2");
+    let run = window_run(&display, &dir, "touch", &["touch: on", &at, "wait-secs: 1"]);
+    let touch = &run.state["touch"];
+    assert!(touch.is_object(), "{}", run.stdout);
+    let melon = run.state["objects"][0]["id"].as_u64().unwrap();
+    assert_eq!(touch["top_id"].as_u64(), Some(melon), "{touch}");
+    assert!(touch["n_scenes_taken"].as_u64().unwrap() >= 1, "{touch}");
+    // The servo ran (2000 ticks in the two seconds waited on a quiet machine; far fewer
+    // under a loaded test run), and the rind pushes the tool back up, out of the melon, with
+    // a Falcon-class device's force.
+    assert!(touch["n_ticks"].as_u64().unwrap() > 200, "{touch}");
+    let force: Vec<f64> = touch["force"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(force[1] > 1.0 && force[1] <= 8.0, "{touch}");
+    assert!(run.stdout.contains("scripted touch: on"), "{}", run.stdout);
+}
+
+#[test]
 fn a_click_picks_the_object_and_the_point() {
     let display = display();
     let dir = scratch("pick");

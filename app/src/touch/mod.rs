@@ -5,6 +5,7 @@
 //!   path ([`PathDevice`]); what `sculpt touch <scene.wrl> --trace IN.csv --out OUT.csv`
 //!   runs. The scene's objects become haptic containers through the haptic crate's own
 //!   `ObjectContainer::from_scene`, exactly as its trace tests build them.
+//! - [`live`]: the servo on the live scene in the running app, moved by the mouse.
 //! - [`feed`]: the live scene: the engine's per-object changes become new haptic snapshots,
 //!   rebuilding only the changed objects, handed to a running servo through the haptic
 //!   crate's lock-free handoff.
@@ -16,6 +17,7 @@
 //! the zone does not rotate).
 
 pub mod feed;
+pub mod live;
 pub mod path;
 
 use glam::{DQuat, DVec3};

@@ -17,7 +17,7 @@ use render::snapshot::render_from_scene;
 
 use super::hooks::Hooks;
 use super::mesher::{MeshJob, MeshKind, Mesher};
-use super::viewport::{StrokeEvent, StrokePhase, ViewState, ViewportReport, viewport_ui};
+use super::viewport::{Modes, StrokeEvent, StrokePhase, ViewState, ViewportReport, viewport_ui};
 use ::app::brush::{Brush, Stroke};
 use ::app::clock::{self, Now};
 use ::app::command::{self, Planned};
@@ -53,6 +53,12 @@ pub const PATCHES_KEPT_MAX: usize = 256;
 pub const MESHING_SHOWN_MILLIS: u64 = 200;
 /// While time runs and something moves, a frame at least this often (60 per second).
 pub const ANIMATION_FRAME_MILLIS: u64 = 16;
+/// Colours of the haptic zone, the touch tool and the force it meets.
+const TOUCH_ZONE_COLOUR: [f32; 4] = [0.9, 0.9, 0.9, 0.6];
+const TOUCH_TOOL_COLOUR: [f32; 4] = [0.2, 0.9, 1.0, 1.0];
+const TOUCH_FORCE_COLOUR: [f32; 4] = [1.0, 0.3, 0.2, 1.0];
+/// Shift+wheel moves the touch tool by this fraction of the scene's radius per point.
+const TOUCH_DEPTH_PER_SCROLL_POINT: f32 = 0.002;
 /// The side panel's width until the user resizes it, points.
 pub const SIDE_PANEL_POINTS: f32 = 400.0;
 /// While time runs, an object whose drawing reads `t` is meshed again at most this often.
@@ -232,6 +238,8 @@ pub struct SculptApp {
     pub(super) join_input: Option<(String, Option<String>)>,
     /// The brush a drag sculpts with.
     pub(super) brush: Brush,
+    /// Touch with the mouse: the servo on the live scene, while on.
+    pub(super) touch: Option<::app::touch::live::LiveTouch>,
     /// The window's layout as last drawn (kept between runs).
     pub(super) layout: Layout,
     /// The scene's time (motions), playing or paused.
@@ -325,6 +333,7 @@ impl SculptApp {
             sculpting: false,
             scene_clock: clock::SceneClock::new(clock::now().instant),
             layout: Layout::default(),
+            touch: None,
             frame_time_secs: 0.0,
             stroke: None,
             preview_at: None,
@@ -351,6 +360,11 @@ impl SculptApp {
         if self.selected.is_none() {
             // The first object to appear (the demo, or a joined session's) is selected.
             self.selected = view.scene().objects().next().map(|(id, _)| id.0);
+        }
+        if let Some(live) = &self.touch
+            && changes.as_ref().is_none_or(|c| !c.is_empty())
+        {
+            live.wake();
         }
         if let Some(changes) = changes {
             self.dirty |= !changes.is_empty();
@@ -649,6 +663,7 @@ impl SculptApp {
             }
         }
         self.draw_presence(&mut scene);
+        self.draw_touch(&mut scene);
         (scene, ids)
     }
 
@@ -745,6 +760,8 @@ impl SculptApp {
     /// Starts an engine on `config` and puts it in the place of this one (which stops), with
     /// the window's per-session state cleared.
     fn switch_session(&mut self, mut config: EngineConfig, shared: bool) -> Result<(), String> {
+        // The servo felt the session left.
+        self.set_touching(false)?;
         // The session left is still listening while the new one starts.
         config.network.listen.set_port(0);
         let engine = Engine::start(config.clone(), clock::now().wall).map_err(|e| e.to_string())?;
@@ -803,9 +820,13 @@ impl SculptApp {
                 Some((idx, base, mesh, patch))
             })
             .collect();
+        let modes = Modes {
+            sculpting,
+            touching: self.touch.is_some(),
+        };
         let mut input = viewport_ui(
             ui,
-            sculpting,
+            modes,
             &mut self.view,
             &scene,
             patches,
@@ -826,6 +847,11 @@ impl SculptApp {
         if let Some(px) = input.hover_px {
             let ray = self.view.camera.ray_through_pixel(px, input.size_px);
             self.pointer = scene.pick(&ray).map(|hit| hit.point_in_world);
+        }
+        if input.hover_px.is_some() || input.depth_scroll != 0.0 {
+            let depth =
+                input.depth_scroll * TOUCH_DEPTH_PER_SCROLL_POINT * sphere.map_or(1.0, |s| s.1);
+            self.touch_follow(input.hover_px, input.size_px, depth);
         }
         if let Some(at) = self.hooks.take_pick_if_ready(self.is_idle()) {
             let size_px = input.size_px;
@@ -989,6 +1015,50 @@ impl SculptApp {
             }
         }
         any
+    }
+
+    /// Starts or stops touching the scene with the mouse (the servo and its feed).
+    pub(super) fn set_touching(&mut self, on: bool) -> Result<(), String> {
+        match (on, self.touch.take()) {
+            (true, None) => {
+                let view = Arc::clone(self.engine.view());
+                let model = ::app::touch::DeviceModel::Falcon;
+                self.touch = Some(::app::touch::live::LiveTouch::start(view, model)?);
+                self.status = "touching with the mouse: the tool follows the pointer; \
+                               Shift+wheel moves it in depth"
+                    .into();
+            }
+            (true, Some(live)) => self.touch = Some(live),
+            (false, Some(live)) => live.stop(),
+            (false, None) => {}
+        }
+        Ok(())
+    }
+
+    /// Moves the touch tool under the pointer, in the plane through it that faces the
+    /// camera, then `depth` scene units away from the camera.
+    fn touch_follow(&self, px: Option<[f32; 2]>, size_px: [u32; 2], depth: f32) {
+        let Some(live) = &self.touch else {
+            return;
+        };
+        let to_render = render_from_scene();
+        let hip = to_render.transform_point3(live.stats().hip_world.as_vec3());
+        let camera = &self.view.camera;
+        let forward = (camera.target - camera.eye()).normalize_or_zero();
+        let mut target = hip;
+        if let Some(px) = px {
+            let ray = camera.ray_through_pixel(px, size_px);
+            let facing = ray.direction.dot(forward);
+            if facing.abs() > 1e-6 {
+                let s = (hip - ray.origin).dot(forward) / facing;
+                target = ray.origin + ray.direction * s;
+            }
+        }
+        target += forward * depth;
+        if target != hip {
+            let scene_point = to_render.inverse().transform_point3(target);
+            live.move_to_world(scene_point.as_dvec3());
+        }
     }
 
     /// Runs or stops the scene's time.
@@ -1216,6 +1286,7 @@ impl SculptApp {
 impl eframe::App for SculptApp {
     fn on_exit(&mut self) {
         self.save_settings();
+        let _ = self.set_touching(false);
     }
 
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
@@ -1236,7 +1307,9 @@ impl eframe::App for SculptApp {
         self.files(ui.ctx());
         self.run_hooks(ui.ctx());
         self.publish_presence();
-        let animating = self.place_moving(now.instant) && self.scene_clock.playing();
+        // Moving objects while time runs, and the touch tool while touching, draw every frame.
+        let animating =
+            (self.place_moving(now.instant) && self.scene_clock.playing()) || self.touch.is_some();
         let title = match self.n_meshing_long(now.instant) {
             0 => format!("sculpt — {}", self.presence_text()),
             n => format!("sculpt — meshing {n}… — {}", self.presence_text()),
@@ -1279,6 +1352,31 @@ impl eframe::App for SculptApp {
             .as_secs_f64()
             * 1e3;
         push_bounded(&mut self.stats.ui_ms, ui_ms, FRAME_SAMPLES_MAX);
+    }
+}
+
+impl SculptApp {
+    /// The haptic zone, the tool at the haptic interface point and the force it meets.
+    fn draw_touch(&self, scene: &mut Scene) {
+        let Some(live) = &self.touch else {
+            return;
+        };
+        let to_render = render_from_scene();
+        let zone = live.zone_box();
+        let zone = Aabb::new(zone.min.as_vec3().to_array(), zone.max.as_vec3().to_array());
+        scene.add_box(moved_box(&zone, &to_render), TOUCH_ZONE_COLOUR);
+        let stats = live.stats();
+        let hip = to_render.transform_point3(stats.hip_world.as_vec3());
+        let size = (zone.hi[0] - zone.lo[0]) * 0.03;
+        scene.add_crosshair(hip, size, TOUCH_TOOL_COLOUR);
+        let force = stats.force_newtons.as_vec3();
+        if force.length() > 1e-3 {
+            // One zone-width per device maximum (the zone does not rotate: device axes are
+            // scene axes).
+            let max = live.model().capabilities().force_newtons_max as f32;
+            let reach = to_render.transform_vector3(force / max * (zone.hi[0] - zone.lo[0]) * 0.25);
+            scene.add_arrow(hip, hip + reach, TOUCH_FORCE_COLOUR);
+        }
     }
 }
 

@@ -198,6 +198,35 @@ impl SculptApp {
                 self.hooks.idle_frames = 0;
                 return;
             }
+            if let Some(word) = line.strip_prefix("touch:") {
+                let on = match word.trim() {
+                    "on" => true,
+                    "off" => false,
+                    other => {
+                        self.hooks.fail(format!("bad `touch: {other}`: on or off"));
+                        return;
+                    }
+                };
+                println!("sculpt: scripted touch: {}", word.trim());
+                if let Err(e) = self.set_touching(on) {
+                    self.hooks.fail(e);
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
+            if let Some(at) = line.strip_prefix("touch-at:") {
+                let point: Vec<f64> = at
+                    .split(',')
+                    .filter_map(|v| v.trim().parse().ok())
+                    .collect();
+                match (&self.touch, point.as_slice()) {
+                    (Some(live), &[x, y, z]) => live.move_to_world(glam::DVec3::new(x, y, z)),
+                    (None, _) => self.hooks.fail("`touch-at:` before `touch: on`".into()),
+                    _ => self.hooks.fail(format!("bad `touch-at: {at}`: X,Y,Z")),
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
             if let Some(path) = line.strip_prefix("import:") {
                 println!("sculpt: scripted import: {path}");
                 if let Err(e) = self.import_file(std::path::Path::new(path.trim())) {
@@ -328,6 +357,17 @@ impl SculptApp {
             "scene_hash": view.scene_hash_hex(),
             "time_secs": self.frame_time_secs,
             "window_points": self.layout.window_points,
+            "touch": self.touch.as_ref().map(|live| {
+                let s = live.stats();
+                json!({
+                    "hip": s.hip_world.to_array(),
+                    "force": s.force_newtons.to_array(),
+                    "top_id": s.top_id,
+                    "n_ticks": s.n_ticks,
+                    "n_scenes_taken": s.n_scenes_taken,
+                    "compute_micros": s.compute_micros,
+                })
+            }),
             "side_panel_points": self.layout.side_panel_points,
             "playing": self.scene_clock.playing(),
             "selected": self.selected.map(|id| view.object_label(id)),

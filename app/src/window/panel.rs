@@ -495,6 +495,8 @@ impl SculptApp {
         ui.separator();
         self.tool_ui(ui);
         ui.separator();
+        self.touch_ui(ui);
+        ui.separator();
         ui.heading("Objects");
         let now = clock::now().wall;
         let rows: Vec<(u64, String, Option<String>)> = {
@@ -621,5 +623,41 @@ impl SculptApp {
                     self.undo_op(op);
                 }
             });
+    }
+}
+
+impl SculptApp {
+    /// The Touch section: start or stop touching with the mouse, and what the servo feels.
+    fn touch_ui(&mut self, ui: &mut egui::Ui) {
+        ui.heading("Touch");
+        let on = self.touch.is_some();
+        let word = if on {
+            "Stop touching"
+        } else {
+            "Touch with the mouse"
+        };
+        let tip = "run the 1 kHz haptic servo on this scene: the tool follows the pointer \
+                   (Shift+wheel: depth) and the force a Falcon-class device would give is drawn";
+        if ui.button(word).on_hover_text(tip).clicked()
+            && let Err(e) = self.set_touching(!on)
+        {
+            self.status = format!("cannot touch: {e}");
+        }
+        let Some(live) = &self.touch else {
+            return;
+        };
+        let s = live.stats();
+        let touched = s.top_id.map_or_else(
+            || "nothing".to_string(),
+            |id| lock(self.engine.view()).object_label(id),
+        );
+        ui.label(format!(
+            "force {:.2} N · touching {touched}",
+            s.force_newtons.length()
+        ));
+        ui.label(format!(
+            "servo: {} ticks, {} late · tick compute p50 {} µs, p99.9 {} µs, max {} µs",
+            s.n_ticks, s.n_overruns, s.compute_micros[0], s.compute_micros[2], s.compute_micros[3]
+        ));
     }
 }

@@ -352,6 +352,18 @@ pub struct ViewportInput {
     pub moved: bool,
     /// A sculpting drag (primary button while a tool is active): where, and which phase.
     pub stroke: Option<StrokeEvent>,
+    /// Shift+wheel while touching: points of scroll to move the touch tool in depth
+    /// (positive: away from the camera).
+    pub depth_scroll: f32,
+}
+
+/// What the pointer does in the viewport besides navigating.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Modes {
+    /// A primary drag sculpts (secondary orbits).
+    pub sculpting: bool,
+    /// The touch tool follows the pointer; Shift+wheel moves it in depth.
+    pub touching: bool,
 }
 
 /// One frame of a sculpting drag.
@@ -375,10 +387,11 @@ pub enum StrokePhase {
 }
 
 /// Draws the viewport over the rest of `ui` and handles orbit (drag), zoom (scroll), reset
-/// (double-click or `F`) and picking (click).
+/// (double-click or `F`) and picking (click); while touching, Shift+scroll moves the touch
+/// tool in depth instead of zooming.
 pub fn viewport_ui(
     ui: &mut egui::Ui,
-    sculpting: bool,
+    modes: Modes,
     view: &mut ViewState,
     scene: &Scene,
     patches: Vec<(usize, Arc<Mesh>, Arc<Mesh>, MeshPatch)>,
@@ -392,6 +405,10 @@ pub fn viewport_ui(
         ((rect.width() * ppp).round() as u32).clamp(1, VIEWPORT_SIDE_MAX),
         ((rect.height() * ppp).round() as u32).clamp(1, VIEWPORT_SIDE_MAX),
     ];
+    let Modes {
+        sculpting,
+        touching,
+    } = modes;
     let mut input = ViewportInput {
         size_px,
         ..ViewportInput::default()
@@ -430,8 +447,12 @@ pub fn viewport_ui(
         }
     }
     if response.hovered() {
-        let scroll = ui.input(|i| i.smooth_scroll_delta.y);
-        if scroll != 0.0 {
+        let (scroll, shift) = ui.input(|i| (i.smooth_scroll_delta.y, i.modifiers.shift));
+        if touching && shift {
+            // egui turns Shift+wheel into horizontal scrolling on some platforms.
+            let both = ui.input(|i| i.smooth_scroll_delta);
+            input.depth_scroll = -(both.x + both.y);
+        } else if scroll != 0.0 {
             view.camera.zoom((-scroll * ZOOM_PER_SCROLL_POINT).exp());
             view.moved = true;
             input.moved = true;

@@ -32,11 +32,21 @@ pub struct MouseHandle {
 impl MouseHandle {
     /// Moves the tip by a pointer motion (pixels; screen y grows downward) and wheel steps.
     pub fn move_by(&self, dx_pixels: f64, dy_pixels: f64, wheel_steps: f64) {
-        let delta = DVec3::new(
+        self.move_by_metres(DVec3::new(
             dx_pixels * METRES_PER_PIXEL,
             -dy_pixels * METRES_PER_PIXEL,
             -wheel_steps * METRES_PER_WHEEL_STEP,
-        );
+        ));
+    }
+
+    /// The tip's position, metres, device frame.
+    pub fn position_metres(&self) -> DVec3 {
+        read(&self.shared)
+    }
+
+    /// Moves the tip by `delta` metres in the device frame (a caller that maps pointer
+    /// motion through its own camera), clamped to the workspace; non-finite moves are ignored.
+    pub fn move_by_metres(&self, delta: DVec3) {
         let now = read(&self.shared);
         let next = self.workspace.clamp(
             now + if delta.is_finite() {

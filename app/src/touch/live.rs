@@ -1,0 +1,212 @@
+//! Touch in the running app: the 1 kHz servo on the live scene, driven by the mouse.
+//!
+//! [`LiveTouch::start`] fits a haptic zone around the scene's tangible objects, starts the
+//! haptic crate's paced servo thread with a mouse-driven device, and a [`Feed`] that hands it
+//! a new snapshot whenever the engine's view changes (only the changed objects are rebuilt).
+//! The window moves the tip ([`LiveTouch::move_by_world`], the pointer mapped through its own
+//! camera) and reads what the servo did ([`LiveTouch::stats`]): the haptic interface point,
+//! the force and the object touched. A mouse renders no force, so the forces are computed
+//! for a device model (a Falcon-class device by default) and shown, not felt; the same
+//! servo drives a force-feedback device when one is attached.
+
+use glam::DVec3;
+use haptic::container::Aabb;
+use haptic::container::object::ObjectContainer;
+use haptic::device::mouse::{MouseDevice, MouseHandle};
+use haptic::device::{Capabilities, DeviceError, DeviceSample, HapticDevice};
+use haptic::force::zone::HapticZone;
+use haptic::servo::{Servo, ServoConfig, ServoHandle, ServoStats, StatsSnapshot, spawn};
+
+use super::feed::{Feed, LiveScene};
+use super::{DeviceModel, bounds_of, rig, zone_for};
+use crate::engine::{SharedView, lock};
+
+/// The mouse's input with a device model's force capabilities: forces are computed for that
+/// model and shown, never rendered.
+pub struct ShownForce {
+    mouse: MouseDevice,
+    caps: Capabilities,
+}
+
+impl HapticDevice for ShownForce {
+    fn capabilities(&self) -> &Capabilities {
+        &self.caps
+    }
+    fn sample(&mut self) -> Result<DeviceSample, DeviceError> {
+        self.mouse.sample()
+    }
+    fn set_force(&mut self, _force_newtons: DVec3) -> Result<(), DeviceError> {
+        Ok(())
+    }
+}
+
+/// A running servo on the live scene with its feed and the mouse that moves it.
+pub struct LiveTouch {
+    servo: ServoHandle<ShownForce, LiveScene>,
+    feed: Feed,
+    waker: Box<dyn Fn() + Send>,
+    stats: std::sync::Arc<ServoStats>,
+    mouse: MouseHandle,
+    zone: HapticZone,
+    workspace: Aabb,
+    model: DeviceModel,
+}
+
+impl LiveTouch {
+    /// Starts touching `view`'s scene with the mouse, forces computed for `model`.
+    pub fn start(view: SharedView, model: DeviceModel) -> Result<LiveTouch, String> {
+        let bounds = {
+            let view = lock(&view);
+            let (containers, _) = ObjectContainer::from_scene(view.scene());
+            bounds_of(&containers)
+        };
+        let (mouse, handle) = MouseDevice::new();
+        let model_caps = model.capabilities();
+        let caps = Capabilities {
+            n_dof_input: 3,
+            workspace_metres: mouse.capabilities().workspace_metres,
+            n_buttons: mouse.capabilities().n_buttons,
+            ..model_caps
+        };
+        let zone = zone_for(&caps, bounds, None);
+        let device = ShownForce { mouse, caps };
+        let mut servo_rig = rig(model, zone);
+        servo_rig.caps = caps;
+        let (servo, link) = Servo::init(device, servo_rig);
+        let stats = std::sync::Arc::clone(&link.stats);
+        let feed = Feed::spawn(view, link.scenes).map_err(|e| e.to_string())?;
+        let config = ServoConfig {
+            thread_name: "sculpt-servo".into(),
+            ..ServoConfig::default()
+        };
+        let servo = match spawn(servo, &config) {
+            Ok(servo) => servo,
+            Err(e) => {
+                feed.stop();
+                return Err(e.to_string());
+            }
+        };
+        Ok(LiveTouch {
+            servo,
+            waker: Box::new(feed.waker()),
+            feed,
+            stats,
+            mouse: handle,
+            zone,
+            workspace: caps.workspace_metres,
+            model,
+        })
+    }
+
+    /// Moves the tip by `delta` in scene units (the window maps pointer motion through its
+    /// camera into the scene first).
+    pub fn move_by_world(&self, delta: DVec3) {
+        let metres = self.zone.device_from_world_dir(delta) * self.zone.device_metres(1.0);
+        self.mouse.move_by_metres(metres);
+    }
+
+    /// Moves the tip so that the haptic interface point is at `p` (scene units), as far as
+    /// the workspace reaches.
+    pub fn move_to_world(&self, p: DVec3) {
+        let target = self.zone.device_from_world(p);
+        self.mouse
+            .move_by_metres(target - self.mouse.position_metres());
+    }
+
+    /// Presses or releases the device's button (bit 0).
+    pub fn set_button(&self, down: bool) {
+        self.mouse.set_buttons(u32::from(down));
+    }
+
+    /// Wakes the feed (the view changed) so that the servo gets the change in its next
+    /// snapshot rather than at the feed's next poll.
+    pub fn wake(&self) {
+        (self.waker)();
+    }
+
+    /// What the servo has done: the haptic interface point, the force, the touched object,
+    /// tick timing.
+    pub fn stats(&self) -> StatsSnapshot {
+        self.stats.snapshot()
+    }
+
+    /// The haptic zone's box in scene units (drawn in the view).
+    pub fn zone_box(&self) -> Aabb {
+        self.zone.box_world(self.workspace)
+    }
+
+    /// The device model whose forces are computed.
+    pub fn model(&self) -> DeviceModel {
+        self.model
+    }
+
+    /// Stops the servo (force zeroed first) and the feed.
+    pub fn stop(self) {
+        if self.servo.stop().is_err() {
+            log::error!("the servo thread panicked");
+        }
+        self.feed.stop();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::{Engine, EngineConfig, lock};
+
+    /// Waits (at most 10 s) until `done` holds for the servo's statistics.
+    fn wait_stats(live: &LiveTouch, what: &str, done: impl Fn(&StatsSnapshot) -> bool) {
+        let deadline = crate::clock::now().instant + std::time::Duration::from_secs(10);
+        while !done(&live.stats()) {
+            assert!(
+                crate::clock::now().instant < deadline,
+                "timed out waiting for {what}: {:?}",
+                live.stats()
+            );
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+    }
+
+    #[test]
+    fn the_mouse_moves_the_servo_into_the_demo_watermelon_and_its_rind_pushes_out() {
+        let dir = std::env::temp_dir().join(format!("sculpt-live-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let config = EngineConfig {
+            demo: crate::demos::find("watermelon").ok(),
+            ..EngineConfig::on_loopback(&dir)
+        };
+        let engine = Engine::start(config, crate::clock::now().wall).unwrap();
+        let deadline = crate::clock::now().instant + std::time::Duration::from_secs(20);
+        while lock(engine.view()).scene().is_empty() {
+            assert!(crate::clock::now().instant < deadline, "no demo");
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        let melon = lock(engine.view()).scene().objects().next().unwrap().0.0;
+        let live =
+            LiveTouch::start(std::sync::Arc::clone(engine.view()), DeviceModel::Falcon).unwrap();
+        wait_stats(&live, "a snapshot", |s| s.n_scenes_taken >= 1);
+        // Outside the melon: nothing touched, no force.
+        live.move_to_world(DVec3::new(0.0, 1.09, 0.0));
+        wait_stats(&live, "the tip above the melon", |s| {
+            (s.hip_world - DVec3::new(0.0, 1.09, 0.0)).length() < 1e-3 && s.top_id.is_none()
+        });
+        // Into the rind's zone from above (the demo's rind is 0.05 deep; the wedge is cut
+        // out of the melon's +x, +y, +z corner, so this is on the whole rind): the
+        // Falcon-class force points up, out of the melon.
+        live.move_to_world(DVec3::new(-0.2, (0.98f64 * 0.98 - 0.08).sqrt(), -0.2));
+        wait_stats(&live, "the rind's push", |s| {
+            s.top_id == Some(melon) && s.force_newtons.y > 1.0
+        });
+        let s = live.stats();
+        assert!(s.force_newtons.length() <= 8.0 + 1e-9, "{s:?}");
+        assert!(s.n_ticks > 0 && s.compute_micros[0] < 1_000, "{s:?}");
+        let zone = live.zone_box();
+        assert!(
+            zone.min.x < -1.0 && zone.max.x > 1.0,
+            "the zone covers the melon: {zone:?}"
+        );
+        live.stop();
+        engine.shutdown();
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
