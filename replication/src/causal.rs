@@ -1,4 +1,5 @@
-//! Causal bookkeeping: version vectors (what a peer has) and the DAG's frontier (heads).
+//! Causal bookkeeping: version vectors (what a peer has), the DAG's frontier (heads), and the
+//! memo of which ops have a given op in their causal past ([`Reach`]).
 
 use std::collections::BTreeMap;
 use std::collections::BTreeSet;
@@ -132,6 +133,68 @@ impl Frontier {
     }
 }
 
+/// Most (target, author) entries a [`Reach`] memo holds; past it the memo starts afresh, which
+/// changes no answer, only what the next ones cost.
+pub const MAX_REACH_MEMO_ENTRIES: usize = 1 << 20;
+
+/// A memo of causal reachability: for a target op, per author, the sequence numbers of that
+/// author's ops known *not* to have the target in their causal past (`..=unseen_to`) and known
+/// to have it (`seen_from..`). Each op of an author has the author's previous op in its past,
+/// so both are ranges of the author's chain; an op's past never changes once it is delivered,
+/// so an entry never goes stale.
+#[derive(Clone, Debug, Default)]
+pub struct Reach {
+    bounds: BTreeMap<OpId, BTreeMap<PeerId, (u64, u64)>>,
+    n_entries: usize,
+}
+
+impl Reach {
+    /// Whether `author`'s op `seq` has `target` in its causal past, if known.
+    pub fn known(&self, target: &OpId, author: &PeerId, seq: u64) -> Option<bool> {
+        let (unseen_to, seen_from) = *self.bounds.get(target)?.get(author)?;
+        if seq <= unseen_to {
+            Some(false)
+        } else if seq >= seen_from {
+            Some(true)
+        } else {
+            None
+        }
+    }
+
+    /// Records whether `author`'s op `seq` has `target` in its causal past.
+    pub fn record(&mut self, target: OpId, author: PeerId, seq: u64, seen: bool) {
+        if self.n_entries >= MAX_REACH_MEMO_ENTRIES {
+            self.bounds.clear();
+            self.n_entries = 0;
+        }
+        let n_entries = &mut self.n_entries;
+        let entry = self
+            .bounds
+            .entry(target)
+            .or_default()
+            .entry(author)
+            .or_insert_with(|| {
+                *n_entries += 1;
+                (0, u64::MAX)
+            });
+        if seen {
+            entry.1 = entry.1.min(seq);
+        } else {
+            entry.0 = entry.0.max(seq);
+        }
+    }
+
+    /// Number of (target, author) entries held.
+    pub fn len(&self) -> usize {
+        self.n_entries
+    }
+
+    /// True if nothing is memoised.
+    pub fn is_empty(&self) -> bool {
+        self.n_entries == 0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -154,6 +217,20 @@ mod tests {
         assert_eq!(f.len(), 2);
         f.deliver(c, &[a, b]);
         assert_eq!(f.heads().copied().collect::<Vec<_>>(), vec![c]);
+    }
+
+    #[test]
+    fn reach_memo_keeps_ranges_of_an_authors_chain() {
+        let mut r = Reach::default();
+        let (t, a) = (OpId([9; 32]), PeerId([1; 32]));
+        assert_eq!(r.known(&t, &a, 3), None);
+        r.record(t, a, 3, false);
+        r.record(t, a, 7, true);
+        assert_eq!(r.known(&t, &a, 1), Some(false));
+        assert_eq!(r.known(&t, &a, 3), Some(false));
+        assert_eq!(r.known(&t, &a, 5), None);
+        assert_eq!(r.known(&t, &a, 9), Some(true));
+        assert_eq!(r.len(), 1);
     }
 
     #[test]

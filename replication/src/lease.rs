@@ -1,5 +1,10 @@
 //! Lease and undo rules, evaluated in the fold: given the state before an op in the linear
 //! order, decide whether the op is effective or rejected (and why), and update the state.
+//!
+//! A lease binds only ops that saw it. The fold carries the lease state of the whole prefix
+//! (what an op that saw every earlier op faces); an op that missed some earlier lease ops of
+//! its object is judged against the lease its own causal past gives instead, which the log
+//! works out ([`crate::log`]) and hands to [`FoldState::apply`] as `seen`.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
@@ -189,89 +194,45 @@ impl FoldState {
         Ok(Self { leases, undone })
     }
 
-    /// Who blocks `author` from changing `object` at `at`, if anyone.
-    fn blocker(&self, author: PeerId, object: ObjectId, at: Timestamp) -> Option<Lease> {
-        self.leases
-            .get(&object)
-            .copied()
-            .filter(|l| l.holds_at(at) && l.holder != author)
-    }
-
     /// Evaluates one op and updates the state. `target` describes an undo/redo's target if it
-    /// precedes this op in the order.
+    /// precedes this op in the order. `seen` is `None` when every earlier lease op of the op's
+    /// object is in its causal past; otherwise it is the object's lease as the op's causal
+    /// past gives it (see [`lease_step`]), and the op is judged against that, while the state
+    /// still follows the whole prefix.
     pub fn apply(
         &mut self,
         author: PeerId,
         at: Timestamp,
         effect: Effect,
         target: Option<TargetInfo>,
+        seen: Option<Option<Lease>>,
     ) -> Mark {
         let verdict = match effect {
             Effect::Independent => Ok(()),
-            Effect::Edit { object } => self.check_free(author, object, at),
-            Effect::Acquire {
-                object,
-                strength,
-                ttl_micros,
-            } => self.acquire(author, at, object, strength, ttl_micros),
-            Effect::Release { object } => match self.leases.get(&object) {
-                Some(l) if l.holder == author && l.holds_at(at) => {
-                    self.leases.remove(&object);
-                    Ok(())
+            Effect::Edit { object }
+            | Effect::Acquire { object, .. }
+            | Effect::Release { object } => {
+                let global = self.leases.get(&object).copied();
+                let judged = lease_step(seen.unwrap_or(global), author, at, effect);
+                let whole = match seen {
+                    None => judged,
+                    Some(_) => lease_step(global, author, at, effect),
+                };
+                if let Ok(lease) = whole {
+                    match lease {
+                        Some(l) => self.leases.insert(object, l),
+                        None => self.leases.remove(&object),
+                    };
                 }
-                _ => Err(RejectReason::NotHolder),
-            },
-            Effect::Undo { target: id } => self.undo_redo(author, at, id, target, true),
-            Effect::Redo { target: id } => self.undo_redo(author, at, id, target, false),
+                judged.map(|_| ())
+            }
+            Effect::Undo { target: id } => self.undo_redo(author, at, id, target, true, seen),
+            Effect::Redo { target: id } => self.undo_redo(author, at, id, target, false, seen),
         };
         match verdict {
             Ok(()) => Mark::Effective,
             Err(reason) => Mark::Rejected(reason),
         }
-    }
-
-    fn check_free(
-        &self,
-        author: PeerId,
-        object: ObjectId,
-        at: Timestamp,
-    ) -> Result<(), RejectReason> {
-        match self.blocker(author, object, at) {
-            Some(l) => Err(RejectReason::LeaseHeld { holder: l.holder }),
-            None => Ok(()),
-        }
-    }
-
-    fn acquire(
-        &mut self,
-        author: PeerId,
-        at: Timestamp,
-        object: ObjectId,
-        strength: LeaseStrength,
-        ttl_micros: u64,
-    ) -> Result<(), RejectReason> {
-        if let Some(l) = self.blocker(author, object, at) {
-            match (strength, l.strength) {
-                // A weak acquire takes a weak lease over; the former holder loses it.
-                (LeaseStrength::Weak, LeaseStrength::Weak) => {}
-                (LeaseStrength::Weak, LeaseStrength::Strong) => {
-                    return Err(RejectReason::StrongLeaseHeld { holder: l.holder });
-                }
-                (LeaseStrength::Strong, _) => {
-                    return Err(RejectReason::LeaseHeld { holder: l.holder });
-                }
-            }
-        }
-        let expires_at = at.saturating_add_micros(ttl_micros.min(MAX_LEASE_TTL_MICROS));
-        self.leases.insert(
-            object,
-            Lease {
-                holder: author,
-                strength,
-                expires_at,
-            },
-        );
-        Ok(())
     }
 
     fn undo_redo(
@@ -281,6 +242,7 @@ impl FoldState {
         id: OpId,
         target: Option<TargetInfo>,
         undo: bool,
+        seen: Option<Option<Lease>>,
     ) -> Result<(), RejectReason> {
         let t = target.ok_or(RejectReason::UnknownTarget)?;
         if t.author != author {
@@ -297,13 +259,64 @@ impl FoldState {
             (false, false) => return Err(RejectReason::NotUndone),
             _ => {}
         }
-        self.check_free(author, object, at)?;
+        let lease = seen.unwrap_or_else(|| self.leases.get(&object).copied());
+        lease_step(lease, author, at, Effect::Edit { object })?;
         if undo {
             self.undone.insert(id);
         } else {
             self.undone.remove(&id);
         }
         Ok(())
+    }
+}
+
+/// The lease rules on one object: the verdict on `effect` by `author` at `at` against the
+/// object's `lease` (as recorded: it may have expired), and the object's lease after it.
+///
+/// An edit (or undo/redo) needs the object free, expired or the author's own; a weak acquire
+/// takes a weak lease over, a strong one needs the object free, expired or its own, and either
+/// lasts its TTL clamped to [`MAX_LEASE_TTL_MICROS`]; a release needs the live holder.
+pub fn lease_step(
+    lease: Option<Lease>,
+    author: PeerId,
+    at: Timestamp,
+    effect: Effect,
+) -> Result<Option<Lease>, RejectReason> {
+    let blocker = lease.filter(|l| l.holds_at(at) && l.holder != author);
+    match effect {
+        Effect::Independent => Ok(lease),
+        Effect::Edit { .. } | Effect::Undo { .. } | Effect::Redo { .. } => match blocker {
+            Some(l) => Err(RejectReason::LeaseHeld { holder: l.holder }),
+            None => Ok(lease),
+        },
+        Effect::Acquire {
+            strength,
+            ttl_micros,
+            ..
+        } => {
+            if let Some(l) = blocker {
+                match (strength, l.strength) {
+                    // A weak acquire takes a weak lease over; the former holder loses it.
+                    (LeaseStrength::Weak, LeaseStrength::Weak) => {}
+                    (LeaseStrength::Weak, LeaseStrength::Strong) => {
+                        return Err(RejectReason::StrongLeaseHeld { holder: l.holder });
+                    }
+                    (LeaseStrength::Strong, _) => {
+                        return Err(RejectReason::LeaseHeld { holder: l.holder });
+                    }
+                }
+            }
+            let expires_at = at.saturating_add_micros(ttl_micros.min(MAX_LEASE_TTL_MICROS));
+            Ok(Some(Lease {
+                holder: author,
+                strength,
+                expires_at,
+            }))
+        }
+        Effect::Release { .. } => match lease {
+            Some(l) if l.holder == author && l.holds_at(at) => Ok(None),
+            _ => Err(RejectReason::NotHolder),
+        },
     }
 }
 
@@ -328,42 +341,78 @@ mod tests {
         let mut s = FoldState::default();
         let edit = Effect::Edit { object: OBJ };
         assert_eq!(
-            s.apply(B, Timestamp(0), edit, None),
+            s.apply(B, Timestamp(0), edit, None, None),
             Mark::Effective,
             "free object"
         );
         assert_eq!(
-            s.apply(A, Timestamp(1), acquire(LeaseStrength::Weak, 100), None),
+            s.apply(
+                A,
+                Timestamp(1),
+                acquire(LeaseStrength::Weak, 100),
+                None,
+                None
+            ),
             Mark::Effective
         );
         assert_eq!(
-            s.apply(B, Timestamp(2), edit, None),
+            s.apply(B, Timestamp(2), edit, None, None),
             Mark::Rejected(RejectReason::LeaseHeld { holder: A })
         );
         assert_eq!(
-            s.apply(B, Timestamp(3), acquire(LeaseStrength::Weak, 100), None),
+            s.apply(
+                B,
+                Timestamp(3),
+                acquire(LeaseStrength::Weak, 100),
+                None,
+                None
+            ),
             Mark::Effective
         );
         assert_eq!(
-            s.apply(A, Timestamp(4), edit, None),
+            s.apply(A, Timestamp(4), edit, None, None),
             Mark::Rejected(RejectReason::LeaseHeld { holder: B })
         );
         assert_eq!(
-            s.apply(A, Timestamp(5), acquire(LeaseStrength::Strong, 100), None),
+            s.apply(
+                A,
+                Timestamp(5),
+                acquire(LeaseStrength::Strong, 100),
+                None,
+                None
+            ),
             Mark::Rejected(RejectReason::LeaseHeld { holder: B })
         );
         assert_eq!(
-            s.apply(B, Timestamp(6), acquire(LeaseStrength::Strong, 10), None),
+            s.apply(
+                B,
+                Timestamp(6),
+                acquire(LeaseStrength::Strong, 10),
+                None,
+                None
+            ),
             Mark::Effective
         );
         assert_eq!(
-            s.apply(A, Timestamp(7), acquire(LeaseStrength::Weak, 10), None),
+            s.apply(
+                A,
+                Timestamp(7),
+                acquire(LeaseStrength::Weak, 10),
+                None,
+                None
+            ),
             Mark::Rejected(RejectReason::StrongLeaseHeld { holder: B })
         );
         // The strong lease expires at 16.
-        assert_eq!(s.apply(A, Timestamp(16), edit, None), Mark::Effective);
+        assert_eq!(s.apply(A, Timestamp(16), edit, None, None), Mark::Effective);
         assert_eq!(
-            s.apply(B, Timestamp(17), Effect::Release { object: OBJ }, None),
+            s.apply(
+                B,
+                Timestamp(17),
+                Effect::Release { object: OBJ },
+                None,
+                None
+            ),
             Mark::Rejected(RejectReason::NotHolder)
         );
     }
@@ -371,13 +420,19 @@ mod tests {
     #[test]
     fn release_frees_the_object() {
         let mut s = FoldState::default();
-        s.apply(A, Timestamp(1), acquire(LeaseStrength::Strong, 1000), None);
+        s.apply(
+            A,
+            Timestamp(1),
+            acquire(LeaseStrength::Strong, 1000),
+            None,
+            None,
+        );
         assert_eq!(
-            s.apply(A, Timestamp(2), Effect::Release { object: OBJ }, None),
+            s.apply(A, Timestamp(2), Effect::Release { object: OBJ }, None, None),
             Mark::Effective
         );
         assert_eq!(
-            s.apply(B, Timestamp(3), Effect::Edit { object: OBJ }, None),
+            s.apply(B, Timestamp(3), Effect::Edit { object: OBJ }, None, None),
             Mark::Effective
         );
         assert_eq!(s.lease(OBJ), None);
@@ -395,30 +450,39 @@ mod tests {
         let undo = Effect::Undo { target: id };
         let redo = Effect::Redo { target: id };
         assert_eq!(
-            s.apply(A, Timestamp(1), redo, Some(info)),
+            s.apply(A, Timestamp(1), redo, Some(info), None),
             Mark::Rejected(RejectReason::NotUndone)
         );
         assert_eq!(
-            s.apply(B, Timestamp(1), undo, Some(info)),
+            s.apply(B, Timestamp(1), undo, Some(info), None),
             Mark::Rejected(RejectReason::NotOwnTarget)
         );
         assert_eq!(
-            s.apply(A, Timestamp(1), undo, None),
+            s.apply(A, Timestamp(1), undo, None, None),
             Mark::Rejected(RejectReason::UnknownTarget)
         );
-        assert_eq!(s.apply(A, Timestamp(1), undo, Some(info)), Mark::Effective);
+        assert_eq!(
+            s.apply(A, Timestamp(1), undo, Some(info), None),
+            Mark::Effective
+        );
         assert!(s.is_undone(&id));
         assert_eq!(
-            s.apply(A, Timestamp(2), undo, Some(info)),
+            s.apply(A, Timestamp(2), undo, Some(info), None),
             Mark::Rejected(RejectReason::AlreadyUndone)
         );
-        s.apply(B, Timestamp(3), acquire(LeaseStrength::Weak, 100), None);
+        s.apply(
+            B,
+            Timestamp(3),
+            acquire(LeaseStrength::Weak, 100),
+            None,
+            None,
+        );
         assert_eq!(
-            s.apply(A, Timestamp(4), redo, Some(info)),
+            s.apply(A, Timestamp(4), redo, Some(info), None),
             Mark::Rejected(RejectReason::LeaseHeld { holder: B })
         );
         assert_eq!(
-            s.apply(A, Timestamp(200), redo, Some(info)),
+            s.apply(A, Timestamp(200), redo, Some(info), None),
             Mark::Effective
         );
         assert!(!s.is_undone(&id));
@@ -427,7 +491,7 @@ mod tests {
             ..info
         };
         assert_eq!(
-            s.apply(A, Timestamp(201), undo, Some(rejected)),
+            s.apply(A, Timestamp(201), undo, Some(rejected), None),
             Mark::Rejected(RejectReason::TargetNotEffective)
         );
     }

@@ -4,7 +4,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use crate::causal::{Frontier, VersionVector};
+use crate::causal::{Frontier, Reach, VersionVector};
 use crate::identity::{Keypair, PeerId};
 use crate::lease::{FoldState, Lease, Mark, RejectReason, TargetInfo};
 use crate::op::{BuildError, MAX_DEPS, Op, OpFields, OpId, VerifiedOp};
@@ -13,9 +13,11 @@ use crate::pending::{DepKey, Evicted, Origin, Pending, PendingLimits};
 use crate::time::{HybridClock, MAX_CLOCK_SKEW_MICROS, Timestamp};
 
 mod base;
+mod seen;
 
 pub use base::CutError;
 pub(crate) use base::{Base, BaseAuthor, BaseKind, BaseOp};
+pub use seen::MAX_UNSEEN_LEASE_OPS;
 
 /// The fold state is checkpointed every this many positions of the linear order, so a late
 /// op re-evaluates from the nearest checkpoint instead of from the start.
@@ -171,6 +173,14 @@ pub struct Refold {
     pub object_keys: BTreeMap<ObjectId, OrderKey>,
 }
 
+/// What a refold carries to judge ops against the leases they saw, taken out of the log for
+/// its duration.
+struct LeaseCx {
+    lease_ops: BTreeMap<ObjectId, Vec<seen::LeaseOp>>,
+    reach: Reach,
+    alt: seen::AltFolds,
+}
+
 /// The ops one insertion delivered, for membership tests (usually one op).
 enum Inserted<'a> {
     Few(&'a [OpId]),
@@ -232,6 +242,17 @@ pub struct Log<P> {
     by_author: BTreeMap<PeerId, Vec<OpId>>,
     /// Each object's held edits (ops whose effect is [`Effect::Edit`]) in linear order.
     by_object: BTreeMap<ObjectId, Vec<OrderKey>>,
+    /// Each object's held lease ops (acquires and releases) in linear order, with what the
+    /// fold learnt of each: a lease binds only ops that saw it.
+    lease_ops: BTreeMap<ObjectId, Vec<seen::LeaseOp>>,
+    /// Each object's deletes (held, and those inside the base) in linear order.
+    deletes: BTreeMap<ObjectId, Vec<(OrderKey, OpId)>>,
+    /// For each held delete, the held edits of its object in its causal past.
+    delete_hides: BTreeMap<OpId, Vec<OpId>>,
+    /// Per object, the edits hidden by an effective delete that is not undone and saw them.
+    hidden: BTreeMap<ObjectId, BTreeSet<OpId>>,
+    /// Memo of causal reachability (a cache: it changes no verdict).
+    reach: Reach,
     /// What a log joined from a snapshot knows of the ops before the cut.
     base: Option<Box<Base<P>>>,
     frontier: Frontier,
@@ -265,6 +286,11 @@ impl<P: Payload> Log<P> {
             n_folded: 0,
             by_author: BTreeMap::new(),
             by_object: BTreeMap::new(),
+            lease_ops: BTreeMap::new(),
+            deletes: BTreeMap::new(),
+            delete_hides: BTreeMap::new(),
+            hidden: BTreeMap::new(),
+            reach: Reach::default(),
             base: None,
             frontier: Frontier::default(),
             vv: VersionVector::new(),
@@ -581,15 +607,35 @@ impl<P: Payload> Log<P> {
         self.order.insert(pos, (key, id));
         self.marks.insert(pos, Mark::Effective);
         self.by_author.entry(author).or_default().push(id);
-        if let Effect::Edit { object } = op.payload().effect() {
-            let keys = self.by_object.entry(object).or_default();
-            if keys.last().is_none_or(|k| *k < key) {
-                keys.push(key);
-            } else {
+        match op.payload().effect() {
+            Effect::Edit { object } => {
+                let keys = self.by_object.entry(object).or_default();
                 let at = keys.partition_point(|k| *k < key);
                 keys.insert(at, key);
+                if op.payload().is_delete() {
+                    let deletes = self.deletes.entry(object).or_default();
+                    let at = deletes.partition_point(|(k, _)| *k < key);
+                    deletes.insert(at, (key, op.id()));
+                }
             }
+            Effect::Acquire { object, .. } | Effect::Release { object } => {
+                // Placeholders: the refold that follows fills them in.
+                let list = self.lease_ops.entry(object).or_default();
+                let at = list.partition_point(|l| l.key < key);
+                let placeholder = seen::LeaseOp {
+                    key,
+                    id: op.id(),
+                    before: None,
+                    unseen: None,
+                };
+                list.insert(at, placeholder);
+            }
+            _ => {}
         }
+        let delete_of = match op.payload().effect() {
+            Effect::Edit { object } if op.payload().is_delete() => Some(object),
+            _ => None,
+        };
         self.vv.raise(author, op.seq());
         self.frontier.deliver(id, op.deps());
         self.max_lamport = self.max_lamport.max(op.lamport());
@@ -597,7 +643,35 @@ impl<P: Payload> Log<P> {
         self.ops.insert(id, op);
         self.n_bytes += n_bytes;
         self.author_bytes.insert(author, author_bytes);
+        if let Some(object) = delete_of {
+            self.note_delete(object, id, key);
+        }
         Ok(pos)
+    }
+
+    /// The held DAG, for reachability.
+    fn dag(&self) -> seen::Dag<'_, P> {
+        seen::Dag {
+            ops: &self.ops,
+            by_author: &self.by_author,
+            base: self.base.as_deref(),
+        }
+    }
+
+    /// Records which held edits of `object` the delete `id` just delivered saw. Every edit in
+    /// its causal past is delivered before it, so this never changes later.
+    fn note_delete(&mut self, object: ObjectId, id: OpId, key: OrderKey) {
+        let keys = self.by_object.get(&object).map_or(&[][..], Vec::as_slice);
+        let before = &keys[..keys.partition_point(|k| *k < key)];
+        let mut reach = std::mem::take(&mut self.reach);
+        let dag = self.dag();
+        let hides: Vec<OpId> = before
+            .iter()
+            .filter_map(|k| self.position_of_key(k).map(|p| self.order[p].1))
+            .filter(|e| dag.sees(&mut reach, &id, e))
+            .collect();
+        self.reach = reach;
+        self.delete_hides.insert(id, hides);
     }
 
     /// Re-evaluates marks from `from` to the end, starting at the nearest checkpoint (or at
@@ -616,6 +690,11 @@ impl<P: Payload> Log<P> {
             from,
             ..Refold::default()
         };
+        let mut cx = LeaseCx {
+            lease_ops: std::mem::take(&mut self.lease_ops),
+            reach: std::mem::take(&mut self.reach),
+            alt: seen::AltFolds::new(),
+        };
         // Marks at or after `from` were computed before the insertion (or are placeholders):
         // compare against the old verdicts to find the objects that changed.
         for pos in start..self.order.len() {
@@ -623,13 +702,14 @@ impl<P: Payload> Log<P> {
             {
                 self.checkpoints.push(state.clone());
             }
-            let id = self.order[pos].1;
+            let (key, id) = self.order[pos];
             let Some(op) = self.ops.get(&id) else {
                 continue;
             };
             let effect = op.payload().effect();
             let target = self.target_info(effect, pos);
-            let mark = state.apply(op.author(), op.timestamp(), effect, target);
+            let seen = self.lease_context(&mut cx, &state, (key, id), target);
+            let mark = state.apply(op.author(), op.timestamp(), effect, target, seen);
             if pos >= from {
                 let changed = self.marks[pos] != mark || inserted.contains(&id);
                 if changed {
@@ -638,8 +718,11 @@ impl<P: Payload> Log<P> {
                 self.marks[pos] = mark;
             }
         }
+        self.lease_ops = cx.lease_ops;
+        self.reach = cx.reach;
         self.state = state;
         self.n_folded = self.order.len();
+        self.update_hidden(&mut refold);
         // An undo or redo changes its target's activity, which may lie before `from`.
         if let Some(first) = refold.objects.values().min() {
             refold.from = refold.from.min(*first);
@@ -670,6 +753,126 @@ impl<P: Payload> Log<P> {
         let key = self.order[at].0;
         let k = refold.object_keys.entry(object).or_insert(key);
         *k = (*k).min(key);
+    }
+
+    /// The lease an op's causal past gives its object, when it missed some of the object's
+    /// earlier lease ops (`None` when it saw them all: the fold's state is then its past's).
+    /// Records, for a lease op, the prefix's lease before it and the lease ops it missed.
+    fn lease_context(
+        &self,
+        cx: &mut LeaseCx,
+        state: &FoldState,
+        (key, id): (OrderKey, OpId),
+        target: Option<TargetInfo>,
+    ) -> Option<Option<Lease>> {
+        let effect = self.ops.get(&id)?.payload().effect();
+        let object = match effect {
+            Effect::Edit { object }
+            | Effect::Acquire { object, .. }
+            | Effect::Release { object } => object,
+            Effect::Undo { .. } | Effect::Redo { .. } => match target?.effect {
+                Effect::Edit { object } => object,
+                _ => return None,
+            },
+            Effect::Independent => return None,
+        };
+        let list = cx.lease_ops.get_mut(&object)?;
+        let n = list.partition_point(|l| l.key < key);
+        let dag = self.dag();
+        let unseen = seen::unseen_before(&dag, &mut cx.reach, list, n, &id);
+        let lease = (!unseen.is_empty())
+            .then(|| seen::lease_seen(&dag, list, n, &unseen, &mut cx.alt, object));
+        if matches!(effect, Effect::Acquire { .. } | Effect::Release { .. }) {
+            let me = &mut list[n];
+            assert!(me.id == id, "a lease op is indexed under its object");
+            me.before = state.lease(object);
+            me.unseen = (unseen.len() <= MAX_UNSEEN_LEASE_OPS).then_some(unseen);
+        }
+        lease
+    }
+
+    /// Recomputes the hidden edits of every object `refold` names, and adds to it the objects
+    /// whose hidden edits changed, from the first that did.
+    fn update_hidden(&mut self, refold: &mut Refold) {
+        let objects: BTreeSet<ObjectId> = refold
+            .objects
+            .keys()
+            .chain(&refold.base_objects)
+            .copied()
+            .filter(|o| self.deletes.contains_key(o) || self.hidden.contains_key(o))
+            .collect();
+        for object in objects {
+            let now = self.hidden_of(object);
+            let old = self.hidden.remove(&object).unwrap_or_default();
+            for changed in now.symmetric_difference(&old) {
+                match self.position(changed) {
+                    Some(pos) => {
+                        let e = refold.objects.entry(object).or_insert(pos);
+                        *e = (*e).min(pos);
+                        let key = self.order[pos].0;
+                        let k = refold.object_keys.entry(object).or_insert(key);
+                        *k = (*k).min(key);
+                    }
+                    None => {
+                        refold.base_objects.insert(object);
+                    }
+                }
+            }
+            if !now.is_empty() {
+                self.hidden.insert(object, now);
+            }
+        }
+    }
+
+    /// The edits of `object` that an effective delete, not undone, saw. Inside a joined log's
+    /// base no deps are kept: a delete there or after the cut is taken to have seen every base
+    /// edit sorted before it (a documented non-guarantee).
+    fn hidden_of(&self, object: ObjectId) -> BTreeSet<OpId> {
+        let mut out = BTreeSet::new();
+        let base_edits = self
+            .base
+            .as_ref()
+            .and_then(|b| b.edits_by_object.get(&object))
+            .map_or(&[][..], Vec::as_slice);
+        for (key, d) in self.deletes.get(&object).into_iter().flatten() {
+            if !self.is_effective(d) || self.state.is_undone(d) {
+                continue;
+            }
+            if let Some(hides) = self.delete_hides.get(d) {
+                out.extend(hides.iter().copied());
+            }
+            out.extend(
+                base_edits
+                    .iter()
+                    .filter(|(k, e)| k < key && e != d)
+                    .map(|(_, e)| *e),
+            );
+        }
+        out
+    }
+
+    /// True if `id` is held and effective, or an effective edit inside the base.
+    fn is_effective(&self, id: &OpId) -> bool {
+        match self.mark(id) {
+            Some(mark) => mark == Mark::Effective,
+            None => self.base.as_ref().is_some_and(|b| b.edits.contains_key(id)),
+        }
+    }
+
+    /// True if `object` has a delete (held, or inside the base), effective or not.
+    pub fn has_deletes(&self, object: ObjectId) -> bool {
+        self.deletes.contains_key(&object)
+    }
+
+    /// True if an effective delete that is not undone saw edit `id` (see [`Payload::is_delete`]).
+    pub fn is_hidden(&self, id: &OpId) -> bool {
+        if self.hidden.is_empty() {
+            return false;
+        }
+        let Some(Effect::Edit { object }) = self.get(id).map(|op| op.payload().effect()) else {
+            return false;
+        };
+        self.hidden.get(&object).is_some_and(|h| h.contains(id))
     }
 
     fn position(&self, id: &OpId) -> Option<usize> {
@@ -774,7 +977,8 @@ impl<P: Payload> Log<P> {
             .zip(&self.marks)
             .filter_map(|((_, id), mark)| {
                 let op = self.ops.get(id)?;
-                let active = *mark == Mark::Effective && !self.state.is_undone(id);
+                let active =
+                    *mark == Mark::Effective && !self.state.is_undone(id) && !self.is_hidden(id);
                 Some(Entry {
                     op,
                     mark: *mark,
@@ -797,7 +1001,7 @@ impl<P: Payload> Log<P> {
         Some(Entry {
             op,
             mark,
-            active: mark == Mark::Effective && !self.state.is_undone(&id),
+            active: mark == Mark::Effective && !self.state.is_undone(&id) && !self.is_hidden(&id),
         })
     }
 
@@ -831,14 +1035,10 @@ impl<P: Payload> Log<P> {
         self.position(id).map(|p| self.marks[p])
     }
 
-    /// True if the op is effective and not undone (inside the base: an effective edit not
-    /// undone).
+    /// True if the op is effective, not undone and not hidden by a delete that saw it (inside
+    /// the base: an effective edit not undone and not hidden).
     pub fn is_active(&self, id: &OpId) -> bool {
-        let effective = match self.mark(id) {
-            Some(mark) => mark == Mark::Effective,
-            None => self.base.as_ref().is_some_and(|b| b.edits.contains_key(id)),
-        };
-        effective && !self.state.is_undone(id)
+        self.is_effective(id) && !self.state.is_undone(id) && !self.is_hidden(id)
     }
 
     /// The author's rejected ops in linear order, with reasons, so their work can be re-applied.

@@ -135,16 +135,20 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
     pub(crate) fn fold_prefix(&mut self, log: &Log<P>, n: usize, state: &FoldState) {
         if let Some(base) = log.base() {
             for (object, edits) in &base.edits_by_object {
-                let toggled = edits
-                    .iter()
-                    .any(|(_, id)| base.state.is_undone(id) != state.is_undone(id));
+                // Deletes hide edits without reaching the scene: an object with any is folded
+                // again from its active edits.
+                let toggled = log.has_deletes(*object)
+                    || edits
+                        .iter()
+                        .any(|(_, id)| base.state.is_undone(id) != state.is_undone(id));
                 if !toggled {
                     continue;
                 }
                 self.scene.reset_object(*object);
                 self.stats.n_object_refolds += 1;
                 for (key, id) in edits {
-                    if let Some(op) = base.edits.get(id).filter(|_| !state.is_undone(id)) {
+                    let active = !state.is_undone(id) && !log.is_hidden(id);
+                    if let Some(op) = base.edits.get(id).filter(|_| active) {
                         self.scene.apply(FoldEntry { key: *key, op });
                         self.stats.n_applied += 1;
                     }
@@ -152,7 +156,8 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
             }
         }
         for entry in log.entries().take(n) {
-            if entry.mark != Mark::Effective || state.is_undone(&entry.op.id()) {
+            let id = entry.op.id();
+            if entry.mark != Mark::Effective || state.is_undone(&id) || log.is_hidden(&id) {
                 continue;
             }
             let key = OrderKey::of(entry.op);

@@ -75,6 +75,14 @@ pub trait Payload: Clone + fmt::Debug + PartialEq + Eq {
 
     /// What the core must know about this payload.
     fn effect(&self) -> Effect;
+
+    /// True if this op deletes the object of its [`Effect::Edit`]. A delete removes only what
+    /// it saw: while it is effective and not undone, the edits of its object in its causal
+    /// past are inactive; edits it did not see (concurrent ones, or later ones) stay active.
+    /// The scene does not apply a delete itself: it acts only through which edits are active.
+    fn is_delete(&self) -> bool {
+        false
+    }
 }
 
 /// A small payload for tests, examples and the simulator.
@@ -115,6 +123,11 @@ pub mod test_payload {
         Undo(OpId),
         /// Redoes an undone edit.
         Redo(OpId),
+        /// Deletes an object: hides the edits of it that it saw (an edit needing the lease).
+        Delete {
+            /// The object.
+            object: u64,
+        },
     }
 
     impl Payload for TestPayload {
@@ -150,6 +163,10 @@ pub mod test_payload {
                 Self::Redo(id) => {
                     out.push(5);
                     out.extend_from_slice(&id.0);
+                }
+                Self::Delete { object } => {
+                    out.push(6);
+                    put_varint(out, *object);
                 }
             }
         }
@@ -187,6 +204,9 @@ pub mod test_payload {
                 },
                 4 => Self::Undo(OpId(r.array()?)),
                 5 => Self::Redo(OpId(r.array()?)),
+                6 => Self::Delete {
+                    object: r.varint()?,
+                },
                 _ => {
                     return Err(DecodeError::Invalid {
                         offset: tag_offset,
@@ -201,7 +221,7 @@ pub mod test_payload {
         fn effect(&self) -> Effect {
             match self {
                 Self::Chat(_) => Effect::Independent,
-                Self::Set { object, .. } => Effect::Edit {
+                Self::Set { object, .. } | Self::Delete { object } => Effect::Edit {
                     object: ObjectId(*object),
                 },
                 Self::Acquire {
@@ -223,6 +243,10 @@ pub mod test_payload {
                 Self::Undo(target) => Effect::Undo { target: *target },
                 Self::Redo(target) => Effect::Redo { target: *target },
             }
+        }
+
+        fn is_delete(&self) -> bool {
+            matches!(self, Self::Delete { .. })
         }
     }
 

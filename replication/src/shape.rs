@@ -7,6 +7,12 @@
 //! validated when decoded (formulas compiled, numbers checked), so an op that reaches the fold
 //! describes a valid change; a change to an object that does not exist (deleted, or created by
 //! an op that lost a race) changes nothing and stays in history.
+//!
+//! A delete removes only what it saw ([`Payload::is_delete`]): the edits of its object in its
+//! causal past, its creation included, become inactive. An edit made concurrently stays
+//! active, but without its creation the object is still gone (it changes nothing); a delete
+//! that never saw the creation (one backdated by a member, say) removes nothing, and a
+//! creation after a delete it saw makes the object anew.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -197,6 +203,10 @@ impl Payload for ShapePayload {
             ShapePayload::Chat(_) => Effect::Independent,
         }
     }
+
+    fn is_delete(&self) -> bool {
+        matches!(self, ShapePayload::Delete { .. })
+    }
 }
 
 /// A chat line in the scene.
@@ -291,10 +301,9 @@ impl Materialize<ShapePayload> for ShapeScene {
                     let _ = self.scene.create(object, (**data).clone(), group);
                 }
             }
-            ShapePayload::Delete { object } => {
-                self.scene.remove_object(scene::ObjectId(*object));
-                self.edit_ops.remove(object);
-            }
+            // A delete acts through the log: it hides the edits of its object that it saw
+            // (their creation included), and the object is the fold of those left.
+            ShapePayload::Delete { .. } => {}
             ShapePayload::Set { object, field } => {
                 if let Some(o) = self.scene.object_mut(scene::ObjectId(*object)) {
                     let _ = o.set(field.clone());

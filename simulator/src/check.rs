@@ -237,7 +237,9 @@ impl Culprit {
 }
 
 /// No honest op that was effective at its author's peer is, at the end on any honest peer,
-/// rejected, inactive or deleted by an op that did not have it in its causal past. A verdict
+/// rejected, inactive or deleted by an op that did not have it in its causal past: it may be
+/// inactive only through its author's undo or a delete of its object, either having it in its
+/// causal past. A verdict
 /// depends only on the ops before it in the linear order, and those never have it in their
 /// causal past (Lamport times grow along it), so an effective op must stay effective, may be
 /// inactive only through an undo that has it in its causal past (its author's), and its object
@@ -255,13 +257,14 @@ fn check_erasure(sim: &Simulation, failures: &mut Vec<String>) {
             continue;
         }
         let log = h.peer.log();
-        // Active deletes per object, with their positions in the linear order.
+        // Effective deletes not undone per object, with their positions in the linear order.
         let mut deletes: BTreeMap<u64, Vec<(usize, &Op<ShapePayload>)>> = BTreeMap::new();
         let mut position = BTreeMap::new();
         for (pos, e) in log.entries().enumerate() {
             position.insert(e.op.id(), pos);
             if let ShapePayload::Delete { object } = e.op.payload()
-                && e.active
+                && e.mark == Mark::Effective
+                && !log.fold_state().is_undone(&e.op.id())
             {
                 deletes.entry(*object).or_default().push((pos, e.op));
             }
@@ -281,32 +284,33 @@ fn check_erasure(sim: &Simulation, failures: &mut Vec<String>) {
                     Culprit::HostileLease
                 }),
                 Mark::Rejected(_) => Some(Culprit::Other),
-                Mark::Effective if !log.is_active(id) && !undone_by_successor(log, op) => {
+                Mark::Effective
+                    if !log.is_active(id)
+                        && !undone_by_successor(log, op)
+                        && !deleted_by_successor(log, op) =>
+                {
                     Some(Culprit::Other)
                 }
                 Mark::Effective => None,
             };
-            if let Some(culprit) = verdict {
-                found.push((culprit, format!("op {id} by {}: {mark:?}", op.author())));
-                continue;
-            }
-            let (ShapePayload::Create { object, .. }, Some(&at)) = (op.payload(), position.get(id))
-            else {
-                continue;
-            };
+            // An inactive edit with a delete of its object after it that never saw it: blame
+            // that delete.
+            let object = edited_object(op.payload());
+            let at = position.get(id).copied().unwrap_or(0);
             let erasing = deletes
-                .get(object)
+                .get(&object.unwrap_or(u64::MAX))
                 .into_iter()
                 .flatten()
                 .find(|(pos, d)| *pos > at && !in_causal_past(log, d, op));
-            if let Some((_, d)) = erasing {
-                let culprit = if honest(&d.author()) {
-                    Culprit::HonestDelete
-                } else {
-                    Culprit::HostileDelete
-                };
-                let what = format!("create {id} by {}: deleted by {}", op.author(), d.id());
-                found.push((culprit, what));
+            let verdict = match (verdict, erasing) {
+                (Some(Culprit::Other), Some((_, d))) if honest(&d.author()) => {
+                    Some(Culprit::HonestDelete)
+                }
+                (Some(Culprit::Other), Some(_)) => Some(Culprit::HostileDelete),
+                (verdict, _) => verdict,
+            };
+            if let Some(culprit) = verdict {
+                found.push((culprit, format!("op {id} by {}: {mark:?}", op.author())));
             }
         }
         for hostile in [true, false] {
@@ -333,6 +337,32 @@ fn check_erasure(sim: &Simulation, failures: &mut Vec<String>) {
             ));
         }
     }
+}
+
+/// The object an edit changes (`None` for other ops).
+fn edited_object(payload: &ShapePayload) -> Option<u64> {
+    match payload {
+        ShapePayload::Create { object, .. }
+        | ShapePayload::Delete { object }
+        | ShapePayload::Set { object, .. }
+        | ShapePayload::Edit { object, .. }
+        | ShapePayload::Move { object, .. } => Some(*object),
+        _ => None,
+    }
+}
+
+/// True if an effective delete of `target`'s object, not undone, has it in its causal past
+/// (a delete removes what it saw, and only that).
+fn deleted_by_successor(log: &Log<ShapePayload>, target: &Op<ShapePayload>) -> bool {
+    let Some(object) = edited_object(target.payload()) else {
+        return false;
+    };
+    log.entries().any(|e| {
+        e.mark == Mark::Effective
+            && matches!(e.op.payload(), ShapePayload::Delete { object: o } if *o == object)
+            && !log.fold_state().is_undone(&e.op.id())
+            && in_causal_past(log, e.op, target)
+    })
 }
 
 /// True if an effective undo of `target` in `log` has it in its causal past.

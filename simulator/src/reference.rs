@@ -6,6 +6,9 @@
 //! [`ShapePayload`] variants itself and walks the final order once from the start with plain
 //! maps, as the rules are written in `ARCHITECTURE.md`:
 //!
+//! - every op is judged on its own causal past alone (what its author had): the lease of its
+//!   object is the fold of these rules over the lease ops of that object in its causal past,
+//!   in linear order, from scratch (a lease binds only ops that saw it);
 //! - an edit of an object is effective unless another peer holds a lease on it that has not
 //!   expired at the edit's timestamp;
 //! - a weak acquire takes over another peer's live weak lease but not a strong one; a strong
@@ -14,7 +17,8 @@
 //! - a release is effective only by the live holder;
 //! - an undo (redo) is effective only on an earlier, own, effective edit that is not (is)
 //!   undone, and only if the edit's object is free for the author; an edit is active when it
-//!   is effective and not undone at the end.
+//!   is effective and not undone at the end, and no effective delete of its object that is not
+//!   undone has it in its causal past (a delete removes only what it saw).
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -192,9 +196,35 @@ pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
     let mut out = LeaseCheck::default();
     let mut observed = Vec::new();
     let mut flipped = !flip_first_rejected;
-    for entry in log.entries() {
+    let entries: Vec<_> = log.entries().collect();
+    let pasts = causal_pasts(log, &entries);
+    // Per object, the positions of its lease ops (acquires and releases).
+    let mut lease_ops: BTreeMap<u64, Vec<usize>> = BTreeMap::new();
+    for (pos, entry) in entries.iter().enumerate() {
         let op = entry.op;
         let k = kind(op.payload());
+        let object = match k {
+            Kind::Edit(o) | Kind::Acquire { object: o, .. } | Kind::Release(o) => Some(o),
+            Kind::Undo(t) | Kind::Redo(t) => rules.earlier.get(&t).and_then(|s| s.edit_of),
+            Kind::Independent => None,
+        };
+        if let Some(object) = object {
+            // The lease its causal past gives the object, folded from scratch.
+            let mut seen = Rules::default();
+            for &p in lease_ops.get(&object).into_iter().flatten() {
+                if pasts[pos].contains(p) {
+                    let l = entries[p].op;
+                    let _ = seen.verdict(l.author(), l.timestamp().0, &kind(l.payload()));
+                }
+            }
+            match seen.leases.get(&object) {
+                Some(lease) => rules.leases.insert(object, *lease),
+                None => rules.leases.remove(&object),
+            };
+            if matches!(k, Kind::Acquire { .. } | Kind::Release(_)) {
+                lease_ops.entry(object).or_default().push(pos);
+            }
+        }
         let expected = match rules.verdict(op.author(), op.timestamp().0, &k) {
             Ok(()) => Mark::Effective,
             Err(reason) => Mark::Rejected(reason),
@@ -225,13 +255,77 @@ pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
         }
         observed.push((op.id(), expected, entry.active));
     }
+    // Deletes that stand hide the edits of their object they saw.
+    let mut hidden = BTreeSet::new();
+    for (pos, entry) in entries.iter().enumerate() {
+        let ShapePayload::Delete { object } = entry.op.payload() else {
+            continue;
+        };
+        let stands = observed[pos].1 == Mark::Effective && !rules.undone.contains(&observed[pos].0);
+        if !stands {
+            continue;
+        }
+        for (p, e) in entries[..pos].iter().enumerate() {
+            let same =
+                matches!(kind(e.op.payload()), Kind::Edit(o) if o == *object & !GROUP_LEASE_BIT);
+            if same && pasts[pos].contains(p) {
+                hidden.insert(e.op.id());
+            }
+        }
+    }
     for (id, expected, active) in observed {
-        let should = expected == Mark::Effective && !rules.undone.contains(&id);
+        let should =
+            expected == Mark::Effective && !rules.undone.contains(&id) && !hidden.contains(&id);
         if active != should {
             out.note(format!("op {id}: active {active}, the rules say {should}"));
         }
     }
     out
+}
+
+/// A set of positions of the linear order, as bits.
+struct Positions(Vec<u64>);
+
+impl Positions {
+    fn contains(&self, pos: usize) -> bool {
+        self.0
+            .get(pos / 64)
+            .is_some_and(|w| w & (1 << (pos % 64)) != 0)
+    }
+}
+
+/// Each entry's causal past, as positions of the linear order (a topological order, so every
+/// parent comes first): its deps and its author's previous op, and theirs.
+fn causal_pasts(
+    log: &Log<ShapePayload>,
+    entries: &[replication::log::Entry<'_, ShapePayload>],
+) -> Vec<Positions> {
+    let position: BTreeMap<OpId, usize> = entries
+        .iter()
+        .enumerate()
+        .map(|(p, e)| (e.op.id(), p))
+        .collect();
+    let words = entries.len().div_ceil(64);
+    let mut pasts: Vec<Positions> = Vec::with_capacity(entries.len());
+    for e in entries {
+        let mut past = vec![0u64; words];
+        let prev =
+            e.op.seq()
+                .checked_sub(1)
+                .and_then(|s| log.by_seq(&e.op.author(), s))
+                .map(|op| op.id());
+        for parent in e.op.deps().iter().copied().chain(prev) {
+            let Some(&p) = position.get(&parent) else {
+                continue;
+            };
+            for (w, theirs) in past.iter_mut().zip(&pasts[p].0) {
+                *w |= theirs;
+            }
+            past[p / 64] |= 1 << (p % 64);
+        }
+        pasts.push(Positions(past));
+    }
+    pasts
 }
 
 impl LeaseCheck {

@@ -167,7 +167,20 @@ impl<P: Payload> Log<P> {
         // The clock observes the base's latest timestamp when this log authors (`Log::author`),
         // bounded by the wall clock then.
         let clock = crate::time::HybridClock::default();
-        Self {
+        // The base's deletes, which hide the base edits of their object sorted before them.
+        let mut deletes: BTreeMap<ObjectId, Vec<(OrderKey, OpId)>> = BTreeMap::new();
+        for (object, edits) in &base.edits_by_object {
+            for (key, id) in edits {
+                if base
+                    .edits
+                    .get(id)
+                    .is_some_and(|op| op.payload().is_delete())
+                {
+                    deletes.entry(*object).or_default().push((*key, *id));
+                }
+            }
+        }
+        let mut log = Self {
             ops: BTreeMap::new(),
             order: Vec::new(),
             marks: Vec::new(),
@@ -176,6 +189,11 @@ impl<P: Payload> Log<P> {
             n_folded: 0,
             by_author: BTreeMap::new(),
             by_object: BTreeMap::new(),
+            lease_ops: BTreeMap::new(),
+            deletes,
+            delete_hides: BTreeMap::new(),
+            hidden: BTreeMap::new(),
+            reach: crate::causal::Reach::default(),
             frontier,
             vv,
             // New local ops must land after the cut.
@@ -189,7 +207,15 @@ impl<P: Payload> Log<P> {
             n_bytes: 0,
             author_bytes: BTreeMap::new(),
             author_quota: super::MAX_AUTHOR_BYTES,
+        };
+        let objects: Vec<ObjectId> = log.deletes.keys().copied().collect();
+        for object in objects {
+            let hidden = log.hidden_of(object);
+            if !hidden.is_empty() {
+                log.hidden.insert(object, hidden);
+            }
         }
+        log
     }
 
     pub(crate) fn base(&self) -> Option<&Base<P>> {
@@ -263,13 +289,21 @@ impl<P: Payload> Log<P> {
         }
         let k = (n / CHECKPOINT_INTERVAL).min(self.checkpoints.len() - 1);
         let mut state = self.checkpoints[k].clone();
+        // A copy of what the fold learnt: judging again records the same things.
+        let mut cx = super::LeaseCx {
+            lease_ops: self.lease_ops.clone(),
+            reach: self.reach.clone(),
+            alt: super::seen::AltFolds::new(),
+        };
         for pos in k * CHECKPOINT_INTERVAL..n {
-            let Some(op) = self.ops.get(&self.order[pos].1) else {
+            let (key, id) = self.order[pos];
+            let Some(op) = self.ops.get(&id) else {
                 continue;
             };
             let effect = op.payload().effect();
             let target = self.target_info(effect, pos);
-            state.apply(op.author(), op.timestamp(), effect, target);
+            let seen = self.lease_context(&mut cx, &state, (key, id), target);
+            state.apply(op.author(), op.timestamp(), effect, target, seen);
         }
         state
     }

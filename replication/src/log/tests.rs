@@ -38,10 +38,20 @@ fn observe(log: &TLog) -> Vec<(OpId, Mark, bool)> {
 /// A random workload by `n_authors` replicas that author ops and merge each other at random,
 /// so ops are concurrent in many ways. Returns every op, each author's in seq order.
 pub(crate) fn workload(seed: u64, n_authors: u8, n_steps: usize) -> Vec<VerifiedOp<TestPayload>> {
+    workload_with_marks(seed, n_authors, n_steps).0
+}
+
+/// [`workload`], with each op's mark at its author's replica right after it was authored.
+pub(crate) fn workload_with_marks(
+    seed: u64,
+    n_authors: u8,
+    n_steps: usize,
+) -> (Vec<VerifiedOp<TestPayload>>, BTreeMap<OpId, Mark>) {
     let mut rng = ChaCha20Rng::seed_from_u64(seed);
     let keys: Vec<Keypair> = (0..n_authors).map(key).collect();
     let mut replicas: Vec<TLog> = (0..n_authors).map(|_| TLog::default()).collect();
     let mut all = Vec::new();
+    let mut marks = BTreeMap::new();
     for step in 0..n_steps {
         let now = Timestamp(step as u64 * 1000);
         let a = (rng.next_u32() % u32::from(n_authors)) as usize;
@@ -71,12 +81,14 @@ pub(crate) fn workload(seed: u64, n_authors: u8, n_steps: usize) -> Vec<Verified
             3 if !own_edits.is_empty() => TestPayload::Undo(pick(&mut rng)),
             4 if !own_edits.is_empty() => TestPayload::Redo(pick(&mut rng)),
             5 => TestPayload::Chat(format!("hi {step}")),
+            6 if rng.next_u32() % 3 == 0 => TestPayload::Delete { object },
             _ => set(object, &format!("v{step}")),
         };
         let (op, _) = replicas[a].author(&keys[a], now, payload).unwrap();
+        marks.insert(op.id(), replicas[a].mark(&op.id()).unwrap());
         all.push(op);
     }
-    all
+    (all, marks)
 }
 
 pub(crate) fn deliver_all(ops: &[VerifiedOp<TestPayload>]) -> TLog {
@@ -170,7 +182,7 @@ fn edits_need_the_lease_and_rejections_are_queryable() {
 }
 
 #[test]
-fn late_op_refolds_from_its_position_and_flips_marks() {
+fn a_late_acquire_does_not_bind_edits_that_never_saw_it() {
     let (a, b) = (key(0), key(1));
     // B works offline: acquires object 1 at lamport 1.
     let mut offline = TLog::default();
@@ -188,7 +200,7 @@ fn late_op_refolds_from_its_position_and_flips_marks() {
         );
     }
     assert!(a_ops.iter().all(|op| log.is_active(&op.id())));
-    // B's acquire arrives late. Lamport 1 and B's key: its place in the order decides.
+    // B's acquire arrives late and sorts before A's edits, which never saw it: they stand.
     let ins = log
         .insert(Timestamp(100), b_acquire.clone(), Origin(1))
         .unwrap();
@@ -199,15 +211,119 @@ fn late_op_refolds_from_its_position_and_flips_marks() {
         .unwrap();
     assert_eq!(refold.from, b_pos);
     assert_eq!(refold.objects.get(&ObjectId(1)), Some(&b_pos));
-    for op in &a_ops {
-        let pos = log.linear_ids().position(|id| id == op.id()).unwrap();
-        let expected_active = pos < b_pos;
-        assert_eq!(
-            log.is_active(&op.id()),
-            expected_active,
-            "op at {pos}, acquire at {b_pos}"
-        );
+    assert!(a_ops.iter().all(|op| log.is_active(&op.id())));
+    // A's next edit saw it, and is bound by it.
+    let (after, _) = log.author(&a, Timestamp(200), set(1, "after")).unwrap();
+    assert_eq!(
+        log.mark(&after.id()),
+        Some(Mark::Rejected(RejectReason::LeaseHeld {
+            holder: b.peer_id()
+        }))
+    );
+}
+
+#[test]
+fn a_backdated_strong_acquire_binds_only_the_ops_that_saw_it() {
+    let (a, c, mallory) = (key(0), key(2), key(9));
+    let hoard = TestPayload::Acquire {
+        object: 1,
+        strong: true,
+        ttl_micros: u64::MAX,
+    };
+    // A fresh key: Lamport 1, stamped 0, no deps, asking for the lease forever.
+    let backdated = signed(&mallory, 1, 1, 0, vec![], hoard);
+    let mut log = TLog::default();
+    let (honest, _) = log.author(&a, Timestamp(1_000), set(1, "mine")).unwrap();
+    let mut other = TLog::default();
+    other.merge(Timestamp(1_000), &log).unwrap();
+    let (concurrent, _) = other
+        .author(&c, Timestamp(2_000), set(1, "theirs"))
+        .unwrap();
+    log.insert(Timestamp(3_000), backdated.clone(), Origin(1))
+        .unwrap();
+    log.insert(Timestamp(3_000), concurrent.clone(), Origin(2))
+        .unwrap();
+    // Both honest edits sort after the hoard and are stamped within its hour; neither saw it.
+    assert!(log.is_active(&honest.id()));
+    assert!(log.is_active(&concurrent.id()));
+    // An edit that did see it is refused, as it would be everywhere.
+    let (saw, _) = log.author(&a, Timestamp(4_000), set(1, "late")).unwrap();
+    assert!(saw.deps().contains(&backdated.id()));
+    assert_eq!(
+        log.mark(&saw.id()),
+        Some(Mark::Rejected(RejectReason::LeaseHeld {
+            holder: mallory.peer_id()
+        }))
+    );
+    // The same verdicts in any delivery order.
+    let all = [honest, concurrent, backdated, saw];
+    for seed in 0..8 {
+        let shuffled_log = deliver_all_causally(&shuffled(&all, seed));
+        assert_eq!(observe(&shuffled_log), observe(&log), "order {seed}");
     }
+}
+
+#[test]
+fn a_delete_hides_only_the_edits_it_saw() {
+    let (a, b, mallory) = (key(0), key(1), key(9));
+    let mut log = TLog::default();
+    let (create, _) = log.author(&a, Timestamp(1_000), set(1, "made")).unwrap();
+    // A backdated delete by a fresh key, which never saw the object: it hides nothing.
+    let backdated = signed(&mallory, 1, 1, 0, vec![], TestPayload::Delete { object: 1 });
+    log.insert(Timestamp(2_000), backdated, Origin(1)).unwrap();
+    let (edit, _) = log.author(&a, Timestamp(3_000), set(1, "edited")).unwrap();
+    assert!(log.is_active(&create.id()) && log.is_active(&edit.id()));
+    // B deletes what it saw (both edits); A edits concurrently.
+    let mut b_log = TLog::default();
+    b_log.merge(Timestamp(3_000), &log).unwrap();
+    let (delete, _) = b_log
+        .author(&b, Timestamp(4_000), TestPayload::Delete { object: 1 })
+        .unwrap();
+    let (concurrent, _) = log.author(&a, Timestamp(4_000), set(1, "again")).unwrap();
+    log.insert(Timestamp(5_000), delete.clone(), Origin(2))
+        .unwrap();
+    assert!(log.is_hidden(&create.id()) && log.is_hidden(&edit.id()));
+    assert!(!log.is_active(&create.id()));
+    assert!(
+        log.is_active(&concurrent.id()),
+        "a concurrent edit is not erased"
+    );
+    // An undo of the delete brings back what it hid.
+    let (undo, _) = log
+        .author(&b, Timestamp(6_000), TestPayload::Undo(delete.id()))
+        .unwrap();
+    assert_eq!(log.mark(&undo.id()), Some(Mark::Effective));
+    assert!(log.is_active(&create.id()) && log.is_active(&edit.id()));
+}
+
+/// Inserts `ops` in the given order, parking those whose past is missing.
+fn deliver_all_causally(ops: &[VerifiedOp<TestPayload>]) -> TLog {
+    let mut log = TLog::default();
+    for op in ops {
+        log.insert(Timestamp(0), op.clone(), Origin(1)).unwrap();
+    }
+    assert_eq!(log.n_pending(), 0);
+    log
+}
+
+/// The causal past of `id` in `log`: reachable through deps and each author's previous op.
+pub(crate) fn causal_past(log: &TLog, id: &OpId) -> BTreeSet<OpId> {
+    let mut seen = BTreeSet::new();
+    let mut stack = vec![*id];
+    while let Some(id) = stack.pop() {
+        let Some(op) = log.get(&id) else { continue };
+        let prev = op
+            .seq()
+            .checked_sub(1)
+            .and_then(|s| log.by_seq(&op.author(), s))
+            .map(Op::id);
+        for p in op.deps().iter().copied().chain(prev) {
+            if seen.insert(p) {
+                stack.push(p);
+            }
+        }
+    }
+    seen
 }
 
 #[test]
@@ -290,6 +406,17 @@ proptest! {
         prop_assert_eq!(observe(&a), observe(&b));
         prop_assert_eq!(a.version_vector(), b.version_vector());
         prop_assert_eq!(a.heads().collect::<Vec<_>>(), b.heads().collect::<Vec<_>>());
+    }
+
+    /// A verdict depends only on the op's causal past, which its author had: every peer ends
+    /// with the mark the author saw, whatever arrives later and in whatever order.
+    #[test]
+    fn every_mark_is_the_one_its_author_saw(seed in any::<u64>(), perm in any::<u64>()) {
+        let (ops, at_author) = workload_with_marks(seed, 4, 60);
+        let log = deliver_all(&shuffled(&ops, perm));
+        for (id, mark) in &at_author {
+            prop_assert_eq!(log.mark(id), Some(*mark), "op {}", id);
+        }
     }
 
     #[test]

@@ -1,0 +1,189 @@
+//! What an op saw: causal reachability over the held DAG, the lease an op's own causal past
+//! gives its object, and the edits each delete saw.
+//!
+//! A lease binds only ops that have its acquire in their causal past, and a delete hides only
+//! the edits in its causal past. Both are decided from the log's content alone (deps and each
+//! author's chain of seqs), so every peer holding the same ops gets the same verdicts whatever
+//! the delivery order.
+
+use std::collections::BTreeMap;
+
+use super::{Base, OrderKey};
+use crate::causal::Reach;
+use crate::identity::PeerId;
+use crate::lease::{Lease, lease_step};
+use crate::op::{Op, OpId};
+use crate::payload::{ObjectId, Payload};
+
+/// Most lease ops of an object, sorted before a lease op but missing from its causal past, that
+/// the op remembers. An op that saw a lease op remembering its misses stops scanning there;
+/// past this many it scans on (the cost grows, the verdict does not change).
+pub const MAX_UNSEEN_LEASE_OPS: usize = 16;
+
+/// One lease op (acquire or release) of an object, and what the fold learnt of it.
+#[derive(Clone, Debug)]
+pub(crate) struct LeaseOp {
+    pub(crate) key: OrderKey,
+    pub(crate) id: OpId,
+    /// The object's lease in the fold of the whole prefix just before this op.
+    pub(crate) before: Option<Lease>,
+    /// The object's lease ops sorted before this one that are not in its causal past, sorted;
+    /// `None` when more than [`MAX_UNSEEN_LEASE_OPS`].
+    pub(crate) unseen: Option<Vec<(OrderKey, OpId)>>,
+}
+
+/// Alternative lease folds computed during one refold, keyed by object and the lease ops
+/// skipped: how far each got (an index into the object's lease ops) and the lease there.
+pub(crate) type AltFolds = BTreeMap<(ObjectId, Vec<OrderKey>), (usize, Option<Lease>)>;
+
+/// The held part of the op DAG, as reachability walks it.
+pub(crate) struct Dag<'a, P> {
+    pub(crate) ops: &'a BTreeMap<OpId, Op<P>>,
+    pub(crate) by_author: &'a BTreeMap<PeerId, Vec<OpId>>,
+    pub(crate) base: Option<&'a Base<P>>,
+}
+
+impl<P: Payload> Dag<'_, P> {
+    /// The author's previous held op (`None` for its first, or one inside the base).
+    fn prev(&self, op: &Op<P>) -> Option<&OpId> {
+        let base_seq = self.base.map_or(0, |b| b.seq(&op.author()));
+        let idx = op.seq().checked_sub(2 + base_seq)?;
+        self.by_author
+            .get(&op.author())?
+            .get(usize::try_from(idx).ok()?)
+    }
+
+    /// The answer for `id` without walking, if there is one.
+    fn quick(&self, memo: &Reach, id: &OpId, target: &Op<P>, target_id: &OpId) -> Option<bool> {
+        if id == target_id {
+            return Some(true);
+        }
+        // Ops inside a base have Lamport times at or below its cut, below every held op's.
+        let Some(op) = self.ops.get(id) else {
+            return Some(false);
+        };
+        // Lamport times grow along every dependency and every author's chain.
+        if op.lamport() <= target.lamport() {
+            return Some(false);
+        }
+        if op.author() == target.author() {
+            return Some(op.seq() >= target.seq());
+        }
+        memo.known(target_id, &op.author(), op.seq())
+    }
+
+    /// True if held op `target` is `from` or in its causal past (reachable through deps and
+    /// each author's previous op). Walks each op at most once per target over the memo's life.
+    pub(crate) fn sees(&self, memo: &mut Reach, from: &OpId, target_id: &OpId) -> bool {
+        let Some(target) = self.ops.get(target_id) else {
+            // A target inside the base: every held op is after the cut; treat it as seen
+            // (a joined log keeps no deps for its base: a documented non-guarantee).
+            return true;
+        };
+        if let Some(known) = self.quick(memo, from, target, target_id) {
+            return known;
+        }
+        // Depth-first, children before parents: an op's answer is the "or" of its parents'.
+        // A parent goes back on the stack under its unanswered parents and is answered when it
+        // comes up again (a memo that started afresh meanwhile only repeats some work).
+        let mut stack = vec![*from];
+        while let Some(id) = stack.pop() {
+            if let Some(known) = self.quick(memo, &id, target, target_id) {
+                if id == *from {
+                    return known;
+                }
+                continue;
+            }
+            let Some(op) = self.ops.get(&id) else {
+                continue;
+            };
+            let parents = || op.deps().iter().chain(self.prev(op));
+            let answers = parents().map(|p| self.quick(memo, p, target, target_id));
+            let mut unknown = Vec::new();
+            let mut seen = false;
+            for (p, answer) in parents().zip(answers) {
+                match answer {
+                    Some(true) => {
+                        seen = true;
+                        break;
+                    }
+                    Some(false) => {}
+                    None => unknown.push(*p),
+                }
+            }
+            if seen || unknown.is_empty() {
+                memo.record(*target_id, op.author(), op.seq(), seen);
+                if id == *from {
+                    return seen;
+                }
+                continue;
+            }
+            stack.push(id);
+            stack.extend(unknown);
+        }
+        // The walk starts from `from` and only answers it last.
+        false
+    }
+}
+
+/// The lease ops among `list[..n]` (an object's lease ops before `x` in the order) that are
+/// not in `x`'s causal past, sorted: empty when `x` saw them all.
+pub(crate) fn unseen_before<P: Payload>(
+    dag: &Dag<'_, P>,
+    memo: &mut Reach,
+    list: &[LeaseOp],
+    n: usize,
+    x: &OpId,
+) -> Vec<(OrderKey, OpId)> {
+    let mut unseen = Vec::new();
+    for l in list[..n].iter().rev() {
+        if !dag.sees(memo, x, &l.id) {
+            unseen.push((l.key, l.id));
+            continue;
+        }
+        // What `l` saw, `x` saw: only `l`'s own misses are left to check.
+        if let Some(misses) = &l.unseen {
+            unseen.extend(misses.iter().filter(|(_, id)| !dag.sees(memo, x, id)));
+            break;
+        }
+    }
+    unseen.sort_unstable();
+    unseen.dedup();
+    unseen
+}
+
+/// The object's lease as the causal past of an op gives it: the lease rules folded, in linear
+/// order, over `list[..n]` without the `unseen` lease ops. Starts from the whole prefix's lease
+/// before the first unseen op (everything before it was seen), and continues a fold kept in
+/// `alt` for the same object and unseen ops, so a run of ops that missed the same lease ops
+/// costs one pass over the object's lease ops.
+pub(crate) fn lease_seen<P: Payload>(
+    dag: &Dag<'_, P>,
+    list: &[LeaseOp],
+    n: usize,
+    unseen: &[(OrderKey, OpId)],
+    alt: &mut AltFolds,
+    object: ObjectId,
+) -> Option<Lease> {
+    assert!(
+        !unseen.is_empty(),
+        "an op that saw every lease op uses the fold's state"
+    );
+    let first = list.partition_point(|l| l.key < unseen[0].0);
+    let cache_key = (object, unseen.iter().map(|(k, _)| *k).collect::<Vec<_>>());
+    let (mut i, mut lease) = match alt.get(&cache_key) {
+        Some(&(i, lease)) if i <= n => (i, lease),
+        _ => (first, list[first].before),
+    };
+    while i < n {
+        let l = &list[i];
+        let skipped = unseen.binary_search_by(|(k, _)| k.cmp(&l.key)).is_ok();
+        if !skipped && let Some(op) = dag.ops.get(&l.id) {
+            let effect = op.payload().effect();
+            lease = lease_step(lease, op.author(), op.timestamp(), effect).unwrap_or(lease);
+        }
+        i += 1;
+    }
+    alt.insert(cache_key, (n, lease));
+    lease
+}
