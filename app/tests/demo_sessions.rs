@@ -73,6 +73,14 @@ fn status(engine: &Engine, what: &str) -> String {
     row.map(|h| h.status.clone()).unwrap_or_default()
 }
 
+/// Both peers show the latest stroke as rejected.
+fn both_rejected(a: &Engine, b: &Engine) {
+    for peer in [a, b] {
+        let latest = status(peer, "sculpted");
+        assert!(latest.starts_with("rejected"), "{latest}");
+    }
+}
+
 #[test]
 fn femur_one_peer_holds_the_bone_the_other_drills_through_a_takeover_and_exports_it() {
     let (dir_a, dir_b) = (scratch("femur-a"), scratch("femur-b"));
@@ -115,13 +123,7 @@ fn femur_one_peer_holds_the_bone_the_other_drills_through_a_takeover_and_exports
     stroke(&b, bone, drill, outside, inside);
     let n_ops = lock(b.view()).n_ops();
     wait_view(&a, "b's first drill", |v| v.n_ops() == n_ops);
-    for peer in [&a, &b] {
-        assert!(
-            status(peer, "sculpted").starts_with("rejected"),
-            "{}",
-            status(peer, "sculpted")
-        );
-    }
+    both_rejected(&a, &b);
     // B takes the bone over (a weak lease gives way) and drills: that one holds, and A's
     // next edit of the bone, a density painting, is refused in its turn.
     command(&b, bone, "lease");
@@ -138,13 +140,7 @@ fn femur_one_peer_holds_the_bone_the_other_drills_through_a_takeover_and_exports
     );
     let n_ops = lock(a.view()).n_ops();
     wait_view(&b, "a's painting", |v| v.n_ops() == n_ops);
-    for peer in [&a, &b] {
-        assert!(
-            status(peer, "sculpted").starts_with("rejected"),
-            "{}",
-            status(peer, "sculpted")
-        );
-    }
+    both_rejected(&a, &b);
     // B undoes its drill and does it again; both peers end with the same scene.
     command(&b, bone, "undo");
     command(&b, bone, "redo");

@@ -10,6 +10,7 @@ use std::collections::VecDeque;
 
 use glam::DVec3;
 use haptic::force::wave::{WaveCoupling, WavePacket, WavePort};
+use rand_core::{RngCore, SeedableRng};
 
 const DT: f64 = 0.001;
 const SECONDS: f64 = 10.0;
@@ -22,15 +23,17 @@ const COUPLING: WaveCoupling = WaveCoupling {
     damping: 2.0,
 };
 
-/// A deterministic generator for jitter and loss (xorshift64*), so runs replay exactly.
-struct Draws(u64);
+/// Seeded draws for jitter and loss, so runs replay exactly.
+struct Draws(rand_chacha::ChaCha8Rng);
 
 impl Draws {
+    fn new(seed: u64) -> Draws {
+        Draws(rand_chacha::ChaCha8Rng::seed_from_u64(seed))
+    }
+
+    /// Uniform in [0, 1).
     fn unit(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+        (self.0.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 
@@ -132,7 +135,7 @@ enum Kind {
 }
 
 fn run(kind: Kind, delay_secs: f64, jitter_secs: f64, loss: f64, seed: u64) -> Run {
-    let mut draws = Draws(seed | 1);
+    let mut draws = Draws::new(seed);
     let start = targets(0.0);
     let mut devices = start.map(|p| Device {
         position: p,
