@@ -188,6 +188,7 @@ impl SculptApp {
             if let Some(secs) = line.strip_prefix("wait-secs:") {
                 match secs.trim().parse::<f64>() {
                     Ok(s) if (0.0..=MAX_WAIT_SECS).contains(&s) => {
+                        println!("sculpt: scripted wait: {s} s");
                         let wait = std::time::Duration::from_secs_f64(s);
                         self.hooks.step_until = Some(::app::clock::now().instant + wait);
                     }
@@ -364,6 +365,8 @@ impl SculptApp {
                     "force": s.force_newtons.to_array(),
                     "top_id": s.top_id,
                     "n_ticks": s.n_ticks,
+                    "n_overruns": s.n_overruns,
+                    "period_micros": s.period_micros,
                     "n_scenes_taken": s.n_scenes_taken,
                     "compute_micros": s.compute_micros,
                 })
