@@ -109,16 +109,18 @@ fn run(root: &Path, secs: u64) -> anyhow::Result<()> {
     // last step (the wait) does: from its start, for `secs` seconds.
     let stdout = window.stdout.take().context("the window's stdout")?;
     let (started_tx, started) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        for line in std::io::BufReader::new(stdout)
-            .lines()
-            .map_while(Result::ok)
-        {
-            if line.starts_with("sculpt: scripted wait:") {
-                let _ = started_tx.send(());
+    std::thread::Builder::new()
+        .name("window-stdout".into())
+        .spawn(move || {
+            for line in std::io::BufReader::new(stdout)
+                .lines()
+                .map_while(Result::ok)
+            {
+                if line.starts_with("sculpt: scripted wait:") {
+                    let _ = started_tx.send(());
+                }
             }
-        }
-    });
+        })?;
     started
         .recv_timeout(Duration::from_secs(120))
         .context("the window never reached its wait")?;
@@ -131,7 +133,7 @@ fn run(root: &Path, secs: u64) -> anyhow::Result<()> {
         let payload = ShapePayload::Set {
             object,
             field: fdsl::object::Field::Tension(Some(Property::new(
-                Formula::new(&format!("{tension:.3}")).context("a tension")?,
+                Formula::new(format!("{tension:.3}")).context("a tension")?,
             ))),
         };
         a.author(payload)?

@@ -490,6 +490,44 @@ fn touching_with_the_mouse_runs_the_servo_on_the_scene_and_the_rind_pushes_back(
 }
 
 #[test]
+fn a_touch_stroke_with_the_device_button_held_carves_one_op() {
+    let display = display();
+    let dir = scratch("touch-carve");
+    // Across the demo watermelon's whole side, 0.02 to 0.03 into its rind.
+    let on_rind = |x: f64| (0.98f64 * 0.98 - x * x - 0.04).sqrt();
+    let stroke = format!(
+        "touch-stroke: -0.2,{},-0.2:-0.5,{},-0.2",
+        on_rind(-0.2),
+        on_rind(-0.5)
+    );
+    let run = window_run(
+        &display,
+        &dir,
+        "carved",
+        &["touch: on", "tool: carve ball radius 0.1", &stroke],
+    );
+    let state = &run.state;
+    let melon = &state["objects"][0];
+    assert_eq!(melon["n_edits"], 1, "one stroke, one edit: {state}");
+    assert_eq!(state["n_ops"], 2, "the demo and the stroke: {state}");
+    let history = state["history"].as_array().unwrap();
+    let last = history.last().unwrap();
+    assert!(
+        last["what"]
+            .as_str()
+            .unwrap()
+            .contains("sculpted Watermelon")
+            && last["status"] == "effective",
+        "{history:?}"
+    );
+    assert!(
+        run.stdout.contains("scripted touch stroke"),
+        "{}",
+        run.stdout
+    );
+}
+
+#[test]
 fn a_click_picks_the_object_and_the_point() {
     let display = display();
     let dir = scratch("pick");
@@ -860,10 +898,12 @@ fn carve_strokes_patch_the_mesh_and_upload_the_patch_drawing_what_a_whole_mesh_d
     let n_patched = state["meshes"]["patched"].as_u64().unwrap();
     assert!(n_patched >= CARVES.len() as u64, "{state}");
     // The renderer took every patch and wrote a fraction of the whole mesh's bytes (about 38
-    // per triangle: 12 of indices and half a 52-byte vertex).
+    // per triangle: 12 of indices and half a 52-byte vertex). Not necessarily the last
+    // upload: how many previews a stroke gets depends on the machine's load, and after
+    // enough patches the mesher assembles the whole mesh again (unreferenced vertices).
     assert_eq!(state["patches_refused"], 0, "{state}");
     let n_triangles = object["n_triangles"].as_u64().unwrap();
-    let uploaded = state["last_upload_bytes"].as_u64().unwrap();
+    let uploaded = state["min_upload_bytes"].as_u64().unwrap();
     assert!(
         uploaded > 0 && uploaded * 3 < 38 * n_triangles,
         "{uploaded} bytes uploaded for a mesh of {n_triangles} triangles"

@@ -50,6 +50,7 @@ pub struct LiveTouch {
     zone: HapticZone,
     workspace: Aabb,
     model: DeviceModel,
+    button: std::sync::atomic::AtomicBool,
 }
 
 impl LiveTouch {
@@ -95,6 +96,7 @@ impl LiveTouch {
             zone,
             workspace: caps.workspace_metres,
             model,
+            button: std::sync::atomic::AtomicBool::new(false),
         })
     }
 
@@ -116,6 +118,13 @@ impl LiveTouch {
     /// Presses or releases the device's button (bit 0).
     pub fn set_button(&self, down: bool) {
         self.mouse.set_buttons(u32::from(down));
+        self.button
+            .store(down, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Whether the device's button is held.
+    pub fn button_down(&self) -> bool {
+        self.button.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// Wakes the feed (the view changed) so that the servo gets the change in its next

@@ -848,6 +848,10 @@ impl SculptApp {
             let ray = self.view.camera.ray_through_pixel(px, input.size_px);
             self.pointer = scene.pick(&ray).map(|hit| hit.point_in_world);
         }
+        if let Some(down) = input.touch_button {
+            self.touch_button(down);
+        }
+        self.follow_touch_stroke();
         if input.hover_px.is_some() || input.depth_scroll != 0.0 {
             let depth =
                 input.depth_scroll * TOUCH_DEPTH_PER_SCROLL_POINT * sphere.map_or(1.0, |s| s.1);
@@ -931,23 +935,70 @@ impl SculptApp {
                     self.preview_stroke();
                 }
             }
-            StrokePhase::End => {
-                let Some(mut stroke) = self.stroke.take() else {
-                    return;
-                };
-                if let Some(at) = at_scene {
-                    stroke.push(at);
-                }
-                let planned = stroke.finish(&lock(self.engine.view()));
-                self.last_stroke = Some(stroke.scene_points().to_vec());
-                match planned {
-                    Ok(planned) => match self.engine.author(planned.payload.clone()) {
-                        Ok(pending) => self.pending = Some((pending, planned)),
-                        Err(e) => self.status = e.to_string(),
-                    },
-                    Err(e) => self.status = e,
-                }
+            StrokePhase::End => self.finish_stroke(at_scene),
+        }
+    }
+
+    /// Ends the stroke in progress at `at` (scene coordinates) and authors its one op.
+    fn finish_stroke(&mut self, at: Option<glam::DVec3>) {
+        let Some(mut stroke) = self.stroke.take() else {
+            return;
+        };
+        if let Some(at) = at {
+            stroke.push(at);
+        }
+        let planned = stroke.finish(&lock(self.engine.view()));
+        self.last_stroke = Some(stroke.scene_points().to_vec());
+        match planned {
+            Ok(planned) => match self.engine.author(planned.payload.clone()) {
+                Ok(pending) => self.pending = Some((pending, planned)),
+                Err(e) => self.status = e.to_string(),
+            },
+            Err(e) => self.status = e,
+        }
+    }
+
+    /// The touch device's button: pressed on a touched object, the current brush starts a
+    /// stroke at the haptic interface point; held, the stroke follows it; released, the
+    /// stroke is one op (touch-sculpting).
+    pub(super) fn touch_button(&mut self, down: bool) {
+        let Some(live) = &self.touch else {
+            return;
+        };
+        live.set_button(down);
+        let s = live.stats();
+        if !down {
+            self.finish_stroke(Some(s.hip_world));
+            return;
+        }
+        let Some(object) = s.top_id else {
+            self.status = "touch an object to sculpt it with the device".into();
+            return;
+        };
+        let begun = Stroke::begin(&lock(self.engine.view()), object, self.brush, s.hip_world);
+        match begun {
+            Ok(stroke) => {
+                self.selected = Some(object);
+                self.stroke = Some(stroke);
+                self.preview_at = None;
             }
+            Err(e) => self.status = e,
+        }
+    }
+
+    /// While the touch device's button is held, the stroke follows the haptic interface
+    /// point (previewed as a drawn stroke is).
+    fn follow_touch_stroke(&mut self) {
+        let Some(live) = &self.touch else {
+            return;
+        };
+        if !live.button_down() {
+            return;
+        }
+        let hip = live.stats().hip_world;
+        if let Some(stroke) = &mut self.stroke {
+            stroke.push(hip);
+            self.preview_stroke();
         }
     }
 

@@ -51,6 +51,8 @@ pub struct Hooks {
     step_until: Option<std::time::Instant>,
     /// A scripted drag in progress: from and to (fractions of the viewport), and the frame.
     drag: Option<([[f32; 2]; 2], u32)>,
+    /// A scripted touch stroke in progress: from and to (scene coordinates), and the frame.
+    touch_drag: Option<([glam::DVec3; 2], u32)>,
     /// Scripted steps wait until the session holds this many ops.
     pub wait_ops: Option<usize>,
     /// Scripted steps wait until this many other peers' presence is known.
@@ -144,6 +146,10 @@ impl SculptApp {
             self.close(ctx);
             return;
         }
+        if let Some(([from, to], frame)) = self.hooks.touch_drag {
+            self.touch_drag_frame(from, to, frame);
+            return;
+        }
         let synced = {
             let view = lock(self.engine.view());
             self.hooks.wait_ops.is_none_or(|n| view.n_ops() >= n)
@@ -211,6 +217,30 @@ impl SculptApp {
                 println!("sculpt: scripted touch: {}", word.trim());
                 if let Err(e) = self.set_touching(on) {
                     self.hooks.fail(e);
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
+            if let Some(spec) = line.strip_prefix("touch-stroke:") {
+                let point = |text: &str| -> Option<glam::DVec3> {
+                    let v: Vec<f64> = text
+                        .split(',')
+                        .map(|c| c.trim().parse().ok())
+                        .collect::<Option<_>>()?;
+                    (v.len() == 3).then(|| glam::DVec3::new(v[0], v[1], v[2]))
+                };
+                let ends = spec
+                    .split_once(':')
+                    .and_then(|(a, b)| Some([point(a)?, point(b)?]));
+                match (ends, self.touch.is_some()) {
+                    (Some(ends), true) => {
+                        println!("sculpt: scripted touch stroke: {}", spec.trim());
+                        self.hooks.touch_drag = Some((ends, 0));
+                    }
+                    (None, _) => self.hooks.fail(format!(
+                        "bad `touch-stroke: {spec}`: X0,Y0,Z0:X1,Y1,Z1 in scene coordinates"
+                    )),
+                    (_, false) => self.hooks.fail("`touch-stroke:` before `touch: on`".into()),
                 }
                 self.hooks.idle_frames = 0;
                 return;
@@ -413,6 +443,7 @@ impl SculptApp {
                 "whole": self.stats.n_whole,
             }),
             "last_upload_bytes": self.viewport.lock().ok().map(|r| r.last_upload_bytes),
+            "min_upload_bytes": self.viewport.lock().ok().and_then(|r| r.min_upload_bytes),
             "patches_refused": self.viewport.lock().ok().map(|r| r.n_patches_refused),
         })
     }
@@ -499,4 +530,33 @@ fn save_screenshot(image: &egui::ColorImage, path: &std::path::Path) -> Result<(
         .save_png(path)
         .map(|()| println!("sculpt: screenshot saved to {}", path.display()))
         .map_err(|e| format!("cannot save the screenshot to {}: {e}", path.display()))
+}
+
+impl SculptApp {
+    /// One frame of a scripted touch stroke: the tool goes to its start, the button goes
+    /// down two frames later (the servo has moved there by then), the tool moves along the
+    /// segment over `DRAG_FRAMES` frames, and the button comes up.
+    fn touch_drag_frame(&mut self, from: glam::DVec3, to: glam::DVec3, frame: u32) {
+        let Some(live) = &self.touch else {
+            self.hooks.touch_drag = None;
+            self.hooks.fail("the touch stroke lost its device".into());
+            return;
+        };
+        let moving = frame.saturating_sub(2);
+        match frame {
+            0 => live.move_to_world(from),
+            1 => {}
+            2 => self.touch_button(true),
+            _ if moving <= DRAG_FRAMES => {
+                live.move_to_world(from.lerp(to, f64::from(moving) / f64::from(DRAG_FRAMES)));
+            }
+            _ => {
+                self.touch_button(false);
+                self.hooks.touch_drag = None;
+                self.hooks.idle_frames = 0;
+                return;
+            }
+        }
+        self.hooks.touch_drag = Some(([from, to], frame + 1));
+    }
 }

@@ -224,6 +224,8 @@ pub struct ViewportReport {
     pub prepare_ms: Vec<f64>,
     /// Mesh bytes the last prepare that uploaded any wrote (`Renderer::mesh_bytes_uploaded`).
     pub last_upload_bytes: u64,
+    /// The fewest mesh bytes a prepare that uploaded any wrote (a patch's, once one went up).
+    pub min_upload_bytes: Option<u64>,
     /// Patches the renderer refused (it uploads those meshes whole).
     pub n_patches_refused: u64,
 }
@@ -272,6 +274,8 @@ impl CallbackTrait for ViewportCallback {
             let uploaded = res.renderer.mesh_bytes_uploaded();
             if uploaded > 0 {
                 report.last_upload_bytes = uploaded;
+                report.min_upload_bytes =
+                    Some(report.min_upload_bytes.map_or(uploaded, |m| m.min(uploaded)));
             }
         }
         if prepared.is_err() {
@@ -355,6 +359,9 @@ pub struct ViewportInput {
     /// Shift+wheel while touching: points of scroll to move the touch tool in depth
     /// (positive: away from the camera).
     pub depth_scroll: f32,
+    /// While touching, the primary button went down (true) or up (false) on the viewport:
+    /// the touch device's button.
+    pub touch_button: Option<bool>,
 }
 
 /// What the pointer does in the viewport besides navigating.
@@ -362,7 +369,8 @@ pub struct ViewportInput {
 pub struct Modes {
     /// A primary drag sculpts (secondary orbits).
     pub sculpting: bool,
-    /// The touch tool follows the pointer; Shift+wheel moves it in depth.
+    /// The touch tool follows the pointer; Shift+wheel moves it in depth; a primary drag is
+    /// the device's button (touch-sculpting) and the secondary one orbits.
     pub touching: bool,
 }
 
@@ -414,7 +422,12 @@ pub fn viewport_ui(
         ..ViewportInput::default()
     };
     let at_px = |pos: egui::Pos2| [(pos.x - rect.min.x) * ppp, (pos.y - rect.min.y) * ppp];
-    if sculpting && let Some(pos) = response.interact_pointer_pos() {
+    // While touching, the primary button is the touch device's: it sculpts at the tool, not
+    // under the pointer.
+    if sculpting
+        && !touching
+        && let Some(pos) = response.interact_pointer_pos()
+    {
         let phase = if response.drag_started_by(egui::PointerButton::Primary) {
             Some(StrokePhase::Begin)
         } else if response.drag_stopped_by(egui::PointerButton::Primary) {
@@ -429,7 +442,14 @@ pub fn viewport_ui(
             px: at_px(pos),
         });
     }
-    let orbiting = if sculpting {
+    if touching {
+        if response.drag_started_by(egui::PointerButton::Primary) {
+            input.touch_button = Some(true);
+        } else if response.drag_stopped_by(egui::PointerButton::Primary) {
+            input.touch_button = Some(false);
+        }
+    }
+    let orbiting = if sculpting || touching {
         response.dragged_by(egui::PointerButton::Secondary)
     } else {
         response.dragged_by(egui::PointerButton::Primary)
