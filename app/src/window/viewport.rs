@@ -274,8 +274,11 @@ impl CallbackTrait for ViewportCallback {
             let uploaded = res.renderer.mesh_bytes_uploaded();
             if uploaded > 0 {
                 report.last_upload_bytes = uploaded;
-                report.min_upload_bytes =
-                    Some(report.min_upload_bytes.map_or(uploaded, |m| m.min(uploaded)));
+                report.min_upload_bytes = Some(
+                    report
+                        .min_upload_bytes
+                        .map_or(uploaded, |m| m.min(uploaded)),
+                );
             }
         }
         if prepared.is_err() {
