@@ -38,26 +38,54 @@ async fn two_nodes_converge_on_the_same_op_set() {
 #[tokio::test]
 async fn three_nodes_converge_through_a_line() {
     let (a, b, c) = (node(1), node(2), node(3));
-    // Everyone edits object 7 offline: exactly one lease wins everywhere.
+    let all = [&a.handle, &b.handle, &c.handle];
+    // Everyone takes a weak lease on object 7 and edits it offline: nobody saw another's
+    // lease, so nobody's edit is bound by one (a lease binds only ops that saw it).
     for (h, tag) in [(&a.handle, "a"), (&b.handle, "b"), (&c.handle, "c")] {
         author_some(h, 7, tag).await;
     }
     // A - B - C: A and C never talk directly.
     b.handle.dial(a.handle.local_addr()).await.unwrap();
     c.handle.dial(b.handle.local_addr()).await.unwrap();
-    converge(&[&a.handle, &b.handle, &c.handle], 12).await;
+    converge(&all, 12).await;
     let view = observe(&a.handle).await;
-    let n_active_sets = view.iter().filter(|(_, _, active)| *active).count();
     assert!(
-        n_active_sets < 12,
-        "some edits must lose the lease: {view:?}"
+        view.iter()
+            .all(|(_, mark, _)| *mark == replication::Mark::Effective),
+        "concurrent leases bind no one: {view:?}"
     );
+    for h in &all[1..] {
+        assert_eq!(observe(h).await, view, "every node judges the same");
+    }
+    // Leases still bind the ops that saw them: C takes the lease over, and A's next edit,
+    // authored once A has seen that, is refused on every node.
+    let take = TestPayload::Acquire {
+        object: 7,
+        strong: false,
+        ttl_micros: 60_000_000,
+    };
+    c.handle.author(take).await.unwrap();
+    converge(&all, 13).await;
+    let late = TestPayload::Set {
+        object: 7,
+        value: "a, too late".into(),
+    };
+    let late = a.handle.author(late).await.unwrap();
+    converge(&all, 14).await;
+    for h in all {
+        let marks = observe(h).await;
+        let (_, mark, active) = marks.iter().find(|(id, _, _)| *id == late).unwrap();
+        assert!(
+            matches!(mark, replication::Mark::Rejected(_)) && !active,
+            "{mark:?}"
+        );
+    }
     let live = c
         .handle
         .author(TestPayload::Chat("from c".into()))
         .await
         .unwrap();
-    converge(&[&a.handle, &b.handle, &c.handle], 13).await;
+    converge(&all, 15).await;
     assert!(op_ids(&a.handle).await.contains(&live));
     assert!(a.handle.connected_peers().await.unwrap().len() == 1);
 }
