@@ -21,6 +21,7 @@
 use std::time::Duration;
 
 use crate::identity::{Keypair, PEER_ID_BYTES, PeerId, SIGNATURE_BYTES, Signature};
+use crate::net::node::CloseCode;
 use crate::net::session::SessionKeys;
 
 /// Version byte that opens an admission frame.
@@ -94,6 +95,10 @@ pub enum AdmissionError {
     /// The remote closed the connection: it refused our admission.
     #[error("the remote refused admission: {0}")]
     RefusedByRemote(String),
+    /// The remote closed the connection because it keeps another one to this peer (both
+    /// sides dialed at once): not a refusal, the peers are connected.
+    #[error("the remote kept another connection to this peer")]
+    Superseded,
 }
 
 /// One side's proof.
@@ -225,18 +230,36 @@ pub struct Admitted {
     pub recv: quinn::RecvStream,
 }
 
-fn connection_error(e: impl std::fmt::Display) -> AdmissionError {
-    AdmissionError::Connection(e.to_string())
+/// Maps a lost connection: a remote that closed it has refused us, unless it closed it as a
+/// duplicate of another connection between the same two peers.
+fn connection_error(e: &quinn::ConnectionError) -> AdmissionError {
+    match e {
+        quinn::ConnectionError::ApplicationClosed(close)
+            if close.error_code == CloseCode::Duplicate.var_int() =>
+        {
+            AdmissionError::Superseded
+        }
+        quinn::ConnectionError::ApplicationClosed(close) => {
+            AdmissionError::RefusedByRemote(String::from_utf8_lossy(&close.reason).into_owned())
+        }
+        e => AdmissionError::Connection(e.to_string()),
+    }
 }
 
-/// Maps a read failure: a remote that closed the connection has refused us.
 fn read_error(e: quinn::ReadExactError) -> AdmissionError {
     match e {
-        quinn::ReadExactError::ReadError(quinn::ReadError::ConnectionLost(
-            quinn::ConnectionError::ApplicationClosed(close),
-        )) => AdmissionError::RefusedByRemote(String::from_utf8_lossy(&close.reason).into_owned()),
+        quinn::ReadExactError::ReadError(quinn::ReadError::ConnectionLost(lost)) => {
+            connection_error(&lost)
+        }
         quinn::ReadExactError::FinishedEarly(_) => AdmissionError::Malformed("stream ended"),
-        e => connection_error(e),
+        e => AdmissionError::Connection(e.to_string()),
+    }
+}
+
+fn write_error(e: quinn::WriteError) -> AdmissionError {
+    match e {
+        quinn::WriteError::ConnectionLost(lost) => connection_error(&lost),
+        e => AdmissionError::Connection(e.to_string()),
     }
 }
 
@@ -254,11 +277,12 @@ pub async fn admit_dialer(
     keypair: &Keypair,
 ) -> Result<Admitted, AdmissionError> {
     let exporter = exporter(connection)?;
-    let (mut send, mut recv) = connection.open_bi().await.map_err(connection_error)?;
-    let proof = AdmissionFrame::prove(keys, keypair, Role::Dialer, &exporter);
-    send.write_all(&proof.encode())
+    let (mut send, mut recv) = connection
+        .open_bi()
         .await
-        .map_err(connection_error)?;
+        .map_err(|e| connection_error(&e))?;
+    let proof = AdmissionFrame::prove(keys, keypair, Role::Dialer, &exporter);
+    send.write_all(&proof.encode()).await.map_err(write_error)?;
     let peer = read_admission(&mut recv)
         .await?
         .verify(keys, Role::Dialer, &exporter)?;
@@ -273,14 +297,15 @@ pub async fn admit_acceptor(
     keypair: &Keypair,
 ) -> Result<Admitted, AdmissionError> {
     let exporter = exporter(connection)?;
-    let (mut send, mut recv) = connection.accept_bi().await.map_err(connection_error)?;
+    let (mut send, mut recv) = connection
+        .accept_bi()
+        .await
+        .map_err(|e| connection_error(&e))?;
     let peer = read_admission(&mut recv)
         .await?
         .verify(keys, Role::Acceptor, &exporter)?;
     let proof = AdmissionFrame::prove(keys, keypair, Role::Acceptor, &exporter);
-    send.write_all(&proof.encode())
-        .await
-        .map_err(connection_error)?;
+    send.write_all(&proof.encode()).await.map_err(write_error)?;
     Ok(Admitted { peer, send, recv })
 }
 

@@ -26,17 +26,17 @@ impl Shared {
     }
 
     async fn report_failure(&self, conn: Option<ConnId>, addr: SocketAddr, error: AdmissionError) {
-        let kind = RefusalKind::from(&error);
-        // The core task only goes away when the node stops; then nobody needs the news.
-        let _ = self
-            .inputs
-            .send(Input::AdmissionFailed {
+        let input = match RefusalKind::of(&error) {
+            Some(kind) => Input::AdmissionFailed {
                 conn,
                 addr,
                 error,
                 kind,
-            })
-            .await;
+            },
+            None => Input::Superseded { conn, addr },
+        };
+        // The core task only goes away when the node stops; then nobody needs the news.
+        let _ = self.inputs.send(input).await;
     }
 }
 

@@ -14,7 +14,7 @@ use super::{
 };
 use crate::identity::PeerId;
 use crate::log::Log;
-use crate::net::admission::Role;
+use crate::net::admission::{AdmissionError, Role};
 use crate::net::clock::{duration_until, wall_clock_now};
 use crate::op::OpId;
 use crate::payload::Payload;
@@ -236,6 +236,21 @@ impl<P: Payload + Send + 'static> Core<P> {
                     let _ = reply.send(Err(DialError::Admission(error.clone())));
                 }
                 self.emit(NodeEvent::AdmissionFailed { addr, error });
+            }
+            Input::Superseded { conn, addr } => {
+                self.stats.n_duplicates += 1;
+                if let Some(reply) = conn.and_then(|c| self.dials.remove(&c)) {
+                    // The dial's answer is the connection the remote kept, when it is here
+                    // already (the usual order); otherwise the caller learns why, and the
+                    // kept connection's admission is reported as any other.
+                    let kept = self
+                        .conns
+                        .iter()
+                        .find(|(_, l)| l.connection.remote_address() == addr)
+                        .map(|(&c, _)| c);
+                    let _ =
+                        reply.send(kept.ok_or(DialError::Admission(AdmissionError::Superseded)));
+                }
             }
             Input::Frame { conn, bytes } => {
                 self.peer.handle_input(wall_clock_now(), conn, &bytes);

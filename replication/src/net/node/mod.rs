@@ -99,7 +99,7 @@ pub enum CloseCode {
 }
 
 impl CloseCode {
-    fn var_int(self) -> quinn::VarInt {
+    pub(crate) fn var_int(self) -> quinn::VarInt {
         quinn::VarInt::from_u32(self as u32)
     }
 }
@@ -239,9 +239,11 @@ pub enum RefusalKind {
     TooManyConnections,
 }
 
-impl From<&AdmissionError> for RefusalKind {
-    fn from(e: &AdmissionError) -> Self {
-        match e {
+impl RefusalKind {
+    /// The kind of a failed admission; none for a connection the remote closed as a
+    /// duplicate, which is not a failure (the two peers are connected by the other one).
+    fn of(e: &AdmissionError) -> Option<Self> {
+        Some(match e {
             AdmissionError::WrongInvite => Self::WrongInvite,
             AdmissionError::BadSignature => Self::BadSignature,
             AdmissionError::Malformed(_)
@@ -250,7 +252,8 @@ impl From<&AdmissionError> for RefusalKind {
             AdmissionError::Timeout => Self::Timeout,
             AdmissionError::Exporter | AdmissionError::Connection(_) => Self::Connection,
             AdmissionError::RefusedByRemote(_) => Self::RefusedByRemote,
-        }
+            AdmissionError::Superseded => return None,
+        })
     }
 }
 
@@ -527,6 +530,11 @@ enum Input {
         addr: SocketAddr,
         error: AdmissionError,
         kind: RefusalKind,
+    },
+    /// The remote closed a connection in admission as a duplicate (both sides dialed at once).
+    Superseded {
+        conn: Option<ConnId>,
+        addr: SocketAddr,
     },
     Frame {
         conn: ConnId,
