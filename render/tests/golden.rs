@@ -728,6 +728,36 @@ fn femur_demo_matches_golden() {
     }
 }
 
+#[test]
+fn shark_demo_matches_golden() {
+    // Looked at by eye: at time 0 a blue-grey polygon shark (dorsal fin, two pectoral fins, a
+    // forked tail) swims to the right of a grey rock, above a round sandy seabed; its body and
+    // wake containers are invisible.
+    let Some(images) = check_scene_file("shark", 0) else {
+        return;
+    };
+    let shark = |p: [i32; 4]| p[2] > p[0] + 40 && p[2] > 90;
+    let sand = |p: [i32; 4]| p[0] > 150 && p[0] > p[2] + 20 && p[1] > p[2] + 10;
+    for (view, image) in &images {
+        assert!(fraction_where(image, shark) > 0.002, "{view}: no shark");
+        assert!(fraction_where(image, sand) > 0.05, "{view}: no seabed");
+    }
+}
+
+#[test]
+fn classroom_demo_matches_golden() {
+    // Looked at by eye: a grey block of clay on a wooden workbench with four legs.
+    let Some(images) = check_scene_file("classroom", 0) else {
+        return;
+    };
+    let clay = |p: [i32; 4]| (p[0] - p[2]).abs() < 12 && (p[0] - p[1]).abs() < 12 && p[0] > 60;
+    let wood = |p: [i32; 4]| p[0] > p[2] + 40 && p[1] > p[2] + 10 && p[0] > 80;
+    for (view, image) in &images {
+        assert!(fraction_where(image, clay) > 0.05, "{view}: no clay");
+        assert!(fraction_where(image, wood) > 0.03, "{view}: no bench");
+    }
+}
+
 /// A white ball lit from its left, with an ambient colour (or none): where the light does not
 /// reach, only the ambient term shows.
 fn ambient_ball(ambient: Option<[f32; 3]>) -> Scene {

@@ -7,6 +7,8 @@
 
 use fdsl::fvrml::{LoadOptions, Loaded, load};
 
+pub mod shark;
+
 /// The demo `sculpt` and `sculpt demo` open when no name is given.
 pub const DEFAULT_DEMO: &str = "watermelon";
 
@@ -33,7 +35,7 @@ pub const DEMOS: &[Demo] = &[
         about: "A cut watermelon (Figure 7.1): push through the rind's tension and it pops; the \
                 flesh is crunchy inside a hard shell.",
         file: "scenes/watermelon.wrl",
-        text: include_str!("../../scenes/watermelon.wrl"),
+        text: include_str!("../../../scenes/watermelon.wrl"),
     },
     Demo {
         name: "wind",
@@ -41,7 +43,7 @@ pub const DEMOS: &[Demo] = &[
         about: "A turning fan whose airflow is a force field inside an invisible cone: it \
                 pushes along the cone's axis, strongest near the fan, and stops outside it.",
         file: "scenes/wind.wrl",
-        text: include_str!("../../scenes/wind.wrl"),
+        text: include_str!("../../../scenes/wind.wrl"),
     },
     Demo {
         name: "whirlpool",
@@ -49,7 +51,16 @@ pub const DEMOS: &[Demo] = &[
         about: "Water in a basin with a helical force field (Figures 7.3 and 7.4): it pulls \
                 round, in and down.",
         file: "scenes/whirlpool.wrl",
-        text: include_str!("../../scenes/whirlpool.wrl"),
+        text: include_str!("../../../scenes/whirlpool.wrl"),
+    },
+    Demo {
+        name: "shark",
+        title: "Moving shark",
+        about: "A shark swims round a rock once every 10 seconds; its body and the wake \
+                behind it move with it: hold the hand on its path to feel it pass and the \
+                wake tug the hand along.",
+        file: "scenes/shark.wrl",
+        text: include_str!("../../../scenes/shark.wrl"),
     },
     Demo {
         name: "campus",
@@ -57,7 +68,16 @@ pub const DEMOS: &[Demo] = &[
         about: "A small campus of polygon buildings made touchable by invisible function \
                 containers (Figures 7.7 and 7.8): the walls are solid, the lawn is soft.",
         file: "scenes/campus.wrl",
-        text: include_str!("../../scenes/campus.wrl"),
+        text: include_str!("../../../scenes/campus.wrl"),
+    },
+    Demo {
+        name: "classroom",
+        title: "Classroom",
+        about: "A block of clay on a workbench that a class shapes together (Figures 7.9 and \
+                7.10): load a shape with `shape:`, colour it, give it a density, dig holes \
+                with a small cylinder and paint friction on with a big one.",
+        file: "scenes/classroom.wrl",
+        text: include_str!("../../../scenes/classroom.wrl"),
     },
     Demo {
         name: "femur",
@@ -65,7 +85,7 @@ pub const DEMOS: &[Demo] = &[
         about: "A femur with marrow softer than its bone (Figure 7.14's surgical session): \
                 carve into it with a cylinder tool, paint density, undo, and export the result.",
         file: "scenes/femur.wrl",
-        text: include_str!("../../scenes/femur.wrl"),
+        text: include_str!("../../../scenes/femur.wrl"),
     },
 ];
 
@@ -130,6 +150,16 @@ mod tests {
             assert!(!loaded.scene.is_empty(), "{}", demo.name);
             let warnings: Vec<String> = loaded.warnings.iter().map(ToString::to_string).collect();
             assert!(warnings.is_empty(), "{}: {warnings:?}", demo.name);
+        }
+    }
+
+    /// A demo opens as a session by authoring its objects as ops: each must fit in one.
+    #[test]
+    fn every_demo_plans_as_ops_that_fit() {
+        for demo in DEMOS {
+            let payloads = crate::engine::demo_payloads_from(demo, 1)
+                .unwrap_or_else(|e| panic!("{}: {e}", demo.name));
+            assert!(!payloads.is_empty(), "{}", demo.name);
         }
     }
 
