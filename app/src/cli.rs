@@ -78,6 +78,10 @@ pub struct PeerArgs {
     /// pointer on a surface would be (for tests and demonstrations).
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_point)]
     pub pointer: Option<[f32; 3]>,
+    /// Show other peers a touch tool at X,Y,Z (the renderer's world), as a window whose touch
+    /// is on shows its tool (for tests and demonstrations).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_point)]
+    pub tool_at: Option<[f32; 3]>,
 }
 
 fn parse_point(text: &str) -> Result<[f32; 3], String> {
@@ -341,9 +345,10 @@ pub fn peer(args: PeerArgs) -> anyhow::Result<()> {
         wait_for_ops(&engine, n)?;
     }
     run_commands(&engine, &args.command)?;
-    if let Some(at) = args.pointer {
+    if args.pointer.is_some() || args.tool_at.is_some() {
         let mut presence = engine.presence();
-        presence.pointer = Some(at);
+        presence.pointer = args.pointer;
+        presence.tool = args.tool_at;
         engine.set_presence(presence)?;
     }
     let runtime = tokio::runtime::Builder::new_current_thread()

@@ -487,6 +487,15 @@ fn touching_with_the_mouse_runs_the_servo_on_the_scene_and_the_rind_pushes_back(
         .collect();
     assert!(force[1] > 1.0 && force[1] <= 8.0, "{touch}");
     assert!(run.stdout.contains("scripted touch: on"), "{}", run.stdout);
+    // Other peers are shown the tool where it is: the scene's point in the renderer's world
+    // (+z up: the scene's y is the renderer's z).
+    let tool: Vec<f64> = run.state["my_tool"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no tool published: {}", run.state))
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!((tool[2] - y).abs() < 0.05, "{tool:?} against {y}");
 }
 
 #[test]
@@ -725,7 +734,7 @@ fn deep_blue(picture: &RgbaImage) -> f64 {
 }
 
 #[test]
-fn a_headless_peers_edits_and_pointer_show_in_the_window_and_the_windows_edit_reaches_it() {
+fn a_headless_peers_edits_pointer_and_tool_show_in_the_window_and_its_edit_reaches_it() {
     let display = display();
     let dir = scratch("together");
     let invite = sculpt(None, &["invite"]);
@@ -745,6 +754,8 @@ fn a_headless_peers_edits_and_pointer_show_in_the_window_and_the_windows_edit_re
         "Bo",
         "--pointer",
         "0,0,0",
+        "--tool-at",
+        "0.5,-0.25,1",
         "--command",
         "new: 0.8-sqrt(x^2+y^2+z^2)",
         "--command",
@@ -794,12 +805,17 @@ fn a_headless_peers_edits_and_pointer_show_in_the_window_and_the_windows_edit_re
         blue > 0.05,
         "the peer's blue ball covers {blue} of the view"
     );
-    // Its presence (name and pointer) arrived and is drawn.
+    // Its presence (name, pointer and touch tool) arrived and is drawn.
     let presence = &state["presence"][0];
     assert_eq!(presence["name"], "Bo", "{state}");
     assert_eq!(
         presence["pointer"],
         serde_json::json!([0.0, 0.0, 0.0]),
+        "{state}"
+    );
+    assert_eq!(
+        presence["tool"],
+        serde_json::json!([0.5, -0.25, 1.0]),
         "{state}"
     );
     assert_eq!(state["peers"][0]["online"], true, "{state}");

@@ -280,6 +280,7 @@ impl Engine {
             name: config.name.clone().unwrap_or_else(|| me.short()),
             colour: presence::default_colour(&me.0),
             pointer: None,
+            tool: None,
             selected: None,
             camera: None,
         }));

@@ -2,9 +2,10 @@
 //! latest value wins).
 //!
 //! Each peer sends its display name and colour, the point of the surface under its pointer,
-//! its selected object and its camera, whenever one of them changes (at most
-//! [`PRESENCE_RATE_HZ`] times a second). Receivers draw the pointer and outline the selection
-//! in the sender's colour, and may follow its camera. Values come from peers: the decoder
+//! its touch tool's point while it touches, its selected object and its camera, whenever one
+//! of them changes (at most [`PRESENCE_RATE_HZ`] times a second). Receivers draw the pointer,
+//! the tool (a crosshair in a box, as the thesis shows other users' tools) and outline the
+//! selection in the sender's colour, and may follow its camera. Values come from peers: the decoder
 //! bounds every length and refuses non-finite numbers.
 
 /// The ephemeral channel presence travels on.
@@ -13,8 +14,8 @@ pub const PRESENCE_CHANNEL: u32 = 1;
 pub const PRESENCE_RATE_HZ: u64 = 20;
 /// Longest display name, in bytes.
 pub const MAX_NAME_BYTES: usize = 32;
-/// The encoding's version byte.
-const VERSION: u8 = 1;
+/// The encoding's version byte (2: with the touch tool).
+const VERSION: u8 = 2;
 
 /// An orbit camera in the renderer's world (+z up): what it looks at and from where.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -34,6 +35,8 @@ pub struct Presence {
     pub colour: [u8; 3],
     /// The surface point under the pointer (the renderer's world, +z up), if any.
     pub pointer: Option<[f32; 3]>,
+    /// The touch tool's point (the renderer's world), while the peer's touch is on.
+    pub tool: Option<[f32; 3]>,
     /// The selected object.
     pub selected: Option<u64>,
     /// The camera.
@@ -58,6 +61,9 @@ pub enum PresenceError {
     /// Bytes after the value.
     #[error("presence value has {0} extra bytes")]
     Trailing(usize),
+    /// Flag bits this version does not know.
+    #[error("presence flags {0:#010b} name parts this version does not know")]
+    Flags(u8),
 }
 
 /// The colour a peer gets until its user picks one: from its id, so it is stable.
@@ -76,8 +82,8 @@ pub fn default_colour(peer: &[u8; 32]) -> [u8; 3] {
 }
 
 impl Presence {
-    /// `[1][name len][name][r g b][flags][pointer 3×f32][target 3×f32][orbit 3×f32][selected u64]`,
-    /// little-endian; the optional parts are present when their flag bit is set.
+    /// `[2][name len][name][r g b][flags][pointer 3×f32][target 3×f32][orbit 3×f32][selected u64]
+    /// [tool 3×f32]`, little-endian; the optional parts are present when their flag bit is set.
     pub fn encode(&self) -> Vec<u8> {
         let name = truncate(&self.name, MAX_NAME_BYTES);
         let mut out = Vec::with_capacity(64 + name.len());
@@ -87,7 +93,8 @@ impl Presence {
         out.extend_from_slice(&self.colour);
         let flags = u8::from(self.pointer.is_some())
             | u8::from(self.selected.is_some()) << 1
-            | u8::from(self.camera.is_some()) << 2;
+            | u8::from(self.camera.is_some()) << 2
+            | u8::from(self.tool.is_some()) << 3;
         out.push(flags);
         let mut put = |v: &[f32; 3]| v.iter().for_each(|x| out.extend(x.to_le_bytes()));
         if let Some(p) = &self.pointer {
@@ -99,6 +106,9 @@ impl Presence {
         }
         if let Some(s) = self.selected {
             out.extend(s.to_le_bytes());
+        }
+        if let Some(t) = &self.tool {
+            t.iter().for_each(|x| out.extend(x.to_le_bytes()));
         }
         out
     }
@@ -139,6 +149,14 @@ impl Presence {
         } else {
             None
         };
+        let tool = if flags & 8 != 0 {
+            Some(r.vec3()?)
+        } else {
+            None
+        };
+        if flags >> 4 != 0 {
+            return Err(PresenceError::Flags(flags));
+        }
         if r.at != bytes.len() {
             return Err(PresenceError::Trailing(bytes.len() - r.at));
         }
@@ -146,6 +164,7 @@ impl Presence {
             name,
             colour,
             pointer,
+            tool,
             selected,
             camera,
         })
@@ -203,6 +222,7 @@ mod tests {
             name: "Ada".into(),
             colour: [10, 20, 30],
             pointer: Some([0.5, -1.0, 2.0]),
+            tool: Some([0.25, 0.5, -0.75]),
             selected: Some(0x1234_5678_9abc),
             camera: Some(CameraPose {
                 target: [0.0, 0.0, 0.0],
@@ -217,6 +237,7 @@ mod tests {
         assert_eq!(Presence::decode(&full.encode()), Ok(full.clone()));
         let bare = Presence {
             pointer: None,
+            tool: None,
             selected: None,
             camera: None,
             ..full
@@ -250,8 +271,21 @@ mod tests {
         let mut version = bytes.clone();
         version[0] = 9;
         assert_eq!(Presence::decode(&version), Err(PresenceError::Version(9)));
-        let mut long_name = bytes;
+        let mut long_name = bytes.clone();
         long_name[1] = 200;
         assert!(Presence::decode(&long_name).is_err());
+        let mut tool_nan = bytes.clone();
+        let at = bytes.len() - 4;
+        tool_nan[at..].copy_from_slice(&f32::INFINITY.to_le_bytes());
+        assert_eq!(
+            Presence::decode(&tool_nan),
+            Err(PresenceError::NotFinite(at))
+        );
+        let mut unknown = bytes;
+        unknown[2 + 3 + 3] |= 0x10;
+        assert_eq!(
+            Presence::decode(&unknown),
+            Err(PresenceError::Flags(unknown[2 + 3 + 3]))
+        );
     }
 }

@@ -45,6 +45,8 @@ const BRUSH_COLOUR: [f32; 4] = [1.0, 1.0, 1.0, 1.0];
 const PREVIEW_MILLIS: u64 = 120;
 /// Half the size of another peer's pointer cross, in world units.
 const PRESENCE_CROSS_SIZE: f32 = 0.06;
+/// Half the size of the cross (in a box) that marks another peer's touch tool, world units.
+const PRESENCE_TOOL_SIZE: f32 = 0.15;
 /// Colour of the selected object's box.
 const SELECTION_COLOUR: [f32; 4] = [1.0, 0.85, 0.2, 1.0];
 /// Patches kept for the viewport between its draws.
@@ -259,7 +261,7 @@ pub struct SculptApp {
     /// The surface point under the pointer, in the renderer's world.
     pointer: Option<Vec3>,
     /// The presence last handed to the engine.
-    presence_sent: Option<Presence>,
+    pub(super) presence_sent: Option<Presence>,
     /// The window title last set.
     title: String,
     /// Where the brush, name and colour are kept between runs.
@@ -667,7 +669,8 @@ impl SculptApp {
         (scene, ids)
     }
 
-    /// Other peers' pointers (a cross) and selections (a box) in their colours.
+    /// Other peers' pointers (a cross), touch tools (a larger cross in a box) and selections
+    /// (a box) in their colours.
     fn draw_presence(&self, scene: &mut Scene) {
         let view = lock(self.engine.view());
         for p in view.presence().values() {
@@ -675,6 +678,14 @@ impl SculptApp {
             let colour = [r, g, b, 1.0];
             if let Some(at) = p.pointer {
                 scene.add_crosshair(Vec3::from_array(at), PRESENCE_CROSS_SIZE, colour);
+            }
+            if let Some(at) = p.tool.map(Vec3::from_array) {
+                scene.add_crosshair(at, PRESENCE_TOOL_SIZE, colour);
+                let half = Vec3::splat(PRESENCE_TOOL_SIZE * 0.35);
+                scene.add_box(
+                    Aabb::new((at - half).to_array(), (at + half).to_array()),
+                    colour,
+                );
             }
             if let Some(b) = p
                 .selected
@@ -690,6 +701,11 @@ impl SculptApp {
     fn publish_presence(&mut self) {
         let mut presence = self.engine.presence();
         presence.pointer = self.pointer.map(|p| p.to_array());
+        presence.tool = self.touch.as_ref().map(|live| {
+            render_from_scene()
+                .transform_point3(live.stats().hip_world.as_vec3())
+                .to_array()
+        });
         presence.selected = self.selected;
         let c = &self.view.camera;
         presence.camera = Some(CameraPose {

@@ -402,6 +402,7 @@ impl SculptApp {
                 })
             }),
             "side_panel_points": self.layout.side_panel_points,
+            "my_tool": self.presence_sent.as_ref().and_then(|p| p.tool),
             "playing": self.scene_clock.playing(),
             "selected": self.selected.map(|id| view.object_label(id)),
             "peers": rows(view.peers().iter().map(|p| json!({
@@ -420,7 +421,7 @@ impl SculptApp {
             "my_rejections": view.my_rejections().iter().map(|(_, why)| why.clone()).collect::<Vec<_>>(),
             "presence": rows(view.presence().iter().map(|(peer, p)| json!({
                 "peer": peer.short(), "name": p.name, "colour": p.colour,
-                "pointer": p.pointer, "selected": p.selected,
+                "pointer": p.pointer, "tool": p.tool, "selected": p.selected,
             })).collect()),
             "objects": objects,
             "chat": rows(self.chat.iter().map(|c| json!({
