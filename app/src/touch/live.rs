@@ -40,6 +40,9 @@ impl HapticDevice for ShownForce {
     }
 }
 
+/// Where the tool starts, as a fraction of the workspace's height below its top.
+const START_BELOW_TOP: f64 = 0.05;
+
 /// A running servo on the live scene with its feed and the mouse that moves it.
 pub struct LiveTouch {
     servo: ServoHandle<ShownForce, LiveScene>,
@@ -70,6 +73,16 @@ impl LiveTouch {
             ..model_caps
         };
         let zone = zone_for(&caps, bounds, None);
+        // The tool starts near the top of the workspace, above the objects the zone is fitted
+        // around: started at its centre it would begin inside them, and a hand that begins
+        // inside a skin never feels it (the stack takes it as already through).
+        let w = caps.workspace_metres;
+        let start = DVec3::new(
+            0.5 * (w.min.x + w.max.x),
+            w.max.y - START_BELOW_TOP * (w.max.y - w.min.y),
+            0.5 * (w.min.z + w.max.z),
+        );
+        handle.move_by_metres(start - handle.position_metres());
         let device = ShownForce { mouse, caps };
         let mut servo_rig = rig(model, zone);
         servo_rig.caps = caps;
