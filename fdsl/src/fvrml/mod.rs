@@ -52,6 +52,7 @@
 //! ```
 
 mod document;
+mod edit;
 mod lexer;
 mod load;
 mod parser;
@@ -92,6 +93,12 @@ pub const MAX_INLINE_DEPTH: usize = 8;
 pub const MAX_INLINE_FILES: usize = 256;
 /// Most nodes the loader visits over one load (bounds `USE` copies of `USE` copies).
 pub const MAX_LOAD_STEPS: usize = 1 << 20;
+/// Most edits the loaded objects hold together, `USE` copies included (a shape with many
+/// edits can be copied many times for a few bytes each).
+pub const MAX_LOAD_EDITS: usize = 1 << 22;
+/// Most tool stamps the edits of one load compile to (a short `FEdit` can sweep a small tool
+/// far, expanding to up to `MAX_STROKE_STAMPS` stamps).
+pub const MAX_LOAD_STAMPS: usize = 1 << 22;
 /// Most issues kept for one load; later ones are counted in a last issue.
 pub const MAX_ISSUES: usize = 256;
 
