@@ -79,8 +79,8 @@ const AXES: [(&str, Axis); 3] = [("x", Axis::X), ("y", Axis::Y), ("z", Axis::Z)]
 pub(super) struct ReadEdit {
     pub(super) edit: Edit,
     pub(super) active: bool,
-    /// Where the parts the object model may refuse were written.
-    pub(super) node_pos: Pos,
+    /// Where the node and the parts the object model may refuse were written.
+    node_pos: Pos,
     tool_pos: Pos,
     path_pos: Pos,
     blend_pos: Pos,
