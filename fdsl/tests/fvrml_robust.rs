@@ -1,13 +1,14 @@
 //! FVRML against hostile input (truncated figures, unbalanced brackets, huge numbers, deep
 //! nesting, USE explosions, Inline cycles, token soups) and the round-trip properties: for
 //! random documents `parse(write(doc)) == doc` and writing is idempotent; for random scenes
-//! `load(save(scene)) == scene`.
+//! (edit histories included) `load(save(scene)) == scene`.
 #![allow(clippy::unwrap_used, reason = "test helpers unwrap")]
 
 use fdsl::fvrml::{self, Document, Field, Issue, LoadOptions, Node, NodeRef, Value};
 use fdsl::object::{
-    Appearance, ColorDef, ColorMap, Domain, ForceField, Formula, Geometry, Motion, ObjectData,
-    ParametricKind, Physics, Property, Shape, Timing, Transform,
+    Appearance, Axis, ColorDef, ColorMap, Domain, Edit, EditOp, ForceField, Formula, Geometry,
+    Motion, ObjectData, PaintValue, Paintable, ParametricKind, Physics, Pose, Property, Shape,
+    Timing, ToolShape, Transform,
 };
 use fdsl::scene::{Group, GroupId, ObjectId, Scene};
 use glam::{DAffine3, DMat3, DQuat, DVec3};
@@ -350,6 +351,25 @@ const SOUP: &[&str] = &[
     ",",
     "é",
     "\\",
+    "edits",
+    "FEdit",
+    "operation",
+    "\"union\"",
+    "\"paint\"",
+    "property",
+    "\"friction\"",
+    "value",
+    "tool",
+    "\"cylinder\"",
+    "\"box\"",
+    "radius",
+    "halfHeight",
+    "halfExtents",
+    "path",
+    "blendRadius",
+    "mirror",
+    "\"x\"",
+    "active",
 ];
 
 /// Text for documents: quotes, backslashes, line breaks, braces and typographic quotes.
@@ -632,17 +652,85 @@ fn object_data() -> BoxedStrategy<ObjectData> {
         .boxed()
 }
 
+/// A valid edit with awkward numbers (`-0`, thirds, tiny and large values), and whether it
+/// stays active.
+fn edit() -> impl Strategy<Value = (Edit, bool)> {
+    let coordinate = || prop_oneof![-2.0..2.0f64, Just(-0.0), Just(1.0 / 3.0), Just(1e-9)];
+    let size = || prop_oneof![0.05..1.0f64, Just(0.1 + 0.2)];
+    let pose = (
+        prop::array::uniform3(coordinate()),
+        prop::array::uniform4(-1.0..1.0f64),
+        0.5..2.0f64,
+    )
+        .prop_map(|(p, q, scale)| Pose {
+            position: DVec3::from_array(p),
+            rotation: DQuat::from_array(q) + DQuat::from_xyzw(0.0, 0.0, 0.0, 1.5),
+            scale,
+        });
+    let tool = prop_oneof![
+        size().prop_map(|radius| ToolShape::Sphere { radius }),
+        (prop::array::uniform3(size()), 0.0..1.0f64).prop_map(|(h, r)| {
+            let half_extents = DVec3::from_array(h);
+            ToolShape::Box {
+                half_extents,
+                rounding: r * half_extents.min_element(),
+            }
+        }),
+        (size(), size()).prop_map(|(radius, half_height)| ToolShape::Cylinder {
+            radius,
+            half_height
+        }),
+    ];
+    let op = prop_oneof![
+        Just(EditOp::Union),
+        Just(EditOp::Subtract),
+        Just(EditOp::Intersect),
+        (
+            prop::sample::select(Paintable::ALL.to_vec()),
+            prop_oneof![
+                prop::num::f64::NORMAL.prop_map(PaintValue::Scalar),
+                prop::array::uniform3(0.0..=1.0f32).prop_map(PaintValue::Color),
+            ]
+        )
+            .prop_map(|(property, value)| EditOp::Paint { property, value }),
+    ];
+    let mirror = prop::option::of(prop::sample::select(vec![Axis::X, Axis::Y, Axis::Z]));
+    let blend = prop_oneof![Just(0.0), Just(-0.0), 0.0..0.5f64];
+    (
+        op,
+        tool,
+        prop::collection::vec(pose, 1..4),
+        blend,
+        mirror,
+        any::<bool>(),
+    )
+        .prop_map(|(op, tool, path, blend_radius, mirror, active)| {
+            let edit = Edit {
+                op,
+                tool,
+                path,
+                blend_radius,
+                mirror,
+            };
+            (edit, active)
+        })
+}
+
 #[derive(Clone, Debug)]
 enum Item {
-    Object(Box<ObjectData>),
+    Object(Box<ObjectData>, Vec<(Edit, bool)>),
     Group(String, Transform, Vec<Item>),
 }
 
 fn items() -> impl Strategy<Value = Vec<Item>> {
-    let leaf = object_data().prop_map(|d| Item::Object(Box::new(d)));
-    let tree = leaf.prop_recursive(3, 12, 3, |inner| {
+    let object = || {
+        (object_data(), prop::collection::vec(edit(), 0..4))
+            .prop_map(|(d, edits)| Item::Object(Box::new(d), edits))
+    };
+    let leaf = object();
+    let tree = leaf.prop_recursive(3, 12, 3, move |inner| {
         prop_oneof![
-            2 => object_data().prop_map(|d| Item::Object(Box::new(d))),
+            2 => object(),
             1 => (text(), transform(), prop::collection::vec(inner, 0..3))
                 .prop_map(|(n, t, c)| Item::Group(n, t, c)),
         ]
@@ -654,10 +742,15 @@ fn items() -> impl Strategy<Value = Vec<Item>> {
 fn build(items: &[Item], parent: Option<GroupId>, scene: &mut Scene, ids: &mut (u64, u64)) {
     for item in items {
         match item {
-            Item::Object(data) => {
-                scene
-                    .create(ObjectId(ids.0), (**data).clone(), parent)
-                    .unwrap();
+            Item::Object(data, edits) => {
+                let id = ObjectId(ids.0);
+                scene.create(id, (**data).clone(), parent).unwrap();
+                for (edit, active) in edits {
+                    let idx = scene.apply(id, edit.clone()).unwrap();
+                    if !active {
+                        scene.object_mut(id).unwrap().undo(idx);
+                    }
+                }
                 ids.0 += 1;
             }
             Item::Group(name, transform, children) => {
@@ -711,6 +804,67 @@ proptest! {
     }
 }
 
+/// A field of an `FEdit`, well or badly named, with a value of any form.
+fn edit_field() -> impl Strategy<Value = String> {
+    let name = prop::sample::select(vec![
+        "operation",
+        "property",
+        "value",
+        "tool",
+        "radius",
+        "halfHeight",
+        "halfExtents",
+        "rounding",
+        "path",
+        "blendRadius",
+        "mirror",
+        "active",
+        "colour",
+    ]);
+    let number = prop_oneof![
+        prop::sample::select(vec!["0", "1", "-1", "0.5", "-0", "1e300", "1e-320", "2e6"])
+            .prop_map(String::from),
+        number().prop_map(fvrml::format_number),
+    ];
+    let words = prop::sample::select(vec![
+        "\"union\"",
+        "\"subtract\"",
+        "\"intersect\"",
+        "\"paint\"",
+        "\"sphere\"",
+        "\"box\"",
+        "\"cylinder\"",
+        "\"x\"",
+        "\"friction\"",
+        "\"diffuseColor\"",
+        "\"q\"",
+        "TRUE",
+        "FALSE",
+        "[]",
+        "NULL",
+        "Sphere { }",
+        "[\"a\"]",
+    ])
+    .prop_map(String::from);
+    let value = prop_oneof![
+        words,
+        prop::collection::vec(number.clone(), 1..4).prop_map(|v| v.join(" ")),
+        prop::collection::vec(number, 0..25).prop_map(|v| format!("[{}]", v.join(" "))),
+    ];
+    (name, value).prop_map(|(n, v)| format!("{n} {v}"))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// Random `FEdit`s load or fail with located issues; none panics.
+    #[test]
+    fn random_edits_are_read_or_located(fields in prop::collection::vec(edit_field(), 0..9)) {
+        let text = with_edit(&fields.join(" "));
+        let _ = try_load(&text, "");
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
 
@@ -728,4 +882,183 @@ proptest! {
         prop_assert_eq!(&loaded.scene, &scene, "{}", text);
         prop_assert_eq!(fvrml::write(&fvrml::save(&loaded.scene)), text);
     }
+}
+
+/// An `FShape` whose third line is `edits [ FEdit { <body> } ]`.
+fn with_edit(body: &str) -> String {
+    format!("FShape {{\n  geometry Sphere {{ radius 1 }}\n  edits [ FEdit {{ {body} }} ]\n}}\n")
+}
+
+/// A stamp that loads cleanly, to build hostile variants from.
+const STAMP: &str = r#"operation "subtract" tool "sphere" radius 0.1 path [0 0 0 0 0 0 1 1]"#;
+
+/// Each malformed `FEdit` is an error (the load fails) or a warning (the load goes on), with
+/// the message's words, at the first character of `at` (line 3 of the text), never a panic.
+/// Errors are for what cannot be read as written, as for every other node; warnings for
+/// what is ignored (unknown fields, a node of another type, sizes the tool does not use).
+#[test]
+fn hostile_edits_are_located_errors_or_warnings() {
+    use fdsl::Severity::{Error, Warning};
+    let pose = "0 0 0 0 0 0 1 1 ";
+    let too_many_poses = format!(
+        r#"operation "union" tool "sphere" radius 0.1 path [{}]"#,
+        pose.repeat(fdsl::limits::MAX_STROKE_POSES + 1)
+    );
+    let cases: Vec<(String, &str, fdsl::Severity, &str)> = vec![
+        (r#"operation "smear" tool "sphere" radius 0.1 path [0 0 0 0 0 0 1 1]"#.into(), "\"smear\"", Error, "`operation` is one of \"union\", \"subtract\", \"intersect\" or \"paint\""),
+        (r#"operation 3 tool "sphere" radius 0.1 path [0 0 0 0 0 0 1 1]"#.into(), "3 tool", Error, "`operation` is one of"),
+        (r#"tool "sphere" radius 0.1 path [0 0 0 0 0 0 1 1]"#.into(), "FEdit", Error, "needs an `operation`"),
+        (r#"operation "union" tool "sphere" radius 0.1 path [0 0 0 0 0 0 1]"#.into(), "[0 0 0 0 0 0 1]", Error, "8 numbers per pose"),
+        (r#"operation "union" tool "sphere" radius 0.1 path []"#.into(), "[]", Error, "a stroke needs 1 to MAX_STROKE_POSES poses"),
+        (too_many_poses, "[0 0", Error, "a stroke needs 1 to MAX_STROKE_POSES poses"),
+        (r#"operation "union" tool "sphere" radius 0.1 path "0 0 0""#.into(), "\"0 0 0\"", Error, "should be numbers"),
+        (r#"operation "union" tool "sphere" radius 0.1 path [0 1e999 0 0 0 0 1 1]"#.into(), "1e999", Error, "the number `1e999` is out of range"),
+        (r#"operation "union" tool "sphere" radius -0.1 path [0 0 0 0 0 0 1 1]"#.into(), "\"sphere\"", Error, "tool sizes must be positive"),
+        (r#"operation "union" tool "cylinder" radius 0.1 halfHeight 1e7 path [0 0 0 0 0 0 1 1]"#.into(), "\"cylinder\"", Error, "at most MAX_TOOL_SIZE"),
+        (r#"operation "union" tool "box" halfExtents 0.1 0.1 0.1 rounding 0.2 path [0 0 0 0 0 0 1 1]"#.into(), "\"box\"", Error, "tool sizes"),
+        (r#"operation "union" tool "cylinder" radius 0.1 path [0 0 0 0 0 0 1 1]"#.into(), "FEdit", Error, "a \"cylinder\" tool needs `halfHeight`"),
+        (r#"operation "union" tool "box" halfExtents 0.1 0.1 path [0 0 0 0 0 0 1 1]"#.into(), "0.1 0.1 path", Error, "should be 3 numbers"),
+        (r#"operation "union" tool "cone" radius 0.1 path [0 0 0 0 0 0 1 1]"#.into(), "\"cone\"", Error, "`tool` is one of"),
+        (r#"operation "union" radius 0.1 path [0 0 0 0 0 0 1 1]"#.into(), "FEdit", Error, "needs a `tool`"),
+        (r#"operation "union" tool "sphere" radius 0.1"#.into(), "FEdit", Error, "needs a `path`"),
+        (format!("{STAMP} blendRadius -1"), "-1", Error, "the blend radius must be finite and not negative"),
+        (format!("{STAMP} blendRadius 1 2"), "1 2", Error, "should be one number"),
+        (r#"operation "union" tool "sphere" radius 0.1 path [0 0 0 0 0 0 0 1]"#.into(), "[0 0 0 0 0 0 0 1]", Error, "non-zero rotation"),
+        (r#"operation "union" tool "sphere" radius 0.1 path [0 0 0 0 0 0 1 0]"#.into(), "[0 0 0 0 0 0 1 0]", Error, "positive scale"),
+        (r#"operation "union" tool "sphere" radius 0.1 path [0 0 0 0 0 0 1 1, 2e6 0 0 0 0 0 1 1]"#.into(), "[0 0 0", Error, "poses must be finite"),
+        (r#"operation "union" tool "box" halfExtents 1e-6 1e-6 1e-6 path [0 0 0 0 0 0 1 1, 1000 0 0 0 0 0 1 1]"#.into(), "[0 0 0", Error, "MAX_STROKE_STAMPS"),
+        (format!("{STAMP} mirror \"w\""), "\"w\"", Error, "`mirror` is one of \"x\", \"y\" or \"z\""),
+        (format!("{STAMP} active 1"), "1 } ]", Error, "TRUE or FALSE"),
+        (r#"operation "paint" tool "sphere" radius 0.1 path [0 0 0 0 0 0 1 1] value 0.5"#.into(), "FEdit", Error, "needs a `property`"),
+        (r#"operation "paint" property "friction" tool "sphere" radius 0.1 path [0 0 0 0 0 0 1 1]"#.into(), "FEdit", Error, "needs a `value`"),
+        (r#"operation "paint" property "smell" value 1 tool "sphere" radius 0.1 path [0 0 0 0 0 0 1 1]"#.into(), "\"smell\"", Error, "`property` is one of \"diffuseColor\""),
+        (r#"operation "paint" property "friction" value 1 2 tool "sphere" radius 0.1 path [0 0 0 0 0 0 1 1]"#.into(), "1 2", Error, "one number (a scalar) or three"),
+        (r#"operation "paint" property "diffuseColor" value 2 0 0 tool "sphere" radius 0.1 path [0 0 0 0 0 0 1 1]"#.into(), "2 0 0", Error, "colours within [0, 1]"),
+        (format!("{STAMP} colour 1 0 0"), "colour", Warning, "`FEdit` has no field `colour`"),
+        (format!("{STAMP} halfHeight 1"), "halfHeight", Warning, "`halfHeight` is ignored for a \"sphere\" tool"),
+        (format!("{STAMP} property \"friction\""), "property", Warning, "`property` is ignored: only painting uses it"),
+        (format!("{STAMP} path [0 0 0 0 0 0 1 2]"), "path [0 0 0 0 0 0 1 1]", Warning, "given again later"),
+    ];
+    for (body, at, severity, message) in &cases {
+        let text = with_edit(body);
+        let result = try_load(&text, "");
+        assert_eq!(result.is_err(), *severity == Error, "{body}: {result:#?}");
+        let issues = result.unwrap_or_else(|issues| issues);
+        let Some(issue) = issues
+            .iter()
+            .find(|i| i.severity == *severity && i.message.contains(message))
+        else {
+            panic!("{body}: no {severity:?} with {message:?} in {issues:#?}");
+        };
+        let offset = text
+            .find(at)
+            .unwrap_or_else(|| panic!("{at:?} is not in {text}"));
+        assert_eq!(
+            issue.location.span.start as usize, offset,
+            "{body}: {issue}"
+        );
+        let line_start = text[..offset].rfind('\n').map_or(0, |i| i + 1);
+        let column = text[line_start..offset].chars().count() + 1;
+        assert_eq!(issue.location.line, 3, "{body}: {issue}");
+        assert_eq!(issue.location.column as usize, column, "{body}: {issue}");
+    }
+
+    // Other nodes in `edits` are skipped with a warning, `NULL` quietly; the good edit stays.
+    let text = format!(
+        "FShape {{\n  geometry Sphere {{ radius 1 }}\n  edits [ Sphere {{ }} NULL FEdit {{ {STAMP} }} ]\n}}\n"
+    );
+    let issues = try_load(&text, "").unwrap();
+    assert_eq!(issues.len(), 1, "{issues:#?}");
+    assert!(issues[0].message.contains("`Sphere` cannot be in `edits`"));
+    let issues = errors("FShape { edits 5 }");
+    assert!(
+        issues[0].message.contains("a list of `FEdit` nodes"),
+        "{issues:#?}"
+    );
+    let issues = errors("FShape { edits [ USE Nothing ] }");
+    assert!(issues[0].message.contains("`USE Nothing`"), "{issues:#?}");
+    // Plain VRML shapes carry no edits.
+    let issues = try_load(&format!("Shape {{ edits [ FEdit {{ {STAMP} }} ] }}"), "").unwrap();
+    assert!(
+        issues[0].message.contains("`Shape` has no field `edits`"),
+        "{issues:#?}"
+    );
+}
+
+/// Documents built in code can hold numbers no text can: NaN and infinities are refused by
+/// the object model, as the same edit from a peer would be.
+#[test]
+fn edits_with_numbers_that_are_not_finite_are_refused() {
+    let num = |name: &str, v: Vec<f64>| Field::new(name, Value::Numbers(v));
+    let edit = |path: Vec<f64>, blend: f64| {
+        let fields = vec![
+            Field::new("operation", Value::String("union".into())),
+            Field::new("tool", Value::String("sphere".into())),
+            num("radius", vec![0.1]),
+            Field::new("path", Value::NumberList(path)),
+            num("blendRadius", vec![blend]),
+        ];
+        NodeRef::Node(Box::new(Node::new("FEdit", fields)))
+    };
+    let pose = |x: f64| vec![x, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0];
+    for (item, message) in [
+        (edit(pose(f64::NAN), 0.0), "poses must be finite"),
+        (edit(pose(f64::INFINITY), 0.0), "poses must be finite"),
+        (edit(pose(0.0), f64::NAN), "the blend radius must be finite"),
+        (
+            edit(pose(0.0), f64::NEG_INFINITY),
+            "the blend radius must be finite",
+        ),
+    ] {
+        let shape = Node::new(
+            "FShape",
+            vec![Field::new("edits", Value::NodeList(vec![item]))],
+        );
+        let doc = Document {
+            nodes: vec![NodeRef::Node(Box::new(shape))],
+        };
+        let mut no_files = |p: &str| Err(format!("no {p}"));
+        let issues = fvrml::load_document(&doc, &LoadOptions::default(), &mut no_files)
+            .unwrap_err()
+            .issues;
+        assert!(issues[0].message.contains(message), "{issues:#?}");
+    }
+}
+
+/// `USE` makes a file small and its objects large: the edits one object may hold, the edits
+/// all loaded objects hold and the stamps the edits expand to are each bounded.
+#[test]
+fn edit_limits_hold_against_use_copies() {
+    let max = fdsl::limits::MAX_EDITS_PER_OBJECT;
+    let uses = |n: usize| " USE E".repeat(n);
+    let head = format!("FShape {{ edits [ DEF E FEdit {{ {STAMP} }} ] }}\n");
+    let text = format!("{head}FShape {{ edits [{}] }}", uses(max + 1));
+    let issues = errors(&text);
+    assert!(
+        issues[0].message.contains("more than the limit"),
+        "{issues:#?}"
+    );
+    // Each copy of a full shape counts again.
+    let copies = fvrml::MAX_LOAD_EDITS / max;
+    let text = format!(
+        "{head}DEF S FShape {{ edits [{}] }}\n{}",
+        uses(max - 1),
+        "USE S\n".repeat(copies)
+    );
+    let issues = errors(&text);
+    assert!(
+        issues[0].message.contains("edits; stopped"),
+        "{:#?}",
+        &issues[..1]
+    );
+    // Distinct short edits sweeping a tiny box far.
+    let sweep = r#"FEdit { operation "union" tool "box" halfExtents 1e-4 1e-4 1e-4 path [0 0 0 0 0 0 1 1, 0.8 0 0 0 0 0 1 1] }"#;
+    let n_stamps = 16_001;
+    let n = fvrml::MAX_LOAD_STAMPS / n_stamps + 1;
+    let text = format!("FShape {{ edits [ {} ] }}", [sweep].repeat(n).join("\n"));
+    let issues = errors(&text);
+    assert!(
+        issues[0].message.contains("tool stamps; stopped"),
+        "{issues:#?}"
+    );
 }

@@ -4,14 +4,15 @@
 
 use std::collections::BTreeMap;
 use std::fmt;
+use std::sync::Arc;
 
 use super::document::{Document, Field, Node, NodeRef, Pos, Value};
 use super::read::{Fields, Reader, Scope, address};
 use super::{
-    Issue, Issues, MAX_INLINE_DEPTH, MAX_INLINE_FILES, MAX_LOAD_STEPS, MAX_NESTING_DEPTH,
-    MAX_TOTAL_BYTES, parser,
+    Issue, Issues, MAX_INLINE_DEPTH, MAX_INLINE_FILES, MAX_LOAD_EDITS, MAX_LOAD_STAMPS,
+    MAX_LOAD_STEPS, MAX_NESTING_DEPTH, MAX_TOTAL_BYTES, parser,
 };
-use crate::object::{Motion, Object, ObjectError, Slot, Transform};
+use crate::object::{CompiledEdit, Motion, Object, ObjectError, Slot, Transform};
 use crate::scene::{Group, GroupId, ObjectId, Scene, SceneError};
 
 /// How to load.
@@ -109,6 +110,9 @@ fn run(
         root_path: options.path.clone(),
         inline_stack: Vec::new(),
         cache: BTreeMap::new(),
+        edit_cache: BTreeMap::new(),
+        n_edits: 0,
+        n_stamps: 0,
     };
     let scope = Scope::new(doc, 0, None);
     let place = Place {
@@ -158,6 +162,9 @@ struct GroupNode<'d> {
     children: Vec<&'d Field>,
 }
 
+/// A compiled `FEdit` and whether it is active.
+type LoadedEdit = (Arc<CompiledEdit>, bool);
+
 struct Loader<'r> {
     resolve: &'r mut dyn FnMut(&str) -> Result<String, String>,
     issues: Issues,
@@ -173,6 +180,13 @@ struct Loader<'r> {
     inline_stack: Vec<String>,
     /// Converted shapes by (file serial, node address): `USE` copies reuse them.
     cache: BTreeMap<(usize, usize), Option<Object>>,
+    /// Compiled `FEdit`s and whether they are active, keyed the same way (`None`: refused,
+    /// already reported).
+    edit_cache: BTreeMap<(usize, usize), Option<LoadedEdit>>,
+    /// Edits held by the objects loaded so far (bounded by [`MAX_LOAD_EDITS`]).
+    n_edits: usize,
+    /// Stamps the compiled edits expand to (bounded by [`MAX_LOAD_STAMPS`]).
+    n_stamps: usize,
 }
 
 impl Loader<'_> {
@@ -242,11 +256,20 @@ impl Loader<'_> {
             scope,
             positions: BTreeMap::new(),
         };
-        let data = reader.object(node);
+        let (data, edit_nodes) = reader.object(node);
         let positions = reader.positions;
         let object = match Object::new(data) {
-            Ok(object) => Some(object),
+            Ok(mut object) => {
+                self.apply_edits(scope, &mut object, &edit_nodes);
+                Some(object)
+            }
             Err(e) => {
+                // The edits are still read, so that their errors are reported too.
+                for edit in edit_nodes {
+                    if !self.stopped {
+                        self.compiled_edit(scope, edit);
+                    }
+                }
                 let pos = slot_of(&e)
                     .and_then(|slot| positions.get(&slot).copied())
                     .unwrap_or(node.pos);
@@ -258,23 +281,87 @@ impl Loader<'_> {
         object
     }
 
+    /// Applies the `FEdit`s to `object` in order, through the object model (the checks edits
+    /// from peers get); an edit it refuses is an error at the field it is about.
+    fn apply_edits<'d>(&mut self, scope: &Scope<'d>, object: &mut Object, nodes: &[&'d Node]) {
+        for &node in nodes {
+            if self.stopped {
+                return;
+            }
+            let Some((edit, active)) = self.compiled_edit(scope, node) else {
+                continue;
+            };
+            match object.apply_compiled(edit) {
+                Ok(idx) => {
+                    if !active {
+                        object.undo(idx);
+                    }
+                }
+                Err(e) => {
+                    // The history is full: later edits would be refused too.
+                    self.error(scope, node.pos, format!("this edit cannot be applied: {e}"));
+                    return;
+                }
+            }
+        }
+    }
+
+    /// An `FEdit` read and compiled, once per node (`USE` copies share it).
+    fn compiled_edit<'d>(&mut self, scope: &Scope<'d>, node: &'d Node) -> Option<LoadedEdit> {
+        let key = (scope.serial, address(node));
+        if let Some(cached) = self.edit_cache.get(&key) {
+            return cached.clone();
+        }
+        let mut reader = Reader {
+            issues: &mut self.issues,
+            scope,
+            positions: BTreeMap::new(),
+        };
+        let read = reader.edit(node);
+        let compiled = read.and_then(|read| match CompiledEdit::new(read.edit.clone()) {
+            Ok(compiled) => Some((Arc::new(compiled), read.active)),
+            Err(e) => {
+                let message = format!("this edit cannot be applied: {e}");
+                self.error(scope, read.pos_of(&e), message);
+                None
+            }
+        });
+        if let Some((edit, _)) = &compiled {
+            self.n_stamps = self.n_stamps.saturating_add(edit.n_stamps());
+            if self.n_stamps > MAX_LOAD_STAMPS {
+                let message = format!(
+                    "the edits read expand to more than {MAX_LOAD_STAMPS} tool stamps; stopped"
+                );
+                self.error(scope, node.pos, message);
+                self.stopped = true;
+            }
+        }
+        self.edit_cache.insert(key, compiled.clone());
+        compiled
+    }
+
     fn object<'d>(&mut self, scope: &Scope<'d>, node: &'d Node, place: &Place) {
         let Some(mut object) = self.converted(scope, node) else {
             return;
         };
         if let Some(moving) = &place.moving {
-            let mut data = object.data().clone();
-            if data.motion.is_some() {
+            if object.data().motion.is_some() {
                 self.warning(
                     scope,
                     node.pos,
                     "this shape's own motion is replaced by the enclosing FTransform's",
                 );
             }
-            data.transform = moving.transform.then(&data.transform);
-            data.motion = Some(moving.motion.clone());
-            match Object::new(data) {
-                Ok(o) => object = o,
+            // `set` keeps the edit history (edits are in object coordinates, which the
+            // placement does not change).
+            let transform = moving.transform.then(&object.data().transform);
+            let placed = object
+                .set(crate::object::Field::Transform(transform))
+                .and_then(|()| {
+                    object.set(crate::object::Field::Motion(Some(moving.motion.clone())))
+                });
+            match placed {
+                Ok(()) => {}
                 Err(e) => {
                     let pos = if slot_of(&e) == Some(Slot::Motion) {
                         moving.pos
@@ -285,6 +372,14 @@ impl Loader<'_> {
                     return;
                 }
             }
+        }
+        self.n_edits = self.n_edits.saturating_add(object.history().len());
+        if self.n_edits > MAX_LOAD_EDITS {
+            let message =
+                format!("the loaded objects hold more than {MAX_LOAD_EDITS} edits; stopped");
+            self.error(scope, node.pos, message);
+            self.stopped = true;
+            return;
         }
         let id = self.next_object;
         match self.scene.insert_object(ObjectId(id), object, place.group) {

@@ -13,16 +13,38 @@
 //!
 //! Writing is the reverse: [`save`] turns a scene into a [`Document`] and [`write()`] prints a
 //! document as canonical text that [`parse`] reads back equal (numbers bit-identical).
-//! `load(save(scene))` gives back the scene, except for the objects' edit histories, which
-//! FVRML text does not carry (the binary codec, [`Scene::encode`], does), and except that
-//! ids are those the loader assigns (see [`LoadOptions`]).
+//! `load(save(scene))` gives back the scene, the objects' edit histories included, except
+//! that ids are those the loader assigns (see [`LoadOptions`]).
 //!
 //! The dialect (node and field names, our extensions, limits) is described in the `fdsl`
 //! section of `ARCHITECTURE.md` and on the items below. In short: the thesis's `FShape`,
 //! `FGeometry`, `FAppearance`, `FMaterial`, `FTexture3D`, `FPhysics`, `FSurface`,
-//! `FTension`, `FFriction`, `FDensity`, `FForce` and `FTransform`; our `FColorMap` and
-//! `FDepth`; VRML97's `Shape`, `Appearance`, `Material`, `Box`, `Sphere`, `Cylinder`,
+//! `FTension`, `FFriction`, `FDensity`, `FForce` and `FTransform`; our `FColorMap`,
+//! `FDepth` and `FEdit`; VRML97's `Shape`, `Appearance`, `Material`, `Box`, `Sphere`, `Cylinder`,
 //! `Cone`, `IndexedFaceSet`, `Coordinate`, `Transform`, `Group` and `Inline`.
+//!
+//! An `FShape`'s sculpting history is its field `edits`, one `FEdit` per edit in history
+//! order, applied after the shape's description through the object model (the checks edits
+//! from peers get; a refused or malformed edit is a located error):
+//!
+//! ```text
+//! FEdit {
+//!   operation "paint"          # "union", "subtract", "intersect" or "paint"
+//!   property "friction"        # painting only: "diffuseColor", "transparency", "shininess",
+//!                              # "tension", "friction", "depth" or "density"
+//!   value 0.7                  # painting only: one number, or three (r g b) for a colour
+//!   tool "cylinder"            # "sphere" (radius), "box" (halfExtents x y z, rounding,
+//!   radius 0.1                 # default 0) or "cylinder" (radius, halfHeight)
+//!   halfHeight 0.3
+//!   path [                     # the stroke, one pose per line: position x y z,
+//!     0 0.2 0 0 0 0 1 1,       # rotation quaternion qx qy qz qw, uniform scale
+//!     0.5 0.2 0 0 0 0 1 1
+//!   ]
+//!   blendRadius 0.05           # default 0 (sharp)
+//!   mirror "x"                 # default none; "x", "y" or "z": also mirrored in x = 0, ...
+//!   active FALSE               # default TRUE; FALSE for an undone edit
+//! }
+//! ```
 //!
 //! ```
 //! use fdsl::fvrml::{self, LoadOptions};
@@ -52,6 +74,7 @@
 //! ```
 
 mod document;
+mod edit;
 mod lexer;
 mod load;
 mod parser;
@@ -92,6 +115,12 @@ pub const MAX_INLINE_DEPTH: usize = 8;
 pub const MAX_INLINE_FILES: usize = 256;
 /// Most nodes the loader visits over one load (bounds `USE` copies of `USE` copies).
 pub const MAX_LOAD_STEPS: usize = 1 << 20;
+/// Most edits the loaded objects hold together, `USE` copies included (a shape with many
+/// edits can be copied many times for a few bytes each).
+pub const MAX_LOAD_EDITS: usize = 1 << 22;
+/// Most tool stamps the edits of one load compile to (a short `FEdit` can sweep a small tool
+/// far, expanding to up to `MAX_STROKE_STAMPS` stamps).
+pub const MAX_LOAD_STAMPS: usize = 1 << 22;
 /// Most issues kept for one load; later ones are counted in a last issue.
 pub const MAX_ISSUES: usize = 256;
 

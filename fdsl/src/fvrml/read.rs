@@ -184,7 +184,7 @@ impl<'d> Reader<'_, 'd> {
         }
     }
 
-    fn wrong_type(&mut self, field: &Field, expected: &str) {
+    pub(super) fn wrong_type(&mut self, field: &Field, expected: &str) {
         self.error(
             field.value_pos,
             format!("the field `{}` should be {expected}", field.name),

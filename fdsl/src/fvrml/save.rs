@@ -1,23 +1,25 @@
 //! A [`Scene`] to a [`Document`]: groups become `Group` or `Transform` nodes, objects become
-//! `FShape`s with every property written out, in an order that makes the loader give the
-//! same ids back (see [`save`]).
+//! `FShape`s with every property and their edit histories (`FEdit`s) written out, in an order
+//! that makes the loader give the same ids back (see [`save`]).
 
 use std::collections::BTreeMap;
 
 use super::document::{Document, Field, Node, NodeRef, Value};
+use super::edit::write_edits;
 use super::placement::{numbers, write_domain, write_motion, write_timing, write_transform};
 use super::shape::parametric_by_outputs;
 use crate::mesh::TriMesh;
 use crate::object::{
-    Appearance, ColorDef, ColorMap, ForceField, Formula, Geometry, ObjectData, ParametricKind,
-    Physics, Property, Shape,
+    Appearance, ColorDef, ColorMap, ForceField, Formula, Geometry, Object, ParametricKind, Physics,
+    Property, Shape,
 };
 use crate::scene::{GroupId, ObjectId, Scene};
 
 /// The scene as a document. Every object is an `FShape` holding its name, transform, motion,
-/// geometry, appearance and physics; every group a `Group` (identity transform) or a
-/// `Transform` holding its name. Edit histories are not written: FVRML describes objects,
-/// not how they were sculpted (the binary [`Scene::encode`] keeps them).
+/// geometry, appearance, physics and edit history (`edits`, one `FEdit` per edit in history
+/// order, undone ones with `active FALSE`); every group a `Group` (identity transform) or a
+/// `Transform` holding its name. Numbers are written as they are, so loading gives back the
+/// same objects and edits bit for bit.
 ///
 /// Ids are not written either. Siblings are written in id order, a group placed before an
 /// object when its first object has a smaller id, so loading gives every object and group
@@ -80,7 +82,7 @@ impl Saver<'_> {
                 g += 1;
             } else {
                 if let Some(object) = self.scene.object(objects[o]) {
-                    out.push(node(shape(object.data())));
+                    out.push(node(shape(object)));
                 }
                 o += 1;
             }
@@ -128,7 +130,8 @@ fn node_field(name: &str, n: Node) -> Field {
 }
 
 /// An object as an `FShape`.
-fn shape(data: &ObjectData) -> Node {
+fn shape(object: &Object) -> Node {
+    let data = object.data();
     let mut fields = Vec::new();
     if !data.name.is_empty() {
         fields.push(Field::new("name", Value::String(data.name.clone())));
@@ -146,6 +149,7 @@ fn shape(data: &ObjectData) -> Node {
     if data.physics != Physics::default() {
         fields.push(node_field("physics", physics(&data.physics)));
     }
+    write_edits(object, &mut fields);
     Node::new("FShape", fields)
 }
 
@@ -284,7 +288,7 @@ fn color_map(map: &ColorMap) -> Node {
 
 /// An `f32` as the shortest `f64` whose text reads back to the same `f32` (so `0.8f32` is
 /// written `0.8`, not `0.800000011920929`).
-fn f32_value(v: f32) -> f64 {
+pub(super) fn f32_value(v: f32) -> f64 {
     let short: f64 = format!("{v}").parse().unwrap_or(f64::from(v));
     let same = short as f32 == v;
     if same { short } else { f64::from(v) }

@@ -17,6 +17,7 @@ pub const KNOWN_NODES: &[&str] = &[
     "FDensity",
     "FForce",
     "FTransform",
+    "FEdit",
     "Shape",
     "Appearance",
     "Material",

@@ -34,8 +34,9 @@ const KIND_MESSAGE: &str = "`kind` is \"implicit\", \"curve\", \"surface\" or \"
 
 impl<'d> Reader<'_, 'd> {
     /// An object from an `FShape` or `Shape` (what could not be read is reported and left
-    /// out).
-    pub(super) fn object(&mut self, node: &'d Node) -> ObjectData {
+    /// out), and the `FEdit` nodes of an `FShape`'s `edits`, in order (the loader applies
+    /// them to the object).
+    pub(super) fn object(&mut self, node: &'d Node) -> (ObjectData, Vec<&'d Node>) {
         let mut fields = Fields::new(node);
         let mut data = ObjectData {
             name: self.name(&mut fields),
@@ -62,8 +63,12 @@ impl<'d> Reader<'_, 'd> {
         {
             data.physics = self.physics(p);
         }
+        let mut edits = Vec::new();
+        if function_shape && let Some(field) = fields.get("edits") {
+            edits = self.edit_nodes(field);
+        }
         self.finish(fields);
-        data
+        (data, edits)
     }
 
     /// The `name` field (our extension), else the `DEF` name, else empty.
