@@ -219,7 +219,7 @@ pub struct ExportArgs {
     #[arg(long, value_name = "N")]
     pub depth: Option<u8>,
     /// The file to write: .stl (binary), .obj, .glb (meshes in scene coordinates, +y up) or
-    /// .wrl (FVRML, without edit histories). Written whole or not at all.
+    /// .wrl (FVRML, edit histories included). Written whole or not at all.
     #[arg(value_name = "OUT")]
     pub out: PathBuf,
 }

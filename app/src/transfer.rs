@@ -20,8 +20,8 @@
 //! triangulated, imported meshes as they are, displacement applied) at the depth asked,
 //! places it in scene coordinates (groups, transform and motion at t = 0; +y up, as in
 //! FVRML and glTF) and merges every object into one mesh. Colours, materials and physics
-//! are not written to mesh files. FVRML holds everything but the edit histories, which the
-//! report names. The file is written to a temporary file beside the target, synced, then
+//! are not written to mesh files. FVRML holds everything, the edit histories included
+//! (`FEdit` nodes, `fdsl::fvrml`). The file is written to a temporary file beside the target, synced, then
 //! renamed over it, so a failed export leaves no partial file.
 //!
 //! Guarantee: a mesh exported from a closed solid (an implicit solid inside its box, a
@@ -612,8 +612,7 @@ pub struct ExportReport {
     pub closed: Option<bool>,
     /// Each object exported, by id.
     pub objects: Vec<ExportedObject>,
-    /// What a person should know: objects not exported and why, solids whose mesh is open,
-    /// edit histories FVRML does not carry.
+    /// What a person should know: objects not exported and why, solids whose mesh is open.
     pub notes: Vec<String>,
 }
 
@@ -731,24 +730,8 @@ fn fvrml_bytes(scene: &Scene, object: Option<ObjectId>, report: &mut ExportRepor
         }
         None => scene,
     };
-    let mut edited = Vec::new();
     for (id, entry) in scene.objects() {
-        let exported = exported_object(id, &entry.object);
-        if exported.n_edits > 0 {
-            edited.push(format!(
-                "\"{}\" ({} edits)",
-                exported.name, exported.n_edits
-            ));
-        }
-        report.objects.push(exported);
-    }
-    if !edited.is_empty() {
-        report.notes.push(format!(
-            "FVRML does not hold edit histories: {} {} written as before sculpting; export .stl, \
-             .obj or .glb to keep the sculpted surface",
-            edited.join(", "),
-            if edited.len() == 1 { "is" } else { "are" }
-        ));
+        report.objects.push(exported_object(id, &entry.object));
     }
     fvrml::write(&fvrml::save(scene)).into_bytes()
 }

@@ -169,3 +169,178 @@ fn femur_one_peer_holds_the_bone_the_other_drills_through_a_takeover_and_exports
     drop(b);
     drop(a);
 }
+
+/// The classroom's mechanical part (Figure 7.9's "mechanical assembly"): a plate with a boss,
+/// bored through. In the model's own coordinates; the model sits 0.3 above the bench.
+const CLASSROOM_PART: &str = "(((0.8-abs(x)) & (0.5-abs(z)) & (0.1-abs(y))) | \
+                              ((0.25-sqrt(x^2+z^2)) & (y+0.1) & (0.45-y))) \\ (0.1-sqrt(x^2+z^2))";
+
+/// Runs `sculpt touch SCENE` over `rows` (scene coordinates, button up) and returns the forces.
+fn touch_forces(dir: &Path, scene: &Path, rows: &[(f64, DVec3)]) -> Vec<DVec3> {
+    let mut path_csv = String::from("t,x,y,z,button\n");
+    for (t, p) in rows {
+        path_csv.push_str(&format!("{t},{},{},{},0\n", p.x, p.y, p.z));
+    }
+    let (input, output) = (dir.join("in.csv"), dir.join("out.csv"));
+    std::fs::write(&input, path_csv).unwrap();
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_sculpt"))
+        .arg("touch")
+        .arg(scene)
+        .arg("--trace")
+        .arg(&input)
+        .arg("--out")
+        .arg(&output)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    std::fs::read_to_string(&output)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|line| {
+            let v: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
+            DVec3::new(v[1], v[2], v[3])
+        })
+        .collect()
+}
+
+#[test]
+fn classroom_two_students_shape_colour_weigh_dig_and_paint_one_model_and_save_it() {
+    let (dir_a, dir_b) = (scratch("classroom-a"), scratch("classroom-b"));
+    let classroom = app::demos::find("classroom").unwrap();
+    // "Student" opens the classroom; "WeiLei" joins with the invite.
+    let student = Engine::start(
+        EngineConfig {
+            demo: Some(classroom),
+            ..EngineConfig::on_loopback(&dir_a)
+        },
+        T0,
+    )
+    .unwrap();
+    wait_view(&student, "the classroom", |v| v.scene().len() == 2);
+    let addr = lock(student.view()).listen_addr().unwrap();
+    let weilei = Engine::start(
+        EngineConfig {
+            invite: Some(student.invite().clone()),
+            network: Network {
+                dial: vec![addr],
+                ..EngineConfig::on_loopback(&dir_b).network
+            },
+            ..EngineConfig::on_loopback(&dir_b)
+        },
+        T0,
+    )
+    .unwrap();
+    wait_view(&weilei, "the classroom from the student", |v| {
+        v.scene().len() == 2
+    });
+    let model = object_named(&student, "Model");
+    assert_eq!(object_named(&weilei, "Model"), model);
+
+    // Figure 7.10, line by line: the student loads the shape, WeiLei colours it, the student
+    // gives it a density.
+    command(&student, model, &format!("shape: {CLASSROOM_PART}"));
+    command(&weilei, model, "colour: 0.3+0.2*y, 0.45, 0.75-0.2*y");
+    command(&student, model, "density: 0.6");
+    // WeiLei's big cylinder paints friction over the plate's +x end; the student's small
+    // cylinder digs two holes through the plate's -x end and softens the skin beside them.
+    let big = "paint friction 0.9 cylinder radius 0.3";
+    stroke(
+        &weilei,
+        model,
+        big,
+        DVec3::new(0.55, 0.4, -0.2),
+        DVec3::new(0.55, 0.4, 0.2),
+    );
+    let small = "carve cylinder radius 0.06";
+    for z in [-0.25, 0.25] {
+        stroke(
+            &student,
+            model,
+            small,
+            DVec3::new(-0.55, 0.55, z),
+            DVec3::new(-0.55, 0.05, z),
+        );
+    }
+    let soften = "paint tension 0.3 cylinder radius 0.06";
+    stroke(
+        &student,
+        model,
+        soften,
+        DVec3::new(-0.3, 0.4, 0.0),
+        DVec3::new(-0.3, 0.4, 0.1),
+    );
+    let n_ops = lock(student.view()).n_ops();
+    wait_view(&weilei, "everyone's edits", |v| v.n_ops() == n_ops);
+    for peer in [&student, &weilei] {
+        let view = lock(peer.view());
+        let edits: Vec<&str> = view
+            .history()
+            .iter()
+            .filter(|h| h.what.contains("Model"))
+            .map(|h| h.status.as_str())
+            .collect();
+        assert!(
+            edits.len() >= 7 && edits.iter().all(|s| *s == "effective"),
+            "{edits:?}"
+        );
+    }
+    assert_eq!(
+        lock(student.view()).scene_hash_hex(),
+        lock(weilei.view()).scene_hash_hex()
+    );
+
+    // "save": the student writes the scene as FVRML; it reads back with the same objects and
+    // the painted friction where WeiLei's cylinder went.
+    let saved = dir_a.join("classroom-saved.wrl");
+    let scene = lock(student.view()).scene().clone();
+    app::transfer::export(&scene, None, &saved, 6).unwrap();
+    let mut no_files = |path: &str| Err(format!("no file {path}"));
+    let text = std::fs::read_to_string(&saved).unwrap();
+    let loaded = fdsl::fvrml::load(&text, &fdsl::fvrml::LoadOptions::default(), &mut no_files)
+        .unwrap()
+        .scene;
+    assert_eq!(loaded.len(), 2);
+    let part = loaded
+        .objects()
+        .find(|(_, o)| o.object.data().name == "Model")
+        .map(|(_, o)| o.object.clone())
+        .unwrap();
+    let mut sampler = fdsl::object::Sampler::new(std::sync::Arc::new(part));
+    let friction = fdsl::object::Paintable::Friction;
+    // (The model's own coordinates: 0.3 below the scene's.)
+    assert_eq!(
+        sampler.scalar(friction, DVec3::new(0.55, 0.1, 0.0), 0.0),
+        Some(0.9)
+    );
+    assert_ne!(
+        sampler.scalar(friction, DVec3::new(-0.55, 0.1, 0.0), 0.0),
+        Some(0.9)
+    );
+
+    // Felt from the saved file: a hand going down through a hole meets nothing; beside it,
+    // the plate's density resists (the plate spans y 0.2 to 0.4 in the scene).
+    let down = |x: f64, z: f64| {
+        [
+            (0.0, DVec3::new(x, 0.6, z)),
+            (0.2, DVec3::new(x, 0.6, z)),
+            (1.0, DVec3::new(x, 0.1, z)),
+        ]
+    };
+    let through_hole = touch_forces(&dir_a, &saved, &down(-0.55, 0.25));
+    let beside = touch_forces(&dir_a, &saved, &down(-0.55, 0.0));
+    // Ticks 400 to 600: the hand between y 0.35 and 0.225, inside the plate.
+    let drag = |forces: &[DVec3]| forces[400..600].iter().sum::<DVec3>() / 200.0;
+    let (hole, solid) = (drag(&through_hole), drag(&beside));
+    assert!(hole.length() < 1e-9, "the hole is empty: {hole}");
+    assert!(
+        solid.y > 0.05 && solid.y > 0.9 * solid.length(),
+        "the plate: {solid}"
+    );
+    drop(weilei);
+    drop(student);
+}
