@@ -126,11 +126,10 @@ pub(super) fn chain_factors<T: Real>(op: BinaryOp, a: T, b: T) -> (T, T) {
         BinaryOp::RAnd | BinaryOp::ROr => {
             let s = (a * a + b * b).sqrt();
             let sign = if op == BinaryOp::RAnd { -one } else { one };
-            if s == T::ZERO {
-                (one, one)
-            } else {
-                (one + sign * a / s, one + sign * b / s)
-            }
+            // Both factors are computed before the choice, so that the bulk loops see a
+            // select rather than a branch.
+            let (ka, kb) = (one + sign * a / s, one + sign * b / s);
+            if s == T::ZERO { (one, one) } else { (ka, kb) }
         }
         BinaryOp::Min
         | BinaryOp::Max
