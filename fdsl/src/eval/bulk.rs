@@ -113,7 +113,8 @@ impl BulkEval {
     }
 }
 
-fn wide_simd_available() -> bool {
+/// Whether the CPU runs the AVX2 and FMA builds of the evaluators' loops.
+pub(super) fn wide_simd_available() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")

@@ -3,8 +3,10 @@
 //!
 //! Where an operation is not differentiable (the crease of `min`, a step of `floor`), the
 //! derivative of the branch the value came from is used, which is what surface normals need.
+//!
+//! The rules are written once, per scalar, and shared: [`GradEval`] runs them in f64 at a point,
+//! and the bulk evaluator (`grad_bulk.rs`) runs them in f32 on each lane of its arrays.
 
-use super::CHUNK;
 use super::real::Real;
 use crate::compile::{BinaryOp, TernaryOp, UnaryOp};
 use crate::tape::{Code, Operand, Tape};
@@ -23,7 +25,7 @@ pub struct Grad<T> {
 }
 
 impl<T: Real> Grad<T> {
-    fn constant(v: T) -> Self {
+    pub(super) fn constant(v: T) -> Self {
         Grad {
             v,
             dx: T::ZERO,
@@ -61,7 +63,7 @@ impl<T: Real> Grad<T> {
 /// `d * k`, where a zero factor wins over an infinite one (the derivative of `sqrt` at 0 of a
 /// constant is 0, and so is the derivative of `sign` of anything).
 #[inline(always)]
-fn scale<T: Real>(d: T, k: T) -> T {
+pub(super) fn scale<T: Real>(d: T, k: T) -> T {
     if d == T::ZERO || k == T::ZERO {
         T::ZERO
     } else {
@@ -69,56 +71,104 @@ fn scale<T: Real>(d: T, k: T) -> T {
     }
 }
 
+/// `d op(a) / da`, given `a` and the value `v = op(a)`.
 #[inline(always)]
-fn unary<T: Real>(op: UnaryOp, a: Grad<T>) -> Grad<T> {
-    let v = T::unary(op, a.v);
+pub(super) fn unary_factor<T: Real>(op: UnaryOp, a: T, v: T) -> T {
     let two = T::ONE + T::ONE;
-    let k = match op {
+    match op {
         UnaryOp::Neg => -T::ONE,
         UnaryOp::Abs => {
-            if a.v < T::ZERO {
+            if a < T::ZERO {
                 -T::ONE
             } else {
                 T::ONE
             }
         }
         UnaryOp::Sqrt => T::ONE / (two * v),
-        UnaryOp::Square => two * a.v,
-        UnaryOp::Sin => a.v.cos(),
-        UnaryOp::Cos => -a.v.sin(),
+        UnaryOp::Square => two * a,
+        UnaryOp::Sin => a.cos(),
+        UnaryOp::Cos => -a.sin(),
         UnaryOp::Tan => {
-            let c = a.v.cos();
+            let c = a.cos();
             T::ONE / (c * c)
         }
-        UnaryOp::Asin => T::ONE / (T::ONE - a.v * a.v).sqrt(),
-        UnaryOp::Acos => -T::ONE / (T::ONE - a.v * a.v).sqrt(),
-        UnaryOp::Atan => T::ONE / (T::ONE + a.v * a.v),
+        UnaryOp::Asin => T::ONE / (T::ONE - a * a).sqrt(),
+        UnaryOp::Acos => -T::ONE / (T::ONE - a * a).sqrt(),
+        UnaryOp::Atan => T::ONE / (T::ONE + a * a),
         UnaryOp::Exp => v,
-        UnaryOp::Ln => T::ONE / a.v,
+        UnaryOp::Ln => T::ONE / a,
         UnaryOp::Floor | UnaryOp::Ceil | UnaryOp::Sign | UnaryOp::Not => T::ZERO,
-    };
-    Grad::chain(v, k, a)
+    }
 }
 
 #[inline(always)]
-fn binary<T: Real>(op: BinaryOp, a: Grad<T>, b: Grad<T>) -> Grad<T> {
+pub(super) fn unary<T: Real>(op: UnaryOp, a: Grad<T>) -> Grad<T> {
+    let v = T::unary(op, a.v);
+    Grad::chain(v, unary_factor(op, a.v, v), a)
+}
+
+/// `(d/da, d/db)` of the binary operations whose derivative is `ka a' + kb b'` everywhere:
+/// the arithmetic ones, `atan2`, `%` and the R-functions. The others (`min`, `max`, `pow` and
+/// the comparisons) have their own rules in [`binary`] and never reach here.
+#[inline(always)]
+pub(super) fn chain_factors<T: Real>(op: BinaryOp, a: T, b: T) -> (T, T) {
+    let one = T::ONE;
+    match op {
+        BinaryOp::Add => (one, one),
+        BinaryOp::Sub => (one, -one),
+        BinaryOp::Mul => (b, a),
+        BinaryOp::Div => (one / b, -a / (b * b)),
+        BinaryOp::Atan2 => {
+            let d = a * a + b * b;
+            (b / d, -a / d)
+        }
+        BinaryOp::Mod => (one, -(a / b).floor()),
+        BinaryOp::RAnd | BinaryOp::ROr => {
+            let s = (a * a + b * b).sqrt();
+            let sign = if op == BinaryOp::RAnd { -one } else { one };
+            // Both factors are computed before the choice, so that the bulk loops see a
+            // select rather than a branch.
+            let (ka, kb) = (one + sign * a / s, one + sign * b / s);
+            if s == T::ZERO { (one, one) } else { (ka, kb) }
+        }
+        BinaryOp::Min
+        | BinaryOp::Max
+        | BinaryOp::Pow
+        | BinaryOp::Lt
+        | BinaryOp::Le
+        | BinaryOp::Eq
+        | BinaryOp::And
+        | BinaryOp::Or => unreachable!("{op:?} has no chain factors"),
+    }
+}
+
+/// Whether `min(a, b)` takes its value (and so its derivative) from `a`.
+#[inline(always)]
+pub(super) fn min_takes_a<T: Real>(a: T, b: T) -> bool {
+    a <= b || b.is_nan()
+}
+
+/// Whether `max(a, b)` takes its value (and so its derivative) from `a`.
+#[inline(always)]
+pub(super) fn max_takes_a<T: Real>(a: T, b: T) -> bool {
+    a >= b || b.is_nan()
+}
+
+#[inline(always)]
+pub(super) fn binary<T: Real>(op: BinaryOp, a: Grad<T>, b: Grad<T>) -> Grad<T> {
     let v = T::binary(op, a.v, b.v);
     let zero = T::ZERO;
     let one = T::ONE;
     match op {
-        BinaryOp::Add => Grad::chain2(v, one, a, one, b),
-        BinaryOp::Sub => Grad::chain2(v, one, a, -one, b),
-        BinaryOp::Mul => Grad::chain2(v, b.v, a, a.v, b),
-        BinaryOp::Div => Grad::chain2(v, one / b.v, a, -a.v / (b.v * b.v), b),
         BinaryOp::Min => {
-            if a.v <= b.v || b.v.is_nan() {
+            if min_takes_a(a.v, b.v) {
                 Grad { v, ..a }
             } else {
                 Grad { v, ..b }
             }
         }
         BinaryOp::Max => {
-            if a.v >= b.v || b.v.is_nan() {
+            if max_takes_a(a.v, b.v) {
                 Grad { v, ..a }
             } else {
                 Grad { v, ..b }
@@ -137,28 +187,25 @@ fn binary<T: Real>(op: BinaryOp, a: Grad<T>, b: Grad<T>) -> Grad<T> {
             };
             Grad::chain2(v, ka, a, kb, b)
         }
-        BinaryOp::Atan2 => {
-            let d = a.v * a.v + b.v * b.v;
-            Grad::chain2(v, b.v / d, a, -a.v / d, b)
-        }
-        BinaryOp::Mod => Grad::chain2(v, one, a, -(a.v / b.v).floor(), b),
         BinaryOp::Lt | BinaryOp::Le | BinaryOp::Eq | BinaryOp::And | BinaryOp::Or => {
             Grad::constant(v)
         }
-        BinaryOp::RAnd | BinaryOp::ROr => {
-            let s = (a.v * a.v + b.v * b.v).sqrt();
-            let sign = if op == BinaryOp::RAnd { -one } else { one };
-            if s == zero {
-                Grad::chain2(v, one, a, one, b)
-            } else {
-                Grad::chain2(v, one + sign * a.v / s, a, one + sign * b.v / s, b)
-            }
+        BinaryOp::Add
+        | BinaryOp::Sub
+        | BinaryOp::Mul
+        | BinaryOp::Div
+        | BinaryOp::Atan2
+        | BinaryOp::Mod
+        | BinaryOp::RAnd
+        | BinaryOp::ROr => {
+            let (ka, kb) = chain_factors(op, a.v, b.v);
+            Grad::chain2(v, ka, a, kb, b)
         }
     }
 }
 
 #[inline(always)]
-fn ternary<T: Real>(op: TernaryOp, a: Grad<T>, b: Grad<T>, c: Grad<T>) -> Grad<T> {
+pub(super) fn ternary<T: Real>(op: TernaryOp, a: Grad<T>, b: Grad<T>, c: Grad<T>) -> Grad<T> {
     match op {
         TernaryOp::Select => {
             if a.v != T::ZERO {
@@ -262,120 +309,11 @@ impl GradEval {
     }
 }
 
-/// Values and gradients over slices of points in f32 (for surface normals).
-///
-/// Like [`super::BulkEval`], it runs one instruction at a time over a chunk of
-/// [`CHUNK`] points, so the tape is interpreted once per chunk rather than once per point.
-#[derive(Clone, Debug)]
-pub struct GradBulkEval {
-    tape: Tape,
-    regs: Vec<[Grad<f32>; CHUNK]>,
-}
-
-type GradLanes = [Grad<f32>; CHUNK];
-
-impl GradBulkEval {
-    /// An evaluator for `tape`.
-    pub fn new(tape: &Tape) -> GradBulkEval {
-        GradBulkEval {
-            tape: tape.clone(),
-            regs: vec![[Grad::default(); CHUNK]; tape.n_regs()],
-        }
-    }
-
-    /// Value and gradient of the first output at each point, written to `out`.
-    pub fn eval(&mut self, x: &[f32], y: &[f32], z: &[f32], t: f32, out: &mut [Grad<f32>]) {
-        let n = x.len();
-        assert!(
-            y.len() == n && z.len() == n && out.len() == n,
-            "slices differ in length"
-        );
-        let mut start = 0;
-        while start < n {
-            let len = CHUNK.min(n - start);
-            let coords = [
-                &x[start..start + len],
-                &y[start..start + len],
-                &z[start..start + len],
-            ];
-            for (slot, reg) in self.tape.inputs().iter().enumerate() {
-                let Some(r) = reg else { continue };
-                let lanes = &mut self.regs[*r as usize];
-                for (i, g) in lanes.iter_mut().enumerate() {
-                    let v = if slot == 3 {
-                        t
-                    } else {
-                        coords[slot].get(i).copied().unwrap_or(0.0)
-                    };
-                    *g = Grad::constant(v);
-                    match slot {
-                        0 => g.dx = 1.0,
-                        1 => g.dy = 1.0,
-                        2 => g.dz = 1.0,
-                        _ => {}
-                    }
-                }
-            }
-            for instr in self.tape.instrs() {
-                run_instr(instr, &mut self.regs);
-            }
-            match self.tape.outputs()[0] {
-                Operand::Reg(r) => {
-                    out[start..start + len].copy_from_slice(&self.regs[r as usize][..len])
-                }
-                Operand::Const(c) => out[start..start + len].fill(Grad::constant(c as f32)),
-            }
-            start += len;
-        }
-    }
-}
-
-/// One instruction over a chunk. The operation is matched once, outside the lane loop, so
-/// each loop body is the scalar rule specialised to that operation.
-fn run_instr(instr: &crate::tape::Instr, regs: &mut [GradLanes]) {
-    let lane = |regs: &[GradLanes], o: Operand, i: usize| match o {
-        Operand::Reg(r) => regs[r as usize][i],
-        Operand::Const(c) => Grad::constant(c as f32),
-    };
-    let [a, b, c] = instr.args;
-    let out = instr.out as usize;
-    let mut result = [Grad::default(); CHUNK];
-    macro_rules! each {
-        ($f:expr) => {
-            for (i, r) in result.iter_mut().enumerate() {
-                *r = $f(i);
-            }
-        };
-    }
-    match instr.code {
-        Code::Unary(op) => {
-            macro_rules! u {
-                ($($v:ident),*) => {
-                    match op {
-                        $(UnaryOp::$v => each!(|i| unary(UnaryOp::$v, lane(regs, a, i))),)*
-                    }
-                };
-            }
-            u!(
-                Neg, Abs, Sqrt, Square, Sin, Cos, Tan, Asin, Acos, Atan, Exp, Ln, Floor, Ceil,
-                Sign, Not
-            )
-        }
-        Code::Binary(op) => {
-            macro_rules! b {
-                ($($v:ident),*) => {
-                    match op {
-                        $(BinaryOp::$v => each!(|i| binary(BinaryOp::$v, lane(regs, a, i), lane(regs, b, i))),)*
-                    }
-                };
-            }
-            b!(
-                Add, Sub, Mul, Div, Min, Max, Pow, Atan2, Mod, Lt, Le, Eq, And, Or, RAnd, ROr
-            )
-        }
-        Code::Ternary(op) => {
-            each!(|i| ternary(op, lane(regs, a, i), lane(regs, b, i), lane(regs, c, i)))
-        }
-    }
-    regs[out] = result;
+/// Value and gradient of the first output at one point by the scalar rules in f32: the
+/// reference the bulk evaluator must equal bit for bit.
+#[cfg(test)]
+pub(super) fn eval_f32(tape: &Tape, p: [f32; 4]) -> Grad<f32> {
+    let mut regs = vec![Grad::default(); tape.n_regs()];
+    run(tape, &mut regs, p);
+    output(tape, &regs, 0)
 }

@@ -9,12 +9,14 @@
 
 mod bulk;
 mod grad;
+mod grad_bulk;
 mod interval;
 mod point;
 mod real;
 
 pub use bulk::{BulkEval, CHUNK};
-pub use grad::{Grad, GradBulkEval, GradEval};
+pub use grad::{Grad, GradEval};
+pub use grad_bulk::GradBulkEval;
 pub use interval::{Interval, IntervalEval};
 pub use point::PointEval;
 pub use real::{fast_cos, fast_sin};
