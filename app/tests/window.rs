@@ -118,13 +118,30 @@ fn sculpt(display: Option<&str>, args: &[&str]) -> Output {
     let data = Path::new(env!("CARGO_TARGET_TMPDIR"))
         .join("window")
         .join(format!("xdg-data-{}", std::process::id()));
-    sculpt_with_data(display, args, &data)
+    sculpt_under(display, args, &data, None)
 }
 
 /// [`sculpt`] with `data` as its data directory (where settings are kept).
 fn sculpt_with_data(display: Option<&str>, args: &[&str], data: &Path) -> Output {
+    sculpt_under(display, args, data, None)
+}
+
+/// [`sculpt_with_data`], run as `WRAPPER sculpt ARGS...` when a wrapper is given.
+fn sculpt_under(
+    display: Option<&str>,
+    args: &[&str],
+    data: &Path,
+    wrapper: Option<&Path>,
+) -> Output {
     let runtime = scratch("xdg-runtime");
-    let mut command = Command::new(env!("CARGO_BIN_EXE_sculpt"));
+    let mut command = match wrapper {
+        Some(wrapper) => {
+            let mut c = Command::new(wrapper);
+            c.arg(env!("CARGO_BIN_EXE_sculpt"));
+            c
+        }
+        None => Command::new(env!("CARGO_BIN_EXE_sculpt")),
+    };
     command
         .args(args)
         .env_remove("WAYLAND_DISPLAY")
@@ -185,6 +202,17 @@ fn window_with(
     name: &str,
     args: &[&str],
 ) -> (Value, RgbaImage, String) {
+    window_under(display, dir, name, args, None)
+}
+
+/// [`window_with`], run under `wrapper` when one is given.
+fn window_under(
+    display: &Display,
+    dir: &Path,
+    name: &str,
+    args: &[&str],
+    wrapper: Option<&Path>,
+) -> (Value, RgbaImage, String) {
     let (shot, dump) = (
         dir.join(format!("{name}.png")),
         dir.join(format!("{name}.json")),
@@ -200,7 +228,10 @@ fn window_with(
         "--exit-after-frames",
         FRAMES_MAX,
     ]);
-    let run = sculpt(Some(&display.name), &all);
+    let data = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("window")
+        .join(format!("xdg-data-{}", std::process::id()));
+    let run = sculpt_under(Some(&display.name), &all, &data, wrapper);
     let (stdout, stderr) = (text(&run.stdout), text(&run.stderr));
     assert!(run.status.success(), "{name}: {stdout}\n{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
@@ -496,6 +527,70 @@ fn touching_with_the_mouse_runs_the_servo_on_the_scene_and_the_rind_pushes_back(
         .map(|v| v.as_f64().unwrap())
         .collect();
     assert!((tool[2] - y).abs() < 0.05, "{tool:?} against {y}");
+}
+
+/// The fake SpaceMouse's wrapper (`haptic/tests/fake-hid/run.sh`): it runs a command with a
+/// fake 3D mouse on hidraw in a private mount namespace, or exits 77 saying why it cannot.
+fn fake_3d_mouse() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../haptic/tests/fake-hid/run.sh")
+}
+
+#[test]
+fn a_3d_mouse_moves_the_touch_tool_and_without_one_the_window_says_what_to_do() {
+    let display = display();
+    let dir = scratch("3d-mouse");
+    // No 3D mouse here: the window keeps looking and says so; touch goes on with the mouse.
+    let lonely = ["touch: on", "touch-device: 3d-mouse", "wait-secs: 1"];
+    let run = window_run(&display, &dir, "no-3d-mouse", &lonely);
+    let status = run.state["touch"]["device_status"]
+        .as_str()
+        .unwrap_or_default();
+    assert!(status.contains("still looking"), "{}", run.state["touch"]);
+    // With the fake SpaceMouse (it streams X from 0 to 349, Y = -X, Z = 7: a push along +x
+    // and -y, held), the tool moves +x and -y from where it was put, outside the melon.
+    let check = Command::new(fake_3d_mouse()).arg("true").output().unwrap();
+    if check.status.code() == Some(77) {
+        eprintln!("skipped the fake 3D mouse: {}", text(&check.stdout));
+        return;
+    }
+    assert!(
+        check.status.success(),
+        "{}{}",
+        text(&check.stdout),
+        text(&check.stderr)
+    );
+    let store = dir.join("fake-store");
+    let args = [
+        "--store",
+        store.to_str().unwrap(),
+        "--command",
+        "touch: on",
+        "--command",
+        "touch-at: -0.8,0.8,-0.8",
+        "--command",
+        "touch-device: 3d-mouse",
+        "--command",
+        "wait-secs: 2",
+    ];
+    let (state, _, stdout) =
+        window_under(&display, &dir, "3d-mouse", &args, Some(&fake_3d_mouse()));
+    let touch = &state["touch"];
+    assert!(stdout.contains("open /hidraw0"), "{stdout}");
+    assert_eq!(
+        touch["device_status"].as_str(),
+        Some("3D mouse connected: push the cap to move the tool"),
+        "{touch}"
+    );
+    let hip: Vec<f64> = touch["hip"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(
+        hip[0] > -0.5 && hip[1] < 0.5,
+        "the tool did not move: {touch}"
+    );
 }
 
 #[test]

@@ -128,6 +128,11 @@ impl LiveTouch {
             .move_by_metres(target - self.mouse.position_metres());
     }
 
+    /// The mouse device the servo samples, for another input to move (a 3D mouse).
+    pub fn mouse_handle(&self) -> MouseHandle {
+        self.mouse.clone()
+    }
+
     /// Presses or releases the device's button (bit 0).
     pub fn set_button(&self, down: bool) {
         self.mouse.set_buttons(u32::from(down));

@@ -242,6 +242,12 @@ pub struct SculptApp {
     pub(super) brush: Brush,
     /// Touch with the mouse: the servo on the live scene, while on.
     pub(super) touch: Option<::app::touch::live::LiveTouch>,
+    /// A 3D mouse moving the touch tool, while chosen and touch is on; its button presses
+    /// arrive on the receiver.
+    pub(super) spacemouse: Option<(
+        ::app::touch::spacemouse::SpaceMouseDriver,
+        std::sync::mpsc::Receiver<bool>,
+    )>,
     /// The window's layout as last drawn (kept between runs).
     pub(super) layout: Layout,
     /// The scene's time (motions), playing or paused.
@@ -336,6 +342,7 @@ impl SculptApp {
             scene_clock: clock::SceneClock::new(clock::now().instant),
             layout: Layout::default(),
             touch: None,
+            spacemouse: None,
             frame_time_secs: 0.0,
             stroke: None,
             preview_at: None,
@@ -867,6 +874,14 @@ impl SculptApp {
         if let Some(down) = input.touch_button {
             self.touch_button(down);
         }
+        let presses: Vec<bool> = self
+            .spacemouse
+            .as_ref()
+            .map(|(_, presses)| presses.try_iter().collect())
+            .unwrap_or_default();
+        for down in presses {
+            self.touch_button(down);
+        }
         self.follow_touch_stroke();
         if input.hover_px.is_some() || input.depth_scroll != 0.0 {
             let depth =
@@ -1096,9 +1111,36 @@ impl SculptApp {
                     .into();
             }
             (true, Some(live)) => self.touch = Some(live),
-            (false, Some(live)) => live.stop(),
+            (false, Some(live)) => {
+                self.spacemouse = None;
+                live.stop();
+            }
             (false, None) => {}
         }
+        Ok(())
+    }
+
+    /// Moves the touch tool with a 3D mouse (`true`, turning touch on if need be) or with the
+    /// pointer alone (`false`). Without a 3D mouse the driver keeps looking and says so.
+    pub(super) fn set_spacemouse(&mut self, on: bool) -> Result<(), String> {
+        if !on {
+            self.spacemouse = None;
+            return Ok(());
+        }
+        if self.spacemouse.is_some() {
+            return Ok(());
+        }
+        self.set_touching(true)?;
+        let Some(live) = &self.touch else {
+            return Err("touch did not start".into());
+        };
+        let (press, presses) = std::sync::mpsc::channel();
+        let driver =
+            ::app::touch::spacemouse::SpaceMouseDriver::spawn(live.mouse_handle(), move |down| {
+                let _ = press.send(down);
+            })
+            .map_err(|e| format!("cannot start the 3D mouse thread: {e}"))?;
+        self.spacemouse = Some((driver, presses));
         Ok(())
     }
 

@@ -221,6 +221,23 @@ impl SculptApp {
                 self.hooks.idle_frames = 0;
                 return;
             }
+            if let Some(word) = line.strip_prefix("touch-device:") {
+                let on = match word.trim() {
+                    "3d-mouse" => true,
+                    "mouse" => false,
+                    other => {
+                        self.hooks
+                            .fail(format!("bad `touch-device: {other}`: mouse or 3d-mouse"));
+                        return;
+                    }
+                };
+                println!("sculpt: scripted touch device: {}", word.trim());
+                if let Err(e) = self.set_spacemouse(on) {
+                    self.hooks.fail(e);
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
             if let Some(spec) = line.strip_prefix("touch-stroke:") {
                 let point = |text: &str| -> Option<glam::DVec3> {
                     let v: Vec<f64> = text
@@ -399,6 +416,7 @@ impl SculptApp {
                     "period_micros": s.period_micros,
                     "n_scenes_taken": s.n_scenes_taken,
                     "compute_micros": s.compute_micros,
+                    "device_status": self.spacemouse.as_ref().map(|(d, _)| d.status().text()),
                 })
             }),
             "side_panel_points": self.layout.side_panel_points,

@@ -643,6 +643,20 @@ impl SculptApp {
         {
             self.status = format!("cannot touch: {e}");
         }
+        let mut with_3d_mouse = self.spacemouse.is_some();
+        let tip = "move the tool with a 3D mouse (3Dconnexion SpaceMouse): push the cap to \
+                   move it, its left button sculpts; plugging and unplugging are fine";
+        if ui
+            .checkbox(&mut with_3d_mouse, "3D mouse")
+            .on_hover_text(tip)
+            .changed()
+            && let Err(e) = self.set_spacemouse(with_3d_mouse)
+        {
+            self.status = format!("cannot use the 3D mouse: {e}");
+        }
+        if let Some((driver, _)) = &self.spacemouse {
+            ui.label(driver.status().text());
+        }
         let Some(live) = &self.touch else {
             return;
         };

@@ -3,9 +3,17 @@
 # with a HID PID force-feedback device). Needs root, unshare, python3-fusepy and libfuse2.
 # Everything happens in a private mount namespace: /sys and /dev of the host are untouched.
 #   usage: FAKE_HID_KIND=spacemouse|pid run.sh CMD [ARGS...]
+# Exits 77, saying why, where it cannot run (not root, no /dev/fuse, fusepy or unshare missing).
 set -euo pipefail
 HERE=$(cd "$(dirname "$0")" && pwd)
 if [ -z "${IN_FAKE_NS:-}" ]; then
+  # Exit 77 (skipped) with the reason when the fake cannot run here.
+  why=""
+  [ "$(id -u)" = 0 ] || why="not root"
+  [ -e /dev/fuse ] || why="no /dev/fuse"
+  /usr/bin/python3 -c "import fusepy" 2>/dev/null || why="python3-fusepy missing"
+  command -v unshare >/dev/null || why="unshare missing"
+  if [ -n "$why" ]; then echo "fake HID unavailable: $why"; exit 77; fi
   exec env IN_FAKE_NS=1 unshare --mount --propagation private "$0" "$@"
 fi
 KIND=${FAKE_HID_KIND:-spacemouse}
