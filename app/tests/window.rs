@@ -529,6 +529,67 @@ fn touching_with_the_mouse_runs_the_servo_on_the_scene_and_the_rind_pushes_back(
     assert!((tool[2] - y).abs() < 0.05, "{tool:?} against {y}");
 }
 
+#[test]
+fn a_recorded_touch_path_replays_headless_to_the_force_the_window_showed() {
+    let display = display();
+    let dir = scratch("touch-record");
+    let recorded = dir.join("path.csv");
+    let record = format!("touch-record: {}", recorded.display());
+    // Above the melon, then 0.02 into its rind (zone 0.05 deep), resting there.
+    let y = (0.98f64 * 0.98 - 0.08).sqrt();
+    let rest = format!("touch-at: -0.2,{y},-0.2");
+    let run = window_run(
+        &display,
+        &dir,
+        "record",
+        &[
+            "touch: on",
+            &record,
+            "touch-at: -0.2,1.1,-0.2",
+            "wait-secs: 0.5",
+            &rest,
+            "wait-secs: 1",
+            "touch-record: off",
+        ],
+    );
+    let touch = &run.state["touch"];
+    assert!(touch["n_plotted"].as_u64().unwrap() > 3, "{touch}");
+    assert!(touch["recording"].is_null(), "{touch}");
+    let window_force = touch["force"][1].as_f64().unwrap();
+    assert!(window_force > 1.0, "{touch}");
+    // The file is a touch path; `sculpt touch` replays it over the same scene.
+    let csv = std::fs::read_to_string(&recorded).unwrap();
+    let path = app::touch::path::TouchPath::parse(&csv).unwrap();
+    assert!(path.n_ticks(0.001) > 1000, "{csv}");
+    let forces = dir.join("forces.csv");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/watermelon.wrl");
+    let replay = sculpt(
+        None,
+        &[
+            "touch",
+            scene.to_str().unwrap(),
+            "--trace",
+            recorded.to_str().unwrap(),
+            "--out",
+            forces.to_str().unwrap(),
+        ],
+    );
+    assert!(replay.status.success(), "{}", text(&replay.stderr));
+    let last = std::fs::read_to_string(&forces).unwrap();
+    let last: Vec<f64> = last
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    // Resting in the rind, the replay pushes up as the window's servo did.
+    assert!(
+        last[2] > 0.7 * window_force && last[2] < 1.3 * window_force,
+        "replayed {last:?} against the window's {window_force} N up"
+    );
+}
+
 /// The fake SpaceMouse's wrapper (`haptic/tests/fake-hid/run.sh`): it runs a command with a
 /// fake 3D mouse on hidraw in a private mount namespace, or exits 77 saying why it cannot.
 fn fake_3d_mouse() -> PathBuf {

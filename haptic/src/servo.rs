@@ -97,6 +97,7 @@ pub struct ServoStats {
     n_scenes_taken: AtomicU64,
     force_bits: [AtomicU64; 3],
     tip_bits: [AtomicU64; 3],
+    energy_bits: AtomicU64,
     top_id: AtomicU64,
 }
 
@@ -123,6 +124,9 @@ pub struct StatsSnapshot {
     pub hip_world: DVec3,
     /// The ruling container, if any.
     pub top_id: Option<u64>,
+    /// The passivity observer's energy after the last tick, joules: what the rendering has
+    /// dissipated minus what it injected (negative while it has injected energy).
+    pub energy_joules: f64,
 }
 
 impl ServoStats {
@@ -136,6 +140,7 @@ impl ServoStats {
             n_stalls: AtomicU64::new(0),
             n_scenes_taken: AtomicU64::new(0),
             force_bits: Default::default(),
+            energy_bits: AtomicU64::new(0),
             tip_bits: Default::default(),
             top_id: AtomicU64::new(u64::MAX),
         }
@@ -180,6 +185,7 @@ impl ServoStats {
             force_newtons: vec3(&self.force_bits),
             hip_world: vec3(&self.tip_bits),
             top_id: (top != u64::MAX).then_some(top),
+            energy_joules: f64::from_bits(self.energy_bits.load(Ordering::Relaxed)),
         }
     }
 }
@@ -348,6 +354,9 @@ impl<D: HapticDevice, S: Scene> Servo<D, S> {
         }
         store_vec3(&self.stats.force_bits, out.force_newtons);
         store_vec3(&self.stats.tip_bits, out.hip_world);
+        self.stats
+            .energy_bits
+            .store(self.state.energy_joules().to_bits(), Ordering::Relaxed);
         self.stats
             .top_id
             .store(out.top_id.unwrap_or(u64::MAX), Ordering::Relaxed);

@@ -72,7 +72,10 @@ impl LiveTouch {
             n_buttons: mouse.capabilities().n_buttons,
             ..model_caps
         };
-        let zone = zone_for(&caps, bounds, None);
+        // The zone is fitted with the model's workspace, as `sculpt touch` fits it, so that a
+        // recorded path replays to the forces shown here; the mouse's larger workspace only
+        // gives the tool room around it.
+        let zone = zone_for(&model_caps, bounds, None);
         // The tool starts near the top of the workspace, above the objects the zone is fitted
         // around: started at its centre it would begin inside them, and a hand that begins
         // inside a skin never feels it (the stack takes it as already through).

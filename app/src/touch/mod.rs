@@ -6,6 +6,7 @@
 //!   runs. The scene's objects become haptic containers through the haptic crate's own
 //!   `ObjectContainer::from_scene`, exactly as its trace tests build them.
 //! - [`live`]: the servo on the live scene in the running app, moved by the mouse.
+//! - [`record`]: the live tool's path recorded for replay, and the force history the window plots.
 //! - [`spacemouse`]: a 3D mouse as the live touch tool's input, on a thread of its own.
 //! - [`feed`]: the live scene: the engine's per-object changes become new haptic snapshots,
 //!   rebuilding only the changed objects, handed to a running servo through the haptic
@@ -20,6 +21,7 @@
 pub mod feed;
 pub mod live;
 pub mod path;
+pub mod record;
 pub mod spacemouse;
 
 use glam::{DQuat, DVec3};

@@ -37,6 +37,8 @@ pub enum FileAction {
     Import,
     /// Write the selection (or the scene) to a file.
     Export,
+    /// Record the touch tool's path to a file.
+    RecordTouch,
 }
 
 /// Colour of the brush outline and the stroke being drawn.
@@ -248,6 +250,12 @@ pub struct SculptApp {
         ::app::touch::spacemouse::SpaceMouseDriver,
         std::sync::mpsc::Receiver<bool>,
     )>,
+    /// The touch tool's path being recorded, and when recording began.
+    pub(super) touch_recording: Option<(::app::touch::record::Recorder, Instant)>,
+    /// Recent force and energy for the Touch section's plot, timed from `opened`.
+    pub(super) force_history: ::app::touch::record::ForceHistory,
+    /// When the window opened.
+    opened: Instant,
     /// The window's layout as last drawn (kept between runs).
     pub(super) layout: Layout,
     /// The scene's time (motions), playing or paused.
@@ -343,6 +351,9 @@ impl SculptApp {
             layout: Layout::default(),
             touch: None,
             spacemouse: None,
+            touch_recording: None,
+            force_history: ::app::touch::record::ForceHistory::default(),
+            opened: clock::now().instant,
             frame_time_secs: 0.0,
             stroke: None,
             preview_at: None,
@@ -883,6 +894,7 @@ impl SculptApp {
             self.touch_button(down);
         }
         self.follow_touch_stroke();
+        self.record_touch();
         if input.hover_px.is_some() || input.depth_scroll != 0.0 {
             let depth =
                 input.depth_scroll * TOUCH_DEPTH_PER_SCROLL_POINT * sphere.map_or(1.0, |s| s.1);
@@ -1113,11 +1125,69 @@ impl SculptApp {
             (true, Some(live)) => self.touch = Some(live),
             (false, Some(live)) => {
                 self.spacemouse = None;
+                self.stop_touch_recording();
                 live.stop();
             }
             (false, None) => {}
         }
         Ok(())
+    }
+
+    /// Adds this frame's force and energy to the plot and, while recording, the tool's point
+    /// to the recorded path.
+    fn record_touch(&mut self) {
+        let Some(live) = &self.touch else {
+            return;
+        };
+        let s = live.stats();
+        let now = clock::now().instant;
+        self.force_history.push(::app::touch::record::ForceSample {
+            t_secs: (now - self.opened).as_secs_f64(),
+            force_newtons: s.force_newtons.length(),
+            energy_joules: s.energy_joules,
+        });
+        let button = live.button_down();
+        let Some((recorder, since)) = &mut self.touch_recording else {
+            return;
+        };
+        match recorder.push((now - *since).as_secs_f64(), s.hip_world, button) {
+            Ok(true) => {}
+            Ok(false) => {
+                self.status = "the touch recording reached its limit and stopped".into();
+                self.stop_touch_recording();
+            }
+            Err(e) => {
+                self.status = format!("cannot record the touch path: {e}");
+                self.touch_recording = None;
+            }
+        }
+    }
+
+    /// Records the touch tool's path to `path` (touch must be on), replayable with
+    /// `sculpt touch SCENE --trace PATH`.
+    pub(super) fn start_touch_recording(&mut self, path: &std::path::Path) -> Result<(), String> {
+        if self.touch.is_none() {
+            return Err("turn touch on before recording".into());
+        }
+        let recorder = ::app::touch::record::Recorder::create(path)
+            .map_err(|e| format!("cannot record to {}: {e}", path.display()))?;
+        self.touch_recording = Some((recorder, clock::now().instant));
+        self.status = format!("recording the touch path to {}", path.display());
+        Ok(())
+    }
+
+    /// Stops recording and says where the path went.
+    pub(super) fn stop_touch_recording(&mut self) {
+        if let Some((recorder, _)) = self.touch_recording.take() {
+            self.status = match recorder.finish() {
+                Ok((path, n)) => format!(
+                    "recorded {n} points to {}: replay with `sculpt touch SCENE --trace {}`",
+                    path.display(),
+                    path.display()
+                ),
+                Err(e) => format!("the touch recording could not be finished: {e}"),
+            };
+        }
     }
 
     /// Moves the touch tool with a 3D mouse (`true`, turning touch on if need be) or with the

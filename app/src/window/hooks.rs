@@ -221,6 +221,17 @@ impl SculptApp {
                 self.hooks.idle_frames = 0;
                 return;
             }
+            if let Some(target) = line.strip_prefix("touch-record:") {
+                let target = target.trim();
+                println!("sculpt: scripted touch record: {target}");
+                if target == "off" {
+                    self.stop_touch_recording();
+                } else if let Err(e) = self.start_touch_recording(std::path::Path::new(target)) {
+                    self.hooks.fail(e);
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
             if let Some(word) = line.strip_prefix("touch-device:") {
                 let on = match word.trim() {
                     "3d-mouse" => true,
@@ -417,6 +428,9 @@ impl SculptApp {
                     "n_scenes_taken": s.n_scenes_taken,
                     "compute_micros": s.compute_micros,
                     "device_status": self.spacemouse.as_ref().map(|(d, _)| d.status().text()),
+                    "energy_joules": s.energy_joules,
+                    "n_plotted": self.force_history.len(),
+                    "recording": self.touch_recording.as_ref().map(|(r, _)| r.n_rows()),
                 })
             }),
             "side_panel_points": self.layout.side_panel_points,

@@ -263,6 +263,7 @@ impl SculptApp {
             ui.label(match action {
                 FileAction::Import => "Import file:",
                 FileAction::Export => "Export to:",
+                FileAction::RecordTouch => "Record the touch path to (.csv):",
             });
             let response = ui.add(
                 egui::TextEdit::singleline(&mut text)
@@ -275,6 +276,7 @@ impl SculptApp {
                 let result = match action {
                     FileAction::Import => self.import_file(&path),
                     FileAction::Export => self.export_file(path),
+                    FileAction::RecordTouch => self.start_touch_recording(&path),
                 };
                 match result {
                     Ok(()) => done = true,
@@ -673,5 +675,71 @@ impl SculptApp {
             "servo: {} ticks, {} late · tick compute p50 {} µs, p99.9 {} µs, max {} µs",
             s.n_ticks, s.n_overruns, s.compute_micros[0], s.compute_micros[2], s.compute_micros[3]
         ));
+        self.force_plot_ui(ui, s.energy_joules);
+        match &self.touch_recording {
+            Some((recorder, _)) => {
+                let word = format!("Stop recording ({} points)", recorder.n_rows());
+                if ui.button(word).clicked() {
+                    self.stop_touch_recording();
+                }
+            }
+            None => {
+                let tip = "write the tool's path as CSV (t,x,y,z,button), which \
+                           `sculpt touch SCENE --trace FILE --out FORCES.csv` replays headless";
+                if ui.button("Record the path…").on_hover_text(tip).clicked() {
+                    self.file_input = Some((FileAction::RecordTouch, String::new(), None));
+                }
+            }
+        }
+    }
+
+    /// The last seconds of force (orange, newtons) and of the passivity observer's energy
+    /// (blue, joules, around its zero line), each scaled to its own peak.
+    fn force_plot_ui(&self, ui: &mut egui::Ui, energy_joules: f64) {
+        let history = &self.force_history;
+        let peak = history.peak_newtons();
+        ui.label(format!(
+            "last {:.0} s: peak {peak:.2} N · energy {:.2} mJ",
+            ::app::touch::record::FORCE_HISTORY_SECS,
+            energy_joules * 1e3
+        ));
+        let (response, painter) =
+            ui.allocate_painter(egui::vec2(ui.available_width(), 60.0), egui::Sense::hover());
+        let rect = response.rect;
+        painter.rect_filled(rect, 2.0, egui::Color32::from_gray(24));
+        let Some(last) = history.samples().last().map(|s| s.t_secs) else {
+            return;
+        };
+        let window = ::app::touch::record::FORCE_HISTORY_SECS;
+        let x = |t: f64| rect.left() + rect.width() * (1.0 - ((last - t) / window) as f32);
+        let force_scale = if peak > 0.0 { peak } else { 1.0 };
+        let energy_peak = history
+            .samples()
+            .map(|s| s.energy_joules.abs())
+            .fold(0.0, f64::max);
+        let energy_scale = if energy_peak > 0.0 { energy_peak } else { 1.0 };
+        let mid = rect.center().y;
+        painter.line_segment(
+            [egui::pos2(rect.left(), mid), egui::pos2(rect.right(), mid)],
+            egui::Stroke::new(1.0, egui::Color32::from_gray(60)),
+        );
+        let force: Vec<egui::Pos2> = history
+            .samples()
+            .map(|s| {
+                let y = rect.bottom() - rect.height() * (s.force_newtons / force_scale) as f32;
+                egui::pos2(x(s.t_secs), y)
+            })
+            .collect();
+        let energy: Vec<egui::Pos2> = history
+            .samples()
+            .map(|s| {
+                let y = mid - 0.5 * rect.height() * (s.energy_joules / energy_scale) as f32;
+                egui::pos2(x(s.t_secs), y)
+            })
+            .collect();
+        let orange = egui::Color32::from_rgb(240, 160, 60);
+        let blue = egui::Color32::from_rgb(90, 160, 240);
+        painter.add(egui::Shape::line(energy, egui::Stroke::new(1.0, blue)));
+        painter.add(egui::Shape::line(force, egui::Stroke::new(1.5, orange)));
     }
 }
