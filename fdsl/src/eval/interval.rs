@@ -279,6 +279,10 @@ fn unary_finite(op: UnaryOp, a: Interval) -> Interval {
 /// Bounds of a 2pi-periodic function with maxima at `max_at + 2k pi` and minima at
 /// `min_at + 2k pi`, with values in [-1, 1].
 fn periodic(a: Interval, f: fn(f64) -> f64, max_at: f64, min_at: f64) -> Interval {
+    if !(a.lo.is_finite() && a.hi.is_finite()) {
+        // The function of an infinite end is NaN (`sin(ln(0))`).
+        return Interval::new(-1.0, 1.0).with_nan(true);
+    }
     let width = a.hi - a.lo;
     if width >= 2.0 * PI || width.is_nan() {
         return Interval::new(-1.0, 1.0);
