@@ -183,6 +183,7 @@ impl Grid {
             .filter(|&e| key[e as usize] != usize::MAX)
             .collect();
         order.sort_by_key(|&e| (key[e as usize], e));
+        built.arena = EditArena::with_room_for(order.iter().map(|&e| &*entries[e as usize].edit));
         for e in order {
             let entry = &entries[e as usize];
             built.slot_of[e as usize] = built.arena.push(e, &entry.edit, entry.active);
@@ -529,6 +530,16 @@ impl History {
             .bvh
             .visit_box(region, |i| take_edit(small.edit_of[i as usize]));
         (self.indexed_end as u32..entries.len() as u32).for_each(take_edit);
+    }
+
+    /// The operation of the hit's edit (from the arena when it is there, which the query has
+    /// just read: no visit to the edit itself).
+    #[inline]
+    pub(crate) fn op(&self, hit: Hit) -> EditOp {
+        match hit.slot() {
+            Some(slot) => self.arena.op(slot),
+            None => self.entries[hit.edit()].edit.edit().op,
+        }
     }
 
     /// [`CompiledEdit::apply_value`] of the hit's edit.

@@ -366,13 +366,18 @@ impl Sampler {
         let history = self.object.history();
         history.hits_at_point(p, &mut self.hits);
         let entries = history.entries();
-        self.hits.iter().rev().find_map(|&hit| {
-            let e = &entries[hit.edit()].edit;
-            match e.edit().op {
-                EditOp::Paint { property: q, value } if q == property && e.paints(p) => Some(value),
+        // The operation comes from the index: only paintings of `property` visit their edit.
+        self.hits
+            .iter()
+            .rev()
+            .find_map(|&hit| match history.op(hit) {
+                EditOp::Paint { property: q, value }
+                    if q == property && entries[hit.edit()].edit.paints(p) =>
+                {
+                    Some(value)
+                }
                 _ => None,
-            }
-        })
+            })
     }
 
     /// A colour at `p`: painted, else from the appearance, else (diffuse only) a grey.

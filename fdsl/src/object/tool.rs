@@ -411,7 +411,10 @@ impl CompiledTool {
 /// A tool's value and gradient at `p` from its stamps in order, without an index: the best of
 /// the stamps whose grown boxes hold `p`, else empty space ([`NOTHING`]).
 #[inline]
-pub(crate) fn scan_eval(stamps: &[(Aabb, Stamp)], p: DVec3) -> (f64, DVec3) {
+pub(crate) fn scan_eval<'a>(
+    stamps: impl IntoIterator<Item = &'a (Aabb, Stamp)>,
+    p: DVec3,
+) -> (f64, DVec3) {
     let mut best = (NOTHING, DVec3::ZERO);
     for (bounds, stamp) in stamps {
         if bounds.contains(p) {
@@ -425,7 +428,11 @@ pub(crate) fn scan_eval(stamps: &[(Aabb, Stamp)], p: DVec3) -> (f64, DVec3) {
 }
 
 /// A tool's interval over `region` from its stamps in order, without an index.
-pub(crate) fn scan_interval(stamps: &[(Aabb, Stamp)], lipschitz: f64, region: &Aabb) -> Interval {
+pub(crate) fn scan_interval<'a>(
+    stamps: impl IntoIterator<Item = &'a (Aabb, Stamp)>,
+    lipschitz: f64,
+    region: &Aabb,
+) -> Interval {
     let center = region.center();
     let spread = region.size().length() * 0.5 * lipschitz;
     // Over the region each stamp whose box meets it is within `spread` of its value at the
