@@ -207,3 +207,16 @@ fn copied_stamps(edit: &CompiledEdit) -> (&[(Aabb, Stamp)], f64) {
         (_, Some(s)) => s,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_item_is_a_stamp_with_its_box_and_a_tag() {
+        // The arena costs one item per record and per copied stamp (ARCHITECTURE.md and
+        // BENCHMARKS.md quote 160 bytes): a record must not make items larger than a stamp.
+        assert!(size_of::<Record>() <= size_of::<(Aabb, Stamp)>());
+        assert_eq!(size_of::<Item>(), 160);
+    }
+}

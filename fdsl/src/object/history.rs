@@ -3,10 +3,12 @@
 //! point, not on how many there are.
 //!
 //! The index has three parts, oldest first: a large part over most of the history, a small
-//! [`Bvh`] over recent edits, and a short unindexed tail. The large part answers points through
-//! a uniform grid (one cell lookup and a short contiguous list, whatever the history's length;
-//! edits much larger than a cell go to a small tree beside it) and boxes and rays through a
-//! [`Bvh`]. Appending costs nothing until
+//! [`Bvh`] over recent edits, and a short unindexed tail. The large part answers points and
+//! boxes through a uniform grid (one cell lookup and a short contiguous list, whatever the
+//! history's length; edits much larger than a cell go to a small tree beside it, and boxes
+//! meeting more than `GRID_QUERY_CELLS_MAX` cells go to a [`Bvh`] over the whole part), and
+//! evaluates its edits from an `EditArena` built with the grid: copies of their evaluation
+//! data in cell order. Appending costs nothing until
 //! [`History::refresh`]: the tail then moves into the small tree, and the small tree into the
 //! large one when it has grown to an eighth of it, so rebuilding costs O(log n) per edit
 //! amortised. Queries stay correct without a refresh (the tail is scanned), only slower.
