@@ -20,7 +20,6 @@ struct Record {
     lipschitz: f64,
     op: EditOp,
     mirror: Option<Axis>,
-    active: bool,
     /// False when the tool keeps an index of its own: no stamps are copied and the edit is
     /// evaluated through its [`CompiledEdit`].
     copied: bool,
@@ -57,7 +56,7 @@ impl EditArena {
     /// its own (a long stroke) has no stamps copied: such an edit is evaluated through its
     /// [`CompiledEdit`] (see [`EditArena::copied`]). Paintings copy no stamps either (they
     /// leave the value alone; what they paint is read from the edit itself).
-    pub(crate) fn push(&mut self, idx: u32, edit: &CompiledEdit, active: bool) -> u32 {
+    pub(crate) fn push(&mut self, idx: u32, edit: &CompiledEdit) -> u32 {
         let (stamps, lipschitz) = copied_stamps(edit);
         let op = edit.edit().op;
         let slot = u32::try_from(self.items.len()).expect("an arena holds fewer than 2^32 items");
@@ -67,7 +66,6 @@ impl EditArena {
             lipschitz,
             op,
             mirror: edit.edit().mirror,
-            active,
             copied: edit.tool().scanned_stamps().is_some(),
             edit: idx,
             len: stamps.len() as u32,
@@ -99,25 +97,17 @@ impl EditArena {
         self.items.capacity() * size_of::<Item>()
     }
 
-    pub(crate) fn set_active(&mut self, slot: u32, active: bool) {
-        match &mut self.items[slot as usize] {
-            Item::Edit(r) => r.active = active,
-            Item::Stamp(_) => unreachable!("slot {slot} names a stamp, not an edit"),
-        }
-    }
-
-    /// Whether the edit in `slot` is active and its region holds `p`.
+    /// Whether the region of the edit in `slot` holds `p` (activity is the history's).
     #[inline]
     pub(crate) fn touches(&self, slot: u32, p: DVec3) -> bool {
         let r = self.record(slot);
-        r.active && (r.boxes[0].contains(p) || r.boxes[1].contains(p))
+        r.boxes[0].contains(p) || r.boxes[1].contains(p)
     }
 
-    /// Whether the edit in `slot` is active and its region meets `region`.
+    /// Whether the region of the edit in `slot` meets `region`.
     #[inline]
     pub(crate) fn meets(&self, slot: u32, region: &Aabb) -> bool {
-        let r = self.record(slot);
-        r.active && r.boxes.iter().any(|b| b.overlaps(region))
+        self.record(slot).boxes.iter().any(|b| b.overlaps(region))
     }
 
     #[inline]

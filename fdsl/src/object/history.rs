@@ -188,7 +188,7 @@ impl Grid {
         built.arena = EditArena::with_room_for(order.iter().map(|&e| &*entries[e as usize].edit));
         for e in order {
             let entry = &entries[e as usize];
-            built.slot_of[e as usize] = built.arena.push(e, &entry.edit, entry.active);
+            built.slot_of[e as usize] = built.arena.push(e, &entry.edit);
         }
         let slot_of = &built.slot_of;
         let mut large = Vec::new();
@@ -330,17 +330,25 @@ impl Hit {
     }
 }
 
+/// The large part of the index: a grid for points and boxes, a tree for boxes too large for
+/// the grid, and the arena of its edits' evaluation data. Immutable once built (activity lives
+/// in the history), so copies of an object share it.
+#[derive(Debug, Default)]
+struct Large {
+    tree: Level,
+    grid: Grid,
+    arena: EditArena,
+    /// Edit index -> slot in `arena` (`NO_SLOT` for an edit without boxes).
+    slot_of: Vec<u32>,
+}
+
 /// The ordered, indexed edits of one object.
 #[derive(Clone, Debug, Default)]
 pub struct History {
     entries: Vec<HistoryEntry>,
-    /// The large part: a grid for points and boxes, a tree for boxes too large for the grid,
-    /// and the arena of its edits' evaluation data.
-    big: Level,
-    big_grid: Grid,
-    arena: EditArena,
-    /// Edit index -> slot in `arena` (`NO_SLOT` past `big_end`).
-    slot_of: Vec<u32>,
+    /// Each entry's `active`, side by side (what the index's queries read).
+    active: Vec<bool>,
+    large: Arc<Large>,
     small: Level,
     /// Edits `[0, big_end)` are in the large tree.
     big_end: usize,
@@ -376,6 +384,7 @@ impl History {
             self.intersects.push(idx as u32);
         }
         self.entries.push(HistoryEntry { edit, active: true });
+        self.active.push(true);
         Ok(idx)
     }
 
@@ -384,11 +393,7 @@ impl History {
         match self.entries.get_mut(idx) {
             Some(e) => {
                 e.active = active;
-                if let Some(&slot) = self.slot_of.get(idx)
-                    && slot != NO_SLOT
-                {
-                    self.arena.set_active(slot, active);
-                }
+                self.active[idx] = active;
                 true
             }
             None => false,
@@ -401,12 +406,10 @@ impl History {
             return;
         }
         self.entries.truncate(n);
+        self.active.truncate(n);
         self.intersects.retain(|&i| (i as usize) < n);
         if n < self.big_end {
-            self.big = Level::default();
-            self.big_grid = Grid::default();
-            self.arena = EditArena::default();
-            self.slot_of = Vec::new();
+            self.large = Arc::default();
             self.small = Level::default();
             self.big_end = 0;
             self.indexed_end = 0;
@@ -425,11 +428,13 @@ impl History {
         let small_len = n - self.big_end;
         if small_len > SMALL_MIN && small_len > self.big_end / 8 {
             let boxes = boxes_of(&self.entries, 0..n);
-            self.big = Level::from_boxes(&boxes);
             let built = Grid::build(&boxes, &self.entries);
-            self.big_grid = built.grid;
-            self.arena = built.arena;
-            self.slot_of = built.slot_of;
+            self.large = Arc::new(Large {
+                tree: Level::from_boxes(&boxes),
+                grid: built.grid,
+                arena: built.arena,
+                slot_of: built.slot_of,
+            });
             self.small = Level::default();
             self.big_end = n;
         } else {
@@ -462,10 +467,13 @@ impl History {
     /// Calls `take` for every active edit whose region contains `p`, some more than once.
     #[inline]
     fn visit_point(&self, p: DVec3, mut take: impl FnMut(Hit)) {
-        let arena = &self.arena;
-        self.big_grid.visit_point(p, |slot| {
+        let arena = &self.large.arena;
+        self.large.grid.visit_point(p, |slot| {
             if arena.touches(slot, p) {
-                take(self.hit(slot));
+                let hit = self.hit(slot);
+                if self.active[hit.edit()] {
+                    take(hit);
+                }
             }
         });
         let entries = &self.entries;
@@ -485,8 +493,9 @@ impl History {
     /// The hit for arena `slot`.
     #[inline]
     fn hit(&self, slot: u32) -> Hit {
-        let edit = self.arena.edit(slot);
-        match self.arena.copied(slot) {
+        let arena = &self.large.arena;
+        let edit = arena.edit(slot);
+        match arena.copied(slot) {
             true => Hit::new(edit, slot),
             false => Hit::new(edit, NO_SLOT),
         }
@@ -508,16 +517,19 @@ impl History {
 
     /// Calls `take` for every active edit whose region meets `region`, some more than once.
     fn visit_box(&self, region: &Aabb, mut take: impl FnMut(Hit)) {
-        let arena = &self.arena;
+        let large = &*self.large;
         let mut take_slot = |slot: u32| {
-            if arena.meets(slot, region) {
-                take(self.hit(slot));
+            if large.arena.meets(slot, region) {
+                let hit = self.hit(slot);
+                if self.active[hit.edit()] {
+                    take(hit);
+                }
             }
         };
-        if !self.big_grid.visit_box(region, &mut take_slot) {
-            let big = &self.big;
-            big.bvh.visit_box(region, |i| {
-                take_slot(self.slot_of[big.edit_of[i as usize] as usize]);
+        if !large.grid.visit_box(region, &mut take_slot) {
+            let tree = &large.tree;
+            tree.bvh.visit_box(region, |i| {
+                take_slot(large.slot_of[tree.edit_of[i as usize] as usize]);
             });
         }
         let entries = &self.entries;
@@ -539,7 +551,7 @@ impl History {
     #[inline]
     pub(crate) fn op(&self, hit: Hit) -> EditOp {
         match hit.slot() {
-            Some(slot) => self.arena.op(slot),
+            Some(slot) => self.large.arena.op(slot),
             None => self.entries[hit.edit()].edit.edit().op,
         }
     }
@@ -548,7 +560,7 @@ impl History {
     #[inline]
     pub(crate) fn apply_value(&self, hit: Hit, f: f64, p: DVec3) -> f64 {
         match hit.slot() {
-            Some(slot) => self.arena.apply_value(slot, f, p),
+            Some(slot) => self.large.arena.apply_value(slot, f, p),
             None => self.entries[hit.edit()].edit.apply_value(f, p),
         }
     }
@@ -557,7 +569,7 @@ impl History {
     #[inline]
     pub(crate) fn apply_grad(&self, hit: Hit, f: (f64, DVec3), p: DVec3) -> (f64, DVec3) {
         match hit.slot() {
-            Some(slot) => self.arena.apply_grad(slot, f, p),
+            Some(slot) => self.large.arena.apply_grad(slot, f, p),
             None => self.entries[hit.edit()].edit.apply_grad(f, p),
         }
     }
@@ -565,14 +577,14 @@ impl History {
     /// [`CompiledEdit::apply_interval`] of the hit's edit.
     pub(crate) fn apply_interval(&self, hit: Hit, f: Interval, region: &Aabb) -> Interval {
         match hit.slot() {
-            Some(slot) => self.arena.apply_interval(slot, f, region),
+            Some(slot) => self.large.arena.apply_interval(slot, f, region),
             None => self.entries[hit.edit()].edit.apply_interval(f, region),
         }
     }
 
     /// Bytes the arena of the index's large part holds (a copy of its edits' evaluation data).
     pub fn arena_bytes(&self) -> usize {
-        self.arena.bytes() + self.slot_of.capacity() * size_of::<u32>()
+        self.large.arena.bytes() + self.large.slot_of.capacity() * size_of::<u32>()
     }
 
     /// The last active intersection for which `outside` holds, if any: before it, nothing
@@ -654,6 +666,11 @@ mod tests {
             }
         }
         assert!(h.big_end > 0, "the large tree was built");
+        let copy = h.clone();
+        assert!(
+            Arc::ptr_eq(&copy.large, &h.large),
+            "copies share the large part"
+        );
         for n in [4000, 2500, 100] {
             h.truncate(n);
             h.refresh();
