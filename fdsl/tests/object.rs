@@ -1073,3 +1073,88 @@ fn an_object_is_tangible_only_with_physics_or_painted_physics() {
     }));
     assert!(rich_object().is_tangible());
 }
+
+/// A small stamp (a ball or a rounded box of size 0.005 to 0.05), so that long histories fill
+/// the index's grid cells rather than its tree of large boxes.
+fn small_edit_strategy() -> impl Strategy<Value = Edit> {
+    (
+        op_strategy(),
+        point(),
+        0.005..0.05f64,
+        any::<bool>(),
+        prop_oneof![3 => Just(0.0), 1 => 0.0..0.02f64],
+        prop_oneof![3 => Just(None), 1 => Just(Some(Axis::Z))],
+    )
+        .prop_map(|(op, at, size, ball, blend_radius, mirror)| {
+            let tool = if ball {
+                ToolShape::Sphere { radius: size }
+            } else {
+                ToolShape::Box {
+                    half_extents: DVec3::splat(size),
+                    rounding: size * 0.25,
+                }
+            };
+            let path = vec![
+                Pose::at(at),
+                Pose::at(at + DVec3::new(size, size * 0.5, 0.0)),
+            ];
+            Edit {
+                blend_radius,
+                mirror,
+                ..Edit::stroke(op, tool, path)
+            }
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(8))]
+
+    /// The index's large part (the grid and the arena of copied edit data) evaluates exactly
+    /// as the unindexed scan of the same history: values, gradients, intervals over small and
+    /// large boxes, and paint, bit for bit, also after undo and redo.
+    #[test]
+    fn a_long_indexed_history_evaluates_as_the_unindexed_scan(
+        edits in prop::collection::vec(
+            prop_oneof![1 => edit_strategy(), 3 => small_edit_strategy()],
+            300..400,
+        ),
+        toggled in prop::collection::vec(0..400usize, 24),
+        points in prop::collection::vec(point(), 48),
+        halves in prop::collection::vec(prop_oneof![0.001..0.05f64, 0.05..0.8f64], 48),
+    ) {
+        let mut scanned = Object::implicit(SPHERE).unwrap();
+        for e in &edits {
+            scanned.apply(e.clone()).unwrap();
+        }
+        let mut indexed = scanned.clone();
+        indexed.prepare();
+        prop_assert_eq!(indexed.history().tail_len(), 0);
+        prop_assert!(indexed.history().arena_bytes() > 0);
+        for (k, &i) in toggled.iter().enumerate() {
+            // Undo most, redo a few of those undone.
+            let active = k % 5 == 4;
+            scanned.history_mut().set_active(i, active);
+            indexed.history_mut().set_active(i, active);
+        }
+        let (mut a, mut b) = (scanned.sampler(), indexed.sampler());
+        for (p, h) in points.iter().zip(&halves) {
+            let p = *p;
+            prop_assert_eq!(a.value(p, 0.0).to_bits(), b.value(p, 0.0).to_bits(), "value at {}", p);
+            let (ga, gb) = (a.gradient(p, 0.0), b.gradient(p, 0.0));
+            prop_assert_eq!(ga.0.to_bits(), gb.0.to_bits(), "gradient value at {}", p);
+            prop_assert_eq!(ga.1.to_array().map(f64::to_bits), gb.1.to_array().map(f64::to_bits));
+            let region = Aabb::around(p, DVec3::splat(*h));
+            let (ia, ib) = (a.interval(&region, 0.0), b.interval(&region, 0.0));
+            prop_assert_eq!(
+                (ia.lo.to_bits(), ia.hi.to_bits(), ia.nan),
+                (ib.lo.to_bits(), ib.hi.to_bits(), ib.nan),
+                "interval around {} of half size {}", p, h
+            );
+            prop_assert_eq!(a.diffuse(p, 0.0), b.diffuse(p, 0.0));
+            prop_assert_eq!(
+                a.scalar(Paintable::Density, p, 0.0).map(f64::to_bits),
+                b.scalar(Paintable::Density, p, 0.0).map(f64::to_bits)
+            );
+        }
+    }
+}

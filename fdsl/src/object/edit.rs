@@ -150,6 +150,11 @@ impl CompiledEdit {
         &self.edit
     }
 
+    /// The compiled tool.
+    pub(crate) fn tool(&self) -> &CompiledTool {
+        &self.tool
+    }
+
     /// The boxes outside which the edit is inert (the second is empty without a mirror).
     pub fn boxes(&self) -> &[Aabb; 2] {
         &self.boxes
@@ -246,64 +251,88 @@ impl CompiledEdit {
     /// The value after this edit, given the value `f` before it, at `p`.
     #[inline]
     pub(crate) fn apply_value(&self, f: f64, p: DVec3) -> f64 {
-        let g = self.tool_value(p);
-        let b = self.edit.blend_radius;
-        match self.edit.op {
-            EditOp::Union => smooth_max(f, g, b),
-            EditOp::Subtract => smooth_min(f, -g, b),
-            EditOp::Intersect => smooth_min(f, g, b),
-            EditOp::Paint { .. } => f,
-        }
+        fold_value(&self.edit.op, f, self.tool_value(p), self.edit.blend_radius)
     }
 
     /// Value and gradient after this edit.
     #[inline]
     pub(crate) fn apply_grad(&self, f: (f64, DVec3), p: DVec3) -> (f64, DVec3) {
-        let (g, dg) = self.tool_eval(p);
-        let b = self.edit.blend_radius;
-        match self.edit.op {
-            EditOp::Union => smooth_max_grad(f, (g, dg), b),
-            EditOp::Subtract => smooth_min_grad(f, (-g, -dg), b),
-            EditOp::Intersect => smooth_min_grad(f, (g, dg), b),
-            EditOp::Paint { .. } => f,
-        }
+        fold_grad(&self.edit.op, f, self.tool_eval(p), self.edit.blend_radius)
     }
 
     /// Interval after this edit over `region`, which the edit's boxes may cover only in part
     /// (then the edit is inert over the rest).
     pub(crate) fn apply_interval(&self, f: Interval, region: &Aabb) -> Interval {
         let g = self.tool_interval(region);
-        let b = self.edit.blend_radius;
-        let applied = match self.edit.op {
-            EditOp::Union => Interval::new(f.lo.max(g.lo), f.hi.max(g.hi) + b * 0.25),
-            EditOp::Subtract => Interval::new(f.lo.min(-g.hi) - b * 0.25, f.hi.min(-g.lo)),
-            EditOp::Intersect => Interval::new(f.lo.min(g.lo) - b * 0.25, f.hi.min(g.hi)),
-            EditOp::Paint { .. } => f,
-        };
-        let applied = Interval {
-            nan: f.nan,
-            ..applied
-        };
-        if self.covers(region) {
-            return applied;
-        }
-        // Over the part of the region outside the boxes, unions and subtractions leave `f`
-        // and an intersection leaves its outside value.
-        let rest = match self.edit.op {
-            EditOp::Intersect => Interval::point(self.outside_value()),
-            _ => f,
-        };
-        Interval {
-            lo: applied.lo.min(rest.lo),
-            hi: applied.hi.max(rest.hi),
-            nan: f.nan,
-        }
+        let covered = self.covers(region);
+        fold_interval(&self.edit.op, f, g, self.edit.blend_radius, covered)
     }
 
     /// The value an intersection leaves outside its region: empty space (a tool's support is
     /// its region; an intersection with nothing is nothing).
     pub(crate) fn outside_value(&self) -> f64 {
         super::NOTHING
+    }
+}
+
+/// The value after an edit of `op` with blend radius `b` whose tool has the value `g`, given
+/// the value `f` before it (what [`CompiledEdit::apply_value`] and the edit arena share).
+#[inline]
+pub(crate) fn fold_value(op: &EditOp, f: f64, g: f64, b: f64) -> f64 {
+    match op {
+        EditOp::Union => smooth_max(f, g, b),
+        EditOp::Subtract => smooth_min(f, -g, b),
+        EditOp::Intersect => smooth_min(f, g, b),
+        EditOp::Paint { .. } => f,
+    }
+}
+
+/// Value and gradient after an edit whose tool has the value and gradient `g`.
+#[inline]
+pub(crate) fn fold_grad(op: &EditOp, f: (f64, DVec3), g: (f64, DVec3), b: f64) -> (f64, DVec3) {
+    let (g, dg) = g;
+    match op {
+        EditOp::Union => smooth_max_grad(f, (g, dg), b),
+        EditOp::Subtract => smooth_min_grad(f, (-g, -dg), b),
+        EditOp::Intersect => smooth_min_grad(f, (g, dg), b),
+        EditOp::Paint { .. } => f,
+    }
+}
+
+/// Interval after an edit whose tool has the interval `g` over a region; `covered` says
+/// whether one of the edit's boxes holds the whole region (else the edit is inert over the
+/// rest).
+#[inline]
+pub(crate) fn fold_interval(
+    op: &EditOp,
+    f: Interval,
+    g: Interval,
+    b: f64,
+    covered: bool,
+) -> Interval {
+    let applied = match op {
+        EditOp::Union => Interval::new(f.lo.max(g.lo), f.hi.max(g.hi) + b * 0.25),
+        EditOp::Subtract => Interval::new(f.lo.min(-g.hi) - b * 0.25, f.hi.min(-g.lo)),
+        EditOp::Intersect => Interval::new(f.lo.min(g.lo) - b * 0.25, f.hi.min(g.hi)),
+        EditOp::Paint { .. } => f,
+    };
+    let applied = Interval {
+        nan: f.nan,
+        ..applied
+    };
+    if covered {
+        return applied;
+    }
+    // Over the part of the region outside the boxes, unions and subtractions leave `f`
+    // and an intersection leaves its outside value.
+    let rest = match op {
+        EditOp::Intersect => Interval::point(super::NOTHING),
+        _ => f,
+    };
+    Interval {
+        lo: applied.lo.min(rest.lo),
+        hi: applied.hi.max(rest.hi),
+        nan: f.nan,
     }
 }
 

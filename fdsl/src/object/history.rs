@@ -3,10 +3,12 @@
 //! point, not on how many there are.
 //!
 //! The index has three parts, oldest first: a large part over most of the history, a small
-//! [`Bvh`] over recent edits, and a short unindexed tail. The large part answers points through
-//! a uniform grid (one cell lookup and a short contiguous list, whatever the history's length;
-//! edits much larger than a cell go to a small tree beside it) and boxes and rays through a
-//! [`Bvh`]. Appending costs nothing until
+//! [`Bvh`] over recent edits, and a short unindexed tail. The large part answers points and
+//! boxes through a uniform grid (one cell lookup and a short contiguous list, whatever the
+//! history's length; edits much larger than a cell go to a small tree beside it, and boxes
+//! meeting more than `GRID_QUERY_CELLS_MAX` cells go to a [`Bvh`] over the whole part), and
+//! evaluates its edits from an `EditArena` built with the grid: copies of their evaluation
+//! data in cell order. Appending costs nothing until
 //! [`History::refresh`]: the tail then moves into the small tree, and the small tree into the
 //! large one when it has grown to an eighth of it, so rebuilding costs O(log n) per edit
 //! amortised. Queries stay correct without a refresh (the tail is scanned), only slower.
@@ -16,8 +18,10 @@ use std::sync::Arc;
 use glam::DVec3;
 
 use super::ObjectError;
+use super::arena::EditArena;
 use super::edit::{CompiledEdit, EditOp};
 use crate::bvh::{Aabb, Bvh};
+use crate::eval::Interval;
 use crate::limits::MAX_EDITS_PER_OBJECT;
 
 /// Longest unindexed tail left by [`History::refresh`].
@@ -69,21 +73,27 @@ fn boxes_of(entries: &[HistoryEntry], range: std::ops::Range<usize>) -> Vec<(Aab
     out
 }
 
-/// A box in single precision, rounded outwards, with its edit.
+/// A box in single precision, rounded outwards, with its edit's slot in the arena.
 #[derive(Clone, Copy, Debug)]
 struct GridItem {
     lo: [f32; 3],
     hi: [f32; 3],
-    edit: u32,
+    slot: u32,
 }
 
 impl GridItem {
-    fn new(b: &Aabb, edit: u32) -> GridItem {
+    fn new(b: &Aabb, slot: u32) -> GridItem {
         GridItem {
             lo: b.lo.to_array().map(|v| (v as f32).next_down()),
             hi: b.hi.to_array().map(|v| (v as f32).next_up()),
-            edit,
+            slot,
         }
+    }
+
+    /// Whether the box may meet `region` (it holds the exact box: the caller confirms).
+    #[inline]
+    fn may_meet(&self, region: &Aabb) -> bool {
+        (0..3).all(|k| self.lo[k] as f64 <= region.hi[k] && region.lo[k] <= self.hi[k] as f64)
     }
 
     #[inline]
@@ -99,9 +109,12 @@ impl GridItem {
 
 /// Most cells per indexed box in a grid (a bound on its memory).
 const GRID_CELLS_PER_BOX: usize = 8;
+/// Box queries meeting more grid cells than this go to the large tree instead.
+const GRID_QUERY_CELLS_MAX: usize = 64;
 
-/// A uniform grid over small boxes for point queries; boxes spanning more than two cells on
-/// an axis go to `large` instead.
+/// A uniform grid over small boxes for point and box queries; boxes spanning more than two
+/// cells on an axis go to `large` instead. Items name slots of the arena built with the grid
+/// (`large.edit_of` too holds slots, not edit indices).
 #[derive(Clone, Debug, Default)]
 struct Grid {
     origin: DVec3,
@@ -113,10 +126,24 @@ struct Grid {
     large: Level,
 }
 
+/// The grid and arena of the large part, and each edit's slot in that arena.
+struct GridBuild {
+    grid: Grid,
+    arena: EditArena,
+    slot_of: Vec<u32>,
+}
+
 impl Grid {
-    fn build(boxes: &[(Aabb, u32)]) -> Grid {
+    /// Indexes `boxes` (from [`boxes_of`] over `entries[..n]`, every edit of the part) and
+    /// copies the edits into an arena in cell order: the edits one cell names sit together.
+    fn build(boxes: &[(Aabb, u32)], entries: &[HistoryEntry]) -> GridBuild {
+        let mut built = GridBuild {
+            grid: Grid::default(),
+            arena: EditArena::default(),
+            slot_of: vec![NO_SLOT; entries.len()],
+        };
         if boxes.is_empty() {
-            return Grid::default();
+            return built;
         }
         let bounds = boxes.iter().fold(Aabb::EMPTY, |a, (b, _)| a.union(b));
         // Cells about the size of a typical box, but no more cells than the memory bound.
@@ -138,17 +165,44 @@ impl Grid {
             dims,
             ..Grid::default()
         };
+        // Arena order: edits by the cell of their first box's low corner (large boxes last),
+        // so that a cell's items name nearby records.
+        let n_cells = dims[0] * dims[1] * dims[2];
+        let mut key = vec![usize::MAX; entries.len()];
+        for (b, e) in boxes {
+            let k = &mut key[*e as usize];
+            if *k == usize::MAX {
+                let [x, y, z] = grid.cell_of(b.lo);
+                let spans = (0..3).any(|a| grid.cell_of(b.hi)[a] - [x, y, z][a] > 1);
+                *k = if spans {
+                    n_cells
+                } else {
+                    x + dims[0] * (y + dims[1] * z)
+                };
+            }
+        }
+        let mut order: Vec<u32> = (0..entries.len() as u32)
+            .filter(|&e| key[e as usize] != usize::MAX)
+            .collect();
+        order.sort_by_key(|&e| (key[e as usize], e));
+        built.arena = EditArena::with_room_for(order.iter().map(|&e| &*entries[e as usize].edit));
+        for e in order {
+            let entry = &entries[e as usize];
+            built.slot_of[e as usize] = built.arena.push(e, &entry.edit);
+        }
+        let slot_of = &built.slot_of;
         let mut large = Vec::new();
-        let mut counts = vec![0u32; dims[0] * dims[1] * dims[2] + 1];
+        let mut counts = vec![0u32; n_cells + 1];
         let mut small = Vec::with_capacity(boxes.len());
         for (b, e) in boxes {
+            let slot = slot_of[*e as usize];
             let (lo, hi) = (grid.cell_of(b.lo), grid.cell_of(b.hi));
             if (0..3).any(|k| hi[k] - lo[k] > 1) {
-                large.push((*b, *e));
+                large.push((*b, slot));
                 continue;
             }
             grid.for_cells(lo, hi, |c| counts[c] += 1);
-            small.push((*b, *e, lo, hi));
+            small.push((*b, slot, lo, hi));
         }
         let mut total = 0u32;
         for c in counts.iter_mut() {
@@ -161,18 +215,19 @@ impl Grid {
         let empty = GridItem {
             lo: [0.0; 3],
             hi: [0.0; 3],
-            edit: 0,
+            slot: 0,
         };
         let mut items = vec![empty; total as usize];
-        for (b, e, lo, hi) in small {
+        for (b, slot, lo, hi) in small {
             grid.for_cells(lo, hi, |c| {
-                items[next[c] as usize] = GridItem::new(&b, e);
+                items[next[c] as usize] = GridItem::new(&b, slot);
                 next[c] += 1;
             });
         }
         grid.items = items;
         grid.large = Level::from_boxes(&large);
-        grid
+        built.grid = grid;
+        built
     }
 
     #[inline]
@@ -191,7 +246,7 @@ impl Grid {
         }
     }
 
-    /// Calls `visit(edit)` for every box that may contain `p` (tested in single precision,
+    /// Calls `visit(slot)` for every box that may contain `p` (tested in single precision,
     /// rounded outwards: the caller confirms).
     #[inline]
     fn visit_point(&self, p: DVec3, mut visit: impl FnMut(u32)) {
@@ -205,7 +260,7 @@ impl Grid {
                 let range = self.starts[c] as usize..self.starts[c + 1] as usize;
                 for item in &self.items[range] {
                     if item.contains(pf) {
-                        visit(item.edit);
+                        visit(item.slot);
                     }
                 }
             }
@@ -215,15 +270,85 @@ impl Grid {
             .bvh
             .visit_point(p, |i| visit(large.edit_of[i as usize]));
     }
+
+    /// Calls `visit(slot)` for every box that may meet `region` (the caller confirms; a box in
+    /// several cells comes once per cell), and returns true; or returns false, visiting
+    /// nothing, when the region is not an ordered box or meets more than
+    /// [`GRID_QUERY_CELLS_MAX`] cells (the tree answers it better).
+    fn visit_box(&self, region: &Aabb, mut visit: impl FnMut(u32)) -> bool {
+        let ordered = (0..3).all(|k| region.lo[k] <= region.hi[k]);
+        if !ordered {
+            return false;
+        }
+        if !self.starts.is_empty() {
+            let (lo, hi) = (self.cell_of(region.lo), self.cell_of(region.hi));
+            let n_cells: usize = (0..3).map(|k| hi[k] - lo[k] + 1).product();
+            if n_cells > GRID_QUERY_CELLS_MAX {
+                return false;
+            }
+            self.for_cells(lo, hi, |c| {
+                let range = self.starts[c] as usize..self.starts[c + 1] as usize;
+                for item in &self.items[range] {
+                    if item.may_meet(region) {
+                        visit(item.slot);
+                    }
+                }
+            });
+        }
+        let large = &self.large;
+        large
+            .bvh
+            .visit_box(region, |i| visit(large.edit_of[i as usize]));
+        true
+    }
+}
+
+/// No slot: the edit is not in the arena.
+const NO_SLOT: u32 = u32::MAX;
+
+/// An edit a query found: its index in the history and, when the arena evaluates it, its slot
+/// there. Hits order as their edits do.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub(crate) struct Hit(u64);
+
+impl Hit {
+    #[inline]
+    fn new(edit: u32, slot: u32) -> Hit {
+        Hit(((edit as u64) << 32) | slot as u64)
+    }
+
+    /// The edit's index in the history.
+    #[inline]
+    pub(crate) fn edit(self) -> usize {
+        (self.0 >> 32) as usize
+    }
+
+    #[inline]
+    fn slot(self) -> Option<u32> {
+        let slot = self.0 as u32;
+        (slot != NO_SLOT).then_some(slot)
+    }
+}
+
+/// The large part of the index: a grid for points and boxes, a tree for boxes too large for
+/// the grid, and the arena of its edits' evaluation data. Immutable once built (activity lives
+/// in the history), so copies of an object share it.
+#[derive(Debug, Default)]
+struct Large {
+    tree: Level,
+    grid: Grid,
+    arena: EditArena,
+    /// Edit index -> slot in `arena` (`NO_SLOT` for an edit without boxes).
+    slot_of: Vec<u32>,
 }
 
 /// The ordered, indexed edits of one object.
 #[derive(Clone, Debug, Default)]
 pub struct History {
     entries: Vec<HistoryEntry>,
-    /// The large part: a tree for boxes and rays, a grid for points.
-    big: Level,
-    big_grid: Grid,
+    /// Each entry's `active`, side by side (what the index's queries read).
+    active: Vec<bool>,
+    large: Arc<Large>,
     small: Level,
     /// Edits `[0, big_end)` are in the large tree.
     big_end: usize,
@@ -259,6 +384,7 @@ impl History {
             self.intersects.push(idx as u32);
         }
         self.entries.push(HistoryEntry { edit, active: true });
+        self.active.push(true);
         Ok(idx)
     }
 
@@ -267,6 +393,7 @@ impl History {
         match self.entries.get_mut(idx) {
             Some(e) => {
                 e.active = active;
+                self.active[idx] = active;
                 true
             }
             None => false,
@@ -279,10 +406,10 @@ impl History {
             return;
         }
         self.entries.truncate(n);
+        self.active.truncate(n);
         self.intersects.retain(|&i| (i as usize) < n);
         if n < self.big_end {
-            self.big = Level::default();
-            self.big_grid = Grid::default();
+            self.large = Arc::default();
             self.small = Level::default();
             self.big_end = 0;
             self.indexed_end = 0;
@@ -301,8 +428,13 @@ impl History {
         let small_len = n - self.big_end;
         if small_len > SMALL_MIN && small_len > self.big_end / 8 {
             let boxes = boxes_of(&self.entries, 0..n);
-            self.big = Level::from_boxes(&boxes);
-            self.big_grid = Grid::build(&boxes);
+            let built = Grid::build(&boxes, &self.entries);
+            self.large = Arc::new(Large {
+                tree: Level::from_boxes(&boxes),
+                grid: built.grid,
+                arena: built.arena,
+                slot_of: built.slot_of,
+            });
             self.small = Level::default();
             self.big_end = n;
         } else {
@@ -320,39 +452,139 @@ impl History {
     #[inline]
     pub fn collect_point(&self, p: DVec3, out: &mut Vec<u32>) {
         out.clear();
+        self.visit_point(p, |h| out.push(h.edit() as u32));
+        finish(out);
+    }
+
+    /// [`History::collect_point`] as hits that the `apply_*` methods evaluate.
+    #[inline]
+    pub(crate) fn hits_at_point(&self, p: DVec3, out: &mut Vec<Hit>) {
+        out.clear();
+        self.visit_point(p, |h| out.push(h));
+        finish(out);
+    }
+
+    /// Calls `take` for every active edit whose region contains `p`, some more than once.
+    #[inline]
+    fn visit_point(&self, p: DVec3, mut take: impl FnMut(Hit)) {
+        let arena = &self.large.arena;
+        self.large.grid.visit_point(p, |slot| {
+            if arena.touches(slot, p) {
+                let hit = self.hit(slot);
+                if self.active[hit.edit()] {
+                    take(hit);
+                }
+            }
+        });
         let entries = &self.entries;
-        let mut take = |e: u32| {
+        let mut take_edit = |e: u32| {
             let entry = &entries[e as usize];
             if entry.active && entry.edit.touches(p) {
-                out.push(e);
+                take(Hit::new(e, NO_SLOT));
             }
         };
-        self.big_grid.visit_point(p, &mut take);
         let small = &self.small;
         small
             .bvh
-            .visit_point(p, |i| take(small.edit_of[i as usize]));
-        (self.indexed_end as u32..entries.len() as u32).for_each(&mut take);
-        finish(out);
+            .visit_point(p, |i| take_edit(small.edit_of[i as usize]));
+        (self.indexed_end as u32..entries.len() as u32).for_each(take_edit);
+    }
+
+    /// The hit for arena `slot`.
+    #[inline]
+    fn hit(&self, slot: u32) -> Hit {
+        let arena = &self.large.arena;
+        let edit = arena.edit(slot);
+        match arena.copied(slot) {
+            true => Hit::new(edit, slot),
+            false => Hit::new(edit, NO_SLOT),
+        }
     }
 
     /// Writes to `out`, ascending, the active edits whose region overlaps `region`.
     pub fn collect_box(&self, region: &Aabb, out: &mut Vec<u32>) {
         out.clear();
-        let entries = &self.entries;
-        let mut take = |e: u32| {
-            let entry = &entries[e as usize];
-            if entry.active && entry.edit.boxes().iter().any(|b| b.overlaps(region)) {
-                out.push(e);
+        self.visit_box(region, |h| out.push(h.edit() as u32));
+        finish(out);
+    }
+
+    /// [`History::collect_box`] as hits that the `apply_*` methods evaluate.
+    pub(crate) fn hits_in_box(&self, region: &Aabb, out: &mut Vec<Hit>) {
+        out.clear();
+        self.visit_box(region, |h| out.push(h));
+        finish(out);
+    }
+
+    /// Calls `take` for every active edit whose region meets `region`, some more than once.
+    fn visit_box(&self, region: &Aabb, mut take: impl FnMut(Hit)) {
+        let large = &*self.large;
+        let mut take_slot = |slot: u32| {
+            if large.arena.meets(slot, region) {
+                let hit = self.hit(slot);
+                if self.active[hit.edit()] {
+                    take(hit);
+                }
             }
         };
-        for level in [&self.big, &self.small] {
-            level
-                .bvh
-                .visit_box(region, |i| take(level.edit_of[i as usize]));
+        if !large.grid.visit_box(region, &mut take_slot) {
+            let tree = &large.tree;
+            tree.bvh.visit_box(region, |i| {
+                take_slot(large.slot_of[tree.edit_of[i as usize] as usize]);
+            });
         }
-        (self.indexed_end as u32..entries.len() as u32).for_each(&mut take);
-        finish(out);
+        let entries = &self.entries;
+        let mut take_edit = |e: u32| {
+            let entry = &entries[e as usize];
+            if entry.active && entry.edit.boxes().iter().any(|b| b.overlaps(region)) {
+                take(Hit::new(e, NO_SLOT));
+            }
+        };
+        let small = &self.small;
+        small
+            .bvh
+            .visit_box(region, |i| take_edit(small.edit_of[i as usize]));
+        (self.indexed_end as u32..entries.len() as u32).for_each(take_edit);
+    }
+
+    /// The operation of the hit's edit (from the arena when it is there, which the query has
+    /// just read: no visit to the edit itself).
+    #[inline]
+    pub(crate) fn op(&self, hit: Hit) -> EditOp {
+        match hit.slot() {
+            Some(slot) => self.large.arena.op(slot),
+            None => self.entries[hit.edit()].edit.edit().op,
+        }
+    }
+
+    /// [`CompiledEdit::apply_value`] of the hit's edit.
+    #[inline]
+    pub(crate) fn apply_value(&self, hit: Hit, f: f64, p: DVec3) -> f64 {
+        match hit.slot() {
+            Some(slot) => self.large.arena.apply_value(slot, f, p),
+            None => self.entries[hit.edit()].edit.apply_value(f, p),
+        }
+    }
+
+    /// [`CompiledEdit::apply_grad`] of the hit's edit.
+    #[inline]
+    pub(crate) fn apply_grad(&self, hit: Hit, f: (f64, DVec3), p: DVec3) -> (f64, DVec3) {
+        match hit.slot() {
+            Some(slot) => self.large.arena.apply_grad(slot, f, p),
+            None => self.entries[hit.edit()].edit.apply_grad(f, p),
+        }
+    }
+
+    /// [`CompiledEdit::apply_interval`] of the hit's edit.
+    pub(crate) fn apply_interval(&self, hit: Hit, f: Interval, region: &Aabb) -> Interval {
+        match hit.slot() {
+            Some(slot) => self.large.arena.apply_interval(slot, f, region),
+            None => self.entries[hit.edit()].edit.apply_interval(f, region),
+        }
+    }
+
+    /// Bytes the arena of the index's large part holds (a copy of its edits' evaluation data).
+    pub fn arena_bytes(&self) -> usize {
+        self.large.arena.bytes() + self.large.slot_of.capacity() * size_of::<u32>()
     }
 
     /// The last active intersection for which `outside` holds, if any: before it, nothing
@@ -376,7 +608,7 @@ impl History {
 }
 
 #[inline]
-fn finish(out: &mut Vec<u32>) {
+fn finish<T: Ord>(out: &mut Vec<T>) {
     if out.len() > 1 {
         out.sort_unstable();
         out.dedup();
@@ -434,6 +666,11 @@ mod tests {
             }
         }
         assert!(h.big_end > 0, "the large tree was built");
+        let copy = h.clone();
+        assert!(
+            Arc::ptr_eq(&copy.large, &h.large),
+            "copies share the large part"
+        );
         for n in [4000, 2500, 100] {
             h.truncate(n);
             h.refresh();

@@ -18,6 +18,7 @@
 //! [`NOTHING`] and is what its union edits add.
 
 pub mod appearance;
+mod arena;
 mod box_sampler;
 pub mod codec;
 pub mod compiled;

@@ -11,6 +11,7 @@ use glam::{DMat3, DQuat, DVec3};
 use super::appearance::Rgb;
 use super::box_sampler::BoxSampler;
 use super::edit::{EditOp, PaintValue, Paintable};
+use super::history::Hit;
 use super::space::Transform;
 use super::{CompiledColor, CompiledShape, NOTHING, Object};
 use crate::bvh::Aabb;
@@ -189,7 +190,7 @@ pub struct Sampler {
     /// object space (computed once: the haptic loop asks every tick).
     force_space: (super::Domain, Transform, DMat3),
     motion: [Option<PointEval>; 2],
-    hits: Vec<u32>,
+    hits: Vec<Hit>,
 }
 
 impl Sampler {
@@ -243,16 +244,16 @@ impl Sampler {
     /// empty space outside its stamps' grown boxes), so it visits only the edits near `p`.
     pub fn value(&mut self, p: DVec3, t: f64) -> f64 {
         let history = self.object.history();
-        history.collect_point(p, &mut self.hits);
+        history.hits_at_point(p, &mut self.hits);
         let start = history.last_intersect_where(|e| !e.touches(p));
         let (mut v, from) = match start {
             Some(k) => (history.entries()[k].edit.outside_value(), k + 1),
             None => (self.base_value(p, t), 0),
         };
-        let entries = self.object.history().entries();
-        for &i in &self.hits {
-            if i as usize >= from {
-                v = entries[i as usize].edit.apply_value(v, p);
+        let history = self.object.history();
+        for &hit in &self.hits {
+            if hit.edit() >= from {
+                v = history.apply_value(hit, v, p);
             }
         }
         v
@@ -261,7 +262,7 @@ impl Sampler {
     /// Value and gradient at `p`.
     pub fn gradient(&mut self, p: DVec3, t: f64) -> (f64, DVec3) {
         let history = self.object.history();
-        history.collect_point(p, &mut self.hits);
+        history.hits_at_point(p, &mut self.hits);
         let start = history.last_intersect_where(|e| !e.touches(p));
         let (mut v, from) = match start {
             Some(k) => (
@@ -275,10 +276,10 @@ impl Sampler {
                 0,
             ),
         };
-        let entries = self.object.history().entries();
-        for &i in &self.hits {
-            if i as usize >= from {
-                v = entries[i as usize].edit.apply_grad(v, p);
+        let history = self.object.history();
+        for &hit in &self.hits {
+            if hit.edit() >= from {
+                v = history.apply_grad(hit, v, p);
             }
         }
         v
@@ -287,7 +288,7 @@ impl Sampler {
     /// An interval holding the value at every point of `region` (object space).
     pub fn interval(&mut self, region: &Aabb, t: f64) -> Interval {
         let history = self.object.history();
-        history.collect_box(region, &mut self.hits);
+        history.hits_in_box(region, &mut self.hits);
         let start = history.last_intersect_where(|e| !e.boxes().iter().any(|b| b.overlaps(region)));
         let (mut v, from) = match start {
             Some(k) => (
@@ -301,10 +302,10 @@ impl Sampler {
                 0,
             ),
         };
-        let entries = self.object.history().entries();
-        for &i in &self.hits {
-            if i as usize >= from {
-                v = entries[i as usize].edit.apply_interval(v, region);
+        let history = self.object.history();
+        for &hit in &self.hits {
+            if hit.edit() >= from {
+                v = history.apply_interval(hit, v, region);
             }
         }
         v
@@ -363,15 +364,20 @@ impl Sampler {
     /// The newest painting of `property` that covers `p`.
     fn painted(&mut self, property: Paintable, p: DVec3) -> Option<PaintValue> {
         let history = self.object.history();
-        history.collect_point(p, &mut self.hits);
+        history.hits_at_point(p, &mut self.hits);
         let entries = history.entries();
-        self.hits.iter().rev().find_map(|&i| {
-            let e = &entries[i as usize].edit;
-            match e.edit().op {
-                EditOp::Paint { property: q, value } if q == property && e.paints(p) => Some(value),
+        // The operation comes from the index: only paintings of `property` visit their edit.
+        self.hits
+            .iter()
+            .rev()
+            .find_map(|&hit| match history.op(hit) {
+                EditOp::Paint { property: q, value }
+                    if q == property && entries[hit.edit()].edit.paints(p) =>
+                {
+                    Some(value)
+                }
                 _ => None,
-            }
-        })
+            })
     }
 
     /// A colour at `p`: painted, else from the appearance, else (diffuse only) a grey.

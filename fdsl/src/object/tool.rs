@@ -110,7 +110,7 @@ impl Pose {
 
 /// One primitive of a compiled tool.
 #[derive(Clone, Copy, Debug)]
-enum Stamp {
+pub(crate) enum Stamp {
     /// Points within a linearly varying radius of the segment `a`-`b`.
     Capsule {
         a: DVec3,
@@ -346,22 +346,29 @@ impl CompiledTool {
     /// empty space ([`NOTHING`]) where none does (a tool's support is its stamps' boxes).
     #[inline]
     pub(crate) fn eval(&self, p: DVec3) -> (f64, DVec3) {
+        let Some(bvh) = &self.stamp_index else {
+            return scan_eval(&self.stamps, p);
+        };
         let mut best = (NOTHING, DVec3::ZERO);
-        let take = |i: u32| {
-            let i = i as usize;
-            let (bounds, stamp) = &self.stamps[i];
+        bvh.visit_point(p, |i| {
+            let (bounds, stamp) = &self.stamps[i as usize];
             if bounds.contains(p) {
                 let v = stamp.eval(p);
                 if v.0 > best.0 {
                     best = v;
                 }
             }
-        };
-        match &self.stamp_index {
-            Some(bvh) => bvh.visit_point(p, take),
-            None => (0..self.stamps.len() as u32).for_each(take),
-        }
+        });
         best
+    }
+
+    /// The stamps with their grown boxes when a query scans them all (no index of their own),
+    /// and the Lipschitz bound: what an edit arena copies to evaluate the tool without it.
+    pub(crate) fn scanned_stamps(&self) -> Option<(&[(Aabb, Stamp)], f64)> {
+        match self.stamp_index {
+            Some(_) => None,
+            None => Some((&self.stamps, self.lipschitz)),
+        }
     }
 
     /// The value by definition, visiting every stamp without the index (for checks).
@@ -381,12 +388,13 @@ impl CompiledTool {
 
     /// An interval holding every value over `region`.
     pub(crate) fn interval(&self, region: &Aabb) -> Interval {
+        let Some(bvh) = &self.stamp_index else {
+            return scan_interval(&self.stamps, self.lipschitz, region);
+        };
         let center = region.center();
         let spread = region.size().length() * 0.5 * self.lipschitz;
-        // Over the region each stamp whose box meets it is within `spread` of its value at the
-        // centre; where no stamp box holds a point the tool is empty space.
         let (mut lo, mut hi) = (NOTHING, NOTHING);
-        let take = |i: u32| {
+        bvh.visit_box(region, |i| {
             let (bounds, stamp) = &self.stamps[i as usize];
             if bounds.overlaps(region) {
                 let v = stamp.eval(center).0;
@@ -395,13 +403,51 @@ impl CompiledTool {
                     lo = lo.max(v - spread);
                 }
             }
-        };
-        match &self.stamp_index {
-            Some(bvh) => bvh.visit_box(region, take),
-            None => (0..self.stamps.len() as u32).for_each(take),
-        }
+        });
         Interval::new(lo, hi)
     }
+}
+
+/// A tool's value and gradient at `p` from its stamps in order, without an index: the best of
+/// the stamps whose grown boxes hold `p`, else empty space ([`NOTHING`]).
+#[inline]
+pub(crate) fn scan_eval<'a>(
+    stamps: impl IntoIterator<Item = &'a (Aabb, Stamp)>,
+    p: DVec3,
+) -> (f64, DVec3) {
+    let mut best = (NOTHING, DVec3::ZERO);
+    for (bounds, stamp) in stamps {
+        if bounds.contains(p) {
+            let v = stamp.eval(p);
+            if v.0 > best.0 {
+                best = v;
+            }
+        }
+    }
+    best
+}
+
+/// A tool's interval over `region` from its stamps in order, without an index.
+pub(crate) fn scan_interval<'a>(
+    stamps: impl IntoIterator<Item = &'a (Aabb, Stamp)>,
+    lipschitz: f64,
+    region: &Aabb,
+) -> Interval {
+    let center = region.center();
+    let spread = region.size().length() * 0.5 * lipschitz;
+    // Over the region each stamp whose box meets it is within `spread` of its value at the
+    // centre; where no stamp box holds a point the tool is empty space.
+    let (mut lo, mut hi) = (NOTHING, NOTHING);
+    for (bounds, stamp) in stamps {
+        if bounds.overlaps(region) {
+            let v = stamp.eval(center).0;
+            hi = hi.max(v + spread);
+            if bounds.contains_box(region) {
+                lo = lo.max(v - spread);
+            }
+        }
+    }
+    Interval::new(lo, hi)
 }
 
 /// Primitive stamps for `shape` along `poses`.
