@@ -15,6 +15,9 @@ use app::command::{parse, plan};
 use app::engine::{Engine, EngineConfig, Network, View, lock};
 use glam::DVec3;
 use replication::Timestamp;
+use touch_support::{csv, touch};
+
+mod touch_support;
 
 const T0: Timestamp = Timestamp(1_795_355_107_000_000);
 
@@ -81,33 +84,42 @@ fn both_rejected(a: &Engine, b: &Engine) {
     }
 }
 
-#[test]
-fn femur_one_peer_holds_the_bone_the_other_drills_through_a_takeover_and_exports_it() {
-    let (dir_a, dir_b) = (scratch("femur-a"), scratch("femur-b"));
-    let femur = app::demos::find("femur").unwrap();
+/// A session on loopback: one peer opens demo `name` (in `dir_a`), the other joins it with
+/// the invite (in `dir_b`); returns both once each holds the demo's `n_objects` objects.
+fn demo_pair(name: &str, dir_a: &Path, dir_b: &Path, n_objects: usize) -> (Engine, Engine) {
+    let demo = app::demos::find(name).unwrap();
     let a = Engine::start(
         EngineConfig {
-            demo: Some(femur),
-            ..EngineConfig::on_loopback(&dir_a)
+            demo: Some(demo),
+            ..EngineConfig::on_loopback(dir_a)
         },
         T0,
     )
     .unwrap();
-    wait_view(&a, "the femur", |v| v.scene().len() == 4);
+    wait_view(&a, "the demo", |v| v.scene().len() == n_objects);
     let addr = lock(a.view()).listen_addr().unwrap();
     let b = Engine::start(
         EngineConfig {
             invite: Some(a.invite().clone()),
             network: Network {
                 dial: vec![addr],
-                ..EngineConfig::on_loopback(&dir_b).network
+                ..EngineConfig::on_loopback(dir_b).network
             },
-            ..EngineConfig::on_loopback(&dir_b)
+            ..EngineConfig::on_loopback(dir_b)
         },
         T0,
     )
     .unwrap();
-    wait_view(&b, "the femur from a", |v| v.scene().len() == 4);
+    wait_view(&b, "the demo from the other peer", |v| {
+        v.scene().len() == n_objects
+    });
+    (a, b)
+}
+
+#[test]
+fn femur_one_peer_holds_the_bone_the_other_drills_through_a_takeover_and_exports_it() {
+    let (dir_a, dir_b) = (scratch("femur-a"), scratch("femur-b"));
+    let (a, b) = demo_pair("femur", &dir_a, &dir_b, 4);
     let bone = object_named(&a, "Bone");
     assert_eq!(object_named(&b, "Bone"), bone);
 
@@ -175,69 +187,11 @@ fn femur_one_peer_holds_the_bone_the_other_drills_through_a_takeover_and_exports
 const CLASSROOM_PART: &str = "(((0.8-abs(x)) & (0.5-abs(z)) & (0.1-abs(y))) | \
                               ((0.25-sqrt(x^2+z^2)) & (y+0.1) & (0.45-y))) \\ (0.1-sqrt(x^2+z^2))";
 
-/// Runs `sculpt touch SCENE` over `rows` (scene coordinates, button up) and returns the forces.
-fn touch_forces(dir: &Path, scene: &Path, rows: &[(f64, DVec3)]) -> Vec<DVec3> {
-    let mut path_csv = String::from("t,x,y,z,button\n");
-    for (t, p) in rows {
-        path_csv.push_str(&format!("{t},{},{},{},0\n", p.x, p.y, p.z));
-    }
-    let (input, output) = (dir.join("in.csv"), dir.join("out.csv"));
-    std::fs::write(&input, path_csv).unwrap();
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_sculpt"))
-        .arg("touch")
-        .arg(scene)
-        .arg("--trace")
-        .arg(&input)
-        .arg("--out")
-        .arg(&output)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    std::fs::read_to_string(&output)
-        .unwrap()
-        .lines()
-        .skip(1)
-        .map(|line| {
-            let v: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
-            DVec3::new(v[1], v[2], v[3])
-        })
-        .collect()
-}
-
 #[test]
 fn classroom_two_students_shape_colour_weigh_dig_and_paint_one_model_and_save_it() {
     let (dir_a, dir_b) = (scratch("classroom-a"), scratch("classroom-b"));
-    let classroom = app::demos::find("classroom").unwrap();
     // "Student" opens the classroom; "WeiLei" joins with the invite.
-    let student = Engine::start(
-        EngineConfig {
-            demo: Some(classroom),
-            ..EngineConfig::on_loopback(&dir_a)
-        },
-        T0,
-    )
-    .unwrap();
-    wait_view(&student, "the classroom", |v| v.scene().len() == 2);
-    let addr = lock(student.view()).listen_addr().unwrap();
-    let weilei = Engine::start(
-        EngineConfig {
-            invite: Some(student.invite().clone()),
-            network: Network {
-                dial: vec![addr],
-                ..EngineConfig::on_loopback(&dir_b).network
-            },
-            ..EngineConfig::on_loopback(&dir_b)
-        },
-        T0,
-    )
-    .unwrap();
-    wait_view(&weilei, "the classroom from the student", |v| {
-        v.scene().len() == 2
-    });
+    let (student, weilei) = demo_pair("classroom", &dir_a, &dir_b, 2);
     let model = object_named(&student, "Model");
     assert_eq!(object_named(&weilei, "Model"), model);
 
@@ -331,10 +285,11 @@ fn classroom_two_students_shape_colour_weigh_dig_and_paint_one_model_and_save_it
             (1.0, DVec3::new(x, 0.1, z)),
         ]
     };
-    let through_hole = touch_forces(&dir_a, &saved, &down(-0.55, 0.25));
-    let beside = touch_forces(&dir_a, &saved, &down(-0.55, 0.0));
+    let through_hole = touch(&dir_a, &saved, &csv(&down(-0.55, 0.25)), &[]);
+    let beside = touch(&dir_a, &saved, &csv(&down(-0.55, 0.0)), &[]);
     // Ticks 400 to 600: the hand between y 0.35 and 0.225, inside the plate.
-    let drag = |forces: &[DVec3]| forces[400..600].iter().sum::<DVec3>() / 200.0;
+    let drag =
+        |forces: &[(f64, DVec3)]| forces[400..600].iter().map(|f| f.1).sum::<DVec3>() / 200.0;
     let (hole, solid) = (drag(&through_hole), drag(&beside));
     assert!(hole.length() < 1e-9, "the hole is empty: {hole}");
     assert!(

@@ -8,23 +8,18 @@
 )]
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use glam::DVec3;
 use haptic::container::Aabb;
 use haptic::shapes::{Analytic, fdsl_watermelon};
 
+mod touch_support;
+
 use app::touch::path::TouchPath;
 use app::touch::{DeviceModel, TICK_SECS, replay, rig, zone_for};
+use touch_support::{csv, sculpt_touch, touch};
 
 const WATERMELON_FDSL: &str = include_str!("../../tests/data/models/watermelon.fdsl");
-
-fn sculpt(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_sculpt"))
-        .args(args)
-        .output()
-        .unwrap()
-}
 
 fn scratch(name: &str) -> PathBuf {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("touch-{name}"));
@@ -46,47 +41,6 @@ fn repo_file(relative: &str) -> PathBuf {
 
 fn scene_file(name: &str) -> PathBuf {
     repo_file(&format!("tests/data/scenes/{name}"))
-}
-
-/// A path as CSV from `(t, point)` rows, button up.
-fn csv(rows: &[(f64, DVec3)]) -> String {
-    let mut out = String::from("t,x,y,z,button\n");
-    for (t, p) in rows {
-        out.push_str(&format!("{t},{},{},{},0\n", p.x, p.y, p.z));
-    }
-    out
-}
-
-/// Runs `sculpt touch SCENE --trace INPUT --out OUTPUT EXTRA...`.
-fn sculpt_touch(scene: &Path, input: &Path, output: &Path, extra: &[&str]) -> Output {
-    let mut args = vec![
-        "touch",
-        scene.to_str().unwrap(),
-        "--trace",
-        input.to_str().unwrap(),
-        "--out",
-        output.to_str().unwrap(),
-    ];
-    args.extend_from_slice(extra);
-    sculpt(&args)
-}
-
-/// Runs `sculpt touch` and reads the forces it wrote, one per tick.
-fn touch(dir: &Path, scene: &Path, path_csv: &str, extra: &[&str]) -> Vec<(f64, DVec3)> {
-    let (input, output) = (dir.join("in.csv"), dir.join("out.csv"));
-    std::fs::write(&input, path_csv).unwrap();
-    let run = sculpt_touch(scene, &input, &output, extra);
-    assert!(run.status.success(), "{}", text(&run.stderr));
-    let written = std::fs::read_to_string(&output).unwrap();
-    let mut lines = written.lines();
-    assert_eq!(lines.next(), Some("t,fx,fy,fz"));
-    lines
-        .map(|line| {
-            let v: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
-            assert_eq!(v.len(), 4, "{line}");
-            (v[0], DVec3::new(v[1], v[2], v[3]))
-        })
-        .collect()
 }
 
 /// The path's point at each tick, as the replay samples it.

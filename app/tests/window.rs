@@ -21,6 +21,8 @@ use std::process::{Child, Command, Output, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Duration;
 
+mod touch_support;
+
 use render::image::RgbaImage;
 use serde_json::Value;
 
@@ -563,30 +565,13 @@ fn a_recorded_touch_path_replays_headless_to_the_force_the_window_showed() {
     assert!(path.n_ticks(0.001) > 1000, "{csv}");
     let forces = dir.join("forces.csv");
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/watermelon.wrl");
-    let replay = sculpt(
-        None,
-        &[
-            "touch",
-            scene.to_str().unwrap(),
-            "--trace",
-            recorded.to_str().unwrap(),
-            "--out",
-            forces.to_str().unwrap(),
-        ],
-    );
+    let replay = touch_support::sculpt_touch(&scene, &recorded, &forces, &[]);
     assert!(replay.status.success(), "{}", text(&replay.stderr));
-    let last = std::fs::read_to_string(&forces).unwrap();
-    let last: Vec<f64> = last
-        .lines()
-        .last()
-        .unwrap()
-        .split(',')
-        .map(|v| v.parse().unwrap())
-        .collect();
+    let (_, last) = *touch_support::read_forces(&forces).last().unwrap();
     // Resting in the rind, the replay pushes up as the window's servo did.
     assert!(
-        last[2] > 0.7 * window_force && last[2] < 1.3 * window_force,
-        "replayed {last:?} against the window's {window_force} N up"
+        last.y > 0.7 * window_force && last.y < 1.3 * window_force,
+        "replayed {last} against the window's {window_force} N up"
     );
 }
 
