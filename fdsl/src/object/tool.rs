@@ -391,20 +391,9 @@ impl CompiledTool {
         let Some(bvh) = &self.stamp_index else {
             return scan_interval(&self.stamps, self.lipschitz, region);
         };
-        let center = region.center();
-        let spread = region.size().length() * 0.5 * self.lipschitz;
-        let (mut lo, mut hi) = (NOTHING, NOTHING);
-        bvh.visit_box(region, |i| {
-            let (bounds, stamp) = &self.stamps[i as usize];
-            if bounds.overlaps(region) {
-                let v = stamp.eval(center).0;
-                hi = hi.max(v + spread);
-                if bounds.contains_box(region) {
-                    lo = lo.max(v - spread);
-                }
-            }
-        });
-        Interval::new(lo, hi)
+        let mut bounds = StampBounds::new(self.lipschitz, region);
+        bvh.visit_box(region, |i| bounds.add(&self.stamps[i as usize]));
+        bounds.interval()
     }
 }
 
@@ -433,21 +422,46 @@ pub(crate) fn scan_interval<'a>(
     lipschitz: f64,
     region: &Aabb,
 ) -> Interval {
-    let center = region.center();
-    let spread = region.size().length() * 0.5 * lipschitz;
-    // Over the region each stamp whose box meets it is within `spread` of its value at the
-    // centre; where no stamp box holds a point the tool is empty space.
-    let (mut lo, mut hi) = (NOTHING, NOTHING);
-    for (bounds, stamp) in stamps {
-        if bounds.overlaps(region) {
-            let v = stamp.eval(center).0;
-            hi = hi.max(v + spread);
-            if bounds.contains_box(region) {
-                lo = lo.max(v - spread);
+    let mut bounds = StampBounds::new(lipschitz, region);
+    stamps.into_iter().for_each(|stamp| bounds.add(stamp));
+    bounds.interval()
+}
+
+/// A tool's interval over a region, gathered stamp by stamp in any order. Over the region
+/// each stamp whose box meets it is within `spread` of its value at the centre; where no
+/// stamp box holds a point the tool is empty space.
+struct StampBounds<'r> {
+    region: &'r Aabb,
+    center: DVec3,
+    spread: f64,
+    lo: f64,
+    hi: f64,
+}
+
+impl<'r> StampBounds<'r> {
+    fn new(lipschitz: f64, region: &'r Aabb) -> Self {
+        StampBounds {
+            region,
+            center: region.center(),
+            spread: region.size().length() * 0.5 * lipschitz,
+            lo: NOTHING,
+            hi: NOTHING,
+        }
+    }
+
+    fn add(&mut self, (bounds, stamp): &(Aabb, Stamp)) {
+        if bounds.overlaps(self.region) {
+            let v = stamp.eval(self.center).0;
+            self.hi = self.hi.max(v + self.spread);
+            if bounds.contains_box(self.region) {
+                self.lo = self.lo.max(v - self.spread);
             }
         }
     }
-    Interval::new(lo, hi)
+
+    fn interval(&self) -> Interval {
+        Interval::new(self.lo, self.hi)
+    }
 }
 
 /// Primitive stamps for `shape` along `poses`.
