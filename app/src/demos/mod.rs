@@ -57,8 +57,8 @@ pub const DEMOS: &[Demo] = &[
         name: "shark",
         title: "Moving shark",
         about: "A shark swims round a rock once every 10 seconds; its body and the wake \
-                behind it move with it: hold the hand on its path to feel it pass and the \
-                wake tug the hand along.",
+                behind it move with it: hold the hand just outside its circle and the wake \
+                tugs it along as the shark passes; reach in to feel its skin and body.",
         file: "scenes/shark.wrl",
         text: include_str!("../../../scenes/shark.wrl"),
     },
