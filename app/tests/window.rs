@@ -1049,8 +1049,11 @@ fn carve_strokes_patch_the_mesh_and_upload_the_patch_drawing_what_a_whole_mesh_d
     let state = &carved.state;
     let object = &state["objects"][0];
     assert_eq!(object["n_edits"], CARVES.len(), "{state}");
-    // The first mesh was whole; every stroke (previews and the op) was a patch.
-    assert_eq!(object["mesh_kind"], "patch", "{state}");
+    // The first mesh was whole; every stroke (previews and the op) was a patch. The last
+    // result may be "unchanged": when the stroke's last preview already held exactly the op's
+    // points, the op changes nothing the preview had not drawn.
+    let kind = object["mesh_kind"].as_str().unwrap_or_default();
+    assert!(kind == "patch" || kind == "unchanged", "{state}");
     assert_eq!(state["meshes"]["whole"], 1, "{state}");
     let n_patched = state["meshes"]["patched"].as_u64().unwrap();
     assert!(n_patched >= CARVES.len() as u64, "{state}");
