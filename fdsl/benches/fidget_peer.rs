@@ -39,6 +39,7 @@ pub fn to_fidget(tape: &Tape) -> (Context, Node) {
                 let (a, b, c) = (arg(&mut ctx, a), arg(&mut ctx, b), arg(&mut ctx, c));
                 ternary(&mut ctx, op, a, b, c)
             }
+            Code::Sample(_) => panic!("fidget has no sampled grids; the benchmark models use none"),
         };
         regs[instr.out as usize] = Some(node);
     }

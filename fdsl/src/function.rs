@@ -4,7 +4,7 @@ use std::fmt;
 use std::sync::Arc;
 
 use crate::compile::lower::{self, Lowered};
-pub use crate::compile::lower::{Options, SetOps};
+pub use crate::compile::lower::{Grids, Options, SetOps};
 use crate::compile::{Context, Node};
 use crate::syntax::diagnostic::render_all;
 use crate::syntax::{Diagnostic, parser};

@@ -42,6 +42,7 @@ pub mod compile;
 pub mod eval;
 mod function;
 pub mod fvrml;
+pub mod grid;
 pub mod limits;
 pub mod mesh;
 pub mod models;
@@ -50,6 +51,6 @@ pub mod scene;
 pub mod syntax;
 pub mod tape;
 
-pub use function::{CompileError, Compiled, Function, MissingOutput, Options, SetOps};
+pub use function::{CompileError, Compiled, Function, Grids, MissingOutput, Options, SetOps};
 pub use syntax::{Diagnostic, Severity, Span};
 pub use tape::Tape;

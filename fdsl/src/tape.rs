@@ -9,6 +9,7 @@ use std::sync::Arc;
 
 use crate::compile::graph::{Context, Node, Op};
 use crate::compile::ops::{BinaryOp, TernaryOp, UnaryOp};
+use crate::grid::Grid;
 
 /// What an instruction computes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -19,6 +20,8 @@ pub enum Code {
     Binary(BinaryOp),
     /// Three arguments.
     Ternary(TernaryOp),
+    /// The grid of this index in [`Tape::grids`] at the three arguments `(x, y, z)`.
+    Sample(u8),
 }
 
 /// An instruction's argument: a register, or a constant folded into the instruction.
@@ -92,6 +95,7 @@ enum SsaOp {
     Unary(UnaryOp, u32),
     Binary(BinaryOp, u32, u32),
     Ternary(TernaryOp, u32, u32, u32),
+    Sample(u8, u32, u32, u32),
 }
 
 impl SsaOp {
@@ -100,7 +104,7 @@ impl SsaOp {
             SsaOp::Input(_) | SsaOp::Const(_) => ([0; 3], 0),
             SsaOp::Unary(_, a) => ([a, 0, 0], 1),
             SsaOp::Binary(_, a, b) => ([a, b, 0], 2),
-            SsaOp::Ternary(_, a, b, c) => ([a, b, c], 3),
+            SsaOp::Ternary(_, a, b, c) | SsaOp::Sample(_, a, b, c) => ([a, b, c], 3),
         }
     }
 
@@ -120,6 +124,7 @@ pub struct Tape {
     n_regs: u32,
     inputs: [Option<u32>; 4],
     outputs: Arc<[Operand]>,
+    grids: Arc<[Arc<Grid>]>,
 }
 
 impl Tape {
@@ -137,13 +142,14 @@ impl Tape {
                 Op::Unary(op, a) => SsaOp::Unary(op, at(a)),
                 Op::Binary(op, a, b) => SsaOp::Binary(op, at(a), at(b)),
                 Op::Ternary(op, a, b, c) => SsaOp::Ternary(op, at(a), at(b), at(c)),
+                Op::Sample(g, a, b, c) => SsaOp::Sample(g, at(a), at(b), at(c)),
             });
         }
         let outputs: Vec<u32> = roots.iter().map(|r| index[r.index()]).collect();
-        Tape::from_ssa(ssa, outputs)
+        Tape::from_ssa(ssa, outputs, context.grids().into())
     }
 
-    fn from_ssa(ssa: Vec<SsaOp>, ssa_outputs: Vec<u32>) -> Tape {
+    fn from_ssa(ssa: Vec<SsaOp>, ssa_outputs: Vec<u32>, grids: Arc<[Arc<Grid>]>) -> Tape {
         let n = ssa.len();
         // The last instruction reading each value; outputs live to the end.
         let mut last_use = vec![0usize; n];
@@ -198,6 +204,7 @@ impl Tape {
                 SsaOp::Unary(op, _) => Code::Unary(op),
                 SsaOp::Binary(op, _, _) => Code::Binary(op),
                 SsaOp::Ternary(op, _, _, _) => Code::Ternary(op),
+                SsaOp::Sample(g, _, _, _) => Code::Sample(g),
                 SsaOp::Input(_) | SsaOp::Const(_) => unreachable!("leaves were skipped"),
             };
             instrs.push(Instr {
@@ -222,7 +229,13 @@ impl Tape {
             n_regs,
             inputs,
             outputs: outputs.into(),
+            grids,
         }
+    }
+
+    /// The grids the tape's [`Code::Sample`] instructions index.
+    pub fn grids(&self) -> &[Arc<Grid>] {
+        &self.grids
     }
 
     /// The register instructions, in order.
@@ -308,6 +321,7 @@ impl Tape {
                 SsaOp::Unary(o, a) => SsaOp::Unary(o, m(a)),
                 SsaOp::Binary(o, a, b) => SsaOp::Binary(o, m(a), m(b)),
                 SsaOp::Ternary(o, a, b, c) => SsaOp::Ternary(o, m(a), m(b), m(c)),
+                SsaOp::Sample(g, a, b, c) => SsaOp::Sample(g, m(a), m(b), m(c)),
             };
             map[i] = ops.len() as u32;
             ops.push(new);
@@ -338,12 +352,13 @@ impl Tape {
                 SsaOp::Unary(o, a) => SsaOp::Unary(o, c(a)),
                 SsaOp::Binary(o, a, b) => SsaOp::Binary(o, c(a), c(b)),
                 SsaOp::Ternary(o, a, b, cc) => SsaOp::Ternary(o, c(a), c(b), c(cc)),
+                SsaOp::Sample(g, a, b, cc) => SsaOp::Sample(g, c(a), c(b), c(cc)),
             };
             compact[i] = kept.len() as u32;
             kept.push(new);
         }
         let outputs = outputs.iter().map(|&o| compact[o as usize]).collect();
-        Tape::from_ssa(kept, outputs)
+        Tape::from_ssa(kept, outputs, Arc::clone(&self.grids))
     }
 
     /// For each SSA value: whether only its sign can reach the outputs, through operations whose

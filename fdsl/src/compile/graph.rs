@@ -5,8 +5,10 @@
 //! could be done while compiling.
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 use super::ops::{BinaryOp, TernaryOp, UnaryOp};
+use crate::grid::Grid;
 use crate::limits::MAX_GRAPH_NODES;
 
 /// A handle to an operation in a [`Context`].
@@ -33,6 +35,8 @@ pub enum Op {
     Binary(BinaryOp, Node, Node),
     /// A ternary operation.
     Ternary(TernaryOp, Node, Node, Node),
+    /// The grid of this index in [`Context::grids`] sampled at `(x, y, z)`.
+    Sample(u8, Node, Node, Node),
 }
 
 /// The graph grew past its limit (at most [`MAX_GRAPH_NODES`]).
@@ -49,6 +53,7 @@ pub struct Context {
     ops: Vec<Op>,
     dedup: BTreeMap<Op, Node>,
     limit: usize,
+    grids: Vec<Arc<Grid>>,
 }
 
 impl Default for Context {
@@ -69,6 +74,7 @@ impl Context {
             ops: Vec::new(),
             dedup: BTreeMap::new(),
             limit: limit.min(MAX_GRAPH_NODES),
+            grids: Vec::new(),
         }
     }
 
@@ -233,6 +239,43 @@ impl Context {
         self.intern(Op::Ternary(op, a, b, c))
     }
 
+    /// The grid `grid` sampled at `(x, y, z)` (folded when all three are constants). A
+    /// context holds at most [`crate::grid::MAX_GRIDS`] distinct grids; the lowering checks
+    /// the options' grids against that limit before it calls this.
+    pub fn sample(
+        &mut self,
+        grid: &Arc<Grid>,
+        x: Node,
+        y: Node,
+        z: Node,
+    ) -> Result<Node, GraphFull> {
+        if let (Some(vx), Some(vy), Some(vz)) = (
+            self.const_value(x),
+            self.const_value(y),
+            self.const_value(z),
+        ) {
+            return self.constant(grid.value([vx, vy, vz]));
+        }
+        let index = match self
+            .grids
+            .iter()
+            .position(|g| Arc::ptr_eq(g, grid) || g == grid)
+        {
+            Some(i) => i,
+            None => {
+                self.grids.push(Arc::clone(grid));
+                self.grids.len() - 1
+            }
+        };
+        let index = u8::try_from(index).expect("the options hold at most MAX_GRIDS grids");
+        self.intern(Op::Sample(index, x, y, z))
+    }
+
+    /// The grids [`Op::Sample`] indexes.
+    pub fn grids(&self) -> &[Arc<Grid>] {
+        &self.grids
+    }
+
     /// The nodes each root depends on (the roots included), in topological order.
     pub fn reachable(&self, roots: &[Node]) -> Vec<Node> {
         let mut live = vec![false; self.ops.len()];
@@ -250,7 +293,7 @@ impl Context {
                     live[a.index()] = true;
                     live[b.index()] = true;
                 }
-                Op::Ternary(_, a, b, c) => {
+                Op::Ternary(_, a, b, c) | Op::Sample(_, a, b, c) => {
                     live[a.index()] = true;
                     live[b.index()] = true;
                     live[c.index()] = true;

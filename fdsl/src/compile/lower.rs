@@ -8,9 +8,11 @@
 //! still depends on the coordinates after [`MAX_SYMBOLIC_TRIPS`] trips is an error.
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
 
 use super::graph::{Context, GraphFull, Node};
 use super::ops::{BinaryOp, TernaryOp, UnaryOp};
+use crate::grid::{Grid, MAX_GRIDS};
 use crate::limits::{
     MAX_CALL_ARGS, MAX_LOOP_TRIPS, MAX_OUTPUTS, MAX_STATEMENT_FUEL, MAX_VARIABLES,
 };
@@ -30,8 +32,11 @@ pub enum SetOps {
     RFunction,
 }
 
+/// The grids a formula may call, by name (see [`crate::grid`]).
+pub type Grids = Arc<[Arc<Grid>]>;
+
 /// Options of the compiler.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, Hash)]
 pub struct Options {
     /// What `& | \` mean.
     pub set_ops: SetOps,
@@ -39,6 +44,9 @@ pub struct Options {
     /// [`crate::limits::MAX_GRAPH_NODES`] (`None`: that limit); objects' formulas use
     /// [`crate::limits::formula_node_budget`].
     pub max_graph_nodes: Option<usize>,
+    /// Sampled grids the program may call by name, `name(x, y, z)`: at most
+    /// [`MAX_GRIDS`], with distinct names.
+    pub grids: Grids,
 }
 
 /// A lowered program: the graph and its named outputs.
@@ -113,7 +121,13 @@ pub fn lower(program: &Program, options: Options) -> (Option<Lowered>, Vec<Diagn
         fuel: 0,
         inputs_used: [false; 4],
     };
-    let outputs = lowerer.program(program);
+    let outputs = match check_grids(&lowerer.options.grids) {
+        Ok(()) => lowerer.program(program),
+        Err(d) => {
+            lowerer.report(d);
+            None
+        }
+    };
     let failed = lowerer.diagnostics.iter().any(Diagnostic::is_error);
     let lowered = match outputs {
         Some(outputs) if !failed => Some(Lowered {
@@ -124,6 +138,34 @@ pub fn lower(program: &Program, options: Options) -> (Option<Lowered>, Vec<Diagn
         _ => None,
     };
     (lowered, lowerer.diagnostics)
+}
+
+/// The options' grids are few enough and distinctly named.
+fn check_grids(grids: &[Arc<Grid>]) -> Result<(), Diagnostic> {
+    let whole = Span::new(0, 0);
+    if grids.len() > MAX_GRIDS {
+        return Err(Diagnostic::error(
+            whole,
+            format!(
+                "{} grids were given; a formula may call at most {MAX_GRIDS}",
+                grids.len()
+            ),
+        ));
+    }
+    for (i, g) in grids.iter().enumerate() {
+        if grids[..i].iter().any(|h| h.name() == g.name()) {
+            return Err(Diagnostic::error(
+                whole,
+                format!("two grids are named `{}`", g.name()),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Whether `name` is a function of the language (grids may not take such names).
+pub(crate) fn is_builtin_function(name: &str) -> bool {
+    arity(name).is_some()
 }
 
 /// A lowering step failed; its diagnostic is recorded (or it follows one already recorded).
@@ -747,9 +789,16 @@ impl Lowerer {
 
     fn call(&mut self, name: &ast::Ident, args: &[Expr], span: Span, env: &Env) -> LResult<Node> {
         let f = name.name.as_str();
-        let Some((min_args, max_args)) = arity(f) else {
+        let grid = self.options.grids.iter().find(|g| g.name() == f).cloned();
+        let arity = match &grid {
+            Some(_) => Some((3, 3)),
+            None => arity(f),
+        };
+        let Some((min_args, max_args)) = arity else {
             let mut d = Diagnostic::error(name.span, format!("unknown function `{f}`"));
-            if let Some(best) = suggest(f, FUNCTION_NAMES) {
+            let mut names: Vec<&str> = FUNCTION_NAMES.to_vec();
+            names.extend(self.options.grids.iter().map(|g| g.name()));
+            if let Some(best) = suggest(f, &names) {
                 d = d.with_hint(format!("did you mean `{best}`?"));
             } else {
                 d = d.with_hint("see the list of functions in the documentation of fdsl");
@@ -783,6 +832,10 @@ impl Lowerer {
         }
         if failed {
             return Err(Failed);
+        }
+        if let Some(grid) = grid {
+            let sampled = self.ctx.sample(&grid, nodes[0], nodes[1], nodes[2]);
+            return self.full(span, sampled);
         }
         self.builtin(f, &nodes, span)
     }

@@ -105,11 +105,11 @@ impl BulkEval {
             #[expect(unsafe_code, reason = "calling a function compiled for AVX2 and FMA")]
             // SAFETY: `wide` is only set when the CPU reports AVX2 and FMA at run time.
             unsafe {
-                run_wide(self.tape.instrs(), &mut self.regs, &mut self.scratch)
+                run_wide(&self.tape, &mut self.regs, &mut self.scratch)
             };
             return;
         }
-        run_tape(self.tape.instrs(), &mut self.regs, &mut self.scratch);
+        run_tape(&self.tape, &mut self.regs, &mut self.scratch);
     }
 }
 
@@ -127,8 +127,8 @@ pub(super) fn wide_simd_available() -> bool {
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn run_wide(instrs: &[Instr], regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
-    run_tape(instrs, regs, scratch);
+fn run_wide(tape: &Tape, regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
+    run_tape(tape, regs, scratch);
 }
 
 /// An argument of an instruction over a chunk: lanes of a register, or one constant.
@@ -199,12 +199,19 @@ fn bool_f32(b: bool) -> f32 {
 }
 
 #[inline(always)]
-fn run_tape(instrs: &[Instr], regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
-    for instr in instrs {
+fn run_tape(tape: &Tape, regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
+    for instr in tape.instrs() {
         let out = instr.out as usize;
-        if let Code::Ternary(op) = instr.code {
-            ternary(op, instr, regs, scratch);
-            continue;
+        match instr.code {
+            Code::Ternary(op) => {
+                ternary(op, instr, regs, scratch);
+                continue;
+            }
+            Code::Sample(g) => {
+                sample(&tape.grids()[g as usize], instr, regs, scratch);
+                continue;
+            }
+            Code::Unary(_) | Code::Binary(_) => {}
         }
         let (below, rest) = regs.split_at_mut(out);
         let Some((o, above)) = rest.split_first_mut() else {
@@ -233,7 +240,7 @@ fn run_tape(instrs: &[Instr], regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
                 unary(op, o, a);
             }
             Code::Binary(op) => binary(op, o, src(instr.args[0]), src(instr.args[1])),
-            Code::Ternary(_) => {}
+            Code::Ternary(_) | Code::Sample(_) => {}
         }
     }
 }
@@ -285,6 +292,21 @@ fn binary(op: BinaryOp, o: &mut Lanes, a: Src, b: Src) {
         BinaryOp::Or => lanes2!(o, a, b, |x, y| bool_f32(x != 0.0 || y != 0.0)),
         BinaryOp::RAnd => lanes2!(o, a, b, |x, y| x + y - (x * x + y * y).sqrt()),
         BinaryOp::ROr => lanes2!(o, a, b, |x, y| x + y + (x * x + y * y).sqrt()),
+    }
+}
+
+/// Grid samples are computed per lane in f64 (the point evaluator's value, rounded).
+fn sample(grid: &crate::grid::Grid, instr: &Instr, regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
+    for (k, arg) in instr.args.iter().enumerate() {
+        match *arg {
+            Operand::Reg(r) => scratch[k] = regs[r as usize],
+            Operand::Const(c) => scratch[k].fill(c as f32),
+        }
+    }
+    let o = &mut regs[instr.out as usize];
+    let [a, b, c] = &*scratch;
+    for i in 0..CHUNK {
+        o[i] = grid.value([f64::from(a[i]), f64::from(b[i]), f64::from(c[i])]) as f32;
     }
 }
 

@@ -9,6 +9,7 @@
 
 use super::real::Real;
 use crate::compile::{BinaryOp, TernaryOp, UnaryOp};
+use crate::grid::Grid;
 use crate::tape::{Code, Operand, Tape};
 
 /// A value with its gradient.
@@ -253,6 +254,20 @@ fn blend_min<T: Real>(a: Grad<T>, b: Grad<T>, r: Grad<T>) -> Grad<T> {
     }
 }
 
+/// A grid sampled at `(a, b, c)`, computed in f64: its value, and the chain rule through the
+/// grid's gradient.
+pub(super) fn sample<T: Real>(grid: &Grid, a: Grad<T>, b: Grad<T>, c: Grad<T>) -> Grad<T> {
+    let (v, g) = grid.value_grad([a.v.to_f64(), b.v.to_f64(), c.v.to_f64()]);
+    let [ka, kb, kc] = g.map(T::from_f64);
+    let d = |x: T, y: T, z: T| scale(x, ka) + scale(y, kb) + scale(z, kc);
+    Grad {
+        v: T::from_f64(v),
+        dx: d(a.dx, b.dx, c.dx),
+        dy: d(a.dy, b.dy, c.dy),
+        dz: d(a.dz, b.dz, c.dz),
+    }
+}
+
 fn run<T: Real>(tape: &Tape, regs: &mut [Grad<T>], p: [T; 4]) {
     for (slot, reg) in tape.inputs().iter().enumerate() {
         let Some(r) = reg else { continue };
@@ -275,6 +290,7 @@ fn run<T: Real>(tape: &Tape, regs: &mut [Grad<T>], p: [T; 4]) {
             Code::Unary(op) => unary(op, get(a)),
             Code::Binary(op) => binary(op, get(a), get(b)),
             Code::Ternary(op) => ternary(op, get(a), get(b), get(c)),
+            Code::Sample(g) => sample(&tape.grids()[g as usize], get(a), get(b), get(c)),
         };
     }
 }

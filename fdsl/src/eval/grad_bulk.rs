@@ -17,7 +17,7 @@ use super::grad::{
 };
 use super::real::Real;
 use crate::compile::{BinaryOp, TernaryOp, UnaryOp};
-use crate::tape::{Code, Instr, Operand, Tape};
+use crate::tape::{Code, Operand, Tape};
 
 type Lanes = [f32; CHUNK];
 
@@ -135,18 +135,18 @@ impl GradBulkEval {
             #[expect(unsafe_code, reason = "calling a function compiled for AVX2 and FMA")]
             // SAFETY: `wide` is only set when the CPU reports AVX2 and FMA at run time.
             unsafe {
-                run_wide(self.tape.instrs(), &mut self.regs, &mut self.scratch)
+                run_wide(&self.tape, &mut self.regs, &mut self.scratch)
             };
             return;
         }
-        run_tape(self.tape.instrs(), &mut self.regs, &mut self.scratch);
+        run_tape(&self.tape, &mut self.regs, &mut self.scratch);
     }
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn run_wide(instrs: &[Instr], regs: &mut [GradLanes], scratch: &mut [GradLanes; 3]) {
-    run_tape(instrs, regs, scratch);
+fn run_wide(tape: &Tape, regs: &mut [GradLanes], scratch: &mut [GradLanes; 3]) {
+    run_tape(tape, regs, scratch);
 }
 
 /// An argument of an instruction over a chunk: the lanes of a register, or a constant (whose
@@ -193,6 +193,14 @@ fn lane(a: impl Arg, i: usize) -> Grad<f32> {
     }
 }
 
+#[inline(always)]
+fn src_lane(s: Src<'_>, i: usize) -> Grad<f32> {
+    match s {
+        Src::R(a) => lane(a, i),
+        Src::C(c) => Grad::constant(c),
+    }
+}
+
 #[derive(Clone, Copy)]
 enum Src<'a> {
     R(&'a GradLanes),
@@ -200,8 +208,8 @@ enum Src<'a> {
 }
 
 #[inline(always)]
-fn run_tape(instrs: &[Instr], regs: &mut [GradLanes], scratch: &mut [GradLanes; 3]) {
-    for instr in instrs {
+fn run_tape(tape: &Tape, regs: &mut [GradLanes], scratch: &mut [GradLanes; 3]) {
+    for instr in tape.instrs() {
         let out = instr.out as usize;
         // The tape never writes a register that the same instruction reads (it allocates the
         // output before freeing the arguments), so the output splits off from the arguments.
@@ -235,6 +243,18 @@ fn run_tape(instrs: &[Instr], regs: &mut [GradLanes], scratch: &mut [GradLanes; 
             },
             Code::Ternary(TernaryOp::Select) => select_lanes(o, src(a), src(b), src(c)),
             Code::Ternary(op) => blend_lanes(op, o, [src(a), src(b), src(c)], scratch),
+            Code::Sample(g) => {
+                let grid = &tape.grids()[g as usize];
+                let [a, b, c] = [src(a), src(b), src(c)];
+                for i in 0..CHUNK {
+                    let r =
+                        super::grad::sample(grid, src_lane(a, i), src_lane(b, i), src_lane(c, i));
+                    o.v[i] = r.v;
+                    o.d[0][i] = r.dx;
+                    o.d[1][i] = r.dy;
+                    o.d[2][i] = r.dz;
+                }
+            }
         }
     }
 }

@@ -158,6 +158,7 @@ impl IntervalEval {
             }
         }
         let regs = &mut self.regs;
+        let grids = self.tape.grids();
         for (i, instr) in self.tape.instrs().iter().enumerate() {
             let get = |o: Operand| match o {
                 Operand::Reg(r) => regs[r as usize],
@@ -168,10 +169,26 @@ impl IntervalEval {
                 Code::Unary(op) => (unary(op, get(a)), Choice::Both),
                 Code::Binary(op) => binary(op, get(a), get(b)),
                 Code::Ternary(op) => ternary(op, get(a), get(b), get(c)),
+                Code::Sample(g) => (
+                    sample(&grids[g as usize], [get(a), get(b), get(c)]),
+                    Choice::Both,
+                ),
             };
             regs[instr.out as usize] = value;
             self.choices[i] = choice;
         }
+    }
+}
+
+/// A grid's bounds over a box of coordinates: the samples the box's cells reach.
+fn sample(grid: &crate::grid::Grid, p: [Interval; 3]) -> Interval {
+    if p.iter().any(Interval::ends_nan) {
+        return Interval::NAN;
+    }
+    let nan = p.iter().any(|i| i.nan);
+    match grid.bounds(p.map(|i| i.lo), p.map(|i| i.hi)) {
+        Some((lo, hi)) => Interval::new(lo, hi).with_nan(nan),
+        None => Interval::NAN,
     }
 }
 

@@ -30,6 +30,7 @@ impl PointEval {
             }
         }
         let regs = &mut self.regs;
+        let grids = self.tape.grids();
         for instr in self.tape.instrs().iter() {
             let get = |o: Operand| match o {
                 Operand::Reg(r) => regs[r as usize],
@@ -40,6 +41,7 @@ impl PointEval {
                 Code::Unary(op) => op.apply(get(a)),
                 Code::Binary(op) => op.apply(get(a), get(b)),
                 Code::Ternary(op) => op.apply(get(a), get(b), get(c)),
+                Code::Sample(g) => grids[g as usize].value([get(a), get(b), get(c)]),
             };
             regs[instr.out as usize] = value;
         }

@@ -63,6 +63,8 @@ pub trait Real:
     const ONE: Self;
     /// From f64 (rounding).
     fn from_f64(v: f64) -> Self;
+    /// To f64 (exact).
+    fn to_f64(self) -> f64;
     /// Sine.
     fn sin(self) -> Self;
     /// Cosine.
@@ -93,6 +95,10 @@ macro_rules! impl_real {
             #[inline(always)]
             fn from_f64(v: f64) -> Self {
                 v as $t
+            }
+            #[inline(always)]
+            fn to_f64(self) -> f64 {
+                f64::from(self)
             }
             #[inline(always)]
             fn sin(self) -> Self {

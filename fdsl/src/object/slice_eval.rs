@@ -81,11 +81,12 @@ impl SliceEval {
     fn run(&mut self) {
         let regs = &mut self.regs;
         let args = &mut *self.args;
+        let grids = self.tape.grids();
         for instr in self.tape.instrs().iter() {
             let n_args = match instr.code {
                 Code::Unary(_) => 1,
                 Code::Binary(_) => 2,
-                Code::Ternary(_) => 3,
+                Code::Ternary(_) | Code::Sample(_) => 3,
             };
             for (k, arg) in instr.args.iter().take(n_args).enumerate() {
                 match *arg {
@@ -99,6 +100,7 @@ impl SliceEval {
                 Code::Unary(op) => unary(op, o, a),
                 Code::Binary(op) => binary(op, o, a, b),
                 Code::Ternary(op) => lanes!(o, |i| op.apply(a[i], b[i], c[i])),
+                Code::Sample(g) => lanes!(o, |i| grids[g as usize].value([a[i], b[i], c[i]])),
             }
         }
     }
