@@ -13,6 +13,13 @@ use fdsl::fvrml::MAX_FILE_BYTES;
 
 /// Reads a scene file as text, refusing one over [`MAX_FILE_BYTES`] before reading it.
 pub fn read_scene_text(path: &Path) -> Result<String, String> {
+    String::from_utf8(read_scene_bytes(path)?)
+        .map_err(|_| format!("{}: not UTF-8 text", path.display()))
+}
+
+/// Reads a file a scene names (an `Inline`'s text, a grid's samples), refusing one over
+/// [`MAX_FILE_BYTES`] before reading it.
+pub fn read_scene_bytes(path: &Path) -> Result<Vec<u8>, String> {
     let len = std::fs::metadata(path)
         .map_err(|e| format!("{}: {e}", path.display()))?
         .len();
@@ -22,7 +29,7 @@ pub fn read_scene_text(path: &Path) -> Result<String, String> {
             path.display()
         ));
     }
-    std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))
+    std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))
 }
 
 /// Resolves and reads `Inline` URLs relative to a scene's folder, only inside `root`.
@@ -80,9 +87,9 @@ impl InlineResolver {
         ))
     }
 
-    /// Reads the file an `Inline` URL names (see [`InlineResolver::path`]).
-    pub fn read(&self, url: &str) -> Result<String, String> {
-        read_scene_text(&self.path(url)?)
+    /// Reads the file an `Inline` or grid URL names (see [`InlineResolver::path`]).
+    pub fn read(&self, url: &str) -> Result<Vec<u8>, String> {
+        read_scene_bytes(&self.path(url)?)
     }
 }
 
@@ -117,7 +124,7 @@ mod tests {
             let linked = r.read("link.wrl").unwrap_err();
             assert!(linked.contains("link"), "{linked}");
             let wide = InlineResolver::new(&scenes, &dir).unwrap();
-            assert_eq!(wide.read("link.wrl").unwrap(), "password");
+            assert_eq!(wide.read("link.wrl").unwrap(), b"password");
         }
         let _ = std::fs::remove_dir_all(&dir);
     }

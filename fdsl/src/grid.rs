@@ -114,28 +114,46 @@ impl From<Grid> for GridData {
 
 impl PartialEq for Grid {
     fn eq(&self, other: &Grid) -> bool {
-        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-        let d = (&self.data, &other.data);
-        d.0.name == d.1.name
-            && d.0.size == d.1.size
-            && bits(&d.0.origin) == bits(&d.1.origin)
-            && bits(&d.0.spacing) == bits(&d.1.spacing)
-            && bits(&d.0.range) == bits(&d.1.range)
-            && d.0.samples == d.1.samples
+        self.key() == other.key()
     }
 }
 
 impl Eq for Grid {}
 
+impl Grid {
+    /// Every field, floats as bits: what equality, order and hashing compare.
+    fn key(&self) -> (&str, [u16; 3], [u64; 8], &[u8]) {
+        let d = &self.data;
+        let bits = [
+            d.origin[0],
+            d.origin[1],
+            d.origin[2],
+            d.spacing[0],
+            d.spacing[1],
+            d.spacing[2],
+            d.range[0],
+            d.range[1],
+        ]
+        .map(f64::to_bits);
+        (&d.name, d.size, bits, &d.samples)
+    }
+}
+
+impl PartialOrd for Grid {
+    fn partial_cmp(&self, other: &Grid) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Grid {
+    fn cmp(&self, other: &Grid) -> std::cmp::Ordering {
+        self.key().cmp(&other.key())
+    }
+}
+
 impl Hash for Grid {
     fn hash<H: Hasher>(&self, state: &mut H) {
-        let d = &self.data;
-        d.name.hash(state);
-        d.size.hash(state);
-        for v in d.origin.iter().chain(&d.spacing).chain(&d.range) {
-            v.to_bits().hash(state);
-        }
-        d.samples.hash(state);
+        self.key().hash(state);
     }
 }
 

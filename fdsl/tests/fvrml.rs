@@ -19,7 +19,7 @@ const FIGURE_7_14: &str = include_str!("../../tests/data/scenes/figure_7_14.wrl"
 const WATERMELON: &str = include_str!("../../scenes/watermelon.wrl");
 const WATERMELON_FDSL: &str = include_str!("../../tests/data/models/watermelon.fdsl");
 
-fn no_files(path: &str) -> Result<String, String> {
+fn no_files(path: &str) -> Result<Vec<u8>, String> {
     Err(format!("no file {path}"))
 }
 
@@ -436,7 +436,7 @@ fn inline_reads_local_files_through_the_resolver() {
         asked.borrow_mut().push(path.to_string());
         files
             .get(path)
-            .map(|s| (*s).to_string())
+            .map(|s| s.as_bytes().to_vec())
             .ok_or_else(|| "not found".to_string())
     };
     let options = LoadOptions {
@@ -506,7 +506,7 @@ fn inline_depth_is_limited() {
             .trim_start_matches('f')
             .parse()
             .unwrap();
-        Ok(format!("Inline {{ url \"f{}.wrl\" }}", n + 1))
+        Ok(format!("Inline {{ url \"f{}.wrl\" }}", n + 1).into_bytes())
     };
     let issues = match fvrml::load(
         "Inline { url \"f0.wrl\" }",
@@ -911,4 +911,112 @@ fn sculpting_edits_survive_save_and_load() {
         }
     }
     assert!(n_changed > 100, "the edits change only {n_changed} samples");
+}
+
+/// A 3 x 2 x 2 grid whose byte is 100 i + 20 j + 10 k, written inline.
+const GRID_SCENE: &str = r#"#VRML V2.0 utf8
+FShape {
+  name "phantom"
+  grids [
+    FGrid {
+      name "scan"
+      size 3 2 2
+      origin -1 -0.5 -0.5
+      spacing 1 1 1
+      range 0 2.55
+      samples [0 100 200 20 120 220 10 110 210 30 130 230]
+    }
+  ]
+  geometry FGeometry { definition "scan(x, y, z) - 1" }
+  physics FPhysics { density FDensity { definition "scan(x, y, z)" } }
+}
+"#;
+
+#[test]
+fn grids_are_read_inline_or_from_files_and_saved_inline() {
+    let loaded = load(GRID_SCENE);
+    let (_, _, object) = objects(&loaded.scene)[0];
+    let mut s = object.sampler();
+    // Bytes stand for 0 to 2.55: the value at index (1.5, 0.5, 0.5) is (150 + 10 + 5) / 100.
+    let p = DVec3::new(0.5, 0.0, 0.0);
+    assert!((s.scalar(fdsl::object::Paintable::Density, p, 0.0).unwrap() - 1.65).abs() < 1e-12);
+    assert!((s.value(p, 0.0) - 0.65).abs() < 1e-12);
+    // Saved, the samples are written inline and read back bit for bit.
+    let text = fvrml::write(&fvrml::save(&loaded.scene));
+    assert!(text.contains("FGrid"), "{text}");
+    assert_eq!(load(&text).scene, loaded.scene);
+    // The same samples from an NRRD file and from a raw file with a declared size.
+    let samples: [u8; 12] = [0, 100, 200, 20, 120, 220, 10, 110, 210, 30, 130, 230];
+    let mut nrrd = b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 3 2 2\nspace origin: (-1,-0.5,-0.5)\nencoding: raw\n\n".to_vec();
+    nrrd.extend(samples);
+    let mut files = |path: &str| match path {
+        "scans/head.nrrd" => Ok(nrrd.clone()),
+        "scans/head.raw" => Ok(samples.to_vec()),
+        _ => Err(format!("no file {path}")),
+    };
+    let options = LoadOptions {
+        path: "scans/scene.wrl".into(),
+        ..LoadOptions::default()
+    };
+    let inline = GRID_SCENE.find("      spacing").unwrap()..GRID_SCENE.find("    }\n  ]").unwrap();
+    for replacement in [
+        "      range 0 2.55\n      url \"head.nrrd\"\n",
+        "      spacing 1 1 1\n      range 0 2.55\n      url [\"missing.raw\" \"head.raw\"]\n",
+    ] {
+        let mut text = GRID_SCENE.to_string();
+        text.replace_range(inline.clone(), replacement);
+        if replacement.contains("nrrd") {
+            text = text.replace("      size 3 2 2\n      origin -1 -0.5 -0.5\n", "");
+        }
+        let from_file = fvrml::load(&text, &options, &mut files).unwrap();
+        assert_eq!(from_file.scene, loaded.scene, "{replacement}");
+    }
+}
+
+#[test]
+fn bad_grids_are_located_errors() {
+    let cases = [
+        // What is replaced in GRID_SCENE, by what, and the error's line and words.
+        ("      name \"scan\"\n", "", 5, "`FGrid` needs a `name`"),
+        ("230]", "256]", 11, "whole numbers from 0 to 255"),
+        (
+            "size 3 2 2",
+            "size 3 2 1",
+            7,
+            "whole counts from 2 to 65535",
+        ),
+        (
+            "size 3 2 2",
+            "size 3 2 3",
+            5,
+            "declares 18 samples but 12 bytes were given",
+        ),
+        (
+            "      samples [0 100 200 20 120 220 10 110 210 30 130 230]\n",
+            "      url \"gone.raw\"\n",
+            11,
+            "cannot read grid `gone.raw`",
+        ),
+        (
+            "definition \"scan(x, y, z) - 1\"",
+            "definition \"scna(x, y, z) - 1\"",
+            14,
+            "did you mean `scan`?",
+        ),
+        (
+            "name \"scan\"",
+            "name \"sin\"",
+            5,
+            "grid name `sin` is not usable",
+        ),
+    ];
+    for (from, to, line, words) in cases {
+        assert!(GRID_SCENE.contains(from), "{from}");
+        let issues = load_err(&GRID_SCENE.replace(from, to));
+        let error = issues.iter().find(|i| i.message.contains(words));
+        let Some(error) = error else {
+            panic!("{from} -> {to}: no error with {words:?} in {issues:#?}");
+        };
+        assert_eq!(error.location.line, line, "{from} -> {to}: {error:?}");
+    }
 }

@@ -24,7 +24,7 @@ const FIGURES: [&str; 4] = [
 /// Loads with a resolver that serves `inline` for every path; checks that every issue has
 /// a position inside the text it names (root text only).
 fn try_load(text: &str, inline: &str) -> Result<Vec<Issue>, Vec<Issue>> {
-    let mut resolve = |_: &str| Ok(inline.to_string());
+    let mut resolve = |_: &str| Ok(inline.as_bytes().to_vec());
     let n_lines = u32::try_from(text.lines().count().max(1)).unwrap();
     let result = fvrml::load(text, &LoadOptions::default(), &mut resolve);
     let issues = match &result {
@@ -235,7 +235,8 @@ fn inline_cycles_and_floods_are_errors() {
             "Inline {{ url \"{}.wrl\" }} Inline {{ url \"{}.wrl\" }}",
             2 * n + 1,
             2 * n + 2
-        ))
+        )
+        .into_bytes())
     };
     let result = fvrml::load(
         "Inline { url \"0.wrl\" }",
@@ -631,6 +632,21 @@ fn object_data() -> BoxedStrategy<ObjectData> {
                 timing,
             }),
     );
+    // A grid no formula calls (the object still holds and saves it), placed by any numbers,
+    // -0 included.
+    let grid = (
+        prop::array::uniform3(2usize..4),
+        prop::array::uniform3(prop_oneof![Just(0.0), Just(-0.0), -3.0..3.0f64]),
+        prop::array::uniform3(prop_oneof![Just(1.0), 0.01..2.0f64]),
+        prop::array::uniform2(-5.0..5.0f64),
+        prop::collection::vec(any::<u8>(), 64),
+    )
+        .prop_map(|(size, origin, spacing, range, bytes)| {
+            let n = size.iter().product::<usize>();
+            let grid =
+                fdsl::grid::Grid::from_raw("scan", size, origin, spacing, range, &bytes[..n]);
+            std::sync::Arc::new(grid.unwrap())
+        });
     (
         text(),
         prop::option::of(geometry()),
@@ -638,15 +654,17 @@ fn object_data() -> BoxedStrategy<ObjectData> {
         physics,
         transform(),
         motion,
+        prop::option::of(grid),
     )
         .prop_map(
-            |(name, geometry, appearance, physics, transform, motion)| ObjectData {
+            |(name, geometry, appearance, physics, transform, motion, grid)| ObjectData {
                 name,
                 geometry,
                 appearance,
                 physics,
                 transform,
                 motion,
+                grids: grid.into_iter().collect(),
             },
         )
         .boxed()

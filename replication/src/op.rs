@@ -302,9 +302,7 @@ impl<'a> Envelope<'a> {
     /// Decodes and validates the payload (which must be in canonical form) into the op.
     pub fn into_op<P: Payload>(self) -> Result<Op<P>, DecodeError> {
         let payload = P::decode(self.payload_bytes).map_err(|e| e.shifted(self.payload_start))?;
-        let mut canonical = Vec::with_capacity(self.payload_bytes.len());
-        payload.encode(&mut canonical);
-        if canonical != self.payload_bytes {
+        if !payload.is_canonical(self.payload_bytes) {
             return Err(DecodeError::Invalid {
                 offset: self.payload_offset,
                 what: "non-canonical payload",

@@ -73,6 +73,15 @@ pub trait Payload: Clone + fmt::Debug + PartialEq + Eq {
     /// panicking; error offsets are relative to the start of `bytes`.
     fn decode(bytes: &[u8]) -> Result<Self, DecodeError>;
 
+    /// Whether `bytes`, which decoded to `self`, are its canonical encoding. By default: what
+    /// [`Payload::encode`] writes; a payload whose format gained a version may also accept its
+    /// canonical encoding in an older version it still reads (ops signed then).
+    fn is_canonical(&self, bytes: &[u8]) -> bool {
+        let mut canonical = Vec::with_capacity(bytes.len());
+        self.encode(&mut canonical);
+        canonical == bytes
+    }
+
     /// What the core must know about this payload.
     fn effect(&self) -> Effect;
 

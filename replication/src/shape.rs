@@ -105,6 +105,121 @@ pub enum ShapePayload {
 // Payloads are validated on decode (no NaN reaches one), so equality is reflexive.
 impl Eq for ShapePayload {}
 
+/// [`ShapePayload`] as encoded in version 1 of the object encoding (before objects held
+/// grids): ops signed then are read into today's payloads, and checked canonical in that
+/// version.
+#[derive(Serialize, Deserialize)]
+enum ShapePayloadV1 {
+    Create {
+        object: u64,
+        data: Box<object_codec::v1::ObjectData>,
+        group: Option<u64>,
+    },
+    Delete {
+        object: u64,
+    },
+    Set {
+        object: u64,
+        field: Field,
+    },
+    Edit {
+        object: u64,
+        edit: Edit,
+    },
+    SetGroup {
+        group: u64,
+        value: Option<Group>,
+    },
+    Move {
+        object: u64,
+        group: Option<u64>,
+    },
+    Acquire {
+        object: u64,
+        strong: bool,
+        ttl_micros: u64,
+    },
+    Release {
+        object: u64,
+    },
+    Undo(#[serde(with = "op_id")] OpId),
+    Redo(#[serde(with = "op_id")] OpId),
+    Chat(String),
+}
+
+impl ShapePayloadV1 {
+    /// `p` in version 1's layout; `None` when it holds what version 1 cannot say (grids).
+    fn of(p: &ShapePayload) -> Option<ShapePayloadV1> {
+        Some(match p.clone() {
+            ShapePayload::Create {
+                object,
+                data,
+                group,
+            } => ShapePayloadV1::Create {
+                object,
+                data: Box::new(object_codec::v1::ObjectData::of(*data)?),
+                group,
+            },
+            ShapePayload::Delete { object } => ShapePayloadV1::Delete { object },
+            ShapePayload::Set {
+                field: Field::Grids(_),
+                ..
+            } => return None,
+            ShapePayload::Set { object, field } => ShapePayloadV1::Set { object, field },
+            ShapePayload::Edit { object, edit } => ShapePayloadV1::Edit { object, edit },
+            ShapePayload::SetGroup { group, value } => ShapePayloadV1::SetGroup { group, value },
+            ShapePayload::Move { object, group } => ShapePayloadV1::Move { object, group },
+            ShapePayload::Acquire {
+                object,
+                strong,
+                ttl_micros,
+            } => ShapePayloadV1::Acquire {
+                object,
+                strong,
+                ttl_micros,
+            },
+            ShapePayload::Release { object } => ShapePayloadV1::Release { object },
+            ShapePayload::Undo(id) => ShapePayloadV1::Undo(id),
+            ShapePayload::Redo(id) => ShapePayloadV1::Redo(id),
+            ShapePayload::Chat(text) => ShapePayloadV1::Chat(text),
+        })
+    }
+}
+
+impl From<ShapePayloadV1> for ShapePayload {
+    fn from(p: ShapePayloadV1) -> ShapePayload {
+        match p {
+            ShapePayloadV1::Create {
+                object,
+                data,
+                group,
+            } => ShapePayload::Create {
+                object,
+                data: Box::new((*data).into()),
+                group,
+            },
+            ShapePayloadV1::Delete { object } => ShapePayload::Delete { object },
+            ShapePayloadV1::Set { object, field } => ShapePayload::Set { object, field },
+            ShapePayloadV1::Edit { object, edit } => ShapePayload::Edit { object, edit },
+            ShapePayloadV1::SetGroup { group, value } => ShapePayload::SetGroup { group, value },
+            ShapePayloadV1::Move { object, group } => ShapePayload::Move { object, group },
+            ShapePayloadV1::Acquire {
+                object,
+                strong,
+                ttl_micros,
+            } => ShapePayload::Acquire {
+                object,
+                strong,
+                ttl_micros,
+            },
+            ShapePayloadV1::Release { object } => ShapePayload::Release { object },
+            ShapePayloadV1::Undo(id) => ShapePayload::Undo(id),
+            ShapePayloadV1::Redo(id) => ShapePayload::Redo(id),
+            ShapePayloadV1::Chat(text) => ShapePayload::Chat(text),
+        }
+    }
+}
+
 mod op_id {
     use super::OpId;
     use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -162,15 +277,27 @@ impl Payload for ShapePayload {
             });
         }
         let payload: ShapePayload =
-            object_codec::decode("shape payload", bytes).map_err(|_| DecodeError::Invalid {
-                offset: 0,
-                what: "shape payload encoding",
-            })?;
+            object_codec::decode_versioned::<_, ShapePayloadV1>("shape payload", bytes).map_err(
+                |_| DecodeError::Invalid {
+                    offset: 0,
+                    what: "shape payload encoding",
+                },
+            )?;
         payload.validate().map_err(|_| DecodeError::Invalid {
             offset: 0,
             what: "shape payload contents (a formula, number or text is not valid)",
         })?;
         Ok(payload)
+    }
+
+    fn is_canonical(&self, bytes: &[u8]) -> bool {
+        if bytes.first() == Some(&object_codec::VERSION_1) {
+            return ShapePayloadV1::of(self)
+                .is_some_and(|v1| object_codec::encode_version_1(&v1) == bytes);
+        }
+        let mut canonical = Vec::with_capacity(bytes.len());
+        self.encode(&mut canonical);
+        canonical == bytes
     }
 
     fn effect(&self) -> Effect {

@@ -12,6 +12,7 @@ use super::{
     Issue, Issues, MAX_INLINE_DEPTH, MAX_INLINE_FILES, MAX_LOAD_EDITS, MAX_LOAD_STAMPS,
     MAX_LOAD_STEPS, MAX_NESTING_DEPTH, MAX_TOTAL_BYTES, parser,
 };
+use crate::grid::Grid;
 use crate::object::{CompiledEdit, Motion, Object, ObjectError, Slot, Transform};
 use crate::scene::{Group, GroupId, ObjectId, Scene, SceneError};
 
@@ -74,7 +75,7 @@ impl fmt::Display for LoadError {
 pub fn load(
     text: &str,
     options: &LoadOptions,
-    resolve: &mut dyn FnMut(&str) -> Result<String, String>,
+    resolve: &mut dyn FnMut(&str) -> Result<Vec<u8>, String>,
 ) -> Result<Loaded, LoadError> {
     let mut issues = Issues::default();
     let doc = parser::parse(text, None, &mut issues);
@@ -85,7 +86,7 @@ pub fn load(
 pub fn load_document(
     doc: &Document,
     options: &LoadOptions,
-    resolve: &mut dyn FnMut(&str) -> Result<String, String>,
+    resolve: &mut dyn FnMut(&str) -> Result<Vec<u8>, String>,
 ) -> Result<Loaded, LoadError> {
     run(doc, Issues::default(), 0, options, resolve)
 }
@@ -95,7 +96,7 @@ fn run(
     issues: Issues,
     n_bytes: usize,
     options: &LoadOptions,
-    resolve: &mut dyn FnMut(&str) -> Result<String, String>,
+    resolve: &mut dyn FnMut(&str) -> Result<Vec<u8>, String>,
 ) -> Result<Loaded, LoadError> {
     let mut loader = Loader {
         resolve,
@@ -166,7 +167,7 @@ struct GroupNode<'d> {
 type LoadedEdit = (Arc<CompiledEdit>, bool);
 
 struct Loader<'r> {
-    resolve: &'r mut dyn FnMut(&str) -> Result<String, String>,
+    resolve: &'r mut dyn FnMut(&str) -> Result<Vec<u8>, String>,
     issues: Issues,
     scene: Scene,
     next_object: u64,
@@ -256,8 +257,9 @@ impl Loader<'_> {
             scope,
             positions: BTreeMap::new(),
         };
-        let (data, edit_nodes) = reader.object(node);
+        let (mut data, edit_nodes, grid_nodes) = reader.object(node);
         let positions = reader.positions;
+        data.grids = self.grids(scope, &grid_nodes).into();
         let object = match Object::new(data) {
             Ok(mut object) => {
                 self.apply_edits(scope, &mut object, &edit_nodes);
@@ -279,6 +281,66 @@ impl Loader<'_> {
         };
         self.cache.insert(key, object.clone());
         object
+    }
+
+    /// The grids of `FGrid` nodes: samples inline, or a file's (tried in url order, relative
+    /// to the file being read, counted in the load's totals). One that cannot be built is an
+    /// error at its node and left out (the formulas calling it then say so too).
+    fn grids<'d>(&mut self, scope: &Scope<'d>, nodes: &[&'d Node]) -> Vec<Arc<Grid>> {
+        let mut grids = Vec::new();
+        for &node in nodes {
+            let mut reader = Reader {
+                issues: &mut self.issues,
+                scope,
+                positions: BTreeMap::new(),
+            };
+            let Some(read) = reader.grid(node) else {
+                continue;
+            };
+            let mut file = None;
+            let mut failures = Vec::new();
+            for url in &read.urls {
+                let url = url.trim();
+                let Url::Relative(relative) = classify(url) else {
+                    failures.push(format!("url not read (only relative paths are): {url}"));
+                    continue;
+                };
+                let base = scope.file.as_deref().unwrap_or(&self.root_path);
+                let path = join(base, relative);
+                match (self.resolve)(&path) {
+                    Ok(bytes) => {
+                        self.total_bytes = self.total_bytes.saturating_add(bytes.len());
+                        file = Some(bytes);
+                        break;
+                    }
+                    Err(e) => failures.push(format!("cannot read grid `{path}`: {e}")),
+                }
+            }
+            if self.total_bytes > MAX_TOTAL_BYTES {
+                let message = format!("the files read exceed {MAX_TOTAL_BYTES} bytes; stopped");
+                self.error(scope, read.url_pos, message);
+                self.stopped = true;
+                return grids;
+            }
+            if file.is_none() && !read.urls.is_empty() {
+                for message in failures {
+                    self.error(scope, read.url_pos, message);
+                }
+                continue;
+            }
+            match read.build(file.as_deref()) {
+                Ok(grid) => grids.push(Arc::new(grid)),
+                Err(message) => {
+                    let pos = if file.is_some() {
+                        read.url_pos
+                    } else {
+                        read.pos
+                    };
+                    self.error(scope, pos, format!("grid `{}`: {message}", read.name));
+                }
+            }
+        }
+        grids
     }
 
     /// Applies the `FEdit`s to `object` in order, through the object model (the checks edits
@@ -607,8 +669,10 @@ impl Loader<'_> {
             self.stopped = true;
             return Err(None);
         }
-        let text =
+        let bytes =
             (self.resolve)(path).map_err(|e| Some(format!("cannot read Inline `{path}`: {e}")))?;
+        let text = String::from_utf8(bytes)
+            .map_err(|_| Some(format!("Inline `{path}` is not UTF-8 text")))?;
         self.total_bytes = self.total_bytes.saturating_add(text.len());
         if self.total_bytes > MAX_TOTAL_BYTES {
             let message = format!("the files read exceed {MAX_TOTAL_BYTES} bytes; {path} not read");
@@ -642,6 +706,7 @@ fn slot_of(e: &ObjectError) -> Option<Slot> {
         | ObjectError::BadTiming { slot }
         | ObjectError::BadParameters { slot }
         | ObjectError::BadColorMap { slot, .. } => Some(*slot),
+        ObjectError::BadGrids { .. } => Some(Slot::Grids),
         _ => None,
     }
 }

@@ -75,6 +75,7 @@
 
 mod document;
 mod edit;
+mod grid;
 mod lexer;
 mod load;
 mod parser;

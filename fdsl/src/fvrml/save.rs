@@ -149,6 +149,7 @@ fn shape(object: &Object) -> Node {
     if data.physics != Physics::default() {
         fields.push(node_field("physics", physics(&data.physics)));
     }
+    super::grid::write_grids(&data.grids, &mut fields);
     write_edits(object, &mut fields);
     Node::new("FShape", fields)
 }

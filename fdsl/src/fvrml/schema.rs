@@ -18,6 +18,7 @@ pub const KNOWN_NODES: &[&str] = &[
     "FForce",
     "FTransform",
     "FEdit",
+    "FGrid",
     "Shape",
     "Appearance",
     "Material",

@@ -34,9 +34,9 @@ const KIND_MESSAGE: &str = "`kind` is \"implicit\", \"curve\", \"surface\" or \"
 
 impl<'d> Reader<'_, 'd> {
     /// An object from an `FShape` or `Shape` (what could not be read is reported and left
-    /// out), and the `FEdit` nodes of an `FShape`'s `edits`, in order (the loader applies
-    /// them to the object).
-    pub(super) fn object(&mut self, node: &'d Node) -> (ObjectData, Vec<&'d Node>) {
+    /// out), the `FEdit` nodes of an `FShape`'s `edits`, in order (the loader applies them to
+    /// the object), and the `FGrid` nodes of its `grids` (the loader reads their files).
+    pub(super) fn object(&mut self, node: &'d Node) -> (ObjectData, Vec<&'d Node>, Vec<&'d Node>) {
         let mut fields = Fields::new(node);
         let mut data = ObjectData {
             name: self.name(&mut fields),
@@ -67,8 +67,13 @@ impl<'d> Reader<'_, 'd> {
         if function_shape && let Some(field) = fields.get("edits") {
             edits = self.edit_nodes(field);
         }
+        let mut grids = Vec::new();
+        if function_shape && let Some(field) = fields.get("grids") {
+            self.positions.insert(Slot::Grids, field.value_pos);
+            grids = self.grid_nodes(field);
+        }
         self.finish(fields);
-        (data, edits)
+        (data, edits, grids)
     }
 
     /// The `name` field (our extension), else the `DEF` name, else empty.

@@ -2,6 +2,9 @@
 //! `postcard` (varint integers, little-endian floats, fields in declaration order, no maps
 //! with unordered keys), so equal values encode to equal bytes on every peer.
 //!
+//! Version 2 added [`ObjectData::grids`]; version 1 is still read (stores and files written
+//! before it), through [`decode_versioned`] and the layouts in [`v1`], and never written.
+//!
 //! Decoding takes untrusted bytes: their length is bounded by [`MAX_ENCODED_BYTES`], every
 //! sequence allocates at most what the remaining input can hold, trailing bytes are an error,
 //! and the result is validated (formulas compiled, numbers checked) before it is returned.
@@ -13,14 +16,77 @@ use super::edit::{CompiledEdit, Edit};
 use super::{Object, ObjectData, ObjectError};
 use crate::limits::MAX_ENCODED_BYTES;
 
-/// The encoding's version; decoders refuse others.
-pub const VERSION: u8 = 1;
+/// The encoding's version, which encoders write; decoders read it and [`VERSION_1`].
+pub const VERSION: u8 = 2;
+/// The first version, before objects held grids.
+pub const VERSION_1: u8 = 1;
 
 /// An object as encoded: its description and its edits with their activity.
 #[derive(serde::Serialize, serde::Deserialize)]
 struct ObjectRecord {
     data: ObjectData,
     edits: Vec<(Edit, bool)>,
+}
+
+/// Layouts of version 1 that differ from today's: read into today's types.
+pub mod v1 {
+    use serde::{Deserialize, Serialize};
+
+    use super::super::{Appearance, Edit, Geometry, Motion, Physics, Transform};
+
+    /// [`super::ObjectData`] without grids.
+    #[derive(Serialize, Deserialize)]
+    pub struct ObjectData {
+        name: String,
+        geometry: Option<Geometry>,
+        appearance: Appearance,
+        physics: Physics,
+        transform: Transform,
+        motion: Option<Motion>,
+    }
+
+    impl ObjectData {
+        /// `d` in version 1's layout; `None` when it holds grids, which version 1 cannot say.
+        pub fn of(d: super::ObjectData) -> Option<ObjectData> {
+            d.grids.is_empty().then_some(ObjectData {
+                name: d.name,
+                geometry: d.geometry,
+                appearance: d.appearance,
+                physics: d.physics,
+                transform: d.transform,
+                motion: d.motion,
+            })
+        }
+    }
+
+    impl From<ObjectData> for super::ObjectData {
+        fn from(d: ObjectData) -> super::ObjectData {
+            super::ObjectData {
+                name: d.name,
+                geometry: d.geometry,
+                appearance: d.appearance,
+                physics: d.physics,
+                transform: d.transform,
+                motion: d.motion,
+                grids: Default::default(),
+            }
+        }
+    }
+
+    #[derive(Deserialize)]
+    pub(super) struct ObjectRecord {
+        data: ObjectData,
+        edits: Vec<(Edit, bool)>,
+    }
+
+    impl From<ObjectRecord> for super::ObjectRecord {
+        fn from(r: ObjectRecord) -> super::ObjectRecord {
+            super::ObjectRecord {
+                data: r.data.into(),
+                edits: r.edits,
+            }
+        }
+    }
 }
 
 /// Encodes any serialisable value of the object model, version byte first.
@@ -34,8 +100,27 @@ pub fn encode<T: Serialize>(value: &T) -> Vec<u8> {
     }
 }
 
-/// Decodes a value encoded by [`encode`] (no validation beyond the encoding).
+/// Encodes a value in [`VERSION_1`] (a layout from [`v1`], or a type that did not change):
+/// what checks that bytes written then are canonical.
+pub fn encode_version_1<T: Serialize>(value: &T) -> Vec<u8> {
+    match postcard::to_extend(value, vec![VERSION_1]) {
+        Ok(v) => v,
+        Err(e) => unreachable!("the object model always serialises: {e}"),
+    }
+}
+
+/// Decodes a value encoded by [`encode`] (no validation beyond the encoding), of a type whose
+/// layout is the same in every version (one holding no [`ObjectData`]).
 pub fn decode<T: DeserializeOwned>(what: &'static str, bytes: &[u8]) -> Result<T, ObjectError> {
+    decode_versioned::<T, T>(what, bytes)
+}
+
+/// Decodes a value encoded by [`encode`] in the current version, or in [`VERSION_1`] as
+/// `V1` (its layout then) converted.
+pub fn decode_versioned<T: DeserializeOwned, V1: DeserializeOwned + Into<T>>(
+    what: &'static str,
+    bytes: &[u8],
+) -> Result<T, ObjectError> {
     let fail = |reason: String| ObjectError::Decode { what, reason };
     if bytes.len() > MAX_ENCODED_BYTES {
         return Err(fail(format!(
@@ -43,17 +128,21 @@ pub fn decode<T: DeserializeOwned>(what: &'static str, bytes: &[u8]) -> Result<T
             bytes.len()
         )));
     }
-    match bytes.first() {
+    let body = &bytes[1.min(bytes.len())..];
+    let within = |e: postcard::Error| fail(format!("{e} (within {} bytes)", bytes.len()));
+    let (value, rest) = match bytes.first() {
         None => return Err(fail("no bytes".into())),
-        Some(&VERSION) => {}
+        Some(&VERSION) => postcard::take_from_bytes::<T>(body).map_err(within)?,
+        Some(&VERSION_1) => {
+            let (old, rest) = postcard::take_from_bytes::<V1>(body).map_err(within)?;
+            (old.into(), rest)
+        }
         Some(&v) => {
             return Err(fail(format!(
-                "version {v} is not supported (this is {VERSION})"
+                "version {v} is not supported (this reads {VERSION_1} and {VERSION})"
             )));
         }
-    }
-    let (value, rest) = postcard::take_from_bytes::<T>(&bytes[1..])
-        .map_err(|e| fail(format!("{e} (within {} bytes)", bytes.len())))?;
+    };
     if !rest.is_empty() {
         return Err(fail(format!(
             "{} bytes left over at offset {}",
@@ -80,7 +169,7 @@ pub fn encode_object(object: &Object) -> Vec<u8> {
 
 /// Decodes and validates an object.
 pub fn decode_object(bytes: &[u8]) -> Result<Object, ObjectError> {
-    let record: ObjectRecord = decode("object", bytes)?;
+    let record: ObjectRecord = decode_versioned::<_, v1::ObjectRecord>("object", bytes)?;
     let mut object = Object::new(record.data)?;
     for (edit, active) in record.edits {
         let idx = object.apply(edit)?;

@@ -6,6 +6,7 @@
 //! instructions in all; past either, the oldest entries go first. Failures are not kept (a
 //! formula that fails stops at its budget, see [`crate::limits::formula_node_budget`]).
 
+use crate::function::Grids;
 use std::cell::Cell;
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::{Mutex, PoisonError};
@@ -18,7 +19,8 @@ pub const MAX_CACHED_TAPES: usize = 4096;
 pub const MAX_CACHED_INSTRUCTIONS: usize = 2_000_000;
 
 /// The formula's text and the outputs its tape takes (empty: the main value).
-type Key = (String, Vec<String>);
+/// A formula's text, its outputs, and the grids it was compiled with (compared by content).
+type Key = (String, Vec<String>, Grids);
 
 struct Cache {
     tapes: BTreeMap<Key, Tape>,
@@ -54,11 +56,13 @@ pub(crate) fn count_compilation() {
 pub(crate) fn tape<E>(
     text: &str,
     outputs: &[&str],
+    grids: &Grids,
     compile: impl FnOnce() -> Result<Tape, E>,
 ) -> Result<Tape, E> {
     let key: Key = (
         text.to_owned(),
         outputs.iter().map(|&o| o.to_owned()).collect(),
+        grids.clone(),
     );
     if let Some(tape) = lock().tapes.get(&key) {
         return Ok(tape.clone());

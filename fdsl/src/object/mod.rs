@@ -49,7 +49,7 @@ pub use space::{Domain, Motion, Timing, Transform};
 pub use tool::{Axis, Pose, ToolShape};
 
 use crate::bvh::Aabb;
-use crate::function::{CompileError, Function, MissingOutput};
+use crate::function::{CompileError, Function, Grids, MissingOutput};
 use crate::limits::MAX_SOURCE_BYTES;
 use crate::tape::Tape;
 
@@ -86,12 +86,14 @@ impl Formula {
         Ok(())
     }
 
-    /// Compiles the formula and takes a tape of `outputs` (or the main value when empty).
-    fn tape(&self, slot: Slot, outputs: &[&str]) -> Result<Tape, ObjectError> {
+    /// Compiles the formula, which may call `grids`, and takes a tape of `outputs` (or the
+    /// main value when empty).
+    fn tape(&self, slot: Slot, outputs: &[&str], grids: &Grids) -> Result<Tape, ObjectError> {
         self.check_len()?;
-        compiled::tape(&self.0, outputs, || {
+        compiled::tape(&self.0, outputs, grids, || {
             let options = crate::Options {
                 max_graph_nodes: Some(crate::limits::formula_node_budget(self.0.len())),
+                grids: grids.clone(),
                 ..crate::Options::default()
             };
             let function =
@@ -154,6 +156,8 @@ pub enum Slot {
     Transform,
     /// The object's motion.
     Motion,
+    /// The sampled grids its formulas may call.
+    Grids,
 }
 
 impl fmt::Display for Slot {
@@ -177,6 +181,7 @@ impl fmt::Display for Slot {
             Slot::PhysicsSpace => "physics domain",
             Slot::Transform => "transform",
             Slot::Motion => "motion",
+            Slot::Grids => "grids",
         };
         f.write_str(name)
     }
@@ -185,6 +190,12 @@ impl fmt::Display for Slot {
 /// What is wrong with an object, an edit or their encoding.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ObjectError {
+    /// The grids are too many or share a name.
+    #[error("grids: {reason}")]
+    BadGrids {
+        /// What is wrong.
+        reason: String,
+    },
     /// A formula does not compile.
     #[error("{slot}: {error}")]
     Compile {
@@ -288,6 +299,9 @@ pub struct ObjectData {
     pub transform: Transform,
     /// A time-dependent placement applied after `transform`.
     pub motion: Option<Motion>,
+    /// Sampled grids (volume data) its formulas may call by name: at most
+    /// [`crate::grid::MAX_GRIDS`], with distinct names.
+    pub grids: Grids,
 }
 
 /// One property's new value (see [`Slot`]).
@@ -329,6 +343,8 @@ pub enum Field {
     Transform(Transform),
     /// The object's motion.
     Motion(Option<Motion>),
+    /// The sampled grids (every formula is compiled again with them).
+    Grids(Grids),
 }
 
 impl Field {
@@ -353,6 +369,7 @@ impl Field {
             Field::PhysicsSpace(..) => Slot::PhysicsSpace,
             Field::Transform(_) => Slot::Transform,
             Field::Motion(_) => Slot::Motion,
+            Field::Grids(_) => Slot::Grids,
         }
     }
 
@@ -378,8 +395,27 @@ impl Field {
             Field::PhysicsSpace(d, t) => (p.domain, p.transform) = (d, t),
             Field::Transform(v) => data.transform = v,
             Field::Motion(v) => data.motion = v,
+            Field::Grids(v) => data.grids = v,
         }
     }
+}
+
+/// An object's grids are few enough and distinctly named.
+fn check_grids(grids: &Grids) -> Result<(), ObjectError> {
+    let bad = |reason: String| Err(ObjectError::BadGrids { reason });
+    if grids.len() > crate::grid::MAX_GRIDS {
+        return bad(format!(
+            "{} grids; an object may hold at most {}",
+            grids.len(),
+            crate::grid::MAX_GRIDS
+        ));
+    }
+    for (i, g) in grids.iter().enumerate() {
+        if grids[..i].iter().any(|h| h.name() == g.name()) {
+            return bad(format!("two grids are named `{}`", g.name()));
+        }
+    }
+    Ok(())
 }
 
 /// A compiled shape: its field's tape (none for parametric shapes) and its placement.
@@ -395,13 +431,15 @@ pub(crate) struct CompiledShape {
 }
 
 impl CompiledShape {
-    fn new(geometry: &Geometry, slot: Slot) -> Result<CompiledShape, ObjectError> {
+    fn new(geometry: &Geometry, slot: Slot, grids: &Grids) -> Result<CompiledShape, ObjectError> {
         geometry.validate(slot)?;
         let (tape, parametric, mesh) = match &geometry.shape {
-            Shape::Implicit(f) => (Some(f.tape(slot, &[])?), None, None),
-            Shape::Parametric { formula, .. } => {
-                (None, Some(formula.tape(slot, &["x", "y", "z"])?), None)
-            }
+            Shape::Implicit(f) => (Some(f.tape(slot, &[], grids)?), None, None),
+            Shape::Parametric { formula, .. } => (
+                None,
+                Some(formula.tape(slot, &["x", "y", "z"], grids)?),
+                None,
+            ),
             Shape::Mesh(m) => (None, None, Some(m.clone())),
         };
         Ok(CompiledShape {
@@ -430,13 +468,13 @@ pub enum CompiledColor {
 }
 
 impl CompiledColor {
-    fn new(def: &ColorDef, slot: Slot) -> Result<CompiledColor, ObjectError> {
+    fn new(def: &ColorDef, slot: Slot, grids: &Grids) -> Result<CompiledColor, ObjectError> {
         def.validate(slot)?;
         Ok(match def {
             ColorDef::Constant(c) => CompiledColor::Constant(*c),
-            ColorDef::Rgb(f) => CompiledColor::Rgb(f.tape(slot, &["r", "g", "b"])?),
+            ColorDef::Rgb(f) => CompiledColor::Rgb(f.tape(slot, &["r", "g", "b"], grids)?),
             ColorDef::Map { formula, map } => {
-                CompiledColor::Map(formula.tape(slot, &[])?, map.clone())
+                CompiledColor::Map(formula.tape(slot, &[], grids)?, map.clone())
             }
         })
     }
@@ -465,30 +503,33 @@ impl CompiledParts {
                 len: data.name.len(),
             });
         }
+        let grids = &data.grids;
+        check_grids(grids)?;
         let geometry = data
             .geometry
             .as_ref()
-            .map(|g| CompiledShape::new(g, Slot::Geometry))
+            .map(|g| CompiledShape::new(g, Slot::Geometry, grids))
             .transpose()?;
         let (a, p) = (&data.appearance, &data.physics);
         a.validate()?;
         p.validate()?;
         let color = |def: &Option<ColorDef>, slot| {
             def.as_ref()
-                .map(|d| CompiledColor::new(d, slot))
+                .map(|d| CompiledColor::new(d, slot, grids))
                 .transpose()
         };
-        let scalar = |f: &Option<Formula>, slot| f.as_ref().map(|f| f.tape(slot, &[])).transpose();
+        let scalar =
+            |f: &Option<Formula>, slot| f.as_ref().map(|f| f.tape(slot, &[], grids)).transpose();
         // Disabled properties are compiled too (a broken one is an error now, not when it is
         // enabled later) but not kept.
         let feel = |prop: &Option<Property>, slot| -> Result<Option<Tape>, ObjectError> {
             let Some(prop) = prop else { return Ok(None) };
-            let tape = prop.formula.tape(slot, &[])?;
+            let tape = prop.formula.tape(slot, &[], grids)?;
             Ok(prop.enabled.then_some(tape))
         };
         let force = match &p.force {
             Some(f) => {
-                let tape = f.formula.tape(Slot::Force, &["x", "y", "z"])?;
+                let tape = f.formula.tape(Slot::Force, &["x", "y", "z"], grids)?;
                 f.enabled.then_some(tape)
             }
             None => None,
@@ -502,11 +543,11 @@ impl CompiledParts {
                 Some([
                     m.translation
                         .as_ref()
-                        .map(|f| f.tape(Slot::Motion, &["x", "y", "z"]))
+                        .map(|f| f.tape(Slot::Motion, &["x", "y", "z"], grids))
                         .transpose()?,
                     m.angle
                         .as_ref()
-                        .map(|f| f.tape(Slot::Motion, &[]))
+                        .map(|f| f.tape(Slot::Motion, &[], grids))
                         .transpose()?,
                 ])
             }
@@ -518,7 +559,7 @@ impl CompiledParts {
             container: p
                 .container
                 .as_ref()
-                .map(|g| CompiledShape::new(g, Slot::Container))
+                .map(|g| CompiledShape::new(g, Slot::Container, grids))
                 .transpose()?,
             colors: [
                 color(&a.diffuse, Slot::Diffuse)?,
@@ -771,7 +812,8 @@ impl Object {
             | Slot::AppearanceSpace
             | Slot::PhysicsSpace
             | Slot::Transform
-            | Slot::Motion => None,
+            | Slot::Motion
+            | Slot::Grids => None,
         }
     }
 
