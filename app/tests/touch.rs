@@ -721,3 +721,52 @@ fn the_sharks_wake_follows_its_motion_in_time() {
         }
     }
 }
+
+/// The mean force felt pushing straight into the MRI demo's cut face (z = 0) at `(x, y)`,
+/// from z = 0.3 to z = -0.3 at 0.6 units a second, while the hand is between z = `from` and
+/// z = `to` (inside the head).
+fn mri_drag(name: &str, x: f64, y: f64, from: f64, to: f64) -> DVec3 {
+    let rows = [
+        (0.0, DVec3::new(x, y, 0.3)),
+        (0.5, DVec3::new(x, y, 0.3)),
+        (1.5, DVec3::new(x, y, -0.3)),
+    ];
+    let forces = touch(
+        &scratch(name),
+        &repo_file("scenes/mri.wrl"),
+        &csv(&rows),
+        &[],
+    );
+    // z = 0.3 - 0.6 (t - 0.5); forces are written every millisecond.
+    let ms = |z: f64| ((0.5 + (0.3 - z) / 0.6) * 1000.0) as usize;
+    mean_force(&forces, ms(from)..ms(to))
+}
+
+#[test]
+fn the_scans_density_is_felt_tissue_by_tissue() {
+    // Straight into the cut face through brain, through the tumour's middle, and down a
+    // ventricle (hollow: the fluid is below the solid's threshold).
+    let brain = mri_drag("demo-mri-brain", -0.3, -0.3, -0.1, -0.25);
+    let tumour = mri_drag("demo-mri-tumour", 0.24, 0.3, -0.04, -0.14);
+    let ventricle = mri_drag("demo-mri-ventricle", -0.14, 0.12, -0.05, -0.2);
+    // The tissue resists the motion (the hand moves -z).
+    assert!(
+        brain.z > 0.0 && brain.z > 0.9 * brain.length(),
+        "brain: {brain}"
+    );
+    assert!(
+        tumour.z > 0.0 && tumour.z > 0.9 * tumour.length(),
+        "tumour: {tumour}"
+    );
+    // Density is the scan's value: the tumour (about 1 at its middle) against the brain
+    // (0.6), and nothing in the hollow ventricle (0.36 N and 0.78 N and 0 when this was
+    // written).
+    assert!(
+        tumour.length() > 1.4 * brain.length(),
+        "tumour {tumour} against brain {brain}"
+    );
+    assert!(
+        ventricle.length() < 0.2 * brain.length(),
+        "ventricle {ventricle} against brain {brain}"
+    );
+}

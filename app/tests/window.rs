@@ -532,6 +532,45 @@ fn touching_with_the_mouse_runs_the_servo_on_the_scene_and_the_rind_pushes_back(
 }
 
 #[test]
+fn the_sampling_sphere_takes_the_colour_of_the_density_under_it_in_the_mri_demo() {
+    let display = display();
+    let dir = scratch("mri-sampling");
+    let store = dir.join("store");
+    // In the brain, then in the tumour (scene coordinates: the head is not moved).
+    let mut seen = Vec::new();
+    for (name, at) in [("brain", "-0.3,-0.3,-0.2"), ("tumour", "0.24,0.3,-0.1")] {
+        let touch_at = format!("touch-at: {at}");
+        let mut args = vec!["demo", "mri", "--store", store.to_str().unwrap()];
+        for c in ["touch: on", touch_at.as_str(), "wait-secs: 1"] {
+            args.extend(["--command", c]);
+        }
+        let (state, _, stdout) = window_with(&display, &dir, name, &args);
+        // The head is drawn: its formulas call the scan's grid, in the window as anywhere.
+        let head = &state["objects"][0];
+        assert!(head["skipped"].is_null(), "{head}");
+        assert!(head["n_triangles"].as_u64().unwrap() > 1000, "{head}");
+        let touch = &state["touch"];
+        let density = touch["sampled_density"].as_f64();
+        let colour: Vec<f64> = touch["sampling_colour"]
+            .as_array()
+            .unwrap_or_else(|| panic!("{stdout}\n{state}"))
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        seen.push((density, colour));
+    }
+    let (brain, tumour) = (&seen[0], &seen[1]);
+    // The scan's values there: 0.6 in the brain, about 1 in the tumour.
+    assert!(brain.0.is_some_and(|d| (d - 0.6).abs() < 0.05), "{brain:?}");
+    assert!(tumour.0.is_some_and(|d| d > 0.85), "{tumour:?}");
+    // Denser is redder.
+    assert!(
+        tumour.1[0] > brain.1[0] && tumour.1[1] < brain.1[1],
+        "{seen:?}"
+    );
+}
+
+#[test]
 fn a_recorded_touch_path_replays_headless_to_the_force_the_window_showed() {
     let display = display();
     let dir = scratch("touch-record");

@@ -600,9 +600,11 @@ fn scene_file(name: &str) -> fdsl::scene::Scene {
     } else {
         root.join("tests/data/scenes").join(format!("{name}.wrl"))
     };
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut no_files = |path: &str| Err(format!("no file {path}"));
-    fdsl::fvrml::load(&text, &fdsl::fvrml::LoadOptions::default(), &mut no_files)
+    let text = std::fs::read_to_string(&path).unwrap();
+    // Files a scene names (the MRI demo's volume) sit beside it.
+    let folder = path.parent().unwrap().to_path_buf();
+    let mut beside = |url: &str| std::fs::read(folder.join(url)).map_err(|e| format!("{url}: {e}"));
+    fdsl::fvrml::load(&text, &fdsl::fvrml::LoadOptions::default(), &mut beside)
         .unwrap()
         .scene
 }
@@ -742,6 +744,24 @@ fn shark_demo_matches_golden() {
         assert!(fraction_where(image, shark) > 0.002, "{view}: no shark");
         assert!(fraction_where(image, sand) > 0.05, "{view}: no seabed");
     }
+}
+
+#[test]
+fn mri_demo_matches_golden() {
+    // Looked at by eye: a head scan cut open at z = 0, seen from the front: peach skin round
+    // the edge, a white ring of skull, pinkish-grey brain, the two ventricles hollow (their
+    // walls shaded) and a red tumour up and to the right of them; from the corner the back
+    // half of the head shows its skin.
+    let Some(images) = check_scene_file("mri", 0) else {
+        return;
+    };
+    let tumour = |p: [i32; 4]| p[0] > 150 && p[0] > p[1] + 80 && p[0] > p[2] + 80;
+    let bone = |p: [i32; 4]| p[0] > 185 && p[1] > 180 && p[2] > 175 && p[0] - p[2] < 20;
+    let brain = |p: [i32; 4]| p[0] > 150 && (8..30).contains(&(p[0] - p[1])) && p[2] > p[1];
+    let front = &images[0].1;
+    assert!(fraction_where(front, tumour) > 0.005, "no tumour");
+    assert!(fraction_where(front, bone) > 0.02, "no skull");
+    assert!(fraction_where(front, brain) > 0.1, "no brain");
 }
 
 #[test]

@@ -208,10 +208,8 @@ fn use_scene(scene: &Scene) {
             .expect("meshes"),
             None => Mesh::default(),
         };
-        // The app's mesher builds it from the bare appearance; render's own paths take the
-        // object's tapes (`CompiledAppearance::of`).
-        let mut appearance =
-            CompiledAppearance::new(&object.data().appearance).expect("a valid appearance");
+        // The app's mesher and render's own paths take the object's tapes.
+        let mut appearance = CompiledAppearance::of(object);
         appearance.apply(&mut mesh, 0.5);
     }
 

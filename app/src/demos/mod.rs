@@ -7,6 +7,7 @@
 
 use fdsl::fvrml::{LoadOptions, Loaded, load};
 
+pub mod mri;
 pub mod shark;
 
 /// The demo `sculpt` and `sculpt demo` open when no name is given.
@@ -25,6 +26,8 @@ pub struct Demo {
     pub file: &'static str,
     /// The file's text.
     pub text: &'static str,
+    /// Files it names (grid volumes), by their path relative to it, built in too.
+    pub files: &'static [(&'static str, &'static [u8])],
 }
 
 /// Every demo, in the thesis's order.
@@ -36,6 +39,7 @@ pub const DEMOS: &[Demo] = &[
                 flesh is crunchy inside a hard shell.",
         file: "scenes/watermelon.wrl",
         text: include_str!("../../../scenes/watermelon.wrl"),
+        files: &[],
     },
     Demo {
         name: "wind",
@@ -44,6 +48,7 @@ pub const DEMOS: &[Demo] = &[
                 pushes along the cone's axis, strongest near the fan, and stops outside it.",
         file: "scenes/wind.wrl",
         text: include_str!("../../../scenes/wind.wrl"),
+        files: &[],
     },
     Demo {
         name: "whirlpool",
@@ -52,6 +57,7 @@ pub const DEMOS: &[Demo] = &[
                 round, in and down.",
         file: "scenes/whirlpool.wrl",
         text: include_str!("../../../scenes/whirlpool.wrl"),
+        files: &[],
     },
     Demo {
         name: "shark",
@@ -61,6 +67,7 @@ pub const DEMOS: &[Demo] = &[
                 tugs it along as the shark passes; reach in to feel its skin and body.",
         file: "scenes/shark.wrl",
         text: include_str!("../../../scenes/shark.wrl"),
+        files: &[],
     },
     Demo {
         name: "campus",
@@ -69,6 +76,7 @@ pub const DEMOS: &[Demo] = &[
                 containers (Figures 7.7 and 7.8): the walls are solid, the lawn is soft.",
         file: "scenes/campus.wrl",
         text: include_str!("../../../scenes/campus.wrl"),
+        files: &[],
     },
     Demo {
         name: "classroom",
@@ -78,6 +86,18 @@ pub const DEMOS: &[Demo] = &[
                 with a small cylinder and paint friction on with a big one.",
         file: "scenes/classroom.wrl",
         text: include_str!("../../../scenes/classroom.wrl"),
+        files: &[],
+    },
+    Demo {
+        name: "mri",
+        title: "MRI segmentation",
+        about: "A head scan as a function (Figure 7.11): a sampled grid, cut open, coloured \
+                and made dense by its tissue. Touch it with the sampling sphere, which takes \
+                the colour of the density under it: skull hard, brain soft, the tumour \
+                harder, the ventricles hollow.",
+        file: "scenes/mri.wrl",
+        text: include_str!("../../../scenes/mri.wrl"),
+        files: &[("head.nrrd", include_bytes!("../../../scenes/head.nrrd"))],
     },
     Demo {
         name: "femur",
@@ -86,6 +106,7 @@ pub const DEMOS: &[Demo] = &[
                 carve into it with a cylinder tool, paint density, undo, and export the result.",
         file: "scenes/femur.wrl",
         text: include_str!("../../../scenes/femur.wrl"),
+        files: &[],
     },
 ];
 
@@ -101,15 +122,16 @@ pub fn find(name: &str) -> Result<&'static Demo, String> {
 }
 
 impl Demo {
-    /// The scene as FVRML loads it (demos have no `Inline` files).
+    /// The scene as FVRML loads it, with its built-in files.
     pub fn load(&self, options: &LoadOptions) -> Result<Loaded, String> {
-        let mut no_inline = |url: &str| {
-            Err(format!(
-                "the demo scene `{}` has no inline files ({url})",
-                self.name
-            ))
+        let mut built_in = |url: &str| {
+            self.files
+                .iter()
+                .find(|(name, _)| *name == url)
+                .map(|(_, bytes)| bytes.to_vec())
+                .ok_or_else(|| format!("the demo scene `{}` has no file `{url}`", self.name))
         };
-        load(self.text, options, &mut no_inline)
+        load(self.text, options, &mut built_in)
             .map_err(|e| format!("the demo scene `{}` does not load: {e}", self.name))
     }
 }

@@ -21,6 +21,7 @@
 pub mod feed;
 pub mod live;
 pub mod path;
+pub mod probe;
 pub mod record;
 pub mod spacemouse;
 

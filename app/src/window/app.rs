@@ -24,6 +24,7 @@ use ::app::command::{self, Planned};
 use ::app::engine::{
     CameraPose, ChatRow, Engine, EngineConfig, HistoryRow, PeerRow, Pending, Presence, lock,
 };
+use ::app::touch::probe;
 use replication::PeerId;
 
 /// Frames whose times are kept for the statistics.
@@ -1535,6 +1536,18 @@ impl eframe::App for SculptApp {
 }
 
 impl SculptApp {
+    /// The density under the live touch tool, in the object it touches (see [`probe`]).
+    fn sampled_density(&self) -> Option<f64> {
+        self.sampled_density_in(&lock(self.engine.view()))
+    }
+
+    /// [`SculptApp::sampled_density`] with the engine's view already locked.
+    pub(crate) fn sampled_density_in(&self, view: &::app::engine::View) -> Option<f64> {
+        let stats = self.touch.as_ref()?.stats();
+        let t = self.scene_clock.secs(clock::now().instant);
+        probe::density_at(view.scene(), stats.top_id?, stats.hip_world, t)
+    }
+
     /// The haptic zone, the tool at the haptic interface point and the force it meets.
     fn draw_touch(&self, scene: &mut Scene) {
         let Some(live) = &self.touch else {
@@ -1548,6 +1561,13 @@ impl SculptApp {
         let hip = to_render.transform_point3(stats.hip_world.as_vec3());
         let size = (zone.hi[0] - zone.lo[0]) * 0.03;
         scene.add_crosshair(hip, size, TOUCH_TOOL_COLOUR);
+        // The sampling sphere, coloured by the density under the tool.
+        let radius = f64::from(zone.hi[0] - zone.lo[0]) * probe::SAMPLING_RADIUS_OF_ZONE;
+        scene.add_tool(
+            &fdsl::object::ToolShape::Sphere { radius },
+            glam::Mat4::from_translation(hip),
+            probe::sampling_colour(self.sampled_density()),
+        );
         let force = stats.force_newtons.as_vec3();
         if force.length() > 1e-3 {
             // One zone-width per device maximum (the zone does not rotate: device axes are

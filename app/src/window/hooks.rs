@@ -429,6 +429,9 @@ impl SculptApp {
                     "compute_micros": s.compute_micros,
                     "device_status": self.spacemouse.as_ref().map(|(d, _)| d.status().text()),
                     "energy_joules": s.energy_joules,
+                    "sampled_density": self.sampled_density_in(&view),
+                    "sampling_colour":
+                        ::app::touch::probe::sampling_colour(self.sampled_density_in(&view)),
                     "n_plotted": self.force_history.len(),
                     "recording": self.touch_recording.as_ref().map(|(r, _)| r.n_rows()),
                 })

@@ -587,8 +587,7 @@ fn mesh_whole(
         .map_err(|e| e.to_string())?;
     let mut mesh = Mesh::default();
     let patch = octree.mesh_update(&mut mesh).map_err(|e| e.to_string())?;
-    let mut appearance =
-        CompiledAppearance::new(&object.data().appearance).map_err(|e| e.to_string())?;
+    let mut appearance = CompiledAppearance::of(&object);
     let everything = std::slice::from_ref(&(0..mesh.n_vertices())).to_vec();
     recolour(&object, &mut appearance, &mut mesh, &everything, Vec::new());
     let material = appearance.material(&mesh, 0.0, Material::default());
@@ -737,7 +736,7 @@ mod tests {
     /// Vertices used by a triangle of `mesh` whose colour is not what colouring the whole
     /// mesh for `object` gives.
     fn wrongly_coloured(object: &Object, mesh: &Mesh) -> usize {
-        let mut appearance = CompiledAppearance::new(&object.data().appearance).unwrap();
+        let mut appearance = CompiledAppearance::of(object);
         let mut whole = mesh.clone();
         let everything = std::slice::from_ref(&(0..mesh.n_vertices())).to_vec();
         recolour(object, &mut appearance, &mut whole, &everything, Vec::new());
