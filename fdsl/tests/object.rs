@@ -374,19 +374,11 @@ fn an_objects_formulas_call_its_grids_and_a_grid_in_use_cannot_go() {
     );
 }
 
-fn from_hex(text: &str) -> Vec<u8> {
-    let text = text.trim();
-    (0..text.len())
-        .step_by(2)
-        .map(|i| u8::from_str_radix(&text[i..i + 2], 16).unwrap())
-        .collect()
-}
-
 #[test]
 fn objects_written_before_grids_still_decode() {
-    let bytes = from_hex(include_str!("../../tests/data/format-v1/object.hex"));
+    let bytes = include_bytes!("../../tests/data/format-v1/object.bin");
     assert_eq!(bytes[0], codec::VERSION_1);
-    let object = codec::decode_object(&bytes).unwrap();
+    let object = codec::decode_object(bytes).unwrap();
     let mut data = ObjectData {
         name: "clay".into(),
         geometry: Some(Geometry::implicit(Formula::new("1-x^2-y^2-z^2").unwrap())),

@@ -61,6 +61,13 @@ pub enum Effect {
     },
 }
 
+/// Whether [`Payload::encode`] writes exactly `bytes` for `payload`.
+pub fn encodes_to<P: Payload>(payload: &P, bytes: &[u8]) -> bool {
+    let mut canonical = Vec::with_capacity(bytes.len());
+    payload.encode(&mut canonical);
+    canonical == bytes
+}
+
 /// An op's payload: the object model's edits, encoded canonically.
 ///
 /// The core is generic over it; `fdsl`'s edits implement it, tests use a small payload.
@@ -77,9 +84,7 @@ pub trait Payload: Clone + fmt::Debug + PartialEq + Eq {
     /// [`Payload::encode`] writes; a payload whose format gained a version may also accept its
     /// canonical encoding in an older version it still reads (ops signed then).
     fn is_canonical(&self, bytes: &[u8]) -> bool {
-        let mut canonical = Vec::with_capacity(bytes.len());
-        self.encode(&mut canonical);
-        canonical == bytes
+        encodes_to(self, bytes)
     }
 
     /// What the core must know about this payload.

@@ -295,9 +295,7 @@ impl Payload for ShapePayload {
             return ShapePayloadV1::of(self)
                 .is_some_and(|v1| object_codec::encode_version_1(&v1) == bytes);
         }
-        let mut canonical = Vec::with_capacity(bytes.len());
-        self.encode(&mut canonical);
-        canonical == bytes
+        crate::payload::encodes_to(self, bytes)
     }
 
     fn effect(&self) -> Effect {

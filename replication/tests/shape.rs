@@ -322,22 +322,14 @@ fn payloads_are_small_and_hostile_bytes_are_refused() {
     }
 }
 
-fn from_hex(text: &str) -> Vec<u8> {
-    let text = text.trim();
-    (0..text.len())
-        .step_by(2)
-        .map(|i| u8::from_str_radix(&text[i..i + 2], 16).unwrap())
-        .collect()
-}
-
 /// Ops signed before objects held grids (version 1 of the object encoding) are still read,
 /// verified and folded: a store or a peer from then loses nothing.
 #[test]
 fn ops_signed_before_grids_still_verify_and_fold() {
-    let create = from_hex(include_str!("../../tests/data/format-v1/create.hex"));
-    let set = from_hex(include_str!("../../tests/data/format-v1/set.hex"));
-    let create = replication::Op::<ShapePayload>::decode_verified(&create).unwrap();
-    let set = replication::Op::<ShapePayload>::decode_verified(&set).unwrap();
+    let create = include_bytes!("../../tests/data/format-v1/create.bin");
+    let set = include_bytes!("../../tests/data/format-v1/set.bin");
+    let create = replication::Op::<ShapePayload>::decode_verified(create).unwrap();
+    let set = replication::Op::<ShapePayload>::decode_verified(set).unwrap();
     assert_eq!(create.author(), Keypair::from_seed([9; 32]).peer_id());
     let ShapePayload::Create {
         object: 7, data, ..

@@ -295,14 +295,20 @@ fn binary(op: BinaryOp, o: &mut Lanes, a: Src, b: Src) {
     }
 }
 
-/// Grid samples are computed per lane in f64 (the point evaluator's value, rounded).
-fn sample(grid: &crate::grid::Grid, instr: &Instr, regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
+/// Copies an instruction's three arguments into scratch chunks (constants filled), so that
+/// its output may share a register with none of them.
+fn gather(instr: &Instr, regs: &[Lanes], scratch: &mut [Lanes; 3]) {
     for (k, arg) in instr.args.iter().enumerate() {
         match *arg {
             Operand::Reg(r) => scratch[k] = regs[r as usize],
             Operand::Const(c) => scratch[k].fill(c as f32),
         }
     }
+}
+
+/// Grid samples are computed per lane in f64 (the point evaluator's value, rounded).
+fn sample(grid: &crate::grid::Grid, instr: &Instr, regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
+    gather(instr, regs, scratch);
     let o = &mut regs[instr.out as usize];
     let [a, b, c] = &*scratch;
     for i in 0..CHUNK {
@@ -313,12 +319,7 @@ fn sample(grid: &crate::grid::Grid, instr: &Instr, regs: &mut [Lanes], scratch: 
 /// Ternary operations are rare; their arguments are copied into scratch chunks first, so the
 /// output may share a register with none of them and constants need no special case.
 fn ternary(op: TernaryOp, instr: &Instr, regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
-    for (k, arg) in instr.args.iter().enumerate() {
-        match *arg {
-            Operand::Reg(r) => scratch[k] = regs[r as usize],
-            Operand::Const(c) => scratch[k].fill(c as f32),
-        }
-    }
+    gather(instr, regs, scratch);
     let o = &mut regs[instr.out as usize];
     let [a, b, c] = &*scratch;
     match op {

@@ -105,44 +105,7 @@ impl<'d> Reader<'_, 'd> {
     /// The `FEdit` nodes of an `FShape`'s `edits` field, in order (`USE` resolved, `NULL`
     /// skipped, nodes of other types warned about and skipped).
     pub(super) fn edit_nodes(&mut self, field: &'d Field) -> Vec<&'d Node> {
-        let items: &'d [NodeRef] = match &field.value {
-            Value::NodeList(list) => list,
-            Value::Node(r) => std::slice::from_ref(r),
-            Value::EmptyList => &[],
-            _ => {
-                self.wrong_type(field, "a list of `FEdit` nodes");
-                return Vec::new();
-            }
-        };
-        if items.len() > MAX_EDITS_PER_OBJECT {
-            self.error(
-                field.value_pos,
-                format!(
-                    "`edits` holds {} edits, more than the limit of {MAX_EDITS_PER_OBJECT} an \
-                     object may hold",
-                    items.len()
-                ),
-            );
-            return Vec::new();
-        }
-        let mut nodes = Vec::with_capacity(items.len());
-        for r in items {
-            let Some(node) = self.resolve(r, field.value_pos) else {
-                continue;
-            };
-            if node.type_name == "FEdit" {
-                nodes.push(node);
-            } else {
-                self.warning(
-                    node.pos,
-                    format!(
-                        "`{}` cannot be in `edits` (expected FEdit); ignored",
-                        node.type_name
-                    ),
-                );
-            }
-        }
-        nodes
+        self.listed_nodes(field, "FEdit", MAX_EDITS_PER_OBJECT, "edits")
     }
 
     /// An `FEdit`: `operation`, `property` and `value` (painting), `tool` and its sizes,

@@ -52,36 +52,7 @@ impl GridRead<'_> {
 impl<'d> Reader<'_, 'd> {
     /// The `FGrid` nodes of a `grids` field.
     pub(super) fn grid_nodes(&mut self, field: &'d Field) -> Vec<&'d Node> {
-        let items: &'d [NodeRef] = match &field.value {
-            Value::NodeList(list) => list,
-            Value::Node(r) => std::slice::from_ref(r),
-            Value::EmptyList => &[],
-            _ => {
-                self.wrong_type(field, "a list of `FGrid` nodes");
-                return Vec::new();
-            }
-        };
-        if items.len() > MAX_GRIDS {
-            let message = format!(
-                "`grids` holds {} grids, more than the limit of {MAX_GRIDS} an object may hold",
-                items.len()
-            );
-            self.error(field.value_pos, message);
-            return Vec::new();
-        }
-        let mut nodes = Vec::with_capacity(items.len());
-        for r in items {
-            let Some(node) = self.resolve(r, field.value_pos) else {
-                continue;
-            };
-            if node.type_name == "FGrid" {
-                nodes.push(node);
-            } else {
-                let message = format!("a `{}` in `grids` is ignored", node.type_name);
-                self.warning(node.pos, message);
-            }
-        }
-        nodes
+        self.listed_nodes(field, "FGrid", MAX_GRIDS, "grids")
     }
 
     /// The fields of one `FGrid`; `None` (reported) when they cannot make a grid.

@@ -275,6 +275,52 @@ impl<'d> Reader<'_, 'd> {
         self.formula(field)
     }
 
+    /// The nodes of type `type_name` a list field holds, in order (`USE` resolved, `NULL`
+    /// skipped, nodes of other types warned about and skipped); none, with an error, when it
+    /// holds more than `max` (`what` names them in the message).
+    pub(super) fn listed_nodes(
+        &mut self,
+        field: &'d Field,
+        type_name: &str,
+        max: usize,
+        what: &str,
+    ) -> Vec<&'d Node> {
+        let items: &'d [NodeRef] = match &field.value {
+            Value::NodeList(list) => list,
+            Value::Node(r) => std::slice::from_ref(r),
+            Value::EmptyList => &[],
+            _ => {
+                self.wrong_type(field, &format!("a list of `{type_name}` nodes"));
+                return Vec::new();
+            }
+        };
+        if items.len() > max {
+            let message = format!(
+                "`{}` holds {} {what}, more than the limit of {max} an object may hold",
+                field.name,
+                items.len()
+            );
+            self.error(field.value_pos, message);
+            return Vec::new();
+        }
+        let mut nodes = Vec::with_capacity(items.len());
+        for r in items {
+            let Some(node) = self.resolve(r, field.value_pos) else {
+                continue;
+            };
+            if node.type_name == type_name {
+                nodes.push(node);
+            } else {
+                let message = format!(
+                    "`{}` cannot be in `{}` (expected {type_name}); ignored",
+                    node.type_name, field.name
+                );
+                self.warning(node.pos, message);
+            }
+        }
+        nodes
+    }
+
     /// The node of an `SFNode` field (resolving `USE`); `None` for `NULL` or on error.
     pub(super) fn node(&mut self, field: &'d Field) -> Option<&'d Node> {
         match &field.value {

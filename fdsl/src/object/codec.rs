@@ -91,10 +91,13 @@ pub mod v1 {
 
 /// Encodes any serialisable value of the object model, version byte first.
 pub fn encode<T: Serialize>(value: &T) -> Vec<u8> {
-    let out = vec![VERSION];
+    encode_as(VERSION, value)
+}
+
+fn encode_as<T: Serialize>(version: u8, value: &T) -> Vec<u8> {
     // Serialising plain data into a Vec cannot fail: no maps with non-string keys, no
     // sequences of unknown length.
-    match postcard::to_extend(value, out) {
+    match postcard::to_extend(value, vec![version]) {
         Ok(v) => v,
         Err(e) => unreachable!("the object model always serialises: {e}"),
     }
@@ -103,10 +106,7 @@ pub fn encode<T: Serialize>(value: &T) -> Vec<u8> {
 /// Encodes a value in [`VERSION_1`] (a layout from [`v1`], or a type that did not change):
 /// what checks that bytes written then are canonical.
 pub fn encode_version_1<T: Serialize>(value: &T) -> Vec<u8> {
-    match postcard::to_extend(value, vec![VERSION_1]) {
-        Ok(v) => v,
-        Err(e) => unreachable!("the object model always serialises: {e}"),
-    }
+    encode_as(VERSION_1, value)
 }
 
 /// Decodes a value encoded by [`encode`] (no validation beyond the encoding), of a type whose
