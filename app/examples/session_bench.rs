@@ -25,12 +25,11 @@
 //! program exits non-zero when anything fails to converge in time. The stores live in a
 //! fresh directory under the system's temporary directory, removed at the end.
 
-use std::alloc::{GlobalAlloc, Layout, System};
 use std::collections::VecDeque;
 use std::net::{SocketAddr, UdpSocket};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, sync_channel};
 use std::time::{Duration, Instant};
 
@@ -44,38 +43,10 @@ use replication::net::discovery::registry::{self, Registry};
 use replication::net::invite::Invite;
 use replication::shape::ShapePayload;
 use replication::{Keypair, Timestamp};
-
-/// Counts live heap bytes (allocated minus freed).
-struct Counting;
-
-static LIVE_BYTES: AtomicUsize = AtomicUsize::new(0);
-
-#[expect(unsafe_code, reason = "a global allocator is an unsafe trait")]
-// SAFETY: every method forwards to `System` with the caller's arguments unchanged, so the
-// allocator contract is `System`'s; the counter is only arithmetic on the side.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        LIVE_BYTES.fetch_add(layout.size(), Ordering::Relaxed);
-        // SAFETY: forwarded unchanged (see the impl).
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        LIVE_BYTES.fetch_sub(layout.size(), Ordering::Relaxed);
-        // SAFETY: forwarded unchanged (see the impl).
-        unsafe { System.dealloc(ptr, layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        LIVE_BYTES.fetch_add(new_size, Ordering::Relaxed);
-        LIVE_BYTES.fetch_sub(layout.size(), Ordering::Relaxed);
-        // SAFETY: forwarded unchanged (see the impl).
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use testkit::alloc::{CountingAlloc, live_bytes};
 
 #[global_allocator]
-static ALLOC: Counting = Counting;
+static ALLOC: CountingAlloc = CountingAlloc;
 
 /// Objects A creates before the edits (each `shape:` edit goes to the next one in turn).
 const N_OBJECTS: usize = 4;
@@ -749,10 +720,10 @@ fn register_sessions(registry: &mut Registry, n_sessions: usize) -> anyhow::Resu
 fn discovery_memory(n_sessions: usize) -> anyhow::Result<()> {
     // A fixed cookie key: the figures do not depend on it.
     let mut registry = Registry::new([0x42; 32]);
-    let (heap_before, rss_before) = (LIVE_BYTES.load(Ordering::Relaxed), vm_rss_kib());
+    let (heap_before, rss_before) = (live_bytes(), vm_rss_kib());
     let n_datagrams = register_sessions(&mut registry, n_sessions)?;
     let end = REGISTRY_T0.saturating_add_micros(u64::from(n_datagrams) * REGISTER_GAP_MICROS);
-    let heap_held = LIVE_BYTES.load(Ordering::Relaxed) - heap_before;
+    let heap_held = live_bytes() - heap_before;
     let rss_held = vm_rss_kib()
         .zip(rss_before)
         .map(|(after, before)| after - before);
@@ -766,7 +737,7 @@ fn discovery_memory(n_sessions: usize) -> anyhow::Result<()> {
     );
     // Rate-limit state idles out 2 s after a source's last request; registrations live 60 s.
     registry.expire(end.saturating_add_micros(3_000_000));
-    let heap_sessions = LIVE_BYTES.load(Ordering::Relaxed) - heap_before;
+    let heap_sessions = live_bytes() - heap_before;
     println!(
         "discovery registry: {n_sessions} sessions offered ({n_datagrams} Register datagrams: \
          a cookie round trip per registration, each from its own source IP), {n_held} sessions held (MAX_SESSIONS = {}), \

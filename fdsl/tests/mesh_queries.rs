@@ -7,64 +7,16 @@
     reason = "test helpers unwrap what a test expects to succeed"
 )]
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::f64::consts::PI;
 
 use fdsl::mesh::geometry::closest_point_on_triangle;
 use fdsl::mesh::{TriMesh, shapes};
 use glam::DVec3;
 use proptest::prelude::*;
-
-struct Counting;
-
-thread_local! {
-    static ARMED: Cell<bool> = const { Cell::new(false) };
-    // Per thread, so that tests running in parallel do not count each other.
-    static N_ALLOCS: Cell<usize> = const { Cell::new(0) };
-}
-
-fn count_one() {
-    if ARMED.with(Cell::get) {
-        N_ALLOCS.with(|n| n.set(n.get() + 1));
-    }
-}
-
-#[expect(
-    unsafe_code,
-    reason = "a global allocator is an unsafe trait; it only counts"
-)]
-// SAFETY: every call forwards to `System` with the same arguments; counting has no effect on
-// the memory handed out.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count_one();
-        // SAFETY: forwarded unchanged; the caller upholds `GlobalAlloc::alloc`'s contract.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        count_one();
-        // SAFETY: forwarded unchanged; `ptr` came from `System.alloc` with this layout.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count_one();
-        // SAFETY: forwarded unchanged; the caller upholds `GlobalAlloc::realloc`'s contract.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use testkit::alloc::{CountingAlloc, allocations_in as allocations};
 
 #[global_allocator]
-static ALLOCATOR: Counting = Counting;
-
-/// Allocations made by `f` on this thread.
-fn allocations(f: impl FnOnce()) -> usize {
-    N_ALLOCS.with(|n| n.set(0));
-    ARMED.with(|a| a.set(true));
-    f();
-    ARMED.with(|a| a.set(false));
-    N_ALLOCS.with(Cell::get)
-}
+static ALLOCATOR: CountingAlloc = CountingAlloc;
 
 /// The box [-1, 1]^3.
 fn unit_box() -> TriMesh {

@@ -7,9 +7,6 @@
     reason = "test helpers outside #[test] fns unwrap"
 )]
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
 use glam::DVec3;
 use haptic::container::Aabb;
 use haptic::container::Container;
@@ -26,56 +23,10 @@ use haptic::shapes::{
     circle_waypoints, fdsl_watermelon_grid, fdsl_whirlpool, icosphere, object_watermelon_scene,
     sphere_dents, watermelon_grid,
 };
-
-struct Counting;
-
-thread_local! {
-    static ARMED: Cell<bool> = const { Cell::new(false) };
-    // Per thread, so that tests running in parallel do not count each other.
-    static N_ALLOCS: Cell<usize> = const { Cell::new(0) };
-}
-
-fn count_one() {
-    if ARMED.with(Cell::get) {
-        N_ALLOCS.with(|n| n.set(n.get() + 1));
-    }
-}
-
-#[expect(
-    unsafe_code,
-    reason = "a global allocator is an unsafe trait; it only counts"
-)]
-// SAFETY: every call forwards to `System` with the same arguments; counting has no effect on
-// the memory handed out.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count_one();
-        // SAFETY: forwarded unchanged; the caller upholds `GlobalAlloc::alloc`'s contract.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        count_one();
-        // SAFETY: forwarded unchanged; `ptr` came from `System.alloc` with this layout.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count_one();
-        // SAFETY: forwarded unchanged; the caller upholds `GlobalAlloc::realloc`'s contract.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use testkit::alloc::{CountingAlloc, allocations_in as count_allocs};
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
-
-/// Runs `f` with allocation counting armed on this thread; returns allocations seen.
-fn count_allocs(f: impl FnOnce()) -> usize {
-    let before = N_ALLOCS.with(Cell::get);
-    ARMED.with(|a| a.set(true));
-    f();
-    ARMED.with(|a| a.set(false));
-    N_ALLOCS.with(Cell::get) - before
-}
+static GLOBAL: CountingAlloc = CountingAlloc;
 
 fn rig() -> Rig {
     let caps = Capabilities::desktop_pen();

@@ -4,8 +4,7 @@
 
 mod common;
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use testkit::alloc::{CountingAlloc, live_bytes};
 
 use common::{N_HISTORY, Side, TLog, TScene, build, catch_up, history};
 use replication::materialize::test_scene::TestScene;
@@ -15,40 +14,11 @@ use replication::snapshot::Snapshot;
 use replication::store::OpStore;
 use replication::{Op, VerifiedOp};
 
-/// Counts live heap bytes.
-struct Counting;
-
-static LIVE_BYTES: AtomicUsize = AtomicUsize::new(0);
-
-#[expect(unsafe_code, reason = "a global allocator is an unsafe trait")]
-// SAFETY: every method forwards to `System` with the caller's arguments unchanged, so the
-// allocator contract is `System`'s; the counter is only arithmetic on the side.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        LIVE_BYTES.fetch_add(layout.size(), Ordering::Relaxed);
-        // SAFETY: forwarded unchanged (see the impl).
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        LIVE_BYTES.fetch_sub(layout.size(), Ordering::Relaxed);
-        // SAFETY: forwarded unchanged (see the impl).
-        unsafe { System.dealloc(ptr, layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        LIVE_BYTES.fetch_add(new_size, Ordering::Relaxed);
-        LIVE_BYTES.fetch_sub(layout.size(), Ordering::Relaxed);
-        // SAFETY: forwarded unchanged (see the impl).
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static ALLOC: Counting = Counting;
+static ALLOC: CountingAlloc = CountingAlloc;
 
 fn live() -> usize {
-    LIVE_BYTES.load(Ordering::Relaxed)
+    live_bytes()
 }
 
 fn per_op(bytes: usize, n: usize) -> f64 {

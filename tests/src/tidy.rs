@@ -144,9 +144,37 @@ pub fn files_without_header(files: &[PathBuf]) -> Vec<PathBuf> {
         .collect()
 }
 
+/// The packages (from `cargo metadata --format-version 1` output) that depend on
+/// `dev_only` other than as a dev-dependency, with the kind they use.
+pub fn non_dev_uses(metadata: &serde_json::Value, dev_only: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    for package in metadata["packages"].as_array().into_iter().flatten() {
+        for dep in package["dependencies"].as_array().into_iter().flatten() {
+            let kind = dep["kind"].as_str().unwrap_or("normal");
+            if dep["name"].as_str() == Some(dev_only) && kind != "dev" {
+                let name = package["name"].as_str().unwrap_or("?");
+                out.push(format!("`{name}` uses `{dev_only}` as a {kind} dependency"));
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_dev_only_crate_used_otherwise_is_found() {
+        let metadata = serde_json::json!({"packages": [
+            {"name": "fdsl", "dependencies": [{"name": "testkit", "kind": "dev"}]},
+            {"name": "app", "dependencies": [{"name": "testkit", "kind": null}]},
+        ]});
+        assert_eq!(
+            non_dev_uses(&metadata, "testkit"),
+            ["`app` uses `testkit` as a normal dependency"]
+        );
+    }
 
     const MAP: &str = "intro\n```tidy-deps\nfdsl ->\nrender -> fdsl\napp -> fdsl render\n```\n";
 

@@ -33,7 +33,8 @@ fn dependency_edges_follow_the_architecture_map() {
     );
     let metadata: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
     let actual = tidy::workspace_edges(&metadata).unwrap();
-    let problems = tidy::check_edges(&allowed, &actual);
+    let mut problems = tidy::check_edges(&allowed, &actual);
+    problems.extend(tidy::non_dev_uses(&metadata, "testkit"));
     assert!(
         problems.is_empty(),
         "dependency map violations:\n{}",
@@ -51,6 +52,7 @@ fn every_source_file_has_a_header() {
         "app",
         "simulator",
         "tests",
+        "testkit",
     ];
     let files: Vec<_> = members
         .iter()
