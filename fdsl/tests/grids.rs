@@ -208,3 +208,42 @@ fn misusing_a_grid_is_a_located_error() {
     let many: Vec<Arc<Grid>> = (0..=MAX_GRIDS).map(|i| bumpy(&format!("g{i}"))).collect();
     assert!(error("g0(x, y, z)", with(&many)).1.contains("at most 8"));
 }
+
+/// A valid 3 x 3 x 3 NRRD file.
+fn nrrd_file() -> Vec<u8> {
+    let mut file = b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 3 3 3\nspacings: 0.5 0.5 0.5\nspace origin: (-0.5,-0.5,-0.5)\nencoding: raw\n\n".to_vec();
+    file.extend((0..27u8).map(|b| b * 9));
+    file
+}
+
+proptest::proptest! {
+    /// Any bytes read as NRRD are a grid or an error, never a panic.
+    #[test]
+    fn any_bytes_are_a_grid_or_an_nrrd_error(bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..400)) {
+        let _ = Grid::from_nrrd("scan", &bytes, [0.0, 1.0]);
+    }
+
+    /// A valid file with bytes changed anywhere (header or samples) is a grid whose samples
+    /// are the file's tail, or an error.
+    #[test]
+    fn changed_files_are_a_grid_or_an_nrrd_error(
+        changes in proptest::collection::vec((0usize..140, proptest::prelude::any::<u8>()), 1..6),
+    ) {
+        let mut file = nrrd_file();
+        for (at, byte) in changes {
+            let at = at % file.len();
+            file[at] = byte;
+        }
+        if let Ok(grid) = Grid::from_nrrd("scan", &file, [0.0, 1.0]) {
+            let samples = &grid.data().samples;
+            proptest::prop_assert!(file.ends_with(samples));
+            proptest::prop_assert_eq!(samples.len(), grid.data().size.iter().map(|&s| usize::from(s)).product::<usize>());
+        }
+    }
+}
+
+#[test]
+fn the_valid_file_reads() {
+    let grid = Grid::from_nrrd("scan", &nrrd_file(), [0.0, 1.0]).unwrap();
+    assert_eq!(grid.extent(), ([-0.5; 3], [0.5; 3]));
+}
