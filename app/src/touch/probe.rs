@@ -26,6 +26,18 @@ pub fn density_at(scene: &Scene, id: u64, at: DVec3, t: f64) -> Option<f64> {
         .filter(|d| d.is_finite())
 }
 
+/// The density under the tool at `at`: in the object the servo reports touching (`top`),
+/// else (before the servo's first scene, or between objects) in the first object, by id,
+/// whose solid holds `at` and has a density there.
+pub fn density_under(scene: &Scene, top: Option<u64>, at: DVec3, t: f64) -> Option<f64> {
+    if let Some(d) = top.and_then(|id| density_at(scene, id, at, t)) {
+        return Some(d);
+    }
+    scene
+        .objects()
+        .find_map(|(id, _)| density_at(scene, id.0, at, t))
+}
+
 /// The sampling sphere's colour for a density: grey where there is none, then blue (0) through
 /// green (0.5) to red (1 and more), opaque.
 pub fn sampling_colour(density: Option<f64>) -> [f32; 4] {
@@ -69,6 +81,14 @@ mod tests {
         assert!((d - 0.7).abs() < 1e-12, "{d}");
         assert_eq!(density_at(&scene, 3, DVec3::new(0.0, 0.0, 0.0), 0.0), None);
         assert_eq!(density_at(&scene, 4, DVec3::new(2.5, 0.0, 0.0), 0.0), None);
+        // Without the servo's word (or with a stale one), the object holding the point.
+        let under = |top| density_under(&scene, top, DVec3::new(2.5, 0.0, 0.0), 0.0);
+        assert_eq!(under(None), Some(d));
+        assert_eq!(under(Some(4)), Some(d));
+        assert_eq!(
+            density_under(&scene, None, DVec3::new(9.0, 0.0, 0.0), 0.0),
+            None
+        );
         let (low, high) = (sampling_colour(Some(0.1)), sampling_colour(Some(0.95)));
         assert!(low[2] > low[0] && high[0] > high[2], "{low:?} {high:?}");
         assert_ne!(sampling_colour(None), low);

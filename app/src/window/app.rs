@@ -1545,7 +1545,7 @@ impl SculptApp {
     pub(crate) fn sampled_density_in(&self, view: &::app::engine::View) -> Option<f64> {
         let stats = self.touch.as_ref()?.stats();
         let t = self.scene_clock.secs(clock::now().instant);
-        probe::density_at(view.scene(), stats.top_id?, stats.hip_world, t)
+        probe::density_under(view.scene(), stats.top_id, stats.hip_world, t)
     }
 
     /// The haptic zone, the tool at the haptic interface point and the force it meets.
