@@ -98,6 +98,8 @@ impl<'d> Reader<'_, 'd> {
         });
         let origin = three(&mut fields, self, "origin");
         let spacing = three(&mut fields, self, "spacing");
+        // A `size` given but refused is reported once, not again as a missing size.
+        ok &= size_pos.is_none() || size.is_some();
         let range = match fields.get("range") {
             Some(f) => match self.fixed(f, 2) {
                 Some(v) => [v[0], v[1]],
