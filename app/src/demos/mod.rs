@@ -94,7 +94,7 @@ pub const DEMOS: &[Demo] = &[
         about: "A head scan as a function (Figure 7.11): a sampled grid, cut open, coloured \
                 and made dense by its tissue. Touch it with the sampling sphere, which takes \
                 the colour of the density under it: skull hard, brain soft, the tumour \
-                harder, the ventricles hollow.",
+                hardest, the ventricles hollow.",
         file: "scenes/mri.wrl",
         text: include_str!("../../../scenes/mri.wrl"),
         files: &[("head.nrrd", include_bytes!("../../../scenes/head.nrrd"))],

@@ -27,8 +27,9 @@ pub fn density_at(scene: &Scene, id: u64, at: DVec3, t: f64) -> Option<f64> {
 }
 
 /// The density under the tool at `at`: in the object the servo reports touching (`top`),
-/// else (before the servo's first scene, or between objects) in the first object, by id,
-/// whose solid holds `at` and has a density there.
+/// else in the first object, by id, whose solid holds `at` and has a density there. Looking
+/// through every object costs a sampler each, so a caller whose servo has reported a scene
+/// passes its `top` and calls this only before (the window, every frame while touching).
 pub fn density_under(scene: &Scene, top: Option<u64>, at: DVec3, t: f64) -> Option<f64> {
     if let Some(d) = top.and_then(|id| density_at(scene, id, at, t)) {
         return Some(d);

@@ -1545,7 +1545,12 @@ impl SculptApp {
     pub(crate) fn sampled_density_in(&self, view: &::app::engine::View) -> Option<f64> {
         let stats = self.touch.as_ref()?.stats();
         let t = self.scene_clock.secs(clock::now().instant);
-        probe::density_under(view.scene(), stats.top_id, stats.hip_world, t)
+        if stats.n_scenes_taken == 0 {
+            // The servo has no scene yet, so no word on what it touches: look it up.
+            return probe::density_under(view.scene(), None, stats.hip_world, t);
+        }
+        // Once it has, it names the object (or none, in empty space): one sampler a frame.
+        probe::density_at(view.scene(), stats.top_id?, stats.hip_world, t)
     }
 
     /// The haptic zone, the tool at the haptic interface point and the force it meets.
