@@ -10,6 +10,7 @@ use app::engine::{Engine, EngineConfig, Network, lock, store};
 use fdsl::Function;
 use fdsl::eval::{BulkEval, PointEval};
 use replication::net::invite::Invite;
+use replication::shape::ShapePayload;
 
 /// How often a headless peer looks at its view to print what changed.
 const PEER_POLL_MILLIS: u64 = 100;
@@ -703,11 +704,15 @@ fn author_imports(
             eprintln!("{warning}");
         }
         for (payload, made) in imported.payloads.into_iter().zip(&imported.made) {
+            let part = matches!(payload, ShapePayload::Part { .. });
             engine
                 .author(payload)?
                 .wait()
                 .map_err(|e| anyhow::anyhow!("{}: {made}: {e}", path.display()))?;
-            println!("{}: {made}", path.display());
+            // A part is progress, not a result: the object's line follows its last part.
+            if !part {
+                println!("{}: {made}", path.display());
+            }
         }
     }
     Ok(())

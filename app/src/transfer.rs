@@ -9,8 +9,10 @@
 //! authors them in order. A file is read whole within a named limit before it is parsed
 //! ([`fdsl::fvrml::MAX_FILE_BYTES`], [`MAX_MESH_FILE_BYTES`]); its `Inline`s may read only
 //! files in its own folder, or under a root the user names ([`import_within`], checked by
-//! [`crate::files::InlineResolver`]); every object must fit in one
-//! op ([`replication::payload::MAX_PAYLOAD_BYTES`]: a mesh of a few hundred triangles), and
+//! [`crate::files::InlineResolver`]); an object too large for one op
+//! ([`replication::payload::MAX_PAYLOAD_BYTES`]: a mesh of a few hundred triangles) is
+//! authored in parts ([`replication::shape::parts`]), up to
+//! [`replication::shape::parts::MAX_ASSEMBLED_BYTES`] (a mesh of about 170 000 triangles), and
 //! a file may bring at most [`MAX_IMPORT_OBJECTS`] objects. Any failure is an error naming
 //! the file and where in it (line and column, byte offset or JSON path, as the reader
 //! reports), and then no payload at all is returned.
@@ -42,9 +44,8 @@ use fdsl::mesh::{MeshFormat, TriMesh};
 use fdsl::object::{ColorDef, Domain, Geometry, Object, ObjectData, ParametricKind, Shape};
 use fdsl::scene::{GroupId, ObjectId, Scene};
 use glam::DVec3;
-use replication::Payload as _;
-use replication::payload::MAX_PAYLOAD_BYTES;
 use replication::shape::ShapePayload;
+use replication::shape::parts::{self, MAX_ASSEMBLED_BYTES, SplitError};
 
 use crate::files::{InlineResolver, read_scene_text};
 
@@ -53,8 +54,9 @@ use crate::files::{InlineResolver, read_scene_text};
 pub const MAX_IMPORT_OBJECTS: usize = 1024;
 /// Most groups one imported file may bring.
 pub const MAX_IMPORT_GROUPS: usize = 1024;
-/// Largest mesh file read, in bytes. A mesh must fit in one op, so files this large are
-/// refused for their size long before; the limit only stops a huge file being read at all.
+/// Largest mesh file read, in bytes. An object is at most
+/// [`replication::shape::parts::MAX_ASSEMBLED_BYTES`] as ops, so files this large are refused
+/// for their size long before; the limit only stops a huge file being read at all.
 pub const MAX_MESH_FILE_BYTES: u64 = 16 << 20;
 /// The domain around an imported mesh: its box grown on every side by this fraction of the
 /// box's diagonal, so sculpting just outside the surface stays inside the domain.
@@ -149,12 +151,12 @@ pub enum ImportError {
         /// The limit.
         limit: usize,
     },
-    /// An object does not fit in one op.
+    /// An object is larger than a change authored in parts may be.
     #[error(
-        "{}: {what} takes {n_bytes} bytes as an op, more than the {MAX_PAYLOAD_BYTES} one op \
-         carries{hint}", .path.display()
+        "{}: {what} takes {n_bytes} bytes as ops, more than the {MAX_ASSEMBLED_BYTES} one \
+         object may take{hint}", .path.display()
     )]
-    TooLargeForAnOp {
+    TooLarge {
         /// The file.
         path: PathBuf,
         /// The object, in words.
@@ -187,9 +189,10 @@ pub enum ImportError {
 /// What [`import`] planned: the payloads to author in order, and what they make.
 #[derive(Clone, Debug)]
 pub struct Imported {
-    /// `SetGroup` ops (parents first), then one `Create` per object.
+    /// `SetGroup` ops (parents first), then one `Create` per object; an object larger than
+    /// one op comes as its `Part`s and the `Assemble` that completes it.
     pub payloads: Vec<ShapePayload>,
-    /// One line per payload, in the same order, saying what it makes.
+    /// One line per payload, in the same order, saying what it makes (a part: which one).
     pub made: Vec<String>,
     /// What was skipped or read leniently (FVRML warnings with their locations, an open
     /// mesh), one line each.
@@ -312,11 +315,9 @@ pub(crate) fn scene_payloads(
             Some(Shape::Mesh(m)) => Some(&**m),
             _ => None,
         };
-        check_payload(path, &what, &payload, mesh)?;
-        imported
-            .made
-            .push(format!("object {object} \"{}\": {}", data.name, kind(data)));
-        imported.payloads.push(payload);
+        let made = format!("object {object} \"{}\": {}", data.name, kind(data));
+        let ops = payload_ops(path, &what, payload, mesh)?;
+        push_ops(&mut imported, ops, made);
     }
     imported.next_id = ids.end;
     Ok(imported)
@@ -350,9 +351,8 @@ fn group_payloads(
             group: new,
             value: Some(value),
         };
-        check_payload(path, &what, &payload, None)?;
-        imported.made.push(made);
-        imported.payloads.push(payload);
+        let ops = payload_ops(path, &what, payload, None)?;
+        push_ops(imported, ops, made);
     }
     Ok(group_ids)
 }
@@ -420,28 +420,36 @@ fn parametric_name(kind: ParametricKind) -> &'static str {
     }
 }
 
-/// Checks that `payload` is valid and fits in one op; `mesh` gives a hint when it does not.
-fn check_payload(
+/// Checks that `payload` is valid and returns the ops that author it: itself, or its parts
+/// and their assembly when it is larger than one op ([`parts::split`]); `mesh` gives a hint
+/// when it is too large even for that.
+fn payload_ops(
     path: &Path,
     what: &str,
-    payload: &ShapePayload,
+    payload: ShapePayload,
     mesh: Option<&TriMesh>,
-) -> Result<(), ImportError> {
+) -> Result<Vec<ShapePayload>, ImportError> {
     payload.validate().map_err(|reason| ImportError::Invalid {
         path: path.into(),
         what: what.into(),
         reason,
     })?;
-    let mut bytes = Vec::new();
-    payload.encode(&mut bytes);
-    if bytes.len() <= MAX_PAYLOAD_BYTES {
-        return Ok(());
-    }
+    let n_bytes = match parts::split(payload) {
+        Ok(ops) => return Ok(ops),
+        Err(SplitError::TooLarge { n_bytes }) => n_bytes,
+        Err(e) => {
+            return Err(ImportError::Invalid {
+                path: path.into(),
+                what: what.into(),
+                reason: e.to_string(),
+            });
+        }
+    };
     let hint = match mesh {
         Some(m) => {
             let n = m.triangles().len();
             // Bytes grow about linearly with triangles; aim 10% under the limit.
-            let fits = n * MAX_PAYLOAD_BYTES * 9 / (10 * bytes.len());
+            let fits = n * MAX_ASSEMBLED_BYTES / n_bytes * 9 / 10;
             format!(
                 "; it has {n} triangles and {} vertices: simplify it to about {fits} triangles",
                 m.positions().len()
@@ -449,12 +457,27 @@ fn check_payload(
         }
         None => String::new(),
     };
-    Err(ImportError::TooLargeForAnOp {
+    Err(ImportError::TooLarge {
         path: path.into(),
         what: what.into(),
-        n_bytes: bytes.len(),
+        n_bytes,
         hint,
     })
+}
+
+/// Appends the ops of one planned change, each with the line saying what it makes (`made`
+/// for the last, which completes it; the parts before it say which part they are).
+fn push_ops(imported: &mut Imported, ops: Vec<ShapePayload>, made: String) {
+    let n_parts = ops.len() - 1;
+    for (i, op) in ops.into_iter().enumerate() {
+        let line = if i == n_parts {
+            made.clone()
+        } else {
+            format!("{made}: part {} of {n_parts}", i + 1)
+        };
+        imported.made.push(line);
+        imported.payloads.push(op);
+    }
 }
 
 fn import_mesh(path: &Path, format: MeshFormat, next_id: u64) -> Result<Imported, ImportError> {
@@ -484,7 +507,7 @@ fn import_mesh(path: &Path, format: MeshFormat, next_id: u64) -> Result<Imported
         data: Box::new(data),
         group: None,
     };
-    check_payload(path, &format!("the mesh \"{name}\""), &payload, Some(&mesh))?;
+    let ops = payload_ops(path, &format!("the mesh \"{name}\""), payload, Some(&mesh))?;
     let mut warnings = Vec::new();
     if !mesh.is_closed() {
         warnings.push(format!(
@@ -493,12 +516,14 @@ fn import_mesh(path: &Path, format: MeshFormat, next_id: u64) -> Result<Imported
             path.display()
         ));
     }
-    Ok(Imported {
-        payloads: vec![payload],
-        made: vec![made],
+    let mut imported = Imported {
+        payloads: Vec::new(),
+        made: Vec::new(),
         warnings,
         next_id: ids.end,
-    })
+    };
+    push_ops(&mut imported, ops, made);
+    Ok(imported)
 }
 
 /// The mesh in a domain around it, in its own coordinates.
@@ -1071,7 +1096,7 @@ mod tests {
     }
 
     #[test]
-    fn a_mesh_is_imported_in_a_domain_around_it_and_a_large_one_is_refused_with_a_hint() {
+    fn a_mesh_is_imported_in_a_domain_around_it_in_parts_when_large_and_refused_when_huge() {
         let dir = scratch("mesh");
         let cube = fdsl::mesh::shapes::cube(DVec3::splat(-1.0), DVec3::new(1.0, 2.0, 3.0));
         let mut bytes = Vec::new();
@@ -1110,16 +1135,48 @@ mod tests {
             assert_eq!(sampler.value(p, 0.0), cube.signed_distance(p), "{p}");
         }
 
+        // Larger than one op: its parts, then the assembly that makes the object.
         let big = fdsl::mesh::shapes::icosphere(1.0, 4);
         bytes.clear();
         fdsl::mesh::glb::write(&big, &mut bytes);
         let path = dir.join("big.glb");
         std::fs::write(&path, &bytes).unwrap();
+        let imported = import(&path, 7).unwrap();
+        let (last, parts) = imported.payloads.split_last().unwrap();
+        assert!(parts.len() > 1, "{}", parts.len());
+        assert!(
+            parts
+                .iter()
+                .all(|p| matches!(p, ShapePayload::Part { object: 7, .. })),
+            "{parts:?}"
+        );
+        let ShapePayload::Assemble {
+            object: 7,
+            parts: hashes,
+        } = last
+        else {
+            panic!("{last:?}");
+        };
+        assert_eq!(hashes.len(), parts.len());
+        assert_eq!(imported.made.len(), imported.payloads.len());
+        let made = "object 7 \"big\": a mesh of 5120 triangles, closed";
+        assert_eq!(imported.made.last().unwrap(), made);
+        assert_eq!(
+            imported.made[0],
+            format!("{made}: part 1 of {}", parts.len())
+        );
+
+        // Larger than an object may be: refused with a hint.
+        let huge = fdsl::mesh::shapes::icosphere(1.0, 7);
+        bytes.clear();
+        fdsl::mesh::glb::write(&huge, &mut bytes);
+        let path = dir.join("huge.glb");
+        std::fs::write(&path, &bytes).unwrap();
         let e = import(&path, 7).unwrap_err();
         let text = e.to_string();
-        assert!(matches!(e, ImportError::TooLargeForAnOp { .. }), "{text}");
+        assert!(matches!(e, ImportError::TooLarge { .. }), "{text}");
         assert!(
-            text.contains("big.glb") && text.contains("simplify it to about"),
+            text.contains("huge.glb") && text.contains("simplify it to about"),
             "{text}"
         );
         let _ = std::fs::remove_dir_all(&dir);

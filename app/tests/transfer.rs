@@ -113,18 +113,31 @@ fn import_and_export_have_help() {
 fn each_mesh_file_becomes_an_object_with_the_files_signed_distance() {
     let dir = scratch("transfer_meshes");
     let store_dir = dir.join("store");
-    let files = [
+    let mut files = [
         "meshes/cube.obj",
         "meshes/cube_binary.stl",
         "meshes/cube_ascii.stl",
         "meshes/icosphere.glb",
     ]
-    .map(data);
+    .map(data)
+    .to_vec();
+    // 20,480 triangles: about 240 KB, authored in parts.
+    let big = dir.join("big_ball.glb");
+    let mut bytes = Vec::new();
+    fdsl::mesh::glb::write(&fdsl::mesh::shapes::icosphere(0.8, 5), &mut bytes);
+    assert!(bytes.len() > 10 * replication::payload::MAX_PAYLOAD_BYTES);
+    std::fs::write(&big, &bytes).unwrap();
+    files.push(big);
     let mut args = vec!["import", "--store", arg(&store_dir)];
     args.extend(files.iter().map(|f| arg(f)));
     let stdout = ok(&args);
+    assert_eq!(
+        stdout.lines().count(),
+        files.len(),
+        "one line per object: {stdout}"
+    );
     let scene = scene_of(&store_dir);
-    assert_eq!(scene.len(), 4, "{stdout}");
+    assert_eq!(scene.len(), files.len(), "{stdout}");
     for file in &files {
         let stem = file.file_stem().unwrap().to_str().unwrap();
         let id = object_named(&scene, stem);
@@ -391,4 +404,45 @@ fn an_inline_outside_the_files_folder_is_refused() {
     .unwrap();
     ok(&["import", "--store", arg(&store_dir), arg(&friendly)]);
     assert_eq!(scene_of(&store_dir).len(), 2);
+}
+
+#[test]
+fn a_scan_larger_than_an_op_is_imported_whole() {
+    let dir = scratch("transfer_scan");
+    let store_dir = dir.join("store");
+    // A 48^3 ball of bytes (110,592 samples, seven ops' worth), raw, beside the scene.
+    let n = 48usize;
+    let samples: Vec<u8> = (0..n * n * n)
+        .map(|i| {
+            let c = |v: usize| v as f64 / (n - 1) as f64 * 2.0 - 1.0;
+            let (x, y, z) = (c(i % n), c(i / n % n), c(i / (n * n)));
+            (255.0 * (1.0 - (x * x + y * y + z * z).sqrt()).clamp(0.0, 1.0)) as u8
+        })
+        .collect();
+    std::fs::write(dir.join("ball.raw"), &samples).unwrap();
+    let scene = dir.join("scan.wrl");
+    std::fs::write(
+        &scene,
+        format!(
+            "#VRML V2.0 utf8\nDEF Scan FShape {{\n  grids [ FGrid {{ name \"ball\" size {n} {n} {n} \
+             origin -1 -1 -1 spacing {s} {s} {s} url \"ball.raw\" }} ]\n  geometry FGeometry {{ \
+             definition \"ball(x, y, z) - 0.5\" bboxSize 2 2 2 }}\n}}\n",
+            s = 2.0 / (n - 1) as f64
+        ),
+    )
+    .unwrap();
+    let stdout = ok(&["import", "--store", arg(&store_dir), arg(&scene)]);
+    assert_eq!(stdout.lines().count(), 1, "{stdout}");
+    let scene = scene_of(&store_dir);
+    let object = scene.object(object_named(&scene, "Scan")).unwrap();
+    let grids = &object.data().grids;
+    assert_eq!(grids.len(), 1);
+    assert_eq!(grids[0].data().samples.len(), samples.len());
+    let mut sampler = object.sampler();
+    // The ball's value is 1 - r: inside the solid within r < 0.5. The centre falls between
+    // samples 0.037 from it.
+    let centre = sampler.value(DVec3::ZERO, 0.0);
+    assert!((centre - 0.5).abs() < 0.05, "{centre}");
+    assert!(sampler.value(DVec3::new(0.3, 0.0, 0.0), 0.0) > 0.1);
+    assert!(sampler.value(DVec3::new(0.0, 0.7, 0.0), 0.0) < -0.1);
 }

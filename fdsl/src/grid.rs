@@ -7,8 +7,8 @@
 //! Outside the grid the coordinate is clamped to its faces, so the value continues the border
 //! samples; a NaN coordinate gives NaN.
 //!
-//! Samples are bytes so that a grid fits in one replicated op ([`MAX_GRID_SAMPLES`]); `range`
-//! maps byte 0 and byte 255 to the values they stand for. Grids are read from raw bytes with a
+//! Samples are bytes, so a grid of [`MAX_GRID_SAMPLES`] is 256 KiB on the wire (replication
+//! authors an object that large in parts); `range` maps byte 0 and byte 255 to the values they stand for. Grids are read from raw bytes with a
 //! declared size ([`Grid::from_raw`]) or from an NRRD file ([`Grid::from_nrrd`]), and every
 //! constructor checks the limits, so a `Grid` is never invalid.
 
@@ -16,9 +16,9 @@ use std::hash::{Hash, Hasher};
 
 use serde::{Deserialize, Serialize};
 
-/// Most samples in one grid: 16 000 bytes, so that a grid and the rest of its object fit in one
-/// replicated op (a 25 x 25 x 25 grid).
-pub const MAX_GRID_SAMPLES: usize = 16_000;
+/// Most samples in one grid: a 64 x 64 x 64 grid, 256 KiB, so that an object's
+/// [`MAX_GRIDS`] grids fit in one change authored in parts (4 MiB in replication).
+pub const MAX_GRID_SAMPLES: usize = 64 * 64 * 64;
 /// Most grids one formula may call (and one object may hold).
 pub const MAX_GRIDS: usize = 8;
 /// Longest grid name, in bytes.
@@ -579,8 +579,9 @@ mod tests {
             Grid::from_raw("g", size, [0.0; 3], [1.0; 3], [0.0, 1.0], &vec![0; n])
         };
         assert!(matches!(sized([1, 2, 2], 4), Err(GridError::BadSize(_))));
+        assert!(sized([64, 64, 64], 64 * 64 * 64).is_ok());
         assert!(matches!(
-            sized([30, 30, 30], 27_000),
+            sized([65, 64, 64], 65 * 64 * 64),
             Err(GridError::BadSize(_))
         ));
         assert!(matches!(

@@ -4,16 +4,19 @@
 //! hostile payload bytes are refused.
 #![allow(clippy::unwrap_used, reason = "test helpers outside #[test] functions")]
 
+use std::sync::Arc;
+
 use fdsl::object::{
-    ColorDef, Edit, EditOp, Field, Formula, Geometry, ObjectData, PaintValue, Paintable, Pose,
-    ToolShape,
+    ColorDef, Domain, Edit, EditOp, Field, Formula, Geometry, ObjectData, PaintValue, Paintable,
+    Pose, Shape, ToolShape,
 };
 use fdsl::scene::ObjectId as SceneObjectId;
 use glam::DVec3;
 use proptest::prelude::*;
 use replication::materialize::{Materialize, Materialized};
+use replication::payload::MAX_PAYLOAD_BYTES;
 use replication::pending::Origin;
-use replication::shape::{ShapePayload, ShapeScene};
+use replication::shape::{ShapePayload, ShapeScene, parts};
 use replication::{Keypair, Log, Payload, Timestamp, VerifiedOp};
 
 type SLog = Log<ShapePayload>;
@@ -362,4 +365,203 @@ fn ops_signed_before_grids_still_verify_and_fold() {
     overlong[4] |= 0x80;
     overlong.insert(5, 0);
     assert!(!ShapePayload::decode(&overlong).is_ok_and(|p| p.is_canonical(&overlong)));
+}
+
+/// A ball as an icosphere mesh of 5,120 triangles: about 60 KB, four ops' worth.
+fn mesh_ball(object: u64) -> ShapePayload {
+    let mesh = fdsl::mesh::shapes::icosphere(1.0, 4);
+    ShapePayload::Create {
+        object,
+        data: Box::new(ObjectData {
+            name: "mesh ball".into(),
+            geometry: Some(Geometry {
+                shape: Shape::Mesh(Arc::new(mesh)),
+                ..Geometry::implicit_in(
+                    Formula::new("0").unwrap(),
+                    Domain::new(DVec3::ZERO, DVec3::splat(2.5)),
+                )
+            }),
+            ..ObjectData::default()
+        }),
+        group: None,
+    }
+}
+
+fn object_data(scene: &SScene, object: u64) -> Option<ObjectData> {
+    let o = scene.scene().scene().object(SceneObjectId(object))?;
+    Some(o.data().clone())
+}
+
+#[test]
+fn a_change_larger_than_an_op_is_authored_in_parts_and_folds_whole_in_any_order() {
+    let whole = mesh_ball(1);
+    let ShapePayload::Create { data, .. } = &whole else {
+        unreachable!()
+    };
+    let expected = (**data).clone();
+    let ops = parts::split(whole).unwrap();
+    assert!(ops.len() >= 4, "{} ops", ops.len());
+    let mut author = SLog::default();
+    let mut signed = Vec::new();
+    for (i, payload) in ops.into_iter().enumerate() {
+        let mut bytes = Vec::new();
+        payload.encode(&mut bytes);
+        assert!(bytes.len() <= MAX_PAYLOAD_BYTES, "op {i}: {}", bytes.len());
+        assert_eq!(ShapePayload::decode(&bytes).unwrap(), payload);
+        let (op, _) = author.author(&key(0), Timestamp(10), payload).unwrap();
+        signed.push(op);
+    }
+    // A carve by another peer that saw the mesh, and a concurrent colour that did not: it
+    // sorts before the assembly on some peers' logs for a while, so objects refold.
+    let (carve_op, _) = author
+        .clone()
+        .author(&key(1), Timestamp(20), carve(DVec3::new(0.0, 1.0, 0.0)))
+        .unwrap();
+    let (colour_op, _) = SLog::default()
+        .author(&key(2), Timestamp(5), color([0.9, 0.1, 0.1]))
+        .unwrap();
+    signed.push(carve_op);
+    signed.push(colour_op);
+
+    let (_, reference) = deliver(&signed);
+    let folded = object_data(&reference, 1).expect("the object is made");
+    assert_eq!(folded.geometry, expected.geometry);
+    assert_eq!(folded.name, expected.name);
+    let mut sampler = reference
+        .scene()
+        .scene()
+        .object(SceneObjectId(1))
+        .unwrap()
+        .sampler();
+    assert!(sampler.value(DVec3::ZERO, 0.0) > 0.5, "inside the mesh");
+    assert!(
+        sampler.value(DVec3::new(0.0, 0.95, 0.0), 0.0) < 0.0,
+        "carved after assembly"
+    );
+    let scratch = SScene::fold(&deliver(&signed).0).unwrap();
+    assert_eq!(scratch.scene_hash(), reference.scene_hash());
+
+    // Reversed and rotated deliveries wait for the causal past and end the same.
+    for rotation in [0, 3, signed.len() / 2] {
+        let mut order: Vec<_> = signed.iter().rev().cloned().collect();
+        order.rotate_left(rotation);
+        let (log, scene) = deliver(&order);
+        assert_eq!(log.len(), signed.len());
+        assert_eq!(
+            scene.scene_hash(),
+            reference.scene_hash(),
+            "rotation {rotation}"
+        );
+    }
+
+    // Parts held before their assembly survive a snapshot.
+    let (half, _) = deliver(&signed[..3]);
+    let held = SScene::fold(&half).unwrap();
+    assert!(
+        object_data(&held, 1).is_none(),
+        "not made before its assembly"
+    );
+    let mut bytes = Vec::new();
+    held.scene().encode_snapshot(&mut bytes);
+    let back = ShapeScene::decode_snapshot(&bytes).unwrap();
+    assert!(back == *held.scene());
+    assert_ne!(
+        held.scene_hash(),
+        SScene::fold(&SLog::default()).unwrap().scene_hash(),
+        "held parts are part of the scene's state"
+    );
+}
+
+#[test]
+fn an_assembly_without_its_parts_or_of_something_else_changes_nothing() {
+    let ops = parts::split(mesh_ball(1)).unwrap();
+    let (last, pieces) = ops.split_last().unwrap();
+    let ShapePayload::Assemble { parts: hashes, .. } = last else {
+        panic!("{last:?}")
+    };
+    let scene_of = |payloads: Vec<ShapePayload>| {
+        let mut log = SLog::default();
+        let mut scene = SScene::fold(&log).unwrap();
+        for p in payloads {
+            let (_, ins) = log.author(&key(0), Timestamp(10), p).unwrap();
+            scene.apply_insertion(&log, &ins);
+        }
+        scene
+    };
+    let assemble = |object, parts: Vec<[u8; 32]>| ShapePayload::Assemble { object, parts };
+
+    // One part missing.
+    let mut missing = pieces.to_vec();
+    missing.remove(2);
+    missing.push(last.clone());
+    assert!(object_data(&scene_of(missing), 1).is_none());
+
+    // Another object's parts.
+    let mut elsewhere = pieces.to_vec();
+    elsewhere.push(assemble(2, hashes.clone()));
+    let scene = scene_of(elsewhere);
+    assert!(object_data(&scene, 1).is_none() && object_data(&scene, 2).is_none());
+
+    // Parts in the wrong order do not decode; then they are consumed, and the right
+    // assembly after them finds nothing.
+    let mut reversed = pieces.to_vec();
+    reversed.push(assemble(1, hashes.iter().rev().copied().collect()));
+    reversed.push(last.clone());
+    assert!(object_data(&scene_of(reversed), 1).is_none());
+
+    // A second assembly of parts already consumed makes nothing again.
+    let mut twice = ops.clone();
+    twice.push(ShapePayload::Delete { object: 1 });
+    twice.push(last.clone());
+    assert!(object_data(&scene_of(twice), 1).is_none());
+
+    // Parts that encode something other than a creation or a property of the object.
+    for inner in [
+        ShapePayload::Chat("x".repeat(MAX_PAYLOAD_BYTES)),
+        carve(DVec3::ZERO),
+        ShapePayload::Set {
+            object: 2,
+            field: Field::Name("other".into()),
+        },
+    ] {
+        let mut bytes = Vec::new();
+        inner.encode(&mut bytes);
+        let mut payloads = Vec::new();
+        let mut hashes = Vec::new();
+        for piece in bytes.chunks(1000) {
+            hashes.push(parts::part_hash(piece));
+            payloads.push(ShapePayload::Part {
+                object: 1,
+                bytes: piece.to_vec(),
+            });
+        }
+        payloads.splice(0..0, ops.iter().cloned());
+        payloads.push(assemble(1, hashes));
+        let scene = scene_of(payloads);
+        let data = object_data(&scene, 1).unwrap();
+        assert_eq!(data.name, "mesh ball", "{inner:?} changed nothing");
+    }
+
+    // Decoding refuses empty parts and assemblies of no or too many parts.
+    for bad in [
+        ShapePayload::Part {
+            object: 1,
+            bytes: Vec::new(),
+        },
+        assemble(1, Vec::new()),
+        assemble(1, vec![[0; 32]; parts::MAX_PARTS + 1]),
+    ] {
+        let mut bytes = Vec::new();
+        bad.encode(&mut bytes);
+        assert!(ShapePayload::decode(&bytes).is_err(), "{bad:?}");
+    }
+
+    // Splitting: too large for parts, and kinds that are never split.
+    let too_big = ShapePayload::Chat("x".repeat(MAX_PAYLOAD_BYTES));
+    assert!(matches!(
+        parts::split(too_big),
+        Err(parts::SplitError::NotSplittable { .. })
+    ));
+    let small = color([0.1, 0.2, 0.3]);
+    assert_eq!(parts::split(small.clone()).unwrap(), vec![small]);
 }

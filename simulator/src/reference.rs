@@ -82,7 +82,9 @@ fn kind(p: &ShapePayload) -> Kind {
         | ShapePayload::Delete { object }
         | ShapePayload::Set { object, .. }
         | ShapePayload::Edit { object, .. }
-        | ShapePayload::Move { object, .. } => Kind::Edit(obj(*object)),
+        | ShapePayload::Move { object, .. }
+        | ShapePayload::Part { object, .. }
+        | ShapePayload::Assemble { object, .. } => Kind::Edit(obj(*object)),
         ShapePayload::SetGroup { group, .. } => Kind::Edit(group | GROUP_LEASE_BIT),
         ShapePayload::Acquire {
             object,

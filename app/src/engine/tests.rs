@@ -333,9 +333,9 @@ fn news_keeps_the_latest_lines_and_disconnections_read_as_actions() {
     assert_eq!(next, MAX_NEWS_LINES as u64 + 5);
     assert!(news.since(next).0.is_empty());
     let text = disconnect_text(&DisconnectReason::Sync(CloseReason::WrongProtocol {
-        remote: 3,
+        remote: 4,
     }));
-    assert!(text.contains("protocol 3, this build speaks 2"), "{text}");
+    assert!(text.contains("protocol 4, this build speaks 3"), "{text}");
 }
 
 #[test]
@@ -363,4 +363,47 @@ fn a_joined_sessions_directory_is_named_by_its_invite_without_revealing_it() {
     let discovery = replication::net::SessionKeys::from_invite(&a).discovery_id();
     let discovery_hex: String = discovery[..6].iter().map(|b| format!("{b:02x}")).collect();
     assert_ne!(&name["joined-".len()..], discovery_hex);
+}
+
+#[test]
+fn a_large_import_is_one_history_row_not_undone_and_its_id_not_reused() {
+    let dir = scratch("parts");
+    let s = Engine::start(config(&dir), T0).unwrap();
+    wait_view(&s, "the demo", |v| v.n_ops() == 1);
+    let first_id = lock(s.view()).next_object_id();
+    let mesh = fdsl::mesh::shapes::icosphere(1.0, 4);
+    let data = fdsl::object::ObjectData {
+        name: "ball".into(),
+        geometry: Some(Geometry {
+            shape: Shape::Mesh(std::sync::Arc::new(mesh)),
+            ..Geometry::implicit(Formula::new("0").unwrap())
+        }),
+        ..Default::default()
+    };
+    let ops = replication::shape::parts::split(ShapePayload::Create {
+        object: first_id,
+        data: Box::new(data),
+        group: None,
+    })
+    .unwrap();
+    let n_ops = ops.len();
+    assert!(n_ops > 2, "{n_ops}");
+    for op in ops {
+        author(&s, op);
+    }
+    let view = lock(s.view());
+    assert_eq!(view.object_label(first_id), "ball");
+    assert_eq!(view.n_ops(), 1 + n_ops);
+    let rows: Vec<&str> = view.history().iter().map(|h| h.what.as_str()).collect();
+    assert_eq!(rows.len(), 2, "the parts are not rows: {rows:?}");
+    assert_eq!(
+        rows[1],
+        format!("put together a change to ball from {} parts", n_ops - 1)
+    );
+    assert!(!view.history()[1].undoable);
+    assert_eq!(view.undo_target(first_id), None, "a creation is not undone");
+    assert!(view.next_object_id() > first_id, "the id is taken");
+    drop(view);
+    drop(s);
+    let _ = fs::remove_dir_all(&dir);
 }

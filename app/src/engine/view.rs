@@ -537,8 +537,17 @@ impl Observer<ShapePayload> for Folder {
 
 /// The latest [`MAX_HISTORY_ROWS`] ops of `log`, oldest first.
 fn history(log: &Log<ShapePayload>, me: PeerId, scene: &Scene) -> Vec<HistoryRow> {
-    let skip = log.len().saturating_sub(MAX_HISTORY_ROWS);
+    // Parts are how a large change travels; its `Assemble` is the row that says what it did.
+    let rows = |e: &replication::log::Entry<'_, ShapePayload>| {
+        !matches!(e.op.payload(), ShapePayload::Part { .. })
+    };
+    let skip = log
+        .entries()
+        .filter(rows)
+        .count()
+        .saturating_sub(MAX_HISTORY_ROWS);
     log.entries()
+        .filter(rows)
         .skip(skip)
         .map(|entry| {
             let payload = entry.op.payload();
@@ -552,8 +561,7 @@ fn history(log: &Log<ShapePayload>, me: PeerId, scene: &Scene) -> Vec<HistoryRow
                 Mark::Effective => "effective".to_string(),
             };
             let mine = entry.op.author() == me;
-            let edits = matches!(payload.effect(), Effect::Edit { .. })
-                && !matches!(payload, ShapePayload::Create { .. });
+            let edits = matches!(payload.effect(), Effect::Edit { .. }) && !is_whole(payload);
             HistoryRow {
                 author: entry.op.author().short(),
                 mine,
@@ -575,7 +583,7 @@ fn targets(log: &Log<ShapePayload>, me: PeerId) -> (BTreeMap<u64, OpId>, BTreeMa
     let entries: Vec<_> = log.entries().filter(|e| e.op.author() == me).collect();
     for e in entries.iter().rev() {
         match e.op.payload() {
-            ShapePayload::Create { .. } => {}
+            payload if is_whole(payload) => {}
             ShapePayload::Undo(target) => {
                 let Some(object) = log.get(target).and_then(|op| edited_object(op.payload()))
                 else {
@@ -599,6 +607,15 @@ fn targets(log: &Log<ShapePayload>, me: PeerId) -> (BTreeMap<u64, OpId>, BTreeMa
     (undo, redo)
 }
 
+/// Whether `payload` makes an object or is a piece of a large change, which `undo` leaves
+/// alone (undoing a part would take the whole change back at the next refold).
+fn is_whole(payload: &ShapePayload) -> bool {
+    matches!(
+        payload,
+        ShapePayload::Create { .. } | ShapePayload::Part { .. } | ShapePayload::Assemble { .. }
+    )
+}
+
 /// The object an edit changes, if the payload is an edit of an object.
 fn edited_object(payload: &ShapePayload) -> Option<u64> {
     match payload.effect() {
@@ -615,7 +632,11 @@ fn next_object_id(log: &Log<ShapePayload>, me: PeerId) -> u64 {
         .entries()
         .filter(|e| e.op.author() == me)
         .filter_map(|e| match e.op.payload() {
-            ShapePayload::Create { object, .. } if object & !0xffff_ffff == prefix => {
+            ShapePayload::Create { object, .. }
+            | ShapePayload::Part { object, .. }
+            | ShapePayload::Assemble { object, .. }
+                if object & !0xffff_ffff == prefix =>
+            {
                 Some(object & 0xffff_ffff)
             }
             _ => None,
@@ -672,6 +693,18 @@ fn describe(log: &Log<ShapePayload>, scene: &Scene, payload: &ShapePayload) -> S
         ShapePayload::Undo(target) => format!("undo: {}", describe_op(target)),
         ShapePayload::Redo(target) => format!("redo: {}", describe_op(target)),
         ShapePayload::Chat(text) => format!("said \"{}\"", quote(text)),
+        ShapePayload::Part { object, bytes } => {
+            format!(
+                "sent {} bytes of a change to {}",
+                bytes.len(),
+                label(*object)
+            )
+        }
+        ShapePayload::Assemble { object, parts } => format!(
+            "put together a change to {} from {} parts",
+            label(*object),
+            parts.len()
+        ),
     }
 }
 

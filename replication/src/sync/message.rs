@@ -18,7 +18,9 @@ use crate::op::MAX_OP_BYTES;
 /// Version byte that opens every sync message.
 pub const SYNC_WIRE_VERSION: u8 = 1;
 /// Protocol version announced in [`Message::Hello`]; peers with another version disconnect.
-pub const PROTOCOL_VERSION: u64 = 2;
+/// 3: payloads may be authored in parts (`ShapePayload::Part`, `ShapePayload::Assemble`),
+/// which a build speaking 2 cannot decode.
+pub const PROTOCOL_VERSION: u64 = 3;
 /// Length of a session id.
 pub const SESSION_ID_BYTES: usize = 16;
 /// Most ops in one [`Message::Ops`] batch.

@@ -11,9 +11,11 @@
 //! property test in `tests/peer_script.rs`, so CI runs what the fuzzer explores.
 
 use fdsl::object::{Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
+use replication::Payload as _;
 use replication::op::OpFields;
 use replication::pending::MAX_PENDING_OPS;
 use replication::shape::ShapePayload;
+use replication::shape::parts::part_hash;
 use replication::sync::message::{MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION, SessionId};
 use replication::{ConnId, Event, Keypair, Log, Op, OpId, Peer, PeerId, Timestamp, VersionVector};
 
@@ -178,7 +180,7 @@ impl World {
                 self.known[bytes.pick(n) as usize]
             }
         };
-        match bytes.u8() % 9 {
+        match bytes.u8() % 11 {
             0 => ShapePayload::Create {
                 object,
                 data: Box::new(ObjectData {
@@ -213,6 +215,41 @@ impl World {
             5 => ShapePayload::Undo(known(bytes)),
             6 => ShapePayload::Redo(known(bytes)),
             7 => ShapePayload::Delete { object },
+            // A creation in two parts: either part, or an assembly of them in either order or
+            // of a made-up part.
+            9 | 10 => {
+                let mut whole = Vec::new();
+                ShapePayload::Create {
+                    object,
+                    data: Box::default(),
+                    group: None,
+                }
+                .encode(&mut whole);
+                let halves = whole.split_at(whole.len() / 2);
+                let (first, second) = (part_hash(halves.0), part_hash(halves.1));
+                match bytes.u8() % 5 {
+                    0 => ShapePayload::Part {
+                        object,
+                        bytes: halves.0.to_vec(),
+                    },
+                    1 => ShapePayload::Part {
+                        object,
+                        bytes: halves.1.to_vec(),
+                    },
+                    2 => ShapePayload::Assemble {
+                        object,
+                        parts: vec![first, second],
+                    },
+                    3 => ShapePayload::Assemble {
+                        object,
+                        parts: vec![second, first],
+                    },
+                    _ => ShapePayload::Assemble {
+                        object,
+                        parts: vec![first, [bytes.u8(); 32]],
+                    },
+                }
+            }
             _ => ShapePayload::Chat("hi".into()),
         }
     }

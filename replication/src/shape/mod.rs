@@ -13,6 +13,12 @@
 //! active, but without its creation the object is still gone (it changes nothing); a delete
 //! that never saw the creation (one backdated by a member, say) removes nothing, and a
 //! creation after a delete it saw makes the object anew.
+//!
+//! A change too large for one op (an imported mesh, large sampled grids) is authored in parts
+//! ([`parts`]): `Part` ops carry its encoding in pieces, and an `Assemble` op names the pieces
+//! by hash; the fold puts the change together when it reaches the `Assemble`.
+
+pub mod parts;
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -100,6 +106,23 @@ pub enum ShapePayload {
     Redo(#[serde(with = "op_id")] OpId),
     /// A chat message.
     Chat(String),
+    /// One piece of a change too large for one op: the fold keeps it with its object until an
+    /// `Assemble` names it.
+    Part {
+        /// The object the change is for.
+        object: u64,
+        /// At most [`parts::MAX_PART_BYTES`] bytes of the change's encoding.
+        bytes: Vec<u8>,
+    },
+    /// The change whose canonical encoding is the concatenation, in order, of the parts with
+    /// these blake3 hashes, which the object's fold holds: a `Create` or a `Set` of `object`,
+    /// at most [`parts::MAX_ASSEMBLED_BYTES`] long ([`parts::split`] makes both kinds of op).
+    Assemble {
+        /// The object.
+        object: u64,
+        /// The parts' hashes, in order (at most [`parts::MAX_PARTS`]).
+        parts: Vec<[u8; 32]>,
+    },
 }
 
 // Payloads are validated on decode (no NaN reaches one), so equality is reflexive.
@@ -182,6 +205,7 @@ impl ShapePayloadV1 {
             ShapePayload::Undo(id) => ShapePayloadV1::Undo(id),
             ShapePayload::Redo(id) => ShapePayloadV1::Redo(id),
             ShapePayload::Chat(text) => ShapePayloadV1::Chat(text),
+            ShapePayload::Part { .. } | ShapePayload::Assemble { .. } => return None,
         })
     }
 }
@@ -257,6 +281,8 @@ impl ShapePayload {
             ShapePayload::Chat(text) if text.len() > MAX_CHAT_BYTES => {
                 Err(format!("chat message longer than {MAX_CHAT_BYTES} bytes"))
             }
+            ShapePayload::Part { bytes, .. } => parts::check_part(bytes),
+            ShapePayload::Assemble { parts: hashes, .. } => parts::check_assemble(hashes),
             _ => Ok(()),
         }
     }
@@ -305,7 +331,9 @@ impl Payload for ShapePayload {
             | ShapePayload::Delete { object: o }
             | ShapePayload::Set { object: o, .. }
             | ShapePayload::Edit { object: o, .. }
-            | ShapePayload::Move { object: o, .. } => Effect::Edit { object: object(o) },
+            | ShapePayload::Move { object: o, .. }
+            | ShapePayload::Part { object: o, .. }
+            | ShapePayload::Assemble { object: o, .. } => Effect::Edit { object: object(o) },
             ShapePayload::SetGroup { group, .. } => Effect::Edit {
                 object: ObjectId(group | GROUP_LEASE_BIT),
             },
@@ -357,6 +385,8 @@ pub struct ShapeScene {
     compiled: BTreeMap<OpId, Arc<CompiledEdit>>,
     /// For each object, the op of each history entry (to map undo targets to edits).
     edit_ops: BTreeMap<u64, Vec<OpId>>,
+    /// For each object, the parts folded and not yet assembled.
+    parts: parts::HeldParts,
 }
 
 impl ShapeScene {
@@ -386,32 +416,25 @@ impl ShapeScene {
             .iter()
             .map(|(o, ids)| (*o, ids.iter().map(|id| id.0).collect()))
             .collect();
-        object_codec::encode(&(self.scene.encode(), &self.chat, edit_ops))
+        object_codec::encode(&(
+            self.scene.encode(),
+            &self.chat,
+            edit_ops,
+            self.parts.encode(),
+        ))
     }
 }
 
 impl PartialEq for ShapeScene {
     fn eq(&self, other: &Self) -> bool {
-        self.scene == other.scene && self.chat == other.chat
+        self.scene == other.scene && self.chat == other.chat && self.parts == other.parts
     }
 }
 
-impl Materialize<ShapePayload> for ShapeScene {
-    fn reset_object(&mut self, object: ObjectId) {
-        if object.0 & GROUP_LEASE_BIT != 0 {
-            // Groups are re-folded by re-applying their ops; removing first keeps the fold
-            // from-scratch equal.
-            self.scene
-                .remove_group(GroupId(object.0 & !GROUP_LEASE_BIT));
-        } else {
-            self.scene.remove_object(scene::ObjectId(object.0));
-            self.edit_ops.remove(&object.0);
-        }
-    }
-
-    fn apply(&mut self, entry: FoldEntry<'_, ShapePayload>) {
-        let id = entry.op.id();
-        match entry.op.payload() {
+impl ShapeScene {
+    /// Folds one payload: an active entry's, or a change its `Assemble` put together.
+    fn apply_payload(&mut self, key: OrderKey, id: OpId, payload: &ShapePayload) {
+        match payload {
             ShapePayload::Create {
                 object,
                 data,
@@ -470,7 +493,6 @@ impl Materialize<ShapePayload> for ShapeScene {
                     .set_object_group(scene::ObjectId(*object), group.map(GroupId));
             }
             ShapePayload::Chat(text) => {
-                let key = entry.key;
                 let line = ChatLine {
                     lamport: key.lamport,
                     author: key.author.0,
@@ -487,7 +509,35 @@ impl Materialize<ShapePayload> for ShapeScene {
             | ShapePayload::Release { .. }
             | ShapePayload::Undo(_)
             | ShapePayload::Redo(_) => {}
+            ShapePayload::Part { object, bytes } => self.parts.hold(*object, bytes),
+            ShapePayload::Assemble {
+                object,
+                parts: hashes,
+            } => {
+                if let Some(change) = self.parts.assemble(id, *object, hashes) {
+                    self.apply_payload(key, id, &change);
+                }
+            }
         }
+    }
+}
+
+impl Materialize<ShapePayload> for ShapeScene {
+    fn reset_object(&mut self, object: ObjectId) {
+        if object.0 & GROUP_LEASE_BIT != 0 {
+            // Groups are re-folded by re-applying their ops; removing first keeps the fold
+            // from-scratch equal.
+            self.scene
+                .remove_group(GroupId(object.0 & !GROUP_LEASE_BIT));
+        } else {
+            self.scene.remove_object(scene::ObjectId(object.0));
+            self.edit_ops.remove(&object.0);
+            self.parts.forget(object.0);
+        }
+    }
+
+    fn apply(&mut self, entry: FoldEntry<'_, ShapePayload>) {
+        self.apply_payload(entry.key, entry.op.id(), entry.op.payload());
     }
 
     fn scene_hash(&self) -> SceneHash {
@@ -511,9 +561,18 @@ impl Materialize<ShapePayload> for ShapeScene {
             offset: 0,
             what: "shape scene snapshot",
         };
-        type Record = (Vec<u8>, Vec<ChatLine>, Vec<(u64, Vec<[u8; 32]>)>);
-        let (scene_bytes, chat, edit_ops): Record =
+        type Record = (
+            Vec<u8>,
+            Vec<ChatLine>,
+            Vec<(u64, Vec<[u8; 32]>)>,
+            parts::EncodedParts,
+        );
+        let (scene_bytes, chat, edit_ops, held): Record =
             object_codec::decode("shape scene snapshot", bytes).map_err(invalid)?;
+        let parts = parts::HeldParts::decode(held).ok_or(DecodeError::Invalid {
+            offset: 0,
+            what: "shape scene snapshot's parts (one is empty or too long)",
+        })?;
         let scene = Scene::decode(&scene_bytes).map_err(|_| DecodeError::Invalid {
             offset: 0,
             what: "shape scene snapshot's scene",
@@ -526,6 +585,7 @@ impl Materialize<ShapePayload> for ShapeScene {
                 .into_iter()
                 .map(|(o, ids)| (o, ids.into_iter().map(OpId).collect()))
                 .collect(),
+            parts,
         })
     }
 }
