@@ -1286,6 +1286,11 @@ fn the_file_menu_imports_a_mesh_and_exports_the_selection_closed() {
     let display = display();
     let dir = scratch("files");
     let cube = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/meshes/cube.obj");
+    // 20,480 triangles, larger than one op: the window authors its parts, then the object.
+    let ball = dir.join("ball.glb");
+    let mut bytes = Vec::new();
+    fdsl::mesh::glb::write(&fdsl::mesh::shapes::icosphere(0.3, 5), &mut bytes);
+    std::fs::write(&ball, &bytes).unwrap();
     let out = dir.join("melon.stl");
     let run = window_run(
         &display,
@@ -1294,13 +1299,19 @@ fn the_file_menu_imports_a_mesh_and_exports_the_selection_closed() {
         &[
             &format!("export: {}", out.display()),
             &format!("import: {}", cube.display()),
+            &format!("import: {}", ball.display()),
         ],
     );
     let objects = run.state["objects"].as_array().unwrap();
     assert_eq!(
         objects.len(),
-        2,
-        "the watermelon and the imported cube: {}",
+        3,
+        "the watermelon, the imported cube and ball: {}",
+        run.state
+    );
+    assert!(
+        objects.iter().any(|o| o["name"] == "ball"),
+        "{}",
         run.state
     );
     let mesh = fdsl::mesh::MeshFormat::StlBinary
