@@ -1309,11 +1309,7 @@ fn the_file_menu_imports_a_mesh_and_exports_the_selection_closed() {
         "the watermelon, the imported cube and ball: {}",
         run.state
     );
-    assert!(
-        objects.iter().any(|o| o["name"] == "ball"),
-        "{}",
-        run.state
-    );
+    assert!(objects.iter().any(|o| o["name"] == "ball"), "{}", run.state);
     let mesh = fdsl::mesh::MeshFormat::StlBinary
         .read(&std::fs::read(&out).unwrap())
         .unwrap();

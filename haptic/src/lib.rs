@@ -59,4 +59,5 @@ pub mod force;
 pub mod handoff;
 pub mod servo;
 pub mod shapes;
+pub mod shared;
 mod sync;

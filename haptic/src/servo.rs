@@ -18,6 +18,7 @@ use crate::container::{Container, Scene};
 use crate::device::HapticDevice;
 use crate::force::{self, ProxyState, Region, Rig};
 use crate::handoff::{self, Publisher, Receiver};
+use crate::shared::{self, Coupled, SharedToolLink};
 
 /// Width of one histogram bucket, microseconds.
 pub const HISTOGRAM_BUCKET_MICROS: u64 = 10;
@@ -221,6 +222,8 @@ pub struct Servo<D, S> {
     rigs: Receiver<Rig>,
     stats: Arc<ServoStats>,
     t_secs: f64,
+    shared: Arc<SharedToolLink>,
+    coupled: Option<Coupled>,
 }
 
 /// The app's side of a servo: publish snapshots and rig settings, read statistics.
@@ -231,6 +234,8 @@ pub struct ServoLink<S> {
     pub rigs: Publisher<Rig>,
     /// Statistics written by the servo.
     pub stats: Arc<ServoStats>,
+    /// The shared tool: a coupling with another peer's device ([`crate::shared`]).
+    pub shared: Arc<SharedToolLink>,
 }
 
 impl<S: Send> ServoLink<S> {
@@ -247,6 +252,7 @@ impl<D: HapticDevice, S: Scene> Servo<D, S> {
         let (scene_tx, scene_rx) = handoff::channel();
         let (rig_tx, rig_rx) = handoff::channel();
         let stats = Arc::new(ServoStats::new());
+        let shared = Arc::new(SharedToolLink::default());
         let rig = Rig {
             caps: *device.capabilities(),
             ..rig
@@ -262,11 +268,14 @@ impl<D: HapticDevice, S: Scene> Servo<D, S> {
             rigs: rig_rx,
             stats: Arc::clone(&stats),
             t_secs: 0.0,
+            shared: Arc::clone(&shared),
+            coupled: None,
         };
         let link = ServoLink {
             scenes: scene_tx,
             rigs: rig_tx,
             stats,
+            shared,
         };
         (servo, link)
     }
@@ -346,13 +355,27 @@ impl<D: HapticDevice, S: Scene> Servo<D, S> {
                 dt_secs,
             ),
         };
-        if self.device.set_force(out.force_newtons).is_err() {
+        let tick = shared::Tick {
+            tip_metres: sample.position_metres,
+            velocity_metres_per_sec: self.state.velocity_device(),
+            force_max_newtons: self.rig.caps.force_newtons_max,
+            t_secs: self.t_secs,
+            dt_secs,
+            stalled: out.stalled,
+        };
+        let coupling = shared::step(&self.shared, &mut self.coupled, tick);
+        let force_newtons = if coupling == DVec3::ZERO {
+            out.force_newtons
+        } else {
+            (out.force_newtons + coupling).clamp_length_max(self.rig.caps.force_newtons_max)
+        };
+        if self.device.set_force(force_newtons).is_err() {
             return self.fail_safe();
         }
         if out.stalled {
             self.stats.n_stalls.fetch_add(1, Ordering::Relaxed);
         }
-        store_vec3(&self.stats.force_bits, out.force_newtons);
+        store_vec3(&self.stats.force_bits, force_newtons);
         store_vec3(&self.stats.tip_bits, out.hip_world);
         self.stats
             .energy_bits
@@ -361,7 +384,7 @@ impl<D: HapticDevice, S: Scene> Servo<D, S> {
             .top_id
             .store(out.top_id.unwrap_or(u64::MAX), Ordering::Relaxed);
         StepOutcome {
-            force_newtons: out.force_newtons,
+            force_newtons,
             top_id: out.top_id,
             region: out.region,
             stalled: out.stalled,
@@ -372,6 +395,7 @@ impl<D: HapticDevice, S: Scene> Servo<D, S> {
     fn fail_safe(&mut self) -> StepOutcome {
         self.stats.n_device_errors.fetch_add(1, Ordering::Relaxed);
         self.state.reset();
+        self.coupled = None;
         // The device already failed once this tick; a second failure changes nothing.
         let _ = self.device.set_force(DVec3::ZERO);
         store_vec3(&self.stats.force_bits, DVec3::ZERO);

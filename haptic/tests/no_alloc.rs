@@ -56,6 +56,8 @@ fn servo_step_never_allocates() {
     .unwrap();
     let (mut servo, link) = Servo::init(device, rig());
     link.scenes.publish(Box::new(watermelon_grid(64)));
+    // A shared tool runs too, its partner's packets arriving between ticks.
+    link.shared.start(haptic::shared::DEFAULT_COUPLING);
     let mut n_allocs = 0;
     let mut n_crossing_ticks = 0;
     let mut last_top = None;
@@ -64,7 +66,13 @@ fn servo_step_never_allocates() {
             for tick in 0..500 {
                 // One long tick per round: the stall path, then the ramp back in.
                 let dt = if tick == 250 { 0.02 } else { 0.001 };
+                link.shared.deliver(&haptic::force::wave::WavePacket {
+                    t_secs: f64::from(round * 500 + tick) * 1e-3,
+                    wave: DVec3::new(0.1, 0.0, -0.1),
+                    energy_sent_joules: f64::from(tick) * 1e-3,
+                });
                 let out = servo.step(dt);
+                let _ = link.shared.take_outgoing();
                 if out.top_id != last_top {
                     n_crossing_ticks += 1;
                     last_top = out.top_id;
@@ -86,6 +94,7 @@ fn servo_step_never_allocates() {
         "the path crossed containers: {n_crossing_ticks}"
     );
     assert!(link.stats.snapshot().n_stalls >= 8);
+    assert!(link.shared.energy_in_joules() > 0.0, "the coupling ran");
 
     // The device-failure path does not allocate either.
     let trace = Trace {
@@ -155,7 +164,13 @@ fn servo_step_over_fdsl_and_mesh_containers_never_allocates() {
         n_allocs += count_allocs(|| {
             for tick in 0..500 {
                 let dt = if tick == 250 { 0.02 } else { 0.001 };
+                link.shared.deliver(&haptic::force::wave::WavePacket {
+                    t_secs: f64::from(round * 500 + tick) * 1e-3,
+                    wave: DVec3::new(0.1, 0.0, -0.1),
+                    energy_sent_joules: f64::from(tick) * 1e-3,
+                });
                 let out = servo.step(dt);
+                let _ = link.shared.take_outgoing();
                 if let Some(top) = out.top_id {
                     seen[top as usize % seen.len()] = true;
                 }
@@ -245,7 +260,13 @@ fn servo_step_over_object_containers_never_allocates() {
         n_allocs += count_allocs(|| {
             for tick in 0..500 {
                 let dt = if tick == 250 { 0.02 } else { 0.001 };
+                link.shared.deliver(&haptic::force::wave::WavePacket {
+                    t_secs: f64::from(round * 500 + tick) * 1e-3,
+                    wave: DVec3::new(0.1, 0.0, -0.1),
+                    energy_sent_joules: f64::from(tick) * 1e-3,
+                });
                 let out = servo.step(dt);
+                let _ = link.shared.take_outgoing();
                 if let Some(top) = out.top_id {
                     seen[top as usize % seen.len()] = true;
                 }
