@@ -222,8 +222,9 @@ pub(crate) struct Tick {
     pub velocity_metres_per_sec: DVec3,
     /// The device's maximum force, newtons.
     pub force_max_newtons: f64,
-    /// The servo's time and tick length, seconds.
+    /// The servo's time, seconds.
     pub t_secs: f64,
+    /// The tick's length, seconds.
     pub dt_secs: f64,
     /// The tick stalled (the scene renders no force either).
     pub stalled: bool,

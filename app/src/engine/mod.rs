@@ -181,9 +181,35 @@ impl Pending {
     }
 }
 
+/// What a face does with values another peer sends on an ephemeral channel: called on the
+/// engine thread with the sender and the value (at most
+/// [`replication::sync::state::MAX_EPHEMERAL_BYTES`]), so it must be quick and never block.
+pub type EphemeralListener = Box<dyn Fn(PeerId, &[u8]) + Send>;
+
+/// The listeners faces set, by channel.
+type Listeners = Arc<Mutex<std::collections::BTreeMap<u32, EphemeralListener>>>;
+
+/// Sends ephemeral values through an engine from any thread (see
+/// [`Engine::ephemeral_sender`]).
+#[derive(Clone)]
+pub struct EphemeralSender(tokio::sync::mpsc::Sender<Request>);
+
+impl EphemeralSender {
+    /// Sends the latest value on `channel` to every connected peer; a full queue drops it
+    /// (a newer value follows), a stopped engine is an error.
+    pub fn send(&self, channel: u32, value: Vec<u8>) -> Result<(), RequestError> {
+        match self.0.try_send(Request::Ephemeral { channel, value }) {
+            Ok(()) => Ok(()),
+            Err(tokio::sync::mpsc::error::TrySendError::Full(_)) => Err(RequestError::Busy),
+            Err(tokio::sync::mpsc::error::TrySendError::Closed(_)) => Err(RequestError::Stopped),
+        }
+    }
+}
+
 /// A running engine.
 pub struct Engine {
     requests: tokio::sync::mpsc::Sender<Request>,
+    listeners: Listeners,
     view: SharedView,
     news: Arc<Mutex<News>>,
     invite: Invite,
@@ -283,9 +309,12 @@ impl Engine {
             tool: None,
             selected: None,
             camera: None,
+            holds_tool_with: None,
         }));
         let presence_changed = Arc::new(std::sync::atomic::AtomicBool::new(true));
+        let listeners = Listeners::default();
         let worker = Worker {
+            listeners: listeners.clone(),
             presence_changed: presence_changed.clone(),
             view: view.clone(),
             news: news.clone(),
@@ -325,6 +354,7 @@ impl Engine {
         }
         Ok(Engine {
             requests,
+            listeners,
             view,
             news,
             invite,
@@ -385,6 +415,28 @@ impl Engine {
             }
         }
         Ok(Pending(answer))
+    }
+
+    /// Calls `listener` with every value another peer sends on `channel` (replacing the
+    /// channel's listener; `None` removes it). Presence's channel is the engine's own.
+    pub fn listen_ephemeral(&self, channel: u32, listener: Option<EphemeralListener>) {
+        let mut listeners = self
+            .listeners
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        match listener {
+            Some(l) if channel != presence::PRESENCE_CHANNEL => {
+                listeners.insert(channel, l);
+            }
+            _ => {
+                listeners.remove(&channel);
+            }
+        }
+    }
+
+    /// A handle that sends ephemeral values from another thread.
+    pub fn ephemeral_sender(&self) -> EphemeralSender {
+        EphemeralSender(self.requests.clone())
     }
 
     /// Sends the latest value on an ephemeral channel to every connected peer (never
@@ -470,6 +522,8 @@ struct Worker {
     session_name: String,
     /// The LAN's sessions, as DNS-SD lists them.
     lan: Mutex<Option<tokio::sync::watch::Receiver<Vec<LanSession>>>>,
+    /// The faces' ephemeral listeners.
+    listeners: Listeners,
 }
 
 /// How this engine reached the addresses it dialed (at most [`MAX_DIALED`] are kept).
@@ -778,9 +832,21 @@ impl Worker {
             NodeEvent::Rejected { peer, detail, .. } => {
                 log::debug!("dropped bad input from {}: {detail}", peer.short());
             }
-            NodeEvent::Delivered { .. }
-            | NodeEvent::Ephemeral { .. }
-            | NodeEvent::UpToDate { .. } => {}
+            NodeEvent::Ephemeral {
+                peer,
+                channel,
+                value,
+                ..
+            } => {
+                let listeners = self
+                    .listeners
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner);
+                if let Some(listener) = listeners.get(&channel) {
+                    listener(peer, &value);
+                }
+            }
+            NodeEvent::Delivered { .. } | NodeEvent::UpToDate { .. } => {}
         }
     }
 

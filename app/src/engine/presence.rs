@@ -14,8 +14,8 @@ pub const PRESENCE_CHANNEL: u32 = 1;
 pub const PRESENCE_RATE_HZ: u64 = 20;
 /// Longest display name, in bytes.
 pub const MAX_NAME_BYTES: usize = 32;
-/// The encoding's version byte (2: with the touch tool).
-const VERSION: u8 = 2;
+/// The encoding's version byte (2: with the touch tool; 3: with the shared tool's partner).
+const VERSION: u8 = 3;
 
 /// An orbit camera in the renderer's world (+z up): what it looks at and from where.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -41,6 +41,9 @@ pub struct Presence {
     pub selected: Option<u64>,
     /// The camera.
     pub camera: Option<CameraPose>,
+    /// The peer this one holds the touch tool with (`app::touch::shared`): the two are
+    /// coupled when each names the other.
+    pub holds_tool_with: Option<[u8; 32]>,
 }
 
 /// Why a presence value was refused.
@@ -82,8 +85,9 @@ pub fn default_colour(peer: &[u8; 32]) -> [u8; 3] {
 }
 
 impl Presence {
-    /// `[2][name len][name][r g b][flags][pointer 3×f32][target 3×f32][orbit 3×f32][selected u64]
-    /// [tool 3×f32]`, little-endian; the optional parts are present when their flag bit is set.
+    /// `[3][name len][name][r g b][flags][pointer 3×f32][target 3×f32][orbit 3×f32][selected u64]
+    /// [tool 3×f32][partner 32]`, little-endian; the optional parts are present when their flag
+    /// bit is set.
     pub fn encode(&self) -> Vec<u8> {
         let name = truncate(&self.name, MAX_NAME_BYTES);
         let mut out = Vec::with_capacity(64 + name.len());
@@ -94,7 +98,8 @@ impl Presence {
         let flags = u8::from(self.pointer.is_some())
             | u8::from(self.selected.is_some()) << 1
             | u8::from(self.camera.is_some()) << 2
-            | u8::from(self.tool.is_some()) << 3;
+            | u8::from(self.tool.is_some()) << 3
+            | u8::from(self.holds_tool_with.is_some()) << 4;
         out.push(flags);
         let mut put = |v: &[f32; 3]| v.iter().for_each(|x| out.extend(x.to_le_bytes()));
         if let Some(p) = &self.pointer {
@@ -109,6 +114,9 @@ impl Presence {
         }
         if let Some(t) = &self.tool {
             t.iter().for_each(|x| out.extend(x.to_le_bytes()));
+        }
+        if let Some(p) = &self.holds_tool_with {
+            out.extend_from_slice(p);
         }
         out
     }
@@ -154,7 +162,14 @@ impl Presence {
         } else {
             None
         };
-        if flags >> 4 != 0 {
+        let holds_tool_with = if flags & 16 != 0 {
+            let mut p = [0u8; 32];
+            p.copy_from_slice(r.take(32)?);
+            Some(p)
+        } else {
+            None
+        };
+        if flags >> 5 != 0 {
             return Err(PresenceError::Flags(flags));
         }
         if r.at != bytes.len() {
@@ -167,6 +182,7 @@ impl Presence {
             tool,
             selected,
             camera,
+            holds_tool_with,
         })
     }
 }
@@ -228,6 +244,7 @@ mod tests {
                 target: [0.0, 0.0, 0.0],
                 orbit: [0.7, 0.4, 5.0],
             }),
+            holds_tool_with: Some([7; 32]),
         }
     }
 
@@ -240,6 +257,7 @@ mod tests {
             tool: None,
             selected: None,
             camera: None,
+            holds_tool_with: None,
             ..full
         };
         assert_eq!(Presence::decode(&bare.encode()), Ok(bare));
@@ -275,14 +293,14 @@ mod tests {
         long_name[1] = 200;
         assert!(Presence::decode(&long_name).is_err());
         let mut tool_nan = bytes.clone();
-        let at = bytes.len() - 4;
-        tool_nan[at..].copy_from_slice(&f32::INFINITY.to_le_bytes());
+        let at = bytes.len() - 32 - 4;
+        tool_nan[at..at + 4].copy_from_slice(&f32::INFINITY.to_le_bytes());
         assert_eq!(
             Presence::decode(&tool_nan),
             Err(PresenceError::NotFinite(at))
         );
         let mut unknown = bytes;
-        unknown[2 + 3 + 3] |= 0x10;
+        unknown[2 + 3 + 3] |= 0x20;
         assert_eq!(
             Presence::decode(&unknown),
             Err(PresenceError::Flags(unknown[2 + 3 + 3]))

@@ -364,6 +364,14 @@ impl View {
         self.next_object
     }
 
+    /// A peer's display name, or its short id when it gave none.
+    pub fn peer_label(&self, peer: PeerId) -> String {
+        self.peers
+            .iter()
+            .find(|r| r.peer == peer && !r.name.is_empty())
+            .map_or_else(|| peer.short(), |r| r.name.clone())
+    }
+
     /// An object's name, or `object N` when it has none (or is gone).
     pub fn object_label(&self, object: u64) -> String {
         object_label(self.scene(), object)

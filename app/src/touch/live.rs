@@ -54,6 +54,7 @@ pub struct LiveTouch {
     workspace: Aabb,
     model: DeviceModel,
     button: std::sync::atomic::AtomicBool,
+    shared: std::sync::Arc<haptic::shared::SharedToolLink>,
 }
 
 impl LiveTouch {
@@ -91,6 +92,7 @@ impl LiveTouch {
         servo_rig.caps = caps;
         let (servo, link) = Servo::init(device, servo_rig);
         let stats = std::sync::Arc::clone(&link.stats);
+        let shared = std::sync::Arc::clone(&link.shared);
         let feed = Feed::spawn(view, link.scenes).map_err(|e| e.to_string())?;
         let config = ServoConfig {
             thread_name: "sculpt-servo".into(),
@@ -113,6 +115,7 @@ impl LiveTouch {
             workspace: caps.workspace_metres,
             model,
             button: std::sync::atomic::AtomicBool::new(false),
+            shared,
         })
     }
 
@@ -163,6 +166,11 @@ impl LiveTouch {
     /// The haptic zone's box in scene units (drawn in the view).
     pub fn zone_box(&self) -> Aabb {
         self.zone.box_world(self.workspace)
+    }
+
+    /// The servo's shared-tool link, for [`super::shared::SharedTool`].
+    pub fn shared_link(&self) -> std::sync::Arc<haptic::shared::SharedToolLink> {
+        std::sync::Arc::clone(&self.shared)
     }
 
     /// The device model whose forces are computed.

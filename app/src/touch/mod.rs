@@ -23,6 +23,7 @@ pub mod live;
 pub mod path;
 pub mod probe;
 pub mod record;
+pub mod shared;
 pub mod spacemouse;
 
 use glam::{DQuat, DVec3};

@@ -251,6 +251,12 @@ pub struct SculptApp {
         ::app::touch::spacemouse::SpaceMouseDriver,
         std::sync::mpsc::Receiver<bool>,
     )>,
+    /// The shared tool (while touching): coupled with the peer it is held with when that
+    /// peer holds it back.
+    pub(super) shared_tool: Option<::app::touch::shared::SharedTool>,
+    /// The peer this user holds the touch tool with, and where that stands.
+    pub(super) hold_with: Option<replication::PeerId>,
+    pub(super) shared_state: ::app::touch::shared::SharedState,
     /// The touch tool's path being recorded, and when recording began.
     pub(super) touch_recording: Option<(::app::touch::record::Recorder, Instant)>,
     /// Recent force and energy for the Touch section's plot, timed from `opened`.
@@ -352,6 +358,9 @@ impl SculptApp {
             layout: Layout::default(),
             touch: None,
             spacemouse: None,
+            shared_tool: None,
+            hold_with: None,
+            shared_state: ::app::touch::shared::SharedState::Alone,
             touch_recording: None,
             force_history: ::app::touch::record::ForceHistory::default(),
             opened: clock::now().instant,
@@ -725,6 +734,7 @@ impl SculptApp {
                 .transform_point3(live.stats().hip_world.as_vec3())
                 .to_array()
         });
+        presence.holds_tool_with = self.hold_with.filter(|_| self.touch.is_some()).map(|p| p.0);
         presence.selected = self.selected;
         let c = &self.view.camera;
         presence.camera = Some(CameraPose {
@@ -896,6 +906,7 @@ impl SculptApp {
         }
         self.follow_touch_stroke();
         self.record_touch();
+        self.update_shared_tool();
         if input.hover_px.is_some() || input.depth_scroll != 0.0 {
             let depth =
                 input.depth_scroll * TOUCH_DEPTH_PER_SCROLL_POINT * sphere.map_or(1.0, |s| s.1);
@@ -1118,7 +1129,12 @@ impl SculptApp {
             (true, None) => {
                 let view = Arc::clone(self.engine.view());
                 let model = ::app::touch::DeviceModel::Falcon;
-                self.touch = Some(::app::touch::live::LiveTouch::start(view, model)?);
+                let live = ::app::touch::live::LiveTouch::start(view, model)?;
+                match ::app::touch::shared::SharedTool::start(&self.engine, live.shared_link()) {
+                    Ok(tool) => self.shared_tool = Some(tool),
+                    Err(e) => log::warn!("no shared tool: {e}"),
+                }
+                self.touch = Some(live);
                 self.status = "touching with the mouse: the tool follows the pointer; \
                                Shift+wheel moves it in depth"
                     .into();
@@ -1127,11 +1143,44 @@ impl SculptApp {
             (false, Some(live)) => {
                 self.spacemouse = None;
                 self.stop_touch_recording();
+                if let Some(tool) = self.shared_tool.take() {
+                    tool.stop(&self.engine);
+                }
+                self.shared_state = ::app::touch::shared::SharedState::Alone;
                 live.stop();
             }
             (false, None) => {}
         }
         Ok(())
+    }
+
+    /// Couples the shared tool when the peer it is held with holds it back, and uncouples
+    /// when either lets go.
+    fn update_shared_tool(&mut self) {
+        let Some(tool) = &self.shared_tool else {
+            return;
+        };
+        let me = self.engine.peer_id();
+        let view = lock(self.engine.view());
+        let theirs = self.hold_with.and_then(|p| view.presence().get(&p));
+        let state = tool.update(me, self.hold_with, theirs);
+        drop(view);
+        if state != self.shared_state {
+            let name = |p| lock(self.engine.view()).peer_label(p);
+            self.status = match state {
+                ::app::touch::shared::SharedState::Coupled(p) => {
+                    format!(
+                        "holding the tool with {}: each of you feels the other",
+                        name(p)
+                    )
+                }
+                ::app::touch::shared::SharedState::Waiting(p) => {
+                    format!("waiting for {} to hold the tool with you", name(p))
+                }
+                ::app::touch::shared::SharedState::Alone => "holding the tool alone".into(),
+            };
+            self.shared_state = state;
+        }
     }
 
     /// Adds this frame's force and energy to the plot and, while recording, the tool's point

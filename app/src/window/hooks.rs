@@ -232,6 +232,27 @@ impl SculptApp {
                 self.hooks.idle_frames = 0;
                 return;
             }
+            if let Some(who) = line.strip_prefix("touch-share:") {
+                let who = who.trim();
+                println!("sculpt: scripted shared tool: {who}");
+                if who == "off" {
+                    self.hold_with = None;
+                } else {
+                    let found = lock(self.engine.view())
+                        .peers()
+                        .iter()
+                        .find(|r| r.peer.short() == who || r.name == who)
+                        .map(|r| r.peer);
+                    match found {
+                        Some(peer) => self.hold_with = Some(peer),
+                        None => self.hooks.fail(format!(
+                            "bad `touch-share: {who}`: no peer with that short id or name"
+                        )),
+                    }
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
             if let Some(word) = line.strip_prefix("touch-device:") {
                 let on = match word.trim() {
                     "3d-mouse" => true,
@@ -434,6 +455,24 @@ impl SculptApp {
                         ::app::touch::probe::sampling_colour(self.sampled_density_in(&view)),
                     "n_plotted": self.force_history.len(),
                     "recording": self.touch_recording.as_ref().map(|(r, _)| r.n_rows()),
+                    "shared_tool": self.shared_tool.as_ref().map(|tool| {
+                        let st = tool.stats();
+                        let (state, with) = match self.shared_state {
+                            ::app::touch::shared::SharedState::Alone => ("alone", None),
+                            ::app::touch::shared::SharedState::Waiting(p) => ("waiting", Some(p)),
+                            ::app::touch::shared::SharedState::Coupled(p) => ("coupled", Some(p)),
+                        };
+                        json!({
+                            "state": state,
+                            "with": with.map(|p| p.short()),
+                            "n_sent": st.n_sent,
+                            "n_received": st.n_received,
+                            "n_dropped": st.n_dropped,
+                            "force": st.force_newtons.to_array(),
+                            "energy_in_joules": st.energy_in_joules,
+                            "energy_out_joules": st.energy_out_joules,
+                        })
+                    }),
                 })
             }),
             "side_panel_points": self.layout.side_panel_points,

@@ -676,6 +676,7 @@ impl SculptApp {
             s.n_ticks, s.n_overruns, s.compute_micros[0], s.compute_micros[2], s.compute_micros[3]
         ));
         self.force_plot_ui(ui, s.energy_joules);
+        self.shared_tool_ui(ui);
         match &self.touch_recording {
             Some((recorder, _)) => {
                 let word = format!("Stop recording ({} points)", recorder.n_rows());
@@ -689,6 +690,67 @@ impl SculptApp {
                 if ui.button("Record the path…").on_hover_text(tip).clicked() {
                     self.file_input = Some((FileAction::RecordTouch, String::new(), None));
                 }
+            }
+        }
+    }
+
+    /// Holding the tool with another peer: whom, where that stands, and what the coupling does.
+    fn shared_tool_ui(&mut self, ui: &mut egui::Ui) {
+        let online: Vec<(replication::PeerId, String)> = {
+            let view = lock(self.engine.view());
+            view.peers()
+                .iter()
+                .filter(|r| r.online)
+                .map(|r| (r.peer, view.peer_label(r.peer)))
+                .collect()
+        };
+        let shown = |p: Option<replication::PeerId>| {
+            p.map_or_else(
+                || "nobody".to_string(),
+                |p| {
+                    online
+                        .iter()
+                        .find(|(q, _)| *q == p)
+                        .map_or_else(|| p.short(), |(_, name)| name.clone())
+                },
+            )
+        };
+        let tip = "hold the tool together with another peer: once they hold it with you too, \
+                   your devices are coupled and each feels the other (wave variables keep the \
+                   coupling stable whatever the network delay)";
+        let mut choice = self.hold_with;
+        egui::ComboBox::from_label("hold the tool with")
+            .selected_text(shown(choice))
+            .show_ui(ui, |ui| {
+                ui.selectable_value(&mut choice, None, "nobody");
+                for (peer, name) in &online {
+                    ui.selectable_value(&mut choice, Some(*peer), name);
+                }
+            })
+            .response
+            .on_hover_text(tip);
+        self.hold_with = choice;
+        let Some(tool) = &self.shared_tool else {
+            return;
+        };
+        use ::app::touch::shared::SharedState;
+        match self.shared_state {
+            SharedState::Alone => {}
+            SharedState::Waiting(p) => {
+                ui.label(format!(
+                    "waiting for {} to hold it with you",
+                    shown(Some(p))
+                ));
+            }
+            SharedState::Coupled(p) => {
+                let st = tool.stats();
+                ui.label(format!(
+                    "coupled with {}: {:.2} N from the link · wave energy in {:.1} mJ, out {:.1} mJ",
+                    shown(Some(p)),
+                    st.force_newtons.length(),
+                    st.energy_in_joules * 1e3,
+                    st.energy_out_joules * 1e3
+                ));
             }
         }
     }
