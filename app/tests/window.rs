@@ -679,6 +679,86 @@ fn a_3d_mouse_moves_the_touch_tool_and_without_one_the_window_says_what_to_do() 
 }
 
 #[test]
+fn a_hid_force_feedback_device_renders_the_rinds_push() {
+    let display = display();
+    let dir = scratch("force-feedback");
+    // The fake's wrapper as a HID PID force-feedback device (vendor 1234, product f00d).
+    let wrapper = dir.join("fake-pid.sh");
+    std::fs::write(
+        &wrapper,
+        format!(
+            "#!/bin/sh\nFAKE_HID_KIND=pid exec {} \"$@\"\n",
+            fake_3d_mouse().display()
+        ),
+    )
+    .unwrap();
+    std::fs::set_permissions(
+        &wrapper,
+        std::os::unix::fs::PermissionsExt::from_mode(0o755),
+    )
+    .unwrap();
+    let check = Command::new(&wrapper).arg("true").output().unwrap();
+    if check.status.code() == Some(77) {
+        eprintln!(
+            "skipped the fake force-feedback device: {}",
+            text(&check.stdout)
+        );
+        return;
+    }
+    // Beside the melon on its -x side, then 0.02 into its rind there: the rind pushes the
+    // tool out along -x, the axis the device renders.
+    let x = -(0.98f64 * 0.98 - 0.08).sqrt();
+    let store = dir.join("store");
+    let (beside, into) = (
+        "touch-at: -1.4,0.2,-0.2".to_string(),
+        format!("touch-at: {x},0.2,-0.2"),
+    );
+    let args = [
+        "--store",
+        store.to_str().unwrap(),
+        "--command",
+        "touch: on",
+        "--command",
+        "touch-force: 1234:f00d",
+        "--command",
+        &beside,
+        "--command",
+        "wait-secs: 0.5",
+        "--command",
+        &into,
+        "--command",
+        "wait-secs: 1",
+    ];
+    let (state, _, stdout) = window_under(&display, &dir, "force-feedback", &args, Some(&wrapper));
+    let touch = &state["touch"];
+    assert_eq!(
+        touch["force_output"].as_str(),
+        Some("force on Fake HID PID joystick (1234:f00d) (its axis renders x)"),
+        "{touch}"
+    );
+    assert!(touch["n_force_writes"].as_u64().unwrap() > 200, "{touch}");
+    assert!(touch["force"][0].as_f64().unwrap() < -1.0, "{touch}");
+    // The device took the effect, then constant forces pushing along -x (a negative
+    // magnitude: its high byte has the top bit set), and zero last, when touch stopped.
+    let log = stdout
+        .split_once("--- device log:")
+        .map(|(_, l)| l)
+        .unwrap_or_default();
+    assert!(log.contains("feature set: 0b010000"), "{log}");
+    let forces: Vec<&str> = log
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("output report: 0507"))
+        .collect();
+    assert!(forces.len() > 200, "{} force reports", forces.len());
+    let negative = |f: &str| u8::from_str_radix(&f[2..4], 16).is_ok_and(|h| h & 0x80 != 0);
+    assert!(
+        forces.iter().filter(|f| negative(f)).count() > 100,
+        "the rind pushes along -x: {forces:?}"
+    );
+    assert_eq!(forces.last(), Some(&"0000"), "the force is zeroed on exit");
+}
+
+#[test]
 fn a_touch_stroke_with_the_device_button_held_carves_one_op() {
     let display = display();
     let dir = scratch("touch-carve");

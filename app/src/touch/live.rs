@@ -18,6 +18,7 @@ use haptic::force::zone::HapticZone;
 use haptic::servo::{Servo, ServoConfig, ServoHandle, ServoStats, StatsSnapshot, spawn};
 
 use super::feed::{Feed, LiveScene};
+use super::force_output::{self, ForceOutput, OutputSlot};
 use super::{DeviceModel, bounds_of, rig, zone_for};
 use crate::engine::{SharedView, lock};
 
@@ -26,6 +27,8 @@ use crate::engine::{SharedView, lock};
 pub struct ShownForce {
     mouse: MouseDevice,
     caps: Capabilities,
+    /// A force-feedback device the force also goes to, when one is chosen.
+    output: OutputSlot,
 }
 
 impl HapticDevice for ShownForce {
@@ -35,7 +38,8 @@ impl HapticDevice for ShownForce {
     fn sample(&mut self) -> Result<DeviceSample, DeviceError> {
         self.mouse.sample()
     }
-    fn set_force(&mut self, _force_newtons: DVec3) -> Result<(), DeviceError> {
+    fn set_force(&mut self, force_newtons: DVec3) -> Result<(), DeviceError> {
+        self.output.write(force_newtons);
         Ok(())
     }
 }
@@ -55,6 +59,7 @@ pub struct LiveTouch {
     model: DeviceModel,
     button: std::sync::atomic::AtomicBool,
     shared: std::sync::Arc<haptic::shared::SharedToolLink>,
+    force_output: ForceOutput,
 }
 
 impl LiveTouch {
@@ -87,7 +92,12 @@ impl LiveTouch {
             0.5 * (w.min.z + w.max.z),
         );
         handle.move_by_metres(start - handle.position_metres());
-        let device = ShownForce { mouse, caps };
+        let (force_output, output) = force_output::channel(caps.force_newtons_max);
+        let device = ShownForce {
+            mouse,
+            caps,
+            output,
+        };
         let mut servo_rig = rig(model, zone);
         servo_rig.caps = caps;
         let (servo, link) = Servo::init(device, servo_rig);
@@ -116,6 +126,7 @@ impl LiveTouch {
             model,
             button: std::sync::atomic::AtomicBool::new(false),
             shared,
+            force_output,
         })
     }
 
@@ -166,6 +177,17 @@ impl LiveTouch {
     /// The haptic zone's box in scene units (drawn in the view).
     pub fn zone_box(&self) -> Aabb {
         self.zone.box_world(self.workspace)
+    }
+
+    /// Where the force goes besides the screen: a force-feedback device, chosen while
+    /// touching ([`super::force_output`]).
+    pub fn force_output(&mut self) -> &mut ForceOutput {
+        &mut self.force_output
+    }
+
+    /// [`LiveTouch::force_output`], to read.
+    pub fn force_output_ref(&self) -> &ForceOutput {
+        &self.force_output
     }
 
     /// The servo's shared-tool link, for [`super::shared::SharedTool`].

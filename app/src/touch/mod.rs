@@ -19,6 +19,7 @@
 //! the zone does not rotate).
 
 pub mod feed;
+pub mod force_output;
 pub mod live;
 pub mod path;
 pub mod probe;

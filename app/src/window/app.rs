@@ -257,6 +257,8 @@ pub struct SculptApp {
     /// The peer this user holds the touch tool with, and where that stands.
     pub(super) hold_with: Option<replication::PeerId>,
     pub(super) shared_state: ::app::touch::shared::SharedState,
+    /// The force-feedback devices last listed for the Touch section, or why none could be.
+    pub(super) force_devices: Option<Result<Vec<haptic::device::hid::HidDeviceInfo>, String>>,
     /// The touch tool's path being recorded, and when recording began.
     pub(super) touch_recording: Option<(::app::touch::record::Recorder, Instant)>,
     /// Recent force and energy for the Touch section's plot, timed from `opened`.
@@ -361,6 +363,7 @@ impl SculptApp {
             shared_tool: None,
             hold_with: None,
             shared_state: ::app::touch::shared::SharedState::Alone,
+            force_devices: None,
             touch_recording: None,
             force_history: ::app::touch::record::ForceHistory::default(),
             opened: clock::now().instant,
@@ -907,6 +910,9 @@ impl SculptApp {
         self.follow_touch_stroke();
         self.record_touch();
         self.update_shared_tool();
+        if let Some(live) = &self.touch {
+            live.force_output_ref().collect();
+        }
         if input.hover_px.is_some() || input.depth_scroll != 0.0 {
             let depth =
                 input.depth_scroll * TOUCH_DEPTH_PER_SCROLL_POINT * sphere.map_or(1.0, |s| s.1);
@@ -1151,6 +1157,20 @@ impl SculptApp {
             }
             (false, None) => {}
         }
+        Ok(())
+    }
+
+    /// Sends the servo's force to the HID force-feedback device `ids` (`VID:PID`), or shows it
+    /// only (`None`); touch must be on.
+    pub(super) fn set_force_output(&mut self, ids: Option<(u16, u16)>) -> Result<(), String> {
+        let Some(live) = &mut self.touch else {
+            return Err("turn touch on before choosing a force-feedback device".into());
+        };
+        match ids {
+            Some((vendor, product)) => live.force_output().open(vendor, product)?,
+            None => live.force_output().close(),
+        }
+        self.status = live.force_output_ref().status();
         Ok(())
     }
 

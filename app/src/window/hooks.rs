@@ -232,6 +232,21 @@ impl SculptApp {
                 self.hooks.idle_frames = 0;
                 return;
             }
+            if let Some(ids) = line.strip_prefix("touch-force:") {
+                let ids = ids.trim();
+                println!("sculpt: scripted force output: {ids}");
+                let parsed = match ids {
+                    "off" => Ok(None),
+                    _ => ::app::touch::force_output::parse_ids(ids)
+                        .map(Some)
+                        .ok_or_else(|| format!("bad `touch-force: {ids}`: VID:PID in hex, or off")),
+                };
+                if let Err(e) = parsed.and_then(|ids| self.set_force_output(ids)) {
+                    self.hooks.fail(e);
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
             if let Some(who) = line.strip_prefix("touch-share:") {
                 let who = who.trim();
                 println!("sculpt: scripted shared tool: {who}");
@@ -455,6 +470,8 @@ impl SculptApp {
                         ::app::touch::probe::sampling_colour(self.sampled_density_in(&view)),
                     "n_plotted": self.force_history.len(),
                     "recording": self.touch_recording.as_ref().map(|(r, _)| r.n_rows()),
+                    "force_output": live.force_output_ref().status(),
+                    "n_force_writes": live.force_output_ref().n_writes(),
                     "shared_tool": self.shared_tool.as_ref().map(|tool| {
                         let st = tool.stats();
                         let (state, with) = match self.shared_state {

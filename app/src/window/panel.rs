@@ -676,6 +676,7 @@ impl SculptApp {
             s.n_ticks, s.n_overruns, s.compute_micros[0], s.compute_micros[2], s.compute_micros[3]
         ));
         self.force_plot_ui(ui, s.energy_joules);
+        self.force_output_ui(ui);
         self.shared_tool_ui(ui);
         match &self.touch_recording {
             Some((recorder, _)) => {
@@ -691,6 +692,48 @@ impl SculptApp {
                     self.file_input = Some((FileAction::RecordTouch, String::new(), None));
                 }
             }
+        }
+    }
+
+    /// The force-feedback device the force goes to: listed on demand, chosen, and its state.
+    fn force_output_ui(&mut self, ui: &mut egui::Ui) {
+        let Some(live) = &self.touch else {
+            return;
+        };
+        ui.label(live.force_output_ref().status());
+        let chosen = live
+            .force_output_ref()
+            .device()
+            .map(|d| (d.vendor_id, d.product_id));
+        let mut choice = chosen;
+        let tip = "send the force to a HID force-feedback device (a joystick or a HID PID \
+                   device renders its x component); unplugging it only stops the force";
+        egui::ComboBox::from_label("force-feedback device")
+            .selected_text(match chosen {
+                Some((v, p)) => format!("{v:04x}:{p:04x}"),
+                None => "none".into(),
+            })
+            .show_ui(ui, |ui| {
+                ui.selectable_value(&mut choice, None, "none");
+                if let Some(Ok(list)) = &self.force_devices {
+                    for d in list {
+                        let label = ::app::touch::force_output::label(d);
+                        ui.selectable_value(&mut choice, Some((d.vendor_id, d.product_id)), label);
+                    }
+                }
+            })
+            .response
+            .on_hover_text(tip);
+        if ui.button("Find devices").clicked() {
+            self.force_devices = Some(::app::touch::force_output::devices());
+        }
+        if let Some(Err(why)) = &self.force_devices {
+            ui.label(why.clone());
+        }
+        if choice != chosen
+            && let Err(e) = self.set_force_output(choice)
+        {
+            self.status = e;
         }
     }
 

@@ -271,6 +271,48 @@ pub fn constant_force_report(block_idx: u8, force_newtons: f64, force_newtons_ma
     [pid_report::SET_CONSTANT_FORCE, block_idx, lo, hi]
 }
 
+/// HID usage pages and usages of devices that may render force: joysticks and gamepads on
+/// the generic desktop page, and anything on the physical interface (PID) page.
+pub const FORCE_FEEDBACK_USAGES: [(u16, u16); 2] = [(0x01, 0x04), (0x01, 0x05)];
+/// The physical interface device (PID) usage page.
+pub const PID_USAGE_PAGE: u16 = 0x0f;
+
+/// A HID device that may take force-feedback effects, for a person to choose.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct HidDeviceInfo {
+    /// USB vendor id.
+    pub vendor_id: u16,
+    /// USB product id.
+    pub product_id: u16,
+    /// The product's name, as the device reports it (may be empty).
+    pub name: String,
+}
+
+/// The connected HID devices that may render force ([`FORCE_FEEDBACK_USAGES`] or the PID
+/// page), each listed once.
+pub fn force_feedback_devices() -> Result<Vec<HidDeviceInfo>, OpenError> {
+    let api = HidApi::new().map_err(OpenError::Api)?;
+    let mut out: Vec<HidDeviceInfo> = Vec::new();
+    for d in api.device_list() {
+        let usage = (d.usage_page(), d.usage());
+        if !(FORCE_FEEDBACK_USAGES.contains(&usage) || usage.0 == PID_USAGE_PAGE) {
+            continue;
+        }
+        let info = HidDeviceInfo {
+            vendor_id: d.vendor_id(),
+            product_id: d.product_id(),
+            name: d.product_string().unwrap_or_default().to_string(),
+        };
+        if !out
+            .iter()
+            .any(|o| (o.vendor_id, o.product_id) == (info.vendor_id, info.product_id))
+        {
+            out.push(info);
+        }
+    }
+    Ok(out)
+}
+
 /// A HID PID force-feedback device streaming one constant-force effect.
 pub struct PidForce {
     device: HidDevice,

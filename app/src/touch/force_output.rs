@@ -1,0 +1,248 @@
+//! Where the live servo's force goes besides the screen: a HID force-feedback device
+//! (through hidapi; [`haptic::device::hid::PidForce`], which renders the force's x component on
+//! its axis), chosen while touching and unplugged without harm.
+//!
+//! The servo's device ([`super::live::ShownForce`]) holds an [`OutputSlot`]; the window holds
+//! the [`ForceOutput`] that feeds it. A device opened on the window's thread is handed to the
+//! servo through the haptic crate's lock-free hand-off, and a device the servo drops (a write
+//! failed: it was unplugged) goes back the same way to be closed here, so the servo never
+//! waits, allocates or frees. A device that cannot be opened is an error in words, with the
+//! udev rule to add when the system refuses access.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+use glam::DVec3;
+use haptic::device::HapticDevice as _;
+use haptic::device::hid::{self, HidDeviceInfo, OpenError, PidForce};
+use haptic::handoff::{self, Publisher, Receiver};
+
+/// A udev rule that lets the user's session open a HID force-feedback device.
+pub const UDEV_RULE: &str =
+    r#"KERNEL=="hidraw*", SUBSYSTEM=="hidraw", TAG+="uaccess", MODE="0660""#;
+
+/// What the servo writes its force to: a device, or none.
+pub enum Output {
+    /// The force is shown only.
+    Shown,
+    /// A HID PID device renders it.
+    Pid(PidForce),
+}
+
+/// Counters both ends read.
+#[derive(Default)]
+struct Counters {
+    /// Forces written to the device.
+    n_writes: AtomicU64,
+    /// Set by the servo when a write failed and it let the device go.
+    lost: AtomicBool,
+}
+
+/// The servo's end: the current output, and the hand-off it comes by.
+pub struct OutputSlot {
+    incoming: Receiver<Output>,
+    current: Option<Box<Output>>,
+    /// Values waiting for room on the hand-off's return ring.
+    retiring: Option<Box<Output>>,
+    counters: Arc<Counters>,
+}
+
+impl OutputSlot {
+    /// Writes `force_newtons` to the device, if one is chosen. Never fails: a failed write
+    /// drops the device (it goes back to the window to be closed) and the force is shown only.
+    /// No allocation, lock or wait.
+    pub fn write(&mut self, force_newtons: DVec3) {
+        if let Some(old) = self.retiring.take() {
+            self.retiring = self.incoming.retire(old).err();
+        }
+        if self.retiring.is_none()
+            && let Some(next) = self.incoming.take()
+            && let Some(old) = self.current.replace(next)
+        {
+            self.retiring = self.incoming.retire(old).err();
+        }
+        let Some(Output::Pid(device)) = self.current.as_deref_mut() else {
+            return;
+        };
+        if device.set_force(force_newtons).is_ok() {
+            self.counters.n_writes.fetch_add(1, Ordering::Relaxed);
+            return;
+        }
+        self.counters.lost.store(true, Ordering::Relaxed);
+        if self.retiring.is_none()
+            && let Some(old) = self.current.take()
+        {
+            self.retiring = self.incoming.retire(old).err();
+        }
+    }
+}
+
+/// The window's end: opens, swaps and closes the device.
+pub struct ForceOutput {
+    outgoing: Publisher<Output>,
+    counters: Arc<Counters>,
+    chosen: Option<HidDeviceInfo>,
+    force_newtons_max: f64,
+}
+
+/// A connected pair: the window's end and the servo's, for a device model rendering up to
+/// `force_newtons_max` (the device's full scale).
+pub fn channel(force_newtons_max: f64) -> (ForceOutput, OutputSlot) {
+    let (outgoing, incoming) = handoff::channel();
+    let counters = Arc::new(Counters::default());
+    (
+        ForceOutput {
+            outgoing,
+            counters: Arc::clone(&counters),
+            chosen: None,
+            force_newtons_max,
+        },
+        OutputSlot {
+            incoming,
+            current: None,
+            retiring: None,
+            counters,
+        },
+    )
+}
+
+/// The connected HID devices that may render force, or why none can be listed.
+pub fn devices() -> Result<Vec<HidDeviceInfo>, String> {
+    hid::force_feedback_devices().map_err(|e| open_error_text(&e))
+}
+
+/// Words for why a force-feedback device could not be used, with what to do.
+pub fn open_error_text(e: &OpenError) -> String {
+    match e {
+        OpenError::NotFound => "that force-feedback device is not connected: plug it in and \
+                                choose it again"
+            .into(),
+        OpenError::Api(_) | OpenError::Open(_) => cannot_open_text(&e.to_string()),
+        OpenError::Effect(why) => format!(
+            "the device refused the force effect ({why}): it may not support HID PID constant \
+             force"
+        ),
+    }
+}
+
+impl ForceOutput {
+    /// Opens the device `vendor_id:product_id` and sends the servo's force to it from the
+    /// next tick on; on an error the force stays where it was going.
+    pub fn open(&mut self, vendor_id: u16, product_id: u16) -> Result<(), String> {
+        let device = PidForce::open(vendor_id, product_id, self.force_newtons_max)
+            .map_err(|e| open_error_text(&e))?;
+        let name = hid::force_feedback_devices()
+            .ok()
+            .and_then(|list| {
+                list.into_iter()
+                    .find(|d| (d.vendor_id, d.product_id) == (vendor_id, product_id))
+            })
+            .map_or_else(String::new, |d| d.name);
+        self.counters.lost.store(false, Ordering::Relaxed);
+        self.outgoing.publish(Box::new(Output::Pid(device)));
+        self.chosen = Some(HidDeviceInfo {
+            vendor_id,
+            product_id,
+            name,
+        });
+        Ok(())
+    }
+
+    /// Shows the force only (the device is closed once the servo hands it back).
+    pub fn close(&mut self) {
+        self.outgoing.publish(Box::new(Output::Shown));
+        self.chosen = None;
+    }
+
+    /// Closes what the servo handed back (call every frame).
+    pub fn collect(&self) {
+        self.outgoing.collect_retired();
+    }
+
+    /// The chosen device, while it works.
+    pub fn device(&self) -> Option<&HidDeviceInfo> {
+        self.chosen
+            .as_ref()
+            .filter(|_| !self.counters.lost.load(Ordering::Relaxed))
+    }
+
+    /// Forces written to the device so far.
+    pub fn n_writes(&self) -> u64 {
+        self.counters.n_writes.load(Ordering::Relaxed)
+    }
+
+    /// Where the force goes, in a line for the window.
+    pub fn status(&self) -> String {
+        match (&self.chosen, self.counters.lost.load(Ordering::Relaxed)) {
+            (None, _) => "force shown only (no force-feedback device chosen)".into(),
+            (Some(d), true) => format!(
+                "{} stopped answering (unplugged?): the force is shown only; plug it in and \
+                 choose it again",
+                label(d)
+            ),
+            (Some(d), false) => format!("force on {} (its axis renders x)", label(d)),
+        }
+    }
+}
+
+/// Words for a device the system would not open (`detail`: its reason).
+fn cannot_open_text(detail: &str) -> String {
+    format!(
+        "the force-feedback device cannot be opened ({detail}): add the udev rule \
+         `{UDEV_RULE}` to /etc/udev/rules.d/70-sculpt-force-feedback.rules, run `sudo udevadm \
+         control --reload && sudo udevadm trigger`, plug it in again and choose it again"
+    )
+}
+
+/// A device in words: its name and ids.
+pub fn label(d: &HidDeviceInfo) -> String {
+    let name = if d.name.is_empty() {
+        "HID device"
+    } else {
+        &d.name
+    };
+    format!("{name} ({:04x}:{:04x})", d.vendor_id, d.product_id)
+}
+
+/// Reads `VID:PID` in hexadecimal (`1234:f00d`).
+pub fn parse_ids(text: &str) -> Option<(u16, u16)> {
+    let (v, p) = text.trim().split_once(':')?;
+    Some((
+        u16::from_str_radix(v.trim(), 16).ok()?,
+        u16::from_str_radix(p.trim(), 16).ok()?,
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ids_read_in_hex_and_errors_say_what_to_do() {
+        assert_eq!(parse_ids("1234:f00d"), Some((0x1234, 0xf00d)));
+        assert_eq!(parse_ids(" 046D : C626 "), Some((0x046d, 0xc626)));
+        for bad in ["", "1234", "12345:1", "x:1", "1:2:3"] {
+            assert_eq!(parse_ids(bad), None, "{bad}");
+        }
+        assert!(open_error_text(&OpenError::NotFound).contains("plug it in"));
+        let denied = cannot_open_text("Permission denied");
+        assert!(
+            denied.contains(UDEV_RULE) && denied.contains("Permission denied"),
+            "{denied}"
+        );
+    }
+
+    #[test]
+    fn with_no_device_the_slot_writes_nothing_and_says_so() {
+        let (mut output, mut slot) = channel(8.0);
+        slot.write(DVec3::X);
+        assert_eq!(output.n_writes(), 0);
+        assert!(output.status().contains("shown only"));
+        assert!(output.open(0xdead, 0xbeef).is_err(), "no such device");
+        assert!(output.device().is_none());
+        output.close();
+        slot.write(DVec3::X);
+        output.collect();
+        assert_eq!(output.n_writes(), 0);
+    }
+}
