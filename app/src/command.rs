@@ -110,6 +110,9 @@ pub enum Command<'a> {
     /// `tool: carve ball radius 0.2 ...`: the brush a drag sculpts with (no op; see
     /// [`crate::brush::Brush::parse`]).
     Tool(&'a str),
+    /// `probe: radius 0.1 tension 0.8 ...`: the touch tool's body, which others feel (no op;
+    /// see [`crate::touch::body::ToolBody::parse`]).
+    Probe(&'a str),
     /// Plain text: a chat message.
     Chat(&'a str),
     /// `shape: <formula>`: the selected object's implicit geometry.
@@ -154,6 +157,7 @@ pub fn parse(line: &str) -> Option<Command<'_>> {
             "new" => return Some(Command::New(rest)),
             "name" => return Some(Command::Name(rest)),
             "tool" => return Some(Command::Tool(rest)),
+            "probe" => return Some(Command::Probe(rest)),
             other => {
                 if let Some((_, kind)) = PropertyKind::ALL.iter().find(|(n, _)| *n == other) {
                     return Some(Command::Property(*kind, rest));
@@ -324,6 +328,9 @@ pub fn plan(
             Ok(planned(payload, summary))
         }
         Command::Tool(_) => Err("tool: is a brush setting, not an op; the window sets it".into()),
+        Command::Probe(_) => {
+            Err("probe: is the touch tool's body, not an op; the window sets it".into())
+        }
         Command::Undo => {
             let (id, _) = selected_object()?;
             let target = session.undo_target(id).ok_or_else(|| {

@@ -502,7 +502,13 @@ fn touching_with_the_mouse_runs_the_servo_on_the_scene_and_the_rind_pushes_back(
     // On the demo watermelon's whole side, 0.02 into its rind (zone 0.05 deep).
     let y = (0.98f64 * 0.98 - 0.08).sqrt();
     let at = format!("touch-at: -0.2,{y},-0.2");
-    let run = window_run(&display, &dir, "touch", &["touch: on", &at, "wait-secs: 1"]);
+    let probe = "probe: radius 0.1 tension 0.8 density 1";
+    let run = window_run(
+        &display,
+        &dir,
+        "touch",
+        &["touch: on", probe, &at, "wait-secs: 1"],
+    );
     let touch = &run.state["touch"];
     assert!(touch.is_object(), "{}", run.stdout);
     let melon = run.state["objects"][0]["id"].as_u64().unwrap();
@@ -529,6 +535,17 @@ fn touching_with_the_mouse_runs_the_servo_on_the_scene_and_the_rind_pushes_back(
         .map(|v| v.as_f64().unwrap())
         .collect();
     assert!((tool[2] - y).abs() < 0.05, "{tool:?} against {y}");
+    // With the probe's body, which other peers' servos feel there.
+    let body: Vec<f64> = run.state["my_tool_body"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no tool body published: {}", run.state))
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert_eq!(body.len(), 4);
+    for (got, want) in body.iter().zip([0.1, 0.8, 0.0, 1.0]) {
+        assert!((got - want).abs() < 1e-6, "{body:?}");
+    }
 }
 
 #[test]

@@ -310,6 +310,7 @@ impl Engine {
             selected: None,
             camera: None,
             holds_tool_with: None,
+            tool_body: None,
         }));
         let presence_changed = Arc::new(std::sync::atomic::AtomicBool::new(true));
         let listeners = Listeners::default();
@@ -805,13 +806,7 @@ impl Worker {
             } if channel == presence::PRESENCE_CHANNEL => {
                 let mut view = lock(&self.view);
                 match Presence::decode(&value) {
-                    Ok(p) => {
-                        for row in view.peers.iter_mut().filter(|r| r.peer == peer) {
-                            row.name.clone_from(&p.name);
-                            row.colour = p.colour;
-                        }
-                        view.presence.insert(peer, p);
-                    }
+                    Ok(p) => view.note_presence(peer, p),
                     Err(e) => {
                         view.n_bad_presence += 1;
                         log::debug!("bad presence from {}: {e}", peer.short());

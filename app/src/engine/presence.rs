@@ -44,6 +44,9 @@ pub struct Presence {
     /// The peer this one holds the touch tool with (`app::touch::shared`): the two are
     /// coupled when each names the other.
     pub holds_tool_with: Option<[u8; 32]>,
+    /// The touch tool's body, while tangible: radius, tension, friction, density
+    /// (`app::touch::body::ToolBody`, which receivers check).
+    pub tool_body: Option<[f32; 4]>,
 }
 
 /// Why a presence value was refused.
@@ -86,8 +89,8 @@ pub fn default_colour(peer: &[u8; 32]) -> [u8; 3] {
 
 impl Presence {
     /// `[3][name len][name][r g b][flags][pointer 3×f32][target 3×f32][orbit 3×f32][selected u64]
-    /// [tool 3×f32][partner 32]`, little-endian; the optional parts are present when their flag
-    /// bit is set.
+    /// [tool 3×f32][partner 32][body 4×f32]`, little-endian; the optional parts are present
+    /// when their flag bit is set.
     pub fn encode(&self) -> Vec<u8> {
         let name = truncate(&self.name, MAX_NAME_BYTES);
         let mut out = Vec::with_capacity(64 + name.len());
@@ -99,7 +102,8 @@ impl Presence {
             | u8::from(self.selected.is_some()) << 1
             | u8::from(self.camera.is_some()) << 2
             | u8::from(self.tool.is_some()) << 3
-            | u8::from(self.holds_tool_with.is_some()) << 4;
+            | u8::from(self.holds_tool_with.is_some()) << 4
+            | u8::from(self.tool_body.is_some()) << 5;
         out.push(flags);
         let mut put = |v: &[f32; 3]| v.iter().for_each(|x| out.extend(x.to_le_bytes()));
         if let Some(p) = &self.pointer {
@@ -117,6 +121,9 @@ impl Presence {
         }
         if let Some(p) = &self.holds_tool_with {
             out.extend_from_slice(p);
+        }
+        if let Some(b) = &self.tool_body {
+            b.iter().for_each(|x| out.extend(x.to_le_bytes()));
         }
         out
     }
@@ -169,7 +176,14 @@ impl Presence {
         } else {
             None
         };
-        if flags >> 5 != 0 {
+        let tool_body = if flags & 32 != 0 {
+            let [a, b, c] = r.vec3()?;
+            let [d, ..] = r.vec3_part(1)?;
+            Some([a, b, c, d])
+        } else {
+            None
+        };
+        if flags >> 6 != 0 {
             return Err(PresenceError::Flags(flags));
         }
         if r.at != bytes.len() {
@@ -183,6 +197,7 @@ impl Presence {
             selected,
             camera,
             holds_tool_with,
+            tool_body,
         })
     }
 }
@@ -215,8 +230,13 @@ impl<'a> Reader<'a> {
     }
 
     fn vec3(&mut self) -> Result<[f32; 3], PresenceError> {
+        self.vec3_part(3)
+    }
+
+    /// The next `n` (at most 3) finite f32s, the rest zero.
+    fn vec3_part(&mut self, n: usize) -> Result<[f32; 3], PresenceError> {
         let mut v = [0.0f32; 3];
-        for x in &mut v {
+        for x in v.iter_mut().take(n) {
             let at = self.at;
             let mut b = [0u8; 4];
             b.copy_from_slice(self.take(4)?);
@@ -245,6 +265,7 @@ mod tests {
                 orbit: [0.7, 0.4, 5.0],
             }),
             holds_tool_with: Some([7; 32]),
+            tool_body: Some([0.1, 0.8, 0.0, 2.0]),
         }
     }
 
@@ -258,6 +279,7 @@ mod tests {
             selected: None,
             camera: None,
             holds_tool_with: None,
+            tool_body: None,
             ..full
         };
         assert_eq!(Presence::decode(&bare.encode()), Ok(bare));
@@ -293,14 +315,14 @@ mod tests {
         long_name[1] = 200;
         assert!(Presence::decode(&long_name).is_err());
         let mut tool_nan = bytes.clone();
-        let at = bytes.len() - 32 - 4;
+        let at = bytes.len() - 16 - 32 - 4;
         tool_nan[at..at + 4].copy_from_slice(&f32::INFINITY.to_le_bytes());
         assert_eq!(
             Presence::decode(&tool_nan),
             Err(PresenceError::NotFinite(at))
         );
         let mut unknown = bytes;
-        unknown[2 + 3 + 3] |= 0x20;
+        unknown[2 + 3 + 3] |= 0x40;
         assert_eq!(
             Presence::decode(&unknown),
             Err(PresenceError::Flags(unknown[2 + 3 + 3]))

@@ -226,6 +226,19 @@ impl View {
         &self.my_rejections
     }
 
+    /// Takes a presence value that arrived from `peer` (the engine calls this): the peer's
+    /// row takes its name and colour, and the view's waker is called.
+    pub fn note_presence(&mut self, peer: PeerId, presence: Presence) {
+        for row in self.peers.iter_mut().filter(|r| r.peer == peer) {
+            row.name.clone_from(&presence.name);
+            row.colour = presence.colour;
+        }
+        self.presence.insert(peer, presence);
+        if let Some(wake) = &self.waker {
+            wake();
+        }
+    }
+
     /// Sets what the engine calls after each change of the view (a window asks for a frame).
     pub fn set_waker(&mut self, waker: Box<dyn Fn() + Send>) {
         self.waker = Some(waker);

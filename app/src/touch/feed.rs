@@ -8,6 +8,11 @@
 //! one `ObjectContainer` per object over those shared, prepared objects (each container
 //! only adds its sampler's scratch space).
 //!
+//! Other peers' touch tools with a tangible body ([`super::body::ToolBody`], in their
+//! presence) join the snapshot as balls at their tool points, with container ids from
+//! [`REMOTE_TOOL_ID_BASE`] on; a snapshot is built again when they move or change, and they
+//! cost only their own small objects.
+//!
 //! A [`Feed`] runs a snapshotter on the `sculpt-haptic-feed` thread and publishes each
 //! snapshot through the haptic crate's lock-free handoff (`haptic::handoff`): the servo
 //! takes it at its next tick by one atomic swap and never waits, and the snapshots it
@@ -32,8 +37,19 @@ use crate::engine::{SharedView, lock};
 /// The feed looks at the view at least this often, even when nobody wakes it.
 pub const FEED_POLL_MILLIS: u64 = 100;
 
-/// What the servo renders on the live scene: one container per object, in id order.
+/// What the servo renders on the live scene: one container per object, in id order, then
+/// other peers' tangible tools.
 pub type LiveScene = Vec<ObjectContainer>;
+
+/// The container id of the first remote peer's tool (in peer id order), the next one's one
+/// more: above every object id (objects take 63 bits).
+pub const REMOTE_TOOL_ID_BASE: u64 = 1 << 63;
+
+/// Most remote tools felt at once (the nearest are not chosen: the first peers by id).
+pub const MAX_REMOTE_TOOLS: usize = 16;
+
+/// A remote peer's tangible tool: where (scene coordinates) and its body.
+type RemoteTool = (replication::PeerId, glam::DVec3, super::body::ToolBody);
 
 /// An object copied out of the view and prepared for sampling.
 struct Prepared {
@@ -56,6 +72,8 @@ pub struct Built {
 pub struct Snapshotter {
     cursor: u64,
     prepared: BTreeMap<ObjectId, Prepared>,
+    /// The remote tools in the last snapshot.
+    tools: Vec<RemoteTool>,
 }
 
 impl Snapshotter {
@@ -67,7 +85,11 @@ impl Snapshotter {
     /// A new snapshot when objects changed since the last call, else `None`. The view is
     /// locked only to read what changed and to copy those objects.
     pub fn update(&mut self, view: &SharedView) -> Option<Built> {
-        let copies = self.copy_changed(view)?;
+        let (copies, tools) = self.copy_changed(view);
+        if copies.is_none() && tools == self.tools {
+            return None;
+        }
+        let copies = copies.unwrap_or_default();
         let n_rebuilt = copies.iter().filter(|(_, copy)| copy.is_some()).count();
         for (id, copy) in copies {
             match copy {
@@ -97,6 +119,19 @@ impl Snapshotter {
                 Err(e) => refused.push((*id, e.to_string())),
             }
         }
+        for ((_, at, body), n) in tools.iter().zip(0u64..) {
+            let Some(mut object) = body.object(*at) else {
+                continue;
+            };
+            object.prepare();
+            let sampler = Sampler::new(Arc::new(object));
+            if let Ok(c) =
+                ObjectContainer::new(REMOTE_TOOL_ID_BASE + n, sampler, Transform::IDENTITY)
+            {
+                scene.push(c);
+            }
+        }
+        self.tools = tools;
         Some(Built {
             scene,
             n_rebuilt,
@@ -104,7 +139,8 @@ impl Snapshotter {
         })
     }
 
-    /// Under the view's lock: the changed objects' copies (`None` for one that is gone).
+    /// Under the view's lock: the changed objects' copies (`None` for one that is gone; no
+    /// list when nothing changed), and the remote tangible tools.
     #[expect(
         clippy::type_complexity,
         reason = "a local list of (id, copy or gone) pairs"
@@ -112,13 +148,27 @@ impl Snapshotter {
     fn copy_changed(
         &mut self,
         view: &SharedView,
-    ) -> Option<Vec<(ObjectId, Option<(Object, Transform)>)>> {
+    ) -> (
+        Option<Vec<(ObjectId, Option<(Object, Transform)>)>>,
+        Vec<RemoteTool>,
+    ) {
         let view = lock(view);
+        let scene_from_render = render::snapshot::render_from_scene().inverse();
+        let tools: Vec<RemoteTool> = view
+            .presence()
+            .iter()
+            .filter_map(|(peer, p)| {
+                let body = super::body::ToolBody::from_wire(p.tool_body?)?;
+                let at = scene_from_render.transform_point3(glam::Vec3::from_array(p.tool?));
+                body.is_tangible().then_some((*peer, at.as_dvec3(), body))
+            })
+            .take(MAX_REMOTE_TOOLS)
+            .collect();
         let (changes, cursor) = view.changes_since(self.cursor);
         self.cursor = cursor;
         let scene = view.scene();
         let ids: Vec<ObjectId> = match changes {
-            Some(ids) if ids.is_empty() => return None,
+            Some(ids) if ids.is_empty() => return (None, tools),
             Some(ids) => ids.into_iter().collect(),
             // Everything may have changed: every object of the scene, and every one kept
             // (to drop those that are gone).
@@ -139,7 +189,7 @@ impl Snapshotter {
                 (id, copy)
             })
             .collect();
-        Some(copies)
+        (Some(copies), tools)
     }
 }
 

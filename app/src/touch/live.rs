@@ -269,4 +269,54 @@ mod tests {
         engine.shutdown();
         let _ = std::fs::remove_dir_all(&dir);
     }
+
+    #[test]
+    fn another_peers_tangible_probe_is_felt_where_its_tool_is() {
+        let dir = std::env::temp_dir().join(format!("sculpt-live-probe-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let config = EngineConfig {
+            demo: crate::demos::find("watermelon").ok(),
+            ..EngineConfig::on_loopback(&dir)
+        };
+        let engine = Engine::start(config, crate::clock::now().wall).unwrap();
+        let deadline = crate::clock::now().instant + std::time::Duration::from_secs(20);
+        while lock(engine.view()).scene().is_empty() {
+            assert!(crate::clock::now().instant < deadline, "no demo");
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        let live =
+            LiveTouch::start(std::sync::Arc::clone(engine.view()), DeviceModel::Falcon).unwrap();
+        wait_stats(&live, "a snapshot", |s| s.n_scenes_taken >= 1);
+        // Above the melon: nothing there yet.
+        live.move_to_world(DVec3::new(0.0, 1.5, 0.0));
+        wait_stats(&live, "the tip above the melon", |s| {
+            (s.hip_world.y - 1.5).abs() < 1e-3 && s.top_id.is_none()
+        });
+        // Another peer's tool arrives there: a probe of radius 0.1 with tension, centred at
+        // y = 1.25 (its surface at 1.35), as its presence says (the renderer's world, +z up).
+        let probe = crate::touch::body::ToolBody {
+            radius: 0.1,
+            tension: 0.8,
+            friction: 0.0,
+            density: 1.0,
+        };
+        let mut presence = engine.presence();
+        presence.tool = Some([0.0, 0.0, 1.25]);
+        presence.tool_body = Some(probe.to_wire());
+        lock(engine.view()).note_presence(replication::PeerId([9; 32]), presence);
+        // Down into its surface zone: the probe pushes the tool back up.
+        live.move_to_world(DVec3::new(0.0, 1.33, 0.0));
+        wait_stats(&live, "the probe's push", |s| {
+            s.top_id == Some(super::super::feed::REMOTE_TOOL_ID_BASE) && s.force_newtons.y > 0.5
+        });
+        // The peer's tool goes intangible: it is gone from the servo's scene.
+        let mut presence = engine.presence();
+        presence.tool = Some([0.0, 0.0, 1.25]);
+        presence.tool_body = None;
+        lock(engine.view()).note_presence(replication::PeerId([9; 32]), presence);
+        wait_stats(&live, "the probe gone", |s| s.top_id.is_none());
+        live.stop();
+        engine.shutdown();
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -18,6 +18,7 @@
 //! are newtons of the chosen [`DeviceModel`] in device axes (the same axes as the scene's:
 //! the zone does not rotate).
 
+pub mod body;
 pub mod feed;
 pub mod force_output;
 pub mod live;

@@ -415,6 +415,7 @@ mod tests {
             selected: None,
             camera: None,
             holds_tool_with: holds.map(|p| p.0),
+            tool_body: None,
         }
     }
 

@@ -257,6 +257,8 @@ pub struct SculptApp {
     /// The peer this user holds the touch tool with, and where that stands.
     pub(super) hold_with: Option<replication::PeerId>,
     pub(super) shared_state: ::app::touch::shared::SharedState,
+    /// The touch tool's body, which other peers feel while it is tangible.
+    pub(super) tool_body: ::app::touch::body::ToolBody,
     /// The force-feedback devices last listed for the Touch section, or why none could be.
     pub(super) force_devices: Option<Result<Vec<haptic::device::hid::HidDeviceInfo>, String>>,
     /// The touch tool's path being recorded, and when recording began.
@@ -363,6 +365,7 @@ impl SculptApp {
             shared_tool: None,
             hold_with: None,
             shared_state: ::app::touch::shared::SharedState::Alone,
+            tool_body: ::app::touch::body::ToolBody::default(),
             force_devices: None,
             touch_recording: None,
             force_history: ::app::touch::record::ForceHistory::default(),
@@ -578,6 +581,18 @@ impl SculptApp {
         let Some(command) = command::parse(line) else {
             return;
         };
+        if let command::Command::Probe(text) = command {
+            match self.tool_body.parse(text) {
+                Ok(body) => {
+                    self.tool_body = body;
+                    self.input_error = None;
+                    self.input.clear();
+                    self.status = format!("touch tool: {}", body.describe());
+                }
+                Err(e) => self.input_error = Some(e),
+            }
+            return;
+        }
         if let command::Command::Tool(text) = command {
             match self.brush.parse(text) {
                 Ok(brush) => {
@@ -738,6 +753,8 @@ impl SculptApp {
                 .to_array()
         });
         presence.holds_tool_with = self.hold_with.filter(|_| self.touch.is_some()).map(|p| p.0);
+        presence.tool_body = (self.touch.is_some() && self.tool_body.is_tangible())
+            .then(|| self.tool_body.to_wire());
         presence.selected = self.selected;
         let c = &self.view.camera;
         presence.camera = Some(CameraPose {

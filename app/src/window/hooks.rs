@@ -494,6 +494,7 @@ impl SculptApp {
             }),
             "side_panel_points": self.layout.side_panel_points,
             "my_tool": self.presence_sent.as_ref().and_then(|p| p.tool),
+            "my_tool_body": self.presence_sent.as_ref().and_then(|p| p.tool_body),
             "playing": self.scene_clock.playing(),
             "selected": self.selected.map(|id| view.object_label(id)),
             "peers": rows(view.peers().iter().map(|p| json!({

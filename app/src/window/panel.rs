@@ -677,6 +677,11 @@ impl SculptApp {
         ));
         self.force_plot_ui(ui, s.energy_joules);
         self.force_output_ui(ui);
+        ui.label(format!("your tool: {}", self.tool_body.describe()))
+            .on_hover_text(
+                "others feel your tool when it has tension or density: set them with \
+                 `probe: radius 0.1 tension 0.8 friction 0.3 density 1` (or `probe: off`)",
+            );
         self.shared_tool_ui(ui);
         match &self.touch_recording {
             Some((recorder, _)) => {
