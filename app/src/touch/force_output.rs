@@ -217,6 +217,116 @@ pub fn parse_ids(text: &str) -> Option<(u16, u16)> {
 mod tests {
     use super::*;
 
+    /// Set in the child process the fake device runs.
+    const CHILD_ENV: &str = "SCULPT_FAKE_PID_CHILD";
+
+    /// The live servo on the demo watermelon, its force sent to the fake HID PID device
+    /// (haptic's FUSE fake, vendor 1234, product f00d): the rind's push along -x arrives as
+    /// constant-force reports, and closing the output hands the device back. This test runs
+    /// itself again under the fake, which needs root and FUSE; elsewhere it says why it
+    /// skipped.
+    #[test]
+    fn the_live_servos_force_reaches_a_hid_force_feedback_device() {
+        use crate::engine::{Engine, EngineConfig, lock};
+        use crate::touch::DeviceModel;
+        use crate::touch::live::LiveTouch;
+        if std::env::var(CHILD_ENV).is_ok() {
+            let dir = std::env::temp_dir().join(format!("sculpt-ff-{}", std::process::id()));
+            let _ = std::fs::remove_dir_all(&dir);
+            let config = EngineConfig {
+                demo: crate::demos::find("watermelon").ok(),
+                ..EngineConfig::on_loopback(&dir)
+            };
+            let engine = Engine::start(config, crate::clock::now().wall).unwrap();
+            let wait = |what: &str, done: &dyn Fn() -> bool| {
+                let deadline = crate::clock::now().instant + std::time::Duration::from_secs(20);
+                while !done() {
+                    assert!(crate::clock::now().instant < deadline, "timed out: {what}");
+                    std::thread::sleep(std::time::Duration::from_millis(5));
+                }
+            };
+            wait("the demo", &|| !lock(engine.view()).scene().is_empty());
+            let list = devices().unwrap();
+            assert!(
+                list.iter()
+                    .any(|d| (d.vendor_id, d.product_id) == (0x1234, 0xf00d)),
+                "{list:?}"
+            );
+            let mut live =
+                LiveTouch::start(std::sync::Arc::clone(engine.view()), DeviceModel::Falcon)
+                    .unwrap();
+            live.force_output().open(0x1234, 0xf00d).unwrap();
+            // Beside the melon on its -x side, then 0.02 into its rind: pushed along -x.
+            live.move_to_world(DVec3::new(-1.4, 0.2, -0.2));
+            wait("beside", &|| live.stats().top_id.is_none());
+            let x = -(0.98f64 * 0.98 - 0.08).sqrt();
+            live.move_to_world(DVec3::new(x, 0.2, -0.2));
+            wait("the rind's push", &|| live.stats().force_newtons.x < -1.0);
+            wait("writes", &|| live.force_output_ref().n_writes() > 200);
+            let status = live.force_output_ref().status();
+            println!("CHILD status: {status}");
+            // Closed: the servo takes the change at its next tick and writes no more.
+            live.force_output().close();
+            std::thread::sleep(std::time::Duration::from_millis(50));
+            let writes = live.force_output_ref().n_writes();
+            std::thread::sleep(std::time::Duration::from_millis(50));
+            live.force_output_ref().collect();
+            println!(
+                "CHILD writes after close: {}",
+                live.force_output_ref().n_writes() - writes
+            );
+            live.stop();
+            engine.shutdown();
+            let _ = std::fs::remove_dir_all(&dir);
+            return;
+        }
+        let fake = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../haptic/tests/fake-hid/run.sh");
+        let exe = std::env::current_exe().unwrap();
+        let out = std::process::Command::new(fake)
+            .env("FAKE_HID_KIND", "pid")
+            .env(CHILD_ENV, "1")
+            .arg(exe)
+            .args([
+                "--exact",
+                "touch::force_output::tests::the_live_servos_force_reaches_a_hid_force_feedback_device",
+                "--nocapture",
+                "--test-threads=1",
+            ])
+            .stdin(std::process::Stdio::null())
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        if out.status.code() == Some(77) {
+            eprintln!("skipped the fake force-feedback device: {stdout}");
+            return;
+        }
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{stdout}\n{stderr}");
+        assert!(
+            stdout.contains("CHILD status: force on Fake HID PID joystick (1234:f00d)"),
+            "{stdout}"
+        );
+        assert!(stdout.contains("CHILD writes after close: 0"), "{stdout}");
+        let log = stdout.split_once("--- device log:").map_or("", |(_, l)| l);
+        assert!(log.contains("feature set: 0b010000"), "{log}");
+        let forces: Vec<&str> = log
+            .lines()
+            .filter_map(|l| l.trim().strip_prefix("output report: 0507"))
+            .collect();
+        // A negative magnitude (along -x) has the top bit of its high byte set.
+        let negative = |f: &str| {
+            u8::from_str_radix(f.get(2..4)?, 16)
+                .ok()
+                .map(|h| h & 0x80 != 0)
+        };
+        assert!(
+            forces.iter().filter(|f| negative(f) == Some(true)).count() > 100,
+            "the rind pushes along -x: {} reports",
+            forces.len()
+        );
+    }
+
     #[test]
     fn ids_read_in_hex_and_errors_say_what_to_do() {
         assert_eq!(parse_ids("1234:f00d"), Some((0x1234, 0xf00d)));

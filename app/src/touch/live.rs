@@ -44,6 +44,9 @@ impl HapticDevice for ShownForce {
     }
 }
 
+/// The sizes a zone may take, relative to the one fitted at start.
+pub const ZONE_SIZE_RANGE: (f64, f64) = (0.1, 10.0);
+
 /// Where the tool starts, as a fraction of the workspace's height below its top.
 const START_BELOW_TOP: f64 = 0.05;
 
@@ -54,7 +57,13 @@ pub struct LiveTouch {
     waker: Box<dyn Fn() + Send>,
     stats: std::sync::Arc<ServoStats>,
     mouse: MouseHandle,
-    zone: HapticZone,
+    /// The zone the servo renders with (changed by [`LiveTouch::set_zone`]).
+    zone: std::sync::Mutex<HapticZone>,
+    /// The zone fitted at start, which sizes are relative to.
+    fitted: HapticZone,
+    /// The rig the servo renders with, less its zone, and where new ones go.
+    rig: haptic::force::Rig,
+    rigs: haptic::handoff::Publisher<haptic::force::Rig>,
     workspace: Aabb,
     model: DeviceModel,
     button: std::sync::atomic::AtomicBool,
@@ -100,9 +109,11 @@ impl LiveTouch {
         };
         let mut servo_rig = rig(model, zone);
         servo_rig.caps = caps;
+        let base_rig = servo_rig;
         let (servo, link) = Servo::init(device, servo_rig);
         let stats = std::sync::Arc::clone(&link.stats);
         let shared = std::sync::Arc::clone(&link.shared);
+        let rigs = link.rigs;
         let feed = Feed::spawn(view, link.scenes).map_err(|e| e.to_string())?;
         let config = ServoConfig {
             thread_name: "sculpt-servo".into(),
@@ -121,7 +132,10 @@ impl LiveTouch {
             feed,
             stats,
             mouse: handle,
-            zone,
+            zone: std::sync::Mutex::new(zone),
+            fitted: zone,
+            rig: base_rig,
+            rigs,
             workspace: caps.workspace_metres,
             model,
             button: std::sync::atomic::AtomicBool::new(false),
@@ -133,14 +147,52 @@ impl LiveTouch {
     /// Moves the tip by `delta` in scene units (the window maps pointer motion through its
     /// camera into the scene first).
     pub fn move_by_world(&self, delta: DVec3) {
-        let metres = self.zone.device_from_world_dir(delta) * self.zone.device_metres(1.0);
+        let zone = self.zone();
+        let metres = zone.device_from_world_dir(delta) * zone.device_metres(1.0);
         self.mouse.move_by_metres(metres);
+    }
+
+    /// The haptic zone the servo renders with.
+    pub fn zone(&self) -> HapticZone {
+        *self
+            .zone
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// Moves the zone so that its centre is at `center` (scene units) and scales it to
+    /// `size` times the zone fitted at start (clamped to [`ZONE_SIZE_RANGE`]); the servo
+    /// renders with it from its next tick. The tool moves with the zone (the hand did not
+    /// move), and stiffness scales with it: a zone twice as large feels half as stiff per
+    /// scene unit.
+    pub fn set_zone(&self, center: DVec3, size: f64) {
+        if !center.is_finite() || !size.is_finite() {
+            return;
+        }
+        let size = size.clamp(ZONE_SIZE_RANGE.0, ZONE_SIZE_RANGE.1);
+        let zone = HapticZone {
+            center_world: center,
+            world_per_device_metre: self.fitted.world_per_device_metre * size,
+            ..self.fitted
+        };
+        *self
+            .zone
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = zone;
+        self.rigs
+            .publish(Box::new(haptic::force::Rig { zone, ..self.rig }));
+        self.rigs.collect_retired();
+    }
+
+    /// The zone's size relative to the one fitted at start.
+    pub fn zone_size(&self) -> f64 {
+        self.zone().world_per_device_metre / self.fitted.world_per_device_metre
     }
 
     /// Moves the tip so that the haptic interface point is at `p` (scene units), as far as
     /// the workspace reaches.
     pub fn move_to_world(&self, p: DVec3) {
-        let target = self.zone.device_from_world(p);
+        let target = self.zone().device_from_world(p);
         self.mouse
             .move_by_metres(target - self.mouse.position_metres());
     }
@@ -176,7 +228,7 @@ impl LiveTouch {
 
     /// The haptic zone's box in scene units (drawn in the view).
     pub fn zone_box(&self) -> Aabb {
-        self.zone.box_world(self.workspace)
+        self.zone().box_world(self.workspace)
     }
 
     /// Where the force goes besides the screen: a force-feedback device, chosen while
@@ -265,6 +317,61 @@ mod tests {
             zone.min.x < -1.0 && zone.max.x > 1.0,
             "the zone covers the melon: {zone:?}"
         );
+        live.stop();
+        engine.shutdown();
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_zone_twice_as_large_reaches_further_and_feels_half_as_stiff() {
+        let dir = std::env::temp_dir().join(format!("sculpt-live-zone-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let config = EngineConfig {
+            demo: crate::demos::find("watermelon").ok(),
+            ..EngineConfig::on_loopback(&dir)
+        };
+        let engine = Engine::start(config, crate::clock::now().wall).unwrap();
+        let deadline = crate::clock::now().instant + std::time::Duration::from_secs(20);
+        while lock(engine.view()).scene().is_empty() {
+            assert!(crate::clock::now().instant < deadline, "no demo");
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        let live =
+            LiveTouch::start(std::sync::Arc::clone(engine.view()), DeviceModel::Falcon).unwrap();
+        wait_stats(&live, "a snapshot", |s| s.n_scenes_taken >= 1);
+        // 0.02 into the rind from above, at the fitted zone and at one twice as large.
+        let above = DVec3::new(-0.2, 1.5, -0.2);
+        let rind = DVec3::new(-0.2, (0.98f64 * 0.98 - 0.08).sqrt(), -0.2);
+        let push = |what: &str| {
+            live.move_to_world(above);
+            wait_stats(&live, &format!("{what}: above"), |s| s.top_id.is_none());
+            live.move_to_world(rind);
+            wait_stats(&live, &format!("{what}: in the rind"), |s| {
+                (s.hip_world - rind).length() < 1e-3 && s.force_newtons.y > 0.2
+            });
+            // Past the ramp-in and the rate limit.
+            std::thread::sleep(std::time::Duration::from_millis(300));
+            live.stats().force_newtons.y
+        };
+        let fitted = push("fitted");
+        let box_fitted = live.zone_box();
+        let centre = live.zone().center_world;
+        live.set_zone(centre, 2.0);
+        assert!((live.zone_size() - 2.0).abs() < 1e-12);
+        let big = live.zone_box();
+        assert!(
+            ((big.max.x - big.min.x) / (box_fitted.max.x - box_fitted.min.x) - 2.0).abs() < 1e-9,
+            "{big:?} against {box_fitted:?}"
+        );
+        let larger = push("twice as large");
+        let ratio = larger / fitted;
+        assert!(
+            (0.35..0.65).contains(&ratio),
+            "{larger} N against {fitted} N"
+        );
+        // Sizes are clamped to the range.
+        live.set_zone(centre, 1e6);
+        assert_eq!(live.zone_size(), ZONE_SIZE_RANGE.1);
         live.stop();
         engine.shutdown();
         let _ = std::fs::remove_dir_all(&dir);

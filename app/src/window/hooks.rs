@@ -232,6 +232,25 @@ impl SculptApp {
                 self.hooks.idle_frames = 0;
                 return;
             }
+            if let Some(zone) = line.strip_prefix("touch-zone:") {
+                println!("sculpt: scripted zone: {}", zone.trim());
+                let numbers: Vec<f64> = zone
+                    .split([',', ' '])
+                    .filter(|w| !w.is_empty())
+                    .filter_map(|w| w.parse().ok())
+                    .collect();
+                match (&self.touch, numbers.as_slice()) {
+                    (Some(live), &[x, y, z, size]) => {
+                        live.set_zone(glam::DVec3::new(x, y, z), size);
+                    }
+                    (None, _) => self.hooks.fail("`touch-zone:` before `touch: on`".into()),
+                    _ => self
+                        .hooks
+                        .fail(format!("bad `touch-zone: {zone}`: X,Y,Z SIZE")),
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
             if let Some(ids) = line.strip_prefix("touch-force:") {
                 let ids = ids.trim();
                 println!("sculpt: scripted force output: {ids}");
@@ -471,6 +490,8 @@ impl SculptApp {
                     "n_plotted": self.force_history.len(),
                     "recording": self.touch_recording.as_ref().map(|(r, _)| r.n_rows()),
                     "force_output": live.force_output_ref().status(),
+                    "zone_centre": live.zone().center_world.to_array(),
+                    "zone_size": live.zone_size(),
                     "n_force_writes": live.force_output_ref().n_writes(),
                     "shared_tool": self.shared_tool.as_ref().map(|tool| {
                         let st = tool.stats();

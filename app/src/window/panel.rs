@@ -676,6 +676,7 @@ impl SculptApp {
             s.n_ticks, s.n_overruns, s.compute_micros[0], s.compute_micros[2], s.compute_micros[3]
         ));
         self.force_plot_ui(ui, s.energy_joules);
+        self.zone_ui(ui);
         self.force_output_ui(ui);
         ui.label(format!("your tool: {}", self.tool_body.describe()))
             .on_hover_text(
@@ -697,6 +698,50 @@ impl SculptApp {
                     self.file_input = Some((FileAction::RecordTouch, String::new(), None));
                 }
             }
+        }
+    }
+
+    /// The haptic zone: its size (stiffness scales with it) and where it sits.
+    fn zone_ui(&mut self, ui: &mut egui::Ui) {
+        let Some(live) = &self.touch else {
+            return;
+        };
+        let zone = live.zone();
+        let mut size = live.zone_size();
+        let range = ::app::touch::live::ZONE_SIZE_RANGE;
+        let tip = "how much of the scene the device's workspace covers: a larger zone reaches \
+                   further and feels softer per scene unit";
+        let changed = ui
+            .add(
+                egui::Slider::new(&mut size, range.0..=range.1)
+                    .logarithmic(true)
+                    .text("zone size"),
+            )
+            .on_hover_text(tip)
+            .changed();
+        let mut center = zone.center_world;
+        let selected_centre = self
+            .selected
+            .and_then(|id| self.objects.get(&fdsl::scene::ObjectId(id)))
+            .and_then(|t| t.drawn_box)
+            .map(|b| {
+                let mid = (glam::Vec3::from_array(b.lo) + glam::Vec3::from_array(b.hi)) * 0.5;
+                render::snapshot::render_from_scene()
+                    .inverse()
+                    .transform_point3(mid)
+                    .as_dvec3()
+            });
+        let centre_clicked = ui
+            .add_enabled(
+                selected_centre.is_some(),
+                egui::Button::new("Centre the zone on the selection"),
+            )
+            .clicked();
+        if centre_clicked && let Some(c) = selected_centre {
+            center = c;
+        }
+        if changed || centre_clicked {
+            live.set_zone(center, size);
         }
     }
 
