@@ -227,17 +227,10 @@ mod tests {
     /// skipped.
     #[test]
     fn the_live_servos_force_reaches_a_hid_force_feedback_device() {
-        use crate::engine::{Engine, EngineConfig, lock};
         use crate::touch::DeviceModel;
         use crate::touch::live::LiveTouch;
         if std::env::var(CHILD_ENV).is_ok() {
-            let dir = std::env::temp_dir().join(format!("sculpt-ff-{}", std::process::id()));
-            let _ = std::fs::remove_dir_all(&dir);
-            let config = EngineConfig {
-                demo: crate::demos::find("watermelon").ok(),
-                ..EngineConfig::on_loopback(&dir)
-            };
-            let engine = Engine::start(config, crate::clock::now().wall).unwrap();
+            let (engine, dir) = crate::touch::live::tests::watermelon_engine("ff");
             let wait = |what: &str, done: &dyn Fn() -> bool| {
                 let deadline = crate::clock::now().instant + std::time::Duration::from_secs(20);
                 while !done() {
@@ -245,7 +238,6 @@ mod tests {
                     std::thread::sleep(std::time::Duration::from_millis(5));
                 }
             };
-            wait("the demo", &|| !lock(engine.view()).scene().is_empty());
             let list = devices().unwrap();
             assert!(
                 list.iter()

@@ -262,9 +262,27 @@ impl LiveTouch {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::engine::{Engine, EngineConfig, lock};
+
+    /// An engine on loopback in a fresh scratch store (named by `tag`) holding the demo
+    /// watermelon, once it is there, and the store's directory.
+    pub(crate) fn watermelon_engine(tag: &str) -> (Engine, std::path::PathBuf) {
+        let dir = std::env::temp_dir().join(format!("sculpt-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let config = EngineConfig {
+            demo: crate::demos::find("watermelon").ok(),
+            ..EngineConfig::on_loopback(&dir)
+        };
+        let engine = Engine::start(config, crate::clock::now().wall).unwrap();
+        let deadline = crate::clock::now().instant + std::time::Duration::from_secs(20);
+        while lock(engine.view()).scene().is_empty() {
+            assert!(crate::clock::now().instant < deadline, "no demo");
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        (engine, dir)
+    }
 
     /// Waits (at most 10 s) until `done` holds for the servo's statistics.
     fn wait_stats(live: &LiveTouch, what: &str, done: impl Fn(&StatsSnapshot) -> bool) {
@@ -281,18 +299,7 @@ mod tests {
 
     #[test]
     fn the_mouse_moves_the_servo_into_the_demo_watermelon_and_its_rind_pushes_out() {
-        let dir = std::env::temp_dir().join(format!("sculpt-live-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let config = EngineConfig {
-            demo: crate::demos::find("watermelon").ok(),
-            ..EngineConfig::on_loopback(&dir)
-        };
-        let engine = Engine::start(config, crate::clock::now().wall).unwrap();
-        let deadline = crate::clock::now().instant + std::time::Duration::from_secs(20);
-        while lock(engine.view()).scene().is_empty() {
-            assert!(crate::clock::now().instant < deadline, "no demo");
-            std::thread::sleep(std::time::Duration::from_millis(10));
-        }
+        let (engine, dir) = watermelon_engine("live");
         let melon = lock(engine.view()).scene().objects().next().unwrap().0.0;
         let live =
             LiveTouch::start(std::sync::Arc::clone(engine.view()), DeviceModel::Falcon).unwrap();
@@ -324,18 +331,7 @@ mod tests {
 
     #[test]
     fn a_zone_twice_as_large_reaches_further_and_feels_half_as_stiff() {
-        let dir = std::env::temp_dir().join(format!("sculpt-live-zone-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let config = EngineConfig {
-            demo: crate::demos::find("watermelon").ok(),
-            ..EngineConfig::on_loopback(&dir)
-        };
-        let engine = Engine::start(config, crate::clock::now().wall).unwrap();
-        let deadline = crate::clock::now().instant + std::time::Duration::from_secs(20);
-        while lock(engine.view()).scene().is_empty() {
-            assert!(crate::clock::now().instant < deadline, "no demo");
-            std::thread::sleep(std::time::Duration::from_millis(10));
-        }
+        let (engine, dir) = watermelon_engine("live-zone");
         let live =
             LiveTouch::start(std::sync::Arc::clone(engine.view()), DeviceModel::Falcon).unwrap();
         wait_stats(&live, "a snapshot", |s| s.n_scenes_taken >= 1);
@@ -379,18 +375,7 @@ mod tests {
 
     #[test]
     fn another_peers_tangible_probe_is_felt_where_its_tool_is() {
-        let dir = std::env::temp_dir().join(format!("sculpt-live-probe-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let config = EngineConfig {
-            demo: crate::demos::find("watermelon").ok(),
-            ..EngineConfig::on_loopback(&dir)
-        };
-        let engine = Engine::start(config, crate::clock::now().wall).unwrap();
-        let deadline = crate::clock::now().instant + std::time::Duration::from_secs(20);
-        while lock(engine.view()).scene().is_empty() {
-            assert!(crate::clock::now().instant < deadline, "no demo");
-            std::thread::sleep(std::time::Duration::from_millis(10));
-        }
+        let (engine, dir) = watermelon_engine("live-probe");
         let live =
             LiveTouch::start(std::sync::Arc::clone(engine.view()), DeviceModel::Falcon).unwrap();
         wait_stats(&live, "a snapshot", |s| s.n_scenes_taken >= 1);
