@@ -507,13 +507,28 @@ fn touching_with_the_mouse_runs_the_servo_on_the_scene_and_the_rind_pushes_back(
         &display,
         &dir,
         "touch",
-        &["touch: on", probe, &at, "wait-secs: 1"],
+        &[
+            "touch: on",
+            probe,
+            "touch-force: dead:beef",
+            &at,
+            "wait-secs: 1",
+        ],
     );
     let touch = &run.state["touch"];
     assert!(touch.is_object(), "{}", run.stdout);
     let melon = run.state["objects"][0]["id"].as_u64().unwrap();
     assert_eq!(touch["top_id"].as_u64(), Some(melon), "{touch}");
     assert!(touch["n_scenes_taken"].as_u64().unwrap() >= 1, "{touch}");
+    // No force-feedback device 'dead:beef' here: it was tried off the window's thread, and
+    // the force is shown only.
+    assert!(
+        touch["force_output"]
+            .as_str()
+            .is_some_and(|s| s.contains("shown only")),
+        "{touch}"
+    );
+    assert_eq!(touch["n_force_writes"].as_u64(), Some(0), "{touch}");
     // The servo ran (2000 ticks in the two seconds waited on a quiet machine; far fewer
     // under a loaded test run), and the rind pushes the tool back up, out of the melon, with
     // a Falcon-class device's force.

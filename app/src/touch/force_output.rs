@@ -7,7 +7,8 @@
 //! servo through the haptic crate's lock-free hand-off, and a device the servo drops (a write
 //! failed: it was unplugged) goes back the same way to be closed here, so the servo never
 //! waits, allocates or frees. A device that cannot be opened is an error in words, with the
-//! udev rule to add when the system refuses access.
+//! udev rule to add when the system refuses access. Listing and opening devices is IO, so the
+//! window does both on a thread of its own ([`ForceOutput::start_open`], [`list_in_background`]).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -125,27 +126,92 @@ pub fn open_error_text(e: &OpenError) -> String {
     }
 }
 
+/// A device being opened on its own thread (see [`ForceOutput::start_open`]).
+pub struct Opening(std::sync::mpsc::Receiver<Result<(PidForce, HidDeviceInfo), String>>);
+
+/// Lists the force-feedback devices on a thread of its own; the answer comes on the receiver.
+pub fn list_in_background() -> std::sync::mpsc::Receiver<Result<Vec<HidDeviceInfo>, String>> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    let spawned = std::thread::Builder::new()
+        .name("sculpt-hid-list".into())
+        .spawn(move || {
+            let _ = tx.send(devices());
+        });
+    if let Err(e) = spawned {
+        log::warn!("cannot list HID devices: {e}");
+    }
+    rx
+}
+
+/// Opens `vendor_id:product_id` for a device rendering up to `force_newtons_max` (blocking:
+/// hidapi's enumeration and the effect's feature reports).
+fn open_blocking(
+    vendor_id: u16,
+    product_id: u16,
+    force_newtons_max: f64,
+) -> Result<(PidForce, HidDeviceInfo), String> {
+    let device = PidForce::open(vendor_id, product_id, force_newtons_max)
+        .map_err(|e| open_error_text(&e))?;
+    let name = hid::force_feedback_devices()
+        .ok()
+        .and_then(|list| {
+            list.into_iter()
+                .find(|d| (d.vendor_id, d.product_id) == (vendor_id, product_id))
+        })
+        .map_or_else(String::new, |d| d.name);
+    let info = HidDeviceInfo {
+        vendor_id,
+        product_id,
+        name,
+    };
+    Ok((device, info))
+}
+
 impl ForceOutput {
     /// Opens the device `vendor_id:product_id` and sends the servo's force to it from the
-    /// next tick on; on an error the force stays where it was going.
+    /// next tick on; on an error the force stays where it was going. Blocks on the device's
+    /// IO: the window uses [`ForceOutput::start_open`].
     pub fn open(&mut self, vendor_id: u16, product_id: u16) -> Result<(), String> {
-        let device = PidForce::open(vendor_id, product_id, self.force_newtons_max)
-            .map_err(|e| open_error_text(&e))?;
-        let name = hid::force_feedback_devices()
-            .ok()
-            .and_then(|list| {
-                list.into_iter()
-                    .find(|d| (d.vendor_id, d.product_id) == (vendor_id, product_id))
-            })
-            .map_or_else(String::new, |d| d.name);
+        let (device, info) = open_blocking(vendor_id, product_id, self.force_newtons_max)?;
+        self.use_device(device, info);
+        Ok(())
+    }
+
+    /// Starts opening `vendor_id:product_id` on a thread of its own; pass the result to
+    /// [`ForceOutput::finish_open`] until it answers.
+    pub fn start_open(&self, vendor_id: u16, product_id: u16) -> Opening {
+        let (tx, rx) = std::sync::mpsc::channel();
+        let max = self.force_newtons_max;
+        let spawned = std::thread::Builder::new()
+            .name("sculpt-hid-open".into())
+            .spawn(move || {
+                let _ = tx.send(open_blocking(vendor_id, product_id, max));
+            });
+        if let Err(e) = spawned {
+            let (tx, rx) = std::sync::mpsc::channel();
+            let _ = tx.send(Err(format!("cannot start opening the device: {e}")));
+            return Opening(rx);
+        }
+        Opening(rx)
+    }
+
+    /// The outcome of `opening` once it came (then the device takes the force from the
+    /// servo's next tick), `None` while it is still opening.
+    pub fn finish_open(&mut self, opening: &Opening) -> Option<Result<(), String>> {
+        let outcome = match opening.0.try_recv() {
+            Ok(outcome) => outcome,
+            Err(std::sync::mpsc::TryRecvError::Empty) => return None,
+            Err(std::sync::mpsc::TryRecvError::Disconnected) => {
+                Err("the device could not be opened (its thread stopped)".into())
+            }
+        };
+        Some(outcome.map(|(device, info)| self.use_device(device, info)))
+    }
+
+    fn use_device(&mut self, device: PidForce, info: HidDeviceInfo) {
         self.counters.lost.store(false, Ordering::Relaxed);
         self.outgoing.publish(Box::new(Output::Pid(device)));
-        self.chosen = Some(HidDeviceInfo {
-            vendor_id,
-            product_id,
-            name,
-        });
-        Ok(())
+        self.chosen = Some(info);
     }
 
     /// Shows the force only (the device is closed once the servo hands it back).
@@ -247,7 +313,15 @@ mod tests {
             let mut live =
                 LiveTouch::start(std::sync::Arc::clone(engine.view()), DeviceModel::Falcon)
                     .unwrap();
-            live.force_output().open(0x1234, 0xf00d).unwrap();
+            // As the window opens it: on a thread of its own.
+            let opening = live.force_output_ref().start_open(0x1234, 0xf00d);
+            let opened = loop {
+                if let Some(outcome) = live.force_output().finish_open(&opening) {
+                    break outcome;
+                }
+                std::thread::sleep(std::time::Duration::from_millis(5));
+            };
+            opened.unwrap();
             // Beside the melon on its -x side, then 0.02 into its rind: pushed along -x.
             live.move_to_world(DVec3::new(-1.4, 0.2, -0.2));
             wait("beside", &|| live.stats().top_id.is_none());
@@ -341,6 +415,14 @@ mod tests {
         assert_eq!(output.n_writes(), 0);
         assert!(output.status().contains("shown only"));
         assert!(output.open(0xdead, 0xbeef).is_err(), "no such device");
+        let opening = output.start_open(0xdead, 0xbeef);
+        let outcome = loop {
+            if let Some(outcome) = output.finish_open(&opening) {
+                break outcome;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        };
+        assert!(outcome.is_err());
         assert!(output.device().is_none());
         output.close();
         slot.write(DVec3::X);

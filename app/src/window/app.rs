@@ -261,6 +261,11 @@ pub struct SculptApp {
     pub(super) tool_body: ::app::touch::body::ToolBody,
     /// The force-feedback devices last listed for the Touch section, or why none could be.
     pub(super) force_devices: Option<Result<Vec<haptic::device::hid::HidDeviceInfo>, String>>,
+    /// A listing under way, on a thread of its own.
+    pub(super) force_listing:
+        Option<std::sync::mpsc::Receiver<Result<Vec<haptic::device::hid::HidDeviceInfo>, String>>>,
+    /// A force-feedback device being opened, on a thread of its own.
+    pub(super) force_opening: Option<::app::touch::force_output::Opening>,
     /// The touch tool's path being recorded, and when recording began.
     pub(super) touch_recording: Option<(::app::touch::record::Recorder, Instant)>,
     /// Recent force and energy for the Touch section's plot, timed from `opened`.
@@ -367,6 +372,8 @@ impl SculptApp {
             shared_state: ::app::touch::shared::SharedState::Alone,
             tool_body: ::app::touch::body::ToolBody::default(),
             force_devices: None,
+            force_listing: None,
+            force_opening: None,
             touch_recording: None,
             force_history: ::app::touch::record::ForceHistory::default(),
             opened: clock::now().instant,
@@ -927,9 +934,7 @@ impl SculptApp {
         self.follow_touch_stroke();
         self.record_touch();
         self.update_shared_tool();
-        if let Some(live) = &self.touch {
-            live.force_output_ref().collect();
-        }
+        self.poll_force_output();
         if input.hover_px.is_some() || input.depth_scroll != 0.0 {
             let depth =
                 input.depth_scroll * TOUCH_DEPTH_PER_SCROLL_POINT * sphere.map_or(1.0, |s| s.1);
@@ -1177,18 +1182,51 @@ impl SculptApp {
         Ok(())
     }
 
-    /// Sends the servo's force to the HID force-feedback device `ids` (`VID:PID`), or shows it
-    /// only (`None`); touch must be on.
+    /// Sends the servo's force to the HID force-feedback device `ids` (`VID:PID`), opened on
+    /// a thread of its own (the status line says how it went), or shows it only (`None`);
+    /// touch must be on.
     pub(super) fn set_force_output(&mut self, ids: Option<(u16, u16)>) -> Result<(), String> {
         let Some(live) = &mut self.touch else {
             return Err("turn touch on before choosing a force-feedback device".into());
         };
         match ids {
-            Some((vendor, product)) => live.force_output().open(vendor, product)?,
-            None => live.force_output().close(),
+            Some((vendor, product)) => {
+                self.force_opening = Some(live.force_output_ref().start_open(vendor, product));
+                self.status =
+                    format!("opening the force-feedback device {vendor:04x}:{product:04x}…");
+            }
+            None => {
+                self.force_opening = None;
+                live.force_output().close();
+                self.status = live.force_output_ref().status();
+            }
         }
-        self.status = live.force_output_ref().status();
         Ok(())
+    }
+
+    /// Takes what the force-feedback threads answered, and closes devices the servo handed
+    /// back.
+    fn poll_force_output(&mut self) {
+        if let Some(rx) = &self.force_listing
+            && let Ok(listed) = rx.try_recv()
+        {
+            self.force_devices = Some(listed);
+            self.force_listing = None;
+        }
+        let Some(live) = &mut self.touch else {
+            self.force_opening = None;
+            return;
+        };
+        live.force_output_ref().collect();
+        if let Some(opening) = &self.force_opening
+            && let Some(outcome) = live.force_output().finish_open(opening)
+        {
+            self.status = match outcome {
+                Ok(()) => live.force_output_ref().status(),
+                Err(e) => e,
+            };
+            self.force_opening = None;
+        }
     }
 
     /// Couples the shared tool when the peer it is held with holds it back, and uncouples

@@ -774,8 +774,8 @@ impl SculptApp {
             })
             .response
             .on_hover_text(tip);
-        if ui.button("Find devices").clicked() {
-            self.force_devices = Some(::app::touch::force_output::devices());
+        if ui.button("Find devices").clicked() && self.force_listing.is_none() {
+            self.force_listing = Some(::app::touch::force_output::list_in_background());
         }
         if let Some(Err(why)) = &self.force_devices {
             ui.label(why.clone());
