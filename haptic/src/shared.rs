@@ -243,7 +243,8 @@ pub(crate) fn step(link: &SharedToolLink, coupled: &mut Option<Coupled>, tick: T
     } = tick;
     let generation = link.generation.load(Ordering::Acquire);
     if generation == 0 || stalled || !tip_metres.is_finite() {
-        if coupled.take().is_some() || generation == 0 {
+        // Once, when a coupling ends: off, the tick costs one atomic load.
+        if coupled.take().is_some() {
             link.publish(DVec3::ZERO, None);
         }
         return DVec3::ZERO;
