@@ -198,12 +198,19 @@ impl EphemeralSender {
     /// Sends the latest value on `channel` to every connected peer; a full queue drops it
     /// (a newer value follows), a stopped engine is an error.
     pub fn send(&self, channel: u32, value: Vec<u8>) -> Result<(), RequestError> {
-        match self.0.try_send(Request::Ephemeral { channel, value }) {
-            Ok(()) => Ok(()),
-            Err(tokio::sync::mpsc::error::TrySendError::Full(_)) => Err(RequestError::Busy),
-            Err(tokio::sync::mpsc::error::TrySendError::Closed(_)) => Err(RequestError::Stopped),
-        }
+        try_request(&self.0, Request::Ephemeral { channel, value })
     }
+}
+
+/// Queues `request` for the engine thread without waiting.
+fn try_request(
+    requests: &tokio::sync::mpsc::Sender<Request>,
+    request: Request,
+) -> Result<(), RequestError> {
+    requests.try_send(request).map_err(|e| match e {
+        tokio::sync::mpsc::error::TrySendError::Full(_) => RequestError::Busy,
+        tokio::sync::mpsc::error::TrySendError::Closed(_) => RequestError::Stopped,
+    })
 }
 
 /// A running engine.
@@ -395,10 +402,7 @@ impl Engine {
     }
 
     fn request(&self, request: Request) -> Result<(), RequestError> {
-        self.requests.try_send(request).map_err(|e| match e {
-            tokio::sync::mpsc::error::TrySendError::Full(_) => RequestError::Busy,
-            tokio::sync::mpsc::error::TrySendError::Closed(_) => RequestError::Stopped,
-        })
+        try_request(&self.requests, request)
     }
 
     /// Authors an op (validated, stored, then sent); the reply comes on the returned

@@ -559,17 +559,17 @@ impl Observer<ShapePayload> for Folder {
 /// The latest [`MAX_HISTORY_ROWS`] ops of `log`, oldest first.
 fn history(log: &Log<ShapePayload>, me: PeerId, scene: &Scene) -> Vec<HistoryRow> {
     // Parts are how a large change travels; its `Assemble` is the row that says what it did.
-    let rows = |e: &replication::log::Entry<'_, ShapePayload>| {
-        !matches!(e.op.payload(), ShapePayload::Part { .. })
-    };
-    let skip = log
+    let mut last = std::collections::VecDeque::with_capacity(MAX_HISTORY_ROWS);
+    for entry in log
         .entries()
-        .filter(rows)
-        .count()
-        .saturating_sub(MAX_HISTORY_ROWS);
-    log.entries()
-        .filter(rows)
-        .skip(skip)
+        .filter(|e| !matches!(e.op.payload(), ShapePayload::Part { .. }))
+    {
+        if last.len() == MAX_HISTORY_ROWS {
+            last.pop_front();
+        }
+        last.push_back(entry);
+    }
+    last.into_iter()
         .map(|entry| {
             let payload = entry.op.payload();
             let status = match entry.mark {
@@ -582,7 +582,7 @@ fn history(log: &Log<ShapePayload>, me: PeerId, scene: &Scene) -> Vec<HistoryRow
                 Mark::Effective => "effective".to_string(),
             };
             let mine = entry.op.author() == me;
-            let edits = matches!(payload.effect(), Effect::Edit { .. }) && !is_whole(payload);
+            let edits = matches!(payload.effect(), Effect::Edit { .. }) && !undo_skips(payload);
             HistoryRow {
                 author: entry.op.author().short(),
                 mine,
@@ -604,7 +604,7 @@ fn targets(log: &Log<ShapePayload>, me: PeerId) -> (BTreeMap<u64, OpId>, BTreeMa
     let entries: Vec<_> = log.entries().filter(|e| e.op.author() == me).collect();
     for e in entries.iter().rev() {
         match e.op.payload() {
-            payload if is_whole(payload) => {}
+            payload if undo_skips(payload) => {}
             ShapePayload::Undo(target) => {
                 let Some(object) = log.get(target).and_then(|op| edited_object(op.payload()))
                 else {
@@ -628,9 +628,9 @@ fn targets(log: &Log<ShapePayload>, me: PeerId) -> (BTreeMap<u64, OpId>, BTreeMa
     (undo, redo)
 }
 
-/// Whether `payload` makes an object or is a piece of a large change, which `undo` leaves
-/// alone (undoing a part would take the whole change back at the next refold).
-fn is_whole(payload: &ShapePayload) -> bool {
+/// Whether `undo` leaves `payload` alone: it makes an object, or it is a piece of a large
+/// change (undoing a part would take the whole change back at the next refold).
+fn undo_skips(payload: &ShapePayload) -> bool {
     matches!(
         payload,
         ShapePayload::Create { .. } | ShapePayload::Part { .. } | ShapePayload::Assemble { .. }
