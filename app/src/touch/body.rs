@@ -139,9 +139,12 @@ impl ToolBody {
 
     /// The body as an object at `at` (scene coordinates), for a servo's scene.
     pub fn object(&self, at: DVec3) -> Option<Object> {
-        let number = |v: f64| Formula::new(format!("{v}")).ok();
-        let property = |v: f64| -> Option<Option<Property>> {
-            Some((v > 0.0).then(|| number(v).map(Property::new)).flatten())
+        // A property where the value is positive; a number's text always compiles.
+        let property = |v: f64| {
+            (v > 0.0)
+                .then(|| Formula::new(format!("{v}")).map(Property::new))
+                .transpose()
+                .ok()
         };
         let data = ObjectData {
             name: "probe".into(),

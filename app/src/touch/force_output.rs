@@ -168,17 +168,9 @@ fn open_blocking(
 }
 
 impl ForceOutput {
-    /// Opens the device `vendor_id:product_id` and sends the servo's force to it from the
-    /// next tick on; on an error the force stays where it was going. Blocks on the device's
-    /// IO: the window uses [`ForceOutput::start_open`].
-    pub fn open(&mut self, vendor_id: u16, product_id: u16) -> Result<(), String> {
-        let (device, info) = open_blocking(vendor_id, product_id, self.force_newtons_max)?;
-        self.use_device(device, info);
-        Ok(())
-    }
-
-    /// Starts opening `vendor_id:product_id` on a thread of its own; pass the result to
-    /// [`ForceOutput::finish_open`] until it answers.
+    /// Starts opening `vendor_id:product_id` on a thread of its own (hidapi's enumeration and
+    /// the effect's feature reports are IO); pass the result to [`ForceOutput::finish_open`]
+    /// until it answers. On an error the force stays where it was going.
     pub fn start_open(&self, vendor_id: u16, product_id: u16) -> Opening {
         let (tx, rx) = std::sync::mpsc::channel();
         let max = self.force_newtons_max;
@@ -414,7 +406,6 @@ mod tests {
         slot.write(DVec3::X);
         assert_eq!(output.n_writes(), 0);
         assert!(output.status().contains("shown only"));
-        assert!(output.open(0xdead, 0xbeef).is_err(), "no such device");
         let opening = output.start_open(0xdead, 0xbeef);
         let outcome = loop {
             if let Some(outcome) = output.finish_open(&opening) {
@@ -422,7 +413,7 @@ mod tests {
             }
             std::thread::sleep(std::time::Duration::from_millis(5));
         };
-        assert!(outcome.is_err());
+        assert!(outcome.is_err(), "no such device");
         assert!(output.device().is_none());
         output.close();
         slot.write(DVec3::X);

@@ -58,7 +58,7 @@ pub struct LiveTouch {
     stats: std::sync::Arc<ServoStats>,
     mouse: MouseHandle,
     /// The zone the servo renders with (changed by [`LiveTouch::set_zone`]).
-    zone: std::sync::Mutex<HapticZone>,
+    zone: HapticZone,
     /// The zone fitted at start, which sizes are relative to.
     fitted: HapticZone,
     /// The rig the servo renders with, less its zone, and where new ones go.
@@ -132,7 +132,7 @@ impl LiveTouch {
             feed,
             stats,
             mouse: handle,
-            zone: std::sync::Mutex::new(zone),
+            zone,
             fitted: zone,
             rig: base_rig,
             rigs,
@@ -154,10 +154,7 @@ impl LiveTouch {
 
     /// The haptic zone the servo renders with.
     pub fn zone(&self) -> HapticZone {
-        *self
-            .zone
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
+        self.zone
     }
 
     /// Moves the zone so that its centre is at `center` (scene units) and scales it to
@@ -165,7 +162,7 @@ impl LiveTouch {
     /// renders with it from its next tick. The tool moves with the zone (the hand did not
     /// move), and stiffness scales with it: a zone twice as large feels half as stiff per
     /// scene unit.
-    pub fn set_zone(&self, center: DVec3, size: f64) {
+    pub fn set_zone(&mut self, center: DVec3, size: f64) {
         if !center.is_finite() || !size.is_finite() {
             return;
         }
@@ -175,10 +172,7 @@ impl LiveTouch {
             world_per_device_metre: self.fitted.world_per_device_metre * size,
             ..self.fitted
         };
-        *self
-            .zone
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner) = zone;
+        self.zone = zone;
         self.rigs
             .publish(Box::new(haptic::force::Rig { zone, ..self.rig }));
         self.rigs.collect_retired();
@@ -332,24 +326,24 @@ pub(crate) mod tests {
     #[test]
     fn a_zone_twice_as_large_reaches_further_and_feels_half_as_stiff() {
         let (engine, dir) = watermelon_engine("live-zone");
-        let live =
+        let mut live =
             LiveTouch::start(std::sync::Arc::clone(engine.view()), DeviceModel::Falcon).unwrap();
         wait_stats(&live, "a snapshot", |s| s.n_scenes_taken >= 1);
         // 0.02 into the rind from above, at the fitted zone and at one twice as large.
         let above = DVec3::new(-0.2, 1.5, -0.2);
         let rind = DVec3::new(-0.2, (0.98f64 * 0.98 - 0.08).sqrt(), -0.2);
-        let push = |what: &str| {
+        let push = |live: &LiveTouch, what: &str| {
             live.move_to_world(above);
-            wait_stats(&live, &format!("{what}: above"), |s| s.top_id.is_none());
+            wait_stats(live, &format!("{what}: above"), |s| s.top_id.is_none());
             live.move_to_world(rind);
-            wait_stats(&live, &format!("{what}: in the rind"), |s| {
+            wait_stats(live, &format!("{what}: in the rind"), |s| {
                 (s.hip_world - rind).length() < 1e-3 && s.force_newtons.y > 0.2
             });
             // Past the ramp-in and the rate limit.
             std::thread::sleep(std::time::Duration::from_millis(300));
             live.stats().force_newtons.y
         };
-        let fitted = push("fitted");
+        let fitted = push(&live, "fitted");
         let box_fitted = live.zone_box();
         let centre = live.zone().center_world;
         live.set_zone(centre, 2.0);
@@ -359,7 +353,7 @@ pub(crate) mod tests {
             ((big.max.x - big.min.x) / (box_fitted.max.x - box_fitted.min.x) - 2.0).abs() < 1e-9,
             "{big:?} against {box_fitted:?}"
         );
-        let larger = push("twice as large");
+        let larger = push(&live, "twice as large");
         let ratio = larger / fitted;
         assert!(
             (0.35..0.65).contains(&ratio),

@@ -239,7 +239,7 @@ impl SculptApp {
                     .filter(|w| !w.is_empty())
                     .filter_map(|w| w.parse().ok())
                     .collect();
-                match (&self.touch, numbers.as_slice()) {
+                match (&mut self.touch, numbers.as_slice()) {
                     (Some(live), &[x, y, z, size]) => {
                         live.set_zone(glam::DVec3::new(x, y, z), size);
                     }

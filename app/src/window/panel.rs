@@ -706,7 +706,7 @@ impl SculptApp {
         let Some(live) = &self.touch else {
             return;
         };
-        let zone = live.zone();
+        let mut center = live.zone().center_world;
         let mut size = live.zone_size();
         let range = ::app::touch::live::ZONE_SIZE_RANGE;
         let tip = "how much of the scene the device's workspace covers: a larger zone reaches \
@@ -719,7 +719,6 @@ impl SculptApp {
             )
             .on_hover_text(tip)
             .changed();
-        let mut center = zone.center_world;
         let selected_centre = self
             .selected
             .and_then(|id| self.objects.get(&fdsl::scene::ObjectId(id)))
@@ -740,7 +739,9 @@ impl SculptApp {
         if centre_clicked && let Some(c) = selected_centre {
             center = c;
         }
-        if changed || centre_clicked {
+        if (changed || centre_clicked)
+            && let Some(live) = &mut self.touch
+        {
             live.set_zone(center, size);
         }
     }
