@@ -198,7 +198,8 @@ pub struct ImportArgs {
     #[arg(long, value_name = "DIR")]
     pub store: PathBuf,
     /// The files to import, in order: FVRML scenes (.wrl; `Inline`s only from the file's own
-    /// folder) and meshes (.stl, .obj, .glb; one object each, at most one op's size).
+    /// folder) and meshes (.stl, .obj, .glb; one object each, up to about 170 000 triangles,
+    /// authored in parts when larger than one op).
     #[arg(required = true, value_name = "FILE")]
     pub files: Vec<PathBuf>,
     /// Let `Inline` files come from anywhere inside DIR (default: each scene's own folder).
