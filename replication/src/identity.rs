@@ -1,9 +1,16 @@
 //! Peer identity: ed25519 key pairs, peer ids (public keys) and signatures.
+//!
+//! Signatures are checked by the ZIP 215 rules (`ed25519-zebra`): one signature alone and the
+//! same signature in a batch get the same verdict, whatever its author crafted (a small-order
+//! or mixed-order key or `R` included). Peers must agree on which ops are signed, and a peer
+//! checks a batch of ops or one op depending on how they arrived, so rules under which the two
+//! could differ would let a member split the session.
 
 use std::fmt;
 
-use ed25519_dalek::{Signer, SigningKey, VerifyingKey};
-use rand_core::CryptoRngCore;
+use ed25519_zebra::batch;
+use ed25519_zebra::{SigningKey, VerificationKey, VerificationKeyBytes};
+use rand_core::{CryptoRng, CryptoRngCore, RngCore};
 
 /// Length of a peer id (an ed25519 public key) in bytes.
 pub const PEER_ID_BYTES: usize = 32;
@@ -61,15 +68,15 @@ pub struct Keypair {
 impl Keypair {
     /// Generates a key pair from the RNG the caller passes in (seeded in tests and simulation).
     pub fn generate(rng: &mut impl CryptoRngCore) -> Self {
-        Self {
-            signing: SigningKey::generate(rng),
-        }
+        let mut seed = [0; 32];
+        rng.fill_bytes(&mut seed);
+        Self::from_seed(seed)
     }
 
     /// Rebuilds a key pair from its 32-byte secret seed.
     pub fn from_seed(seed: [u8; 32]) -> Self {
         Self {
-            signing: SigningKey::from_bytes(&seed),
+            signing: SigningKey::from(seed),
         }
     }
 
@@ -80,7 +87,7 @@ impl Keypair {
 
     /// This key pair's public identity.
     pub fn peer_id(&self) -> PeerId {
-        PeerId(self.signing.verifying_key().to_bytes())
+        PeerId(VerificationKeyBytes::from(&self.signing).into())
     }
 
     /// Signs `message`.
@@ -97,12 +104,13 @@ impl fmt::Debug for Keypair {
 }
 
 impl PeerId {
-    /// Verifies `signature` over `message` with strict ed25519 rules (no malleable signatures).
+    /// Verifies `signature` over `message` by the ZIP 215 rules (the same verdict as in a
+    /// batch, [`verify_batch`]; `s` must be canonical, so a signature cannot be altered into
+    /// another valid one).
     pub fn verify(&self, message: &[u8], signature: &Signature) -> Result<(), VerifyError> {
         let key =
-            VerifyingKey::from_bytes(&self.0).map_err(|_| VerifyError::BadKey(self.short()))?;
-        let sig = ed25519_dalek::Signature::from_bytes(&signature.0);
-        key.verify_strict(message, &sig)
+            VerificationKey::try_from(self.0).map_err(|_| VerifyError::BadKey(self.short()))?;
+        key.verify(&ed25519_zebra::Signature::from_bytes(&signature.0), message)
             .map_err(|_| VerifyError::BadSignature(self.short()))
     }
 
@@ -129,6 +137,67 @@ impl fmt::Debug for Signature {
         write!(f, "Signature({}..)", hex(&self.0[..4]))
     }
 }
+
+/// Most signatures [`verify_batch`] checks in one equation; a longer slice is checked in
+/// runs of this many (one sync batch of ops).
+pub const MAX_BATCH_SIGNATURES: usize = 64;
+
+/// Checks many signatures at once: true if every one of them verifies, by the same rules as
+/// [`PeerId::verify`] (ZIP 215), so a false answer means at least one would fail alone and the
+/// caller checks them one by one to find it. Signatures by one author share their key's work,
+/// so a batch of ops from few authors costs about a third of checking each.
+///
+/// The equation's random coefficients are drawn from a hash of everything in the batch (keys,
+/// signatures and messages), never from the system: the core takes no randomness it is not
+/// given, and an author cannot choose a signature knowing the coefficients it will meet.
+pub fn verify_batch(items: &[(PeerId, &[u8], Signature)]) -> bool {
+    items.chunks(MAX_BATCH_SIGNATURES).all(|run| {
+        let mut transcript =
+            blake3::Hasher::new_derive_key("sculpt/identity/batch-coefficients/v1");
+        let mut verifier = batch::Verifier::new();
+        for (author, message, signature) in run {
+            transcript.update(&author.0);
+            transcript.update(&signature.0);
+            transcript.update(&(message.len() as u64).to_le_bytes());
+            transcript.update(message);
+            let sig = ed25519_zebra::Signature::from_bytes(&signature.0);
+            verifier.queue((VerificationKeyBytes::from(author.0), sig, message));
+        }
+        verifier
+            .verify(TranscriptRng(transcript.finalize_xof()))
+            .is_ok()
+    })
+}
+
+/// A stream of coefficient bytes read from a hash of a batch (see [`verify_batch`]).
+struct TranscriptRng(blake3::OutputReader);
+
+impl RngCore for TranscriptRng {
+    fn next_u32(&mut self) -> u32 {
+        let mut b = [0; 4];
+        self.0.fill(&mut b);
+        u32::from_le_bytes(b)
+    }
+
+    fn next_u64(&mut self) -> u64 {
+        let mut b = [0; 8];
+        self.0.fill(&mut b);
+        u64::from_le_bytes(b)
+    }
+
+    fn fill_bytes(&mut self, dest: &mut [u8]) {
+        self.0.fill(dest);
+    }
+
+    fn try_fill_bytes(&mut self, dest: &mut [u8]) -> Result<(), rand_core::Error> {
+        self.0.fill(dest);
+        Ok(())
+    }
+}
+
+/// A hash-derived stream: unpredictable to anyone who cannot choose the whole batch after
+/// seeing it, which is what the batch equation needs.
+impl CryptoRng for TranscriptRng {}
 
 /// Lower-case hex of `bytes`.
 pub(crate) fn hex(bytes: &[u8]) -> String {
@@ -171,6 +240,114 @@ mod tests {
         let k = Keypair::from_seed([3; 32]);
         let text = format!("{k:?}");
         assert!(!text.contains(&hex(&k.seed())), "{text}");
+    }
+
+    /// A signature by a key with a torsion part (`A = aB + T`), optionally with a torsion part
+    /// in `R` too: valid under the cofactored (ZIP 215) equation, invalid under the strict one
+    /// for most messages. A member can make these at will; they are where batch and single
+    /// checks disagree in libraries that mix the two equations.
+    fn mixed_order_signature(
+        a: u64,
+        torsion_a: usize,
+        torsion_r: usize,
+        message: &[u8],
+    ) -> (PeerId, Signature) {
+        use curve25519_dalek::constants::{ED25519_BASEPOINT_POINT as B, EIGHT_TORSION};
+        use curve25519_dalek::scalar::Scalar;
+        use sha2::{Digest, Sha512};
+        let a = Scalar::from(a);
+        let key = (a * B + EIGHT_TORSION[torsion_a]).compress();
+        let r = Scalar::from(0x5eed_u64 + message.len() as u64);
+        let big_r = (r * B + EIGHT_TORSION[torsion_r]).compress();
+        let hash: [u8; 64] = Sha512::new()
+            .chain_update(big_r.as_bytes())
+            .chain_update(key.as_bytes())
+            .chain_update(message)
+            .finalize()
+            .into();
+        let k = Scalar::from_bytes_mod_order_wide(&hash);
+        let s = r + k * a;
+        let mut signature = [0; SIGNATURE_BYTES];
+        signature[..32].copy_from_slice(big_r.as_bytes());
+        signature[32..].copy_from_slice(s.as_bytes());
+        (PeerId(key.to_bytes()), Signature(signature))
+    }
+
+    #[test]
+    fn batch_and_single_checks_agree_on_mixed_order_keys_and_nonces() {
+        let honest = Keypair::from_seed([5; 32]);
+        let mut n_valid = 0;
+        for torsion_a in 0..8 {
+            for torsion_r in 0..8 {
+                let message = vec![7; torsion_a * 8 + torsion_r];
+                let (key, signature) =
+                    mixed_order_signature(1000 + torsion_a as u64, torsion_a, torsion_r, &message);
+                let alone = key.verify(&message, &signature).is_ok();
+                n_valid += usize::from(alone);
+                let honest_sig = honest.sign(b"honest");
+                let batch = [
+                    (honest.peer_id(), &b"honest"[..], honest_sig),
+                    (key, &message[..], signature),
+                ];
+                assert_eq!(verify_batch(&batch[1..]), alone, "{torsion_a} {torsion_r}");
+                assert_eq!(verify_batch(&batch), alone, "{torsion_a} {torsion_r}");
+            }
+        }
+        // The cofactored rules accept them all: the strict ones would refuse most, and then a
+        // batch (cofactored) and a single check (strict) would split peers.
+        assert_eq!(n_valid, 64);
+    }
+
+    #[test]
+    fn a_forged_signature_fails_its_batch_wherever_it_sits() {
+        let keys: Vec<Keypair> = (0..3).map(|i| Keypair::from_seed([i; 32])).collect();
+        let messages: Vec<Vec<u8>> = (0..150u32).map(|i| i.to_le_bytes().to_vec()).collect();
+        let items: Vec<(PeerId, &[u8], Signature)> = messages
+            .iter()
+            .enumerate()
+            .map(|(i, m)| {
+                let k = &keys[i % keys.len()];
+                (k.peer_id(), m.as_slice(), k.sign(m))
+            })
+            .collect();
+        assert!(verify_batch(&items));
+        assert!(verify_batch(&[]));
+        for at in [0, 63, 64, 100, 149] {
+            let mut forged = items.clone();
+            forged[at].2.0[40] ^= 1;
+            assert!(!verify_batch(&forged), "{at}");
+            let mut swapped = items.clone();
+            swapped[at].0 = keys[(at + 1) % keys.len()].peer_id();
+            assert!(!verify_batch(&swapped), "{at}");
+        }
+    }
+
+    proptest! {
+        #![proptest_config(crate::test_config(32))]
+        #[test]
+        fn a_batch_verifies_exactly_when_each_of_its_signatures_does(
+            seed in any::<u64>(),
+            flips in proptest::collection::vec(proptest::option::weighted(0.2, any::<usize>()), 1..12),
+        ) {
+            let keys: Vec<Keypair> = (0..2)
+                .map(|i| Keypair::generate(&mut ChaCha20Rng::seed_from_u64(seed.wrapping_add(i))))
+                .collect();
+            let messages: Vec<Vec<u8>> = (0..flips.len()).map(|i| vec![i as u8; i]).collect();
+            let items: Vec<(PeerId, &[u8], Signature)> = flips
+                .iter()
+                .enumerate()
+                .map(|(i, flip)| {
+                    let k = &keys[i % 2];
+                    let mut sig = k.sign(&messages[i]);
+                    if let Some(bit) = flip {
+                        sig.0[bit % SIGNATURE_BYTES] ^= 1 << (bit % 8);
+                    }
+                    (k.peer_id(), messages[i].as_slice(), sig)
+                })
+                .collect();
+            let each = items.iter().all(|(key, m, sig)| key.verify(m, sig).is_ok());
+            prop_assert_eq!(verify_batch(&items), each);
+        }
     }
 
     proptest! {

@@ -173,6 +173,25 @@ pub struct Refold {
     pub object_keys: BTreeMap<ObjectId, OrderKey>,
 }
 
+impl Refold {
+    /// Adds a later insertion's refold to this one: each object from the earlier of its two
+    /// first changed entries. Folding the merged refold once, after both insertions, gives
+    /// what folding each after its own insertion gives (a driver that drains a step's events
+    /// together folds each object once, not once per insertion).
+    pub fn merge(&mut self, later: &Refold) {
+        for (object, key) in &later.object_keys {
+            let earliest = self.object_keys.entry(*object).or_insert(*key);
+            *earliest = (*earliest).min(*key);
+        }
+        for (object, pos) in &later.objects {
+            let earliest = self.objects.entry(*object).or_insert(*pos);
+            *earliest = (*earliest).min(*pos);
+        }
+        self.base_objects.extend(later.base_objects.iter().copied());
+        self.from = self.from.min(later.from);
+    }
+}
+
 /// What a refold carries to judge ops against the leases they saw, taken out of the log for
 /// its duration.
 struct LeaseCx {

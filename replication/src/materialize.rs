@@ -191,6 +191,32 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
         }
     }
 
+    /// Brings the scene up to date with several insertions drained together, all of them
+    /// already in `log`: their refolds merged ([`Refold::merge`]) and folded once. Applying
+    /// them one by one would refold from scratch every object an earlier one already folded
+    /// past a later one's first change.
+    pub fn apply_insertions<'a>(
+        &mut self,
+        log: &Log<P>,
+        insertions: impl IntoIterator<Item = &'a Insertion>,
+    ) {
+        let mut delivered = Vec::new();
+        let mut merged: Option<Refold> = None;
+        for insertion in insertions {
+            let Some(refold) = &insertion.refold else {
+                continue;
+            };
+            delivered.extend_from_slice(&insertion.delivered);
+            match &mut merged {
+                Some(merged) => merged.merge(refold),
+                None => merged = Some(refold.clone()),
+            }
+        }
+        if let Some(refold) = merged {
+            self.apply_refold(log, &delivered, &refold);
+        }
+    }
+
     /// Re-folds what `refold` names and applies the `delivered` independent entries.
     pub fn apply_refold(&mut self, log: &Log<P>, delivered: &[OpId], refold: &Refold) {
         for (object, from) in &refold.object_keys {

@@ -8,6 +8,7 @@ use std::time::Duration;
 use fdsl::object::{Field, Formula, Geometry, Shape};
 use rand_core::SeedableRng;
 use replication::Timestamp;
+use replication::sync::message::PROTOCOL_VERSION;
 
 use super::*;
 
@@ -333,9 +334,13 @@ fn news_keeps_the_latest_lines_and_disconnections_read_as_actions() {
     assert_eq!(next, MAX_NEWS_LINES as u64 + 5);
     assert!(news.since(next).0.is_empty());
     let text = disconnect_text(&DisconnectReason::Sync(CloseReason::WrongProtocol {
-        remote: 4,
+        remote: PROTOCOL_VERSION + 1,
     }));
-    assert!(text.contains("protocol 4, this build speaks 3"), "{text}");
+    let expected = format!(
+        "protocol {}, this build speaks {PROTOCOL_VERSION}",
+        PROTOCOL_VERSION + 1
+    );
+    assert!(text.contains(&expected), "{text}");
 }
 
 #[test]

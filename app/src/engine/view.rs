@@ -510,18 +510,7 @@ impl Observer<ShapePayload> for Folder {
             return;
         };
         delivered.extend_from_slice(&insertion.delivered);
-        for (object, key) in &refold.object_keys {
-            let earliest = merged.object_keys.entry(*object).or_insert(*key);
-            *earliest = (*earliest).min(*key);
-        }
-        for (object, pos) in &refold.objects {
-            let earliest = merged.objects.entry(*object).or_insert(*pos);
-            *earliest = (*earliest).min(*pos);
-        }
-        merged
-            .base_objects
-            .extend(refold.base_objects.iter().copied());
-        merged.from = merged.from.min(refold.from);
+        merged.merge(refold);
     }
 
     fn settled(&mut self, peer: &Peer<ShapePayload>, changed: bool) {

@@ -84,12 +84,15 @@ impl Side {
         }
     }
 
+    /// Folds the round's deliveries together, as a node folds each settled step.
     fn drain(&mut self) {
+        let mut delivered = Vec::new();
         while let Some(event) = self.sync.poll_event() {
             if let Event::Delivered(ins) = event {
-                self.scene.apply_insertion(&self.log, &ins);
+                delivered.push(ins);
             }
         }
+        self.scene.apply_insertions(&self.log, &delivered);
     }
 }
 

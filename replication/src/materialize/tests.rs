@@ -117,6 +117,45 @@ fn insertions_applied_after_later_ones_still_converge() {
     assert_eq!(scene.scene(), from_scratch(&log).scene());
 }
 
+#[test]
+fn insertions_drained_together_fold_each_object_once_and_equal_the_fold_from_scratch() {
+    for order in [0, 3, 9] {
+        let ops = workload(12, 3, 200);
+        let ops = if order == 0 {
+            ops
+        } else {
+            shuffled(&ops, order)
+        };
+        let mut log = TLog::default();
+        let mut one_by_one = from_scratch(&log);
+        let mut together = from_scratch(&log);
+        let mut queued = Vec::new();
+        for (i, op) in ops.into_iter().enumerate() {
+            queued.push(log.insert(Timestamp(0), op, Origin(1)).unwrap());
+            if i % 16 == 15 {
+                for ins in &queued {
+                    one_by_one.apply_insertion(&log, ins);
+                }
+                together.apply_insertions(&log, &queued);
+                queued.clear();
+            }
+        }
+        for ins in &queued {
+            one_by_one.apply_insertion(&log, ins);
+        }
+        together.apply_insertions(&log, &queued);
+        let expected = from_scratch(&log);
+        assert_eq!(together.scene(), expected.scene(), "order {order}");
+        assert_eq!(one_by_one.scene(), expected.scene(), "order {order}");
+        let (merged, single) = (together.stats(), one_by_one.stats());
+        assert!(
+            merged.n_applied < single.n_applied
+                && merged.n_object_refolds <= single.n_object_refolds,
+            "order {order}: {merged:?} against {single:?}"
+        );
+    }
+}
+
 /// Authors A and B: A edits objects 0 and 1 under a lease and undoes and redoes its last `n`
 /// edits, while B edits objects 1 and 2 and chats, concurrently, without leases.
 fn undo_redo_ops(

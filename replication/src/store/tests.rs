@@ -100,6 +100,45 @@ fn reopen_restores_exactly_and_loads_into_a_log() {
 }
 
 #[test]
+fn a_stored_op_whose_signature_fails_is_named_by_its_record() {
+    let _no_spawn = no_spawn();
+    let key = Keypair::from_seed([6; 32]);
+    // Forged records at the start, the middle of a batch of signatures, and past the first.
+    for forged_at in [0, 37, 100] {
+        let path = temp_path("forged");
+        {
+            let (mut store, _, _) = OpStore::<TestPayload>::open(&path).unwrap();
+            let mut last: Option<Op<TestPayload>> = None;
+            for i in 0..130 {
+                let op = next_op(&key, last.as_ref(), i).into_op();
+                let stored = if i == forged_at {
+                    let mut bytes = op.encoded().to_vec();
+                    let at = bytes.len() - 1;
+                    bytes[at] ^= 1;
+                    Op::decode(&bytes).unwrap()
+                } else {
+                    op.clone()
+                };
+                store.append(&[&stored]).unwrap();
+                last = Some(op);
+            }
+        }
+        let mut log = Log::default();
+        let error = OpStore::<TestPayload>::open_into(&path, Timestamp(0), &mut log)
+            .map(|_| ())
+            .unwrap_err();
+        assert!(
+            matches!(error, OpenError::BadSignature { record_idx } if record_idx == forged_at),
+            "{forged_at}: {error:?}"
+        );
+        // The file is left as it was.
+        let (_, ops, _) = OpStore::<TestPayload>::open(&path).unwrap();
+        assert_eq!(ops.len(), 130);
+        let _ = std::fs::remove_dir_all(path.parent().unwrap());
+    }
+}
+
+#[test]
 fn torn_or_corrupt_tails_are_cut_and_never_accepted() {
     let _no_spawn = no_spawn();
     let path = temp_path("torn");

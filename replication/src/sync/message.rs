@@ -20,7 +20,10 @@ pub const SYNC_WIRE_VERSION: u8 = 1;
 /// Protocol version announced in [`Message::Hello`]; peers with another version disconnect.
 /// 3: payloads may be authored in parts (`ShapePayload::Part`, `ShapePayload::Assemble`),
 /// which a build speaking 2 cannot decode.
-pub const PROTOCOL_VERSION: u64 = 3;
+/// 4: signatures are checked by the ZIP 215 rules (alone or in batches), which accept some
+/// crafted signatures the strict rules of 3 refuse; the two must not share a session, or a
+/// member could make them disagree on which ops exist.
+pub const PROTOCOL_VERSION: u64 = 4;
 /// Length of a session id.
 pub const SESSION_ID_BYTES: usize = 16;
 /// Most ops in one [`Message::Ops`] batch.

@@ -707,12 +707,43 @@ impl<P: Payload> SyncState<P> {
         // The ack names only the batch's authors: what the sender needs to move on, in
         // bytes that do not grow with the number of peers.
         let mut authors = Vec::new();
-        for bytes in ops {
+        // Cheapest check first: each envelope and its id (a hash), then known ops are skipped,
+        // then the signatures of the rest in one batch, and only a signed op's payload is
+        // decoded and validated (which may compile formulas). A forged or replayed op never
+        // costs a compile.
+        let mut fresh: Vec<Envelope<'_>> = Vec::with_capacity(ops.len());
+        for bytes in &ops {
             self.stats.n_ops_in += 1;
-            if let Some(author) = self.on_op(now, &bytes, log)
-                && !authors.contains(&author)
-            {
-                authors.push(author);
+            let envelope = match Envelope::parse(bytes) {
+                Ok(envelope) => envelope,
+                Err(e) => {
+                    self.reject(decode_reject_kind(&e), e.to_string());
+                    continue;
+                }
+            };
+            if log.contains(&envelope.id()) {
+                if !authors.contains(&envelope.author()) {
+                    authors.push(envelope.author());
+                }
+            } else if fresh.iter().all(|other| other.id() != envelope.id()) {
+                fresh.push(envelope);
+            }
+        }
+        for op in Envelope::into_verified_all::<P>(fresh) {
+            match op {
+                Ok(op) => {
+                    if !authors.contains(&op.author()) {
+                        authors.push(op.author());
+                    }
+                    match log.insert(now, op, self.config.origin) {
+                        Ok(insertion) => self.on_insertion(insertion),
+                        Err(e) => self.reject_refused(&e),
+                    }
+                }
+                Err(ReceiveError::Verify(e)) => {
+                    self.reject(RejectKind::BadSignature, e.to_string())
+                }
+                Err(ReceiveError::Decode(e)) => self.reject(decode_reject_kind(&e), e.to_string()),
             }
         }
         let mut have = VersionVector::new();
@@ -721,40 +752,6 @@ impl<P: Payload> SyncState<P> {
         }
         self.control.push_back(Message::Ack { batch_no, have });
         self.update_up_to_date(log);
-    }
-
-    /// Handles one received op; returns its author if it decoded.
-    fn on_op(&mut self, now: Timestamp, bytes: &[u8], log: &mut Log<P>) -> Option<PeerId> {
-        // Cheapest check first: the envelope and its id (a hash), then a known op is skipped,
-        // then the signature, and only a signed op's payload is decoded and validated (which
-        // may compile formulas). A forged or replayed op never costs a compile.
-        let envelope = match Envelope::parse(bytes) {
-            Ok(envelope) => envelope,
-            Err(e) => {
-                self.reject(decode_reject_kind(&e), e.to_string());
-                return None;
-            }
-        };
-        let author = envelope.author();
-        if log.contains(&envelope.id()) {
-            return Some(author);
-        }
-        let op = match envelope.into_verified::<P>() {
-            Ok(op) => op,
-            Err(ReceiveError::Verify(e)) => {
-                self.reject(RejectKind::BadSignature, e.to_string());
-                return None;
-            }
-            Err(ReceiveError::Decode(e)) => {
-                self.reject(decode_reject_kind(&e), e.to_string());
-                return None;
-            }
-        };
-        match log.insert(now, op, self.config.origin) {
-            Ok(insertion) => self.on_insertion(insertion),
-            Err(e) => self.reject_refused(&e),
-        }
-        Some(author)
     }
 
     fn reject_refused(&mut self, e: &InsertError) {

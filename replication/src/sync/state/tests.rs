@@ -316,10 +316,11 @@ fn hostile_inputs_are_counted_and_honest_ops_survive() {
     let kinds = feed(&mut b, 3, &batch.encode());
     assert_eq!(
         kinds,
+        // Envelopes are read first, signatures then checked together.
         vec![
-            RejectKind::BadSignature,
             RejectKind::MalformedOp,
-            RejectKind::UnknownVersion
+            RejectKind::UnknownVersion,
+            RejectKind::BadSignature,
         ]
     );
     assert!(
@@ -373,6 +374,45 @@ fn hostile_inputs_are_counted_and_honest_ops_survive() {
 }
 
 const SYNC_VERSION_FOR_TEST: u8 = crate::sync::message::SYNC_WIRE_VERSION;
+
+#[test]
+fn a_forged_op_in_a_full_batch_costs_only_itself_and_repeats_are_inserted_once() {
+    let mut b = Node::new(2, 1);
+    let mallory = Keypair::from_seed([9; 32]);
+    let keys = [Keypair::from_seed([1; 32]), Keypair::from_seed([3; 32])];
+    let mut source = TLog::default();
+    let honest: Vec<_> = (0..MAX_BATCH_OPS - 2)
+        .map(|i| {
+            let payload = TestPayload::Chat(format!("line {i}"));
+            source
+                .author(&keys[i % 2], Timestamp(5 + i as u64), payload)
+                .unwrap()
+                .0
+        })
+        .collect();
+    assert!(
+        feed(
+            &mut b,
+            2,
+            &hello(mallory.peer_id(), SESSION, PROTOCOL_VERSION)
+        )
+        .is_empty()
+    );
+    let mut ops: Vec<Vec<u8>> = honest.iter().map(|op| op.encoded().to_vec()).collect();
+    let mut forged = honest[30].encoded().to_vec();
+    let last = forged.len() - 1;
+    forged[last] ^= 1;
+    ops.insert(31, forged);
+    ops.push(honest[7].encoded().to_vec());
+    let kinds = feed(&mut b, 3, &Message::Ops { batch_no: 1, ops }.encode());
+    assert_eq!(kinds, vec![RejectKind::BadSignature]);
+    assert_eq!(
+        b.log.len(),
+        honest.len(),
+        "every honest op is delivered once"
+    );
+    assert!(honest.iter().all(|op| b.log.contains(&op.id())));
+}
 
 #[test]
 fn wrong_session_or_protocol_closes() {
