@@ -6,6 +6,11 @@
 //! [`Message::Want`](crate::sync::message::Message::Want) to one holder (right away if the
 //! author is not connected, after [`RELAY_AFTER_MICROS`] if it is and so should deliver them
 //! itself), and asks the next holder only if nothing arrived for [`WANT_RETRY_MICROS`].
+//! A holder that answered in that time with messages but not one op claimed what it does not
+//! send: its claim is withdrawn ([`SyncState::withdraw_claim`]) and not learnt again from it
+//! for [`CLAIM_WITHDRAWN_MICROS`](crate::sync::state::CLAIM_WITHDRAWN_MICROS), so made-up
+//! claims cost a retry period each, not work for the connection's life. A holder that sent
+//! nothing at all (a partition) keeps its claims.
 
 use std::collections::{BTreeMap, VecDeque};
 
@@ -69,9 +74,41 @@ struct WantState {
     /// When the lack was first seen.
     since: Timestamp,
     /// When, where and at what held seq it was last asked for, if it was.
-    asked: Option<(Timestamp, ConnId, u64)>,
+    asked: Option<Asked>,
     /// How many holders were asked so far (picks the next).
     n_asked: usize,
+}
+
+/// One ask for an author's ops: when, of which connection, at what held seq, and how many
+/// messages and ops that connection had sent by then.
+#[derive(Clone, Copy, Debug)]
+struct Asked {
+    at: Timestamp,
+    conn: ConnId,
+    had: u64,
+    n_messages: u64,
+    n_ops: u64,
+}
+
+impl Asked {
+    fn new<P: Payload>(at: Timestamp, conn: ConnId, had: u64, sync: Option<&SyncState<P>>) -> Self {
+        let stats = sync.map(SyncState::stats);
+        Self {
+            at,
+            conn,
+            had,
+            n_messages: stats.map_or(0, |s| s.n_messages_in),
+            n_ops: stats.map_or(0, |s| s.n_ops_in),
+        }
+    }
+
+    /// The connection answered since (some message came) but sent no op at all: it claimed
+    /// ops it does not send. A silent one (a partition, a dead link) is only waited for.
+    fn unanswered<P: Payload>(&self, sync: Option<&SyncState<P>>) -> bool {
+        sync.is_some_and(|s| {
+            s.stats().n_messages_in > self.n_messages && s.stats().n_ops_in == self.n_ops
+        })
+    }
 }
 
 impl<P: Payload> Peer<P> {
@@ -198,6 +235,7 @@ impl<P: Payload> Peer<P> {
         }
         self.wants.retain(|author, _| lacking.get(author) > 0);
         let mut asks: BTreeMap<ConnId, VersionVector> = BTreeMap::new();
+        let mut withdraw: Vec<(ConnId, PeerId)> = Vec::new();
         for (author, _) in lacking.iter() {
             let have = held.get(author);
             let want = self.wants.entry(*author).or_insert(WantState {
@@ -213,14 +251,19 @@ impl<P: Payload> Peer<P> {
             if now < want.since.saturating_add_micros(wait) {
                 continue;
             }
-            if let Some((at, conn, had)) = want.asked {
-                if have > had {
+            if let Some(asked) = want.asked {
+                let sync = self.connections.get(&asked.conn);
+                if have > asked.had {
                     // The holder is delivering: give it more time.
-                    want.asked = Some((now, conn, have));
+                    want.asked = Some(Asked::new(now, asked.conn, have, sync));
                     continue;
                 }
-                if now < at.saturating_add_micros(WANT_RETRY_MICROS) {
+                if now < asked.at.saturating_add_micros(WANT_RETRY_MICROS) {
                     continue;
+                }
+                if asked.unanswered(sync) {
+                    // The claim is withdrawn, and the next holder, if any, is asked below.
+                    withdraw.push((asked.conn, *author));
                 }
             }
             // Holders that delivered the most so far are asked first: a remote that only claims
@@ -235,12 +278,21 @@ impl<P: Payload> Peer<P> {
                 .filter(|(_, _, seq)| *seq > have)
                 .collect();
             holders.sort_by_key(|&(delivered, conn, _)| (std::cmp::Reverse(delivered), conn));
+            if let Some(&(failed, _)) = withdraw.last().filter(|(_, a)| a == author) {
+                holders.retain(|(_, conn, _)| *conn != failed);
+            }
             let Some(&(_, conn, seq)) = holders.get(want.n_asked % holders.len().max(1)) else {
+                want.asked = None;
                 continue;
             };
-            want.asked = Some((now, conn, have));
+            want.asked = Some(Asked::new(now, conn, have, self.connections.get(&conn)));
             want.n_asked += 1;
             asks.entry(conn).or_default().raise(*author, seq);
+        }
+        for (conn, author) in withdraw {
+            if let Some(sync) = self.connections.get_mut(&conn) {
+                sync.withdraw_claim(now, &author, &self.log);
+            }
         }
         for (conn, vv) in asks {
             if let Some(sync) = self.connections.get_mut(&conn) {
@@ -523,8 +575,8 @@ mod tests {
 
     use crate::causal::MAX_VV_AUTHORS;
     use crate::sync::message::{MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION};
-    use crate::sync::state::MAX_REMOTE_UNKNOWN_AUTHORS;
     use crate::sync::state::tests::log_of_many_authors;
+    use crate::sync::state::{CLAIM_WITHDRAWN_MICROS, MAX_REMOTE_UNKNOWN_AUTHORS};
 
     fn hello_from(peer: PeerId, session_id: SessionId) -> Vec<u8> {
         Message::Hello {
@@ -599,9 +651,11 @@ mod tests {
         );
         assert_eq!(n_wanted, MAX_REMOTE_UNKNOWN_AUTHORS);
         assert!(a.wants.len() <= MAX_REMOTE_UNKNOWN_AUTHORS);
-        // Nothing arrives: the peer does not ask the remote for its full have again, and more
-        // strangers are still dropped.
-        for t in 1..=5 {
+        // Nothing arrives: until the claims are withdrawn, the peer does not ask the remote
+        // for its full have again, and more strangers are still dropped.
+        let mut vv = VersionVector::new();
+        vv.raise(PeerId([7; 32]), 1);
+        for t in 1..=2 {
             a.handle_timeout(Timestamp(t * RELAY_AFTER_MICROS));
             let messages = transmit_checked(&mut a, Timestamp(t * RELAY_AFTER_MICROS));
             assert!(
@@ -609,13 +663,96 @@ mod tests {
                 "{messages:?}"
             );
         }
-        let mut vv = VersionVector::new();
-        vv.raise(PeerId([7; 32]), 1);
-        a.handle_input(Timestamp(3_000_000), ConnId(1), &Message::Have(vv).encode());
+        a.handle_input(
+            Timestamp(900_000),
+            ConnId(1),
+            &Message::Have(vv.clone()).encode(),
+        );
         let (_, sync) = a.connections().next().unwrap();
         assert_eq!(
             sync.remote_version_vector().len(),
             MAX_REMOTE_UNKNOWN_AUTHORS
+        );
+        // A retry period after the ask, every claim the remote did not make good is withdrawn:
+        // nothing is left to scan or ask for on its account.
+        let later = Timestamp(2 + WANT_RETRY_MICROS + WANT_CHECK_MICROS);
+        a.handle_timeout(later);
+        transmit_checked(&mut a, later);
+        a.handle_timeout(Timestamp(later.0 + WANT_CHECK_MICROS));
+        let (_, sync) = a.connections().next().unwrap();
+        assert!(sync.remote_version_vector().is_empty());
+        assert_eq!(
+            sync.stats().n_claims_withdrawn,
+            MAX_REMOTE_UNKNOWN_AUTHORS as u64
+        );
+        assert!(a.wants.is_empty(), "{}", a.wants.len());
+        // The same claims sent again are not learnt again for a while; a claim to more of a
+        // withdrawn author is, and so are new ones.
+        let now = Timestamp(later.0 + 2 * WANT_CHECK_MICROS);
+        let made_up = |round: u8| {
+            let mut vv = VersionVector::new();
+            for i in 0..MAX_VV_AUTHORS as u32 {
+                let mut id = [round; 32];
+                id[..4].copy_from_slice(&i.to_be_bytes());
+                vv.raise(PeerId(id), 1);
+            }
+            Message::Have(vv).encode()
+        };
+        a.handle_input(now, ConnId(1), &made_up(0));
+        assert!(
+            a.connections()
+                .next()
+                .unwrap()
+                .1
+                .remote_version_vector()
+                .is_empty()
+        );
+        let mut more = VersionVector::new();
+        more.raise(PeerId([0; 32]), 2);
+        a.handle_input(now, ConnId(1), &Message::Have(more).encode());
+        a.handle_input(now, ConnId(1), &made_up(1));
+        let (_, sync) = a.connections().next().unwrap();
+        assert_eq!(sync.remote_version_vector().get(&PeerId([0; 32])), 2);
+        assert_eq!(
+            sync.remote_version_vector().len(),
+            MAX_REMOTE_UNKNOWN_AUTHORS
+        );
+        // Those are asked for and withdrawn in turn. Then the first claims, whose withdrawal
+        // has lapsed, are learnt again, but for the one withdrawn since.
+        let asked = Timestamp(later.0 + CLAIM_WITHDRAWN_MICROS + WANT_CHECK_MICROS);
+        a.handle_timeout(asked);
+        transmit_checked(&mut a, asked);
+        // A remote that sends nothing at all (a partition, a dead link) keeps its claims and is
+        // only waited for; one that answers with anything but ops loses them.
+        let silent = Timestamp(asked.0 + WANT_RETRY_MICROS + WANT_CHECK_MICROS);
+        a.handle_timeout(silent);
+        transmit_checked(&mut a, silent);
+        assert_eq!(
+            a.connections()
+                .next()
+                .unwrap()
+                .1
+                .remote_version_vector()
+                .len(),
+            MAX_REMOTE_UNKNOWN_AUTHORS
+        );
+        a.handle_input(silent, ConnId(1), &Message::Have(vv.clone()).encode());
+        let silent = Timestamp(silent.0 + WANT_RETRY_MICROS + WANT_CHECK_MICROS);
+        a.handle_timeout(silent);
+        assert!(
+            a.connections()
+                .next()
+                .unwrap()
+                .1
+                .remote_version_vector()
+                .is_empty()
+        );
+        a.handle_input(silent, ConnId(1), &made_up(0));
+        let (_, sync) = a.connections().next().unwrap();
+        assert_eq!(sync.remote_version_vector().get(&PeerId([0; 32])), 0);
+        assert_eq!(
+            sync.remote_version_vector().len(),
+            MAX_REMOTE_UNKNOWN_AUTHORS - 1
         );
     }
 

@@ -5,7 +5,7 @@
 //! blake3 hash, in order. The author authors them in that order, so the parts are in the
 //! `Assemble`'s causal past and every peer folds them first.
 //!
-//! The fold ([`HeldParts`]) keeps each object's parts by hash until an `Assemble` of that
+//! The fold (`HeldParts`) keeps each object's parts by hash until an `Assemble` of that
 //! object consumes them. An `Assemble` changes nothing when a part it names is not held (never
 //! sent, undone, hidden by a delete, or already consumed), or when the bytes are not the
 //! canonical encoding of a valid `Create` or `Set` of its own object. Since a part is consumed

@@ -75,6 +75,15 @@ pub const MAX_EPHEMERAL_CHANNELS: usize = 64;
 /// haves and acks. Such a claim is only good for asking the remote to relay the author's ops,
 /// so the excess is dropped (and counted) rather than stored; it is learnt again later.
 pub const MAX_REMOTE_UNKNOWN_AUTHORS: usize = MAX_VV_AUTHORS;
+/// A claim the remote did not make good (asked for an author's ops, it sent nothing for
+/// [`crate::peer::WANT_RETRY_MICROS`]) is withdrawn, and the same claim, up to the same seq, is
+/// not learnt again from this remote for this long (60 s): a remote that claims made-up
+/// authors costs one ask and one retry period per claim, not a scan every check for the
+/// connection's life. A claim to more of that author is learnt at once.
+pub const CLAIM_WITHDRAWN_MICROS: u64 = 60_000_000;
+/// Most withdrawn claims one connection remembers (the excess is withdrawn but may be learnt
+/// again at once).
+pub const MAX_WITHDRAWN_CLAIMS: usize = MAX_REMOTE_UNKNOWN_AUTHORS;
 /// A connection that dropped some of the remote's claims checks this often (1 s) whether
 /// enough of what it kept has arrived to ask for the remote's full have again.
 pub const RELEARN_CHECK_MICROS: u64 = HAVE_EVERY_MICROS;
@@ -192,6 +201,8 @@ pub struct SyncStats {
     /// log does not hold beyond [`MAX_REMOTE_UNKNOWN_AUTHORS`], and wants for authors it does
     /// not hold (an honest remote wants only what this peer's haves named).
     pub n_claims_dropped: u64,
+    /// Claims withdrawn because the remote, asked, sent nothing ([`CLAIM_WITHDRAWN_MICROS`]).
+    pub n_claims_withdrawn: u64,
 }
 
 impl SyncStats {
@@ -286,6 +297,8 @@ pub struct SyncState<P> {
     unknown_counted_at: usize,
     /// Some of the remote's claims were dropped since it last sent its full have.
     claims_dropped: bool,
+    /// Claims withdrawn: the author, the seq claimed, and until when it is not learnt again.
+    withdrawn: BTreeMap<PeerId, (u64, Timestamp)>,
     /// A hello went out to ask again for the remote's full have and no have came since.
     relearn_asked: bool,
     /// When to next check whether to ask again.
@@ -342,6 +355,7 @@ impl<P: Payload> SyncState<P> {
             n_unknown_claimed: 0,
             unknown_counted_at: 0,
             claims_dropped: false,
+            withdrawn: BTreeMap::new(),
             relearn_asked: false,
             relearn_check_at: now,
             sent_vv: VersionVector::new(),
@@ -614,6 +628,13 @@ impl<P: Payload> SyncState<P> {
         let held = log.version_vector();
         let mut n_dropped = 0u64;
         for (author, seq) in vv.iter() {
+            if let Some((claimed, until)) = self.withdrawn.get(author) {
+                if now < *until && seq <= claimed {
+                    n_dropped += 1;
+                    continue;
+                }
+                self.withdrawn.remove(author);
+            }
             let unknown = held.get(author) == 0 && self.remote_vv.get(author) == 0;
             if unknown && !self.room_for_unknown(held) {
                 n_dropped += 1;
@@ -629,6 +650,35 @@ impl<P: Payload> SyncState<P> {
                 self.claims_dropped = true;
                 self.relearn_check_at = now.saturating_add_micros(RELEARN_CHECK_MICROS);
             }
+        }
+        self.sendable_cache.set(None);
+        self.update_up_to_date(log);
+    }
+
+    /// Withdraws the remote's claim to hold more of `author` than the log does: the remote
+    /// was asked for those ops and sent none (see [`CLAIM_WITHDRAWN_MICROS`]). What it is
+    /// known to hold of that author becomes what the log holds, so nothing more is asked of it
+    /// or waited for on its account; nothing is sent either, since that is no more than the
+    /// remote holds.
+    pub fn withdraw_claim(&mut self, now: Timestamp, author: &PeerId, log: &Log<P>) {
+        let held = log.version_vector().get(author);
+        let claimed = self.remote_vv.get(author);
+        if claimed <= held {
+            return;
+        }
+        self.remote_vv.set(*author, held);
+        self.sent_vv
+            .set(*author, self.sent_vv.get(author).min(held));
+        if held == 0 {
+            self.n_unknown_claimed = self.n_unknown_claimed.saturating_sub(1);
+        }
+        self.stats.n_claims_withdrawn += 1;
+        if self.withdrawn.len() < MAX_WITHDRAWN_CLAIMS || self.withdrawn.contains_key(author) {
+            let until = now.saturating_add_micros(CLAIM_WITHDRAWN_MICROS);
+            self.withdrawn.insert(*author, (claimed, until));
+        } else {
+            // Full: forget the expired entries to make room next time.
+            self.withdrawn.retain(|_, (_, until)| now < *until);
         }
         self.sendable_cache.set(None);
         self.update_up_to_date(log);
