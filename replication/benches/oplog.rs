@@ -12,7 +12,7 @@ mod common;
 use std::path::PathBuf;
 use std::sync::LazyLock;
 
-use common::{N_HISTORY, Side, TLog, TScene, build, catch_up, history};
+use common::{N_HISTORY, NOW, Side, TLog, TScene, build, catch_up, history};
 use divan::Bencher;
 use divan::counter::ItemsCount;
 use replication::materialize::test_scene::TestScene;
@@ -61,7 +61,7 @@ fn apply_in_order(bencher: Bencher, n: usize) {
             let mut log = TLog::default();
             let mut scene = TScene::fold(&log).expect("empty");
             for op in ops {
-                let ins = log.insert(Timestamp(0), op, Origin(1)).expect("in order");
+                let ins = log.insert(NOW, op, Origin(1)).expect("in order");
                 scene.apply_insertion(&log, &ins);
             }
             (log, scene)
@@ -77,7 +77,7 @@ fn apply_in_order_log_only(bencher: Bencher, n: usize) {
         .bench_values(|ops| {
             let mut log = TLog::default();
             for op in ops {
-                log.insert(Timestamp(0), op, Origin(1)).expect("in order");
+                log.insert(NOW, op, Origin(1)).expect("in order");
             }
             log
         });
@@ -152,7 +152,7 @@ fn late_acquire_refold_100k(bencher: Bencher) {
         .with_inputs(|| (FULL.0.clone(), FULL.1.clone()))
         .bench_values(|(mut log, mut scene)| {
             let ins = log
-                .insert(Timestamp(0), late.clone(), Origin(2))
+                .insert(NOW, late.clone(), Origin(2))
                 .expect("accepted");
             scene.apply_insertion(&log, &ins);
             (log, scene)
@@ -167,7 +167,7 @@ fn late_chat_refold_100k(bencher: Bencher) {
         .with_inputs(|| (FULL.0.clone(), FULL.1.clone()))
         .bench_values(|(mut log, mut scene)| {
             let ins = log
-                .insert(Timestamp(0), late.clone(), Origin(2))
+                .insert(NOW, late.clone(), Origin(2))
                 .expect("accepted");
             scene.apply_insertion(&log, &ins);
             (log, scene)

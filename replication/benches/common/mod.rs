@@ -16,6 +16,12 @@ pub type TScene = Materialized<TestPayload, TestScene>;
 
 /// The largest history the benches use.
 pub const N_HISTORY: usize = 100_000;
+/// Microseconds between the history's ops.
+pub const HISTORY_STEP_MICROS: u64 = 1000;
+/// The receivers' clock: after the whole history's timestamps. A receiver whose clock is
+/// behind an op's timestamp by more than the skew bound parks the op until then, so a bench
+/// run at time 0 would apply only the first minute of the history and park the rest.
+pub const NOW: Timestamp = Timestamp(N_HISTORY as u64 * HISTORY_STEP_MICROS + 1);
 
 /// The four authors.
 pub fn keys() -> Vec<Keypair> {
@@ -43,7 +49,11 @@ pub fn history(n: usize) -> Vec<VerifiedOp<TestPayload>> {
             },
         };
         let (op, _) = log
-            .author(&keys[i % keys.len()], Timestamp(i as u64 * 1000), payload)
+            .author(
+                &keys[i % keys.len()],
+                Timestamp(i as u64 * HISTORY_STEP_MICROS),
+                payload,
+            )
             .expect("a valid op");
         out.push(op);
     }
@@ -56,10 +66,11 @@ pub fn build(ops: &[VerifiedOp<TestPayload>]) -> (TLog, TScene) {
     let mut scene = TScene::fold(&log).expect("an empty scene");
     for op in ops {
         let ins = log
-            .insert(Timestamp(0), op.clone(), Origin(1))
+            .insert(NOW, op.clone(), Origin(1))
             .expect("in-order ops are accepted");
         scene.apply_insertion(&log, &ins);
     }
+    assert_eq!(log.len(), ops.len(), "every op of the history is delivered");
     (log, scene)
 }
 
@@ -78,7 +89,7 @@ impl Side {
             origin: Origin(origin),
         };
         Self {
-            sync: SyncState::new(Timestamp(0), config),
+            sync: SyncState::new(NOW, config),
             log,
             scene,
         }
@@ -99,7 +110,7 @@ impl Side {
 /// Exchanges messages until `b` holds what `a` holds, advancing virtual time 1 ms a round
 /// (the send pacing allows 1,000 messages a second); returns the bytes sent both ways.
 pub fn catch_up(a: &mut Side, b: &mut Side) -> u64 {
-    let mut now = 0;
+    let mut now = NOW.0;
     // A lone connection asks for every author's ops it lacks, as `Peer` would of its only
     // holder.
     let mut wanted = None;
@@ -118,6 +129,7 @@ pub fn catch_up(a: &mut Side, b: &mut Side) -> u64 {
         a.drain();
         b.drain();
         if b.log.version_vector() == a.log.version_vector() {
+            assert_eq!(b.log.len(), a.log.len(), "nothing is left pending");
             return a.sync.stats().n_bytes_out + b.sync.stats().n_bytes_out;
         }
         now += 1000;
