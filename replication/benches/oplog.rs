@@ -151,9 +151,7 @@ fn late_acquire_refold_100k(bencher: Bencher) {
     bencher
         .with_inputs(|| (FULL.0.clone(), FULL.1.clone()))
         .bench_values(|(mut log, mut scene)| {
-            let ins = log
-                .insert(NOW, late.clone(), Origin(2))
-                .expect("accepted");
+            let ins = log.insert(NOW, late.clone(), Origin(2)).expect("accepted");
             scene.apply_insertion(&log, &ins);
             (log, scene)
         });
@@ -166,9 +164,7 @@ fn late_chat_refold_100k(bencher: Bencher) {
     bencher
         .with_inputs(|| (FULL.0.clone(), FULL.1.clone()))
         .bench_values(|(mut log, mut scene)| {
-            let ins = log
-                .insert(NOW, late.clone(), Origin(2))
-                .expect("accepted");
+            let ins = log.insert(NOW, late.clone(), Origin(2)).expect("accepted");
             scene.apply_insertion(&log, &ins);
             (log, scene)
         });

@@ -614,6 +614,22 @@ mod tests {
             .collect()
     }
 
+    /// A have of [`MAX_VV_AUTHORS`] made-up authors, their ids starting with `round`.
+    fn made_up_have(round: u8) -> Vec<u8> {
+        let mut vv = VersionVector::new();
+        for i in 0..MAX_VV_AUTHORS as u32 {
+            let mut id = [round; 32];
+            id[..4].copy_from_slice(&i.to_be_bytes());
+            vv.raise(PeerId(id), 1);
+        }
+        Message::Have(vv).encode()
+    }
+
+    /// What `peer`'s first connection knows its remote to hold.
+    fn claims(peer: &TPeer) -> &VersionVector {
+        peer.connections().next().unwrap().1.remote_version_vector()
+    }
+
     /// Issue 17: two haves of 4,096 made-up authors each, then a timeout, panicked the peer
     /// (one want named all 8,192 and tripped the outgoing-size assertion).
     #[test]
@@ -624,13 +640,7 @@ mod tests {
         let mallory = Keypair::from_seed([9; 32]).peer_id();
         a.handle_input(Timestamp(0), ConnId(1), &hello_from(mallory, session));
         for round in 0..2u8 {
-            let mut vv = VersionVector::new();
-            for i in 0..MAX_VV_AUTHORS as u32 {
-                let mut id = [round; 32];
-                id[..4].copy_from_slice(&i.to_be_bytes());
-                vv.raise(PeerId(id), 1);
-            }
-            a.handle_input(Timestamp(1), ConnId(1), &Message::Have(vv).encode());
+            a.handle_input(Timestamp(1), ConnId(1), &made_up_have(round));
         }
         a.handle_timeout(Timestamp(2));
         let mut n_wanted = 0;
@@ -689,28 +699,12 @@ mod tests {
         // The same claims sent again are not learnt again for a while; a claim to more of a
         // withdrawn author is, and so are new ones.
         let now = Timestamp(later.0 + 2 * WANT_CHECK_MICROS);
-        let made_up = |round: u8| {
-            let mut vv = VersionVector::new();
-            for i in 0..MAX_VV_AUTHORS as u32 {
-                let mut id = [round; 32];
-                id[..4].copy_from_slice(&i.to_be_bytes());
-                vv.raise(PeerId(id), 1);
-            }
-            Message::Have(vv).encode()
-        };
-        a.handle_input(now, ConnId(1), &made_up(0));
-        assert!(
-            a.connections()
-                .next()
-                .unwrap()
-                .1
-                .remote_version_vector()
-                .is_empty()
-        );
+        a.handle_input(now, ConnId(1), &made_up_have(0));
+        assert!(claims(&a).is_empty());
         let mut more = VersionVector::new();
         more.raise(PeerId([0; 32]), 2);
         a.handle_input(now, ConnId(1), &Message::Have(more).encode());
-        a.handle_input(now, ConnId(1), &made_up(1));
+        a.handle_input(now, ConnId(1), &made_up_have(1));
         let (_, sync) = a.connections().next().unwrap();
         assert_eq!(sync.remote_version_vector().get(&PeerId([0; 32])), 2);
         assert_eq!(
@@ -727,27 +721,12 @@ mod tests {
         let silent = Timestamp(asked.0 + WANT_RETRY_MICROS + WANT_CHECK_MICROS);
         a.handle_timeout(silent);
         transmit_checked(&mut a, silent);
-        assert_eq!(
-            a.connections()
-                .next()
-                .unwrap()
-                .1
-                .remote_version_vector()
-                .len(),
-            MAX_REMOTE_UNKNOWN_AUTHORS
-        );
+        assert_eq!(claims(&a).len(), MAX_REMOTE_UNKNOWN_AUTHORS);
         a.handle_input(silent, ConnId(1), &Message::Have(vv.clone()).encode());
         let silent = Timestamp(silent.0 + WANT_RETRY_MICROS + WANT_CHECK_MICROS);
         a.handle_timeout(silent);
-        assert!(
-            a.connections()
-                .next()
-                .unwrap()
-                .1
-                .remote_version_vector()
-                .is_empty()
-        );
-        a.handle_input(silent, ConnId(1), &made_up(0));
+        assert!(claims(&a).is_empty());
+        a.handle_input(silent, ConnId(1), &made_up_have(0));
         let (_, sync) = a.connections().next().unwrap();
         assert_eq!(sync.remote_version_vector().get(&PeerId([0; 32])), 0);
         assert_eq!(
