@@ -7,7 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use crate::causal::{Frontier, Reach, VersionVector};
 use crate::identity::{Keypair, PeerId};
 use crate::lease::{FoldState, Lease, Mark, RejectReason, TargetInfo};
-use crate::op::{BuildError, MAX_DEPS, Op, OpFields, OpId, VerifiedOp};
+use crate::op::{BuildError, MAX_DEPS, Op, OpFields, OpId, OpSlab, VerifiedOp};
 use crate::payload::{Effect, ObjectId, Payload};
 use crate::pending::{DepKey, Evicted, Origin, Pending, PendingLimits};
 use crate::time::{HybridClock, MAX_CLOCK_SKEW_MICROS, Timestamp};
@@ -246,7 +246,7 @@ pub struct LogStats {
 /// The replicated log of one peer, generic over the payload.
 #[derive(Debug, Clone)]
 pub struct Log<P> {
-    ops: BTreeMap<OpId, Op<P>>,
+    ops: OpSlab<P>,
     /// The linear order: sorted by key; a topological order because Lamport times grow
     /// along every dependency.
     order: Vec<(OrderKey, OpId)>,
@@ -297,7 +297,7 @@ impl<P: Payload> Log<P> {
     /// An empty log whose pending buffer has the given limits.
     pub fn with_pending_limits(limits: PendingLimits) -> Self {
         Self {
-            ops: BTreeMap::new(),
+            ops: OpSlab::default(),
             order: Vec::new(),
             marks: Vec::new(),
             checkpoints: vec![FoldState::default()],

@@ -65,6 +65,92 @@ impl fmt::Display for OpId {
     }
 }
 
+/// A hash map keyed by op id. Ids are blake3 hashes, so their first eight bytes are already a
+/// uniform hash: the map spends no time hashing, and lookups cost no tree walk of 32-byte
+/// comparisons. Nothing iterates these maps where order would matter (iteration order is
+/// deterministic anyway: no random state). A member who wants its ops to collide must sign
+/// each attempt at an id, about 2^17 signatures per colliding op in a log of 10^5 ops.
+#[expect(
+    clippy::disallowed_types,
+    reason = "never iterated (only `OpSlab` looks ids up), and the hasher has no random state"
+)]
+type OpIdMap<V> = std::collections::HashMap<OpId, V, OpIdHashing>;
+
+/// Held ops, stored by arrival in one vector and found by id through an [`OpIdMap`] of
+/// positions: the index moves 36-byte entries when it grows, never the ops, and a log's ops sit
+/// in arrival order, near the ops they were delivered with.
+#[derive(Clone, Debug)]
+pub(crate) struct OpSlab<P> {
+    ops: Vec<Op<P>>,
+    index: OpIdMap<u32>,
+}
+
+impl<P> Default for OpSlab<P> {
+    fn default() -> Self {
+        Self {
+            ops: Vec::new(),
+            index: OpIdMap::default(),
+        }
+    }
+}
+
+impl<P> OpSlab<P> {
+    /// The op with id `id`, if held.
+    pub(crate) fn get(&self, id: &OpId) -> Option<&Op<P>> {
+        self.index.get(id).map(|&i| &self.ops[i as usize])
+    }
+
+    /// True if an op with id `id` is held.
+    pub(crate) fn contains_key(&self, id: &OpId) -> bool {
+        self.index.contains_key(id)
+    }
+
+    /// Holds `op` (not held yet) under its id. A log holds at most
+    /// [`crate::log::MAX_LOG_OPS`] ops, far below `u32::MAX`.
+    pub(crate) fn insert(&mut self, id: OpId, op: Op<P>) {
+        let at = u32::try_from(self.ops.len()).expect("a log holds fewer than 2^32 ops");
+        let previous = self.index.insert(id, at);
+        assert!(previous.is_none(), "an op is held once");
+        self.ops.push(op);
+    }
+
+    /// Ops held.
+    pub(crate) fn len(&self) -> usize {
+        self.ops.len()
+    }
+}
+
+/// The hasher of [`OpIdMap`]: an op id's first eight bytes.
+#[derive(Clone, Copy, Debug, Default)]
+struct OpIdHashing;
+
+impl std::hash::BuildHasher for OpIdHashing {
+    type Hasher = OpIdHasher;
+    fn build_hasher(&self) -> OpIdHasher {
+        OpIdHasher(0)
+    }
+}
+
+/// See [`OpIdHashing`].
+#[derive(Clone, Copy, Debug)]
+struct OpIdHasher(u64);
+
+impl std::hash::Hasher for OpIdHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        // An id hashes as its length, then its 32 bytes (the slice's `Hash`).
+        let mut head = [0; 8];
+        let n = bytes.len().min(8);
+        head[..n].copy_from_slice(&bytes[..n]);
+        self.0 = self.0.rotate_left(5) ^ u64::from_le_bytes(head);
+    }
+
+    fn write_usize(&mut self, _length: usize) {}
+}
+
 /// The unsigned fields of an op, as its author fills them in.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct OpFields<P> {

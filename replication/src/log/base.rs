@@ -181,7 +181,7 @@ impl<P: Payload> Log<P> {
             }
         }
         let mut log = Self {
-            ops: BTreeMap::new(),
+            ops: crate::op::OpSlab::default(),
             order: Vec::new(),
             marks: Vec::new(),
             checkpoints: vec![base.state.clone()],

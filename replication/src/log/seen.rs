@@ -38,7 +38,7 @@ pub(crate) type AltFolds = BTreeMap<(ObjectId, Vec<OrderKey>), (usize, Option<Le
 
 /// The held part of the op DAG, as reachability walks it.
 pub(crate) struct Dag<'a, P> {
-    pub(crate) ops: &'a BTreeMap<OpId, Op<P>>,
+    pub(crate) ops: &'a crate::op::OpSlab<P>,
     pub(crate) by_author: &'a BTreeMap<PeerId, Vec<OpId>>,
     pub(crate) base: Option<&'a Base<P>>,
 }
