@@ -533,6 +533,12 @@ impl<P: Payload> Log<P> {
     }
 
     fn missing(&self, op: &Op<P>, now: Timestamp) -> BTreeSet<DepKey> {
+        let seq_ready = op.seq() == 1 || self.vv.get(&op.author()) >= op.seq() - 1;
+        let on_time = op.timestamp() <= now.saturating_add_micros(MAX_CLOCK_SKEW_MICROS);
+        if seq_ready && on_time && op.deps().iter().all(|d| self.contains(d)) {
+            // The common case, without building a set.
+            return BTreeSet::new();
+        }
         let mut missing: BTreeSet<DepKey> = op
             .deps()
             .iter()

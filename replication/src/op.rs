@@ -76,20 +76,25 @@ impl fmt::Display for OpId {
 )]
 type OpIdMap<V> = std::collections::HashMap<OpId, V, OpIdHashing>;
 
-/// Held ops, stored by arrival in one vector and found by id through an [`OpIdMap`] of
-/// positions: the index moves 36-byte entries when it grows, never the ops, and a log's ops sit
-/// in arrival order, near the ops they were delivered with.
+/// Ops per chunk of an [`OpSlab`].
+const SLAB_CHUNK: usize = 4096;
+
+/// Held ops, stored by arrival in fixed-size chunks and found by id through an [`OpIdMap`] of
+/// positions: growing moves 36-byte index entries, never an op, and a log's ops sit in arrival
+/// order, near the ops they were delivered with.
 #[derive(Clone, Debug)]
 pub(crate) struct OpSlab<P> {
-    ops: Vec<Op<P>>,
+    chunks: Vec<Vec<Op<P>>>,
     index: OpIdMap<u32>,
+    len: usize,
 }
 
 impl<P> Default for OpSlab<P> {
     fn default() -> Self {
         Self {
-            ops: Vec::new(),
+            chunks: Vec::new(),
             index: OpIdMap::default(),
+            len: 0,
         }
     }
 }
@@ -97,7 +102,8 @@ impl<P> Default for OpSlab<P> {
 impl<P> OpSlab<P> {
     /// The op with id `id`, if held.
     pub(crate) fn get(&self, id: &OpId) -> Option<&Op<P>> {
-        self.index.get(id).map(|&i| &self.ops[i as usize])
+        let at = *self.index.get(id)? as usize;
+        Some(&self.chunks[at / SLAB_CHUNK][at % SLAB_CHUNK])
     }
 
     /// True if an op with id `id` is held.
@@ -108,15 +114,21 @@ impl<P> OpSlab<P> {
     /// Holds `op` (not held yet) under its id. A log holds at most
     /// [`crate::log::MAX_LOG_OPS`] ops, far below `u32::MAX`.
     pub(crate) fn insert(&mut self, id: OpId, op: Op<P>) {
-        let at = u32::try_from(self.ops.len()).expect("a log holds fewer than 2^32 ops");
+        let at = u32::try_from(self.len).expect("a log holds fewer than 2^32 ops");
         let previous = self.index.insert(id, at);
         assert!(previous.is_none(), "an op is held once");
-        self.ops.push(op);
+        if self.len.is_multiple_of(SLAB_CHUNK) {
+            self.chunks.push(Vec::with_capacity(SLAB_CHUNK));
+        }
+        if let Some(chunk) = self.chunks.last_mut() {
+            chunk.push(op);
+        }
+        self.len += 1;
     }
 
     /// Ops held.
     pub(crate) fn len(&self) -> usize {
-        self.ops.len()
+        self.len
     }
 }
 
