@@ -79,9 +79,9 @@ type OpIdMap<V> = std::collections::HashMap<OpId, V, OpIdHashing>;
 /// Ops per chunk of an [`OpSlab`].
 const SLAB_CHUNK: usize = 4096;
 
-/// Held ops, stored by arrival in fixed-size chunks and found by id through an [`OpIdMap`] of
-/// positions: growing moves 36-byte index entries, never an op, and a log's ops sit in arrival
-/// order, near the ops they were delivered with.
+/// Held ops, stored by arrival in chunks of [`SLAB_CHUNK`] and found by id through an
+/// [`OpIdMap`] of positions: past the first chunk, growing moves 36-byte index entries, never
+/// an op, and a log's ops sit in arrival order, near the ops they were delivered with.
 #[derive(Clone, Debug)]
 pub(crate) struct OpSlab<P> {
     chunks: Vec<Vec<Op<P>>>,
@@ -118,7 +118,10 @@ impl<P> OpSlab<P> {
         let previous = self.index.insert(id, at);
         assert!(previous.is_none(), "an op is held once");
         if self.len.is_multiple_of(SLAB_CHUNK) {
-            self.chunks.push(Vec::with_capacity(SLAB_CHUNK));
+            // The first chunk grows as ops come (a small log stays small); later ones are
+            // made whole, so no op moves once the log is past one chunk.
+            let capacity = if self.len == 0 { 0 } else { SLAB_CHUNK };
+            self.chunks.push(Vec::with_capacity(capacity));
         }
         if let Some(chunk) = self.chunks.last_mut() {
             chunk.push(op);
