@@ -211,6 +211,8 @@ pub(crate) struct Coupled {
     port: WavePort,
     /// The inbound sequence number last taken.
     seen: u64,
+    /// The last tick stalled: the port is put back at the tip on the next one.
+    paused: bool,
 }
 
 /// What the servo knows of one tick, for the shared tool.
@@ -242,10 +244,20 @@ pub(crate) fn step(link: &SharedToolLink, coupled: &mut Option<Coupled>, tick: T
         stalled,
     } = tick;
     let generation = link.generation.load(Ordering::Acquire);
-    if generation == 0 || stalled || !tip_metres.is_finite() {
+    if generation == 0 {
         // Once, when a coupling ends: off, the tick costs one atomic load.
         if coupled.take().is_some() {
             link.publish(DVec3::ZERO, None);
+        }
+        return DVec3::ZERO;
+    }
+    if stalled || !tip_metres.is_finite() {
+        // A stall pauses the coupling; it does not end it. A fresh port would start a fresh
+        // energy account, and could then take in again wave energy the other side reported
+        // before the stall, which the old port had already taken.
+        if let Some(c) = coupled.as_mut().filter(|c| c.generation == generation) {
+            c.paused = true;
+            link.publish(DVec3::ZERO, Some(&c.port));
         }
         return DVec3::ZERO;
     }
@@ -256,8 +268,13 @@ pub(crate) fn step(link: &SharedToolLink, coupled: &mut Option<Coupled>, tick: T
             port: WavePort::new(link.coupling(), tip_metres),
             // Packets from before this coupling are not this coupling's.
             seen: link.start_seq.load(Ordering::Relaxed),
+            paused: false,
         }),
     };
+    if c.paused {
+        c.port.reanchor(tip_metres);
+        c.paused = false;
+    }
     if let Some((seq, packet)) = link.inbound.load()
         && seq != c.seen
     {

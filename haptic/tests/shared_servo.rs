@@ -82,6 +82,9 @@ impl Wire {
 struct Run {
     /// The least energy the coupling had absorbed from both devices, joules.
     min_absorbed_joules: f64,
+    /// The most wave energy B had taken in beyond what A had sent, joules (never positive
+    /// when the link makes no energy).
+    max_b_in_over_a_out_joules: f64,
     /// Root mean square coupling force on B, newtons.
     rms_force_on_b: f64,
     /// How far B's tip moved along x, metres (A's circle lies in x and y).
@@ -89,6 +92,18 @@ struct Run {
 }
 
 fn run(delay_secs: f64, jitter_secs: f64, loss: f64, seed: u64) -> Run {
+    run_stalling(delay_secs, jitter_secs, loss, seed, None)
+}
+
+/// [`run`], with both servos stalling now and then (one tick of 20 ms, past the stall limit),
+/// as a loaded machine's servo threads do: A every `stall_every` ticks, B 50 ticks later.
+fn run_stalling(
+    delay_secs: f64,
+    jitter_secs: f64,
+    loss: f64,
+    seed: u64,
+    stall_every: Option<usize>,
+) -> Run {
     let caps = Capabilities::falcon();
     let hand_a = HandModel {
         stiffness_newtons_per_metre: 300.0,
@@ -119,6 +134,7 @@ fn run(delay_secs: f64, jitter_secs: f64, loss: f64, seed: u64) -> Run {
     let mut wires = [wire(), wire()];
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let (mut absorbed, mut min_absorbed) = (0.0f64, 0.0f64);
+    let mut max_excess = f64::NEG_INFINITY;
     let mut commanded = [DVec3::ZERO; 2];
     let (mut sum_sq_b, mut b_x) = (0.0, (f64::INFINITY, f64::NEG_INFINITY));
     let n_ticks = (SECONDS / DT) as usize;
@@ -130,8 +146,9 @@ fn run(delay_secs: f64, jitter_secs: f64, loss: f64, seed: u64) -> Run {
             }
         }
         let before = [servo_a.device().tip_metres(), servo_b.device().tip_metres()];
-        servo_a.step(DT);
-        servo_b.step(DT);
+        let stalls = |offset: usize| stall_every.is_some_and(|n| tick % n == (n - 1 + offset) % n);
+        servo_a.step(if stalls(0) { 0.02 } else { DT });
+        servo_b.step(if stalls(50) { 0.02 } else { DT });
         let after = [servo_a.device().tip_metres(), servo_b.device().tip_metres()];
         // A device moves during its sample under the force commanded the tick before, so
         // that force did this tick's work.
@@ -145,11 +162,14 @@ fn run(delay_secs: f64, jitter_secs: f64, loss: f64, seed: u64) -> Run {
             }
         }
         min_absorbed = min_absorbed.min(absorbed);
+        max_excess =
+            max_excess.max(link_b.shared.energy_in_joules() - link_a.shared.energy_out_joules());
         sum_sq_b += link_b.shared.force_newtons().length_squared();
         b_x = (b_x.0.min(after[1].x), b_x.1.max(after[1].x));
     }
     Run {
         min_absorbed_joules: min_absorbed,
+        max_b_in_over_a_out_joules: max_excess,
         rms_force_on_b: (sum_sq_b / n_ticks as f64).sqrt(),
         b_travel_x: b_x.1 - b_x.0,
     }
@@ -170,6 +190,19 @@ fn two_servos_share_a_tool_passively_at_0_50_and_200_ms() {
             assert!(r.rms_force_on_b > 0.05, "{delay} s, seed {seed}: {r:?}");
             assert!(r.b_travel_x > 0.002, "{delay} s, seed {seed}: {r:?}");
         }
+    }
+}
+
+#[test]
+fn a_stalling_servo_keeps_its_coupling_and_takes_in_no_more_than_was_sent() {
+    for seed in 1..=3 {
+        let r = run_stalling(0.05, 0.01, 0.05, seed, Some(300));
+        // A stall pauses that side: its energy account goes on, so over the whole run B never
+        // takes in more wave energy than A's account says she sent, and the devices get back
+        // no more than they put in.
+        assert!(r.max_b_in_over_a_out_joules <= 1e-9, "seed {seed}: {r:?}");
+        assert!(r.min_absorbed_joules > -1e-3, "seed {seed}: {r:?}");
+        assert!(r.rms_force_on_b > 0.05, "seed {seed}: {r:?}");
     }
 }
 

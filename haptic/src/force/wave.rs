@@ -145,6 +145,14 @@ impl WavePort {
         self.port
     }
 
+    /// Puts the port back at the device's tip `at` (after a pause, so the spring does not
+    /// snap), keeping the energy accounts: moving the port takes the spring's stored energy
+    /// away, never adds any, and what may still be taken in from the link stays what the other
+    /// side has sent less what was taken.
+    pub fn reanchor(&mut self, at: DVec3) {
+        self.port = at;
+    }
+
     /// Wave energy taken in from the link so far, joules.
     pub fn energy_in_joules(&self) -> f64 {
         self.energy_in_joules
