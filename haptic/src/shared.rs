@@ -99,11 +99,18 @@ pub struct SharedToolLink {
     /// The inbound sequence number when the coupling started: packets up to it belong to an
     /// earlier coupling.
     start_seq: AtomicU64,
+    /// The other side's energy account in the last packet up to `start_seq`, joules, as bits:
+    /// the new coupling takes in only what the other side sends beyond it.
+    start_peer_sent_bits: AtomicU64,
     /// Wave energy in and out of this side so far, joules, and the coupling force, newtons
     /// (device frame), as bits: written by the servo.
     energy_in_bits: AtomicU64,
     energy_out_bits: AtomicU64,
     force_bits: [AtomicU64; 3],
+    /// What the ports of ended couplings took in and sent, joules, as bits (servo only): each
+    /// side's account runs on across couplings, so the other side never counts energy twice.
+    ended_in_bits: AtomicU64,
+    ended_out_bits: AtomicU64,
 }
 
 impl SharedToolLink {
@@ -125,8 +132,20 @@ impl SharedToolLink {
         {
             word.store(value.to_bits(), Ordering::Relaxed);
         }
-        self.start_seq
-            .store(self.inbound.seq.load(Ordering::Acquire), Ordering::Relaxed);
+        // The latest packet and its number, read whole: a packet being written is waited
+        // for (one writer, a few stores; this is the app's thread, not the servo's).
+        let (seq, peer_sent) = loop {
+            if let Some((seq, p)) = self.inbound.load() {
+                break (seq, p.energy_sent_joules);
+            }
+            if self.inbound.seq.load(Ordering::Acquire) == 0 {
+                break (0, 0.0);
+            }
+            std::hint::spin_loop();
+        };
+        self.start_seq.store(seq, Ordering::Relaxed);
+        self.start_peer_sent_bits
+            .store(peer_sent.to_bits(), Ordering::Relaxed);
         let generation = self.generations.fetch_add(1, Ordering::Relaxed) + 1;
         self.generation.store(generation, Ordering::Release);
     }
@@ -159,12 +178,12 @@ impl SharedToolLink {
         (self.taken.swap(seq, Ordering::Relaxed) != seq).then_some(packet)
     }
 
-    /// Wave energy this side has taken in from the link, joules.
+    /// Wave energy this side has taken in from the link, joules, over every coupling.
     pub fn energy_in_joules(&self) -> f64 {
         f64::from_bits(self.energy_in_bits.load(Ordering::Relaxed))
     }
 
-    /// Wave energy this side has sent into the link, joules.
+    /// Wave energy this side has sent into the link, joules, over every coupling.
     pub fn energy_out_joules(&self) -> f64 {
         f64::from_bits(self.energy_out_bits.load(Ordering::Relaxed))
     }
@@ -194,13 +213,35 @@ impl SharedToolLink {
         for (bits, value) in self.force_bits.iter().zip(force.to_array()) {
             bits.store(value.to_bits(), Ordering::Relaxed);
         }
+        let (ended_in, ended_out) = self.ended();
         let (energy_in, energy_out) = port.map_or((0.0, 0.0), |p| {
             (p.energy_in_joules(), p.energy_out_joules())
         });
         self.energy_in_bits
-            .store(energy_in.to_bits(), Ordering::Relaxed);
+            .store((ended_in + energy_in).to_bits(), Ordering::Relaxed);
         self.energy_out_bits
-            .store(energy_out.to_bits(), Ordering::Relaxed);
+            .store((ended_out + energy_out).to_bits(), Ordering::Relaxed);
+    }
+
+    /// What the ports of ended couplings took in and sent, joules.
+    fn ended(&self) -> (f64, f64) {
+        (
+            f64::from_bits(self.ended_in_bits.load(Ordering::Relaxed)),
+            f64::from_bits(self.ended_out_bits.load(Ordering::Relaxed)),
+        )
+    }
+
+    /// Adds an ending coupling's port to the ended accounts (the servo thread only).
+    fn end(&self, port: &WavePort) {
+        let (ended_in, ended_out) = self.ended();
+        self.ended_in_bits.store(
+            (ended_in + port.energy_in_joules()).to_bits(),
+            Ordering::Relaxed,
+        );
+        self.ended_out_bits.store(
+            (ended_out + port.energy_out_joules()).to_bits(),
+            Ordering::Relaxed,
+        );
     }
 }
 
@@ -246,7 +287,8 @@ pub(crate) fn step(link: &SharedToolLink, coupled: &mut Option<Coupled>, tick: T
     let generation = link.generation.load(Ordering::Acquire);
     if generation == 0 {
         // Once, when a coupling ends: off, the tick costs one atomic load.
-        if coupled.take().is_some() {
+        if let Some(ended) = coupled.take() {
+            link.end(&ended.port);
             link.publish(DVec3::ZERO, None);
         }
         return DVec3::ZERO;
@@ -263,13 +305,22 @@ pub(crate) fn step(link: &SharedToolLink, coupled: &mut Option<Coupled>, tick: T
     }
     let c = match coupled {
         Some(c) if c.generation == generation => c,
-        _ => coupled.insert(Coupled {
-            generation,
-            port: WavePort::new(link.coupling(), tip_metres),
-            // Packets from before this coupling are not this coupling's.
-            seen: link.start_seq.load(Ordering::Relaxed),
-            paused: false,
-        }),
+        _ => {
+            if let Some(ended) = coupled.take() {
+                link.end(&ended.port);
+            }
+            // The other side's account as last heard before this coupling: this port takes in
+            // only what it sends beyond that (an earlier port may have taken the rest).
+            let peer_baseline = f64::from_bits(link.start_peer_sent_bits.load(Ordering::Relaxed));
+            let (_, sent_before) = link.ended();
+            coupled.insert(Coupled {
+                generation,
+                port: WavePort::continuing(link.coupling(), tip_metres, sent_before, peer_baseline),
+                // Packets from before this coupling are not this coupling's.
+                seen: link.start_seq.load(Ordering::Relaxed),
+                paused: false,
+            })
+        }
     };
     if c.paused {
         c.port.reanchor(tip_metres);

@@ -92,18 +92,21 @@ struct Run {
 }
 
 fn run(delay_secs: f64, jitter_secs: f64, loss: f64, seed: u64) -> Run {
-    run_stalling(delay_secs, jitter_secs, loss, seed, None)
+    run_troubled(delay_secs, jitter_secs, loss, seed, Trouble::default())
 }
 
-/// [`run`], with both servos stalling now and then (one tick of 20 ms, past the stall limit),
-/// as a loaded machine's servo threads do: A every `stall_every` ticks, B 50 ticks later.
-fn run_stalling(
-    delay_secs: f64,
-    jitter_secs: f64,
-    loss: f64,
-    seed: u64,
+/// What goes wrong now and then during a run, on both sides: A at every `n`th tick, B 50
+/// ticks later.
+#[derive(Clone, Copy, Debug, Default)]
+struct Trouble {
+    /// The servo stalls (one tick of 20 ms, past the stall limit), as a loaded machine's
+    /// servo thread does.
     stall_every: Option<usize>,
-) -> Run {
+    /// The app starts the coupling afresh, as when a partner lets go and takes hold again.
+    restart_every: Option<usize>,
+}
+
+fn run_troubled(delay_secs: f64, jitter_secs: f64, loss: f64, seed: u64, trouble: Trouble) -> Run {
     let caps = Capabilities::falcon();
     let hand_a = HandModel {
         stiffness_newtons_per_metre: 300.0,
@@ -146,7 +149,15 @@ fn run_stalling(
             }
         }
         let before = [servo_a.device().tip_metres(), servo_b.device().tip_metres()];
-        let stalls = |offset: usize| stall_every.is_some_and(|n| tick % n == (n - 1 + offset) % n);
+        let now = |every: Option<usize>, offset: usize| {
+            every.is_some_and(|n| tick % n == (n - 1 + offset) % n)
+        };
+        for (offset, link) in [(0, &link_a), (50, &link_b)] {
+            if now(trouble.restart_every, offset) {
+                link.shared.start(DEFAULT_COUPLING);
+            }
+        }
+        let stalls = |offset| now(trouble.stall_every, offset);
         servo_a.step(if stalls(0) { 0.02 } else { DT });
         servo_b.step(if stalls(50) { 0.02 } else { DT });
         let after = [servo_a.device().tip_metres(), servo_b.device().tip_metres()];
@@ -196,10 +207,31 @@ fn two_servos_share_a_tool_passively_at_0_50_and_200_ms() {
 #[test]
 fn a_stalling_servo_keeps_its_coupling_and_takes_in_no_more_than_was_sent() {
     for seed in 1..=3 {
-        let r = run_stalling(0.05, 0.01, 0.05, seed, Some(300));
+        let trouble = Trouble {
+            stall_every: Some(300),
+            ..Trouble::default()
+        };
+        let r = run_troubled(0.05, 0.01, 0.05, seed, trouble);
         // A stall pauses that side: its energy account goes on, so over the whole run B never
         // takes in more wave energy than A's account says she sent, and the devices get back
         // no more than they put in.
+        assert!(r.max_b_in_over_a_out_joules <= 1e-9, "seed {seed}: {r:?}");
+        assert!(r.min_absorbed_joules > -1e-3, "seed {seed}: {r:?}");
+        assert!(r.rms_force_on_b > 0.05, "seed {seed}: {r:?}");
+    }
+}
+
+#[test]
+fn couplings_started_afresh_take_in_no_more_than_was_sent_over_all_of_them() {
+    for seed in 1..=3 {
+        let trouble = Trouble {
+            restart_every: Some(700),
+            ..Trouble::default()
+        };
+        let r = run_troubled(0.05, 0.01, 0.05, seed, trouble);
+        // Each side's account runs on across its couplings, and a new coupling takes in only
+        // what the other side sends after it began: over the whole run B never takes in more
+        // than A sent, and the devices get back no more than they put in.
         assert!(r.max_b_in_over_a_out_joules <= 1e-9, "seed {seed}: {r:?}");
         assert!(r.min_absorbed_joules > -1e-3, "seed {seed}: {r:?}");
         assert!(r.rms_force_on_b > 0.05, "seed {seed}: {r:?}");

@@ -60,6 +60,12 @@ pub struct WavePort {
     wave_in_t_secs: f64,
     /// What the other side says it has sent, joules.
     peer_energy_sent_joules: f64,
+    /// What the other side had said it sent before this port began, joules: energy an earlier
+    /// port of this side may already have taken in.
+    peer_baseline_joules: f64,
+    /// What this side's earlier ports sent, joules: added to this port's account on the
+    /// wire, so the other side sees one account that only grows.
+    sent_before_joules: f64,
     /// Wave energy taken in from the link so far, joules.
     energy_in_joules: f64,
     /// Wave energy sent into the link so far, joules.
@@ -69,12 +75,31 @@ pub struct WavePort {
 impl WavePort {
     /// A side at rest with its port at the device's tip `at`.
     pub fn new(coupling: WaveCoupling, at: DVec3) -> WavePort {
+        WavePort::continuing(coupling, at, 0.0, 0.0)
+    }
+
+    /// A side at rest at `at` that follows earlier ports of the same side: they sent
+    /// `sent_before_joules` in all, and the other side had said it sent
+    /// `peer_baseline_joules` when this one began. Packets carry this side's whole account,
+    /// and this port takes in only what the other side sends beyond the baseline, so a side
+    /// that restarts its port can neither take in twice what was sent once, nor make the
+    /// other side's account look smaller.
+    pub fn continuing(
+        coupling: WaveCoupling,
+        at: DVec3,
+        sent_before_joules: f64,
+        peer_baseline_joules: f64,
+    ) -> WavePort {
+        let finite_or_zero = |v: f64| if v.is_finite() { v.max(0.0) } else { 0.0 };
+        let baseline = finite_or_zero(peer_baseline_joules);
         WavePort {
             coupling,
             port: at,
             wave_in: DVec3::ZERO,
             wave_in_t_secs: f64::NEG_INFINITY,
-            peer_energy_sent_joules: 0.0,
+            peer_energy_sent_joules: baseline,
+            peer_baseline_joules: baseline,
+            sent_before_joules: finite_or_zero(sent_before_joules),
             energy_in_joules: 0.0,
             energy_out_joules: 0.0,
         }
@@ -116,7 +141,9 @@ impl WavePort {
         // side has sent (jitter, reordering and loss cannot make energy).
         let mut v = self.wave_in;
         let wanted = 0.5 * v.length_squared() * dt_secs;
-        let allowed = (self.peer_energy_sent_joules - self.energy_in_joules).max(0.0);
+        let allowed =
+            (self.peer_energy_sent_joules - self.peer_baseline_joules - self.energy_in_joules)
+                .max(0.0);
         if wanted > allowed {
             v *= if wanted > 0.0 {
                 (allowed / wanted).sqrt()
@@ -135,7 +162,7 @@ impl WavePort {
         let packet = WavePacket {
             t_secs,
             wave: u,
-            energy_sent_joules: self.energy_out_joules,
+            energy_sent_joules: self.sent_before_joules + self.energy_out_joules,
         };
         (-force_on_link, packet)
     }
