@@ -535,24 +535,20 @@ impl<P: Payload> Log<P> {
     fn missing(&self, op: &Op<P>, now: Timestamp) -> BTreeSet<DepKey> {
         let seq_ready = op.seq() == 1 || self.vv.get(&op.author()) >= op.seq() - 1;
         let on_time = op.timestamp() <= now.saturating_add_micros(MAX_CLOCK_SKEW_MICROS);
-        if seq_ready && on_time && op.deps().iter().all(|d| self.contains(d)) {
-            // The common case, without building a set.
-            return BTreeSet::new();
-        }
         let mut missing: BTreeSet<DepKey> = op
             .deps()
             .iter()
             .filter(|d| !self.contains(d))
             .map(|d| DepKey::Op(*d))
             .collect();
-        if op.seq() > 1 && self.vv.get(&op.author()) < op.seq() - 1 {
+        if !seq_ready {
             missing.insert(DepKey::Seq(op.author(), op.seq() - 1));
         }
         // Ops from this peer's store are not held back (an insertion from `LOCAL_ORIGIN` drops
         // this key): the store has them because they were delivered before. One stored before
         // this bound existed cannot pin the clock (`HybridClock::observe` is bounded) nor make
         // a local op precede it (`Log::author_deps` leaves it out until the clock passes it).
-        if op.timestamp() > now.saturating_add_micros(MAX_CLOCK_SKEW_MICROS) {
+        if !on_time {
             missing.insert(DepKey::Clock(Timestamp(
                 op.timestamp().0 - MAX_CLOCK_SKEW_MICROS,
             )));
