@@ -192,6 +192,30 @@ impl Refold {
     }
 }
 
+/// Insertions drained together, not folded yet: their delivered ops in order and their
+/// refolds merged ([`Refold::merge`]), so a driver folds each object once per step.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Drained {
+    /// The delivered ops of every insertion added that changed the log, in order.
+    pub delivered: Vec<OpId>,
+    /// Their merged refold; `None` while nothing changed.
+    pub refold: Option<Refold>,
+}
+
+impl Drained {
+    /// Adds the next insertion (one that changed nothing adds nothing).
+    pub fn add(&mut self, insertion: &Insertion) {
+        let Some(refold) = &insertion.refold else {
+            return;
+        };
+        self.delivered.extend_from_slice(&insertion.delivered);
+        match &mut self.refold {
+            Some(merged) => merged.merge(refold),
+            None => self.refold = Some(refold.clone()),
+        }
+    }
+}
+
 /// What a refold carries to judge ops against the leases they saw, taken out of the log for
 /// its duration.
 struct LeaseCx {

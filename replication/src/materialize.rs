@@ -12,7 +12,7 @@ use std::marker::PhantomData;
 
 use crate::codec::DecodeError;
 use crate::lease::{FoldState, Mark};
-use crate::log::{Insertion, Log, OrderKey, Refold};
+use crate::log::{Drained, Insertion, Log, OrderKey, Refold};
 use crate::op::{Op, OpId};
 use crate::payload::{Effect, ObjectId, Payload};
 
@@ -192,28 +192,20 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
     }
 
     /// Brings the scene up to date with several insertions drained together, all of them
-    /// already in `log`: their refolds merged ([`Refold::merge`]) and folded once. Applying
-    /// them one by one would refold from scratch every object an earlier one already folded
-    /// past a later one's first change.
+    /// already in `log`: their refolds merged ([`Drained`]) and folded once. Applying them one
+    /// by one would refold from scratch every object an earlier one already folded past a
+    /// later one's first change.
     pub fn apply_insertions<'a>(
         &mut self,
         log: &Log<P>,
         insertions: impl IntoIterator<Item = &'a Insertion>,
     ) {
-        let mut delivered = Vec::new();
-        let mut merged: Option<Refold> = None;
+        let mut drained = Drained::default();
         for insertion in insertions {
-            let Some(refold) = &insertion.refold else {
-                continue;
-            };
-            delivered.extend_from_slice(&insertion.delivered);
-            match &mut merged {
-                Some(merged) => merged.merge(refold),
-                None => merged = Some(refold.clone()),
-            }
+            drained.add(insertion);
         }
-        if let Some(refold) = merged {
-            self.apply_refold(log, &delivered, &refold);
+        if let Some(refold) = &drained.refold {
+            self.apply_refold(log, &drained.delivered, refold);
         }
     }
 

@@ -11,7 +11,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use fdsl::object::{ColorDef, Field, Shape};
 use fdsl::scene::{ObjectId, Scene};
-use replication::log::{Insertion, Refold};
+use replication::log::{Drained, Insertion, Refold};
 use replication::materialize::Materialized;
 use replication::net::node::Observer;
 use replication::shape::{ShapePayload, ShapeScene};
@@ -486,8 +486,8 @@ pub fn lock(view: &SharedView) -> MutexGuard<'_, View> {
 /// and folded once when the step settles.
 pub struct Folder {
     pub(super) view: SharedView,
-    /// The step's delivered ops and merged refold, not folded yet.
-    pub(super) pending: Option<(Vec<OpId>, Refold)>,
+    /// The step's insertions, not folded yet.
+    pub(super) pending: Drained,
 }
 
 impl Folder {
@@ -495,28 +495,21 @@ impl Folder {
     pub fn new(view: SharedView) -> Folder {
         Folder {
             view,
-            pending: None,
+            pending: Drained::default(),
         }
     }
 }
 
 impl Observer<ShapePayload> for Folder {
     fn inserted(&mut self, _log: &Log<ShapePayload>, insertion: &Insertion) {
-        let Some(refold) = &insertion.refold else {
-            return;
-        };
-        let Some((delivered, merged)) = &mut self.pending else {
-            self.pending = Some((insertion.delivered.clone(), refold.clone()));
-            return;
-        };
-        delivered.extend_from_slice(&insertion.delivered);
-        merged.merge(refold);
+        self.pending.add(insertion);
     }
 
     fn settled(&mut self, peer: &Peer<ShapePayload>, changed: bool) {
         let mut view = lock(&self.view);
-        if let Some((delivered, refold)) = self.pending.take() {
-            view.apply_refold(peer.log(), &delivered, &refold);
+        let drained = std::mem::take(&mut self.pending);
+        if let Some(refold) = &drained.refold {
+            view.apply_refold(peer.log(), &drained.delivered, refold);
         }
         if changed {
             view.refresh(peer.log());
