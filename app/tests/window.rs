@@ -285,6 +285,19 @@ fn object_geometry(state: &Value) -> String {
         .to_string()
 }
 
+/// The numbers of the array `value` (a state dump's vector), or a panic naming `what`.
+fn numbers(value: &Value, what: &str) -> Vec<f64> {
+    value
+        .as_array()
+        .unwrap_or_else(|| panic!("{what}: no array in {value}"))
+        .iter()
+        .map(|v| {
+            v.as_f64()
+                .unwrap_or_else(|| panic!("{what}: {v} is not a number"))
+        })
+        .collect()
+}
+
 #[test]
 fn the_window_shows_the_watermelon_and_an_edit_survives_a_restart() {
     let display = display();
@@ -533,30 +546,15 @@ fn touching_with_the_mouse_runs_the_servo_on_the_scene_and_the_rind_pushes_back(
     // under a loaded test run), and the rind pushes the tool back up, out of the melon, with
     // a Falcon-class device's force.
     assert!(touch["n_ticks"].as_u64().unwrap() > 200, "{touch}");
-    let force: Vec<f64> = touch["force"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let force = numbers(&touch["force"], "force");
     assert!(force[1] > 1.0 && force[1] <= 8.0, "{touch}");
     assert!(run.stdout.contains("scripted touch: on"), "{}", run.stdout);
     // Other peers are shown the tool where it is: the scene's point in the renderer's world
     // (+z up: the scene's y is the renderer's z).
-    let tool: Vec<f64> = run.state["my_tool"]
-        .as_array()
-        .unwrap_or_else(|| panic!("no tool published: {}", run.state))
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let tool = numbers(&run.state["my_tool"], "the tool published");
     assert!((tool[2] - y).abs() < 0.05, "{tool:?} against {y}");
     // With the probe's body, which other peers' servos feel there.
-    let body: Vec<f64> = run.state["my_tool_body"]
-        .as_array()
-        .unwrap_or_else(|| panic!("no tool body published: {}", run.state))
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let body = numbers(&run.state["my_tool_body"], "the tool body published");
     assert_eq!(body.len(), 4);
     for (got, want) in body.iter().zip([0.1, 0.8, 0.0, 1.0]) {
         assert!((got - want).abs() < 1e-6, "{body:?}");
@@ -583,12 +581,7 @@ fn the_sampling_sphere_takes_the_colour_of_the_density_under_it_in_the_mri_demo(
         assert!(head["n_triangles"].as_u64().unwrap() > 1000, "{head}");
         let touch = &state["touch"];
         let density = touch["sampled_density"].as_f64();
-        let colour: Vec<f64> = touch["sampling_colour"]
-            .as_array()
-            .unwrap_or_else(|| panic!("{stdout}\n{state}"))
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
+        let colour = numbers(&touch["sampling_colour"], &format!("{stdout}\n{state}"));
         seen.push((density, colour));
     }
     let (brain, tumour) = (&seen[0], &seen[1]);
@@ -698,12 +691,7 @@ fn a_3d_mouse_moves_the_touch_tool_and_without_one_the_window_says_what_to_do() 
         Some("3D mouse connected: push the cap to move the tool"),
         "{touch}"
     );
-    let hip: Vec<f64> = touch["hip"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let hip = numbers(&touch["hip"], "hip");
     assert!(
         hip[0] > -0.5 && hip[1] < 0.5,
         "the tool did not move: {touch}"
