@@ -30,7 +30,10 @@ pub const MAX_OP_BYTES: usize = 1
 const SIGNING_CONTEXT: &[u8] = b"sculpt/op/v1";
 
 /// An op's id: the blake3 hash of its canonical encoding (signature included).
-#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+///
+/// Transparent over its bytes, so an op's dependencies are read in place from its encoding.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, bytemuck::TransparentWrapper)]
+#[repr(transparent)]
 pub struct OpId(pub [u8; OP_ID_BYTES]);
 
 /// Byte-wise order (see [`crate::identity`]'s fast comparison).
@@ -157,9 +160,14 @@ impl std::hash::Hasher for OpIdHasher {
 
     fn write(&mut self, bytes: &[u8]) {
         // An id hashes as its length, then its 32 bytes (the slice's `Hash`).
-        let mut head = [0; 8];
-        let n = bytes.len().min(8);
-        head[..n].copy_from_slice(&bytes[..n]);
+        let head = match bytes.first_chunk::<8>() {
+            Some(head) => *head,
+            None => {
+                let mut head = [0; 8];
+                head[..bytes.len()].copy_from_slice(bytes);
+                head
+            }
+        };
         self.0 = self.0.rotate_left(5) ^ u64::from_le_bytes(head);
     }
 
@@ -200,13 +208,43 @@ pub enum BuildError {
 }
 
 /// A signed op. Immutable: its id and encoding are computed once, when built or decoded.
+///
+/// A log holds every op of the session, so an op keeps each part once: its dependencies and
+/// signature are read from the encoding in place, not copied beside it.
 #[derive(Clone, PartialEq, Eq)]
 pub struct Op<P> {
     author: PeerId,
-    fields: OpFields<P>,
-    signature: Signature,
+    seq: u64,
+    lamport: u64,
+    timestamp: Timestamp,
+    payload: P,
     id: OpId,
-    encoded: Vec<u8>,
+    encoded: Box<[u8]>,
+    deps: DepsAt,
+}
+
+/// Where an op's dependencies lie in its encoding: `n` ids from byte `at`. Dependencies start
+/// after the version, author and four varints, so `at` is below 100.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct DepsAt {
+    at: u8,
+    n: u8,
+}
+
+impl DepsAt {
+    fn new(at: usize, n: usize) -> Self {
+        Self {
+            at: u8::try_from(at).expect("dependencies start within the op's first 100 bytes"),
+            n: u8::try_from(n).expect("an op names at most MAX_DEPS dependencies"),
+        }
+    }
+
+    /// The dependencies in `encoded`.
+    fn of(self, encoded: &[u8]) -> &[OpId] {
+        let start = usize::from(self.at);
+        let bytes = &encoded[start..start + usize::from(self.n) * OP_ID_BYTES];
+        <OpId as bytemuck::TransparentWrapper<_>>::wrap_slice(bytes.as_chunks::<OP_ID_BYTES>().0)
+    }
 }
 
 /// An op whose signature has been checked, or that this peer signed itself. Only these
@@ -255,7 +293,7 @@ impl<P: Payload> Op<P> {
         }
         let author = keypair.peer_id();
         let mut encoded = Vec::new();
-        encode_body(&mut encoded, &author, &fields)?;
+        let deps = encode_body(&mut encoded, &author, &fields)?;
         let signature = keypair.sign(&signing_message(&encoded));
         encoded.extend_from_slice(&signature.0);
         assert!(
@@ -265,10 +303,13 @@ impl<P: Payload> Op<P> {
         let id = OpId(*blake3::hash(&encoded).as_bytes());
         Ok(Self {
             author,
-            fields,
-            signature,
+            seq: fields.seq,
+            lamport: fields.lamport,
+            timestamp: fields.timestamp,
+            payload: fields.payload,
             id,
-            encoded,
+            encoded: encoded.into_boxed_slice(),
+            deps,
         })
     }
 
@@ -289,7 +330,7 @@ impl<P: Payload> Op<P> {
     /// Checks the author's signature over the op's body.
     pub fn verify(&self) -> Result<(), VerifyError> {
         self.author
-            .verify(&signing_message(self.body()), &self.signature)
+            .verify(&signing_message(self.body()), &self.signature())
     }
 
     /// The signed part of the encoding.
@@ -302,7 +343,7 @@ impl<P: Payload> Op<P> {
     pub fn first_unsigned(ops: &[Self]) -> Option<usize> {
         let bodies: Vec<(PeerId, &[u8], Signature)> = ops
             .iter()
-            .map(|op| (op.author, op.body(), op.signature))
+            .map(|op| (op.author, op.body(), op.signature()))
             .collect();
         if all_signed(&bodies) {
             None
@@ -340,7 +381,7 @@ pub struct Envelope<'a> {
     seq: u64,
     lamport: u64,
     timestamp: Timestamp,
-    deps: Vec<OpId>,
+    deps: DepsAt,
     /// Where the payload's length prefix starts, and the payload itself.
     payload_offset: usize,
     payload_start: usize,
@@ -376,7 +417,7 @@ impl<'a> Envelope<'a> {
             });
         }
         let timestamp = Timestamp(r.varint()?);
-        let deps = decode_deps(&mut r)?;
+        let deps = check_deps(&mut r)?;
         let payload_offset = r.offset();
         let payload_bytes = r.bytes("payload length", MAX_PAYLOAD_BYTES as u64)?;
         let payload_start = r.offset() - payload_bytes.len();
@@ -405,6 +446,11 @@ impl<'a> Envelope<'a> {
     /// The claimed author.
     pub fn author(&self) -> PeerId {
         self.author
+    }
+
+    /// The op's dependencies, sorted.
+    pub fn deps(&self) -> &'a [OpId] {
+        self.deps.of(self.bytes)
     }
 
     /// Checks the author's signature over the body.
@@ -459,16 +505,13 @@ impl<'a> Envelope<'a> {
         }
         Ok(Op {
             author: self.author,
-            fields: OpFields {
-                seq: self.seq,
-                lamport: self.lamport,
-                timestamp: self.timestamp,
-                deps: self.deps,
-                payload,
-            },
-            signature: self.signature,
+            seq: self.seq,
+            lamport: self.lamport,
+            timestamp: self.timestamp,
+            payload,
             id: self.id,
-            encoded: self.bytes.to_vec(),
+            encoded: self.bytes.into(),
+            deps: self.deps,
         })
     }
 }
@@ -484,27 +527,32 @@ impl<P> Op<P> {
     }
     /// Per-author sequence number.
     pub fn seq(&self) -> u64 {
-        self.fields.seq
+        self.seq
     }
     /// Lamport time.
     pub fn lamport(&self) -> u64 {
-        self.fields.lamport
+        self.lamport
     }
     /// Hybrid wall-clock timestamp.
     pub fn timestamp(&self) -> Timestamp {
-        self.fields.timestamp
+        self.timestamp
     }
     /// Causal dependencies, sorted.
     pub fn deps(&self) -> &[OpId] {
-        &self.fields.deps
+        self.deps.of(&self.encoded)
     }
     /// The payload.
     pub fn payload(&self) -> &P {
-        &self.fields.payload
+        &self.payload
     }
-    /// The signature.
+    /// The signature (the encoding's last bytes).
     pub fn signature(&self) -> Signature {
-        self.signature
+        Signature(
+            *self
+                .encoded
+                .last_chunk()
+                .expect("an op's encoding ends with its signature"),
+        )
     }
     /// The canonical encoding (what is sent, stored and hashed).
     pub fn encoded(&self) -> &[u8] {
@@ -517,26 +565,28 @@ impl<P: fmt::Debug> fmt::Debug for Op<P> {
         f.debug_struct("Op")
             .field("id", &self.id)
             .field("author", &self.author)
-            .field("seq", &self.fields.seq)
-            .field("lamport", &self.fields.lamport)
-            .field("timestamp", &self.fields.timestamp)
-            .field("deps", &self.fields.deps)
-            .field("payload", &self.fields.payload)
+            .field("seq", &self.seq)
+            .field("lamport", &self.lamport)
+            .field("timestamp", &self.timestamp)
+            .field("deps", &self.deps())
+            .field("payload", &self.payload)
             .finish()
     }
 }
 
+/// Appends the op's body (everything but the signature); returns where its deps lie.
 fn encode_body<P: Payload>(
     out: &mut Vec<u8>,
     author: &PeerId,
     fields: &OpFields<P>,
-) -> Result<(), BuildError> {
+) -> Result<DepsAt, BuildError> {
     out.push(OP_FORMAT_VERSION);
     out.extend_from_slice(&author.0);
     put_varint(out, fields.seq);
     put_varint(out, fields.lamport);
     put_varint(out, fields.timestamp.0);
     put_varint(out, fields.deps.len() as u64);
+    let deps = DepsAt::new(out.len(), fields.deps.len());
     for dep in &fields.deps {
         out.extend_from_slice(&dep.0);
     }
@@ -551,22 +601,24 @@ fn encode_body<P: Payload>(
     }
     put_varint(out, payload.len() as u64);
     out.extend_from_slice(&payload);
-    Ok(())
+    Ok(deps)
 }
 
-fn decode_deps(r: &mut Reader<'_>) -> Result<Vec<OpId>, DecodeError> {
+/// Reads past the dependencies, checking they are sorted and distinct; returns where they lie.
+fn check_deps(r: &mut Reader<'_>) -> Result<DepsAt, DecodeError> {
     let n_deps = r.bounded("dependency count", MAX_DEPS as u64)?;
-    let mut deps: Vec<OpId> = Vec::with_capacity(n_deps);
+    let deps = DepsAt::new(r.offset(), n_deps);
+    let mut last: Option<OpId> = None;
     for _ in 0..n_deps {
         let offset = r.offset();
         let dep = OpId(r.array()?);
-        if deps.last().is_some_and(|last| *last >= dep) {
+        if last.is_some_and(|last| last >= dep) {
             return Err(DecodeError::Invalid {
                 offset,
                 what: "unsorted or repeated dependency",
             });
         }
-        deps.push(dep);
+        last = Some(dep);
     }
     Ok(deps)
 }
