@@ -132,9 +132,9 @@ fn run(root: &Path, secs: u64) -> anyhow::Result<()> {
         let tension = 0.2 + 0.6 * (rng.next_u64() % 1000) as f64 / 1000.0;
         let payload = ShapePayload::Set {
             object,
-            field: fdsl::object::Field::Tension(Some(Property::new(
+            field: Box::new(fdsl::object::Field::Tension(Some(Property::new(
                 Formula::new(format!("{tension:.3}")).context("a tension")?,
-            ))),
+            )))),
         };
         a.author(payload)?
             .wait()

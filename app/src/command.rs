@@ -222,7 +222,7 @@ pub fn plan(
             };
             let payload = ShapePayload::Set {
                 object: id,
-                field: Field::Geometry(Some(geometry)),
+                field: Box::new(Field::Geometry(Some(geometry))),
             };
             payload.validate().map_err(|e| format!("shape: {e}"))?;
             let summary = format!("set the shape of {}", session.object_label(id));
@@ -233,7 +233,7 @@ pub fn plan(
             let current = object.data().appearance.diffuse.as_ref();
             let payload = ShapePayload::Set {
                 object: id,
-                field: Field::Diffuse(Some(colour_def(text, current)?)),
+                field: Box::new(Field::Diffuse(Some(colour_def(text, current)?))),
             };
             payload.validate().map_err(|e| format!("colour: {e}"))?;
             let summary = format!("set the colour of {}", session.object_label(id));
@@ -290,7 +290,7 @@ pub fn plan(
             };
             let payload = ShapePayload::Set {
                 object: id,
-                field: kind.field(formula),
+                field: Box::new(kind.field(formula)),
             };
             payload.validate().map_err(|e| format!("{what}: {e}"))?;
             let summary = format!("set the {what} of {}", session.object_label(id));
@@ -300,7 +300,7 @@ pub fn plan(
             let (id, _) = selected_object()?;
             let payload = ShapePayload::Set {
                 object: id,
-                field: Field::Name(text.to_string()),
+                field: Box::new(Field::Name(text.to_string())),
             };
             payload.validate().map_err(|e| format!("name: {e}"))?;
             Ok(planned(
@@ -519,10 +519,10 @@ mod tests {
     fn colours_take_numbers_formulas_or_a_scalar_through_the_map() {
         let (s, id) = session();
         let colour = |text| match plan(Command::Colour(text), &s, Some(id)).unwrap().payload {
-            ShapePayload::Set {
-                field: Field::Diffuse(Some(def)),
-                ..
-            } => def,
+            ShapePayload::Set { field, .. } => match *field {
+                Field::Diffuse(Some(def)) => def,
+                other => panic!("{other:?}"),
+            },
             other => panic!("{other:?}"),
         };
         assert_eq!(colour("0.2, 0.4, 1"), ColorDef::Constant([0.2, 0.4, 1.0]));

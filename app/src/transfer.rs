@@ -349,7 +349,7 @@ fn group_payloads(
         let made = format!("group {new} \"{}\"", value.name);
         let payload = ShapePayload::SetGroup {
             group: new,
-            value: Some(value),
+            value: Some(Box::new(value)),
         };
         let ops = payload_ops(path, &what, payload, None)?;
         push_ops(imported, ops, made);

@@ -438,7 +438,9 @@ mod live {
         // A slackens the ball's surface: B's hand sinks deeper and is pushed less.
         let tension = ShapePayload::Set {
             object,
-            field: Field::Tension(Some(Property::new(Formula::new("0.2").unwrap()))),
+            field: Box::new(Field::Tension(Some(Property::new(
+                Formula::new("0.2").unwrap(),
+            )))),
         };
         let taken = stats.snapshot().n_scenes_taken;
         let (slack_latency, before, after) = edit_and_feel(&a, tension, &arrivals, &stats, |s| {

@@ -181,7 +181,9 @@ fn create(object: u64, formula: &str) -> ShapePayload {
 fn set_geometry(object: u64, formula: &str) -> ShapePayload {
     ShapePayload::Set {
         object,
-        field: Field::Geometry(Some(Geometry::implicit(formula_of(formula)))),
+        field: Box::new(Field::Geometry(Some(Geometry::implicit(formula_of(
+            formula,
+        ))))),
     }
 }
 

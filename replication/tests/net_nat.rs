@@ -276,7 +276,7 @@ fn workload(seed: u8) -> Vec<ShapePayload> {
         },
         ShapePayload::Set {
             object,
-            field: Field::Diffuse(Some(ColorDef::Constant([0.8, 0.2, 0.1]))),
+            field: Box::new(Field::Diffuse(Some(ColorDef::Constant([0.8, 0.2, 0.1])))),
         },
     ]
 }

@@ -50,7 +50,7 @@ fn carve(at: DVec3) -> ShapePayload {
 fn color(rgb: [f32; 3]) -> ShapePayload {
     ShapePayload::Set {
         object: 1,
-        field: Field::Diffuse(Some(ColorDef::Constant(rgb))),
+        field: Box::new(Field::Diffuse(Some(ColorDef::Constant(rgb)))),
     }
 }
 
@@ -157,10 +157,10 @@ fn concurrent_writes_resolve_by_the_order_and_edits_all_apply() {
         .entries()
         .filter(|e| e.active)
         .filter_map(|e| match e.op.payload() {
-            ShapePayload::Set {
-                field: Field::Diffuse(c),
-                ..
-            } => Some(c.clone()),
+            ShapePayload::Set { field, .. } => match &**field {
+                Field::Diffuse(c) => Some(c.clone()),
+                _ => None,
+            },
             _ => None,
         })
         .last()
@@ -297,7 +297,7 @@ fn payloads_are_small_and_hostile_bytes_are_refused() {
     let mut bad = Vec::new();
     ShapePayload::Set {
         object: 1,
-        field: Field::Transparency(Some(Formula::new("1 +").unwrap())),
+        field: Box::new(Field::Transparency(Some(Formula::new("1 +").unwrap()))),
     }
     .encode(&mut bad);
     assert!(ShapePayload::decode(&bad).is_err());
@@ -521,7 +521,7 @@ fn an_assembly_without_its_parts_or_of_something_else_changes_nothing() {
         carve(DVec3::ZERO),
         ShapePayload::Set {
             object: 2,
-            field: Field::Name("other".into()),
+            field: Box::new(Field::Name("other".into())),
         },
     ] {
         let mut bytes = Vec::new();

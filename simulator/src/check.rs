@@ -494,15 +494,11 @@ fn kind(p: &ShapePayload) -> &'static str {
     use fdsl::object::{ColorDef, Field};
     match p {
         ShapePayload::Create { .. } => "create (geometry formula)",
-        ShapePayload::Set {
-            field: Field::Diffuse(Some(ColorDef::Rgb(_))),
-            ..
-        } => "set colour formula",
-        ShapePayload::Set {
-            field: Field::Geometry(_),
-            ..
-        } => "set geometry formula",
-        ShapePayload::Set { .. } => "set constant",
+        ShapePayload::Set { field, .. } => match **field {
+            Field::Diffuse(Some(ColorDef::Rgb(_))) => "set colour formula",
+            Field::Geometry(_) => "set geometry formula",
+            _ => "set constant",
+        },
         ShapePayload::Edit { .. } => "tool edit",
         ShapePayload::Undo(_) | ShapePayload::Redo(_) => "undo",
         ShapePayload::Chat(_) => "chat",

@@ -137,23 +137,23 @@ impl User {
             }
             8..=17 => ShapePayload::Set {
                 object: target,
-                field: Field::Diffuse(Some(ColorDef::Constant([
+                field: Box::new(Field::Diffuse(Some(ColorDef::Constant([
                     rng.unit() as f32,
                     rng.unit() as f32,
                     rng.unit() as f32,
-                ]))),
+                ])))),
             },
             18..=22 => ShapePayload::Set {
                 object: target,
-                field: Field::Diffuse(Some(ColorDef::Rgb(
+                field: Box::new(Field::Diffuse(Some(ColorDef::Rgb(
                     Formula::new(COLOURS[rng.index(COLOURS.len())]).ok()?,
-                ))),
+                )))),
             },
             23..=27 => ShapePayload::Set {
                 object: target,
-                field: Field::Geometry(Some(Geometry::implicit(
+                field: Box::new(Field::Geometry(Some(Geometry::implicit(
                     Formula::new(SHAPES[rng.index(SHAPES.len())]).ok()?,
-                ))),
+                )))),
             },
             28..=52 => {
                 let op = if rng.chance(700) {

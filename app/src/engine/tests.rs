@@ -31,7 +31,9 @@ fn config(store: &Path) -> EngineConfig {
 fn set_shape(object: u64, formula: &str) -> ShapePayload {
     ShapePayload::Set {
         object,
-        field: Field::Geometry(Some(Geometry::implicit(Formula::new(formula).unwrap()))),
+        field: Box::new(Field::Geometry(Some(Geometry::implicit(
+            Formula::new(formula).unwrap(),
+        )))),
     }
 }
 

@@ -62,8 +62,9 @@ pub enum ShapePayload {
     Set {
         /// The object.
         object: u64,
-        /// The property and its value.
-        field: Field,
+        /// The property and its value (boxed: the largest variant would set the size of every
+        /// payload a log holds).
+        field: Box<Field>,
     },
     /// A sculpting edit (union, carve, intersect or paint, possibly a whole stroke).
     Edit {
@@ -76,8 +77,8 @@ pub enum ShapePayload {
     SetGroup {
         /// The group.
         group: u64,
-        /// Its new description.
-        value: Option<Group>,
+        /// Its new description (boxed, as `Set`'s field).
+        value: Option<Box<Group>>,
     },
     /// Moves an object into a group (or to the top).
     Move {
@@ -143,7 +144,7 @@ enum ShapePayloadV1 {
     },
     Set {
         object: u64,
-        field: Field,
+        field: Box<Field>,
     },
     Edit {
         object: u64,
@@ -151,7 +152,7 @@ enum ShapePayloadV1 {
     },
     SetGroup {
         group: u64,
-        value: Option<Group>,
+        value: Option<Box<Group>>,
     },
     Move {
         object: u64,
@@ -184,10 +185,7 @@ impl ShapePayloadV1 {
                 group,
             },
             ShapePayload::Delete { object } => ShapePayloadV1::Delete { object },
-            ShapePayload::Set {
-                field: Field::Grids(_),
-                ..
-            } => return None,
+            ShapePayload::Set { field, .. } if matches!(*field, Field::Grids(_)) => return None,
             ShapePayload::Set { object, field } => ShapePayloadV1::Set { object, field },
             ShapePayload::Edit { object, edit } => ShapePayloadV1::Edit { object, edit },
             ShapePayload::SetGroup { group, value } => ShapePayloadV1::SetGroup { group, value },
@@ -454,7 +452,7 @@ impl ShapeScene {
             ShapePayload::Delete { .. } => {}
             ShapePayload::Set { object, field } => {
                 if let Some(o) = self.scene.object_mut(scene::ObjectId(*object)) {
-                    let _ = o.set(field.clone());
+                    let _ = o.set((**field).clone());
                 }
             }
             ShapePayload::Edit { object, edit } => {
@@ -480,7 +478,7 @@ impl ShapeScene {
                 let g = GroupId(*group);
                 match value {
                     Some(v) => {
-                        let _ = self.scene.set_group(g, v.clone());
+                        let _ = self.scene.set_group(g, (**v).clone());
                     }
                     None => {
                         self.scene.remove_group(g);

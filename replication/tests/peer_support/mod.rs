@@ -194,7 +194,7 @@ impl World {
             },
             1 => ShapePayload::Set {
                 object,
-                field: Field::Name(format!("n{}", bytes.u8())),
+                field: Box::new(Field::Name(format!("n{}", bytes.u8()))),
             },
             2 => ShapePayload::Edit {
                 object,
