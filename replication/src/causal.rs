@@ -142,16 +142,73 @@ pub const MAX_REACH_MEMO_ENTRIES: usize = 1 << 20;
 /// to have it (`seen_from..`). Each op of an author has the author's previous op in its past,
 /// so both are ranges of the author's chain; an op's past never changes once it is delivered,
 /// so an entry never goes stale.
+///
+/// Targets and authors are numbered in order of first use, so an entry is 16 bytes in a hash
+/// table rather than two 32-byte ids in nested trees: a log of 32 authors' ops held about 100
+/// bytes per entry that way, and more than a tenth of its memory in this memo.
 #[derive(Clone, Debug, Default)]
 pub struct Reach {
-    bounds: BTreeMap<OpId, BTreeMap<PeerId, (u64, u64)>>,
-    n_entries: usize,
+    targets: BTreeMap<OpId, u32>,
+    authors: BTreeMap<PeerId, u32>,
+    /// `(target number, author number)` to `(unseen_to, seen_from)`; `seen_from` is
+    /// `u32::MAX` while unknown. Sequence numbers from `u32::MAX` on are not memoised.
+    bounds: ReachMap,
+}
+
+/// See [`Reach::bounds`]: keyed by two numbers this memo gave out, never by a remote's bytes.
+#[expect(
+    clippy::disallowed_types,
+    reason = "never iterated (lookups and inserts only), and the hasher has no random state"
+)]
+type ReachMap = std::collections::HashMap<u64, (u32, u32), PairHashing>;
+
+/// The hasher of [`ReachMap`]: a full 64-bit mix of the key (both numbers reach the low
+/// bits, which pick the bucket).
+#[derive(Clone, Copy, Debug, Default)]
+struct PairHashing;
+
+impl std::hash::BuildHasher for PairHashing {
+    type Hasher = PairHasher;
+    fn build_hasher(&self) -> PairHasher {
+        PairHasher(0)
+    }
+}
+
+/// See [`PairHashing`].
+#[derive(Clone, Copy, Debug)]
+struct PairHasher(u64);
+
+impl std::hash::Hasher for PairHasher {
+    fn finish(&self) -> u64 {
+        // The splitmix64 finaliser.
+        let mut x = self.0;
+        x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        x ^ (x >> 31)
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = self.0.rotate_left(8) ^ u64::from(b);
+        }
+    }
+
+    fn write_u64(&mut self, n: u64) {
+        self.0 ^= n;
+    }
 }
 
 impl Reach {
+    fn key(&self, target: &OpId, author: &PeerId) -> Option<u64> {
+        let target = *self.targets.get(target)?;
+        let author = *self.authors.get(author)?;
+        Some(u64::from(target) << 32 | u64::from(author))
+    }
+
     /// Whether `author`'s op `seq` has `target` in its causal past, if known.
     pub fn known(&self, target: &OpId, author: &PeerId, seq: u64) -> Option<bool> {
-        let (unseen_to, seen_from) = *self.bounds.get(target)?.get(author)?;
+        let seq = u32::try_from(seq).ok()?;
+        let (unseen_to, seen_from) = *self.bounds.get(&self.key(target, author)?)?;
         if seq <= unseen_to {
             Some(false)
         } else if seq >= seen_from {
@@ -163,20 +220,24 @@ impl Reach {
 
     /// Records whether `author`'s op `seq` has `target` in its causal past.
     pub fn record(&mut self, target: OpId, author: PeerId, seq: u64, seen: bool) {
-        if self.n_entries >= MAX_REACH_MEMO_ENTRIES {
-            self.bounds.clear();
-            self.n_entries = 0;
+        let Some(seq) = u32::try_from(seq).ok().filter(|s| *s < u32::MAX) else {
+            return;
+        };
+        if self.bounds.len() >= MAX_REACH_MEMO_ENTRIES {
+            *self = Self::default();
         }
-        let n_entries = &mut self.n_entries;
-        let entry = self
-            .bounds
-            .entry(target)
-            .or_default()
-            .entry(author)
-            .or_insert_with(|| {
-                *n_entries += 1;
-                (0, u64::MAX)
-            });
+        let key = match self.key(&target, &author) {
+            Some(key) => key,
+            None => {
+                let next = |n: usize| u32::try_from(n).expect("at most MAX_REACH_MEMO_ENTRIES");
+                let n_targets = next(self.targets.len());
+                let target = *self.targets.entry(target).or_insert(n_targets);
+                let n_authors = next(self.authors.len());
+                let author = *self.authors.entry(author).or_insert(n_authors);
+                u64::from(target) << 32 | u64::from(author)
+            }
+        };
+        let entry = self.bounds.entry(key).or_insert((0, u32::MAX));
         if seen {
             entry.1 = entry.1.min(seq);
         } else {
@@ -186,12 +247,12 @@ impl Reach {
 
     /// Number of (target, author) entries held.
     pub fn len(&self) -> usize {
-        self.n_entries
+        self.bounds.len()
     }
 
     /// True if nothing is memoised.
     pub fn is_empty(&self) -> bool {
-        self.n_entries == 0
+        self.bounds.is_empty()
     }
 }
 
@@ -231,6 +292,38 @@ mod tests {
         assert_eq!(r.known(&t, &a, 5), None);
         assert_eq!(r.known(&t, &a, 9), Some(true));
         assert_eq!(r.len(), 1);
+        // Sequence numbers past 32 bits are not memoised: asked again, never answered wrong.
+        r.record(t, a, u64::from(u32::MAX), true);
+        r.record(t, a, 1 << 40, false);
+        assert_eq!(r.known(&t, &a, 1 << 40), None);
+        assert_eq!(r.known(&t, &a, 9), Some(true));
+    }
+
+    #[test]
+    fn reach_memo_keeps_every_pair_apart_and_starts_afresh_at_its_limit() {
+        let mut r = Reach::default();
+        let target = |i: u32| OpId(blake3::hash(&i.to_le_bytes()).into());
+        let author = |i: u32| PeerId(blake3::hash(&(i + 1000).to_le_bytes()).into());
+        for t in 0..40 {
+            for a in 0..40 {
+                r.record(target(t), author(a), u64::from(t + a + 1), (t + a) % 2 == 0);
+            }
+        }
+        assert_eq!(r.len(), 1600);
+        for t in 0..40 {
+            for a in 0..40 {
+                let seq = u64::from(t + a + 1);
+                assert_eq!(r.known(&target(t), &author(a), seq), Some((t + a) % 2 == 0));
+            }
+        }
+        assert_eq!(r.known(&target(40), &author(0), 1), None);
+        for i in 0..MAX_REACH_MEMO_ENTRIES as u32 - 1600 {
+            r.record(target(100 + i), author(0), 1, true);
+        }
+        assert_eq!(r.len(), MAX_REACH_MEMO_ENTRIES);
+        r.record(target(0), author(0), 1, true);
+        assert_eq!(r.len(), 1, "the memo started afresh");
+        assert_eq!(r.known(&target(1), &author(1), 3), None);
     }
 
     #[test]
