@@ -25,12 +25,19 @@ pub const SHORT_ID_HEX_DIGITS: usize = 8;
 #[derive(Clone, Copy, PartialEq, Eq, Hash)]
 pub struct PeerId(pub [u8; PEER_ID_BYTES]);
 
-/// Byte-wise (lexicographic) order of 32-byte ids, comparing the first 8 bytes as one
-/// big-endian integer first: the same order as comparing the arrays, without a `memcmp`
-/// call in the common case (ids are hashes or keys, so they differ early).
+/// Byte-wise (lexicographic) order of 32-byte ids, compared as four big-endian integers: the
+/// same order as comparing the arrays, without a `memcmp` call. Ids are hashes or keys, so
+/// unequal ones differ in the first word; equal ones (every lookup that finds its key) cost
+/// four integer comparisons.
 pub(crate) fn cmp_id_bytes(a: &[u8; 32], b: &[u8; 32]) -> std::cmp::Ordering {
-    let head = |x: &[u8; 32]| u64::from_be_bytes([x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7]]);
-    head(a).cmp(&head(b)).then_with(|| a.cmp(b))
+    let (a, b) = (a.as_chunks::<8>().0, b.as_chunks::<8>().0);
+    for (x, y) in a.iter().zip(b) {
+        let order = u64::from_be_bytes(*x).cmp(&u64::from_be_bytes(*y));
+        if order.is_ne() {
+            return order;
+        }
+    }
+    std::cmp::Ordering::Equal
 }
 
 impl Ord for PeerId {
@@ -347,6 +354,24 @@ mod tests {
                 .collect();
             let each = items.iter().all(|(key, m, sig)| key.verify(m, sig).is_ok());
             prop_assert_eq!(verify_batch(&items), each);
+        }
+    }
+
+    proptest! {
+        #![proptest_config(crate::test_config(256))]
+        /// Ids sort as byte arrays: the linear order's tie-break depends on it. The second id
+        /// shares a prefix of any length with the first, so every word decides some cases.
+        #[test]
+        fn ids_compare_as_byte_arrays(
+            a in any::<[u8; 32]>(),
+            tail in any::<[u8; 32]>(),
+            shared in 0usize..=32,
+        ) {
+            let mut b = a;
+            b[shared..].copy_from_slice(&tail[shared..]);
+            prop_assert_eq!(cmp_id_bytes(&a, &b), a.cmp(&b));
+            prop_assert_eq!(cmp_id_bytes(&b, &a), b.cmp(&a));
+            prop_assert_eq!(PeerId(a).cmp(&PeerId(b)), a.cmp(&b));
         }
     }
 

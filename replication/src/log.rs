@@ -643,11 +643,7 @@ impl<P: Payload> Log<P> {
         }
         let key = OrderKey::of(&op);
         // Most ops arrive in order: append without searching.
-        let pos = if self.order.last().is_none_or(|(k, _)| *k < key) {
-            self.order.len()
-        } else {
-            self.order.partition_point(|(k, _)| *k < key)
-        };
+        let pos = point_near_end(&self.order, |(k, _)| *k < key);
         let id = op.id();
         self.order.insert(pos, (key, id));
         self.marks.insert(pos, Mark::Effective);
@@ -655,7 +651,7 @@ impl<P: Payload> Log<P> {
         match op.payload().effect() {
             Effect::Edit { object } => {
                 let keys = self.by_object.entry(object).or_default();
-                let at = keys.partition_point(|k| *k < key);
+                let at = point_near_end(keys, |k| *k < key);
                 keys.insert(at, key);
                 if op.payload().is_delete() {
                     let deletes = self.deletes.entry(object).or_default();
@@ -666,7 +662,7 @@ impl<P: Payload> Log<P> {
             Effect::Acquire { object, .. } | Effect::Release { object } => {
                 // Placeholders: the refold that follows fills them in.
                 let list = self.lease_ops.entry(object).or_default();
-                let at = list.partition_point(|l| l.key < key);
+                let at = point_near_end(list, |l| l.key < key);
                 let placeholder = seen::LeaseOp {
                     key,
                     id: op.id(),
@@ -707,7 +703,7 @@ impl<P: Payload> Log<P> {
     /// its causal past is delivered before it, so this never changes later.
     fn note_delete(&mut self, object: ObjectId, id: OpId, key: OrderKey) {
         let keys = self.by_object.get(&object).map_or(&[][..], Vec::as_slice);
-        let before = &keys[..keys.partition_point(|k| *k < key)];
+        let before = &keys[..point_near_end(keys, |k| *k < key)];
         let mut reach = std::mem::take(&mut self.reach);
         let dag = self.dag();
         let hides: Vec<OpId> = before
@@ -822,7 +818,7 @@ impl<P: Payload> Log<P> {
             Effect::Independent => return None,
         };
         let list = cx.lease_ops.get_mut(&object)?;
-        let n = list.partition_point(|l| l.key < key);
+        let n = point_near_end(list, |l| l.key < key);
         let dag = self.dag();
         let unseen = seen::unseen_before(&dag, &mut cx.reach, list, n, &id);
         let lease = (!unseen.is_empty())
@@ -1102,6 +1098,17 @@ impl<P: Payload> Log<P> {
     /// The lease on `object` that holds at `now`, after every delivered op.
     pub fn lease(&self, object: ObjectId, now: Timestamp) -> Option<Lease> {
         self.state.lease(object).filter(|l| l.holds_at(now))
+    }
+}
+
+/// `list.partition_point(pred)`, looking at the end first: ops mostly arrive in order, so the
+/// point is usually the end, or just before the last entry (the op itself, once indexed).
+fn point_near_end<T>(list: &[T], pred: impl Fn(&T) -> bool) -> usize {
+    match list {
+        [] => 0,
+        [.., last] if pred(last) => list.len(),
+        [.., before, _] if pred(before) => list.len() - 1,
+        _ => list.partition_point(pred),
     }
 }
 

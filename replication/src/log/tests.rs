@@ -395,6 +395,23 @@ fn many_ops_cross_checkpoints_consistently() {
 }
 
 proptest! {
+    #![proptest_config(crate::test_config(256))]
+
+    /// The in-order shortcut finds the same point as a binary search, wherever it lies.
+    #[test]
+    fn the_point_near_the_end_is_the_partition_point(
+        mut list in proptest::collection::vec(0u8..40, 0..12),
+        key in 0u8..42,
+    ) {
+        list.sort_unstable();
+        prop_assert_eq!(
+            point_near_end(&list, |x| *x < key),
+            list.partition_point(|x| *x < key)
+        );
+    }
+}
+
+proptest! {
     #![proptest_config(crate::test_config(32))]
 
     #[test]
