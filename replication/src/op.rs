@@ -83,8 +83,9 @@ type OpIdMap<V> = std::collections::HashMap<OpId, V, OpIdHashing>;
 const SLAB_CHUNK: usize = 4096;
 
 /// Held ops, stored by arrival in chunks of [`SLAB_CHUNK`] and found by id through an
-/// [`OpIdMap`] of positions: past the first chunk, growing moves 36-byte index entries, never
-/// an op, and a log's ops sit in arrival order, near the ops they were delivered with.
+/// [`OpIdMap`] of positions: growing moves only the last chunk's ops and 36-byte index
+/// entries, never the whole log, and a log's ops sit in arrival order, near the ops they were
+/// delivered with.
 #[derive(Clone, Debug)]
 pub(crate) struct OpSlab<P> {
     chunks: Vec<Vec<Op<P>>>,
@@ -121,10 +122,10 @@ impl<P> OpSlab<P> {
         let previous = self.index.insert(id, at);
         assert!(previous.is_none(), "an op is held once");
         if self.len.is_multiple_of(SLAB_CHUNK) {
-            // The first chunk grows as ops come (a small log stays small); later ones are
-            // made whole, so no op moves once the log is past one chunk.
-            let capacity = if self.len == 0 { 0 } else { SLAB_CHUNK };
-            self.chunks.push(Vec::with_capacity(capacity));
+            // Each chunk grows as ops come, doubling up to exactly `SLAB_CHUNK` (a power of
+            // two): only the last chunk has empty slots, at most as many as it holds ops, and
+            // an op moves about once on average while its chunk grows.
+            self.chunks.push(Vec::new());
         }
         if let Some(chunk) = self.chunks.last_mut() {
             chunk.push(op);
