@@ -19,6 +19,9 @@ use fdsl::tape::{Fidelity, Tape};
 use fidget::shape::Shape;
 
 mod fidget_peer;
+#[path = "shared/points.rs"]
+mod points;
+use points::points;
 
 /// The names of the reference models, the benchmarks' arguments.
 fn models() -> impl Iterator<Item = &'static str> {
@@ -35,26 +38,6 @@ fn tape(model: &str) -> Tape {
     Function::parse(source(model))
         .unwrap_or_else(|e| panic!("{model}: {e}"))
         .tape()
-}
-
-/// Deterministic scattered points in [-1.2, 1.2]^3.
-fn points(n: usize) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.4 - 1.2
-    };
-    let mut xs = Vec::with_capacity(n);
-    let mut ys = Vec::with_capacity(n);
-    let mut zs = Vec::with_capacity(n);
-    for _ in 0..n {
-        xs.push(next());
-        ys.push(next());
-        zs.push(next());
-    }
-    (xs, ys, zs)
 }
 
 const N_VALUES: usize = 65_536;

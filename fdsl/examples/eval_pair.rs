@@ -1,0 +1,110 @@
+//! fdsl's bulk value evaluator against fidget's JIT and VM, timed by one plain loop for all
+//! three, so that each runs at its best and the ratios do not depend on a harness.
+//!
+//! Inside the divan `eval` bench, fidget's JIT on the short tapes measured 15 to 25% slower
+//! than this loop in the same build, while fdsl's evaluator and the long tapes measured about
+//! the same (BENCHMARKS.md). Here the three evaluators take turns, round after round, on the
+//! same 65,536 points, and each reports the median of its rounds.
+//!
+//! Run with `cargo run --release -p fdsl --example eval_pair [-- MODEL...]`.
+
+use fdsl::Function;
+use fdsl::eval::BulkEval;
+use fidget::shape::Shape;
+
+#[path = "../benches/fidget_peer.rs"]
+mod fidget_peer;
+#[path = "../benches/shared/points.rs"]
+mod points;
+
+/// Points per call, as the bench's `bulk_values`.
+const N_POINTS: usize = 65_536;
+/// Rounds; each evaluator runs once per round.
+const N_ROUNDS: usize = 21;
+/// Each timed batch runs at least this long.
+const MIN_BATCH_SECONDS: f64 = 0.02;
+
+/// One evaluator under test: a call over the points.
+type Run<'a> = Box<dyn FnMut() + 'a>;
+
+/// Seconds per call of `run`, timed over a batch of `calls` calls.
+fn per_call(run: &mut Run<'_>, calls: usize) -> f64 {
+    #[expect(
+        clippy::disallowed_methods,
+        reason = "a benchmark times real work: this is its one clock"
+    )]
+    let start = std::time::Instant::now();
+    for _ in 0..calls {
+        run();
+    }
+    start.elapsed().as_secs_f64() / calls as f64
+}
+
+fn median(mut xs: Vec<f64>) -> f64 {
+    xs.sort_by(f64::total_cmp);
+    xs[xs.len() / 2]
+}
+
+fn fidget_run<'a, F: fidget::eval::Function + fidget::eval::MathFunction + Clone + 'a>(
+    tape: &fdsl::tape::Tape,
+    (xs, ys, zs): &'a (Vec<f32>, Vec<f32>, Vec<f32>),
+) -> Run<'a> {
+    let (ctx, root) = fidget_peer::to_fidget(tape);
+    let shape = Shape::<F>::new(&ctx, root).expect("fidget accepts the model");
+    let t = shape.float_slice_tape(Default::default());
+    let mut eval = Shape::<F>::new_float_slice_eval();
+    Box::new(move || {
+        std::hint::black_box(eval.eval(&t, xs, ys, zs).expect("evaluates"));
+    })
+}
+
+fn main() {
+    let asked: Vec<String> = std::env::args().skip(1).collect();
+    let points = points::points(N_POINTS);
+    println!("| model | fdsl | fidget JIT | fidget VM | fdsl vs JIT | fdsl vs VM |");
+    println!("|---|---|---|---|---|---|");
+    for (model, source) in fdsl::models::REFERENCE_MODELS {
+        if !asked.is_empty() && !asked.iter().any(|a| a == model) {
+            continue;
+        }
+        let tape = Function::parse(source)
+            .unwrap_or_else(|e| panic!("{model}: {e}"))
+            .tape();
+        let mut eval = BulkEval::new(&tape);
+        let mut out = vec![0.0; N_POINTS];
+        let (xs, ys, zs) = &points;
+        let mut runs: Vec<Run<'_>> = vec![
+            Box::new(|| {
+                eval.eval(xs, ys, zs, 0.0, &mut out);
+                std::hint::black_box(&out);
+            }),
+            fidget_run::<fidget::jit::JitFunction>(&tape, &points),
+            fidget_run::<fidget::vm::VmFunction>(&tape, &points),
+        ];
+        // Warm up, and size each batch to at least `MIN_BATCH_SECONDS`.
+        let calls: Vec<usize> = runs
+            .iter_mut()
+            .map(|run| {
+                let once = per_call(run, 3);
+                (MIN_BATCH_SECONDS / once).ceil().max(1.0) as usize
+            })
+            .collect();
+        let mut times = vec![Vec::with_capacity(N_ROUNDS); runs.len()];
+        for round in 0..N_ROUNDS {
+            // A different evaluator goes first in each round.
+            for k in 0..runs.len() {
+                let i = (round + k) % runs.len();
+                times[i].push(per_call(&mut runs[i], calls[i]));
+            }
+        }
+        let [fdsl, jit, vm] = [0, 1, 2].map(|i| median(std::mem::take(&mut times[i])));
+        println!(
+            "| {model} | {:.1} µs | {:.1} µs | {:.1} µs | {:.2} | {:.2} |",
+            fdsl * 1e6,
+            jit * 1e6,
+            vm * 1e6,
+            jit / fdsl,
+            vm / fdsl
+        );
+    }
+}
