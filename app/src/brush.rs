@@ -296,7 +296,7 @@ impl Stroke {
     pub fn finish(&self, view: &View) -> Result<Planned, String> {
         let payload = ShapePayload::Edit {
             object: self.object,
-            edit: self.edit(),
+            edit: Box::new(self.edit()),
         };
         payload.validate().map_err(|e| format!("stroke: {e}"))?;
         Ok(Planned {

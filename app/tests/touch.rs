@@ -462,11 +462,11 @@ mod live {
         // A carves a hole where B's device rests: B's hand is in free space at once.
         let carve = ShapePayload::Edit {
             object,
-            edit: Edit::stamp(
+            edit: Box::new(Edit::stamp(
                 EditOp::Subtract,
                 ToolShape::Sphere { radius: 0.3 },
                 Pose::at(rest),
-            ),
+            )),
         };
         let taken = stats.snapshot().n_scenes_taken;
         let (carve_latency, before, after) = edit_and_feel(&a, carve, &arrivals, &stats, |s| {

@@ -219,7 +219,7 @@ fn sculpted_ball(dir: &Path) -> ObjectId {
     );
     let edit = ShapePayload::Edit {
         object,
-        edit: carve,
+        edit: Box::new(carve),
     };
     engine.author(edit).unwrap().wait().unwrap();
     engine.shutdown();

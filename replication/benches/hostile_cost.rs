@@ -294,7 +294,7 @@ fn stroke_bomb(n: usize) -> Workload {
     let payloads = std::iter::once(create(1, "1-sqrt(x^2+y^2+z^2)")).chain((1..n).map(|_| {
         ShapePayload::Edit {
             object: 1,
-            edit: edit.clone(),
+            edit: Box::new(edit.clone()),
         }
     }));
     Workload {
@@ -314,11 +314,11 @@ fn backdated(n: usize, history: usize) -> Workload {
         std::iter::once(create(1, "1-sqrt(x^2+y^2+z^2)")).chain((1..history).map(|i| {
             ShapePayload::Edit {
                 object: 1,
-                edit: Edit::stamp(
+                edit: Box::new(Edit::stamp(
                     EditOp::Union,
                     ToolShape::Sphere { radius: 0.1 },
                     Pose::at(DVec3::new((i as f64).sin(), (i as f64).cos(), 0.0)),
-                ),
+                )),
             }
         })),
     );
@@ -329,11 +329,11 @@ fn backdated(n: usize, history: usize) -> Workload {
                 &key,
                 [ShapePayload::Edit {
                     object: 1,
-                    edit: Edit::stamp(
+                    edit: Box::new(Edit::stamp(
                         EditOp::Subtract,
                         ToolShape::Sphere { radius: 0.1 },
                         Pose::at(DVec3::new(0.0, 0.0, i as f64 * 0.01)),
-                    ),
+                    )),
                 }],
             )
             .remove(0)

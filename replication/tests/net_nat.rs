@@ -268,11 +268,11 @@ fn workload(seed: u8) -> Vec<ShapePayload> {
         },
         ShapePayload::Edit {
             object,
-            edit: Edit::stamp(
+            edit: Box::new(Edit::stamp(
                 EditOp::Subtract,
                 ToolShape::Sphere { radius: 0.2 },
                 Pose::at(DVec3::new(0.5, 0.0, 0.0)),
-            ),
+            )),
         },
         ShapePayload::Set {
             object,

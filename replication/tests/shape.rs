@@ -39,11 +39,11 @@ fn sphere_data() -> ObjectData {
 fn carve(at: DVec3) -> ShapePayload {
     ShapePayload::Edit {
         object: 1,
-        edit: Edit::stamp(
+        edit: Box::new(Edit::stamp(
             EditOp::Subtract,
             ToolShape::Sphere { radius: 0.2 },
             Pose::at(at),
-        ),
+        )),
     }
 }
 
@@ -84,14 +84,14 @@ fn concurrent_workload(n_peers: u8, per_peer: usize) -> Vec<VerifiedOp<ShapePayl
                 },
                 _ => ShapePayload::Edit {
                     object: 1,
-                    edit: Edit::stamp(
+                    edit: Box::new(Edit::stamp(
                         EditOp::Paint {
                             property: Paintable::Density,
                             value: PaintValue::Scalar(p as f64 + 1.0),
                         },
                         ToolShape::Sphere { radius: 0.3 },
                         Pose::at(DVec3::new(0.0, x, 0.0)),
-                    ),
+                    )),
                 },
             };
             let is_edit = matches!(payload, ShapePayload::Edit { .. });
@@ -303,11 +303,11 @@ fn payloads_are_small_and_hostile_bytes_are_refused() {
     assert!(ShapePayload::decode(&bad).is_err());
     let nan = ShapePayload::Edit {
         object: 1,
-        edit: Edit::stamp(
+        edit: Box::new(Edit::stamp(
             EditOp::Union,
             ToolShape::Sphere { radius: f64::NAN },
             Pose::at(DVec3::ZERO),
-        ),
+        )),
     };
     let mut bad = Vec::new();
     nan.encode(&mut bad);

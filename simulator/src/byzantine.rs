@@ -230,13 +230,13 @@ fn batch(batch_no: u64, ops: Vec<Vec<u8>>) -> Vec<u8> {
 fn stamp_edit(rng: &mut SimRng, object: u64) -> ShapePayload {
     ShapePayload::Edit {
         object,
-        edit: Edit::stamp(
+        edit: Box::new(Edit::stamp(
             EditOp::Subtract,
             ToolShape::Sphere {
                 radius: rng.range_f64(0.05, 0.3),
             },
             Pose::at([rng.range_f64(-1.0, 1.0), 0.0, 0.0].into()),
-        ),
+        )),
     }
 }
 
@@ -279,13 +279,13 @@ fn stroke_bomb(object: u64) -> ShapePayload {
         .collect();
     ShapePayload::Edit {
         object,
-        edit: Edit {
+        edit: Box::new(Edit {
             op: EditOp::Subtract,
             tool: ToolShape::Sphere { radius: 0.2 },
             path,
             blend_radius: 0.05,
             mirror: Some(Axis::X),
-        },
+        }),
     }
 }
 

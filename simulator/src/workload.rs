@@ -172,18 +172,18 @@ impl User {
                     .collect();
                 ShapePayload::Edit {
                     object: target,
-                    edit: Edit::stroke(
+                    edit: Box::new(Edit::stroke(
                         op,
                         ToolShape::Sphere {
                             radius: rng.range_f64(0.05, 0.4),
                         },
                         path,
-                    ),
+                    )),
                 }
             }
             53..=64 => ShapePayload::Edit {
                 object: target,
-                edit: Edit::stamp(
+                edit: Box::new(Edit::stamp(
                     EditOp::Paint {
                         property: Paintable::Color,
                         value: PaintValue::Color([
@@ -196,7 +196,7 @@ impl User {
                         radius: rng.range_f64(0.1, 0.5),
                     },
                     Pose::at([rng.range_f64(-1.0, 1.0), 0.0, 0.0].into()),
-                ),
+                )),
             },
             65..=72 => match self.edits.len() {
                 0 => ShapePayload::Chat(format!("nothing to undo from {peer_idx}")),

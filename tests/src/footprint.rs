@@ -354,7 +354,7 @@ pub fn measure(
         now = now.saturating_add_micros(OP_INTERVAL_MICROS);
         let payload = ShapePayload::Edit {
             object: OBJECT_ID,
-            edit,
+            edit: Box::new(edit),
         };
         let (op, insertion) = log.author(&author, now, payload)?;
         scene.apply_insertion(&log, &insertion);

@@ -198,13 +198,13 @@ impl World {
             },
             2 => ShapePayload::Edit {
                 object,
-                edit: Edit {
+                edit: Box::new(Edit {
                     op: EditOp::Subtract,
                     tool: ToolShape::Sphere { radius: 0.1 },
                     path: vec![Pose::at([f64::from(bytes.u8()) / 255.0, 0.0, 0.0].into())],
                     blend_radius: 0.0,
                     mirror: None,
-                },
+                }),
             },
             3 => ShapePayload::Acquire {
                 object,
