@@ -827,7 +827,8 @@ impl<P: Payload> Log<P> {
             let me = &mut list[n];
             assert!(me.id == id, "a lease op is indexed under its object");
             me.before = state.lease(object);
-            me.unseen = (unseen.len() <= MAX_UNSEEN_LEASE_OPS).then_some(unseen);
+            me.unseen = (unseen.len() <= MAX_UNSEEN_LEASE_OPS)
+                .then(|| unseen.iter().map(|(_, id)| *id).collect());
         }
         lease
     }

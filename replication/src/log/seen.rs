@@ -27,9 +27,10 @@ pub(crate) struct LeaseOp {
     pub(crate) id: OpId,
     /// The object's lease in the fold of the whole prefix just before this op.
     pub(crate) before: Option<Lease>,
-    /// The object's lease ops sorted before this one that are not in its causal past, sorted;
-    /// `None` when more than [`MAX_UNSEEN_LEASE_OPS`].
-    pub(crate) unseen: Option<Vec<(OrderKey, OpId)>>,
+    /// The ids of the object's lease ops sorted before this one that are not in its causal
+    /// past, in order; `None` when more than [`MAX_UNSEEN_LEASE_OPS`]. Ids alone (their keys
+    /// are their ops'), since every lease op of a session keeps this list.
+    pub(crate) unseen: Option<Box<[OpId]>>,
 }
 
 /// Alternative lease folds computed during one refold, keyed by object and the lease ops
@@ -143,7 +144,13 @@ pub(crate) fn unseen_before<P: Payload>(
         }
         // What `l` saw, `x` saw: only `l`'s own misses are left to check.
         if let Some(misses) = &l.unseen {
-            unseen.extend(misses.iter().filter(|(_, id)| !dag.sees(memo, x, id)));
+            for id in misses.iter().filter(|id| !dag.sees(memo, x, id)) {
+                let op = dag
+                    .ops
+                    .get(id)
+                    .expect("a lease op's misses are held lease ops");
+                unseen.push((OrderKey::of(op), *id));
+            }
             break;
         }
     }
