@@ -12,6 +12,7 @@ use fdsl::object::{Axis, Edit, EditOp, PaintValue, Paintable, Pose, ToolShape, T
 use fdsl::scene::ObjectId;
 use glam::DVec3;
 use replication::shape::ShapePayload;
+use std::sync::Arc;
 
 use crate::command::Planned;
 use crate::engine::View;
@@ -296,7 +297,7 @@ impl Stroke {
     pub fn finish(&self, view: &View) -> Result<Planned, String> {
         let payload = ShapePayload::Edit {
             object: self.object,
-            edit: Box::new(self.edit()),
+            edit: Arc::new(self.edit()),
         };
         payload.validate().map_err(|e| format!("stroke: {e}"))?;
         Ok(Planned {

@@ -462,7 +462,7 @@ mod live {
         // A carves a hole where B's device rests: B's hand is in free space at once.
         let carve = ShapePayload::Edit {
             object,
-            edit: Box::new(Edit::stamp(
+            edit: Arc::new(Edit::stamp(
                 EditOp::Subtract,
                 ToolShape::Sphere { radius: 0.3 },
                 Pose::at(rest),

@@ -9,6 +9,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+use std::sync::Arc;
 
 use app::engine::{Engine, EngineConfig, lock, store};
 use fdsl::mesh::{MeshFormat, TriMesh};
@@ -219,7 +220,7 @@ fn sculpted_ball(dir: &Path) -> ObjectId {
     );
     let edit = ShapePayload::Edit {
         object,
-        edit: Box::new(carve),
+        edit: Arc::new(carve),
     };
     engine.author(edit).unwrap().wait().unwrap();
     engine.shutdown();

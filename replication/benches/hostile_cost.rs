@@ -9,6 +9,7 @@
 //! Run: `cargo bench -p replication --bench hostile_cost` (add `-- --quick` for a short run).
 
 use std::hint::black_box;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use fdsl::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
@@ -294,7 +295,7 @@ fn stroke_bomb(n: usize) -> Workload {
     let payloads = std::iter::once(create(1, "1-sqrt(x^2+y^2+z^2)")).chain((1..n).map(|_| {
         ShapePayload::Edit {
             object: 1,
-            edit: Box::new(edit.clone()),
+            edit: Arc::new(edit.clone()),
         }
     }));
     Workload {
@@ -314,7 +315,7 @@ fn backdated(n: usize, history: usize) -> Workload {
         std::iter::once(create(1, "1-sqrt(x^2+y^2+z^2)")).chain((1..history).map(|i| {
             ShapePayload::Edit {
                 object: 1,
-                edit: Box::new(Edit::stamp(
+                edit: Arc::new(Edit::stamp(
                     EditOp::Union,
                     ToolShape::Sphere { radius: 0.1 },
                     Pose::at(DVec3::new((i as f64).sin(), (i as f64).cos(), 0.0)),
@@ -329,7 +330,7 @@ fn backdated(n: usize, history: usize) -> Workload {
                 &key,
                 [ShapePayload::Edit {
                     object: 1,
-                    edit: Box::new(Edit::stamp(
+                    edit: Arc::new(Edit::stamp(
                         EditOp::Subtract,
                         ToolShape::Sphere { radius: 0.1 },
                         Pose::at(DVec3::new(0.0, 0.0, i as f64 * 0.01)),

@@ -268,7 +268,7 @@ fn workload(seed: u8) -> Vec<ShapePayload> {
         },
         ShapePayload::Edit {
             object,
-            edit: Box::new(Edit::stamp(
+            edit: Arc::new(Edit::stamp(
                 EditOp::Subtract,
                 ToolShape::Sphere { radius: 0.2 },
                 Pose::at(DVec3::new(0.5, 0.0, 0.0)),

@@ -39,7 +39,7 @@ fn sphere_data() -> ObjectData {
 fn carve(at: DVec3) -> ShapePayload {
     ShapePayload::Edit {
         object: 1,
-        edit: Box::new(Edit::stamp(
+        edit: Arc::new(Edit::stamp(
             EditOp::Subtract,
             ToolShape::Sphere { radius: 0.2 },
             Pose::at(at),
@@ -84,7 +84,7 @@ fn concurrent_workload(n_peers: u8, per_peer: usize) -> Vec<VerifiedOp<ShapePayl
                 },
                 _ => ShapePayload::Edit {
                     object: 1,
-                    edit: Box::new(Edit::stamp(
+                    edit: Arc::new(Edit::stamp(
                         EditOp::Paint {
                             property: Paintable::Density,
                             value: PaintValue::Scalar(p as f64 + 1.0),
@@ -303,7 +303,7 @@ fn payloads_are_small_and_hostile_bytes_are_refused() {
     assert!(ShapePayload::decode(&bad).is_err());
     let nan = ShapePayload::Edit {
         object: 1,
-        edit: Box::new(Edit::stamp(
+        edit: Arc::new(Edit::stamp(
             EditOp::Union,
             ToolShape::Sphere { radius: f64::NAN },
             Pose::at(DVec3::ZERO),

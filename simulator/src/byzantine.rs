@@ -29,6 +29,7 @@ use replication::shape::ShapePayload;
 use replication::sync::message::{MAX_BATCH_OPS, Message};
 use replication::time::MAX_CLOCK_SKEW_MICROS;
 use replication::{ConnId, Keypair, Op, OpId, Peer, PeerId, Timestamp, VersionVector};
+use std::sync::Arc;
 
 use crate::rng::SimRng;
 use crate::sim::{Ev, SESSION_ID, Simulation, deliver, guarded_call};
@@ -230,7 +231,7 @@ fn batch(batch_no: u64, ops: Vec<Vec<u8>>) -> Vec<u8> {
 fn stamp_edit(rng: &mut SimRng, object: u64) -> ShapePayload {
     ShapePayload::Edit {
         object,
-        edit: Box::new(Edit::stamp(
+        edit: Arc::new(Edit::stamp(
             EditOp::Subtract,
             ToolShape::Sphere {
                 radius: rng.range_f64(0.05, 0.3),
@@ -279,7 +280,7 @@ fn stroke_bomb(object: u64) -> ShapePayload {
         .collect();
     ShapePayload::Edit {
         object,
-        edit: Box::new(Edit {
+        edit: Arc::new(Edit {
             op: EditOp::Subtract,
             tool: ToolShape::Sphere { radius: 0.2 },
             path,

@@ -14,6 +14,7 @@ use fdsl::object::{
 };
 use replication::OpId;
 use replication::shape::ShapePayload;
+use std::sync::Arc;
 
 use crate::rng::SimRng;
 
@@ -172,7 +173,7 @@ impl User {
                     .collect();
                 ShapePayload::Edit {
                     object: target,
-                    edit: Box::new(Edit::stroke(
+                    edit: Arc::new(Edit::stroke(
                         op,
                         ToolShape::Sphere {
                             radius: rng.range_f64(0.05, 0.4),
@@ -183,7 +184,7 @@ impl User {
             }
             53..=64 => ShapePayload::Edit {
                 object: target,
-                edit: Box::new(Edit::stamp(
+                edit: Arc::new(Edit::stamp(
                     EditOp::Paint {
                         property: Paintable::Color,
                         value: PaintValue::Color([

@@ -18,6 +18,7 @@
 //! colours and other vertex attributes (STL and our GLB carry positions only).
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 use fdsl::object::{Edit, EditOp, Object, ObjectData, Pose, Sampler, Shape, ToolShape};
 use fdsl::scene::ObjectId;
@@ -354,7 +355,7 @@ pub fn measure(
         now = now.saturating_add_micros(OP_INTERVAL_MICROS);
         let payload = ShapePayload::Edit {
             object: OBJECT_ID,
-            edit: Box::new(edit),
+            edit: Arc::new(edit),
         };
         let (op, insertion) = log.author(&author, now, payload)?;
         scene.apply_insertion(&log, &insertion);

@@ -188,5 +188,5 @@ pub fn encode_edit(edit: &Edit) -> Vec<u8> {
 
 /// Decodes and validates one edit.
 pub fn decode_edit(bytes: &[u8]) -> Result<CompiledEdit, ObjectError> {
-    CompiledEdit::new(decode("edit", bytes)?)
+    CompiledEdit::new(decode::<Edit>("edit", bytes)?)
 }

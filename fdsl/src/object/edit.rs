@@ -4,6 +4,7 @@
 
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 use super::ObjectError;
 use super::appearance::Rgb;
@@ -112,15 +113,17 @@ impl Edit {
 /// An edit ready to evaluate.
 #[derive(Clone, Debug)]
 pub struct CompiledEdit {
-    edit: Edit,
+    /// Shared with whoever holds the edit (a replicated op), not copied.
+    edit: Arc<Edit>,
     tool: CompiledTool,
     /// One box, or two with a mirror: outside them the edit changes nothing that matters.
     boxes: [Aabb; 2],
 }
 
 impl CompiledEdit {
-    /// Validates and compiles an edit.
-    pub fn new(edit: Edit) -> Result<CompiledEdit, ObjectError> {
+    /// Validates and compiles an edit (an `Edit`, or an `Arc<Edit>` to share).
+    pub fn new(edit: impl Into<Arc<Edit>>) -> Result<CompiledEdit, ObjectError> {
+        let edit = edit.into();
         let blend = edit.blend_radius;
         if !(blend.is_finite() && blend >= 0.0) {
             return Err(ObjectError::BadStroke {

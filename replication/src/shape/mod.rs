@@ -70,8 +70,8 @@ pub enum ShapePayload {
     Edit {
         /// The object.
         object: u64,
-        /// The edit (boxed, as `Set`'s field).
-        edit: Box<Edit>,
+        /// The edit (shared with the scene's compiled edit, and boxed as `Set`'s field).
+        edit: Arc<Edit>,
     },
     /// Adds, changes (`Some`) or removes (`None`) a group.
     SetGroup {
@@ -148,7 +148,7 @@ enum ShapePayloadV1 {
     },
     Edit {
         object: u64,
-        edit: Box<Edit>,
+        edit: Arc<Edit>,
     },
     SetGroup {
         group: u64,
@@ -267,7 +267,7 @@ impl ShapePayload {
                 field.clone().apply_to(&mut data);
                 Object::new(data).map(|_| ()).map_err(|e| e.to_string())
             }
-            ShapePayload::Edit { edit, .. } => CompiledEdit::new((**edit).clone())
+            ShapePayload::Edit { edit, .. } => CompiledEdit::new(Arc::clone(edit))
                 .map(|_| ())
                 .map_err(|e| e.to_string()),
             ShapePayload::SetGroup { value: Some(g), .. } => {
@@ -461,7 +461,7 @@ impl ShapeScene {
                 };
                 let compiled = match self.compiled.get(&id) {
                     Some(c) => c.clone(),
-                    None => match CompiledEdit::new((**edit).clone()) {
+                    None => match CompiledEdit::new(Arc::clone(edit)) {
                         Ok(c) => {
                             let c = Arc::new(c);
                             self.compiled.insert(id, c.clone());

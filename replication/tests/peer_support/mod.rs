@@ -18,6 +18,7 @@ use replication::shape::ShapePayload;
 use replication::shape::parts::part_hash;
 use replication::sync::message::{MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION, SessionId};
 use replication::{ConnId, Event, Keypair, Log, Op, OpId, Peer, PeerId, Timestamp, VersionVector};
+use std::sync::Arc;
 
 const SESSION: SessionId = [7; 16];
 /// Connections the script uses (ids 0..).
@@ -198,7 +199,7 @@ impl World {
             },
             2 => ShapePayload::Edit {
                 object,
-                edit: Box::new(Edit {
+                edit: Arc::new(Edit {
                     op: EditOp::Subtract,
                     tool: ToolShape::Sphere { radius: 0.1 },
                     path: vec![Pose::at([f64::from(bytes.u8()) / 255.0, 0.0, 0.0].into())],
