@@ -18,6 +18,8 @@ use fdsl::eval::{BulkEval, GradBulkEval, Interval, IntervalEval};
 use fdsl::tape::{Fidelity, Tape};
 use fidget::shape::Shape;
 
+#[path = "shared/fidget_bulk.rs"]
+mod fidget_bulk;
 mod fidget_peer;
 #[path = "shared/points.rs"]
 mod points;
@@ -70,12 +72,10 @@ mod bulk_values {
         model: &str,
     ) {
         let (ctx, root) = fidget_peer::to_fidget(&tape(model));
-        let shape = Shape::<F>::new(&ctx, root).expect("fidget accepts the model");
-        let t = shape.float_slice_tape(Default::default());
-        let mut eval = Shape::<F>::new_float_slice_eval();
+        let mut eval = fidget_bulk::RawBulk::<F>::new(&ctx, root);
         let (xs, ys, zs) = points(N_VALUES);
         bencher.counter(ItemsCount::new(N_VALUES)).bench_local(|| {
-            divan::black_box(eval.eval(&t, &xs, &ys, &zs).expect("evaluates"));
+            divan::black_box(eval.eval(&xs, &ys, &zs));
         });
     }
 

@@ -1,17 +1,17 @@
 //! fdsl's bulk value evaluator against fidget's JIT and VM, timed by one plain loop for all
-//! three, so that each runs at its best and the ratios do not depend on a harness.
+//! three, with fidget called through its raw bulk evaluator (`benches/shared/fidget_bulk.rs`).
 //!
-//! Inside the divan `eval` bench, fidget's JIT on the short tapes measured 15 to 25% slower
-//! than this loop in the same build, while fdsl's evaluator and the long tapes measured about
-//! the same (BENCHMARKS.md). Here the three evaluators take turns, round after round, on the
-//! same 65,536 points, and each reports the median of its rounds.
+//! The three evaluators take turns, round after round, on the same 65,536 points, and each
+//! reports the median of its rounds: a check of the divan `eval` bench's `bulk_values` by a
+//! second harness.
 //!
 //! Run with `cargo run --release -p fdsl --example eval_pair [-- MODEL...]`.
 
 use fdsl::Function;
 use fdsl::eval::BulkEval;
-use fidget::shape::Shape;
 
+#[path = "../benches/shared/fidget_bulk.rs"]
+mod fidget_bulk;
 #[path = "../benches/fidget_peer.rs"]
 mod fidget_peer;
 #[path = "../benches/shared/points.rs"]
@@ -50,11 +50,9 @@ fn fidget_run<'a, F: fidget::eval::Function + fidget::eval::MathFunction + Clone
     (xs, ys, zs): &'a (Vec<f32>, Vec<f32>, Vec<f32>),
 ) -> Run<'a> {
     let (ctx, root) = fidget_peer::to_fidget(tape);
-    let shape = Shape::<F>::new(&ctx, root).expect("fidget accepts the model");
-    let t = shape.float_slice_tape(Default::default());
-    let mut eval = Shape::<F>::new_float_slice_eval();
+    let mut eval = fidget_bulk::RawBulk::<F>::new(&ctx, root);
     Box::new(move || {
-        std::hint::black_box(eval.eval(&t, xs, ys, zs).expect("evaluates"));
+        std::hint::black_box(eval.eval(xs, ys, zs));
     })
 }
 
