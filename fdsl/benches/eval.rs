@@ -72,7 +72,7 @@ mod bulk_values {
         model: &str,
     ) {
         let (ctx, root) = fidget_peer::to_fidget(&tape(model));
-        let mut eval = fidget_bulk::RawBulk::<F>::new(&ctx, root);
+        let mut eval = fidget_bulk::values::<F>(&ctx, root);
         let (xs, ys, zs) = points(N_VALUES);
         bencher.counter(ItemsCount::new(N_VALUES)).bench_local(|| {
             divan::black_box(eval.eval(&xs, &ys, &zs));
@@ -112,9 +112,7 @@ mod bulk_gradients {
         model: &str,
     ) {
         let (ctx, root) = fidget_peer::to_fidget(&tape(model));
-        let shape = Shape::<F>::new(&ctx, root).expect("fidget accepts the model");
-        let t = shape.grad_slice_tape(Default::default());
-        let mut eval = Shape::<F>::new_grad_slice_eval();
+        let mut eval = fidget_bulk::gradients::<F>(&ctx, root);
         let (xs, ys, zs) = points(N_GRADIENTS);
         let (xs, ys, zs): (Vec<fidget::types::Grad>, Vec<_>, Vec<_>) = (
             xs.iter()
@@ -130,7 +128,7 @@ mod bulk_gradients {
         bencher
             .counter(ItemsCount::new(N_GRADIENTS))
             .bench_local(|| {
-                divan::black_box(eval.eval(&t, &xs, &ys, &zs).expect("evaluates"));
+                divan::black_box(eval.eval(&xs, &ys, &zs));
             });
     }
 

@@ -11,6 +11,7 @@ use fdsl::Function;
 use fdsl::eval::BulkEval;
 
 #[path = "../benches/shared/fidget_bulk.rs"]
+#[expect(dead_code, reason = "this example times values, not gradients")]
 mod fidget_bulk;
 #[path = "../benches/fidget_peer.rs"]
 mod fidget_peer;
@@ -50,7 +51,7 @@ fn fidget_run<'a, F: fidget::eval::Function + fidget::eval::MathFunction + Clone
     (xs, ys, zs): &'a (Vec<f32>, Vec<f32>, Vec<f32>),
 ) -> Run<'a> {
     let (ctx, root) = fidget_peer::to_fidget(tape);
-    let mut eval = fidget_bulk::RawBulk::<F>::new(&ctx, root);
+    let mut eval = fidget_bulk::values::<F>(&ctx, root);
     Box::new(move || {
         std::hint::black_box(eval.eval(xs, ys, zs));
     })

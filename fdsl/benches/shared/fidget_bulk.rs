@@ -1,5 +1,5 @@
-//! fidget's float bulk evaluator called directly, with the three axes passed in the tape's
-//! own variable order: the peer at its best for bulk values.
+//! fidget's bulk evaluators called directly, with the three axes passed in the tape's own
+//! variable order: the peer at its best for bulk values and gradients.
 //!
 //! fidget's `Shape` wrapper (`ShapeBulkEval::eval`) first copies every point into scratch
 //! arrays, one coordinate at a time, so that it can apply an optional transform. That copy
@@ -11,19 +11,31 @@ use fidget::context::{Context, Node};
 use fidget::eval::{BulkEvaluator, Function, MathFunction, Tape};
 use fidget::var::Var;
 
-/// A function's float bulk evaluator and tape, and where each axis goes among its variables.
-pub struct RawBulk<F: Function> {
-    tape: <F::FloatSliceEval as BulkEvaluator>::Tape,
-    eval: F::FloatSliceEval,
+/// A bulk evaluator and its tape, and which axis fills each of the tape's variables.
+pub struct RawBulk<E: BulkEvaluator> {
+    tape: E::Tape,
+    eval: E,
     /// For each variable slot, the axis (0, 1, 2 for x, y, z) that fills it.
     slots: Vec<usize>,
 }
 
-impl<F: Function + MathFunction> RawBulk<F> {
-    /// The evaluator of `root` in `ctx`, whose only variables are the three axes.
-    pub fn new(ctx: &Context, root: Node) -> Self {
-        let function = F::new(ctx, &[root]).expect("fidget accepts the model");
-        let tape = function.float_slice_tape(Default::default());
+/// fidget's float evaluator of `root` in `ctx`, whose only variables are the three axes.
+pub fn values<F: Function + MathFunction>(ctx: &Context, root: Node) -> RawBulk<F::FloatSliceEval> {
+    let function = F::new(ctx, &[root]).expect("fidget accepts the model");
+    RawBulk::new(function.float_slice_tape(Default::default()))
+}
+
+/// fidget's gradient evaluator of `root` in `ctx`, whose only variables are the three axes.
+pub fn gradients<F: Function + MathFunction>(
+    ctx: &Context,
+    root: Node,
+) -> RawBulk<F::GradSliceEval> {
+    let function = F::new(ctx, &[root]).expect("fidget accepts the model");
+    RawBulk::new(function.grad_slice_tape(Default::default()))
+}
+
+impl<E: BulkEvaluator> RawBulk<E> {
+    fn new(tape: E::Tape) -> Self {
         let vars = tape.vars();
         let mut slots = vec![0; vars.len().max(1)];
         for (axis, var) in [Var::X, Var::Y, Var::Z].iter().enumerate() {
@@ -33,16 +45,16 @@ impl<F: Function + MathFunction> RawBulk<F> {
         }
         Self {
             tape,
-            eval: F::new_float_slice_eval(),
+            eval: E::new(),
             slots,
         }
     }
 
     /// Evaluates the function at the points `(xs[i], ys[i], zs[i])`; returns the first
-    /// value, and hands every value to `black_box` so that none of the work can be skipped.
-    pub fn eval(&mut self, xs: &[f32], ys: &[f32], zs: &[f32]) -> f32 {
+    /// result, and hands every result to `black_box` so that none of the work can be skipped.
+    pub fn eval(&mut self, xs: &[E::Data], ys: &[E::Data], zs: &[E::Data]) -> Option<E::Data> {
         let axes = [xs, ys, zs];
-        let mut vars: [&[f32]; 3] = [xs; 3];
+        let mut vars: [&[E::Data]; 3] = [xs; 3];
         for (slot, axis) in self.slots.iter().enumerate() {
             vars[slot] = axes[*axis];
         }
@@ -50,7 +62,7 @@ impl<F: Function + MathFunction> RawBulk<F> {
             .eval
             .eval(&self.tape, &vars[..self.slots.len()])
             .expect("evaluates");
-        let values = std::hint::black_box(&out[0]);
-        values.first().copied().unwrap_or(f32::NAN)
+        let results = std::hint::black_box(&out[0]);
+        results.first().copied()
     }
 }
