@@ -155,54 +155,25 @@ pub struct Reach {
     bounds: ReachMap,
 }
 
-/// See [`Reach::bounds`]: keyed by two numbers this memo gave out, never by a remote's bytes.
+/// See [`Reach::bounds`]: keyed by two numbers this memo gave out, never by a remote's bytes,
+/// spread by [`crate::op::mix64`].
 #[expect(
     clippy::disallowed_types,
     reason = "never iterated (lookups and inserts only), and the hasher has no random state"
 )]
-type ReachMap = std::collections::HashMap<u64, (u32, u32), PairHashing>;
+type ReachMap = std::collections::HashMap<u64, (u32, u32), crate::op::UniformHashing>;
 
-/// The hasher of [`ReachMap`]: a full 64-bit mix of the key (both numbers reach the low
-/// bits, which pick the bucket).
-#[derive(Clone, Copy, Debug, Default)]
-struct PairHashing;
-
-impl std::hash::BuildHasher for PairHashing {
-    type Hasher = PairHasher;
-    fn build_hasher(&self) -> PairHasher {
-        PairHasher(0)
-    }
-}
-
-/// See [`PairHashing`].
-#[derive(Clone, Copy, Debug)]
-struct PairHasher(u64);
-
-impl std::hash::Hasher for PairHasher {
-    fn finish(&self) -> u64 {
-        // The splitmix64 finaliser.
-        let mut x = self.0;
-        x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        x ^ (x >> 31)
-    }
-
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.0 = self.0.rotate_left(8) ^ u64::from(b);
-        }
-    }
-
-    fn write_u64(&mut self, n: u64) {
-        self.0 ^= n;
-    }
+/// The [`ReachMap`] key of a target's and an author's numbers.
+fn pair_key(target: u32, author: u32) -> u64 {
+    crate::op::mix64(u64::from(target) << 32 | u64::from(author))
 }
 
 impl Reach {
     fn key(&self, target: &OpId, author: &PeerId) -> Option<u64> {
-        let target = *self.targets.get(target)?;
-        let author = *self.authors.get(author)?;
-        Some(u64::from(target) << 32 | u64::from(author))
+        Some(pair_key(
+            *self.targets.get(target)?,
+            *self.authors.get(author)?,
+        ))
     }
 
     /// Whether `author`'s op `seq` has `target` in its causal past, if known.
@@ -234,7 +205,7 @@ impl Reach {
                 let target = *self.targets.entry(target).or_insert(n_targets);
                 let n_authors = next(self.authors.len());
                 let author = *self.authors.entry(author).or_insert(n_authors);
-                u64::from(target) << 32 | u64::from(author)
+                pair_key(target, author)
             }
         };
         let entry = self.bounds.entry(key).or_insert((0, u32::MAX));

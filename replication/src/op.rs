@@ -77,7 +77,7 @@ impl fmt::Display for OpId {
     clippy::disallowed_types,
     reason = "never iterated (only `OpSlab` looks ids up), and the hasher has no random state"
 )]
-type OpIdMap<V> = std::collections::HashMap<OpId, V, OpIdHashing>;
+type OpIdMap<V> = std::collections::HashMap<OpId, V, UniformHashing>;
 
 /// Ops per chunk of an [`OpSlab`].
 const SLAB_CHUNK: usize = 4096;
@@ -139,28 +139,38 @@ impl<P> OpSlab<P> {
     }
 }
 
-/// The hasher of [`OpIdMap`]: an op id's first eight bytes.
+/// The hasher of maps whose keys are uniform already, so it spends no time hashing: an op
+/// id (its first eight bytes) in [`OpIdMap`], or a `u64` spread by [`mix64`].
 #[derive(Clone, Copy, Debug, Default)]
-struct OpIdHashing;
+pub(crate) struct UniformHashing;
 
-impl std::hash::BuildHasher for OpIdHashing {
-    type Hasher = OpIdHasher;
-    fn build_hasher(&self) -> OpIdHasher {
-        OpIdHasher(0)
+impl std::hash::BuildHasher for UniformHashing {
+    type Hasher = UniformHasher;
+    fn build_hasher(&self) -> UniformHasher {
+        UniformHasher(0)
     }
 }
 
-/// See [`OpIdHashing`].
-#[derive(Clone, Copy, Debug)]
-struct OpIdHasher(u64);
+/// The splitmix64 finaliser: a bijection of `u64` that spreads every input bit over the
+/// output, so small numbers become keys for [`UniformHashing`] without collisions.
+pub(crate) fn mix64(mut x: u64) -> u64 {
+    x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    x ^ (x >> 31)
+}
 
-impl std::hash::Hasher for OpIdHasher {
+/// See [`UniformHashing`].
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct UniformHasher(u64);
+
+impl std::hash::Hasher for UniformHasher {
     fn finish(&self) -> u64 {
         self.0
     }
 
     fn write(&mut self, bytes: &[u8]) {
-        // An id hashes as its length, then its 32 bytes (the slice's `Hash`).
+        // An id hashes as its length, then its 32 bytes (the slice's `Hash`); a `u64` as its
+        // 8 bytes.
         let head = match bytes.first_chunk::<8>() {
             Some(head) => *head,
             None => {
