@@ -77,13 +77,16 @@ fn run(root: &Path, secs: u64) -> anyhow::Result<()> {
     config.name = Some("streamer".into());
     let a = Engine::start(config, clock::now().wall)?;
     let n = GRID * GRID * GRID;
-    let first = lock(a.view()).next_object_id();
-    for i in 0..n {
-        let payload = ShapePayload::Create {
-            object: first + i as u64,
-            data: Box::new(ball(i)),
-            group: None,
-        };
+    let first = lock(a.view()).next_object();
+    let ids: Vec<u64> = (0..n as u64)
+        .map(|k| first.skip(k).map(|s| s.id()))
+        .collect::<Option<_>>()
+        .context("object ids")?;
+    for (i, _) in ids.iter().enumerate() {
+        let payload = first
+            .skip(i as u64)
+            .context("object ids")?
+            .create(ball(i), None);
         a.author(payload)?
             .wait()
             .map_err(|e| anyhow::anyhow!("create: {e}"))?;
@@ -128,7 +131,7 @@ fn run(root: &Path, secs: u64) -> anyhow::Result<()> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
     let mut n_edits = 0u64;
     while clock::now().instant < stop_at {
-        let object = first + rng.next_u64() % n as u64;
+        let object = ids[(rng.next_u64() % n as u64) as usize];
         let tension = 0.2 + 0.6 * (rng.next_u64() % 1000) as f64 / 1000.0;
         let payload = ShapePayload::Set {
             object,

@@ -356,7 +356,7 @@ mod tests {
         let keypair = replication::Keypair::from_seed([5; 32]);
         let mut log = replication::Log::default();
         let me = keypair.peer_id();
-        let first = View::new(me, &log).unwrap().next_object_id();
+        let first = View::new(me, &log).unwrap().next_object();
         for payload in crate::engine::demo_payloads_from(&crate::demos::DEMOS[0], first).unwrap() {
             log.author(&keypair, replication::Timestamp(1), payload)
                 .unwrap();

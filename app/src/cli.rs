@@ -10,7 +10,7 @@ use app::engine::{Engine, EngineConfig, Network, lock, store};
 use fdsl::Function;
 use fdsl::eval::{BulkEval, PointEval};
 use replication::net::invite::Invite;
-use replication::shape::ShapePayload;
+use replication::shape::{IdSource, ShapePayload};
 
 /// How often a headless peer looks at its view to print what changed.
 const PEER_POLL_MILLIS: u64 = 100;
@@ -674,21 +674,21 @@ fn local_engine(store: &std::path::Path) -> anyhow::Result<Engine> {
 /// as it was; then each op is authored in order and waited for, and what it made printed.
 pub fn import_command(args: &ImportArgs) -> anyhow::Result<()> {
     use app::transfer;
-    let plan = |path: &PathBuf, next_id| match &args.inline_root {
-        Some(root) => transfer::import_within(path, next_id, root),
-        None => transfer::import(path, next_id),
+    let plan = |path: &PathBuf, next| match &args.inline_root {
+        Some(root) => transfer::import_within(path, next, root),
+        None => transfer::import(path, next),
     };
     // A dry run with provisional ids: a bad file is refused without opening the store.
     for path in &args.files {
-        plan(path, 0)?;
+        plan(path, IdSource::first(replication::PeerId([0; 32])))?;
     }
     let engine = local_engine(&args.store)?;
-    let mut next_id = lock(engine.view()).next_object_id();
+    let mut next = lock(engine.view()).next_object();
     let mut planned = Vec::with_capacity(args.files.len());
     for path in &args.files {
         // Dropping the engine on an error shuts it down, every op on disk.
-        let imported = plan(path, next_id)?;
-        next_id = imported.next_id;
+        let imported = plan(path, next)?;
+        next = imported.next;
         planned.push((path, imported));
     }
     let result = author_imports(&engine, planned);
@@ -751,8 +751,8 @@ pub fn export_command(args: &ExportArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The object `id` names: its full id, or the number the window shows (`object N`, the id's
-/// low 32 bits) when exactly one object has it.
+/// The object `id` names: its full id, or the number the window shows (`object N`: the id's
+/// low 32 bits, or the N of an object `new:` named `object N`) when exactly one object has it.
 fn object_by_number(scene: &fdsl::scene::Scene, id: u64) -> anyhow::Result<fdsl::scene::ObjectId> {
     use fdsl::scene::ObjectId;
     if scene.object(ObjectId(id)).is_some() {
@@ -760,8 +760,10 @@ fn object_by_number(scene: &fdsl::scene::Scene, id: u64) -> anyhow::Result<fdsl:
     }
     let matching: Vec<ObjectId> = scene
         .objects()
+        .filter(|(o, entry)| {
+            o.0 & 0xffff_ffff == id || entry.object.data().name == format!("object {id}")
+        })
         .map(|(o, _)| o)
-        .filter(|o| o.0 & 0xffff_ffff == id)
         .collect();
     match matching[..] {
         [one] => Ok(one),

@@ -243,9 +243,10 @@ pub fn plan(
             let function = check_formula("new", text)?;
             let domain = fit_domain(&function.tape(), 0.0).map_err(|e| format!("new: {e}"))?;
             let formula = Formula::new(text).map_err(|e| format!("new: {e}"))?;
-            let object = session.next_object_id();
+            let ids = session.next_object();
+            let object = ids.id();
             let n_objects = session.scene().len();
-            let name = format!("object {}", object & 0xffff_ffff);
+            let name = format!("object {}", ids.counter);
             let data = ObjectData {
                 name: name.clone(),
                 geometry: Some(Geometry::implicit_in(formula, domain)),
@@ -260,11 +261,7 @@ pub fn plan(
                 },
                 ..ObjectData::default()
             };
-            let payload = ShapePayload::Create {
-                object,
-                data: Box::new(data),
-                group: None,
-            };
+            let payload = ids.create(data, None);
             payload.validate().map_err(|e| format!("new: {e}"))?;
             Ok(Planned {
                 payload,
@@ -490,7 +487,7 @@ mod tests {
         let keypair = replication::Keypair::from_seed([3; 32]);
         let mut log = replication::Log::default();
         let me = keypair.peer_id();
-        let first = View::new(me, &log).unwrap().next_object_id();
+        let first = View::new(me, &log).unwrap().next_object();
         for payload in crate::engine::demo_payloads_from(&crate::demos::DEMOS[0], first).unwrap() {
             log.author(&keypair, Timestamp(1_000_000), payload).unwrap();
         }

@@ -44,8 +44,8 @@ use fdsl::mesh::{MeshFormat, TriMesh};
 use fdsl::object::{ColorDef, Domain, Geometry, Object, ObjectData, ParametricKind, Shape};
 use fdsl::scene::{GroupId, ObjectId, Scene};
 use glam::DVec3;
-use replication::shape::ShapePayload;
 use replication::shape::parts::{self, MAX_ASSEMBLED_BYTES, SplitError};
+use replication::shape::{IdSource, ShapePayload};
 
 use crate::files::{InlineResolver, read_scene_text};
 
@@ -176,7 +176,7 @@ pub enum ImportError {
         /// Why.
         reason: String,
     },
-    /// The ids from `next_id` on would leave this peer's id range.
+    /// The ids from `next` on would use up this peer's counter.
     #[error("{}: no object ids left for {count} more objects and groups", .path.display())]
     IdsExhausted {
         /// The file.
@@ -198,13 +198,13 @@ pub struct Imported {
     /// mesh), one line each.
     pub warnings: Vec<String>,
     /// The id after the last one used: where a following import should start.
-    pub next_id: u64,
+    pub next: IdSource,
 }
 
 /// The ops that bring the objects of the file at `path` into a session, with ids from
-/// `next_id` on ([`crate::engine::View::next_object_id`]); see [`import`].
-pub fn import_payloads(path: &Path, next_id: u64) -> Result<Vec<ShapePayload>, ImportError> {
-    import(path, next_id).map(|imported| imported.payloads)
+/// `next` on ([`crate::engine::View::next_object`]); see [`import`].
+pub fn import_payloads(path: &Path, next: IdSource) -> Result<Vec<ShapePayload>, ImportError> {
+    import(path, next).map(|imported| imported.payloads)
 }
 
 /// Reads the file at `path` and plans the ops that bring its objects into a session.
@@ -216,28 +216,29 @@ pub fn import_payloads(path: &Path, next_id: u64) -> Result<Vec<ShapePayload>, I
 ///   (its signed distance, positive inside) in a domain around it (grown by
 ///   [`MESH_DOMAIN_MARGIN`]), in the file's own coordinates.
 ///
-/// Ids: groups take `next_id, next_id + 1, ...`, then objects the ids after them, so the
-/// highest id used is an object's and the view's next object id moves past all of them.
-pub fn import(path: &Path, next_id: u64) -> Result<Imported, ImportError> {
+/// Ids: groups take the ids of the counters from `next` on, then objects the ones after
+/// them, so the highest counter used is an object's and the view's next object moves past
+/// all of them.
+pub fn import(path: &Path, next: IdSource) -> Result<Imported, ImportError> {
     let dir = path.parent().unwrap_or(Path::new(""));
-    import_within(path, next_id, dir)
+    import_within(path, next, dir)
 }
 
 /// [`import`], with `Inline` files allowed anywhere inside `inline_root` (which the user
 /// chose: `sculpt import --inline-root DIR`) rather than only in the file's own folder.
 pub fn import_within(
     path: &Path,
-    next_id: u64,
+    next: IdSource,
     inline_root: &Path,
 ) -> Result<Imported, ImportError> {
     match FileFormat::of(path) {
-        Some(FileFormat::Fvrml) => import_scene(path, next_id, inline_root),
-        Some(FileFormat::Mesh(format)) => import_mesh(path, format, next_id),
+        Some(FileFormat::Fvrml) => import_scene(path, next, inline_root),
+        Some(FileFormat::Mesh(format)) => import_mesh(path, format, next),
         None => Err(ImportError::UnknownFormat { path: path.into() }),
     }
 }
 
-fn import_scene(path: &Path, next_id: u64, inline_root: &Path) -> Result<Imported, ImportError> {
+fn import_scene(path: &Path, next: IdSource, inline_root: &Path) -> Result<Imported, ImportError> {
     let read_error = |message: String| ImportError::Read {
         path: path.into(),
         message,
@@ -253,7 +254,7 @@ fn import_scene(path: &Path, next_id: u64, inline_root: &Path) -> Result<Importe
             errors: e.errors().map(|i| located(i, &shown)).collect(),
         }
     })?;
-    let mut imported = scene_payloads(path, &loaded.scene, next_id)?;
+    let mut imported = scene_payloads(path, &loaded.scene, next)?;
     let mut warnings: Vec<String> = loaded.warnings.iter().map(|w| located(w, &shown)).collect();
     warnings.append(&mut imported.warnings);
     imported.warnings = warnings;
@@ -268,11 +269,11 @@ fn located(issue: &fvrml::Issue, shown: &str) -> String {
     format!("{file}:{line}:{column}: {severity}: {}", issue.message)
 }
 
-/// The payloads of a loaded scene: groups parents first, then objects, ids from `next_id`.
+/// The payloads of a loaded scene: groups parents first, then objects, ids from `next`.
 pub(crate) fn scene_payloads(
     path: &Path,
     scene: &Scene,
-    next_id: u64,
+    next: IdSource,
 ) -> Result<Imported, ImportError> {
     let too_many = |what, count, limit| ImportError::TooMany {
         path: path.into(),
@@ -287,7 +288,7 @@ pub(crate) fn scene_payloads(
         payloads: Vec::new(),
         made: Vec::new(),
         warnings: Vec::new(),
-        next_id,
+        next,
     };
     if scene.is_empty() {
         imported
@@ -299,17 +300,14 @@ pub(crate) fn scene_payloads(
     if groups.len() > MAX_IMPORT_GROUPS {
         return Err(too_many("groups", groups.len(), MAX_IMPORT_GROUPS));
     }
-    let ids = IdRange::new(path, next_id, groups.len() + scene.len())?;
-    let group_ids = group_payloads(path, scene, &groups, ids.first, &mut imported)?;
+    let ids = IdRange::new(path, next, groups.len() + scene.len())?;
+    let group_ids = group_payloads(path, scene, &groups, &ids, &mut imported)?;
     let new_group = |g: Option<GroupId>| g.and_then(|g| group_ids.get(&g).copied());
-    let first_object = ids.first + groups.len() as u64;
-    for ((_, entry), object) in scene.objects().zip(first_object..) {
+    for (k, (_, entry)) in scene.objects().enumerate() {
         let data = entry.object.data();
-        let payload = ShapePayload::Create {
-            object,
-            data: Box::new(data.clone()),
-            group: new_group(entry.group),
-        };
+        let source = ids.at(groups.len() + k);
+        let payload = source.create(data.clone(), new_group(entry.group));
+        let object = source.id();
         let what = format!("object \"{}\"", data.name);
         let mesh = match data.geometry.as_ref().map(|g| &g.shape) {
             Some(Shape::Mesh(m)) => Some(&**m),
@@ -319,22 +317,24 @@ pub(crate) fn scene_payloads(
         let ops = payload_ops(path, &what, payload, mesh)?;
         push_ops(&mut imported, ops, made);
     }
-    imported.next_id = ids.end;
+    imported.next = ids.end;
     Ok(imported)
 }
 
-/// Appends a `SetGroup` for each of `groups` (parents first), with ids from `first` in that
+/// Appends a `SetGroup` for each of `groups` (parents first), with ids from `ids` in that
 /// order so that each parent exists when its children are set; returns the new ids.
 fn group_payloads(
     path: &Path,
     scene: &Scene,
     groups: &[GroupId],
-    first: u64,
+    ids: &IdRange,
     imported: &mut Imported,
 ) -> Result<BTreeMap<GroupId, u64>, ImportError> {
-    let group_ids: BTreeMap<GroupId, u64> =
-        groups.iter().zip(first..).map(|(g, n)| (*g, n)).collect();
-    for (g, new) in groups.iter().zip(first..) {
+    let group_ids: BTreeMap<GroupId, u64> = (groups.iter().enumerate())
+        .map(|(k, g)| (*g, ids.at(k).id()))
+        .collect();
+    for (k, g) in groups.iter().enumerate() {
+        let new = ids.at(k);
         let Some(group) = scene.group(*g) else {
             continue;
         };
@@ -346,9 +346,9 @@ fn group_payloads(
             ..group.clone()
         };
         let what = format!("group \"{}\"", value.name);
-        let made = format!("group {new} \"{}\"", value.name);
+        let made = format!("group {} \"{}\"", new.id(), value.name);
         let payload = ShapePayload::SetGroup {
-            group: new,
+            group: new.id(),
             value: Some(Box::new(value)),
         };
         let ops = payload_ops(path, &what, payload, None)?;
@@ -375,25 +375,28 @@ fn groups_parents_first(scene: &Scene) -> Vec<GroupId> {
     groups.into_iter().map(|(_, g)| g).collect()
 }
 
-/// `count` consecutive ids from `first`, inside one peer's range.
+/// `count` consecutive counters of one author from `first`.
 struct IdRange {
-    first: u64,
-    end: u64,
+    first: IdSource,
+    end: IdSource,
 }
 
 impl IdRange {
-    fn new(path: &Path, first: u64, count: usize) -> Result<IdRange, ImportError> {
-        // Ids are a peer's 31-bit prefix and a 32-bit counter (`View::next_object_id`); the
-        // top bit marks groups in the lease space, so it must stay clear.
-        let end = first
-            .checked_add(count as u64)
-            .filter(|end| *end < 1 << 63 && (first & 0xffff_ffff) + count as u64 <= 0xffff_ffff);
-        match end {
+    fn new(path: &Path, first: IdSource, count: usize) -> Result<IdRange, ImportError> {
+        match first.skip(count as u64) {
             Some(end) => Ok(IdRange { first, end }),
             None => Err(ImportError::IdsExhausted {
                 path: path.into(),
                 count,
             }),
+        }
+    }
+
+    /// The source of the `k`-th id of the range (`k` below its count).
+    fn at(&self, k: usize) -> IdSource {
+        IdSource {
+            counter: self.first.counter + k as u32,
+            ..self.first
         }
     }
 }
@@ -480,7 +483,7 @@ fn push_ops(imported: &mut Imported, ops: Vec<ShapePayload>, made: String) {
     }
 }
 
-fn import_mesh(path: &Path, format: MeshFormat, next_id: u64) -> Result<Imported, ImportError> {
+fn import_mesh(path: &Path, format: MeshFormat, next: IdSource) -> Result<Imported, ImportError> {
     let bytes = read_bounded(path, MAX_MESH_FILE_BYTES)?;
     let mesh = format.read(&bytes).map_err(|error| ImportError::Mesh {
         path: path.into(),
@@ -490,7 +493,7 @@ fn import_mesh(path: &Path, format: MeshFormat, next_id: u64) -> Result<Imported
         return Err(ImportError::EmptyMesh { path: path.into() });
     }
     let name = mesh_name(path);
-    let ids = IdRange::new(path, next_id, 1)?;
+    let ids = IdRange::new(path, next, 1)?;
     let mesh = Arc::new(mesh);
     let data = ObjectData {
         name: name.clone(),
@@ -501,12 +504,8 @@ fn import_mesh(path: &Path, format: MeshFormat, next_id: u64) -> Result<Imported
         },
         ..ObjectData::default()
     };
-    let made = format!("object {} \"{name}\": {}", ids.first, kind(&data));
-    let payload = ShapePayload::Create {
-        object: ids.first,
-        data: Box::new(data),
-        group: None,
-    };
+    let made = format!("object {} \"{name}\": {}", ids.first.id(), kind(&data));
+    let payload = ids.first.create(data, None);
     let ops = payload_ops(path, &format!("the mesh \"{name}\""), payload, Some(&mesh))?;
     let mut warnings = Vec::new();
     if !mesh.is_closed() {
@@ -520,7 +519,7 @@ fn import_mesh(path: &Path, format: MeshFormat, next_id: u64) -> Result<Imported
         payloads: Vec::new(),
         made: Vec::new(),
         warnings,
-        next_id: ids.end,
+        next: ids.end,
     };
     push_ops(&mut imported, ops, made);
     Ok(imported)
@@ -998,6 +997,14 @@ mod tests {
     use fdsl::object::{Formula, Transform};
     use fdsl::scene::Group;
 
+    /// Ids of one made-up author from `counter`.
+    fn ids(counter: u32) -> IdSource {
+        IdSource {
+            author: replication::PeerId([1; 32]),
+            counter,
+        }
+    }
+
     fn scratch(name: &str) -> PathBuf {
         let dir =
             std::env::temp_dir().join(format!("sculpt-transfer-{name}-{}", std::process::id()));
@@ -1044,35 +1051,26 @@ mod tests {
             .unwrap();
         scene.create(ObjectId(1), ball("b"), None).unwrap();
         let path = Path::new("scene.wrl");
-        let imported = scene_payloads(path, &scene, 100).unwrap();
-        assert_eq!(imported.next_id, 104);
+        let imported = scene_payloads(path, &scene, ids(100)).unwrap();
+        assert_eq!(imported.next, ids(104));
         assert_eq!(imported.made.len(), 4);
         let [outer, inner, a, b] = &imported.payloads[..] else {
             panic!("{:?}", imported.payloads);
         };
         assert!(
-            matches!(outer, ShapePayload::SetGroup { group: 100, value: Some(g) } if g.parent.is_none())
+            matches!(outer, ShapePayload::SetGroup { group, value: Some(g) } if *group == ids(100).id() && g.parent.is_none())
         );
         assert!(
-            matches!(inner, ShapePayload::SetGroup { group: 101, value: Some(g) } if g.parent == Some(GroupId(100)))
+            matches!(inner, ShapePayload::SetGroup { group, value: Some(g) } if *group == ids(101).id() && g.parent == Some(GroupId(ids(100).id())))
         );
-        assert!(matches!(
-            a,
-            ShapePayload::Create {
-                object: 102,
-                group: Some(101),
-                ..
-            }
-        ));
-        assert!(matches!(
-            b,
-            ShapePayload::Create {
-                object: 103,
-                group: None,
-                ..
-            }
-        ));
-        let exhausted = scene_payloads(path, &scene, 0xffff_fffe).unwrap_err();
+        assert_eq!(
+            (a, b),
+            (
+                &ids(102).create(ball("a"), Some(ids(101).id())),
+                &ids(103).create(ball("b"), None)
+            )
+        );
+        let exhausted = scene_payloads(path, &scene, ids(u32::MAX - 2)).unwrap_err();
         assert!(matches!(
             exhausted,
             ImportError::IdsExhausted { count: 4, .. }
@@ -1087,7 +1085,7 @@ mod tests {
                 .create(ObjectId(i), ObjectData::default(), None)
                 .unwrap();
         }
-        let e = scene_payloads(Path::new("many.wrl"), &scene, 1).unwrap_err();
+        let e = scene_payloads(Path::new("many.wrl"), &scene, ids(1)).unwrap_err();
         assert!(
             matches!(e, ImportError::TooMany { what: "objects", count, .. } if count == MAX_IMPORT_OBJECTS + 1),
             "{e}"
@@ -1103,17 +1101,19 @@ mod tests {
         fdsl::mesh::obj::write(&cube, &mut bytes);
         let path = dir.join("block.obj");
         std::fs::write(&path, &bytes).unwrap();
-        let imported = import(&path, 7).unwrap();
-        assert_eq!(imported.next_id, 8);
+        let imported = import(&path, ids(7)).unwrap();
+        assert_eq!(imported.next, ids(8));
         assert!(imported.warnings.is_empty(), "{:?}", imported.warnings);
         let ShapePayload::Create {
-            object: 7,
+            object,
+            counter: Some(7),
             data,
             group: None,
         } = &imported.payloads[0]
         else {
             panic!("{:?}", imported.payloads);
         };
+        assert_eq!(*object, ids(7).id());
         assert_eq!(data.name, "block");
         let geometry = data.geometry.as_ref().unwrap();
         let domain = geometry.domain.unwrap().aabb();
@@ -1141,26 +1141,28 @@ mod tests {
         fdsl::mesh::glb::write(&big, &mut bytes);
         let path = dir.join("big.glb");
         std::fs::write(&path, &bytes).unwrap();
-        let imported = import(&path, 7).unwrap();
+        let imported = import(&path, ids(7)).unwrap();
         let (last, parts) = imported.payloads.split_last().unwrap();
         assert!(parts.len() > 1, "{}", parts.len());
+        let seven = ids(7).id();
         assert!(
             parts
                 .iter()
-                .all(|p| matches!(p, ShapePayload::Part { object: 7, .. })),
+                .all(|p| matches!(p, ShapePayload::Part { object, .. } if *object == seven)),
             "{parts:?}"
         );
         let ShapePayload::Assemble {
-            object: 7,
+            object,
             parts: hashes,
         } = last
         else {
             panic!("{last:?}");
         };
+        assert_eq!(*object, seven);
         assert_eq!(hashes.len(), parts.len());
         assert_eq!(imported.made.len(), imported.payloads.len());
-        let made = "object 7 \"big\": a mesh of 5120 triangles, closed";
-        assert_eq!(imported.made.last().unwrap(), made);
+        let made = format!("object {seven} \"big\": a mesh of 5120 triangles, closed");
+        assert_eq!(imported.made.last().unwrap(), &made);
         assert_eq!(
             imported.made[0],
             format!("{made}: part 1 of {}", parts.len())
@@ -1172,7 +1174,7 @@ mod tests {
         fdsl::mesh::glb::write(&huge, &mut bytes);
         let path = dir.join("huge.glb");
         std::fs::write(&path, &bytes).unwrap();
-        let e = import(&path, 7).unwrap_err();
+        let e = import(&path, ids(7)).unwrap_err();
         let text = e.to_string();
         assert!(matches!(e, ImportError::TooLarge { .. }), "{text}");
         assert!(
@@ -1186,14 +1188,14 @@ mod tests {
     fn unknown_missing_and_empty_files_are_refused() {
         let dir = scratch("refused");
         assert!(matches!(
-            import(&dir.join("notes.txt"), 1),
+            import(&dir.join("notes.txt"), ids(1)),
             Err(ImportError::UnknownFormat { .. })
         ));
-        let missing = import(&dir.join("missing.stl"), 1).unwrap_err();
+        let missing = import(&dir.join("missing.stl"), ids(1)).unwrap_err();
         assert!(missing.to_string().contains("missing.stl"), "{missing}");
         std::fs::write(dir.join("empty.obj"), "v 0 0 0\n").unwrap();
         assert!(matches!(
-            import(&dir.join("empty.obj"), 1),
+            import(&dir.join("empty.obj"), ids(1)),
             Err(ImportError::EmptyMesh { .. })
         ));
         let _ = std::fs::remove_dir_all(&dir);

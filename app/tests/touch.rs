@@ -366,17 +366,10 @@ mod live {
         let (da, db) = (super::scratch("live-a"), super::scratch("live-b"));
         let a = Engine::start(config(&da), T0).unwrap();
         // The ball B's hand will rest in, and another one far from it.
-        let object = lock(a.view()).next_object_id();
-        for (id, x, radius) in [(object, 0.0, 1.0), (object + 1, 3.0, 0.5)] {
-            let data = Box::new(ball(x, radius));
-            author(
-                &a,
-                ShapePayload::Create {
-                    object: id,
-                    data,
-                    group: None,
-                },
-            );
+        let first = lock(a.view()).next_object();
+        let object = first.id();
+        for (k, x, radius) in [(0, 0.0, 1.0), (1, 3.0, 0.5)] {
+            author(&a, first.skip(k).unwrap().create(ball(x, radius), None));
         }
         let addr = lock(a.view()).listen_addr().unwrap();
         let b_config = EngineConfig {

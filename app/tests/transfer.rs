@@ -198,7 +198,8 @@ fn the_watermelon_scene_is_imported_as_its_object() {
 /// A store holding a ball carved by a ball at (1, 0, 0); returns the ball's id.
 fn sculpted_ball(dir: &Path) -> ObjectId {
     let engine = engine(dir);
-    let object = lock(engine.view()).next_object_id();
+    let ids = lock(engine.view()).next_object();
+    let object = ids.id();
     let data = ObjectData {
         name: "ball".into(),
         geometry: Some(Geometry::implicit_in(
@@ -207,11 +208,7 @@ fn sculpted_ball(dir: &Path) -> ObjectId {
         )),
         ..ObjectData::default()
     };
-    let create = ShapePayload::Create {
-        object,
-        data: Box::new(data),
-        group: None,
-    };
+    let create = ids.create(data, None);
     engine.author(create).unwrap().wait().unwrap();
     let carve = Edit::stamp(
         EditOp::Subtract,

@@ -171,6 +171,7 @@ fn authored(key: &Keypair, payloads: impl IntoIterator<Item = ShapePayload>) -> 
 fn create(object: u64, formula: &str) -> ShapePayload {
     ShapePayload::Create {
         object,
+        counter: None,
         data: Box::new(ObjectData {
             geometry: Some(Geometry::implicit(formula_of(formula))),
             ..ObjectData::default()

@@ -254,6 +254,7 @@ fn workload(seed: u8) -> Vec<ShapePayload> {
     vec![
         ShapePayload::Create {
             object,
+            counter: None,
             data: Box::new(ObjectData {
                 name: format!("ball {seed}"),
                 geometry: Some(Geometry::implicit(long_formula())),

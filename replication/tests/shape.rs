@@ -16,7 +16,9 @@ use proptest::prelude::*;
 use replication::materialize::{Materialize, Materialized};
 use replication::payload::MAX_PAYLOAD_BYTES;
 use replication::pending::Origin;
-use replication::shape::{ShapePayload, ShapeScene, parts};
+use replication::shape::{
+    DERIVED_ID_BIT, IdSource, ShapePayload, ShapeScene, may_create, object_id, parts,
+};
 use replication::{Keypair, Log, Payload, Timestamp, VerifiedOp};
 
 type SLog = Log<ShapePayload>;
@@ -64,6 +66,7 @@ fn concurrent_workload(n_peers: u8, per_peer: usize) -> Vec<VerifiedOp<ShapePayl
             Timestamp(1),
             ShapePayload::Create {
                 object: 1,
+                counter: None,
                 data: Box::new(sphere_data()),
                 group: None,
             },
@@ -191,6 +194,7 @@ fn undo_then_redo_restores_the_scene_and_snapshots_round_trip() {
         &mut scene,
         ShapePayload::Create {
             object: 1,
+            counter: None,
             data: Box::new(sphere_data()),
             group: None,
         },
@@ -249,6 +253,7 @@ fn a_weak_takeover_rejects_the_former_holders_edits() {
     let mut log = SLog::default();
     let create = ShapePayload::Create {
         object: 1,
+        counter: None,
         data: Box::new(sphere_data()),
         group: None,
     };
@@ -285,6 +290,7 @@ fn payloads_are_small_and_hostile_bytes_are_refused() {
     let mut create = Vec::new();
     ShapePayload::Create {
         object: 1,
+        counter: None,
         data: Box::new(sphere_data()),
         group: None,
     }
@@ -372,6 +378,7 @@ fn mesh_ball(object: u64) -> ShapePayload {
     let mesh = fdsl::mesh::shapes::icosphere(1.0, 4);
     ShapePayload::Create {
         object,
+        counter: None,
         data: Box::new(ObjectData {
             name: "mesh ball".into(),
             geometry: Some(Geometry {
@@ -564,4 +571,131 @@ fn an_assembly_without_its_parts_or_of_something_else_changes_nothing() {
     ));
     let small = color([0.1, 0.2, 0.3]);
     assert_eq!(parts::split(small.clone()).unwrap(), vec![small]);
+}
+
+/// A member who knows the id an honest peer is about to use cannot create the object first:
+/// ids derive from their author's key and counter, and no other author's `Create` makes it,
+/// however early it sorts, with or without a counter, whole or in parts.
+#[test]
+fn a_member_cannot_take_an_object_id_another_peer_is_about_to_use() {
+    let (honest, member) = (key(0), key(1));
+    let ids = IdSource::first(honest.peer_id());
+    let target = ids.id();
+    let stolen = || ObjectData {
+        name: "stolen".into(),
+        ..sphere_data()
+    };
+    // The member's ops, authored before anything of the honest peer's: Lamport 1 onwards, so
+    // each sorts before the honest creation below.
+    let mut bogus = vec![
+        ShapePayload::Create {
+            object: target,
+            counter: None,
+            data: Box::new(stolen()),
+            group: None,
+        },
+        ShapePayload::Create {
+            object: target,
+            counter: Some(ids.counter),
+            data: Box::new(stolen()),
+            group: None,
+        },
+    ];
+    let ShapePayload::Create { data: big, .. } = mesh_ball(target) else {
+        unreachable!()
+    };
+    bogus.extend(
+        parts::split(ShapePayload::Create {
+            object: target,
+            counter: Some(7),
+            data: big,
+            group: None,
+        })
+        .unwrap(),
+    );
+    let mut member_log = SLog::default();
+    let member_ops: Vec<_> = bogus
+        .into_iter()
+        .map(|p| member_log.author(&member, Timestamp(1), p).unwrap().0)
+        .collect();
+    // The honest peer chats first, so its creation has a later Lamport time than all of them.
+    let mut honest_log = SLog::default();
+    let mut honest_ops = vec![
+        honest_log
+            .author(&honest, Timestamp(5), ShapePayload::Chat("hi".into()))
+            .unwrap()
+            .0,
+    ];
+    honest_ops.push(
+        honest_log
+            .author(&honest, Timestamp(6), ids.create(sphere_data(), None))
+            .unwrap()
+            .0,
+    );
+    for ops in [
+        [member_ops.clone(), honest_ops.clone()].concat(),
+        [honest_ops.clone(), member_ops.clone()].concat(),
+    ] {
+        let (log, scene) = deliver(&ops);
+        let first_create = log
+            .entries()
+            .position(|e| matches!(e.op.payload(), ShapePayload::Create { .. }));
+        assert_eq!(first_create, Some(0), "the member's creation sorts first");
+        let object = object_data(&scene, target).expect("the honest creation makes it");
+        assert_eq!(object.name, "ball");
+        assert!(!matches!(object.geometry.unwrap().shape, Shape::Mesh(_)));
+    }
+
+    // Without the honest creation, none of the member's makes the object.
+    let (_, scene) = deliver(&member_ops);
+    assert!(object_data(&scene, target).is_none());
+
+    // The member's own ids work: with its counter, or (as ops signed before ids were derived
+    // do) without a counter outside the derived ids.
+    let own = IdSource::first(member.peer_id());
+    assert!(!may_create(member.peer_id(), target, Some(1)));
+    assert!(!may_create(member.peer_id(), target, None));
+    assert!(may_create(member.peer_id(), own.id(), Some(1)));
+    assert!(may_create(member.peer_id(), 7, None));
+    let (mine, _) = member_log
+        .author(&member, Timestamp(9), own.create(stolen(), None))
+        .unwrap();
+    let (_, scene) = deliver(&[member_ops, vec![mine]].concat());
+    assert_eq!(object_data(&scene, own.id()).unwrap().name, "stolen");
+}
+
+/// Derived ids: the derived bit set, the group bit clear, one per author and counter, and a
+/// `Create` with a counter encodes after every older variant, so ops signed before still
+/// decode to what they said.
+#[test]
+fn derived_ids_are_distinct_and_older_creations_decode_as_before() {
+    let mut seen = std::collections::BTreeSet::new();
+    for i in 0..8 {
+        let author = key(i).peer_id();
+        for counter in [0, 1, 2, 1000, u32::MAX] {
+            let id = object_id(author, counter);
+            assert_eq!(id & (DERIVED_ID_BIT | 1 << 63), DERIVED_ID_BIT);
+            assert!(seen.insert(id), "{id:#x} twice");
+        }
+    }
+    let older = ShapePayload::Create {
+        object: 7,
+        counter: None,
+        data: Box::new(sphere_data()),
+        group: None,
+    };
+    let mut bytes = Vec::new();
+    older.encode(&mut bytes);
+    assert_eq!(
+        bytes[1], 0,
+        "a counterless creation is variant 0, as before"
+    );
+    assert_eq!(ShapePayload::decode(&bytes).unwrap(), older);
+    let derived = IdSource::first(key(0).peer_id()).create(sphere_data(), Some(3));
+    bytes.clear();
+    derived.encode(&mut bytes);
+    assert_eq!(bytes[1], 13, "after every older variant");
+    let back = ShapePayload::decode(&bytes).unwrap();
+    assert!(back.is_canonical(&bytes));
+    assert_eq!(back, derived);
 }

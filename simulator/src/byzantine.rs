@@ -19,6 +19,9 @@
 //! - with `lease_attacks`, lease hoarding: strong acquires with `ttl u64::MAX` from a chain
 //!   that sees everything (so honest ops authored after them are refused by design, and those
 //!   authored concurrently must not be);
+//! - id theft: a backdated `Create` (fresh key, Lamport 1) of the object id an honest peer's
+//!   user will take next, with or without a counter, named [`STOLEN_NAME`]: no honest scene
+//!   may ever hold an object of that name;
 //! - with `forks`, equivocation: two ops of one fresh key with sequence number 1, sent to two
 //!   different peers.
 
@@ -42,6 +45,8 @@ pub const SYBIL_BURST: usize = 32;
 pub const MAX_COST_BOMBS: usize = 12;
 /// How far back a backdated op is stamped when not at time 0.
 pub const BACKDATE_MICROS: u64 = 10 * 60 * 1_000_000;
+/// The name of the objects id theft creates.
+pub const STOLEN_NAME: &str = "stolen id";
 /// Object ids the byzantine member creates (above every honest user's).
 const BOMB_OBJECT_BASE: u64 = 64 << 32;
 /// The compile bomb: a short loop, unrolled as far as an object's formula may
@@ -92,6 +97,7 @@ enum Attack {
     GiantVersionVectors,
     OversizedBatch,
     CostBomb,
+    TakeId,
     Fork,
 }
 
@@ -107,6 +113,7 @@ impl Attack {
             Attack::GiantVersionVectors => "giant-vv",
             Attack::OversizedBatch => "oversized-batch",
             Attack::CostBomb => "cost-bomb",
+            Attack::TakeId => "take-id",
             Attack::Fork => "fork",
         }
     }
@@ -297,6 +304,7 @@ fn cost_bomb(kind: u64, object: u64, text: &str) -> Option<ShapePayload> {
     Some(match kind {
         0 => ShapePayload::Create {
             object,
+            counter: None,
             data: Box::new(ObjectData {
                 geometry: Some(geometry()?),
                 ..ObjectData::default()
@@ -329,6 +337,7 @@ impl Simulation {
                 Attack::GiantVersionVectors,
                 Attack::OversizedBatch,
                 Attack::CostBomb,
+                Attack::TakeId,
             ]);
         }
         if faults.lease_attacks {
@@ -358,6 +367,7 @@ impl Simulation {
     fn craft(&mut self, attack: Attack, to: usize, targets: &[usize]) -> Option<Sends> {
         let now = self.now;
         let objects = self.objects.clone();
+        let victim = self.honest.get(to).map(|h| h.user.next_ids());
         let hostile = self.hostile.as_mut()?;
         let me = hostile.peer_id();
         let batch_no = hostile.next_batch_no();
@@ -482,6 +492,28 @@ impl Simulation {
                 };
                 let timestamp = now.max(f.timestamp);
                 one(sign(&key, 1, f.lamport + 1, timestamp, f.heads, payload))
+            }
+            Attack::TakeId => {
+                let key = byz.sybil()?;
+                let victim = victim?.skip(rng.below(3))?;
+                let payload = ShapePayload::Create {
+                    object: victim.id(),
+                    counter: rng.chance(500).then_some(victim.counter),
+                    data: Box::new(ObjectData {
+                        name: STOLEN_NAME.into(),
+                        geometry: Some(Geometry::implicit(Formula::new("1-x^2-y^2-z^2").ok()?)),
+                        ..ObjectData::default()
+                    }),
+                    group: None,
+                };
+                one(sign(
+                    &key,
+                    1,
+                    1,
+                    now.saturating_sub(BACKDATE_MICROS),
+                    Vec::new(),
+                    payload,
+                ))
             }
             Attack::Fork => {
                 let key = byz.sybil()?;

@@ -102,6 +102,7 @@ pub(crate) fn finish(sim: Simulation) -> Report {
     check_floods(&sim, &mut failures);
     if sim.hostile.as_ref().is_some_and(|h| h.byzantine.is_some()) {
         check_erasure(&sim, &mut failures);
+        check_stolen_ids(&sim, &mut failures);
     }
     let memory = memory_figures(&sim, &mut failures);
     build_report(
@@ -111,6 +112,20 @@ pub(crate) fn finish(sim: Simulation) -> Report {
         memory,
         n_lease_checked,
     )
+}
+
+/// No honest scene holds an object the byzantine member created under an honest peer's id.
+fn check_stolen_ids(sim: &Simulation, failures: &mut Vec<String>) {
+    for (i, h) in sim.honest.iter().enumerate() {
+        let stolen = (h.scene.scene().scene().objects())
+            .filter(|(_, o)| o.object.data().name == crate::byzantine::STOLEN_NAME)
+            .count();
+        if stolen > 0 {
+            failures.push(format!(
+                "peer {i}: {stolen} objects created by a member under another peer's id"
+            ));
+        }
+    }
 }
 
 /// Per-peer history: panics, causal order, pending, authored and durable ops present, ops

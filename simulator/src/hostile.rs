@@ -56,12 +56,12 @@ pub(crate) struct Hostile {
 impl Hostile {
     pub(crate) fn new(key: Keypair) -> Hostile {
         Hostile {
+            user: User::new(key.peer_id()),
             key,
             captured: Vec::new(),
             own: Vec::new(),
             own_ids: Vec::new(),
             own_lamport: 0,
-            user: User::default(),
             next_batch_no: 1,
             forged: Vec::new(),
             byzantine: None,

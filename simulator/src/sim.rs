@@ -1207,11 +1207,12 @@ pub(crate) fn new_honest(
             scene,
         ))
     })?;
+    let user = User::new(peer.peer_id());
     Some(Honest {
         key_seed,
         peer,
         scene,
-        user: User::default(),
+        user,
         seen: BTreeSet::new(),
         n_received_insertions: 0,
         panicked: None,

@@ -12,8 +12,8 @@ use fdsl::object::{
     ColorDef, Edit, EditOp, Field, Formula, Geometry, ObjectData, PaintValue, Paintable, Pose,
     ToolShape,
 };
-use replication::OpId;
-use replication::shape::ShapePayload;
+use replication::shape::{IdSource, ShapePayload};
+use replication::{OpId, PeerId};
 use std::sync::Arc;
 
 use crate::rng::SimRng;
@@ -80,17 +80,14 @@ pub fn actions(seed: u64, n_actions: usize, start_micros: u64) -> Vec<Action> {
 }
 
 /// What one user remembers between actions.
-#[derive(Debug, Default, Clone)]
+#[derive(Debug, Clone)]
 pub struct User {
+    /// Whose key its objects' ids derive from.
+    author: PeerId,
     /// Objects this user created.
-    created: u64,
+    created: u32,
     /// Its own edits, most recent last (for undo).
     edits: Vec<OpId>,
-}
-
-/// An object id unique to `(peer_idx, n)`: peer index in the high bits.
-fn object_id(peer_idx: usize, n: u64) -> u64 {
-    ((peer_idx as u64 + 1) << 32) | n
 }
 
 fn shape_data(rng: &mut SimRng, name: String) -> Option<ObjectData> {
@@ -104,14 +101,26 @@ fn shape_data(rng: &mut SimRng, name: String) -> Option<ObjectData> {
 
 /// The payload that creates the hot object.
 pub fn hot_object(rng: &mut SimRng) -> Option<ShapePayload> {
+    // Without a counter, as ops signed before ids were derived create: every peer may, and
+    // the first in the order makes the object.
     Some(ShapePayload::Create {
         object: HOT_OBJECT,
+        counter: None,
         data: shape_data(rng, "hot".into())?.into(),
         group: None,
     })
 }
 
 impl User {
+    /// The user of the peer whose key is `author`.
+    pub fn new(author: PeerId) -> User {
+        User {
+            author,
+            created: 0,
+            edits: Vec::new(),
+        }
+    }
+
     /// Draws the next action of the user of peer `peer_idx`; `known` are the objects it may
     /// touch (the hot one and the ones created so far by anyone).
     pub fn next(
@@ -129,12 +138,14 @@ impl User {
         let payload = match roll {
             0..=7 => {
                 self.created += 1;
-                let object = object_id(peer_idx, self.created);
-                ShapePayload::Create {
-                    object,
-                    data: shape_data(rng, format!("p{peer_idx}-{}", self.created))?.into(),
-                    group: None,
-                }
+                let ids = IdSource {
+                    author: self.author,
+                    counter: self.created,
+                };
+                ids.create(
+                    shape_data(rng, format!("p{peer_idx}-{}", self.created))?,
+                    None,
+                )
             }
             8..=17 => ShapePayload::Set {
                 object: target,
@@ -214,6 +225,14 @@ impl User {
         Some(payload)
     }
 
+    /// Where the ids of this user's next objects start.
+    pub fn next_ids(&self) -> IdSource {
+        IdSource {
+            author: self.author,
+            counter: self.created.saturating_add(1),
+        }
+    }
+
     /// Takes note of an authored op (edits become undoable).
     pub fn authored(&mut self, payload: &ShapePayload, id: OpId) {
         if matches!(payload, ShapePayload::Edit { .. }) {
@@ -222,11 +241,6 @@ impl User {
             }
             self.edits.push(id);
         }
-    }
-
-    /// Object ids created by `peer_idx`'s user so far.
-    pub fn created_ids(&self, peer_idx: usize) -> impl Iterator<Item = u64> {
-        (1..=self.created).map(move |n| object_id(peer_idx, n))
     }
 }
 
@@ -248,7 +262,7 @@ mod tests {
     #[test]
     fn every_drawn_payload_validates_and_round_trips() {
         let mut rng = SimRng::new(3);
-        let mut user = User::default();
+        let mut user = User::new(PeerId([2; 32]));
         let mut kinds = std::collections::BTreeSet::new();
         for i in 0..400 {
             let p = user.next(&mut rng, 2, &[HOT_OBJECT]).unwrap();

@@ -27,7 +27,7 @@ use render::mesh::object_field::ObjectField;
 use render::mesh::octree::{MeshSettings, OctreeMeshError, OctreeMesher};
 use render::mesh::{Aabb, Mesh};
 use replication::materialize::Materialized;
-use replication::shape::{ShapePayload, ShapeScene};
+use replication::shape::{IdSource, ShapePayload, ShapeScene};
 use replication::{Keypair, Log, Timestamp};
 
 /// The reference models (`tests/data/models/*.fdsl`), name and source.
@@ -60,8 +60,8 @@ pub const MODEL_HALF_SIDE: f32 = 1.2;
 pub const STL_TRIANGLE_BYTES: usize = 50;
 /// What a mesh delta spends to name one removed triangle (a `u32` index).
 pub const REMOVED_TRIANGLE_BYTES: usize = 4;
-/// The id every measured object gets in its session.
-const OBJECT_ID: u64 = 1;
+/// The key that authors every measured session.
+const AUTHOR_SEED: [u8; 32] = [0x5c; 32];
 /// Tries to find the surface with a ray before a stroke starts at the object's centre.
 const SURFACE_TRIES_MAX: usize = 16;
 /// Steps of the march that finds a stroke's starting point on the surface.
@@ -97,7 +97,7 @@ pub enum FootprintError {
     #[error("authoring an op: {0}")]
     Author(#[from] replication::log::AuthorError),
     /// The folded scene lacks the object the session created.
-    #[error("the folded scene has no object {OBJECT_ID}")]
+    #[error("the folded scene has no object of the session")]
     Missing,
     /// The mesher failed.
     #[error("meshing: {0}")]
@@ -325,15 +325,11 @@ pub fn measure(
     session: &SessionSpec,
     depth: u8,
 ) -> Result<Footprint, FootprintError> {
-    let author = Keypair::from_seed([0x5c; 32]);
+    let author = Keypair::from_seed(AUTHOR_SEED);
     let mut log = Log::<ShapePayload>::default();
     let mut scene = Materialized::<ShapePayload, ShapeScene>::fold(&log)?;
     let mut now = Timestamp(1_000_000);
-    let create = ShapePayload::Create {
-        object: OBJECT_ID,
-        data: Box::new(subject.data.clone()),
-        group: None,
-    };
+    let create = IdSource::first(author.peer_id()).create(subject.data.clone(), None);
     let (op, insertion) = log.author(&author, now, create)?;
     scene.apply_insertion(&log, &insertion);
     let mut ops = vec![op.encoded().to_vec()];
@@ -354,7 +350,7 @@ pub fn measure(
         let edit = stroke(&mut rng, &object, subject.bounds, edit_idx, session);
         now = now.saturating_add_micros(OP_INTERVAL_MICROS);
         let payload = ShapePayload::Edit {
-            object: OBJECT_ID,
+            object: object_id(),
             edit: Arc::new(edit),
         };
         let (op, insertion) = log.author(&author, now, payload)?;
@@ -389,12 +385,17 @@ pub fn measure(
     })
 }
 
+/// The id of every measured session's object: its author's first.
+fn object_id() -> u64 {
+    IdSource::first(Keypair::from_seed(AUTHOR_SEED).peer_id()).id()
+}
+
 /// The session's object in a folded scene.
 pub fn folded(scene: &Materialized<ShapePayload, ShapeScene>) -> Result<Object, FootprintError> {
     scene
         .scene()
         .scene()
-        .object(ObjectId(OBJECT_ID))
+        .object(ObjectId(object_id()))
         .cloned()
         .ok_or(FootprintError::Missing)
 }

@@ -179,8 +179,11 @@ mod tests {
     #[test]
     fn every_demo_plans_as_ops_that_fit() {
         for demo in DEMOS {
-            let payloads = crate::engine::demo_payloads_from(demo, 1)
-                .unwrap_or_else(|e| panic!("{}: {e}", demo.name));
+            let payloads = crate::engine::demo_payloads_from(
+                demo,
+                replication::shape::IdSource::first(replication::PeerId([1; 32])),
+            )
+            .unwrap_or_else(|e| panic!("{}: {e}", demo.name));
             assert!(!payloads.is_empty(), "{}", demo.name);
         }
     }

@@ -296,7 +296,7 @@ impl Engine {
         let demo = config
             .demo
             .filter(|_| new_session && log.is_empty())
-            .map(|demo| demo_payloads_from(demo, lock(&view).next_object_id()));
+            .map(|demo| demo_payloads_from(demo, lock(&view).next_object()));
         let (requests, inbox) = tokio::sync::mpsc::channel(MAX_QUEUED_REQUESTS);
         let (ready_tx, ready_rx) = std_mpsc::channel();
         // The discovery id takes a slow derivation (argon2id): once per start.
@@ -1014,13 +1014,13 @@ fn disconnect_text(reason: &DisconnectReason) -> String {
 }
 
 /// A demo scene's ops, as an import of its file plans them: its groups (parents first), then
-/// its objects in their groups, with ids from `first_id` on.
+/// its objects in their groups, with ids from `first` on.
 pub fn demo_payloads_from(
     demo: &crate::demos::Demo,
-    first_id: u64,
+    first: replication::shape::IdSource,
 ) -> Result<Vec<ShapePayload>, String> {
     let loaded = demo.load(&fdsl::fvrml::LoadOptions::default())?;
-    crate::transfer::scene_payloads(std::path::Path::new(demo.file), &loaded.scene, first_id)
+    crate::transfer::scene_payloads(std::path::Path::new(demo.file), &loaded.scene, first)
         .map(|imported| imported.payloads)
         .map_err(|e| e.to_string())
 }

@@ -140,7 +140,8 @@ fn undo_and_redo_pick_this_peers_latest_edit_of_the_object() {
     let statuses: Vec<&str> = view.history().iter().map(|h| h.status.as_str()).collect();
     assert_eq!(statuses[1], "effective");
     assert_eq!(statuses[2], "undone");
-    assert!(view.next_object_id() > melon);
+    let fresh = view.next_object().id();
+    assert!(fresh != melon && view.scene().object(fdsl::scene::ObjectId(fresh)).is_none());
     drop(view);
     drop(s);
     let _ = fs::remove_dir_all(&dir);
@@ -377,7 +378,8 @@ fn a_large_import_is_one_history_row_not_undone_and_its_id_not_reused() {
     let dir = scratch("parts");
     let s = Engine::start(config(&dir), T0).unwrap();
     wait_view(&s, "the demo", |v| v.n_ops() == 1);
-    let first_id = lock(s.view()).next_object_id();
+    let first = lock(s.view()).next_object();
+    let first_id = first.id();
     let mesh = fdsl::mesh::shapes::icosphere(1.0, 4);
     let data = fdsl::object::ObjectData {
         name: "ball".into(),
@@ -387,12 +389,7 @@ fn a_large_import_is_one_history_row_not_undone_and_its_id_not_reused() {
         }),
         ..Default::default()
     };
-    let ops = replication::shape::parts::split(ShapePayload::Create {
-        object: first_id,
-        data: Box::new(data),
-        group: None,
-    })
-    .unwrap();
+    let ops = replication::shape::parts::split(first.create(data, None)).unwrap();
     let n_ops = ops.len();
     assert!(n_ops > 2, "{n_ops}");
     for op in ops {
@@ -409,7 +406,11 @@ fn a_large_import_is_one_history_row_not_undone_and_its_id_not_reused() {
     );
     assert!(!view.history()[1].undoable);
     assert_eq!(view.undo_target(first_id), None, "a creation is not undone");
-    assert!(view.next_object_id() > first_id, "the id is taken");
+    let next = view.next_object();
+    assert!(
+        next.counter > first.counter && next.id() != first_id,
+        "the id is taken"
+    );
     drop(view);
     drop(s);
     let _ = fs::remove_dir_all(&dir);

@@ -14,7 +14,7 @@ use fdsl::scene::{ObjectId, Scene};
 use replication::log::{Drained, Insertion, Refold};
 use replication::materialize::Materialized;
 use replication::net::node::Observer;
-use replication::shape::{ShapePayload, ShapeScene};
+use replication::shape::{IdSource, ShapePayload, ShapeScene};
 use replication::{Effect, Log, Mark, OpId, Payload as _, Peer, PeerId, Timestamp};
 
 use super::presence::Presence;
@@ -108,7 +108,7 @@ pub struct View {
     chat: Vec<ChatRow>,
     undo: BTreeMap<u64, OpId>,
     redo: BTreeMap<u64, OpId>,
-    next_object: u64,
+    next_object: IdSource,
     changes: ChangeLog,
     leases: BTreeMap<u64, replication::lease::Lease>,
     my_rejections: Vec<(OpId, String)>,
@@ -139,7 +139,7 @@ impl View {
             chat: Vec::new(),
             undo: BTreeMap::new(),
             redo: BTreeMap::new(),
-            next_object: 0,
+            next_object: IdSource::first(me),
             changes: ChangeLog::default(),
             leases: BTreeMap::new(),
             my_rejections: Vec::new(),
@@ -190,7 +190,7 @@ impl View {
         let (undo, redo) = targets(log, self.me);
         self.undo = undo;
         self.redo = redo;
-        self.next_object = next_object_id(log, self.me);
+        self.next_object = IdSource::next_in(log, self.me);
         // Every lease as the fold left it; a face compares `expires_at` with its clock.
         let ids: Vec<u64> = self.scene().objects().map(|(id, _)| id.0).collect();
         self.leases = ids
@@ -372,8 +372,9 @@ impl View {
         self.redo.get(&object).copied()
     }
 
-    /// A fresh object id: this peer's 31-bit prefix, then one more than its highest counter.
-    pub fn next_object_id(&self) -> u64 {
+    /// Where this peer's fresh object ids start: its key and one more than its highest
+    /// counter ([`IdSource::next_in`]).
+    pub fn next_object(&self) -> IdSource {
         self.next_object
     }
 
@@ -625,28 +626,6 @@ fn edited_object(payload: &ShapePayload) -> Option<u64> {
         Effect::Edit { object } if object.0 & GROUP_BIT == 0 => Some(object.0),
         _ => None,
     }
-}
-
-/// This peer's 31-bit key prefix, then one more than the highest counter it used.
-fn next_object_id(log: &Log<ShapePayload>, me: PeerId) -> u64 {
-    let prefix =
-        u64::from(u32::from_le_bytes([me.0[0], me.0[1], me.0[2], me.0[3]]) & 0x7fff_ffff) << 32;
-    let highest = log
-        .entries()
-        .filter(|e| e.op.author() == me)
-        .filter_map(|e| match e.op.payload() {
-            ShapePayload::Create { object, .. }
-            | ShapePayload::Part { object, .. }
-            | ShapePayload::Assemble { object, .. }
-                if object & !0xffff_ffff == prefix =>
-            {
-                Some(object & 0xffff_ffff)
-            }
-            _ => None,
-        })
-        .max()
-        .unwrap_or(0);
-    prefix | (highest + 1).min(0xffff_ffff)
 }
 
 /// An object's name, or `object N` when it has none (or is gone).

@@ -1477,7 +1477,7 @@ impl SculptApp {
     /// Plans the ops of a scene or mesh file and queues them; nothing is authored when the
     /// file is refused.
     pub(super) fn import_file(&mut self, path: &std::path::Path) -> Result<(), String> {
-        let next = lock(self.engine.view()).next_object_id();
+        let next = lock(self.engine.view()).next_object();
         let imported = ::app::transfer::import(path, next).map_err(|e| e.to_string())?;
         self.status = format!(
             "importing {} ({} ops)",

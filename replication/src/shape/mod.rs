@@ -8,6 +8,10 @@
 //! describes a valid change; a change to an object that does not exist (deleted, or created by
 //! an op that lost a race) changes nothing and stays in history.
 //!
+//! Object ids are bound to their creator ([`object_id`]): a `Create` makes its object only
+//! under an id derived from its own author's key and the counter it carries, so a member who
+//! predicts the id another peer will use next cannot take it.
+//!
 //! A delete removes only what it saw ([`Payload::is_delete`]): the edits of its object in its
 //! causal past, its creation included, become inactive. An edit made concurrently stays
 //! active, but without its creation the object is still gone (it changes nothing); a delete
@@ -20,13 +24,14 @@
 
 pub mod parts;
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use fdsl::object::codec as object_codec;
 use fdsl::object::{CompiledEdit, Edit, Field, Object, ObjectData};
 use fdsl::scene::{self, Group, GroupId, Scene};
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use crate::codec::DecodeError;
 use crate::identity::PeerId;
@@ -41,13 +46,114 @@ pub const MAX_CHAT_BYTES: usize = 2048;
 /// Groups share the lease space of objects with the top bit set.
 const GROUP_LEASE_BIT: u64 = 1 << 63;
 
+/// Set in every id [`object_id`] derives, and in no id a `Create` without a counter (signed
+/// before ids were derived) may take.
+pub const DERIVED_ID_BIT: u64 = 1 << 31;
+
+/// The id of the object that `author`'s `Create` with `counter` makes: 62 bits of a hash of
+/// both, with [`DERIVED_ID_BIT`] set and the group bit clear. Nobody else can create it: a
+/// `Create` takes effect only when its id is its author's ([`may_create`]), and finding
+/// another key and counter with the same id is a search of about 2^62 hashes.
+pub fn object_id(author: PeerId, counter: u32) -> u64 {
+    let mut hasher =
+        blake3::Hasher::new_derive_key("sculpt 2026-11-27 object id of author and counter");
+    hasher.update(&author.0);
+    hasher.update(&counter.to_le_bytes());
+    let [a, b, c, d, e, f, g, h, ..] = *hasher.finalize().as_bytes();
+    (u64::from_le_bytes([a, b, c, d, e, f, g, h]) & !GROUP_LEASE_BIT) | DERIVED_ID_BIT
+}
+
+/// Whether a `Create` of `object` with `counter` by `author` may make the object: a derived
+/// id must be its author's, and a `Create` without a counter (an op signed before ids were
+/// derived) may take only an id outside the derived ones.
+pub fn may_create(author: PeerId, object: u64, counter: Option<u32>) -> bool {
+    match counter {
+        Some(counter) => object == object_id(author, counter),
+        None => object & DERIVED_ID_BIT == 0,
+    }
+}
+
+/// Where an author's next new object (or group) ids come from: its key and a counter.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct IdSource {
+    /// The author.
+    pub author: PeerId,
+    /// The counter of the next id.
+    pub counter: u32,
+}
+
+impl IdSource {
+    /// The first source of `author`'s ids.
+    pub fn first(author: PeerId) -> IdSource {
+        IdSource { author, counter: 1 }
+    }
+
+    /// The next id.
+    pub fn id(&self) -> u64 {
+        object_id(self.author, self.counter)
+    }
+
+    /// The source `n` ids on; `None` past the last counter.
+    pub fn skip(self, n: u64) -> Option<IdSource> {
+        let counter = u64::from(self.counter).checked_add(n)?;
+        Some(IdSource {
+            author: self.author,
+            counter: u32::try_from(counter).ok()?,
+        })
+    }
+
+    /// Where `author`'s next ids start in `log`: after the highest counter of its `Create`s,
+    /// past the ids its `Part`s, `Assemble`s and `SetGroup`s already use (an object authored
+    /// in parts, a group); the last counter when all are used.
+    pub fn next_in(log: &crate::Log<ShapePayload>, author: PeerId) -> IdSource {
+        let mut highest = 0;
+        let mut used = std::collections::BTreeSet::new();
+        for e in log.entries().filter(|e| e.op.author() == author) {
+            match e.op.payload() {
+                ShapePayload::Create {
+                    counter: Some(c), ..
+                } => highest = highest.max(*c),
+                ShapePayload::Part { object, .. }
+                | ShapePayload::Assemble { object, .. }
+                | ShapePayload::SetGroup { group: object, .. } => {
+                    used.insert(*object);
+                }
+                _ => {}
+            }
+        }
+        let mut next = IdSource {
+            author,
+            counter: highest.saturating_add(1),
+        };
+        while used.contains(&next.id()) && next.counter < u32::MAX {
+            next.counter += 1;
+        }
+        next
+    }
+
+    /// A `Create` of the next id.
+    pub fn create(&self, data: ObjectData, group: Option<u64>) -> ShapePayload {
+        ShapePayload::Create {
+            object: self.id(),
+            counter: Some(self.counter),
+            data: Box::new(data),
+            group,
+        }
+    }
+}
+
 /// One change to the shared scene.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum ShapePayload {
-    /// Creates object `object` (ids are chosen by the author, e.g. from its key and a counter).
+    /// Creates object `object`, which must be [`object_id`] of the op's author and `counter`
+    /// ([`IdSource::create`]); any other `Create` changes nothing and stays in history.
     Create {
         /// The new object's id.
         object: u64,
+        /// The author's counter `object` derives from; `None` in ops signed before ids were
+        /// derived, which may take only ids without [`DERIVED_ID_BIT`] and are not bound to
+        /// their author.
+        counter: Option<u32>,
         /// Its description.
         data: Box<ObjectData>,
         /// The group it hangs from.
@@ -102,9 +208,9 @@ pub enum ShapePayload {
         object: u64,
     },
     /// Undoes one of the author's earlier edits.
-    Undo(#[serde(with = "op_id")] OpId),
+    Undo(OpId),
     /// Redoes an undone edit.
-    Redo(#[serde(with = "op_id")] OpId),
+    Redo(OpId),
     /// A chat message.
     Chat(String),
     /// One piece of a change too large for one op: the fold keeps it with its object until an
@@ -128,6 +234,203 @@ pub enum ShapePayload {
 
 // Payloads are validated on decode (no NaN reaches one), so equality is reflexive.
 impl Eq for ShapePayload {}
+
+/// [`ShapePayload`] as encoded: its variants in their order, `Create` in its layout from
+/// before ids were derived, and then `CreateOwned`, a `Create` with its counter, so ops signed
+/// before read as they did. Serializing borrows; deserializing moves.
+#[derive(Serialize, Deserialize)]
+enum Wire<'a> {
+    Create {
+        object: u64,
+        data: Cow<'a, Box<ObjectData>>,
+        group: Option<u64>,
+    },
+    Delete {
+        object: u64,
+    },
+    Set {
+        object: u64,
+        field: Cow<'a, Box<Field>>,
+    },
+    Edit {
+        object: u64,
+        edit: Cow<'a, Arc<Edit>>,
+    },
+    SetGroup {
+        group: u64,
+        value: Cow<'a, Option<Box<Group>>>,
+    },
+    Move {
+        object: u64,
+        group: Option<u64>,
+    },
+    Acquire {
+        object: u64,
+        strong: bool,
+        ttl_micros: u64,
+    },
+    Release {
+        object: u64,
+    },
+    Undo(#[serde(with = "op_id")] OpId),
+    Redo(#[serde(with = "op_id")] OpId),
+    Chat(Cow<'a, str>),
+    Part {
+        object: u64,
+        bytes: Cow<'a, [u8]>,
+    },
+    Assemble {
+        object: u64,
+        parts: Cow<'a, [[u8; 32]]>,
+    },
+    CreateOwned {
+        object: u64,
+        counter: u32,
+        data: Cow<'a, Box<ObjectData>>,
+        group: Option<u64>,
+    },
+}
+
+impl<'a> From<&'a ShapePayload> for Wire<'a> {
+    fn from(p: &'a ShapePayload) -> Wire<'a> {
+        match p {
+            ShapePayload::Create {
+                object,
+                counter: None,
+                data,
+                group,
+            } => Wire::Create {
+                object: *object,
+                data: Cow::Borrowed(data),
+                group: *group,
+            },
+            ShapePayload::Create {
+                object,
+                counter: Some(counter),
+                data,
+                group,
+            } => Wire::CreateOwned {
+                object: *object,
+                counter: *counter,
+                data: Cow::Borrowed(data),
+                group: *group,
+            },
+            ShapePayload::Delete { object } => Wire::Delete { object: *object },
+            ShapePayload::Set { object, field } => Wire::Set {
+                object: *object,
+                field: Cow::Borrowed(field),
+            },
+            ShapePayload::Edit { object, edit } => Wire::Edit {
+                object: *object,
+                edit: Cow::Borrowed(edit),
+            },
+            ShapePayload::SetGroup { group, value } => Wire::SetGroup {
+                group: *group,
+                value: Cow::Borrowed(value),
+            },
+            ShapePayload::Move { object, group } => Wire::Move {
+                object: *object,
+                group: *group,
+            },
+            ShapePayload::Acquire {
+                object,
+                strong,
+                ttl_micros,
+            } => Wire::Acquire {
+                object: *object,
+                strong: *strong,
+                ttl_micros: *ttl_micros,
+            },
+            ShapePayload::Release { object } => Wire::Release { object: *object },
+            ShapePayload::Undo(id) => Wire::Undo(*id),
+            ShapePayload::Redo(id) => Wire::Redo(*id),
+            ShapePayload::Chat(text) => Wire::Chat(Cow::Borrowed(text)),
+            ShapePayload::Part { object, bytes } => Wire::Part {
+                object: *object,
+                bytes: Cow::Borrowed(bytes),
+            },
+            ShapePayload::Assemble { object, parts } => Wire::Assemble {
+                object: *object,
+                parts: Cow::Borrowed(parts),
+            },
+        }
+    }
+}
+
+impl From<Wire<'_>> for ShapePayload {
+    fn from(w: Wire<'_>) -> ShapePayload {
+        match w {
+            Wire::Create {
+                object,
+                data,
+                group,
+            } => ShapePayload::Create {
+                object,
+                counter: None,
+                data: data.into_owned(),
+                group,
+            },
+            Wire::CreateOwned {
+                object,
+                counter,
+                data,
+                group,
+            } => ShapePayload::Create {
+                object,
+                counter: Some(counter),
+                data: data.into_owned(),
+                group,
+            },
+            Wire::Delete { object } => ShapePayload::Delete { object },
+            Wire::Set { object, field } => ShapePayload::Set {
+                object,
+                field: field.into_owned(),
+            },
+            Wire::Edit { object, edit } => ShapePayload::Edit {
+                object,
+                edit: edit.into_owned(),
+            },
+            Wire::SetGroup { group, value } => ShapePayload::SetGroup {
+                group,
+                value: value.into_owned(),
+            },
+            Wire::Move { object, group } => ShapePayload::Move { object, group },
+            Wire::Acquire {
+                object,
+                strong,
+                ttl_micros,
+            } => ShapePayload::Acquire {
+                object,
+                strong,
+                ttl_micros,
+            },
+            Wire::Release { object } => ShapePayload::Release { object },
+            Wire::Undo(id) => ShapePayload::Undo(id),
+            Wire::Redo(id) => ShapePayload::Redo(id),
+            Wire::Chat(text) => ShapePayload::Chat(text.into_owned()),
+            Wire::Part { object, bytes } => ShapePayload::Part {
+                object,
+                bytes: bytes.into_owned(),
+            },
+            Wire::Assemble { object, parts } => ShapePayload::Assemble {
+                object,
+                parts: parts.into_owned(),
+            },
+        }
+    }
+}
+
+impl Serialize for ShapePayload {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        Wire::from(self).serialize(s)
+    }
+}
+
+impl<'de> Deserialize<'de> for ShapePayload {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<ShapePayload, D::Error> {
+        Wire::deserialize(d).map(ShapePayload::from)
+    }
+}
 
 /// [`ShapePayload`] as encoded in version 1 of the object encoding (before objects held
 /// grids): ops signed then are read into today's payloads, and checked canonical in that
@@ -177,6 +480,7 @@ impl ShapePayloadV1 {
         Some(match p.clone() {
             ShapePayload::Create {
                 object,
+                counter: None,
                 data,
                 group,
             } => ShapePayloadV1::Create {
@@ -184,6 +488,7 @@ impl ShapePayloadV1 {
                 data: Box::new(object_codec::v1::ObjectData::of(*data)?),
                 group,
             },
+            ShapePayload::Create { .. } => return None,
             ShapePayload::Delete { object } => ShapePayloadV1::Delete { object },
             ShapePayload::Set { field, .. } if matches!(*field, Field::Grids(_)) => return None,
             ShapePayload::Set { object, field } => ShapePayloadV1::Set { object, field },
@@ -217,6 +522,7 @@ impl From<ShapePayloadV1> for ShapePayload {
                 group,
             } => ShapePayload::Create {
                 object,
+                counter: None,
                 data: Box::new((*data).into()),
                 group,
             },
@@ -435,11 +741,15 @@ impl ShapeScene {
         match payload {
             ShapePayload::Create {
                 object,
+                counter,
                 data,
                 group,
             } => {
+                // Only the author an id is derived from makes the object (a member cannot take
+                // an id another peer is about to use), and the first creation in the order.
+                let allowed = may_create(key.author, *object, *counter);
                 let object = scene::ObjectId(*object);
-                if self.scene.object(object).is_none() {
+                if allowed && self.scene.object(object).is_none() {
                     // Valid by decode; a missing group puts the object at the top.
                     let group = group
                         .map(GroupId)

@@ -184,6 +184,7 @@ impl World {
         match bytes.u8() % 11 {
             0 => ShapePayload::Create {
                 object,
+                counter: None,
                 data: Box::new(ObjectData {
                     geometry: Some(Geometry::implicit(
                         Formula::new(["1-x^2-y^2-z^2", "x", "min(x,y)"][bytes.pick(3) as usize])
@@ -222,6 +223,7 @@ impl World {
                 let mut whole = Vec::new();
                 ShapePayload::Create {
                     object,
+                    counter: None,
                     data: Box::default(),
                     group: None,
                 }
