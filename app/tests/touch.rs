@@ -367,7 +367,7 @@ mod live {
         let a = Engine::start(config(&da), T0).unwrap();
         // The ball B's hand will rest in, and another one far from it.
         let first = lock(a.view()).next_object();
-        let object = first.id();
+        let (object, other) = (first.id(), first.skip(1).unwrap().id());
         for (k, x, radius) in [(0, 0.0, 1.0), (1, 3.0, 0.5)] {
             author(&a, first.skip(k).unwrap().create(ball(x, radius), None));
         }
@@ -477,7 +477,7 @@ mod live {
         );
         assert_eq!(feed_stats.n_objects, 2);
         // A deletes the other ball: the next snapshot leaves it out and rebuilds nothing.
-        author(&a, ShapePayload::Delete { object: object + 1 });
+        author(&a, ShapePayload::Delete { object: other });
         wait("the deletion", || feed.stats().n_snapshots == 4);
         assert_eq!((feed.stats().n_objects, feed.stats().n_rebuilt), (1, 4));
         eprintln!(

@@ -65,6 +65,7 @@ fn crafted_attacks_crash_split_and_corrupt_nothing() {
         "giant-vv",
         "oversized-batch",
         "cost-bomb",
+        "take-id",
     ] {
         assert!(
             sent.get(attack).is_some_and(|n| *n > 0),
@@ -78,7 +79,7 @@ fn crafted_attacks_crash_split_and_corrupt_nothing() {
 fn backdated_and_hoarded_leases_and_deletes_erase_no_honest_op() {
     // Backdated strong acquires asking for ever, a hoarding key and backdated deletes: none
     // erases an honest op effective at its author, on any honest peer.
-    let with = runs("byzantine", FaultSet::default(), 1..3);
+    let with = runs("byzantine", FaultSet::default(), 1..4);
     let mut sent = std::collections::BTreeMap::new();
     for report in &with {
         assert!(
