@@ -172,14 +172,12 @@ mod interval {
         model: &str,
     ) {
         let (ctx, root) = fidget_peer::to_fidget(&tape(model));
-        let shape = Shape::<F>::new(&ctx, root).expect("fidget accepts the model");
-        let t = shape.interval_tape(Default::default());
-        let mut eval = Shape::<F>::new_interval_eval();
+        let mut eval = fidget_bulk::intervals::<F>(&ctx, root);
         let boxes = boxes();
         bencher.counter(ItemsCount::new(N_BOXES)).bench_local(|| {
             for b in &boxes {
                 let i = |k: usize| fidget::types::Interval::new(b[k], b[k] + BOX_SIZE);
-                divan::black_box(eval.eval(&t, i(0), i(1), i(2)).expect("evaluates").0);
+                divan::black_box(eval.eval([i(0), i(1), i(2)]));
             }
         });
     }
