@@ -302,7 +302,7 @@ pub fn plan(
             payload.validate().map_err(|e| format!("name: {e}"))?;
             Ok(planned(
                 payload,
-                format!("named object {} {text}", id & 0xffff_ffff),
+                format!("named {} {text}", session.object_label(id)),
             ))
         }
         Command::Lease(kind) => {

@@ -235,6 +235,10 @@ pub enum ShapePayload {
 // Payloads are validated on decode (no NaN reaches one), so equality is reflexive.
 impl Eq for ShapePayload {}
 
+// A log holds one decoded payload per op: its largest variant sets the size of every one.
+#[cfg(target_pointer_width = "64")]
+const _: () = assert!(std::mem::size_of::<ShapePayload>() <= 40);
+
 /// [`ShapePayload`] as encoded: its variants in their order, `Create` in its layout from
 /// before ids were derived, and then `CreateOwned`, a `Create` with its counter, so ops signed
 /// before read as they did. Serializing borrows; deserializing moves.
