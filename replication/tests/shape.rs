@@ -699,3 +699,39 @@ fn derived_ids_are_distinct_and_older_creations_decode_as_before() {
     assert!(back.is_canonical(&bytes));
     assert_eq!(back, derived);
 }
+
+/// Where an author's next ids start: past its highest counter, and past the ids its parts,
+/// assemblies and groups use; counterless creations and another author's ops do not count.
+#[test]
+fn the_next_ids_skip_every_id_the_author_used() {
+    let (me, other) = (key(0), key(1));
+    let first = IdSource::first(me.peer_id());
+    let mut log = SLog::default();
+    assert_eq!(IdSource::next_in(&log, me.peer_id()), first);
+    let at = |k: u64| first.skip(k).unwrap();
+    let ShapePayload::Create { data: big, .. } = mesh_ball(0) else {
+        unreachable!()
+    };
+    let mut payloads = vec![
+        at(0).create(sphere_data(), None),
+        ShapePayload::Create {
+            object: 5,
+            counter: None,
+            data: Box::new(sphere_data()),
+            group: None,
+        },
+    ];
+    // An object in parts at counter 2, then a group at counter 3.
+    payloads.extend(parts::split(at(1).create(*big, None)).unwrap());
+    payloads.push(ShapePayload::SetGroup {
+        group: at(2).id(),
+        value: None,
+    });
+    for p in payloads {
+        log.author(&me, Timestamp(1), p).unwrap();
+    }
+    // Another author's creation under my next id (which makes nothing) does not move mine.
+    log.author(&other, Timestamp(2), at(3).create(sphere_data(), None))
+        .unwrap();
+    assert_eq!(IdSource::next_in(&log, me.peer_id()), at(3));
+}
