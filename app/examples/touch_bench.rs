@@ -24,7 +24,7 @@ use app::engine::{Engine, EngineConfig, lock};
 use fdsl::object::{Domain, Formula, Geometry, ObjectData, Physics, Property, Transform};
 use glam::DVec3;
 use rand_core::{RngCore, SeedableRng};
-use replication::shape::ShapePayload;
+use replication::shape::{IdSource, ShapePayload};
 
 /// Balls per side of the grid (64 in all).
 const GRID: usize = 4;
@@ -78,15 +78,13 @@ fn run(root: &Path, secs: u64) -> anyhow::Result<()> {
     let a = Engine::start(config, clock::now().wall)?;
     let n = GRID * GRID * GRID;
     let first = lock(a.view()).next_object();
-    let ids: Vec<u64> = (0..n as u64)
-        .map(|k| first.skip(k).map(|s| s.id()))
+    let sources: Vec<IdSource> = (0..n as u64)
+        .map(|k| first.skip(k))
         .collect::<Option<_>>()
         .context("object ids")?;
-    for (i, _) in ids.iter().enumerate() {
-        let payload = first
-            .skip(i as u64)
-            .context("object ids")?
-            .create(ball(i), None);
+    let ids: Vec<u64> = sources.iter().map(IdSource::id).collect();
+    for (i, source) in sources.iter().enumerate() {
+        let payload = source.create(ball(i), None);
         a.author(payload)?
             .wait()
             .map_err(|e| anyhow::anyhow!("create: {e}"))?;
