@@ -28,6 +28,8 @@ struct Workload {
     /// Receive the way nodes did before the signature was checked first: decode the whole
     /// op (payload validation included), then verify.
     decode_first: bool,
+    /// How far the receiver's clock moves between two received ops, in microseconds.
+    gap_micros: u64,
     setup: Vec<Vec<u8>>,
     received: Vec<Vec<u8>>,
 }
@@ -50,17 +52,23 @@ fn main() {
         Box::new(move || replayed(n)),
         Box::new(move || compile_bomb(n)),
         Box::new(move || stroke_bomb(n)),
-        Box::new(move || backdated(n, history)),
+        Box::new(move || backdated(n, history, 0)),
+        // As slowly as the refold budget is earned back: every op is folded on its own.
+        Box::new(move || backdated(n, history, refold_micros(history))),
+        Box::new(move || backdated(n, 10 * history, 0)),
+        Box::new(move || backdated(n, 10 * history, refold_micros(10 * history))),
     ];
-    println!("| workload | ops | bytes | CPU | per op | per KiB | vs honest (per byte) |");
-    println!("|---|---|---|---|---|---|---|");
+    println!(
+        "| workload | ops | bytes | CPU | per op | per KiB | vs honest (per byte) | entries refolded |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
     let mut honest_per_byte = None;
     for build in &workloads {
-        let (workload, bytes, time) = measure(build.as_ref());
+        let (workload, bytes, time, refolded) = measure(build.as_ref());
         let per_byte = time.as_secs_f64() / bytes as f64;
         let baseline = *honest_per_byte.get_or_insert(per_byte);
         println!(
-            "| {} | {} | {} | {:.1} ms | {:.1} µs | {:.1} µs | {:.1} |",
+            "| {} | {} | {} | {:.1} ms | {:.1} µs | {:.1} µs | {:.1} | {} |",
             workload.name,
             workload.received.len(),
             bytes,
@@ -68,15 +76,18 @@ fn main() {
             time.as_secs_f64() * 1e6 / workload.received.len() as f64,
             per_byte * 1024.0 * 1e6,
             per_byte / baseline,
+            refolded,
         );
     }
 }
 
 /// Feeds a workload's ops to a fresh receiver (after its setup) and returns the workload, the
-/// bytes received and the CPU time (the best of three runs, each of a workload built afresh:
-/// this is one thread, no IO).
-fn measure(build: &dyn Fn() -> Workload) -> (Workload, usize, Duration) {
+/// bytes received, the CPU time (the best of three runs, each of a workload built afresh:
+/// this is one thread, no IO) and the entries refolds re-evaluated while receiving (positions
+/// of the log's order and edits the scene folded again).
+fn measure(build: &dyn Fn() -> Workload) -> (Workload, usize, Duration, u64) {
     let mut last = None;
+    let mut refolded = 0;
     let best = (0..3)
         .map(|_| {
             let workload = last.insert(build());
@@ -84,21 +95,31 @@ fn measure(build: &dyn Fn() -> Workload) -> (Workload, usize, Duration) {
             fdsl::object::compiled::clear();
             let (mut log, mut scene) = receiver();
             for op in &workload.setup {
-                receive(&mut log, &mut scene, op);
+                receive(&mut log, &mut scene, op, NOW);
             }
+            let entries =
+                |log: &SLog, scene: &SScene| log.stats().n_refolded + scene.stats().n_applied;
+            let before = entries(&log, &scene);
             #[expect(
                 clippy::disallowed_methods,
                 reason = "a benchmark reads the clock to time the receiver"
             )]
             let start = Instant::now();
-            for op in &workload.received {
+            for (i, op) in workload.received.iter().enumerate() {
+                let now = Timestamp(NOW.0 + i as u64 * workload.gap_micros);
                 if workload.decode_first {
-                    receive_decoding_first(&mut log, &mut scene, op);
+                    receive_decoding_first(&mut log, &mut scene, op, now);
                 } else {
-                    receive(&mut log, &mut scene, op);
+                    receive(&mut log, &mut scene, op, now);
                 }
             }
+            // Ops held back for the refold budget are delivered when it is earned back.
+            while let Some(due) = log.next_due() {
+                let insertion = log.release_due(due);
+                scene.apply_insertion(&log, &insertion);
+            }
             let time = start.elapsed();
+            refolded = entries(&log, &scene) - before;
             black_box(scene.scene_hash());
             time
         })
@@ -106,7 +127,7 @@ fn measure(build: &dyn Fn() -> Workload) -> (Workload, usize, Duration) {
         .unwrap_or_default();
     let workload = last.expect("three runs");
     let bytes = workload.received.iter().map(Vec::len).sum();
-    (workload, bytes, best)
+    (workload, bytes, best, refolded)
 }
 
 /// A number no formula of this process has used yet.
@@ -121,8 +142,11 @@ fn receiver() -> (SLog, SScene) {
     (log, scene)
 }
 
+/// The receiver's clock when the first received op arrives.
+const NOW: Timestamp = Timestamp(u64::MAX / 4);
+
 /// What a node does with one received op; refusals are counted by the real code, dropped here.
-fn receive(log: &mut SLog, scene: &mut SScene, bytes: &[u8]) {
+fn receive(log: &mut SLog, scene: &mut SScene, bytes: &[u8], now: Timestamp) {
     let Ok(envelope) = replication::op::Envelope::parse(bytes) else {
         return;
     };
@@ -132,13 +156,13 @@ fn receive(log: &mut SLog, scene: &mut SScene, bytes: &[u8]) {
     let Ok(op) = envelope.into_verified::<ShapePayload>() else {
         return;
     };
-    if let Ok(insertion) = log.insert(Timestamp(u64::MAX / 2), op, Origin(1)) {
+    if let Ok(insertion) = log.insert(now, op, Origin(1)) {
         scene.apply_insertion(log, &insertion);
     }
 }
 
 /// [`receive`] in the order nodes used before: the payload decoded and validated first.
-fn receive_decoding_first(log: &mut SLog, scene: &mut SScene, bytes: &[u8]) {
+fn receive_decoding_first(log: &mut SLog, scene: &mut SScene, bytes: &[u8], now: Timestamp) {
     let Ok(op) = replication::Op::<ShapePayload>::decode(bytes) else {
         return;
     };
@@ -148,7 +172,7 @@ fn receive_decoding_first(log: &mut SLog, scene: &mut SScene, bytes: &[u8]) {
     let Ok(op) = op.into_verified() else {
         return;
     };
-    if let Ok(insertion) = log.insert(Timestamp(u64::MAX / 2), op, Origin(1)) {
+    if let Ok(insertion) = log.insert(now, op, Origin(1)) {
         scene.apply_insertion(log, &insertion);
     }
 }
@@ -207,6 +231,7 @@ fn honest(n: usize) -> Workload {
         setup: Vec::new(),
         received: authored(&key, payloads),
         decode_first: false,
+        gap_micros: 0,
     }
 }
 
@@ -225,6 +250,7 @@ fn forged(n: usize) -> Workload {
         setup: Vec::new(),
         received,
         decode_first: false,
+        gap_micros: 0,
     }
 }
 
@@ -239,6 +265,7 @@ fn replayed(n: usize) -> Workload {
         setup: ops.clone(),
         received: ops,
         decode_first: false,
+        gap_micros: 0,
     }
 }
 
@@ -271,6 +298,7 @@ fn compile_bomb(n: usize) -> Workload {
         setup: Vec::new(),
         received: authored(&key, payloads),
         decode_first: false,
+        gap_micros: 0,
     }
 }
 
@@ -304,12 +332,21 @@ fn stroke_bomb(n: usize) -> Workload {
         setup: Vec::new(),
         received: authored(&key, payloads),
         decode_first: false,
+        gap_micros: 0,
     }
 }
 
+/// How long the refold budget takes to earn back what one backdated edit of a `history`-edit
+/// object costs: the log's positions from the first checkpoint and the object's edits.
+fn refold_micros(history: usize) -> u64 {
+    let entries = 2 * history + replication::log::CHECKPOINT_INTERVAL;
+    entries as u64 * 1_000_000 / replication::log::MAX_REFOLD_ENTRIES_PER_SECOND
+}
+
 /// An object with a long history, then edits backdated before all of it (Lamport 1, no
-/// dependencies, each from a fresh key), each making the receiver refold the object.
-fn backdated(n: usize, history: usize) -> Workload {
+/// dependencies, each from a fresh key), each making the receiver refold the object, arriving
+/// `gap_micros` apart.
+fn backdated(n: usize, history: usize, gap_micros: u64) -> Workload {
     let owner = Keypair::from_seed([6; 32]);
     let setup = authored(
         &owner,
@@ -342,10 +379,14 @@ fn backdated(n: usize, history: usize) -> Workload {
         })
         .collect();
     Workload {
-        name: format!("backdated: edits sorted before a {history}-edit history, fresh keys"),
+        name: format!(
+            "backdated: edits sorted before a {history}-edit history, fresh keys, {} ms apart",
+            gap_micros as f64 / 1e3
+        ),
         setup,
         received,
         decode_first: false,
+        gap_micros,
     }
 }
 

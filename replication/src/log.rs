@@ -36,6 +36,22 @@ pub const MAX_AUTHOR_BYTES: u64 = 256 * 1024 * 1024;
 /// base ops are not looked up), and `u64::MAX / MAX_LAMPORT_JUMP` is far above
 /// [`MAX_LOG_OPS`], so no member can exhaust the Lamport clock before the log fills.
 pub const MAX_LAMPORT_JUMP: u64 = 1 << 32;
+/// Most entries a remote op's refold may re-evaluate without being charged for it: positions
+/// of the linear order from the checkpoint before it, plus the edits of each object the scene
+/// folds again from its start. An op landing near the end of a small object's history (an
+/// honest concurrent edit) is delivered at once, whatever the budget below.
+pub const MAX_FREE_REFOLD_ENTRIES: usize = 2 * CHECKPOINT_INTERVAL;
+/// Most entries per second that refolds caused by remote ops may re-evaluate, on average,
+/// counting only refolds over [`MAX_FREE_REFOLD_ENTRIES`]. A remote op whose refold would be
+/// over that while the budget is spent waits in the pending buffer until it is earned back;
+/// every op that waited is then delivered in one batch, one refold. So a member sending
+/// backdated ops costs a receiver at most this many entries a second, however many it sends,
+/// and an op lands in the same place whenever it is delivered.
+pub const MAX_REFOLD_ENTRIES_PER_SECOND: u64 = 200_000;
+/// How far the refold budget may be overspent before remote ops wait: one second of
+/// [`MAX_REFOLD_ENTRIES_PER_SECOND`], so a single late op on a history up to this long is
+/// never held.
+pub const MAX_REFOLD_BURST_ENTRIES: u64 = MAX_REFOLD_ENTRIES_PER_SECOND;
 
 /// The [`Origin`] of ops this peer authors or loads from its own store.
 pub const LOCAL_ORIGIN: Origin = Origin(0);
@@ -265,6 +281,12 @@ pub struct LogStats {
     pub n_refused: u64,
     /// Pending ops evicted.
     pub n_evicted: u64,
+    /// Positions of the linear order re-evaluated by refolds (the cost of late ops).
+    pub n_refolded: u64,
+    /// Entries charged to the refold budget ([`MAX_REFOLD_ENTRIES_PER_SECOND`]).
+    pub n_refold_charged: u64,
+    /// Remote ops held back because the refold budget was spent.
+    pub n_held_for_refold: u64,
 }
 
 /// The replicated log of one peer, generic over the payload.
@@ -309,6 +331,9 @@ pub struct Log<P> {
     author_bytes: BTreeMap<PeerId, u64>,
     /// [`MAX_AUTHOR_BYTES`], lowered by tests only.
     author_quota: u64,
+    /// When the refold budget is earned back: each charged refold pushes it on by its cost
+    /// at [`MAX_REFOLD_ENTRIES_PER_SECOND`] (a virtual scheduling time, as in GCRA).
+    refold_paid_until: Timestamp,
 }
 
 impl<P: Payload> Default for Log<P> {
@@ -344,6 +369,7 @@ impl<P: Payload> Log<P> {
             n_bytes: 0,
             author_bytes: BTreeMap::new(),
             author_quota: MAX_AUTHOR_BYTES,
+            refold_paid_until: Timestamp(0),
         }
     }
 
@@ -473,6 +499,13 @@ impl<P: Payload> Log<P> {
             self.deliver_queue(now, std::collections::VecDeque::new(), None, &mut out);
             return Ok(out);
         }
+        let remote = clocked && origin != LOCAL_ORIGIN;
+        if remote && let Some(until) = self.refold_hold(&op, now) {
+            out.parked = true;
+            self.hold_for_refold(now, op, origin, until, &mut out);
+            self.deliver_queue(now, std::collections::VecDeque::new(), None, &mut out);
+            return Ok(out);
+        }
         let first_id = op.id();
         let first_pos = self
             .deliver(op, now)
@@ -480,7 +513,7 @@ impl<P: Payload> Log<P> {
         let mut queue = std::collections::VecDeque::new();
         self.free_waiters(first_id, &mut queue);
         out.delivered.push(first_id);
-        self.deliver_queue(now, queue, Some(first_pos), &mut out);
+        self.deliver_queue(now, queue, Some((first_pos, remote)), &mut out);
         Ok(out)
     }
 
@@ -499,13 +532,17 @@ impl<P: Payload> Log<P> {
 
     /// Delivers `queue` (freed ops), then the pending ops due at `now`, and everything they
     /// free; records it all in `out` with the refold from the first changed position.
+    /// `first` is the position of an op delivered just before, and whether it came from a
+    /// remote origin: a refold a remote op caused is charged to the refold budget.
     fn deliver_queue(
         &mut self,
         now: Timestamp,
         mut queue: std::collections::VecDeque<(Op<P>, Origin)>,
-        mut first_pos: Option<usize>,
+        first: Option<(usize, bool)>,
         out: &mut Insertion,
     ) {
+        let mut first_pos = first.map(|(pos, _)| pos);
+        let mut charged = first.is_some_and(|(_, remote)| remote);
         queue.extend(self.pending.due(now));
         while let Some((ready, ready_origin)) = queue.pop_front() {
             let id = ready.id();
@@ -516,9 +553,15 @@ impl<P: Payload> Log<P> {
                     .extend(self.pending.insert(now, ready, ready_origin, missing));
                 continue;
             }
+            let remote = ready_origin != LOCAL_ORIGIN;
+            if remote && let Some(until) = self.refold_hold(&ready, now) {
+                self.hold_for_refold(now, ready, ready_origin, until, out);
+                continue;
+            }
             match self.deliver(ready, now) {
                 Ok(pos) => {
                     first_pos = Some(first_pos.map_or(pos, |f| f.min(pos)));
+                    charged |= remote;
                     out.delivered.push(id);
                     self.free_waiters(id, &mut queue);
                 }
@@ -530,8 +573,102 @@ impl<P: Payload> Log<P> {
         }
         self.stats.n_evicted += out.evicted.len() as u64;
         if let Some(first_pos) = first_pos {
-            out.refold = Some(self.refold_from(first_pos, &Inserted::new(&out.delivered)));
+            let positions = self.refold_positions(first_pos);
+            let refold = self.refold_from(first_pos, &Inserted::new(&out.delivered));
+            if charged {
+                let objects = refold.object_keys.iter();
+                let entries = positions
+                    + objects
+                        .map(|(object, from)| self.scene_refold_entries(*object, from))
+                        .sum::<usize>();
+                self.charge_refold(now, entries);
+            }
+            out.refold = Some(refold);
         }
+    }
+
+    /// Positions a refold from `from` re-evaluates: from the checkpoint at or before it, or
+    /// none when `from` lies after everything folded (ops arriving in order).
+    fn refold_positions(&self, from: usize) -> usize {
+        if from >= self.n_folded {
+            0
+        } else {
+            self.order.len() - self.refold_start(from)
+        }
+    }
+
+    /// The checkpointed position a refold from `from` (before what was folded) starts at.
+    fn refold_start(&self, from: usize) -> usize {
+        (from / CHECKPOINT_INTERVAL).min(self.checkpoints.len() - 1) * CHECKPOINT_INTERVAL
+    }
+
+    /// Edits a scene folds again when `object` changes from `from` on: all of them (it folds
+    /// the object from its start) unless the change is at or after its last held edit.
+    fn scene_refold_entries(&self, object: ObjectId, from: &OrderKey) -> usize {
+        let held = self.by_object.get(&object).map_or(&[][..], Vec::as_slice);
+        if held.last().is_none_or(|last| last <= from) {
+            return 0;
+        }
+        let in_base = self
+            .base
+            .as_ref()
+            .and_then(|b| b.edits_by_object.get(&object));
+        held.len() + in_base.map_or(0, Vec::len)
+    }
+
+    /// Charges `entries` re-evaluated by a refold remote ops caused to the refold budget.
+    fn charge_refold(&mut self, now: Timestamp, entries: usize) {
+        if entries <= MAX_FREE_REFOLD_ENTRIES {
+            return;
+        }
+        self.stats.n_refold_charged += entries as u64;
+        let micros = entries as u64 * 1_000_000 / MAX_REFOLD_ENTRIES_PER_SECOND;
+        self.refold_paid_until = self
+            .refold_paid_until
+            .max(now)
+            .saturating_add_micros(micros);
+    }
+
+    /// When a remote op must wait for the refold budget: its refold would re-evaluate more
+    /// than [`MAX_FREE_REFOLD_ENTRIES`] while the budget is overspent by more than
+    /// [`MAX_REFOLD_BURST_ENTRIES`]. `None` to deliver it now.
+    fn refold_hold(&self, op: &Op<P>, now: Timestamp) -> Option<Timestamp> {
+        const BURST_MICROS: u64 =
+            MAX_REFOLD_BURST_ENTRIES * 1_000_000 / MAX_REFOLD_ENTRIES_PER_SECOND;
+        let until = Timestamp(self.refold_paid_until.0.checked_sub(BURST_MICROS)?);
+        if until <= now {
+            return None;
+        }
+        let key = OrderKey::of(op);
+        let pos = point_near_end(&self.order, |(k, _)| *k < key);
+        // The object the scene folds again, from the op itself or from an undone edit.
+        let object = match op.payload().effect() {
+            Effect::Edit { object }
+            | Effect::Acquire { object, .. }
+            | Effect::Release { object } => Some((object, key)),
+            Effect::Undo { target } | Effect::Redo { target } => self
+                .target_object(&target)
+                .map(|(object, at)| (object, at.map_or(key, |at| self.order[at].0.min(key)))),
+            Effect::Independent => None,
+        };
+        let scene = object.map_or(0, |(o, from)| self.scene_refold_entries(o, &from));
+        (self.refold_positions(pos) + scene > MAX_FREE_REFOLD_ENTRIES).then_some(until)
+    }
+
+    /// Parks `op` until `until`, when the refold budget is earned back
+    /// ([`Log::refold_hold`]); it is then delivered with every op that waited beside it.
+    fn hold_for_refold(
+        &mut self,
+        now: Timestamp,
+        op: Op<P>,
+        origin: Origin,
+        until: Timestamp,
+        out: &mut Insertion,
+    ) {
+        self.stats.n_held_for_refold += 1;
+        let wait = BTreeSet::from([DepKey::Clock(until)]);
+        out.evicted
+            .extend(self.pending.insert(now, op, origin, wait));
     }
 
     /// Drops pending ops that waited too long; their senders offer them again on next sync.
@@ -723,10 +860,12 @@ impl<P: Payload> Log<P> {
             (self.n_folded, std::mem::take(&mut self.state))
         } else {
             // Checkpoints after `from` are stale (positions shifted); one may not exist yet.
-            let k = (from / CHECKPOINT_INTERVAL).min(self.checkpoints.len() - 1);
+            let start = self.refold_start(from);
+            let k = start / CHECKPOINT_INTERVAL;
             self.checkpoints.truncate(k + 1);
-            (k * CHECKPOINT_INTERVAL, self.checkpoints[k].clone())
+            (start, self.checkpoints[k].clone())
         };
+        self.stats.n_refolded += (self.order.len() - start) as u64;
         let mut refold = Refold {
             from,
             ..Refold::default()

@@ -803,4 +803,62 @@ mod tests {
         assert!(sync.stats().n_claims_dropped > 0);
         assert!(t <= 5_000_000, "synced at {t}");
     }
+
+    /// Issue 17, item 6: a member sends a peer with a long history backdated edits, one per
+    /// message, each making it refold the whole order and the edited object. The peer holds
+    /// what its refold budget cannot pay for, delivers it together once it can, relays it, and
+    /// converges with an honest peer.
+    #[test]
+    fn backdated_ops_held_for_the_refold_budget_are_delivered_together_and_converge() {
+        let (mut peers, links) = full_mesh(2, Timestamp(0));
+        for i in 0..3_000u64 {
+            let value = format!("v{i}");
+            peers[0]
+                .author(Timestamp(i), TestPayload::Set { object: 1, value })
+                .unwrap();
+        }
+        pump(&mut peers, &links, Timestamp(3_000));
+        assert_eq!(peers[1].log().len(), 3_000);
+        let now = Timestamp(1_000_000);
+        let hostile = ConnId(9);
+        peers[0].connect(now, hostile).unwrap();
+        let mallory = Keypair::from_seed([9; 32]);
+        peers[0].handle_input(now, hostile, &hello_from(mallory.peer_id(), [5; 16]));
+        let backdated: Vec<_> = (0..200u8)
+            .map(|i| {
+                let mut seed = [100; 32];
+                seed[1] = i;
+                let key = Keypair::from_seed(seed);
+                let set = TestPayload::Set {
+                    object: 1,
+                    value: format!("backdated {i}"),
+                };
+                crate::log::tests::signed(&key, 1, 1, u64::from(i), vec![], set)
+            })
+            .collect();
+        for (i, op) in backdated.iter().enumerate() {
+            let batch = Message::Ops {
+                batch_no: i as u64,
+                ops: vec![op.encoded().to_vec()],
+            };
+            peers[0].handle_input(now, hostile, &batch.encode());
+        }
+        let stats = peers[0].log().stats();
+        assert!(stats.n_held_for_refold > 0, "{stats:?}");
+        let held = peers[0].log().n_pending();
+        assert!(held > 0);
+        peers[0].disconnect(hostile);
+        while peers[0].poll_transmit(now).is_some() {}
+        let t = settle(&mut peers, &links, now.0, |p| {
+            p.iter().all(|p| p.log().len() == 3_200)
+        });
+        assert!(t <= now.0 + 2_000_000, "delivered at {t}");
+        assert_eq!(observe(&peers[0]), observe(&peers[1]));
+        // The held ops were delivered at once: one refold more, not one per op.
+        let refolded = peers[0].log().stats().n_refolded - stats.n_refolded;
+        assert!(
+            refolded <= 3_200,
+            "{refolded} positions for {held} held ops"
+        );
+    }
 }

@@ -207,6 +207,7 @@ impl<P: Payload> Log<P> {
             n_bytes: 0,
             author_bytes: BTreeMap::new(),
             author_quota: super::MAX_AUTHOR_BYTES,
+            refold_paid_until: Timestamp(0),
         };
         let objects: Vec<ObjectId> = log.deletes.keys().copied().collect();
         for object in objects {

@@ -788,3 +788,61 @@ fn a_local_author_over_its_quota_gets_an_error_and_the_log_is_unchanged() {
     assert_eq!(log.len() as u64, n);
     assert!(log.n_bytes() <= 1_000);
 }
+
+#[test]
+fn backdated_ops_flooding_a_long_log_refold_within_the_budget_and_land_as_without_it() {
+    // A history of 20,000 ops, then a member's 100 backdated edits, each sent alone at the
+    // same moment: each lands near the start, so each would re-evaluate the whole order
+    // (2,000,000 positions in all without the budget) and make the scene fold its object's
+    // 5,000 edits again.
+    let (a, c, mallory) = (key(0), key(2), key(9));
+    let n = 20_000u64;
+    let mut log = TLog::default();
+    for i in 0..n {
+        log.author(&a, Timestamp(i), set(i % 4, "x")).unwrap();
+    }
+    let backdated: Vec<_> = (1..=100u64)
+        .map(|i| signed(&mallory, i, i, i, vec![], set(1, "mine")))
+        .collect();
+    let mut reference = log.clone();
+    let now = Timestamp(n + 1_000_000);
+    let before = log.stats().n_refolded;
+    let mut held = 0;
+    for op in &backdated {
+        held += usize::from(log.insert(now, op.clone(), Origin(1)).unwrap().parked);
+    }
+    // The first held op holds the rest of the member's chain behind it.
+    assert!(
+        held > 0 && log.stats().n_held_for_refold >= 1,
+        "the budget holds some back"
+    );
+    // An honest op landing at the end is not held behind them.
+    let mut other = log.clone();
+    let (honest, _) = other.author(&c, now, set(1, "c")).unwrap();
+    let ins = log.insert(now, honest.clone(), Origin(2)).unwrap();
+    assert_eq!(ins.delivered, vec![honest.id()]);
+    // The held ops wait together, are delivered together and cost one refold.
+    let due = log.next_due().expect("held ops wait for the budget");
+    assert!(due > now && due.0 - now.0 <= 1_000_000);
+    let released = log.release_due(due);
+    assert_eq!(released.delivered.len(), held);
+    assert_eq!(log.n_pending(), 0);
+    // Within the burst, what the budget earned meanwhile, the refold that overspent it and
+    // the held batch's one refold.
+    let elapsed_s = (due.0 - now.0) as f64 / 1e6;
+    let budget = MAX_REFOLD_BURST_ENTRIES as f64
+        + MAX_REFOLD_ENTRIES_PER_SECOND as f64 * elapsed_s
+        + 2.0 * (log.len() + log.object_edit_keys(ObjectId(1)).len()) as f64;
+    let refolded = log.stats().n_refolded - before;
+    let charged = log.stats().n_refold_charged;
+    assert!(
+        refolded as f64 <= budget && charged as f64 <= budget,
+        "{refolded} positions re-evaluated, {charged} charged, budget {budget}"
+    );
+    // Where they land does not depend on when: the same as a log that took them unheld.
+    for op in backdated.iter().chain([&honest]) {
+        reference.insert(now, op.clone(), LOCAL_ORIGIN).unwrap();
+    }
+    assert_eq!(observe(&log), observe(&reference));
+    assert!(backdated.iter().all(|op| log.is_active(&op.id())));
+}
