@@ -53,6 +53,36 @@ pub const MAX_REFOLD_ENTRIES_PER_SECOND: u64 = 200_000;
 /// never held.
 pub const MAX_REFOLD_BURST_ENTRIES: u64 = MAX_REFOLD_ENTRIES_PER_SECOND;
 
+/// What refolds remote ops cause may cost; [`RefoldBudget::default`] uses the named limits.
+/// A peer lowers it only to exercise held deliveries on small logs (the simulator).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RefoldBudget {
+    /// Entries a refold may re-evaluate without being charged ([`MAX_FREE_REFOLD_ENTRIES`]).
+    pub free_entries: usize,
+    /// Entries a second charged refolds may re-evaluate ([`MAX_REFOLD_ENTRIES_PER_SECOND`]).
+    pub entries_per_second: u64,
+    /// How far the budget may be overspent before ops wait ([`MAX_REFOLD_BURST_ENTRIES`]).
+    pub burst_entries: u64,
+}
+
+impl Default for RefoldBudget {
+    fn default() -> Self {
+        Self {
+            free_entries: MAX_FREE_REFOLD_ENTRIES,
+            entries_per_second: MAX_REFOLD_ENTRIES_PER_SECOND,
+            burst_entries: MAX_REFOLD_BURST_ENTRIES,
+        }
+    }
+}
+
+impl RefoldBudget {
+    /// Microseconds the budget takes to earn back `entries`.
+    fn micros(&self, entries: u64) -> u64 {
+        let per_second = self.entries_per_second.max(1);
+        entries.saturating_mul(1_000_000) / per_second
+    }
+}
+
 /// The [`Origin`] of ops this peer authors or loads from its own store.
 pub const LOCAL_ORIGIN: Origin = Origin(0);
 
@@ -332,8 +362,9 @@ pub struct Log<P> {
     /// [`MAX_AUTHOR_BYTES`], lowered by tests only.
     author_quota: u64,
     /// When the refold budget is earned back: each charged refold pushes it on by its cost
-    /// at [`MAX_REFOLD_ENTRIES_PER_SECOND`] (a virtual scheduling time, as in GCRA).
+    /// at the budget's rate (a virtual scheduling time, as in GCRA).
     refold_paid_until: Timestamp,
+    refold_budget: RefoldBudget,
 }
 
 impl<P: Payload> Default for Log<P> {
@@ -370,7 +401,13 @@ impl<P: Payload> Log<P> {
             author_bytes: BTreeMap::new(),
             author_quota: MAX_AUTHOR_BYTES,
             refold_paid_until: Timestamp(0),
+            refold_budget: RefoldBudget::default(),
         }
+    }
+
+    /// Sets what refolds remote ops cause may cost ([`RefoldBudget`]).
+    pub fn set_refold_budget(&mut self, budget: RefoldBudget) {
+        self.refold_budget = budget;
     }
 
     /// An empty log whose authors' quota is `quota` bytes instead of [`MAX_AUTHOR_BYTES`].
@@ -618,11 +655,11 @@ impl<P: Payload> Log<P> {
 
     /// Charges `entries` re-evaluated by a refold remote ops caused to the refold budget.
     fn charge_refold(&mut self, now: Timestamp, entries: usize) {
-        if entries <= MAX_FREE_REFOLD_ENTRIES {
+        if entries <= self.refold_budget.free_entries {
             return;
         }
         self.stats.n_refold_charged += entries as u64;
-        let micros = entries as u64 * 1_000_000 / MAX_REFOLD_ENTRIES_PER_SECOND;
+        let micros = self.refold_budget.micros(entries as u64);
         self.refold_paid_until = self
             .refold_paid_until
             .max(now)
@@ -630,12 +667,11 @@ impl<P: Payload> Log<P> {
     }
 
     /// When a remote op must wait for the refold budget: its refold would re-evaluate more
-    /// than [`MAX_FREE_REFOLD_ENTRIES`] while the budget is overspent by more than
-    /// [`MAX_REFOLD_BURST_ENTRIES`]. `None` to deliver it now.
+    /// than the free entries while the budget is overspent by more than its burst. `None` to
+    /// deliver it now.
     fn refold_hold(&self, op: &Op<P>, now: Timestamp) -> Option<Timestamp> {
-        const BURST_MICROS: u64 =
-            MAX_REFOLD_BURST_ENTRIES * 1_000_000 / MAX_REFOLD_ENTRIES_PER_SECOND;
-        let until = Timestamp(self.refold_paid_until.0.checked_sub(BURST_MICROS)?);
+        let burst = self.refold_budget.micros(self.refold_budget.burst_entries);
+        let until = Timestamp(self.refold_paid_until.0.checked_sub(burst)?);
         if until <= now {
             return None;
         }
@@ -652,7 +688,7 @@ impl<P: Payload> Log<P> {
             Effect::Independent => None,
         };
         let scene = object.map_or(0, |(o, from)| self.scene_refold_entries(o, &from));
-        (self.refold_positions(pos) + scene > MAX_FREE_REFOLD_ENTRIES).then_some(until)
+        (self.refold_positions(pos) + scene > self.refold_budget.free_entries).then_some(until)
     }
 
     /// Parks `op` until `until`, when the refold budget is earned back

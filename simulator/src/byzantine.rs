@@ -22,6 +22,10 @@
 //! - id theft: a backdated `Create` (fresh key, Lamport 1) of the object id an honest peer's
 //!   user will take next, with or without a counter, named [`STOLEN_NAME`]: no honest scene
 //!   may ever hold an object of that name;
+//! - refold floods: a fresh key's chain of [`REFOLD_FLOOD`] backdated edits of one object
+//!   (Lamport 1 up, no other dependencies), each in a message of its own, so each would make
+//!   the receiver refold its whole order; honest peers run with a budget scaled to the
+//!   simulator's logs ([`crate::sim::SMALL_REFOLD_BUDGET`]), so they hold and batch them;
 //! - with `forks`, equivocation: two ops of one fresh key with sequence number 1, sent to two
 //!   different peers.
 
@@ -43,6 +47,8 @@ pub const MAX_SYBIL_KEYS: usize = 512;
 pub const SYBIL_BURST: usize = 32;
 /// Most cost bombs in one run.
 pub const MAX_COST_BOMBS: usize = 12;
+/// Backdated ops in one refold flood, each sent alone.
+pub const REFOLD_FLOOD: u64 = 24;
 /// How far back a backdated op is stamped when not at time 0.
 pub const BACKDATE_MICROS: u64 = 10 * 60 * 1_000_000;
 /// The name of the objects id theft creates.
@@ -98,6 +104,7 @@ enum Attack {
     OversizedBatch,
     CostBomb,
     TakeId,
+    RefoldFlood,
     Fork,
 }
 
@@ -114,6 +121,7 @@ impl Attack {
             Attack::OversizedBatch => "oversized-batch",
             Attack::CostBomb => "cost-bomb",
             Attack::TakeId => "take-id",
+            Attack::RefoldFlood => "refold-flood",
             Attack::Fork => "fork",
         }
     }
@@ -338,6 +346,7 @@ impl Simulation {
                 Attack::OversizedBatch,
                 Attack::CostBomb,
                 Attack::TakeId,
+                Attack::RefoldFlood,
             ]);
         }
         if faults.lease_attacks {
@@ -394,6 +403,17 @@ impl Simulation {
                     _ => ShapePayload::Chat("backdated".into()),
                 };
                 one(sign(&key, 1, 1, at, Vec::new(), payload))
+            }
+            Attack::RefoldFlood => {
+                let key = byz.sybil()?;
+                let start = now.saturating_sub(BACKDATE_MICROS);
+                let mut out = vec![(to, hello(me))];
+                for i in 0..REFOLD_FLOOD {
+                    let edit = stamp_edit(rng, object);
+                    let (_, bytes) = sign(&key, i + 1, i + 1, start + i, Vec::new(), edit)?;
+                    out.push((to, batch(batch_no + i, vec![bytes])));
+                }
+                Some(out)
             }
             Attack::Hoard => {
                 let chain = &mut byz.hoarder;

@@ -497,6 +497,9 @@ fn build_report(
         n_lost_own_ops: sim.lost_own.len(),
         n_hostile_ops_accepted,
         n_flood_accepted_max: sim.floods.iter().map(|f| f.1).max().unwrap_or(0),
+        n_refold_holds: (sim.honest.iter())
+            .map(|h| h.peer.log().stats().n_held_for_refold)
+            .sum(),
         failures,
         samples: sim.samples,
         stats: sim.stats,

@@ -2,6 +2,7 @@
 //! the real [`Snapshot::capture`], encodes it; the joiner decodes those bytes (so the codec
 //! is exercised too) and joins with [`Snapshot::join`], then syncs only the ops after the cut.
 
+use replication::log::RefoldBudget;
 use replication::pending::PendingLimits;
 use replication::shape::{ShapePayload, ShapeScene};
 use replication::snapshot::Snapshot;
@@ -15,7 +16,12 @@ use crate::sim::{Honest, SESSION_ID, Scene};
 pub(crate) type Joined = (Vec<u8>, u64, Peer<ShapePayload>, Scene);
 
 /// Joins `joiner` from a snapshot of `producer`'s log.
-pub(crate) fn from_snapshot(producer: &Honest, joiner: &Honest) -> Result<Joined, String> {
+/// The joiner's log runs with the refold `budget`.
+pub(crate) fn from_snapshot(
+    producer: &Honest,
+    joiner: &Honest,
+    budget: RefoldBudget,
+) -> Result<Joined, String> {
     let log = producer.peer.log();
     let cut = log.stable_lamport();
     let snapshot = Snapshot::<ShapePayload>::capture::<ShapeScene>(log, cut)
@@ -24,9 +30,10 @@ pub(crate) fn from_snapshot(producer: &Honest, joiner: &Honest) -> Result<Joined
     let (peer, scene) = memory::with_slot(joiner.slot, || {
         let decoded =
             Snapshot::<ShapePayload>::decode(&bytes).map_err(|e| format!("decode: {e}"))?;
-        let (log, scene) = decoded
+        let (mut log, scene) = decoded
             .join::<ShapeScene>(PendingLimits::default())
             .map_err(|e| format!("join: {e}"))?;
+        log.set_refold_budget(budget);
         let key = Keypair::from_seed(joiner.key_seed);
         Ok::<_, String>((Peer::new(key, SESSION_ID, log), scene))
     })?;

@@ -98,6 +98,8 @@ pub struct Report {
     pub n_hostile_ops_accepted: usize,
     /// Most messages of one flood an honest peer accepted (the rest were rate limited).
     pub n_flood_accepted_max: u64,
+    /// Ops honest peers held back for their refold budget (summed over their final logs).
+    pub n_refold_holds: u64,
     /// What the checkers found; empty when the run passed.
     pub failures: Vec<String>,
 }
@@ -163,7 +165,11 @@ impl Report {
             s.honest_rejects
         )?;
         if !s.byzantine.is_empty() {
-            writeln!(f, "  byzantine attacks sent: {:?}", s.byzantine)?;
+            writeln!(
+                f,
+                "  byzantine attacks sent: {:?}; ops held for the refold budget {}",
+                s.byzantine, self.n_refold_holds
+            )?;
         }
         Ok(())
     }

@@ -9,6 +9,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::panic::{self, AssertUnwindSafe};
 
+use replication::log::RefoldBudget;
 use replication::materialize::{Materialized, SceneHash};
 use replication::shape::{ShapePayload, ShapeScene};
 use replication::{ConnId, Event, Keypair, Log, OpId, Peer, Timestamp};
@@ -286,7 +287,9 @@ impl Simulation {
             let mut key_seed = [0u8; 32];
             keys.fill(&mut key_seed);
             let slot = memory::slot(first_slot, i);
-            honest.push(new_honest(key_seed, Log::default(), slot).ok_or(ConfigError::Peers(i))?);
+            let log = Log::default();
+            let budget = refold_budget(&faults);
+            honest.push(new_honest(key_seed, log, slot, budget).ok_or(ConfigError::Peers(i))?);
         }
         let hostile = config.hostile.then(|| {
             let mut key_seed = [0u8; 32];
@@ -710,7 +713,8 @@ impl Simulation {
     fn join(&mut self, idx: usize, snapshot: bool) {
         let mut joined = false;
         if snapshot && self.snapshot_safe(idx) {
-            match crate::join::from_snapshot(&self.honest[0], &self.honest[idx]) {
+            let budget = refold_budget(&self.faults);
+            match crate::join::from_snapshot(&self.honest[0], &self.honest[idx], budget) {
                 Ok((bytes, cut, peer, scene)) => {
                     let h = &mut self.honest[idx];
                     h.peer = peer;
@@ -786,7 +790,8 @@ impl Simulation {
             }
         }
         h.authored.retain(|id| !self.lost_own.contains(id));
-        let log = recovered.log;
+        let mut log = recovered.log;
+        log.set_refold_budget(refold_budget(&self.faults));
         match memory::with_slot(h.slot, || Scene::fold(&log)) {
             Ok(scene) => h.scene = scene,
             Err(e) => self
@@ -1193,12 +1198,32 @@ pub(crate) fn deliver(
     }
 }
 
+/// The refold budget honest peers run with. Under the byzantine preset it is scaled down to
+/// the simulator's logs of hundreds of ops ([`SMALL_REFOLD_BUDGET`]), so the refold flood
+/// makes them hold and batch deliveries as a long log would; elsewhere it is the core's.
+pub(crate) fn refold_budget(faults: &Faults) -> RefoldBudget {
+    if faults.byzantine {
+        SMALL_REFOLD_BUDGET
+    } else {
+        RefoldBudget::default()
+    }
+}
+
+/// [`RefoldBudget`] for logs about a thousand times shorter than the core's limits assume.
+pub const SMALL_REFOLD_BUDGET: RefoldBudget = RefoldBudget {
+    free_entries: 32,
+    entries_per_second: 2_000,
+    burst_entries: 2_000,
+};
+
 /// A fresh honest peer with `log` (charged to memory slot `slot`).
 pub(crate) fn new_honest(
     key_seed: [u8; 32],
-    log: Log<ShapePayload>,
+    mut log: Log<ShapePayload>,
     slot: usize,
+    budget: RefoldBudget,
 ) -> Option<Honest> {
+    log.set_refold_budget(budget);
     let slot_baseline = memory::live_bytes(slot);
     let (peer, scene) = memory::with_slot(slot, || {
         let scene = Scene::fold(&log).ok()?;

@@ -66,6 +66,7 @@ fn crafted_attacks_crash_split_and_corrupt_nothing() {
         "oversized-batch",
         "cost-bomb",
         "take-id",
+        "refold-flood",
     ] {
         assert!(
             sent.get(attack).is_some_and(|n| *n > 0),
@@ -73,6 +74,10 @@ fn crafted_attacks_crash_split_and_corrupt_nothing() {
         );
     }
     assert!(!sent.contains_key("fork"), "{sent:?}");
+    // The refold floods made honest peers hold ops for their budget, and still every checker
+    // passed: held ops are delivered, in place, and relayed.
+    let held: u64 = reports.iter().map(|r| r.n_refold_holds).sum();
+    assert!(held > 0, "{}", reports[0]);
 }
 
 #[test]

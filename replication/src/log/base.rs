@@ -208,6 +208,7 @@ impl<P: Payload> Log<P> {
             author_bytes: BTreeMap::new(),
             author_quota: super::MAX_AUTHOR_BYTES,
             refold_paid_until: Timestamp(0),
+            refold_budget: super::RefoldBudget::default(),
         };
         let objects: Vec<ObjectId> = log.deletes.keys().copied().collect();
         for object in objects {
