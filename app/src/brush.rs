@@ -12,7 +12,6 @@ use fdsl::object::{Axis, Edit, EditOp, PaintValue, Paintable, Pose, ToolShape, T
 use fdsl::scene::ObjectId;
 use glam::DVec3;
 use replication::shape::ShapePayload;
-use std::sync::Arc;
 
 use crate::command::Planned;
 use crate::engine::View;
@@ -295,11 +294,8 @@ impl Stroke {
 
     /// The op the finished stroke authors.
     pub fn finish(&self, view: &View) -> Result<Planned, String> {
-        let payload = ShapePayload::Edit {
-            object: self.object,
-            edit: Arc::new(self.edit()),
-        };
-        payload.validate().map_err(|e| format!("stroke: {e}"))?;
+        let payload =
+            ShapePayload::edit(self.object, self.edit()).map_err(|e| format!("stroke: {e}"))?;
         Ok(Planned {
             payload,
             summary: format!(
@@ -379,8 +375,8 @@ mod tests {
             panic!("{planned:?}");
         };
         assert_eq!(*object, melon);
-        assert_eq!(edit.op, EditOp::Subtract);
-        assert_eq!(edit.path.len(), 6);
+        assert_eq!(edit.edit().op, EditOp::Subtract);
+        assert_eq!(edit.edit().path.len(), 6);
         assert!(Stroke::begin(&view, 12345, brush, DVec3::ZERO).is_err());
     }
 }

@@ -453,14 +453,15 @@ mod live {
         std::thread::sleep(Duration::from_millis(300));
 
         // A carves a hole where B's device rests: B's hand is in free space at once.
-        let carve = ShapePayload::Edit {
+        let carve = ShapePayload::edit(
             object,
-            edit: Arc::new(Edit::stamp(
+            Edit::stamp(
                 EditOp::Subtract,
                 ToolShape::Sphere { radius: 0.3 },
                 Pose::at(rest),
-            )),
-        };
+            ),
+        )
+        .expect("a valid edit");
         let taken = stats.snapshot().n_scenes_taken;
         let (carve_latency, before, after) = edit_and_feel(&a, carve, &arrivals, &stats, |s| {
             s.n_scenes_taken > taken && s.top_id.is_none()

@@ -9,7 +9,6 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use std::sync::Arc;
 
 use app::engine::{Engine, EngineConfig, lock, store};
 use fdsl::mesh::{MeshFormat, TriMesh};
@@ -215,10 +214,7 @@ fn sculpted_ball(dir: &Path) -> ObjectId {
         ToolShape::Sphere { radius: 0.5 },
         Pose::at(DVec3::X),
     );
-    let edit = ShapePayload::Edit {
-        object,
-        edit: Arc::new(carve),
-    };
+    let edit = ShapePayload::edit(object, carve).expect("a valid edit");
     engine.author(edit).unwrap().wait().unwrap();
     engine.shutdown();
     ObjectId(object)

@@ -9,7 +9,6 @@
 //! Run: `cargo bench -p replication --bench hostile_cost` (add `-- --quick` for a short run).
 
 use std::hint::black_box;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use fdsl::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
@@ -321,12 +320,8 @@ fn stroke_bomb(n: usize) -> Workload {
         blend_radius: 0.05,
         mirror: Some(Axis::X),
     };
-    let payloads = std::iter::once(create(1, "1-sqrt(x^2+y^2+z^2)")).chain((1..n).map(|_| {
-        ShapePayload::Edit {
-            object: 1,
-            edit: Arc::new(edit.clone()),
-        }
-    }));
+    let payloads = std::iter::once(create(1, "1-sqrt(x^2+y^2+z^2)"))
+        .chain((1..n).map(|_| ShapePayload::edit(1, edit.clone()).expect("a valid edit")));
     Workload {
         name: "stroke bomb: 220-pose mirrored strokes (the most a payload holds)".into(),
         setup: Vec::new(),
@@ -351,14 +346,15 @@ fn backdated(n: usize, history: usize, gap_micros: u64) -> Workload {
     let setup = authored(
         &owner,
         std::iter::once(create(1, "1-sqrt(x^2+y^2+z^2)")).chain((1..history).map(|i| {
-            ShapePayload::Edit {
-                object: 1,
-                edit: Arc::new(Edit::stamp(
+            ShapePayload::edit(
+                1,
+                Edit::stamp(
                     EditOp::Union,
                     ToolShape::Sphere { radius: 0.1 },
                     Pose::at(DVec3::new((i as f64).sin(), (i as f64).cos(), 0.0)),
-                )),
-            }
+                ),
+            )
+            .expect("a valid edit")
         })),
     );
     let received = (0..n)
@@ -366,14 +362,15 @@ fn backdated(n: usize, history: usize, gap_micros: u64) -> Workload {
             let key = Keypair::from_seed(seed(7, i));
             authored(
                 &key,
-                [ShapePayload::Edit {
-                    object: 1,
-                    edit: Arc::new(Edit::stamp(
+                [ShapePayload::edit(
+                    1,
+                    Edit::stamp(
                         EditOp::Subtract,
                         ToolShape::Sphere { radius: 0.1 },
                         Pose::at(DVec3::new(0.0, 0.0, i as f64 * 0.01)),
-                    )),
-                }],
+                    ),
+                )
+                .expect("a valid edit")],
             )
             .remove(0)
         })

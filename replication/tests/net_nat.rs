@@ -267,14 +267,15 @@ fn workload(seed: u8) -> Vec<ShapePayload> {
             strong: false,
             ttl_micros: 60_000_000,
         },
-        ShapePayload::Edit {
+        ShapePayload::edit(
             object,
-            edit: Arc::new(Edit::stamp(
+            Edit::stamp(
                 EditOp::Subtract,
                 ToolShape::Sphere { radius: 0.2 },
                 Pose::at(DVec3::new(0.5, 0.0, 0.0)),
-            )),
-        },
+            ),
+        )
+        .expect("a valid edit"),
         ShapePayload::Set {
             object,
             field: Box::new(Field::Diffuse(Some(ColorDef::Constant([0.8, 0.2, 0.1])))),

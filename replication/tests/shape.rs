@@ -39,14 +39,15 @@ fn sphere_data() -> ObjectData {
 }
 
 fn carve(at: DVec3) -> ShapePayload {
-    ShapePayload::Edit {
-        object: 1,
-        edit: Arc::new(Edit::stamp(
+    ShapePayload::edit(
+        1,
+        Edit::stamp(
             EditOp::Subtract,
             ToolShape::Sphere { radius: 0.2 },
             Pose::at(at),
-        )),
-    }
+        ),
+    )
+    .expect("a valid edit")
 }
 
 fn color(rgb: [f32; 3]) -> ShapePayload {
@@ -85,17 +86,18 @@ fn concurrent_workload(n_peers: u8, per_peer: usize) -> Vec<VerifiedOp<ShapePayl
                     Some(id) => ShapePayload::Undo(id),
                     None => ShapePayload::Chat(format!("{p}:{i}")),
                 },
-                _ => ShapePayload::Edit {
-                    object: 1,
-                    edit: Arc::new(Edit::stamp(
+                _ => ShapePayload::edit(
+                    1,
+                    Edit::stamp(
                         EditOp::Paint {
                             property: Paintable::Density,
                             value: PaintValue::Scalar(p as f64 + 1.0),
                         },
                         ToolShape::Sphere { radius: 0.3 },
                         Pose::at(DVec3::new(0.0, x, 0.0)),
-                    )),
-                },
+                    ),
+                )
+                .expect("a valid edit"),
             };
             let is_edit = matches!(payload, ShapePayload::Edit { .. });
             let (op, _) = log
@@ -307,16 +309,26 @@ fn payloads_are_small_and_hostile_bytes_are_refused() {
     }
     .encode(&mut bad);
     assert!(ShapePayload::decode(&bad).is_err());
-    let nan = ShapePayload::Edit {
-        object: 1,
-        edit: Arc::new(Edit::stamp(
+    // An edit that does not compile (a radius of NaN) is refused at decode: its encoding is a
+    // valid edit's with the radius's eight bytes replaced.
+    let radius = 0.123_456_789_f64;
+    let valid = ShapePayload::edit(
+        1,
+        Edit::stamp(
             EditOp::Union,
-            ToolShape::Sphere { radius: f64::NAN },
+            ToolShape::Sphere { radius },
             Pose::at(DVec3::ZERO),
-        )),
-    };
+        ),
+    )
+    .unwrap();
     let mut bad = Vec::new();
-    nan.encode(&mut bad);
+    valid.encode(&mut bad);
+    assert!(ShapePayload::decode(&bad).is_ok());
+    let at = bad
+        .windows(8)
+        .position(|w| w == radius.to_le_bytes())
+        .expect("the radius in the encoding");
+    bad[at..at + 8].copy_from_slice(&f64::NAN.to_le_bytes());
     assert!(ShapePayload::decode(&bad).is_err());
     let mut rng = 0x1234_5678u64;
     for _ in 0..2000 {

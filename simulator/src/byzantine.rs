@@ -36,7 +36,6 @@ use replication::shape::ShapePayload;
 use replication::sync::message::{MAX_BATCH_OPS, Message};
 use replication::time::MAX_CLOCK_SKEW_MICROS;
 use replication::{ConnId, Keypair, Op, OpId, Peer, PeerId, Timestamp, VersionVector};
-use std::sync::Arc;
 
 use crate::rng::SimRng;
 use crate::sim::{Ev, SESSION_ID, Simulation, deliver, guarded_call};
@@ -244,16 +243,17 @@ fn batch(batch_no: u64, ops: Vec<Vec<u8>>) -> Vec<u8> {
 }
 
 fn stamp_edit(rng: &mut SimRng, object: u64) -> ShapePayload {
-    ShapePayload::Edit {
+    ShapePayload::edit(
         object,
-        edit: Arc::new(Edit::stamp(
+        Edit::stamp(
             EditOp::Subtract,
             ToolShape::Sphere {
                 radius: rng.range_f64(0.05, 0.3),
             },
             Pose::at([rng.range_f64(-1.0, 1.0), 0.0, 0.0].into()),
-        )),
-    }
+        ),
+    )
+    .expect("a valid edit")
 }
 
 fn hoard(object: u64) -> ShapePayload {
@@ -293,16 +293,17 @@ fn stroke_bomb(object: u64) -> ShapePayload {
             Pose::at([(i * 0.37).sin(), (i * 0.11).cos(), i * 0.003].into())
         })
         .collect();
-    ShapePayload::Edit {
+    ShapePayload::edit(
         object,
-        edit: Arc::new(Edit {
+        Edit {
             op: EditOp::Subtract,
             tool: ToolShape::Sphere { radius: 0.2 },
             path,
             blend_radius: 0.05,
             mirror: Some(Axis::X),
-        }),
-    }
+        },
+    )
+    .expect("a valid edit")
 }
 
 /// Cost bomb `kind`: 0 creates `object` with the formula `text`, 1 sets its geometry to it,

@@ -14,7 +14,6 @@ use fdsl::object::{
 };
 use replication::shape::{IdSource, ShapePayload};
 use replication::{OpId, PeerId};
-use std::sync::Arc;
 
 use crate::rng::SimRng;
 
@@ -182,20 +181,21 @@ impl User {
                 let path = (0..n_poses)
                     .map(|i| Pose::at([at[0] + 0.05 * i as f64, at[1], at[2]].into()))
                     .collect();
-                ShapePayload::Edit {
-                    object: target,
-                    edit: Arc::new(Edit::stroke(
+                ShapePayload::edit(
+                    target,
+                    Edit::stroke(
                         op,
                         ToolShape::Sphere {
                             radius: rng.range_f64(0.05, 0.4),
                         },
                         path,
-                    )),
-                }
+                    ),
+                )
+                .expect("a valid edit")
             }
-            53..=64 => ShapePayload::Edit {
-                object: target,
-                edit: Arc::new(Edit::stamp(
+            53..=64 => ShapePayload::edit(
+                target,
+                Edit::stamp(
                     EditOp::Paint {
                         property: Paintable::Color,
                         value: PaintValue::Color([
@@ -208,8 +208,9 @@ impl User {
                         radius: rng.range_f64(0.1, 0.5),
                     },
                     Pose::at([rng.range_f64(-1.0, 1.0), 0.0, 0.0].into()),
-                )),
-            },
+                ),
+            )
+            .expect("a valid edit"),
             65..=72 => match self.edits.len() {
                 0 => ShapePayload::Chat(format!("nothing to undo from {peer_idx}")),
                 n => ShapePayload::Undo(self.edits[rng.index(n)]),

@@ -18,7 +18,6 @@
 //! colours and other vertex attributes (STL and our GLB carry positions only).
 
 use std::collections::BTreeMap;
-use std::sync::Arc;
 
 use fdsl::object::{Edit, EditOp, Object, ObjectData, Pose, Sampler, Shape, ToolShape};
 use fdsl::scene::ObjectId;
@@ -349,10 +348,7 @@ pub fn measure(
     for edit_idx in 0..session.n_edits {
         let edit = stroke(&mut rng, &object, subject.bounds, edit_idx, session);
         now = now.saturating_add_micros(OP_INTERVAL_MICROS);
-        let payload = ShapePayload::Edit {
-            object: object_id(),
-            edit: Arc::new(edit),
-        };
+        let payload = ShapePayload::edit(object_id(), edit).expect("a valid edit");
         let (op, insertion) = log.author(&author, now, payload)?;
         scene.apply_insertion(&log, &insertion);
         ops.push(op.encoded().to_vec());

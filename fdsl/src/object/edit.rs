@@ -120,6 +120,29 @@ pub struct CompiledEdit {
     boxes: [Aabb; 2],
 }
 
+/// Two compiled edits are equal when their edits are: the rest is a function of the edit.
+impl PartialEq for CompiledEdit {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.edit, &other.edit) || *self.edit == *other.edit
+    }
+}
+
+/// Encoded as its [`Edit`], so a compiled edit and the edit it came from encode alike.
+impl Serialize for CompiledEdit {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        self.edit.serialize(s)
+    }
+}
+
+/// Decoded as an [`Edit`] and compiled on the spot: an edit that does not compile is a
+/// decoding error, so whoever decodes one holds it ready to fold and never compiles it again.
+impl<'de> Deserialize<'de> for CompiledEdit {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let edit = Edit::deserialize(d)?;
+        CompiledEdit::new(edit).map_err(serde::de::Error::custom)
+    }
+}
+
 impl CompiledEdit {
     /// Validates and compiles an edit (an `Edit`, or an `Arc<Edit>` to share).
     pub fn new(edit: impl Into<Arc<Edit>>) -> Result<CompiledEdit, ObjectError> {
@@ -150,6 +173,11 @@ impl CompiledEdit {
 
     /// The edit as given.
     pub fn edit(&self) -> &Edit {
+        &self.edit
+    }
+
+    /// The edit as given, shared.
+    pub fn shared_edit(&self) -> &Arc<Edit> {
         &self.edit
     }
 

@@ -176,8 +176,9 @@ pub enum ShapePayload {
     Edit {
         /// The object.
         object: u64,
-        /// The edit (shared with the scene's compiled edit, and boxed as `Set`'s field).
-        edit: Arc<Edit>,
+        /// The edit, compiled once when made or decoded (an edit that does not compile never
+        /// decodes) and shared with the object that folds it.
+        edit: Arc<CompiledEdit>,
     },
     /// Adds, changes (`Some`) or removes (`None`) a group.
     SetGroup {
@@ -258,7 +259,7 @@ enum Wire<'a> {
     },
     Edit {
         object: u64,
-        edit: Cow<'a, Arc<Edit>>,
+        edit: Cow<'a, Arc<CompiledEdit>>,
     },
     SetGroup {
         group: u64,
@@ -455,7 +456,7 @@ enum ShapePayloadV1 {
     },
     Edit {
         object: u64,
-        edit: Arc<Edit>,
+        edit: Arc<CompiledEdit>,
     },
     SetGroup {
         group: u64,
@@ -566,6 +567,15 @@ mod op_id {
 }
 
 impl ShapePayload {
+    /// An [`ShapePayload::Edit`] of `object`: the edit compiled, or why it cannot be.
+    pub fn edit(
+        object: u64,
+        edit: impl Into<Arc<Edit>>,
+    ) -> Result<ShapePayload, fdsl::object::ObjectError> {
+        let edit = Arc::new(CompiledEdit::new(edit)?);
+        Ok(ShapePayload::Edit { object, edit })
+    }
+
     /// Checks what decoding cannot: formulas compile, numbers are valid, text is short.
     pub fn validate(&self) -> Result<(), String> {
         match self {
@@ -577,9 +587,6 @@ impl ShapePayload {
                 field.clone().apply_to(&mut data);
                 Object::new(data).map(|_| ()).map_err(|e| e.to_string())
             }
-            ShapePayload::Edit { edit, .. } => CompiledEdit::new(Arc::clone(edit))
-                .map(|_| ())
-                .map_err(|e| e.to_string()),
             ShapePayload::SetGroup { value: Some(g), .. } => {
                 if g.transform.inverse().is_none() || g.name.len() > fdsl::object::MAX_NAME_BYTES {
                     return Err("group transform not invertible or name too long".into());
@@ -689,8 +696,6 @@ pub struct ShapeScene {
     scene: Scene,
     /// Chat lines in linear order.
     chat: Vec<ChatLine>,
-    /// Compiled edits by the op that made them, so a re-fold does not recompile strokes.
-    compiled: BTreeMap<OpId, Arc<CompiledEdit>>,
     /// For each object, the op of each history entry (to map undo targets to edits).
     edit_ops: BTreeMap<u64, Vec<OpId>>,
     /// For each object, the parts folded and not yet assembled.
@@ -773,18 +778,7 @@ impl ShapeScene {
                 let Some(o) = self.scene.object_mut(scene::ObjectId(*object)) else {
                     return;
                 };
-                let compiled = match self.compiled.get(&id) {
-                    Some(c) => c.clone(),
-                    None => match CompiledEdit::new(Arc::clone(edit)) {
-                        Ok(c) => {
-                            let c = Arc::new(c);
-                            self.compiled.insert(id, c.clone());
-                            c
-                        }
-                        Err(_) => return,
-                    },
-                };
-                if o.apply_compiled(compiled).is_ok() {
+                if o.apply_compiled(Arc::clone(edit)).is_ok() {
                     self.edit_ops.entry(*object).or_default().push(id);
                 }
             }
@@ -892,7 +886,6 @@ impl Materialize<ShapePayload> for ShapeScene {
         Ok(ShapeScene {
             scene,
             chat,
-            compiled: BTreeMap::new(),
             edit_ops: edit_ops
                 .into_iter()
                 .map(|(o, ids)| (o, ids.into_iter().map(OpId).collect()))

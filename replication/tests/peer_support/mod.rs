@@ -18,7 +18,6 @@ use replication::shape::ShapePayload;
 use replication::shape::parts::part_hash;
 use replication::sync::message::{MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION, SessionId};
 use replication::{ConnId, Event, Keypair, Log, Op, OpId, Peer, PeerId, Timestamp, VersionVector};
-use std::sync::Arc;
 
 const SESSION: SessionId = [7; 16];
 /// Connections the script uses (ids 0..).
@@ -198,16 +197,17 @@ impl World {
                 object,
                 field: Box::new(Field::Name(format!("n{}", bytes.u8()))),
             },
-            2 => ShapePayload::Edit {
+            2 => ShapePayload::edit(
                 object,
-                edit: Arc::new(Edit {
+                Edit {
                     op: EditOp::Subtract,
                     tool: ToolShape::Sphere { radius: 0.1 },
                     path: vec![Pose::at([f64::from(bytes.u8()) / 255.0, 0.0, 0.0].into())],
                     blend_radius: 0.0,
                     mirror: None,
-                }),
-            },
+                },
+            )
+            .expect("a valid edit"),
             3 => ShapePayload::Acquire {
                 object,
                 strong: bytes.u8().is_multiple_of(2),
