@@ -747,3 +747,68 @@ fn the_next_ids_skip_every_id_the_author_used() {
         .unwrap();
     assert_eq!(IdSource::next_in(&log, me.peer_id()), at(3));
 }
+
+/// Issue 17 item 6: a received sculpting edit is compiled once, at decode; folding it, and
+/// folding its object again after a backdated op lands before it, compiles nothing more.
+#[test]
+fn a_received_edit_is_compiled_once_from_its_bytes_to_the_scene() {
+    use fdsl::object::compiled::n_edits_compiled_on_this_thread;
+    let (a, b) = (key(0), key(1));
+    let mut author = SLog::default();
+    let ids = IdSource::first(a.peer_id());
+    let (create, _) = author
+        .author(&a, Timestamp(10), ids.create(sphere_data(), None))
+        .unwrap();
+    let object = ids.id();
+    let stroke = Edit::stroke(
+        EditOp::Subtract,
+        ToolShape::Sphere { radius: 0.1 },
+        (0..20)
+            .map(|i| Pose::at(DVec3::new(0.05 * f64::from(i), 0.5, 0.0)))
+            .collect(),
+    );
+    let (edit, _) = author
+        .author(
+            &a,
+            Timestamp(20),
+            ShapePayload::edit(object, stroke).unwrap(),
+        )
+        .unwrap();
+    let bytes: Vec<Vec<u8>> = [&create, &edit]
+        .iter()
+        .map(|op| op.encoded().to_vec())
+        .collect();
+    // Another member's backdated colour, sorted before the edit: its object refolds.
+    let mut other = SLog::default();
+    let backdated = ShapePayload::Set {
+        object,
+        field: Box::new(Field::Diffuse(Some(ColorDef::Constant([1.0, 0.0, 0.0])))),
+    };
+    other
+        .insert(Timestamp(10), create.clone(), Origin(1))
+        .unwrap();
+    let (late, _) = other.author(&b, Timestamp(15), backdated).unwrap();
+    let before = n_edits_compiled_on_this_thread();
+    let mut log = SLog::default();
+    let mut scene = SScene::fold(&log).unwrap();
+    for bytes in &bytes {
+        let op = replication::Op::<ShapePayload>::decode_verified(bytes).unwrap();
+        let ins = log.insert(Timestamp(30), op, Origin(1)).unwrap();
+        scene.apply_insertion(&log, &ins);
+    }
+    assert_eq!(
+        n_edits_compiled_on_this_thread(),
+        before + 1,
+        "at decode only"
+    );
+    let ins = log.insert(Timestamp(30), late, Origin(2)).unwrap();
+    scene.apply_insertion(&log, &ins);
+    assert!(scene.stats().n_object_refolds >= 1, "{:?}", scene.stats());
+    assert_eq!(
+        n_edits_compiled_on_this_thread(),
+        before + 1,
+        "not at the refold"
+    );
+    let folded = scene.scene().scene().object(SceneObjectId(object)).unwrap();
+    assert_eq!(folded.history().len(), 1);
+}

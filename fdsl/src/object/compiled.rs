@@ -38,6 +38,20 @@ static CACHE: Mutex<Cache> = Mutex::new(Cache {
 thread_local! {
     /// Texts compiled on this thread (every [`crate::Function::compile_with`]).
     static N_COMPILED: Cell<u64> = const { Cell::new(0) };
+    /// Edits compiled on this thread (every [`crate::object::CompiledEdit::new`]).
+    static N_EDITS_COMPILED: Cell<u64> = const { Cell::new(0) };
+}
+
+/// How many sculpting edits this thread has compiled (every
+/// [`crate::object::CompiledEdit::new`], successful or not): what a test reads to show that a
+/// received edit is compiled once from its bytes to the scene.
+pub fn n_edits_compiled_on_this_thread() -> u64 {
+    N_EDITS_COMPILED.with(Cell::get)
+}
+
+/// Counts one edit compilation on this thread (called by `CompiledEdit::new`).
+pub(crate) fn count_edit_compilation() {
+    N_EDITS_COMPILED.with(|n| n.set(n.get() + 1));
 }
 
 /// How many texts this thread has compiled: every [`crate::Function::compile`], through this

@@ -146,6 +146,7 @@ impl<'de> Deserialize<'de> for CompiledEdit {
 impl CompiledEdit {
     /// Validates and compiles an edit (an `Edit`, or an `Arc<Edit>` to share).
     pub fn new(edit: impl Into<Arc<Edit>>) -> Result<CompiledEdit, ObjectError> {
+        super::compiled::count_edit_compilation();
         let edit = edit.into();
         let blend = edit.blend_radius;
         if !(blend.is_finite() && blend >= 0.0) {
