@@ -82,8 +82,9 @@ fn main() {
 
 /// Feeds a workload's ops to a fresh receiver (after its setup) and returns the workload, the
 /// bytes received, the CPU time (the best of three runs, each of a workload built afresh:
-/// this is one thread, no IO) and the entries refolds re-evaluated while receiving (positions
-/// of the log's order and edits the scene folded again).
+/// this is one thread, no IO) and the entries re-evaluated while receiving: positions of the
+/// log's order its refolds went over, plus entries the scene applied (each received op once,
+/// and every edit of an object it folded again).
 fn measure(build: &dyn Fn() -> Workload) -> (Workload, usize, Duration, u64) {
     let mut last = None;
     let mut refolded = 0;

@@ -304,7 +304,7 @@ pub struct Entry<'a, P> {
     pub active: bool,
 }
 
-/// Counters of what the log refused or dropped.
+/// Counters of what the log refused, dropped, re-evaluated and held back.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct LogStats {
     /// Ops refused (equivocation, bad Lamport time, full).
