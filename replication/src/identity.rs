@@ -125,6 +125,11 @@ impl PeerId {
     pub fn short(&self) -> String {
         hex(&self.0[..SHORT_ID_HEX_DIGITS / 2])
     }
+
+    /// The whole key in lowercase hex.
+    pub fn to_hex(&self) -> String {
+        hex(&self.0)
+    }
 }
 
 impl fmt::Display for PeerId {

@@ -64,6 +64,9 @@ pub enum RejectReason {
     AlreadyUndone,
     /// A redo of an edit that is not undone.
     NotUndone,
+    /// An op of a member the session's founder expelled, not in the expel's causal past: it
+    /// is void (see [`crate::membership`]).
+    Expelled,
 }
 
 impl fmt::Display for RejectReason {
@@ -78,6 +81,7 @@ impl fmt::Display for RejectReason {
             Self::TargetNotEffective => f.write_str("undo/redo of a rejected edit"),
             Self::AlreadyUndone => f.write_str("already undone"),
             Self::NotUndone => f.write_str("redo of an edit that is not undone"),
+            Self::Expelled => f.write_str("its author was expelled"),
         }
     }
 }
@@ -207,27 +211,47 @@ impl FoldState {
         target: Option<TargetInfo>,
         seen: Option<Option<Lease>>,
     ) -> Mark {
+        self.apply_exempting(author, at, effect, target, seen, &mut |_| false)
+    }
+
+    /// [`FoldState::apply`], where a lease held by a peer for which `exempt` is true does not
+    /// bind the op (the founder expelled its holder, as the op's causal past has it: see
+    /// [`crate::membership`]). Only acquires and releases change the state; an acquire judged
+    /// free that way takes the lease over in it.
+    pub fn apply_exempting(
+        &mut self,
+        author: PeerId,
+        at: Timestamp,
+        effect: Effect,
+        target: Option<TargetInfo>,
+        seen: Option<Option<Lease>>,
+        exempt: &mut dyn FnMut(&PeerId) -> bool,
+    ) -> Mark {
+        let mut binding = |lease: Option<Lease>| lease.filter(|l| !exempt(&l.holder));
         let verdict = match effect {
             Effect::Independent => Ok(()),
             Effect::Edit { object }
             | Effect::Acquire { object, .. }
             | Effect::Release { object } => {
                 let global = self.leases.get(&object).copied();
-                let judged = lease_step(seen.unwrap_or(global), author, at, effect);
-                let whole = match seen {
-                    None => judged,
-                    Some(_) => lease_step(global, author, at, effect),
-                };
-                if let Ok(lease) = whole {
-                    match lease {
-                        Some(l) => self.leases.insert(object, l),
-                        None => self.leases.remove(&object),
+                let judged = lease_step(binding(seen.unwrap_or(global)), author, at, effect);
+                if matches!(effect, Effect::Acquire { .. } | Effect::Release { .. }) {
+                    let whole = match seen {
+                        None => judged,
+                        Some(_) => lease_step(binding(global), author, at, effect),
                     };
+                    if let Ok(lease) = whole {
+                        match lease {
+                            Some(l) => self.leases.insert(object, l),
+                            None => self.leases.remove(&object),
+                        };
+                    }
                 }
                 judged.map(|_| ())
             }
-            Effect::Undo { target: id } => self.undo_redo(author, at, id, target, true, seen),
-            Effect::Redo { target: id } => self.undo_redo(author, at, id, target, false, seen),
+            Effect::Undo { .. } | Effect::Redo { .. } => {
+                self.undo_redo(author, at, effect, target, seen, &mut binding)
+            }
         };
         match verdict {
             Ok(()) => Mark::Effective,
@@ -235,15 +259,21 @@ impl FoldState {
         }
     }
 
+    /// An undo or redo (`effect`) of `target`.
     fn undo_redo(
         &mut self,
         author: PeerId,
         at: Timestamp,
-        id: OpId,
+        effect: Effect,
         target: Option<TargetInfo>,
-        undo: bool,
         seen: Option<Option<Lease>>,
+        binding: &mut dyn FnMut(Option<Lease>) -> Option<Lease>,
     ) -> Result<(), RejectReason> {
+        let (id, undo) = match effect {
+            Effect::Undo { target } => (target, true),
+            Effect::Redo { target } => (target, false),
+            _ => return Err(RejectReason::TargetNotEdit),
+        };
         let t = target.ok_or(RejectReason::UnknownTarget)?;
         if t.author != author {
             return Err(RejectReason::NotOwnTarget);
@@ -259,7 +289,7 @@ impl FoldState {
             (false, false) => return Err(RejectReason::NotUndone),
             _ => {}
         }
-        let lease = seen.unwrap_or_else(|| self.leases.get(&object).copied());
+        let lease = binding(seen.unwrap_or_else(|| self.leases.get(&object).copied()));
         lease_step(lease, author, at, Effect::Edit { object })?;
         if undo {
             self.undone.insert(id);

@@ -109,6 +109,7 @@ pub mod identity;
 pub mod lease;
 pub mod log;
 pub mod materialize;
+pub mod membership;
 #[cfg(feature = "net")]
 pub mod net;
 pub mod op;

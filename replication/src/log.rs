@@ -7,6 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use crate::causal::{Frontier, Reach, VersionVector};
 use crate::identity::{Keypair, PeerId};
 use crate::lease::{FoldState, Lease, Mark, RejectReason, TargetInfo};
+use crate::membership::FounderCommitment;
 use crate::op::{BuildError, MAX_DEPS, Op, OpFields, OpId, OpSlab, VerifiedOp};
 use crate::payload::{Effect, ObjectId, Payload};
 use crate::pending::{DepKey, Evicted, Origin, Pending, PendingLimits};
@@ -85,6 +86,14 @@ impl RefoldBudget {
 
 /// The [`Origin`] of ops this peer authors or loads from its own store.
 pub const LOCAL_ORIGIN: Origin = Origin(0);
+
+/// Why [`Log::set_founder`] refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum FounderError {
+    /// The log already holds or waits for ops, judged without a founder.
+    #[error("the founder must be named before the log holds any op")]
+    NotEmpty,
+}
 
 /// Why an op was refused outright (it is not stored, not even as rejected).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -217,6 +226,9 @@ pub struct Refold {
     /// when later ops land before them; keys do not, so a driver that applies an insertion
     /// after later ones were inserted (events drained in a batch) must use these.
     pub object_keys: BTreeMap<ObjectId, OrderKey>,
+    /// Authors whose ops from this seq on turned void or counted again (an expel or a readmit,
+    /// [`crate::membership`]): their independent entries from there must be applied again.
+    pub void_from: BTreeMap<PeerId, u64>,
 }
 
 impl Refold {
@@ -235,6 +247,10 @@ impl Refold {
         }
         self.base_objects.extend(later.base_objects.iter().copied());
         self.from = self.from.min(later.from);
+        for (author, seq) in &later.void_from {
+            let earliest = self.void_from.entry(*author).or_insert(*seq);
+            *earliest = (*earliest).min(*seq);
+        }
     }
 }
 
@@ -365,6 +381,19 @@ pub struct Log<P> {
     /// at the budget's rate (a virtual scheduling time, as in GCRA).
     refold_paid_until: Timestamp,
     refold_budget: RefoldBudget,
+    /// What the session's invite commits to, when it names a founder
+    /// ([`crate::membership`]): only membership ops it proves count.
+    founder: Option<FounderCommitment>,
+    /// Per member, the held membership ops that count (by the founder, of another member),
+    /// in delivery order, with whether each expels.
+    membership_ops: BTreeMap<PeerId, Vec<(OpId, bool)>>,
+    /// Per expelled member, the last seq of its ops that are not void (those in the causal
+    /// past of every expel of it that counts and no readmit cancelled).
+    expelled: BTreeMap<PeerId, u64>,
+    /// Members whose membership ops changed since the last refold.
+    members_changed: BTreeSet<PeerId>,
+    /// Members whose ops from this seq on changed sides since the last refold.
+    void_changed: BTreeMap<PeerId, u64>,
 }
 
 impl<P: Payload> Default for Log<P> {
@@ -402,7 +431,46 @@ impl<P: Payload> Log<P> {
             author_quota: MAX_AUTHOR_BYTES,
             refold_paid_until: Timestamp(0),
             refold_budget: RefoldBudget::default(),
+            founder: None,
+            membership_ops: BTreeMap::new(),
+            expelled: BTreeMap::new(),
+            members_changed: BTreeSet::new(),
+            void_changed: BTreeMap::new(),
         }
+    }
+
+    /// Names what the session's invite commits to, so that its founder's membership ops count
+    /// ([`crate::membership`]). Every peer of a session must set the same one before its first
+    /// op is inserted (a log joined from a snapshot: before its first op after the cut), or
+    /// their verdicts on expelled members differ.
+    pub fn set_founder(&mut self, commitment: FounderCommitment) -> Result<(), FounderError> {
+        if self.ops.len() > 0 || !self.pending.is_empty() {
+            return Err(FounderError::NotEmpty);
+        }
+        self.founder = Some(commitment);
+        Ok(())
+    }
+
+    /// What the session's invite commits to, if set.
+    pub fn founder(&self) -> Option<FounderCommitment> {
+        self.founder
+    }
+
+    /// The expelled members, each with the last seq of its ops that still count (its later
+    /// ops are void).
+    pub fn expelled(&self) -> &BTreeMap<PeerId, u64> {
+        &self.expelled
+    }
+
+    /// True if the founder expelled `member` (and has not readmitted it).
+    pub fn is_expelled(&self, member: &PeerId) -> bool {
+        self.expelled.contains_key(member)
+    }
+
+    /// True if the log holds a membership op that counts (such a log cannot be cut into a
+    /// snapshot: [`CutError::Membership`]).
+    pub fn has_membership_ops(&self) -> bool {
+        !self.membership_ops.is_empty()
     }
 
     /// Sets what refolds remote ops cause may cost ([`RefoldBudget`]).
@@ -609,6 +677,11 @@ impl<P: Payload> Log<P> {
             }
         }
         self.stats.n_evicted += out.evicted.len() as u64;
+        if !self.members_changed.is_empty() {
+            // A membership op was delivered, so `first_pos` is set and the refold reports
+            // the activity this changes.
+            self.update_expelled();
+        }
         if let Some(first_pos) = first_pos {
             let positions = self.refold_positions(first_pos);
             let refold = self.refold_from(first_pos, &Inserted::new(&out.delivered));
@@ -860,6 +933,7 @@ impl<P: Payload> Log<P> {
         if let Some(object) = delete_of {
             self.note_delete(object, id, key);
         }
+        self.note_membership(author, id);
         Ok(pos)
     }
 
@@ -869,7 +943,70 @@ impl<P: Payload> Log<P> {
             ops: &self.ops,
             by_author: &self.by_author,
             base: self.base.as_deref(),
+            members: &self.membership_ops,
         }
+    }
+
+    /// Records the membership op `id` just delivered, if it counts: its author proves to be
+    /// the founder with the nonce it shows, and it names another member.
+    fn note_membership(&mut self, author: PeerId, id: OpId) {
+        let Some(founder) = &self.founder else {
+            return;
+        };
+        let Some(m) = self.ops.get(&id).and_then(|op| op.payload().membership()) else {
+            return;
+        };
+        if m.member == author || !founder.is_founder(&author, &m.nonce) {
+            return;
+        }
+        self.membership_ops
+            .entry(m.member)
+            .or_default()
+            .push((id, m.expel));
+        self.members_changed.insert(m.member);
+    }
+
+    /// Recomputes which ops of the members whose membership ops changed are void, and notes
+    /// from which seq each member's changed ([`Refold::void_from`] of the next refold).
+    fn update_expelled(&mut self) {
+        for member in std::mem::take(&mut self.members_changed) {
+            let last = self.last_counting_seq(&member);
+            let old = self.expelled.get(&member).copied();
+            if last == old {
+                continue;
+            }
+            match last {
+                Some(last) => self.expelled.insert(member, last),
+                None => self.expelled.remove(&member),
+            };
+            // Ops after the lower of the two bounds changed sides.
+            let from_seq = last.unwrap_or(u64::MAX).min(old.unwrap_or(u64::MAX)) + 1;
+            let earliest = self.void_changed.entry(member).or_insert(from_seq);
+            *earliest = (*earliest).min(from_seq);
+        }
+    }
+
+    /// The last seq of `member`'s ops that still count: the fewest its expels saw, over the
+    /// expels no readmit saw; `None` when no such expel is held.
+    fn last_counting_seq(&mut self, member: &PeerId) -> Option<u64> {
+        let ops = self.membership_ops.get(member)?;
+        let mut reach = std::mem::take(&mut self.reach);
+        let dag = self.dag();
+        let chain = self.by_author.get(member).map_or(&[][..], Vec::as_slice);
+        let base_seq = self.base.as_ref().map_or(0, |b| b.seq(member));
+        let mut last: Option<u64> = None;
+        for (expel, _) in ops.iter().filter(|(_, expel)| *expel) {
+            let readmitted = ops
+                .iter()
+                .any(|(r, is_expel)| !is_expel && dag.sees(&mut reach, r, expel));
+            if readmitted {
+                continue;
+            }
+            let seen = base_seq + dag.seen_prefix(&mut reach, expel, chain) as u64;
+            last = Some(last.map_or(seen, |l| l.min(seen)));
+        }
+        self.reach = reach;
+        last
     }
 
     /// Records which held edits of `object` the delete `id` just delivered saw. Every edit in
@@ -904,6 +1041,7 @@ impl<P: Payload> Log<P> {
         self.stats.n_refolded += (self.order.len() - start) as u64;
         let mut refold = Refold {
             from,
+            void_from: std::mem::take(&mut self.void_changed),
             ..Refold::default()
         };
         let mut cx = LeaseCx {
@@ -918,14 +1056,12 @@ impl<P: Payload> Log<P> {
             {
                 self.checkpoints.push(state.clone());
             }
-            let (key, id) = self.order[pos];
+            let id = self.order[pos].1;
             let Some(op) = self.ops.get(&id) else {
                 continue;
             };
             let effect = op.payload().effect();
-            let target = self.target_info(effect, pos);
-            let seen = self.lease_context(&mut cx, &state, (key, id), target);
-            let mark = state.apply(op.author(), op.timestamp(), effect, target, seen);
+            let mark = self.judge(&mut cx, &mut state, pos);
             if pos >= from {
                 let changed = self.marks[pos] != mark || inserted.contains(&id);
                 if changed {
@@ -938,12 +1074,69 @@ impl<P: Payload> Log<P> {
         self.reach = cx.reach;
         self.state = state;
         self.n_folded = self.order.len();
+        self.report_void_changes(&mut refold);
         self.update_hidden(&mut refold);
         // An undo or redo changes its target's activity, which may lie before `from`.
         if let Some(first) = refold.objects.values().min() {
             refold.from = refold.from.min(*first);
         }
         refold
+    }
+
+    /// Judges the op at `pos` against `state` (the fold of the positions before it) and
+    /// advances the state past it.
+    fn judge(&self, cx: &mut LeaseCx, state: &mut FoldState, pos: usize) -> Mark {
+        let (key, id) = self.order[pos];
+        let Some(op) = self.ops.get(&id) else {
+            return Mark::Effective;
+        };
+        let effect = op.payload().effect();
+        let target = self.target_info(effect, pos);
+        let seen = self.lease_context(cx, state, (key, id), target);
+        let (author, at) = (op.author(), op.timestamp());
+        if self.membership_ops.is_empty() {
+            return state.apply(author, at, effect, target, seen);
+        }
+        // Membership as this op's causal past has it: a member that saw its own expel is
+        // refused, and nobody who saw an expel is bound by the expelled member's leases.
+        let dag = self.dag();
+        if dag.expelled_in_past(&mut cx.reach, &id, &author) {
+            return Mark::Rejected(RejectReason::Expelled);
+        }
+        let reach = &mut cx.reach;
+        let mut exempt = |holder: &PeerId| dag.expelled_in_past(reach, &id, holder);
+        state.apply_exempting(author, at, effect, target, seen, &mut exempt)
+    }
+
+    /// Records in `refold` the objects of the ops that turned void or counted again
+    /// ([`Refold::void_from`]): their activity changed, not their marks.
+    fn report_void_changes(&self, refold: &mut Refold) {
+        for (member, from_seq) in refold.void_from.clone() {
+            let member = &member;
+            let base_seq = self.base.as_ref().map_or(0, |b| b.seq(member));
+            let skip = usize::try_from(from_seq.saturating_sub(base_seq + 1)).unwrap_or(usize::MAX);
+            let chain = self.by_author.get(member).map_or(&[][..], Vec::as_slice);
+            for id in chain.iter().skip(skip) {
+                let (Some(op), Some(pos)) = (self.ops.get(id), self.position(id)) else {
+                    continue;
+                };
+                refold.from = refold.from.min(pos);
+                self.report_change(refold, op.payload().effect(), pos);
+            }
+        }
+    }
+
+    /// True if held op `id` is void: its author was expelled by an expel that did not see it
+    /// ([`crate::membership`]). A void op keeps its mark (verdicts are judged on causal pasts,
+    /// which an expel arriving later does not change) but is inactive: the scene does not fold
+    /// it, and a void delete hides nothing.
+    pub fn is_void(&self, id: &OpId) -> bool {
+        if self.expelled.is_empty() {
+            return false;
+        }
+        self.ops.get(id).is_some_and(|op| {
+            (self.expelled.get(&op.author())).is_some_and(|last| op.seq() > *last)
+        })
     }
 
     /// Records in `refold` the object whose fold the changed op at `pos` affects.
@@ -997,7 +1190,7 @@ impl<P: Payload> Log<P> {
         let dag = self.dag();
         let unseen = seen::unseen_before(&dag, &mut cx.reach, list, n, &id);
         let lease = (!unseen.is_empty())
-            .then(|| seen::lease_seen(&dag, list, n, &unseen, &mut cx.alt, object));
+            .then(|| seen::lease_seen(&dag, &mut cx.reach, list, n, &unseen, &mut cx.alt, object));
         if matches!(effect, Effect::Acquire { .. } | Effect::Release { .. }) {
             let me = &mut list[n];
             assert!(me.id == id, "a lease op is indexed under its object");
@@ -1052,7 +1245,7 @@ impl<P: Payload> Log<P> {
             .and_then(|b| b.edits_by_object.get(&object))
             .map_or(&[][..], Vec::as_slice);
         for (key, d) in self.deletes.get(&object).into_iter().flatten() {
-            if !self.is_effective(d) || self.state.is_undone(d) {
+            if !self.is_effective(d) || self.state.is_undone(d) || self.is_void(d) {
                 continue;
             }
             if let Some(hides) = self.delete_hides.get(d) {
@@ -1194,8 +1387,10 @@ impl<P: Payload> Log<P> {
             .zip(&self.marks)
             .filter_map(|((_, id), mark)| {
                 let op = self.ops.get(id)?;
-                let active =
-                    *mark == Mark::Effective && !self.state.is_undone(id) && !self.is_hidden(id);
+                let active = *mark == Mark::Effective
+                    && !self.state.is_undone(id)
+                    && !self.is_hidden(id)
+                    && !self.is_void(id);
                 Some(Entry {
                     op,
                     mark: *mark,
@@ -1218,7 +1413,10 @@ impl<P: Payload> Log<P> {
         Some(Entry {
             op,
             mark,
-            active: mark == Mark::Effective && !self.state.is_undone(&id) && !self.is_hidden(&id),
+            active: mark == Mark::Effective
+                && !self.state.is_undone(&id)
+                && !self.is_hidden(&id)
+                && !self.is_void(&id),
         })
     }
 
@@ -1255,7 +1453,10 @@ impl<P: Payload> Log<P> {
     /// True if the op is effective, not undone and not hidden by a delete that saw it (inside
     /// the base: an effective edit not undone and not hidden).
     pub fn is_active(&self, id: &OpId) -> bool {
-        self.is_effective(id) && !self.state.is_undone(id) && !self.is_hidden(id)
+        self.is_effective(id)
+            && !self.state.is_undone(id)
+            && !self.is_hidden(id)
+            && !self.is_void(id)
     }
 
     /// The author's rejected ops in linear order, with reasons, so their work can be re-applied.

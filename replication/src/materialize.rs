@@ -11,6 +11,7 @@ use std::collections::BTreeMap;
 use std::marker::PhantomData;
 
 use crate::codec::DecodeError;
+use crate::identity::PeerId;
 use crate::lease::{FoldState, Mark};
 use crate::log::{Drained, Insertion, Log, OrderKey, Refold};
 use crate::op::{Op, OpId};
@@ -57,6 +58,10 @@ pub trait Materialize<P: Payload> {
 
     /// Folds one active entry: an edit of one object, or an independent entry.
     fn apply(&mut self, entry: FoldEntry<'_, P>);
+
+    /// Forgets the independent entries by `author` with seq `from_seq` or later (the ops of a
+    /// member an expel voided, or a readmit brought back); the active ones are applied again.
+    fn reset_independent(&mut self, author: PeerId, from_seq: u64);
 
     /// The blake3 hash of the scene's canonical encoding.
     fn scene_hash(&self) -> SceneHash;
@@ -157,7 +162,11 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
         }
         for entry in log.entries().take(n) {
             let id = entry.op.id();
-            if entry.mark != Mark::Effective || state.is_undone(&id) || log.is_hidden(&id) {
+            if entry.mark != Mark::Effective
+                || state.is_undone(&id)
+                || log.is_hidden(&id)
+                || log.is_void(&id)
+            {
                 continue;
             }
             let key = OrderKey::of(entry.op);
@@ -209,8 +218,27 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
         }
     }
 
-    /// Re-folds what `refold` names and applies the `delivered` independent entries.
+    /// Re-folds what `refold` names and applies the `delivered` independent entries (the
+    /// active ones: those of an expelled member's void ops are not).
     pub fn apply_refold(&mut self, log: &Log<P>, delivered: &[OpId], refold: &Refold) {
+        for (author, from_seq) in &refold.void_from {
+            self.scene.reset_independent(*author, *from_seq);
+            let last = log.version_vector().get(author);
+            for seq in *from_seq..=last {
+                let Some(op) = log.by_seq(author, seq) else {
+                    continue;
+                };
+                if op.payload().effect() == Effect::Independent && log.is_active(&op.id()) {
+                    self.scene.apply(FoldEntry {
+                        key: OrderKey::of(op),
+                        op,
+                    });
+                    self.stats.n_applied += 1;
+                }
+            }
+        }
+        let reapplied =
+            |op: &Op<P>| (refold.void_from.get(&op.author())).is_some_and(|from| op.seq() >= *from);
         for (object, from) in &refold.object_keys {
             let full = refold.base_objects.contains(object)
                 || self
@@ -225,7 +253,7 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
         }
         for id in delivered {
             let Some(op) = log.get(id) else { continue };
-            if op.payload().effect() == Effect::Independent {
+            if op.payload().effect() == Effect::Independent && log.is_active(id) && !reapplied(op) {
                 self.scene.apply(FoldEntry {
                     key: OrderKey::of(op),
                     op,
@@ -280,7 +308,6 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
 pub mod test_scene {
     use super::*;
     use crate::codec::{Reader, put_bytes, put_varint};
-    use crate::identity::PeerId;
     use crate::payload::test_payload::{MAX_TEST_TEXT_BYTES, TestPayload};
 
     /// Version byte of the test scene's snapshot encoding.
@@ -300,6 +327,11 @@ pub mod test_scene {
     impl Materialize<TestPayload> for TestScene {
         fn reset_object(&mut self, object: ObjectId) {
             self.objects.remove(&object.0);
+        }
+
+        fn reset_independent(&mut self, author: PeerId, from_seq: u64) {
+            self.chat
+                .retain(|(key, _)| key.author != author || key.seq < from_seq);
         }
 
         fn apply(&mut self, entry: FoldEntry<'_, TestPayload>) {

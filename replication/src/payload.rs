@@ -4,6 +4,7 @@
 use std::fmt;
 
 use crate::codec::DecodeError;
+use crate::membership::Membership;
 use crate::op::OpId;
 
 /// Largest encoded payload accepted in an op, in bytes (typical ops are well under 1 KiB).
@@ -97,6 +98,13 @@ pub trait Payload: Clone + fmt::Debug + PartialEq + Eq {
     fn is_delete(&self) -> bool {
         false
     }
+
+    /// The expel or readmit this op asks for, if it is a membership op (its [`Effect`] is
+    /// [`Effect::Independent`]). The log alone decides whether it counts: see
+    /// [`crate::membership`].
+    fn membership(&self) -> Option<Membership> {
+        None
+    }
 }
 
 /// A small payload for tests, examples and the simulator.
@@ -142,6 +150,8 @@ pub mod test_payload {
             /// The object.
             object: u64,
         },
+        /// Expels or readmits a member (counts only from the session's founder).
+        Member(Membership),
     }
 
     impl Payload for TestPayload {
@@ -182,6 +192,12 @@ pub mod test_payload {
                     out.push(6);
                     put_varint(out, *object);
                 }
+                Self::Member(m) => {
+                    out.push(7);
+                    out.extend_from_slice(&m.member.0);
+                    out.push(u8::from(m.expel));
+                    out.extend_from_slice(&m.nonce);
+                }
             }
         }
 
@@ -196,17 +212,7 @@ pub mod test_payload {
                 },
                 2 => {
                     let object = r.varint()?;
-                    let flag_offset = r.offset();
-                    let strong = match r.u8()? {
-                        0 => false,
-                        1 => true,
-                        _ => {
-                            return Err(DecodeError::Invalid {
-                                offset: flag_offset,
-                                what: "flag",
-                            });
-                        }
-                    };
+                    let strong = flag(&mut r)?;
                     Self::Acquire {
                         object,
                         strong,
@@ -221,6 +227,11 @@ pub mod test_payload {
                 6 => Self::Delete {
                     object: r.varint()?,
                 },
+                7 => Self::Member(Membership {
+                    member: crate::identity::PeerId(r.array()?),
+                    expel: flag(&mut r)?,
+                    nonce: r.array()?,
+                }),
                 _ => {
                     return Err(DecodeError::Invalid {
                         offset: tag_offset,
@@ -234,7 +245,7 @@ pub mod test_payload {
 
         fn effect(&self) -> Effect {
             match self {
-                Self::Chat(_) => Effect::Independent,
+                Self::Chat(_) | Self::Member(_) => Effect::Independent,
                 Self::Set { object, .. } | Self::Delete { object } => Effect::Edit {
                     object: ObjectId(*object),
                 },
@@ -261,6 +272,25 @@ pub mod test_payload {
 
         fn is_delete(&self) -> bool {
             matches!(self, Self::Delete { .. })
+        }
+
+        fn membership(&self) -> Option<Membership> {
+            match self {
+                Self::Member(m) => Some(*m),
+                _ => None,
+            }
+        }
+    }
+
+    fn flag(r: &mut Reader<'_>) -> Result<bool, DecodeError> {
+        let offset = r.offset();
+        match r.u8()? {
+            0 => Ok(false),
+            1 => Ok(true),
+            _ => Err(DecodeError::Invalid {
+                offset,
+                what: "flag",
+            }),
         }
     }
 

@@ -147,7 +147,9 @@ impl<P: Payload> Peer<P> {
         now: Timestamp,
         payload: P,
     ) -> Result<(VerifiedOp<P>, Insertion), AuthorError> {
-        self.log.author(&self.keypair, now, payload)
+        let authored = self.log.author(&self.keypair, now, payload)?;
+        self.close_expelled();
+        Ok(authored)
     }
 
     /// Opens a connection (state is built afresh for every connection).
@@ -184,6 +186,19 @@ impl<P: Payload> Peer<P> {
             sync.handle_input(now, bytes, &mut self.log);
             drain(conn, sync, &mut self.events);
             self.wants_dirty = true;
+            self.close_expelled();
+        }
+    }
+
+    /// Closes every connection to a member the founder expelled (all of them, when it expelled
+    /// this peer): an expel may arrive on any connection.
+    fn close_expelled(&mut self) {
+        if self.log.expelled().is_empty() {
+            return;
+        }
+        for (conn, sync) in &mut self.connections {
+            sync.close_if_expelled(&self.log);
+            drain(*conn, sync, &mut self.events);
         }
     }
 
@@ -347,7 +362,7 @@ fn drain<P: Payload>(
 mod tests {
     use super::*;
     use crate::payload::test_payload::TestPayload;
-    use crate::sync::state::HAVE_EVERY_MICROS;
+    use crate::sync::state::{CloseReason, HAVE_EVERY_MICROS};
 
     type TPeer = Peer<TestPayload>;
 
@@ -559,8 +574,10 @@ mod tests {
                 n_sent += 1;
             }
         }
-        // One send, then resends after 1, 2, 4, 8, 16, 32 and 32 s, plus one have.
-        assert!(n_sent <= 10, "{n_sent} messages to a silent remote");
+        // One send, then resends after 1, 2, 4, 8, 16, 32 and 32 s, plus one have, and one
+        // repeat of the have with a hello (the remote lacks the op; it is not repeated again
+        // until the remote speaks).
+        assert!(n_sent <= 12, "{n_sent} messages to a silent remote");
         assert!(n_sent >= 7, "{n_sent}: no resends");
         assert_eq!(peers[1].log().len(), 0);
         // Peer 1 speaks (its periodic have after authoring): peer 0 resends within the base
@@ -571,6 +588,41 @@ mod tests {
         let start = t;
         let done = settle(&mut peers, &links, t, |p| p[1].log().len() == 2);
         assert!(done - start <= 2 * RESEND_AFTER_MICROS, "{}", done - start);
+    }
+
+    #[test]
+    fn a_third_peers_op_reaches_a_remote_whose_haves_were_all_lost() {
+        // A and B are connected; A gets an op of C's that B can only get from A. Every have A
+        // sends B for 15 s is lost, and then A's log does not grow again: A repeats its full
+        // have while B is known to lack the op, so B asks for it and gets it.
+        let (mut peers, links) = full_mesh(2, Timestamp(0));
+        pump(&mut peers, &links, Timestamp(0));
+        let carol = ConnId(7);
+        peers[0].connect(Timestamp(0), carol).unwrap();
+        let c = Keypair::from_seed([3; 32]);
+        peers[0].handle_input(Timestamp(0), carol, &hello_from(c.peer_id(), [5; 16]));
+        let op = crate::log::tests::signed(&c, 1, 1, 0, vec![], TestPayload::Chat("hi".into()));
+        let batch = Message::Ops {
+            batch_no: 0,
+            ops: vec![op.encoded().to_vec()],
+        };
+        peers[0].handle_input(Timestamp(0), carol, &batch.encode());
+        peers[0].disconnect(carol);
+        assert!(peers[0].log().contains(&op.id()));
+        let mut t = 0;
+        while t < 60_000_000 && !peers[1].log().contains(&op.id()) {
+            t += 100_000;
+            let now = Timestamp(t);
+            for p in peers.iter_mut() {
+                p.handle_timeout(now);
+            }
+            if t < 15_000_000 {
+                while peers[0].poll_transmit(now).is_some() {}
+            }
+            pump(&mut peers, &links, now);
+        }
+        assert!(peers[1].log().contains(&op.id()), "B never got the op");
+        assert!(t <= 35_000_000, "got it at {t} µs");
     }
 
     use crate::causal::MAX_VV_AUTHORS;
@@ -860,5 +912,75 @@ mod tests {
             refolded <= 3_200,
             "{refolded} positions for {held} held ops"
         );
+    }
+
+    #[test]
+    fn the_founder_expels_a_member_and_every_peer_closes_its_connections_to_it() {
+        use crate::membership::{FounderCommitment, Membership};
+        let nonce = [0xf0; 32];
+        let founder = Keypair::from_seed([1; 32]).peer_id();
+        let now = Timestamp(0);
+        let mut peers: Vec<TPeer> = (1..=3u8)
+            .map(|i| {
+                let mut log = Log::default();
+                log.set_founder(FounderCommitment::of(&founder, &nonce))
+                    .unwrap();
+                Peer::new(Keypair::from_seed([i; 32]), [5; 16], log)
+            })
+            .collect();
+        let mut links = Vec::new();
+        for a in 0..3 {
+            for b in a + 1..3 {
+                peers[a].connect(now, ConnId(b as u64)).unwrap();
+                peers[b].connect(now, ConnId(a as u64)).unwrap();
+                links.push((a, ConnId(b as u64), b, ConnId(a as u64)));
+            }
+        }
+        let member = peers[2].peer_id();
+        peers[2]
+            .author(now, TestPayload::Chat("hello".into()))
+            .unwrap();
+        pump(&mut peers, &links, now);
+        assert!(peers.iter().all(|p| p.log().len() == 1));
+        let expel = TestPayload::Member(Membership {
+            member,
+            expel: true,
+            nonce,
+        });
+        peers[0].author(Timestamp(1_000), expel).unwrap();
+        let closed =
+            |p: &TPeer, conn: u64| p.connections().any(|(c, s)| c.0 == conn && s.is_closed());
+        assert!(closed(&peers[0], 2), "the founder closes at once");
+        let mut events = Vec::new();
+        while let Some(e) = peers[0].poll_event() {
+            events.push(e);
+        }
+        assert!(events.contains(&(
+            ConnId(2),
+            Event::Closed(CloseReason::Expelled { peer: member })
+        )));
+        let t = settle(&mut peers, &links, 1_000, |p| p[1].log().len() == 2);
+        assert!(
+            closed(&peers[1], 2),
+            "a peer that learns of the expel closes too"
+        );
+        assert!(!closed(&peers[1], 0), "and keeps its other connections");
+        // What the expelled member writes now reaches nobody, and would count for nothing.
+        peers[2]
+            .author(Timestamp(t), TestPayload::Chat("still here".into()))
+            .unwrap();
+        let t = settle(&mut peers, &links, t, |_| true);
+        pump(&mut peers, &links, Timestamp(t + HAVE_EVERY_MICROS));
+        assert_eq!(peers[0].log().len(), 2);
+        assert_eq!(peers[1].log().len(), 2);
+        assert!(peers[0].log().is_expelled(&member));
+        // A member who is not the founder cannot expel anyone with the same nonce.
+        let forged = TestPayload::Member(Membership {
+            member: peers[0].peer_id(),
+            expel: true,
+            nonce,
+        });
+        peers[1].author(Timestamp(t), forged).unwrap();
+        assert!(!closed(&peers[1], 0) && !peers[1].log().is_expelled(&peers[0].peer_id()));
     }
 }

@@ -78,6 +78,10 @@ pub enum CutError {
         /// The highest stable cut.
         stable: u64,
     },
+    /// The log holds a founder's expel or readmit: a base keeps no membership, so the cut
+    /// would forget it (join such a session from full history).
+    #[error("the log holds membership ops, which a snapshot cannot keep")]
+    Membership,
     /// The cut is below the log's own base cut.
     #[error("cut {cut} is below the log's base cut {base}")]
     BelowBase {
@@ -209,6 +213,12 @@ impl<P: Payload> Log<P> {
             author_quota: super::MAX_AUTHOR_BYTES,
             refold_paid_until: Timestamp(0),
             refold_budget: super::RefoldBudget::default(),
+            // A snapshot keeps no membership (a log holding any cannot be cut).
+            founder: None,
+            membership_ops: BTreeMap::new(),
+            expelled: BTreeMap::new(),
+            members_changed: Default::default(),
+            void_changed: BTreeMap::new(),
         };
         let objects: Vec<ObjectId> = log.deletes.keys().copied().collect();
         for object in objects {
@@ -313,6 +323,9 @@ impl<P: Payload> Log<P> {
     /// The base of this log at Lamport time `cut` (without the scene, which the caller folds):
     /// every held op at or before the cut joins the existing base, if any.
     pub(crate) fn base_at(&self, cut: u64) -> Result<(Base<P>, usize), CutError> {
+        if self.has_membership_ops() {
+            return Err(CutError::Membership);
+        }
         let stable = self.stable_lamport();
         if cut > stable {
             return Err(CutError::NotStable { cut, stable });

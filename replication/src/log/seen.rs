@@ -42,9 +42,41 @@ pub(crate) struct Dag<'a, P> {
     pub(crate) ops: &'a crate::op::OpSlab<P>,
     pub(crate) by_author: &'a BTreeMap<PeerId, Vec<OpId>>,
     pub(crate) base: Option<&'a Base<P>>,
+    /// Per member, the membership ops that count, with whether each expels.
+    pub(crate) members: &'a BTreeMap<PeerId, Vec<(OpId, bool)>>,
 }
 
 impl<P: Payload> Dag<'_, P> {
+    /// True if `from`'s causal past has the founder expelling `member`: an expel of it is in
+    /// that past, and no readmit there saw that expel. Such an op is not bound by the member's
+    /// leases, and if it is the member's own, it is rejected.
+    pub(crate) fn expelled_in_past(&self, memo: &mut Reach, from: &OpId, member: &PeerId) -> bool {
+        let Some(ops) = self.members.get(member) else {
+            return false;
+        };
+        ops.iter().filter(|(_, expel)| *expel).any(|(e, _)| {
+            self.sees(memo, from, e)
+                && !ops
+                    .iter()
+                    .any(|(r, expel)| !expel && self.sees(memo, from, r) && self.sees(memo, r, e))
+        })
+    }
+
+    /// How many of `chain` (an author's held ops in seq order) are in `from`'s causal past: a
+    /// prefix, since each op's previous op is in its past.
+    pub(crate) fn seen_prefix(&self, memo: &mut Reach, from: &OpId, chain: &[OpId]) -> usize {
+        let (mut lo, mut hi) = (0, chain.len());
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if self.sees(memo, from, &chain[mid]) {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        lo
+    }
+
     /// The author's previous held op (`None` for its first, or one inside the base).
     fn prev(&self, op: &Op<P>) -> Option<&OpId> {
         let base_seq = self.base.map_or(0, |b| b.seq(&op.author()));
@@ -166,6 +198,7 @@ pub(crate) fn unseen_before<P: Payload>(
 /// costs one pass over the object's lease ops.
 pub(crate) fn lease_seen<P: Payload>(
     dag: &Dag<'_, P>,
+    memo: &mut Reach,
     list: &[LeaseOp],
     n: usize,
     unseen: &[(OrderKey, OpId)],
@@ -186,8 +219,13 @@ pub(crate) fn lease_seen<P: Payload>(
         let l = &list[i];
         let skipped = unseen.binary_search_by(|(k, _)| k.cmp(&l.key)).is_ok();
         if !skipped && let Some(op) = dag.ops.get(&l.id) {
-            let effect = op.payload().effect();
-            lease = lease_step(lease, op.author(), op.timestamp(), effect).unwrap_or(lease);
+            // Judged as the fold judged it: rejected if its author saw its own expel, and not
+            // bound by a holder it saw expelled.
+            if !dag.expelled_in_past(memo, &l.id, &op.author()) {
+                let binding = lease.filter(|h| !dag.expelled_in_past(memo, &l.id, &h.holder));
+                let effect = op.payload().effect();
+                lease = lease_step(binding, op.author(), op.timestamp(), effect).unwrap_or(lease);
+            }
         }
         i += 1;
     }

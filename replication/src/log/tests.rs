@@ -2,6 +2,7 @@
 //! delivery-order independence and merge laws.
 
 use super::*;
+use crate::membership::{FounderCommitment, Membership};
 use crate::payload::test_payload::TestPayload;
 use proptest::prelude::*;
 use rand_chacha::ChaCha20Rng;
@@ -47,9 +48,43 @@ pub(crate) fn workload_with_marks(
     n_authors: u8,
     n_steps: usize,
 ) -> (Vec<VerifiedOp<TestPayload>>, BTreeMap<OpId, Mark>) {
+    workload_in(seed, n_authors, n_steps, None)
+}
+
+/// The nonce of author 0's founder commitment in [`founded_workload`].
+const FOUNDER_NONCE: [u8; 32] = [0xf0; 32];
+
+/// A log of a session founded by author 0 ([`key`]`(0)` with [`FOUNDER_NONCE`]).
+pub(crate) fn founded_log() -> TLog {
+    let mut log = TLog::default();
+    log.set_founder(FounderCommitment::of(&key(0).peer_id(), &FOUNDER_NONCE))
+        .unwrap();
+    log
+}
+
+/// [`workload`] in a session founded by author 0, who now and then expels or readmits
+/// another author; the others send membership ops too, which must count for nothing.
+pub(crate) fn founded_workload(
+    seed: u64,
+    n_authors: u8,
+    n_steps: usize,
+) -> Vec<VerifiedOp<TestPayload>> {
+    workload_in(seed, n_authors, n_steps, Some(FOUNDER_NONCE)).0
+}
+
+fn workload_in(
+    seed: u64,
+    n_authors: u8,
+    n_steps: usize,
+    founder_nonce: Option<[u8; 32]>,
+) -> (Vec<VerifiedOp<TestPayload>>, BTreeMap<OpId, Mark>) {
     let mut rng = ChaCha20Rng::seed_from_u64(seed);
     let keys: Vec<Keypair> = (0..n_authors).map(key).collect();
-    let mut replicas: Vec<TLog> = (0..n_authors).map(|_| TLog::default()).collect();
+    let new_replica = || match founder_nonce {
+        Some(_) => founded_log(),
+        None => TLog::default(),
+    };
+    let mut replicas: Vec<TLog> = (0..n_authors).map(|_| new_replica()).collect();
     let mut all = Vec::new();
     let mut marks = BTreeMap::new();
     for step in 0..n_steps {
@@ -70,7 +105,13 @@ pub(crate) fn workload_with_marks(
             .map(|e| e.op.id())
             .collect();
         let pick = |rng: &mut ChaCha20Rng| own_edits[(rng.next_u32() as usize) % own_edits.len()];
-        let payload = match rng.next_u32() % 8 {
+        let n_kinds = if founder_nonce.is_some() { 9 } else { 8 };
+        let payload = match rng.next_u32() % n_kinds {
+            8 => TestPayload::Member(Membership {
+                member: keys[1 + (rng.next_u32() % u32::from(n_authors - 1)) as usize].peer_id(),
+                expel: rng.next_u32() % 3 != 0,
+                nonce: founder_nonce.unwrap_or_default(),
+            }),
             0 => weak(object, 5000),
             1 => TestPayload::Acquire {
                 object,
@@ -92,7 +133,10 @@ pub(crate) fn workload_with_marks(
 }
 
 pub(crate) fn deliver_all(ops: &[VerifiedOp<TestPayload>]) -> TLog {
-    let mut log = TLog::default();
+    deliver_all_into(TLog::default(), ops)
+}
+
+fn deliver_all_into(mut log: TLog, ops: &[VerifiedOp<TestPayload>]) -> TLog {
     for op in ops {
         log.insert(Timestamp(0), op.clone(), Origin(1)).unwrap();
     }
@@ -845,4 +889,184 @@ fn backdated_ops_flooding_a_long_log_refold_within_the_budget_and_land_as_withou
     }
     assert_eq!(observe(&log), observe(&reference));
     assert!(backdated.iter().all(|op| log.is_active(&op.id())));
+}
+
+proptest! {
+    #![proptest_config(crate::test_config(24))]
+
+    /// Expels and readmits (and membership ops from authors who are not the founder) give
+    /// the same verdicts in any delivery order, and every change they make lies where the
+    /// refold reports it.
+    /// An expel never changes a verdict its author saw (no honest op is erased by it): marks
+    /// are judged on causal pasts, and an expel only voids the member's own ops.
+    #[test]
+    fn with_expels_every_mark_is_the_one_its_author_saw(seed in any::<u64>(), perm in any::<u64>()) {
+        let (ops, at_author) = workload_in(seed, 4, 60, Some(FOUNDER_NONCE));
+        let log = deliver_all_into(founded_log(), &shuffled(&ops, perm));
+        for (id, mark) in &at_author {
+            prop_assert_eq!(log.mark(id), Some(*mark), "op {}", id);
+        }
+    }
+
+    #[test]
+    fn expels_give_the_same_verdicts_in_any_order_and_report_their_refolds(
+        seed in any::<u64>(),
+        perm in any::<u64>(),
+    ) {
+        let ops = founded_workload(seed, 3, 40);
+        let a = deliver_all_into(founded_log(), &ops);
+        let b = deliver_all_into(founded_log(), &shuffled(&ops, perm));
+        prop_assert_eq!(a.len(), ops.len());
+        prop_assert_eq!(observe(&a), observe(&b));
+        prop_assert_eq!(a.expelled(), b.expelled());
+        let mut log = founded_log();
+        for op in shuffled(&ops, perm) {
+            let before: BTreeMap<OpId, (Mark, bool)> =
+                log.entries().map(|e| (e.op.id(), (e.mark, e.active))).collect();
+            let ins = log.insert(Timestamp(0), op, Origin(1)).unwrap();
+            let Some(refold) = ins.refold else {
+                continue;
+            };
+            for (pos, e) in log.entries().enumerate() {
+                if before.get(&e.op.id()) == Some(&(e.mark, e.active)) {
+                    continue;
+                }
+                prop_assert!(refold.from <= pos);
+                if let Some(object) = fold_object(&log, e.op) {
+                    let from = refold.objects.get(&object).copied();
+                    prop_assert!(from.is_some_and(|f| f <= pos), "{object:?} changed at {pos}, refold {from:?}");
+                }
+            }
+        }
+        prop_assert_eq!(observe(&log), observe(&a));
+    }
+}
+
+#[test]
+fn the_founder_expels_a_member_whose_unseen_ops_turn_void_and_whose_leases_bind_nobody_who_saw_it()
+{
+    let (founder, honest, mallory) = (key(0), key(1), key(9));
+    let hoard = TestPayload::Acquire {
+        object: 2,
+        strong: true,
+        ttl_micros: u64::MAX,
+    };
+    let mut log = founded_log();
+    let (made, _) = log
+        .author(&mallory, Timestamp(1_000), set(1, "mine"))
+        .unwrap();
+    // The founder sees Mallory's first op only; meanwhile Mallory hoards object 2 and edits
+    // object 1 again, and an honest member who saw the hoard is refused by it.
+    let mut founders = founded_log();
+    founders.merge(Timestamp(1_000), &log).unwrap();
+    let (hoarded, _) = log.author(&mallory, Timestamp(2_000), hoard).unwrap();
+    let (again, _) = log
+        .author(&mallory, Timestamp(2_100), set(1, "again"))
+        .unwrap();
+    let (refused, _) = log
+        .author(&honest, Timestamp(2_200), set(2, "honest"))
+        .unwrap();
+    let held_by_mallory = Some(Mark::Rejected(RejectReason::LeaseHeld {
+        holder: mallory.peer_id(),
+    }));
+    assert_eq!(log.mark(&refused.id()), held_by_mallory);
+    let membership = |member: &Keypair, expel| {
+        TestPayload::Member(Membership {
+            member: member.peer_id(),
+            expel,
+            nonce: FOUNDER_NONCE,
+        })
+    };
+    let (expelled, _) = founders
+        .author(&founder, Timestamp(3_000), membership(&mallory, true))
+        .unwrap();
+    // Mallory, posing as the founder with the founder's nonce, expels the honest member: it
+    // counts for nothing (the nonce proves the founder's key only).
+    let (forged, _) = log
+        .author(&mallory, Timestamp(2_300), membership(&honest, true))
+        .unwrap();
+    let ins = log
+        .insert(Timestamp(4_000), expelled.clone(), Origin(2))
+        .unwrap();
+    let refold = ins.refold.expect("the expel changed what is active");
+    assert!(refold.objects.contains_key(&ObjectId(1)));
+    assert_eq!(refold.void_from.get(&mallory.peer_id()), Some(&2));
+    assert!(log.is_expelled(&mallory.peer_id()) && !log.is_expelled(&honest.peer_id()));
+    assert_eq!(log.expelled().get(&mallory.peer_id()), Some(&1));
+    assert!(log.is_active(&made.id()), "what the founder saw stays");
+    for void in [&hoarded, &again, &forged] {
+        assert!(log.is_void(&void.id()) && !log.is_active(&void.id()));
+    }
+    // Verdicts stand as their authors saw them: the refused edit saw the hoard, not the expel.
+    assert_eq!(log.mark(&refused.id()), held_by_mallory);
+    assert_eq!(log.mark(&hoarded.id()), Some(Mark::Effective));
+    // An edit that saw the expel is not bound by the hoard, though its lease runs on.
+    let (freed, _) = log
+        .author(&honest, Timestamp(5_000), set(2, "freed"))
+        .unwrap();
+    assert!(log.is_active(&freed.id()));
+    // Mallory goes on after seeing its expel: refused outright.
+    let (after, _) = log
+        .author(&mallory, Timestamp(5_000), set(3, "after"))
+        .unwrap();
+    let refused_expelled = Some(Mark::Rejected(RejectReason::Expelled));
+    assert_eq!(log.mark(&after.id()), refused_expelled);
+    // Every delivery order gives the same verdicts and activity.
+    let all = [
+        made.clone(),
+        hoarded.clone(),
+        again,
+        refused.clone(),
+        expelled,
+        forged,
+        freed.clone(),
+        after.clone(),
+    ];
+    for seed in 0..8 {
+        let other = deliver_all_into(founded_log(), &shuffled(&all, seed));
+        assert_eq!(observe(&other), observe(&log), "order {seed}");
+    }
+    // Without a founder named, the same ops expel nobody and the hoard binds.
+    let unfounded = deliver_all(&all);
+    assert!(unfounded.expelled().is_empty());
+    assert!(unfounded.is_active(&hoarded.id()));
+    assert_eq!(unfounded.mark(&freed.id()), held_by_mallory);
+    // A readmit that saw the expel cancels it: Mallory's unseen ops count again, and ops that
+    // see the readmit are bound by its leases again.
+    let (readmit, _) = log
+        .author(&founder, Timestamp(6_000), membership(&mallory, false))
+        .unwrap();
+    assert_eq!(log.mark(&readmit.id()), Some(Mark::Effective));
+    assert!(!log.is_expelled(&mallory.peer_id()));
+    assert!(log.is_active(&hoarded.id()));
+    assert_eq!(log.mark(&after.id()), refused_expelled, "a verdict stands");
+    let (bound, _) = log
+        .author(&honest, Timestamp(7_000), set(2, "bound"))
+        .unwrap();
+    assert_eq!(log.mark(&bound.id()), held_by_mallory);
+    // The founder cannot expel itself, and a log with ops cannot name a founder late.
+    let (own, _) = log
+        .author(&founder, Timestamp(8_000), membership(&founder, true))
+        .unwrap();
+    assert!(log.is_active(&own.id()) && log.expelled().is_empty());
+    assert_eq!(
+        log.set_founder(FounderCommitment::of(&founder.peer_id(), &FOUNDER_NONCE)),
+        Err(FounderError::NotEmpty)
+    );
+}
+
+#[test]
+fn the_founded_workload_voids_ops_and_readmits() {
+    let (mut voided, mut readmitted) = (false, false);
+    for seed in 0..16 {
+        let log = deliver_all_into(founded_log(), &founded_workload(seed, 3, 40));
+        voided |= log.entries().any(|e| log.is_void(&e.op.id()));
+        readmitted |= log.entries().any(|e| {
+            matches!(e.op.payload(), TestPayload::Member(m) if !m.expel && e.op.author() == key(0).peer_id())
+        });
+    }
+    assert!(
+        voided && readmitted,
+        "the workload exercises expels and readmits"
+    );
 }

@@ -6,7 +6,10 @@ use super::test_scene::TestScene;
 use super::*;
 use crate::identity::PeerId;
 use crate::lease::RejectReason;
-use crate::log::tests::{TLog, causal_past, deliver_all, key, set, shuffled, weak, workload};
+use crate::log::tests::{
+    TLog, causal_past, deliver_all, founded_log, founded_workload, key, set, shuffled, weak,
+    workload,
+};
 use crate::op::VerifiedOp;
 use crate::payload::test_payload::TestPayload;
 use crate::pending::Origin;
@@ -316,6 +319,24 @@ proptest! {
     fn incremental_refold_equals_fold_from_scratch(seed in any::<u64>(), perm in any::<u64>()) {
         let ops = shuffled(&workload(seed, 3, 30), perm);
         let mut log = TLog::default();
+        let mut scene = from_scratch(&log);
+        for op in ops {
+            let ins = log.insert(Timestamp(0), op, Origin(1)).unwrap();
+            scene.apply_insertion(&log, &ins);
+            prop_assert_eq!(scene.scene().clone(), from_scratch(&log).scene().clone());
+        }
+        prop_assert_eq!(scene.scene(), &naive_scene(&log));
+    }
+
+    /// Expels and readmits void and bring back a member's ops, chat included: the scene kept
+    /// in step equals the fold from scratch after every insertion, in any delivery order.
+    #[test]
+    fn expels_keep_the_incremental_scene_equal_to_the_fold_from_scratch(
+        seed in any::<u64>(),
+        perm in any::<u64>(),
+    ) {
+        let ops = shuffled(&founded_workload(seed, 3, 40), perm);
+        let mut log = founded_log();
         let mut scene = from_scratch(&log);
         for op in ops {
             let ins = log.insert(Timestamp(0), op, Origin(1)).unwrap();

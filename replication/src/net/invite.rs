@@ -69,6 +69,9 @@ use std::str::FromStr;
 
 use rand_core::CryptoRngCore;
 
+use crate::identity::PeerId;
+use crate::membership::{COMMITMENT_SYMBOLS, FOUNDER_NONCE_BYTES, FounderCommitment};
+
 /// Longest text [`Invite::parse`] reads, in bytes, surrounding whitespace included; longer
 /// input is refused before any other work.
 pub const MAX_INVITE_BYTES: usize = 256;
@@ -86,6 +89,7 @@ pub const CODE_TEXT_CHARS: usize = CODE_CHARS + N_GROUPS - 1;
 pub const RANDOM_CHARS: usize = 26;
 /// Random bits in a code (5 per random character).
 pub const RANDOM_BITS: u32 = 130;
+const _: () = assert!(RANDOM_CHARS == COMMITMENT_SYMBOLS);
 
 /// Data characters in a group (all but its check character).
 const GROUP_DATA_CHARS: usize = GROUP_CHARS - 1;
@@ -132,11 +136,34 @@ impl Invite {
     pub fn generate(rng: &mut impl CryptoRngCore) -> Invite {
         let mut random = [0; RANDOM_CHARS];
         rng.fill_bytes(&mut random);
-        let mut data = [0; DATA_CHARS];
-        for (d, r) in data.iter_mut().zip(random) {
+        for r in &mut random {
             // 256 is a multiple of 32, so the low 5 bits of a uniform byte are uniform.
-            *d = r & SYMBOL_MASK;
+            *r &= SYMBOL_MASK;
         }
+        Self::from_random(random)
+    }
+
+    /// A new invite for a session founded by `founder`: its random characters are
+    /// [`FounderCommitment::of`] the founder's key and `nonce` (a secret from the system's
+    /// RNG, kept beside the invite), so the founder can prove itself to every member and
+    /// expel members ([`crate::membership`]). It carries as many unpredictable bits as a
+    /// drawn one while the nonce stays secret.
+    pub fn for_founder(founder: &PeerId, nonce: &[u8; FOUNDER_NONCE_BYTES]) -> Invite {
+        Self::from_random(FounderCommitment::of(founder, nonce).0)
+    }
+
+    /// What this invite commits to: its random characters. Only an invite made by
+    /// [`Invite::for_founder`] has a founder who matches it.
+    pub fn founder_commitment(&self) -> FounderCommitment {
+        let mut symbols = [0; COMMITMENT_SYMBOLS];
+        symbols.copy_from_slice(&self.data()[..RANDOM_CHARS]);
+        FounderCommitment(symbols)
+    }
+
+    /// The invite whose random characters are `random` (each below 32).
+    fn from_random(random: [u8; RANDOM_CHARS]) -> Invite {
+        let mut data = [0; DATA_CHARS];
+        data[..RANDOM_CHARS].copy_from_slice(&random);
         let [w0, w1] = whole_check_chars(&data);
         data[RANDOM_CHARS] = w0;
         data[RANDOM_CHARS + 1] = w1;
@@ -655,6 +682,19 @@ mod tests {
             assert_eq!(Invite::parse(&text), Ok(invite.clone()));
             assert_eq!(text.parse::<Invite>(), Ok(invite));
         }
+    }
+
+    #[test]
+    fn a_founders_invite_parses_and_commits_to_its_founder_alone() {
+        let founder = crate::identity::Keypair::from_seed([3; 32]).peer_id();
+        let other = crate::identity::Keypair::from_seed([4; 32]).peer_id();
+        let invite = Invite::for_founder(&founder, &[5; 32]);
+        let parsed = Invite::parse(&invite.to_string()).expect("a founder's invite parses");
+        let commitment = parsed.founder_commitment();
+        assert!(commitment.is_founder(&founder, &[5; 32]));
+        assert!(!commitment.is_founder(&other, &[5; 32]));
+        assert!(!commitment.is_founder(&founder, &[6; 32]));
+        assert_ne!(Invite::for_founder(&founder, &[6; 32]), invite);
     }
 
     #[test]

@@ -37,6 +37,7 @@ use crate::codec::DecodeError;
 use crate::identity::PeerId;
 use crate::log::OrderKey;
 use crate::materialize::{FoldEntry, MAX_SCENE_SNAPSHOT_BYTES, Materialize, SceneHash};
+use crate::membership::Membership;
 use crate::op::OpId;
 use crate::payload::{Effect, LeaseStrength, MAX_PAYLOAD_BYTES, ObjectId, Payload};
 
@@ -231,6 +232,9 @@ pub enum ShapePayload {
         /// The parts' hashes, in order (at most [`parts::MAX_PARTS`]).
         parts: Vec<[u8; 32]>,
     },
+    /// Expels or readmits a member; counts only from the session's founder
+    /// ([`crate::membership`]). Boxed, as `Set`'s field.
+    Member(Box<Membership>),
 }
 
 // Payloads are validated on decode (no NaN reaches one), so equality is reflexive.
@@ -293,6 +297,11 @@ enum Wire<'a> {
         counter: u32,
         data: Cow<'a, Box<ObjectData>>,
         group: Option<u64>,
+    },
+    Member {
+        member: [u8; 32],
+        expel: bool,
+        nonce: [u8; 32],
     },
 }
 
@@ -358,6 +367,11 @@ impl<'a> From<&'a ShapePayload> for Wire<'a> {
                 object: *object,
                 parts: Cow::Borrowed(parts),
             },
+            ShapePayload::Member(m) => Wire::Member {
+                member: m.member.0,
+                expel: m.expel,
+                nonce: m.nonce,
+            },
         }
     }
 }
@@ -421,6 +435,15 @@ impl From<Wire<'_>> for ShapePayload {
                 object,
                 parts: parts.into_owned(),
             },
+            Wire::Member {
+                member,
+                expel,
+                nonce,
+            } => ShapePayload::Member(Box::new(Membership {
+                member: PeerId(member),
+                expel,
+                nonce,
+            })),
         }
     }
 }
@@ -513,7 +536,9 @@ impl ShapePayloadV1 {
             ShapePayload::Undo(id) => ShapePayloadV1::Undo(id),
             ShapePayload::Redo(id) => ShapePayloadV1::Redo(id),
             ShapePayload::Chat(text) => ShapePayloadV1::Chat(text),
-            ShapePayload::Part { .. } | ShapePayload::Assemble { .. } => return None,
+            ShapePayload::Part { .. } | ShapePayload::Assemble { .. } | ShapePayload::Member(_) => {
+                return None;
+            }
         })
     }
 }
@@ -668,12 +693,19 @@ impl Payload for ShapePayload {
             ShapePayload::Release { object: o } => Effect::Release { object: object(o) },
             ShapePayload::Undo(target) => Effect::Undo { target },
             ShapePayload::Redo(target) => Effect::Redo { target },
-            ShapePayload::Chat(_) => Effect::Independent,
+            ShapePayload::Chat(_) | ShapePayload::Member(_) => Effect::Independent,
         }
     }
 
     fn is_delete(&self) -> bool {
         matches!(self, ShapePayload::Delete { .. })
+    }
+
+    fn membership(&self) -> Option<Membership> {
+        match self {
+            ShapePayload::Member(m) => Some(**m),
+            _ => None,
+        }
     }
 }
 
@@ -814,7 +846,8 @@ impl ShapeScene {
             ShapePayload::Acquire { .. }
             | ShapePayload::Release { .. }
             | ShapePayload::Undo(_)
-            | ShapePayload::Redo(_) => {}
+            | ShapePayload::Redo(_)
+            | ShapePayload::Member(_) => {}
             ShapePayload::Part { object, bytes } => self.parts.hold(*object, bytes),
             ShapePayload::Assemble {
                 object,
@@ -829,6 +862,11 @@ impl ShapeScene {
 }
 
 impl Materialize<ShapePayload> for ShapeScene {
+    fn reset_independent(&mut self, author: PeerId, from_seq: u64) {
+        self.chat
+            .retain(|l| l.author != author.0 || l.seq < from_seq);
+    }
+
     fn reset_object(&mut self, object: ObjectId) {
         if object.0 & GROUP_LEASE_BIT != 0 {
             // Groups are re-folded by re-applying their ops; removing first keeps the fold

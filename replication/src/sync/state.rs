@@ -63,7 +63,8 @@ pub const RELAY_AFTER_MICROS: u64 = 500_000;
 /// A peer tells each remote what it has gained at most this often (1 s), as a delta.
 pub const HAVE_EVERY_MICROS: u64 = 1_000_000;
 /// ... and everything it holds at most this often (10 s) while that changed, which repairs
-/// lost deltas.
+/// lost deltas; also, unchanged, while the remote is known to lack ops it holds (repeated
+/// only after the remote said something), which repairs a lost last have.
 pub const HAVE_FULL_EVERY_MICROS: u64 = 10_000_000;
 /// Messages a remote may send per second on average before they are dropped.
 pub const MAX_MESSAGES_PER_SEC: u64 = 2_000;
@@ -135,6 +136,12 @@ pub enum CloseReason {
     },
     /// The remote is in another session.
     WrongSession,
+    /// The session's founder expelled `peer`: the remote, or this peer itself
+    /// ([`crate::membership`]).
+    Expelled {
+        /// The member expelled.
+        peer: PeerId,
+    },
 }
 
 /// Something the application should know.
@@ -328,6 +335,14 @@ pub struct SyncState<P> {
     have_out: VecDeque<VersionVector>,
     next_batch_no: u64,
     up_to_date: bool,
+    /// Bumped whenever `remote_vv` changes (it keys `lacks_cache`).
+    remote_vv_version: u64,
+    /// Whether the remote is known to lack an op the log holds, for a log length and a
+    /// `remote_vv_version`.
+    lacks_cache: Cell<Option<(usize, u64, bool)>>,
+    /// Messages received when the last repeated full have went out (see `have_due`): the
+    /// next waits until the remote says something, so a silent remote gets one.
+    repaired_at_messages_in: Option<u64>,
     control: VecDeque<Message>,
     events: VecDeque<Event>,
     eph_out: BTreeMap<u32, Vec<u8>>,
@@ -372,6 +387,9 @@ impl<P: Payload> SyncState<P> {
             have_out: VecDeque::new(),
             next_batch_no: 1,
             up_to_date: false,
+            remote_vv_version: 0,
+            lacks_cache: Cell::new(None),
+            repaired_at_messages_in: None,
             control: VecDeque::new(),
             events: VecDeque::new(),
             eph_out: BTreeMap::new(),
@@ -461,6 +479,26 @@ impl<P: Payload> SyncState<P> {
 
     /// Handles one message received from the remote.
     pub fn handle_input(&mut self, now: Timestamp, bytes: &[u8], log: &mut Log<P>) {
+        self.read_input(now, bytes, log);
+        self.close_if_expelled(log);
+    }
+
+    /// Closes the connection when `log` says the founder expelled its remote or this peer:
+    /// an expelled member syncs with nobody (its ops after the expel are void anyway).
+    pub fn close_if_expelled(&mut self, log: &Log<P>) {
+        if self.closed || log.expelled().is_empty() {
+            return;
+        }
+        let expelled = [self.remote, Some(self.config.local)]
+            .into_iter()
+            .flatten()
+            .find(|p| log.is_expelled(p));
+        if let Some(peer) = expelled {
+            self.close(CloseReason::Expelled { peer });
+        }
+    }
+
+    fn read_input(&mut self, now: Timestamp, bytes: &[u8], log: &mut Log<P>) {
         if self.closed {
             return;
         }
@@ -642,6 +680,7 @@ impl<P: Payload> SyncState<P> {
             }
             self.n_unknown_claimed += usize::from(unknown);
             self.remote_vv.raise(*author, *seq);
+            self.remote_vv_version += 1;
             self.sent_vv.raise(*author, *seq);
         }
         if n_dropped > 0 {
@@ -667,6 +706,7 @@ impl<P: Payload> SyncState<P> {
             return;
         }
         self.remote_vv.set(*author, held);
+        self.remote_vv_version += 1;
         self.sent_vv
             .set(*author, self.sent_vv.get(author).min(held));
         if held == 0 {
@@ -832,6 +872,11 @@ impl<P: Payload> SyncState<P> {
     /// Handles the passing of time: resends unanswered hellos and unacknowledged batches,
     /// and expires pending ops whose dependencies never came.
     pub fn handle_timeout(&mut self, now: Timestamp, log: &mut Log<P>) {
+        self.timeout(now, log);
+        self.close_if_expelled(log);
+    }
+
+    fn timeout(&mut self, now: Timestamp, log: &mut Log<P>) {
         if self.closed {
             return;
         }
@@ -877,6 +922,15 @@ impl<P: Payload> SyncState<P> {
             self.have_sent_len = log.len();
             self.have_sent_at = now;
             if full {
+                if self.full_have_len == log.len() {
+                    // A repeat while the remote seems to lack something (see `have_due`): if
+                    // it is our picture of the remote that is stale, its answer to a hello,
+                    // a full have, puts it right.
+                    self.queue_hello(now);
+                    self.repaired_at_messages_in = Some(self.stats.n_messages_in);
+                } else {
+                    self.repaired_at_messages_in = None;
+                }
                 self.full_have_len = log.len();
                 self.full_have_at = now;
             }
@@ -922,7 +976,10 @@ impl<P: Payload> SyncState<P> {
             None
         } else if self.have_sent_len < log.len() {
             Some(self.have_sent_at.saturating_add_micros(HAVE_EVERY_MICROS))
-        } else if self.full_have_len < log.len() {
+        } else if self.full_have_len < log.len() || self.repair_due(log) {
+            // Also repeated, unchanged, while the remote is known to lack ops the log holds:
+            // it asks for third peers' ops only when a have names them, and the have that
+            // did may have been lost after the log last grew.
             Some(
                 self.full_have_at
                     .saturating_add_micros(HAVE_FULL_EVERY_MICROS),
@@ -930,6 +987,29 @@ impl<P: Payload> SyncState<P> {
         } else {
             None
         }
+    }
+
+    /// True if an unchanged full have should go out again: the remote is known to lack ops
+    /// the log holds, and it said something since the last repeat (or there was none).
+    fn repair_due(&self, log: &Log<P>) -> bool {
+        let heard = self
+            .repaired_at_messages_in
+            .is_none_or(|n| self.stats.n_messages_in > n);
+        heard && self.remote_lacks(log)
+    }
+
+    /// True if the remote is known to lack an op the log holds (cached per log length and
+    /// change of what the remote is known to hold).
+    fn remote_lacks(&self, log: &Log<P>) -> bool {
+        let key = (log.len(), self.remote_vv_version);
+        if let Some((len, version, lacks)) = self.lacks_cache.get()
+            && (len, version) == key
+        {
+            return lacks;
+        }
+        let lacks = !self.remote_vv.dominates(log.version_vector());
+        self.lacks_cache.set(Some((key.0, key.1, lacks)));
+        lacks
     }
 
     /// When [`SyncState::handle_timeout`] should next be called.
