@@ -232,7 +232,7 @@ fn parse_size(text: &str) -> Result<(u32, u32), String> {
     Ok((side(w)?, side(h)?))
 }
 
-/// `sculpt invite`: a fresh invite, for a new session.
+/// `sculpt invite`: a fresh invite, for a new session (drawn at random: it names no founder).
 pub fn invite() -> anyhow::Result<()> {
     let invite = Invite::generate(&mut store::entropy_rng()?);
     println!("{invite}");

@@ -11,6 +11,7 @@ use fdsl::object::{
     Transform, fit_domain,
 };
 use glam::DVec3;
+use replication::membership::Membership;
 use replication::shape::ShapePayload;
 
 use crate::engine::View;
@@ -126,6 +127,10 @@ pub enum Command<'a> {
     Undo,
     /// `redo`: the edit this peer's latest undo of the selected object took back.
     Redo,
+    /// `expel: <name or id>`: the founder removes a member from the session.
+    Expel(&'a str),
+    /// `readmit: <name or id>`: the founder takes back its expels of a member.
+    Readmit(&'a str),
 }
 
 /// Reads a line; `None` for an empty one.
@@ -158,6 +163,8 @@ pub fn parse(line: &str) -> Option<Command<'_>> {
             "name" => return Some(Command::Name(rest)),
             "tool" => return Some(Command::Tool(rest)),
             "probe" => return Some(Command::Probe(rest)),
+            "expel" => return Some(Command::Expel(rest)),
+            "readmit" => return Some(Command::Readmit(rest)),
             other => {
                 if let Some((_, kind)) = PropertyKind::ALL.iter().find(|(n, _)| *n == other) {
                     return Some(Command::Property(*kind, rest));
@@ -204,6 +211,34 @@ pub fn plan(
             let payload = ShapePayload::Chat(text.to_string());
             payload.validate()?;
             Ok(planned(payload, "sent".into()))
+        }
+        Command::Expel(who) | Command::Readmit(who) => {
+            let expel = matches!(command, Command::Expel(_));
+            let nonce = session.founder_nonce().ok_or(
+                "only the session's founder (the peer that made its invite) can expel or readmit",
+            )?;
+            let member = session.find_member(who)?;
+            if member == session.peer_id() {
+                return Err("the founder cannot expel itself".into());
+            }
+            if !expel && !session.expelled().contains(&member) {
+                return Err(format!("{} is not expelled", member.short()));
+            }
+            let payload = ShapePayload::Member(Box::new(Membership {
+                member,
+                expel,
+                nonce,
+            }));
+            let summary = if expel {
+                format!(
+                    "expelled {}: its ops from now on count for nothing, and every peer \
+                     closes its connections to it",
+                    member.short()
+                )
+            } else {
+                format!("readmitted {}", member.short())
+            };
+            Ok(planned(payload, summary))
         }
         Command::Shape(text) => {
             let (id, object) = selected_object()?;

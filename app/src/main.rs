@@ -31,7 +31,8 @@ enum Cmd {
     Peer(cli::PeerArgs),
     /// Run a discovery node: it introduces peers to each other and never sees an op.
     Discovery(cli::DiscoveryArgs),
-    /// Print a fresh invite code for a new session.
+    /// Print a fresh invite code for a new session. A session started from it has no
+    /// founder, so nobody can expel members; start `sculpt` without `--invite` to found one.
     Invite,
     /// List the session stores under a directory.
     Sessions(cli::SessionsArgs),

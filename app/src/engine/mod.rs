@@ -26,7 +26,7 @@ use replication::net::node::{DialError, DisconnectReason, NodeConfig, NodeEvent,
 use replication::net::{Node, SessionKeys};
 use replication::shape::ShapePayload;
 use replication::sync::state::CloseReason;
-use replication::{Log, OpId, PeerId, Timestamp};
+use replication::{OpId, PeerId, Timestamp};
 
 pub use presence::{CameraPose, Presence};
 pub use view::{ChatRow, HistoryRow, PeerRow, SharedView, View, lock};
@@ -257,7 +257,7 @@ impl News {
 impl Engine {
     /// Opens the store, starts the node on the engine thread and waits until it listens.
     pub fn start(config: EngineConfig, now: Timestamp) -> Result<Engine, StartError> {
-        let (keypair, invite, new_session, store, log, notices, store_error) =
+        let (keypair, invite, new_session, store, log, founder_nonce, notices, store_error) =
             match store::open(&config.store, config.invite.as_ref(), now) {
                 Ok(o) => (
                     o.keypair,
@@ -265,22 +265,29 @@ impl Engine {
                     o.new_session,
                     Some(o.store),
                     o.log,
+                    o.founder_nonce,
                     o.notices,
                     None,
                 ),
                 Err(e) if config.memory_fallback => {
-                    let invite = match &config.invite {
-                        Some(i) => i.clone(),
-                        None => Invite::generate(&mut store::entropy_rng()?),
+                    let keypair = store::memory_keypair(now);
+                    let (invite, founder_nonce) = match &config.invite {
+                        Some(i) => (i.clone(), None),
+                        None => {
+                            let nonce =
+                                store::entropy_seed().map_err(store::StoreError::Entropy)?;
+                            (Invite::for_founder(&keypair.peer_id(), &nonce), Some(nonce))
+                        }
                     };
                     let error = format!("{e}; nothing stored was changed, and edits are not saved");
-                    let keypair = store::memory_keypair(now);
+                    let log = store::founded_log(&invite);
                     (
                         keypair,
                         invite,
                         true,
                         None,
-                        Log::default(),
+                        log,
+                        founder_nonce,
                         Vec::new(),
                         Some(error),
                     )
@@ -290,6 +297,7 @@ impl Engine {
         let me = keypair.peer_id();
         let mut view = View::new(me, &log).map_err(StartError::Thread)?;
         view.notices = notices;
+        view.founder_nonce = founder_nonce;
         view.store_error = store_error;
         let view: SharedView = Arc::new(Mutex::new(view));
         let news = Arc::new(Mutex::new(News::default()));
@@ -309,16 +317,10 @@ impl Engine {
             log,
             store,
         };
-        let local_presence = Arc::new(Mutex::new(Presence {
-            name: config.name.clone().unwrap_or_else(|| me.short()),
-            colour: presence::default_colour(&me.0),
-            pointer: None,
-            tool: None,
-            selected: None,
-            camera: None,
-            holds_tool_with: None,
-            tool_body: None,
-        }));
+        let local_presence = Arc::new(Mutex::new(Presence::named(
+            config.name.clone().unwrap_or_else(|| me.short()),
+            presence::default_colour(&me.0),
+        )));
         let presence_changed = Arc::new(std::sync::atomic::AtomicBool::new(true));
         let listeners = Listeners::default();
         let worker = Worker {
@@ -1008,6 +1010,9 @@ fn disconnect_text(reason: &DisconnectReason) -> String {
             replication::sync::message::PROTOCOL_VERSION
         ),
         DisconnectReason::Sync(CloseReason::WrongSession) => "it is in another session".into(),
+        DisconnectReason::Sync(CloseReason::Expelled { peer }) => {
+            format!("the session's founder expelled {}", peer.short())
+        }
         DisconnectReason::Lost(why) => format!("connection lost ({why})"),
         other => format!("{other:?}"),
     }

@@ -88,6 +88,20 @@ pub fn default_colour(peer: &[u8; 32]) -> [u8; 3] {
 }
 
 impl Presence {
+    /// A user's name and colour, with nothing pointed at, touched, selected or held.
+    pub fn named(name: String, colour: [u8; 3]) -> Self {
+        Self {
+            name,
+            colour,
+            pointer: None,
+            tool: None,
+            selected: None,
+            camera: None,
+            holds_tool_with: None,
+            tool_body: None,
+        }
+    }
+
     /// `[3][name len][name][r g b][flags][pointer 3×f32][target 3×f32][orbit 3×f32][selected u64]
     /// [tool 3×f32][partner 32][body 4×f32]`, little-endian; the optional parts are present
     /// when their flag bit is set.

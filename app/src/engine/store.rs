@@ -1,7 +1,8 @@
 //! A session's store directory: its invite, this peer's identity key and the op log.
 //!
 //! Layout: `session.invite` (the session's invite code), `identity.key` (the 32-byte ed25519
-//! seed) and `ops.sculpt` (the `OpStore`, with its `.lock` file and any torn tail it set
+//! seed), `founder.nonce` (only in the store of the peer that made the session: what proves
+//! it the founder, who may expel members) and `ops.sculpt` (the `OpStore`, with its `.lock` file and any torn tail it set
 //! aside). The directory is made `0700` and the secret files `0600`; each secret is written
 //! to a temporary file, synced, then linked into place, so a crash never leaves half a key.
 //! The op store is locked for as long as it is open: a second process gets an error naming
@@ -11,6 +12,7 @@ use std::fs;
 use std::io::{Read as _, Write as _};
 use std::path::{Path, PathBuf};
 
+use replication::membership::FOUNDER_NONCE_BYTES;
 use replication::net::invite::{Invite, InviteError};
 use replication::shape::ShapePayload;
 use replication::store::{OpStore, OpenError};
@@ -22,6 +24,10 @@ pub const INVITE_FILE: &str = "session.invite";
 pub const KEY_FILE: &str = "identity.key";
 /// The op log's file name.
 pub const OPS_FILE: &str = "ops.sculpt";
+/// The founder's secret nonce, in the store of the peer that made the session: the invite
+/// commits to it and the founder's key ([`replication::membership`]), and showing it lets
+/// the founder expel members.
+pub const FOUNDER_NONCE_FILE: &str = "founder.nonce";
 /// Bytes of the identity key file: an ed25519 seed.
 pub const KEY_FILE_BYTES: usize = 32;
 /// Longest invite file read (an invite is far shorter).
@@ -91,6 +97,8 @@ pub struct Opened {
     pub store: OpStore<ShapePayload>,
     /// The ops it held.
     pub log: Log<ShapePayload>,
+    /// The founder's nonce, when this peer founded the session (it may expel members).
+    pub founder_nonce: Option<[u8; FOUNDER_NONCE_BYTES]>,
     /// Things the user should know.
     pub notices: Vec<String>,
 }
@@ -99,10 +107,16 @@ pub struct Opened {
 /// when `None` and the directory holds none).
 pub fn open(dir: &Path, invite: Option<&Invite>, now: Timestamp) -> Result<Opened, StoreError> {
     make_private_dir(dir)?;
-    let mut log = Log::default();
-    // The op store first: its lock keeps a second process away from every other file too.
     let ops_path = dir.join(OPS_FILE);
     let had_ops = fs::metadata(&ops_path).is_ok_and(|m| m.len() > 0);
+    // The key and the invite before the ops: a new session's invite commits to its founder,
+    // and the log judges expels against it from the first op on. Both are only ever created
+    // (linked into place, never overwritten), so a second process racing here fails at the
+    // link or at the op store's lock below.
+    let (keypair, key_notice) = load_or_create_key(&dir.join(KEY_FILE), had_ops)?;
+    let (invite, new_session) = session_invite(dir, invite, &keypair)?;
+    let founder_nonce = read_founder_nonce(dir, &keypair, &invite)?;
+    let mut log = founded_log(&invite);
     let (store, recovery) = OpStore::open_into_trusted(&ops_path, now, &mut log)?;
     let mut notices = Vec::new();
     if recovery.n_truncated_bytes > 0 {
@@ -115,8 +129,6 @@ pub fn open(dir: &Path, invite: Option<&Invite>, now: Timestamp) -> Result<Opene
             recovery.n_truncated_bytes, recovery.n_records
         ));
     }
-    let (invite, new_session) = session_invite(dir, invite)?;
-    let (keypair, key_notice) = load_or_create_key(&dir.join(KEY_FILE), had_ops)?;
     notices.extend(key_notice);
     Ok(Opened {
         keypair,
@@ -124,13 +136,58 @@ pub fn open(dir: &Path, invite: Option<&Invite>, now: Timestamp) -> Result<Opene
         new_session,
         store,
         log,
+        founder_nonce,
         notices,
     })
 }
 
+/// An empty log of the session of `invite`: one whose founder's expels count.
+pub fn founded_log(invite: &Invite) -> Log<ShapePayload> {
+    let mut log = Log::default();
+    log.set_founder(invite.founder_commitment())
+        .expect("an empty log takes a founder");
+    log
+}
+
+/// The founder's nonce stored in `dir`, if there is one and it makes this peer the founder
+/// of `invite`'s session.
+fn read_founder_nonce(
+    dir: &Path,
+    keypair: &Keypair,
+    invite: &Invite,
+) -> Result<Option<[u8; FOUNDER_NONCE_BYTES]>, StoreError> {
+    let path = dir.join(FOUNDER_NONCE_FILE);
+    let mut nonce = [0; FOUNDER_NONCE_BYTES];
+    match fs::File::open(&path) {
+        Ok(file) => {
+            let mut bytes = Vec::new();
+            file.take(FOUNDER_NONCE_BYTES as u64 + 1)
+                .read_to_end(&mut bytes)
+                .map_err(|source| StoreError::Io {
+                    path: path.clone(),
+                    source,
+                })?;
+            if bytes.len() != FOUNDER_NONCE_BYTES {
+                return Ok(None);
+            }
+            nonce.copy_from_slice(&bytes);
+            let founder = invite.founder_commitment();
+            Ok(founder
+                .is_founder(&keypair.peer_id(), &nonce)
+                .then_some(nonce))
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(source) => Err(StoreError::Io { path, source }),
+    }
+}
+
 /// The invite stored in `dir`, checked against the one given; or the one given (or a new
 /// one) written there.
-fn session_invite(dir: &Path, given: Option<&Invite>) -> Result<(Invite, bool), StoreError> {
+fn session_invite(
+    dir: &Path,
+    given: Option<&Invite>,
+    keypair: &Keypair,
+) -> Result<(Invite, bool), StoreError> {
     let path = dir.join(INVITE_FILE);
     let io = |source| StoreError::Io {
         path: path.clone(),
@@ -156,7 +213,17 @@ fn session_invite(dir: &Path, given: Option<&Invite>) -> Result<(Invite, bool), 
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
             let (invite, new) = match given {
                 Some(given) => (given.clone(), false),
-                None => (Invite::generate(&mut entropy_rng()?), true),
+                None => {
+                    // The nonce first: an invite whose nonce was lost founds a session
+                    // nobody can expel from.
+                    let nonce = entropy_seed().map_err(StoreError::Entropy)?;
+                    let nonce_path = dir.join(FOUNDER_NONCE_FILE);
+                    write_secret(&nonce_path, &nonce).map_err(|source| StoreError::Io {
+                        path: nonce_path,
+                        source,
+                    })?;
+                    (Invite::for_founder(&keypair.peer_id(), &nonce), true)
+                }
             };
             write_secret(&path, format!("{invite}\n").as_bytes()).map_err(io)?;
             Ok((invite, new))

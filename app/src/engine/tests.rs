@@ -266,6 +266,51 @@ fn secrets_are_private_and_a_second_engine_on_a_store_is_refused() {
 }
 
 #[test]
+fn a_new_session_is_founded_by_its_maker_and_a_joiner_is_not_its_founder() {
+    use std::os::unix::fs::PermissionsExt as _;
+    let (dir, joiner) = (scratch("founder"), scratch("founder-joiner"));
+    let made = store::open(&dir, None, T0).unwrap();
+    let nonce = made
+        .founder_nonce
+        .expect("the maker of a session is its founder");
+    let mode = fs::metadata(dir.join(store::FOUNDER_NONCE_FILE))
+        .unwrap()
+        .permissions()
+        .mode();
+    assert_eq!(mode & 0o777, 0o600);
+    let commitment = made.invite.founder_commitment();
+    assert!(commitment.is_founder(&made.keypair.peer_id(), &nonce));
+    assert_eq!(made.log.founder(), Some(commitment));
+    let invite = made.invite.clone();
+    drop(made);
+    let reopened = store::open(&dir, None, T0).unwrap();
+    assert_eq!(reopened.founder_nonce, Some(nonce));
+    drop(reopened);
+    let joined = store::open(&joiner, Some(&invite), T0).unwrap();
+    assert_eq!(joined.founder_nonce, None);
+    assert_eq!(
+        joined.log.founder(),
+        Some(commitment),
+        "a joiner judges expels the same way"
+    );
+    // A nonce copied into another peer's store does not make that peer the founder.
+    drop(joined);
+    fs::copy(
+        dir.join(store::FOUNDER_NONCE_FILE),
+        joiner.join(store::FOUNDER_NONCE_FILE),
+    )
+    .unwrap();
+    assert_eq!(
+        store::open(&joiner, Some(&invite), T0)
+            .unwrap()
+            .founder_nonce,
+        None
+    );
+    let _ = fs::remove_dir_all(&dir);
+    let _ = fs::remove_dir_all(&joiner);
+}
+
+#[test]
 fn an_edit_on_one_engine_reaches_the_other_as_a_change_of_that_object_with_presence() {
     let (da, db) = (scratch("pair-a"), scratch("pair-b"));
     let a = Engine::start(config(&da), T0).unwrap();

@@ -13,6 +13,7 @@ use fdsl::object::{ColorDef, Field, Shape};
 use fdsl::scene::{ObjectId, Scene};
 use replication::log::{Drained, Insertion, Refold};
 use replication::materialize::Materialized;
+use replication::membership::FOUNDER_NONCE_BYTES;
 use replication::net::node::Observer;
 use replication::shape::{IdSource, ShapePayload, ShapeScene};
 use replication::{Effect, Log, Mark, OpId, Payload as _, Peer, PeerId, Timestamp};
@@ -123,6 +124,9 @@ pub struct View {
     pub(super) store_error: Option<String>,
     pub(super) n_loaded: usize,
     pub(super) listen: Option<std::net::SocketAddr>,
+    /// The founder's nonce, when this peer founded the session (it may expel members).
+    pub(super) founder_nonce: Option<[u8; FOUNDER_NONCE_BYTES]>,
+    expelled: BTreeSet<PeerId>,
     waker: Option<Box<dyn Fn() + Send>>,
 }
 
@@ -154,6 +158,8 @@ impl View {
             store_error: None,
             n_loaded: log.len(),
             listen: None,
+            founder_nonce: None,
+            expelled: BTreeSet::new(),
             waker: None,
         };
         view.refresh(log);
@@ -185,6 +191,7 @@ impl View {
     /// Recomputes the rows and targets that depend on the whole log.
     pub fn refresh(&mut self, log: &Log<ShapePayload>) {
         self.n_ops = log.len();
+        self.expelled = log.expelled().keys().copied().collect();
         self.history = history(log, self.me, self.scene.scene().scene());
         self.chat = self.chat_rows(log);
         let (undo, redo) = targets(log, self.me);
@@ -247,6 +254,50 @@ impl View {
     /// This peer's id.
     pub fn peer_id(&self) -> PeerId {
         self.me
+    }
+
+    /// The founder's nonce, when this peer founded the session: only then may it expel.
+    pub fn founder_nonce(&self) -> Option<[u8; FOUNDER_NONCE_BYTES]> {
+        self.founder_nonce
+    }
+
+    /// The members the founder expelled (and has not readmitted).
+    pub fn expelled(&self) -> &BTreeSet<PeerId> {
+        &self.expelled
+    }
+
+    /// The member a person names: by the name its user chose (any case) or by the start of
+    /// its id (at least 4 hex digits), among the peers met and the expelled members. Names
+    /// that fit several members, or none, are an error that says so.
+    pub fn find_member(&self, text: &str) -> Result<PeerId, String> {
+        let text = text.trim();
+        if text.is_empty() {
+            return Err("name a member: its name or the start of its id".into());
+        }
+        let hex = text.to_ascii_lowercase();
+        let candidates: BTreeSet<PeerId> = self
+            .peers
+            .iter()
+            .map(|r| r.peer)
+            .chain(self.presence.keys().copied())
+            .chain(self.expelled.iter().copied())
+            .collect();
+        let name_of = |p: &PeerId| self.presence.get(p).map(|pr| pr.name.as_str());
+        let found: Vec<PeerId> = candidates
+            .into_iter()
+            .filter(|p| {
+                name_of(p).is_some_and(|n| n.eq_ignore_ascii_case(text))
+                    || (hex.len() >= 4 && p.to_hex().starts_with(&hex))
+            })
+            .collect();
+        match found.as_slice() {
+            [one] => Ok(*one),
+            [] => Err(format!("no member is called or starts with \"{text}\"")),
+            many => Err(format!(
+                "\"{text}\" fits {} members; give more of the id",
+                many.len()
+            )),
+        }
     }
 
     /// The folded scene.
@@ -556,6 +607,7 @@ fn history(log: &Log<ShapePayload>, me: PeerId, scene: &Scene) -> Vec<HistoryRow
         .map(|entry| {
             let payload = entry.op.payload();
             let status = match entry.mark {
+                _ if log.is_void(&entry.op.id()) => "void: its author was expelled".to_string(),
                 Mark::Rejected(reason) => format!("rejected: {reason}"),
                 Mark::Effective
                     if !entry.active && matches!(payload.effect(), Effect::Edit { .. }) =>
@@ -687,6 +739,8 @@ fn describe(log: &Log<ShapePayload>, scene: &Scene, payload: &ShapePayload) -> S
             label(*object),
             parts.len()
         ),
+        ShapePayload::Member(m) if m.expel => format!("expelled {}", m.member.short()),
+        ShapePayload::Member(m) => format!("readmitted {}", m.member.short()),
     }
 }
 
@@ -747,5 +801,55 @@ mod tests {
         let (_, now) = log.since(0);
         log.push(Change::Object(ObjectId(7)));
         assert_eq!(log.since(now).0, Some([ObjectId(7)].into()));
+    }
+
+    #[test]
+    fn only_the_founder_plans_an_expel_of_a_member_named_by_name_or_id() {
+        use crate::command::{Command, plan};
+        use replication::membership::FounderCommitment;
+        let founder = replication::Keypair::from_seed([3; 32]);
+        let member = replication::Keypair::from_seed([4; 32]).peer_id();
+        let nonce = [7; FOUNDER_NONCE_BYTES];
+        let mut log = replication::Log::default();
+        log.set_founder(FounderCommitment::of(&founder.peer_id(), &nonce))
+            .unwrap();
+        let mut view = View::new(founder.peer_id(), &log).unwrap();
+        view.note_presence(member, Presence::named("Ada".into(), [1, 2, 3]));
+        let err = plan(Command::Expel("Ada"), &view, None).unwrap_err();
+        assert!(err.contains("founder"), "{err}");
+        view.founder_nonce = Some(nonce);
+        for who in ["ada", &member.to_hex()[..6]] {
+            let planned = plan(Command::Expel(who), &view, None).unwrap();
+            assert_eq!(
+                planned.payload.membership().map(|m| (m.member, m.expel)),
+                Some((member, true))
+            );
+        }
+        assert!(
+            plan(Command::Expel("Bob"), &view, None)
+                .unwrap_err()
+                .contains("no member")
+        );
+        assert!(
+            plan(
+                Command::Expel(&founder.peer_id().to_hex()[..8]),
+                &view,
+                None
+            )
+            .is_err()
+        );
+        assert!(
+            plan(Command::Readmit("Ada"), &view, None)
+                .unwrap_err()
+                .contains("not expelled")
+        );
+        // Authored, the expel counts: the view lists the member as expelled, and a readmit
+        // is planned.
+        let expel = plan(Command::Expel("Ada"), &view, None).unwrap().payload;
+        log.author(&founder, Timestamp(1_000), expel).unwrap();
+        view.refresh(&log);
+        assert!(view.expelled().contains(&member));
+        let readmit = plan(Command::Readmit("Ada"), &view, None).unwrap().payload;
+        assert_eq!(readmit.membership().map(|m| m.expel), Some(false));
     }
 }

@@ -29,7 +29,8 @@ plain text is chat; commands change the selected object:
   force: x=..; y=..; z=..;  a force field of u, v, w, t
   name: <text>              rename it
   lease / hold / release    take it over, take it if free, give it back
-  undo / redo               your last edit of it";
+  undo / redo               your last edit of it
+  expel: / readmit: <name or id>   the founder removes a member, or takes it back";
 
 impl SculptApp {
     /// Solo, N peers, or offline with edits waiting: what the title bar says.
@@ -439,6 +440,11 @@ impl SculptApp {
             ui.weak("nobody met yet");
         }
         let mut follow = None;
+        let mut membership = None;
+        let (expelled, founder) = {
+            let view = lock(self.engine.view());
+            (view.expelled().clone(), view.founder_nonce().is_some())
+        };
         for p in &self.peers {
             let [r, g, b] = p.colour;
             let colour = egui::Color32::from_rgb(r, g, b);
@@ -447,6 +453,22 @@ impl SculptApp {
                 ui.painter().circle_filled(dot.center(), 5.0, colour);
                 ui.strong(&p.name);
                 ui.weak(p.peer.short());
+                let out = expelled.contains(&p.peer);
+                if out {
+                    ui.colored_label(egui::Color32::LIGHT_RED, "expelled");
+                }
+                if founder {
+                    let (word, line) = if out {
+                        ("readmit", "readmit")
+                    } else {
+                        ("expel", "expel")
+                    };
+                    let hover = "as the session's founder: its ops from now on count for nothing, \
+                                 and every peer closes its connections to it (readmit undoes it)";
+                    if ui.small_button(word).on_hover_text(hover).clicked() {
+                        membership = Some(format!("{line}: {}", p.peer.to_hex()));
+                    }
+                }
                 if !p.online {
                     ui.weak("offline");
                     return;
@@ -466,6 +488,9 @@ impl SculptApp {
         }
         if let Some(f) = follow {
             self.following = f;
+        }
+        if let Some(line) = membership {
+            self.submit(&line);
         }
         let lan = lock(self.engine.view()).lan_sessions().to_vec();
         egui::CollapsingHeader::new(format!("on this network ({})", lan.len()))
