@@ -27,10 +27,13 @@
 //!   the receiver refold its whole order; honest peers run with a budget scaled to the
 //!   simulator's logs ([`crate::sim::SMALL_REFOLD_BUDGET`]), so they hold and batch them;
 //! - with `forks`, equivocation: two ops of one fresh key with sequence number 1, sent to two
-//!   different peers.
+//!   different peers;
+//! - with `expel`, forged expels: a fresh key's expel of an honest peer, showing the founder's
+//!   nonce or a made-up one (neither may count: only the founder's key matches the invite).
 
 use fdsl::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
 use replication::causal::MAX_VV_AUTHORS;
+use replication::membership::Membership;
 use replication::op::{MAX_DEPS, OpFields};
 use replication::shape::ShapePayload;
 use replication::sync::message::{MAX_BATCH_OPS, Message};
@@ -38,7 +41,7 @@ use replication::time::MAX_CLOCK_SKEW_MICROS;
 use replication::{ConnId, Keypair, Op, OpId, Peer, PeerId, Timestamp, VersionVector};
 
 use crate::rng::SimRng;
-use crate::sim::{Ev, SESSION_ID, Simulation, deliver, guarded_call};
+use crate::sim::{Ev, FOUNDER_NONCE, SESSION_ID, Simulation, deliver, guarded_call};
 
 /// Most fresh keys the byzantine member makes in one run.
 pub const MAX_SYBIL_KEYS: usize = 512;
@@ -105,6 +108,7 @@ enum Attack {
     TakeId,
     RefoldFlood,
     Fork,
+    ForgeExpel,
 }
 
 impl Attack {
@@ -122,6 +126,7 @@ impl Attack {
             Attack::TakeId => "take-id",
             Attack::RefoldFlood => "refold-flood",
             Attack::Fork => "fork",
+            Attack::ForgeExpel => "forge-expel",
         }
     }
 }
@@ -181,6 +186,11 @@ impl Byzantine {
             must_refuse: Vec::new(),
             forks: Vec::new(),
         }
+    }
+
+    /// The key of its lease hoarder's chain.
+    pub(crate) fn hoarder_id(&self) -> PeerId {
+        self.hoarder.key.peer_id()
     }
 
     fn frontier(&self) -> Frontier {
@@ -356,6 +366,9 @@ impl Simulation {
         if faults.forks {
             menu.push(Attack::Fork);
         }
+        if faults.expel {
+            menu.push(Attack::ForgeExpel);
+        }
         if menu.is_empty() {
             return false;
         }
@@ -378,6 +391,7 @@ impl Simulation {
         let now = self.now;
         let objects = self.objects.clone();
         let victim = self.honest.get(to).map(|h| h.user.next_ids());
+        let victim_key = self.honest.get(to).map(|h| h.peer.peer_id());
         let hostile = self.hostile.as_mut()?;
         let me = hostile.peer_id();
         let batch_no = hostile.next_batch_no();
@@ -535,6 +549,23 @@ impl Simulation {
                     Vec::new(),
                     payload,
                 ))
+            }
+            Attack::ForgeExpel => {
+                // A member posing as the founder: with the founder's nonce (as if it leaked,
+                // and it does once the founder expels) or a made-up one.
+                let key = byz.sybil()?;
+                let mut nonce = FOUNDER_NONCE;
+                if rng.chance(500) {
+                    rng.fill(&mut nonce);
+                }
+                let expel = Membership {
+                    member: victim_key?,
+                    expel: true,
+                    nonce,
+                };
+                let payload = ShapePayload::Member(Box::new(expel));
+                let timestamp = now.max(f.timestamp);
+                one(sign(&key, 1, f.lamport + 1, timestamp, f.heads, payload))
             }
             Attack::Fork => {
                 let key = byz.sybil()?;

@@ -104,6 +104,9 @@ pub(crate) fn finish(sim: Simulation) -> Report {
         check_erasure(&sim, &mut failures);
         check_stolen_ids(&sim, &mut failures);
     }
+    if sim.faults.expel {
+        check_expels(&sim, &mut failures);
+    }
     let memory = memory_figures(&sim, &mut failures);
     build_report(
         sim,
@@ -112,6 +115,48 @@ pub(crate) fn finish(sim: Simulation) -> Report {
         memory,
         n_lease_checked,
     )
+}
+
+/// Only the founder's expels counted: no honest peer is expelled anywhere, and every member
+/// peer 0 holds as expelled is expelled on every honest peer, up to the same seq, with every op
+/// of it after that seq void and inactive (the reference checks the verdicts).
+fn check_expels(sim: &Simulation, failures: &mut Vec<String>) {
+    let honest: BTreeSet<PeerId> = sim.honest.iter().map(|h| h.peer.peer_id()).collect();
+    let founders = sim.honest[0].peer.log().expelled();
+    for (i, h) in sim.honest.iter().enumerate() {
+        if h.panicked.is_some() {
+            continue;
+        }
+        let log = h.peer.log();
+        let wrongly: Vec<String> = (log.expelled().keys())
+            .filter(|p| honest.contains(p))
+            .map(PeerId::short)
+            .collect();
+        if !wrongly.is_empty() {
+            failures.push(format!("peer {i}: honest peers {wrongly:?} expelled"));
+        }
+        if log.expelled() != founders {
+            failures.push(format!(
+                "peer {i}: expelled {:?}, peer 0 {:?}",
+                log.expelled(),
+                founders
+            ));
+        }
+        let counted = log
+            .entries()
+            .filter(|e| {
+                founders
+                    .get(&e.op.author())
+                    .is_some_and(|last| e.op.seq() > *last)
+            })
+            .filter(|e| e.active || !log.is_void(&e.op.id()))
+            .count();
+        if counted > 0 {
+            failures.push(format!(
+                "peer {i}: {counted} ops of expelled members not void"
+            ));
+        }
+    }
 }
 
 /// No honest scene holds an object the byzantine member created under an honest peer's id.
@@ -500,6 +545,9 @@ fn build_report(
         n_refold_holds: (sim.honest.iter())
             .map(|h| h.peer.log().stats().n_held_for_refold)
             .sum(),
+        n_void_ops: (sim.honest[0].peer.log().entries())
+            .filter(|e| sim.honest[0].peer.log().is_void(&e.op.id()))
+            .count(),
         failures,
         samples: sim.samples,
         stats: sim.stats,

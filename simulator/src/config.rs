@@ -57,6 +57,9 @@ pub struct Faults {
     pub lease_attacks: bool,
     /// Whether it also equivocates: two ops under one key with one sequence number.
     pub forks: bool,
+    /// Whether peer 0 founded the session and expels the hostile member's key late in the
+    /// run ([`replication::membership`]), while the member forges expels of honest peers.
+    pub expel: bool,
 }
 
 /// One kind of fault, as `--without` names it.
@@ -88,11 +91,13 @@ pub enum FaultKind {
     LeaseAttacks,
     /// Equivocation (forks).
     Forks,
+    /// The founder expelling the hostile member, and the member forging expels.
+    Expel,
 }
 
 impl FaultKind {
     /// Every kind, in the order the shrinker tries switching them off.
-    pub const ALL: [FaultKind; 13] = [
+    pub const ALL: [FaultKind; 14] = [
         FaultKind::Crashes,
         FaultKind::LateJoins,
         FaultKind::Partitions,
@@ -107,6 +112,7 @@ impl FaultKind {
         FaultKind::Forks,
         FaultKind::LeaseAttacks,
         FaultKind::Byzantine,
+        FaultKind::Expel,
     ];
 
     /// The name `--without` takes.
@@ -125,6 +131,7 @@ impl FaultKind {
             FaultKind::Byzantine => "byzantine",
             FaultKind::LeaseAttacks => "lease-attacks",
             FaultKind::Forks => "forks",
+            FaultKind::Expel => "expel",
         }
     }
 
@@ -184,6 +191,7 @@ const CHAOS: Faults = Faults {
     byzantine: false,
     lease_attacks: false,
     forks: false,
+    expel: false,
 };
 
 /// Chaos plus every hostile-member attack that replication is meant to withstand today
@@ -192,6 +200,7 @@ const BYZANTINE: Faults = Faults {
     name: "byzantine",
     byzantine: true,
     lease_attacks: true,
+    expel: true,
     ..CHAOS
 };
 
@@ -216,6 +225,7 @@ impl Faults {
             byzantine: false,
             lease_attacks: false,
             forks: false,
+            expel: false,
         },
         Faults {
             name: "lan",
@@ -233,6 +243,7 @@ impl Faults {
             byzantine: false,
             lease_attacks: false,
             forks: false,
+            expel: false,
         },
         Faults {
             name: "wan",
@@ -250,6 +261,7 @@ impl Faults {
             byzantine: false,
             lease_attacks: false,
             forks: false,
+            expel: false,
         },
         CHAOS,
         // A mix of chaos's fault kinds drawn per seed (see `Config::effective_faults`).
@@ -286,6 +298,7 @@ impl Faults {
             FaultKind::Byzantine => self.byzantine = false,
             FaultKind::LeaseAttacks => self.lease_attacks = false,
             FaultKind::Forks => self.forks = false,
+            FaultKind::Expel => self.expel = false,
         }
         self
     }

@@ -36,7 +36,7 @@ struct Cli {
     #[arg(long, default_value = "chaos", value_parser = parse_faults)]
     faults: Faults,
     /// Fault kinds to switch off, comma-separated: jitter loss dup bandwidth partitions
-    /// offline crashes late-joins forgery flood byzantine lease-attacks forks.
+    /// offline crashes late-joins forgery flood byzantine lease-attacks forks expel.
     #[arg(long, value_name = "KIND,...", value_delimiter = ',', value_parser = parse_fault_kind)]
     without: Vec<FaultKind>,
     /// No hostile member.

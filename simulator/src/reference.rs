@@ -18,7 +18,14 @@
 //! - an undo (redo) is effective only on an earlier, own, effective edit that is not (is)
 //!   undone, and only if the edit's object is free for the author; an edit is active when it
 //!   is effective and not undone at the end, and no effective delete of its object that is not
-//!   undone has it in its causal past (a delete removes only what it saw).
+//!   undone has it in its causal past (a delete removes only what it saw);
+//! - in a session with a founder, membership is read from each op's causal past: a member is
+//!   expelled there when an expel of it by the founder (a membership op whose nonce proves its
+//!   author the founder, naming another member) is in it and no readmit there saw that expel.
+//!   An op whose author is expelled in its past is rejected as [`RejectReason::Expelled`], and
+//!   a lease whose holder is expelled in an op's past does not bind that op;
+//! - an expel that no readmit saw makes the member's ops it did not see void: they keep their
+//!   verdicts but are inactive (a void delete hides nothing).
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -98,23 +105,36 @@ fn kind(p: &ShapePayload) -> Kind {
         ShapePayload::Release { object } => Kind::Release(obj(*object)),
         ShapePayload::Undo(t) => Kind::Undo(*t),
         ShapePayload::Redo(t) => Kind::Redo(*t),
-        ShapePayload::Chat(_) => Kind::Independent,
+        ShapePayload::Chat(_) | ShapePayload::Member(_) => Kind::Independent,
     }
 }
 
 impl Rules {
     /// The live lease of another peer on `object` at `at`.
-    fn blocker(&self, author: PeerId, object: u64, at: u64) -> Option<Lease> {
+    fn blocker(
+        &self,
+        author: PeerId,
+        object: u64,
+        at: u64,
+        exempt: &dyn Fn(&PeerId) -> bool,
+    ) -> Option<Lease> {
         self.leases
             .get(&object)
-            .filter(|l| at < l.expires_micros && l.holder != author)
+            .filter(|l| at < l.expires_micros && l.holder != author && !exempt(&l.holder))
             .copied()
     }
 
-    fn verdict(&mut self, author: PeerId, at: u64, k: &Kind) -> Result<(), RejectReason> {
+    /// The verdict on an op; a lease held by a peer `exempt` names does not bind it.
+    fn verdict(
+        &mut self,
+        author: PeerId,
+        at: u64,
+        k: &Kind,
+        exempt: &dyn Fn(&PeerId) -> bool,
+    ) -> Result<(), RejectReason> {
         match *k {
             Kind::Independent => Ok(()),
-            Kind::Edit(object) => match self.blocker(author, object, at) {
+            Kind::Edit(object) => match self.blocker(author, object, at, exempt) {
                 Some(l) => Err(RejectReason::LeaseHeld { holder: l.holder }),
                 None => Ok(()),
             },
@@ -123,7 +143,7 @@ impl Rules {
                 strong,
                 ttl,
             } => {
-                if let Some(l) = self.blocker(author, object, at) {
+                if let Some(l) = self.blocker(author, object, at, exempt) {
                     if strong {
                         return Err(RejectReason::LeaseHeld { holder: l.holder });
                     }
@@ -146,8 +166,8 @@ impl Rules {
                 }
                 _ => Err(RejectReason::NotHolder),
             },
-            Kind::Undo(target) => self.toggle(author, at, target, true),
-            Kind::Redo(target) => self.toggle(author, at, target, false),
+            Kind::Undo(target) => self.toggle(author, at, target, true, exempt),
+            Kind::Redo(target) => self.toggle(author, at, target, false, exempt),
         }
     }
 
@@ -157,6 +177,7 @@ impl Rules {
         at: u64,
         target: OpId,
         undo: bool,
+        exempt: &dyn Fn(&PeerId) -> bool,
     ) -> Result<(), RejectReason> {
         let seen = self
             .earlier
@@ -177,7 +198,7 @@ impl Rules {
         if !undo && !undone {
             return Err(RejectReason::NotUndone);
         }
-        if let Some(l) = self.blocker(author, object, at) {
+        if let Some(l) = self.blocker(author, object, at, exempt) {
             return Err(RejectReason::LeaseHeld { holder: l.holder });
         }
         if undo {
@@ -200,6 +221,21 @@ pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
     let mut flipped = !flip_first_rejected;
     let entries: Vec<_> = log.entries().collect();
     let pasts = causal_pasts(log, &entries);
+    let membership = membership_ops(log, &entries);
+    let void = void_ops(&entries, &pasts, &membership);
+    // Whether `member` is expelled in the causal past of the op at `pos` (itself included).
+    let expelled_at = |pos: usize, member: &PeerId| {
+        let saw = |p: usize, q: usize| p == q || pasts[p].contains(q);
+        membership.get(member).is_some_and(|ops| {
+            ops.iter().any(|&(e, expel)| {
+                expel
+                    && saw(pos, e)
+                    && !ops
+                        .iter()
+                        .any(|&(r, expel)| !expel && saw(pos, r) && saw(r, e))
+            })
+        })
+    };
     // Per object, the positions of its lease ops (acquires and releases).
     let mut lease_ops: BTreeMap<u64, Vec<usize>> = BTreeMap::new();
     for (pos, entry) in entries.iter().enumerate() {
@@ -214,9 +250,10 @@ pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
             // The lease its causal past gives the object, folded from scratch.
             let mut seen = Rules::default();
             for &p in lease_ops.get(&object).into_iter().flatten() {
-                if pasts[pos].contains(p) {
-                    let l = entries[p].op;
-                    let _ = seen.verdict(l.author(), l.timestamp().0, &kind(l.payload()));
+                let l = entries[p].op;
+                if pasts[pos].contains(p) && !expelled_at(p, &l.author()) {
+                    let exempt = |holder: &PeerId| expelled_at(p, holder);
+                    let _ = seen.verdict(l.author(), l.timestamp().0, &kind(l.payload()), &exempt);
                 }
             }
             match seen.leases.get(&object) {
@@ -227,9 +264,14 @@ pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
                 lease_ops.entry(object).or_default().push(pos);
             }
         }
-        let expected = match rules.verdict(op.author(), op.timestamp().0, &k) {
-            Ok(()) => Mark::Effective,
-            Err(reason) => Mark::Rejected(reason),
+        let exempt = |holder: &PeerId| expelled_at(pos, holder);
+        let expected = if expelled_at(pos, &op.author()) {
+            Mark::Rejected(RejectReason::Expelled)
+        } else {
+            match rules.verdict(op.author(), op.timestamp().0, &k, &exempt) {
+                Ok(()) => Mark::Effective,
+                Err(reason) => Mark::Rejected(reason),
+            }
         };
         let mut mark = entry.mark;
         if !flipped && matches!(mark, Mark::Rejected(RejectReason::LeaseHeld { .. })) {
@@ -263,7 +305,9 @@ pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
         let ShapePayload::Delete { object } = entry.op.payload() else {
             continue;
         };
-        let stands = observed[pos].1 == Mark::Effective && !rules.undone.contains(&observed[pos].0);
+        let stands = observed[pos].1 == Mark::Effective
+            && !rules.undone.contains(&observed[pos].0)
+            && !void.contains(pos);
         if !stands {
             continue;
         }
@@ -275,14 +319,65 @@ pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
             }
         }
     }
-    for (id, expected, active) in observed {
-        let should =
-            expected == Mark::Effective && !rules.undone.contains(&id) && !hidden.contains(&id);
+    for (pos, (id, expected, active)) in observed.into_iter().enumerate() {
+        let should = expected == Mark::Effective
+            && !rules.undone.contains(&id)
+            && !hidden.contains(&id)
+            && !void.contains(pos);
         if active != should {
             out.note(format!("op {id}: active {active}, the rules say {should}"));
         }
     }
     out
+}
+
+/// Per member, the membership ops that count (by the founder the log's invite commits to,
+/// naming another member), as positions with whether each expels.
+fn membership_ops(
+    log: &Log<ShapePayload>,
+    entries: &[replication::log::Entry<'_, ShapePayload>],
+) -> BTreeMap<PeerId, Vec<(usize, bool)>> {
+    let mut membership: BTreeMap<PeerId, Vec<(usize, bool)>> = BTreeMap::new();
+    let Some(founder) = log.founder() else {
+        return membership;
+    };
+    for (pos, e) in entries.iter().enumerate() {
+        if let ShapePayload::Member(m) = e.op.payload()
+            && m.member != e.op.author()
+            && founder.is_founder(&e.op.author(), &m.nonce)
+        {
+            membership.entry(m.member).or_default().push((pos, m.expel));
+        }
+    }
+    membership
+}
+
+/// The positions of the void ops, by brute force over the causal pasts: per member, each
+/// standing expel (seen by no readmit of that member) voids the member's ops it did not see.
+fn void_ops(
+    entries: &[replication::log::Entry<'_, ShapePayload>],
+    pasts: &[Positions],
+    membership: &BTreeMap<PeerId, Vec<(usize, bool)>>,
+) -> Positions {
+    let mut void = Positions(vec![0; entries.len().div_ceil(64)]);
+    for (member, ops) in membership {
+        let standing: Vec<usize> = ops
+            .iter()
+            .filter(|(e, expel)| {
+                *expel
+                    && !ops
+                        .iter()
+                        .any(|(r, is_expel)| !is_expel && pasts[*r].contains(*e))
+            })
+            .map(|(e, _)| *e)
+            .collect();
+        for (pos, entry) in entries.iter().enumerate() {
+            if entry.op.author() == *member && standing.iter().any(|e| !pasts[*e].contains(pos)) {
+                void.0[pos / 64] |= 1 << (pos % 64);
+            }
+        }
+    }
+    void
 }
 
 /// A set of positions of the linear order, as bits.
@@ -395,5 +490,71 @@ mod tests {
         let report = check(&log, false);
         assert_eq!((report.n_checked, report.n_rejected), (2, 0), "{report:?}");
         assert_eq!(report.n_mismatches, 0, "{report:?}");
+    }
+
+    #[test]
+    fn the_reference_voids_what_the_founders_expel_did_not_see_as_the_core_does() {
+        use replication::membership::{FounderCommitment, Membership};
+        let (founder, mallory, c) = (
+            Keypair::from_seed([1; 32]),
+            Keypair::from_seed([2; 32]),
+            Keypair::from_seed([3; 32]),
+        );
+        let nonce = [9; 32];
+        let founded = || {
+            let mut log = Log::<ShapePayload>::default();
+            log.set_founder(FounderCommitment::of(&founder.peer_id(), &nonce))
+                .unwrap();
+            log
+        };
+        let mut log = founded();
+        let mut founders = founded();
+        log.author(&mallory, Timestamp(1000), acquire(true))
+            .unwrap();
+        founders.merge(Timestamp(1000), &log).unwrap();
+        // Unseen by the founder: Mallory hoards again, and C's delete that saw it is refused.
+        let hoard = ShapePayload::Acquire {
+            object: 1,
+            strong: true,
+            ttl_micros: u64::MAX,
+        };
+        log.author(&mallory, Timestamp(1200), hoard).unwrap();
+        let expel = ShapePayload::Member(Box::new(Membership {
+            member: mallory.peer_id(),
+            expel: true,
+            nonce,
+        }));
+        let (expel, _) = founders.author(&founder, Timestamp(1100), expel).unwrap();
+        log.author(&c, Timestamp(2000), ShapePayload::Delete { object: 1 })
+            .unwrap();
+        log.insert(Timestamp(3000), expel, replication::pending::Origin(1))
+            .unwrap();
+        let report = check(&log, false);
+        assert_eq!(report.n_checked, 4);
+        assert_eq!(report.n_mismatches, 0, "{report:?}");
+        let n_void = log.entries().filter(|e| log.is_void(&e.op.id())).count();
+        assert_eq!(n_void, 1, "the hoard the founder never saw is void");
+        // Mallory, seeing its expel, is refused; C, seeing it, is not bound by the hoard.
+        log.author(&mallory, Timestamp(4000), acquire(true))
+            .unwrap();
+        log.author(&c, Timestamp(4100), ShapePayload::Delete { object: 1 })
+            .unwrap();
+        let report = check(&log, false);
+        assert_eq!(report.n_checked, 6);
+        assert_eq!(report.n_mismatches, 0, "{report:?}");
+        let marks: Vec<Mark> = log.entries().map(|e| e.mark).collect();
+        assert_eq!(marks[4], Mark::Rejected(RejectReason::Expelled));
+        assert_eq!(marks[5], Mark::Effective);
+        // Read without the founder (as a core without expels would judge), the same ops
+        // disagree with the reference.
+        let mut unfounded = Log::<ShapePayload>::default();
+        unfounded.merge(Timestamp(3000), &log).unwrap();
+        let mut founded_again = founded();
+        founded_again.merge(Timestamp(3000), &unfounded).unwrap();
+        assert_eq!(check(&founded_again, false).n_mismatches, 0);
+        assert_ne!(
+            unfounded.entries().map(|e| e.mark).collect::<Vec<_>>(),
+            log.entries().map(|e| e.mark).collect::<Vec<_>>()
+        );
     }
 }

@@ -100,6 +100,8 @@ pub struct Report {
     pub n_flood_accepted_max: u64,
     /// Ops honest peers held back for their refold budget (summed over their final logs).
     pub n_refold_holds: u64,
+    /// Ops of expelled members void on peer 0 at the end.
+    pub n_void_ops: usize,
     /// What the checkers found; empty when the run passed.
     pub failures: Vec<String>,
 }
@@ -167,8 +169,9 @@ impl Report {
         if !s.byzantine.is_empty() {
             writeln!(
                 f,
-                "  byzantine attacks sent: {:?}; ops held for the refold budget {}",
-                s.byzantine, self.n_refold_holds
+                "  byzantine attacks sent: {:?}; ops held for the refold budget {}; \
+                 expels {}, void ops {}, connections closed by expels {}",
+                s.byzantine, self.n_refold_holds, s.n_expels, self.n_void_ops, s.n_expel_closes
             )?;
         }
         Ok(())

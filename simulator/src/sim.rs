@@ -11,7 +11,9 @@ use std::panic::{self, AssertUnwindSafe};
 
 use replication::log::RefoldBudget;
 use replication::materialize::{Materialized, SceneHash};
+use replication::membership::{FounderCommitment, Membership};
 use replication::shape::{ShapePayload, ShapeScene};
+use replication::sync::state::CloseReason;
 use replication::{ConnId, Event, Keypair, Log, OpId, Peer, Timestamp};
 
 use crate::byzantine::Byzantine;
@@ -53,6 +55,9 @@ const SCHEDULE_STREAM: u64 = 3;
 const NET_STREAM: u64 = 4;
 const HOT_STREAM: u64 = 5;
 const BYZANTINE_STREAM: u64 = 6;
+/// The founder's nonce: with [`crate::config::Faults::expel`], the session's invite commits
+/// to peer 0's key and this nonce, so peer 0 may expel ([`replication::membership`]).
+pub const FOUNDER_NONCE: [u8; 32] = *b"sculpt simulator founder nonce!!";
 
 pub(crate) type Scene = Materialized<ShapePayload, ShapeScene>;
 
@@ -112,6 +117,11 @@ pub(crate) enum Ev {
         generation: u64,
     },
     Heal,
+    /// The founder (peer 0) expels one of the hostile member's keys: the one it connects
+    /// with (`connection`), or its lease hoarder's.
+    Expel {
+        connection: bool,
+    },
     /// After healing: stop once honest peers agree and nothing is in flight between them.
     Probe,
     /// Records a sample for the plots (not part of the trace).
@@ -229,6 +239,10 @@ pub struct Stats {
     pub n_snapshot_joins: u64,
     /// The byzantine member's crafted attacks sent, by kind.
     pub byzantine: BTreeMap<&'static str, u64>,
+    /// Expels of the hostile member the founder (peer 0) authored.
+    pub n_expels: u64,
+    /// Connections honest peers closed because the founder expelled their remote.
+    pub n_expel_closes: u64,
 }
 
 /// A run in progress.
@@ -283,11 +297,20 @@ impl Simulation {
         let mut keys = SimRng::stream(config.seed, KEYS_STREAM);
         let first_slot = memory::reserve_slots(n);
         let mut honest = Vec::with_capacity(n);
+        let mut founder = None;
         for i in 0..n {
             let mut key_seed = [0u8; 32];
             keys.fill(&mut key_seed);
             let slot = memory::slot(first_slot, i);
-            let log = Log::default();
+            if i == 0 && faults.expel && config.hostile {
+                let key = Keypair::from_seed(key_seed).peer_id();
+                founder = Some(FounderCommitment::of(&key, &FOUNDER_NONCE));
+            }
+            let mut log = Log::default();
+            if let Some(founder) = founder {
+                log.set_founder(founder)
+                    .map_err(|_| ConfigError::Peers(i))?;
+            }
             let budget = refold_budget(&faults);
             honest.push(new_honest(key_seed, log, slot, budget).ok_or(ConfigError::Peers(i))?);
         }
@@ -384,6 +407,7 @@ impl Simulation {
             self.push(at, Ev::User { action_idx });
         }
         self.schedule_faults(&mut sched, span);
+        self.schedule_expel(&mut sched, span);
         self.push(work_end + 1, Ev::Heal);
         self.sample_interval_micros = (span / 256).max(10_000);
         self.push(START_MICROS + self.sample_interval_micros, Ev::Sample);
@@ -474,6 +498,42 @@ impl Simulation {
                 );
             }
         }
+    }
+
+    /// The founder's expels of the hostile member: its lease hoarder's key in the third
+    /// quarter of the work, the key it connects with in the last (drawn last, so the draws
+    /// above keep their times).
+    fn schedule_expel(&mut self, sched: &mut SimRng, span: u64) {
+        let hoarder_at = START_MICROS + span / 2 + sched.below(span / 4);
+        let connection_at = START_MICROS + span * 3 / 4 + sched.below(span / 4);
+        if self.config.hostile && self.faults.expel {
+            self.push(hoarder_at, Ev::Expel { connection: false });
+            self.push(connection_at, Ev::Expel { connection: true });
+        }
+    }
+
+    /// The founder (peer 0, when it runs) expels one of the hostile member's keys: every
+    /// honest peer must then void what that key signs without having seen the expel, and
+    /// close its connections to the key it connects with.
+    fn expel_hostile(&mut self, connection: bool) {
+        let Some(hostile) = self.hostile.as_ref() else {
+            return;
+        };
+        let member = match (&hostile.byzantine, connection) {
+            (Some(byz), false) => byz.hoarder_id(),
+            _ => hostile.peer_id(),
+        };
+        let founder = &self.honest[0];
+        if !founder.started || founder.panicked.is_some() {
+            return;
+        }
+        self.stats.n_expels += 1;
+        let expel = Membership {
+            member,
+            expel: true,
+            nonce: FOUNDER_NONCE,
+        };
+        self.author(0, ShapePayload::Member(Box::new(expel)));
     }
 
     /// Runs to quiescence (or the limit) and checks the outcome.
@@ -601,6 +661,10 @@ impl Simulation {
             Ev::Heal => {
                 self.trace.u64(8);
                 self.heal();
+            }
+            Ev::Expel { connection } => {
+                self.trace.u64(19);
+                self.expel_hostile(connection);
             }
             Ev::Probe => {
                 if self.n_in_flight == 0 && self.agreed() {
@@ -747,6 +811,10 @@ impl Simulation {
     fn snapshot_safe(&self, joiner: usize) -> bool {
         let producer = &self.honest[0];
         if producer.panicked.is_some() || (self.hostile.is_some() && self.faults.forgery) {
+            return false;
+        }
+        // A snapshot keeps no membership: a log with an expel cannot be cut.
+        if producer.peer.log().has_membership_ops() {
             return false;
         }
         let vv = producer.peer.log().version_vector();
@@ -1033,8 +1101,11 @@ impl Simulation {
                     *self.stats.honest_rejects.entry(kind).or_default() += 1;
                 }
             }
-            Event::Closed(_) => {
+            Event::Closed(reason) => {
                 self.trace.u64(12);
+                if matches!(reason, CloseReason::Expelled { .. }) {
+                    self.stats.n_expel_closes += 1;
+                }
                 // The transport closes both ends.
                 let other = conn.0 as usize;
                 if other < self.n_nodes() {

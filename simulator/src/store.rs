@@ -18,6 +18,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use replication::log::Log;
+use replication::membership::FounderCommitment;
 use replication::pending::PendingLimits;
 use replication::shape::ShapePayload;
 use replication::snapshot::Snapshot;
@@ -126,7 +127,8 @@ impl Disk {
             .map_err(|e| format!("store directory: {e}"))
             .and_then(|()| {
                 let path = dir.join("ops.sculpt");
-                write_and_recover(&path, &ops, torn_keep, self.snapshot.as_deref(), now)
+                let snapshot = self.snapshot.as_deref();
+                write_and_recover(&path, &ops, torn_keep, snapshot, old.founder(), now)
             });
         // The store's lock file and any torn tail it set aside go with the directory.
         let _ = std::fs::remove_dir_all(&dir);
@@ -159,12 +161,14 @@ fn temp_dir() -> PathBuf {
 }
 
 /// Writes `ops` through the real store, cuts the last record to `torn_keep` bytes if given,
-/// and reopens the file into a log (joined from `snapshot`, if any).
+/// and reopens the file into a log (joined from `snapshot`, if any) of the session `founder`
+/// founded, if it names one.
 fn write_and_recover(
     path: &std::path::Path,
     ops: &[&Op<ShapePayload>],
     torn_keep: Option<usize>,
     snapshot: Option<&[u8]>,
+    founder: Option<FounderCommitment>,
     now: Timestamp,
 ) -> Result<(Log<ShapePayload>, usize, u64), String> {
     let (mut store, stale, _) =
@@ -192,6 +196,10 @@ fn write_and_recover(
             .into_log(PendingLimits::default()),
         None => Log::default(),
     };
+    if let Some(founder) = founder {
+        log.set_founder(founder)
+            .map_err(|e| format!("store recovery: {e}"))?;
+    }
     let (_store, recovery) =
         OpStore::open_into(path, now, &mut log).map_err(|e| format!("store recovery: {e}"))?;
     Ok((log, recovery.n_records, recovery.n_truncated_bytes))

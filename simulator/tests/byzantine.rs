@@ -81,6 +81,45 @@ fn crafted_attacks_crash_split_and_corrupt_nothing() {
 }
 
 #[test]
+fn the_founder_expels_the_member_and_forged_expels_count_for_nothing() {
+    // Peer 0 founds the session and expels the lease hoarder's key, then the key the member
+    // connects with; the member forges expels of honest peers. Every checker passes: honest
+    // peers agree on who is expelled (never one of them), the hoarder's ops its expel did not
+    // see are void everywhere, verdicts match the reference's membership rules, and no honest
+    // op is erased.
+    let reports = runs("byzantine", FaultSet::default(), 3..6);
+    let (mut expels, mut closes, mut void) = (0, 0, 0);
+    let mut forged = 0;
+    for report in &reports {
+        assert!(report.failures.is_empty(), "{report}");
+        expels += report.stats.n_expels;
+        closes += report.stats.n_expel_closes;
+        void += report.n_void_ops;
+        forged += report
+            .stats
+            .byzantine
+            .get("forge-expel")
+            .copied()
+            .unwrap_or(0);
+    }
+    assert!(expels >= 2 && closes > 0 && forged > 0, "{}", reports[0]);
+    assert!(
+        void > 0,
+        "an expel voided some of the member's ops: {}",
+        reports[0]
+    );
+    // Switched off, nobody expels and nothing is void.
+    for report in runs(
+        "byzantine",
+        FaultSet::default().with(FaultKind::Expel),
+        1..2,
+    ) {
+        assert!(report.failures.is_empty(), "{report}");
+        assert_eq!((report.stats.n_expels, report.n_void_ops), (0, 0));
+    }
+}
+
+#[test]
 fn backdated_and_hoarded_leases_and_deletes_erase_no_honest_op() {
     // Backdated strong acquires asking for ever, a hoarding key and backdated deletes: none
     // erases an honest op effective at its author, on any honest peer.
