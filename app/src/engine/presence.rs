@@ -287,15 +287,7 @@ mod tests {
     fn values_round_trip_with_and_without_their_optional_parts() {
         let full = sample();
         assert_eq!(Presence::decode(&full.encode()), Ok(full.clone()));
-        let bare = Presence {
-            pointer: None,
-            tool: None,
-            selected: None,
-            camera: None,
-            holds_tool_with: None,
-            tool_body: None,
-            ..full
-        };
+        let bare = Presence::named(full.name.clone(), full.colour);
         assert_eq!(Presence::decode(&bare.encode()), Ok(bare));
     }
 

@@ -33,6 +33,22 @@ fn deliver_incrementally(ops: &[VerifiedOp<TestPayload>]) -> (TLog, TScene) {
     (log, scene)
 }
 
+/// Inserts `ops` into `log` one by one: the scene kept in step equals the fold from scratch
+/// after each, and the naive fold at the end.
+fn incremental_equals_fold_from_scratch(
+    mut log: TLog,
+    ops: Vec<VerifiedOp<TestPayload>>,
+) -> Result<(), TestCaseError> {
+    let mut scene = from_scratch(&log);
+    for op in ops {
+        let ins = log.insert(Timestamp(0), op, Origin(1)).unwrap();
+        scene.apply_insertion(&log, &ins);
+        prop_assert_eq!(scene.scene().clone(), from_scratch(&log).scene().clone());
+    }
+    prop_assert_eq!(scene.scene(), &naive_scene(&log));
+    Ok(())
+}
+
 /// The scene a naive fold gives: each object's last active `Set`, chat in order.
 fn naive_scene(log: &TLog) -> TestScene {
     let mut scene = TestScene::default();
@@ -318,14 +334,7 @@ proptest! {
     #[test]
     fn incremental_refold_equals_fold_from_scratch(seed in any::<u64>(), perm in any::<u64>()) {
         let ops = shuffled(&workload(seed, 3, 30), perm);
-        let mut log = TLog::default();
-        let mut scene = from_scratch(&log);
-        for op in ops {
-            let ins = log.insert(Timestamp(0), op, Origin(1)).unwrap();
-            scene.apply_insertion(&log, &ins);
-            prop_assert_eq!(scene.scene().clone(), from_scratch(&log).scene().clone());
-        }
-        prop_assert_eq!(scene.scene(), &naive_scene(&log));
+        incremental_equals_fold_from_scratch(TLog::default(), ops)?;
     }
 
     /// Expels and readmits void and bring back a member's ops, chat included: the scene kept
@@ -336,14 +345,7 @@ proptest! {
         perm in any::<u64>(),
     ) {
         let ops = shuffled(&founded_workload(seed, 3, 40), perm);
-        let mut log = founded_log();
-        let mut scene = from_scratch(&log);
-        for op in ops {
-            let ins = log.insert(Timestamp(0), op, Origin(1)).unwrap();
-            scene.apply_insertion(&log, &ins);
-            prop_assert_eq!(scene.scene().clone(), from_scratch(&log).scene().clone());
-        }
-        prop_assert_eq!(scene.scene(), &naive_scene(&log));
+        incremental_equals_fold_from_scratch(founded_log(), ops)?;
     }
 
     #[test]
