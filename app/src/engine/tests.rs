@@ -371,6 +371,51 @@ fn an_edit_on_one_engine_reaches_the_other_as_a_change_of_that_object_with_prese
 }
 
 #[test]
+fn the_founder_expels_a_peer_over_quic_and_hears_from_it_no_more() {
+    use crate::command::{Command, plan};
+    let (da, db) = (scratch("expel-a"), scratch("expel-b"));
+    let a = Engine::start(config(&da), T0).unwrap();
+    wait_view(&a, "the demo", |v| v.n_ops() == 1);
+    let addr = lock(a.view()).listen_addr().unwrap();
+    let b_config = EngineConfig {
+        invite: Some(a.invite().clone()),
+        demo: None,
+        network: Network {
+            dial: vec![addr],
+            ..config(&db).network
+        },
+        name: Some("Bea".into()),
+        ..config(&db)
+    };
+    let b = Engine::start(b_config, T0).unwrap();
+    wait_view(&b, "the demo from a", |v| v.n_ops() == 1);
+    wait_view(&a, "b's name", |v| {
+        v.n_online() == 1 && v.peers().iter().any(|p| p.name == "Bea")
+    });
+    let (founder, member) = (lock(a.view()).peer_id(), lock(b.view()).peer_id());
+    // B joined with A's invite: it is not the founder and cannot expel A.
+    let refused = plan(
+        Command::Expel(&founder.to_hex()[..8]),
+        &lock(b.view()),
+        None,
+    );
+    assert!(refused.unwrap_err().contains("founder"));
+    // A, who made the session, expels B by its name.
+    let expel = plan(Command::Expel("bea"), &lock(a.view()), None).unwrap();
+    author(&a, expel.payload);
+    wait_view(&a, "b expelled and cut off", |v| {
+        v.expelled().contains(&member) && v.n_online() == 0
+    });
+    // B goes on writing, and its engine dials A again: A hears none of it.
+    author(&b, ShapePayload::Chat("still here".into()));
+    std::thread::sleep(Duration::from_millis(1_500));
+    assert_eq!(lock(a.view()).n_ops(), 2, "the demo and the expel only");
+    drop((a, b));
+    let _ = fs::remove_dir_all(&da);
+    let _ = fs::remove_dir_all(&db);
+}
+
+#[test]
 fn news_keeps_the_latest_lines_and_disconnections_read_as_actions() {
     let mut news = News::default();
     for i in 0..MAX_NEWS_LINES + 5 {
