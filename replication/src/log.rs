@@ -7,7 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use crate::causal::{Frontier, Reach, VersionVector};
 use crate::identity::{Keypair, PeerId};
 use crate::lease::{FoldState, Lease, Mark, RejectReason, TargetInfo};
-use crate::membership::FounderCommitment;
+use crate::membership::{FounderCommitment, Membership};
 use crate::op::{BuildError, MAX_DEPS, Op, OpFields, OpId, OpSlab, VerifiedOp};
 use crate::payload::{Effect, ObjectId, Payload};
 use crate::pending::{DepKey, Evicted, Origin, Pending, PendingLimits};
@@ -927,13 +927,16 @@ impl<P: Payload> Log<P> {
         self.frontier.deliver(id, op.deps());
         self.max_lamport = self.max_lamport.max(op.lamport());
         self.clock.observe(op.timestamp(), now);
+        let membership = op.payload().membership();
         self.ops.insert(id, op);
         self.n_bytes += n_bytes;
         self.author_bytes.insert(author, author_bytes);
         if let Some(object) = delete_of {
             self.note_delete(object, id, key);
         }
-        self.note_membership(author, id);
+        if let Some(membership) = membership {
+            self.note_membership(author, id, membership);
+        }
         Ok(pos)
     }
 
@@ -947,13 +950,10 @@ impl<P: Payload> Log<P> {
         }
     }
 
-    /// Records the membership op `id` just delivered, if it counts: its author proves to be
-    /// the founder with the nonce it shows, and it names another member.
-    fn note_membership(&mut self, author: PeerId, id: OpId) {
+    /// Records the membership op `id` (asking for `m`) just delivered, if it counts: its
+    /// author proves to be the founder with the nonce it shows, and it names another member.
+    fn note_membership(&mut self, author: PeerId, id: OpId, m: Membership) {
         let Some(founder) = &self.founder else {
-            return;
-        };
-        let Some(m) = self.ops.get(&id).and_then(|op| op.payload().membership()) else {
             return;
         };
         if m.member == author || !founder.is_founder(&author, &m.nonce) {

@@ -308,14 +308,7 @@ impl<P: Payload> Log<P> {
             alt: super::seen::AltFolds::new(),
         };
         for pos in k * CHECKPOINT_INTERVAL..n {
-            let (key, id) = self.order[pos];
-            let Some(op) = self.ops.get(&id) else {
-                continue;
-            };
-            let effect = op.payload().effect();
-            let target = self.target_info(effect, pos);
-            let seen = self.lease_context(&mut cx, &state, (key, id), target);
-            state.apply(op.author(), op.timestamp(), effect, target, seen);
+            self.judge(&mut cx, &mut state, pos);
         }
         state
     }
