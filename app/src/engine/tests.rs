@@ -57,6 +57,21 @@ fn author(engine: &Engine, payload: ShapePayload) -> OpId {
     engine.author(payload).unwrap().wait().unwrap()
 }
 
+/// A peer called `name`, stored in `dir`, that joins `a`'s session by dialing it (the demo it
+/// would author only in a new session).
+fn joiner(a: &Engine, dir: &Path, name: &str) -> EngineConfig {
+    let addr = lock(a.view()).listen_addr().unwrap();
+    EngineConfig {
+        invite: Some(a.invite().clone()),
+        network: Network {
+            dial: vec![addr],
+            ..config(dir).network
+        },
+        name: Some(name.into()),
+        ..config(dir)
+    }
+}
+
 /// Waits (at most 20 s) until `done` holds for the view.
 fn wait_view(engine: &Engine, what: &str, done: impl Fn(&mut View) -> bool) {
     let deadline = crate::clock::now().instant + Duration::from_secs(20);
@@ -316,18 +331,7 @@ fn an_edit_on_one_engine_reaches_the_other_as_a_change_of_that_object_with_prese
     let a = Engine::start(config(&da), T0).unwrap();
     wait_view(&a, "the demo", |v| v.n_ops() == 1);
     let melon = only_object(&a);
-    let addr = lock(a.view()).listen_addr().unwrap();
-    let b_config = EngineConfig {
-        invite: Some(a.invite().clone()),
-        demo: crate::demos::find(crate::demos::DEFAULT_DEMO).ok(),
-        network: Network {
-            dial: vec![addr],
-            ..config(&db).network
-        },
-        name: Some("Bea".into()),
-        ..config(&db)
-    };
-    let b = Engine::start(b_config, T0).unwrap();
+    let b = Engine::start(joiner(&a, &db, "Bea"), T0).unwrap();
     wait_view(&b, "the demo from a", |v| v.n_ops() == 1);
     assert_eq!(
         lock(b.view()).n_loaded(),
@@ -376,18 +380,7 @@ fn the_founder_expels_a_peer_over_quic_and_hears_from_it_no_more() {
     let (da, db) = (scratch("expel-a"), scratch("expel-b"));
     let a = Engine::start(config(&da), T0).unwrap();
     wait_view(&a, "the demo", |v| v.n_ops() == 1);
-    let addr = lock(a.view()).listen_addr().unwrap();
-    let b_config = EngineConfig {
-        invite: Some(a.invite().clone()),
-        demo: None,
-        network: Network {
-            dial: vec![addr],
-            ..config(&db).network
-        },
-        name: Some("Bea".into()),
-        ..config(&db)
-    };
-    let b = Engine::start(b_config, T0).unwrap();
+    let b = Engine::start(joiner(&a, &db, "Bea"), T0).unwrap();
     wait_view(&b, "the demo from a", |v| v.n_ops() == 1);
     wait_view(&a, "b's name", |v| {
         v.n_online() == 1 && v.peers().iter().any(|p| p.name == "Bea")
