@@ -52,7 +52,9 @@
 //!   panic, and never costs an honest op.
 //! - An author that signs two ops with one seq (equivocation) is refused at the second one
 //!   seen; peers that saw different forks first may then disagree about that author's later
-//!   ops. Honest authors never do this.
+//!   ops. The peer that sees both keeps a [`fork::ForkProof`] and sync spreads it, so every
+//!   member learns who forked. Honest authors fork only when one identity runs as two copies
+//!   or from a restored backup.
 //! - Lease expiry is judged by op timestamps, which authors choose: it is deterministic, not
 //!   a guarantee against a peer with a wrong clock.
 //!
@@ -105,6 +107,7 @@
 
 pub mod causal;
 pub mod codec;
+pub mod fork;
 pub mod identity;
 pub mod lease;
 pub mod log;

@@ -5,6 +5,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use crate::causal::{Frontier, Reach, VersionVector};
+use crate::fork::{ForkProof, Forks};
 use crate::identity::{Keypair, PeerId};
 use crate::lease::{FoldState, Lease, Mark, RejectReason, TargetInfo};
 use crate::membership::{FounderCommitment, Membership};
@@ -394,6 +395,9 @@ pub struct Log<P> {
     members_changed: BTreeSet<PeerId>,
     /// Members whose ops from this seq on changed sides since the last refold.
     void_changed: BTreeMap<PeerId, u64>,
+    /// Proofs of authors that signed two ops with one seq ([`crate::fork`]): seen here, or
+    /// learnt from peers. They change no verdict.
+    forks: Forks,
 }
 
 impl<P: Payload> Default for Log<P> {
@@ -436,6 +440,7 @@ impl<P: Payload> Log<P> {
             expelled: BTreeMap::new(),
             members_changed: BTreeSet::new(),
             void_changed: BTreeMap::new(),
+            forks: Forks::default(),
         }
     }
 
@@ -839,6 +844,10 @@ impl<P: Payload> Log<P> {
         let author = op.author();
         let held = self.vv.get(&author);
         if held >= op.seq() {
+            let proof = (self.by_seq(&author, op.seq())).map(|other| ForkProof::of_ops(other, &op));
+            if let Some(proof) = proof {
+                self.forks.record(proof);
+            }
             return Err(InsertError::Equivocation {
                 author,
                 seq: op.seq(),
@@ -1137,6 +1146,21 @@ impl<P: Payload> Log<P> {
         self.ops.get(id).is_some_and(|op| {
             (self.expelled.get(&op.author())).is_some_and(|last| op.seq() > *last)
         })
+    }
+
+    /// The fork proofs this log holds ([`crate::fork`]).
+    pub fn forks(&self) -> &Forks {
+        &self.forks
+    }
+
+    /// Keeps a fork proof learnt from a peer, if it is about an author this log holds ops of
+    /// (a proof about a stranger would let anyone fill the table with fresh keys) and that
+    /// author has none yet; true if kept. It changes no verdict.
+    pub fn record_fork(&mut self, proof: ForkProof) -> bool {
+        if self.vv.get(&proof.author()) == 0 {
+            return false;
+        }
+        self.forks.record(proof)
     }
 
     /// Records in `refold` the object whose fold the changed op at `pos` affects.

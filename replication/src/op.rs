@@ -459,6 +459,11 @@ impl<'a> Envelope<'a> {
         self.author
     }
 
+    /// The claimed seq.
+    pub fn seq(&self) -> u64 {
+        self.seq
+    }
+
     /// The op's dependencies, sorted.
     pub fn deps(&self) -> &'a [OpId] {
         self.deps.of(self.bytes)

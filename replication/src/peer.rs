@@ -983,4 +983,116 @@ mod tests {
         peers[1].author(Timestamp(t), forged).unwrap();
         assert!(!closed(&peers[1], 0) && !peers[1].log().is_expelled(&peers[0].peer_id()));
     }
+
+    #[test]
+    fn a_fork_one_peer_sees_reaches_every_peer_holding_its_author() {
+        // Two copies of one identity (a store copied to a second machine) each author seq 1;
+        // a third peer hears both, the fourth knows neither copy.
+        let session = [9; 16];
+        let copy = || Keypair::from_seed([1; 32]);
+        let mut peers: Vec<TPeer> = [copy(), copy(), Keypair::from_seed([3; 32])]
+            .into_iter()
+            .chain([Keypair::from_seed([4; 32])])
+            .map(|k| Peer::new(k, session, Log::default()))
+            .collect();
+        let now = Timestamp(1_000);
+        let twin = peers[0].peer_id();
+        peers[0]
+            .author(now, TestPayload::Chat("left".into()))
+            .unwrap();
+        peers[1]
+            .author(now, TestPayload::Chat("right".into()))
+            .unwrap();
+        let links = [(0, ConnId(1), 2, ConnId(1)), (1, ConnId(1), 2, ConnId(2))];
+        for (p, c) in [(0, 1), (1, 1), (2, 1), (2, 2)] {
+            peers[p].connect(now, ConnId(c)).unwrap();
+        }
+        pump(&mut peers, &links, now);
+        for p in &peers[..3] {
+            assert_eq!(p.log().forks().seq_of(&twin), Some(1), "{}", p.peer_id());
+        }
+        assert_eq!(peers[2].log().len(), 1, "the second op is refused");
+        // The fourth peer gets the proof only once it holds an op of the twin.
+        peers[2]
+            .author(now, TestPayload::Chat("hello".into()))
+            .unwrap();
+        let links = [
+            (0, ConnId(1), 2, ConnId(1)),
+            (1, ConnId(1), 2, ConnId(2)),
+            (2, ConnId(3), 3, ConnId(1)),
+        ];
+        let mut route = BTreeMap::new();
+        for &(a, a_conn, b, b_conn) in &links {
+            route.insert((a, a_conn), (b, b_conn));
+            route.insert((b, b_conn), (a, a_conn));
+        }
+        peers[2].connect(now, ConnId(3)).unwrap();
+        peers[3].connect(now, ConnId(1)).unwrap();
+        let mut forked = Vec::new();
+        let mut t = now.0;
+        while peers[3].log().forks().seq_of(&twin).is_none() {
+            assert!(t < now.0 + 10 * RELAY_AFTER_MICROS, "no proof by {t}");
+            t += 100_000;
+            for p in peers.iter_mut() {
+                p.handle_timeout(Timestamp(t));
+            }
+            for _ in 0..100 {
+                let mut moved = false;
+                for from in 0..peers.len() {
+                    while let Some((conn, bytes)) = peers[from].poll_transmit(Timestamp(t)) {
+                        let (to, to_conn) = route[&(from, conn)];
+                        peers[to].handle_input(Timestamp(t), to_conn, &bytes);
+                        moved = true;
+                    }
+                }
+                for (i, p) in peers.iter_mut().enumerate() {
+                    while let Some((_, e)) = p.poll_event() {
+                        if i == 3 && matches!(e, Event::Forked { .. }) {
+                            forked.push(e);
+                        }
+                    }
+                }
+                if !moved {
+                    break;
+                }
+            }
+        }
+        assert_eq!(peers[3].log().version_vector().get(&twin), 1);
+        assert_eq!(
+            forked,
+            [Event::Forked {
+                author: twin,
+                seq: 1
+            }]
+        );
+        // A forged proof about an author it holds is refused and counted against its sender.
+        let third = Keypair::from_seed([3; 32]);
+        let forged = |text: &str| {
+            let fields = crate::op::OpFields {
+                seq: 1,
+                lamport: 9,
+                timestamp: now,
+                deps: Vec::new(),
+                payload: TestPayload::Chat(text.into()),
+            };
+            crate::Op::sign(&third, fields).unwrap().encoded().to_vec()
+        };
+        let mut b = forged("b");
+        *b.last_mut().unwrap() ^= 1;
+        let message = crate::sync::message::Message::Forked {
+            ops: [forged("a"), b],
+        };
+        peers[3].handle_input(Timestamp(t), ConnId(1), &message.encode());
+        assert!(!peers[3].log().forks().contains(&third.peer_id()));
+        let rejected = std::iter::from_fn(|| peers[3].poll_event()).any(|(_, e)| {
+            matches!(
+                e,
+                Event::Rejected {
+                    kind: crate::sync::state::RejectKind::BadForkProof,
+                    ..
+                }
+            )
+        });
+        assert!(rejected);
+    }
 }

@@ -219,6 +219,7 @@ impl<P: Payload> Log<P> {
             expelled: BTreeMap::new(),
             members_changed: Default::default(),
             void_changed: BTreeMap::new(),
+            forks: crate::fork::Forks::default(),
         };
         let objects: Vec<ObjectId> = log.deletes.keys().copied().collect();
         for object in objects {

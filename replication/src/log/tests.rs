@@ -387,6 +387,7 @@ fn refused_ops_are_counted() {
         },
     )
     .unwrap();
+    let fork_bytes = fork.encoded().to_vec();
     assert_eq!(
         log.insert(Timestamp(0), fork, Origin(1)),
         Err(InsertError::Equivocation {
@@ -394,6 +395,29 @@ fn refused_ops_are_counted() {
             seq: 1
         })
     );
+    // The log keeps the two ops as a proof anyone can check, and no proof about a stranger.
+    let proof = &log.forks().proofs()[0];
+    assert_eq!((proof.author(), proof.seq()), (a.peer_id(), 1));
+    let [x, y] = proof.ops();
+    assert_eq!(ForkProof::check(x, y).as_ref(), Ok(proof));
+    assert!(proof.ops().contains(&&fork_bytes[..]) && proof.ops().contains(&op1.encoded()));
+    let stranger = key(7);
+    let stranger_op = |text| {
+        let fields = OpFields {
+            seq: 1,
+            lamport: 1,
+            timestamp: Timestamp(2),
+            deps: vec![],
+            payload: set(1, text),
+        };
+        Op::sign(&stranger, fields).unwrap()
+    };
+    let (s1, s2) = (stranger_op("p"), stranger_op("q"));
+    let stranger_proof = ForkProof::check(s1.encoded(), s2.encoded()).unwrap();
+    assert!(!log.record_fork(stranger_proof.clone()));
+    log.insert(Timestamp(3), s1, Origin(1)).unwrap();
+    assert!(log.record_fork(stranger_proof));
+    assert_eq!(log.forks().seq_of(&stranger.peer_id()), Some(1));
     // Lamport time not above its dependency.
     let bad = Op::sign(
         &key(1),
@@ -419,7 +443,7 @@ fn refused_ops_are_counted() {
         "a forged op never reaches the log"
     );
     assert_eq!(log.stats().n_refused, 2);
-    assert_eq!(log.len(), 1);
+    assert_eq!(log.len(), 2, "the first op and the stranger's");
 }
 
 #[test]

@@ -23,7 +23,8 @@ pub const SYNC_WIRE_VERSION: u8 = 1;
 /// 4: signatures are checked by the ZIP 215 rules (alone or in batches), which accept some
 /// crafted signatures the strict rules of 3 refuse; the two must not share a session, or a
 /// member could make them disagree on which ops exist.
-pub const PROTOCOL_VERSION: u64 = 4;
+/// 5: [`Message::Forked`] carries proofs of equivocation, which a build speaking 4 refuses.
+pub const PROTOCOL_VERSION: u64 = 5;
 /// Length of a session id.
 pub const SESSION_ID_BYTES: usize = 16;
 /// Most ops in one [`Message::Ops`] batch.
@@ -40,6 +41,8 @@ const MAX_VV_BYTES: usize = MAX_VARINT_BYTES + MAX_VV_AUTHORS * (PEER_ID_BYTES +
 const _: () = assert!(2 + MAX_VARINT_BYTES + MAX_VV_BYTES <= MAX_MESSAGE_BYTES);
 // An ack names at most one batch's authors.
 const _: () = assert!(MAX_BATCH_OPS <= MAX_VV_AUTHORS);
+// A fork proof of two ops of the largest size fits in a message.
+const _: () = assert!(2 + 2 * (MAX_VARINT_BYTES + MAX_OP_BYTES) <= MAX_MESSAGE_BYTES);
 
 /// A session's id (derived from its invite by the transport).
 pub type SessionId = [u8; SESSION_ID_BYTES];
@@ -88,6 +91,13 @@ pub enum Message {
         /// The value.
         value: Vec<u8>,
     },
+    /// A proof that an author signed two different ops with one seq: both ops' encodings
+    /// ([`crate::fork::ForkProof`]), each checked by the receiver. Sent once per connection per
+    /// proof, when the remote holds ops of that author.
+    Forked {
+        /// The two encoded ops.
+        ops: [Vec<u8>; 2],
+    },
 }
 
 const TAG_HELLO: u8 = 1;
@@ -96,6 +106,7 @@ const TAG_OPS: u8 = 3;
 const TAG_ACK: u8 = 4;
 const TAG_EPHEMERAL: u8 = 5;
 const TAG_WANT: u8 = 6;
+const TAG_FORKED: u8 = 7;
 
 impl Message {
     /// The encoded message.
@@ -144,6 +155,12 @@ impl Message {
                 put_varint(&mut out, u64::from(*channel));
                 put_varint(&mut out, *seq);
                 put_bytes(&mut out, value);
+            }
+            Self::Forked { ops } => {
+                out.push(TAG_FORKED);
+                for op in ops {
+                    put_bytes(&mut out, op);
+                }
             }
         }
         out
@@ -215,6 +232,11 @@ impl Message {
                     seq,
                     value,
                 }
+            }
+            TAG_FORKED => {
+                let a = r.bytes("op length", MAX_OP_BYTES as u64)?.to_vec();
+                let b = r.bytes("op length", MAX_OP_BYTES as u64)?.to_vec();
+                Self::Forked { ops: [a, b] }
             }
             _ => {
                 return Err(DecodeError::Invalid {
@@ -298,6 +320,11 @@ mod tests {
                 proptest::collection::vec(proptest::collection::vec(any::<u8>(), 0..40), 0..5)
             )
                 .prop_map(|(batch_no, ops)| Message::Ops { batch_no, ops }),
+            (
+                proptest::collection::vec(any::<u8>(), 0..40),
+                proptest::collection::vec(any::<u8>(), 0..40)
+            )
+                .prop_map(|(a, b)| Message::Forked { ops: [a, b] }),
             (any::<u64>(), vv).prop_map(|(batch_no, have)| Message::Ack { batch_no, have }),
             (
                 any::<u32>(),

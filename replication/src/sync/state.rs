@@ -29,11 +29,12 @@
 //! and absent authors hold back.
 
 use std::cell::Cell;
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::marker::PhantomData;
 
 use crate::causal::{MAX_VV_AUTHORS, VersionVector};
 use crate::codec::DecodeError;
+use crate::fork::ForkProof;
 use crate::identity::PeerId;
 use crate::log::{InsertError, Insertion, Log};
 use crate::op::{Envelope, MAX_OP_BYTES, Op, ReceiveError};
@@ -124,6 +125,8 @@ pub enum RejectKind {
     RateLimited,
     /// An ephemeral value over [`MAX_EPHEMERAL_BYTES`] or too many channels.
     EphemeralTooLarge,
+    /// A [`Message::Forked`] whose two ops are not a signed fork ([`crate::fork::ProofError`]).
+    BadForkProof,
 }
 
 /// Why the connection closed.
@@ -167,6 +170,14 @@ pub enum Event {
         channel: u32,
         /// The value.
         value: Vec<u8>,
+    },
+    /// This input showed that `author` signed two ops with the seq `seq`: a fork proof came,
+    /// or an op forked one the log holds ([`crate::fork`]). The log keeps the proof.
+    Forked {
+        /// The author that equivocated.
+        author: PeerId,
+        /// The seq it signed twice.
+        seq: u64,
     },
     /// The remote has acknowledged everything this peer holds.
     UpToDate,
@@ -343,6 +354,10 @@ pub struct SyncState<P> {
     /// Messages received when the last repeated full have went out (see `have_due`): the
     /// next waits until the remote says something, so a silent remote gets one.
     repaired_at_messages_in: Option<u64>,
+    /// Authors whose fork proof went out on this connection.
+    forks_sent: BTreeSet<PeerId>,
+    /// The log's proof count and `remote_vv_version` at which no proof was left to send.
+    forks_idle: Cell<Option<(usize, u64)>>,
     control: VecDeque<Message>,
     events: VecDeque<Event>,
     eph_out: BTreeMap<u32, Vec<u8>>,
@@ -390,6 +405,8 @@ impl<P: Payload> SyncState<P> {
             remote_vv_version: 0,
             lacks_cache: Cell::new(None),
             repaired_at_messages_in: None,
+            forks_sent: BTreeSet::new(),
+            forks_idle: Cell::new(None),
             control: VecDeque::new(),
             events: VecDeque::new(),
             eph_out: BTreeMap::new(),
@@ -479,7 +496,15 @@ impl<P: Payload> SyncState<P> {
 
     /// Handles one message received from the remote.
     pub fn handle_input(&mut self, now: Timestamp, bytes: &[u8], log: &mut Log<P>) {
+        let n_proofs = log.forks().proofs().len();
         self.read_input(now, bytes, log);
+        // Forks this input revealed: a proof it carried, or an op that forks a held one.
+        for proof in &log.forks().proofs()[n_proofs..] {
+            self.events.push_back(Event::Forked {
+                author: proof.author(),
+                seq: proof.seq(),
+            });
+        }
         self.close_if_expelled(log);
     }
 
@@ -591,6 +616,33 @@ impl<P: Payload> SyncState<P> {
                     );
                 }
             }
+            Message::Forked { ops: [a, b] } => {
+                self.hello_confirmed = true;
+                self.on_forked(&a, &b, log);
+            }
+        }
+    }
+
+    /// A proof of a fork: checked (two signatures) only if it is about an author the log
+    /// holds and has no proof of, so a repeated or irrelevant proof costs a hash.
+    fn on_forked(&mut self, a: &[u8], b: &[u8], log: &mut Log<P>) {
+        let author = match Envelope::parse(a) {
+            Ok(envelope) => envelope.author(),
+            Err(e) => {
+                self.reject(RejectKind::BadForkProof, e.to_string());
+                return;
+            }
+        };
+        // Whoever sent it holds it: it need not go back.
+        self.forks_sent.insert(author);
+        if log.forks().contains(&author) || log.version_vector().get(&author) == 0 {
+            return;
+        }
+        match ForkProof::check(a, b) {
+            Ok(proof) => {
+                log.record_fork(proof);
+            }
+            Err(e) => self.reject(RejectKind::BadForkProof, e.to_string()),
         }
     }
 
@@ -1033,10 +1085,29 @@ impl<P: Payload> SyncState<P> {
         .min()
     }
 
-    /// True if haves, ephemeral values or ops wait to be sent and the window has room.
+    /// The next fork proof to send: one the remote has not been sent, about an author it
+    /// holds ops of (a proof about an author it does not hold would be dropped).
+    fn next_fork_proof<'a>(&self, log: &'a Log<P>) -> Option<&'a ForkProof> {
+        let proofs = log.forks().proofs();
+        let key = (proofs.len(), self.remote_vv_version);
+        if proofs.is_empty() || self.forks_idle.get() == Some(key) {
+            return None;
+        }
+        let next = proofs.iter().find(|p| {
+            !self.forks_sent.contains(&p.author()) && self.remote_vv.get(&p.author()) > 0
+        });
+        if next.is_none() {
+            self.forks_idle.set(Some(key));
+        }
+        next
+    }
+
+    /// True if haves, ephemeral values, fork proofs or ops wait to be sent and the window has
+    /// room.
     fn data_waiting(&self, log: &Log<P>) -> bool {
         !self.have_out.is_empty()
             || !self.eph_out.is_empty()
+            || self.next_fork_proof(log).is_some()
             || (self.in_flight.len() < MAX_IN_FLIGHT_BATCHES && self.sendable(log))
     }
 
@@ -1085,6 +1156,12 @@ impl<P: Payload> SyncState<P> {
                 seq: self.eph_out_seq,
                 value,
             });
+        }
+        if let Some(proof) = self.next_fork_proof(log) {
+            let ops = proof.ops().map(<[u8]>::to_vec);
+            self.forks_sent.insert(proof.author());
+            self.send_bucket.spend();
+            return Some(Message::Forked { ops });
         }
         if self.in_flight.len() >= MAX_IN_FLIGHT_BATCHES {
             return None;

@@ -459,6 +459,7 @@ impl<P: Payload + Send + 'static> Core<P> {
                     value,
                 },
                 Event::UpToDate => NodeEvent::UpToDate { conn, peer },
+                Event::Forked { author, seq } => NodeEvent::Forked { conn, author, seq },
                 Event::Closed(reason) => {
                     let reason = DisconnectReason::Sync(reason);
                     self.drop_conn(conn, CloseCode::Sync, Some(reason));

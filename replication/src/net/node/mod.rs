@@ -307,6 +307,17 @@ pub enum NodeEvent {
         /// The remote.
         peer: PeerId,
     },
+    /// Input from this connection showed that `author` signed two ops with one seq (the
+    /// log keeps the proof, [`crate::fork`]); `author` may be this node's own identity, run
+    /// twice or restored from an old copy.
+    Forked {
+        /// The connection.
+        conn: ConnId,
+        /// The author that equivocated.
+        author: PeerId,
+        /// The seq it signed twice.
+        seq: u64,
+    },
     /// The core dropped bad input from this connection (also counted in its stats).
     Rejected {
         /// The connection.
