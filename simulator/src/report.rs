@@ -170,8 +170,14 @@ impl Report {
             writeln!(
                 f,
                 "  byzantine attacks sent: {:?}; ops held for the refold budget {}; \
-                 expels {}, void ops {}, connections closed by expels {}",
-                s.byzantine, self.n_refold_holds, s.n_expels, self.n_void_ops, s.n_expel_closes
+                 expels {}, void ops {}, connections closed by expels {}; forks learnt by \
+                 honest peers {}",
+                s.byzantine,
+                self.n_refold_holds,
+                s.n_expels,
+                self.n_void_ops,
+                s.n_expel_closes,
+                s.n_forks_learnt
             )?;
         }
         Ok(())

@@ -243,6 +243,8 @@ pub struct Stats {
     pub n_expels: u64,
     /// Connections honest peers closed because the founder expelled their remote.
     pub n_expel_closes: u64,
+    /// Forks honest peers learnt (a proof came, or an op forked a held one).
+    pub n_forks_learnt: u64,
 }
 
 /// A run in progress.
@@ -1114,6 +1116,10 @@ impl Simulation {
             }
             Event::Connected { .. } | Event::Ephemeral { .. } | Event::UpToDate => {
                 self.trace.u64(13);
+            }
+            Event::Forked { .. } => {
+                self.trace.u64(14);
+                self.stats.n_forks_learnt += 1;
             }
         }
     }

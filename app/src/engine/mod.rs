@@ -819,6 +819,23 @@ impl Worker {
                     }
                 }
             }
+            NodeEvent::Forked { author, seq, .. } => {
+                let mut view = lock(&self.view);
+                let who = if author == view.peer_id() {
+                    "this identity".to_string()
+                } else {
+                    view.peers
+                        .iter()
+                        .find(|p| p.peer == author)
+                        .map_or_else(|| author.short(), |p| p.name.clone())
+                };
+                view.forked.insert(author, seq);
+                drop(view);
+                self.say(format!(
+                    "{who} signed two different edits as #{seq} (a fork): peers that got \
+                     different ones disagree about its later edits"
+                ));
+            }
             NodeEvent::AdmissionFailed { addr, error } => {
                 self.say(format!(
                     "a connection with {addr} was refused: {}",

@@ -127,6 +127,8 @@ pub struct View {
     /// The founder's nonce, when this peer founded the session (it may expel members).
     pub(super) founder_nonce: Option<[u8; FOUNDER_NONCE_BYTES]>,
     expelled: BTreeSet<PeerId>,
+    /// Authors proven to have signed two ops with one seq, and that seq.
+    pub(super) forked: BTreeMap<PeerId, u64>,
     waker: Option<Box<dyn Fn() + Send>>,
 }
 
@@ -160,6 +162,7 @@ impl View {
             listen: None,
             founder_nonce: None,
             expelled: BTreeSet::new(),
+            forked: BTreeMap::new(),
             waker: None,
         };
         view.refresh(log);
@@ -192,6 +195,7 @@ impl View {
     pub fn refresh(&mut self, log: &Log<ShapePayload>) {
         self.n_ops = log.len();
         self.expelled = log.expelled().keys().copied().collect();
+        self.forked = log.forks().authors().collect();
         self.history = history(log, self.me, self.scene.scene().scene());
         self.chat = self.chat_rows(log);
         let (undo, redo) = targets(log, self.me);
@@ -264,6 +268,13 @@ impl View {
     /// The members the founder expelled (and has not readmitted).
     pub fn expelled(&self) -> &BTreeSet<PeerId> {
         &self.expelled
+    }
+
+    /// The authors proven to have signed two different ops with one seq, and that seq
+    /// ([`replication::fork`]); this peer's own id among them means its identity runs
+    /// twice or its store was restored from an older copy.
+    pub fn forked(&self) -> &BTreeMap<PeerId, u64> {
+        &self.forked
     }
 
     /// The member a person names: by the name its user chose (any case) or by the start of
@@ -851,5 +862,40 @@ mod tests {
         assert!(view.expelled().contains(&member));
         let readmit = plan(Command::Readmit("Ada"), &view, None).unwrap().payload;
         assert_eq!(readmit.membership().map(|m| m.expel), Some(false));
+    }
+
+    #[test]
+    fn a_fork_the_log_saw_marks_its_author_in_the_view() {
+        use replication::op::{Op, OpFields};
+        let me = replication::Keypair::from_seed([3; 32]);
+        let mut log = replication::Log::default();
+        let mut view = View::new(me.peer_id(), &log).unwrap();
+        let op = |text: &str| {
+            let fields = OpFields {
+                seq: 1,
+                lamport: 1,
+                timestamp: replication::Timestamp(1),
+                deps: Vec::new(),
+                payload: ShapePayload::Chat(text.into()),
+            };
+            Op::sign(&me, fields).unwrap()
+        };
+        log.insert(
+            replication::Timestamp(2),
+            op("here"),
+            replication::log::LOCAL_ORIGIN,
+        )
+        .unwrap();
+        view.refresh(&log);
+        assert!(view.forked().is_empty());
+        // The same identity, run twice, signed another op as #1.
+        let refused = log.insert(
+            replication::Timestamp(2),
+            op("there"),
+            replication::pending::Origin(1),
+        );
+        assert!(refused.is_err());
+        view.refresh(&log);
+        assert_eq!(view.forked().get(&me.peer_id()), Some(&1));
     }
 }

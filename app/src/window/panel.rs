@@ -9,6 +9,10 @@ use ::app::engine::lock;
 
 /// Colour of errors.
 const ERROR_COLOUR: egui::Color32 = egui::Color32::from_rgb(255, 110, 100);
+/// What a forked author's mark means.
+const FORKED_HOVER: &str = "this identity signed two different edits with one number: \
+                            it runs as two copies, or from a restored backup, or it is \
+                            hostile; peers that got different ones disagree about its later edits";
 /// Colour of notices.
 const NOTICE_COLOUR: egui::Color32 = egui::Color32::from_rgb(240, 200, 90);
 /// Ops still to receive from which the catch-up bar shows.
@@ -212,6 +216,9 @@ impl SculptApp {
         let view = lock(self.engine.view());
         if let Some(error) = view.store_error() {
             ui.colored_label(ERROR_COLOUR, format!("Store error: {error}"));
+        }
+        if let Some(seq) = view.forked().get(&view.peer_id()) {
+            ui.colored_label(ERROR_COLOUR, own_fork_text(*seq));
         }
         for notice in view.notices() {
             ui.colored_label(NOTICE_COLOUR, notice);
@@ -441,9 +448,14 @@ impl SculptApp {
         }
         let mut follow = None;
         let mut membership = None;
-        let (expelled, founder) = {
+        let (expelled, forked, founder) = {
             let view = lock(self.engine.view());
-            (view.expelled().clone(), view.founder_nonce().is_some())
+            let forked = view.forked().clone();
+            (
+                view.expelled().clone(),
+                forked,
+                view.founder_nonce().is_some(),
+            )
         };
         for p in &self.peers {
             let [r, g, b] = p.colour;
@@ -456,6 +468,10 @@ impl SculptApp {
                 let out = expelled.contains(&p.peer);
                 if out {
                     ui.colored_label(egui::Color32::LIGHT_RED, "expelled");
+                }
+                if let Some(seq) = forked.get(&p.peer) {
+                    ui.colored_label(egui::Color32::LIGHT_RED, format!("forked at #{seq}"))
+                        .on_hover_text(FORKED_HOVER);
                 }
                 if founder {
                     let (word, line) = if out {
@@ -923,4 +939,14 @@ impl SculptApp {
         painter.add(egui::Shape::line(energy, egui::Stroke::new(1.0, blue)));
         painter.add(egui::Shape::line(force, egui::Stroke::new(1.5, orange)));
     }
+}
+
+/// What it means that this peer's own identity forked at `seq`, and what to do.
+fn own_fork_text(seq: u64) -> String {
+    format!(
+        "This identity signed two different edits as #{seq}: another copy of this store is \
+         running, or it was restored from an older copy. Peers that got the other edit refuse \
+         this one's from there on. Close the other copy; to go on editing, join again with a \
+         new store."
+    )
 }
