@@ -68,7 +68,8 @@
 //!   signature covers `"sculpt/op/v1"` + everything before it; the id is blake3 of all of it.
 //! - Sync message: `[1][tag]` then Hello `[protocol][session 16][peer 32][hello_seen]`,
 //!   Have `[vv]`, Want `[vv]`, Ops `[batch_no][n ≤ 64][op bytes]*`, Ack `[batch_no][vv]`,
-//!   Ephemeral `[channel][seq][value ≤ 1 KiB]`; a vv is `[n][author 32][seq]*` sorted.
+//!   Ephemeral `[channel][seq][value ≤ 1 KiB]`, Forked `[op bytes][op bytes]`, WantOps
+//!   `[n ≤ 64][id 32]*`; a vv is `[n][author 32][seq]*` sorted.
 //! - Store file: `SCULPTOPS` `[1]`, then records `[u32 LE len][blake3 of len+body, 16][body]`.
 //! - Snapshot: see [`snapshot`] (`SCULPTSNAP` `[1]` ... `[blake3 32]`).
 //!

@@ -1399,6 +1399,19 @@ impl<P: Payload> Log<P> {
         self.pending.len()
     }
 
+    /// Number of ops waiting that came from `origin`.
+    pub fn n_pending_from(&self, origin: Origin) -> usize {
+        self.pending.n_from(origin)
+    }
+
+    /// Dependencies by id that ops from `origin` waiting since `before` still miss
+    /// ([`Pending::stuck_deps`]), at most `max`, none of them held or waiting.
+    pub fn stuck_deps(&self, origin: Origin, before: Timestamp, max: usize) -> Vec<OpId> {
+        let mut stuck = self.pending.stuck_deps(origin, before, max);
+        stuck.retain(|id| !self.contains(id));
+        stuck
+    }
+
     /// What was refused or evicted so far.
     pub fn stats(&self) -> LogStats {
         self.stats

@@ -1095,4 +1095,75 @@ mod tests {
         });
         assert!(rejected);
     }
+
+    #[test]
+    fn the_other_op_of_a_fork_is_asked_for_by_id_and_both_peers_learn_of_it() {
+        use crate::sync::state::{STUCK_CHECK_MICROS, STUCK_DEP_MICROS};
+        // A member signs two ops as seq 1 and gives one to each peer, and each peer builds on
+        // the one it holds.
+        let hostile = Keypair::from_seed([6; 32]);
+        let fork = |text: &str| {
+            let fields = crate::op::OpFields {
+                seq: 1,
+                lamport: 1,
+                timestamp: Timestamp(1),
+                deps: Vec::new(),
+                payload: TestPayload::Chat(text.into()),
+            };
+            crate::Op::sign(&hostile, fields).unwrap()
+        };
+        let now = Timestamp(1_000);
+        let mut peers: Vec<TPeer> = [fork("a"), fork("b")]
+            .into_iter()
+            .zip(1..)
+            .map(|(op, i)| {
+                let mut log = Log::default();
+                log.insert(now, op, Origin(7)).unwrap();
+                Peer::new(Keypair::from_seed([i; 32]), [9; 16], log)
+            })
+            .collect();
+        for p in &mut peers {
+            p.author(now, TestPayload::Chat("on my side".into()))
+                .unwrap();
+        }
+        let links = [(0, ConnId(1), 1, ConnId(1))];
+        for p in &mut peers {
+            p.connect(now, ConnId(1)).unwrap();
+        }
+        pump(&mut peers, &links, now);
+        // Version vectors cannot tell the two sides apart: each peer's op waits for the
+        // other's side, and nobody has seen both.
+        for p in &peers {
+            assert_eq!(p.log().n_pending(), 1);
+            assert!(p.log().forks().proofs().is_empty());
+        }
+        let mut t = now.0;
+        while !peers
+            .iter()
+            .all(|p| p.log().forks().contains(&hostile.peer_id()))
+        {
+            assert!(
+                t <= now.0 + STUCK_DEP_MICROS + 3 * STUCK_CHECK_MICROS,
+                "not asked by {t}"
+            );
+            t += 100_000;
+            for p in peers.iter_mut() {
+                p.handle_timeout(Timestamp(t));
+            }
+            pump(&mut peers, &links, Timestamp(t));
+        }
+        assert!(
+            t >= now.0 + STUCK_DEP_MICROS,
+            "asked before version vectors had their turn"
+        );
+        for p in &peers {
+            let (_, sync) = p.connections().next().unwrap();
+            assert_eq!(sync.stats().n_ops_asked, 1);
+            assert_eq!(
+                sync.stats().n_rejected(),
+                0,
+                "answering an ask is no offence"
+            );
+        }
+    }
 }

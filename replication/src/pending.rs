@@ -147,6 +147,36 @@ impl<P: Clone> Pending<P> {
         self.per_origin.get(&origin).map_or(0, BTreeSet::len)
     }
 
+    /// The dependencies, by id, that ops from `origin` which arrived at or before `before`
+    /// still wait for and that are not waiting here themselves: at most `max`, sorted. An
+    /// honest sender holds the dependencies of every op it sends, so one that waited this
+    /// long and did not come by the version vectors is worth asking for by id (the other op
+    /// of a fork, which version vectors cannot tell apart, is one).
+    pub fn stuck_deps(&self, origin: Origin, before: Timestamp, max: usize) -> Vec<OpId> {
+        let mut stuck = BTreeSet::new();
+        let ids = self.per_origin.get(&origin).into_iter().flatten();
+        for (_, id) in ids {
+            let Some(entry) = self.entries.get(id) else {
+                continue;
+            };
+            if entry.arrived > before {
+                // In arrival order: every later one arrived later.
+                break;
+            }
+            for key in &entry.missing {
+                if let DepKey::Op(dep) = key
+                    && !self.entries.contains_key(dep)
+                {
+                    stuck.insert(*dep);
+                    if stuck.len() == max {
+                        return stuck.into_iter().collect();
+                    }
+                }
+            }
+        }
+        stuck.into_iter().collect()
+    }
+
     /// Parks `op` until every key in `missing` is satisfied; returns what had to be evicted
     /// to stay within limits (possibly `op` itself).
     pub fn insert(

@@ -107,6 +107,7 @@ pub(crate) fn finish(sim: Simulation) -> Report {
     if sim.faults.expel {
         check_expels(&sim, &mut failures);
     }
+    check_forks(&sim, &mut failures);
     let memory = memory_figures(&sim, &mut failures);
     build_report(
         sim,
@@ -155,6 +156,43 @@ fn check_expels(sim: &Simulation, failures: &mut Vec<String>) {
             failures.push(format!(
                 "peer {i}: {counted} ops of expelled members not void"
             ));
+        }
+    }
+}
+
+/// Every fork the byzantine member made that honest peers built on both sides of is known to
+/// every honest peer holding an op of its key: the proof reached it (the holder of one side
+/// asked for the other by id, then passed the proof on).
+fn check_forks(sim: &Simulation, failures: &mut Vec<String>) {
+    let forks = (sim.hostile.as_ref())
+        .and_then(|h| h.byzantine.as_ref())
+        .map_or(&[][..], |b| &b.forks[..]);
+    for (a, b) in forks {
+        let author = (sim.honest.iter())
+            .find_map(|h| h.peer.log().get(a).or_else(|| h.peer.log().get(b)))
+            .map(replication::Op::author);
+        let Some(author) = author else {
+            continue;
+        };
+        // Only when honest peers built on both sides does anyone need the other side (an
+        // honest op waits for it, and is asked for it by id); else nobody sees both.
+        let built_on = |side: &OpId| {
+            sim.honest.iter().any(|h| {
+                let me = h.peer.peer_id();
+                (h.peer.log().entries()).any(|e| e.op.author() == me && e.op.deps().contains(side))
+            })
+        };
+        if !(built_on(a) && built_on(b)) {
+            continue;
+        }
+        for (i, h) in sim.honest.iter().enumerate() {
+            let log = h.peer.log();
+            if log.version_vector().get(&author) > 0 && !log.forks().contains(&author) {
+                failures.push(format!(
+                    "peer {i}: holds ops of {}, which forked, and no proof of it",
+                    author.short()
+                ));
+            }
         }
     }
 }

@@ -13,7 +13,7 @@
 use crate::causal::{MAX_VV_AUTHORS, VersionVector};
 use crate::codec::{DecodeError, MAX_VARINT_BYTES, Reader, put_bytes, put_varint};
 use crate::identity::{PEER_ID_BYTES, PeerId};
-use crate::op::MAX_OP_BYTES;
+use crate::op::{MAX_OP_BYTES, OpId};
 
 /// Version byte that opens every sync message.
 pub const SYNC_WIRE_VERSION: u8 = 1;
@@ -23,7 +23,8 @@ pub const SYNC_WIRE_VERSION: u8 = 1;
 /// 4: signatures are checked by the ZIP 215 rules (alone or in batches), which accept some
 /// crafted signatures the strict rules of 3 refuse; the two must not share a session, or a
 /// member could make them disagree on which ops exist.
-/// 5: [`Message::Forked`] carries proofs of equivocation, which a build speaking 4 refuses.
+/// 5: [`Message::Forked`] carries proofs of equivocation and [`Message::WantOps`] asks for
+/// ops by id, which a build speaking 4 refuses.
 pub const PROTOCOL_VERSION: u64 = 5;
 /// Length of a session id.
 pub const SESSION_ID_BYTES: usize = 16;
@@ -98,6 +99,9 @@ pub enum Message {
         /// The two encoded ops.
         ops: [Vec<u8>; 2],
     },
+    /// Asks for ops by id (at most [`MAX_BATCH_OPS`]): dependencies that ops this remote sent
+    /// have waited for too long. The receiver sends those it holds in an ops batch.
+    WantOps(Vec<OpId>),
 }
 
 const TAG_HELLO: u8 = 1;
@@ -107,6 +111,7 @@ const TAG_ACK: u8 = 4;
 const TAG_EPHEMERAL: u8 = 5;
 const TAG_WANT: u8 = 6;
 const TAG_FORKED: u8 = 7;
+const TAG_WANT_OPS: u8 = 8;
 
 impl Message {
     /// The encoded message.
@@ -160,6 +165,13 @@ impl Message {
                 out.push(TAG_FORKED);
                 for op in ops {
                     put_bytes(&mut out, op);
+                }
+            }
+            Self::WantOps(ids) => {
+                out.push(TAG_WANT_OPS);
+                put_varint(&mut out, ids.len() as u64);
+                for id in ids {
+                    out.extend_from_slice(&id.0);
                 }
             }
         }
@@ -237,6 +249,14 @@ impl Message {
                 let a = r.bytes("op length", MAX_OP_BYTES as u64)?.to_vec();
                 let b = r.bytes("op length", MAX_OP_BYTES as u64)?.to_vec();
                 Self::Forked { ops: [a, b] }
+            }
+            TAG_WANT_OPS => {
+                let n = r.bounded("wanted op count", MAX_BATCH_OPS as u64)?;
+                let mut ids = Vec::with_capacity(n);
+                for _ in 0..n {
+                    ids.push(OpId(r.array()?));
+                }
+                Self::WantOps(ids)
             }
             _ => {
                 return Err(DecodeError::Invalid {
@@ -325,6 +345,8 @@ mod tests {
                 proptest::collection::vec(any::<u8>(), 0..40)
             )
                 .prop_map(|(a, b)| Message::Forked { ops: [a, b] }),
+            proptest::collection::vec(any::<[u8; 32]>(), 0..5)
+                .prop_map(|ids| Message::WantOps(ids.into_iter().map(OpId).collect())),
             (any::<u64>(), vv).prop_map(|(batch_no, have)| Message::Ack { batch_no, have }),
             (
                 any::<u32>(),

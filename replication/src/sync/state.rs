@@ -37,7 +37,7 @@ use crate::codec::DecodeError;
 use crate::fork::ForkProof;
 use crate::identity::PeerId;
 use crate::log::{InsertError, Insertion, Log};
-use crate::op::{Envelope, MAX_OP_BYTES, Op, ReceiveError};
+use crate::op::{Envelope, MAX_OP_BYTES, Op, OpId, ReceiveError};
 use crate::payload::Payload;
 use crate::pending::{EvictReason, Origin};
 use crate::sync::message::{
@@ -89,6 +89,17 @@ pub const MAX_WITHDRAWN_CLAIMS: usize = MAX_REMOTE_UNKNOWN_AUTHORS;
 /// A connection that dropped some of the remote's claims checks this often (1 s) whether
 /// enough of what it kept has arrived to ask for the remote's full have again.
 pub const RELEARN_CHECK_MICROS: u64 = HAVE_EVERY_MICROS;
+/// How long an op from the remote waits for a dependency before this peer asks the remote
+/// for it by id ([`Message::WantOps`]): long enough that version vectors would have brought
+/// it (a full have goes out this often), so only what they cannot name is asked for, such as
+/// the other op of a fork.
+pub const STUCK_DEP_MICROS: u64 = HAVE_FULL_EVERY_MICROS;
+/// How often a connection with ops from its remote waiting looks for stuck dependencies.
+pub const STUCK_CHECK_MICROS: u64 = HAVE_EVERY_MICROS;
+/// Most ops one connection asks for by id over its life.
+pub const MAX_ASKED_OPS: usize = 1024;
+/// Most ops asked for by id that one connection queues to send.
+pub const MAX_ASKED_OUT: usize = 4 * MAX_BATCH_OPS;
 
 const MICROS_PER_SEC: u64 = 1_000_000;
 const _: () = assert!(MAX_BATCH_BYTES + MAX_BATCH_OPS * 10 + 32 <= MAX_MESSAGE_BYTES);
@@ -221,6 +232,10 @@ pub struct SyncStats {
     pub n_claims_dropped: u64,
     /// Claims withdrawn because the remote, asked, sent nothing ([`CLAIM_WITHDRAWN_MICROS`]).
     pub n_claims_withdrawn: u64,
+    /// Ops asked for by id ([`Message::WantOps`], [`STUCK_DEP_MICROS`]).
+    pub n_ops_asked: u64,
+    /// Ops the remote asked for by id that were not sent: not held, or over [`MAX_ASKED_OUT`].
+    pub n_asks_dropped: u64,
 }
 
 impl SyncStats {
@@ -354,6 +369,12 @@ pub struct SyncState<P> {
     /// Messages received when the last repeated full have went out (see `have_due`): the
     /// next waits until the remote says something, so a silent remote gets one.
     repaired_at_messages_in: Option<u64>,
+    /// Ops asked for by id on this connection (at most [`MAX_ASKED_OPS`]).
+    asked: BTreeSet<OpId>,
+    /// When to next look for stuck dependencies.
+    stuck_check_at: Timestamp,
+    /// Ops the remote asked for by id, to send.
+    asked_out: VecDeque<OpId>,
     /// Authors whose fork proof went out on this connection.
     forks_sent: BTreeSet<PeerId>,
     /// The log's proof count and `remote_vv_version` at which no proof was left to send.
@@ -405,6 +426,9 @@ impl<P: Payload> SyncState<P> {
             remote_vv_version: 0,
             lacks_cache: Cell::new(None),
             repaired_at_messages_in: None,
+            asked: BTreeSet::new(),
+            stuck_check_at: now,
+            asked_out: VecDeque::new(),
             forks_sent: BTreeSet::new(),
             forks_idle: Cell::new(None),
             control: VecDeque::new(),
@@ -619,6 +643,19 @@ impl<P: Payload> SyncState<P> {
             Message::Forked { ops: [a, b] } => {
                 self.hello_confirmed = true;
                 self.on_forked(&a, &b, log);
+            }
+            Message::WantOps(ids) => {
+                self.hello_confirmed = true;
+                for id in ids {
+                    if log.contains(&id)
+                        && self.asked_out.len() < MAX_ASKED_OUT
+                        && !self.asked_out.contains(&id)
+                    {
+                        self.asked_out.push_back(id);
+                    } else {
+                        self.stats.n_asks_dropped += 1;
+                    }
+                }
             }
         }
     }
@@ -896,8 +933,13 @@ impl<P: Payload> SyncState<P> {
         self.update_up_to_date(log);
     }
 
+    /// Counts an op the log refused against the remote, unless it forked a held op: an
+    /// honest remote may hold the other side of a fork (and send it when asked by id), and
+    /// the log keeps the proof.
     fn reject_refused(&mut self, e: &InsertError) {
-        self.reject(RejectKind::RefusedOp, e.to_string());
+        if !matches!(e, InsertError::Equivocation { .. }) {
+            self.reject(RejectKind::RefusedOp, e.to_string());
+        }
     }
 
     fn on_insertion(&mut self, insertion: Insertion) {
@@ -911,7 +953,7 @@ impl<P: Payload> SyncState<P> {
             }
         }
         for (id, origin, e) in &insertion.refused {
-            if *origin == self.config.origin {
+            if *origin == self.config.origin && !matches!(e, InsertError::Equivocation { .. }) {
                 self.reject(RejectKind::RefusedOp, format!("{id}: {e}"));
             }
         }
@@ -954,6 +996,9 @@ impl<P: Payload> SyncState<P> {
         if self.relearn_due().is_some_and(|d| d <= now) {
             self.relearn(now, log);
         }
+        if self.stuck_due(log).is_some_and(|d| d <= now) {
+            self.ask_stuck(now, log);
+        }
         if self.have_due(log).is_some_and(|d| d <= now) {
             // Parts of an earlier have still queued: a full have replaces them, so the queue
             // never holds more than one full have.
@@ -987,6 +1032,34 @@ impl<P: Payload> SyncState<P> {
                 self.full_have_at = now;
             }
         }
+    }
+
+    /// When to look for stuck dependencies: while ops from the remote wait and there is room
+    /// to ask.
+    fn stuck_due(&self, log: &Log<P>) -> Option<Timestamp> {
+        let waiting = self.remote.is_some()
+            && self.asked.len() < MAX_ASKED_OPS
+            && log.n_pending_from(self.config.origin) > 0;
+        waiting.then_some(self.stuck_check_at)
+    }
+
+    /// Asks the remote by id for the dependencies its ops waited for since
+    /// [`STUCK_DEP_MICROS`] ago, each once on this connection.
+    fn ask_stuck(&mut self, now: Timestamp, log: &Log<P>) {
+        self.stuck_check_at = now.saturating_add_micros(STUCK_CHECK_MICROS);
+        let Some(before) = now.0.checked_sub(STUCK_DEP_MICROS) else {
+            return;
+        };
+        let room = MAX_ASKED_OPS - self.asked.len();
+        let mut ids = log.stuck_deps(self.config.origin, Timestamp(before), MAX_BATCH_OPS);
+        ids.retain(|id| !self.asked.contains(id));
+        ids.truncate(room);
+        if ids.is_empty() {
+            return;
+        }
+        self.stats.n_ops_asked += ids.len() as u64;
+        self.asked.extend(ids.iter().copied());
+        self.control.push_back(Message::WantOps(ids));
     }
 
     /// Folds one round-trip sample into the estimate (a batch acked without a resend in
@@ -1077,6 +1150,7 @@ impl<P: Payload> SyncState<P> {
             self.resend_due(),
             self.have_due(log),
             self.relearn_due(),
+            self.stuck_due(log),
             pace,
             log.next_pending_expiry(),
         ]
@@ -1108,6 +1182,7 @@ impl<P: Payload> SyncState<P> {
         !self.have_out.is_empty()
             || !self.eph_out.is_empty()
             || self.next_fork_proof(log).is_some()
+            || (self.in_flight.len() < MAX_IN_FLIGHT_BATCHES && !self.asked_out.is_empty())
             || (self.in_flight.len() < MAX_IN_FLIGHT_BATCHES && self.sendable(log))
     }
 
@@ -1166,7 +1241,10 @@ impl<P: Payload> SyncState<P> {
         if self.in_flight.len() >= MAX_IN_FLIGHT_BATCHES {
             return None;
         }
-        let ops = self.next_batch(log);
+        let mut ops = self.asked_batch(log);
+        if ops.is_empty() {
+            ops = self.next_batch(log);
+        }
         if ops.is_empty() {
             return None;
         }
@@ -1207,6 +1285,25 @@ impl<P: Payload> SyncState<P> {
         };
         self.sendable_cache.set(Some((log.len(), sendable)));
         sendable
+    }
+
+    /// Ops the remote asked for by id, in the order asked, bounded like any batch.
+    fn asked_batch(&mut self, log: &Log<P>) -> Vec<Vec<u8>> {
+        let mut batch = Vec::new();
+        let mut n_bytes = 0;
+        while let Some(id) = self.asked_out.front() {
+            let Some(op) = log.get(id) else {
+                self.asked_out.pop_front();
+                continue;
+            };
+            if batch.len() == MAX_BATCH_OPS || n_bytes + op.encoded().len() > MAX_BATCH_BYTES {
+                break;
+            }
+            n_bytes += op.encoded().len();
+            batch.push(op.encoded().to_vec());
+            self.asked_out.pop_front();
+        }
+        batch
     }
 
     /// Ops the remote lacks and we have not sent, in linear order (so causally), bounded.

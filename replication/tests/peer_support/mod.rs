@@ -333,7 +333,7 @@ impl World {
 
     fn step(&mut self, bytes: &mut Bytes<'_>) {
         let conn = self.conn(bytes);
-        match bytes.u8() % 12 {
+        match bytes.u8() % 14 {
             0 => {
                 let _ = self.peer.connect(Timestamp(self.now), conn);
                 if !bytes.u8().is_multiple_of(4) {
@@ -406,6 +406,23 @@ impl World {
             10 => {
                 let raw: Vec<u8> = (0..bytes.u8()).map(|_| bytes.u8()).collect();
                 self.peer.handle_input(Timestamp(self.now), conn, &raw);
+            }
+            11 => {
+                // A fork proof: two hostile ops, a real fork when they share key and seq.
+                if let (Some(a), Some(b)) = (self.hostile_op(bytes), self.hostile_op(bytes)) {
+                    self.send(conn, &Message::Forked { ops: [a, b] });
+                }
+            }
+            12 => {
+                let ids = (0..=bytes.pick(6))
+                    .map(|_| match self.known.len() {
+                        n if n > 0 && bytes.u8().is_multiple_of(2) => {
+                            self.known[bytes.pick(n as u64) as usize]
+                        }
+                        _ => OpId([bytes.u8(); 32]),
+                    })
+                    .collect();
+                self.send(conn, &Message::WantOps(ids));
             }
             _ => {
                 let payload = self.payload(bytes);
