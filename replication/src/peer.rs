@@ -183,10 +183,31 @@ impl<P: Payload> Peer<P> {
     /// Handles bytes received on `conn`; unknown connections are ignored.
     pub fn handle_input(&mut self, now: Timestamp, conn: ConnId, bytes: &[u8]) {
         if let Some(sync) = self.connections.get_mut(&conn) {
+            let first = self.events.len();
             sync.handle_input(now, bytes, &mut self.log);
             drain(conn, sync, &mut self.events);
+            self.charge_others(conn, first);
             self.wants_dirty = true;
             self.close_expelled();
+        }
+    }
+
+    /// Hands the insertions among `events[first..]`, which `conn`'s input caused, to the
+    /// other connections, so each counts what they refused or evicted of its own remote's ops.
+    fn charge_others(&mut self, conn: ConnId, first: usize) {
+        let foreign: Vec<Insertion> = (self.events.range(first..))
+            .filter_map(|(_, e)| match e {
+                Event::Delivered(i) if !i.refused.is_empty() || !i.evicted.is_empty() => {
+                    Some(i.clone())
+                }
+                _ => None,
+            })
+            .collect();
+        for insertion in &foreign {
+            for (other, sync) in self.connections.iter_mut().filter(|(c, _)| **c != conn) {
+                sync.charge(insertion);
+                drain(*other, sync, &mut self.events);
+            }
         }
     }
 

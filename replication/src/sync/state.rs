@@ -371,7 +371,9 @@ pub struct SyncState<P> {
     repaired_at_messages_in: Option<u64>,
     /// Ops asked for by id on this connection (at most [`MAX_ASKED_OPS`]).
     asked: BTreeSet<OpId>,
-    /// When to next look for stuck dependencies.
+    /// When to next look for stuck dependencies: not before this connection is
+    /// [`STUCK_DEP_MICROS`] old, so what the version vectors bring after a reconnection is
+    /// never asked for again by id.
     stuck_check_at: Timestamp,
     /// Ops the remote asked for by id, to send.
     asked_out: VecDeque<OpId>,
@@ -427,7 +429,7 @@ impl<P: Payload> SyncState<P> {
             lacks_cache: Cell::new(None),
             repaired_at_messages_in: None,
             asked: BTreeSet::new(),
-            stuck_check_at: now,
+            stuck_check_at: now.saturating_add_micros(STUCK_DEP_MICROS),
             asked_out: VecDeque::new(),
             forks_sent: BTreeSet::new(),
             forks_idle: Cell::new(None),
@@ -943,6 +945,18 @@ impl<P: Payload> SyncState<P> {
     }
 
     fn on_insertion(&mut self, insertion: Insertion) {
+        self.charge(&insertion);
+        if !insertion.delivered.is_empty() {
+            self.stats.n_ops_delivered += insertion.delivered.len() as u64;
+            self.events.push_back(Event::Delivered(insertion));
+        }
+    }
+
+    /// Counts against the remote what `insertion` evicted or refused of the ops it sent,
+    /// whichever connection's input caused the insertion ([`crate::Peer`] hands every
+    /// insertion to every connection): an op parked from this remote may be freed, and
+    /// refused, by an op from another.
+    pub fn charge(&mut self, insertion: &Insertion) {
         for evicted in &insertion.evicted {
             if evicted.origin == self.config.origin {
                 let kind = match evicted.reason {
@@ -956,10 +970,6 @@ impl<P: Payload> SyncState<P> {
             if *origin == self.config.origin && !matches!(e, InsertError::Equivocation { .. }) {
                 self.reject(RejectKind::RefusedOp, format!("{id}: {e}"));
             }
-        }
-        if !insertion.delivered.is_empty() {
-            self.stats.n_ops_delivered += insertion.delivered.len() as u64;
-            self.events.push_back(Event::Delivered(insertion));
         }
     }
 
@@ -1044,7 +1054,7 @@ impl<P: Payload> SyncState<P> {
     }
 
     /// Asks the remote by id for the dependencies its ops waited for since
-    /// [`STUCK_DEP_MICROS`] ago, each once on this connection.
+    /// [`STUCK_DEP_MICROS`] ago, each once on this connection (which is at least that old).
     fn ask_stuck(&mut self, now: Timestamp, log: &Log<P>) {
         self.stuck_check_at = now.saturating_add_micros(STUCK_CHECK_MICROS);
         let Some(before) = now.0.checked_sub(STUCK_DEP_MICROS) else {
