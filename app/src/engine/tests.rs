@@ -399,9 +399,13 @@ fn the_founder_expels_a_peer_over_quic_and_hears_from_it_no_more() {
     wait_view(&a, "b expelled and cut off", |v| {
         v.expelled().contains(&member) && v.n_online() == 0
     });
-    // B goes on writing, and its engine dials A again: A hears none of it.
+    // B goes on writing, and its engine dials A again every 2 s: A refuses it at
+    // admission, so it hears none of it and never sees it connect again.
+    let (_, seen) = a.news_since(0);
     author(&b, ShapePayload::Chat("still here".into()));
-    std::thread::sleep(Duration::from_millis(1_500));
+    std::thread::sleep(Duration::from_millis(2 * DIAL_RETRY_MILLIS + 500));
+    let (lines, _) = a.news_since(seen);
+    assert!(!lines.iter().any(|l| l.contains("connected")), "{lines:?}");
     assert_eq!(lock(a.view()).n_ops(), 2, "the demo and the expel only");
     drop((a, b));
     let _ = fs::remove_dir_all(&da);

@@ -305,6 +305,19 @@ impl<P: Payload + Send + 'static> Core<P> {
             let kind = RefusalKind::SelfConnection;
             return self.refuse(&connection, reply, kind, DialError::SelfConnection);
         }
+        // An expelled member holds the invite but syncs with nobody: refused here, before it
+        // costs a connection slot, a sync state and a connected-then-left pair of events.
+        if let Some(out) = [peer, me]
+            .into_iter()
+            .find(|p| self.peer.log().is_expelled(p))
+        {
+            return self.refuse(
+                &connection,
+                reply,
+                RefusalKind::Expelled,
+                DialError::Expelled(out),
+            );
+        }
         // Two connections to one peer (both dialed at once, or a redial): both sides keep
         // the one whose dialer has the smaller id, and the newer one when the dialer is the
         // same (a redial means the dialer believes the old one is dead). A connection from

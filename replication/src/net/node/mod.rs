@@ -159,6 +159,9 @@ pub enum DialError {
     /// Already [`crate::peer::MAX_CONNECTIONS`] connections.
     #[error("too many connections")]
     TooManyConnections,
+    /// The session's founder expelled the remote, or this node ([`crate::membership`]).
+    #[error("the session's founder expelled {0}")]
+    Expelled(PeerId),
 }
 
 /// Why an op could not be authored through the node.
@@ -237,6 +240,9 @@ pub enum RefusalKind {
     SelfConnection,
     /// Already [`crate::peer::MAX_CONNECTIONS`] connections.
     TooManyConnections,
+    /// The remote, or this node, is expelled from the session: admitted by the invite, it
+    /// would be closed as soon as the sync starts.
+    Expelled,
 }
 
 impl RefusalKind {
