@@ -89,12 +89,13 @@ pub const MAX_WITHDRAWN_CLAIMS: usize = MAX_REMOTE_UNKNOWN_AUTHORS;
 /// A connection that dropped some of the remote's claims checks this often (1 s) whether
 /// enough of what it kept has arrived to ask for the remote's full have again.
 pub const RELEARN_CHECK_MICROS: u64 = HAVE_EVERY_MICROS;
-/// How long an op from the remote waits for a dependency before this peer asks the remote
-/// for it by id ([`Message::WantOps`]): long enough that version vectors would have brought
-/// it (a full have goes out this often), so only what they cannot name is asked for, such as
-/// the other op of a fork.
+/// How long an op from the remote waits for a dependency, with the log not growing, before
+/// this peer asks the remote for it by id ([`Message::WantOps`]): while version vectors bring
+/// ops the log grows, so only what they cannot name is asked for, such as the other op of a
+/// fork (a full have goes out this often).
 pub const STUCK_DEP_MICROS: u64 = HAVE_FULL_EVERY_MICROS;
-/// How often a connection with ops from its remote waiting looks for stuck dependencies.
+/// How soon a connection that asked for stuck dependencies looks for more (after a look
+/// that found none, it waits [`STUCK_DEP_MICROS`]).
 pub const STUCK_CHECK_MICROS: u64 = HAVE_EVERY_MICROS;
 /// Most ops one connection asks for by id over its life.
 pub const MAX_ASKED_OPS: usize = 1024;
@@ -377,6 +378,9 @@ pub struct SyncState<P> {
     stuck_check_at: Timestamp,
     /// Ops the remote asked for by id, to send.
     asked_out: VecDeque<OpId>,
+    /// The log's length at the last check for stuck dependencies, and since when it was so.
+    stuck_log_len: Option<usize>,
+    log_still_since: Timestamp,
     /// Authors whose fork proof went out on this connection.
     forks_sent: BTreeSet<PeerId>,
     /// The log's proof count and `remote_vv_version` at which no proof was left to send.
@@ -431,6 +435,8 @@ impl<P: Payload> SyncState<P> {
             asked: BTreeSet::new(),
             stuck_check_at: now.saturating_add_micros(STUCK_DEP_MICROS),
             asked_out: VecDeque::new(),
+            stuck_log_len: None,
+            log_still_since: now,
             forks_sent: BTreeSet::new(),
             forks_idle: Cell::new(None),
             control: VecDeque::new(),
@@ -524,6 +530,7 @@ impl<P: Payload> SyncState<P> {
     pub fn handle_input(&mut self, now: Timestamp, bytes: &[u8], log: &mut Log<P>) {
         let n_proofs = log.forks().proofs().len();
         self.read_input(now, bytes, log);
+        self.observe_log(now, log);
         // Forks this input revealed: a proof it carried, or an op that forks a held one.
         for proof in &log.forks().proofs()[n_proofs..] {
             self.events.push_back(Event::Forked {
@@ -1006,6 +1013,7 @@ impl<P: Payload> SyncState<P> {
         if self.relearn_due().is_some_and(|d| d <= now) {
             self.relearn(now, log);
         }
+        self.observe_log(now, log);
         if self.stuck_due(log).is_some_and(|d| d <= now) {
             self.ask_stuck(now, log);
         }
@@ -1044,29 +1052,48 @@ impl<P: Payload> SyncState<P> {
         }
     }
 
-    /// When to look for stuck dependencies: while ops from the remote wait and there is room
-    /// to ask.
+    /// Notes whether the log grew since last seen (on every input and timer): a log that
+    /// grows is still being brought what it lacks.
+    fn observe_log(&mut self, now: Timestamp, log: &Log<P>) {
+        if self.stuck_log_len != Some(log.len()) {
+            self.stuck_log_len = Some(log.len());
+            self.log_still_since = now;
+        }
+    }
+
+    /// When to look for stuck dependencies: while ops from the remote wait, there is room to
+    /// ask, and the log has not grown for [`STUCK_DEP_MICROS`] as last seen.
     fn stuck_due(&self, log: &Log<P>) -> Option<Timestamp> {
         let waiting = self.remote.is_some()
             && self.asked.len() < MAX_ASKED_OPS
             && log.n_pending_from(self.config.origin) > 0;
-        waiting.then_some(self.stuck_check_at)
+        let still = self.log_still_since.saturating_add_micros(STUCK_DEP_MICROS);
+        waiting.then_some(self.stuck_check_at.max(still))
     }
 
     /// Asks the remote by id for the dependencies its ops waited for since
-    /// [`STUCK_DEP_MICROS`] ago, each once on this connection (which is at least that old).
+    /// [`STUCK_DEP_MICROS`] ago, each once on this connection (which is at least that old),
+    /// once the log has not grown for as long.
     fn ask_stuck(&mut self, now: Timestamp, log: &Log<P>) {
-        self.stuck_check_at = now.saturating_add_micros(STUCK_CHECK_MICROS);
+        self.observe_log(now, log);
+        let still = self.log_still_since.saturating_add_micros(STUCK_DEP_MICROS);
         let Some(before) = now.0.checked_sub(STUCK_DEP_MICROS) else {
             return;
         };
+        if now < still {
+            // The log grows: what it waits for may still come by the version vectors.
+            return;
+        }
         let room = MAX_ASKED_OPS - self.asked.len();
         let mut ids = log.stuck_deps(self.config.origin, Timestamp(before), MAX_BATCH_OPS);
         ids.retain(|id| !self.asked.contains(id));
         ids.truncate(room);
         if ids.is_empty() {
+            // Nothing new to ask: look again after as long (a split stays quiet).
+            self.stuck_check_at = now.saturating_add_micros(STUCK_DEP_MICROS);
             return;
         }
+        self.stuck_check_at = now.saturating_add_micros(STUCK_CHECK_MICROS);
         self.stats.n_ops_asked += ids.len() as u64;
         self.asked.extend(ids.iter().copied());
         self.control.push_back(Message::WantOps(ids));
