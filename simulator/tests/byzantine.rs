@@ -1,10 +1,9 @@
 //! The `byzantine` presets: a hostile member that holds the invite, runs the real core and
 //! crafts attacks (issue 17). A few small seeds here; campaigns run thousands from the CLI.
 //!
-//! Until replication binds a lease only to ops that had it in their causal past (issue 17,
-//! item 3), the causal-erasure checker fails on every run with leases, honest or hostile: those
-//! failures are the known ones, and everything else must hold. Equivocation (item 2) is not
-//! handled yet either: `byzantine-forks` splits the session, a known failure kept visible here.
+//! Every checker must hold, the causal-erasure one included. Equivocation (item 2) is only
+//! detected: `byzantine-forks` splits the session, a known failure kept visible here, while
+//! every honest peer learns who forked.
 
 use simulator::config::{Config, FaultKind, FaultSet, Faults};
 use simulator::memory::CountingAlloc;
@@ -183,4 +182,11 @@ fn forks_split_the_session_a_known_failure() {
     // Each side refuses the other's fork, and every honest op after it waits forever.
     let split = |f: &&String| f.contains("still pending") || f.contains("no quiescence");
     assert!(other_failures(&report).iter().any(split), "{report}");
+    // But every honest peer learns who forked: the holder of one side asks for the other by
+    // id, refuses it and passes the proof on (the fork-proof checker finds no peer without).
+    assert!(report.stats.n_forks_learnt >= 3, "{report}");
+    assert!(
+        !report.failures.iter().any(|f| f.contains("no proof")),
+        "{report}"
+    );
 }
