@@ -381,7 +381,8 @@ pub struct SyncState<P> {
     /// The log's length at the last check for stuck dependencies, and since when it was so.
     stuck_log_len: Option<usize>,
     log_still_since: Timestamp,
-    /// Authors whose fork proof went out on this connection.
+    /// Authors whose fork proof went out on this connection, or came in on it (at most the
+    /// log's proofs, [`crate::fork::MAX_FORK_PROOFS`]).
     forks_sent: BTreeSet<PeerId>,
     /// The log's proof count and `remote_vv_version` at which no proof was left to send.
     forks_idle: Cell<Option<(usize, u64)>>,
@@ -679,16 +680,21 @@ impl<P: Payload> SyncState<P> {
                 return;
             }
         };
-        // Whoever sent it holds it: it need not go back.
-        self.forks_sent.insert(author);
-        if log.forks().contains(&author) || log.version_vector().get(&author) == 0 {
+        if log.version_vector().get(&author) == 0 {
             return;
         }
-        match ForkProof::check(a, b) {
-            Ok(proof) => {
-                log.record_fork(proof);
+        if !log.forks().contains(&author) {
+            match ForkProof::check(a, b) {
+                Ok(proof) => {
+                    log.record_fork(proof);
+                }
+                Err(e) => return self.reject(RejectKind::BadForkProof, e.to_string()),
             }
-            Err(e) => self.reject(RejectKind::BadForkProof, e.to_string()),
+        }
+        // Whoever sent a good proof holds one: ours need not go back. Only authors with a
+        // proof here are noted, so the set stays within the log's proofs.
+        if log.forks().contains(&author) {
+            self.forks_sent.insert(author);
         }
     }
 
