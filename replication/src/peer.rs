@@ -387,13 +387,19 @@ mod tests {
 
     type TPeer = Peer<TestPayload>;
 
-    /// Delivers every queued message at once, in order, until nothing moves.
-    fn pump(peers: &mut [TPeer], links: &[(usize, ConnId, usize, ConnId)], now: Timestamp) {
+    /// Delivers every queued message at once, in order, until nothing moves; returns the
+    /// events drained on the way, with the index of the peer that had each.
+    fn pump(
+        peers: &mut [TPeer],
+        links: &[(usize, ConnId, usize, ConnId)],
+        now: Timestamp,
+    ) -> Vec<(usize, Event)> {
         let mut route = BTreeMap::new();
         for &(a, a_conn, b, b_conn) in links {
             route.insert((a, a_conn), (b, b_conn));
             route.insert((b, b_conn), (a, a_conn));
         }
+        let mut events = Vec::new();
         for _ in 0..1000 {
             let mut moved = false;
             for from in 0..peers.len() {
@@ -403,11 +409,11 @@ mod tests {
                     moved = true;
                 }
             }
-            for p in peers.iter_mut() {
-                while p.poll_event().is_some() {}
+            for (i, p) in peers.iter_mut().enumerate() {
+                events.extend(std::iter::from_fn(|| p.poll_event()).map(|(_, e)| (i, e)));
             }
             if !moved {
-                return;
+                return events;
             }
         }
         panic!("the sync did not quiesce");
@@ -1042,11 +1048,6 @@ mod tests {
             (1, ConnId(1), 2, ConnId(2)),
             (2, ConnId(3), 3, ConnId(1)),
         ];
-        let mut route = BTreeMap::new();
-        for &(a, a_conn, b, b_conn) in &links {
-            route.insert((a, a_conn), (b, b_conn));
-            route.insert((b, b_conn), (a, a_conn));
-        }
         peers[2].connect(now, ConnId(3)).unwrap();
         peers[3].connect(now, ConnId(1)).unwrap();
         let mut forked = Vec::new();
@@ -1057,26 +1058,12 @@ mod tests {
             for p in peers.iter_mut() {
                 p.handle_timeout(Timestamp(t));
             }
-            for _ in 0..100 {
-                let mut moved = false;
-                for from in 0..peers.len() {
-                    while let Some((conn, bytes)) = peers[from].poll_transmit(Timestamp(t)) {
-                        let (to, to_conn) = route[&(from, conn)];
-                        peers[to].handle_input(Timestamp(t), to_conn, &bytes);
-                        moved = true;
-                    }
-                }
-                for (i, p) in peers.iter_mut().enumerate() {
-                    while let Some((_, e)) = p.poll_event() {
-                        if i == 3 && matches!(e, Event::Forked { .. }) {
-                            forked.push(e);
-                        }
-                    }
-                }
-                if !moved {
-                    break;
-                }
-            }
+            let events = pump(&mut peers, &links, Timestamp(t));
+            forked.extend(
+                (events.into_iter())
+                    .filter(|(i, e)| *i == 3 && matches!(e, Event::Forked { .. }))
+                    .map(|(_, e)| e),
+            );
         }
         assert_eq!(peers[3].log().version_vector().get(&twin), 1);
         assert_eq!(
