@@ -378,7 +378,7 @@ pub struct SyncState<P> {
     stuck_check_at: Timestamp,
     /// Ops the remote asked for by id, to send.
     asked_out: VecDeque<OpId>,
-    /// The log's length at the last check for stuck dependencies, and since when it was so.
+    /// The log's length when last seen (every input and timer), and since when it was so.
     stuck_log_len: Option<usize>,
     log_still_since: Timestamp,
     /// Authors whose fork proof went out on this connection, or came in on it (at most the
@@ -948,11 +948,9 @@ impl<P: Payload> SyncState<P> {
         self.update_up_to_date(log);
     }
 
-    /// Counts an op the log refused against the remote, unless it forked a held op: an
-    /// honest remote may hold the other side of a fork (and send it when asked by id), and
-    /// the log keeps the proof.
+    /// Counts an op the log refused against the remote ([`is_offence`]).
     fn reject_refused(&mut self, e: &InsertError) {
-        if !matches!(e, InsertError::Equivocation { .. }) {
+        if is_offence(e) {
             self.reject(RejectKind::RefusedOp, e.to_string());
         }
     }
@@ -980,7 +978,7 @@ impl<P: Payload> SyncState<P> {
             }
         }
         for (id, origin, e) in &insertion.refused {
-            if *origin == self.config.origin && !matches!(e, InsertError::Equivocation { .. }) {
+            if *origin == self.config.origin && is_offence(e) {
                 self.reject(RejectKind::RefusedOp, format!("{id}: {e}"));
             }
         }
@@ -1384,6 +1382,13 @@ impl<P: Payload> SyncState<P> {
         }
         batch
     }
+}
+
+/// True if the log's refusal of an op counts against the remote that sent it: all do but a
+/// fork of a held op, since an honest remote may hold the other side (and send it when asked
+/// by id), and the log keeps the proof.
+fn is_offence(e: &InsertError) -> bool {
+    !matches!(e, InsertError::Equivocation { .. })
 }
 
 /// The rejection a received op's decode error counts as.
