@@ -1,252 +1,145 @@
-//! Evidence of equivocation: an author that signed two different ops with one seq.
+//! Equivocation: an author that signed two different ops with one seq (a fork of its history).
 //!
-//! A log keeps one op per author and seq, so it refuses the second op of a fork
-//! ([`crate::log::InsertError::Equivocation`]). What it keeps instead is a [`ForkProof`]: both
-//! ops' signed bytes, which anyone can check on their own. Sync passes each proof a peer holds
-//! to its connections once (`Message::Forked`), so every member learns of a fork that any one
-//! of them saw, and the app marks the author. Proofs change no verdict and no order: they are
-//! for people (an honest identity running as two copies, or a store restored from an old
-//! backup, forks too, and its user must be told).
+//! A hostile member forks on purpose, often giving each side to a different peer; an honest
+//! identity forks too when it runs as two copies, or when its store is restored from an old
+//! backup. Whatever the cause, a log accepts both sides: an op whose author's slot is taken is
+//! held beside the first (a *sibling*), ordered by its key and then its id, so the honest ops
+//! built on either side are delivered and every peer holds the same history.
+//!
+//! The verdict is deterministic and does not depend on which side came first: once a log holds
+//! two ops of an author with one seq, every op of that author at the lowest such seq or after is
+//! rejected as [`crate::RejectReason::Forked`], on both sides. Neither side can be preferred on
+//! merit, and an op of a side nobody built on may never reach every peer (version vectors count
+//! seqs, not sides), so no peer may let it count. The author's ops before the fork stand. Past
+//! the fork an author's ops reach their causal past through their deps only (no implicit
+//! previous op: which op that is depends on the side).
+//!
+//! [`Forks`] notes, per author, the lowest forked seq and two ops that prove it. Sync passes the
+//! two ops to every connection whose remote holds the author (`Message::Forked`); the receiver
+//! inserts them like any other ops, so it holds both sides of the proof and reaches the same
+//! verdict.
 
 use std::collections::BTreeMap;
 
-use crate::codec::DecodeError;
-use crate::identity::{PeerId, VerifyError};
-use crate::op::{Envelope, Op, OpId};
+use crate::identity::PeerId;
+use crate::op::OpId;
 
-/// Most fork proofs a log keeps (one per author); later ones are counted and dropped.
-pub const MAX_FORK_PROOFS: usize = 1024;
-/// Most bytes of ops the kept fork proofs hold, in all.
-pub const MAX_FORK_PROOF_BYTES: usize = 8 * 1024 * 1024;
-
-/// Why bytes offered as a fork proof are not one.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum ProofError {
-    /// One of the two ops does not decode.
-    #[error("op {index} of the proof: {error}")]
-    Decode {
-        /// Which op (0 or 1).
-        index: usize,
-        /// The decoder's error, with its offset in that op.
-        error: DecodeError,
-    },
-    /// One of the two ops is not signed by its author.
-    #[error("op {index} of the proof: {error}")]
-    Verify {
-        /// Which op (0 or 1).
-        index: usize,
-        /// The signature check's error.
-        error: VerifyError,
-    },
-    /// The two ops are not two different ops of one author with one seq.
-    #[error("the two ops are not a fork (authors, seqs or ids do not differ as a fork's do)")]
-    NotAFork,
+/// The lowest seq an author signed twice, with two held ops of that seq.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Fork {
+    /// The seq signed twice.
+    pub seq: u64,
+    /// Two different held ops of the author with that seq, in id order.
+    pub ids: [OpId; 2],
+    /// When this entry last changed, on [`Forks::generation`]'s count.
+    generation: u64,
 }
 
-/// Two different ops signed by one author with one seq, in id order.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ForkProof {
-    author: PeerId,
-    seq: u64,
-    ops: [Box<[u8]>; 2],
-}
-
-impl ForkProof {
-    /// Checks untrusted bytes: both decode as ops, both signatures hold, and they are two
-    /// different ops of one author with one seq.
-    pub fn check(a: &[u8], b: &[u8]) -> Result<Self, ProofError> {
-        let parse = |index, bytes| {
-            let envelope =
-                Envelope::parse(bytes).map_err(|error| ProofError::Decode { index, error })?;
-            envelope
-                .verify()
-                .map_err(|error| ProofError::Verify { index, error })?;
-            Ok(envelope)
-        };
-        let (ea, eb) = (parse(0, a)?, parse(1, b)?);
-        if ea.author() != eb.author() || ea.seq() != eb.seq() || ea.id() == eb.id() {
-            return Err(ProofError::NotAFork);
-        }
-        Ok(Self::ordered(
-            ea.author(),
-            ea.seq(),
-            (ea.id(), a),
-            (eb.id(), b),
-        ))
-    }
-
-    /// The proof two verified ops make (the caller checked they are a fork).
-    pub(crate) fn of_ops<P>(a: &Op<P>, b: &Op<P>) -> Self {
-        debug_assert!(a.author() == b.author() && a.seq() == b.seq() && a.id() != b.id());
-        Self::ordered(
-            a.author(),
-            a.seq(),
-            (a.id(), a.encoded()),
-            (b.id(), b.encoded()),
-        )
-    }
-
-    fn ordered(author: PeerId, seq: u64, a: (OpId, &[u8]), b: (OpId, &[u8])) -> Self {
-        let (first, second) = if a.0 < b.0 { (a, b) } else { (b, a) };
-        Self {
-            author,
-            seq,
-            ops: [first.1.into(), second.1.into()],
-        }
-    }
-
-    /// The author that equivocated.
-    pub fn author(&self) -> PeerId {
-        self.author
-    }
-
-    /// The seq it signed twice.
-    pub fn seq(&self) -> u64 {
-        self.seq
-    }
-
-    /// The two ops' encodings, in id order.
-    pub fn ops(&self) -> [&[u8]; 2] {
-        [&self.ops[0], &self.ops[1]]
-    }
-
-    fn n_bytes(&self) -> usize {
-        self.ops[0].len() + self.ops[1].len()
-    }
-}
-
-/// The fork proofs a log holds: at most one per author, in the order they were learnt, within
-/// [`MAX_FORK_PROOFS`] and [`MAX_FORK_PROOF_BYTES`].
+/// The forks a log holds, one entry per forked author (so no more entries than authors held).
 #[derive(Debug, Clone, Default)]
 pub struct Forks {
-    proofs: Vec<ForkProof>,
-    by_author: BTreeMap<PeerId, usize>,
-    n_bytes: usize,
-    n_dropped: u64,
+    by_author: BTreeMap<PeerId, Fork>,
+    generation: u64,
 }
 
 impl Forks {
-    /// Keeps `proof` if its author has none yet and there is room; true if kept.
-    pub fn record(&mut self, proof: ForkProof) -> bool {
-        if self.by_author.contains_key(&proof.author) {
+    /// Notes that `author` signed `a` and `b` (different held ops) with `seq`; true if this is
+    /// the author's first fork or a lower seq than the one noted.
+    pub(crate) fn record(&mut self, author: PeerId, seq: u64, a: OpId, b: OpId) -> bool {
+        debug_assert!(a != b, "a fork is two different ops");
+        if self.seq_of(&author).is_some_and(|held| held <= seq) {
             return false;
         }
-        if self.proofs.len() >= MAX_FORK_PROOFS
-            || self.n_bytes + proof.n_bytes() > MAX_FORK_PROOF_BYTES
-        {
-            self.n_dropped += 1;
-            return false;
-        }
-        self.n_bytes += proof.n_bytes();
-        self.by_author.insert(proof.author, self.proofs.len());
-        self.proofs.push(proof);
+        self.generation += 1;
+        let ids = if a < b { [a, b] } else { [b, a] };
+        let generation = self.generation;
+        self.by_author.insert(
+            author,
+            Fork {
+                seq,
+                ids,
+                generation,
+            },
+        );
         true
     }
 
-    /// The seq `author` signed twice, if a proof of it is held.
+    /// The lowest seq `author` signed twice, if it forked.
     pub fn seq_of(&self, author: &PeerId) -> Option<u64> {
-        self.by_author.get(author).map(|&i| self.proofs[i].seq)
+        self.by_author.get(author).map(|f| f.seq)
     }
 
-    /// True if a proof of `author` is held.
+    /// True if `author` forked.
     pub fn contains(&self, author: &PeerId) -> bool {
         self.by_author.contains_key(author)
     }
 
-    /// The proofs, in the order they were learnt (a list that only grows).
-    pub fn proofs(&self) -> &[ForkProof] {
-        &self.proofs
+    /// The forked authors in id order, each with its fork.
+    pub fn iter(&self) -> impl Iterator<Item = (&PeerId, &Fork)> {
+        self.by_author.iter()
     }
 
-    /// The authors with a proof, and the seq each signed twice.
+    /// The forked authors, each with the lowest seq it signed twice.
     pub fn authors(&self) -> impl Iterator<Item = (PeerId, u64)> + '_ {
-        self.proofs.iter().map(|p| (p.author, p.seq))
+        self.by_author.iter().map(|(a, f)| (*a, f.seq))
     }
 
-    /// Proofs dropped for want of room.
-    pub fn n_dropped(&self) -> u64 {
-        self.n_dropped
+    /// Number of forked authors.
+    pub fn len(&self) -> usize {
+        self.by_author.len()
+    }
+
+    /// True if no author forked.
+    pub fn is_empty(&self) -> bool {
+        self.by_author.is_empty()
+    }
+
+    /// A count that grows with every change: compare two readings to learn whether a fork was
+    /// found or lowered between them.
+    pub fn generation(&self) -> u64 {
+        self.generation
+    }
+
+    /// The authors whose fork was found or lowered after `generation`, with its seq now.
+    pub fn changed_since(&self, generation: u64) -> impl Iterator<Item = (PeerId, u64)> + '_ {
+        let any = self.generation > generation;
+        (self.by_author.iter())
+            .filter(move |(_, f)| any && f.generation > generation)
+            .map(|(a, f)| (*a, f.seq))
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Keypair;
-    use crate::op::OpFields;
-    use crate::payload::test_payload::TestPayload;
-    use crate::time::Timestamp;
 
-    fn op(key: &Keypair, seq: u64, text: &str) -> Op<TestPayload> {
-        let fields = OpFields {
-            seq,
-            lamport: seq,
-            timestamp: Timestamp(seq),
-            deps: Vec::new(),
-            payload: TestPayload::Chat(text.into()),
-        };
-        Op::sign(key, fields).expect("signs").into_op()
+    fn id(byte: u8) -> OpId {
+        OpId([byte; 32])
     }
 
     #[test]
-    fn a_proof_is_two_signed_ops_of_one_author_and_seq() {
-        let key = Keypair::from_seed([7; 32]);
-        let (a, b) = (op(&key, 3, "left"), op(&key, 3, "right"));
-        let proof = ForkProof::check(a.encoded(), b.encoded()).expect("a fork");
-        assert_eq!((proof.author(), proof.seq()), (key.peer_id(), 3));
-        // The same proof whichever order the ops come in, and from held ops.
-        assert_eq!(
-            ForkProof::check(b.encoded(), a.encoded()),
-            Ok(proof.clone())
-        );
-        assert_eq!(ForkProof::of_ops(&a, &b), proof);
-    }
-
-    #[test]
-    fn what_is_not_a_fork_is_refused_with_its_reason() {
-        let key = Keypair::from_seed([7; 32]);
-        let other = Keypair::from_seed([8; 32]);
-        let a = op(&key, 3, "left");
-        let not_a_fork = [
-            op(&key, 3, "left"),  // the same op
-            op(&key, 4, "right"), // another seq
-            op(&other, 3, "right"),
-        ];
-        for b in &not_a_fork {
-            assert_eq!(
-                ForkProof::check(a.encoded(), b.encoded()),
-                Err(ProofError::NotAFork)
-            );
-        }
-        // A forged signature: the last byte of the signature flipped.
-        let mut forged = op(&key, 3, "right").encoded().to_vec();
-        *forged.last_mut().expect("bytes") ^= 1;
-        assert!(matches!(
-            ForkProof::check(a.encoded(), &forged),
-            Err(ProofError::Verify { index: 1, .. })
-        ));
-        assert!(matches!(
-            ForkProof::check(&a.encoded()[..10], &forged),
-            Err(ProofError::Decode { index: 0, .. })
-        ));
-    }
-
-    #[test]
-    fn one_proof_per_author_within_the_limits() {
+    fn a_fork_is_noted_once_per_author_at_its_lowest_seq() {
         let mut forks = Forks::default();
-        let key = Keypair::from_seed([7; 32]);
-        let proof = |seq| ForkProof::of_ops(&op(&key, seq, "a"), &op(&key, seq, "b"));
-        assert!(forks.record(proof(5)));
-        assert!(!forks.record(proof(2)), "one proof per author");
-        assert_eq!(forks.seq_of(&key.peer_id()), Some(5));
-        for i in 0..MAX_FORK_PROOFS as u64 + 3 {
-            let mut seed = [0; 32];
-            seed[..8].copy_from_slice(&i.to_le_bytes());
-            seed[31] = 1;
-            let k = Keypair::from_seed(seed);
-            forks.record(ForkProof::of_ops(&op(&k, 1, "a"), &op(&k, 1, "b")));
-        }
-        assert_eq!(forks.proofs().len(), MAX_FORK_PROOFS);
-        assert_eq!(forks.n_dropped(), 4);
+        let (x, y) = (PeerId([1; 32]), PeerId([2; 32]));
+        assert!(forks.record(x, 5, id(9), id(3)));
+        assert_eq!(
+            forks.iter().next().map(|(_, f)| f.ids),
+            Some([id(3), id(9)])
+        );
+        let g = forks.generation();
+        assert!(
+            !forks.record(x, 7, id(4), id(5)),
+            "a higher seq adds nothing"
+        );
+        assert!(!forks.record(x, 5, id(4), id(5)), "nor does the same seq");
+        assert_eq!(forks.changed_since(g).count(), 0);
+        assert!(forks.record(x, 2, id(4), id(5)), "a lower seq replaces it");
+        assert!(forks.record(y, 1, id(6), id(7)));
+        assert_eq!(forks.seq_of(&x), Some(2));
+        assert_eq!(
+            forks.changed_since(g).collect::<Vec<_>>(),
+            vec![(x, 2), (y, 1)]
+        );
+        assert_eq!(forks.len(), 2);
     }
 }

@@ -67,6 +67,9 @@ pub enum RejectReason {
     /// An op of a member the session's founder expelled, not in the expel's causal past: it
     /// is void (see [`crate::membership`]).
     Expelled,
+    /// An op of an author that signed two different ops with one seq, at that seq or after:
+    /// both sides are held, neither counts (see [`crate::fork`]).
+    Forked,
 }
 
 impl fmt::Display for RejectReason {
@@ -81,6 +84,7 @@ impl fmt::Display for RejectReason {
             Self::TargetNotEffective => f.write_str("undo/redo of a rejected edit"),
             Self::AlreadyUndone => f.write_str("already undone"),
             Self::NotUndone => f.write_str("redo of an edit that is not undone"),
+            Self::Forked => f.write_str("its author forked its history at or before it"),
             Self::Expelled => f.write_str("its author was expelled"),
         }
     }

@@ -50,11 +50,12 @@
 //!   by [`Log::rejected_by`]; hostile input (bad signature, malformed bytes, oversized
 //!   batches, ops whose deps never come) is a counted [`sync::state::RejectKind`], never a
 //!   panic, and never costs an honest op.
-//! - An author that signs two ops with one seq (equivocation) is refused at the second one
-//!   seen; peers that saw different forks first may then disagree about that author's later
-//!   ops. The peer that sees both keeps a [`fork::ForkProof`] and sync spreads it, so every
-//!   member learns who forked. Honest authors fork only when one identity runs as two copies
-//!   or from a restored backup.
+//! - An author that signs two ops with one seq (equivocation) forks its history: both sides
+//!   are held, so honest ops built on either side are delivered, and every op of that author
+//!   from the fork on is rejected, whichever side a peer saw first ([`fork`]). Haves name the
+//!   op at each announced seq, so peers holding different sides find out even when nobody
+//!   built on them, and sync passes the two ops to every peer holding the author. Honest
+//!   authors fork only when one identity runs as two copies or from a restored backup.
 //! - Lease expiry is judged by op timestamps, which authors choose: it is deterministic, not
 //!   a guarantee against a peer with a wrong clock.
 //!
@@ -67,9 +68,10 @@
 //!   `[payload len ≤ 16 KiB][payload][ed25519 signature 64]`, deps sorted and distinct; the
 //!   signature covers `"sculpt/op/v1"` + everything before it; the id is blake3 of all of it.
 //! - Sync message: `[1][tag]` then Hello `[protocol][session 16][peer 32][hello_seen]`,
-//!   Have `[vv]`, Want `[vv]`, Ops `[batch_no][n ≤ 64][op bytes]*`, Ack `[batch_no][vv]`,
-//!   Ephemeral `[channel][seq][value ≤ 1 KiB]`, Forked `[op bytes][op bytes]`, WantOps
-//!   `[n ≤ 64][id 32]*`; a vv is `[n][author 32][seq]*` sorted.
+//!   Have `[vv][n = 0 or the vv's][tip u64 LE]*`, Want `[vv]`, Ops `[batch_no][n ≤ 64][op
+//!   bytes]*`, Ack `[batch_no][vv]`, Ephemeral `[channel][seq][value ≤ 1 KiB]`, Forked `[op
+//!   bytes][op bytes][answer]`, WantOps `[n ≤ 64][id 32]*`; a vv is `[n][author 32][seq]*`
+//!   sorted.
 //! - Store file: `SCULPTOPS` `[1]`, then records `[u32 LE len][blake3 of len+body, 16][body]`.
 //! - Snapshot: see [`snapshot`] (`SCULPTSNAP` `[1]` ... `[blake3 32]`).
 //!

@@ -5,7 +5,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use crate::causal::{Frontier, Reach, VersionVector};
-use crate::fork::{ForkProof, Forks};
+use crate::fork::Forks;
 use crate::identity::{Keypair, PeerId};
 use crate::lease::{FoldState, Lease, Mark, RejectReason, TargetInfo};
 use crate::membership::{FounderCommitment, Membership};
@@ -228,7 +228,8 @@ pub struct Refold {
     /// after later ones were inserted (events drained in a batch) must use these.
     pub object_keys: BTreeMap<ObjectId, OrderKey>,
     /// Authors whose ops from this seq on turned void or counted again (an expel or a readmit,
-    /// [`crate::membership`]): their independent entries from there must be applied again.
+    /// [`crate::membership`]), or were rejected by a fork ([`crate::fork`]): their independent
+    /// entries from there must be applied again.
     pub void_from: BTreeMap<PeerId, u64>,
 }
 
@@ -395,9 +396,17 @@ pub struct Log<P> {
     members_changed: BTreeSet<PeerId>,
     /// Members whose ops from this seq on changed sides since the last refold.
     void_changed: BTreeMap<PeerId, u64>,
-    /// Proofs of authors that signed two ops with one seq ([`crate::fork`]): seen here, or
-    /// learnt from peers. They change no verdict.
+    /// Authors that signed two held ops with one seq ([`crate::fork`]): their ops from that
+    /// seq on are rejected as [`RejectReason::Forked`].
     forks: Forks,
+    /// Per forked author, its held ops that are not on its chain (`by_author`): the second and
+    /// later ops of a seq, in delivery order.
+    siblings: BTreeMap<PeerId, Vec<OpId>>,
+    /// Authors whose fork was found or lowered since the last refold.
+    forks_changed: BTreeSet<PeerId>,
+    /// Objects whose deletes learnt again what they saw (after a fork), with the delete's
+    /// position: their hidden edits are recomputed by the next refold.
+    hides_changed: Vec<(ObjectId, usize)>,
 }
 
 impl<P: Payload> Default for Log<P> {
@@ -441,6 +450,9 @@ impl<P: Payload> Log<P> {
             members_changed: BTreeSet::new(),
             void_changed: BTreeMap::new(),
             forks: Forks::default(),
+            siblings: BTreeMap::new(),
+            forks_changed: BTreeSet::new(),
+            hides_changed: Vec::new(),
         }
     }
 
@@ -682,6 +694,11 @@ impl<P: Payload> Log<P> {
             }
         }
         self.stats.n_evicted += out.evicted.len() as u64;
+        if !self.forks_changed.is_empty()
+            && let Some(pos) = self.note_forks()
+        {
+            first_pos = Some(first_pos.map_or(pos, |f| f.min(pos)));
+        }
         if !self.members_changed.is_empty() {
             // A membership op was delivered, so `first_pos` is set and the refold reports
             // the activity this changes.
@@ -839,32 +856,46 @@ impl<P: Payload> Log<P> {
         }
     }
 
-    /// Adds an op whose causal past is delivered; returns its position in the order.
+    /// Adds an op whose causal past is delivered; returns its position in the order. An op
+    /// whose author's slot is taken is held beside the first as a sibling ([`crate::fork`]).
     fn deliver(&mut self, op: Op<P>, now: Timestamp) -> Result<usize, InsertError> {
         let author = op.author();
         let held = self.vv.get(&author);
-        if held >= op.seq() {
-            let proof = (self.by_seq(&author, op.seq())).map(|other| ForkProof::of_ops(other, &op));
-            if let Some(proof) = proof {
-                self.forks.record(proof);
+        let twin = if held >= op.seq() {
+            // A twin inside a base cannot be told apart from this op's past: refused.
+            match self.by_seq(&author, op.seq()) {
+                Some(twin) => Some(twin.id()),
+                None => {
+                    return Err(InsertError::Equivocation {
+                        author,
+                        seq: op.seq(),
+                    });
+                }
             }
-            return Err(InsertError::Equivocation {
-                author,
-                seq: op.seq(),
-            });
-        }
-        assert!(
-            held + 1 == op.seq(),
-            "delivery waits for the author's previous op"
-        );
+        } else {
+            assert!(
+                held + 1 == op.seq(),
+                "delivery waits for the author's previous op"
+            );
+            None
+        };
         if self.ops.len() >= MAX_LOG_OPS {
             return Err(InsertError::Full);
         }
-        let prev = self.by_author.get(&author).and_then(|ids| ids.last());
+        // The author's previous op is part of the causal past only up to its first fork,
+        // where there is one previous op whichever side an op is on.
+        let fork_seq = (self.forks.seq_of(&author).unwrap_or(u64::MAX)).min(if twin.is_some() {
+            op.seq()
+        } else {
+            u64::MAX
+        });
+        let prev = (op.seq() <= fork_seq)
+            .then(|| self.by_seq(&author, op.seq().checked_sub(1)?))
+            .flatten();
         // Deps and previous ops inside a base have Lamport times at or below its cut, and
         // `insert` refused every op at or below the cut, so held ones set the floor.
         // Timestamps inside a base are not kept per op: a joined log checks held ones only.
-        let past = || op.deps().iter().chain(prev).filter_map(|d| self.ops.get(d));
+        let past = || (op.deps().iter().filter_map(|d| self.ops.get(d))).chain(prev);
         let floor = past().map(Op::lamport).max().unwrap_or(0);
         let floor_ts = past().map(Op::timestamp).max().unwrap_or_default();
         if op.lamport() <= floor {
@@ -897,11 +928,26 @@ impl<P: Payload> Log<P> {
             return Err(InsertError::Full);
         }
         let key = OrderKey::of(&op);
-        // Most ops arrive in order: append without searching.
-        let pos = point_near_end(&self.order, |(k, _)| *k < key);
         let id = op.id();
+        // Most ops arrive in order: append without searching. Siblings share a key: the id
+        // breaks the tie.
+        let pos = point_near_end(&self.order, |entry| *entry < (key, id));
         self.order.insert(pos, (key, id));
+        // A placeholder: the refold that follows judges it.
         self.marks.insert(pos, Mark::Effective);
+        if let Some(twin) = twin {
+            // Rejected whatever it does, so no object, lease or delete index names it.
+            self.siblings.entry(author).or_default().push(id);
+            if self.forks.record(author, op.seq(), twin, id) {
+                self.forks_changed.insert(author);
+            }
+            self.frontier.deliver(id, op.deps());
+            self.max_lamport = self.max_lamport.max(op.lamport());
+            self.ops.insert(id, op);
+            self.n_bytes += n_bytes;
+            self.author_bytes.insert(author, author_bytes);
+            return Ok(pos);
+        }
         self.by_author.entry(author).or_default().push(id);
         match op.payload().effect() {
             Effect::Edit { object } => {
@@ -954,6 +1000,7 @@ impl<P: Payload> Log<P> {
         seen::Dag {
             ops: &self.ops,
             by_author: &self.by_author,
+            forks: &self.forks,
             base: self.base.as_deref(),
             members: &self.membership_ops,
         }
@@ -1001,8 +1048,14 @@ impl<P: Payload> Log<P> {
         let ops = self.membership_ops.get(member)?;
         let mut reach = std::mem::take(&mut self.reach);
         let dag = self.dag();
-        let chain = self.by_author.get(member).map_or(&[][..], Vec::as_slice);
+        let mut chain = self.by_author.get(member).map_or(&[][..], Vec::as_slice);
         let base_seq = self.base.as_ref().map_or(0, |b| b.seq(member));
+        if let Some(fork) = self.forks.seq_of(member) {
+            // Past its fork a member's ops are rejected anyway, and its chain is no longer one
+            // history: the ops that count end before it.
+            let before = usize::try_from(fork.saturating_sub(base_seq + 1)).unwrap_or(usize::MAX);
+            chain = &chain[..chain.len().min(before)];
+        }
         let mut last: Option<u64> = None;
         for (expel, _) in ops.iter().filter(|(_, expel)| *expel) {
             let readmitted = ops
@@ -1016,6 +1069,52 @@ impl<P: Payload> Log<P> {
         }
         self.reach = reach;
         last
+    }
+
+    /// Makes a fork just found or lowered hold: past it an op's causal past no longer runs
+    /// through its author's previous op, so the reach memo starts afresh and the deletes from
+    /// the fork's first op on learn again what they saw; a forked member's void ops are counted
+    /// again, and the scene is told the author's ops changed from the fork on
+    /// ([`Refold::void_from`]). Returns the position of the author's first op at or past its fork: verdicts from
+    /// there on may change.
+    fn note_forks(&mut self) -> Option<usize> {
+        let mut first: Option<usize> = None;
+        for author in std::mem::take(&mut self.forks_changed) {
+            let Some(seq) = self.forks.seq_of(&author) else {
+                continue;
+            };
+            let base_seq = self.base.as_ref().map_or(0, |b| b.seq(&author));
+            let skip = usize::try_from(seq.saturating_sub(base_seq + 1)).unwrap_or(usize::MAX);
+            let chain = self.by_author.get(&author).map_or(&[][..], Vec::as_slice);
+            let siblings = self.siblings.get(&author).map_or(&[][..], Vec::as_slice);
+            for id in chain.iter().skip(skip).chain(siblings) {
+                if let Some(pos) = self.position(id) {
+                    first = Some(first.map_or(pos, |f| f.min(pos)));
+                }
+            }
+            if self.membership_ops.contains_key(&author) {
+                self.members_changed.insert(author);
+            }
+            // Its ops the scene keeps outside objects (chat) are dropped from the fork on.
+            let void_from = self.void_changed.entry(author).or_insert(seq);
+            *void_from = (*void_from).min(seq);
+        }
+        self.reach = Reach::default();
+        let from = self.order[first?].0;
+        let deletes: Vec<(ObjectId, OpId, OrderKey)> = (self.deletes.iter())
+            .flat_map(|(object, list)| list.iter().map(move |(k, id)| (*object, *id, *k)))
+            .filter(|(_, id, k)| *k >= from && self.ops.contains_key(id))
+            .collect();
+        for (object, id, key) in deletes {
+            let old = self.delete_hides.get(&id).cloned();
+            self.note_delete(object, id, key);
+            if self.delete_hides.get(&id) != old.as_ref()
+                && let Some(pos) = self.position(&id)
+            {
+                self.hides_changed.push((object, pos));
+            }
+        }
+        first
     }
 
     /// Records which held edits of `object` the delete `id` just delivered saw. Every edit in
@@ -1084,6 +1183,9 @@ impl<P: Payload> Log<P> {
         self.state = state;
         self.n_folded = self.order.len();
         self.report_void_changes(&mut refold);
+        for (object, pos) in std::mem::take(&mut self.hides_changed) {
+            self.report_change(&mut refold, Effect::Edit { object }, pos);
+        }
         self.update_hidden(&mut refold);
         // An undo or redo changes its target's activity, which may lie before `from`.
         if let Some(first) = refold.objects.values().min() {
@@ -1100,6 +1202,18 @@ impl<P: Payload> Log<P> {
             return Mark::Effective;
         };
         let effect = op.payload().effect();
+        if self.dag().is_forked(op) {
+            // A lease op on the chain still notes the lease before it: later lease ops that
+            // missed it fold from there.
+            let on_chain = || {
+                self.by_seq(&op.author(), op.seq())
+                    .is_some_and(|o| o.id() == id)
+            };
+            if matches!(effect, Effect::Acquire { .. } | Effect::Release { .. }) && on_chain() {
+                self.lease_context(cx, state, (key, id), None);
+            }
+            return Mark::Rejected(RejectReason::Forked);
+        }
         let target = self.target_info(effect, pos);
         let seen = self.lease_context(cx, state, (key, id), target);
         let (author, at) = (op.author(), op.timestamp());
@@ -1148,19 +1262,9 @@ impl<P: Payload> Log<P> {
         })
     }
 
-    /// The fork proofs this log holds ([`crate::fork`]).
+    /// The authors that forked ([`crate::fork`]).
     pub fn forks(&self) -> &Forks {
         &self.forks
-    }
-
-    /// Keeps a fork proof learnt from a peer, if it is about an author this log holds ops of
-    /// (a proof about a stranger would let anyone fill the table with fresh keys) and that
-    /// author has none yet; true if kept. It changes no verdict.
-    pub fn record_fork(&mut self, proof: ForkProof) -> bool {
-        if self.vv.get(&proof.author()) == 0 {
-            return false;
-        }
-        self.forks.record(proof)
     }
 
     /// Records in `refold` the object whose fold the changed op at `pos` affects.
@@ -1310,16 +1414,36 @@ impl<P: Payload> Log<P> {
     }
 
     fn position(&self, id: &OpId) -> Option<usize> {
-        let op = self.ops.get(id)?;
-        self.position_of_key(&OrderKey::of(op))
-    }
-
-    fn position_of_key(&self, key: &OrderKey) -> Option<usize> {
+        let entry = (OrderKey::of(self.ops.get(id)?), *id);
         // Live ops are looked up right after they were appended.
-        if self.order.last().is_some_and(|(k, _)| k == key) {
+        if self.order.last() == Some(&entry) {
             return Some(self.order.len() - 1);
         }
-        self.order.binary_search_by(|(k, _)| k.cmp(key)).ok()
+        self.order.binary_search(&entry).ok()
+    }
+
+    /// The position of the op with `key` on its author's chain (a sibling of a fork shares
+    /// its key).
+    fn position_of_key(&self, key: &OrderKey) -> Option<usize> {
+        let n = self.order.len();
+        if self.order.last().is_some_and(|(k, _)| k == key)
+            && (n < 2 || self.order[n - 2].0 != *key)
+        {
+            return Some(n - 1);
+        }
+        let at = self.order.partition_point(|(k, _)| k < key);
+        let same = self.order[at..]
+            .iter()
+            .take_while(|(k, _)| k == key)
+            .count();
+        match same {
+            0 => None,
+            1 => Some(at),
+            _ => {
+                let chain = self.by_seq(&key.author, key.seq)?.id();
+                (at..at + same).find(|p| self.order[*p].1 == chain)
+            }
+        }
     }
 
     fn target_info(&self, effect: Effect, pos: usize) -> Option<TargetInfo> {

@@ -688,7 +688,7 @@ mod tests {
                 for (a, s) in c {
                     part.raise(*a, *s);
                 }
-                Message::Have(part).encode()
+                Message::have(part).encode()
             })
             .collect()
     }
@@ -701,7 +701,7 @@ mod tests {
             id[..4].copy_from_slice(&i.to_be_bytes());
             vv.raise(PeerId(id), 1);
         }
-        Message::Have(vv).encode()
+        Message::have(vv).encode()
     }
 
     /// What `peer`'s first connection knows its remote to hold.
@@ -755,7 +755,7 @@ mod tests {
         a.handle_input(
             Timestamp(900_000),
             ConnId(1),
-            &Message::Have(vv.clone()).encode(),
+            &Message::have(vv.clone()).encode(),
         );
         let (_, sync) = a.connections().next().unwrap();
         assert_eq!(
@@ -782,7 +782,7 @@ mod tests {
         assert!(claims(&a).is_empty());
         let mut more = VersionVector::new();
         more.raise(PeerId([0; 32]), 2);
-        a.handle_input(now, ConnId(1), &Message::Have(more).encode());
+        a.handle_input(now, ConnId(1), &Message::have(more).encode());
         a.handle_input(now, ConnId(1), &made_up_have(1));
         let (_, sync) = a.connections().next().unwrap();
         assert_eq!(sync.remote_version_vector().get(&PeerId([0; 32])), 2);
@@ -801,7 +801,7 @@ mod tests {
         a.handle_timeout(silent);
         transmit_checked(&mut a, silent);
         assert_eq!(claims(&a).len(), MAX_REMOTE_UNKNOWN_AUTHORS);
-        a.handle_input(silent, ConnId(1), &Message::Have(vv.clone()).encode());
+        a.handle_input(silent, ConnId(1), &Message::have(vv.clone()).encode());
         let silent = Timestamp(silent.0 + WANT_RETRY_MICROS + WANT_CHECK_MICROS);
         a.handle_timeout(silent);
         assert!(claims(&a).is_empty());
@@ -1038,7 +1038,7 @@ mod tests {
         for p in &peers[..3] {
             assert_eq!(p.log().forks().seq_of(&twin), Some(1), "{}", p.peer_id());
         }
-        assert_eq!(peers[2].log().len(), 1, "the second op is refused");
+        assert_eq!(peers[2].log().len(), 2, "both sides are held");
         // The fourth peer gets the proof only once it holds an op of the twin.
         peers[2]
             .author(now, TestPayload::Chat("hello".into()))
@@ -1066,6 +1066,14 @@ mod tests {
             );
         }
         assert_eq!(peers[3].log().version_vector().get(&twin), 1);
+        assert_eq!(peers[3].log().len(), 3, "both sides came with the fork");
+        let marks = |p: &TPeer| {
+            p.log()
+                .entries()
+                .map(|e| (e.op.id(), e.mark))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(marks(&peers[3]), marks(&peers[2]));
         assert_eq!(
             forked,
             [Event::Forked {
@@ -1073,40 +1081,90 @@ mod tests {
                 seq: 1
             }]
         );
-        // A forged proof about an author it holds is refused and counted against its sender.
+        // Two ops offered as a fork that are none, or whose signatures fail, note no fork and
+        // count against their sender.
         let third = Keypair::from_seed([3; 32]);
-        let forged = |text: &str| {
+        let forged = |seq: u64, text: &str, flip: bool| {
             let fields = crate::op::OpFields {
-                seq: 1,
+                seq,
                 lamport: 9,
                 timestamp: now,
                 deps: Vec::new(),
                 payload: TestPayload::Chat(text.into()),
             };
-            crate::Op::sign(&third, fields).unwrap().encoded().to_vec()
+            let mut bytes = crate::Op::sign(&third, fields).unwrap().encoded().to_vec();
+            *bytes.last_mut().unwrap() ^= u8::from(flip);
+            bytes
         };
-        let mut b = forged("b");
-        *b.last_mut().unwrap() ^= 1;
-        let message = crate::sync::message::Message::Forked {
-            ops: [forged("a"), b],
-        };
-        peers[3].handle_input(Timestamp(t), ConnId(1), &message.encode());
-        assert!(!peers[3].log().forks().contains(&third.peer_id()));
-        let rejected = std::iter::from_fn(|| peers[3].poll_event()).any(|(_, e)| {
-            matches!(
-                e,
-                Event::Rejected {
-                    kind: crate::sync::state::RejectKind::BadForkProof,
-                    ..
-                }
-            )
-        });
-        assert!(rejected);
+        use crate::sync::state::RejectKind;
+        let cases = [
+            (
+                [forged(1, "a", false), forged(2, "b", false)],
+                RejectKind::BadForkProof,
+            ),
+            (
+                [forged(1, "a", true), forged(1, "b", true)],
+                RejectKind::BadSignature,
+            ),
+        ];
+        for (ops, kind) in cases {
+            let message = crate::sync::message::Message::Forked { ops, answer: false };
+            peers[3].handle_input(Timestamp(t), ConnId(1), &message.encode());
+            assert!(!peers[3].log().forks().contains(&third.peer_id()));
+            let rejected = std::iter::from_fn(|| peers[3].poll_event())
+                .any(|(_, e)| matches!(e, Event::Rejected { kind: k, .. } if k == kind));
+            assert!(rejected, "{kind:?}");
+        }
     }
 
     #[test]
-    fn the_other_op_of_a_fork_is_asked_for_by_id_and_both_peers_learn_of_it() {
-        use crate::sync::state::{STUCK_CHECK_MICROS, STUCK_DEP_MICROS};
+    fn a_fork_nobody_built_on_is_found_by_the_tips_of_haves() {
+        // A member gives each peer a different op as seq 1 and nothing more: no honest op
+        // waits for either side, so only the haves' tips can tell the peers apart.
+        let hostile = Keypair::from_seed([6; 32]);
+        let fork = |text: &str| {
+            let fields = crate::op::OpFields {
+                seq: 1,
+                lamport: 1,
+                timestamp: Timestamp(1),
+                deps: Vec::new(),
+                payload: TestPayload::Chat(text.into()),
+            };
+            crate::Op::sign(&hostile, fields).unwrap()
+        };
+        let now = Timestamp(1_000);
+        let mut peers: Vec<TPeer> = [fork("a"), fork("b")]
+            .into_iter()
+            .zip(1..)
+            .map(|(op, i)| {
+                let mut log = Log::default();
+                log.insert(now, op, Origin(7)).unwrap();
+                Peer::new(Keypair::from_seed([i; 32]), [9; 16], log)
+            })
+            .collect();
+        let links = [(0, ConnId(1), 1, ConnId(1))];
+        for p in &mut peers {
+            p.connect(now, ConnId(1)).unwrap();
+        }
+        pump(&mut peers, &links, now);
+        for p in &peers {
+            assert_eq!(p.log().forks().seq_of(&hostile.peer_id()), Some(1));
+            assert_eq!(p.log().len(), 2, "both sides held");
+            let (_, sync) = p.connections().next().unwrap();
+            assert_eq!(sync.stats().n_ops_asked, 0, "found without asking");
+            assert_eq!(sync.stats().n_rejected(), 0);
+            for e in p.log().entries() {
+                assert_eq!(e.mark, crate::Mark::Rejected(crate::RejectReason::Forked));
+                assert!(!e.active);
+            }
+        }
+        let (_, sync) = peers[0].connections().next().unwrap();
+        let (_, other) = peers[1].connections().next().unwrap();
+        assert!(sync.stats().n_tips_differ + other.stats().n_tips_differ >= 1);
+    }
+
+    #[test]
+    fn both_sides_of_a_fork_built_on_reach_both_peers_and_every_op_is_delivered() {
         // A member signs two ops as seq 1 and gives one to each peer, and each peer builds on
         // the one it holds.
         let hostile = Keypair::from_seed([6; 32]);
@@ -1138,40 +1196,36 @@ mod tests {
         for p in &mut peers {
             p.connect(now, ConnId(1)).unwrap();
         }
+        let t = now.0;
         pump(&mut peers, &links, now);
-        // Version vectors cannot tell the two sides apart: each peer's op waits for the
-        // other's side, and nobody has seen both.
         for p in &peers {
-            assert_eq!(p.log().n_pending(), 1);
-            assert!(p.log().forks().proofs().is_empty());
-        }
-        let mut t = now.0;
-        while !peers
-            .iter()
-            .all(|p| p.log().forks().contains(&hostile.peer_id()))
-        {
-            assert!(
-                t <= now.0 + STUCK_DEP_MICROS + 3 * STUCK_CHECK_MICROS,
-                "not asked by {t}"
-            );
-            t += 100_000;
-            for p in peers.iter_mut() {
-                p.handle_timeout(Timestamp(t));
-            }
-            pump(&mut peers, &links, Timestamp(t));
-        }
-        assert!(
-            t >= now.0 + STUCK_DEP_MICROS,
-            "asked before version vectors had their turn"
-        );
-        for p in &peers {
+            assert!(p.log().forks().contains(&hostile.peer_id()));
             let (_, sync) = p.connections().next().unwrap();
-            assert_eq!(sync.stats().n_ops_asked, 1);
-            assert_eq!(
-                sync.stats().n_rejected(),
-                0,
-                "answering an ask is no offence"
-            );
+            assert_eq!(sync.stats().n_rejected(), 0, "holding a side is no offence");
+        }
+        // Both sides are held, so the honest ops built on them are delivered, and both peers
+        // judge alike: the member's ops rejected, the honest ones standing.
+        let t = t + 1_000_000;
+        for p in peers.iter_mut() {
+            p.handle_timeout(Timestamp(t));
+        }
+        pump(&mut peers, &links, Timestamp(t));
+        let outcome = |p: &TPeer| {
+            (p.log().entries())
+                .map(|e| (e.op.id(), e.mark, e.active))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(outcome(&peers[0]), outcome(&peers[1]));
+        for p in &peers {
+            assert_eq!((p.log().len(), p.log().n_pending()), (4, 0));
+            for e in p.log().entries() {
+                let expected = if e.op.author() == hostile.peer_id() {
+                    crate::Mark::Rejected(crate::RejectReason::Forked)
+                } else {
+                    crate::Mark::Effective
+                };
+                assert_eq!(e.mark, expected);
+            }
         }
     }
 }

@@ -492,7 +492,7 @@ impl Simulation {
                 let mut out = vec![(to, hello(me))];
                 for _ in 0..2 {
                     let vv = made_up_vv(rng, MAX_VV_AUTHORS);
-                    out.push((to, Message::Have(vv).encode()));
+                    out.push((to, Message::have(vv).encode()));
                 }
                 let vv = made_up_vv(rng, MAX_VV_AUTHORS);
                 out.push((to, Message::Want(vv).encode()));

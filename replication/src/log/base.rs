@@ -82,6 +82,10 @@ pub enum CutError {
     /// would forget it (join such a session from full history).
     #[error("the log holds membership ops, which a snapshot cannot keep")]
     Membership,
+    /// The log holds a fork ([`crate::fork`]): a base keeps one op per author and seq, so the
+    /// cut would forget a side (join such a session from full history).
+    #[error("the log holds a forked author's two sides, which a snapshot cannot keep")]
+    Forked,
     /// The cut is below the log's own base cut.
     #[error("cut {cut} is below the log's base cut {base}")]
     BelowBase {
@@ -220,6 +224,9 @@ impl<P: Payload> Log<P> {
             members_changed: Default::default(),
             void_changed: BTreeMap::new(),
             forks: crate::fork::Forks::default(),
+            siblings: BTreeMap::new(),
+            forks_changed: Default::default(),
+            hides_changed: Vec::new(),
         };
         let objects: Vec<ObjectId> = log.deletes.keys().copied().collect();
         for object in objects {
@@ -319,6 +326,9 @@ impl<P: Payload> Log<P> {
     pub(crate) fn base_at(&self, cut: u64) -> Result<(Base<P>, usize), CutError> {
         if self.has_membership_ops() {
             return Err(CutError::Membership);
+        }
+        if !self.forks.is_empty() {
+            return Err(CutError::Forked);
         }
         let stable = self.stable_lamport();
         if cut > stable {

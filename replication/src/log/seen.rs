@@ -41,6 +41,9 @@ pub(crate) type AltFolds = BTreeMap<(ObjectId, Vec<OrderKey>), (usize, Option<Le
 pub(crate) struct Dag<'a, P> {
     pub(crate) ops: &'a crate::op::OpSlab<P>,
     pub(crate) by_author: &'a BTreeMap<PeerId, Vec<OpId>>,
+    /// The forked authors: past its fork, an author's ops reach their past through their deps
+    /// alone, and no memo or seq shortcut speaks for them.
+    pub(crate) forks: &'a crate::fork::Forks,
     pub(crate) base: Option<&'a Base<P>>,
     /// Per member, the membership ops that count, with whether each expels.
     pub(crate) members: &'a BTreeMap<PeerId, Vec<(OpId, bool)>>,
@@ -77,8 +80,22 @@ impl<P: Payload> Dag<'_, P> {
         lo
     }
 
-    /// The author's previous held op (`None` for its first, or one inside the base).
+    /// True if `op` is at or past its author's fork ([`crate::fork`]): it is rejected.
+    pub(crate) fn is_forked(&self, op: &Op<P>) -> bool {
+        self.past_fork(&op.author(), op.seq())
+    }
+
+    /// True if `author` forked at `seq` or before.
+    fn past_fork(&self, author: &PeerId, seq: u64) -> bool {
+        !self.forks.is_empty() && self.forks.seq_of(author).is_some_and(|f| seq >= f)
+    }
+
+    /// The author's previous held op (`None` for its first, one inside the base, or past the
+    /// author's fork, where the previous op depends on the side).
     fn prev(&self, op: &Op<P>) -> Option<&OpId> {
+        if self.past_fork(&op.author(), op.seq().saturating_sub(1)) {
+            return None;
+        }
         let base_seq = self.base.map_or(0, |b| b.seq(&op.author()));
         let idx = op.seq().checked_sub(2 + base_seq)?;
         self.by_author
@@ -99,7 +116,11 @@ impl<P: Payload> Dag<'_, P> {
         if op.lamport() <= target.lamport() {
             return Some(false);
         }
-        if op.author() == target.author() {
+        if self.past_fork(&op.author(), op.seq()) {
+            // Two ops share this seq and may see different things: walk.
+            return None;
+        }
+        if op.author() == target.author() && !self.past_fork(&target.author(), target.seq()) {
             return Some(op.seq() >= target.seq());
         }
         memo.known(target_id, &op.author(), op.seq())
@@ -119,9 +140,15 @@ impl<P: Payload> Dag<'_, P> {
         // Depth-first, children before parents: an op's answer is the "or" of its parents'.
         // A parent goes back on the stack under its unanswered parents and is answered when it
         // comes up again (a memo that started afresh meanwhile only repeats some work).
+        // Answers for ops past their author's fork, which the memo does not keep: this walk
+        // keeps them, so each op is still answered once.
+        let mut forked: BTreeMap<OpId, bool> = BTreeMap::new();
+        let quick = |memo: &Reach, forked: &BTreeMap<OpId, bool>, id: &OpId| {
+            (forked.get(id).copied()).or_else(|| self.quick(memo, id, target, target_id))
+        };
         let mut stack = vec![*from];
         while let Some(id) = stack.pop() {
-            if let Some(known) = self.quick(memo, &id, target, target_id) {
+            if let Some(known) = quick(memo, &forked, &id) {
                 if id == *from {
                     return known;
                 }
@@ -131,7 +158,7 @@ impl<P: Payload> Dag<'_, P> {
                 continue;
             };
             let parents = || op.deps().iter().chain(self.prev(op));
-            let answers = parents().map(|p| self.quick(memo, p, target, target_id));
+            let answers = parents().map(|p| quick(memo, &forked, p));
             let mut unknown = Vec::new();
             let mut seen = false;
             for (p, answer) in parents().zip(answers) {
@@ -145,7 +172,11 @@ impl<P: Payload> Dag<'_, P> {
                 }
             }
             if seen || unknown.is_empty() {
-                memo.record(*target_id, op.author(), op.seq(), seen);
+                if self.past_fork(&op.author(), op.seq()) {
+                    forked.insert(id, seen);
+                } else {
+                    memo.record(*target_id, op.author(), op.seq(), seen);
+                }
                 if id == *from {
                     return seen;
                 }
@@ -218,7 +249,10 @@ pub(crate) fn lease_seen<P: Payload>(
     while i < n {
         let l = &list[i];
         let skipped = unseen.binary_search_by(|(k, _)| k.cmp(&l.key)).is_ok();
-        if !skipped && let Some(op) = dag.ops.get(&l.id) {
+        if !skipped
+            && let Some(op) = dag.ops.get(&l.id)
+            && !dag.is_forked(op)
+        {
             // Judged as the fold judged it: rejected if its author saw its own expel, and not
             // bound by a holder it saw expelled.
             if !dag.expelled_in_past(memo, &l.id, &op.author()) {

@@ -25,7 +25,10 @@ pub const SYNC_WIRE_VERSION: u8 = 1;
 /// member could make them disagree on which ops exist.
 /// 5: [`Message::Forked`] carries proofs of equivocation and [`Message::WantOps`] asks for
 /// ops by id, which a build speaking 4 refuses.
-pub const PROTOCOL_VERSION: u64 = 5;
+/// 6: a [`Message::Have`] names the sender's op at each seq it announces (its tip), so two
+/// peers holding different sides of a fork find out, and [`Message::Forked`] carries two ops
+/// the receiver inserts.
+pub const PROTOCOL_VERSION: u64 = 6;
 /// Length of a session id.
 pub const SESSION_ID_BYTES: usize = 16;
 /// Most ops in one [`Message::Ops`] batch.
@@ -38,12 +41,25 @@ pub const MAX_EPHEMERAL_BYTES: usize = 1024;
 /// The largest encoding of a version vector of [`MAX_VV_AUTHORS`] entries (count, then author
 /// and seq each).
 const MAX_VV_BYTES: usize = MAX_VARINT_BYTES + MAX_VV_AUTHORS * (PEER_ID_BYTES + MAX_VARINT_BYTES);
-// A Have, Want or Ack of a full version vector fits in a message with room for its header.
-const _: () = assert!(2 + MAX_VARINT_BYTES + MAX_VV_BYTES <= MAX_MESSAGE_BYTES);
+/// Bytes of one tip ([`Message::Have`]): the first bytes of an op id.
+pub const TIP_BYTES: usize = 8;
+// A Have of a full version vector with its tips, a Want or an Ack fits in a message with room
+// for its header.
+const _: () = assert!(
+    2 + MAX_VARINT_BYTES + MAX_VV_BYTES + MAX_VARINT_BYTES + MAX_VV_AUTHORS * TIP_BYTES
+        <= MAX_MESSAGE_BYTES
+);
 // An ack names at most one batch's authors.
 const _: () = assert!(MAX_BATCH_OPS <= MAX_VV_AUTHORS);
-// A fork proof of two ops of the largest size fits in a message.
-const _: () = assert!(2 + 2 * (MAX_VARINT_BYTES + MAX_OP_BYTES) <= MAX_MESSAGE_BYTES);
+// Two ops of the largest size offered as a fork fit in a message.
+const _: () = assert!(3 + 2 * (MAX_VARINT_BYTES + MAX_OP_BYTES) <= MAX_MESSAGE_BYTES);
+
+/// The tip of an op id: its first [`TIP_BYTES`] bytes, never 0 (which says "none").
+pub fn tip(id: &OpId) -> u64 {
+    let mut head = [0; TIP_BYTES];
+    head.copy_from_slice(&id.0[..TIP_BYTES]);
+    u64::from_le_bytes(head).max(1)
+}
 
 /// A session's id (derived from its invite by the transport).
 pub type SessionId = [u8; SESSION_ID_BYTES];
@@ -65,7 +81,14 @@ pub enum Message {
     /// What the sender holds, so the receiver sends only what it lacks: all of it in answer
     /// to a hello, later only the entries that grew since the sender's previous have (the
     /// receiver joins them, so a lost or stale have only costs a redundant send).
-    Have(VersionVector),
+    Have {
+        /// The entries.
+        vv: VersionVector,
+        /// For each entry in order, the tip of the sender's op at that seq ([`tip`]), or 0
+        /// where it holds none (inside a snapshot's base); empty when not said. A receiver
+        /// holding another op there sends its own: the two are a fork ([`crate::fork`]).
+        tips: Vec<u64>,
+    },
     /// A batch of encoded ops, in the sender's linear order.
     Ops {
         /// Sender's batch number, echoed by [`Message::Ack`].
@@ -92,12 +115,14 @@ pub enum Message {
         /// The value.
         value: Vec<u8>,
     },
-    /// A proof that an author signed two different ops with one seq: both ops' encodings
-    /// ([`crate::fork::ForkProof`]), each checked by the receiver. Sent once per connection per
-    /// proof, when the remote holds ops of that author.
+    /// Two different ops an author signed with one seq ([`crate::fork`]), which the receiver
+    /// inserts like any ops. Sent when the remote holds ops of that author, until it answers
+    /// with the same message (`answer` set), which is not answered.
     Forked {
         /// The two encoded ops.
         ops: [Vec<u8>; 2],
+        /// True for an answer to the remote's.
+        answer: bool,
     },
     /// Asks for ops by id (at most [`MAX_BATCH_OPS`]): dependencies that ops this remote sent
     /// have waited for too long. The receiver sends those it holds in an ops batch.
@@ -114,6 +139,14 @@ const TAG_FORKED: u8 = 7;
 const TAG_WANT_OPS: u8 = 8;
 
 impl Message {
+    /// A have without tips.
+    pub fn have(vv: VersionVector) -> Self {
+        Self::Have {
+            vv,
+            tips: Vec::new(),
+        }
+    }
+
     /// The encoded message.
     pub fn encode(&self) -> Vec<u8> {
         let mut out = vec![SYNC_WIRE_VERSION];
@@ -130,9 +163,13 @@ impl Message {
                 out.extend_from_slice(&peer.0);
                 out.push(u8::from(*hello_seen));
             }
-            Self::Have(vv) => {
+            Self::Have { vv, tips } => {
                 out.push(TAG_HAVE);
                 put_vv(&mut out, vv);
+                put_varint(&mut out, tips.len() as u64);
+                for tip in tips {
+                    out.extend_from_slice(&tip.to_le_bytes());
+                }
             }
             Self::Ops { batch_no, ops } => {
                 out.push(TAG_OPS);
@@ -161,11 +198,12 @@ impl Message {
                 put_varint(&mut out, *seq);
                 put_bytes(&mut out, value);
             }
-            Self::Forked { ops } => {
+            Self::Forked { ops, answer } => {
                 out.push(TAG_FORKED);
                 for op in ops {
                     put_bytes(&mut out, op);
                 }
+                out.push(u8::from(*answer));
             }
             Self::WantOps(ids) => {
                 out.push(TAG_WANT_OPS);
@@ -218,7 +256,21 @@ impl Message {
                     hello_seen,
                 }
             }
-            TAG_HAVE => Self::Have(read_vv(&mut r)?),
+            TAG_HAVE => {
+                let vv = read_vv(&mut r)?;
+                let offset = r.offset();
+                let n = r.bounded("tip count", MAX_VV_AUTHORS as u64)?;
+                if n != 0 && n != vv.len() {
+                    return Err(DecodeError::Invalid {
+                        offset,
+                        what: "tip count differs from the version vector's",
+                    });
+                }
+                let tips = (0..n)
+                    .map(|_| r.array().map(u64::from_le_bytes))
+                    .collect::<Result<_, _>>()?;
+                Self::Have { vv, tips }
+            }
             TAG_WANT => Self::Want(read_vv(&mut r)?),
             TAG_OPS => {
                 let batch_no = r.varint()?;
@@ -248,7 +300,21 @@ impl Message {
             TAG_FORKED => {
                 let a = r.bytes("op length", MAX_OP_BYTES as u64)?.to_vec();
                 let b = r.bytes("op length", MAX_OP_BYTES as u64)?.to_vec();
-                Self::Forked { ops: [a, b] }
+                let flag_offset = r.offset();
+                let answer = match r.u8()? {
+                    0 => false,
+                    1 => true,
+                    _ => {
+                        return Err(DecodeError::Invalid {
+                            offset: flag_offset,
+                            what: "flag",
+                        });
+                    }
+                };
+                Self::Forked {
+                    ops: [a, b],
+                    answer,
+                }
             }
             TAG_WANT_OPS => {
                 let n = r.bounded("wanted op count", MAX_BATCH_OPS as u64)?;
@@ -333,7 +399,14 @@ mod tests {
                         hello_seen,
                     }
                 }),
-            vv.clone().prop_map(Message::Have),
+            (vv.clone(), any::<u64>()).prop_map(|(vv, tip)| {
+                let tips = if tip % 2 == 0 {
+                    Vec::new()
+                } else {
+                    vec![tip; vv.len()]
+                };
+                Message::Have { vv, tips }
+            }),
             vv.clone().prop_map(Message::Want),
             (
                 any::<u64>(),
@@ -342,9 +415,13 @@ mod tests {
                 .prop_map(|(batch_no, ops)| Message::Ops { batch_no, ops }),
             (
                 proptest::collection::vec(any::<u8>(), 0..40),
-                proptest::collection::vec(any::<u8>(), 0..40)
+                proptest::collection::vec(any::<u8>(), 0..40),
+                any::<bool>()
             )
-                .prop_map(|(a, b)| Message::Forked { ops: [a, b] }),
+                .prop_map(|(a, b, answer)| Message::Forked {
+                    ops: [a, b],
+                    answer
+                }),
             proptest::collection::vec(any::<[u8; 32]>(), 0..5)
                 .prop_map(|ids| Message::WantOps(ids.into_iter().map(OpId).collect())),
             (any::<u64>(), vv).prop_map(|(batch_no, have)| Message::Ack { batch_no, have }),
@@ -397,8 +474,12 @@ mod tests {
         let parts = vv.split(MAX_VV_AUTHORS);
         assert_eq!(parts.len(), 2);
         let (full, batch_no) = (&parts[0], u64::MAX);
+        let tips = vec![u64::MAX; full.len()];
         for m in [
-            Message::Have(full.clone()),
+            Message::Have {
+                vv: full.clone(),
+                tips,
+            },
             Message::Want(full.clone()),
             Message::Ack {
                 batch_no,
@@ -410,7 +491,7 @@ mod tests {
             assert_eq!(Message::decode(&bytes), Ok(m));
         }
         assert!(matches!(
-            Message::decode(&Message::Have(vv).encode()),
+            Message::decode(&Message::have(vv).encode()),
             Err(DecodeError::OverLimit {
                 what: "version vector length",
                 ..

@@ -34,7 +34,6 @@ use std::marker::PhantomData;
 
 use crate::causal::{MAX_VV_AUTHORS, VersionVector};
 use crate::codec::DecodeError;
-use crate::fork::ForkProof;
 use crate::identity::PeerId;
 use crate::log::{InsertError, Insertion, Log};
 use crate::op::{Envelope, MAX_OP_BYTES, Op, OpId, ReceiveError};
@@ -42,6 +41,7 @@ use crate::payload::Payload;
 use crate::pending::{EvictReason, Origin};
 use crate::sync::message::{
     MAX_BATCH_OPS, MAX_EPHEMERAL_BYTES, MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION, SessionId,
+    tip,
 };
 use crate::time::Timestamp;
 
@@ -137,7 +137,8 @@ pub enum RejectKind {
     RateLimited,
     /// An ephemeral value over [`MAX_EPHEMERAL_BYTES`] or too many channels.
     EphemeralTooLarge,
-    /// A [`Message::Forked`] whose two ops are not a signed fork ([`crate::fork::ProofError`]).
+    /// A [`Message::Forked`] whose two ops do not decode, or are not one author's with one seq
+    /// and different ids.
     BadForkProof,
 }
 
@@ -183,8 +184,9 @@ pub enum Event {
         /// The value.
         value: Vec<u8>,
     },
-    /// This input showed that `author` signed two ops with the seq `seq`: a fork proof came,
-    /// or an op forked one the log holds ([`crate::fork`]). The log keeps the proof.
+    /// This input showed that `author` signed two ops with the seq `seq` (the lowest the log
+    /// knows): a fork's two ops came, or an op forked one the log holds ([`crate::fork`]). The
+    /// log holds both, and rejects the author's ops from `seq` on.
     Forked {
         /// The author that equivocated.
         author: PeerId,
@@ -235,6 +237,9 @@ pub struct SyncStats {
     pub n_claims_withdrawn: u64,
     /// Ops asked for by id ([`Message::WantOps`], [`STUCK_DEP_MICROS`]).
     pub n_ops_asked: u64,
+    /// Ops sent because the remote's have named another op at their seq: a fork
+    /// ([`Message::Have`]'s tips).
+    pub n_tips_differ: u64,
     /// Ops the remote asked for by id that were not sent: not held, or over [`MAX_ASKED_OUT`].
     pub n_asks_dropped: u64,
 }
@@ -359,7 +364,7 @@ pub struct SyncState<P> {
     full_have_at: Timestamp,
     /// Parts of haves after the first not yet sent (each at most [`MAX_VV_AUTHORS`]); at most
     /// one full have's worth, since a have queued behind unsent parts goes out full instead.
-    have_out: VecDeque<VersionVector>,
+    have_out: VecDeque<Message>,
     next_batch_no: u64,
     up_to_date: bool,
     /// Bumped whenever `remote_vv` changes (it keys `lacks_cache`).
@@ -381,11 +386,24 @@ pub struct SyncState<P> {
     /// The log's length when last seen (every input and timer), and since when it was so.
     stuck_log_len: Option<usize>,
     log_still_since: Timestamp,
-    /// Authors whose fork proof went out on this connection, or came in on it (at most the
-    /// log's proofs, [`crate::fork::MAX_FORK_PROOFS`]).
-    forks_sent: BTreeSet<PeerId>,
-    /// The log's proof count and `remote_vv_version` at which no proof was left to send.
-    forks_idle: Cell<Option<(usize, u64)>>,
+    /// Per forked author, the lowest forked seq the remote showed it knows (it sent that fork's
+    /// two ops, or lower ones). At most one entry per fork the log holds.
+    forks_known: BTreeMap<PeerId, u64>,
+    /// Per forked author, the seq of the fork last sent, when, and how long to wait for its
+    /// answer before sending it again (doubling up to [`RESEND_AFTER_MAX_MICROS`]).
+    forks_sent: BTreeMap<PeerId, (u64, Timestamp, u64)>,
+    /// Forks whose answer did not come in time: to send again.
+    forks_resend: BTreeSet<PeerId>,
+    /// Per author the log holds, the seq at which a tip of the remote last differed from the
+    /// log's op (which then went out).
+    tips_answered: BTreeMap<PeerId, u64>,
+    /// Forks the remote sent that await our answer.
+    forks_answer: BTreeSet<PeerId>,
+    /// Bumped whenever the four fields above change.
+    forks_epoch: u64,
+    /// The log's fork generation, `remote_vv_version` and `forks_epoch` at which no fork was
+    /// left to send.
+    forks_idle: Cell<Option<(u64, u64, u64)>>,
     control: VecDeque<Message>,
     events: VecDeque<Event>,
     eph_out: BTreeMap<u32, Vec<u8>>,
@@ -438,7 +456,12 @@ impl<P: Payload> SyncState<P> {
             asked_out: VecDeque::new(),
             stuck_log_len: None,
             log_still_since: now,
-            forks_sent: BTreeSet::new(),
+            forks_known: BTreeMap::new(),
+            forks_sent: BTreeMap::new(),
+            forks_resend: BTreeSet::new(),
+            forks_answer: BTreeSet::new(),
+            tips_answered: BTreeMap::new(),
+            forks_epoch: 0,
             forks_idle: Cell::new(None),
             control: VecDeque::new(),
             events: VecDeque::new(),
@@ -529,15 +552,18 @@ impl<P: Payload> SyncState<P> {
 
     /// Handles one message received from the remote.
     pub fn handle_input(&mut self, now: Timestamp, bytes: &[u8], log: &mut Log<P>) {
-        let n_proofs = log.forks().proofs().len();
+        let generation = log.forks().generation();
         self.read_input(now, bytes, log);
         self.observe_log(now, log);
-        // Forks this input revealed: a proof it carried, or an op that forks a held one.
-        for proof in &log.forks().proofs()[n_proofs..] {
-            self.events.push_back(Event::Forked {
-                author: proof.author(),
-                seq: proof.seq(),
-            });
+        // Forks this input revealed or lowered: two ops it carried as a fork, or an op that
+        // forks a held one.
+        if log.forks().generation() != generation {
+            for (author, seq) in log.forks().changed_since(generation) {
+                self.events.push_back(Event::Forked { author, seq });
+            }
+            // An op refused before its author's fork was known (checked against the wrong
+            // side's previous op) may be delivered now: it can be asked for again.
+            self.asked.clear();
         }
         self.close_if_expelled(log);
     }
@@ -608,12 +634,13 @@ impl<P: Payload> SyncState<P> {
         match message {
             // Hellos are handled by `handle_input` before the remote is known.
             Message::Hello { .. } => {}
-            Message::Have(vv) => {
+            Message::Have { vv, tips } => {
                 self.hello_confirmed = true;
                 // Taken as the answer to a hello sent to relearn (a have crossing it on the
                 // way only delays the relearning until the remote's next full have).
                 self.relearn_asked = false;
                 self.learn_remote(now, &vv, log);
+                self.compare_tips(&vv, &tips, log);
             }
             Message::Want(vv) => {
                 self.hello_confirmed = true;
@@ -650,9 +677,9 @@ impl<P: Payload> SyncState<P> {
                     );
                 }
             }
-            Message::Forked { ops: [a, b] } => {
+            Message::Forked { ops, answer } => {
                 self.hello_confirmed = true;
-                self.on_forked(&a, &b, log);
+                self.on_forked(now, ops, answer, log);
             }
             Message::WantOps(ids) => {
                 self.hello_confirmed = true;
@@ -670,31 +697,44 @@ impl<P: Payload> SyncState<P> {
         }
     }
 
-    /// A proof of a fork: checked (two signatures) only if it is about an author the log
-    /// holds and has no proof of, so a repeated or irrelevant proof costs a hash.
-    fn on_forked(&mut self, a: &[u8], b: &[u8], log: &mut Log<P>) {
-        let author = match Envelope::parse(a) {
-            Ok(envelope) => envelope.author(),
-            Err(e) => {
-                self.reject(RejectKind::BadForkProof, e.to_string());
-                return;
+    /// Two ops offered as a fork ([`crate::fork`]): if they are one (an author, a seq, two
+    /// ids) of an author the log holds, and lower than any fork of it the log holds, both are
+    /// inserted like any received ops (their signatures checked there), so this peer holds
+    /// both sides and reaches the same verdicts. A repeated or irrelevant one costs two hashes.
+    /// It is answered (unless it is an answer) with the log's fork of that author, so the
+    /// sender knows it arrived.
+    fn on_forked(&mut self, now: Timestamp, ops: [Vec<u8>; 2], answer: bool, log: &mut Log<P>) {
+        let (author, seq) = match (Envelope::parse(&ops[0]), Envelope::parse(&ops[1])) {
+            (Ok(a), Ok(b))
+                if a.author() == b.author() && a.seq() == b.seq() && a.id() != b.id() =>
+            {
+                (a.author(), a.seq())
+            }
+            (Err(e), _) | (_, Err(e)) => {
+                return self.reject(RejectKind::BadForkProof, e.to_string());
+            }
+            _ => {
+                return self.reject(
+                    RejectKind::BadForkProof,
+                    "the two ops are not one author's with one seq".into(),
+                );
             }
         };
         if log.version_vector().get(&author) == 0 {
             return;
         }
-        if !log.forks().contains(&author) {
-            match ForkProof::check(a, b) {
-                Ok(proof) => {
-                    log.record_fork(proof);
-                }
-                Err(e) => return self.reject(RejectKind::BadForkProof, e.to_string()),
-            }
+        if log.forks().seq_of(&author).is_none_or(|held| seq < held) {
+            self.insert_received(now, &ops, log, &mut Vec::new());
         }
-        // Whoever sent a good proof holds one: ours need not go back. Only authors with a
-        // proof here are noted, so the set stays within the log's proofs.
+        // Whoever sent two good ops knows that fork. Only authors with a fork here are noted,
+        // so the maps stay within the log's forks.
         if log.forks().contains(&author) {
-            self.forks_sent.insert(author);
+            let known = self.forks_known.entry(author).or_insert(seq);
+            *known = (*known).min(seq);
+            if !answer {
+                self.forks_answer.insert(author);
+            }
+            self.forks_epoch += 1;
         }
     }
 
@@ -736,7 +776,7 @@ impl<P: Payload> SyncState<P> {
         // Every hello is answered with a full Have: it tells the remote what we hold and
         // confirms we saw its hello (so it stops resending). A Have is never answered, so this
         // cannot loop.
-        self.queue_have(log.version_vector(), true);
+        self.queue_have(log.version_vector(), true, log);
         self.have_sent_vv = log.version_vector().clone();
         self.have_sent_len = log.len();
         self.have_sent_at = now;
@@ -749,19 +789,52 @@ impl<P: Payload> SyncState<P> {
         }
     }
 
-    /// Queues a have in parts; a full one replaces parts not yet sent. The first part goes
-    /// out at once as control (it may confirm a hello); the others are paced like data, so a
-    /// log of any size is announced within the remote's rate limit.
-    fn queue_have(&mut self, have: &VersionVector, full: bool) {
+    /// Queues a have in parts, each entry with the tip of the log's op there; a full one
+    /// replaces parts not yet sent. The first part goes out at once as control (it may confirm
+    /// a hello); the others are paced like data, so a log of any size is announced within the
+    /// remote's rate limit.
+    fn queue_have(&mut self, have: &VersionVector, full: bool, log: &Log<P>) {
         if full {
-            self.control.retain(|m| !matches!(m, Message::Have(_)));
+            self.control.retain(|m| !matches!(m, Message::Have { .. }));
             self.have_out.clear();
         }
-        let mut parts = have.split(MAX_VV_AUTHORS).into_iter();
+        let with_tips = |vv: VersionVector| {
+            let tips = (vv.iter())
+                .map(|(author, seq)| log.by_seq(author, *seq).map_or(0, |op| tip(&op.id())))
+                .collect();
+            Message::Have { vv, tips }
+        };
+        let mut parts = have.split(MAX_VV_AUTHORS).into_iter().map(with_tips);
         if let Some(first) = parts.next() {
-            self.control.push_back(Message::Have(first));
+            self.control.push_back(first);
         }
         self.have_out.extend(parts);
+    }
+
+    /// Compares the tips of a have with the log's ops at the same seqs: where the log holds
+    /// another op, the two are a fork nobody may have built on (so nobody would ask for
+    /// either), and the log's op goes to the remote as if asked for. The remote then holds
+    /// both, and sends the fork back ([`crate::fork`]). Seqs at or past a fork the log knows
+    /// are skipped: that fork goes out anyway.
+    fn compare_tips(&mut self, vv: &VersionVector, tips: &[u64], log: &Log<P>) {
+        for ((author, seq), their) in vv.iter().zip(tips) {
+            if *their == 0 || log.forks().seq_of(author).is_some_and(|f| f <= *seq) {
+                continue;
+            }
+            let Some(op) = log.by_seq(author, *seq) else {
+                continue;
+            };
+            let id = op.id();
+            // Once per author and seq: a remote repeating a wrong tip gets nothing more.
+            if tip(&id) != *their
+                && self.tips_answered.get(author) != Some(seq)
+                && self.asked_out.len() < MAX_ASKED_OUT
+            {
+                self.stats.n_tips_differ += 1;
+                self.tips_answered.insert(*author, *seq);
+                self.asked_out.push_back(id);
+            }
+        }
     }
 
     /// Joins what the remote says it holds into what it is known to hold, keeping at most
@@ -901,12 +974,30 @@ impl<P: Payload> SyncState<P> {
         // The ack names only the batch's authors: what the sender needs to move on, in
         // bytes that do not grow with the number of peers.
         let mut authors = Vec::new();
+        self.insert_received(now, &ops, log, &mut authors);
+        let mut have = VersionVector::new();
+        for author in authors {
+            have.raise(author, log.version_vector().get(&author));
+        }
+        self.control.push_back(Message::Ack { batch_no, have });
+        self.update_up_to_date(log);
+    }
+
+    /// Inserts received ops into `log`, noting in `authors` the authors of those held or
+    /// signed.
+    fn insert_received(
+        &mut self,
+        now: Timestamp,
+        ops: &[Vec<u8>],
+        log: &mut Log<P>,
+        authors: &mut Vec<PeerId>,
+    ) {
         // Cheapest check first: each envelope and its id (a hash), then known ops are skipped,
         // then the signatures of the rest in one batch, and only a signed op's payload is
         // decoded and validated (which may compile formulas). A forged or replayed op never
         // costs a compile.
         let mut fresh: Vec<Envelope<'_>> = Vec::with_capacity(ops.len());
-        for bytes in &ops {
+        for bytes in ops {
             self.stats.n_ops_in += 1;
             let envelope = match Envelope::parse(bytes) {
                 Ok(envelope) => envelope,
@@ -940,12 +1031,6 @@ impl<P: Payload> SyncState<P> {
                 Err(ReceiveError::Decode(e)) => self.reject(decode_reject_kind(&e), e.to_string()),
             }
         }
-        let mut have = VersionVector::new();
-        for author in authors {
-            have.raise(author, log.version_vector().get(&author));
-        }
-        self.control.push_back(Message::Ack { batch_no, have });
-        self.update_up_to_date(log);
     }
 
     /// Counts an op the log refused against the remote ([`is_offence`]).
@@ -1021,6 +1106,17 @@ impl<P: Payload> SyncState<P> {
         if self.stuck_due(log).is_some_and(|d| d <= now) {
             self.ask_stuck(now, log);
         }
+        if self.forks_due().is_some_and(|d| d <= now) {
+            let late: Vec<PeerId> = (self.forks_sent.iter())
+                .filter(|(author, (seq, at, wait))| {
+                    at.saturating_add_micros(*wait) <= now
+                        && self.forks_known.get(*author).is_none_or(|k| k > seq)
+                })
+                .map(|(author, _)| *author)
+                .collect();
+            self.forks_resend.extend(late);
+            self.forks_epoch += 1;
+        }
         if self.have_due(log).is_some_and(|d| d <= now) {
             // Parts of an earlier have still queued: a full have replaces them, so the queue
             // never holds more than one full have.
@@ -1036,7 +1132,7 @@ impl<P: Payload> SyncState<P> {
                     have.raise(*author, *seq);
                 }
             }
-            self.queue_have(&have, full);
+            self.queue_have(&have, full, log);
             self.have_sent_vv = log.version_vector().clone();
             self.have_sent_len = log.len();
             self.have_sent_at = now;
@@ -1192,6 +1288,7 @@ impl<P: Payload> SyncState<P> {
             self.have_due(log),
             self.relearn_due(),
             self.stuck_due(log),
+            self.forks_due(),
             pace,
             log.next_pending_expiry(),
         ]
@@ -1200,29 +1297,50 @@ impl<P: Payload> SyncState<P> {
         .min()
     }
 
-    /// The next fork proof to send: one the remote has not been sent, about an author it
-    /// holds ops of (a proof about an author it does not hold would be dropped).
-    fn next_fork_proof<'a>(&self, log: &'a Log<P>) -> Option<&'a ForkProof> {
-        let proofs = log.forks().proofs();
-        let key = (proofs.len(), self.remote_vv_version);
-        if proofs.is_empty() || self.forks_idle.get() == Some(key) {
+    /// The next fork to send, and whether as an answer: first the answers owed, then a fork
+    /// the remote is not known to know (or a lower one) and that was not sent, or whose answer
+    /// is late, of an author the remote holds ops of (a fork of an author it does not hold
+    /// would be dropped).
+    fn next_fork(&self, log: &Log<P>) -> Option<(PeerId, crate::fork::Fork, bool)> {
+        let forks = log.forks();
+        if let Some(author) = self.forks_answer.first()
+            && let Some((_, fork)) = forks.iter().find(|(a, _)| *a == author)
+        {
+            return Some((*author, *fork, true));
+        }
+        let key = (forks.generation(), self.remote_vv_version, self.forks_epoch);
+        if forks.is_empty() || self.forks_idle.get() == Some(key) {
             return None;
         }
-        let next = proofs.iter().find(|p| {
-            !self.forks_sent.contains(&p.author()) && self.remote_vv.get(&p.author()) > 0
+        let next = forks.iter().find(|(author, fork)| {
+            let unknown = self.forks_known.get(author).is_none_or(|k| fork.seq < *k);
+            let unsent = (self.forks_sent.get(author))
+                .is_none_or(|(seq, _, _)| fork.seq < *seq || self.forks_resend.contains(author));
+            unknown && unsent && self.remote_vv.get(author) > 0
         });
         if next.is_none() {
             self.forks_idle.set(Some(key));
         }
-        next
+        next.map(|(author, fork)| (*author, *fork, false))
     }
 
-    /// True if haves, ephemeral values, fork proofs or ops wait to be sent and the window has
+    /// When the earliest fork sent waits no longer for its answer.
+    fn forks_due(&self) -> Option<Timestamp> {
+        (self.forks_sent.iter())
+            .filter(|(author, (seq, _, _))| {
+                !self.forks_resend.contains(*author)
+                    && self.forks_known.get(*author).is_none_or(|k| k > seq)
+            })
+            .map(|(_, (_, at, wait))| at.saturating_add_micros(*wait))
+            .min()
+    }
+
+    /// True if haves, ephemeral values, forks or ops wait to be sent and the window has
     /// room.
     fn data_waiting(&self, log: &Log<P>) -> bool {
         !self.have_out.is_empty()
             || !self.eph_out.is_empty()
-            || self.next_fork_proof(log).is_some()
+            || self.next_fork(log).is_some()
             || (self.in_flight.len() < MAX_IN_FLIGHT_BATCHES && !self.asked_out.is_empty())
             || (self.in_flight.len() < MAX_IN_FLIGHT_BATCHES && self.sendable(log))
     }
@@ -1262,7 +1380,7 @@ impl<P: Payload> SyncState<P> {
         }
         if let Some(have) = self.have_out.pop_front() {
             self.send_bucket.spend();
-            return Some(Message::Have(have));
+            return Some(have);
         }
         if let Some((channel, value)) = self.eph_out.pop_first() {
             self.send_bucket.spend();
@@ -1273,11 +1391,30 @@ impl<P: Payload> SyncState<P> {
                 value,
             });
         }
-        if let Some(proof) = self.next_fork_proof(log) {
-            let ops = proof.ops().map(<[u8]>::to_vec);
-            self.forks_sent.insert(proof.author());
-            self.send_bucket.spend();
-            return Some(Message::Forked { ops });
+        if let Some((author, fork, answer)) = self.next_fork(log) {
+            if answer {
+                self.forks_answer.remove(&author);
+            } else {
+                let wait = match self.forks_sent.get(&author) {
+                    Some((seq, _, wait)) if *seq == fork.seq => {
+                        (wait * 2).min(RESEND_AFTER_MAX_MICROS)
+                    }
+                    _ => self.base_resend_micros(),
+                };
+                self.forks_sent.insert(author, (fork.seq, now, wait));
+                self.forks_resend.remove(&author);
+            }
+            self.forks_epoch += 1;
+            let [a, b] = fork
+                .ids
+                .map(|id| log.get(&id).map(|op| op.encoded().to_vec()));
+            if let (Some(a), Some(b)) = (a, b) {
+                self.send_bucket.spend();
+                return Some(Message::Forked {
+                    ops: [a, b],
+                    answer,
+                });
+            }
         }
         if self.in_flight.len() >= MAX_IN_FLIGHT_BATCHES {
             return None;
@@ -1385,8 +1522,8 @@ impl<P: Payload> SyncState<P> {
 }
 
 /// True if the log's refusal of an op counts against the remote that sent it: all do but a
-/// fork of a held op, since an honest remote may hold the other side (and send it when asked
-/// by id), and the log keeps the proof.
+/// fork of an op inside the log's snapshot base (which it cannot tell apart), since an honest
+/// remote may hold the other side.
 fn is_offence(e: &InsertError) -> bool {
     !matches!(e, InsertError::Equivocation { .. })
 }

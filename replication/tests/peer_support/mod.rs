@@ -371,7 +371,7 @@ impl World {
                 self.send(conn, &hello);
             }
             4 => {
-                let have = Message::Have(self.version_vector(bytes));
+                let have = Message::have(self.version_vector(bytes));
                 self.send(conn, &have);
             }
             5 => {
@@ -410,7 +410,13 @@ impl World {
             11 => {
                 // A fork proof: two hostile ops, a real fork when they share key and seq.
                 if let (Some(a), Some(b)) = (self.hostile_op(bytes), self.hostile_op(bytes)) {
-                    self.send(conn, &Message::Forked { ops: [a, b] });
+                    self.send(
+                        conn,
+                        &Message::Forked {
+                            ops: [a, b],
+                            answer: false,
+                        },
+                    );
                 }
             }
             12 => {

@@ -313,9 +313,9 @@ pub enum NodeEvent {
         /// The remote.
         peer: PeerId,
     },
-    /// Input from this connection showed that `author` signed two ops with one seq (the
-    /// log keeps the proof, [`crate::fork`]); `author` may be this node's own identity, run
-    /// twice or restored from an old copy.
+    /// Input from this connection showed that `author` signed two ops with one seq, `seq`
+    /// the lowest known ([`crate::fork`]): its ops from there on count for nothing. `author`
+    /// may be this node's own identity, run twice or restored from an old copy.
     Forked {
         /// The connection.
         conn: ConnId,

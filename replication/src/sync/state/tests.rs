@@ -442,7 +442,7 @@ fn flooding_is_rate_limited() {
     let mut b = Node::new(2, 1);
     let peer = Keypair::from_seed([1; 32]).peer_id();
     feed(&mut b, 1, &hello(peer, SESSION, PROTOCOL_VERSION));
-    let have = Message::Have(VersionVector::new()).encode();
+    let have = Message::have(VersionVector::new()).encode();
     let mut limited = 0;
     for _ in 0..(MAX_MESSAGE_BURST + 10) {
         limited += feed(&mut b, 1, &have)
@@ -571,13 +571,13 @@ fn a_hello_to_a_log_of_many_authors_is_answered_with_split_haves() {
         + b.sync
             .control
             .iter()
-            .filter(|m| matches!(m, Message::Have(_)))
+            .filter(|m| matches!(m, Message::Have { .. }))
             .count();
     assert_eq!(n_queued, 8_000usize.div_ceil(MAX_VV_AUTHORS));
     let mut told = VersionVector::new();
     let mut n_haves = 0;
     for message in drain_checked(&mut b, 1, 100 * MILLI) {
-        if let Message::Have(vv) = message {
+        if let Message::Have { vv, .. } = message {
             told.join(&vv);
             n_haves += 1;
         }
@@ -604,4 +604,58 @@ fn wants_for_authors_not_held_are_dropped_and_counted() {
     assert_eq!(feed(&mut b, 2, &Message::Want(vv).encode()), vec![]);
     assert_eq!(b.sync.relay_vv.len(), 1);
     assert_eq!(b.sync.stats().n_claims_dropped, MAX_VV_AUTHORS as u64 - 1);
+}
+
+/// An op whose dependency never comes is asked for by id once the log has stood still for
+/// [`STUCK_DEP_MICROS`], once; and an ask for a held op is answered with it in a batch.
+#[test]
+fn a_dependency_that_never_comes_is_asked_for_by_id_and_asks_are_answered() {
+    let mut a = Node::new(1, 2);
+    let other = Keypair::from_seed([9; 32]);
+    let missing = OpId([0x5a; 32]);
+    let fields = OpFields {
+        seq: 1,
+        lamport: 2,
+        timestamp: Timestamp(1),
+        deps: vec![missing],
+        payload: TestPayload::Chat("built on something you lack".into()),
+    };
+    let waiting = crate::op::Op::sign(&other, fields).unwrap();
+    assert!(
+        feed(
+            &mut a,
+            0,
+            &hello(other.peer_id(), SESSION, PROTOCOL_VERSION)
+        )
+        .is_empty()
+    );
+    let batch = Message::Ops {
+        batch_no: 1,
+        ops: vec![waiting.encoded().to_vec()],
+    };
+    assert!(feed(&mut a, 0, &batch.encode()).is_empty());
+    assert_eq!(a.log.n_pending(), 1);
+    let asks = |messages: &[Message]| {
+        (messages.iter())
+            .filter_map(|m| match m {
+                Message::WantOps(ids) => Some(ids.clone()),
+                _ => None,
+            })
+            .collect::<Vec<_>>()
+    };
+    let early = drain_checked(&mut a, 0, STUCK_DEP_MICROS - 100 * MILLI);
+    assert!(asks(&early).is_empty(), "asked before the log stood still");
+    let late = drain_checked(&mut a, STUCK_DEP_MICROS, 3 * STUCK_CHECK_MICROS);
+    assert_eq!(asks(&late), vec![vec![missing]]);
+    assert_eq!(a.sync.stats().n_ops_asked, 1);
+    // The other way: the remote asks for an op `a` holds, and gets it.
+    let held = a.author(STUCK_DEP_MICROS, "mine".into());
+    let want = Message::WantOps(vec![held.id(), OpId([0x77; 32])]);
+    assert!(feed(&mut a, STUCK_DEP_MICROS, &want.encode()).is_empty());
+    let sent = drain_checked(&mut a, STUCK_DEP_MICROS, 100 * MILLI);
+    let answered = sent.iter().any(
+        |m| matches!(m, Message::Ops { ops, .. } if ops.iter().any(|o| o[..] == *held.encoded())),
+    );
+    assert!(answered, "{sent:?}");
+    assert_eq!(a.sync.stats().n_asks_dropped, 1, "the unknown id");
 }
