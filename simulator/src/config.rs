@@ -206,8 +206,7 @@ const BYZANTINE: Faults = Faults {
 
 impl Faults {
     /// Every preset, mildest first (`swarm` draws a mix per seed from `chaos`;
-    /// `byzantine-forks` is `byzantine` with equivocation, which replication does not handle
-    /// yet: a known failure).
+    /// `byzantine-forks` is `byzantine` with equivocation).
     pub const PRESETS: [Faults; 7] = [
         Faults {
             name: "none",

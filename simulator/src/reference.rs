@@ -25,7 +25,10 @@
 //!   An op whose author is expelled in its past is rejected as [`RejectReason::Expelled`], and
 //!   a lease whose holder is expelled in an op's past does not bind that op;
 //! - an expel that no readmit saw makes the member's ops it did not see void: they keep their
-//!   verdicts but are inactive (a void delete hides nothing).
+//!   verdicts but are inactive (a void delete hides nothing);
+//! - an author with two held ops of one seq forked: its ops at the lowest such seq and after
+//!   are rejected as [`RejectReason::Forked`] and count in nobody's lease, and past that seq
+//!   an op's causal past runs through its deps alone.
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -220,7 +223,11 @@ pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
     let mut observed = Vec::new();
     let mut flipped = !flip_first_rejected;
     let entries: Vec<_> = log.entries().collect();
-    let pasts = causal_pasts(log, &entries);
+    let forks = forks(&entries);
+    let forked = |op: &replication::Op<ShapePayload>| {
+        forks.get(&op.author()).is_some_and(|f| op.seq() >= *f)
+    };
+    let pasts = causal_pasts(log, &entries, &forks);
     let membership = membership_ops(log, &entries);
     let void = void_ops(&entries, &pasts, &membership);
     // Whether `member` is expelled in the causal past of the op at `pos` (itself included).
@@ -251,7 +258,7 @@ pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
             let mut seen = Rules::default();
             for &p in lease_ops.get(&object).into_iter().flatten() {
                 let l = entries[p].op;
-                if pasts[pos].contains(p) && !expelled_at(p, &l.author()) {
+                if pasts[pos].contains(p) && !expelled_at(p, &l.author()) && !forked(l) {
                     let exempt = |holder: &PeerId| expelled_at(p, holder);
                     let _ = seen.verdict(l.author(), l.timestamp().0, &kind(l.payload()), &exempt);
                 }
@@ -265,7 +272,9 @@ pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
             }
         }
         let exempt = |holder: &PeerId| expelled_at(pos, holder);
-        let expected = if expelled_at(pos, &op.author()) {
+        let expected = if forked(op) {
+            Mark::Rejected(RejectReason::Forked)
+        } else if expelled_at(pos, &op.author()) {
             Mark::Rejected(RejectReason::Expelled)
         } else {
             match rules.verdict(op.author(), op.timestamp().0, &k, &exempt) {
@@ -391,11 +400,26 @@ impl Positions {
     }
 }
 
+/// Per author that signed two held ops with one seq, the lowest such seq.
+fn forks(entries: &[replication::log::Entry<'_, ShapePayload>]) -> BTreeMap<PeerId, u64> {
+    let mut seen = BTreeSet::new();
+    let mut forks: BTreeMap<PeerId, u64> = BTreeMap::new();
+    for e in entries {
+        if !seen.insert((e.op.author(), e.op.seq())) {
+            let f = forks.entry(e.op.author()).or_insert(e.op.seq());
+            *f = (*f).min(e.op.seq());
+        }
+    }
+    forks
+}
+
 /// Each entry's causal past, as positions of the linear order (a topological order, so every
-/// parent comes first): its deps and its author's previous op, and theirs.
+/// parent comes first): its deps and its author's previous op (up to the author's fork), and
+/// theirs.
 fn causal_pasts(
     log: &Log<ShapePayload>,
     entries: &[replication::log::Entry<'_, ShapePayload>],
+    forks: &BTreeMap<PeerId, u64>,
 ) -> Vec<Positions> {
     let position: BTreeMap<OpId, usize> = entries
         .iter()
@@ -406,11 +430,11 @@ fn causal_pasts(
     let mut pasts: Vec<Positions> = Vec::with_capacity(entries.len());
     for e in entries {
         let mut past = vec![0u64; words];
-        let prev =
-            e.op.seq()
-                .checked_sub(1)
-                .and_then(|s| log.by_seq(&e.op.author(), s))
-                .map(|op| op.id());
+        let past_fork = forks.get(&e.op.author()).is_some_and(|f| e.op.seq() > *f);
+        let prev = (e.op.seq().checked_sub(1))
+            .filter(|_| !past_fork)
+            .and_then(|s| log.by_seq(&e.op.author(), s))
+            .map(|op| op.id());
         for parent in e.op.deps().iter().copied().chain(prev) {
             let Some(&p) = position.get(&parent) else {
                 continue;

@@ -880,8 +880,15 @@ impl Simulation {
             return true;
         };
         let vv = first.peer.log().version_vector();
+        // Forks too: learning one changes verdicts, not version vectors.
+        let forks = |h: &Honest| h.peer.log().forks().authors().collect::<Vec<_>>();
+        let first_forks = forks(first);
         first.peer.log().n_pending() == 0
-            && live.all(|h| h.peer.log().n_pending() == 0 && h.peer.log().version_vector() == vv)
+            && live.all(|h| {
+                h.peer.log().n_pending() == 0
+                    && h.peer.log().version_vector() == vv
+                    && forks(h) == first_forks
+            })
     }
 
     pub(crate) fn online(&self, node: usize) -> bool {
