@@ -832,8 +832,8 @@ impl Worker {
                 view.forked.insert(author, seq);
                 drop(view);
                 self.say(format!(
-                    "{who} signed two different edits as #{seq} (a fork): peers that got \
-                     different ones disagree about its later edits"
+                    "{who} signed two different edits as #{seq} (a fork): its edits from \
+                     #{seq} on count for nothing"
                 ));
             }
             NodeEvent::AdmissionFailed { addr, error } => {

@@ -888,13 +888,15 @@ mod tests {
         .unwrap();
         view.refresh(&log);
         assert!(view.forked().is_empty());
-        // The same identity, run twice, signed another op as #1.
-        let refused = log.insert(
+        // The same identity, run twice, signed another op as #1: both are held, neither counts.
+        let other = log.insert(
             replication::Timestamp(2),
             op("there"),
             replication::pending::Origin(1),
         );
-        assert!(refused.is_err());
+        assert!(other.is_ok_and(|i| i.delivered.len() == 1));
+        assert_eq!(log.len(), 2);
+        assert!(log.entries().all(|e| !e.active));
         view.refresh(&log);
         assert_eq!(view.forked().get(&me.peer_id()), Some(&1));
     }

@@ -12,7 +12,8 @@ const ERROR_COLOUR: egui::Color32 = egui::Color32::from_rgb(255, 110, 100);
 /// What a forked author's mark means.
 const FORKED_HOVER: &str = "this identity signed two different edits with one number: \
                             it runs as two copies, or from a restored backup, or it is \
-                            hostile; peers that got different ones disagree about its later edits";
+                            hostile; its edits from that number on count for nothing, \
+                            everywhere";
 /// Colour of notices.
 const NOTICE_COLOUR: egui::Color32 = egui::Color32::from_rgb(240, 200, 90);
 /// Ops still to receive from which the catch-up bar shows.
@@ -945,8 +946,8 @@ impl SculptApp {
 fn own_fork_text(seq: u64) -> String {
     format!(
         "This identity signed two different edits as #{seq}: another copy of this store is \
-         running, or it was restored from an older copy. Peers that got the other edit refuse \
-         this one's from there on. Close the other copy; to go on editing, join again with a \
+         running, or it was restored from an older copy. Its edits from #{seq} on count for \
+         nothing, on every peer. Close the other copy; to go on editing, join again with a \
          new store."
     )
 }
