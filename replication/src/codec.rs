@@ -158,6 +158,19 @@ impl<'a> Reader<'a> {
         Ok(b)
     }
 
+    /// Reads a byte that must be 0 (false) or 1 (true).
+    pub fn flag(&mut self) -> Result<bool, DecodeError> {
+        let offset = self.offset;
+        match self.u8()? {
+            0 => Ok(false),
+            1 => Ok(true),
+            _ => Err(DecodeError::Invalid {
+                offset,
+                what: "flag",
+            }),
+        }
+    }
+
     /// Reads `n` bytes.
     pub fn take(&mut self, n: usize) -> Result<&'a [u8], DecodeError> {
         if self.remaining() < n {

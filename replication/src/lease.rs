@@ -165,16 +165,10 @@ impl FoldState {
                 });
             }
             let holder = PeerId(r.array()?);
-            let flag_offset = r.offset();
-            let strength = match r.u8()? {
-                0 => LeaseStrength::Weak,
-                1 => LeaseStrength::Strong,
-                _ => {
-                    return Err(DecodeError::Invalid {
-                        offset: flag_offset,
-                        what: "flag",
-                    });
-                }
+            let strength = if r.flag()? {
+                LeaseStrength::Strong
+            } else {
+                LeaseStrength::Weak
             };
             let expires_at = Timestamp(r.varint()?);
             leases.insert(

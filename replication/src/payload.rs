@@ -212,7 +212,7 @@ pub mod test_payload {
                 },
                 2 => {
                     let object = r.varint()?;
-                    let strong = flag(&mut r)?;
+                    let strong = r.flag()?;
                     Self::Acquire {
                         object,
                         strong,
@@ -229,7 +229,7 @@ pub mod test_payload {
                 },
                 7 => Self::Member(Membership {
                     member: crate::identity::PeerId(r.array()?),
-                    expel: flag(&mut r)?,
+                    expel: r.flag()?,
                     nonce: r.array()?,
                 }),
                 _ => {
@@ -279,18 +279,6 @@ pub mod test_payload {
                 Self::Member(m) => Some(*m),
                 _ => None,
             }
-        }
-    }
-
-    fn flag(r: &mut Reader<'_>) -> Result<bool, DecodeError> {
-        let offset = r.offset();
-        match r.u8()? {
-            0 => Ok(false),
-            1 => Ok(true),
-            _ => Err(DecodeError::Invalid {
-                offset,
-                what: "flag",
-            }),
         }
     }
 

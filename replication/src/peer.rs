@@ -1117,10 +1117,9 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_fork_nobody_built_on_is_found_by_the_tips_of_haves() {
-        // A member gives each peer a different op as seq 1 and nothing more: no honest op
-        // waits for either side, so only the haves' tips can tell the peers apart.
+    /// Two peers, each holding a different op a member signed as its seq 1: the member and
+    /// the peers.
+    fn peers_on_two_sides_of_a_fork(now: Timestamp) -> (Keypair, Vec<TPeer>) {
         let hostile = Keypair::from_seed([6; 32]);
         let fork = |text: &str| {
             let fields = crate::op::OpFields {
@@ -1132,8 +1131,7 @@ mod tests {
             };
             crate::Op::sign(&hostile, fields).unwrap()
         };
-        let now = Timestamp(1_000);
-        let mut peers: Vec<TPeer> = [fork("a"), fork("b")]
+        let peers = [fork("a"), fork("b")]
             .into_iter()
             .zip(1..)
             .map(|(op, i)| {
@@ -1142,6 +1140,15 @@ mod tests {
                 Peer::new(Keypair::from_seed([i; 32]), [9; 16], log)
             })
             .collect();
+        (hostile, peers)
+    }
+
+    #[test]
+    fn a_fork_nobody_built_on_is_found_by_the_tips_of_haves() {
+        // A member gives each peer a different op as seq 1 and nothing more: no honest op
+        // waits for either side, so only the haves' tips can tell the peers apart.
+        let now = Timestamp(1_000);
+        let (hostile, mut peers) = peers_on_two_sides_of_a_fork(now);
         let links = [(0, ConnId(1), 1, ConnId(1))];
         for p in &mut peers {
             p.connect(now, ConnId(1)).unwrap();
@@ -1167,27 +1174,8 @@ mod tests {
     fn both_sides_of_a_fork_built_on_reach_both_peers_and_every_op_is_delivered() {
         // A member signs two ops as seq 1 and gives one to each peer, and each peer builds on
         // the one it holds.
-        let hostile = Keypair::from_seed([6; 32]);
-        let fork = |text: &str| {
-            let fields = crate::op::OpFields {
-                seq: 1,
-                lamport: 1,
-                timestamp: Timestamp(1),
-                deps: Vec::new(),
-                payload: TestPayload::Chat(text.into()),
-            };
-            crate::Op::sign(&hostile, fields).unwrap()
-        };
         let now = Timestamp(1_000);
-        let mut peers: Vec<TPeer> = [fork("a"), fork("b")]
-            .into_iter()
-            .zip(1..)
-            .map(|(op, i)| {
-                let mut log = Log::default();
-                log.insert(now, op, Origin(7)).unwrap();
-                Peer::new(Keypair::from_seed([i; 32]), [9; 16], log)
-            })
-            .collect();
+        let (hostile, mut peers) = peers_on_two_sides_of_a_fork(now);
         for p in &mut peers {
             p.author(now, TestPayload::Chat("on my side".into()))
                 .unwrap();

@@ -238,17 +238,7 @@ impl Message {
                 let protocol_version = r.varint()?;
                 let session_id = r.array()?;
                 let peer = PeerId(r.array()?);
-                let flag_offset = r.offset();
-                let hello_seen = match r.u8()? {
-                    0 => false,
-                    1 => true,
-                    _ => {
-                        return Err(DecodeError::Invalid {
-                            offset: flag_offset,
-                            what: "flag",
-                        });
-                    }
-                };
+                let hello_seen = r.flag()?;
                 Self::Hello {
                     protocol_version,
                     session_id,
@@ -300,17 +290,7 @@ impl Message {
             TAG_FORKED => {
                 let a = r.bytes("op length", MAX_OP_BYTES as u64)?.to_vec();
                 let b = r.bytes("op length", MAX_OP_BYTES as u64)?.to_vec();
-                let flag_offset = r.offset();
-                let answer = match r.u8()? {
-                    0 => false,
-                    1 => true,
-                    _ => {
-                        return Err(DecodeError::Invalid {
-                            offset: flag_offset,
-                            what: "flag",
-                        });
-                    }
-                };
+                let answer = r.flag()?;
                 Self::Forked {
                     ops: [a, b],
                     answer,
