@@ -47,7 +47,7 @@ impl Forks {
     /// the author's first fork or a lower seq than the one noted.
     pub(crate) fn record(&mut self, author: PeerId, seq: u64, a: OpId, b: OpId) -> bool {
         debug_assert!(a != b, "a fork is two different ops");
-        if self.seq_of(&author).is_some_and(|held| held <= seq) {
+        if self.covers(&author, seq) {
             return false;
         }
         self.generation += 1;
@@ -64,9 +64,19 @@ impl Forks {
         true
     }
 
+    /// `author`'s fork, if it forked.
+    pub fn get(&self, author: &PeerId) -> Option<&Fork> {
+        self.by_author.get(author)
+    }
+
     /// The lowest seq `author` signed twice, if it forked.
     pub fn seq_of(&self, author: &PeerId) -> Option<u64> {
-        self.by_author.get(author).map(|f| f.seq)
+        self.get(author).map(|f| f.seq)
+    }
+
+    /// True if `author` forked at `seq` or before: its ops at `seq` are rejected.
+    pub fn covers(&self, author: &PeerId, seq: u64) -> bool {
+        self.seq_of(author).is_some_and(|f| f <= seq)
     }
 
     /// True if `author` forked.
@@ -102,9 +112,8 @@ impl Forks {
 
     /// The authors whose fork was found or lowered after `generation`, with its seq now.
     pub fn changed_since(&self, generation: u64) -> impl Iterator<Item = (PeerId, u64)> + '_ {
-        let any = self.generation > generation;
         (self.by_author.iter())
-            .filter(move |(_, f)| any && f.generation > generation)
+            .filter(move |(_, f)| f.generation > generation)
             .map(|(a, f)| (*a, f.seq))
     }
 }

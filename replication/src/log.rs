@@ -884,12 +884,8 @@ impl<P: Payload> Log<P> {
         }
         // The author's previous op is part of the causal past only up to its first fork,
         // where there is one previous op whichever side an op is on.
-        let fork_seq = (self.forks.seq_of(&author).unwrap_or(u64::MAX)).min(if twin.is_some() {
-            op.seq()
-        } else {
-            u64::MAX
-        });
-        let prev = (op.seq() <= fork_seq)
+        let past_fork = self.forks.covers(&author, op.seq().saturating_sub(1));
+        let prev = (!past_fork)
             .then(|| self.by_seq(&author, op.seq().checked_sub(1)?))
             .flatten();
         // Deps and previous ops inside a base have Lamport times at or below its cut, and
@@ -1075,8 +1071,8 @@ impl<P: Payload> Log<P> {
     /// through its author's previous op, so the reach memo starts afresh and the deletes from
     /// the fork's first op on learn again what they saw; a forked member's void ops are counted
     /// again, and the scene is told the author's ops changed from the fork on
-    /// ([`Refold::void_from`]). Returns the position of the author's first op at or past its fork: verdicts from
-    /// there on may change.
+    /// ([`Refold::void_from`]). Returns the position of the author's first op at or past its
+    /// fork: verdicts from there on may change.
     fn note_forks(&mut self) -> Option<usize> {
         let mut first: Option<usize> = None;
         for author in std::mem::take(&mut self.forks_changed) {
@@ -1202,7 +1198,7 @@ impl<P: Payload> Log<P> {
             return Mark::Effective;
         };
         let effect = op.payload().effect();
-        if self.dag().is_forked(op) {
+        if self.forks.covers(&op.author(), op.seq()) {
             // A lease op on the chain still notes the lease before it: later lease ops that
             // missed it fold from there.
             let on_chain = || {

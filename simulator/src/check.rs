@@ -265,7 +265,7 @@ fn check_history(
 /// True if `id`, held by some honest peer, is at or past its author's fork as `log` knows it.
 fn past_fork(sim: &Simulation, log: &Log<ShapePayload>, id: &OpId) -> bool {
     let op = sim.honest.iter().find_map(|h| h.peer.log().get(id));
-    op.is_some_and(|op| (log.forks().seq_of(&op.author())).is_some_and(|f| op.seq() >= f))
+    op.is_some_and(|op| log.forks().covers(&op.author(), op.seq()))
 }
 
 /// A fresh fold of the peer's log, compared with its incremental scene.

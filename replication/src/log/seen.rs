@@ -82,18 +82,13 @@ impl<P: Payload> Dag<'_, P> {
 
     /// True if `op` is at or past its author's fork ([`crate::fork`]): it is rejected.
     pub(crate) fn is_forked(&self, op: &Op<P>) -> bool {
-        self.past_fork(&op.author(), op.seq())
-    }
-
-    /// True if `author` forked at `seq` or before.
-    fn past_fork(&self, author: &PeerId, seq: u64) -> bool {
-        !self.forks.is_empty() && self.forks.seq_of(author).is_some_and(|f| seq >= f)
+        self.forks.covers(&op.author(), op.seq())
     }
 
     /// The author's previous held op (`None` for its first, one inside the base, or past the
     /// author's fork, where the previous op depends on the side).
     fn prev(&self, op: &Op<P>) -> Option<&OpId> {
-        if self.past_fork(&op.author(), op.seq().saturating_sub(1)) {
+        if self.forks.covers(&op.author(), op.seq().saturating_sub(1)) {
             return None;
         }
         let base_seq = self.base.map_or(0, |b| b.seq(&op.author()));
@@ -116,11 +111,11 @@ impl<P: Payload> Dag<'_, P> {
         if op.lamport() <= target.lamport() {
             return Some(false);
         }
-        if self.past_fork(&op.author(), op.seq()) {
+        if self.forks.covers(&op.author(), op.seq()) {
             // Two ops share this seq and may see different things: walk.
             return None;
         }
-        if op.author() == target.author() && !self.past_fork(&target.author(), target.seq()) {
+        if op.author() == target.author() && !self.forks.covers(&target.author(), target.seq()) {
             return Some(op.seq() >= target.seq());
         }
         memo.known(target_id, &op.author(), op.seq())
@@ -172,7 +167,7 @@ impl<P: Payload> Dag<'_, P> {
                 }
             }
             if seen || unknown.is_empty() {
-                if self.past_fork(&op.author(), op.seq()) {
+                if self.forks.covers(&op.author(), op.seq()) {
                     forked.insert(id, seen);
                 } else {
                     memo.record(*target_id, op.author(), op.seq(), seen);

@@ -386,6 +386,9 @@ pub struct SyncState<P> {
     /// The log's length when last seen (every input and timer), and since when it was so.
     stuck_log_len: Option<usize>,
     log_still_since: Timestamp,
+    /// Per author the log holds, the seq at which a tip of the remote last differed from the
+    /// log's op (which then went out).
+    tips_answered: BTreeMap<PeerId, u64>,
     /// Per forked author, the lowest forked seq the remote showed it knows (it sent that fork's
     /// two ops, or lower ones). At most one entry per fork the log holds.
     forks_known: BTreeMap<PeerId, u64>,
@@ -394,9 +397,6 @@ pub struct SyncState<P> {
     forks_sent: BTreeMap<PeerId, (u64, Timestamp, u64)>,
     /// Forks whose answer did not come in time: to send again.
     forks_resend: BTreeSet<PeerId>,
-    /// Per author the log holds, the seq at which a tip of the remote last differed from the
-    /// log's op (which then went out).
-    tips_answered: BTreeMap<PeerId, u64>,
     /// Forks the remote sent that await our answer.
     forks_answer: BTreeSet<PeerId>,
     /// Bumped whenever the four fields above change.
@@ -723,7 +723,7 @@ impl<P: Payload> SyncState<P> {
         if log.version_vector().get(&author) == 0 {
             return;
         }
-        if log.forks().seq_of(&author).is_none_or(|held| seq < held) {
+        if !log.forks().covers(&author, seq) {
             self.insert_received(now, &ops, log, &mut Vec::new());
         }
         // Whoever sent two good ops knows that fork. Only authors with a fork here are noted,
@@ -818,7 +818,7 @@ impl<P: Payload> SyncState<P> {
     /// are skipped: that fork goes out anyway.
     fn compare_tips(&mut self, vv: &VersionVector, tips: &[u64], log: &Log<P>) {
         for ((author, seq), their) in vv.iter().zip(tips) {
-            if *their == 0 || log.forks().seq_of(author).is_some_and(|f| f <= *seq) {
+            if *their == 0 || log.forks().covers(author, *seq) {
                 continue;
             }
             let Some(op) = log.by_seq(author, *seq) else {
@@ -1107,11 +1107,8 @@ impl<P: Payload> SyncState<P> {
             self.ask_stuck(now, log);
         }
         if self.forks_due().is_some_and(|d| d <= now) {
-            let late: Vec<PeerId> = (self.forks_sent.iter())
-                .filter(|(author, (seq, at, wait))| {
-                    at.saturating_add_micros(*wait) <= now
-                        && self.forks_known.get(*author).is_none_or(|k| k > seq)
-                })
+            let late: Vec<PeerId> = (self.forks_awaited())
+                .filter(|(_, due)| *due <= now)
                 .map(|(author, _)| *author)
                 .collect();
             self.forks_resend.extend(late);
@@ -1304,7 +1301,7 @@ impl<P: Payload> SyncState<P> {
     fn next_fork(&self, log: &Log<P>) -> Option<(PeerId, crate::fork::Fork, bool)> {
         let forks = log.forks();
         if let Some(author) = self.forks_answer.first()
-            && let Some((_, fork)) = forks.iter().find(|(a, _)| *a == author)
+            && let Some(fork) = forks.get(author)
         {
             return Some((*author, *fork, true));
         }
@@ -1324,15 +1321,20 @@ impl<P: Payload> SyncState<P> {
         next.map(|(author, fork)| (*author, *fork, false))
     }
 
-    /// When the earliest fork sent waits no longer for its answer.
-    fn forks_due(&self) -> Option<Timestamp> {
+    /// The forks sent and still awaiting their answer (not yet to be sent again), each with
+    /// when it waits no longer.
+    fn forks_awaited(&self) -> impl Iterator<Item = (&PeerId, Timestamp)> {
         (self.forks_sent.iter())
             .filter(|(author, (seq, _, _))| {
                 !self.forks_resend.contains(*author)
                     && self.forks_known.get(*author).is_none_or(|k| k > seq)
             })
-            .map(|(_, (_, at, wait))| at.saturating_add_micros(*wait))
-            .min()
+            .map(|(author, (_, at, wait))| (author, at.saturating_add_micros(*wait)))
+    }
+
+    /// When the earliest fork sent waits no longer for its answer.
+    fn forks_due(&self) -> Option<Timestamp> {
+        self.forks_awaited().map(|(_, due)| due).min()
     }
 
     /// True if haves, ephemeral values, forks or ops wait to be sent and the window has
