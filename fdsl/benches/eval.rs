@@ -14,7 +14,7 @@
 use divan::Bencher;
 use divan::counter::ItemsCount;
 use fdsl::Function;
-use fdsl::eval::{BulkEval, GradBulkEval, Interval, IntervalEval};
+use fdsl::eval::{BulkEval, GradBulkEval, Interval, IntervalBulkEval, IntervalEval};
 use fdsl::tape::{Fidelity, Tape};
 use fidget::shape::Shape;
 
@@ -164,6 +164,26 @@ mod interval {
                 let i = |k: usize| Interval::new(b[k] as f64, (b[k] + BOX_SIZE) as f64);
                 divan::black_box(eval.eval([i(0), i(1), i(2), Interval::point(0.0)]));
             }
+        });
+    }
+
+    /// The same boxes through the bulk evaluator, [`fdsl::eval::BOX_CHUNK`] boxes per pass;
+    /// each box's choices are recorded, as `fdsl` and fidget's tracing evaluators record them.
+    #[divan::bench(args = models())]
+    fn fdsl_bulk(bencher: Bencher, model: &str) {
+        let tape = tape(model);
+        let mut eval = IntervalBulkEval::new(&tape);
+        let boxes: Vec<[Interval; 4]> = boxes()
+            .iter()
+            .map(|b| {
+                let i = |k: usize| Interval::new(b[k] as f64, (b[k] + BOX_SIZE) as f64);
+                [i(0), i(1), i(2), Interval::point(0.0)]
+            })
+            .collect();
+        let mut out = vec![Interval::point(0.0); N_BOXES];
+        bencher.counter(ItemsCount::new(N_BOXES)).bench_local(|| {
+            eval.eval(&boxes, &mut out);
+            divan::black_box(&out);
         });
     }
 

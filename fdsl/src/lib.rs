@@ -4,8 +4,8 @@
 //!
 //! The pipeline is source text -> [`syntax::ast`] (with byte spans) -> SSA expression graph
 //! ([`compile::Context`], folded and deduplicated) -> register [`Tape`] -> evaluators
-//! ([`eval::PointEval`], [`eval::BulkEval`], [`eval::IntervalEval`], [`eval::GradEval`],
-//! [`eval::GradBulkEval`]). Interval evaluation records choices that
+//! ([`eval::PointEval`], [`eval::BulkEval`], [`eval::IntervalEval`], [`eval::IntervalBulkEval`],
+//! [`eval::GradEval`], [`eval::GradBulkEval`]). Interval evaluation records choices that
 //! [`Tape::simplify`] uses to drop branches that cannot matter in a box.
 //!
 //! Sign convention: `f >= 0` is inside a solid, `f = 0` its surface (as in the thesis and

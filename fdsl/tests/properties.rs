@@ -7,7 +7,9 @@
 )]
 
 use fdsl::Function;
-use fdsl::eval::{BulkEval, GradBulkEval, GradEval, Interval, IntervalEval, PointEval};
+use fdsl::eval::{
+    BulkEval, GradBulkEval, GradEval, Interval, IntervalBulkEval, IntervalEval, PointEval,
+};
 use fdsl::tape::Fidelity;
 use proptest::prelude::*;
 
@@ -116,6 +118,29 @@ proptest! {
         for p in points {
             let v = point.eval(p);
             prop_assert!(bounds.contains(v), "{src}\nbox {b:?}\nvalue {v} at {p:?} outside {bounds:?}");
+        }
+    }
+
+    #[test]
+    fn bulk_intervals_and_choices_are_the_box_by_box_ones(
+        src in expr(5),
+        boxes in proptest::collection::vec(box_and_points().prop_map(|(b, _)| b), 1..12),
+    ) {
+        let Some(f) = compile(&src) else { return Ok(()) };
+        let tape = f.tape();
+        let mut scalar = IntervalEval::new(&tape);
+        let mut bulk = IntervalBulkEval::new(&tape);
+        let mut out = vec![Interval::point(0.0); boxes.len()];
+        bulk.eval(&boxes, &mut out);
+        let mut choices = Vec::new();
+        for (k, (b, o)) in boxes.iter().zip(&out).enumerate() {
+            let want = scalar.eval(*b);
+            let same = want.lo.to_bits() == o.lo.to_bits()
+                && want.hi.to_bits() == o.hi.to_bits()
+                && want.nan == o.nan;
+            prop_assert!(same, "{src}\nbox {b:?}: bulk {o:?}, box by box {want:?}");
+            bulk.choices(k, &mut choices);
+            prop_assert_eq!(scalar.choices(), choices.as_slice(), "{}", src);
         }
     }
 

@@ -4,7 +4,7 @@
 #![no_main]
 
 use fdsl::Function;
-use fdsl::eval::{BulkEval, GradEval, Interval, IntervalEval, PointEval};
+use fdsl::eval::{BulkEval, GradEval, Interval, IntervalBulkEval, IntervalEval, PointEval};
 use fdsl::tape::Fidelity;
 use libfuzzer_sys::fuzz_target;
 
@@ -26,7 +26,10 @@ fuzz_target!(|data: &[u8]| {
     BulkEval::new(&tape).eval(&[0.1, 0.2, 0.3], &[0.0; 3], &[-0.5; 3], 0.0, &mut out);
     let i = Interval::new(-1.0, 1.0);
     let mut interval = IntervalEval::new(&tape);
-    interval.eval([i, i, i, Interval::point(0.0)]);
+    let bounds = interval.eval([i, i, i, Interval::point(0.0)]);
+    let mut bulk = [Interval::point(0.0)];
+    IntervalBulkEval::new(&tape).eval(&[[i, i, i, Interval::point(0.0)]], &mut bulk);
+    assert_eq!(format!("{bounds:?}"), format!("{:?}", bulk[0]), "bulk bounds differ");
     let simpler = tape.simplify(interval.choices(), Fidelity::Sign);
     let _ = PointEval::new(&simpler).eval(p);
 });

@@ -181,7 +181,7 @@ impl IntervalEval {
 }
 
 /// A grid's bounds over a box of coordinates: the samples the box's cells reach.
-fn sample(grid: &crate::grid::Grid, p: [Interval; 3]) -> Interval {
+pub(super) fn sample(grid: &crate::grid::Grid, p: [Interval; 3]) -> Interval {
     if p.iter().any(Interval::ends_nan) {
         return Interval::NAN;
     }
@@ -200,7 +200,8 @@ fn monotone(a: Interval, f: impl Fn(f64) -> f64) -> Interval {
     }
 }
 
-fn unary(op: UnaryOp, a: Interval) -> Interval {
+#[inline(always)]
+pub(super) fn unary(op: UnaryOp, a: Interval) -> Interval {
     if a.ends_nan() {
         return Interval::NAN;
     }
@@ -211,6 +212,7 @@ fn unary(op: UnaryOp, a: Interval) -> Interval {
 }
 
 /// Bounds of a unary operation over an interval with numeric ends.
+#[inline(always)]
 fn unary_finite(op: UnaryOp, a: Interval) -> Interval {
     match op {
         UnaryOp::Neg => Interval::new(-a.hi, -a.lo),
@@ -404,7 +406,8 @@ fn sign_only(choice: Choice) -> Choice {
     }
 }
 
-fn binary(op: BinaryOp, a: Interval, b: Interval) -> (Interval, Choice) {
+#[inline(always)]
+pub(super) fn binary(op: BinaryOp, a: Interval, b: Interval) -> (Interval, Choice) {
     let nan = a.has_nan() || b.has_nan();
     let logic = matches!(
         op,
@@ -428,6 +431,7 @@ fn binary(op: BinaryOp, a: Interval, b: Interval) -> (Interval, Choice) {
 }
 
 /// Bounds and choice of a binary operation over intervals with numeric ends.
+#[inline(always)]
 fn binary_finite(op: BinaryOp, a: Interval, b: Interval) -> (Interval, Choice) {
     let value = match op {
         BinaryOp::Add => Interval::new(a.lo + b.lo, a.hi + b.hi),
@@ -534,7 +538,7 @@ fn modulo(a: Interval, b: Interval) -> Interval {
     }
 }
 
-fn ternary(op: TernaryOp, a: Interval, b: Interval, c: Interval) -> (Interval, Choice) {
+pub(super) fn ternary(op: TernaryOp, a: Interval, b: Interval, c: Interval) -> (Interval, Choice) {
     match op {
         TernaryOp::Select => {
             if a.ends_nan() || a.nan {

@@ -11,6 +11,7 @@ mod bulk;
 mod grad;
 mod grad_bulk;
 mod interval;
+mod interval_bulk;
 mod point;
 mod real;
 
@@ -18,5 +19,6 @@ pub use bulk::{BulkEval, CHUNK};
 pub use grad::{Grad, GradEval};
 pub use grad_bulk::GradBulkEval;
 pub use interval::{Interval, IntervalEval};
+pub use interval_bulk::{BOX_CHUNK, IntervalBulkEval};
 pub use point::PointEval;
 pub use real::{fast_cos, fast_sin};
