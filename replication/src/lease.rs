@@ -72,6 +72,31 @@ pub enum RejectReason {
     Forked,
 }
 
+impl RejectReason {
+    /// What the op's author can do about it, in a few words for a tooltip.
+    pub fn remedy(&self) -> &'static str {
+        match self {
+            Self::LeaseHeld { .. } | Self::StrongLeaseHeld { .. } => {
+                "it stays in the history, marked rejected; take the lease and redo it"
+            }
+            Self::NotHolder => "nothing to give back: the lease was not yours at that point",
+            Self::UnknownTarget
+            | Self::NotOwnTarget
+            | Self::TargetNotEdit
+            | Self::TargetNotEffective
+            | Self::AlreadyUndone
+            | Self::NotUndone => "nothing changed; undo and redo apply to your own effective edits",
+            Self::Forked => {
+                "two copies of your identity signed different edits; from the fork on, its edits \
+                 count for nothing on every peer: join again with a new identity"
+            }
+            Self::Expelled => {
+                "the session's founder expelled this identity; its edits count for nothing"
+            }
+        }
+    }
+}
+
 impl fmt::Display for RejectReason {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {

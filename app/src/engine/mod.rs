@@ -29,7 +29,7 @@ use replication::sync::state::CloseReason;
 use replication::{OpId, PeerId, Timestamp};
 
 pub use presence::{CameraPose, Presence};
-pub use view::{ChatRow, HistoryRow, PeerRow, SharedView, View, lock};
+pub use view::{ChatRow, HistoryRow, PeerRow, Rejection, SharedView, View, lock};
 
 /// Requests queued from faces to the engine thread before `try_*` calls report it busy.
 pub const MAX_QUEUED_REQUESTS: usize = 256;

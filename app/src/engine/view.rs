@@ -44,6 +44,17 @@ pub struct ChatRow {
     pub text: String,
 }
 
+/// One of this peer's ops that took no effect.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rejection {
+    /// The op.
+    pub op: OpId,
+    /// What it did and why it was rejected.
+    pub why: String,
+    /// What its author can do about it.
+    pub remedy: &'static str,
+}
+
 /// One op of the history.
 #[derive(Clone, Debug, PartialEq)]
 pub struct HistoryRow {
@@ -112,7 +123,7 @@ pub struct View {
     next_object: IdSource,
     changes: ChangeLog,
     leases: BTreeMap<u64, replication::lease::Lease>,
-    my_rejections: Vec<(OpId, String)>,
+    my_rejections: Vec<Rejection>,
     generation: u64,
     hash: Option<(u64, String)>,
     pub(super) peers: Vec<PeerRow>,
@@ -220,7 +231,11 @@ impl View {
                 let what = log
                     .get(&id)
                     .map_or_else(String::new, |op| describe(log, self.scene(), op.payload()));
-                (id, format!("{what}: {reason}"))
+                Rejection {
+                    op: id,
+                    why: format!("{what}: {reason}"),
+                    remedy: reason.remedy(),
+                }
             })
             .collect();
     }
@@ -233,7 +248,7 @@ impl View {
 
     /// This peer's latest rejected ops (newest first, at most [`MAX_REJECTIONS_SHOWN`]), with
     /// what they did and why they were rejected.
-    pub fn my_rejections(&self) -> &[(OpId, String)] {
+    pub fn my_rejections(&self) -> &[Rejection] {
         &self.my_rejections
     }
 
@@ -899,5 +914,13 @@ mod tests {
         assert!(log.entries().all(|e| !e.active));
         view.refresh(&log);
         assert_eq!(view.forked().get(&me.peer_id()), Some(&1));
+        // Both are this peer's rejected ops, and the advice is about the fork, not a lease.
+        let rejections = view.my_rejections();
+        assert_eq!(rejections.len(), 2);
+        for r in rejections {
+            assert!(r.why.contains("forked"), "{}", r.why);
+            assert!(r.remedy.contains("new identity"), "{}", r.remedy);
+            assert!(!r.remedy.contains("lease"), "{}", r.remedy);
+        }
     }
 }

@@ -531,7 +531,7 @@ impl SculptApp {
                 points.iter().map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>()
             }),
             "probes": self.probes(&view),
-            "my_rejections": view.my_rejections().iter().map(|(_, why)| why.clone()).collect::<Vec<_>>(),
+            "my_rejections": view.my_rejections().iter().map(|r| r.why.clone()).collect::<Vec<_>>(),
             "presence": rows(view.presence().iter().map(|(peer, p)| json!({
                 "peer": peer.short(), "name": p.name, "colour": p.colour,
                 "pointer": p.pointer, "tool": p.tool, "selected": p.selected,

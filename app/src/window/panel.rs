@@ -587,11 +587,12 @@ impl SculptApp {
             });
         }
         let rejected = lock(self.engine.view()).my_rejections().first().cloned();
-        if let Some((_, why)) = rejected {
-            ui.colored_label(ERROR_COLOUR, format!("Your last rejected edit: {why}"))
-                .on_hover_text(
-                    "it stays in the history, marked rejected; take the lease and redo it",
-                );
+        if let Some(rejected) = rejected {
+            ui.colored_label(
+                ERROR_COLOUR,
+                format!("Your last rejected edit: {}", rejected.why),
+            )
+            .on_hover_text(rejected.remedy);
         }
         ui.separator();
         ui.heading("Chat and commands");
