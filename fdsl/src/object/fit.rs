@@ -12,7 +12,7 @@
 use glam::DVec3;
 
 use super::space::Domain;
-use crate::eval::{Interval, IntervalEval};
+use crate::eval::{BOX_CHUNK, Interval, IntervalBulkEval};
 use crate::tape::Tape;
 
 /// Half the edge of the cube searched for the solid (scene units).
@@ -40,48 +40,74 @@ pub enum FitError {
 }
 
 /// The domain of the solid `tape >= 0` at time `t` (the tape's first output is the value).
+///
+/// Cells are bounded [`BOX_CHUNK`] at a time by the bulk interval evaluator, whose bounds are
+/// the box-by-box ones; the kept cells, and so the domain, do not depend on that order.
 pub fn fit_domain(tape: &Tape, t: f64) -> Result<Domain, FitError> {
-    let mut eval = IntervalEval::new(tape);
+    let mut eval = IntervalBulkEval::new(tape);
     let finest = 2.0 * MAX_FIT_HALF_SIZE / f64::from(1u32 << FIT_DEPTH);
     let mut lo = DVec3::splat(f64::INFINITY);
     let mut hi = DVec3::splat(f64::NEG_INFINITY);
-    let mut cells = vec![(
-        DVec3::splat(-MAX_FIT_HALF_SIZE),
-        2.0 * MAX_FIT_HALF_SIZE,
-        0u32,
-    )];
+    let mut cells = vec![Cell {
+        corner: DVec3::splat(-MAX_FIT_HALF_SIZE),
+        edge: 2.0 * MAX_FIT_HALF_SIZE,
+        depth: 0,
+    }];
+    let mut batch = Vec::with_capacity(BOX_CHUNK);
+    let mut boxes = [[Interval::point(0.0); 4]; BOX_CHUNK];
+    let mut bounds = [Interval::point(0.0); BOX_CHUNK];
     let mut n_evaluated = 0usize;
-    while let Some((corner, edge, depth)) = cells.pop() {
-        n_evaluated += 1;
+    while !cells.is_empty() {
+        let n = cells.len().min(BOX_CHUNK);
+        n_evaluated += n;
         if n_evaluated > MAX_FIT_CELLS {
             return Err(FitError::TooComplex);
         }
-        let axis = |a: usize| Interval::new(corner[a], corner[a] + edge);
-        let v = eval.eval([axis(0), axis(1), axis(2), Interval::point(t)]);
-        let maybe_inside = v.hi >= 0.0 || v.has_nan();
-        if !maybe_inside {
-            continue;
+        batch.clear();
+        batch.extend(cells.drain(cells.len() - n..));
+        for (b, cell) in boxes.iter_mut().zip(&batch) {
+            let axis = |a: usize| Interval::new(cell.corner[a], cell.corner[a] + cell.edge);
+            *b = [axis(0), axis(1), axis(2), Interval::point(t)];
         }
-        let surely_inside = v.lo >= 0.0 && !v.has_nan();
-        if surely_inside || depth == FIT_DEPTH {
-            let far = corner + DVec3::splat(edge);
-            let touches_edge = corner.min_element() <= -MAX_FIT_HALF_SIZE
-                || far.max_element() >= MAX_FIT_HALF_SIZE;
-            if touches_edge {
-                return Err(FitError::Unbounded);
+        eval.eval(&boxes[..n], &mut bounds[..n]);
+        for (
+            &Cell {
+                corner,
+                edge,
+                depth,
+            },
+            v,
+        ) in batch.iter().zip(&bounds)
+        {
+            let maybe_inside = v.hi >= 0.0 || v.has_nan();
+            if !maybe_inside {
+                continue;
             }
-            lo = lo.min(corner);
-            hi = hi.max(far);
-            continue;
-        }
-        let half = edge / 2.0;
-        for k in 0..8u32 {
-            let offset = DVec3::new(
-                f64::from(k & 1) * half,
-                f64::from(k >> 1 & 1) * half,
-                f64::from(k >> 2 & 1) * half,
-            );
-            cells.push((corner + offset, half, depth + 1));
+            let surely_inside = v.lo >= 0.0 && !v.has_nan();
+            if surely_inside || depth == FIT_DEPTH {
+                let far = corner + DVec3::splat(edge);
+                let touches_edge = corner.min_element() <= -MAX_FIT_HALF_SIZE
+                    || far.max_element() >= MAX_FIT_HALF_SIZE;
+                if touches_edge {
+                    return Err(FitError::Unbounded);
+                }
+                lo = lo.min(corner);
+                hi = hi.max(far);
+                continue;
+            }
+            let half = edge / 2.0;
+            for k in 0..8u32 {
+                let offset = DVec3::new(
+                    f64::from(k & 1) * half,
+                    f64::from(k >> 1 & 1) * half,
+                    f64::from(k >> 2 & 1) * half,
+                );
+                cells.push(Cell {
+                    corner: corner + offset,
+                    edge: half,
+                    depth: depth + 1,
+                });
+            }
         }
     }
     if lo.x > hi.x {
@@ -89,6 +115,14 @@ pub fn fit_domain(tape: &Tape, t: f64) -> Result<Domain, FitError> {
     }
     let (lo, hi) = (lo - DVec3::splat(finest), hi + DVec3::splat(finest));
     Ok(Domain::new((lo + hi) / 2.0, hi - lo))
+}
+
+/// A cube of the search: its lowest corner, its edge and how many splits made it.
+#[derive(Clone, Copy)]
+struct Cell {
+    corner: DVec3,
+    edge: f64,
+    depth: u32,
 }
 
 #[cfg(test)]
@@ -142,6 +176,63 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// The search as it was, one cell at a time in depth-first order through the box-by-box
+    /// evaluator: the batched search must find the same domains.
+    fn fit_box_by_box(tape: &Tape) -> Result<Domain, FitError> {
+        let mut eval = crate::eval::IntervalEval::new(tape);
+        let finest = 2.0 * MAX_FIT_HALF_SIZE / f64::from(1u32 << FIT_DEPTH);
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        let mut cells = vec![(DVec3::splat(-MAX_FIT_HALF_SIZE), 2.0 * MAX_FIT_HALF_SIZE, 0)];
+        while let Some((corner, edge, depth)) = cells.pop() {
+            let axis = |a: usize| Interval::new(corner[a], corner[a] + edge);
+            let v = eval.eval([axis(0), axis(1), axis(2), Interval::point(0.0)]);
+            if !(v.hi >= 0.0 || v.has_nan()) {
+                continue;
+            }
+            if (v.lo >= 0.0 && !v.has_nan()) || depth == FIT_DEPTH {
+                let far = corner + DVec3::splat(edge);
+                if corner.min_element() <= -MAX_FIT_HALF_SIZE
+                    || far.max_element() >= MAX_FIT_HALF_SIZE
+                {
+                    return Err(FitError::Unbounded);
+                }
+                (lo, hi) = (lo.min(corner), hi.max(far));
+                continue;
+            }
+            for k in 0..8u32 {
+                let offset = DVec3::new(
+                    f64::from(k & 1),
+                    f64::from(k >> 1 & 1),
+                    f64::from(k >> 2 & 1),
+                ) * (edge / 2.0);
+                cells.push((corner + offset, edge / 2.0, depth + 1));
+            }
+        }
+        if lo.x > hi.x {
+            return Err(FitError::Empty);
+        }
+        let (lo, hi) = (lo - DVec3::splat(finest), hi + DVec3::splat(finest));
+        Ok(Domain::new((lo + hi) / 2.0, hi - lo))
+    }
+
+    #[test]
+    fn batched_search_finds_the_box_by_box_domains() {
+        let sources = crate::models::REFERENCE_MODELS
+            .into_iter()
+            .map(|(_, src)| src)
+            .chain([
+                "0.3-sqrt((x-1)^2+y^2+z^2)",
+                "min(1-abs(x), min(2-abs(y), 3-abs(z-10)))",
+                "sqrt(0.25-x^2-y^2-z^2) - 0.1",
+                "x",
+                "-1",
+            ]);
+        for src in sources {
+            let tape = Function::parse(src).unwrap().tape();
+            assert_eq!(fit_domain(&tape, 0.0), fit_box_by_box(&tape), "{src}");
         }
     }
 
