@@ -8,8 +8,9 @@
 
 use std::f64::consts::{FRAC_PI_2, PI};
 
+use super::interval_bulk::Passes;
 use crate::compile::{BinaryOp, TernaryOp, UnaryOp};
-use crate::tape::{Choice, Code, Operand, Tape};
+use crate::tape::{Choice, Tape};
 
 /// A closed interval `[lo, hi]` of the values a function takes over a box, plus whether the
 /// function may be undefined (NaN) somewhere in the box.
@@ -110,73 +111,42 @@ impl Interval {
 }
 
 /// Evaluates a tape over boxes and records the choices for simplification.
+///
+/// It runs the kernels of [`super::IntervalBulkEval`] over one box per pass, so the two give
+/// the same bounds and choices; the rules themselves are the functions below.
 #[derive(Clone, Debug)]
 pub struct IntervalEval {
-    tape: Tape,
-    regs: Vec<Interval>,
-    choices: Vec<Choice>,
+    passes: Passes<1>,
 }
 
 impl IntervalEval {
     /// An evaluator for `tape`.
     pub fn new(tape: &Tape) -> IntervalEval {
         IntervalEval {
-            tape: tape.clone(),
-            regs: vec![Interval::point(0.0); tape.n_regs()],
-            choices: vec![Choice::Both; tape.len()],
+            passes: Passes::new(tape),
         }
     }
 
     /// The tape this evaluator runs.
     pub fn tape(&self) -> &Tape {
-        &self.tape
+        self.passes.tape()
     }
 
     /// Bounds of the first output over the box `p = [x, y, z, t]`.
     pub fn eval(&mut self, p: [Interval; 4]) -> Interval {
-        self.run(p);
+        self.passes.load(0, &p);
+        self.passes.run(1);
         self.output(0)
     }
 
     /// Bounds of output `idx` after the last [`IntervalEval::eval`].
     pub fn output(&self, idx: usize) -> Interval {
-        match self.tape.outputs()[idx] {
-            Operand::Reg(r) => self.regs[r as usize],
-            Operand::Const(c) => Interval::point(c),
-        }
+        self.passes.output(idx, 0)
     }
 
     /// The choices of the last evaluation, one per instruction, for [`Tape::simplify`].
     pub fn choices(&self) -> &[Choice] {
-        &self.choices
-    }
-
-    fn run(&mut self, p: [Interval; 4]) {
-        for (slot, reg) in self.tape.inputs().iter().enumerate() {
-            if let Some(r) = reg {
-                self.regs[*r as usize] = p[slot];
-            }
-        }
-        let regs = &mut self.regs;
-        let grids = self.tape.grids();
-        for (i, instr) in self.tape.instrs().iter().enumerate() {
-            let get = |o: Operand| match o {
-                Operand::Reg(r) => regs[r as usize],
-                Operand::Const(c) => Interval::point(c),
-            };
-            let [a, b, c] = instr.args;
-            let (value, choice) = match instr.code {
-                Code::Unary(op) => (unary(op, get(a)), Choice::Both),
-                Code::Binary(op) => binary(op, get(a), get(b)),
-                Code::Ternary(op) => ternary(op, get(a), get(b), get(c)),
-                Code::Sample(g) => (
-                    sample(&grids[g as usize], [get(a), get(b), get(c)]),
-                    Choice::Both,
-                ),
-            };
-            regs[instr.out as usize] = value;
-            self.choices[i] = choice;
-        }
+        self.passes.choices().as_flattened()
     }
 }
 
