@@ -213,19 +213,11 @@ fn run_tape(tape: &Tape, regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
             }
             Code::Unary(_) | Code::Binary(_) => {}
         }
-        let (below, rest) = regs.split_at_mut(out);
-        let Some((o, above)) = rest.split_first_mut() else {
+        let Some((o, args)) = super::split_out(regs, out) else {
             continue;
         };
         let src = |arg: Operand| match arg {
-            Operand::Reg(r) => {
-                let r = r as usize;
-                Src::R(if r < out {
-                    &below[r]
-                } else {
-                    &above[r - out - 1]
-                })
-            }
+            Operand::Reg(r) => Src::R(args.get(r)),
             Operand::Const(c) => Src::C(c as f32),
         };
         match instr.code {

@@ -290,22 +290,11 @@ fn run_tape<const N: usize>(
     let n = n.min(N);
     for (instr, ch) in tape.instrs().iter().zip(choices.iter_mut()) {
         let out = instr.out as usize;
-        // The tape never writes a register that the same instruction reads (it allocates the
-        // output before freeing the arguments), so the output splits off from the arguments.
-        let (below, rest) = regs.split_at_mut(out);
-        let Some((o, above)) = rest.split_first_mut() else {
+        let Some((o, args)) = super::split_out(regs, out) else {
             continue;
         };
         let src = |arg: Operand| match arg {
-            Operand::Reg(r) => {
-                let r = r as usize;
-                assert!(r != out, "an instruction reads its own output register");
-                Src::R(if r < out {
-                    &below[r]
-                } else {
-                    &above[r - out - 1]
-                })
-            }
+            Operand::Reg(r) => Src::R(args.get(r)),
             Operand::Const(c) => Src::C(Interval::point(c)),
         };
         let [a, b, c] = instr.args;

@@ -22,3 +22,40 @@ pub use interval::{Interval, IntervalEval};
 pub use interval_bulk::{BOX_CHUNK, IntervalBulkEval};
 pub use point::PointEval;
 pub use real::{fast_cos, fast_sin};
+
+/// The registers an instruction reads, once its output register is split off for writing.
+struct Args<'a, T> {
+    below: &'a [T],
+    above: &'a [T],
+    out: usize,
+}
+
+impl<'a, T> Args<'a, T> {
+    /// Register `r`.
+    ///
+    /// # Panics
+    /// If `r` is the output register: the tape never writes a register that the same
+    /// instruction reads (it allocates the output before freeing the arguments).
+    #[inline(always)]
+    fn get(&self, r: u32) -> &'a T {
+        let r = r as usize;
+        assert!(
+            r != self.out,
+            "an instruction reads its own output register"
+        );
+        if r < self.out {
+            &self.below[r]
+        } else {
+            &self.above[r - self.out - 1]
+        }
+    }
+}
+
+/// Splits register `out` off from the others, for an instruction that writes it and reads
+/// others; `None` if there is no such register.
+#[inline(always)]
+fn split_out<T>(regs: &mut [T], out: usize) -> Option<(&mut T, Args<'_, T>)> {
+    let (below, rest) = regs.split_at_mut(out);
+    let (o, above) = rest.split_first_mut()?;
+    Some((&mut *o, Args { below, above, out }))
+}
