@@ -129,7 +129,7 @@ impl<const N: usize> Passes<N> {
 /// Bounds of a tape over many boxes at once, with each box's choices for [`Tape::simplify`].
 ///
 /// It gives what [`super::IntervalEval`] gives box by box, faster when there are many boxes to
-/// bound (the cells of a search, a mesher's children).
+/// bound at once (the cells of `crate::object::fit_domain`'s search).
 #[derive(Clone, Debug)]
 pub struct IntervalBulkEval {
     passes: Passes<BOX_CHUNK>,
