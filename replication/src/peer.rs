@@ -4,8 +4,13 @@
 //! Across connections the peer decides whom to ask for what it lacks: when some remote's
 //! version vector shows ops of an author this peer does not hold, it sends one
 //! [`Message::Want`](crate::sync::message::Message::Want) to one holder (right away if the
-//! author is not connected, after [`RELAY_AFTER_MICROS`] if it is and so should deliver them
-//! itself), and asks the next holder only if nothing arrived for [`WANT_RETRY_MICROS`].
+//! author is not connected, after the author's connection's resend timeout if it is and so
+//! should deliver them itself), and asks the next holder only if nothing arrived for twice the
+//! holder's resend timeout. Those timeouts come from the round trips measured on each
+//! connection (its first hello answered, then acknowledged batches), so on a LAN a lost op
+//! is repaired in milliseconds and on a slow link nobody is asked too early; a connection
+//! without a measurement waits what the peer's other connections measure, and none waits
+//! longer than [`RELAY_AFTER_MICROS`] and [`WANT_RETRY_MICROS`].
 //! A holder that answered in that time with messages but not one op claimed what it does not
 //! send: its claim is withdrawn ([`SyncState::withdraw_claim`]) and not learnt again from it
 //! for [`CLAIM_WITHDRAWN_MICROS`](crate::sync::state::CLAIM_WITHDRAWN_MICROS), so made-up
@@ -26,7 +31,8 @@ use crate::sync::state::{
 };
 use crate::time::Timestamp;
 
-/// A want that brought nothing for this long (1 s) goes to the next holder.
+/// A want that brought nothing for twice the holder's resend timeout, and at most this long
+/// (1 s), goes to the next holder.
 pub const WANT_RETRY_MICROS: u64 = RESEND_AFTER_MICROS;
 /// Wants are reconsidered at most this often (100 ms) after something changed.
 pub const WANT_CHECK_MICROS: u64 = 100_000;
@@ -171,7 +177,11 @@ impl<P: Payload> Peer<P> {
             local: self.peer_id(),
             origin,
         };
-        self.connections.insert(conn, SyncState::new(now, config));
+        let mut sync = SyncState::new(now, config);
+        if let Some(micros) = self.typical_resend_timeout() {
+            sync.assume_resend_timeout(micros);
+        }
+        self.connections.insert(conn, sync);
         Ok(())
     }
 
@@ -184,9 +194,17 @@ impl<P: Payload> Peer<P> {
     pub fn handle_input(&mut self, now: Timestamp, conn: ConnId, bytes: &[u8]) {
         if let Some(sync) = self.connections.get_mut(&conn) {
             let first = self.events.len();
+            let len = self.log.len();
             sync.handle_input(now, bytes, &mut self.log);
             drain(conn, sync, &mut self.events);
             self.charge_others(conn, first);
+            if self.log.len() > len {
+                // Ops get through: connections stalled in backoff try again soon.
+                for (other, sync) in self.connections.iter_mut().filter(|(c, _)| **c != conn) {
+                    sync.wake(now);
+                    drain(*other, sync, &mut self.events);
+                }
+            }
             self.wants_dirty = true;
             self.close_expelled();
         }
@@ -247,6 +265,19 @@ impl<P: Payload> Peer<P> {
         }
     }
 
+    /// The median of the resend timeouts measured on this peer's connections, if any was:
+    /// what a connection without a measurement of its own assumes.
+    fn typical_resend_timeout(&self) -> Option<u64> {
+        let mut measured: Vec<u64> = (self.connections.values())
+            .filter_map(SyncState::resend_timeout)
+            .collect();
+        if measured.is_empty() {
+            return None;
+        }
+        let mid = measured.len() / 2;
+        Some(*measured.select_nth_unstable(mid).1)
+    }
+
     fn want_due(&self) -> Option<Timestamp> {
         (self.wants_dirty || !self.wants.is_empty()).then_some(self.want_check_at)
     }
@@ -259,9 +290,9 @@ impl<P: Payload> Peer<P> {
         // The most any remote holds of each author this peer lacks.
         let mut lacking = VersionVector::new();
         let mut direct = Vec::new();
-        for sync in self.connections.values() {
+        for (conn, sync) in &self.connections {
             if let Some(remote) = sync.remote() {
-                direct.push(remote);
+                direct.push((remote, *conn));
             }
             for (author, seq) in sync.remote_version_vector().iter() {
                 if *seq > held.get(author) {
@@ -270,6 +301,20 @@ impl<P: Payload> Peer<P> {
             }
         }
         self.wants.retain(|author, _| lacking.get(author) > 0);
+        // How long a connection's answer is waited for: its measured resend timeout (the
+        // round trip and its spread), else the typical one, capped by the constants.
+        let typical = self.typical_resend_timeout();
+        if let Some(micros) = typical {
+            // Connections without a round trip of their own follow what the others measure.
+            for sync in self.connections.values_mut() {
+                sync.assume_resend_timeout(micros);
+            }
+        }
+        let timeout = |conn: &ConnId| {
+            (self.connections.get(conn))
+                .and_then(SyncState::resend_timeout)
+                .or(typical)
+        };
         let mut asks: BTreeMap<ConnId, VersionVector> = BTreeMap::new();
         let mut withdraw: Vec<(ConnId, PeerId)> = Vec::new();
         for (author, _) in lacking.iter() {
@@ -279,10 +324,11 @@ impl<P: Payload> Peer<P> {
                 asked: None,
                 n_asked: 0,
             });
-            let wait = if direct.contains(author) {
-                RELAY_AFTER_MICROS
-            } else {
-                0
+            let wait = match direct.iter().find(|(remote, _)| remote == author) {
+                Some((_, conn)) => {
+                    timeout(conn).map_or(RELAY_AFTER_MICROS, |t| t.min(RELAY_AFTER_MICROS))
+                }
+                None => 0,
             };
             if now < want.since.saturating_add_micros(wait) {
                 continue;
@@ -294,7 +340,9 @@ impl<P: Payload> Peer<P> {
                     want.asked = Some(Asked::new(now, asked.conn, have, sync));
                     continue;
                 }
-                if now < asked.at.saturating_add_micros(WANT_RETRY_MICROS) {
+                let retry = timeout(&asked.conn)
+                    .map_or(WANT_RETRY_MICROS, |t| (2 * t).min(WANT_RETRY_MICROS));
+                if now < asked.at.saturating_add_micros(retry) {
                     continue;
                 }
                 if asked.unanswered(sync) {
@@ -383,7 +431,7 @@ fn drain<P: Payload>(
 mod tests {
     use super::*;
     use crate::payload::test_payload::TestPayload;
-    use crate::sync::state::{CloseReason, HAVE_EVERY_MICROS};
+    use crate::sync::state::{CloseReason, HAVE_EVERY_MICROS, RESEND_AFTER_MIN_MICROS};
 
     type TPeer = Peer<TestPayload>;
 
@@ -618,6 +666,60 @@ mod tests {
     }
 
     #[test]
+    fn a_lost_op_is_relayed_after_the_measured_timeout_not_the_fixed_one() {
+        // A, B and C in a full mesh on a link that delivers at once: every connection
+        // measures a round trip of 0 and so the shortest resend timeout. Everything A sends C
+        // is lost; B's next have tells C that B holds A's op. C asks B after its connection to
+        // A's resend timeout (100 ms), not after RELAY_AFTER_MICROS (500 ms).
+        let (mut peers, links) = full_mesh(3, Timestamp(0));
+        pump(&mut peers, &links, Timestamp(0));
+        let timeouts: Vec<Option<u64>> = (peers[2].connections())
+            .map(|(_, s)| s.resend_timeout())
+            .collect();
+        assert_eq!(timeouts, [Some(RESEND_AFTER_MIN_MICROS); 2]);
+        let (op, _) = peers[0]
+            .author(Timestamp(0), TestPayload::Chat("to C by way of B".into()))
+            .unwrap();
+        let route = |from: usize, conn: ConnId| {
+            let (a, ac, b, bc) = (links.iter())
+                .find(|(a, ac, b, bc)| (*a, *ac) == (from, conn) || (*b, *bc) == (from, conn))
+                .copied()
+                .unwrap();
+            if (a, ac) == (from, conn) {
+                (b, bc)
+            } else {
+                (a, ac)
+            }
+        };
+        let mut t = 0;
+        let mut learnt_at = None;
+        while !peers[2].log().contains(&op.id()) {
+            assert!(t < 3 * HAVE_EVERY_MICROS, "never relayed");
+            t += 10_000;
+            let now = Timestamp(t);
+            for p in peers.iter_mut() {
+                p.handle_timeout(now);
+            }
+            for from in 0..3 {
+                while let Some((conn, bytes)) = peers[from].poll_transmit(now) {
+                    let (to, to_conn) = route(from, conn);
+                    if (from, to) != (0, 2) {
+                        peers[to].handle_input(now, to_conn, &bytes);
+                    }
+                }
+            }
+            if learnt_at.is_none() && !peers[2].wants.is_empty() {
+                learnt_at = Some(t);
+            }
+        }
+        let learnt_at = learnt_at.expect("C asked for the op");
+        assert!(
+            t - learnt_at <= RESEND_AFTER_MIN_MICROS + 2 * WANT_CHECK_MICROS,
+            "C learnt of the op at {learnt_at} and got it at {t}"
+        );
+    }
+
+    #[test]
     fn a_third_peers_op_reaches_a_remote_whose_haves_were_all_lost() {
         // A and B are connected; A gets an op of C's that B can only get from A. Every have A
         // sends B for 15 s is lost, and then A's log does not grow again: A repeats its full
@@ -752,11 +854,9 @@ mod tests {
                 "{messages:?}"
             );
         }
-        a.handle_input(
-            Timestamp(900_000),
-            ConnId(1),
-            &Message::have(vv.clone()).encode(),
-        );
+        // The remote answers, with anything but ops, after the last ask.
+        let answered = Timestamp(2 * RELAY_AFTER_MICROS + 1);
+        a.handle_input(answered, ConnId(1), &Message::have(vv.clone()).encode());
         let (_, sync) = a.connections().next().unwrap();
         assert_eq!(
             sync.remote_version_vector().len(),
@@ -764,7 +864,7 @@ mod tests {
         );
         // A retry period after the ask, every claim the remote did not make good is withdrawn:
         // nothing is left to scan or ask for on its account.
-        let later = Timestamp(2 + WANT_RETRY_MICROS + WANT_CHECK_MICROS);
+        let later = Timestamp(answered.0 + WANT_RETRY_MICROS + WANT_CHECK_MICROS);
         a.handle_timeout(later);
         transmit_checked(&mut a, later);
         a.handle_timeout(Timestamp(later.0 + WANT_CHECK_MICROS));

@@ -159,15 +159,15 @@ fn caught_and_shrunk(config: Config, what: &str, max_actions: usize) {
     assert_eq!(again.failures, shrunk.report.failures);
 }
 
-/// The first seed from `first` (of ten) whose run of `config` fails.
-fn first_failing(first: u64, config: &Config) -> Config {
-    (first..first + 10)
+/// The first seed from `first` (of `n`) whose run of `config` fails.
+fn first_failing(first: u64, n: u64, config: &Config) -> Config {
+    (first..first + n)
         .map(|seed| Config {
             seed,
             ..config.clone()
         })
         .find(|c| !checked(c.clone()).passed())
-        .expect("the planted bug went unnoticed on ten seeds")
+        .expect("the planted bug went unnoticed on every seed tried")
 }
 
 #[test]
@@ -176,7 +176,7 @@ fn dropping_every_tenth_received_insertion_is_caught_and_shrunk() {
         sabotage: Sabotage::DropEveryTenthInsertion,
         ..Config::new(31, 4, 120, faults("lan"))
     };
-    let failing = first_failing(31, &config);
+    let failing = first_failing(31, 10, &config);
     let text = checked(failing.clone()).to_string();
     let replay = format!(
         "--seed {} --peers 4 --ops 120 --faults lan --sabotage drop-insertions",
@@ -210,7 +210,10 @@ fn sending_before_the_store_synced_is_caught() {
         sabotage: Sabotage::SendUnsynced,
         ..Config::new(1, 4, 200, faults("chaos"))
     };
-    let failing = first_failing(1, &config);
+    // The bug shows only when an author crashes before its sync and then authors again
+    // before the others hand its lost op back: the quicker the sync repairs, the rarer that
+    // is (one seed in eleven to fifteen of these).
+    let failing = first_failing(1, 40, &config);
     let clean = checked(Config {
         sabotage: Sabotage::None,
         ..failing

@@ -23,10 +23,10 @@
 //!
 //! Traffic in a full mesh of n peers: a peer sends its own ops to every remote at once, but
 //! relays a third peer's ops only when the remote asks with a [`Message::Want`]. The
-//! [`Peer`](crate::peer::Peer) asks one connection at a time for what it lacks, after
-//! [`RELAY_AFTER_MICROS`] when the author itself is connected, so each op crosses each link
-//! about once instead of once per relaying peer; wants carry what partitions, losses, crashes
-//! and absent authors hold back.
+//! [`Peer`](crate::peer::Peer) asks one connection at a time for what it lacks, after about a
+//! round trip when the author itself is connected (at most [`RELAY_AFTER_MICROS`]), so each op
+//! crosses each link about once instead of once per relaying peer; wants carry what
+//! partitions, losses, crashes and absent authors hold back.
 
 use std::cell::Cell;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
@@ -57,9 +57,9 @@ pub const RESEND_AFTER_MIN_MICROS: u64 = 100_000;
 /// The resend interval doubles while the remote stays silent, up to this (32 s), so a dead or
 /// hostile remote that never answers costs a bounded trickle.
 pub const RESEND_AFTER_MAX_MICROS: u64 = 32_000_000;
-/// A peer asks a third peer for an author's ops only after lacking them this long (500 ms)
-/// while the author itself is connected: time for the author's own send (and a resend at the
-/// measured round trip) to arrive.
+/// A peer asks a third peer for an author's ops only after lacking them for the resend timeout
+/// of its connection to the author, when it has one, and at most this long (500 ms): time for
+/// the author's own send (or its resend) to arrive.
 pub const RELAY_AFTER_MICROS: u64 = 500_000;
 /// A peer tells each remote what it has gained at most this often (1 s), as a delta.
 pub const HAVE_EVERY_MICROS: u64 = 1_000_000;
@@ -77,11 +77,12 @@ pub const MAX_EPHEMERAL_CHANNELS: usize = 64;
 /// haves and acks. Such a claim is only good for asking the remote to relay the author's ops,
 /// so the excess is dropped (and counted) rather than stored; it is learnt again later.
 pub const MAX_REMOTE_UNKNOWN_AUTHORS: usize = MAX_VV_AUTHORS;
-/// A claim the remote did not make good (asked for an author's ops, it sent nothing for
-/// [`crate::peer::WANT_RETRY_MICROS`]) is withdrawn, and the same claim, up to the same seq, is
-/// not learnt again from this remote for this long (60 s): a remote that claims made-up
-/// authors costs one ask and one retry period per claim, not a scan every check for the
-/// connection's life. A claim to more of that author is learnt at once.
+/// A claim the remote did not make good (asked for an author's ops, it answered without one
+/// for the retry period, at most [`crate::peer::WANT_RETRY_MICROS`]) is withdrawn, and the
+/// same claim, up to the same seq, is not learnt again from this remote for this long (60 s):
+/// a remote that claims made-up authors costs one ask and one retry period per claim, not a
+/// scan every check for the connection's life. A claim to more of that author is learnt at
+/// once.
 pub const CLAIM_WITHDRAWN_MICROS: u64 = 60_000_000;
 /// Most withdrawn claims one connection remembers (the excess is withdrawn but may be learnt
 /// again at once).
@@ -325,8 +326,18 @@ pub struct SyncState<P> {
     /// The remote has confirmed it saw our hello.
     hello_confirmed: bool,
     hello_sent_at: Option<Timestamp>,
+    /// When the first hello went out, while no timer sent it again: the remote's first have
+    /// answers it, which measures a round trip before any batch is acknowledged.
+    hello_first_at: Option<Timestamp>,
     /// Current hello resend interval (doubles while unanswered).
     hello_resend_micros: u64,
+    /// The round trip from our first hello to the have that answered it, if measured.
+    hello_rtt_micros: Option<u64>,
+    /// The hello resend timeout assumed until a round trip is measured here (from the peer's
+    /// other connections, see [`SyncState::assume_resend_timeout`]).
+    assumed_resend_micros: u64,
+    /// When [`SyncState::wake`] last cut a backoff short.
+    woken_at: Option<Timestamp>,
     /// What the remote is known to hold (join of its Have and Acks), within the bound on
     /// authors the log does not hold.
     remote_vv: VersionVector,
@@ -426,7 +437,11 @@ impl<P: Payload> SyncState<P> {
             closed: false,
             hello_confirmed: false,
             hello_sent_at: None,
+            hello_first_at: Some(now),
             hello_resend_micros: RESEND_AFTER_MICROS,
+            hello_rtt_micros: None,
+            assumed_resend_micros: RESEND_AFTER_MICROS,
+            woken_at: None,
             remote_vv: VersionVector::new(),
             n_unknown_claimed: 0,
             unknown_counted_at: 0,
@@ -497,6 +512,38 @@ impl<P: Payload> SyncState<P> {
         &self.stats
     }
 
+    /// How long an answer is waited for on this connection before acting without it, once a
+    /// round trip was measured here: four deviations above the smoothed round trip of
+    /// acknowledged batches or, before the first, three times the round trip of the first
+    /// hello (RFC 6298's first sample), between [`RESEND_AFTER_MIN_MICROS`] and
+    /// [`RESEND_AFTER_MICROS`]; `None` before. Batches themselves wait for their own
+    /// measurement: a hello is small, and a batch on a slow link takes longer to acknowledge.
+    pub fn resend_timeout(&self) -> Option<u64> {
+        let from_hello = || self.hello_rtt_micros.map(|rtt| rtt.saturating_mul(3));
+        (self.rtt_micros.map(|_| self.base_resend_micros()))
+            .or_else(|| from_hello().map(|t| t.clamp(RESEND_AFTER_MIN_MICROS, RESEND_AFTER_MICROS)))
+    }
+
+    /// How long an unanswered hello waits before it goes again (before any backoff).
+    fn hello_timeout(&self) -> u64 {
+        self.resend_timeout().unwrap_or(self.assumed_resend_micros)
+    }
+
+    /// Until a round trip is measured here, waits `micros` (clamped to the resend bounds)
+    /// instead of [`RESEND_AFTER_MICROS`] before sending the hello again: a peer passes what
+    /// its other connections measured, so a lost hello on a new connection costs about a
+    /// round trip, not a second. A hello timeout that backed off keeps its backoff.
+    pub fn assume_resend_timeout(&mut self, micros: u64) {
+        let micros = micros.clamp(RESEND_AFTER_MIN_MICROS, RESEND_AFTER_MICROS);
+        if self.resend_timeout().is_some() {
+            return;
+        }
+        if self.hello_resend_micros == self.assumed_resend_micros {
+            self.hello_resend_micros = micros;
+        }
+        self.assumed_resend_micros = micros;
+    }
+
     fn queue_hello(&mut self, now: Timestamp) {
         self.control.push_back(Message::Hello {
             protocol_version: PROTOCOL_VERSION,
@@ -548,6 +595,26 @@ impl<P: Payload> SyncState<P> {
         }
         self.eph_out.insert(channel, value);
         Ok(())
+    }
+
+    /// News that the network carries ops again (the log grew through another connection, say
+    /// after a partition healed): an unanswered hello that backed off while the remote was
+    /// silent goes out again on the base interval instead of waiting up to
+    /// [`RESEND_AFTER_MAX_MICROS`]. Both ends of a connection whose hellos were lost back off
+    /// alike, and nothing else would wake them. At most once per [`RESEND_AFTER_MICROS`], so a
+    /// dead remote still costs a bounded trickle of hellos however busy the other connections
+    /// are. (Batches are left to back off: the remote's next have resets them, and resending
+    /// them into a partition costs far more than a hello.)
+    pub fn wake(&mut self, now: Timestamp) {
+        let base = self.hello_timeout();
+        let stalled = self.hello_due().is_some() && self.hello_resend_micros > base;
+        let rested =
+            (self.woken_at).is_none_or(|t| now.0 >= t.0.saturating_add(RESEND_AFTER_MICROS));
+        if self.closed || !stalled || !rested {
+            return;
+        }
+        self.woken_at = Some(now);
+        self.hello_resend_micros = base;
     }
 
     /// Handles one message received from the remote.
@@ -619,11 +686,17 @@ impl<P: Payload> SyncState<P> {
             }
             _ if self.remote.is_none() => {
                 self.reject(RejectKind::BeforeHello, "data before hello".into());
+                // The remote answers a hello of ours whose own hello was lost, maybe during a
+                // partition: ours goes out again on the base interval (it answers with its
+                // own), not a backed-off one.
+                self.hello_resend_micros = self.hello_timeout();
             }
             message => {
                 // The remote speaks, maybe again after a partition healed: what it has not
-                // acknowledged goes out again on the base interval, not a backed-off one.
+                // acknowledged, our hello included, goes out again on the base interval, not
+                // a backed-off one.
                 self.resend_micros = self.base_resend_micros();
+                self.hello_resend_micros = self.hello_timeout();
                 self.handle_message(now, message, log);
             }
         }
@@ -636,6 +709,11 @@ impl<P: Payload> SyncState<P> {
             Message::Hello { .. } => {}
             Message::Have { vv, tips } => {
                 self.hello_confirmed = true;
+                // The first have answers our first hello, unless a timer sent that again:
+                // then which one it answers is unknown (Karn's rule), and nothing is measured.
+                if let Some(at) = self.hello_first_at.take() {
+                    self.hello_rtt_micros = Some(now.0.saturating_sub(at.0));
+                }
                 // Taken as the answer to a hello sent to relearn (a have crossing it on the
                 // way only delays the relearning until the remote's next full have).
                 self.relearn_asked = false;
@@ -1089,6 +1167,7 @@ impl<P: Payload> SyncState<P> {
             }
         }
         if self.hello_due().is_some_and(|d| d <= now) {
+            self.hello_first_at = None;
             self.queue_hello(now);
             self.hello_resend_micros = (self.hello_resend_micros * 2).min(RESEND_AFTER_MAX_MICROS);
         }
@@ -1208,7 +1287,8 @@ impl<P: Payload> SyncState<P> {
         });
     }
 
-    /// The resend timeout before any backoff: four deviations above the smoothed round trip.
+    /// The batch resend timeout before any backoff: four deviations above the smoothed round
+    /// trip of acknowledged batches, or [`RESEND_AFTER_MICROS`] before one is measured.
     fn base_resend_micros(&self) -> u64 {
         self.rtt_micros.map_or(RESEND_AFTER_MICROS, |(srtt, var)| {
             srtt.saturating_add(var.saturating_mul(4))

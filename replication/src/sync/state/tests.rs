@@ -659,3 +659,111 @@ fn a_dependency_that_never_comes_is_asked_for_by_id_and_asks_are_answered() {
     assert!(answered, "{sent:?}");
     assert_eq!(a.sync.stats().n_asks_dropped, 1, "the unknown id");
 }
+
+/// Everything `node` sends at `now`, decoded.
+fn outbox(node: &mut Node, now: u64) -> Vec<Message> {
+    std::iter::from_fn(|| node.sync.poll_transmit(Timestamp(now), &node.log))
+        .map(|bytes| Message::decode(&bytes).unwrap())
+        .collect()
+}
+
+/// Hands everything `from` sends at `sent` to `to` at `arrives`.
+fn carry(from: &mut Node, to: &mut Node, sent: u64, arrives: u64) {
+    for message in outbox(from, sent) {
+        to.sync
+            .handle_input(Timestamp(arrives), &message.encode(), &mut to.log);
+    }
+    to.drain_events();
+}
+
+#[test]
+fn the_answer_to_the_first_hello_measures_a_round_trip() {
+    // A's hello takes 40 ms each way: the have that answers it measures 80 ms, so A resends
+    // after 80 + 4 * 40 ms (RFC 6298's first sample) before any batch was acknowledged.
+    let [mut a, mut b] = [Node::new(1, 2), Node::new(2, 1)];
+    assert_eq!(a.sync.resend_timeout(), None);
+    carry(&mut a, &mut b, 0, 40 * MILLI);
+    carry(&mut b, &mut a, 40 * MILLI, 80 * MILLI);
+    assert_eq!(a.sync.resend_timeout(), Some(240 * MILLI));
+    // B's own hello crossed A's; its answer measures B's side the same way.
+    carry(&mut a, &mut b, 80 * MILLI, 120 * MILLI);
+    assert_eq!(b.sync.resend_timeout(), Some(3 * 120 * MILLI));
+
+    // Karn's rule: once a timer sent the hello again, which one a have answers is unknown,
+    // and nothing is measured from it.
+    let [mut a, mut b] = [Node::new(1, 2), Node::new(2, 1)];
+    outbox(&mut a, 0); // lost
+    let resent = RESEND_AFTER_MICROS;
+    a.sync.handle_timeout(Timestamp(resent), &mut a.log);
+    carry(&mut a, &mut b, resent, resent + 40 * MILLI);
+    carry(&mut b, &mut a, resent + 40 * MILLI, resent + 80 * MILLI);
+    assert!(a.sync.remote().is_some());
+    assert_eq!(a.sync.resend_timeout(), None);
+}
+
+#[test]
+fn a_new_connection_assumes_the_peers_timeout_and_keeps_its_backoff() {
+    let mut a = Node::new(1, 2);
+    a.sync.assume_resend_timeout(200 * MILLI);
+    assert_eq!(outbox(&mut a, 0).len(), 1);
+    // The hello is lost: it goes out again after the assumed 200 ms, not after a second.
+    assert_eq!(a.sync.poll_timeout(&a.log), Some(Timestamp(200 * MILLI)));
+    a.sync.handle_timeout(Timestamp(200 * MILLI), &mut a.log);
+    assert!(matches!(
+        outbox(&mut a, 200 * MILLI)[..],
+        [Message::Hello { .. }]
+    ));
+    // Lost again, it waits twice as long; assuming the same timeout again does not cut the
+    // backoff short, and neither does a shorter one.
+    a.sync.assume_resend_timeout(200 * MILLI);
+    a.sync.assume_resend_timeout(150 * MILLI);
+    assert_eq!(a.sync.poll_timeout(&a.log), Some(Timestamp(600 * MILLI)));
+    // Out-of-range assumptions are clamped to the resend bounds.
+    let mut c = Node::new(3, 2);
+    c.sync.assume_resend_timeout(1);
+    assert_eq!(
+        c.sync.poll_timeout(&c.log),
+        Some(Timestamp(RESEND_AFTER_MIN_MICROS))
+    );
+}
+
+#[test]
+fn a_hello_backed_off_into_a_partition_wakes_when_ops_get_through_elsewhere() {
+    // Both hellos of a connection are lost in a partition, and each side backs off to
+    // seconds. News that ops get through (the peer wakes its connections when its log grows
+    // through another) brings the next hello within the base interval, at most once a
+    // second, so a dead remote still gets a trickle.
+    let mut a = Node::new(1, 2);
+    outbox(&mut a, 0);
+    let mut t = 0;
+    for _ in 0..4 {
+        t = a.sync.poll_timeout(&a.log).unwrap().0;
+        a.sync.handle_timeout(Timestamp(t), &mut a.log);
+        outbox(&mut a, t);
+    }
+    let backed_off = a.sync.poll_timeout(&a.log).unwrap().0 - t;
+    assert_eq!(backed_off, 16 * RESEND_AFTER_MICROS);
+    let now = t + 10 * MILLI;
+    a.sync.wake(Timestamp(now));
+    assert_eq!(
+        a.sync.poll_timeout(&a.log),
+        Some(Timestamp(t + RESEND_AFTER_MICROS))
+    );
+    a.sync
+        .handle_timeout(Timestamp(t + RESEND_AFTER_MICROS), &mut a.log);
+    let t = t + RESEND_AFTER_MICROS;
+    assert!(matches!(outbox(&mut a, t)[..], [Message::Hello { .. }]));
+    // Woken again within the second: the backoff stands.
+    a.sync.wake(Timestamp(t + 1));
+    assert_eq!(
+        a.sync.poll_timeout(&a.log),
+        Some(Timestamp(t + 2 * RESEND_AFTER_MICROS))
+    );
+    // A connection that is not stalled is left alone.
+    let [mut b, mut c] = [Node::new(2, 3), Node::new(3, 2)];
+    carry(&mut b, &mut c, 0, 10 * MILLI);
+    carry(&mut c, &mut b, 10 * MILLI, 20 * MILLI);
+    let before = b.sync.poll_timeout(&b.log);
+    b.sync.wake(Timestamp(30 * MILLI));
+    assert_eq!(b.sync.poll_timeout(&b.log), before);
+}
