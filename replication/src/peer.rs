@@ -200,9 +200,8 @@ impl<P: Payload> Peer<P> {
             self.charge_others(conn, first);
             if self.log.len() > len {
                 // Ops get through: connections stalled in backoff try again soon.
-                for (other, sync) in self.connections.iter_mut().filter(|(c, _)| **c != conn) {
+                for (_, sync) in self.connections.iter_mut().filter(|(c, _)| **c != conn) {
                     sync.wake(now);
-                    drain(*other, sync, &mut self.events);
                 }
             }
             self.wants_dirty = true;
