@@ -113,17 +113,24 @@ impl SsaOp {
     }
 }
 
-/// A compiled straight-line program with one or more outputs.
+/// A compiled straight-line program with one or more outputs. A handle: clones share one
+/// program, and an absent tape (`Option<Tape>`) costs a pointer, so the many optional parts
+/// of an object stay small.
 #[derive(Clone, Debug)]
-pub struct Tape {
-    ssa: Arc<[SsaOp]>,
-    ssa_outputs: Arc<[u32]>,
+pub struct Tape(Arc<Program>);
+
+const _: () = assert!(size_of::<Option<Tape>>() == size_of::<usize>());
+
+#[derive(Debug)]
+struct Program {
+    ssa: Box<[SsaOp]>,
+    ssa_outputs: Box<[u32]>,
     /// The SSA index each instruction computes.
-    instr_ssa: Arc<[u32]>,
-    instrs: Arc<[Instr]>,
+    instr_ssa: Box<[u32]>,
+    instrs: Box<[Instr]>,
     n_regs: u32,
     inputs: [Option<u32>; 4],
-    outputs: Arc<[Operand]>,
+    outputs: Box<[Operand]>,
     grids: Arc<[Arc<Grid>]>,
 }
 
@@ -221,7 +228,7 @@ impl Tape {
                 _ => Operand::Reg(reg_of[o as usize]),
             })
             .collect();
-        Tape {
+        Tape(Arc::new(Program {
             ssa: ssa.into(),
             ssa_outputs: ssa_outputs.into(),
             instr_ssa: instr_ssa.into(),
@@ -230,42 +237,42 @@ impl Tape {
             inputs,
             outputs: outputs.into(),
             grids,
-        }
+        }))
     }
 
     /// The grids the tape's [`Code::Sample`] instructions index.
     pub fn grids(&self) -> &[Arc<Grid>] {
-        &self.grids
+        &self.0.grids
     }
 
     /// The register instructions, in order.
     pub fn instrs(&self) -> &[Instr] {
-        &self.instrs
+        &self.0.instrs
     }
 
     /// How many registers an evaluator needs.
     pub fn n_regs(&self) -> usize {
-        self.n_regs as usize
+        self.0.n_regs as usize
     }
 
     /// The register that holds each coordinate slot, if the tape reads it.
     pub fn inputs(&self) -> [Option<u32>; 4] {
-        self.inputs
+        self.0.inputs
     }
 
     /// Where each output is found after evaluation.
     pub fn outputs(&self) -> &[Operand] {
-        &self.outputs
+        &self.0.outputs
     }
 
     /// How many instructions the tape runs.
     pub fn len(&self) -> usize {
-        self.instrs.len()
+        self.0.instrs.len()
     }
 
     /// Whether the tape runs no instruction (every output is an input or a constant).
     pub fn is_empty(&self) -> bool {
-        self.instrs.is_empty()
+        self.0.instrs.is_empty()
     }
 
     /// A tape that computes the same outputs over the region where `choices` were recorded
@@ -275,13 +282,13 @@ impl Tape {
     pub fn simplify(&self, choices: &[Choice], fidelity: Fidelity) -> Tape {
         assert_eq!(
             choices.len(),
-            self.instrs.len(),
+            self.0.instrs.len(),
             "one choice per instruction"
         );
-        let n = self.ssa.len();
+        let n = self.0.ssa.len();
         let mut choice_of = vec![Choice::Both; n];
         for (i, &c) in choices.iter().enumerate() {
-            choice_of[self.instr_ssa[i] as usize] = c;
+            choice_of[self.0.instr_ssa[i] as usize] = c;
         }
         let sign_context = match fidelity {
             Fidelity::Exact => Vec::new(),
@@ -291,7 +298,7 @@ impl Tape {
         // arguments) or the argument its choice selects.
         let mut map = vec![u32::MAX; n];
         let mut ops: Vec<SsaOp> = Vec::with_capacity(n);
-        for (i, op) in self.ssa.iter().enumerate() {
+        for (i, op) in self.0.ssa.iter().enumerate() {
             let m = |a: u32| map[a as usize];
             let pick = match (choice_of[i], op) {
                 (Choice::Left, SsaOp::Binary(_, a, _)) => Some(*a),
@@ -326,7 +333,12 @@ impl Tape {
             map[i] = ops.len() as u32;
             ops.push(new);
         }
-        let outputs: Vec<u32> = self.ssa_outputs.iter().map(|&o| map[o as usize]).collect();
+        let outputs: Vec<u32> = self
+            .0
+            .ssa_outputs
+            .iter()
+            .map(|&o| map[o as usize])
+            .collect();
         // Backward: keep only what the outputs still read.
         let mut live = vec![false; ops.len()];
         for &o in &outputs {
@@ -358,20 +370,20 @@ impl Tape {
             kept.push(new);
         }
         let outputs = outputs.iter().map(|&o| compact[o as usize]).collect();
-        Tape::from_ssa(kept, outputs, Arc::clone(&self.grids))
+        Tape::from_ssa(kept, outputs, Arc::clone(&self.0.grids))
     }
 
     /// For each SSA value: whether only its sign can reach the outputs, through operations whose
     /// sign depends only on their arguments' signs (`min`, `max`, R-functions, negation).
     fn sign_context(&self) -> Vec<bool> {
-        let n = self.ssa.len();
+        let n = self.0.ssa.len();
         let mut used = vec![false; n];
         let mut sign_only = vec![true; n];
-        for &o in self.ssa_outputs.iter() {
+        for &o in self.0.ssa_outputs.iter() {
             used[o as usize] = true;
         }
         for i in (0..n).rev() {
-            let op = self.ssa[i];
+            let op = self.0.ssa[i];
             let transparent = sign_only[i]
                 && matches!(
                     op,
