@@ -120,6 +120,9 @@ pub struct CompiledEdit {
     boxes: [Aabb; 2],
 }
 
+// Every held edit is compiled (a replicated edit op holds one), so its size is per op held.
+const _: () = assert!(size_of::<CompiledEdit>() <= 152);
+
 /// Two compiled edits are equal when their edits are: the rest is a function of the edit.
 impl PartialEq for CompiledEdit {
     fn eq(&self, other: &Self) -> bool {

@@ -271,13 +271,12 @@ pub(crate) struct CompiledTool {
     /// Each stamp with its box grown by the margin, side by side so that a scan reads one
     /// contiguous array.
     stamps: Vec<(Aabb, Stamp)>,
-    /// An index over the boxes when there are many stamps.
-    stamp_index: Option<Bvh>,
+    /// An index over the boxes when there are many stamps (boxed: most tools have few, and
+    /// an absent index then costs a pointer).
+    stamp_index: Option<Box<Bvh>>,
     /// How far each stamp's box is grown: beyond it the stamp's distance is at least this, and
     /// the tool counts as empty space there.
     margin: f64,
-    /// The box around all stamps, grown by the margin.
-    bounds: Aabb,
     lipschitz: f64,
 }
 
@@ -314,22 +313,23 @@ impl CompiledTool {
             .fold(0.0, f64::max);
         let margin = 0.5 * size + extra_margin;
         let stamp_boxes: Vec<Aabb> = stamps.iter().map(|s| s.aabb().expand(margin)).collect();
-        let bounds = stamp_boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(b));
-        let stamp_index = (stamps.len() > STAMP_INDEX_MIN).then(|| Bvh::build(&stamp_boxes));
+        let stamp_index =
+            (stamps.len() > STAMP_INDEX_MIN).then(|| Box::new(Bvh::build(&stamp_boxes)));
         let lipschitz = stamps.iter().map(Stamp::lipschitz).fold(1.0, f64::max);
         let stamps = stamp_boxes.into_iter().zip(stamps).collect();
         Ok(CompiledTool {
             stamps,
             stamp_index,
             margin,
-            bounds,
             lipschitz,
         })
     }
 
-    /// The box around the tool's support (outside it the tool is empty space).
+    /// The box around the tool's support (outside it the tool is empty space): the union of
+    /// the stamps' grown boxes, computed on each call (an edit keeps it; see
+    /// [`CompiledEdit::boxes`](super::edit::CompiledEdit::boxes)).
     pub(crate) fn bounds(&self) -> Aabb {
-        self.bounds
+        self.stamps.iter().fold(Aabb::EMPTY, |a, (b, _)| a.union(b))
     }
 
     /// The band half-width within which values are exact.
