@@ -3,6 +3,7 @@
 //! object's own.
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
@@ -313,7 +314,7 @@ impl Scene {
     pub fn create(
         &mut self,
         id: ObjectId,
-        data: ObjectData,
+        data: impl Into<Arc<ObjectData>>,
         group: Option<GroupId>,
     ) -> Result<(), SceneError> {
         self.insert_object(id, Object::new(data)?, group)

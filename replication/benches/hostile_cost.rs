@@ -196,7 +196,7 @@ fn create(object: u64, formula: &str) -> ShapePayload {
     ShapePayload::Create {
         object,
         counter: None,
-        data: Box::new(ObjectData {
+        data: std::sync::Arc::new(ObjectData {
             geometry: Some(Geometry::implicit(formula_of(formula))),
             ..ObjectData::default()
         }),

@@ -255,7 +255,7 @@ fn workload(seed: u8) -> Vec<ShapePayload> {
         ShapePayload::Create {
             object,
             counter: None,
-            data: Box::new(ObjectData {
+            data: std::sync::Arc::new(ObjectData {
                 name: format!("ball {seed}"),
                 geometry: Some(Geometry::implicit(long_formula())),
                 ..ObjectData::default()

@@ -324,7 +324,7 @@ fn cost_bomb(kind: u64, object: u64, text: &str) -> Option<ShapePayload> {
         0 => ShapePayload::Create {
             object,
             counter: None,
-            data: Box::new(ObjectData {
+            data: std::sync::Arc::new(ObjectData {
                 geometry: Some(geometry()?),
                 ..ObjectData::default()
             }),
@@ -534,7 +534,7 @@ impl Simulation {
                 let payload = ShapePayload::Create {
                     object: victim.id(),
                     counter: rng.chance(500).then_some(victim.counter),
-                    data: Box::new(ObjectData {
+                    data: std::sync::Arc::new(ObjectData {
                         name: STOLEN_NAME.into(),
                         geometry: Some(Geometry::implicit(Formula::new("1-x^2-y^2-z^2").ok()?)),
                         ..ObjectData::default()

@@ -592,14 +592,21 @@ impl CompiledParts {
 /// An object: its description, compiled, and its indexed edit history.
 #[derive(Clone, Debug)]
 pub struct Object {
-    data: ObjectData,
+    /// Shared with whoever holds the description (a replicated op), not copied: an
+    /// `ObjectData` is about 1.5 KB before its formulas.
+    data: Arc<ObjectData>,
     parts: Arc<CompiledParts>,
     history: History,
 }
 
+// A scene holds its objects inline and their descriptions behind a pointer.
+const _: () = assert!(size_of::<Object>() <= 192);
+
 impl Object {
-    /// Validates and compiles `data`; every formula must compile.
-    pub fn new(data: ObjectData) -> Result<Object, ObjectError> {
+    /// Validates and compiles `data` (an `ObjectData`, or an `Arc<ObjectData>` to share);
+    /// every formula must compile.
+    pub fn new(data: impl Into<Arc<ObjectData>>) -> Result<Object, ObjectError> {
+        let data = data.into();
         let parts = Arc::new(CompiledParts::new(&data)?);
         Ok(Object {
             data,
@@ -621,12 +628,17 @@ impl Object {
         &self.data
     }
 
+    /// The description as shared with whoever else holds it.
+    pub fn shared_data(&self) -> &Arc<ObjectData> {
+        &self.data
+    }
+
     /// Sets one property; on error the object is unchanged.
     pub fn set(&mut self, field: Field) -> Result<(), ObjectError> {
-        let mut data = self.data.clone();
+        let mut data = ObjectData::clone(&self.data);
         field.apply_to(&mut data);
         self.parts = Arc::new(CompiledParts::new(&data)?);
-        self.data = data;
+        self.data = Arc::new(data);
         Ok(())
     }
 

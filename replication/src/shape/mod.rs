@@ -137,7 +137,7 @@ impl IdSource {
         ShapePayload::Create {
             object: self.id(),
             counter: Some(self.counter),
-            data: Box::new(data),
+            data: Arc::new(data),
             group,
         }
     }
@@ -156,7 +156,7 @@ pub enum ShapePayload {
         /// their author.
         counter: Option<u32>,
         /// Its description.
-        data: Box<ObjectData>,
+        data: Arc<ObjectData>,
         /// The group it hangs from.
         group: Option<u64>,
     },
@@ -251,7 +251,7 @@ const _: () = assert!(std::mem::size_of::<ShapePayload>() <= 40);
 enum Wire<'a> {
     Create {
         object: u64,
-        data: Cow<'a, Box<ObjectData>>,
+        data: Cow<'a, Arc<ObjectData>>,
         group: Option<u64>,
     },
     Delete {
@@ -295,7 +295,7 @@ enum Wire<'a> {
     CreateOwned {
         object: u64,
         counter: u32,
-        data: Cow<'a, Box<ObjectData>>,
+        data: Cow<'a, Arc<ObjectData>>,
         group: Option<u64>,
     },
     Member {
@@ -513,7 +513,7 @@ impl ShapePayloadV1 {
                 group,
             } => ShapePayloadV1::Create {
                 object,
-                data: Box::new(object_codec::v1::ObjectData::of(*data)?),
+                data: Box::new(object_codec::v1::ObjectData::of(ObjectData::clone(&data))?),
                 group,
             },
             ShapePayload::Create { .. } => return None,
@@ -553,7 +553,7 @@ impl From<ShapePayloadV1> for ShapePayload {
             } => ShapePayload::Create {
                 object,
                 counter: None,
-                data: Box::new((*data).into()),
+                data: Arc::new((*data).into()),
                 group,
             },
             ShapePayloadV1::Delete { object } => ShapePayload::Delete { object },
@@ -604,7 +604,7 @@ impl ShapePayload {
     /// Checks what decoding cannot: formulas compile, numbers are valid, text is short.
     pub fn validate(&self) -> Result<(), String> {
         match self {
-            ShapePayload::Create { data, .. } => Object::new((**data).clone())
+            ShapePayload::Create { data, .. } => Object::new(Arc::clone(data))
                 .map(|_| ())
                 .map_err(|e| e.to_string()),
             ShapePayload::Set { field, .. } => {
@@ -795,7 +795,7 @@ impl ShapeScene {
                     let group = group
                         .map(GroupId)
                         .filter(|g| self.scene.group(*g).is_some());
-                    let _ = self.scene.create(object, (**data).clone(), group);
+                    let _ = self.scene.create(object, Arc::clone(data), group);
                 }
             }
             // A delete acts through the log: it hides the edits of its object that it saw

@@ -184,7 +184,7 @@ impl World {
             0 => ShapePayload::Create {
                 object,
                 counter: None,
-                data: Box::new(ObjectData {
+                data: std::sync::Arc::new(ObjectData {
                     geometry: Some(Geometry::implicit(
                         Formula::new(["1-x^2-y^2-z^2", "x", "min(x,y)"][bytes.pick(3) as usize])
                             .expect("short"),
@@ -224,7 +224,7 @@ impl World {
                 ShapePayload::Create {
                     object,
                     counter: None,
-                    data: Box::default(),
+                    data: Default::default(),
                     group: None,
                 }
                 .encode(&mut whole);
