@@ -68,36 +68,37 @@ impl fmt::Display for OpId {
     }
 }
 
-/// A hash map keyed by op id. Ids are blake3 hashes, so their first eight bytes are already a
-/// uniform hash: the map spends no time hashing, and lookups cost no tree walk of 32-byte
-/// comparisons. Nothing iterates these maps where order would matter (iteration order is
-/// deterministic anyway: no random state). A member who wants its ops to collide must sign
-/// each attempt at an id, about 2^17 signatures per colliding op in a log of 10^5 ops.
-#[expect(
-    clippy::disallowed_types,
-    reason = "never iterated (only `OpSlab` looks ids up), and the hasher has no random state"
-)]
-type OpIdMap<V> = std::collections::HashMap<OpId, V, UniformHashing>;
-
 /// Ops per chunk of an [`OpSlab`].
 const SLAB_CHUNK: usize = 4096;
 
-/// Held ops, stored by arrival in chunks of [`SLAB_CHUNK`] and found by id through an
-/// [`OpIdMap`] of positions: growing moves only the last chunk's ops and 36-byte index
+/// Held ops, stored by arrival in chunks of [`SLAB_CHUNK`] and found by id through a hash
+/// table of their positions: growing moves only the last chunk's ops and 4-byte index
 /// entries, never the whole log, and a log's ops sit in arrival order, near the ops they were
 /// delivered with.
+///
+/// The table holds positions only; a lookup confirms a candidate against the op's own id.
+/// Ids are blake3 hashes, so their first eight bytes are already a uniform hash
+/// ([`id_hash`]): nothing is hashed, and an entry is 4 bytes where an id and its position
+/// were 36. Nothing iterates the table. A member who wants its ops to collide must sign each
+/// attempt at an id, about 2^17 signatures per colliding op in a log of 10^5 ops.
 #[derive(Clone, Debug)]
 pub(crate) struct OpSlab<P> {
     chunks: Vec<Vec<Op<P>>>,
-    index: OpIdMap<u32>,
+    index: hashbrown::HashTable<u32>,
     len: usize,
+}
+
+/// The hash of an op id in an [`OpSlab`]'s table: its first eight bytes.
+fn id_hash(id: &OpId) -> u64 {
+    let (head, _) = id.0.split_first_chunk::<8>().expect("an id is 32 bytes");
+    u64::from_le_bytes(*head)
 }
 
 impl<P> Default for OpSlab<P> {
     fn default() -> Self {
         Self {
             chunks: Vec::new(),
-            index: OpIdMap::default(),
+            index: hashbrown::HashTable::new(),
             len: 0,
         }
     }
@@ -106,21 +107,26 @@ impl<P> Default for OpSlab<P> {
 impl<P> OpSlab<P> {
     /// The op with id `id`, if held.
     pub(crate) fn get(&self, id: &OpId) -> Option<&Op<P>> {
-        let at = *self.index.get(id)? as usize;
-        Some(&self.chunks[at / SLAB_CHUNK][at % SLAB_CHUNK])
+        let at = *self.index.find(id_hash(id), |&at| self.at(at).id == *id)?;
+        Some(self.at(at))
     }
 
     /// True if an op with id `id` is held.
     pub(crate) fn contains_key(&self, id: &OpId) -> bool {
-        self.index.contains_key(id)
+        self.get(id).is_some()
+    }
+
+    fn at(&self, at: u32) -> &Op<P> {
+        let at = at as usize;
+        &self.chunks[at / SLAB_CHUNK][at % SLAB_CHUNK]
     }
 
     /// Holds `op` (not held yet) under its id. A log holds at most
     /// [`crate::log::MAX_LOG_OPS`] ops, far below `u32::MAX`.
     pub(crate) fn insert(&mut self, id: OpId, op: Op<P>) {
+        debug_assert!(!self.contains_key(&id), "an op is held once");
+        debug_assert!(op.id == id, "an op is held under its own id");
         let at = u32::try_from(self.len).expect("a log holds fewer than 2^32 ops");
-        let previous = self.index.insert(id, at);
-        assert!(previous.is_none(), "an op is held once");
         if self.len.is_multiple_of(SLAB_CHUNK) {
             // Each chunk grows as ops come, doubling up to exactly `SLAB_CHUNK` (a power of
             // two): only the last chunk has empty slots, at most as many as it holds ops, and
@@ -131,6 +137,12 @@ impl<P> OpSlab<P> {
             chunk.push(op);
         }
         self.len += 1;
+        let chunks = &self.chunks;
+        let rehash = |&at: &u32| {
+            let at = at as usize;
+            id_hash(&chunks[at / SLAB_CHUNK][at % SLAB_CHUNK].id)
+        };
+        self.index.insert_unique(id_hash(&id), at, rehash);
     }
 
     /// Ops held.
@@ -139,8 +151,8 @@ impl<P> OpSlab<P> {
     }
 }
 
-/// The hasher of maps whose keys are uniform already, so it spends no time hashing: an op
-/// id (its first eight bytes) in [`OpIdMap`], or a `u64` spread by [`mix64`].
+/// The hasher of maps whose keys are uniform already, so it spends no time hashing: a `u64`
+/// spread by [`mix64`].
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct UniformHashing;
 
@@ -169,20 +181,16 @@ impl std::hash::Hasher for UniformHasher {
     }
 
     fn write(&mut self, bytes: &[u8]) {
-        // An id hashes as its length, then its 32 bytes (the slice's `Hash`); a `u64` as its
-        // 8 bytes.
-        let head = match bytes.first_chunk::<8>() {
-            Some(head) => *head,
-            None => {
-                let mut head = [0; 8];
-                head[..bytes.len()].copy_from_slice(bytes);
-                head
-            }
-        };
+        // Not reached by `u64` keys (`write_u64`); any other key folds in its first 8 bytes.
+        let mut head = [0; 8];
+        let n = bytes.len().min(8);
+        head[..n].copy_from_slice(&bytes[..n]);
         self.0 = self.0.rotate_left(5) ^ u64::from_le_bytes(head);
     }
 
-    fn write_usize(&mut self, _length: usize) {}
+    fn write_u64(&mut self, x: u64) {
+        self.0 = self.0.rotate_left(5) ^ x;
+    }
 }
 
 /// The unsigned fields of an op, as its author fills them in.
@@ -221,10 +229,9 @@ pub enum BuildError {
 /// A signed op. Immutable: its id and encoding are computed once, when built or decoded.
 ///
 /// A log holds every op of the session, so an op keeps each part once: its dependencies and
-/// signature are read from the encoding in place, not copied beside it.
+/// signature, and its author, are read from the encoding in place, not copied beside it.
 #[derive(Clone, PartialEq, Eq)]
 pub struct Op<P> {
-    author: PeerId,
     seq: u64,
     lamport: u64,
     timestamp: Timestamp,
@@ -313,7 +320,6 @@ impl<P: Payload> Op<P> {
         );
         let id = OpId(*blake3::hash(&encoded).as_bytes());
         Ok(Self {
-            author,
             seq: fields.seq,
             lamport: fields.lamport,
             timestamp: fields.timestamp,
@@ -340,7 +346,7 @@ impl<P: Payload> Op<P> {
 
     /// Checks the author's signature over the op's body.
     pub fn verify(&self) -> Result<(), VerifyError> {
-        self.author
+        self.author()
             .verify(&signing_message(self.body()), &self.signature())
     }
 
@@ -354,7 +360,7 @@ impl<P: Payload> Op<P> {
     pub fn first_unsigned(ops: &[Self]) -> Option<usize> {
         let bodies: Vec<(PeerId, &[u8], Signature)> = ops
             .iter()
-            .map(|op| (op.author, op.body(), op.signature()))
+            .map(|op| (op.author(), op.body(), op.signature()))
             .collect();
         if all_signed(&bodies) {
             None
@@ -520,7 +526,6 @@ impl<'a> Envelope<'a> {
             });
         }
         Ok(Op {
-            author: self.author,
             seq: self.seq,
             lamport: self.lamport,
             timestamp: self.timestamp,
@@ -537,9 +542,13 @@ impl<P> Op<P> {
     pub fn id(&self) -> OpId {
         self.id
     }
-    /// The author's peer id.
+    /// The author's peer id (the encoding's bytes after its version).
     pub fn author(&self) -> PeerId {
-        self.author
+        PeerId(
+            *self.encoded[1..]
+                .first_chunk()
+                .expect("an op's encoding starts with its version and author"),
+        )
     }
     /// Per-author sequence number.
     pub fn seq(&self) -> u64 {
@@ -580,7 +589,7 @@ impl<P: fmt::Debug> fmt::Debug for Op<P> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.debug_struct("Op")
             .field("id", &self.id)
-            .field("author", &self.author)
+            .field("author", &self.author())
             .field("seq", &self.seq)
             .field("lamport", &self.lamport)
             .field("timestamp", &self.timestamp)
@@ -757,9 +766,44 @@ mod tests {
         Op::sign(&k, fields).unwrap().into_op()
     }
 
+    /// The slab's table holds positions hashed by an id's first eight bytes: ids that share
+    /// them are told apart by the ops' own ids, through every growth of the table.
+    #[test]
+    fn a_slab_finds_ops_whose_ids_share_their_hash_bits() {
+        let template = sample(1);
+        let with_id = |id: [u8; 32]| {
+            let mut op = template.clone();
+            op.id = OpId(id);
+            op
+        };
+        let twin = |i: u32, tail: u8| {
+            let mut id = [tail; 32];
+            id[..4].copy_from_slice(&(i % 64).to_le_bytes());
+            id[4..8].copy_from_slice(&[0xab; 4]);
+            id[8..12].copy_from_slice(&i.to_le_bytes());
+            id
+        };
+        let mut slab = OpSlab::default();
+        // 64 hash values, each shared by about 156 ids.
+        for i in 0..10_000 {
+            slab.insert(OpId(twin(i, 1)), with_id(twin(i, 1)));
+        }
+        assert_eq!(slab.len(), 10_000);
+        for i in 0..10_000 {
+            let id = OpId(twin(i, 1));
+            assert_eq!(slab.get(&id).map(Op::id), Some(id), "op {i}");
+            assert!(
+                !slab.contains_key(&OpId(twin(i, 2))),
+                "a stranger with the same bits"
+            );
+        }
+        assert_eq!(slab.get(&template.id()), None);
+    }
+
     #[test]
     fn build_sorts_deps_and_verifies() {
         let op = sample(1);
+        assert_eq!(op.author(), Keypair::from_seed([1; 32]).peer_id());
         assert_eq!(op.deps(), &[OpId([1; 32]), OpId([2; 32])]);
         assert!(op.verify().is_ok());
         assert_eq!(op.encoded()[0], OP_FORMAT_VERSION);

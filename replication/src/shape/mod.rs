@@ -243,6 +243,9 @@ impl Eq for ShapePayload {}
 // A log holds one decoded payload per op: its largest variant sets the size of every one.
 #[cfg(target_pointer_width = "64")]
 const _: () = assert!(std::mem::size_of::<ShapePayload>() <= 40);
+// And one op: the payload, counters, id and encoding (read in place for the rest).
+#[cfg(target_pointer_width = "64")]
+const _: () = assert!(std::mem::size_of::<crate::Op<ShapePayload>>() <= 120);
 
 /// [`ShapePayload`] as encoded: its variants in their order, `Create` in its layout from
 /// before ids were derived, and then `CreateOwned`, a `Create` with its counter, so ops signed
