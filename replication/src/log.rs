@@ -891,9 +891,10 @@ impl<P: Payload> Log<P> {
         // Deps and previous ops inside a base have Lamport times at or below its cut, and
         // `insert` refused every op at or below the cut, so held ones set the floor.
         // Timestamps inside a base are not kept per op: a joined log checks held ones only.
-        let past = || (op.deps().iter().filter_map(|d| self.ops.get(d))).chain(prev);
-        let floor = past().map(Op::lamport).max().unwrap_or(0);
-        let floor_ts = past().map(Op::timestamp).max().unwrap_or_default();
+        let past = (op.deps().iter().filter_map(|d| self.ops.get(d))).chain(prev);
+        let (floor, floor_ts) = past.fold((0, Timestamp::default()), |(lamport, ts), p| {
+            (lamport.max(p.lamport()), ts.max(p.timestamp()))
+        });
         if op.lamport() <= floor {
             return Err(InsertError::BadLamport {
                 lamport: op.lamport(),
