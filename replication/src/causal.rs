@@ -133,7 +133,7 @@ impl Frontier {
     }
 }
 
-/// Most (target, author) entries a [`Reach`] memo holds; past it the memo starts afresh, which
+/// Most (target, author) slots a [`Reach`] memo holds; past it the memo starts afresh, which
 /// changes no answer, only what the next ones cost.
 pub const MAX_REACH_MEMO_ENTRIES: usize = 1 << 20;
 
@@ -143,43 +143,37 @@ pub const MAX_REACH_MEMO_ENTRIES: usize = 1 << 20;
 /// so both are ranges of the author's chain; an op's past never changes once it is delivered,
 /// so an entry never goes stale.
 ///
-/// Targets and authors are numbered in order of first use, so an entry is 16 bytes in a hash
-/// table rather than two 32-byte ids in nested trees: a log of 32 authors' ops held about 100
-/// bytes per entry that way, and more than a tenth of its memory in this memo.
+/// Targets and authors are numbered in order of first use, and each target has a row of 8-byte
+/// slots indexed by author number: a session's few authors are asked about most targets, so
+/// the rows are nearly full. A hash table of pairs took 16 bytes an entry and doubled as it
+/// grew (about 150 bytes per op held at 32 peers); nested trees of ids, before it, about 100
+/// bytes an entry.
 #[derive(Clone, Debug, Default)]
 pub struct Reach {
     targets: BTreeMap<OpId, u32>,
     authors: BTreeMap<PeerId, u32>,
-    /// `(target number, author number)` to `(unseen_to, seen_from)`; `seen_from` is
-    /// `u32::MAX` while unknown. Sequence numbers from `u32::MAX` on are not memoised.
-    bounds: ReachMap,
+    /// Per target number, per author number: `(unseen_to, seen_from)`, [`UNKNOWN`] until an
+    /// answer is recorded. Sequence numbers from `u32::MAX` on are not memoised.
+    rows: Vec<Vec<(u32, u32)>>,
+    /// Slots in all rows (what [`MAX_REACH_MEMO_ENTRIES`] bounds).
+    n_slots: usize,
+    /// Slots holding an answer.
+    n_entries: usize,
 }
 
-/// See [`Reach::bounds`]: keyed by two numbers this memo gave out, never by a remote's bytes,
-/// spread by [`crate::op::mix64`].
-#[expect(
-    clippy::disallowed_types,
-    reason = "never iterated (lookups and inserts only), and the hasher has no random state"
-)]
-type ReachMap = std::collections::HashMap<u64, (u32, u32), crate::op::UniformHashing>;
-
-/// The [`ReachMap`] key of a target's and an author's numbers.
-fn pair_key(target: u32, author: u32) -> u64 {
-    crate::op::mix64(u64::from(target) << 32 | u64::from(author))
-}
+/// A slot with nothing recorded: no seq is known either way.
+const UNKNOWN: (u32, u32) = (0, u32::MAX);
 
 impl Reach {
-    fn key(&self, target: &OpId, author: &PeerId) -> Option<u64> {
-        Some(pair_key(
-            *self.targets.get(target)?,
-            *self.authors.get(author)?,
-        ))
+    fn slot(&self, target: &OpId, author: &PeerId) -> Option<(u32, u32)> {
+        let row = self.rows.get(*self.targets.get(target)? as usize)?;
+        row.get(*self.authors.get(author)? as usize).copied()
     }
 
     /// Whether `author`'s op `seq` has `target` in its causal past, if known.
     pub fn known(&self, target: &OpId, author: &PeerId, seq: u64) -> Option<bool> {
         let seq = u32::try_from(seq).ok()?;
-        let (unseen_to, seen_from) = *self.bounds.get(&self.key(target, author)?)?;
+        let (unseen_to, seen_from) = self.slot(target, author).filter(|s| *s != UNKNOWN)?;
         if seq <= unseen_to {
             Some(false)
         } else if seq >= seen_from {
@@ -194,36 +188,48 @@ impl Reach {
         let Some(seq) = u32::try_from(seq).ok().filter(|s| *s < u32::MAX) else {
             return;
         };
-        if self.bounds.len() >= MAX_REACH_MEMO_ENTRIES {
-            *self = Self::default();
+        if seq == 0 && !seen {
+            // Says nothing: no op has seq 0.
+            return;
         }
-        let key = match self.key(&target, &author) {
-            Some(key) => key,
-            None => {
-                let next = |n: usize| u32::try_from(n).expect("at most MAX_REACH_MEMO_ENTRIES");
-                let n_targets = next(self.targets.len());
-                let target = *self.targets.entry(target).or_insert(n_targets);
-                let n_authors = next(self.authors.len());
-                let author = *self.authors.entry(author).or_insert(n_authors);
-                pair_key(target, author)
-            }
-        };
-        let entry = self.bounds.entry(key).or_insert((0, u32::MAX));
+        let next = |n: usize| u32::try_from(n).expect("at most MAX_REACH_MEMO_ENTRIES");
+        let n_targets = next(self.targets.len());
+        let t = *self.targets.entry(target).or_insert(n_targets) as usize;
+        let n_authors = next(self.authors.len());
+        let a = *self.authors.entry(author).or_insert(n_authors) as usize;
+        let grow = (a + 1).saturating_sub(self.rows.get(t).map_or(0, Vec::len));
+        if self.n_slots + grow > MAX_REACH_MEMO_ENTRIES {
+            *self = Self::default();
+            return self.record(target, author, seq.into(), seen);
+        }
+        if t == self.rows.len() {
+            self.rows.push(Vec::new());
+        }
+        let row = &mut self.rows[t];
+        if grow > 0 {
+            row.reserve_exact(grow);
+            row.resize(a + 1, UNKNOWN);
+            self.n_slots += grow;
+        }
+        let slot = &mut row[a];
+        if *slot == UNKNOWN {
+            self.n_entries += 1;
+        }
         if seen {
-            entry.1 = entry.1.min(seq);
+            slot.1 = slot.1.min(seq);
         } else {
-            entry.0 = entry.0.max(seq);
+            slot.0 = slot.0.max(seq);
         }
     }
 
-    /// Number of (target, author) entries held.
+    /// Number of (target, author) pairs with an answer.
     pub fn len(&self) -> usize {
-        self.bounds.len()
+        self.n_entries
     }
 
     /// True if nothing is memoised.
     pub fn is_empty(&self) -> bool {
-        self.bounds.is_empty()
+        self.n_entries == 0
     }
 }
 
@@ -292,8 +298,12 @@ mod tests {
             r.record(target(100 + i), author(0), 1, true);
         }
         assert_eq!(r.len(), MAX_REACH_MEMO_ENTRIES);
+        // An answer in a slot it holds costs nothing; a new slot past the limit starts afresh.
         r.record(target(0), author(0), 1, true);
+        assert_eq!(r.len(), MAX_REACH_MEMO_ENTRIES);
+        r.record(target(0), author(40), 1, true);
         assert_eq!(r.len(), 1, "the memo started afresh");
+        assert_eq!(r.known(&target(0), &author(40), 1), Some(true));
         assert_eq!(r.known(&target(1), &author(1), 3), None);
     }
 

@@ -151,48 +151,6 @@ impl<P> OpSlab<P> {
     }
 }
 
-/// The hasher of maps whose keys are uniform already, so it spends no time hashing: a `u64`
-/// spread by [`mix64`].
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct UniformHashing;
-
-impl std::hash::BuildHasher for UniformHashing {
-    type Hasher = UniformHasher;
-    fn build_hasher(&self) -> UniformHasher {
-        UniformHasher(0)
-    }
-}
-
-/// The splitmix64 finaliser: a bijection of `u64` that spreads every input bit over the
-/// output, so small numbers become keys for [`UniformHashing`] without collisions.
-pub(crate) fn mix64(mut x: u64) -> u64 {
-    x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    x ^ (x >> 31)
-}
-
-/// See [`UniformHashing`].
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct UniformHasher(u64);
-
-impl std::hash::Hasher for UniformHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-
-    fn write(&mut self, bytes: &[u8]) {
-        // Not reached by `u64` keys (`write_u64`); any other key folds in its first 8 bytes.
-        let mut head = [0; 8];
-        let n = bytes.len().min(8);
-        head[..n].copy_from_slice(&bytes[..n]);
-        self.0 = self.0.rotate_left(5) ^ u64::from_le_bytes(head);
-    }
-
-    fn write_u64(&mut self, x: u64) {
-        self.0 = self.0.rotate_left(5) ^ x;
-    }
-}
-
 /// The unsigned fields of an op, as its author fills them in.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct OpFields<P> {
