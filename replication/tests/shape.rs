@@ -39,8 +39,12 @@ fn sphere_data() -> ObjectData {
 }
 
 fn carve(at: DVec3) -> ShapePayload {
+    carve_at(1, at)
+}
+
+fn carve_at(object: u64, at: DVec3) -> ShapePayload {
     ShapePayload::edit(
-        1,
+        object,
         Edit::stamp(
             EditOp::Subtract,
             ToolShape::Sphere { radius: 0.2 },
@@ -834,7 +838,13 @@ fn a_created_object_shares_its_description_with_the_op() {
         Arc::clone(o.shared_data())
     };
     assert!(Arc::ptr_eq(&held(&scene), data), "folded");
-    let (_, ins) = log.author(&a, Timestamp(20), carve_object(object)).unwrap();
+    let (_, ins) = log
+        .author(
+            &a,
+            Timestamp(20),
+            carve_at(object, DVec3::new(0.5, 0.0, 0.0)),
+        )
+        .unwrap();
     scene.apply_insertion(&log, &ins);
     assert!(Arc::ptr_eq(&held(&scene), data), "after an edit");
     assert!(
@@ -850,16 +860,4 @@ fn a_created_object_shares_its_description_with_the_op() {
     let changed = held(&scene);
     assert!(!Arc::ptr_eq(&changed, data), "a set makes its own");
     assert!(changed.appearance.diffuse.is_some());
-}
-
-fn carve_object(object: u64) -> ShapePayload {
-    ShapePayload::edit(
-        object,
-        Edit::stamp(
-            EditOp::Subtract,
-            ToolShape::Sphere { radius: 0.2 },
-            Pose::at(DVec3::new(0.5, 0.0, 0.0)),
-        ),
-    )
-    .expect("a valid edit")
 }
