@@ -155,7 +155,8 @@ pub struct Reach {
     /// Per target number, per author number: `(unseen_to, seen_from)`, [`UNKNOWN`] until an
     /// answer is recorded. Sequence numbers from `u32::MAX` on are not memoised.
     rows: Vec<Vec<(u32, u32)>>,
-    /// Slots in all rows (what [`MAX_REACH_MEMO_ENTRIES`] bounds).
+    /// Slots in all rows (what [`MAX_REACH_MEMO_ENTRIES`] bounds; rows reserve at most an
+    /// eighth more).
     n_slots: usize,
     /// Slots holding an answer.
     n_entries: usize,
@@ -207,7 +208,13 @@ impl Reach {
         }
         let row = &mut self.rows[t];
         if grow > 0 {
-            row.reserve_exact(grow);
+            // A row grows by at least an eighth: one extended an author at a time (a member
+            // signing with ever new keys) copies each slot a bounded number of times, not once
+            // per new author, and holds at most an eighth more than its slots.
+            let len = row.len();
+            if a >= row.capacity() {
+                row.reserve_exact((a + 1).max(len + len / 8 + 1) - len);
+            }
             row.resize(a + 1, UNKNOWN);
             self.n_slots += grow;
         }
@@ -274,6 +281,24 @@ mod tests {
         r.record(t, a, 1 << 40, false);
         assert_eq!(r.known(&t, &a, 1 << 40), None);
         assert_eq!(r.known(&t, &a, 9), Some(true));
+    }
+
+    /// A row extended one new author at a time grows geometrically: few copies, little slack.
+    #[test]
+    fn a_reach_row_grown_one_author_at_a_time_is_copied_few_times() {
+        let mut r = Reach::default();
+        let author = |i: u32| PeerId(blake3::hash(&i.to_le_bytes()).into());
+        let mut n_grown = 0;
+        for a in 0..4000 {
+            let before = r.rows.first().map_or(0, Vec::capacity);
+            r.record(OpId([9; 32]), author(a), 1, true);
+            n_grown += usize::from(r.rows[0].capacity() != before);
+        }
+        let row = &r.rows[0];
+        assert_eq!(row.len(), 4000);
+        assert!(row.capacity() <= 4000 + 4000 / 8 + 1, "{}", row.capacity());
+        assert!(n_grown < 100, "{n_grown} reallocations");
+        assert_eq!(r.known(&OpId([9; 32]), &author(3999), 1), Some(true));
     }
 
     #[test]
