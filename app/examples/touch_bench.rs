@@ -66,7 +66,8 @@ fn ball(i: usize) -> ObjectData {
             zone_depth: Some(Property::new(f("0.05"))),
             density: Some(Property::new(f("0.3"))),
             ..Physics::default()
-        },
+        }
+        .into(),
         transform: Transform::translate(centre),
         ..ObjectData::default()
     }

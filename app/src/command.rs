@@ -293,7 +293,8 @@ pub fn plan(
                 appearance: fdsl::object::Appearance {
                     diffuse: Some(ColorDef::Constant(NEW_OBJECT_COLOUR)),
                     ..Default::default()
-                },
+                }
+                .into(),
                 ..ObjectData::default()
             };
             let payload = ids.create(data, None);

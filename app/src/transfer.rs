@@ -501,7 +501,8 @@ fn import_mesh(path: &Path, format: MeshFormat, next: IdSource) -> Result<Import
         appearance: fdsl::object::Appearance {
             diffuse: Some(ColorDef::Constant(crate::command::NEW_OBJECT_COLOUR)),
             ..Default::default()
-        },
+        }
+        .into(),
         ..ObjectData::default()
     };
     let made = format!("object {} \"{name}\": {}", ids.first.id(), kind(&data));

@@ -329,7 +329,8 @@ mod live {
                 tension: property("0.8"),
                 zone_depth: property("0.1"),
                 ..Physics::default()
-            },
+            }
+            .into(),
             ..ObjectData::default()
         }
     }

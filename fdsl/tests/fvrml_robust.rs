@@ -660,8 +660,8 @@ fn object_data() -> BoxedStrategy<ObjectData> {
             |(name, geometry, appearance, physics, transform, motion, grid)| ObjectData {
                 name,
                 geometry,
-                appearance,
-                physics,
+                appearance: appearance.into(),
+                physics: physics.into(),
                 transform,
                 motion,
                 grids: grid.into_iter().collect(),

@@ -309,7 +309,8 @@ fn rich_object() -> Object {
             transparency: Some(f("0.1")),
             displacement: Some(f("0.01*sin(20*x)")),
             ..Appearance::default()
-        },
+        }
+        .into(),
         physics: Physics {
             tension: Some(Property::new(f("1"))),
             friction: Some(Property {
@@ -318,7 +319,8 @@ fn rich_object() -> Object {
             }),
             density: Some(Property::new(f("2 + y + scan(x, y, z)"))),
             ..Physics::default()
-        },
+        }
+        .into(),
         transform: Transform::from_trs(
             DVec3::new(1.0, 0.0, 0.0),
             DQuat::from_rotation_z(0.5),
@@ -539,7 +541,8 @@ fn force_fields_map_the_container_box_onto_their_parameters() {
                 enabled: true,
             }),
             ..Physics::default()
-        },
+        }
+        .into(),
         ..ObjectData::default()
     })
     .unwrap();
@@ -1122,7 +1125,7 @@ fn an_object_is_tangible_only_with_physics_or_painted_physics() {
     // Any enabled property or force field makes it tangible; a disabled one does not.
     let with = |physics: Physics| {
         Object::new(ObjectData {
-            physics,
+            physics: physics.into(),
             ..plain.clone()
         })
         .unwrap()

@@ -429,7 +429,8 @@ pub fn object_watermelon(
             density: property(WATERMELON_DENSITY)?,
             zone_depth: property(&format!("{}", 0.05 * radius))?,
             ..Physics::default()
-        },
+        }
+        .into(),
         transform: fdsl::object::Transform::from_trs(
             center,
             glam::DQuat::IDENTITY,

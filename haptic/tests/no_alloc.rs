@@ -207,7 +207,8 @@ fn moving_field_ball() -> ObjectContainer {
                 enabled: true,
             }),
             ..Physics::default()
-        },
+        }
+        .into(),
         transform: Transform::translate(DVec3::new(0.0, 1.0, 0.0)),
         motion: Some(Motion {
             translation: Some(formula("x = 0.1 * sin(t); y = 0; z = 0;")),

@@ -405,7 +405,8 @@ fn ball_object() -> fdsl::object::Object {
             zone_depth: property("0.05"),
             density: property("0.3"),
             ..Physics::default()
-        },
+        }
+        .into(),
         ..ObjectData::default()
     })
     .unwrap()

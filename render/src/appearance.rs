@@ -193,7 +193,7 @@ impl CompiledAppearance {
     /// [`CompiledAppearance::of`] for an object's appearance.
     pub fn new(appearance: &Appearance) -> Result<CompiledAppearance, AppearanceError> {
         let object = Object::new(ObjectData {
-            appearance: appearance.clone(),
+            appearance: appearance.clone().into(),
             ..ObjectData::default()
         })
         .map_err(AppearanceError::of_object)?;

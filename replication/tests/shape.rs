@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use fdsl::object::{
     ColorDef, Domain, Edit, EditOp, Field, Formula, Geometry, ObjectData, PaintValue, Paintable,
-    Pose, Shape, ToolShape,
+    Pose, Shape, Shared, ToolShape,
 };
 use fdsl::scene::ObjectId as SceneObjectId;
 use glam::DVec3;
@@ -817,8 +817,9 @@ fn a_received_edit_is_compiled_once_from_its_bytes_to_the_scene() {
     assert_eq!(folded.history().len(), 1);
 }
 
-/// A created object's description (about 1.5 KB before its formulas) is held once: the scene's
-/// object shares the op's, through the fold and a refold, until a `Set` changes it.
+/// A created object's description (about 0.5 KB before its formulas) is held once: the scene's
+/// object shares the op's, through the fold and a refold, until a `Set` changes it, and then
+/// still shares the parts the `Set` left alone.
 #[test]
 fn a_created_object_shares_its_description_with_the_op() {
     let a = key(0);
@@ -860,4 +861,16 @@ fn a_created_object_shares_its_description_with_the_op() {
     let changed = held(&scene);
     assert!(!Arc::ptr_eq(&changed, data), "a set makes its own");
     assert!(changed.appearance.diffuse.is_some());
+    assert!(
+        Shared::ptr_eq(&changed.physics, &data.physics),
+        "a colour leaves the physics shared"
+    );
+    assert!(
+        !Shared::ptr_eq(&changed.appearance, &data.appearance),
+        "and copies the appearance it changes"
+    );
+    assert!(
+        data.appearance.diffuse.is_none(),
+        "the op's description is untouched"
+    );
 }

@@ -95,7 +95,8 @@ fn everything() -> ObjectData {
             shininess: Some(formula(SHININESS)),
             displacement: Some(formula(DISPLACEMENT)),
             ..Appearance::default()
-        },
+        }
+        .into(),
         physics: Physics {
             container: Some(Geometry::implicit_in(formula(CONTAINER), unit_box(1.6))),
             tension: Some(Property::new(formula(TENSION))),
@@ -109,7 +110,8 @@ fn everything() -> ObjectData {
                 enabled: true,
             }),
             ..Physics::default()
-        },
+        }
+        .into(),
         motion: Some(Motion {
             translation: Some(formula(TRANSLATION)),
             axis: DVec3::Z,

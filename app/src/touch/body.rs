@@ -161,7 +161,8 @@ impl ToolBody {
                 density: property(self.density)?,
                 zone_depth: property(0.5 * self.radius)?,
                 ..Physics::default()
-            },
+            }
+            .into(),
             ..ObjectData::default()
         };
         Object::new(data).ok()

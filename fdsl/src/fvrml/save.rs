@@ -143,10 +143,10 @@ fn shape(object: &Object) -> Node {
     if let Some(g) = &data.geometry {
         fields.push(node_field("geometry", geometry(g)));
     }
-    if data.appearance != Appearance::default() {
+    if *data.appearance != Appearance::default() {
         fields.push(node_field("appearance", appearance(&data.appearance)));
     }
-    if data.physics != Physics::default() {
+    if *data.physics != Physics::default() {
         fields.push(node_field("physics", physics(&data.physics)));
     }
     super::grid::write_grids(&data.grids, &mut fields);

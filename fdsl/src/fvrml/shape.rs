@@ -55,13 +55,13 @@ impl<'d> Reader<'_, 'd> {
         if let Some(field) = fields.get("appearance")
             && let Some(a) = self.node_of(field, &["FAppearance", "Appearance"])
         {
-            data.appearance = self.appearance(a);
+            data.appearance = self.appearance(a).into();
         }
         if function_shape
             && let Some(field) = fields.get("physics")
             && let Some(p) = self.node_of(field, &["FPhysics"])
         {
-            data.physics = self.physics(p);
+            data.physics = self.physics(p).into();
         }
         let mut edits = Vec::new();
         if function_shape && let Some(field) = fields.get("edits") {

@@ -32,15 +32,15 @@ struct ObjectRecord {
 pub mod v1 {
     use serde::{Deserialize, Serialize};
 
-    use super::super::{Appearance, Edit, Geometry, Motion, Physics, Transform};
+    use super::super::{Appearance, Edit, Geometry, Motion, Physics, Shared, Transform};
 
     /// [`super::ObjectData`] without grids.
     #[derive(Serialize, Deserialize)]
     pub struct ObjectData {
         name: String,
         geometry: Option<Geometry>,
-        appearance: Appearance,
-        physics: Physics,
+        appearance: Shared<Appearance>,
+        physics: Shared<Physics>,
         transform: Transform,
         motion: Option<Motion>,
     }

@@ -186,7 +186,8 @@ mod tests {
                 specular: Some(ColorDef::Constant([1.0; 3])),
                 shininess: Some(f("0.25 /* tapes */")),
                 ..Default::default()
-            },
+            }
+            .into(),
             physics: Physics {
                 tension: Some(Property {
                     formula: f("0.5 /* tapes, disabled */"),
@@ -200,7 +201,8 @@ mod tests {
                     enabled: true,
                 }),
                 ..Physics::default()
-            },
+            }
+            .into(),
             ..ObjectData::default()
         };
         let object = Object::new(data).unwrap();

@@ -131,7 +131,8 @@ fn properties_are_read_in_object_coordinates_and_painting_overrides() {
             enabled: false,
         }),
         ..Physics::default()
-    };
+    }
+    .into();
     let mut object = Object::new(data).unwrap();
     object
         .apply(Edit::stamp(
