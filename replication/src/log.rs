@@ -341,9 +341,10 @@ pub struct LogStats {
 #[derive(Debug, Clone)]
 pub struct Log<P> {
     ops: OpSlab<P>,
-    /// The linear order: sorted by key; a topological order because Lamport times grow
-    /// along every dependency.
-    order: Vec<(OrderKey, OpId)>,
+    /// The linear order, as positions in `ops`: sorted by each op's key, then id (siblings
+    /// of a fork share a key); a topological order because Lamport times grow along every
+    /// dependency. Keys and ids are read from the ops: an entry is 4 bytes, not 80.
+    order: Vec<u32>,
     /// `marks[i]` is the verdict on `order[i]`.
     marks: Vec<Mark>,
     /// `checkpoints[k]` is the fold state before position `k * CHECKPOINT_INTERVAL`.
@@ -771,7 +772,7 @@ impl<P: Payload> Log<P> {
             return None;
         }
         let key = OrderKey::of(op);
-        let pos = point_near_end(&self.order, |(k, _)| *k < key);
+        let pos = point_near_end(&self.order, |&at| self.slot_key(at) < key);
         // The object the scene folds again, from the op itself or from an undone edit.
         let object = match op.payload().effect() {
             Effect::Edit { object }
@@ -779,7 +780,7 @@ impl<P: Payload> Log<P> {
             | Effect::Release { object } => Some((object, key)),
             Effect::Undo { target } | Effect::Redo { target } => self
                 .target_object(&target)
-                .map(|(object, at)| (object, at.map_or(key, |at| self.order[at].0.min(key)))),
+                .map(|(object, at)| (object, at.map_or(key, |at| self.order_key(at).min(key)))),
             Effect::Independent => None,
         };
         let scene = object.map_or(0, |(o, from)| self.scene_refold_entries(o, &from));
@@ -816,10 +817,9 @@ impl<P: Payload> Log<P> {
 
     /// Inserts every op of `other` (in its linear order, so causally).
     pub fn merge(&mut self, now: Timestamp, other: &Log<P>) -> Result<(), InsertError> {
-        for (_, id) in &other.order {
-            if let Some(op) = other.ops.get(id) {
-                self.insert(now, VerifiedOp::trusted(op.clone()), LOCAL_ORIGIN)?;
-            }
+        for &at in &other.order {
+            let op = other.ops.at(at).clone();
+            self.insert(now, VerifiedOp::trusted(op), LOCAL_ORIGIN)?;
         }
         Ok(())
     }
@@ -928,8 +928,10 @@ impl<P: Payload> Log<P> {
         let id = op.id();
         // Most ops arrive in order: append without searching. Siblings share a key: the id
         // breaks the tie.
-        let pos = point_near_end(&self.order, |entry| *entry < (key, id));
-        self.order.insert(pos, (key, id));
+        let pos = point_near_end(&self.order, |&at| self.slot_entry(at) < (key, id));
+        // Where the slab will hold it: every path from here holds it.
+        let at = u32::try_from(self.ops.len()).expect("a log holds fewer than 2^32 ops");
+        self.order.insert(pos, at);
         // A placeholder: the refold that follows judges it.
         self.marks.insert(pos, Mark::Effective);
         if let Some(twin) = twin {
@@ -940,7 +942,8 @@ impl<P: Payload> Log<P> {
             }
             self.frontier.deliver(id, op.deps());
             self.max_lamport = self.max_lamport.max(op.lamport());
-            self.ops.insert(id, op);
+            let held = self.ops.insert(id, op);
+            debug_assert_eq!(held, at, "held where the order says");
             self.n_bytes += n_bytes;
             self.author_bytes.insert(author, author_bytes);
             return Ok(pos);
@@ -980,7 +983,8 @@ impl<P: Payload> Log<P> {
         self.max_lamport = self.max_lamport.max(op.lamport());
         self.clock.observe(op.timestamp(), now);
         let membership = op.payload().membership();
-        self.ops.insert(id, op);
+        let held = self.ops.insert(id, op);
+        debug_assert_eq!(held, at, "held where the order says");
         self.n_bytes += n_bytes;
         self.author_bytes.insert(author, author_bytes);
         if let Some(object) = delete_of {
@@ -1097,7 +1101,7 @@ impl<P: Payload> Log<P> {
             *void_from = (*void_from).min(seq);
         }
         self.reach = Reach::default();
-        let from = self.order[first?].0;
+        let from = self.order_key(first?);
         let deletes: Vec<(ObjectId, OpId, OrderKey)> = (self.deletes.iter())
             .flat_map(|(object, list)| list.iter().map(move |(k, id)| (*object, *id, *k)))
             .filter(|(_, id, k)| *k >= from && self.ops.contains_key(id))
@@ -1123,7 +1127,7 @@ impl<P: Payload> Log<P> {
         let dag = self.dag();
         let hides: Vec<OpId> = before
             .iter()
-            .filter_map(|k| self.position_of_key(k).map(|p| self.order[p].1))
+            .filter_map(|k| self.position_of_key(k).map(|p| self.id_at(p)))
             .filter(|e| dag.sees(&mut reach, &id, e))
             .collect();
         self.reach = reach;
@@ -1161,11 +1165,8 @@ impl<P: Payload> Log<P> {
             {
                 self.checkpoints.push(state.clone());
             }
-            let id = self.order[pos].1;
-            let Some(op) = self.ops.get(&id) else {
-                continue;
-            };
-            let effect = op.payload().effect();
+            let op = self.op_at(pos);
+            let (id, effect) = (op.id(), op.payload().effect());
             let mark = self.judge(&mut cx, &mut state, pos);
             if pos >= from {
                 let changed = self.marks[pos] != mark || inserted.contains(&id);
@@ -1194,10 +1195,8 @@ impl<P: Payload> Log<P> {
     /// Judges the op at `pos` against `state` (the fold of the positions before it) and
     /// advances the state past it.
     fn judge(&self, cx: &mut LeaseCx, state: &mut FoldState, pos: usize) -> Mark {
-        let (key, id) = self.order[pos];
-        let Some(op) = self.ops.get(&id) else {
-            return Mark::Effective;
-        };
+        let op = self.op_at(pos);
+        let (key, id) = (OrderKey::of(op), op.id());
         let effect = op.payload().effect();
         if self.forks.covers(&op.author(), op.seq()) {
             // A lease op on the chain still notes the lease before it: later lease ops that
@@ -1284,7 +1283,7 @@ impl<P: Payload> Log<P> {
         };
         let e = refold.objects.entry(object).or_insert(at);
         *e = (*e).min(at);
-        let key = self.order[at].0;
+        let key = self.order_key(at);
         let k = refold.object_keys.entry(object).or_insert(key);
         *k = (*k).min(key);
     }
@@ -1344,7 +1343,7 @@ impl<P: Payload> Log<P> {
                     Some(pos) => {
                         let e = refold.objects.entry(object).or_insert(pos);
                         *e = (*e).min(pos);
-                        let key = self.order[pos].0;
+                        let key = self.order_key(pos);
                         let k = refold.object_keys.entry(object).or_insert(key);
                         *k = (*k).min(key);
                     }
@@ -1411,34 +1410,60 @@ impl<P: Payload> Log<P> {
     }
 
     fn position(&self, id: &OpId) -> Option<usize> {
-        let entry = (OrderKey::of(self.ops.get(id)?), *id);
+        let at = self.ops.position(id)?;
         // Live ops are looked up right after they were appended.
-        if self.order.last() == Some(&entry) {
+        if self.order.last() == Some(&at) {
             return Some(self.order.len() - 1);
         }
-        self.order.binary_search(&entry).ok()
+        let entry = self.slot_entry(at);
+        let pos = self.order.partition_point(|&a| self.slot_entry(a) < entry);
+        (self.order.get(pos) == Some(&at)).then_some(pos)
+    }
+
+    /// The op at position `pos` of the linear order.
+    fn op_at(&self, pos: usize) -> &Op<P> {
+        self.ops.at(self.order[pos])
+    }
+
+    /// The order key at position `pos` of the linear order.
+    fn order_key(&self, pos: usize) -> OrderKey {
+        OrderKey::of(self.op_at(pos))
+    }
+
+    /// The id of the op at position `pos` of the linear order.
+    fn id_at(&self, pos: usize) -> OpId {
+        self.op_at(pos).id()
+    }
+
+    /// The order key of the op the slab holds at `at`.
+    fn slot_key(&self, at: u32) -> OrderKey {
+        OrderKey::of(self.ops.at(at))
+    }
+
+    /// What the linear order sorts the op the slab holds at `at` by.
+    fn slot_entry(&self, at: u32) -> (OrderKey, OpId) {
+        let op = self.ops.at(at);
+        (OrderKey::of(op), op.id())
     }
 
     /// The position of the op with `key` on its author's chain (a sibling of a fork shares
     /// its key).
     fn position_of_key(&self, key: &OrderKey) -> Option<usize> {
         let n = self.order.len();
-        if self.order.last().is_some_and(|(k, _)| k == key)
-            && (n < 2 || self.order[n - 2].0 != *key)
-        {
+        if n > 0 && self.order_key(n - 1) == *key && (n < 2 || self.order_key(n - 2) != *key) {
             return Some(n - 1);
         }
-        let at = self.order.partition_point(|(k, _)| k < key);
+        let at = self.order.partition_point(|&a| self.slot_key(a) < *key);
         let same = self.order[at..]
             .iter()
-            .take_while(|(k, _)| k == key)
+            .take_while(|&&a| self.slot_key(a) == *key)
             .count();
         match same {
             0 => None,
             1 => Some(at),
             _ => {
                 let chain = self.by_seq(&key.author, key.seq)?.id();
-                (at..at + same).find(|p| self.order[*p].1 == chain)
+                (at..at + same).find(|p| self.id_at(*p) == chain)
             }
         }
     }
@@ -1540,33 +1565,31 @@ impl<P: Payload> Log<P> {
 
     /// The linear order with every op's mark and whether the scene folds it.
     pub fn entries(&self) -> impl Iterator<Item = Entry<'_, P>> {
-        self.order
-            .iter()
-            .zip(&self.marks)
-            .filter_map(|((_, id), mark)| {
-                let op = self.ops.get(id)?;
-                let active = *mark == Mark::Effective
-                    && !self.state.is_undone(id)
-                    && !self.is_hidden(id)
-                    && !self.is_void(id);
-                Some(Entry {
-                    op,
-                    mark: *mark,
-                    active,
-                })
-            })
+        self.order.iter().zip(&self.marks).map(|(&at, mark)| {
+            let op = self.ops.at(at);
+            let id = &op.id();
+            let active = *mark == Mark::Effective
+                && !self.state.is_undone(id)
+                && !self.is_hidden(id)
+                && !self.is_void(id);
+            Entry {
+                op,
+                mark: *mark,
+                active,
+            }
+        })
     }
 
     /// The order key at held position `pos`.
     pub fn key_at(&self, pos: usize) -> Option<OrderKey> {
-        self.order.get(pos).map(|(k, _)| *k)
+        self.order.get(pos).map(|&at| self.slot_key(at))
     }
 
     /// The held entry with order key `key`.
     pub fn entry_at_key(&self, key: &OrderKey) -> Option<Entry<'_, P>> {
         let pos = self.position_of_key(key)?;
-        let id = self.order[pos].1;
-        let op = self.ops.get(&id)?;
+        let op = self.op_at(pos);
+        let id = op.id();
         let mark = self.marks[pos];
         Some(Entry {
             op,
@@ -1591,16 +1614,14 @@ impl<P: Payload> Log<P> {
 
     /// Op ids in the linear order.
     pub fn linear_ids(&self) -> impl Iterator<Item = OpId> + '_ {
-        self.order.iter().map(|(_, id)| *id)
+        self.order.iter().map(|&at| self.ops.at(at).id())
     }
 
     /// Ops with Lamport time `lamport` or more, in linear order; used to stream what a
     /// remote lacks.
     pub(crate) fn ops_from_lamport(&self, lamport: u64) -> impl Iterator<Item = &Op<P>> {
-        let start = self.order.partition_point(|(k, _)| k.lamport < lamport);
-        self.order[start..]
-            .iter()
-            .filter_map(|(_, id)| self.ops.get(id))
+        let start = (self.order).partition_point(|&at| self.ops.at(at).lamport() < lamport);
+        self.order[start..].iter().map(|&at| self.ops.at(at))
     }
 
     /// The verdict on a delivered op.
@@ -1622,9 +1643,9 @@ impl<P: Payload> Log<P> {
         self.order
             .iter()
             .zip(&self.marks)
-            .filter(|((k, _), _)| k.author == *author)
-            .filter_map(|((_, id), mark)| match mark {
-                Mark::Rejected(reason) => Some((*id, *reason)),
+            .filter(|(at, _)| self.ops.at(**at).author() == *author)
+            .filter_map(|(&at, mark)| match mark {
+                Mark::Rejected(reason) => Some((self.ops.at(at).id(), *reason)),
                 Mark::Effective => None,
             })
             .collect()

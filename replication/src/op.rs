@@ -94,6 +94,13 @@ fn id_hash(id: &OpId) -> u64 {
     u64::from_le_bytes(*head)
 }
 
+/// The op at position `at` of a slab's chunks (a free function: the slab's table borrows
+/// the chunks beside itself while it grows).
+fn slot<P>(chunks: &[Vec<Op<P>>], at: u32) -> &Op<P> {
+    let at = at as usize;
+    &chunks[at / SLAB_CHUNK][at % SLAB_CHUNK]
+}
+
 impl<P> Default for OpSlab<P> {
     fn default() -> Self {
         Self {
@@ -107,8 +114,15 @@ impl<P> Default for OpSlab<P> {
 impl<P> OpSlab<P> {
     /// The op with id `id`, if held.
     pub(crate) fn get(&self, id: &OpId) -> Option<&Op<P>> {
-        let at = *self.index.find(id_hash(id), |&at| self.at(at).id == *id)?;
-        Some(self.at(at))
+        Some(self.at(self.position(id)?))
+    }
+
+    /// Where the op with id `id` is held, if it is: a position [`OpSlab::at`] takes, which
+    /// never changes.
+    pub(crate) fn position(&self, id: &OpId) -> Option<u32> {
+        self.index
+            .find(id_hash(id), |&at| self.at(at).id == *id)
+            .copied()
     }
 
     /// True if an op with id `id` is held.
@@ -116,14 +130,15 @@ impl<P> OpSlab<P> {
         self.get(id).is_some()
     }
 
-    fn at(&self, at: u32) -> &Op<P> {
-        let at = at as usize;
-        &self.chunks[at / SLAB_CHUNK][at % SLAB_CHUNK]
+    /// The op held at position `at` (from [`OpSlab::position`] or [`OpSlab::insert`]).
+    pub(crate) fn at(&self, at: u32) -> &Op<P> {
+        slot(&self.chunks, at)
     }
 
-    /// Holds `op` (not held yet) under its id. A log holds at most
-    /// [`crate::log::MAX_LOG_OPS`] ops, far below `u32::MAX`.
-    pub(crate) fn insert(&mut self, id: OpId, op: Op<P>) {
+    /// Holds `op` (not held yet) under its id and returns its position: the number of ops
+    /// held before it. A log holds at most [`crate::log::MAX_LOG_OPS`] ops, far below
+    /// `u32::MAX`.
+    pub(crate) fn insert(&mut self, id: OpId, op: Op<P>) -> u32 {
         debug_assert!(!self.contains_key(&id), "an op is held once");
         debug_assert!(op.id == id, "an op is held under its own id");
         let at = u32::try_from(self.len).expect("a log holds fewer than 2^32 ops");
@@ -138,11 +153,9 @@ impl<P> OpSlab<P> {
         }
         self.len += 1;
         let chunks = &self.chunks;
-        let rehash = |&at: &u32| {
-            let at = at as usize;
-            id_hash(&chunks[at / SLAB_CHUNK][at % SLAB_CHUNK].id)
-        };
-        self.index.insert_unique(id_hash(&id), at, rehash);
+        self.index
+            .insert_unique(id_hash(&id), at, |&at| id_hash(&slot(chunks, at).id));
+        at
     }
 
     /// Ops held.

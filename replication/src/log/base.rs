@@ -299,7 +299,7 @@ impl<P: Payload> Log<P> {
 
     /// The number of held positions at or before Lamport time `cut`.
     pub(crate) fn prefix_len(&self, cut: u64) -> usize {
-        self.order.partition_point(|(k, _)| k.lamport <= cut)
+        (self.order).partition_point(|&at| self.ops.at(at).lamport() <= cut)
     }
 
     /// The lease/undo state after the first `n` positions.
@@ -364,8 +364,9 @@ impl<P: Payload> Log<P> {
                 Some((o.id, b.authors.get(o.author_idx as usize)?.author, o.kind))
             }));
         }
-        for (pos, (key, id)) in self.order[..n].iter().enumerate() {
-            let Some(op) = self.ops.get(id) else { continue };
+        for pos in 0..n {
+            let op = self.op_at(pos);
+            let (key, id) = (&OrderKey::of(op), &op.id());
             frontier.deliver(*id, op.deps());
             authors.insert(key.author, (key.seq, key.lamport));
             max_timestamp = max_timestamp.max(op.timestamp());
