@@ -352,8 +352,8 @@ pub struct Log<P> {
     /// The fold state after the first `n_folded` positions (all of them between calls).
     state: FoldState,
     n_folded: usize,
-    /// Each author's held ops in seq order (after the base's, if any).
-    by_author: BTreeMap<PeerId, Vec<OpId>>,
+    /// Each author's held ops in seq order (after the base's, if any), as positions in `ops`.
+    by_author: BTreeMap<PeerId, Vec<u32>>,
     /// Each object's held edits (ops whose effect is [`Effect::Edit`]) in linear order.
     by_object: BTreeMap<ObjectId, Vec<OrderKey>>,
     /// Each object's held lease ops (acquires and releases) in linear order, with what the
@@ -948,7 +948,7 @@ impl<P: Payload> Log<P> {
             self.author_bytes.insert(author, author_bytes);
             return Ok(pos);
         }
-        self.by_author.entry(author).or_default().push(id);
+        self.by_author.entry(author).or_default().push(at);
         match op.payload().effect() {
             Effect::Edit { object } => {
                 let keys = self.by_object.entry(object).or_default();
@@ -1087,8 +1087,9 @@ impl<P: Payload> Log<P> {
             let base_seq = self.base.as_ref().map_or(0, |b| b.seq(&author));
             let skip = usize::try_from(seq.saturating_sub(base_seq + 1)).unwrap_or(usize::MAX);
             let chain = self.by_author.get(&author).map_or(&[][..], Vec::as_slice);
+            let chain = chain.iter().skip(skip).map(|&at| self.ops.at(at).id_ref());
             let siblings = self.siblings.get(&author).map_or(&[][..], Vec::as_slice);
-            for id in chain.iter().skip(skip).chain(siblings) {
+            for id in chain.chain(siblings) {
                 if let Some(pos) = self.position(id) {
                     first = Some(first.map_or(pos, |f| f.min(pos)));
                 }
@@ -1235,8 +1236,9 @@ impl<P: Payload> Log<P> {
             let base_seq = self.base.as_ref().map_or(0, |b| b.seq(member));
             let skip = usize::try_from(from_seq.saturating_sub(base_seq + 1)).unwrap_or(usize::MAX);
             let chain = self.by_author.get(member).map_or(&[][..], Vec::as_slice);
-            for id in chain.iter().skip(skip) {
-                let (Some(op), Some(pos)) = (self.ops.get(id), self.position(id)) else {
+            for &at in chain.iter().skip(skip) {
+                let op = self.ops.at(at);
+                let Some(pos) = self.position(op.id_ref()) else {
                     continue;
                 };
                 refold.from = refold.from.min(pos);
@@ -1524,10 +1526,8 @@ impl<P: Payload> Log<P> {
     pub fn by_seq(&self, author: &PeerId, seq: u64) -> Option<&Op<P>> {
         let base_seq = self.base.as_ref().map_or(0, |b| b.seq(author));
         let idx = usize::try_from(seq.checked_sub(1 + base_seq)?).ok()?;
-        self.by_author
-            .get(author)?
-            .get(idx)
-            .and_then(|id| self.ops.get(id))
+        let at = *self.by_author.get(author)?.get(idx)?;
+        Some(self.ops.at(at))
     }
 
     /// What this log holds, per author.

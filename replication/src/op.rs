@@ -509,6 +509,11 @@ impl<'a> Envelope<'a> {
 }
 
 impl<P> Op<P> {
+    /// The op's id, where the op holds it.
+    pub(crate) fn id_ref(&self) -> &OpId {
+        &self.id
+    }
+
     /// The op's id (blake3 of [`Op::encoded`]).
     pub fn id(&self) -> OpId {
         self.id

@@ -281,8 +281,8 @@ impl<P: Payload> Log<P> {
         if let Some(op) = self
             .by_author
             .get(author)
-            .and_then(|ids| ids.last())
-            .and_then(|id| self.ops.get(id))
+            .and_then(|chain| chain.last())
+            .map(|&at| self.ops.at(at))
         {
             return op.lamport();
         }

@@ -40,7 +40,8 @@ pub(crate) type AltFolds = BTreeMap<(ObjectId, Vec<OrderKey>), (usize, Option<Le
 /// The held part of the op DAG, as reachability walks it.
 pub(crate) struct Dag<'a, P> {
     pub(crate) ops: &'a crate::op::OpSlab<P>,
-    pub(crate) by_author: &'a BTreeMap<PeerId, Vec<OpId>>,
+    /// Each author's held ops in seq order, as positions in `ops`.
+    pub(crate) by_author: &'a BTreeMap<PeerId, Vec<u32>>,
     /// The forked authors: past its fork, an author's ops reach their past through their deps
     /// alone, and no memo or seq shortcut speaks for them.
     pub(crate) forks: &'a crate::fork::Forks,
@@ -65,13 +66,13 @@ impl<P: Payload> Dag<'_, P> {
         })
     }
 
-    /// How many of `chain` (an author's held ops in seq order) are in `from`'s causal past: a
-    /// prefix, since each op's previous op is in its past.
-    pub(crate) fn seen_prefix(&self, memo: &mut Reach, from: &OpId, chain: &[OpId]) -> usize {
+    /// How many of `chain` (an author's held ops in seq order, as positions in `ops`) are in
+    /// `from`'s causal past: a prefix, since each op's previous op is in its past.
+    pub(crate) fn seen_prefix(&self, memo: &mut Reach, from: &OpId, chain: &[u32]) -> usize {
         let (mut lo, mut hi) = (0, chain.len());
         while lo < hi {
             let mid = lo + (hi - lo) / 2;
-            if self.sees(memo, from, &chain[mid]) {
+            if self.sees(memo, from, self.ops.at(chain[mid]).id_ref()) {
                 lo = mid + 1;
             } else {
                 hi = mid;
@@ -93,9 +94,11 @@ impl<P: Payload> Dag<'_, P> {
         }
         let base_seq = self.base.map_or(0, |b| b.seq(&op.author()));
         let idx = op.seq().checked_sub(2 + base_seq)?;
-        self.by_author
+        let at = self
+            .by_author
             .get(&op.author())?
-            .get(usize::try_from(idx).ok()?)
+            .get(usize::try_from(idx).ok()?)?;
+        Some(self.ops.at(*at).id_ref())
     }
 
     /// The answer for `id` without walking, if there is one.
