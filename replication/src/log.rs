@@ -354,8 +354,9 @@ pub struct Log<P> {
     n_folded: usize,
     /// Each author's held ops in seq order (after the base's, if any), as positions in `ops`.
     by_author: BTreeMap<PeerId, Vec<u32>>,
-    /// Each object's held edits (ops whose effect is [`Effect::Edit`]) in linear order.
-    by_object: BTreeMap<ObjectId, Vec<OrderKey>>,
+    /// Each object's held edits (ops whose effect is [`Effect::Edit`]) in linear order, as
+    /// positions in `ops`.
+    by_object: BTreeMap<ObjectId, Vec<u32>>,
     /// Each object's held lease ops (acquires and releases) in linear order, with what the
     /// fold learnt of each: a lease binds only ops that saw it.
     lease_ops: BTreeMap<ObjectId, Vec<seen::LeaseOp>>,
@@ -738,8 +739,8 @@ impl<P: Payload> Log<P> {
     /// Edits a scene folds again when `object` changes from `from` on: all of them (it folds
     /// the object from its start) unless the change is at or after its last held edit.
     fn scene_refold_entries(&self, object: ObjectId, from: &OrderKey) -> usize {
-        let held = self.by_object.get(&object).map_or(&[][..], Vec::as_slice);
-        if held.last().is_none_or(|last| last <= from) {
+        let held = self.held_edits(object);
+        if held.last().is_none_or(|&last| self.slot_key(last) <= *from) {
             return 0;
         }
         let in_base = self
@@ -951,9 +952,10 @@ impl<P: Payload> Log<P> {
         self.by_author.entry(author).or_default().push(at);
         match op.payload().effect() {
             Effect::Edit { object } => {
-                let keys = self.by_object.entry(object).or_default();
-                let at = point_near_end(keys, |k| *k < key);
-                keys.insert(at, key);
+                let ops = &self.ops;
+                let held = self.by_object.entry(object).or_default();
+                let i = point_near_end(held, |&a| OrderKey::of(ops.at(a)) < key);
+                held.insert(i, at);
                 if op.payload().is_delete() {
                     let deletes = self.deletes.entry(object).or_default();
                     let at = deletes.partition_point(|(k, _)| *k < key);
@@ -1122,13 +1124,13 @@ impl<P: Payload> Log<P> {
     /// Records which held edits of `object` the delete `id` just delivered saw. Every edit in
     /// its causal past is delivered before it, so this never changes later.
     fn note_delete(&mut self, object: ObjectId, id: OpId, key: OrderKey) {
-        let keys = self.by_object.get(&object).map_or(&[][..], Vec::as_slice);
-        let before = &keys[..point_near_end(keys, |k| *k < key)];
         let mut reach = std::mem::take(&mut self.reach);
+        let held = self.held_edits(object);
+        let before = &held[..point_near_end(held, |&a| self.slot_key(a) < key)];
         let dag = self.dag();
         let hides: Vec<OpId> = before
             .iter()
-            .filter_map(|k| self.position_of_key(k).map(|p| self.id_at(p)))
+            .map(|&a| self.ops.at(a).id())
             .filter(|e| dag.sees(&mut reach, &id, e))
             .collect();
         self.reach = reach;
@@ -1565,19 +1567,21 @@ impl<P: Payload> Log<P> {
 
     /// The linear order with every op's mark and whether the scene folds it.
     pub fn entries(&self) -> impl Iterator<Item = Entry<'_, P>> {
-        self.order.iter().zip(&self.marks).map(|(&at, mark)| {
-            let op = self.ops.at(at);
-            let id = &op.id();
-            let active = *mark == Mark::Effective
+        (0..self.order.len()).map(|pos| self.entry_at(pos))
+    }
+
+    /// The entry at position `pos` of the linear order.
+    fn entry_at(&self, pos: usize) -> Entry<'_, P> {
+        let op = self.op_at(pos);
+        let (id, mark) = (op.id_ref(), self.marks[pos]);
+        Entry {
+            op,
+            mark,
+            active: mark == Mark::Effective
                 && !self.state.is_undone(id)
                 && !self.is_hidden(id)
-                && !self.is_void(id);
-            Entry {
-                op,
-                mark: *mark,
-                active,
-            }
-        })
+                && !self.is_void(id),
+        }
     }
 
     /// The order key at held position `pos`.
@@ -1587,23 +1591,33 @@ impl<P: Payload> Log<P> {
 
     /// The held entry with order key `key`.
     pub fn entry_at_key(&self, key: &OrderKey) -> Option<Entry<'_, P>> {
-        let pos = self.position_of_key(key)?;
-        let op = self.op_at(pos);
-        let id = op.id();
-        let mark = self.marks[pos];
-        Some(Entry {
-            op,
-            mark,
-            active: mark == Mark::Effective
-                && !self.state.is_undone(&id)
-                && !self.is_hidden(&id)
-                && !self.is_void(&id),
+        Some(self.entry_at(self.position_of_key(key)?))
+    }
+
+    /// `object`'s held edits (ops whose effect is an edit of it) with their order keys, in
+    /// linear order, active or not: all of them, or those from key `from` on.
+    pub fn object_edits(
+        &self,
+        object: ObjectId,
+        from: Option<&OrderKey>,
+    ) -> impl Iterator<Item = (OrderKey, Entry<'_, P>)> {
+        let held = self.held_edits(object);
+        let start = from.map_or(0, |from| {
+            held.partition_point(|&a| self.slot_key(a) < *from)
+        });
+        held[start..].iter().filter_map(|&a| {
+            let pos = self.position(self.ops.at(a).id_ref())?;
+            Some((self.order_key(pos), self.entry_at(pos)))
         })
     }
 
-    /// The order keys of `object`'s held edits (ops whose effect is an edit of it), in linear
-    /// order, active or not.
-    pub fn object_edit_keys(&self, object: ObjectId) -> &[OrderKey] {
+    /// How many edits of `object` are held.
+    pub fn n_object_edits(&self, object: ObjectId) -> usize {
+        self.held_edits(object).len()
+    }
+
+    /// `object`'s held edits in linear order, as positions in `ops`.
+    fn held_edits(&self, object: ObjectId) -> &[u32] {
         self.by_object.get(&object).map_or(&[], Vec::as_slice)
     }
 

@@ -278,26 +278,23 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
                 }
             }
         }
-        self.apply_held_edits(log, object, 0);
+        self.apply_held_edits(log, object, None);
     }
 
     /// Applies `object`'s active held edits from key `from` on, after what was applied.
     fn append_object(&mut self, log: &Log<P>, object: ObjectId, from: &OrderKey) {
         self.stats.n_object_appends += 1;
-        let start = log.object_edit_keys(object).partition_point(|k| k < from);
-        self.apply_held_edits(log, object, start);
+        self.apply_held_edits(log, object, Some(from));
     }
 
-    fn apply_held_edits(&mut self, log: &Log<P>, object: ObjectId, start: usize) {
-        for key in &log.object_edit_keys(object)[start..] {
-            let Some(entry) = log.entry_at_key(key).filter(|e| e.active) else {
+    /// Applies `object`'s active held edits: all of them, or those from key `from` on.
+    fn apply_held_edits(&mut self, log: &Log<P>, object: ObjectId, from: Option<&OrderKey>) {
+        for (key, entry) in log.object_edits(object, from) {
+            if !entry.active {
                 continue;
-            };
-            self.scene.apply(FoldEntry {
-                key: *key,
-                op: entry.op,
-            });
-            self.last_applied.insert(object, *key);
+            }
+            self.scene.apply(FoldEntry { key, op: entry.op });
+            self.last_applied.insert(object, key);
             self.stats.n_applied += 1;
         }
     }

@@ -1004,7 +1004,7 @@ fn backdated_ops_flooding_a_long_log_refold_within_the_budget_and_land_as_withou
     let elapsed_s = (due.0 - now.0) as f64 / 1e6;
     let budget = MAX_REFOLD_BURST_ENTRIES as f64
         + MAX_REFOLD_ENTRIES_PER_SECOND as f64 * elapsed_s
-        + 2.0 * (log.len() + log.object_edit_keys(ObjectId(1)).len()) as f64;
+        + 2.0 * (log.len() + log.n_object_edits(ObjectId(1))) as f64;
     let refolded = log.stats().n_refolded - before;
     let charged = log.stats().n_refold_charged;
     assert!(
