@@ -15,6 +15,7 @@ use crate::pending::{DepKey, Evicted, Origin, Pending, PendingLimits};
 use crate::time::{HybridClock, MAX_CLOCK_SKEW_MICROS, Timestamp};
 
 mod base;
+mod marks;
 mod seen;
 
 pub use base::CutError;
@@ -345,8 +346,8 @@ pub struct Log<P> {
     /// of a fork share a key); a topological order because Lamport times grow along every
     /// dependency. Keys and ids are read from the ops: an entry is 4 bytes, not 80.
     order: Vec<u32>,
-    /// `marks[i]` is the verdict on `order[i]`.
-    marks: Vec<Mark>,
+    /// The verdict on each position of `order`.
+    marks: marks::Marks,
     /// `checkpoints[k]` is the fold state before position `k * CHECKPOINT_INTERVAL`.
     checkpoints: Vec<FoldState>,
     /// The fold state after the first `n_folded` positions (all of them between calls).
@@ -423,7 +424,7 @@ impl<P: Payload> Log<P> {
         Self {
             ops: OpSlab::default(),
             order: Vec::new(),
-            marks: Vec::new(),
+            marks: marks::Marks::default(),
             checkpoints: vec![FoldState::default()],
             state: FoldState::default(),
             n_folded: 0,
@@ -934,7 +935,7 @@ impl<P: Payload> Log<P> {
         let at = u32::try_from(self.ops.len()).expect("a log holds fewer than 2^32 ops");
         self.order.insert(pos, at);
         // A placeholder: the refold that follows judges it.
-        self.marks.insert(pos, Mark::Effective);
+        self.marks.insert(pos);
         if let Some(twin) = twin {
             // Rejected whatever it does, so no object, lease or delete index names it.
             self.siblings.entry(author).or_default().push(id);
@@ -1172,11 +1173,11 @@ impl<P: Payload> Log<P> {
             let (id, effect) = (op.id(), op.payload().effect());
             let mark = self.judge(&mut cx, &mut state, pos);
             if pos >= from {
-                let changed = self.marks[pos] != mark || inserted.contains(&id);
+                let changed = self.mark_at(pos) != mark || inserted.contains(&id);
                 if changed {
                     self.report_change(&mut refold, effect, pos);
                 }
-                self.marks[pos] = mark;
+                self.marks.set(pos, self.order[pos], mark);
             }
         }
         self.lease_ops = cx.lease_ops;
@@ -1424,6 +1425,11 @@ impl<P: Payload> Log<P> {
         (self.order.get(pos) == Some(&at)).then_some(pos)
     }
 
+    /// The verdict on position `pos` of the linear order.
+    fn mark_at(&self, pos: usize) -> Mark {
+        self.marks.get(pos, self.order[pos])
+    }
+
     /// The op at position `pos` of the linear order.
     fn op_at(&self, pos: usize) -> &Op<P> {
         self.ops.at(self.order[pos])
@@ -1484,7 +1490,7 @@ impl<P: Payload> Log<P> {
         Some(TargetInfo {
             author: op.author(),
             effect: op.payload().effect(),
-            mark: self.marks[target_pos],
+            mark: self.mark_at(target_pos),
         })
     }
 
@@ -1573,7 +1579,7 @@ impl<P: Payload> Log<P> {
     /// The entry at position `pos` of the linear order.
     fn entry_at(&self, pos: usize) -> Entry<'_, P> {
         let op = self.op_at(pos);
-        let (id, mark) = (op.id_ref(), self.marks[pos]);
+        let (id, mark) = (op.id_ref(), self.mark_at(pos));
         Entry {
             op,
             mark,
@@ -1640,7 +1646,7 @@ impl<P: Payload> Log<P> {
 
     /// The verdict on a delivered op.
     pub fn mark(&self, id: &OpId) -> Option<Mark> {
-        self.position(id).map(|p| self.marks[p])
+        self.position(id).map(|p| self.mark_at(p))
     }
 
     /// True if the op is effective, not undone and not hidden by a delete that saw it (inside
@@ -1654,12 +1660,10 @@ impl<P: Payload> Log<P> {
 
     /// The author's rejected ops in linear order, with reasons, so their work can be re-applied.
     pub fn rejected_by(&self, author: &PeerId) -> Vec<(OpId, RejectReason)> {
-        self.order
-            .iter()
-            .zip(&self.marks)
-            .filter(|(at, _)| self.ops.at(**at).author() == *author)
-            .filter_map(|(&at, mark)| match mark {
-                Mark::Rejected(reason) => Some((self.ops.at(at).id(), *reason)),
+        (0..self.order.len())
+            .filter(|&pos| self.op_at(pos).author() == *author)
+            .filter_map(|pos| match self.mark_at(pos) {
+                Mark::Rejected(reason) => Some((self.id_at(pos), reason)),
                 Mark::Effective => None,
             })
             .collect()

@@ -191,7 +191,7 @@ impl<P: Payload> Log<P> {
         let mut log = Self {
             ops: crate::op::OpSlab::default(),
             order: Vec::new(),
-            marks: Vec::new(),
+            marks: super::marks::Marks::default(),
             checkpoints: vec![base.state.clone()],
             state: base.state.clone(),
             n_folded: 0,
@@ -370,7 +370,7 @@ impl<P: Payload> Log<P> {
             frontier.deliver(*id, op.deps());
             authors.insert(key.author, (key.seq, key.lamport));
             max_timestamp = max_timestamp.max(op.timestamp());
-            let kind = match (op.payload().effect(), self.marks[pos]) {
+            let kind = match (op.payload().effect(), self.mark_at(pos)) {
                 (Effect::Edit { object }, Mark::Effective) => {
                     edits.insert(*id, op.clone());
                     edits_by_object.entry(object).or_default().push((*key, *id));
