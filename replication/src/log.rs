@@ -346,7 +346,7 @@ pub struct Log<P> {
     /// of a fork share a key); a topological order because Lamport times grow along every
     /// dependency. Keys and ids are read from the ops: an entry is 4 bytes, not 80.
     order: Vec<u32>,
-    /// The verdict on each position of `order`.
+    /// The verdict on each held op, by slab position.
     marks: marks::Marks,
     /// `checkpoints[k]` is the fold state before position `k * CHECKPOINT_INTERVAL`.
     checkpoints: Vec<FoldState>,
@@ -935,7 +935,7 @@ impl<P: Payload> Log<P> {
         let at = u32::try_from(self.ops.len()).expect("a log holds fewer than 2^32 ops");
         self.order.insert(pos, at);
         // A placeholder: the refold that follows judges it.
-        self.marks.insert(pos);
+        self.marks.push();
         if let Some(twin) = twin {
             // Rejected whatever it does, so no object, lease or delete index names it.
             self.siblings.entry(author).or_default().push(id);
@@ -966,14 +966,14 @@ impl<P: Payload> Log<P> {
             Effect::Acquire { object, .. } | Effect::Release { object } => {
                 // Placeholders: the refold that follows fills them in.
                 let list = self.lease_ops.entry(object).or_default();
-                let at = point_near_end(list, |l| l.key < key);
+                let i = point_near_end(list, |l| l.key < key);
                 let placeholder = seen::LeaseOp {
                     key,
-                    id: op.id(),
+                    at,
                     before: None,
                     unseen: None,
                 };
-                list.insert(at, placeholder);
+                list.insert(i, placeholder);
             }
             _ => {}
         }
@@ -1173,11 +1173,14 @@ impl<P: Payload> Log<P> {
             let (id, effect) = (op.id(), op.payload().effect());
             let mark = self.judge(&mut cx, &mut state, pos);
             if pos >= from {
-                let changed = self.mark_at(pos) != mark || inserted.contains(&id);
-                if changed {
+                let at = self.order[pos];
+                let old = self.marks.get(at);
+                if old != mark || inserted.contains(&id) {
                     self.report_change(&mut refold, effect, pos);
                 }
-                self.marks.set(pos, self.order[pos], mark);
+                if old != mark {
+                    self.marks.set(at, mark);
+                }
             }
         }
         self.lease_ops = cx.lease_ops;
@@ -1322,10 +1325,13 @@ impl<P: Payload> Log<P> {
             .then(|| seen::lease_seen(&dag, &mut cx.reach, list, n, &unseen, &mut cx.alt, object));
         if matches!(effect, Effect::Acquire { .. } | Effect::Release { .. }) {
             let me = &mut list[n];
-            assert!(me.id == id, "a lease op is indexed under its object");
+            assert!(
+                self.ops.at(me.at).id_ref() == &id,
+                "a lease op is indexed under its object"
+            );
             me.before = state.lease(object);
             me.unseen = (unseen.len() <= MAX_UNSEEN_LEASE_OPS)
-                .then(|| unseen.iter().map(|(_, id)| *id).collect());
+                .then(|| unseen.iter().map(|&(_, at)| at).collect());
         }
         lease
     }
@@ -1427,7 +1433,7 @@ impl<P: Payload> Log<P> {
 
     /// The verdict on position `pos` of the linear order.
     fn mark_at(&self, pos: usize) -> Mark {
-        self.marks.get(pos, self.order[pos])
+        self.marks.get(self.order[pos])
     }
 
     /// The op at position `pos` of the linear order.
@@ -1573,13 +1579,13 @@ impl<P: Payload> Log<P> {
 
     /// The linear order with every op's mark and whether the scene folds it.
     pub fn entries(&self) -> impl Iterator<Item = Entry<'_, P>> {
-        (0..self.order.len()).map(|pos| self.entry_at(pos))
+        self.order.iter().map(|&at| self.entry_of(at))
     }
 
-    /// The entry at position `pos` of the linear order.
-    fn entry_at(&self, pos: usize) -> Entry<'_, P> {
-        let op = self.op_at(pos);
-        let (id, mark) = (op.id_ref(), self.mark_at(pos));
+    /// The entry of the op the slab holds at `at`.
+    fn entry_of(&self, at: u32) -> Entry<'_, P> {
+        let op = self.ops.at(at);
+        let (id, mark) = (op.id_ref(), self.marks.get(at));
         Entry {
             op,
             mark,
@@ -1597,7 +1603,8 @@ impl<P: Payload> Log<P> {
 
     /// The held entry with order key `key`.
     pub fn entry_at_key(&self, key: &OrderKey) -> Option<Entry<'_, P>> {
-        Some(self.entry_at(self.position_of_key(key)?))
+        let pos = self.position_of_key(key)?;
+        Some(self.entry_of(self.order[pos]))
     }
 
     /// `object`'s held edits (ops whose effect is an edit of it) with their order keys, in
@@ -1611,10 +1618,7 @@ impl<P: Payload> Log<P> {
         let start = from.map_or(0, |from| {
             held.partition_point(|&a| self.slot_key(a) < *from)
         });
-        held[start..].iter().filter_map(|&a| {
-            let pos = self.position(self.ops.at(a).id_ref())?;
-            Some((self.order_key(pos), self.entry_at(pos)))
-        })
+        (held[start..].iter()).map(|&at| (self.slot_key(at), self.entry_of(at)))
     }
 
     /// How many edits of `object` are held.
@@ -1646,7 +1650,7 @@ impl<P: Payload> Log<P> {
 
     /// The verdict on a delivered op.
     pub fn mark(&self, id: &OpId) -> Option<Mark> {
-        self.position(id).map(|p| self.mark_at(p))
+        self.ops.position(id).map(|at| self.marks.get(at))
     }
 
     /// True if the op is effective, not undone and not hidden by a delete that saw it (inside

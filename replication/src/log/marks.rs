@@ -1,33 +1,35 @@
-//! The verdicts on a log's linear order, one byte per op.
+//! The verdicts on a log's ops, one byte per op.
 //!
 //! A [`Mark`] is 33 bytes because two rejections name the lease holder. Most ops are
 //! effective and few rejections name anyone, so a log keeps each verdict as a one-byte code
-//! and the holders aside, by the op's position in the log's slab (which, unlike its position
-//! in the order, never shifts).
+//! and the holders aside. Both are indexed by the op's position in the log's slab, which,
+//! unlike its position in the linear order, never shifts: a late op appends a verdict, and a
+//! verdict is found from the op alone.
 
 use std::collections::BTreeMap;
 
 use crate::identity::PeerId;
 use crate::lease::{Mark, RejectReason};
 
-/// One verdict per position of the linear order.
+/// One verdict per held op.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Marks {
+    /// By slab position.
     codes: Vec<u8>,
     /// The holder each `LeaseHeld` or `StrongLeaseHeld` verdict names, by slab position.
     holders: BTreeMap<u32, PeerId>,
 }
 
 impl Marks {
-    /// The verdict at order position `pos`, whose op the slab holds at `at`.
-    pub(crate) fn get(&self, pos: usize, at: u32) -> Mark {
+    /// The verdict on the op the slab holds at `at`.
+    pub(crate) fn get(&self, at: u32) -> Mark {
         let holder = || {
             *self
                 .holders
                 .get(&at)
                 .expect("a named holder is kept with its verdict")
         };
-        match self.codes[pos] {
+        match self.codes[at as usize] {
             0 => Mark::Effective,
             1 => Mark::Rejected(RejectReason::LeaseHeld { holder: holder() }),
             2 => Mark::Rejected(RejectReason::StrongLeaseHeld { holder: holder() }),
@@ -43,8 +45,8 @@ impl Marks {
         }
     }
 
-    /// Sets the verdict at order position `pos`, whose op the slab holds at `at`.
-    pub(crate) fn set(&mut self, pos: usize, at: u32, mark: Mark) {
+    /// Sets the verdict on the op the slab holds at `at`.
+    pub(crate) fn set(&mut self, at: u32, mark: Mark) {
         let (code, holder) = match mark {
             Mark::Effective => (0, None),
             Mark::Rejected(reason) => match reason {
@@ -61,17 +63,24 @@ impl Marks {
                 RejectReason::Forked => (11, None),
             },
         };
-        self.codes[pos] = code;
-        match holder {
-            Some(holder) => self.holders.insert(at, holder),
-            None => self.holders.remove(&at),
-        };
+        let old = std::mem::replace(&mut self.codes[at as usize], code);
+        if let Some(holder) = holder {
+            self.holders.insert(at, holder);
+        } else if names_holder(old) {
+            self.holders.remove(&at);
+        }
     }
 
-    /// Makes room at order position `pos` for an op just delivered, effective until judged.
-    pub(crate) fn insert(&mut self, pos: usize) {
-        self.codes.insert(pos, 0);
+    /// Adds the verdict on the op just held at the slab's next position, effective until
+    /// judged.
+    pub(crate) fn push(&mut self) {
+        self.codes.push(0);
     }
+}
+
+/// Whether verdicts with `code` name a lease holder.
+fn names_holder(code: u8) -> bool {
+    matches!(code, 1 | 2)
 }
 
 #[cfg(test)]
@@ -96,29 +105,29 @@ mod tests {
         ];
         let marks = std::iter::once(Mark::Effective).chain(reasons.map(Mark::Rejected));
         let mut m = Marks::default();
-        for (pos, mark) in marks.clone().enumerate() {
-            m.insert(pos);
-            assert_eq!(
-                m.get(pos, 100 + pos as u32),
-                Mark::Effective,
-                "a placeholder"
-            );
-            m.set(pos, 100 + pos as u32, mark);
+        for (at, mark) in (0..).zip(marks.clone()) {
+            m.push();
+            assert_eq!(m.get(at), Mark::Effective, "a placeholder");
+            m.set(at, mark);
         }
-        for (pos, mark) in marks.enumerate() {
-            assert_eq!(m.get(pos, 100 + pos as u32), mark);
+        for (at, mark) in (0..).zip(marks) {
+            assert_eq!(m.get(at), mark);
         }
         assert_eq!(m.holders.len(), 2);
         // A verdict that changes from naming a holder to not naming one drops it.
-        m.set(1, 101, Mark::Rejected(RejectReason::NotHolder));
-        m.set(2, 102, Mark::Effective);
+        m.set(1, Mark::Rejected(RejectReason::NotHolder));
+        m.set(2, Mark::Effective);
         assert!(m.holders.is_empty());
-        // Shifting positions in the order keeps each holder with its op.
-        m.set(1, 101, Mark::Rejected(RejectReason::LeaseHeld { holder }));
-        m.insert(0);
-        assert_eq!(
-            m.get(2, 101),
-            Mark::Rejected(RejectReason::LeaseHeld { holder })
+        let other = PeerId([9; 32]);
+        m.set(1, Mark::Rejected(RejectReason::LeaseHeld { holder }));
+        m.set(
+            1,
+            Mark::Rejected(RejectReason::StrongLeaseHeld { holder: other }),
         );
+        assert_eq!(
+            m.get(1),
+            Mark::Rejected(RejectReason::StrongLeaseHeld { holder: other })
+        );
+        assert_eq!(m.holders.len(), 1);
     }
 }

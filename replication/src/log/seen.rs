@@ -23,14 +23,16 @@ pub const MAX_UNSEEN_LEASE_OPS: usize = 16;
 /// One lease op (acquire or release) of an object, and what the fold learnt of it.
 #[derive(Clone, Debug)]
 pub(crate) struct LeaseOp {
+    /// The op's order key (kept here: a refold compares it for every lease op it judges).
     pub(crate) key: OrderKey,
-    pub(crate) id: OpId,
+    /// The op's position in the log's slab (its id is read from it).
+    pub(crate) at: u32,
     /// The object's lease in the fold of the whole prefix just before this op.
     pub(crate) before: Option<Lease>,
-    /// The ids of the object's lease ops sorted before this one that are not in its causal
-    /// past, in order; `None` when more than [`MAX_UNSEEN_LEASE_OPS`]. Ids alone (their keys
-    /// are their ops'), since every lease op of a session keeps this list.
-    pub(crate) unseen: Option<Box<[OpId]>>,
+    /// The object's lease ops sorted before this one that are not in its causal past, in
+    /// order, as slab positions; `None` when more than [`MAX_UNSEEN_LEASE_OPS`]. Positions
+    /// alone (keys and ids are their ops'), since every lease op of a session keeps this list.
+    pub(crate) unseen: Option<Box<[u32]>>,
 }
 
 /// Alternative lease folds computed during one refold, keyed by object and the lease ops
@@ -189,28 +191,27 @@ impl<P: Payload> Dag<'_, P> {
 }
 
 /// The lease ops among `list[..n]` (an object's lease ops before `x` in the order) that are
-/// not in `x`'s causal past, sorted: empty when `x` saw them all.
+/// not in `x`'s causal past, with their slab positions, sorted: empty when `x` saw them all.
 pub(crate) fn unseen_before<P: Payload>(
     dag: &Dag<'_, P>,
     memo: &mut Reach,
     list: &[LeaseOp],
     n: usize,
     x: &OpId,
-) -> Vec<(OrderKey, OpId)> {
+) -> Vec<(OrderKey, u32)> {
     let mut unseen = Vec::new();
     for l in list[..n].iter().rev() {
-        if !dag.sees(memo, x, &l.id) {
-            unseen.push((l.key, l.id));
+        if !dag.sees(memo, x, dag.ops.at(l.at).id_ref()) {
+            unseen.push((l.key, l.at));
             continue;
         }
         // What `l` saw, `x` saw: only `l`'s own misses are left to check.
         if let Some(misses) = &l.unseen {
-            for id in misses.iter().filter(|id| !dag.sees(memo, x, id)) {
-                let op = dag
-                    .ops
-                    .get(id)
-                    .expect("a lease op's misses are held lease ops");
-                unseen.push((OrderKey::of(op), *id));
+            for &at in misses.iter() {
+                let op = dag.ops.at(at);
+                if !dag.sees(memo, x, op.id_ref()) {
+                    unseen.push((OrderKey::of(op), at));
+                }
             }
             break;
         }
@@ -230,7 +231,7 @@ pub(crate) fn lease_seen<P: Payload>(
     memo: &mut Reach,
     list: &[LeaseOp],
     n: usize,
-    unseen: &[(OrderKey, OpId)],
+    unseen: &[(OrderKey, u32)],
     alt: &mut AltFolds,
     object: ObjectId,
 ) -> Option<Lease> {
@@ -247,14 +248,13 @@ pub(crate) fn lease_seen<P: Payload>(
     while i < n {
         let l = &list[i];
         let skipped = unseen.binary_search_by(|(k, _)| k.cmp(&l.key)).is_ok();
-        if !skipped
-            && let Some(op) = dag.ops.get(&l.id)
-            && !dag.is_forked(op)
-        {
+        let op = dag.ops.at(l.at);
+        if !skipped && !dag.is_forked(op) {
             // Judged as the fold judged it: rejected if its author saw its own expel, and not
             // bound by a holder it saw expelled.
-            if !dag.expelled_in_past(memo, &l.id, &op.author()) {
-                let binding = lease.filter(|h| !dag.expelled_in_past(memo, &l.id, &h.holder));
+            let id = op.id_ref();
+            if !dag.expelled_in_past(memo, id, &op.author()) {
+                let binding = lease.filter(|h| !dag.expelled_in_past(memo, id, &h.holder));
                 let effect = op.payload().effect();
                 lease = lease_step(binding, op.author(), op.timestamp(), effect).unwrap_or(lease);
             }
