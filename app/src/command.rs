@@ -78,11 +78,13 @@ impl PropertyKind {
             Self::Transparency => Field::Transparency(formula),
             Self::Shininess => Field::Shininess(formula),
             Self::Texture => Field::Displacement(formula),
-            Self::Force => Field::Force(formula.map(|formula| ForceField {
-                formula,
-                parameters: [[0.0, 1.0]; 3],
-                timing: Timing::default(),
-                enabled: true,
+            Self::Force => Field::Force(formula.map(|formula| {
+                Box::new(ForceField {
+                    formula,
+                    parameters: [[0.0, 1.0]; 3],
+                    timing: Timing::default(),
+                    enabled: true,
+                })
             })),
         }
     }
@@ -257,7 +259,7 @@ pub fn plan(
             };
             let payload = ShapePayload::Set {
                 object: id,
-                field: Box::new(Field::Geometry(Some(geometry))),
+                field: Box::new(Field::Geometry(Some(Box::new(geometry)))),
             };
             payload.validate().map_err(|e| format!("shape: {e}"))?;
             let summary = format!("set the shape of {}", session.object_label(id));

@@ -205,7 +205,7 @@ impl Scene {
                 let t = group.transform.then(&o.object.data().transform);
                 // Composing two valid transforms keeps it finite; a degenerate product keeps
                 // the old placement rather than failing a removal.
-                let _ = o.object.set(crate::object::Field::Transform(t));
+                let _ = o.object.set(crate::object::Field::Transform(Box::new(t)));
             }
         }
         Some(group)

@@ -584,7 +584,7 @@ fn bad_descriptions_are_errors_that_name_the_property() {
     };
     assert!(o.set(Field::Diffuse(Some(bad_map))).is_err());
     let flat = Transform::from_trs(DVec3::ZERO, DQuat::IDENTITY, DVec3::new(1.0, 0.0, 1.0));
-    assert!(o.set(Field::Transform(flat)).is_err());
+    assert!(o.set(Field::Transform(Box::new(flat))).is_err());
     assert!(Formula::new("x".repeat(fdsl::limits::MAX_SOURCE_BYTES + 1)).is_err());
     let nan_edit = Edit::stamp(
         EditOp::Union,
@@ -1231,5 +1231,39 @@ proptest! {
                 b.scalar(Paintable::Density, p, 0.0).map(f64::to_bits)
             );
         }
+    }
+}
+
+/// A field's boxed value encodes as the value itself, so fields written before it was boxed
+/// (stores, peers) read alike: the variant's index, then the value's own bytes.
+#[test]
+fn a_boxed_field_encodes_as_its_value() {
+    fn encode<T: serde::Serialize>(value: &T) -> Vec<u8> {
+        postcard::to_allocvec(value).unwrap()
+    }
+    let g = Geometry::implicit(Formula::new("x*x + y*y + z*z - 1").unwrap());
+    let (d, t) = (Domain::UNIT, Transform::translate(DVec3::X));
+    let cases: [(Field, Vec<u8>); 3] = [
+        (
+            Field::Geometry(Some(Box::new(g.clone()))),
+            [vec![1, 1], encode(&g)].concat(),
+        ),
+        (
+            Field::PhysicsSpace(Some(Box::new(d)), Box::new(t)),
+            [vec![15, 1], encode(&d), encode(&t)].concat(),
+        ),
+        (
+            Field::Transform(Box::new(t)),
+            [vec![16], encode(&t)].concat(),
+        ),
+    ];
+    for (field, expected) in cases {
+        assert_eq!(
+            postcard::to_allocvec(&field).unwrap(),
+            expected,
+            "{field:?}"
+        );
+        let back: Field = postcard::from_bytes(&expected).unwrap();
+        assert_eq!(back, field);
     }
 }

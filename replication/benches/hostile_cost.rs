@@ -207,8 +207,8 @@ fn create(object: u64, formula: &str) -> ShapePayload {
 fn set_geometry(object: u64, formula: &str) -> ShapePayload {
     ShapePayload::Set {
         object,
-        field: Box::new(Field::Geometry(Some(Geometry::implicit(formula_of(
-            formula,
+        field: Box::new(Field::Geometry(Some(Box::new(Geometry::implicit(
+            formula_of(formula),
         ))))),
     }
 }

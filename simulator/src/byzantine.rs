@@ -332,7 +332,7 @@ fn cost_bomb(kind: u64, object: u64, text: &str) -> Option<ShapePayload> {
         },
         1 => ShapePayload::Set {
             object,
-            field: Box::new(Field::Geometry(Some(geometry()?))),
+            field: Box::new(Field::Geometry(Some(Box::new(geometry()?)))),
         },
         _ => stroke_bomb(object),
     })

@@ -162,9 +162,9 @@ impl User {
             },
             23..=27 => ShapePayload::Set {
                 object: target,
-                field: Box::new(Field::Geometry(Some(Geometry::implicit(
+                field: Box::new(Field::Geometry(Some(Box::new(Geometry::implicit(
                     Formula::new(SHAPES[rng.index(SHAPES.len())]).ok()?,
-                )))),
+                ))))),
             },
             28..=52 => {
                 let op = if rng.chance(700) {

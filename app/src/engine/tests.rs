@@ -31,9 +31,9 @@ fn config(store: &Path) -> EngineConfig {
 fn set_shape(object: u64, formula: &str) -> ShapePayload {
     ShapePayload::Set {
         object,
-        field: Box::new(Field::Geometry(Some(Geometry::implicit(
+        field: Box::new(Field::Geometry(Some(Box::new(Geometry::implicit(
             Formula::new(formula).unwrap(),
-        )))),
+        ))))),
     }
 }
 

@@ -418,9 +418,10 @@ impl Loader<'_> {
             // placement does not change).
             let transform = moving.transform.then(&object.data().transform);
             let placed = object
-                .set(crate::object::Field::Transform(transform))
+                .set(crate::object::Field::Transform(Box::new(transform)))
                 .and_then(|()| {
-                    object.set(crate::object::Field::Motion(Some(moving.motion.clone())))
+                    let motion = Box::new(moving.motion.clone());
+                    object.set(crate::object::Field::Motion(Some(motion)))
                 });
             match placed {
                 Ok(()) => {}

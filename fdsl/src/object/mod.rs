@@ -306,13 +306,15 @@ pub struct ObjectData {
     pub grids: Grids,
 }
 
-/// One property's new value (see [`Slot`]).
+/// One property's new value (see [`Slot`]). Values larger than a colour are boxed: every
+/// replicated `Set` holds a field, and the largest variant sets the size of all of them. A box
+/// encodes as its value.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Field {
     /// The name.
     Name(String),
     /// The geometry.
-    Geometry(Option<Geometry>),
+    Geometry(Option<Box<Geometry>>),
     /// Diffuse colour.
     Diffuse(Option<ColorDef>),
     /// Ambient colour.
@@ -326,9 +328,9 @@ pub enum Field {
     /// Geometric texture (displacement along the normal).
     Displacement(Option<Formula>),
     /// The appearance's domain and transform.
-    AppearanceSpace(Option<Domain>, Transform),
+    AppearanceSpace(Option<Box<Domain>>, Box<Transform>),
     /// The haptic container (`None`: the geometry).
-    Container(Option<Geometry>),
+    Container(Option<Box<Geometry>>),
     /// Surface tension.
     Tension(Option<Property>),
     /// Friction.
@@ -338,16 +340,19 @@ pub enum Field {
     /// Density.
     Density(Option<Property>),
     /// Force field.
-    Force(Option<ForceField>),
+    Force(Option<Box<ForceField>>),
     /// The physics' domain and transform.
-    PhysicsSpace(Option<Domain>, Transform),
+    PhysicsSpace(Option<Box<Domain>>, Box<Transform>),
     /// The object's transform.
-    Transform(Transform),
+    Transform(Box<Transform>),
     /// The object's motion.
-    Motion(Option<Motion>),
+    Motion(Option<Box<Motion>>),
     /// The sampled grids (every formula is compiled again with them).
     Grids(Grids),
 }
+
+// A replicated `Set` holds one field: a colour's size, not a geometry's (which was 240 bytes).
+const _: () = assert!(size_of::<Field>() <= 56);
 
 impl Field {
     /// The property this field writes.
@@ -380,23 +385,23 @@ impl Field {
         let (a, p) = (&mut data.appearance, &mut data.physics);
         match self {
             Field::Name(v) => data.name = v,
-            Field::Geometry(v) => data.geometry = v,
+            Field::Geometry(v) => data.geometry = v.map(|g| *g),
             Field::Diffuse(v) => a.diffuse = v,
             Field::Ambient(v) => a.ambient = v,
             Field::Specular(v) => a.specular = v,
             Field::Transparency(v) => a.transparency = v,
             Field::Shininess(v) => a.shininess = v,
             Field::Displacement(v) => a.displacement = v,
-            Field::AppearanceSpace(d, t) => (a.domain, a.transform) = (d, t),
-            Field::Container(v) => p.container = v,
+            Field::AppearanceSpace(d, t) => (a.domain, a.transform) = (d.map(|d| *d), *t),
+            Field::Container(v) => p.container = v.map(|g| *g),
             Field::Tension(v) => p.tension = v,
             Field::Friction(v) => p.friction = v,
             Field::ZoneDepth(v) => p.zone_depth = v,
             Field::Density(v) => p.density = v,
-            Field::Force(v) => p.force = v,
-            Field::PhysicsSpace(d, t) => (p.domain, p.transform) = (d, t),
-            Field::Transform(v) => data.transform = v,
-            Field::Motion(v) => data.motion = v,
+            Field::Force(v) => p.force = v.map(|f| *f),
+            Field::PhysicsSpace(d, t) => (p.domain, p.transform) = (d.map(|d| *d), *t),
+            Field::Transform(v) => data.transform = *v,
+            Field::Motion(v) => data.motion = v.map(|m| *m),
             Field::Grids(v) => data.grids = v,
         }
     }
