@@ -487,20 +487,38 @@ impl CompiledColor {
     }
 }
 
-/// Every formula of an object, compiled.
+/// Every formula of an object, compiled. A scene holds one per object: the parts most objects
+/// lack (a container, a space other than the object's) cost a pointer each.
 #[derive(Clone, Debug)]
 pub(crate) struct CompiledParts {
     pub(crate) geometry: Option<CompiledShape>,
-    pub(crate) container: Option<CompiledShape>,
+    pub(crate) container: Option<Box<CompiledShape>>,
     pub(crate) colors: [Option<CompiledColor>; 3],
     /// Transparency, shininess, displacement.
     pub(crate) looks: [Option<Tape>; 3],
-    pub(crate) appearance_from_object: Transform,
+    pub(crate) appearance_from_object: SparseTransform,
     /// Tension, friction, zone depth, density (disabled ones are `None`).
     pub(crate) feels: [Option<Tape>; 4],
-    pub(crate) physics_from_object: Transform,
+    pub(crate) physics_from_object: SparseTransform,
     pub(crate) force: Option<Tape>,
     pub(crate) motion: Option<[Option<Tape>; 2]>,
+}
+
+const _: () = assert!(size_of::<CompiledParts>() <= 400);
+
+/// A transform held behind a pointer unless it is the identity, which is then not stored.
+#[derive(Clone, Debug)]
+pub(crate) struct SparseTransform(Option<Box<Transform>>);
+
+impl SparseTransform {
+    fn new(t: Transform) -> SparseTransform {
+        SparseTransform((!t.is_identity()).then(|| Box::new(t)))
+    }
+
+    /// The transform.
+    pub(crate) fn get(&self) -> &Transform {
+        self.0.as_deref().unwrap_or(&Transform::IDENTITY)
+    }
 }
 
 impl CompiledParts {
@@ -566,7 +584,7 @@ impl CompiledParts {
             container: p
                 .container
                 .as_ref()
-                .map(|g| CompiledShape::new(g, Slot::Container, grids))
+                .map(|g| CompiledShape::new(g, Slot::Container, grids).map(Box::new))
                 .transpose()?,
             colors: [
                 color(&a.diffuse, Slot::Diffuse)?,
@@ -578,18 +596,22 @@ impl CompiledParts {
                 scalar(&a.shininess, Slot::Shininess)?,
                 scalar(&a.displacement, Slot::Displacement)?,
             ],
-            appearance_from_object: a.transform.inverse().ok_or(ObjectError::BadTransform {
-                slot: Slot::AppearanceSpace,
-            })?,
+            appearance_from_object: SparseTransform::new(a.transform.inverse().ok_or(
+                ObjectError::BadTransform {
+                    slot: Slot::AppearanceSpace,
+                },
+            )?),
             feels: [
                 feel(&p.tension, Slot::Tension)?,
                 feel(&p.friction, Slot::Friction)?,
                 feel(&p.zone_depth, Slot::ZoneDepth)?,
                 feel(&p.density, Slot::Density)?,
             ],
-            physics_from_object: p.transform.inverse().ok_or(ObjectError::BadTransform {
-                slot: Slot::PhysicsSpace,
-            })?,
+            physics_from_object: SparseTransform::new(p.transform.inverse().ok_or(
+                ObjectError::BadTransform {
+                    slot: Slot::PhysicsSpace,
+                },
+            )?),
             force,
             motion,
         })
@@ -802,9 +824,8 @@ impl Object {
     /// - [`Slot::Motion`] has two formulas and is `None` here ([`Sampler::placement`]
     ///   evaluates them); the slots without formulas are `None`.
     pub fn tape(&self, slot: Slot) -> Option<&Tape> {
-        fn shape(s: &Option<CompiledShape>) -> Option<&Tape> {
-            s.as_ref()
-                .and_then(|s| s.tape.as_ref().or(s.parametric.as_ref()))
+        fn shape(s: Option<&CompiledShape>) -> Option<&Tape> {
+            s.and_then(|s| s.tape.as_ref().or(s.parametric.as_ref()))
         }
         fn color(c: &Option<CompiledColor>) -> Option<&Tape> {
             match c {
@@ -814,8 +835,8 @@ impl Object {
         }
         let parts = &*self.parts;
         match slot {
-            Slot::Geometry => shape(&parts.geometry),
-            Slot::Container => shape(&parts.container),
+            Slot::Geometry => shape(parts.geometry.as_ref()),
+            Slot::Container => shape(parts.container.as_deref()),
             Slot::Diffuse => color(&parts.colors[ColorSlot::Diffuse as usize]),
             Slot::Ambient => color(&parts.colors[ColorSlot::Ambient as usize]),
             Slot::Specular => color(&parts.colors[ColorSlot::Specular as usize]),
@@ -844,7 +865,7 @@ impl Object {
     /// Object space to appearance space (the inverse of the appearance's transform, checked
     /// when it was set).
     pub fn appearance_from_object(&self) -> Transform {
-        self.parts.appearance_from_object
+        *self.parts.appearance_from_object.get()
     }
 }
 

@@ -211,7 +211,7 @@ impl Sampler {
         Sampler {
             force_space,
             geometry: parts.geometry.as_ref().map(Shape::new),
-            container: parts.container.as_ref().map(Shape::new),
+            container: parts.container.as_deref().map(Shape::new),
             colors: [0, 1, 2].map(|i| parts.colors[i].as_ref().map(Color::new)),
             looks: [0, 1, 2].map(|i| point(&parts.looks[i])),
             feels: [0, 1, 2, 3].map(|i| point(&parts.feels[i])),
@@ -387,7 +387,7 @@ impl Sampler {
         {
             return Some(c);
         }
-        let q = self.object.parts().appearance_from_object.point(p);
+        let q = self.object.parts().appearance_from_object.get().point(p);
         match &mut self.colors[slot as usize] {
             Some(c) => Some(c.eval([q.x, q.y, q.z, t])),
             None => (slot == ColorSlot::Diffuse).then_some(DEFAULT_DIFFUSE),
@@ -420,9 +420,9 @@ impl Sampler {
         }
         let parts = self.object.parts();
         let (space, eval) = if from_appearance {
-            (&parts.appearance_from_object, &mut self.looks[idx])
+            (parts.appearance_from_object.get(), &mut self.looks[idx])
         } else {
-            (&parts.physics_from_object, &mut self.feels[idx])
+            (parts.physics_from_object.get(), &mut self.feels[idx])
         };
         let q = space.point(p);
         eval.as_mut().map(|e| e.eval([q.x, q.y, q.z, t]))
@@ -438,7 +438,7 @@ impl Sampler {
 
     /// Displacement along the normal (the geometric texture) at `p`, if any.
     pub fn displacement(&mut self, p: DVec3, t: f64) -> Option<f64> {
-        let q = self.object.parts().appearance_from_object.point(p);
+        let q = self.object.parts().appearance_from_object.get().point(p);
         self.looks[2].as_mut().map(|e| e.eval([q.x, q.y, q.z, t]))
     }
 
