@@ -1615,8 +1615,9 @@ impl<P: Payload> Log<P> {
         from: Option<&OrderKey>,
     ) -> impl Iterator<Item = (OrderKey, Entry<'_, P>)> {
         let held = self.held_edits(object);
+        // A fold continuing after ops that arrived in order starts at or near the end.
         let start = from.map_or(0, |from| {
-            held.partition_point(|&a| self.slot_key(a) < *from)
+            point_near_end(held, |&a| self.slot_key(a) < *from)
         });
         (held[start..].iter()).map(|&at| (self.slot_key(at), self.entry_of(at)))
     }
