@@ -366,20 +366,20 @@ impl<P: Payload> Log<P> {
         }
         for pos in 0..n {
             let op = self.op_at(pos);
-            let (key, id) = (&OrderKey::of(op), &op.id());
-            frontier.deliver(*id, op.deps());
+            let (key, id) = (OrderKey::of(op), op.id());
+            frontier.deliver(id, op.deps());
             authors.insert(key.author, (key.seq, key.lamport));
             max_timestamp = max_timestamp.max(op.timestamp());
             let kind = match (op.payload().effect(), self.mark_at(pos)) {
                 (Effect::Edit { object }, Mark::Effective) => {
-                    edits.insert(*id, op.clone());
-                    edits_by_object.entry(object).or_default().push((*key, *id));
+                    edits.insert(id, op.clone());
+                    edits_by_object.entry(object).or_default().push((key, id));
                     BaseKind::EffectiveEdit
                 }
                 (Effect::Edit { .. }, Mark::Rejected(_)) => BaseKind::RejectedEdit,
                 _ => BaseKind::Other,
             };
-            kinds.push((*id, key.author, kind));
+            kinds.push((id, key.author, kind));
         }
         let authors: Vec<BaseAuthor> = authors
             .into_iter()
