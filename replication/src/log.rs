@@ -4,6 +4,8 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
+use smallvec::SmallVec;
+
 use crate::causal::{Frontier, Reach, VersionVector};
 use crate::fork::Forks;
 use crate::identity::{Keypair, PeerId};
@@ -16,10 +18,12 @@ use crate::time::{HybridClock, MAX_CLOCK_SKEW_MICROS, Timestamp};
 
 mod base;
 mod marks;
+mod object_keys;
 mod seen;
 
 pub use base::CutError;
 pub(crate) use base::{Base, BaseAuthor, BaseKind, BaseOp};
+pub use object_keys::ObjectKeys;
 pub use seen::MAX_UNSEEN_LEASE_OPS;
 
 /// The fold state is checkpointed every this many positions of the linear order, so a late
@@ -175,8 +179,9 @@ pub enum AuthorError {
 /// What inserting one op did. Drain it: it is the only report of these facts.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Insertion {
-    /// Ops newly delivered, in delivery order (the op itself and any pending ops it freed).
-    pub delivered: Vec<OpId>,
+    /// Ops newly delivered, in delivery order (the op itself and any pending ops it freed);
+    /// one is held inline.
+    pub delivered: SmallVec<[OpId; 1]>,
     /// True if the op was already known (delivered or pending): nothing changed.
     pub duplicate: bool,
     /// True if the op waits in the pending buffer for dependencies.
@@ -215,19 +220,18 @@ impl OrderKey {
 /// Where the scene fold must restart after a change to the log.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Refold {
-    /// First position of the linear order whose op, mark or activity changed.
+    /// First position of the linear order whose op, mark or activity changed (an undo's
+    /// target position counts too).
     pub from: usize,
-    /// For each object touched, the first position from which its own fold must be redone
-    /// (an undo's target position counts for the target's object).
-    pub objects: BTreeMap<ObjectId, usize>,
     /// Objects whose edits *inside the base* (the part of the order a log joined from a
     /// snapshot holds no ops for) changed activity, through an undo or redo: their fold must be
     /// redone from the object's start. Always empty for a log without a base.
     pub base_objects: BTreeSet<ObjectId>,
-    /// The same first changed entries as [`Refold::objects`], as order keys. Positions shift
-    /// when later ops land before them; keys do not, so a driver that applies an insertion
-    /// after later ones were inserted (events drained in a batch) must use these.
-    pub object_keys: BTreeMap<ObjectId, OrderKey>,
+    /// For each object touched, the first entry from which its own fold must be redone (an
+    /// undo's target counts for the target's object), as an order key: positions shift when
+    /// later ops land before them and keys do not, so a driver that applies an insertion after
+    /// later ones were inserted (events drained in a batch) still finds it.
+    pub object_keys: ObjectKeys,
     /// Authors whose ops from this seq on turned void or counted again (an expel or a readmit,
     /// [`crate::membership`]), or were rejected by a fork ([`crate::fork`]): their independent
     /// entries from there must be applied again.
@@ -241,12 +245,7 @@ impl Refold {
     /// together folds each object once, not once per insertion).
     pub fn merge(&mut self, later: &Refold) {
         for (object, key) in &later.object_keys {
-            let earliest = self.object_keys.entry(*object).or_insert(*key);
-            *earliest = (*earliest).min(*key);
-        }
-        for (object, pos) in &later.objects {
-            let earliest = self.objects.entry(*object).or_insert(*pos);
-            *earliest = (*earliest).min(*pos);
+            self.object_keys.lower(*object, *key);
         }
         self.base_objects.extend(later.base_objects.iter().copied());
         self.from = self.from.min(later.from);
@@ -668,7 +667,9 @@ impl<P: Payload> Log<P> {
     ) {
         let mut first_pos = first.map(|(pos, _)| pos);
         let mut charged = first.is_some_and(|(_, remote)| remote);
-        queue.extend(self.pending.due(now));
+        if !self.pending.is_empty() {
+            queue.extend(self.pending.due(now));
+        }
         while let Some((ready, ready_origin)) = queue.pop_front() {
             let id = ready.id();
             let missing = self.missing(&ready, now);
@@ -829,6 +830,10 @@ impl<P: Payload> Log<P> {
     fn missing(&self, op: &Op<P>, now: Timestamp) -> BTreeSet<DepKey> {
         let seq_ready = op.seq() == 1 || self.vv.get(&op.author()) >= op.seq() - 1;
         let on_time = op.timestamp() <= now.saturating_add_micros(MAX_CLOCK_SKEW_MICROS);
+        if seq_ready && on_time && op.deps().iter().all(|d| self.contains(d)) {
+            // The usual case: nothing to collect.
+            return BTreeSet::new();
+        }
         let mut missing: BTreeSet<DepKey> = op
             .deps()
             .iter()
@@ -851,6 +856,9 @@ impl<P: Payload> Log<P> {
     }
 
     fn free_waiters(&mut self, id: OpId, queue: &mut std::collections::VecDeque<(Op<P>, Origin)>) {
+        if self.pending.is_empty() {
+            return;
+        }
         let Some(op) = self.ops.get(&id) else { return };
         let keys = [DepKey::Op(id), DepKey::Seq(op.author(), op.seq())];
         for key in keys {
@@ -1192,10 +1200,6 @@ impl<P: Payload> Log<P> {
             self.report_change(&mut refold, Effect::Edit { object }, pos);
         }
         self.update_hidden(&mut refold);
-        // An undo or redo changes its target's activity, which may lie before `from`.
-        if let Some(first) = refold.objects.values().min() {
-            refold.from = refold.from.min(*first);
-        }
         refold
     }
 
@@ -1213,12 +1217,12 @@ impl<P: Payload> Log<P> {
                     .is_some_and(|o| o.id() == id)
             };
             if matches!(effect, Effect::Acquire { .. } | Effect::Release { .. }) && on_chain() {
-                self.lease_context(cx, state, (key, id), None);
+                self.lease_context(cx, state, (key, id, effect), None);
             }
             return Mark::Rejected(RejectReason::Forked);
         }
         let target = self.target_info(effect, pos);
-        let seen = self.lease_context(cx, state, (key, id), target);
+        let seen = self.lease_context(cx, state, (key, id, effect), target);
         let (author, at) = (op.author(), op.timestamp());
         if self.membership_ops.is_empty() {
             return state.apply(author, at, effect, target, seen);
@@ -1289,11 +1293,9 @@ impl<P: Payload> Log<P> {
                 }
             }
         };
-        let e = refold.objects.entry(object).or_insert(at);
-        *e = (*e).min(at);
-        let key = self.order_key(at);
-        let k = refold.object_keys.entry(object).or_insert(key);
-        *k = (*k).min(key);
+        // An undo or redo changes its target's activity, which may lie before `from`.
+        refold.from = refold.from.min(at);
+        refold.object_keys.lower(object, self.order_key(at));
     }
 
     /// The lease an op's causal past gives its object, when it missed some of the object's
@@ -1303,10 +1305,9 @@ impl<P: Payload> Log<P> {
         &self,
         cx: &mut LeaseCx,
         state: &FoldState,
-        (key, id): (OrderKey, OpId),
+        (key, id, effect): (OrderKey, OpId, Effect),
         target: Option<TargetInfo>,
     ) -> Option<Option<Lease>> {
-        let effect = self.ops.get(&id)?.payload().effect();
         let object = match effect {
             Effect::Edit { object }
             | Effect::Acquire { object, .. }
@@ -1339,8 +1340,12 @@ impl<P: Payload> Log<P> {
     /// Recomputes the hidden edits of every object `refold` names, and adds to it the objects
     /// whose hidden edits changed, from the first that did.
     fn update_hidden(&mut self, refold: &mut Refold) {
+        if self.deletes.is_empty() && self.hidden.is_empty() {
+            // No object has a delete or hidden edits: nothing to recompute.
+            return;
+        }
         let objects: BTreeSet<ObjectId> = refold
-            .objects
+            .object_keys
             .keys()
             .chain(&refold.base_objects)
             .copied()
@@ -1352,11 +1357,8 @@ impl<P: Payload> Log<P> {
             for changed in now.symmetric_difference(&old) {
                 match self.position(changed) {
                     Some(pos) => {
-                        let e = refold.objects.entry(object).or_insert(pos);
-                        *e = (*e).min(pos);
-                        let key = self.order_key(pos);
-                        let k = refold.object_keys.entry(object).or_insert(key);
-                        *k = (*k).min(key);
+                        refold.from = refold.from.min(pos);
+                        refold.object_keys.lower(object, self.order_key(pos));
                     }
                     None => {
                         refold.base_objects.insert(object);

@@ -275,7 +275,10 @@ fn a_late_acquire_does_not_bind_edits_that_never_saw_it() {
         .position(|id| id == b_acquire.id())
         .unwrap();
     assert_eq!(refold.from, b_pos);
-    assert_eq!(refold.objects.get(&ObjectId(1)), Some(&b_pos));
+    assert_eq!(
+        refold.object_keys.get(&ObjectId(1)),
+        Some(&OrderKey::of(b_acquire.op()))
+    );
     assert!(a_ops.iter().all(|op| log.is_active(&op.id())));
     // A's next edit saw it, and is bound by it.
     let (after, _) = log.author(&a, Timestamp(200), set(1, "after")).unwrap();
@@ -474,7 +477,7 @@ fn both_sides_of_a_fork_are_held_and_rejected_in_every_delivery_order() {
     assert_eq!(log.mark(&ha.id()), Some(Mark::Effective));
     assert!(
         ins.refold
-            .is_some_and(|r| r.objects.contains_key(&ObjectId(1)))
+            .is_some_and(|r| r.object_keys.contains_key(&ObjectId(1)))
     );
     assert!(
         log.is_active(&x1.id()),
@@ -700,8 +703,8 @@ proptest! {
                 }
                 prop_assert!(refold.from <= pos);
                 if let Some(object) = fold_object(&log, e.op) {
-                    let from = refold.objects.get(&object).copied();
-                    prop_assert!(from.is_some_and(|f| f <= pos), "{object:?} changed at {pos}, refold {from:?}");
+                    let from = refold.object_keys.get(&object).copied();
+                    prop_assert!(from.is_some_and(|f| f <= OrderKey::of(e.op)), "{object:?} changed at {pos}, refold {from:?}");
                 }
             }
         }
@@ -850,16 +853,16 @@ fn an_op_from_the_far_future_waits_then_lands_in_the_same_place_on_two_peers() {
     let due = ahead - MAX_CLOCK_SKEW_MICROS;
     assert_eq!(x.next_due(), Some(Timestamp(due)));
     assert!(x.release_due(Timestamp(due - 1)).delivered.is_empty());
-    assert_eq!(x.release_due(Timestamp(due)).delivered, vec![future.id()]);
+    assert_eq!(x.release_due(Timestamp(due)).delivered[..], [future.id()]);
     let released = x.release_due(Timestamp(due + 1));
-    assert_eq!(released.delivered, vec![after.id()]);
+    assert_eq!(released.delivered[..], [after.id()]);
     assert!(released.refold.is_some());
     // y's clock passes it later, and an insertion (a duplicate here) delivers it.
     let ins = y
         .insert(Timestamp(due + 7), concurrent.clone(), Origin(2))
         .unwrap();
     assert!(ins.duplicate);
-    assert_eq!(ins.delivered, vec![future.id(), after.id()]);
+    assert_eq!(ins.delivered[..], [future.id(), after.id()]);
     assert_eq!(x.next_due(), None);
     assert_eq!(observe(&x), observe(&y));
     let ids: Vec<OpId> = x.linear_ids().collect();
@@ -880,7 +883,7 @@ fn a_stored_far_future_op_does_not_pin_the_clock() {
     let far = signed(&key(1), 1, 1, u64::MAX - 1, vec![], set(1, "far"));
     let far_id = far.id();
     let loaded = log.insert(Timestamp(now), far, LOCAL_ORIGIN).unwrap();
-    assert_eq!(loaded.delivered, vec![far_id]);
+    assert_eq!(loaded.delivered[..], [far_id]);
     let (mine, _) = log.author(&key(0), Timestamp(now), set(2, "x")).unwrap();
     assert_eq!(mine.timestamp(), Timestamp(now + MAX_CLOCK_SKEW_MICROS + 1));
     assert!(mine.deps().is_empty());
@@ -992,7 +995,7 @@ fn backdated_ops_flooding_a_long_log_refold_within_the_budget_and_land_as_withou
     let mut other = log.clone();
     let (honest, _) = other.author(&c, now, set(1, "c")).unwrap();
     let ins = log.insert(now, honest.clone(), Origin(2)).unwrap();
-    assert_eq!(ins.delivered, vec![honest.id()]);
+    assert_eq!(ins.delivered[..], [honest.id()]);
     // The held ops wait together, are delivered together and cost one refold.
     let due = log.next_due().expect("held ops wait for the budget");
     assert!(due > now && due.0 - now.0 <= 1_000_000);
@@ -1061,8 +1064,8 @@ proptest! {
                 }
                 prop_assert!(refold.from <= pos);
                 if let Some(object) = fold_object(&log, e.op) {
-                    let from = refold.objects.get(&object).copied();
-                    prop_assert!(from.is_some_and(|f| f <= pos), "{object:?} changed at {pos}, refold {from:?}");
+                    let from = refold.object_keys.get(&object).copied();
+                    prop_assert!(from.is_some_and(|f| f <= OrderKey::of(e.op)), "{object:?} changed at {pos}, refold {from:?}");
                 }
             }
         }
@@ -1117,7 +1120,7 @@ fn the_founder_expels_a_member_whose_unseen_ops_turn_void_and_whose_leases_bind_
         .insert(Timestamp(4_000), expelled.clone(), Origin(2))
         .unwrap();
     let refold = ins.refold.expect("the expel changed what is active");
-    assert!(refold.objects.contains_key(&ObjectId(1)));
+    assert!(refold.object_keys.contains_key(&ObjectId(1)));
     assert_eq!(refold.void_from.get(&mallory.peer_id()), Some(&2));
     assert!(log.is_expelled(&mallory.peer_id()) && !log.is_expelled(&honest.peer_id()));
     assert_eq!(log.expelled().get(&mallory.peer_id()), Some(&1));
