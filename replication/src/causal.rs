@@ -102,34 +102,77 @@ impl VersionVector {
 /// The frontier of the op DAG: delivered ops that no delivered op depends on yet.
 ///
 /// New local ops depend on exactly these.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Frontier {
-    heads: BTreeSet<OpId>,
+    heads: Heads,
+}
+
+/// Most heads a frontier keeps in a sorted vector; past this it keeps a tree, and returns to
+/// the vector below half of it.
+const MAX_FEW_HEADS: usize = 32;
+
+/// A frontier's heads in id order. A session has about one head per concurrent author, so
+/// most deliveries replace one head in a short vector; a tree keeps a member that makes
+/// thousands of heads (ops that name no deps) from costing a shift of all of them per op.
+#[derive(Clone, Debug, PartialEq, Eq)]
+enum Heads {
+    Few(Vec<OpId>),
+    Many(BTreeSet<OpId>),
+}
+
+impl Default for Frontier {
+    fn default() -> Self {
+        Self {
+            heads: Heads::Few(Vec::new()),
+        }
+    }
 }
 
 impl Frontier {
     /// Records a delivered op. Causal delivery guarantees its dependencies were delivered
     /// before it and that nothing delivered depends on it yet.
     pub fn deliver(&mut self, id: OpId, deps: &[OpId]) {
-        for dep in deps {
-            self.heads.remove(dep);
+        match &mut self.heads {
+            Heads::Few(heads) => {
+                heads.retain(|h| !deps.contains(h));
+                let at = heads.partition_point(|h| *h < id);
+                heads.insert(at, id);
+                if heads.len() > MAX_FEW_HEADS {
+                    self.heads = Heads::Many(heads.drain(..).collect());
+                }
+            }
+            Heads::Many(heads) => {
+                for dep in deps {
+                    heads.remove(dep);
+                }
+                heads.insert(id);
+                if heads.len() < MAX_FEW_HEADS / 2 {
+                    self.heads = Heads::Few(std::mem::take(heads).into_iter().collect());
+                }
+            }
         }
-        self.heads.insert(id);
     }
 
     /// The heads in id order.
     pub fn heads(&self) -> impl Iterator<Item = &OpId> {
-        self.heads.iter()
+        let (few, many) = match &self.heads {
+            Heads::Few(heads) => (Some(heads.iter()), None),
+            Heads::Many(heads) => (None, Some(heads.iter())),
+        };
+        few.into_iter().flatten().chain(many.into_iter().flatten())
     }
 
     /// Number of heads.
     pub fn len(&self) -> usize {
-        self.heads.len()
+        match &self.heads {
+            Heads::Few(heads) => heads.len(),
+            Heads::Many(heads) => heads.len(),
+        }
     }
 
     /// True before any op is delivered.
     pub fn is_empty(&self) -> bool {
-        self.heads.is_empty()
+        self.len() == 0
     }
 }
 
@@ -143,14 +186,16 @@ pub const MAX_REACH_MEMO_ENTRIES: usize = 1 << 20;
 /// so both are ranges of the author's chain; an op's past never changes once it is delivered,
 /// so an entry never goes stale.
 ///
-/// Targets and authors are numbered in order of first use, and each target has a row of 8-byte
+/// Targets are named by their position in the log's slab ([`crate::op`]), which never changes
+/// while the log holds the op. Targets and authors are numbered in order of first use, and
+/// each target has a row of 8-byte
 /// slots indexed by author number: a session's few authors are asked about most targets, so
 /// the rows are nearly full. A hash table of pairs took 16 bytes an entry and doubled as it
 /// grew (about 150 bytes per op held at 32 peers); nested trees of ids, before it, about 100
 /// bytes an entry.
 #[derive(Clone, Debug, Default)]
 pub struct Reach {
-    targets: BTreeMap<OpId, u32>,
+    targets: BTreeMap<u32, u32>,
     authors: BTreeMap<PeerId, u32>,
     /// Per target number, per author number: `(unseen_to, seen_from)`, [`UNKNOWN`] until an
     /// answer is recorded. Sequence numbers from `u32::MAX` on are not memoised.
@@ -166,13 +211,13 @@ pub struct Reach {
 const UNKNOWN: (u32, u32) = (0, u32::MAX);
 
 impl Reach {
-    fn slot(&self, target: &OpId, author: &PeerId) -> Option<(u32, u32)> {
-        let row = self.rows.get(*self.targets.get(target)? as usize)?;
+    fn slot(&self, target: u32, author: &PeerId) -> Option<(u32, u32)> {
+        let row = self.rows.get(*self.targets.get(&target)? as usize)?;
         row.get(*self.authors.get(author)? as usize).copied()
     }
 
     /// Whether `author`'s op `seq` has `target` in its causal past, if known.
-    pub fn known(&self, target: &OpId, author: &PeerId, seq: u64) -> Option<bool> {
+    pub fn known(&self, target: u32, author: &PeerId, seq: u64) -> Option<bool> {
         let seq = u32::try_from(seq).ok()?;
         let (unseen_to, seen_from) = self.slot(target, author).filter(|s| *s != UNKNOWN)?;
         if seq <= unseen_to {
@@ -185,7 +230,7 @@ impl Reach {
     }
 
     /// Records whether `author`'s op `seq` has `target` in its causal past.
-    pub fn record(&mut self, target: OpId, author: PeerId, seq: u64, seen: bool) {
+    pub fn record(&mut self, target: u32, author: PeerId, seq: u64, seen: bool) {
         let Some(seq) = u32::try_from(seq).ok().filter(|s| *s < u32::MAX) else {
             return;
         };
@@ -265,22 +310,54 @@ mod tests {
     }
 
     #[test]
+    fn a_frontier_keeps_its_heads_sorted_across_both_forms() {
+        // Ops naming no deps each stay a head: the frontier outgrows its vector, then shrinks
+        // back into it, and always lists its heads in id order.
+        let id = |i: u32| {
+            let mut bytes = [0; 32];
+            bytes[..4].copy_from_slice(&i.wrapping_mul(2_654_435_761).to_be_bytes());
+            bytes[4..8].copy_from_slice(&i.to_be_bytes());
+            OpId(bytes)
+        };
+        let mut f = Frontier::default();
+        let mut expected = BTreeSet::new();
+        for i in 0..100 {
+            f.deliver(id(i), &[]);
+            expected.insert(id(i));
+            assert!(f.heads().copied().eq(expected.iter().copied()), "after {i}");
+        }
+        // Then each new op merges one old head and the previous new one.
+        for i in 0..99 {
+            let deps: Vec<OpId> = std::iter::once(id(i))
+                .chain((i > 0).then(|| id(1000 + i - 1)))
+                .collect();
+            f.deliver(id(1000 + i), &deps);
+            expected.retain(|h| !deps.contains(h));
+            expected.insert(id(1000 + i));
+            assert!(f.heads().copied().eq(expected.iter().copied()), "after {i}");
+            assert_eq!(f.len(), expected.len());
+        }
+        assert_eq!(f.len(), 2);
+        assert!(matches!(f.heads, Heads::Few(_)));
+    }
+
+    #[test]
     fn reach_memo_keeps_ranges_of_an_authors_chain() {
         let mut r = Reach::default();
-        let (t, a) = (OpId([9; 32]), PeerId([1; 32]));
-        assert_eq!(r.known(&t, &a, 3), None);
+        let (t, a) = (9, PeerId([1; 32]));
+        assert_eq!(r.known(t, &a, 3), None);
         r.record(t, a, 3, false);
         r.record(t, a, 7, true);
-        assert_eq!(r.known(&t, &a, 1), Some(false));
-        assert_eq!(r.known(&t, &a, 3), Some(false));
-        assert_eq!(r.known(&t, &a, 5), None);
-        assert_eq!(r.known(&t, &a, 9), Some(true));
+        assert_eq!(r.known(t, &a, 1), Some(false));
+        assert_eq!(r.known(t, &a, 3), Some(false));
+        assert_eq!(r.known(t, &a, 5), None);
+        assert_eq!(r.known(t, &a, 9), Some(true));
         assert_eq!(r.len(), 1);
         // Sequence numbers past 32 bits are not memoised: asked again, never answered wrong.
         r.record(t, a, u64::from(u32::MAX), true);
         r.record(t, a, 1 << 40, false);
-        assert_eq!(r.known(&t, &a, 1 << 40), None);
-        assert_eq!(r.known(&t, &a, 9), Some(true));
+        assert_eq!(r.known(t, &a, 1 << 40), None);
+        assert_eq!(r.known(t, &a, 9), Some(true));
     }
 
     /// A row extended one new author at a time grows geometrically: few copies, little slack.
@@ -291,20 +368,20 @@ mod tests {
         let mut n_grown = 0;
         for a in 0..4000 {
             let before = r.rows.first().map_or(0, Vec::capacity);
-            r.record(OpId([9; 32]), author(a), 1, true);
+            r.record(9, author(a), 1, true);
             n_grown += usize::from(r.rows[0].capacity() != before);
         }
         let row = &r.rows[0];
         assert_eq!(row.len(), 4000);
         assert!(row.capacity() <= 4000 + 4000 / 8 + 1, "{}", row.capacity());
         assert!(n_grown < 100, "{n_grown} reallocations");
-        assert_eq!(r.known(&OpId([9; 32]), &author(3999), 1), Some(true));
+        assert_eq!(r.known(9, &author(3999), 1), Some(true));
     }
 
     #[test]
     fn reach_memo_keeps_every_pair_apart_and_starts_afresh_at_its_limit() {
         let mut r = Reach::default();
-        let target = |i: u32| OpId(blake3::hash(&i.to_le_bytes()).into());
+        let target = |i: u32| i * 7 + 3;
         let author = |i: u32| PeerId(blake3::hash(&(i + 1000).to_le_bytes()).into());
         for t in 0..40 {
             for a in 0..40 {
@@ -315,10 +392,10 @@ mod tests {
         for t in 0..40 {
             for a in 0..40 {
                 let seq = u64::from(t + a + 1);
-                assert_eq!(r.known(&target(t), &author(a), seq), Some((t + a) % 2 == 0));
+                assert_eq!(r.known(target(t), &author(a), seq), Some((t + a) % 2 == 0));
             }
         }
-        assert_eq!(r.known(&target(40), &author(0), 1), None);
+        assert_eq!(r.known(target(40), &author(0), 1), None);
         for i in 0..MAX_REACH_MEMO_ENTRIES as u32 - 1600 {
             r.record(target(100 + i), author(0), 1, true);
         }
@@ -328,8 +405,8 @@ mod tests {
         assert_eq!(r.len(), MAX_REACH_MEMO_ENTRIES);
         r.record(target(0), author(40), 1, true);
         assert_eq!(r.len(), 1, "the memo started afresh");
-        assert_eq!(r.known(&target(0), &author(40), 1), Some(true));
-        assert_eq!(r.known(&target(1), &author(1), 3), None);
+        assert_eq!(r.known(target(0), &author(40), 1), Some(true));
+        assert_eq!(r.known(target(1), &author(1), 3), None);
     }
 
     #[test]

@@ -104,14 +104,19 @@ impl<P: Payload> Dag<'_, P> {
     }
 
     /// The answer for `id` without walking, if there is one.
-    fn quick(&self, memo: &Reach, id: &OpId, target: &Op<P>, target_id: &OpId) -> Option<bool> {
-        if id == target_id {
+    fn quick(&self, memo: &Reach, id: &OpId, target: &Op<P>, target_at: u32) -> Option<bool> {
+        if id == target.id_ref() {
             return Some(true);
         }
         // Ops inside a base have Lamport times at or below its cut, below every held op's.
         let Some(op) = self.ops.get(id) else {
             return Some(false);
         };
+        self.quick_held(memo, op, target, target_at)
+    }
+
+    /// [`Dag::quick`] for a held op other than the target.
+    fn quick_held(&self, memo: &Reach, op: &Op<P>, target: &Op<P>, target_at: u32) -> Option<bool> {
         // Lamport times grow along every dependency and every author's chain.
         if op.lamport() <= target.lamport() {
             return Some(false);
@@ -123,18 +128,59 @@ impl<P: Payload> Dag<'_, P> {
         if op.author() == target.author() && !self.forks.covers(&target.author(), target.seq()) {
             return Some(op.seq() >= target.seq());
         }
-        memo.known(target_id, &op.author(), op.seq())
+        memo.known(target_at, &op.author(), op.seq())
+    }
+
+    /// The answer for held `op` from its parents' quick answers, recorded in the memo: the walk's
+    /// first step, without its stack. A live op's parents are usually answered already (its
+    /// author's previous op asked the same), so most asks end here. `None` when a parent needs
+    /// the walk, or for an op past its author's fork (which the memo does not keep).
+    fn one_step(
+        &self,
+        memo: &mut Reach,
+        op: &Op<P>,
+        target: &Op<P>,
+        target_at: u32,
+    ) -> Option<bool> {
+        if self.forks.covers(&op.author(), op.seq()) {
+            return None;
+        }
+        let mut seen = false;
+        for p in op.deps().iter().chain(self.prev(op)) {
+            if self.quick(memo, p, target, target_at)? {
+                seen = true;
+                break;
+            }
+        }
+        memo.record(target_at, op.author(), op.seq(), seen);
+        Some(seen)
     }
 
     /// True if held op `target` is `from` or in its causal past (reachable through deps and
     /// each author's previous op). Walks each op at most once per target over the memo's life.
     pub(crate) fn sees(&self, memo: &mut Reach, from: &OpId, target_id: &OpId) -> bool {
-        let Some(target) = self.ops.get(target_id) else {
+        match self.ops.position(target_id) {
+            Some(target_at) => self.sees_at(memo, from, target_at),
             // A target inside the base: every held op is after the cut; treat it as seen
             // (a joined log keeps no deps for its base: a documented non-guarantee).
+            None => true,
+        }
+    }
+
+    /// [`Dag::sees`] for the target held at slab position `target_at`.
+    pub(crate) fn sees_at(&self, memo: &mut Reach, from: &OpId, target_at: u32) -> bool {
+        let target = self.ops.at(target_at);
+        if from == target.id_ref() {
             return true;
+        }
+        let Some(from_op) = self.ops.get(from) else {
+            // Inside the base: before every held op.
+            return false;
         };
-        if let Some(known) = self.quick(memo, from, target, target_id) {
+        if let Some(known) = self.quick_held(memo, from_op, target, target_at) {
+            return known;
+        }
+        if let Some(known) = self.one_step(memo, from_op, target, target_at) {
             return known;
         }
         // Depth-first, children before parents: an op's answer is the "or" of its parents'.
@@ -144,7 +190,7 @@ impl<P: Payload> Dag<'_, P> {
         // keeps them, so each op is still answered once.
         let mut forked: BTreeMap<OpId, bool> = BTreeMap::new();
         let quick = |memo: &Reach, forked: &BTreeMap<OpId, bool>, id: &OpId| {
-            (forked.get(id).copied()).or_else(|| self.quick(memo, id, target, target_id))
+            (forked.get(id).copied()).or_else(|| self.quick(memo, id, target, target_at))
         };
         let mut stack = vec![*from];
         while let Some(id) = stack.pop() {
@@ -175,7 +221,7 @@ impl<P: Payload> Dag<'_, P> {
                 if self.forks.covers(&op.author(), op.seq()) {
                     forked.insert(id, seen);
                 } else {
-                    memo.record(*target_id, op.author(), op.seq(), seen);
+                    memo.record(target_at, op.author(), op.seq(), seen);
                 }
                 if id == *from {
                     return seen;
@@ -201,7 +247,7 @@ pub(crate) fn unseen_before<P: Payload>(
 ) -> Vec<(OrderKey, u32)> {
     let mut unseen = Vec::new();
     for l in list[..n].iter().rev() {
-        if !dag.sees(memo, x, dag.ops.at(l.at).id_ref()) {
+        if !dag.sees_at(memo, x, l.at) {
             unseen.push((l.key, l.at));
             continue;
         }
@@ -209,7 +255,7 @@ pub(crate) fn unseen_before<P: Payload>(
         if let Some(misses) = &l.unseen {
             for &at in misses.iter() {
                 let op = dag.ops.at(at);
-                if !dag.sees(memo, x, op.id_ref()) {
+                if !dag.sees_at(memo, x, at) {
                     unseen.push((OrderKey::of(op), at));
                 }
             }
