@@ -71,6 +71,9 @@ impl fmt::Display for OpId {
 /// Ops per chunk of an [`OpSlab`].
 const SLAB_CHUNK: usize = 4096;
 
+/// The latest held ops [`OpSlab::position`] compares before it probes the index.
+const RECENT_SLOTS: u32 = 4;
+
 /// Held ops, stored by arrival in chunks of [`SLAB_CHUNK`] and found by id through a hash
 /// table of their positions: growing moves only the last chunk's ops and 4-byte index
 /// entries, never the whole log, and a log's ops sit in arrival order, near the ops they were
@@ -120,6 +123,13 @@ impl<P> OpSlab<P> {
     /// Where the op with id `id` is held, if it is: a position [`OpSlab::at`] takes, which
     /// never changes.
     pub(crate) fn position(&self, id: &OpId) -> Option<u32> {
+        // A live op names the latest ops as its deps and is asked about right after it is
+        // held: the last few slots answer most lookups without a probe of the table.
+        let n = u32::try_from(self.len).unwrap_or(u32::MAX);
+        let recent = n.saturating_sub(RECENT_SLOTS)..n;
+        if let Some(at) = recent.rev().find(|&at| self.at(at).id == *id) {
+            return Some(at);
+        }
         self.index
             .find(id_hash(id), |&at| self.at(at).id == *id)
             .copied()
