@@ -101,8 +101,8 @@ impl VersionVector {
 
 /// The frontier of the op DAG: delivered ops that no delivered op depends on yet.
 ///
-/// New local ops depend on exactly these.
-#[derive(Clone, Debug, PartialEq, Eq)]
+/// New local ops depend on exactly these. Two frontiers are equal when their heads are.
+#[derive(Clone, Debug)]
 pub struct Frontier {
     heads: Heads,
 }
@@ -114,11 +114,20 @@ const MAX_FEW_HEADS: usize = 32;
 /// A frontier's heads in id order. A session has about one head per concurrent author, so
 /// most deliveries replace one head in a short vector; a tree keeps a member that makes
 /// thousands of heads (ops that name no deps) from costing a shift of all of them per op.
-#[derive(Clone, Debug, PartialEq, Eq)]
+/// Between half of [`MAX_FEW_HEADS`] and it, the same heads may be held in either form.
+#[derive(Clone, Debug)]
 enum Heads {
     Few(Vec<OpId>),
     Many(BTreeSet<OpId>),
 }
+
+impl PartialEq for Frontier {
+    fn eq(&self, other: &Self) -> bool {
+        self.len() == other.len() && self.heads().eq(other.heads())
+    }
+}
+
+impl Eq for Frontier {}
 
 impl Default for Frontier {
     fn default() -> Self {
@@ -188,9 +197,8 @@ pub const MAX_REACH_MEMO_ENTRIES: usize = 1 << 20;
 ///
 /// Targets are named by their position in the log's slab ([`crate::op`]), which never changes
 /// while the log holds the op. Targets and authors are numbered in order of first use, and
-/// each target has a row of 8-byte
-/// slots indexed by author number: a session's few authors are asked about most targets, so
-/// the rows are nearly full. A hash table of pairs took 16 bytes an entry and doubled as it
+/// each target has a row of 8-byte slots indexed by author number: a session's few authors are
+/// asked about most targets, so the rows are nearly full. A hash table of pairs took 16 bytes an entry and doubled as it
 /// grew (about 150 bytes per op held at 32 peers); nested trees of ids, before it, about 100
 /// bytes an entry.
 #[derive(Clone, Debug, Default)]
@@ -339,6 +347,28 @@ mod tests {
         }
         assert_eq!(f.len(), 2);
         assert!(matches!(f.heads, Heads::Few(_)));
+    }
+
+    #[test]
+    fn frontiers_with_the_same_heads_are_equal_in_either_form() {
+        let id = |i: u8| OpId([i; 32]);
+        // One grows past the vector and shrinks back to 20 heads, still a tree; the other
+        // takes the same 20 heads directly, in a vector.
+        let mut grown = Frontier::default();
+        for i in 0..40 {
+            grown.deliver(id(i), &[]);
+        }
+        let merged: Vec<OpId> = (20..40).map(id).collect();
+        grown.deliver(id(200), &merged);
+        let mut direct = Frontier::default();
+        for i in (0..20).chain([200]) {
+            direct.deliver(id(i), &[]);
+        }
+        assert!(matches!(grown.heads, Heads::Many(_)));
+        assert!(matches!(direct.heads, Heads::Few(_)));
+        assert_eq!(grown, direct);
+        direct.deliver(id(201), &[]);
+        assert_ne!(grown, direct);
     }
 
     #[test]
