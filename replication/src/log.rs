@@ -347,6 +347,9 @@ pub struct Log<P> {
     order: Vec<u32>,
     /// The verdict on each held op, by slab position.
     marks: marks::Marks,
+    /// Per held op, by slab position, how much of the delivery order its deps alone show it
+    /// saw: every op held before that position is in its causal past ([`seen::Dag`]).
+    horizons: Vec<u32>,
     /// `checkpoints[k]` is the fold state before position `k * CHECKPOINT_INTERVAL`.
     checkpoints: Vec<FoldState>,
     /// The fold state after the first `n_folded` positions (all of them between calls).
@@ -424,6 +427,7 @@ impl<P: Payload> Log<P> {
             ops: OpSlab::default(),
             order: Vec::new(),
             marks: marks::Marks::default(),
+            horizons: Vec::new(),
             checkpoints: vec![FoldState::default()],
             state: FoldState::default(),
             n_folded: 0,
@@ -901,10 +905,21 @@ impl<P: Payload> Log<P> {
         // Deps and previous ops inside a base have Lamport times at or below its cut, and
         // `insert` refused every op at or below the cut, so held ones set the floor.
         // Timestamps inside a base are not kept per op: a joined log checks held ones only.
-        let past = (op.deps().iter().filter_map(|d| self.ops.get(d))).chain(prev);
-        let (floor, floor_ts) = past.fold((0, Timestamp::default()), |(lamport, ts), p| {
-            (lamport.max(p.lamport()), ts.max(p.timestamp()))
-        });
+        let (mut floor, mut floor_ts) = (0, Timestamp::default());
+        let mut horizon = 0;
+        for d in op.deps() {
+            let Some(d_at) = self.ops.position(d) else {
+                continue;
+            };
+            let dep = self.ops.at(d_at);
+            (floor, floor_ts) = (floor.max(dep.lamport()), floor_ts.max(dep.timestamp()));
+            // The dep itself and every op before its own horizon: one prefix when they meet.
+            let h = self.horizons[d_at as usize];
+            horizon = horizon.max(if h == d_at { d_at + 1 } else { h });
+        }
+        if let Some(p) = prev {
+            (floor, floor_ts) = (floor.max(p.lamport()), floor_ts.max(p.timestamp()));
+        }
         if op.lamport() <= floor {
             return Err(InsertError::BadLamport {
                 lamport: op.lamport(),
@@ -951,6 +966,7 @@ impl<P: Payload> Log<P> {
                 self.forks_changed.insert(author);
             }
             self.frontier.deliver(id, op.deps());
+            self.horizons.push(self.horizon_of(at, horizon));
             self.max_lamport = self.max_lamport.max(op.lamport());
             let held = self.ops.insert(id, op);
             debug_assert_eq!(held, at, "held where the order says");
@@ -991,6 +1007,7 @@ impl<P: Payload> Log<P> {
         };
         self.vv.raise(author, op.seq());
         self.frontier.deliver(id, op.deps());
+        self.horizons.push(self.horizon_of(at, horizon));
         self.max_lamport = self.max_lamport.max(op.lamport());
         self.clock.observe(op.timestamp(), now);
         let membership = op.payload().membership();
@@ -1007,10 +1024,22 @@ impl<P: Payload> Log<P> {
         Ok(pos)
     }
 
+    /// The horizon of the op about to be held at `at`, just delivered to the frontier, whose
+    /// deps' horizons give `from_deps`. When the op is the frontier's only head, its deps
+    /// named every head: every held op is in its causal past.
+    fn horizon_of(&self, at: u32, from_deps: u32) -> u32 {
+        if self.frontier.len() == 1 {
+            at
+        } else {
+            from_deps
+        }
+    }
+
     /// The held DAG, for reachability.
     fn dag(&self) -> seen::Dag<'_, P> {
         seen::Dag {
             ops: &self.ops,
+            horizons: &self.horizons,
             by_author: &self.by_author,
             forks: &self.forks,
             base: self.base.as_deref(),

@@ -192,6 +192,7 @@ impl<P: Payload> Log<P> {
             ops: crate::op::OpSlab::default(),
             order: Vec::new(),
             marks: super::marks::Marks::default(),
+            horizons: Vec::new(),
             checkpoints: vec![base.state.clone()],
             state: base.state.clone(),
             n_folded: 0,

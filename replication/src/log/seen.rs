@@ -42,6 +42,12 @@ pub(crate) type AltFolds = BTreeMap<(ObjectId, Vec<OrderKey>), (usize, Option<Le
 /// The held part of the op DAG, as reachability walks it.
 pub(crate) struct Dag<'a, P> {
     pub(crate) ops: &'a crate::op::OpSlab<P>,
+    /// Per held op, by slab position: every op held before this position is in its causal
+    /// past, through deps alone. An op whose deps named every head of the frontier has its own
+    /// position; otherwise the furthest its deps reach, one past a dep whose horizon is its
+    /// own. Deps never change, so neither do horizons; prev links are left out because a fork
+    /// found later cuts them.
+    pub(crate) horizons: &'a [u32],
     /// Each author's held ops in seq order, as positions in `ops`.
     pub(crate) by_author: &'a BTreeMap<PeerId, Vec<u32>>,
     /// The forked authors: past its fork, an author's ops reach their past through their deps
@@ -109,17 +115,21 @@ impl<P: Payload> Dag<'_, P> {
             return Some(true);
         }
         // Ops inside a base have Lamport times at or below its cut, below every held op's.
-        let Some(op) = self.ops.get(id) else {
+        let Some(at) = self.ops.position(id) else {
             return Some(false);
         };
-        self.quick_held(memo, op, target, target_at)
+        self.quick_held(memo, at, target, target_at)
     }
 
-    /// [`Dag::quick`] for a held op other than the target.
-    fn quick_held(&self, memo: &Reach, op: &Op<P>, target: &Op<P>, target_at: u32) -> Option<bool> {
+    /// [`Dag::quick`] for the held op at `at`, other than the target.
+    fn quick_held(&self, memo: &Reach, at: u32, target: &Op<P>, target_at: u32) -> Option<bool> {
+        let op = self.ops.at(at);
         // Lamport times grow along every dependency and every author's chain.
         if op.lamport() <= target.lamport() {
             return Some(false);
+        }
+        if target_at < self.horizons[at as usize] {
+            return Some(true);
         }
         if self.forks.covers(&op.author(), op.seq()) {
             // Two ops share this seq and may see different things: walk.
@@ -173,13 +183,14 @@ impl<P: Payload> Dag<'_, P> {
         if from == target.id_ref() {
             return true;
         }
-        let Some(from_op) = self.ops.get(from) else {
+        let Some(from_at) = self.ops.position(from) else {
             // Inside the base: before every held op.
             return false;
         };
-        if let Some(known) = self.quick_held(memo, from_op, target, target_at) {
+        if let Some(known) = self.quick_held(memo, from_at, target, target_at) {
             return known;
         }
+        let from_op = self.ops.at(from_at);
         if let Some(known) = self.one_step(memo, from_op, target, target_at) {
             return known;
         }

@@ -394,6 +394,84 @@ pub(crate) fn causal_past(log: &TLog, id: &OpId) -> BTreeSet<OpId> {
     seen
 }
 
+/// The ops reachable from `id` through deps alone (no author's previous op).
+fn deps_past(log: &TLog, id: &OpId) -> BTreeSet<OpId> {
+    let mut seen = BTreeSet::new();
+    let mut stack = vec![*id];
+    while let Some(id) = stack.pop() {
+        let Some(op) = log.get(&id) else { continue };
+        for p in op.deps() {
+            if seen.insert(*p) {
+                stack.push(*p);
+            }
+        }
+    }
+    seen
+}
+
+/// Checks every held op's horizon against its deps' reach, and every answer of `sees` against
+/// the causal past found by a plain walk (held sides of a fork included).
+fn check_horizons(log: &TLog) -> Result<(), TestCaseError> {
+    let dag = log.dag();
+    let mut memo = Reach::default();
+    for at in 0..u32::try_from(log.ops.len()).unwrap() {
+        let id = log.ops.at(at).id();
+        let h = log.horizons[at as usize];
+        prop_assert!(h <= at, "a horizon lies at or before its op");
+        let past = deps_past(log, &id);
+        for before in 0..h {
+            prop_assert!(
+                past.contains(log.ops.at(before).id_ref()),
+                "op {} before {}",
+                before,
+                at
+            );
+        }
+        if log.forks().is_empty() {
+            let past = causal_past(log, &id);
+            for target in 0..u32::try_from(log.ops.len()).unwrap() {
+                let t = log.ops.at(target).id();
+                let expected = t == id || past.contains(&t);
+                prop_assert_eq!(
+                    dag.sees(&mut memo, &id, &t),
+                    expected,
+                    "{} sees {}",
+                    at,
+                    target
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(crate::test_config(32))]
+
+    /// Every op held before an op's horizon is in its past through deps alone, in any
+    /// delivery order and with forked authors; and `sees` answers as a walk does.
+    #[test]
+    fn an_ops_horizon_lies_inside_its_causal_past(seed in any::<u64>(), perm in any::<u64>()) {
+        let ops = workload(seed, 4, 40);
+        check_horizons(&deliver_all(&shuffled(&ops, perm)))?;
+        let twins = twin_workload(seed, 3, 40);
+        check_horizons(&deliver_all(&shuffled(&twins, perm)))?;
+    }
+}
+
+/// One author writing alone names the frontier's only head each time: each op saw every op
+/// held before it, and its horizon says so.
+#[test]
+fn a_lone_authors_ops_see_everything_before_them() {
+    let a = key(0);
+    let mut log = TLog::default();
+    for i in 0..20 {
+        log.author(&a, Timestamp(i + 1), set(i % 3, "x")).unwrap();
+    }
+    let at: Vec<u32> = (0..20).collect();
+    assert_eq!(log.horizons, at);
+}
+
 #[test]
 fn refused_ops_are_counted() {
     let a = key(0);
