@@ -201,8 +201,17 @@ pub const MAX_REACH_MEMO_ENTRIES: usize = 1 << 20;
 /// asked about most targets, so the rows are nearly full. A hash table of pairs took 16 bytes an entry and doubled as it
 /// grew (about 150 bytes per op held at 32 peers); nested trees of ids, before it, about 100
 /// bytes an entry.
+///
+/// An empty memo holds nothing on the heap and costs nothing to drop: a log lends its memo
+/// out for each refold and takes it back, leaving an empty one in its place meanwhile.
 #[derive(Clone, Debug, Default)]
 pub struct Reach {
+    tables: Option<Box<ReachTables>>,
+}
+
+/// What a [`Reach`] memo holds once something is recorded.
+#[derive(Clone, Debug, Default)]
+struct ReachTables {
     targets: BTreeMap<u32, u32>,
     authors: BTreeMap<PeerId, u32>,
     /// Per target number, per author number: `(unseen_to, seen_from)`, [`UNKNOWN`] until an
@@ -220,8 +229,9 @@ const UNKNOWN: (u32, u32) = (0, u32::MAX);
 
 impl Reach {
     fn slot(&self, target: u32, author: &PeerId) -> Option<(u32, u32)> {
-        let row = self.rows.get(*self.targets.get(&target)? as usize)?;
-        row.get(*self.authors.get(author)? as usize).copied()
+        let t = self.tables.as_deref()?;
+        let row = t.rows.get(*t.targets.get(&target)? as usize)?;
+        row.get(*t.authors.get(author)? as usize).copied()
     }
 
     /// Whether `author`'s op `seq` has `target` in its causal past, if known.
@@ -246,6 +256,29 @@ impl Reach {
             // Says nothing: no op has seq 0.
             return;
         }
+        let tables = self.tables.get_or_insert_default();
+        if !tables.record(target, author, seq, seen) {
+            // Full: start afresh.
+            **tables = ReachTables::default();
+            tables.record(target, author, seq, seen);
+        }
+    }
+
+    /// Number of (target, author) pairs with an answer.
+    pub fn len(&self) -> usize {
+        self.tables.as_ref().map_or(0, |t| t.n_entries)
+    }
+
+    /// True if nothing is memoised.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+impl ReachTables {
+    /// [`Reach::record`] for a seq below `u32::MAX`; false, recording nothing, when the slots
+    /// it needs would pass [`MAX_REACH_MEMO_ENTRIES`].
+    fn record(&mut self, target: u32, author: PeerId, seq: u32, seen: bool) -> bool {
         let next = |n: usize| u32::try_from(n).expect("at most MAX_REACH_MEMO_ENTRIES");
         let n_targets = next(self.targets.len());
         let t = *self.targets.entry(target).or_insert(n_targets) as usize;
@@ -253,8 +286,7 @@ impl Reach {
         let a = *self.authors.entry(author).or_insert(n_authors) as usize;
         let grow = (a + 1).saturating_sub(self.rows.get(t).map_or(0, Vec::len));
         if self.n_slots + grow > MAX_REACH_MEMO_ENTRIES {
-            *self = Self::default();
-            return self.record(target, author, seq.into(), seen);
+            return false;
         }
         if t == self.rows.len() {
             self.rows.push(Vec::new());
@@ -280,16 +312,7 @@ impl Reach {
         } else {
             slot.0 = slot.0.max(seq);
         }
-    }
-
-    /// Number of (target, author) pairs with an answer.
-    pub fn len(&self) -> usize {
-        self.n_entries
-    }
-
-    /// True if nothing is memoised.
-    pub fn is_empty(&self) -> bool {
-        self.n_entries == 0
+        true
     }
 }
 
@@ -396,12 +419,13 @@ mod tests {
         let mut r = Reach::default();
         let author = |i: u32| PeerId(blake3::hash(&i.to_le_bytes()).into());
         let mut n_grown = 0;
+        let capacity = |r: &Reach| r.tables.as_ref().map_or(0, |t| t.rows[0].capacity());
         for a in 0..4000 {
-            let before = r.rows.first().map_or(0, Vec::capacity);
+            let before = capacity(&r);
             r.record(9, author(a), 1, true);
-            n_grown += usize::from(r.rows[0].capacity() != before);
+            n_grown += usize::from(capacity(&r) != before);
         }
-        let row = &r.rows[0];
+        let row = &r.tables.as_ref().unwrap().rows[0];
         assert_eq!(row.len(), 4000);
         assert!(row.capacity() <= 4000 + 4000 / 8 + 1, "{}", row.capacity());
         assert!(n_grown < 100, "{n_grown} reallocations");

@@ -280,12 +280,25 @@ impl Drained {
     }
 }
 
-/// What a refold carries to judge ops against the leases they saw, taken out of the log for
-/// its duration.
+/// What a refold carries to judge ops against the leases they saw: the reach memo, taken out
+/// of the log for its duration, and what judging the last lease op learnt of it.
 struct LeaseCx {
-    lease_ops: BTreeMap<ObjectId, Vec<seen::LeaseOp>>,
     reach: Reach,
-    alt: seen::AltFolds,
+    /// What judging the last lease op learnt of it, for the log to record once it is done.
+    learnt: Option<Learnt>,
+    /// Folds of ops that missed lease ops, kept from one op to the next ([`seen::lease_seen`]);
+    /// made when first needed.
+    alt: Option<seen::AltFolds>,
+}
+
+/// What judging a lease op learnt of it ([`seen::LeaseOp::before`] and
+/// [`seen::LeaseOp::unseen`]), and where the log keeps it.
+struct Learnt {
+    object: ObjectId,
+    /// The op's index among its object's lease ops.
+    index: usize,
+    before: Option<Lease>,
+    unseen: Option<Box<[u32]>>,
 }
 
 /// The ops one insertion delivered, for membership tests (usually one op).
@@ -617,11 +630,13 @@ impl<P: Payload> Log<P> {
                 cut_lamport: base.lamport,
             });
         }
-        let mut missing = self.missing(&op, now);
-        if !clocked || origin == LOCAL_ORIGIN {
-            missing.retain(|key| !matches!(key, DepKey::Clock(_)));
-        }
-        if !missing.is_empty() {
+        let missing = self.missing(&op, now).and_then(|mut keys| {
+            if !clocked || origin == LOCAL_ORIGIN {
+                keys.retain(|key| !matches!(key, DepKey::Clock(_)));
+            }
+            (!keys.is_empty()).then_some(keys)
+        });
+        if let Some(missing) = missing {
             out.parked = true;
             out.evicted = self.pending.insert(now, op, origin, missing);
             self.deliver_queue(now, std::collections::VecDeque::new(), None, &mut out);
@@ -676,8 +691,7 @@ impl<P: Payload> Log<P> {
         }
         while let Some((ready, ready_origin)) = queue.pop_front() {
             let id = ready.id();
-            let missing = self.missing(&ready, now);
-            if !missing.is_empty() {
+            if let Some(missing) = self.missing(&ready, now) {
                 // Freed by one key but another (e.g. the previous seq) is still missing.
                 out.evicted
                     .extend(self.pending.insert(now, ready, ready_origin, missing));
@@ -831,12 +845,13 @@ impl<P: Payload> Log<P> {
         Ok(())
     }
 
-    fn missing(&self, op: &Op<P>, now: Timestamp) -> BTreeSet<DepKey> {
+    /// What `op` waits for before it can be delivered: `None` when nothing.
+    fn missing(&self, op: &Op<P>, now: Timestamp) -> Option<BTreeSet<DepKey>> {
         let seq_ready = op.seq() == 1 || self.vv.get(&op.author()) >= op.seq() - 1;
         let on_time = op.timestamp() <= now.saturating_add_micros(MAX_CLOCK_SKEW_MICROS);
         if seq_ready && on_time && op.deps().iter().all(|d| self.contains(d)) {
-            // The usual case: nothing to collect.
-            return BTreeSet::new();
+            // The usual case: nothing to collect (nor to drop).
+            return None;
         }
         let mut missing: BTreeSet<DepKey> = op
             .deps()
@@ -856,7 +871,7 @@ impl<P: Payload> Log<P> {
                 op.timestamp().0 - MAX_CLOCK_SKEW_MICROS,
             )));
         }
-        missing
+        Some(missing)
     }
 
     fn free_waiters(&mut self, id: OpId, queue: &mut std::collections::VecDeque<(Op<P>, Origin)>) {
@@ -1191,13 +1206,14 @@ impl<P: Payload> Log<P> {
         self.stats.n_refolded += (self.order.len() - start) as u64;
         let mut refold = Refold {
             from,
+            base_objects: BTreeSet::new(),
+            object_keys: ObjectKeys::default(),
             void_from: std::mem::take(&mut self.void_changed),
-            ..Refold::default()
         };
         let mut cx = LeaseCx {
-            lease_ops: std::mem::take(&mut self.lease_ops),
             reach: std::mem::take(&mut self.reach),
-            alt: seen::AltFolds::new(),
+            learnt: None,
+            alt: None,
         };
         // Marks at or after `from` were computed before the insertion (or are placeholders):
         // compare against the old verdicts to find the objects that changed.
@@ -1209,6 +1225,12 @@ impl<P: Payload> Log<P> {
             let op = self.op_at(pos);
             let (id, effect) = (op.id(), op.payload().effect());
             let mark = self.judge(&mut cx, &mut state, pos);
+            if let Some(learnt) = cx.learnt.take()
+                && let Some(me) = (self.lease_ops.get_mut(&learnt.object))
+                    .and_then(|list| list.get_mut(learnt.index))
+            {
+                (me.before, me.unseen) = (learnt.before, learnt.unseen);
+            }
             if pos >= from {
                 let at = self.order[pos];
                 let old = self.marks.get(at);
@@ -1220,7 +1242,6 @@ impl<P: Payload> Log<P> {
                 }
             }
         }
-        self.lease_ops = cx.lease_ops;
         self.reach = cx.reach;
         self.state = state;
         self.n_folded = self.order.len();
@@ -1270,6 +1291,9 @@ impl<P: Payload> Log<P> {
     /// Records in `refold` the objects of the ops that turned void or counted again
     /// ([`Refold::void_from`]): their activity changed, not their marks.
     fn report_void_changes(&self, refold: &mut Refold) {
+        if refold.void_from.is_empty() {
+            return;
+        }
         for (member, from_seq) in refold.void_from.clone() {
             let member = &member;
             let base_seq = self.base.as_ref().map_or(0, |b| b.seq(member));
@@ -1347,21 +1371,27 @@ impl<P: Payload> Log<P> {
             },
             Effect::Independent => return None,
         };
-        let list = cx.lease_ops.get_mut(&object)?;
+        let list = self.lease_ops.get(&object)?;
         let n = point_near_end(list, |l| l.key < key);
         let dag = self.dag();
         let unseen = seen::unseen_before(&dag, &mut cx.reach, list, n, &id);
-        let lease = (!unseen.is_empty())
-            .then(|| seen::lease_seen(&dag, &mut cx.reach, list, n, &unseen, &mut cx.alt, object));
+        let lease = (!unseen.is_empty()).then(|| {
+            let alt = cx.alt.get_or_insert_with(seen::AltFolds::new);
+            seen::lease_seen(&dag, &mut cx.reach, list, n, &unseen, alt, object)
+        });
         if matches!(effect, Effect::Acquire { .. } | Effect::Release { .. }) {
-            let me = &mut list[n];
             assert!(
-                self.ops.at(me.at).id_ref() == &id,
+                self.ops.at(list[n].at).id_ref() == &id,
                 "a lease op is indexed under its object"
             );
-            me.before = state.lease(object);
-            me.unseen = (unseen.len() <= MAX_UNSEEN_LEASE_OPS)
+            let unseen = (unseen.len() <= MAX_UNSEEN_LEASE_OPS)
                 .then(|| unseen.iter().map(|&(_, at)| at).collect());
+            cx.learnt = Some(Learnt {
+                object,
+                index: n,
+                before: state.lease(object),
+                unseen,
+            });
         }
         lease
     }

@@ -310,11 +310,12 @@ impl<P: Payload> Log<P> {
         }
         let k = (n / CHECKPOINT_INTERVAL).min(self.checkpoints.len() - 1);
         let mut state = self.checkpoints[k].clone();
-        // A copy of what the fold learnt: judging again records the same things.
+        // Judging again learns of each lease op what the log holds already: nothing is
+        // recorded.
         let mut cx = super::LeaseCx {
-            lease_ops: self.lease_ops.clone(),
             reach: self.reach.clone(),
-            alt: super::seen::AltFolds::new(),
+            learnt: None,
+            alt: None,
         };
         for pos in k * CHECKPOINT_INTERVAL..n {
             self.judge(&mut cx, &mut state, pos);
