@@ -280,6 +280,16 @@ impl Drained {
     }
 }
 
+/// What a log holds of one author.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Authored {
+    /// The author's held ops in seq order (after the base's, if any), as positions in the
+    /// slab: its chain, without the siblings of a fork.
+    pub(crate) chain: Vec<u32>,
+    /// Bytes of the author's encoded ops held, siblings included ([`MAX_AUTHOR_BYTES`]).
+    pub(crate) bytes: u64,
+}
+
 /// What a refold carries to judge ops against the leases they saw: the reach memo, taken out
 /// of the log for its duration, and what judging the last lease op learnt of it.
 struct LeaseCx {
@@ -368,8 +378,9 @@ pub struct Log<P> {
     /// The fold state after the first `n_folded` positions (all of them between calls).
     state: FoldState,
     n_folded: usize,
-    /// Each author's held ops in seq order (after the base's, if any), as positions in `ops`.
-    by_author: BTreeMap<PeerId, Vec<u32>>,
+    /// What is held of each author: one record, so that an op's delivery looks its author up
+    /// twice (to check, then to record), not once per fact.
+    authors: BTreeMap<PeerId, Authored>,
     /// Each object's held edits (ops whose effect is [`Effect::Edit`]) in linear order, as
     /// positions in `ops`.
     by_object: BTreeMap<ObjectId, Vec<u32>>,
@@ -392,9 +403,8 @@ pub struct Log<P> {
     clock: HybridClock,
     pending: Pending<P>,
     stats: LogStats,
-    /// Bytes of encoded ops held, in all and per author.
+    /// Bytes of encoded ops held, in all (per author in [`Authored::bytes`]).
     n_bytes: u64,
-    author_bytes: BTreeMap<PeerId, u64>,
     /// [`MAX_AUTHOR_BYTES`], lowered by tests only.
     author_quota: u64,
     /// When the refold budget is earned back: each charged refold pushes it on by its cost
@@ -417,7 +427,7 @@ pub struct Log<P> {
     /// Authors that signed two held ops with one seq ([`crate::fork`]): their ops from that
     /// seq on are rejected as [`RejectReason::Forked`].
     forks: Forks,
-    /// Per forked author, its held ops that are not on its chain (`by_author`): the second and
+    /// Per forked author, its held ops that are not on its chain (`authors`): the second and
     /// later ops of a seq, in delivery order.
     siblings: BTreeMap<PeerId, Vec<OpId>>,
     /// Authors whose fork was found or lowered since the last refold.
@@ -444,7 +454,7 @@ impl<P: Payload> Log<P> {
             checkpoints: vec![FoldState::default()],
             state: FoldState::default(),
             n_folded: 0,
-            by_author: BTreeMap::new(),
+            authors: BTreeMap::new(),
             by_object: BTreeMap::new(),
             lease_ops: BTreeMap::new(),
             deletes: BTreeMap::new(),
@@ -459,7 +469,6 @@ impl<P: Payload> Log<P> {
             pending: Pending::with_limits(limits),
             stats: LogStats::default(),
             n_bytes: 0,
-            author_bytes: BTreeMap::new(),
             author_quota: MAX_AUTHOR_BYTES,
             refold_paid_until: Timestamp(0),
             refold_budget: RefoldBudget::default(),
@@ -531,7 +540,12 @@ impl<P: Payload> Log<P> {
     /// Bytes of encoded ops held by `author` (of the ops after a snapshot's cut, in a joined
     /// log).
     pub fn author_bytes(&self, author: &PeerId) -> u64 {
-        self.author_bytes.get(author).copied().unwrap_or(0)
+        self.authors.get(author).map_or(0, |a| a.bytes)
+    }
+
+    /// The author's held ops on its chain in seq order (after the base's), as slab positions.
+    fn chain(&self, author: &PeerId) -> &[u32] {
+        self.authors.get(author).map_or(&[], |a| &a.chain)
     }
 
     /// Authors, signs and inserts a new op by `keypair` that depends on the current heads.
@@ -889,10 +903,19 @@ impl<P: Payload> Log<P> {
     /// whose author's slot is taken is held beside the first as a sibling ([`crate::fork`]).
     fn deliver(&mut self, op: Op<P>, now: Timestamp) -> Result<usize, InsertError> {
         let author = op.author();
-        let held = self.vv.get(&author);
+        let authored = self.authors.get(&author);
+        let chain = authored.map_or(&[][..], |a| &a.chain);
+        let base_seq = self.base.as_ref().map_or(0, |b| b.seq(&author));
+        // The chain's op with seq `seq`, if held.
+        let on_chain = |seq: u64| {
+            let i = usize::try_from(seq.checked_sub(1 + base_seq)?).ok()?;
+            Some(self.ops.at(*chain.get(i)?))
+        };
+        let held = base_seq + chain.len() as u64;
+        debug_assert_eq!(held, self.vv.get(&author), "the chain is what is held");
         let twin = if held >= op.seq() {
             // A twin inside a base cannot be told apart from this op's past: refused.
-            match self.by_seq(&author, op.seq()) {
+            match on_chain(op.seq()) {
                 Some(twin) => Some(twin.id()),
                 None => {
                     return Err(InsertError::Equivocation {
@@ -915,7 +938,7 @@ impl<P: Payload> Log<P> {
         // where there is one previous op whichever side an op is on.
         let past_fork = self.forks.covers(&author, op.seq().saturating_sub(1));
         let prev = (!past_fork)
-            .then(|| self.by_seq(&author, op.seq().checked_sub(1)?))
+            .then(|| on_chain(op.seq().checked_sub(1)?))
             .flatten();
         // Deps and previous ops inside a base have Lamport times at or below its cut, and
         // `insert` refused every op at or below the cut, so held ones set the floor.
@@ -954,7 +977,7 @@ impl<P: Payload> Log<P> {
             });
         }
         let n_bytes = op.encoded().len() as u64;
-        let author_bytes = self.author_bytes(&author) + n_bytes;
+        let author_bytes = authored.map_or(0, |a| a.bytes) + n_bytes;
         if author_bytes > self.author_quota {
             return Err(InsertError::AuthorQuota {
                 author,
@@ -986,10 +1009,12 @@ impl<P: Payload> Log<P> {
             let held = self.ops.insert(id, op);
             debug_assert_eq!(held, at, "held where the order says");
             self.n_bytes += n_bytes;
-            self.author_bytes.insert(author, author_bytes);
+            self.authors.entry(author).or_default().bytes = author_bytes;
             return Ok(pos);
         }
-        self.by_author.entry(author).or_default().push(at);
+        let authored = self.authors.entry(author).or_default();
+        authored.chain.push(at);
+        authored.bytes = author_bytes;
         match op.payload().effect() {
             Effect::Edit { object } => {
                 let ops = &self.ops;
@@ -1029,7 +1054,6 @@ impl<P: Payload> Log<P> {
         let held = self.ops.insert(id, op);
         debug_assert_eq!(held, at, "held where the order says");
         self.n_bytes += n_bytes;
-        self.author_bytes.insert(author, author_bytes);
         if let Some(object) = delete_of {
             self.note_delete(object, id, key);
         }
@@ -1055,7 +1079,7 @@ impl<P: Payload> Log<P> {
         seen::Dag {
             ops: &self.ops,
             horizons: &self.horizons,
-            by_author: &self.by_author,
+            authors: &self.authors,
             forks: &self.forks,
             base: self.base.as_deref(),
             members: &self.membership_ops,
@@ -1104,7 +1128,7 @@ impl<P: Payload> Log<P> {
         let ops = self.membership_ops.get(member)?;
         let mut reach = std::mem::take(&mut self.reach);
         let dag = self.dag();
-        let mut chain = self.by_author.get(member).map_or(&[][..], Vec::as_slice);
+        let mut chain = self.chain(member);
         let base_seq = self.base.as_ref().map_or(0, |b| b.seq(member));
         if let Some(fork) = self.forks.seq_of(member) {
             // Past its fork a member's ops are rejected anyway, and its chain is no longer one
@@ -1141,7 +1165,7 @@ impl<P: Payload> Log<P> {
             };
             let base_seq = self.base.as_ref().map_or(0, |b| b.seq(&author));
             let skip = usize::try_from(seq.saturating_sub(base_seq + 1)).unwrap_or(usize::MAX);
-            let chain = self.by_author.get(&author).map_or(&[][..], Vec::as_slice);
+            let chain = self.chain(&author);
             let chain = chain.iter().skip(skip).map(|&at| self.ops.at(at).id_ref());
             let siblings = self.siblings.get(&author).map_or(&[][..], Vec::as_slice);
             for id in chain.chain(siblings) {
@@ -1298,7 +1322,7 @@ impl<P: Payload> Log<P> {
             let member = &member;
             let base_seq = self.base.as_ref().map_or(0, |b| b.seq(member));
             let skip = usize::try_from(from_seq.saturating_sub(base_seq + 1)).unwrap_or(usize::MAX);
-            let chain = self.by_author.get(member).map_or(&[][..], Vec::as_slice);
+            let chain = self.chain(member);
             for &at in chain.iter().skip(skip) {
                 let op = self.ops.at(at);
                 let Some(pos) = self.position(op.id_ref()) else {
@@ -1601,7 +1625,7 @@ impl<P: Payload> Log<P> {
     pub fn by_seq(&self, author: &PeerId, seq: u64) -> Option<&Op<P>> {
         let base_seq = self.base.as_ref().map_or(0, |b| b.seq(author));
         let idx = usize::try_from(seq.checked_sub(1 + base_seq)?).ok()?;
-        let at = *self.by_author.get(author)?.get(idx)?;
+        let at = *self.chain(author).get(idx)?;
         Some(self.ops.at(at))
     }
 

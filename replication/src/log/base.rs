@@ -196,7 +196,7 @@ impl<P: Payload> Log<P> {
             checkpoints: vec![base.state.clone()],
             state: base.state.clone(),
             n_folded: 0,
-            by_author: BTreeMap::new(),
+            authors: BTreeMap::new(),
             by_object: BTreeMap::new(),
             lease_ops: BTreeMap::new(),
             deletes,
@@ -214,7 +214,6 @@ impl<P: Payload> Log<P> {
             // Ops inside the base are not counted: a joined log judges quotas on the ops
             // after its cut only (a non-guarantee, as for timestamps).
             n_bytes: 0,
-            author_bytes: BTreeMap::new(),
             author_quota: super::MAX_AUTHOR_BYTES,
             refold_paid_until: Timestamp(0),
             refold_budget: super::RefoldBudget::default(),
@@ -279,12 +278,7 @@ impl<P: Payload> Log<P> {
 
     /// The Lamport time of the author's latest op here (0 if none).
     fn last_lamport(&self, author: &PeerId) -> u64 {
-        if let Some(op) = self
-            .by_author
-            .get(author)
-            .and_then(|chain| chain.last())
-            .map(|&at| self.ops.at(at))
-        {
+        if let Some(op) = self.chain(author).last().map(|&at| self.ops.at(at)) {
             return op.lamport();
         }
         self.base

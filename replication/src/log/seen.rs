@@ -48,8 +48,8 @@ pub(crate) struct Dag<'a, P> {
     /// own. Deps never change, so neither do horizons; prev links are left out because a fork
     /// found later cuts them.
     pub(crate) horizons: &'a [u32],
-    /// Each author's held ops in seq order, as positions in `ops`.
-    pub(crate) by_author: &'a BTreeMap<PeerId, Vec<u32>>,
+    /// What is held of each author: its chain of held ops in seq order, as positions in `ops`.
+    pub(crate) authors: &'a BTreeMap<PeerId, super::Authored>,
     /// The forked authors: past its fork, an author's ops reach their past through their deps
     /// alone, and no memo or seq shortcut speaks for them.
     pub(crate) forks: &'a crate::fork::Forks,
@@ -102,10 +102,7 @@ impl<P: Payload> Dag<'_, P> {
         }
         let base_seq = self.base.map_or(0, |b| b.seq(&op.author()));
         let idx = op.seq().checked_sub(2 + base_seq)?;
-        let at = self
-            .by_author
-            .get(&op.author())?
-            .get(usize::try_from(idx).ok()?)?;
+        let at = (self.authors.get(&op.author())?.chain).get(usize::try_from(idx).ok()?)?;
         Some(self.ops.at(*at).id_ref())
     }
 
