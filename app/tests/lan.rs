@@ -9,7 +9,7 @@
 )]
 
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use serde_json::Value;
@@ -57,15 +57,22 @@ fn peers_of_one_session_find_each_other_on_the_lan_without_a_server() {
             dir.join(format!("{name}.log")).display()
         )
     };
+    // The shell becomes the `sleep` that holds the namespace open, so killing it leaves no
+    // process behind but the peers (killed below by their store paths), and none of them holds
+    // the test's output: the shell writes to a file.
     let script = format!(
         "ip link set lo up && ip route add 224.0.0.0/4 dev lo || exit 3\n{}\n{}\n{}\n\
-         sleep {WAIT_SECS}\n",
+         exec sleep {WAIT_SECS}\n",
         peer("a", &melon, "melon", "hello from a"),
         peer("b", &melon, "melon", "hello from b"),
         peer("c", &cube, "cube", "hello from c"),
     );
+    let shell_log = dir.join("namespace.log");
     let mut namespace = Command::new("unshare")
         .args(["-rn", "sh", "-c", &script])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&shell_log).unwrap())
         .spawn()
         .unwrap();
     let (a, b, c) = (dir.join("a.json"), dir.join("b.json"), dir.join("c.json"));
@@ -83,13 +90,14 @@ fn peers_of_one_session_find_each_other_on_the_lan_without_a_server() {
             break;
         }
         if let Ok(Some(status)) = namespace.try_wait() {
-            panic!("the namespace ended early ({status})");
+            let shell = std::fs::read_to_string(&shell_log).unwrap_or_default();
+            panic!("the namespace ended early ({status}): {shell}");
         }
         std::thread::sleep(Duration::from_millis(100));
     }
-    let logs: Vec<String> = ["a", "b", "c"]
+    let logs: Vec<String> = ["a.log", "b.log", "c.log", "namespace.log"]
         .iter()
-        .map(|n| std::fs::read_to_string(dir.join(format!("{n}.log"))).unwrap_or_default())
+        .map(|n| std::fs::read_to_string(dir.join(n)).unwrap_or_default())
         .collect();
     let (sa, sc) = (last_state(&a), last_state(&c));
     let _ = namespace.kill();
