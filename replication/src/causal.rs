@@ -198,9 +198,9 @@ pub const MAX_REACH_MEMO_ENTRIES: usize = 1 << 20;
 /// Targets are named by their position in the log's slab ([`crate::op`]), which never changes
 /// while the log holds the op. Targets and authors are numbered in order of first use, and
 /// each target has a row of 8-byte slots indexed by author number: a session's few authors are
-/// asked about most targets, so the rows are nearly full. A hash table of pairs took 16 bytes an entry and doubled as it
-/// grew (about 150 bytes per op held at 32 peers); nested trees of ids, before it, about 100
-/// bytes an entry.
+/// asked about most targets, so the rows are nearly full. A hash table of pairs took 16 bytes
+/// an entry and doubled as it grew (about 150 bytes per op held at 32 peers); nested trees of
+/// ids, before it, about 100 bytes an entry.
 ///
 /// An empty memo holds nothing on the heap and costs nothing to drop: a log lends its memo
 /// out for each refold and takes it back, leaving an empty one in its place meanwhile.

@@ -290,6 +290,15 @@ pub(crate) struct Authored {
     pub(crate) bytes: u64,
 }
 
+impl Authored {
+    /// Where the chain's op with sequence number `seq` is held, when the base holds the
+    /// author's first `base_seq` ops (`None` inside the base or past the chain).
+    pub(crate) fn at_seq(&self, base_seq: u64, seq: u64) -> Option<u32> {
+        let i = usize::try_from(seq.checked_sub(1 + base_seq)?).ok()?;
+        self.chain.get(i).copied()
+    }
+}
+
 /// What a refold carries to judge ops against the leases they saw: the reach memo, taken out
 /// of the log for its duration, and what judging the last lease op learnt of it.
 struct LeaseCx {
@@ -904,14 +913,9 @@ impl<P: Payload> Log<P> {
     fn deliver(&mut self, op: Op<P>, now: Timestamp) -> Result<usize, InsertError> {
         let author = op.author();
         let authored = self.authors.get(&author);
-        let chain = authored.map_or(&[][..], |a| &a.chain);
         let base_seq = self.base.as_ref().map_or(0, |b| b.seq(&author));
-        // The chain's op with seq `seq`, if held.
-        let on_chain = |seq: u64| {
-            let i = usize::try_from(seq.checked_sub(1 + base_seq)?).ok()?;
-            Some(self.ops.at(*chain.get(i)?))
-        };
-        let held = base_seq + chain.len() as u64;
+        let on_chain = |seq: u64| Some(self.ops.at(authored?.at_seq(base_seq, seq)?));
+        let held = base_seq + authored.map_or(0, |a| a.chain.len() as u64);
         debug_assert_eq!(held, self.vv.get(&author), "the chain is what is held");
         let twin = if held >= op.seq() {
             // A twin inside a base cannot be told apart from this op's past: refused.
@@ -1624,9 +1628,10 @@ impl<P: Payload> Log<P> {
     /// The author's held op with sequence number `seq` (`None` inside the base).
     pub fn by_seq(&self, author: &PeerId, seq: u64) -> Option<&Op<P>> {
         let base_seq = self.base.as_ref().map_or(0, |b| b.seq(author));
-        let idx = usize::try_from(seq.checked_sub(1 + base_seq)?).ok()?;
-        let at = *self.chain(author).get(idx)?;
-        Some(self.ops.at(at))
+        Some(
+            self.ops
+                .at(self.authors.get(author)?.at_seq(base_seq, seq)?),
+        )
     }
 
     /// What this log holds, per author.

@@ -101,9 +101,8 @@ impl<P: Payload> Dag<'_, P> {
             return None;
         }
         let base_seq = self.base.map_or(0, |b| b.seq(&op.author()));
-        let idx = op.seq().checked_sub(2 + base_seq)?;
-        let at = (self.authors.get(&op.author())?.chain).get(usize::try_from(idx).ok()?)?;
-        Some(self.ops.at(*at).id_ref())
+        let at = (self.authors.get(&op.author())?).at_seq(base_seq, op.seq().checked_sub(1)?)?;
+        Some(self.ops.at(at).id_ref())
     }
 
     /// The answer for `id` without walking, if there is one.
