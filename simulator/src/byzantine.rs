@@ -495,7 +495,7 @@ impl Simulation {
                     out.push((to, Message::have(vv).encode()));
                 }
                 let vv = made_up_vv(rng, MAX_VV_AUTHORS);
-                out.push((to, Message::Want(vv).encode()));
+                out.push((to, Message::want(vv).encode()));
                 Some(out)
             }
             Attack::OversizedBatch => {

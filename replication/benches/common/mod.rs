@@ -117,7 +117,7 @@ pub fn catch_up(a: &mut Side, b: &mut Side) -> u64 {
     for _ in 0..10_000_000 {
         let lacking = b.sync.lacking(&b.log);
         if !lacking.is_empty() && wanted.as_ref() != Some(&lacking) {
-            b.sync.want(lacking.clone());
+            b.sync.want(lacking.clone(), &b.log);
             wanted = Some(lacking);
         }
         while let Some(bytes) = a.sync.poll_transmit(Timestamp(now), &a.log) {

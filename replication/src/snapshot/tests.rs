@@ -73,7 +73,7 @@ fn pump(a: &mut Side, b: &mut Side, now: &mut u64) {
         for side in [&mut *a, &mut *b] {
             let lacking = side.sync.lacking(&side.log);
             if !lacking.is_empty() && side.wanted.as_ref() != Some(&lacking) {
-                side.sync.want(lacking.clone());
+                side.sync.want(lacking.clone(), &side.log);
                 side.wanted = Some(lacking);
                 moved = true;
             }

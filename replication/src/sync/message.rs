@@ -28,7 +28,9 @@ pub const SYNC_WIRE_VERSION: u8 = 1;
 /// 6: a [`Message::Have`] names the sender's op at each seq it announces (its tip), so two
 /// peers holding different sides of a fork find out, and [`Message::Forked`] carries two ops
 /// the receiver inserts.
-pub const PROTOCOL_VERSION: u64 = 6;
+/// 7: a [`Message::Want`] says how much of each author the sender holds, so the receiver
+/// relays from there rather than from what it last heard.
+pub const PROTOCOL_VERSION: u64 = 7;
 /// Length of a session id.
 pub const SESSION_ID_BYTES: usize = 16;
 /// Most ops in one [`Message::Ops`] batch.
@@ -43,11 +45,14 @@ pub const MAX_EPHEMERAL_BYTES: usize = 1024;
 const MAX_VV_BYTES: usize = MAX_VARINT_BYTES + MAX_VV_AUTHORS * (PEER_ID_BYTES + MAX_VARINT_BYTES);
 /// Bytes of one tip ([`Message::Have`]): the first bytes of an op id.
 pub const TIP_BYTES: usize = 8;
-// A Have of a full version vector with its tips, a Want or an Ack fits in a message with room
-// for its header.
+// A Have of a full version vector with its tips, a Want with its held seqs or an Ack fits in
+// a message with room for its header.
 const _: () = assert!(
     2 + MAX_VARINT_BYTES + MAX_VV_BYTES + MAX_VARINT_BYTES + MAX_VV_AUTHORS * TIP_BYTES
         <= MAX_MESSAGE_BYTES
+);
+const _: () = assert!(
+    2 + MAX_VV_BYTES + MAX_VARINT_BYTES + MAX_VV_AUTHORS * MAX_VARINT_BYTES <= MAX_MESSAGE_BYTES
 );
 // An ack names at most one batch's authors.
 const _: () = assert!(MAX_BATCH_OPS <= MAX_VV_AUTHORS);
@@ -105,7 +110,14 @@ pub enum Message {
     },
     /// Asks the receiver to relay third peers' ops up to these entries (the sender lacks them
     /// and chose this receiver among those whose haves show them).
-    Want(VersionVector),
+    Want {
+        /// Up to where each author's ops are wanted.
+        vv: VersionVector,
+        /// For each entry in order, the seq of the author the sender holds (it holds that
+        /// author's ops up to there), which the receiver learns as from a have: after a
+        /// partition its picture of the sender may be old, and it would relay from there.
+        held: Vec<u64>,
+    },
     /// A latest-value-wins ephemeral value (pose, presence); never stored.
     Ephemeral {
         /// The stream.
@@ -147,6 +159,12 @@ impl Message {
         }
     }
 
+    /// A want that says nothing of what the sender holds.
+    pub fn want(vv: VersionVector) -> Self {
+        let held = vec![0; vv.len()];
+        Self::Want { vv, held }
+    }
+
     /// The encoded message.
     pub fn encode(&self) -> Vec<u8> {
         let mut out = vec![SYNC_WIRE_VERSION];
@@ -184,9 +202,13 @@ impl Message {
                 put_varint(&mut out, *batch_no);
                 put_vv(&mut out, have);
             }
-            Self::Want(vv) => {
+            Self::Want { vv, held } => {
                 out.push(TAG_WANT);
                 put_vv(&mut out, vv);
+                put_varint(&mut out, held.len() as u64);
+                for seq in held {
+                    put_varint(&mut out, *seq);
+                }
             }
             Self::Ephemeral {
                 channel,
@@ -261,7 +283,19 @@ impl Message {
                     .collect::<Result<_, _>>()?;
                 Self::Have { vv, tips }
             }
-            TAG_WANT => Self::Want(read_vv(&mut r)?),
+            TAG_WANT => {
+                let vv = read_vv(&mut r)?;
+                let offset = r.offset();
+                let n = r.bounded("held count", MAX_VV_AUTHORS as u64)?;
+                if n != vv.len() {
+                    return Err(DecodeError::Invalid {
+                        offset,
+                        what: "held count differs from the version vector's",
+                    });
+                }
+                let held = (0..n).map(|_| r.varint()).collect::<Result<_, _>>()?;
+                Self::Want { vv, held }
+            }
             TAG_OPS => {
                 let batch_no = r.varint()?;
                 let n_ops = r.bounded("batch op count", MAX_BATCH_OPS as u64)?;
@@ -387,7 +421,10 @@ mod tests {
                 };
                 Message::Have { vv, tips }
             }),
-            vv.clone().prop_map(Message::Want),
+            (vv.clone(), any::<u64>()).prop_map(|(vv, seq)| {
+                let held = vec![seq; vv.len()];
+                Message::Want { vv, held }
+            }),
             (
                 any::<u64>(),
                 proptest::collection::vec(proptest::collection::vec(any::<u8>(), 0..40), 0..5)
@@ -460,7 +497,10 @@ mod tests {
                 vv: full.clone(),
                 tips,
             },
-            Message::Want(full.clone()),
+            Message::Want {
+                vv: full.clone(),
+                held: vec![u64::MAX; full.len()],
+            },
             Message::Ack {
                 batch_no,
                 have: full.clone(),

@@ -3,10 +3,12 @@
 //! Inputs are `handle_*(now, ..)`; outputs are [`SyncState::poll_transmit`],
 //! [`SyncState::poll_event`] and [`SyncState::poll_timeout`]. Drain every `poll_*` after each
 //! input. The state is rebuilt on every connection: the remote's version vector is learnt
-//! from its hello-time [`Message::Have`], from the changes it announces at most every
-//! [`HAVE_EVERY_MICROS`] and from acks, and anything not acknowledged is sent again after a
-//! timeout estimated from the round trips of acknowledged batches (between
-//! [`RESEND_AFTER_MIN_MICROS`] and [`RESEND_AFTER_MICROS`]), backing off to
+//! from its hello-time [`Message::Have`] (the hello is sent again until it comes, and none of
+//! our own ops goes out before it or a want or ack saying how much of them the remote holds),
+//! from the changes it announces at most every [`HAVE_EVERY_MICROS`],
+//! from acks and from what its wants say it holds, and anything not acknowledged is sent again
+//! after a timeout estimated from the round trips of the first hello and of acknowledged
+//! batches (between [`RESEND_AFTER_MIN_MICROS`] and [`RESEND_AFTER_MICROS`]), backing off to
 //! [`RESEND_AFTER_MAX_MICROS`] while the remote stays silent, so a lost or duplicated message
 //! can neither stall nor loop a sync.
 //!
@@ -21,12 +23,12 @@
 //! was kept has been fetched, the connection sends its hello again, which every peer answers
 //! with its full have, and learns the next part.
 //!
-//! Traffic in a full mesh of n peers: a peer sends its own ops to every remote at once, but
-//! relays a third peer's ops only when the remote asks with a [`Message::Want`]. The
-//! [`Peer`](crate::peer::Peer) asks one connection at a time for what it lacks, after about a
-//! round trip when the author itself is connected (at most [`RELAY_AFTER_MICROS`]), so each op
-//! crosses each link about once instead of once per relaying peer; wants carry what
-//! partitions, losses, crashes and absent authors hold back.
+//! Traffic in a full mesh of n peers: a peer sends its own ops to every remote once it knows
+//! what the remote holds, but relays a third peer's ops only when the remote asks with a
+//! [`Message::Want`]. The [`Peer`](crate::peer::Peer) asks one connection at a time for what
+//! it lacks, after about a round trip when the author itself is connected (at most
+//! [`RELAY_AFTER_MICROS`]), so each op crosses each link about once instead of once per
+//! relaying peer; wants carry what partitions, losses, crashes and absent authors hold back.
 
 use std::cell::Cell;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
@@ -325,6 +327,11 @@ pub struct SyncState<P> {
     closed: bool,
     /// The remote has confirmed it saw our hello.
     hello_confirmed: bool,
+    /// A have of the remote arrived on this connection (until then the hello is sent again).
+    have_learnt: bool,
+    /// How much of our own ops the remote holds is known (from a have, or a want or ack that
+    /// names our author): until then none of them goes out, since they may be held.
+    own_known: bool,
     hello_sent_at: Option<Timestamp>,
     /// When the first hello went out, while no timer sent it again: the remote's first have
     /// answers it, which measures a round trip before any batch is acknowledged.
@@ -436,6 +443,8 @@ impl<P: Payload> SyncState<P> {
             remote: None,
             closed: false,
             hello_confirmed: false,
+            have_learnt: false,
+            own_known: false,
             hello_sent_at: None,
             hello_first_at: Some(now),
             hello_resend_micros: RESEND_AFTER_MICROS,
@@ -516,8 +525,7 @@ impl<P: Payload> SyncState<P> {
     /// round trip was measured here: four deviations above the smoothed round trip of
     /// acknowledged batches or, before the first, three times the round trip of the first
     /// hello (RFC 6298's first sample), between [`RESEND_AFTER_MIN_MICROS`] and
-    /// [`RESEND_AFTER_MICROS`]; `None` before. Batches themselves wait for their own
-    /// measurement: a hello is small, and a batch on a slow link takes longer to acknowledge.
+    /// [`RESEND_AFTER_MICROS`]; `None` before.
     pub fn resend_timeout(&self) -> Option<u64> {
         let from_hello = || self.hello_rtt_micros.map(|rtt| rtt.saturating_mul(3));
         (self.rtt_micros.map(|_| self.base_resend_micros()))
@@ -577,11 +585,17 @@ impl<P: Payload> SyncState<P> {
         lacking
     }
 
-    /// Asks the remote to relay third peers' ops up to `vv`, in as many wants as it takes.
-    pub fn want(&mut self, vv: VersionVector) {
+    /// Asks the remote to relay third peers' ops up to `vv`, in as many wants as it takes,
+    /// each saying how much of those authors `log` holds.
+    pub fn want(&mut self, vv: VersionVector, log: &Log<P>) {
         if self.remote.is_some() && !self.closed && !vv.is_empty() {
-            self.control
-                .extend(vv.split(MAX_VV_AUTHORS).into_iter().map(Message::Want));
+            let with_held = |vv: VersionVector| {
+                let held = (vv.iter())
+                    .map(|(author, _)| log.version_vector().get(author))
+                    .collect();
+                Message::Want { vv, held }
+            };
+            (self.control).extend(vv.split(MAX_VV_AUTHORS).into_iter().map(with_held));
         }
     }
 
@@ -692,12 +706,13 @@ impl<P: Payload> SyncState<P> {
                 self.hello_resend_micros = self.hello_timeout();
             }
             message => {
+                self.handle_message(now, message, log);
                 // The remote speaks, maybe again after a partition healed: what it has not
                 // acknowledged, our hello included, goes out again on the base interval, not
-                // a backed-off one.
+                // a backed-off one (measured with what this message taught, such as the round
+                // trip of a have answering our hello).
                 self.resend_micros = self.base_resend_micros();
                 self.hello_resend_micros = self.hello_timeout();
-                self.handle_message(now, message, log);
             }
         }
     }
@@ -709,6 +724,8 @@ impl<P: Payload> SyncState<P> {
             Message::Hello { .. } => {}
             Message::Have { vv, tips } => {
                 self.hello_confirmed = true;
+                self.have_learnt = true;
+                self.own_known = true;
                 // The first have answers our first hello, unless a timer sent that again:
                 // then which one it answers is unknown (Karn's rule), and nothing is measured.
                 if let Some(at) = self.hello_first_at.take() {
@@ -720,9 +737,9 @@ impl<P: Payload> SyncState<P> {
                 self.learn_remote(now, &vv, log);
                 self.compare_tips(&vv, &tips, log);
             }
-            Message::Want(vv) => {
+            Message::Want { vv, held } => {
                 self.hello_confirmed = true;
-                self.on_want(&vv, log);
+                self.on_want(now, &vv, &held, log);
             }
             Message::Ops { batch_no, ops } => {
                 self.hello_confirmed = true;
@@ -730,6 +747,7 @@ impl<P: Payload> SyncState<P> {
             }
             Message::Ack { batch_no, have } => {
                 self.hello_confirmed = true;
+                self.own_known |= have.get(&self.config.local) > 0;
                 if let Some(sent_at) = self.in_flight.remove(&batch_no) {
                     self.measure_rtt(now.0.saturating_sub(sent_at.0));
                     self.resend_micros = self.base_resend_micros();
@@ -997,8 +1015,21 @@ impl<P: Payload> SyncState<P> {
     }
 
     /// The remote asks for third peers' ops. Only authors the log holds are kept: those are
-    /// all an honest remote asks for (it saw them in this peer's haves).
-    fn on_want(&mut self, vv: &VersionVector, log: &Log<P>) {
+    /// all an honest remote asks for (it saw them in this peer's haves). What it says it holds
+    /// of them is learnt first, so the relay starts there.
+    fn on_want(&mut self, now: Timestamp, vv: &VersionVector, held: &[u64], log: &Log<P>) {
+        let mut holds = VersionVector::new();
+        for ((author, _), seq) in vv.iter().zip(held) {
+            if *seq > 0 && log.version_vector().get(author) > 0 {
+                holds.raise(*author, *seq);
+            }
+        }
+        if !holds.is_empty() {
+            self.learn_remote(now, &holds, log);
+        }
+        if vv.get(&self.config.local) > 0 {
+            self.own_known = true;
+        }
         for (author, seq) in vv.iter() {
             if log.version_vector().get(author) == 0 {
                 self.stats.n_claims_dropped += 1;
@@ -1288,17 +1319,25 @@ impl<P: Payload> SyncState<P> {
     }
 
     /// The batch resend timeout before any backoff: four deviations above the smoothed round
-    /// trip of acknowledged batches, or [`RESEND_AFTER_MICROS`] before one is measured.
+    /// trip of acknowledged batches; before the first, three round trips of the first hello
+    /// (RFC 6298's first sample), or [`RESEND_AFTER_MICROS`] before that is measured. The
+    /// first batches of a connection often carry what a peer back from a partition or a crash
+    /// lacks, and one lost there would otherwise cost a whole second.
     fn base_resend_micros(&self) -> u64 {
-        self.rtt_micros.map_or(RESEND_AFTER_MICROS, |(srtt, var)| {
-            srtt.saturating_add(var.saturating_mul(4))
-                .clamp(RESEND_AFTER_MIN_MICROS, RESEND_AFTER_MICROS)
-        })
+        self.rtt_micros.map_or_else(
+            || self.resend_timeout().unwrap_or(RESEND_AFTER_MICROS),
+            |(srtt, var)| {
+                srtt.saturating_add(var.saturating_mul(4))
+                    .clamp(RESEND_AFTER_MIN_MICROS, RESEND_AFTER_MICROS)
+            },
+        )
     }
 
+    /// A hello goes out again until the remote's have arrives: every hello is answered with
+    /// one, and until then what the remote holds is unknown.
     fn hello_due(&self) -> Option<Timestamp> {
         self.hello_sent_at
-            .filter(|_| self.remote.is_none() || !self.hello_confirmed)
+            .filter(|_| self.remote.is_none() || !self.have_learnt)
             .map(|t| t.saturating_add_micros(self.hello_resend_micros))
     }
 
@@ -1520,7 +1559,7 @@ impl<P: Payload> SyncState<P> {
     /// up to what the remote asked for.
     fn send_limit(&self, author: &PeerId, held: u64) -> u64 {
         if *author == self.config.local {
-            held
+            if self.own_known { held } else { 0 }
         } else {
             held.min(self.relay_vv.get(author))
         }
@@ -1536,7 +1575,7 @@ impl<P: Payload> SyncState<P> {
             Some((_, true)) => true,
             Some((_, false)) => {
                 let me = &self.config.local;
-                self.sent_vv.get(me) < log.version_vector().get(me)
+                self.own_known && self.sent_vv.get(me) < log.version_vector().get(me)
             }
             None => log
                 .version_vector()

@@ -375,7 +375,7 @@ impl World {
                 self.send(conn, &have);
             }
             5 => {
-                let want = Message::Want(self.version_vector(bytes));
+                let want = Message::want(self.version_vector(bytes));
                 self.send(conn, &want);
             }
             6 | 7 => {
