@@ -3,10 +3,12 @@
 //!
 //! Across connections the peer decides whom to ask for what it lacks: when some remote's
 //! version vector shows ops of an author this peer does not hold, it sends one
-//! [`Message::Want`](crate::sync::message::Message::Want) to one holder (right away if the
-//! author is not connected, after the author's connection's resend timeout if it is and so
-//! should deliver them itself), and asks the next holder only if nothing arrived for twice the
-//! holder's resend timeout. Those timeouts come from the round trips measured on each
+//! [`Message::Want`](crate::sync::message::Message::Want) to one holder at once: the author
+//! itself when it is connected and shows them (its want goes on the connection that carries
+//! the author's own sends, so nothing crosses twice), else the holder that delivered the
+//! most. It asks the next holder when the one asked gave all it shows, or if nothing arrived
+//! for the author's resend timeout, or for twice a third peer's; after a third peer, the
+//! author is asked again. Those timeouts come from the round trips measured on each
 //! connection (its first hello answered, then acknowledged batches), so on a LAN a lost op
 //! is repaired in milliseconds and on a slow link nobody is asked too early; a connection
 //! without a measurement waits what the peer's other connections measure, and none waits
@@ -77,8 +79,6 @@ pub struct Peer<P> {
 /// What this peer asked for one author's ops.
 #[derive(Clone, Copy, Debug)]
 struct WantState {
-    /// When the lack was first seen.
-    since: Timestamp,
     /// When, where and at what held seq it was last asked for, if it was.
     asked: Option<Asked>,
     /// How many holders were asked so far (picks the next).
@@ -319,55 +319,70 @@ impl<P: Payload> Peer<P> {
         for (author, _) in lacking.iter() {
             let have = held.get(author);
             let want = self.wants.entry(*author).or_insert(WantState {
-                since: now,
                 asked: None,
                 n_asked: 0,
             });
-            let wait = match direct.iter().find(|(remote, _)| remote == author) {
-                Some((_, conn)) => {
-                    timeout(conn).map_or(RELAY_AFTER_MICROS, |t| t.min(RELAY_AFTER_MICROS))
-                }
-                None => 0,
+            let holds_more = |conn: &ConnId| {
+                (self.connections.get(conn))
+                    .is_some_and(|s| s.remote_version_vector().get(author) > have)
             };
-            if now < want.since.saturating_add_micros(wait) {
-                continue;
-            }
-            if let Some(asked) = want.asked {
+            // The author's own connection, if it shows more of the author than this peer holds.
+            let author_conn = (direct.iter())
+                .find(|(remote, _)| remote == author)
+                .map(|(_, conn)| *conn)
+                .filter(holds_more);
+            if let Some(asked) = want.asked
+                && holds_more(&asked.conn)
+            {
                 let sync = self.connections.get(&asked.conn);
                 if have > asked.had {
                     // The holder is delivering: give it more time.
                     want.asked = Some(Asked::new(now, asked.conn, have, sync));
                     continue;
                 }
-                let retry = timeout(&asked.conn)
-                    .map_or(WANT_RETRY_MICROS, |t| (2 * t).min(WANT_RETRY_MICROS));
+                let from_author = Some(asked.conn) == author_conn;
+                let retry = match timeout(&asked.conn) {
+                    Some(t) if from_author => t.min(RELAY_AFTER_MICROS),
+                    None if from_author => RELAY_AFTER_MICROS,
+                    Some(t) => (2 * t).min(WANT_RETRY_MICROS),
+                    None => WANT_RETRY_MICROS,
+                };
                 if now < asked.at.saturating_add_micros(retry) {
                     continue;
                 }
-                if asked.unanswered(sync) {
+                if !from_author && asked.unanswered(sync) {
                     // The claim is withdrawn, and the next holder, if any, is asked below.
                     withdraw.push((asked.conn, *author));
                 }
             }
-            // Holders that delivered the most so far are asked first: a remote that only claims
-            // to hold ops (a replayed have) and sends none is tried last.
-            let mut holders: Vec<(u64, ConnId, u64)> = self
-                .connections
-                .iter()
-                .map(|(c, s)| {
-                    let seq = s.remote_version_vector().get(author);
-                    (s.stats().n_ops_delivered, *c, seq)
-                })
-                .filter(|(_, _, seq)| *seq > have)
-                .collect();
-            holders.sort_by_key(|&(delivered, conn, _)| (std::cmp::Reverse(delivered), conn));
-            if let Some(&(failed, _)) = withdraw.last().filter(|(_, a)| a == author) {
-                holders.retain(|(_, conn, _)| *conn != failed);
-            }
-            let Some(&(_, conn, seq)) = holders.get(want.n_asked % holders.len().max(1)) else {
-                want.asked = None;
-                continue;
+            // A holder that gave all it shows is not waited for. The author is asked first
+            // (and again after each third peer): it sends on the connection that carries its
+            // own pushes, so nothing goes twice, and the want tells it where to start. Then
+            // holders that delivered the most so far: a remote that only claims to hold ops (a
+            // replayed have) and sends none is tried last.
+            let last = want.asked.map(|a| a.conn);
+            let conn = match author_conn.filter(|c| Some(*c) != last) {
+                Some(conn) => conn,
+                None => {
+                    let mut holders: Vec<(u64, ConnId)> = (self.connections.iter())
+                        .filter(|(c, _)| holds_more(c))
+                        .map(|(c, s)| (s.stats().n_ops_delivered, *c))
+                        .collect();
+                    holders.sort_by_key(|&(delivered, conn)| (std::cmp::Reverse(delivered), conn));
+                    if let Some(&(failed, _)) = withdraw.last().filter(|(_, a)| a == author) {
+                        holders.retain(|(_, conn)| *conn != failed);
+                    }
+                    if holders.len() > 1 {
+                        holders.retain(|(_, conn)| Some(*conn) != author_conn);
+                    }
+                    let Some(&(_, conn)) = holders.get(want.n_asked % holders.len().max(1)) else {
+                        want.asked = None;
+                        continue;
+                    };
+                    conn
+                }
             };
+            let seq = self.connections[&conn].remote_version_vector().get(author);
             want.asked = Some(Asked::new(now, conn, have, self.connections.get(&conn)));
             want.n_asked += 1;
             asks.entry(conn).or_default().raise(*author, seq);
@@ -717,6 +732,74 @@ mod tests {
             t - learnt_at <= RESEND_AFTER_MIN_MICROS + 2 * WANT_CHECK_MICROS,
             "C learnt of the op at {learnt_at} and got it at {t}"
         );
+    }
+
+    #[test]
+    fn an_author_whose_batches_were_lost_is_asked_at_once_and_nobody_relays() {
+        // A, B and C in a full mesh on a link that delivers at once. A's first five batches
+        // to B are lost, so A's resends back off; its have then tells B what A holds. B asks
+        // A itself at once: A sends the op again on the want, and C, which also holds it and
+        // delivered B more, is not asked (before, B waited A's timeout and then asked C, who
+        // relayed it).
+        let (mut peers, links) = full_mesh(3, Timestamp(0));
+        pump(&mut peers, &links, Timestamp(0));
+        // C has delivered B more than A, which ranks it first among third peers.
+        for k in 0..3 {
+            peers[2]
+                .author(Timestamp(0), TestPayload::Chat(format!("C {k}")))
+                .unwrap();
+        }
+        pump(&mut peers, &links, Timestamp(0));
+        let sent_by_c = |peers: &[TPeer]| -> u64 {
+            (peers[2].connections())
+                .map(|(_, s)| s.stats().n_ops_out)
+                .sum()
+        };
+        let before = sent_by_c(&peers);
+        let (op, _) = peers[0]
+            .author(Timestamp(0), TestPayload::Chat("to B, late".into()))
+            .unwrap();
+        let route = |from: usize, conn: ConnId| {
+            let (a, ac, b, bc) = (links.iter())
+                .find(|(a, ac, b, bc)| (*a, *ac) == (from, conn) || (*b, *bc) == (from, conn))
+                .copied()
+                .unwrap();
+            if (a, ac) == (from, conn) {
+                (b, bc)
+            } else {
+                (a, ac)
+            }
+        };
+        let (mut t, mut n_lost) = (0, 0);
+        let mut learnt_at = None;
+        while !peers[1].log().contains(&op.id()) {
+            assert!(t < 10 * HAVE_EVERY_MICROS, "B never got the op");
+            t += 10_000;
+            let now = Timestamp(t);
+            for p in peers.iter_mut() {
+                p.handle_timeout(now);
+            }
+            for from in 0..3 {
+                while let Some((conn, bytes)) = peers[from].poll_transmit(now) {
+                    let (to, to_conn) = route(from, conn);
+                    let batch = matches!(Message::decode(&bytes), Ok(Message::Ops { .. }));
+                    if (from, to) == (0, 1) && batch && n_lost < 5 {
+                        n_lost += 1;
+                        continue;
+                    }
+                    peers[to].handle_input(now, to_conn, &bytes);
+                }
+            }
+            if learnt_at.is_none() && peers[1].wants.contains_key(&op.author()) {
+                learnt_at = Some(t);
+            }
+        }
+        let learnt_at = learnt_at.expect("B asked for the op");
+        assert!(
+            t - learnt_at <= 2 * WANT_CHECK_MICROS,
+            "B learnt of the op at {learnt_at} and got it at {t}"
+        );
+        assert_eq!(sent_by_c(&peers), before, "C relayed what A could send");
     }
 
     #[test]

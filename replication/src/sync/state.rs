@@ -26,9 +26,11 @@
 //! Traffic in a full mesh of n peers: a peer sends its own ops to every remote once it knows
 //! what the remote holds, but relays a third peer's ops only when the remote asks with a
 //! [`Message::Want`]. The [`Peer`](crate::peer::Peer) asks one connection at a time for what
-//! it lacks, after about a round trip when the author itself is connected (at most
-//! [`RELAY_AFTER_MICROS`]), so each op crosses each link about once instead of once per
-//! relaying peer; wants carry what partitions, losses, crashes and absent authors hold back.
+//! it lacks: the author itself first when it is connected (the want goes on the connection
+//! that carries the author's own sends, so nothing crosses twice), a third peer after about a
+//! round trip without progress (at most [`RELAY_AFTER_MICROS`]), so each op crosses each link
+//! about once instead of once per relaying peer; wants carry what partitions, losses, crashes
+//! and absent authors hold back.
 
 use std::cell::Cell;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
@@ -59,9 +61,9 @@ pub const RESEND_AFTER_MIN_MICROS: u64 = 100_000;
 /// The resend interval doubles while the remote stays silent, up to this (32 s), so a dead or
 /// hostile remote that never answers costs a bounded trickle.
 pub const RESEND_AFTER_MAX_MICROS: u64 = 32_000_000;
-/// A peer asks a third peer for an author's ops only after lacking them for the resend timeout
-/// of its connection to the author, when it has one, and at most this long (500 ms): time for
-/// the author's own send (or its resend) to arrive.
+/// A peer asks a third peer for a connected author's ops only after the author, asked first,
+/// sent none for the resend timeout of its connection, when it has one, and at most this long
+/// (500 ms): time for the author's own send (or its resend) to arrive.
 pub const RELAY_AFTER_MICROS: u64 = 500_000;
 /// A peer tells each remote what it has gained at most this often (1 s), as a delta.
 pub const HAVE_EVERY_MICROS: u64 = 1_000_000;
