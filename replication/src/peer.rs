@@ -595,6 +595,35 @@ mod tests {
     /// A link: peer, its connection id, the other peer, its connection id.
     type Link = (usize, ConnId, usize, ConnId);
 
+    /// One tick on links that deliver at once: every timer, then every message sent but those
+    /// `lose(from, to, bytes)` picks.
+    fn tick_losing(
+        peers: &mut [TPeer],
+        links: &[Link],
+        now: Timestamp,
+        mut lose: impl FnMut(usize, usize, &[u8]) -> bool,
+    ) {
+        for p in peers.iter_mut() {
+            p.handle_timeout(now);
+        }
+        for from in 0..peers.len() {
+            while let Some((conn, bytes)) = peers[from].poll_transmit(now) {
+                let (a, a_conn, b, b_conn) = (links.iter())
+                    .copied()
+                    .find(|&(a, ac, b, bc)| (a, ac) == (from, conn) || (b, bc) == (from, conn))
+                    .unwrap();
+                let (to, to_conn) = if (a, a_conn) == (from, conn) {
+                    (b, b_conn)
+                } else {
+                    (a, a_conn)
+                };
+                if !lose(from, to, &bytes) {
+                    peers[to].handle_input(now, to_conn, &bytes);
+                }
+            }
+        }
+    }
+
     /// Every pair of `n` peers connected; peer `i` reaches peer `j` on `ConnId(j)`.
     fn full_mesh(n: u8, now: Timestamp) -> (Vec<TPeer>, Vec<Link>) {
         let mut peers: Vec<TPeer> = (1..=n)
@@ -695,34 +724,14 @@ mod tests {
         let (op, _) = peers[0]
             .author(Timestamp(0), TestPayload::Chat("to C by way of B".into()))
             .unwrap();
-        let route = |from: usize, conn: ConnId| {
-            let (a, ac, b, bc) = (links.iter())
-                .find(|(a, ac, b, bc)| (*a, *ac) == (from, conn) || (*b, *bc) == (from, conn))
-                .copied()
-                .unwrap();
-            if (a, ac) == (from, conn) {
-                (b, bc)
-            } else {
-                (a, ac)
-            }
-        };
         let mut t = 0;
         let mut learnt_at = None;
         while !peers[2].log().contains(&op.id()) {
             assert!(t < 3 * HAVE_EVERY_MICROS, "never relayed");
             t += 10_000;
-            let now = Timestamp(t);
-            for p in peers.iter_mut() {
-                p.handle_timeout(now);
-            }
-            for from in 0..3 {
-                while let Some((conn, bytes)) = peers[from].poll_transmit(now) {
-                    let (to, to_conn) = route(from, conn);
-                    if (from, to) != (0, 2) {
-                        peers[to].handle_input(now, to_conn, &bytes);
-                    }
-                }
-            }
+            tick_losing(&mut peers, &links, Timestamp(t), |from, to, _| {
+                (from, to) == (0, 2)
+            });
             if learnt_at.is_none() && !peers[2].wants.is_empty() {
                 learnt_at = Some(t);
             }
@@ -759,37 +768,17 @@ mod tests {
         let (op, _) = peers[0]
             .author(Timestamp(0), TestPayload::Chat("to B, late".into()))
             .unwrap();
-        let route = |from: usize, conn: ConnId| {
-            let (a, ac, b, bc) = (links.iter())
-                .find(|(a, ac, b, bc)| (*a, *ac) == (from, conn) || (*b, *bc) == (from, conn))
-                .copied()
-                .unwrap();
-            if (a, ac) == (from, conn) {
-                (b, bc)
-            } else {
-                (a, ac)
-            }
-        };
         let (mut t, mut n_lost) = (0, 0);
         let mut learnt_at = None;
         while !peers[1].log().contains(&op.id()) {
             assert!(t < 10 * HAVE_EVERY_MICROS, "B never got the op");
             t += 10_000;
-            let now = Timestamp(t);
-            for p in peers.iter_mut() {
-                p.handle_timeout(now);
-            }
-            for from in 0..3 {
-                while let Some((conn, bytes)) = peers[from].poll_transmit(now) {
-                    let (to, to_conn) = route(from, conn);
-                    let batch = matches!(Message::decode(&bytes), Ok(Message::Ops { .. }));
-                    if (from, to) == (0, 1) && batch && n_lost < 5 {
-                        n_lost += 1;
-                        continue;
-                    }
-                    peers[to].handle_input(now, to_conn, &bytes);
-                }
-            }
+            tick_losing(&mut peers, &links, Timestamp(t), |from, to, bytes| {
+                let batch = matches!(Message::decode(bytes), Ok(Message::Ops { .. }));
+                let lose = (from, to) == (0, 1) && batch && n_lost < 5;
+                n_lost += usize::from(lose);
+                lose
+            });
             if learnt_at.is_none() && peers[1].wants.contains_key(&op.author()) {
                 learnt_at = Some(t);
             }

@@ -797,23 +797,29 @@ fn hold(node: &mut Node, ops: &[VerifiedOp<TestPayload>]) {
     }
 }
 
-/// A connection sent its own ops as soon as the remote's hello came, before the remote's have
-/// said what it holds: a peer back from a partition or a crash got again what it held. None
-/// goes out before the have, and the hello goes out again until one comes (a lost have would
-/// otherwise leave the connection silent).
-#[test]
-fn own_ops_wait_for_the_remotes_have_and_the_hello_repeats_until_one_comes() {
+/// A with three ops of its own, B holding the first two; A's hello reaches B at 40 ms, and of
+/// B's answer only its hello reaches A, at 80 ms (its have is lost).
+fn have_lost() -> [Node; 2] {
     let [mut a, mut b] = [Node::new(1, 2), Node::new(2, 1)];
     let mine: Vec<_> = (1..=3).map(|i| a.author(i, format!("a{i}"))).collect();
     hold(&mut b, &mine[..2]);
     carry(&mut a, &mut b, 0, 40 * MILLI);
-    // B answers with its have and its own hello; the have is lost.
     for message in outbox(&mut b, 40 * MILLI) {
         if matches!(message, Message::Hello { .. }) {
             a.sync
                 .handle_input(Timestamp(80 * MILLI), &message.encode(), &mut a.log);
         }
     }
+    [a, b]
+}
+
+/// A connection sent its own ops as soon as the remote's hello came, before the remote's have
+/// said what it holds: a peer back from a partition or a crash got again what it held. None
+/// goes out before the have, and the hello goes out again until one comes (a lost have would
+/// otherwise leave the connection silent).
+#[test]
+fn own_ops_wait_for_the_remotes_have_and_the_hello_repeats_until_one_comes() {
+    let [mut a, mut b] = have_lost();
     assert!(a.sync.remote().is_some());
     let early = drain_checked(&mut a, 80 * MILLI, RESEND_AFTER_MICROS);
     assert_eq!(batched(&early), vec![], "a batch before the remote's have");
@@ -882,17 +888,7 @@ fn a_first_batch_lost_goes_out_again_after_the_hellos_round_trips() {
 /// they go out from there, before any have came.
 #[test]
 fn a_want_for_the_authors_own_ops_lets_them_go_before_a_have() {
-    let [mut a, mut b] = [Node::new(1, 2), Node::new(2, 1)];
-    let mine: Vec<_> = (1..=3).map(|i| a.author(i, format!("a{i}"))).collect();
-    hold(&mut b, &mine[..2]);
-    carry(&mut a, &mut b, 0, 40 * MILLI);
-    let hello_only = outbox(&mut b, 40 * MILLI)
-        .into_iter()
-        .filter(|m| matches!(m, Message::Hello { .. }));
-    for message in hello_only {
-        a.sync
-            .handle_input(Timestamp(80 * MILLI), &message.encode(), &mut a.log);
-    }
+    let [mut a, mut b] = have_lost();
     assert_eq!(batched(&outbox(&mut a, 80 * MILLI)), vec![]);
     let mut vv = VersionVector::new();
     vv.raise(a.key.peer_id(), 3);
