@@ -155,6 +155,9 @@ pub(crate) struct Byzantine {
     pub(crate) must_refuse: Vec<OpId>,
     /// Pairs of ops that equivocate (same key, same sequence number).
     pub(crate) forks: Vec<(OpId, OpId)>,
+    /// Attacks chosen so far, and the menu entry the first one took (see `byzantine_send`).
+    n_turns: usize,
+    first_turn: usize,
 }
 
 /// What the core knows now: its heads (at most [`MAX_DEPS`]) and their highest Lamport time
@@ -185,6 +188,8 @@ impl Byzantine {
             bomb: None,
             must_refuse: Vec::new(),
             forks: Vec::new(),
+            n_turns: 0,
+            first_turn: 0,
         }
     }
 
@@ -372,7 +377,18 @@ impl Simulation {
         if menu.is_empty() {
             return false;
         }
-        let attack = menu[self.net.index(menu.len())];
+        // Each attack of the menu in turn from a random first one, so every kind is sent about
+        // as often whatever the network's draws (a random pick each time left one kind out of
+        // some short runs when an unrelated change moved those draws).
+        let first = self.net.index(menu.len());
+        let Some(byz) = self.hostile.as_mut().and_then(|h| h.byzantine.as_mut()) else {
+            return false;
+        };
+        if byz.n_turns == 0 {
+            byz.first_turn = first;
+        }
+        let attack = menu[(byz.first_turn + byz.n_turns) % menu.len()];
+        byz.n_turns += 1;
         let to = targets[self.net.index(targets.len())];
         let Some(sends) = self.craft(attack, to, targets) else {
             return false;
