@@ -28,8 +28,8 @@ pub const SYNC_WIRE_VERSION: u8 = 1;
 /// 6: a [`Message::Have`] names the sender's op at each seq it announces (its tip), so two
 /// peers holding different sides of a fork find out, and [`Message::Forked`] carries two ops
 /// the receiver inserts.
-/// 7: a [`Message::Want`] says how much of each author the sender holds, so the receiver
-/// relays from there rather than from what it last heard.
+/// 7: a [`Message::Want`] says how much of each author the sender holds, with the tip there,
+/// so the receiver relays from there rather than from what it last heard.
 pub const PROTOCOL_VERSION: u64 = 7;
 /// Length of a session id.
 pub const SESSION_ID_BYTES: usize = 16;
@@ -52,7 +52,8 @@ const _: () = assert!(
         <= MAX_MESSAGE_BYTES
 );
 const _: () = assert!(
-    2 + MAX_VV_BYTES + MAX_VARINT_BYTES + MAX_VV_AUTHORS * MAX_VARINT_BYTES <= MAX_MESSAGE_BYTES
+    2 + MAX_VV_BYTES + MAX_VARINT_BYTES + MAX_VV_AUTHORS * (MAX_VARINT_BYTES + TIP_BYTES)
+        <= MAX_MESSAGE_BYTES
 );
 // An ack names at most one batch's authors.
 const _: () = assert!(MAX_BATCH_OPS <= MAX_VV_AUTHORS);
@@ -114,9 +115,10 @@ pub enum Message {
         /// Up to where each author's ops are wanted.
         vv: VersionVector,
         /// For each entry in order, the seq of the author the sender holds (it holds that
-        /// author's ops up to there), which the receiver learns as from a have: after a
-        /// partition its picture of the sender may be old, and it would relay from there.
-        held: Vec<u64>,
+        /// author's ops up to there) and the tip of its op at that seq (0 for none), which the
+        /// receiver learns as from a have, tips compared as a have's: after a partition its
+        /// picture of the sender may be old, and it would relay from there.
+        held: Vec<(u64, u64)>,
     },
     /// A latest-value-wins ephemeral value (pose, presence); never stored.
     Ephemeral {
@@ -161,7 +163,7 @@ impl Message {
 
     /// A want that says nothing of what the sender holds.
     pub fn want(vv: VersionVector) -> Self {
-        let held = vec![0; vv.len()];
+        let held = vec![(0, 0); vv.len()];
         Self::Want { vv, held }
     }
 
@@ -206,8 +208,9 @@ impl Message {
                 out.push(TAG_WANT);
                 put_vv(&mut out, vv);
                 put_varint(&mut out, held.len() as u64);
-                for seq in held {
+                for (seq, tip) in held {
                     put_varint(&mut out, *seq);
+                    out.extend_from_slice(&tip.to_le_bytes());
                 }
             }
             Self::Ephemeral {
@@ -293,7 +296,9 @@ impl Message {
                         what: "held count differs from the version vector's",
                     });
                 }
-                let held = (0..n).map(|_| r.varint()).collect::<Result<_, _>>()?;
+                let held = (0..n)
+                    .map(|_| Ok((r.varint()?, u64::from_le_bytes(r.array()?))))
+                    .collect::<Result<_, DecodeError>>()?;
                 Self::Want { vv, held }
             }
             TAG_OPS => {
@@ -422,7 +427,7 @@ mod tests {
                 Message::Have { vv, tips }
             }),
             (vv.clone(), any::<u64>()).prop_map(|(vv, seq)| {
-                let held = vec![seq; vv.len()];
+                let held = vec![(seq, seq.rotate_left(7)); vv.len()];
                 Message::Want { vv, held }
             }),
             (
@@ -499,7 +504,7 @@ mod tests {
             },
             Message::Want {
                 vv: full.clone(),
-                held: vec![u64::MAX; full.len()],
+                held: vec![(u64::MAX, u64::MAX); full.len()],
             },
             Message::Ack {
                 batch_no,

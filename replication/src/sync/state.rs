@@ -593,7 +593,11 @@ impl<P: Payload> SyncState<P> {
         if self.remote.is_some() && !self.closed && !vv.is_empty() {
             let with_held = |vv: VersionVector| {
                 let held = (vv.iter())
-                    .map(|(author, _)| log.version_vector().get(author))
+                    .map(|(author, _)| {
+                        let seq = log.version_vector().get(author);
+                        let at = log.by_seq(author, seq);
+                        (seq, at.map_or(0, |op| tip(&op.id())))
+                    })
                     .collect();
                 Message::Want { vv, held }
             };
@@ -1019,15 +1023,20 @@ impl<P: Payload> SyncState<P> {
     /// The remote asks for third peers' ops. Only authors the log holds are kept: those are
     /// all an honest remote asks for (it saw them in this peer's haves). What it says it holds
     /// of them is learnt first, so the relay starts there.
-    fn on_want(&mut self, now: Timestamp, vv: &VersionVector, held: &[u64], log: &Log<P>) {
+    fn on_want(&mut self, now: Timestamp, vv: &VersionVector, held: &[(u64, u64)], log: &Log<P>) {
         let mut holds = VersionVector::new();
-        for ((author, _), seq) in vv.iter().zip(held) {
+        let mut tips = Vec::new();
+        for ((author, _), (seq, tip)) in vv.iter().zip(held) {
             if *seq > 0 && log.version_vector().get(author) > 0 {
                 holds.raise(*author, *seq);
+                tips.push(*tip);
             }
         }
         if !holds.is_empty() {
+            // As for a have: where the remote holds another op at a seq than the log does,
+            // the two are a fork, and the log's goes out.
             self.learn_remote(now, &holds, log);
+            self.compare_tips(&holds, &tips, log);
         }
         if vv.get(&self.config.local) > 0 {
             self.own_known = true;

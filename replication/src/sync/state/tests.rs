@@ -899,3 +899,30 @@ fn a_want_for_the_authors_own_ops_lets_them_go_before_a_have() {
         vec![(a.key.peer_id(), 3)]
     );
 }
+
+/// A want's held seqs were learnt without the tips a have carries: a relay holding another op
+/// at the asker's last seq (one side of a fork) counted the asker as holding its own, and two
+/// peers on different sides of a fork with the same version vectors never exchanged them.
+/// A want now names the asker's op at each seq it holds, compared as a have's tips are.
+#[test]
+fn a_want_names_the_askers_op_where_it_holds_so_a_fork_is_found() {
+    let [mut q, mut r] = [Node::new(1, 2), Node::new(2, 1)];
+    let mut x = Node::new(9, 0);
+    let side = x.author(1, "one side".into());
+    let mut twin = Node::new(9, 0);
+    let other = twin.author(1, "the other side".into());
+    let next = twin.author(2, "built on the other side".into());
+    assert_eq!((side.seq(), other.seq()), (1, 1));
+    hold(&mut q, &[side]);
+    hold(&mut r, &[other.clone(), next]);
+    carry(&mut q, &mut r, 0, 10 * MILLI);
+    carry(&mut r, &mut q, 10 * MILLI, 20 * MILLI);
+    // Q's have is lost, so R learns what Q holds from its want alone.
+    outbox(&mut q, 20 * MILLI);
+    let tips_before = r.sync.stats().n_tips_differ;
+    q.sync.want(r.log.version_vector().clone(), &q.log);
+    carry(&mut q, &mut r, 30 * MILLI, 40 * MILLI);
+    assert_eq!(r.sync.stats().n_tips_differ, tips_before + 1);
+    let sent = batched(&outbox(&mut r, 40 * MILLI));
+    assert!(sent.contains(&(other.author(), 1)), "{sent:?}");
+}
