@@ -595,8 +595,7 @@ impl<P: Payload> SyncState<P> {
                 let held = (vv.iter())
                     .map(|(author, _)| {
                         let seq = log.version_vector().get(author);
-                        let at = log.by_seq(author, seq);
-                        (seq, at.map_or(0, |op| tip(&op.id())))
+                        (seq, tip_at(log, author, seq))
                     })
                     .collect();
                 Message::Want { vv, held }
@@ -902,7 +901,7 @@ impl<P: Payload> SyncState<P> {
         }
         let with_tips = |vv: VersionVector| {
             let tips = (vv.iter())
-                .map(|(author, seq)| log.by_seq(author, *seq).map_or(0, |op| tip(&op.id())))
+                .map(|(author, seq)| tip_at(log, author, *seq))
                 .collect();
             Message::Have { vv, tips }
         };
@@ -1651,6 +1650,12 @@ impl<P: Payload> SyncState<P> {
         }
         batch
     }
+}
+
+/// The tip of `log`'s op of `author` at `seq`, or 0 where it holds none (inside a snapshot's
+/// base): what a have or a want says of the op at a seq it announces.
+fn tip_at<P: Payload>(log: &Log<P>, author: &PeerId, seq: u64) -> u64 {
+    log.by_seq(author, seq).map_or(0, |op| tip(&op.id()))
 }
 
 /// True if the log's refusal of an op counts against the remote that sent it: all do but a
