@@ -17,7 +17,8 @@
 //! send: its claim is withdrawn ([`SyncState::withdraw_claim`]) and not learnt again from it
 //! for [`CLAIM_WITHDRAWN_MICROS`](crate::sync::state::CLAIM_WITHDRAWN_MICROS), so made-up
 //! claims cost a retry period each, not work for the connection's life. A holder that sent
-//! nothing at all (a partition) keeps its claims.
+//! nothing at all (a partition) keeps its claims, and so does an author asked for its own ops
+//! (a third peer is asked next, and the author again after it).
 
 use std::collections::{BTreeMap, VecDeque};
 

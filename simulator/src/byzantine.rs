@@ -379,7 +379,8 @@ impl Simulation {
         }
         // Each attack of the menu in turn from a random first one, so every kind is sent about
         // as often whatever the network's draws (a random pick each time left one kind out of
-        // some short runs when an unrelated change moved those draws).
+        // some short runs when an unrelated change moved those draws). The draw is still made
+        // every time, so the network's stream advances per attack as it did.
         let first = self.net.index(menu.len());
         let Some(byz) = self.hostile.as_mut().and_then(|h| h.byzantine.as_mut()) else {
             return false;
