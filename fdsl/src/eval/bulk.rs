@@ -1,24 +1,37 @@
-//! The f32 bulk evaluator: many points per call, one instruction at a time over a chunk of
-//! [`CHUNK`] lanes, so dispatch costs once per instruction and chunk rather than per point, and
-//! each inner loop is a plain loop over arrays that the compiler vectorises. On x86-64 CPUs with
-//! AVX2 and FMA the same loops are compiled a second time for those features and chosen at run
-//! time.
+//! The f32 bulk evaluator: many points per call, one step at a time over a chunk of [`CHUNK`]
+//! lanes, so dispatch costs once per step and chunk rather than per point, and each inner loop
+//! is a plain loop over arrays that the compiler vectorises. A step is one instruction of the
+//! tape, or two fused into one loop (`fuse.rs`), with the same results bit for bit. Steps read
+//! coordinates from the caller's slices, and the last step writes a single output straight
+//! into the caller's slice. On x86-64 CPUs with AVX2 and FMA the same loops are compiled a
+//! second time for those features and chosen at run time.
 
+use super::fuse::{self, Arg, Bin, Kind, Plan, Then, Un};
 use super::real::{fast_cos, fast_sin};
 use crate::compile::{BinaryOp, TernaryOp, UnaryOp};
-use crate::tape::{Code, Instr, Operand, Tape};
+use crate::tape::{Code, Tape};
 
-/// Points evaluated together per instruction.
-pub const CHUNK: usize = 128;
+/// Points evaluated together per step. A register is 2 KiB, so the reference models' tapes (up
+/// to 9 registers) and a chunk of coordinates fit in a 48 KiB first-level cache. With 128 lanes
+/// each step's dispatch and loop set-up came four times as often, and short tapes took up to
+/// 1.7 times as long (BENCHMARKS.md).
+pub const CHUNK: usize = 512;
 
 type Lanes = [f32; CHUNK];
+
+/// Points evaluated together in what is left after whole chunks, so that a call for a few
+/// points computes a few lanes.
+const SMALL: usize = 64;
 
 /// Evaluates a tape over slices of points in f32.
 #[derive(Clone, Debug)]
 pub struct BulkEval {
     tape: Tape,
+    plan: Plan,
     regs: Vec<Lanes>,
-    /// Three scratch chunks for constant arguments of ternary operations.
+    /// The coordinates of a last, partial chunk, padded.
+    pad: Box<[Lanes; 3]>,
+    /// Three scratch chunks for the arguments of ternary operations and grid samples.
     scratch: Box<[Lanes; 3]>,
     wide: bool,
 }
@@ -26,9 +39,12 @@ pub struct BulkEval {
 impl BulkEval {
     /// An evaluator for `tape`.
     pub fn new(tape: &Tape) -> BulkEval {
+        let plan = fuse::plan(tape);
         BulkEval {
             tape: tape.clone(),
-            regs: vec![[0.0; CHUNK]; tape.n_regs()],
+            regs: vec![[0.0; CHUNK]; plan.n_regs],
+            plan,
+            pad: Box::new([[0.0; CHUNK]; 3]),
             scratch: Box::new([[0.0; CHUNK]; 3]),
             wide: wide_simd_available(),
         }
@@ -37,6 +53,12 @@ impl BulkEval {
     /// The tape this evaluator runs.
     pub fn tape(&self) -> &Tape {
         &self.tape
+    }
+
+    /// How many steps a chunk of points takes: the tape's instructions, fewer where pairs of
+    /// them run as one.
+    pub fn n_steps(&self) -> usize {
+        self.plan.steps.len()
     }
 
     /// The first output at the points `(x[i], y[i], z[i], t)`, written to `out[i]`.
@@ -61,56 +83,122 @@ impl BulkEval {
             "coordinate slices differ in length"
         );
         assert!(
-            outs.len() <= self.tape.outputs().len(),
+            outs.len() <= self.plan.outputs.len(),
             "more output slices than outputs"
         );
         assert!(
             outs.iter().all(|o| o.len() == n),
             "output slices differ in length"
         );
-        let inputs = self.tape.inputs();
         let mut start = 0;
         while start < n {
-            let len = CHUNK.min(n - start);
-            let coords = [
-                &x[start..start + len],
-                &y[start..start + len],
-                &z[start..start + len],
-            ];
-            for (slot, reg) in inputs.iter().enumerate() {
-                let Some(r) = reg else { continue };
-                let lanes = &mut self.regs[*r as usize];
-                if slot == 3 {
-                    lanes.fill(t);
-                } else {
-                    lanes[..len].copy_from_slice(coords[slot]);
-                }
-            }
-            self.run();
-            for (k, out) in outs.iter_mut().enumerate() {
-                match self.tape.outputs()[k] {
-                    Operand::Reg(r) => {
-                        out[start..start + len].copy_from_slice(&self.regs[r as usize][..len])
-                    }
-                    Operand::Const(c) => out[start..start + len].fill(c as f32),
-                }
-            }
-            start += len;
+            // Whole chunks, then what is left in small chunks, so that a call for a few points
+            // computes a few lanes, not a whole chunk.
+            start += if n - start >= CHUNK {
+                self.chunk::<CHUNK>(x, y, z, t, outs, start)
+            } else {
+                self.chunk::<SMALL>(x, y, z, t, outs, start)
+            };
         }
     }
 
-    fn run(&mut self) {
-        #[cfg(target_arch = "x86_64")]
-        if self.wide {
-            #[expect(unsafe_code, reason = "calling a function compiled for AVX2 and FMA")]
-            // SAFETY: `wide` is only set when the CPU reports AVX2 and FMA at run time.
-            unsafe {
-                run_wide(&self.tape, &mut self.regs, &mut self.scratch)
-            };
-            return;
+    /// Evaluates up to `N` points from `start` (the first `N` lanes of each register); returns
+    /// how many.
+    fn chunk<const N: usize>(
+        &mut self,
+        x: &[f32],
+        y: &[f32],
+        z: &[f32],
+        t: f32,
+        outs: &mut [&mut [f32]],
+        start: usize,
+    ) -> usize {
+        let len = N.min(x.len() - start);
+        let BulkEval {
+            plan,
+            regs,
+            pad,
+            scratch,
+            wide,
+            ..
+        } = self;
+        let coords = [x, y, z].map(|c| &c[start..start + len]);
+        let inputs: [&[f32; N]; 3] = match coords.map(<&[f32; N]>::try_from) {
+            [Ok(x), Ok(y), Ok(z)] => [x, y, z],
+            _ => {
+                for (p, c) in pad.iter_mut().zip(coords) {
+                    p[..len].copy_from_slice(c);
+                }
+                [&pad[0], &pad[1], &pad[2]].map(lanes_of)
+            }
+        };
+        let lanes = Lanes3 { inputs, t };
+        // A single output made by the last step is written straight to the caller's slice.
+        let sink = match (&mut *outs, plan.last_writes_output()) {
+            ([out], true) => <&mut [f32; N]>::try_from(&mut out[start..start + len]).ok(),
+            _ => None,
+        };
+        let direct = sink.is_some();
+        run(*wide, plan, regs, &lanes, scratch, sink);
+        if direct {
+            return len;
         }
-        run_tape(&self.tape, &mut self.regs, &mut self.scratch);
+        for (k, out) in outs.iter_mut().enumerate() {
+            let out = &mut out[start..start + len];
+            match plan.outputs[k] {
+                Arg::Reg(r) => out.copy_from_slice(&regs[r as usize][..len]),
+                Arg::Input(s) if s < 3 => out.copy_from_slice(&inputs[s as usize][..len]),
+                Arg::Input(_) => out.fill(t),
+                Arg::Const(c) => out.fill(c),
+            }
+        }
+        len
     }
+}
+
+/// The first `N` lanes of a register.
+#[inline(always)]
+fn lanes_of<const N: usize>(reg: &Lanes) -> &[f32; N] {
+    const { assert!(N <= CHUNK) };
+    reg.first_chunk()
+        .expect("a register holds at least N lanes")
+}
+
+/// The first `N` lanes of a register, to write.
+#[inline(always)]
+fn lanes_of_mut<const N: usize>(reg: &mut Lanes) -> &mut [f32; N] {
+    const { assert!(N <= CHUNK) };
+    reg.first_chunk_mut()
+        .expect("a register holds at least N lanes")
+}
+
+/// A chunk's coordinates: `N` lanes of x, y and z, and one time.
+struct Lanes3<'a, const N: usize> {
+    inputs: [&'a [f32; N]; 3],
+    t: f32,
+}
+
+/// Runs the plan over the first `N` lanes of the registers. With a `sink`, the last step writes
+/// there instead of to its register.
+fn run<const N: usize>(
+    wide: bool,
+    plan: &Plan,
+    regs: &mut [Lanes],
+    lanes: &Lanes3<N>,
+    scratch: &mut [Lanes; 3],
+    sink: Option<&mut [f32; N]>,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if wide {
+        #[expect(unsafe_code, reason = "calling a function compiled for AVX2 and FMA")]
+        // SAFETY: `wide` is only set when the CPU reports AVX2 and FMA at run time.
+        unsafe {
+            run_wide(plan, regs, lanes, scratch, sink)
+        };
+        return;
+    }
+    let _ = wide;
+    run_plan(plan, regs, lanes, scratch, sink);
 }
 
 /// Whether the CPU runs the AVX2 and FMA builds of the evaluators' loops.
@@ -127,55 +215,179 @@ pub(super) fn wide_simd_available() -> bool {
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn run_wide(tape: &Tape, regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
-    run_tape(tape, regs, scratch);
+fn run_wide<const N: usize>(
+    plan: &Plan,
+    regs: &mut [Lanes],
+    lanes: &Lanes3<N>,
+    scratch: &mut [Lanes; 3],
+    sink: Option<&mut [f32; N]>,
+) {
+    run_plan(plan, regs, lanes, scratch, sink);
 }
 
-/// An argument of an instruction over a chunk: lanes of a register, or one constant.
+/// An argument of a step over `N` lanes: lanes, or one value for every lane.
 #[derive(Clone, Copy)]
-enum Src<'a> {
-    R(&'a Lanes),
+enum Src<'a, const N: usize> {
+    R(&'a [f32; N]),
     C(f32),
 }
 
-macro_rules! lanes1 {
-    ($o:ident, $a:ident, |$x:ident| $body:expr) => {
-        for i in 0..CHUNK {
-            let $x = $a[i];
-            $o[i] = $body;
+/// `o[i] = f(a[i], b[i])`, one loop per kind of argument so that each vectorises.
+#[inline(always)]
+fn lanes2<const N: usize>(o: &mut [f32; N], a: Src<N>, b: Src<N>, f: impl Fn(f32, f32) -> f32) {
+    match (a, b) {
+        (Src::R(a), Src::R(b)) => {
+            for i in 0..N {
+                o[i] = f(a[i], b[i]);
+            }
+        }
+        (Src::R(a), Src::C(c)) => {
+            for i in 0..N {
+                o[i] = f(a[i], c);
+            }
+        }
+        (Src::C(c), Src::R(b)) => {
+            for i in 0..N {
+                o[i] = f(c, b[i]);
+            }
+        }
+        (Src::C(c), Src::C(d)) => o.fill(f(c, d)),
+    }
+}
+
+/// `o[i] = g(f(a[i], b[i]), c[i])`: a fused pair of binary operations.
+#[inline(always)]
+fn lanes3<const N: usize>(
+    o: &mut [f32; N],
+    a: Src<N>,
+    b: Src<N>,
+    c: Src<N>,
+    f: impl Fn(f32, f32) -> f32,
+    g: impl Fn(f32, f32) -> f32,
+) {
+    match (a, b, c) {
+        (Src::R(a), Src::R(b), Src::R(c)) => {
+            for i in 0..N {
+                o[i] = g(f(a[i], b[i]), c[i]);
+            }
+        }
+        (Src::R(a), Src::R(b), Src::C(c)) => {
+            for i in 0..N {
+                o[i] = g(f(a[i], b[i]), c);
+            }
+        }
+        (Src::R(a), Src::C(b), Src::R(c)) => {
+            for i in 0..N {
+                o[i] = g(f(a[i], b), c[i]);
+            }
+        }
+        (Src::R(a), Src::C(b), Src::C(c)) => {
+            for i in 0..N {
+                o[i] = g(f(a[i], b), c);
+            }
+        }
+        (Src::C(a), Src::R(b), Src::R(c)) => {
+            for i in 0..N {
+                o[i] = g(f(a, b[i]), c[i]);
+            }
+        }
+        (Src::C(a), Src::R(b), Src::C(c)) => {
+            for i in 0..N {
+                o[i] = g(f(a, b[i]), c);
+            }
+        }
+        // The plan never fuses an operation of two constants; computed once all the same.
+        (Src::C(a), Src::C(b), c) => lanes2(o, Src::C(f(a, b)), c, g),
+    }
+}
+
+/// Binds `$f` to the lane function of a fusing unary operation.
+macro_rules! with_un {
+    ($u:expr, $f:ident => $body:expr) => {
+        match $u {
+            Un::Neg => {
+                let $f = move |x: f32| -x;
+                $body
+            }
+            Un::Abs => {
+                let $f = move |x: f32| x.abs();
+                $body
+            }
+            Un::Sqrt => {
+                let $f = move |x: f32| x.sqrt();
+                $body
+            }
+            Un::Square => {
+                let $f = move |x: f32| x * x;
+                $body
+            }
         }
     };
 }
 
-macro_rules! lanes2 {
-    ($o:ident, $a:expr, $b:expr, |$x:ident, $y:ident| $body:expr) => {
-        match ($a, $b) {
-            (Src::R(a), Src::R(b)) => {
-                for i in 0..CHUNK {
-                    let $x = a[i];
-                    let $y = b[i];
-                    $o[i] = $body;
-                }
+/// Binds `$f` to the lane function of a fusing inner binary operation.
+macro_rules! with_bin {
+    ($b:expr, $f:ident => $body:expr) => {
+        match $b {
+            Bin::Add => {
+                let $f = move |x: f32, y: f32| x + y;
+                $body
             }
-            (Src::R(a), Src::C(c)) => {
-                for i in 0..CHUNK {
-                    let $x = a[i];
-                    let $y = c;
-                    $o[i] = $body;
-                }
+            Bin::Sub => {
+                let $f = move |x: f32, y: f32| x - y;
+                $body
             }
-            (Src::C(c), Src::R(b)) => {
-                for i in 0..CHUNK {
-                    let $x = c;
-                    let $y = b[i];
-                    $o[i] = $body;
-                }
+            Bin::Mul => {
+                let $f = move |x: f32, y: f32| x * y;
+                $body
             }
-            (Src::C(c), Src::C(d)) => {
-                let $x = c;
-                let $y = d;
-                let v = $body;
-                $o.fill(v);
+            Bin::Min => {
+                let $f = move |x: f32, y: f32| min_nan(x, y);
+                $body
+            }
+            Bin::Max => {
+                let $f = move |x: f32, y: f32| max_nan(x, y);
+                $body
+            }
+        }
+    };
+}
+
+/// Binds `$f` to the lane function `(v, a) -> then(v, a)` of a fusing outer operation.
+macro_rules! with_then {
+    ($t:expr, $f:ident => $body:expr) => {
+        match $t {
+            Then::Add => {
+                let $f = move |v: f32, a: f32| v + a;
+                $body
+            }
+            Then::Mul => {
+                let $f = move |v: f32, a: f32| v * a;
+                $body
+            }
+            Then::Sub => {
+                let $f = move |v: f32, a: f32| v - a;
+                $body
+            }
+            Then::SubFrom => {
+                let $f = move |v: f32, a: f32| a - v;
+                $body
+            }
+            Then::Min => {
+                let $f = move |v: f32, a: f32| min_nan(v, a);
+                $body
+            }
+            Then::MinOf => {
+                let $f = move |v: f32, a: f32| min_nan(a, v);
+                $body
+            }
+            Then::Max => {
+                let $f = move |v: f32, a: f32| max_nan(v, a);
+                $body
+            }
+            Then::MaxOf => {
+                let $f = move |v: f32, a: f32| max_nan(a, v);
+                $body
             }
         }
     };
@@ -199,46 +411,72 @@ fn bool_f32(b: bool) -> f32 {
 }
 
 #[inline(always)]
-fn run_tape(tape: &Tape, regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
-    for instr in tape.instrs() {
-        let out = instr.out as usize;
-        match instr.code {
-            Code::Ternary(op) => {
-                ternary(op, instr, regs, scratch);
-                continue;
+fn run_plan<const N: usize>(
+    plan: &Plan,
+    regs: &mut [Lanes],
+    lanes: &Lanes3<N>,
+    scratch: &mut [Lanes; 3],
+    mut sink: Option<&mut [f32; N]>,
+) {
+    let last = plan.steps.len().wrapping_sub(1);
+    for (s, step) in plan.steps.iter().enumerate() {
+        let out = step.out as usize;
+        if let Kind::Plain(code @ (Code::Ternary(_) | Code::Sample(_))) = step.kind {
+            gather(&step.args, regs, lanes, scratch);
+            let o = match sink.as_deref_mut() {
+                Some(sink) if s == last => sink,
+                _ => lanes_of_mut(&mut regs[out]),
+            };
+            match code {
+                Code::Ternary(op) => ternary(op, o, scratch),
+                Code::Sample(g) => sample(&plan.grids[g as usize], o, scratch),
+                Code::Unary(_) | Code::Binary(_) => {}
             }
-            Code::Sample(g) => {
-                sample(&tape.grids()[g as usize], instr, regs, scratch);
-                continue;
-            }
-            Code::Unary(_) | Code::Binary(_) => {}
+            continue;
         }
         let Some((o, args)) = super::split_out(regs, out) else {
             continue;
         };
-        let src = |arg: Operand| match arg {
-            Operand::Reg(r) => Src::R(args.get(r)),
-            Operand::Const(c) => Src::C(c as f32),
+        let o = match sink.as_deref_mut() {
+            Some(sink) if s == last => sink,
+            _ => lanes_of_mut(o),
         };
-        match instr.code {
-            Code::Unary(op) => {
-                let a = match src(instr.args[0]) {
-                    Src::R(a) => a,
-                    Src::C(c) => {
-                        o.fill(<f32 as super::real::Real>::unary(op, c));
-                        continue;
-                    }
-                };
-                unary(op, o, a);
+        let src = |arg: Arg| match arg {
+            Arg::Reg(r) => Src::R(lanes_of(args.get(r))),
+            Arg::Input(s) if s < 3 => Src::R(lanes.inputs[s as usize]),
+            Arg::Input(_) => Src::C(lanes.t),
+            Arg::Const(c) => Src::C(c),
+        };
+        let [a, b, c] = step.args.map(src);
+        match step.kind {
+            Kind::Plain(Code::Unary(op)) => match a {
+                Src::R(a) => unary(op, o, a),
+                Src::C(c) => o.fill(<f32 as super::real::Real>::unary(op, c)),
+            },
+            Kind::Plain(Code::Binary(op)) => binary(op, o, a, b),
+            Kind::Plain(Code::Ternary(_) | Code::Sample(_)) => {}
+            Kind::UnBin(u, op) => {
+                with_un!(u, f => with_bin!(op, g => lanes2(o, a, b, move |x, y| f(g(x, y)))))
             }
-            Code::Binary(op) => binary(op, o, src(instr.args[0]), src(instr.args[1])),
-            Code::Ternary(_) | Code::Sample(_) => {}
+            Kind::BinUn(t, u) => {
+                with_then!(t, g => with_un!(u, f => lanes2(o, a, b, move |x, y| g(f(x), y))))
+            }
+            Kind::BinBin(t, op) => with_then!(t, g => with_bin!(op, f => lanes3(o, a, b, c, f, g))),
         }
     }
 }
 
+macro_rules! lanes1 {
+    ($o:ident, $a:ident, |$x:ident| $body:expr) => {
+        for i in 0..N {
+            let $x = $a[i];
+            $o[i] = $body;
+        }
+    };
+}
+
 #[inline(always)]
-fn unary(op: UnaryOp, o: &mut Lanes, a: &Lanes) {
+fn unary<const N: usize>(op: UnaryOp, o: &mut [f32; N], a: &[f32; N]) {
     match op {
         UnaryOp::Neg => lanes1!(o, a, |x| -x),
         UnaryOp::Abs => lanes1!(o, a, |x| x.abs()),
@@ -266,67 +504,70 @@ fn unary(op: UnaryOp, o: &mut Lanes, a: &Lanes) {
 }
 
 #[inline(always)]
-fn binary(op: BinaryOp, o: &mut Lanes, a: Src, b: Src) {
+fn binary<const N: usize>(op: BinaryOp, o: &mut [f32; N], a: Src<N>, b: Src<N>) {
     match op {
-        BinaryOp::Add => lanes2!(o, a, b, |x, y| x + y),
-        BinaryOp::Sub => lanes2!(o, a, b, |x, y| x - y),
-        BinaryOp::Mul => lanes2!(o, a, b, |x, y| x * y),
-        BinaryOp::Div => lanes2!(o, a, b, |x, y| x / y),
-        BinaryOp::Min => lanes2!(o, a, b, |x, y| min_nan(x, y)),
-        BinaryOp::Max => lanes2!(o, a, b, |x, y| max_nan(x, y)),
-        BinaryOp::Pow => lanes2!(o, a, b, |x, y| x.powf(y)),
-        BinaryOp::Atan2 => lanes2!(o, a, b, |x, y| x.atan2(y)),
-        BinaryOp::Mod => lanes2!(o, a, b, |x, y| x - y * (x / y).floor()),
-        BinaryOp::Lt => lanes2!(o, a, b, |x, y| bool_f32(x < y)),
-        BinaryOp::Le => lanes2!(o, a, b, |x, y| bool_f32(x <= y)),
-        BinaryOp::Eq => lanes2!(o, a, b, |x, y| bool_f32(x == y)),
-        BinaryOp::And => lanes2!(o, a, b, |x, y| bool_f32(x != 0.0 && y != 0.0)),
-        BinaryOp::Or => lanes2!(o, a, b, |x, y| bool_f32(x != 0.0 || y != 0.0)),
-        BinaryOp::RAnd => lanes2!(o, a, b, |x, y| x + y - (x * x + y * y).sqrt()),
-        BinaryOp::ROr => lanes2!(o, a, b, |x, y| x + y + (x * x + y * y).sqrt()),
+        BinaryOp::Add => lanes2(o, a, b, |x, y| x + y),
+        BinaryOp::Sub => lanes2(o, a, b, |x, y| x - y),
+        BinaryOp::Mul => lanes2(o, a, b, |x, y| x * y),
+        BinaryOp::Div => lanes2(o, a, b, |x, y| x / y),
+        BinaryOp::Min => lanes2(o, a, b, min_nan),
+        BinaryOp::Max => lanes2(o, a, b, max_nan),
+        BinaryOp::Pow => lanes2(o, a, b, |x, y| x.powf(y)),
+        BinaryOp::Atan2 => lanes2(o, a, b, |x, y| x.atan2(y)),
+        BinaryOp::Mod => lanes2(o, a, b, |x, y| x - y * (x / y).floor()),
+        BinaryOp::Lt => lanes2(o, a, b, |x, y| bool_f32(x < y)),
+        BinaryOp::Le => lanes2(o, a, b, |x, y| bool_f32(x <= y)),
+        BinaryOp::Eq => lanes2(o, a, b, |x, y| bool_f32(x == y)),
+        BinaryOp::And => lanes2(o, a, b, |x, y| bool_f32(x != 0.0 && y != 0.0)),
+        BinaryOp::Or => lanes2(o, a, b, |x, y| bool_f32(x != 0.0 || y != 0.0)),
+        BinaryOp::RAnd => lanes2(o, a, b, |x, y| x + y - (x * x + y * y).sqrt()),
+        BinaryOp::ROr => lanes2(o, a, b, |x, y| x + y + (x * x + y * y).sqrt()),
     }
 }
 
-/// Copies an instruction's three arguments into scratch chunks (constants filled), so that
-/// its output may share a register with none of them.
-fn gather(instr: &Instr, regs: &[Lanes], scratch: &mut [Lanes; 3]) {
-    for (k, arg) in instr.args.iter().enumerate() {
+/// Copies a step's three arguments into scratch chunks (one values filled), so that its output
+/// may share a register with none of them.
+fn gather<const N: usize>(
+    args: &[Arg; 3],
+    regs: &[Lanes],
+    lanes: &Lanes3<N>,
+    scratch: &mut [Lanes; 3],
+) {
+    for (k, arg) in args.iter().enumerate() {
         match *arg {
-            Operand::Reg(r) => scratch[k] = regs[r as usize],
-            Operand::Const(c) => scratch[k].fill(c as f32),
+            Arg::Reg(r) => scratch[k][..N].copy_from_slice(&regs[r as usize][..N]),
+            Arg::Input(s) if s < 3 => scratch[k][..N].copy_from_slice(lanes.inputs[s as usize]),
+            Arg::Input(_) => scratch[k][..N].fill(lanes.t),
+            Arg::Const(c) => scratch[k][..N].fill(c),
         }
     }
 }
 
 /// Grid samples are computed per lane in f64 (the point evaluator's value, rounded).
-fn sample(grid: &crate::grid::Grid, instr: &Instr, regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
-    gather(instr, regs, scratch);
-    let o = &mut regs[instr.out as usize];
-    let [a, b, c] = &*scratch;
-    for i in 0..CHUNK {
+fn sample<const N: usize>(grid: &crate::grid::Grid, o: &mut [f32; N], scratch: &[Lanes; 3]) {
+    let [a, b, c] = scratch;
+    for i in 0..N {
         o[i] = grid.value([f64::from(a[i]), f64::from(b[i]), f64::from(c[i])]) as f32;
     }
 }
 
 /// Ternary operations are rare; their arguments are copied into scratch chunks first, so the
 /// output may share a register with none of them and constants need no special case.
-fn ternary(op: TernaryOp, instr: &Instr, regs: &mut [Lanes], scratch: &mut [Lanes; 3]) {
-    gather(instr, regs, scratch);
-    let o = &mut regs[instr.out as usize];
-    let [a, b, c] = &*scratch;
+fn ternary<const N: usize>(op: TernaryOp, o: &mut [f32; N], scratch: &[Lanes; 3]) {
+    let [a, b, c] = scratch;
     match op {
         TernaryOp::Select => {
-            for i in 0..CHUNK {
+            for i in 0..N {
                 o[i] = if a[i] != 0.0 { b[i] } else { c[i] };
             }
         }
         TernaryOp::BlendMin => {
-            for i in 0..CHUNK {
+            for i in 0..N {
                 o[i] = blend_min(a[i], b[i], c[i]);
             }
         }
         TernaryOp::BlendMax => {
-            for i in 0..CHUNK {
+            for i in 0..N {
                 o[i] = -blend_min(-a[i], -b[i], c[i]);
             }
         }
@@ -337,4 +578,142 @@ fn ternary(op: TernaryOp, instr: &Instr, regs: &mut [Lanes], scratch: &mut [Lane
 fn blend_min(a: f32, b: f32, r: f32) -> f32 {
     let h = (r - (a - b).abs()).max(0.0) / r;
     min_nan(a, b) - h * h * r * 0.25
+}
+
+#[cfg(test)]
+mod tests {
+    use proptest::prelude::*;
+
+    use super::*;
+    use crate::Function;
+
+    fn tape(src: &str) -> Tape {
+        Function::parse(src).expect("a valid formula").tape()
+    }
+
+    /// The evaluator with one step per instruction.
+    fn unfused(tape: &Tape) -> BulkEval {
+        let mut eval = BulkEval::new(tape);
+        eval.plan = fuse::plan_with(tape, false);
+        eval.regs = vec![[0.0; CHUNK]; eval.plan.n_regs];
+        eval
+    }
+
+    /// Texts over x, y, z and t, mostly of the operations that fuse.
+    fn expr() -> impl Strategy<Value = String> {
+        let leaf = prop_oneof![
+            Just("x".to_string()),
+            Just("y".to_string()),
+            Just("z".to_string()),
+            Just("t".to_string()),
+            (-2.0f64..2.0).prop_map(|v| format!("{v:.2}")),
+        ];
+        leaf.prop_recursive(5, 48, 2, |inner| {
+            let un = prop_oneof![
+                Just("-"),
+                Just("abs"),
+                Just("sqrt"),
+                Just("sqr"),
+                Just("sin")
+            ];
+            let bin = prop_oneof![
+                Just("+"),
+                Just("-"),
+                Just("*"),
+                Just("&"),
+                Just("|"),
+                Just("/"),
+                Just("<")
+            ];
+            prop_oneof![
+                (un, inner.clone()).prop_map(|(f, a)| if f == "-" {
+                    format!("-({a})")
+                } else {
+                    format!("{f}({a})")
+                }),
+                (inner.clone(), bin, inner.clone())
+                    .prop_map(|(a, op, b)| format!("({a}) {op} ({b})")),
+                (inner.clone(), inner)
+                    .prop_map(|(a, b)| format!("min(({a}) - ({b}), max({b}, {a}))")),
+            ]
+        })
+    }
+
+    /// Coordinates with zeros of both signs and values whose square roots are NaN.
+    fn coordinate() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            4 => -2.0f32..2.0,
+            1 => Just(0.0f32),
+            1 => Just(-0.0f32),
+        ]
+    }
+
+    fn same_bits(a: f32, b: f32) -> bool {
+        a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan())
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+
+        #[test]
+        fn fused_steps_give_the_bits_of_one_step_per_instruction(
+            src in expr(),
+            points in proptest::collection::vec((coordinate(), coordinate(), coordinate()), 1..1300),
+            t in coordinate(),
+        ) {
+            let Ok(f) = Function::parse(&src) else { return Ok(()) };
+            let tape = f.tape();
+            let xs: Vec<f32> = points.iter().map(|p| p.0).collect();
+            let ys: Vec<f32> = points.iter().map(|p| p.1).collect();
+            let zs: Vec<f32> = points.iter().map(|p| p.2).collect();
+            let (mut fused, mut reference) = (vec![0.0; xs.len()], vec![0.0; xs.len()]);
+            BulkEval::new(&tape).eval(&xs, &ys, &zs, t, &mut fused);
+            unfused(&tape).eval(&xs, &ys, &zs, t, &mut reference);
+            for i in 0..xs.len() {
+                prop_assert!(
+                    same_bits(fused[i], reference[i]),
+                    "{src} at {:?}, t {t}: fused {} unfused {}",
+                    points[i], fused[i], reference[i]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn distance_formulas_take_half_the_steps() {
+        let sphere = BulkEval::new(&tape("1-x^2-y^2-z^2"));
+        assert_eq!(sphere.n_steps(), 3, "{:?}", sphere.plan.steps);
+        let ball = tape("0.3 - sqrt((x-0.1)^2 + (y+0.2)^2 + (z-0.3)^2)");
+        assert_eq!(ball.len(), 10);
+        assert_eq!(BulkEval::new(&ball).n_steps(), 5);
+        let watermelon = tape(crate::models::reference_model("watermelon").expect("a model"));
+        assert!(BulkEval::new(&watermelon).n_steps() * 3 <= watermelon.len() * 2);
+    }
+
+    #[test]
+    fn partial_chunks_and_copied_outputs_match_the_direct_write() {
+        let tape = tape("sqrt(abs(x*y - z)) | (t - x^2)");
+        let n = CHUNK * 2 + 13;
+        let xs: Vec<f32> = (0..n).map(|i| (i as f32 * 0.37).sin()).collect();
+        let ys: Vec<f32> = (0..n).map(|i| (i as f32 * 0.11).cos()).collect();
+        let zs: Vec<f32> = (0..n).map(|i| (i as f32 * 0.05) - 1.0).collect();
+        let mut eval = BulkEval::new(&tape);
+        let mut all = vec![0.0; n];
+        eval.eval(&xs, &ys, &zs, 0.5, &mut all);
+        // Point by point, every call a partial chunk of one point.
+        for i in 0..n {
+            let mut one = [0.0];
+            eval.eval(&xs[i..=i], &ys[i..=i], &zs[i..=i], 0.5, &mut one);
+            assert!(same_bits(one[0], all[i]), "point {i}");
+        }
+        // Through the general output path, which copies from the register.
+        let mut again = vec![0.0; n];
+        let mut none: [&mut [f32]; 0] = [];
+        eval.eval_outputs(&xs, &ys, &zs, 0.5, &mut none);
+        eval.eval_outputs(&xs, &ys, &zs, 0.5, &mut [&mut again]);
+        assert!(all.iter().zip(&again).all(|(a, b)| same_bits(*a, *b)));
+        let mut reference = vec![0.0; n];
+        unfused(&tape).eval(&xs, &ys, &zs, 0.5, &mut reference);
+        assert!(all.iter().zip(&reference).all(|(a, b)| same_bits(*a, *b)));
+    }
 }

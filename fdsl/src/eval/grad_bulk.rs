@@ -1,5 +1,5 @@
 //! The f32 bulk gradient evaluator: values and forward-mode derivatives over slices of points,
-//! one instruction at a time over a chunk of [`CHUNK`] lanes, like [`super::BulkEval`].
+//! one instruction at a time over a chunk of [`CHUNK`] lanes.
 //!
 //! Each register is a structure of arrays (the value, d/dx, d/dy and d/dz, each a chunk of
 //! lanes), so each rule is a plain loop over arrays that the compiler vectorises; keeping value
@@ -11,13 +11,17 @@
 //! functions, in the same order), so a lane's result is that of [`super::GradEval`]'s rules
 //! run in f32, bit for bit, NaN and the sign of zero included.
 
-use super::CHUNK;
 use super::grad::{
     Grad, binary, chain_factors, max_takes_a, min_takes_a, scale, ternary, unary, unary_factor,
 };
 use super::real::Real;
 use crate::compile::{BinaryOp, TernaryOp, UnaryOp};
 use crate::tape::{Code, Operand, Tape};
+
+/// Points evaluated together per instruction. Each register holds four arrays (the value and
+/// its three derivatives), so this is a quarter of [`super::CHUNK`], and the same number of
+/// registers fits in the first-level cache.
+const CHUNK: usize = 128;
 
 type Lanes = [f32; CHUNK];
 

@@ -8,6 +8,7 @@
 //! [`Tape`]: crate::tape::Tape
 
 mod bulk;
+mod fuse;
 mod grad;
 mod grad_bulk;
 mod interval;
