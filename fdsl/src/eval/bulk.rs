@@ -6,7 +6,7 @@
 //! into the caller's slice. On x86-64 CPUs with AVX2 and FMA the same loops are compiled a
 //! second time for those features and chosen at run time.
 
-use super::fuse::{self, Arg, Bin, Kind, Plan, Then, Un};
+use super::fuse::{self, Arg, Bin, Kind, Lin, Pick, Plan, Shift, Then, Un};
 use super::real::{fast_cos, fast_sin};
 use crate::compile::{BinaryOp, TernaryOp, UnaryOp};
 use crate::tape::{Code, Tape};
@@ -393,6 +393,50 @@ macro_rules! with_then {
     };
 }
 
+/// Binds `$f` to the lane function `(v, a) -> lin(v, a)`.
+macro_rules! with_lin {
+    ($t:expr, $f:ident => $body:expr) => {
+        match $t {
+            Lin::Add => {
+                let $f = move |v: f32, a: f32| v + a;
+                $body
+            }
+            Lin::Sub => {
+                let $f = move |v: f32, a: f32| v - a;
+                $body
+            }
+            Lin::SubFrom => {
+                let $f = move |v: f32, a: f32| a - v;
+                $body
+            }
+        }
+    };
+}
+
+/// Binds `$f` to the lane function `(v, a) -> pick(v, a)`.
+macro_rules! with_pick {
+    ($t:expr, $f:ident => $body:expr) => {
+        match $t {
+            Pick::Min => {
+                let $f = move |v: f32, a: f32| min_nan(v, a);
+                $body
+            }
+            Pick::MinOf => {
+                let $f = move |v: f32, a: f32| min_nan(a, v);
+                $body
+            }
+            Pick::Max => {
+                let $f = move |v: f32, a: f32| max_nan(v, a);
+                $body
+            }
+            Pick::MaxOf => {
+                let $f = move |v: f32, a: f32| max_nan(a, v);
+                $body
+            }
+        }
+    };
+}
+
 #[inline(always)]
 fn min_nan(a: f32, b: f32) -> f32 {
     let m = if b < a { b } else { a };
@@ -462,6 +506,13 @@ fn run_plan<const N: usize>(
                 with_then!(t, g => with_un!(u, f => lanes2(o, a, b, move |x, y| g(f(x), y))))
             }
             Kind::BinBin(t, op) => with_then!(t, g => with_bin!(op, f => lanes3(o, a, b, c, f, g))),
+            Kind::SumSq(t, shift) => with_lin!(t, g => match shift {
+                Shift::Plus => lanes3(o, a, b, c, |x, y| (x + y) * (x + y), g),
+                Shift::Minus => lanes3(o, a, b, c, |x, y| (x - y) * (x - y), g),
+            }),
+            Kind::RootPick(p, t) => {
+                with_pick!(p, g => with_lin!(t, f => lanes3(o, a, b, c, move |x, y| f(x.sqrt(), y), g)))
+            }
         }
     }
 }
@@ -683,9 +734,14 @@ mod tests {
     fn distance_formulas_take_half_the_steps() {
         let sphere = BulkEval::new(&tape("1-x^2-y^2-z^2"));
         assert_eq!(sphere.n_steps(), 3, "{:?}", sphere.plan.steps);
-        let ball = tape("0.3 - sqrt((x-0.1)^2 + (y+0.2)^2 + (z-0.3)^2)");
-        assert_eq!(ball.len(), 10);
-        assert_eq!(BulkEval::new(&ball).n_steps(), 5);
+        // A ball: a square, two sums of squares, and the radius less the root.
+        let ball = "0.3 - sqrt((x-0.1)^2 + (y+0.2)^2 + (z-0.3)^2)";
+        assert_eq!(tape(ball).len(), 10);
+        assert_eq!(BulkEval::new(&tape(ball)).n_steps(), 4);
+        // A union of balls: the second's root and radius go into the union's step.
+        let two = tape(&format!("({ball}) | (0.2 - sqrt(x^2 + (y-1)^2 + z^2))"));
+        assert_eq!(two.len(), 19);
+        assert_eq!(BulkEval::new(&two).n_steps(), 8);
         let watermelon = tape(crate::models::reference_model("watermelon").expect("a model"));
         assert!(BulkEval::new(&watermelon).n_steps() * 3 <= watermelon.len() * 2);
     }

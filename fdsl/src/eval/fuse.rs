@@ -1,12 +1,17 @@
-//! The f32 bulk evaluator's program: a tape's instructions with pairs fused into one step.
+//! The f32 bulk evaluator's program: a tape's instructions with pairs, and a few triples, fused
+//! into one step.
 //!
 //! Over a chunk of lanes, every step reads its arguments from memory and writes its result back,
 //! so on short, cheap instructions (`x - c`, `t * t`, `a + b`) the loads, stores and dispatch
 //! cost more than the arithmetic. A value that only one later instruction reads can be computed
-//! inside that instruction's loop instead, where it never leaves a register: `(x - c)^2`, `a - b^2`, `max(m, r - d)`, `a + b * c`. Each step fuses at
-//! most two operations, from the few that distance functions are made of, and computes exactly
-//! what the two instructions compute in turn (the same f32 operations in the same order, no
-//! fused multiply-add), so results stay bit for bit those of the unfused tape.
+//! inside that instruction's loop instead, where it never leaves a register: `(x - c)^2`,
+//! `a - b^2`, `max(m, r - d)`, `a + b * c`. Most steps fuse two operations from the few that
+//! distance fields are made of; the two idioms of a ball take three, a sum of squares
+//! `s + (y - c)^2` and a union or intersection with a ball `max(m, r - sqrt(s))`. An operation
+//! of coordinates and constants alone (`0.1 * y`) is computed again in every reader that takes
+//! it in, even when it has several. Each step computes exactly what its instructions compute in
+//! turn (the same f32 operations in the same order, no fused multiply-add), so results stay bit
+//! for bit those of the unfused tape.
 //!
 //! The plan also gives the evaluator its own registers: a step reads coordinates straight from
 //! the caller's slices ([`Arg::Input`]) and constants from the step, and registers are
@@ -69,6 +74,32 @@ pub(super) enum Then {
     MaxOf,
 }
 
+/// `v + a`, `v - a` or `a - v`: the outer operation of a sum of squares, or the middle one of a
+/// ball's distance.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Lin {
+    Add,
+    Sub,
+    SubFrom,
+}
+
+/// `a0 + a1` or `a0 - a1`: the difference squared in a sum of squares.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Shift {
+    Plus,
+    Minus,
+}
+
+/// `min(v, a)`, `min(a, v)`, `max(v, a)` or `max(a, v)`: the outer operation of a union or
+/// intersection with a ball.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Pick {
+    Min,
+    MinOf,
+    Max,
+    MaxOf,
+}
+
 /// What a step computes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) enum Kind {
@@ -80,6 +111,10 @@ pub(super) enum Kind {
     BinUn(Then, Un),
     /// `then(b(args[0], args[1]), args[2])`
     BinBin(Then, Bin),
+    /// `lin((args[0] ± args[1])^2, args[2])`: a sum of squares.
+    SumSq(Lin, Shift),
+    /// `pick(lin(sqrt(args[0]), args[1]), args[2])`: a union or intersection with a ball.
+    RootPick(Pick, Lin),
 }
 
 /// One step of the program: `out = kind(args)`; unused arguments are `Const(0.0)`.
@@ -153,6 +188,27 @@ fn then(op: Bin, at: usize) -> Then {
     }
 }
 
+/// The outer `Add` or `Sub` of three fused operations, with the inner value in argument `at`.
+fn lin(op: BinaryOp, at: usize) -> Option<Lin> {
+    Some(match (op, at) {
+        (BinaryOp::Add, _) => Lin::Add,
+        (BinaryOp::Sub, 0) => Lin::Sub,
+        (BinaryOp::Sub, _) => Lin::SubFrom,
+        _ => return None,
+    })
+}
+
+/// The outer `Min` or `Max` of three fused operations, with the inner value in argument `at`.
+fn pick(op: BinaryOp, at: usize) -> Option<Pick> {
+    Some(match (op, at) {
+        (BinaryOp::Min, 0) => Pick::Min,
+        (BinaryOp::Min, _) => Pick::MinOf,
+        (BinaryOp::Max, 0) => Pick::Max,
+        (BinaryOp::Max, _) => Pick::MaxOf,
+        _ => return None,
+    })
+}
+
 fn n_args(code: Code) -> usize {
     match code {
         Code::Unary(_) => 1,
@@ -204,9 +260,24 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
     }
 
     // Pick pairs in order. `inner[i]` is the instruction fused into `i`; an instruction that
-    // took one in, or was taken in, takes part in no other pair.
+    // took one in, or was taken in, takes part in no other pair, except that a pair of the two
+    // idioms of distance fields is taken into a third instruction (`deep`): a sum of squares
+    // `s + (y - c)^2`, and a union or intersection with a ball `max(m, r - sqrt(s))`.
     let mut inner: Vec<Option<u32>> = vec![None; n];
+    let mut deep = vec![false; n];
     let mut fused_away = vec![false; n];
+    // A cheap operation of coordinates and constants alone (`0.1 * y`) is computed again
+    // inside each reader that takes it in, rather than stored once for several: an operation
+    // costs less than a step. It stays a step of its own only for readers that did not.
+    let leafy = |j: usize| {
+        let k = n_args(instrs[j].code);
+        args[j][..k].iter().all(|v| !matches!(v, Val::Instr(_)))
+    };
+    let mut taken = vec![0u32; n];
+    let code = |j: usize| instrs[j].code;
+    let is_pair = |inner: &[Option<u32>], deep: &[bool], j: usize, outer: Code, in_: Code| {
+        !deep[j] && code(j) == outer && inner[j].is_some_and(|k| code(k as usize) == in_)
+    };
     let simple_args = |a: &[Val; 3], k: usize| {
         // A time argument is one value, not lanes, and two constants would have been folded:
         // the fused loops take neither.
@@ -218,10 +289,39 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
             Code::Binary(op) if bin(op).is_some() => &[1, 0],
             _ => &[],
         };
+        let triple = candidates.iter().find_map(|&at| {
+            let Val::Instr(j) = args[i][at] else {
+                return None;
+            };
+            let j = j as usize;
+            let Code::Binary(op) = code(i) else {
+                return None;
+            };
+            let square = Code::Unary(UnaryOp::Square);
+            let sqrt = Code::Unary(UnaryOp::Sqrt);
+            let sum = |b| Code::Binary(b);
+            let fits = uses[j] == 1
+                && match op {
+                    BinaryOp::Add | BinaryOp::Sub => [BinaryOp::Add, BinaryOp::Sub]
+                        .into_iter()
+                        .any(|b| is_pair(&inner, &deep, j, square, sum(b))),
+                    BinaryOp::Min | BinaryOp::Max => [BinaryOp::Add, BinaryOp::Sub]
+                        .into_iter()
+                        .any(|b| is_pair(&inner, &deep, j, sum(b), sqrt)),
+                    _ => false,
+                };
+            fits.then_some(j)
+        });
+        if let Some(j) = triple {
+            inner[i] = Some(j as u32);
+            deep[i] = true;
+            fused_away[j] = true;
+            continue;
+        }
         for &at in candidates {
             let Val::Instr(j) = args[i][at] else { continue };
             let j = j as usize;
-            let takes = uses[j] == 1
+            let takes = (uses[j] == 1 || leafy(j))
                 && inner[j].is_none()
                 && !fused_away[j]
                 && simple_args(&args[j], n_args(instrs[j].code))
@@ -233,7 +333,8 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
                 };
             if takes {
                 inner[i] = Some(j as u32);
-                fused_away[j] = true;
+                taken[j] += 1;
+                fused_away[j] = taken[j] == uses[j];
                 break;
             }
         }
@@ -246,9 +347,41 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
         if fused_away[i] {
             continue;
         }
-        let code = instrs[i].code;
+        let code = code(i);
         let step = match (code, inner[i]) {
             (_, None) => (i, Kind::Plain(code), args[i]),
+            (Code::Binary(op), Some(j)) if deep[i] => {
+                let j = j as usize;
+                let at = usize::from(args[i][1] == Val::Instr(j as u32));
+                let other = args[i][1 - at];
+                let k = inner[j].expect("a triple takes in a pair") as usize;
+                match (instrs[j].code, instrs[k].code) {
+                    (Code::Unary(_), Code::Binary(b)) => {
+                        let outer = lin(op, at).expect("a sum of squares adds");
+                        let shift = match b {
+                            BinaryOp::Add => Shift::Plus,
+                            _ => Shift::Minus,
+                        };
+                        (
+                            i,
+                            Kind::SumSq(outer, shift),
+                            [args[k][0], args[k][1], other],
+                        )
+                    }
+                    (Code::Binary(middle), _) => {
+                        let outer = pick(op, at).expect("a ball is picked by min or max");
+                        let at_root = usize::from(args[j][1] == Val::Instr(k as u32));
+                        let middle = lin(middle, at_root).expect("a ball's radius is added");
+                        let radius = args[j][1 - at_root];
+                        (
+                            i,
+                            Kind::RootPick(outer, middle),
+                            [args[k][0], radius, other],
+                        )
+                    }
+                    _ => unreachable!("only the two idioms were picked"),
+                }
+            }
             (Code::Unary(u), Some(j)) => {
                 let (Some(u), Code::Binary(b)) = (un(u), instrs[j as usize].code) else {
                     unreachable!("only simple pairs were picked")
