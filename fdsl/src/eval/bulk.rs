@@ -29,10 +29,12 @@ pub struct BulkEval {
     tape: Tape,
     plan: Plan,
     regs: Vec<Lanes>,
-    /// The coordinates of a last, partial chunk, padded.
-    pad: Box<[Lanes; 3]>,
-    /// Three scratch chunks for the arguments of ternary operations and grid samples.
-    scratch: Box<[Lanes; 3]>,
+    /// The coordinates of a last, partial small chunk, padded.
+    pad: [[f32; SMALL]; 3],
+    /// Three scratch chunks for the arguments of ternary operations and grid samples; none
+    /// when the plan has no such step, so that building an evaluator for a short tape (a
+    /// mesher builds one per simplified tape) stays cheap.
+    scratch: Vec<Lanes>,
     wide: bool,
 }
 
@@ -43,9 +45,9 @@ impl BulkEval {
         BulkEval {
             tape: tape.clone(),
             regs: vec![[0.0; CHUNK]; plan.n_regs],
+            scratch: vec![[0.0; CHUNK]; if plan.gathers() { 3 } else { 0 }],
             plan,
-            pad: Box::new([[0.0; CHUNK]; 3]),
-            scratch: Box::new([[0.0; CHUNK]; 3]),
+            pad: [[0.0; SMALL]; 3],
             wide: wide_simd_available(),
         }
     }
@@ -90,30 +92,6 @@ impl BulkEval {
             outs.iter().all(|o| o.len() == n),
             "output slices differ in length"
         );
-        let mut start = 0;
-        while start < n {
-            // Whole chunks, then what is left in small chunks, so that a call for a few points
-            // computes a few lanes, not a whole chunk.
-            start += if n - start >= CHUNK {
-                self.chunk::<CHUNK>(x, y, z, t, outs, start)
-            } else {
-                self.chunk::<SMALL>(x, y, z, t, outs, start)
-            };
-        }
-    }
-
-    /// Evaluates up to `N` points from `start` (the first `N` lanes of each register); returns
-    /// how many.
-    fn chunk<const N: usize>(
-        &mut self,
-        x: &[f32],
-        y: &[f32],
-        z: &[f32],
-        t: f32,
-        outs: &mut [&mut [f32]],
-        start: usize,
-    ) -> usize {
-        let len = N.min(x.len() - start);
         let BulkEval {
             plan,
             regs,
@@ -122,31 +100,72 @@ impl BulkEval {
             wide,
             ..
         } = self;
-        let coords = [x, y, z].map(|c| &c[start..start + len]);
-        let inputs: [&[f32; N]; 3] = match coords.map(<&[f32; N]>::try_from) {
-            [Ok(x), Ok(y), Ok(z)] => [x, y, z],
-            _ => {
-                for (p, c) in pad.iter_mut().zip(coords) {
-                    p[..len].copy_from_slice(c);
+        let mut start = 0;
+        while start < n {
+            // Whole chunks, then what is left in small chunks, so that a call for a few points
+            // computes a few lanes, not a whole chunk.
+            let whole = [x, y, z].map(|c| c[start..].first_chunk::<CHUNK>());
+            let mut machine = Machine {
+                plan,
+                regs,
+                scratch,
+                wide: *wide,
+            };
+            start += match whole {
+                [Some(x), Some(y), Some(z)] => machine.chunk([x, y, z], t, outs, start, CHUNK),
+                _ => {
+                    let len = SMALL.min(n - start);
+                    let inputs = match [x, y, z].map(|c| c[start..].first_chunk::<SMALL>()) {
+                        [Some(x), Some(y), Some(z)] => [x, y, z],
+                        _ => {
+                            for (p, c) in pad.iter_mut().zip([x, y, z]) {
+                                p[..len].copy_from_slice(&c[start..start + len]);
+                            }
+                            [&pad[0], &pad[1], &pad[2]]
+                        }
+                    };
+                    machine.chunk(inputs, t, outs, start, len)
                 }
-                [&pad[0], &pad[1], &pad[2]].map(lanes_of)
-            }
-        };
+            };
+        }
+    }
+}
+
+/// What runs a plan: the plan, its registers and scratch.
+struct Machine<'a> {
+    plan: &'a Plan,
+    regs: &'a mut [Lanes],
+    scratch: &'a mut [Lanes],
+    wide: bool,
+}
+
+impl Machine<'_> {
+    /// Evaluates the `len` points from `start` whose coordinates are the first `len` of
+    /// `inputs`, in the first `N` lanes of each register; returns `len`.
+    fn chunk<const N: usize>(
+        &mut self,
+        inputs: [&[f32; N]; 3],
+        t: f32,
+        outs: &mut [&mut [f32]],
+        start: usize,
+        len: usize,
+    ) -> usize {
         let lanes = Lanes3 { inputs, t };
+        let plan = self.plan;
         // A single output made by the last step is written straight to the caller's slice.
         let sink = match (&mut *outs, plan.last_writes_output()) {
-            ([out], true) => <&mut [f32; N]>::try_from(&mut out[start..start + len]).ok(),
+            ([out], true) => out[start..].first_chunk_mut::<N>(),
             _ => None,
         };
         let direct = sink.is_some();
-        run(*wide, plan, regs, &lanes, scratch, sink);
+        run(self.wide, plan, self.regs, &lanes, self.scratch, sink);
         if direct {
             return len;
         }
         for (k, out) in outs.iter_mut().enumerate() {
             let out = &mut out[start..start + len];
             match plan.outputs[k] {
-                Arg::Reg(r) => out.copy_from_slice(&regs[r as usize][..len]),
+                Arg::Reg(r) => out.copy_from_slice(&self.regs[r as usize][..len]),
                 Arg::Input(s) if s < 3 => out.copy_from_slice(&inputs[s as usize][..len]),
                 Arg::Input(_) => out.fill(t),
                 Arg::Const(c) => out.fill(c),
@@ -185,7 +204,7 @@ fn run<const N: usize>(
     plan: &Plan,
     regs: &mut [Lanes],
     lanes: &Lanes3<N>,
-    scratch: &mut [Lanes; 3],
+    scratch: &mut [Lanes],
     sink: Option<&mut [f32; N]>,
 ) {
     #[cfg(target_arch = "x86_64")]
@@ -219,7 +238,7 @@ fn run_wide<const N: usize>(
     plan: &Plan,
     regs: &mut [Lanes],
     lanes: &Lanes3<N>,
-    scratch: &mut [Lanes; 3],
+    scratch: &mut [Lanes],
     sink: Option<&mut [f32; N]>,
 ) {
     run_plan(plan, regs, lanes, scratch, sink);
@@ -459,13 +478,16 @@ fn run_plan<const N: usize>(
     plan: &Plan,
     regs: &mut [Lanes],
     lanes: &Lanes3<N>,
-    scratch: &mut [Lanes; 3],
+    scratch: &mut [Lanes],
     mut sink: Option<&mut [f32; N]>,
 ) {
     let last = plan.steps.len().wrapping_sub(1);
     for (s, step) in plan.steps.iter().enumerate() {
         let out = step.out as usize;
         if let Kind::Plain(code @ (Code::Ternary(_) | Code::Sample(_))) = step.kind {
+            let Some(scratch) = scratch.first_chunk_mut::<3>() else {
+                unreachable!("an evaluator whose plan gathers holds three scratch chunks")
+            };
             gather(&step.args, regs, lanes, scratch);
             let o = match sink.as_deref_mut() {
                 Some(sink) if s == last => sink,

@@ -136,6 +136,14 @@ pub(super) struct Plan {
 }
 
 impl Plan {
+    /// Whether a step copies its arguments into scratch lanes first (ternary operations and
+    /// grid samples).
+    pub fn gathers(&self) -> bool {
+        self.steps
+            .iter()
+            .any(|s| matches!(s.kind, Kind::Plain(Code::Ternary(_) | Code::Sample(_))))
+    }
+
     /// Whether the first output is the register that the last step writes.
     pub fn last_writes_output(&self) -> bool {
         match (self.steps.last(), self.outputs.first()) {
@@ -227,6 +235,7 @@ pub(super) fn plan(tape: &Tape) -> Plan {
 pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
     let instrs = tape.instrs();
     let n = instrs.len();
+    let code = |j: usize| instrs[j].code;
     // The tape's register program back to values: what each register holds as it runs.
     let mut holds = vec![Val::Const(0.0); tape.n_regs()];
     for (slot, reg) in tape.inputs().iter().enumerate() {
@@ -238,222 +247,194 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
         Operand::Reg(r) => holds[r as usize],
         Operand::Const(c) => Val::Const(c as f32),
     };
-    let mut args = Vec::with_capacity(n);
-    let mut uses = vec![0u32; n];
+    let mut nodes: Vec<Node> = Vec::with_capacity(n);
     for (i, instr) in instrs.iter().enumerate() {
-        let mut a = [Val::Const(0.0); 3];
-        for (k, slot) in a.iter_mut().enumerate().take(n_args(instr.code)) {
+        let mut args = [Val::Const(0.0); 3];
+        for (k, slot) in args.iter_mut().enumerate().take(n_args(instr.code)) {
             *slot = operand(&holds, instr.args[k]);
             if let Val::Instr(j) = *slot {
-                uses[j as usize] += 1;
+                nodes[j as usize].uses += 1;
             }
         }
-        args.push(a);
+        nodes.push(Node::new(args));
         holds[instr.out as usize] = Val::Instr(i as u32);
     }
-    let outputs: Vec<Val> = tape.outputs().iter().map(|&o| operand(&holds, o)).collect();
-    for o in &outputs {
-        if let Val::Instr(j) = *o {
-            // An output is read after the last step: never fused into a reader.
-            uses[j as usize] += 2;
+    for &o in tape.outputs() {
+        if let Val::Instr(j) = operand(&holds, o) {
+            // An output is read after the last step: never fused into a reader, nor freed.
+            nodes[j as usize].uses += 2;
+            nodes[j as usize].last_read = u32::MAX;
         }
     }
 
-    // Pick pairs in order. `inner[i]` is the instruction fused into `i`; an instruction that
+    // Pick pairs in order. `inner` is the instruction fused into a node; an instruction that
     // took one in, or was taken in, takes part in no other pair, except that a pair of the two
     // idioms of distance fields is taken into a third instruction (`deep`): a sum of squares
     // `s + (y - c)^2`, and a union or intersection with a ball `max(m, r - sqrt(s))`.
-    let mut inner: Vec<Option<u32>> = vec![None; n];
-    let mut deep = vec![false; n];
-    let mut fused_away = vec![false; n];
+    //
     // A cheap operation of coordinates and constants alone (`0.1 * y`) is computed again
     // inside each reader that takes it in, rather than stored once for several: an operation
     // costs less than a step. It stays a step of its own only for readers that did not.
-    let leafy = |j: usize| {
-        let k = n_args(instrs[j].code);
-        args[j][..k].iter().all(|v| !matches!(v, Val::Instr(_)))
-    };
-    let mut taken = vec![0u32; n];
-    let code = |j: usize| instrs[j].code;
-    let is_pair = |inner: &[Option<u32>], deep: &[bool], j: usize, outer: Code, in_: Code| {
-        !deep[j] && code(j) == outer && inner[j].is_some_and(|k| code(k as usize) == in_)
+    let leafy = |node: &Node, j: usize| {
+        let k = n_args(code(j));
+        node.args[..k].iter().all(|v| !matches!(v, Val::Instr(_)))
     };
     let simple_args = |a: &[Val; 3], k: usize| {
         // A time argument is one value, not lanes, and two constants would have been folded:
         // the fused loops take neither.
         !a[..k].contains(&Val::Input(3)) && a[..k].iter().any(|v| !matches!(v, Val::Const(_)))
     };
+    let (square, sqrt) = (Code::Unary(UnaryOp::Square), Code::Unary(UnaryOp::Sqrt));
+    let is_sum = |c: Code| matches!(c, Code::Binary(BinaryOp::Add | BinaryOp::Sub));
     for i in (0..n).filter(|_| fusing) {
-        let candidates: &[usize] = match instrs[i].code {
-            Code::Unary(op) if un(op).is_some() => &[0],
-            Code::Binary(op) if bin(op).is_some() => &[1, 0],
-            _ => &[],
+        let (candidates, op): (&[usize], _) = match code(i) {
+            Code::Unary(op) if un(op).is_some() => (&[0], None),
+            Code::Binary(op) if bin(op).is_some() => (&[1, 0], Some(op)),
+            _ => continue,
         };
         let triple = candidates.iter().find_map(|&at| {
-            let Val::Instr(j) = args[i][at] else {
+            let Val::Instr(j) = nodes[i].args[at] else {
                 return None;
             };
-            let j = j as usize;
-            let Code::Binary(op) = code(i) else {
-                return None;
+            let inner = &nodes[j as usize];
+            let k = inner.inner.filter(|_| inner.uses == 1 && !inner.deep)?;
+            let (cj, ck) = (code(j as usize), code(k as usize));
+            let fits = match op? {
+                BinaryOp::Add | BinaryOp::Sub => cj == square && is_sum(ck),
+                BinaryOp::Min | BinaryOp::Max => is_sum(cj) && ck == sqrt,
+                _ => false,
             };
-            let square = Code::Unary(UnaryOp::Square);
-            let sqrt = Code::Unary(UnaryOp::Sqrt);
-            let sum = |b| Code::Binary(b);
-            let fits = uses[j] == 1
-                && match op {
-                    BinaryOp::Add | BinaryOp::Sub => [BinaryOp::Add, BinaryOp::Sub]
-                        .into_iter()
-                        .any(|b| is_pair(&inner, &deep, j, square, sum(b))),
-                    BinaryOp::Min | BinaryOp::Max => [BinaryOp::Add, BinaryOp::Sub]
-                        .into_iter()
-                        .any(|b| is_pair(&inner, &deep, j, sum(b), sqrt)),
-                    _ => false,
-                };
-            fits.then_some(j)
+            fits.then_some(j as usize)
         });
         if let Some(j) = triple {
-            inner[i] = Some(j as u32);
-            deep[i] = true;
-            fused_away[j] = true;
+            nodes[i].inner = Some(j as u32);
+            nodes[i].deep = true;
+            nodes[j].fused_away = true;
             continue;
         }
         for &at in candidates {
-            let Val::Instr(j) = args[i][at] else { continue };
+            let Val::Instr(j) = nodes[i].args[at] else {
+                continue;
+            };
             let j = j as usize;
-            let takes = (uses[j] == 1 || leafy(j))
-                && inner[j].is_none()
-                && !fused_away[j]
-                && simple_args(&args[j], n_args(instrs[j].code))
-                && match (instrs[i].code, instrs[j].code) {
+            let inner = &nodes[j];
+            let takes = inner.inner.is_none()
+                && !inner.fused_away
+                && (inner.uses == 1 || leafy(inner, j))
+                && match (code(i), code(j)) {
                     (Code::Unary(_), Code::Binary(b)) => bin(b).is_some(),
                     (Code::Binary(_), Code::Unary(u)) => un(u).is_some(),
                     (Code::Binary(_), Code::Binary(b)) => bin(b).is_some(),
                     _ => false,
-                };
+                }
+                && simple_args(&inner.args, n_args(code(j)));
             if takes {
-                inner[i] = Some(j as u32);
-                taken[j] += 1;
-                fused_away[j] = taken[j] == uses[j];
+                nodes[i].inner = Some(j as u32);
+                let inner = &mut nodes[j];
+                inner.taken += 1;
+                inner.fused_away = inner.taken == inner.uses;
                 break;
             }
         }
     }
 
-    // Each remaining instruction becomes a step over values; then registers, allocated as the
-    // tape does: a step's output before its arguments are freed, so it never overwrites them.
-    let mut steps: Vec<(usize, Kind, [Val; 3])> = Vec::with_capacity(n);
+    // Each remaining instruction becomes a step over values.
+    let mut steps: Vec<(u32, Kind, [Val; 3])> = Vec::with_capacity(n);
     for i in 0..n {
-        if fused_away[i] {
+        let node = &nodes[i];
+        if node.fused_away {
             continue;
         }
-        let code = code(i);
-        let step = match (code, inner[i]) {
-            (_, None) => (i, Kind::Plain(code), args[i]),
-            (Code::Binary(op), Some(j)) if deep[i] => {
+        let args = node.args;
+        let step = match (code(i), node.inner) {
+            (code, None) => (Kind::Plain(code), args),
+            (Code::Binary(op), Some(j)) if node.deep => {
                 let j = j as usize;
-                let at = usize::from(args[i][1] == Val::Instr(j as u32));
-                let other = args[i][1 - at];
-                let k = inner[j].expect("a triple takes in a pair") as usize;
-                match (instrs[j].code, instrs[k].code) {
+                let at = usize::from(args[1] == Val::Instr(j as u32));
+                let other = args[1 - at];
+                let k = nodes[j].inner.expect("a triple takes in a pair") as usize;
+                let (middle, innermost) = (&nodes[j].args, &nodes[k].args);
+                match (code(j), code(k)) {
                     (Code::Unary(_), Code::Binary(b)) => {
                         let outer = lin(op, at).expect("a sum of squares adds");
                         let shift = match b {
                             BinaryOp::Add => Shift::Plus,
                             _ => Shift::Minus,
                         };
-                        (
-                            i,
-                            Kind::SumSq(outer, shift),
-                            [args[k][0], args[k][1], other],
-                        )
+                        let args = [innermost[0], innermost[1], other];
+                        (Kind::SumSq(outer, shift), args)
                     }
-                    (Code::Binary(middle), _) => {
+                    (Code::Binary(m), _) => {
                         let outer = pick(op, at).expect("a ball is picked by min or max");
-                        let at_root = usize::from(args[j][1] == Val::Instr(k as u32));
-                        let middle = lin(middle, at_root).expect("a ball's radius is added");
-                        let radius = args[j][1 - at_root];
-                        (
-                            i,
-                            Kind::RootPick(outer, middle),
-                            [args[k][0], radius, other],
-                        )
+                        let at_root = usize::from(middle[1] == Val::Instr(k as u32));
+                        let m = lin(m, at_root).expect("a ball's radius is added");
+                        let args = [innermost[0], middle[1 - at_root], other];
+                        (Kind::RootPick(outer, m), args)
                     }
                     _ => unreachable!("only the two idioms were picked"),
                 }
             }
             (Code::Unary(u), Some(j)) => {
-                let (Some(u), Code::Binary(b)) = (un(u), instrs[j as usize].code) else {
+                let (Some(u), Code::Binary(b)) = (un(u), code(j as usize)) else {
                     unreachable!("only simple pairs were picked")
                 };
                 let b = bin(b).expect("only simple pairs were picked");
-                (i, Kind::UnBin(u, b), args[j as usize])
+                (Kind::UnBin(u, b), nodes[j as usize].args)
             }
             (Code::Binary(op), Some(j)) => {
-                let at = usize::from(args[i][1] == Val::Instr(j));
-                let other = args[i][1 - at];
+                let at = usize::from(args[1] == Val::Instr(j));
+                let other = args[1 - at];
                 let outer = then(bin(op).expect("only simple pairs were picked"), at);
-                let inner_args = args[j as usize];
-                match instrs[j as usize].code {
+                let inner = nodes[j as usize].args;
+                match code(j as usize) {
                     Code::Unary(u) => {
                         let u = un(u).expect("only simple pairs were picked");
-                        (
-                            i,
-                            Kind::BinUn(outer, u),
-                            [inner_args[0], other, Val::Const(0.0)],
-                        )
+                        (Kind::BinUn(outer, u), [inner[0], other, Val::Const(0.0)])
                     }
                     Code::Binary(b) => {
                         let b = bin(b).expect("only simple pairs were picked");
-                        (
-                            i,
-                            Kind::BinBin(outer, b),
-                            [inner_args[0], inner_args[1], other],
-                        )
+                        (Kind::BinBin(outer, b), [inner[0], inner[1], other])
                     }
                     _ => unreachable!("only simple pairs were picked"),
                 }
             }
             _ => unreachable!("only unary and binary instructions take a pair"),
         };
-        steps.push(step);
+        steps.push((i as u32, step.0, step.1));
     }
 
-    let mut last_read = vec![0usize; n];
+    // Registers, allocated as the tape does: a step's output before its arguments are freed,
+    // so that it never overwrites them.
     for (s, (_, _, a)) in steps.iter().enumerate() {
         for v in a {
-            if let Val::Instr(j) = *v {
-                last_read[j as usize] = s;
+            if let Val::Instr(j) = *v
+                && nodes[j as usize].last_read != u32::MAX
+            {
+                nodes[j as usize].last_read = s as u32;
             }
         }
     }
-    for o in &outputs {
-        if let Val::Instr(j) = *o {
-            last_read[j as usize] = usize::MAX;
-        }
-    }
-    let mut reg_of = vec![u32::MAX; n];
     let mut free: Vec<u32> = Vec::new();
     let mut n_regs = 0u32;
-    let arg = |reg_of: &[u32], v: Val| match v {
+    let arg = |nodes: &[Node], v: Val| match v {
         Val::Input(slot) => Arg::Input(slot),
         Val::Const(c) => Arg::Const(c),
-        Val::Instr(j) => Arg::Reg(reg_of[j as usize]),
+        Val::Instr(j) => Arg::Reg(nodes[j as usize].reg),
     };
     let mut out_steps = Vec::with_capacity(steps.len());
     for (s, &(i, kind, a)) in steps.iter().enumerate() {
-        let args = [arg(&reg_of, a[0]), arg(&reg_of, a[1]), arg(&reg_of, a[2])];
+        let args = a.map(|v| arg(&nodes, v));
         let out = free.pop().unwrap_or_else(|| {
             n_regs += 1;
             n_regs - 1
         });
-        reg_of[i] = out;
+        nodes[i as usize].reg = out;
         for (k, v) in a.iter().enumerate() {
             if let Val::Instr(j) = *v
-                && last_read[j as usize] == s
+                && nodes[j as usize].last_read == s as u32
                 && !a[..k].contains(v)
             {
-                free.push(reg_of[j as usize]);
+                free.push(nodes[j as usize].reg);
             }
         }
         out_steps.push(Step { kind, out, args });
@@ -461,7 +442,46 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
     Plan {
         steps: out_steps.into(),
         n_regs: n_regs as usize,
-        outputs: outputs.iter().map(|&v| arg(&reg_of, v)).collect(),
+        outputs: tape
+            .outputs()
+            .iter()
+            .map(|&o| arg(&nodes, operand(&holds, o)))
+            .collect(),
         grids: tape.grids().into(),
+    }
+}
+
+/// What planning knows of one instruction of the tape.
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    args: [Val; 3],
+    /// Readers, an output counting two.
+    uses: u32,
+    /// Readers that took it into their step.
+    taken: u32,
+    /// The instruction this one took into its step.
+    inner: Option<u32>,
+    /// Whether `inner` is itself a pair.
+    deep: bool,
+    /// Whether every reader took it in, so that it is no step of its own.
+    fused_away: bool,
+    /// The last step that reads it (`u32::MAX`: an output, read after every step).
+    last_read: u32,
+    /// Its register.
+    reg: u32,
+}
+
+impl Node {
+    fn new(args: [Val; 3]) -> Node {
+        Node {
+            args,
+            uses: 0,
+            taken: 0,
+            inner: None,
+            deep: false,
+            fused_away: false,
+            last_read: 0,
+            reg: u32::MAX,
+        }
     }
 }
