@@ -782,6 +782,12 @@ impl<P: Payload> Log<P> {
     /// Edits a scene folds again when `object` changes from `from` on: all of them (it folds
     /// the object from its start) unless the change is at or after its last held edit.
     fn scene_refold_entries(&self, object: ObjectId, from: &OrderKey) -> usize {
+        // A change at or after the order's last op lies after every held edit (an op arriving
+        // in order): no need to look the object up.
+        let end = self.order.last().map(|&last| self.slot_key(last));
+        if end.is_none_or(|end| end <= *from) {
+            return 0;
+        }
         let held = self.held_edits(object);
         if held.last().is_none_or(|&last| self.slot_key(last) <= *from) {
             return 0;
