@@ -35,8 +35,13 @@ impl VersionVector {
         if seq == 0 {
             return;
         }
-        let entry = self.seqs.entry(author).or_insert(0);
-        *entry = (*entry).max(seq);
+        // Held authors are the usual case: `get_mut` searches without taking the key.
+        match self.seqs.get_mut(&author) {
+            Some(entry) => *entry = (*entry).max(seq),
+            None => {
+                self.seqs.insert(author, seq);
+            }
+        }
     }
 
     /// Sets `author`'s entry to exactly `seq` (0 removes it), lowering it if need be.

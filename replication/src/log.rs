@@ -918,10 +918,12 @@ impl<P: Payload> Log<P> {
     /// whose author's slot is taken is held beside the first as a sibling ([`crate::fork`]).
     fn deliver(&mut self, op: Op<P>, now: Timestamp) -> Result<usize, InsertError> {
         let author = op.author();
-        let authored = self.authors.get(&author);
+        // The author's record, looked up once: read to check the op, then written to hold it.
+        let authored = self.authors.get_mut(&author);
         let base_seq = self.base.as_ref().map_or(0, |b| b.seq(&author));
-        let on_chain = |seq: u64| Some(self.ops.at(authored?.at_seq(base_seq, seq)?));
-        let held = base_seq + authored.map_or(0, |a| a.chain.len() as u64);
+        let ops = &self.ops;
+        let on_chain = |seq: u64| Some(ops.at(authored.as_deref()?.at_seq(base_seq, seq)?));
+        let held = base_seq + authored.as_deref().map_or(0, |a| a.chain.len() as u64);
         debug_assert_eq!(held, self.vv.get(&author), "the chain is what is held");
         let twin = if held >= op.seq() {
             // A twin inside a base cannot be told apart from this op's past: refused.
@@ -987,7 +989,7 @@ impl<P: Payload> Log<P> {
             });
         }
         let n_bytes = op.encoded().len() as u64;
-        let author_bytes = authored.map_or(0, |a| a.bytes) + n_bytes;
+        let author_bytes = authored.as_deref().map_or(0, |a| a.bytes) + n_bytes;
         if author_bytes > self.author_quota {
             return Err(InsertError::AuthorQuota {
                 author,
@@ -997,13 +999,27 @@ impl<P: Payload> Log<P> {
         if self.n_bytes + n_bytes > MAX_LOG_BYTES {
             return Err(InsertError::Full);
         }
+        // Where the slab will hold it: every path from here holds it.
+        let at = u32::try_from(self.ops.len()).expect("a log holds fewer than 2^32 ops");
+        // A sibling of a fork is not on its author's chain.
+        let chain_at = twin.is_none().then_some(at);
+        match authored {
+            Some(a) => {
+                a.chain.extend(chain_at);
+                a.bytes = author_bytes;
+            }
+            None => {
+                // A new author: its chain grows from empty, as every chain does.
+                let authored = self.authors.entry(author).or_default();
+                authored.chain.extend(chain_at);
+                authored.bytes = author_bytes;
+            }
+        }
         let key = OrderKey::of(&op);
         let id = op.id();
         // Most ops arrive in order: append without searching. Siblings share a key: the id
         // breaks the tie.
         let pos = point_near_end(&self.order, |&at| self.slot_entry(at) < (key, id));
-        // Where the slab will hold it: every path from here holds it.
-        let at = u32::try_from(self.ops.len()).expect("a log holds fewer than 2^32 ops");
         self.order.insert(pos, at);
         // A placeholder: the refold that follows judges it.
         self.marks.push();
@@ -1019,18 +1035,13 @@ impl<P: Payload> Log<P> {
             let held = self.ops.insert(id, op);
             debug_assert_eq!(held, at, "held where the order says");
             self.n_bytes += n_bytes;
-            self.authors.entry(author).or_default().bytes = author_bytes;
             return Ok(pos);
         }
-        let authored = self.authors.entry(author).or_default();
-        authored.chain.push(at);
-        authored.bytes = author_bytes;
         match op.payload().effect() {
             Effect::Edit { object } => {
                 let ops = &self.ops;
-                let held = self.by_object.entry(object).or_default();
-                let i = point_near_end(held, |&a| OrderKey::of(ops.at(a)) < key);
-                held.insert(i, at);
+                let before = |&a: &u32| OrderKey::of(ops.at(a)) < key;
+                insert_in_list(&mut self.by_object, object, at, before);
                 if op.payload().is_delete() {
                     let deletes = self.deletes.entry(object).or_default();
                     let at = deletes.partition_point(|(k, _)| *k < key);
@@ -1039,15 +1050,13 @@ impl<P: Payload> Log<P> {
             }
             Effect::Acquire { object, .. } | Effect::Release { object } => {
                 // Placeholders: the refold that follows fills them in.
-                let list = self.lease_ops.entry(object).or_default();
-                let i = point_near_end(list, |l| l.key < key);
                 let placeholder = seen::LeaseOp {
                     key,
                     at,
                     before: None,
                     unseen: None,
                 };
-                list.insert(i, placeholder);
+                insert_in_list(&mut self.lease_ops, object, placeholder, |l| l.key < key);
             }
             _ => {}
         }
@@ -1784,6 +1793,25 @@ fn point_near_end<T>(list: &[T], pred: impl Fn(&T) -> bool) -> usize {
         [.., last] if pred(last) => list.len(),
         [.., before, _] if pred(before) => list.len() - 1,
         _ => list.partition_point(pred),
+    }
+}
+
+/// Inserts `item` into the sorted list `map` holds under `key`, at the first place where
+/// `before` does not hold ([`point_near_end`]). A key already there, the usual case, is found
+/// by one search, without an entry (which takes the key by value and costs more).
+fn insert_in_list<K: Ord, T>(
+    map: &mut BTreeMap<K, Vec<T>>,
+    key: K,
+    item: T,
+    before: impl Fn(&T) -> bool,
+) {
+    match map.get_mut(&key) {
+        Some(list) => {
+            let i = point_near_end(list, before);
+            list.insert(i, item);
+        }
+        // Grown from empty, not made to measure: the list's next item does not reallocate.
+        None => map.entry(key).or_default().push(item),
     }
 }
 
