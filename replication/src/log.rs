@@ -639,7 +639,7 @@ impl<P: Payload> Log<P> {
     ) -> Result<Insertion, InsertError> {
         let op = op.into_op();
         let mut out = Insertion::default();
-        if self.contains(&op.id()) || self.pending.contains(&op.id()) {
+        if self.contains_arriving(&op.id()) || self.pending.contains(&op.id()) {
             out.duplicate = true;
             self.deliver_queue(now, std::collections::VecDeque::new(), None, &mut out);
             return Ok(out);
@@ -1638,6 +1638,13 @@ impl<P: Payload> Log<P> {
     /// True if `id` is delivered (held, or inside the base).
     pub fn contains(&self, id: &OpId) -> bool {
         self.ops.contains_key(id) || self.base.as_ref().is_some_and(|b| b.contains(id))
+    }
+
+    /// [`Log::contains`] for an op arriving, which is usually new: the slab's table is probed
+    /// without comparing the latest ops first.
+    fn contains_arriving(&self, id: &OpId) -> bool {
+        self.ops.indexed_position(id).is_some()
+            || self.base.as_ref().is_some_and(|b| b.contains(id))
     }
 
     /// The author's held op with sequence number `seq` (`None` inside the base).

@@ -130,6 +130,12 @@ impl<P> OpSlab<P> {
         if let Some(at) = recent.rev().find(|&at| self.at(at).id == *id) {
             return Some(at);
         }
+        self.indexed_position(id)
+    }
+
+    /// [`OpSlab::position`] from the table alone, without comparing the latest ops first: for
+    /// an id that is usually not held (an op arriving), which those comparisons never find.
+    pub(crate) fn indexed_position(&self, id: &OpId) -> Option<u32> {
         self.index
             .find(id_hash(id), |&at| self.at(at).id == *id)
             .copied()
