@@ -1310,12 +1310,12 @@ impl<P: Payload> Log<P> {
                     .is_some_and(|o| o.id() == id)
             };
             if matches!(effect, Effect::Acquire { .. } | Effect::Release { .. }) && on_chain() {
-                self.lease_context(cx, state, (key, id, effect), None);
+                self.lease_context(cx, state, (key, self.order[pos], effect), None);
             }
             return Mark::Rejected(RejectReason::Forked);
         }
         let target = self.target_info(effect, pos);
-        let seen = self.lease_context(cx, state, (key, id, effect), target);
+        let seen = self.lease_context(cx, state, (key, self.order[pos], effect), target);
         let (author, at) = (op.author(), op.timestamp());
         if self.membership_ops.is_empty() {
             return state.apply(author, at, effect, target, seen);
@@ -1401,7 +1401,7 @@ impl<P: Payload> Log<P> {
         &self,
         cx: &mut LeaseCx,
         state: &FoldState,
-        (key, id, effect): (OrderKey, OpId, Effect),
+        (key, at, effect): (OrderKey, u32, Effect),
         target: Option<TargetInfo>,
     ) -> Option<Option<Lease>> {
         let object = match effect {
@@ -1417,16 +1417,13 @@ impl<P: Payload> Log<P> {
         let list = self.lease_ops.get(&object)?;
         let n = point_near_end(list, |l| l.key < key);
         let dag = self.dag();
-        let unseen = seen::unseen_before(&dag, &mut cx.reach, list, n, &id);
+        let unseen = seen::unseen_before(&dag, &mut cx.reach, list, n, at);
         let lease = (!unseen.is_empty()).then(|| {
             let alt = cx.alt.get_or_insert_with(seen::AltFolds::new);
             seen::lease_seen(&dag, &mut cx.reach, list, n, &unseen, alt, object)
         });
         if matches!(effect, Effect::Acquire { .. } | Effect::Release { .. }) {
-            assert!(
-                self.ops.at(list[n].at).id_ref() == &id,
-                "a lease op is indexed under its object"
-            );
+            assert!(list[n].at == at, "a lease op is indexed under its object");
             let unseen = (unseen.len() <= MAX_UNSEEN_LEASE_OPS)
                 .then(|| unseen.iter().map(|&(_, at)| at).collect());
             cx.learnt = Some(Learnt {

@@ -175,18 +175,28 @@ impl<P: Payload> Dag<'_, P> {
 
     /// [`Dag::sees`] for the target held at slab position `target_at`.
     pub(crate) fn sees_at(&self, memo: &mut Reach, from: &OpId, target_at: u32) -> bool {
-        let target = self.ops.at(target_at);
-        if from == target.id_ref() {
+        if from == self.ops.at(target_at).id_ref() {
             return true;
         }
-        let Some(from_at) = self.ops.position(from) else {
+        match self.ops.position(from) {
+            Some(from_at) => self.held_sees_at(memo, from_at, target_at),
             // Inside the base: before every held op.
-            return false;
-        };
+            None => false,
+        }
+    }
+
+    /// [`Dag::sees_at`] for `from` held at slab position `from_at` (a caller that holds the
+    /// position skips the lookup of its id).
+    pub(crate) fn held_sees_at(&self, memo: &mut Reach, from_at: u32, target_at: u32) -> bool {
+        if from_at == target_at {
+            return true;
+        }
+        let target = self.ops.at(target_at);
         if let Some(known) = self.quick_held(memo, from_at, target, target_at) {
             return known;
         }
         let from_op = self.ops.at(from_at);
+        let from = from_op.id_ref();
         if let Some(known) = self.one_step(memo, from_op, target, target_at) {
             return known;
         }
@@ -250,11 +260,11 @@ pub(crate) fn unseen_before<P: Payload>(
     memo: &mut Reach,
     list: &[LeaseOp],
     n: usize,
-    x: &OpId,
+    x_at: u32,
 ) -> Vec<(OrderKey, u32)> {
     let mut unseen = Vec::new();
     for l in list[..n].iter().rev() {
-        if !dag.sees_at(memo, x, l.at) {
+        if !dag.held_sees_at(memo, x_at, l.at) {
             unseen.push((l.key, l.at));
             continue;
         }
@@ -262,7 +272,7 @@ pub(crate) fn unseen_before<P: Payload>(
         if let Some(misses) = &l.unseen {
             for &at in misses.iter() {
                 let op = dag.ops.at(at);
-                if !dag.sees_at(memo, x, at) {
+                if !dag.held_sees_at(memo, x_at, at) {
                     unseen.push((OrderKey::of(op), at));
                 }
             }
