@@ -148,6 +148,13 @@ impl Frontier {
     pub fn deliver(&mut self, id: OpId, deps: &[OpId]) {
         match &mut self.heads {
             Heads::Few(heads) => {
+                if let [only] = heads.as_mut_slice()
+                    && deps.contains(only)
+                {
+                    // The usual op, which saw the only head: it replaces it.
+                    *only = id;
+                    return;
+                }
                 heads.retain(|h| !deps.contains(h));
                 let at = heads.partition_point(|h| *h < id);
                 heads.insert(at, id);
