@@ -248,7 +248,7 @@ impl FoldState {
         effect: Effect,
         target: Option<TargetInfo>,
         seen: Option<Option<Lease>>,
-        exempt: &mut dyn FnMut(&PeerId) -> bool,
+        exempt: &mut impl FnMut(&PeerId) -> bool,
     ) -> Mark {
         let mut binding = |lease: Option<Lease>| lease.filter(|l| !exempt(&l.holder));
         let verdict = match effect {
