@@ -320,6 +320,18 @@ struct Learnt {
     unseen: Option<Box<[u32]>>,
 }
 
+/// What an op's deps show of its causal past ([`Log::deps_seen`]).
+struct DepsSeen {
+    /// The highest Lamport time among the held deps (0 when none is held).
+    lamport: u64,
+    /// The latest timestamp among the held deps.
+    timestamp: Timestamp,
+    /// Every op held before this slab position is a dep or in a dep's causal past.
+    horizon: u32,
+    /// True if every dep is delivered (held, or inside the base).
+    all_delivered: bool,
+}
+
 /// The ops one insertion delivered, for membership tests (usually one op).
 enum Inserted<'a> {
     Few(&'a [OpId]),
@@ -653,7 +665,8 @@ impl<P: Payload> Log<P> {
                 cut_lamport: base.lamport,
             });
         }
-        let missing = self.missing(&op, now).and_then(|mut keys| {
+        let deps = self.deps_seen(&op);
+        let missing = self.missing(&op, now, &deps).and_then(|mut keys| {
             if !clocked || origin == LOCAL_ORIGIN {
                 keys.retain(|key| !matches!(key, DepKey::Clock(_)));
             }
@@ -674,7 +687,7 @@ impl<P: Payload> Log<P> {
         }
         let first_id = op.id();
         let first_pos = self
-            .deliver(op, now)
+            .deliver(op, now, deps)
             .inspect_err(|_| self.stats.n_refused += 1)?;
         let mut queue = std::collections::VecDeque::new();
         self.free_waiters(first_id, &mut queue);
@@ -714,7 +727,8 @@ impl<P: Payload> Log<P> {
         }
         while let Some((ready, ready_origin)) = queue.pop_front() {
             let id = ready.id();
-            if let Some(missing) = self.missing(&ready, now) {
+            let deps = self.deps_seen(&ready);
+            if let Some(missing) = self.missing(&ready, now, &deps) {
                 // Freed by one key but another (e.g. the previous seq) is still missing.
                 out.evicted
                     .extend(self.pending.insert(now, ready, ready_origin, missing));
@@ -725,7 +739,7 @@ impl<P: Payload> Log<P> {
                 self.hold_for_refold(now, ready, ready_origin, until, out);
                 continue;
             }
-            match self.deliver(ready, now) {
+            match self.deliver(ready, now, deps) {
                 Ok(pos) => {
                     first_pos = Some(first_pos.map_or(pos, |f| f.min(pos)));
                     charged |= remote;
@@ -874,11 +888,38 @@ impl<P: Payload> Log<P> {
         Ok(())
     }
 
-    /// What `op` waits for before it can be delivered: `None` when nothing.
-    fn missing(&self, op: &Op<P>, now: Timestamp) -> Option<BTreeSet<DepKey>> {
+    /// What `op`'s deps show of its causal past, looked up once for [`Log::missing`] and
+    /// [`Log::deliver`]. Deps and previous ops inside a base have Lamport times at or below
+    /// its cut, and `insert` refused every op at or below the cut, so held ones set the floor.
+    /// Timestamps inside a base are not kept per op: a joined log checks held ones only.
+    fn deps_seen(&self, op: &Op<P>) -> DepsSeen {
+        let mut seen = DepsSeen {
+            lamport: 0,
+            timestamp: Timestamp::default(),
+            horizon: 0,
+            all_delivered: true,
+        };
+        for d in op.deps() {
+            let Some(d_at) = self.ops.position(d) else {
+                seen.all_delivered &= self.base.as_ref().is_some_and(|b| b.contains(d));
+                continue;
+            };
+            let dep = self.ops.at(d_at);
+            seen.lamport = seen.lamport.max(dep.lamport());
+            seen.timestamp = seen.timestamp.max(dep.timestamp());
+            // The dep itself and every op before its own horizon: one prefix when they meet.
+            let h = self.horizons[d_at as usize];
+            seen.horizon = seen.horizon.max(if h == d_at { d_at + 1 } else { h });
+        }
+        seen
+    }
+
+    /// What `op`, whose deps show `deps` ([`Log::deps_seen`]), waits for before it can be
+    /// delivered: `None` when nothing.
+    fn missing(&self, op: &Op<P>, now: Timestamp, deps: &DepsSeen) -> Option<BTreeSet<DepKey>> {
         let seq_ready = op.seq() == 1 || self.vv.get(&op.author()) >= op.seq() - 1;
         let on_time = op.timestamp() <= now.saturating_add_micros(MAX_CLOCK_SKEW_MICROS);
-        if seq_ready && on_time && op.deps().iter().all(|d| self.contains(d)) {
+        if seq_ready && on_time && deps.all_delivered {
             // The usual case: nothing to collect (nor to drop).
             return None;
         }
@@ -916,7 +957,7 @@ impl<P: Payload> Log<P> {
 
     /// Adds an op whose causal past is delivered; returns its position in the order. An op
     /// whose author's slot is taken is held beside the first as a sibling ([`crate::fork`]).
-    fn deliver(&mut self, op: Op<P>, now: Timestamp) -> Result<usize, InsertError> {
+    fn deliver(&mut self, op: Op<P>, now: Timestamp, deps: DepsSeen) -> Result<usize, InsertError> {
         let author = op.author();
         // The author's record, looked up once: read to check the op, then written to hold it.
         let authored = self.authors.get_mut(&author);
@@ -952,21 +993,12 @@ impl<P: Payload> Log<P> {
         let prev = (!past_fork)
             .then(|| on_chain(op.seq().checked_sub(1)?))
             .flatten();
-        // Deps and previous ops inside a base have Lamport times at or below its cut, and
-        // `insert` refused every op at or below the cut, so held ones set the floor.
-        // Timestamps inside a base are not kept per op: a joined log checks held ones only.
-        let (mut floor, mut floor_ts) = (0, Timestamp::default());
-        let mut horizon = 0;
-        for d in op.deps() {
-            let Some(d_at) = self.ops.position(d) else {
-                continue;
-            };
-            let dep = self.ops.at(d_at);
-            (floor, floor_ts) = (floor.max(dep.lamport()), floor_ts.max(dep.timestamp()));
-            // The dep itself and every op before its own horizon: one prefix when they meet.
-            let h = self.horizons[d_at as usize];
-            horizon = horizon.max(if h == d_at { d_at + 1 } else { h });
-        }
+        let DepsSeen {
+            lamport: mut floor,
+            timestamp: mut floor_ts,
+            horizon,
+            ..
+        } = deps;
         if let Some(p) = prev {
             (floor, floor_ts) = (floor.max(p.lamport()), floor_ts.max(p.timestamp()));
         }
