@@ -1297,9 +1297,11 @@ impl<P: Payload> Log<P> {
             {
                 self.checkpoints.push(state.clone());
             }
-            let op = self.op_at(pos);
-            let (id, effect) = (op.id(), op.payload().effect());
-            let mark = self.judge(&mut cx, &mut state, pos);
+            // Read once for judging and reporting; from the slab's field, not through
+            // `op_at`, so that the writes below may borrow the log's other fields.
+            let op = self.ops.at(self.order[pos]);
+            let (key, effect) = (OrderKey::of(op), op.payload().effect());
+            let mark = self.judge_read(&mut cx, &mut state, pos, (op, key, effect));
             if let Some(learnt) = cx.learnt.take()
                 && let Some(me) = (self.lease_ops.get_mut(&learnt.object))
                     .and_then(|list| list.get_mut(learnt.index))
@@ -1309,8 +1311,8 @@ impl<P: Payload> Log<P> {
             if pos >= from {
                 let at = self.order[pos];
                 let old = self.marks.get(at);
-                if old != mark || inserted.contains(&id) {
-                    self.report_change(&mut refold, effect, pos);
+                if old != mark || inserted.contains(op.id_ref()) {
+                    self.report_change(&mut refold, effect, pos, key);
                 }
                 if old != mark {
                     self.marks.set(at, mark);
@@ -1322,7 +1324,12 @@ impl<P: Payload> Log<P> {
         self.n_folded = self.order.len();
         self.report_void_changes(&mut refold);
         for (object, pos) in std::mem::take(&mut self.hides_changed) {
-            self.report_change(&mut refold, Effect::Edit { object }, pos);
+            self.report_change(
+                &mut refold,
+                Effect::Edit { object },
+                pos,
+                self.order_key(pos),
+            );
         }
         self.update_hidden(&mut refold);
         refold
@@ -1332,14 +1339,25 @@ impl<P: Payload> Log<P> {
     /// advances the state past it.
     fn judge(&self, cx: &mut LeaseCx, state: &mut FoldState, pos: usize) -> Mark {
         let op = self.op_at(pos);
-        let (key, id) = (OrderKey::of(op), op.id());
-        let effect = op.payload().effect();
+        let (key, effect) = (OrderKey::of(op), op.payload().effect());
+        self.judge_read(cx, state, pos, (op, key, effect))
+    }
+
+    /// [`Log::judge`] for the op at `pos`, its order key and its effect, already read.
+    fn judge_read(
+        &self,
+        cx: &mut LeaseCx,
+        state: &mut FoldState,
+        pos: usize,
+        (op, key, effect): (&Op<P>, OrderKey, Effect),
+    ) -> Mark {
+        let id = op.id_ref();
         if self.forks.covers(&op.author(), op.seq()) {
             // A lease op on the chain still notes the lease before it: later lease ops that
             // missed it fold from there.
             let on_chain = || {
                 self.by_seq(&op.author(), op.seq())
-                    .is_some_and(|o| o.id() == id)
+                    .is_some_and(|o| o.id_ref() == id)
             };
             if matches!(effect, Effect::Acquire { .. } | Effect::Release { .. }) && on_chain() {
                 self.lease_context(cx, state, (key, self.order[pos], effect), None);
@@ -1355,11 +1373,11 @@ impl<P: Payload> Log<P> {
         // Membership as this op's causal past has it: a member that saw its own expel is
         // refused, and nobody who saw an expel is bound by the expelled member's leases.
         let dag = self.dag();
-        if dag.expelled_in_past(&mut cx.reach, &id, &author) {
+        if dag.expelled_in_past(&mut cx.reach, id, &author) {
             return Mark::Rejected(RejectReason::Expelled);
         }
         let reach = &mut cx.reach;
-        let mut exempt = |holder: &PeerId| dag.expelled_in_past(reach, &id, holder);
+        let mut exempt = |holder: &PeerId| dag.expelled_in_past(reach, id, holder);
         state.apply_exempting(author, at, effect, target, seen, &mut exempt)
     }
 
@@ -1380,7 +1398,7 @@ impl<P: Payload> Log<P> {
                     continue;
                 };
                 refold.from = refold.from.min(pos);
-                self.report_change(refold, op.payload().effect(), pos);
+                self.report_change(refold, op.payload().effect(), pos, OrderKey::of(op));
             }
         }
     }
@@ -1403,8 +1421,9 @@ impl<P: Payload> Log<P> {
         &self.forks
     }
 
-    /// Records in `refold` the object whose fold the changed op at `pos` affects.
-    fn report_change(&self, refold: &mut Refold, effect: Effect, pos: usize) {
+    /// Records in `refold` the object whose fold the changed op at `pos` (order key `key`)
+    /// affects.
+    fn report_change(&self, refold: &mut Refold, effect: Effect, pos: usize, key: OrderKey) {
         let (object, at) = match effect {
             Effect::Independent => return,
             Effect::Edit { object }
@@ -1423,7 +1442,8 @@ impl<P: Payload> Log<P> {
         };
         // An undo or redo changes its target's activity, which may lie before `from`.
         refold.from = refold.from.min(at);
-        refold.object_keys.lower(object, self.order_key(at));
+        let key = if at == pos { key } else { self.order_key(at) };
+        refold.object_keys.lower(object, key);
     }
 
     /// The lease an op's causal past gives its object, when it missed some of the object's
