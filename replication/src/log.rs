@@ -798,12 +798,14 @@ impl<P: Payload> Log<P> {
     fn scene_refold_entries(&self, object: ObjectId, from: &OrderKey) -> usize {
         // A change at or after the order's last op lies after every held edit (an op arriving
         // in order): no need to look the object up.
-        let end = self.order.last().map(|&last| self.slot_key(last));
-        if end.is_none_or(|end| end <= *from) {
+        if (self.order.last()).is_none_or(|&last| self.slot_cmp(last, from).is_le()) {
             return 0;
         }
         let held = self.held_edits(object);
-        if held.last().is_none_or(|&last| self.slot_key(last) <= *from) {
+        if held
+            .last()
+            .is_none_or(|&last| self.slot_cmp(last, from).is_le())
+        {
             return 0;
         }
         let in_base = self
@@ -836,7 +838,7 @@ impl<P: Payload> Log<P> {
             return None;
         }
         let key = OrderKey::of(op);
-        let pos = point_near_end(&self.order, |&at| self.slot_key(at) < key);
+        let pos = point_near_end(&self.order, |&at| self.slot_cmp(at, &key).is_lt());
         // The object the scene folds again, from the op itself or from an undone edit.
         let object = match op.payload().effect() {
             Effect::Edit { object }
@@ -1051,7 +1053,10 @@ impl<P: Payload> Log<P> {
         let id = op.id();
         // Most ops arrive in order: append without searching. Siblings share a key: the id
         // breaks the tie.
-        let pos = point_near_end(&self.order, |&at| self.slot_entry(at) < (key, id));
+        let pos = point_near_end(&self.order, |&at| {
+            let op = self.ops.at(at);
+            cmp_key(op, &key).then_with(|| op.id_ref().cmp(&id)).is_lt()
+        });
         self.order.insert(pos, at);
         // A placeholder: the refold that follows judges it.
         self.marks.push();
@@ -1072,7 +1077,7 @@ impl<P: Payload> Log<P> {
         match op.payload().effect() {
             Effect::Edit { object } => {
                 let ops = &self.ops;
-                let before = |&a: &u32| OrderKey::of(ops.at(a)) < key;
+                let before = |&a: &u32| cmp_key(ops.at(a), &key).is_lt();
                 insert_in_list(&mut self.by_object, object, at, before);
                 if op.payload().is_delete() {
                     let deletes = self.deletes.entry(object).or_default();
@@ -1609,6 +1614,11 @@ impl<P: Payload> Log<P> {
         OrderKey::of(self.ops.at(at))
     }
 
+    /// How the op the slab holds at `at` sorts against `key` ([`cmp_key`]).
+    fn slot_cmp(&self, at: u32, key: &OrderKey) -> std::cmp::Ordering {
+        cmp_key(self.ops.at(at), key)
+    }
+
     /// What the linear order sorts the op the slab holds at `at` by.
     fn slot_entry(&self, at: u32) -> (OrderKey, OpId) {
         let op = self.ops.at(at);
@@ -1849,6 +1859,16 @@ fn point_near_end<T>(list: &[T], pred: impl Fn(&T) -> bool) -> usize {
         [.., last] if pred(last) => list.len(),
         [.., before, _] if pred(before) => list.len() - 1,
         _ => list.partition_point(pred),
+    }
+}
+
+/// How `op` sorts against `key` in the linear order. Lamport times differ in most
+/// comparisons and decide them without the op's author, which is read from its encoding
+/// (another cache line) to build its whole key.
+fn cmp_key<P>(op: &Op<P>, key: &OrderKey) -> std::cmp::Ordering {
+    match op.lamport().cmp(&key.lamport) {
+        std::cmp::Ordering::Equal => OrderKey::of(op).cmp(key),
+        unequal => unequal,
     }
 }
 
