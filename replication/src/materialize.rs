@@ -240,15 +240,25 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
         let reapplied =
             |op: &Op<P>| (refold.void_from.get(&op.author())).is_some_and(|from| op.seq() >= *from);
         for (object, from) in &refold.object_keys {
-            let full = refold.base_objects.contains(object)
-                || self
-                    .last_applied
-                    .get(object)
-                    .is_some_and(|last| last >= from);
-            if full {
-                self.refold_object(log, *object);
-            } else {
-                self.append_object(log, *object, from);
+            let in_base = refold.base_objects.contains(object);
+            // Looked up once: to choose, then to note what an append applied.
+            match self.last_applied.get_mut(object) {
+                // The change lies after everything applied to the object: append.
+                Some(last) if !in_base && *last < *from => {
+                    self.stats.n_object_appends += 1;
+                    let (scene, stats) = (&mut self.scene, &mut self.stats);
+                    if let Some(key) = apply_held_edits(scene, stats, log, *object, Some(from)) {
+                        *last = key;
+                    }
+                }
+                None if !in_base => {
+                    self.stats.n_object_appends += 1;
+                    let (scene, stats) = (&mut self.scene, &mut self.stats);
+                    if let Some(key) = apply_held_edits(scene, stats, log, *object, Some(from)) {
+                        self.last_applied.insert(*object, key);
+                    }
+                }
+                _ => self.refold_object(log, *object),
             }
         }
         for id in delivered {
@@ -278,26 +288,33 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
                 }
             }
         }
-        self.apply_held_edits(log, object, None);
-    }
-
-    /// Applies `object`'s active held edits from key `from` on, after what was applied.
-    fn append_object(&mut self, log: &Log<P>, object: ObjectId, from: &OrderKey) {
-        self.stats.n_object_appends += 1;
-        self.apply_held_edits(log, object, Some(from));
-    }
-
-    /// Applies `object`'s active held edits: all of them, or those from key `from` on.
-    fn apply_held_edits(&mut self, log: &Log<P>, object: ObjectId, from: Option<&OrderKey>) {
-        for (key, entry) in log.object_edits(object, from) {
-            if !entry.active {
-                continue;
-            }
-            self.scene.apply(FoldEntry { key, op: entry.op });
+        let (scene, stats) = (&mut self.scene, &mut self.stats);
+        if let Some(key) = apply_held_edits(scene, stats, log, object, None) {
             self.last_applied.insert(object, key);
-            self.stats.n_applied += 1;
         }
     }
+}
+
+/// Applies `object`'s active held edits to `scene`: all of them, or those from key `from` on.
+/// Returns the key of the last one applied, for the caller to note where it keeps it (one
+/// write per object, not one per edit).
+fn apply_held_edits<P: Payload, M: Materialize<P>>(
+    scene: &mut M,
+    stats: &mut FoldStats,
+    log: &Log<P>,
+    object: ObjectId,
+    from: Option<&OrderKey>,
+) -> Option<OrderKey> {
+    let mut last = None;
+    for (key, entry) in log.object_edits(object, from) {
+        if !entry.active {
+            continue;
+        }
+        scene.apply(FoldEntry { key, op: entry.op });
+        stats.n_applied += 1;
+        last = Some(key);
+    }
+    last
 }
 
 /// A toy scene for [`crate::payload::test_payload::TestPayload`]: each object's value (the
