@@ -332,29 +332,6 @@ struct DepsSeen {
     all_delivered: bool,
 }
 
-/// The ops one insertion delivered, for membership tests (usually one op).
-enum Inserted<'a> {
-    Few(&'a [OpId]),
-    Many(BTreeSet<OpId>),
-}
-
-impl<'a> Inserted<'a> {
-    fn new(ids: &'a [OpId]) -> Self {
-        if ids.len() <= 16 {
-            Self::Few(ids)
-        } else {
-            Self::Many(ids.iter().copied().collect())
-        }
-    }
-
-    fn contains(&self, id: &OpId) -> bool {
-        match self {
-            Self::Few(ids) => ids.contains(id),
-            Self::Many(set) => set.contains(id),
-        }
-    }
-}
-
 /// One op in the linear order with its verdict.
 #[derive(Debug, Clone, Copy)]
 pub struct Entry<'a, P> {
@@ -765,7 +742,17 @@ impl<P: Payload> Log<P> {
         }
         if let Some(first_pos) = first_pos {
             let positions = self.refold_positions(first_pos);
-            let refold = self.refold_from(first_pos, &Inserted::new(&out.delivered));
+            // Held ops never move nor go, and every op this insertion held is in `delivered`:
+            // they are the slab's last ones.
+            let first_new = self.ops.len().saturating_sub(out.delivered.len());
+            debug_assert!(
+                (out.delivered.last()).is_none_or(|id| {
+                    let at = self.ops.position(id).map(|at| at as usize);
+                    at == self.ops.len().checked_sub(1)
+                }),
+                "the ops an insertion delivered are the last held"
+            );
+            let refold = self.refold_from(first_pos, first_new);
             if charged {
                 let objects = refold.object_keys.iter();
                 let entries = positions
@@ -1272,8 +1259,9 @@ impl<P: Payload> Log<P> {
 
     /// Re-evaluates marks from `from` to the end, starting at the nearest checkpoint (or at
     /// the current state, when everything changed lies after what was folded: the common case
-    /// of ops arriving in order).
-    fn refold_from(&mut self, from: usize, inserted: &Inserted<'_>) -> Refold {
+    /// of ops arriving in order). The ops held at slab positions from `first_new` on are the
+    /// insertion's own, reported whatever their marks.
+    fn refold_from(&mut self, from: usize, first_new: usize) -> Refold {
         let (start, mut state) = if from >= self.n_folded {
             (self.n_folded, std::mem::take(&mut self.state))
         } else {
@@ -1316,7 +1304,7 @@ impl<P: Payload> Log<P> {
             if pos >= from {
                 let at = self.order[pos];
                 let old = self.marks.get(at);
-                if old != mark || inserted.contains(op.id_ref()) {
+                if old != mark || at as usize >= first_new {
                     self.report_change(&mut refold, effect, pos, key);
                 }
                 if old != mark {
