@@ -320,139 +320,80 @@ fn lanes3<const N: usize>(
     }
 }
 
+/// Matches `$e` and runs `$body` with `$f` bound to the lane function of its arm, so that each
+/// arm's loops are compiled for that function.
+macro_rules! bind {
+    ($e:expr, $f:ident => $body:expr, { $($pat:pat => $lane:expr),+ $(,)? }) => {
+        match $e {
+            $($pat => {
+                let $f = $lane;
+                $body
+            })+
+        }
+    };
+}
+
 /// Binds `$f` to the lane function of a fusing unary operation.
 macro_rules! with_un {
     ($u:expr, $f:ident => $body:expr) => {
-        match $u {
-            Un::Neg => {
-                let $f = move |x: f32| -x;
-                $body
-            }
-            Un::Abs => {
-                let $f = move |x: f32| x.abs();
-                $body
-            }
-            Un::Sqrt => {
-                let $f = move |x: f32| x.sqrt();
-                $body
-            }
-            Un::Square => {
-                let $f = move |x: f32| x * x;
-                $body
-            }
-        }
+        bind!($u, $f => $body, {
+            Un::Neg => move |x: f32| -x,
+            Un::Abs => move |x: f32| x.abs(),
+            Un::Sqrt => move |x: f32| x.sqrt(),
+            Un::Square => move |x: f32| x * x,
+        })
     };
 }
 
 /// Binds `$f` to the lane function of a fusing inner binary operation.
 macro_rules! with_bin {
     ($b:expr, $f:ident => $body:expr) => {
-        match $b {
-            Bin::Add => {
-                let $f = move |x: f32, y: f32| x + y;
-                $body
-            }
-            Bin::Sub => {
-                let $f = move |x: f32, y: f32| x - y;
-                $body
-            }
-            Bin::Mul => {
-                let $f = move |x: f32, y: f32| x * y;
-                $body
-            }
-            Bin::Min => {
-                let $f = move |x: f32, y: f32| min_nan(x, y);
-                $body
-            }
-            Bin::Max => {
-                let $f = move |x: f32, y: f32| max_nan(x, y);
-                $body
-            }
-        }
+        bind!($b, $f => $body, {
+            Bin::Add => move |x: f32, y: f32| x + y,
+            Bin::Sub => move |x: f32, y: f32| x - y,
+            Bin::Mul => move |x: f32, y: f32| x * y,
+            Bin::Min => move |x: f32, y: f32| min_nan(x, y),
+            Bin::Max => move |x: f32, y: f32| max_nan(x, y),
+        })
     };
 }
 
 /// Binds `$f` to the lane function `(v, a) -> then(v, a)` of a fusing outer operation.
 macro_rules! with_then {
     ($t:expr, $f:ident => $body:expr) => {
-        match $t {
-            Then::Add => {
-                let $f = move |v: f32, a: f32| v + a;
-                $body
-            }
-            Then::Mul => {
-                let $f = move |v: f32, a: f32| v * a;
-                $body
-            }
-            Then::Sub => {
-                let $f = move |v: f32, a: f32| v - a;
-                $body
-            }
-            Then::SubFrom => {
-                let $f = move |v: f32, a: f32| a - v;
-                $body
-            }
-            Then::Min => {
-                let $f = move |v: f32, a: f32| min_nan(v, a);
-                $body
-            }
-            Then::MinOf => {
-                let $f = move |v: f32, a: f32| min_nan(a, v);
-                $body
-            }
-            Then::Max => {
-                let $f = move |v: f32, a: f32| max_nan(v, a);
-                $body
-            }
-            Then::MaxOf => {
-                let $f = move |v: f32, a: f32| max_nan(a, v);
-                $body
-            }
-        }
+        bind!($t, $f => $body, {
+            Then::Add => move |v: f32, a: f32| v + a,
+            Then::Mul => move |v: f32, a: f32| v * a,
+            Then::Sub => move |v: f32, a: f32| v - a,
+            Then::SubFrom => move |v: f32, a: f32| a - v,
+            Then::Min => move |v: f32, a: f32| min_nan(v, a),
+            Then::MinOf => move |v: f32, a: f32| min_nan(a, v),
+            Then::Max => move |v: f32, a: f32| max_nan(v, a),
+            Then::MaxOf => move |v: f32, a: f32| max_nan(a, v),
+        })
     };
 }
 
 /// Binds `$f` to the lane function `(v, a) -> lin(v, a)`.
 macro_rules! with_lin {
     ($t:expr, $f:ident => $body:expr) => {
-        match $t {
-            Lin::Add => {
-                let $f = move |v: f32, a: f32| v + a;
-                $body
-            }
-            Lin::Sub => {
-                let $f = move |v: f32, a: f32| v - a;
-                $body
-            }
-            Lin::SubFrom => {
-                let $f = move |v: f32, a: f32| a - v;
-                $body
-            }
-        }
+        bind!($t, $f => $body, {
+            Lin::Add => move |v: f32, a: f32| v + a,
+            Lin::Sub => move |v: f32, a: f32| v - a,
+            Lin::SubFrom => move |v: f32, a: f32| a - v,
+        })
     };
 }
 
 /// Binds `$f` to the lane function `(v, a) -> pick(v, a)`.
 macro_rules! with_pick {
     ($t:expr, $f:ident => $body:expr) => {
-        match $t {
-            Pick::Min => {
-                let $f = move |v: f32, a: f32| min_nan(v, a);
-                $body
-            }
-            Pick::MinOf => {
-                let $f = move |v: f32, a: f32| min_nan(a, v);
-                $body
-            }
-            Pick::Max => {
-                let $f = move |v: f32, a: f32| max_nan(v, a);
-                $body
-            }
-            Pick::MaxOf => {
-                let $f = move |v: f32, a: f32| max_nan(a, v);
-                $body
-            }
-        }
+        bind!($t, $f => $body, {
+            Pick::Min => move |v: f32, a: f32| min_nan(v, a),
+            Pick::MinOf => move |v: f32, a: f32| min_nan(a, v),
+            Pick::Max => move |v: f32, a: f32| max_nan(v, a),
+            Pick::MaxOf => move |v: f32, a: f32| max_nan(a, v),
+        })
     };
 }
 
