@@ -33,6 +33,17 @@ pub enum Operand {
     Const(f64),
 }
 
+impl Code {
+    /// How many of an instruction's arguments this operation reads.
+    pub fn n_args(self) -> usize {
+        match self {
+            Code::Unary(_) => 1,
+            Code::Binary(_) => 2,
+            Code::Ternary(_) | Code::Sample(_) => 3,
+        }
+    }
+}
+
 /// One register instruction: `out = code(args)`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Instr {

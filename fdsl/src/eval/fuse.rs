@@ -217,14 +217,6 @@ fn pick(op: BinaryOp, at: usize) -> Option<Pick> {
     })
 }
 
-fn n_args(code: Code) -> usize {
-    match code {
-        Code::Unary(_) => 1,
-        Code::Binary(_) => 2,
-        Code::Ternary(_) | Code::Sample(_) => 3,
-    }
-}
-
 /// Fuses `tape`'s instructions in pairs and allocates registers for the result.
 pub(super) fn plan(tape: &Tape) -> Plan {
     plan_with(tape, true)
@@ -250,7 +242,7 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
     let mut nodes: Vec<Node> = Vec::with_capacity(n);
     for (i, instr) in instrs.iter().enumerate() {
         let mut args = [Val::Const(0.0); 3];
-        for (k, slot) in args.iter_mut().enumerate().take(n_args(instr.code)) {
+        for (k, slot) in args.iter_mut().enumerate().take(instr.code.n_args()) {
             *slot = operand(&holds, instr.args[k]);
             if let Val::Instr(j) = *slot {
                 nodes[j as usize].uses += 1;
@@ -276,7 +268,7 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
     // inside each reader that takes it in, rather than stored once for several: an operation
     // costs less than a step. It stays a step of its own only for readers that did not.
     let leafy = |node: &Node, j: usize| {
-        let k = n_args(code(j));
+        let k = code(j).n_args();
         node.args[..k].iter().all(|v| !matches!(v, Val::Instr(_)))
     };
     let simple_args = |a: &[Val; 3], k: usize| {
@@ -327,7 +319,7 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
                     (Code::Binary(_), Code::Binary(b)) => bin(b).is_some(),
                     _ => false,
                 }
-                && simple_args(&inner.args, n_args(code(j)));
+                && simple_args(&inner.args, code(j).n_args());
             if takes {
                 nodes[i].inner = Some(j as u32);
                 let inner = &mut nodes[j];

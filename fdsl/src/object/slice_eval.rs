@@ -83,12 +83,7 @@ impl SliceEval {
         let args = &mut *self.args;
         let grids = self.tape.grids();
         for instr in self.tape.instrs().iter() {
-            let n_args = match instr.code {
-                Code::Unary(_) => 1,
-                Code::Binary(_) => 2,
-                Code::Ternary(_) | Code::Sample(_) => 3,
-            };
-            for (k, arg) in instr.args.iter().take(n_args).enumerate() {
+            for (k, arg) in instr.args.iter().take(instr.code.n_args()).enumerate() {
                 match *arg {
                     Operand::Reg(r) => args[k] = regs[r as usize],
                     Operand::Const(c) => args[k].fill(c),
