@@ -26,7 +26,6 @@ const SMALL: usize = 64;
 /// Evaluates a tape over slices of points in f32.
 #[derive(Clone, Debug)]
 pub struct BulkEval {
-    tape: Tape,
     plan: Plan,
     regs: Vec<Lanes>,
     /// The coordinates of a last, partial small chunk, padded.
@@ -43,7 +42,6 @@ impl BulkEval {
     pub fn new(tape: &Tape) -> BulkEval {
         let plan = fuse::plan(tape);
         BulkEval {
-            tape: tape.clone(),
             regs: vec![[0.0; CHUNK]; plan.n_regs],
             scratch: vec![[0.0; CHUNK]; if plan.gathers() { 3 } else { 0 }],
             plan,
@@ -54,7 +52,7 @@ impl BulkEval {
 
     /// The tape this evaluator runs.
     pub fn tape(&self) -> &Tape {
-        &self.tape
+        &self.plan.tape
     }
 
     /// How many steps a chunk of points takes: the tape's instructions, fewer where pairs of
@@ -436,7 +434,7 @@ fn run_plan<const N: usize>(
             };
             match code {
                 Code::Ternary(op) => ternary(op, o, scratch),
-                Code::Sample(g) => sample(&plan.grids[g as usize], o, scratch),
+                Code::Sample(g) => sample(&plan.tape.grids()[g as usize], o, scratch),
                 Code::Unary(_) | Code::Binary(_) => {}
             }
             continue;

@@ -17,10 +17,7 @@
 //! the caller's slices ([`Arg::Input`]) and constants from the step, and registers are
 //! allocated so that no step writes a register it reads.
 
-use std::sync::Arc;
-
 use crate::compile::{BinaryOp, UnaryOp};
-use crate::grid::Grid;
 use crate::tape::{Code, Operand, Tape};
 
 /// Where a step's argument comes from.
@@ -131,8 +128,8 @@ pub(super) struct Plan {
     pub steps: Box<[Step]>,
     pub n_regs: usize,
     pub outputs: Box<[Arg]>,
-    /// The grids that [`Code::Sample`] steps index.
-    pub grids: Box<[Arc<Grid>]>,
+    /// The tape planned: its grids are what [`Code::Sample`] steps index.
+    pub tape: Tape,
 }
 
 impl Plan {
@@ -439,7 +436,7 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
             .iter()
             .map(|&o| arg(&nodes, operand(&holds, o)))
             .collect(),
-        grids: tape.grids().into(),
+        tape: tape.clone(),
     }
 }
 
