@@ -8,6 +8,7 @@
 //! active. So the same op set gives the same scene, and the same [`SceneHash`], on every peer.
 
 use std::collections::BTreeMap;
+use std::collections::btree_map::Entry;
 use std::marker::PhantomData;
 
 use crate::codec::DecodeError;
@@ -240,25 +241,18 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
         let reapplied =
             |op: &Op<P>| (refold.void_from.get(&op.author())).is_some_and(|from| op.seq() >= *from);
         for (object, from) in &refold.object_keys {
-            let in_base = refold.base_objects.contains(object);
             // Looked up once: to choose, then to note what an append applied.
-            match self.last_applied.get_mut(object) {
-                // The change lies after everything applied to the object: append.
-                Some(last) if !in_base && *last < *from => {
-                    self.stats.n_object_appends += 1;
-                    let (scene, stats) = (&mut self.scene, &mut self.stats);
-                    if let Some(key) = apply_held_edits(scene, stats, log, *object, Some(from)) {
-                        *last = key;
-                    }
-                }
-                None if !in_base => {
-                    self.stats.n_object_appends += 1;
-                    let (scene, stats) = (&mut self.scene, &mut self.stats);
-                    if let Some(key) = apply_held_edits(scene, stats, log, *object, Some(from)) {
-                        self.last_applied.insert(*object, key);
-                    }
-                }
-                _ => self.refold_object(log, *object),
+            let last = self.last_applied.entry(*object);
+            let applied_after = matches!(&last, Entry::Occupied(l) if *l.get() >= *from);
+            if refold.base_objects.contains(object) || applied_after {
+                self.refold_object(log, *object);
+                continue;
+            }
+            // The change lies after everything applied to the object: append.
+            self.stats.n_object_appends += 1;
+            let (scene, stats) = (&mut self.scene, &mut self.stats);
+            if let Some(key) = apply_held_edits(scene, stats, log, *object, Some(from)) {
+                last.insert_entry(key);
             }
         }
         for id in delivered {
