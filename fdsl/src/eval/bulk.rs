@@ -1,12 +1,12 @@
 //! The f32 bulk evaluator: many points per call, one step at a time over a chunk of [`CHUNK`]
 //! lanes, so dispatch costs once per step and chunk rather than per point, and each inner loop
 //! is a plain loop over arrays that the compiler vectorises. A step is one instruction of the
-//! tape, or two fused into one loop (`fuse.rs`), with the same results bit for bit. Steps read
+//! tape, or several fused into one loop (`fuse.rs`), with the same results bit for bit. Steps read
 //! coordinates from the caller's slices, and the last step writes a single output straight
 //! into the caller's slice. On x86-64 CPUs with AVX2 and FMA the same loops are compiled a
 //! second time for those features and chosen at run time.
 
-use super::fuse::{self, Arg, Bin, Kind, Lin, Pick, Plan, Shift, Then, Un};
+use super::fuse::{self, Arg, Bin, Kind, Lin, Pick, Plan, Shift, Sum, Then, Un};
 use super::real::{fast_cos, fast_sin};
 use crate::compile::{BinaryOp, TernaryOp, UnaryOp};
 use crate::tape::{Code, Tape};
@@ -474,7 +474,59 @@ fn run_plan<const N: usize>(
             Kind::RootPick(p, t) => {
                 with_pick!(p, g => with_lin!(t, f => lanes3(o, a, b, c, move |x, y| f(x.sqrt(), y), g)))
             }
+            Kind::Sum(sum) => add_terms(o, [a, b, c], &sum),
         }
+    }
+}
+
+/// Binds `$f` to the lane function `(u, c) -> (u - c)^2` or `u - c` of a [`Sum`]'s term.
+macro_rules! with_term {
+    ($square:expr, $f:ident => $body:expr) => {
+        bind!($square, $f => $body, {
+            true => move |u: f32, c: f32| (u - c) * (u - c),
+            false => move |u: f32, c: f32| u - c,
+        })
+    };
+}
+
+/// `o[i] = ((offset + t0) + t1) + t2`, with term `j` computed from lanes `u[j]`.
+#[inline(always)]
+fn add_terms<const N: usize>(o: &mut [f32; N], u: [Src<N>; 3], sum: &Sum) {
+    let [t0, t1, t2] = sum.terms;
+    let lanes = u.map(|u| match u {
+        Src::R(lanes) => Some(lanes),
+        Src::C(_) => None,
+    });
+    // The first term, after the offset if there is one.
+    macro_rules! start {
+        ($s:ident => $body:expr) => {
+            bind!(sum.offset, $s => $body, {
+                Some(c) => move |t: f32| c + t,
+                None => move |t: f32| t,
+            })
+        };
+    }
+    match (sum.n, lanes) {
+        (1, [Some(a), ..]) => with_term!(t0.square, f0 => start!(s => {
+            for i in 0..N {
+                o[i] = s(t0.k * f0(a[i], t0.c));
+            }
+        })),
+        (2, [Some(a), Some(b), _]) => {
+            with_term!(t0.square, f0 => with_term!(t1.square, f1 => start!(s => {
+                for i in 0..N {
+                    o[i] = s(t0.k * f0(a[i], t0.c)) + t1.k * f1(b[i], t1.c);
+                }
+            })))
+        }
+        (3, [Some(a), Some(b), Some(d)]) => {
+            with_term!(t0.square, f0 => with_term!(t1.square, f1 => with_term!(t2.square, f2 => start!(s => {
+                for i in 0..N {
+                    o[i] = s(t0.k * f0(a[i], t0.c)) + t1.k * f1(b[i], t1.c) + t2.k * f2(d[i], t2.c);
+                }
+            }))))
+        }
+        _ => unreachable!("the plan gives a sum one to three terms of lanes"),
     }
 }
 
@@ -691,20 +743,149 @@ mod tests {
         }
     }
 
+    /// A term of a sum: `(u - c)^2` or `k * u` in each way it can be written, or a constant,
+    /// with `u` a coordinate or a formula.
+    fn term() -> impl Strategy<Value = String> {
+        let lanes = prop_oneof![
+            Just("x".to_string()),
+            Just("y".to_string()),
+            Just("z".to_string()),
+            Just("t".to_string()),
+            Just("(x * y - 0.25)".to_string()),
+            Just("sin(z)".to_string()),
+        ];
+        let c = prop_oneof![Just(0.0f64), Just(-0.0), Just(1.0), -1.5f64..1.5];
+        (lanes, c, 0..8u8).prop_map(|(u, c, form)| match form {
+            0 => format!("({u} - ({c}))^2"),
+            1 => format!("(({c}) - {u})^2"),
+            2 => format!("({u} + ({c}))^2"),
+            3 => format!("(({c}) + {u})^2"),
+            4 => format!("{u}^2"),
+            5 => format!("({c}) * {u}"),
+            6 => format!("{u} * ({c})"),
+            _ => format!("({c})"),
+        })
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+
+        #[test]
+        fn sums_of_terms_give_the_bits_of_one_step_per_instruction(
+            terms in proptest::collection::vec((term(), any::<bool>()), 2..6),
+            nested in any::<bool>(),
+            points in proptest::collection::vec((coordinate(), coordinate(), coordinate()), 1..600),
+            t in coordinate(),
+        ) {
+            // Sums and differences of two to five terms, left to right or with the last two
+            // grouped, read by a root as a ball reads them and by a second formula.
+            let join = |terms: &[(String, bool)]| {
+                let mut out = terms[0].0.clone();
+                for (term, minus) in &terms[1..] {
+                    out = format!("{out} {} {term}", if *minus { "-" } else { "+" });
+                }
+                out
+            };
+            let sum = match terms.split_at(terms.len() - 2) {
+                (head, [a, b]) if nested && !head.is_empty() => {
+                    let op = if a.1 { "-" } else { "+" };
+                    format!("{} {op} ({})", join(head), join(&[(a.0.clone(), false), b.clone()]))
+                }
+                _ => join(&terms),
+            };
+            let src = format!("max(0.4 - sqrt({sum}), min({sum}, x) - 2)");
+            let Ok(f) = Function::parse(&src) else { return Ok(()) };
+            let tape = f.tape();
+            let xs: Vec<f32> = points.iter().map(|p| p.0).collect();
+            let ys: Vec<f32> = points.iter().map(|p| p.1).collect();
+            let zs: Vec<f32> = points.iter().map(|p| p.2).collect();
+            let (mut fused, mut reference) = (vec![0.0; xs.len()], vec![0.0; xs.len()]);
+            BulkEval::new(&tape).eval(&xs, &ys, &zs, t, &mut fused);
+            unfused(&tape).eval(&xs, &ys, &zs, t, &mut reference);
+            for i in 0..xs.len() {
+                prop_assert!(
+                    same_bits(fused[i], reference[i]),
+                    "{src} at {:?}, t {t}: fused {} unfused {}",
+                    points[i], fused[i], reference[i]
+                );
+            }
+        }
+    }
+
     #[test]
-    fn distance_formulas_take_half_the_steps() {
+    fn each_way_to_write_a_sum_gives_the_bits_of_one_step_per_instruction() {
+        // One formula per rewrite of `fuse::sum_of` and `fuse::term`, each a sum in the plan.
+        let formulas = [
+            "(x - 0.5)^2 + (y + 0.25)^2",
+            "(0.5 - x)^2 + (0.25 + y)^2 + z^2",
+            "x^2 - (0.75 + y^2)",
+            "x^2 - (y^2 - 0.75)",
+            "0.3 * z - (0.9 * x - 0.1 * y)",
+            "0.3 * z + (0.9 * x - y * 0.1)",
+            "1.5 - x^2 - y^2 - z^2",
+            "x^2 - 1.5",
+            "(z - 1)^2 - 0.5 * x - 2 * y",
+            "(t - 0.5) * 2 + x * 3",
+        ];
+        let values = [-1.25f32, -0.5, -0.0, 0.0, 0.5, 1.0, 1.75];
+        let mut xs = Vec::new();
+        let (mut ys, mut zs) = (Vec::new(), Vec::new());
+        for &x in &values {
+            for &y in &values {
+                for &z in &values {
+                    xs.push(x);
+                    ys.push(y);
+                    zs.push(z);
+                }
+            }
+        }
+        for src in formulas {
+            let tape = tape(src);
+            let mut fused = BulkEval::new(&tape);
+            let sums = fused
+                .plan
+                .steps
+                .iter()
+                .filter(|s| matches!(s.kind, Kind::Sum(_)));
+            assert!(sums.count() >= 1, "{src}: {:?}", fused.plan.steps);
+            for t in [-0.0, 0.5] {
+                let (mut a, mut b) = (vec![0.0; xs.len()], vec![0.0; xs.len()]);
+                fused.eval(&xs, &ys, &zs, t, &mut a);
+                unfused(&tape).eval(&xs, &ys, &zs, t, &mut b);
+                for i in 0..xs.len() {
+                    assert!(
+                        same_bits(a[i], b[i]),
+                        "{src} at ({}, {}, {}), t {t}: fused {} unfused {}",
+                        xs[i],
+                        ys[i],
+                        zs[i],
+                        a[i],
+                        b[i]
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn distance_formulas_take_a_quarter_of_the_steps() {
         let sphere = BulkEval::new(&tape("1-x^2-y^2-z^2"));
-        assert_eq!(sphere.n_steps(), 3, "{:?}", sphere.plan.steps);
-        // A ball: a square, two sums of squares, and the radius less the root.
+        assert_eq!(sphere.n_steps(), 1, "{:?}", sphere.plan.steps);
+        // A ball: the squared distance to its centre, and the radius less the root.
         let ball = "0.3 - sqrt((x-0.1)^2 + (y+0.2)^2 + (z-0.3)^2)";
         assert_eq!(tape(ball).len(), 10);
-        assert_eq!(BulkEval::new(&tape(ball)).n_steps(), 4);
+        assert_eq!(BulkEval::new(&tape(ball)).n_steps(), 2);
         // A union of balls: the second's root and radius go into the union's step.
         let two = tape(&format!("({ball}) | (0.2 - sqrt(x^2 + (y-1)^2 + z^2))"));
         assert_eq!(two.len(), 19);
-        assert_eq!(BulkEval::new(&two).n_steps(), 8);
+        assert_eq!(BulkEval::new(&two).n_steps(), 4);
+        // A cylinder's two terms, written the other way round.
+        let cylinder = tape("0.5 - sqrt((0.2 - y)^2 + (x + 0.1)^2)");
+        assert_eq!(BulkEval::new(&cylinder).n_steps(), 2);
+        // Planes of products with constants, those products shared between the planes.
         let watermelon = tape(crate::models::reference_model("watermelon").expect("a model"));
-        assert!(BulkEval::new(&watermelon).n_steps() * 3 <= watermelon.len() * 2);
+        assert_eq!(watermelon.len(), 22);
+        assert_eq!(BulkEval::new(&watermelon).n_steps(), 6);
     }
 
     #[test]

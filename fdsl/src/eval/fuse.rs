@@ -1,17 +1,19 @@
-//! The f32 bulk evaluator's program: a tape's instructions with pairs, and a few triples, fused
-//! into one step.
+//! The f32 bulk evaluator's program: a tape's instructions fused, two or more at a time, into
+//! steps.
 //!
 //! Over a chunk of lanes, every step reads its arguments from memory and writes its result back,
 //! so on short, cheap instructions (`x - c`, `t * t`, `a + b`) the loads, stores and dispatch
 //! cost more than the arithmetic. A value that only one later instruction reads can be computed
 //! inside that instruction's loop instead, where it never leaves a register: `(x - c)^2`,
 //! `a - b^2`, `max(m, r - d)`, `a + b * c`. Most steps fuse two operations from the few that
-//! distance fields are made of; the two idioms of a ball take three, a sum of squares
-//! `s + (y - c)^2` and a union or intersection with a ball `max(m, r - sqrt(s))`. An operation
-//! of coordinates and constants alone (`0.1 * y`) is computed again in every reader that takes
-//! it in, even when it has several. Each step computes exactly what its instructions compute in
-//! turn (the same f32 operations in the same order, no fused multiply-add), so results stay bit
-//! for bit those of the unfused tape.
+//! distance fields are made of. A union or intersection with a ball `max(m, r - sqrt(s))` takes
+//! three, and so does a sum of squares `s + (y - c)^2`. A sum of up to three terms `k * u` or
+//! `(u - c)^2`, after a constant or not, is one step whatever its operations: a squared distance
+//! to a point, a plane `0.9 x + 0.1 y - 0.1 z`, a sphere `1 - x^2 - y^2 - z^2`. An operation of
+//! coordinates and constants alone (`0.1 * y`) is computed again in every reader that takes it
+//! in, even when it has several. Each step computes exactly what its instructions compute in turn
+//! (the same f32 operations in the same order, no fused multiply-add, rewritten only where the
+//! rewrite gives the same bits), so results stay bit for bit those of the unfused tape.
 //!
 //! The plan also gives the evaluator its own registers: a step reads coordinates straight from
 //! the caller's slices ([`Arg::Input`]) and constants from the step, and registers are
@@ -112,6 +114,33 @@ pub(super) enum Kind {
     SumSq(Lin, Shift),
     /// `pick(lin(sqrt(args[0]), args[1]), args[2])`: a union or intersection with a ball.
     RootPick(Pick, Lin),
+    /// `((offset + t0) + t1) + t2` over the terms of a [`Sum`], term `j` of lanes `args[j]`.
+    Sum(Sum),
+}
+
+/// A sum of one to three terms, each `k * (u - c)` or `k * (u - c)^2` with `u` lanes, added
+/// in order after an optional constant: a squared distance, a plane, a sphere's `1 - x^2 - y^2`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Sum {
+    pub offset: Option<f32>,
+    pub terms: [Term; 3],
+    /// How many of `terms` are added (1 only after an offset).
+    pub n: u8,
+}
+
+/// A term of a [`Sum`]: `k * (u - c)`, squared first with `square`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Term {
+    pub k: f32,
+    pub c: f32,
+    pub square: bool,
+}
+
+impl Term {
+    /// `-term`: the same bits as the term subtracted.
+    fn neg(self) -> Term {
+        Term { k: -self.k, ..self }
+    }
 }
 
 /// One step of the program: `out = kind(args)`; unused arguments are `Const(0.0)`.
@@ -276,6 +305,15 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
     let (square, sqrt) = (Code::Unary(UnaryOp::Square), Code::Unary(UnaryOp::Sqrt));
     let is_sum = |c: Code| matches!(c, Code::Binary(BinaryOp::Add | BinaryOp::Sub));
     for i in (0..n).filter(|_| fusing) {
+        if let Some((sum, absorbed)) = sum_of(&nodes, &code, i) {
+            nodes[i].sum = Some(sum);
+            for j in absorbed {
+                let node = &mut nodes[j];
+                node.taken += 1;
+                node.fused_away = node.taken == node.uses;
+            }
+            continue;
+        }
         let (candidates, op): (&[usize], _) = match code(i) {
             Code::Unary(op) if un(op).is_some() => (&[0], None),
             Code::Binary(op) if bin(op).is_some() => (&[1, 0], Some(op)),
@@ -308,6 +346,7 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
             let j = j as usize;
             let inner = &nodes[j];
             let takes = inner.inner.is_none()
+                && inner.sum.is_none()
                 && !inner.fused_away
                 && (inner.uses == 1 || leafy(inner, j))
                 && match (code(i), code(j)) {
@@ -335,6 +374,15 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
             continue;
         }
         let args = node.args;
+        if let Some(Planned { offset, terms, n }) = node.sum {
+            let sum = Sum {
+                offset,
+                terms: terms.map(|(_, t)| t),
+                n,
+            };
+            steps.push((i as u32, Kind::Sum(sum), terms.map(|(u, _)| u)));
+            continue;
+        }
         let step = match (code(i), node.inner) {
             (code, None) => (Kind::Plain(code), args),
             (Code::Binary(op), Some(j)) if node.deep => {
@@ -440,6 +488,139 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
     }
 }
 
+/// A [`Sum`] before registers: its terms' lanes are values.
+#[derive(Clone, Copy, Debug)]
+struct Planned {
+    offset: Option<f32>,
+    terms: [(Val, Term); 3],
+    n: u8,
+}
+
+impl Planned {
+    /// The sum with `term` added last, when it has room.
+    fn then(self, term: (Val, Term)) -> Option<Planned> {
+        let mut next = self;
+        *next.terms.get_mut(usize::from(self.n))? = term;
+        next.n += 1;
+        Some(next)
+    }
+}
+
+/// What an argument of a sum is to it.
+enum Part {
+    /// A term it computes again in its own step, and the instruction that gave it.
+    Term(usize, (Val, Term)),
+    /// A smaller sum, which only this sum reads.
+    Sum(usize, Planned),
+    Const(f32),
+}
+
+/// Instruction `i` as a [`Sum`] of the terms and sums it reads, and the instructions it takes
+/// in.
+///
+/// Every rewrite gives the tape's bits: addition gives the same bits in either order,
+/// `a - b` is `a + (-b)`, `-(k * v)` is `(-k) * v`, `(c - u)^2` is `(u - c)^2` (rounding to
+/// nearest is symmetric), `(u + c)^2` is `(u - (-c))^2`, and `u` is `u - 0` and `1 * u`.
+fn sum_of(
+    nodes: &[Node],
+    code: &impl Fn(usize) -> Code,
+    i: usize,
+) -> Option<(Planned, Vec<usize>)> {
+    let minus = match code(i) {
+        Code::Binary(BinaryOp::Add) => false,
+        Code::Binary(BinaryOp::Sub) => true,
+        _ => return None,
+    };
+    let part = |v: Val| match v {
+        Val::Const(c) => Some(Part::Const(c)),
+        Val::Input(_) => None,
+        Val::Instr(j) => {
+            let j = j as usize;
+            let node = &nodes[j];
+            match node.sum {
+                Some(s) if node.uses == 1 && !node.fused_away => Some(Part::Sum(j, s)),
+                Some(_) => None,
+                None => term(nodes, code, j).map(|t| Part::Term(j, t)),
+            }
+        }
+    };
+    let signed = |t: (Val, Term)| if minus { (t.0, t.1.neg()) } else { t };
+    let blank = (
+        Val::Const(0.0),
+        Term {
+            k: 0.0,
+            c: 0.0,
+            square: false,
+        },
+    );
+    let sum = |offset, terms: &[(Val, Term)]| {
+        let mut all = [blank; 3];
+        all[..terms.len()].copy_from_slice(terms);
+        Planned {
+            offset,
+            terms: all,
+            n: terms.len() as u8,
+        }
+    };
+    let [a, b, _] = nodes[i].args;
+    Some(match (part(a)?, part(b)?) {
+        (Part::Sum(j, s), Part::Term(l, t)) => (s.then(signed(t))?, vec![j, l]),
+        // `t - s` is not `(-s) + t`: negating a sum of zeros of both signs gives `-0`, the
+        // negated terms' sum `+0`.
+        (Part::Term(l, t), Part::Sum(j, s)) if !minus => (s.then(t)?, vec![j, l]),
+        (Part::Term(j, t), Part::Term(l, u)) => (sum(None, &[t, signed(u)]), vec![j, l]),
+        (Part::Const(c), Part::Term(l, t)) => (sum(Some(c), &[signed(t)]), vec![l]),
+        (Part::Term(l, t), Part::Const(c)) => {
+            (sum(Some(if minus { -c } else { c }), &[t]), vec![l])
+        }
+        _ => return None,
+    })
+}
+
+/// Instruction `j` as a term `k * (u - c)^2` or `k * u` with `u` lanes, when no other reader
+/// needs it stored: a square of a difference with a constant, or a product with one.
+fn term(nodes: &[Node], code: &impl Fn(usize) -> Code, j: usize) -> Option<(Val, Term)> {
+    let node = &nodes[j];
+    let leafy = node.args[..code(j).n_args()]
+        .iter()
+        .all(|v| !matches!(v, Val::Instr(_)));
+    if node.fused_away || !(node.uses == 1 || leafy) {
+        return None;
+    }
+    let (u, term) = match (code(j), node.inner) {
+        (Code::Unary(UnaryOp::Square), None) => (node.args[0], (1.0, 0.0)),
+        (Code::Unary(UnaryOp::Square), Some(k)) => {
+            let diff = &nodes[k as usize];
+            if diff.inner.is_some() {
+                return None;
+            }
+            let (u, c) = match (code(k as usize), diff.args[0], diff.args[1]) {
+                (Code::Binary(BinaryOp::Sub), u, Val::Const(c))
+                | (Code::Binary(BinaryOp::Sub), Val::Const(c), u) => (u, c),
+                (Code::Binary(BinaryOp::Add), u, Val::Const(c))
+                | (Code::Binary(BinaryOp::Add), Val::Const(c), u) => (u, -c),
+                _ => return None,
+            };
+            (u, (1.0, c))
+        }
+        (Code::Binary(BinaryOp::Mul), None) => match (node.args[0], node.args[1]) {
+            (u, Val::Const(k)) | (Val::Const(k), u) => (u, (k, 0.0)),
+            _ => return None,
+        },
+        _ => return None,
+    };
+    let square = code(j) == Code::Unary(UnaryOp::Square);
+    let lanes = matches!(u, Val::Input(0..=2) | Val::Instr(_));
+    lanes.then_some((
+        u,
+        Term {
+            k: term.0,
+            c: term.1,
+            square,
+        },
+    ))
+}
+
 /// What planning knows of one instruction of the tape.
 #[derive(Clone, Copy, Debug)]
 struct Node {
@@ -452,6 +633,8 @@ struct Node {
     inner: Option<u32>,
     /// Whether `inner` is itself a pair.
     deep: bool,
+    /// What it adds, when it is a [`Sum`] of terms.
+    sum: Option<Planned>,
     /// Whether every reader took it in, so that it is no step of its own.
     fused_away: bool,
     /// The last step that reads it (`u32::MAX`: an output, read after every step).
@@ -468,6 +651,7 @@ impl Node {
             taken: 0,
             inner: None,
             deep: false,
+            sum: None,
             fused_away: false,
             last_read: 0,
             reg: u32::MAX,
