@@ -3,8 +3,8 @@
 //! is a plain loop over arrays that the compiler vectorises. A step is one instruction of the
 //! tape, or several fused into one loop (`fuse.rs`), with the same results bit for bit. Steps read
 //! coordinates from the caller's slices, and the last step writes a single output straight
-//! into the caller's slice. On x86-64 CPUs with AVX2 and FMA the same loops are compiled a
-//! second time for those features and chosen at run time.
+//! into the caller's slice. On x86-64 the same loops are compiled again for AVX2 and FMA, and
+//! for AVX-512, and the widest build the CPU runs is chosen at run time.
 
 use super::fuse::{self, Arg, Bin, Kind, Lin, Pick, Plan, Shift, Sum, Then, Un};
 use super::real::{fast_cos, fast_sin};
@@ -34,7 +34,7 @@ pub struct BulkEval {
     /// when the plan has no such step, so that building an evaluator for a short tape (a
     /// mesher builds one per simplified tape) stays cheap.
     scratch: Vec<Lanes>,
-    wide: bool,
+    simd: Simd,
 }
 
 impl BulkEval {
@@ -46,7 +46,7 @@ impl BulkEval {
             scratch: vec![[0.0; CHUNK]; if plan.gathers() { 3 } else { 0 }],
             plan,
             pad: [[0.0; SMALL]; 3],
-            wide: wide_simd_available(),
+            simd: Simd::widest(),
         }
     }
 
@@ -95,7 +95,7 @@ impl BulkEval {
             regs,
             pad,
             scratch,
-            wide,
+            simd,
             ..
         } = self;
         let mut start = 0;
@@ -107,7 +107,7 @@ impl BulkEval {
                 plan,
                 regs,
                 scratch,
-                wide: *wide,
+                simd: *simd,
             };
             start += match whole {
                 [Some(x), Some(y), Some(z)] => machine.chunk([x, y, z], t, outs, start, CHUNK),
@@ -134,7 +134,7 @@ struct Machine<'a> {
     plan: &'a Plan,
     regs: &'a mut [Lanes],
     scratch: &'a mut [Lanes],
-    wide: bool,
+    simd: Simd,
 }
 
 impl Machine<'_> {
@@ -156,7 +156,7 @@ impl Machine<'_> {
             _ => None,
         };
         let direct = sink.is_some();
-        run(self.wide, plan, self.regs, &lanes, self.scratch, sink);
+        run(self.simd, plan, self.regs, &lanes, self.scratch, sink);
         if direct {
             return len;
         }
@@ -195,44 +195,91 @@ struct Lanes3<'a, const N: usize> {
     t: f32,
 }
 
+/// Which build of the loops runs: the portable one, or one compiled for the wider vectors the
+/// CPU reports at run time. Each gives the same bits: the loops use no fused multiply-add and
+/// no operation whose result depends on the vector width.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Simd {
+    Portable,
+    /// AVX2 and FMA: eight lanes a vector.
+    Avx2,
+    /// AVX-512: sixteen lanes a vector, where fidget's JIT and the builds of the other bulk
+    /// evaluators use eight.
+    Avx512,
+}
+
+impl Simd {
+    /// The widest build this CPU runs.
+    pub(super) fn widest() -> Simd {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::is_x86_feature_detected as has;
+            if has!("avx512f") && has!("avx512vl") && has!("avx2") && has!("fma") {
+                return Simd::Avx512;
+            }
+            if has!("avx2") && has!("fma") {
+                return Simd::Avx2;
+            }
+        }
+        Simd::Portable
+    }
+
+    /// Every build this CPU runs, the portable one first.
+    #[cfg(test)]
+    fn available() -> Vec<Simd> {
+        let all = [Simd::Portable, Simd::Avx2, Simd::Avx512];
+        let widest = Simd::widest();
+        all.into_iter()
+            .take_while(|&s| s != widest)
+            .chain([widest])
+            .collect()
+    }
+}
+
 /// Runs the plan over the first `N` lanes of the registers. With a `sink`, the last step writes
 /// there instead of to its register.
 fn run<const N: usize>(
-    wide: bool,
+    simd: Simd,
     plan: &Plan,
     regs: &mut [Lanes],
     lanes: &Lanes3<N>,
     scratch: &mut [Lanes],
     sink: Option<&mut [f32; N]>,
 ) {
-    #[cfg(target_arch = "x86_64")]
-    if wide {
+    match simd {
+        #[cfg(target_arch = "x86_64")]
+        #[expect(unsafe_code, reason = "calling a function compiled for AVX-512")]
+        // SAFETY: `Simd::Avx512` is only chosen when the CPU reports AVX-512 (F and VL), AVX2
+        // and FMA at run time.
+        Simd::Avx512 => unsafe { run_avx512(plan, regs, lanes, scratch, sink) },
+        #[cfg(target_arch = "x86_64")]
         #[expect(unsafe_code, reason = "calling a function compiled for AVX2 and FMA")]
-        // SAFETY: `wide` is only set when the CPU reports AVX2 and FMA at run time.
-        unsafe {
-            run_wide(plan, regs, lanes, scratch, sink)
-        };
-        return;
+        // SAFETY: `Simd::Avx2` is only chosen when the CPU reports AVX2 and FMA at run time.
+        Simd::Avx2 => unsafe { run_wide(plan, regs, lanes, scratch, sink) },
+        _ => run_plan(plan, regs, lanes, scratch, sink),
     }
-    let _ = wide;
-    run_plan(plan, regs, lanes, scratch, sink);
 }
 
 /// Whether the CPU runs the AVX2 and FMA builds of the evaluators' loops.
 pub(super) fn wide_simd_available() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
+    Simd::widest() != Simd::Portable
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn run_wide<const N: usize>(
+    plan: &Plan,
+    regs: &mut [Lanes],
+    lanes: &Lanes3<N>,
+    scratch: &mut [Lanes],
+    sink: Option<&mut [f32; N]>,
+) {
+    run_plan(plan, regs, lanes, scratch, sink);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+fn run_avx512<const N: usize>(
     plan: &Plan,
     regs: &mut [Lanes],
     lanes: &Lanes3<N>,
@@ -660,7 +707,31 @@ mod tests {
         let mut eval = BulkEval::new(tape);
         eval.plan = fuse::plan_with(tape, false);
         eval.regs = vec![[0.0; CHUNK]; eval.plan.n_regs];
+        eval.simd = Simd::Portable;
         eval
+    }
+
+    /// The fused evaluator's values at the points, with each build of the loops this CPU
+    /// runs; fails unless every build gives `reference`'s bits.
+    fn check_every_build(
+        tape: &Tape,
+        [xs, ys, zs]: [&[f32]; 3],
+        t: f32,
+        reference: &[f32],
+    ) -> Result<(), String> {
+        let mut eval = BulkEval::new(tape);
+        let mut out = vec![0.0; xs.len()];
+        for simd in Simd::available() {
+            eval.simd = simd;
+            eval.eval(xs, ys, zs, t, &mut out);
+            if let Some(i) = (0..xs.len()).find(|&i| !same_bits(out[i], reference[i])) {
+                return Err(format!(
+                    "{simd:?} at ({}, {}, {}), t {t}: fused {} unfused {}",
+                    xs[i], ys[i], zs[i], out[i], reference[i]
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Texts over x, y, z and t, mostly of the operations that fuse.
@@ -730,16 +801,10 @@ mod tests {
             let xs: Vec<f32> = points.iter().map(|p| p.0).collect();
             let ys: Vec<f32> = points.iter().map(|p| p.1).collect();
             let zs: Vec<f32> = points.iter().map(|p| p.2).collect();
-            let (mut fused, mut reference) = (vec![0.0; xs.len()], vec![0.0; xs.len()]);
-            BulkEval::new(&tape).eval(&xs, &ys, &zs, t, &mut fused);
+            let mut reference = vec![0.0; xs.len()];
             unfused(&tape).eval(&xs, &ys, &zs, t, &mut reference);
-            for i in 0..xs.len() {
-                prop_assert!(
-                    same_bits(fused[i], reference[i]),
-                    "{src} at {:?}, t {t}: fused {} unfused {}",
-                    points[i], fused[i], reference[i]
-                );
-            }
+            let checked = check_every_build(&tape, [&xs, &ys, &zs], t, &reference);
+            prop_assert!(checked.is_ok(), "{src}: {}", checked.unwrap_err());
         }
     }
 
@@ -799,16 +864,10 @@ mod tests {
             let xs: Vec<f32> = points.iter().map(|p| p.0).collect();
             let ys: Vec<f32> = points.iter().map(|p| p.1).collect();
             let zs: Vec<f32> = points.iter().map(|p| p.2).collect();
-            let (mut fused, mut reference) = (vec![0.0; xs.len()], vec![0.0; xs.len()]);
-            BulkEval::new(&tape).eval(&xs, &ys, &zs, t, &mut fused);
+            let mut reference = vec![0.0; xs.len()];
             unfused(&tape).eval(&xs, &ys, &zs, t, &mut reference);
-            for i in 0..xs.len() {
-                prop_assert!(
-                    same_bits(fused[i], reference[i]),
-                    "{src} at {:?}, t {t}: fused {} unfused {}",
-                    points[i], fused[i], reference[i]
-                );
-            }
+            let checked = check_every_build(&tape, [&xs, &ys, &zs], t, &reference);
+            prop_assert!(checked.is_ok(), "{src}: {}", checked.unwrap_err());
         }
     }
 
@@ -841,7 +900,7 @@ mod tests {
         }
         for src in formulas {
             let tape = tape(src);
-            let mut fused = BulkEval::new(&tape);
+            let fused = BulkEval::new(&tape);
             let sums = fused
                 .plan
                 .steps
@@ -849,19 +908,10 @@ mod tests {
                 .filter(|s| matches!(s.kind, Kind::Sum(_)));
             assert!(sums.count() >= 1, "{src}: {:?}", fused.plan.steps);
             for t in [-0.0, 0.5] {
-                let (mut a, mut b) = (vec![0.0; xs.len()], vec![0.0; xs.len()]);
-                fused.eval(&xs, &ys, &zs, t, &mut a);
-                unfused(&tape).eval(&xs, &ys, &zs, t, &mut b);
-                for i in 0..xs.len() {
-                    assert!(
-                        same_bits(a[i], b[i]),
-                        "{src} at ({}, {}, {}), t {t}: fused {} unfused {}",
-                        xs[i],
-                        ys[i],
-                        zs[i],
-                        a[i],
-                        b[i]
-                    );
+                let mut reference = vec![0.0; xs.len()];
+                unfused(&tape).eval(&xs, &ys, &zs, t, &mut reference);
+                if let Err(e) = check_every_build(&tape, [&xs, &ys, &zs], t, &reference) {
+                    panic!("{src}: {e}");
                 }
             }
         }
