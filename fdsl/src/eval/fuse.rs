@@ -307,7 +307,7 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
     for i in (0..n).filter(|_| fusing) {
         if let Some((sum, absorbed)) = sum_of(&nodes, &code, i) {
             nodes[i].sum = Some(sum);
-            for j in absorbed {
+            for j in absorbed.into_iter().flatten() {
                 let node = &mut nodes[j];
                 node.taken += 1;
                 node.fused_away = node.taken == node.uses;
@@ -525,7 +525,7 @@ fn sum_of(
     nodes: &[Node],
     code: &impl Fn(usize) -> Code,
     i: usize,
-) -> Option<(Planned, Vec<usize>)> {
+) -> Option<(Planned, [Option<usize>; 2])> {
     let minus = match code(i) {
         Code::Binary(BinaryOp::Add) => false,
         Code::Binary(BinaryOp::Sub) => true,
@@ -564,14 +564,14 @@ fn sum_of(
     };
     let [a, b, _] = nodes[i].args;
     Some(match (part(a)?, part(b)?) {
-        (Part::Sum(j, s), Part::Term(l, t)) => (s.then(signed(t))?, vec![j, l]),
+        (Part::Sum(j, s), Part::Term(l, t)) => (s.then(signed(t))?, [Some(j), Some(l)]),
         // `t - s` is not `(-s) + t`: negating a sum of zeros of both signs gives `-0`, the
         // negated terms' sum `+0`.
-        (Part::Term(l, t), Part::Sum(j, s)) if !minus => (s.then(t)?, vec![j, l]),
-        (Part::Term(j, t), Part::Term(l, u)) => (sum(None, &[t, signed(u)]), vec![j, l]),
-        (Part::Const(c), Part::Term(l, t)) => (sum(Some(c), &[signed(t)]), vec![l]),
+        (Part::Term(l, t), Part::Sum(j, s)) if !minus => (s.then(t)?, [Some(j), Some(l)]),
+        (Part::Term(j, t), Part::Term(l, u)) => (sum(None, &[t, signed(u)]), [Some(j), Some(l)]),
+        (Part::Const(c), Part::Term(l, t)) => (sum(Some(c), &[signed(t)]), [Some(l), None]),
         (Part::Term(l, t), Part::Const(c)) => {
-            (sum(Some(if minus { -c } else { c }), &[t]), vec![l])
+            (sum(Some(if minus { -c } else { c }), &[t]), [Some(l), None])
         }
         _ => return None,
     })
