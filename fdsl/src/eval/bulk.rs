@@ -6,7 +6,7 @@
 //! into the caller's slice. On x86-64 the same loops are compiled again for AVX2 and FMA, and
 //! for AVX-512, and the widest build the CPU runs is chosen at run time.
 
-use super::fuse::{self, Arg, Bin, Kind, Lin, Pick, Plan, Shift, Sum, Then, Un};
+use super::fuse::{self, Arg, Bin, Kind, Lin, Pick, Plan, Shift, Squares, Sum, Term, Then, Un};
 use super::real::{fast_cos, fast_sin};
 use crate::compile::{BinaryOp, TernaryOp, UnaryOp};
 use crate::tape::{Code, Tape};
@@ -415,6 +415,8 @@ macro_rules! with_then {
             Then::MinOf => move |v: f32, a: f32| min_nan(a, v),
             Then::Max => move |v: f32, a: f32| max_nan(v, a),
             Then::MaxOf => move |v: f32, a: f32| max_nan(a, v),
+            Then::RAnd => move |v: f32, a: f32| r_and(v, a),
+            Then::ROr => move |v: f32, a: f32| r_or(v, a),
         })
     };
 }
@@ -454,6 +456,18 @@ fn max_nan(a: f32, b: f32) -> f32 {
     if b.is_nan() { b } else { m }
 }
 
+/// The R-function intersection; the same bits with its arguments swapped.
+#[inline(always)]
+fn r_and(a: f32, b: f32) -> f32 {
+    a + b - (a * a + b * b).sqrt()
+}
+
+/// The R-function union; the same bits with its arguments swapped.
+#[inline(always)]
+fn r_or(a: f32, b: f32) -> f32 {
+    a + b + (a * a + b * b).sqrt()
+}
+
 #[inline(always)]
 fn bool_f32(b: bool) -> f32 {
     if b { 1.0 } else { 0.0 }
@@ -474,7 +488,8 @@ fn run_plan<const N: usize>(
             let Some(scratch) = scratch.first_chunk_mut::<3>() else {
                 unreachable!("an evaluator whose plan gathers holds three scratch chunks")
             };
-            gather(&step.args, regs, lanes, scratch);
+            let [a, b, c, _] = step.args;
+            gather(&[a, b, c], regs, lanes, scratch);
             let o = match sink.as_deref_mut() {
                 Some(sink) if s == last => sink,
                 _ => lanes_of_mut(&mut regs[out]),
@@ -499,7 +514,7 @@ fn run_plan<const N: usize>(
             Arg::Input(_) => Src::C(lanes.t),
             Arg::Const(c) => Src::C(c),
         };
-        let [a, b, c] = step.args.map(src);
+        let [a, b, c, d] = step.args.map(src);
         match step.kind {
             Kind::Plain(Code::Unary(op)) => match a {
                 Src::R(a) => unary(op, o, a),
@@ -521,24 +536,40 @@ fn run_plan<const N: usize>(
             Kind::RootPick(p, t) => {
                 with_pick!(p, g => with_lin!(t, f => lanes3(o, a, b, c, move |x, y| f(x.sqrt(), y), g)))
             }
-            Kind::Sum(sum) => add_terms(o, [a, b, c], &sum),
+            Kind::Sum(sum) => add_terms(o, [a, b, c], &sum, |v, _| v),
+            Kind::SumThen(sum, t) => with_then!(t, g => match d {
+                Src::R(d) => add_terms(o, [a, b, c], &sum, move |v, i| g(v, d[i])),
+                Src::C(d) => add_terms(o, [a, b, c], &sum, move |v, _| g(v, d)),
+            }),
         }
     }
 }
 
-/// Binds `$f` to the lane function `(u, c) -> (u - c)^2` or `u - c` of a [`Sum`]'s term.
-macro_rules! with_term {
-    ($square:expr, $f:ident => $body:expr) => {
-        bind!($square, $f => $body, {
-            true => move |u: f32, c: f32| (u - c) * (u - c),
-            false => move |u: f32, c: f32| u - c,
-        })
-    };
+/// `o[i] = finish(((offset + t0) + t1) + t2, i)`, with term `j` computed from lanes `u[j]`.
+#[inline(always)]
+fn add_terms<const N: usize>(
+    o: &mut [f32; N],
+    u: [Src<N>; 3],
+    sum: &Sum,
+    finish: impl Fn(f32, usize) -> f32,
+) {
+    let square = |t: Term, u: f32| t.k * ((u - t.c) * (u - t.c));
+    bind!(sum.squares, term => add_terms_with(o, u, sum, term, finish), {
+        Squares::All => square,
+        Squares::None => |t: Term, u: f32| t.k * u,
+        Squares::Some => move |t: Term, u: f32| if t.square { square(t, u) } else { t.k * u },
+    })
 }
 
-/// `o[i] = ((offset + t0) + t1) + t2`, with term `j` computed from lanes `u[j]`.
+/// [`add_terms`] with `term` computing each term.
 #[inline(always)]
-fn add_terms<const N: usize>(o: &mut [f32; N], u: [Src<N>; 3], sum: &Sum) {
+fn add_terms_with<const N: usize>(
+    o: &mut [f32; N],
+    u: [Src<N>; 3],
+    sum: &Sum,
+    term: impl Fn(Term, f32) -> f32,
+    finish: impl Fn(f32, usize) -> f32,
+) {
     let [t0, t1, t2] = sum.terms;
     let lanes = u.map(|u| match u {
         Src::R(lanes) => Some(lanes),
@@ -554,25 +585,21 @@ fn add_terms<const N: usize>(o: &mut [f32; N], u: [Src<N>; 3], sum: &Sum) {
         };
     }
     match (sum.n, lanes) {
-        (1, [Some(a), ..]) => with_term!(t0.square, f0 => start!(s => {
+        (1, [Some(a), ..]) => start!(s => {
             for i in 0..N {
-                o[i] = s(t0.k * f0(a[i], t0.c));
+                o[i] = finish(s(term(t0, a[i])), i);
             }
-        })),
-        (2, [Some(a), Some(b), _]) => {
-            with_term!(t0.square, f0 => with_term!(t1.square, f1 => start!(s => {
-                for i in 0..N {
-                    o[i] = s(t0.k * f0(a[i], t0.c)) + t1.k * f1(b[i], t1.c);
-                }
-            })))
-        }
-        (3, [Some(a), Some(b), Some(d)]) => {
-            with_term!(t0.square, f0 => with_term!(t1.square, f1 => with_term!(t2.square, f2 => start!(s => {
-                for i in 0..N {
-                    o[i] = s(t0.k * f0(a[i], t0.c)) + t1.k * f1(b[i], t1.c) + t2.k * f2(d[i], t2.c);
-                }
-            }))))
-        }
+        }),
+        (2, [Some(a), Some(b), _]) => start!(s => {
+            for i in 0..N {
+                o[i] = finish(s(term(t0, a[i])) + term(t1, b[i]), i);
+            }
+        }),
+        (3, [Some(a), Some(b), Some(d)]) => start!(s => {
+            for i in 0..N {
+                o[i] = finish(s(term(t0, a[i])) + term(t1, b[i]) + term(t2, d[i]), i);
+            }
+        }),
         _ => unreachable!("the plan gives a sum one to three terms of lanes"),
     }
 }
@@ -631,8 +658,8 @@ fn binary<const N: usize>(op: BinaryOp, o: &mut [f32; N], a: Src<N>, b: Src<N>) 
         BinaryOp::Eq => lanes2(o, a, b, |x, y| bool_f32(x == y)),
         BinaryOp::And => lanes2(o, a, b, |x, y| bool_f32(x != 0.0 && y != 0.0)),
         BinaryOp::Or => lanes2(o, a, b, |x, y| bool_f32(x != 0.0 || y != 0.0)),
-        BinaryOp::RAnd => lanes2(o, a, b, |x, y| x + y - (x * x + y * y).sqrt()),
-        BinaryOp::ROr => lanes2(o, a, b, |x, y| x + y + (x * x + y * y).sqrt()),
+        BinaryOp::RAnd => lanes2(o, a, b, r_and),
+        BinaryOp::ROr => lanes2(o, a, b, r_or),
     }
 }
 
@@ -760,6 +787,7 @@ mod tests {
                 Just("/"),
                 Just("<")
             ];
+            let rfunc = prop_oneof![Just("r_and"), Just("r_or")];
             prop_oneof![
                 (un, inner.clone()).prop_map(|(f, a)| if f == "-" {
                     format!("-({a})")
@@ -768,8 +796,9 @@ mod tests {
                 }),
                 (inner.clone(), bin, inner.clone())
                     .prop_map(|(a, op, b)| format!("({a}) {op} ({b})")),
-                (inner.clone(), inner)
+                (inner.clone(), inner.clone())
                     .prop_map(|(a, b)| format!("min(({a}) - ({b}), max({b}, {a}))")),
+                (rfunc, inner.clone(), inner).prop_map(|(f, a, b)| format!("{f}({a}, {b})")),
             ]
         })
     }
@@ -885,6 +914,16 @@ mod tests {
             "x^2 - 1.5",
             "(z - 1)^2 - 0.5 * x - 2 * y",
             "(t - 0.5) * 2 + x * 3",
+            // Sums in the loop of the one operation that reads them.
+            "min(x, 0.5 * y - z * 0.25)",
+            "min(0.5 * y - z * 0.25, x)",
+            "max(0.5 - y^2 - z^2, x)",
+            "max(x, 0.5 - y^2 - z^2)",
+            "r_and(x, 1 - y^2 - z^2)",
+            "r_or(1 - y^2, sin(x))",
+            "t - (x^2 + y^2)",
+            "(x - 1)^2 + (y - 1)^2 - t",
+            "(2 * x + y * 3) * z",
         ];
         let values = [-1.25f32, -0.5, -0.0, 0.0, 0.5, 1.0, 1.75];
         let mut xs = Vec::new();
@@ -905,7 +944,7 @@ mod tests {
                 .plan
                 .steps
                 .iter()
-                .filter(|s| matches!(s.kind, Kind::Sum(_)));
+                .filter(|s| matches!(s.kind, Kind::Sum(_) | Kind::SumThen(..)));
             assert!(sums.count() >= 1, "{src}: {:?}", fused.plan.steps);
             for t in [-0.0, 0.5] {
                 let mut reference = vec![0.0; xs.len()];
@@ -918,7 +957,7 @@ mod tests {
     }
 
     #[test]
-    fn distance_formulas_take_a_quarter_of_the_steps() {
+    fn distance_formulas_take_a_fifth_of_the_steps() {
         let sphere = BulkEval::new(&tape("1-x^2-y^2-z^2"));
         assert_eq!(sphere.n_steps(), 1, "{:?}", sphere.plan.steps);
         // A ball: the squared distance to its centre, and the radius less the root.
@@ -932,10 +971,14 @@ mod tests {
         // A cylinder's two terms, written the other way round.
         let cylinder = tape("0.5 - sqrt((0.2 - y)^2 + (x + 0.1)^2)");
         assert_eq!(BulkEval::new(&cylinder).n_steps(), 2);
-        // Planes of products with constants, those products shared between the planes.
+        // Planes of products with constants, those products shared between the planes, and
+        // two of them in the loops of the intersections that read them.
         let watermelon = tape(crate::models::reference_model("watermelon").expect("a model"));
         assert_eq!(watermelon.len(), 22);
-        assert_eq!(BulkEval::new(&watermelon).n_steps(), 6);
+        assert_eq!(BulkEval::new(&watermelon).n_steps(), 5);
+        // R-functions take sums in as min and max do.
+        let rfunc = tape(crate::models::reference_model("watermelon_rfunc").expect("a model"));
+        assert_eq!(BulkEval::new(&rfunc).n_steps(), 5);
     }
 
     #[test]

@@ -9,11 +9,14 @@
 //! distance fields are made of. A union or intersection with a ball `max(m, r - sqrt(s))` takes
 //! three, and so does a sum of squares `s + (y - c)^2`. A sum of up to three terms `k * u` or
 //! `(u - c)^2`, after a constant or not, is one step whatever its operations: a squared distance
-//! to a point, a plane `0.9 x + 0.1 y - 0.1 z`, a sphere `1 - x^2 - y^2 - z^2`. An operation of
-//! coordinates and constants alone (`0.1 * y`) is computed again in every reader that takes it
-//! in, even when it has several. Each step computes exactly what its instructions compute in turn
-//! (the same f32 operations in the same order, no fused multiply-add, rewritten only where the
-//! rewrite gives the same bits), so results stay bit for bit those of the unfused tape.
+//! to a point, a plane `0.9 x + 0.1 y - 0.1 z`, a sphere `1 - x^2 - y^2 - z^2`. A sum that only
+//! one operation reads (`min(p, plane)`, an R-function of it) runs inside that operation's loop,
+//! where a square root, if the operation has one, leaves the arithmetic units time for it. An
+//! operation of coordinates and constants alone (`0.1 * y`) is computed again in every reader
+//! that takes it in, even when it has several. Each step computes exactly what its instructions
+//! compute in turn (the same f32 operations in the same order, no fused multiply-add, rewritten
+//! only where the rewrite gives the same bits), so results stay bit for bit those of the unfused
+//! tape.
 //!
 //! The plan also gives the evaluator its own registers: a step reads coordinates straight from
 //! the caller's slices ([`Arg::Input`]) and constants from the step, and registers are
@@ -53,8 +56,9 @@ pub(super) enum Bin {
 }
 
 /// A binary operation that fuses as the outer operation, written `op(v, a)` with `v` the fused
-/// inner value and `a` the step's other argument. `Add` and `Mul` give the same bits in either
-/// order; the others have a reversed form for an inner value that was the right argument.
+/// inner value and `a` the step's other argument. `Add`, `Mul` and the R-functions give the
+/// same bits in either order; the others have a reversed form for an inner value that was the
+/// right argument.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Then {
     Add,
@@ -71,6 +75,10 @@ pub(super) enum Then {
     Max,
     /// `max(a, v)`
     MaxOf,
+    /// The R-function intersection `v + a - sqrt(v^2 + a^2)`.
+    RAnd,
+    /// The R-function union `v + a + sqrt(v^2 + a^2)`.
+    ROr,
 }
 
 /// `v + a`, `v - a` or `a - v`: the outer operation of a sum of squares, or the middle one of a
@@ -116,6 +124,8 @@ pub(super) enum Kind {
     RootPick(Pick, Lin),
     /// `((offset + t0) + t1) + t2` over the terms of a [`Sum`], term `j` of lanes `args[j]`.
     Sum(Sum),
+    /// `then(sum, args[3])`: a [`Sum`] that only this operation reads, in its loop.
+    SumThen(Sum, Then),
 }
 
 /// A sum of one to three terms, each `k * (u - c)` or `k * (u - c)^2` with `u` lanes, added
@@ -126,9 +136,20 @@ pub(super) struct Sum {
     pub terms: [Term; 3],
     /// How many of `terms` are added (1 only after an offset).
     pub n: u8,
+    /// Which of the `n` terms are squares, so that the loops of the common sums (all squares,
+    /// or all products) compute only their own kind of term.
+    pub squares: Squares,
 }
 
-/// A term of a [`Sum`]: `k * (u - c)`, squared first with `square`.
+/// Which terms of a [`Sum`] are squares.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Squares {
+    All,
+    None,
+    Some,
+}
+
+/// A term of a [`Sum`]: `k * (u - c)^2` with `square`, else `k * u` (`c` is then 0).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Term {
     pub k: f32,
@@ -143,12 +164,13 @@ impl Term {
     }
 }
 
-/// One step of the program: `out = kind(args)`; unused arguments are `Const(0.0)`.
+/// One step of the program: `out = kind(args)`; unused arguments are `Const(0.0)`. Only
+/// [`Kind::SumThen`] reads a fourth.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Step {
     pub kind: Kind,
     pub out: u32,
-    pub args: [Arg; 3],
+    pub args: [Arg; 4],
 }
 
 /// A tape's program for the bulk evaluator.
@@ -219,6 +241,15 @@ fn then(op: Bin, at: usize) -> Then {
         (Bin::Min, _) => Then::MinOf,
         (Bin::Max, 0) => Then::Max,
         (Bin::Max, _) => Then::MaxOf,
+    }
+}
+
+/// The outer operation `op(a, b)`, R-functions included, with the inner value in argument `at`.
+fn outer(op: BinaryOp, at: usize) -> Option<Then> {
+    match op {
+        BinaryOp::RAnd => Some(Then::RAnd),
+        BinaryOp::ROr => Some(Then::ROr),
+        op => bin(op).map(|b| then(b, at)),
     }
 }
 
@@ -314,6 +345,24 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
             }
             continue;
         }
+        // A sum that only this operation reads is computed in its loop.
+        if let Code::Binary(op) = code(i)
+            && outer(op, 0).is_some()
+        {
+            let sum = [1, 0].into_iter().find_map(|at| match nodes[i].args[at] {
+                Val::Instr(j) => {
+                    let node = &nodes[j as usize];
+                    let alone = node.uses == 1 && !node.fused_away;
+                    (node.sum.is_some() && alone).then_some(j)
+                }
+                _ => None,
+            });
+            if let Some(j) = sum {
+                nodes[i].inner = Some(j);
+                nodes[j as usize].fused_away = true;
+                continue;
+            }
+        }
         let (candidates, op): (&[usize], _) = match code(i) {
             Code::Unary(op) if un(op).is_some() => (&[0], None),
             Code::Binary(op) if bin(op).is_some() => (&[1, 0], Some(op)),
@@ -367,7 +416,7 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
     }
 
     // Each remaining instruction becomes a step over values.
-    let mut steps: Vec<(u32, Kind, [Val; 3])> = Vec::with_capacity(n);
+    let mut steps: Vec<(u32, Kind, [Val; 4])> = Vec::with_capacity(n);
     for i in 0..n {
         let node = &nodes[i];
         if node.fused_away {
@@ -375,16 +424,22 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
         }
         let args = node.args;
         if let Some(Planned { offset, terms, n }) = node.sum {
-            let sum = Sum {
-                offset,
-                terms: terms.map(|(_, t)| t),
-                n,
-            };
-            steps.push((i as u32, Kind::Sum(sum), terms.map(|(u, _)| u)));
+            let (sum, [u0, u1, u2]) = Planned { offset, terms, n }.split();
+            steps.push((i as u32, Kind::Sum(sum), [u0, u1, u2, Val::Const(0.0)]));
             continue;
         }
+        let three = |[a, b, c]: [Val; 3]| [a, b, c, Val::Const(0.0)];
         let step = match (code(i), node.inner) {
-            (code, None) => (Kind::Plain(code), args),
+            (code, None) => (Kind::Plain(code), three(args)),
+            (Code::Binary(op), Some(j)) if nodes[j as usize].sum.is_some() => {
+                let at = usize::from(args[1] == Val::Instr(j));
+                let then = outer(op, at).expect("only simple operations take a sum in");
+                let Some(p) = nodes[j as usize].sum else {
+                    unreachable!("the guard found a sum")
+                };
+                let (sum, [u0, u1, u2]) = p.split();
+                (Kind::SumThen(sum, then), [u0, u1, u2, args[1 - at]])
+            }
             (Code::Binary(op), Some(j)) if node.deep => {
                 let j = j as usize;
                 let at = usize::from(args[1] == Val::Instr(j as u32));
@@ -399,14 +454,14 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
                             _ => Shift::Minus,
                         };
                         let args = [innermost[0], innermost[1], other];
-                        (Kind::SumSq(outer, shift), args)
+                        (Kind::SumSq(outer, shift), three(args))
                     }
                     (Code::Binary(m), _) => {
                         let outer = pick(op, at).expect("a ball is picked by min or max");
                         let at_root = usize::from(middle[1] == Val::Instr(k as u32));
                         let m = lin(m, at_root).expect("a ball's radius is added");
                         let args = [innermost[0], middle[1 - at_root], other];
-                        (Kind::RootPick(outer, m), args)
+                        (Kind::RootPick(outer, m), three(args))
                     }
                     _ => unreachable!("only the two idioms were picked"),
                 }
@@ -416,7 +471,7 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
                     unreachable!("only simple pairs were picked")
                 };
                 let b = bin(b).expect("only simple pairs were picked");
-                (Kind::UnBin(u, b), nodes[j as usize].args)
+                (Kind::UnBin(u, b), three(nodes[j as usize].args))
             }
             (Code::Binary(op), Some(j)) => {
                 let at = usize::from(args[1] == Val::Instr(j));
@@ -426,11 +481,14 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
                 match code(j as usize) {
                     Code::Unary(u) => {
                         let u = un(u).expect("only simple pairs were picked");
-                        (Kind::BinUn(outer, u), [inner[0], other, Val::Const(0.0)])
+                        (
+                            Kind::BinUn(outer, u),
+                            three([inner[0], other, Val::Const(0.0)]),
+                        )
                     }
                     Code::Binary(b) => {
                         let b = bin(b).expect("only simple pairs were picked");
-                        (Kind::BinBin(outer, b), [inner[0], inner[1], other])
+                        (Kind::BinBin(outer, b), three([inner[0], inner[1], other]))
                     }
                     _ => unreachable!("only simple pairs were picked"),
                 }
@@ -497,6 +555,23 @@ struct Planned {
 }
 
 impl Planned {
+    /// The step's sum, and the lanes of its terms.
+    fn split(self) -> (Sum, [Val; 3]) {
+        let used = &self.terms[..usize::from(self.n)];
+        let squares = match used.iter().filter(|(_, t)| t.square).count() {
+            0 => Squares::None,
+            k if k == used.len() => Squares::All,
+            _ => Squares::Some,
+        };
+        let sum = Sum {
+            offset: self.offset,
+            terms: self.terms.map(|(_, t)| t),
+            n: self.n,
+            squares,
+        };
+        (sum, self.terms.map(|(u, _)| u))
+    }
+
     /// The sum with `term` added last, when it has room.
     fn then(self, term: (Val, Term)) -> Option<Planned> {
         let mut next = self;
