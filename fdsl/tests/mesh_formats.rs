@@ -305,8 +305,15 @@ fn stl_errors_say_where() {
 }
 
 #[test]
+fn obj_corners_may_name_texture_and_normal_indices() {
+    let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1/1 2/2 3/3\nf 1//1 2//1 4//1\nf -1/1/1 -2/-1/1 -3//-2\n";
+    let mesh = obj::read(text.as_bytes()).expect("valid corners");
+    assert_eq!(mesh.triangles(), &[[0, 1, 2], [0, 1, 3], [3, 2, 1]]);
+}
+
+#[test]
 fn obj_errors_say_where() {
-    let cases: [(&str, &str); 10] = [
+    let cases: [(&str, &str); 13] = [
         (
             "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 0\n",
             "4:7: vertex indices count from 1",
@@ -339,6 +346,19 @@ fn obj_errors_say_where() {
         (
             "v 0 0 0\nv 1 0 0\n  f 1 2 # a comment\n",
             "3:3: a face needs three corners at least, this one has 2",
+        ),
+        // Two faces run together by a damaged newline are not one larger face.
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3/f 2 3 1\n",
+            "4:7: expected a vertex index, found `3/f`",
+        ),
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1/1/1 2 3\n",
+            "4:3: expected a vertex index, found `1/1/1/1`",
+        ),
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/ 2 3\n",
+            "4:3: expected a vertex index, found `1/`",
         ),
         (
             "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/2/3 x/1 3\n",

@@ -189,14 +189,31 @@ fn face(
     Ok(())
 }
 
-/// The zero-based vertex of a face corner (`v`, `v/vt`, `v/vt/vn` or `v//vn`).
+/// The zero-based vertex of a face corner (`v`, `v/vt`, `v/vt/vn` or `v//vn`). The texture
+/// and normal indices are not used, but must be numbers, so that a damaged line (`5/f 12 11`,
+/// two faces run together) is refused rather than read as one larger face.
 fn corner(t: Token<'_>, n_vertices: usize) -> Result<u32, ObjError> {
-    let text = t.text.split(|&b| b == b'/').next().unwrap_or(t.text);
+    let mut parts = t.text.split(|&b| b == b'/');
+    let text = parts.next().unwrap_or(t.text);
     let bad_index = || ObjError::BadIndex {
         line: t.line,
         column: t.column,
         text: t.shown(),
     };
+    let number = |part: &[u8]| {
+        let digits = part.strip_prefix(b"-").unwrap_or(part);
+        !digits.is_empty() && digits.iter().all(u8::is_ascii_digit)
+    };
+    let (vt, vn, more) = (parts.next(), parts.next(), parts.next());
+    let well_formed = more.is_none()
+        && match (vt, vn) {
+            (None, _) => true,
+            (Some(vt), None) => number(vt),
+            (Some(vt), Some(vn)) => (vt.is_empty() || number(vt)) && number(vn),
+        };
+    if !well_formed {
+        return Err(bad_index());
+    }
     let out_of_range = || ObjError::IndexOutOfRange {
         line: t.line,
         column: t.column,
