@@ -6,8 +6,10 @@
 
 use glam::DVec3;
 
-use super::edit::{CompiledEdit, EditOp, fold_grad, fold_interval, fold_value};
-use super::tool::{Axis, Stamp, scan_eval, scan_interval};
+use super::edit::{
+    CompiledEdit, EditOp, fold_grad, fold_interval, fold_value, keeps_interval, keeps_value,
+};
+use super::tool::{Axis, Stamp, interval_max, scan_eval, scan_interval};
 use crate::bvh::Aabb;
 use crate::eval::Interval;
 
@@ -18,6 +20,9 @@ struct Record {
     boxes: [Aabb; 2],
     blend: f64,
     lipschitz: f64,
+    /// The tool's [`value_max`](super::tool::value_max), rounded up to single precision (still
+    /// a bound; a record must not outgrow a stamp).
+    value_max: f32,
     op: EditOp,
     mirror: Option<Axis>,
     /// False when the tool keeps an index of its own: no stamps are copied and the edit is
@@ -64,6 +69,7 @@ impl EditArena {
             boxes: *edit.boxes(),
             blend: edit.edit().blend_radius,
             lipschitz,
+            value_max: f32_up(edit.tool().value_max()),
             op,
             mirror: edit.edit().mirror,
             copied: edit.tool().scanned_stamps().is_some(),
@@ -134,7 +140,7 @@ impl EditArena {
     #[inline]
     pub(crate) fn apply_value(&self, slot: u32, f: f64, p: DVec3) -> f64 {
         let r = self.record(slot);
-        if let EditOp::Paint { .. } = r.op {
+        if keeps_value(&r.op, f, r.value_max.into(), r.blend) {
             return f;
         }
         let stamps = self.stamps_of(slot, r);
@@ -150,7 +156,7 @@ impl EditArena {
     #[inline]
     pub(crate) fn apply_grad(&self, slot: u32, f: (f64, DVec3), p: DVec3) -> (f64, DVec3) {
         let r = self.record(slot);
-        if let EditOp::Paint { .. } = r.op {
+        if keeps_value(&r.op, f.0, r.value_max.into(), r.blend) {
             return f;
         }
         let stamps = self.stamps_of(slot, r);
@@ -175,6 +181,11 @@ impl EditArena {
         if let EditOp::Paint { .. } = r.op {
             return f;
         }
+        let covered = r.boxes[0].contains_box(region) || r.boxes[1].contains_box(region);
+        let g_max = interval_max(r.value_max.into(), r.lipschitz, region);
+        if keeps_interval(&r.op, f, g_max) {
+            return fold_interval(&r.op, f, Interval::new(g_max, g_max), r.blend, covered);
+        }
         let stamps = self.stamps_of(slot, r);
         let direct = scan_interval(stamps.clone(), r.lipschitz, region);
         let g = match r.mirror {
@@ -184,9 +195,14 @@ impl EditArena {
             }
             None => direct,
         };
-        let covered = r.boxes[0].contains_box(region) || r.boxes[1].contains_box(region);
         fold_interval(&r.op, f, g, r.blend, covered)
     }
+}
+
+/// The least single-precision number at least `v`.
+fn f32_up(v: f64) -> f32 {
+    let w = v as f32;
+    if f64::from(w) < v { w.next_up() } else { w }
 }
 
 /// The stamps the arena copies of `edit`, with the Lipschitz bound (none for a painting or a

@@ -286,21 +286,34 @@ impl CompiledEdit {
     /// The value after this edit, given the value `f` before it, at `p`.
     #[inline]
     pub(crate) fn apply_value(&self, f: f64, p: DVec3) -> f64 {
-        fold_value(&self.edit.op, f, self.tool_value(p), self.edit.blend_radius)
+        let (op, b) = (&self.edit.op, self.edit.blend_radius);
+        if keeps_value(op, f, self.tool.value_max(), b) {
+            return f;
+        }
+        fold_value(op, f, self.tool_value(p), b)
     }
 
     /// Value and gradient after this edit.
     #[inline]
     pub(crate) fn apply_grad(&self, f: (f64, DVec3), p: DVec3) -> (f64, DVec3) {
-        fold_grad(&self.edit.op, f, self.tool_eval(p), self.edit.blend_radius)
+        let (op, b) = (&self.edit.op, self.edit.blend_radius);
+        if keeps_value(op, f.0, self.tool.value_max(), b) {
+            return f;
+        }
+        fold_grad(op, f, self.tool_eval(p), b)
     }
 
     /// Interval after this edit over `region`, which the edit's boxes may cover only in part
     /// (then the edit is inert over the rest).
     pub(crate) fn apply_interval(&self, f: Interval, region: &Aabb) -> Interval {
-        let g = self.tool_interval(region);
+        let (op, b) = (&self.edit.op, self.edit.blend_radius);
         let covered = self.covers(region);
-        fold_interval(&self.edit.op, f, g, self.edit.blend_radius, covered)
+        let g_max = self.tool.interval_max(region);
+        let g = match keeps_interval(op, f, g_max) {
+            true => Interval::new(g_max, g_max),
+            false => self.tool_interval(region),
+        };
+        fold_interval(op, f, g, b, covered)
     }
 
     /// The value an intersection leaves outside its region: empty space (a tool's support is
@@ -319,6 +332,47 @@ pub(crate) fn fold_value(op: &EditOp, f: f64, g: f64, b: f64) -> f64 {
         EditOp::Subtract => smooth_min(f, -g, b),
         EditOp::Intersect => smooth_min(f, g, b),
         EditOp::Paint { .. } => f,
+    }
+}
+
+/// Whether an edit of `op` with blend radius `b` leaves the value `f` as it is, bit for bit,
+/// whatever its tool's value `g` as long as `g <= g_max`: then [`fold_value`] and
+/// [`fold_grad`] return `f` itself and the tool need not be evaluated. A union keeps `f` where
+/// `f` exceeds every value of the tool by the blend radius, a subtraction where `-f` does
+/// (`smooth_max`'s first branch, whose test only gets truer as `g` falls: rounding is
+/// monotone), a painting always; an intersection never (a lower `g` lowers the result).
+#[inline]
+pub(crate) fn keeps_value(op: &EditOp, f: f64, g_max: f64, b: f64) -> bool {
+    match op {
+        EditOp::Union => keeps_first(f, g_max, b),
+        EditOp::Subtract => keeps_first(-f, g_max, b),
+        EditOp::Intersect => false,
+        EditOp::Paint { .. } => true,
+    }
+}
+
+/// Whether `smooth_max(a, g, k)` (and its gradient form) returns `a` for every `g <= g_max`.
+#[inline]
+fn keeps_first(a: f64, g_max: f64, k: f64) -> bool {
+    if k <= 0.0 {
+        a > g_max
+    } else {
+        0.5 + 0.5 * (a - g_max) / k >= 1.0
+    }
+}
+
+/// Whether [`fold_interval`] of an edit of `op` over `f` gives the same bits for every tool
+/// interval whose ends are at most `g_max` (then it may be given `[g_max, g_max]` instead of
+/// the tool's interval): a union whose tool stays below both ends of `f`, where each
+/// `max(f, g)` is `f`, or a subtraction whose negated tool stays above both, where each
+/// `min(f, -g)` is `f`. False for NaN ends.
+#[inline]
+pub(crate) fn keeps_interval(op: &EditOp, f: Interval, g_max: f64) -> bool {
+    match op {
+        EditOp::Union => g_max < f.lo && g_max < f.hi,
+        EditOp::Subtract => g_max < -f.hi && g_max < -f.lo,
+        EditOp::Intersect => false,
+        EditOp::Paint { .. } => true,
     }
 }
 
@@ -433,6 +487,130 @@ mod tests {
             }
         }
         assert_eq!(smooth_max(0.0, 1.0, 0.1), 1.0);
+    }
+
+    #[test]
+    fn an_edit_that_keeps_the_value_folds_to_the_same_bits() {
+        // Every `f` and every tool value `g <= g_max` over edge cases: where the shortcut
+        // says the edit keeps `f`, the full fold gives `f` (intervals: the fold with
+        // `[g_max, g_max]` gives the full fold's bits).
+        let values = [
+            f64::NEG_INFINITY,
+            super::super::NOTHING,
+            -1.0,
+            -0.0125,
+            -0.01,
+            -1e-300,
+            -0.0,
+            0.0,
+            1e-300,
+            0.01,
+            0.0125,
+            1.0,
+            f64::INFINITY,
+            f64::NAN,
+        ];
+        let ops = [EditOp::Union, EditOp::Subtract, EditOp::Intersect];
+        let (mut kept, mut n_intervals) = (0, 0);
+        for op in &ops {
+            for b in [0.0, 0.001, 0.02] {
+                for g_max in [0.0, 0.01, 0.0100001] {
+                    for &f in &values {
+                        for &g in values.iter().filter(|&&g| g <= g_max) {
+                            if keeps_value(op, f, g_max, b) {
+                                kept += 1;
+                                let v = fold_value(op, f, g, b);
+                                assert_eq!(v.to_bits(), f.to_bits(), "{op:?} {f} {g} {b}");
+                                let d = DVec3::new(0.5, -0.0, 2.0);
+                                let (w, dw) = fold_grad(op, (f, d), (g, DVec3::X), b);
+                                assert_eq!((w.to_bits(), dw), (f.to_bits(), d));
+                            }
+                        }
+                        for &lo in &values {
+                            let f = Interval {
+                                lo,
+                                hi: f,
+                                nan: false,
+                            };
+                            if !keeps_interval(op, f, g_max) {
+                                continue;
+                            }
+                            for &glo in values.iter().filter(|&&g| g <= g_max) {
+                                for &ghi in values.iter().filter(|&&g| g <= g_max) {
+                                    for covered in [false, true] {
+                                        n_intervals += 1;
+                                        let full = fold_interval(
+                                            op,
+                                            f,
+                                            Interval::new(glo, ghi),
+                                            b,
+                                            covered,
+                                        );
+                                        let short = fold_interval(
+                                            op,
+                                            f,
+                                            Interval::new(g_max, g_max),
+                                            b,
+                                            covered,
+                                        );
+                                        assert_eq!(
+                                            (full.lo.to_bits(), full.hi.to_bits(), full.nan),
+                                            (short.lo.to_bits(), short.hi.to_bits(), short.nan),
+                                            "{op:?} {f:?} [{glo}, {ghi}] {b} {covered}"
+                                        );
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(kept > 100 && n_intervals > 100, "{kept} {n_intervals}");
+    }
+
+    #[test]
+    fn a_tool_stays_below_its_value_bound() {
+        let shapes = [
+            ToolShape::Sphere { radius: 0.3 },
+            ToolShape::Box {
+                half_extents: DVec3::new(0.2, 0.1, 0.3),
+                rounding: 0.05,
+            },
+            ToolShape::Cylinder {
+                radius: 0.15,
+                half_height: 0.4,
+            },
+        ];
+        for shape in shapes {
+            let path = vec![
+                Pose::at(DVec3::ZERO),
+                Pose {
+                    position: DVec3::new(0.3, 0.1, -0.2),
+                    rotation: glam::DQuat::from_rotation_z(0.7),
+                    scale: 1.7,
+                },
+            ];
+            let mut edit = Edit::stroke(EditOp::Union, shape, path);
+            edit.blend_radius = 0.01;
+            edit.mirror = Some(Axis::Y);
+            let e = CompiledEdit::new(edit).unwrap();
+            let g_max = e.tool().value_max();
+            let mut best = f64::NEG_INFINITY;
+            for i in 0..4000 {
+                let a = i as f64;
+                let p = DVec3::new((a * 0.37).sin(), (a * 0.23).cos(), (a * 0.11).sin()) * 0.6;
+                let v = e.tool_value(p);
+                assert!(v <= g_max, "{shape:?} at {p}: {v} > {g_max}");
+                best = best.max(v);
+                let region = Aabb::around(p, DVec3::splat(0.01 + 0.001 * (i % 50) as f64));
+                let iv = e.tool_interval(&region);
+                let i_max = e.tool().interval_max(&region);
+                assert!(iv.lo <= i_max && iv.hi <= i_max, "{shape:?} {region:?}");
+            }
+            // The bound is not vacuous: the tool's deepest points come close to it.
+            assert!(best > 0.1 * g_max, "{shape:?}: {best} against {g_max}");
+        }
     }
 
     #[test]

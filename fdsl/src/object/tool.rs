@@ -337,6 +337,17 @@ impl CompiledTool {
         self.margin
     }
 
+    /// An upper bound of the tool's value anywhere: see [`value_max`].
+    pub(crate) fn value_max(&self) -> f64 {
+        value_max(self.margin)
+    }
+
+    /// An upper bound of every end of [`CompiledTool::interval`] over `region`: see
+    /// [`interval_max`].
+    pub(crate) fn interval_max(&self, region: &Aabb) -> f64 {
+        interval_max(value_max(self.margin), self.lipschitz, region)
+    }
+
     /// Number of primitive stamps.
     pub(crate) fn n_stamps(&self) -> usize {
         self.stamps.len()
@@ -397,6 +408,35 @@ impl CompiledTool {
     }
 }
 
+/// An upper bound of the value of a tool of margin `margin`, at any point: a stamp's value is
+/// at most its largest half-size (a capsule's `r - len` is at most its larger radius, a posed
+/// box's or cylinder's negated distance at most its half-size times its scale, and empty
+/// space is [`NOTHING`]), the tool's half-size `size` is the largest of those, and its margin
+/// is `size / 2` plus a blend radius that is not negative. The relative `1e-9` covers the
+/// rounding of the stamps' arithmetic (a few ulps). Mirrors take the larger of two values of
+/// the same tool, so the bound holds for them too.
+#[inline]
+pub(crate) fn value_max(margin: f64) -> f64 {
+    2.0 * margin * (1.0 + 1e-9)
+}
+
+/// An upper bound of both ends of a tool's interval over `region` (from [`scan_interval`] or
+/// [`CompiledTool::interval`], mirror included) given the tool's [`value_max`] and Lipschitz
+/// bound: every end is `NOTHING` or a stamp's value at the centre plus or minus the same
+/// `spread`, computed here as they compute it (rounding is monotone, so `v <= value_max`
+/// gives `v + spread <= value_max + spread` in floating point too). NaN when the region's
+/// size is NaN (then no comparison with it holds).
+#[inline]
+pub(crate) fn interval_max(value_max: f64, lipschitz: f64, region: &Aabb) -> f64 {
+    value_max + spread(lipschitz, region)
+}
+
+/// How far a tool's value can move from the region's centre within the region.
+#[inline]
+fn spread(lipschitz: f64, region: &Aabb) -> f64 {
+    region.size().length() * 0.5 * lipschitz
+}
+
 /// A tool's value and gradient at `p` from its stamps in order, without an index: the best of
 /// the stamps whose grown boxes hold `p`, else empty space ([`NOTHING`]).
 #[inline]
@@ -443,7 +483,7 @@ impl<'r> StampBounds<'r> {
         StampBounds {
             region,
             center: region.center(),
-            spread: region.size().length() * 0.5 * lipschitz,
+            spread: spread(lipschitz, region),
             lo: NOTHING,
             hi: NOTHING,
         }
