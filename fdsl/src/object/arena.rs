@@ -1,167 +1,246 @@
 //! [`EditArena`]: what the large part of a [`History`](super::History) index needs to
-//! evaluate its edits, copied into one contiguous array in the grid's spatial order (each
-//! edit's record followed by its stamps), so that the edits one grid cell names lie near each
-//! other in memory instead of behind one pointer each, scattered over the heap. A copy changes where the numbers are read from, never the
-//! numbers: evaluation through the arena runs the same operations as [`CompiledEdit`]'s.
+//! evaluate its edits, copied out of the edits into three flat arrays so that a query reads
+//! few cache lines and never follows an edit's pointers:
+//! - per edit, a *hot* line (64 bytes, indexed by the edit's index): its first box, its
+//!   operation, the bounds that tell when it cannot change a value, and where its stamps are;
+//!   what a point or box query reads of every edit it meets;
+//! - per edit, a *cold* record: its mirror box, blend radius, Lipschitz bound and full
+//!   operation, read only when the edit is evaluated;
+//! - the copied stamps, each edit's run contiguous, edits in the grid's spatial order so that
+//!   the stamps of the edits one grid cell names lie near each other.
+//!
+//! A copy changes where the numbers are read from, never the numbers: evaluation through the
+//! arena runs the same operations as [`CompiledEdit`]'s.
 
 use glam::DVec3;
 
-use super::edit::{
-    CompiledEdit, EditOp, fold_grad, fold_interval, fold_value, keeps_interval, keeps_value,
-};
+use super::edit::{CompiledEdit, EditOp, fold_grad, fold_interval, fold_value, keeps_interval};
 use super::tool::{Axis, Stamp, interval_max, scan_eval, scan_interval};
 use crate::bvh::Aabb;
 use crate::eval::Interval;
 
-/// One edit's evaluation data; its `len` stamps follow it in the arena.
+/// What every query reads of an edit: one cache line.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+struct Hot {
+    /// The edit's first box (`Aabb::EMPTY` for an edit the arena does not hold).
+    box0: Aabb,
+    /// At least the tool's [`value_max`](super::tool::value_max) plus the blend radius,
+    /// rounded up to single precision: a union keeps every value above it and a subtraction
+    /// every value below its negation (see [`keeps_value`](super::edit::keeps_value)).
+    keep_above: f32,
+    /// At least the tool's Lipschitz bound, rounded up to single precision (for the interval
+    /// test, [`keeps_interval`]).
+    lipschitz_up: f32,
+    /// The edit's stamps are `stamps[first..first + len]`.
+    first: u32,
+    len: u16,
+    kind: Kind,
+    /// `MIRRORED` and `COPIED`.
+    flags: u8,
+}
+
+/// The edit has a mirror (its second box is in the cold record).
+const MIRRORED: u8 = 1;
+/// The arena evaluates the edit (else its [`CompiledEdit`] does: a tool with an index of its
+/// own, a long stroke, has no stamps copied).
+const COPIED: u8 = 2;
+
+/// The operation without its painted value.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+enum Kind {
+    Union,
+    Subtract,
+    Intersect,
+    Paint,
+}
+
+impl Kind {
+    fn of(op: &EditOp) -> Kind {
+        match op {
+            EditOp::Union => Kind::Union,
+            EditOp::Subtract => Kind::Subtract,
+            EditOp::Intersect => Kind::Intersect,
+            EditOp::Paint { .. } => Kind::Paint,
+        }
+    }
+}
+
+/// What evaluating an edit reads besides its hot line.
 #[derive(Clone, Debug)]
-struct Record {
-    /// The edit's boxes (the second is empty without a mirror).
-    boxes: [Aabb; 2],
+struct Cold {
+    /// The mirror box (empty without a mirror).
+    box1: Aabb,
     blend: f64,
     lipschitz: f64,
-    /// The tool's [`value_max`](super::tool::value_max), rounded up to single precision (still
-    /// a bound; a record must not outgrow a stamp).
-    value_max: f32,
     op: EditOp,
     mirror: Option<Axis>,
-    /// False when the tool keeps an index of its own: no stamps are copied and the edit is
-    /// evaluated through its [`CompiledEdit`].
-    copied: bool,
-    /// The edit's index in the history.
-    edit: u32,
-    len: u32,
 }
 
-/// An element of the arena.
-#[derive(Clone, Debug)]
-enum Item {
-    /// An edit, followed by its stamps.
-    Edit(Record),
-    /// A stamp with its grown box.
-    Stamp((Aabb, Stamp)),
-}
+const ABSENT: Hot = Hot {
+    box0: Aabb::EMPTY,
+    keep_above: f32::INFINITY,
+    lipschitz_up: f32::INFINITY,
+    first: 0,
+    len: 0,
+    kind: Kind::Paint,
+    flags: 0,
+};
 
-/// The evaluation data of the edits of an index's large part (see the module documentation).
+/// The evaluation data of the edits of an index's large part (see the module documentation),
+/// indexed by the edits' indices in the history.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct EditArena {
-    items: Vec<Item>,
+    hot: Vec<Hot>,
+    cold: Vec<Cold>,
+    stamps: Vec<(Aabb, Stamp)>,
 }
 
 impl EditArena {
-    /// An arena with room for exactly `edits` (no more memory than their copies need).
-    pub(crate) fn with_room_for<'a>(edits: impl Iterator<Item = &'a CompiledEdit>) -> EditArena {
-        let n_items = edits.map(|e| 1 + copied_stamps(e).0.len()).sum();
-        EditArena {
-            items: Vec::with_capacity(n_items),
-        }
-    }
-
-    /// Copies edit `idx` in as the next record and returns its slot. A tool with an index of
-    /// its own (a long stroke) has no stamps copied: such an edit is evaluated through its
-    /// [`CompiledEdit`] (see [`EditArena::copied`]). Paintings copy no stamps either (they
-    /// leave the value alone; what they paint is read from the edit itself).
-    pub(crate) fn push(&mut self, idx: u32, edit: &CompiledEdit) -> u32 {
-        let (stamps, lipschitz) = copied_stamps(edit);
-        let op = edit.edit().op;
-        let slot = u32::try_from(self.items.len()).expect("an arena holds fewer than 2^32 items");
-        self.items.push(Item::Edit(Record {
-            boxes: *edit.boxes(),
-            blend: edit.edit().blend_radius,
-            lipschitz,
-            value_max: f32_up(edit.tool().value_max()),
-            op,
-            mirror: edit.edit().mirror,
-            copied: edit.tool().scanned_stamps().is_some(),
-            edit: idx,
-            len: stamps.len() as u32,
-        }));
-        self.items.extend(stamps.iter().map(|s| Item::Stamp(*s)));
-        slot
-    }
-
-    /// The history index of the edit in `slot`.
-    #[inline]
-    pub(crate) fn edit(&self, slot: u32) -> u32 {
-        self.record(slot).edit
-    }
-
-    /// The operation of the edit in `slot`.
-    #[inline]
-    pub(crate) fn op(&self, slot: u32) -> EditOp {
-        self.record(slot).op
-    }
-
-    /// Whether the edit in `slot` is evaluated from the arena (else from its [`CompiledEdit`]).
-    #[inline]
-    pub(crate) fn copied(&self, slot: u32) -> bool {
-        self.record(slot).copied
-    }
-
-    /// Bytes held (records and stamps, counting reserved capacity).
-    pub(crate) fn bytes(&self) -> usize {
-        self.items.capacity() * size_of::<Item>()
-    }
-
-    /// Whether the region of the edit in `slot` holds `p` (activity is the history's).
-    #[inline]
-    pub(crate) fn touches(&self, slot: u32, p: DVec3) -> bool {
-        let r = self.record(slot);
-        r.boxes[0].contains(p) || r.boxes[1].contains(p)
-    }
-
-    /// Whether the region of the edit in `slot` meets `region`.
-    #[inline]
-    pub(crate) fn meets(&self, slot: u32, region: &Aabb) -> bool {
-        self.record(slot).boxes.iter().any(|b| b.overlaps(region))
-    }
-
-    #[inline]
-    fn record(&self, slot: u32) -> &Record {
-        match &self.items[slot as usize] {
-            Item::Edit(r) => r,
-            Item::Stamp(_) => unreachable!("slot {slot} names a stamp, not an edit"),
-        }
-    }
-
-    /// The stamps of the edit in `slot`.
-    #[inline]
-    fn stamps_of(&self, slot: u32, r: &Record) -> impl Iterator<Item = &(Aabb, Stamp)> + Clone {
-        let first = slot as usize + 1;
-        self.items[first..first + r.len as usize]
+    /// An arena for edits `0..edits.len()`, with room for exactly the stamps of those that
+    /// `order` names (no more memory than their copies need).
+    pub(crate) fn new(edits: &[&CompiledEdit], order: &[u32]) -> EditArena {
+        let n_stamps = order
             .iter()
-            .filter_map(|item| match item {
-                Item::Stamp(s) => Some(s),
-                Item::Edit(_) => None,
-            })
+            .map(|&e| copied_stamps(edits[e as usize]).0.len())
+            .sum();
+        let mut arena = EditArena {
+            hot: vec![ABSENT; edits.len()],
+            cold: Vec::with_capacity(edits.len()),
+            stamps: Vec::with_capacity(n_stamps),
+        };
+        for e in edits {
+            arena.cold.push(Cold {
+                box1: e.boxes()[1],
+                blend: e.edit().blend_radius,
+                lipschitz: copied_stamps(e).1,
+                op: e.edit().op,
+                mirror: e.edit().mirror,
+            });
+        }
+        for &idx in order {
+            arena.copy(idx, edits[idx as usize]);
+        }
+        arena
     }
 
-    /// [`CompiledEdit::apply_value`] of the edit in `slot`.
+    /// Copies edit `idx` in: its hot line, and its stamps as the next run. A tool with an
+    /// index of its own (a long stroke) has no stamps copied: such an edit is evaluated
+    /// through its [`CompiledEdit`] (see [`EditArena::copied`]). Paintings copy no stamps
+    /// either (they leave the value alone; what they paint is read from the edit itself).
+    fn copy(&mut self, idx: u32, edit: &CompiledEdit) {
+        let (stamps, lipschitz) = copied_stamps(edit);
+        let first = u32::try_from(self.stamps.len()).expect("an arena holds < 2^32 stamps");
+        let len = u16::try_from(stamps.len()).expect("copied tools have few stamps");
+        let value_max = edit.tool().value_max();
+        let blend = edit.edit().blend_radius;
+        let mut flags = 0;
+        if edit.edit().mirror.is_some() {
+            flags |= MIRRORED;
+        }
+        if edit.tool().scanned_stamps().is_some() {
+            flags |= COPIED;
+        }
+        self.hot[idx as usize] = Hot {
+            box0: edit.boxes()[0],
+            // The relative 1e-9 covers the rounding of the sum (see `keeps_value`).
+            keep_above: f32_up((value_max + blend) * (1.0 + 1e-9)),
+            lipschitz_up: f32_up(lipschitz),
+            first,
+            len,
+            kind: Kind::of(&edit.edit().op),
+            flags,
+        };
+        self.stamps.extend_from_slice(stamps);
+    }
+
+    /// The operation of edit `e`.
     #[inline]
-    pub(crate) fn apply_value(&self, slot: u32, f: f64, p: DVec3) -> f64 {
-        let r = self.record(slot);
-        if keeps_value(&r.op, f, r.value_max.into(), r.blend) {
+    pub(crate) fn op(&self, e: u32) -> EditOp {
+        self.cold[e as usize].op
+    }
+
+    /// Whether edit `e` is evaluated from the arena (else from its [`CompiledEdit`]).
+    #[inline]
+    pub(crate) fn copied(&self, e: u32) -> bool {
+        self.hot[e as usize].flags & COPIED != 0
+    }
+
+    /// Bytes held (hot lines, cold records and stamps, counting reserved capacity).
+    pub(crate) fn bytes(&self) -> usize {
+        self.hot.capacity() * size_of::<Hot>()
+            + self.cold.capacity() * size_of::<Cold>()
+            + self.stamps.capacity() * size_of::<(Aabb, Stamp)>()
+    }
+
+    /// Whether the region of edit `e` holds `p` (activity is the history's).
+    #[inline]
+    pub(crate) fn touches(&self, e: u32, p: DVec3) -> bool {
+        let h = &self.hot[e as usize];
+        h.box0.contains(p) || (h.flags & MIRRORED != 0 && self.cold[e as usize].box1.contains(p))
+    }
+
+    /// Whether the region of edit `e` meets `region`.
+    #[inline]
+    pub(crate) fn meets(&self, e: u32, region: &Aabb) -> bool {
+        let h = &self.hot[e as usize];
+        h.box0.overlaps(region)
+            || (h.flags & MIRRORED != 0 && self.cold[e as usize].box1.overlaps(region))
+    }
+
+    /// The stamps of edit `e`.
+    #[inline]
+    fn stamps_of(&self, h: &Hot) -> &[(Aabb, Stamp)] {
+        let first = h.first as usize;
+        &self.stamps[first..first + h.len as usize]
+    }
+
+    /// Whether an edit keeps the value `f` (a sufficient condition for
+    /// [`keeps_value`](super::edit::keeps_value)'s test: the hot line
+    /// holds the tool's bound plus the blend radius, rounded up, so `f` above it is above the
+    /// tool's bound by at least the blend radius, which is [`smooth_max`]'s first branch).
+    ///
+    /// [`smooth_max`]: super::edit::smooth_max
+    #[inline]
+    fn keeps(h: &Hot, f: f64) -> bool {
+        let above = f64::from(h.keep_above);
+        match h.kind {
+            Kind::Union => f > above,
+            Kind::Subtract => -f > above,
+            Kind::Intersect => false,
+            Kind::Paint => true,
+        }
+    }
+
+    /// [`CompiledEdit::apply_value`] of edit `e`.
+    #[inline]
+    pub(crate) fn apply_value(&self, e: u32, f: f64, p: DVec3) -> f64 {
+        let h = &self.hot[e as usize];
+        if EditArena::keeps(h, f) {
             return f;
         }
-        let stamps = self.stamps_of(slot, r);
-        let direct = scan_eval(stamps.clone(), p).0;
-        let g = match r.mirror {
+        let c = &self.cold[e as usize];
+        let stamps = self.stamps_of(h);
+        let direct = scan_eval(stamps, p).0;
+        let g = match c.mirror {
             Some(axis) => direct.max(scan_eval(stamps, axis.reflect(p)).0),
             None => direct,
         };
-        fold_value(&r.op, f, g, r.blend)
+        fold_value(&c.op, f, g, c.blend)
     }
 
-    /// [`CompiledEdit::apply_grad`] of the edit in `slot`.
+    /// [`CompiledEdit::apply_grad`] of edit `e`.
     #[inline]
-    pub(crate) fn apply_grad(&self, slot: u32, f: (f64, DVec3), p: DVec3) -> (f64, DVec3) {
-        let r = self.record(slot);
-        if keeps_value(&r.op, f.0, r.value_max.into(), r.blend) {
+    pub(crate) fn apply_grad(&self, e: u32, f: (f64, DVec3), p: DVec3) -> (f64, DVec3) {
+        let h = &self.hot[e as usize];
+        if EditArena::keeps(h, f.0) {
             return f;
         }
-        let stamps = self.stamps_of(slot, r);
-        let direct = scan_eval(stamps.clone(), p);
-        let g = match r.mirror {
+        let c = &self.cold[e as usize];
+        let stamps = self.stamps_of(h);
+        let direct = scan_eval(stamps, p);
+        let g = match c.mirror {
             Some(axis) => {
                 let (v, g) = scan_eval(stamps, axis.reflect(p));
                 if v > direct.0 {
@@ -172,30 +251,33 @@ impl EditArena {
             }
             None => direct,
         };
-        fold_grad(&r.op, f, g, r.blend)
+        fold_grad(&c.op, f, g, c.blend)
     }
 
-    /// [`CompiledEdit::apply_interval`] of the edit in `slot`.
-    pub(crate) fn apply_interval(&self, slot: u32, f: Interval, region: &Aabb) -> Interval {
-        let r = self.record(slot);
-        if let EditOp::Paint { .. } = r.op {
+    /// [`CompiledEdit::apply_interval`] of edit `e`.
+    pub(crate) fn apply_interval(&self, e: u32, f: Interval, region: &Aabb) -> Interval {
+        let h = &self.hot[e as usize];
+        if h.kind == Kind::Paint {
             return f;
         }
-        let covered = r.boxes[0].contains_box(region) || r.boxes[1].contains_box(region);
-        let g_max = interval_max(r.value_max.into(), r.lipschitz, region);
-        if keeps_interval(&r.op, f, g_max) {
-            return fold_interval(&r.op, f, Interval::new(g_max, g_max), r.blend, covered);
+        let c = &self.cold[e as usize];
+        let covered = h.box0.contains_box(region) || c.box1.contains_box(region);
+        // Bounds at least the tool's value bound and Lipschitz bound give a bound at least
+        // `interval_max` (each operation is monotone).
+        let g_max = interval_max(f64::from(h.keep_above), f64::from(h.lipschitz_up), region);
+        if keeps_interval(&c.op, f, g_max) {
+            return fold_interval(&c.op, f, Interval::new(g_max, g_max), c.blend, covered);
         }
-        let stamps = self.stamps_of(slot, r);
-        let direct = scan_interval(stamps.clone(), r.lipschitz, region);
-        let g = match r.mirror {
+        let stamps = self.stamps_of(h);
+        let direct = scan_interval(stamps, c.lipschitz, region);
+        let g = match c.mirror {
             Some(axis) => {
-                let m = scan_interval(stamps, r.lipschitz, &axis.reflect_box(region));
+                let m = scan_interval(stamps, c.lipschitz, &axis.reflect_box(region));
                 Interval::new(direct.lo.max(m.lo), direct.hi.max(m.hi))
             }
             None => direct,
         };
-        fold_interval(&r.op, f, g, r.blend, covered)
+        fold_interval(&c.op, f, g, c.blend, covered)
     }
 }
 
@@ -219,10 +301,20 @@ mod tests {
     use super::*;
 
     #[test]
-    fn an_item_is_a_stamp_with_its_box_and_a_tag() {
-        // The arena costs one item per record and per copied stamp (ARCHITECTURE.md and
-        // BENCHMARKS.md quote 160 bytes): a record must not make items larger than a stamp.
-        assert!(size_of::<Record>() <= size_of::<(Aabb, Stamp)>());
-        assert_eq!(size_of::<Item>(), 160);
+    fn an_edit_costs_one_line_and_a_cold_record() {
+        // The arena costs a hot line and a cold record per edit and a stamp with its box per
+        // copied stamp (ARCHITECTURE.md and BENCHMARKS.md quote 160 bytes for a record and
+        // for a stamp, the size of the arena's items before they were split): neither may
+        // outgrow that.
+        assert_eq!(size_of::<Hot>(), 64);
+        assert!(size_of::<Hot>() + size_of::<Cold>() <= 160);
+        assert!(size_of::<(Aabb, Stamp)>() <= 160);
+    }
+
+    #[test]
+    fn single_precision_bounds_round_up() {
+        for v in [0.0, 1e-30, 0.1, 0.01, 1.0 / 3.0, 1e30, -0.1] {
+            assert!(f64::from(f32_up(v)) >= v, "{v}");
+        }
     }
 }

@@ -73,39 +73,51 @@ fn boxes_of(entries: &[HistoryEntry], range: std::ops::Range<usize>) -> Vec<(Aab
     out
 }
 
-/// A box in single precision, rounded outwards, with its edit's slot in the arena.
+/// A box on the grid's lattice of 16-bit steps, rounded outwards, with its edit's index and
+/// which of its cells on each axis is its first (16 bytes: a cell's list is read whole).
 #[derive(Clone, Copy, Debug)]
 struct GridItem {
-    lo: [f32; 3],
-    hi: [f32; 3],
-    slot: u32,
+    lo: [u16; 3],
+    hi: [u16; 3],
+    /// The edit's index, and `FIRST_X << k` when this is the box's first cell along axis `k`.
+    edit_first: u32,
 }
+
+/// The bit of [`GridItem::edit_first`] that marks the box's first cell along x (then y, z).
+const FIRST_X: u32 = 1 << 29;
+/// The edit's index in [`GridItem::edit_first`].
+const EDIT_MASK: u32 = FIRST_X - 1;
+const _: () = assert!(MAX_EDITS_PER_OBJECT <= EDIT_MASK as usize);
 
 impl GridItem {
-    fn new(b: &Aabb, slot: u32) -> GridItem {
-        GridItem {
-            lo: b.lo.to_array().map(|v| (v as f32).next_down()),
-            hi: b.hi.to_array().map(|v| (v as f32).next_up()),
-            slot,
-        }
+    #[inline]
+    fn edit(&self) -> u32 {
+        self.edit_first & EDIT_MASK
     }
 
-    /// Whether the box may meet `region` (it holds the exact box: the caller confirms).
+    /// Whether the box may hold a point on lattice step `q` (the caller confirms).
     #[inline]
-    fn may_meet(&self, region: &Aabb) -> bool {
-        (0..3).all(|k| self.lo[k] as f64 <= region.hi[k] && region.lo[k] <= self.hi[k] as f64)
+    fn contains(&self, q: [u16; 3]) -> bool {
+        q[0] >= self.lo[0]
+            && q[0] <= self.hi[0]
+            && q[1] >= self.lo[1]
+            && q[1] <= self.hi[1]
+            && q[2] >= self.lo[2]
+            && q[2] <= self.hi[2]
     }
 
+    /// Whether the box may meet a box spanning lattice steps `lo..=hi` (the caller confirms).
     #[inline]
-    fn contains(&self, p: [f32; 3]) -> bool {
-        p[0] >= self.lo[0]
-            && p[0] <= self.hi[0]
-            && p[1] >= self.lo[1]
-            && p[1] <= self.hi[1]
-            && p[2] >= self.lo[2]
-            && p[2] <= self.hi[2]
+    fn may_meet(&self, lo: [u16; 3], hi: [u16; 3]) -> bool {
+        (0..3).all(|k| self.lo[k] <= hi[k] && lo[k] <= self.hi[k])
     }
 }
+
+/// Lattice steps across the grid's widest axis: 16 bits with room to spare, so a point of the
+/// grid rounds to a step that fits.
+const LATTICE_STEPS: f64 = 65_000.0;
+/// The last lattice step.
+const STEP_MAX: f64 = u16::MAX as f64;
 
 /// Most cells per indexed box in a grid (a bound on its memory).
 const GRID_CELLS_PER_BOX: usize = 8;
@@ -113,12 +125,16 @@ const GRID_CELLS_PER_BOX: usize = 8;
 const GRID_QUERY_CELLS_MAX: usize = 64;
 
 /// A uniform grid over small boxes for point and box queries; boxes spanning more than two
-/// cells on an axis go to `large` instead. Items name slots of the arena built with the grid
-/// (`large.edit_of` too holds slots, not edit indices).
+/// cells on an axis go to `large` instead. Items hold their boxes rounded outwards to a
+/// lattice of 16-bit steps over the grid: monotone rounding (a coordinate's step is the floor
+/// of its scaled offset, a box's high end rounds up) keeps every point of a box on a step
+/// inside the box's steps.
 #[derive(Clone, Debug, Default)]
 struct Grid {
     origin: DVec3,
     inv_cell: f64,
+    /// Lattice steps per unit length.
+    inv_step: f64,
     dims: [usize; 3],
     /// Cell `c` holds `items[starts[c]..starts[c + 1]]`.
     starts: Vec<u32>,
@@ -126,24 +142,14 @@ struct Grid {
     large: Level,
 }
 
-/// The grid and arena of the large part, and each edit's slot in that arena.
-struct GridBuild {
-    grid: Grid,
-    arena: EditArena,
-    slot_of: Vec<u32>,
-}
-
 impl Grid {
-    /// Indexes `boxes` (from [`boxes_of`] over `entries[..n]`, every edit of the part) and
-    /// copies the edits into an arena in cell order: the edits one cell names sit together.
-    fn build(boxes: &[(Aabb, u32)], entries: &[HistoryEntry]) -> GridBuild {
-        let mut built = GridBuild {
-            grid: Grid::default(),
-            arena: EditArena::default(),
-            slot_of: vec![NO_SLOT; entries.len()],
-        };
+    /// Indexes `boxes` (from [`boxes_of`] over `entries`, every edit of the part) and copies
+    /// the edits into an arena, their stamps in cell order: the stamps of the edits one cell
+    /// names sit together.
+    fn build(boxes: &[(Aabb, u32)], entries: &[HistoryEntry]) -> (Grid, EditArena) {
+        let edits: Vec<&CompiledEdit> = entries.iter().map(|e| &*e.edit).collect();
         if boxes.is_empty() {
-            return built;
+            return (Grid::default(), EditArena::new(&edits, &[]));
         }
         let bounds = boxes.iter().fold(Aabb::EMPTY, |a, (b, _)| a.union(b));
         // Cells about the size of a typical box, but no more cells than the memory bound.
@@ -159,9 +165,11 @@ impl Grid {
             .max(DVec3::ONE)
             .to_array()
             .map(|d| d as usize);
+        let widest = (0..3).map(|k| dims[k] as f64 * cell).fold(0.0, f64::max);
         let mut grid = Grid {
             origin: bounds.lo,
             inv_cell: 1.0 / cell,
+            inv_step: LATTICE_STEPS / widest,
             dims,
             ..Grid::default()
         };
@@ -185,24 +193,18 @@ impl Grid {
             .filter(|&e| key[e as usize] != usize::MAX)
             .collect();
         order.sort_by_key(|&e| (key[e as usize], e));
-        built.arena = EditArena::with_room_for(order.iter().map(|&e| &*entries[e as usize].edit));
-        for e in order {
-            let entry = &entries[e as usize];
-            built.slot_of[e as usize] = built.arena.push(e, &entry.edit);
-        }
-        let slot_of = &built.slot_of;
+        let arena = EditArena::new(&edits, &order);
         let mut large = Vec::new();
         let mut counts = vec![0u32; n_cells + 1];
         let mut small = Vec::with_capacity(boxes.len());
         for (b, e) in boxes {
-            let slot = slot_of[*e as usize];
             let (lo, hi) = (grid.cell_of(b.lo), grid.cell_of(b.hi));
             if (0..3).any(|k| hi[k] - lo[k] > 1) {
-                large.push((*b, slot));
+                large.push((*b, *e));
                 continue;
             }
             grid.for_cells(lo, hi, |c| counts[c] += 1);
-            small.push((*b, slot, lo, hi));
+            small.push((*b, *e, lo, hi));
         }
         let mut total = 0u32;
         for c in counts.iter_mut() {
@@ -213,21 +215,54 @@ impl Grid {
         let mut next = counts.clone();
         grid.starts = counts;
         let empty = GridItem {
-            lo: [0.0; 3],
-            hi: [0.0; 3],
-            slot: 0,
+            lo: [0; 3],
+            hi: [0; 3],
+            edit_first: 0,
         };
         let mut items = vec![empty; total as usize];
-        for (b, slot, lo, hi) in small {
-            grid.for_cells(lo, hi, |c| {
-                items[next[c] as usize] = GridItem::new(&b, slot);
-                next[c] += 1;
-            });
+        for (b, e, lo, hi) in small {
+            let (qlo, qhi) = (grid.step_down(b.lo), grid.step_up(b.hi));
+            for z in lo[2]..=hi[2] {
+                for y in lo[1]..=hi[1] {
+                    for x in lo[0]..=hi[0] {
+                        let c = x + dims[0] * (y + dims[1] * z);
+                        let first = [x == lo[0], y == lo[1], z == lo[2]];
+                        let flags = (0..3)
+                            .filter(|&k| first[k])
+                            .fold(0, |f, k| f | (FIRST_X << k));
+                        items[next[c] as usize] = GridItem {
+                            lo: qlo,
+                            hi: qhi,
+                            edit_first: e | flags,
+                        };
+                        next[c] += 1;
+                    }
+                }
+            }
         }
         grid.items = items;
         grid.large = Level::from_boxes(&large);
-        built.grid = grid;
-        built
+        (grid, arena)
+    }
+
+    /// The lattice step at or below `p`, clamped to the lattice (rounding is monotone: a
+    /// larger coordinate never gets a smaller step). The cast truncates, which is the floor
+    /// of a clamped, so non-negative, value (and needs no `floor` call).
+    #[inline]
+    fn step_down(&self, p: DVec3) -> [u16; 3] {
+        let q = ((p - self.origin) * self.inv_step).clamp(DVec3::ZERO, DVec3::splat(STEP_MAX));
+        [q.x as u16, q.y as u16, q.z as u16]
+    }
+
+    /// The lattice step at or above `p`, clamped to the lattice.
+    #[inline]
+    fn step_up(&self, p: DVec3) -> [u16; 3] {
+        let q = ((p - self.origin) * self.inv_step).clamp(DVec3::ZERO, DVec3::splat(STEP_MAX));
+        let up = |v: f64| {
+            let s = v as u16;
+            if f64::from(s) < v { s + 1 } else { s }
+        };
+        [up(q.x), up(q.y), up(q.z)]
     }
 
     #[inline]
@@ -246,8 +281,8 @@ impl Grid {
         }
     }
 
-    /// Calls `visit(slot)` for every box that may contain `p` (tested in single precision,
-    /// rounded outwards: the caller confirms).
+    /// Calls `visit(edit)` for every box that may contain `p` (tested on the lattice, rounded
+    /// outwards: the caller confirms).
     #[inline]
     fn visit_point(&self, p: DVec3, mut visit: impl FnMut(u32)) {
         if !self.starts.is_empty() {
@@ -256,11 +291,11 @@ impl Grid {
             if inside {
                 let [x, y, z] = self.cell_of(p);
                 let c = x + self.dims[0] * (y + self.dims[1] * z);
-                let pf = p.to_array().map(|v| v as f32);
+                let step = self.step_down(p);
                 let range = self.starts[c] as usize..self.starts[c + 1] as usize;
                 for item in &self.items[range] {
-                    if item.contains(pf) {
-                        visit(item.slot);
+                    if item.contains(step) {
+                        visit(item.edit());
                     }
                 }
             }
@@ -271,10 +306,14 @@ impl Grid {
             .visit_point(p, |i| visit(large.edit_of[i as usize]));
     }
 
-    /// Calls `visit(slot)` for every box that may meet `region` (the caller confirms; a box in
-    /// several cells comes once per cell), and returns true; or returns false, visiting
-    /// nothing, when the region is not an ordered box or meets more than
-    /// [`GRID_QUERY_CELLS_MAX`] cells (the tree answers it better).
+    /// Calls `visit(edit)` for every box that may meet `region` (the caller confirms), and
+    /// returns true; or returns false, visiting nothing, when the region is not an ordered box
+    /// or meets more than [`GRID_QUERY_CELLS_MAX`] cells (the tree answers it better).
+    ///
+    /// A box in several of the region's cells comes once, from the cell holding the low
+    /// corner of its overlap with the region: along each axis, the region's first cell or
+    /// the box's own first cell (cells are monotone in the coordinate, so the overlap's low
+    /// corner, the larger of the two low corners, lies in the later of the two first cells).
     fn visit_box(&self, region: &Aabb, mut visit: impl FnMut(u32)) -> bool {
         let ordered = (0..3).all(|k| region.lo[k] <= region.hi[k]);
         if !ordered {
@@ -286,14 +325,27 @@ impl Grid {
             if n_cells > GRID_QUERY_CELLS_MAX {
                 return false;
             }
-            self.for_cells(lo, hi, |c| {
-                let range = self.starts[c] as usize..self.starts[c + 1] as usize;
-                for item in &self.items[range] {
-                    if item.may_meet(region) {
-                        visit(item.slot);
+            let (qlo, qhi) = (self.step_down(region.lo), self.step_up(region.hi));
+            for z in lo[2]..=hi[2] {
+                for y in lo[1]..=hi[1] {
+                    for x in lo[0]..=hi[0] {
+                        // Bits an item needs: its first cell along each axis where this cell
+                        // is not the region's first.
+                        let need = [x > lo[0], y > lo[1], z > lo[2]]
+                            .iter()
+                            .enumerate()
+                            .filter(|(_, later)| **later)
+                            .fold(0, |f, (k, _)| f | (FIRST_X << k));
+                        let c = x + self.dims[0] * (y + self.dims[1] * z);
+                        let range = self.starts[c] as usize..self.starts[c + 1] as usize;
+                        for item in &self.items[range] {
+                            if item.edit_first & need == need && item.may_meet(qlo, qhi) {
+                                visit(item.edit());
+                            }
+                        }
                     }
                 }
-            });
+            }
         }
         let large = &self.large;
         large
@@ -303,11 +355,11 @@ impl Grid {
     }
 }
 
-/// No slot: the edit is not in the arena.
+/// The edit is not evaluated by the arena.
 const NO_SLOT: u32 = u32::MAX;
 
-/// An edit a query found: its index in the history and, when the arena evaluates it, its slot
-/// there. Hits order as their edits do.
+/// An edit a query found: its index in the history and whether the arena evaluates it (then
+/// the slot is the index again). Hits order as their edits do.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub(crate) struct Hit(u64);
 
@@ -338,8 +390,6 @@ struct Large {
     tree: Level,
     grid: Grid,
     arena: EditArena,
-    /// Edit index -> slot in `arena` (`NO_SLOT` for an edit without boxes).
-    slot_of: Vec<u32>,
 }
 
 /// The ordered, indexed edits of one object.
@@ -428,12 +478,11 @@ impl History {
         let small_len = n - self.big_end;
         if small_len > SMALL_MIN && small_len > self.big_end / 8 {
             let boxes = boxes_of(&self.entries, 0..n);
-            let built = Grid::build(&boxes, &self.entries);
+            let (grid, arena) = Grid::build(&boxes, &self.entries);
             self.large = Arc::new(Large {
                 tree: Level::from_boxes(&boxes),
-                grid: built.grid,
-                arena: built.arena,
-                slot_of: built.slot_of,
+                grid,
+                arena,
             });
             self.small = Level::default();
             self.big_end = n;
@@ -468,12 +517,9 @@ impl History {
     #[inline]
     fn visit_point(&self, p: DVec3, mut take: impl FnMut(Hit)) {
         let arena = &self.large.arena;
-        self.large.grid.visit_point(p, |slot| {
-            if arena.touches(slot, p) {
-                let hit = self.hit(slot);
-                if self.active[hit.edit()] {
-                    take(hit);
-                }
+        self.large.grid.visit_point(p, |e| {
+            if self.active[e as usize] && arena.touches(e, p) {
+                take(self.hit(e));
             }
         });
         let entries = &self.entries;
@@ -490,14 +536,12 @@ impl History {
         (self.indexed_end as u32..entries.len() as u32).for_each(take_edit);
     }
 
-    /// The hit for arena `slot`.
+    /// The hit for edit `e` of the large part.
     #[inline]
-    fn hit(&self, slot: u32) -> Hit {
-        let arena = &self.large.arena;
-        let edit = arena.edit(slot);
-        match arena.copied(slot) {
-            true => Hit::new(edit, slot),
-            false => Hit::new(edit, NO_SLOT),
+    fn hit(&self, e: u32) -> Hit {
+        match self.large.arena.copied(e) {
+            true => Hit::new(e, e),
+            false => Hit::new(e, NO_SLOT),
         }
     }
 
@@ -518,19 +562,15 @@ impl History {
     /// Calls `take` for every active edit whose region meets `region`, some more than once.
     fn visit_box(&self, region: &Aabb, mut take: impl FnMut(Hit)) {
         let large = &*self.large;
-        let mut take_slot = |slot: u32| {
-            if large.arena.meets(slot, region) {
-                let hit = self.hit(slot);
-                if self.active[hit.edit()] {
-                    take(hit);
-                }
+        let mut take_large = |e: u32| {
+            if self.active[e as usize] && large.arena.meets(e, region) {
+                take(self.hit(e));
             }
         };
-        if !large.grid.visit_box(region, &mut take_slot) {
+        if !large.grid.visit_box(region, &mut take_large) {
             let tree = &large.tree;
-            tree.bvh.visit_box(region, |i| {
-                take_slot(large.slot_of[tree.edit_of[i as usize] as usize]);
-            });
+            tree.bvh
+                .visit_box(region, |i| take_large(tree.edit_of[i as usize]));
         }
         let entries = &self.entries;
         let mut take_edit = |e: u32| {
@@ -584,7 +624,7 @@ impl History {
 
     /// Bytes the arena of the index's large part holds (a copy of its edits' evaluation data).
     pub fn arena_bytes(&self) -> usize {
-        self.large.arena.bytes() + self.large.slot_of.capacity() * size_of::<u32>()
+        self.large.arena.bytes()
     }
 
     /// The last active intersection for which `outside` holds, if any: before it, nothing
@@ -689,5 +729,40 @@ mod tests {
             })
             .collect();
         assert_eq!(out, want);
+    }
+
+    #[test]
+    fn grid_box_queries_find_each_overlapping_edit_once() {
+        // Boxes from a point to several cells wide, on and off the edits' corners: the grid
+        // (with its once-per-box rule) and the tree give what a scan gives, and the grid
+        // visits no edit twice.
+        let mut h = History::default();
+        let point = |i: usize| {
+            let a = i as f64;
+            DVec3::new((a * 0.37).sin(), (a * 0.23).cos(), (a * 0.11).sin()) * 0.5
+        };
+        for i in 0..3000 {
+            h.push(edit_at(point(i))).unwrap();
+        }
+        h.refresh();
+        assert_eq!(h.tail_len(), 0);
+        let mut out = Vec::new();
+        for k in 0..400 {
+            let half = [0.0, 0.001, 0.02, 0.05, 0.09, 0.3][k % 6];
+            let center = point(k * 13) + DVec3::splat(0.05 * ((k % 3) as f64 - 1.0));
+            let region = Aabb::around(center, DVec3::splat(half));
+            h.collect_box(&region, &mut out);
+            let want: Vec<u32> = (0..h.len() as u32)
+                .filter(|&i| h.entries()[i as usize].edit.bounds().overlaps(&region))
+                .collect();
+            assert_eq!(out, want, "around {center} of half size {half}");
+            let mut seen = Vec::new();
+            if h.large.grid.visit_box(&region, |e| seen.push(e)) {
+                let n = seen.len();
+                seen.sort_unstable();
+                seen.dedup();
+                assert_eq!(seen.len(), n, "the grid visits each box once");
+            }
+        }
     }
 }
