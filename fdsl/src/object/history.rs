@@ -136,8 +136,11 @@ struct Grid {
     /// Lattice steps per unit length.
     inv_step: f64,
     dims: [usize; 3],
-    /// Cell `c` holds `items[starts[c]..starts[c + 1]]`.
-    starts: Vec<u32>,
+    /// Cell `c` holds `items[starts[c][0]..starts[c + 1][0]]`: first, from `starts[c][0]`,
+    /// the boxes that begin in an earlier cell along x, latest-ending first; then, from
+    /// `starts[c][1]`, those that begin in this one, earliest-beginning first. A scan along
+    /// either run stops at the first box that ends before (begins after) the query.
+    starts: Vec<[u32; 2]>,
     items: Vec<GridItem>,
     large: Level,
 }
@@ -213,7 +216,6 @@ impl Grid {
             total += n;
         }
         let mut next = counts.clone();
-        grid.starts = counts;
         let empty = GridItem {
             lo: [0; 3],
             hi: [0; 3],
@@ -240,6 +242,20 @@ impl Grid {
                 }
             }
         }
+        grid.starts = Vec::with_capacity(counts.len());
+        for c in 0..n_cells {
+            let cell = &mut items[counts[c] as usize..counts[c + 1] as usize];
+            cell.sort_by_key(|item| match item.edit_first & FIRST_X {
+                0 => (false, u16::MAX - item.hi[0]),
+                _ => (true, item.lo[0]),
+            });
+            let n_before = cell
+                .iter()
+                .take_while(|i| i.edit_first & FIRST_X == 0)
+                .count();
+            grid.starts.push([counts[c], counts[c] + n_before as u32]);
+        }
+        grid.starts.push([total, total]);
         grid.items = items;
         grid.large = Level::from_boxes(&large);
         (grid, arena)
@@ -292,8 +308,20 @@ impl Grid {
                 let [x, y, z] = self.cell_of(p);
                 let c = x + self.dims[0] * (y + self.dims[1] * z);
                 let step = self.step_down(p);
-                let range = self.starts[c] as usize..self.starts[c + 1] as usize;
-                for item in &self.items[range] {
+                let [begin, mid] = self.starts[c].map(|i| i as usize);
+                let end = self.starts[c + 1][0] as usize;
+                for item in &self.items[begin..mid] {
+                    if item.hi[0] < step[0] {
+                        break;
+                    }
+                    if item.contains(step) {
+                        visit(item.edit());
+                    }
+                }
+                for item in &self.items[mid..end] {
+                    if item.lo[0] > step[0] {
+                        break;
+                    }
                     if item.contains(step) {
                         visit(item.edit());
                     }
@@ -337,8 +365,23 @@ impl Grid {
                             .filter(|(_, later)| **later)
                             .fold(0, |f, (k, _)| f | (FIRST_X << k));
                         let c = x + self.dims[0] * (y + self.dims[1] * z);
-                        let range = self.starts[c] as usize..self.starts[c + 1] as usize;
-                        for item in &self.items[range] {
+                        let [begin, mid] = self.starts[c].map(|i| i as usize);
+                        let end = self.starts[c + 1][0] as usize;
+                        // Past the region's first cell along x, only boxes beginning here
+                        // count (see above), so the first run is skipped.
+                        let before = if x > lo[0] { mid..mid } else { begin..mid };
+                        for item in &self.items[before] {
+                            if item.hi[0] < qlo[0] {
+                                break;
+                            }
+                            if item.edit_first & need == need && item.may_meet(qlo, qhi) {
+                                visit(item.edit());
+                            }
+                        }
+                        for item in &self.items[mid..end] {
+                            if item.lo[0] > qhi[0] {
+                                break;
+                            }
                             if item.edit_first & need == need && item.may_meet(qlo, qhi) {
                                 visit(item.edit());
                             }
