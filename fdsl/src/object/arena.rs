@@ -15,7 +15,7 @@
 use glam::DVec3;
 
 use super::edit::{CompiledEdit, EditOp, fold_grad, fold_interval, fold_value, keeps_interval};
-use super::tool::{Axis, Stamp, interval_max, scan_eval, scan_interval};
+use super::tool::{Axis, Stamp, interval_max, scan_eval, scan_interval, scan_value};
 use crate::bvh::Aabb;
 use crate::eval::Interval;
 
@@ -222,9 +222,9 @@ impl EditArena {
         }
         let c = &self.cold[e as usize];
         let stamps = self.stamps_of(h);
-        let direct = scan_eval(stamps, p).0;
+        let direct = scan_value(stamps, p);
         let g = match c.mirror {
-            Some(axis) => direct.max(scan_eval(stamps, axis.reflect(p)).0),
+            Some(axis) => direct.max(scan_value(stamps, axis.reflect(p))),
             None => direct,
         };
         fold_value(&c.op, f, g, c.blend)

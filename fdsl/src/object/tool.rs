@@ -216,6 +216,77 @@ impl Stamp {
     }
 }
 
+impl Stamp {
+    /// The value of [`Stamp::eval`] alone, by the same operations (so the same bits) without
+    /// the gradient's.
+    #[inline]
+    fn value(&self, p: DVec3) -> f64 {
+        match *self {
+            Stamp::Capsule {
+                a,
+                b,
+                radius_a,
+                radius_b,
+            } => {
+                let ab = b - a;
+                let len2 = ab.length_squared();
+                let s = if len2 > 0.0 {
+                    ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                let c = a + ab * s;
+                let r = radius_a + (radius_b - radius_a) * s;
+                r - (p - c).length()
+            }
+            Stamp::Posed {
+                shape,
+                position,
+                rotation,
+                scale,
+            } => {
+                let q = rotation.inverse() * (p - position) / scale;
+                -local_distance(shape, q) * scale
+            }
+        }
+    }
+}
+
+/// The distance of [`local_sdf`] alone, by the same operations.
+#[inline]
+fn local_distance(shape: ToolShape, q: DVec3) -> f64 {
+    match shape {
+        ToolShape::Box {
+            half_extents,
+            rounding,
+        } => {
+            let d = q.abs() - (half_extents - DVec3::splat(rounding));
+            let len = d.max(DVec3::ZERO).length();
+            if len > 0.0 {
+                len - rounding
+            } else {
+                d[d.max_position()] - rounding
+            }
+        }
+        ToolShape::Cylinder {
+            radius,
+            half_height,
+        } => {
+            let radial = (q.x * q.x + q.z * q.z).sqrt();
+            let dr = radial - radius;
+            let dy = q.y.abs() - half_height;
+            if dr > 0.0 && dy > 0.0 {
+                (dr * dr + dy * dy).sqrt()
+            } else if dr > dy {
+                dr
+            } else {
+                dy
+            }
+        }
+        ToolShape::Sphere { radius } => q.length() - radius,
+    }
+}
+
 /// Signed distance (negative inside) and its gradient, for boxes and cylinders.
 fn local_sdf(shape: ToolShape, q: DVec3) -> (f64, DVec3) {
     match shape {
@@ -391,10 +462,23 @@ impl CompiledTool {
             .fold(NOTHING, f64::max)
     }
 
-    /// Value only.
+    /// The value of [`CompiledTool::eval`] alone (the same bits, without the gradients).
     #[inline]
     pub(crate) fn value(&self, p: DVec3) -> f64 {
-        self.eval(p).0
+        let Some(bvh) = &self.stamp_index else {
+            return scan_value(&self.stamps, p);
+        };
+        let mut best = NOTHING;
+        bvh.visit_point(p, |i| {
+            let (bounds, stamp) = &self.stamps[i as usize];
+            if bounds.contains(p) {
+                let v = stamp.value(p);
+                if v > best {
+                    best = v;
+                }
+            }
+        });
+        best
     }
 
     /// An interval holding every value over `region`.
@@ -456,6 +540,21 @@ pub(crate) fn scan_eval<'a>(
     best
 }
 
+/// The value of [`scan_eval`] alone (the same bits, without the gradients).
+#[inline]
+pub(crate) fn scan_value<'a>(stamps: impl IntoIterator<Item = &'a (Aabb, Stamp)>, p: DVec3) -> f64 {
+    let mut best = NOTHING;
+    for (bounds, stamp) in stamps {
+        if bounds.contains(p) {
+            let v = stamp.value(p);
+            if v > best {
+                best = v;
+            }
+        }
+    }
+    best
+}
+
 /// A tool's interval over `region` from its stamps in order, without an index.
 pub(crate) fn scan_interval<'a>(
     stamps: impl IntoIterator<Item = &'a (Aabb, Stamp)>,
@@ -491,7 +590,7 @@ impl<'r> StampBounds<'r> {
 
     fn add(&mut self, (bounds, stamp): &(Aabb, Stamp)) {
         if bounds.overlaps(self.region) {
-            let v = stamp.eval(self.center).0;
+            let v = stamp.value(self.center);
             self.hi = self.hi.max(v + self.spread);
             if bounds.contains_box(self.region) {
                 self.lo = self.lo.max(v - self.spread);
@@ -585,6 +684,58 @@ mod tests {
             tool.value(p + DVec3::Y * h) - tool.value(p - DVec3::Y * h),
             tool.value(p + DVec3::Z * h) - tool.value(p - DVec3::Z * h),
         ) / (2.0 * h)
+    }
+
+    #[test]
+    fn stamp_values_are_the_values_of_their_evaluation() {
+        let shapes = [
+            ToolShape::Sphere { radius: 0.1 },
+            ToolShape::Box {
+                half_extents: DVec3::new(0.2, 0.1, 0.3),
+                rounding: 0.02,
+            },
+            ToolShape::Box {
+                half_extents: DVec3::splat(0.1),
+                rounding: 0.0,
+            },
+            ToolShape::Cylinder {
+                radius: 0.15,
+                half_height: 0.2,
+            },
+        ];
+        let path = [
+            Pose::at(DVec3::ZERO),
+            Pose {
+                position: DVec3::new(0.2, 0.1, 0.0),
+                rotation: DQuat::from_rotation_z(0.3),
+                scale: 1.5,
+            },
+            Pose::at(DVec3::new(0.2, 0.1, 0.0)),
+        ];
+        let mut n = 0;
+        for shape in shapes {
+            let tool = CompiledTool::new(shape, &path, 0.01).unwrap();
+            for i in 0..2000 {
+                let a = i as f64;
+                let p = DVec3::new((a * 0.37).sin(), (a * 0.23).cos(), (a * 0.11).sin()) * 0.5;
+                // Points on the axes and the stamps' centres hit the ties and zero lengths.
+                let p = match i % 7 {
+                    0 => DVec3::new(p.x, 0.0, 0.0),
+                    1 => path[i % 3].position,
+                    _ => p,
+                };
+                for (_, stamp) in &tool.stamps {
+                    assert_eq!(stamp.value(p).to_bits(), stamp.eval(p).0.to_bits());
+                    n += 1;
+                }
+                assert_eq!(tool.value(p).to_bits(), tool.eval(p).0.to_bits());
+                assert_eq!(
+                    scan_value(&tool.stamps, p).to_bits(),
+                    scan_eval(&tool.stamps, p).0.to_bits()
+                );
+            }
+        }
+        assert!(n > 10_000);
     }
 
     #[test]
