@@ -4,7 +4,7 @@
 //! - per edit, a *hot* line (64 bytes, indexed by the edit's index): its first box, its
 //!   operation, the bounds that tell when it cannot change a value, and where its stamps are;
 //!   what a point or box query reads of every edit it meets;
-//! - per edit, a *cold* record: its mirror box, blend radius, Lipschitz bound and full
+//! - per edit, a *cold* record: its tool's shape, blend radius, Lipschitz bound and full
 //!   operation, read only when the edit is evaluated;
 //! - the copied stamps, each edit's run contiguous, edits in the grid's spatial order so that
 //!   the stamps of the edits one grid cell names lie near each other.
@@ -15,7 +15,7 @@
 use glam::DVec3;
 
 use super::edit::{CompiledEdit, EditOp, fold_grad, fold_interval, fold_value, keeps_interval};
-use super::tool::{Axis, Stamp, interval_max, scan_eval, scan_interval, scan_value};
+use super::tool::{Axis, Stamp, ToolShape, interval_max, scan_eval, scan_interval, scan_value};
 use crate::bvh::Aabb;
 use crate::eval::Interval;
 
@@ -36,15 +36,27 @@ struct Hot {
     first: u32,
     len: u16,
     kind: Kind,
-    /// `MIRRORED` and `COPIED`.
+    /// `COPIED`, and `MIRRORED << axis` for an edit mirrored in the plane normal to `axis`.
     flags: u8,
 }
 
-/// The edit has a mirror (its second box is in the cold record).
-const MIRRORED: u8 = 1;
 /// The arena evaluates the edit (else its [`CompiledEdit`] does: a tool with an index of its
 /// own, a long stroke, has no stamps copied).
-const COPIED: u8 = 2;
+const COPIED: u8 = 1;
+/// The edit is mirrored in the plane normal to x (shifted by the axis: y, z).
+const MIRRORED: u8 = 2;
+const MIRROR_AXES: [Axis; 3] = [Axis::X, Axis::Y, Axis::Z];
+
+impl Hot {
+    /// The edit's second box: its first reflected (the same operation as
+    /// [`CompiledEdit::new`]'s, so the same bits), if it has a mirror.
+    #[inline]
+    fn box1(&self) -> Option<Aabb> {
+        (0..3)
+            .find(|&k| self.flags & (MIRRORED << k) != 0)
+            .map(|k| MIRROR_AXES[k].reflect_box(&self.box0))
+    }
+}
 
 /// The operation without its painted value.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -70,8 +82,8 @@ impl Kind {
 /// What evaluating an edit reads besides its hot line.
 #[derive(Clone, Debug)]
 struct Cold {
-    /// The mirror box (empty without a mirror).
-    box1: Aabb,
+    /// The tool's shape (the stamps do not copy it).
+    shape: ToolShape,
     blend: f64,
     lipschitz: f64,
     op: EditOp,
@@ -112,7 +124,7 @@ impl EditArena {
         };
         for e in edits {
             arena.cold.push(Cold {
-                box1: e.boxes()[1],
+                shape: e.edit().tool,
                 blend: e.edit().blend_radius,
                 lipschitz: copied_stamps(e).1,
                 op: e.edit().op,
@@ -136,8 +148,8 @@ impl EditArena {
         let value_max = edit.tool().value_max();
         let blend = edit.edit().blend_radius;
         let mut flags = 0;
-        if edit.edit().mirror.is_some() {
-            flags |= MIRRORED;
+        if let Some(axis) = edit.edit().mirror {
+            flags |= MIRRORED << (axis as u8);
         }
         if edit.tool().scanned_stamps().is_some() {
             flags |= COPIED;
@@ -178,15 +190,14 @@ impl EditArena {
     #[inline]
     pub(crate) fn touches(&self, e: u32, p: DVec3) -> bool {
         let h = &self.hot[e as usize];
-        h.box0.contains(p) || (h.flags & MIRRORED != 0 && self.cold[e as usize].box1.contains(p))
+        h.box0.contains(p) || h.box1().is_some_and(|b| b.contains(p))
     }
 
     /// Whether the region of edit `e` meets `region`.
     #[inline]
     pub(crate) fn meets(&self, e: u32, region: &Aabb) -> bool {
         let h = &self.hot[e as usize];
-        h.box0.overlaps(region)
-            || (h.flags & MIRRORED != 0 && self.cold[e as usize].box1.overlaps(region))
+        h.box0.overlaps(region) || h.box1().is_some_and(|b| b.overlaps(region))
     }
 
     /// The stamps of edit `e`.
@@ -222,9 +233,9 @@ impl EditArena {
         }
         let c = &self.cold[e as usize];
         let stamps = self.stamps_of(h);
-        let direct = scan_value(stamps, p);
+        let direct = scan_value(stamps, c.shape, p);
         let g = match c.mirror {
-            Some(axis) => direct.max(scan_value(stamps, axis.reflect(p))),
+            Some(axis) => direct.max(scan_value(stamps, c.shape, axis.reflect(p))),
             None => direct,
         };
         fold_value(&c.op, f, g, c.blend)
@@ -239,10 +250,10 @@ impl EditArena {
         }
         let c = &self.cold[e as usize];
         let stamps = self.stamps_of(h);
-        let direct = scan_eval(stamps, p);
+        let direct = scan_eval(stamps, c.shape, p);
         let g = match c.mirror {
             Some(axis) => {
-                let (v, g) = scan_eval(stamps, axis.reflect(p));
+                let (v, g) = scan_eval(stamps, c.shape, axis.reflect(p));
                 if v > direct.0 {
                     (v, axis.reflect(g))
                 } else {
@@ -261,7 +272,8 @@ impl EditArena {
             return f;
         }
         let c = &self.cold[e as usize];
-        let covered = h.box0.contains_box(region) || c.box1.contains_box(region);
+        let covered =
+            h.box0.contains_box(region) || h.box1().is_some_and(|b| b.contains_box(region));
         // Bounds at least the tool's value bound and Lipschitz bound give a bound at least
         // `interval_max` (each operation is monotone).
         let g_max = interval_max(f64::from(h.keep_above), f64::from(h.lipschitz_up), region);
@@ -269,10 +281,10 @@ impl EditArena {
             return fold_interval(&c.op, f, Interval::new(g_max, g_max), c.blend, covered);
         }
         let stamps = self.stamps_of(h);
-        let direct = scan_interval(stamps, c.lipschitz, region);
+        let direct = scan_interval(stamps, c.shape, c.lipschitz, region);
         let g = match c.mirror {
             Some(axis) => {
-                let m = scan_interval(stamps, c.lipschitz, &axis.reflect_box(region));
+                let m = scan_interval(stamps, c.shape, c.lipschitz, &axis.reflect_box(region));
                 Interval::new(direct.lo.max(m.lo), direct.hi.max(m.hi))
             }
             None => direct,
@@ -305,10 +317,75 @@ mod tests {
         // The arena costs a hot line and a cold record per edit and a stamp with its box per
         // copied stamp (ARCHITECTURE.md and BENCHMARKS.md quote 160 bytes for a record and
         // for a stamp, the size of the arena's items before they were split): neither may
-        // outgrow that.
+        // outgrow that. A stamp is 120 bytes since the tool's shape moved to the cold record.
         assert_eq!(size_of::<Hot>(), 64);
         assert!(size_of::<Hot>() + size_of::<Cold>() <= 160);
-        assert!(size_of::<(Aabb, Stamp)>() <= 160);
+        assert_eq!(size_of::<(Aabb, Stamp)>(), 120);
+    }
+
+    #[test]
+    fn an_edit_the_hot_line_keeps_folds_to_the_same_bits() {
+        use super::super::edit::{Edit, fold_grad};
+        use super::super::tool::{Pose, ToolShape};
+        let mut edits = Vec::new();
+        for (i, op) in [EditOp::Union, EditOp::Subtract, EditOp::Intersect]
+            .into_iter()
+            .enumerate()
+        {
+            for blend in [0.0, 0.003, 0.05] {
+                let mut edit = Edit::stamp(
+                    op,
+                    ToolShape::Sphere {
+                        radius: 0.01 + 0.02 * i as f64,
+                    },
+                    Pose::at(DVec3::ZERO),
+                );
+                edit.blend_radius = blend;
+                edits.push(CompiledEdit::new(edit).unwrap());
+            }
+        }
+        let refs: Vec<&CompiledEdit> = edits.iter().collect();
+        let order: Vec<u32> = (0..edits.len() as u32).collect();
+        let arena = EditArena::new(&refs, &order);
+        let mut n_kept = 0;
+        for (e, edit) in edits.iter().enumerate() {
+            let (op, b) = (&edit.edit().op, edit.edit().blend_radius);
+            let h = &arena.hot[e];
+            let g_max = edit.tool().value_max();
+            let above = f64::from(h.keep_above);
+            // Values at and around the threshold, on both sides of zero.
+            let mut fs = Vec::new();
+            for x in [
+                above,
+                g_max,
+                g_max + b,
+                0.5 * g_max,
+                0.0,
+                1.0,
+                f64::INFINITY,
+            ] {
+                let mut v = x;
+                for _ in 0..4 {
+                    fs.extend([v, -v]);
+                    v = v.next_up();
+                }
+            }
+            for f in fs {
+                if !EditArena::keeps(h, f) {
+                    continue;
+                }
+                n_kept += 1;
+                for k in 0..=64 {
+                    // Tool values from far below up to the bound itself.
+                    let g = g_max - (g_max + 1.0) * (k as f64 / 64.0).powi(3);
+                    assert_eq!(fold_value(op, f, g, b).to_bits(), f.to_bits(), "{op:?} {f}");
+                    let d = DVec3::new(1.0, -0.0, 0.5);
+                    let (v, dv) = fold_grad(op, (f, d), (g, DVec3::Y), b);
+                    assert_eq!((v.to_bits(), dv), (f.to_bits(), d));
+                }
+            }
+        }
+        assert!(n_kept > 50, "{n_kept}");
     }
 
     #[test]

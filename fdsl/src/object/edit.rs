@@ -230,10 +230,10 @@ impl CompiledEdit {
     /// The tool's value (positive inside) and gradient at `p`, mirror included.
     #[inline]
     pub(crate) fn tool_eval(&self, p: DVec3) -> (f64, DVec3) {
-        let direct = self.tool.eval(p);
+        let direct = self.tool.eval(self.edit.tool, p);
         match self.edit.mirror {
             Some(axis) => {
-                let (v, g) = self.tool.eval(axis.reflect(p));
+                let (v, g) = self.tool.eval(self.edit.tool, axis.reflect(p));
                 if v > direct.0 {
                     (v, axis.reflect(g))
                 } else {
@@ -248,9 +248,9 @@ impl CompiledEdit {
     /// index: the best stamp whose grown box holds `p`, else empty space. The fast paths must
     /// agree with it.
     pub fn raw_tool_value(&self, p: DVec3) -> f64 {
-        let direct = self.tool.raw_value(p);
+        let direct = self.tool.raw_value(self.edit.tool, p);
         match self.edit.mirror {
-            Some(axis) => direct.max(self.tool.raw_value(axis.reflect(p))),
+            Some(axis) => direct.max(self.tool.raw_value(self.edit.tool, axis.reflect(p))),
             None => direct,
         }
     }
@@ -258,19 +258,21 @@ impl CompiledEdit {
     /// The tool's value at `p`.
     #[inline]
     pub(crate) fn tool_value(&self, p: DVec3) -> f64 {
-        let direct = self.tool.value(p);
+        let direct = self.tool.value(self.edit.tool, p);
         match self.edit.mirror {
-            Some(axis) => direct.max(self.tool.value(axis.reflect(p))),
+            Some(axis) => direct.max(self.tool.value(self.edit.tool, axis.reflect(p))),
             None => direct,
         }
     }
 
     /// An interval of the tool's values over `region`.
     pub(crate) fn tool_interval(&self, region: &Aabb) -> Interval {
-        let direct = self.tool.interval(region);
+        let direct = self.tool.interval(self.edit.tool, region);
         match self.edit.mirror {
             Some(axis) => {
-                let m = self.tool.interval(&axis.reflect_box(region));
+                let m = self
+                    .tool
+                    .interval(self.edit.tool, &axis.reflect_box(region));
                 Interval::new(direct.lo.max(m.lo), direct.hi.max(m.hi))
             }
             None => direct,

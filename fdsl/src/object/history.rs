@@ -774,6 +774,154 @@ mod tests {
         assert_eq!(out, want);
     }
 
+    /// The fold by definition, without the index, the arena or the inert-edit shortcut:
+    /// every active edit in order through `CompiledEdit`'s full tool evaluation (an
+    /// intersection that misses leaves empty space).
+    struct Reference<'a> {
+        history: &'a History,
+        base: crate::object::Sampler,
+    }
+
+    impl Reference<'_> {
+        fn value(&mut self, p: DVec3) -> f64 {
+            let mut v = self.base.value(p, 0.0);
+            for e in self.history.entries().iter().filter(|e| e.active) {
+                let (op, b) = (&e.edit.edit().op, e.edit.edit().blend_radius);
+                if e.edit.touches(p) {
+                    v = crate::object::edit::fold_value(op, v, e.edit.tool_value(p), b);
+                } else if matches!(op, EditOp::Intersect) {
+                    v = crate::object::NOTHING;
+                }
+            }
+            v
+        }
+
+        fn gradient(&mut self, p: DVec3) -> (f64, DVec3) {
+            let mut v = self.base.gradient(p, 0.0);
+            for e in self.history.entries().iter().filter(|e| e.active) {
+                let (op, b) = (&e.edit.edit().op, e.edit.edit().blend_radius);
+                if e.edit.touches(p) {
+                    v = crate::object::edit::fold_grad(op, v, e.edit.tool_eval(p), b);
+                } else if matches!(op, EditOp::Intersect) {
+                    v = (crate::object::NOTHING, DVec3::ZERO);
+                }
+            }
+            v
+        }
+
+        fn interval(&mut self, region: &Aabb) -> Interval {
+            let mut v = self.base.interval(region, 0.0);
+            for e in self.history.entries().iter().filter(|e| e.active) {
+                let (op, b) = (&e.edit.edit().op, e.edit.edit().blend_radius);
+                if e.edit.boxes().iter().any(|x| x.overlaps(region)) {
+                    let g = e.edit.tool_interval(region);
+                    let covered = e.edit.covers(region);
+                    v = crate::object::edit::fold_interval(op, v, g, b, covered);
+                } else if matches!(op, EditOp::Intersect) {
+                    v = Interval::point(crate::object::NOTHING);
+                }
+            }
+            v
+        }
+    }
+
+    #[test]
+    fn indexed_evaluation_is_the_fold_by_definition_bit_for_bit() {
+        use crate::object::Object;
+        use crate::object::tool::Axis;
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut object = Object::implicit("1 - x^2 - y^2 - z^2").unwrap();
+        let mut centres = Vec::new();
+        for i in 0..1500 {
+            let at = DVec3::new(next(), next(), next()) * 2.2 - DVec3::splat(1.1);
+            // Half the edits on the sphere's surface, where sculpting happens and where
+            // values are near the tools' (so the inert-edit test is tight).
+            let at = match i % 2 {
+                0 => at.normalize_or(DVec3::X) * (1.0 + 0.04 * (next() - 0.5)),
+                _ => at,
+            };
+            let size = 0.01 + 0.06 * next();
+            centres.push((at, size));
+            let tool = match i % 3 {
+                0 => ToolShape::Sphere { radius: size },
+                1 => ToolShape::Box {
+                    half_extents: DVec3::new(size, size * 0.7, size * 1.2),
+                    rounding: size * 0.2,
+                },
+                _ => ToolShape::Cylinder {
+                    radius: size,
+                    half_height: size * 1.5,
+                },
+            };
+            // Mostly short strokes (copied into the arena), a few long ones (their own index).
+            let n_poses = if i % 97 == 0 { 40 } else { 1 + i % 4 };
+            let step = DVec3::new(next(), next(), next()) * size;
+            let path = (0..n_poses)
+                .map(|k| Pose {
+                    position: at + step * k as f64,
+                    rotation: glam::DQuat::from_rotation_y(0.3 * k as f64 + next()),
+                    scale: 1.0 + 0.3 * next(),
+                })
+                .collect();
+            let op = match i % 41 {
+                40 => EditOp::Intersect,
+                k if k % 2 == 0 => EditOp::Union,
+                _ => EditOp::Subtract,
+            };
+            let mut edit = Edit::stroke(op, tool, path);
+            if i % 5 == 0 {
+                edit.blend_radius = 0.02 * next();
+            }
+            edit.mirror = [None, None, None, Some(Axis::X), Some(Axis::Z)][i % 5];
+            object.apply(edit).unwrap();
+        }
+        object.prepare();
+        for i in (0..1500).step_by(11) {
+            object.history_mut().set_active(i, false);
+        }
+        let history = object.history();
+        assert_eq!(history.tail_len(), 0);
+        assert!(history.big_end > 0, "the arena is in use");
+        let mut reference = Reference {
+            history,
+            base: Object::implicit("1 - x^2 - y^2 - z^2").unwrap().sampler(),
+        };
+        let mut sampler = object.sampler();
+        for k in 0..6000 {
+            // Half the points anywhere, half in or near an edit's first stamp, where its
+            // tool's values are highest (and the inert-edit test is closest to its bound).
+            let p = match k % 2 {
+                0 => DVec3::new(next(), next(), next()) * 2.4 - DVec3::splat(1.2),
+                _ => {
+                    let (at, size) = centres[(next() * centres.len() as f64) as usize];
+                    at + (DVec3::new(next(), next(), next()) - DVec3::splat(0.5)) * size
+                }
+            };
+            let (a, b) = (sampler.value(p, 0.0), reference.value(p));
+            assert_eq!(a.to_bits(), b.to_bits(), "value at {p}");
+            let (a, b) = (sampler.gradient(p, 0.0), reference.gradient(p));
+            assert_eq!(a.0.to_bits(), b.0.to_bits(), "gradient value at {p}");
+            assert_eq!(
+                a.1.to_array().map(f64::to_bits),
+                b.1.to_array().map(f64::to_bits)
+            );
+            let half = [0.001, 0.01, 1.0 / 64.0, 0.05, 0.3][k % 5];
+            let region = Aabb::around(p, DVec3::splat(half));
+            let (a, b) = (sampler.interval(&region, 0.0), reference.interval(&region));
+            assert_eq!(
+                (a.lo.to_bits(), a.hi.to_bits(), a.nan),
+                (b.lo.to_bits(), b.hi.to_bits(), b.nan),
+                "interval around {p} of half size {half}"
+            );
+        }
+    }
+
     #[test]
     fn grid_box_queries_find_each_overlapping_edit_once() {
         // Boxes from a point to several cells wide, on and off the edits' corners: the grid

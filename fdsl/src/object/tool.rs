@@ -118,9 +118,9 @@ pub(crate) enum Stamp {
         radius_a: f64,
         radius_b: f64,
     },
-    /// A box or cylinder at a pose.
+    /// A box or cylinder at a pose (the shape is the tool's: every stamp of a tool has the
+    /// same, so it is not copied into each).
     Posed {
-        shape: ToolShape,
         position: DVec3,
         rotation: DQuat,
         scale: f64,
@@ -128,7 +128,7 @@ pub(crate) enum Stamp {
 }
 
 impl Stamp {
-    fn aabb(&self) -> Aabb {
+    fn aabb(&self, shape: ToolShape) -> Aabb {
         match *self {
             Stamp::Capsule {
                 a,
@@ -137,7 +137,6 @@ impl Stamp {
                 radius_b,
             } => Aabb::new(a, b).expand(radius_a.max(radius_b)),
             Stamp::Posed {
-                shape,
                 position,
                 rotation,
                 scale,
@@ -176,7 +175,7 @@ impl Stamp {
 
     /// Value (positive inside) and gradient at `p`.
     #[inline]
-    fn eval(&self, p: DVec3) -> (f64, DVec3) {
+    fn eval(&self, shape: ToolShape, p: DVec3) -> (f64, DVec3) {
         match *self {
             Stamp::Capsule {
                 a,
@@ -203,7 +202,6 @@ impl Stamp {
                 (r - len, grad)
             }
             Stamp::Posed {
-                shape,
                 position,
                 rotation,
                 scale,
@@ -219,8 +217,8 @@ impl Stamp {
 impl Stamp {
     /// The value of [`Stamp::eval`] alone, by the same operations (so the same bits) without
     /// the gradient's.
-    #[inline]
-    fn value(&self, p: DVec3) -> f64 {
+    #[inline(always)]
+    fn value(&self, shape: ToolShape, p: DVec3) -> f64 {
         match *self {
             Stamp::Capsule {
                 a,
@@ -240,7 +238,6 @@ impl Stamp {
                 r - (p - c).length()
             }
             Stamp::Posed {
-                shape,
                 position,
                 rotation,
                 scale,
@@ -383,7 +380,10 @@ impl CompiledTool {
             .map(|p| shape.half_extents().max_element() * p.scale)
             .fold(0.0, f64::max);
         let margin = 0.5 * size + extra_margin;
-        let stamp_boxes: Vec<Aabb> = stamps.iter().map(|s| s.aabb().expand(margin)).collect();
+        let stamp_boxes: Vec<Aabb> = stamps
+            .iter()
+            .map(|s| s.aabb(shape).expand(margin))
+            .collect();
         let stamp_index =
             (stamps.len() > STAMP_INDEX_MIN).then(|| Box::new(Bvh::build(&stamp_boxes)));
         let lipschitz = stamps.iter().map(Stamp::lipschitz).fold(1.0, f64::max);
@@ -427,15 +427,15 @@ impl CompiledTool {
     /// Value and gradient at `p`: the best of the stamps whose grown boxes hold `p`, and
     /// empty space ([`NOTHING`]) where none does (a tool's support is its stamps' boxes).
     #[inline]
-    pub(crate) fn eval(&self, p: DVec3) -> (f64, DVec3) {
+    pub(crate) fn eval(&self, shape: ToolShape, p: DVec3) -> (f64, DVec3) {
         let Some(bvh) = &self.stamp_index else {
-            return scan_eval(&self.stamps, p);
+            return scan_eval(&self.stamps, shape, p);
         };
         let mut best = (NOTHING, DVec3::ZERO);
         bvh.visit_point(p, |i| {
             let (bounds, stamp) = &self.stamps[i as usize];
             if bounds.contains(p) {
-                let v = stamp.eval(p);
+                let v = stamp.eval(shape, p);
                 if v.0 > best.0 {
                     best = v;
                 }
@@ -454,25 +454,25 @@ impl CompiledTool {
     }
 
     /// The value by definition, visiting every stamp without the index (for checks).
-    pub(crate) fn raw_value(&self, p: DVec3) -> f64 {
+    pub(crate) fn raw_value(&self, shape: ToolShape, p: DVec3) -> f64 {
         self.stamps
             .iter()
             .filter(|(b, _)| b.contains(p))
-            .map(|(_, s)| s.eval(p).0)
+            .map(|(_, s)| s.eval(shape, p).0)
             .fold(NOTHING, f64::max)
     }
 
     /// The value of [`CompiledTool::eval`] alone (the same bits, without the gradients).
     #[inline]
-    pub(crate) fn value(&self, p: DVec3) -> f64 {
+    pub(crate) fn value(&self, shape: ToolShape, p: DVec3) -> f64 {
         let Some(bvh) = &self.stamp_index else {
-            return scan_value(&self.stamps, p);
+            return scan_value(&self.stamps, shape, p);
         };
         let mut best = NOTHING;
         bvh.visit_point(p, |i| {
             let (bounds, stamp) = &self.stamps[i as usize];
             if bounds.contains(p) {
-                let v = stamp.value(p);
+                let v = stamp.value(shape, p);
                 if v > best {
                     best = v;
                 }
@@ -482,11 +482,11 @@ impl CompiledTool {
     }
 
     /// An interval holding every value over `region`.
-    pub(crate) fn interval(&self, region: &Aabb) -> Interval {
+    pub(crate) fn interval(&self, shape: ToolShape, region: &Aabb) -> Interval {
         let Some(bvh) = &self.stamp_index else {
-            return scan_interval(&self.stamps, self.lipschitz, region);
+            return scan_interval(&self.stamps, shape, self.lipschitz, region);
         };
-        let mut bounds = StampBounds::new(self.lipschitz, region);
+        let mut bounds = StampBounds::new(shape, self.lipschitz, region);
         bvh.visit_box(region, |i| bounds.add(&self.stamps[i as usize]));
         bounds.interval()
     }
@@ -526,12 +526,13 @@ fn spread(lipschitz: f64, region: &Aabb) -> f64 {
 #[inline]
 pub(crate) fn scan_eval<'a>(
     stamps: impl IntoIterator<Item = &'a (Aabb, Stamp)>,
+    shape: ToolShape,
     p: DVec3,
 ) -> (f64, DVec3) {
     let mut best = (NOTHING, DVec3::ZERO);
     for (bounds, stamp) in stamps {
         if bounds.contains(p) {
-            let v = stamp.eval(p);
+            let v = stamp.eval(shape, p);
             if v.0 > best.0 {
                 best = v;
             }
@@ -542,11 +543,15 @@ pub(crate) fn scan_eval<'a>(
 
 /// The value of [`scan_eval`] alone (the same bits, without the gradients).
 #[inline]
-pub(crate) fn scan_value<'a>(stamps: impl IntoIterator<Item = &'a (Aabb, Stamp)>, p: DVec3) -> f64 {
+pub(crate) fn scan_value<'a>(
+    stamps: impl IntoIterator<Item = &'a (Aabb, Stamp)>,
+    shape: ToolShape,
+    p: DVec3,
+) -> f64 {
     let mut best = NOTHING;
     for (bounds, stamp) in stamps {
         if bounds.contains(p) {
-            let v = stamp.value(p);
+            let v = stamp.value(shape, p);
             if v > best {
                 best = v;
             }
@@ -558,10 +563,11 @@ pub(crate) fn scan_value<'a>(stamps: impl IntoIterator<Item = &'a (Aabb, Stamp)>
 /// A tool's interval over `region` from its stamps in order, without an index.
 pub(crate) fn scan_interval<'a>(
     stamps: impl IntoIterator<Item = &'a (Aabb, Stamp)>,
+    shape: ToolShape,
     lipschitz: f64,
     region: &Aabb,
 ) -> Interval {
-    let mut bounds = StampBounds::new(lipschitz, region);
+    let mut bounds = StampBounds::new(shape, lipschitz, region);
     stamps.into_iter().for_each(|stamp| bounds.add(stamp));
     bounds.interval()
 }
@@ -570,6 +576,7 @@ pub(crate) fn scan_interval<'a>(
 /// each stamp whose box meets it is within `spread` of its value at the centre; where no
 /// stamp box holds a point the tool is empty space.
 struct StampBounds<'r> {
+    shape: ToolShape,
     region: &'r Aabb,
     center: DVec3,
     spread: f64,
@@ -578,8 +585,9 @@ struct StampBounds<'r> {
 }
 
 impl<'r> StampBounds<'r> {
-    fn new(lipschitz: f64, region: &'r Aabb) -> Self {
+    fn new(shape: ToolShape, lipschitz: f64, region: &'r Aabb) -> Self {
         StampBounds {
+            shape,
             region,
             center: region.center(),
             spread: spread(lipschitz, region),
@@ -590,7 +598,7 @@ impl<'r> StampBounds<'r> {
 
     fn add(&mut self, (bounds, stamp): &(Aabb, Stamp)) {
         if bounds.overlaps(self.region) {
-            let v = stamp.value(self.center);
+            let v = stamp.value(self.shape, self.center);
             self.hi = self.hi.max(v + self.spread);
             if bounds.contains_box(self.region) {
                 self.lo = self.lo.max(v - self.spread);
@@ -621,7 +629,6 @@ fn stamps_along(shape: ToolShape, poses: &[Pose]) -> Result<Vec<Stamp>, ObjectEr
         return Ok(poses.windows(2).map(|w| capsule(&w[0], &w[1])).collect());
     }
     let posed = |p: &Pose| Stamp::Posed {
-        shape,
         position: p.position,
         rotation: p.rotation,
         scale: p.scale,
@@ -677,12 +684,12 @@ impl Axis {
 mod tests {
     use super::*;
 
-    fn finite_difference(tool: &CompiledTool, p: DVec3) -> DVec3 {
+    fn finite_difference(tool: &CompiledTool, shape: ToolShape, p: DVec3) -> DVec3 {
         let h = 1e-6;
         DVec3::new(
-            tool.value(p + DVec3::X * h) - tool.value(p - DVec3::X * h),
-            tool.value(p + DVec3::Y * h) - tool.value(p - DVec3::Y * h),
-            tool.value(p + DVec3::Z * h) - tool.value(p - DVec3::Z * h),
+            tool.value(shape, p + DVec3::X * h) - tool.value(shape, p - DVec3::X * h),
+            tool.value(shape, p + DVec3::Y * h) - tool.value(shape, p - DVec3::Y * h),
+            tool.value(shape, p + DVec3::Z * h) - tool.value(shape, p - DVec3::Z * h),
         ) / (2.0 * h)
     }
 
@@ -725,13 +732,19 @@ mod tests {
                     _ => p,
                 };
                 for (_, stamp) in &tool.stamps {
-                    assert_eq!(stamp.value(p).to_bits(), stamp.eval(p).0.to_bits());
+                    assert_eq!(
+                        stamp.value(shape, p).to_bits(),
+                        stamp.eval(shape, p).0.to_bits()
+                    );
                     n += 1;
                 }
-                assert_eq!(tool.value(p).to_bits(), tool.eval(p).0.to_bits());
                 assert_eq!(
-                    scan_value(&tool.stamps, p).to_bits(),
-                    scan_eval(&tool.stamps, p).0.to_bits()
+                    tool.value(shape, p).to_bits(),
+                    tool.eval(shape, p).0.to_bits()
+                );
+                assert_eq!(
+                    scan_value(&tool.stamps, shape, p).to_bits(),
+                    scan_eval(&tool.stamps, shape, p).0.to_bits()
                 );
             }
         }
@@ -745,16 +758,17 @@ mod tests {
             Pose::at(DVec3::X),
             Pose::at(DVec3::new(1.0, 1.0, 0.0)),
         ];
-        let tool = CompiledTool::new(ToolShape::Sphere { radius: 0.1 }, &path, 0.0).unwrap();
+        let shape = ToolShape::Sphere { radius: 0.1 };
+        let tool = CompiledTool::new(shape, &path, 0.0).unwrap();
         assert_eq!(tool.n_stamps(), 2);
-        assert!((tool.value(DVec3::new(0.5, 0.05, 0.0)) - 0.05).abs() < 1e-12);
-        assert!((tool.value(DVec3::new(1.0, 0.5, 0.08)) - 0.02).abs() < 1e-12);
+        assert!((tool.value(shape, DVec3::new(0.5, 0.05, 0.0)) - 0.05).abs() < 1e-12);
+        assert!((tool.value(shape, DVec3::new(1.0, 0.5, 0.08)) - 0.02).abs() < 1e-12);
         // Away from every stamp the tool is empty space.
-        assert_eq!(tool.value(DVec3::splat(10.0)), NOTHING);
+        assert_eq!(tool.value(shape, DVec3::splat(10.0)), NOTHING);
         assert!(tool.margin() > 0.0);
         let p = DVec3::new(0.3, 0.07, 0.02);
-        let g = tool.eval(p).1;
-        assert!((g - finite_difference(&tool, p)).length() < 1e-6);
+        let g = tool.eval(shape, p).1;
+        assert!((g - finite_difference(&tool, shape, p)).length() < 1e-6);
     }
 
     #[test]
@@ -777,7 +791,7 @@ mod tests {
             };
             let tool = CompiledTool::new(shape, &[pose], 0.0).unwrap();
             assert!(
-                tool.value(pose.position) > 0.0,
+                tool.value(shape, pose.position) > 0.0,
                 "{shape:?} centre is inside"
             );
             for p in [
@@ -785,9 +799,9 @@ mod tests {
                 DVec3::new(0.15, 0.5, 0.2),
                 DVec3::new(-0.1, 0.2, 0.45),
             ] {
-                let (v, g) = tool.eval(p);
+                let (v, g) = tool.eval(shape, p);
                 if v > -tool.margin() + 1e-3 && v > NOTHING {
-                    let fd = finite_difference(&tool, p);
+                    let fd = finite_difference(&tool, shape, p);
                     assert!((g - fd).length() < 1e-5, "{shape:?} at {p}: {g} vs {fd}");
                 }
             }
@@ -811,25 +825,26 @@ mod tests {
         for i in 0..300 {
             let a = i as f64 * 0.0371;
             let p = DVec3::new(a.cos() * 1.02, a.sin(), a * 0.1 + 0.01);
-            let brute = tool.raw_value(p);
-            assert_eq!(tool.value(p), brute, "at {p}");
+            let brute = tool.raw_value(shape, p);
+            assert_eq!(tool.value(shape, p), brute, "at {p}");
         }
     }
 
     #[test]
     fn intervals_enclose_values() {
+        let shape = ToolShape::Sphere { radius: 0.3 };
         let tool = CompiledTool::new(
-            ToolShape::Sphere { radius: 0.3 },
+            shape,
             &[Pose::at(DVec3::ZERO), Pose::at(DVec3::new(0.5, 0.0, 0.0))],
             0.1,
         )
         .unwrap();
         let region = Aabb::new(DVec3::new(0.1, 0.1, 0.1), DVec3::new(0.4, 0.3, 0.2));
-        let iv = tool.interval(&region);
+        let iv = tool.interval(shape, &region);
         for i in 0..=10 {
             let s = i as f64 / 10.0;
             let p = region.lo.lerp(region.hi, s);
-            assert!(iv.contains(tool.value(p)), "{iv:?} at {p}");
+            assert!(iv.contains(tool.value(shape, p)), "{iv:?} at {p}");
         }
     }
 
