@@ -265,29 +265,25 @@ pub(super) fn wide_simd_available() -> bool {
     Simd::widest() != Simd::Portable
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn run_wide<const N: usize>(
-    plan: &Plan,
-    regs: &mut [Lanes],
-    lanes: &Lanes3<N>,
-    scratch: &mut [Lanes],
-    sink: Option<&mut [f32; N]>,
-) {
-    run_plan(plan, regs, lanes, scratch, sink);
+/// Defines `$name`, [`run_plan`] compiled for the target features `$features`.
+macro_rules! run_plan_built_for {
+    ($name:ident, $features:literal) => {
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $features)]
+        fn $name<const N: usize>(
+            plan: &Plan,
+            regs: &mut [Lanes],
+            lanes: &Lanes3<N>,
+            scratch: &mut [Lanes],
+            sink: Option<&mut [f32; N]>,
+        ) {
+            run_plan(plan, regs, lanes, scratch, sink);
+        }
+    };
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
-fn run_avx512<const N: usize>(
-    plan: &Plan,
-    regs: &mut [Lanes],
-    lanes: &Lanes3<N>,
-    scratch: &mut [Lanes],
-    sink: Option<&mut [f32; N]>,
-) {
-    run_plan(plan, regs, lanes, scratch, sink);
-}
+run_plan_built_for!(run_wide, "avx2,fma");
+run_plan_built_for!(run_avx512, "avx512f,avx512vl,avx2,fma");
 
 /// An argument of a step over `N` lanes: lanes, or one value for every lane.
 #[derive(Clone, Copy)]

@@ -183,15 +183,7 @@ impl Stamp {
                 radius_a,
                 radius_b,
             } => {
-                let ab = b - a;
-                let len2 = ab.length_squared();
-                let s = if len2 > 0.0 {
-                    ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                let c = a + ab * s;
-                let r = radius_a + (radius_b - radius_a) * s;
+                let Closest { ab, len2, s, c, r } = closest(a, b, radius_a, radius_b, p);
                 let d = p - c;
                 let len = d.length();
                 let mut grad = if len > 0.0 { -d / len } else { DVec3::ZERO };
@@ -214,6 +206,35 @@ impl Stamp {
     }
 }
 
+/// The point of a capsule's axis closest to a point, and what finding it computed.
+struct Closest {
+    /// The axis, `b - a`, and its squared length.
+    ab: DVec3,
+    len2: f64,
+    /// The closest point's parameter along the axis, in [0, 1].
+    s: f64,
+    /// The closest point, and the radius there.
+    c: DVec3,
+    r: f64,
+}
+
+/// The point of the axis from `a` to `b` closest to `p`, and the radius there: the shared
+/// start of [`Stamp::eval`] and [`Stamp::value`], so that both compute it by the same
+/// operations.
+#[inline(always)]
+fn closest(a: DVec3, b: DVec3, radius_a: f64, radius_b: f64, p: DVec3) -> Closest {
+    let ab = b - a;
+    let len2 = ab.length_squared();
+    let s = if len2 > 0.0 {
+        ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let c = a + ab * s;
+    let r = radius_a + (radius_b - radius_a) * s;
+    Closest { ab, len2, s, c, r }
+}
+
 impl Stamp {
     /// The value of [`Stamp::eval`] alone, by the same operations (so the same bits) without
     /// the gradient's.
@@ -226,15 +247,7 @@ impl Stamp {
                 radius_a,
                 radius_b,
             } => {
-                let ab = b - a;
-                let len2 = ab.length_squared();
-                let s = if len2 > 0.0 {
-                    ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                let c = a + ab * s;
-                let r = radius_a + (radius_b - radius_a) * s;
+                let Closest { c, r, .. } = closest(a, b, radius_a, radius_b, p);
                 r - (p - c).length()
             }
             Stamp::Posed {
