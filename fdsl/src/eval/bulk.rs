@@ -734,6 +734,21 @@ mod tests {
         eval
     }
 
+    /// [`check_every_build`] for the formula `src` at `points`, against its unfused plan; a
+    /// text that does not parse passes.
+    fn check_formula(src: &str, points: &[(f32, f32, f32)], t: f32) -> Result<(), String> {
+        let Ok(f) = Function::parse(src) else {
+            return Ok(());
+        };
+        let tape = f.tape();
+        let xs: Vec<f32> = points.iter().map(|p| p.0).collect();
+        let ys: Vec<f32> = points.iter().map(|p| p.1).collect();
+        let zs: Vec<f32> = points.iter().map(|p| p.2).collect();
+        let mut reference = vec![0.0; xs.len()];
+        unfused(&tape).eval(&xs, &ys, &zs, t, &mut reference);
+        check_every_build(&tape, [&xs, &ys, &zs], t, &reference)
+    }
+
     /// The fused evaluator's values at the points, with each build of the loops this CPU
     /// runs; fails unless every build gives `reference`'s bits.
     fn check_every_build(
@@ -821,14 +836,7 @@ mod tests {
             points in proptest::collection::vec((coordinate(), coordinate(), coordinate()), 1..1300),
             t in coordinate(),
         ) {
-            let Ok(f) = Function::parse(&src) else { return Ok(()) };
-            let tape = f.tape();
-            let xs: Vec<f32> = points.iter().map(|p| p.0).collect();
-            let ys: Vec<f32> = points.iter().map(|p| p.1).collect();
-            let zs: Vec<f32> = points.iter().map(|p| p.2).collect();
-            let mut reference = vec![0.0; xs.len()];
-            unfused(&tape).eval(&xs, &ys, &zs, t, &mut reference);
-            let checked = check_every_build(&tape, [&xs, &ys, &zs], t, &reference);
+            let checked = check_formula(&src, &points, t);
             prop_assert!(checked.is_ok(), "{src}: {}", checked.unwrap_err());
         }
     }
@@ -884,14 +892,7 @@ mod tests {
                 _ => join(&terms),
             };
             let src = format!("max(0.4 - sqrt({sum}), min({sum}, x) - 2)");
-            let Ok(f) = Function::parse(&src) else { return Ok(()) };
-            let tape = f.tape();
-            let xs: Vec<f32> = points.iter().map(|p| p.0).collect();
-            let ys: Vec<f32> = points.iter().map(|p| p.1).collect();
-            let zs: Vec<f32> = points.iter().map(|p| p.2).collect();
-            let mut reference = vec![0.0; xs.len()];
-            unfused(&tape).eval(&xs, &ys, &zs, t, &mut reference);
-            let checked = check_every_build(&tape, [&xs, &ys, &zs], t, &reference);
+            let checked = check_formula(&src, &points, t);
             prop_assert!(checked.is_ok(), "{src}: {}", checked.unwrap_err());
         }
     }
