@@ -6,9 +6,9 @@
 //! [`Message::Want`](crate::sync::message::Message::Want) to one holder at once: the author
 //! itself when it is connected and shows them (its want goes on the connection that carries
 //! the author's own sends, so nothing crosses twice), else the holder that delivered the
-//! most. It asks the next holder when the one asked gave all it shows, or if nothing arrived
-//! for the author's resend timeout, or for twice a third peer's; after a third peer, the
-//! author is asked again. Those timeouts come from the round trips measured on each
+//! most. It asks the next holder when the one asked gave all it shows, or if it sent no op
+//! for its resend timeout (growth from other connections does not count); after a third
+//! peer, the author is asked again. Those timeouts come from the round trips measured on each
 //! connection (its first hello answered, then acknowledged batches), so on a LAN a lost op
 //! is repaired in milliseconds and on a slow link nobody is asked too early; a connection
 //! without a measurement waits what the peer's other connections measure, and none waits
@@ -34,8 +34,8 @@ use crate::sync::state::{
 };
 use crate::time::Timestamp;
 
-/// A want that brought nothing for twice the holder's resend timeout, and at most this long
-/// (1 s), goes to the next holder.
+/// A want that brought nothing for the holder's resend timeout, and at most this long (1 s),
+/// goes to the next holder.
 pub const WANT_RETRY_MICROS: u64 = RESEND_AFTER_MICROS;
 /// Wants are reconsidered at most this often (100 ms) after something changed.
 pub const WANT_CHECK_MICROS: u64 = 100_000;
@@ -107,6 +107,12 @@ impl Asked {
             n_messages: stats.map_or(0, |s| s.n_messages_in),
             n_ops: stats.map_or(0, |s| s.n_ops_in),
         }
+    }
+
+    /// The connection sent ops since: the log's growth may be its doing (ops from elsewhere
+    /// do not show that the holder asked got the want).
+    fn delivered<P: Payload>(&self, sync: Option<&SyncState<P>>) -> bool {
+        sync.is_some_and(|s| s.stats().n_ops_in > self.n_ops)
     }
 
     /// The connection answered since (some message came) but sent no op at all: it claimed
@@ -336,7 +342,7 @@ impl<P: Payload> Peer<P> {
                 && holds_more(&asked.conn)
             {
                 let sync = self.connections.get(&asked.conn);
-                if have > asked.had {
+                if have > asked.had && asked.delivered(sync) {
                     // The holder is delivering: give it more time.
                     want.asked = Some(Asked::new(now, asked.conn, have, sync));
                     continue;
@@ -345,7 +351,7 @@ impl<P: Payload> Peer<P> {
                 let retry = match timeout(&asked.conn) {
                     Some(t) if from_author => t.min(RELAY_AFTER_MICROS),
                     None if from_author => RELAY_AFTER_MICROS,
-                    Some(t) => (2 * t).min(WANT_RETRY_MICROS),
+                    Some(t) => t.min(WANT_RETRY_MICROS),
                     None => WANT_RETRY_MICROS,
                 };
                 if now < asked.at.saturating_add_micros(retry) {
@@ -446,7 +452,10 @@ fn drain<P: Payload>(
 mod tests {
     use super::*;
     use crate::payload::test_payload::TestPayload;
-    use crate::sync::state::{CloseReason, HAVE_EVERY_MICROS, RESEND_AFTER_MIN_MICROS};
+    use crate::sync::message::Message;
+    use crate::sync::state::{
+        CloseReason, HAVE_EVERY_MICROS, PING_FOR_MICROS, RESEND_AFTER_MIN_MICROS,
+    };
 
     type TPeer = Peer<TestPayload>;
 
@@ -684,13 +693,16 @@ mod tests {
             .author(Timestamp(0), TestPayload::Chat("into the void".into()))
             .unwrap();
         // Peer 1 hears nothing and says nothing for two minutes.
-        let mut n_sent = 0;
+        let (mut n_sent, mut n_pings) = (0, 0);
         let mut t = 0;
         while t < 120_000_000 {
             t += 100_000;
             peers[0].handle_timeout(Timestamp(t));
-            while peers[0].poll_transmit(Timestamp(t)).is_some() {
-                n_sent += 1;
+            while let Some((_, bytes)) = peers[0].poll_transmit(Timestamp(t)) {
+                match Message::decode(&bytes) {
+                    Ok(Message::Ping) => n_pings += 1,
+                    _ => n_sent += 1,
+                }
             }
         }
         // One send, then resends after three round trips of the hello (here the floor of
@@ -699,6 +711,10 @@ mod tests {
         // until the remote speaks).
         assert!(n_sent <= 16, "{n_sent} messages to a silent remote");
         assert!(n_sent >= 10, "{n_sent}: no resends");
+        // And pings of a few bytes on the base interval (the floor), for the first
+        // `PING_FOR_MICROS` of silence only.
+        let most = PING_FOR_MICROS / RESEND_AFTER_MIN_MICROS;
+        assert!((most / 2..=most).contains(&n_pings), "{n_pings} pings");
         assert_eq!(peers[1].log().len(), 0);
         // Peer 1 speaks (its periodic have after authoring): peer 0 resends within the base
         // interval, not after the backed-off 32 s.
@@ -708,6 +724,54 @@ mod tests {
         let start = t;
         let done = settle(&mut peers, &links, t, |p| p[1].log().len() == 2);
         assert!(done - start <= 2 * RESEND_AFTER_MICROS, "{}", done - start);
+    }
+
+    #[test]
+    fn a_holder_that_sends_nothing_is_asked_again_while_ops_come_from_elsewhere() {
+        // A, B and D in a full mesh on links that deliver at once; everything A sends D is
+        // lost, so D asks B for A's ops, and its wants to B are lost too. Meanwhile A's ops
+        // reach D one by one from elsewhere (a store, say). Growth that B did not send used to
+        // count as B delivering and restart B's time, so D waited on a want that never
+        // arrived for as long as ops trickled in; now D asks again after B's timeout.
+        let (mut peers, links) = full_mesh(3, Timestamp(0));
+        pump(&mut peers, &links, Timestamp(0));
+        let ops: Vec<_> = (0..16)
+            .map(|k| {
+                (peers[0].author(Timestamp(0), TestPayload::Chat(format!("A {k}"))))
+                    .unwrap()
+                    .0
+            })
+            .collect();
+        let author = ops[0].author();
+        let lost = |from: usize, to: usize, bytes: &[u8]| {
+            (from, to) == (0, 2)
+                || ((from, to) == (2, 1)
+                    && matches!(Message::decode(bytes), Ok(Message::Want { .. })))
+        };
+        let mut t = 0;
+        let asked_at = loop {
+            assert!(t < 3 * HAVE_EVERY_MICROS, "D never asked B");
+            t += 10_000;
+            tick_losing(&mut peers, &links, Timestamp(t), lost);
+            if let Some(asked) = peers[2].wants.get(&author).and_then(|w| w.asked) {
+                break asked.at.0;
+            }
+        };
+        let mut next = 0;
+        while peers[2].wants[&author].n_asked < 2 {
+            assert!(
+                t < asked_at + RESEND_AFTER_MIN_MICROS + 3 * WANT_CHECK_MICROS,
+                "D still waits on B at {t} (asked at {asked_at})"
+            );
+            t += 10_000;
+            if t % 50_000 == 0 && next < ops.len() - 1 {
+                (peers[2].log)
+                    .insert(Timestamp(t), ops[next].clone(), crate::log::LOCAL_ORIGIN)
+                    .unwrap();
+                next += 1;
+            }
+            tick_losing(&mut peers, &links, Timestamp(t), lost);
+        }
     }
 
     #[test]
@@ -828,7 +892,7 @@ mod tests {
     }
 
     use crate::causal::MAX_VV_AUTHORS;
-    use crate::sync::message::{MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION};
+    use crate::sync::message::{MAX_MESSAGE_BYTES, PROTOCOL_VERSION};
     use crate::sync::state::tests::log_of_many_authors;
     use crate::sync::state::{CLAIM_WITHDRAWN_MICROS, MAX_REMOTE_UNKNOWN_AUTHORS};
 
@@ -838,6 +902,7 @@ mod tests {
             session_id,
             peer,
             hello_seen: true,
+            have: None,
         }
         .encode()
     }

@@ -249,6 +249,7 @@ fn hello(peer: PeerId) -> Vec<u8> {
         session_id: SESSION_ID,
         peer,
         hello_seen: true,
+        have: None,
     }
     .encode()
 }

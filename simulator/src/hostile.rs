@@ -95,6 +95,7 @@ impl Hostile {
             session_id: SESSION_ID,
             peer: self.key.peer_id(),
             hello_seen: true,
+            have: None,
         }
         .encode()
     }

@@ -52,6 +52,7 @@ fn sync(data: &[u8]) {
         session_id: SESSION,
         peer: remote,
         hello_seen: true,
+        have: None,
     };
     state.handle_input(Timestamp(0), &hello.encode(), &mut log);
     let mut rest = data;

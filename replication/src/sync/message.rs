@@ -30,7 +30,10 @@ pub const SYNC_WIRE_VERSION: u8 = 1;
 /// the receiver inserts.
 /// 7: a [`Message::Want`] says how much of each author the sender holds, with the tip there,
 /// so the receiver relays from there rather than from what it last heard.
-pub const PROTOCOL_VERSION: u64 = 7;
+/// 8: a [`Message::Hello`] says what the sender holds ([`HelloHave`]), so both ends may send
+/// and ask half a round trip after connecting, without waiting for the have that answers it;
+/// [`Message::Ping`] probes a silent remote.
+pub const PROTOCOL_VERSION: u64 = 8;
 /// Length of a session id.
 pub const SESSION_ID_BYTES: usize = 16;
 /// Most ops in one [`Message::Ops`] batch.
@@ -55,6 +58,15 @@ const _: () = assert!(
     2 + MAX_VV_BYTES + MAX_VARINT_BYTES + MAX_VV_AUTHORS * (MAX_VARINT_BYTES + TIP_BYTES)
         <= MAX_MESSAGE_BYTES
 );
+// A hello with a whole version vector and its tips fits too.
+const _: () = assert!(
+    3 + 2 * MAX_VARINT_BYTES
+        + SESSION_ID_BYTES
+        + PEER_ID_BYTES
+        + MAX_VV_BYTES
+        + MAX_VV_AUTHORS * TIP_BYTES
+        <= MAX_MESSAGE_BYTES
+);
 // An ack names at most one batch's authors.
 const _: () = assert!(MAX_BATCH_OPS <= MAX_VV_AUTHORS);
 // Two ops of the largest size offered as a fork fit in a message.
@@ -70,6 +82,16 @@ pub fn tip(id: &OpId) -> u64 {
 /// A session's id (derived from its invite by the transport).
 pub type SessionId = [u8; SESSION_ID_BYTES];
 
+/// A hello's version vector: the sender's whole one, each entry with its tip as in a
+/// [`Message::Have`].
+#[derive(Clone, Debug, PartialEq, Eq, Default)]
+pub struct HelloHave {
+    /// Every author the sender holds, with the last seq it holds.
+    pub vv: VersionVector,
+    /// For each entry in order, the tip of the sender's op at that seq, or 0 for none.
+    pub tips: Vec<u64>,
+}
+
 /// One sync message.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Message {
@@ -83,6 +105,11 @@ pub enum Message {
         peer: PeerId,
         /// True if the sender has already received the receiver's hello.
         hello_seen: bool,
+        /// What the sender held when it sent this hello, for a log of at most
+        /// [`MAX_HELLO_HAVE_AUTHORS`](crate::sync::state::MAX_HELLO_HAVE_AUTHORS) authors;
+        /// `None` for a larger log (the haves that answer hellos name it) and in hellos of
+        /// builds speaking 7 or older.
+        have: Option<HelloHave>,
     },
     /// What the sender holds, so the receiver sends only what it lacks: all of it in answer
     /// to a hello, later only the entries that grew since the sender's previous have (the
@@ -141,6 +168,11 @@ pub enum Message {
     /// Asks for ops by id (at most [`MAX_BATCH_OPS`]): dependencies that ops this remote sent
     /// have waited for too long. The receiver sends those it holds in an ops batch.
     WantOps(Vec<OpId>),
+    /// Asks a remote that stayed silent while batches to it went unacknowledged whether the
+    /// link carries messages again (say a partition healed): answered with a full have. Sent
+    /// on the base resend interval while the batches' own resends back off, so a healed link
+    /// is found within about a round trip of that interval at the cost of a few bytes.
+    Ping,
 }
 
 const TAG_HELLO: u8 = 1;
@@ -151,6 +183,7 @@ const TAG_EPHEMERAL: u8 = 5;
 const TAG_WANT: u8 = 6;
 const TAG_FORKED: u8 = 7;
 const TAG_WANT_OPS: u8 = 8;
+const TAG_PING: u8 = 9;
 
 impl Message {
     /// A have without tips.
@@ -176,20 +209,21 @@ impl Message {
                 session_id,
                 peer,
                 hello_seen,
+                have,
             } => {
                 out.push(TAG_HELLO);
                 put_varint(&mut out, *protocol_version);
                 out.extend_from_slice(session_id);
                 out.extend_from_slice(&peer.0);
                 out.push(u8::from(*hello_seen));
+                out.push(u8::from(have.is_some()));
+                if let Some(have) = have {
+                    put_have(&mut out, &have.vv, &have.tips);
+                }
             }
             Self::Have { vv, tips } => {
                 out.push(TAG_HAVE);
-                put_vv(&mut out, vv);
-                put_varint(&mut out, tips.len() as u64);
-                for tip in tips {
-                    out.extend_from_slice(&tip.to_le_bytes());
-                }
+                put_have(&mut out, vv, tips);
             }
             Self::Ops { batch_no, ops } => {
                 out.push(TAG_OPS);
@@ -230,6 +264,7 @@ impl Message {
                 }
                 out.push(u8::from(*answer));
             }
+            Self::Ping => out.push(TAG_PING),
             Self::WantOps(ids) => {
                 out.push(TAG_WANT_OPS);
                 put_varint(&mut out, ids.len() as u64);
@@ -264,26 +299,24 @@ impl Message {
                 let session_id = r.array()?;
                 let peer = PeerId(r.array()?);
                 let hello_seen = r.flag()?;
+                // A hello of protocol 7 or older ends here; its version is refused later, with
+                // a reason, rather than as a malformed message.
+                let have = if r.remaining() > 0 && r.flag()? {
+                    let (vv, tips) = read_have(&mut r)?;
+                    Some(HelloHave { vv, tips })
+                } else {
+                    None
+                };
                 Self::Hello {
                     protocol_version,
                     session_id,
                     peer,
                     hello_seen,
+                    have,
                 }
             }
             TAG_HAVE => {
-                let vv = read_vv(&mut r)?;
-                let offset = r.offset();
-                let n = r.bounded("tip count", MAX_VV_AUTHORS as u64)?;
-                if n != 0 && n != vv.len() {
-                    return Err(DecodeError::Invalid {
-                        offset,
-                        what: "tip count differs from the version vector's",
-                    });
-                }
-                let tips = (0..n)
-                    .map(|_| r.array().map(u64::from_le_bytes))
-                    .collect::<Result<_, _>>()?;
+                let (vv, tips) = read_have(&mut r)?;
                 Self::Have { vv, tips }
             }
             TAG_WANT => {
@@ -343,6 +376,7 @@ impl Message {
                 }
                 Self::WantOps(ids)
             }
+            TAG_PING => Self::Ping,
             _ => {
                 return Err(DecodeError::Invalid {
                     offset: tag_offset,
@@ -361,6 +395,31 @@ fn put_vv(out: &mut Vec<u8>, vv: &VersionVector) {
         out.extend_from_slice(&author.0);
         put_varint(out, *seq);
     }
+}
+
+/// A version vector and its tips (none, or one per entry), as a have and a hello carry them.
+fn put_have(out: &mut Vec<u8>, vv: &VersionVector, tips: &[u64]) {
+    put_vv(out, vv);
+    put_varint(out, tips.len() as u64);
+    for tip in tips {
+        out.extend_from_slice(&tip.to_le_bytes());
+    }
+}
+
+fn read_have(r: &mut Reader<'_>) -> Result<(VersionVector, Vec<u64>), DecodeError> {
+    let vv = read_vv(r)?;
+    let offset = r.offset();
+    let n = r.bounded("tip count", MAX_VV_AUTHORS as u64)?;
+    if n != 0 && n != vv.len() {
+        return Err(DecodeError::Invalid {
+            offset,
+            what: "tip count differs from the version vector's",
+        });
+    }
+    let tips = (0..n)
+        .map(|_| r.array().map(u64::from_le_bytes))
+        .collect::<Result<_, _>>()?;
+    Ok((vv, tips))
 }
 
 fn read_vv(r: &mut Reader<'_>) -> Result<VersionVector, DecodeError> {
@@ -408,14 +467,19 @@ mod tests {
                 any::<u64>(),
                 any::<[u8; 16]>(),
                 any::<[u8; 32]>(),
-                any::<bool>()
+                any::<bool>(),
+                proptest::option::of((vv.clone(), any::<u64>())),
             )
-                .prop_map(|(protocol_version, session_id, p, hello_seen)| {
+                .prop_map(|(protocol_version, session_id, p, hello_seen, have)| {
                     Message::Hello {
                         protocol_version,
                         session_id,
                         peer: PeerId(p),
                         hello_seen,
+                        have: have.map(|(vv, tip)| HelloHave {
+                            tips: vec![tip.max(1); vv.len()],
+                            vv,
+                        }),
                     }
                 }),
             (vv.clone(), any::<u64>()).prop_map(|(vv, tip)| {
@@ -446,6 +510,7 @@ mod tests {
                 }),
             proptest::collection::vec(any::<[u8; 32]>(), 0..5)
                 .prop_map(|ids| Message::WantOps(ids.into_iter().map(OpId).collect())),
+            Just(Message::Ping),
             (any::<u64>(), vv).prop_map(|(batch_no, have)| Message::Ack { batch_no, have }),
             (
                 any::<u32>(),

@@ -2,15 +2,20 @@
 //!
 //! Inputs are `handle_*(now, ..)`; outputs are [`SyncState::poll_transmit`],
 //! [`SyncState::poll_event`] and [`SyncState::poll_timeout`]. Drain every `poll_*` after each
-//! input. The state is rebuilt on every connection: the remote's version vector is learnt
-//! from its hello-time [`Message::Have`] (the hello is sent again until it comes, and none of
-//! our own ops goes out before it or a want or ack saying how much of them the remote holds),
-//! from the changes it announces at most every [`HAVE_EVERY_MICROS`],
-//! from acks and from what its wants say it holds, and anything not acknowledged is sent again
-//! after a timeout estimated from the round trips of the first hello and of acknowledged
-//! batches (between [`RESEND_AFTER_MIN_MICROS`] and [`RESEND_AFTER_MICROS`]), backing off to
-//! [`RESEND_AFTER_MAX_MICROS`] while the remote stays silent, so a lost or duplicated message
-//! can neither stall nor loop a sync.
+//! input. The state is rebuilt on every connection: the remote's version vector is learnt from
+//! its hello (which names it for a log of at most [`MAX_HELLO_HAVE_AUTHORS`] authors) and the
+//! [`Message::Have`] that answers ours (the hello is sent again until one comes, and none of
+//! our own ops goes out before the remote's hello or a have, want or ack says how much of them
+//! the remote holds), from the changes it announces at most every [`HAVE_EVERY_MICROS`], from
+//! acks and from what its wants say it holds, and anything not acknowledged is sent again after
+//! a timeout estimated from the round trips of the first hello and of acknowledged batches, or
+//! else from the peer's other connections (between [`RESEND_AFTER_MIN_MICROS`] and
+//! [`RESEND_AFTER_MICROS`]), backing off to [`RESEND_AFTER_MAX_MICROS`] while the remote stays
+//! silent, so a lost or duplicated message can neither stall nor loop a sync. While the resends
+//! back off, a [`Message::Ping`] of a few bytes goes out on the base interval (for at most
+//! [`PING_FOR_MICROS`]); the remote answers it, and the first message after a silence while we
+//! ping, with a full have, so both ends of a healed partition learn what the other holds within
+//! about a round trip of that interval.
 //!
 //! **Bounds.** Every version vector goes out in parts of at most [`MAX_VV_AUTHORS`] authors
 //! (a have's first part at once, its others paced like data; wants as control), so no log is
@@ -44,8 +49,8 @@ use crate::op::{Envelope, MAX_OP_BYTES, Op, OpId, ReceiveError};
 use crate::payload::Payload;
 use crate::pending::{EvictReason, Origin};
 use crate::sync::message::{
-    MAX_BATCH_OPS, MAX_EPHEMERAL_BYTES, MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION, SessionId,
-    tip,
+    HelloHave, MAX_BATCH_OPS, MAX_EPHEMERAL_BYTES, MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION,
+    SessionId, tip,
 };
 use crate::time::Timestamp;
 
@@ -65,6 +70,14 @@ pub const RESEND_AFTER_MAX_MICROS: u64 = 32_000_000;
 /// sent none for the resend timeout of its connection, when it has one, and at most this long
 /// (500 ms): time for the author's own send (or its resend) to arrive.
 pub const RELAY_AFTER_MICROS: u64 = 500_000;
+/// A remote silent while batches to it wait is pinged ([`Message::Ping`]) on the base resend
+/// interval for at most this long (10 s): a healed partition is found within about that
+/// interval, and a dead remote costs at most this long's worth of pings of a few bytes (on
+/// the 100 ms floor, 100) beside the backed-off resends.
+pub const PING_FOR_MICROS: u64 = 10_000_000;
+/// Most authors a hello names ([`HelloHave`], about 5 KiB): a larger log's hellos, which go
+/// again until answered, say nothing of what it holds, and its haves follow in answer.
+pub const MAX_HELLO_HAVE_AUTHORS: usize = 128;
 /// A peer tells each remote what it has gained at most this often (1 s), as a delta.
 pub const HAVE_EVERY_MICROS: u64 = 1_000_000;
 /// ... and everything it holds at most this often (10 s) while that changed, which repairs
@@ -321,6 +334,26 @@ pub struct SyncConfig {
     pub origin: Origin,
 }
 
+/// A hello's fields other than its have.
+struct HelloIn {
+    protocol_version: u64,
+    session_id: SessionId,
+    peer: PeerId,
+    hello_seen: bool,
+}
+
+/// What a hello says the log holds: its whole version vector with tips, for a log of at most
+/// [`MAX_HELLO_HAVE_AUTHORS`] authors.
+fn hello_have<P: Payload>(log: &Log<P>) -> Option<HelloHave> {
+    let vv = log.version_vector();
+    (vv.len() <= MAX_HELLO_HAVE_AUTHORS).then(|| HelloHave {
+        tips: (vv.iter())
+            .map(|(author, seq)| tip_at(log, author, *seq))
+            .collect(),
+        vv: vv.clone(),
+    })
+}
+
 /// Sync with one remote peer over one connection.
 #[derive(Debug)]
 pub struct SyncState<P> {
@@ -365,6 +398,10 @@ pub struct SyncState<P> {
     /// What we sent on this connection (at least `remote_vv`).
     sent_vv: VersionVector,
     in_flight: BTreeMap<u64, Timestamp>,
+    /// When the remote last said anything.
+    heard_at: Timestamp,
+    /// When we last pinged the remote, while it stays silent ([`Message::Ping`]).
+    pinged_at: Option<Timestamp>,
     /// Current batch resend interval (doubles on each resend without an ack in between).
     resend_micros: u64,
     /// Smoothed round trip and its mean deviation from acked batches (RFC 6298), if measured.
@@ -462,6 +499,8 @@ impl<P: Payload> SyncState<P> {
             relearn_check_at: now,
             sent_vv: VersionVector::new(),
             in_flight: BTreeMap::new(),
+            heard_at: now,
+            pinged_at: None,
             resend_micros: RESEND_AFTER_MICROS,
             rtt_micros: None,
             relay_vv: VersionVector::new(),
@@ -551,6 +590,9 @@ impl<P: Payload> SyncState<P> {
         if self.hello_resend_micros == self.assumed_resend_micros {
             self.hello_resend_micros = micros;
         }
+        if self.resend_micros == self.assumed_resend_micros {
+            self.resend_micros = micros;
+        }
         self.assumed_resend_micros = micros;
     }
 
@@ -560,6 +602,8 @@ impl<P: Payload> SyncState<P> {
             session_id: self.config.session_id,
             peer: self.config.local,
             hello_seen: self.remote.is_some(),
+            // Filled in with what the log holds when it goes out (`next_message`).
+            have: None,
         });
         self.hello_sent_at = Some(now);
     }
@@ -675,6 +719,8 @@ impl<P: Payload> SyncState<P> {
         }
         self.stats.n_messages_in += 1;
         self.stats.n_bytes_in += bytes.len() as u64;
+        let silence = now.0.saturating_sub(self.heard_at.0);
+        self.heard_at = now;
         if !self.bucket.take(now) {
             self.reject(
                 RejectKind::RateLimited,
@@ -700,8 +746,15 @@ impl<P: Payload> SyncState<P> {
                 session_id,
                 peer,
                 hello_seen,
+                have,
             } => {
-                self.on_hello(now, protocol_version, session_id, peer, hello_seen, log);
+                let hello = HelloIn {
+                    protocol_version,
+                    session_id,
+                    peer,
+                    hello_seen,
+                };
+                self.on_hello(now, hello, have, log);
             }
             _ if self.remote.is_none() => {
                 self.reject(RejectKind::BeforeHello, "data before hello".into());
@@ -711,6 +764,17 @@ impl<P: Payload> SyncState<P> {
                 self.hello_resend_micros = self.hello_timeout();
             }
             message => {
+                // A ping, or the first word after a silence while we pinged: the link carries
+                // messages again, and what each end holds may have moved on while it did not
+                // (a partition). At most one full have per `HAVE_EVERY_MICROS`, and none for a
+                // remote that talks without acknowledging, so neither pings nor chatter can
+                // make us send more than a trickle.
+                let base = self.base_resend_micros();
+                let pinged = self.pinged_at.take().is_some() && silence >= base;
+                let rested = now.0 >= (self.full_have_at.0).saturating_add(HAVE_EVERY_MICROS);
+                if (matches!(message, Message::Ping) || pinged) && rested {
+                    self.send_full_have(now, log);
+                }
                 self.handle_message(now, message, log);
                 // The remote speaks, maybe again after a partition healed: what it has not
                 // acknowledged, our hello included, goes out again on the base interval, not
@@ -782,6 +846,7 @@ impl<P: Payload> SyncState<P> {
                 self.hello_confirmed = true;
                 self.on_forked(now, ops, answer, log);
             }
+            Message::Ping => self.hello_confirmed = true,
             Message::WantOps(ids) => {
                 self.hello_confirmed = true;
                 for id in ids {
@@ -839,15 +904,13 @@ impl<P: Payload> SyncState<P> {
         }
     }
 
-    fn on_hello(
-        &mut self,
-        now: Timestamp,
-        protocol_version: u64,
-        session_id: SessionId,
-        peer: PeerId,
-        hello_seen: bool,
-        log: &Log<P>,
-    ) {
+    fn on_hello(&mut self, now: Timestamp, hello: HelloIn, have: Option<HelloHave>, log: &Log<P>) {
+        let HelloIn {
+            protocol_version,
+            session_id,
+            peer,
+            hello_seen,
+        } = hello;
         if protocol_version != PROTOCOL_VERSION {
             self.reject(
                 RejectKind::WrongProtocol,
@@ -874,20 +937,33 @@ impl<P: Payload> SyncState<P> {
                 self.events.push_back(Event::Connected { peer });
             }
         }
+        // What the remote held when it said hello, learnt as from a have: our own ops and
+        // wants may go at once, not a round trip later when its answer to our hello comes.
+        // (It does not stop our hello: only a have says the remote saw that.)
+        if let Some(have) = have {
+            self.own_known = true;
+            self.learn_remote(now, &have.vv, log);
+            self.compare_tips(&have.vv, &have.tips, log);
+        }
         // Every hello is answered with a full Have: it tells the remote what we hold and
         // confirms we saw its hello (so it stops resending). A Have is never answered, so this
         // cannot loop.
+        self.send_full_have(now, log);
+        self.hello_confirmed |= hello_seen;
+        if !hello_seen {
+            // The remote has not seen our hello yet: answer once (its resend timer repeats).
+            self.queue_hello(now);
+        }
+    }
+
+    /// Queues everything the log holds as a have (replacing parts not yet sent).
+    fn send_full_have(&mut self, now: Timestamp, log: &Log<P>) {
         self.queue_have(log.version_vector(), true, log);
         self.have_sent_vv = log.version_vector().clone();
         self.have_sent_len = log.len();
         self.have_sent_at = now;
         self.full_have_len = log.len();
         self.full_have_at = now;
-        self.hello_confirmed |= hello_seen;
-        if !hello_seen {
-            // The remote has not seen our hello yet: answer once (its resend timer repeats).
-            self.queue_hello(now);
-        }
     }
 
     /// Queues a have in parts, each entry with the tip of the log's op there; a full one
@@ -1219,6 +1295,10 @@ impl<P: Payload> SyncState<P> {
             self.sendable_cache.set(None);
             self.resend_micros = (self.resend_micros * 2).min(RESEND_AFTER_MAX_MICROS);
         }
+        if self.ping_due().is_some_and(|d| d <= now) {
+            self.pinged_at = Some(now);
+            self.control.push_back(Message::Ping);
+        }
         if self.relearn_due().is_some_and(|d| d <= now) {
             self.relearn(now, log);
         }
@@ -1330,12 +1410,13 @@ impl<P: Payload> SyncState<P> {
 
     /// The batch resend timeout before any backoff: four deviations above the smoothed round
     /// trip of acknowledged batches; before the first, three round trips of the first hello
-    /// (RFC 6298's first sample), or [`RESEND_AFTER_MICROS`] before that is measured. The
-    /// first batches of a connection often carry what a peer back from a partition or a crash
-    /// lacks, and one lost there would otherwise cost a whole second.
+    /// (RFC 6298's first sample), or before that what the peer's other connections measured
+    /// ([`SyncState::assume_resend_timeout`]; [`RESEND_AFTER_MICROS`] without any). The first
+    /// batches of a connection often carry what a peer back from a partition or a crash lacks,
+    /// and one lost there would otherwise cost a whole second.
     fn base_resend_micros(&self) -> u64 {
         self.rtt_micros.map_or_else(
-            || self.resend_timeout().unwrap_or(RESEND_AFTER_MICROS),
+            || self.hello_timeout(),
             |(srtt, var)| {
                 srtt.saturating_add(var.saturating_mul(4))
                     .clamp(RESEND_AFTER_MIN_MICROS, RESEND_AFTER_MICROS)
@@ -1349,6 +1430,21 @@ impl<P: Payload> SyncState<P> {
         self.hello_sent_at
             .filter(|_| self.remote.is_none() || !self.have_learnt)
             .map(|t| t.saturating_add_micros(self.hello_resend_micros))
+    }
+
+    /// While batches wait for acknowledgement and their resends have backed off (the remote
+    /// said nothing for a resend timeout or more), a ping goes out on the base interval, for
+    /// at most [`PING_FOR_MICROS`] of silence.
+    fn ping_due(&self) -> Option<Timestamp> {
+        let base = self.base_resend_micros();
+        if self.remote.is_none() || self.in_flight.is_empty() || self.resend_micros <= base {
+            return None;
+        }
+        let last = self
+            .pinged_at
+            .map_or(self.heard_at, |p| p.max(self.heard_at));
+        let due = last.saturating_add_micros(base);
+        (due.0 <= self.heard_at.0.saturating_add(PING_FOR_MICROS)).then_some(due)
     }
 
     fn resend_due(&self) -> Option<Timestamp> {
@@ -1411,6 +1507,7 @@ impl<P: Payload> SyncState<P> {
         [
             self.hello_due(),
             self.resend_due(),
+            self.ping_due(),
             self.have_due(log),
             self.relearn_due(),
             self.stuck_due(log),
@@ -1499,7 +1596,10 @@ impl<P: Payload> SyncState<P> {
     }
 
     fn next_message(&mut self, now: Timestamp, log: &Log<P>) -> Option<Message> {
-        if let Some(m) = self.control.pop_front() {
+        if let Some(mut m) = self.control.pop_front() {
+            if let Message::Hello { have, .. } = &mut m {
+                *have = hello_have(log);
+            }
             return Some(m);
         }
         // Nothing but control messages goes out before the remote's hello.

@@ -16,7 +16,9 @@ use replication::op::OpFields;
 use replication::pending::MAX_PENDING_OPS;
 use replication::shape::ShapePayload;
 use replication::shape::parts::part_hash;
-use replication::sync::message::{MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION, SessionId};
+use replication::sync::message::{
+    HelloHave, MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION, SessionId,
+};
 use replication::{ConnId, Event, Keypair, Log, Op, OpId, Peer, PeerId, Timestamp, VersionVector};
 
 const SESSION: SessionId = [7; 16];
@@ -120,6 +122,7 @@ pub fn run(data: &[u8]) -> Stats {
             session_id: SESSION,
             peer: world.keys[usize::from(c)].peer_id(),
             hello_seen: true,
+            have: None,
         };
         world.send(conn, &hello);
         world.drain();
@@ -342,6 +345,7 @@ impl World {
                         session_id: SESSION,
                         peer: self.someone(bytes),
                         hello_seen: true,
+                        have: None,
                     };
                     self.send(conn, &hello);
                 }
@@ -367,6 +371,10 @@ impl World {
                     },
                     peer: self.someone(bytes),
                     hello_seen: bytes.u8().is_multiple_of(2),
+                    have: bytes.u8().is_multiple_of(2).then(|| HelloHave {
+                        vv: self.version_vector(bytes),
+                        tips: Vec::new(),
+                    }),
                 };
                 self.send(conn, &hello);
             }
@@ -395,6 +403,7 @@ impl World {
                 };
                 self.send(conn, &ack);
             }
+            9 if bytes.u8().is_multiple_of(4) => self.send(conn, &Message::Ping),
             9 => {
                 let ephemeral = Message::Ephemeral {
                     channel: bytes.u8().into(),

@@ -253,6 +253,7 @@ fn hello(peer: PeerId, session_id: SessionId, protocol_version: u64) -> Vec<u8> 
         session_id,
         peer,
         hello_seen: true,
+        have: None,
     }
     .encode()
 }
@@ -797,8 +798,28 @@ fn hold(node: &mut Node, ops: &[VerifiedOp<TestPayload>]) {
     }
 }
 
+/// The hello of a log whose version vector takes more than one message: it says nothing of
+/// what the sender holds.
+fn without_have(mut message: Message) -> Message {
+    if let Message::Hello { have, .. } = &mut message {
+        *have = None;
+    }
+    message
+}
+
+/// A and B after both hellos and their answers crossed, 40 ms each way: A has measured a round
+/// trip of 80 ms, B one of 120 ms.
+fn connected() -> [Node; 2] {
+    let [mut a, mut b] = [Node::new(1, 2), Node::new(2, 1)];
+    carry(&mut a, &mut b, 0, 40 * MILLI);
+    carry(&mut b, &mut a, 40 * MILLI, 80 * MILLI);
+    carry(&mut a, &mut b, 80 * MILLI, 120 * MILLI);
+    [a, b]
+}
+
 /// A with three ops of its own, B holding the first two; A's hello reaches B at 40 ms, and of
-/// B's answer only its hello reaches A, at 80 ms (its have is lost).
+/// B's answer only its hello reaches A, at 80 ms (its have is lost), saying nothing of what B
+/// holds (as from a log too large for a hello to name).
 fn have_lost() -> [Node; 2] {
     let [mut a, mut b] = [Node::new(1, 2), Node::new(2, 1)];
     let mine: Vec<_> = (1..=3).map(|i| a.author(i, format!("a{i}"))).collect();
@@ -806,11 +827,45 @@ fn have_lost() -> [Node; 2] {
     carry(&mut a, &mut b, 0, 40 * MILLI);
     for message in outbox(&mut b, 40 * MILLI) {
         if matches!(message, Message::Hello { .. }) {
-            a.sync
-                .handle_input(Timestamp(80 * MILLI), &message.encode(), &mut a.log);
+            a.sync.handle_input(
+                Timestamp(80 * MILLI),
+                &without_have(message).encode(),
+                &mut a.log,
+            );
         }
     }
     [a, b]
+}
+
+/// Both ends waited for the have that answers their hello before sending their own ops or
+/// asking for any: a round trip and a half after connecting at best, and a lost have cost a
+/// hello's resend timeout. A hello now says what its sender holds: each end sends only what
+/// the other lacks, half a round trip after connecting.
+#[test]
+fn a_hellos_have_lets_own_ops_go_half_a_round_trip_after_connecting() {
+    let [mut a, mut b] = [Node::new(1, 2), Node::new(2, 1)];
+    let mine: Vec<_> = (1..=3).map(|i| a.author(i, format!("a{i}"))).collect();
+    hold(&mut b, &mine[..2]);
+    // Both connect at 0; B's hello reaches A at 40 ms, and A's answer goes at once.
+    outbox(&mut a, 0);
+    for message in outbox(&mut b, 0) {
+        let Message::Hello { have, .. } = &message else {
+            panic!("B opened with {message:?}");
+        };
+        assert_eq!(have.as_ref().map(|h| h.vv.get(&a.key.peer_id())), Some(2));
+        a.sync
+            .handle_input(Timestamp(40 * MILLI), &message.encode(), &mut a.log);
+    }
+    assert_eq!(
+        batched(&outbox(&mut a, 40 * MILLI)),
+        vec![(a.key.peer_id(), 3)]
+    );
+    // The hello still goes out again until a have says B saw it.
+    assert!(
+        drain_checked(&mut a, 41 * MILLI, RESEND_AFTER_MICROS)
+            .iter()
+            .any(|m| matches!(m, Message::Hello { .. }))
+    );
 }
 
 /// A connection sent its own ops as soon as the remote's hello came, before the remote's have
@@ -867,10 +922,7 @@ fn a_want_says_what_the_asker_holds_and_the_relay_starts_there() {
 /// partition lacks. They now wait three round trips of the first hello.
 #[test]
 fn a_first_batch_lost_goes_out_again_after_the_hellos_round_trips() {
-    let [mut a, mut b] = [Node::new(1, 2), Node::new(2, 1)];
-    carry(&mut a, &mut b, 0, 40 * MILLI);
-    carry(&mut b, &mut a, 40 * MILLI, 80 * MILLI);
-    carry(&mut a, &mut b, 80 * MILLI, 120 * MILLI);
+    let [mut a, _] = connected();
     assert_eq!(a.sync.resend_timeout(), Some(240 * MILLI));
     a.author(100 * MILLI, "lost".into());
     let now = 100 * MILLI;
@@ -915,9 +967,16 @@ fn a_want_names_the_askers_op_where_it_holds_so_a_fork_is_found() {
     assert_eq!((side.seq(), other.seq()), (1, 1));
     hold(&mut q, &[side]);
     hold(&mut r, &[other.clone(), next]);
-    carry(&mut q, &mut r, 0, 10 * MILLI);
+    // Q's hello says nothing of what it holds, and its have is lost, so R learns what Q holds
+    // from its want alone.
+    for message in outbox(&mut q, 0) {
+        (r.sync).handle_input(
+            Timestamp(10 * MILLI),
+            &without_have(message).encode(),
+            &mut r.log,
+        );
+    }
     carry(&mut r, &mut q, 10 * MILLI, 20 * MILLI);
-    // Q's have is lost, so R learns what Q holds from its want alone.
     outbox(&mut q, 20 * MILLI);
     let tips_before = r.sync.stats().n_tips_differ;
     q.sync.want(r.log.version_vector().clone(), &q.log);
@@ -925,4 +984,123 @@ fn a_want_names_the_askers_op_where_it_holds_so_a_fork_is_found() {
     assert_eq!(r.sync.stats().n_tips_differ, tips_before + 1);
     let sent = batched(&outbox(&mut r, 40 * MILLI));
     assert!(sent.contains(&(other.author(), 1)), "{sent:?}");
+}
+
+/// A batch sent before any round trip was measured on its connection (the have answering our
+/// hello lost, say) waited a whole second before going again. It now waits what the peer's
+/// other connections measured.
+#[test]
+fn a_batch_before_any_round_trip_waits_what_other_connections_measured() {
+    let [mut a, mut b] = [Node::new(1, 2), Node::new(2, 1)];
+    a.sync.assume_resend_timeout(300 * MILLI);
+    // B's hello (naming what B holds) reaches A; B's answer to A's hello is lost.
+    outbox(&mut a, 0);
+    for message in outbox(&mut b, 0) {
+        if matches!(message, Message::Hello { .. }) {
+            (a.sync).handle_input(Timestamp(40 * MILLI), &message.encode(), &mut a.log);
+        }
+    }
+    assert_eq!(a.sync.resend_timeout(), None);
+    a.author(50 * MILLI, "lost".into());
+    assert_eq!(batched(&outbox(&mut a, 50 * MILLI)).len(), 1);
+    a.sync.handle_timeout(Timestamp(349 * MILLI), &mut a.log);
+    assert_eq!(
+        batched(&outbox(&mut a, 349 * MILLI)),
+        vec![],
+        "resent early"
+    );
+    a.sync.handle_timeout(Timestamp(350 * MILLI), &mut a.log);
+    assert_eq!(batched(&outbox(&mut a, 350 * MILLI)).len(), 1, "no resend");
+}
+
+/// A partition left both ends' batch resends backed off to seconds, and nothing else crossed
+/// the healed link until the next have a second later: a peer back from a partition waited
+/// about six round trips before anything moved. A connection whose resends back off now pings
+/// on the base interval; the remote answers with a full have, and the batches go again at once.
+#[test]
+fn a_silent_remote_is_pinged_and_the_answer_brings_the_batches_back() {
+    let [mut a, mut b] = connected();
+    let base = a.sync.resend_timeout().unwrap();
+    // A partition: A's batch and every resend and ping are lost for five seconds.
+    let op = a.author(200 * MILLI, "into the partition".into());
+    let lost = drain_checked(&mut a, 200 * MILLI, 5_000_000);
+    let pings = lost.iter().filter(|m| matches!(m, Message::Ping)).count();
+    let resends = batched(&lost).len();
+    assert!(resends <= 5, "{resends} batches into the partition");
+    assert!(
+        pings as u64 >= 4_000_000 / base,
+        "{pings} pings in five seconds on a base of {base} µs"
+    );
+    // It heals: the next ping gets through, and B answers with all it holds.
+    let now = 5_300_000;
+    let next = a.sync.poll_timeout(&a.log).unwrap();
+    assert!(next.0 <= now + base, "next ping or resend at {next:?}");
+    let sent = drain_checked(&mut a, now, base);
+    assert!(sent.iter().any(|m| matches!(m, Message::Ping)), "{sent:?}");
+    b.sync
+        .handle_input(Timestamp(now + base), &Message::Ping.encode(), &mut b.log);
+    let answer = outbox(&mut b, now + base);
+    assert!(
+        answer
+            .iter()
+            .any(|m| matches!(m, Message::Have { vv, .. } if vv.get(&b.key.peer_id()) == 0)),
+        "{answer:?}"
+    );
+    let back = now + base + 40 * MILLI;
+    for message in &answer {
+        (a.sync).handle_input(Timestamp(back), &message.encode(), &mut a.log);
+    }
+    assert!(a.sync.poll_timeout(&a.log).unwrap().0 <= back);
+    a.sync.handle_timeout(Timestamp(back), &mut a.log);
+    let again = outbox(&mut a, back);
+    assert_eq!(batched(&again), vec![(op.author(), op.seq())]);
+}
+
+/// Pings cannot make a remote send more than a trickle: one full have a second.
+#[test]
+fn pings_are_answered_at_most_once_a_second() {
+    let [_, mut b] = connected();
+    outbox(&mut b, 120 * MILLI);
+    let mut n_haves = 0;
+    for ms in 200..1200 {
+        (b.sync).handle_input(Timestamp(ms * MILLI), &Message::Ping.encode(), &mut b.log);
+        n_haves += (outbox(&mut b, ms * MILLI).iter())
+            .filter(|m| matches!(m, Message::Have { .. }))
+            .count();
+    }
+    assert!(n_haves >= 1, "pings never answered");
+    assert!(n_haves <= 2, "{n_haves} haves for 1000 pings in a second");
+}
+
+/// A remote that talks but never acknowledges (hostile, say) kept us pinging, and each of its
+/// messages while we pinged was answered with a full have, which for a log of many authors is
+/// kilobytes every resend interval. Only the first message after a silence is, at most one a
+/// second.
+#[test]
+fn a_remote_that_talks_without_acknowledging_gets_no_stream_of_full_haves() {
+    let [mut a, _] = connected();
+    a.author(200 * MILLI, "never acknowledged".into());
+    let chatter = Message::have(VersionVector::new()).encode();
+    let (mut n_full, mut n_pings) = (0, 0);
+    for ms in 200..5200 {
+        let now = ms * MILLI;
+        if ms % 300 == 0 {
+            a.sync.handle_input(Timestamp(now), &chatter, &mut a.log);
+        }
+        if a.sync.poll_timeout(&a.log).is_some_and(|t| t.0 <= now) {
+            a.sync.handle_timeout(Timestamp(now), &mut a.log);
+        }
+        for message in outbox(&mut a, now) {
+            match message {
+                Message::Ping => n_pings += 1,
+                Message::Have { vv, .. } if vv.get(&a.key.peer_id()) > 0 => n_full += 1,
+                _ => {}
+            }
+        }
+    }
+    assert!(n_pings > 0, "never pinged");
+    assert!(
+        n_full <= 6,
+        "{n_full} full haves for {n_pings} pings in 5 s"
+    );
 }
