@@ -334,12 +334,11 @@ pub struct SyncConfig {
     pub origin: Origin,
 }
 
-/// A hello's fields other than its have.
-struct HelloIn {
-    protocol_version: u64,
-    session_id: SessionId,
-    peer: PeerId,
-    hello_seen: bool,
+/// The tip of the log's op at each entry of `vv`, in order (0 where it holds none).
+fn tips_of<P: Payload>(log: &Log<P>, vv: &VersionVector) -> Vec<u64> {
+    (vv.iter())
+        .map(|(author, seq)| tip_at(log, author, *seq))
+        .collect()
 }
 
 /// What a hello says the log holds: its whole version vector with tips, for a log of at most
@@ -347,9 +346,7 @@ struct HelloIn {
 fn hello_have<P: Payload>(log: &Log<P>) -> Option<HelloHave> {
     let vv = log.version_vector();
     (vv.len() <= MAX_HELLO_HAVE_AUTHORS).then(|| HelloHave {
-        tips: (vv.iter())
-            .map(|(author, seq)| tip_at(log, author, *seq))
-            .collect(),
+        tips: tips_of(log, vv),
         vv: vv.clone(),
     })
 }
@@ -748,13 +745,19 @@ impl<P: Payload> SyncState<P> {
                 hello_seen,
                 have,
             } => {
-                let hello = HelloIn {
-                    protocol_version,
-                    session_id,
-                    peer,
-                    hello_seen,
-                };
-                self.on_hello(now, hello, have, log);
+                self.on_hello(now, protocol_version, session_id, peer, hello_seen, log);
+                // What the remote held when it said hello, learnt as from a have once the
+                // hello is accepted: our own ops and wants may go at once, not a round trip
+                // later when its answer to our hello comes. (It does not stop our hello: only
+                // a have says the remote saw that.)
+                if let Some(have) = have
+                    && !self.closed
+                    && self.remote == Some(peer)
+                {
+                    self.own_known = true;
+                    self.learn_remote(now, &have.vv, log);
+                    self.compare_tips(&have.vv, &have.tips, log);
+                }
             }
             _ if self.remote.is_none() => {
                 self.reject(RejectKind::BeforeHello, "data before hello".into());
@@ -904,13 +907,15 @@ impl<P: Payload> SyncState<P> {
         }
     }
 
-    fn on_hello(&mut self, now: Timestamp, hello: HelloIn, have: Option<HelloHave>, log: &Log<P>) {
-        let HelloIn {
-            protocol_version,
-            session_id,
-            peer,
-            hello_seen,
-        } = hello;
+    fn on_hello(
+        &mut self,
+        now: Timestamp,
+        protocol_version: u64,
+        session_id: SessionId,
+        peer: PeerId,
+        hello_seen: bool,
+        log: &Log<P>,
+    ) {
         if protocol_version != PROTOCOL_VERSION {
             self.reject(
                 RejectKind::WrongProtocol,
@@ -936,14 +941,6 @@ impl<P: Payload> SyncState<P> {
                 self.remote = Some(peer);
                 self.events.push_back(Event::Connected { peer });
             }
-        }
-        // What the remote held when it said hello, learnt as from a have: our own ops and
-        // wants may go at once, not a round trip later when its answer to our hello comes.
-        // (It does not stop our hello: only a have says the remote saw that.)
-        if let Some(have) = have {
-            self.own_known = true;
-            self.learn_remote(now, &have.vv, log);
-            self.compare_tips(&have.vv, &have.tips, log);
         }
         // Every hello is answered with a full Have: it tells the remote what we hold and
         // confirms we saw its hello (so it stops resending). A Have is never answered, so this
@@ -975,11 +972,9 @@ impl<P: Payload> SyncState<P> {
             self.control.retain(|m| !matches!(m, Message::Have { .. }));
             self.have_out.clear();
         }
-        let with_tips = |vv: VersionVector| {
-            let tips = (vv.iter())
-                .map(|(author, seq)| tip_at(log, author, *seq))
-                .collect();
-            Message::Have { vv, tips }
+        let with_tips = |vv: VersionVector| Message::Have {
+            tips: tips_of(log, &vv),
+            vv,
         };
         let mut parts = have.split(MAX_VV_AUTHORS).into_iter().map(with_tips);
         if let Some(first) = parts.next() {
@@ -1436,8 +1431,11 @@ impl<P: Payload> SyncState<P> {
     /// said nothing for a resend timeout or more), a ping goes out on the base interval, for
     /// at most [`PING_FOR_MICROS`] of silence.
     fn ping_due(&self) -> Option<Timestamp> {
+        if self.remote.is_none() || self.in_flight.is_empty() {
+            return None;
+        }
         let base = self.base_resend_micros();
-        if self.remote.is_none() || self.in_flight.is_empty() || self.resend_micros <= base {
+        if self.resend_micros <= base {
             return None;
         }
         let last = self
