@@ -537,6 +537,18 @@ fn run_plan<const N: usize>(
                 Src::R(d) => add_terms(o, [a, b, c], &sum, move |v, i| g(v, d[i])),
                 Src::C(d) => add_terms(o, [a, b, c], &sum, move |v, _| g(v, d)),
             }),
+            Kind::SumRootPick(sum, p, t, r) => {
+                // Each term is `1 * (u - c)^2`, which is `(u - c)^2` bit for bit.
+                let square = |t: Term, u: f32| (u - t.c) * (u - t.c);
+                with_pick!(p, g => with_lin!(t, f => match d {
+                    Src::R(d) => add_terms_with(o, [a, b, c], &sum, square, move |v, i| {
+                        g(f(v.sqrt(), r), d[i])
+                    }),
+                    Src::C(d) => add_terms_with(o, [a, b, c], &sum, square, move |v, _| {
+                        g(f(v.sqrt(), r), d)
+                    }),
+                }))
+            }
         }
     }
 }
@@ -921,6 +933,11 @@ mod tests {
             "t - (x^2 + y^2)",
             "(x - 1)^2 + (y - 1)^2 - t",
             "(2 * x + y * 3) * z",
+            // A ball's squared distance in the loop of the union or intersection with it.
+            "max(x, 0.4 - sqrt((x - 0.5)^2 + (y + 0.25)^2 + z^2))",
+            "max(0.4 - sqrt((0.5 - x)^2 + y^2), z - 1)",
+            "min(sqrt(x^2 + (y - 1)^2 + (z + 0.5)^2) - 0.5, t)",
+            "min(y, sqrt(1 + x^2) + 0.25)",
         ];
         let values = [-1.25f32, -0.5, -0.0, 0.0, 0.5, 1.0, 1.75];
         let mut xs = Vec::new();
@@ -937,11 +954,12 @@ mod tests {
         for src in formulas {
             let tape = tape(src);
             let fused = BulkEval::new(&tape);
-            let sums = fused
-                .plan
-                .steps
-                .iter()
-                .filter(|s| matches!(s.kind, Kind::Sum(_) | Kind::SumThen(..)));
+            let sums = fused.plan.steps.iter().filter(|s| {
+                matches!(
+                    s.kind,
+                    Kind::Sum(_) | Kind::SumThen(..) | Kind::SumRootPick(..)
+                )
+            });
             assert!(sums.count() >= 1, "{src}: {:?}", fused.plan.steps);
             for t in [-0.0, 0.5] {
                 let mut reference = vec![0.0; xs.len()];
@@ -961,10 +979,17 @@ mod tests {
         let ball = "0.3 - sqrt((x-0.1)^2 + (y+0.2)^2 + (z-0.3)^2)";
         assert_eq!(tape(ball).len(), 10);
         assert_eq!(BulkEval::new(&tape(ball)).n_steps(), 2);
-        // A union of balls: the second's root and radius go into the union's step.
+        // A union of balls: the second's squared distance, root and radius go into the
+        // union's step.
         let two = tape(&format!("({ball}) | (0.2 - sqrt(x^2 + (y-1)^2 + z^2))"));
         assert_eq!(two.len(), 19);
-        assert_eq!(BulkEval::new(&two).n_steps(), 4);
+        assert_eq!(BulkEval::new(&two).n_steps(), 3);
+        // Not where the radius varies: the squared distance is then a step of its own.
+        let varying = tape(&format!("({ball}) | (x - sqrt(x^2 + (y-1)^2 + z^2))"));
+        assert_eq!(BulkEval::new(&varying).n_steps(), 4);
+        let spheres = tape(crate::models::reference_model("spheres100").expect("a model"));
+        // The first ball is read by no union: its sum and its root are a step each.
+        assert_eq!(BulkEval::new(&spheres).n_steps(), 101);
         // A cylinder's two terms, written the other way round.
         let cylinder = tape("0.5 - sqrt((0.2 - y)^2 + (x + 0.1)^2)");
         assert_eq!(BulkEval::new(&cylinder).n_steps(), 2);

@@ -7,7 +7,8 @@
 //! inside that instruction's loop instead, where it never leaves a register: `(x - c)^2`,
 //! `a - b^2`, `max(m, r - d)`, `a + b * c`. Most steps fuse two operations from the few that
 //! distance fields are made of. A union or intersection with a ball `max(m, r - sqrt(s))` takes
-//! three, and so does a sum of squares `s + (y - c)^2`. A sum of up to three terms `k * u` or
+//! three, and its squared distance `s` too when only the root reads it, so that a union of balls
+//! is one step a ball; a sum of squares `s + (y - c)^2` takes three. A sum of up to three terms `k * u` or
 //! `(u - c)^2`, after a constant or not, is one step whatever its operations: a squared distance
 //! to a point, a plane `0.9 x + 0.1 y - 0.1 z`, a sphere `1 - x^2 - y^2 - z^2`. A sum that only
 //! one operation reads (`min(p, plane)`, an R-function of it) runs inside that operation's loop,
@@ -126,6 +127,9 @@ pub(super) enum Kind {
     Sum(Sum),
     /// `then(sum, args[3])`: a [`Sum`] that only this operation reads, in its loop.
     SumThen(Sum, Then),
+    /// `pick(lin(sqrt(sum), radius), args[3])`: a union or intersection with a ball whose
+    /// squared distance, a [`Sum`] of squares `(u - c)^2` (each `k` is 1), only its root reads.
+    SumRootPick(Sum, Pick, Lin, f32),
 }
 
 /// A sum of one to three terms, each `k * (u - c)` or `k * (u - c)^2` with `u` lanes, added
@@ -386,6 +390,10 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
             nodes[i].inner = Some(j as u32);
             nodes[i].deep = true;
             nodes[j].fused_away = true;
+            if let Some(s) = ball_sum(&nodes, &code, j) {
+                nodes[i].ball_sum = true;
+                nodes[s].fused_away = true;
+            }
             continue;
         }
         for &at in candidates {
@@ -460,8 +468,19 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
                         let outer = pick(op, at).expect("a ball is picked by min or max");
                         let at_root = usize::from(middle[1] == Val::Instr(k as u32));
                         let m = lin(m, at_root).expect("a ball's radius is added");
-                        let args = [innermost[0], middle[1 - at_root], other];
-                        (Kind::RootPick(outer, m), three(args))
+                        match (node.ball_sum, innermost[0], middle[1 - at_root]) {
+                            (true, Val::Instr(s), Val::Const(radius)) => {
+                                let Some(p) = nodes[s as usize].sum else {
+                                    unreachable!("a ball's sum was planned as one")
+                                };
+                                let (sum, [u0, u1, u2]) = p.split();
+                                let kind = Kind::SumRootPick(sum, outer, m, radius);
+                                (kind, [u0, u1, u2, other])
+                            }
+                            (_, root, radius) => {
+                                (Kind::RootPick(outer, m), three([root, radius, other]))
+                            }
+                        }
                     }
                     _ => unreachable!("only the two idioms were picked"),
                 }
@@ -652,6 +671,27 @@ fn sum_of(
     })
 }
 
+/// The sum of squares under the root of ball `j` (`r - sqrt(s)` or `sqrt(s) - r`, its root
+/// fused in), when only that root reads it, each of its terms is a square `(u - c)^2` taken
+/// once, and the radius is a constant: the squared distance that a union or intersection with
+/// the ball can compute in its own loop.
+fn ball_sum(nodes: &[Node], code: &impl Fn(usize) -> Code, j: usize) -> Option<usize> {
+    let root = nodes[j].inner? as usize;
+    let radius = nodes[j].args.iter().take(code(j).n_args());
+    if !radius.clone().any(|v| matches!(v, Val::Const(_))) {
+        return None;
+    }
+    let Val::Instr(s) = nodes[root].args[0] else {
+        return None;
+    };
+    let node = &nodes[s as usize];
+    let sum = node.sum?;
+    let distance = sum.terms[..usize::from(sum.n)]
+        .iter()
+        .all(|(_, t)| t.square && t.k == 1.0);
+    (distance && node.uses == 1 && !node.fused_away).then_some(s as usize)
+}
+
 /// Instruction `j` as a term `k * (u - c)^2` or `k * u` with `u` lanes, when no other reader
 /// needs it stored: a square of a difference with a constant, or a product with one.
 fn term(nodes: &[Node], code: &impl Fn(usize) -> Code, j: usize) -> Option<(Val, Term)> {
@@ -708,6 +748,9 @@ struct Node {
     inner: Option<u32>,
     /// Whether `inner` is itself a pair.
     deep: bool,
+    /// Whether, `inner` being a ball's root and radius, the root's [`Sum`] of squares is
+    /// computed in this step too.
+    ball_sum: bool,
     /// What it adds, when it is a [`Sum`] of terms.
     sum: Option<Planned>,
     /// Whether every reader took it in, so that it is no step of its own.
@@ -726,6 +769,7 @@ impl Node {
             taken: 0,
             inner: None,
             deep: false,
+            ball_sum: false,
             sum: None,
             fused_away: false,
             last_read: 0,
