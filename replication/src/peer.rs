@@ -8,7 +8,9 @@
 //! the author's own sends, so nothing crosses twice), else the holder that delivered the
 //! most. It asks the next holder when the one asked gave all it shows, or if it sent no op
 //! for its resend timeout (growth from other connections does not count); after a third
-//! peer, the author is asked again. Those timeouts come from the round trips measured on each
+//! peer, the author is asked again. An ask that timed out goes again to two holders at once,
+//! so that a second loss on a lossy link (the want or its answer) does not cost a second
+//! timeout. Those timeouts come from the round trips measured on each
 //! connection (its first hello answered, then acknowledged batches), so on a LAN a lost op
 //! is repaired in milliseconds and on a slow link nobody is asked too early; a connection
 //! without a measurement waits what the peer's other connections measure, and none waits
@@ -338,6 +340,7 @@ impl<P: Payload> Peer<P> {
                 .find(|(remote, _)| remote == author)
                 .map(|(_, conn)| *conn)
                 .filter(holds_more);
+            let mut timed_out = false;
             if let Some(asked) = want.asked
                 && holds_more(&asked.conn)
             {
@@ -357,6 +360,7 @@ impl<P: Payload> Peer<P> {
                 if now < asked.at.saturating_add_micros(retry) {
                     continue;
                 }
+                timed_out = true;
                 if !from_author && asked.unanswered(sync) {
                     // The claim is withdrawn, and the next holder, if any, is asked below.
                     withdraw.push((asked.conn, *author));
@@ -368,31 +372,49 @@ impl<P: Payload> Peer<P> {
             // holders that delivered the most so far: a remote that only claims to hold ops (a
             // replayed have) and sends none is tried last.
             let last = want.asked.map(|a| a.conn);
-            let conn = match author_conn.filter(|c| Some(*c) != last) {
+            let to_author = author_conn.filter(|c| Some(*c) != last);
+            let mut holders: Vec<ConnId> = Vec::new();
+            if to_author.is_none() || timed_out {
+                let mut by_delivered: Vec<(u64, ConnId)> = (self.connections.iter())
+                    .filter(|(c, _)| holds_more(c))
+                    .map(|(c, s)| (s.stats().n_ops_delivered, *c))
+                    .collect();
+                by_delivered.sort_by_key(|&(n, conn)| (std::cmp::Reverse(n), conn));
+                holders.extend(by_delivered.into_iter().map(|(_, conn)| conn));
+                if let Some(&(failed, _)) = withdraw.last().filter(|(_, a)| a == author) {
+                    holders.retain(|conn| *conn != failed);
+                }
+                if holders.len() > 1 {
+                    holders.retain(|conn| Some(*conn) != author_conn);
+                }
+            }
+            let next = want.n_asked % holders.len().max(1);
+            let conn = match to_author {
                 Some(conn) => conn,
                 None => {
-                    let mut holders: Vec<(u64, ConnId)> = (self.connections.iter())
-                        .filter(|(c, _)| holds_more(c))
-                        .map(|(c, s)| (s.stats().n_ops_delivered, *c))
-                        .collect();
-                    holders.sort_by_key(|&(delivered, conn)| (std::cmp::Reverse(delivered), conn));
-                    if let Some(&(failed, _)) = withdraw.last().filter(|(_, a)| a == author) {
-                        holders.retain(|(_, conn)| *conn != failed);
-                    }
-                    if holders.len() > 1 {
-                        holders.retain(|(_, conn)| Some(*conn) != author_conn);
-                    }
-                    let Some(&(_, conn)) = holders.get(want.n_asked % holders.len().max(1)) else {
+                    let Some(&conn) = holders.get(next) else {
                         want.asked = None;
                         continue;
                     };
                     conn
                 }
             };
-            let seq = self.connections[&conn].remote_version_vector().get(author);
+            // An ask that brought nothing in its time is made again of two holders at once:
+            // on a lossy link the want or its answer is lost often enough that waiting out a
+            // second timeout, then a third, is the tail of convergence. A hedge costs the
+            // author's ops sent twice, only where an ask already failed.
+            let hedge = match timed_out {
+                true => (1..=holders.len())
+                    .map(|k| holders[(next + k) % holders.len()])
+                    .find(|c| *c != conn),
+                false => None,
+            };
+            for conn in std::iter::once(conn).chain(hedge) {
+                let seq = self.connections[&conn].remote_version_vector().get(author);
+                asks.entry(conn).or_default().raise(*author, seq);
+            }
             want.asked = Some(Asked::new(now, conn, have, self.connections.get(&conn)));
-            want.n_asked += 1;
-            asks.entry(conn).or_default().raise(*author, seq);
+            want.n_asked += 1 + usize::from(hedge.is_some());
         }
         for (conn, author) in withdraw {
             if let Some(sync) = self.connections.get_mut(&conn) {
@@ -772,6 +794,50 @@ mod tests {
             }
             tick_losing(&mut peers, &links, Timestamp(t), lost);
         }
+    }
+
+    #[test]
+    fn a_want_that_brought_nothing_is_made_again_of_two_holders_at_once() {
+        // A, B, C and D in a full mesh on links that deliver at once, so every timeout is the
+        // shortest. Everything A sends D is lost, so D asks B or C for A's ops, and the first
+        // two wants D sends are lost. Asking one holder at a time, D's retry was lost too and
+        // D waited out a second timeout; now the retry goes to two holders, and one of them
+        // answers.
+        let (mut peers, links) = full_mesh(4, Timestamp(0));
+        pump(&mut peers, &links, Timestamp(0));
+        for k in 0..4 {
+            (peers[0].author(Timestamp(0), TestPayload::Chat(format!("A {k}")))).unwrap();
+        }
+        let wants = std::cell::RefCell::new(Vec::new());
+        let mut t = 0;
+        while peers[3].log().len() < 4 {
+            assert!(t < 3 * HAVE_EVERY_MICROS, "D never got A's ops");
+            t += 10_000;
+            tick_losing(&mut peers, &links, Timestamp(t), |from, to, bytes| {
+                let want = from == 3 && matches!(Message::decode(bytes), Ok(Message::Want { .. }));
+                if want {
+                    wants.borrow_mut().push((t, to));
+                }
+                from == 0 && to == 3 || want && wants.borrow().len() <= 2
+            });
+        }
+        let wants = wants.into_inner();
+        let (first, _) = wants[0];
+        // One holder asked first; both others at the retry, at the same time.
+        assert_eq!(
+            wants.iter().filter(|w| w.0 == first).count(),
+            1,
+            "{wants:?}"
+        );
+        let retry: Vec<_> = wants.iter().filter(|w| w.0 == wants[1].0).collect();
+        assert_eq!(retry.len(), 2, "{wants:?}");
+        assert_ne!(retry[0].1, retry[1].1, "{wants:?}");
+        // So the ops came one timeout after the first ask, not two.
+        let timeout = RESEND_AFTER_MIN_MICROS + WANT_CHECK_MICROS;
+        assert!(
+            t <= first + timeout,
+            "D got A's ops at {t}, asked at {first}: {wants:?}"
+        );
     }
 
     #[test]
