@@ -7,17 +7,17 @@
 //! inside that instruction's loop instead, where it never leaves a register: `(x - c)^2`,
 //! `a - b^2`, `max(m, r - d)`, `a + b * c`. Most steps fuse two operations from the few that
 //! distance fields are made of. A union or intersection with a ball `max(m, r - sqrt(s))` takes
-//! three, and its squared distance `s` too when only the root reads it, so that a union of balls
-//! is one step a ball; a sum of squares `s + (y - c)^2` takes three. A sum of up to three terms `k * u` or
-//! `(u - c)^2`, after a constant or not, is one step whatever its operations: a squared distance
-//! to a point, a plane `0.9 x + 0.1 y - 0.1 z`, a sphere `1 - x^2 - y^2 - z^2`. A sum that only
-//! one operation reads (`min(p, plane)`, an R-function of it) runs inside that operation's loop,
-//! where a square root, if the operation has one, leaves the arithmetic units time for it. An
-//! operation of coordinates and constants alone (`0.1 * y`) is computed again in every reader
-//! that takes it in, even when it has several. Each step computes exactly what its instructions
-//! compute in turn (the same f32 operations in the same order, no fused multiply-add, rewritten
-//! only where the rewrite gives the same bits), so results stay bit for bit those of the unfused
-//! tape.
+//! three, and its squared distance `s` too when only the root reads it, so that a union of
+//! balls is one step a ball; a sum of squares `s + (y - c)^2` takes three. A sum of up to three
+//! terms `k * u` or `(u - c)^2`, after a constant or not, is one step whatever its operations:
+//! a squared distance to a point, a plane `0.9 x + 0.1 y - 0.1 z`, a sphere
+//! `1 - x^2 - y^2 - z^2`. A sum that only one operation reads (`min(p, plane)`, an R-function
+//! of it) runs inside that operation's loop, where a square root, if the operation has one,
+//! leaves the arithmetic units time for it. An operation of coordinates and constants alone
+//! (`0.1 * y`) is computed again in every reader that takes it in, even when it has several.
+//! Each step computes exactly what its instructions compute in turn (the same f32 operations in
+//! the same order, no fused multiply-add, rewritten only where the rewrite gives the same bits),
+//! so results stay bit for bit those of the unfused tape.
 //!
 //! The plan also gives the evaluator its own registers: a step reads coordinates straight from
 //! the caller's slices ([`Arg::Input`]) and constants from the step, and registers are
@@ -390,8 +390,8 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
             nodes[i].inner = Some(j as u32);
             nodes[i].deep = true;
             nodes[j].fused_away = true;
-            if let Some(s) = ball_sum(&nodes, &code, j) {
-                nodes[i].ball_sum = true;
+            if let Some((s, radius)) = ball_sum(&nodes, &code, j) {
+                nodes[i].ball_radius = Some(radius);
                 nodes[s].fused_away = true;
             }
             continue;
@@ -468,8 +468,8 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
                         let outer = pick(op, at).expect("a ball is picked by min or max");
                         let at_root = usize::from(middle[1] == Val::Instr(k as u32));
                         let m = lin(m, at_root).expect("a ball's radius is added");
-                        match (node.ball_sum, innermost[0], middle[1 - at_root]) {
-                            (true, Val::Instr(s), Val::Const(radius)) => {
+                        match (node.ball_radius, innermost[0]) {
+                            (Some(radius), Val::Instr(s)) => {
                                 let Some(p) = nodes[s as usize].sum else {
                                     unreachable!("a ball's sum was planned as one")
                                 };
@@ -477,8 +477,10 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
                                 let kind = Kind::SumRootPick(sum, outer, m, radius);
                                 (kind, [u0, u1, u2, other])
                             }
-                            (_, root, radius) => {
-                                (Kind::RootPick(outer, m), three([root, radius, other]))
+                            (Some(_), _) => unreachable!("a ball's sum is an instruction"),
+                            (None, root) => {
+                                let args = [root, middle[1 - at_root], other];
+                                (Kind::RootPick(outer, m), three(args))
                             }
                         }
                     }
@@ -672,16 +674,18 @@ fn sum_of(
 }
 
 /// The sum of squares under the root of ball `j` (`r - sqrt(s)` or `sqrt(s) - r`, its root
-/// fused in), when only that root reads it, each of its terms is a square `(u - c)^2` taken
-/// once, and the radius is a constant: the squared distance that a union or intersection with
-/// the ball can compute in its own loop.
-fn ball_sum(nodes: &[Node], code: &impl Fn(usize) -> Code, j: usize) -> Option<usize> {
-    let root = nodes[j].inner? as usize;
-    let radius = nodes[j].args.iter().take(code(j).n_args());
-    if !radius.clone().any(|v| matches!(v, Val::Const(_))) {
-        return None;
-    }
-    let Val::Instr(s) = nodes[root].args[0] else {
+/// fused in), and the radius, when only that root reads the sum, each of its terms is a square
+/// `(u - c)^2` taken once, and the radius is a constant: the squared distance that a union or
+/// intersection with the ball can compute in its own loop.
+fn ball_sum(nodes: &[Node], code: &impl Fn(usize) -> Code, j: usize) -> Option<(usize, f32)> {
+    let root = nodes[j].inner?;
+    let radius = nodes[j].args[..code(j).n_args()]
+        .iter()
+        .find_map(|v| match *v {
+            Val::Const(r) => Some(r),
+            _ => None,
+        })?;
+    let Val::Instr(s) = nodes[root as usize].args[0] else {
         return None;
     };
     let node = &nodes[s as usize];
@@ -689,7 +693,7 @@ fn ball_sum(nodes: &[Node], code: &impl Fn(usize) -> Code, j: usize) -> Option<u
     let distance = sum.terms[..usize::from(sum.n)]
         .iter()
         .all(|(_, t)| t.square && t.k == 1.0);
-    (distance && node.uses == 1 && !node.fused_away).then_some(s as usize)
+    (distance && node.uses == 1 && !node.fused_away).then_some((s as usize, radius))
 }
 
 /// Instruction `j` as a term `k * (u - c)^2` or `k * u` with `u` lanes, when no other reader
@@ -748,9 +752,9 @@ struct Node {
     inner: Option<u32>,
     /// Whether `inner` is itself a pair.
     deep: bool,
-    /// Whether, `inner` being a ball's root and radius, the root's [`Sum`] of squares is
-    /// computed in this step too.
-    ball_sum: bool,
+    /// When `inner` is a ball's root and constant radius and the root's [`Sum`] of squares is
+    /// computed in this step too: that radius.
+    ball_radius: Option<f32>,
     /// What it adds, when it is a [`Sum`] of terms.
     sum: Option<Planned>,
     /// Whether every reader took it in, so that it is no step of its own.
@@ -769,7 +773,7 @@ impl Node {
             taken: 0,
             inner: None,
             deep: false,
-            ball_sum: false,
+            ball_radius: None,
             sum: None,
             fused_away: false,
             last_read: 0,
