@@ -403,11 +403,12 @@ impl<P: Payload> Peer<P> {
             // on a lossy link the want or its answer is lost often enough that waiting out a
             // second timeout, then a third, is the tail of convergence. A hedge costs the
             // author's ops sent twice, only where an ask already failed.
-            let hedge = match timed_out {
-                true => (1..=holders.len())
+            let hedge = if timed_out {
+                (1..=holders.len())
                     .map(|k| holders[(next + k) % holders.len()])
-                    .find(|c| *c != conn),
-                false => None,
+                    .find(|c| *c != conn)
+            } else {
+                None
             };
             for conn in std::iter::once(conn).chain(hedge) {
                 let seq = self.connections[&conn].remote_version_vector().get(author);
