@@ -14,7 +14,9 @@
 //! connection (its first hello answered, then acknowledged batches), so on a LAN a lost op
 //! is repaired in milliseconds and on a slow link nobody is asked too early; a connection
 //! without a measurement waits what the peer's other connections measure, and none waits
-//! longer than [`RELAY_AFTER_MICROS`] and [`WANT_RETRY_MICROS`].
+//! longer than [`RELAY_AFTER_MICROS`] and [`WANT_RETRY_MICROS`]. Wants are reconsidered
+//! [`WANT_COALESCE_MICROS`] after input and at the soonest deadline of an open ask, so neither
+//! a lack a have reveals nor a timed-out ask waits for a periodic check.
 //! A holder that answered in that time with messages but not one op claimed what it does not
 //! send: its claim is withdrawn ([`SyncState::withdraw_claim`]) and not learnt again from it
 //! for [`CLAIM_WITHDRAWN_MICROS`](crate::sync::state::CLAIM_WITHDRAWN_MICROS), so made-up
@@ -39,8 +41,11 @@ use crate::time::Timestamp;
 /// A want that brought nothing for the holder's resend timeout, and at most this long (1 s),
 /// goes to the next holder.
 pub const WANT_RETRY_MICROS: u64 = RESEND_AFTER_MICROS;
-/// Wants are reconsidered at most this often (100 ms) after something changed.
+/// Open wants are reconsidered at their asks' deadlines, and at least this often (100 ms).
 pub const WANT_CHECK_MICROS: u64 = 100_000;
+/// After input, wants are reconsidered this long after the last time (10 ms): a have or a
+/// batch is acted on at once, and a burst of messages costs one pass.
+pub const WANT_COALESCE_MICROS: u64 = 10_000;
 
 /// Most simultaneous connections one peer keeps.
 pub const MAX_CONNECTIONS: usize = 64;
@@ -74,8 +79,10 @@ pub struct Peer<P> {
     /// Authors whose ops some remote holds and this peer lacks (at most one entry per author
     /// named in a connection's version vector, so bounded by the connections' limits).
     wants: BTreeMap<PeerId, WantState>,
-    /// Set by input; wants are reconsidered at `want_check_at` while set or while any is open.
+    /// Set by input; wants are reconsidered [`WANT_COALESCE_MICROS`] after `wants_checked_at`
+    /// while set, and at `want_check_at` (the first open want's deadline) while any is open.
     wants_dirty: bool,
+    wants_checked_at: Option<Timestamp>,
     want_check_at: Timestamp,
 }
 
@@ -137,6 +144,7 @@ impl<P: Payload> Peer<P> {
             events: VecDeque::new(),
             wants: BTreeMap::new(),
             wants_dirty: false,
+            wants_checked_at: None,
             want_check_at: Timestamp(0),
         }
     }
@@ -287,13 +295,21 @@ impl<P: Payload> Peer<P> {
     }
 
     fn want_due(&self) -> Option<Timestamp> {
-        (self.wants_dirty || !self.wants.is_empty()).then_some(self.want_check_at)
+        let changed = (self.wants_dirty).then(|| {
+            (self.wants_checked_at).map_or(Timestamp(0), |t| {
+                t.saturating_add_micros(WANT_COALESCE_MICROS)
+            })
+        });
+        let open = (!self.wants.is_empty()).then_some(self.want_check_at);
+        changed.into_iter().chain(open).min()
     }
 
     /// Asks one holder for each author's ops this peer lacks (see the module docs).
     fn update_wants(&mut self, now: Timestamp) {
         self.wants_dirty = false;
-        self.want_check_at = now.saturating_add_micros(WANT_CHECK_MICROS);
+        self.wants_checked_at = Some(now);
+        // The soonest moment an open ask times out, and at the latest a period from now.
+        let mut check_at = now.saturating_add_micros(WANT_CHECK_MICROS);
         let held = self.log.version_vector();
         // The most any remote holds of each author this peer lacks.
         let mut lacking = VersionVector::new();
@@ -323,6 +339,13 @@ impl<P: Payload> Peer<P> {
                 .and_then(SyncState::resend_timeout)
                 .or(typical)
         };
+        // How long an ask of `conn` is waited for (less for the author's own connection).
+        let retry_of = |conn: &ConnId, from_author: bool| match timeout(conn) {
+            Some(t) if from_author => t.min(RELAY_AFTER_MICROS),
+            None if from_author => RELAY_AFTER_MICROS,
+            Some(t) => t.min(WANT_RETRY_MICROS),
+            None => WANT_RETRY_MICROS,
+        };
         let mut asks: BTreeMap<ConnId, VersionVector> = BTreeMap::new();
         let mut withdraw: Vec<(ConnId, PeerId)> = Vec::new();
         for (author, _) in lacking.iter() {
@@ -345,19 +368,17 @@ impl<P: Payload> Peer<P> {
                 && holds_more(&asked.conn)
             {
                 let sync = self.connections.get(&asked.conn);
+                let from_author = Some(asked.conn) == author_conn;
+                let retry = retry_of(&asked.conn, from_author);
                 if have > asked.had && asked.delivered(sync) {
                     // The holder is delivering: give it more time.
                     want.asked = Some(Asked::new(now, asked.conn, have, sync));
+                    check_at = check_at.min(now.saturating_add_micros(retry));
                     continue;
                 }
-                let from_author = Some(asked.conn) == author_conn;
-                let retry = match timeout(&asked.conn) {
-                    Some(t) if from_author => t.min(RELAY_AFTER_MICROS),
-                    None if from_author => RELAY_AFTER_MICROS,
-                    Some(t) => t.min(WANT_RETRY_MICROS),
-                    None => WANT_RETRY_MICROS,
-                };
-                if now < asked.at.saturating_add_micros(retry) {
+                let due = asked.at.saturating_add_micros(retry);
+                if now < due {
+                    check_at = check_at.min(due);
                     continue;
                 }
                 timed_out = true;
@@ -416,7 +437,10 @@ impl<P: Payload> Peer<P> {
             }
             want.asked = Some(Asked::new(now, conn, have, self.connections.get(&conn)));
             want.n_asked += 1 + usize::from(hedge.is_some());
+            let retry = retry_of(&conn, Some(conn) == author_conn);
+            check_at = check_at.min(now.saturating_add_micros(retry));
         }
+        self.want_check_at = check_at;
         for (conn, author) in withdraw {
             if let Some(sync) = self.connections.get_mut(&conn) {
                 sync.withdraw_claim(now, &author, &self.log);
@@ -838,6 +862,58 @@ mod tests {
         assert!(
             t <= first + timeout,
             "D got A's ops at {t}, asked at {first}: {wants:?}"
+        );
+    }
+
+    #[test]
+    fn a_have_showing_what_a_peer_lacks_is_answered_within_the_coalescing_delay() {
+        // A, B and C in a full mesh on links that deliver at once, ticked every millisecond.
+        // Everything A sends C is lost, so C learns of A's op from B's have, which the test
+        // holds back and hands C 20 ms after some other message (a ping) made C check its
+        // wants. C's want must follow the have within WANT_COALESCE_MICROS; it used to wait
+        // for the next periodic check, WANT_CHECK_MICROS after the ping's.
+        let (mut peers, links) = full_mesh(3, Timestamp(0));
+        pump(&mut peers, &links, Timestamp(0));
+        let c_to_b = ConnId(1);
+        let mut t = 1_000_000;
+        let (op, _) = (peers[0].author(Timestamp(t), TestPayload::Chat("A".into()))).unwrap();
+        let held = std::cell::RefCell::new(None);
+        while held.borrow().is_none() {
+            assert!(t < 3 * HAVE_EVERY_MICROS, "B never told C");
+            t += 1_000;
+            tick_losing(&mut peers, &links, Timestamp(t), |from, to, bytes| {
+                let have = matches!(Message::decode(bytes), Ok(Message::Have { .. }));
+                if (from, to) == (1, 2) && have {
+                    held.borrow_mut().get_or_insert(bytes.to_vec());
+                    return true;
+                }
+                (from, to) == (0, 2)
+            });
+        }
+        t += 1_000;
+        peers[2].handle_input(Timestamp(t), c_to_b, &Message::Ping.encode());
+        tick_losing(&mut peers, &links, Timestamp(t), |from, to, _| {
+            (from, to) == (0, 2)
+        });
+        t += 20_000;
+        let told = t;
+        peers[2].handle_input(Timestamp(t), c_to_b, &held.into_inner().unwrap());
+        let mut asked = None;
+        while !peers[2].log().contains(&op.id()) {
+            assert!(t < told + HAVE_EVERY_MICROS, "C never got A's op");
+            tick_losing(&mut peers, &links, Timestamp(t), |from, to, bytes| {
+                let want = matches!(Message::decode(bytes), Ok(Message::Want { .. }));
+                if (from, to) == (2, 1) && want {
+                    asked.get_or_insert(t);
+                }
+                (from, to) == (0, 2)
+            });
+            t += 1_000;
+        }
+        let asked = asked.expect("C asked B");
+        assert!(
+            asked - told <= WANT_COALESCE_MICROS,
+            "told at {told}, asked at {asked}"
         );
     }
 
