@@ -11,68 +11,17 @@
 
 use divan::{Bencher, black_box};
 use fdsl::bvh::Aabb;
-use fdsl::object::{Edit, EditOp, Object, PaintValue, Paintable, Pose, ToolShape};
 use glam::DVec3;
+
+#[path = "shared/history_workload.rs"]
+mod history_workload;
+use history_workload::{N_POINTS, Rng, boxes, object_with_edits, points};
 
 fn main() {
     divan::main();
 }
 
 const EDIT_COUNTS: [usize; 4] = [10, 1_000, 10_000, 100_000];
-const N_POINTS: usize = 4096;
-
-/// A small deterministic generator (xorshift64*), so every run sees the same object.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn in_cube(&mut self, half: f64) -> DVec3 {
-        DVec3::new(self.next(), self.next(), self.next()) * (2.0 * half) - DVec3::splat(half)
-    }
-}
-
-fn object_with_edits(n: usize) -> Object {
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
-    let mut object = Object::implicit("1 - x^2 - y^2 - z^2").expect("sphere compiles");
-    for i in 0..n {
-        let start = rng.in_cube(1.0);
-        let path: Vec<Pose> = (0..4)
-            .map(|k| Pose::at(start + DVec3::new(0.01 * k as f64, 0.005 * k as f64, 0.0)))
-            .collect();
-        let op = match i % 5 {
-            0 | 1 => EditOp::Union,
-            2 | 3 => EditOp::Subtract,
-            _ => EditOp::Paint {
-                property: Paintable::Color,
-                value: PaintValue::Color([1.0, 0.0, 0.0]),
-            },
-        };
-        let tool = if i % 2 == 0 {
-            ToolShape::Sphere { radius: 0.01 }
-        } else {
-            ToolShape::Box {
-                half_extents: DVec3::splat(0.008),
-                rounding: 0.002,
-            }
-        };
-        object
-            .apply(Edit::stroke(op, tool, path))
-            .expect("edits are valid");
-    }
-    object.prepare();
-    object
-}
-
-fn points() -> Vec<DVec3> {
-    let mut rng = Rng(0x1234_5678);
-    (0..N_POINTS).map(|_| rng.in_cube(1.1)).collect()
-}
 
 #[divan::bench(args = EDIT_COUNTS, sample_count = 20)]
 fn value(bencher: Bencher, n_edits: usize) {
@@ -119,14 +68,11 @@ fn color(bencher: Bencher, n_edits: usize) {
         });
 }
 
-/// Boxes of an octree's finer levels (edge 1/64 of the object).
+/// Boxes of an octree's finer levels (edge 1/32, about 1/64 of the object; see `boxes`).
 #[divan::bench(args = EDIT_COUNTS, sample_count = 20)]
 fn interval(bencher: Bencher, n_edits: usize) {
     let mut sampler = object_with_edits(n_edits).sampler();
-    let boxes: Vec<Aabb> = points()
-        .into_iter()
-        .map(|p| Aabb::around(p, DVec3::splat(1.0 / 64.0)))
-        .collect();
+    let boxes = boxes();
     bencher
         .counter(divan::counter::ItemsCount::new(N_POINTS))
         .bench_local(|| {
