@@ -17,6 +17,9 @@ mod fidget_bulk;
 mod fidget_peer;
 #[path = "../benches/shared/points.rs"]
 mod points;
+#[path = "../benches/shared/timing.rs"]
+mod timing;
+use timing::{per_call, quantile};
 
 /// Points per call, as the bench's `bulk_values`.
 const N_POINTS: usize = 65_536;
@@ -27,24 +30,6 @@ const MIN_BATCH_SECONDS: f64 = 0.02;
 
 /// One evaluator under test: a call over the points.
 type Run<'a> = Box<dyn FnMut() + 'a>;
-
-/// Seconds per call of `run`, timed over a batch of `calls` calls.
-fn per_call(run: &mut Run<'_>, calls: usize) -> f64 {
-    #[expect(
-        clippy::disallowed_methods,
-        reason = "a benchmark times real work: this is its one clock"
-    )]
-    let start = std::time::Instant::now();
-    for _ in 0..calls {
-        run();
-    }
-    start.elapsed().as_secs_f64() / calls as f64
-}
-
-fn median(mut xs: Vec<f64>) -> f64 {
-    xs.sort_by(f64::total_cmp);
-    xs[xs.len() / 2]
-}
 
 fn fidget_run<'a, F: fidget::eval::Function + fidget::eval::MathFunction + Clone + 'a>(
     tape: &fdsl::tape::Tape,
@@ -84,7 +69,7 @@ fn main() {
         let calls: Vec<usize> = runs
             .iter_mut()
             .map(|run| {
-                let once = per_call(run, 3);
+                let once = per_call(&mut *run, 3);
                 (MIN_BATCH_SECONDS / once).ceil().max(1.0) as usize
             })
             .collect();
@@ -96,7 +81,7 @@ fn main() {
                 times[i].push(per_call(&mut runs[i], calls[i]));
             }
         }
-        let [fdsl, jit, vm] = [0, 1, 2].map(|i| median(std::mem::take(&mut times[i])));
+        let [fdsl, jit, vm] = [0, 1, 2].map(|i| quantile(&times[i], 0.5));
         println!(
             "| {model} | {:.1} µs | {:.1} µs | {:.1} µs | {:.2} | {:.2} |",
             fdsl * 1e6,

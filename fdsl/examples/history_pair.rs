@@ -13,9 +13,13 @@
 use fdsl::bvh::Aabb;
 use fdsl::object::Sampler;
 use glam::DVec3;
+use std::hint::black_box;
 
 #[path = "../benches/shared/history_workload.rs"]
 mod history_workload;
+#[path = "../benches/shared/timing.rs"]
+mod timing;
+use timing::{per_call, quantile};
 
 /// History lengths; the first is the base of the ratios.
 const EDIT_COUNTS: [usize; 4] = [10, 1_000, 10_000, 100_000];
@@ -49,26 +53,6 @@ impl Query {
     }
 }
 
-/// Seconds per pass, timed over a batch of `calls` passes.
-fn per_call(mut run: impl FnMut() -> f64, calls: usize) -> f64 {
-    #[expect(
-        clippy::disallowed_methods,
-        reason = "a benchmark times real work: this is its one clock"
-    )]
-    let start = std::time::Instant::now();
-    for _ in 0..calls {
-        std::hint::black_box(run());
-    }
-    start.elapsed().as_secs_f64() / calls as f64
-}
-
-/// The value at quantile `q` of `xs`.
-fn quantile(xs: &[f64], q: f64) -> f64 {
-    let mut xs = xs.to_vec();
-    xs.sort_by(f64::total_cmp);
-    xs[((xs.len() - 1) as f64 * q).round() as usize]
-}
-
 /// Times `query` on sampler `i` and on the first (10 edits) in turns: the median seconds per
 /// point of each, and the ratio of the two in each round.
 fn run_pair(
@@ -82,7 +66,12 @@ fn run_pair(
     // Warm up, and size each batch to at least `MIN_BATCH_SECONDS`.
     let calls = pair.map(|j| {
         let s = &mut samplers[j];
-        let once = per_call(|| query.run(s, points, boxes), 3);
+        let once = per_call(
+            || {
+                black_box(query.run(s, points, boxes));
+            },
+            3,
+        );
         (MIN_BATCH_SECONDS / once).ceil().max(1.0) as usize
     });
     let mut times = [Vec::with_capacity(N_ROUNDS), Vec::with_capacity(N_ROUNDS)];
@@ -91,7 +80,10 @@ fn run_pair(
         for k in 0..2 {
             let which = (round + k) % 2;
             let s = &mut samplers[pair[which]];
-            times[which].push(per_call(|| query.run(s, points, boxes), calls[which]));
+            let run = || {
+                black_box(query.run(s, points, boxes));
+            };
+            times[which].push(per_call(run, calls[which]));
         }
     }
     let ratios = (0..N_ROUNDS).map(|r| times[1][r] / times[0][r]).collect();
