@@ -752,7 +752,7 @@ mod tests {
                 }
             }
         }
-        // One send, then resends after three round trips of the hello (here the floor of
+        // One send, then resends after 1.75 round trips of the hello (here the floor of
         // 100 ms), doubling to 32 s: 0.1 to 25.6 s, then twice 32 s; plus one have, and one
         // repeat of the have with a hello (the remote lacks the op; it is not repeated again
         // until the remote speaks).

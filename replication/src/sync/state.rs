@@ -63,6 +63,13 @@ pub const MAX_BATCH_BYTES: usize = 64 * 1024;
 pub const RESEND_AFTER_MICROS: u64 = 1_000_000;
 /// The shortest batch resend timeout, however short the round trips (100 ms).
 pub const RESEND_AFTER_MIN_MICROS: u64 = 100_000;
+/// A batch resend timeout is the smoothed round trip of acknowledged batches plus this many
+/// of their mean deviations (numerator, denominator: one and a half). RFC 6298 takes four,
+/// for TCP's per-segment samples; a sample here spans the sending of the whole batch and of
+/// those queued before it, so batch sizes alone spread the samples, and four deviations held
+/// a lost batch for two and a half round trips of the link (BENCHMARKS.md, "Resend timeouts
+/// of one and a half deviations").
+pub const RESEND_DEVIATIONS: (u64, u64) = (3, 2);
 /// The resend interval doubles while the remote stays silent, up to this (32 s), so a dead or
 /// hostile remote that never answers costs a bounded trickle.
 pub const RESEND_AFTER_MAX_MICROS: u64 = 32_000_000;
@@ -560,12 +567,15 @@ impl<P: Payload> SyncState<P> {
     }
 
     /// How long an answer is waited for on this connection before acting without it, once a
-    /// round trip was measured here: four deviations above the smoothed round trip of
-    /// acknowledged batches or, before the first, three times the round trip of the first
-    /// hello (RFC 6298's first sample), between [`RESEND_AFTER_MIN_MICROS`] and
+    /// round trip was measured here: [`RESEND_DEVIATIONS`] above the smoothed round trip of
+    /// acknowledged batches or, before the first, the same from the round trip of the first
+    /// hello taken as RFC 6298's first sample (1.75 times it), between [`RESEND_AFTER_MIN_MICROS`] and
     /// [`RESEND_AFTER_MICROS`]; `None` before.
     pub fn resend_timeout(&self) -> Option<u64> {
-        let from_hello = || self.hello_rtt_micros.map(|rtt| rtt.saturating_mul(3));
+        // RFC 6298's first sample: the round trip, and half of it as the deviation.
+        let (n, d) = RESEND_DEVIATIONS;
+        let from_hello =
+            || (self.hello_rtt_micros).map(|rtt| rtt.saturating_add(rtt * n / (2 * d)));
         (self.rtt_micros.map(|_| self.base_resend_micros()))
             .or_else(|| from_hello().map(|t| t.clamp(RESEND_AFTER_MIN_MICROS, RESEND_AFTER_MICROS)))
     }
@@ -1403,9 +1413,9 @@ impl<P: Payload> SyncState<P> {
         });
     }
 
-    /// The batch resend timeout before any backoff: four deviations above the smoothed round
-    /// trip of acknowledged batches; before the first, three round trips of the first hello
-    /// (RFC 6298's first sample), or before that what the peer's other connections measured
+    /// The batch resend timeout before any backoff: [`RESEND_DEVIATIONS`] above the smoothed
+    /// round trip of acknowledged batches; before the first, the same from the first hello's
+    /// round trip (RFC 6298's first sample: 1.75 round trips), or before that what the peer's other connections measured
     /// ([`SyncState::assume_resend_timeout`]; [`RESEND_AFTER_MICROS`] without any). The first
     /// batches of a connection often carry what a peer back from a partition or a crash lacks,
     /// and one lost there would otherwise cost a whole second.
@@ -1413,7 +1423,8 @@ impl<P: Payload> SyncState<P> {
         self.rtt_micros.map_or_else(
             || self.hello_timeout(),
             |(srtt, var)| {
-                srtt.saturating_add(var.saturating_mul(4))
+                let (n, d) = RESEND_DEVIATIONS;
+                srtt.saturating_add(var.saturating_mul(n) / d)
                     .clamp(RESEND_AFTER_MIN_MICROS, RESEND_AFTER_MICROS)
             },
         )
