@@ -151,6 +151,15 @@ impl Report {
             s.n_queue_drops,
             s.n_stale_drops
         )?;
+        let mut kinds: Vec<_> = s.bytes_by_kind.iter().collect();
+        kinds.sort_by_key(|(kind, (_, n_bytes))| (std::cmp::Reverse(*n_bytes), *kind));
+        let kinds: Vec<String> = (kinds.iter())
+            .map(|(kind, (n, n_bytes))| {
+                let share = 100.0 * *n_bytes as f64 / s.n_bytes.max(1) as f64;
+                format!("{kind} {share:.1}% ({n} messages)")
+            })
+            .collect();
+        writeln!(f, "  bytes by message kind: {}", kinds.join(", "))?;
         writeln!(
             f,
             "  hostile sent {} (forged ops {}, own ops {} of which {} accepted, flood {} \

@@ -192,6 +192,9 @@ pub struct Stats {
     pub n_messages: u64,
     /// Bytes honest peers sent to honest peers.
     pub n_bytes: u64,
+    /// Of those, messages and bytes by kind ([`replication::sync::message::kind_of`]; tags
+    /// no message has count as "unknown").
+    pub bytes_by_kind: BTreeMap<&'static str, (u64, u64)>,
     /// Messages honest peers sent to the hostile peer.
     pub n_messages_to_hostile: u64,
     /// Messages handed to an honest peer.
@@ -1159,6 +1162,10 @@ impl Simulation {
         }
         self.stats.n_messages += 1;
         self.stats.n_bytes += bytes.len() as u64;
+        let kind = replication::sync::message::kind_of(&bytes).unwrap_or("unknown");
+        let counted = self.stats.bytes_by_kind.entry(kind).or_default();
+        counted.0 += 1;
+        counted.1 += bytes.len() as u64;
         if self.blocked.contains_key(&(from, to)) {
             self.stats.n_partition_drops += 1;
             return;

@@ -185,6 +185,23 @@ const TAG_FORKED: u8 = 7;
 const TAG_WANT_OPS: u8 = 8;
 const TAG_PING: u8 = 9;
 
+/// The kind of an encoded message, read from its tag alone (to count traffic without decoding
+/// it); `None` where no message has that tag.
+pub fn kind_of(bytes: &[u8]) -> Option<&'static str> {
+    Some(match *bytes.get(1)? {
+        TAG_HELLO => "hello",
+        TAG_HAVE => "have",
+        TAG_OPS => "ops",
+        TAG_ACK => "ack",
+        TAG_EPHEMERAL => "ephemeral",
+        TAG_WANT => "want",
+        TAG_FORKED => "forked",
+        TAG_WANT_OPS => "want_ops",
+        TAG_PING => "ping",
+        _ => return None,
+    })
+}
+
 impl Message {
     /// A have without tips.
     pub fn have(vv: VersionVector) -> Self {
@@ -589,11 +606,35 @@ mod tests {
         ));
     }
 
+    #[test]
+    fn bytes_without_a_known_tag_have_no_kind() {
+        assert_eq!(kind_of(&[]), None);
+        assert_eq!(kind_of(&[SYNC_WIRE_VERSION]), None);
+        assert_eq!(kind_of(&[SYNC_WIRE_VERSION, 0]), None);
+        assert_eq!(kind_of(&[SYNC_WIRE_VERSION, 200]), None);
+    }
+
     proptest! {
         #![proptest_config(crate::test_config(128))]
         #[test]
         fn round_trips(m in message_strategy()) {
             prop_assert_eq!(Message::decode(&m.encode()), Ok(m));
+        }
+
+        #[test]
+        fn every_message_is_counted_under_its_kind(m in message_strategy()) {
+            let kind = match &m {
+                Message::Hello { .. } => "hello",
+                Message::Have { .. } => "have",
+                Message::Ops { .. } => "ops",
+                Message::Ack { .. } => "ack",
+                Message::Ephemeral { .. } => "ephemeral",
+                Message::Want { .. } => "want",
+                Message::Forked { .. } => "forked",
+                Message::WantOps(_) => "want_ops",
+                Message::Ping => "ping",
+            };
+            prop_assert_eq!(kind_of(&m.encode()), Some(kind));
         }
 
         #[test]

@@ -569,19 +569,27 @@ impl<P: Payload> SyncState<P> {
     /// How long an answer is waited for on this connection before acting without it, once a
     /// round trip was measured here: [`RESEND_DEVIATIONS`] above the smoothed round trip of
     /// acknowledged batches or, before the first, the same from the round trip of the first
-    /// hello taken as RFC 6298's first sample (1.75 times it), between [`RESEND_AFTER_MIN_MICROS`] and
-    /// [`RESEND_AFTER_MICROS`]; `None` before.
+    /// hello taken as RFC 6298's first sample (1.75 times it), between
+    /// [`RESEND_AFTER_MIN_MICROS`] and [`RESEND_AFTER_MICROS`]; `None` before.
     pub fn resend_timeout(&self) -> Option<u64> {
-        // RFC 6298's first sample: the round trip, and half of it as the deviation.
+        // The smoothed round trip and twice its mean deviation; RFC 6298's first sample is
+        // the round trip, and half of it as the deviation.
+        let first = || self.hello_rtt_micros.map(|rtt| (rtt, rtt));
+        let (srtt, twice_var) = (self.rtt_micros)
+            .map(|(srtt, var)| (srtt, var.saturating_mul(2)))
+            .or_else(first)?;
         let (n, d) = RESEND_DEVIATIONS;
-        let from_hello =
-            || (self.hello_rtt_micros).map(|rtt| rtt.saturating_add(rtt * n / (2 * d)));
-        (self.rtt_micros.map(|_| self.base_resend_micros()))
-            .or_else(|| from_hello().map(|t| t.clamp(RESEND_AFTER_MIN_MICROS, RESEND_AFTER_MICROS)))
+        let timeout = srtt.saturating_add(twice_var.saturating_mul(n) / (2 * d));
+        Some(timeout.clamp(RESEND_AFTER_MIN_MICROS, RESEND_AFTER_MICROS))
     }
 
-    /// How long an unanswered hello waits before it goes again (before any backoff).
-    fn hello_timeout(&self) -> u64 {
+    /// How long a batch or an unanswered hello waits before it goes again (before any
+    /// backoff): [`SyncState::resend_timeout`] or, before a round trip was measured here, what
+    /// the peer's other connections measured ([`SyncState::assume_resend_timeout`];
+    /// [`RESEND_AFTER_MICROS`] without any). The first batches of a connection often carry
+    /// what a peer back from a partition or a crash lacks, and one lost there would otherwise
+    /// cost a whole second.
+    fn base_resend_micros(&self) -> u64 {
         self.resend_timeout().unwrap_or(self.assumed_resend_micros)
     }
 
@@ -676,7 +684,7 @@ impl<P: Payload> SyncState<P> {
     /// are. (Batches are left to back off: the remote's next have resets them, and resending
     /// them into a partition costs far more than a hello.)
     pub fn wake(&mut self, now: Timestamp) {
-        let base = self.hello_timeout();
+        let base = self.base_resend_micros();
         let stalled = self.hello_due().is_some() && self.hello_resend_micros > base;
         let rested =
             (self.woken_at).is_none_or(|t| now.0 >= t.0.saturating_add(RESEND_AFTER_MICROS));
@@ -774,7 +782,7 @@ impl<P: Payload> SyncState<P> {
                 // The remote answers a hello of ours whose own hello was lost, maybe during a
                 // partition: ours goes out again on the base interval (it answers with its
                 // own), not a backed-off one.
-                self.hello_resend_micros = self.hello_timeout();
+                self.hello_resend_micros = self.base_resend_micros();
             }
             message => {
                 // A ping, or the first word after a silence while we pinged: the link carries
@@ -794,7 +802,7 @@ impl<P: Payload> SyncState<P> {
                 // a backed-off one (measured with what this message taught, such as the round
                 // trip of a have answering our hello).
                 self.resend_micros = self.base_resend_micros();
-                self.hello_resend_micros = self.hello_timeout();
+                self.hello_resend_micros = self.base_resend_micros();
             }
         }
     }
@@ -1411,23 +1419,6 @@ impl<P: Payload> SyncState<P> {
                 (3 * var + srtt.abs_diff(sample)) / 4,
             ),
         });
-    }
-
-    /// The batch resend timeout before any backoff: [`RESEND_DEVIATIONS`] above the smoothed
-    /// round trip of acknowledged batches; before the first, the same from the first hello's
-    /// round trip (RFC 6298's first sample: 1.75 round trips), or before that what the peer's other connections measured
-    /// ([`SyncState::assume_resend_timeout`]; [`RESEND_AFTER_MICROS`] without any). The first
-    /// batches of a connection often carry what a peer back from a partition or a crash lacks,
-    /// and one lost there would otherwise cost a whole second.
-    fn base_resend_micros(&self) -> u64 {
-        self.rtt_micros.map_or_else(
-            || self.hello_timeout(),
-            |(srtt, var)| {
-                let (n, d) = RESEND_DEVIATIONS;
-                srtt.saturating_add(var.saturating_mul(n) / d)
-                    .clamp(RESEND_AFTER_MIN_MICROS, RESEND_AFTER_MICROS)
-            },
-        )
     }
 
     /// A hello goes out again until the remote's have arrives: every hello is answered with
