@@ -185,9 +185,12 @@ const TAG_FORKED: u8 = 7;
 const TAG_WANT_OPS: u8 = 8;
 const TAG_PING: u8 = 9;
 
-/// The kind of an encoded message, read from its tag alone (to count traffic without decoding
-/// it); `None` where no message has that tag.
+/// The kind of an encoded message, read from its version byte and tag alone (to count traffic
+/// without decoding it); `None` for another wire version or a tag no message has.
 pub fn kind_of(bytes: &[u8]) -> Option<&'static str> {
+    if bytes.first() != Some(&SYNC_WIRE_VERSION) {
+        return None;
+    }
     Some(match *bytes.get(1)? {
         TAG_HELLO => "hello",
         TAG_HAVE => "have",
@@ -612,6 +615,10 @@ mod tests {
         assert_eq!(kind_of(&[SYNC_WIRE_VERSION]), None);
         assert_eq!(kind_of(&[SYNC_WIRE_VERSION, 0]), None);
         assert_eq!(kind_of(&[SYNC_WIRE_VERSION, 200]), None);
+        assert_eq!(
+            kind_of(&[SYNC_WIRE_VERSION.wrapping_add(1), TAG_PING]),
+            None
+        );
     }
 
     proptest! {
