@@ -608,6 +608,7 @@ fn build_report(
         n_void_ops: (sim.honest[0].peer.log().entries())
             .filter(|e| sim.honest[0].peer.log().is_void(&e.op.id()))
             .count(),
+        catch_up: sim.honest.iter().map(|h| h.catch_up).collect(),
         failures,
         samples: sim.samples,
         stats: sim.stats,

@@ -102,9 +102,32 @@ pub struct Report {
     pub n_refold_holds: u64,
     /// Ops of expelled members void on peer 0 at the end.
     pub n_void_ops: usize,
+    /// How each honest peer caught up after healing, by index.
+    pub catch_up: Vec<CatchUp>,
     /// What the checkers found; empty when the run passed.
     pub failures: Vec<String>,
 }
+
+/// How one honest peer caught up after healing: what its log held then, and when the ops it
+/// lacked came (the slowest peer's last delivery is the convergence time).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CatchUp {
+    /// Ops in its log at healing.
+    pub n_held_at_heal: usize,
+    /// Ops delivered to it after healing.
+    pub n_delivered: usize,
+    /// Insertions that delivered them.
+    pub n_insertions: usize,
+    /// Its first delivery, in virtual microseconds after healing.
+    pub first_micros: Option<u64>,
+    /// Its last delivery, in virtual microseconds after healing.
+    pub last_micros: Option<u64>,
+    /// The node whose message caused the last delivery.
+    pub last_from: Option<u64>,
+}
+
+/// Peers named in the report's line on catching up, slowest first.
+const N_SLOWEST_SHOWN: usize = 3;
 
 impl Report {
     /// Whether every checker passed.
@@ -151,6 +174,32 @@ impl Report {
             s.n_queue_drops,
             s.n_stale_drops
         )?;
+        let mut slowest: Vec<(usize, &CatchUp)> = (self.catch_up.iter().enumerate())
+            .filter(|(_, c)| c.last_micros.is_some())
+            .collect();
+        slowest.sort_by_key(|(i, c)| (std::cmp::Reverse(c.last_micros), *i));
+        if !slowest.is_empty() {
+            let ms = |t: Option<u64>| t.unwrap_or(0) as f64 / 1e3;
+            let shown: Vec<String> = (slowest.iter().take(N_SLOWEST_SHOWN))
+                .map(|(i, c)| {
+                    let from = c
+                        .last_from
+                        .map_or(String::new(), |n| format!(" from node {n}"));
+                    format!(
+                        "peer {i} got {} ops in {} insertions, {:.1} to {:.1} ms{from}",
+                        c.n_delivered,
+                        c.n_insertions,
+                        ms(c.first_micros),
+                        ms(c.last_micros)
+                    )
+                })
+                .collect();
+            writeln!(
+                f,
+                "  slowest to catch up after healing: {}",
+                shown.join("; ")
+            )?;
+        }
         let mut kinds: Vec<_> = s.bytes_by_kind.iter().collect();
         kinds.sort_by_key(|(kind, (_, n_bytes))| (std::cmp::Reverse(*n_bytes), *kind));
         let kinds: Vec<String> = (kinds.iter())

@@ -20,7 +20,7 @@ use crate::byzantine::Byzantine;
 use crate::config::{Config, ConfigError, Faults};
 use crate::hostile::Hostile;
 use crate::memory;
-use crate::report::{PeerSample, Report, Sample};
+use crate::report::{CatchUp, PeerSample, Report, Sample};
 use crate::rng::SimRng;
 use crate::store::Disk;
 use crate::trace::TraceHash;
@@ -160,6 +160,8 @@ pub(crate) struct Honest {
     /// A crash waiting for the next write (its restart delay, and whether it waits for an
     /// op of the peer's own).
     pub(crate) crash_armed: Option<(u64, bool)>,
+    /// How it catches up after healing.
+    pub(crate) catch_up: CatchUp,
 }
 
 impl Honest {
@@ -735,6 +737,10 @@ impl Simulation {
         for h in &mut self.honest {
             h.offline_depth = 0;
             h.crash_armed = None;
+            h.catch_up = CatchUp {
+                n_held_at_heal: h.peer.log().len(),
+                ..CatchUp::default()
+            };
         }
         for a in 0..self.n_nodes() {
             for b in a + 1..self.n_nodes() {
@@ -1082,6 +1088,15 @@ impl Simulation {
                 }
                 let sabotage = self.config.sabotage;
                 let h = &mut self.honest[idx];
+                if self.heal_at > START_MICROS && !insertion.delivered.is_empty() {
+                    let since = self.now - self.heal_at;
+                    let c = &mut h.catch_up;
+                    c.n_delivered += insertion.delivered.len();
+                    c.n_insertions += 1;
+                    c.first_micros.get_or_insert(since);
+                    c.last_micros = Some(since);
+                    c.last_from = Some(conn.0);
+                }
                 note_delivered(h, &insertion.delivered);
                 h.disk.append(&insertion.delivered);
                 h.n_received_insertions += 1;
@@ -1346,6 +1361,7 @@ pub(crate) fn new_honest(
         n_bytes_sent: 0,
         snapshot_cut: None,
         crash_armed: None,
+        catch_up: CatchUp::default(),
     })
 }
 

@@ -74,6 +74,21 @@ fn a_fixed_seed_converges_under_chaos_with_crashes() {
     let report = converges(13, "chaos");
     let s = &report.stats;
     assert!(s.n_crashes > 0 && s.n_stale_drops > 0, "{report}");
+    // The catch-up accounting: every op a peer lacked at healing is delivered after it, and
+    // the slowest peer's last delivery is the convergence time.
+    let first = report.catch_up[0];
+    assert_eq!(
+        first.n_held_at_heal + first.n_delivered,
+        report.n_log_ops,
+        "{report}"
+    );
+    let last = report.catch_up.iter().filter_map(|c| c.last_micros).max();
+    assert_eq!(last, Some(report.convergence_micros), "{report}");
+    assert!(
+        report
+            .to_string()
+            .contains("slowest to catch up after healing: peer ")
+    );
 }
 
 /// Runs `n` consecutive seeds from `first`; every one must pass.
