@@ -116,14 +116,15 @@ pub struct CatchUp {
     pub n_held_at_heal: usize,
     /// Ops delivered to it after healing.
     pub n_delivered: usize,
-    /// Insertions that delivered them.
+    /// Insertions that delivered them; the fields below mean something only when some did.
     pub n_insertions: usize,
     /// Its first delivery, in virtual microseconds after healing.
-    pub first_micros: Option<u64>,
+    pub first_micros: u64,
     /// Its last delivery, in virtual microseconds after healing.
-    pub last_micros: Option<u64>,
-    /// The node whose message caused the last delivery.
-    pub last_from: Option<u64>,
+    pub last_micros: u64,
+    /// The node whose connection reported the last delivery: the sender of the message that
+    /// caused it (ops released by the clock are reported on the peer's first connection).
+    pub last_from: u64,
 }
 
 /// Peers named in the report's line on catching up, slowest first.
@@ -175,22 +176,19 @@ impl Report {
             s.n_stale_drops
         )?;
         let mut slowest: Vec<(usize, &CatchUp)> = (self.catch_up.iter().enumerate())
-            .filter(|(_, c)| c.last_micros.is_some())
+            .filter(|(_, c)| c.n_insertions > 0)
             .collect();
         slowest.sort_by_key(|(i, c)| (std::cmp::Reverse(c.last_micros), *i));
         if !slowest.is_empty() {
-            let ms = |t: Option<u64>| t.unwrap_or(0) as f64 / 1e3;
             let shown: Vec<String> = (slowest.iter().take(N_SLOWEST_SHOWN))
                 .map(|(i, c)| {
-                    let from = c
-                        .last_from
-                        .map_or(String::new(), |n| format!(" from node {n}"));
                     format!(
-                        "peer {i} got {} ops in {} insertions, {:.1} to {:.1} ms{from}",
+                        "peer {i} got {} ops in {} insertions, {:.1} to {:.1} ms from node {}",
                         c.n_delivered,
                         c.n_insertions,
-                        ms(c.first_micros),
-                        ms(c.last_micros)
+                        c.first_micros as f64 / 1e3,
+                        c.last_micros as f64 / 1e3,
+                        c.last_from
                     )
                 })
                 .collect();

@@ -1091,11 +1091,13 @@ impl Simulation {
                 if self.heal_at > START_MICROS && !insertion.delivered.is_empty() {
                     let since = self.now - self.heal_at;
                     let c = &mut h.catch_up;
+                    if c.n_insertions == 0 {
+                        c.first_micros = since;
+                    }
                     c.n_delivered += insertion.delivered.len();
                     c.n_insertions += 1;
-                    c.first_micros.get_or_insert(since);
-                    c.last_micros = Some(since);
-                    c.last_from = Some(conn.0);
+                    c.last_micros = since;
+                    c.last_from = conn.0;
                 }
                 note_delivered(h, &insertion.delivered);
                 h.disk.append(&insertion.delivered);
