@@ -33,7 +33,9 @@ pub const SYNC_WIRE_VERSION: u8 = 1;
 /// 8: a [`Message::Hello`] says what the sender holds ([`HelloHave`]), so both ends may send
 /// and ask half a round trip after connecting, without waiting for the have that answers it;
 /// [`Message::Ping`] probes a silent remote.
-pub const PROTOCOL_VERSION: u64 = 8;
+/// 9: a ping that a full have does not answer is answered with a [`Message::Pong`], which a
+/// build speaking 8 refuses.
+pub const PROTOCOL_VERSION: u64 = 9;
 /// Length of a session id.
 pub const SESSION_ID_BYTES: usize = 16;
 /// Most ops in one [`Message::Ops`] batch.
@@ -169,10 +171,14 @@ pub enum Message {
     /// have waited for too long. The receiver sends those it holds in an ops batch.
     WantOps(Vec<OpId>),
     /// Asks a remote that stayed silent while batches to it went unacknowledged whether the
-    /// link carries messages again (say a partition healed): answered with a full have. Sent
-    /// on the base resend interval while the batches' own resends back off, so a healed link
-    /// is found within about a round trip of that interval at the cost of a few bytes.
+    /// link carries messages again (say a partition healed): answered with a full have, or a
+    /// [`Message::Pong`] within a have interval of the last. Sent a few times per base resend
+    /// interval while the batches' own resends back off, so a healed link is found within
+    /// about a round trip of hearing each other at the cost of a few bytes.
     Ping,
+    /// Answers a [`Message::Ping`] that a full have does not (one went out less than a have
+    /// interval ago): the link carries messages, so what waits for the remote goes again now.
+    Pong,
 }
 
 const TAG_HELLO: u8 = 1;
@@ -184,6 +190,7 @@ const TAG_WANT: u8 = 6;
 const TAG_FORKED: u8 = 7;
 const TAG_WANT_OPS: u8 = 8;
 const TAG_PING: u8 = 9;
+const TAG_PONG: u8 = 10;
 
 /// The kind of an encoded message, read from its version byte and tag alone (to count traffic
 /// without decoding it); `None` for another wire version or a tag no message has.
@@ -201,6 +208,7 @@ pub fn kind_of(bytes: &[u8]) -> Option<&'static str> {
         TAG_FORKED => "forked",
         TAG_WANT_OPS => "want_ops",
         TAG_PING => "ping",
+        TAG_PONG => "pong",
         _ => return None,
     })
 }
@@ -285,6 +293,7 @@ impl Message {
                 out.push(u8::from(*answer));
             }
             Self::Ping => out.push(TAG_PING),
+            Self::Pong => out.push(TAG_PONG),
             Self::WantOps(ids) => {
                 out.push(TAG_WANT_OPS);
                 put_varint(&mut out, ids.len() as u64);
@@ -397,6 +406,7 @@ impl Message {
                 Self::WantOps(ids)
             }
             TAG_PING => Self::Ping,
+            TAG_PONG => Self::Pong,
             _ => {
                 return Err(DecodeError::Invalid {
                     offset: tag_offset,
@@ -531,6 +541,7 @@ mod tests {
             proptest::collection::vec(any::<[u8; 32]>(), 0..5)
                 .prop_map(|ids| Message::WantOps(ids.into_iter().map(OpId).collect())),
             Just(Message::Ping),
+            Just(Message::Pong),
             (any::<u64>(), vv).prop_map(|(batch_no, have)| Message::Ack { batch_no, have }),
             (
                 any::<u32>(),
@@ -640,6 +651,7 @@ mod tests {
                 Message::Forked { .. } => "forked",
                 Message::WantOps(_) => "want_ops",
                 Message::Ping => "ping",
+                Message::Pong => "pong",
             };
             prop_assert_eq!(kind_of(&m.encode()), Some(kind));
         }

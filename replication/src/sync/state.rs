@@ -12,10 +12,12 @@
 //! else from the peer's other connections (between [`RESEND_AFTER_MIN_MICROS`] and
 //! [`RESEND_AFTER_MICROS`]), backing off to [`RESEND_AFTER_MAX_MICROS`] while the remote stays
 //! silent, so a lost or duplicated message can neither stall nor loop a sync. While the resends
-//! back off, a [`Message::Ping`] of a few bytes goes out on the base interval (for at most
-//! [`PING_FOR_MICROS`]); the remote answers it, and the first message after a silence while we
-//! ping, with a full have, so both ends of a healed partition learn what the other holds within
-//! about a round trip of that interval.
+//! back off, a [`Message::Ping`] of a few bytes goes out a few times per base interval (for at
+//! most [`PING_FOR_MICROS`]); the remote answers it, and the first message after a silence
+//! while we ping, with a full have (or, within a have interval of the last, a
+//! [`Message::Pong`]), so both ends of a healed partition learn what the other holds, and
+//! send again what waits, within about a round trip of hearing each other. Data that overtakes
+//! a lost hello is held (at most [`MAX_EARLY_MESSAGES`]) until the hello comes, not dropped.
 //!
 //! **Bounds.** Every version vector goes out in parts of at most [`MAX_VV_AUTHORS`] authors
 //! (a have's first part at once, its others paced like data; wants as control), so no log is
@@ -77,11 +79,23 @@ pub const RESEND_AFTER_MAX_MICROS: u64 = 32_000_000;
 /// sent none for the resend timeout of its connection, when it has one, and at most this long
 /// (500 ms): time for the author's own send (or its resend) to arrive.
 pub const RELAY_AFTER_MICROS: u64 = 500_000;
-/// A remote silent while batches to it wait is pinged ([`Message::Ping`]) on the base resend
-/// interval for at most this long (10 s): a healed partition is found within about that
-/// interval, and a dead remote costs at most this long's worth of pings of a few bytes (on
-/// the 100 ms floor, 100) beside the backed-off resends.
+/// A remote silent while batches to it wait is pinged ([`Message::Ping`]) this many times per
+/// base resend interval ([`PINGS_PER_RESEND`], at most every [`PING_AFTER_MIN_MICROS`]) for at
+/// most this long (10 s): a healed partition is found within about a quarter of a resend
+/// timeout and a one-way trip, a lost ping costs a quarter, not a whole timeout, and a dead
+/// remote costs at most this long's worth of pings of a few bytes (on the 25 ms floor, 400)
+/// beside the backed-off resends.
 pub const PING_FOR_MICROS: u64 = 10_000_000;
+/// Pings per base resend interval while a remote stays silent (see [`PING_FOR_MICROS`]).
+pub const PINGS_PER_RESEND: u64 = 4;
+/// The shortest interval between pings (25 ms), however short the round trips.
+pub const PING_AFTER_MIN_MICROS: u64 = 25_000;
+/// Most messages one connection holds that came before the remote's hello (data overtaking a
+/// lost or late hello), handled once the hello comes; more are dropped as
+/// [`RejectKind::BeforeHello`].
+pub const MAX_EARLY_MESSAGES: usize = 8;
+/// Most bytes of such messages one connection holds (128 KiB).
+pub const MAX_EARLY_BYTES: usize = 128 * 1024;
 /// Most authors a hello names ([`HelloHave`], about 5 KiB): a larger log's hellos, which go
 /// again until answered, say nothing of what it holds, and its haves follow in answer.
 pub const MAX_HELLO_HAVE_AUTHORS: usize = 128;
@@ -366,6 +380,8 @@ pub struct SyncState<P> {
     closed: bool,
     /// The remote has confirmed it saw our hello.
     hello_confirmed: bool,
+    /// Messages that came before the remote's hello, with their bytes: handled once it comes.
+    early: VecDeque<(Message, usize)>,
     /// A have of the remote arrived on this connection (until then the hello is sent again).
     have_learnt: bool,
     /// How much of our own ops the remote holds is known (from a have, or a want or ack that
@@ -486,6 +502,7 @@ impl<P: Payload> SyncState<P> {
             remote: None,
             closed: false,
             hello_confirmed: false,
+            early: VecDeque::new(),
             have_learnt: false,
             own_known: false,
             hello_sent_at: None,
@@ -776,35 +793,55 @@ impl<P: Payload> SyncState<P> {
                     self.learn_remote(now, &have.vv, log);
                     self.compare_tips(&have.vv, &have.tips, log);
                 }
+                while self.remote.is_some()
+                    && !self.closed
+                    && let Some((message, _)) = self.early.pop_front()
+                {
+                    self.on_message(now, 0, message, log);
+                }
             }
-            _ if self.remote.is_none() => {
-                self.reject(RejectKind::BeforeHello, "data before hello".into());
+            message if self.remote.is_none() => {
+                // Held until the hello comes (a lost hello is sent again; data sent behind it
+                // need not be), within bounds; the rest is dropped.
+                let held: usize = self.early.iter().map(|(_, n)| n).sum();
+                if self.early.len() < MAX_EARLY_MESSAGES && held + bytes.len() <= MAX_EARLY_BYTES {
+                    self.early.push_back((message, bytes.len()));
+                } else {
+                    self.reject(RejectKind::BeforeHello, "data before hello".into());
+                }
                 // The remote answers a hello of ours whose own hello was lost, maybe during a
                 // partition: ours goes out again on the base interval (it answers with its
                 // own), not a backed-off one.
                 self.hello_resend_micros = self.base_resend_micros();
             }
-            message => {
-                // A ping, or the first word after a silence while we pinged: the link carries
-                // messages again, and what each end holds may have moved on while it did not
-                // (a partition). At most one full have per `HAVE_EVERY_MICROS`, and none for a
-                // remote that talks without acknowledging, so neither pings nor chatter can
-                // make us send more than a trickle.
-                let base = self.base_resend_micros();
-                let pinged = self.pinged_at.take().is_some() && silence >= base;
-                let rested = now.0 >= (self.full_have_at.0).saturating_add(HAVE_EVERY_MICROS);
-                if (matches!(message, Message::Ping) || pinged) && rested {
-                    self.send_full_have(now, log);
-                }
-                self.handle_message(now, message, log);
-                // The remote speaks, maybe again after a partition healed: what it has not
-                // acknowledged, our hello included, goes out again on the base interval, not
-                // a backed-off one (measured with what this message taught, such as the round
-                // trip of a have answering our hello).
-                self.resend_micros = self.base_resend_micros();
-                self.hello_resend_micros = self.base_resend_micros();
-            }
+            message => self.on_message(now, silence, message, log),
         }
+    }
+
+    /// A message other than a hello, once the remote's hello has arrived, after `silence`.
+    fn on_message(&mut self, now: Timestamp, silence: u64, message: Message, log: &mut Log<P>) {
+        // A ping, or the first word after a silence while we pinged: the link carries
+        // messages again, and what each end holds may have moved on while it did not
+        // (a partition). At most one full have per `HAVE_EVERY_MICROS`, and none for a
+        // remote that talks without acknowledging, so neither pings nor chatter can
+        // make us send more than a trickle.
+        let base = self.base_resend_micros();
+        let pinged = self.pinged_at.take().is_some() && silence >= base;
+        let rested = now.0 >= (self.full_have_at.0).saturating_add(HAVE_EVERY_MICROS);
+        if (matches!(message, Message::Ping) || pinged) && rested {
+            self.send_full_have(now, log);
+        } else if matches!(message, Message::Ping) {
+            // A have went out less than an interval ago: the pinger only needs to
+            // hear that the link carries messages again.
+            self.control.push_back(Message::Pong);
+        }
+        self.handle_message(now, message, log);
+        // The remote speaks, maybe again after a partition healed: what it has not
+        // acknowledged, our hello included, goes out again on the base interval, not
+        // a backed-off one (measured with what this message taught, such as the round
+        // trip of a have answering our hello).
+        self.resend_micros = self.base_resend_micros();
+        self.hello_resend_micros = self.base_resend_micros();
     }
 
     /// Handles a decoded message other than a hello, once the remote's hello has arrived.
@@ -867,7 +904,7 @@ impl<P: Payload> SyncState<P> {
                 self.hello_confirmed = true;
                 self.on_forked(now, ops, answer, log);
             }
-            Message::Ping => self.hello_confirmed = true,
+            Message::Ping | Message::Pong => self.hello_confirmed = true,
             Message::WantOps(ids) => {
                 self.hello_confirmed = true;
                 for id in ids {
@@ -1430,8 +1467,8 @@ impl<P: Payload> SyncState<P> {
     }
 
     /// While batches wait for acknowledgement and their resends have backed off (the remote
-    /// said nothing for a resend timeout or more), a ping goes out on the base interval, for
-    /// at most [`PING_FOR_MICROS`] of silence.
+    /// said nothing for a resend timeout or more), a ping goes out [`PINGS_PER_RESEND`] times
+    /// per base interval, for at most [`PING_FOR_MICROS`] of silence.
     fn ping_due(&self) -> Option<Timestamp> {
         if self.remote.is_none() || self.in_flight.is_empty() {
             return None;
@@ -1443,7 +1480,7 @@ impl<P: Payload> SyncState<P> {
         let last = self
             .pinged_at
             .map_or(self.heard_at, |p| p.max(self.heard_at));
-        let due = last.saturating_add_micros(base);
+        let due = last.saturating_add_micros(ping_interval(base));
         (due.0 <= self.heard_at.0.saturating_add(PING_FOR_MICROS)).then_some(due)
     }
 
@@ -1754,6 +1791,11 @@ impl<P: Payload> SyncState<P> {
 
 /// The tip of `log`'s op of `author` at `seq`, or 0 where it holds none (inside a snapshot's
 /// base): what a have or a want says of the op at a seq it announces.
+/// How often a silent remote is pinged, given the base resend interval.
+fn ping_interval(base_resend_micros: u64) -> u64 {
+    (base_resend_micros / PINGS_PER_RESEND).max(PING_AFTER_MIN_MICROS)
+}
+
 fn tip_at<P: Payload>(log: &Log<P>, author: &PeerId, seq: u64) -> u64 {
     log.by_seq(author, seq).map_or(0, |op| tip(&op.id()))
 }

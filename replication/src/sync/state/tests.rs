@@ -282,7 +282,9 @@ fn hostile_inputs_are_counted_and_honest_ops_survive() {
         ops: vec![honest.encoded().to_vec()],
     }
     .encode();
-    assert_eq!(feed(&mut b, 1, &early), vec![RejectKind::BeforeHello]);
+    // Data before the hello is held for it (see `data_that_overtakes_a_lost_hello_is_held_
+    // until_the_hello_comes`), and handled once the hello comes.
+    assert!(feed(&mut b, 1, &early).is_empty());
     assert!(
         feed(
             &mut b,
@@ -291,6 +293,7 @@ fn hostile_inputs_are_counted_and_honest_ops_survive() {
         )
         .is_empty()
     );
+    assert!(b.log.contains(&honest.id()), "the early batch was dropped");
     assert_eq!(
         feed(
             &mut b,
@@ -369,7 +372,7 @@ fn hostile_inputs_are_counted_and_honest_ops_survive() {
     let stats = b.sync.stats();
     assert_eq!(stats.rejected.get(&RejectKind::BadSignature), Some(&1));
     assert_eq!(stats.rejected.get(&RejectKind::PendingExpired), Some(&1));
-    assert_eq!(stats.n_rejected(), 9);
+    assert_eq!(stats.n_rejected(), 8);
     // Acks were queued for both batches and nothing panicked.
     assert!(!b.sync.is_closed());
 }
@@ -1123,4 +1126,108 @@ fn acknowledged_batches_set_the_resend_timeout_one_and_a_half_deviations_up() {
     };
     assert_eq!(round(200 * MILLI, 100 * MILLI), Some(175 * MILLI));
     assert_eq!(round(400 * MILLI, 180 * MILLI), Some(196_250));
+}
+
+/// Data that overtook a lost hello (the remote heard ours and sent its have, ops or want at
+/// once) was dropped as before the hello: a want so dropped cost the asker its whole retry
+/// timeout, and ops their sender's resend timeout, at the moment a peer back from a partition
+/// catches up. It is held now, within bounds, and handled when the hello comes.
+#[test]
+fn data_that_overtakes_a_lost_hello_is_held_until_the_hello_comes() {
+    let [mut a, mut b] = [Node::new(1, 2), Node::new(2, 1)];
+    let mine: Vec<_> = (1..=3).map(|i| a.author(i, format!("a{i}"))).collect();
+    // B's hello reaches A; A's hello to B is lost, and its answer arrives first.
+    outbox(&mut a, 0);
+    carry(&mut b, &mut a, 0, 40 * MILLI);
+    let answer = outbox(&mut a, 40 * MILLI);
+    assert!(
+        answer.iter().any(|m| matches!(m, Message::Ops { .. })),
+        "A sent no ops on B's hello: {answer:?}"
+    );
+    let mut a_hello = None;
+    for message in answer {
+        if matches!(message, Message::Hello { .. }) {
+            a_hello = Some(message);
+        } else {
+            let kinds = feed(&mut b, 80 * MILLI, &message.encode());
+            assert!(kinds.is_empty(), "{message:?} refused: {kinds:?}");
+        }
+    }
+    assert_eq!(b.log.len(), 0, "handled before the hello");
+    // More than the bound is dropped and counted.
+    let extra = MAX_EARLY_MESSAGES;
+    let mut n_dropped = 0;
+    for _ in 0..extra {
+        n_dropped += feed(&mut b, 81 * MILLI, &Message::Ping.encode()).len();
+    }
+    assert!(n_dropped > 0, "{extra} more early messages all held");
+    let stats = b.sync.stats();
+    assert_eq!(
+        stats.rejected.get(&RejectKind::BeforeHello),
+        Some(&(n_dropped as u64))
+    );
+    // The hello comes (sent again): what was held is handled, in order.
+    let a_hello = a_hello.expect("A's hello");
+    assert!(feed(&mut b, 200 * MILLI, &a_hello.encode()).is_empty());
+    let held: Vec<_> = mine.iter().map(|op| b.log.contains(&op.id())).collect();
+    assert_eq!(held, vec![true; 3]);
+    let acks = outbox(&mut b, 200 * MILLI);
+    assert!(
+        acks.iter().any(|m| matches!(m, Message::Ack { .. })),
+        "the held batch was not acknowledged: {acks:?}"
+    );
+}
+
+/// A ping within a have interval of the last full have went unanswered, so a pinger whose
+/// batch and resend were lost heard nothing, kept backing off, and waited up to a second for
+/// the link it had already found. It is answered with a pong, and the pinger sends again at
+/// once.
+#[test]
+fn a_ping_that_a_have_does_not_answer_gets_a_pong_and_the_batches_go_again() {
+    let [mut a, mut b] = connected();
+    outbox(&mut b, 120 * MILLI);
+    let op = a.author(200 * MILLI, "lost twice".into());
+    // A's batch and its resends are lost, and B is silent, so A pings.
+    let lost = drain_checked(&mut a, 200 * MILLI, 1_000_000);
+    assert!(batched(&lost).contains(&(op.author(), op.seq())));
+    assert!(lost.iter().any(|m| matches!(m, Message::Ping)), "{lost:?}");
+    // B answers a first ping with its full have, one right after with a pong.
+    let first = 1_200 * MILLI;
+    (b.sync).handle_input(Timestamp(first), &Message::Ping.encode(), &mut b.log);
+    assert!(
+        (outbox(&mut b, first).iter()).any(|m| matches!(m, Message::Have { .. })),
+        "the first ping got no have"
+    );
+    let second = first + 100 * MILLI;
+    (b.sync).handle_input(Timestamp(second), &Message::Ping.encode(), &mut b.log);
+    let answer = outbox(&mut b, second);
+    assert_eq!(answer, vec![Message::Pong]);
+    // A hears the pong after its silence: the batch goes again at once, not after a
+    // backed-off timeout.
+    let back = second + 40 * MILLI;
+    (a.sync).handle_input(Timestamp(back), &Message::Pong.encode(), &mut a.log);
+    assert!(a.sync.poll_timeout(&a.log).unwrap().0 <= back);
+    a.sync.handle_timeout(Timestamp(back), &mut a.log);
+    assert_eq!(
+        batched(&outbox(&mut a, back)),
+        vec![(op.author(), op.seq())]
+    );
+}
+
+/// A silent remote is pinged four times per base resend interval, not once: a ping lost into
+/// a healing partition costs a quarter of a timeout.
+#[test]
+fn a_silent_remote_is_pinged_four_times_a_resend_interval() {
+    let [mut a, _] = connected();
+    let base = a.sync.resend_timeout().unwrap();
+    a.author(200 * MILLI, "into the partition".into());
+    let sent = drain_checked(&mut a, 200 * MILLI, 3_000_000);
+    let pings = sent.iter().filter(|m| matches!(m, Message::Ping)).count() as u64;
+    let interval = (base / PINGS_PER_RESEND).max(PING_AFTER_MIN_MICROS);
+    // Pings start once the first resend went (`base` after the send), then go every interval.
+    let expected = (3_000_000 - base) / interval + 1;
+    assert!(
+        (expected.saturating_sub(2)..=expected + 2).contains(&pings),
+        "{pings} pings in 3 s on a base of {base} µs, expected about {expected}"
+    );
 }
