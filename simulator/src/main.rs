@@ -117,6 +117,7 @@ struct Summary {
     n_runs: u64,
     n_failed: u64,
     round_trips: Vec<f64>,
+    catch_up_round_trips: Vec<f64>,
     messages_per_op: Vec<f64>,
     bytes_per_op: Vec<f64>,
     peak_bytes_max: i64,
@@ -137,6 +138,8 @@ impl Summary {
         self.n_runs += 1;
         self.n_failed += u64::from(!r.passed());
         self.round_trips.push(r.convergence_round_trips());
+        self.catch_up_round_trips
+            .push(r.mean_catch_up_round_trips());
         self.messages_per_op.push(r.messages_per_op());
         self.bytes_per_op.push(r.bytes_per_op());
         if let Some(m) = r.memory {
@@ -173,12 +176,14 @@ impl Summary {
         );
         let rt = &self.round_trips;
         println!(
-            "  convergence after healing (round trips): mean {:.1}, p50 {:.1}, p90 {:.1}, p99 {:.1}, max {:.1}",
+            "  convergence after healing (round trips): mean {:.1}, p50 {:.1}, p90 {:.1}, p99 {:.1}, max {:.1}; \
+             a peer's catch-up, mean {:.2}",
             mean(rt),
             q(rt, 0.5),
             q(rt, 0.9),
             q(rt, 0.99),
-            q(rt, 1.0)
+            q(rt, 1.0),
+            mean(&self.catch_up_round_trips)
         );
         println!(
             "  messages/op: mean {:.1}, max {:.1}; bytes/op: mean {:.0}, max {:.0}",

@@ -87,6 +87,18 @@ fn a_fixed_seed_converges_under_chaos_with_crashes() {
         .map(|c| c.last_micros)
         .max();
     assert_eq!(last, Some(report.convergence_micros), "{report}");
+    // The mean over peers lies between the fastest peer's catch-up and the slowest's.
+    let mean = report.mean_catch_up_round_trips();
+    let rtt = report.mean_rtt_micros as f64;
+    let fastest = (report.catch_up.iter())
+        .map(|c| if c.n_insertions > 0 { c.last_micros } else { 0 })
+        .min()
+        .unwrap();
+    assert!(fastest as f64 / rtt <= mean, "{report}");
+    assert!(mean < report.convergence_round_trips(), "{report}");
+    assert!(report.to_string().contains(&format!(
+        "a peer caught up after {mean:.2} round trips on average"
+    )));
     assert!(
         report
             .to_string()
