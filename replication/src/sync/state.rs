@@ -1789,13 +1789,13 @@ impl<P: Payload> SyncState<P> {
     }
 }
 
-/// The tip of `log`'s op of `author` at `seq`, or 0 where it holds none (inside a snapshot's
-/// base): what a have or a want says of the op at a seq it announces.
 /// How often a silent remote is pinged, given the base resend interval.
 fn ping_interval(base_resend_micros: u64) -> u64 {
     (base_resend_micros / PINGS_PER_RESEND).max(PING_AFTER_MIN_MICROS)
 }
 
+/// The tip of `log`'s op of `author` at `seq`, or 0 where it holds none (inside a snapshot's
+/// base): what a have or a want says of the op at a seq it announces.
 fn tip_at<P: Payload>(log: &Log<P>, author: &PeerId, seq: u64) -> u64 {
     log.by_seq(author, seq).map_or(0, |op| tip(&op.id()))
 }

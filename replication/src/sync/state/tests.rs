@@ -1223,7 +1223,8 @@ fn a_silent_remote_is_pinged_four_times_a_resend_interval() {
     a.author(200 * MILLI, "into the partition".into());
     let sent = drain_checked(&mut a, 200 * MILLI, 3_000_000);
     let pings = sent.iter().filter(|m| matches!(m, Message::Ping)).count() as u64;
-    let interval = (base / PINGS_PER_RESEND).max(PING_AFTER_MIN_MICROS);
+    let interval = ping_interval(base);
+    assert_eq!(interval, base / PINGS_PER_RESEND);
     // Pings start once the first resend went (`base` after the send), then go every interval.
     let expected = (3_000_000 - base) / interval + 1;
     assert!(
