@@ -50,6 +50,43 @@ pub const ZONE_SIZE_RANGE: (f64, f64) = (0.1, 10.0);
 /// Where the tool starts, as a fraction of the workspace's height below its top.
 const START_BELOW_TOP: f64 = 0.05;
 
+/// Watches a running servo for a stretch of ticks with no stall. After a stall (a tick or a
+/// device sample more than the stall time late, which a starved machine gives) the force is
+/// zero and ramps in again, so a force read before such a stretch has passed may be a
+/// recovery, not what the scene pushes with.
+#[derive(Clone, Copy, Debug)]
+pub struct SteadyWatch {
+    window: std::time::Duration,
+    since: std::time::Instant,
+    n_stalls: u64,
+}
+
+impl SteadyWatch {
+    /// Starts watching at `now`, when the servo had rendered `stats`; steady after `window`
+    /// with no stall (at least the ramp-in, or the force may still be ramping).
+    pub fn new(
+        window: std::time::Duration,
+        stats: &StatsSnapshot,
+        now: std::time::Instant,
+    ) -> Self {
+        SteadyWatch {
+            window,
+            since: now,
+            n_stalls: stats.n_stalls,
+        }
+    }
+
+    /// Notes the servo's `stats` read at `now`; true once no tick has stalled for the window
+    /// (a stall seen late restarts the window from when it was seen, never earlier).
+    pub fn observe(&mut self, stats: &StatsSnapshot, now: std::time::Instant) -> bool {
+        if stats.n_stalls != self.n_stalls {
+            self.n_stalls = stats.n_stalls;
+            self.since = now;
+        }
+        now.saturating_duration_since(self.since) >= self.window
+    }
+}
+
 /// A running servo on the live scene with its feed and the mouse that moves it.
 pub struct LiveTouch {
     servo: ServoHandle<ShownForce, LiveScene>,
@@ -241,6 +278,29 @@ impl LiveTouch {
         std::sync::Arc::clone(&self.shared)
     }
 
+    /// A watch for a stretch without stalls twice the servo's ramp-in long, started now.
+    pub fn steady_watch(&self) -> SteadyWatch {
+        let window = std::time::Duration::from_secs_f64(2.0 * self.rig.params.ramp_in_secs);
+        SteadyWatch::new(window, &self.stats(), crate::clock::now().instant)
+    }
+
+    /// Waits (at most `timeout`) until the servo has ticked for [`LiveTouch::steady_watch`]'s
+    /// window without a stall, and returns what it rendered then; `None` if it never did.
+    pub fn wait_steady(&self, timeout: std::time::Duration) -> Option<StatsSnapshot> {
+        let mut watch = self.steady_watch();
+        let deadline = crate::clock::now().instant + timeout;
+        loop {
+            let (stats, now) = (self.stats(), crate::clock::now().instant);
+            if watch.observe(&stats, now) {
+                return Some(stats);
+            }
+            if now >= deadline {
+                return None;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+    }
+
     /// The device model whose forces are computed.
     pub fn model(&self) -> DeviceModel {
         self.model
@@ -292,6 +352,34 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn a_steady_watch_restarts_at_every_stall_it_sees() {
+        let stats = |n_stalls| StatsSnapshot {
+            n_ticks: 0,
+            n_overruns: 0,
+            n_device_errors: 0,
+            n_stalls,
+            n_scenes_taken: 0,
+            period_micros: [0; 4],
+            compute_micros: [0; 4],
+            force_newtons: DVec3::ZERO,
+            hip_world: DVec3::ZERO,
+            top_id: None,
+            energy_joules: 0.0,
+        };
+        let ms = std::time::Duration::from_millis;
+        let t0 = crate::clock::now().instant;
+        let mut watch = SteadyWatch::new(ms(500), &stats(3), t0);
+        assert!(!watch.observe(&stats(3), t0 + ms(499)));
+        // A stall seen at 499 ms: the window starts again there.
+        assert!(!watch.observe(&stats(4), t0 + ms(499)));
+        assert!(!watch.observe(&stats(4), t0 + ms(998)));
+        assert!(watch.observe(&stats(4), t0 + ms(999)));
+        // An instant before the window's start (clocks read out of order) is not steady.
+        assert!(!watch.observe(&stats(5), t0 + ms(1_000)));
+        assert!(!watch.observe(&stats(5), t0));
+    }
+
+    #[test]
     fn the_mouse_moves_the_servo_into_the_demo_watermelon_and_its_rind_pushes_out() {
         let (engine, dir) = watermelon_engine("live");
         let melon = lock(engine.view()).scene().objects().next().unwrap().0.0;
@@ -339,9 +427,10 @@ pub(crate) mod tests {
             wait_stats(live, &format!("{what}: in the rind"), |s| {
                 (s.hip_world - rind).length() < 1e-3 && s.force_newtons.y > 0.2
             });
-            // Past the ramp-in and the rate limit.
-            std::thread::sleep(std::time::Duration::from_millis(300));
-            live.stats().force_newtons.y
+            // Past the ramp-in and the rate limit, with no stall since (a starved machine
+            // gives late ticks, and each restarts the ramp).
+            let steady = live.wait_steady(std::time::Duration::from_secs(10));
+            steady.expect("the servo never ran steady").force_newtons.y
         };
         let fitted = push(&live, "fitted");
         let box_fitted = live.zone_box();

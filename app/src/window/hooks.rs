@@ -26,6 +26,10 @@ const MAX_WAIT_SECS: f64 = 60.0;
 /// Frames a scripted drag takes from its start to its end.
 const DRAG_FRAMES: u32 = 12;
 
+/// How near (scene units) the servo's tool must be to a scripted touch stroke's start before
+/// the stroke's button goes down.
+const TOUCH_AT_TOLERANCE: f64 = 1e-3;
+
 /// Frames every object must have been drawn as the scene has it before a scripted step runs
 /// (one frame paints the new meshes, the next can be captured).
 const IDLE_FRAMES_BEFORE_STEP: u32 = 2;
@@ -53,6 +57,11 @@ pub struct Hooks {
     drag: Option<([[f32; 2]; 2], u32)>,
     /// A scripted touch stroke in progress: from and to (scene coordinates), and the frame.
     touch_drag: Option<([glam::DVec3; 2], u32)>,
+    /// A `wait-touch-steady` step: later steps wait until the servo has run without a stall
+    /// for the watch's window.
+    touch_steady: Option<::app::touch::live::SteadyWatch>,
+    /// The force (newtons, device frame) when the last `wait-touch-steady` step ended.
+    pub steady_force: Option<[f64; 3]>,
     /// Scripted steps wait until the session holds this many ops.
     pub wait_ops: Option<usize>,
     /// Scripted steps wait until this many other peers' presence is known.
@@ -150,7 +159,16 @@ impl SculptApp {
             self.touch_drag_frame(from, to, frame);
             return;
         }
-        let synced = {
+        if let (Some(watch), Some(live)) = (&mut self.hooks.touch_steady, &self.touch) {
+            let stats = live.stats();
+            if watch.observe(&stats, ::app::clock::now().instant) {
+                let force = stats.force_newtons.to_array();
+                println!("sculpt: the servo ran steady: force {force:?} N");
+                self.hooks.steady_force = Some(force);
+                self.hooks.touch_steady = None;
+            }
+        }
+        let synced = self.hooks.touch_steady.is_none() && {
             let view = lock(self.engine.view());
             self.hooks.wait_ops.is_none_or(|n| view.n_ops() >= n)
                 && self.hooks.step_ops.is_none_or(|n| view.n_ops() >= n)
@@ -201,6 +219,16 @@ impl SculptApp {
                     _ => self.hooks.fail(format!(
                         "bad `wait-secs: {secs}`: a number of seconds up to {MAX_WAIT_SECS}"
                     )),
+                }
+                self.hooks.idle_frames = 0;
+                return;
+            }
+            if line.trim() == "wait-touch-steady" {
+                match &self.touch {
+                    Some(live) => self.hooks.touch_steady = Some(live.steady_watch()),
+                    None => self
+                        .hooks
+                        .fail("`wait-touch-steady` before `touch: on`".into()),
                 }
                 self.hooks.idle_frames = 0;
                 return;
@@ -476,6 +504,8 @@ impl SculptApp {
                 json!({
                     "hip": s.hip_world.to_array(),
                     "force": s.force_newtons.to_array(),
+                    "steady_force": self.hooks.steady_force,
+                    "n_stalls": s.n_stalls,
                     "top_id": s.top_id,
                     "n_ticks": s.n_ticks,
                     "n_overruns": s.n_overruns,
@@ -648,8 +678,8 @@ fn save_screenshot(image: &egui::ColorImage, path: &std::path::Path) -> Result<(
 
 impl SculptApp {
     /// One frame of a scripted touch stroke: the tool goes to its start, the button goes
-    /// down two frames later (the servo has moved there by then), the tool moves along the
-    /// segment over `DRAG_FRAMES` frames, and the button comes up.
+    /// down once the servo has moved it there (two frames at the least), the tool moves along
+    /// the segment over `DRAG_FRAMES` frames, and the button comes up.
     fn touch_drag_frame(&mut self, from: glam::DVec3, to: glam::DVec3, frame: u32) {
         let Some(live) = &self.touch else {
             self.hooks.touch_drag = None;
@@ -659,6 +689,9 @@ impl SculptApp {
         let moving = frame.saturating_sub(2);
         match frame {
             0 => live.move_to_world(from),
+            // The button goes down once the servo has put the tool there (a starved machine
+            // can leave it a few frames behind); the frame limit bounds the wait.
+            1 if live.stats().hip_world.distance(from) > TOUCH_AT_TOLERANCE => return,
             1 => {}
             2 => self.touch_button(true),
             _ if moving <= DRAG_FRAMES => {
