@@ -284,23 +284,6 @@ impl LiveTouch {
         SteadyWatch::new(window, &self.stats(), crate::clock::now().instant)
     }
 
-    /// Waits (at most `timeout`) until the servo has ticked for [`LiveTouch::steady_watch`]'s
-    /// window without a stall, and returns what it rendered then; `None` if it never did.
-    pub fn wait_steady(&self, timeout: std::time::Duration) -> Option<StatsSnapshot> {
-        let mut watch = self.steady_watch();
-        let deadline = crate::clock::now().instant + timeout;
-        loop {
-            let (stats, now) = (self.stats(), crate::clock::now().instant);
-            if watch.observe(&stats, now) {
-                return Some(stats);
-            }
-            if now >= deadline {
-                return None;
-            }
-            std::thread::sleep(std::time::Duration::from_millis(5));
-        }
-    }
-
     /// The device model whose forces are computed.
     pub fn model(&self) -> DeviceModel {
         self.model
@@ -338,14 +321,21 @@ pub(crate) mod tests {
         (engine, dir)
     }
 
-    /// Waits (at most 10 s) until `done` holds for the servo's statistics.
-    fn wait_stats(live: &LiveTouch, what: &str, done: impl Fn(&StatsSnapshot) -> bool) {
+    /// Waits (at most 10 s) until `done` holds for the servo's statistics, and returns them.
+    fn wait_stats(
+        live: &LiveTouch,
+        what: &str,
+        mut done: impl FnMut(&StatsSnapshot) -> bool,
+    ) -> StatsSnapshot {
         let deadline = crate::clock::now().instant + std::time::Duration::from_secs(10);
-        while !done(&live.stats()) {
+        loop {
+            let stats = live.stats();
+            if done(&stats) {
+                return stats;
+            }
             assert!(
                 crate::clock::now().instant < deadline,
-                "timed out waiting for {what}: {:?}",
-                live.stats()
+                "timed out waiting for {what}: {stats:?}"
             );
             std::thread::sleep(std::time::Duration::from_millis(5));
         }
@@ -429,8 +419,11 @@ pub(crate) mod tests {
             });
             // Past the ramp-in and the rate limit, with no stall since (a starved machine
             // gives late ticks, and each restarts the ramp).
-            let steady = live.wait_steady(std::time::Duration::from_secs(10));
-            steady.expect("the servo never ran steady").force_newtons.y
+            let mut watch = live.steady_watch();
+            let steady = wait_stats(live, &format!("{what}: steady"), |s| {
+                watch.observe(s, crate::clock::now().instant)
+            });
+            steady.force_newtons.y
         };
         let fitted = push(&live, "fitted");
         let box_fitted = live.zone_box();
