@@ -3,7 +3,7 @@
 //! `eval`, `slice`, `render` and `touch` for functions and scenes.
 
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use app::engine::{Engine, EngineConfig, Network, lock, store};
@@ -486,7 +486,12 @@ pub fn slice_command(args: &SliceArgs) -> anyhow::Result<()> {
 /// The text of a function: the argument itself, or the file named after `@`.
 fn source(arg: &str) -> anyhow::Result<String> {
     match arg.strip_prefix('@') {
-        Some(path) => std::fs::read_to_string(path).with_context(|| format!("cannot read {path}")),
+        Some(path) => {
+            let bytes =
+                app::files::read_bounded(Path::new(path), fdsl::limits::MAX_SOURCE_BYTES as u64)
+                    .map_err(anyhow::Error::msg)?;
+            String::from_utf8(bytes).map_err(|_| anyhow::anyhow!("{path}: not UTF-8 text"))
+        }
         None => Ok(arg.to_string()),
     }
 }
@@ -610,17 +615,9 @@ pub fn touch_command(args: &TouchArgs) -> anyhow::Result<()> {
     }
     let scene = load_scene(&args.scene, args.inline_root.as_deref())?;
     let trace = &args.trace;
-    let len = std::fs::metadata(trace)
-        .with_context(|| format!("cannot read {}", trace.display()))?
-        .len();
-    if len > MAX_PATH_FILE_BYTES {
-        bail!(
-            "{}: {len} bytes, more than the limit of {MAX_PATH_FILE_BYTES}",
-            trace.display()
-        );
-    }
-    let text = std::fs::read_to_string(trace)
-        .with_context(|| format!("cannot read {}", trace.display()))?;
+    let bytes = app::files::read_bounded(trace, MAX_PATH_FILE_BYTES).map_err(anyhow::Error::msg)?;
+    let text = String::from_utf8(bytes)
+        .map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", trace.display()))?;
     let path = TouchPath::parse(&text).map_err(|e| anyhow::anyhow!("{}:{e}", trace.display()))?;
     let (containers, refused) = ObjectContainer::from_scene(&scene);
     for (id, why) in &refused {

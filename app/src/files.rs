@@ -7,6 +7,7 @@
 //! it is given (the scene's folder unless the user names a wider one), checked on the
 //! canonical path after links are followed.
 
+use std::io::Read;
 use std::path::{Component, Path, PathBuf};
 
 use fdsl::fvrml::MAX_FILE_BYTES;
@@ -20,16 +21,44 @@ pub fn read_scene_text(path: &Path) -> Result<String, String> {
 /// Reads a file a scene names (an `Inline`'s text, a grid's samples), refusing one over
 /// [`MAX_FILE_BYTES`] before reading it.
 pub fn read_scene_bytes(path: &Path) -> Result<Vec<u8>, String> {
-    let len = std::fs::metadata(path)
-        .map_err(|e| format!("{}: {e}", path.display()))?
-        .len();
-    if len > MAX_FILE_BYTES as u64 {
-        return Err(format!(
-            "{}: {len} bytes, more than the limit of {MAX_FILE_BYTES}",
-            path.display()
-        ));
+    read_bounded(path, MAX_FILE_BYTES as u64)
+}
+
+/// Reads a regular file of at most `limit` bytes: anything else is an error that names the
+/// path, found before reading and never by waiting.
+///
+/// A file a user or a scene names may be a FIFO, a device or a folder: opening a FIFO waits
+/// for a writer and reading a device may never end, so the file is opened without blocking,
+/// refused unless the opened file is a regular one (checked on the open file, so it cannot
+/// be swapped after the check), and read through a bound in case it grows while being read.
+pub fn read_bounded(path: &Path, limit: u64) -> Result<Vec<u8>, String> {
+    let fail = |why: String| format!("{}: {why}", path.display());
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    std::os::unix::fs::OpenOptionsExt::custom_flags(&mut options, libc::O_NONBLOCK);
+    let file = options.open(path).map_err(|e| fail(e.to_string()))?;
+    let metadata = file.metadata().map_err(|e| fail(e.to_string()))?;
+    if !metadata.is_file() {
+        let kind = if metadata.is_dir() {
+            "a folder"
+        } else {
+            "a FIFO, socket or device"
+        };
+        return Err(fail(format!("{kind}, not a regular file")));
     }
-    std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))
+    let too_large = |len: u64| fail(format!("{len} bytes, more than the limit of {limit}"));
+    if metadata.len() > limit {
+        return Err(too_large(metadata.len()));
+    }
+    let mut bytes = Vec::with_capacity(metadata.len() as usize);
+    file.take(limit + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| fail(e.to_string()))?;
+    if bytes.len() as u64 > limit {
+        return Err(too_large(bytes.len() as u64));
+    }
+    Ok(bytes)
 }
 
 /// Resolves and reads `Inline` URLs relative to a scene's folder, only inside `root`.
@@ -96,6 +125,63 @@ impl InlineResolver {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Runs `read` on another thread and fails, instead of hanging, if it does not answer
+    /// within a few seconds.
+    fn answers_in_time<T: Send + 'static>(read: impl FnOnce() -> T + Send + 'static) -> T {
+        let (send, receive) = std::sync::mpsc::channel();
+        std::thread::Builder::new()
+            .name("read-under-test".into())
+            .spawn(move || send.send(read()))
+            .unwrap();
+        receive
+            .recv_timeout(std::time::Duration::from_secs(5))
+            .expect("the read answers instead of waiting")
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_a_device_or_a_folder_is_refused_without_waiting() {
+        let dir = std::env::temp_dir().join(format!("sculpt-fifo-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let fifo = dir.join("part.wrl");
+        let made = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap();
+        assert!(made.success(), "mkfifo");
+        let path = fifo.clone();
+        let why = answers_in_time(move || read_scene_bytes(&path)).unwrap_err();
+        assert!(why.contains("not a regular file"), "{why}");
+        assert!(why.contains("part.wrl"), "names the file: {why}");
+        let why = answers_in_time(|| read_bounded(Path::new("/dev/zero"), 1 << 20)).unwrap_err();
+        assert!(why.contains("not a regular file"), "{why}");
+        let folder = dir.clone();
+        let why = answers_in_time(move || read_scene_text(&folder)).unwrap_err();
+        assert!(why.contains("a folder"), "{why}");
+        // An Inline naming the FIFO inside the scene's folder is refused the same way.
+        let resolver = InlineResolver::new(&dir, &dir).unwrap();
+        let why = answers_in_time(move || resolver.read("part.wrl")).unwrap_err();
+        assert!(why.contains("not a regular file"), "{why}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_file_over_the_limit_is_refused_and_one_at_it_is_read() {
+        let dir = std::env::temp_dir().join(format!("sculpt-bound-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("grid.raw");
+        std::fs::write(&path, [7u8; 100]).unwrap();
+        assert_eq!(read_bounded(&path, 100).unwrap().len(), 100);
+        let why = read_bounded(&path, 99).unwrap_err();
+        assert!(
+            why.contains("100 bytes, more than the limit of 99"),
+            "{why}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn inlines_stay_inside_the_scene_folder_unless_allowed() {

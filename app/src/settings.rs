@@ -37,30 +37,22 @@ impl Settings {
     /// Reads the settings at `path`: the defaults when there is no file, and the defaults with
     /// the reason when it cannot be read.
     pub fn load(path: &Path) -> (Settings, Option<String>) {
-        let text = match std::fs::metadata(path) {
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-                return (Settings::default(), None);
-            }
-            Err(e) => {
-                return (
-                    Settings::default(),
-                    Some(format!("{}: {e}", path.display())),
-                );
-            }
-            Ok(m) if m.len() > MAX_SETTINGS_BYTES => {
-                let why = format!("{}: over {MAX_SETTINGS_BYTES} bytes", path.display());
-                return (Settings::default(), Some(why));
-            }
-            Ok(_) => std::fs::read_to_string(path),
-        };
-        let parsed = text
-            .map_err(|e| e.to_string())
-            .and_then(|t| serde_json::from_str::<Value>(&t).map_err(|e| e.to_string()));
+        if matches!(std::fs::symlink_metadata(path), Err(e) if e.kind() == std::io::ErrorKind::NotFound)
+        {
+            return (Settings::default(), None);
+        }
+        let parsed = crate::files::read_bounded(path, MAX_SETTINGS_BYTES)
+            .and_then(|bytes| {
+                String::from_utf8(bytes).map_err(|_| format!("{}: not UTF-8", path.display()))
+            })
+            .and_then(|t| {
+                serde_json::from_str::<Value>(&t).map_err(|e| format!("{}: {e}", path.display()))
+            });
         match parsed {
             Ok(v) => Settings::from_json(&v),
             Err(e) => (
                 Settings::default(),
-                Some(format!("{}: {e}; using the defaults", path.display())),
+                Some(format!("{e}; using the defaults")),
             ),
         }
     }

@@ -35,7 +35,7 @@
 
 use std::collections::BTreeMap;
 use std::fmt;
-use std::io::{Read as _, Write as _};
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -552,31 +552,13 @@ fn mesh_name(path: &Path) -> String {
     stem[..end].to_string()
 }
 
-/// The file's bytes, refused before reading when over `limit` (and if it grows past it
-/// while being read).
+/// The file's bytes through [`crate::files::read_bounded`], refused before reading when
+/// over `limit` or not a regular file.
 fn read_bounded(path: &Path, limit: u64) -> Result<Vec<u8>, ImportError> {
-    let fail = |message: String| ImportError::Read {
+    crate::files::read_bounded(path, limit).map_err(|message| ImportError::Read {
         path: path.into(),
-        message: format!("{}: {message}", path.display()),
-    };
-    let too_large = |len: u64| {
-        fail(format!(
-            "{len} bytes, more than the limit of {limit} for a mesh file"
-        ))
-    };
-    let file = std::fs::File::open(path).map_err(|e| fail(e.to_string()))?;
-    let len = file.metadata().map_err(|e| fail(e.to_string()))?.len();
-    if len > limit {
-        return Err(too_large(len));
-    }
-    let mut bytes = Vec::with_capacity(len as usize);
-    file.take(limit + 1)
-        .read_to_end(&mut bytes)
-        .map_err(|e| fail(e.to_string()))?;
-    if bytes.len() as u64 > limit {
-        return Err(too_large(bytes.len() as u64));
-    }
-    Ok(bytes)
+        message,
+    })
 }
 
 /// Why an export failed. Nothing was written at `path` (a temporary file is removed).

@@ -139,3 +139,50 @@ fn an_inline_outside_the_scenes_folder_is_refused_unless_allowed() {
     assert!(run.status.success(), "{stdout}\n{stderr}");
     assert!(stdout.contains("triangles"), "{stdout}");
 }
+
+#[cfg(unix)]
+#[test]
+fn a_fifo_in_the_scenes_folder_is_refused_instead_of_waited_on() {
+    let dir = scratch("render_fifo");
+    let part = dir.join("part.wrl");
+    let made = Command::new("mkfifo").arg(&part).status().unwrap();
+    assert!(made.success(), "mkfifo");
+    let scene = dir.join("scene.wrl");
+    std::fs::write(&scene, "#VRML V2.0 utf8\nInline { url \"part.wrl\" }\n").unwrap();
+    let out = dir.join("out");
+    // Run with a deadline of 400 polls 50 ms apart: before the fix the process waited on the FIFO forever.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sculpt"))
+        .args([
+            "render",
+            scene.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut polls = 0;
+    while child.try_wait().unwrap().is_none() {
+        polls += 1;
+        if polls > 400 {
+            child.kill().unwrap();
+            panic!("sculpt render waited on a FIFO for 20 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let run = child.wait_with_output().unwrap();
+    let stderr = text(&run.stderr);
+    assert!(!run.status.success(), "{stderr}");
+    assert!(stderr.contains("part.wrl"), "{stderr}");
+    assert!(stderr.contains("not a regular file"), "{stderr}");
+    // And the scene file itself may not be one either.
+    let refused = sculpt(&[
+        "render",
+        part.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!refused.status.success());
+    assert!(text(&refused.stderr).contains("not a regular file"));
+}
