@@ -227,6 +227,72 @@ fn the_demo_watermelons_rind_holds_a_resting_hand_then_pops() {
     );
 }
 
+/// A ball of radius 1 written the way the thesis writes physics: a tension and nothing else.
+const TENSION_ONLY_BALL: &str = r#"#VRML V2.0 utf8
+DEF Ball FShape {
+  geometry FGeometry { definition "1-sqrt(x^2+y^2+z^2)" bboxSize 2.2 2.2 2.2 }
+  physics FPhysics { surface FSurface { tension FTension { definition "1" } } }
+}
+"#;
+
+#[test]
+fn a_ball_with_tension_and_no_depth_pushes_out_within_the_zone_the_device_sets() {
+    let dir = scratch("tension-only");
+    let scene = dir.join("ball.wrl");
+    let at = |y: f64| DVec3::new(0.0, y, 0.0);
+    // Down onto the top of the ball, a rest 0.03 inside, then on to 0.15 inside.
+    let rows = [
+        (0.0, at(1.2)),
+        (0.3, at(1.2)),
+        (1.3, at(0.97)),
+        (1.8, at(0.97)),
+        (2.8, at(0.85)),
+        (3.3, at(0.85)),
+    ];
+    let path_csv = csv(&rows);
+    std::fs::write(&scene, TENSION_ONLY_BALL).unwrap();
+    let (input, output) = (dir.join("in.csv"), dir.join("out.csv"));
+    std::fs::write(&input, &path_csv).unwrap();
+    let run = sculpt_touch(&scene, &input, &output, &[]);
+    let stdout = text(&run.stdout);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    // The zone is fitted around the ball (22 scene units per device metre) and the Falcon's
+    // 8 N at 3000 N/m sets the zone 2.67 mm deep: 0.0587 scene units.
+    assert!(
+        stdout.contains("surface zone where no FDepth is given: 2.67 mm at the device, 0.0587"),
+        "{stdout}"
+    );
+    let forces = touch_support::read_forces(&output);
+    let max = DeviceModel::Falcon.capabilities().force_newtons_max;
+    assert!(forces.iter().all(|(_, f)| f.length() <= max + 1e-9));
+    // Resting 0.03 inside, about half way into the zone: pushed out (up) with about half
+    // the device's force.
+    let resting = forces[1790].1;
+    assert!(
+        resting.y > 0.4 * max && resting.y < 0.6 * max,
+        "resting in the zone: {resting}"
+    );
+    assert!(
+        resting.y > 0.99 * resting.length(),
+        "along the normal: {resting}"
+    );
+    // Past the zone the membrane popped: nothing pushes.
+    assert!(forces[3290].1.length() < 1e-3, "{}", forces[3290].1);
+
+    // An explicit depth overrides the device's: 0.2 deep, the second rest is still in it.
+    let deep = TENSION_ONLY_BALL.replace(
+        "definition \"1\" } }",
+        "definition \"1\" } depth FDepth { definition \"0.2\" } }",
+    );
+    std::fs::write(&scene, deep).unwrap();
+    let forces = touch(&dir, &scene, &path_csv, &[]);
+    assert!(
+        forces[3290].1.y > 0.9 * max,
+        "still in the given zone: {}",
+        forces[3290].1
+    );
+}
+
 #[test]
 fn bad_paths_and_scenes_are_errors_with_their_location_and_write_nothing() {
     let dir = scratch("bad");

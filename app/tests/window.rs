@@ -549,6 +549,14 @@ fn touching_with_the_mouse_runs_the_servo_on_the_scene_and_the_rind_pushes_back(
     assert!(touch["n_ticks"].as_u64().unwrap() > 200, "{touch}");
     let force = numbers(&touch["steady_force"], "steady force");
     assert!(force[1] > 1.0 && force[1] <= 8.0, "{touch}");
+    // The Touch section says how deep the device's surface zone is where an object gives no
+    // depth: a Falcon-class 8 N at 3000 N/m.
+    assert!(
+        touch["zone_depth"]
+            .as_str()
+            .is_some_and(|s| s.contains("where no FDepth is given: 2.67 mm at the device")),
+        "{touch}"
+    );
     assert!(run.stdout.contains("scripted touch: on"), "{}", run.stdout);
     // Other peers are shown the tool where it is: the scene's point in the renderer's world
     // (+z up: the scene's y is the renderer's z).
