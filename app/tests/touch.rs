@@ -294,6 +294,74 @@ fn a_ball_with_tension_and_no_depth_pushes_out_within_the_zone_the_device_sets()
 }
 
 #[test]
+fn figure_7_8s_campus_container_is_felt_on_the_campus_it_is_grouped_with() {
+    // Figure 7.8 as printed, its remote campus (`Inline`, not fetched) replaced by a local
+    // stand-in: one building, a box 1 wide and 1 high on the origin. The physics-only FShape
+    // (geometry "0", tension "1", friction "0.3", no depth) makes it tangible.
+    let dir = scratch("figure-7-8");
+    let printed = std::fs::read_to_string(scene_file("figure_7_8.wrl")).unwrap();
+    let remote = "http://cospace.sce.ntu.edu.sg/vircampus/enter.wrl";
+    assert!(printed.contains(remote));
+    let scene = dir.join("figure_7_8.wrl");
+    std::fs::write(&scene, printed.replace(remote, "enter.wrl")).unwrap();
+    std::fs::write(
+        dir.join("enter.wrl"),
+        "#VRML V2.0 utf8\nShape { geometry Box { size 1 1 1 } }\n",
+    )
+    .unwrap();
+    // Down onto the roof (y = 0.5), a rest 0.013 in (half the device's zone: the zone
+    // spans the box at 10 scene units per device metre), a slide along +x at that depth,
+    // and a rest.
+    let at = |x: f64, y: f64| DVec3::new(x, y, 0.0);
+    let rows = [
+        (0.0, at(0.0, 0.7)),
+        (0.3, at(0.0, 0.7)),
+        (1.3, at(0.0, 0.487)),
+        (1.8, at(0.0, 0.487)),
+        (2.8, at(0.3, 0.487)),
+        (3.3, at(0.3, 0.487)),
+    ];
+    let (input, output) = (dir.join("in.csv"), dir.join("out.csv"));
+    std::fs::write(&input, csv(&rows)).unwrap();
+    let run = sculpt_touch(&scene, &input, &output, &[]);
+    let stderr = text(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("gives its physics to the 1 shapes grouped with it"),
+        "{stderr}"
+    );
+    assert!(
+        text(&run.stdout).contains("1 objects felt"),
+        "{}",
+        text(&run.stdout)
+    );
+    let forces = touch_support::read_forces(&output);
+    let max = DeviceModel::Falcon.capabilities().force_newtons_max;
+    assert!(forces.iter().all(|(_, f)| f.length() <= max + 1e-9));
+    // Tension: resting half way into the zone, pushed up with about half the device's force.
+    let resting = forces[1790].1;
+    assert!(
+        resting.y > 0.4 * max && resting.y < 0.6 * max && resting.x.abs() < 1e-6,
+        "resting on the roof: {resting}"
+    );
+    // Friction: sliding along +x, a force against the motion 0.3 of the push.
+    for k in [2300, 2500, 2700] {
+        let f = forces[k].1;
+        assert!(f.y > 0.4 * max, "tick {k}: still pushed out: {f}");
+        assert!(
+            (-f.x / f.y - 0.3).abs() < 0.03,
+            "tick {k}: friction 0.3 against the slide: {f}"
+        );
+    }
+    // At rest again friction fades: only the push.
+    assert!(
+        forces[3290].1.x.abs() < 0.05 * forces[3290].1.y,
+        "{}",
+        forces[3290].1
+    );
+}
+
+#[test]
 fn bad_paths_and_scenes_are_errors_with_their_location_and_write_nothing() {
     let dir = scratch("bad");
     let (input, output) = (dir.join("in.csv"), dir.join("out.csv"));

@@ -183,9 +183,114 @@ fn figure_7_8_loads_as_printed() {
     assert_eq!(lines_of(w, "EXTERNPROTO `Chat`"), vec![30]);
     assert_eq!(lines_of(w, "`Script` node skipped"), vec![27, 33, 38, 43]);
     assert_eq!(warning_line(w, "`TextToSpeech` node skipped"), 36);
-    // The Script after a PROTO without a body is still found: nothing else went wrong.
+    // The Script after a PROTO without a body is still found: nothing else went wrong (its
+    // Inline, the campus it makes tangible, is remote: it is kept as written).
     assert_eq!(w.len(), 16, "{w:#?}");
     assert_round_trip(&loaded.scene);
+}
+
+/// Figure 7.8's physics-only `FShape` as printed, grouped with a local campus instead of the
+/// remote one: its physics goes to every shape of the group that has none (through nested
+/// groups and Inline files too), the carrier leaves the scene, and shapes with physics of
+/// their own, or outside the group, keep theirs.
+#[test]
+fn a_shapeless_fshape_gives_its_physics_to_the_shapes_grouped_with_it() {
+    let carrier_start = FIGURE_7_8.find(" FShape").unwrap();
+    let carrier_end = FIGURE_7_8.find(" Inline").unwrap();
+    let carrier = &FIGURE_7_8[carrier_start..carrier_end];
+    let text = format!(
+        "Group {{ children [\n{carrier}\n Inline {{ url \"campus.wrl\" }}\n \
+         Transform {{ translation 3 0 0 children Shape {{ geometry Sphere {{ }} }} }}\n \
+         FShape {{ geometry Box {{ }} physics FPhysics {{ density FDensity {{ definition \"0.5\" }} }} }}\n\
+         ] }}\nShape {{ geometry Cone {{ }} }}\n"
+    );
+    let campus = "Shape { geometry Box { size 1 2 1 } }\n\
+                  Shape { geometry IndexedFaceSet { coord Coordinate { point [0 0 0, 1 0 0, 0 1 0, 0 0 1] } \
+                  coordIndex [0 2 1 -1, 0 1 3 -1, 0 3 2 -1, 1 2 3 -1] } }\n";
+    let mut resolve = |path: &str| match path {
+        "campus.wrl" => Ok(campus.as_bytes().to_vec()),
+        _ => Err(format!("no file {path}")),
+    };
+    let loaded = fvrml::load(&text, &LoadOptions::default(), &mut resolve).unwrap();
+    let objs = objects(&loaded.scene);
+    // The box, the mesh and the sphere got the carrier's physics; the carrier is gone.
+    let tangible: Vec<ObjectId> = objs
+        .iter()
+        .filter(|o| o.2.is_tangible())
+        .map(|o| o.0)
+        .collect();
+    assert_eq!(objs.len(), 5, "{objs:#?}");
+    assert_eq!(
+        tangible,
+        [ObjectId(1), ObjectId(2), ObjectId(3), ObjectId(4)]
+    );
+    assert!(objs.iter().all(|o| o.0 != ObjectId(0)), "the carrier left");
+    for id in [1, 2, 3] {
+        let object = loaded.scene.object(ObjectId(id)).unwrap();
+        let p = &object.data().physics;
+        assert_eq!(p.tension.as_ref().unwrap().formula.as_str(), "1", "{id}");
+        assert_eq!(p.friction.as_ref().unwrap().formula.as_str(), "0.3", "{id}");
+        assert!(p.zone_depth.is_none() && p.density.is_none(), "{id}");
+    }
+    // A shape with physics of its own keeps it; the cone outside the group is not touched.
+    let own = &loaded.scene.object(ObjectId(4)).unwrap().data().physics;
+    assert!(own.tension.is_none() && own.density.is_some());
+    assert!(!loaded.scene.object(ObjectId(5)).unwrap().is_tangible());
+    let w = &loaded.warnings;
+    assert_eq!(
+        warning_line(w, "gives its physics to the 3 shapes grouped with it"),
+        1
+    );
+    // Saved, the shapes carry the physics themselves: loaded again, nothing is lent.
+    let again = load(&fvrml::write(&fvrml::save(&loaded.scene)));
+    assert!(again.warnings.is_empty(), "{:#?}", again.warnings);
+    let data = |scene: &Scene| -> Vec<ObjectData> {
+        scene
+            .objects()
+            .map(|(_, o)| o.object.data().clone())
+            .collect()
+    };
+    assert_eq!(data(&again.scene), data(&loaded.scene));
+}
+
+/// A shape defined as the constant 0 with physics, saved from a scene where it gave nothing
+/// (here, made in code), loads back as it was: saving writes it `bboxSize -1 -1 -1`, which
+/// no carrier has.
+#[test]
+fn a_zero_shape_with_physics_saved_in_a_group_loads_back_as_it_was() {
+    let mut scene = Scene::new();
+    let group = fdsl::scene::Group {
+        name: "campus".into(),
+        parent: None,
+        transform: fdsl::object::Transform::IDENTITY,
+    };
+    scene.set_group(GroupId(0), group).unwrap();
+    let formula = |text: &str| fdsl::object::Formula::new(text).unwrap();
+    let zero = ObjectData {
+        geometry: Some(fdsl::object::Geometry::implicit(formula("0"))),
+        physics: fdsl::object::Physics {
+            tension: Some(fdsl::object::Property::new(formula("1"))),
+            ..fdsl::object::Physics::default()
+        }
+        .into(),
+        ..ObjectData::default()
+    };
+    let building = ObjectData {
+        geometry: Some(fdsl::object::Geometry::implicit_in(
+            formula("0.5-abs(x)"),
+            fdsl::object::Domain::new(DVec3::ZERO, DVec3::ONE),
+        )),
+        ..ObjectData::default()
+    };
+    for (id, data) in [zero, building].into_iter().enumerate() {
+        let object = Object::new(data).unwrap();
+        scene
+            .insert_object(ObjectId(id as u64), object, Some(GroupId(0)))
+            .unwrap();
+    }
+    let text = fvrml::write(&fvrml::save(&scene));
+    assert!(text.contains("bboxSize -1 -1 -1"), "{text}");
+    assert_round_trip(&scene);
 }
 
 #[test]

@@ -114,6 +114,7 @@ fn run(
         edit_cache: BTreeMap::new(),
         n_edits: 0,
         n_stamps: 0,
+        carriers: std::collections::BTreeSet::new(),
     };
     let scope = Scope::new(doc, 0, None);
     let place = Place {
@@ -188,6 +189,8 @@ struct Loader<'r> {
     n_edits: usize,
     /// Stamps the compiled edits expand to (bounded by [`MAX_LOAD_STAMPS`]).
     n_stamps: usize,
+    /// Objects written as shapeless `FShape`s that give their group physics (`lend.rs`).
+    carriers: std::collections::BTreeSet<u64>,
 }
 
 impl Loader<'_> {
@@ -445,6 +448,9 @@ impl Loader<'_> {
             return;
         }
         let id = self.next_object;
+        if super::lend::written_as_carrier(scope, node) {
+            self.carriers.insert(id);
+        }
         match self.scene.insert_object(ObjectId(id), object, place.group) {
             Ok(()) => match id.checked_add(1) {
                 Some(next) => self.next_object = next,
@@ -470,6 +476,7 @@ impl Loader<'_> {
         let Some(inner) = self.enter(scope, node, place, group) else {
             return;
         };
+        let first_object = self.next_object;
         for field in children {
             match &field.value {
                 Value::NodeList(list) => {
@@ -485,6 +492,16 @@ impl Loader<'_> {
                     "`children` should be a list of nodes",
                 ),
             }
+        }
+        self.lend_physics(scope, node, inner.group, first_object);
+    }
+
+    /// A shapeless `FShape`'s physics for the shapes grouped with it ([`super::lend`]).
+    fn lend_physics(&mut self, scope: &Scope<'_>, node: &Node, group: Option<GroupId>, first: u64) {
+        let ids = first..self.next_object;
+        let lent = super::lend::lend_physics(&mut self.scene, group, ids, &self.carriers);
+        for message in lent.messages() {
+            self.warning(scope, node.pos, message);
         }
     }
 

@@ -76,6 +76,7 @@
 mod document;
 mod edit;
 mod grid;
+mod lend;
 mod lexer;
 mod load;
 mod parser;
