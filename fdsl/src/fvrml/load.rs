@@ -114,6 +114,7 @@ fn run(
         edit_cache: BTreeMap::new(),
         n_edits: 0,
         n_stamps: 0,
+        fit_work_left: super::MAX_LOAD_FIT_WORK,
         carriers: std::collections::BTreeSet::new(),
     };
     let scope = Scope::new(doc, 0, None);
@@ -189,6 +190,8 @@ struct Loader<'r> {
     n_edits: usize,
     /// Stamps the compiled edits expand to (bounded by [`MAX_LOAD_STAMPS`]).
     n_stamps: usize,
+    /// What is left of [`super::MAX_LOAD_FIT_WORK`] for fitting domains.
+    fit_work_left: u64,
     /// Objects written as shapeless `FShape`s that give their group physics (`lend.rs`).
     carriers: std::collections::BTreeSet<u64>,
 }
@@ -265,6 +268,11 @@ impl Loader<'_> {
         data.grids = self.grids(scope, &grid_nodes).into();
         let object = match Object::new(data) {
             Ok(mut object) => {
+                let left = &mut self.fit_work_left;
+                for (slot, why) in super::fitted::fit_domains(&mut object, scope, node, left) {
+                    let pos = positions.get(&slot).copied().unwrap_or(node.pos);
+                    self.warning(scope, pos, why.to_string());
+                }
                 self.apply_edits(scope, &mut object, &edit_nodes);
                 Some(object)
             }

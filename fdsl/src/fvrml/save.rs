@@ -187,8 +187,8 @@ fn geometry(g: &Geometry) -> Node {
     }
     match &g.domain {
         Some(d) => write_domain(d, &mut fields),
-        // Said on purpose, so that a constant 0 loads back as written, not as physics for
-        // its group (`lend.rs`).
+        // Said on purpose, so that loading neither fits one (`fitted.rs`) nor reads a
+        // constant 0 as physics for its group (`lend.rs`).
         None if matches!(g.shape, Shape::Implicit(_)) => {
             fields.push(numbers("bboxSize", &[-1.0; 3]));
         }
