@@ -142,6 +142,7 @@ fn figure_7_4_loads_as_printed() {
         20
     );
     assert_eq!(warning_line(w, "typographic quotes"), 3);
+    assert_eq!(warning_line(w, "`friction` belongs in the surface"), 9);
     assert_round_trip(&loaded.scene);
 }
 
@@ -307,7 +308,7 @@ fn a_solid_without_a_bbox_gets_the_domain_new_fits_and_an_unbounded_one_says_why
     let ball = "0.3-sqrt((x-1)^2+y^2+z^2)";
     let text = format!(
         "FShape {{ geometry FGeometry {{ definition \"{ball}\" }}\n\
-         physics FPhysics {{ tension FTension {{ definition \"1\" }}\n\
+         physics FPhysics {{ surface FSurface {{ tension FTension {{ definition \"1\" }} }}\n\
          container FGeometry {{ definition \"0.5-sqrt(x^2+y^2+z^2)\" }} }} }}\n\
          FShape {{ geometry FGeometry {{ definition \"x\" }} }}\n\
          FShape {{ geometry FGeometry {{ definition \"-1-x^2\" }} }}\n"
@@ -878,7 +879,7 @@ fn saving_a_rich_scene_keeps_everything() {
 #[test]
 fn strings_opened_straight_and_closed_typographic_read_as_printed() {
     let text = "FShape {\n  geometry FGeometry { definition \"1-x^2-y^2-z^2” }\n  \
-                physics FPhysics { tension FTension { definition \"0.8” } }\n}\n";
+                physics FPhysics { surface FSurface { tension FTension { definition \"0.8” } } }\n}\n";
     let loaded = load(text);
     assert_eq!(loaded.warnings.len(), 1, "{:#?}", loaded.warnings);
     assert!(
