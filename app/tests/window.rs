@@ -838,6 +838,69 @@ fn a_corrupt_store_is_shown_as_an_error_and_left_as_it_was() {
 }
 
 #[test]
+fn an_invite_join_and_a_locked_store_say_what_happened_in_the_status_line() {
+    let display = display();
+    let dir = scratch("opening");
+    let invite = sculpt(None, &["invite"]);
+    assert!(invite.status.success());
+    let code = text(&invite.stdout).trim().to_string();
+    // Joined by invite on a new store: no demo of ours was authored into the session.
+    let joined = dir.join("joined");
+    let (state, _, _) = window_with(
+        &display,
+        &dir,
+        "joined",
+        &[
+            "--store",
+            joined.to_str().unwrap(),
+            "--invite",
+            &code,
+            "--no-lan",
+            "--exit-when-idle",
+        ],
+    );
+    assert_eq!(
+        state["status"], "new store: joined the session; its objects come from its peers",
+        "{state}"
+    );
+    assert_eq!(state["n_ops"], 0, "{state}");
+    // A store another process holds: the window works in memory and says why, once.
+    let locked = dir.join("locked");
+    let mut peer = HeadlessPeer::spawn(&[
+        "--store",
+        locked.to_str().unwrap(),
+        "--no-lan",
+        "--listen",
+        "127.0.0.1:0",
+        "--json",
+    ]);
+    peer.wait_for("the peer to run", |v| v["ops"].is_number());
+    let (state, _, _) = window_with(
+        &display,
+        &dir,
+        "locked",
+        &[
+            "--store",
+            locked.to_str().unwrap(),
+            "--no-lan",
+            "--exit-when-idle",
+        ],
+    );
+    assert_eq!(
+        state["status"], "in memory, the store cannot be used: the demo scene was authored",
+        "{state}"
+    );
+    let error = state["store_error"].as_str().unwrap();
+    assert_eq!(
+        error.matches("in use by another sculpt process").count(),
+        1,
+        "{error}"
+    );
+    let holder = format!("pid {}", peer.child.id());
+    assert_eq!(error.matches(&holder).count(), 1, "{error}");
+}
+
+#[test]
 fn without_a_display_the_window_says_so_and_points_at_the_headless_commands() {
     let dir = scratch("nodisplay");
     let store = dir.join("store");
