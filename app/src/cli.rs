@@ -649,6 +649,7 @@ pub fn touch_command(args: &TouchArgs) -> anyhow::Result<()> {
         c.y,
         c.z
     );
+    println!("{}", app::touch::zone_depth_text(&caps, &zone));
     println!(
         "{n_felt} objects felt; wrote {} ({} ticks, peak {peak:.3} N)",
         args.out.display(),

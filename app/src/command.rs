@@ -625,4 +625,75 @@ mod tests {
         let err = plan(Command::New("x"), &s, None).unwrap_err();
         assert!(err.contains("unbounded"), "{err}");
     }
+    /// One rule for a solid made without a domain: the same bounded formula gets the same
+    /// domain, bit for bit, from `new:`, from an FVRML file without `bboxSize` (as an import
+    /// plans it), and from a peer (the import's op over the wire and through another log, whose
+    /// scene hashes alike); an unbounded one is refused everywhere with the same words.
+    #[test]
+    fn the_same_bounded_formula_gets_the_same_domain_from_new_a_file_and_a_peer() {
+        use replication::Payload as _;
+        let (s, _) = session();
+        let formula = "0.3-sqrt((x-1)^2+y^2+z^2)";
+        let domain_of = |payload: &ShapePayload| match payload {
+            ShapePayload::Create { data, .. } => data.geometry.as_ref().unwrap().domain.unwrap(),
+            other => panic!("{other:?}"),
+        };
+        let bits =
+            |d: fdsl::object::Domain| [d.center, d.size].map(|v| v.to_array().map(f64::to_bits));
+        let from_new = domain_of(&plan(Command::New(formula), &s, None).unwrap().payload);
+
+        let text = format!("FShape {{ geometry FGeometry {{ definition \"{formula}\" }} }}");
+        let mut no_files = |path: &str| Err(format!("no file {path}"));
+        let options = fdsl::fvrml::LoadOptions::default();
+        let loaded = fdsl::fvrml::load(&text, &options, &mut no_files).unwrap();
+        assert!(loaded.warnings.is_empty(), "{:?}", loaded.warnings);
+        let path = std::path::Path::new("ball.wrl");
+        let imported = crate::transfer::scene_payloads(path, &loaded.scene, s.next_object())
+            .unwrap()
+            .payloads;
+        let create = imported.last().unwrap();
+        assert_eq!(bits(domain_of(create)), bits(from_new));
+
+        // A peer decodes the op's bytes and folds it into its own log.
+        let mut bytes = Vec::new();
+        create.encode(&mut bytes);
+        let decoded = ShapePayload::decode(&bytes).unwrap();
+        assert_eq!(bits(domain_of(&decoded)), bits(from_new));
+        // Authored by the session's peer, whose ids the import took.
+        let (a, b) = (
+            replication::Keypair::from_seed([3; 32]),
+            replication::Keypair::from_seed([5; 32]),
+        );
+        let mut log_a = replication::Log::default();
+        log_a.author(&a, Timestamp(2_000_000), decoded).unwrap();
+        let mut log_b = replication::Log::default();
+        log_b.merge(Timestamp(2_000_001), &log_a).unwrap();
+        let mut view_a = View::new(a.peer_id(), &log_a).unwrap();
+        let mut view_b = View::new(b.peer_id(), &log_b).unwrap();
+        assert_eq!(view_a.scene_hash_hex(), view_b.scene_hash_hex());
+        let (_, on_b) = view_b.scene().objects().next().unwrap();
+        let domain = on_b
+            .object
+            .data()
+            .geometry
+            .as_ref()
+            .unwrap()
+            .domain
+            .unwrap();
+        assert_eq!(bits(domain), bits(from_new));
+
+        // Unbounded: `new:` refuses it, the file keeps it without a domain and says the same,
+        // and the renderer says the same again.
+        let unbounded = fdsl::object::FitError::Unbounded.to_string();
+        let err = plan(Command::New("x"), &s, None).unwrap_err();
+        assert_eq!(err, format!("new: {unbounded}"));
+        let text = "FShape { geometry FGeometry { definition \"x\" } }";
+        let loaded = fdsl::fvrml::load(text, &options, &mut no_files).unwrap();
+        assert_eq!(loaded.warnings.len(), 1, "{:?}", loaded.warnings);
+        assert!(
+            loaded.warnings[0].message.ends_with(&unbounded),
+            "{:?}",
+            loaded.warnings
+        );
+    }
 }

@@ -227,6 +227,140 @@ fn the_demo_watermelons_rind_holds_a_resting_hand_then_pops() {
     );
 }
 
+/// A ball of radius 1 written the way the thesis writes physics: a tension and nothing else.
+const TENSION_ONLY_BALL: &str = r#"#VRML V2.0 utf8
+DEF Ball FShape {
+  geometry FGeometry { definition "1-sqrt(x^2+y^2+z^2)" bboxSize 2.2 2.2 2.2 }
+  physics FPhysics { surface FSurface { tension FTension { definition "1" } } }
+}
+"#;
+
+#[test]
+fn a_ball_with_tension_and_no_depth_pushes_out_within_the_zone_the_device_sets() {
+    let dir = scratch("tension-only");
+    let scene = dir.join("ball.wrl");
+    let at = |y: f64| DVec3::new(0.0, y, 0.0);
+    // Down onto the top of the ball, a rest 0.03 inside, then on to 0.15 inside.
+    let rows = [
+        (0.0, at(1.2)),
+        (0.3, at(1.2)),
+        (1.3, at(0.97)),
+        (1.8, at(0.97)),
+        (2.8, at(0.85)),
+        (3.3, at(0.85)),
+    ];
+    let path_csv = csv(&rows);
+    std::fs::write(&scene, TENSION_ONLY_BALL).unwrap();
+    let (input, output) = (dir.join("in.csv"), dir.join("out.csv"));
+    std::fs::write(&input, &path_csv).unwrap();
+    let run = sculpt_touch(&scene, &input, &output, &[]);
+    let stdout = text(&run.stdout);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    // The zone is fitted around the ball (22 scene units per device metre) and the Falcon's
+    // 8 N at 3000 N/m sets the zone 2.67 mm deep: 0.0587 scene units.
+    assert!(
+        stdout.contains("surface zone where no FDepth is given: 2.67 mm at the device, 0.0587"),
+        "{stdout}"
+    );
+    let forces = touch_support::read_forces(&output);
+    let max = DeviceModel::Falcon.capabilities().force_newtons_max;
+    assert!(forces.iter().all(|(_, f)| f.length() <= max + 1e-9));
+    // Resting 0.03 inside, about half way into the zone: pushed out (up) with about half
+    // the device's force.
+    let resting = forces[1790].1;
+    assert!(
+        resting.y > 0.4 * max && resting.y < 0.6 * max,
+        "resting in the zone: {resting}"
+    );
+    assert!(
+        resting.y > 0.99 * resting.length(),
+        "along the normal: {resting}"
+    );
+    // Past the zone the membrane popped: nothing pushes.
+    assert!(forces[3290].1.length() < 1e-3, "{}", forces[3290].1);
+
+    // An explicit depth overrides the device's: 0.2 deep, the second rest is still in it.
+    let deep = TENSION_ONLY_BALL.replace(
+        "definition \"1\" } }",
+        "definition \"1\" } depth FDepth { definition \"0.2\" } }",
+    );
+    std::fs::write(&scene, deep).unwrap();
+    let forces = touch(&dir, &scene, &path_csv, &[]);
+    assert!(
+        forces[3290].1.y > 0.9 * max,
+        "still in the given zone: {}",
+        forces[3290].1
+    );
+}
+
+#[test]
+fn figure_7_8s_campus_container_is_felt_on_the_campus_it_is_grouped_with() {
+    // Figure 7.8 as printed, its remote campus (`Inline`, not fetched) replaced by a local
+    // stand-in: one building, a box 1 wide and 1 high on the origin. The physics-only FShape
+    // (geometry "0", tension "1", friction "0.3", no depth) makes it tangible.
+    let dir = scratch("figure-7-8");
+    let printed = std::fs::read_to_string(scene_file("figure_7_8.wrl")).unwrap();
+    let remote = "http://cospace.sce.ntu.edu.sg/vircampus/enter.wrl";
+    assert!(printed.contains(remote));
+    let scene = dir.join("figure_7_8.wrl");
+    std::fs::write(&scene, printed.replace(remote, "enter.wrl")).unwrap();
+    std::fs::write(
+        dir.join("enter.wrl"),
+        "#VRML V2.0 utf8\nShape { geometry Box { size 1 1 1 } }\n",
+    )
+    .unwrap();
+    // Down onto the roof (y = 0.5), a rest 0.013 in (half the device's zone: the zone
+    // spans the box at 10 scene units per device metre), a slide along +x at that depth,
+    // and a rest.
+    let at = |x: f64, y: f64| DVec3::new(x, y, 0.0);
+    let rows = [
+        (0.0, at(0.0, 0.7)),
+        (0.3, at(0.0, 0.7)),
+        (1.3, at(0.0, 0.487)),
+        (1.8, at(0.0, 0.487)),
+        (2.8, at(0.3, 0.487)),
+        (3.3, at(0.3, 0.487)),
+    ];
+    let (input, output) = (dir.join("in.csv"), dir.join("out.csv"));
+    std::fs::write(&input, csv(&rows)).unwrap();
+    let run = sculpt_touch(&scene, &input, &output, &[]);
+    let stderr = text(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("gives its physics to the 1 shapes grouped with it"),
+        "{stderr}"
+    );
+    assert!(
+        text(&run.stdout).contains("1 objects felt"),
+        "{}",
+        text(&run.stdout)
+    );
+    let forces = touch_support::read_forces(&output);
+    let max = DeviceModel::Falcon.capabilities().force_newtons_max;
+    assert!(forces.iter().all(|(_, f)| f.length() <= max + 1e-9));
+    // Tension: resting half way into the zone, pushed up with about half the device's force.
+    let resting = forces[1790].1;
+    assert!(
+        resting.y > 0.4 * max && resting.y < 0.6 * max && resting.x.abs() < 1e-6,
+        "resting on the roof: {resting}"
+    );
+    // Friction: sliding along +x, a force against the motion 0.3 of the push.
+    for k in [2300, 2500, 2700] {
+        let f = forces[k].1;
+        assert!(f.y > 0.4 * max, "tick {k}: still pushed out: {f}");
+        assert!(
+            (-f.x / f.y - 0.3).abs() < 0.03,
+            "tick {k}: friction 0.3 against the slide: {f}"
+        );
+    }
+    // At rest again friction fades: only the push.
+    assert!(
+        forces[3290].1.x.abs() < 0.05 * forces[3290].1.y,
+        "{}",
+        forces[3290].1
+    );
+}
+
 #[test]
 fn bad_paths_and_scenes_are_errors_with_their_location_and_write_nothing() {
     let dir = scratch("bad");

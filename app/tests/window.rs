@@ -549,6 +549,14 @@ fn touching_with_the_mouse_runs_the_servo_on_the_scene_and_the_rind_pushes_back(
     assert!(touch["n_ticks"].as_u64().unwrap() > 200, "{touch}");
     let force = numbers(&touch["steady_force"], "steady force");
     assert!(force[1] > 1.0 && force[1] <= 8.0, "{touch}");
+    // The Touch section says how deep the device's surface zone is where an object gives no
+    // depth: a Falcon-class 8 N at 3000 N/m.
+    assert!(
+        touch["zone_depth"]
+            .as_str()
+            .is_some_and(|s| s.contains("where no FDepth is given: 2.67 mm at the device")),
+        "{touch}"
+    );
     assert!(run.stdout.contains("scripted touch: on"), "{}", run.stdout);
     // Other peers are shown the tool where it is: the scene's point in the renderer's world
     // (+z up: the scene's y is the renderer's z).
@@ -827,6 +835,69 @@ fn a_corrupt_store_is_shown_as_an_error_and_left_as_it_was() {
         "{state}"
     );
     assert_eq!(std::fs::read(store.join("ops.sculpt")).unwrap(), garbage);
+}
+
+#[test]
+fn an_invite_join_and_a_locked_store_say_what_happened_in_the_status_line() {
+    let display = display();
+    let dir = scratch("opening");
+    let invite = sculpt(None, &["invite"]);
+    assert!(invite.status.success());
+    let code = text(&invite.stdout).trim().to_string();
+    // Joined by invite on a new store: no demo of ours was authored into the session.
+    let joined = dir.join("joined");
+    let (state, _, _) = window_with(
+        &display,
+        &dir,
+        "joined",
+        &[
+            "--store",
+            joined.to_str().unwrap(),
+            "--invite",
+            &code,
+            "--no-lan",
+            "--exit-when-idle",
+        ],
+    );
+    assert_eq!(
+        state["status"], "new store: joined the session; its objects come from its peers",
+        "{state}"
+    );
+    assert_eq!(state["n_ops"], 0, "{state}");
+    // A store another process holds: the window works in memory and says why, once.
+    let locked = dir.join("locked");
+    let mut peer = HeadlessPeer::spawn(&[
+        "--store",
+        locked.to_str().unwrap(),
+        "--no-lan",
+        "--listen",
+        "127.0.0.1:0",
+        "--json",
+    ]);
+    peer.wait_for("the peer to run", |v| v["ops"].is_number());
+    let (state, _, _) = window_with(
+        &display,
+        &dir,
+        "locked",
+        &[
+            "--store",
+            locked.to_str().unwrap(),
+            "--no-lan",
+            "--exit-when-idle",
+        ],
+    );
+    assert_eq!(
+        state["status"], "in memory, the store cannot be used: the demo scene was authored",
+        "{state}"
+    );
+    let error = state["store_error"].as_str().unwrap();
+    assert_eq!(
+        error.matches("in use by another sculpt process").count(),
+        1,
+        "{error}"
+    );
+    let holder = format!("pid {}", peer.child.id());
+    assert_eq!(error.matches(&holder).count(), 1, "{error}");
 }
 
 #[test]

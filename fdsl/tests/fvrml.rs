@@ -7,8 +7,8 @@ use std::collections::BTreeMap;
 use fdsl::Severity;
 use fdsl::fvrml::{self, Issue, LoadOptions, Loaded};
 use fdsl::object::{
-    Axis, ColorDef, ColorSlot, Edit, EditOp, Object, ObjectData, PaintValue, Paintable,
-    ParametricKind, Pose, Shape, ToolShape,
+    Axis, ColorDef, ColorSlot, Edit, EditOp, FitError, Object, ObjectData, PaintValue, Paintable,
+    ParametricKind, Pose, Shape, ToolShape, fit_domain,
 };
 use fdsl::scene::{GroupId, ObjectId, Scene};
 use glam::{DQuat, DVec3};
@@ -60,12 +60,18 @@ fn lines_of(issues: &[Issue], text: &str) -> Vec<u32> {
 }
 
 /// Saving, writing, parsing and loading again gives the same scene, and saving that again
-/// gives the same text.
+/// gives the same text; the only warnings are about solids no domain fits (an unbounded
+/// solid says so on every load).
 fn assert_round_trip(scene: &Scene) {
     let text = fvrml::write(&fvrml::save(scene));
     let again = load(&text);
     assert_eq!(&again.scene, scene, "scene changed through:\n{text}");
-    assert!(again.warnings.is_empty(), "{:#?}", again.warnings);
+    let other: Vec<&Issue> = again
+        .warnings
+        .iter()
+        .filter(|w| !w.message.starts_with("no domain fits"))
+        .collect();
+    assert!(other.is_empty(), "{other:#?}");
     assert_eq!(fvrml::write(&fvrml::save(&again.scene)), text);
 }
 
@@ -136,6 +142,7 @@ fn figure_7_4_loads_as_printed() {
         20
     );
     assert_eq!(warning_line(w, "typographic quotes"), 3);
+    assert_eq!(warning_line(w, "`friction` belongs in the surface"), 9);
     assert_round_trip(&loaded.scene);
 }
 
@@ -183,8 +190,150 @@ fn figure_7_8_loads_as_printed() {
     assert_eq!(lines_of(w, "EXTERNPROTO `Chat`"), vec![30]);
     assert_eq!(lines_of(w, "`Script` node skipped"), vec![27, 33, 38, 43]);
     assert_eq!(warning_line(w, "`TextToSpeech` node skipped"), 36);
-    // The Script after a PROTO without a body is still found: nothing else went wrong.
+    // The Script after a PROTO without a body is still found: nothing else went wrong (its
+    // Inline, the campus it makes tangible, is remote: it is kept as written).
     assert_eq!(w.len(), 16, "{w:#?}");
+    assert_round_trip(&loaded.scene);
+}
+
+/// Figure 7.8's physics-only `FShape` as printed, grouped with a local campus instead of the
+/// remote one: its physics goes to every shape of the group that has none (through nested
+/// groups and Inline files too), the carrier leaves the scene, and shapes with physics of
+/// their own, or outside the group, keep theirs.
+#[test]
+fn a_shapeless_fshape_gives_its_physics_to_the_shapes_grouped_with_it() {
+    let carrier_start = FIGURE_7_8.find(" FShape").unwrap();
+    let carrier_end = FIGURE_7_8.find(" Inline").unwrap();
+    let carrier = &FIGURE_7_8[carrier_start..carrier_end];
+    let text = format!(
+        "Group {{ children [\n{carrier}\n Inline {{ url \"campus.wrl\" }}\n \
+         Transform {{ translation 3 0 0 children Shape {{ geometry Sphere {{ }} }} }}\n \
+         FShape {{ geometry Box {{ }} physics FPhysics {{ density FDensity {{ definition \"0.5\" }} }} }}\n\
+         ] }}\nShape {{ geometry Cone {{ }} }}\n"
+    );
+    let campus = "Shape { geometry Box { size 1 2 1 } }\n\
+                  Shape { geometry IndexedFaceSet { coord Coordinate { point [0 0 0, 1 0 0, 0 1 0, 0 0 1] } \
+                  coordIndex [0 2 1 -1, 0 1 3 -1, 0 3 2 -1, 1 2 3 -1] } }\n";
+    let mut resolve = |path: &str| match path {
+        "campus.wrl" => Ok(campus.as_bytes().to_vec()),
+        _ => Err(format!("no file {path}")),
+    };
+    let loaded = fvrml::load(&text, &LoadOptions::default(), &mut resolve).unwrap();
+    let objs = objects(&loaded.scene);
+    // The box, the mesh and the sphere got the carrier's physics; the carrier is gone.
+    let tangible: Vec<ObjectId> = objs
+        .iter()
+        .filter(|o| o.2.is_tangible())
+        .map(|o| o.0)
+        .collect();
+    assert_eq!(objs.len(), 5, "{objs:#?}");
+    assert_eq!(
+        tangible,
+        [ObjectId(1), ObjectId(2), ObjectId(3), ObjectId(4)]
+    );
+    assert!(objs.iter().all(|o| o.0 != ObjectId(0)), "the carrier left");
+    for id in [1, 2, 3] {
+        let object = loaded.scene.object(ObjectId(id)).unwrap();
+        let p = &object.data().physics;
+        assert_eq!(p.tension.as_ref().unwrap().formula.as_str(), "1", "{id}");
+        assert_eq!(p.friction.as_ref().unwrap().formula.as_str(), "0.3", "{id}");
+        assert!(p.zone_depth.is_none() && p.density.is_none(), "{id}");
+    }
+    // A shape with physics of its own keeps it; the cone outside the group is not touched.
+    let own = &loaded.scene.object(ObjectId(4)).unwrap().data().physics;
+    assert!(own.tension.is_none() && own.density.is_some());
+    assert!(!loaded.scene.object(ObjectId(5)).unwrap().is_tangible());
+    let w = &loaded.warnings;
+    assert_eq!(
+        warning_line(w, "gives its physics to the 3 shapes grouped with it"),
+        1
+    );
+    // Saved, the shapes carry the physics themselves: loaded again, nothing is lent.
+    let again = load(&fvrml::write(&fvrml::save(&loaded.scene)));
+    assert!(again.warnings.is_empty(), "{:#?}", again.warnings);
+    let data = |scene: &Scene| -> Vec<ObjectData> {
+        scene
+            .objects()
+            .map(|(_, o)| o.object.data().clone())
+            .collect()
+    };
+    assert_eq!(data(&again.scene), data(&loaded.scene));
+}
+
+/// A shape defined as the constant 0 with physics, saved from a scene where it gave nothing
+/// (here, made in code), loads back as it was: saving writes it `bboxSize -1 -1 -1`, which
+/// no carrier has.
+#[test]
+fn a_zero_shape_with_physics_saved_in_a_group_loads_back_as_it_was() {
+    let mut scene = Scene::new();
+    let group = fdsl::scene::Group {
+        name: "campus".into(),
+        parent: None,
+        transform: fdsl::object::Transform::IDENTITY,
+    };
+    scene.set_group(GroupId(0), group).unwrap();
+    let formula = |text: &str| fdsl::object::Formula::new(text).unwrap();
+    let zero = ObjectData {
+        geometry: Some(fdsl::object::Geometry::implicit(formula("0"))),
+        physics: fdsl::object::Physics {
+            tension: Some(fdsl::object::Property::new(formula("1"))),
+            ..fdsl::object::Physics::default()
+        }
+        .into(),
+        ..ObjectData::default()
+    };
+    let building = ObjectData {
+        geometry: Some(fdsl::object::Geometry::implicit_in(
+            formula("0.5-abs(x)"),
+            fdsl::object::Domain::new(DVec3::ZERO, DVec3::ONE),
+        )),
+        ..ObjectData::default()
+    };
+    for (id, data) in [zero, building].into_iter().enumerate() {
+        let object = Object::new(data).unwrap();
+        scene
+            .insert_object(ObjectId(id as u64), object, Some(GroupId(0)))
+            .unwrap();
+    }
+    let text = fvrml::write(&fvrml::save(&scene));
+    assert!(text.contains("bboxSize -1 -1 -1"), "{text}");
+    assert_round_trip(&scene);
+}
+
+/// An implicit solid written without `bboxSize` gets the domain `new:` would fit to it (the
+/// geometry and a container alike); one that is unbounded or empty keeps none and says why
+/// at its definition, in `new:`'s words.
+#[test]
+fn a_solid_without_a_bbox_gets_the_domain_new_fits_and_an_unbounded_one_says_why() {
+    let ball = "0.3-sqrt((x-1)^2+y^2+z^2)";
+    let text = format!(
+        "FShape {{ geometry FGeometry {{ definition \"{ball}\" }}\n\
+         physics FPhysics {{ surface FSurface {{ tension FTension {{ definition \"1\" }} }}\n\
+         container FGeometry {{ definition \"0.5-sqrt(x^2+y^2+z^2)\" }} }} }}\n\
+         FShape {{ geometry FGeometry {{ definition \"x\" }} }}\n\
+         FShape {{ geometry FGeometry {{ definition \"-1-x^2\" }} }}\n"
+    );
+    let loaded = load(&text);
+    let fitted = |src: &str| fit_domain(&fdsl::Function::parse(src).unwrap().tape(), 0.0);
+    let objs = objects(&loaded.scene);
+    let data = objs[0].2.data();
+    assert_eq!(
+        data.geometry.as_ref().unwrap().domain,
+        Some(fitted(ball).unwrap())
+    );
+    let container = data.physics.container.as_ref().unwrap();
+    assert_eq!(
+        container.domain,
+        Some(fitted("0.5-sqrt(x^2+y^2+z^2)").unwrap())
+    );
+    assert!(objs[0].2.bounds().is_some());
+    for (k, e) in [(1, FitError::Unbounded), (2, FitError::Empty)] {
+        assert_eq!(objs[k].2.data().geometry.as_ref().unwrap().domain, None);
+        let issue = &loaded.warnings[k - 1];
+        assert_eq!(issue.location.line, k as u32 + 3, "{issue}");
+        assert_eq!(issue.message, format!("no domain fits: {e}"));
+    }
+    assert_eq!(loaded.warnings.len(), 2, "{:#?}", loaded.warnings);
     assert_round_trip(&loaded.scene);
 }
 
@@ -730,7 +879,7 @@ fn saving_a_rich_scene_keeps_everything() {
 #[test]
 fn strings_opened_straight_and_closed_typographic_read_as_printed() {
     let text = "FShape {\n  geometry FGeometry { definition \"1-x^2-y^2-z^2” }\n  \
-                physics FPhysics { tension FTension { definition \"0.8” } }\n}\n";
+                physics FPhysics { surface FSurface { tension FTension { definition \"0.8” } } }\n}\n";
     let loaded = load(text);
     assert_eq!(loaded.warnings.len(), 1, "{:#?}", loaded.warnings);
     assert!(

@@ -105,8 +105,9 @@ pub trait Container: Send {
     fn friction(&mut self, p: DVec3, t_secs: f64) -> Option<f64>;
     /// Interior density in `[0, 1]` (fraction of the device's maximum damping).
     fn density(&mut self, p: DVec3, t_secs: f64) -> Option<f64>;
-    /// Depth of the surface zone in world units at `p`.
-    fn zone_depth(&mut self, p: DVec3, t_secs: f64) -> f64;
+    /// Depth of the surface zone in world units at `p`; `None` when the container gives none,
+    /// and the renderer then uses the device's own ([`crate::force::Rig::zone_depth_world`]).
+    fn zone_depth(&mut self, p: DVec3, t_secs: f64) -> Option<f64>;
     /// The force field's domain and timing, `None` when the container has no field mapped
     /// through a [`FieldDomain`] (the default; see [`Container::field_at`]).
     fn field_domain(&self) -> Option<FieldDomain> {

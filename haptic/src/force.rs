@@ -92,6 +92,15 @@ pub struct Rig {
     pub params: ForceParams,
 }
 
+impl Rig {
+    /// The surface zone's depth in world units where a container gives none: the device's
+    /// own ([`Capabilities::zone_depth_metres`]) through the zone's scale, so that resizing
+    /// the zone keeps the depth the hand feels.
+    pub fn zone_depth_world(&self) -> f64 {
+        self.zone.world_distance(self.caps.zone_depth_metres())
+    }
+}
+
 /// Where the HIP is relative to the ruling container.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Region {
@@ -388,7 +397,9 @@ fn effect_force<S: Scene + ?Sized>(
     } else {
         f64::INFINITY
     };
-    let zone_depth = container.zone_depth(hip, t_secs);
+    let zone_depth = container
+        .zone_depth(hip, t_secs)
+        .unwrap_or_else(|| rig.zone_depth_world());
     let tension = if depth < zone_depth {
         finite(container.tension(hip, t_secs))
     } else {

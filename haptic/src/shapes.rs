@@ -230,8 +230,8 @@ impl Container for Analytic {
             }
         })
     }
-    fn zone_depth(&mut self, _p: DVec3, _t_secs: f64) -> f64 {
-        self.zone_depth
+    fn zone_depth(&mut self, _p: DVec3, _t_secs: f64) -> Option<f64> {
+        Some(self.zone_depth)
     }
     fn field_domain(&self) -> Option<FieldDomain> {
         self.field.map(|(_, domain)| domain)

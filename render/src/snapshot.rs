@@ -398,10 +398,7 @@ pub(crate) fn object_mesh(object: &Object, depth: u8, t_secs: f64) -> ObjectMesh
                     Err(e) => skipped = Some(e.to_string()),
                 }
             }
-            None => {
-                skipped =
-                    Some("an implicit solid without a bounding box (bboxSize) is unbounded".into());
-            }
+            None => skipped = Some(fdsl::object::FitError::Unbounded.to_string()),
         }
     }
     ObjectMesh {

@@ -281,10 +281,12 @@ impl Engine {
                     };
                     let error = format!("{e}; nothing stored was changed, and edits are not saved");
                     let log = store::founded_log(&invite);
+                    // A session joined by invite is the others': it gets no demo of ours.
+                    let new_session = config.invite.is_none();
                     (
                         keypair,
                         invite,
-                        true,
+                        new_session,
                         None,
                         log,
                         founder_nonce,
@@ -305,6 +307,11 @@ impl Engine {
             .demo
             .filter(|_| new_session && log.is_empty())
             .map(|demo| demo_payloads_from(demo, lock(&view).next_object()));
+        {
+            let mut view = lock(&view);
+            view.authoring_demo = matches!(demo, Some(Ok(_)));
+            view.joined = config.invite.is_some();
+        }
         let (requests, inbox) = tokio::sync::mpsc::channel(MAX_QUEUED_REQUESTS);
         let (ready_tx, ready_rx) = std_mpsc::channel();
         // The discovery id takes a slow derivation (argon2id): once per start.

@@ -80,9 +80,23 @@ pub enum StoreError {
     /// No entropy for a new key or invite.
     #[error("cannot read /dev/urandom: {0}")]
     Entropy(std::io::Error),
+    /// Another process holds the op file (its message names the file and the holder).
+    #[error("{0}")]
+    Locked(OpenError),
     /// The op file could not be opened or loaded.
     #[error("the op store cannot be opened: {0}")]
-    Open(#[from] OpenError),
+    Open(OpenError),
+}
+
+// Not `#[from]`: the message already holds the cause's, which as the error's source too
+// would print twice in a chain (`sculpt: {e:#}`).
+impl From<OpenError> for StoreError {
+    fn from(e: OpenError) -> StoreError {
+        match e {
+            OpenError::Locked { .. } => StoreError::Locked(e),
+            _ => StoreError::Open(e),
+        }
+    }
 }
 
 /// An opened store directory.

@@ -280,6 +280,94 @@ fn secrets_are_private_and_a_second_engine_on_a_store_is_refused() {
     let _ = fs::remove_dir_all(&dir);
 }
 
+/// A locked store's refusal names the store and its holder once, however it is shown (the
+/// CLI prints the error with its causes), and the window's fallback in memory says so.
+#[test]
+fn a_locked_store_says_so_once_and_the_fallback_works_in_memory() {
+    let dir = scratch("locked");
+    let first = Engine::start(config(&dir), T0).unwrap();
+    let strict = EngineConfig {
+        memory_fallback: false,
+        ..config(&dir)
+    };
+    let refused = Engine::start(strict, T0).err().unwrap();
+    let shown = format!("{:#}", anyhow::Error::from(refused));
+    assert_eq!(
+        shown.matches("in use by another sculpt process").count(),
+        1,
+        "{shown}"
+    );
+    assert_eq!(shown.matches(store::OPS_FILE).count(), 1, "{shown}");
+    let holder = format!("pid {}", std::process::id());
+    assert_eq!(shown.matches(&holder).count(), 1, "{shown}");
+    let fallback = Engine::start(config(&dir), T0).unwrap();
+    let view = lock(fallback.view());
+    let error = view.store_error().unwrap();
+    assert_eq!(
+        error.matches("in use by another sculpt process").count(),
+        1,
+        "{error}"
+    );
+    assert_eq!(
+        error.matches("store").count(),
+        2,
+        "the store's path and `stored`: {error}"
+    );
+    assert_eq!(
+        view.opening_status(),
+        "in memory, the store cannot be used: the demo scene was authored"
+    );
+    drop(view);
+    drop(fallback);
+    drop(first);
+    let _ = fs::remove_dir_all(&dir);
+}
+
+/// The window's first status line says what starting did: the demo authored in a new
+/// session, a session joined by invite (no demo of ours authored into it, in memory too),
+/// or the ops loaded.
+#[test]
+fn the_opening_status_says_whether_the_demo_was_authored_or_a_session_joined() {
+    let dir = scratch("opening");
+    let first = Engine::start(config(&dir), T0).unwrap();
+    assert_eq!(
+        lock(first.view()).opening_status(),
+        "new store: the demo scene was authored"
+    );
+    wait_view(&first, "the demo", |v| v.n_ops() == 1);
+    let invite = first.invite().clone();
+    first.shutdown();
+    let again = Engine::start(config(&dir), T0).unwrap();
+    assert_eq!(
+        lock(again.view()).opening_status(),
+        "loaded 1 ops from the store"
+    );
+
+    // Joining: a new store of its own, then the same store while `again` holds it.
+    let joined_dir = scratch("opening-joined");
+    for store in [&joined_dir, &dir] {
+        let joining = EngineConfig {
+            invite: Some(invite.clone()),
+            ..config(store)
+        };
+        let joined = Engine::start(joining, T0).unwrap();
+        std::thread::sleep(Duration::from_millis(300));
+        let view = lock(joined.view());
+        let status = view.opening_status();
+        assert!(
+            status.ends_with("joined the session; its objects come from its peers"),
+            "{status}"
+        );
+        assert!(!status.contains("demo"), "{status}");
+        assert_eq!(view.n_ops(), 0, "no demo was authored into the session");
+        drop(view);
+        joined.shutdown();
+    }
+    drop(again);
+    let _ = fs::remove_dir_all(&dir);
+    let _ = fs::remove_dir_all(&joined_dir);
+}
+
 #[test]
 fn a_new_session_is_founded_by_its_maker_and_a_joiner_is_not_its_founder() {
     use std::os::unix::fs::PermissionsExt as _;

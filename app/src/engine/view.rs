@@ -134,6 +134,10 @@ pub struct View {
     pub(super) notices: Vec<String>,
     pub(super) store_error: Option<String>,
     pub(super) n_loaded: usize,
+    /// This start authors the demo scene (a new session, not joined).
+    pub(super) authoring_demo: bool,
+    /// The session was joined by invite.
+    pub(super) joined: bool,
     pub(super) listen: Option<std::net::SocketAddr>,
     /// The founder's nonce, when this peer founded the session (it may expel members).
     pub(super) founder_nonce: Option<[u8; FOUNDER_NONCE_BYTES]>,
@@ -170,6 +174,8 @@ impl View {
             notices: Vec::new(),
             store_error: None,
             n_loaded: log.len(),
+            authoring_demo: false,
+            joined: false,
             listen: None,
             founder_nonce: None,
             expelled: BTreeSet::new(),
@@ -339,6 +345,23 @@ impl View {
     /// Ops loaded from the store at start.
     pub fn n_loaded(&self) -> usize {
         self.n_loaded
+    }
+
+    /// What starting found, for the window's first status line: the ops loaded from the
+    /// store, or for a new one whether the demo scene was authored or a session joined
+    /// (whose objects come from its peers), and whether the session lives in memory because
+    /// the store cannot be used.
+    pub fn opening_status(&self) -> String {
+        let what = match self.n_loaded {
+            0 if self.authoring_demo => "the demo scene was authored".to_string(),
+            0 if self.joined => "joined the session; its objects come from its peers".to_string(),
+            0 => "an empty session".to_string(),
+            n => return format!("loaded {n} ops from the store"),
+        };
+        match self.store_error {
+            Some(_) => format!("in memory, the store cannot be used: {what}"),
+            None => format!("new store: {what}"),
+        }
     }
 
     /// Counts changes of the scene; equal counts mean an equal scene.

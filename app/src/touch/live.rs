@@ -215,6 +215,12 @@ impl LiveTouch {
         self.rigs.collect_retired();
     }
 
+    /// The surface zone where a scene gives no depth, as the Touch section shows it
+    /// ([`crate::touch::zone_depth_text`] for this device and zone).
+    pub fn zone_depth_text(&self) -> String {
+        crate::touch::zone_depth_text(&self.rig.caps, &self.zone)
+    }
+
     /// The zone's size relative to the one fitted at start.
     pub fn zone_size(&self) -> f64 {
         self.zone().world_per_device_metre / self.fitted.world_per_device_metre

@@ -93,6 +93,26 @@ pub fn zone_for(
     }
 }
 
+/// The surface zone where a scene gives no depth (no `FDepth`): the device's own
+/// (`Capabilities::zone_depth_metres`: where its stiffness reaches its largest force), in
+/// millimetres at the device and in scene units through `zone`. `sculpt touch` prints it and
+/// the window's Touch section shows it.
+pub fn zone_depth_text(caps: &Capabilities, zone: &HapticZone) -> String {
+    let metres = caps.zone_depth_metres();
+    let world = zone.world_distance(metres);
+    // Three significant digits, however large the scene.
+    let decimals = if world > 0.0 && world.is_finite() {
+        (2.0 - world.log10().floor()).clamp(0.0, 12.0) as usize
+    } else {
+        0
+    };
+    format!(
+        "surface zone where no FDepth is given: {:.2} mm at the device, {world:.decimals$} \
+         scene units",
+        metres * 1e3
+    )
+}
+
 /// The rig of a device model over a zone, with the haptic crate's default safety settings.
 pub fn rig(model: DeviceModel, zone: HapticZone) -> Rig {
     Rig {

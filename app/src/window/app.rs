@@ -324,10 +324,7 @@ impl SculptApp {
         let (selected, status) = {
             let view = lock(engine.view());
             let selected = view.scene().objects().next().map(|(id, _)| id.0);
-            let status = match view.n_loaded() {
-                0 => "new store: the demo scene was authored".to_string(),
-                n => format!("loaded {n} ops from the store"),
-            };
+            let status = view.opening_status();
             (selected, status)
         };
         Ok(SculptApp {

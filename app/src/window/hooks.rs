@@ -489,7 +489,7 @@ impl SculptApp {
             })
             .collect();
         let rows = |rows: Vec<Value>| Value::Array(rows);
-        json!({
+        let mut state = json!({
             "peer": view.peer_id().short(),
             "store": self.engine.store_dir().display().to_string(),
             "store_error": view.store_error(),
@@ -589,7 +589,12 @@ impl SculptApp {
             "last_upload_bytes": self.viewport.lock().ok().map(|r| r.last_upload_bytes),
             "min_upload_bytes": self.viewport.lock().ok().and_then(|r| r.min_upload_bytes),
             "patches_refused": self.viewport.lock().ok().map(|r| r.n_patches_refused),
-        })
+        });
+        // Beside the rest: one more key inside `json!` passes the macro's recursion limit.
+        if let Some(live) = &self.touch {
+            state["touch"]["zone_depth"] = live.zone_depth_text().into();
+        }
+        state
     }
 }
 

@@ -578,8 +578,8 @@ fn mesh_whole(
     world_from_group: Transform,
     depth: u8,
 ) -> Result<(Incremental, MeshPatch), String> {
-    let bounds = mesh_bounds(&object, depth)
-        .ok_or("an implicit solid without a bounding box (bboxSize) is unbounded")?;
+    let bounds =
+        mesh_bounds(&object, depth).ok_or_else(|| fdsl::object::FitError::Unbounded.to_string())?;
     let mut octree =
         OctreeMesher::new(&MeshSettings { bounds, depth }).map_err(|e| e.to_string())?;
     octree

@@ -762,6 +762,11 @@ impl SculptApp {
             )
             .on_hover_text(tip)
             .changed();
+        ui.weak(live.zone_depth_text()).on_hover_text(
+            "objects without a depth of their own feel a surface zone as deep as the device \
+             reaches its largest force at its largest stiffness; give one with FDepth or \
+             `depth:`",
+        );
         let selected_centre = self
             .selected
             .and_then(|id| self.objects.get(&fdsl::scene::ObjectId(id)))

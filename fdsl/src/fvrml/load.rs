@@ -114,6 +114,8 @@ fn run(
         edit_cache: BTreeMap::new(),
         n_edits: 0,
         n_stamps: 0,
+        fit_work_left: super::MAX_LOAD_FIT_WORK,
+        carriers: std::collections::BTreeSet::new(),
     };
     let scope = Scope::new(doc, 0, None);
     let place = Place {
@@ -188,6 +190,10 @@ struct Loader<'r> {
     n_edits: usize,
     /// Stamps the compiled edits expand to (bounded by [`MAX_LOAD_STAMPS`]).
     n_stamps: usize,
+    /// What is left of [`super::MAX_LOAD_FIT_WORK`] for fitting domains.
+    fit_work_left: u64,
+    /// Objects written as shapeless `FShape`s that give their group physics (`lend.rs`).
+    carriers: std::collections::BTreeSet<u64>,
 }
 
 impl Loader<'_> {
@@ -262,6 +268,11 @@ impl Loader<'_> {
         data.grids = self.grids(scope, &grid_nodes).into();
         let object = match Object::new(data) {
             Ok(mut object) => {
+                let left = &mut self.fit_work_left;
+                for (slot, why) in super::fitted::fit_domains(&mut object, scope, node, left) {
+                    let pos = positions.get(&slot).copied().unwrap_or(node.pos);
+                    self.warning(scope, pos, why.to_string());
+                }
                 self.apply_edits(scope, &mut object, &edit_nodes);
                 Some(object)
             }
@@ -445,6 +456,9 @@ impl Loader<'_> {
             return;
         }
         let id = self.next_object;
+        if super::lend::written_as_carrier(scope, node) {
+            self.carriers.insert(id);
+        }
         match self.scene.insert_object(ObjectId(id), object, place.group) {
             Ok(()) => match id.checked_add(1) {
                 Some(next) => self.next_object = next,
@@ -470,6 +484,7 @@ impl Loader<'_> {
         let Some(inner) = self.enter(scope, node, place, group) else {
             return;
         };
+        let first_object = self.next_object;
         for field in children {
             match &field.value {
                 Value::NodeList(list) => {
@@ -485,6 +500,16 @@ impl Loader<'_> {
                     "`children` should be a list of nodes",
                 ),
             }
+        }
+        self.lend_physics(scope, node, inner.group, first_object);
+    }
+
+    /// A shapeless `FShape`'s physics for the shapes grouped with it ([`super::lend`]).
+    fn lend_physics(&mut self, scope: &Scope<'_>, node: &Node, group: Option<GroupId>, first: u64) {
+        let ids = first..self.next_object;
+        let lent = super::lend::lend_physics(&mut self.scene, group, ids, &self.carriers);
+        for message in lent.messages() {
+            self.warning(scope, node.pos, message);
         }
     }
 

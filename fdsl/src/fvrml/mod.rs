@@ -75,7 +75,9 @@
 
 mod document;
 mod edit;
+mod fitted;
 mod grid;
+mod lend;
 mod lexer;
 mod load;
 mod parser;
@@ -122,6 +124,10 @@ pub const MAX_LOAD_EDITS: usize = 1 << 22;
 /// Most tool stamps the edits of one load compile to (a short `FEdit` can sweep a small tool
 /// far, expanding to up to `MAX_STROKE_STAMPS` stamps).
 pub const MAX_LOAD_STAMPS: usize = 1 << 22;
+/// Most cells times tape instructions one load spends fitting domains to implicit solids
+/// written without `bboxSize` (about a second of interval evaluation in a release build);
+/// later solids keep no domain, with a warning.
+pub const MAX_LOAD_FIT_WORK: u64 = 1 << 28;
 /// Most issues kept for one load; later ones are counted in a last issue.
 pub const MAX_ISSUES: usize = 256;
 

@@ -250,7 +250,10 @@ impl<'d> Reader<'_, 'd> {
         }
     }
 
-    /// A formula: a string, or a single number (read as its text).
+    /// A formula: a string, or a single number (read as its text). What the formula language
+    /// reads leniently (a printed dash for a minus, the thesis's `BEGIN ... END` wrapper) is
+    /// a warning at the string, with the formula's own rendered diagnostic; compile errors
+    /// are reported where the object is built.
     pub(super) fn formula(&mut self, field: &'d Field) -> Option<Formula> {
         let text = match &field.value {
             Value::String(s) => s.clone(),
@@ -261,11 +264,28 @@ impl<'d> Reader<'_, 'd> {
             }
         };
         match Formula::new(text) {
-            Ok(f) => Some(f),
+            Ok(f) => {
+                self.lenient_reads(field, f.as_str());
+                Some(f)
+            }
             Err(e) => {
                 self.error(field.value_pos, e.to_string());
                 None
             }
+        }
+    }
+
+    /// Warns of what the formula's syntax reads leniently (parsing only: compiling happens
+    /// once, where the object is built).
+    fn lenient_reads(&mut self, field: &'d Field, text: &str) {
+        let (_, diagnostics) = crate::syntax::parser::parse(text);
+        if diagnostics.iter().any(crate::Diagnostic::is_error) {
+            return;
+        }
+        for d in diagnostics {
+            let rendered = d.render(text);
+            let message = format!("`{}`: {}", field.name, rendered.trim_end());
+            self.warning(field.value_pos, message);
         }
     }
 

@@ -185,8 +185,14 @@ fn geometry(g: &Geometry) -> Node {
             fields.push(ranges(parameters));
         }
     }
-    if let Some(d) = &g.domain {
-        write_domain(d, &mut fields);
+    match &g.domain {
+        Some(d) => write_domain(d, &mut fields),
+        // Said on purpose, so that loading neither fits one (`fitted.rs`) nor reads a
+        // constant 0 as physics for its group (`lend.rs`).
+        None if matches!(g.shape, Shape::Implicit(_)) => {
+            fields.push(numbers("bboxSize", &[-1.0; 3]));
+        }
+        None => {}
     }
     write_transform(&g.transform, &mut fields);
     Node::new("FGeometry", fields)

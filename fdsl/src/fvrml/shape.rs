@@ -566,11 +566,11 @@ impl<'d> Reader<'_, 'd> {
             && let Some(s) = self.node_of(field, &["FSurface"])
         {
             let mut surface = Fields::new(s);
-            self.surface(&mut surface, &mut p);
+            self.surface(&mut surface, &mut p, false);
             self.finish(surface);
         }
         // The thesis's Figure 7.4 writes `friction` straight under `FPhysics`.
-        self.surface(&mut fields, &mut p);
+        self.surface(&mut fields, &mut p, true);
         if let Some(field) = fields.get("density")
             && let Some(d) = self.node_of(field, &["FDensity"])
         {
@@ -592,8 +592,10 @@ impl<'d> Reader<'_, 'd> {
         p
     }
 
-    /// `tension`, `friction` and `depth` of an `FSurface` (or written under `FPhysics`).
-    fn surface(&mut self, fields: &mut Fields<'d>, p: &mut Physics) {
+    /// `tension`, `friction` and `depth` of an `FSurface`, or written straight under
+    /// `FPhysics` (`under_physics`), as the thesis's Figure 7.4 does: read alike, with a warning
+    /// that names where they belong (Figure 7.8's spelling and section 6.4's hierarchy).
+    fn surface(&mut self, fields: &mut Fields<'d>, p: &mut Physics, under_physics: bool) {
         for (name, type_name, slot) in [
             ("tension", "FTension", Slot::Tension),
             ("friction", "FFriction", Slot::Friction),
@@ -605,6 +607,15 @@ impl<'d> Reader<'_, 'd> {
             let Some(node) = self.node_of(field, &[type_name]) else {
                 continue;
             };
+            if under_physics {
+                self.warning(
+                    field.pos,
+                    format!(
+                        "`{name}` belongs in the surface: `physics FPhysics {{ surface FSurface {{ \
+                         {name} {type_name} {{ ... }} }} }}`; read as if written there"
+                    ),
+                );
+            }
             let property = self.property(node, slot);
             let target = match slot {
                 Slot::Tension => &mut p.tension,

@@ -34,8 +34,11 @@ pub enum FitError {
     /// The function is below zero everywhere searched.
     #[error("the solid is empty: the function is below 0 everywhere within ±{MAX_FIT_HALF_SIZE}")]
     Empty,
-    /// The boundary needed more than [`MAX_FIT_CELLS`] cells.
-    #[error("the solid's boundary is too intricate to bound within {MAX_FIT_CELLS} cells")]
+    /// The boundary needed more than [`MAX_FIT_CELLS`] cells (or the caller's budget).
+    #[error(
+        "the solid's boundary is too intricate to bound within {MAX_FIT_CELLS} cells; give the \
+         object a domain"
+    )]
     TooComplex,
 }
 
@@ -43,7 +46,35 @@ pub enum FitError {
 ///
 /// Cells are bounded [`BOX_CHUNK`] at a time by the bulk interval evaluator, whose bounds are
 /// the box-by-box ones; the kept cells, and so the domain, do not depend on that order.
+///
+/// This is the one rule for an implicit solid made without a domain, wherever it is made:
+/// the command line's `new:` and `shape:`, and an FVRML file's `FGeometry` without
+/// `bboxSize`. The object carries the domain found, so peers take it from the op and never
+/// fit again.
 pub fn fit_domain(tape: &Tape, t: f64) -> Result<Domain, FitError> {
+    fit_domain_within(tape, t, MAX_FIT_CELLS).0
+}
+
+/// [`fit_domain`] evaluating at most `max_cells` cells (at most [`MAX_FIT_CELLS`]; past it,
+/// [`FitError::TooComplex`]), and the number of cells it evaluated: what a caller with a
+/// budget over several solids counts (an FVRML load).
+pub fn fit_domain_within(
+    tape: &Tape,
+    t: f64,
+    max_cells: usize,
+) -> (Result<Domain, FitError>, usize) {
+    let max_cells = max_cells.min(MAX_FIT_CELLS);
+    let mut n_evaluated = 0usize;
+    let fitted = search(tape, t, max_cells, &mut n_evaluated);
+    (fitted, n_evaluated.min(max_cells))
+}
+
+fn search(
+    tape: &Tape,
+    t: f64,
+    max_cells: usize,
+    n_evaluated: &mut usize,
+) -> Result<Domain, FitError> {
     let mut eval = IntervalBulkEval::new(tape);
     let finest = 2.0 * MAX_FIT_HALF_SIZE / f64::from(1u32 << FIT_DEPTH);
     let mut lo = DVec3::splat(f64::INFINITY);
@@ -56,11 +87,10 @@ pub fn fit_domain(tape: &Tape, t: f64) -> Result<Domain, FitError> {
     let mut batch = Vec::with_capacity(BOX_CHUNK);
     let mut boxes = [[Interval::point(0.0); 4]; BOX_CHUNK];
     let mut bounds = [Interval::point(0.0); BOX_CHUNK];
-    let mut n_evaluated = 0usize;
     while !cells.is_empty() {
         let n = cells.len().min(BOX_CHUNK);
-        n_evaluated += n;
-        if n_evaluated > MAX_FIT_CELLS {
+        *n_evaluated += n;
+        if *n_evaluated > max_cells {
             return Err(FitError::TooComplex);
         }
         batch.clear();

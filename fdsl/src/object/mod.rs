@@ -41,7 +41,7 @@ use serde::{Deserialize, Serialize};
 pub use appearance::{Appearance, ColorDef, ColorMap, Rgb};
 pub use box_sampler::{BoxSampler, SCAN_EDITS_MAX};
 pub use edit::{CompiledEdit, Edit, EditOp, PaintValue, Paintable};
-pub use fit::{FitError, fit_domain};
+pub use fit::{FitError, fit_domain, fit_domain_within};
 pub use geometry::{Geometry, ParametricKind, Shape};
 pub use history::History;
 pub use physics::{ForceField, Physics, Property};

@@ -201,9 +201,9 @@ impl Container for FunctionContainer {
         self.props.density(p, t_secs)
     }
 
-    fn zone_depth(&mut self, p: DVec3, t_secs: f64) -> f64 {
+    fn zone_depth(&mut self, p: DVec3, t_secs: f64) -> Option<f64> {
         let p = self.placement.object_from_world(p);
-        self.props.zone_depth(p, t_secs) * self.placement.scale
+        Some(self.props.zone_depth(p, t_secs)? * self.placement.scale)
     }
 
     fn field_domain(&self) -> Option<FieldDomain> {
@@ -290,7 +290,7 @@ mod tests {
             "world metric depth"
         );
         assert_eq!(c.density(DVec3::new(11.0, 0.0, 0.0), 0.0), Some(0.5));
-        assert_eq!(c.zone_depth(DVec3::new(11.0, 0.0, 0.0), 0.0), 0.2);
+        assert_eq!(c.zone_depth(DVec3::new(11.0, 0.0, 0.0), 0.0), Some(0.2));
         assert!(Placement::new(DVec3::ZERO, 0.0).is_none());
         assert!(Placement::new(DVec3::NAN, 1.0).is_none());
     }

@@ -381,7 +381,7 @@ impl Container for MeshContainer {
         self.props.density(p, t_secs)
     }
 
-    fn zone_depth(&mut self, p: DVec3, t_secs: f64) -> f64 {
+    fn zone_depth(&mut self, p: DVec3, t_secs: f64) -> Option<f64> {
         self.props.zone_depth(p, t_secs)
     }
 

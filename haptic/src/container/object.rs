@@ -280,12 +280,16 @@ impl Container for ObjectContainer {
         self.scalar(Paintable::Density, p, t_secs)
     }
 
-    /// Scene units; a missing, negative or non-finite depth is no zone.
-    fn zone_depth(&mut self, p: DVec3, t_secs: f64) -> f64 {
-        match self.scalar(Paintable::ZoneDepth, p, t_secs) {
-            Some(depth) if depth.is_finite() => depth.max(0.0),
-            _ => 0.0,
-        }
+    /// Scene units; `None` when the object gives no depth (none, or disabled), so that the
+    /// device's own applies; a negative or non-finite depth is no zone.
+    fn zone_depth(&mut self, p: DVec3, t_secs: f64) -> Option<f64> {
+        self.scalar(Paintable::ZoneDepth, p, t_secs).map(|depth| {
+            if depth.is_finite() {
+                depth.max(0.0)
+            } else {
+                0.0
+            }
+        })
     }
 
     fn field_at(&mut self, p: DVec3, t_secs: f64) -> Option<DVec3> {

@@ -61,7 +61,8 @@ pub struct PropertySpec {
     pub friction: Option<Scalar>,
     /// Interior density in `[0, 1]`, a fraction of the device's maximum damping.
     pub density: Option<Scalar>,
-    /// Depth of the surface zone, world units; `None` means no zone (no tension felt).
+    /// Depth of the surface zone, world units; `None` leaves it to the device
+    /// ([`crate::force::Rig::zone_depth_world`]).
     pub zone_depth: Option<Scalar>,
     /// The force field.
     pub field: Option<FieldSpec>,
@@ -195,15 +196,15 @@ impl Properties {
         self.density.as_mut().map(|e| e.at(p, t_secs))
     }
 
-    /// Surface-zone depth at `p`, world units (0 when disabled; a negative or non-finite value
-    /// from a function counts as 0).
-    pub fn zone_depth(&mut self, p: DVec3, t_secs: f64) -> f64 {
-        let depth = self.zone_depth.as_mut().map_or(0.0, |e| e.at(p, t_secs));
-        if depth.is_finite() {
+    /// Surface-zone depth at `p`, world units (`None` when not given; a negative or
+    /// non-finite value from a function counts as 0).
+    pub fn zone_depth(&mut self, p: DVec3, t_secs: f64) -> Option<f64> {
+        let depth = self.zone_depth.as_mut()?.at(p, t_secs);
+        Some(if depth.is_finite() {
             depth.max(0.0)
         } else {
             0.0
-        }
+        })
     }
 
     /// The force field's domain, `None` without a field.
@@ -248,8 +249,8 @@ mod tests {
         assert_eq!(props.friction(p, 0.0), None);
         assert!((props.density(p, 0.25).unwrap() - 0.85).abs() < 1e-12);
         // A negative depth from a function is no zone at all.
-        assert_eq!(props.zone_depth(p, 0.0), 0.0);
-        assert!((props.zone_depth(DVec3::ZERO, 0.0) - 0.1).abs() < 1e-12);
+        assert_eq!(props.zone_depth(p, 0.0), Some(0.0));
+        assert!((props.zone_depth(DVec3::ZERO, 0.0).unwrap() - 0.1).abs() < 1e-12);
         assert_eq!(props.field_domain(), None);
         assert_eq!(props.force_field(p, 0.0), DVec3::ZERO);
     }

@@ -31,7 +31,17 @@ pub struct Capabilities {
     pub workspace_metres: Aabb,
     /// Number of buttons reported in [`DeviceSample::buttons`].
     pub n_buttons: u8,
+    /// The smallest motion of the tip the device senses, in metres (0 when unknown).
+    pub position_resolution_metres: f64,
 }
+
+/// A surface zone the device's own limits set ([`Capabilities::zone_depth_metres`]) is at
+/// least this many of its position steps deep, so that the tension's rise through the zone
+/// is felt as a slope and not as a step.
+pub const MIN_ZONE_DEPTH_STEPS: f64 = 16.0;
+/// A surface zone the device's own limits set is at most this fraction of the workspace's
+/// shortest side deep, so that a soft device's zone does not swallow what it touches.
+pub const MAX_ZONE_DEPTH_WORKSPACE_FRACTION: f64 = 0.05;
 
 impl Capabilities {
     /// A desktop pen-type device (about the size of a Phantom Omni / Touch).
@@ -44,12 +54,14 @@ impl Capabilities {
             damping_newton_secs_per_metre_max: 10.0,
             workspace_metres: Aabb::new(DVec3::splat(-0.08), DVec3::splat(0.08)),
             n_buttons: 2,
+            // 450 dpi, the nominal resolution of a Phantom Omni.
+            position_resolution_metres: 0.0254 / 450.0,
         }
     }
 
     /// A Falcon-class desktop device (Novint Falcon): 8 N, 3000 N/m and 20 N s/m, the
     /// limits CHAI3D states for it, in its 4-inch (about 0.1 m) cubic workspace; 3 degrees
-    /// of freedom in and out, 4 buttons.
+    /// of freedom in and out, 4 buttons, 400 dpi.
     pub fn falcon() -> Self {
         Self {
             n_dof_input: 3,
@@ -59,6 +71,33 @@ impl Capabilities {
             damping_newton_secs_per_metre_max: 20.0,
             workspace_metres: Aabb::new(DVec3::splat(-0.05), DVec3::splat(0.05)),
             n_buttons: 4,
+            position_resolution_metres: 0.0254 / 400.0,
+        }
+    }
+
+    /// The depth of the surface zone, in device metres, for a container that gives none
+    /// (thesis section 4.3: the zone's depth depends on the device's precision, workspace and
+    /// maximum force): the depth at which the largest stiffness reaches the largest force,
+    /// `force_newtons_max / stiffness_newtons_per_metre_max`, so that a tension of 1 pushes
+    /// with the device's whole force at the bottom of the zone; at most
+    /// [`MAX_ZONE_DEPTH_WORKSPACE_FRACTION`] of the workspace's shortest side (also when the
+    /// device has no stiffness) and at least [`MIN_ZONE_DEPTH_STEPS`] position steps.
+    ///
+    /// ```
+    /// let falcon = haptic::device::Capabilities::falcon();
+    /// assert!((falcon.zone_depth_metres() - 8.0 / 3000.0).abs() < 1e-12);
+    /// ```
+    pub fn zone_depth_metres(&self) -> f64 {
+        let deepest =
+            MAX_ZONE_DEPTH_WORKSPACE_FRACTION * self.workspace_metres.size().min_element();
+        let shallowest = MIN_ZONE_DEPTH_STEPS * self.position_resolution_metres;
+        let reach = self.force_newtons_max / self.stiffness_newtons_per_metre_max;
+        let reach = if reach.is_finite() { reach } else { deepest };
+        let depth = reach.min(deepest).max(shallowest);
+        if depth.is_finite() {
+            depth.max(0.0)
+        } else {
+            0.0
         }
     }
 
@@ -130,5 +169,45 @@ impl<D: HapticDevice + ?Sized> HapticDevice for Box<D> {
     }
     fn set_force(&mut self, force_newtons: DVec3) -> Result<(), DeviceError> {
         (**self).set_force(force_newtons)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_zone_depth_is_where_stiffness_reaches_the_force_within_precision_and_workspace() {
+        let pen = Capabilities::desktop_pen();
+        assert!((pen.zone_depth_metres() - 3.3 / 1000.0).abs() < 1e-12);
+        // A stiff, weak device: the zone keeps 16 position steps.
+        let stiff = Capabilities {
+            stiffness_newtons_per_metre_max: 1e7,
+            ..pen
+        };
+        let steps = MIN_ZONE_DEPTH_STEPS * pen.position_resolution_metres;
+        assert!((stiff.zone_depth_metres() - steps).abs() < 1e-15);
+        // No stiffness at all, or a soft one: at most a twentieth of the workspace.
+        let limp = Capabilities {
+            stiffness_newtons_per_metre_max: 0.0,
+            ..pen
+        };
+        assert!(
+            (limp.zone_depth_metres() - 0.16 * MAX_ZONE_DEPTH_WORKSPACE_FRACTION).abs() < 1e-15
+        );
+        let soft = Capabilities {
+            stiffness_newtons_per_metre_max: 1.0,
+            ..pen
+        };
+        assert_eq!(soft.zone_depth_metres(), limp.zone_depth_metres());
+        // A device without force or workspace: no zone, never NaN.
+        let nothing = Capabilities {
+            force_newtons_max: 0.0,
+            stiffness_newtons_per_metre_max: 0.0,
+            workspace_metres: Aabb::new(DVec3::ZERO, DVec3::ZERO),
+            position_resolution_metres: 0.0,
+            ..pen
+        };
+        assert_eq!(nothing.zone_depth_metres(), 0.0);
     }
 }

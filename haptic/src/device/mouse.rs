@@ -95,6 +95,7 @@ impl MouseDevice {
             damping_newton_secs_per_metre_max: 0.0,
             workspace_metres: workspace,
             n_buttons: 2,
+            position_resolution_metres: 0.0,
         };
         let shared = Arc::new(Shared::default());
         let handle = MouseHandle {

@@ -2,11 +2,13 @@
 //!
 //! ```text
 //! sculpt-haptic-trace 1
-//! caps <dof_in> <dof_out> <force_max> <stiffness_max> <damping_max> <ws_min xyz> <ws_max xyz> <n_buttons>
+//! caps <dof_in> <dof_out> <force_max> <stiffness_max> <damping_max> <ws_min xyz> <ws_max xyz> <n_buttons> [<resolution>]
 //! s <timestamp_micros> <px> <py> <pz> <qx> <qy> <qz> <qw> <buttons>
 //! f <fx> <fy> <fz>
 //! ```
 //! Lines starting with `#` and blank lines are ignored. A bad file is an error naming the line.
+//! The position resolution (metres) was added later: a `caps` line without it reads as 0,
+//! unknown.
 
 use std::fmt::Write as _;
 
@@ -96,7 +98,7 @@ impl Trace {
         let _ = writeln!(out, "{TRACE_HEADER}");
         let _ = writeln!(
             out,
-            "caps {} {} {} {} {} {} {} {} {} {} {} {}",
+            "caps {} {} {} {} {} {} {} {} {} {} {} {} {}",
             c.n_dof_input,
             c.n_dof_output,
             c.force_newtons_max,
@@ -108,7 +110,8 @@ impl Trace {
             hi.x,
             hi.y,
             hi.z,
-            c.n_buttons
+            c.n_buttons,
+            c.position_resolution_metres
         );
         for event in &self.events {
             let _ = match event {
@@ -230,7 +233,16 @@ fn integer<T: std::str::FromStr>(fields: &[&str], idx: usize) -> Result<T, Trace
 }
 
 fn parse_caps(fields: &[&str]) -> Result<Capabilities, TraceErrorKind> {
-    field_count(fields, 12)?;
+    let resolution = match fields.len() {
+        13 => floats::<1>(fields, 12)?[0],
+        _ => {
+            field_count(fields, 12)?;
+            0.0
+        }
+    };
+    if resolution < 0.0 {
+        return Err(TraceErrorKind::BadNumber(13));
+    }
     let limits = floats::<3>(fields, 2)?;
     let ws = floats::<6>(fields, 5)?;
     let (lo, hi) = (
@@ -248,6 +260,7 @@ fn parse_caps(fields: &[&str]) -> Result<Capabilities, TraceErrorKind> {
         damping_newton_secs_per_metre_max: limits[2],
         workspace_metres: Aabb::new(lo, hi),
         n_buttons: integer(fields, 11)?,
+        position_resolution_metres: resolution,
     })
 }
 
@@ -473,6 +486,28 @@ mod tests {
         assert_eq!(e.line, 2);
         let long = "#".repeat(TRACE_LINE_BYTES_MAX + 1);
         assert_eq!(error_of(&with(3, &long)).kind, TraceErrorKind::TooLarge);
+    }
+
+    #[test]
+    fn a_caps_line_without_the_resolution_reads_as_unknown() {
+        let trace = recorded();
+        assert_eq!(
+            trace.caps.position_resolution_metres,
+            Capabilities::desktop_pen().position_resolution_metres
+        );
+        let text = trace.to_text();
+        let lines: Vec<&str> = text.lines().collect();
+        let old_caps: Vec<&str> = lines[1].split(' ').take(13).collect();
+        let mut old = lines.clone();
+        let old_line = old_caps.join(" ");
+        old[1] = &old_line;
+        let parsed = Trace::parse(&old.join("\n")).unwrap();
+        assert_eq!(parsed.caps.position_resolution_metres, 0.0);
+        assert_eq!(parsed.events, trace.events);
+        let negative = format!("{old_line} -1");
+        old[1] = &negative;
+        let e = error_of(&old.join("\n"));
+        assert_eq!((e.line, e.kind), (2, TraceErrorKind::BadNumber(13)));
     }
 
     #[test]

@@ -408,8 +408,8 @@ impl Container for Stiffening {
     fn density(&mut self, _p: DVec3, _t: f64) -> Option<f64> {
         None
     }
-    fn zone_depth(&mut self, _p: DVec3, _t: f64) -> f64 {
-        0.2
+    fn zone_depth(&mut self, _p: DVec3, _t: f64) -> Option<f64> {
+        Some(0.2)
     }
     fn field_domain(&self) -> Option<FieldDomain> {
         None

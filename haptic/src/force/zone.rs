@@ -74,6 +74,12 @@ impl HapticZone {
         world_distance / self.world_per_device_metre
     }
 
+    /// A distance in device metres in world units: the inverse of
+    /// [`HapticZone::device_metres`].
+    pub fn world_distance(&self, device_metres: f64) -> f64 {
+        device_metres * self.world_per_device_metre
+    }
+
     /// The world box the device workspace covers (for drawing the zone).
     pub fn box_world(&self, workspace: Aabb) -> Aabb {
         let corners = [workspace.min, workspace.max].map(|c| self.world_from_device(c));
@@ -118,6 +124,7 @@ mod tests {
             DVec3::new(3.5, 1.5, 4.5)
         );
         assert_eq!(moved.device_metres(0.5), 0.1);
+        assert_eq!(moved.world_distance(0.1), 0.5);
         let turned = HapticZone {
             rotation: DQuat::from_rotation_y(0.7),
             ..moved

@@ -152,7 +152,7 @@ fn properties_are_read_in_object_coordinates_and_painting_overrides() {
     assert_eq!(c.density(inside_paint, 0.0), Some(0.9), "painted");
     assert_eq!(c.density(DVec3::new(9.0, 0.0, 0.0), 0.0), None, "unpainted");
     // Scene units: the object's scale does not touch the zone depth.
-    assert_eq!(c.zone_depth(inside_paint, 0.0), 0.04);
+    assert_eq!(c.zone_depth(inside_paint, 0.0), Some(0.04));
     assert_eq!(c.field_at(inside_paint, 0.0), None, "no field");
 }
 
@@ -329,4 +329,77 @@ fn an_object_too_costly_for_the_tick_is_refused_by_name_and_the_rest_is_felt() {
         let n = Object::new(data).unwrap().touch_instructions();
         assert!(n * 4 < super::MAX_TOUCH_INSTRUCTIONS, "{name}: {n}");
     }
+}
+
+/// Presses the tip `depth_world` into the top of a ball with tension 1 (and the given zone
+/// depth), kinematically through the force renderer, and returns the steady force.
+fn pressed_ball(zone_depth: Option<&str>, depth_world: f64) -> glam::DVec3 {
+    use crate::device::{Capabilities, DeviceSample};
+    use crate::force::zone::HapticZone;
+    use crate::force::{ForceParams, ProxyState, Rig, render};
+    let mut data = ball_data(Some(Domain::new(DVec3::ZERO, DVec3::splat(2.2))));
+    let physics = Physics {
+        tension: Some(Property::new(formula("1"))),
+        zone_depth: zone_depth.map(|d| Property::new(formula(d))),
+        ..Physics::default()
+    };
+    data.physics = physics.into();
+    let mut scene = vec![container(data, Transform::IDENTITY)];
+    let caps = Capabilities::falcon();
+    let zone = HapticZone::fit(
+        caps.workspace_metres,
+        crate::container::Aabb::new(DVec3::splat(-1.1), DVec3::splat(1.1)),
+    );
+    let rig = Rig {
+        caps,
+        zone,
+        params: ForceParams::default(),
+    };
+    let mut state = ProxyState::new();
+    let mut force = DVec3::ZERO;
+    // From above the ball down to the depth in 0.2 s, then held there for 0.4 s.
+    for k in 0..600u32 {
+        let s = (f64::from(k) / 200.0).min(1.0);
+        let hip = DVec3::new(0.0, 1.05 - s * (0.05 + depth_world), 0.0);
+        let sample = DeviceSample::at(zone.device_from_world(hip), u64::from(k) * 1000);
+        let out = render(
+            &mut scene,
+            &mut state,
+            &rig,
+            &sample,
+            f64::from(k) * 1e-3,
+            1e-3,
+        );
+        assert!(out.force_newtons.length() <= caps.force_newtons_max + 1e-9);
+        force = out.force_newtons;
+    }
+    force
+}
+
+#[test]
+fn without_a_zone_depth_the_device_sets_it_and_a_given_depth_overrides_it() {
+    use crate::device::Capabilities;
+    let caps = Capabilities::falcon();
+    // The zone fitted around the ball: 22 scene units per device metre.
+    let zone_world = caps.zone_depth_metres() * 2.2 / 0.1;
+    // Half way into the device's zone: half the device's force, pushing out (up).
+    let half = pressed_ball(None, 0.5 * zone_world);
+    assert!(
+        (half.y - 0.5 * caps.force_newtons_max).abs() < 0.05,
+        "tension 1 at half the zone: {half}"
+    );
+    assert!(half.x.abs() < 1e-6 && half.z.abs() < 1e-6, "{half}");
+    // Past the device's zone the membrane has popped: nothing pushes.
+    let past = pressed_ball(None, 1.5 * zone_world);
+    assert!(past.length() < 1e-6, "popped: {past}");
+    // A given depth counts instead: the same press is still in a deeper zone, and pushes
+    // with the stiffness times the depth, whatever the zone's depth.
+    let deeper = pressed_ball(Some("0.5"), 1.5 * zone_world);
+    assert!(
+        (deeper.y - caps.force_newtons_max).abs() < 0.05,
+        "clamped to the device's force: {deeper}"
+    );
+    // A zero depth is no zone at all.
+    let none = pressed_ball(Some("0"), 0.5 * zone_world);
+    assert!(none.length() < 1e-6, "{none}");
 }
