@@ -402,6 +402,7 @@ impl Loader<'_> {
         compiled
     }
 
+    #[inline(never)]
     fn object<'d>(&mut self, scope: &Scope<'d>, node: &'d Node, place: &Place) {
         let Some(mut object) = self.converted(scope, node) else {
             return;
@@ -489,6 +490,7 @@ impl Loader<'_> {
     }
 
     /// The fields of a `Group`, `Transform` or `FTransform`.
+    #[inline(never)]
     fn read_group<'d>(&mut self, scope: &Scope<'d>, node: &'d Node) -> GroupNode<'d> {
         let mut reader = Reader {
             issues: &mut self.issues,
@@ -527,6 +529,7 @@ impl Loader<'_> {
 
     /// Makes the group (or, under a moving `FTransform`, folds its transform into the
     /// motion's frame); returns where its children go.
+    #[inline(never)]
     fn enter(
         &mut self,
         scope: &Scope<'_>,
@@ -587,6 +590,7 @@ impl Loader<'_> {
         })
     }
 
+    #[inline(never)]
     fn inline<'d>(&mut self, scope: &Scope<'d>, node: &'d Node, place: &Place) {
         let mut reader = Reader {
             issues: &mut self.issues,
