@@ -12,4 +12,6 @@ mod peer_support;
 use libfuzzer_sys::fuzz_target;
 use testkit::stack::on_small_stack;
 
-fuzz_target!(|data: &[u8]| on_small_stack(|| peer_support::run(data)));
+fuzz_target!(|data: &[u8]| {
+    on_small_stack(|| peer_support::run(data));
+});
