@@ -164,3 +164,23 @@ fn sessions_lists_the_stores_under_a_root() {
     );
     assert!(!out.contains("not-a-session"), "{out}");
 }
+
+#[test]
+fn check_locates_a_too_deep_formula_instead_of_overflowing_the_stack() {
+    // `x^x^...` once recursed a level per `^`: 60 KB of it aborted the 8 MiB main thread.
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli-check");
+    std::fs::create_dir_all(&dir).unwrap();
+    let deep = dir.join("deep.fdsl");
+    std::fs::write(&deep, "x^".repeat(30_000) + "x").unwrap();
+    let run = sculpt(&["check", &format!("@{}", deep.display())]);
+    let stderr = text(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("nests deeper than"), "{stderr}");
+    assert!(stderr.contains("--> 1:"), "{stderr}");
+    // As long a flat chain nests nothing and compiles.
+    let flat = dir.join("flat.fdsl");
+    std::fs::write(&flat, "x+".repeat(30_000) + "x").unwrap();
+    let run = sculpt(&["check", &format!("@{}", flat.display())]);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    assert!(text(&run.stdout).starts_with("ok: outputs value"));
+}

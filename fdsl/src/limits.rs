@@ -5,8 +5,14 @@
 
 /// The longest source text accepted, in bytes.
 pub const MAX_SOURCE_BYTES: usize = 64 * 1024;
-/// The deepest nesting of parentheses, blocks and operators the parser follows.
+/// The deepest nesting within one expression: parentheses, calls, prefix operators, `^`
+/// and pending binary operators. The parser and the lowering keep it on the heap, not the
+/// stack (long flat chains such as `x+x+...+x` nest nothing: they are limited by length).
 pub const MAX_NESTING_DEPTH: usize = 256;
+/// The deepest nesting of statements: blocks, `if`, `else` (so each `else if` of a chain),
+/// `for` and `while`. Statements are read and lowered by recursion, so this bounds the stack
+/// a compilation needs; at this depth the whole pipeline fits a 256 KiB thread.
+pub const MAX_STATEMENT_DEPTH: usize = 64;
 /// The most nodes an expression graph may hold after deduplication.
 pub const MAX_GRAPH_NODES: usize = 200_000;
 /// An object's formula may unroll to at most this many graph nodes plus

@@ -276,6 +276,21 @@ impl Tape {
         &self.0.outputs
     }
 
+    /// The bytes the tape's program holds, shared by its clones (the grids it names not
+    /// counted).
+    pub fn heap_bytes(&self) -> usize {
+        let p = &*self.0;
+        // The `Arc`'s two counts, then the program and its slices.
+        2 * size_of::<usize>()
+            + size_of::<Program>()
+            + size_of_val(&*p.ssa)
+            + size_of_val(&*p.ssa_outputs)
+            + size_of_val(&*p.instr_ssa)
+            + size_of_val(&*p.instrs)
+            + size_of_val(&*p.outputs)
+            + size_of_val(&*p.grids)
+    }
+
     /// How many instructions the tape runs.
     pub fn len(&self) -> usize {
         self.0.instrs.len()

@@ -13,6 +13,7 @@ use fdsl::object::{
 use fdsl::scene::{Group, GroupId, ObjectId, Scene};
 use glam::{DAffine3, DMat3, DQuat, DVec3};
 use proptest::prelude::*;
+use testkit::stack::on_small_stack;
 
 const FIGURES: [&str; 4] = [
     include_str!("../../tests/data/scenes/figure_7_4.wrl"),
@@ -120,63 +121,95 @@ fn huge_numbers_are_errors_or_exact() {
     assert!(issues[0].message.contains("not invertible"), "{issues:#?}");
 }
 
-/// Runs `f` on a named thread with a small stack, so that unbounded recursion would crash.
-fn on_small_stack(f: impl FnOnce() + Send + 'static) {
-    std::thread::Builder::new()
-        .name("fvrml-small-stack".into())
-        .stack_size(2048 * 1024)
-        .spawn(f)
-        .unwrap()
-        .join()
-        .unwrap();
+/// A shape whose formula nests as deep as the language allows: statements to
+/// `MAX_STATEMENT_DEPTH`, and an expression to `MAX_NESTING_DEPTH` inside the deepest one, so
+/// that the loads below compile the worst formula at their deepest point.
+fn deepest_shape() -> String {
+    use fdsl::limits::{MAX_NESTING_DEPTH, MAX_STATEMENT_DEPTH};
+    let n = MAX_STATEMENT_DEPTH - 1;
+    // The pending `-` is one level of the expression.
+    let m = MAX_NESTING_DEPTH - 1;
+    let formula = format!(
+        "function frep(x,y,z) {{ r = 0; {}r = 0.5 - {}x{} + 0*x^2;{} return r; }}",
+        "{ ".repeat(n),
+        "(".repeat(m),
+        ")".repeat(m),
+        " }".repeat(n)
+    );
+    assert!(fdsl::Function::parse(&formula).is_ok());
+    format!("FShape {{ geometry FGeometry {{ definition \"{formula}\" }} }}")
 }
 
 #[test]
 fn deep_nesting_never_overflows_the_stack() {
+    let d = fvrml::MAX_NESTING_DEPTH;
+    let too_deep = format!("deeper than the limit of {d}");
+    // On the stack of the engine's thread, where every load runs.
     on_small_stack(|| {
         let braces = "Group { children [ ".repeat(100_000);
         let issues = errors(&braces);
-        assert!(
-            issues
-                .iter()
-                .any(|i| i.message.contains("deeper than the limit of 128"))
-        );
+        assert!(issues.iter().any(|i| i.message.contains(&too_deep)));
         let _ = errors(&"[".repeat(1_000_000));
         let _ = errors(&"{".repeat(1_000_000));
         let _ = errors(&format!("Group {{ children {} }}", "[".repeat(1_000_000)));
-        // Closed, but deeper than the limit.
-        let text = format!(
-            "{}FShape {{ }}{}",
-            "Transform { children [ ".repeat(200),
-            "] } ".repeat(200)
-        );
-        assert!(!errors(&text).is_empty());
-        // 63 nested groups (the scene allows 64) around a shape load.
-        let text = format!(
-            "{}FShape {{ }}{}",
-            "Transform { children [ ".repeat(63),
-            "] } ".repeat(63)
-        );
-        assert!(try_load(&text, "").is_ok());
-        // The worst case for the stack: a moving FTransform (nested groups flatten, so only
-        // the nesting limit applies) around an Inline whose file is parsed at that depth and
-        // nests as deep again (the loader then stops at its limit).
-        let deep = |inner: &str| {
+        let _ = errors(&"FShape { geometry ".repeat(100_000));
+        let deep = |n: usize, inner: &str| {
             format!(
                 "{}{inner}{}",
-                "Transform { children [ ".repeat(125),
-                "] } ".repeat(125)
+                "Transform { children [ ".repeat(n),
+                "] } ".repeat(n)
             )
         };
-        let text = format!(
-            "FTransform {{ translationFunction \"x=t; y=0; z=0;\" children [ {} ] }}",
-            deep("Inline { url \"deep.wrl\" }")
-        );
-        let issues = try_load(&text, &deep("FShape { }")).unwrap_err();
+        // Closed, but deeper than the limit.
+        assert!(!errors(&deep(200, "FShape { }")).is_empty());
+        let shape = deepest_shape();
+        // As many nested groups as a scene may hold, around the deepest formula: what
+        // saving such a scene writes loads back.
+        assert!(try_load(&deep(fdsl::limits::MAX_GROUP_DEPTH, &shape), "").is_ok());
+        // Under a moving FTransform nested groups flatten, so only the nesting limits apply:
+        // the parser's comes first (the FTransform, the groups, the shape and its geometry).
+        let moving = |inner: &str| {
+            format!("FTransform {{ translationFunction \"x=t; y=0; z=0;\" children [ {inner} ] }}")
+        };
+        assert!(try_load(&moving(&deep(d - 3, &shape)), "").is_ok());
+        let issues = try_load(&moving(&deep(d - 2, &shape)), "").unwrap_err();
+        assert!(issues[0].message.contains(&too_deep), "{issues:#?}");
+        // The worst case for the stack: an Inline at that depth, whose file is parsed there
+        // and nests as deep again (the loader then stops at its limit).
+        let text = moving(&deep(d - 3, "Inline { url \"deep.wrl\" }"));
+        let issues = try_load(&text, &deep(d - 3, &shape)).unwrap_err();
         assert!(
             issues[0]
                 .message
-                .contains("groups nest deeper than the limit of 128")
+                .contains(&format!("groups nest {too_deep}")),
+            "{issues:#?}"
+        );
+        // An Inline whose file loads the deepest formula at the deepest place it may.
+        let text = moving(&deep(d - 9, "Inline { url \"deep.wrl\" }"));
+        assert!(try_load(&text, &deep(6, &shape)).is_ok());
+        // A chain of `USE`s, each a group holding the previous one, as deep as loads allow.
+        let chain = |n: usize| {
+            let mut text = format!("DEF G0 Transform {{ children [ {shape} ] }}\n");
+            for k in 1..n {
+                text.push_str(&format!(
+                    "DEF G{k} Transform {{ children [ USE G{} ] }}\n",
+                    k - 1
+                ));
+            }
+            text
+        };
+        assert!(try_load(&moving(&chain(d - 1)), "").is_ok());
+        let issues = try_load(&moving(&chain(d)), "").unwrap_err();
+        assert!(
+            issues
+                .iter()
+                .any(|i| i.message.contains(&format!("groups nest {too_deep}"))),
+            "{issues:#?}"
+        );
+        let issues = try_load(&chain(fdsl::limits::MAX_GROUP_DEPTH + 1), "").unwrap_err();
+        assert!(
+            issues.iter().any(|i| i.message.contains("deeper")),
+            "{issues:#?}"
         );
     });
 }

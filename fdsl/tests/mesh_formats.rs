@@ -700,3 +700,30 @@ fn read_errors_name_their_format() {
     let e = MeshFormat::Glb.read(b"nonsense").unwrap_err();
     assert!(e.to_string().starts_with("glTF: byte 0:"), "{e}");
 }
+
+#[test]
+fn deep_json_in_a_glb_reads_on_a_small_stack() {
+    use testkit::stack::on_small_stack;
+    // A value nobody reads is skipped by serde_json without recursion, however deep; where
+    // the glTF types expect an object, nesting is a type error at once.
+    let (bin, _) = interleaved_tetrahedron();
+    let views = r#"{"buffer":0,"byteLength":96,"byteStride":24}"#;
+    let accessors = r#"{"bufferView":0,"componentType":5126,"count":4,"type":"VEC3"}"#;
+    let file = |field: &str, depth: usize, open: &str, close: &str| {
+        let value = format!("{}0{}", open.repeat(depth), close.repeat(depth));
+        let json = gltf_json(accessors, views, 96, false);
+        let json = format!(r#"{{"{field}":{value},{}"#, &json[1..]);
+        glb_file(&json, Some(&bin))
+    };
+    on_small_stack(|| {
+        for (open, close) in [("[", "]"), (r#"{"a":"#, "}")] {
+            for depth in [127, 128, 100_000] {
+                // The JSON reads; the mesh it describes is the error (4 corners, no indices).
+                let e = glb::read(&file("extras", depth, open, close)).unwrap_err();
+                assert!(matches!(e, GlbError::Invalid { .. }), "{e}");
+                let e = glb::read(&file("asset", depth, "[", "]")).unwrap_err();
+                assert!(matches!(e, GlbError::Json { .. }), "{e}");
+            }
+        }
+    });
+}

@@ -3,5 +3,8 @@
 //!
 //! - [`alloc`]: a counting global allocator, for "this path never allocates" tests and for
 //!   heap figures.
+//! - [`stack`]: runs a closure on a thread with a small stack, so that unbounded recursion on
+//!   deep input is a crash in tests, not a pass on the harness's large stacks.
 
 pub mod alloc;
+pub mod stack;

@@ -48,6 +48,11 @@ pub const PRESENCE_REPEAT_MILLIS: u64 = 1_000;
 pub const SHUTDOWN_FLUSH_MILLIS: u64 = 2_000;
 /// How long [`Engine::start`] waits for the engine thread to bind its socket.
 pub const START_TIMEOUT_SECS: u64 = 20;
+/// The engine thread's stack. A backstop only: what it decodes, folds and compiles (ops,
+/// snapshots, formulas, scene files from peers) is bounded to fit 256 KiB (fdsl's and
+/// replication's small-stack tests), and this margin keeps an unforeseen deep path from
+/// aborting every peer at the default 2 MiB (8 MiB, as the main thread has).
+pub const ENGINE_STACK_BYTES: usize = 8 << 20;
 
 /// How the engine reaches other peers.
 #[derive(Clone, Debug)]
@@ -355,6 +360,7 @@ impl Engine {
         };
         let thread = std::thread::Builder::new()
             .name("sculpt-engine".into())
+            .stack_size(ENGINE_STACK_BYTES)
             .spawn(move || worker.run(node_config, demo, inbox, ready_tx))
             .map_err(|e| StartError::Thread(e.to_string()))?;
         match ready_rx.recv_timeout(Duration::from_secs(START_TIMEOUT_SECS)) {

@@ -1,14 +1,19 @@
 //! Fuzzes the whole front end and the evaluators: any bytes, read as text, must compile or be
 //! rejected with diagnostics, never panic, hang or allocate without bound; a compiled function
-//! must evaluate at a point, over a box and with a simplified tape without panicking.
+//! must evaluate at a point, over a box and with a simplified tape without panicking. Each
+//! input runs on a thread with a 256 KiB stack, the budget of the engine's thread, so that a
+//! recursion as deep as the input is a crash the fuzzer finds.
 #![no_main]
 
 use fdsl::Function;
 use fdsl::eval::{BulkEval, GradEval, Interval, IntervalBulkEval, IntervalEval, PointEval};
 use fdsl::tape::Fidelity;
 use libfuzzer_sys::fuzz_target;
+use testkit::stack::on_small_stack;
 
-fuzz_target!(|data: &[u8]| {
+fuzz_target!(|data: &[u8]| on_small_stack(|| compile(data)));
+
+fn compile(data: &[u8]) {
     let text = String::from_utf8_lossy(data);
     let compiled = Function::compile(&text);
     for d in &compiled.diagnostics {
@@ -32,4 +37,4 @@ fuzz_target!(|data: &[u8]| {
     assert_eq!(format!("{bounds:?}"), format!("{:?}", bulk[0]), "bulk bounds differ");
     let simpler = tape.simplify(interval.choices(), Fidelity::Sign);
     let _ = PointEval::new(&simpler).eval(p);
-});
+}

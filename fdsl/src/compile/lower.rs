@@ -14,7 +14,8 @@ use super::graph::{Context, GraphFull, Node};
 use super::ops::{BinaryOp, TernaryOp, UnaryOp};
 use crate::grid::{Grid, MAX_GRIDS};
 use crate::limits::{
-    MAX_CALL_ARGS, MAX_LOOP_TRIPS, MAX_OUTPUTS, MAX_STATEMENT_FUEL, MAX_VARIABLES,
+    MAX_CALL_ARGS, MAX_LOOP_TRIPS, MAX_OUTPUTS, MAX_STATEMENT_DEPTH, MAX_STATEMENT_FUEL,
+    MAX_VARIABLES,
 };
 use crate::syntax::ast::{self, Expr, ExprKind, FunctionDef, Item, Program, Stmt};
 use crate::syntax::{Diagnostic, Span};
@@ -119,6 +120,7 @@ pub fn lower(program: &Program, options: Options) -> (Option<Lowered>, Vec<Diagn
         options,
         diagnostics: Vec::new(),
         fuel: 0,
+        depth: 0,
         inputs_used: [false; 4],
     };
     let outputs = match check_grids(&lowerer.options.grids) {
@@ -199,6 +201,8 @@ struct Lowerer {
     options: Options,
     diagnostics: Vec<Diagnostic>,
     fuel: usize,
+    /// How many statements enclose the one being run.
+    depth: usize,
     inputs_used: [bool; 4],
 }
 
@@ -455,8 +459,26 @@ impl Lowerer {
     }
 
     /// Runs one statement. Errors are recorded; the statement's variables are poisoned so that
-    /// later statements are still checked without cascading reports.
+    /// later statements are still checked without cascading reports. Statements nest by
+    /// recursion, so their depth is checked here too (the parser's limit, for programs
+    /// built in code).
     fn statement(&mut self, s: &Stmt, env: &mut Env) {
+        if self.depth >= MAX_STATEMENT_DEPTH {
+            self.report(
+                Diagnostic::error(
+                    s.span(),
+                    format!("statements nest deeper than {MAX_STATEMENT_DEPTH} levels"),
+                )
+                .with_hint("flatten the blocks, `if`s and loops"),
+            );
+            return;
+        }
+        self.depth += 1;
+        self.run_statement(s, env);
+        self.depth -= 1;
+    }
+
+    fn run_statement(&mut self, s: &Stmt, env: &mut Env) {
         self.fuel += 1;
         if self.fuel > MAX_STATEMENT_FUEL {
             if self.fuel == MAX_STATEMENT_FUEL + 1 {
@@ -664,26 +686,91 @@ impl Lowerer {
         self.diagnostics.iter().filter(|d| d.is_error()).count()
     }
 
-    fn expr(&mut self, e: &Expr, env: &Env) -> LResult<Node> {
+    /// Lowers an expression without recursion (a chain such as `x+x+...+x` is as deep as the
+    /// text is long): a post-order walk over an explicit stack, in the order a recursive walk
+    /// would take, so nodes and diagnostics come in source order.
+    fn expr(&mut self, root: &Expr, env: &Env) -> LResult<Node> {
+        enum Step<'e> {
+            /// Lower this subtree.
+            Enter(&'e Expr),
+            /// Its operands are lowered (on top of `values`): apply its operation.
+            Exit(&'e Expr, Option<Arc<Grid>>),
+        }
+        let mut steps = vec![Step::Enter(root)];
+        let mut values: Vec<LResult<Node>> = Vec::new();
+        let mut operands: Vec<Node> = Vec::new();
+        while let Some(step) = steps.pop() {
+            match step {
+                Step::Enter(e) => match &e.kind {
+                    ExprKind::Number(v) => values.push(self.constant(e.span, *v)),
+                    ExprKind::Var(name) => values.push(self.variable(name, e.span, env)),
+                    ExprKind::Unary(_, a) => {
+                        steps.push(Step::Exit(e, None));
+                        steps.push(Step::Enter(a));
+                    }
+                    ExprKind::Binary(_, a, b) => {
+                        steps.push(Step::Exit(e, None));
+                        steps.push(Step::Enter(b));
+                        steps.push(Step::Enter(a));
+                    }
+                    ExprKind::Call(name, args) => match self.callee(name, args, e.span) {
+                        Ok(grid) => {
+                            steps.push(Step::Exit(e, grid));
+                            steps.extend(args.iter().rev().map(Step::Enter));
+                        }
+                        Err(Failed) => values.push(Err(Failed)),
+                    },
+                },
+                Step::Exit(e, grid) => {
+                    let n_args = match &e.kind {
+                        ExprKind::Unary(..) => 1,
+                        ExprKind::Binary(..) => 2,
+                        ExprKind::Call(_, args) => args.len(),
+                        ExprKind::Number(_) | ExprKind::Var(_) => 0,
+                    };
+                    operands.clear();
+                    let mut failed = false;
+                    for v in values.drain(values.len() - n_args..) {
+                        match v {
+                            Ok(node) => operands.push(node),
+                            Err(Failed) => failed = true,
+                        }
+                    }
+                    let value = if failed {
+                        Err(Failed)
+                    } else {
+                        self.apply(e, grid, &operands)
+                    };
+                    values.push(value);
+                }
+            }
+        }
+        assert_eq!(values.len(), 1, "an expression lowers to one value");
+        values.pop().unwrap_or(Err(Failed))
+    }
+
+    /// The operation of `e` on its lowered operands.
+    fn apply(&mut self, e: &Expr, grid: Option<Arc<Grid>>, n: &[Node]) -> LResult<Node> {
         let span = e.span;
         match &e.kind {
-            ExprKind::Number(v) => self.constant(span, *v),
-            ExprKind::Var(name) => self.variable(name, span, env),
-            ExprKind::Unary(op, a) => {
-                let a = self.expr(a, env)?;
+            ExprKind::Unary(op, _) => {
                 let op = match op {
                     ast::UnaryOp::Neg => UnaryOp::Neg,
                     ast::UnaryOp::Not => UnaryOp::Not,
                 };
-                self.unary(span, op, a)
+                self.unary(span, op, n[0])
             }
-            ExprKind::Binary(op, a, b) => {
-                let a = self.expr(a, env);
-                let b = self.expr(b, env);
-                let (a, b) = (a?, b?);
-                self.binary_expr(span, *op, a, b)
+            ExprKind::Binary(op, _, _) => self.binary_expr(span, *op, n[0], n[1]),
+            ExprKind::Call(name, _) => match grid {
+                Some(grid) => {
+                    let sampled = self.ctx.sample(&grid, n[0], n[1], n[2]);
+                    self.full(span, sampled)
+                }
+                None => self.builtin(&name.name, n, span),
+            },
+            ExprKind::Number(_) | ExprKind::Var(_) => {
+                unreachable!("leaves are lowered when entered")
             }
-            ExprKind::Call(name, args) => self.call(name, args, span, env),
         }
     }
 
@@ -787,7 +874,14 @@ impl Lowerer {
         self.fail(d)
     }
 
-    fn call(&mut self, name: &ast::Ident, args: &[Expr], span: Span, env: &Env) -> LResult<Node> {
+    /// Checks a call's function and argument count before its arguments are lowered; the
+    /// grid it samples, if it names one.
+    fn callee(
+        &mut self,
+        name: &ast::Ident,
+        args: &[Expr],
+        span: Span,
+    ) -> LResult<Option<Arc<Grid>>> {
         let f = name.name.as_str();
         let grid = self.options.grids.iter().find(|g| g.name() == f).cloned();
         let arity = match &grid {
@@ -822,22 +916,7 @@ impl Lowerer {
                 ),
             ));
         }
-        let mut nodes = Vec::with_capacity(args.len());
-        let mut failed = false;
-        for a in args {
-            match self.expr(a, env) {
-                Ok(n) => nodes.push(n),
-                Err(Failed) => failed = true,
-            }
-        }
-        if failed {
-            return Err(Failed);
-        }
-        if let Some(grid) = grid {
-            let sampled = self.ctx.sample(&grid, nodes[0], nodes[1], nodes[2]);
-            return self.full(span, sampled);
-        }
-        self.builtin(f, &nodes, span)
+        Ok(grid)
     }
 
     fn builtin(&mut self, f: &str, n: &[Node], span: Span) -> LResult<Node> {

@@ -413,6 +413,7 @@ impl Loader<'_> {
         compiled
     }
 
+    #[inline(never)]
     fn object<'d>(&mut self, scope: &Scope<'d>, node: &'d Node, place: &Place) {
         let Some(mut object) = self.converted(scope, node) else {
             return;
@@ -514,6 +515,7 @@ impl Loader<'_> {
     }
 
     /// The fields of a `Group`, `Transform` or `FTransform`.
+    #[inline(never)]
     fn read_group<'d>(&mut self, scope: &Scope<'d>, node: &'d Node) -> GroupNode<'d> {
         let mut reader = Reader {
             issues: &mut self.issues,
@@ -552,6 +554,7 @@ impl Loader<'_> {
 
     /// Makes the group (or, under a moving `FTransform`, folds its transform into the
     /// motion's frame); returns where its children go.
+    #[inline(never)]
     fn enter(
         &mut self,
         scope: &Scope<'_>,
@@ -612,6 +615,7 @@ impl Loader<'_> {
         })
     }
 
+    #[inline(never)]
     fn inline<'d>(&mut self, scope: &Scope<'d>, node: &'d Node, place: &Place) {
         let mut reader = Reader {
             issues: &mut self.issues,

@@ -107,7 +107,7 @@ pub const MAX_FILE_BYTES: usize = 16 << 20;
 /// Most bytes read over one load, the root file and every `Inline` together.
 pub const MAX_TOTAL_BYTES: usize = 64 << 20;
 /// Deepest nesting of nodes and lists in one file.
-pub const MAX_NESTING_DEPTH: usize = 128;
+pub const MAX_NESTING_DEPTH: usize = 72;
 /// Most nodes in one file.
 pub const MAX_NODES: usize = 200_000;
 /// Most values in one list (or one run of numbers).

@@ -2,9 +2,11 @@
 //! compiled once however many times objects holding it are built (a received op is validated,
 //! then folded; a scene is reloaded; an object is copied for the mesher or the servo).
 //!
-//! The cache holds at most [`MAX_CACHED_TAPES`] tapes and [`MAX_CACHED_INSTRUCTIONS`]
-//! instructions in all; past either, the oldest entries go first. Failures are not kept (a
-//! formula that fails stops at its budget, see [`crate::limits::formula_node_budget`]).
+//! The cache holds at most [`MAX_CACHED_TAPES`] tapes and [`MAX_CACHED_BYTES`] bytes in all
+//! (tapes, the texts and outputs that key them, and the grids they keep alive, estimated from
+//! their sizes: a 64 KiB text can compile to a few instructions); past either, the oldest
+//! entries go first. Failures are not kept (a formula that fails stops at its budget, see
+//! [`crate::limits::formula_node_budget`]).
 
 use crate::function::Grids;
 use std::cell::Cell;
@@ -15,25 +17,45 @@ use crate::tape::Tape;
 
 /// Most tapes kept.
 pub const MAX_CACHED_TAPES: usize = 4096;
-/// Most instructions kept over all tapes (a few tens of MB at most).
-pub const MAX_CACHED_INSTRUCTIONS: usize = 2_000_000;
+/// Most bytes the cache holds (see [`entry_bytes`]).
+pub const MAX_CACHED_BYTES: usize = 64 << 20;
 
 /// The formula's text and the outputs its tape takes (empty: the main value).
 /// A formula's text, its outputs, and the grids it was compiled with (compared by content).
 type Key = (String, Vec<String>, Grids);
 
 struct Cache {
-    tapes: BTreeMap<Key, Tape>,
+    /// Each tape with the bytes its entry holds.
+    tapes: BTreeMap<Key, (Tape, usize)>,
     /// Keys in insertion order, oldest first.
     order: VecDeque<Key>,
-    n_instructions: usize,
+    n_bytes: usize,
 }
 
 static CACHE: Mutex<Cache> = Mutex::new(Cache {
     tapes: BTreeMap::new(),
     order: VecDeque::new(),
-    n_instructions: 0,
+    n_bytes: 0,
 });
+
+/// The bytes an entry holds: its tape, its key twice (in the map and in the order), and the
+/// grids it keeps alive (counted for each entry, though entries may share them).
+fn entry_bytes(key: &Key, tape: &Tape) -> usize {
+    let (text, outputs, grids) = key;
+    let strings: usize = outputs
+        .iter()
+        .map(|o| size_of::<String>() + o.capacity())
+        .sum();
+    let key_bytes = size_of::<Key>() + text.capacity() + strings;
+    let samples: usize = grids
+        .iter()
+        .map(|g| size_of::<crate::grid::Grid>() + g.name().len() + g.data().samples.capacity())
+        .sum();
+    let grid_bytes = size_of_val(&**grids) + samples;
+    // A map entry and a queue slot besides the key's own bytes.
+    let slots = size_of::<Key>() + size_of::<(Tape, usize)>();
+    2 * key_bytes + slots + grid_bytes + tape.heap_bytes()
+}
 
 thread_local! {
     /// Texts compiled on this thread (every [`crate::Function::compile_with`]).
@@ -78,27 +100,26 @@ pub(crate) fn tape<E>(
         outputs.iter().map(|&o| o.to_owned()).collect(),
         grids.clone(),
     );
-    if let Some(tape) = lock().tapes.get(&key) {
+    if let Some((tape, _)) = lock().tapes.get(&key) {
         return Ok(tape.clone());
     }
     // Compiled outside the lock: another thread may compile the same formula meanwhile, and
     // both results are the same.
     let tape = compile()?;
+    let n_bytes = entry_bytes(&key, &tape);
     let mut cache = lock();
-    if tape.len() <= MAX_CACHED_INSTRUCTIONS && !cache.tapes.contains_key(&key) {
-        while cache.tapes.len() >= MAX_CACHED_TAPES
-            || cache.n_instructions + tape.len() > MAX_CACHED_INSTRUCTIONS
-        {
+    if n_bytes <= MAX_CACHED_BYTES && !cache.tapes.contains_key(&key) {
+        while cache.tapes.len() >= MAX_CACHED_TAPES || cache.n_bytes + n_bytes > MAX_CACHED_BYTES {
             let Some(oldest) = cache.order.pop_front() else {
                 break;
             };
-            if let Some(old) = cache.tapes.remove(&oldest) {
-                cache.n_instructions -= old.len();
+            if let Some((_, old_bytes)) = cache.tapes.remove(&oldest) {
+                cache.n_bytes -= old_bytes;
             }
         }
-        cache.n_instructions += tape.len();
+        cache.n_bytes += n_bytes;
         cache.order.push_back(key.clone());
-        cache.tapes.insert(key, tape.clone());
+        cache.tapes.insert(key, (tape.clone(), n_bytes));
     }
     Ok(tape)
 }
@@ -113,13 +134,13 @@ pub fn clear() {
     let mut cache = lock();
     cache.tapes.clear();
     cache.order.clear();
-    cache.n_instructions = 0;
+    cache.n_bytes = 0;
 }
 
-/// Tapes and instructions held now.
+/// Tapes and bytes held now.
 pub fn cached() -> (usize, usize) {
     let cache = lock();
-    (cache.tapes.len(), cache.n_instructions)
+    (cache.tapes.len(), cache.n_bytes)
 }
 
 #[cfg(test)]
@@ -246,9 +267,9 @@ mod tests {
         for i in 0..MAX_CACHED_TAPES + 50 {
             object(&format!("{i}.5 - x^2 - y^2 - z^2"));
         }
-        let (n_tapes, n_instructions) = cached();
+        let (n_tapes, n_bytes) = cached();
         assert!(n_tapes <= MAX_CACHED_TAPES, "{n_tapes}");
-        assert!(n_instructions <= MAX_CACHED_INSTRUCTIONS);
+        assert!(n_bytes <= MAX_CACHED_BYTES);
         // The newest stay, the oldest went.
         let before = n_compiled_on_this_thread();
         object(&format!("{}.5 - x^2 - y^2 - z^2", MAX_CACHED_TAPES + 49));

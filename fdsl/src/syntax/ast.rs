@@ -1,4 +1,10 @@
 //! The abstract syntax tree: programs, statements and expressions, each with its byte span.
+//!
+//! Expressions can be as deep as the text is long (`x+x+...+x` is a left-leaning chain), so
+//! nothing walks them by recursion: the parser and the lowering use explicit stacks, and
+//! [`Expr`]'s `Drop` takes its subtrees apart iteratively. Statements nest by recursion, at
+//! most [`crate::limits::MAX_STATEMENT_DEPTH`] deep from the parser. The derived `Clone`,
+//! `PartialEq` and `Debug` do recurse: they are for small trees (tests, messages).
 
 use super::Span;
 
@@ -83,6 +89,9 @@ pub enum Stmt {
 }
 
 impl Stmt {
+    /// An empty block, what a statement taken apart is left holding.
+    const EMPTY: Stmt = Stmt::Block(Vec::new(), Span { start: 0, end: 0 });
+
     /// Where the statement stands.
     pub fn span(&self) -> Span {
         match self {
@@ -151,6 +160,68 @@ pub struct Expr {
     pub kind: ExprKind,
     /// Where.
     pub span: Span,
+}
+
+impl Drop for Stmt {
+    /// Drops nested statements from a list instead of by recursion: the parser bounds their
+    /// depth, but a program built in code may nest deeper.
+    fn drop(&mut self) {
+        let mut pending: Vec<Stmt> = Vec::new();
+        take_statements(self, &mut pending);
+        while let Some(mut child) = pending.pop() {
+            take_statements(&mut child, &mut pending);
+        }
+    }
+}
+
+/// Moves the statements nested in `s` into `out`, leaving it without any.
+fn take_statements(s: &mut Stmt, out: &mut Vec<Stmt>) {
+    match s {
+        Stmt::Block(body, _) => out.append(body),
+        Stmt::If {
+            then, otherwise, ..
+        } => {
+            out.push(std::mem::replace(&mut **then, Stmt::EMPTY));
+            out.extend(otherwise.take().map(|o| *o));
+        }
+        Stmt::Loop {
+            init, step, body, ..
+        } => {
+            out.push(std::mem::replace(&mut **body, Stmt::EMPTY));
+            out.extend(init.take().map(|s| *s));
+            out.extend(step.take().map(|s| *s));
+        }
+        Stmt::Assign { .. } | Stmt::Return(..) | Stmt::Expr(_) => {}
+    }
+}
+
+impl Drop for Expr {
+    /// Drops the subtrees from a list instead of by recursion, one level per node, which
+    /// would overflow the stack on a long chain.
+    fn drop(&mut self) {
+        let mut pending: Vec<Expr> = Vec::new();
+        take_children(&mut self.kind, &mut pending);
+        while let Some(mut child) = pending.pop() {
+            take_children(&mut child.kind, &mut pending);
+            // `child` now holds no subtree: dropping it does not recurse.
+        }
+    }
+}
+
+/// Moves the subtrees of `kind` into `out`, leaving it a leaf.
+fn take_children(kind: &mut ExprKind, out: &mut Vec<Expr>) {
+    if matches!(kind, ExprKind::Number(_) | ExprKind::Var(_)) {
+        return;
+    }
+    match std::mem::replace(kind, ExprKind::Number(0.0)) {
+        ExprKind::Number(_) | ExprKind::Var(_) => {}
+        ExprKind::Unary(_, a) => out.push(*a),
+        ExprKind::Binary(_, a, b) => {
+            out.push(*a);
+            out.push(*b);
+        }
+        ExprKind::Call(_, args) => out.extend(args),
+    }
 }
 
 /// The kinds of expression.

@@ -134,13 +134,14 @@ impl Diagnostic {
         let _ = writeln!(out, "{:gutter$}--> {line}:{col}", "");
         let _ = writeln!(out, "{:gutter$} |", "");
         let _ = writeln!(out, "{line} | {text}");
+        // Padded by repetition, not a `{:pad$}` width: widths past `u16::MAX` panic, and a
+        // line of the text can be longer.
         let _ = writeln!(
             out,
-            "{:gutter$} | {:pad$}{}",
+            "{:gutter$} | {}{}",
             "",
-            "",
-            "^".repeat(width),
-            pad = col - 1
+            " ".repeat(col - 1),
+            "^".repeat(width)
         );
         if let Some(hint) = &self.hint {
             let _ = writeln!(out, "{:gutter$} = hint: {hint}", "");
@@ -180,6 +181,18 @@ mod tests {
         assert_eq!(
             text,
             "error: unknown function `sni`\n --> 2:5\n  |\n2 | b = sni(x);\n  |     ^^^\n  = hint: did you mean `sin`?\n"
+        );
+    }
+
+    #[test]
+    fn a_column_past_u16_max_renders() {
+        let src = "x".repeat(70_000);
+        let d = Diagnostic::error(Span::new(69_999, 70_000), "far");
+        let text = d.render(&src);
+        assert!(
+            text.contains(&format!("{}^\n", " ".repeat(69_999))),
+            "{}",
+            &text[..80]
         );
     }
 

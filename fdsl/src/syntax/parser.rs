@@ -8,11 +8,15 @@
 //! compares the whole intersection with zero.
 //!
 //! Dashes printed for a minus sign (the thesis's en dash) read as `-` with a warning.
+//!
+//! Statements are read by recursive descent, at most [`MAX_STATEMENT_DEPTH`] deep; an
+//! expression is read by one loop over an explicit stack, at most [`MAX_NESTING_DEPTH`] deep,
+//! so no text can overflow the stack of the thread that parses it.
 
 use super::ast::*;
 use super::lexer::{Token, TokenKind, tokenize};
 use super::{Diagnostic, Span};
-use crate::limits::{MAX_DIAGNOSTICS, MAX_NESTING_DEPTH, MAX_SOURCE_BYTES};
+use crate::limits::{MAX_DIAGNOSTICS, MAX_NESTING_DEPTH, MAX_SOURCE_BYTES, MAX_STATEMENT_DEPTH};
 
 /// Parses a whole source text. The program holds whatever could be read; the diagnostics say
 /// what could not. A program with no error diagnostic is complete.
@@ -60,6 +64,7 @@ struct Parser<'a> {
     source: &'a str,
     tokens: Vec<Token>,
     pos: usize,
+    /// How many statements enclose the one being read.
     depth: usize,
     diagnostics: Vec<Diagnostic>,
     /// Set once the nesting limit is hit, so that parsing unwinds instead of reporting again.
@@ -139,26 +144,31 @@ impl<'a> Parser<'a> {
         }
     }
 
+    /// Enters a statement: statements nest by recursion, at most [`MAX_STATEMENT_DEPTH`] deep.
     fn enter(&mut self, span: Span) -> PResult<()> {
-        self.depth += 1;
-        if self.depth > MAX_NESTING_DEPTH {
-            if !self.too_deep {
-                self.too_deep = true;
-                self.report(
-                    Diagnostic::error(
-                        span,
-                        format!("the text nests deeper than {MAX_NESTING_DEPTH} levels"),
-                    )
-                    .with_hint("use intermediate variables to flatten the expression"),
-                );
-            }
-            return Err(Failed);
+        if self.depth >= MAX_STATEMENT_DEPTH {
+            return self.nested_too_deeply(
+                span,
+                format!("statements nest deeper than {MAX_STATEMENT_DEPTH} levels"),
+                "each block, `if`, `else` and loop nests one level: flatten them, \
+                 or compute parts in variables first",
+            );
         }
+        self.depth += 1;
         Ok(())
     }
 
     fn leave(&mut self) {
         self.depth -= 1;
+    }
+
+    /// Reports the first nesting past a limit; parsing then unwinds and stops.
+    fn nested_too_deeply<T>(&mut self, span: Span, message: String, hint: &str) -> PResult<T> {
+        if !self.too_deep {
+            self.too_deep = true;
+            self.report(Diagnostic::error(span, message).with_hint(hint));
+        }
+        Err(Failed)
     }
 
     fn program(&mut self) -> Program {
@@ -277,13 +287,11 @@ impl<'a> Parser<'a> {
     /// `{ statements }`, returning the statements and the span from brace to brace.
     fn block(&mut self) -> PResult<(Vec<Stmt>, Span)> {
         let open = self.bump();
-        self.enter(open.span)?;
         let mut body = Vec::new();
         loop {
             match self.peek().kind {
                 TokenKind::RBrace => break,
                 TokenKind::Eof => {
-                    self.leave();
                     let end = self.peek().span;
                     return self.fail(
                         Diagnostic::error(open.span, "this `{` is never closed")
@@ -296,7 +304,6 @@ impl<'a> Parser<'a> {
                 Ok(s) => body.push(s),
                 Err(Failed) => {
                     if self.too_deep {
-                        self.leave();
                         return Err(Failed);
                     }
                     self.recover_in_block();
@@ -304,7 +311,6 @@ impl<'a> Parser<'a> {
             }
         }
         let close = self.bump();
-        self.leave();
         Ok((body, open.span.to(close.span)))
     }
 
@@ -501,78 +507,80 @@ impl<'a> Parser<'a> {
         Ok(cond)
     }
 
+    /// An expression, read without recursion: what the text opens (prefixes, `^`, pending
+    /// binary operators, parentheses, calls) waits on an explicit stack of [`Open`] frames,
+    /// at most [`MAX_NESTING_DEPTH`] of them, so no text can overflow the thread's stack.
     fn expr(&mut self) -> PResult<Expr> {
-        self.binary(0)
-    }
-
-    fn binary(&mut self, min_level: u8) -> PResult<Expr> {
-        let start = self.peek();
-        self.enter(start.span)?;
-        let result = self.binary_inner(min_level);
-        self.leave();
-        result
-    }
-
-    fn binary_inner(&mut self, min_level: u8) -> PResult<Expr> {
-        let mut lhs = self.unary()?;
-        while let Some((op, level)) = binary_op(self.peek().kind) {
-            if level < min_level {
-                break;
-            }
-            self.bump();
-            let rhs = self.binary(level + 1)?;
-            let span = lhs.span.to(rhs.span);
-            lhs = Expr {
-                kind: ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)),
-                span,
+        let open = &mut Vec::new();
+        loop {
+            let Some(mut operand) = self.operand(open)? else {
+                continue;
             };
+            // Close everything the operand completes; come back for the next operand when an
+            // operator or a `,` asks for one.
+            loop {
+                // `atom ^ unary`, right-associative: `2^3^2` is `2^9`, `x^-2` is allowed.
+                if self.peek().kind == TokenKind::Caret {
+                    let caret = self.bump();
+                    self.open(open, Open::Power(operand), caret.span)?;
+                    break;
+                }
+                operand = close_prefixes(open, operand);
+                if let Some((op, level)) = binary_op(self.peek().kind) {
+                    operand = close_binaries(open, operand, level);
+                    let token = self.bump();
+                    self.open(open, Open::Binary(operand, op, level), token.span)?;
+                    break;
+                }
+                operand = close_binaries(open, operand, 0);
+                match open.pop() {
+                    None => return Ok(operand),
+                    Some(Open::Paren(paren)) => operand = self.close_paren(paren, operand)?,
+                    Some(Open::Call(name, paren, mut args)) => {
+                        args.push(operand);
+                        if self.peek().kind == TokenKind::Comma {
+                            let comma = self.bump();
+                            self.open(open, Open::Call(name, paren, args), comma.span)?;
+                            break;
+                        }
+                        operand = self.close_call(name, paren, args)?;
+                    }
+                    Some(frame @ (Open::Prefix(..) | Open::Power(_) | Open::Binary(..))) => {
+                        unreachable!("operators were closed above: {frame:?}")
+                    }
+                }
+            }
         }
-        Ok(lhs)
     }
 
-    fn unary(&mut self) -> PResult<Expr> {
+    /// Pushes a frame, or reports that the text nests too deeply.
+    fn open(&mut self, open: &mut Vec<Open>, frame: Open, span: Span) -> PResult<()> {
+        if open.len() >= MAX_NESTING_DEPTH {
+            return self.nested_too_deeply(
+                span,
+                format!("the text nests deeper than {MAX_NESTING_DEPTH} levels"),
+                "use intermediate variables to flatten the expression",
+            );
+        }
+        open.push(frame);
+        Ok(())
+    }
+
+    /// Reads the start of an operand: a prefix, `(` or `name(` opens a frame (`None`); a
+    /// number, a name or `name()` is a whole atom.
+    fn operand(&mut self, open: &mut Vec<Open>) -> PResult<Option<Expr>> {
         let token = self.peek();
-        let op = match token.kind {
-            TokenKind::Minus => Some(UnaryOp::Neg),
-            TokenKind::Bang => Some(UnaryOp::Not),
-            TokenKind::Plus => None,
-            _ => return self.power(),
+        let prefix = match token.kind {
+            TokenKind::Minus => Some(Some(UnaryOp::Neg)),
+            TokenKind::Bang => Some(Some(UnaryOp::Not)),
+            TokenKind::Plus => Some(None),
+            _ => None,
         };
-        self.bump();
-        self.enter(token.span)?;
-        let operand = self.unary();
-        self.leave();
-        let operand = operand?;
-        let span = token.span.to(operand.span);
-        Ok(match op {
-            Some(op) => Expr {
-                kind: ExprKind::Unary(op, Box::new(operand)),
-                span,
-            },
-            None => Expr {
-                kind: operand.kind,
-                span,
-            },
-        })
-    }
-
-    /// `atom ^ unary`, right-associative: `2^3^2` is `2^9` and `x^-2` is allowed.
-    fn power(&mut self) -> PResult<Expr> {
-        let base = self.atom()?;
-        if self.peek().kind != TokenKind::Caret {
-            return Ok(base);
+        if let Some(op) = prefix {
+            self.bump();
+            self.open(open, Open::Prefix(op, token.span), token.span)?;
+            return Ok(None);
         }
-        self.bump();
-        let exponent = self.unary()?;
-        let span = base.span.to(exponent.span);
-        Ok(Expr {
-            kind: ExprKind::Binary(BinaryOp::Pow, Box::new(base), Box::new(exponent)),
-            span,
-        })
-    }
-
-    fn atom(&mut self) -> PResult<Expr> {
-        let token = self.peek();
         match token.kind {
             TokenKind::Number(value) => {
                 self.bump();
@@ -582,40 +590,30 @@ impl<'a> Parser<'a> {
                         "this number is too large to represent",
                     ));
                 }
-                Ok(Expr {
+                Ok(Some(Expr {
                     kind: ExprKind::Number(value),
                     span: token.span,
-                })
+                }))
             }
             TokenKind::Ident => {
                 let name = self.ident("a name")?;
-                if self.peek().kind == TokenKind::LParen {
-                    return self.call(name);
+                if self.peek().kind != TokenKind::LParen {
+                    return Ok(Some(Expr {
+                        span: name.span,
+                        kind: ExprKind::Var(name.name),
+                    }));
                 }
-                Ok(Expr {
-                    span: name.span,
-                    kind: ExprKind::Var(name.name),
-                })
+                let paren = self.bump();
+                if self.peek().kind == TokenKind::RParen {
+                    return self.close_call(name, paren, Vec::new()).map(Some);
+                }
+                self.open(open, Open::Call(name, paren, Vec::new()), paren.span)?;
+                Ok(None)
             }
             TokenKind::LParen => {
                 self.bump();
-                let inner = self.expr()?;
-                let close = self.peek();
-                if close.kind != TokenKind::RParen {
-                    let found = self.describe(close);
-                    return self.fail(
-                        Diagnostic::error(
-                            token.span,
-                            format!("this `(` is not closed (found {found})"),
-                        )
-                        .with_hint("add the missing `)`"),
-                    );
-                }
-                self.bump();
-                Ok(Expr {
-                    kind: inner.kind,
-                    span: token.span.to(close.span),
-                })
+                self.open(open, Open::Paren(token), token.span)?;
+                Ok(None)
             }
             TokenKind::Unknown(c) => self.fail(unknown_char(token.span, c)),
             TokenKind::Eof => self.fail(
@@ -626,25 +624,32 @@ impl<'a> Parser<'a> {
         }
     }
 
-    fn call(&mut self, name: Ident) -> PResult<Expr> {
-        let open = self.bump();
-        let mut args = Vec::new();
-        if self.peek().kind != TokenKind::RParen {
-            loop {
-                args.push(self.expr()?);
-                if self.peek().kind == TokenKind::Comma {
-                    self.bump();
-                } else {
-                    break;
-                }
-            }
-        }
+    /// `( inner` followed by the `)` that closes it.
+    fn close_paren(&mut self, paren: Token, mut inner: Expr) -> PResult<Expr> {
         let close = self.peek();
         if close.kind != TokenKind::RParen {
             let found = self.describe(close);
             return self.fail(
                 Diagnostic::error(
-                    open.span,
+                    paren.span,
+                    format!("this `(` is not closed (found {found})"),
+                )
+                .with_hint("add the missing `)`"),
+            );
+        }
+        self.bump();
+        inner.span = paren.span.to(close.span);
+        Ok(inner)
+    }
+
+    /// `name( args` followed by the `)` that closes them.
+    fn close_call(&mut self, name: Ident, paren: Token, args: Vec<Expr>) -> PResult<Expr> {
+        let close = self.peek();
+        if close.kind != TokenKind::RParen {
+            let found = self.describe(close);
+            return self.fail(
+                Diagnostic::error(
+                    paren.span,
                     format!(
                         "the arguments of `{}` are not closed (found {found})",
                         name.name
@@ -660,6 +665,71 @@ impl<'a> Parser<'a> {
             span,
         })
     }
+}
+
+/// A construct the expression parser has opened and not yet closed.
+#[derive(Debug)]
+enum Open {
+    /// A prefix `-` or `!` (`None`: `+`), applied once its operand is read.
+    Prefix(Option<UnaryOp>, Span),
+    /// `base ^`, waiting for its exponent.
+    Power(Expr),
+    /// `lhs op`, waiting for its right operand; the number is the operator's precedence.
+    Binary(Expr, BinaryOp, u8),
+    /// `(`, waiting for the expression inside.
+    Paren(Token),
+    /// `name(` and the arguments read so far, waiting for the next one.
+    Call(Ident, Token, Vec<Expr>),
+}
+
+/// Applies the prefixes and `^`s on top of the stack, innermost first: `-x^2` is `-(x^2)`.
+fn close_prefixes(open: &mut Vec<Open>, mut operand: Expr) -> Expr {
+    loop {
+        operand = match open.pop() {
+            Some(Open::Prefix(op, at)) => {
+                let span = at.to(operand.span);
+                match op {
+                    Some(op) => Expr {
+                        kind: ExprKind::Unary(op, Box::new(operand)),
+                        span,
+                    },
+                    None => {
+                        operand.span = span;
+                        operand
+                    }
+                }
+            }
+            Some(Open::Power(base)) => {
+                let span = base.span.to(operand.span);
+                Expr {
+                    kind: ExprKind::Binary(BinaryOp::Pow, Box::new(base), Box::new(operand)),
+                    span,
+                }
+            }
+            other => {
+                open.extend(other);
+                return operand;
+            }
+        };
+    }
+}
+
+/// Applies the pending binary operators on top of the stack that bind at least as tightly as
+/// `level` (all are left-associative).
+fn close_binaries(open: &mut Vec<Open>, mut operand: Expr, level: u8) -> Expr {
+    while let Some(Open::Binary(_, _, l)) = open.last()
+        && *l >= level
+    {
+        let Some(Open::Binary(lhs, op, _)) = open.pop() else {
+            unreachable!("the top frame is a binary operator")
+        };
+        let span = lhs.span.to(operand.span);
+        operand = Expr {
+            kind: ExprKind::Binary(op, Box::new(lhs), Box::new(operand)),
+            span,
+        };
+    }
+    operand
 }
 
 fn binary_op(kind: TokenKind) -> Option<(BinaryOp, u8)> {

@@ -1,7 +1,8 @@
 //! Fuzzes every decoder of untrusted replication input and the sync state machine: any bytes
 //! must decode or be refused (op, sync message, snapshot, test scene), and fed to a
 //! `SyncState` after a valid hello, as a sequence of messages, must be handled or counted as
-//! rejections, never panic, hang or allocate without bound.
+//! rejections, never panic, hang or allocate without bound. Each input runs on a thread with
+//! a 256 KiB stack, so that a recursion as deep as the input is a crash the fuzzer finds.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
@@ -12,10 +13,13 @@ use replication::pending::Origin;
 use replication::snapshot::Snapshot;
 use replication::sync::message::{Message, PROTOCOL_VERSION};
 use replication::{Keypair, Log, Op, SyncConfig, SyncState, Timestamp};
+use testkit::stack::on_small_stack;
 
 const SESSION: [u8; 16] = [5; 16];
 
-fuzz_target!(|data: &[u8]| {
+fuzz_target!(|data: &[u8]| on_small_stack(|| decode(data)));
+
+fn decode(data: &[u8]) {
     if let Ok(op) = Op::<TestPayload>::decode(data) {
         assert_eq!(op.encoded(), data, "a decoded op is canonical");
         let _ = op.verify();
@@ -33,7 +37,7 @@ fuzz_target!(|data: &[u8]| {
         assert_eq!(out, data, "a decoded scene is canonical");
     }
     sync(data);
-});
+}
 
 /// Feeds `data`, split into messages by a one-byte length prefix, to a connection whose
 /// remote has said hello, with time advancing between messages.
