@@ -173,8 +173,9 @@ impl Scene {
             .ok_or(SceneError::Object(ObjectError::BadTransform {
                 slot: crate::object::Slot::Transform,
             }))?;
-        // Walk up from the new parent: reaching `id` is a cycle.
-        let mut depth = 1;
+        // Walk up from the new parent: reaching `id` is a cycle. A group already in the scene
+        // brings the groups below it along, so they count too.
+        let mut depth = 1 + self.height_below(id);
         let mut up = group.parent;
         while let Some(g) = up {
             if g == id {
@@ -186,8 +187,49 @@ impl Scene {
             }
             up = self.groups.get(&g).and_then(|g| g.parent);
         }
+        if depth > MAX_GROUP_DEPTH {
+            return Err(SceneError::TooDeep);
+        }
         self.groups.insert(id, group);
         Ok(())
+    }
+
+    /// How many levels of groups hang below `id` (0 when none does): each group's distance up
+    /// to `id`, walked once per group (a distance found is kept for the groups below it), so
+    /// this costs O(groups) map lookups whatever the shape of the tree.
+    fn height_below(&self, id: GroupId) -> usize {
+        // For each group walked: its distance up to `id`, or `None` when `id` is not above it.
+        let mut known: BTreeMap<GroupId, Option<usize>> = BTreeMap::new();
+        let mut height = 0;
+        let mut path = Vec::new();
+        for &start in self.groups.keys() {
+            path.clear();
+            let mut up = Some(start);
+            let found = loop {
+                match up {
+                    None => break None,
+                    Some(g) if g == id => break Some(0),
+                    Some(g) => {
+                        if let Some(&d) = known.get(&g) {
+                            break d;
+                        }
+                        // Depths are bounded on every insert, so no walk is longer than the
+                        // limit; a longer one can only be a cycle, which inserts refuse.
+                        if path.len() > MAX_GROUP_DEPTH {
+                            break None;
+                        }
+                        path.push(g);
+                        up = self.groups.get(&g).and_then(|g| g.parent);
+                    }
+                }
+            };
+            for (i, &g) in path.iter().rev().enumerate() {
+                let d = found.map(|d| d + i + 1);
+                known.insert(g, d);
+                height = height.max(d.unwrap_or(0));
+            }
+        }
+        height
     }
 
     /// Removes a group; what hung from it hangs from its parent.

@@ -1267,3 +1267,38 @@ fn a_boxed_field_encodes_as_its_value() {
         assert_eq!(back, field);
     }
 }
+
+#[test]
+fn moving_a_group_with_groups_below_it_counts_their_depth() {
+    let mut scene = Scene::new();
+    let chain = |scene: &mut Scene, first: u64, n: u64| {
+        for i in 0..n {
+            let parent = (i > 0).then(|| GroupId(first + i - 1));
+            let group = Group {
+                parent,
+                ..Group::default()
+            };
+            scene.set_group(GroupId(first + i), group).unwrap();
+        }
+    };
+    let limit = fdsl::limits::MAX_GROUP_DEPTH as u64;
+    // Two chains of 40: hanging the second's root under the first's leaf would nest 80 deep.
+    chain(&mut scene, 0, 40);
+    chain(&mut scene, 100, 40);
+    let under_leaf = Group {
+        parent: Some(GroupId(39)),
+        ..Group::default()
+    };
+    assert!(scene.set_group(GroupId(100), under_leaf.clone()).is_err());
+    assert_eq!(scene.group(GroupId(100)).unwrap().parent, None, "unchanged");
+    // Exactly at the limit is allowed: 40 above and 24 in the moved chain.
+    let short = limit - 40;
+    chain(&mut scene, 200, short);
+    scene.set_group(GroupId(200), under_leaf.clone()).unwrap();
+    // One more level below the moved chain's leaf would pass the limit.
+    let deeper = Group {
+        parent: Some(GroupId(200 + short - 1)),
+        ..Group::default()
+    };
+    assert!(scene.set_group(GroupId(300), deeper).is_err());
+}
