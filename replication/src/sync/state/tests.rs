@@ -1232,3 +1232,85 @@ fn a_silent_remote_is_pinged_four_times_a_resend_interval() {
         "{pings} pings in 3 s on a base of {base} µs, expected about {expected}"
     );
 }
+
+/// Full haves among `messages`: haves naming every author of `log`.
+fn n_full_haves(messages: &[Message], log: &TLog) -> usize {
+    (messages.iter())
+        .filter(|m| matches!(m, Message::Have { vv, .. } if vv.len() == log.version_vector().len()))
+        .count()
+}
+
+/// Issue 49: every hello was answered with a full have, so a remote's 53-byte hellos made a
+/// peer with a large log announce all of it each time (about 100 KB at 50,000 authors). A
+/// full have now answers at most one hello a second, and hellos beyond the allowance count
+/// against the connection.
+#[test]
+fn a_remote_repeating_hellos_gets_one_full_have_a_second_and_is_counted() {
+    let mut b = Node::new(2, 1);
+    b.log = log_of_many_authors(300);
+    let peer = Keypair::from_seed([1; 32]).peer_id();
+    let hello = hello(peer, SESSION, PROTOCOL_VERSION);
+    let (mut n_full, mut n_repeated) = (0, 0);
+    for ms in 0..1000 {
+        let now = ms * MILLI;
+        let kinds = feed(&mut b, now, &hello);
+        n_repeated += kinds
+            .iter()
+            .filter(|k| **k == RejectKind::RepeatedHello)
+            .count();
+        if b.sync.poll_timeout(&b.log).is_some_and(|t| t.0 <= now) {
+            b.sync.handle_timeout(Timestamp(now), &mut b.log);
+        }
+        n_full += n_full_haves(&outbox(&mut b, now), &b.log);
+    }
+    assert!(
+        n_full <= 2,
+        "{n_full} full haves for 1000 hellos in a second"
+    );
+    let allowed = (MAX_HELLO_BURST + MAX_HELLOS_PER_SEC) as usize;
+    assert!(n_repeated >= 1000 - allowed, "{n_repeated} hellos counted");
+    assert_eq!(
+        b.sync.stats().rejected.get(&RejectKind::RepeatedHello),
+        Some(&(n_repeated as u64))
+    );
+}
+
+/// A hello resent because the have answering it was lost is answered at once with a small
+/// have that confirms it (the remote stops resending), and the full have follows within a
+/// have interval of the first.
+#[test]
+fn a_hello_resent_after_a_lost_have_is_confirmed_at_once_and_gets_the_full_have_soon() {
+    let mut b = Node::new(2, 1);
+    b.log = log_of_many_authors(300);
+    let mut a = Node::new(1, 2);
+    let theirs = a.author(1, "a1".into());
+    hold(&mut b, std::slice::from_ref(&theirs));
+    let hello = outbox(&mut a, 0).remove(0).encode();
+    assert!(feed(&mut b, 10 * MILLI, &hello).is_empty());
+    assert_eq!(n_full_haves(&outbox(&mut b, 10 * MILLI), &b.log), 1, "lost");
+    // A resends its hello; B's answer confirms it and says what B holds of A's ops.
+    let resent = 200 * MILLI;
+    assert!(feed(&mut b, resent, &hello).is_empty());
+    let answer = outbox(&mut b, resent);
+    assert_eq!(n_full_haves(&answer, &b.log), 0);
+    for message in &answer {
+        a.sync.handle_input(
+            Timestamp(resent + 10 * MILLI),
+            &message.encode(),
+            &mut a.log,
+        );
+    }
+    assert!(
+        a.sync.remote_version_vector().get(&a.key.peer_id()) == 1,
+        "{answer:?}"
+    );
+    assert!(
+        drain_checked(&mut a, resent + 10 * MILLI, 2 * RESEND_AFTER_MICROS)
+            .iter()
+            .all(|m| !matches!(m, Message::Hello { .. })),
+        "A still resends its hello"
+    );
+    // The full have goes a have interval after the first.
+    let later = drain_checked(&mut b, resent, HAVE_EVERY_MICROS);
+    assert_eq!(n_full_haves(&later, &b.log), 1, "{} messages", later.len());
+}
