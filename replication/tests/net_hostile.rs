@@ -21,6 +21,7 @@ use replication::net::node::{
 };
 use replication::net::{frame, tls};
 use replication::payload::test_payload::TestPayload;
+use replication::peer::MAX_CONNECTIONS;
 
 /// Where attackers send from: another loopback address than the honest nodes' 127.0.0.1.
 const ATTACKER_IP: &str = "127.0.0.2";
@@ -298,4 +299,50 @@ async fn one_invite_holder_gets_at_most_its_address_share_of_connections() {
     admission::admit_dialer(&again, &keys, &keypair)
         .await
         .expect("a freed slot admits again");
+}
+
+/// Issue 49: every connection slot was shared by accepted and dialed connections, and remotes
+/// from eight addresses (eight connections each) held all of them, so an honest dial in was
+/// refused. A newcomer now takes the slot of the least useful accepted connection.
+#[tokio::test]
+async fn remotes_holding_every_slot_from_eight_addresses_leave_an_honest_peer_in() {
+    let a = node(1);
+    author_some(&a.handle, 1, "alice").await;
+    let addr = a.handle.local_addr();
+    let keys = session_keys(INVITE);
+    let mut held = Vec::new();
+    for ip_idx in 0..MAX_CONNECTIONS / MAX_CONNECTIONS_PER_ADDRESS {
+        let attacker = client_endpoint(&format!("127.0.0.{}", 2 + ip_idx));
+        for seed in 0..MAX_CONNECTIONS_PER_ADDRESS {
+            let connection = connect(&attacker, addr).await.unwrap();
+            let keypair = Keypair::from_seed([(10 + ip_idx * 16 + seed) as u8; 32]);
+            let proof = admission::admit_dialer(&connection, &keys, &keypair)
+                .await
+                .unwrap();
+            held.push((connection, proof));
+        }
+    }
+    eventually("every slot is held", || async {
+        a.handle.stats().await.unwrap().connections.len() == MAX_CONNECTIONS
+    })
+    .await;
+    // An honest peer dials in from its own address, gets a slot and syncs.
+    let honest = node(2);
+    honest
+        .handle
+        .dial(addr)
+        .await
+        .expect("an honest dial gets in");
+    converge(&[&a.handle, &honest.handle], 4).await;
+    let stats = a.handle.stats().await.unwrap();
+    assert_eq!(stats.n_evicted, 1, "{stats:?}");
+    assert_eq!(stats.connections.len(), MAX_CONNECTIONS);
+    // Exactly one of the attackers' connections was closed for it.
+    let mut n_closed = 0;
+    for (connection, _) in &held {
+        if connection.close_reason().is_some() {
+            n_closed += 1;
+        }
+    }
+    assert_eq!(n_closed, 1);
 }

@@ -206,6 +206,8 @@ pub enum CloseReason {
         /// The member expelled.
         peer: PeerId,
     },
+    /// The peer needed this connection's slot for another ([`crate::peer::Peer::accept`]).
+    Evicted,
 }
 
 /// Something the application should know.

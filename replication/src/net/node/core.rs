@@ -16,12 +16,13 @@ use crate::identity::PeerId;
 use crate::log::Log;
 use crate::net::admission::{AdmissionError, Role};
 use crate::net::clock::{duration_until, wall_clock_now};
+use crate::net::prefix::AddressPrefix;
 use crate::op::OpId;
 use crate::payload::Payload;
 use crate::peer::{ConnId, ConnectError, Peer};
 use crate::store::OpStore;
 use crate::sync::message::Message;
-use crate::sync::state::Event;
+use crate::sync::state::{CloseReason, Event};
 use crate::time::Timestamp;
 
 /// One admitted connection.
@@ -340,7 +341,16 @@ impl<P: Payload + Send + 'static> Core<P> {
                 return;
             }
         }
-        match self.peer.connect(wall_clock_now(), conn) {
+        // A connection the remote dialed competes for slots with those of its address
+        // prefix; when all are taken, the least useful accepted one makes room.
+        let opened = match role {
+            Role::Dialer => self.peer.connect(wall_clock_now(), conn),
+            Role::Acceptor => {
+                let source = AddressPrefix::of(connection.remote_address().ip()).key();
+                self.peer.accept(wall_clock_now(), conn, source)
+            }
+        };
+        match opened {
             Ok(()) => {}
             Err(ConnectError::TooMany) => {
                 let kind = RefusalKind::TooManyConnections;
@@ -474,6 +484,9 @@ impl<P: Payload + Send + 'static> Core<P> {
                 Event::UpToDate => NodeEvent::UpToDate { conn, peer },
                 Event::Forked { author, seq } => NodeEvent::Forked { conn, author, seq },
                 Event::Closed(reason) => {
+                    if reason == CloseReason::Evicted {
+                        self.stats.n_evicted += 1;
+                    }
                     let reason = DisconnectReason::Sync(reason);
                     self.drop_conn(conn, CloseCode::Sync, Some(reason));
                     continue;
