@@ -118,6 +118,16 @@ pub const MAX_HELLOS_PER_SEC: u64 = 2;
 pub const MAX_HELLO_BURST: u64 = 8;
 /// Most ephemeral channels buffered for sending.
 pub const MAX_EPHEMERAL_CHANNELS: usize = 64;
+/// Bytes of new ops (not held yet) a remote may make this peer take per second on average,
+/// counted before their signatures are checked: beyond it and [`MAX_RECEIVED_OP_BYTES_BURST`]
+/// a batch's remaining ops are dropped unread and the batch is not acknowledged, so an
+/// honest sender's resend brings them later (counted in [`SyncStats::n_ops_over_quota`]).
+/// One connection's ops cost this peer bounded CPU and memory per second, whatever it sends
+/// (8 MiB: about what one core verifies).
+pub const MAX_RECEIVED_OP_BYTES_PER_SEC: u64 = 8 * 1024 * 1024;
+/// The burst of [`MAX_RECEIVED_OP_BYTES_PER_SEC`] (32 MiB): a catch-up of 10^5 ops of the
+/// usual size (about 160 bytes) fits in it twice.
+pub const MAX_RECEIVED_OP_BYTES_BURST: u64 = 32 * 1024 * 1024;
 /// Most authors the local log does not hold that one connection remembers from the remote's
 /// haves and acks. Such a claim is only good for asking the remote to relay the author's ops,
 /// so the excess is dropped (and counted) rather than stored; it is learnt again later.
@@ -151,6 +161,8 @@ pub const MAX_ASKED_OUT: usize = 4 * MAX_BATCH_OPS;
 const MICROS_PER_SEC: u64 = 1_000_000;
 const _: () = assert!(MAX_BATCH_BYTES + MAX_BATCH_OPS * 10 + 32 <= MAX_MESSAGE_BYTES);
 const _: () = assert!(MAX_OP_BYTES <= MAX_BATCH_BYTES);
+// An honest catch-up of 10^5 ops of about 160 bytes fits in the op-byte burst twice.
+const _: () = assert!(MAX_RECEIVED_OP_BYTES_BURST >= 2 * 100_000 * 160);
 
 /// What kind of bad or unwanted input was dropped. Each is counted and reported.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -292,6 +304,8 @@ pub struct SyncStats {
     pub n_tips_differ: u64,
     /// Ops the remote asked for by id that were not sent: not held, or over [`MAX_ASKED_OUT`].
     pub n_asks_dropped: u64,
+    /// New ops from the remote dropped unread over [`MAX_RECEIVED_OP_BYTES_PER_SEC`].
+    pub n_ops_over_quota: u64,
 }
 
 impl SyncStats {
@@ -331,6 +345,17 @@ impl TokenBucket {
 
     fn has_token(&self) -> bool {
         self.tokens_micros >= MICROS_PER_SEC
+    }
+
+    /// Refills and takes `n` tokens if there are as many.
+    fn take_n(&mut self, now: Timestamp, n: u64) -> bool {
+        self.refill(now);
+        let cost = n.saturating_mul(MICROS_PER_SEC);
+        let ok = self.tokens_micros >= cost;
+        if ok {
+            self.tokens_micros -= cost;
+        }
+        ok
     }
 
     fn spend(&mut self) {
@@ -505,6 +530,8 @@ pub struct SyncState<P> {
     bucket: TokenBucket,
     /// Limits the remote's hellos.
     hello_bucket: TokenBucket,
+    /// Limits the bytes of new ops the remote makes us take.
+    op_bytes_bucket: TokenBucket,
     /// Paces what we send, at half the remote's limit, leaving room for its acks.
     send_bucket: TokenBucket,
     stats: SyncStats,
@@ -575,6 +602,11 @@ impl<P: Payload> SyncState<P> {
             eph_in: BTreeMap::new(),
             bucket: TokenBucket::new(now, MAX_MESSAGES_PER_SEC, MAX_MESSAGE_BURST),
             hello_bucket: TokenBucket::new(now, MAX_HELLOS_PER_SEC, MAX_HELLO_BURST),
+            op_bytes_bucket: TokenBucket::new(
+                now,
+                MAX_RECEIVED_OP_BYTES_PER_SEC,
+                MAX_RECEIVED_OP_BYTES_BURST,
+            ),
             send_bucket: TokenBucket::new(now, MAX_MESSAGES_PER_SEC / 2, MAX_MESSAGE_BURST / 2),
             stats: SyncStats::default(),
             payload: PhantomData,
@@ -1273,29 +1305,35 @@ impl<P: Payload> SyncState<P> {
         // The ack names only the batch's authors: what the sender needs to move on, in
         // bytes that do not grow with the number of peers.
         let mut authors = Vec::new();
-        self.insert_received(now, &ops, log, &mut authors);
-        let mut have = VersionVector::new();
-        for author in authors {
-            have.raise(author, log.version_vector().get(&author));
+        let whole = self.insert_received(now, &ops, log, &mut authors);
+        // A batch cut short by the quota is not acknowledged: its sender sends it again after
+        // its resend timeout, when what this peer took of it is skipped as held.
+        if whole {
+            let mut have = VersionVector::new();
+            for author in authors {
+                have.raise(author, log.version_vector().get(&author));
+            }
+            self.control.push_back(Message::Ack { batch_no, have });
         }
-        self.control.push_back(Message::Ack { batch_no, have });
         self.update_up_to_date(log);
     }
 
     /// Inserts received ops into `log`, noting in `authors` the authors of those held or
-    /// signed.
+    /// signed; false when [`MAX_RECEIVED_OP_BYTES_PER_SEC`] cut the ops short (the rest are
+    /// dropped unread).
     fn insert_received(
         &mut self,
         now: Timestamp,
         ops: &[Vec<u8>],
         log: &mut Log<P>,
         authors: &mut Vec<PeerId>,
-    ) {
+    ) -> bool {
         // Cheapest check first: each envelope and its id (a hash), then known ops are skipped,
         // then the signatures of the rest in one batch, and only a signed op's payload is
         // decoded and validated (which may compile formulas). A forged or replayed op never
         // costs a compile.
         let mut fresh: Vec<Envelope<'_>> = Vec::with_capacity(ops.len());
+        let mut fresh_bytes: Vec<usize> = Vec::with_capacity(ops.len());
         for bytes in ops {
             self.stats.n_ops_in += 1;
             let envelope = match Envelope::parse(bytes) {
@@ -1311,7 +1349,22 @@ impl<P: Payload> SyncState<P> {
                 }
             } else if fresh.iter().all(|other| other.id() != envelope.id()) {
                 fresh.push(envelope);
+                fresh_bytes.push(bytes.len());
             }
+        }
+        // Only new ops cost the quota, in order: past it, the rest wait for a resend.
+        let mut whole = true;
+        let mut n_fresh = 0;
+        for n_bytes in fresh_bytes {
+            if !self.op_bytes_bucket.take_n(now, n_bytes as u64) {
+                whole = false;
+                break;
+            }
+            n_fresh += 1;
+        }
+        if !whole {
+            self.stats.n_ops_over_quota += (fresh.len() - n_fresh) as u64;
+            fresh.truncate(n_fresh);
         }
         for op in Envelope::into_verified_all::<P>(fresh) {
             match op {
@@ -1330,6 +1383,7 @@ impl<P: Payload> SyncState<P> {
                 Err(ReceiveError::Decode(e)) => self.reject(decode_reject_kind(&e), e.to_string()),
             }
         }
+        whole
     }
 
     /// Counts an op the log refused against the remote ([`is_offence`]).
@@ -1862,9 +1916,10 @@ fn tip_at<P: Payload>(log: &Log<P>, author: &PeerId, seq: u64) -> u64 {
 
 /// True if the log's refusal of an op counts against the remote that sent it: all do but a
 /// fork of an op inside the log's snapshot base (which it cannot tell apart), since an honest
-/// remote may hold the other side.
+/// remote may hold the other side, and a full log (an honest relay's op is refused as much as
+/// any: the remote did nothing wrong).
 fn is_offence(e: &InsertError) -> bool {
-    !matches!(e, InsertError::Equivocation { .. })
+    !matches!(e, InsertError::Equivocation { .. } | InsertError::Full)
 }
 
 /// The rejection a received op's decode error counts as.

@@ -1314,3 +1314,79 @@ fn a_hello_resent_after_a_lost_have_is_confirmed_at_once_and_gets_the_full_have_
     let later = drain_checked(&mut b, resent, HAVE_EVERY_MICROS);
     assert_eq!(n_full_haves(&later, &b.log), 1, "{} messages", later.len());
 }
+
+/// Issue 49: an op refused because this peer's log is full counted as a rejection against the
+/// connection that relayed it, so a full log cut its honest relays off. Only refusals the
+/// remote is to blame for count.
+#[test]
+fn an_op_a_full_log_refuses_is_not_counted_against_its_relay() {
+    let mut b = Node::new(2, 1);
+    let refused = |e: InsertError| Insertion {
+        refused: vec![(OpId([1; 32]), Origin(1), e)],
+        ..Insertion::default()
+    };
+    b.sync.charge(&refused(InsertError::Full));
+    b.drain_events();
+    assert_eq!(b.sync.stats().n_rejected(), 0, "{:?}", b.events);
+    b.sync.charge(&refused(InsertError::BadLamport {
+        lamport: 1,
+        floor: 2,
+    }));
+    assert_eq!(
+        b.sync.stats().rejected.get(&RejectKind::RefusedOp),
+        Some(&1)
+    );
+}
+
+/// Bytes of the ops `log` holds.
+fn held_bytes(log: &TLog) -> u64 {
+    log.entries().map(|e| e.op.encoded().len() as u64).sum()
+}
+
+/// Issue 49: a connection could make this peer take new ops as fast as it sent them. Past its
+/// quota of op bytes a batch's remaining ops are dropped unread and the batch goes
+/// unacknowledged; the sender's resends bring the rest, as the quota refills, and the
+/// remote is not counted as an offender. (The test shrinks the quota to a size it can fill.)
+#[test]
+fn a_remote_over_its_op_byte_quota_is_cut_short_and_resends_bring_the_rest() {
+    let [mut a, mut b] = connected();
+    let start = 200 * MILLI;
+    let (rate, burst) = (100_000, 200_000);
+    b.sync.op_bytes_bucket = TokenBucket::new(Timestamp(start), rate, burst);
+    for i in 0..1500 {
+        a.author(start, format!("{i:0>250}"));
+    }
+    assert!(held_bytes(&a.log) > 2 * burst);
+    let mut now = start;
+    while b.log.len() < a.log.len() {
+        assert!(now < start + 60_000_000, "not synced by {now}");
+        for node in [&mut a, &mut b] {
+            if node
+                .sync
+                .poll_timeout(&node.log)
+                .is_some_and(|t| t.0 <= now)
+            {
+                node.sync.handle_timeout(Timestamp(now), &mut node.log);
+            }
+        }
+        carry(&mut a, &mut b, now, now);
+        carry(&mut b, &mut a, now, now);
+        let allowed = burst + rate * (now - start) / 1_000_000;
+        assert!(
+            held_bytes(&b.log) <= allowed,
+            "{} bytes at {now}",
+            held_bytes(&b.log)
+        );
+        now += MILLI;
+    }
+    let stats = b.sync.stats();
+    assert!(stats.n_ops_over_quota > 0);
+    assert_eq!(stats.n_rejected(), 0, "{:?}", stats.rejected);
+    // Taking the rest needed the quota to refill, not a stall: about the excess over the rate.
+    let needed = (held_bytes(&a.log) - burst) * 1_000_000 / rate;
+    assert!(
+        now - start < needed + 5_000_000,
+        "{} µs for {needed}",
+        now - start
+    );
+}
