@@ -292,6 +292,15 @@ impl<P: Payload> Peer<P> {
         Ok(())
     }
 
+    /// The transport proved that the remote of `conn` holds `peer` (at admission): its sync
+    /// hello must name it, or the connection closes before anything the remote sent is
+    /// handled ([`SyncState::set_admitted`]). Call it right after opening `conn`.
+    pub fn set_admitted(&mut self, conn: ConnId, peer: PeerId) {
+        if let Some(sync) = self.connections.get_mut(&conn) {
+            sync.set_admitted(peer);
+        }
+    }
+
     /// Forgets a connection (the transport lost it); nothing acknowledged is lost.
     pub fn disconnect(&mut self, conn: ConnId) {
         self.connections.remove(&conn);

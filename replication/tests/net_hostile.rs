@@ -22,6 +22,7 @@ use replication::net::node::{
 use replication::net::{frame, tls};
 use replication::payload::test_payload::TestPayload;
 use replication::peer::MAX_CONNECTIONS;
+use replication::sync::message::{Message, PROTOCOL_VERSION};
 
 /// Where attackers send from: another loopback address than the honest nodes' 127.0.0.1.
 const ATTACKER_IP: &str = "127.0.0.2";
@@ -345,4 +346,43 @@ async fn remotes_holding_every_slot_from_eight_addresses_leave_an_honest_peer_in
         }
     }
     assert_eq!(n_closed, 1);
+}
+
+/// Issue 49: a remote admitted under one key could send data ahead of a hello naming another
+/// peer, and the node checked the hello's id only after the core had handled the hello and
+/// the data it held. The core knows the admitted id now and closes first.
+#[tokio::test]
+async fn data_ahead_of_a_hello_naming_another_peer_is_never_handled() {
+    let a = node(1);
+    author_some(&a.handle, 1, "alice").await;
+    let (impostor, mut stream) = admitted(a.handle.local_addr(), 68).await;
+    let victim = Keypair::from_seed([69; 32]);
+    let mut log = replication::Log::<TestPayload>::default();
+    let (op, _) = log
+        .author(
+            &victim,
+            replication::Timestamp(1_000),
+            TestPayload::Chat("early".into()),
+        )
+        .unwrap();
+    let batch = Message::Ops {
+        batch_no: 1,
+        ops: vec![op.encoded().to_vec()],
+    };
+    let hello = Message::Hello {
+        protocol_version: PROTOCOL_VERSION,
+        session_id: session_keys(INVITE).session_id(),
+        peer: victim.peer_id(),
+        hello_seen: false,
+        have: None,
+    };
+    for message in [batch, hello] {
+        frame::write_frame(&mut stream.send, &message.encode())
+            .await
+            .unwrap();
+    }
+    assert_eq!(closed_code(&impostor).await, CloseCode::Protocol as u64);
+    let stats = a.handle.stats().await.unwrap();
+    assert_eq!(stats.n_identity_mismatches, 1, "{stats:?}");
+    assert!(!op_ids(&a.handle).await.contains(&op.op().id()));
 }

@@ -220,6 +220,12 @@ pub enum CloseReason {
     },
     /// The peer needed this connection's slot for another ([`crate::peer::Peer::accept`]).
     Evicted,
+    /// The remote's hello named another peer than the one the transport admitted
+    /// ([`SyncState::set_admitted`]).
+    NotAdmitted {
+        /// The id the hello named.
+        claimed: PeerId,
+    },
 }
 
 /// Something the application should know.
@@ -413,6 +419,8 @@ fn hello_have<P: Payload>(log: &Log<P>) -> Option<HelloHave> {
 pub struct SyncState<P> {
     config: SyncConfig,
     remote: Option<PeerId>,
+    /// The id the transport proved the remote holds, if it did: the hello must name it.
+    admitted: Option<PeerId>,
     closed: bool,
     /// The remote has confirmed it saw our hello.
     hello_confirmed: bool,
@@ -544,6 +552,7 @@ impl<P: Payload> SyncState<P> {
         let mut state = Self {
             config,
             remote: None,
+            admitted: None,
             closed: false,
             hello_confirmed: false,
             early: VecDeque::new(),
@@ -618,6 +627,14 @@ impl<P: Payload> SyncState<P> {
     /// The remote's peer id, once its hello arrived.
     pub fn remote(&self) -> Option<PeerId> {
         self.remote
+    }
+
+    /// The transport proved that the remote holds `peer` (its admission): a hello naming
+    /// another id closes the connection ([`CloseReason::NotAdmitted`]) before anything the
+    /// remote sent is handled, the data it sent ahead of its hello included. Call it before
+    /// any input.
+    pub fn set_admitted(&mut self, peer: PeerId) {
+        self.admitted = Some(peer);
     }
 
     /// True once the connection was closed.
@@ -1042,6 +1059,16 @@ impl<P: Payload> SyncState<P> {
         if session_id != self.config.session_id {
             self.reject(RejectKind::WrongSession, "another session".into());
             self.close(CloseReason::WrongSession);
+            return;
+        }
+        if let Some(admitted) = self.admitted
+            && peer != admitted
+        {
+            self.reject(
+                RejectKind::WrongPeer,
+                format!("{peer}, admitted {admitted}"),
+            );
+            self.close(CloseReason::NotAdmitted { claimed: peer });
             return;
         }
         match self.remote {

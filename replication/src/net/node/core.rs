@@ -351,7 +351,8 @@ impl<P: Payload + Send + 'static> Core<P> {
             }
         };
         match opened {
-            Ok(()) => {}
+            // The sync hello must name the id admission proved, or nothing it sent counts.
+            Ok(()) => self.peer.set_admitted(conn, peer),
             Err(ConnectError::TooMany) => {
                 let kind = RefusalKind::TooManyConnections;
                 return self.refuse(&connection, reply, kind, DialError::TooManyConnections);
@@ -444,7 +445,8 @@ impl<P: Payload + Send + 'static> Core<P> {
                 continue;
             };
             let event = match event {
-                Event::Connected { peer: claimed } if claimed != peer => {
+                // The core closed it before handling anything it sent.
+                Event::Closed(CloseReason::NotAdmitted { .. }) => {
                     self.stats.n_identity_mismatches += 1;
                     let reason = DisconnectReason::IdentityMismatch;
                     self.drop_conn(conn, CloseCode::Protocol, Some(reason));

@@ -1390,3 +1390,67 @@ fn a_remote_over_its_op_byte_quota_is_cut_short_and_resends_bring_the_rest() {
         now - start
     );
 }
+
+/// Issue 49: the transport checked the hello's id against the one admission proved only after
+/// the core had taken the hello, and with it up to `MAX_EARLY_MESSAGES` held messages: an
+/// admitted remote could have ops handled under another peer's hello. The core now knows
+/// the admitted id and closes on a hello naming another, before handling anything held.
+#[test]
+fn a_hello_naming_another_peer_than_the_admitted_one_closes_before_held_data_is_handled() {
+    let mut b = Node::new(2, 1);
+    let mallory = Keypair::from_seed([9; 32]);
+    b.sync.set_admitted(mallory.peer_id());
+    let victim = Keypair::from_seed([1; 32]);
+    let mut source = TLog::default();
+    let ops: Vec<_> = (0..MAX_EARLY_MESSAGES as u64)
+        .map(|i| {
+            let payload = TestPayload::Chat(format!("early {i}"));
+            source.author(&victim, Timestamp(5 + i), payload).unwrap().0
+        })
+        .collect();
+    for (i, op) in ops.iter().enumerate() {
+        let batch = Message::Ops {
+            batch_no: i as u64 + 1,
+            ops: vec![op.encoded().to_vec()],
+        };
+        assert!(feed(&mut b, 1, &batch.encode()).is_empty());
+    }
+    let claim = hello(victim.peer_id(), SESSION, PROTOCOL_VERSION);
+    b.sync.handle_input(Timestamp(2), &claim, &mut b.log);
+    b.drain_events();
+    assert!(b.sync.is_closed());
+    assert_eq!(b.log.len(), 0, "held data was handled");
+    assert_eq!(
+        b.sync.stats().rejected.get(&RejectKind::WrongPeer),
+        Some(&1)
+    );
+    assert!(b.events.contains(&Event::Closed(CloseReason::NotAdmitted {
+        claimed: victim.peer_id()
+    })));
+    assert!(
+        !b.events
+            .iter()
+            .any(|e| matches!(e, Event::Connected { .. }))
+    );
+    // The admitted id's own hello is taken as ever.
+    let mut c = Node::new(3, 1);
+    c.sync.set_admitted(victim.peer_id());
+    feed(
+        &mut c,
+        1,
+        &Message::Ops {
+            batch_no: 1,
+            ops: vec![ops[0].encoded().to_vec()],
+        }
+        .encode(),
+    );
+    assert!(
+        feed(
+            &mut c,
+            2,
+            &hello(victim.peer_id(), SESSION, PROTOCOL_VERSION)
+        )
+        .is_empty()
+    );
+    assert!(c.log.contains(&ops[0].id()) && !c.sync.is_closed());
+}
