@@ -184,7 +184,7 @@ impl<P: Payload> Peer<P> {
         payload: P,
     ) -> Result<(VerifiedOp<P>, Insertion), AuthorError> {
         let authored = self.log.author(&self.keypair, now, payload)?;
-        self.close_expelled();
+        self.close_expelled(now);
         Ok(authored)
     }
 
@@ -322,7 +322,7 @@ impl<P: Payload> Peer<P> {
                 }
             }
             self.wants_dirty = true;
-            self.close_expelled();
+            self.close_expelled(now);
         }
     }
 
@@ -345,14 +345,15 @@ impl<P: Payload> Peer<P> {
         }
     }
 
-    /// Closes every connection to a member the founder expelled (all of them, when it expelled
-    /// this peer): an expel may arrive on any connection.
-    fn close_expelled(&mut self) {
+    /// Closes every connection to a member the founder expelled, once the member was told
+    /// ([`crate::sync::state::EXPEL_NOTICE_MICROS`]), and all of them at once when it
+    /// expelled this peer: an expel may arrive on any connection.
+    fn close_expelled(&mut self, now: Timestamp) {
         if self.log.expelled().is_empty() {
             return;
         }
         for (conn, sync) in &mut self.connections {
-            sync.close_if_expelled(&self.log);
+            sync.close_if_expelled(now, &self.log);
             drain(*conn, sync, &mut self.events);
         }
     }
@@ -601,7 +602,8 @@ mod tests {
     use crate::payload::test_payload::TestPayload;
     use crate::sync::message::Message;
     use crate::sync::state::{
-        CloseReason, HAVE_EVERY_MICROS, PING_FOR_MICROS, RESEND_AFTER_MIN_MICROS,
+        CloseReason, EXPEL_NOTICE_MICROS, HAVE_EVERY_MICROS, PING_FOR_MICROS,
+        RESEND_AFTER_MIN_MICROS,
     };
 
     type TPeer = Peer<TestPayload>;
@@ -1544,20 +1546,22 @@ mod tests {
         peers[0].author(Timestamp(1_000), expel).unwrap();
         let closed =
             |p: &TPeer, conn: u64| p.connections().any(|(c, s)| c.0 == conn && s.is_closed());
-        assert!(closed(&peers[0], 2), "the founder closes at once");
-        let mut events = Vec::new();
-        while let Some(e) = peers[0].poll_event() {
-            events.push(e);
-        }
-        assert!(events.contains(&(
-            ConnId(2),
-            Event::Closed(CloseReason::Expelled { peer: member })
-        )));
-        let t = settle(&mut peers, &links, 1_000, |p| p[1].log().len() == 2);
-        assert!(
-            closed(&peers[1], 2),
-            "a peer that learns of the expel closes too"
+        assert!(!closed(&peers[0], 2), "the member is told first");
+        // The expel reaches the member, whose own log now says it is out: it closes every
+        // connection, saying so.
+        let events = pump(&mut peers, &links, Timestamp(1_000));
+        assert!(peers[2].log().is_expelled(&member));
+        let told = Event::Closed(CloseReason::Expelled { peer: member });
+        assert_eq!(
+            events.iter().filter(|(i, e)| *i == 2 && *e == told).count(),
+            2
         );
+        // The others close theirs within the notice.
+        let deadline = 1_000 + EXPEL_NOTICE_MICROS;
+        let t = settle(&mut peers, &links, 1_000, |p| {
+            closed(&p[0], 2) && closed(&p[1], 2)
+        });
+        assert!(t <= deadline + 100_000, "closed at {t}");
         assert!(!closed(&peers[1], 0), "and keeps its other connections");
         // What the expelled member writes now reaches nobody, and would count for nothing.
         peers[2]
@@ -1576,6 +1580,72 @@ mod tests {
         });
         peers[1].author(Timestamp(t), forged).unwrap();
         assert!(!closed(&peers[1], 0) && !peers[1].log().is_expelled(&peers[0].peer_id()));
+    }
+
+    /// Issue 49: every peer that held the founder's expel closed its connections to the
+    /// member at once, so the member, its own log never holding the expel, was never told and
+    /// could show nothing. Each keeps the connection for the notice, sends the member what it
+    /// lacks (the expel among it) and takes none of its ops; the member learns it even from
+    /// a peer that only relays the founder's ops, and every connection to it closes by the
+    /// deadline.
+    #[test]
+    fn an_expelled_member_is_told_before_its_connections_close() {
+        use crate::membership::{FounderCommitment, Membership};
+        let nonce = [0xf0; 32];
+        let founder = Keypair::from_seed([1; 32]).peer_id();
+        let mut peers: Vec<TPeer> = (1..=3u8)
+            .map(|i| {
+                let mut log = Log::default();
+                log.set_founder(FounderCommitment::of(&founder, &nonce))
+                    .unwrap();
+                Peer::new(Keypair::from_seed([i; 32]), [5; 16], log)
+            })
+            .collect();
+        // Founder - relay - member: the member hears the founder only through the relay.
+        let links = [(0, ConnId(1), 1, ConnId(0)), (1, ConnId(2), 2, ConnId(1))];
+        for (p, c) in [(0, 1), (1, 0), (1, 2), (2, 1)] {
+            peers[p].connect(Timestamp(0), ConnId(c)).unwrap();
+        }
+        let member = peers[2].peer_id();
+        peers[2]
+            .author(Timestamp(0), TestPayload::Chat("hello".into()))
+            .unwrap();
+        let t = settle(&mut peers, &links, 0, |p| {
+            p.iter().all(|p| p.log().len() == 1)
+        });
+        let expel = TestPayload::Member(Membership {
+            member,
+            expel: true,
+            nonce,
+        });
+        peers[0].author(Timestamp(t), expel).unwrap();
+        let mut now = t;
+        let mut events = Vec::new();
+        while !peers[2].log().is_expelled(&member) {
+            assert!(now < t + EXPEL_NOTICE_MICROS, "the member was never told");
+            now += 10_000;
+            for p in peers.iter_mut() {
+                p.handle_timeout(Timestamp(now));
+            }
+            events.extend(pump(&mut peers, &links, Timestamp(now)));
+        }
+        let told = Event::Closed(CloseReason::Expelled { peer: member });
+        assert!(events.contains(&(2, told)), "{events:?}");
+        // The relay closes by the deadline.
+        let relayed = |p: &TPeer| {
+            p.connections()
+                .find(|(c, _)| c.0 == 2)
+                .map(|(_, s)| s.is_closed())
+        };
+        while relayed(&peers[1]) == Some(false) {
+            assert!(
+                now <= t + EXPEL_NOTICE_MICROS + 20_000,
+                "still open at {now}"
+            );
+            now += 10_000;
+            peers[1].handle_timeout(Timestamp(now));
+        }
+        assert_eq!(peers[1].log().len(), 2);
     }
 
     #[test]

@@ -157,6 +157,13 @@ pub const STUCK_CHECK_MICROS: u64 = HAVE_EVERY_MICROS;
 pub const MAX_ASKED_OPS: usize = 1024;
 /// Most ops asked for by id that one connection queues to send.
 pub const MAX_ASKED_OUT: usize = 4 * MAX_BATCH_OPS;
+/// A connection to a member the founder expelled stays open at most this long (5 s) once this
+/// peer holds the expel, so that the member learns it too: it is sent what it lacks, the
+/// expel among it (its own log then says it was expelled, and it closes every connection
+/// with [`CloseReason::Expelled`] naming itself, which its app can show), and none of its
+/// ops are taken. The connection closes as soon as the member is known to hold everything
+/// this peer holds, or at this deadline.
+pub const EXPEL_NOTICE_MICROS: u64 = 5_000_000;
 
 const MICROS_PER_SEC: u64 = 1_000_000;
 const _: () = assert!(MAX_BATCH_BYTES + MAX_BATCH_OPS * 10 + 32 <= MAX_MESSAGE_BYTES);
@@ -421,6 +428,9 @@ pub struct SyncState<P> {
     remote: Option<PeerId>,
     /// The id the transport proved the remote holds, if it did: the hello must name it.
     admitted: Option<PeerId>,
+    /// The remote is expelled: when the connection closes at the latest
+    /// ([`EXPEL_NOTICE_MICROS`]).
+    expel_notice_until: Option<Timestamp>,
     closed: bool,
     /// The remote has confirmed it saw our hello.
     hello_confirmed: bool,
@@ -553,6 +563,7 @@ impl<P: Payload> SyncState<P> {
             config,
             remote: None,
             admitted: None,
+            expel_notice_until: None,
             closed: false,
             hello_confirmed: false,
             early: VecDeque::new(),
@@ -783,6 +794,7 @@ impl<P: Payload> SyncState<P> {
 
     /// Handles one message received from the remote.
     pub fn handle_input(&mut self, now: Timestamp, bytes: &[u8], log: &mut Log<P>) {
+        self.close_if_expelled(now, log);
         let generation = log.forks().generation();
         self.read_input(now, bytes, log);
         self.observe_log(now, log);
@@ -796,21 +808,28 @@ impl<P: Payload> SyncState<P> {
             // side's previous op) may be delivered now: it can be asked for again.
             self.asked.clear();
         }
-        self.close_if_expelled(log);
+        self.close_if_expelled(now, log);
     }
 
-    /// Closes the connection when `log` says the founder expelled its remote or this peer:
-    /// an expelled member syncs with nobody (its ops after the expel are void anyway).
-    pub fn close_if_expelled(&mut self, log: &Log<P>) {
+    /// Closes the connection when `log` says the founder expelled this peer (at once: it
+    /// syncs with nobody) or the remote: then once the remote is known to hold everything
+    /// `log` holds, the expel among it, or [`EXPEL_NOTICE_MICROS`] after this peer first
+    /// saw the expel here, whichever comes first (its ops after the expel are void anyway).
+    pub fn close_if_expelled(&mut self, now: Timestamp, log: &Log<P>) {
         if self.closed || log.expelled().is_empty() {
             return;
         }
-        let expelled = [self.remote, Some(self.config.local)]
-            .into_iter()
-            .flatten()
-            .find(|p| log.is_expelled(p));
-        if let Some(peer) = expelled {
-            self.close(CloseReason::Expelled { peer });
+        let local = self.config.local;
+        if log.is_expelled(&local) {
+            return self.close(CloseReason::Expelled { peer: local });
+        }
+        let Some(remote) = self.remote.filter(|r| log.is_expelled(r)) else {
+            return;
+        };
+        let until = *(self.expel_notice_until)
+            .get_or_insert_with(|| now.saturating_add_micros(EXPEL_NOTICE_MICROS));
+        if now >= until || self.remote_vv.dominates(log.version_vector()) {
+            self.close(CloseReason::Expelled { peer: remote });
         }
     }
 
@@ -942,6 +961,10 @@ impl<P: Payload> SyncState<P> {
             Message::Want { vv, held } => {
                 self.hello_confirmed = true;
                 self.on_want(now, &vv, &held, log);
+            }
+            // An expelled remote is only told (see `EXPEL_NOTICE_MICROS`): its ops are void.
+            Message::Ops { .. } | Message::Forked { .. } if self.expel_notice_until.is_some() => {
+                self.hello_confirmed = true;
             }
             Message::Ops { batch_no, ops } => {
                 self.hello_confirmed = true;
@@ -1453,7 +1476,7 @@ impl<P: Payload> SyncState<P> {
     /// and expires pending ops whose dependencies never came.
     pub fn handle_timeout(&mut self, now: Timestamp, log: &mut Log<P>) {
         self.timeout(now, log);
-        self.close_if_expelled(log);
+        self.close_if_expelled(now, log);
     }
 
     fn timeout(&mut self, now: Timestamp, log: &mut Log<P>) {
@@ -1690,6 +1713,7 @@ impl<P: Payload> SyncState<P> {
             self.relearn_due(),
             self.stuck_due(log),
             self.forks_due(),
+            self.expel_notice_until,
             pace,
             log.next_pending_expiry(),
         ]
