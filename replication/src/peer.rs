@@ -34,7 +34,8 @@ use crate::payload::Payload;
 use crate::pending::Origin;
 use crate::sync::message::SessionId;
 use crate::sync::state::{
-    EphemeralError, Event, RELAY_AFTER_MICROS, RESEND_AFTER_MICROS, SyncConfig, SyncState,
+    EphemeralError, Event, OpByteQuota, RELAY_AFTER_MICROS, RESEND_AFTER_MICROS, SyncConfig,
+    SyncState,
 };
 use crate::time::Timestamp;
 
@@ -298,6 +299,14 @@ impl<P: Payload> Peer<P> {
     pub fn set_admitted(&mut self, conn: ConnId, peer: PeerId) {
         if let Some(sync) = self.connections.get_mut(&conn) {
             sync.set_admitted(peer);
+        }
+    }
+
+    /// Replaces the quota of new op bytes the remote of `conn` may make this peer take
+    /// ([`SyncState::set_op_byte_quota`]).
+    pub fn set_op_byte_quota(&mut self, now: Timestamp, conn: ConnId, quota: OpByteQuota) {
+        if let Some(sync) = self.connections.get_mut(&conn) {
+            sync.set_op_byte_quota(now, quota);
         }
     }
 

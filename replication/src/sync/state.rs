@@ -404,6 +404,26 @@ pub struct SyncConfig {
     pub origin: Origin,
 }
 
+/// How many bytes of new ops one connection may make this peer take: by default
+/// [`MAX_RECEIVED_OP_BYTES_PER_SEC`] and [`MAX_RECEIVED_OP_BYTES_BURST`]; a harness whose logs
+/// are small (the simulator) scales it down to match.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct OpByteQuota {
+    /// Bytes per second on average.
+    pub bytes_per_sec: u64,
+    /// Bytes in a burst.
+    pub burst_bytes: u64,
+}
+
+impl Default for OpByteQuota {
+    fn default() -> Self {
+        Self {
+            bytes_per_sec: MAX_RECEIVED_OP_BYTES_PER_SEC,
+            burst_bytes: MAX_RECEIVED_OP_BYTES_BURST,
+        }
+    }
+}
+
 /// The tip of the log's op at each entry of `vv`, in order (0 where it holds none).
 fn tips_of<P: Payload>(log: &Log<P>, vv: &VersionVector) -> Vec<u64> {
     (vv.iter())
@@ -646,6 +666,11 @@ impl<P: Payload> SyncState<P> {
     /// any input.
     pub fn set_admitted(&mut self, peer: PeerId) {
         self.admitted = Some(peer);
+    }
+
+    /// Replaces the connection's quota of new op bytes (full again from `now`).
+    pub fn set_op_byte_quota(&mut self, now: Timestamp, quota: OpByteQuota) {
+        self.op_bytes_bucket = TokenBucket::new(now, quota.bytes_per_sec, quota.burst_bytes);
     }
 
     /// True once the connection was closed.

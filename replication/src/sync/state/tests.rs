@@ -1352,7 +1352,11 @@ fn a_remote_over_its_op_byte_quota_is_cut_short_and_resends_bring_the_rest() {
     let [mut a, mut b] = connected();
     let start = 200 * MILLI;
     let (rate, burst) = (100_000, 200_000);
-    b.sync.op_bytes_bucket = TokenBucket::new(Timestamp(start), rate, burst);
+    let quota = OpByteQuota {
+        bytes_per_sec: rate,
+        burst_bytes: burst,
+    };
+    b.sync.set_op_byte_quota(Timestamp(start), quota);
     for i in 0..1500 {
         a.author(start, format!("{i:0>250}"));
     }
