@@ -109,13 +109,23 @@ pub const HAVE_FULL_EVERY_MICROS: u64 = 10_000_000;
 pub const MAX_MESSAGES_PER_SEC: u64 = 2_000;
 /// Messages a remote may send in a burst.
 pub const MAX_MESSAGE_BURST: u64 = 512;
-/// Hellos a remote may send per second on average. An honest remote sends one, then again
-/// until a have answers (at least [`RESEND_AFTER_MIN_MICROS`] apart, backing off), and one a
-/// second at most to relearn: hellos beyond this and [`MAX_HELLO_BURST`] are dropped and
-/// counted ([`RejectKind::RepeatedHello`]).
-pub const MAX_HELLOS_PER_SEC: u64 = 2;
-/// Hellos a remote may send in a burst (a connection's first and its resends into a loss).
-pub const MAX_HELLO_BURST: u64 = 8;
+/// Full haves a remote's hellos may cost this peer per second on average: every hello asks
+/// for one (it tells the remote what this peer holds, and confirms the hello), so this
+/// bounds what hellos make this peer announce, as pings are (a full have a second). A hello
+/// beyond it and [`MAX_HELLO_ANSWER_BURST`] is dropped unanswered (counted in
+/// [`SyncStats::n_hellos_unanswered`]): an honest remote sends it again until a have comes.
+pub const MAX_HELLO_ANSWERS_PER_SEC: u64 = 1;
+/// The burst of [`MAX_HELLO_ANSWERS_PER_SEC`]: a connection's first hello, its answer to
+/// ours, and resends after a lost have or two.
+pub const MAX_HELLO_ANSWER_BURST: u64 = 4;
+/// Hellos a remote may send per second on average before they count against it: beyond this
+/// and [`MAX_HELLO_BURST`] they are dropped and counted ([`RejectKind::RepeatedHello`]). An
+/// honest remote sends one, then again only while no have answers it (at least
+/// [`RESEND_AFTER_MIN_MICROS`] apart), and one to relearn or repair now and then: even on a
+/// link that loses and duplicates a quarter of its messages that stays well within.
+pub const MAX_HELLOS_PER_SEC: u64 = 4;
+/// The burst of [`MAX_HELLOS_PER_SEC`].
+pub const MAX_HELLO_BURST: u64 = 16;
 /// Most ephemeral channels buffered for sending.
 pub const MAX_EPHEMERAL_CHANNELS: usize = 64;
 /// Bytes of new ops (not held yet) a remote may make this peer take per second on average,
@@ -319,6 +329,8 @@ pub struct SyncStats {
     pub n_asks_dropped: u64,
     /// New ops from the remote dropped unread over [`MAX_RECEIVED_OP_BYTES_PER_SEC`].
     pub n_ops_over_quota: u64,
+    /// Hellos dropped unanswered over [`MAX_HELLO_ANSWERS_PER_SEC`].
+    pub n_hellos_unanswered: u64,
 }
 
 impl SyncStats {
@@ -510,13 +522,9 @@ pub struct SyncState<P> {
     have_sent_vv: VersionVector,
     have_sent_len: usize,
     have_sent_at: Timestamp,
-    /// The log's length and the time at the last full have, and whether one went out.
+    /// The log's length and the time at the last full have.
     full_have_len: usize,
     full_have_at: Timestamp,
-    full_have_sent: bool,
-    /// A hello came within [`HAVE_EVERY_MICROS`] of the last full have: the next goes out
-    /// when that interval ends (a hello resent after a lost have gets it within a second).
-    full_have_owed: bool,
     /// Parts of haves after the first not yet sent (each at most [`MAX_VV_AUTHORS`]); at most
     /// one full have's worth, since a have queued behind unsent parts goes out full instead.
     have_out: VecDeque<Message>,
@@ -566,8 +574,9 @@ pub struct SyncState<P> {
     eph_in: BTreeMap<u32, u64>,
     /// Limits what the remote may send us.
     bucket: TokenBucket,
-    /// Limits the remote's hellos.
+    /// Limits the remote's hellos, and the full haves they cost.
     hello_bucket: TokenBucket,
+    hello_answer_bucket: TokenBucket,
     /// Limits the bytes of new ops the remote makes us take.
     op_bytes_bucket: TokenBucket,
     /// Paces what we send, at half the remote's limit, leaving room for its acks.
@@ -615,8 +624,6 @@ impl<P: Payload> SyncState<P> {
             have_sent_at: now,
             full_have_len: 0,
             full_have_at: now,
-            full_have_sent: false,
-            full_have_owed: false,
             have_out: VecDeque::new(),
             next_batch_no: 1,
             up_to_date: false,
@@ -642,6 +649,11 @@ impl<P: Payload> SyncState<P> {
             eph_in: BTreeMap::new(),
             bucket: TokenBucket::new(now, MAX_MESSAGES_PER_SEC, MAX_MESSAGE_BURST),
             hello_bucket: TokenBucket::new(now, MAX_HELLOS_PER_SEC, MAX_HELLO_BURST),
+            hello_answer_bucket: TokenBucket::new(
+                now,
+                MAX_HELLO_ANSWERS_PER_SEC,
+                MAX_HELLO_ANSWER_BURST,
+            ),
             op_bytes_bucket: TokenBucket::new(
                 now,
                 MAX_RECEIVED_OP_BYTES_PER_SEC,
@@ -892,6 +904,11 @@ impl<P: Payload> SyncState<P> {
                     format!("a hello over {MAX_HELLOS_PER_SEC} a second"),
                 );
             }
+            // Every hello costs a full have: past the allowance none is answered, and the
+            // remote, if honest, sends it again.
+            Message::Hello { .. } if !self.hello_answer_bucket.take(now) => {
+                self.stats.n_hellos_unanswered += 1;
+            }
             Message::Hello {
                 protocol_version,
                 session_id,
@@ -1130,41 +1147,16 @@ impl<P: Payload> SyncState<P> {
                 self.events.push_back(Event::Connected { peer });
             }
         }
-        self.answer_hello(now, log);
+        // Every hello is answered with a full Have: it tells the remote what we hold and
+        // confirms we saw its hello (so it stops resending). A Have is never answered, so this
+        // cannot loop, and the full haves hellos cost are limited (`MAX_HELLO_ANSWERS_PER_SEC`).
+        self.send_full_have(now, log);
         self.hello_confirmed |= hello_seen;
         let hello_queued = (self.control.iter()).any(|m| matches!(m, Message::Hello { .. }));
         if !hello_seen && !hello_queued {
             // The remote has not seen our hello yet: answer once (its resend timer repeats).
             self.queue_hello(now);
         }
-    }
-
-    /// Answers a hello with a have, which confirms it (the remote stops resending) and tells
-    /// the remote what we hold. A Have is never answered, so this cannot loop. At most one
-    /// full have per [`HAVE_EVERY_MICROS`] answers hellos, as for pings: within that of the
-    /// last, a hello is answered by a have still queued, or else by a have naming only what we
-    /// hold of the remote's own ops, and the full have goes out when the interval ends (the
-    /// remote may have resent its hello because ours was lost). So a remote's hellos cost a
-    /// trickle of full haves, however many it sends.
-    fn answer_hello(&mut self, now: Timestamp, log: &Log<P>) {
-        let rested = !self.full_have_sent
-            || now.0 >= (self.full_have_at.0).saturating_add(HAVE_EVERY_MICROS);
-        if rested {
-            return self.send_full_have(now, log);
-        }
-        self.full_have_owed = true;
-        let have_queued = (self.control.iter()).any(|m| matches!(m, Message::Have { .. }));
-        if have_queued {
-            return;
-        }
-        let mut own = VersionVector::new();
-        if let Some(remote) = self.remote {
-            let seq = log.version_vector().get(&remote);
-            if seq > 0 {
-                own.raise(remote, seq);
-            }
-        }
-        self.queue_have(&own, false, log);
     }
 
     /// Queues everything the log holds as a have (replacing parts not yet sent).
@@ -1175,8 +1167,6 @@ impl<P: Payload> SyncState<P> {
         self.have_sent_at = now;
         self.full_have_len = log.len();
         self.full_have_at = now;
-        self.full_have_sent = true;
-        self.full_have_owed = false;
     }
 
     /// Queues a have in parts, each entry with the tip of the log's op there; a full one
@@ -1547,9 +1537,6 @@ impl<P: Payload> SyncState<P> {
             self.forks_resend.extend(late);
             self.forks_epoch += 1;
         }
-        if self.full_have_owed && self.have_due(log).is_some_and(|d| d <= now) {
-            self.send_full_have(now, log);
-        }
         if self.have_due(log).is_some_and(|d| d <= now) {
             // Parts of an earlier have still queued: a full have replaces them, so the queue
             // never holds more than one full have.
@@ -1581,7 +1568,6 @@ impl<P: Payload> SyncState<P> {
                 }
                 self.full_have_len = log.len();
                 self.full_have_at = now;
-                self.full_have_sent = true;
             }
         }
     }
@@ -1680,9 +1666,7 @@ impl<P: Payload> SyncState<P> {
 
     /// When to announce what this peer gained since its last have, if it gained anything.
     fn have_due(&self, log: &Log<P>) -> Option<Timestamp> {
-        if self.remote.is_some() && self.full_have_owed {
-            Some(self.full_have_at.saturating_add_micros(HAVE_EVERY_MICROS))
-        } else if self.remote.is_none() || !self.hello_confirmed {
+        if self.remote.is_none() || !self.hello_confirmed {
             None
         } else if self.have_sent_len < log.len() {
             Some(self.have_sent_at.saturating_add_micros(HAVE_EVERY_MICROS))
