@@ -30,8 +30,8 @@
 //!   different peers;
 //! - with `expel`, forged expels: a fresh key's expel of an honest peer, showing the founder's
 //!   nonce or a made-up one (neither may count: only the founder's key matches the invite);
-//! - hello floods: [`HELLO_FLOOD`] hellos at once (each answered by at most a full have a
-//!   second, those over the allowance counted);
+//! - hello floods: [`HELLO_FLOOD`] hellos at once (a few answered with full haves, then one a
+//!   second; those over the allowance counted);
 //! - wrong-id hellos: a hello naming an honest peer's id on the member's own connection, which
 //!   the transport admitted under the member's key, so the receiver closes it (the member
 //!   then dials again, [`REDIAL_MICROS`] later);
