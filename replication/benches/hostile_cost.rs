@@ -6,7 +6,15 @@
 //! (`Materialized::apply_insertion`, as the app's engine folds). Every op is authored by one
 //! member, signed, and within every limit unless the workload says otherwise.
 //!
-//! Run: `cargo bench -p replication --bench hostile_cost` (add `-- --quick` for a short run).
+//! A second table measures what a remote's messages on one connection cost the receiving
+//! sync core (`SyncState::handle_input`, its timers and every reply drained), per byte
+//! received, against an honest sender's ops: hello floods, a hello naming another peer than
+//! the admitted one behind held data, floods of new op bytes, Sybils holding every connection
+//! slot (`Peer`), and with the `net` feature a discovery registry fed datagrams from a whole
+//! IPv6 /52.
+//!
+//! Run: `cargo bench -p replication --bench hostile_cost` (add `-- --quick` for a short run;
+//! `--features net` adds the registry row).
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -78,6 +86,7 @@ fn main() {
             refolded,
         );
     }
+    protocol::run(quick);
 }
 
 /// Feeds a workload's ops to a fresh receiver (after its setup) and returns the workload, the
@@ -403,4 +412,410 @@ fn long_formula() -> String {
         i += 1;
     }
     text
+}
+
+/// Attacks on the sync protocol over one connection, and on connection slots and discovery.
+mod protocol {
+    use std::hint::black_box;
+    use std::time::{Duration, Instant};
+
+    use replication::log::OrderKey;
+    use replication::op::{Op, OpFields};
+    use replication::peer::{ConnId, ConnectError, MAX_CONNECTIONS, Peer};
+    use replication::pending::Origin;
+    use replication::shape::ShapePayload;
+    use replication::sync::message::{MAX_BATCH_OPS, Message, PROTOCOL_VERSION, SessionId};
+    use replication::sync::state::MAX_EARLY_MESSAGES;
+    use replication::{Keypair, Log, PeerId, SyncConfig, SyncState, Timestamp, VerifiedOp};
+
+    use super::{NOW, SLog, seed};
+
+    const SESSION: SessionId = [3; 16];
+    const MILLI: u64 = 1000;
+
+    /// The node's part of opening a connection the remote dialed from `source`, under the id
+    /// admission proved.
+    fn open_accepted(
+        peer: &mut Peer<ShapePayload>,
+        conn: ConnId,
+        source: u64,
+        admitted: PeerId,
+    ) -> Result<(), ConnectError> {
+        peer.accept(NOW, conn, source)?;
+        peer.set_admitted(conn, admitted);
+        Ok(())
+    }
+
+    /// Tells a connection the id admission proved.
+    fn admit(sync: &mut SyncState<ShapePayload>, admitted: PeerId) {
+        sync.set_admitted(admitted);
+    }
+
+    /// One connection's traffic: what the receiver holds first, the messages and when (µs
+    /// after [`NOW`]), and the id its remote was admitted under.
+    struct Exchange {
+        name: String,
+        log: SLog,
+        messages: Vec<(u64, Vec<u8>)>,
+        admitted: PeerId,
+    }
+
+    /// What receiving an exchange cost: CPU, bytes sent back, bytes of ops taken.
+    struct Cost {
+        bytes_in: usize,
+        cpu: Duration,
+        bytes_out: u64,
+        held_bytes: u64,
+    }
+
+    fn op_bytes(log: &SLog) -> u64 {
+        log.entries().map(|e| e.op.encoded().len() as u64).sum()
+    }
+
+    /// Feeds an exchange to a fresh connection (the best CPU of three runs, each of the
+    /// exchange built afresh).
+    fn measure(build: &dyn Fn() -> Exchange) -> (String, Cost) {
+        let mut best: Option<Cost> = None;
+        let mut name = String::new();
+        for _ in 0..3 {
+            let Exchange {
+                name: n,
+                mut log,
+                messages,
+                admitted,
+            } = build();
+            name = n;
+            let held_before = op_bytes(&log);
+            let config = SyncConfig {
+                session_id: SESSION,
+                local: Keypair::from_seed([200; 32]).peer_id(),
+                origin: Origin(1),
+            };
+            let mut sync = SyncState::new(NOW, config);
+            admit(&mut sync, admitted);
+            let mut bytes_out = 0;
+            #[expect(
+                clippy::disallowed_methods,
+                reason = "a benchmark reads the clock to time the receiver"
+            )]
+            let start = Instant::now();
+            for (at, bytes) in &messages {
+                let now = Timestamp(NOW.0 + at);
+                if sync.poll_timeout(&log).is_some_and(|t| t <= now) {
+                    sync.handle_timeout(now, &mut log);
+                }
+                sync.handle_input(now, bytes, &mut log);
+                while let Some(out) = sync.poll_transmit(now, &log) {
+                    bytes_out += out.len() as u64;
+                }
+                while sync.poll_event().is_some() {}
+            }
+            let cpu = start.elapsed();
+            black_box(&log);
+            let cost = Cost {
+                bytes_in: messages.iter().map(|(_, m)| m.len()).sum(),
+                cpu,
+                bytes_out,
+                held_bytes: op_bytes(&log) - held_before,
+            };
+            if best.as_ref().is_none_or(|b| cost.cpu < b.cpu) {
+                best = Some(cost);
+            }
+        }
+        (name, best.expect("three runs"))
+    }
+
+    fn hello(peer: PeerId) -> Vec<u8> {
+        Message::Hello {
+            protocol_version: PROTOCOL_VERSION,
+            session_id: SESSION,
+            peer,
+            hello_seen: true,
+            have: None,
+        }
+        .encode()
+    }
+
+    /// `n` chat ops of `text_bytes` each by `key`, a chain from seq 1.
+    fn chain(key: &Keypair, n: usize, text_bytes: usize) -> Vec<Vec<u8>> {
+        chain_in(&mut SLog::default(), key, n, text_bytes)
+    }
+
+    /// [`chain`], authored in `log` (after what it holds, so that ops authored in one log
+    /// arrive in order and refold nothing).
+    fn chain_in(log: &mut SLog, key: &Keypair, n: usize, text_bytes: usize) -> Vec<Vec<u8>> {
+        let text = "x".repeat(text_bytes);
+        (0..n)
+            .map(|i| {
+                let payload = ShapePayload::Chat(text.clone());
+                let at = Timestamp(1_000_000 + i as u64);
+                let (op, _) = log.author(key, at, payload).expect("a valid op");
+                op.encoded().to_vec()
+            })
+            .collect()
+    }
+
+    /// A log of `n_authors` one-op authors (chat, Lamport 1), as a receiver with a large
+    /// session holds.
+    fn log_of_many_authors(n_authors: usize) -> SLog {
+        let mut ops: Vec<VerifiedOp<ShapePayload>> = (0..n_authors)
+            .map(|i| {
+                let fields = OpFields {
+                    seq: 1,
+                    lamport: 1,
+                    timestamp: Timestamp(1),
+                    deps: Vec::new(),
+                    payload: ShapePayload::Chat(String::new()),
+                };
+                Op::sign(&Keypair::from_seed(seed(9, i)), fields).expect("a valid op")
+            })
+            .collect();
+        ops.sort_by_key(|op| OrderKey::of(op));
+        let mut log = SLog::default();
+        for op in ops {
+            log.insert(Timestamp(1), op, Origin(0)).expect("in order");
+        }
+        log
+    }
+
+    /// Honest traffic: the honest workload's ops, 8 a batch, a batch a millisecond.
+    fn honest(n: usize) -> Exchange {
+        let ops = super::honest(n).received;
+        let sender = Keypair::from_seed([1; 32]).peer_id();
+        let mut messages = vec![(0, hello(sender))];
+        for (i, batch) in ops.chunks(8).enumerate() {
+            let batch = Message::Ops {
+                batch_no: i as u64 + 1,
+                ops: batch.to_vec(),
+            };
+            messages.push(((i as u64 + 1) * MILLI, batch.encode()));
+        }
+        Exchange {
+            name: "honest: short-formula edits, 8 a batch".into(),
+            log: SLog::default(),
+            messages,
+            admitted: sender,
+        }
+    }
+
+    /// A hello every `gap_micros` to a receiver with a log of `n_authors` authors.
+    fn hello_flood(n_hellos: u64, gap_micros: u64, n_authors: usize) -> Exchange {
+        let attacker = Keypair::from_seed([2; 32]).peer_id();
+        let gap = if gap_micros >= 1_000_000 {
+            format!("{} s", gap_micros / 1_000_000)
+        } else {
+            format!("{} ms", gap_micros / MILLI)
+        };
+        Exchange {
+            name: format!("hello flood: a hello every {gap} to a log of {n_authors} authors"),
+            log: log_of_many_authors(n_authors),
+            messages: (0..n_hellos)
+                .map(|i| (i * gap_micros, hello(attacker)))
+                .collect(),
+            admitted: attacker,
+        }
+    }
+
+    /// Data held ahead of a hello naming another peer than the admitted one: as many batches
+    /// of fresh ops as the early buffer takes, then the hello.
+    fn wrong_id_hello() -> Exchange {
+        let attacker = Keypair::from_seed([3; 32]).peer_id();
+        let victim = Keypair::from_seed([4; 32]).peer_id();
+        let ops = chain(&Keypair::from_seed([5; 32]), MAX_EARLY_MESSAGES * 8, 1_800);
+        let mut messages: Vec<(u64, Vec<u8>)> = ops
+            .chunks(8)
+            .enumerate()
+            .map(|(i, batch)| {
+                let batch = Message::Ops {
+                    batch_no: i as u64 + 1,
+                    ops: batch.to_vec(),
+                };
+                (0, batch.encode())
+            })
+            .collect();
+        messages.push((MILLI, hello(victim)));
+        Exchange {
+            name: format!(
+                "wrong-id hello: {MAX_EARLY_MESSAGES} batches held, then a hello of another peer"
+            ),
+            log: SLog::default(),
+            messages,
+            admitted: attacker,
+        }
+    }
+
+    /// Full batches of fresh ops, a batch a millisecond, each of a new key's chain.
+    fn byte_flood(n_batches: usize) -> Exchange {
+        let attacker = Keypair::from_seed([6; 32]).peer_id();
+        let mut messages = vec![(0, hello(attacker))];
+        let mut authored = SLog::default();
+        for i in 0..n_batches {
+            let key = Keypair::from_seed(seed(7, i));
+            let ops = chain_in(&mut authored, &key, MAX_BATCH_OPS, 1_000);
+            let batch = Message::Ops {
+                batch_no: i as u64 + 1,
+                ops,
+            };
+            messages.push(((i as u64 + 1) * MILLI, batch.encode()));
+        }
+        Exchange {
+            name: format!(
+                "byte flood: {n_batches} batches of 64 fresh 1 KiB ops, a millisecond apart"
+            ),
+            log: SLog::default(),
+            messages,
+            admitted: attacker,
+        }
+    }
+
+    /// Sybils from 8 sources open every slot and say hello, then an honest remote dials in:
+    /// the CPU of the Sybils' hellos per byte, and whether the honest one got a slot.
+    fn slot_filling() -> (usize, Duration, bool) {
+        let mut best = None;
+        let mut admitted = false;
+        let mut n_bytes = 0;
+        for _ in 0..3 {
+            let mut peer = Peer::new(
+                Keypair::from_seed([8; 32]),
+                SESSION,
+                Log::<ShapePayload>::default(),
+            );
+            let hellos: Vec<(PeerId, Vec<u8>)> = (0..MAX_CONNECTIONS)
+                .map(|i| {
+                    let id = Keypair::from_seed(seed(10, i)).peer_id();
+                    (id, hello(id))
+                })
+                .collect();
+            n_bytes = hellos.iter().map(|(_, h)| h.len()).sum();
+            #[expect(
+                clippy::disallowed_methods,
+                reason = "a benchmark reads the clock to time the receiver"
+            )]
+            let start = Instant::now();
+            for (i, (id, bytes)) in hellos.iter().enumerate() {
+                let conn = ConnId(i as u64);
+                if open_accepted(&mut peer, conn, (i / 8) as u64, *id).is_ok() {
+                    peer.handle_input(NOW, conn, bytes);
+                }
+                while peer.poll_transmit(NOW).is_some() {}
+                while peer.poll_event().is_some() {}
+            }
+            let honest = Keypair::from_seed([11; 32]).peer_id();
+            admitted = open_accepted(&mut peer, ConnId(1_000), 1_000, honest).is_ok();
+            let cpu = start.elapsed();
+            if best.is_none_or(|b| cpu < b) {
+                best = Some(cpu);
+            }
+        }
+        (n_bytes, best.unwrap_or_default(), admitted)
+    }
+
+    /// 1-byte datagrams from every /64 of one /52, then honest registrations: the CPU of the
+    /// flood per byte, and how many honest registrations were answered with peers.
+    #[cfg(feature = "net")]
+    fn registry_fill(n_per_source: usize) -> (usize, Duration, usize) {
+        use replication::net::discovery::message::{DiscoveryMessage, NO_COOKIE};
+        use replication::net::discovery::registry::Registry;
+        use std::net::{Ipv6Addr, SocketAddr};
+        let mut best = None;
+        let mut n_registered = 0;
+        let n_bytes = 4096 * n_per_source;
+        for _ in 0..3 {
+            let mut registry = Registry::new([42; 32]);
+            #[expect(
+                clippy::disallowed_methods,
+                reason = "a benchmark reads the clock to time the receiver"
+            )]
+            let start = Instant::now();
+            for subnet in 0..4096u16 {
+                let ip = Ipv6Addr::new(0x2001, 0xdb8, 0xa000, subnet, 0, 0, 0, 1);
+                for _ in 0..n_per_source {
+                    black_box(registry.handle_datagram(NOW, SocketAddr::new(ip.into(), 1), &[0]));
+                }
+            }
+            let cpu = start.elapsed();
+            n_registered = 0;
+            for host in 1..=3u8 {
+                let from = SocketAddr::from(([198, 51, 100, host], 9));
+                let key = Keypair::from_seed([host; 32]);
+                let probe = DiscoveryMessage::register(&key, [1; 16], 9, NO_COOKIE).encode();
+                let cookie = match registry
+                    .handle_datagram(NOW, from, &probe)
+                    .map(|r| DiscoveryMessage::decode(&r))
+                {
+                    Some(Ok(DiscoveryMessage::Challenge { cookie })) => cookie,
+                    _ => continue,
+                };
+                let request = DiscoveryMessage::register(&key, [1; 16], 9, cookie).encode();
+                let reply = registry.handle_datagram(NOW, from, &request);
+                if let Some(Ok(DiscoveryMessage::Peers(_))) =
+                    reply.map(|r| DiscoveryMessage::decode(&r))
+                {
+                    n_registered += 1;
+                }
+            }
+            if best.is_none_or(|b| cpu < b) {
+                best = Some(cpu);
+            }
+        }
+        (n_bytes, best.unwrap_or_default(), n_registered)
+    }
+
+    pub fn run(quick: bool) {
+        let (n_ops, n_hellos, n_paced, n_authors, n_batches) = if quick {
+            (20, 100, 3, 5_000, 50)
+        } else {
+            (200, 1_000, 10, 50_000, 1_000)
+        };
+        println!();
+        println!(
+            "| traffic on one connection | messages | bytes in | CPU | per KiB in | vs honest (per byte) | bytes out per byte in | op bytes held per byte in |"
+        );
+        println!("|---|---|---|---|---|---|---|---|");
+        let builds: Vec<Box<dyn Fn() -> Exchange>> = vec![
+            Box::new(move || honest(n_ops)),
+            Box::new(move || hello_flood(n_hellos, MILLI, n_authors)),
+            // Paced to get every full have the throttle allows: the worst case per byte.
+            Box::new(move || hello_flood(n_paced, 1_000_000, n_authors)),
+            Box::new(wrong_id_hello),
+            Box::new(move || byte_flood(n_batches)),
+        ];
+        let mut honest_per_byte = None;
+        for build in &builds {
+            let (name, cost) = measure(build.as_ref());
+            let n_messages = build().messages.len();
+            let per_byte = cost.cpu.as_secs_f64() / cost.bytes_in as f64;
+            let baseline = *honest_per_byte.get_or_insert(per_byte);
+            println!(
+                "| {name} | {n_messages} | {} | {:.1} ms | {:.2} µs | {:.2} | {:.2} | {:.2} |",
+                cost.bytes_in,
+                cost.cpu.as_secs_f64() * 1e3,
+                per_byte * 1024.0 * 1e6,
+                per_byte / baseline,
+                cost.bytes_out as f64 / cost.bytes_in as f64,
+                cost.held_bytes as f64 / cost.bytes_in as f64,
+            );
+        }
+        let baseline = honest_per_byte.unwrap_or(f64::NAN);
+        let (n_bytes, cpu, admitted) = slot_filling();
+        let per_byte = cpu.as_secs_f64() / n_bytes as f64;
+        println!(
+            "| slot filling: {MAX_CONNECTIONS} Sybils from 8 sources say hello, then an honest remote dials in ({}) | {MAX_CONNECTIONS} | {n_bytes} | {:.1} ms | {:.2} µs | {:.2} | | |",
+            if admitted { "admitted" } else { "refused" },
+            cpu.as_secs_f64() * 1e3,
+            per_byte * 1024.0 * 1e6,
+            per_byte / baseline,
+        );
+        #[cfg(feature = "net")]
+        {
+            let (n_bytes, cpu, n_registered) = registry_fill(if quick { 5 } else { 40 });
+            let per_byte = cpu.as_secs_f64() / n_bytes as f64;
+            println!(
+                "| registry fill: 1-byte datagrams from the 4,096 /64s of one /52, then 3 honest registrations ({n_registered} answered) | {n_bytes} | {n_bytes} | {:.1} ms | {:.2} µs | {:.2} | | |",
+                cpu.as_secs_f64() * 1e3,
+                per_byte * 1024.0 * 1e6,
+                per_byte / baseline,
+            );
+        }
+    }
 }

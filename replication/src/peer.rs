@@ -34,7 +34,8 @@ use crate::payload::Payload;
 use crate::pending::Origin;
 use crate::sync::message::SessionId;
 use crate::sync::state::{
-    EphemeralError, Event, RELAY_AFTER_MICROS, RESEND_AFTER_MICROS, SyncConfig, SyncState,
+    EphemeralError, Event, OpByteQuota, RELAY_AFTER_MICROS, RESEND_AFTER_MICROS, SyncConfig,
+    SyncState,
 };
 use crate::time::Timestamp;
 
@@ -47,7 +48,9 @@ pub const WANT_CHECK_MICROS: u64 = 100_000;
 /// batch is acted on at once, and a burst of messages costs one pass.
 pub const WANT_COALESCE_MICROS: u64 = 10_000;
 
-/// Most simultaneous connections one peer keeps.
+/// Most simultaneous connections one peer keeps. When all are taken, a new one (dialed or
+/// accepted) takes the slot of the least useful accepted connection (see [`Peer::accept`]),
+/// so remotes that dial in cannot lock out an honest accept or a dial.
 pub const MAX_CONNECTIONS: usize = 64;
 
 /// A connection's id, chosen by the caller (the transport or the simulator).
@@ -57,7 +60,7 @@ pub struct ConnId(pub u64);
 /// Why a connection could not be opened.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum ConnectError {
-    /// Already [`MAX_CONNECTIONS`] connections.
+    /// Already [`MAX_CONNECTIONS`] connections, none of them accepted (so none to evict).
     #[error("already {MAX_CONNECTIONS} connections")]
     TooMany,
     /// This id is in use.
@@ -75,6 +78,8 @@ pub struct Peer<P> {
     session_id: SessionId,
     log: Log<P>,
     connections: BTreeMap<ConnId, SyncState<P>>,
+    /// How each connection holds its slot (one entry per connection).
+    slots: BTreeMap<ConnId, Slot>,
     events: VecDeque<(ConnId, Event)>,
     /// Authors whose ops some remote holds and this peer lacks (at most one entry per author
     /// named in a connection's version vector, so bounded by the connections' limits).
@@ -84,6 +89,14 @@ pub struct Peer<P> {
     wants_dirty: bool,
     wants_checked_at: Option<Timestamp>,
     want_check_at: Timestamp,
+}
+
+/// How a connection holds its slot: when it opened, and for one the remote dialed, the
+/// source group the transport named.
+#[derive(Clone, Copy, Debug)]
+struct Slot {
+    opened_at: Timestamp,
+    accepted_from: Option<u64>,
 }
 
 /// What this peer asked for one author's ops.
@@ -141,6 +154,7 @@ impl<P: Payload> Peer<P> {
             session_id,
             log,
             connections: BTreeMap::new(),
+            slots: BTreeMap::new(),
             events: VecDeque::new(),
             wants: BTreeMap::new(),
             wants_dirty: false,
@@ -171,17 +185,43 @@ impl<P: Payload> Peer<P> {
         payload: P,
     ) -> Result<(VerifiedOp<P>, Insertion), AuthorError> {
         let authored = self.log.author(&self.keypair, now, payload)?;
-        self.close_expelled();
+        self.close_expelled(now);
         Ok(authored)
     }
 
-    /// Opens a connection (state is built afresh for every connection).
+    /// Opens a connection this peer dialed (state is built afresh for every connection). It
+    /// is never evicted; when [`MAX_CONNECTIONS`] are open, it takes the slot of an accepted
+    /// one (see [`Peer::accept`]).
     pub fn connect(&mut self, now: Timestamp, conn: ConnId) -> Result<(), ConnectError> {
+        self.open(now, conn, None)
+    }
+
+    /// Opens a connection the remote dialed, from `source`: a group the transport names (a
+    /// hash of the remote's address prefix, say), whose connections compete for slots.
+    /// When [`MAX_CONNECTIONS`] are open, the least useful accepted connection is closed to
+    /// make room (`Event::Closed(CloseReason::Evicted)` on it): one of the source with the
+    /// most accepted connections, among those the one that delivered the fewest ops this
+    /// peer lacked (and whose remote authored none it holds), the oldest of equals. So
+    /// remotes from a few sources that hold every slot lose them to anyone else, a new
+    /// remote is never refused for want of a slot, and a remote that brings ops is kept
+    /// over one that only holds a slot.
+    pub fn accept(
+        &mut self,
+        now: Timestamp,
+        conn: ConnId,
+        source: u64,
+    ) -> Result<(), ConnectError> {
+        self.open(now, conn, Some(source))
+    }
+
+    fn open(
+        &mut self,
+        now: Timestamp,
+        conn: ConnId,
+        accepted_from: Option<u64>,
+    ) -> Result<(), ConnectError> {
         if self.connections.contains_key(&conn) {
             return Err(ConnectError::InUse(conn));
-        }
-        if self.connections.len() >= MAX_CONNECTIONS {
-            return Err(ConnectError::TooMany);
         }
         // Origin 0 is the local peer; connection n is origin n + 1.
         let origin = Origin(
@@ -189,6 +229,9 @@ impl<P: Payload> Peer<P> {
                 .checked_add(1)
                 .ok_or(ConnectError::OutOfRange(conn))?,
         );
+        if self.connections.len() >= MAX_CONNECTIONS {
+            self.evict_accepted(accepted_from)?;
+        }
         let config = SyncConfig {
             session_id: self.session_id,
             local: self.peer_id(),
@@ -199,12 +242,78 @@ impl<P: Payload> Peer<P> {
             sync.assume_resend_timeout(micros);
         }
         self.connections.insert(conn, sync);
+        let slot = Slot {
+            opened_at: now,
+            accepted_from,
+        };
+        self.slots.insert(conn, slot);
+        assert!(
+            self.connections.len() <= MAX_CONNECTIONS,
+            "more than MAX_CONNECTIONS connections"
+        );
         Ok(())
+    }
+
+    /// Closes the least useful accepted connection (see [`Peer::accept`]) to make room for one
+    /// more, from `source` if the remote dialed it; `TooMany` if none was accepted.
+    fn evict_accepted(&mut self, source: Option<u64>) -> Result<(), ConnectError> {
+        let mut by_source: BTreeMap<u64, usize> = BTreeMap::new();
+        for from in self
+            .slots
+            .values()
+            .filter_map(|s| s.accepted_from)
+            .chain(source)
+        {
+            *by_source.entry(from).or_default() += 1;
+        }
+        let held = self.log.version_vector();
+        let usefulness = |conn: &ConnId| {
+            let sync = self.connections.get(conn);
+            let delivered = sync.map_or(0, |s| s.stats().n_ops_delivered);
+            let known = sync
+                .and_then(SyncState::remote)
+                .is_some_and(|remote| held.get(&remote) > 0);
+            (delivered, known)
+        };
+        let victim = (self.slots.iter())
+            .filter_map(|(conn, slot)| Some((conn, slot.accepted_from?, slot.opened_at)))
+            .max_by_key(|(conn, from, opened_at)| {
+                let crowd = by_source.get(from).copied().unwrap_or(0);
+                (
+                    crowd,
+                    std::cmp::Reverse(usefulness(conn)),
+                    std::cmp::Reverse(*opened_at),
+                )
+            })
+            .map(|(conn, _, _)| *conn)
+            .ok_or(ConnectError::TooMany)?;
+        self.disconnect(victim);
+        let closed = Event::Closed(crate::sync::state::CloseReason::Evicted);
+        self.events.push_back((victim, closed));
+        Ok(())
+    }
+
+    /// The transport proved that the remote of `conn` holds `peer` (at admission): its sync
+    /// hello must name it, or the connection closes before anything the remote sent is
+    /// handled ([`SyncState::set_admitted`]). Call it right after opening `conn`.
+    pub fn set_admitted(&mut self, conn: ConnId, peer: PeerId) {
+        if let Some(sync) = self.connections.get_mut(&conn) {
+            sync.set_admitted(peer);
+        }
+    }
+
+    /// Replaces the quota of new op bytes the remote of `conn` may make this peer take
+    /// ([`SyncState::set_op_byte_quota`]).
+    pub fn set_op_byte_quota(&mut self, now: Timestamp, conn: ConnId, quota: OpByteQuota) {
+        if let Some(sync) = self.connections.get_mut(&conn) {
+            sync.set_op_byte_quota(now, quota);
+        }
     }
 
     /// Forgets a connection (the transport lost it); nothing acknowledged is lost.
     pub fn disconnect(&mut self, conn: ConnId) {
         self.connections.remove(&conn);
+        self.slots.remove(&conn);
     }
 
     /// Handles bytes received on `conn`; unknown connections are ignored.
@@ -222,7 +331,7 @@ impl<P: Payload> Peer<P> {
                 }
             }
             self.wants_dirty = true;
-            self.close_expelled();
+            self.close_expelled(now);
         }
     }
 
@@ -245,14 +354,15 @@ impl<P: Payload> Peer<P> {
         }
     }
 
-    /// Closes every connection to a member the founder expelled (all of them, when it expelled
-    /// this peer): an expel may arrive on any connection.
-    fn close_expelled(&mut self) {
+    /// Closes every connection to a member the founder expelled, once the member was told
+    /// ([`crate::sync::state::EXPEL_NOTICE_MICROS`]), and all of them at once when it
+    /// expelled this peer: an expel may arrive on any connection.
+    fn close_expelled(&mut self, now: Timestamp) {
         if self.log.expelled().is_empty() {
             return;
         }
         for (conn, sync) in &mut self.connections {
-            sync.close_if_expelled(&self.log);
+            sync.close_if_expelled(now, &self.log);
             drain(*conn, sync, &mut self.events);
         }
     }
@@ -501,7 +611,8 @@ mod tests {
     use crate::payload::test_payload::TestPayload;
     use crate::sync::message::Message;
     use crate::sync::state::{
-        CloseReason, HAVE_EVERY_MICROS, PING_FOR_MICROS, RESEND_AFTER_MIN_MICROS,
+        CloseReason, EXPEL_NOTICE_MICROS, HAVE_EVERY_MICROS, PING_FOR_MICROS,
+        RESEND_AFTER_MIN_MICROS,
     };
 
     type TPeer = Peer<TestPayload>;
@@ -1326,6 +1437,88 @@ mod tests {
         );
     }
 
+    /// Sends everything `peer` has to send on connections of `sybils`, as nowhere.
+    fn discard_sends(peer: &mut TPeer, now: Timestamp) -> Vec<(ConnId, Vec<u8>)> {
+        std::iter::from_fn(|| peer.poll_transmit(now)).collect()
+    }
+
+    /// Issue 49: 64 slots shared by accepted and dialed connections, 8 accepted per address:
+    /// remotes from 8 addresses held them all, and an honest accept or dial failed. A new
+    /// connection now takes the slot of the least useful accepted one, from the most crowded
+    /// source, so the honest ones get in and stay.
+    #[test]
+    fn sybils_from_eight_sources_holding_every_slot_lock_out_neither_accepts_nor_dials() {
+        let now = Timestamp(1_000);
+        let mut a = Peer::new(
+            Keypair::from_seed([1; 32]),
+            [5; 16],
+            Log::<TestPayload>::default(),
+        );
+        let mut b = Peer::new(Keypair::from_seed([2; 32]), [5; 16], Log::default());
+        b.author(now, TestPayload::Chat("honest".into())).unwrap();
+        // 8 sources, 8 connections each: every slot.
+        for idx in 0..MAX_CONNECTIONS as u64 {
+            a.accept(now, ConnId(idx), idx / 8).unwrap();
+            let sybil = Keypair::from_seed([100 + idx as u8; 32]).peer_id();
+            let hello = Message::Hello {
+                protocol_version: crate::sync::message::PROTOCOL_VERSION,
+                session_id: [5; 16],
+                peer: sybil,
+                hello_seen: true,
+                have: None,
+            };
+            a.handle_input(now, ConnId(idx), &hello.encode());
+        }
+        discard_sends(&mut a, now);
+        while a.poll_event().is_some() {}
+        // An honest remote dials in from a source of its own, and syncs.
+        let honest = ConnId(1_000);
+        a.accept(now, honest, 1_000).unwrap();
+        b.connect(now, ConnId(1)).unwrap();
+        let evicted: Vec<ConnId> = std::iter::from_fn(|| a.poll_event())
+            .filter(|(_, e)| *e == Event::Closed(CloseReason::Evicted))
+            .map(|(c, _)| c)
+            .collect();
+        assert_eq!(evicted.len(), 1, "{evicted:?}");
+        assert!(evicted[0].0 < MAX_CONNECTIONS as u64);
+        assert_eq!(a.connections().count(), MAX_CONNECTIONS);
+        for _ in 0..10 {
+            for (conn, bytes) in discard_sends(&mut a, now) {
+                if conn == honest {
+                    b.handle_input(now, ConnId(1), &bytes);
+                }
+            }
+            while let Some((_, bytes)) = b.poll_transmit(now) {
+                a.handle_input(now, honest, &bytes);
+            }
+        }
+        assert_eq!(a.log().len(), 1, "the honest remote's op arrived");
+        // A dial gets a slot too.
+        a.connect(now, ConnId(2_000)).unwrap();
+        assert_eq!(a.connections().count(), MAX_CONNECTIONS);
+        // However many more Sybils dial in, from the crowded sources or new ones, the honest
+        // remote and the dial keep their slots.
+        for idx in 0..200 {
+            let source = if idx % 2 == 0 { idx % 8 } else { 10_000 + idx };
+            a.accept(Timestamp(2_000 + idx), ConnId(3_000 + idx), source)
+                .unwrap();
+        }
+        assert!(a.connections().any(|(c, _)| *c == honest));
+        assert!(a.connections().any(|(c, _)| *c == ConnId(2_000)));
+        assert_eq!(a.connections().count(), MAX_CONNECTIONS);
+        // With every slot dialed, nothing is evicted and the next is refused.
+        let mut c = Peer::new(
+            Keypair::from_seed([3; 32]),
+            [5; 16],
+            Log::<TestPayload>::default(),
+        );
+        for idx in 0..MAX_CONNECTIONS as u64 {
+            c.connect(now, ConnId(idx)).unwrap();
+        }
+        assert_eq!(c.accept(now, ConnId(99), 1), Err(ConnectError::TooMany));
+        assert_eq!(c.connect(now, ConnId(99)), Err(ConnectError::TooMany));
+    }
+
     #[test]
     fn the_founder_expels_a_member_and_every_peer_closes_its_connections_to_it() {
         use crate::membership::{FounderCommitment, Membership};
@@ -1362,20 +1555,22 @@ mod tests {
         peers[0].author(Timestamp(1_000), expel).unwrap();
         let closed =
             |p: &TPeer, conn: u64| p.connections().any(|(c, s)| c.0 == conn && s.is_closed());
-        assert!(closed(&peers[0], 2), "the founder closes at once");
-        let mut events = Vec::new();
-        while let Some(e) = peers[0].poll_event() {
-            events.push(e);
-        }
-        assert!(events.contains(&(
-            ConnId(2),
-            Event::Closed(CloseReason::Expelled { peer: member })
-        )));
-        let t = settle(&mut peers, &links, 1_000, |p| p[1].log().len() == 2);
-        assert!(
-            closed(&peers[1], 2),
-            "a peer that learns of the expel closes too"
+        assert!(!closed(&peers[0], 2), "the member is told first");
+        // The expel reaches the member, whose own log now says it is out: it closes every
+        // connection, saying so.
+        let events = pump(&mut peers, &links, Timestamp(1_000));
+        assert!(peers[2].log().is_expelled(&member));
+        let told = Event::Closed(CloseReason::Expelled { peer: member });
+        assert_eq!(
+            events.iter().filter(|(i, e)| *i == 2 && *e == told).count(),
+            2
         );
+        // The others close theirs within the notice.
+        let deadline = 1_000 + EXPEL_NOTICE_MICROS;
+        let t = settle(&mut peers, &links, 1_000, |p| {
+            closed(&p[0], 2) && closed(&p[1], 2)
+        });
+        assert!(t <= deadline + 100_000, "closed at {t}");
         assert!(!closed(&peers[1], 0), "and keeps its other connections");
         // What the expelled member writes now reaches nobody, and would count for nothing.
         peers[2]
@@ -1394,6 +1589,72 @@ mod tests {
         });
         peers[1].author(Timestamp(t), forged).unwrap();
         assert!(!closed(&peers[1], 0) && !peers[1].log().is_expelled(&peers[0].peer_id()));
+    }
+
+    /// Issue 49: every peer that held the founder's expel closed its connections to the
+    /// member at once, so the member, its own log never holding the expel, was never told and
+    /// could show nothing. Each keeps the connection for the notice, sends the member what it
+    /// lacks (the expel among it) and takes none of its ops; the member learns it even from
+    /// a peer that only relays the founder's ops, and every connection to it closes by the
+    /// deadline.
+    #[test]
+    fn an_expelled_member_is_told_before_its_connections_close() {
+        use crate::membership::{FounderCommitment, Membership};
+        let nonce = [0xf0; 32];
+        let founder = Keypair::from_seed([1; 32]).peer_id();
+        let mut peers: Vec<TPeer> = (1..=3u8)
+            .map(|i| {
+                let mut log = Log::default();
+                log.set_founder(FounderCommitment::of(&founder, &nonce))
+                    .unwrap();
+                Peer::new(Keypair::from_seed([i; 32]), [5; 16], log)
+            })
+            .collect();
+        // Founder - relay - member: the member hears the founder only through the relay.
+        let links = [(0, ConnId(1), 1, ConnId(0)), (1, ConnId(2), 2, ConnId(1))];
+        for (p, c) in [(0, 1), (1, 0), (1, 2), (2, 1)] {
+            peers[p].connect(Timestamp(0), ConnId(c)).unwrap();
+        }
+        let member = peers[2].peer_id();
+        peers[2]
+            .author(Timestamp(0), TestPayload::Chat("hello".into()))
+            .unwrap();
+        let t = settle(&mut peers, &links, 0, |p| {
+            p.iter().all(|p| p.log().len() == 1)
+        });
+        let expel = TestPayload::Member(Membership {
+            member,
+            expel: true,
+            nonce,
+        });
+        peers[0].author(Timestamp(t), expel).unwrap();
+        let mut now = t;
+        let mut events = Vec::new();
+        while !peers[2].log().is_expelled(&member) {
+            assert!(now < t + EXPEL_NOTICE_MICROS, "the member was never told");
+            now += 10_000;
+            for p in peers.iter_mut() {
+                p.handle_timeout(Timestamp(now));
+            }
+            events.extend(pump(&mut peers, &links, Timestamp(now)));
+        }
+        let told = Event::Closed(CloseReason::Expelled { peer: member });
+        assert!(events.contains(&(2, told)), "{events:?}");
+        // The relay closes by the deadline.
+        let relayed = |p: &TPeer| {
+            p.connections()
+                .find(|(c, _)| c.0 == 2)
+                .map(|(_, s)| s.is_closed())
+        };
+        while relayed(&peers[1]) == Some(false) {
+            assert!(
+                now <= t + EXPEL_NOTICE_MICROS + 20_000,
+                "still open at {now}"
+            );
+            now += 10_000;
+            peers[1].handle_timeout(Timestamp(now));
+        }
+        assert_eq!(peers[1].log().len(), 2);
     }
 
     #[test]

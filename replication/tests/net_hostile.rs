@@ -21,6 +21,8 @@ use replication::net::node::{
 };
 use replication::net::{frame, tls};
 use replication::payload::test_payload::TestPayload;
+use replication::peer::MAX_CONNECTIONS;
+use replication::sync::message::{Message, PROTOCOL_VERSION};
 
 /// Where attackers send from: another loopback address than the honest nodes' 127.0.0.1.
 const ATTACKER_IP: &str = "127.0.0.2";
@@ -298,4 +300,89 @@ async fn one_invite_holder_gets_at_most_its_address_share_of_connections() {
     admission::admit_dialer(&again, &keys, &keypair)
         .await
         .expect("a freed slot admits again");
+}
+
+/// Issue 49: every connection slot was shared by accepted and dialed connections, and remotes
+/// from eight addresses (eight connections each) held all of them, so an honest dial in was
+/// refused. A newcomer now takes the slot of the least useful accepted connection.
+#[tokio::test]
+async fn remotes_holding_every_slot_from_eight_addresses_leave_an_honest_peer_in() {
+    let a = node(1);
+    author_some(&a.handle, 1, "alice").await;
+    let addr = a.handle.local_addr();
+    let keys = session_keys(INVITE);
+    let mut held = Vec::new();
+    for ip_idx in 0..MAX_CONNECTIONS / MAX_CONNECTIONS_PER_ADDRESS {
+        let attacker = client_endpoint(&format!("127.0.0.{}", 2 + ip_idx));
+        for seed in 0..MAX_CONNECTIONS_PER_ADDRESS {
+            let connection = connect(&attacker, addr).await.unwrap();
+            let keypair = Keypair::from_seed([(10 + ip_idx * 16 + seed) as u8; 32]);
+            let proof = admission::admit_dialer(&connection, &keys, &keypair)
+                .await
+                .unwrap();
+            held.push((connection, proof));
+        }
+    }
+    eventually("every slot is held", || async {
+        a.handle.stats().await.unwrap().connections.len() == MAX_CONNECTIONS
+    })
+    .await;
+    // An honest peer dials in from its own address, gets a slot and syncs.
+    let honest = node(2);
+    honest
+        .handle
+        .dial(addr)
+        .await
+        .expect("an honest dial gets in");
+    converge(&[&a.handle, &honest.handle], 4).await;
+    let stats = a.handle.stats().await.unwrap();
+    assert_eq!(stats.n_evicted, 1, "{stats:?}");
+    assert_eq!(stats.connections.len(), MAX_CONNECTIONS);
+    // Exactly one of the attackers' connections was closed for it.
+    let mut n_closed = 0;
+    for (connection, _) in &held {
+        if connection.close_reason().is_some() {
+            n_closed += 1;
+        }
+    }
+    assert_eq!(n_closed, 1);
+}
+
+/// Issue 49: a remote admitted under one key could send data ahead of a hello naming another
+/// peer, and the node checked the hello's id only after the core had handled the hello and
+/// the data it held. The core knows the admitted id now and closes first.
+#[tokio::test]
+async fn data_ahead_of_a_hello_naming_another_peer_is_never_handled() {
+    let a = node(1);
+    author_some(&a.handle, 1, "alice").await;
+    let (impostor, mut stream) = admitted(a.handle.local_addr(), 68).await;
+    let victim = Keypair::from_seed([69; 32]);
+    let mut log = replication::Log::<TestPayload>::default();
+    let (op, _) = log
+        .author(
+            &victim,
+            replication::Timestamp(1_000),
+            TestPayload::Chat("early".into()),
+        )
+        .unwrap();
+    let batch = Message::Ops {
+        batch_no: 1,
+        ops: vec![op.encoded().to_vec()],
+    };
+    let hello = Message::Hello {
+        protocol_version: PROTOCOL_VERSION,
+        session_id: session_keys(INVITE).session_id(),
+        peer: victim.peer_id(),
+        hello_seen: false,
+        have: None,
+    };
+    for message in [batch, hello] {
+        frame::write_frame(&mut stream.send, &message.encode())
+            .await
+            .unwrap();
+    }
+    assert_eq!(closed_code(&impostor).await, CloseCode::Protocol as u64);
+    let stats = a.handle.stats().await.unwrap();
+    assert_eq!(stats.n_identity_mismatches, 1, "{stats:?}");
+    assert!(!op_ids(&a.handle).await.contains(&op.op().id()));
 }

@@ -29,7 +29,17 @@
 //! - with `forks`, equivocation: two ops of one fresh key with sequence number 1, sent to two
 //!   different peers;
 //! - with `expel`, forged expels: a fresh key's expel of an honest peer, showing the founder's
-//!   nonce or a made-up one (neither may count: only the founder's key matches the invite).
+//!   nonce or a made-up one (neither may count: only the founder's key matches the invite);
+//! - hello floods: [`HELLO_FLOOD`] hellos at once (a few answered with full haves, then one a
+//!   second; those over the allowance counted);
+//! - wrong-id hellos: a hello naming an honest peer's id on the member's own connection, which
+//!   the transport admitted under the member's key, so the receiver closes it (the member
+//!   then dials again, [`REDIAL_MICROS`] later);
+//! - byte floods: [`BYTE_FLOOD_BATCHES`] full batches of fresh keys' large chat ops at once,
+//!   over the receiver's quota of op bytes ([`SMALL_OP_BYTE_QUOTA`], scaled to the
+//!   simulator's logs), which drops the rest unacknowledged; each chain depends on an op
+//!   nobody holds, so what the receiver takes waits in its pending buffer until it expires
+//!   (held, never relayed: the flood costs honest links nothing).
 
 use fdsl::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
 use replication::causal::MAX_VV_AUTHORS;
@@ -37,11 +47,12 @@ use replication::membership::Membership;
 use replication::op::{MAX_DEPS, OpFields};
 use replication::shape::ShapePayload;
 use replication::sync::message::{MAX_BATCH_OPS, Message};
+use replication::sync::state::{CloseReason, MAX_HELLO_BURST, OpByteQuota};
 use replication::time::MAX_CLOCK_SKEW_MICROS;
 use replication::{ConnId, Keypair, Op, OpId, Peer, PeerId, Timestamp, VersionVector};
 
 use crate::rng::SimRng;
-use crate::sim::{Ev, FOUNDER_NONCE, SESSION_ID, Simulation, deliver, guarded_call};
+use crate::sim::{Ev, FOUNDER_NONCE, SESSION_ID, Simulation, deliver, guarded, guarded_call};
 
 /// Most fresh keys the byzantine member makes in one run.
 pub const MAX_SYBIL_KEYS: usize = 512;
@@ -55,6 +66,23 @@ pub const REFOLD_FLOOD: u64 = 24;
 pub const BACKDATE_MICROS: u64 = 10 * 60 * 1_000_000;
 /// The name of the objects id theft creates.
 pub const STOLEN_NAME: &str = "stolen id";
+/// Hellos in one hello flood.
+pub const HELLO_FLOOD: usize = 4 * MAX_HELLO_BURST as usize;
+/// Full batches in one byte flood, each of a fresh key's chain of large chat ops.
+pub const BYTE_FLOOD_BATCHES: u64 = 12;
+/// Bytes of text in each op of a byte flood (about 1 KiB per op, 64 KiB per batch).
+pub const BYTE_FLOOD_TEXT_BYTES: usize = 900;
+/// Most byte floods in one run.
+pub const MAX_BYTE_FLOODS: usize = 3;
+/// How long after a receiver closed its connection (not for an expel) the member dials again.
+pub const REDIAL_MICROS: u64 = 100_000;
+/// The quota of new op bytes per connection where a byzantine member runs, scaled like the
+/// refold budget to the simulator's logs of hundreds of ops: a catch-up of a whole run's
+/// honest ops and cost bombs fits in the burst, a byte flood does not.
+pub const SMALL_OP_BYTE_QUOTA: OpByteQuota = OpByteQuota {
+    bytes_per_sec: 128 * 1024,
+    burst_bytes: 512 * 1024,
+};
 /// Object ids the byzantine member creates (above every honest user's).
 const BOMB_OBJECT_BASE: u64 = 64 << 32;
 /// The compile bomb: a short loop, unrolled as far as an object's formula may
@@ -109,6 +137,9 @@ enum Attack {
     RefoldFlood,
     Fork,
     ForgeExpel,
+    HelloFlood,
+    WrongIdHello,
+    ByteFlood,
 }
 
 impl Attack {
@@ -127,6 +158,9 @@ impl Attack {
             Attack::RefoldFlood => "refold-flood",
             Attack::Fork => "fork",
             Attack::ForgeExpel => "forge-expel",
+            Attack::HelloFlood => "hello-flood",
+            Attack::WrongIdHello => "wrong-id-hello",
+            Attack::ByteFlood => "byte-flood",
         }
     }
 }
@@ -148,6 +182,7 @@ pub(crate) struct Byzantine {
     keys: SimRng,
     n_sybil_keys: usize,
     n_bombs: usize,
+    n_byte_floods: usize,
     hoarder: Chain,
     /// The compile bomb's text, searched once.
     bomb: Option<Option<String>>,
@@ -184,6 +219,7 @@ impl Byzantine {
             keys,
             n_sybil_keys: 0,
             n_bombs: 0,
+            n_byte_floods: 0,
             hoarder,
             bomb: None,
             must_refuse: Vec::new(),
@@ -364,6 +400,9 @@ impl Simulation {
                 Attack::CostBomb,
                 Attack::TakeId,
                 Attack::RefoldFlood,
+                Attack::HelloFlood,
+                Attack::WrongIdHello,
+                Attack::ByteFlood,
             ]);
         }
         if faults.lease_attacks {
@@ -410,6 +449,9 @@ impl Simulation {
         let objects = self.objects.clone();
         let victim = self.honest.get(to).map(|h| h.user.next_ids());
         let victim_key = self.honest.get(to).map(|h| h.peer.peer_id());
+        let third_key = (self.honest.iter().enumerate())
+            .find(|(idx, _)| *idx != to)
+            .map(|(_, h)| h.peer.peer_id());
         let hostile = self.hostile.as_mut()?;
         let me = hostile.peer_id();
         let batch_no = hostile.next_batch_no();
@@ -585,6 +627,32 @@ impl Simulation {
                 let timestamp = now.max(f.timestamp);
                 one(sign(&key, 1, f.lamport + 1, timestamp, f.heads, payload))
             }
+            Attack::HelloFlood => Some((0..HELLO_FLOOD).map(|_| (to, hello(me))).collect()),
+            Attack::WrongIdHello => Some(vec![(to, hello(third_key.or(victim_key)?))]),
+            Attack::ByteFlood => {
+                if byz.n_byte_floods >= MAX_BYTE_FLOODS {
+                    return None;
+                }
+                byz.n_byte_floods += 1;
+                let text = "x".repeat(BYTE_FLOOD_TEXT_BYTES);
+                let timestamp = now.max(f.timestamp);
+                let mut out = vec![(to, hello(me))];
+                for batch_idx in 0..BYTE_FLOOD_BATCHES {
+                    let key = byz.sybil()?;
+                    let mut missing = [0; 32];
+                    rng.fill(&mut missing);
+                    let (mut deps, mut ops) = (vec![OpId(missing)], Vec::new());
+                    for seq in 1..=MAX_BATCH_OPS as u64 {
+                        let payload = ShapePayload::Chat(text.clone());
+                        let (id, bytes) =
+                            sign(&key, seq, f.lamport + seq, timestamp, deps, payload)?;
+                        deps = vec![id];
+                        ops.push(bytes);
+                    }
+                    out.push((to, batch(batch_no + batch_idx, ops)));
+                }
+                Some(out)
+            }
             Attack::Fork => {
                 let key = byz.sybil()?;
                 // Another peer than `to`, when there is one.
@@ -607,6 +675,44 @@ impl Simulation {
                     (other, batch(batch_no, vec![b.1])),
                 ])
             }
+        }
+    }
+
+    /// The transport's part of honest peer `x`'s new connection to node `y`: the id admission
+    /// proved (the member's own key for the hostile one), and where a byzantine member runs,
+    /// the quota of op bytes scaled to the simulator's logs.
+    pub(crate) fn admit_link(&mut self, x: usize, y: usize) {
+        let now = Timestamp(self.now);
+        let admitted = match self.honest.get(y) {
+            Some(h) => Some(h.peer.peer_id()),
+            None => self.hostile.as_ref().map(|h| h.peer_id()),
+        };
+        let byzantine = self.faults.byzantine;
+        if let (Some(h), Some(admitted)) = (self.honest.get_mut(x), admitted) {
+            guarded(h, |p| {
+                p.set_admitted(ConnId(y as u64), admitted);
+                if byzantine {
+                    p.set_op_byte_quota(now, ConnId(y as u64), SMALL_OP_BYTE_QUOTA);
+                }
+            });
+        }
+    }
+
+    /// After honest peer `idx` closed its connection to `other` for `reason`: the hostile
+    /// member dials again soon, unless it was expelled.
+    pub(crate) fn redial_after_close(&mut self, idx: usize, other: usize, reason: CloseReason) {
+        let expelled = matches!(reason, CloseReason::Expelled { .. });
+        if Some(other) == self.hostile_idx() && !expelled {
+            self.push(self.now + REDIAL_MICROS, Ev::Redial { peer: idx });
+        }
+    }
+
+    /// The hostile member dials honest peer `peer` again.
+    pub(crate) fn redial(&mut self, peer: usize) {
+        if let Some(h) = self.hostile_idx()
+            && self.online(peer)
+        {
+            self.connect_pair(peer, h);
         }
     }
 

@@ -122,6 +122,10 @@ pub(crate) enum Ev {
     Expel {
         connection: bool,
     },
+    /// The hostile member dials honest peer `peer` again after it closed their connection.
+    Redial {
+        peer: usize,
+    },
     /// After healing: stop once honest peers agree and nothing is in flight between them.
     Probe,
     /// Records a sample for the plots (not part of the trace).
@@ -673,6 +677,7 @@ impl Simulation {
                 self.trace.u64(19);
                 self.expel_hostile(connection);
             }
+            Ev::Redial { peer } => self.redial(peer),
             Ev::Probe => {
                 if self.n_in_flight == 0 && self.agreed() {
                     self.quiet = true;
@@ -911,7 +916,7 @@ impl Simulation {
         &mut self.pairs[lo][hi]
     }
 
-    fn connect_pair(&mut self, a: usize, b: usize) {
+    pub(crate) fn connect_pair(&mut self, a: usize, b: usize) {
         if self.pair(a, b).connected {
             return;
         }
@@ -926,6 +931,7 @@ impl Simulation {
                 // side; honest runs never hit it, and the checkers would see the divergence.
                 let _ = guarded(h, |p| p.connect(now, ConnId(y as u64)));
             }
+            self.admit_link(x, y);
         }
         let pair = self.pair(a, b);
         pair.connected = true;
@@ -1139,6 +1145,7 @@ impl Simulation {
                 let other = conn.0 as usize;
                 if other < self.n_nodes() {
                     self.disconnect_pair(idx, other);
+                    self.redial_after_close(idx, other, reason);
                 }
             }
             Event::Connected { .. } | Event::Ephemeral { .. } | Event::UpToDate => {

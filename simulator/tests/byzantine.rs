@@ -63,6 +63,9 @@ fn crafted_attacks_crash_split_and_corrupt_nothing() {
         "cost-bomb",
         "take-id",
         "refold-flood",
+        "hello-flood",
+        "wrong-id-hello",
+        "byte-flood",
     ] {
         assert!(
             sent.get(attack).is_some_and(|n| *n > 0),
@@ -70,6 +73,12 @@ fn crafted_attacks_crash_split_and_corrupt_nothing() {
         );
     }
     assert!(!sent.contains_key("fork"), "{sent:?}");
+    // Hellos over the allowance were counted, and so were hellos naming another peer than
+    // the admitted member (each closed the connection, and the member dialed again).
+    for kind in ["RepeatedHello", "WrongPeer"] {
+        let counted = |r: &Report| r.stats.hostile_rejects.contains_key(kind);
+        assert!(reports.iter().any(counted), "{kind}: {}", reports[0]);
+    }
     // The refold floods made honest peers hold ops for their budget, and still every checker
     // passed: held ops are delivered, in place, and relayed.
     let held: u64 = reports.iter().map(|r| r.n_refold_holds).sum();

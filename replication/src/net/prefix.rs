@@ -34,6 +34,19 @@ impl AddressPrefix {
             }
         }
     }
+
+    /// A 64-bit name of the prefix (a hash, so no chosen prefix shares another's), for the
+    /// core's source groups ([`crate::peer::Peer::accept`]).
+    pub fn key(&self) -> u64 {
+        let mut hasher = blake3::Hasher::new();
+        match self {
+            Self::V4(octets) => hasher.update(&[4]).update(octets),
+            Self::V6(prefix) => hasher.update(&[6]).update(prefix),
+        };
+        let mut key = [0; 8];
+        key.copy_from_slice(&hasher.finalize().as_bytes()[..8]);
+        u64::from_le_bytes(key)
+    }
 }
 
 impl fmt::Debug for AddressPrefix {

@@ -109,8 +109,35 @@ pub const HAVE_FULL_EVERY_MICROS: u64 = 10_000_000;
 pub const MAX_MESSAGES_PER_SEC: u64 = 2_000;
 /// Messages a remote may send in a burst.
 pub const MAX_MESSAGE_BURST: u64 = 512;
+/// Full haves a remote's hellos may cost this peer per second on average: every hello asks
+/// for one (it tells the remote what this peer holds, and confirms the hello), so this
+/// bounds what hellos make this peer announce, as pings are (a full have a second). A hello
+/// beyond it and [`MAX_HELLO_ANSWER_BURST`] is dropped unanswered (counted in
+/// [`SyncStats::n_hellos_unanswered`]): an honest remote sends it again until a have comes.
+pub const MAX_HELLO_ANSWERS_PER_SEC: u64 = 1;
+/// The burst of [`MAX_HELLO_ANSWERS_PER_SEC`]: a connection's first hello, its answer to
+/// ours, and resends after a lost have or two.
+pub const MAX_HELLO_ANSWER_BURST: u64 = 4;
+/// Hellos a remote may send per second on average before they count against it: beyond this
+/// and [`MAX_HELLO_BURST`] they are dropped and counted ([`RejectKind::RepeatedHello`]). An
+/// honest remote sends one, then again only while no have answers it (at least
+/// [`RESEND_AFTER_MIN_MICROS`] apart), and one to relearn or repair now and then: even on a
+/// link that loses and duplicates a quarter of its messages that stays well within.
+pub const MAX_HELLOS_PER_SEC: u64 = 4;
+/// The burst of [`MAX_HELLOS_PER_SEC`].
+pub const MAX_HELLO_BURST: u64 = 16;
 /// Most ephemeral channels buffered for sending.
 pub const MAX_EPHEMERAL_CHANNELS: usize = 64;
+/// Bytes of new ops (not held yet) a remote may make this peer take per second on average,
+/// counted before their signatures are checked: beyond it and [`MAX_RECEIVED_OP_BYTES_BURST`]
+/// a batch's remaining ops are dropped unread and the batch is not acknowledged, so an
+/// honest sender's resend brings them later (counted in [`SyncStats::n_ops_over_quota`]).
+/// One connection's ops cost this peer bounded CPU and memory per second, whatever it sends
+/// (8 MiB: about what one core verifies).
+pub const MAX_RECEIVED_OP_BYTES_PER_SEC: u64 = 8 * 1024 * 1024;
+/// The burst of [`MAX_RECEIVED_OP_BYTES_PER_SEC`] (32 MiB): a catch-up of 10^5 ops of the
+/// usual size (about 160 bytes) fits in it twice.
+pub const MAX_RECEIVED_OP_BYTES_BURST: u64 = 32 * 1024 * 1024;
 /// Most authors the local log does not hold that one connection remembers from the remote's
 /// haves and acks. Such a claim is only good for asking the remote to relay the author's ops,
 /// so the excess is dropped (and counted) rather than stored; it is learnt again later.
@@ -140,10 +167,19 @@ pub const STUCK_CHECK_MICROS: u64 = HAVE_EVERY_MICROS;
 pub const MAX_ASKED_OPS: usize = 1024;
 /// Most ops asked for by id that one connection queues to send.
 pub const MAX_ASKED_OUT: usize = 4 * MAX_BATCH_OPS;
+/// A connection to a member the founder expelled stays open at most this long (5 s) once this
+/// peer holds the expel, so that the member learns it too: it is sent what it lacks, the
+/// expel among it (its own log then says it was expelled, and it closes every connection
+/// with [`CloseReason::Expelled`] naming itself, which its app can show), and none of its
+/// ops are taken. The connection closes as soon as the member is known to hold everything
+/// this peer holds, or at this deadline.
+pub const EXPEL_NOTICE_MICROS: u64 = 5_000_000;
 
 const MICROS_PER_SEC: u64 = 1_000_000;
 const _: () = assert!(MAX_BATCH_BYTES + MAX_BATCH_OPS * 10 + 32 <= MAX_MESSAGE_BYTES);
 const _: () = assert!(MAX_OP_BYTES <= MAX_BATCH_BYTES);
+// An honest catch-up of 10^5 ops of about 160 bytes fits in the op-byte burst twice.
+const _: () = assert!(MAX_RECEIVED_OP_BYTES_BURST >= 2 * 100_000 * 160);
 
 /// What kind of bad or unwanted input was dropped. Each is counted and reported.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -160,6 +196,8 @@ pub enum RejectKind {
     WrongSession,
     /// A hello from a different peer than earlier on this connection.
     WrongPeer,
+    /// A hello over the remote's allowance ([`MAX_HELLOS_PER_SEC`], [`MAX_HELLO_BURST`]).
+    RepeatedHello,
     /// Data before the remote's hello.
     BeforeHello,
     /// An op that does not decode.
@@ -196,6 +234,14 @@ pub enum CloseReason {
     Expelled {
         /// The member expelled.
         peer: PeerId,
+    },
+    /// The peer needed this connection's slot for another ([`crate::peer::Peer::accept`]).
+    Evicted,
+    /// The remote's hello named another peer than the one the transport admitted
+    /// ([`SyncState::set_admitted`]).
+    NotAdmitted {
+        /// The id the hello named.
+        claimed: PeerId,
     },
 }
 
@@ -281,6 +327,10 @@ pub struct SyncStats {
     pub n_tips_differ: u64,
     /// Ops the remote asked for by id that were not sent: not held, or over [`MAX_ASKED_OUT`].
     pub n_asks_dropped: u64,
+    /// New ops from the remote dropped unread over [`MAX_RECEIVED_OP_BYTES_PER_SEC`].
+    pub n_ops_over_quota: u64,
+    /// Hellos dropped unanswered over [`MAX_HELLO_ANSWERS_PER_SEC`].
+    pub n_hellos_unanswered: u64,
 }
 
 impl SyncStats {
@@ -322,6 +372,17 @@ impl TokenBucket {
         self.tokens_micros >= MICROS_PER_SEC
     }
 
+    /// Refills and takes `n` tokens if there are as many.
+    fn take_n(&mut self, now: Timestamp, n: u64) -> bool {
+        self.refill(now);
+        let cost = n.saturating_mul(MICROS_PER_SEC);
+        let ok = self.tokens_micros >= cost;
+        if ok {
+            self.tokens_micros -= cost;
+        }
+        ok
+    }
+
     fn spend(&mut self) {
         self.tokens_micros = self.tokens_micros.saturating_sub(MICROS_PER_SEC);
     }
@@ -355,6 +416,26 @@ pub struct SyncConfig {
     pub origin: Origin,
 }
 
+/// How many bytes of new ops one connection may make this peer take: by default
+/// [`MAX_RECEIVED_OP_BYTES_PER_SEC`] and [`MAX_RECEIVED_OP_BYTES_BURST`]; a harness whose logs
+/// are small (the simulator) scales it down to match.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct OpByteQuota {
+    /// Bytes per second on average.
+    pub bytes_per_sec: u64,
+    /// Bytes in a burst.
+    pub burst_bytes: u64,
+}
+
+impl Default for OpByteQuota {
+    fn default() -> Self {
+        Self {
+            bytes_per_sec: MAX_RECEIVED_OP_BYTES_PER_SEC,
+            burst_bytes: MAX_RECEIVED_OP_BYTES_BURST,
+        }
+    }
+}
+
 /// The tip of the log's op at each entry of `vv`, in order (0 where it holds none).
 fn tips_of<P: Payload>(log: &Log<P>, vv: &VersionVector) -> Vec<u64> {
     (vv.iter())
@@ -377,6 +458,11 @@ fn hello_have<P: Payload>(log: &Log<P>) -> Option<HelloHave> {
 pub struct SyncState<P> {
     config: SyncConfig,
     remote: Option<PeerId>,
+    /// The id the transport proved the remote holds, if it did: the hello must name it.
+    admitted: Option<PeerId>,
+    /// The remote is expelled: when the connection closes at the latest
+    /// ([`EXPEL_NOTICE_MICROS`]).
+    expel_notice_until: Option<Timestamp>,
     closed: bool,
     /// The remote has confirmed it saw our hello.
     hello_confirmed: bool,
@@ -488,6 +574,11 @@ pub struct SyncState<P> {
     eph_in: BTreeMap<u32, u64>,
     /// Limits what the remote may send us.
     bucket: TokenBucket,
+    /// Limits the remote's hellos, and the full haves they cost.
+    hello_bucket: TokenBucket,
+    hello_answer_bucket: TokenBucket,
+    /// Limits the bytes of new ops the remote makes us take.
+    op_bytes_bucket: TokenBucket,
     /// Paces what we send, at half the remote's limit, leaving room for its acks.
     send_bucket: TokenBucket,
     stats: SyncStats,
@@ -500,6 +591,8 @@ impl<P: Payload> SyncState<P> {
         let mut state = Self {
             config,
             remote: None,
+            admitted: None,
+            expel_notice_until: None,
             closed: false,
             hello_confirmed: false,
             early: VecDeque::new(),
@@ -555,6 +648,17 @@ impl<P: Payload> SyncState<P> {
             eph_out_seq: 0,
             eph_in: BTreeMap::new(),
             bucket: TokenBucket::new(now, MAX_MESSAGES_PER_SEC, MAX_MESSAGE_BURST),
+            hello_bucket: TokenBucket::new(now, MAX_HELLOS_PER_SEC, MAX_HELLO_BURST),
+            hello_answer_bucket: TokenBucket::new(
+                now,
+                MAX_HELLO_ANSWERS_PER_SEC,
+                MAX_HELLO_ANSWER_BURST,
+            ),
+            op_bytes_bucket: TokenBucket::new(
+                now,
+                MAX_RECEIVED_OP_BYTES_PER_SEC,
+                MAX_RECEIVED_OP_BYTES_BURST,
+            ),
             send_bucket: TokenBucket::new(now, MAX_MESSAGES_PER_SEC / 2, MAX_MESSAGE_BURST / 2),
             stats: SyncStats::default(),
             payload: PhantomData,
@@ -566,6 +670,19 @@ impl<P: Payload> SyncState<P> {
     /// The remote's peer id, once its hello arrived.
     pub fn remote(&self) -> Option<PeerId> {
         self.remote
+    }
+
+    /// The transport proved that the remote holds `peer` (its admission): a hello naming
+    /// another id closes the connection ([`CloseReason::NotAdmitted`]) before anything the
+    /// remote sent is handled, the data it sent ahead of its hello included. Call it before
+    /// any input.
+    pub fn set_admitted(&mut self, peer: PeerId) {
+        self.admitted = Some(peer);
+    }
+
+    /// Replaces the connection's quota of new op bytes (full again from `now`).
+    pub fn set_op_byte_quota(&mut self, now: Timestamp, quota: OpByteQuota) {
+        self.op_bytes_bucket = TokenBucket::new(now, quota.bytes_per_sec, quota.burst_bytes);
     }
 
     /// True once the connection was closed.
@@ -714,6 +831,7 @@ impl<P: Payload> SyncState<P> {
 
     /// Handles one message received from the remote.
     pub fn handle_input(&mut self, now: Timestamp, bytes: &[u8], log: &mut Log<P>) {
+        self.close_if_expelled(now, log);
         let generation = log.forks().generation();
         self.read_input(now, bytes, log);
         self.observe_log(now, log);
@@ -727,21 +845,28 @@ impl<P: Payload> SyncState<P> {
             // side's previous op) may be delivered now: it can be asked for again.
             self.asked.clear();
         }
-        self.close_if_expelled(log);
+        self.close_if_expelled(now, log);
     }
 
-    /// Closes the connection when `log` says the founder expelled its remote or this peer:
-    /// an expelled member syncs with nobody (its ops after the expel are void anyway).
-    pub fn close_if_expelled(&mut self, log: &Log<P>) {
+    /// Closes the connection when `log` says the founder expelled this peer (at once: it
+    /// syncs with nobody) or the remote: then once the remote is known to hold everything
+    /// `log` holds, the expel among it, or [`EXPEL_NOTICE_MICROS`] after this peer first
+    /// saw the expel here, whichever comes first (its ops after the expel are void anyway).
+    pub fn close_if_expelled(&mut self, now: Timestamp, log: &Log<P>) {
         if self.closed || log.expelled().is_empty() {
             return;
         }
-        let expelled = [self.remote, Some(self.config.local)]
-            .into_iter()
-            .flatten()
-            .find(|p| log.is_expelled(p));
-        if let Some(peer) = expelled {
-            self.close(CloseReason::Expelled { peer });
+        let local = self.config.local;
+        if log.is_expelled(&local) {
+            return self.close(CloseReason::Expelled { peer: local });
+        }
+        let Some(remote) = self.remote.filter(|r| log.is_expelled(r)) else {
+            return;
+        };
+        let until = *(self.expel_notice_until)
+            .get_or_insert_with(|| now.saturating_add_micros(EXPEL_NOTICE_MICROS));
+        if now >= until || self.remote_vv.dominates(log.version_vector()) {
+            self.close(CloseReason::Expelled { peer: remote });
         }
     }
 
@@ -773,6 +898,17 @@ impl<P: Payload> SyncState<P> {
             }
         };
         match message {
+            Message::Hello { .. } if !self.hello_bucket.take(now) => {
+                self.reject(
+                    RejectKind::RepeatedHello,
+                    format!("a hello over {MAX_HELLOS_PER_SEC} a second"),
+                );
+            }
+            // Every hello costs a full have: past the allowance none is answered, and the
+            // remote, if honest, sends it again.
+            Message::Hello { .. } if !self.hello_answer_bucket.take(now) => {
+                self.stats.n_hellos_unanswered += 1;
+            }
             Message::Hello {
                 protocol_version,
                 session_id,
@@ -867,6 +1003,10 @@ impl<P: Payload> SyncState<P> {
             Message::Want { vv, held } => {
                 self.hello_confirmed = true;
                 self.on_want(now, &vv, &held, log);
+            }
+            // An expelled remote is only told (see `EXPEL_NOTICE_MICROS`): its ops are void.
+            Message::Ops { .. } | Message::Forked { .. } if self.expel_notice_until.is_some() => {
+                self.hello_confirmed = true;
             }
             Message::Ops { batch_no, ops } => {
                 self.hello_confirmed = true;
@@ -986,6 +1126,16 @@ impl<P: Payload> SyncState<P> {
             self.close(CloseReason::WrongSession);
             return;
         }
+        if let Some(admitted) = self.admitted
+            && peer != admitted
+        {
+            self.reject(
+                RejectKind::WrongPeer,
+                format!("{peer}, admitted {admitted}"),
+            );
+            self.close(CloseReason::NotAdmitted { claimed: peer });
+            return;
+        }
         match self.remote {
             Some(known) if known != peer => {
                 self.reject(RejectKind::WrongPeer, format!("{peer} after {known}"));
@@ -999,10 +1149,11 @@ impl<P: Payload> SyncState<P> {
         }
         // Every hello is answered with a full Have: it tells the remote what we hold and
         // confirms we saw its hello (so it stops resending). A Have is never answered, so this
-        // cannot loop.
+        // cannot loop, and the full haves hellos cost are limited (`MAX_HELLO_ANSWERS_PER_SEC`).
         self.send_full_have(now, log);
         self.hello_confirmed |= hello_seen;
-        if !hello_seen {
+        let hello_queued = (self.control.iter()).any(|m| matches!(m, Message::Hello { .. }));
+        if !hello_seen && !hello_queued {
             // The remote has not seen our hello yet: answer once (its resend timer repeats).
             self.queue_hello(now);
         }
@@ -1219,29 +1370,35 @@ impl<P: Payload> SyncState<P> {
         // The ack names only the batch's authors: what the sender needs to move on, in
         // bytes that do not grow with the number of peers.
         let mut authors = Vec::new();
-        self.insert_received(now, &ops, log, &mut authors);
-        let mut have = VersionVector::new();
-        for author in authors {
-            have.raise(author, log.version_vector().get(&author));
+        let whole = self.insert_received(now, &ops, log, &mut authors);
+        // A batch cut short by the quota is not acknowledged: its sender sends it again after
+        // its resend timeout, when what this peer took of it is skipped as held.
+        if whole {
+            let mut have = VersionVector::new();
+            for author in authors {
+                have.raise(author, log.version_vector().get(&author));
+            }
+            self.control.push_back(Message::Ack { batch_no, have });
         }
-        self.control.push_back(Message::Ack { batch_no, have });
         self.update_up_to_date(log);
     }
 
     /// Inserts received ops into `log`, noting in `authors` the authors of those held or
-    /// signed.
+    /// signed; false when [`MAX_RECEIVED_OP_BYTES_PER_SEC`] cut the ops short (the rest are
+    /// dropped unread).
     fn insert_received(
         &mut self,
         now: Timestamp,
         ops: &[Vec<u8>],
         log: &mut Log<P>,
         authors: &mut Vec<PeerId>,
-    ) {
+    ) -> bool {
         // Cheapest check first: each envelope and its id (a hash), then known ops are skipped,
         // then the signatures of the rest in one batch, and only a signed op's payload is
         // decoded and validated (which may compile formulas). A forged or replayed op never
         // costs a compile.
         let mut fresh: Vec<Envelope<'_>> = Vec::with_capacity(ops.len());
+        let mut fresh_bytes: Vec<usize> = Vec::with_capacity(ops.len());
         for bytes in ops {
             self.stats.n_ops_in += 1;
             let envelope = match Envelope::parse(bytes) {
@@ -1257,7 +1414,22 @@ impl<P: Payload> SyncState<P> {
                 }
             } else if fresh.iter().all(|other| other.id() != envelope.id()) {
                 fresh.push(envelope);
+                fresh_bytes.push(bytes.len());
             }
+        }
+        // Only new ops cost the quota, in order: past it, the rest wait for a resend.
+        let mut whole = true;
+        let mut n_fresh = 0;
+        for n_bytes in fresh_bytes {
+            if !self.op_bytes_bucket.take_n(now, n_bytes as u64) {
+                whole = false;
+                break;
+            }
+            n_fresh += 1;
+        }
+        if !whole {
+            self.stats.n_ops_over_quota += (fresh.len() - n_fresh) as u64;
+            fresh.truncate(n_fresh);
         }
         for op in Envelope::into_verified_all::<P>(fresh) {
             match op {
@@ -1276,6 +1448,7 @@ impl<P: Payload> SyncState<P> {
                 Err(ReceiveError::Decode(e)) => self.reject(decode_reject_kind(&e), e.to_string()),
             }
         }
+        whole
     }
 
     /// Counts an op the log refused against the remote ([`is_offence`]).
@@ -1318,7 +1491,7 @@ impl<P: Payload> SyncState<P> {
     /// and expires pending ops whose dependencies never came.
     pub fn handle_timeout(&mut self, now: Timestamp, log: &mut Log<P>) {
         self.timeout(now, log);
-        self.close_if_expelled(log);
+        self.close_if_expelled(now, log);
     }
 
     fn timeout(&mut self, now: Timestamp, log: &mut Log<P>) {
@@ -1549,6 +1722,7 @@ impl<P: Payload> SyncState<P> {
             self.relearn_due(),
             self.stuck_due(log),
             self.forks_due(),
+            self.expel_notice_until,
             pace,
             log.next_pending_expiry(),
         ]
@@ -1802,9 +1976,10 @@ fn tip_at<P: Payload>(log: &Log<P>, author: &PeerId, seq: u64) -> u64 {
 
 /// True if the log's refusal of an op counts against the remote that sent it: all do but a
 /// fork of an op inside the log's snapshot base (which it cannot tell apart), since an honest
-/// remote may hold the other side.
+/// remote may hold the other side, and a full log (an honest relay's op is refused as much as
+/// any: the remote did nothing wrong).
 fn is_offence(e: &InsertError) -> bool {
-    !matches!(e, InsertError::Equivocation { .. })
+    !matches!(e, InsertError::Equivocation { .. } | InsertError::Full)
 }
 
 /// The rejection a received op's decode error counts as.

@@ -65,8 +65,15 @@ pub const TXT_KEY_PEERS: &str = "peers";
 pub const MAX_SESSION_NAME_BYTES: usize = 64;
 /// The longest host name kept from the network (the DNS limit).
 pub const MAX_HOST_BYTES: usize = 255;
-/// How many announced instances the browser keeps; more are dropped and counted.
+/// How many announced instances the browser keeps. A new one beyond it takes the place of
+/// the least recently announced instance that proved nothing (see [`DnsSd::note_admitted`]):
+/// another session's first when it is of ours, never one of ours when it is another's.
 pub const MAX_LAN_SESSIONS: usize = 256;
+/// How many announced instances the browser keeps whose first address is one IP: a new one
+/// beyond it takes the place of that address's least recently announced instance that proved
+/// nothing, so one host cannot fill the table with made-up instances, while several peers on
+/// one host (tests, a shared machine) are all kept.
+pub const MAX_LAN_SESSIONS_PER_ADDRESS: usize = 16;
 /// How many addresses the browser keeps per instance; more are dropped and counted.
 pub const MAX_ADDRS_PER_SESSION: usize = 8;
 /// How many peers one call of [`DnsSd::peers_to_dial`] returns at most.
@@ -149,9 +156,14 @@ pub struct DnsSdStats {
     pub n_malformed: u64,
     /// Announcements of another TXT layout version (ignored).
     pub n_other_versions: u64,
-    /// Instances dropped because the table held [`MAX_LAN_SESSIONS`]: new ones of other
-    /// sessions, or old ones of other sessions displaced by one of ours.
+    /// New instances dropped because the table (or their address's share of it) held
+    /// [`MAX_LAN_SESSIONS`] ([`MAX_LAN_SESSIONS_PER_ADDRESS`]) and none they may displace.
     pub n_over_limit: u64,
+    /// Instances displaced by a new one over [`MAX_LAN_SESSIONS`] or
+    /// [`MAX_LAN_SESSIONS_PER_ADDRESS`].
+    pub n_displaced: u64,
+    /// Instances of our session proven by a connection admitted at their address.
+    pub n_proven: u64,
     /// Addresses dropped beyond [`MAX_ADDRS_PER_SESSION`].
     pub n_addrs_dropped: u64,
     /// Times the browse subscription ended (the daemon drops one that falls behind) and was
@@ -342,7 +354,14 @@ impl DnsSd {
 
     /// Every announced instance on the link, this peer's own included, in instance-name order.
     pub fn sessions(&self) -> impl Iterator<Item = &LanSession> {
-        self.table.by_instance.values()
+        self.table.by_instance.values().map(|held| &held.session)
+    }
+
+    /// A dial of `dialed` (from [`DnsSd::peers_to_dial`]) was admitted: whoever answered at the
+    /// instance's address holds the invite. Such an instance is never displaced by unproven
+    /// ones while it stays announced.
+    pub fn note_admitted(&mut self, dialed: &DiscoveredPeer) {
+        self.table.note_admitted(dialed, &mut self.stats);
     }
 
     /// The counters.
@@ -383,9 +402,7 @@ impl DnsSd {
                 }
             },
             ServiceEvent::ServiceRemoved(_, fullname) => {
-                let removed = self
-                    .table
-                    .by_instance
+                let removed = (self.table.by_instance)
                     .remove(&fullname.to_lowercase())
                     .is_some();
                 self.stats.n_removed += u64::from(removed);
@@ -400,13 +417,34 @@ impl DnsSd {
 #[derive(Debug, Default)]
 struct SessionTable {
     /// Keyed by the lower-case instance name (DNS names are case-insensitive).
-    by_instance: BTreeMap<String, LanSession>,
+    by_instance: BTreeMap<String, Held>,
+    /// Counts announcements taken: what `Held::seen` is measured in.
+    n_seen: u64,
+}
+
+/// One instance in the table.
+#[derive(Debug)]
+struct Held {
+    session: LanSession,
+    /// When it was last announced (in `SessionTable::n_seen`).
+    seen: u64,
+    /// A connection dialed at its address was admitted ([`DnsSd::note_admitted`]).
+    proven: bool,
+}
+
+impl Held {
+    fn ip(&self) -> Option<std::net::IpAddr> {
+        self.session.addrs.first().map(SocketAddr::ip)
+    }
 }
 
 impl SessionTable {
     /// Adds or updates an instance; returns whether the table changed. A new instance beyond
-    /// [`MAX_LAN_SESSIONS`] is dropped and counted, unless it belongs to `ours`, which then
-    /// displaces one of another session: strangers cannot crowd our own peers out.
+    /// [`MAX_LAN_SESSIONS_PER_ADDRESS`] or [`MAX_LAN_SESSIONS`] takes the place of the least
+    /// recently announced instance that proved nothing (at its address, or anywhere): one of
+    /// another session first when the new one is of `ours`, and never one of `ours` when it is
+    /// not, so neither strangers nor made-up instances of our own session crowd out a real
+    /// peer of ours, and the new one is never refused while one it may displace is unproven.
     fn insert(
         &mut self,
         session: LanSession,
@@ -414,31 +452,71 @@ impl SessionTable {
         stats: &mut DnsSdStats,
     ) -> bool {
         let key = session.instance.to_lowercase();
-        if self.by_instance.len() >= MAX_LAN_SESSIONS && !self.by_instance.contains_key(&key) {
-            let displaced = (ours == Some(session.discovery_id))
-                .then(|| {
-                    self.by_instance
-                        .iter()
-                        .rev()
-                        .find(|(_, s)| Some(s.discovery_id) != ours)
-                        .map(|(k, _)| k.clone())
-                })
-                .flatten();
-            let Some(displaced) = displaced else {
+        self.n_seen += 1;
+        if let Some(held) = self.by_instance.get_mut(&key) {
+            stats.n_resolved += 1;
+            held.seen = self.n_seen;
+            let changed = held.session != session;
+            held.session = session;
+            return changed;
+        }
+        let is_ours = |s: &LanSession| ours == Some(s.discovery_id);
+        let new_is_ours = is_ours(&session);
+        // The least recently announced unproven instance among `candidates` the new one may
+        // displace (another session's first, when the new one is of ours).
+        let victim = |candidates: &mut dyn Iterator<Item = (&String, &Held)>| {
+            candidates
+                .filter(|(_, h)| !h.proven && (new_is_ours || !is_ours(&h.session)))
+                .min_by_key(|(_, h)| (is_ours(&h.session), h.seen))
+                .map(|(k, _)| k.clone())
+        };
+        let ip = session.addrs.first().map(SocketAddr::ip);
+        let at_address = |h: &&Held| ip.is_some() && h.ip() == ip;
+        let n_at_address = self.by_instance.values().filter(at_address).count();
+        let displaced = if n_at_address >= MAX_LAN_SESSIONS_PER_ADDRESS {
+            let mut candidates = self.by_instance.iter().filter(|(_, h)| at_address(h));
+            Some(victim(&mut candidates))
+        } else if self.by_instance.len() >= MAX_LAN_SESSIONS {
+            Some(victim(&mut self.by_instance.iter()))
+        } else {
+            None
+        };
+        match displaced {
+            Some(None) => {
                 stats.n_over_limit += 1;
                 return false;
-            };
-            self.by_instance.remove(&displaced);
-            stats.n_over_limit += 1;
+            }
+            Some(Some(victim)) => {
+                self.by_instance.remove(&victim);
+                stats.n_displaced += 1;
+            }
+            None => {}
         }
         stats.n_resolved += 1;
-        let changed = self.by_instance.get(&key) != Some(&session);
-        self.by_instance.insert(key, session);
+        let held = Held {
+            session,
+            seen: self.n_seen,
+            proven: false,
+        };
+        self.by_instance.insert(key, held);
         assert!(
             self.by_instance.len() <= MAX_LAN_SESSIONS,
             "the session table is bounded"
         );
-        changed
+        true
+    }
+
+    /// See [`DnsSd::note_admitted`]: marks the instances of `dialed`'s peer that list its
+    /// address.
+    fn note_admitted(&mut self, dialed: &DiscoveredPeer, stats: &mut DnsSdStats) {
+        for held in self.by_instance.values_mut() {
+            let listed =
+                held.session.peer == dialed.peer && held.session.addrs.contains(&dialed.addr);
+            if listed && !held.proven {
+                held.proven = true;
+                stats.n_proven += 1;
+            }
+        }
     }
 
     /// See [`DnsSd::peers_to_dial`]; `round` picks the address.
@@ -450,7 +528,7 @@ impl SessionTable {
         round: u64,
     ) -> Vec<DiscoveredPeer> {
         let mut found: Vec<DiscoveredPeer> = Vec::new();
-        for session in self.by_instance.values() {
+        for session in self.by_instance.values().map(|held| &held.session) {
             if session.discovery_id != discovery_id
                 || session.protocol_version != PROTOCOL_VERSION
                 || Some(session.peer) == own
@@ -507,7 +585,7 @@ pub async fn announce_and_dial<P: Payload + Send + 'static>(
     let mut announcement = Some(announcement);
     let mut poll_tick = tokio::time::interval(Duration::from_millis(POLL_INTERVAL_MILLIS));
     let mut dial_tick = tokio::time::interval(Duration::from_millis(DIAL_INTERVAL_MILLIS));
-    let mut dialing: Option<tokio::task::JoinHandle<()>> = None;
+    let mut dialing: Option<tokio::task::JoinHandle<Vec<DiscoveredPeer>>> = None;
     loop {
         tokio::select! {
             _ = poll_tick.tick() => {
@@ -537,13 +615,23 @@ pub async fn announce_and_dial<P: Payload + Send + 'static>(
                 if dialing.as_ref().is_some_and(|d| !d.is_finished()) {
                     continue;
                 }
+                // The instances whose address admitted a dial of the last round are proven.
+                if let Some(done) = dialing.take() {
+                    for dialed in done.await.unwrap_or_default() {
+                        dnssd.note_admitted(&dialed);
+                    }
+                }
                 let found = dnssd.peers_to_dial(discovery_id, node.local_addr());
                 if !found.is_empty() {
                     // Failures are the node's to count (admission refusals, timeouts); the
                     // next round dials again, at the instance's next address.
                     let node = node.clone();
                     dialing = Some(tokio::spawn(async move {
-                        node.dial_discovered(&found).await;
+                        let outcomes = node.dial_discovered(&found).await;
+                        (outcomes.into_iter())
+                            .filter(|(_, outcome)| outcome.is_ok())
+                            .map(|(dialed, _)| dialed)
+                            .collect()
                     }));
                 }
             }
@@ -942,22 +1030,97 @@ mod tests {
         let (mut table, mut stats) = (SessionTable::default(), DnsSdStats::default());
         let stranger = [9; DISCOVERY_ID_BYTES];
         for idx in 0..MAX_LAN_SESSIONS {
-            assert!(table.insert(lan_session(idx, stranger, 9), Some(ID), &mut stats));
+            assert!(table.insert(lan_session_at(idx, stranger, 9), Some(ID), &mut stats));
         }
         // An update of a known instance is taken; an unchanged one changes nothing.
-        let mut updated = lan_session(0, stranger, 9);
+        let mut updated = lan_session_at(0, stranger, 9);
         updated.n_peers = 5;
         assert!(table.insert(updated.clone(), Some(ID), &mut stats));
         assert!(!table.insert(updated, Some(ID), &mut stats));
-        // One more stranger is dropped and counted; one of ours displaces a stranger.
-        assert!(!table.insert(lan_session(9_000, stranger, 9), Some(ID), &mut stats));
-        assert_eq!(stats.n_over_limit, 1);
+        // One more stranger displaces the stranger announced least recently; so does one of
+        // ours.
+        assert!(table.insert(lan_session_at(9_000, stranger, 9), Some(ID), &mut stats));
+        assert!(
+            !table
+                .by_instance
+                .contains_key(&lan_session(1, stranger, 9).instance)
+        );
         assert!(table.insert(lan_session(9_001, ID, 1), Some(ID), &mut stats));
-        assert_eq!(stats.n_over_limit, 2);
+        assert_eq!(stats.n_displaced, 2);
         assert_eq!(table.by_instance.len(), MAX_LAN_SESSIONS);
-        assert!(table.by_instance.values().any(|s| s.discovery_id == ID));
-        // Without a session of our own, nothing displaces anything.
-        assert!(!table.insert(lan_session(9_002, ID, 2), None, &mut stats));
+        assert_eq!(n_of(&table, ID), 1);
+        // Strangers never displace one of ours.
+        for idx in 0..2 * MAX_LAN_SESSIONS {
+            table.insert(
+                lan_session_at(10_000 + idx, stranger, 9),
+                Some(ID),
+                &mut stats,
+            );
+        }
+        assert_eq!(n_of(&table, ID), 1);
+    }
+
+    /// Instance `instance_idx` of `discovery_id` with an address of its own.
+    fn lan_session_at(instance_idx: usize, discovery_id: DiscoveryId, peer: u8) -> LanSession {
+        let [_, _, hi, lo] = u32::try_from(instance_idx).unwrap().to_be_bytes();
+        LanSession {
+            addrs: vec![SocketAddr::from(([10, 9, hi, lo], 4433))],
+            ..lan_session(instance_idx, discovery_id, peer)
+        }
+    }
+
+    /// How many instances of `discovery_id` the table holds.
+    fn n_of(table: &SessionTable, discovery_id: DiscoveryId) -> usize {
+        (table.by_instance.values())
+            .filter(|h| h.session.discovery_id == discovery_id)
+            .count()
+    }
+
+    /// Issue 49: made-up instances claiming our own discovery id filled the table (256 of
+    /// them), and a real peer of ours announced next was dropped: there was no stranger to
+    /// displace. A new instance now displaces the least recently announced one that proved
+    /// nothing, and one whose address admitted a dial is never displaced.
+    #[test]
+    fn made_up_instances_of_our_session_cannot_crowd_out_a_real_peer_of_ours() {
+        let (mut table, mut stats) = (SessionTable::default(), DnsSdStats::default());
+        for idx in 0..MAX_LAN_SESSIONS {
+            assert!(table.insert(lan_session_at(idx, ID, 7), Some(ID), &mut stats));
+        }
+        let real = lan_session(5_000, ID, 1);
+        assert!(table.insert(real.clone(), Some(ID), &mut stats));
+        assert!(table.by_instance.contains_key(&real.instance));
+        assert_eq!(stats.n_displaced, 1);
+        // It is dialed and admits; made-up instances keep coming, and it stays.
+        let dialed = table.peers_to_dial(ID, None, "0.0.0.0:1".parse().unwrap(), 0);
+        let real_dialed = dialed.iter().find(|d| d.peer == real.peer).unwrap();
+        table.note_admitted(real_dialed, &mut stats);
+        assert_eq!(stats.n_proven, 1);
+        for idx in 0..2 * MAX_LAN_SESSIONS {
+            table.insert(lan_session_at(1_000 + idx, ID, 7), Some(ID), &mut stats);
+        }
+        assert!(table.by_instance.contains_key(&real.instance));
+        assert_eq!(table.by_instance.len(), MAX_LAN_SESSIONS);
+        // A second real peer announced now still gets in.
+        let second = lan_session(6_000, ID, 2);
+        assert!(table.insert(second.clone(), Some(ID), &mut stats));
+        assert!(table.by_instance.contains_key(&second.instance));
+    }
+
+    /// One host's made-up instances hold at most its address's share of the table, whichever
+    /// session they claim, so a peer on another host is never displaced by them.
+    #[test]
+    fn one_address_holds_at_most_its_share_of_the_table() {
+        let (mut table, mut stats) = (SessionTable::default(), DnsSdStats::default());
+        let real = lan_session(5_000, ID, 1);
+        assert!(table.insert(real.clone(), Some(ID), &mut stats));
+        for idx in 0..2 * MAX_LAN_SESSIONS {
+            assert!(table.insert(lan_session(idx, ID, 7), Some(ID), &mut stats));
+        }
+        assert_eq!(table.by_instance.len(), 1 + MAX_LAN_SESSIONS_PER_ADDRESS);
+        assert!(
+            table.by_instance.contains_key(&real.instance),
+            "never proven, still kept"
+        );
     }
 
     #[test]

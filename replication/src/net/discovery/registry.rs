@@ -49,8 +49,16 @@ pub const MAX_SESSIONS: usize = 4096;
 pub const MAX_PEERS_PER_SESSION: usize = 64;
 /// Registrations across all sessions.
 pub const MAX_REGISTRATIONS: usize = 16_384;
-/// Sources (IPv4 addresses, IPv6 /64s) rate-limited at once; idle ones are forgotten.
-pub const MAX_SOURCES: usize = 4096;
+/// Token buckets that rate-limit requests by source (IPv4 address, IPv6 /64), in one fixed
+/// array: the server keeps no state per source before a request shows the source's cookie,
+/// so a spread of sources cannot fill a table and lock the next one out.
+pub const SOURCE_BUCKETS: usize = 1 << 16;
+/// Buckets each source hashes to (by a keyed hash of its prefix); a request is taken while
+/// any of them holds a token, and spends one from each that does. A source is refused only
+/// when others drained every one of its buckets: sources at full rate from a whole IPv6 /52
+/// (4,096 /64s) drain about 22% of the array, and refuse an unrelated source with a chance
+/// of about 0.2%.
+pub const BUCKETS_PER_SOURCE: usize = 4;
 /// Requests one source may send per second on average.
 pub const REQUESTS_PER_SEC_PER_SOURCE: u64 = 5;
 /// Requests one source may send in a burst: a registration takes two (the challenge, then
@@ -64,6 +72,8 @@ pub const MAX_PEERS_PER_SOURCE_PER_SESSION: usize = 8;
 pub const COOKIE_WINDOW_MICROS: u64 = 60_000_000;
 
 const COOKIE_CONTEXT: &[u8] = b"sculpt/discovery/cookie/v2";
+/// Derives the key of the source hash from the cookie key.
+const SOURCE_HASH_CONTEXT: &str = "sculpt/discovery/source-buckets/v1";
 /// Introductions one registration may cause (fewer when the request's bytes run out first).
 pub const MAX_INTRODUCTIONS_PER_REGISTER: usize = 8;
 
@@ -86,8 +96,6 @@ pub struct RegistryStats {
     pub n_unexpected: u64,
     /// Requests over their source's rate limit.
     pub n_rate_limited: u64,
-    /// Requests dropped because [`MAX_SOURCES`] sources are active.
-    pub n_sources_full: u64,
     /// Registrations not stored because a session or the server is full (still answered).
     pub n_full: u64,
     /// Registrations answered with a Challenge (no cookie, or a stale or foreign one).
@@ -142,32 +150,67 @@ struct SourceBucket {
 
 impl SourceBucket {
     const CAPACITY: u64 = REQUEST_BURST_PER_SOURCE * MICROS_PER_SEC;
+    const FULL: Self = Self {
+        tokens_micros: Self::CAPACITY,
+        last: Timestamp(0),
+    };
 
-    fn new(now: Timestamp) -> Self {
-        Self {
-            tokens_micros: Self::CAPACITY,
-            last: now,
-        }
-    }
-
-    fn take(&mut self, now: Timestamp) -> bool {
+    fn refill(&mut self, now: Timestamp) {
         let elapsed = now.0.saturating_sub(self.last.0);
         self.last = self.last.max(now);
         self.tokens_micros = self
             .tokens_micros
             .saturating_add(elapsed.saturating_mul(REQUESTS_PER_SEC_PER_SOURCE))
             .min(Self::CAPACITY);
-        let ok = self.tokens_micros >= MICROS_PER_SEC;
-        if ok {
-            self.tokens_micros -= MICROS_PER_SEC;
-        }
-        ok
     }
 
-    /// Idle long enough that forgetting it changes nothing (it would be full again).
-    fn idle(&self, now: Timestamp) -> bool {
-        let refill_micros = Self::CAPACITY / REQUESTS_PER_SEC_PER_SOURCE;
-        self.last.saturating_add_micros(refill_micros) <= now
+    fn has_token(&self) -> bool {
+        self.tokens_micros >= MICROS_PER_SEC
+    }
+}
+
+/// The rate limit of every source, in [`SOURCE_BUCKETS`] buckets shared by hash.
+struct SourceLimits {
+    buckets: Vec<SourceBucket>,
+    /// The key of the source hash (secret, so nobody can pick sources that share buckets).
+    key: [u8; 32],
+}
+
+impl SourceLimits {
+    fn new(cookie_key: &[u8; 32]) -> Self {
+        Self {
+            buckets: vec![SourceBucket::FULL; SOURCE_BUCKETS],
+            key: blake3::derive_key(SOURCE_HASH_CONTEXT, cookie_key),
+        }
+    }
+
+    /// The buckets of `source`.
+    fn indexes(&self, source: AddressPrefix) -> [usize; BUCKETS_PER_SOURCE] {
+        let bytes = match source {
+            AddressPrefix::V4(octets) => [&[4u8][..], &octets[..]].concat(),
+            AddressPrefix::V6(prefix) => [&[6u8][..], &prefix[..]].concat(),
+        };
+        let hash = blake3::keyed_hash(&self.key, &bytes);
+        let mut indexes = [0; BUCKETS_PER_SOURCE];
+        for (index, chunk) in indexes.iter_mut().zip(hash.as_bytes().chunks_exact(4)) {
+            let word = u32::from_le_bytes([chunk[0], chunk[1], chunk[2], chunk[3]]);
+            *index = word as usize % SOURCE_BUCKETS;
+        }
+        indexes
+    }
+
+    /// Takes a request of `source` if any of its buckets holds a token.
+    fn take(&mut self, now: Timestamp, source: AddressPrefix) -> bool {
+        let mut ok = false;
+        for index in self.indexes(source) {
+            let bucket = &mut self.buckets[index];
+            bucket.refill(now);
+            if bucket.has_token() {
+                bucket.tokens_micros -= MICROS_PER_SEC;
+                ok = true;
+            }
+        }
+        ok
     }
 }
 
@@ -175,7 +218,7 @@ impl SourceBucket {
 pub struct Registry {
     sessions: BTreeMap<DiscoveryId, BTreeMap<PeerId, Registration>>,
     n_registrations: usize,
-    sources: BTreeMap<AddressPrefix, SourceBucket>,
+    sources: SourceLimits,
     /// Introductions of the last registration, at most [`MAX_INTRODUCTIONS_PER_REGISTER`].
     introductions: Vec<(SocketAddr, Vec<u8>)>,
     stats: RegistryStats,
@@ -189,7 +232,6 @@ impl std::fmt::Debug for Registry {
         f.debug_struct("Registry")
             .field("n_sessions", &self.sessions.len())
             .field("n_registrations", &self.n_registrations)
-            .field("n_sources", &self.sources.len())
             .field("stats", &self.stats)
             .finish_non_exhaustive()
     }
@@ -202,7 +244,7 @@ impl Registry {
         Self {
             sessions: BTreeMap::new(),
             n_registrations: 0,
-            sources: BTreeMap::new(),
+            sources: SourceLimits::new(&cookie_key),
             introductions: Vec::new(),
             stats: RegistryStats::default(),
             cookie_key,
@@ -393,18 +435,7 @@ impl Registry {
     }
 
     fn admit_source(&mut self, now: Timestamp, source: AddressPrefix) -> bool {
-        if !self.sources.contains_key(&source) && self.sources.len() >= MAX_SOURCES {
-            self.sources.retain(|_, bucket| !bucket.idle(now));
-            if self.sources.len() >= MAX_SOURCES {
-                self.stats.n_sources_full += 1;
-                return false;
-            }
-        }
-        let ok = self
-            .sources
-            .entry(source)
-            .or_insert_with(|| SourceBucket::new(now))
-            .take(now);
+        let ok = self.sources.take(now, source);
         if !ok {
             self.stats.n_rate_limited += 1;
         }
@@ -491,7 +522,7 @@ impl Registry {
             .collect()
     }
 
-    /// Drops expired registrations and idle rate-limit state.
+    /// Drops expired registrations.
     pub fn expire(&mut self, now: Timestamp) {
         let mut n_expired = 0;
         self.sessions.retain(|_, peers| {
@@ -502,7 +533,6 @@ impl Registry {
         });
         self.n_registrations -= n_expired;
         self.stats.n_expired += n_expired as u64;
-        self.sources.retain(|_, bucket| !bucket.idle(now));
     }
 }
 
@@ -746,13 +776,12 @@ mod tests {
     }
 
     #[test]
-    fn one_ipv6_64_cannot_fill_the_sources_table() {
+    fn one_ipv6_64_shares_its_rate_limit() {
         let mut r = registry();
         let t = Timestamp(0);
-        // More addresses than the table holds, all in 2001:db8:0:1::/64.
-        let n_addresses = MAX_SOURCES + 10;
+        // Many addresses, all in 2001:db8:0:1::/64.
         let mut n_answered = 0;
-        for host in 0..n_addresses {
+        for host in 0..5000u32 {
             let ip = Ipv6Addr::new(0x2001, 0xdb8, 0, 1, 0, 0, (host >> 16) as u16, host as u16);
             let probe = DiscoveryMessage::register(&keypair(1), [1; 16], 1, NO_COOKIE);
             if r.handle_datagram(t, SocketAddr::new(ip.into(), 1), &probe.encode())
@@ -761,12 +790,45 @@ mod tests {
                 n_answered += 1;
             }
         }
-        // They share one bucket, and the table has room for everyone else.
+        // They share one bucket, and everyone else has room.
         assert_eq!(n_answered, REQUEST_BURST_PER_SOURCE);
-        assert_eq!(r.stats().n_sources_full, 0);
         assert!(peers(register_at(&mut r, t, from(1, 1), 1, 1, 1)).is_empty());
         let other_64 = SocketAddr::new(Ipv6Addr::new(0x2001, 0xdb8, 0, 2, 0, 0, 0, 1).into(), 1);
         assert!(peers(register_mapped_at(&mut r, t, other_64, 1, 2)).len() == 1);
+    }
+
+    /// Issue 49: the rate limit kept a bucket per source before decoding anything, in a table
+    /// of 4,096 sources, so 1-byte datagrams from the 4,096 /64s of one /52 filled it and the
+    /// next honest registration was dropped unanswered. The buckets are a fixed array shared
+    /// by hash now: nothing is kept per source, and the honest source still gets through.
+    #[test]
+    fn datagrams_from_a_whole_52_leave_honest_sources_registering() {
+        let mut r = registry();
+        let t = Timestamp(0);
+        let n_flood = 2 * REQUEST_BURST_PER_SOURCE;
+        for subnet in 0..4096u16 {
+            let ip = Ipv6Addr::new(0x2001, 0xdb8, 0xa000, subnet, 0, 0, 0, 1);
+            for _ in 0..n_flood {
+                r.handle_datagram(t, SocketAddr::new(ip.into(), 1), &[0]);
+            }
+        }
+        assert!(r.stats().n_rate_limited >= 4096 * REQUEST_BURST_PER_SOURCE);
+        for (peer, addr) in [
+            (1, from(1, 1)),
+            (2, "198.51.100.7:9".parse().unwrap()),
+            (3, "[2001:db8:77::5]:9".parse().unwrap()),
+        ] {
+            let limited = r.stats().n_rate_limited;
+            assert!(
+                matches!(
+                    decode(register_at(&mut r, t, addr, 1, peer, 1)),
+                    DiscoveryMessage::Peers(_)
+                ),
+                "{addr} was not registered"
+            );
+            assert_eq!(r.stats().n_rate_limited, limited, "{addr}");
+        }
+        assert_eq!(r.n_registrations(), 3);
     }
 
     #[test]

@@ -16,12 +16,13 @@ use crate::identity::PeerId;
 use crate::log::Log;
 use crate::net::admission::{AdmissionError, Role};
 use crate::net::clock::{duration_until, wall_clock_now};
+use crate::net::prefix::AddressPrefix;
 use crate::op::OpId;
 use crate::payload::Payload;
 use crate::peer::{ConnId, ConnectError, Peer};
 use crate::store::OpStore;
 use crate::sync::message::Message;
-use crate::sync::state::Event;
+use crate::sync::state::{CloseReason, Event};
 use crate::time::Timestamp;
 
 /// One admitted connection.
@@ -340,8 +341,18 @@ impl<P: Payload + Send + 'static> Core<P> {
                 return;
             }
         }
-        match self.peer.connect(wall_clock_now(), conn) {
-            Ok(()) => {}
+        // A connection the remote dialed competes for slots with those of its address
+        // prefix; when all are taken, the least useful accepted one makes room.
+        let opened = match role {
+            Role::Dialer => self.peer.connect(wall_clock_now(), conn),
+            Role::Acceptor => {
+                let source = AddressPrefix::of(connection.remote_address().ip()).key();
+                self.peer.accept(wall_clock_now(), conn, source)
+            }
+        };
+        match opened {
+            // The sync hello must name the id admission proved, or nothing it sent counts.
+            Ok(()) => self.peer.set_admitted(conn, peer),
             Err(ConnectError::TooMany) => {
                 let kind = RefusalKind::TooManyConnections;
                 return self.refuse(&connection, reply, kind, DialError::TooManyConnections);
@@ -434,7 +445,8 @@ impl<P: Payload + Send + 'static> Core<P> {
                 continue;
             };
             let event = match event {
-                Event::Connected { peer: claimed } if claimed != peer => {
+                // The core closed it before handling anything it sent.
+                Event::Closed(CloseReason::NotAdmitted { .. }) => {
                     self.stats.n_identity_mismatches += 1;
                     let reason = DisconnectReason::IdentityMismatch;
                     self.drop_conn(conn, CloseCode::Protocol, Some(reason));
@@ -474,6 +486,9 @@ impl<P: Payload + Send + 'static> Core<P> {
                 Event::UpToDate => NodeEvent::UpToDate { conn, peer },
                 Event::Forked { author, seq } => NodeEvent::Forked { conn, author, seq },
                 Event::Closed(reason) => {
+                    if reason == CloseReason::Evicted {
+                        self.stats.n_evicted += 1;
+                    }
                     let reason = DisconnectReason::Sync(reason);
                     self.drop_conn(conn, CloseCode::Sync, Some(reason));
                     continue;

@@ -70,8 +70,9 @@ pub const MAX_ADMISSIONS_IN_PROGRESS: usize = 64;
 pub const MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS: usize = 4;
 /// Accepted connections (admitted or in admission) from one source address at once, whatever
 /// peer ids they prove: an invite holder who makes new keys gets no more than this many of
-/// the [`crate::peer::MAX_CONNECTIONS`] slots from one address. Connections this node dialed
-/// are not counted.
+/// the [`crate::peer::MAX_CONNECTIONS`] slots from one address, and when every slot is taken
+/// a newcomer takes one from the address holding the most ([`crate::peer::Peer::accept`]).
+/// Connections this node dialed are not counted.
 pub const MAX_CONNECTIONS_PER_ADDRESS: usize = 8;
 /// How long an accepted connection may take, from its validated first packet, to finish the
 /// QUIC handshake and send a valid admission frame (a few round trips and one lost packet's
@@ -156,7 +157,7 @@ pub enum DialError {
     /// The address is this node.
     #[error("the remote is this node")]
     SelfConnection,
-    /// Already [`crate::peer::MAX_CONNECTIONS`] connections.
+    /// Already [`crate::peer::MAX_CONNECTIONS`] connections, all of them dialed by this node.
     #[error("too many connections")]
     TooManyConnections,
     /// The session's founder expelled the remote, or this node ([`crate::membership`]).
@@ -238,7 +239,8 @@ pub enum RefusalKind {
     AddressBusy,
     /// The remote is this node.
     SelfConnection,
-    /// Already [`crate::peer::MAX_CONNECTIONS`] connections.
+    /// Already [`crate::peer::MAX_CONNECTIONS`] connections, all of them dialed by this node
+    /// (otherwise an accepted one makes room).
     TooManyConnections,
     /// The remote, or this node, is expelled from the session: admitted by the invite, it
     /// would be closed as soon as the sync starts.
@@ -394,6 +396,9 @@ pub struct NodeStats {
     pub n_identity_mismatches: u64,
     /// Connections closed as duplicates of another connection to the same peer.
     pub n_duplicates: u64,
+    /// Accepted connections closed to make room for a newer one when every slot was taken
+    /// ([`crate::peer::Peer::accept`]).
+    pub n_evicted: u64,
     /// Connections closed because they did not read fast enough.
     pub n_slow_readers: u64,
     /// Received datagrams that are not ephemeral sync messages (dropped).
