@@ -36,6 +36,8 @@ pub const SYNC_WIRE_VERSION: u8 = 1;
 /// 9: a ping that a full have does not answer is answered with a [`Message::Pong`], which a
 /// build speaking 8 refuses.
 pub const PROTOCOL_VERSION: u64 = 9;
+/// The last protocol whose hello ends after `hello_seen` (protocol 8 added the hello's have).
+const LAST_PROTOCOL_WITHOUT_HELLO_HAVE: u64 = 7;
 /// Length of a session id.
 pub const SESSION_ID_BYTES: usize = 16;
 /// Most ops in one [`Message::Ops`] batch.
@@ -244,7 +246,10 @@ impl Message {
                 out.extend_from_slice(session_id);
                 out.extend_from_slice(&peer.0);
                 out.push(u8::from(*hello_seen));
-                out.push(u8::from(have.is_some()));
+                // A hello of a protocol before hellos named haves ends here (see `decode`).
+                if *protocol_version > LAST_PROTOCOL_WITHOUT_HELLO_HAVE || have.is_some() {
+                    out.push(u8::from(have.is_some()));
+                }
                 if let Some(have) = have {
                     put_have(&mut out, &have.vv, &have.tips);
                 }
@@ -329,8 +334,24 @@ impl Message {
                 let peer = PeerId(r.array()?);
                 let hello_seen = r.flag()?;
                 // A hello of protocol 7 or older ends here; its version is refused later, with
-                // a reason, rather than as a malformed message.
-                let have = if r.remaining() > 0 && r.flag()? {
+                // a reason, rather than as a malformed message. Later hellos always carry the
+                // flag, older ones only to say that a have follows, so every message has one
+                // encoding.
+                let old = protocol_version <= LAST_PROTOCOL_WITHOUT_HELLO_HAVE;
+                let flag_offset = r.offset();
+                let has_have = if old && r.remaining() == 0 {
+                    false
+                } else {
+                    let flag = r.flag()?;
+                    if old && !flag {
+                        return Err(DecodeError::Invalid {
+                            offset: flag_offset,
+                            what: "an old hello's have flag that names no have",
+                        });
+                    }
+                    flag
+                };
+                let have = if has_have {
                     let (vv, tips) = read_have(&mut r)?;
                     Some(HelloHave { vv, tips })
                 } else {
@@ -483,6 +504,50 @@ fn read_vv(r: &mut Reader<'_>) -> Result<VersionVector, DecodeError> {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// Found by the `decode` fuzz target: a hello of a newer protocol without its have flag
+    /// decoded, and encoded one byte longer.
+    #[test]
+    fn every_hello_that_decodes_has_one_encoding() {
+        let hex = "01017a000001030801030800ffffffffffffff00ffffffffff0000000000000000000000\
+                   00000000a5a5a5a50000003d00000000";
+        let bytes: Vec<u8> = (0..hex.len() / 2)
+            .map(|i| u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).unwrap())
+            .collect();
+        assert!(
+            Message::decode(&bytes).is_err(),
+            "protocol 122 without the flag"
+        );
+        let hello = |protocol_version, have| Message::Hello {
+            protocol_version,
+            session_id: [1; 16],
+            peer: PeerId([2; 32]),
+            hello_seen: true,
+            have,
+        };
+        let some_have = || {
+            let mut vv = VersionVector::new();
+            vv.raise(PeerId([3; 32]), 4);
+            Some(HelloHave {
+                tips: vec![5; vv.len()],
+                vv,
+            })
+        };
+        for message in [
+            hello(7, None),
+            hello(7, some_have()),
+            hello(9, None),
+            hello(9, some_have()),
+        ] {
+            let encoded = message.encode();
+            let decoded = Message::decode(&encoded).unwrap();
+            assert_eq!(decoded.encode(), encoded);
+        }
+        // A protocol 7 hello with a flag that names no have has a shorter form: refused.
+        let mut old = hello(7, None).encode();
+        old.push(0);
+        assert!(Message::decode(&old).is_err());
+    }
 
     fn message_strategy() -> impl Strategy<Value = Message> {
         let vv = proptest::collection::btree_map(any::<[u8; 32]>(), 1u64.., 0..4).prop_map(|m| {
