@@ -385,6 +385,11 @@ pub struct Log<P> {
     /// Each object's held lease ops (acquires and releases) in linear order, with what the
     /// fold learnt of each: a lease binds only ops that saw it.
     lease_ops: BTreeMap<ObjectId, Vec<seen::LeaseOp>>,
+    /// Each object's held ops that create it ([`Payload::creates`]) in linear order, as
+    /// positions in `ops`: an acquire counts only once an effective one is in its past.
+    creates: BTreeMap<ObjectId, Vec<u32>>,
+    /// The objects an effective edit inside the base creates (every held op is after them).
+    base_created: BTreeSet<ObjectId>,
     /// Each object's deletes (held, and those inside the base) in linear order.
     deletes: BTreeMap<ObjectId, Vec<(OrderKey, OpId)>>,
     /// For each held delete, the held edits of its object in its causal past.
@@ -455,6 +460,8 @@ impl<P: Payload> Log<P> {
             authors: BTreeMap::new(),
             by_object: BTreeMap::new(),
             lease_ops: BTreeMap::new(),
+            creates: BTreeMap::new(),
+            base_created: BTreeSet::new(),
             deletes: BTreeMap::new(),
             delete_hides: BTreeMap::new(),
             hidden: BTreeMap::new(),
@@ -1066,6 +1073,9 @@ impl<P: Payload> Log<P> {
                 let ops = &self.ops;
                 let before = |&a: &u32| cmp_key(ops.at(a), &key).is_lt();
                 insert_in_list(&mut self.by_object, object, at, before);
+                if op.payload().creates(&author) {
+                    insert_in_list(&mut self.creates, object, at, before);
+                }
                 if op.payload().is_delete() {
                     let deletes = self.deletes.entry(object).or_default();
                     let at = deletes.partition_point(|(k, _)| *k < key);
@@ -1126,7 +1136,33 @@ impl<P: Payload> Log<P> {
             forks: &self.forks,
             base: self.base.as_deref(),
             members: &self.membership_ops,
+            marks: &self.marks,
         }
+    }
+
+    /// True if an effective op creating `object` ([`Payload::creates`]) is in the causal past
+    /// of the op held at `at`, whose order key is `key`, or inside the base.
+    fn created_in_past(
+        &self,
+        reach: &mut Reach,
+        at: u32,
+        key: &OrderKey,
+        object: ObjectId,
+    ) -> bool {
+        if self.base_created.contains(&object) {
+            return true;
+        }
+        let Some(list) = self.creates.get(&object) else {
+            return false;
+        };
+        let n = point_near_end(list, |&c| self.slot_cmp(c, key).is_lt());
+        let dag = self.dag();
+        // Latest first: an honest acquire saw the creation sorted just before it, not the
+        // backdated ones a member may have sorted first.
+        list[..n]
+            .iter()
+            .rev()
+            .any(|&c| self.marks.get(c) == Mark::Effective && dag.held_sees_at(reach, at, c))
     }
 
     /// Records the membership op `id` (asking for `m`) just delivered, if it counts: its
@@ -1360,14 +1396,19 @@ impl<P: Payload> Log<P> {
         let target = self.target_info(effect, pos);
         let seen = self.lease_context(cx, state, (key, self.order[pos], effect), target);
         let (author, at) = (op.author(), op.timestamp());
-        if self.membership_ops.is_empty() {
-            return state.apply(author, at, effect, target, seen);
-        }
         // Membership as this op's causal past has it: a member that saw its own expel is
         // refused, and nobody who saw an expel is bound by the expelled member's leases.
         let dag = self.dag();
-        if dag.expelled_in_past(&mut cx.reach, id, &author) {
+        if !self.membership_ops.is_empty() && dag.expelled_in_past(&mut cx.reach, id, &author) {
             return Mark::Rejected(RejectReason::Expelled);
+        }
+        if let Effect::Acquire { object, .. } = effect
+            && !self.created_in_past(&mut cx.reach, self.order[pos], &key, object)
+        {
+            return Mark::Rejected(RejectReason::UnknownObject);
+        }
+        if self.membership_ops.is_empty() {
+            return state.apply(author, at, effect, target, seen);
         }
         let reach = &mut cx.reach;
         let mut exempt = |holder: &PeerId| dag.expelled_in_past(reach, id, holder);

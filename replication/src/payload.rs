@@ -4,6 +4,7 @@
 use std::fmt;
 
 use crate::codec::DecodeError;
+use crate::identity::PeerId;
 use crate::membership::Membership;
 use crate::op::OpId;
 
@@ -99,6 +100,16 @@ pub trait Payload: Clone + fmt::Debug + PartialEq + Eq {
         false
     }
 
+    /// True if this op, authored by `author`, makes the object of its [`Effect::Edit`] exist
+    /// (by the payload's own rules on who may make which object). A lease counts only once an
+    /// effective op that creates its object is in the acquire's causal past, so a member cannot
+    /// lease an id before its creator makes it. By default no op creates anything, and no lease
+    /// counts.
+    fn creates(&self, author: &PeerId) -> bool {
+        let _ = author;
+        false
+    }
+
     /// The expel or readmit this op asks for, if it is a membership op (its [`Effect`] is
     /// [`Effect::Independent`]). The log alone decides whether it counts: see
     /// [`crate::membership`].
@@ -120,7 +131,8 @@ pub mod test_payload {
     pub enum TestPayload {
         /// A chat line (independent of leases).
         Chat(String),
-        /// Sets object `object`'s value (an edit needing the lease).
+        /// Sets object `object`'s value (an edit needing the lease); it also makes the object
+        /// exist, for every author ([`Payload::creates`]).
         Set {
             /// The object.
             object: u64,
@@ -272,6 +284,10 @@ pub mod test_payload {
 
         fn is_delete(&self) -> bool {
             matches!(self, Self::Delete { .. })
+        }
+
+        fn creates(&self, _author: &PeerId) -> bool {
+            matches!(self, Self::Set { .. })
         }
 
         fn membership(&self) -> Option<Membership> {

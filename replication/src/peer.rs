@@ -571,24 +571,24 @@ mod tests {
         let mut peers: Vec<TPeer> = (1..=3)
             .map(|i| Peer::new(Keypair::from_seed([i; 32]), session, Log::default()))
             .collect();
-        // Offline: A and C both take object 1 and edit it; B chats.
+        // Offline: each peer edits object 1 (which makes it, as far as it knows) and takes it.
         let now = Timestamp(1_000);
         for (i, p) in peers.iter_mut().enumerate() {
             let object = 1;
+            p.author(
+                now,
+                TestPayload::Set {
+                    object,
+                    value: format!("peer {i}"),
+                },
+            )
+            .unwrap();
             p.author(
                 now,
                 TestPayload::Acquire {
                     object,
                     strong: false,
                     ttl_micros: 10_000_000,
-                },
-            )
-            .unwrap();
-            p.author(
-                now,
-                TestPayload::Set {
-                    object,
-                    value: format!("peer {i}"),
                 },
             )
             .unwrap();

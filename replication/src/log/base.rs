@@ -188,6 +188,14 @@ impl<P: Payload> Log<P> {
                 }
             }
         }
+        // Every held op sorts after the base: an effective creation there was seen by all.
+        let base_created = (base.edits.values())
+            .filter(|op| op.payload().creates(&op.author()))
+            .filter_map(|op| match op.payload().effect() {
+                Effect::Edit { object } => Some(object),
+                _ => None,
+            })
+            .collect();
         let mut log = Self {
             ops: crate::op::OpSlab::default(),
             order: Vec::new(),
@@ -199,6 +207,8 @@ impl<P: Payload> Log<P> {
             authors: BTreeMap::new(),
             by_object: BTreeMap::new(),
             lease_ops: BTreeMap::new(),
+            creates: BTreeMap::new(),
+            base_created,
             deletes,
             delete_hides: BTreeMap::new(),
             hidden: BTreeMap::new(),

@@ -215,6 +215,7 @@ fn linear_order_respects_causality() {
 fn edits_need_the_lease_and_rejections_are_queryable() {
     let (a, b) = (key(0), key(1));
     let mut log = TLog::default();
+    log.author(&a, Timestamp(5), set(1, "made")).unwrap();
     log.author(&a, Timestamp(10), weak(1, 1_000)).unwrap();
     let (ok, _) = log.author(&a, Timestamp(20), set(1, "x")).unwrap();
     let (blocked, _) = log.author(&b, Timestamp(30), set(1, "y")).unwrap();
@@ -249,13 +250,15 @@ fn edits_need_the_lease_and_rejections_are_queryable() {
 #[test]
 fn a_late_acquire_does_not_bind_edits_that_never_saw_it() {
     let (a, b) = (key(0), key(1));
-    // B works offline: acquires object 1 at lamport 1.
+    // A makes object 1; B, having seen that, works offline: acquires object 1 at lamport 2.
+    let mut log = TLog::default();
+    log.author(&a, Timestamp(1), set(1, "made")).unwrap();
     let mut offline = TLog::default();
+    offline.merge(Timestamp(1), &log).unwrap();
     let (b_acquire, _) = offline
         .author(&b, Timestamp(5), weak(1, 1_000_000))
         .unwrap();
     // A, not knowing, edits object 1 three times.
-    let mut log = TLog::default();
     let mut a_ops = Vec::new();
     for i in 0..3 {
         a_ops.push(
@@ -298,15 +301,17 @@ fn a_backdated_strong_acquire_binds_only_the_ops_that_saw_it() {
         strong: true,
         ttl_micros: u64::MAX,
     };
-    // A fresh key: Lamport 1, stamped 0, no deps, asking for the lease forever.
-    let backdated = signed(&mallory, 1, 1, 0, vec![], hoard);
     let mut log = TLog::default();
-    let (honest, _) = log.author(&a, Timestamp(1_000), set(1, "mine")).unwrap();
+    let (made, _) = log.author(&a, Timestamp(500), set(1, "made")).unwrap();
+    // A fresh key: Lamport 2, stamped as early as its past allows, depending on the object's
+    // creation alone, asking for the lease forever.
+    let backdated = signed(&mallory, 1, 2, 500, vec![made.id()], hoard);
+    let honest = signed(&a, 2, 5, 1_000, vec![made.id()], set(1, "mine"));
+    log.insert(Timestamp(1_000), honest.clone(), LOCAL_ORIGIN)
+        .unwrap();
     let mut other = TLog::default();
     other.merge(Timestamp(1_000), &log).unwrap();
-    let (concurrent, _) = other
-        .author(&c, Timestamp(2_000), set(1, "theirs"))
-        .unwrap();
+    let concurrent = signed(&c, 1, 6, 2_000, vec![honest.id()], set(1, "theirs"));
     log.insert(Timestamp(3_000), backdated.clone(), Origin(1))
         .unwrap();
     log.insert(Timestamp(3_000), concurrent.clone(), Origin(2))
@@ -324,7 +329,7 @@ fn a_backdated_strong_acquire_binds_only_the_ops_that_saw_it() {
         }))
     );
     // The same verdicts in any delivery order.
-    let all = [honest, concurrent, backdated, saw];
+    let all = [made, honest, concurrent, backdated, saw];
     for seed in 0..8 {
         let shuffled_log = deliver_all_causally(&shuffled(&all, seed));
         assert_eq!(observe(&shuffled_log), observe(&log), "order {seed}");
@@ -874,6 +879,7 @@ fn a_lease_asking_for_more_than_the_max_ttl_ends_at_the_max() {
         strong: true,
         ttl_micros: u64::MAX,
     };
+    log.author(&b, Timestamp(500), set(1, "made")).unwrap();
     log.author(&a, Timestamp(1000), strong_forever).unwrap();
     let (held, _) = log.author(&b, Timestamp(2000), set(1, "x")).unwrap();
     assert!(matches!(log.mark(&held.id()), Some(Mark::Rejected(_))));
@@ -1161,6 +1167,7 @@ fn the_founder_expels_a_member_whose_unseen_ops_turn_void_and_whose_leases_bind_
         ttl_micros: u64::MAX,
     };
     let mut log = founded_log();
+    let (two, _) = log.author(&honest, Timestamp(500), set(2, "two")).unwrap();
     let (made, _) = log
         .author(&mallory, Timestamp(1_000), set(1, "mine"))
         .unwrap();
@@ -1222,6 +1229,7 @@ fn the_founder_expels_a_member_whose_unseen_ops_turn_void_and_whose_leases_bind_
     assert_eq!(log.mark(&after.id()), refused_expelled);
     // Every delivery order gives the same verdicts and activity.
     let all = [
+        two,
         made.clone(),
         hoarded.clone(),
         again,
@@ -1277,5 +1285,157 @@ fn the_founded_workload_voids_ops_and_readmits() {
     assert!(
         voided && readmitted,
         "the workload exercises expels and readmits"
+    );
+}
+
+#[test]
+fn strong_acquires_of_a_victims_next_objects_do_not_reject_its_creations() {
+    let (victim, mallory) = (key(0), key(9));
+    let hoard = |object| TestPayload::Acquire {
+        object,
+        strong: true,
+        ttl_micros: u64::MAX,
+    };
+    let mut log = TLog::default();
+    log.author(&victim, Timestamp(1_000), set(1, "first"))
+        .unwrap();
+    // Mallory sees everything and strongly takes the ids the victim will make next.
+    let hoards: Vec<_> = (2..5)
+        .map(|object| {
+            log.author(&mallory, Timestamp(2_000), hoard(object))
+                .unwrap()
+                .0
+        })
+        .collect();
+    for h in &hoards {
+        assert_eq!(
+            log.mark(&h.id()),
+            Some(Mark::Rejected(RejectReason::UnknownObject))
+        );
+    }
+    // The victim, who saw the hoards, makes and edits its objects all the same.
+    let made: Vec<_> = (2..5)
+        .flat_map(|object| {
+            let create = log.author(&victim, Timestamp(3_000), set(object, "made"));
+            let edit = log.author(&victim, Timestamp(3_100), set(object, "edited"));
+            [create.unwrap().0, edit.unwrap().0]
+        })
+        .collect();
+    assert!(made.iter().all(|op| log.is_active(&op.id())));
+    assert_eq!(log.lease(ObjectId(2), Timestamp(3_200)), None);
+    // Once Mallory has seen an object made, its lease counts, and binds the ops that see it.
+    let (taken, _) = log.author(&mallory, Timestamp(4_000), hoard(2)).unwrap();
+    assert_eq!(log.mark(&taken.id()), Some(Mark::Effective));
+    let (bound, _) = log
+        .author(&victim, Timestamp(4_100), set(2, "bound"))
+        .unwrap();
+    assert_eq!(
+        log.mark(&bound.id()),
+        Some(Mark::Rejected(RejectReason::LeaseHeld {
+            holder: mallory.peer_id()
+        }))
+    );
+    // The same verdicts in any delivery order.
+    let all: Vec<_> = log
+        .entries()
+        .map(|e| VerifiedOp::trusted(e.op.clone()))
+        .collect();
+    for seed in 0..8 {
+        assert_eq!(
+            observe(&deliver_all_causally(&shuffled(&all, seed))),
+            observe(&log),
+            "order {seed}"
+        );
+    }
+}
+
+#[test]
+fn one_member_leasing_every_object_holds_at_most_the_cap_and_the_rest_stay_free() {
+    use crate::lease::MAX_LIVE_LEASES_PER_AUTHOR;
+    let (honest, mallory) = (key(0), key(9));
+    let n_objects = MAX_LIVE_LEASES_PER_AUTHOR as u64 + 8;
+    let mut log = TLog::default();
+    for object in 0..n_objects {
+        log.author(&honest, Timestamp(1_000), set(object, "made"))
+            .unwrap();
+    }
+    let hoard = |object| TestPayload::Acquire {
+        object,
+        strong: true,
+        ttl_micros: u64::MAX,
+    };
+    let marks: Vec<Mark> = (0..n_objects)
+        .map(|object| {
+            let (op, _) = log
+                .author(&mallory, Timestamp(2_000), hoard(object))
+                .unwrap();
+            log.mark(&op.id()).unwrap()
+        })
+        .collect();
+    let (held, over) = marks.split_at(MAX_LIVE_LEASES_PER_AUTHOR);
+    assert!(held.iter().all(|m| *m == Mark::Effective));
+    let too_many = Mark::Rejected(RejectReason::TooManyLeases);
+    assert!(over.iter().all(|m| *m == too_many), "{over:?}");
+    // Renewing a lease it holds is no new lease; the honest member edits past the cap.
+    let (renewed, _) = log.author(&mallory, Timestamp(2_100), hoard(0)).unwrap();
+    assert_eq!(log.mark(&renewed.id()), Some(Mark::Effective));
+    let (free, _) = log
+        .author(&honest, Timestamp(2_200), set(n_objects - 1, "free"))
+        .unwrap();
+    assert!(log.is_active(&free.id()));
+    let (blocked, _) = log
+        .author(&honest, Timestamp(2_200), set(0, "blocked"))
+        .unwrap();
+    assert!(!log.is_active(&blocked.id()));
+    // A release gives a slot back.
+    log.author(
+        &mallory,
+        Timestamp(2_300),
+        TestPayload::Release { object: 0 },
+    )
+    .unwrap();
+    let (next, _) = log
+        .author(&mallory, Timestamp(2_400), hoard(n_objects - 1))
+        .unwrap();
+    assert_eq!(log.mark(&next.id()), Some(Mark::Effective));
+    let (again, _) = log
+        .author(&mallory, Timestamp(2_500), hoard(n_objects - 2))
+        .unwrap();
+    assert_eq!(log.mark(&again.id()), Some(too_many));
+    // The same verdicts in any delivery order.
+    let all: Vec<_> = log
+        .entries()
+        .map(|e| VerifiedOp::trusted(e.op.clone()))
+        .collect();
+    for seed in 0..4 {
+        assert_eq!(
+            observe(&deliver_all_causally(&shuffled(&all, seed))),
+            observe(&log),
+            "order {seed}"
+        );
+    }
+}
+
+#[test]
+fn live_leases_expire_out_of_the_cap() {
+    use crate::lease::MAX_LIVE_LEASES_PER_AUTHOR;
+    let (honest, mallory) = (key(0), key(9));
+    let n_objects = MAX_LIVE_LEASES_PER_AUTHOR as u64 + 1;
+    let mut log = TLog::default();
+    for object in 0..n_objects {
+        log.author(&honest, Timestamp(1_000), set(object, "made"))
+            .unwrap();
+    }
+    for object in 0..n_objects - 1 {
+        log.author(&mallory, Timestamp(2_000), weak(object, 1_000))
+            .unwrap();
+    }
+    let (late, _) = log
+        .author(&mallory, Timestamp(3_000), weak(n_objects - 1, 1_000))
+        .unwrap();
+    assert_eq!(
+        log.mark(&late.id()),
+        Some(Mark::Effective),
+        "the others expired"
     );
 }

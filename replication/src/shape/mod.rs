@@ -704,6 +704,18 @@ impl Payload for ShapePayload {
         matches!(self, ShapePayload::Delete { .. })
     }
 
+    /// A `Create` that may make its object ([`may_create`]), or the first part of one
+    /// authored in parts. Groups cannot be leased (an acquire's id loses its group bit).
+    fn creates(&self, author: &PeerId) -> bool {
+        match self {
+            ShapePayload::Create {
+                object, counter, ..
+            } => may_create(*author, *object, *counter),
+            ShapePayload::Part { object, bytes } => parts::starts_create(author, *object, bytes),
+            _ => false,
+        }
+    }
+
     fn membership(&self) -> Option<Membership> {
         match self {
             ShapePayload::Member(m) => Some(**m),
