@@ -39,8 +39,8 @@ pub const MAX_LOG_BYTES: u64 = 7 * 512 * 1024 * 1024;
 /// and one member cannot fill every peer's memory and store on its own.
 pub const MAX_AUTHOR_BYTES: u64 = 256 * 1024 * 1024;
 /// Most an op's Lamport time may exceed the highest of its dependencies' and its author's
-/// previous op's (2^32). Honest ops exceed it by one (more only after a snapshot join, whose
-/// base ops are not looked up), and `u64::MAX / MAX_LAMPORT_JUMP` is far above
+/// previous op's (2^32). Honest ops exceed it by one (a log joined from a snapshot takes a
+/// dependency inside its base to be at the cut), and `u64::MAX / MAX_LAMPORT_JUMP` is far above
 /// [`MAX_LOG_OPS`], so no member can exhaust the Lamport clock before the log fills.
 pub const MAX_LAMPORT_JUMP: u64 = 1 << 32;
 /// Most entries a remote op's refold may re-evaluate without being charged for it: positions
@@ -885,8 +885,10 @@ impl<P: Payload> Log<P> {
     }
 
     /// What `op`'s deps show of its causal past, looked up once for [`Log::missing`] and
-    /// [`Log::deliver`]. Deps and previous ops inside a base have Lamport times at or below
-    /// its cut, and `insert` refused every op at or below the cut, so held ones set the floor.
+    /// [`Log::deliver`]. A dep inside a base has a Lamport time at or below its cut, which is
+    /// kept rather than each op's: the cut is its floor, so an op after a leap before the cut
+    /// is judged as a full log would judge it from the dep at the cut (one from a dep far
+    /// below the cut may leap up to [`MAX_LAMPORT_JUMP`] past the cut, a non-guarantee).
     /// Timestamps inside a base are not kept per op: a joined log checks held ones only.
     fn deps_seen(&self, op: &Op<P>) -> DepsSeen {
         let mut seen = DepsSeen {
@@ -897,7 +899,10 @@ impl<P: Payload> Log<P> {
         };
         for d in op.deps() {
             let Some(d_at) = self.ops.position(d) else {
-                seen.all_delivered &= self.base.as_ref().is_some_and(|b| b.contains(d));
+                match self.base.as_ref().filter(|b| b.contains(d)) {
+                    Some(base) => seen.lamport = seen.lamport.max(base.lamport),
+                    None => seen.all_delivered = false,
+                }
                 continue;
             };
             let dep = self.ops.at(d_at);
@@ -997,6 +1002,9 @@ impl<P: Payload> Log<P> {
         } = deps;
         if let Some(p) = prev {
             (floor, floor_ts) = (floor.max(p.lamport()), floor_ts.max(p.timestamp()));
+        } else if !past_fork && op.seq() > 1 && op.seq() - 1 == base_seq {
+            // The previous op is the author's last inside the base, whose Lamport time is kept.
+            floor = floor.max(self.base.as_ref().map_or(0, |b| b.lamport_of(&author)));
         }
         if op.lamport() <= floor {
             return Err(InsertError::BadLamport {

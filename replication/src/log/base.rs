@@ -108,6 +108,13 @@ impl<P> Base<P> {
         self.find(id).is_some()
     }
 
+    /// The Lamport time of the author's last op inside the base (0 if none).
+    pub(crate) fn lamport_of(&self, author: &PeerId) -> u64 {
+        self.authors
+            .binary_search_by(|a| a.author.cmp(author))
+            .map_or(0, |i| self.authors[i].lamport)
+    }
+
     pub(crate) fn seq(&self, author: &PeerId) -> u64 {
         self.authors
             .binary_search_by(|a| a.author.cmp(author))
@@ -291,15 +298,7 @@ impl<P: Payload> Log<P> {
         if let Some(op) = self.chain(author).last().map(|&at| self.ops.at(at)) {
             return op.lamport();
         }
-        self.base
-            .as_ref()
-            .and_then(|b| {
-                b.authors
-                    .binary_search_by(|a| a.author.cmp(author))
-                    .ok()
-                    .map(|i| b.authors[i].lamport)
-            })
-            .unwrap_or(0)
+        self.base.as_ref().map_or(0, |b| b.lamport_of(author))
     }
 
     /// The number of held positions at or before Lamport time `cut`.
