@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 use fdsl::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
 use glam::DVec3;
 use replication::materialize::Materialized;
+use replication::op::UNNAMED_SESSION;
 use replication::pending::Origin;
 use replication::shape::{ShapePayload, ShapeScene};
 use replication::{Keypair, Log, Timestamp};
@@ -153,7 +154,7 @@ fn receive(log: &mut SLog, scene: &mut SScene, bytes: &[u8], now: Timestamp) {
     if log.contains(&envelope.id()) {
         return;
     }
-    let Ok(op) = envelope.into_verified::<ShapePayload>() else {
+    let Ok(op) = envelope.into_verified::<ShapePayload>(&UNNAMED_SESSION) else {
         return;
     };
     if let Ok(insertion) = log.insert(now, op, Origin(1)) {
@@ -169,7 +170,7 @@ fn receive_decoding_first(log: &mut SLog, scene: &mut SScene, bytes: &[u8], now:
     if log.contains(&op.id()) {
         return;
     }
-    let Ok(op) = op.into_verified() else {
+    let Ok(op) = op.into_verified(&UNNAMED_SESSION) else {
         return;
     };
     if let Ok(insertion) = log.insert(now, op, Origin(1)) {

@@ -11,9 +11,10 @@ use crate::fork::Forks;
 use crate::identity::{Keypair, PeerId};
 use crate::lease::{FoldState, Lease, Mark, RejectReason, TargetInfo};
 use crate::membership::{FounderCommitment, Membership};
-use crate::op::{BuildError, MAX_DEPS, Op, OpFields, OpId, OpSlab, VerifiedOp};
+use crate::op::{BuildError, MAX_DEPS, Op, OpFields, OpId, OpSlab, UNNAMED_SESSION, VerifiedOp};
 use crate::payload::{Effect, ObjectId, Payload};
 use crate::pending::{DepKey, Evicted, Origin, Pending, PendingLimits};
+use crate::sync::message::SessionId;
 use crate::time::{HybridClock, MAX_CLOCK_SKEW_MICROS, Timestamp};
 
 mod base;
@@ -414,6 +415,8 @@ pub struct Log<P> {
     /// at the budget's rate (a virtual scheduling time, as in GCRA).
     refold_paid_until: Timestamp,
     refold_budget: RefoldBudget,
+    /// The session whose id this log's own ops are signed for ([`Log::set_session_id`]).
+    session_id: SessionId,
     /// What the session's invite commits to, when it names a founder
     /// ([`crate::membership`]): only membership ops it proves count.
     founder: Option<FounderCommitment>,
@@ -477,6 +480,7 @@ impl<P: Payload> Log<P> {
             author_quota: MAX_AUTHOR_BYTES,
             refold_paid_until: Timestamp(0),
             refold_budget: RefoldBudget::default(),
+            session_id: UNNAMED_SESSION,
             founder: None,
             membership_ops: BTreeMap::new(),
             expelled: BTreeMap::new(),
@@ -499,6 +503,18 @@ impl<P: Payload> Log<P> {
         }
         self.founder = Some(commitment);
         Ok(())
+    }
+
+    /// Names the session this log is of: its own ops are signed for it ([`Op::sign`]), and
+    /// what it receives is checked against it ([`crate::sync`]). A log starts with
+    /// [`UNNAMED_SESSION`]; [`crate::Peer::new`] names its session.
+    pub fn set_session_id(&mut self, session_id: SessionId) {
+        self.session_id = session_id;
+    }
+
+    /// The session this log is of ([`Log::set_session_id`]).
+    pub fn session_id(&self) -> SessionId {
+        self.session_id
     }
 
     /// What the session's invite commits to, if set.
@@ -575,7 +591,7 @@ impl<P: Payload> Log<P> {
             deps: self.author_deps(timestamp),
             payload,
         };
-        let op = Op::sign(keypair, fields)?;
+        let op = Op::sign(keypair, &self.session_id, fields)?;
         let insertion = self.insert_from(now, op.clone(), LOCAL_ORIGIN, false)?;
         assert!(
             insertion.delivered.first() == Some(&op.id()),

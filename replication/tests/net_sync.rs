@@ -238,6 +238,7 @@ async fn a_connection_killed_mid_sync_reconnects_and_converges() {
     // which verifies only about 40 signatures per second.
     const N_OPS: usize = if cfg!(debug_assertions) { 150 } else { 5_000 };
     let mut log = Log::default();
+    log.set_session_id(session_keys(INVITE).session_id());
     let alice = Keypair::from_seed([1; 32]);
     for i in 0..N_OPS {
         let payload = TestPayload::Chat(format!("line {i}"));
@@ -308,6 +309,7 @@ async fn a_node_with_a_store_persists_authored_and_received_ops() {
     b.handle.shutdown().await.unwrap();
     // Reopened, the store holds every op B authored or received, signatures checked.
     let mut reloaded = Log::<TestPayload>::default();
+    reloaded.set_session_id(session_keys(INVITE).session_id());
     OpStore::open_into(&path, Timestamp(0), &mut reloaded).unwrap();
     let stored: std::collections::BTreeSet<_> = reloaded.entries().map(|e| e.op.id()).collect();
     assert_eq!(stored, held);
@@ -337,6 +339,7 @@ async fn a_received_batch_of_ops_costs_one_fsync_not_one_per_op() {
     );
     b.handle.shutdown().await.unwrap();
     let mut reloaded = Log::<TestPayload>::default();
+    reloaded.set_session_id(session_keys(INVITE).session_id());
     OpStore::open_into(&path, Timestamp(0), &mut reloaded).unwrap();
     assert_eq!(reloaded.len(), n_ops);
     std::fs::remove_file(&path).unwrap();

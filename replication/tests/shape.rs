@@ -353,8 +353,12 @@ fn payloads_are_small_and_hostile_bytes_are_refused() {
 fn ops_signed_before_grids_still_verify_and_fold() {
     let create = include_bytes!("../../tests/data/format-v1/create.bin");
     let set = include_bytes!("../../tests/data/format-v1/set.bin");
-    let create = replication::Op::<ShapePayload>::decode_verified(create).unwrap();
-    let set = replication::Op::<ShapePayload>::decode_verified(set).unwrap();
+    let create =
+        replication::Op::<ShapePayload>::decode_verified(create, &replication::op::UNNAMED_SESSION)
+            .unwrap();
+    let set =
+        replication::Op::<ShapePayload>::decode_verified(set, &replication::op::UNNAMED_SESSION)
+            .unwrap();
     assert_eq!(create.author(), Keypair::from_seed([9; 32]).peer_id());
     let ShapePayload::Create {
         object: 7, data, ..
@@ -871,7 +875,11 @@ fn a_received_edit_is_compiled_once_from_its_bytes_to_the_scene() {
     let mut log = SLog::default();
     let mut scene = SScene::fold(&log).unwrap();
     for bytes in &bytes {
-        let op = replication::Op::<ShapePayload>::decode_verified(bytes).unwrap();
+        let op = replication::Op::<ShapePayload>::decode_verified(
+            bytes,
+            &replication::op::UNNAMED_SESSION,
+        )
+        .unwrap();
         let ins = log.insert(Timestamp(30), op, Origin(1)).unwrap();
         scene.apply_insertion(&log, &ins);
     }

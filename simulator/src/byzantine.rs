@@ -239,7 +239,7 @@ fn sign(
         deps,
         payload,
     };
-    let op = Op::sign(key, fields).ok()?;
+    let op = Op::sign(key, &SESSION_ID, fields).ok()?;
     Some((op.id(), op.encoded().to_vec()))
 }
 

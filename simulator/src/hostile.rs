@@ -118,7 +118,7 @@ impl Hostile {
             deps: Vec::new(),
             payload: ShapePayload::Chat("forged".into()),
         };
-        let op = Op::sign(&self.key, fields).ok()?;
+        let op = Op::sign(&self.key, &SESSION_ID, fields).ok()?;
         let mut bytes = op.encoded().to_vec();
         bytes.get_mut(1..33)?.copy_from_slice(&victim.0);
         let forged = Op::<ShapePayload>::decode(&bytes).ok()?;
@@ -151,7 +151,7 @@ impl Hostile {
             deps: Vec::new(),
             payload: payload.clone(),
         };
-        let Ok(op) = Op::sign(&self.key, fields) else {
+        let Ok(op) = Op::sign(&self.key, &SESSION_ID, fields) else {
             return false;
         };
         self.user.authored(&payload, op.id());

@@ -893,7 +893,7 @@ mod tests {
                 deps: Vec::new(),
                 payload: ShapePayload::Chat(text.into()),
             };
-            Op::sign(&me, fields).unwrap()
+            Op::sign(&me, &replication::op::UNNAMED_SESSION, fields).unwrap()
         };
         log.insert(
             replication::Timestamp(2),

@@ -18,7 +18,7 @@ const SESSION: [u8; 16] = [5; 16];
 fuzz_target!(|data: &[u8]| {
     if let Ok(op) = Op::<TestPayload>::decode(data) {
         assert_eq!(op.encoded(), data, "a decoded op is canonical");
-        let _ = op.verify();
+        let _ = op.verify(&replication::op::UNNAMED_SESSION);
     }
     if let Ok(message) = Message::decode(data) {
         assert_eq!(message.encode(), data, "a decoded message is canonical");

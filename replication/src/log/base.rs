@@ -234,6 +234,7 @@ impl<P: Payload> Log<P> {
             author_quota: super::MAX_AUTHOR_BYTES,
             refold_paid_until: Timestamp(0),
             refold_budget: super::RefoldBudget::default(),
+            session_id: crate::op::UNNAMED_SESSION,
             // A snapshot keeps no membership (a log holding any cannot be cut).
             founder: None,
             membership_ops: BTreeMap::new(),

@@ -485,6 +485,7 @@ fn refused_ops_are_counted() {
     // Lamport time not above its dependency.
     let bad = Op::sign(
         &key(1),
+        &crate::op::UNNAMED_SESSION,
         OpFields {
             seq: 1,
             lamport: 1,
@@ -503,7 +504,7 @@ fn refused_ops_are_counted() {
     bytes[1..33].copy_from_slice(&key(2).peer_id().0);
     let forged = Op::<TestPayload>::decode(&bytes).unwrap();
     assert!(
-        forged.into_verified().is_err(),
+        forged.into_verified(&crate::op::UNNAMED_SESSION).is_err(),
         "a forged op never reaches the log"
     );
     assert_eq!(log.stats().n_refused, 1);
@@ -827,6 +828,7 @@ fn a_lamport_leap_towards_exhaustion_is_refused() {
     let leap = |lamport| {
         Op::sign(
             &key(2),
+            &crate::op::UNNAMED_SESSION,
             OpFields {
                 seq: 1,
                 lamport,
@@ -860,6 +862,23 @@ pub(crate) fn signed(
     deps: Vec<OpId>,
     payload: TestPayload,
 ) -> VerifiedOp<TestPayload> {
+    signed_in(
+        &crate::op::UNNAMED_SESSION,
+        key,
+        (seq, lamport, timestamp),
+        deps,
+        payload,
+    )
+}
+
+/// [`signed`] for `session`, with seq, Lamport time and timestamp.
+pub(crate) fn signed_in(
+    session: &crate::sync::message::SessionId,
+    key: &Keypair,
+    (seq, lamport, timestamp): (u64, u64, u64),
+    deps: Vec<OpId>,
+    payload: TestPayload,
+) -> VerifiedOp<TestPayload> {
     let fields = OpFields {
         seq,
         lamport,
@@ -867,7 +886,7 @@ pub(crate) fn signed(
         deps,
         payload,
     };
-    Op::sign(key, fields).unwrap()
+    Op::sign(key, session, fields).unwrap()
 }
 
 #[test]

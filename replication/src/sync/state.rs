@@ -1259,7 +1259,7 @@ impl<P: Payload> SyncState<P> {
                 fresh.push(envelope);
             }
         }
-        for op in Envelope::into_verified_all::<P>(fresh) {
+        for op in Envelope::into_verified_all::<P>(fresh, &log.session_id()) {
             match op {
                 Ok(op) => {
                     if !authors.contains(&op.author()) {
