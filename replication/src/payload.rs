@@ -5,7 +5,7 @@ use std::fmt;
 
 use crate::codec::DecodeError;
 use crate::identity::PeerId;
-use crate::membership::Membership;
+use crate::membership::{Admission, Membership};
 use crate::op::OpId;
 
 /// Largest encoded payload accepted in an op, in bytes (typical ops are well under 1 KiB).
@@ -116,6 +116,23 @@ pub trait Payload: Clone + fmt::Debug + PartialEq + Eq {
     fn membership(&self) -> Option<Membership> {
         None
     }
+
+    /// The admission this op makes, if it is an admission op (its [`Effect`] is
+    /// [`Effect::Independent`]): a session that binds its authors accepts a key's ops only once
+    /// its first op names one of it ([`crate::membership`]).
+    fn admission(&self) -> Option<Admission> {
+        None
+    }
+
+    /// The payload of an admission op making `admission`, for a node that admits the keys it
+    /// meets; `None` for a payload that cannot admit anyone.
+    fn admitting(admission: Admission) -> Option<Self>
+    where
+        Self: Sized,
+    {
+        let _ = admission;
+        None
+    }
 }
 
 /// A small payload for tests, examples and the simulator.
@@ -164,6 +181,8 @@ pub mod test_payload {
         },
         /// Expels or readmits a member (counts only from the session's founder).
         Member(Membership),
+        /// Admits a key ([`crate::membership::Admission`]).
+        Admit(Admission),
     }
 
     impl Payload for TestPayload {
@@ -210,6 +229,15 @@ pub mod test_payload {
                     out.push(u8::from(m.expel));
                     out.extend_from_slice(&m.nonce);
                 }
+                Self::Admit(a) => {
+                    out.push(8);
+                    out.extend_from_slice(&a.key.0);
+                    put_varint(out, a.grant_bytes);
+                    out.push(u8::from(a.nonce.is_some()));
+                    if let Some(nonce) = &a.nonce {
+                        out.extend_from_slice(nonce);
+                    }
+                }
             }
         }
 
@@ -244,6 +272,16 @@ pub mod test_payload {
                     expel: r.flag()?,
                     nonce: r.array()?,
                 }),
+                8 => {
+                    let key = PeerId(r.array()?);
+                    let grant_bytes = r.varint()?;
+                    let nonce = if r.flag()? { Some(r.array()?) } else { None };
+                    Self::Admit(Admission {
+                        key,
+                        grant_bytes,
+                        nonce,
+                    })
+                }
                 _ => {
                     return Err(DecodeError::Invalid {
                         offset: tag_offset,
@@ -257,7 +295,7 @@ pub mod test_payload {
 
         fn effect(&self) -> Effect {
             match self {
-                Self::Chat(_) | Self::Member(_) => Effect::Independent,
+                Self::Chat(_) | Self::Member(_) | Self::Admit(_) => Effect::Independent,
                 Self::Set { object, .. } | Self::Delete { object } => Effect::Edit {
                     object: ObjectId(*object),
                 },
@@ -295,6 +333,17 @@ pub mod test_payload {
                 Self::Member(m) => Some(*m),
                 _ => None,
             }
+        }
+
+        fn admission(&self) -> Option<Admission> {
+            match self {
+                Self::Admit(a) => Some(*a),
+                _ => None,
+            }
+        }
+
+        fn admitting(admission: Admission) -> Option<Self> {
+            Some(Self::Admit(admission))
         }
     }
 

@@ -112,7 +112,9 @@ fn kind(p: &ShapePayload) -> Kind {
         ShapePayload::Release { object } => Kind::Release(obj(*object)),
         ShapePayload::Undo(t) => Kind::Undo(*t),
         ShapePayload::Redo(t) => Kind::Redo(*t),
-        ShapePayload::Chat(_) | ShapePayload::Member(_) => Kind::Independent,
+        ShapePayload::Chat(_) | ShapePayload::Member(_) | ShapePayload::Admit(_) => {
+            Kind::Independent
+        }
     }
 }
 

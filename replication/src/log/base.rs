@@ -82,6 +82,11 @@ pub enum CutError {
     /// would forget it (join such a session from full history).
     #[error("the log holds membership ops, which a snapshot cannot keep")]
     Membership,
+    /// The session binds its authors ([`Log::bind_authors`]): a base keeps neither the
+    /// admissions nor the budgets, so a joined log could not judge the ops after the cut
+    /// (join such a session from full history).
+    #[error("the session binds its authors, whose admissions and budgets a snapshot cannot keep")]
+    Bound,
     /// The log holds a fork ([`crate::fork`]): a base keeps one op per author and seq, so the
     /// cut would forget a side (join such a session from full history).
     #[error("the log holds a forked author's two sides, which a snapshot cannot keep")]
@@ -220,6 +225,9 @@ impl<P: Payload> Log<P> {
             delete_hides: BTreeMap::new(),
             hidden: BTreeMap::new(),
             reach: crate::causal::Reach::default(),
+            // A bound session's log is never cut (`CutError::Bound`).
+            binding: None,
+            admissions: BTreeMap::new(),
             frontier,
             vv,
             // New local ops must land after the cut.
@@ -332,6 +340,9 @@ impl<P: Payload> Log<P> {
     pub(crate) fn base_at(&self, cut: u64) -> Result<(Base<P>, usize), CutError> {
         if self.has_membership_ops() {
             return Err(CutError::Membership);
+        }
+        if self.binds_authors() {
+            return Err(CutError::Bound);
         }
         if !self.forks.is_empty() {
             return Err(CutError::Forked);

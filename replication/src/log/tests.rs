@@ -1458,3 +1458,178 @@ fn live_leases_expire_out_of_the_cap() {
         "the others expired"
     );
 }
+
+/// A log of a session founded by author 0 that binds its authors, with `cap` bytes in all.
+fn bound_log(cap: u64) -> TLog {
+    let mut log = founded_log();
+    log.bind_authors(cap).unwrap();
+    log
+}
+
+fn admit(key: &Keypair, grant_bytes: u64) -> TestPayload {
+    TestPayload::Admit(crate::membership::Admission {
+        key: key.peer_id(),
+        grant_bytes,
+        nonce: None,
+    })
+}
+
+/// The founder's admission of itself, which roots every budget.
+fn found(founder: &Keypair) -> TestPayload {
+    TestPayload::Admit(crate::membership::Admission {
+        key: founder.peer_id(),
+        grant_bytes: 0,
+        nonce: Some(FOUNDER_NONCE),
+    })
+}
+
+#[test]
+fn a_bound_session_takes_a_keys_ops_only_once_its_first_names_its_admission() {
+    let (founder, newcomer, stranger) = (key(0), key(1), key(9));
+    let mut log = bound_log(MAX_LOG_BYTES);
+    // Nobody writes before the founder's admission of itself: not even the founder.
+    assert_eq!(
+        log.author(&founder, Timestamp(1), set(1, "x")).unwrap_err(),
+        AuthorError::NotAdmitted
+    );
+    log.author(&founder, Timestamp(1), found(&founder)).unwrap();
+    assert_eq!(
+        log.remaining_budget(&founder.peer_id()),
+        Some(MAX_LOG_BYTES - log.n_bytes())
+    );
+    let grant = log.default_grant(&founder.peer_id());
+    assert_eq!(
+        grant, MAX_AUTHOR_BYTES,
+        "a quarter of the cap is more than an author's quota"
+    );
+    let (admission, _) = log
+        .author(&founder, Timestamp(2), admit(&newcomer, grant))
+        .unwrap();
+    log.author(&founder, Timestamp(3), set(2, "later")).unwrap();
+    // The newcomer's first op names its admission, though it is no longer a head.
+    let (first, _) = log.author(&newcomer, Timestamp(4), set(1, "mine")).unwrap();
+    assert!(first.deps().contains(&admission.id()));
+    assert_eq!(
+        log.remaining_budget(&newcomer.peer_id()),
+        Some(grant - first.encoded().len() as u64)
+    );
+    // A key minted offline is refused, whatever its first op says of itself.
+    let heads: Vec<OpId> = log.heads().copied().collect();
+    let lamport = log.entries().map(|e| e.op.lamport()).max().unwrap() + 1;
+    let unadmitted = |payload| signed(&stranger, 1, lamport, 10, heads.clone(), payload);
+    let fake_founding = TestPayload::Admit(crate::membership::Admission {
+        key: stranger.peer_id(),
+        grant_bytes: 0,
+        nonce: Some([7; 32]),
+    });
+    for payload in [set(1, "sybil"), admit(&stranger, 1 << 20), fake_founding] {
+        assert_eq!(
+            log.insert(Timestamp(10), unadmitted(payload), Origin(1)),
+            Err(InsertError::NotAdmitted {
+                author: stranger.peer_id()
+            })
+        );
+    }
+    assert!(!log.is_admitted(&stranger.peer_id()) && log.is_admitted(&newcomer.peer_id()));
+    // An op signed without its session is refused here.
+    let old = Op::sign_v1(
+        &newcomer,
+        OpFields {
+            seq: 2,
+            lamport,
+            timestamp: Timestamp(10),
+            deps: heads.clone(),
+            payload: set(1, "old"),
+        },
+    )
+    .unwrap();
+    assert_eq!(
+        log.insert(Timestamp(10), old.clone(), Origin(1)),
+        Err(InsertError::OldLayout)
+    );
+    // Every delivery order holds the same ops: the newcomer's wait for their admission.
+    let all: Vec<_> = log
+        .entries()
+        .map(|e| VerifiedOp::trusted(e.op.clone()))
+        .collect();
+    for seed in 0..8 {
+        let mut other = bound_log(MAX_LOG_BYTES);
+        for op in shuffled(&all, seed) {
+            other.insert(Timestamp(10), op, Origin(1)).unwrap();
+        }
+        assert_eq!(other.n_pending(), 0);
+        assert_eq!(observe(&other), observe(&log), "order {seed}");
+    }
+    // A session that does not bind keeps the old rules: the stranger and the old layout pass.
+    let mut unbound = founded_log();
+    unbound.merge(Timestamp(10), &log).unwrap();
+    unbound
+        .insert(Timestamp(10), unadmitted(set(1, "sybil")), Origin(1))
+        .unwrap();
+    unbound.insert(Timestamp(10), old, Origin(1)).unwrap();
+    assert_eq!(
+        TLog::default().bind_authors(1),
+        Err(FounderError::NoFounder)
+    );
+}
+
+#[test]
+fn grants_hold_every_author_within_its_budget_and_the_log_under_the_cap_in_any_order() {
+    let (founder, member) = (key(0), key(1));
+    let sybils: Vec<Keypair> = (10..20).map(key).collect();
+    let cap = 40_000;
+    // The member's ops as it would sign them, budgets aside: authored in a session that does
+    // not bind, then delivered to logs that do.
+    let mut free = founded_log();
+    let mut ops = vec![
+        free.author(&founder, Timestamp(1), found(&founder))
+            .unwrap()
+            .0,
+        free.author(&founder, Timestamp(2), admit(&member, 12_000))
+            .unwrap()
+            .0,
+    ];
+    for (i, sybil) in sybils.iter().enumerate() {
+        let t = 10 + i as u64;
+        ops.push(
+            free.author(&member, Timestamp(t), admit(sybil, 3_000))
+                .unwrap()
+                .0,
+        );
+        for j in 0..20 {
+            let text = "x".repeat(200);
+            ops.push(
+                free.author(sybil, Timestamp(t * 100 + j), set(j, &text))
+                    .unwrap()
+                    .0,
+            );
+        }
+    }
+    // The founder grants more than it holds: refused, as an over-budget op is.
+    let too_much = free
+        .author(&founder, Timestamp(3_000), admit(&key(30), cap))
+        .unwrap()
+        .0;
+    ops.push(too_much.clone());
+    let mut accepted = None;
+    for seed in 0..6 {
+        let mut log = bound_log(cap);
+        for op in shuffled(&ops, seed) {
+            match log.insert(Timestamp(5_000), op, Origin(1)) {
+                Ok(_) | Err(InsertError::AuthorQuota { .. }) => {}
+                Err(e) => panic!("{e}"),
+            }
+        }
+        assert!(log.n_bytes() <= cap, "{} bytes", log.n_bytes());
+        assert!(!log.contains(&too_much.id()));
+        let ids: BTreeSet<OpId> = log.linear_ids().collect();
+        // Some sybil ops were refused (each sybil's grant is smaller than its writes), and
+        // every order refused the same ones (ops refused wait for nothing: none is pending
+        // but those whose deps were refused).
+        assert!(ids.len() < ops.len() - 1);
+        match &accepted {
+            None => accepted = Some(ids),
+            Some(first) => assert_eq!(&ids, first, "order {seed}"),
+        }
+    }
+}
