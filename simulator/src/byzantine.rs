@@ -29,11 +29,25 @@
 //! - with `forks`, equivocation: two ops of one fresh key with sequence number 1, sent to two
 //!   different peers;
 //! - with `expel`, forged expels: a fresh key's expel of an honest peer, showing the founder's
-//!   nonce or a made-up one (neither may count: only the founder's key matches the invite).
+//!   nonce or a made-up one (neither may count: only the founder's key matches the invite);
+//! - Sybil keys it admits itself: its core authors an admission of a fresh key with a grant of
+//!   [`SYBIL_GRANT_BYTES`] (in a session that binds its authors, out of its own budget), and the
+//!   key sends two chats of about 2 KiB naming it, the second past the grant: every peer must
+//!   take the first and refuse the second alike;
+//! - a fresh key's admission of itself, with the founder's nonce or a made-up one (in a session
+//!   that binds its authors, refused everywhere: only the founder's key proves the founder);
+//! - a cap fill: its core authors chats of about 2 KiB until its own budget is spent;
+//! - with `lease_attacks`, strong acquires of the ids the target's user will create next, and
+//!   of every object at once: the first bind nobody (those objects do not exist yet), and of
+//!   the second at most [`replication::lease::MAX_LIVE_LEASES_PER_AUTHOR`] count.
+//!
+//! In a session that binds its authors (even seeds with `expel`, see
+//! [`crate::sim::SESSION_CAP_BYTES`]), every fresh key above whose first op names no admission
+//! is refused by every peer.
 
 use fdsl::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
 use replication::causal::MAX_VV_AUTHORS;
-use replication::membership::Membership;
+use replication::membership::{Admission, Membership};
 use replication::op::{MAX_DEPS, OpFields};
 use replication::shape::ShapePayload;
 use replication::sync::message::{MAX_BATCH_OPS, Message};
@@ -55,6 +69,11 @@ pub const REFOLD_FLOOD: u64 = 24;
 pub const BACKDATE_MICROS: u64 = 10 * 60 * 1_000_000;
 /// The name of the objects id theft creates.
 pub const STOLEN_NAME: &str = "stolen id";
+/// What the byzantine member grants each Sybil key it admits: more than one of its 2 KiB
+/// chats, less than two.
+pub const SYBIL_GRANT_BYTES: u64 = 4 * 1024;
+/// Chats of about 2 KiB one cap fill authors at most.
+pub const CAP_FILL_OPS: usize = 16;
 /// Object ids the byzantine member creates (above every honest user's).
 const BOMB_OBJECT_BASE: u64 = 64 << 32;
 /// The compile bomb: a short loop, unrolled as far as an object's formula may
@@ -109,6 +128,11 @@ enum Attack {
     RefoldFlood,
     Fork,
     ForgeExpel,
+    AdmittedSybil,
+    SelfAdmitted,
+    CapFill,
+    LeasePredicted,
+    LeaseAll,
 }
 
 impl Attack {
@@ -127,6 +151,11 @@ impl Attack {
             Attack::RefoldFlood => "refold-flood",
             Attack::Fork => "fork",
             Attack::ForgeExpel => "forge-expel",
+            Attack::AdmittedSybil => "admitted-sybil",
+            Attack::SelfAdmitted => "self-admitted",
+            Attack::CapFill => "cap-fill",
+            Attack::LeasePredicted => "lease-predicted",
+            Attack::LeaseAll => "lease-all",
         }
     }
 }
@@ -169,7 +198,13 @@ struct Frontier {
 }
 
 impl Byzantine {
-    pub(crate) fn new(key: Keypair, keys: SimRng) -> Byzantine {
+    /// The member with key `key`, its fresh keys drawn from `keys`, its core over `log` (of
+    /// the run's session: its founder and binding named).
+    pub(crate) fn new(
+        key: Keypair,
+        keys: SimRng,
+        log: replication::Log<ShapePayload>,
+    ) -> Byzantine {
         let mut keys = keys;
         let hoarder = Chain {
             key: fresh_key(&mut keys),
@@ -178,7 +213,7 @@ impl Byzantine {
             timestamp: 0,
         };
         Byzantine {
-            core: Peer::new(key, SESSION_ID, replication::Log::default()),
+            core: Peer::new(key, SESSION_ID, log),
             panicked: None,
             wake_at: None,
             keys,
@@ -207,6 +242,14 @@ impl Byzantine {
             timestamp: ops().map(|op| op.timestamp().0).max().unwrap_or(0),
             heads: heads.clone(),
         }
+    }
+
+    /// Authors `payload` through its core (sent to its connections by the core's sync).
+    fn author(&mut self, now: u64, payload: ShapePayload) -> Option<OpId> {
+        let authored = guarded_call(&mut self.panicked, &mut self.core, |p| {
+            p.author(Timestamp(now), payload)
+        })?;
+        authored.ok().map(|(op, _)| op.id())
     }
 
     fn sybil(&mut self) -> Option<Keypair> {
@@ -364,10 +407,18 @@ impl Simulation {
                 Attack::CostBomb,
                 Attack::TakeId,
                 Attack::RefoldFlood,
+                Attack::AdmittedSybil,
+                Attack::SelfAdmitted,
+                Attack::CapFill,
             ]);
         }
         if faults.lease_attacks {
-            menu.extend([Attack::BackdatedLease, Attack::Hoard]);
+            menu.extend([
+                Attack::BackdatedLease,
+                Attack::Hoard,
+                Attack::LeasePredicted,
+                Attack::LeaseAll,
+            ]);
         }
         if faults.forks {
             menu.push(Attack::Fork);
@@ -402,6 +453,8 @@ impl Simulation {
             self.stats.n_hostile_messages += 1;
             self.push(at, deliver(h, to, epoch, bytes, None));
         }
+        // What the core authored goes out through its sync.
+        self.byzantine_flush();
         true
     }
 
@@ -584,6 +637,60 @@ impl Simulation {
                 let payload = ShapePayload::Member(Box::new(expel));
                 let timestamp = now.max(f.timestamp);
                 one(sign(&key, 1, f.lamport + 1, timestamp, f.heads, payload))
+            }
+            Attack::AdmittedSybil => {
+                let key = byz.sybil()?;
+                let admission = Admission {
+                    key: key.peer_id(),
+                    grant_bytes: SYBIL_GRANT_BYTES,
+                    nonce: None,
+                };
+                byz.author(now, ShapePayload::Admit(Box::new(admission)))?;
+                // After the admission, so its first op names it (the core's only head now).
+                let f = byz.frontier();
+                let timestamp = now.max(f.timestamp);
+                let chat = |i: u64| ShapePayload::Chat(format!("{i}{}", "s".repeat(2_000)));
+                let (first, within) = sign(&key, 1, f.lamport + 1, timestamp, f.heads, chat(1))?;
+                let (_, past) = sign(&key, 2, f.lamport + 2, timestamp, vec![first], chat(2))?;
+                Some(vec![
+                    (to, hello(me)),
+                    (to, batch(batch_no, vec![within, past])),
+                ])
+            }
+            Attack::SelfAdmitted => {
+                let key = byz.sybil()?;
+                let mut nonce = FOUNDER_NONCE;
+                if rng.chance(500) {
+                    rng.fill(&mut nonce);
+                }
+                let admission = Admission {
+                    key: key.peer_id(),
+                    grant_bytes: u64::MAX,
+                    nonce: Some(nonce),
+                };
+                let payload = ShapePayload::Admit(Box::new(admission));
+                let timestamp = now.max(f.timestamp);
+                one(sign(&key, 1, f.lamport + 1, timestamp, f.heads, payload))
+            }
+            Attack::CapFill => {
+                let text = "f".repeat(2_000);
+                let n_authored = (0..CAP_FILL_OPS)
+                    .map_while(|_| byz.author(now, ShapePayload::Chat(text.clone())))
+                    .count();
+                (n_authored > 0).then(Vec::new)
+            }
+            Attack::LeasePredicted => {
+                let next = victim?;
+                for n in 0..3 {
+                    byz.author(now, hoard(next.skip(n)?.id()))?;
+                }
+                Some(Vec::new())
+            }
+            Attack::LeaseAll => {
+                for &object in &objects {
+                    byz.author(now, hoard(object))?;
+                }
+                Some(Vec::new())
             }
             Attack::Fork => {
                 let key = byz.sybil()?;
