@@ -37,6 +37,8 @@
 //! - a fresh key's admission of itself, with the founder's nonce or a made-up one (in a session
 //!   that binds its authors, refused everywhere: only the founder's key proves the founder);
 //! - a cap fill: its core authors chats of about 2 KiB until its own budget is spent;
+//! - an op signed for another session (its signature covers that session's id): every peer
+//!   must refuse it;
 //! - with `lease_attacks`, strong acquires of the ids the target's user will create next, and
 //!   of every object at once: the first bind nobody (those objects do not exist yet), and of
 //!   the second at most [`replication::lease::MAX_LIVE_LEASES_PER_AUTHOR`] count.
@@ -74,6 +76,8 @@ pub const STOLEN_NAME: &str = "stolen id";
 pub const SYBIL_GRANT_BYTES: u64 = 4 * 1024;
 /// Chats of about 2 KiB one cap fill authors at most.
 pub const CAP_FILL_OPS: usize = 16;
+/// The session id the member signs an op for that it sends into this one.
+const OTHER_SESSION_ID: replication::sync::message::SessionId = [0xee; 16];
 /// Object ids the byzantine member creates (above every honest user's).
 const BOMB_OBJECT_BASE: u64 = 64 << 32;
 /// The compile bomb: a short loop, unrolled as far as an object's formula may
@@ -133,6 +137,7 @@ enum Attack {
     CapFill,
     LeasePredicted,
     LeaseAll,
+    OtherSession,
 }
 
 impl Attack {
@@ -156,6 +161,7 @@ impl Attack {
             Attack::CapFill => "cap-fill",
             Attack::LeasePredicted => "lease-predicted",
             Attack::LeaseAll => "lease-all",
+            Attack::OtherSession => "other-session",
         }
     }
 }
@@ -180,7 +186,8 @@ pub(crate) struct Byzantine {
     hoarder: Chain,
     /// The compile bomb's text, searched once.
     bomb: Option<Option<String>>,
-    /// Ops every honest peer must refuse (stamped before their causal past).
+    /// Ops every honest peer must refuse (stamped before their causal past, or signed for
+    /// another session).
     pub(crate) must_refuse: Vec<OpId>,
     /// Pairs of ops that equivocate (same key, same sequence number).
     pub(crate) forks: Vec<(OpId, OpId)>,
@@ -410,6 +417,7 @@ impl Simulation {
                 Attack::AdmittedSybil,
                 Attack::SelfAdmitted,
                 Attack::CapFill,
+                Attack::OtherSession,
             ]);
         }
         if faults.lease_attacks {
@@ -685,6 +693,20 @@ impl Simulation {
                     byz.author(now, hoard(next.skip(n)?.id()))?;
                 }
                 Some(Vec::new())
+            }
+            Attack::OtherSession => {
+                // Well formed and signed by a fresh key, but for another session's id.
+                let fields = OpFields {
+                    seq: 1,
+                    lamport: f.lamport + 1,
+                    timestamp: Timestamp(now.max(f.timestamp)),
+                    deps: f.heads,
+                    payload: ShapePayload::Chat("from another session".into()),
+                };
+                let key = byz.sybil()?;
+                let op = Op::sign(&key, &OTHER_SESSION_ID, fields).ok()?;
+                byz.must_refuse.push(op.id());
+                one(Some((op.id(), op.encoded().to_vec())))
             }
             Attack::LeaseAll => {
                 for &object in &objects {

@@ -67,7 +67,7 @@ pub(crate) fn finish(sim: Simulation) -> Report {
         if n_refused > 0 {
             failures.push(format!(
                 "peer {i}: {n_refused} hostile ops accepted that are stamped before their \
-                 causal past"
+                 causal past or signed for another session"
             ));
         }
         if h.snapshot_cut.is_none() {

@@ -213,6 +213,7 @@ fn a_session_binding_its_authors_refuses_unadmitted_keys_and_stays_under_its_cap
         "cap-fill",
         "lease-predicted",
         "lease-all",
+        "other-session",
     ] {
         assert!(
             sent.get(attack).is_some_and(|n| *n > 0),
