@@ -346,6 +346,9 @@ pub fn peer(args: PeerArgs) -> anyhow::Result<()> {
     if let Some(n) = args.wait_ops {
         wait_for_ops(&engine, n)?;
     }
+    if !args.command.is_empty() {
+        wait_for_admission(&engine)?;
+    }
     run_commands(&engine, &args.command)?;
     if args.pointer.is_some() || args.tool_at.is_some() {
         let mut presence = engine.presence();
@@ -390,6 +393,22 @@ fn wait_for_ops(engine: &Engine, n: usize) -> anyhow::Result<()> {
                 "--wait-ops {n}: only {} ops after {MAX_WAIT_OPS_SECS} s",
                 lock(engine.view()).n_ops()
             );
+        }
+        std::thread::sleep(std::time::Duration::from_millis(PEER_POLL_MILLIS / 4));
+    }
+    Ok(())
+}
+
+/// Longest a peer with `--command` lines waits for a member to admit it.
+const MAX_WAIT_ADMISSION_SECS: u64 = 60;
+
+/// Waits until this peer may author: at once unless the session binds its authors and no
+/// member has admitted this peer yet.
+fn wait_for_admission(engine: &Engine) -> anyhow::Result<()> {
+    let start = app::clock::now().instant;
+    while !lock(engine.view()).admitted() {
+        if start.elapsed().as_secs() >= MAX_WAIT_ADMISSION_SECS {
+            bail!("no member admitted this peer within {MAX_WAIT_ADMISSION_SECS} s");
         }
         std::thread::sleep(std::time::Duration::from_millis(PEER_POLL_MILLIS / 4));
     }

@@ -85,7 +85,8 @@ fn both_rejected(a: &Engine, b: &Engine) {
 }
 
 /// A session on loopback: one peer opens demo `name` (in `dir_a`), the other joins it with
-/// the invite (in `dir_b`); returns both once each holds the demo's `n_objects` objects.
+/// the invite (in `dir_b`); returns both once each holds the demo's `n_objects` objects and
+/// the joiner its admission (the session binds its authors).
 fn demo_pair(name: &str, dir_a: &Path, dir_b: &Path, n_objects: usize) -> (Engine, Engine) {
     let demo = app::demos::find(name).unwrap();
     let a = Engine::start(
@@ -110,8 +111,8 @@ fn demo_pair(name: &str, dir_a: &Path, dir_b: &Path, n_objects: usize) -> (Engin
         T0,
     )
     .unwrap();
-    wait_view(&b, "the demo from the other peer", |v| {
-        v.scene().len() == n_objects
+    wait_view(&b, "the demo from the other peer and its admission", |v| {
+        v.scene().len() == n_objects && v.admitted()
     });
     (a, b)
 }

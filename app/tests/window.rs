@@ -325,14 +325,15 @@ fn the_window_shows_the_watermelon_and_an_edit_survives_a_restart() {
         "{}",
         edited.stdout
     );
-    assert_eq!(edited.state["n_ops"], 2);
+    // The founder's admission of itself, the demo and the edit.
+    assert_eq!(edited.state["n_ops"], 3);
     assert!(edited.state["edit_to_mesh_ms"].as_array().unwrap().len() == 1);
 
     // Restarted on the same store, with a formula that does not compile: the sphere came
     // back from the store, the bad line authored nothing and shows the caret diagnostic.
     let stored = std::fs::read(&ops).unwrap();
     let bad = window_run(&display, &dir, "restarted", &["shape: 1-x^2-sni(y)"]);
-    assert_eq!(bad.state["n_loaded"], 2);
+    assert_eq!(bad.state["n_loaded"], 3);
     assert!(
         object_geometry(&bad.state).contains(SPHERE),
         "{}",
@@ -360,9 +361,9 @@ fn the_window_shows_the_watermelon_and_an_edit_survives_a_restart() {
     let undone = window_run(&display, &dir, "undone", &["undo", "the wedge is back"]);
     let c = colours(&undone.picture);
     assert!(c.red > 0.05, "{c:?}");
-    assert_eq!(undone.state["n_ops"], 4);
+    assert_eq!(undone.state["n_ops"], 5);
     let history = undone.state["history"].as_array().unwrap();
-    assert_eq!(history[1]["status"], "undone", "{history:?}");
+    assert_eq!(history[2]["status"], "undone", "{history:?}");
     assert_eq!(undone.state["chat"][0]["text"], "the wedge is back");
 }
 
@@ -737,7 +738,10 @@ fn a_touch_stroke_with_the_device_button_held_carves_one_op() {
     let state = &run.state;
     let melon = &state["objects"][0];
     assert_eq!(melon["n_edits"], 1, "one stroke, one edit: {state}");
-    assert_eq!(state["n_ops"], 2, "the demo and the stroke: {state}");
+    assert_eq!(
+        state["n_ops"], 3,
+        "the founding, the demo and the stroke: {state}"
+    );
     let history = state["history"].as_array().unwrap();
     let last = history.last().unwrap();
     assert!(
@@ -1146,10 +1150,10 @@ fn a_carve_stroke_is_one_op_shows_where_dragged_survives_a_restart_and_undoes() 
     let history = carved.state["history"].as_array().unwrap();
     assert_eq!(
         history.len(),
-        2,
-        "exactly one op for the whole drag: {history:?}"
+        3,
+        "the founding, the demo and one op for the whole drag: {history:?}"
     );
-    assert!(history[1]["what"].as_str().unwrap().contains("sculpted"));
+    assert!(history[2]["what"].as_str().unwrap().contains("sculpted"));
     let near = difference(&before.picture, &carved.picture, NEAR_DRAG);
     let far = difference(&before.picture, &carved.picture, FAR_FROM_DRAG);
     assert!(
@@ -1158,7 +1162,7 @@ fn a_carve_stroke_is_one_op_shows_where_dragged_survives_a_restart_and_undoes() 
     );
     // A restart shows the same carved object, from the store.
     let again = window_run(&display, &dir, "again", &[]);
-    assert_eq!(again.state["n_loaded"], 2, "{}", again.state);
+    assert_eq!(again.state["n_loaded"], 3, "{}", again.state);
     assert_eq!(again.state["objects"][0]["n_edits"], 1);
     assert!(difference(&carved.picture, &again.picture, NEAR_DRAG) < 2.0);
     // Undo (the shortcut) brings the surface back.

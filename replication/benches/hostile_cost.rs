@@ -22,9 +22,11 @@ use std::time::{Duration, Instant};
 use fdsl::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
 use glam::DVec3;
 use replication::materialize::Materialized;
+use replication::membership::{Admission, FounderCommitment};
+use replication::op::UNNAMED_SESSION;
 use replication::pending::Origin;
 use replication::shape::{ShapePayload, ShapeScene};
-use replication::{Keypair, Log, Timestamp};
+use replication::{Keypair, Log, PeerId, Timestamp};
 
 type SLog = Log<ShapePayload>;
 type SScene = Materialized<ShapePayload, ShapeScene>;
@@ -65,6 +67,10 @@ fn main() {
         Box::new(move || backdated(n, 10 * history, 0)),
         Box::new(move || backdated(n, 10 * history, refold_micros(10 * history))),
     ];
+    let workloads: Vec<Box<dyn Fn() -> Workload>> = workloads
+        .into_iter()
+        .chain(admission_and_lease_workloads(n))
+        .collect();
     println!(
         "| workload | ops | bytes | CPU | per op | per KiB | vs honest (per byte) | entries refolded |"
     );
@@ -102,7 +108,7 @@ fn measure(build: &dyn Fn() -> Workload) -> (Workload, usize, Duration, u64) {
             let workload = last.insert(build());
             // Authoring compiled the member's formulas in this process; a receiver has not.
             fdsl::object::compiled::clear();
-            let (mut log, mut scene) = receiver();
+            let (mut log, mut scene) = receiver_for(&workload.setup);
             for op in &workload.setup {
                 receive(&mut log, &mut scene, op, NOW);
             }
@@ -151,6 +157,28 @@ fn receiver() -> (SLog, SScene) {
     (log, scene)
 }
 
+/// The receiver of a workload: of a session that binds its authors when the setup opens with
+/// a founder's admission of itself (whose nonce names the session's founder), else
+/// [`receiver`].
+fn receiver_for(setup: &[Vec<u8>]) -> (SLog, SScene) {
+    let founding = (setup.first())
+        .and_then(|bytes| replication::Op::<ShapePayload>::decode(bytes).ok())
+        .and_then(|op| {
+            let admission = replication::Payload::admission(op.payload())?;
+            let nonce = admission.nonce.filter(|_| admission.key == op.author())?;
+            Some(FounderCommitment::of(&op.author(), &nonce))
+        });
+    let Some(founder) = founding else {
+        return receiver();
+    };
+    let mut log = SLog::default();
+    log.set_founder(founder).expect("an empty log");
+    log.bind_authors(replication::log::MAX_LOG_BYTES)
+        .expect("an empty founded log");
+    let scene = SScene::fold(&log).expect("an empty scene folds");
+    (log, scene)
+}
+
 /// The receiver's clock when the first received op arrives.
 const NOW: Timestamp = Timestamp(u64::MAX / 4);
 
@@ -162,7 +190,7 @@ fn receive(log: &mut SLog, scene: &mut SScene, bytes: &[u8], now: Timestamp) {
     if log.contains(&envelope.id()) {
         return;
     }
-    let Ok(op) = envelope.into_verified::<ShapePayload>() else {
+    let Ok(op) = envelope.into_verified::<ShapePayload>(&UNNAMED_SESSION) else {
         return;
     };
     if let Ok(insertion) = log.insert(now, op, Origin(1)) {
@@ -178,7 +206,7 @@ fn receive_decoding_first(log: &mut SLog, scene: &mut SScene, bytes: &[u8], now:
     if log.contains(&op.id()) {
         return;
     }
-    let Ok(op) = op.into_verified() else {
+    let Ok(op) = op.into_verified(&UNNAMED_SESSION) else {
         return;
     };
     if let Ok(insertion) = log.insert(now, op, Origin(1)) {
@@ -567,7 +595,12 @@ mod protocol {
                     deps: Vec::new(),
                     payload: ShapePayload::Chat(String::new()),
                 };
-                Op::sign(&Keypair::from_seed(seed(9, i)), fields).expect("a valid op")
+                Op::sign(
+                    &Keypair::from_seed(seed(9, i)),
+                    &super::UNNAMED_SESSION,
+                    fields,
+                )
+                .expect("a valid op")
             })
             .collect();
         ops.sort_by_key(|op| OrderKey::of(op));
@@ -817,5 +850,190 @@ mod protocol {
                 per_byte / baseline,
             );
         }
+    }
+}
+
+// --- Admissions and leases (issue 49): what binding authors and gating leases cost. ---
+
+/// The founder of the sessions below that bind their authors, and its nonce.
+const FOUNDER_NONCE: [u8; 32] = [0xf0; 32];
+
+/// The workloads of a member against a session's admissions and leases.
+fn admission_and_lease_workloads(n: usize) -> Vec<Box<dyn Fn() -> Workload>> {
+    vec![
+        Box::new(move || bound_honest(n)),
+        Box::new(move || unadmitted(n)),
+        Box::new(move || over_grant(n)),
+        Box::new(move || leases_on_predicted_ids(n)),
+        Box::new(move || leases_on_every_object(n)),
+    ]
+}
+
+/// Ops authored in order by `key` on a log that already holds `setup` (so they name what the
+/// setup ends with), in a session that does not bind: what a member may sign, refused or not.
+fn authored_after(
+    setup: &[Vec<u8>],
+    key: &Keypair,
+    payloads: impl IntoIterator<Item = ShapePayload>,
+) -> Vec<Vec<u8>> {
+    let mut log = SLog::default();
+    for bytes in setup {
+        let op = replication::Op::<ShapePayload>::decode_verified(bytes, &UNNAMED_SESSION)
+            .expect("a setup op");
+        log.insert(Timestamp(2_000_000), op, Origin(1))
+            .expect("in order");
+    }
+    payloads
+        .into_iter()
+        .enumerate()
+        .map(|(i, payload)| {
+            let at = Timestamp(3_000_000 + i as u64);
+            let (op, _) = log.author(key, at, payload).expect("a valid op");
+            op.encoded().to_vec()
+        })
+        .collect()
+}
+
+/// The founder's admission of itself, then its admissions of `keys` with `grant_bytes` each.
+fn founded(keys: &[PeerId], grant_bytes: u64) -> Vec<Vec<u8>> {
+    let founder = Keypair::from_seed([20; 32]);
+    let founding = Admission {
+        key: founder.peer_id(),
+        grant_bytes: 0,
+        nonce: Some(FOUNDER_NONCE),
+    };
+    let admissions = keys.iter().map(|key| {
+        ShapePayload::Admit(Box::new(Admission {
+            key: *key,
+            grant_bytes,
+            nonce: None,
+        }))
+    });
+    let payloads = std::iter::once(ShapePayload::Admit(Box::new(founding)))
+        .chain(std::iter::once(create(1, "1-sqrt(x^2+y^2+z^2)")))
+        .chain(admissions);
+    authored(&founder, payloads)
+}
+
+/// Honest traffic in a session that binds its authors: an admitted member's short formulas.
+fn bound_honest(n: usize) -> Workload {
+    let member = Keypair::from_seed([21; 32]);
+    let setup = founded(&[member.peer_id()], replication::log::MAX_AUTHOR_BYTES);
+    let received = authored_after(
+        &setup,
+        &member,
+        (0..n).map(|_| {
+            set_geometry(
+                1,
+                &format!("1.{}-sqrt(x^2+y^2/{}+z^2)&(y+0.5)", fresh(), fresh()),
+            )
+        }),
+    );
+    Workload {
+        name: "honest, in a session that binds its authors: an admitted member's formulas".into(),
+        setup,
+        received,
+        decode_first: false,
+        gap_micros: 0,
+    }
+}
+
+/// Sybil keys nobody admitted, each sending one 2 KiB chat: refused at insert.
+fn unadmitted(n: usize) -> Workload {
+    let setup = founded(&[], 0);
+    let received = (0..n)
+        .flat_map(|i| {
+            let key = Keypair::from_seed(seed(22, i));
+            authored_after(&setup, &key, [ShapePayload::Chat("s".repeat(2_000))])
+        })
+        .collect();
+    Workload {
+        name: "Sybil keys nobody admitted: 2 KiB chats, refused".into(),
+        setup,
+        received,
+        decode_first: false,
+        gap_micros: 0,
+    }
+}
+
+/// Admitted keys, each granted less than one op, each sending one 2 KiB chat: refused as over
+/// their budget.
+fn over_grant(n: usize) -> Workload {
+    let keys: Vec<Keypair> = (0..n).map(|i| Keypair::from_seed(seed(23, i))).collect();
+    let ids: Vec<PeerId> = keys.iter().map(Keypair::peer_id).collect();
+    let setup = founded(&ids, 1_024);
+    // Each key's first op names its admission (the setup's op after the founding and the
+    // creation), as a node's own first op does.
+    let received = (keys.iter().zip(&setup[2..]))
+        .map(|(key, admission)| {
+            let admission = replication::Op::<ShapePayload>::decode(admission).expect("an op");
+            let fields = replication::op::OpFields {
+                seq: 1,
+                lamport: admission.lamport() + 1,
+                timestamp: Timestamp(3_000_000),
+                deps: vec![admission.id()],
+                payload: ShapePayload::Chat("s".repeat(2_000)),
+            };
+            let op = replication::Op::sign(key, &UNNAMED_SESSION, fields).expect("a valid op");
+            op.encoded().to_vec()
+        })
+        .collect();
+    Workload {
+        name: "admitted keys past their grant: 2 KiB chats, refused".into(),
+        setup,
+        received,
+        decode_first: false,
+        gap_micros: 0,
+    }
+}
+
+/// Strong acquires, asking for ever, of the ids another peer will create next: each counts
+/// for nothing (its object's creation is not in its past).
+fn leases_on_predicted_ids(n: usize) -> Workload {
+    let owner = Keypair::from_seed([24; 32]);
+    let member = Keypair::from_seed([25; 32]);
+    let setup = authored(&owner, [create(1, "1-sqrt(x^2+y^2+z^2)")]);
+    let next = replication::shape::IdSource::first(owner.peer_id());
+    let received = authored_after(
+        &setup,
+        &member,
+        (0..n as u64).map(|i| hoard(next.skip(i).expect("a counter").id())),
+    );
+    Workload {
+        name: "strong acquires of ids another peer will create next".into(),
+        setup,
+        received,
+        decode_first: false,
+        gap_micros: 0,
+    }
+}
+
+/// Strong acquires, asking for ever, of every object of a session of `n` objects: at most
+/// `MAX_LIVE_LEASES_PER_AUTHOR` count.
+fn leases_on_every_object(n: usize) -> Workload {
+    let owner = Keypair::from_seed([26; 32]);
+    let member = Keypair::from_seed([27; 32]);
+    let setup = authored(
+        &owner,
+        (0..n as u64).map(|object| create(object + 1, "1-sqrt(x^2+y^2+z^2)")),
+    );
+    let received = authored_after(&setup, &member, (0..n as u64).map(|o| hoard(o + 1)));
+    Workload {
+        name: format!(
+            "strong acquires of every object of {n} (at most {} count)",
+            replication::lease::MAX_LIVE_LEASES_PER_AUTHOR
+        ),
+        setup,
+        received,
+        decode_first: false,
+        gap_micros: 0,
+    }
+}
+
+fn hoard(object: u64) -> ShapePayload {
+    ShapePayload::Acquire {
+        object,
+        strong: true,
+        ttl_micros: u64::MAX,
     }
 }

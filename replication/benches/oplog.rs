@@ -97,7 +97,7 @@ fn decode_and_verify_op(bencher: Bencher) {
     bencher.bench(|| {
         Op::<TestPayload>::decode(divan::black_box(&bytes))
             .expect("decodes")
-            .into_verified()
+            .into_verified(&replication::op::UNNAMED_SESSION)
             .expect("verifies")
     });
 }

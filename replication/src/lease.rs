@@ -18,6 +18,12 @@ use crate::time::Timestamp;
 /// Longest a lease may hold (one hour). An acquire asking for more is clamped to it in the
 /// fold, on every peer alike, so a lease taken with `ttl u64::MAX` still ends.
 pub const MAX_LEASE_TTL_MICROS: u64 = 60 * 60 * 1_000_000;
+/// Most live leases one author may hold: an acquire of another object by an author whose own
+/// effective acquires, not released by it, already hold this many unexpired leases is
+/// rejected ([`RejectReason::TooManyLeases`]). Counted along the author's own chain (its
+/// acquires and releases, with their own verdicts), so the count is a function of the op's
+/// causal past, and one member cannot hold every object of a session at once.
+pub const MAX_LIVE_LEASES_PER_AUTHOR: usize = 32;
 
 /// A lease on one object, as of some point in the linear order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -70,6 +76,20 @@ pub enum RejectReason {
     /// An op of an author that signed two different ops with one seq, at that seq or after:
     /// both sides are held, neither counts (see [`crate::fork`]).
     Forked,
+    /// An acquire of an object whose creation is not in its causal past
+    /// ([`crate::Payload::creates`]): nobody can lease an id before its creator makes it.
+    UnknownObject,
+    /// An acquire by an author already holding [`MAX_LIVE_LEASES_PER_AUTHOR`] live leases on
+    /// other objects.
+    TooManyLeases,
+}
+
+impl RejectReason {
+    /// True if the reason is the acquire's own, whatever lease its object has: such an
+    /// acquire counts in nobody's view of the lease, as if it were not there.
+    pub fn voids_lease_op(&self) -> bool {
+        matches!(self, Self::UnknownObject | Self::TooManyLeases)
+    }
 }
 
 impl RejectReason {
@@ -93,6 +113,10 @@ impl RejectReason {
             Self::Expelled => {
                 "the session's founder expelled this identity; its edits count for nothing"
             }
+            Self::UnknownObject => {
+                "nothing to lease yet: take the lease once the object's creation has arrived"
+            }
+            Self::TooManyLeases => "release some of the leases you hold, then take this one",
         }
     }
 }
@@ -111,6 +135,11 @@ impl fmt::Display for RejectReason {
             Self::NotUndone => f.write_str("redo of an edit that is not undone"),
             Self::Forked => f.write_str("its author forked its history at or before it"),
             Self::Expelled => f.write_str("its author was expelled"),
+            Self::UnknownObject => f.write_str("acquire of an object it never saw created"),
+            Self::TooManyLeases => write!(
+                f,
+                "its author already held {MAX_LIVE_LEASES_PER_AUTHOR} live leases"
+            ),
         }
     }
 }
@@ -140,6 +169,11 @@ pub struct TargetInfo {
 pub struct FoldState {
     leases: BTreeMap<ObjectId, Lease>,
     undone: BTreeSet<OpId>,
+    /// Per author and object, when the lease its own last effective acquire took expires,
+    /// until its own effective release: what [`MAX_LIVE_LEASES_PER_AUTHOR`] counts. Only the
+    /// author's ops change its entries, so they follow its chain, not the order's other ops
+    /// (a lease another peer took over still counts until it expires or is released).
+    claims: BTreeMap<(PeerId, ObjectId), Timestamp>,
 }
 
 impl FoldState {
@@ -157,7 +191,7 @@ impl FoldState {
     pub const MAX_DECODED_ENTRIES: usize = crate::log::MAX_LOG_OPS;
 
     /// Appends the canonical encoding: `[n][object][holder 32][strong 0/1][expires]*`
-    /// `[n][undone id 32]*`, both sorted.
+    /// `[n][undone id 32]*` `[n][author 32][object][expires]*`, each sorted.
     pub fn encode(&self, out: &mut Vec<u8>) {
         put_varint(out, self.leases.len() as u64);
         for (object, lease) in &self.leases {
@@ -170,10 +204,18 @@ impl FoldState {
         for id in &self.undone {
             out.extend_from_slice(&id.0);
         }
+        put_varint(out, self.claims.len() as u64);
+        for ((author, object), expires_at) in &self.claims {
+            out.extend_from_slice(&author.0);
+            put_varint(out, object.0);
+            put_varint(out, expires_at.0);
+        }
     }
 
-    /// Decodes [`FoldState::encode`]'s output from untrusted bytes (sorted, bounded).
-    pub fn decode(r: &mut Reader<'_>) -> Result<Self, DecodeError> {
+    /// Decodes [`FoldState::encode`]'s output from untrusted bytes (sorted, bounded); with
+    /// `with_claims` false, the layout from before live leases were counted (no claims: a log
+    /// joined from it counts only the leases taken after its cut).
+    pub fn decode(r: &mut Reader<'_>, with_claims: bool) -> Result<Self, DecodeError> {
         // Each lease takes at least 35 bytes and each id 32: bound counts by what is left.
         let limit = |r: &Reader<'_>, each: usize| {
             (r.remaining() / each).min(Self::MAX_DECODED_ENTRIES) as u64
@@ -218,7 +260,43 @@ impl FoldState {
             }
             undone.insert(id);
         }
-        Ok(Self { leases, undone })
+        let mut claims = BTreeMap::new();
+        if with_claims {
+            // Each claim takes at least 34 bytes.
+            let n_claims = r.bounded("claim count", limit(r, 34))?;
+            for _ in 0..n_claims {
+                let offset = r.offset();
+                let key = (PeerId(r.array()?), ObjectId(r.varint()?));
+                if claims.last_key_value().is_some_and(|(k, _)| *k >= key) {
+                    return Err(DecodeError::Invalid {
+                        offset,
+                        what: "unsorted claims",
+                    });
+                }
+                claims.insert(key, Timestamp(r.varint()?));
+            }
+        }
+        Ok(Self {
+            leases,
+            undone,
+            claims,
+        })
+    }
+
+    /// True if `author`, acquiring `object` at `at`, already holds
+    /// [`MAX_LIVE_LEASES_PER_AUTHOR`] live leases on other objects by its own acquires. Drops
+    /// the author's claims that expired by `at` (its later ops are stamped no earlier).
+    fn over_lease_cap(&mut self, author: PeerId, object: ObjectId, at: Timestamp) -> bool {
+        let range = (author, ObjectId(0))..=(author, ObjectId(u64::MAX));
+        let expired: Vec<(PeerId, ObjectId)> = (self.claims.range(range.clone()))
+            .filter(|(_, until)| **until <= at)
+            .map(|(k, _)| *k)
+            .collect();
+        for key in expired {
+            self.claims.remove(&key);
+        }
+        let others = self.claims.range(range).filter(|((_, o), _)| *o != object);
+        others.count() >= MAX_LIVE_LEASES_PER_AUTHOR
     }
 
     /// Evaluates one op and updates the state. `target` describes an undo/redo's target if it
@@ -251,6 +329,11 @@ impl FoldState {
         exempt: &mut impl FnMut(&PeerId) -> bool,
     ) -> Mark {
         let mut binding = |lease: Option<Lease>| lease.filter(|l| !exempt(&l.holder));
+        if let Effect::Acquire { object, .. } = effect
+            && self.over_lease_cap(author, object, at)
+        {
+            return Mark::Rejected(RejectReason::TooManyLeases);
+        }
         let verdict = match effect {
             Effect::Independent => Ok(()),
             Effect::Edit { object }
@@ -258,6 +341,15 @@ impl FoldState {
             | Effect::Release { object } => {
                 let global = self.leases.get(&object).copied();
                 let judged = lease_step(binding(seen.unwrap_or(global)), author, at, effect);
+                match (effect, judged) {
+                    (Effect::Acquire { .. }, Ok(Some(lease))) => {
+                        self.claims.insert((author, object), lease.expires_at);
+                    }
+                    (Effect::Release { .. }, Ok(_)) => {
+                        self.claims.remove(&(author, object));
+                    }
+                    _ => {}
+                }
                 if matches!(effect, Effect::Acquire { .. } | Effect::Release { .. }) {
                     let whole = match seen {
                         None => judged,

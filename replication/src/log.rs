@@ -11,9 +11,10 @@ use crate::fork::Forks;
 use crate::identity::{Keypair, PeerId};
 use crate::lease::{FoldState, Lease, Mark, RejectReason, TargetInfo};
 use crate::membership::{FounderCommitment, Membership};
-use crate::op::{BuildError, MAX_DEPS, Op, OpFields, OpId, OpSlab, VerifiedOp};
+use crate::op::{BuildError, MAX_DEPS, Op, OpFields, OpId, OpSlab, UNNAMED_SESSION, VerifiedOp};
 use crate::payload::{Effect, ObjectId, Payload};
 use crate::pending::{DepKey, Evicted, Origin, Pending, PendingLimits};
+use crate::sync::message::SessionId;
 use crate::time::{HybridClock, MAX_CLOCK_SKEW_MICROS, Timestamp};
 
 mod base;
@@ -39,8 +40,8 @@ pub const MAX_LOG_BYTES: u64 = 7 * 512 * 1024 * 1024;
 /// and one member cannot fill every peer's memory and store on its own.
 pub const MAX_AUTHOR_BYTES: u64 = 256 * 1024 * 1024;
 /// Most an op's Lamport time may exceed the highest of its dependencies' and its author's
-/// previous op's (2^32). Honest ops exceed it by one (more only after a snapshot join, whose
-/// base ops are not looked up), and `u64::MAX / MAX_LAMPORT_JUMP` is far above
+/// previous op's (2^32). Honest ops exceed it by one (a log joined from a snapshot takes a
+/// dependency inside its base to be at the cut), and `u64::MAX / MAX_LAMPORT_JUMP` is far above
 /// [`MAX_LOG_OPS`], so no member can exhaust the Lamport clock before the log fills.
 pub const MAX_LAMPORT_JUMP: u64 = 1 << 32;
 /// Most entries a remote op's refold may re-evaluate without being charged for it: positions
@@ -90,15 +91,22 @@ impl RefoldBudget {
     }
 }
 
+/// An honest admitter grants a newcomer this share of its remaining budget (a quarter), at
+/// most [`MAX_AUTHOR_BYTES`] ([`Log::default_grant`]).
+pub const GRANT_SHARE_OF_REMAINING: u64 = 4;
+
 /// The [`Origin`] of ops this peer authors or loads from its own store.
 pub const LOCAL_ORIGIN: Origin = Origin(0);
 
-/// Why [`Log::set_founder`] refused.
+/// Why [`Log::set_founder`] or [`Log::bind_authors`] refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum FounderError {
     /// The log already holds or waits for ops, judged without a founder.
     #[error("the founder must be named before the log holds any op")]
     NotEmpty,
+    /// Authors are bound to their admissions, whose root is the founder: name it first.
+    #[error("a session binds its authors only once it names its founder")]
+    NoFounder,
 }
 
 /// Why an op was refused outright (it is not stored, not even as rejected).
@@ -153,6 +161,18 @@ pub enum InsertError {
         /// The quota.
         limit: u64,
     },
+    /// The session binds its authors ([`Log::bind_authors`]) and the author has no op here
+    /// yet, yet this op names no admission of its key among its deps (nor is it the founder's
+    /// admission of itself): a key nobody admitted writes nothing.
+    #[error("author {author} was not admitted: its first op names no admission of its key")]
+    NotAdmitted {
+        /// The author.
+        author: PeerId,
+    },
+    /// The session binds its authors, and the op was signed in the layout from before ops
+    /// named their session ([`crate::op::OP_FORMAT_VERSION_1`]).
+    #[error("an op signed without its session, refused in a session that binds its authors")]
+    OldLayout,
     /// The log was joined from a snapshot, and the op belongs before the snapshot's cut but
     /// is not in it (an author the snapshot's producer did not know, working offline). This
     /// log cannot place it: rebuild from full history (see [`crate::snapshot`]).
@@ -174,6 +194,9 @@ pub enum AuthorError {
     /// The op could not be inserted.
     #[error(transparent)]
     Insert(#[from] InsertError),
+    /// The session binds its authors and holds no admission of this peer's key yet.
+    #[error("waiting for a member to admit this peer")]
+    NotAdmitted,
 }
 
 /// What inserting one op did. Drain it: it is the only report of these facts.
@@ -288,6 +311,12 @@ pub(crate) struct Authored {
     pub(crate) chain: Vec<u32>,
     /// Bytes of the author's encoded ops held, siblings included ([`MAX_AUTHOR_BYTES`]).
     pub(crate) bytes: u64,
+    /// Bytes its held admissions granted other keys ([`crate::membership::Admission`]).
+    pub(crate) granted: u64,
+    /// What its ops and grants may spend in all: the grants of the admissions its first op
+    /// named, the session's cap for the founder, or unbounded where authors are not bound
+    /// (only [`MAX_AUTHOR_BYTES`] then holds).
+    pub(crate) budget: u64,
 }
 
 impl Authored {
@@ -385,6 +414,11 @@ pub struct Log<P> {
     /// Each object's held lease ops (acquires and releases) in linear order, with what the
     /// fold learnt of each: a lease binds only ops that saw it.
     lease_ops: BTreeMap<ObjectId, Vec<seen::LeaseOp>>,
+    /// Each object's held ops that create it ([`Payload::creates`]) in linear order, as
+    /// positions in `ops`: an acquire counts only once an effective one is in its past.
+    creates: BTreeMap<ObjectId, Vec<u32>>,
+    /// The objects an effective edit inside the base creates (every held op is after them).
+    base_created: BTreeSet<ObjectId>,
     /// Each object's deletes (held, and those inside the base) in linear order.
     deletes: BTreeMap<ObjectId, Vec<(OrderKey, OpId)>>,
     /// For each held delete, the held edits of its object in its causal past.
@@ -393,6 +427,11 @@ pub struct Log<P> {
     hidden: BTreeMap<ObjectId, BTreeSet<OpId>>,
     /// Memo of causal reachability (a cache: it changes no verdict).
     reach: Reach,
+    /// The founder's budget, the session's cap on bytes of ops, when the session binds its
+    /// authors to their admissions ([`Log::bind_authors`]).
+    binding: Option<u64>,
+    /// Per key, the held ops that admit it, in delivery order.
+    admissions: BTreeMap<PeerId, Vec<OpId>>,
     /// What a log joined from a snapshot knows of the ops before the cut.
     base: Option<Box<Base<P>>>,
     frontier: Frontier,
@@ -409,6 +448,8 @@ pub struct Log<P> {
     /// at the budget's rate (a virtual scheduling time, as in GCRA).
     refold_paid_until: Timestamp,
     refold_budget: RefoldBudget,
+    /// The session whose id this log's own ops are signed for ([`Log::set_session_id`]).
+    session_id: SessionId,
     /// What the session's invite commits to, when it names a founder
     /// ([`crate::membership`]): only membership ops it proves count.
     founder: Option<FounderCommitment>,
@@ -455,10 +496,14 @@ impl<P: Payload> Log<P> {
             authors: BTreeMap::new(),
             by_object: BTreeMap::new(),
             lease_ops: BTreeMap::new(),
+            creates: BTreeMap::new(),
+            base_created: BTreeSet::new(),
             deletes: BTreeMap::new(),
             delete_hides: BTreeMap::new(),
             hidden: BTreeMap::new(),
             reach: Reach::default(),
+            binding: None,
+            admissions: BTreeMap::new(),
             base: None,
             frontier: Frontier::default(),
             vv: VersionVector::new(),
@@ -470,6 +515,7 @@ impl<P: Payload> Log<P> {
             author_quota: MAX_AUTHOR_BYTES,
             refold_paid_until: Timestamp(0),
             refold_budget: RefoldBudget::default(),
+            session_id: UNNAMED_SESSION,
             founder: None,
             membership_ops: BTreeMap::new(),
             expelled: BTreeMap::new(),
@@ -494,9 +540,74 @@ impl<P: Payload> Log<P> {
         Ok(())
     }
 
+    /// Names the session this log is of: its own ops are signed for it ([`Op::sign`]), and
+    /// what it receives is checked against it ([`crate::sync`]). A log starts with
+    /// [`UNNAMED_SESSION`]; [`crate::Peer::new`] names its session.
+    pub fn set_session_id(&mut self, session_id: SessionId) {
+        self.session_id = session_id;
+    }
+
+    /// The session this log is of ([`Log::set_session_id`]).
+    pub fn session_id(&self) -> SessionId {
+        self.session_id
+    }
+
     /// What the session's invite commits to, if set.
     pub fn founder(&self) -> Option<FounderCommitment> {
         self.founder
+    }
+
+    /// Binds the session's authors to their admissions ([`crate::membership`]): from its first
+    /// op, the log accepts a key's ops only if its first op names an admission of it among its
+    /// deps (or is the founder's admission of itself, showing the nonce), and holds each
+    /// author's spending (its ops' bytes and the grants it gave) within its budget, the
+    /// founder's being `founder_budget` bytes (at most [`MAX_LOG_BYTES`]: the app passes that;
+    /// every peer of a session must pass the same). Ops signed without their session are
+    /// refused. Every peer of a session must bind, or not, before its first op, as for
+    /// [`Log::set_founder`], which must come first.
+    pub fn bind_authors(&mut self, founder_budget: u64) -> Result<(), FounderError> {
+        if self.ops.len() > 0 || !self.pending.is_empty() {
+            return Err(FounderError::NotEmpty);
+        }
+        if self.founder.is_none() {
+            return Err(FounderError::NoFounder);
+        }
+        self.binding = Some(founder_budget.min(MAX_LOG_BYTES));
+        Ok(())
+    }
+
+    /// True if the session binds its authors to their admissions ([`Log::bind_authors`]).
+    pub fn binds_authors(&self) -> bool {
+        self.binding.is_some()
+    }
+
+    /// The founder's budget, when the session binds its authors ([`Log::bind_authors`]).
+    pub fn founder_budget(&self) -> Option<u64> {
+        self.binding
+    }
+
+    /// True if `key` may write here: authors are not bound, or the log holds an op of it or
+    /// an admission of it.
+    pub fn is_admitted(&self, key: &PeerId) -> bool {
+        self.binding.is_none()
+            || self.authors.contains_key(key)
+            || self.admissions.contains_key(key)
+    }
+
+    /// Bytes `author` may still spend on ops and grants, where authors are bound and it has
+    /// written (`None` otherwise).
+    pub fn remaining_budget(&self, author: &PeerId) -> Option<u64> {
+        self.binding?;
+        let a = self.authors.get(author)?;
+        Some(a.budget.saturating_sub(a.bytes + a.granted))
+    }
+
+    /// What an honest `admitter` grants a newcomer: [`GRANT_SHARE_OF_REMAINING`] of its
+    /// remaining budget, at most [`MAX_AUTHOR_BYTES`]. An admitter with no op yet (it waits for
+    /// its own admission's grant to be known here) grants a share of [`MAX_AUTHOR_BYTES`].
+    pub fn default_grant(&self, admitter: &PeerId) -> u64 {
+        let remaining = self.remaining_budget(admitter).unwrap_or(MAX_AUTHOR_BYTES);
+        (remaining / GRANT_SHARE_OF_REMAINING).min(MAX_AUTHOR_BYTES)
     }
 
     /// The expelled members, each with the last seq of its ops that still count (its later
@@ -554,6 +665,7 @@ impl<P: Payload> Log<P> {
         payload: P,
     ) -> Result<(VerifiedOp<P>, Insertion), AuthorError> {
         let me = keypair.peer_id();
+        let own_admissions = self.own_admissions(&me, &payload)?;
         let seq = self.vv.get(&me).checked_add(1).ok_or(InsertError::Full)?;
         let lamport = self.max_lamport.checked_add(1).ok_or(InsertError::Full)?;
         if let Some(base) = &self.base {
@@ -561,20 +673,76 @@ impl<P: Payload> Log<P> {
             self.clock.observe(base.max_timestamp, now);
         }
         let timestamp = self.clock.tick(now);
+        let mut deps = self.author_deps(timestamp);
+        if let Some(admission) = own_admissions
+            && !deps.contains(&admission)
+        {
+            // Left-out heads stay heads: the next op names them.
+            deps.truncate(MAX_DEPS - 1);
+            deps.push(admission);
+        }
         let fields = OpFields {
             seq,
             lamport,
             timestamp,
-            deps: self.author_deps(timestamp),
+            deps,
             payload,
         };
-        let op = Op::sign(keypair, fields)?;
+        let op = Op::sign(keypair, &self.session_id, fields)?;
         let insertion = self.insert_from(now, op.clone(), LOCAL_ORIGIN, false)?;
         assert!(
             insertion.delivered.first() == Some(&op.id()),
             "a local op is delivered at once"
         );
         Ok((op, insertion))
+    }
+
+    /// The admissions of `me` its next op must name ([`Log::bind_authors`]): one, when authors
+    /// are bound and `me` has no op yet, unless `payload` is the founder's admission of itself.
+    fn own_admissions(&self, me: &PeerId, payload: &P) -> Result<Option<OpId>, AuthorError> {
+        if self.binding.is_none() || self.vv.get(me) > 0 || self.is_founding(me, payload) {
+            return Ok(None);
+        }
+        let first = self.admissions.get(me).and_then(|ids| ids.first());
+        first.copied().map(Some).ok_or(AuthorError::NotAdmitted)
+    }
+
+    /// True if `payload`, by `author`, is the founder's admission of itself.
+    fn is_founding(&self, author: &PeerId, payload: &P) -> bool {
+        let nonce = payload
+            .admission()
+            .filter(|a| a.key == *author)
+            .and_then(|a| a.nonce);
+        (self.founder.as_ref()).is_some_and(|f| nonce.is_some_and(|n| f.is_founder(author, &n)))
+    }
+
+    /// The budget of `op`'s author, whose first op here it is, where authors are bound
+    /// ([`Authored::budget`]): the session's cap `cap` for the founder's admission of itself,
+    /// the grants of the admissions of its key it names among its deps (by other keys)
+    /// otherwise. Every dep is delivered, so every peer finds the same.
+    fn first_budget(&self, op: &Op<P>, cap: u64) -> Result<u64, InsertError> {
+        let author = op.author();
+        if self.is_founding(&author, op.payload()) {
+            return Ok(cap);
+        }
+        let grants = (op.deps().iter())
+            .filter_map(|d| self.ops.get(d))
+            .filter(|d| d.author() != author)
+            .filter_map(|d| d.payload().admission().filter(|a| a.key == author))
+            .map(|a| a.grant_bytes);
+        let mut budget = None;
+        for grant in grants {
+            budget = Some(budget.unwrap_or(0u64).saturating_add(grant));
+        }
+        budget.ok_or(InsertError::NotAdmitted { author })
+    }
+
+    /// Bytes `op` grants another key (its admission's grant; 0 for any other op, and for an
+    /// admission of its own author).
+    fn grant_of(op: &Op<P>) -> u64 {
+        (op.payload().admission())
+            .filter(|a| a.key != op.author())
+            .map_or(0, |a| a.grant_bytes)
     }
 
     /// The heads a new op depends on: all of them, or when more than [`MAX_DEPS`] peers wrote
@@ -878,8 +1046,10 @@ impl<P: Payload> Log<P> {
     }
 
     /// What `op`'s deps show of its causal past, looked up once for [`Log::missing`] and
-    /// [`Log::deliver`]. Deps and previous ops inside a base have Lamport times at or below
-    /// its cut, and `insert` refused every op at or below the cut, so held ones set the floor.
+    /// [`Log::deliver`]. A dep inside a base has a Lamport time at or below its cut, which is
+    /// kept rather than each op's: the cut is its floor, so an op after a leap before the cut
+    /// is judged as a full log would judge it from the dep at the cut (one from a dep far
+    /// below the cut may leap up to [`MAX_LAMPORT_JUMP`] past the cut, a non-guarantee).
     /// Timestamps inside a base are not kept per op: a joined log checks held ones only.
     fn deps_seen(&self, op: &Op<P>) -> DepsSeen {
         let mut seen = DepsSeen {
@@ -890,7 +1060,10 @@ impl<P: Payload> Log<P> {
         };
         for d in op.deps() {
             let Some(d_at) = self.ops.position(d) else {
-                seen.all_delivered &= self.base.as_ref().is_some_and(|b| b.contains(d));
+                match self.base.as_ref().filter(|b| b.contains(d)) {
+                    Some(base) => seen.lamport = seen.lamport.max(base.lamport),
+                    None => seen.all_delivered = false,
+                }
                 continue;
             };
             let dep = self.ops.at(d_at);
@@ -948,6 +1121,15 @@ impl<P: Payload> Log<P> {
     /// whose author's slot is taken is held beside the first as a sibling ([`crate::fork`]).
     fn deliver(&mut self, op: Op<P>, now: Timestamp, deps: DepsSeen) -> Result<usize, InsertError> {
         let author = op.author();
+        if self.binding.is_some() && op.version() != crate::op::OP_FORMAT_VERSION {
+            return Err(InsertError::OldLayout);
+        }
+        // Where authors are bound, a new author's budget, from its first op (an old one's is
+        // in its record); an unbound log looks nothing up.
+        let first_budget = match self.binding {
+            Some(cap) if !self.authors.contains_key(&author) => Some(self.first_budget(&op, cap)?),
+            _ => None,
+        };
         // The author's record, looked up once: read to check the op, then written to hold it.
         let authored = self.authors.get_mut(&author);
         let base_seq = self.base.as_ref().map_or(0, |b| b.seq(&author));
@@ -990,6 +1172,9 @@ impl<P: Payload> Log<P> {
         } = deps;
         if let Some(p) = prev {
             (floor, floor_ts) = (floor.max(p.lamport()), floor_ts.max(p.timestamp()));
+        } else if !past_fork && op.seq() > 1 && op.seq() - 1 == base_seq {
+            // The previous op is the author's last inside the base, whose Lamport time is kept.
+            floor = floor.max(self.base.as_ref().map_or(0, |b| b.lamport_of(&author)));
         }
         if op.lamport() <= floor {
             return Err(InsertError::BadLamport {
@@ -1017,6 +1202,19 @@ impl<P: Payload> Log<P> {
                 limit: self.author_quota,
             });
         }
+        // Its ops and grants along its chain within its budget, on every peer alike.
+        let grant = Self::grant_of(&op);
+        let granted = authored
+            .as_deref()
+            .map_or(0, |a| a.granted)
+            .saturating_add(grant);
+        let budget = (first_budget.or(authored.as_deref().map(|a| a.budget))).unwrap_or(u64::MAX);
+        if author_bytes.saturating_add(granted) > budget {
+            return Err(InsertError::AuthorQuota {
+                author,
+                limit: budget,
+            });
+        }
         if self.n_bytes + n_bytes > MAX_LOG_BYTES {
             return Err(InsertError::Full);
         }
@@ -1028,12 +1226,15 @@ impl<P: Payload> Log<P> {
             Some(a) => {
                 a.chain.extend(chain_at);
                 a.bytes = author_bytes;
+                a.granted = granted;
             }
             None => {
                 // A new author: its chain grows from empty, as every chain does.
                 let authored = self.authors.entry(author).or_default();
                 authored.chain.extend(chain_at);
                 authored.bytes = author_bytes;
+                authored.granted = granted;
+                authored.budget = budget;
             }
         }
         let key = OrderKey::of(&op);
@@ -1066,6 +1267,9 @@ impl<P: Payload> Log<P> {
                 let ops = &self.ops;
                 let before = |&a: &u32| cmp_key(ops.at(a), &key).is_lt();
                 insert_in_list(&mut self.by_object, object, at, before);
+                if op.payload().creates(&author) {
+                    insert_in_list(&mut self.creates, object, at, before);
+                }
                 if op.payload().is_delete() {
                     let deletes = self.deletes.entry(object).or_default();
                     let at = deletes.partition_point(|(k, _)| *k < key);
@@ -1094,6 +1298,9 @@ impl<P: Payload> Log<P> {
         self.max_lamport = self.max_lamport.max(op.lamport());
         self.clock.observe(op.timestamp(), now);
         let membership = op.payload().membership();
+        if let Some(admission) = op.payload().admission() {
+            self.admissions.entry(admission.key).or_default().push(id);
+        }
         let held = self.ops.insert(id, op);
         debug_assert_eq!(held, at, "held where the order says");
         self.n_bytes += n_bytes;
@@ -1126,7 +1333,33 @@ impl<P: Payload> Log<P> {
             forks: &self.forks,
             base: self.base.as_deref(),
             members: &self.membership_ops,
+            marks: &self.marks,
         }
+    }
+
+    /// True if an effective op creating `object` ([`Payload::creates`]) is in the causal past
+    /// of the op held at `at`, whose order key is `key`, or inside the base.
+    fn created_in_past(
+        &self,
+        reach: &mut Reach,
+        at: u32,
+        key: &OrderKey,
+        object: ObjectId,
+    ) -> bool {
+        if self.base_created.contains(&object) {
+            return true;
+        }
+        let Some(list) = self.creates.get(&object) else {
+            return false;
+        };
+        let n = point_near_end(list, |&c| self.slot_cmp(c, key).is_lt());
+        let dag = self.dag();
+        // Latest first: an honest acquire saw the creation sorted just before it, not the
+        // backdated ones a member may have sorted first.
+        list[..n]
+            .iter()
+            .rev()
+            .any(|&c| self.marks.get(c) == Mark::Effective && dag.held_sees_at(reach, at, c))
     }
 
     /// Records the membership op `id` (asking for `m`) just delivered, if it counts: its
@@ -1360,14 +1593,19 @@ impl<P: Payload> Log<P> {
         let target = self.target_info(effect, pos);
         let seen = self.lease_context(cx, state, (key, self.order[pos], effect), target);
         let (author, at) = (op.author(), op.timestamp());
-        if self.membership_ops.is_empty() {
-            return state.apply(author, at, effect, target, seen);
-        }
         // Membership as this op's causal past has it: a member that saw its own expel is
         // refused, and nobody who saw an expel is bound by the expelled member's leases.
         let dag = self.dag();
-        if dag.expelled_in_past(&mut cx.reach, id, &author) {
+        if !self.membership_ops.is_empty() && dag.expelled_in_past(&mut cx.reach, id, &author) {
             return Mark::Rejected(RejectReason::Expelled);
+        }
+        if let Effect::Acquire { object, .. } = effect
+            && !self.created_in_past(&mut cx.reach, self.order[pos], &key, object)
+        {
+            return Mark::Rejected(RejectReason::UnknownObject);
+        }
+        if self.membership_ops.is_empty() {
+            return state.apply(author, at, effect, target, seen);
         }
         let reach = &mut cx.reach;
         let mut exempt = |holder: &PeerId| dag.expelled_in_past(reach, id, holder);

@@ -11,6 +11,14 @@
 //! [`crate::log`]): the ops of the member that are not in the expel's causal past are void
 //! everywhere (no effect on the scene, no lease), and a readmit by the founder cancels every
 //! expel of that member it saw.
+//!
+//! Who may write at all, in a session that binds its authors ([`crate::Log::bind_authors`]):
+//! a key whose first op names an [`Admission`] of it among its deps, authored by a key already
+//! admitted, which gives it a budget of bytes out of its own. The root is the founder, whose
+//! first op is its admission of itself showing the nonce, and whose budget is the session's cap
+//! on bytes of ops: every author's spending (its ops' bytes and the grants it gave) is counted
+//! along its chain and held within its budget by every peer alike, so the log as a whole never
+//! passes the cap, and a key minted offline writes nothing.
 
 use crate::identity::PeerId;
 
@@ -42,6 +50,20 @@ impl FounderCommitment {
     pub fn is_founder(&self, author: &PeerId, nonce: &[u8; FOUNDER_NONCE_BYTES]) -> bool {
         Self::of(author, nonce) == *self
     }
+}
+
+/// An admission op's meaning: its author lets `key` write, with `grant_bytes` of its own
+/// budget (see the [module docs](self)).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Admission {
+    /// The newcomer's key.
+    pub key: PeerId,
+    /// Bytes of ops (and grants of its own) the newcomer may spend; counted against the
+    /// admitter's budget whether or not the newcomer ever writes.
+    pub grant_bytes: u64,
+    /// The founder's nonce, in the founder's admission of itself (which makes its budget the
+    /// session's cap); `None` in every other admission.
+    pub nonce: Option<[u8; FOUNDER_NONCE_BYTES]>,
 }
 
 /// A membership op's meaning: the founder expels `member`, or readmits it.

@@ -8,10 +8,19 @@ use crate::identity::{
     Keypair, PEER_ID_BYTES, PeerId, SIGNATURE_BYTES, Signature, VerifyError, hex,
 };
 use crate::payload::{MAX_PAYLOAD_BYTES, Payload};
+use crate::sync::message::{SESSION_ID_BYTES, SessionId};
 use crate::time::Timestamp;
 
-/// Version byte that opens every encoded op.
-pub const OP_FORMAT_VERSION: u8 = 1;
+/// Version byte that opens every op signed now: 2, whose signature covers the session's id
+/// ([`Op::sign`]), so an op signed for one session never verifies in another.
+pub const OP_FORMAT_VERSION: u8 = 2;
+/// Version byte of ops signed before signatures named their session: they still decode and
+/// verify (their signature covers the op alone), except in a log that binds its authors
+/// ([`crate::Log::bind_authors`]), which refuses them.
+pub const OP_FORMAT_VERSION_1: u8 = 1;
+/// The session a log made without one signs under ([`crate::Log::set_session_id`]): tests and
+/// tools that never sync.
+pub const UNNAMED_SESSION: SessionId = [0; SESSION_ID_BYTES];
 /// Most causal dependencies one op may name.
 pub const MAX_DEPS: usize = 32;
 /// Length of an op id in bytes.
@@ -26,8 +35,11 @@ pub const MAX_OP_BYTES: usize = 1
     + 10
     + MAX_PAYLOAD_BYTES
     + SIGNATURE_BYTES;
-/// Domain separation for op signatures, so they can never be replayed as another message.
-const SIGNING_CONTEXT: &[u8] = b"sculpt/op/v1";
+/// Domain separation for op signatures, so they can never be replayed as another message;
+/// the session's id follows it in what is signed.
+const SIGNING_CONTEXT: &[u8] = b"sculpt/op/v2";
+/// What ops of [`OP_FORMAT_VERSION_1`] signed: the context and the op, no session.
+const SIGNING_CONTEXT_V1: &[u8] = b"sculpt/op/v1";
 
 /// An op's id: the blake3 hash of its canonical encoding (signature included).
 ///
@@ -284,12 +296,32 @@ impl<P> std::ops::Deref for VerifiedOp<P> {
 }
 
 impl<P: Payload> Op<P> {
-    /// Builds and signs an op by `keypair`'s peer.
-    pub fn sign(keypair: &Keypair, fields: OpFields<P>) -> Result<VerifiedOp<P>, BuildError> {
-        Self::build(keypair, fields).map(VerifiedOp)
+    /// Builds and signs an op by `keypair`'s peer for `session` (its signature covers the
+    /// session's id, so it verifies in that session only).
+    pub fn sign(
+        keypair: &Keypair,
+        session: &SessionId,
+        fields: OpFields<P>,
+    ) -> Result<VerifiedOp<P>, BuildError> {
+        Self::build(keypair, OP_FORMAT_VERSION, session, fields).map(VerifiedOp)
     }
 
-    fn build(keypair: &Keypair, mut fields: OpFields<P>) -> Result<Self, BuildError> {
+    /// An op in the layout signed before signatures named their session
+    /// ([`OP_FORMAT_VERSION_1`]), for tests of how such ops are still read.
+    #[cfg(test)]
+    pub(crate) fn sign_v1(
+        keypair: &Keypair,
+        fields: OpFields<P>,
+    ) -> Result<VerifiedOp<P>, BuildError> {
+        Self::build(keypair, OP_FORMAT_VERSION_1, &UNNAMED_SESSION, fields).map(VerifiedOp)
+    }
+
+    fn build(
+        keypair: &Keypair,
+        version: u8,
+        session: &SessionId,
+        mut fields: OpFields<P>,
+    ) -> Result<Self, BuildError> {
         fields.deps.sort_unstable();
         fields.deps.dedup();
         if fields.deps.len() > MAX_DEPS {
@@ -300,8 +332,8 @@ impl<P: Payload> Op<P> {
         }
         let author = keypair.peer_id();
         let mut encoded = Vec::new();
-        let deps = encode_body(&mut encoded, &author, &fields)?;
-        let signature = keypair.sign(&signing_message(&encoded));
+        let deps = encode_body(&mut encoded, version, &author, &fields)?;
+        let signature = keypair.sign(&signing_message(&encoded, session));
         encoded.extend_from_slice(&signature.0);
         assert!(
             encoded.len() <= MAX_OP_BYTES,
@@ -327,16 +359,21 @@ impl<P: Payload> Op<P> {
     }
 
     /// Decodes an op from untrusted bytes, cheapest check first: the envelope (format and
-    /// limits), then the signature, and only then the payload, whose validation may compile
-    /// formulas. A forged op costs a hash and a signature check, never a compile.
-    pub fn decode_verified(bytes: &[u8]) -> Result<VerifiedOp<P>, ReceiveError> {
-        Envelope::parse(bytes)?.into_verified()
+    /// limits), then the signature (for `session`), and only then the payload, whose
+    /// validation may compile formulas. A forged op costs a hash and a signature check, never
+    /// a compile.
+    pub fn decode_verified(
+        bytes: &[u8],
+        session: &SessionId,
+    ) -> Result<VerifiedOp<P>, ReceiveError> {
+        Envelope::parse(bytes)?.into_verified(session)
     }
 
-    /// Checks the author's signature over the op's body.
-    pub fn verify(&self) -> Result<(), VerifyError> {
+    /// Checks the author's signature over the op's body, for `session` (an op of
+    /// [`OP_FORMAT_VERSION_1`] names no session and verifies in any).
+    pub fn verify(&self, session: &SessionId) -> Result<(), VerifyError> {
         self.author()
-            .verify(&signing_message(self.body()), &self.signature())
+            .verify(&signing_message(self.body(), session), &self.signature())
     }
 
     /// The signed part of the encoding.
@@ -344,23 +381,24 @@ impl<P: Payload> Op<P> {
         &self.encoded[..self.encoded.len() - SIGNATURE_BYTES]
     }
 
-    /// Checks the signatures of `ops` in batches (see [`Envelope::into_verified_all`]): the
-    /// index of the first op whose signature does not verify, if any.
-    pub fn first_unsigned(ops: &[Self]) -> Option<usize> {
+    /// Checks the signatures of `ops` for `session` in batches (see
+    /// [`Envelope::into_verified_all`]): the index of the first op whose signature does not
+    /// verify, if any.
+    pub fn first_unsigned(ops: &[Self], session: &SessionId) -> Option<usize> {
         let bodies: Vec<(PeerId, &[u8], Signature)> = ops
             .iter()
             .map(|op| (op.author(), op.body(), op.signature()))
             .collect();
-        if all_signed(&bodies) {
+        if all_signed(&bodies, session) {
             None
         } else {
-            ops.iter().position(|op| op.verify().is_err())
+            ops.iter().position(|op| op.verify(session).is_err())
         }
     }
 
-    /// Checks the signature and returns the op as verified.
-    pub fn into_verified(self) -> Result<VerifiedOp<P>, VerifyError> {
-        self.verify()?;
+    /// Checks the signature for `session` and returns the op as verified.
+    pub fn into_verified(self, session: &SessionId) -> Result<VerifiedOp<P>, VerifyError> {
+        self.verify(session)?;
         Ok(VerifiedOp(self))
     }
 }
@@ -409,7 +447,7 @@ impl<'a> Envelope<'a> {
         }
         let mut r = Reader::new(bytes);
         let version = r.u8()?;
-        if version != OP_FORMAT_VERSION {
+        if version != OP_FORMAT_VERSION && version != OP_FORMAT_VERSION_1 {
             return Err(DecodeError::UnknownVersion { offset: 0, version });
         }
         let author = PeerId(r.array()?);
@@ -464,15 +502,18 @@ impl<'a> Envelope<'a> {
         self.deps.of(self.bytes)
     }
 
-    /// Checks the author's signature over the body.
-    pub fn verify(&self) -> Result<(), VerifyError> {
+    /// Checks the author's signature over the body, for `session`.
+    pub fn verify(&self, session: &SessionId) -> Result<(), VerifyError> {
         self.author
-            .verify(&signing_message(self.body()), &self.signature)
+            .verify(&signing_message(self.body(), session), &self.signature)
     }
 
-    /// Checks the signature, then decodes the payload: the op, verified.
-    pub fn into_verified<P: Payload>(self) -> Result<VerifiedOp<P>, ReceiveError> {
-        self.verify()?;
+    /// Checks the signature for `session`, then decodes the payload: the op, verified.
+    pub fn into_verified<P: Payload>(
+        self,
+        session: &SessionId,
+    ) -> Result<VerifiedOp<P>, ReceiveError> {
+        self.verify(session)?;
         Ok(VerifiedOp(self.into_op()?))
     }
 
@@ -482,19 +523,20 @@ impl<'a> Envelope<'a> {
     /// signature is checked again one by one, so forged ops cost their sender, not the others.
     pub fn into_verified_all<P: Payload>(
         envelopes: Vec<Self>,
+        session: &SessionId,
     ) -> Vec<Result<VerifiedOp<P>, ReceiveError>> {
         let bodies: Vec<(PeerId, &[u8], Signature)> = envelopes
             .iter()
             .map(|e| (e.author, e.body(), e.signature))
             .collect();
-        let all_signed = all_signed(&bodies);
+        let all_signed = all_signed(&bodies, session);
         envelopes
             .into_iter()
             .map(|e| {
                 if all_signed {
                     Ok(VerifiedOp(e.into_op()?))
                 } else {
-                    e.into_verified()
+                    e.into_verified(session)
                 }
             })
             .collect()
@@ -577,6 +619,11 @@ impl<P> Op<P> {
     pub fn encoded(&self) -> &[u8] {
         &self.encoded
     }
+    /// The format version the op was signed in ([`OP_FORMAT_VERSION`], or
+    /// [`OP_FORMAT_VERSION_1`] for an op signed before signatures named their session).
+    pub fn version(&self) -> u8 {
+        self.encoded[0]
+    }
 }
 
 impl<P: fmt::Debug> fmt::Debug for Op<P> {
@@ -596,10 +643,11 @@ impl<P: fmt::Debug> fmt::Debug for Op<P> {
 /// Appends the op's body (everything but the signature); returns where its deps lie.
 fn encode_body<P: Payload>(
     out: &mut Vec<u8>,
+    version: u8,
     author: &PeerId,
     fields: &OpFields<P>,
 ) -> Result<DepsAt, BuildError> {
-    out.push(OP_FORMAT_VERSION);
+    out.push(version);
     out.extend_from_slice(&author.0);
     put_varint(out, fields.seq);
     put_varint(out, fields.lamport);
@@ -642,12 +690,12 @@ fn check_deps(r: &mut Reader<'_>) -> Result<DepsAt, DecodeError> {
     Ok(deps)
 }
 
-/// True if every `(author, body, signature)` verifies, checked in batches
+/// True if every `(author, body, signature)` verifies for `session`, checked in batches
 /// ([`crate::identity::verify_batch`]).
-fn all_signed(bodies: &[(PeerId, &[u8], Signature)]) -> bool {
+fn all_signed(bodies: &[(PeerId, &[u8], Signature)], session: &SessionId) -> bool {
     let messages: Vec<Vec<u8>> = bodies
         .iter()
-        .map(|(_, body, _)| signing_message(body))
+        .map(|(_, body, _)| signing_message(body, session))
         .collect();
     let items: Vec<(PeerId, &[u8], Signature)> = bodies
         .iter()
@@ -657,9 +705,20 @@ fn all_signed(bodies: &[(PeerId, &[u8], Signature)]) -> bool {
     crate::identity::verify_batch(&items)
 }
 
-fn signing_message(body: &[u8]) -> Vec<u8> {
-    let mut message = Vec::with_capacity(SIGNING_CONTEXT.len() + body.len());
-    message.extend_from_slice(SIGNING_CONTEXT);
+/// What an op's signature covers: for [`OP_FORMAT_VERSION`] the context, the session's id
+/// and the body; for [`OP_FORMAT_VERSION_1`] (no session) the old context and the body. The
+/// body opens with the version byte, so neither layout's message can pass for the other's.
+fn signing_message(body: &[u8], session: &SessionId) -> Vec<u8> {
+    let v1 = body.first() == Some(&OP_FORMAT_VERSION_1);
+    let context = if v1 {
+        SIGNING_CONTEXT_V1
+    } else {
+        SIGNING_CONTEXT
+    };
+    let session: &[u8] = if v1 { &[] } else { session };
+    let mut message = Vec::with_capacity(context.len() + session.len() + body.len());
+    message.extend_from_slice(context);
+    message.extend_from_slice(session);
     message.extend_from_slice(body);
     message
 }
@@ -669,6 +728,9 @@ mod tests {
     use super::*;
     use crate::payload::test_payload::TestPayload;
     use proptest::prelude::*;
+
+    /// The session the tests sign for.
+    const S: SessionId = [5; SESSION_ID_BYTES];
 
     fn payload_strategy() -> impl Strategy<Value = TestPayload> {
         prop_oneof![
@@ -717,12 +779,12 @@ mod tests {
             deps: vec![],
             payload: Counted(TestPayload::Chat("a formula to compile".into())),
         };
-        let op = Op::sign(&k, fields).unwrap();
+        let op = Op::sign(&k, &S, fields).unwrap();
         let mut forged = op.encoded().to_vec();
         let last = forged.len() - 1;
         forged[last] ^= 1;
         let before = PAYLOAD_DECODES.load(std::sync::atomic::Ordering::SeqCst);
-        let refused = Op::<Counted>::decode_verified(&forged);
+        let refused = Op::<Counted>::decode_verified(&forged, &S);
         assert!(
             matches!(refused, Err(ReceiveError::Verify(_))),
             "{refused:?}"
@@ -730,7 +792,7 @@ mod tests {
         let after = PAYLOAD_DECODES.load(std::sync::atomic::Ordering::SeqCst);
         assert_eq!(after, before, "a forged op's payload was decoded");
         // The honest op decodes (its payload once) and verifies.
-        let honest = Op::<Counted>::decode_verified(op.encoded()).unwrap();
+        let honest = Op::<Counted>::decode_verified(op.encoded(), &S).unwrap();
         assert_eq!(honest.id(), op.id());
         assert_eq!(
             PAYLOAD_DECODES.load(std::sync::atomic::Ordering::SeqCst),
@@ -757,7 +819,7 @@ mod tests {
                 value: "x*x+y*y-1".into(),
             },
         };
-        Op::sign(&k, fields).unwrap().into_op()
+        Op::sign(&k, &S, fields).unwrap().into_op()
     }
 
     /// The slab's table holds positions hashed by an id's first eight bytes: ids that share
@@ -799,9 +861,57 @@ mod tests {
         let op = sample(1);
         assert_eq!(op.author(), Keypair::from_seed([1; 32]).peer_id());
         assert_eq!(op.deps(), &[OpId([1; 32]), OpId([2; 32])]);
-        assert!(op.verify().is_ok());
+        assert!(op.verify(&S).is_ok());
         assert_eq!(op.encoded()[0], OP_FORMAT_VERSION);
         assert!(op.encoded().len() < 1024);
+    }
+
+    #[test]
+    fn an_op_signed_for_one_session_verifies_in_no_other() {
+        let op = sample(1);
+        let other: SessionId = [6; SESSION_ID_BYTES];
+        assert!(op.verify(&S).is_ok());
+        assert!(op.verify(&other).is_err());
+        let envelope = Envelope::parse(op.encoded()).unwrap();
+        assert!(envelope.verify(&other).is_err());
+        assert!(matches!(
+            Op::<TestPayload>::decode_verified(op.encoded(), &other),
+            Err(ReceiveError::Verify(_))
+        ));
+        let batch = Envelope::into_verified_all::<TestPayload>(vec![envelope], &other);
+        assert!(matches!(batch[..], [Err(ReceiveError::Verify(_))]));
+        assert_eq!(
+            Op::first_unsigned(std::slice::from_ref(&op), &other),
+            Some(0)
+        );
+        assert_eq!(Op::first_unsigned(&[op], &S), None);
+    }
+
+    #[test]
+    fn an_op_signed_before_ops_named_their_session_still_reads_and_verifies() {
+        let k = Keypair::from_seed([4; 32]);
+        let fields = OpFields {
+            seq: 1,
+            lamport: 1,
+            timestamp: Timestamp(5),
+            deps: vec![],
+            payload: TestPayload::Chat("old".into()),
+        };
+        let old = Op::sign_v1(&k, fields.clone()).unwrap().into_op();
+        assert_eq!(old.version(), OP_FORMAT_VERSION_1);
+        let read = Op::<TestPayload>::decode(old.encoded()).unwrap();
+        assert_eq!(read, old);
+        // It names no session, so it verifies under any.
+        assert!(read.verify(&S).is_ok() && read.verify(&UNNAMED_SESSION).is_ok());
+        // The same fields signed now make another op, which names its session.
+        let new = Op::sign(&k, &S, fields).unwrap();
+        assert_eq!(new.version(), OP_FORMAT_VERSION);
+        assert_ne!(new.id(), old.id());
+        // Relabelled as signed now, its signature no longer verifies.
+        let mut relabelled = old.encoded().to_vec();
+        relabelled[0] = OP_FORMAT_VERSION;
+        let relabelled = Op::<TestPayload>::decode(&relabelled).unwrap();
+        assert!(relabelled.verify(&S).is_err() && relabelled.verify(&UNNAMED_SESSION).is_err());
     }
 
     #[test]
@@ -811,7 +921,7 @@ mod tests {
         let mut bytes = op.encoded().to_vec();
         bytes[1..33].copy_from_slice(&Keypair::from_seed([2; 32]).peer_id().0);
         let forged = Op::<TestPayload>::decode(&bytes).unwrap();
-        assert!(forged.verify().is_err());
+        assert!(forged.verify(&S).is_err());
         assert_ne!(forged.id(), op.id());
     }
 
@@ -854,7 +964,7 @@ mod tests {
             payload: TestPayload::Chat(String::new()),
         };
         assert_eq!(
-            Op::sign(&k, fields).unwrap_err(),
+            Op::sign(&k, &S, fields).unwrap_err(),
             BuildError::TooManyDeps(MAX_DEPS + 1)
         );
         let long = OpFields {
@@ -865,7 +975,7 @@ mod tests {
             payload: TestPayload::Chat("x".repeat(300)),
         };
         assert_eq!(
-            Op::sign(&k, long).unwrap_err(),
+            Op::sign(&k, &S, long).unwrap_err(),
             BuildError::PayloadNotCanonical
         );
     }
@@ -880,9 +990,9 @@ mod tests {
         ) {
             let k = Keypair::from_seed([seed; 32]);
             let deps = deps.into_iter().map(OpId).collect();
-            let op = Op::sign(&k, OpFields { seq, lamport, timestamp: Timestamp(ts), deps, payload }).unwrap().into_op();
+            let op = Op::sign(&k, &S, OpFields { seq, lamport, timestamp: Timestamp(ts), deps, payload }).unwrap().into_op();
             let back = Op::<TestPayload>::decode(op.encoded()).unwrap();
-            prop_assert!(back.verify().is_ok());
+            prop_assert!(back.verify(&S).is_ok());
             prop_assert_eq!(back.id(), op.id());
             prop_assert_eq!(back, op);
         }
@@ -892,7 +1002,7 @@ mod tests {
             if let Ok(op) = Op::<TestPayload>::decode(&bytes) {
                 // Whatever decodes is canonical: it re-encodes to the same bytes.
                 prop_assert_eq!(op.encoded(), &bytes[..]);
-                let _ = op.verify();
+                let _ = op.verify(&S);
             }
         }
 
@@ -904,7 +1014,7 @@ mod tests {
             bytes[i] = val;
             bytes.truncate(1 + cut % bytes.len());
             match Op::<TestPayload>::decode(&bytes) {
-                Ok(decoded) => prop_assert!(decoded.verify().is_err() || decoded == op),
+                Ok(decoded) => prop_assert!(decoded.verify(&S).is_err() || decoded == op),
                 Err(e) => prop_assert!(e.offset() <= bytes.len()),
             }
         }

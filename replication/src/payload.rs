@@ -4,7 +4,8 @@
 use std::fmt;
 
 use crate::codec::DecodeError;
-use crate::membership::Membership;
+use crate::identity::PeerId;
+use crate::membership::{Admission, Membership};
 use crate::op::OpId;
 
 /// Largest encoded payload accepted in an op, in bytes (typical ops are well under 1 KiB).
@@ -99,10 +100,37 @@ pub trait Payload: Clone + fmt::Debug + PartialEq + Eq {
         false
     }
 
+    /// True if this op, authored by `author`, makes the object of its [`Effect::Edit`] exist
+    /// (by the payload's own rules on who may make which object). A lease counts only once an
+    /// effective op that creates its object is in the acquire's causal past, so a member cannot
+    /// lease an id before its creator makes it. By default no op creates anything, and no lease
+    /// counts.
+    fn creates(&self, author: &PeerId) -> bool {
+        let _ = author;
+        false
+    }
+
     /// The expel or readmit this op asks for, if it is a membership op (its [`Effect`] is
     /// [`Effect::Independent`]). The log alone decides whether it counts: see
     /// [`crate::membership`].
     fn membership(&self) -> Option<Membership> {
+        None
+    }
+
+    /// The admission this op makes, if it is an admission op (its [`Effect`] is
+    /// [`Effect::Independent`]): a session that binds its authors accepts a key's ops only once
+    /// its first op names one of it ([`crate::membership`]).
+    fn admission(&self) -> Option<Admission> {
+        None
+    }
+
+    /// The payload of an admission op making `admission`, for a node that admits the keys it
+    /// meets; `None` for a payload that cannot admit anyone.
+    fn admitting(admission: Admission) -> Option<Self>
+    where
+        Self: Sized,
+    {
+        let _ = admission;
         None
     }
 }
@@ -120,7 +148,8 @@ pub mod test_payload {
     pub enum TestPayload {
         /// A chat line (independent of leases).
         Chat(String),
-        /// Sets object `object`'s value (an edit needing the lease).
+        /// Sets object `object`'s value (an edit needing the lease); it also makes the object
+        /// exist, for every author ([`Payload::creates`]).
         Set {
             /// The object.
             object: u64,
@@ -152,6 +181,8 @@ pub mod test_payload {
         },
         /// Expels or readmits a member (counts only from the session's founder).
         Member(Membership),
+        /// Admits a key ([`crate::membership::Admission`]).
+        Admit(Admission),
     }
 
     impl Payload for TestPayload {
@@ -198,6 +229,15 @@ pub mod test_payload {
                     out.push(u8::from(m.expel));
                     out.extend_from_slice(&m.nonce);
                 }
+                Self::Admit(a) => {
+                    out.push(8);
+                    out.extend_from_slice(&a.key.0);
+                    put_varint(out, a.grant_bytes);
+                    out.push(u8::from(a.nonce.is_some()));
+                    if let Some(nonce) = &a.nonce {
+                        out.extend_from_slice(nonce);
+                    }
+                }
             }
         }
 
@@ -232,6 +272,16 @@ pub mod test_payload {
                     expel: r.flag()?,
                     nonce: r.array()?,
                 }),
+                8 => {
+                    let key = PeerId(r.array()?);
+                    let grant_bytes = r.varint()?;
+                    let nonce = if r.flag()? { Some(r.array()?) } else { None };
+                    Self::Admit(Admission {
+                        key,
+                        grant_bytes,
+                        nonce,
+                    })
+                }
                 _ => {
                     return Err(DecodeError::Invalid {
                         offset: tag_offset,
@@ -245,7 +295,7 @@ pub mod test_payload {
 
         fn effect(&self) -> Effect {
             match self {
-                Self::Chat(_) | Self::Member(_) => Effect::Independent,
+                Self::Chat(_) | Self::Member(_) | Self::Admit(_) => Effect::Independent,
                 Self::Set { object, .. } | Self::Delete { object } => Effect::Edit {
                     object: ObjectId(*object),
                 },
@@ -274,11 +324,26 @@ pub mod test_payload {
             matches!(self, Self::Delete { .. })
         }
 
+        fn creates(&self, _author: &PeerId) -> bool {
+            matches!(self, Self::Set { .. })
+        }
+
         fn membership(&self) -> Option<Membership> {
             match self {
                 Self::Member(m) => Some(*m),
                 _ => None,
             }
+        }
+
+        fn admission(&self) -> Option<Admission> {
+            match self {
+                Self::Admit(a) => Some(*a),
+                _ => None,
+            }
+        }
+
+        fn admitting(admission: Admission) -> Option<Self> {
+            Some(Self::Admit(admission))
         }
     }
 

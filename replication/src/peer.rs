@@ -147,8 +147,10 @@ impl Asked {
 }
 
 impl<P: Payload> Peer<P> {
-    /// A peer in session `session_id` with an existing (for example reloaded) log.
-    pub fn new(keypair: Keypair, session_id: SessionId, log: Log<P>) -> Self {
+    /// A peer in session `session_id` with an existing (for example reloaded) log, which it
+    /// names the session of ([`Log::set_session_id`]).
+    pub fn new(keypair: Keypair, session_id: SessionId, mut log: Log<P>) -> Self {
+        log.set_session_id(session_id);
         Self {
             keypair,
             session_id,
@@ -682,24 +684,24 @@ mod tests {
         let mut peers: Vec<TPeer> = (1..=3)
             .map(|i| Peer::new(Keypair::from_seed([i; 32]), session, Log::default()))
             .collect();
-        // Offline: A and C both take object 1 and edit it; B chats.
+        // Offline: each peer edits object 1 (which makes it, as far as it knows) and takes it.
         let now = Timestamp(1_000);
         for (i, p) in peers.iter_mut().enumerate() {
             let object = 1;
+            p.author(
+                now,
+                TestPayload::Set {
+                    object,
+                    value: format!("peer {i}"),
+                },
+            )
+            .unwrap();
             p.author(
                 now,
                 TestPayload::Acquire {
                     object,
                     strong: false,
                     ttl_micros: 10_000_000,
-                },
-            )
-            .unwrap();
-            p.author(
-                now,
-                TestPayload::Set {
-                    object,
-                    value: format!("peer {i}"),
                 },
             )
             .unwrap();
@@ -1125,7 +1127,8 @@ mod tests {
         peers[0].connect(Timestamp(0), carol).unwrap();
         let c = Keypair::from_seed([3; 32]);
         peers[0].handle_input(Timestamp(0), carol, &hello_from(c.peer_id(), [5; 16]));
-        let op = crate::log::tests::signed(&c, 1, 1, 0, vec![], TestPayload::Chat("hi".into()));
+        let chat = TestPayload::Chat("hi".into());
+        let op = crate::log::tests::signed_in(&[5; 16], &c, (1, 1, 0), vec![], chat);
         let batch = Message::Ops {
             batch_no: 0,
             ops: vec![op.encoded().to_vec()],
@@ -1344,7 +1347,8 @@ mod tests {
     /// message can, and gets all of it.
     #[test]
     fn a_peer_syncs_fully_with_a_log_of_more_authors_than_a_message_names() {
-        let session = [5; 16];
+        // The log's ops were signed without a session named.
+        let session = crate::op::UNNAMED_SESSION;
         let mut peers = vec![
             TPeer::new(
                 Keypair::from_seed([1; 32]),
@@ -1408,7 +1412,7 @@ mod tests {
                     object: 1,
                     value: format!("backdated {i}"),
                 };
-                crate::log::tests::signed(&key, 1, 1, u64::from(i), vec![], set)
+                crate::log::tests::signed_in(&[5; 16], &key, (1, 1, u64::from(i)), vec![], set)
             })
             .collect();
         for (i, op) in backdated.iter().enumerate() {
@@ -1730,6 +1734,7 @@ mod tests {
         // Two ops offered as a fork that are none, or whose signatures fail, note no fork and
         // count against their sender.
         let third = Keypair::from_seed([3; 32]);
+        let session = peers[3].log().session_id();
         let forged = |seq: u64, text: &str, flip: bool| {
             let fields = crate::op::OpFields {
                 seq,
@@ -1738,7 +1743,7 @@ mod tests {
                 deps: Vec::new(),
                 payload: TestPayload::Chat(text.into()),
             };
-            let mut bytes = crate::Op::sign(&third, fields).unwrap().encoded().to_vec();
+            let mut bytes = (crate::Op::sign(&third, &session, fields).unwrap().encoded()).to_vec();
             *bytes.last_mut().unwrap() ^= u8::from(flip);
             bytes
         };
@@ -1775,7 +1780,7 @@ mod tests {
                 deps: Vec::new(),
                 payload: TestPayload::Chat(text.into()),
             };
-            crate::Op::sign(&hostile, fields).unwrap()
+            crate::Op::sign(&hostile, &[9; 16], fields).unwrap()
         };
         let peers = [fork("a"), fork("b")]
             .into_iter()

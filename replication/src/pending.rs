@@ -353,9 +353,13 @@ mod tests {
             deps: vec![],
             payload: TestPayload::Chat(format!("{seq}")),
         };
-        Op::sign(&Keypair::from_seed([seed; 32]), fields)
-            .unwrap()
-            .into_op()
+        Op::sign(
+            &Keypair::from_seed([seed; 32]),
+            &crate::op::UNNAMED_SESSION,
+            fields,
+        )
+        .unwrap()
+        .into_op()
     }
 
     #[test]

@@ -18,10 +18,13 @@
 //! its checksum only catches corruption. Join only from a snapshot you made yourself or got
 //! from a peer you trust; compare [`crate::materialize::SceneHash`]es with other peers later.
 //!
-//! Format (version 1), integers as varints: `SCULPTSNAP [1] [cut lamport] [max timestamp]`
+//! Format (version 2), integers as varints: `SCULPTSNAP [1] [cut lamport] [max timestamp]`
 //! `[n ≤ MAX_SNAPSHOT_AUTHORS][author 32][seq][lamport]*` (sorted) `[n][id 32][author idx][kind 0/1/2]*`
 //! (sorted by id) `[n][head id 32]*` `[fold state]` `[n][len][op]*` (the effective edits in
-//! linear order) `[len][scene snapshot]` `[blake3 of everything before, 32]`.
+//! linear order) `[len][scene snapshot]` `[blake3 of everything before, 32]`. Version 1 is the
+//! same without the fold state's live leases per author ([`FoldState::encode`]); a log joined
+//! from it counts only the leases taken after its cut towards
+//! [`crate::lease::MAX_LIVE_LEASES_PER_AUTHOR`].
 
 use crate::causal::VersionVector;
 use crate::codec::{DecodeError, Reader, put_bytes, put_varint};
@@ -38,8 +41,9 @@ use std::collections::BTreeMap;
 
 /// Magic bytes that open an encoded snapshot.
 pub const SNAPSHOT_MAGIC: &[u8; 10] = b"SCULPTSNAP";
-/// The snapshot format version.
-pub const SNAPSHOT_FORMAT_VERSION: u8 = 1;
+/// The snapshot format version (2: the fold state names each author's live leases; version 1,
+/// without them, still decodes).
+pub const SNAPSHOT_FORMAT_VERSION: u8 = 2;
 /// Largest encoded snapshot accepted or produced, in bytes (256 MiB).
 pub const MAX_SNAPSHOT_BYTES: usize = 256 * 1024 * 1024;
 /// Bytes of checksum at the end of a snapshot.
@@ -208,7 +212,7 @@ impl<P: Payload> Snapshot<P> {
         }
         let version_offset = r.offset();
         let version = r.u8()?;
-        if version != SNAPSHOT_FORMAT_VERSION {
+        if version != SNAPSHOT_FORMAT_VERSION && version != 1 {
             return Err(DecodeError::UnknownVersion {
                 offset: version_offset,
                 version,
@@ -225,7 +229,7 @@ impl<P: Payload> Snapshot<P> {
         let authors = read_authors(&mut r, lamport)?;
         let ops = read_ops(&mut r, &authors)?;
         let heads = read_heads(&mut r, &ops)?;
-        let state = FoldState::decode(&mut r)?;
+        let state = FoldState::decode(&mut r, version >= 2)?;
         let (edits, edits_by_object) = read_edits::<P>(&mut r, lamport, &authors, &ops)?;
         let scene = r
             .bytes("scene length", MAX_SCENE_SNAPSHOT_BYTES as u64)?

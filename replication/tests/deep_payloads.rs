@@ -80,7 +80,8 @@ fn the_deepest_formulas_decode_validate_and_fold_on_a_small_stack() {
     let scene = on_small_stack(|| {
         // Nothing cached: the decoder and the fold each compile every formula.
         compiled::clear();
-        let op = Op::<ShapePayload>::decode_verified(&bytes).unwrap();
+        let op =
+            Op::<ShapePayload>::decode_verified(&bytes, &replication::op::UNNAMED_SESSION).unwrap();
         compiled::clear();
         let mut log = SLog::default();
         let mut scene = SScene::fold(&log).unwrap();

@@ -44,6 +44,7 @@ fn wall_now() -> Timestamp {
 fn authored_log(n_ops: usize) -> Log<TestPayload> {
     let alice = Keypair::from_seed([1; 32]);
     let mut log = Log::default();
+    log.set_session_id(session_keys(INVITE).session_id());
     for op_idx in 0..n_ops {
         let text = format!("op {op_idx:06}: a line of a sculpting session's chat history");
         log.author(

@@ -7,7 +7,9 @@ mod net_support;
 
 use net_support::*;
 use replication::net::admission::AdmissionError;
-use replication::net::node::{DialError, DisconnectReason, NodeEvent, RefusalKind};
+use replication::net::node::{
+    ADMISSION_DELAY_MILLIS, DialError, DisconnectReason, NodeEvent, RefusalKind,
+};
 use replication::payload::test_payload::TestPayload;
 use replication::{Keypair, Log, Timestamp};
 
@@ -238,6 +240,7 @@ async fn a_connection_killed_mid_sync_reconnects_and_converges() {
     // which verifies only about 40 signatures per second.
     const N_OPS: usize = if cfg!(debug_assertions) { 150 } else { 5_000 };
     let mut log = Log::default();
+    log.set_session_id(session_keys(INVITE).session_id());
     let alice = Keypair::from_seed([1; 32]);
     for i in 0..N_OPS {
         let payload = TestPayload::Chat(format!("line {i}"));
@@ -308,6 +311,7 @@ async fn a_node_with_a_store_persists_authored_and_received_ops() {
     b.handle.shutdown().await.unwrap();
     // Reopened, the store holds every op B authored or received, signatures checked.
     let mut reloaded = Log::<TestPayload>::default();
+    reloaded.set_session_id(session_keys(INVITE).session_id());
     OpStore::open_into(&path, Timestamp(0), &mut reloaded).unwrap();
     let stored: std::collections::BTreeSet<_> = reloaded.entries().map(|e| e.op.id()).collect();
     assert_eq!(stored, held);
@@ -337,7 +341,83 @@ async fn a_received_batch_of_ops_costs_one_fsync_not_one_per_op() {
     );
     b.handle.shutdown().await.unwrap();
     let mut reloaded = Log::<TestPayload>::default();
+    reloaded.set_session_id(session_keys(INVITE).session_id());
     OpStore::open_into(&path, Timestamp(0), &mut reloaded).unwrap();
     assert_eq!(reloaded.len(), n_ops);
     std::fs::remove_file(&path).unwrap();
+}
+
+/// A session that binds its authors: a fresh key that a node meets is admitted by it, then
+/// syncs and edits; a key that nobody admitted has its ops refused by every node alike.
+#[tokio::test]
+async fn a_node_admits_a_fresh_key_and_every_node_refuses_a_key_nobody_admitted() {
+    use replication::membership::Admission;
+    let founder = Keypair::from_seed([1; 32]);
+    let nonce = [7; 32];
+    let invite = replication::net::Invite::for_founder(&founder.peer_id(), &nonce).to_string();
+    let bound = || {
+        let invite = replication::net::Invite::parse(&invite).unwrap();
+        assert!(invite.binds_authors());
+        let mut log = Log::default();
+        log.set_founder(invite.founder_commitment()).unwrap();
+        log.bind_authors(replication::log::MAX_LOG_BYTES).unwrap();
+        log
+    };
+    let set = |object, value: &str| TestPayload::Set {
+        object,
+        value: value.into(),
+    };
+    let a = node_with(1, &invite, bound());
+    let founding = TestPayload::Admit(Admission {
+        key: founder.peer_id(),
+        grant_bytes: 0,
+        nonce: Some(nonce),
+    });
+    a.handle.author(founding).await.unwrap();
+    a.handle.author(set(1, "founder's")).await.unwrap();
+    let b = node_with(2, &invite, bound());
+    let refused = b.handle.author(set(2, "too soon")).await.unwrap_err();
+    assert!(
+        refused
+            .to_string()
+            .contains("waiting for a member to admit this peer"),
+        "{refused}"
+    );
+    b.handle.dial(a.handle.local_addr()).await.unwrap();
+    let b_id = b.handle.peer_id();
+    eventually("b holds its admission", || async {
+        b.handle
+            .with_peer(move |p| p.log().is_admitted(&b_id))
+            .await
+            .unwrap()
+    })
+    .await;
+    b.handle.author(set(2, "newcomer's")).await.unwrap();
+    converge(&[&a.handle, &b.handle], 4).await;
+    assert_eq!(a.handle.stats().await.unwrap().n_keys_admitted, 1);
+    // A key minted offline writes in its own log (which does not bind) and sends its ops the
+    // moment it connects: every node refuses them, and still does once b admits the key (a
+    // does not: one key per source address is admitted per interval, and b's took this
+    // address's), since the first of them names no admission.
+    let mut own = Log::default();
+    let founder_of = replication::net::Invite::parse(&invite).unwrap();
+    own.set_founder(founder_of.founder_commitment()).unwrap();
+    let c = node_with(3, &invite, own);
+    let minted = c.handle.author(set(3, "sybil")).await.unwrap();
+    c.handle.author(set(3, "sybil again")).await.unwrap();
+    c.handle.dial(a.handle.local_addr()).await.unwrap();
+    c.handle.dial(b.handle.local_addr()).await.unwrap();
+    eventually("b admits c's key", || async {
+        b.handle.stats().await.unwrap().n_keys_admitted == 1
+    })
+    .await;
+    let last = c.handle.author(set(3, "sybil, admitted")).await.unwrap();
+    converge(&[&a.handle, &b.handle], 5).await;
+    tokio::time::sleep(std::time::Duration::from_millis(2 * ADMISSION_DELAY_MILLIS)).await;
+    for h in [&a.handle, &b.handle] {
+        let held = op_ids(h).await;
+        assert!(!held.contains(&minted) && !held.contains(&last));
+        assert_eq!(held.len(), 5);
+    }
+    assert_eq!(a.handle.stats().await.unwrap().n_keys_admitted, 1);
 }

@@ -353,8 +353,12 @@ fn payloads_are_small_and_hostile_bytes_are_refused() {
 fn ops_signed_before_grids_still_verify_and_fold() {
     let create = include_bytes!("../../tests/data/format-v1/create.bin");
     let set = include_bytes!("../../tests/data/format-v1/set.bin");
-    let create = replication::Op::<ShapePayload>::decode_verified(create).unwrap();
-    let set = replication::Op::<ShapePayload>::decode_verified(set).unwrap();
+    let create =
+        replication::Op::<ShapePayload>::decode_verified(create, &replication::op::UNNAMED_SESSION)
+            .unwrap();
+    let set =
+        replication::Op::<ShapePayload>::decode_verified(set, &replication::op::UNNAMED_SESSION)
+            .unwrap();
     assert_eq!(create.author(), Keypair::from_seed([9; 32]).peer_id());
     let ShapePayload::Create {
         object: 7, data, ..
@@ -680,6 +684,81 @@ fn a_member_cannot_take_an_object_id_another_peer_is_about_to_use() {
     assert_eq!(object_data(&scene, own.id()).unwrap().name, "stolen");
 }
 
+/// A member who predicts the ids an honest peer will use next cannot lease them first: an
+/// acquire counts only once its object's creation (a `Create`, or the first part of one
+/// authored in parts, that may make the id) is in its causal past, so the honest creations,
+/// which saw the strong acquires, make their objects and edit them.
+#[test]
+fn strong_acquires_of_predicted_ids_do_not_reject_the_creations() {
+    let (honest, member) = (key(0), key(1));
+    let mut log = SLog::default();
+    log.author(&honest, Timestamp(1), ShapePayload::Chat("hi".into()))
+        .unwrap();
+    let next = IdSource::next_in(&log, honest.peer_id());
+    let predicted: Vec<u64> = (0..3).map(|n| next.skip(n).unwrap().id()).collect();
+    for &object in &predicted {
+        let hoard = ShapePayload::Acquire {
+            object,
+            strong: true,
+            ttl_micros: u64::MAX,
+        };
+        log.author(&member, Timestamp(2), hoard).unwrap();
+    }
+    // The first two whole, the third in parts (a mesh): every op sees every acquire.
+    let mut ids = next;
+    let mut honest_ops = Vec::new();
+    for (i, &object) in predicted.iter().enumerate() {
+        assert_eq!(ids.id(), object);
+        let change = if i < 2 {
+            vec![ids.create(sphere_data(), None)]
+        } else {
+            let ShapePayload::Create { data, .. } = mesh_ball(object) else {
+                unreachable!()
+            };
+            parts::split(ShapePayload::Create {
+                object,
+                counter: Some(ids.counter),
+                data,
+                group: None,
+            })
+            .unwrap()
+        };
+        for payload in change {
+            honest_ops.push(log.author(&honest, Timestamp(3), payload).unwrap().0);
+        }
+        honest_ops.push(
+            log.author(&honest, Timestamp(4), carve_at(object, DVec3::ZERO))
+                .unwrap()
+                .0,
+        );
+        ids = ids.skip(1).unwrap();
+    }
+    assert!(honest_ops.iter().all(|op| log.is_active(&op.id())));
+    let scene = SScene::fold(&log).unwrap();
+    for object in predicted.iter().copied() {
+        assert!(object_data(&scene, object).is_some(), "object {object}");
+    }
+    // An acquire that saw a creation counts: the member takes the first object, and binds the
+    // edits that see it.
+    let take = ShapePayload::Acquire {
+        object: predicted[2],
+        strong: true,
+        ttl_micros: 60_000_000,
+    };
+    log.author(&member, Timestamp(5), take).unwrap();
+    let (bound, _) = log
+        .author(&honest, Timestamp(6), carve_at(predicted[2], DVec3::ZERO))
+        .unwrap();
+    assert!(!log.is_active(&bound.id()));
+    // The first part creates for its author only, and the later parts for nobody.
+    let mut parts =
+        (honest_ops.iter()).filter(|op| matches!(op.payload(), ShapePayload::Part { .. }));
+    let first_part = parts.next().unwrap();
+    assert!(first_part.payload().creates(&honest.peer_id()));
+    assert!(!first_part.payload().creates(&member.peer_id()));
+    assert!(parts.all(|op| !op.payload().creates(&honest.peer_id())));
+}
+
 /// Derived ids: the derived bit set, the group bit clear, one per author and counter, and a
 /// `Create` with a counter encodes after every older variant, so ops signed before still
 /// decode to what they said.
@@ -796,7 +875,11 @@ fn a_received_edit_is_compiled_once_from_its_bytes_to_the_scene() {
     let mut log = SLog::default();
     let mut scene = SScene::fold(&log).unwrap();
     for bytes in &bytes {
-        let op = replication::Op::<ShapePayload>::decode_verified(bytes).unwrap();
+        let op = replication::Op::<ShapePayload>::decode_verified(
+            bytes,
+            &replication::op::UNNAMED_SESSION,
+        )
+        .unwrap();
         let ins = log.insert(Timestamp(30), op, Origin(1)).unwrap();
         scene.apply_insertion(&log, &ins);
     }

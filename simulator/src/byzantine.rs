@@ -40,10 +40,26 @@
 //!   simulator's logs), which drops the rest unacknowledged; each chain depends on an op
 //!   nobody holds, so what the receiver takes waits in its pending buffer until it expires
 //!   (held, never relayed: the flood costs honest links nothing).
+//! - Sybil keys it admits itself: its core authors an admission of a fresh key with a grant of
+//!   [`SYBIL_GRANT_BYTES`] (in a session that binds its authors, out of its own budget), and the
+//!   key sends two chats of about 2 KiB naming it, the second past the grant: every peer must
+//!   take the first and refuse the second alike;
+//! - a fresh key's admission of itself, with the founder's nonce or a made-up one (in a session
+//!   that binds its authors, refused everywhere: only the founder's key proves the founder);
+//! - a cap fill: its core authors chats of about 2 KiB until its own budget is spent;
+//! - an op signed for another session (its signature covers that session's id): every peer
+//!   must refuse it;
+//! - with `lease_attacks`, strong acquires of the ids the target's user will create next, and
+//!   of every object at once: the first bind nobody (those objects do not exist yet), and of
+//!   the second at most [`replication::lease::MAX_LIVE_LEASES_PER_AUTHOR`] count.
+//!
+//! In a session that binds its authors (even seeds with `expel`, see
+//! [`crate::sim::SESSION_CAP_BYTES`]), every fresh key above whose first op names no admission
+//! is refused by every peer.
 
 use fdsl::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
 use replication::causal::MAX_VV_AUTHORS;
-use replication::membership::Membership;
+use replication::membership::{Admission, Membership};
 use replication::op::{MAX_DEPS, OpFields};
 use replication::shape::ShapePayload;
 use replication::sync::message::{MAX_BATCH_OPS, Message};
@@ -83,6 +99,13 @@ pub const SMALL_OP_BYTE_QUOTA: OpByteQuota = OpByteQuota {
     bytes_per_sec: 128 * 1024,
     burst_bytes: 512 * 1024,
 };
+/// What the byzantine member grants each Sybil key it admits: more than one of its 2 KiB
+/// chats, less than two.
+pub const SYBIL_GRANT_BYTES: u64 = 4 * 1024;
+/// Chats of about 2 KiB one cap fill authors at most.
+pub const CAP_FILL_OPS: usize = 16;
+/// The session id the member signs an op for that it sends into this one.
+const OTHER_SESSION_ID: replication::sync::message::SessionId = [0xee; 16];
 /// Object ids the byzantine member creates (above every honest user's).
 const BOMB_OBJECT_BASE: u64 = 64 << 32;
 /// The compile bomb: a short loop, unrolled as far as an object's formula may
@@ -140,6 +163,12 @@ enum Attack {
     HelloFlood,
     WrongIdHello,
     ByteFlood,
+    AdmittedSybil,
+    SelfAdmitted,
+    CapFill,
+    LeasePredicted,
+    LeaseAll,
+    OtherSession,
 }
 
 impl Attack {
@@ -161,6 +190,12 @@ impl Attack {
             Attack::HelloFlood => "hello-flood",
             Attack::WrongIdHello => "wrong-id-hello",
             Attack::ByteFlood => "byte-flood",
+            Attack::AdmittedSybil => "admitted-sybil",
+            Attack::SelfAdmitted => "self-admitted",
+            Attack::CapFill => "cap-fill",
+            Attack::LeasePredicted => "lease-predicted",
+            Attack::LeaseAll => "lease-all",
+            Attack::OtherSession => "other-session",
         }
     }
 }
@@ -186,7 +221,8 @@ pub(crate) struct Byzantine {
     hoarder: Chain,
     /// The compile bomb's text, searched once.
     bomb: Option<Option<String>>,
-    /// Ops every honest peer must refuse (stamped before their causal past).
+    /// Ops every honest peer must refuse (stamped before their causal past, or signed for
+    /// another session).
     pub(crate) must_refuse: Vec<OpId>,
     /// Pairs of ops that equivocate (same key, same sequence number).
     pub(crate) forks: Vec<(OpId, OpId)>,
@@ -204,7 +240,13 @@ struct Frontier {
 }
 
 impl Byzantine {
-    pub(crate) fn new(key: Keypair, keys: SimRng) -> Byzantine {
+    /// The member with key `key`, its fresh keys drawn from `keys`, its core over `log` (of
+    /// the run's session: its founder and binding named).
+    pub(crate) fn new(
+        key: Keypair,
+        keys: SimRng,
+        log: replication::Log<ShapePayload>,
+    ) -> Byzantine {
         let mut keys = keys;
         let hoarder = Chain {
             key: fresh_key(&mut keys),
@@ -213,7 +255,7 @@ impl Byzantine {
             timestamp: 0,
         };
         Byzantine {
-            core: Peer::new(key, SESSION_ID, replication::Log::default()),
+            core: Peer::new(key, SESSION_ID, log),
             panicked: None,
             wake_at: None,
             keys,
@@ -243,6 +285,14 @@ impl Byzantine {
             timestamp: ops().map(|op| op.timestamp().0).max().unwrap_or(0),
             heads: heads.clone(),
         }
+    }
+
+    /// Authors `payload` through its core (sent to its connections by the core's sync).
+    fn author(&mut self, now: u64, payload: ShapePayload) -> Option<OpId> {
+        let authored = guarded_call(&mut self.panicked, &mut self.core, |p| {
+            p.author(Timestamp(now), payload)
+        })?;
+        authored.ok().map(|(op, _)| op.id())
     }
 
     fn sybil(&mut self) -> Option<Keypair> {
@@ -275,7 +325,7 @@ fn sign(
         deps,
         payload,
     };
-    let op = Op::sign(key, fields).ok()?;
+    let op = Op::sign(key, &SESSION_ID, fields).ok()?;
     Some((op.id(), op.encoded().to_vec()))
 }
 
@@ -403,10 +453,19 @@ impl Simulation {
                 Attack::HelloFlood,
                 Attack::WrongIdHello,
                 Attack::ByteFlood,
+                Attack::AdmittedSybil,
+                Attack::SelfAdmitted,
+                Attack::CapFill,
+                Attack::OtherSession,
             ]);
         }
         if faults.lease_attacks {
-            menu.extend([Attack::BackdatedLease, Attack::Hoard]);
+            menu.extend([
+                Attack::BackdatedLease,
+                Attack::Hoard,
+                Attack::LeasePredicted,
+                Attack::LeaseAll,
+            ]);
         }
         if faults.forks {
             menu.push(Attack::Fork);
@@ -441,6 +500,8 @@ impl Simulation {
             self.stats.n_hostile_messages += 1;
             self.push(at, deliver(h, to, epoch, bytes, None));
         }
+        // What the core authored goes out through its sync.
+        self.byzantine_flush();
         true
     }
 
@@ -652,6 +713,74 @@ impl Simulation {
                     out.push((to, batch(batch_no + batch_idx, ops)));
                 }
                 Some(out)
+            }
+            Attack::AdmittedSybil => {
+                let key = byz.sybil()?;
+                let admission = Admission {
+                    key: key.peer_id(),
+                    grant_bytes: SYBIL_GRANT_BYTES,
+                    nonce: None,
+                };
+                byz.author(now, ShapePayload::Admit(Box::new(admission)))?;
+                // After the admission, so its first op names it (the core's only head now).
+                let f = byz.frontier();
+                let timestamp = now.max(f.timestamp);
+                let chat = |i: u64| ShapePayload::Chat(format!("{i}{}", "s".repeat(2_000)));
+                let (first, within) = sign(&key, 1, f.lamport + 1, timestamp, f.heads, chat(1))?;
+                let (_, past) = sign(&key, 2, f.lamport + 2, timestamp, vec![first], chat(2))?;
+                Some(vec![
+                    (to, hello(me)),
+                    (to, batch(batch_no, vec![within, past])),
+                ])
+            }
+            Attack::SelfAdmitted => {
+                let key = byz.sybil()?;
+                let mut nonce = FOUNDER_NONCE;
+                if rng.chance(500) {
+                    rng.fill(&mut nonce);
+                }
+                let admission = Admission {
+                    key: key.peer_id(),
+                    grant_bytes: u64::MAX,
+                    nonce: Some(nonce),
+                };
+                let payload = ShapePayload::Admit(Box::new(admission));
+                let timestamp = now.max(f.timestamp);
+                one(sign(&key, 1, f.lamport + 1, timestamp, f.heads, payload))
+            }
+            Attack::CapFill => {
+                let text = "f".repeat(2_000);
+                let n_authored = (0..CAP_FILL_OPS)
+                    .map_while(|_| byz.author(now, ShapePayload::Chat(text.clone())))
+                    .count();
+                (n_authored > 0).then(Vec::new)
+            }
+            Attack::LeasePredicted => {
+                let next = victim?;
+                for n in 0..3 {
+                    byz.author(now, hoard(next.skip(n)?.id()))?;
+                }
+                Some(Vec::new())
+            }
+            Attack::OtherSession => {
+                // Well formed and signed by a fresh key, but for another session's id.
+                let fields = OpFields {
+                    seq: 1,
+                    lamport: f.lamport + 1,
+                    timestamp: Timestamp(now.max(f.timestamp)),
+                    deps: f.heads,
+                    payload: ShapePayload::Chat("from another session".into()),
+                };
+                let key = byz.sybil()?;
+                let op = Op::sign(&key, &OTHER_SESSION_ID, fields).ok()?;
+                byz.must_refuse.push(op.id());
+                one(Some((op.id(), op.encoded().to_vec())))
+            }
+            Attack::LeaseAll => {
+                for &object in &objects {
+                    byz.author(now, hoard(object))?;
+                }
+                Some(Vec::new())
             }
             Attack::Fork => {
                 let key = byz.sybil()?;

@@ -67,7 +67,7 @@ pub(crate) fn finish(sim: Simulation) -> Report {
         if n_refused > 0 {
             failures.push(format!(
                 "peer {i}: {n_refused} hostile ops accepted that are stamped before their \
-                 causal past"
+                 causal past or signed for another session"
             ));
         }
         if h.snapshot_cut.is_none() {
@@ -103,7 +103,9 @@ pub(crate) fn finish(sim: Simulation) -> Report {
     if sim.hostile.as_ref().is_some_and(|h| h.byzantine.is_some()) {
         check_erasure(&sim, &mut failures);
         check_stolen_ids(&sim, &mut failures);
+        check_creations(&sim, &mut failures);
     }
+    check_cap(&sim, &mut failures);
     if sim.faults.expel {
         check_expels(&sim, &mut failures);
     }
@@ -207,6 +209,48 @@ fn check_stolen_ids(sim: &Simulation, failures: &mut Vec<String>) {
         if stolen > 0 {
             failures.push(format!(
                 "peer {i}: {stolen} objects created by a member under another peer's id"
+            ));
+        }
+    }
+}
+
+/// No honest creation of an object under its own id is refused: nobody's lease counts on an
+/// object before its creation (the byzantine member strongly acquires the ids honest users
+/// take next).
+fn check_creations(sim: &Simulation, failures: &mut Vec<String>) {
+    let honest: BTreeSet<PeerId> = sim.honest.iter().map(|h| h.peer.peer_id()).collect();
+    for (i, h) in sim.honest.iter().enumerate() {
+        let refused = (h.peer.log().entries())
+            .filter(|e| honest.contains(&e.op.author()) && e.mark != Mark::Effective)
+            .filter(|e| {
+                matches!(
+                    e.op.payload(),
+                    ShapePayload::Create {
+                        counter: Some(_),
+                        ..
+                    }
+                )
+            })
+            .count();
+        if refused > 0 {
+            failures.push(format!(
+                "peer {i}: {refused} honest creations of their own ids refused"
+            ));
+        }
+    }
+}
+
+/// In a session that binds its authors, no honest log holds more bytes of ops than the
+/// session's cap, whatever the members and their Sybil keys write.
+fn check_cap(sim: &Simulation, failures: &mut Vec<String>) {
+    for (i, h) in sim.honest.iter().enumerate() {
+        let log = h.peer.log();
+        if let Some(cap) = log.founder_budget()
+            && log.n_bytes() > cap
+        {
+            failures.push(format!(
+                "peer {i}: {} bytes of ops, over the session's cap of {cap}",
+                log.n_bytes()
             ));
         }
     }
@@ -608,6 +652,7 @@ fn build_report(
         n_void_ops: (sim.honest[0].peer.log().entries())
             .filter(|e| sim.honest[0].peer.log().is_void(&e.op.id()))
             .count(),
+        session_bytes: (log0.and_then(Log::founder_budget)).zip(log0.map(Log::n_bytes)),
         catch_up: sim.honest.iter().map(|h| h.catch_up).collect(),
         failures,
         samples: sim.samples,

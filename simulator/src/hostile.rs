@@ -12,7 +12,10 @@
 //!   (a member with a stale clock) and lease fights on the hot object. The hostile peer knows
 //!   the invite, so admission lets it in: these are a member's ops, accepted and replicated
 //!   like any other, and the checkers require every honest peer to agree on them (at most
-//!   [`MAX_HOSTILE_OPS`], all resent every time, so none waits on a lost predecessor).
+//!   [`MAX_HOSTILE_OPS`], all resent every time, so none waits on a lost predecessor). With a
+//!   byzantine core, which authors under the member's connection key, these are signed with a
+//!   second key of the member's (in a session that binds its authors, one nobody admitted:
+//!   refused by every peer).
 //!
 //! With [`crate::config::Faults::flood`] it sends a burst of [`FLOOD_MESSAGES`] at one
 //! instant to one peer, far over the per-connection rate limit, which must hold.
@@ -40,6 +43,10 @@ const HOSTILE_USER_IDX: usize = 62;
 /// The hostile peer's state.
 pub(crate) struct Hostile {
     key: Keypair,
+    /// The key of its own ops: its connection key, or with a byzantine core (which authors
+    /// under the connection key) a second key of the member's, so that the two never sign
+    /// one seq twice ([`Hostile::own_ops_under`]).
+    own_key: Keypair,
     captured: Vec<Vec<u8>>,
     /// Its own ops, encoded, in seq order.
     own: Vec<Vec<u8>>,
@@ -57,6 +64,7 @@ impl Hostile {
     pub(crate) fn new(key: Keypair) -> Hostile {
         Hostile {
             user: User::new(key.peer_id()),
+            own_key: Keypair::from_seed(key.seed()),
             key,
             captured: Vec::new(),
             own: Vec::new(),
@@ -71,6 +79,16 @@ impl Hostile {
     /// Its peer id.
     pub(crate) fn peer_id(&self) -> PeerId {
         self.key.peer_id()
+    }
+
+    /// Signs its own ops with `key` from now on (before it authors any).
+    pub(crate) fn own_ops_under(&mut self, key: Keypair) {
+        assert!(
+            self.own.is_empty(),
+            "the own ops' key is chosen before the first"
+        );
+        self.user = User::new(key.peer_id());
+        self.own_key = key;
     }
 
     /// A fresh batch number for a message of its own.
@@ -118,7 +136,7 @@ impl Hostile {
             deps: Vec::new(),
             payload: ShapePayload::Chat("forged".into()),
         };
-        let op = Op::sign(&self.key, fields).ok()?;
+        let op = Op::sign(&self.key, &SESSION_ID, fields).ok()?;
         let mut bytes = op.encoded().to_vec();
         bytes.get_mut(1..33)?.copy_from_slice(&victim.0);
         let forged = Op::<ShapePayload>::decode(&bytes).ok()?;
@@ -151,7 +169,7 @@ impl Hostile {
             deps: Vec::new(),
             payload: payload.clone(),
         };
-        let Ok(op) = Op::sign(&self.key, fields) else {
+        let Ok(op) = Op::sign(&self.own_key, &SESSION_ID, fields) else {
             return false;
         };
         self.user.authored(&payload, op.id());

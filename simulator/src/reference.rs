@@ -14,6 +14,10 @@
 //! - a weak acquire takes over another peer's live weak lease but not a strong one; a strong
 //!   acquire needs the object free, expired or its own; an effective acquire sets the lease
 //!   to expire `ttl` after its timestamp;
+//! - an acquire counts only once an effective op creating its object is in its causal past
+//!   ([`RejectReason::UnknownObject`]), and only while its author's own effective acquires, not
+//!   released by it, hold fewer than `MAX_LIVE_LEASES_PER_AUTHOR` live leases on other objects
+//!   ([`RejectReason::TooManyLeases`]); an acquire refused so counts in nobody's lease;
 //! - a release is effective only by the live holder;
 //! - an undo (redo) is effective only on an earlier, own, effective edit that is not (is)
 //!   undone, and only if the edit's object is free for the author; an edit is active when it
@@ -32,9 +36,9 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use replication::lease::MAX_LEASE_TTL_MICROS;
+use replication::lease::{MAX_LEASE_TTL_MICROS, MAX_LIVE_LEASES_PER_AUTHOR};
 use replication::shape::ShapePayload;
-use replication::{Log, Mark, OpId, PeerId, RejectReason};
+use replication::{Log, Mark, OpId, Payload, PeerId, RejectReason};
 
 /// Group ids share lease space with objects under this bit (as `replication::shape` does).
 const GROUP_LEASE_BIT: u64 = 1 << 63;
@@ -108,7 +112,9 @@ fn kind(p: &ShapePayload) -> Kind {
         ShapePayload::Release { object } => Kind::Release(obj(*object)),
         ShapePayload::Undo(t) => Kind::Undo(*t),
         ShapePayload::Redo(t) => Kind::Redo(*t),
-        ShapePayload::Chat(_) | ShapePayload::Member(_) => Kind::Independent,
+        ShapePayload::Chat(_) | ShapePayload::Member(_) | ShapePayload::Admit(_) => {
+            Kind::Independent
+        }
     }
 }
 
@@ -213,6 +219,38 @@ impl Rules {
     }
 }
 
+/// Per author and object, when the lease its own last effective acquire took expires, until
+/// its own effective release: the live leases `MAX_LIVE_LEASES_PER_AUTHOR` counts.
+#[derive(Default)]
+struct Claims(BTreeMap<(PeerId, u64), u64>);
+
+impl Claims {
+    /// True if `author` holds the most live leases on objects other than `object` at `at`.
+    fn over_cap(&self, author: PeerId, object: u64, at: u64) -> bool {
+        let live = (self.0.iter())
+            .filter(|((a, o), until)| *a == author && *o != object && at < **until)
+            .count();
+        live >= MAX_LIVE_LEASES_PER_AUTHOR
+    }
+
+    /// Follows the author's acquire or release with its verdict.
+    fn follow(&mut self, author: PeerId, at: u64, k: &Kind, verdict: Mark) {
+        if verdict != Mark::Effective {
+            return;
+        }
+        match k {
+            Kind::Acquire { object, ttl, .. } => {
+                let until = at.saturating_add((*ttl).min(MAX_LEASE_TTL_MICROS));
+                self.0.insert((author, *object), until);
+            }
+            Kind::Release(object) => {
+                self.0.remove(&(author, *object));
+            }
+            _ => {}
+        }
+    }
+}
+
 /// Replays `log`'s linear order (a log with every op since the start, not one joined from a
 /// snapshot) through the reference rules and compares every verdict and activity flag. With
 /// `flip_first_rejected` the peer's first lease-rejected op is read as effective (the
@@ -245,6 +283,7 @@ pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
     };
     // Per object, the positions of its lease ops (acquires and releases).
     let mut lease_ops: BTreeMap<u64, Vec<usize>> = BTreeMap::new();
+    let mut claims = Claims::default();
     for (pos, entry) in entries.iter().enumerate() {
         let op = entry.op;
         let k = kind(op.payload());
@@ -254,11 +293,13 @@ pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
             Kind::Independent => None,
         };
         if let Some(object) = object {
-            // The lease its causal past gives the object, folded from scratch.
+            // The lease its causal past gives the object, folded from scratch over the lease
+            // ops there, but those refused for their own reasons (counted in no view).
             let mut seen = Rules::default();
             for &p in lease_ops.get(&object).into_iter().flatten() {
                 let l = entries[p].op;
-                if pasts[pos].contains(p) && !expelled_at(p, &l.author()) && !forked(l) {
+                let void = matches!(observed[p], (_, Mark::Rejected(r), _) if r.voids_lease_op());
+                if pasts[pos].contains(p) && !void && !expelled_at(p, &l.author()) && !forked(l) {
                     let exempt = |holder: &PeerId| expelled_at(p, holder);
                     let _ = seen.verdict(l.author(), l.timestamp().0, &kind(l.payload()), &exempt);
                 }
@@ -272,16 +313,33 @@ pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
             }
         }
         let exempt = |holder: &PeerId| expelled_at(pos, holder);
+        // An acquire counts once an effective creation of its object is in its past.
+        let created = |object: u64| {
+            (0..pos).any(|p| {
+                let c = entries[p].op;
+                matches!(kind(c.payload()), Kind::Edit(o) if o == object)
+                    && c.payload().creates(&c.author())
+                    && observed[p].1 == Mark::Effective
+                    && pasts[pos].contains(p)
+            })
+        };
         let expected = if forked(op) {
             Mark::Rejected(RejectReason::Forked)
         } else if expelled_at(pos, &op.author()) {
             Mark::Rejected(RejectReason::Expelled)
+        } else if matches!(k, Kind::Acquire { object, .. } if !created(object)) {
+            Mark::Rejected(RejectReason::UnknownObject)
+        } else if let Kind::Acquire { object, .. } = k
+            && claims.over_cap(op.author(), object, op.timestamp().0)
+        {
+            Mark::Rejected(RejectReason::TooManyLeases)
         } else {
             match rules.verdict(op.author(), op.timestamp().0, &k, &exempt) {
                 Ok(()) => Mark::Effective,
                 Err(reason) => Mark::Rejected(reason),
             }
         };
+        claims.follow(op.author(), op.timestamp().0, &k, expected);
         let mut mark = entry.mark;
         if !flipped && matches!(mark, Mark::Rejected(RejectReason::LeaseHeld { .. })) {
             mark = Mark::Effective;
@@ -463,6 +521,16 @@ mod tests {
     use super::*;
     use replication::{Keypair, Timestamp};
 
+    /// The creation of object 1 (anybody may make an id without the derived bit).
+    fn create() -> ShapePayload {
+        ShapePayload::Create {
+            object: 1,
+            counter: None,
+            data: std::sync::Arc::new(fdsl::object::ObjectData::default()),
+            group: None,
+        }
+    }
+
     fn acquire(strong: bool) -> ShapePayload {
         ShapePayload::Acquire {
             object: 1,
@@ -477,6 +545,7 @@ mod tests {
         let mut log = Log::<ShapePayload>::default();
         let chat = |s: &str| ShapePayload::Chat(s.into());
         let script: Vec<(&Keypair, u64, ShapePayload)> = vec![
+            (&b, 900, create()),
             (&a, 1000, acquire(false)),
             (&b, 1010, chat("x")),
             (&b, 1020, ShapePayload::Release { object: 1 }),
@@ -491,7 +560,7 @@ mod tests {
             log.author(key, Timestamp(at), p).unwrap();
         }
         let report = check(&log, false);
-        assert_eq!(report.n_checked, 9);
+        assert_eq!(report.n_checked, 10);
         assert!(report.n_rejected >= 3, "{report:?}");
         assert_eq!(report.n_mismatches, 0, "{report:?}");
         let flipped = check(&log, true);
@@ -507,12 +576,13 @@ mod tests {
             strong: true,
             ttl_micros: u64::MAX,
         };
+        log.author(&b, Timestamp(900), create()).unwrap();
         log.author(&a, Timestamp(1000), hoard).unwrap();
         let late = Timestamp(1000 + MAX_LEASE_TTL_MICROS + 10);
         log.author(&b, late, ShapePayload::Delete { object: 1 })
             .unwrap();
         let report = check(&log, false);
-        assert_eq!((report.n_checked, report.n_rejected), (2, 0), "{report:?}");
+        assert_eq!((report.n_checked, report.n_rejected), (3, 0), "{report:?}");
         assert_eq!(report.n_mismatches, 0, "{report:?}");
     }
 

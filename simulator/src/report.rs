@@ -102,6 +102,9 @@ pub struct Report {
     pub n_refold_holds: u64,
     /// Ops of expelled members void on peer 0 at the end.
     pub n_void_ops: usize,
+    /// The cap on bytes of ops, when the session binds its authors, and the bytes of ops in
+    /// peer 0's final log ([`crate::sim::SESSION_CAP_BYTES`]).
+    pub session_bytes: Option<(u64, u64)>,
     /// How each honest peer caught up after healing, by index.
     pub catch_up: Vec<CatchUp>,
     /// What the checkers found; empty when the run passed.
@@ -248,6 +251,13 @@ impl Report {
                 self.n_void_ops,
                 s.n_expel_closes,
                 s.n_forks_learnt
+            )?;
+        }
+        if let Some((cap, n_bytes)) = self.session_bytes {
+            writeln!(
+                f,
+                "  the session binds its authors: peer 0 holds {n_bytes} bytes of ops of the \
+                 cap's {cap}"
             )?;
         }
         Ok(())

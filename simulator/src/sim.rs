@@ -11,7 +11,7 @@ use std::panic::{self, AssertUnwindSafe};
 
 use replication::log::RefoldBudget;
 use replication::materialize::{Materialized, SceneHash};
-use replication::membership::{FounderCommitment, Membership};
+use replication::membership::{Admission, FounderCommitment, Membership};
 use replication::shape::{ShapePayload, ShapeScene};
 use replication::sync::state::CloseReason;
 use replication::{ConnId, Event, Keypair, Log, OpId, Peer, Timestamp};
@@ -58,6 +58,11 @@ const BYZANTINE_STREAM: u64 = 6;
 /// The founder's nonce: with [`crate::config::Faults::expel`], the session's invite commits
 /// to peer 0's key and this nonce, so peer 0 may expel ([`replication::membership`]).
 pub const FOUNDER_NONCE: [u8; 32] = *b"sculpt simulator founder nonce!!";
+/// The cap on bytes of ops of a run whose session binds its authors (the founder's budget,
+/// [`replication::Log::bind_authors`]): small, so that a member can spend its whole grant
+/// within a run. With a founder, even seeds run such a session (every session the app makes
+/// now) and odd seeds one that does not (every session made before).
+pub const SESSION_CAP_BYTES: u64 = 8 << 20;
 
 pub(crate) type Scene = Materialized<ShapePayload, ShapeScene>;
 
@@ -309,6 +314,16 @@ impl Simulation {
         let first_slot = memory::reserve_slots(n);
         let mut honest = Vec::with_capacity(n);
         let mut founder = None;
+        let session_log = |founder: Option<FounderCommitment>| {
+            let mut log = Log::default();
+            if let Some(founder) = founder {
+                log.set_founder(founder).ok()?;
+                if config.seed.is_multiple_of(2) {
+                    log.bind_authors(SESSION_CAP_BYTES).ok()?;
+                }
+            }
+            Some(log)
+        };
         for i in 0..n {
             let mut key_seed = [0u8; 32];
             keys.fill(&mut key_seed);
@@ -317,11 +332,7 @@ impl Simulation {
                 let key = Keypair::from_seed(key_seed).peer_id();
                 founder = Some(FounderCommitment::of(&key, &FOUNDER_NONCE));
             }
-            let mut log = Log::default();
-            if let Some(founder) = founder {
-                log.set_founder(founder)
-                    .map_err(|_| ConfigError::Peers(i))?;
-            }
+            let log = session_log(founder).ok_or(ConfigError::Peers(i))?;
             let budget = refold_budget(&faults);
             honest.push(new_honest(key_seed, log, slot, budget).ok_or(ConfigError::Peers(i))?);
         }
@@ -333,8 +344,14 @@ impl Simulation {
             keys.fill(&mut key_seed);
             let mut hostile = Hostile::new(Keypair::from_seed(key_seed));
             if faults.byzantine || faults.lease_attacks || faults.forks {
-                let stream = SimRng::stream(config.seed, BYZANTINE_STREAM);
-                hostile.byzantine = Some(Byzantine::new(Keypair::from_seed(key_seed), stream));
+                let mut stream = SimRng::stream(config.seed, BYZANTINE_STREAM);
+                let log = session_log(founder).unwrap_or_default();
+                let key = Keypair::from_seed(key_seed);
+                // Its core authors under the connection key; its own hand-made ops get another.
+                let mut own_seed = [0u8; 32];
+                stream.fill(&mut own_seed);
+                hostile.own_ops_under(Keypair::from_seed(own_seed));
+                hostile.byzantine = Some(Byzantine::new(key, stream, log));
             }
             hostile
         });
@@ -396,6 +413,7 @@ impl Simulation {
         let span = (work_end - START_MICROS).max(1);
         let mut sched = SimRng::stream(self.config.seed, SCHEDULE_STREAM);
         self.schedule_joins(&mut sched, span);
+        self.found_and_admit();
         // Peer 0 creates the object everyone fights over, before anyone connects.
         if let Some(create) =
             workload::hot_object(&mut SimRng::stream(self.config.seed, HOT_STREAM))
@@ -508,6 +526,35 @@ impl Simulation {
                     },
                 );
             }
+        }
+    }
+
+    /// In a session that binds its authors, peer 0 founds it (its admission of itself) and
+    /// admits every other peer's key and the hostile member's, each with an equal share of
+    /// half the session's cap (a founder who knows its members; the node's default grant
+    /// shrinks with every key admitted).
+    fn found_and_admit(&mut self) {
+        let founder = self.honest[0].peer.peer_id();
+        let Some(cap) = self.honest[0].peer.log().founder_budget() else {
+            return;
+        };
+        let founding = Admission {
+            key: founder,
+            grant_bytes: 0,
+            nonce: Some(FOUNDER_NONCE),
+        };
+        self.author(0, ShapePayload::Admit(Box::new(founding)));
+        let grant_bytes = cap / (2 * self.n_nodes() as u64);
+        let members = (self.honest[1..].iter().map(|h| h.peer.peer_id()))
+            .chain(self.hostile.as_ref().map(Hostile::peer_id))
+            .collect::<Vec<_>>();
+        for key in members {
+            let admission = Admission {
+                key,
+                grant_bytes,
+                nonce: None,
+            };
+            self.author(0, ShapePayload::Admit(Box::new(admission)));
         }
     }
 
@@ -695,7 +742,9 @@ impl Simulation {
     fn user_action(&mut self, action_idx: usize) {
         let action = self.actions[action_idx];
         let peer = action.peer(self.config.n_peers);
-        if !self.honest[peer].started {
+        let me = self.honest[peer].peer.peer_id();
+        // A peer whose admission has not reached it yet waits, as the app's user does.
+        if !self.honest[peer].started || !self.honest[peer].peer.log().is_admitted(&me) {
             self.stats.n_actions_skipped += 1;
             return;
         }
@@ -829,8 +878,9 @@ impl Simulation {
         if producer.panicked.is_some() || (self.hostile.is_some() && self.faults.forgery) {
             return false;
         }
-        // A snapshot keeps no membership: a log with an expel cannot be cut.
-        if producer.peer.log().has_membership_ops() {
+        // A snapshot keeps no membership nor admissions: such a log cannot be cut.
+        let log = producer.peer.log();
+        if log.has_membership_ops() || log.binds_authors() {
             return false;
         }
         let vv = producer.peer.log().version_vector();

@@ -24,6 +24,7 @@ use replication::shape::ShapePayload;
 use replication::snapshot::Snapshot;
 use replication::store::OpStore;
 use replication::store::record::CHECKSUM_BYTES;
+use replication::sync::message::SessionId;
 use replication::{Op, OpId, Timestamp};
 
 use crate::rng::SimRng;
@@ -128,7 +129,8 @@ impl Disk {
             .and_then(|()| {
                 let path = dir.join("ops.sculpt");
                 let snapshot = self.snapshot.as_deref();
-                write_and_recover(&path, &ops, torn_keep, snapshot, old.founder(), now)
+                let session = (old.session_id(), old.founder(), old.founder_budget());
+                write_and_recover(&path, &ops, torn_keep, snapshot, session, now)
             });
         // The store's lock file and any torn tail it set aside go with the directory.
         let _ = std::fs::remove_dir_all(&dir);
@@ -161,14 +163,14 @@ fn temp_dir() -> PathBuf {
 }
 
 /// Writes `ops` through the real store, cuts the last record to `torn_keep` bytes if given,
-/// and reopens the file into a log (joined from `snapshot`, if any) of the session `founder`
-/// founded, if it names one.
+/// and reopens the file into a log (joined from `snapshot`, if any) of the session: its id,
+/// the founder it names, if any, and the founder's budget, if it binds its authors.
 fn write_and_recover(
     path: &std::path::Path,
     ops: &[&Op<ShapePayload>],
     torn_keep: Option<usize>,
     snapshot: Option<&[u8]>,
-    founder: Option<FounderCommitment>,
+    (session_id, founder, binding): (SessionId, Option<FounderCommitment>, Option<u64>),
     now: Timestamp,
 ) -> Result<(Log<ShapePayload>, usize, u64), String> {
     let (mut store, stale, _) =
@@ -200,6 +202,11 @@ fn write_and_recover(
         log.set_founder(founder)
             .map_err(|e| format!("store recovery: {e}"))?;
     }
+    if let Some(cap) = binding {
+        log.bind_authors(cap)
+            .map_err(|e| format!("store recovery: {e}"))?;
+    }
+    log.set_session_id(session_id);
     let (_store, recovery) =
         OpStore::open_into(path, now, &mut log).map_err(|e| format!("store recovery: {e}"))?;
     Ok((log, recovery.n_records, recovery.n_truncated_bytes))

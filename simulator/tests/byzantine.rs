@@ -188,3 +188,45 @@ fn forks_are_held_on_both_sides_and_every_checker_holds() {
     let learnt: u64 = reports.iter().map(|r| r.stats.n_forks_learnt).sum();
     assert!(learnt >= 8, "{learnt}");
 }
+
+#[test]
+fn a_session_binding_its_authors_refuses_unadmitted_keys_and_stays_under_its_cap() {
+    // Even seeds bind the authors of a founded session (every session the app makes now), odd
+    // seeds keep the old rules. In both, the member admits Sybil keys of its own past their
+    // grant, admits a fresh key to itself, fills what it may, and strongly acquires the ids
+    // honest users take next and every object; every checker passes (no honest creation
+    // refused, lease verdicts as the reference with its cap, the cap held).
+    let reports = runs("byzantine", FaultSet::default(), 2..6);
+    let mut sent = std::collections::BTreeMap::new();
+    for report in &reports {
+        assert!(report.failures.is_empty(), "{report}");
+        for (attack, n) in &report.stats.byzantine {
+            *sent.entry(*attack).or_insert(0) += n;
+        }
+        let bound = report.config.seed % 2 == 0;
+        match report.session_bytes {
+            Some((cap, n_bytes)) => {
+                assert!(bound && cap == simulator::sim::SESSION_CAP_BYTES && n_bytes <= cap);
+                // The member's crafted ops under fresh keys were refused at the door.
+                assert!(
+                    report.stats.hostile_rejects.contains_key("RefusedOp"),
+                    "{report}"
+                );
+            }
+            None => assert!(!bound, "{report}"),
+        }
+    }
+    for attack in [
+        "admitted-sybil",
+        "self-admitted",
+        "cap-fill",
+        "lease-predicted",
+        "lease-all",
+        "other-session",
+    ] {
+        assert!(
+            sent.get(attack).is_some_and(|n| *n > 0),
+            "{attack}: {sent:?}"
+        );
+    }
+}

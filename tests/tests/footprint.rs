@@ -168,7 +168,11 @@ fn a_peer_with_only_the_ops_meshes_the_same_bytes() {
     for bytes in &sent.ops {
         let op = Op::<ShapePayload>::decode(bytes).unwrap();
         let insertion = log
-            .insert(Timestamp(1), op.into_verified().unwrap(), Origin(1))
+            .insert(
+                Timestamp(1),
+                op.into_verified(&replication::op::UNNAMED_SESSION).unwrap(),
+                Origin(1),
+            )
             .unwrap();
         scene.apply_insertion(&log, &insertion);
     }

@@ -308,6 +308,15 @@ impl Engine {
         view.store_error = store_error;
         let view: SharedView = Arc::new(Mutex::new(view));
         let news = Arc::new(Mutex::new(News::default()));
+        let founding = founder_nonce
+            .filter(|_| log.binds_authors() && log.version_vector().get(&me) == 0)
+            .map(|nonce| {
+                ShapePayload::Admit(Box::new(replication::membership::Admission {
+                    key: me,
+                    grant_bytes: 0,
+                    nonce: Some(nonce),
+                }))
+            });
         let demo = config
             .demo
             .filter(|_| new_session && log.is_empty())
@@ -357,6 +366,7 @@ impl Engine {
                 )
             }),
             lan: Mutex::new(None),
+            founding,
         };
         let thread = std::thread::Builder::new()
             .name("sculpt-engine".into())
@@ -544,6 +554,9 @@ struct Worker {
     lan: Mutex<Option<tokio::sync::watch::Receiver<Vec<LanSession>>>>,
     /// The faces' ephemeral listeners.
     listeners: Listeners,
+    /// The founder's admission of itself, authored first in a new session that binds its
+    /// authors (no other op of anyone counts before it).
+    founding: Option<ShapePayload>,
 }
 
 /// How this engine reached the addresses it dialed (at most [`MAX_DIALED`] are kept).
@@ -625,6 +638,13 @@ impl Worker {
             handle.peer_id().short(),
             handle.local_addr()
         ));
+        if let Some(founding) = self.founding.clone()
+            && let Err(e) = handle.author(founding).await
+        {
+            self.say(format!(
+                "the session's founding op could not be authored: {e}"
+            ));
+        }
         match demo {
             Some(Ok(payloads)) => {
                 for payload in payloads {

@@ -155,11 +155,16 @@ pub fn open(dir: &Path, invite: Option<&Invite>, now: Timestamp) -> Result<Opene
     })
 }
 
-/// An empty log of the session of `invite`: one whose founder's expels count.
+/// An empty log of the session of `invite`: one whose founder's expels count, and which binds
+/// its authors to their admissions when the invite says so (every session made now).
 pub fn founded_log(invite: &Invite) -> Log<ShapePayload> {
     let mut log = Log::default();
     log.set_founder(invite.founder_commitment())
         .expect("an empty log takes a founder");
+    if invite.binds_authors() {
+        log.bind_authors(replication::log::MAX_LOG_BYTES)
+            .expect("an empty founded log binds");
+    }
     log
 }
 

@@ -72,6 +72,9 @@ fn joiner(a: &Engine, dir: &Path, name: &str) -> EngineConfig {
     }
 }
 
+/// Ops a new session holds before its demo: the founder's admission of itself.
+const FOUNDED: usize = 1;
+
 /// Waits (at most 20 s) until `done` holds for the view.
 fn wait_view(engine: &Engine, what: &str, done: impl Fn(&mut View) -> bool) {
     let deadline = crate::clock::now().instant + Duration::from_secs(20);
@@ -90,7 +93,7 @@ fn a_new_store_gets_the_demo_once_and_a_reopened_one_shows_the_same_scene() {
     let first = Engine::start(config(&dir), T0).unwrap();
     assert_eq!(lock(first.view()).store_error(), None);
     assert_eq!(lock(first.view()).n_loaded(), 0);
-    wait_view(&first, "the demo", |v| v.n_ops() == 1);
+    wait_view(&first, "the demo", |v| v.n_ops() == FOUNDED + 1);
     let melon = only_object(&first);
     assert_eq!(lock(first.view()).object_label(melon), "Watermelon");
     let (id, hash, invite) = (
@@ -101,7 +104,7 @@ fn a_new_store_gets_the_demo_once_and_a_reopened_one_shows_the_same_scene() {
     first.shutdown();
 
     let second = Engine::start(config(&dir), T0).unwrap();
-    assert_eq!(lock(second.view()).n_loaded(), 1);
+    assert_eq!(lock(second.view()).n_loaded(), FOUNDED + 1);
     assert_eq!(second.peer_id(), id, "the identity key is kept");
     assert_eq!(second.invite(), &invite, "the session is kept");
     assert_eq!(lock(second.view()).scene_hash_hex(), hash);
@@ -114,13 +117,17 @@ fn a_new_store_gets_the_demo_once_and_a_reopened_one_shows_the_same_scene() {
 
     let third = Engine::start(config(&dir), T0).unwrap();
     let view = lock(third.view());
-    assert_eq!(view.n_loaded(), 3);
+    assert_eq!(view.n_loaded(), FOUNDED + 3);
     assert_eq!(view.chat().len(), 1);
     assert_eq!(view.chat()[0].text, "hello");
     assert_eq!(view.chat()[0].author, id.short());
     let history = view.history();
-    assert_eq!(history.len(), 3);
-    assert!(history[1].what.contains("1-x^2-y^2-z^2"), "{history:?}");
+    assert_eq!(history.len(), FOUNDED + 3);
+    assert_eq!(history[0].what, "founded the session");
+    assert!(
+        history[FOUNDED + 1].what.contains("1-x^2-y^2-z^2"),
+        "{history:?}"
+    );
     assert!(history.iter().all(|h| h.status == "effective" && h.mine));
     drop(view);
     assert_eq!(geometry_formula(&third, melon), "1-x^2-y^2-z^2");
@@ -132,7 +139,7 @@ fn a_new_store_gets_the_demo_once_and_a_reopened_one_shows_the_same_scene() {
 fn undo_and_redo_pick_this_peers_latest_edit_of_the_object() {
     let dir = scratch("undo");
     let s = Engine::start(config(&dir), T0).unwrap();
-    wait_view(&s, "the demo", |v| v.n_ops() == 1);
+    wait_view(&s, "the demo", |v| v.n_ops() == FOUNDED + 1);
     let melon = only_object(&s);
     let original = geometry_formula(&s, melon);
     let a = author(&s, set_shape(melon, "1-x^2-y^2-z^2"));
@@ -153,8 +160,8 @@ fn undo_and_redo_pick_this_peers_latest_edit_of_the_object() {
     assert_eq!(geometry_formula(&s, melon), "1-x^2-y^2-z^2");
     let view = lock(s.view());
     let statuses: Vec<&str> = view.history().iter().map(|h| h.status.as_str()).collect();
-    assert_eq!(statuses[1], "effective");
-    assert_eq!(statuses[2], "undone");
+    assert_eq!(statuses[FOUNDED + 1], "effective");
+    assert_eq!(statuses[FOUNDED + 2], "undone");
     let fresh = view.next_object().id();
     assert!(fresh != melon && view.scene().object(fdsl::scene::ObjectId(fresh)).is_none());
     drop(view);
@@ -194,7 +201,7 @@ fn a_corrupt_store_is_reported_and_left_byte_for_byte() {
 fn a_torn_tail_is_cut_and_its_bytes_are_kept_aside() {
     let dir = scratch("torn");
     let first = Engine::start(config(&dir), T0).unwrap();
-    wait_view(&first, "the demo", |v| v.n_ops() == 1);
+    wait_view(&first, "the demo", |v| v.n_ops() == FOUNDED + 1);
     first.shutdown();
     let ops = dir.join(store::OPS_FILE);
     let mut bytes = fs::read(&ops).unwrap();
@@ -204,7 +211,7 @@ fn a_torn_tail_is_cut_and_its_bytes_are_kept_aside() {
     let s = Engine::start(config(&dir), T0).unwrap();
     let view = lock(s.view());
     assert_eq!(view.store_error(), None);
-    assert_eq!(view.n_loaded(), 1);
+    assert_eq!(view.n_loaded(), FOUNDED + 1);
     let notice = view.notices()[0].clone();
     drop(view);
     assert!(notice.contains("7 bytes"), "{notice}");
@@ -417,10 +424,13 @@ fn a_new_session_is_founded_by_its_maker_and_a_joiner_is_not_its_founder() {
 fn an_edit_on_one_engine_reaches_the_other_as_a_change_of_that_object_with_presence() {
     let (da, db) = (scratch("pair-a"), scratch("pair-b"));
     let a = Engine::start(config(&da), T0).unwrap();
-    wait_view(&a, "the demo", |v| v.n_ops() == 1);
+    wait_view(&a, "the demo", |v| v.n_ops() == FOUNDED + 1);
     let melon = only_object(&a);
     let b = Engine::start(joiner(&a, &db, "Bea"), T0).unwrap();
-    wait_view(&b, "the demo from a", |v| v.n_ops() == 1);
+    // A admits B (the session binds its authors): the demo from A, then B's admission.
+    wait_view(&b, "the demo from a and b's admission", |v| {
+        v.n_ops() == FOUNDED + 2 && v.admitted()
+    });
     assert_eq!(
         lock(b.view()).n_loaded(),
         0,
@@ -428,7 +438,7 @@ fn an_edit_on_one_engine_reaches_the_other_as_a_change_of_that_object_with_prese
     );
     let (_, cursor) = lock(b.view()).changes_since(0);
     author(&a, set_shape(melon, "0.5-x^2-y^2-z^2"));
-    wait_view(&b, "a's edit", |v| v.n_ops() == 2);
+    wait_view(&b, "a's edit", |v| v.n_ops() == FOUNDED + 3);
     let (changes, _) = lock(b.view()).changes_since(cursor);
     assert_eq!(
         changes,
@@ -467,9 +477,11 @@ fn the_founder_expels_a_peer_over_quic_and_hears_from_it_no_more() {
     use crate::command::{Command, plan};
     let (da, db) = (scratch("expel-a"), scratch("expel-b"));
     let a = Engine::start(config(&da), T0).unwrap();
-    wait_view(&a, "the demo", |v| v.n_ops() == 1);
+    wait_view(&a, "the demo", |v| v.n_ops() == FOUNDED + 1);
     let b = Engine::start(joiner(&a, &db, "Bea"), T0).unwrap();
-    wait_view(&b, "the demo from a", |v| v.n_ops() == 1);
+    wait_view(&b, "the demo from a and b's admission", |v| {
+        v.n_ops() == FOUNDED + 2 && v.admitted()
+    });
     wait_view(&a, "b's name", |v| {
         v.n_online() == 1 && v.peers().iter().any(|p| p.name == "Bea")
     });
@@ -494,7 +506,11 @@ fn the_founder_expels_a_peer_over_quic_and_hears_from_it_no_more() {
     std::thread::sleep(Duration::from_millis(2 * DIAL_RETRY_MILLIS + 500));
     let (lines, _) = a.news_since(seen);
     assert!(!lines.iter().any(|l| l.contains("connected")), "{lines:?}");
-    assert_eq!(lock(a.view()).n_ops(), 2, "the demo and the expel only");
+    assert_eq!(
+        lock(a.view()).n_ops(),
+        FOUNDED + 3,
+        "the demo, b's admission and the expel only"
+    );
     drop((a, b));
     let _ = fs::remove_dir_all(&da);
     let _ = fs::remove_dir_all(&db);
@@ -552,7 +568,7 @@ fn a_joined_sessions_directory_is_named_by_its_invite_without_revealing_it() {
 fn a_large_import_is_one_history_row_not_undone_and_its_id_not_reused() {
     let dir = scratch("parts");
     let s = Engine::start(config(&dir), T0).unwrap();
-    wait_view(&s, "the demo", |v| v.n_ops() == 1);
+    wait_view(&s, "the demo", |v| v.n_ops() == FOUNDED + 1);
     let first = lock(s.view()).next_object();
     let first_id = first.id();
     let mesh = fdsl::mesh::shapes::icosphere(1.0, 4);
@@ -572,14 +588,14 @@ fn a_large_import_is_one_history_row_not_undone_and_its_id_not_reused() {
     }
     let view = lock(s.view());
     assert_eq!(view.object_label(first_id), "ball");
-    assert_eq!(view.n_ops(), 1 + n_ops);
+    assert_eq!(view.n_ops(), FOUNDED + 1 + n_ops);
     let rows: Vec<&str> = view.history().iter().map(|h| h.what.as_str()).collect();
-    assert_eq!(rows.len(), 2, "the parts are not rows: {rows:?}");
+    assert_eq!(rows.len(), FOUNDED + 2, "the parts are not rows: {rows:?}");
     assert_eq!(
-        rows[1],
+        rows[FOUNDED + 1],
         format!("put together a change to ball from {} parts", n_ops - 1)
     );
-    assert!(!view.history()[1].undoable);
+    assert!(!view.history()[FOUNDED + 1].undoable);
     assert_eq!(view.undo_target(first_id), None, "a creation is not undone");
     let next = view.next_object();
     assert!(

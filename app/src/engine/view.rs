@@ -116,6 +116,8 @@ pub struct View {
     me: PeerId,
     scene: Materialized<ShapePayload, ShapeScene>,
     n_ops: usize,
+    /// False while the session binds its authors and holds no admission of this peer.
+    admitted: bool,
     history: Vec<HistoryRow>,
     chat: Vec<ChatRow>,
     undo: BTreeMap<u64, OpId>,
@@ -156,6 +158,7 @@ impl View {
             me,
             scene,
             n_ops: 0,
+            admitted: true,
             history: Vec::new(),
             chat: Vec::new(),
             undo: BTreeMap::new(),
@@ -211,6 +214,7 @@ impl View {
     /// Recomputes the rows and targets that depend on the whole log.
     pub fn refresh(&mut self, log: &Log<ShapePayload>) {
         self.n_ops = log.len();
+        self.admitted = log.is_admitted(&self.me);
         self.expelled = log.expelled().keys().copied().collect();
         self.forked = log.forks().authors().collect();
         self.history = history(log, self.me, self.scene.scene().scene());
@@ -340,6 +344,12 @@ impl View {
     /// Ops in the log.
     pub fn n_ops(&self) -> usize {
         self.n_ops
+    }
+
+    /// False while this peer waits for a member to admit it (the session binds its
+    /// authors): it may author nothing until then.
+    pub fn admitted(&self) -> bool {
+        self.admitted
     }
 
     /// Ops loaded from the store at start.
@@ -790,6 +800,8 @@ fn describe(log: &Log<ShapePayload>, scene: &Scene, payload: &ShapePayload) -> S
         ),
         ShapePayload::Member(m) if m.expel => format!("expelled {}", m.member.short()),
         ShapePayload::Member(m) => format!("readmitted {}", m.member.short()),
+        ShapePayload::Admit(a) if a.nonce.is_some() => "founded the session".into(),
+        ShapePayload::Admit(a) => format!("admitted {}", a.key.short()),
     }
 }
 
@@ -916,7 +928,7 @@ mod tests {
                 deps: Vec::new(),
                 payload: ShapePayload::Chat(text.into()),
             };
-            Op::sign(&me, fields).unwrap()
+            Op::sign(&me, &replication::op::UNNAMED_SESSION, fields).unwrap()
         };
         log.insert(
             replication::Timestamp(2),

@@ -22,7 +22,7 @@ fuzz_target!(|data: &[u8]| on_small_stack(|| decode(data)));
 fn decode(data: &[u8]) {
     if let Ok(op) = Op::<TestPayload>::decode(data) {
         assert_eq!(op.encoded(), data, "a decoded op is canonical");
-        let _ = op.verify();
+        let _ = op.verify(&replication::op::UNNAMED_SESSION);
     }
     if let Ok(message) = Message::decode(data) {
         assert_eq!(message.encode(), data, "a decoded message is canonical");

@@ -82,6 +82,11 @@ pub enum CutError {
     /// would forget it (join such a session from full history).
     #[error("the log holds membership ops, which a snapshot cannot keep")]
     Membership,
+    /// The session binds its authors ([`Log::bind_authors`]): a base keeps neither the
+    /// admissions nor the budgets, so a joined log could not judge the ops after the cut
+    /// (join such a session from full history).
+    #[error("the session binds its authors, whose admissions and budgets a snapshot cannot keep")]
+    Bound,
     /// The log holds a fork ([`crate::fork`]): a base keeps one op per author and seq, so the
     /// cut would forget a side (join such a session from full history).
     #[error("the log holds a forked author's two sides, which a snapshot cannot keep")]
@@ -106,6 +111,13 @@ impl<P> Base<P> {
 
     pub(crate) fn contains(&self, id: &OpId) -> bool {
         self.find(id).is_some()
+    }
+
+    /// The Lamport time of the author's last op inside the base (0 if none).
+    pub(crate) fn lamport_of(&self, author: &PeerId) -> u64 {
+        self.authors
+            .binary_search_by(|a| a.author.cmp(author))
+            .map_or(0, |i| self.authors[i].lamport)
     }
 
     pub(crate) fn seq(&self, author: &PeerId) -> u64 {
@@ -188,6 +200,14 @@ impl<P: Payload> Log<P> {
                 }
             }
         }
+        // Every held op sorts after the base: an effective creation there was seen by all.
+        let base_created = (base.edits.values())
+            .filter(|op| op.payload().creates(&op.author()))
+            .filter_map(|op| match op.payload().effect() {
+                Effect::Edit { object } => Some(object),
+                _ => None,
+            })
+            .collect();
         let mut log = Self {
             ops: crate::op::OpSlab::default(),
             order: Vec::new(),
@@ -199,10 +219,15 @@ impl<P: Payload> Log<P> {
             authors: BTreeMap::new(),
             by_object: BTreeMap::new(),
             lease_ops: BTreeMap::new(),
+            creates: BTreeMap::new(),
+            base_created,
             deletes,
             delete_hides: BTreeMap::new(),
             hidden: BTreeMap::new(),
             reach: crate::causal::Reach::default(),
+            // A bound session's log is never cut (`CutError::Bound`).
+            binding: None,
+            admissions: BTreeMap::new(),
             frontier,
             vv,
             // New local ops must land after the cut.
@@ -217,6 +242,7 @@ impl<P: Payload> Log<P> {
             author_quota: super::MAX_AUTHOR_BYTES,
             refold_paid_until: Timestamp(0),
             refold_budget: super::RefoldBudget::default(),
+            session_id: crate::op::UNNAMED_SESSION,
             // A snapshot keeps no membership (a log holding any cannot be cut).
             founder: None,
             membership_ops: BTreeMap::new(),
@@ -281,15 +307,7 @@ impl<P: Payload> Log<P> {
         if let Some(op) = self.chain(author).last().map(|&at| self.ops.at(at)) {
             return op.lamport();
         }
-        self.base
-            .as_ref()
-            .and_then(|b| {
-                b.authors
-                    .binary_search_by(|a| a.author.cmp(author))
-                    .ok()
-                    .map(|i| b.authors[i].lamport)
-            })
-            .unwrap_or(0)
+        self.base.as_ref().map_or(0, |b| b.lamport_of(author))
     }
 
     /// The number of held positions at or before Lamport time `cut`.
@@ -322,6 +340,9 @@ impl<P: Payload> Log<P> {
     pub(crate) fn base_at(&self, cut: u64) -> Result<(Base<P>, usize), CutError> {
         if self.has_membership_ops() {
             return Err(CutError::Membership);
+        }
+        if self.binds_authors() {
+            return Err(CutError::Bound);
         }
         if !self.forks.is_empty() {
             return Err(CutError::Forked);

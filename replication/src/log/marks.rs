@@ -41,7 +41,9 @@ impl Marks {
             8 => Mark::Rejected(RejectReason::AlreadyUndone),
             9 => Mark::Rejected(RejectReason::NotUndone),
             10 => Mark::Rejected(RejectReason::Expelled),
-            _ => Mark::Rejected(RejectReason::Forked),
+            11 => Mark::Rejected(RejectReason::Forked),
+            12 => Mark::Rejected(RejectReason::UnknownObject),
+            _ => Mark::Rejected(RejectReason::TooManyLeases),
         }
     }
 
@@ -61,6 +63,8 @@ impl Marks {
                 RejectReason::NotUndone => (9, None),
                 RejectReason::Expelled => (10, None),
                 RejectReason::Forked => (11, None),
+                RejectReason::UnknownObject => (12, None),
+                RejectReason::TooManyLeases => (13, None),
             },
         };
         let old = std::mem::replace(&mut self.codes[at as usize], code);
@@ -102,6 +106,8 @@ mod tests {
             RejectReason::NotUndone,
             RejectReason::Expelled,
             RejectReason::Forked,
+            RejectReason::UnknownObject,
+            RejectReason::TooManyLeases,
         ];
         let marks = std::iter::once(Mark::Effective).chain(reasons.map(Mark::Rejected));
         let mut m = Marks::default();

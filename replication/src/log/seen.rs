@@ -11,7 +11,7 @@ use std::collections::BTreeMap;
 use super::{Base, OrderKey};
 use crate::causal::Reach;
 use crate::identity::PeerId;
-use crate::lease::{Lease, lease_step};
+use crate::lease::{Lease, Mark, lease_step};
 use crate::op::{Op, OpId};
 use crate::payload::{ObjectId, Payload};
 
@@ -56,6 +56,8 @@ pub(crate) struct Dag<'a, P> {
     pub(crate) base: Option<&'a Base<P>>,
     /// Per member, the membership ops that count, with whether each expels.
     pub(crate) members: &'a BTreeMap<PeerId, Vec<(OpId, bool)>>,
+    /// The verdict on each held op, by slab position.
+    pub(crate) marks: &'a super::marks::Marks,
 }
 
 impl<P: Payload> Dag<'_, P> {
@@ -312,7 +314,10 @@ pub(crate) fn lease_seen<P: Payload>(
         let l = &list[i];
         let skipped = unseen.binary_search_by(|(k, _)| k.cmp(&l.key)).is_ok();
         let op = dag.ops.at(l.at);
-        if !skipped && !dag.is_forked(op) {
+        // An acquire refused for its own reasons (its object unseen, its author over the cap)
+        // is judged so in every view: it counts in none.
+        let void = matches!(dag.marks.get(l.at), Mark::Rejected(r) if r.voids_lease_op());
+        if !skipped && !void && !dag.is_forked(op) {
             // Judged as the fold judged it: rejected if its author saw its own expel, and not
             // bound by a holder it saw expelled.
             let id = op.id_ref();

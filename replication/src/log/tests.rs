@@ -215,6 +215,7 @@ fn linear_order_respects_causality() {
 fn edits_need_the_lease_and_rejections_are_queryable() {
     let (a, b) = (key(0), key(1));
     let mut log = TLog::default();
+    log.author(&a, Timestamp(5), set(1, "made")).unwrap();
     log.author(&a, Timestamp(10), weak(1, 1_000)).unwrap();
     let (ok, _) = log.author(&a, Timestamp(20), set(1, "x")).unwrap();
     let (blocked, _) = log.author(&b, Timestamp(30), set(1, "y")).unwrap();
@@ -249,13 +250,15 @@ fn edits_need_the_lease_and_rejections_are_queryable() {
 #[test]
 fn a_late_acquire_does_not_bind_edits_that_never_saw_it() {
     let (a, b) = (key(0), key(1));
-    // B works offline: acquires object 1 at lamport 1.
+    // A makes object 1; B, having seen that, works offline: acquires object 1 at lamport 2.
+    let mut log = TLog::default();
+    log.author(&a, Timestamp(1), set(1, "made")).unwrap();
     let mut offline = TLog::default();
+    offline.merge(Timestamp(1), &log).unwrap();
     let (b_acquire, _) = offline
         .author(&b, Timestamp(5), weak(1, 1_000_000))
         .unwrap();
     // A, not knowing, edits object 1 three times.
-    let mut log = TLog::default();
     let mut a_ops = Vec::new();
     for i in 0..3 {
         a_ops.push(
@@ -298,15 +301,17 @@ fn a_backdated_strong_acquire_binds_only_the_ops_that_saw_it() {
         strong: true,
         ttl_micros: u64::MAX,
     };
-    // A fresh key: Lamport 1, stamped 0, no deps, asking for the lease forever.
-    let backdated = signed(&mallory, 1, 1, 0, vec![], hoard);
     let mut log = TLog::default();
-    let (honest, _) = log.author(&a, Timestamp(1_000), set(1, "mine")).unwrap();
+    let (made, _) = log.author(&a, Timestamp(500), set(1, "made")).unwrap();
+    // A fresh key: Lamport 2, stamped as early as its past allows, depending on the object's
+    // creation alone, asking for the lease forever.
+    let backdated = signed(&mallory, 1, 2, 500, vec![made.id()], hoard);
+    let honest = signed(&a, 2, 5, 1_000, vec![made.id()], set(1, "mine"));
+    log.insert(Timestamp(1_000), honest.clone(), LOCAL_ORIGIN)
+        .unwrap();
     let mut other = TLog::default();
     other.merge(Timestamp(1_000), &log).unwrap();
-    let (concurrent, _) = other
-        .author(&c, Timestamp(2_000), set(1, "theirs"))
-        .unwrap();
+    let concurrent = signed(&c, 1, 6, 2_000, vec![honest.id()], set(1, "theirs"));
     log.insert(Timestamp(3_000), backdated.clone(), Origin(1))
         .unwrap();
     log.insert(Timestamp(3_000), concurrent.clone(), Origin(2))
@@ -324,7 +329,7 @@ fn a_backdated_strong_acquire_binds_only_the_ops_that_saw_it() {
         }))
     );
     // The same verdicts in any delivery order.
-    let all = [honest, concurrent, backdated, saw];
+    let all = [made, honest, concurrent, backdated, saw];
     for seed in 0..8 {
         let shuffled_log = deliver_all_causally(&shuffled(&all, seed));
         assert_eq!(observe(&shuffled_log), observe(&log), "order {seed}");
@@ -480,6 +485,7 @@ fn refused_ops_are_counted() {
     // Lamport time not above its dependency.
     let bad = Op::sign(
         &key(1),
+        &crate::op::UNNAMED_SESSION,
         OpFields {
             seq: 1,
             lamport: 1,
@@ -498,7 +504,7 @@ fn refused_ops_are_counted() {
     bytes[1..33].copy_from_slice(&key(2).peer_id().0);
     let forged = Op::<TestPayload>::decode(&bytes).unwrap();
     assert!(
-        forged.into_verified().is_err(),
+        forged.into_verified(&crate::op::UNNAMED_SESSION).is_err(),
         "a forged op never reaches the log"
     );
     assert_eq!(log.stats().n_refused, 1);
@@ -822,6 +828,7 @@ fn a_lamport_leap_towards_exhaustion_is_refused() {
     let leap = |lamport| {
         Op::sign(
             &key(2),
+            &crate::op::UNNAMED_SESSION,
             OpFields {
                 seq: 1,
                 lamport,
@@ -855,6 +862,23 @@ pub(crate) fn signed(
     deps: Vec<OpId>,
     payload: TestPayload,
 ) -> VerifiedOp<TestPayload> {
+    signed_in(
+        &crate::op::UNNAMED_SESSION,
+        key,
+        (seq, lamport, timestamp),
+        deps,
+        payload,
+    )
+}
+
+/// [`signed`] for `session`, with seq, Lamport time and timestamp.
+pub(crate) fn signed_in(
+    session: &crate::sync::message::SessionId,
+    key: &Keypair,
+    (seq, lamport, timestamp): (u64, u64, u64),
+    deps: Vec<OpId>,
+    payload: TestPayload,
+) -> VerifiedOp<TestPayload> {
     let fields = OpFields {
         seq,
         lamport,
@@ -862,7 +886,7 @@ pub(crate) fn signed(
         deps,
         payload,
     };
-    Op::sign(key, fields).unwrap()
+    Op::sign(key, session, fields).unwrap()
 }
 
 #[test]
@@ -874,6 +898,7 @@ fn a_lease_asking_for_more_than_the_max_ttl_ends_at_the_max() {
         strong: true,
         ttl_micros: u64::MAX,
     };
+    log.author(&b, Timestamp(500), set(1, "made")).unwrap();
     log.author(&a, Timestamp(1000), strong_forever).unwrap();
     let (held, _) = log.author(&b, Timestamp(2000), set(1, "x")).unwrap();
     assert!(matches!(log.mark(&held.id()), Some(Mark::Rejected(_))));
@@ -1161,6 +1186,7 @@ fn the_founder_expels_a_member_whose_unseen_ops_turn_void_and_whose_leases_bind_
         ttl_micros: u64::MAX,
     };
     let mut log = founded_log();
+    let (two, _) = log.author(&honest, Timestamp(500), set(2, "two")).unwrap();
     let (made, _) = log
         .author(&mallory, Timestamp(1_000), set(1, "mine"))
         .unwrap();
@@ -1222,6 +1248,7 @@ fn the_founder_expels_a_member_whose_unseen_ops_turn_void_and_whose_leases_bind_
     assert_eq!(log.mark(&after.id()), refused_expelled);
     // Every delivery order gives the same verdicts and activity.
     let all = [
+        two,
         made.clone(),
         hoarded.clone(),
         again,
@@ -1278,4 +1305,331 @@ fn the_founded_workload_voids_ops_and_readmits() {
         voided && readmitted,
         "the workload exercises expels and readmits"
     );
+}
+
+#[test]
+fn strong_acquires_of_a_victims_next_objects_do_not_reject_its_creations() {
+    let (victim, mallory) = (key(0), key(9));
+    let hoard = |object| TestPayload::Acquire {
+        object,
+        strong: true,
+        ttl_micros: u64::MAX,
+    };
+    let mut log = TLog::default();
+    log.author(&victim, Timestamp(1_000), set(1, "first"))
+        .unwrap();
+    // Mallory sees everything and strongly takes the ids the victim will make next.
+    let hoards: Vec<_> = (2..5)
+        .map(|object| {
+            log.author(&mallory, Timestamp(2_000), hoard(object))
+                .unwrap()
+                .0
+        })
+        .collect();
+    for h in &hoards {
+        assert_eq!(
+            log.mark(&h.id()),
+            Some(Mark::Rejected(RejectReason::UnknownObject))
+        );
+    }
+    // The victim, who saw the hoards, makes and edits its objects all the same.
+    let made: Vec<_> = (2..5)
+        .flat_map(|object| {
+            let create = log.author(&victim, Timestamp(3_000), set(object, "made"));
+            let edit = log.author(&victim, Timestamp(3_100), set(object, "edited"));
+            [create.unwrap().0, edit.unwrap().0]
+        })
+        .collect();
+    assert!(made.iter().all(|op| log.is_active(&op.id())));
+    assert_eq!(log.lease(ObjectId(2), Timestamp(3_200)), None);
+    // Once Mallory has seen an object made, its lease counts, and binds the ops that see it.
+    let (taken, _) = log.author(&mallory, Timestamp(4_000), hoard(2)).unwrap();
+    assert_eq!(log.mark(&taken.id()), Some(Mark::Effective));
+    let (bound, _) = log
+        .author(&victim, Timestamp(4_100), set(2, "bound"))
+        .unwrap();
+    assert_eq!(
+        log.mark(&bound.id()),
+        Some(Mark::Rejected(RejectReason::LeaseHeld {
+            holder: mallory.peer_id()
+        }))
+    );
+    // The same verdicts in any delivery order.
+    let all: Vec<_> = log
+        .entries()
+        .map(|e| VerifiedOp::trusted(e.op.clone()))
+        .collect();
+    for seed in 0..8 {
+        assert_eq!(
+            observe(&deliver_all_causally(&shuffled(&all, seed))),
+            observe(&log),
+            "order {seed}"
+        );
+    }
+}
+
+#[test]
+fn one_member_leasing_every_object_holds_at_most_the_cap_and_the_rest_stay_free() {
+    use crate::lease::MAX_LIVE_LEASES_PER_AUTHOR;
+    let (honest, mallory) = (key(0), key(9));
+    let n_objects = MAX_LIVE_LEASES_PER_AUTHOR as u64 + 8;
+    let mut log = TLog::default();
+    for object in 0..n_objects {
+        log.author(&honest, Timestamp(1_000), set(object, "made"))
+            .unwrap();
+    }
+    let hoard = |object| TestPayload::Acquire {
+        object,
+        strong: true,
+        ttl_micros: u64::MAX,
+    };
+    let marks: Vec<Mark> = (0..n_objects)
+        .map(|object| {
+            let (op, _) = log
+                .author(&mallory, Timestamp(2_000), hoard(object))
+                .unwrap();
+            log.mark(&op.id()).unwrap()
+        })
+        .collect();
+    let (held, over) = marks.split_at(MAX_LIVE_LEASES_PER_AUTHOR);
+    assert!(held.iter().all(|m| *m == Mark::Effective));
+    let too_many = Mark::Rejected(RejectReason::TooManyLeases);
+    assert!(over.iter().all(|m| *m == too_many), "{over:?}");
+    // Renewing a lease it holds is no new lease; the honest member edits past the cap.
+    let (renewed, _) = log.author(&mallory, Timestamp(2_100), hoard(0)).unwrap();
+    assert_eq!(log.mark(&renewed.id()), Some(Mark::Effective));
+    let (free, _) = log
+        .author(&honest, Timestamp(2_200), set(n_objects - 1, "free"))
+        .unwrap();
+    assert!(log.is_active(&free.id()));
+    let (blocked, _) = log
+        .author(&honest, Timestamp(2_200), set(0, "blocked"))
+        .unwrap();
+    assert!(!log.is_active(&blocked.id()));
+    // A release gives a slot back.
+    log.author(
+        &mallory,
+        Timestamp(2_300),
+        TestPayload::Release { object: 0 },
+    )
+    .unwrap();
+    let (next, _) = log
+        .author(&mallory, Timestamp(2_400), hoard(n_objects - 1))
+        .unwrap();
+    assert_eq!(log.mark(&next.id()), Some(Mark::Effective));
+    let (again, _) = log
+        .author(&mallory, Timestamp(2_500), hoard(n_objects - 2))
+        .unwrap();
+    assert_eq!(log.mark(&again.id()), Some(too_many));
+    // The same verdicts in any delivery order.
+    let all: Vec<_> = log
+        .entries()
+        .map(|e| VerifiedOp::trusted(e.op.clone()))
+        .collect();
+    for seed in 0..4 {
+        assert_eq!(
+            observe(&deliver_all_causally(&shuffled(&all, seed))),
+            observe(&log),
+            "order {seed}"
+        );
+    }
+}
+
+#[test]
+fn live_leases_expire_out_of_the_cap() {
+    use crate::lease::MAX_LIVE_LEASES_PER_AUTHOR;
+    let (honest, mallory) = (key(0), key(9));
+    let n_objects = MAX_LIVE_LEASES_PER_AUTHOR as u64 + 1;
+    let mut log = TLog::default();
+    for object in 0..n_objects {
+        log.author(&honest, Timestamp(1_000), set(object, "made"))
+            .unwrap();
+    }
+    for object in 0..n_objects - 1 {
+        log.author(&mallory, Timestamp(2_000), weak(object, 1_000))
+            .unwrap();
+    }
+    let (late, _) = log
+        .author(&mallory, Timestamp(3_000), weak(n_objects - 1, 1_000))
+        .unwrap();
+    assert_eq!(
+        log.mark(&late.id()),
+        Some(Mark::Effective),
+        "the others expired"
+    );
+}
+
+/// A log of a session founded by author 0 that binds its authors, with `cap` bytes in all.
+fn bound_log(cap: u64) -> TLog {
+    let mut log = founded_log();
+    log.bind_authors(cap).unwrap();
+    log
+}
+
+fn admit(key: &Keypair, grant_bytes: u64) -> TestPayload {
+    TestPayload::Admit(crate::membership::Admission {
+        key: key.peer_id(),
+        grant_bytes,
+        nonce: None,
+    })
+}
+
+/// The founder's admission of itself, which roots every budget.
+fn found(founder: &Keypair) -> TestPayload {
+    TestPayload::Admit(crate::membership::Admission {
+        key: founder.peer_id(),
+        grant_bytes: 0,
+        nonce: Some(FOUNDER_NONCE),
+    })
+}
+
+#[test]
+fn a_bound_session_takes_a_keys_ops_only_once_its_first_names_its_admission() {
+    let (founder, newcomer, stranger) = (key(0), key(1), key(9));
+    let mut log = bound_log(MAX_LOG_BYTES);
+    // Nobody writes before the founder's admission of itself: not even the founder.
+    assert_eq!(
+        log.author(&founder, Timestamp(1), set(1, "x")).unwrap_err(),
+        AuthorError::NotAdmitted
+    );
+    log.author(&founder, Timestamp(1), found(&founder)).unwrap();
+    assert_eq!(
+        log.remaining_budget(&founder.peer_id()),
+        Some(MAX_LOG_BYTES - log.n_bytes())
+    );
+    let grant = log.default_grant(&founder.peer_id());
+    assert_eq!(
+        grant, MAX_AUTHOR_BYTES,
+        "a quarter of the cap is more than an author's quota"
+    );
+    let (admission, _) = log
+        .author(&founder, Timestamp(2), admit(&newcomer, grant))
+        .unwrap();
+    log.author(&founder, Timestamp(3), set(2, "later")).unwrap();
+    // The newcomer's first op names its admission, though it is no longer a head.
+    let (first, _) = log.author(&newcomer, Timestamp(4), set(1, "mine")).unwrap();
+    assert!(first.deps().contains(&admission.id()));
+    assert_eq!(
+        log.remaining_budget(&newcomer.peer_id()),
+        Some(grant - first.encoded().len() as u64)
+    );
+    // A key minted offline is refused, whatever its first op says of itself.
+    let heads: Vec<OpId> = log.heads().copied().collect();
+    let lamport = log.entries().map(|e| e.op.lamport()).max().unwrap() + 1;
+    let unadmitted = |payload| signed(&stranger, 1, lamport, 10, heads.clone(), payload);
+    let fake_founding = TestPayload::Admit(crate::membership::Admission {
+        key: stranger.peer_id(),
+        grant_bytes: 0,
+        nonce: Some([7; 32]),
+    });
+    for payload in [set(1, "sybil"), admit(&stranger, 1 << 20), fake_founding] {
+        assert_eq!(
+            log.insert(Timestamp(10), unadmitted(payload), Origin(1)),
+            Err(InsertError::NotAdmitted {
+                author: stranger.peer_id()
+            })
+        );
+    }
+    assert!(!log.is_admitted(&stranger.peer_id()) && log.is_admitted(&newcomer.peer_id()));
+    // An op signed without its session is refused here.
+    let old = Op::sign_v1(
+        &newcomer,
+        OpFields {
+            seq: 2,
+            lamport,
+            timestamp: Timestamp(10),
+            deps: heads.clone(),
+            payload: set(1, "old"),
+        },
+    )
+    .unwrap();
+    assert_eq!(
+        log.insert(Timestamp(10), old.clone(), Origin(1)),
+        Err(InsertError::OldLayout)
+    );
+    // Every delivery order holds the same ops: the newcomer's wait for their admission.
+    let all: Vec<_> = log
+        .entries()
+        .map(|e| VerifiedOp::trusted(e.op.clone()))
+        .collect();
+    for seed in 0..8 {
+        let mut other = bound_log(MAX_LOG_BYTES);
+        for op in shuffled(&all, seed) {
+            other.insert(Timestamp(10), op, Origin(1)).unwrap();
+        }
+        assert_eq!(other.n_pending(), 0);
+        assert_eq!(observe(&other), observe(&log), "order {seed}");
+    }
+    // A session that does not bind keeps the old rules: the stranger and the old layout pass.
+    let mut unbound = founded_log();
+    unbound.merge(Timestamp(10), &log).unwrap();
+    unbound
+        .insert(Timestamp(10), unadmitted(set(1, "sybil")), Origin(1))
+        .unwrap();
+    unbound.insert(Timestamp(10), old, Origin(1)).unwrap();
+    assert_eq!(
+        TLog::default().bind_authors(1),
+        Err(FounderError::NoFounder)
+    );
+}
+
+#[test]
+fn grants_hold_every_author_within_its_budget_and_the_log_under_the_cap_in_any_order() {
+    let (founder, member) = (key(0), key(1));
+    let sybils: Vec<Keypair> = (10..20).map(key).collect();
+    let cap = 40_000;
+    // The member's ops as it would sign them, budgets aside: authored in a session that does
+    // not bind, then delivered to logs that do.
+    let mut free = founded_log();
+    let mut ops = vec![
+        free.author(&founder, Timestamp(1), found(&founder))
+            .unwrap()
+            .0,
+        free.author(&founder, Timestamp(2), admit(&member, 12_000))
+            .unwrap()
+            .0,
+    ];
+    for (i, sybil) in sybils.iter().enumerate() {
+        let t = 10 + i as u64;
+        ops.push(
+            free.author(&member, Timestamp(t), admit(sybil, 3_000))
+                .unwrap()
+                .0,
+        );
+        for j in 0..20 {
+            let text = "x".repeat(200);
+            ops.push(
+                free.author(sybil, Timestamp(t * 100 + j), set(j, &text))
+                    .unwrap()
+                    .0,
+            );
+        }
+    }
+    // The founder grants more than it holds: refused, as an over-budget op is.
+    let too_much = free
+        .author(&founder, Timestamp(3_000), admit(&key(30), cap))
+        .unwrap()
+        .0;
+    ops.push(too_much.clone());
+    let mut accepted = None;
+    for seed in 0..6 {
+        let mut log = bound_log(cap);
+        for op in shuffled(&ops, seed) {
+            match log.insert(Timestamp(5_000), op, Origin(1)) {
+                Ok(_) | Err(InsertError::AuthorQuota { .. }) => {}
+                Err(e) => panic!("{e}"),
+            }
+        }
+        assert!(log.n_bytes() <= cap, "{} bytes", log.n_bytes());
+        assert!(!log.contains(&too_much.id()));
+        let ids: BTreeSet<OpId> = log.linear_ids().collect();
+        // Some sybil ops were refused (each sybil's grant is smaller than its writes), and
+        // every order refused the same ones (ops refused wait for nothing: none is pending
+        // but those whose deps were refused).
+        assert!(ids.len() < ops.len() - 1);
+        match &accepted {
+            None => accepted = Some(ids),
+            Some(first) => assert_eq!(&ids, first, "order {seed}"),
+        }
+    }
 }

@@ -260,6 +260,16 @@ fn check_lease_rules(log: &TLog) {
             | TestPayload::Release { object } => *object,
             _ => continue,
         };
+        // An acquire counts only once an effective creation of its object is in its past.
+        let created = |id: &OpId| {
+            let past = causal_past(log, id);
+            entries.iter().any(|c| {
+                matches!(c.op.payload(), TestPayload::Set { object: o, .. } if *o == object)
+                    && c.mark == Mark::Effective
+                    && c.op.id() != *id
+                    && past.contains(&c.op.id())
+            })
+        };
         let mut held: Option<(PeerId, bool, u64)> = None;
         for l in entries.iter().filter(|l| past.contains(&l.op.id())) {
             let (h_author, h_at) = (l.op.author(), l.op.timestamp().0);
@@ -269,7 +279,10 @@ fn check_lease_rules(log: &TLog) {
                     object: o,
                     strong,
                     ttl_micros,
-                } if *o == object && blocked.is_none_or(|(_, s, _)| !*strong && !s) => {
+                } if *o == object
+                    && blocked.is_none_or(|(_, s, _)| !*strong && !s)
+                    && created(&l.op.id()) =>
+                {
                     let ttl = (*ttl_micros).min(crate::lease::MAX_LEASE_TTL_MICROS);
                     held = Some((h_author, *strong, h_at.saturating_add(ttl)));
                 }
@@ -291,6 +304,10 @@ fn check_lease_rules(log: &TLog) {
                 }
                 Mark::Rejected(other) => panic!("edit rejected for {other:?}"),
             },
+            TestPayload::Acquire { .. } if !created(&e.op.id()) => {
+                let unknown = Mark::Rejected(RejectReason::UnknownObject);
+                assert_eq!(e.mark, unknown, "acquire of an object it never saw made");
+            }
             TestPayload::Acquire { strong, .. } => {
                 let ok = blocker.is_none_or(|(_, s, _)| !*strong && !s);
                 assert_eq!(e.mark == Mark::Effective, ok, "acquire verdict");

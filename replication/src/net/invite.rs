@@ -20,6 +20,10 @@
 //! - `w`: 2 whole-code check characters.
 //!   With the 26 random characters they form 28 data characters `d_0..d_27` that satisfy
 //!   Σ d_j·α^j = 0 and Σ d_j·α^(2j) = 0: a Reed-Solomon code of distance 3.
+//!   A code whose session binds its authors to their admissions
+//!   ([`Invite::binds_authors`], made by [`Invite::for_founder`]) satisfies Σ d_j·α^j = 1
+//!   instead: no single wrong character turns one kind into the other (it would move the
+//!   second sum too), and codes made before read as sessions that do not bind.
 //! - `c`: one check character per group, last in the group.
 //!   The 5 characters `c_0..c_4` of group `g` (0-based) satisfy Σ c_i·α^i = α^g.
 //!
@@ -140,16 +144,30 @@ impl Invite {
             // 256 is a multiple of 32, so the low 5 bits of a uniform byte are uniform.
             *r &= SYMBOL_MASK;
         }
-        Self::from_random(random)
+        Self::from_random(random, UNBOUND_SYNDROMES)
     }
 
     /// A new invite for a session founded by `founder`: its random characters are
     /// [`FounderCommitment::of`] the founder's key and `nonce` (a secret from the system's
     /// RNG, kept beside the invite), so the founder can prove itself to every member and
     /// expel members ([`crate::membership`]). It carries as many unpredictable bits as a
-    /// drawn one while the nonce stays secret.
+    /// drawn one while the nonce stays secret. Its session binds its authors to their
+    /// admissions ([`Invite::binds_authors`]).
     pub fn for_founder(founder: &PeerId, nonce: &[u8; FOUNDER_NONCE_BYTES]) -> Invite {
-        Self::from_random(FounderCommitment::of(founder, nonce).0)
+        Self::from_random(FounderCommitment::of(founder, nonce).0, BOUND_SYNDROMES)
+    }
+
+    /// An invite of a founded session made before sessions bound their authors (what
+    /// [`Invite::for_founder`] made then), for tests of such sessions.
+    #[doc(hidden)]
+    pub fn for_founder_unbound(founder: &PeerId, nonce: &[u8; FOUNDER_NONCE_BYTES]) -> Invite {
+        Self::from_random(FounderCommitment::of(founder, nonce).0, UNBOUND_SYNDROMES)
+    }
+
+    /// True if the session binds its authors to their admissions
+    /// ([`crate::Log::bind_authors`]): every peer reads it from the code alike.
+    pub fn binds_authors(&self) -> bool {
+        whole_syndromes(&self.data()) == BOUND_SYNDROMES
     }
 
     /// What this invite commits to: its random characters. Only an invite made by
@@ -160,11 +178,12 @@ impl Invite {
         FounderCommitment(symbols)
     }
 
-    /// The invite whose random characters are `random` (each below 32).
-    fn from_random(random: [u8; RANDOM_CHARS]) -> Invite {
+    /// The invite whose random characters are `random` (each below 32) and whose whole-code
+    /// sums are `syndromes`.
+    fn from_random(random: [u8; RANDOM_CHARS], syndromes: [u8; 2]) -> Invite {
         let mut data = [0; DATA_CHARS];
         data[..RANDOM_CHARS].copy_from_slice(&random);
-        let [w0, w1] = whole_check_chars(&data);
+        let [w0, w1] = whole_check_chars(&data, syndromes);
         data[RANDOM_CHARS] = w0;
         data[RANDOM_CHARS + 1] = w1;
         let mut symbols = [0; CODE_CHARS];
@@ -178,7 +197,7 @@ impl Invite {
         }
         let invite = Invite { symbols };
         assert!(
-            invite.n_failed_groups() == 0 && whole_syndromes(&invite.data()) == [0, 0],
+            invite.n_failed_groups() == 0 && whole_syndromes(&invite.data()) == syndromes,
             "a generated invite passes its own checks"
         );
         invite
@@ -216,7 +235,7 @@ impl Invite {
                 last_column: columns[group_idx * GROUP_CHARS + GROUP_CHARS - 1],
             });
         }
-        if whole_syndromes(&invite.data()) != [0, 0] {
+        if ![UNBOUND_SYNDROMES, BOUND_SYNDROMES].contains(&whole_syndromes(&invite.data())) {
             return Err(InviteError::Checksum);
         }
         Ok(invite)
@@ -596,21 +615,27 @@ fn group_check_char(group_idx: usize, data: &[u8]) -> u8 {
     div(missing, alpha_pow(GROUP_DATA_CHARS))
 }
 
-/// The two syndromes Σ d_j·α^j and Σ d_j·α^(2j) of the data characters: both zero for a
-/// code.
+/// The whole-code sums of a session that does not bind its authors (every code made before).
+const UNBOUND_SYNDROMES: [u8; 2] = [0, 0];
+/// The whole-code sums of a session that binds its authors ([`Invite::binds_authors`]).
+const BOUND_SYNDROMES: [u8; 2] = [1, 0];
+
+/// The two syndromes Σ d_j·α^j and Σ d_j·α^(2j) of the data characters: [`UNBOUND_SYNDROMES`]
+/// or [`BOUND_SYNDROMES`] for a code.
 fn whole_syndromes(data: &[u8; DATA_CHARS]) -> [u8; 2] {
     data.iter().enumerate().fold([0, 0], |[s1, s2], (j, &d)| {
         [s1 ^ mul(d, alpha_pow(j)), s2 ^ mul(d, alpha_pow(2 * j))]
     })
 }
 
-/// The whole-code check characters `d_26`, `d_27` for the random characters of `data` (its
-/// last two entries are ignored).
-fn whole_check_chars(data: &[u8; DATA_CHARS]) -> [u8; 2] {
+/// The whole-code check characters `d_26`, `d_27` that give the random characters of `data`
+/// (its last two entries are ignored) the whole-code sums `target`.
+fn whole_check_chars(data: &[u8; DATA_CHARS], target: [u8; 2]) -> [u8; 2] {
     let mut random = *data;
     random[RANDOM_CHARS] = 0;
     random[RANDOM_CHARS + 1] = 0;
     let [s1, s2] = whole_syndromes(&random);
+    let (s1, s2) = (s1 ^ target[0], s2 ^ target[1]);
     // Solve a·p + b·q = s1 and a·r + b·s = s2 for the two check characters a, b (Cramer's
     // rule; the determinant is α^49 + α^48, nonzero, and minus is plus in GF(32)).
     let (p, q) = (alpha_pow(RANDOM_CHARS), alpha_pow(RANDOM_CHARS + 1));
@@ -681,6 +706,33 @@ mod tests {
             assert!(text.bytes().all(|b| b == b'-' || ALPHABET.contains(&b)));
             assert_eq!(Invite::parse(&text), Ok(invite.clone()));
             assert_eq!(text.parse::<Invite>(), Ok(invite));
+        }
+    }
+
+    #[test]
+    fn a_founders_invite_says_its_session_binds_authors_and_no_typo_changes_that() {
+        let founder = crate::identity::Keypair::from_seed([3; 32]).peer_id();
+        let bound = Invite::for_founder(&founder, &[5; 32]);
+        let old = Invite::for_founder_unbound(&founder, &[5; 32]);
+        assert!(bound.binds_authors() && !old.binds_authors());
+        assert!(
+            !invite(1).binds_authors(),
+            "a drawn invite has no founder to bind to"
+        );
+        assert_ne!(bound, old);
+        assert_eq!(bound.founder_commitment(), old.founder_commitment());
+        for text in [bound.to_string(), old.to_string()] {
+            let parsed = Invite::parse(&text).unwrap();
+            assert_eq!(parsed.to_string(), text);
+            // Every one wrong character is refused, never read as the other kind of session.
+            for (i, c) in text.char_indices().filter(|(_, c)| *c != '-') {
+                for &b in ALPHABET.iter().filter(|&&b| char::from(b) != c) {
+                    let mut typo = text.clone().into_bytes();
+                    typo[i] = b;
+                    let typo = String::from_utf8(typo).unwrap();
+                    assert!(Invite::parse(&typo).is_err(), "{typo}");
+                }
+            }
         }
     }
 

@@ -37,7 +37,7 @@ use crate::codec::DecodeError;
 use crate::identity::PeerId;
 use crate::log::OrderKey;
 use crate::materialize::{FoldEntry, MAX_SCENE_SNAPSHOT_BYTES, Materialize, SceneHash};
-use crate::membership::Membership;
+use crate::membership::{Admission, Membership};
 use crate::op::OpId;
 use crate::payload::{Effect, LeaseStrength, MAX_PAYLOAD_BYTES, ObjectId, Payload};
 
@@ -235,6 +235,9 @@ pub enum ShapePayload {
     /// Expels or readmits a member; counts only from the session's founder
     /// ([`crate::membership`]). Boxed, as `Set`'s field.
     Member(Box<Membership>),
+    /// Admits a key, granting it bytes of the author's budget ([`crate::membership`]). Boxed,
+    /// as `Set`'s field.
+    Admit(Box<Admission>),
 }
 
 // Payloads are validated on decode (no NaN reaches one), so equality is reflexive.
@@ -306,6 +309,11 @@ enum Wire<'a> {
         expel: bool,
         nonce: [u8; 32],
     },
+    Admit {
+        key: [u8; 32],
+        grant_bytes: u64,
+        nonce: Option<[u8; 32]>,
+    },
 }
 
 impl<'a> From<&'a ShapePayload> for Wire<'a> {
@@ -374,6 +382,11 @@ impl<'a> From<&'a ShapePayload> for Wire<'a> {
                 member: m.member.0,
                 expel: m.expel,
                 nonce: m.nonce,
+            },
+            ShapePayload::Admit(a) => Wire::Admit {
+                key: a.key.0,
+                grant_bytes: a.grant_bytes,
+                nonce: a.nonce,
             },
         }
     }
@@ -445,6 +458,15 @@ impl From<Wire<'_>> for ShapePayload {
             } => ShapePayload::Member(Box::new(Membership {
                 member: PeerId(member),
                 expel,
+                nonce,
+            })),
+            Wire::Admit {
+                key,
+                grant_bytes,
+                nonce,
+            } => ShapePayload::Admit(Box::new(Admission {
+                key: PeerId(key),
+                grant_bytes,
                 nonce,
             })),
         }
@@ -539,7 +561,10 @@ impl ShapePayloadV1 {
             ShapePayload::Undo(id) => ShapePayloadV1::Undo(id),
             ShapePayload::Redo(id) => ShapePayloadV1::Redo(id),
             ShapePayload::Chat(text) => ShapePayloadV1::Chat(text),
-            ShapePayload::Part { .. } | ShapePayload::Assemble { .. } | ShapePayload::Member(_) => {
+            ShapePayload::Part { .. }
+            | ShapePayload::Assemble { .. }
+            | ShapePayload::Member(_)
+            | ShapePayload::Admit(_) => {
                 return None;
             }
         })
@@ -696,7 +721,9 @@ impl Payload for ShapePayload {
             ShapePayload::Release { object: o } => Effect::Release { object: object(o) },
             ShapePayload::Undo(target) => Effect::Undo { target },
             ShapePayload::Redo(target) => Effect::Redo { target },
-            ShapePayload::Chat(_) | ShapePayload::Member(_) => Effect::Independent,
+            ShapePayload::Chat(_) | ShapePayload::Member(_) | ShapePayload::Admit(_) => {
+                Effect::Independent
+            }
         }
     }
 
@@ -704,11 +731,34 @@ impl Payload for ShapePayload {
         matches!(self, ShapePayload::Delete { .. })
     }
 
+    /// A `Create` that may make its object ([`may_create`]), or the first part of one
+    /// authored in parts. Groups cannot be leased (an acquire's id loses its group bit).
+    fn creates(&self, author: &PeerId) -> bool {
+        match self {
+            ShapePayload::Create {
+                object, counter, ..
+            } => may_create(*author, *object, *counter),
+            ShapePayload::Part { object, bytes } => parts::starts_create(author, *object, bytes),
+            _ => false,
+        }
+    }
+
     fn membership(&self) -> Option<Membership> {
         match self {
             ShapePayload::Member(m) => Some(**m),
             _ => None,
         }
+    }
+
+    fn admission(&self) -> Option<Admission> {
+        match self {
+            ShapePayload::Admit(a) => Some(**a),
+            _ => None,
+        }
+    }
+
+    fn admitting(admission: Admission) -> Option<Self> {
+        Some(ShapePayload::Admit(Box::new(admission)))
     }
 }
 
@@ -850,7 +900,8 @@ impl ShapeScene {
             | ShapePayload::Release { .. }
             | ShapePayload::Undo(_)
             | ShapePayload::Redo(_)
-            | ShapePayload::Member(_) => {}
+            | ShapePayload::Member(_)
+            | ShapePayload::Admit(_) => {}
             ShapePayload::Part { object, bytes } => self.parts.hold(*object, bytes),
             ShapePayload::Assemble {
                 object,

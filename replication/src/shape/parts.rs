@@ -139,6 +139,27 @@ pub(super) fn check_assemble(hashes: &[PartHash]) -> Result<(), String> {
     Ok(())
 }
 
+/// The tag of `CreateOwned` (a `Create` with its counter) in the payload's encoding: what a
+/// part that starts a creation holds after the encoding's version.
+const CREATE_OWNED_TAG: u64 = 13;
+
+/// Whether a `Part` of `object` by `author` holding `bytes` starts the encoding of a `Create`
+/// of `object` with a counter that makes the id `author`'s ([`super::may_create`]): the first
+/// part of an object created in parts, which creates it as far as leases go
+/// ([`Payload::creates`]). Only the head is read (version, tag, id and counter).
+pub(super) fn starts_create(author: &crate::PeerId, object: u64, bytes: &[u8]) -> bool {
+    let mut r = crate::codec::Reader::new(bytes);
+    let head = (|| {
+        let version = r.u8().ok()?;
+        let tag = r.varint().ok()?;
+        let id = r.varint().ok()?;
+        let counter = u32::try_from(r.varint().ok()?).ok()?;
+        (version == object_codec::VERSION && tag == CREATE_OWNED_TAG && id == object)
+            .then_some(counter)
+    })();
+    head.is_some_and(|counter| super::may_create(*author, object, Some(counter)))
+}
+
 /// The change `bytes` encode, when they are the canonical encoding of a valid `Create` or
 /// `Set` of `object`.
 fn decode_change(object: u64, bytes: &[u8]) -> Option<ShapePayload> {

@@ -265,3 +265,48 @@ fn a_snapshot_holds_more_authors_than_a_version_vector_message_names() {
         })
     ));
 }
+
+/// A member leaps Lamport time past 2^32 before the cut; the honest ops after the cut, whose
+/// dependencies lie inside the base, are accepted by the joined log as by a full one, and an
+/// op leaping again from there is refused by both.
+#[test]
+fn ops_after_a_lamport_leap_before_the_cut_get_the_verdicts_of_a_full_log() {
+    use crate::log::MAX_LAMPORT_JUMP;
+    use crate::log::tests::signed;
+    let (honest, mallory) = (key(0), key(9));
+    let mut full = TLog::default();
+    let (first, _) = full.author(&honest, Timestamp(1_000), set(1, "a")).unwrap();
+    let leap_lamport = 1 + MAX_LAMPORT_JUMP;
+    let chat = |text: &str| TestPayload::Chat(text.into());
+    let leap = signed(
+        &mallory,
+        1,
+        leap_lamport,
+        1_000,
+        vec![first.id()],
+        chat("leap"),
+    );
+    full.insert(Timestamp(1_000), leap.clone(), Origin(1))
+        .unwrap();
+    let (after, _) = full.author(&honest, Timestamp(2_000), set(1, "b")).unwrap();
+    assert_eq!(after.deps(), &[leap.id()]);
+    let cut = full.stable_lamport();
+    assert_eq!(cut, leap_lamport);
+    let snapshot = TSnapshot::capture::<TestScene>(&full, cut).unwrap();
+    let bytes = snapshot.encode().unwrap();
+    let mut joined = TSnapshot::decode(&bytes)
+        .unwrap()
+        .into_log(PendingLimits::default());
+    let ins = joined.insert(Timestamp(3_000), after.clone(), Origin(1));
+    assert_eq!(ins.map(|i| i.delivered.to_vec()), Ok(vec![after.id()]));
+    let leap_again = |lamport| signed(&mallory, 2, lamport, 3_000, vec![leap.id()], chat("again"));
+    for log in [&mut full, &mut joined] {
+        let too_far = leap_lamport + MAX_LAMPORT_JUMP + 1;
+        assert!(matches!(
+            log.insert(Timestamp(3_000), leap_again(too_far), Origin(1)),
+            Err(InsertError::LamportJump { .. })
+        ));
+        let (own, _) = log.author(&key(1), Timestamp(4_000), set(2, "c")).unwrap();
+        assert!(own.lamport() > leap_lamport);
+    }
+}

@@ -150,15 +150,16 @@ impl<P: Payload> OpStore<P> {
         ))
     }
 
-    /// Opens the store and inserts every stored op into `log`, checking signatures (in
-    /// batches; [`OpenError::BadSignature`] names the first record that fails).
+    /// Opens the store and inserts every stored op into `log`, checking signatures for the
+    /// log's session (in batches; [`OpenError::BadSignature`] names the first record that
+    /// fails).
     pub fn open_into(
         path: &Path,
         now: Timestamp,
         log: &mut Log<P>,
     ) -> Result<(Self, Recovery), OpenError> {
         let (store, ops, recovery) = Self::open(path)?;
-        if let Some(record_idx) = Op::first_unsigned(&ops) {
+        if let Some(record_idx) = Op::first_unsigned(&ops, &log.session_id()) {
             return Err(OpenError::BadSignature { record_idx });
         }
         for (record_idx, op) in ops.into_iter().enumerate() {

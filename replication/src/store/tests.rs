@@ -55,7 +55,7 @@ fn next_op(key: &Keypair, prev: Option<&Op<TestPayload>>, pad: usize) -> Verifie
             value: "x".repeat(pad),
         },
     };
-    Op::sign(key, fields).unwrap()
+    Op::sign(key, &crate::op::UNNAMED_SESSION, fields).unwrap()
 }
 
 #[test]
@@ -451,7 +451,10 @@ fn kill9_child_writer() {
             );
             let (_, ops, _) = OpStore::<TestPayload>::open(&path).unwrap();
             assert_eq!(ops.len(), 5);
-            assert!(ops.iter().all(|op| op.verify().is_ok()));
+            assert!(
+                ops.iter()
+                    .all(|op| op.verify(&crate::op::UNNAMED_SESSION).is_ok())
+            );
             let _ = std::fs::remove_dir_all(path.parent().unwrap());
         }
     }
@@ -577,7 +580,10 @@ fn kill9_never_loses_acknowledged_ops_nor_accepts_torn_ones() {
     );
     let (_, ops, _) = OpStore::<TestPayload>::open(&path).unwrap();
     assert!(ops.len() >= acked.len());
-    assert!(ops.iter().all(|op| op.verify().is_ok()));
+    assert!(
+        ops.iter()
+            .all(|op| op.verify(&crate::op::UNNAMED_SESSION).is_ok())
+    );
     let _ = std::fs::remove_dir_all(path.parent().unwrap());
 }
 

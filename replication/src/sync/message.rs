@@ -35,7 +35,9 @@ pub const SYNC_WIRE_VERSION: u8 = 1;
 /// [`Message::Ping`] probes a silent remote.
 /// 9: a ping that a full have does not answer is answered with a [`Message::Pong`], which a
 /// build speaking 8 refuses.
-pub const PROTOCOL_VERSION: u64 = 9;
+/// 10: ops are signed for their session ([`crate::op::OP_FORMAT_VERSION`] 2), which a build
+/// speaking 9 cannot decode.
+pub const PROTOCOL_VERSION: u64 = 10;
 /// The last protocol whose hello ends after `hello_seen` (protocol 8 added the hello's have).
 const LAST_PROTOCOL_WITHOUT_HELLO_HAVE: u64 = 7;
 /// Length of a session id.

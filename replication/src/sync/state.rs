@@ -1431,7 +1431,7 @@ impl<P: Payload> SyncState<P> {
             self.stats.n_ops_over_quota += (fresh.len() - n_fresh) as u64;
             fresh.truncate(n_fresh);
         }
-        for op in Envelope::into_verified_all::<P>(fresh) {
+        for op in Envelope::into_verified_all::<P>(fresh, &log.session_id()) {
             match op {
                 Ok(op) => {
                     if !authors.contains(&op.author()) {

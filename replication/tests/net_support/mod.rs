@@ -136,17 +136,18 @@ pub async fn converge(handles: &[&THandle], n_expected: usize) {
     .await;
 }
 
-/// Authors a few ops: a lease on `object`, two edits of it, and a chat line.
+/// Authors a few ops: an edit of `object` (which makes it), a lease on it, another edit and
+/// a chat line.
 pub async fn author_some(handle: &THandle, object: u64, tag: &str) -> Vec<OpId> {
     let payloads = [
+        TestPayload::Set {
+            object,
+            value: format!("{tag} first"),
+        },
         TestPayload::Acquire {
             object,
             strong: false,
             ttl_micros: 60_000_000,
-        },
-        TestPayload::Set {
-            object,
-            value: format!("{tag} first"),
         },
         TestPayload::Set {
             object,

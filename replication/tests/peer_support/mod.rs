@@ -307,6 +307,7 @@ impl World {
         let payload = self.payload(bytes);
         let op = Op::sign(
             &self.keys[k],
+            &SESSION,
             OpFields {
                 seq,
                 lamport,

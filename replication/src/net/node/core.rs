@@ -14,6 +14,7 @@ use super::{
 };
 use crate::identity::PeerId;
 use crate::log::Log;
+use crate::membership::Admission;
 use crate::net::admission::{AdmissionError, Role};
 use crate::net::clock::{duration_until, wall_clock_now};
 use crate::net::prefix::AddressPrefix;
@@ -31,6 +32,9 @@ struct Live {
     role: Role,
     connection: quinn::Connection,
     frames: mpsc::Sender<Vec<u8>>,
+    /// When it was admitted (its key, unknown to a log that binds authors, is admitted
+    /// [`super::ADMISSION_DELAY_MILLIS`] later).
+    since: Timestamp,
 }
 
 pub(super) struct Core<P> {
@@ -49,6 +53,9 @@ pub(super) struct Core<P> {
     counters: Arc<Counters>,
     /// The first bytes of every encoded ephemeral message (version and tag).
     ephemeral_prefix: [u8; 2],
+    /// Per source address, when this node last admitted a key met from there (at most
+    /// [`super::MAX_ADMISSION_SOURCES`]).
+    admitted_from: BTreeMap<AddressPrefix, Timestamp>,
     running: bool,
 }
 
@@ -106,6 +113,7 @@ impl<P: Payload + Send + 'static> Core<P> {
             stats: NodeStats::default(),
             counters,
             ephemeral_prefix: ephemeral_prefix(),
+            admitted_from: BTreeMap::new(),
             running: true,
         }
     }
@@ -371,6 +379,7 @@ impl<P: Payload + Send + 'static> Core<P> {
                 role,
                 connection,
                 frames,
+                since: wall_clock_now(),
             },
         );
         self.stats.n_admitted += 1;
@@ -407,9 +416,59 @@ impl<P: Payload + Send + 'static> Core<P> {
             return;
         }
         self.enforce_rejection_limit();
+        self.admit_newcomers(now);
         self.drain_transmits(now);
         if let Some(observer) = &mut self.observer {
             observer.settled(&self.peer, std::mem::take(&mut self.changed));
+        }
+    }
+
+    /// In a session that binds its authors, admits the keys of connections up for
+    /// [`super::ADMISSION_DELAY_MILLIS`] that the log does not know (no op and no admission
+    /// of theirs is held), once this node may write: at most one per source address every
+    /// [`super::ADMISSION_INTERVAL_MILLIS`], each granted [`Log::default_grant`].
+    fn admit_newcomers(&mut self, now: Timestamp) {
+        let log = self.peer.log();
+        let me = self.peer.peer_id();
+        if !log.binds_authors() || !log.is_admitted(&me) {
+            return;
+        }
+        let delay = super::ADMISSION_DELAY_MILLIS * 1_000;
+        let interval = super::ADMISSION_INTERVAL_MILLIS * 1_000;
+        let due: Vec<(PeerId, AddressPrefix)> = (self.conns.values())
+            .filter(|l| now.0 >= l.since.0.saturating_add(delay) && !log.is_admitted(&l.peer))
+            .map(|l| {
+                (
+                    l.peer,
+                    AddressPrefix::of(l.connection.remote_address().ip()),
+                )
+            })
+            .collect();
+        for (key, prefix) in due {
+            let recent = (self.admitted_from.get(&prefix))
+                .is_some_and(|at| now.0 < at.0.saturating_add(interval));
+            if recent || self.peer.log().is_admitted(&key) {
+                continue;
+            }
+            let grant_bytes = self.peer.log().default_grant(&me);
+            let Some(payload) = P::admitting(Admission {
+                key,
+                grant_bytes,
+                nonce: None,
+            }) else {
+                return;
+            };
+            if self.admitted_from.len() >= super::MAX_ADMISSION_SOURCES
+                && let Some(oldest) = (self.admitted_from.iter())
+                    .min_by_key(|(_, at)| **at)
+                    .map(|(p, _)| *p)
+            {
+                self.admitted_from.remove(&oldest);
+            }
+            self.admitted_from.insert(prefix, now);
+            if self.author(payload).is_ok() {
+                self.stats.n_keys_admitted += 1;
+            }
         }
     }
 

@@ -79,6 +79,16 @@ pub const MAX_CONNECTIONS_PER_ADDRESS: usize = 8;
 /// resend). Shorter than the dialer's [`admission::ADMISSION_TIMEOUT_MILLIS`], so that a
 /// connection that never admits frees its slot soon.
 pub const ACCEPT_TIMEOUT_MILLIS: u64 = 2_000;
+/// In a session that binds its authors, how long a connection to a key the log does not know
+/// stays up before this node admits the key ([`crate::membership::Admission`]), so that sync
+/// first brings an admission another member made.
+pub const ADMISSION_DELAY_MILLIS: u64 = 2_000;
+/// This node admits at most one new key per source address (an IPv4 address or an IPv6 /64)
+/// in this long, so a member rejoining under fresh keys from one address drains admitters'
+/// budgets ([`crate::Log::default_grant`]) no faster.
+pub const ADMISSION_INTERVAL_MILLIS: u64 = 60_000;
+/// Source addresses whose last admission this node remembers; the oldest is forgotten first.
+pub const MAX_ADMISSION_SOURCES: usize = 1024;
 
 /// QUIC application close codes this node sends.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -379,6 +389,8 @@ pub struct NodeStats {
     pub failed_admissions: BTreeMap<RefusalKind, u64>,
     /// Connections admitted.
     pub n_admitted: u64,
+    /// Keys this node admitted to the session ([`ADMISSION_DELAY_MILLIS`]).
+    pub n_keys_admitted: u64,
     /// Stateless retries sent to connection attempts whose source address was not validated
     /// yet (the dialer echoes the token from its address, and only then does this node keep
     /// any state or count the attempt against the address).

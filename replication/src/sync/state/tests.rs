@@ -340,6 +340,7 @@ fn hostile_inputs_are_counted_and_honest_ops_survive() {
     // An op whose dependency never comes waits, then expires and is reported.
     let orphan = Op::sign(
         &mallory,
+        &crate::op::UNNAMED_SESSION,
         OpFields {
             seq: 1,
             lamport: 5,
@@ -522,7 +523,12 @@ pub(crate) fn log_of_many_authors(n_authors: u32) -> TLog {
                 deps: Vec::new(),
                 payload: TestPayload::Chat(String::new()),
             };
-            Op::sign(&Keypair::from_seed(seed), fields).unwrap()
+            Op::sign(
+                &Keypair::from_seed(seed),
+                &crate::op::UNNAMED_SESSION,
+                fields,
+            )
+            .unwrap()
         })
         .collect();
     // In linear order, so each insertion appends.
@@ -624,7 +630,7 @@ fn a_dependency_that_never_comes_is_asked_for_by_id_and_asks_are_answered() {
         deps: vec![missing],
         payload: TestPayload::Chat("built on something you lack".into()),
     };
-    let waiting = crate::op::Op::sign(&other, fields).unwrap();
+    let waiting = crate::op::Op::sign(&other, &crate::op::UNNAMED_SESSION, fields).unwrap();
     assert!(
         feed(
             &mut a,
