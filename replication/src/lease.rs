@@ -96,8 +96,12 @@ impl RejectReason {
     /// What the op's author can do about it, in a few words for a tooltip.
     pub fn remedy(&self) -> &'static str {
         match self {
-            Self::LeaseHeld { .. } | Self::StrongLeaseHeld { .. } => {
+            Self::LeaseHeld { .. } => {
                 "it stays in the history, marked rejected; take the lease and redo it"
+            }
+            Self::StrongLeaseHeld { .. } => {
+                "it stays in the history, marked rejected; a strong lease cannot be taken over: \
+                 redo it once its holder releases it or the lease runs out"
             }
             Self::NotHolder => "nothing to give back: the lease was not yours at that point",
             Self::UnknownTarget
@@ -471,6 +475,26 @@ mod tests {
 
     const A: PeerId = PeerId([1; 32]);
     const B: PeerId = PeerId([2; 32]);
+
+    #[test]
+    fn the_advice_on_a_rejected_edit_follows_its_reason() {
+        // Only a weak lease can be taken over: the advice to take it is for that alone.
+        let weak = RejectReason::LeaseHeld { holder: B }.remedy();
+        assert!(weak.contains("take the lease"), "{weak}");
+        let strong = RejectReason::StrongLeaseHeld { holder: B }.remedy();
+        assert!(!strong.contains("take the lease"), "{strong}");
+        assert!(strong.contains("releases it or the lease runs out"), "{strong}");
+        for other in [
+            RejectReason::Forked,
+            RejectReason::Expelled,
+            RejectReason::UnknownObject,
+            RejectReason::TooManyLeases,
+            RejectReason::NotHolder,
+            RejectReason::AlreadyUndone,
+        ] {
+            assert!(!other.remedy().contains("take the lease and"), "{other}");
+        }
+    }
     const OBJ: ObjectId = ObjectId(7);
 
     fn acquire(strength: LeaseStrength, ttl_micros: u64) -> Effect {
