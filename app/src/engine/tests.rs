@@ -341,13 +341,13 @@ fn the_opening_status_says_whether_the_demo_was_authored_or_a_session_joined() {
         lock(first.view()).opening_status(),
         "new store: the demo scene was authored"
     );
-    wait_view(&first, "the demo", |v| v.n_ops() == 1);
+    wait_view(&first, "the demo", |v| v.n_ops() == FOUNDED + 1);
     let invite = first.invite().clone();
     first.shutdown();
     let again = Engine::start(config(&dir), T0).unwrap();
     assert_eq!(
         lock(again.view()).opening_status(),
-        "loaded 1 ops from the store"
+        format!("loaded {} ops from the store", FOUNDED + 1)
     );
 
     // Joining: a new store of its own, then the same store while `again` holds it.
