@@ -483,7 +483,10 @@ mod tests {
         assert!(weak.contains("take the lease"), "{weak}");
         let strong = RejectReason::StrongLeaseHeld { holder: B }.remedy();
         assert!(!strong.contains("take the lease"), "{strong}");
-        assert!(strong.contains("releases it or the lease runs out"), "{strong}");
+        assert!(
+            strong.contains("releases it or the lease runs out"),
+            "{strong}"
+        );
         for other in [
             RejectReason::Forked,
             RejectReason::Expelled,
