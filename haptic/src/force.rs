@@ -30,7 +30,7 @@ mod tests;
 
 use glam::DVec3;
 
-use crate::container::Scene;
+use crate::container::{GRADIENT_NORM_MIN, Scene};
 use crate::device::{Capabilities, DeviceSample};
 use stack::{ContainerStack, StackEntry};
 use zone::HapticZone;
@@ -39,8 +39,6 @@ use zone::HapticZone;
 pub const CONTAINERS_MAX: usize = 256;
 /// Bisection steps to locate a crossing on the segment travelled in one tick.
 pub const ROOT_BISECTION_STEPS: usize = 30;
-/// Gradients shorter than this have no usable normal (e.g. the centre of a sphere).
-pub const GRADIENT_NORM_MIN: f64 = 1e-9;
 /// Filtered velocity components below this are zero (see `render`; BENCHMARKS.md has the
 /// measurement), metres per second.
 pub const VELOCITY_FLUSH_METRES_PER_SEC: f64 = 1e-12;

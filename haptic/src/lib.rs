@@ -30,7 +30,7 @@
 //!
 //! ```
 //! use glam::DVec3;
-//! use haptic::container::Aabb;
+//! use haptic::aabb::Aabb;
 //! use haptic::device::{Capabilities, DeviceSample};
 //! use haptic::force::{render, ForceParams, ProxyState, Region, Rig, zone::HapticZone};
 //! use haptic::shapes::Analytic;
@@ -53,6 +53,7 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod aabb;
 pub mod container;
 pub mod device;
 pub mod force;

@@ -598,7 +598,7 @@ fn run_loop<D: HapticDevice, S: Scene>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::container::Aabb;
+    use crate::aabb::Aabb;
     use crate::device::sim::{HandModel, SimDevice, Waypoint};
     use crate::device::trace::{Trace, TraceDevice};
     use crate::device::{Capabilities, DeviceSample};

@@ -10,7 +10,7 @@
 //! servo drives a force-feedback device when one is attached.
 
 use glam::DVec3;
-use haptic::container::Aabb;
+use haptic::aabb::Aabb;
 use haptic::container::object::ObjectContainer;
 use haptic::device::mouse::{MouseDevice, MouseHandle};
 use haptic::device::{Capabilities, DeviceError, DeviceSample, HapticDevice};

@@ -30,7 +30,8 @@ pub mod spacemouse;
 
 use glam::{DQuat, DVec3};
 use haptic::container::object::ObjectContainer;
-use haptic::container::{Aabb, Container as _, Scene};
+use haptic::aabb::Aabb;
+use haptic::container::{Container as _, Scene};
 use haptic::device::{Capabilities, DeviceError, DeviceSample, HapticDevice};
 use haptic::force::zone::HapticZone;
 use haptic::force::{ForceParams, Rig};

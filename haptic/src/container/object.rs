@@ -34,7 +34,8 @@ use glam::{DAffine3, DMat3, DVec3};
 use fdsl::object::{Object, Paintable, Sampler, Shape, Transform};
 use fdsl::scene::ObjectId;
 
-use super::{Aabb, Container};
+use super::Container;
+use crate::aabb::Aabb;
 
 /// Why an object cannot become a haptic container.
 #[derive(Debug, thiserror::Error, PartialEq)]
