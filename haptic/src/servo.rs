@@ -477,12 +477,13 @@ impl<D, S> ServoHandle<D, S> {
     }
 }
 
-/// The monotonic clock: the one place the haptic crate reads time.
+/// The monotonic clock: the one place the haptic crate reads time (the servo's pacing and
+/// timing, and the feed's build time).
 #[expect(
     clippy::disallowed_methods,
-    reason = "servo pacing reads the monotonic clock here only"
+    reason = "the haptic crate reads the monotonic clock here only"
 )]
-fn monotonic_now() -> Instant {
+pub(crate) fn monotonic_now() -> Instant {
     Instant::now()
 }
 

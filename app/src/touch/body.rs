@@ -4,12 +4,19 @@
 //!
 //! Set with the `probe:` command (`probe: radius 0.1 tension 0.8 friction 0.3 density 1`,
 //! `probe: off`) or the Touch section. A body with no tension and no density is not tangible
-//! and is not sent. Receivers build it into their servo's scene ([`super::feed`]) at the
-//! sender's tool point, as an fdsl object: the ball `radius - |p|` with those properties and a
-//! surface zone of half the radius.
+//! and is not sent. Receivers read the other peers' tangible tools from their presence
+//! ([`peer_tools`]) and hand them to their servo's feed (`haptic::feed`), which builds each
+//! at the sender's tool point as an fdsl object: the ball `radius - |p|` with those
+//! properties and a surface zone of half the radius.
+
+use std::collections::BTreeMap;
 
 use fdsl::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property, Transform};
 use glam::DVec3;
+use haptic::feed::RemoteTool;
+use replication::PeerId;
+
+use crate::engine::Presence;
 
 /// Largest tool radius, scene units.
 pub const MAX_TOOL_RADIUS: f64 = 10.0;
@@ -167,6 +174,42 @@ impl ToolBody {
         };
         Object::new(data).ok()
     }
+}
+
+/// Another peer's tangible touch tool, as its presence gives it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PeerTool {
+    /// The peer holding it.
+    pub peer: PeerId,
+    /// The tool point, scene coordinates.
+    pub at: DVec3,
+    /// Its body (tangible).
+    pub body: ToolBody,
+}
+
+impl RemoteTool for PeerTool {
+    fn object(&self) -> Option<Object> {
+        self.body.object(self.at)
+    }
+}
+
+/// The tangible tools in other peers' `presence`, in peer id order. Presence carries the
+/// tool point in the renderer's world (+z up, as the window draws it); it is turned back into
+/// the scene's here.
+pub fn peer_tools(presence: &BTreeMap<PeerId, Presence>) -> Vec<PeerTool> {
+    let scene_from_render = render::snapshot::render_from_scene().inverse();
+    presence
+        .iter()
+        .filter_map(|(peer, p)| {
+            let body = ToolBody::from_wire(p.tool_body?)?;
+            let at = scene_from_render.transform_point3(glam::Vec3::from_array(p.tool?));
+            body.is_tangible().then_some(PeerTool {
+                peer: *peer,
+                at: at.as_dvec3(),
+                body,
+            })
+        })
+        .collect()
 }
 
 #[cfg(test)]
