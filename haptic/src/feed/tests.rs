@@ -9,10 +9,11 @@ use std::time::Duration;
 use glam::DVec3;
 
 use fdsl::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property, Transform};
-use fdsl::scene::{Group, GroupId, ObjectId, Scene};
+use fdsl::scene::{GroupId, ObjectId, Scene};
 
 use super::*;
 use crate::container::Container as _;
+use crate::container::object::ObjectContainerError;
 
 /// A ball of `radius` at `at`, with tension when `tangible`.
 fn ball(at: DVec3, radius: f64, tangible: bool) -> Object {
@@ -151,22 +152,38 @@ fn remote_tools_follow_the_objects_and_a_move_builds_again() {
 
 #[test]
 fn an_object_that_cannot_be_felt_is_refused_with_why_and_the_rest_is_felt() {
-    let mut source = Source::default();
-    let flat = Group {
-        transform: Transform::from_trs(DVec3::ZERO, glam::DQuat::IDENTITY, DVec3::ZERO),
-        ..Group::default()
+    // A ball whose formula unrolls to more instructions than a tick may pay (padded so that
+    // the text's own unrolling budget admits it).
+    let mut text = String::from(
+        "function frep(x,y,z,t) { s = 0; for (i = 0; i < 1000; i = i + 1) { \
+         s = s + sin(x*i + y)*cos(z*i - x) + sqrt(abs(y*i + z)); } \
+         return 1 - sqrt(x^2+y^2+z^2) + 1e-9*s; }",
+    );
+    text.push_str(&" ".repeat(2048 - text.len()));
+    let costly = ObjectData {
+        geometry: Some(Geometry::implicit_in(
+            Formula::new(&text).unwrap(),
+            Domain::new(DVec3::ZERO, DVec3::splat(2.2)),
+        )),
+        physics: Physics {
+            tension: Some(Property::new(Formula::new("1").unwrap())),
+            ..Physics::default()
+        }
+        .into(),
+        ..ObjectData::default()
     };
-    source.scene.set_group(GroupId(1), flat).unwrap();
-    source.insert(1, ball(DVec3::ZERO, 1.0, true), Some(GroupId(1)));
+    let mut source = Source::default();
+    source.insert(1, Object::new(costly).unwrap(), None);
     source.insert(2, ball(DVec3::X * 3.0, 1.0, true), None);
     let built = Snapshotter::new().update(&Mutex::new(source)).unwrap();
     assert_eq!(ids(&built), [2]);
-    assert_eq!(
-        built.refused,
-        [(
-            ObjectId(1),
-            crate::container::object::ObjectContainerError::BadPlacement { id: 1 }
-        )]
+    assert!(
+        matches!(
+            built.refused.as_slice(),
+            [(ObjectId(1), ObjectContainerError::TooCostly { id: 1, .. })]
+        ),
+        "{:?}",
+        built.refused
     );
 }
 
