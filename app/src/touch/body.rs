@@ -264,6 +264,47 @@ mod tests {
     }
 
     #[test]
+    fn peers_tools_are_their_tangible_valid_bodies_at_their_points_in_the_scene() {
+        let body = ToolBody {
+            radius: 0.1,
+            tension: 0.8,
+            friction: 0.0,
+            density: 0.0,
+        };
+        let touching = |tool: Option<[f32; 3]>, body: Option<[f32; 4]>| Presence {
+            tool,
+            tool_body: body,
+            ..Presence::named("p".into(), [0; 3])
+        };
+        let presence = BTreeMap::from([
+            // Its tool point in the renderer's world (+z up): the scene's (0, 1.25, 0).
+            (
+                PeerId([1; 32]),
+                touching(Some([0.0, 0.0, 1.25]), Some(body.to_wire())),
+            ),
+            (PeerId([2; 32]), touching(None, Some(body.to_wire()))),
+            (
+                PeerId([3; 32]),
+                touching(Some([0.0; 3]), Some(ToolBody::default().to_wire())),
+            ),
+            (
+                PeerId([4; 32]),
+                touching(Some([0.0; 3]), Some([-1.0, 1.0, 0.0, 0.0])),
+            ),
+            (PeerId([5; 32]), touching(Some([0.0; 3]), None)),
+        ]);
+        let tools = peer_tools(&presence);
+        assert_eq!(tools.len(), 1, "{tools:?}");
+        assert_eq!(
+            (tools[0].peer, tools[0].body),
+            (PeerId([1; 32]), body_f32(body))
+        );
+        assert!((tools[0].at - DVec3::new(0.0, 1.25, 0.0)).length() < 1e-6);
+        let object = RemoteTool::object(&tools[0]).unwrap();
+        assert!(object.sampler().value(tools[0].at, 0.0) > 0.09);
+    }
+
+    #[test]
     fn a_body_is_a_tangible_ball_where_the_tool_is() {
         let body = ToolBody {
             radius: 0.2,

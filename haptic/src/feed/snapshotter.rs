@@ -17,7 +17,7 @@ struct Prepared {
 
 /// One object as the source held it when copied: the object and its groups' placement, or
 /// `None` when it is gone.
-type Copy = (ObjectId, Option<(Object, Transform)>);
+type ObjectCopy = (ObjectId, Option<(Object, Transform)>);
 
 /// Builds haptic snapshots of a source's scene, object by object as they change.
 pub struct Snapshotter<T> {
@@ -69,7 +69,7 @@ impl<T: RemoteTool> Snapshotter<T> {
 
     /// Under the source's lock: the changed objects' copies (no list when nothing changed),
     /// and the remote tangible tools.
-    fn copy_changed<S>(&mut self, source: &S) -> (Option<Vec<Copy>>, Vec<T>)
+    fn copy_changed<S>(&mut self, source: &S) -> (Option<Vec<ObjectCopy>>, Vec<T>)
     where
         S: SceneSource<Tool = T>,
     {
@@ -104,7 +104,7 @@ impl<T: RemoteTool> Snapshotter<T> {
     }
 
     /// Off the lock: prepares each copy and keeps it, and forgets the objects gone.
-    fn prepare(&mut self, copies: Vec<Copy>) {
+    fn prepare(&mut self, copies: Vec<ObjectCopy>) {
         for (id, copy) in copies {
             match copy {
                 Some((mut object, world_from_group)) => {
