@@ -10,7 +10,7 @@
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
-use haptic::container::Aabb;
+use haptic::aabb::Aabb;
 use haptic::shapes::{Analytic, fdsl_watermelon};
 
 mod touch_support;
@@ -416,13 +416,13 @@ mod live {
     use std::time::{Duration, Instant};
 
     use app::engine::{Engine, EngineConfig, Network, lock};
-    use app::touch::feed::Feed;
     use app::touch::{DeviceModel, rig, zone_for};
     use fdsl::object::{Domain, Edit, EditOp, Field, Formula, Geometry, ObjectData, Physics};
     use fdsl::object::{Pose, Property, ToolShape};
     use glam::DVec3;
-    use haptic::container::Aabb;
+    use haptic::aabb::Aabb;
     use haptic::device::sim::{HandModel, SimDevice, Waypoint};
+    use haptic::feed::Feed;
     use haptic::servo::{Servo, ServoConfig, ServoLink, StatsSnapshot};
     use replication::shape::ShapePayload;
 

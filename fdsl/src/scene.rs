@@ -1,6 +1,12 @@
 //! A scene: objects under stable ids, in nested groups with transforms, and a
 //! [`SceneSampler`] that answers in scene (world) coordinates what [`Sampler`] answers in an
 //! object's own.
+//!
+//! The coordinate convention: the world is the scene's own frame (+y up, as VRML); an object
+//! sits in it by [`world_from_object`] at scene time `t`: its own transform followed by its
+//! motion at `t` ([`Sampler::placement`]), then its groups' transforms
+//! ([`Scene::world_from_group`]). Every crate places objects by that one function, so what
+//! is drawn is where it is felt.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -363,6 +369,18 @@ impl Scene {
     }
 }
 
+/// Object space to world space at scene time `t_secs`, for an object whose groups place it
+/// by `world_from_group` ([`Scene::world_from_group`]): its own transform followed by its
+/// motion at `t_secs` ([`Sampler::placement`]), then the groups' transforms. The one placement rule
+/// (see the module documentation); it allocates nothing.
+pub fn world_from_object(
+    world_from_group: &Transform,
+    sampler: &mut Sampler,
+    t_secs: f64,
+) -> Transform {
+    world_from_group.then(&sampler.placement(t_secs))
+}
+
 #[derive(Serialize, Deserialize)]
 struct SceneRecord {
     objects: Vec<(ObjectId, Option<GroupId>, Vec<u8>)>,
@@ -393,12 +411,12 @@ impl SceneSampler {
     /// Object space to world space at time `t`.
     pub fn world_from_object(&mut self, id: ObjectId, t: f64) -> Option<Transform> {
         let e = self.entries.get_mut(&id)?;
-        Some(e.world_from_group.then(&e.sampler.placement(t)))
+        Some(world_from_object(&e.world_from_group, &mut e.sampler, t))
     }
 
     fn local(&mut self, id: ObjectId, t: f64) -> Option<(&mut Sampler, Transform)> {
         let e = self.entries.get_mut(&id)?;
-        let world_from_object = e.world_from_group.then(&e.sampler.placement(t));
+        let world_from_object = world_from_object(&e.world_from_group, &mut e.sampler, t);
         let object_from_world = world_from_object.inverse()?;
         Some((&mut e.sampler, object_from_world))
     }

@@ -13,8 +13,9 @@
 //! `divan::AllocProfiler`.
 
 use glam::DVec3;
+use haptic::aabb::Aabb;
+use haptic::container::Scene;
 use haptic::container::object::ObjectContainer;
-use haptic::container::{Aabb, Scene};
 use haptic::device::Capabilities;
 use haptic::device::sim::{HandModel, SimDevice};
 use haptic::force::zone::HapticZone;

@@ -10,7 +10,7 @@
 use std::path::Path;
 
 use glam::DVec3;
-use haptic::container::Aabb;
+use haptic::aabb::Aabb;
 use haptic::device::Capabilities;
 use haptic::device::sim::{HandModel, SimDevice, Waypoint};
 use haptic::force::zone::HapticZone;

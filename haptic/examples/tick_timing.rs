@@ -18,8 +18,9 @@
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
+use haptic::aabb::Aabb;
 use haptic::container::object::ObjectContainer;
-use haptic::container::{Aabb, Container, Scene};
+use haptic::container::{Container, Scene};
 use haptic::device::sim::{HandModel, SimDevice};
 use haptic::device::{Capabilities, DeviceSample};
 use haptic::force::zone::HapticZone;

@@ -17,42 +17,11 @@ pub mod properties;
 
 use glam::DVec3;
 
-/// An axis-aligned box.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Aabb {
-    /// Smallest corner.
-    pub min: DVec3,
-    /// Largest corner.
-    pub max: DVec3,
-}
+use crate::aabb::Aabb;
 
-impl Aabb {
-    /// A box from two corners (`min <= max` per axis).
-    pub fn new(min: DVec3, max: DVec3) -> Self {
-        assert!(min.cmple(max).all(), "Aabb::new: min {min} > max {max}");
-        Self { min, max }
-    }
-
-    /// The box centre.
-    pub fn center(&self) -> DVec3 {
-        (self.min + self.max) * 0.5
-    }
-
-    /// Edge lengths.
-    pub fn size(&self) -> DVec3 {
-        self.max - self.min
-    }
-
-    /// True when `p` is inside or on the box.
-    pub fn contains(&self, p: DVec3) -> bool {
-        p.cmpge(self.min).all() && p.cmple(self.max).all()
-    }
-
-    /// The nearest point of the box to `p`.
-    pub fn clamp(&self, p: DVec3) -> DVec3 {
-        p.clamp(self.min, self.max)
-    }
-}
+/// Gradients shorter than this have no usable normal (e.g. the centre of a sphere): the
+/// metric depth `f / |grad f|` is not taken there.
+pub const GRADIENT_NORM_MIN: f64 = 1e-9;
 
 /// How a force field's domain and time are mapped (thesis 7.3, `FForce` `parameters`).
 #[derive(Clone, Copy, Debug, PartialEq)]

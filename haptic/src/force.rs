@@ -30,7 +30,7 @@ mod tests;
 
 use glam::DVec3;
 
-use crate::container::Scene;
+use crate::container::{Container, GRADIENT_NORM_MIN, Scene};
 use crate::device::{Capabilities, DeviceSample};
 use stack::{ContainerStack, StackEntry};
 use zone::HapticZone;
@@ -39,8 +39,6 @@ use zone::HapticZone;
 pub const CONTAINERS_MAX: usize = 256;
 /// Bisection steps to locate a crossing on the segment travelled in one tick.
 pub const ROOT_BISECTION_STEPS: usize = 30;
-/// Gradients shorter than this have no usable normal (e.g. the centre of a sphere).
-pub const GRADIENT_NORM_MIN: f64 = 1e-9;
 /// Filtered velocity components below this are zero (see `render`; BENCHMARKS.md has the
 /// measurement), metres per second.
 pub const VELOCITY_FLUSH_METRES_PER_SEC: f64 = 1e-12;
@@ -253,6 +251,36 @@ pub fn render<S: Scene + ?Sized>(
         };
     }
     let dt_device = if gap_secs > 0.0 { gap_secs } else { dt_secs };
+    follow(scene, state, params, sample, hip_world, dt_device, t_secs);
+    let effect = effect_force(scene, state, rig, hip_world, t_secs);
+    let damping = passivity_damping(state, rig, dt_secs);
+    let raw = effect.passive + effect.field;
+    let target = raw - state.velocity_device * damping;
+    let out = safe_output(state, rig, (effect.top_id, effect.region), target, dt_secs);
+    state.field_out = effect.field.clamp_length_max(out.length()) * state.ramp;
+    TickOutput {
+        force_newtons: out,
+        raw_force_newtons: raw,
+        hip_world,
+        top_id: effect.top_id,
+        region: effect.region,
+        stalled: false,
+        passivity_damping: damping,
+    }
+}
+
+/// Follows the tip from the last tick to `sample` (the HIP now at `hip_world`, `dt_device`
+/// seconds later): its filtered velocity, the passivity observer's energy and the container
+/// stack; a first tick only places the stack.
+fn follow<S: Scene + ?Sized>(
+    scene: &mut S,
+    state: &mut ProxyState,
+    params: &ForceParams,
+    sample: &DeviceSample,
+    hip_world: DVec3,
+    dt_device: f64,
+    t_secs: f64,
+) {
     match state.prev {
         Some(prev) => {
             let step = sample.position_metres - prev.position_device;
@@ -285,21 +313,6 @@ pub fn render<S: Scene + ?Sized>(
         position_device: sample.position_metres,
         timestamp_micros: sample.timestamp_micros,
     });
-    let effect = effect_force(scene, state, rig, hip_world, t_secs);
-    let damping = passivity_damping(state, rig, dt_secs);
-    let raw = effect.passive + effect.field;
-    let target = raw - state.velocity_device * damping;
-    let out = safe_output(state, rig, (effect.top_id, effect.region), target, dt_secs);
-    state.field_out = effect.field.clamp_length_max(out.length()) * state.ramp;
-    TickOutput {
-        force_newtons: out,
-        raw_force_newtons: raw,
-        hip_world,
-        top_id: effect.top_id,
-        region: effect.region,
-        stalled: false,
-        passivity_damping: damping,
-    }
 }
 
 /// The coefficient of a first-order low-pass at `cutoff_hz` sampled every `dt_secs`.
@@ -367,11 +380,23 @@ struct Effect {
     region: Region,
 }
 
+impl Effect {
+    /// Outside every container: nothing acts.
+    const FREE: Effect = Effect {
+        passive: DVec3::ZERO,
+        field: DVec3::ZERO,
+        top_id: None,
+        region: Region::Free,
+    };
+}
+
 /// A finite value from an untrusted property function, or `None`.
 fn finite(value: Option<f64>) -> Option<f64> {
     value.filter(|v| v.is_finite())
 }
 
+/// The top container's force at the HIP before the safety layer: tension along the normal
+/// and friction within its surface zone, density as viscosity deeper, and its force field.
 fn effect_force<S: Scene + ?Sized>(
     scene: &mut S,
     state: &ProxyState,
@@ -380,12 +405,7 @@ fn effect_force<S: Scene + ?Sized>(
     t_secs: f64,
 ) -> Effect {
     let Some(top) = state.stack.top() else {
-        return Effect {
-            passive: DVec3::ZERO,
-            field: DVec3::ZERO,
-            top_id: None,
-            region: Region::Free,
-        };
+        return Effect::FREE;
     };
     let caps = &rig.caps;
     let container = scene.container_mut(top.idx as usize);
@@ -430,18 +450,23 @@ fn effect_force<S: Scene + ?Sized>(
             (force, Region::Interior)
         }
     };
-    let field = container
-        .field_at(hip, t_secs)
-        .filter(|v| v.is_finite())
-        .map_or(DVec3::ZERO, |v| {
-            rig.zone.device_from_world_dir(v.clamp_length_max(1.0)) * caps.force_newtons_max
-        });
     Effect {
         passive,
-        field,
+        field: field_force(container, rig, hip, t_secs),
         top_id: Some(top.id),
         region,
     }
+}
+
+/// The container's force field at the HIP, newtons, device frame: a fraction of the device's
+/// maximum force (at most all of it); zero where no field acts or it is not finite.
+fn field_force(container: &mut dyn Container, rig: &Rig, hip: DVec3, t_secs: f64) -> DVec3 {
+    container
+        .field_at(hip, t_secs)
+        .filter(|v| v.is_finite())
+        .map_or(DVec3::ZERO, |v| {
+            rig.zone.device_from_world_dir(v.clamp_length_max(1.0)) * rig.caps.force_newtons_max
+        })
 }
 
 /// Re-resolves stack entries to indices of the current scene, dropping vanished containers.

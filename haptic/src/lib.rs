@@ -9,6 +9,9 @@
 //!   passivity observer, zero on stall);
 //! - [`servo::Servo`] (init / reset / allocation-free `step`) and [`servo::spawn`], the named,
 //!   paced 1 kHz thread, fed through the lock-free [`handoff`];
+//! - [`feed::Feed`]: a live scene to the servo, on a thread of its own: whoever owns a scene
+//!   that changes (the app's session) implements [`feed::SceneSource`], and each change
+//!   becomes a snapshot that rebuilds only the objects it touched;
 //! - [`device::HapticDevice`] with a simulated device, a mouse-driven device, a trace
 //!   recorder and replayer, and HID drivers (3D mouse input, HID PID force output);
 //! - [`force::coupling`]: a shared tool held by several devices through spring-dampers;
@@ -21,8 +24,9 @@
 //!   rays over fdsl's BVH), all built off the servo thread and sampled without allocating.
 //!
 //! What it is not: it does not parse scene files or fold edits itself (it reads objects
-//! through `fdsl::object::Sampler`), never sees the op log, draws nothing and reads no clock
-//! outside the servo's pacing.
+//! through `fdsl::object::Sampler`), never sees the op log or the network (the shared tool's
+//! packets and remote tools come in as values), draws nothing and reads the clock in one
+//! place (the servo's pacing, whose clock the feed's timing shares).
 //!
 //! Conventions: `f >= 0` is inside; distance to the surface is the metric depth
 //! `f / |grad f|`; device positions are metres and forces newtons in the device frame; the
@@ -30,7 +34,7 @@
 //!
 //! ```
 //! use glam::DVec3;
-//! use haptic::container::Aabb;
+//! use haptic::aabb::Aabb;
 //! use haptic::device::{Capabilities, DeviceSample};
 //! use haptic::force::{render, ForceParams, ProxyState, Region, Rig, zone::HapticZone};
 //! use haptic::shapes::Analytic;
@@ -53,8 +57,10 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod aabb;
 pub mod container;
 pub mod device;
+pub mod feed;
 pub mod force;
 pub mod handoff;
 pub mod servo;

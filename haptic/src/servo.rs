@@ -477,12 +477,13 @@ impl<D, S> ServoHandle<D, S> {
     }
 }
 
-/// The monotonic clock: the one place the haptic crate reads time.
+/// The monotonic clock: the one place the haptic crate reads time (the servo's pacing and
+/// timing, and the feed's build time).
 #[expect(
     clippy::disallowed_methods,
-    reason = "servo pacing reads the monotonic clock here only"
+    reason = "the haptic crate reads the monotonic clock here only"
 )]
-fn monotonic_now() -> Instant {
+pub(crate) fn monotonic_now() -> Instant {
     Instant::now()
 }
 
@@ -598,7 +599,7 @@ fn run_loop<D: HapticDevice, S: Scene>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::container::Aabb;
+    use crate::aabb::Aabb;
     use crate::device::sim::{HandModel, SimDevice, Waypoint};
     use crate::device::trace::{Trace, TraceDevice};
     use crate::device::{Capabilities, DeviceSample};

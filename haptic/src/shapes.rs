@@ -12,10 +12,11 @@ use glam::DVec3;
 
 use fdsl::Function;
 
+use crate::aabb::Aabb;
 use crate::container::function::{FunctionContainer, FunctionContainerError, Placement};
 use crate::container::mesh::{MeshContainer, MeshError, RayParams};
 use crate::container::properties::{FieldSpec, PropertySpec, Scalar};
-use crate::container::{Aabb, Container, FieldDomain};
+use crate::container::{Container, FieldDomain};
 
 /// A closed-form solid.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -501,4 +502,25 @@ pub fn mesh_grid(n: usize, n_subdivisions: u32) -> Result<Vec<MeshContainer>, Me
             MeshContainer::new(id, &vertices, &triangles, &props, RayParams::default())
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn whirlpool_of_figure_7_4() {
+        // The texts as printed in the thesis, through the shared builder.
+        let mut c = fdsl_whirlpool(9).unwrap();
+        assert_eq!(
+            c.bounds(),
+            Aabb::new(DVec3::new(-1.6, 0.0, -1.6), DVec3::new(1.6, 0.7, 1.6))
+        );
+        let p = DVec3::new(0.8, 0.35, 0.0);
+        assert!(c.value_grad(p, 0.0).0 > 0.0);
+        let uvw = c.field_domain().unwrap().uvw_from_world(p);
+        assert!((uvw - DVec3::new(0.5, 0.5, 0.0)).length() < 1e-12);
+        let expected = DVec3::new(-0.05, -0.05, -0.5).normalize();
+        assert!((c.force_field(uvw, 0.0) - expected).length() < 1e-12);
+    }
 }

@@ -303,25 +303,7 @@ pub(crate) fn step(link: &SharedToolLink, coupled: &mut Option<Coupled>, tick: T
         }
         return DVec3::ZERO;
     }
-    let c = match coupled {
-        Some(c) if c.generation == generation => c,
-        _ => {
-            if let Some(ended) = coupled.take() {
-                link.end(&ended.port);
-            }
-            // The other side's account as last heard before this coupling: this port takes in
-            // only what it sends beyond that (an earlier port may have taken the rest).
-            let peer_baseline = f64::from_bits(link.start_peer_sent_bits.load(Ordering::Relaxed));
-            let (_, sent_before) = link.ended();
-            coupled.insert(Coupled {
-                generation,
-                port: WavePort::continuing(link.coupling(), tip_metres, sent_before, peer_baseline),
-                // Packets from before this coupling are not this coupling's.
-                seen: link.start_seq.load(Ordering::Relaxed),
-                paused: false,
-            })
-        }
-    };
+    let c = current(link, coupled, generation, tip_metres);
     if c.paused {
         c.port.reanchor(tip_metres);
         c.paused = false;
@@ -346,6 +328,35 @@ pub(crate) fn step(link: &SharedToolLink, coupled: &mut Option<Coupled>, tick: T
     };
     link.publish(force, Some(&c.port));
     force
+}
+
+/// The running coupling of `generation`: the one the servo holds, or a new one at the tip
+/// (the one it held, of an earlier generation, ended first).
+fn current<'a>(
+    link: &SharedToolLink,
+    coupled: &'a mut Option<Coupled>,
+    generation: u64,
+    tip_metres: DVec3,
+) -> &'a mut Coupled {
+    if let Some(ended) = coupled.as_ref()
+        && ended.generation != generation
+    {
+        link.end(&ended.port);
+        *coupled = None;
+    }
+    coupled.get_or_insert_with(|| {
+        // The other side's account as last heard before this coupling: this port takes in
+        // only what it sends beyond that (an earlier port may have taken the rest).
+        let peer_baseline = f64::from_bits(link.start_peer_sent_bits.load(Ordering::Relaxed));
+        let (_, sent_before) = link.ended();
+        Coupled {
+            generation,
+            port: WavePort::continuing(link.coupling(), tip_metres, sent_before, peer_baseline),
+            // Packets from before this coupling are not this coupling's.
+            seen: link.start_seq.load(Ordering::Relaxed),
+            paused: false,
+        }
+    })
 }
 
 #[cfg(test)]

@@ -8,7 +8,7 @@
 )]
 
 use glam::DVec3;
-use haptic::container::Aabb;
+use haptic::aabb::Aabb;
 use haptic::container::Container;
 use haptic::container::mesh::{MeshContainer, RayParams};
 use haptic::container::object::ObjectContainer;

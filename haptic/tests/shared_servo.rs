@@ -11,7 +11,7 @@
 use std::collections::VecDeque;
 
 use glam::DVec3;
-use haptic::container::Aabb;
+use haptic::aabb::Aabb;
 use haptic::container::Container;
 use haptic::device::sim::{HandModel, SimDevice, Waypoint};
 use haptic::device::{Capabilities, HapticDevice as _};

@@ -16,10 +16,11 @@
 )]
 
 use glam::DVec3;
+use haptic::aabb::Aabb;
+use haptic::container::Scene;
 use haptic::container::function::FunctionContainer;
 use haptic::container::object::ObjectContainer;
 use haptic::container::properties::{PropertySpec, Scalar};
-use haptic::container::{Aabb, Scene};
 use haptic::device::sim::{HandModel, SimDevice, Waypoint};
 use haptic::device::{Capabilities, DeviceSample};
 use haptic::force::zone::HapticZone;

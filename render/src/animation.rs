@@ -251,7 +251,8 @@ impl Animator {
     /// Places object `i` at time `t`.
     fn place(&mut self, i: usize, t: f64) {
         let o = &mut self.objects[i];
-        let scene_from_object = o.world_from_group.then(&o.sampler.placement(t));
+        let scene_from_object =
+            fdsl::scene::world_from_object(&o.world_from_group, &mut o.sampler, t);
         self.scene.objects[i].world_from_object =
             render_from_scene() * to_mat4(scene_from_object.parent_from_child);
     }

@@ -12,8 +12,9 @@
 //! - an imported mesh as it is (through the field instead when edits change its shape).
 //!
 //! Then the appearance is applied ([`CompiledAppearance`]; painted colours come from fdsl's
-//! `Sampler`), and the object is placed by its groups' transforms, its own transform and its
-//! motion at `t`. Scenes are +y up (VRML); the renderer's world is +z up, so the whole scene
+//! `Sampler`), and the object is placed by the object model's one rule,
+//! `fdsl::scene::world_from_object` (its own transform and motion at `t`, then its groups'
+//! transforms). Scenes are +y up (VRML); the renderer's world is +z up, so the whole scene
 //! is turned by [`render_from_scene`]. Force fields can be drawn as arrows sampled on a grid
 //! inside their container (see [`SnapshotSettings::force_arrows`]).
 //!
@@ -216,9 +217,11 @@ pub fn build(
     for (id, entry) in scene.objects() {
         let object = &entry.object;
         let mut sampler = object.sampler();
-        let scene_from_object = scene
-            .world_from_group(entry.group)
-            .then(&sampler.placement(settings.t_secs));
+        let scene_from_object = fdsl::scene::world_from_object(
+            &scene.world_from_group(entry.group),
+            &mut sampler,
+            settings.t_secs,
+        );
         let world_from_object = turn * to_mat4(scene_from_object.parent_from_child);
         let ObjectMesh { mesh, skipped, .. } = object_mesh(object, settings.depth, settings.t_secs);
         let mut report = ObjectReport {

@@ -25,6 +25,7 @@ use replication::net::invite::Invite;
 use replication::net::node::{DialError, DisconnectReason, NodeConfig, NodeEvent, NodeHandle};
 use replication::net::{Node, SessionKeys};
 use replication::shape::ShapePayload;
+use replication::sync::ephemeral::PRESENCE_CHANNEL;
 use replication::sync::state::CloseReason;
 use replication::{OpId, PeerId, Timestamp};
 
@@ -92,7 +93,8 @@ pub struct EngineConfig {
     /// When the store cannot be used, run in memory with the error in the view (the window)
     /// instead of failing (a headless peer).
     pub memory_fallback: bool,
-    /// The name other peers see (at most [`presence::MAX_NAME_BYTES`]); `None`: the short id.
+    /// The name other peers see (at most
+    /// [`replication::sync::ephemeral::presence::MAX_NAME_BYTES`]); `None`: the short id.
     pub name: Option<String>,
     /// The session's name on the LAN (`None`: the store directory's name).
     pub session_name: Option<String>,
@@ -455,7 +457,7 @@ impl Engine {
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         match listener {
-            Some(l) if channel != presence::PRESENCE_CHANNEL => {
+            Some(l) if channel != PRESENCE_CHANNEL => {
                 listeners.insert(channel, l);
             }
             _ => {
@@ -707,7 +709,7 @@ impl Worker {
                             .lock()
                             .unwrap_or_else(std::sync::PoisonError::into_inner)
                             .encode();
-                        let _ = handle.send_ephemeral(presence::PRESENCE_CHANNEL, value).await;
+                        let _ = handle.send_ephemeral(PRESENCE_CHANNEL, value).await;
                         presence_due = false;
                         presence_sent_at = tokio::time::Instant::now();
                     }
@@ -842,7 +844,7 @@ impl Worker {
                 channel,
                 value,
                 ..
-            } if channel == presence::PRESENCE_CHANNEL => {
+            } if channel == PRESENCE_CHANNEL => {
                 let mut view = lock(&self.view);
                 match Presence::decode(&value) {
                     Ok(p) => view.note_presence(peer, p),

@@ -5,17 +5,15 @@
 //! its touch tool's point while it touches, its selected object and its camera, whenever one
 //! of them changes (at most [`PRESENCE_RATE_HZ`] times a second). Receivers draw the pointer,
 //! the tool (a crosshair in a box, as the thesis shows other users' tools) and outline the
-//! selection in the sender's colour, and may follow its camera. Values come from peers: the decoder
-//! bounds every length and refuses non-finite numbers.
+//! selection in the sender's colour, and may follow its camera. On the wire a presence is a
+//! [`PresencePacket`] on `replication::sync::ephemeral::PRESENCE_CHANNEL`: its format is
+//! replication's, with the other ephemeral values, and its decoder bounds every length and
+//! refuses non-finite numbers; this module converts.
 
-/// The ephemeral channel presence travels on.
-pub const PRESENCE_CHANNEL: u32 = 1;
+use replication::sync::ephemeral::presence::{PresenceError, PresencePacket};
+
 /// Most presence values a peer sends per second.
 pub const PRESENCE_RATE_HZ: u64 = 20;
-/// Longest display name, in bytes.
-pub const MAX_NAME_BYTES: usize = 32;
-/// The encoding's version byte (2: with the touch tool; 3: with the shared tool's partner).
-const VERSION: u8 = 3;
 
 /// An orbit camera in the renderer's world (+z up): what it looks at and from where.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -29,7 +27,8 @@ pub struct CameraPose {
 /// One peer's presence.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Presence {
-    /// The name the user chose (at most [`MAX_NAME_BYTES`]).
+    /// The name the user chose (at most
+    /// `replication::sync::ephemeral::presence::MAX_NAME_BYTES`).
     pub name: String,
     /// The user's colour (sRGB).
     pub colour: [u8; 3],
@@ -47,29 +46,6 @@ pub struct Presence {
     /// The touch tool's body, while tangible: radius, tension, friction, density
     /// (`app::touch::body::ToolBody`, which receivers check).
     pub tool_body: Option<[f32; 4]>,
-}
-
-/// Why a presence value was refused.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum PresenceError {
-    /// Another version of the encoding.
-    #[error("presence version {0} is not {VERSION}")]
-    Version(u8),
-    /// The bytes end early.
-    #[error("presence value cut short at byte {0}")]
-    Short(usize),
-    /// A name over the limit or not UTF-8.
-    #[error("presence name at byte {0} is over {MAX_NAME_BYTES} bytes or not UTF-8")]
-    Name(usize),
-    /// A coordinate that is not finite.
-    #[error("presence value has a non-finite number at byte {0}")]
-    NotFinite(usize),
-    /// Bytes after the value.
-    #[error("presence value has {0} extra bytes")]
-    Trailing(usize),
-    /// Flag bits this version does not know.
-    #[error("presence flags {0:#010b} name parts this version does not know")]
-    Flags(u8),
 }
 
 /// The colour a peer gets until its user picks one: from its id, so it is stable.
@@ -102,164 +78,45 @@ impl Presence {
         }
     }
 
-    /// `[3][name len][name][r g b][flags][pointer 3×f32][target 3×f32][orbit 3×f32][selected u64]
-    /// [tool 3×f32][partner 32][body 4×f32]`, little-endian; the optional parts are present
-    /// when their flag bit is set.
+    /// The value as sent on presence's channel ([`PresencePacket::encode`]; a name over the
+    /// limit is cut at a character boundary).
     pub fn encode(&self) -> Vec<u8> {
-        let name = truncate(&self.name, MAX_NAME_BYTES);
-        let mut out = Vec::with_capacity(64 + name.len());
-        out.push(VERSION);
-        out.push(name.len() as u8);
-        out.extend_from_slice(name.as_bytes());
-        out.extend_from_slice(&self.colour);
-        let flags = u8::from(self.pointer.is_some())
-            | u8::from(self.selected.is_some()) << 1
-            | u8::from(self.camera.is_some()) << 2
-            | u8::from(self.tool.is_some()) << 3
-            | u8::from(self.holds_tool_with.is_some()) << 4
-            | u8::from(self.tool_body.is_some()) << 5;
-        out.push(flags);
-        let mut put = |v: &[f32; 3]| v.iter().for_each(|x| out.extend(x.to_le_bytes()));
-        if let Some(p) = &self.pointer {
-            put(p);
-        }
-        if let Some(c) = &self.camera {
-            put(&c.target);
-            put(&c.orbit);
-        }
-        if let Some(s) = self.selected {
-            out.extend(s.to_le_bytes());
-        }
-        if let Some(t) = &self.tool {
-            t.iter().for_each(|x| out.extend(x.to_le_bytes()));
-        }
-        if let Some(p) = &self.holds_tool_with {
-            out.extend_from_slice(p);
-        }
-        if let Some(b) = &self.tool_body {
-            b.iter().for_each(|x| out.extend(x.to_le_bytes()));
-        }
-        out
+        PresencePacket::from(self).encode()
     }
 
-    /// Reads what [`Presence::encode`] wrote; anything else is an error.
+    /// Reads a value another peer sent ([`PresencePacket::decode`]).
     pub fn decode(bytes: &[u8]) -> Result<Self, PresenceError> {
-        let mut r = Reader { bytes, at: 0 };
-        let version = r.byte()?;
-        if version != VERSION {
-            return Err(PresenceError::Version(version));
-        }
-        let len = usize::from(r.byte()?);
-        let at = r.at;
-        let name = std::str::from_utf8(r.take(len)?)
-            .ok()
-            .filter(|_| len <= MAX_NAME_BYTES)
-            .ok_or(PresenceError::Name(at))?
-            .to_string();
-        let colour = [r.byte()?, r.byte()?, r.byte()?];
-        let flags = r.byte()?;
-        let pointer = if flags & 1 != 0 {
-            Some(r.vec3()?)
-        } else {
-            None
-        };
-        let camera = if flags & 4 != 0 {
-            Some(CameraPose {
-                target: r.vec3()?,
-                orbit: r.vec3()?,
-            })
-        } else {
-            None
-        };
-        let selected = if flags & 2 != 0 {
-            let mut b = [0u8; 8];
-            b.copy_from_slice(r.take(8)?);
-            Some(u64::from_le_bytes(b))
-        } else {
-            None
-        };
-        let tool = if flags & 8 != 0 {
-            Some(r.vec3()?)
-        } else {
-            None
-        };
-        let holds_tool_with = if flags & 16 != 0 {
-            let mut p = [0u8; 32];
-            p.copy_from_slice(r.take(32)?);
-            Some(p)
-        } else {
-            None
-        };
-        let tool_body = if flags & 32 != 0 {
-            let [a, b, c] = r.vec3()?;
-            let [d, ..] = r.vec3_part(1)?;
-            Some([a, b, c, d])
-        } else {
-            None
-        };
-        if flags >> 6 != 0 {
-            return Err(PresenceError::Flags(flags));
-        }
-        if r.at != bytes.len() {
-            return Err(PresenceError::Trailing(bytes.len() - r.at));
-        }
-        Ok(Self {
-            name,
-            colour,
-            pointer,
-            tool,
-            selected,
-            camera,
-            holds_tool_with,
-            tool_body,
-        })
+        PresencePacket::decode(bytes).map(Presence::from)
     }
 }
 
-/// At most `max` bytes of `text`, cut at a character boundary.
-fn truncate(text: &str, max: usize) -> &str {
-    let mut end = text.len().min(max);
-    while !text.is_char_boundary(end) {
-        end -= 1;
-    }
-    &text[..end]
-}
-
-struct Reader<'a> {
-    bytes: &'a [u8],
-    at: usize,
-}
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize) -> Result<&'a [u8], PresenceError> {
-        let end = self.at.checked_add(n).filter(|e| *e <= self.bytes.len());
-        let end = end.ok_or(PresenceError::Short(self.at))?;
-        let out = &self.bytes[self.at..end];
-        self.at = end;
-        Ok(out)
-    }
-
-    fn byte(&mut self) -> Result<u8, PresenceError> {
-        Ok(self.take(1)?[0])
-    }
-
-    fn vec3(&mut self) -> Result<[f32; 3], PresenceError> {
-        self.vec3_part(3)
-    }
-
-    /// The next `n` (at most 3) finite f32s, the rest zero.
-    fn vec3_part(&mut self, n: usize) -> Result<[f32; 3], PresenceError> {
-        let mut v = [0.0f32; 3];
-        for x in v.iter_mut().take(n) {
-            let at = self.at;
-            let mut b = [0u8; 4];
-            b.copy_from_slice(self.take(4)?);
-            *x = f32::from_le_bytes(b);
-            if !x.is_finite() {
-                return Err(PresenceError::NotFinite(at));
-            }
+impl From<&Presence> for PresencePacket {
+    fn from(p: &Presence) -> Self {
+        PresencePacket {
+            name: p.name.clone(),
+            colour: p.colour,
+            pointer: p.pointer,
+            tool: p.tool,
+            selected: p.selected,
+            camera: p.camera.map(|c| [c.target, c.orbit]),
+            holds_tool_with: p.holds_tool_with,
+            tool_body: p.tool_body,
         }
-        Ok(v)
+    }
+}
+
+impl From<PresencePacket> for Presence {
+    fn from(p: PresencePacket) -> Self {
+        Presence {
+            name: p.name,
+            colour: p.colour,
+            pointer: p.pointer,
+            tool: p.tool,
+            selected: p.selected,
+            camera: p.camera.map(|[target, orbit]| CameraPose { target, orbit }),
+            holds_tool_with: p.holds_tool_with,
+            tool_body: p.tool_body,
+        }
     }
 }
 
@@ -267,71 +124,26 @@ impl<'a> Reader<'a> {
 mod tests {
     use super::*;
 
-    fn sample() -> Presence {
-        Presence {
+    #[test]
+    fn presence_travels_as_its_packet_and_back_whole() {
+        let full = Presence {
             name: "Ada".into(),
             colour: [10, 20, 30],
             pointer: Some([0.5, -1.0, 2.0]),
             tool: Some([0.25, 0.5, -0.75]),
             selected: Some(0x1234_5678_9abc),
             camera: Some(CameraPose {
-                target: [0.0, 0.0, 0.0],
+                target: [0.0, 1.0, 0.0],
                 orbit: [0.7, 0.4, 5.0],
             }),
             holds_tool_with: Some([7; 32]),
             tool_body: Some([0.1, 0.8, 0.0, 2.0]),
-        }
-    }
-
-    #[test]
-    fn values_round_trip_with_and_without_their_optional_parts() {
-        let full = sample();
+        };
         assert_eq!(Presence::decode(&full.encode()), Ok(full.clone()));
         let bare = Presence::named(full.name.clone(), full.colour);
         assert_eq!(Presence::decode(&bare.encode()), Ok(bare));
-    }
-
-    #[test]
-    fn long_names_are_cut_at_a_character_boundary() {
-        let long = Presence {
-            name: "é".repeat(40),
-            ..sample()
-        };
-        let back = Presence::decode(&long.encode()).unwrap();
-        assert_eq!(back.name, "é".repeat(16));
-    }
-
-    #[test]
-    fn every_truncation_and_bad_value_is_an_error() {
-        let bytes = sample().encode();
-        for n in 0..bytes.len() {
-            assert!(Presence::decode(&bytes[..n]).is_err(), "cut at {n}");
-        }
-        let mut extra = bytes.clone();
-        extra.push(0);
-        assert_eq!(Presence::decode(&extra), Err(PresenceError::Trailing(1)));
-        let mut nan = bytes.clone();
-        let at = 2 + 3 + 3 + 1;
-        nan[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
-        assert_eq!(Presence::decode(&nan), Err(PresenceError::NotFinite(at)));
-        let mut version = bytes.clone();
-        version[0] = 9;
-        assert_eq!(Presence::decode(&version), Err(PresenceError::Version(9)));
-        let mut long_name = bytes.clone();
-        long_name[1] = 200;
-        assert!(Presence::decode(&long_name).is_err());
-        let mut tool_nan = bytes.clone();
-        let at = bytes.len() - 16 - 32 - 4;
-        tool_nan[at..at + 4].copy_from_slice(&f32::INFINITY.to_le_bytes());
-        assert_eq!(
-            Presence::decode(&tool_nan),
-            Err(PresenceError::NotFinite(at))
-        );
-        let mut unknown = bytes;
-        unknown[2 + 3 + 3] |= 0x40;
-        assert_eq!(
-            Presence::decode(&unknown),
-            Err(PresenceError::Flags(unknown[2 + 3 + 3]))
-        );
+        let packet = PresencePacket::from(&full);
+        assert_eq!(packet.camera, Some([[0.0, 1.0, 0.0], [0.7, 0.4, 5.0]]));
+        assert_eq!(Presence::from(packet), full);
     }
 }

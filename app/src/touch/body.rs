@@ -4,12 +4,19 @@
 //!
 //! Set with the `probe:` command (`probe: radius 0.1 tension 0.8 friction 0.3 density 1`,
 //! `probe: off`) or the Touch section. A body with no tension and no density is not tangible
-//! and is not sent. Receivers build it into their servo's scene ([`super::feed`]) at the
-//! sender's tool point, as an fdsl object: the ball `radius - |p|` with those properties and a
-//! surface zone of half the radius.
+//! and is not sent. Receivers read the other peers' tangible tools from their presence
+//! ([`peer_tools`]) and hand them to their servo's feed (`haptic::feed`), which builds each
+//! at the sender's tool point as an fdsl object: the ball `radius - |p|` with those
+//! properties and a surface zone of half the radius.
+
+use std::collections::BTreeMap;
 
 use fdsl::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property, Transform};
 use glam::DVec3;
+use haptic::feed::RemoteTool;
+use replication::PeerId;
+
+use crate::engine::Presence;
 
 /// Largest tool radius, scene units.
 pub const MAX_TOOL_RADIUS: f64 = 10.0;
@@ -169,6 +176,42 @@ impl ToolBody {
     }
 }
 
+/// Another peer's tangible touch tool, as its presence gives it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PeerTool {
+    /// The peer holding it.
+    pub peer: PeerId,
+    /// The tool point, scene coordinates.
+    pub at: DVec3,
+    /// Its body (tangible).
+    pub body: ToolBody,
+}
+
+impl RemoteTool for PeerTool {
+    fn object(&self) -> Option<Object> {
+        self.body.object(self.at)
+    }
+}
+
+/// The tangible tools in other peers' `presence`, in peer id order. Presence carries the
+/// tool point in the renderer's world (+z up, as the window draws it); it is turned back into
+/// the scene's here.
+pub fn peer_tools(presence: &BTreeMap<PeerId, Presence>) -> Vec<PeerTool> {
+    let scene_from_render = render::snapshot::render_from_scene().inverse();
+    presence
+        .iter()
+        .filter_map(|(peer, p)| {
+            let body = ToolBody::from_wire(p.tool_body?)?;
+            let at = scene_from_render.transform_point3(glam::Vec3::from_array(p.tool?));
+            body.is_tangible().then_some(PeerTool {
+                peer: *peer,
+                at: at.as_dvec3(),
+                body,
+            })
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -218,6 +261,47 @@ mod tests {
             friction,
             density,
         }
+    }
+
+    #[test]
+    fn peers_tools_are_their_tangible_valid_bodies_at_their_points_in_the_scene() {
+        let body = ToolBody {
+            radius: 0.1,
+            tension: 0.8,
+            friction: 0.0,
+            density: 0.0,
+        };
+        let touching = |tool: Option<[f32; 3]>, body: Option<[f32; 4]>| Presence {
+            tool,
+            tool_body: body,
+            ..Presence::named("p".into(), [0; 3])
+        };
+        let presence = BTreeMap::from([
+            // Its tool point in the renderer's world (+z up): the scene's (0, 1.25, 0).
+            (
+                PeerId([1; 32]),
+                touching(Some([0.0, 0.0, 1.25]), Some(body.to_wire())),
+            ),
+            (PeerId([2; 32]), touching(None, Some(body.to_wire()))),
+            (
+                PeerId([3; 32]),
+                touching(Some([0.0; 3]), Some(ToolBody::default().to_wire())),
+            ),
+            (
+                PeerId([4; 32]),
+                touching(Some([0.0; 3]), Some([-1.0, 1.0, 0.0, 0.0])),
+            ),
+            (PeerId([5; 32]), touching(Some([0.0; 3]), None)),
+        ]);
+        let tools = peer_tools(&presence);
+        assert_eq!(tools.len(), 1, "{tools:?}");
+        assert_eq!(
+            (tools[0].peer, tools[0].body),
+            (PeerId([1; 32]), body_f32(body))
+        );
+        assert!((tools[0].at - DVec3::new(0.0, 1.25, 0.0)).length() < 1e-6);
+        let object = RemoteTool::object(&tools[0]).unwrap();
+        assert!(object.sampler().value(tools[0].at, 0.0) > 0.09);
     }
 
     #[test]

@@ -1,26 +1,49 @@
 //! Touch in the running app: the 1 kHz servo on the live scene, driven by the mouse.
 //!
 //! [`LiveTouch::start`] fits a haptic zone around the scene's tangible objects, starts the
-//! haptic crate's paced servo thread with a mouse-driven device, and a [`Feed`] that hands it
-//! a new snapshot whenever the engine's view changes (only the changed objects are rebuilt).
+//! haptic crate's paced servo thread with a mouse-driven device, and the haptic crate's
+//! [`Feed`] over the engine's view (which is its [`SceneSource`]), which hands the servo a new
+//! snapshot whenever the view changes (only the changed objects are rebuilt).
 //! The window moves the tip ([`LiveTouch::move_by_world`], the pointer mapped through its own
 //! camera) and reads what the servo did ([`LiveTouch::stats`]): the haptic interface point,
 //! the force and the object touched. A mouse renders no force, so the forces are computed
 //! for a device model (a Falcon-class device by default) and shown, not felt; the same
 //! servo drives a force-feedback device when one is attached.
 
+use std::collections::BTreeSet;
+
+use fdsl::scene::{ObjectId, Scene};
 use glam::DVec3;
-use haptic::container::Aabb;
+use haptic::aabb::Aabb;
 use haptic::container::object::ObjectContainer;
 use haptic::device::mouse::{MouseDevice, MouseHandle};
 use haptic::device::{Capabilities, DeviceError, DeviceSample, HapticDevice};
+use haptic::feed::{Feed, SceneSource, Snapshot};
 use haptic::force::zone::HapticZone;
 use haptic::servo::{Servo, ServoConfig, ServoHandle, ServoStats, StatsSnapshot, spawn};
 
-use super::feed::{Feed, LiveScene};
+use super::body::{PeerTool, peer_tools};
 use super::force_output::{self, ForceOutput, OutputSlot};
 use super::{DeviceModel, bounds_of, rig, zone_for};
-use crate::engine::{SharedView, lock};
+use crate::engine::{SharedView, View, lock};
+
+/// The engine's view as the servo's feed reads it: its scene, the objects each change
+/// touched, and the other peers' tangible tools from their presence.
+impl SceneSource for View {
+    type Tool = PeerTool;
+
+    fn scene(&self) -> &Scene {
+        View::scene(self)
+    }
+
+    fn changes_since(&self, cursor: u64) -> (Option<BTreeSet<ObjectId>>, u64) {
+        View::changes_since(self, cursor)
+    }
+
+    fn remote_tools(&self) -> Vec<PeerTool> {
+        peer_tools(self.presence())
+    }
+}
 
 /// The mouse's input with a device model's force capabilities: forces are computed for that
 /// model and shown, never rendered.
@@ -89,7 +112,7 @@ impl SteadyWatch {
 
 /// A running servo on the live scene with its feed and the mouse that moves it.
 pub struct LiveTouch {
-    servo: ServoHandle<ShownForce, LiveScene>,
+    servo: ServoHandle<ShownForce, Snapshot>,
     feed: Feed,
     waker: Box<dyn Fn() + Send>,
     stats: std::sync::Arc<ServoStats>,
@@ -481,7 +504,7 @@ pub(crate) mod tests {
         // Down into its surface zone: the probe pushes the tool back up.
         live.move_to_world(DVec3::new(0.0, 1.33, 0.0));
         wait_stats(&live, "the probe's push", |s| {
-            s.top_id == Some(super::super::feed::REMOTE_TOOL_ID_BASE) && s.force_newtons.y > 0.5
+            s.top_id == Some(haptic::feed::REMOTE_TOOL_ID_BASE) && s.force_newtons.y > 0.5
         });
         // The peer's tool goes intangible: it is gone from the servo's scene.
         let mut presence = engine.presence();

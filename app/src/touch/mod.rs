@@ -8,9 +8,10 @@
 //! - [`live`]: the servo on the live scene in the running app, moved by the mouse.
 //! - [`record`]: the live tool's path recorded for replay, and the force history the window plots.
 //! - [`spacemouse`]: a 3D mouse as the live touch tool's input, on a thread of its own.
-//! - [`feed`]: the live scene: the engine's per-object changes become new haptic snapshots,
-//!   rebuilding only the changed objects, handed to a running servo through the haptic
-//!   crate's lock-free handoff.
+//! - [`body`]: the touch tool's own body, and other peers' tangible tools read from their
+//!   presence for the live servo's feed (`haptic::feed`, which turns the engine's per-object
+//!   changes into snapshots).
+//! - [`shared`]: two peers holding one tool over the network.
 //!
 //! Units and frames: a path gives the haptic interface point (HIP) in the scene's own
 //! coordinates (+y up); the [`HapticZone`] maps the device's workspace onto the scene, by
@@ -19,7 +20,6 @@
 //! the zone does not rotate).
 
 pub mod body;
-pub mod feed;
 pub mod force_output;
 pub mod live;
 pub mod path;
@@ -29,8 +29,9 @@ pub mod shared;
 pub mod spacemouse;
 
 use glam::{DQuat, DVec3};
+use haptic::aabb::Aabb;
 use haptic::container::object::ObjectContainer;
-use haptic::container::{Aabb, Container as _, Scene};
+use haptic::container::{Container as _, Scene};
 use haptic::device::{Capabilities, DeviceError, DeviceSample, HapticDevice};
 use haptic::force::zone::HapticZone;
 use haptic::force::{ForceParams, Rig};

@@ -14,9 +14,8 @@ pub const SAMPLING_RADIUS_OF_ZONE: f64 = 0.02;
 pub fn density_at(scene: &Scene, id: u64, at: DVec3, t: f64) -> Option<f64> {
     let entry = scene.scene_object(ObjectId(id))?;
     let mut sampler = entry.object.sampler();
-    let scene_from_object = scene
-        .world_from_group(entry.group)
-        .then(&sampler.placement(t));
+    let scene_from_object =
+        fdsl::scene::world_from_object(&scene.world_from_group(entry.group), &mut sampler, t);
     let p = scene_from_object.inverse()?.point(at);
     if sampler.container_value(p, t) < 0.0 {
         return None;

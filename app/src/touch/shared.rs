@@ -10,8 +10,10 @@
 //! network delay, jitter and loss cost stiffness, never stability (the haptic crate's
 //! `shared_servo` test holds it passive at 0, 50 and 200 ms one way).
 //!
-//! Packets come from peers: [`decode_packet`] refuses any length, version or number it does not
-//! expect, and the servo bounds what a partner can push ([`haptic::shared`]).
+//! Packets come from peers: their format is replication's ([`SharedToolPacket`], beside the
+//! other wire messages), whose decoder refuses any length, version or number it does not
+//! expect; this module converts them to and from the servo's [`WavePacket`], and the servo
+//! bounds what a partner can push ([`haptic::shared`]).
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -21,66 +23,30 @@ use glam::DVec3;
 use haptic::force::wave::WavePacket;
 use haptic::shared::{DEFAULT_COUPLING, SharedToolLink};
 use replication::PeerId;
+use replication::sync::ephemeral::SHARED_TOOL_CHANNEL;
+use replication::sync::ephemeral::shared_tool::SharedToolPacket;
 
 use crate::engine::{Engine, EphemeralSender, Presence};
 
-/// The ephemeral channel the shared tool's wave packets travel on.
-pub const SHARED_TOOL_CHANNEL: u32 = 2;
 /// How many packets a second the shared tool sends while coupled.
 pub const SHARED_TOOL_RATE_HZ: u64 = 250;
-/// A packet's encoding version.
-const PACKET_VERSION: u8 = 1;
-/// A packet's length: the version, then time, the wave's x, y, z and the energy sent, as
-/// little-endian f64s.
-pub const PACKET_BYTES: usize = 1 + 5 * 8;
 
-/// Why a packet was refused.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum PacketError {
-    /// Not [`PACKET_BYTES`] long.
-    #[error("a shared-tool packet of {0} bytes; it is {PACKET_BYTES}")]
-    Length(usize),
-    /// Another version.
-    #[error("shared-tool packet version {0} is not {PACKET_VERSION}")]
-    Version(u8),
-    /// A number that is not finite, or a negative energy.
-    #[error("shared-tool packet has a bad number at byte {0}")]
-    Number(usize),
+/// The servo's packet `p` as the wire carries it.
+pub fn to_packet(p: &WavePacket) -> SharedToolPacket {
+    SharedToolPacket {
+        t_secs: p.t_secs,
+        wave: p.wave.to_array(),
+        energy_sent_joules: p.energy_sent_joules,
+    }
 }
 
-/// `p` as [`PACKET_BYTES`] bytes.
-pub fn encode_packet(p: &WavePacket) -> Vec<u8> {
-    let mut out = Vec::with_capacity(PACKET_BYTES);
-    out.push(PACKET_VERSION);
-    for v in [p.t_secs, p.wave.x, p.wave.y, p.wave.z, p.energy_sent_joules] {
-        out.extend_from_slice(&v.to_le_bytes());
+/// A packet from the wire as the servo takes it.
+pub fn from_packet(p: SharedToolPacket) -> WavePacket {
+    WavePacket {
+        t_secs: p.t_secs,
+        wave: DVec3::from_array(p.wave),
+        energy_sent_joules: p.energy_sent_joules,
     }
-    out
-}
-
-/// Reads what [`encode_packet`] wrote; anything else is an error.
-pub fn decode_packet(bytes: &[u8]) -> Result<WavePacket, PacketError> {
-    if bytes.len() != PACKET_BYTES {
-        return Err(PacketError::Length(bytes.len()));
-    }
-    if bytes[0] != PACKET_VERSION {
-        return Err(PacketError::Version(bytes[0]));
-    }
-    let mut v = [0.0f64; 5];
-    for (i, x) in v.iter_mut().enumerate() {
-        let at = 1 + 8 * i;
-        let mut b = [0u8; 8];
-        b.copy_from_slice(&bytes[at..at + 8]);
-        *x = f64::from_le_bytes(b);
-        if !x.is_finite() || (i == 4 && *x < 0.0) {
-            return Err(PacketError::Number(at));
-        }
-    }
-    Ok(WavePacket {
-        t_secs: v[0],
-        wave: DVec3::new(v[1], v[2], v[3]),
-        energy_sent_joules: v[4],
-    })
 }
 
 /// Who this peer is coupled with: the peer it holds the tool with (`wanted`), when that peer's
@@ -164,7 +130,7 @@ impl SharedTool {
             );
             move |peer: PeerId, bytes: &[u8]| {
                 let from_partner = *lock(&partner) == Some(peer);
-                match decode_packet(bytes) {
+                match SharedToolPacket::decode(bytes).map(from_packet) {
                     Ok(packet) if from_partner => {
                         link.deliver(&packet);
                         counters.n_received.fetch_add(1, Ordering::Relaxed);
@@ -268,7 +234,7 @@ fn send_loop(
         let Some(packet) = link.take_outgoing() else {
             continue;
         };
-        match out.send(SHARED_TOOL_CHANNEL, encode_packet(&packet)) {
+        match out.send(SHARED_TOOL_CHANNEL, to_packet(&packet).encode()) {
             Ok(()) => {
                 counters.n_sent.fetch_add(1, Ordering::Relaxed);
             }
@@ -420,26 +386,15 @@ mod tests {
     }
 
     #[test]
-    fn packets_round_trip_and_bad_ones_are_refused() {
+    fn wave_packets_travel_as_shared_tool_packets() {
         let p = WavePacket {
             t_secs: 12.5,
             wave: DVec3::new(0.5, -1.0, 2.0),
             energy_sent_joules: 0.75,
         };
-        let bytes = encode_packet(&p);
-        assert_eq!(bytes.len(), PACKET_BYTES);
-        assert_eq!(decode_packet(&bytes), Ok(p));
-        for n in 0..bytes.len() {
-            assert_eq!(decode_packet(&bytes[..n]), Err(PacketError::Length(n)));
-        }
-        let mut version = bytes.clone();
-        version[0] = 2;
-        assert_eq!(decode_packet(&version), Err(PacketError::Version(2)));
-        for (at, bad) in [(1, f64::NAN), (17, f64::INFINITY), (33, -1.0)] {
-            let mut b = bytes.clone();
-            b[at..at + 8].copy_from_slice(&bad.to_le_bytes());
-            assert_eq!(decode_packet(&b), Err(PacketError::Number(at)), "{bad}");
-        }
+        let bytes = to_packet(&p).encode();
+        assert_eq!(SharedToolPacket::decode(&bytes).map(from_packet), Ok(p));
+        assert_eq!(to_packet(&p).wave, [0.5, -1.0, 2.0]);
     }
 
     #[test]

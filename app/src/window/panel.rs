@@ -437,7 +437,7 @@ impl SculptApp {
             ui.add(
                 egui::TextEdit::singleline(&mut me.name)
                     .desired_width(120.0)
-                    .char_limit(::app::engine::presence::MAX_NAME_BYTES),
+                    .char_limit(replication::sync::ephemeral::presence::MAX_NAME_BYTES),
             )
             .on_hover_text("the name others see");
         });

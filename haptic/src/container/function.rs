@@ -15,7 +15,8 @@ use fdsl::Function;
 use fdsl::eval::GradEval;
 
 use super::properties::{Properties, PropertyError, PropertySpec};
-use super::{Aabb, Container, FieldDomain};
+use super::{Container, FieldDomain};
+use crate::aabb::Aabb;
 
 /// Why a function container could not be built.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -170,7 +171,7 @@ impl Container for FunctionContainer {
         // d/dworld = d/dobject / scale, so metric depths come out in world units.
         let grad = DVec3::new(g.dx, g.dy, g.dz) / self.placement.scale;
         let grad_len = grad.length();
-        let metric = if grad_len > crate::force::GRADIENT_NORM_MIN {
+        let metric = if grad_len > super::GRADIENT_NORM_MIN {
             g.v / grad_len
         } else if g.v >= 0.0 {
             f64::INFINITY
@@ -293,22 +294,6 @@ mod tests {
         assert_eq!(c.zone_depth(DVec3::new(11.0, 0.0, 0.0), 0.0), Some(0.2));
         assert!(Placement::new(DVec3::ZERO, 0.0).is_none());
         assert!(Placement::new(DVec3::NAN, 1.0).is_none());
-    }
-
-    #[test]
-    fn whirlpool_of_figure_7_4() {
-        // The texts as printed in the thesis, through the shared builder.
-        let mut c = crate::shapes::fdsl_whirlpool(9).unwrap();
-        assert_eq!(
-            c.bounds(),
-            Aabb::new(DVec3::new(-1.6, 0.0, -1.6), DVec3::new(1.6, 0.7, 1.6))
-        );
-        let p = DVec3::new(0.8, 0.35, 0.0);
-        assert!(c.value_grad(p, 0.0).0 > 0.0);
-        let uvw = c.field_domain().unwrap().uvw_from_world(p);
-        assert!((uvw - DVec3::new(0.5, 0.5, 0.0)).length() < 1e-12);
-        let expected = DVec3::new(-0.05, -0.05, -0.5).normalize();
-        assert!((c.force_field(uvw, 0.0) - expected).length() < 1e-12);
     }
 
     #[test]

@@ -36,7 +36,8 @@ use glam::DVec3;
 
 use super::function::checked_box;
 use super::properties::{Properties, PropertyError, PropertySpec};
-use super::{Aabb, Container, FieldDomain};
+use super::{Container, FieldDomain};
+use crate::aabb::Aabb;
 use ray::{RayIndex, Triangle};
 
 /// The most triangles one mesh container may hold.

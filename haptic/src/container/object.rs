@@ -5,7 +5,8 @@
 //!
 //! Everything is evaluated by an [`fdsl::object::Sampler`] in object coordinates and scene
 //! time; this module maps world points into the object. The placement is a general affine
-//! map `world_from_object` (group transforms, the object's transform and its motion): points
+//! map `world_from_object` (the object model's one rule, `fdsl::scene::world_from_object`:
+//! group transforms, the object's transform and its motion): points
 //! go through its inverse, gradients through the inverse-transpose (`grad_world = A^T
 //! grad_object` for `object = A world + b`), so the metric depth `f / |grad f|` the renderer
 //! computes is in world units however the object is scaled or sheared.
@@ -33,7 +34,8 @@ use glam::{DAffine3, DMat3, DVec3};
 use fdsl::object::{Object, Paintable, Sampler, Shape, Transform};
 use fdsl::scene::ObjectId;
 
-use super::{Aabb, Container};
+use super::Container;
+use crate::aabb::Aabb;
 
 /// Why an object cannot become a haptic container.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -147,7 +149,8 @@ impl ObjectContainer {
                 max: MAX_TOUCH_INSTRUCTIONS,
             });
         }
-        let world_from_object = world_from_parent.then(&sampler.placement(0.0));
+        let world_from_object =
+            fdsl::scene::world_from_object(&world_from_parent, &mut sampler, 0.0);
         let frame =
             Frame::new(&world_from_object, 0.0).ok_or(ObjectContainerError::BadPlacement { id })?;
         let moving = sampler.object().data().motion.is_some();
@@ -230,7 +233,8 @@ impl ObjectContainer {
     /// servo asks many times per tick at the same time).
     fn frame(&mut self, t_secs: f64) -> Frame {
         if self.moving && self.frame.t_secs != t_secs {
-            let world_from_object = self.world_from_parent.then(&self.sampler.placement(t_secs));
+            let world_from_object =
+                fdsl::scene::world_from_object(&self.world_from_parent, &mut self.sampler, t_secs);
             // A motion that degenerates keeps the last good placement.
             if let Some(frame) = Frame::new(&world_from_object, t_secs) {
                 self.frame = frame;

@@ -11,7 +11,8 @@ use glam::DVec3;
 use fdsl::eval::PointEval;
 use fdsl::{Function, MissingOutput};
 
-use super::{Aabb, FieldDomain};
+use super::FieldDomain;
+use crate::aabb::Aabb;
 
 /// The output names of a force field: `function parametric_x/_y/_z(u, v, w)` or the statement
 /// list `x = ...; y = ...; z = ...;`.

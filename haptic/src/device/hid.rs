@@ -13,7 +13,7 @@ use glam::{DQuat, DVec3};
 use hidapi::{HidApi, HidDevice};
 
 use super::{Capabilities, DeviceError, DeviceSample, HapticDevice};
-use crate::container::Aabb;
+use crate::aabb::Aabb;
 
 /// 3Dconnexion vendor ids (current and the older Logitech-era one).
 pub const SPACEMOUSE_VENDOR_IDS: [u16; 2] = [0x256f, 0x046d];

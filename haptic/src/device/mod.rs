@@ -12,7 +12,7 @@ pub mod trace;
 
 use glam::{DQuat, DVec3};
 
-use crate::container::Aabb;
+use crate::aabb::Aabb;
 
 /// What a device can do; the force renderer scales everything to stay within these limits.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use glam::DVec3;
 
 use super::{Capabilities, DeviceError, DeviceSample, HapticDevice};
-use crate::container::Aabb;
+use crate::aabb::Aabb;
 
 /// Tip travel per pixel of pointer motion, metres.
 pub const METRES_PER_PIXEL: f64 = 0.0002;

@@ -15,7 +15,7 @@ use std::fmt::Write as _;
 use glam::{DQuat, DVec3};
 
 use super::{Capabilities, DeviceError, DeviceSample, HapticDevice};
-use crate::container::Aabb;
+use crate::aabb::Aabb;
 
 /// The first line of every trace.
 pub const TRACE_HEADER: &str = "sculpt-haptic-trace 1";

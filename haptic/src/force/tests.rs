@@ -1,11 +1,14 @@
 //! Trace tests of force rendering: the thesis's Figure 4.6 stack walk, the watermelon, a force
-//! field in an invisible cylinder, continuity, passivity and stalls.
+//! field in an invisible cylinder, continuity, passivity and stalls; and over the real container
+//! kinds: a mesh sphere against the closed-form one, the device's surface zone on an object
+//! that gives no depth.
 
 use glam::DVec3;
 
 use super::zone::HapticZone;
 use super::*;
-use crate::container::{Aabb, Container, FieldDomain};
+use crate::aabb::Aabb;
+use crate::container::{Container, FieldDomain};
 use crate::device::sim::{HandModel, SimDevice, Waypoint};
 use crate::device::{Capabilities, DeviceSample, HapticDevice};
 use crate::shapes::{Analytic, Density, Field, Solid};
@@ -582,4 +585,156 @@ fn sim_hand_pushing_a_sphere_settles_on_its_surface() {
         (last.force_newtons.x - 1000.0 * penetration).abs() < 0.02,
         "{last:?}"
     );
+}
+
+// Force rendering over the real container kinds: a mesh against the closed-form sphere, and
+// the device's surface zone where an object gives no depth.
+
+#[test]
+fn mesh_sphere_feels_like_the_closed_form_sphere() {
+    use crate::container::mesh::{MeshContainer, RayParams};
+    use crate::container::properties::{PropertySpec, Scalar};
+    use crate::shapes::icosphere;
+
+    let caps = Capabilities::desktop_pen();
+    let rig = Rig {
+        caps,
+        zone: HapticZone::fit(
+            caps.workspace_metres,
+            Aabb::new(DVec3::splat(-1.6), DVec3::splat(1.6)),
+        ),
+        params: ForceParams::default(),
+    };
+    let s = rig.zone.world_per_device_metre;
+    let mesh = icosphere(DVec3::ZERO, 1.0, 4);
+    let props = PropertySpec {
+        tension: Some(Scalar::Constant(0.6)),
+        zone_depth: Some(Scalar::Constant(0.2)),
+        density: Some(Scalar::Constant(0.3)),
+        ..PropertySpec::default()
+    };
+    let mut meshes =
+        vec![MeshContainer::new(1, &mesh.0, &mesh.1, &props, RayParams::default()).unwrap()];
+    let mut analytic = vec![Analytic {
+        tension: Some(0.6),
+        zone_depth: 0.2,
+        density: Some(Density::Uniform(0.3)),
+        ..Analytic::new(
+            1,
+            Solid::Sphere {
+                center: DVec3::ZERO,
+                radius: 1.0,
+            },
+        )
+    }];
+    let (mut state_mesh, mut state_analytic) = (ProxyState::new(), ProxyState::new());
+    let dir = DVec3::new(0.3, 0.8, 0.52).normalize();
+    let mut regions = vec![];
+    let (mut n_region_mismatches, mut difference_sum) = (0, 0.0);
+    for k in 0..1500u32 {
+        // From 1.3 down to 0.5 along `dir`, world units.
+        let r = 1.3 - 0.8 * f64::from(k) / 1500.0;
+        let sample = DeviceSample::at(dir * r / s, u64::from(k) * 1000);
+        let t = f64::from(k) * 1e-3;
+        let a = render(&mut meshes, &mut state_mesh, &rig, &sample, t, 1e-3);
+        let b = render(&mut analytic, &mut state_analytic, &rig, &sample, t, 1e-3);
+        // Facets lie up to 0.001 inside the sphere: regions change a tick or two later.
+        n_region_mismatches += usize::from(a.region != b.region);
+        let difference = (a.force_newtons - b.force_newtons).length();
+        assert!(
+            difference < 0.12 * caps.force_newtons_max,
+            "tick {k}: {} vs {}",
+            a.force_newtons,
+            b.force_newtons
+        );
+        difference_sum += difference;
+        regions.push(a.region);
+    }
+    assert!(n_region_mismatches <= 6, "{n_region_mismatches}");
+    assert!(difference_sum / 1500.0 < 0.01 * caps.force_newtons_max);
+    assert!(regions.contains(&Region::Surface) && regions.contains(&Region::Interior));
+    assert!(meshes[0].ray_stats().n_locations > 1000);
+}
+
+/// Presses the tip `depth_world` into the top of a ball with tension 1 (and the given zone
+/// depth), kinematically through the force renderer, and returns the steady force.
+fn pressed_ball(zone_depth: Option<&str>, depth_world: f64) -> glam::DVec3 {
+    use fdsl::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property};
+
+    use crate::container::object::ObjectContainer;
+
+    let formula = |text: &str| Formula::new(text).unwrap();
+    // The unit ball as a distance, in its domain.
+    let data = ObjectData {
+        geometry: Some(Geometry {
+            domain: Some(Domain::new(DVec3::ZERO, DVec3::splat(2.2))),
+            ..Geometry::implicit(formula("1 - sqrt(x^2 + y^2 + z^2)"))
+        }),
+        physics: Physics {
+            tension: Some(Property::new(formula("1"))),
+            zone_depth: zone_depth.map(|d| Property::new(formula(d))),
+            ..Physics::default()
+        }
+        .into(),
+        ..ObjectData::default()
+    };
+    let object = Object::new(data).unwrap();
+    let mut scene =
+        vec![ObjectContainer::from_object(5, &object, fdsl::object::Transform::IDENTITY).unwrap()];
+    let caps = Capabilities::falcon();
+    let zone = HapticZone::fit(
+        caps.workspace_metres,
+        Aabb::new(DVec3::splat(-1.1), DVec3::splat(1.1)),
+    );
+    let rig = Rig {
+        caps,
+        zone,
+        params: ForceParams::default(),
+    };
+    let mut state = ProxyState::new();
+    let mut force = DVec3::ZERO;
+    // From above the ball down to the depth in 0.2 s, then held there for 0.4 s.
+    for k in 0..600u32 {
+        let s = (f64::from(k) / 200.0).min(1.0);
+        let hip = DVec3::new(0.0, 1.05 - s * (0.05 + depth_world), 0.0);
+        let sample = DeviceSample::at(zone.device_from_world(hip), u64::from(k) * 1000);
+        let out = render(
+            &mut scene,
+            &mut state,
+            &rig,
+            &sample,
+            f64::from(k) * 1e-3,
+            1e-3,
+        );
+        assert!(out.force_newtons.length() <= caps.force_newtons_max + 1e-9);
+        force = out.force_newtons;
+    }
+    force
+}
+
+#[test]
+fn without_a_zone_depth_the_device_sets_it_and_a_given_depth_overrides_it() {
+    let caps = Capabilities::falcon();
+    // The zone fitted around the ball: 22 scene units per device metre.
+    let zone_world = caps.zone_depth_metres() * 2.2 / 0.1;
+    // Half way into the device's zone: half the device's force, pushing out (up).
+    let half = pressed_ball(None, 0.5 * zone_world);
+    assert!(
+        (half.y - 0.5 * caps.force_newtons_max).abs() < 0.05,
+        "tension 1 at half the zone: {half}"
+    );
+    assert!(half.x.abs() < 1e-6 && half.z.abs() < 1e-6, "{half}");
+    // Past the device's zone the membrane has popped: nothing pushes.
+    let past = pressed_ball(None, 1.5 * zone_world);
+    assert!(past.length() < 1e-6, "popped: {past}");
+    // A given depth counts instead: the same press is still in a deeper zone, and pushes
+    // with the stiffness times the depth, whatever the zone's depth.
+    let deeper = pressed_ball(Some("0.5"), 1.5 * zone_world);
+    assert!(
+        (deeper.y - caps.force_newtons_max).abs() < 0.05,
+        "clamped to the device's force: {deeper}"
+    );
+    // A zero depth is no zone at all.
+    let none = pressed_ball(Some("0"), 0.5 * zone_world);
+    assert!(none.length() < 1e-6, "{none}");
 }

@@ -2,7 +2,7 @@
 
 use glam::{DQuat, DVec3};
 
-use crate::container::Aabb;
+use crate::aabb::Aabb;
 
 /// Maps device coordinates (metres) into world coordinates: `world = center + rotation *
 /// ((device - workspace_center) * world_per_device_metre)`.

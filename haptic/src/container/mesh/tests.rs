@@ -1,13 +1,28 @@
 //! Mesh containers against analytic answers: a cube and an icosphere, points inside, outside
-//! and near edges and corners; nearest hits over the shared BVH against brute force; forces against the closed-form
-//! sphere.
+//! and near edges and corners; nearest hits over the shared BVH against brute force. (The
+//! forces a mesh sphere renders are compared with the closed-form sphere's in the force
+//! renderer's tests.)
 
 use glam::DVec3;
 
 use super::ray::Hit;
 use super::*;
 use crate::container::properties::Scalar;
-use crate::shapes::{cube_mesh, icosphere};
+
+/// fdsl's reference cube `[center - half, center + half]`, 12 outward triangles.
+fn cube_mesh(center: DVec3, half: f64) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    fdsl::mesh::shapes::cube(center - DVec3::splat(half), center + DVec3::splat(half)).into_parts()
+}
+
+/// fdsl's reference icosphere of `radius` (`20 * 4^n` outward triangles) moved to `center`.
+fn icosphere(center: DVec3, radius: f64, n_subdivisions: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let (mut vertices, triangles) =
+        fdsl::mesh::shapes::icosphere(radius, n_subdivisions).into_parts();
+    for v in &mut vertices {
+        *v = (glam::Vec3::from_array(*v) + center.as_vec3()).to_array();
+    }
+    (vertices, triangles)
+}
 
 /// A small deterministic generator (xorshift64*), uniform in `[lo, hi)`.
 struct Rng(u64);
@@ -248,72 +263,3 @@ fn bad_meshes_are_errors() {
         Err(MeshError::Property(_))
     ));
 }
-
-#[test]
-fn mesh_sphere_feels_like_the_closed_form_sphere() {
-    use crate::device::{Capabilities, DeviceSample};
-    use crate::force::zone::HapticZone;
-    use crate::force::{ForceParams, Region, Rig, render};
-    use crate::shapes::{Analytic, Solid};
-
-    let caps = Capabilities::desktop_pen();
-    let rig = Rig {
-        caps,
-        zone: HapticZone::fit(
-            caps.workspace_metres,
-            Aabb::new(DVec3::splat(-1.6), DVec3::splat(1.6)),
-        ),
-        params: ForceParams::default(),
-    };
-    let s = rig.zone.world_per_device_metre;
-    let mesh = icosphere(DVec3::ZERO, 1.0, 4);
-    let props = PropertySpec {
-        tension: Some(Scalar::Constant(0.6)),
-        zone_depth: Some(Scalar::Constant(0.2)),
-        density: Some(Scalar::Constant(0.3)),
-        ..PropertySpec::default()
-    };
-    let mut meshes =
-        vec![MeshContainer::new(1, &mesh.0, &mesh.1, &props, RayParams::default()).unwrap()];
-    let mut analytic = vec![Analytic {
-        tension: Some(0.6),
-        zone_depth: 0.2,
-        density: Some(crate::shapes::Density::Uniform(0.3)),
-        ..Analytic::new(
-            1,
-            Solid::Sphere {
-                center: DVec3::ZERO,
-                radius: 1.0,
-            },
-        )
-    }];
-    let (mut state_mesh, mut state_analytic) = (ProxyState::new(), ProxyState::new());
-    let dir = DVec3::new(0.3, 0.8, 0.52).normalize();
-    let mut regions = vec![];
-    let (mut n_region_mismatches, mut difference_sum) = (0, 0.0);
-    for k in 0..1500u32 {
-        // From 1.3 down to 0.5 along `dir`, world units.
-        let r = 1.3 - 0.8 * f64::from(k) / 1500.0;
-        let sample = DeviceSample::at(dir * r / s, u64::from(k) * 1000);
-        let t = f64::from(k) * 1e-3;
-        let a = render(&mut meshes, &mut state_mesh, &rig, &sample, t, 1e-3);
-        let b = render(&mut analytic, &mut state_analytic, &rig, &sample, t, 1e-3);
-        // Facets lie up to 0.001 inside the sphere: regions change a tick or two later.
-        n_region_mismatches += usize::from(a.region != b.region);
-        let difference = (a.force_newtons - b.force_newtons).length();
-        assert!(
-            difference < 0.12 * caps.force_newtons_max,
-            "tick {k}: {} vs {}",
-            a.force_newtons,
-            b.force_newtons
-        );
-        difference_sum += difference;
-        regions.push(a.region);
-    }
-    assert!(n_region_mismatches <= 6, "{n_region_mismatches}");
-    assert!(difference_sum / 1500.0 < 0.01 * caps.force_newtons_max);
-    assert!(regions.contains(&Region::Surface) && regions.contains(&Region::Interior));
-    assert!(meshes[0].ray_stats().n_locations > 1000);
-}
-
-use crate::force::ProxyState;
