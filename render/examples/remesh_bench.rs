@@ -8,8 +8,8 @@
 //! carving). Each measured step is one more stroke (at a new place), as an op released in the
 //! window leaves the object.
 //!
-//! - incremental: a `Mesher` with one worker (the window's, which starts more) is handed the
-//!   object; its worker remeshes the stroke's boxes, patches the last mesh and recolours the
+//! - incremental: a `Mesher` with one worker (the window's has two to four) is handed the
+//!   object; the worker remeshes the stroke's boxes, patches the last mesh and recolours the
 //!   vertices written; the patch goes to the renderer (`Renderer::patch_object`) and a frame
 //!   is drawn and read back (`Headless::render`: prepare, draw, copy to the CPU).
 //! - whole: what the window did before: `render::snapshot::build` of a one-object scene
