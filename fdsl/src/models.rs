@@ -52,7 +52,7 @@ pub fn reference_model(name: &str) -> Option<&'static str> {
         .map(|(_, source)| *source)
 }
 
-/// The benchmarks' sculpting history (render's `remesh_object`, the app's `remesh_bench`):
+/// The benchmarks' sculpting history (render's `remesh_object` and `remesh_bench`):
 /// edit `k` of a golden-angle spiral of `n` over the unit sphere, turned by `phase` radians; a
 /// ball of `tool_radius` that carves, adding every fifth time, a single stamp every second
 /// time and a two-pose stroke otherwise.

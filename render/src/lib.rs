@@ -18,6 +18,8 @@
 //!   frame within a budget, recolouring and moving only what time changes;
 //! - [`snapshot`]: a whole `fdsl` scene (say, an FVRML file) meshed, coloured, placed and
 //!   pictured offscreen from cameras that frame it (the `sculpt render` command);
+//! - [`mesher`]: the [`Mesher`](mesher::Mesher), named worker threads that mesh objects as
+//!   they change, patching an implicit object's last mesh where only its edits changed;
 //! - [`plot`]: tiny-skia heat-map slices with legends and time-series line plots;
 //! - [`image`]: the [`RgbaImage`](image::RgbaImage) both produce, with PNG encode and decode.
 //!
@@ -57,6 +59,7 @@ pub mod appearance;
 pub mod camera;
 pub mod gpu;
 pub mod mesh;
+pub mod mesher;
 pub mod scene;
 pub mod snapshot;
 

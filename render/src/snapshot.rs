@@ -23,7 +23,7 @@
 
 use std::sync::Arc;
 
-use fdsl::object::{EditOp, Object, ParametricKind, Shape, Slot};
+use fdsl::object::{CompiledEdit, EditOp, Object, ParametricKind, Shape, Slot};
 use fdsl::scene::ObjectId;
 use glam::{DAffine3, DMat4, DVec3, Mat4, Vec3};
 
@@ -331,18 +331,24 @@ fn has_shape_edits(object: &Object) -> bool {
         .any(|e| e.active && e.edit.is_geometric())
 }
 
+/// Whether `edit` paints colour.
+pub(crate) fn is_colour_paint(edit: &CompiledEdit) -> bool {
+    matches!(
+        edit.edit().op,
+        EditOp::Paint {
+            property: fdsl::object::Paintable::Color,
+            ..
+        }
+    )
+}
+
 /// Whether `object` has active colour paintings.
 fn has_colour_paint(object: &Object) -> bool {
-    object.history().entries().iter().any(|e| {
-        e.active
-            && matches!(
-                e.edit.edit().op,
-                EditOp::Paint {
-                    property: fdsl::object::Paintable::Color,
-                    ..
-                }
-            )
-    })
+    object
+        .history()
+        .entries()
+        .iter()
+        .any(|e| e.active && is_colour_paint(&e.edit))
 }
 
 /// An object's triangles in object space, before its appearance.
@@ -567,8 +573,22 @@ pub(crate) fn colour(
     mut mesh: Mesh,
     t: f64,
 ) -> (Mesh, Material) {
-    let t32 = t as f32;
-    appearance.apply(&mut mesh, t32);
+    colour_vertices(object, appearance, &mut mesh, t);
+    let material = appearance.material(&mesh, t as f32, Material::default());
+    (mesh, material)
+}
+
+/// Sets every vertex's colour, ambient colour and alpha (and displaces it) from the object's
+/// compiled appearance at time `t`, then the colours painted on the object from the sampler.
+/// The one colouring of object meshes: the incremental mesher colours the vertices a patch
+/// wrote through it, so a patched mesh has the colours a whole one would.
+pub(crate) fn colour_vertices(
+    object: &Object,
+    appearance: &mut CompiledAppearance,
+    mesh: &mut Mesh,
+    t: f64,
+) {
+    appearance.apply(mesh, t as f32);
     if has_colour_paint(object) {
         let mut sampler = object.sampler();
         for (p, c) in mesh.positions.iter().zip(mesh.colours.iter_mut()) {
@@ -576,8 +596,6 @@ pub(crate) fn colour(
             c[..3].copy_from_slice(&rgb);
         }
     }
-    let material = appearance.material(&mesh, t32, Material::default());
-    (mesh, material)
 }
 
 /// Arrows of the object's force field (if enabled) at time `t_secs`, at the centres of a grid

@@ -12,11 +12,11 @@ use fdsl::scene::ObjectId;
 use glam::Vec3;
 use render::mesh::octree::MeshPatch;
 use render::mesh::{Aabb, Mesh};
+use render::mesher::{MeshJob, MeshKind, Mesher};
 use render::scene::{Line, PickHit, Scene, SceneObject};
 use render::snapshot::render_from_scene;
 
 use super::hooks::Hooks;
-use super::mesher::{MeshJob, MeshKind, Mesher};
 use super::viewport::{Modes, StrokeEvent, StrokePhase, ViewState, ViewportReport, viewport_ui};
 use ::app::brush::{Brush, Stroke};
 use ::app::clock::{self, Now};
@@ -329,7 +329,7 @@ impl SculptApp {
         };
         Ok(SculptApp {
             engine,
-            mesher: Mesher::start(move || mesher_wake())?,
+            mesher: Mesher::start(|| clock::now().instant, move || mesher_wake())?,
             patches: Vec::new(),
             depth,
             objects: BTreeMap::new(),

@@ -3,7 +3,6 @@
 
 mod app;
 mod hooks;
-mod mesher;
 mod panel;
 mod viewport;
 

@@ -98,30 +98,10 @@ pub fn heat_map(
     let mut pixmap = Pixmap::new(s.width, s.height).ok_or(PlotError::BadSize(s.width, s.height))?;
     pixmap.fill(Color::WHITE);
     let (mw, mh) = (map.w as usize, map.h as usize);
-    let mut xs = Vec::with_capacity(mw * mh);
-    let mut ys = Vec::with_capacity(mw * mh);
-    for j in 0..mh {
-        let y = s.y.1 - (j as f32 + 0.5) / mh as f32 * (s.y.1 - s.y.0);
-        for i in 0..mw {
-            xs.push(s.x.0 + (i as f32 + 0.5) / mw as f32 * (s.x.1 - s.x.0));
-            ys.push(y);
-        }
-    }
+    let (xs, ys) = pixel_centres(s, mw, mh);
     let mut values = vec![0.0f32; mw * mh];
     f(&xs, &ys, &mut values);
-    let range = s.range.unwrap_or_else(|| {
-        let finite = values.iter().copied().filter(|v| v.is_finite());
-        let (lo, hi) = finite.fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), v| {
-            (a.min(v), b.max(v))
-        });
-        if lo > hi {
-            (0.0, 1.0)
-        } else if lo == hi {
-            (lo - 0.5, hi + 0.5)
-        } else {
-            (lo, hi)
-        }
-    });
+    let range = s.range.unwrap_or_else(|| fitted_range(&values));
     let stride = s.width as usize;
     let pixels = pixmap.pixels_mut();
     for j in 0..mh {
@@ -149,25 +129,7 @@ pub fn heat_map(
     }
     let ink = Color::from_rgba8(20, 20, 20, 255);
     draw_text(&mut pixmap, &s.title, MARGIN_PX, MARGIN_PX, TITLE_PX, ink);
-    // Three significant digits of the span are enough to read the legend.
-    let step = 10f64.powf(f64::from(range.1 - range.0).log10().floor() - 2.0);
-    let label_x = legend.x + legend.w + 4.0;
-    draw_text(
-        &mut pixmap,
-        &format_number(f64::from(range.1), step),
-        label_x,
-        legend.y,
-        LABEL_PX,
-        ink,
-    );
-    draw_text(
-        &mut pixmap,
-        &format_number(f64::from(range.0), step),
-        label_x,
-        legend.y + legend.h - LABEL_PX,
-        LABEL_PX,
-        ink,
-    );
+    legend_labels(&mut pixmap, legend, range, ink);
     frame(&mut pixmap, map, ink);
     frame(&mut pixmap, legend, ink);
     Ok(HeatMapPicture {
@@ -176,6 +138,59 @@ pub fn heat_map(
         legend,
         range,
     })
+}
+
+/// The points of `s`'s rectangle at the centres of a `mw` x `mh` grid of pixels, row by row
+/// from the top: their x and their y coordinates.
+fn pixel_centres(s: &HeatMapSettings, mw: usize, mh: usize) -> (Vec<f32>, Vec<f32>) {
+    let mut xs = Vec::with_capacity(mw * mh);
+    let mut ys = Vec::with_capacity(mw * mh);
+    for j in 0..mh {
+        let y = s.y.1 - (j as f32 + 0.5) / mh as f32 * (s.y.1 - s.y.0);
+        for i in 0..mw {
+            xs.push(s.x.0 + (i as f32 + 0.5) / mw as f32 * (s.x.1 - s.x.0));
+            ys.push(y);
+        }
+    }
+    (xs, ys)
+}
+
+/// The finite values' minimum and maximum, widened when they are equal; (0, 1) for none.
+fn fitted_range(values: &[f32]) -> (f32, f32) {
+    let finite = values.iter().copied().filter(|v| v.is_finite());
+    let (lo, hi) = finite.fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
+    if lo > hi {
+        (0.0, 1.0)
+    } else if lo == hi {
+        (lo - 0.5, hi + 0.5)
+    } else {
+        (lo, hi)
+    }
+}
+
+/// The range's maximum beside the top of the legend bar, its minimum beside the bottom.
+fn legend_labels(pixmap: &mut Pixmap, legend: PixelRect, range: (f32, f32), ink: Color) {
+    // Three significant digits of the span are enough to read the legend.
+    let step = 10f64.powf(f64::from(range.1 - range.0).log10().floor() - 2.0);
+    let label_x = legend.x + legend.w + 4.0;
+    draw_text(
+        pixmap,
+        &format_number(f64::from(range.1), step),
+        label_x,
+        legend.y,
+        LABEL_PX,
+        ink,
+    );
+    draw_text(
+        pixmap,
+        &format_number(f64::from(range.0), step),
+        label_x,
+        legend.y + legend.h - LABEL_PX,
+        LABEL_PX,
+        ink,
+    );
 }
 
 /// A one-pixel outline just outside `r`.

@@ -133,6 +133,58 @@ fn ticks(range: (f64, f64)) -> (Vec<f64>, f64) {
     )
 }
 
+/// Grid lines across `area`, tick marks and tick labels at each axis's ticks; `axes` holds,
+/// for x then y, the range the area spans, the ticks and their step.
+fn draw_grid(
+    pixmap: &mut Pixmap,
+    area: PixelRect,
+    axes: [((f64, f64), &[f64], f64); 2],
+    ink: Color,
+) {
+    let [(x_range, x_ticks, x_step), (y_range, y_ticks, y_step)] = axes;
+    let grid = paint(Color::from_rgba8(225, 225, 225, 255));
+    let ink_paint = paint(ink);
+    let to_px = |p: [f64; 2]| to_pixel(area, x_range, y_range, p);
+    for &x in x_ticks {
+        let [px, _] = to_px([x, y_range.0]);
+        let px = px.round();
+        fill(pixmap, Rect::from_xywh(px, area.y, 1.0, area.h), &grid);
+        fill(
+            pixmap,
+            Rect::from_xywh(px, area.y + area.h, 1.0, TICK_PX),
+            &ink_paint,
+        );
+        let label = format_number(x, x_step);
+        draw_text(
+            pixmap,
+            &label,
+            px - text_width(&label, LABEL_PX) / 2.0,
+            area.y + area.h + TICK_PX + 4.0,
+            LABEL_PX,
+            ink,
+        );
+    }
+    for &y in y_ticks {
+        let [_, py] = to_px([x_range.0, y]);
+        let py = py.round();
+        fill(pixmap, Rect::from_xywh(area.x, py, area.w, 1.0), &grid);
+        fill(
+            pixmap,
+            Rect::from_xywh(area.x - TICK_PX, py, TICK_PX, 1.0),
+            &ink_paint,
+        );
+        let label = format_number(y, y_step);
+        draw_text(
+            pixmap,
+            &label,
+            area.x - TICK_PX - 4.0 - text_width(&label, LABEL_PX),
+            py - LABEL_PX / 2.0,
+            LABEL_PX,
+            ink,
+        );
+    }
+}
+
 fn paint(c: Color) -> Paint<'static> {
     let mut p = Paint::default();
     p.set_color(c);
@@ -177,73 +229,14 @@ impl LinePlot {
         let mut pixmap = Pixmap::new(width, height).ok_or(PlotError::BadSize(width, height))?;
         pixmap.fill(Color::WHITE);
         let ink = Color::from_rgba8(20, 20, 20, 255);
-        let grid = paint(Color::from_rgba8(225, 225, 225, 255));
-        let ink_paint = paint(ink);
-        let title_x = (width as f32 - text_width(&self.title, TITLE_PX)) / 2.0;
-        draw_text(
-            &mut pixmap,
-            &self.title,
-            title_x.max(MARGIN_PX),
-            MARGIN_PX,
-            TITLE_PX,
-            ink,
-        );
-        draw_text(
-            &mut pixmap,
-            &self.y_label,
-            MARGIN_PX,
-            top - LABEL_PX - 10.0,
-            LABEL_PX,
-            ink,
-        );
-        let x_label_x = area.x + (area.w - text_width(&self.x_label, LABEL_PX)) / 2.0;
-        draw_text(
-            &mut pixmap,
-            &self.x_label,
-            x_label_x,
-            height as f32 - MARGIN_PX - LABEL_PX,
-            LABEL_PX,
-            ink,
-        );
+        self.draw_labels(&mut pixmap, area, ink);
         let to_px = |p: [f64; 2]| to_pixel(area, x_range, y_range, p);
-        for &x in &x_ticks {
-            let [px, _] = to_px([x, y_range.0]);
-            let px = px.round();
-            fill(&mut pixmap, Rect::from_xywh(px, area.y, 1.0, area.h), &grid);
-            fill(
-                &mut pixmap,
-                Rect::from_xywh(px, area.y + area.h, 1.0, TICK_PX),
-                &ink_paint,
-            );
-            let label = format_number(x, x_step);
-            draw_text(
-                &mut pixmap,
-                &label,
-                px - text_width(&label, LABEL_PX) / 2.0,
-                area.y + area.h + TICK_PX + 4.0,
-                LABEL_PX,
-                ink,
-            );
-        }
-        for &y in &y_ticks {
-            let [_, py] = to_px([x_range.0, y]);
-            let py = py.round();
-            fill(&mut pixmap, Rect::from_xywh(area.x, py, area.w, 1.0), &grid);
-            fill(
-                &mut pixmap,
-                Rect::from_xywh(area.x - TICK_PX, py, TICK_PX, 1.0),
-                &ink_paint,
-            );
-            let label = format_number(y, y_step);
-            draw_text(
-                &mut pixmap,
-                &label,
-                area.x - TICK_PX - 4.0 - text_width(&label, LABEL_PX),
-                py - LABEL_PX / 2.0,
-                LABEL_PX,
-                ink,
-            );
-        }
+        draw_grid(
+            &mut pixmap,
+            area,
+            [(x_range, &x_ticks, x_step), (y_range, &y_ticks, y_step)],
+            ink,
+        );
         self.draw_series(&mut pixmap, area, &to_px);
         frame(&mut pixmap, area, ink);
         self.draw_legend(&mut pixmap, area);
@@ -253,6 +246,37 @@ impl LinePlot {
             x_range,
             y_range,
         })
+    }
+
+    /// The title above the plot, the y axis's label over the axis and the x axis's under it.
+    fn draw_labels(&self, pixmap: &mut Pixmap, area: PixelRect, ink: Color) {
+        let (width, height) = (pixmap.width(), pixmap.height());
+        let title_x = (width as f32 - text_width(&self.title, TITLE_PX)) / 2.0;
+        draw_text(
+            pixmap,
+            &self.title,
+            title_x.max(MARGIN_PX),
+            MARGIN_PX,
+            TITLE_PX,
+            ink,
+        );
+        draw_text(
+            pixmap,
+            &self.y_label,
+            MARGIN_PX,
+            area.y - LABEL_PX - 10.0,
+            LABEL_PX,
+            ink,
+        );
+        let x_label_x = area.x + (area.w - text_width(&self.x_label, LABEL_PX)) / 2.0;
+        draw_text(
+            pixmap,
+            &self.x_label,
+            x_label_x,
+            height as f32 - MARGIN_PX - LABEL_PX,
+            LABEL_PX,
+            ink,
+        );
     }
 
     fn draw_series(

@@ -278,6 +278,91 @@ fn pipeline(
     })
 }
 
+/// The three mesh pipelines: opaque, then a transparent object's far side and near side.
+fn mesh_pipelines(
+    device: &wgpu::Device,
+    format: wgpu::TextureFormat,
+    depth: Option<wgpu::TextureFormat>,
+    globals_layout: &wgpu::BindGroupLayout,
+    object_layout: &wgpu::BindGroupLayout,
+) -> [wgpu::RenderPipeline; 3] {
+    let module = device.create_shader_module(wgpu::include_wgsl!("shaders/mesh.wgsl"));
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("render mesh"),
+        bind_group_layouts: &[Some(globals_layout), Some(object_layout)],
+        immediate_size: 0,
+    });
+    let attrs = wgpu::vertex_attr_array![
+        0 => Float32x3, 1 => Float32x3, 2 => Float32x4, 3 => Float32x3
+    ];
+    let buffers = [Some(wgpu::VertexBufferLayout {
+        array_stride: std::mem::size_of::<MeshVertex>() as u64,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &attrs,
+    })];
+    let kind = |label, cull_mode, blend, depth_write| PipelineKind {
+        label,
+        module: &module,
+        layout: &layout,
+        buffers: &buffers,
+        topology: wgpu::PrimitiveTopology::TriangleList,
+        cull_mode,
+        blend,
+        depth_write,
+    };
+    let opaque = kind("render opaque", None, false, true);
+    // Transparent objects draw their far side first, then their near side.
+    let back = kind(
+        "render transparent back",
+        Some(wgpu::Face::Front),
+        true,
+        false,
+    );
+    let front = kind(
+        "render transparent front",
+        Some(wgpu::Face::Back),
+        true,
+        false,
+    );
+    [opaque, back, front].map(|k| pipeline(device, format, depth, k))
+}
+
+/// The pipeline of line lists (arrows, boxes, cursors).
+fn line_pipeline(
+    device: &wgpu::Device,
+    format: wgpu::TextureFormat,
+    depth: Option<wgpu::TextureFormat>,
+    globals_layout: &wgpu::BindGroupLayout,
+) -> wgpu::RenderPipeline {
+    let module = device.create_shader_module(wgpu::include_wgsl!("shaders/line.wgsl"));
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("render lines"),
+        bind_group_layouts: &[Some(globals_layout)],
+        immediate_size: 0,
+    });
+    let attrs = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x4];
+    let buffers = [Some(wgpu::VertexBufferLayout {
+        array_stride: std::mem::size_of::<LineVertex>() as u64,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &attrs,
+    })];
+    pipeline(
+        device,
+        format,
+        depth,
+        PipelineKind {
+            label: "render lines",
+            module: &module,
+            layout: &layout,
+            buffers: &buffers,
+            topology: wgpu::PrimitiveTopology::LineList,
+            cull_mode: None,
+            blend: true,
+            depth_write: true,
+        },
+    )
+}
+
 impl Renderer {
     /// Builds the pipelines for a colour target `format` and an optional depth format
     /// (without depth, meshes are drawn in order with no occlusion test).
@@ -287,88 +372,11 @@ impl Renderer {
         format: wgpu::TextureFormat,
         depth: Option<wgpu::TextureFormat>,
     ) -> Self {
-        let mesh_module = device.create_shader_module(wgpu::include_wgsl!("shaders/mesh.wgsl"));
-        let line_module = device.create_shader_module(wgpu::include_wgsl!("shaders/line.wgsl"));
         let globals_layout = uniform_layout(device, "render globals");
         let object_layout = uniform_layout(device, "render object");
-        let mesh_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("render mesh"),
-            bind_group_layouts: &[Some(&globals_layout), Some(&object_layout)],
-            immediate_size: 0,
-        });
-        let line_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("render lines"),
-            bind_group_layouts: &[Some(&globals_layout)],
-            immediate_size: 0,
-        });
-        let mesh_attrs = wgpu::vertex_attr_array![
-            0 => Float32x3, 1 => Float32x3, 2 => Float32x4, 3 => Float32x3
-        ];
-        let mesh_buffers = [Some(wgpu::VertexBufferLayout {
-            array_stride: std::mem::size_of::<MeshVertex>() as u64,
-            step_mode: wgpu::VertexStepMode::Vertex,
-            attributes: &mesh_attrs,
-        })];
-        let line_attrs = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x4];
-        let line_buffers = [Some(wgpu::VertexBufferLayout {
-            array_stride: std::mem::size_of::<LineVertex>() as u64,
-            step_mode: wgpu::VertexStepMode::Vertex,
-            attributes: &line_attrs,
-        })];
-        let mesh_kind = |label, cull_mode, blend, depth_write| PipelineKind {
-            label,
-            module: &mesh_module,
-            layout: &mesh_layout,
-            buffers: &mesh_buffers,
-            topology: wgpu::PrimitiveTopology::TriangleList,
-            cull_mode,
-            blend,
-            depth_write,
-        };
-        let opaque = pipeline(
-            device,
-            format,
-            depth,
-            mesh_kind("render opaque", None, false, true),
-        );
-        // Transparent objects draw their far side first, then their near side.
-        let transparent_back = pipeline(
-            device,
-            format,
-            depth,
-            mesh_kind(
-                "render transparent back",
-                Some(wgpu::Face::Front),
-                true,
-                false,
-            ),
-        );
-        let transparent_front = pipeline(
-            device,
-            format,
-            depth,
-            mesh_kind(
-                "render transparent front",
-                Some(wgpu::Face::Back),
-                true,
-                false,
-            ),
-        );
-        let lines = pipeline(
-            device,
-            format,
-            depth,
-            PipelineKind {
-                label: "render lines",
-                module: &line_module,
-                layout: &line_layout,
-                buffers: &line_buffers,
-                topology: wgpu::PrimitiveTopology::LineList,
-                cull_mode: None,
-                blend: true,
-                depth_write: true,
-            },
-        );
+        let [opaque, transparent_back, transparent_front] =
+            mesh_pipelines(device, format, depth, &globals_layout, &object_layout);
+        let lines = line_pipeline(device, format, depth, &globals_layout);
         let globals = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("render globals"),
             size: std::mem::size_of::<Globals>() as u64,

@@ -96,32 +96,10 @@ impl Headless {
             height,
             depth_or_array_layers: 1,
         };
-        let target = |format, usage, label| {
-            self.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size,
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
-        };
-        let colour = target(
-            COLOUR_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-            "offscreen colour",
-        );
-        let depth = target(
-            DEPTH_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
-            "offscreen depth",
-        );
+        let [colour, depth] = self.targets(size);
         let colour_view = colour.create_view(&Default::default());
         let depth_view = depth.create_view(&Default::default());
-        let row_bytes = 4 * width;
-        let padded_row = row_bytes.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
+        let padded_row = (4 * width).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
             * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
         let readback = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("offscreen readback"),
@@ -155,6 +133,46 @@ impl Headless {
             size,
         );
         self.queue.submit([encoder.finish()]);
+        self.read_back(&readback, width, height, padded_row)
+    }
+
+    /// The colour and depth textures of a frame of `size`.
+    fn targets(&self, size: wgpu::Extent3d) -> [wgpu::Texture; 2] {
+        let target = |format, usage, label| {
+            self.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let colour = target(
+            COLOUR_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            "offscreen colour",
+        );
+        let depth = target(
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+            "offscreen depth",
+        );
+        [colour, depth]
+    }
+
+    /// Waits for the frame copied into `readback` (rows `padded_row` bytes apart) and takes
+    /// its pixels.
+    fn read_back(
+        &self,
+        readback: &wgpu::Buffer,
+        width: u32,
+        height: u32,
+        padded_row: u32,
+    ) -> Result<RgbaImage, OffscreenError> {
+        let row_bytes = 4 * width;
         let slice = readback.slice(..);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {

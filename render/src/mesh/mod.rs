@@ -296,20 +296,7 @@ impl Mesh {
             })
             .collect();
         let unit: Vec<[f32; 3]> = faces.iter().map(|&n| normalise_or_up(n)).collect();
-        // The triangles around each vertex (compressed rows).
-        let mut start = vec![0u32; n_vertices + 1];
-        for &i in &self.indices {
-            start[i as usize + 1] += 1;
-        }
-        for v in 0..n_vertices {
-            start[v + 1] += start[v];
-        }
-        let mut fill = start.clone();
-        let mut around = vec![0u32; self.indices.len()];
-        for (corner, &i) in self.indices.iter().enumerate() {
-            around[fill[i as usize] as usize] = (corner / 3) as u32;
-            fill[i as usize] += 1;
-        }
+        let (start, around) = self.triangles_around();
         let (mut positions, mut normals) = (Vec::with_capacity(n_vertices), Vec::new());
         let mut colours = Vec::new();
         let mut ambient = Vec::new();
@@ -353,6 +340,26 @@ impl Mesh {
             self.ambient = ambient;
         }
         self.indices = indices;
+    }
+
+    /// The triangles around each vertex, as compressed rows: vertex `v`'s are
+    /// `around[start[v]..start[v + 1]]`.
+    fn triangles_around(&self) -> (Vec<u32>, Vec<u32>) {
+        let n_vertices = self.positions.len();
+        let mut start = vec![0u32; n_vertices + 1];
+        for &i in &self.indices {
+            start[i as usize + 1] += 1;
+        }
+        for v in 0..n_vertices {
+            start[v + 1] += start[v];
+        }
+        let mut fill = start.clone();
+        let mut around = vec![0u32; self.indices.len()];
+        for (corner, &i) in self.indices.iter().enumerate() {
+            around[fill[i as usize] as usize] = (corner / 3) as u32;
+            fill[i as usize] += 1;
+        }
+        (start, around)
     }
 
     /// Recomputes normals as the area-weighted average of the adjacent triangles' normals.

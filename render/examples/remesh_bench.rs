@@ -1,6 +1,6 @@
 //! Stroke released to pixels updated, as the window does it, for an object with 10^4 edits at
-//! octree depths 7 and 8: the window's incremental path against today's whole remesh, in the
-//! same run.
+//! octree depths 7 and 8: the incremental path of [`render::mesher::Mesher`] (what the window
+//! meshes with) against the whole remesh the window did before it, in the same run.
 //!
 //! The object is render's `remesh_object` benchmark object: the unit ball (in a 2.2-unit
 //! domain) carved by 10^4 edits spread over its surface along a golden-angle spiral (ball
@@ -8,10 +8,10 @@
 //! carving). Each measured step is one more stroke (at a new place), as an op released in the
 //! window leaves the object.
 //!
-//! - incremental: the window's own mesher (`src/window/mesher.rs`, compiled into this program)
-//!   is handed the object; its worker remeshes the stroke's boxes, patches the last mesh and
-//!   recolours the vertices written; the patch goes to the renderer (`Renderer::patch_object`)
-//!   and a frame is drawn and read back (`Headless::render`: prepare, draw, copy to the CPU).
+//! - incremental: a `Mesher` with one worker (the window's has two to four) is handed the
+//!   object; the worker remeshes the stroke's boxes, patches the last mesh and recolours the
+//!   vertices written; the patch goes to the renderer (`Renderer::patch_object`) and a frame
+//!   is drawn and read back (`Headless::render`: prepare, draw, copy to the CPU).
 //! - whole: what the window did before: `render::snapshot::build` of a one-object scene
 //!   (octree mesh of everything, appearance), the new mesh uploaded whole and the same frame
 //!   drawn and read back.
@@ -20,29 +20,23 @@
 //! are back. Medians are printed per depth, with the ratio whole / incremental, and the part
 //! of each spent meshing and colouring (the worker's own time; `snapshot::build`).
 //!
-//! `cargo run -p app --release --example remesh_bench` (`-- --quick` for 10^3 edits and
+//! `cargo run -p render --release --example remesh_bench` (`-- --quick` for 10^3 edits and
 //! fewer samples). With no wgpu adapter it says so and exits non-zero.
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
-use anyhow::{Context as _, bail, ensure};
 use fdsl::object::Transform;
 use fdsl::object::{Domain, Edit, Formula, Geometry, Object, ObjectData};
 use fdsl::scene::ObjectId;
 use glam::DVec3;
 use render::camera::Camera;
 use render::gpu::offscreen::Headless;
+use render::mesher::{MeshJob, MeshKind, Meshed, Mesher};
 use render::scene::Scene;
 use render::snapshot::{SnapshotSettings, build};
 
-#[allow(
-    dead_code,
-    reason = "the window's mesher compiled in whole; this program uses part of it"
-)]
-#[path = "../src/window/mesher.rs"]
-mod mesher;
-
-use mesher::{MeshJob, MeshKind, Mesher};
+/// Why the benchmark stopped.
+type Error = Box<dyn std::error::Error>;
 
 /// Edits in the object before the benchmark adds strokes.
 const N_EDITS: usize = 10_000;
@@ -59,16 +53,26 @@ const FRAME_PX: [u32; 2] = [640, 480];
 /// Longest wait for one mesh.
 const MESH_WAIT_SECS: u64 = 600;
 
-fn main() -> anyhow::Result<()> {
+/// Reads the one clock this benchmark uses.
+#[allow(
+    clippy::disallowed_methods,
+    reason = "a benchmark program measures wall time"
+)]
+fn now() -> Instant {
+    Instant::now()
+}
+
+fn main() -> Result<(), Error> {
     let quick = std::env::args().any(|a| a == "--quick");
     let (n_edits, n_incremental, n_whole) = if quick {
         (N_EDITS / 10, 5, 2)
     } else {
         (N_EDITS, N_INCREMENTAL, N_WHOLE)
     };
-    let mut gpu = Headless::new().context("no wgpu adapter: pixels cannot be measured")?;
+    let mut gpu =
+        Headless::new().map_err(|e| format!("no wgpu adapter: pixels cannot be measured ({e})"))?;
     println!("device: {}", gpu.adapter_description());
-    let started = app::clock::now().instant;
+    let started = now();
     let base = object(n_edits)?;
     println!(
         "object: unit ball with {} edits, built in {:.1?}",
@@ -78,14 +82,14 @@ fn main() -> anyhow::Result<()> {
     for depth in DEPTHS {
         let mut object = base.clone();
         let mut next_stroke = 0;
-        let mut stroke = |object: &mut Object| -> anyhow::Result<()> {
+        let mut stroke = |object: &mut Object| -> Result<(), Error> {
             next_stroke += 1;
             object.apply(spiral_edit(next_stroke * 7919, n_edits, 0.5))?;
             Ok(())
         };
 
         // The window's incremental path: the first mesh is whole, then one patch per stroke.
-        let mesher = Mesher::with_threads(1, || {})?;
+        let mesher = Mesher::with_threads(1, now, || {})?;
         let mut scene = Scene {
             camera: Camera {
                 distance: 3.2,
@@ -103,9 +107,9 @@ fn main() -> anyhow::Result<()> {
                 stroke(&mut object)?;
             }
             generation += 1;
-            let t0 = app::clock::now().instant;
+            let t0 = now();
             let done = mesh_with(&mesher, &object, depth, generation)?;
-            let drawn = done.object.context("the object has a mesh")?;
+            let drawn = done.object.ok_or("the object has no mesh")?;
             if let Some((base, patch)) = &done.patch {
                 gpu.renderer_mut()
                     .patch_object(0, base, &drawn.mesh, patch)?;
@@ -124,10 +128,9 @@ fn main() -> anyhow::Result<()> {
                 incremental_mesh_ms.push(done.mesh_secs * 1e3);
             }
         }
-        ensure!(
-            n_patched == n_incremental,
-            "only {n_patched} of {n_incremental} strokes were patched"
-        );
+        if n_patched != n_incremental {
+            return Err(format!("only {n_patched} of {n_incremental} strokes were patched").into());
+        }
         n_triangles_written.sort_unstable();
 
         // Today's path: each stroke meshed whole through `snapshot::build`, uploaded whole.
@@ -136,7 +139,7 @@ fn main() -> anyhow::Result<()> {
         let mut whole_mesh_ms = Vec::new();
         for _ in 0..n_whole {
             stroke(&mut object)?;
-            let t0 = app::clock::now().instant;
+            let t0 = now();
             let mut one = fdsl::scene::Scene::new();
             let mut o = object.clone();
             o.prepare();
@@ -150,7 +153,7 @@ fn main() -> anyhow::Result<()> {
             )?;
             whole_mesh_ms.push(t0.elapsed().as_secs_f64() * 1e3);
             let Some(drawn) = built.scene.objects.into_iter().next() else {
-                bail!("the whole mesh is empty");
+                return Err("the whole mesh is empty".into());
             };
             scene.objects.clear();
             scene.objects.push(drawn);
@@ -186,25 +189,27 @@ fn mesh_with(
     object: &Object,
     depth: u8,
     generation: u64,
-) -> anyhow::Result<mesher::Meshed> {
+) -> Result<Meshed, Error> {
     let job = Box::new(MeshJob {
         id: ObjectId(1),
         object: object.clone(),
         world_from_group: Transform::IDENTITY,
         generation,
         depth,
-        requested_at: app::clock::now().instant,
+        requested_at: now(),
         t_secs: 0.0,
     });
     if mesher.try_send(job).is_err() {
-        bail!("the mesher's queue is full");
+        return Err("the mesher's queue is full".into());
     }
     let done = mesher
         .recv_timeout(Duration::from_secs(MESH_WAIT_SECS))
-        .context("no mesh in time")?;
-    ensure!(done.generation == generation, "a result of another job");
+        .ok_or("no mesh in time")?;
+    if done.generation != generation {
+        return Err("a result of another job".into());
+    }
     if let Some(reason) = &done.skipped {
-        bail!("not meshed: {reason}");
+        return Err(format!("not meshed: {reason}").into());
     }
     Ok(done)
 }
@@ -220,7 +225,7 @@ fn spiral_edit(k: usize, n: usize, phase: f64) -> Edit {
     fdsl::models::spiral_edit(k, n, phase, TOOL_RADIUS)
 }
 
-fn object(n_edits: usize) -> anyhow::Result<Object> {
+fn object(n_edits: usize) -> Result<Object, Error> {
     let mut object = Object::new(ObjectData {
         geometry: Some(Geometry::implicit_in(
             Formula::new("1-sqrt(x^2+y^2+z^2)")?,

@@ -1,0 +1,312 @@
+//! Meshing objects off the caller's thread, incrementally: a [`Mesher`] runs named worker
+//! threads (`sculpt-mesher-N`) that take jobs (one object, as the fold left it) from a bounded
+//! queue, mesh, colour and place them, and hand the drawable object back through a bounded
+//! channel, calling a waker after each result.
+//!
+//! Incremental path (`incremental.rs`): for each implicit object the workers keep its
+//! [`OctreeMesher`](crate::mesh::octree::OctreeMesher) and the mesh last handed out. A job
+//! whose object differs from the last one meshed only in its edit history (edits appended,
+//! undone, redone, or a stroke preview replaced by the stroke) remeshes only the boxes of the
+//! edits that changed, patches the last mesh and recolours only the vertices the patch wrote
+//! (and those in a changed colour painting's box) with [`snapshot`](crate::snapshot)'s own
+//! colouring; the result carries the [`MeshPatch`] for
+//! [`Renderer::patch_object`](crate::gpu::Renderer::patch_object). Anything else (another
+//! geometry, appearance, transform, group, depth, an intersection, a grown bounding box)
+//! meshes the object whole, and other shapes go through [`snapshot::build`](crate::snapshot::build)
+//! as `sculpt render` draws them.
+//!
+//! Scheduling: at least [`MIN_MESHER_THREADS`] workers, so one object's long mesh never holds
+//! up the others; one object is meshed by one worker at a time (its state is checked out). A
+//! newer job for an object replaces its queued one; a worker drops a job that a newer one
+//! superseded before it starts, and stops a patch between its boxes when a newer job comes
+//! (the octree's remesh has no cancel hook inside a box). So an object's results come in the
+//! order of its jobs, and each patch starts from the mesh of the result before it.
+//!
+//! What it is not: it reads no clock (the caller hands in the one that times the work) and
+//! knows nothing of the window that draws its results.
+
+mod incremental;
+#[cfg(test)]
+mod tests;
+
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use fdsl::object::{Object, Transform};
+use fdsl::scene::ObjectId;
+
+use crate::mesh::Mesh;
+use crate::mesh::octree::MeshPatch;
+use crate::scene::{Line, SceneObject};
+use incremental::Incremental;
+
+/// Most objects with a job waiting for a worker.
+pub const MAX_JOBS_QUEUED: usize = 64;
+/// Most results waiting for the caller.
+pub const MAX_RESULTS_QUEUED: usize = 64;
+/// Fewest worker threads: one object's long mesh never holds up the others.
+pub const MIN_MESHER_THREADS: usize = 2;
+/// Most worker threads (each may hold a whole mesh being built).
+pub const MAX_MESHER_THREADS: usize = 4;
+/// Most changed edits one job patches; more mesh the object whole.
+pub const MAX_PATCH_EDITS: usize = 256;
+
+/// One object to mesh.
+pub struct MeshJob {
+    /// Its id.
+    pub id: ObjectId,
+    /// The object as folded (geometry, appearance, edits).
+    pub object: Object,
+    /// The transform of the group it hangs from (scene space, +y up).
+    pub world_from_group: Transform,
+    /// Counts this object's jobs; results of older ones are stale.
+    pub generation: u64,
+    /// Octree depth for implicit shapes.
+    pub depth: u8,
+    /// When the change that asked for it was made (handed back with the result, for
+    /// edit-to-mesh times).
+    pub requested_at: Instant,
+    /// The scene time to mesh at (shapes, colours and fields that read `t`).
+    pub t_secs: f64,
+}
+
+/// How a result was made.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MeshKind {
+    /// Meshed from scratch.
+    Whole,
+    /// The previous mesh patched where the changed edits act.
+    Patch,
+    /// Nothing visible changed (a painting of a physics property): the previous mesh.
+    Unchanged,
+}
+
+impl MeshKind {
+    /// The name a state dump uses.
+    pub fn name(self) -> &'static str {
+        match self {
+            MeshKind::Whole => "whole",
+            MeshKind::Patch => "patch",
+            MeshKind::Unchanged => "unchanged",
+        }
+    }
+}
+
+/// A meshed object.
+pub struct Meshed {
+    /// Its id.
+    pub id: ObjectId,
+    /// The job's generation.
+    pub generation: u64,
+    /// The drawable object (renderer world, +z up), `None` when nothing could be drawn.
+    pub object: Option<SceneObject>,
+    /// Force-field arrows.
+    pub lines: Vec<Line>,
+    /// Triangles meshed.
+    pub n_triangles: usize,
+    /// Why (part of) it is not drawn.
+    pub skipped: Option<String>,
+    /// Seconds the worker spent on it.
+    pub mesh_secs: f64,
+    /// From the job.
+    pub requested_at: Instant,
+    /// The scene time it was meshed and placed at: the job's for a mesh through `snapshot`,
+    /// 0 for the incremental path (which meshes nothing that reads `t` and places at 0).
+    pub t_secs: f64,
+    /// How it was made.
+    pub kind: MeshKind,
+    /// For [`Renderer::patch_object`](crate::gpu::Renderer::patch_object): the mesh this
+    /// object's previous result carried, and the patch from it to this one's (whole for a
+    /// first mesh, so that the renderer gives the buffers room for later patches).
+    pub patch: Option<(Arc<Mesh>, MeshPatch)>,
+}
+
+/// Jobs waiting, and the per-object state of objects not being meshed.
+#[derive(Default)]
+struct Queue {
+    /// The latest job of each object (a newer one replaces it).
+    jobs: BTreeMap<ObjectId, Box<MeshJob>>,
+    /// Objects with a job, oldest first.
+    order: VecDeque<ObjectId>,
+    /// Objects a worker is meshing.
+    busy: BTreeSet<ObjectId>,
+    /// Objects removed while busy: their state is dropped when the worker returns it.
+    gone: BTreeSet<ObjectId>,
+    states: BTreeMap<ObjectId, Incremental>,
+    closed: bool,
+}
+
+struct Shared {
+    queue: Mutex<Queue>,
+    ready: Condvar,
+}
+
+impl Shared {
+    fn lock(&self) -> MutexGuard<'_, Queue> {
+        // A worker that panicked left the queue consistent (it only holds the lock briefly).
+        self.queue
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// Whether a newer job for `id` is waiting.
+    fn superseded(&self, id: ObjectId) -> bool {
+        self.lock().jobs.contains_key(&id)
+    }
+
+    /// Waits for a job of an object no worker is meshing and checks it out with the object's
+    /// kept state; `None` once the mesher is dropped.
+    fn next_job(&self) -> Option<(Box<MeshJob>, Option<Incremental>)> {
+        let mut queue = self.lock();
+        loop {
+            if queue.closed {
+                return None;
+            }
+            let free = queue.order.iter().position(|id| !queue.busy.contains(id));
+            if let Some(at) = free {
+                let Some(id) = queue.order.remove(at) else {
+                    continue;
+                };
+                let Some(job) = queue.jobs.remove(&id) else {
+                    continue;
+                };
+                queue.busy.insert(id);
+                let state = queue.states.remove(&id);
+                return Some((job, state));
+            }
+            queue = self
+                .ready
+                .wait(queue)
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+        }
+    }
+
+    /// Checks an object's state back in (dropped if the object was forgotten meanwhile).
+    fn done(&self, id: ObjectId, state: Option<Incremental>) {
+        {
+            let mut queue = self.lock();
+            queue.busy.remove(&id);
+            if !queue.gone.remove(&id)
+                && let Some(state) = state
+            {
+                queue.states.insert(id, state);
+            }
+        }
+        // A job for this object may have waited for it.
+        self.ready.notify_all();
+    }
+}
+
+/// The worker pool's two ends: jobs in, results out. Dropping it stops the workers (each
+/// after its current job).
+pub struct Mesher {
+    shared: Arc<Shared>,
+    results: Receiver<Meshed>,
+}
+
+impl Drop for Mesher {
+    fn drop(&mut self) {
+        self.shared.lock().closed = true;
+        self.shared.ready.notify_all();
+    }
+}
+
+impl Mesher {
+    /// Starts a worker per core, within [`MIN_MESHER_THREADS`] and [`MAX_MESHER_THREADS`].
+    /// `now` reads the clock that times each job ([`Meshed::mesh_secs`]); `wake` is called
+    /// after each result (it asks the UI for a frame).
+    pub fn start(
+        now: fn() -> Instant,
+        wake: impl Fn() + Send + Sync + 'static,
+    ) -> std::io::Result<Mesher> {
+        let n_threads = std::thread::available_parallelism()
+            .map_or(MIN_MESHER_THREADS, usize::from)
+            .clamp(MIN_MESHER_THREADS, MAX_MESHER_THREADS);
+        Mesher::with_threads(n_threads, now, wake)
+    }
+
+    /// Starts `n_threads` workers (at least one); see [`Mesher::start`].
+    pub fn with_threads(
+        n_threads: usize,
+        now: fn() -> Instant,
+        wake: impl Fn() + Send + Sync + 'static,
+    ) -> std::io::Result<Mesher> {
+        let shared = Arc::new(Shared {
+            queue: Mutex::new(Queue::default()),
+            ready: Condvar::new(),
+        });
+        let (result_tx, results) = sync_channel::<Meshed>(MAX_RESULTS_QUEUED);
+        let wake: Arc<dyn Fn() + Send + Sync> = Arc::new(wake);
+        for k in 0..n_threads.max(1) {
+            let (shared, result_tx, wake) =
+                (Arc::clone(&shared), result_tx.clone(), Arc::clone(&wake));
+            std::thread::Builder::new()
+                .name(format!("sculpt-mesher-{k}"))
+                .spawn(move || work(&shared, &result_tx, now, &*wake))?;
+        }
+        Ok(Mesher { shared, results })
+    }
+
+    /// Queues a job, replacing the object's queued one; gives it back when the queue is full
+    /// (try again later).
+    pub fn try_send(&self, job: Box<MeshJob>) -> Result<(), Box<MeshJob>> {
+        let mut queue = self.shared.lock();
+        let id = job.id;
+        if !queue.jobs.contains_key(&id) {
+            if queue.jobs.len() >= MAX_JOBS_QUEUED {
+                return Err(job);
+            }
+            queue.order.push_back(id);
+        }
+        queue.jobs.insert(id, job);
+        drop(queue);
+        self.shared.ready.notify_all();
+        Ok(())
+    }
+
+    /// Forgets an object that left the scene (its queued job and kept state).
+    pub fn forget(&self, id: ObjectId) {
+        let mut queue = self.shared.lock();
+        queue.jobs.remove(&id);
+        queue.order.retain(|o| *o != id);
+        queue.states.remove(&id);
+        if queue.busy.contains(&id) {
+            queue.gone.insert(id);
+        }
+    }
+
+    /// A finished result, if one is waiting.
+    pub fn try_recv(&self) -> Option<Meshed> {
+        self.results.try_recv().ok()
+    }
+
+    /// Waits up to `timeout` for a finished result (for benchmarks and tests).
+    pub fn recv_timeout(&self, timeout: Duration) -> Option<Meshed> {
+        self.results.recv_timeout(timeout).ok()
+    }
+}
+
+/// A worker: meshes jobs until the mesher is dropped or nobody takes results any more.
+fn work(
+    shared: &Shared,
+    results: &SyncSender<Meshed>,
+    now: fn() -> Instant,
+    wake: &(dyn Fn() + Send + Sync),
+) {
+    while let Some((job, state)) = shared.next_job() {
+        let id = job.id;
+        let start = now();
+        let (out, state) = incremental::mesh(job, state, &|| shared.superseded(id));
+        let mesh_secs = now().duration_since(start).as_secs_f64();
+        shared.done(id, state);
+        if let Some(mut out) = out {
+            out.mesh_secs = mesh_secs;
+            if results.send(out).is_err() {
+                return;
+            }
+            wake();
+        }
+    }
+}

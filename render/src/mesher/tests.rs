@@ -1,0 +1,235 @@
+//! The mesher's tests: patches against whole meshes and colourings, the choice of path,
+//! superseded jobs, and the pool's scheduling.
+
+use std::collections::BTreeSet;
+use std::time::{Duration, Instant};
+
+use fdsl::object::{
+    ColorDef, ColorMap, Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData, PaintValue,
+    Paintable, Pose, ToolShape, Transform,
+};
+use fdsl::scene::ObjectId;
+use glam::DVec3;
+
+use super::incremental::{merged, mesh, recolour};
+use super::{MIN_MESHER_THREADS, MeshJob, MeshKind, Mesher};
+use crate::appearance::CompiledAppearance;
+use crate::mesh::Mesh;
+
+/// Reads the clock for jobs' `requested_at` and the pool's timing (the tests time nothing).
+#[expect(
+    clippy::disallowed_methods,
+    reason = "a job carries an instant and the pool times its work; no test reads a duration"
+)]
+fn now() -> Instant {
+    Instant::now()
+}
+
+/// The unit ball in a domain, coloured by a colour map of its height.
+fn ball() -> Object {
+    let mut data = ObjectData {
+        geometry: Some(Geometry::implicit_in(
+            Formula::new("1-sqrt(x^2+y^2+z^2)").unwrap(),
+            Domain::new(DVec3::ZERO, DVec3::splat(2.2)),
+        )),
+        ..ObjectData::default()
+    };
+    data.appearance.diffuse = Some(ColorDef::Map {
+        formula: Formula::new("y").unwrap(),
+        map: ColorMap {
+            keys: vec![(-1.0, [0.9, 0.1, 0.1]), (1.0, [0.1, 0.9, 0.1])],
+        },
+    });
+    Object::new(data).unwrap()
+}
+
+fn job(object: &Object, generation: u64, depth: u8) -> Box<MeshJob> {
+    Box::new(MeshJob {
+        id: ObjectId(1),
+        object: object.clone(),
+        world_from_group: Transform::IDENTITY,
+        generation,
+        depth,
+        requested_at: now(),
+        t_secs: 0.0,
+    })
+}
+
+fn ball_tool(radius: f64) -> ToolShape {
+    ToolShape::Sphere { radius }
+}
+
+/// Every triangle's corners (position, normal, colour), each triangle starting at its
+/// least corner, sorted: equal for meshes with the same triangles in any order.
+fn triangles(mesh: &Mesh) -> Vec<[[i64; 10]; 3]> {
+    let q = |v: f32| (f64::from(v) * 1e5).round() as i64;
+    let corner = |i: u32| {
+        let i = i as usize;
+        let (p, n, c) = (mesh.positions[i], mesh.normals[i], mesh.colours[i]);
+        [p[0], p[1], p[2], n[0], n[1], n[2], c[0], c[1], c[2], c[3]].map(q)
+    };
+    let mut out: Vec<[[i64; 10]; 3]> = mesh
+        .indices
+        .chunks_exact(3)
+        .map(|t| {
+            let c = [corner(t[0]), corner(t[1]), corner(t[2])];
+            let first = (0..3).min_by_key(|&k| c[k]).unwrap_or(0);
+            [c[first], c[(first + 1) % 3], c[(first + 2) % 3]]
+        })
+        .collect();
+    out.sort_unstable();
+    out
+}
+
+#[test]
+fn ranges_are_sorted_and_joined() {
+    assert_eq!(
+        merged(vec![5..7, 0..2, 1..3, 7..9, 12..13]),
+        vec![0..3, 5..9, 12..13]
+    );
+    assert!(merged(Vec::new()).is_empty());
+}
+
+/// Vertices used by a triangle of `mesh` whose colour is not what colouring the whole
+/// mesh for `object` gives.
+fn wrongly_coloured(object: &Object, mesh: &Mesh) -> usize {
+    let mut appearance = CompiledAppearance::of(object);
+    let mut whole = mesh.clone();
+    let everything = std::slice::from_ref(&(0..mesh.n_vertices())).to_vec();
+    recolour(object, &mut appearance, &mut whole, &everything, Vec::new());
+    let used: BTreeSet<u32> = mesh.indices.iter().copied().collect();
+    used.iter()
+        .filter(|&&i| mesh.colours[i as usize] != whole.colours[i as usize])
+        .count()
+}
+
+#[test]
+fn carves_and_colour_paintings_patch_to_the_whole_meshs_triangles_and_colours() {
+    let never = || false;
+    let mut object = ball();
+    let (first, state) = mesh(job(&object, 1, 5), None, &never);
+    let first = first.unwrap();
+    assert_eq!(first.kind, MeshKind::Whole);
+    assert!(first.patch.as_ref().is_some_and(|(_, p)| p.full));
+    let mut state = state;
+    let edits = [
+        Edit::stamp(
+            EditOp::Subtract,
+            ball_tool(0.3),
+            Pose::at(DVec3::new(0.0, 0.0, 1.0)),
+        ),
+        Edit::stamp(
+            EditOp::Paint {
+                property: Paintable::Color,
+                value: PaintValue::Color([0.1, 0.2, 0.95]),
+            },
+            ball_tool(0.4),
+            Pose::at(DVec3::new(1.0, 0.0, 0.0)),
+        ),
+        Edit::stamp(
+            // Inside the domain: the meshed box stays the same.
+            EditOp::Union,
+            ball_tool(0.15),
+            Pose::at(DVec3::new(0.0, 0.9, 0.0)),
+        ),
+    ];
+    for (k, edit) in edits.into_iter().enumerate() {
+        object.apply(edit).unwrap();
+        let generation = 2 + k as u64;
+        let (done, next) = mesh(job(&object, generation, 5), state, &never);
+        let done = done.unwrap();
+        assert_eq!(done.kind, MeshKind::Patch, "edit {k}");
+        let (base, patch) = done.patch.unwrap();
+        assert!(!patch.full, "edit {k}");
+        let drawn = done.object.unwrap().mesh;
+        // Copying the patch's ranges into the base gives the new mesh (what the renderer
+        // uploads), and it has the whole mesh's triangles and colours.
+        let mut copied = Mesh::clone(&base);
+        copied.positions.resize(patch.n_vertices, [0.0; 3]);
+        copied.normals.resize(patch.n_vertices, [0.0; 3]);
+        copied.colours.resize(patch.n_vertices, [0.0; 4]);
+        copied.indices.resize(3 * patch.n_triangles, 0);
+        for r in &patch.vertex_ranges {
+            for i in r.clone() {
+                copied.positions[i] = drawn.positions[i];
+                copied.normals[i] = drawn.normals[i];
+                copied.colours[i] = drawn.colours[i];
+            }
+        }
+        for r in &patch.triangle_ranges {
+            copied.indices[3 * r.start..3 * r.end]
+                .copy_from_slice(&drawn.indices[3 * r.start..3 * r.end]);
+        }
+        assert!(
+            copied == *drawn,
+            "edit {k}: the patch's ranges make the mesh"
+        );
+        // Its triangles are those the mesher assembles whole (render's invariant), and
+        // every vertex a triangle uses has the colour a whole colouring gives it.
+        let own = next.as_ref().unwrap().octree.mesh().unwrap();
+        let white = |m: &Mesh| {
+            let mut m = m.clone();
+            m.colours.iter_mut().for_each(|c| *c = [1.0; 4]);
+            triangles(&m)
+        };
+        assert!(white(&drawn) == white(&own), "edit {k}");
+        assert_eq!(wrongly_coloured(&object, &drawn), 0, "edit {k}");
+        state = next;
+    }
+    // Undoing the painting recolours its box, back to the colour map.
+    let painted_before = wrongly_coloured(&object, &state.as_ref().unwrap().mesh);
+    object.undo(1);
+    let stale = wrongly_coloured(&object, &state.as_ref().unwrap().mesh);
+    assert!(
+        painted_before == 0 && stale > 20,
+        "{stale} vertices were painted"
+    );
+    let (done, _) = mesh(job(&object, 9, 5), state, &never);
+    let done = done.unwrap();
+    assert_eq!(done.kind, MeshKind::Patch);
+    assert_eq!(wrongly_coloured(&object, &done.object.unwrap().mesh), 0);
+}
+
+#[test]
+fn other_changes_mesh_whole_and_a_superseded_job_is_dropped_before_it_starts() {
+    let never = || false;
+    let mut object = ball();
+    let (_, state) = mesh(job(&object, 1, 5), None, &never);
+    // A newer job waits: this one is dropped, and the kept state is untouched.
+    object
+        .apply(Edit::stamp(
+            EditOp::Subtract,
+            ball_tool(0.3),
+            Pose::at(DVec3::Z),
+        ))
+        .unwrap();
+    let (none, state) = mesh(job(&object, 2, 5), state, &|| true);
+    assert!(none.is_none() && state.is_some());
+    // Another depth, then another appearance: whole.
+    let (done, state) = mesh(job(&object, 3, 6), state, &never);
+    assert_eq!(done.unwrap().kind, MeshKind::Whole);
+    object
+        .set(fdsl::object::Field::Diffuse(Some(ColorDef::Constant([
+            0.2, 0.4, 0.9,
+        ]))))
+        .unwrap();
+    let (done, _) = mesh(job(&object, 4, 6), state, &never);
+    assert_eq!(done.unwrap().kind, MeshKind::Whole);
+}
+
+#[test]
+fn a_long_mesh_of_one_object_does_not_hold_up_another() {
+    let mesher = Mesher::with_threads(MIN_MESHER_THREADS, now, || {}).unwrap();
+    // Object 1 at depth 8 takes seconds; object 2 at depth 4 a few milliseconds.
+    let mut long = job(&ball(), 1, 8);
+    long.id = ObjectId(1);
+    let mut short = job(&ball(), 1, 4);
+    short.id = ObjectId(2);
+    assert!(mesher.try_send(long).is_ok());
+    std::thread::sleep(Duration::from_millis(50));
+    assert!(mesher.try_send(short).is_ok());
+    let first = mesher.recv_timeout(Duration::from_secs(600)).unwrap();
+    assert_eq!(first.id, ObjectId(2), "the short job came first");
+    let second = mesher.recv_timeout(Duration::from_secs(600)).unwrap();
+    assert_eq!(second.id, ObjectId(1));
+}
