@@ -447,12 +447,13 @@ mod protocol {
     use std::hint::black_box;
     use std::time::{Duration, Instant};
 
+    use replication::identity::SessionId;
     use replication::log::OrderKey;
     use replication::op::{Op, OpFields};
     use replication::peer::{ConnId, ConnectError, MAX_CONNECTIONS, Peer};
     use replication::pending::Origin;
     use replication::shape::ShapePayload;
-    use replication::sync::message::{MAX_BATCH_OPS, Message, PROTOCOL_VERSION, SessionId};
+    use replication::sync::message::{MAX_BATCH_OPS, Message, PROTOCOL_VERSION};
     use replication::sync::state::MAX_EARLY_MESSAGES;
     use replication::{Keypair, Log, PeerId, SyncConfig, SyncState, Timestamp, VerifiedOp};
 

@@ -130,10 +130,10 @@ pub mod sync;
 pub mod time;
 
 pub use causal::VersionVector;
-pub use identity::{Keypair, PeerId};
+pub use identity::{Keypair, OpId, PeerId};
 pub use lease::{Mark, RejectReason};
 pub use log::Log;
-pub use op::{Op, OpId, VerifiedOp};
+pub use op::{Op, VerifiedOp};
 pub use payload::{Effect, ObjectId, Payload};
 pub use peer::{ConnId, Peer};
 pub use sync::state::{Event, SyncConfig, SyncState};

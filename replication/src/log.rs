@@ -8,13 +8,14 @@ use smallvec::SmallVec;
 
 use crate::causal::{Frontier, Reach, VersionVector};
 use crate::fork::Forks;
-use crate::identity::{Keypair, PeerId};
+use crate::identity::{Keypair, OpId, PeerId, SessionId};
 use crate::lease::{FoldState, Lease, Mark, RejectReason, TargetInfo};
 use crate::membership::{FounderCommitment, Membership};
-use crate::op::{BuildError, MAX_DEPS, Op, OpFields, OpId, OpSlab, UNNAMED_SESSION, VerifiedOp};
+use crate::op::{
+    BuildError, MAX_DEPS, MAX_LOG_OPS, Op, OpFields, OpSlab, UNNAMED_SESSION, VerifiedOp,
+};
 use crate::payload::{Effect, ObjectId, Payload};
 use crate::pending::{DepKey, Evicted, Origin, Pending, PendingLimits};
-use crate::sync::message::SessionId;
 use crate::time::{HybridClock, MAX_CLOCK_SKEW_MICROS, Timestamp};
 
 mod base;
@@ -30,8 +31,6 @@ pub use seen::MAX_UNSEEN_LEASE_OPS;
 /// The fold state is checkpointed every this many positions of the linear order, so a late
 /// op re-evaluates from the nearest checkpoint instead of from the start.
 pub const CHECKPOINT_INTERVAL: usize = 256;
-/// Most ops one log holds; past it, inserts fail (the store and sync stop growing it).
-pub const MAX_LOG_OPS: usize = 10_000_000;
 /// Most bytes of encoded ops one log holds (3.5 GiB): below the store's limit with room for
 /// every record's framing, so a store never fills with ops its log accepted.
 pub const MAX_LOG_BYTES: u64 = 7 * 512 * 1024 * 1024;

@@ -4,9 +4,8 @@
 use std::fmt;
 
 use crate::codec::DecodeError;
-use crate::identity::PeerId;
+use crate::identity::{OpId, PeerId};
 use crate::membership::{Admission, Membership};
-use crate::op::OpId;
 
 /// Largest encoded payload accepted in an op, in bytes (typical ops are well under 1 KiB).
 pub const MAX_PAYLOAD_BYTES: usize = 16 * 1024;

@@ -27,12 +27,11 @@
 use std::collections::{BTreeMap, VecDeque};
 
 use crate::causal::VersionVector;
-use crate::identity::{Keypair, PeerId};
+use crate::identity::{Keypair, PeerId, SessionId};
 use crate::log::{AuthorError, Insertion, Log};
 use crate::op::VerifiedOp;
 use crate::payload::Payload;
 use crate::pending::Origin;
-use crate::sync::message::SessionId;
 use crate::sync::state::{
     EphemeralError, Event, OpByteQuota, RELAY_AFTER_MICROS, RESEND_AFTER_MICROS, SyncConfig,
     SyncState,
@@ -671,7 +670,7 @@ mod tests {
         t
     }
 
-    fn observe(p: &TPeer) -> Vec<(crate::op::OpId, crate::lease::Mark, bool)> {
+    fn observe(p: &TPeer) -> Vec<(crate::identity::OpId, crate::lease::Mark, bool)> {
         p.log()
             .entries()
             .map(|e| (e.op.id(), e.mark, e.active))

@@ -105,7 +105,7 @@ pub const SYBIL_GRANT_BYTES: u64 = 4 * 1024;
 /// Chats of about 2 KiB one cap fill authors at most.
 pub const CAP_FILL_OPS: usize = 16;
 /// The session id the member signs an op for that it sends into this one.
-const OTHER_SESSION_ID: replication::sync::message::SessionId = [0xee; 16];
+const OTHER_SESSION_ID: replication::identity::SessionId = [0xee; 16];
 /// Object ids the byzantine member creates (above every honest user's).
 const BOMB_OBJECT_BASE: u64 = 64 << 32;
 /// The compile bomb: a short loop, unrolled as far as an object's formula may

@@ -9,9 +9,9 @@ use std::collections::BTreeMap;
 
 use super::{CHECKPOINT_INTERVAL, Log, OrderKey};
 use crate::causal::{Frontier, VersionVector};
-use crate::identity::PeerId;
+use crate::identity::{OpId, PeerId};
 use crate::lease::{FoldState, Mark, RejectReason, TargetInfo};
-use crate::op::{Op, OpId};
+use crate::op::Op;
 use crate::payload::{Effect, ObjectId, Payload};
 use crate::pending::{Pending, PendingLimits};
 use crate::time::Timestamp;

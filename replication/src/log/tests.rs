@@ -873,7 +873,7 @@ pub(crate) fn signed(
 
 /// [`signed`] for `session`, with seq, Lamport time and timestamp.
 pub(crate) fn signed_in(
-    session: &crate::sync::message::SessionId,
+    session: &crate::identity::SessionId,
     key: &Keypair,
     (seq, lamport, timestamp): (u64, u64, u64),
     deps: Vec<OpId>,

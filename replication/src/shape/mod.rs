@@ -34,11 +34,10 @@ use fdsl::scene::{self, Group, GroupId, Scene};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use crate::codec::DecodeError;
-use crate::identity::PeerId;
+use crate::identity::{OpId, PeerId};
 use crate::log::OrderKey;
 use crate::materialize::{FoldEntry, MAX_SCENE_SNAPSHOT_BYTES, Materialize, SceneHash};
 use crate::membership::{Admission, Membership};
-use crate::op::OpId;
 use crate::payload::{Effect, LeaseStrength, MAX_PAYLOAD_BYTES, ObjectId, Payload};
 
 /// Longest chat message, in bytes.

@@ -20,7 +20,7 @@ use std::sync::Arc;
 use fdsl::object::codec as object_codec;
 
 use super::{ShapePayload, ShapePayloadV1};
-use crate::op::OpId;
+use crate::identity::OpId;
 use crate::payload::{MAX_PAYLOAD_BYTES, Payload};
 
 /// Longest change authored in parts, in bytes of its encoding (a mesh of about 170 000

@@ -12,8 +12,8 @@
 
 use crate::causal::{MAX_VV_AUTHORS, VersionVector};
 use crate::codec::{DecodeError, MAX_VARINT_BYTES, Reader, put_bytes, put_varint};
-use crate::identity::{PEER_ID_BYTES, PeerId};
-use crate::op::{MAX_OP_BYTES, OpId};
+use crate::identity::{OpId, PEER_ID_BYTES, PeerId, SESSION_ID_BYTES, SessionId};
+use crate::op::MAX_OP_BYTES;
 
 /// Version byte that opens every sync message.
 pub const SYNC_WIRE_VERSION: u8 = 1;
@@ -40,8 +40,6 @@ pub const SYNC_WIRE_VERSION: u8 = 1;
 pub const PROTOCOL_VERSION: u64 = 10;
 /// The last protocol whose hello ends after `hello_seen` (protocol 8 added the hello's have).
 const LAST_PROTOCOL_WITHOUT_HELLO_HAVE: u64 = 7;
-/// Length of a session id.
-pub const SESSION_ID_BYTES: usize = 16;
 /// Most ops in one [`Message::Ops`] batch.
 pub const MAX_BATCH_OPS: usize = 64;
 /// Largest encoded message in bytes.
@@ -84,9 +82,6 @@ pub fn tip(id: &OpId) -> u64 {
     head.copy_from_slice(&id.0[..TIP_BYTES]);
     u64::from_le_bytes(head).max(1)
 }
-
-/// A session's id (derived from its invite by the transport).
-pub type SessionId = [u8; SESSION_ID_BYTES];
 
 /// A hello's version vector: the sender's whole one, each entry with its tip as in a
 /// [`Message::Have`].

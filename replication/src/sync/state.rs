@@ -45,14 +45,14 @@ use std::marker::PhantomData;
 
 use crate::causal::{MAX_VV_AUTHORS, VersionVector};
 use crate::codec::DecodeError;
-use crate::identity::PeerId;
+use crate::identity::{OpId, PeerId, SessionId};
 use crate::log::{InsertError, Insertion, Log};
-use crate::op::{Envelope, MAX_OP_BYTES, Op, OpId, ReceiveError};
+use crate::op::{Envelope, MAX_OP_BYTES, Op, ReceiveError};
 use crate::payload::Payload;
 use crate::pending::{EvictReason, Origin};
 use crate::sync::message::{
     HelloHave, MAX_BATCH_OPS, MAX_EPHEMERAL_BYTES, MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION,
-    SessionId, tip,
+    tip,
 };
 use crate::time::Timestamp;
 

@@ -12,13 +12,12 @@
 
 use fdsl::object::{Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
 use replication::Payload as _;
+use replication::identity::SessionId;
 use replication::op::OpFields;
 use replication::pending::MAX_PENDING_OPS;
 use replication::shape::ShapePayload;
 use replication::shape::parts::part_hash;
-use replication::sync::message::{
-    HelloHave, MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION, SessionId,
-};
+use replication::sync::message::{HelloHave, MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION};
 use replication::{ConnId, Event, Keypair, Log, Op, OpId, Peer, PeerId, Timestamp, VersionVector};
 
 const SESSION: SessionId = [7; 16];

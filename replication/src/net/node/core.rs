@@ -12,13 +12,12 @@ use super::{
     MAX_QUEUED_FRAMES_PER_CONN, MAX_REJECTIONS_PER_CONN, NodeAuthorError, NodeEvent, NodeStats,
     Observer, RefusalKind, Shared, conn,
 };
-use crate::identity::PeerId;
+use crate::identity::{OpId, PeerId};
 use crate::log::Log;
 use crate::membership::Admission;
 use crate::net::admission::{AdmissionError, Role};
 use crate::net::clock::{duration_until, wall_clock_now};
 use crate::net::prefix::AddressPrefix;
-use crate::op::OpId;
 use crate::payload::Payload;
 use crate::peer::{ConnId, ConnectError, Peer};
 use crate::store::OpStore;
