@@ -24,6 +24,7 @@ use glam::DVec3;
 use replication::materialize::Materialized;
 use replication::membership::{Admission, FounderCommitment};
 use replication::op::UNNAMED_SESSION;
+use replication::payload::LeaseAction;
 use replication::pending::Origin;
 use replication::shape::{ShapePayload, ShapeScene};
 use replication::{Keypair, Log, PeerId, Timestamp};
@@ -1032,9 +1033,9 @@ fn leases_on_every_object(n: usize) -> Workload {
 }
 
 fn hoard(object: u64) -> ShapePayload {
-    ShapePayload::Acquire {
+    ShapePayload::Lease(LeaseAction::Acquire {
         object,
         strong: true,
         ttl_micros: u64::MAX,
-    }
+    })
 }

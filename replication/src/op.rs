@@ -688,6 +688,7 @@ fn signing_message(body: &[u8], session: &SessionId) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::payload::LeaseAction;
     use crate::payload::test_payload::TestPayload;
     use proptest::prelude::*;
 
@@ -700,13 +701,13 @@ mod tests {
             (any::<u64>(), "[a-z0-9+*() ]{0,60}")
                 .prop_map(|(object, value)| TestPayload::Set { object, value }),
             (any::<u64>(), any::<bool>(), any::<u64>()).prop_map(|(object, strong, ttl_micros)| {
-                TestPayload::Acquire {
+                TestPayload::Lease(LeaseAction::Acquire {
                     object,
                     strong,
                     ttl_micros,
-                }
+                })
             }),
-            any::<u64>().prop_map(|object| TestPayload::Release { object }),
+            any::<u64>().prop_map(|object| TestPayload::Lease(LeaseAction::Release { object })),
             any::<[u8; 32]>().prop_map(|b| TestPayload::Undo(OpId(b))),
             any::<[u8; 32]>().prop_map(|b| TestPayload::Redo(OpId(b))),
         ]

@@ -609,6 +609,7 @@ fn drain<P: Payload>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::payload::LeaseAction;
     use crate::payload::test_payload::TestPayload;
     use crate::sync::message::Message;
     use crate::sync::state::{
@@ -697,11 +698,11 @@ mod tests {
             .unwrap();
             p.author(
                 now,
-                TestPayload::Acquire {
+                TestPayload::Lease(LeaseAction::Acquire {
                     object,
                     strong: false,
                     ttl_micros: 10_000_000,
-                },
+                }),
             )
             .unwrap();
         }

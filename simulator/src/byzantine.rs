@@ -61,6 +61,7 @@ use fdsl::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pos
 use replication::causal::MAX_VV_AUTHORS;
 use replication::membership::{Admission, Membership};
 use replication::op::{MAX_DEPS, OpFields};
+use replication::payload::LeaseAction;
 use replication::shape::ShapePayload;
 use replication::sync::message::{MAX_BATCH_OPS, Message};
 use replication::sync::state::{CloseReason, MAX_HELLO_BURST, OpByteQuota};
@@ -359,11 +360,11 @@ fn stamp_edit(rng: &mut SimRng, object: u64) -> ShapePayload {
 }
 
 fn hoard(object: u64) -> ShapePayload {
-    ShapePayload::Acquire {
+    ShapePayload::Lease(LeaseAction::Acquire {
         object,
         strong: true,
         ttl_micros: u64::MAX,
-    }
+    })
 }
 
 /// A version vector of `n` made-up authors with large sequence numbers.

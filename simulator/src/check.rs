@@ -674,7 +674,7 @@ fn kind(p: &ShapePayload) -> &'static str {
         ShapePayload::Edit { .. } => "tool edit",
         ShapePayload::Undo(_) | ShapePayload::Redo(_) => "undo",
         ShapePayload::Chat(_) => "chat",
-        ShapePayload::Acquire { .. } | ShapePayload::Release { .. } => "lease",
+        ShapePayload::Lease(_) => "lease",
         _ => "other",
     }
 }

@@ -21,6 +21,7 @@
 //! instant to one peer, far over the per-connection rate limit, which must hold.
 
 use replication::op::OpFields;
+use replication::payload::LeaseAction;
 use replication::shape::ShapePayload;
 use replication::sync::message::{MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION};
 use replication::sync::state::MAX_MESSAGE_BURST;
@@ -150,11 +151,11 @@ impl Hostile {
             return false;
         }
         let payload = if rng.chance(500) {
-            ShapePayload::Acquire {
+            ShapePayload::Lease(LeaseAction::Acquire {
                 object: HOT_OBJECT,
                 strong: rng.chance(500),
                 ttl_micros: 1 + rng.below(5_000_000),
-            }
+            })
         } else {
             match self.user.next(rng, HOSTILE_USER_IDX, &[HOT_OBJECT]) {
                 Some(p) => p,

@@ -37,6 +37,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use replication::lease::{MAX_LEASE_TTL_MICROS, MAX_LIVE_LEASES_PER_AUTHOR};
+use replication::payload::LeaseAction;
 use replication::shape::ShapePayload;
 use replication::{Log, Mark, OpId, Payload, PeerId, RejectReason};
 
@@ -100,16 +101,16 @@ fn kind(p: &ShapePayload) -> Kind {
         | ShapePayload::Part { object, .. }
         | ShapePayload::Assemble { object, .. } => Kind::Edit(obj(*object)),
         ShapePayload::SetGroup { group, .. } => Kind::Edit(group | GROUP_LEASE_BIT),
-        ShapePayload::Acquire {
+        ShapePayload::Lease(LeaseAction::Acquire {
             object,
             strong,
             ttl_micros,
-        } => Kind::Acquire {
+        }) => Kind::Acquire {
             object: obj(*object),
             strong: *strong,
             ttl: *ttl_micros,
         },
-        ShapePayload::Release { object } => Kind::Release(obj(*object)),
+        ShapePayload::Lease(LeaseAction::Release { object }) => Kind::Release(obj(*object)),
         ShapePayload::Undo(t) => Kind::Undo(*t),
         ShapePayload::Redo(t) => Kind::Redo(*t),
         ShapePayload::Chat(_) | ShapePayload::Member(_) | ShapePayload::Admit(_) => {
@@ -532,11 +533,11 @@ mod tests {
     }
 
     fn acquire(strong: bool) -> ShapePayload {
-        ShapePayload::Acquire {
+        ShapePayload::Lease(LeaseAction::Acquire {
             object: 1,
             strong,
             ttl_micros: 100,
-        }
+        })
     }
 
     #[test]
@@ -548,13 +549,21 @@ mod tests {
             (&b, 900, create()),
             (&a, 1000, acquire(false)),
             (&b, 1010, chat("x")),
-            (&b, 1020, ShapePayload::Release { object: 1 }),
+            (
+                &b,
+                1020,
+                ShapePayload::Lease(LeaseAction::Release { object: 1 }),
+            ),
             (&b, 1030, acquire(false)),
             (&a, 1040, acquire(true)),
             (&b, 1050, acquire(true)),
             (&a, 1060, acquire(false)),
             (&a, 2000, acquire(true)),
-            (&a, 2010, ShapePayload::Release { object: 1 }),
+            (
+                &a,
+                2010,
+                ShapePayload::Lease(LeaseAction::Release { object: 1 }),
+            ),
         ];
         for (key, at, p) in script {
             log.author(key, Timestamp(at), p).unwrap();
@@ -571,11 +580,11 @@ mod tests {
     fn a_lease_asked_for_forever_ends_after_the_longest_ttl_as_in_the_core() {
         let (a, b) = (Keypair::from_seed([1; 32]), Keypair::from_seed([2; 32]));
         let mut log = Log::<ShapePayload>::default();
-        let hoard = ShapePayload::Acquire {
+        let hoard = ShapePayload::Lease(LeaseAction::Acquire {
             object: 1,
             strong: true,
             ttl_micros: u64::MAX,
-        };
+        });
         log.author(&b, Timestamp(900), create()).unwrap();
         log.author(&a, Timestamp(1000), hoard).unwrap();
         let late = Timestamp(1000 + MAX_LEASE_TTL_MICROS + 10);
@@ -607,11 +616,11 @@ mod tests {
             .unwrap();
         founders.merge(Timestamp(1000), &log).unwrap();
         // Unseen by the founder: Mallory hoards again, and C's delete that saw it is refused.
-        let hoard = ShapePayload::Acquire {
+        let hoard = ShapePayload::Lease(LeaseAction::Acquire {
             object: 1,
             strong: true,
             ttl_micros: u64::MAX,
-        };
+        });
         log.author(&mallory, Timestamp(1200), hoard).unwrap();
         let expel = ShapePayload::Member(Box::new(Membership {
             member: mallory.peer_id(),

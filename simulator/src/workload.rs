@@ -12,6 +12,7 @@ use fdsl::object::{
     ColorDef, Edit, EditOp, Field, Formula, Geometry, ObjectData, PaintValue, Paintable, Pose,
     ToolShape,
 };
+use replication::payload::LeaseAction;
 use replication::shape::{IdSource, ShapePayload};
 use replication::{OpId, PeerId};
 
@@ -216,12 +217,12 @@ impl User {
                 n => ShapePayload::Undo(self.edits[rng.index(n)]),
             },
             73..=80 => ShapePayload::Chat(format!("hello from {peer_idx} ({roll})")),
-            81..=92 => ShapePayload::Acquire {
+            81..=92 => ShapePayload::Lease(LeaseAction::Acquire {
                 object: HOT_OBJECT,
                 strong: rng.chance(500),
                 ttl_micros: LEASE_TTL_MICROS,
-            },
-            _ => ShapePayload::Release { object: HOT_OBJECT },
+            }),
+            _ => ShapePayload::Lease(LeaseAction::Release { object: HOT_OBJECT }),
         };
         Some(payload)
     }
@@ -277,8 +278,8 @@ mod tests {
                 ShapePayload::Edit { .. } => "edit",
                 ShapePayload::Undo(_) => "undo",
                 ShapePayload::Chat(_) => "chat",
-                ShapePayload::Acquire { .. } => "acquire",
-                ShapePayload::Release { .. } => "release",
+                ShapePayload::Lease(LeaseAction::Acquire { .. }) => "acquire",
+                ShapePayload::Lease(LeaseAction::Release { .. }) => "release",
                 _ => "other",
             });
             user.authored(&p, OpId([i as u8; 32]));
