@@ -440,14 +440,8 @@ impl ShapeScene {
             } => {
                 // Only the author an id is derived from makes the object (a member cannot take
                 // an id another peer is about to use), and the first creation in the order.
-                let allowed = may_create(key.author, *object, *counter);
-                let object = scene::ObjectId(*object);
-                if allowed && self.scene.object(object).is_none() {
-                    // Valid by decode; a missing group puts the object at the top.
-                    let group = group
-                        .map(GroupId)
-                        .filter(|g| self.scene.group(*g).is_some());
-                    let _ = self.scene.create(object, Arc::clone(data), group);
+                if may_create(key.author, *object, *counter) {
+                    self.create(scene::ObjectId(*object), data, *group);
                 }
             }
             // A delete acts through the log: it hides the edits of its object that it saw
@@ -482,19 +476,7 @@ impl ShapeScene {
                     .scene
                     .set_object_group(scene::ObjectId(*object), group.map(GroupId));
             }
-            ShapePayload::Chat(text) => {
-                let line = ChatLine {
-                    lamport: key.lamport,
-                    author: key.author.0,
-                    seq: key.seq,
-                    text: text.clone(),
-                };
-                let order = |l: &ChatLine| (l.lamport, l.author, l.seq);
-                let at = self.chat.partition_point(|l| order(l) < order(&line));
-                if self.chat.get(at).is_none_or(|l| order(l) != order(&line)) {
-                    self.chat.insert(at, line);
-                }
-            }
+            ShapePayload::Chat(text) => self.chat_line(key, text),
             ShapePayload::Lease(_)
             | ShapePayload::Undo(_)
             | ShapePayload::Redo(_)
@@ -509,6 +491,34 @@ impl ShapeScene {
                     self.apply_payload(key, id, &change);
                 }
             }
+        }
+    }
+}
+
+impl ShapeScene {
+    /// Makes `object`, unless an earlier creation in the order made it.
+    fn create(&mut self, object: scene::ObjectId, data: &Arc<ObjectData>, group: Option<u64>) {
+        if self.scene.object(object).is_none() {
+            // Valid by decode; a missing group puts the object at the top.
+            let group = group
+                .map(GroupId)
+                .filter(|g| self.scene.group(*g).is_some());
+            let _ = self.scene.create(object, Arc::clone(data), group);
+        }
+    }
+
+    /// Puts a chat line at its place in the order (once).
+    fn chat_line(&mut self, key: OrderKey, text: &str) {
+        let line = ChatLine {
+            lamport: key.lamport,
+            author: key.author.0,
+            seq: key.seq,
+            text: text.to_owned(),
+        };
+        let order = |l: &ChatLine| (l.lamport, l.author, l.seq);
+        let at = self.chat.partition_point(|l| order(l) < order(&line));
+        if self.chat.get(at).is_none_or(|l| order(l) != order(&line)) {
+            self.chat.insert(at, line);
         }
     }
 }
