@@ -24,7 +24,7 @@ pub const UNNAMED_SESSION: SessionId = [0; SESSION_ID_BYTES];
 /// Most causal dependencies one op may name.
 pub const MAX_DEPS: usize = 32;
 /// Most ops one log holds; past it, inserts fail (the store and sync stop growing it). Its
-/// [`OpSlab`] names them by 4-byte positions, far below `u32::MAX`.
+/// slab names them by 4-byte positions, far below `u32::MAX`.
 pub const MAX_LOG_OPS: usize = 10_000_000;
 /// Largest possible encoded op in bytes: version, author, three varints, deps, payload,
 /// signature.
