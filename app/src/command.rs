@@ -12,6 +12,7 @@ use fdsl::object::{
 };
 use glam::DVec3;
 use replication::membership::Membership;
+use replication::payload::LeaseAction;
 use replication::shape::ShapePayload;
 
 use crate::engine::View;
@@ -348,15 +349,15 @@ pub fn plan(
             let label = session.object_label(id);
             let (payload, summary) = match kind {
                 LeaseKind::Release => (
-                    ShapePayload::Release { object: id },
+                    ShapePayload::Lease(LeaseAction::Release { object: id }),
                     format!("released {label}"),
                 ),
                 strong => (
-                    ShapePayload::Acquire {
+                    ShapePayload::Lease(LeaseAction::Acquire {
                         object: id,
                         strong: strong == LeaseKind::Strong,
                         ttl_micros: LEASE_TTL_SECS * 1_000_000,
-                    },
+                    }),
                     format!("took the lease of {label} for {LEASE_TTL_SECS} s"),
                 ),
             };
@@ -608,7 +609,7 @@ mod tests {
         let lease = plan(Command::Lease(LeaseKind::Weak), &s, Some(id)).unwrap();
         assert!(matches!(
             lease.payload,
-            ShapePayload::Acquire { strong: false, .. }
+            ShapePayload::Lease(LeaseAction::Acquire { strong: false, .. })
         ));
     }
 

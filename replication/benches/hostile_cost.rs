@@ -24,6 +24,7 @@ use glam::DVec3;
 use replication::materialize::Materialized;
 use replication::membership::{Admission, FounderCommitment};
 use replication::op::UNNAMED_SESSION;
+use replication::payload::LeaseAction;
 use replication::pending::Origin;
 use replication::shape::{ShapePayload, ShapeScene};
 use replication::{Keypair, Log, PeerId, Timestamp};
@@ -447,12 +448,13 @@ mod protocol {
     use std::hint::black_box;
     use std::time::{Duration, Instant};
 
+    use replication::identity::SessionId;
     use replication::log::OrderKey;
     use replication::op::{Op, OpFields};
     use replication::peer::{ConnId, ConnectError, MAX_CONNECTIONS, Peer};
     use replication::pending::Origin;
     use replication::shape::ShapePayload;
-    use replication::sync::message::{MAX_BATCH_OPS, Message, PROTOCOL_VERSION, SessionId};
+    use replication::sync::message::{MAX_BATCH_OPS, Message, PROTOCOL_VERSION};
     use replication::sync::state::MAX_EARLY_MESSAGES;
     use replication::{Keypair, Log, PeerId, SyncConfig, SyncState, Timestamp, VerifiedOp};
 
@@ -1031,9 +1033,9 @@ fn leases_on_every_object(n: usize) -> Workload {
 }
 
 fn hoard(object: u64) -> ShapePayload {
-    ShapePayload::Acquire {
+    ShapePayload::Lease(LeaseAction::Acquire {
         object,
         strong: true,
         ttl_micros: u64::MAX,
-    }
+    })
 }

@@ -16,6 +16,7 @@ use common::{N_HISTORY, NOW, Side, TLog, TScene, build, catch_up, history};
 use divan::Bencher;
 use divan::counter::ItemsCount;
 use replication::materialize::test_scene::TestScene;
+use replication::payload::LeaseAction;
 use replication::payload::test_payload::TestPayload;
 use replication::pending::{Origin, PendingLimits};
 use replication::snapshot::Snapshot;
@@ -143,11 +144,11 @@ fn load_store_verified_100k(bencher: Bencher) {
 /// over is re-folded.
 #[divan::bench(sample_count = 5)]
 fn late_acquire_refold_100k(bencher: Bencher) {
-    let late = Log1::late(TestPayload::Acquire {
+    let late = Log1::late(TestPayload::Lease(LeaseAction::Acquire {
         object: 3,
         strong: false,
         ttl_micros: u64::MAX / 2,
-    });
+    }));
     bencher
         .with_inputs(|| (FULL.0.clone(), FULL.1.clone()))
         .bench_values(|(mut log, mut scene)| {

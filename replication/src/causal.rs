@@ -4,8 +4,7 @@
 use std::collections::BTreeMap;
 use std::collections::BTreeSet;
 
-use crate::identity::PeerId;
-use crate::op::OpId;
+use crate::identity::{OpId, PeerId};
 
 /// Most authors one version vector on the wire may name. A longer one (a log may hold any
 /// number of authors) goes out as several messages: see [`VersionVector::split`].

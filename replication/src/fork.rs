@@ -21,8 +21,7 @@
 
 use std::collections::BTreeMap;
 
-use crate::identity::PeerId;
-use crate::op::OpId;
+use crate::identity::{OpId, PeerId};
 
 /// The lowest seq an author signed twice, with two held ops of that seq.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -1,4 +1,5 @@
-//! Peer identity: ed25519 key pairs, peer ids (public keys) and signatures.
+//! Identities: ed25519 key pairs, peer ids (public keys) and signatures; op ids (the blake3
+//! hash of an op's encoding) and session ids.
 //!
 //! Signatures are checked by the ZIP 215 rules (`ed25519-zebra`): one signature alone and the
 //! same signature in a batch get the same verdict, whatever its author crafted (a small-order
@@ -18,6 +19,13 @@ pub const PEER_ID_BYTES: usize = 32;
 pub const SIGNATURE_BYTES: usize = 64;
 /// Number of hex digits in the short display form of a peer id.
 pub const SHORT_ID_HEX_DIGITS: usize = 8;
+/// Length of an op id in bytes.
+pub const OP_ID_BYTES: usize = 32;
+/// Length of a session id.
+pub const SESSION_ID_BYTES: usize = 16;
+
+/// A session's id (derived from its invite by the transport).
+pub type SessionId = [u8; SESSION_ID_BYTES];
 
 /// A peer's identity: its ed25519 public key.
 ///
@@ -49,6 +57,45 @@ impl Ord for PeerId {
 impl PartialOrd for PeerId {
     fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
         Some(self.cmp(other))
+    }
+}
+
+/// An op's id: the blake3 hash of its canonical encoding (signature included).
+///
+/// Transparent over its bytes, so an op's dependencies are read in place from its encoding.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, bytemuck::TransparentWrapper)]
+#[repr(transparent)]
+pub struct OpId(pub [u8; OP_ID_BYTES]);
+
+/// Byte-wise order (the fast comparison of ids above).
+impl Ord for OpId {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        cmp_id_bytes(&self.0, &other.0)
+    }
+}
+
+impl PartialOrd for OpId {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl OpId {
+    /// Short hex display form.
+    pub fn short(&self) -> String {
+        hex(&self.0[..4])
+    }
+}
+
+impl fmt::Debug for OpId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "OpId({})", self.short())
+    }
+}
+
+impl fmt::Display for OpId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.short())
     }
 }
 

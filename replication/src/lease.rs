@@ -10,8 +10,8 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
 
 use crate::codec::{DecodeError, Reader, put_varint};
-use crate::identity::PeerId;
-use crate::op::OpId;
+use crate::identity::{OpId, PeerId};
+use crate::op::MAX_LOG_OPS;
 use crate::payload::{Effect, LeaseStrength, ObjectId};
 use crate::time::Timestamp;
 
@@ -192,7 +192,7 @@ impl FoldState {
     }
 
     /// Most leases or undone edits a decoded state may hold.
-    pub const MAX_DECODED_ENTRIES: usize = crate::log::MAX_LOG_OPS;
+    pub const MAX_DECODED_ENTRIES: usize = MAX_LOG_OPS;
 
     /// Appends the canonical encoding: `[n][object][holder 32][strong 0/1][expires]*`
     /// `[n][undone id 32]*` `[n][author 32][object][expires]*`, each sorted.

@@ -79,6 +79,7 @@
 //!
 //! ```
 //! use replication::{Keypair, Log, Mark, SyncConfig, SyncState, Timestamp};
+//! use replication::payload::LeaseAction;
 //! use replication::payload::test_payload::TestPayload;
 //! use replication::pending::Origin;
 //!
@@ -88,7 +89,7 @@
 //! let now = Timestamp(1_000);
 //! // A lease counts once its object's creation is in its causal past: create, then lease.
 //! let (edit, _) = a_log.author(&alice, now, TestPayload::Set { object: 7, value: "x*x-1".into() })?;
-//! a_log.author(&alice, now, TestPayload::Acquire { object: 7, strong: false, ttl_micros: 60_000_000 })?;
+//! a_log.author(&alice, now, TestPayload::Lease(LeaseAction::Acquire { object: 7, strong: false, ttl_micros: 60_000_000 }))?;
 //!
 //! // Two sans-IO endpoints; the caller moves the bytes (here: directly).
 //! let config = |me: &Keypair, origin| SyncConfig { session_id: [9; 16], local: me.peer_id(), origin: Origin(origin) };
@@ -130,10 +131,10 @@ pub mod sync;
 pub mod time;
 
 pub use causal::VersionVector;
-pub use identity::{Keypair, PeerId};
+pub use identity::{Keypair, OpId, PeerId};
 pub use lease::{Mark, RejectReason};
 pub use log::Log;
-pub use op::{Op, OpId, VerifiedOp};
+pub use op::{Op, VerifiedOp};
 pub use payload::{Effect, ObjectId, Payload};
 pub use peer::{ConnId, Peer};
 pub use sync::state::{Event, SyncConfig, SyncState};

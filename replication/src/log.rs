@@ -8,13 +8,14 @@ use smallvec::SmallVec;
 
 use crate::causal::{Frontier, Reach, VersionVector};
 use crate::fork::Forks;
-use crate::identity::{Keypair, PeerId};
+use crate::identity::{Keypair, OpId, PeerId, SessionId};
 use crate::lease::{FoldState, Lease, Mark, RejectReason, TargetInfo};
 use crate::membership::{FounderCommitment, Membership};
-use crate::op::{BuildError, MAX_DEPS, Op, OpFields, OpId, OpSlab, UNNAMED_SESSION, VerifiedOp};
+use crate::op::{
+    BuildError, MAX_DEPS, MAX_LOG_OPS, Op, OpFields, OpSlab, UNNAMED_SESSION, VerifiedOp,
+};
 use crate::payload::{Effect, ObjectId, Payload};
 use crate::pending::{DepKey, Evicted, Origin, Pending, PendingLimits};
-use crate::sync::message::SessionId;
 use crate::time::{HybridClock, MAX_CLOCK_SKEW_MICROS, Timestamp};
 
 mod base;
@@ -30,8 +31,6 @@ pub use seen::MAX_UNSEEN_LEASE_OPS;
 /// The fold state is checkpointed every this many positions of the linear order, so a late
 /// op re-evaluates from the nearest checkpoint instead of from the start.
 pub const CHECKPOINT_INTERVAL: usize = 256;
-/// Most ops one log holds; past it, inserts fail (the store and sync stop growing it).
-pub const MAX_LOG_OPS: usize = 10_000_000;
 /// Most bytes of encoded ops one log holds (3.5 GiB): below the store's limit with room for
 /// every record's framing, so a store never fills with ops its log accepted.
 pub const MAX_LOG_BYTES: u64 = 7 * 512 * 1024 * 1024;
@@ -359,6 +358,154 @@ struct DepsSeen {
     horizon: u32,
     /// True if every dep is delivered (held, or inside the base).
     all_delivered: bool,
+}
+
+/// An author's chain of held ops, as delivery reads it: the slab, the author's record (none
+/// before its first op) and how many of its ops the base holds.
+struct Chain<'a, P> {
+    ops: &'a OpSlab<P>,
+    authored: Option<&'a Authored>,
+    base_seq: u64,
+}
+
+impl<'a, P> Chain<'a, P> {
+    /// How many of the author's ops are held, the base's included.
+    fn held(&self) -> u64 {
+        self.base_seq + self.authored.map_or(0, |a| a.chain.len() as u64)
+    }
+
+    /// The op on the chain at `seq` (`None` inside the base or past the chain).
+    fn at_seq(&self, seq: u64) -> Option<&'a Op<P>> {
+        Some(self.ops.at(self.authored?.at_seq(self.base_seq, seq)?))
+    }
+
+    /// The op held at `op`'s seq, if there is one (`op` is then a fork's second side); `op`
+    /// extends the chain otherwise.
+    fn twin(&self, op: &Op<P>) -> Result<Option<OpId>, InsertError> {
+        let held = self.held();
+        if held < op.seq() {
+            assert!(
+                held + 1 == op.seq(),
+                "delivery waits for the author's previous op"
+            );
+            return Ok(None);
+        }
+        // A twin inside a base cannot be told apart from this op's past: refused.
+        match self.at_seq(op.seq()) {
+            Some(twin) => Ok(Some(twin.id())),
+            None => Err(InsertError::Equivocation {
+                author: op.author(),
+                seq: op.seq(),
+            }),
+        }
+    }
+
+    /// Checks that `op`'s Lamport time and timestamp clear what its causal past sets (its
+    /// held deps, `deps`, and its author's previous op); returns its horizon.
+    fn check_floors(
+        &self,
+        base: Option<&Base<P>>,
+        forks: &Forks,
+        op: &Op<P>,
+        deps: DepsSeen,
+    ) -> Result<u32, InsertError> {
+        // The author's previous op is part of the causal past only up to its first fork,
+        // where there is one previous op whichever side an op is on.
+        let past_fork = forks.covers(&op.author(), op.seq().saturating_sub(1));
+        let prev = (!past_fork)
+            .then(|| self.at_seq(op.seq().checked_sub(1)?))
+            .flatten();
+        let DepsSeen {
+            lamport: mut floor,
+            timestamp: mut floor_ts,
+            horizon,
+            ..
+        } = deps;
+        if let Some(p) = prev {
+            (floor, floor_ts) = (floor.max(p.lamport()), floor_ts.max(p.timestamp()));
+        } else if !past_fork && op.seq() > 1 && op.seq() - 1 == self.base_seq {
+            // The previous op is the author's last inside the base, whose Lamport time is kept.
+            floor = floor.max(base.map_or(0, |b| b.lamport_of(&op.author())));
+        }
+        if op.lamport() <= floor {
+            return Err(InsertError::BadLamport {
+                lamport: op.lamport(),
+                floor,
+            });
+        }
+        if op.lamport() - floor > MAX_LAMPORT_JUMP {
+            return Err(InsertError::LamportJump {
+                lamport: op.lamport(),
+                floor,
+            });
+        }
+        if op.timestamp() < floor_ts {
+            return Err(InsertError::BadTimestamp {
+                timestamp: op.timestamp().0,
+                floor: floor_ts.0,
+            });
+        }
+        Ok(horizon)
+    }
+}
+
+/// What holding an op charges its author: its bytes and grants, within the author's quota
+/// and budget.
+struct Charge {
+    /// The op's encoded bytes.
+    n_bytes: u64,
+    /// The author's bytes of held ops with it.
+    author_bytes: u64,
+    /// The author's grants with its own.
+    granted: u64,
+    /// What the author's ops and grants may spend in all.
+    budget: u64,
+}
+
+impl Charge {
+    /// The charge for `op` on its author's record `authored` (none before its first op, whose
+    /// budget is `first_budget` where authors are bound), refused over `quota` bytes or the
+    /// budget.
+    fn of<P: Payload>(
+        authored: Option<&Authored>,
+        quota: u64,
+        first_budget: Option<u64>,
+        op: &Op<P>,
+    ) -> Result<Charge, InsertError> {
+        let n_bytes = op.encoded().len() as u64;
+        let author_bytes = authored.map_or(0, |a| a.bytes) + n_bytes;
+        if author_bytes > quota {
+            return Err(InsertError::AuthorQuota {
+                author: op.author(),
+                limit: quota,
+            });
+        }
+        // Its ops and grants along its chain within its budget, on every peer alike.
+        let grant = Log::<P>::grant_of(op);
+        let granted = authored.map_or(0, |a| a.granted).saturating_add(grant);
+        let budget = (first_budget.or(authored.map(|a| a.budget))).unwrap_or(u64::MAX);
+        if author_bytes.saturating_add(granted) > budget {
+            return Err(InsertError::AuthorQuota {
+                author: op.author(),
+                limit: budget,
+            });
+        }
+        Ok(Charge {
+            n_bytes,
+            author_bytes,
+            granted,
+            budget,
+        })
+    }
+
+    /// Writes the charge into the author's record; `chain_at` is the op's slab position, or
+    /// none for a fork's second side, which is not on the chain.
+    fn record(&self, authored: &mut Authored, chain_at: Option<u32>) {
+        authored.chain.extend(chain_at);
+        authored.bytes = self.author_bytes;
+        authored.granted = self.granted;
+        authored.budget = self.budget;
+    }
 }
 
 /// One op in the linear order with its verdict.
@@ -897,6 +1044,19 @@ impl<P: Payload> Log<P> {
                 }
             }
         }
+        self.close_insertion(now, first_pos, charged, out);
+    }
+
+    /// Ends an insertion that delivered from `first_pos` on (`None`: nothing moved): notes the
+    /// forks and expels it brought, and records in `out` the refold from the first changed
+    /// position, charged to the refold budget if a remote op caused it (`charged`).
+    fn close_insertion(
+        &mut self,
+        now: Timestamp,
+        mut first_pos: Option<usize>,
+        charged: bool,
+        out: &mut Insertion,
+    ) {
         self.stats.n_evicted += out.evicted.len() as u64;
         if !self.forks_changed.is_empty()
             && let Some(pos) = self.note_forks()
@@ -1132,90 +1292,23 @@ impl<P: Payload> Log<P> {
         };
         // The author's record, looked up once: read to check the op, then written to hold it.
         let authored = self.authors.get_mut(&author);
-        let base_seq = self.base.as_ref().map_or(0, |b| b.seq(&author));
-        let ops = &self.ops;
-        let on_chain = |seq: u64| Some(ops.at(authored.as_deref()?.at_seq(base_seq, seq)?));
-        let held = base_seq + authored.as_deref().map_or(0, |a| a.chain.len() as u64);
-        debug_assert_eq!(held, self.vv.get(&author), "the chain is what is held");
-        let twin = if held >= op.seq() {
-            // A twin inside a base cannot be told apart from this op's past: refused.
-            match on_chain(op.seq()) {
-                Some(twin) => Some(twin.id()),
-                None => {
-                    return Err(InsertError::Equivocation {
-                        author,
-                        seq: op.seq(),
-                    });
-                }
-            }
-        } else {
-            assert!(
-                held + 1 == op.seq(),
-                "delivery waits for the author's previous op"
-            );
-            None
+        let chain = Chain {
+            ops: &self.ops,
+            authored: authored.as_deref(),
+            base_seq: self.base.as_ref().map_or(0, |b| b.seq(&author)),
         };
+        debug_assert_eq!(
+            chain.held(),
+            self.vv.get(&author),
+            "the chain is what is held"
+        );
+        let twin = chain.twin(&op)?;
         if self.ops.len() >= MAX_LOG_OPS {
             return Err(InsertError::Full);
         }
-        // The author's previous op is part of the causal past only up to its first fork,
-        // where there is one previous op whichever side an op is on.
-        let past_fork = self.forks.covers(&author, op.seq().saturating_sub(1));
-        let prev = (!past_fork)
-            .then(|| on_chain(op.seq().checked_sub(1)?))
-            .flatten();
-        let DepsSeen {
-            lamport: mut floor,
-            timestamp: mut floor_ts,
-            horizon,
-            ..
-        } = deps;
-        if let Some(p) = prev {
-            (floor, floor_ts) = (floor.max(p.lamport()), floor_ts.max(p.timestamp()));
-        } else if !past_fork && op.seq() > 1 && op.seq() - 1 == base_seq {
-            // The previous op is the author's last inside the base, whose Lamport time is kept.
-            floor = floor.max(self.base.as_ref().map_or(0, |b| b.lamport_of(&author)));
-        }
-        if op.lamport() <= floor {
-            return Err(InsertError::BadLamport {
-                lamport: op.lamport(),
-                floor,
-            });
-        }
-        if op.lamport() - floor > MAX_LAMPORT_JUMP {
-            return Err(InsertError::LamportJump {
-                lamport: op.lamport(),
-                floor,
-            });
-        }
-        if op.timestamp() < floor_ts {
-            return Err(InsertError::BadTimestamp {
-                timestamp: op.timestamp().0,
-                floor: floor_ts.0,
-            });
-        }
-        let n_bytes = op.encoded().len() as u64;
-        let author_bytes = authored.as_deref().map_or(0, |a| a.bytes) + n_bytes;
-        if author_bytes > self.author_quota {
-            return Err(InsertError::AuthorQuota {
-                author,
-                limit: self.author_quota,
-            });
-        }
-        // Its ops and grants along its chain within its budget, on every peer alike.
-        let grant = Self::grant_of(&op);
-        let granted = authored
-            .as_deref()
-            .map_or(0, |a| a.granted)
-            .saturating_add(grant);
-        let budget = (first_budget.or(authored.as_deref().map(|a| a.budget))).unwrap_or(u64::MAX);
-        if author_bytes.saturating_add(granted) > budget {
-            return Err(InsertError::AuthorQuota {
-                author,
-                limit: budget,
-            });
-        }
-        if self.n_bytes + n_bytes > MAX_LOG_BYTES {
+        let horizon = chain.check_floors(self.base.as_deref(), &self.forks, &op, deps)?;
+        let charge = Charge::of(authored.as_deref(), self.author_quota, first_budget, &op)?;
+        if self.n_bytes + charge.n_bytes > MAX_LOG_BYTES {
             return Err(InsertError::Full);
         }
         // Where the slab will hold it: every path from here holds it.
@@ -1223,22 +1316,28 @@ impl<P: Payload> Log<P> {
         // A sibling of a fork is not on its author's chain.
         let chain_at = twin.is_none().then_some(at);
         match authored {
-            Some(a) => {
-                a.chain.extend(chain_at);
-                a.bytes = author_bytes;
-                a.granted = granted;
-            }
-            None => {
-                // A new author: its chain grows from empty, as every chain does.
-                let authored = self.authors.entry(author).or_default();
-                authored.chain.extend(chain_at);
-                authored.bytes = author_bytes;
-                authored.granted = granted;
-                authored.budget = budget;
-            }
+            Some(a) => charge.record(a, chain_at),
+            // A new author: its chain grows from empty, as every chain does.
+            None => charge.record(self.authors.entry(author).or_default(), chain_at),
         }
-        let key = OrderKey::of(&op);
-        let id = op.id();
+        Ok(self.hold(op, now, at, twin, horizon, charge.n_bytes))
+    }
+
+    /// Holds `op`, checked, at slab position `at`: places it in the order and the indexes
+    /// (a fork's second side, whose first is `twin`, only in the fork's); returns its
+    /// position in the order. Inlined, so that the op moves from its caller into its slot
+    /// once, not through this call's argument as well.
+    #[inline]
+    fn hold(
+        &mut self,
+        op: Op<P>,
+        now: Timestamp,
+        at: u32,
+        twin: Option<OpId>,
+        horizon: u32,
+        n_bytes: u64,
+    ) -> usize {
+        let (author, key, id) = (op.author(), OrderKey::of(&op), op.id());
         // Most ops arrive in order: append without searching. Siblings share a key: the id
         // breaks the tie.
         let pos = point_near_end(&self.order, |&at| {
@@ -1249,45 +1348,10 @@ impl<P: Payload> Log<P> {
         // A placeholder: the refold that follows judges it.
         self.marks.push();
         if let Some(twin) = twin {
-            // Rejected whatever it does, so no object, lease or delete index names it.
-            self.siblings.entry(author).or_default().push(id);
-            if self.forks.record(author, op.seq(), twin, id) {
-                self.forks_changed.insert(author);
-            }
-            self.frontier.deliver(id, op.deps());
-            self.horizons.push(self.horizon_of(at, horizon));
-            self.max_lamport = self.max_lamport.max(op.lamport());
-            let held = self.ops.insert(id, op);
-            debug_assert_eq!(held, at, "held where the order says");
-            self.n_bytes += n_bytes;
-            return Ok(pos);
+            self.hold_sibling(op, at, twin, horizon, n_bytes);
+            return pos;
         }
-        match op.payload().effect() {
-            Effect::Edit { object } => {
-                let ops = &self.ops;
-                let before = |&a: &u32| cmp_key(ops.at(a), &key).is_lt();
-                insert_in_list(&mut self.by_object, object, at, before);
-                if op.payload().creates(&author) {
-                    insert_in_list(&mut self.creates, object, at, before);
-                }
-                if op.payload().is_delete() {
-                    let deletes = self.deletes.entry(object).or_default();
-                    let at = deletes.partition_point(|(k, _)| *k < key);
-                    deletes.insert(at, (key, op.id()));
-                }
-            }
-            Effect::Acquire { object, .. } | Effect::Release { object } => {
-                // Placeholders: the refold that follows fills them in.
-                let placeholder = seen::LeaseOp {
-                    key,
-                    at,
-                    before: None,
-                    unseen: None,
-                };
-                insert_in_list(&mut self.lease_ops, object, placeholder, |l| l.key < key);
-            }
-            _ => {}
-        }
+        self.index_effect(&op, at, key);
         let delete_of = match op.payload().effect() {
             Effect::Edit { object } if op.payload().is_delete() => Some(object),
             _ => None,
@@ -1310,7 +1374,57 @@ impl<P: Payload> Log<P> {
         if let Some(membership) = membership {
             self.note_membership(author, id, membership);
         }
-        Ok(pos)
+        pos
+    }
+
+    /// Holds `op`, the second side of a fork whose first is `twin`, at slab position `at`
+    /// (placed in the order already): rejected whatever it does, so no object, lease or delete
+    /// index names it, only the fork's.
+    #[inline]
+    fn hold_sibling(&mut self, op: Op<P>, at: u32, twin: OpId, horizon: u32, n_bytes: u64) {
+        let (author, id) = (op.author(), op.id());
+        self.siblings.entry(author).or_default().push(id);
+        if self.forks.record(author, op.seq(), twin, id) {
+            self.forks_changed.insert(author);
+        }
+        self.frontier.deliver(id, op.deps());
+        self.horizons.push(self.horizon_of(at, horizon));
+        self.max_lamport = self.max_lamport.max(op.lamport());
+        let held = self.ops.insert(id, op);
+        debug_assert_eq!(held, at, "held where the order says");
+        self.n_bytes += n_bytes;
+    }
+
+    /// Names `op`, at slab position `at` and sorting by `key`, in the index of what its
+    /// effect touches: its object's edits (and creations and deletes), or its object's lease
+    /// ops.
+    fn index_effect(&mut self, op: &Op<P>, at: u32, key: OrderKey) {
+        match op.payload().effect() {
+            Effect::Edit { object } => {
+                let ops = &self.ops;
+                let before = |&a: &u32| cmp_key(ops.at(a), &key).is_lt();
+                insert_in_list(&mut self.by_object, object, at, before);
+                if op.payload().creates(&op.author()) {
+                    insert_in_list(&mut self.creates, object, at, before);
+                }
+                if op.payload().is_delete() {
+                    let deletes = self.deletes.entry(object).or_default();
+                    let at = deletes.partition_point(|(k, _)| *k < key);
+                    deletes.insert(at, (key, op.id()));
+                }
+            }
+            Effect::Acquire { object, .. } | Effect::Release { object } => {
+                // Placeholders: the refold that follows fills them in.
+                let placeholder = seen::LeaseOp {
+                    key,
+                    at,
+                    before: None,
+                    unseen: None,
+                };
+                insert_in_list(&mut self.lease_ops, object, placeholder, |l| l.key < key);
+            }
+            _ => {}
+        }
     }
 
     /// The horizon of the op about to be held at `at`, just delivered to the frontier, whose

@@ -12,10 +12,10 @@ use std::collections::btree_map::Entry;
 use std::marker::PhantomData;
 
 use crate::codec::DecodeError;
-use crate::identity::PeerId;
+use crate::identity::{OpId, PeerId};
 use crate::lease::{FoldState, Mark};
 use crate::log::{Drained, Insertion, Log, OrderKey, Refold};
-use crate::op::{Op, OpId};
+use crate::op::Op;
 use crate::payload::{Effect, ObjectId, Payload};
 
 /// Largest scene snapshot a [`Materialize::decode_snapshot`] is given, in bytes.

@@ -5,10 +5,10 @@ use std::fmt;
 
 use crate::codec::{DecodeError, Reader, put_varint};
 use crate::identity::{
-    Keypair, PEER_ID_BYTES, PeerId, SIGNATURE_BYTES, Signature, VerifyError, hex,
+    Keypair, OP_ID_BYTES, OpId, PEER_ID_BYTES, PeerId, SESSION_ID_BYTES, SIGNATURE_BYTES,
+    SessionId, Signature, VerifyError,
 };
 use crate::payload::{MAX_PAYLOAD_BYTES, Payload};
-use crate::sync::message::{SESSION_ID_BYTES, SessionId};
 use crate::time::Timestamp;
 
 /// Version byte that opens every op signed now: 2, whose signature covers the session's id
@@ -23,8 +23,9 @@ pub const OP_FORMAT_VERSION_1: u8 = 1;
 pub const UNNAMED_SESSION: SessionId = [0; SESSION_ID_BYTES];
 /// Most causal dependencies one op may name.
 pub const MAX_DEPS: usize = 32;
-/// Length of an op id in bytes.
-pub const OP_ID_BYTES: usize = 32;
+/// Most ops one log holds; past it, inserts fail (the store and sync stop growing it). Its
+/// slab names them by 4-byte positions, far below `u32::MAX`.
+pub const MAX_LOG_OPS: usize = 10_000_000;
 /// Largest possible encoded op in bytes: version, author, three varints, deps, payload,
 /// signature.
 pub const MAX_OP_BYTES: usize = 1
@@ -40,45 +41,6 @@ pub const MAX_OP_BYTES: usize = 1
 const SIGNING_CONTEXT: &[u8] = b"sculpt/op/v2";
 /// What ops of [`OP_FORMAT_VERSION_1`] signed: the context and the op, no session.
 const SIGNING_CONTEXT_V1: &[u8] = b"sculpt/op/v1";
-
-/// An op's id: the blake3 hash of its canonical encoding (signature included).
-///
-/// Transparent over its bytes, so an op's dependencies are read in place from its encoding.
-#[derive(Clone, Copy, PartialEq, Eq, Hash, bytemuck::TransparentWrapper)]
-#[repr(transparent)]
-pub struct OpId(pub [u8; OP_ID_BYTES]);
-
-/// Byte-wise order (see [`crate::identity`]'s fast comparison).
-impl Ord for OpId {
-    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        crate::identity::cmp_id_bytes(&self.0, &other.0)
-    }
-}
-
-impl PartialOrd for OpId {
-    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
-        Some(self.cmp(other))
-    }
-}
-
-impl OpId {
-    /// Short hex display form.
-    pub fn short(&self) -> String {
-        hex(&self.0[..4])
-    }
-}
-
-impl fmt::Debug for OpId {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "OpId({})", self.short())
-    }
-}
-
-impl fmt::Display for OpId {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.short())
-    }
-}
 
 /// Ops per chunk of an [`OpSlab`]. A chunk is allocated whole, so at most this many slots
 /// less one stand empty (about 7 KiB of `TestPayload` ops).
@@ -164,7 +126,7 @@ impl<P> OpSlab<P> {
     }
 
     /// Holds `op` (not held yet) under its id and returns its position: the number of ops
-    /// held before it. A log holds at most [`crate::log::MAX_LOG_OPS`] ops, far below
+    /// held before it. A log holds at most [`MAX_LOG_OPS`] ops, far below
     /// `u32::MAX`. Inlined, so that the op moves from its caller into its slot once, not
     /// through this call's argument as well.
     #[inline]
@@ -726,6 +688,7 @@ fn signing_message(body: &[u8], session: &SessionId) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::payload::LeaseAction;
     use crate::payload::test_payload::TestPayload;
     use proptest::prelude::*;
 
@@ -738,13 +701,13 @@ mod tests {
             (any::<u64>(), "[a-z0-9+*() ]{0,60}")
                 .prop_map(|(object, value)| TestPayload::Set { object, value }),
             (any::<u64>(), any::<bool>(), any::<u64>()).prop_map(|(object, strong, ttl_micros)| {
-                TestPayload::Acquire {
+                TestPayload::Lease(LeaseAction::Acquire {
                     object,
                     strong,
                     ttl_micros,
-                }
+                })
             }),
-            any::<u64>().prop_map(|object| TestPayload::Release { object }),
+            any::<u64>().prop_map(|object| TestPayload::Lease(LeaseAction::Release { object })),
             any::<[u8; 32]>().prop_map(|b| TestPayload::Undo(OpId(b))),
             any::<[u8; 32]>().prop_map(|b| TestPayload::Redo(OpId(b))),
         ]

@@ -4,9 +4,8 @@
 use std::fmt;
 
 use crate::codec::DecodeError;
-use crate::identity::PeerId;
+use crate::identity::{OpId, PeerId};
 use crate::membership::{Admission, Membership};
-use crate::op::OpId;
 
 /// Largest encoded payload accepted in an op, in bytes (typical ops are well under 1 KiB).
 pub const MAX_PAYLOAD_BYTES: usize = 16 * 1024;
@@ -23,6 +22,52 @@ pub enum LeaseStrength {
     Weak,
     /// Only granted when the object is free, expired or already the acquirer's.
     Strong,
+}
+
+/// The lease vocabulary every payload shares: a lease taken on an object or given back. A
+/// payload holds one as a variant of its own (`Lease`) and encodes it in its own format; the
+/// core reads it through [`LeaseAction::effect`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LeaseAction {
+    /// Takes the object's lease.
+    Acquire {
+        /// The object, in the payload's own ids.
+        object: u64,
+        /// Strong (only when free, expired or own) or weak (takes over).
+        strong: bool,
+        /// Time to live in microseconds from the op's timestamp.
+        ttl_micros: u64,
+    },
+    /// Gives the author's lease on the object back.
+    Release {
+        /// The object, in the payload's own ids.
+        object: u64,
+    },
+}
+
+impl LeaseAction {
+    /// What it means to the core; `lease_object` maps the payload's object id to the object
+    /// whose lease it is.
+    pub fn effect(self, lease_object: impl FnOnce(u64) -> ObjectId) -> Effect {
+        match self {
+            LeaseAction::Acquire {
+                object,
+                strong,
+                ttl_micros,
+            } => Effect::Acquire {
+                object: lease_object(object),
+                strength: if strong {
+                    LeaseStrength::Strong
+                } else {
+                    LeaseStrength::Weak
+                },
+                ttl_micros,
+            },
+            LeaseAction::Release { object } => Effect::Release {
+                object: lease_object(object),
+            },
+        }
+    }
 }
 
 /// What an op means to the core: which object it touches and which lease or undo rule
@@ -156,20 +201,8 @@ pub mod test_payload {
             /// The new value.
             value: String,
         },
-        /// Acquires a lease.
-        Acquire {
-            /// The object.
-            object: u64,
-            /// Strong (true) or weak (false).
-            strong: bool,
-            /// Time to live in microseconds.
-            ttl_micros: u64,
-        },
-        /// Releases a lease.
-        Release {
-            /// The object.
-            object: u64,
-        },
+        /// Acquires or releases a lease.
+        Lease(LeaseAction),
         /// Undoes an earlier edit.
         Undo(OpId),
         /// Redoes an undone edit.
@@ -197,17 +230,17 @@ pub mod test_payload {
                     put_varint(out, *object);
                     put_bytes(out, value.as_bytes());
                 }
-                Self::Acquire {
+                Self::Lease(LeaseAction::Acquire {
                     object,
                     strong,
                     ttl_micros,
-                } => {
+                }) => {
                     out.push(2);
                     put_varint(out, *object);
                     out.push(u8::from(*strong));
                     put_varint(out, *ttl_micros);
                 }
-                Self::Release { object } => {
+                Self::Lease(LeaseAction::Release { object }) => {
                     out.push(3);
                     put_varint(out, *object);
                 }
@@ -253,15 +286,15 @@ pub mod test_payload {
                 2 => {
                     let object = r.varint()?;
                     let strong = r.flag()?;
-                    Self::Acquire {
+                    Self::Lease(LeaseAction::Acquire {
                         object,
                         strong,
                         ttl_micros: r.varint()?,
-                    }
+                    })
                 }
-                3 => Self::Release {
+                3 => Self::Lease(LeaseAction::Release {
                     object: r.varint()?,
-                },
+                }),
                 4 => Self::Undo(OpId(r.array()?)),
                 5 => Self::Redo(OpId(r.array()?)),
                 6 => Self::Delete {
@@ -299,22 +332,7 @@ pub mod test_payload {
                 Self::Set { object, .. } | Self::Delete { object } => Effect::Edit {
                     object: ObjectId(*object),
                 },
-                Self::Acquire {
-                    object,
-                    strong,
-                    ttl_micros,
-                } => Effect::Acquire {
-                    object: ObjectId(*object),
-                    strength: if *strong {
-                        LeaseStrength::Strong
-                    } else {
-                        LeaseStrength::Weak
-                    },
-                    ttl_micros: *ttl_micros,
-                },
-                Self::Release { object } => Effect::Release {
-                    object: ObjectId(*object),
-                },
+                Self::Lease(lease) => lease.effect(ObjectId),
                 Self::Undo(target) => Effect::Undo { target: *target },
                 Self::Redo(target) => Effect::Redo { target: *target },
             }

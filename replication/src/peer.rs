@@ -27,12 +27,11 @@
 use std::collections::{BTreeMap, VecDeque};
 
 use crate::causal::VersionVector;
-use crate::identity::{Keypair, PeerId};
+use crate::identity::{Keypair, PeerId, SessionId};
 use crate::log::{AuthorError, Insertion, Log};
 use crate::op::VerifiedOp;
 use crate::payload::Payload;
 use crate::pending::Origin;
-use crate::sync::message::SessionId;
 use crate::sync::state::{
     EphemeralError, Event, OpByteQuota, RELAY_AFTER_MICROS, RESEND_AFTER_MICROS, SyncConfig,
     SyncState,
@@ -143,6 +142,157 @@ impl Asked {
         sync.is_some_and(|s| {
             s.stats().n_messages_in > self.n_messages && s.stats().n_ops_in == self.n_ops
         })
+    }
+}
+
+/// One pass of [`Peer::update_wants`] over the authors this peer lacks: the asks it makes
+/// per connection, the claims it withdraws, and when it must look again.
+struct WantPass<'a, P: Payload> {
+    now: Timestamp,
+    connections: &'a BTreeMap<ConnId, SyncState<P>>,
+    /// The median resend timeout the connections measured, if any did.
+    typical: Option<u64>,
+    /// The connection to each remote, by the remote's id.
+    direct: Vec<(PeerId, ConnId)>,
+    asks: BTreeMap<ConnId, VersionVector>,
+    withdraw: Vec<(ConnId, PeerId)>,
+    check_at: Timestamp,
+}
+
+impl<P: Payload> WantPass<'_, P> {
+    /// How long an ask of `conn` is waited for (less for the author's own connection).
+    fn retry_of(&self, conn: &ConnId, from_author: bool) -> u64 {
+        let timeout = (self.connections.get(conn))
+            .and_then(SyncState::resend_timeout)
+            .or(self.typical);
+        match timeout {
+            Some(t) if from_author => t.min(RELAY_AFTER_MICROS),
+            None if from_author => RELAY_AFTER_MICROS,
+            Some(t) => t.min(WANT_RETRY_MICROS),
+            None => WANT_RETRY_MICROS,
+        }
+    }
+
+    /// Whether `conn` shows more of `author`'s ops than the `have` this peer holds.
+    fn holds_more(&self, conn: &ConnId, author: &PeerId, have: u64) -> bool {
+        (self.connections.get(conn)).is_some_and(|s| s.remote_version_vector().get(author) > have)
+    }
+
+    /// Asks for `author`'s ops past `have` (its `want`), unless an ask still runs.
+    fn want(&mut self, author: PeerId, have: u64, want: &mut WantState) {
+        // The author's own connection, if it shows more of the author than this peer holds.
+        let author_conn = (self.direct.iter())
+            .find(|(remote, _)| *remote == author)
+            .map(|(_, conn)| *conn)
+            .filter(|conn| self.holds_more(conn, &author, have));
+        let Some(timed_out) = self.last_ask(author, have, author_conn, want) else {
+            return;
+        };
+        // The author is asked first (and again after each third peer): it sends on the
+        // connection that carries its own pushes, so nothing goes twice, and the want tells
+        // it where to start.
+        let last = want.asked.map(|a| a.conn);
+        let to_author = author_conn.filter(|c| Some(*c) != last);
+        let holders = if to_author.is_none() || timed_out {
+            self.holders(author, have, author_conn)
+        } else {
+            Vec::new()
+        };
+        let next = want.n_asked % holders.len().max(1);
+        let conn = match to_author {
+            Some(conn) => conn,
+            None => {
+                let Some(&conn) = holders.get(next) else {
+                    want.asked = None;
+                    return;
+                };
+                conn
+            }
+        };
+        // An ask that brought nothing in its time is made again of two holders at once:
+        // on a lossy link the want or its answer is lost often enough that waiting out a
+        // second timeout, then a third, is the tail of convergence. A hedge costs the
+        // author's ops sent twice, only where an ask already failed.
+        let hedge = if timed_out {
+            (1..=holders.len())
+                .map(|k| holders[(next + k) % holders.len()])
+                .find(|c| *c != conn)
+        } else {
+            None
+        };
+        for conn in std::iter::once(conn).chain(hedge) {
+            let seq = self.connections[&conn].remote_version_vector().get(&author);
+            self.asks.entry(conn).or_default().raise(author, seq);
+        }
+        want.asked = Some(Asked::new(
+            self.now,
+            conn,
+            have,
+            self.connections.get(&conn),
+        ));
+        want.n_asked += 1 + usize::from(hedge.is_some());
+        let retry = self.retry_of(&conn, Some(conn) == author_conn);
+        self.check_at = self.check_at.min(self.now.saturating_add_micros(retry));
+    }
+
+    /// Where the last ask for `author`'s ops past `have` (its `want`) stands: `None` while it
+    /// is waited for (its holder is delivering, or its time is not up), else whether it timed
+    /// out (false when there was none, or its holder shows nothing more). A timed-out ask of
+    /// another holder than the author's own connection (`author_conn`) that answered without
+    /// ops has its claim withdrawn.
+    fn last_ask(
+        &mut self,
+        author: PeerId,
+        have: u64,
+        author_conn: Option<ConnId>,
+        want: &mut WantState,
+    ) -> Option<bool> {
+        let Some(asked) = want.asked else {
+            return Some(false);
+        };
+        if !self.holds_more(&asked.conn, &author, have) {
+            return Some(false);
+        }
+        let sync = self.connections.get(&asked.conn);
+        let from_author = Some(asked.conn) == author_conn;
+        let retry = self.retry_of(&asked.conn, from_author);
+        if have > asked.had && asked.delivered(sync) {
+            // The holder is delivering: give it more time.
+            want.asked = Some(Asked::new(self.now, asked.conn, have, sync));
+            self.check_at = self.check_at.min(self.now.saturating_add_micros(retry));
+            return None;
+        }
+        let due = asked.at.saturating_add_micros(retry);
+        if self.now < due {
+            self.check_at = self.check_at.min(due);
+            return None;
+        }
+        if !from_author && asked.unanswered(sync) {
+            // The claim is withdrawn, and the next holder, if any, is asked.
+            self.withdraw.push((asked.conn, author));
+        }
+        Some(true)
+    }
+
+    /// The connections to ask for `author`'s ops past `have`, in turn: a holder that gave
+    /// all it shows is not waited for, and those that delivered the most so far come first,
+    /// so a remote that only claims to hold ops (a replayed have) and sends none is tried
+    /// last. The one whose claim was just withdrawn is left out, and the author's own
+    /// connection (`author_conn`) too when there are others.
+    fn holders(&self, author: PeerId, have: u64, author_conn: Option<ConnId>) -> Vec<ConnId> {
+        let mut by_delivered: Vec<(u64, ConnId)> = (self.connections.iter())
+            .filter(|(c, _)| self.holds_more(c, &author, have))
+            .map(|(c, s)| (s.stats().n_ops_delivered, *c))
+            .collect();
+        by_delivered.sort_by_key(|&(n, conn)| (std::cmp::Reverse(n), conn));
+        let mut holders: Vec<ConnId> = by_delivered.into_iter().map(|(_, conn)| conn).collect();
+        if let Some(&(failed, _)) = self.withdraw.last().filter(|(_, a)| *a == author) {
+            holders.retain(|conn| *conn != failed);
+        }
+        if holders.len() > 1 {
+            holders.retain(|conn| Some(*conn) != author_conn);
+        }
+        holders
     }
 }
 
@@ -420,8 +570,6 @@ impl<P: Payload> Peer<P> {
     fn update_wants(&mut self, now: Timestamp) {
         self.wants_dirty = false;
         self.wants_checked_at = Some(now);
-        // The soonest moment an open ask times out, and at the latest a period from now.
-        let mut check_at = now.saturating_add_micros(WANT_CHECK_MICROS);
         let held = self.log.version_vector();
         // The most any remote holds of each author this peer lacks.
         let mut lacking = VersionVector::new();
@@ -446,112 +594,29 @@ impl<P: Payload> Peer<P> {
                 sync.assume_resend_timeout(micros);
             }
         }
-        let timeout = |conn: &ConnId| {
-            (self.connections.get(conn))
-                .and_then(SyncState::resend_timeout)
-                .or(typical)
+        let mut pass = WantPass {
+            now,
+            connections: &self.connections,
+            typical,
+            direct,
+            asks: BTreeMap::new(),
+            withdraw: Vec::new(),
+            // The soonest moment an open ask times out, and at the latest a period from now.
+            check_at: now.saturating_add_micros(WANT_CHECK_MICROS),
         };
-        // How long an ask of `conn` is waited for (less for the author's own connection).
-        let retry_of = |conn: &ConnId, from_author: bool| match timeout(conn) {
-            Some(t) if from_author => t.min(RELAY_AFTER_MICROS),
-            None if from_author => RELAY_AFTER_MICROS,
-            Some(t) => t.min(WANT_RETRY_MICROS),
-            None => WANT_RETRY_MICROS,
-        };
-        let mut asks: BTreeMap<ConnId, VersionVector> = BTreeMap::new();
-        let mut withdraw: Vec<(ConnId, PeerId)> = Vec::new();
         for (author, _) in lacking.iter() {
-            let have = held.get(author);
             let want = self.wants.entry(*author).or_insert(WantState {
                 asked: None,
                 n_asked: 0,
             });
-            let holds_more = |conn: &ConnId| {
-                (self.connections.get(conn))
-                    .is_some_and(|s| s.remote_version_vector().get(author) > have)
-            };
-            // The author's own connection, if it shows more of the author than this peer holds.
-            let author_conn = (direct.iter())
-                .find(|(remote, _)| remote == author)
-                .map(|(_, conn)| *conn)
-                .filter(holds_more);
-            let mut timed_out = false;
-            if let Some(asked) = want.asked
-                && holds_more(&asked.conn)
-            {
-                let sync = self.connections.get(&asked.conn);
-                let from_author = Some(asked.conn) == author_conn;
-                let retry = retry_of(&asked.conn, from_author);
-                if have > asked.had && asked.delivered(sync) {
-                    // The holder is delivering: give it more time.
-                    want.asked = Some(Asked::new(now, asked.conn, have, sync));
-                    check_at = check_at.min(now.saturating_add_micros(retry));
-                    continue;
-                }
-                let due = asked.at.saturating_add_micros(retry);
-                if now < due {
-                    check_at = check_at.min(due);
-                    continue;
-                }
-                timed_out = true;
-                if !from_author && asked.unanswered(sync) {
-                    // The claim is withdrawn, and the next holder, if any, is asked below.
-                    withdraw.push((asked.conn, *author));
-                }
-            }
-            // A holder that gave all it shows is not waited for. The author is asked first
-            // (and again after each third peer): it sends on the connection that carries its
-            // own pushes, so nothing goes twice, and the want tells it where to start. Then
-            // holders that delivered the most so far: a remote that only claims to hold ops (a
-            // replayed have) and sends none is tried last.
-            let last = want.asked.map(|a| a.conn);
-            let to_author = author_conn.filter(|c| Some(*c) != last);
-            let mut holders: Vec<ConnId> = Vec::new();
-            if to_author.is_none() || timed_out {
-                let mut by_delivered: Vec<(u64, ConnId)> = (self.connections.iter())
-                    .filter(|(c, _)| holds_more(c))
-                    .map(|(c, s)| (s.stats().n_ops_delivered, *c))
-                    .collect();
-                by_delivered.sort_by_key(|&(n, conn)| (std::cmp::Reverse(n), conn));
-                holders.extend(by_delivered.into_iter().map(|(_, conn)| conn));
-                if let Some(&(failed, _)) = withdraw.last().filter(|(_, a)| a == author) {
-                    holders.retain(|conn| *conn != failed);
-                }
-                if holders.len() > 1 {
-                    holders.retain(|conn| Some(*conn) != author_conn);
-                }
-            }
-            let next = want.n_asked % holders.len().max(1);
-            let conn = match to_author {
-                Some(conn) => conn,
-                None => {
-                    let Some(&conn) = holders.get(next) else {
-                        want.asked = None;
-                        continue;
-                    };
-                    conn
-                }
-            };
-            // An ask that brought nothing in its time is made again of two holders at once:
-            // on a lossy link the want or its answer is lost often enough that waiting out a
-            // second timeout, then a third, is the tail of convergence. A hedge costs the
-            // author's ops sent twice, only where an ask already failed.
-            let hedge = if timed_out {
-                (1..=holders.len())
-                    .map(|k| holders[(next + k) % holders.len()])
-                    .find(|c| *c != conn)
-            } else {
-                None
-            };
-            for conn in std::iter::once(conn).chain(hedge) {
-                let seq = self.connections[&conn].remote_version_vector().get(author);
-                asks.entry(conn).or_default().raise(*author, seq);
-            }
-            want.asked = Some(Asked::new(now, conn, have, self.connections.get(&conn)));
-            want.n_asked += 1 + usize::from(hedge.is_some());
-            let retry = retry_of(&conn, Some(conn) == author_conn);
-            check_at = check_at.min(now.saturating_add_micros(retry));
+            pass.want(*author, held.get(author), want);
         }
+        let WantPass {
+            asks,
+            withdraw,
+            check_at,
+            ..
+        } = pass;
         self.want_check_at = check_at;
         for (conn, author) in withdraw {
             if let Some(sync) = self.connections.get_mut(&conn) {
@@ -610,6 +675,7 @@ fn drain<P: Payload>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::payload::LeaseAction;
     use crate::payload::test_payload::TestPayload;
     use crate::sync::message::Message;
     use crate::sync::state::{
@@ -671,7 +737,7 @@ mod tests {
         t
     }
 
-    fn observe(p: &TPeer) -> Vec<(crate::op::OpId, crate::lease::Mark, bool)> {
+    fn observe(p: &TPeer) -> Vec<(crate::identity::OpId, crate::lease::Mark, bool)> {
         p.log()
             .entries()
             .map(|e| (e.op.id(), e.mark, e.active))
@@ -698,11 +764,11 @@ mod tests {
             .unwrap();
             p.author(
                 now,
-                TestPayload::Acquire {
+                TestPayload::Lease(LeaseAction::Acquire {
                     object,
                     strong: false,
                     ttl_micros: 10_000_000,
-                },
+                }),
             )
             .unwrap();
         }

@@ -6,8 +6,8 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use crate::identity::PeerId;
-use crate::op::{Op, OpId};
+use crate::identity::{OpId, PeerId};
+use crate::op::Op;
 use crate::time::Timestamp;
 
 /// Most ops waiting for dependencies at once.

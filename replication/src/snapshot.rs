@@ -28,12 +28,12 @@
 
 use crate::causal::VersionVector;
 use crate::codec::{DecodeError, Reader, put_bytes, put_varint};
-use crate::identity::PeerId;
+use crate::identity::{OpId, PeerId};
 use crate::lease::FoldState;
-use crate::log::{Base, CutError, Log, MAX_LOG_OPS, OrderKey};
+use crate::log::{Base, CutError, Log, OrderKey};
 use crate::log::{BaseAuthor, BaseKind, BaseOp};
 use crate::materialize::{MAX_SCENE_SNAPSHOT_BYTES, Materialize, Materialized};
-use crate::op::{MAX_OP_BYTES, Op, OpId};
+use crate::op::{MAX_LOG_OPS, MAX_OP_BYTES, Op};
 use crate::payload::{Effect, ObjectId, Payload};
 use crate::pending::PendingLimits;
 use crate::time::Timestamp;

@@ -35,6 +35,7 @@ use replication::net::discovery::registry::RegistryStats;
 use replication::net::discovery::{DiscoveredPeer, DiscoveryServer, RendezvousEvent};
 use replication::net::node::NodeStats;
 use replication::net::{Node, NodeConfig};
+use replication::payload::LeaseAction;
 use replication::shape::ShapePayload;
 use replication::{Keypair, Log, OpId, PeerId};
 
@@ -262,11 +263,11 @@ fn workload(seed: u8) -> Vec<ShapePayload> {
             }),
             group: None,
         },
-        ShapePayload::Acquire {
+        ShapePayload::Lease(LeaseAction::Acquire {
             object,
             strong: false,
             ttl_micros: 60_000_000,
-        },
+        }),
         ShapePayload::edit(
             object,
             Edit::stamp(

@@ -10,6 +10,7 @@ use replication::net::admission::AdmissionError;
 use replication::net::node::{
     ADMISSION_DELAY_MILLIS, DialError, DisconnectReason, NodeEvent, RefusalKind,
 };
+use replication::payload::LeaseAction;
 use replication::payload::test_payload::TestPayload;
 use replication::{Keypair, Log, Timestamp};
 
@@ -61,11 +62,11 @@ async fn three_nodes_converge_through_a_line() {
     }
     // Leases still bind the ops that saw them: C takes the lease over, and A's next edit,
     // authored once A has seen that, is refused on every node.
-    let take = TestPayload::Acquire {
+    let take = TestPayload::Lease(LeaseAction::Acquire {
         object: 7,
         strong: false,
         ttl_micros: 60_000_000,
-    };
+    });
     c.handle.author(take).await.unwrap();
     converge(&all, 13).await;
     let late = TestPayload::Set {

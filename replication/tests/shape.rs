@@ -14,7 +14,7 @@ use fdsl::scene::ObjectId as SceneObjectId;
 use glam::DVec3;
 use proptest::prelude::*;
 use replication::materialize::{Materialize, Materialized};
-use replication::payload::MAX_PAYLOAD_BYTES;
+use replication::payload::{LeaseAction, MAX_PAYLOAD_BYTES};
 use replication::pending::Origin;
 use replication::shape::{
     DERIVED_ID_BIT, IdSource, ShapePayload, ShapeScene, may_create, object_id, parts,
@@ -264,10 +264,12 @@ fn a_weak_takeover_rejects_the_former_holders_edits() {
         group: None,
     };
     log.author(&a, Timestamp(1), create).unwrap();
-    let acquire = |strong| ShapePayload::Acquire {
-        object: 1,
-        strong,
-        ttl_micros: 60_000_000,
+    let acquire = |strong| {
+        ShapePayload::Lease(LeaseAction::Acquire {
+            object: 1,
+            strong,
+            ttl_micros: 60_000_000,
+        })
     };
     log.author(&a, Timestamp(2), acquire(false)).unwrap();
     log.author(&b, Timestamp(3), acquire(false)).unwrap();
@@ -697,11 +699,11 @@ fn strong_acquires_of_predicted_ids_do_not_reject_the_creations() {
     let next = IdSource::next_in(&log, honest.peer_id());
     let predicted: Vec<u64> = (0..3).map(|n| next.skip(n).unwrap().id()).collect();
     for &object in &predicted {
-        let hoard = ShapePayload::Acquire {
+        let hoard = ShapePayload::Lease(LeaseAction::Acquire {
             object,
             strong: true,
             ttl_micros: u64::MAX,
-        };
+        });
         log.author(&member, Timestamp(2), hoard).unwrap();
     }
     // The first two whole, the third in parts (a mesh): every op sees every acquire.
@@ -740,11 +742,11 @@ fn strong_acquires_of_predicted_ids_do_not_reject_the_creations() {
     }
     // An acquire that saw a creation counts: the member takes the first object, and binds the
     // edits that see it.
-    let take = ShapePayload::Acquire {
+    let take = ShapePayload::Lease(LeaseAction::Acquire {
         object: predicted[2],
         strong: true,
         ttl_micros: 60_000_000,
-    };
+    });
     log.author(&member, Timestamp(5), take).unwrap();
     let (bound, _) = log
         .author(&honest, Timestamp(6), carve_at(predicted[2], DVec3::ZERO))

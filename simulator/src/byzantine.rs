@@ -54,21 +54,24 @@
 //!   the second at most [`replication::lease::MAX_LIVE_LEASES_PER_AUTHOR`] count.
 //!
 //! In a session that binds its authors (even seeds with `expel`, see
-//! [`crate::sim::SESSION_CAP_BYTES`]), every fresh key above whose first op names no admission
+//! [`crate::session::SESSION_CAP_BYTES`]), every fresh key above whose first op names no admission
 //! is refused by every peer.
 
 use fdsl::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
 use replication::causal::MAX_VV_AUTHORS;
 use replication::membership::{Admission, Membership};
 use replication::op::{MAX_DEPS, OpFields};
-use replication::shape::ShapePayload;
+use replication::payload::LeaseAction;
+use replication::shape::{IdSource, ShapePayload};
 use replication::sync::message::{MAX_BATCH_OPS, Message};
-use replication::sync::state::{CloseReason, MAX_HELLO_BURST, OpByteQuota};
+use replication::sync::state::{MAX_HELLO_BURST, OpByteQuota};
 use replication::time::MAX_CLOCK_SKEW_MICROS;
 use replication::{ConnId, Keypair, Op, OpId, Peer, PeerId, Timestamp, VersionVector};
 
+use crate::config::Faults;
+use crate::honest::{MAX_DRAIN, guarded_call};
 use crate::rng::SimRng;
-use crate::sim::{Ev, FOUNDER_NONCE, SESSION_ID, Simulation, deliver, guarded, guarded_call};
+use crate::session::{FOUNDER_NONCE, SESSION_ID};
 
 /// Most fresh keys the byzantine member makes in one run.
 pub const MAX_SYBIL_KEYS: usize = 512;
@@ -105,7 +108,7 @@ pub const SYBIL_GRANT_BYTES: u64 = 4 * 1024;
 /// Chats of about 2 KiB one cap fill authors at most.
 pub const CAP_FILL_OPS: usize = 16;
 /// The session id the member signs an op for that it sends into this one.
-const OTHER_SESSION_ID: replication::sync::message::SessionId = [0xee; 16];
+const OTHER_SESSION_ID: replication::identity::SessionId = [0xee; 16];
 /// Object ids the byzantine member creates (above every honest user's).
 const BOMB_OBJECT_BASE: u64 = 64 << 32;
 /// The compile bomb: a short loop, unrolled as far as an object's formula may
@@ -146,7 +149,7 @@ const STROKE_BOMB_POSES: usize = 220;
 
 /// The attacks, as the report counts them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Attack {
+pub(crate) enum Attack {
     Backdated,
     BackdatedLease,
     Hoard,
@@ -172,7 +175,8 @@ enum Attack {
 }
 
 impl Attack {
-    fn name(self) -> &'static str {
+    /// The name the report counts it under.
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Attack::Backdated => "backdated",
             Attack::BackdatedLease => "backdated-lease",
@@ -359,11 +363,11 @@ fn stamp_edit(rng: &mut SimRng, object: u64) -> ShapePayload {
 }
 
 fn hoard(object: u64) -> ShapePayload {
-    ShapePayload::Acquire {
+    ShapePayload::Lease(LeaseAction::Acquire {
         object,
         strong: true,
         ttl_micros: u64::MAX,
-    }
+    })
 }
 
 /// A version vector of `n` made-up authors with large sequence numbers.
@@ -431,13 +435,49 @@ fn cost_bomb(kind: u64, object: u64, text: &str) -> Option<ShapePayload> {
 }
 
 /// Messages for one attack: to a random target, or (forks) one to each of two targets.
-type Sends = Vec<(usize, Vec<u8>)>;
+pub(crate) type Sends = Vec<(usize, Vec<u8>)>;
 
-impl Simulation {
-    /// The byzantine member sends one crafted attack to the reachable peers `targets` (not
-    /// empty); false if it had nothing to send.
-    pub(crate) fn byzantine_send(&mut self, h: usize, targets: &[usize]) -> bool {
-        let faults = self.faults;
+/// What the member sees of the run when it crafts an attack on honest peer `to`.
+pub(crate) struct Aim<'a> {
+    /// Virtual time now.
+    pub(crate) now: u64,
+    /// The member's own id, which its hellos name.
+    pub(crate) me: PeerId,
+    /// A fresh batch number for its messages.
+    pub(crate) batch_no: u64,
+    /// The peer attacked.
+    pub(crate) to: usize,
+    /// Every honest peer it reaches (`to` among them).
+    pub(crate) targets: &'a [usize],
+    /// The run's objects.
+    pub(crate) objects: &'a [u64],
+    /// Where the ids of `to`'s user's next objects come from.
+    pub(crate) victim: Option<IdSource>,
+    /// `to`'s id.
+    pub(crate) victim_key: Option<PeerId>,
+    /// Another honest peer's id than `to`'s, if there is one.
+    pub(crate) third_key: Option<PeerId>,
+}
+
+impl Aim<'_> {
+    /// A hello to `to` under the member's own id.
+    fn hello(&self) -> (usize, Vec<u8>) {
+        (self.to, hello(self.me))
+    }
+
+    /// A hello, then a batch of the one op `op` (`None` if it could not be signed).
+    fn one(&self, op: Option<(OpId, Vec<u8>)>) -> Option<Sends> {
+        let (_, bytes) = op?;
+        Some(vec![
+            self.hello(),
+            (self.to, batch(self.batch_no, vec![bytes])),
+        ])
+    }
+}
+
+impl Attack {
+    /// The attacks `faults` switch on, in the order the member takes turns through them.
+    pub(crate) fn menu(faults: &Faults) -> Vec<Attack> {
         let mut menu = Vec::new();
         if faults.byzantine {
             menu.extend([
@@ -473,475 +513,447 @@ impl Simulation {
         if faults.expel {
             menu.push(Attack::ForgeExpel);
         }
-        if menu.is_empty() {
-            return false;
+        menu
+    }
+}
+
+impl Byzantine {
+    /// The next attack of `menu` (not empty): each in turn from the one `first` names at the
+    /// member's first turn, so every kind is sent about as often whatever the network's draws
+    /// (a random pick each time left one kind out of some short runs when an unrelated change
+    /// moved those draws).
+    pub(crate) fn next_attack(&mut self, menu: &[Attack], first: usize) -> Attack {
+        if self.n_turns == 0 {
+            self.first_turn = first;
         }
-        // Each attack of the menu in turn from a random first one, so every kind is sent about
-        // as often whatever the network's draws (a random pick each time left one kind out of
-        // some short runs when an unrelated change moved those draws). The draw is still made
-        // every time, so the network's stream advances per attack as it did.
-        let first = self.net.index(menu.len());
-        let Some(byz) = self.hostile.as_mut().and_then(|h| h.byzantine.as_mut()) else {
-            return false;
-        };
-        if byz.n_turns == 0 {
-            byz.first_turn = first;
-        }
-        let attack = menu[(byz.first_turn + byz.n_turns) % menu.len()];
-        byz.n_turns += 1;
-        let to = targets[self.net.index(targets.len())];
-        let Some(sends) = self.craft(attack, to, targets) else {
-            return false;
-        };
-        *self.stats.byzantine.entry(attack.name()).or_default() += 1;
-        for (to, bytes) in sends {
-            let epoch = self.pair(h, to).epoch;
-            let at = self.now + self.latency_micros[h][to];
-            self.stats.n_hostile_messages += 1;
-            self.push(at, deliver(h, to, epoch, bytes, None));
-        }
-        // What the core authored goes out through its sync.
-        self.byzantine_flush();
-        true
+        let attack = menu[(self.first_turn + self.n_turns) % menu.len()];
+        self.n_turns += 1;
+        attack
     }
 
-    fn craft(&mut self, attack: Attack, to: usize, targets: &[usize]) -> Option<Sends> {
-        let now = self.now;
-        let objects = self.objects.clone();
-        let victim = self.honest.get(to).map(|h| h.user.next_ids());
-        let victim_key = self.honest.get(to).map(|h| h.peer.peer_id());
-        let third_key = (self.honest.iter().enumerate())
-            .find(|(idx, _)| *idx != to)
-            .map(|(_, h)| h.peer.peer_id());
-        let hostile = self.hostile.as_mut()?;
-        let me = hostile.peer_id();
-        let batch_no = hostile.next_batch_no();
-        let byz = hostile.byzantine.as_mut()?;
-        let rng = &mut self.net;
-        let f = byz.frontier();
-        let object = objects[rng.index(objects.len())];
-        let one = |op: Option<(OpId, Vec<u8>)>| {
-            let (_, bytes) = op?;
-            Some(vec![(to, hello(me)), (to, batch(batch_no, vec![bytes]))])
-        };
+    /// The messages of `attack` on `aim.to` (`None` if it has nothing to send); ops its core
+    /// authors go out through the core's sync instead.
+    pub(crate) fn craft(&mut self, attack: Attack, aim: &Aim, rng: &mut SimRng) -> Option<Sends> {
+        let f = self.frontier();
+        let object = aim.objects[rng.index(aim.objects.len())];
         match attack {
             Attack::Backdated | Attack::BackdatedLease => {
-                let key = byz.sybil()?;
-                let at = if rng.chance(500) {
-                    0
-                } else {
-                    now.saturating_sub(BACKDATE_MICROS)
-                };
-                let payload = match (attack, rng.below(3)) {
-                    (Attack::BackdatedLease, _) => hoard(object),
-                    (_, 0) => ShapePayload::Delete { object },
-                    (_, 1) => stamp_edit(rng, object),
-                    _ => ShapePayload::Chat("backdated".into()),
-                };
-                one(sign(&key, 1, 1, at, Vec::new(), payload))
+                self.backdated(aim, rng, object, attack == Attack::BackdatedLease)
             }
-            Attack::RefoldFlood => {
-                let key = byz.sybil()?;
-                let start = now.saturating_sub(BACKDATE_MICROS);
-                let mut out = vec![(to, hello(me))];
-                for i in 0..REFOLD_FLOOD {
-                    let edit = stamp_edit(rng, object);
-                    let (_, bytes) = sign(&key, i + 1, i + 1, start + i, Vec::new(), edit)?;
-                    out.push((to, batch(batch_no + i, vec![bytes])));
-                }
-                Some(out)
-            }
-            Attack::Hoard => {
-                let chain = &mut byz.hoarder;
-                let lamport = f.lamport.max(chain.lamport) + 1;
-                let timestamp = now.max(f.timestamp).max(chain.timestamp);
-                let op = sign(
-                    &chain.key,
-                    chain.next_seq,
-                    lamport,
-                    timestamp,
-                    f.heads,
-                    hoard(object),
-                )?;
-                chain.next_seq += 1;
-                chain.lamport = lamport;
-                chain.timestamp = timestamp;
-                one(Some(op))
-            }
-            Attack::FarFuture => {
-                let key = byz.sybil()?;
-                let at = if rng.chance(300) {
-                    u64::MAX - 1
-                } else {
-                    now + MAX_CLOCK_SKEW_MICROS + 1 + rng.below(2 * MAX_CLOCK_SKEW_MICROS)
-                };
-                let payload = if rng.chance(500) {
-                    stamp_edit(rng, object)
-                } else {
-                    ShapePayload::Chat("from the future".into())
-                };
-                one(sign(&key, 1, f.lamport + 1, at, f.heads, payload))
-            }
-            Attack::FarPast => {
-                if f.timestamp == 0 {
-                    return None;
-                }
-                let key = byz.sybil()?;
-                let op = sign(&key, 1, f.lamport + 1, 0, f.heads, stamp_edit(rng, object))?;
-                byz.must_refuse.push(op.0);
-                one(Some(op))
-            }
-            Attack::Sybil => {
-                let mut ops = Vec::new();
-                for _ in 0..SYBIL_BURST {
-                    let Some(key) = byz.sybil() else { break };
-                    let payload = if rng.chance(500) {
-                        stamp_edit(rng, object)
-                    } else {
-                        ShapePayload::Chat("sybil".into())
-                    };
-                    let timestamp = now.max(f.timestamp);
-                    let deps = f.heads.clone();
-                    if let Some((_, bytes)) = sign(&key, 1, f.lamport + 1, timestamp, deps, payload)
-                    {
-                        ops.push(bytes);
-                    }
-                }
-                (!ops.is_empty()).then(|| vec![(to, hello(me)), (to, batch(batch_no, ops))])
-            }
-            Attack::GiantVersionVectors => {
-                let mut out = vec![(to, hello(me))];
-                for _ in 0..2 {
-                    let vv = made_up_vv(rng, MAX_VV_AUTHORS);
-                    out.push((to, Message::have(vv).encode()));
-                }
-                let vv = made_up_vv(rng, MAX_VV_AUTHORS);
-                out.push((to, Message::want(vv).encode()));
-                Some(out)
-            }
-            Attack::OversizedBatch => {
-                let key = byz.sybil()?;
-                let timestamp = now.max(f.timestamp);
-                let mut ops = Vec::new();
-                let mut deps = f.heads.clone();
-                for seq in 1..=MAX_BATCH_OPS as u64 + 1 {
-                    let payload = ShapePayload::Chat(format!("batch {seq}"));
-                    let (id, bytes) = sign(&key, seq, f.lamport + seq, timestamp, deps, payload)?;
-                    deps = vec![id];
-                    ops.push(bytes);
-                }
-                Some(vec![(to, hello(me)), (to, batch(batch_no, ops))])
-            }
-            Attack::CostBomb => {
-                if byz.n_bombs >= MAX_COST_BOMBS {
-                    return None;
-                }
-                byz.n_bombs += 1;
-                let key = byz.sybil()?;
-                let payload = match rng.below(3) {
-                    0 => {
-                        let text = byz.bomb.get_or_insert_with(largest_compile_bomb).clone()?;
-                        cost_bomb(0, BOMB_OBJECT_BASE + byz.n_bombs as u64, &text)?
-                    }
-                    1 => cost_bomb(1, object, &long_formula())?,
-                    _ => cost_bomb(2, object, "")?,
-                };
-                let timestamp = now.max(f.timestamp);
-                one(sign(&key, 1, f.lamport + 1, timestamp, f.heads, payload))
-            }
-            Attack::TakeId => {
-                let key = byz.sybil()?;
-                let victim = victim?.skip(rng.below(3))?;
-                let payload = ShapePayload::Create {
-                    object: victim.id(),
-                    counter: rng.chance(500).then_some(victim.counter),
-                    data: std::sync::Arc::new(ObjectData {
-                        name: STOLEN_NAME.into(),
-                        geometry: Some(Geometry::implicit(Formula::new("1-x^2-y^2-z^2").ok()?)),
-                        ..ObjectData::default()
-                    }),
-                    group: None,
-                };
-                one(sign(
-                    &key,
-                    1,
-                    1,
-                    now.saturating_sub(BACKDATE_MICROS),
-                    Vec::new(),
-                    payload,
-                ))
-            }
-            Attack::ForgeExpel => {
-                // A member posing as the founder: with the founder's nonce (as if it leaked,
-                // and it does once the founder expels) or a made-up one.
-                let key = byz.sybil()?;
-                let mut nonce = FOUNDER_NONCE;
-                if rng.chance(500) {
-                    rng.fill(&mut nonce);
-                }
-                let expel = Membership {
-                    member: victim_key?,
-                    expel: true,
-                    nonce,
-                };
-                let payload = ShapePayload::Member(Box::new(expel));
-                let timestamp = now.max(f.timestamp);
-                one(sign(&key, 1, f.lamport + 1, timestamp, f.heads, payload))
-            }
-            Attack::HelloFlood => Some((0..HELLO_FLOOD).map(|_| (to, hello(me))).collect()),
-            Attack::WrongIdHello => Some(vec![(to, hello(third_key.or(victim_key)?))]),
-            Attack::ByteFlood => {
-                if byz.n_byte_floods >= MAX_BYTE_FLOODS {
-                    return None;
-                }
-                byz.n_byte_floods += 1;
-                let text = "x".repeat(BYTE_FLOOD_TEXT_BYTES);
-                let timestamp = now.max(f.timestamp);
-                let mut out = vec![(to, hello(me))];
-                for batch_idx in 0..BYTE_FLOOD_BATCHES {
-                    let key = byz.sybil()?;
-                    let mut missing = [0; 32];
-                    rng.fill(&mut missing);
-                    let (mut deps, mut ops) = (vec![OpId(missing)], Vec::new());
-                    for seq in 1..=MAX_BATCH_OPS as u64 {
-                        let payload = ShapePayload::Chat(text.clone());
-                        let (id, bytes) =
-                            sign(&key, seq, f.lamport + seq, timestamp, deps, payload)?;
-                        deps = vec![id];
-                        ops.push(bytes);
-                    }
-                    out.push((to, batch(batch_no + batch_idx, ops)));
-                }
-                Some(out)
-            }
-            Attack::AdmittedSybil => {
-                let key = byz.sybil()?;
-                let admission = Admission {
-                    key: key.peer_id(),
-                    grant_bytes: SYBIL_GRANT_BYTES,
-                    nonce: None,
-                };
-                byz.author(now, ShapePayload::Admit(Box::new(admission)))?;
-                // After the admission, so its first op names it (the core's only head now).
-                let f = byz.frontier();
-                let timestamp = now.max(f.timestamp);
-                let chat = |i: u64| ShapePayload::Chat(format!("{i}{}", "s".repeat(2_000)));
-                let (first, within) = sign(&key, 1, f.lamport + 1, timestamp, f.heads, chat(1))?;
-                let (_, past) = sign(&key, 2, f.lamport + 2, timestamp, vec![first], chat(2))?;
-                Some(vec![
-                    (to, hello(me)),
-                    (to, batch(batch_no, vec![within, past])),
-                ])
-            }
-            Attack::SelfAdmitted => {
-                let key = byz.sybil()?;
-                let mut nonce = FOUNDER_NONCE;
-                if rng.chance(500) {
-                    rng.fill(&mut nonce);
-                }
-                let admission = Admission {
-                    key: key.peer_id(),
-                    grant_bytes: u64::MAX,
-                    nonce: Some(nonce),
-                };
-                let payload = ShapePayload::Admit(Box::new(admission));
-                let timestamp = now.max(f.timestamp);
-                one(sign(&key, 1, f.lamport + 1, timestamp, f.heads, payload))
-            }
+            Attack::RefoldFlood => self.refold_flood(aim, rng, object),
+            Attack::Hoard => self.hoard_chain(aim, f, object),
+            Attack::FarFuture => self.far_future(aim, rng, f, object),
+            Attack::FarPast => self.far_past(aim, rng, f, object),
+            Attack::Sybil => self.sybil_burst(aim, rng, f, object),
+            Attack::GiantVersionVectors => Some(giant_version_vectors(aim, rng)),
+            Attack::OversizedBatch => self.oversized_batch(aim, f),
+            Attack::CostBomb => self.cost_bomb(aim, rng, f, object),
+            Attack::TakeId => self.take_id(aim, rng),
+            Attack::ForgeExpel => self.forge_expel(aim, rng, f),
+            Attack::HelloFlood => Some((0..HELLO_FLOOD).map(|_| aim.hello()).collect()),
+            Attack::WrongIdHello => Some(vec![(aim.to, hello(aim.third_key.or(aim.victim_key)?))]),
+            Attack::ByteFlood => self.byte_flood(aim, rng, f),
+            Attack::AdmittedSybil => self.admitted_sybil(aim),
+            Attack::SelfAdmitted => self.self_admitted(aim, rng, f),
             Attack::CapFill => {
                 let text = "f".repeat(2_000);
                 let n_authored = (0..CAP_FILL_OPS)
-                    .map_while(|_| byz.author(now, ShapePayload::Chat(text.clone())))
+                    .map_while(|_| self.author(aim.now, ShapePayload::Chat(text.clone())))
                     .count();
                 (n_authored > 0).then(Vec::new)
             }
             Attack::LeasePredicted => {
-                let next = victim?;
+                let next = aim.victim?;
                 for n in 0..3 {
-                    byz.author(now, hoard(next.skip(n)?.id()))?;
+                    self.author(aim.now, hoard(next.skip(n)?.id()))?;
                 }
                 Some(Vec::new())
             }
-            Attack::OtherSession => {
-                // Well formed and signed by a fresh key, but for another session's id.
-                let fields = OpFields {
-                    seq: 1,
-                    lamport: f.lamport + 1,
-                    timestamp: Timestamp(now.max(f.timestamp)),
-                    deps: f.heads,
-                    payload: ShapePayload::Chat("from another session".into()),
-                };
-                let key = byz.sybil()?;
-                let op = Op::sign(&key, &OTHER_SESSION_ID, fields).ok()?;
-                byz.must_refuse.push(op.id());
-                one(Some((op.id(), op.encoded().to_vec())))
-            }
+            Attack::OtherSession => self.other_session(aim, f),
             Attack::LeaseAll => {
-                for &object in &objects {
-                    byz.author(now, hoard(object))?;
+                for &object in aim.objects {
+                    self.author(aim.now, hoard(object))?;
                 }
                 Some(Vec::new())
             }
-            Attack::Fork => {
-                let key = byz.sybil()?;
-                // Another peer than `to`, when there is one.
-                let others: Vec<usize> = targets.iter().copied().filter(|t| *t != to).collect();
-                let other = others
-                    .get(rng.index(others.len().max(1)))
-                    .copied()
-                    .unwrap_or(to);
-                let timestamp = now.max(f.timestamp);
-                let fork = |text: &str| {
-                    let payload = ShapePayload::Chat(text.into());
-                    sign(&key, 1, f.lamport + 1, timestamp, f.heads.clone(), payload)
-                };
-                let (a, b) = (fork("fork a")?, fork("fork b")?);
-                byz.forks.push((a.0, b.0));
-                Some(vec![
-                    (to, hello(me)),
-                    (to, batch(batch_no, vec![a.1])),
-                    (other, hello(me)),
-                    (other, batch(batch_no, vec![b.1])),
-                ])
+            Attack::Fork => self.fork(aim, rng, f),
+        }
+    }
+
+    /// A fresh key's op at Lamport 1 with no dependencies, stamped at time 0 or
+    /// [`BACKDATE_MICROS`] ago: a delete, an edit or a chat, or with `lease` a hoard.
+    fn backdated(
+        &mut self,
+        aim: &Aim,
+        rng: &mut SimRng,
+        object: u64,
+        lease: bool,
+    ) -> Option<Sends> {
+        let key = self.sybil()?;
+        let at = if rng.chance(500) {
+            0
+        } else {
+            aim.now.saturating_sub(BACKDATE_MICROS)
+        };
+        let payload = match (lease, rng.below(3)) {
+            (true, _) => hoard(object),
+            (_, 0) => ShapePayload::Delete { object },
+            (_, 1) => stamp_edit(rng, object),
+            _ => ShapePayload::Chat("backdated".into()),
+        };
+        aim.one(sign(&key, 1, 1, at, Vec::new(), payload))
+    }
+
+    /// A fresh key's chain of [`REFOLD_FLOOD`] backdated edits, each in a message of its own.
+    fn refold_flood(&mut self, aim: &Aim, rng: &mut SimRng, object: u64) -> Option<Sends> {
+        let key = self.sybil()?;
+        let start = aim.now.saturating_sub(BACKDATE_MICROS);
+        let mut out = vec![aim.hello()];
+        for i in 0..REFOLD_FLOOD {
+            let edit = stamp_edit(rng, object);
+            let (_, bytes) = sign(&key, i + 1, i + 1, start + i, Vec::new(), edit)?;
+            out.push((aim.to, batch(aim.batch_no + i, vec![bytes])));
+        }
+        Some(out)
+    }
+
+    /// The hoarder's next strong acquire for ever, on a chain that sees everything.
+    fn hoard_chain(&mut self, aim: &Aim, f: Frontier, object: u64) -> Option<Sends> {
+        let chain = &mut self.hoarder;
+        let lamport = f.lamport.max(chain.lamport) + 1;
+        let timestamp = aim.now.max(f.timestamp).max(chain.timestamp);
+        let op = sign(
+            &chain.key,
+            chain.next_seq,
+            lamport,
+            timestamp,
+            f.heads,
+            hoard(object),
+        )?;
+        chain.next_seq += 1;
+        chain.lamport = lamport;
+        chain.timestamp = timestamp;
+        aim.one(Some(op))
+    }
+
+    /// A fresh key's op stamped far in the future, or a little past the receivers' skew bound.
+    fn far_future(
+        &mut self,
+        aim: &Aim,
+        rng: &mut SimRng,
+        f: Frontier,
+        object: u64,
+    ) -> Option<Sends> {
+        let key = self.sybil()?;
+        let at = if rng.chance(300) {
+            u64::MAX - 1
+        } else {
+            aim.now + MAX_CLOCK_SKEW_MICROS + 1 + rng.below(2 * MAX_CLOCK_SKEW_MICROS)
+        };
+        let payload = if rng.chance(500) {
+            stamp_edit(rng, object)
+        } else {
+            ShapePayload::Chat("from the future".into())
+        };
+        aim.one(sign(&key, 1, f.lamport + 1, at, f.heads, payload))
+    }
+
+    /// A fresh key's edit stamped at time 0 after recent dependencies: every peer must refuse it.
+    fn far_past(&mut self, aim: &Aim, rng: &mut SimRng, f: Frontier, object: u64) -> Option<Sends> {
+        if f.timestamp == 0 {
+            return None;
+        }
+        let key = self.sybil()?;
+        let op = sign(&key, 1, f.lamport + 1, 0, f.heads, stamp_edit(rng, object))?;
+        self.must_refuse.push(op.0);
+        aim.one(Some(op))
+    }
+
+    /// Up to [`SYBIL_BURST`] fresh keys' ops in one batch.
+    fn sybil_burst(
+        &mut self,
+        aim: &Aim,
+        rng: &mut SimRng,
+        f: Frontier,
+        object: u64,
+    ) -> Option<Sends> {
+        let mut ops = Vec::new();
+        for _ in 0..SYBIL_BURST {
+            let Some(key) = self.sybil() else { break };
+            let payload = if rng.chance(500) {
+                stamp_edit(rng, object)
+            } else {
+                ShapePayload::Chat("sybil".into())
+            };
+            let timestamp = aim.now.max(f.timestamp);
+            let deps = f.heads.clone();
+            if let Some((_, bytes)) = sign(&key, 1, f.lamport + 1, timestamp, deps, payload) {
+                ops.push(bytes);
             }
         }
+        (!ops.is_empty()).then(|| vec![aim.hello(), (aim.to, batch(aim.batch_no, ops))])
     }
 
-    /// The transport's part of honest peer `x`'s new connection to node `y`: the id admission
-    /// proved (the member's own key for the hostile one), and where a byzantine member runs,
-    /// the quota of op bytes scaled to the simulator's logs.
-    pub(crate) fn admit_link(&mut self, x: usize, y: usize) {
-        let now = Timestamp(self.now);
-        let admitted = match self.honest.get(y) {
-            Some(h) => Some(h.peer.peer_id()),
-            None => self.hostile.as_ref().map(|h| h.peer_id()),
+    /// [`MAX_BATCH_OPS`] + 1 ops of a fresh key's chain in one message.
+    fn oversized_batch(&mut self, aim: &Aim, f: Frontier) -> Option<Sends> {
+        let key = self.sybil()?;
+        let timestamp = aim.now.max(f.timestamp);
+        let mut ops = Vec::new();
+        let mut deps = f.heads.clone();
+        for seq in 1..=MAX_BATCH_OPS as u64 + 1 {
+            let payload = ShapePayload::Chat(format!("batch {seq}"));
+            let (id, bytes) = sign(&key, seq, f.lamport + seq, timestamp, deps, payload)?;
+            deps = vec![id];
+            ops.push(bytes);
+        }
+        Some(vec![aim.hello(), (aim.to, batch(aim.batch_no, ops))])
+    }
+
+    /// One of at most [`MAX_COST_BOMBS`]: the compile bomb, a long formula or a stroke bomb.
+    fn cost_bomb(
+        &mut self,
+        aim: &Aim,
+        rng: &mut SimRng,
+        f: Frontier,
+        object: u64,
+    ) -> Option<Sends> {
+        if self.n_bombs >= MAX_COST_BOMBS {
+            return None;
+        }
+        self.n_bombs += 1;
+        let key = self.sybil()?;
+        let payload = match rng.below(3) {
+            0 => {
+                let text = self.bomb.get_or_insert_with(largest_compile_bomb).clone()?;
+                cost_bomb(0, BOMB_OBJECT_BASE + self.n_bombs as u64, &text)?
+            }
+            1 => cost_bomb(1, object, &long_formula())?,
+            _ => cost_bomb(2, object, "")?,
         };
-        let byzantine = self.faults.byzantine;
-        if let (Some(h), Some(admitted)) = (self.honest.get_mut(x), admitted) {
-            guarded(h, |p| {
-                p.set_admitted(ConnId(y as u64), admitted);
-                if byzantine {
-                    p.set_op_byte_quota(now, ConnId(y as u64), SMALL_OP_BYTE_QUOTA);
-                }
-            });
-        }
+        let timestamp = aim.now.max(f.timestamp);
+        aim.one(sign(&key, 1, f.lamport + 1, timestamp, f.heads, payload))
     }
 
-    /// After honest peer `idx` closed its connection to `other` for `reason`: the hostile
-    /// member dials again soon, unless it was expelled.
-    pub(crate) fn redial_after_close(&mut self, idx: usize, other: usize, reason: CloseReason) {
-        let expelled = matches!(reason, CloseReason::Expelled { .. });
-        if Some(other) == self.hostile_idx() && !expelled {
-            self.push(self.now + REDIAL_MICROS, Ev::Redial { peer: idx });
-        }
-    }
-
-    /// The hostile member dials honest peer `peer` again.
-    pub(crate) fn redial(&mut self, peer: usize) {
-        if let Some(h) = self.hostile_idx()
-            && self.online(peer)
-        {
-            self.connect_pair(peer, h);
-        }
-    }
-
-    /// Hands a message an honest peer sent the hostile member to its core.
-    pub(crate) fn byzantine_receive(&mut self, from: usize, bytes: &[u8]) {
-        let now = Timestamp(self.now);
-        let Some(byz) = self.byzantine_mut() else {
-            return;
+    /// A backdated `Create` of an id `to`'s user takes soon, named [`STOLEN_NAME`].
+    fn take_id(&mut self, aim: &Aim, rng: &mut SimRng) -> Option<Sends> {
+        let key = self.sybil()?;
+        let victim = aim.victim?.skip(rng.below(3))?;
+        let payload = ShapePayload::Create {
+            object: victim.id(),
+            counter: rng.chance(500).then_some(victim.counter),
+            data: std::sync::Arc::new(ObjectData {
+                name: STOLEN_NAME.into(),
+                geometry: Some(Geometry::implicit(Formula::new("1-x^2-y^2-z^2").ok()?)),
+                ..ObjectData::default()
+            }),
+            group: None,
         };
-        guarded_call(&mut byz.panicked, &mut byz.core, |p| {
-            p.handle_input(now, ConnId(from as u64), bytes);
+        aim.one(sign(
+            &key,
+            1,
+            1,
+            aim.now.saturating_sub(BACKDATE_MICROS),
+            Vec::new(),
+            payload,
+        ))
+    }
+
+    /// A fresh key's expel of `to`, posing as the founder.
+    fn forge_expel(&mut self, aim: &Aim, rng: &mut SimRng, f: Frontier) -> Option<Sends> {
+        // With the founder's nonce (as if it leaked, and it does once the founder expels) or a
+        // made-up one.
+        let key = self.sybil()?;
+        let mut nonce = FOUNDER_NONCE;
+        if rng.chance(500) {
+            rng.fill(&mut nonce);
+        }
+        let expel = Membership {
+            member: aim.victim_key?,
+            expel: true,
+            nonce,
+        };
+        let payload = ShapePayload::Member(Box::new(expel));
+        let timestamp = aim.now.max(f.timestamp);
+        aim.one(sign(&key, 1, f.lamport + 1, timestamp, f.heads, payload))
+    }
+
+    /// One of at most [`MAX_BYTE_FLOODS`]: [`BYTE_FLOOD_BATCHES`] full batches of fresh keys'
+    /// large chats, each chain waiting on an op nobody holds.
+    fn byte_flood(&mut self, aim: &Aim, rng: &mut SimRng, f: Frontier) -> Option<Sends> {
+        if self.n_byte_floods >= MAX_BYTE_FLOODS {
+            return None;
+        }
+        self.n_byte_floods += 1;
+        let text = "x".repeat(BYTE_FLOOD_TEXT_BYTES);
+        let timestamp = aim.now.max(f.timestamp);
+        let mut out = vec![aim.hello()];
+        for batch_idx in 0..BYTE_FLOOD_BATCHES {
+            let key = self.sybil()?;
+            let mut missing = [0; 32];
+            rng.fill(&mut missing);
+            let (mut deps, mut ops) = (vec![OpId(missing)], Vec::new());
+            for seq in 1..=MAX_BATCH_OPS as u64 {
+                let payload = ShapePayload::Chat(text.clone());
+                let (id, bytes) = sign(&key, seq, f.lamport + seq, timestamp, deps, payload)?;
+                deps = vec![id];
+                ops.push(bytes);
+            }
+            out.push((aim.to, batch(aim.batch_no + batch_idx, ops)));
+        }
+        Some(out)
+    }
+
+    /// A fresh key its core admits with [`SYBIL_GRANT_BYTES`], and two chats of the key's, the
+    /// second past the grant.
+    fn admitted_sybil(&mut self, aim: &Aim) -> Option<Sends> {
+        let key = self.sybil()?;
+        let admission = Admission {
+            key: key.peer_id(),
+            grant_bytes: SYBIL_GRANT_BYTES,
+            nonce: None,
+        };
+        self.author(aim.now, ShapePayload::Admit(Box::new(admission)))?;
+        // After the admission, so its first op names it (the core's only head now).
+        let f = self.frontier();
+        let timestamp = aim.now.max(f.timestamp);
+        let chat = |i: u64| ShapePayload::Chat(format!("{i}{}", "s".repeat(2_000)));
+        let (first, within) = sign(&key, 1, f.lamport + 1, timestamp, f.heads, chat(1))?;
+        let (_, past) = sign(&key, 2, f.lamport + 2, timestamp, vec![first], chat(2))?;
+        Some(vec![
+            aim.hello(),
+            (aim.to, batch(aim.batch_no, vec![within, past])),
+        ])
+    }
+
+    /// A fresh key's admission of itself, with the founder's nonce or a made-up one.
+    fn self_admitted(&mut self, aim: &Aim, rng: &mut SimRng, f: Frontier) -> Option<Sends> {
+        let key = self.sybil()?;
+        let mut nonce = FOUNDER_NONCE;
+        if rng.chance(500) {
+            rng.fill(&mut nonce);
+        }
+        let admission = Admission {
+            key: key.peer_id(),
+            grant_bytes: u64::MAX,
+            nonce: Some(nonce),
+        };
+        let payload = ShapePayload::Admit(Box::new(admission));
+        let timestamp = aim.now.max(f.timestamp);
+        aim.one(sign(&key, 1, f.lamport + 1, timestamp, f.heads, payload))
+    }
+
+    /// A fresh key's op, well formed, but signed for another session's id.
+    fn other_session(&mut self, aim: &Aim, f: Frontier) -> Option<Sends> {
+        let fields = OpFields {
+            seq: 1,
+            lamport: f.lamport + 1,
+            timestamp: Timestamp(aim.now.max(f.timestamp)),
+            deps: f.heads,
+            payload: ShapePayload::Chat("from another session".into()),
+        };
+        let key = self.sybil()?;
+        let op = Op::sign(&key, &OTHER_SESSION_ID, fields).ok()?;
+        self.must_refuse.push(op.id());
+        aim.one(Some((op.id(), op.encoded().to_vec())))
+    }
+
+    /// Two ops of one fresh key with seq 1, one to `to` and one to another peer.
+    fn fork(&mut self, aim: &Aim, rng: &mut SimRng, f: Frontier) -> Option<Sends> {
+        let key = self.sybil()?;
+        let to = aim.to;
+        // Another peer than `to`, when there is one.
+        let others: Vec<usize> = aim.targets.iter().copied().filter(|t| *t != to).collect();
+        let other = others
+            .get(rng.index(others.len().max(1)))
+            .copied()
+            .unwrap_or(to);
+        let timestamp = aim.now.max(f.timestamp);
+        let fork = |text: &str| {
+            let payload = ShapePayload::Chat(text.into());
+            sign(&key, 1, f.lamport + 1, timestamp, f.heads.clone(), payload)
+        };
+        let (a, b) = (fork("fork a")?, fork("fork b")?);
+        self.forks.push((a.0, b.0));
+        Some(vec![
+            aim.hello(),
+            (to, batch(aim.batch_no, vec![a.1])),
+            (other, hello(aim.me)),
+            (other, batch(aim.batch_no, vec![b.1])),
+        ])
+    }
+
+    /// Hands its core a message honest peer `from` sent it.
+    pub(crate) fn receive(&mut self, now: u64, from: usize, bytes: &[u8]) {
+        guarded_call(&mut self.panicked, &mut self.core, |p| {
+            p.handle_input(Timestamp(now), ConnId(from as u64), bytes);
         });
-        self.byzantine_flush();
     }
 
-    /// The core's connection to honest peer `other` opened (`true`) or closed.
-    pub(crate) fn byzantine_link(&mut self, other: usize, open: bool) {
-        let now = Timestamp(self.now);
-        let Some(byz) = self.byzantine_mut() else {
-            return;
-        };
-        guarded_call(&mut byz.panicked, &mut byz.core, |p| {
+    /// Its core's connection to honest peer `other` opened (`true`) or closed.
+    pub(crate) fn link(&mut self, now: u64, other: usize, open: bool) {
+        guarded_call(&mut self.panicked, &mut self.core, |p| {
             if open {
                 // Refused only over the connection limit, which the mesh stays under.
-                let _ = p.connect(now, ConnId(other as u64));
+                let _ = p.connect(Timestamp(now), ConnId(other as u64));
             } else {
                 p.disconnect(ConnId(other as u64));
             }
         });
-        if open {
-            self.byzantine_flush();
-        }
     }
 
-    /// The core's timer.
-    pub(crate) fn byzantine_wake(&mut self) {
-        let now = self.now;
-        let Some(byz) = self.byzantine_mut() else {
-            return;
-        };
-        if byz.wake_at == Some(now) {
-            byz.wake_at = None;
+    /// Its core's timer.
+    pub(crate) fn wake(&mut self, now: u64) {
+        if self.wake_at == Some(now) {
+            self.wake_at = None;
         }
-        guarded_call(&mut byz.panicked, &mut byz.core, |p| {
+        guarded_call(&mut self.panicked, &mut self.core, |p| {
             p.handle_timeout(Timestamp(now));
         });
-        self.byzantine_flush();
     }
 
-    fn byzantine_mut(&mut self) -> Option<&mut Byzantine> {
-        self.hostile.as_mut()?.byzantine.as_mut()
-    }
-
-    /// Drains the core's events and transmissions (onto the network, like an honest peer's,
-    /// but never lost: the hostile member's links are its own) and arms its timer.
-    fn byzantine_flush(&mut self) {
-        let Some(h) = self.hostile_idx() else { return };
-        let now = self.now;
+    /// Drains its core's events and transmissions, and arms its timer: what the core sends,
+    /// by honest peer, and when it must wake if that is sooner than it was to.
+    pub(crate) fn drain(&mut self, now: u64) -> (Sends, Option<u64>) {
         let mut out = Vec::new();
-        let next = {
-            let Some(byz) = self.byzantine_mut() else {
-                return;
-            };
-            for _ in 0..crate::sim::MAX_DRAIN {
-                match guarded_call(&mut byz.panicked, &mut byz.core, |p| p.poll_event()) {
-                    Some(Some(_)) => {}
-                    _ => break,
-                }
+        for _ in 0..MAX_DRAIN {
+            match guarded_call(&mut self.panicked, &mut self.core, |p| p.poll_event()) {
+                Some(Some(_)) => {}
+                _ => break,
             }
-            for _ in 0..crate::sim::MAX_DRAIN {
-                let sent = guarded_call(&mut byz.panicked, &mut byz.core, |p| {
-                    p.poll_transmit(Timestamp(now))
-                });
-                match sent {
-                    Some(Some((conn, bytes))) => out.push((conn.0 as usize, bytes)),
-                    _ => break,
-                }
+        }
+        for _ in 0..MAX_DRAIN {
+            let sent = guarded_call(&mut self.panicked, &mut self.core, |p| {
+                p.poll_transmit(Timestamp(now))
+            });
+            match sent {
+                Some(Some((conn, bytes))) => out.push((conn.0 as usize, bytes)),
+                _ => break,
             }
-            let next = guarded_call(&mut byz.panicked, &mut byz.core, |p| p.poll_timeout())
-                .flatten()
-                .map(|t| t.0.max(now + 1));
-            match next {
-                Some(at) if byz.wake_at.is_none_or(|w| at < w) => {
-                    byz.wake_at = Some(at);
-                    Some(at)
-                }
-                _ => None,
+        }
+        let next = guarded_call(&mut self.panicked, &mut self.core, |p| p.poll_timeout())
+            .flatten()
+            .map(|t| t.0.max(now + 1));
+        let wake = match next {
+            Some(at) if self.wake_at.is_none_or(|w| at < w) => {
+                self.wake_at = Some(at);
+                Some(at)
             }
+            _ => None,
         };
-        for (to, bytes) in out {
-            if to < self.honest.len() && self.pair(h, to).connected {
-                let epoch = self.pair(h, to).epoch;
-                let at = now + self.latency_micros[h][to];
-                self.push(at, deliver(h, to, epoch, bytes, None));
-            }
-        }
-        if let Some(at) = next {
-            self.push(at, Ev::HostileWake);
-        }
+        (out, wake)
     }
+}
+
+/// A hello, then two haves and a want of [`MAX_VV_AUTHORS`] made-up authors each.
+fn giant_version_vectors(aim: &Aim, rng: &mut SimRng) -> Sends {
+    let mut out = vec![aim.hello()];
+    for _ in 0..2 {
+        let vv = made_up_vv(rng, MAX_VV_AUTHORS);
+        out.push((aim.to, Message::have(vv).encode()));
+    }
+    let vv = made_up_vv(rng, MAX_VV_AUTHORS);
+    out.push((aim.to, Message::want(vv).encode()));
+    out
 }
 
 #[cfg(test)]

@@ -10,11 +10,12 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use replication::{Mark, Op, OpId, Payload, PeerId, RejectReason};
 
-use crate::config::Sabotage;
+use crate::config::{Config, Faults, Sabotage};
+use crate::honest::{Honest, Scene};
+use crate::hostile::Hostile;
 use crate::memory;
 use crate::reference;
-use crate::report::{Memory, OpKindBytes, Report};
-use crate::sim::{Honest, QUIESCENCE_LIMIT_MICROS, START_MICROS, Scene, Simulation, short_hash};
+use crate::report::{Memory, OpKindBytes, Report, Sample, Stats, short_hash};
 
 /// Heap bytes a peer may hold besides its ops: twice the pending buffer's byte limit (its
 /// encoded ops plus their decoded form), plus room for connections and an empty scene.
@@ -23,45 +24,97 @@ pub const MEMORY_FIXED_BYTES_MAX: i64 = 2 * replication::pending::MAX_PENDING_BY
 /// scene), at its peak. Campaigns measure about 2.3 KiB; this leaves a factor of 7.
 pub const MEMORY_BYTES_PER_OP_MAX: i64 = 16 * 1024;
 
+/// How long after healing the network may take to go quiet before the run counts as stuck.
+pub const QUIESCENCE_LIMIT_MICROS: u64 = 600_000_000;
+
+/// What a run ended with, which the checkers judge.
+pub(crate) struct Ended {
+    pub(crate) config: Config,
+    pub(crate) faults: Faults,
+    pub(crate) honest: Vec<Honest>,
+    pub(crate) hostile: Option<Hostile>,
+    pub(crate) stats: Stats,
+    pub(crate) trace_hash: u64,
+    /// One-way base latency per directed link, `[from][to]`.
+    pub(crate) latency_micros: Vec<Vec<u64>>,
+    /// Virtual time of healing, since the start.
+    pub(crate) heal_micros: u64,
+    /// Virtual time of the last op delivered anywhere, since the start.
+    pub(crate) last_delivery_micros: u64,
+    /// Virtual time the run ended, since the start.
+    pub(crate) end_micros: u64,
+    /// The network did not go quiet within [`QUIESCENCE_LIMIT_MICROS`] of healing (or the
+    /// run handled too many events).
+    pub(crate) timed_out: bool,
+    /// What went wrong at restarts and joins.
+    pub(crate) restart_failures: Vec<String>,
+    /// Ops some peer synced to disk (acknowledged as durable).
+    pub(crate) durable: BTreeSet<OpId>,
+    /// Own ops a crash lost before they were synced.
+    pub(crate) lost_own: BTreeSet<OpId>,
+    /// Per flood: (messages delivered, messages accepted).
+    pub(crate) floods: Vec<(u64, u64)>,
+    pub(crate) samples: Vec<Sample>,
+}
+
 /// Runs every checker and builds the report.
-pub(crate) fn finish(sim: Simulation) -> Report {
+pub(crate) fn finish(end: Ended) -> Report {
     let mut failures = Vec::new();
-    if sim.timed_out {
+    if end.timed_out {
         failures.push(format!(
             "no quiescence within {} s of virtual time after healing",
             QUIESCENCE_LIMIT_MICROS / 1_000_000
         ));
     }
-    failures.extend(sim.restart_failures.iter().cloned());
-    if sim.stats.n_author_errors > 0 {
+    failures.extend(end.restart_failures.iter().cloned());
+    if end.stats.n_author_errors > 0 {
         // A user's edit the core would not author is an edit lost.
         failures.push(format!(
             "the core refused {} user ops: {:?}",
-            sim.stats.n_author_errors, sim.stats.author_errors
+            end.stats.n_author_errors, end.stats.author_errors
         ));
     }
-    let all_authored: Vec<OpId> = sim
+    let (reference_hash, n_lease_checked) = check_peers(&end, &mut failures);
+    check_floods(&end, &mut failures);
+    if end.hostile.as_ref().is_some_and(|h| h.byzantine.is_some()) {
+        check_erasure(&end, &mut failures);
+        check_stolen_ids(&end, &mut failures);
+        check_creations(&end, &mut failures);
+    }
+    check_cap(&end, &mut failures);
+    if end.faults.expel {
+        check_expels(&end, &mut failures);
+    }
+    check_forks(&end, &mut failures);
+    let memory = memory_figures(&end, &mut failures);
+    build_report(end, failures, reference_hash, memory, n_lease_checked)
+}
+
+/// Checks every honest peer on its own (history, refused ops, lease verdicts, fresh fold) and
+/// against the first one checked; returns that one's scene hash and the verdicts checked.
+fn check_peers(end: &Ended, failures: &mut Vec<String>) -> (Option<SceneHash>, usize) {
+    let all_authored: Vec<OpId> = end
         .honest
         .iter()
         .flat_map(|h| h.authored.iter().copied())
         .collect();
-    let forged: Vec<OpId> = sim
+    let forged: Vec<OpId> = end
         .hostile
         .as_ref()
         .map_or(Vec::new(), |h| h.forged.clone());
-    let must_refuse: Vec<OpId> = sim
+    let must_refuse: Vec<OpId> = end
         .hostile
         .as_ref()
         .and_then(|h| h.byzantine.as_ref())
         .map_or(Vec::new(), |b| b.must_refuse.clone());
     let mut reference_hash = None;
     let mut n_lease_checked = 0;
-    for (i, h) in sim.honest.iter().enumerate() {
+    for (i, h) in end.honest.iter().enumerate() {
         if let Some(p) = &h.panicked {
             failures.push(format!("peer {i} panicked: {p}"));
             continue;
         }
-        check_history(&sim, i, h, &all_authored, &forged, &mut failures);
+        check_history(end, i, h, &all_authored, &forged, failures);
         let refused = must_refuse.iter().filter(|id| h.peer.log().contains(id));
         let n_refused = refused.count();
         if n_refused > 0 {
@@ -71,7 +124,7 @@ pub(crate) fn finish(sim: Simulation) -> Report {
             ));
         }
         if h.snapshot_cut.is_none() {
-            let flip = sim.config.sabotage == Sabotage::FlipLeaseVerdict && i == 0;
+            let flip = end.config.sabotage == Sabotage::FlipLeaseVerdict && i == 0;
             let lease = reference::check(h.peer.log(), flip);
             n_lease_checked += lease.n_checked;
             if lease.n_mismatches > 0 {
@@ -82,13 +135,13 @@ pub(crate) fn finish(sim: Simulation) -> Report {
                 ));
             }
         }
-        let Some(fresh) = fresh_hash(&sim, i, h, &mut failures) else {
+        let Some(fresh) = fresh_hash(end, i, h, failures) else {
             continue;
         };
         match reference_hash {
             None => reference_hash = Some((i, fresh)),
             Some((r, hash)) => {
-                compare(&sim.honest[r], r, h, i, &mut failures);
+                compare(&end.honest[r], r, h, i, failures);
                 if hash != fresh {
                     failures.push(format!(
                         "peer {i}: scene hash {} differs from peer {r}'s {}",
@@ -99,34 +152,16 @@ pub(crate) fn finish(sim: Simulation) -> Report {
             }
         }
     }
-    check_floods(&sim, &mut failures);
-    if sim.hostile.as_ref().is_some_and(|h| h.byzantine.is_some()) {
-        check_erasure(&sim, &mut failures);
-        check_stolen_ids(&sim, &mut failures);
-        check_creations(&sim, &mut failures);
-    }
-    check_cap(&sim, &mut failures);
-    if sim.faults.expel {
-        check_expels(&sim, &mut failures);
-    }
-    check_forks(&sim, &mut failures);
-    let memory = memory_figures(&sim, &mut failures);
-    build_report(
-        sim,
-        failures,
-        reference_hash.map(|(_, h)| h),
-        memory,
-        n_lease_checked,
-    )
+    (reference_hash.map(|(_, h)| h), n_lease_checked)
 }
 
 /// Only the founder's expels counted: no honest peer is expelled anywhere, and every member
 /// peer 0 holds as expelled is expelled on every honest peer, up to the same seq, with every op
 /// of it after that seq void and inactive (the reference checks the verdicts).
-fn check_expels(sim: &Simulation, failures: &mut Vec<String>) {
-    let honest: BTreeSet<PeerId> = sim.honest.iter().map(|h| h.peer.peer_id()).collect();
-    let founders = sim.honest[0].peer.log().expelled();
-    for (i, h) in sim.honest.iter().enumerate() {
+fn check_expels(end: &Ended, failures: &mut Vec<String>) {
+    let honest: BTreeSet<PeerId> = end.honest.iter().map(|h| h.peer.peer_id()).collect();
+    let founders = end.honest[0].peer.log().expelled();
+    for (i, h) in end.honest.iter().enumerate() {
         if h.panicked.is_some() {
             continue;
         }
@@ -166,12 +201,12 @@ fn check_expels(sim: &Simulation, failures: &mut Vec<String>) {
 /// every honest peer holding an op of its key (the holder of one side got the other, by a
 /// have's tip or by asking for it by id, and passed both on). `compare` requires the same
 /// forks everywhere besides.
-fn check_forks(sim: &Simulation, failures: &mut Vec<String>) {
-    let forks = (sim.hostile.as_ref())
+fn check_forks(end: &Ended, failures: &mut Vec<String>) {
+    let forks = (end.hostile.as_ref())
         .and_then(|h| h.byzantine.as_ref())
         .map_or(&[][..], |b| &b.forks[..]);
     for (a, b) in forks {
-        let author = (sim.honest.iter())
+        let author = (end.honest.iter())
             .find_map(|h| h.peer.log().get(a).or_else(|| h.peer.log().get(b)))
             .map(replication::Op::author);
         let Some(author) = author else {
@@ -180,7 +215,7 @@ fn check_forks(sim: &Simulation, failures: &mut Vec<String>) {
         // Only when honest peers built on both sides does anyone need the other side (an
         // honest op waits for it, and is asked for it by id); else nobody sees both.
         let built_on = |side: &OpId| {
-            sim.honest.iter().any(|h| {
+            end.honest.iter().any(|h| {
                 let me = h.peer.peer_id();
                 (h.peer.log().entries()).any(|e| e.op.author() == me && e.op.deps().contains(side))
             })
@@ -188,7 +223,7 @@ fn check_forks(sim: &Simulation, failures: &mut Vec<String>) {
         if !(built_on(a) && built_on(b)) {
             continue;
         }
-        for (i, h) in sim.honest.iter().enumerate() {
+        for (i, h) in end.honest.iter().enumerate() {
             let log = h.peer.log();
             if log.version_vector().get(&author) > 0 && !log.forks().contains(&author) {
                 failures.push(format!(
@@ -201,8 +236,8 @@ fn check_forks(sim: &Simulation, failures: &mut Vec<String>) {
 }
 
 /// No honest scene holds an object the byzantine member created under an honest peer's id.
-fn check_stolen_ids(sim: &Simulation, failures: &mut Vec<String>) {
-    for (i, h) in sim.honest.iter().enumerate() {
+fn check_stolen_ids(end: &Ended, failures: &mut Vec<String>) {
+    for (i, h) in end.honest.iter().enumerate() {
         let stolen = (h.scene.scene().scene().objects())
             .filter(|(_, o)| o.object.data().name == crate::byzantine::STOLEN_NAME)
             .count();
@@ -217,9 +252,9 @@ fn check_stolen_ids(sim: &Simulation, failures: &mut Vec<String>) {
 /// No honest creation of an object under its own id is refused: nobody's lease counts on an
 /// object before its creation (the byzantine member strongly acquires the ids honest users
 /// take next).
-fn check_creations(sim: &Simulation, failures: &mut Vec<String>) {
-    let honest: BTreeSet<PeerId> = sim.honest.iter().map(|h| h.peer.peer_id()).collect();
-    for (i, h) in sim.honest.iter().enumerate() {
+fn check_creations(end: &Ended, failures: &mut Vec<String>) {
+    let honest: BTreeSet<PeerId> = end.honest.iter().map(|h| h.peer.peer_id()).collect();
+    for (i, h) in end.honest.iter().enumerate() {
         let refused = (h.peer.log().entries())
             .filter(|e| honest.contains(&e.op.author()) && e.mark != Mark::Effective)
             .filter(|e| {
@@ -242,8 +277,8 @@ fn check_creations(sim: &Simulation, failures: &mut Vec<String>) {
 
 /// In a session that binds its authors, no honest log holds more bytes of ops than the
 /// session's cap, whatever the members and their Sybil keys write.
-fn check_cap(sim: &Simulation, failures: &mut Vec<String>) {
-    for (i, h) in sim.honest.iter().enumerate() {
+fn check_cap(end: &Ended, failures: &mut Vec<String>) {
+    for (i, h) in end.honest.iter().enumerate() {
         let log = h.peer.log();
         if let Some(cap) = log.founder_budget()
             && log.n_bytes() > cap
@@ -259,7 +294,7 @@ fn check_cap(sim: &Simulation, failures: &mut Vec<String>) {
 /// Per-peer history: panics, causal order, pending, authored and durable ops present, ops
 /// lost before they were synced and forged ops absent.
 fn check_history(
-    sim: &Simulation,
+    end: &Ended,
     i: usize,
     h: &Honest,
     all_authored: &[OpId],
@@ -288,13 +323,13 @@ fn check_history(
             // Past its author's fork an op counts for nothing, and a side nobody built on need
             // not reach every peer.
             count(
-                &mut sim.durable.iter().filter(|id| !past_fork(sim, log, id)),
+                &mut end.durable.iter().filter(|id| !past_fork(end, log, id)),
                 false,
             ),
             "ops missing that a peer had synced to disk",
         ),
         (
-            count(&mut sim.lost_own.iter(), true),
+            count(&mut end.lost_own.iter(), true),
             "ops present that their author lost unsynced in a crash (sent before durable)",
         ),
         (count(&mut forged.iter(), true), "forged ops accepted"),
@@ -307,20 +342,15 @@ fn check_history(
 }
 
 /// True if `id`, held by some honest peer, is at or past its author's fork as `log` knows it.
-fn past_fork(sim: &Simulation, log: &Log<ShapePayload>, id: &OpId) -> bool {
-    let op = sim.honest.iter().find_map(|h| h.peer.log().get(id));
+fn past_fork(end: &Ended, log: &Log<ShapePayload>, id: &OpId) -> bool {
+    let op = end.honest.iter().find_map(|h| h.peer.log().get(id));
     op.is_some_and(|op| log.forks().covers(&op.author(), op.seq()))
 }
 
 /// A fresh fold of the peer's log, compared with its incremental scene.
-fn fresh_hash(
-    sim: &Simulation,
-    i: usize,
-    h: &Honest,
-    failures: &mut Vec<String>,
-) -> Option<SceneHash> {
+fn fresh_hash(end: &Ended, i: usize, h: &Honest, failures: &mut Vec<String>) -> Option<SceneHash> {
     let log = h.peer.log();
-    let fresh = if sim.config.sabotage == Sabotage::ReverseFold && i == 1 {
+    let fresh = if end.config.sabotage == Sabotage::ReverseFold && i == 1 {
         Some(reversed_fold_hash(log))
     } else {
         memory::with_slot(0, || Scene::fold(log).ok().map(|s| s.scene_hash()))
@@ -408,98 +438,121 @@ impl Culprit {
 /// causal past (Lamport times grow along it), so an effective op must stay effective, may be
 /// inactive only through an undo that has it in its causal past (its author's), and its object
 /// may be deleted only by a delete that has its creation in its causal past.
-fn check_erasure(sim: &Simulation, failures: &mut Vec<String>) {
-    let honest_ids: BTreeSet<PeerId> = sim.honest.iter().map(|h| h.peer.peer_id()).collect();
-    let checked: Vec<OpId> = sim
+fn check_erasure(end: &Ended, failures: &mut Vec<String>) {
+    let honest_ids: BTreeSet<PeerId> = end.honest.iter().map(|h| h.peer.peer_id()).collect();
+    let checked: Vec<OpId> = end
         .honest
         .iter()
         .flat_map(|h| h.effective_at_author.iter().copied())
-        .filter(|id| !sim.lost_own.contains(id))
+        .filter(|id| !end.lost_own.contains(id))
         .collect();
-    for (i, h) in sim.honest.iter().enumerate() {
+    for (i, h) in end.honest.iter().enumerate() {
         if h.panicked.is_some() {
             continue;
         }
         let log = h.peer.log();
-        // Effective deletes not undone per object, with their positions in the linear order.
-        let mut deletes: BTreeMap<u64, Vec<(usize, &Op<ShapePayload>)>> = BTreeMap::new();
-        let mut position = BTreeMap::new();
-        for (pos, e) in log.entries().enumerate() {
-            position.insert(e.op.id(), pos);
-            if let ShapePayload::Delete { object } = e.op.payload()
-                && e.mark == Mark::Effective
-                && !log.fold_state().is_undone(&e.op.id())
-            {
-                deletes.entry(*object).or_default().push((pos, e.op));
-            }
-        }
+        let (deletes, position) = standing_deletes(log);
         let mut found: Vec<(Culprit, String)> = Vec::new();
         for id in &checked {
             let (Some(mark), Some(op)) = (log.mark(id), log.get(id)) else {
                 continue;
             };
-            let honest = |author: &PeerId| honest_ids.contains(author);
-            let verdict = match mark {
-                Mark::Rejected(
-                    RejectReason::LeaseHeld { holder } | RejectReason::StrongLeaseHeld { holder },
-                ) => Some(if honest(&holder) {
-                    Culprit::HonestLease
-                } else {
-                    Culprit::HostileLease
-                }),
-                Mark::Rejected(_) => Some(Culprit::Other),
-                Mark::Effective
-                    if !log.is_active(id)
-                        && !undone_by_successor(log, op)
-                        && !deleted_by_successor(log, op) =>
-                {
-                    Some(Culprit::Other)
-                }
-                Mark::Effective => None,
-            };
-            // An inactive edit with a delete of its object after it that never saw it: blame
-            // that delete.
-            let object = edited_object(op.payload());
             let at = position.get(id).copied().unwrap_or(0);
-            let erasing = deletes
-                .get(&object.unwrap_or(u64::MAX))
-                .into_iter()
-                .flatten()
-                .find(|(pos, d)| *pos > at && !in_causal_past(log, d, op));
-            let verdict = match (verdict, erasing) {
-                (Some(Culprit::Other), Some((_, d))) if honest(&d.author()) => {
-                    Some(Culprit::HonestDelete)
-                }
-                (Some(Culprit::Other), Some(_)) => Some(Culprit::HostileDelete),
-                (verdict, _) => verdict,
-            };
-            if let Some(culprit) = verdict {
+            if let Some(culprit) = culprit(log, op, mark, at, &deletes, &honest_ids) {
                 found.push((culprit, format!("op {id} by {}: {mark:?}", op.author())));
             }
         }
-        for hostile in [true, false] {
-            let mine: Vec<&(Culprit, String)> = found
-                .iter()
-                .filter(|(c, _)| c.by_hostile() == hostile)
-                .collect();
-            let Some((_, first)) = mine.first() else {
-                continue;
-            };
-            let mut kinds: BTreeMap<Culprit, usize> = BTreeMap::new();
-            for (c, _) in &mine {
-                *kinds.entry(*c).or_default() += 1;
-            }
-            let by = if hostile {
-                "hostile members' ops"
-            } else {
-                "honest peers' concurrent ops (or other verdicts)"
-            };
-            failures.push(format!(
-                "peer {i}: {} honest ops effective at their authors erased by {by} without them \
-                 in their causal past {kinds:?}; first: {first}",
-                mine.len()
-            ));
+        note_erasures(i, &found, failures);
+    }
+}
+
+/// Effective deletes not undone, per object, with their positions in the linear order.
+type Deletes<'a> = BTreeMap<u64, Vec<(usize, &'a Op<ShapePayload>)>>;
+
+/// The standing deletes of `log`, and the position of every op in its linear order.
+fn standing_deletes(log: &Log<ShapePayload>) -> (Deletes<'_>, BTreeMap<OpId, usize>) {
+    let mut deletes: Deletes<'_> = BTreeMap::new();
+    let mut position = BTreeMap::new();
+    for (pos, e) in log.entries().enumerate() {
+        position.insert(e.op.id(), pos);
+        if let ShapePayload::Delete { object } = e.op.payload()
+            && e.mark == Mark::Effective
+            && !log.fold_state().is_undone(&e.op.id())
+        {
+            deletes.entry(*object).or_default().push((pos, e.op));
         }
+    }
+    (deletes, position)
+}
+
+/// What erased `op` (marked `mark`, at position `at` of `log`'s order), effective at its
+/// author's peer, if something did.
+fn culprit(
+    log: &Log<ShapePayload>,
+    op: &Op<ShapePayload>,
+    mark: Mark,
+    at: usize,
+    deletes: &Deletes<'_>,
+    honest_ids: &BTreeSet<PeerId>,
+) -> Option<Culprit> {
+    let honest = |author: &PeerId| honest_ids.contains(author);
+    let verdict = match mark {
+        Mark::Rejected(
+            RejectReason::LeaseHeld { holder } | RejectReason::StrongLeaseHeld { holder },
+        ) => Some(if honest(&holder) {
+            Culprit::HonestLease
+        } else {
+            Culprit::HostileLease
+        }),
+        Mark::Rejected(_) => Some(Culprit::Other),
+        Mark::Effective
+            if !log.is_active(&op.id())
+                && !undone_by_successor(log, op)
+                && !deleted_by_successor(log, op) =>
+        {
+            Some(Culprit::Other)
+        }
+        Mark::Effective => None,
+    };
+    // An inactive edit with a delete of its object after it that never saw it: blame that
+    // delete.
+    let object = edited_object(op.payload());
+    let erasing = deletes
+        .get(&object.unwrap_or(u64::MAX))
+        .into_iter()
+        .flatten()
+        .find(|(pos, d)| *pos > at && !in_causal_past(log, d, op));
+    match (verdict, erasing) {
+        (Some(Culprit::Other), Some((_, d))) if honest(&d.author()) => Some(Culprit::HonestDelete),
+        (Some(Culprit::Other), Some(_)) => Some(Culprit::HostileDelete),
+        (verdict, _) => verdict,
+    }
+}
+
+/// Reports the erasures `found` on peer `i`, by hostile members and by honest peers.
+fn note_erasures(i: usize, found: &[(Culprit, String)], failures: &mut Vec<String>) {
+    for hostile in [true, false] {
+        let mine: Vec<&(Culprit, String)> = found
+            .iter()
+            .filter(|(c, _)| c.by_hostile() == hostile)
+            .collect();
+        let Some((_, first)) = mine.first() else {
+            continue;
+        };
+        let mut kinds: BTreeMap<Culprit, usize> = BTreeMap::new();
+        for (c, _) in &mine {
+            *kinds.entry(*c).or_default() += 1;
+        }
+        let by = if hostile {
+            "hostile members' ops"
+        } else {
+            "honest peers' concurrent ops (or other verdicts)"
+        };
+        failures.push(format!(
+            "peer {i}: {} honest ops effective at their authors erased by {by} without them \
+             in their causal past {kinds:?}; first: {first}",
+            mine.len()
+        ));
     }
 }
 
@@ -573,8 +626,8 @@ fn in_causal_past(
 }
 
 /// The rate limit held: no flood got more than a burst's worth of messages accepted.
-fn check_floods(sim: &Simulation, failures: &mut Vec<String>) {
-    for (f, (delivered, accepted)) in sim.floods.iter().enumerate() {
+fn check_floods(end: &Ended, failures: &mut Vec<String>) {
+    for (f, (delivered, accepted)) in end.floods.iter().enumerate() {
         if *accepted > MAX_MESSAGE_BURST {
             failures.push(format!(
                 "flood {f}: {accepted} of {delivered} messages accepted at one instant, over \
@@ -585,11 +638,11 @@ fn check_floods(sim: &Simulation, failures: &mut Vec<String>) {
 }
 
 /// Memory per peer, checked against the named bounds (only with the counting allocator).
-fn memory_figures(sim: &Simulation, failures: &mut Vec<String>) -> Option<Memory> {
-    if !memory::installed() || sim.honest.is_empty() {
+fn memory_figures(end: &Ended, failures: &mut Vec<String>) -> Option<Memory> {
+    if !memory::installed() || end.honest.is_empty() {
         return None;
     }
-    let n = sim.honest.len() as f64;
+    let n = end.honest.len() as f64;
     let mut m = Memory {
         peak_bytes_max: 0,
         peak_bytes_mean: 0.0,
@@ -597,7 +650,7 @@ fn memory_figures(sim: &Simulation, failures: &mut Vec<String>) -> Option<Memory
         peak_bytes_per_op_max: 0.0,
         final_bytes_per_op_mean: 0.0,
     };
-    for (i, h) in sim.honest.iter().enumerate() {
+    for (i, h) in end.honest.iter().enumerate() {
         let n_ops = h.peer.log().len().max(1) as i64;
         let (peak, last) = (h.peak_live_bytes, h.live_bytes());
         m.peak_bytes_max = m.peak_bytes_max.max(peak);
@@ -617,47 +670,47 @@ fn memory_figures(sim: &Simulation, failures: &mut Vec<String>) -> Option<Memory
 }
 
 fn build_report(
-    sim: Simulation,
+    end: Ended,
     failures: Vec<String>,
     scene_hash: Option<SceneHash>,
     memory: Option<Memory>,
     n_lease_verdicts_checked: usize,
 ) -> Report {
-    let log0 = sim.honest.first().map(|h| h.peer.log());
-    let n_hostile_ops_accepted = match (&sim.hostile, log0) {
+    let log0 = end.honest.first().map(|h| h.peer.log());
+    let n_hostile_ops_accepted = match (&end.hostile, log0) {
         (Some(hostile), Some(log)) => hostile.own_ids.iter().filter(|id| log.contains(id)).count(),
         _ => 0,
     };
     let n_lease_rejected = log0.map_or(0, |l| reference::check(l, false).n_rejected);
-    let mean_latency = mean_latency_micros(&sim.latency_micros, sim.config.n_peers);
+    let mean_latency = mean_latency_micros(&end.latency_micros, end.config.n_peers);
     Report {
         n_log_ops: log0.map_or(0, Log::len),
         op_bytes: log0.map_or(Vec::new(), op_bytes),
         scene_hash,
-        convergence_micros: sim.last_delivery_at.saturating_sub(sim.heal_at),
-        mean_rtt_micros: 2 * mean_latency + sim.faults.jitter_micros,
-        virtual_end_micros: sim.now - START_MICROS,
-        heal_micros: sim.heal_at - START_MICROS,
-        trace_hash: sim.trace.value(),
+        convergence_micros: end.last_delivery_micros.saturating_sub(end.heal_micros),
+        mean_rtt_micros: 2 * mean_latency + end.faults.jitter_micros,
+        virtual_end_micros: end.end_micros,
+        heal_micros: end.heal_micros,
+        trace_hash: end.trace_hash,
         memory,
         n_lease_verdicts_checked,
         n_lease_rejected,
-        n_durable_ops: sim.durable.len(),
-        n_lost_own_ops: sim.lost_own.len(),
+        n_durable_ops: end.durable.len(),
+        n_lost_own_ops: end.lost_own.len(),
         n_hostile_ops_accepted,
-        n_flood_accepted_max: sim.floods.iter().map(|f| f.1).max().unwrap_or(0),
-        n_refold_holds: (sim.honest.iter())
+        n_flood_accepted_max: end.floods.iter().map(|f| f.1).max().unwrap_or(0),
+        n_refold_holds: (end.honest.iter())
             .map(|h| h.peer.log().stats().n_held_for_refold)
             .sum(),
-        n_void_ops: (sim.honest[0].peer.log().entries())
-            .filter(|e| sim.honest[0].peer.log().is_void(&e.op.id()))
+        n_void_ops: (end.honest[0].peer.log().entries())
+            .filter(|e| end.honest[0].peer.log().is_void(&e.op.id()))
             .count(),
         session_bytes: (log0.and_then(Log::founder_budget)).zip(log0.map(Log::n_bytes)),
-        catch_up: sim.honest.iter().map(|h| h.catch_up).collect(),
+        catch_up: end.honest.iter().map(|h| h.catch_up).collect(),
         failures,
-        samples: sim.samples,
-        stats: sim.stats,
-        config: sim.config,
+        samples: end.samples,
+        stats: end.stats,
+        config: end.config,
     }
 }
 
@@ -674,7 +727,7 @@ fn kind(p: &ShapePayload) -> &'static str {
         ShapePayload::Edit { .. } => "tool edit",
         ShapePayload::Undo(_) | ShapePayload::Redo(_) => "undo",
         ShapePayload::Chat(_) => "chat",
-        ShapePayload::Acquire { .. } | ShapePayload::Release { .. } => "lease",
+        ShapePayload::Lease(_) => "lease",
         _ => "other",
     }
 }

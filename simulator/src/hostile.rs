@@ -21,14 +21,17 @@
 //! instant to one peer, far over the per-connection rate limit, which must hold.
 
 use replication::op::OpFields;
+use replication::payload::LeaseAction;
 use replication::shape::ShapePayload;
 use replication::sync::message::{MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION};
 use replication::sync::state::MAX_MESSAGE_BURST;
 use replication::{Keypair, Op, OpId, PeerId, Timestamp};
 
 use crate::byzantine::Byzantine;
+use crate::honest::Honest;
+use crate::report::Stats;
 use crate::rng::SimRng;
-use crate::sim::{SESSION_ID, Simulation, deliver};
+use crate::session::SESSION_ID;
 use crate::workload::{HOT_OBJECT, User};
 
 /// Most messages the hostile peer keeps for replays.
@@ -150,11 +153,11 @@ impl Hostile {
             return false;
         }
         let payload = if rng.chance(500) {
-            ShapePayload::Acquire {
+            ShapePayload::Lease(LeaseAction::Acquire {
                 object: HOT_OBJECT,
                 strong: rng.chance(500),
                 ttl_micros: 1 + rng.below(5_000_000),
-            }
+            })
         } else {
             match self.user.next(rng, HOSTILE_USER_IDX, &[HOT_OBJECT]) {
                 Some(p) => p,
@@ -177,57 +180,18 @@ impl Hostile {
         self.own.push(op.encoded().to_vec());
         true
     }
-}
 
-impl Simulation {
-    /// Honest peers the hostile peer can reach now.
-    fn hostile_targets(&mut self, h: usize) -> Vec<usize> {
-        (0..self.config.n_peers)
-            .filter(|t| self.online(*t) && self.pair(*t, h).connected)
-            .collect()
-    }
-
-    /// The hostile peer sends one of its tricks to a random reachable peer.
-    pub(crate) fn hostile_send(&mut self) {
-        let Some(h) = self.hostile_idx() else { return };
-        let targets = self.hostile_targets(h);
-        if targets.is_empty() {
-            return;
-        }
-        // Half of a byzantine member's tricks are crafted attacks (other presets draw nothing
-        // here, so their runs are unchanged).
-        if self.hostile.as_ref().is_some_and(|x| x.byzantine.is_some())
-            && self.net.chance(500)
-            && self.byzantine_send(h, &targets)
-        {
-            return;
-        }
-        let to = targets[self.net.index(targets.len())];
-        let n_kinds = if self.faults.forgery { 7 } else { 5 };
-        let kind = self.net.below(n_kinds);
-        let messages = match self.hostile_messages(kind) {
-            Some(m) => m,
-            None => vec![self.garbage()],
-        };
-        let epoch = self.pair(h, to).epoch;
-        let at = self.now + self.latency_micros[h][to];
-        for bytes in messages {
-            self.stats.n_hostile_messages += 1;
-            self.push(at, deliver(h, to, epoch, bytes, None));
-        }
-    }
-
-    fn garbage(&mut self) -> Vec<u8> {
-        let mut b = vec![0u8; 1 + self.net.index(512)];
-        self.net.fill(&mut b);
-        b
-    }
-
-    /// The messages of trick `kind` (`None` if it has nothing for that trick yet).
-    fn hostile_messages(&mut self, kind: u64) -> Option<Vec<Vec<u8>>> {
-        let hostile = self.hostile.as_mut()?;
-        let rng = &mut self.net;
-        let n_captured = hostile.captured.len();
+    /// The messages of trick `kind` (`None` if it has nothing for that trick yet), to one of
+    /// the `honest` peers; forged and own ops it makes are counted in `stats`.
+    pub(crate) fn messages(
+        &mut self,
+        kind: u64,
+        rng: &mut SimRng,
+        honest: &[Honest],
+        now: u64,
+        stats: &mut Stats,
+    ) -> Option<Vec<Vec<u8>>> {
+        let n_captured = self.captured.len();
         let captured = |rng: &mut SimRng, hostile: &Hostile| {
             (n_captured > 0).then(|| hostile.captured[rng.index(n_captured)].clone())
         };
@@ -238,9 +202,9 @@ impl Simulation {
                 rng.fill(&mut b[1..64]);
                 vec![b]
             }
-            2 => vec![captured(rng, hostile)?],
+            2 => vec![captured(rng, self)?],
             3 => {
-                let mut b = captured(rng, hostile)?;
+                let mut b = captured(rng, self)?;
                 let i = rng.index(b.len());
                 if let Some(x) = b.get_mut(i) {
                     *x ^= 1 << rng.below(8);
@@ -248,43 +212,30 @@ impl Simulation {
                 vec![b]
             }
             4 => {
-                let mut b = captured(rng, hostile)?;
+                let mut b = captured(rng, self)?;
                 b.truncate(rng.index(b.len()));
                 vec![b]
             }
             5 => {
-                let victim = self.honest[rng.index(self.honest.len())].peer.peer_id();
-                let op = hostile.forge(rng, victim, self.now)?;
-                self.stats.n_forged_ops += 1;
-                vec![hostile.hello(), hostile.batch(vec![op])]
+                let victim = honest[rng.index(honest.len())].peer.peer_id();
+                let op = self.forge(rng, victim, now)?;
+                stats.n_forged_ops += 1;
+                vec![self.hello(), self.batch(vec![op])]
             }
             _ => {
-                if hostile.author(rng, self.now) {
-                    self.stats.n_hostile_ops += 1;
+                if self.author(rng, now) {
+                    stats.n_hostile_ops += 1;
                 }
-                let ops = hostile.own.clone();
-                vec![hostile.hello(), hostile.batch(ops)]
+                let ops = self.own.clone();
+                vec![self.hello(), self.batch(ops)]
             }
         })
     }
+}
 
-    /// Floods one reachable peer with [`FLOOD_MESSAGES`] small messages at one instant.
-    pub(crate) fn hostile_flood(&mut self) {
-        let Some(h) = self.hostile_idx() else { return };
-        let targets = self.hostile_targets(h);
-        if targets.is_empty() {
-            return;
-        }
-        let to = targets[self.net.index(targets.len())];
-        let epoch = self.pair(h, to).epoch;
-        let at = self.now + self.latency_micros[h][to];
-        let flood = self.floods.len();
-        self.floods.push((0, 0));
-        for _ in 0..FLOOD_MESSAGES {
-            let mut b = vec![0u8; 8];
-            self.net.fill(&mut b);
-            self.stats.n_hostile_messages += 1;
-            self.push(at, deliver(h, to, epoch, b, Some(flood)));
-        }
-    }
+/// Random bytes, 1 to 512 of them.
+pub(crate) fn garbage(rng: &mut SimRng) -> Vec<u8> {
+    let mut b = vec![0u8; 1 + rng.index(512)];
+    rng.fill(&mut b);
+    b
 }

@@ -8,8 +8,9 @@ use replication::shape::{ShapePayload, ShapeScene};
 use replication::snapshot::Snapshot;
 use replication::{Keypair, Peer};
 
+use crate::honest::{Honest, Scene};
 use crate::memory;
-use crate::sim::{Honest, SESSION_ID, Scene};
+use crate::session::SESSION_ID;
 
 /// What a snapshot join gives the joiner: the snapshot's bytes (kept beside its store), the
 /// cut, the peer and its scene.

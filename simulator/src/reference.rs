@@ -37,6 +37,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use replication::lease::{MAX_LEASE_TTL_MICROS, MAX_LIVE_LEASES_PER_AUTHOR};
+use replication::payload::LeaseAction;
 use replication::shape::ShapePayload;
 use replication::{Log, Mark, OpId, Payload, PeerId, RejectReason};
 
@@ -100,16 +101,16 @@ fn kind(p: &ShapePayload) -> Kind {
         | ShapePayload::Part { object, .. }
         | ShapePayload::Assemble { object, .. } => Kind::Edit(obj(*object)),
         ShapePayload::SetGroup { group, .. } => Kind::Edit(group | GROUP_LEASE_BIT),
-        ShapePayload::Acquire {
+        ShapePayload::Lease(LeaseAction::Acquire {
             object,
             strong,
             ttl_micros,
-        } => Kind::Acquire {
+        }) => Kind::Acquire {
             object: obj(*object),
             strong: *strong,
             ttl: *ttl_micros,
         },
-        ShapePayload::Release { object } => Kind::Release(obj(*object)),
+        ShapePayload::Lease(LeaseAction::Release { object }) => Kind::Release(obj(*object)),
         ShapePayload::Undo(t) => Kind::Undo(*t),
         ShapePayload::Redo(t) => Kind::Redo(*t),
         ShapePayload::Chat(_) | ShapePayload::Member(_) | ShapePayload::Admit(_) => {
@@ -256,35 +257,15 @@ impl Claims {
 /// `flip_first_rejected` the peer's first lease-rejected op is read as effective (the
 /// checker's planted-bug test).
 pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
+    let replay = Replay::new(log);
     let mut rules = Rules::default();
     let mut out = LeaseCheck::default();
-    let mut observed = Vec::new();
+    let mut observed: Vec<Observed> = Vec::new();
     let mut flipped = !flip_first_rejected;
-    let entries: Vec<_> = log.entries().collect();
-    let forks = forks(&entries);
-    let forked = |op: &replication::Op<ShapePayload>| {
-        forks.get(&op.author()).is_some_and(|f| op.seq() >= *f)
-    };
-    let pasts = causal_pasts(log, &entries, &forks);
-    let membership = membership_ops(log, &entries);
-    let void = void_ops(&entries, &pasts, &membership);
-    // Whether `member` is expelled in the causal past of the op at `pos` (itself included).
-    let expelled_at = |pos: usize, member: &PeerId| {
-        let saw = |p: usize, q: usize| p == q || pasts[p].contains(q);
-        membership.get(member).is_some_and(|ops| {
-            ops.iter().any(|&(e, expel)| {
-                expel
-                    && saw(pos, e)
-                    && !ops
-                        .iter()
-                        .any(|&(r, expel)| !expel && saw(pos, r) && saw(r, e))
-            })
-        })
-    };
     // Per object, the positions of its lease ops (acquires and releases).
     let mut lease_ops: BTreeMap<u64, Vec<usize>> = BTreeMap::new();
     let mut claims = Claims::default();
-    for (pos, entry) in entries.iter().enumerate() {
+    for (pos, entry) in replay.entries.iter().enumerate() {
         let op = entry.op;
         let k = kind(op.payload());
         let object = match k {
@@ -293,52 +274,16 @@ pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
             Kind::Independent => None,
         };
         if let Some(object) = object {
-            // The lease its causal past gives the object, folded from scratch over the lease
-            // ops there, but those refused for their own reasons (counted in no view).
-            let mut seen = Rules::default();
-            for &p in lease_ops.get(&object).into_iter().flatten() {
-                let l = entries[p].op;
-                let void = matches!(observed[p], (_, Mark::Rejected(r), _) if r.voids_lease_op());
-                if pasts[pos].contains(p) && !void && !expelled_at(p, &l.author()) && !forked(l) {
-                    let exempt = |holder: &PeerId| expelled_at(p, holder);
-                    let _ = seen.verdict(l.author(), l.timestamp().0, &kind(l.payload()), &exempt);
-                }
-            }
-            match seen.leases.get(&object) {
-                Some(lease) => rules.leases.insert(object, *lease),
+            let ops = lease_ops.get(&object).map_or(&[][..], Vec::as_slice);
+            match replay.lease_in_past(pos, object, ops, &observed) {
+                Some(lease) => rules.leases.insert(object, lease),
                 None => rules.leases.remove(&object),
             };
             if matches!(k, Kind::Acquire { .. } | Kind::Release(_)) {
                 lease_ops.entry(object).or_default().push(pos);
             }
         }
-        let exempt = |holder: &PeerId| expelled_at(pos, holder);
-        // An acquire counts once an effective creation of its object is in its past.
-        let created = |object: u64| {
-            (0..pos).any(|p| {
-                let c = entries[p].op;
-                matches!(kind(c.payload()), Kind::Edit(o) if o == object)
-                    && c.payload().creates(&c.author())
-                    && observed[p].1 == Mark::Effective
-                    && pasts[pos].contains(p)
-            })
-        };
-        let expected = if forked(op) {
-            Mark::Rejected(RejectReason::Forked)
-        } else if expelled_at(pos, &op.author()) {
-            Mark::Rejected(RejectReason::Expelled)
-        } else if matches!(k, Kind::Acquire { object, .. } if !created(object)) {
-            Mark::Rejected(RejectReason::UnknownObject)
-        } else if let Kind::Acquire { object, .. } = k
-            && claims.over_cap(op.author(), object, op.timestamp().0)
-        {
-            Mark::Rejected(RejectReason::TooManyLeases)
-        } else {
-            match rules.verdict(op.author(), op.timestamp().0, &k, &exempt) {
-                Ok(()) => Mark::Effective,
-                Err(reason) => Mark::Rejected(reason),
-            }
-        };
+        let expected = replay.expected(pos, &k, &mut rules, &claims, &observed);
         claims.follow(op.author(), op.timestamp().0, &k, expected);
         let mut mark = entry.mark;
         if !flipped && matches!(mark, Mark::Rejected(RejectReason::LeaseHeld { .. })) {
@@ -366,36 +311,162 @@ pub fn check(log: &Log<ShapePayload>, flip_first_rejected: bool) -> LeaseCheck {
         }
         observed.push((op.id(), expected, entry.active));
     }
-    // Deletes that stand hide the edits of their object they saw.
-    let mut hidden = BTreeSet::new();
-    for (pos, entry) in entries.iter().enumerate() {
-        let ShapePayload::Delete { object } = entry.op.payload() else {
-            continue;
-        };
-        let stands = observed[pos].1 == Mark::Effective
-            && !rules.undone.contains(&observed[pos].0)
-            && !void.contains(pos);
-        if !stands {
-            continue;
-        }
-        for (p, e) in entries[..pos].iter().enumerate() {
-            let same =
-                matches!(kind(e.op.payload()), Kind::Edit(o) if o == *object & !GROUP_LEASE_BIT);
-            if same && pasts[pos].contains(p) {
-                hidden.insert(e.op.id());
-            }
-        }
-    }
+    let hidden = replay.hidden(&observed, &rules.undone);
     for (pos, (id, expected, active)) in observed.into_iter().enumerate() {
         let should = expected == Mark::Effective
             && !rules.undone.contains(&id)
             && !hidden.contains(&id)
-            && !void.contains(pos);
+            && !replay.void.contains(pos);
         if active != should {
             out.note(format!("op {id}: active {active}, the rules say {should}"));
         }
     }
     out
+}
+
+/// An op replayed: its id, the verdict the rules give it, and whether the peer holds it active.
+type Observed = (OpId, Mark, bool);
+
+/// What the replay reads from a log before it walks the order.
+struct Replay<'a> {
+    /// The log's entries, in its linear order.
+    entries: Vec<replication::log::Entry<'a, ShapePayload>>,
+    /// Per forked author, its lowest forked seq.
+    forks: BTreeMap<PeerId, u64>,
+    /// Each entry's causal past.
+    pasts: Vec<Positions>,
+    /// Per member, the membership ops that count.
+    membership: BTreeMap<PeerId, Vec<(usize, bool)>>,
+    /// The void ops.
+    void: Positions,
+}
+
+impl<'a> Replay<'a> {
+    fn new(log: &'a Log<ShapePayload>) -> Replay<'a> {
+        let entries: Vec<_> = log.entries().collect();
+        let forks = forks(&entries);
+        let pasts = causal_pasts(log, &entries, &forks);
+        let membership = membership_ops(log, &entries);
+        let void = void_ops(&entries, &pasts, &membership);
+        Replay {
+            entries,
+            forks,
+            pasts,
+            membership,
+            void,
+        }
+    }
+
+    /// Whether `op` is at or past its author's fork.
+    fn forked(&self, op: &replication::Op<ShapePayload>) -> bool {
+        self.forks.get(&op.author()).is_some_and(|f| op.seq() >= *f)
+    }
+
+    /// Whether `member` is expelled in the causal past of the op at `pos` (itself included).
+    fn expelled_at(&self, pos: usize, member: &PeerId) -> bool {
+        let saw = |p: usize, q: usize| p == q || self.pasts[p].contains(q);
+        self.membership.get(member).is_some_and(|ops| {
+            ops.iter().any(|&(e, expel)| {
+                expel
+                    && saw(pos, e)
+                    && !ops
+                        .iter()
+                        .any(|&(r, expel)| !expel && saw(pos, r) && saw(r, e))
+            })
+        })
+    }
+
+    /// The lease the causal past of the op at `pos` gives `object`, folded from scratch over
+    /// the object's lease ops `lease_ops` there, but those refused for their own reasons
+    /// (counted in no view).
+    fn lease_in_past(
+        &self,
+        pos: usize,
+        object: u64,
+        lease_ops: &[usize],
+        observed: &[Observed],
+    ) -> Option<Lease> {
+        let mut seen = Rules::default();
+        for &p in lease_ops {
+            let l = self.entries[p].op;
+            let void = matches!(observed[p], (_, Mark::Rejected(r), _) if r.voids_lease_op());
+            if self.pasts[pos].contains(p)
+                && !void
+                && !self.expelled_at(p, &l.author())
+                && !self.forked(l)
+            {
+                let exempt = |holder: &PeerId| self.expelled_at(p, holder);
+                let _ = seen.verdict(l.author(), l.timestamp().0, &kind(l.payload()), &exempt);
+            }
+        }
+        seen.leases.get(&object).copied()
+    }
+
+    /// Whether an effective creation of `object` is in the causal past of the op at `pos`.
+    fn created(&self, pos: usize, object: u64, observed: &[Observed]) -> bool {
+        (0..pos).any(|p| {
+            let c = self.entries[p].op;
+            matches!(kind(c.payload()), Kind::Edit(o) if o == object)
+                && c.payload().creates(&c.author())
+                && observed[p].1 == Mark::Effective
+                && self.pasts[pos].contains(p)
+        })
+    }
+
+    /// The verdict the rules give the op at `pos`, of kind `k`.
+    fn expected(
+        &self,
+        pos: usize,
+        k: &Kind,
+        rules: &mut Rules,
+        claims: &Claims,
+        observed: &[Observed],
+    ) -> Mark {
+        let op = self.entries[pos].op;
+        let exempt = |holder: &PeerId| self.expelled_at(pos, holder);
+        if self.forked(op) {
+            Mark::Rejected(RejectReason::Forked)
+        } else if self.expelled_at(pos, &op.author()) {
+            Mark::Rejected(RejectReason::Expelled)
+        } else if matches!(*k, Kind::Acquire { object, .. } if !self.created(pos, object, observed))
+        {
+            // An acquire counts once an effective creation of its object is in its past.
+            Mark::Rejected(RejectReason::UnknownObject)
+        } else if let Kind::Acquire { object, .. } = *k
+            && claims.over_cap(op.author(), object, op.timestamp().0)
+        {
+            Mark::Rejected(RejectReason::TooManyLeases)
+        } else {
+            match rules.verdict(op.author(), op.timestamp().0, k, &exempt) {
+                Ok(()) => Mark::Effective,
+                Err(reason) => Mark::Rejected(reason),
+            }
+        }
+    }
+
+    /// The edits hidden by deletes that stand (effective, not undone, not void): those of
+    /// their object they saw.
+    fn hidden(&self, observed: &[Observed], undone: &BTreeSet<OpId>) -> BTreeSet<OpId> {
+        let mut hidden = BTreeSet::new();
+        for (pos, entry) in self.entries.iter().enumerate() {
+            let ShapePayload::Delete { object } = entry.op.payload() else {
+                continue;
+            };
+            let stands = observed[pos].1 == Mark::Effective
+                && !undone.contains(&observed[pos].0)
+                && !self.void.contains(pos);
+            if !stands {
+                continue;
+            }
+            for (p, e) in self.entries[..pos].iter().enumerate() {
+                let same = matches!(kind(e.op.payload()), Kind::Edit(o) if o == *object & !GROUP_LEASE_BIT);
+                if same && self.pasts[pos].contains(p) {
+                    hidden.insert(e.op.id());
+                }
+            }
+        }
+        hidden
+    }
 }
 
 /// Per member, the membership ops that count (by the founder the log's invite commits to,
@@ -532,11 +603,11 @@ mod tests {
     }
 
     fn acquire(strong: bool) -> ShapePayload {
-        ShapePayload::Acquire {
+        ShapePayload::Lease(LeaseAction::Acquire {
             object: 1,
             strong,
             ttl_micros: 100,
-        }
+        })
     }
 
     #[test]
@@ -548,13 +619,21 @@ mod tests {
             (&b, 900, create()),
             (&a, 1000, acquire(false)),
             (&b, 1010, chat("x")),
-            (&b, 1020, ShapePayload::Release { object: 1 }),
+            (
+                &b,
+                1020,
+                ShapePayload::Lease(LeaseAction::Release { object: 1 }),
+            ),
             (&b, 1030, acquire(false)),
             (&a, 1040, acquire(true)),
             (&b, 1050, acquire(true)),
             (&a, 1060, acquire(false)),
             (&a, 2000, acquire(true)),
-            (&a, 2010, ShapePayload::Release { object: 1 }),
+            (
+                &a,
+                2010,
+                ShapePayload::Lease(LeaseAction::Release { object: 1 }),
+            ),
         ];
         for (key, at, p) in script {
             log.author(key, Timestamp(at), p).unwrap();
@@ -571,11 +650,11 @@ mod tests {
     fn a_lease_asked_for_forever_ends_after_the_longest_ttl_as_in_the_core() {
         let (a, b) = (Keypair::from_seed([1; 32]), Keypair::from_seed([2; 32]));
         let mut log = Log::<ShapePayload>::default();
-        let hoard = ShapePayload::Acquire {
+        let hoard = ShapePayload::Lease(LeaseAction::Acquire {
             object: 1,
             strong: true,
             ttl_micros: u64::MAX,
-        };
+        });
         log.author(&b, Timestamp(900), create()).unwrap();
         log.author(&a, Timestamp(1000), hoard).unwrap();
         let late = Timestamp(1000 + MAX_LEASE_TTL_MICROS + 10);
@@ -607,11 +686,11 @@ mod tests {
             .unwrap();
         founders.merge(Timestamp(1000), &log).unwrap();
         // Unseen by the founder: Mallory hoards again, and C's delete that saw it is refused.
-        let hoard = ShapePayload::Acquire {
+        let hoard = ShapePayload::Lease(LeaseAction::Acquire {
             object: 1,
             strong: true,
             ttl_micros: u64::MAX,
-        };
+        });
         log.author(&mallory, Timestamp(1200), hoard).unwrap();
         let expel = ShapePayload::Member(Box::new(Membership {
             member: mallory.peer_id(),

@@ -2,12 +2,12 @@
 //! samples over virtual time (for [`crate::plots`]), hashes, and the checkers' failures with
 //! the command that replays them.
 
+use std::collections::BTreeMap;
 use std::fmt;
 
 use replication::materialize::SceneHash;
 
 use crate::config::Config;
-use crate::sim::{Stats, short_hash};
 
 /// One peer at one sample time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -103,7 +103,7 @@ pub struct Report {
     /// Ops of expelled members void on peer 0 at the end.
     pub n_void_ops: usize,
     /// The cap on bytes of ops, when the session binds its authors, and the bytes of ops in
-    /// peer 0's final log ([`crate::sim::SESSION_CAP_BYTES`]).
+    /// peer 0's final log ([`crate::session::SESSION_CAP_BYTES`]).
     pub session_bytes: Option<(u64, u64)>,
     /// How each honest peer caught up after healing, by index.
     pub catch_up: Vec<CatchUp>,
@@ -128,6 +128,84 @@ pub struct CatchUp {
     /// The node whose connection reported the last delivery: the sender of the message that
     /// caused it (ops released by the clock are reported on the peer's first connection).
     pub last_from: u64,
+}
+
+/// Counters a run reports.
+#[derive(Debug, Default, Clone)]
+pub struct Stats {
+    /// Ops the users authored (the hot object's creation included).
+    pub n_ops_authored: u64,
+    /// Ops the core refused to author.
+    pub n_author_errors: u64,
+    /// Why, by error.
+    pub author_errors: BTreeMap<String, u64>,
+    /// Actions of peers that had not joined yet (skipped).
+    pub n_actions_skipped: u64,
+    /// Messages honest peers sent to honest peers.
+    pub n_messages: u64,
+    /// Bytes honest peers sent to honest peers.
+    pub n_bytes: u64,
+    /// Of those, messages and bytes by kind ([`replication::sync::message::kind_of`]; tags
+    /// no message has count as "unknown").
+    pub bytes_by_kind: BTreeMap<&'static str, (u64, u64)>,
+    /// Messages honest peers sent to the hostile peer.
+    pub n_messages_to_hostile: u64,
+    /// Messages handed to an honest peer.
+    pub n_delivered: u64,
+    /// Messages lost at random.
+    pub n_lost: u64,
+    /// Extra copies made.
+    pub n_duplicated: u64,
+    /// Messages dropped by a partition.
+    pub n_partition_drops: u64,
+    /// Messages dropped because their link's queue was full (bandwidth).
+    pub n_queue_drops: u64,
+    /// Messages that arrived after their connection was gone.
+    pub n_stale_drops: u64,
+    /// Messages the hostile peer sent (floods included).
+    pub n_hostile_messages: u64,
+    /// Forged ops (signature not matching the claimed author) the hostile peer sent.
+    pub n_forged_ops: u64,
+    /// Well-formed ops the hostile peer authored under its own key.
+    pub n_hostile_ops: u64,
+    /// Flood messages delivered to an honest peer.
+    pub n_flood_delivered: u64,
+    /// Flood messages an honest peer accepted (not rate limited).
+    pub n_flood_accepted: u64,
+    /// Rejections honest peers reported about honest connections, by kind.
+    pub honest_rejects: BTreeMap<String, u64>,
+    /// Rejections honest peers reported about the hostile connection, by kind.
+    pub hostile_rejects: BTreeMap<String, u64>,
+    /// Rejections honest peers reported about the hostile connection.
+    pub n_hostile_rejects: u64,
+    /// Events handled.
+    pub n_events: u64,
+    /// Crashes and restarts.
+    pub n_crashes: u64,
+    /// Fsyncs completed.
+    pub n_fsyncs: u64,
+    /// Ops appended but lost in crashes (not synced); the crashed peer's own among them are
+    /// gone for good, the others come back from their authors.
+    pub n_lost_unsynced: u64,
+    /// Crashes that left a torn record for recovery to cut.
+    pub n_torn_tails: u64,
+    /// Peers that joined late with an empty log.
+    pub n_late_joins: u64,
+    /// Peers that joined late from a snapshot.
+    pub n_snapshot_joins: u64,
+    /// The byzantine member's crafted attacks sent, by kind.
+    pub byzantine: BTreeMap<&'static str, u64>,
+    /// Expels of the hostile member the founder (peer 0) authored.
+    pub n_expels: u64,
+    /// Connections honest peers closed because the founder expelled their remote.
+    pub n_expel_closes: u64,
+    /// Forks honest peers learnt (a proof came, or an op forked a held one).
+    pub n_forks_learnt: u64,
+}
+
+/// The first 8 bytes of a scene hash in hex.
+pub fn short_hash(h: &SceneHash) -> String {
+    h.0[..8].iter().map(|b| format!("{b:02x}")).collect()
 }
 
 /// Peers named in the report's line on catching up, slowest first.
@@ -192,6 +270,21 @@ impl Report {
             s.n_queue_drops,
             s.n_stale_drops
         )?;
+        self.fmt_slowest(f)?;
+        let mut kinds: Vec<_> = s.bytes_by_kind.iter().collect();
+        kinds.sort_by_key(|(kind, (_, n_bytes))| (std::cmp::Reverse(*n_bytes), *kind));
+        let kinds: Vec<String> = (kinds.iter())
+            .map(|(kind, (n, n_bytes))| {
+                let share = 100.0 * *n_bytes as f64 / s.n_bytes.max(1) as f64;
+                format!("{kind} {share:.1}% ({n} messages)")
+            })
+            .collect();
+        writeln!(f, "  bytes by message kind: {}", kinds.join(", "))?;
+        self.fmt_hostile(f)
+    }
+
+    /// The peers slowest to catch up after healing.
+    fn fmt_slowest(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let mut slowest: Vec<(usize, &CatchUp)> = (self.catch_up.iter().enumerate())
             .filter(|(_, c)| c.n_insertions > 0)
             .collect();
@@ -215,15 +308,12 @@ impl Report {
                 shown.join("; ")
             )?;
         }
-        let mut kinds: Vec<_> = s.bytes_by_kind.iter().collect();
-        kinds.sort_by_key(|(kind, (_, n_bytes))| (std::cmp::Reverse(*n_bytes), *kind));
-        let kinds: Vec<String> = (kinds.iter())
-            .map(|(kind, (n, n_bytes))| {
-                let share = 100.0 * *n_bytes as f64 / s.n_bytes.max(1) as f64;
-                format!("{kind} {share:.1}% ({n} messages)")
-            })
-            .collect();
-        writeln!(f, "  bytes by message kind: {}", kinds.join(", "))?;
+        Ok(())
+    }
+
+    /// What the hostile member sent and what came of it.
+    fn fmt_hostile(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let s = &self.stats;
         writeln!(
             f,
             "  hostile sent {} (forged ops {}, own ops {} of which {} accepted, flood {} \

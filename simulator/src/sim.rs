@@ -9,37 +9,32 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::panic::{self, AssertUnwindSafe};
 
-use replication::log::RefoldBudget;
-use replication::materialize::{Materialized, SceneHash};
+use replication::log::{Insertion, RefoldBudget};
 use replication::membership::{Admission, FounderCommitment, Membership};
-use replication::shape::{ShapePayload, ShapeScene};
+use replication::shape::ShapePayload;
 use replication::sync::state::CloseReason;
 use replication::{ConnId, Event, Keypair, Log, OpId, Peer, Timestamp};
 
-use crate::byzantine::Byzantine;
+use crate::byzantine::{Aim, Attack, Byzantine, REDIAL_MICROS, SMALL_OP_BYTE_QUOTA, Sends};
+use crate::check::{self, Ended, QUIESCENCE_LIMIT_MICROS};
 use crate::config::{Config, ConfigError, Faults};
-use crate::hostile::Hostile;
+use crate::honest::{Honest, MAX_DRAIN, Scene, guarded, new_honest, note_delivered, panic_text};
+use crate::hostile::{self, FLOOD_MESSAGES, Hostile};
 use crate::memory;
-use crate::report::{CatchUp, PeerSample, Report, Sample};
+use crate::report::{CatchUp, PeerSample, Report, Sample, Stats};
 use crate::rng::SimRng;
-use crate::store::Disk;
+use crate::session::{FOUNDER_NONCE, SESSION_CAP_BYTES, SESSION_ID};
 use crate::trace::TraceHash;
-use crate::workload::{self, Action, HOT_OBJECT, User};
+use crate::workload::{self, Action, HOT_OBJECT};
 
 /// The virtual clock's start (µs); op timestamps are virtual times.
 pub const START_MICROS: u64 = 1_000_000_000;
-/// The session every peer joins.
-pub const SESSION_ID: [u8; 16] = *b"sculpt-simulator";
 /// Mean virtual time between two user ops (over all peers).
 pub const MEAN_OP_GAP_MICROS: u64 = workload::MEAN_ACTION_GAP_MICROS;
-/// How long after healing the network may take to go quiet before the run counts as stuck.
-pub const QUIESCENCE_LIMIT_MICROS: u64 = 600_000_000;
 /// Most events one run handles (a live-lock guard).
 pub const MAX_EVENTS: u64 = 200_000_000;
 /// How often, after healing, the harness looks for quiescence.
 pub const PROBE_INTERVAL_MICROS: u64 = 50_000;
-/// Most messages drained from one peer in one go (a live-lock guard).
-pub const MAX_DRAIN: usize = 1_000_000;
 /// A bandwidth-limited link drops a message that would wait longer than this to be sent.
 pub const MAX_LINK_QUEUE_MICROS: u64 = 2_000_000;
 /// Shortest simulated fsync.
@@ -55,20 +50,10 @@ const SCHEDULE_STREAM: u64 = 3;
 const NET_STREAM: u64 = 4;
 const HOT_STREAM: u64 = 5;
 const BYZANTINE_STREAM: u64 = 6;
-/// The founder's nonce: with [`crate::config::Faults::expel`], the session's invite commits
-/// to peer 0's key and this nonce, so peer 0 may expel ([`replication::membership`]).
-pub const FOUNDER_NONCE: [u8; 32] = *b"sculpt simulator founder nonce!!";
-/// The cap on bytes of ops of a run whose session binds its authors (the founder's budget,
-/// [`replication::Log::bind_authors`]): small, so that a member can spend its whole grant
-/// within a run. With a founder, even seeds run such a session (every session the app makes
-/// now) and odd seeds one that does not (every session made before).
-pub const SESSION_CAP_BYTES: u64 = 8 << 20;
-
-pub(crate) type Scene = Materialized<ShapePayload, ShapeScene>;
 
 /// What can happen at a virtual instant.
 #[derive(Debug)]
-pub(crate) enum Ev {
+enum Ev {
     Deliver {
         from: usize,
         to: usize,
@@ -137,143 +122,27 @@ pub(crate) enum Ev {
     Sample,
 }
 
-/// One honest peer and what the harness knows about it.
-pub(crate) struct Honest {
-    /// The key's seed (a restart rebuilds the key from it).
-    pub(crate) key_seed: [u8; 32],
-    pub(crate) peer: Peer<ShapePayload>,
-    /// Kept up to date incrementally from every insertion, as the app does.
-    pub(crate) scene: Scene,
-    pub(crate) user: User,
-    /// Ops delivered so far, to check that every op's deps came before it.
-    pub(crate) seen: BTreeSet<OpId>,
-    pub(crate) n_received_insertions: u64,
-    pub(crate) panicked: Option<String>,
-    pub(crate) offline_depth: u32,
-    /// False until a late peer joins.
-    pub(crate) started: bool,
-    pub(crate) wake_at: Option<u64>,
-    pub(crate) n_causal_violations: u64,
-    pub(crate) authored: Vec<OpId>,
-    /// Its own ops that were effective when it authored them (the causal-erasure checker's).
-    pub(crate) effective_at_author: Vec<OpId>,
-    pub(crate) disk: Disk,
-    /// Memory slot ([`memory`]) its calls are charged to.
-    pub(crate) slot: usize,
-    pub(crate) slot_baseline: i64,
-    pub(crate) peak_live_bytes: i64,
-    pub(crate) n_messages_sent: u64,
-    pub(crate) n_bytes_sent: u64,
-    /// The snapshot cut it joined at, if it joined from one.
-    pub(crate) snapshot_cut: Option<u64>,
-    /// A crash waiting for the next write (its restart delay, and whether it waits for an
-    /// op of the peer's own).
-    pub(crate) crash_armed: Option<(u64, bool)>,
-    /// How it catches up after healing.
-    pub(crate) catch_up: CatchUp,
-}
-
-impl Honest {
-    /// Heap bytes its calls hold now (0 without the counting allocator).
-    pub(crate) fn live_bytes(&self) -> i64 {
-        memory::live_bytes(self.slot) - self.slot_baseline
-    }
-}
-
 /// Connection state of an unordered pair of nodes.
 #[derive(Debug, Clone, Copy, Default)]
-pub(crate) struct Pair {
-    pub(crate) connected: bool,
+struct Pair {
+    connected: bool,
     /// Bumped on every connect and disconnect: messages of an older epoch are dropped.
-    pub(crate) epoch: u64,
-}
-
-/// Counters a run reports.
-#[derive(Debug, Default, Clone)]
-pub struct Stats {
-    /// Ops the users authored (the hot object's creation included).
-    pub n_ops_authored: u64,
-    /// Ops the core refused to author.
-    pub n_author_errors: u64,
-    /// Why, by error.
-    pub author_errors: BTreeMap<String, u64>,
-    /// Actions of peers that had not joined yet (skipped).
-    pub n_actions_skipped: u64,
-    /// Messages honest peers sent to honest peers.
-    pub n_messages: u64,
-    /// Bytes honest peers sent to honest peers.
-    pub n_bytes: u64,
-    /// Of those, messages and bytes by kind ([`replication::sync::message::kind_of`]; tags
-    /// no message has count as "unknown").
-    pub bytes_by_kind: BTreeMap<&'static str, (u64, u64)>,
-    /// Messages honest peers sent to the hostile peer.
-    pub n_messages_to_hostile: u64,
-    /// Messages handed to an honest peer.
-    pub n_delivered: u64,
-    /// Messages lost at random.
-    pub n_lost: u64,
-    /// Extra copies made.
-    pub n_duplicated: u64,
-    /// Messages dropped by a partition.
-    pub n_partition_drops: u64,
-    /// Messages dropped because their link's queue was full (bandwidth).
-    pub n_queue_drops: u64,
-    /// Messages that arrived after their connection was gone.
-    pub n_stale_drops: u64,
-    /// Messages the hostile peer sent (floods included).
-    pub n_hostile_messages: u64,
-    /// Forged ops (signature not matching the claimed author) the hostile peer sent.
-    pub n_forged_ops: u64,
-    /// Well-formed ops the hostile peer authored under its own key.
-    pub n_hostile_ops: u64,
-    /// Flood messages delivered to an honest peer.
-    pub n_flood_delivered: u64,
-    /// Flood messages an honest peer accepted (not rate limited).
-    pub n_flood_accepted: u64,
-    /// Rejections honest peers reported about honest connections, by kind.
-    pub honest_rejects: BTreeMap<String, u64>,
-    /// Rejections honest peers reported about the hostile connection, by kind.
-    pub hostile_rejects: BTreeMap<String, u64>,
-    /// Rejections honest peers reported about the hostile connection.
-    pub n_hostile_rejects: u64,
-    /// Events handled.
-    pub n_events: u64,
-    /// Crashes and restarts.
-    pub n_crashes: u64,
-    /// Fsyncs completed.
-    pub n_fsyncs: u64,
-    /// Ops appended but lost in crashes (not synced); the crashed peer's own among them are
-    /// gone for good, the others come back from their authors.
-    pub n_lost_unsynced: u64,
-    /// Crashes that left a torn record for recovery to cut.
-    pub n_torn_tails: u64,
-    /// Peers that joined late with an empty log.
-    pub n_late_joins: u64,
-    /// Peers that joined late from a snapshot.
-    pub n_snapshot_joins: u64,
-    /// The byzantine member's crafted attacks sent, by kind.
-    pub byzantine: BTreeMap<&'static str, u64>,
-    /// Expels of the hostile member the founder (peer 0) authored.
-    pub n_expels: u64,
-    /// Connections honest peers closed because the founder expelled their remote.
-    pub n_expel_closes: u64,
-    /// Forks honest peers learnt (a proof came, or an op forked a held one).
-    pub n_forks_learnt: u64,
+    epoch: u64,
 }
 
 /// A run in progress.
 pub struct Simulation {
-    pub(crate) config: Config,
-    pub(crate) faults: Faults,
-    pub(crate) net: SimRng,
-    pub(crate) now: u64,
+    config: Config,
+    faults: Faults,
+    net: SimRng,
+    now: u64,
     seq: u64,
     queue: BTreeMap<(u64, u64), Ev>,
-    pub(crate) honest: Vec<Honest>,
-    pub(crate) hostile: Option<Hostile>,
+    honest: Vec<Honest>,
+    hostile: Option<Hostile>,
     actions: Vec<Action>,
     /// One-way base latency per directed link, `[from][to]`.
-    pub(crate) latency_micros: Vec<Vec<u64>>,
+    latency_micros: Vec<Vec<u64>>,
     /// When each directed link is free to send again (bandwidth).
     link_free_at: Vec<Vec<u64>>,
     /// Pair state, `[min][max]`.
@@ -282,24 +151,24 @@ pub struct Simulation {
     /// the crashed peer sent before the crash, of epoch `.0`, are still delivered until `.1`.
     lingering: BTreeMap<(usize, usize), (u64, u64)>,
     blocked: BTreeMap<(usize, usize), u32>,
-    pub(crate) objects: Vec<u64>,
-    pub(crate) stats: Stats,
-    pub(crate) trace: TraceHash,
-    pub(crate) heal_at: u64,
-    pub(crate) last_delivery_at: u64,
-    pub(crate) timed_out: bool,
+    objects: Vec<u64>,
+    stats: Stats,
+    trace: TraceHash,
+    heal_at: u64,
+    last_delivery_at: u64,
+    timed_out: bool,
     /// Messages between honest peers on the network now.
     n_in_flight: u64,
     quiet: bool,
     /// What went wrong at restarts and joins (checked at the end).
-    pub(crate) restart_failures: Vec<String>,
+    restart_failures: Vec<String>,
     /// Ops some peer synced to disk (acknowledged as durable).
-    pub(crate) durable: BTreeSet<OpId>,
+    durable: BTreeSet<OpId>,
     /// Own ops a crash lost before they were synced (so before they were ever sent).
-    pub(crate) lost_own: BTreeSet<OpId>,
+    lost_own: BTreeSet<OpId>,
     /// Per flood: (messages delivered, messages accepted).
-    pub(crate) floods: Vec<(u64, u64)>,
-    pub(crate) samples: Vec<Sample>,
+    floods: Vec<(u64, u64)>,
+    samples: Vec<Sample>,
     sample_interval_micros: u64,
 }
 
@@ -311,50 +180,8 @@ impl Simulation {
         let n = config.n_peers;
         let n_nodes = n + usize::from(config.hostile);
         let mut keys = SimRng::stream(config.seed, KEYS_STREAM);
-        let first_slot = memory::reserve_slots(n);
-        let mut honest = Vec::with_capacity(n);
-        let mut founder = None;
-        let session_log = |founder: Option<FounderCommitment>| {
-            let mut log = Log::default();
-            if let Some(founder) = founder {
-                log.set_founder(founder).ok()?;
-                if config.seed.is_multiple_of(2) {
-                    log.bind_authors(SESSION_CAP_BYTES).ok()?;
-                }
-            }
-            Some(log)
-        };
-        for i in 0..n {
-            let mut key_seed = [0u8; 32];
-            keys.fill(&mut key_seed);
-            let slot = memory::slot(first_slot, i);
-            if i == 0 && faults.expel && config.hostile {
-                let key = Keypair::from_seed(key_seed).peer_id();
-                founder = Some(FounderCommitment::of(&key, &FOUNDER_NONCE));
-            }
-            let log = session_log(founder).ok_or(ConfigError::Peers(i))?;
-            let budget = refold_budget(&faults);
-            honest.push(new_honest(key_seed, log, slot, budget).ok_or(ConfigError::Peers(i))?);
-        }
-        let hostile = config.hostile.then(|| {
-            let mut key_seed = [0u8; 32];
-            for _ in n..crate::config::MAX_PEERS {
-                keys.fill(&mut key_seed);
-            }
-            keys.fill(&mut key_seed);
-            let mut hostile = Hostile::new(Keypair::from_seed(key_seed));
-            if faults.byzantine || faults.lease_attacks || faults.forks {
-                let mut stream = SimRng::stream(config.seed, BYZANTINE_STREAM);
-                let log = session_log(founder).unwrap_or_default();
-                let key = Keypair::from_seed(key_seed);
-                // Its core authors under the connection key; its own hand-made ops get another.
-                let mut own_seed = [0u8; 32];
-                stream.fill(&mut own_seed);
-                hostile.own_ops_under(Keypair::from_seed(own_seed));
-                hostile.byzantine = Some(Byzantine::new(key, stream, log));
-            }
-            hostile
-        });
+        let (honest, founder) = new_peers(&config, &faults, &mut keys)?;
+        let hostile = (config.hostile).then(|| new_hostile(&config, &faults, &mut keys, founder));
         let mut net = SimRng::stream(config.seed, NET_STREAM);
         let lat = faults.latency_micros;
         let latency_micros = (0..n_nodes)
@@ -395,15 +222,15 @@ impl Simulation {
         Ok(sim)
     }
 
-    pub(crate) fn n_nodes(&self) -> usize {
+    fn n_nodes(&self) -> usize {
         self.pairs.len()
     }
 
-    pub(crate) fn hostile_idx(&self) -> Option<usize> {
+    fn hostile_idx(&self) -> Option<usize> {
         self.config.hostile.then_some(self.config.n_peers)
     }
 
-    pub(crate) fn push(&mut self, at: u64, ev: Ev) {
+    fn push(&mut self, at: u64, ev: Ev) {
         self.seq += 1;
         self.queue.insert((at, self.seq), ev);
     }
@@ -618,9 +445,34 @@ impl Simulation {
             }
         }
         self.sample();
-        crate::check::finish(self)
+        check::finish(self.ended())
     }
 
+    /// What the run ended with, for the checkers.
+    fn ended(self) -> Ended {
+        Ended {
+            heal_micros: self.heal_at - START_MICROS,
+            last_delivery_micros: self.last_delivery_at - START_MICROS,
+            end_micros: self.now - START_MICROS,
+            trace_hash: self.trace.value(),
+            timed_out: self.timed_out,
+            config: self.config,
+            faults: self.faults,
+            honest: self.honest,
+            hostile: self.hostile,
+            stats: self.stats,
+            latency_micros: self.latency_micros,
+            restart_failures: self.restart_failures,
+            durable: self.durable,
+            lost_own: self.lost_own,
+            floods: self.floods,
+            samples: self.samples,
+        }
+    }
+
+    /// Handles one event; all but deliveries, redials, probes and samples go into the trace
+    /// under a code of their own.
+    // tidy:table: one arm per event kind, each its trace code and a call.
     fn handle(&mut self, ev: Ev) {
         match ev {
             Ev::Deliver {
@@ -632,13 +484,7 @@ impl Simulation {
             } => self.deliver(from, to, epoch, &bytes, flood),
             Ev::Wake { peer } => {
                 self.trace.u64(1);
-                let now = self.now;
-                let h = &mut self.honest[peer];
-                if h.wake_at == Some(now) {
-                    h.wake_at = None;
-                }
-                guarded(h, |p| p.handle_timeout(Timestamp(now)));
-                self.flush(peer);
+                self.wake(peer);
             }
             Ev::User { action_idx } => {
                 self.trace.u64(2);
@@ -658,20 +504,11 @@ impl Simulation {
             }
             Ev::PartitionStart { cut } => {
                 self.trace.u64(4);
-                for link in cut {
-                    *self.blocked.entry(link).or_default() += 1;
-                }
+                self.partition(cut, true);
             }
             Ev::PartitionEnd { cut } => {
                 self.trace.u64(5);
-                for link in cut {
-                    if let Some(c) = self.blocked.get_mut(&link) {
-                        *c -= 1;
-                        if *c == 0 {
-                            self.blocked.remove(&link);
-                        }
-                    }
-                }
+                self.partition(cut, false);
             }
             Ev::Offline { peer } => {
                 self.trace.u64(6);
@@ -682,16 +519,7 @@ impl Simulation {
                 restart_micros,
             } => {
                 self.trace.u64(9);
-                let h = &mut self.honest[peer];
-                // Most crashes wait for the peer's next write (half of them for an op of its
-                // own: a crash while saving an edit), so they lose unsynced ops and tear
-                // records; the others strike whenever they come.
-                if !h.started || h.panicked.is_some() {
-                } else if h.disk.n_unsynced() == 0 && self.net.chance(700) {
-                    h.crash_armed = Some((restart_micros, self.net.chance(500)));
-                } else {
-                    self.crash(peer, restart_micros);
-                }
+                self.crash_or_arm(peer, restart_micros);
             }
             Ev::Online { peer } => {
                 self.trace.u64(7);
@@ -703,14 +531,7 @@ impl Simulation {
             }
             Ev::Unlinger { to, from, epoch } => {
                 self.trace.u64(17);
-                if self
-                    .lingering
-                    .get(&(to, from))
-                    .is_some_and(|l| l.0 == epoch)
-                {
-                    self.lingering.remove(&(to, from));
-                    guarded(&mut self.honest[to], |p| p.disconnect(ConnId(from as u64)));
-                }
+                self.unlinger(to, from, epoch);
             }
             Ev::FsyncDone { peer, generation } => {
                 self.trace.u64(16);
@@ -725,17 +546,73 @@ impl Simulation {
                 self.expel_hostile(connection);
             }
             Ev::Redial { peer } => self.redial(peer),
-            Ev::Probe => {
-                if self.n_in_flight == 0 && self.agreed() {
-                    self.quiet = true;
-                } else {
-                    self.push(self.now + PROBE_INTERVAL_MICROS, Ev::Probe);
-                }
-            }
+            Ev::Probe => self.probe(),
             Ev::Sample => {
                 self.sample();
                 self.push(self.now + self.sample_interval_micros, Ev::Sample);
             }
+        }
+    }
+
+    /// The peer's timer.
+    fn wake(&mut self, peer: usize) {
+        let now = self.now;
+        let h = &mut self.honest[peer];
+        if h.wake_at == Some(now) {
+            h.wake_at = None;
+        }
+        guarded(h, |p| p.handle_timeout(Timestamp(now)));
+        self.flush(peer);
+    }
+
+    /// A partition of the directed links `cut` starts (`true`) or ends; partitions overlap.
+    fn partition(&mut self, cut: Vec<(usize, usize)>, start: bool) {
+        for link in cut {
+            if start {
+                *self.blocked.entry(link).or_default() += 1;
+            } else if let Some(c) = self.blocked.get_mut(&link) {
+                *c -= 1;
+                if *c == 0 {
+                    self.blocked.remove(&link);
+                }
+            }
+        }
+    }
+
+    /// A crash is due: most wait for the peer's next write (half of them for an op of its
+    /// own: a crash while saving an edit), so they lose unsynced ops and tear records; the
+    /// others strike whenever they come.
+    fn crash_or_arm(&mut self, peer: usize, restart_micros: u64) {
+        let h = &mut self.honest[peer];
+        if !h.started || h.panicked.is_some() {
+            return;
+        }
+        if h.disk.n_unsynced() == 0 && self.net.chance(700) {
+            h.crash_armed = Some((restart_micros, self.net.chance(500)));
+        } else {
+            self.crash(peer, restart_micros);
+        }
+    }
+
+    /// The remote end of a connection to a crashed peer notices the crash, unless the
+    /// connection was replaced since.
+    fn unlinger(&mut self, to: usize, from: usize, epoch: u64) {
+        if self
+            .lingering
+            .get(&(to, from))
+            .is_some_and(|l| l.0 == epoch)
+        {
+            self.lingering.remove(&(to, from));
+            guarded(&mut self.honest[to], |p| p.disconnect(ConnId(from as u64)));
+        }
+    }
+
+    /// After healing: stops once honest peers agree and nothing is in flight between them.
+    fn probe(&mut self) {
+        if self.n_in_flight == 0 && self.agreed() {
+            self.quiet = true;
+        } else {
+            self.push(self.now + PROBE_INTERVAL_MICROS, Ev::Probe);
         }
     }
 
@@ -955,18 +832,18 @@ impl Simulation {
             })
     }
 
-    pub(crate) fn online(&self, node: usize) -> bool {
+    fn online(&self, node: usize) -> bool {
         self.honest
             .get(node)
             .is_none_or(|h| h.offline_depth == 0 && h.started)
     }
 
-    pub(crate) fn pair(&mut self, a: usize, b: usize) -> &mut Pair {
+    fn pair(&mut self, a: usize, b: usize) -> &mut Pair {
         let (lo, hi) = if a < b { (a, b) } else { (b, a) };
         &mut self.pairs[lo][hi]
     }
 
-    pub(crate) fn connect_pair(&mut self, a: usize, b: usize) {
+    fn connect_pair(&mut self, a: usize, b: usize) {
         if self.pair(a, b).connected {
             return;
         }
@@ -1061,7 +938,7 @@ impl Simulation {
 
     /// Drains a peer's events (appending delivered ops to its store), then, once everything
     /// appended is synced, its transmissions; then schedules its next wake-up.
-    pub(crate) fn flush(&mut self, idx: usize) {
+    fn flush(&mut self, idx: usize) {
         let now = self.now;
         for _ in 0..MAX_DRAIN {
             let ev = guarded(&mut self.honest[idx], |p| p.poll_event());
@@ -1132,50 +1009,54 @@ impl Simulation {
         self.flush(idx);
     }
 
+    /// Ops delivered at peer `idx` (reported on connection `conn`): noted, appended to its
+    /// disk and folded into its scene.
+    fn on_delivered(&mut self, idx: usize, conn: ConnId, insertion: Insertion) {
+        self.trace.u64(10);
+        for id in &insertion.delivered {
+            self.trace.bytes(&id.0);
+        }
+        if !insertion.delivered.is_empty() {
+            self.last_delivery_at = self.now;
+        }
+        let sabotage = self.config.sabotage;
+        let h = &mut self.honest[idx];
+        if self.heal_at > START_MICROS && !insertion.delivered.is_empty() {
+            let since = self.now - self.heal_at;
+            let c = &mut h.catch_up;
+            if c.n_insertions == 0 {
+                c.first_micros = since;
+            }
+            c.n_delivered += insertion.delivered.len();
+            c.n_insertions += 1;
+            c.last_micros = since;
+            c.last_from = conn.0;
+        }
+        note_delivered(h, &insertion.delivered);
+        h.disk.append(&insertion.delivered);
+        h.n_received_insertions += 1;
+        let skip = sabotage == crate::config::Sabotage::DropEveryTenthInsertion
+            && idx == 0
+            && h.n_received_insertions.is_multiple_of(10);
+        if !skip {
+            let Honest {
+                peer, scene, slot, ..
+            } = h;
+            let log = peer.log();
+            let applied = memory::with_slot(*slot, || {
+                panic::catch_unwind(AssertUnwindSafe(|| {
+                    scene.apply_insertion(log, &insertion);
+                }))
+            });
+            if let Err(e) = applied {
+                h.panicked = Some(panic_text(e.as_ref()));
+            }
+        }
+    }
+
     fn on_event(&mut self, idx: usize, conn: ConnId, event: Event) {
         match event {
-            Event::Delivered(insertion) => {
-                self.trace.u64(10);
-                for id in &insertion.delivered {
-                    self.trace.bytes(&id.0);
-                }
-                if !insertion.delivered.is_empty() {
-                    self.last_delivery_at = self.now;
-                }
-                let sabotage = self.config.sabotage;
-                let h = &mut self.honest[idx];
-                if self.heal_at > START_MICROS && !insertion.delivered.is_empty() {
-                    let since = self.now - self.heal_at;
-                    let c = &mut h.catch_up;
-                    if c.n_insertions == 0 {
-                        c.first_micros = since;
-                    }
-                    c.n_delivered += insertion.delivered.len();
-                    c.n_insertions += 1;
-                    c.last_micros = since;
-                    c.last_from = conn.0;
-                }
-                note_delivered(h, &insertion.delivered);
-                h.disk.append(&insertion.delivered);
-                h.n_received_insertions += 1;
-                let skip = sabotage == crate::config::Sabotage::DropEveryTenthInsertion
-                    && idx == 0
-                    && h.n_received_insertions.is_multiple_of(10);
-                if !skip {
-                    let Honest {
-                        peer, scene, slot, ..
-                    } = h;
-                    let log = peer.log();
-                    let applied = memory::with_slot(*slot, || {
-                        panic::catch_unwind(AssertUnwindSafe(|| {
-                            scene.apply_insertion(log, &insertion);
-                        }))
-                    });
-                    if let Err(e) = applied {
-                        h.panicked = Some(panic_text(e.as_ref()));
-                    }
-                }
-            }
+            Event::Delivered(insertion) => self.on_delivered(idx, conn, insertion),
             Event::Rejected { kind, .. } => {
                 self.trace.u64(11);
                 let kind = format!("{kind:?}");
@@ -1347,13 +1228,220 @@ impl Simulation {
     }
 }
 
-pub(crate) fn deliver(
-    from: usize,
-    to: usize,
-    epoch: u64,
-    bytes: Vec<u8>,
-    flood: Option<usize>,
-) -> Ev {
+/// The hostile member on the network: its tricks, floods and crafted attacks, and its core's
+/// traffic.
+impl Simulation {
+    /// Honest peers the hostile peer can reach now.
+    fn hostile_targets(&mut self, h: usize) -> Vec<usize> {
+        (0..self.config.n_peers)
+            .filter(|t| self.online(*t) && self.pair(*t, h).connected)
+            .collect()
+    }
+
+    /// The hostile peer sends one of its tricks to a random reachable peer.
+    fn hostile_send(&mut self) {
+        let Some(h) = self.hostile_idx() else { return };
+        let targets = self.hostile_targets(h);
+        if targets.is_empty() {
+            return;
+        }
+        // Half of a byzantine member's tricks are crafted attacks (other presets draw nothing
+        // here, so their runs are unchanged).
+        if self.hostile.as_ref().is_some_and(|x| x.byzantine.is_some())
+            && self.net.chance(500)
+            && self.byzantine_send(h, &targets)
+        {
+            return;
+        }
+        let to = targets[self.net.index(targets.len())];
+        let n_kinds = if self.faults.forgery { 7 } else { 5 };
+        let kind = self.net.below(n_kinds);
+        let (now, rng, honest, stats) = (self.now, &mut self.net, &self.honest, &mut self.stats);
+        let messages = (self.hostile.as_mut())
+            .and_then(|hostile| hostile.messages(kind, rng, honest, now, stats));
+        let messages = messages.unwrap_or_else(|| vec![hostile::garbage(&mut self.net)]);
+        self.hostile_deliver(h, messages.into_iter().map(|bytes| (to, bytes)).collect());
+    }
+
+    /// Puts the hostile member's messages on its links to their receivers (never lost: its
+    /// links are its own).
+    fn hostile_deliver(&mut self, h: usize, sends: Sends) {
+        for (to, bytes) in sends {
+            let epoch = self.pair(h, to).epoch;
+            let at = self.now + self.latency_micros[h][to];
+            self.stats.n_hostile_messages += 1;
+            self.push(at, deliver(h, to, epoch, bytes, None));
+        }
+    }
+
+    /// Floods one reachable peer with [`FLOOD_MESSAGES`] small messages at one instant.
+    fn hostile_flood(&mut self) {
+        let Some(h) = self.hostile_idx() else { return };
+        let targets = self.hostile_targets(h);
+        if targets.is_empty() {
+            return;
+        }
+        let to = targets[self.net.index(targets.len())];
+        let epoch = self.pair(h, to).epoch;
+        let at = self.now + self.latency_micros[h][to];
+        let flood = self.floods.len();
+        self.floods.push((0, 0));
+        for _ in 0..FLOOD_MESSAGES {
+            let mut b = vec![0u8; 8];
+            self.net.fill(&mut b);
+            self.stats.n_hostile_messages += 1;
+            self.push(at, deliver(h, to, epoch, b, Some(flood)));
+        }
+    }
+
+    /// The byzantine member sends one crafted attack to the reachable peers `targets` (not
+    /// empty); false if it had nothing to send.
+    fn byzantine_send(&mut self, h: usize, targets: &[usize]) -> bool {
+        let menu = Attack::menu(&self.faults);
+        if menu.is_empty() {
+            return false;
+        }
+        // The draw is made every time, so the network's stream advances per attack whichever
+        // attack the member's turn picks.
+        let first = self.net.index(menu.len());
+        let Some(byz) = self.byzantine_mut() else {
+            return false;
+        };
+        let attack = byz.next_attack(&menu, first);
+        let to = targets[self.net.index(targets.len())];
+        let Some(sends) = self.craft(attack, to, targets) else {
+            return false;
+        };
+        *self.stats.byzantine.entry(attack.name()).or_default() += 1;
+        self.hostile_deliver(h, sends);
+        // What the core authored goes out through its sync.
+        self.byzantine_flush();
+        true
+    }
+
+    /// The byzantine member crafts `attack` on honest peer `to` from what the run shows it.
+    fn craft(&mut self, attack: Attack, to: usize, targets: &[usize]) -> Option<Sends> {
+        let victim = self.honest.get(to).map(|h| h.user.next_ids());
+        let victim_key = self.honest.get(to).map(|h| h.peer.peer_id());
+        let third_key = (self.honest.iter().enumerate())
+            .find(|(idx, _)| *idx != to)
+            .map(|(_, h)| h.peer.peer_id());
+        let hostile = self.hostile.as_mut()?;
+        let me = hostile.peer_id();
+        let batch_no = hostile.next_batch_no();
+        let byz = hostile.byzantine.as_mut()?;
+        let aim = Aim {
+            now: self.now,
+            me,
+            batch_no,
+            to,
+            targets,
+            objects: &self.objects,
+            victim,
+            victim_key,
+            third_key,
+        };
+        byz.craft(attack, &aim, &mut self.net)
+    }
+
+    /// The transport's part of honest peer `x`'s new connection to node `y`: the id admission
+    /// proved (the member's own key for the hostile one), and where a byzantine member runs,
+    /// the quota of op bytes scaled to the simulator's logs.
+    fn admit_link(&mut self, x: usize, y: usize) {
+        let now = Timestamp(self.now);
+        let admitted = match self.honest.get(y) {
+            Some(h) => Some(h.peer.peer_id()),
+            None => self.hostile.as_ref().map(|h| h.peer_id()),
+        };
+        let byzantine = self.faults.byzantine;
+        if let (Some(h), Some(admitted)) = (self.honest.get_mut(x), admitted) {
+            guarded(h, |p| {
+                p.set_admitted(ConnId(y as u64), admitted);
+                if byzantine {
+                    p.set_op_byte_quota(now, ConnId(y as u64), SMALL_OP_BYTE_QUOTA);
+                }
+            });
+        }
+    }
+
+    /// After honest peer `idx` closed its connection to `other` for `reason`: the hostile
+    /// member dials again soon, unless it was expelled.
+    fn redial_after_close(&mut self, idx: usize, other: usize, reason: CloseReason) {
+        let expelled = matches!(reason, CloseReason::Expelled { .. });
+        if Some(other) == self.hostile_idx() && !expelled {
+            self.push(self.now + REDIAL_MICROS, Ev::Redial { peer: idx });
+        }
+    }
+
+    /// The hostile member dials honest peer `peer` again.
+    fn redial(&mut self, peer: usize) {
+        if let Some(h) = self.hostile_idx()
+            && self.online(peer)
+        {
+            self.connect_pair(peer, h);
+        }
+    }
+
+    /// Hands a message an honest peer sent the hostile member to its core.
+    fn byzantine_receive(&mut self, from: usize, bytes: &[u8]) {
+        let now = self.now;
+        let Some(byz) = self.byzantine_mut() else {
+            return;
+        };
+        byz.receive(now, from, bytes);
+        self.byzantine_flush();
+    }
+
+    /// The core's connection to honest peer `other` opened (`true`) or closed.
+    fn byzantine_link(&mut self, other: usize, open: bool) {
+        let now = self.now;
+        let Some(byz) = self.byzantine_mut() else {
+            return;
+        };
+        byz.link(now, other, open);
+        if open {
+            self.byzantine_flush();
+        }
+    }
+
+    /// The core's timer.
+    fn byzantine_wake(&mut self) {
+        let now = self.now;
+        let Some(byz) = self.byzantine_mut() else {
+            return;
+        };
+        byz.wake(now);
+        self.byzantine_flush();
+    }
+
+    fn byzantine_mut(&mut self) -> Option<&mut Byzantine> {
+        self.hostile.as_mut()?.byzantine.as_mut()
+    }
+
+    /// Puts what the core sends on the network, like an honest peer's but never lost (the
+    /// hostile member's links are its own), and schedules its timer.
+    fn byzantine_flush(&mut self) {
+        let Some(h) = self.hostile_idx() else { return };
+        let now = self.now;
+        let Some((out, next)) = self.byzantine_mut().map(|byz| byz.drain(now)) else {
+            return;
+        };
+        for (to, bytes) in out {
+            if to < self.honest.len() && self.pair(h, to).connected {
+                let epoch = self.pair(h, to).epoch;
+                let at = now + self.latency_micros[h][to];
+                self.push(at, deliver(h, to, epoch, bytes, None));
+            }
+        }
+        if let Some(at) = next {
+            self.push(at, Ev::HostileWake);
+        }
+    }
+}
+
+/// A delivery of `bytes` from node `from` to node `to` on their connection of `epoch`, of flood
+/// `flood` if any.
+fn deliver(from: usize, to: usize, epoch: u64, bytes: Vec<u8>, flood: Option<usize>) -> Ev {
     Ev::Deliver {
         from,
         to,
@@ -1363,10 +1451,76 @@ pub(crate) fn deliver(
     }
 }
 
+/// The log every peer of a run starts with: with a founder, its commitment, and on even
+/// seeds the cap of a session that binds its authors.
+fn session_log(seed: u64, founder: Option<FounderCommitment>) -> Option<Log<ShapePayload>> {
+    let mut log = Log::default();
+    if let Some(founder) = founder {
+        log.set_founder(founder).ok()?;
+        if seed.is_multiple_of(2) {
+            log.bind_authors(SESSION_CAP_BYTES).ok()?;
+        }
+    }
+    Some(log)
+}
+
+/// The honest peers of `config`, their keys drawn from `keys`, and the founder's commitment
+/// (peer 0's, when the founder expels the hostile member).
+fn new_peers(
+    config: &Config,
+    faults: &Faults,
+    keys: &mut SimRng,
+) -> Result<(Vec<Honest>, Option<FounderCommitment>), ConfigError> {
+    let n = config.n_peers;
+    let first_slot = memory::reserve_slots(n);
+    let mut honest = Vec::with_capacity(n);
+    let mut founder = None;
+    for i in 0..n {
+        let mut key_seed = [0u8; 32];
+        keys.fill(&mut key_seed);
+        let slot = memory::slot(first_slot, i);
+        if i == 0 && faults.expel && config.hostile {
+            let key = Keypair::from_seed(key_seed).peer_id();
+            founder = Some(FounderCommitment::of(&key, &FOUNDER_NONCE));
+        }
+        let log = session_log(config.seed, founder).ok_or(ConfigError::Peers(i))?;
+        let budget = refold_budget(faults);
+        honest.push(new_honest(key_seed, log, slot, budget).ok_or(ConfigError::Peers(i))?);
+    }
+    Ok((honest, founder))
+}
+
+/// The hostile member, its key drawn from `keys` after every honest peer's a run of
+/// [`crate::config::MAX_PEERS`] could have; with a byzantine core when `faults` craft attacks.
+fn new_hostile(
+    config: &Config,
+    faults: &Faults,
+    keys: &mut SimRng,
+    founder: Option<FounderCommitment>,
+) -> Hostile {
+    let mut key_seed = [0u8; 32];
+    for _ in config.n_peers..crate::config::MAX_PEERS {
+        keys.fill(&mut key_seed);
+    }
+    keys.fill(&mut key_seed);
+    let mut hostile = Hostile::new(Keypair::from_seed(key_seed));
+    if faults.byzantine || faults.lease_attacks || faults.forks {
+        let mut stream = SimRng::stream(config.seed, BYZANTINE_STREAM);
+        let log = session_log(config.seed, founder).unwrap_or_default();
+        let key = Keypair::from_seed(key_seed);
+        // Its core authors under the connection key; its own hand-made ops get another.
+        let mut own_seed = [0u8; 32];
+        stream.fill(&mut own_seed);
+        hostile.own_ops_under(Keypair::from_seed(own_seed));
+        hostile.byzantine = Some(Byzantine::new(key, stream, log));
+    }
+    hostile
+}
+
 /// The refold budget honest peers run with. Under the byzantine preset it is scaled down to
 /// the simulator's logs of hundreds of ops ([`SMALL_REFOLD_BUDGET`]), so the refold flood
 /// makes them hold and batch deliveries as a long log would; elsewhere it is the core's.
-pub(crate) fn refold_budget(faults: &Faults) -> RefoldBudget {
+fn refold_budget(faults: &Faults) -> RefoldBudget {
     if faults.byzantine {
         SMALL_REFOLD_BUDGET
     } else {
@@ -1381,129 +1535,7 @@ pub const SMALL_REFOLD_BUDGET: RefoldBudget = RefoldBudget {
     burst_entries: 2_000,
 };
 
-/// A fresh honest peer with `log` (charged to memory slot `slot`).
-pub(crate) fn new_honest(
-    key_seed: [u8; 32],
-    mut log: Log<ShapePayload>,
-    slot: usize,
-    budget: RefoldBudget,
-) -> Option<Honest> {
-    log.set_refold_budget(budget);
-    let slot_baseline = memory::live_bytes(slot);
-    let (peer, scene) = memory::with_slot(slot, || {
-        let scene = Scene::fold(&log).ok()?;
-        Some((
-            Peer::new(Keypair::from_seed(key_seed), SESSION_ID, log),
-            scene,
-        ))
-    })?;
-    let user = User::new(peer.peer_id());
-    Some(Honest {
-        key_seed,
-        peer,
-        scene,
-        user,
-        seen: BTreeSet::new(),
-        n_received_insertions: 0,
-        panicked: None,
-        offline_depth: 0,
-        started: true,
-        wake_at: None,
-        n_causal_violations: 0,
-        authored: Vec::new(),
-        effective_at_author: Vec::new(),
-        disk: Disk::default(),
-        slot,
-        slot_baseline,
-        peak_live_bytes: 0,
-        n_messages_sent: 0,
-        n_bytes_sent: 0,
-        snapshot_cut: None,
-        crash_armed: None,
-        catch_up: CatchUp::default(),
-    })
-}
-
 /// Runs `config` to the end.
 pub fn run(config: Config) -> Result<Report, ConfigError> {
     Ok(Simulation::new(config)?.run())
-}
-
-/// Records ops as delivered at a peer, checking that each one's deps came first (deps
-/// inside a snapshot it joined from count as delivered).
-fn note_delivered(h: &mut Honest, delivered: &[OpId]) {
-    for id in delivered {
-        if let Some(op) = h.peer.log().get(id) {
-            let early = op
-                .deps()
-                .iter()
-                .filter(|d| !h.seen.contains(*d) && !inside_base(h, d))
-                .count();
-            h.n_causal_violations += early as u64;
-        }
-        h.seen.insert(*id);
-    }
-}
-
-/// True if `d` lies inside the snapshot the peer joined from (delivered before every op
-/// after the cut).
-fn inside_base(h: &Honest, d: &OpId) -> bool {
-    let Some(cut) = h.snapshot_cut else {
-        return false;
-    };
-    let log = h.peer.log();
-    // Base ops are not held, except effective edits kept whole (at or below the cut).
-    log.contains(d) && log.get(d).is_none_or(|op| op.lamport() <= cut)
-}
-
-/// Calls into a peer unless it already panicked; a panic is recorded, never propagated.
-/// Memory the call allocates is charged to the peer's slot.
-pub(crate) fn guarded<R>(
-    h: &mut Honest,
-    f: impl FnOnce(&mut Peer<ShapePayload>) -> R,
-) -> Option<R> {
-    if h.panicked.is_some() {
-        return None;
-    }
-    let slot = h.slot;
-    let result = memory::with_slot(slot, || {
-        panic::catch_unwind(AssertUnwindSafe(|| f(&mut h.peer)))
-    });
-    match result {
-        Ok(r) => Some(r),
-        Err(e) => {
-            h.panicked = Some(panic_text(e.as_ref()));
-            None
-        }
-    }
-}
-
-/// Calls into a core unless it already panicked; a panic is recorded in `panicked`.
-pub(crate) fn guarded_call<R>(
-    panicked: &mut Option<String>,
-    peer: &mut Peer<ShapePayload>,
-    f: impl FnOnce(&mut Peer<ShapePayload>) -> R,
-) -> Option<R> {
-    if panicked.is_some() {
-        return None;
-    }
-    match panic::catch_unwind(AssertUnwindSafe(|| f(peer))) {
-        Ok(r) => Some(r),
-        Err(e) => {
-            *panicked = Some(panic_text(e.as_ref()));
-            None
-        }
-    }
-}
-
-pub(crate) fn panic_text(e: &(dyn std::any::Any + Send)) -> String {
-    e.downcast_ref::<&str>()
-        .map(|s| (*s).to_owned())
-        .or_else(|| e.downcast_ref::<String>().cloned())
-        .unwrap_or_else(|| "non-text panic".into())
-}
-
-/// The first 8 bytes of a scene hash in hex.
-pub fn short_hash(h: &SceneHash) -> String {
-    h.0[..8].iter().map(|b| format!("{b:02x}")).collect()
 }

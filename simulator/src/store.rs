@@ -17,6 +17,7 @@
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use replication::identity::SessionId;
 use replication::log::Log;
 use replication::membership::FounderCommitment;
 use replication::pending::PendingLimits;
@@ -24,7 +25,6 @@ use replication::shape::ShapePayload;
 use replication::snapshot::Snapshot;
 use replication::store::OpStore;
 use replication::store::record::CHECKSUM_BYTES;
-use replication::sync::message::SessionId;
 use replication::{Op, OpId, Timestamp};
 
 use crate::rng::SimRng;

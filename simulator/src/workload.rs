@@ -12,6 +12,7 @@ use fdsl::object::{
     ColorDef, Edit, EditOp, Field, Formula, Geometry, ObjectData, PaintValue, Paintable, Pose,
     ToolShape,
 };
+use replication::payload::LeaseAction;
 use replication::shape::{IdSource, ShapePayload};
 use replication::{OpId, PeerId};
 
@@ -98,6 +99,53 @@ fn shape_data(rng: &mut SimRng, name: String) -> Option<ObjectData> {
     })
 }
 
+/// A stroke of 1 to 4 poses on `target`, carving or adding.
+fn stroke(rng: &mut SimRng, target: u64) -> ShapePayload {
+    let op = if rng.chance(700) {
+        EditOp::Subtract
+    } else {
+        EditOp::Union
+    };
+    let at = [
+        rng.range_f64(-1.0, 1.0),
+        rng.range_f64(-1.0, 1.0),
+        rng.range_f64(-1.0, 1.0),
+    ];
+    let n_poses = 1 + rng.index(4);
+    let path = (0..n_poses)
+        .map(|i| Pose::at([at[0] + 0.05 * i as f64, at[1], at[2]].into()))
+        .collect();
+    ShapePayload::edit(
+        target,
+        Edit::stroke(
+            op,
+            ToolShape::Sphere {
+                radius: rng.range_f64(0.05, 0.4),
+            },
+            path,
+        ),
+    )
+    .expect("a valid edit")
+}
+
+/// A stamp of paint on `target`.
+fn paint(rng: &mut SimRng, target: u64) -> ShapePayload {
+    ShapePayload::edit(
+        target,
+        Edit::stamp(
+            EditOp::Paint {
+                property: Paintable::Color,
+                value: PaintValue::Color([rng.unit() as f32, rng.unit() as f32, rng.unit() as f32]),
+            },
+            ToolShape::Sphere {
+                radius: rng.range_f64(0.1, 0.5),
+            },
+            Pose::at([rng.range_f64(-1.0, 1.0), 0.0, 0.0].into()),
+        ),
+    )
+    .expect("a valid edit")
+}
+
 /// The payload that creates the hot object.
 pub fn hot_object(rng: &mut SimRng) -> Option<ShapePayload> {
     // Without a counter, as ops signed before ids were derived create: every peer may, and
@@ -166,62 +214,19 @@ impl User {
                     Formula::new(SHAPES[rng.index(SHAPES.len())]).ok()?,
                 ))))),
             },
-            28..=52 => {
-                let op = if rng.chance(700) {
-                    EditOp::Subtract
-                } else {
-                    EditOp::Union
-                };
-                let at = [
-                    rng.range_f64(-1.0, 1.0),
-                    rng.range_f64(-1.0, 1.0),
-                    rng.range_f64(-1.0, 1.0),
-                ];
-                let n_poses = 1 + rng.index(4);
-                let path = (0..n_poses)
-                    .map(|i| Pose::at([at[0] + 0.05 * i as f64, at[1], at[2]].into()))
-                    .collect();
-                ShapePayload::edit(
-                    target,
-                    Edit::stroke(
-                        op,
-                        ToolShape::Sphere {
-                            radius: rng.range_f64(0.05, 0.4),
-                        },
-                        path,
-                    ),
-                )
-                .expect("a valid edit")
-            }
-            53..=64 => ShapePayload::edit(
-                target,
-                Edit::stamp(
-                    EditOp::Paint {
-                        property: Paintable::Color,
-                        value: PaintValue::Color([
-                            rng.unit() as f32,
-                            rng.unit() as f32,
-                            rng.unit() as f32,
-                        ]),
-                    },
-                    ToolShape::Sphere {
-                        radius: rng.range_f64(0.1, 0.5),
-                    },
-                    Pose::at([rng.range_f64(-1.0, 1.0), 0.0, 0.0].into()),
-                ),
-            )
-            .expect("a valid edit"),
+            28..=52 => stroke(rng, target),
+            53..=64 => paint(rng, target),
             65..=72 => match self.edits.len() {
                 0 => ShapePayload::Chat(format!("nothing to undo from {peer_idx}")),
                 n => ShapePayload::Undo(self.edits[rng.index(n)]),
             },
             73..=80 => ShapePayload::Chat(format!("hello from {peer_idx} ({roll})")),
-            81..=92 => ShapePayload::Acquire {
+            81..=92 => ShapePayload::Lease(LeaseAction::Acquire {
                 object: HOT_OBJECT,
                 strong: rng.chance(500),
                 ttl_micros: LEASE_TTL_MICROS,
-            },
-            _ => ShapePayload::Release { object: HOT_OBJECT },
+            }),
+            _ => ShapePayload::Lease(LeaseAction::Release { object: HOT_OBJECT }),
         };
         Some(payload)
     }
@@ -277,8 +282,8 @@ mod tests {
                 ShapePayload::Edit { .. } => "edit",
                 ShapePayload::Undo(_) => "undo",
                 ShapePayload::Chat(_) => "chat",
-                ShapePayload::Acquire { .. } => "acquire",
-                ShapePayload::Release { .. } => "release",
+                ShapePayload::Lease(LeaseAction::Acquire { .. }) => "acquire",
+                ShapePayload::Lease(LeaseAction::Release { .. }) => "release",
                 _ => "other",
             });
             user.authored(&p, OpId([i as u8; 32]));

@@ -206,7 +206,7 @@ fn a_session_binding_its_authors_refuses_unadmitted_keys_and_stays_under_its_cap
         let bound = report.config.seed % 2 == 0;
         match report.session_bytes {
             Some((cap, n_bytes)) => {
-                assert!(bound && cap == simulator::sim::SESSION_CAP_BYTES && n_bytes <= cap);
+                assert!(bound && cap == simulator::session::SESSION_CAP_BYTES && n_bytes <= cap);
                 // The member's crafted ops under fresh keys were refused at the door.
                 assert!(
                     report.stats.hostile_rejects.contains_key("RefusedOp"),

@@ -15,6 +15,7 @@ use replication::log::{Drained, Insertion, Refold};
 use replication::materialize::Materialized;
 use replication::membership::FOUNDER_NONCE_BYTES;
 use replication::net::node::Observer;
+use replication::payload::LeaseAction;
 use replication::shape::{IdSource, ShapePayload, ShapeScene};
 use replication::{Effect, Log, Mark, OpId, Payload as _, Peer, PeerId, Timestamp};
 
@@ -781,8 +782,12 @@ fn describe(log: &Log<ShapePayload>, scene: &Scene, payload: &ShapePayload) -> S
         ShapePayload::SetGroup { value: Some(_), .. } => "set a group".into(),
         ShapePayload::SetGroup { value: None, .. } => "removed a group".into(),
         ShapePayload::Move { object, .. } => format!("moved {}", label(*object)),
-        ShapePayload::Acquire { object, .. } => format!("took the lease of {}", label(*object)),
-        ShapePayload::Release { object } => format!("released {}", label(*object)),
+        ShapePayload::Lease(LeaseAction::Acquire { object, .. }) => {
+            format!("took the lease of {}", label(*object))
+        }
+        ShapePayload::Lease(LeaseAction::Release { object }) => {
+            format!("released {}", label(*object))
+        }
         ShapePayload::Undo(target) => format!("undo: {}", describe_op(target)),
         ShapePayload::Redo(target) => format!("redo: {}", describe_op(target)),
         ShapePayload::Chat(text) => format!("said \"{}\"", quote(text)),

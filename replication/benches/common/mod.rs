@@ -6,6 +6,7 @@
 
 use replication::materialize::Materialized;
 use replication::materialize::test_scene::TestScene;
+use replication::payload::LeaseAction;
 use replication::payload::test_payload::TestPayload;
 use replication::pending::Origin;
 use replication::sync::state::Event;
@@ -37,12 +38,12 @@ pub fn history(n: usize) -> Vec<VerifiedOp<TestPayload>> {
         let object = (i % 64) as u64;
         let payload = match i % 50 {
             0 => TestPayload::Chat(format!("line {i}")),
-            1 => TestPayload::Acquire {
+            1 => TestPayload::Lease(LeaseAction::Acquire {
                 object,
                 strong: false,
                 ttl_micros: 20_000,
-            },
-            2 => TestPayload::Release { object: 1 },
+            }),
+            2 => TestPayload::Lease(LeaseAction::Release { object: 1 }),
             _ => TestPayload::Set {
                 object,
                 value: format!("x*x+y*y-{i}"),

@@ -5,13 +5,13 @@
 //! A cut at Lamport time `L` holds exactly the ops with Lamport time `L` or less. It is
 //! *stable* when no op outside it can ever sort before it: see [`Log::stable_lamport`].
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use super::{CHECKPOINT_INTERVAL, Log, OrderKey};
 use crate::causal::{Frontier, VersionVector};
-use crate::identity::PeerId;
+use crate::identity::{OpId, PeerId};
 use crate::lease::{FoldState, Mark, RejectReason, TargetInfo};
-use crate::op::{Op, OpId};
+use crate::op::Op;
 use crate::payload::{Effect, ObjectId, Payload};
 use crate::pending::{Pending, PendingLimits};
 use crate::time::Timestamp;
@@ -173,6 +173,38 @@ impl<P> Base<P> {
     }
 }
 
+impl<P: Payload> Base<P> {
+    /// The base's deletes, per object, which hide the base edits of their object sorted
+    /// before them.
+    fn deletes(&self) -> BTreeMap<ObjectId, Vec<(OrderKey, OpId)>> {
+        let mut deletes: BTreeMap<ObjectId, Vec<(OrderKey, OpId)>> = BTreeMap::new();
+        for (object, edits) in &self.edits_by_object {
+            for (key, id) in edits {
+                if self
+                    .edits
+                    .get(id)
+                    .is_some_and(|op| op.payload().is_delete())
+                {
+                    deletes.entry(*object).or_default().push((*key, *id));
+                }
+            }
+        }
+        deletes
+    }
+
+    /// The objects an effective creation in the base made: every held op sorts after the
+    /// base, so all saw it.
+    fn created(&self) -> BTreeSet<ObjectId> {
+        (self.edits.values())
+            .filter(|op| op.payload().creates(&op.author()))
+            .filter_map(|op| match op.payload().effect() {
+                Effect::Edit { object } => Some(object),
+                _ => None,
+            })
+            .collect()
+    }
+}
+
 impl<P: Payload> Log<P> {
     /// A log that starts from `base` (a decoded snapshot) instead of from nothing.
     pub(crate) fn from_base(base: Base<P>, limits: PendingLimits) -> Self {
@@ -187,27 +219,8 @@ impl<P: Payload> Log<P> {
         // The clock observes the base's latest timestamp when this log authors (`Log::author`),
         // bounded by the wall clock then.
         let clock = crate::time::HybridClock::default();
-        // The base's deletes, which hide the base edits of their object sorted before them.
-        let mut deletes: BTreeMap<ObjectId, Vec<(OrderKey, OpId)>> = BTreeMap::new();
-        for (object, edits) in &base.edits_by_object {
-            for (key, id) in edits {
-                if base
-                    .edits
-                    .get(id)
-                    .is_some_and(|op| op.payload().is_delete())
-                {
-                    deletes.entry(*object).or_default().push((*key, *id));
-                }
-            }
-        }
-        // Every held op sorts after the base: an effective creation there was seen by all.
-        let base_created = (base.edits.values())
-            .filter(|op| op.payload().creates(&op.author()))
-            .filter_map(|op| match op.payload().effect() {
-                Effect::Edit { object } => Some(object),
-                _ => None,
-            })
-            .collect();
+        let deletes = base.deletes();
+        let base_created = base.created();
         let mut log = Self {
             ops: crate::op::OpSlab::default(),
             order: Vec::new(),
@@ -338,28 +351,8 @@ impl<P: Payload> Log<P> {
     /// The base of this log at Lamport time `cut` (without the scene, which the caller folds):
     /// every held op at or before the cut joins the existing base, if any.
     pub(crate) fn base_at(&self, cut: u64) -> Result<(Base<P>, usize), CutError> {
-        if self.has_membership_ops() {
-            return Err(CutError::Membership);
-        }
-        if self.binds_authors() {
-            return Err(CutError::Bound);
-        }
-        if !self.forks.is_empty() {
-            return Err(CutError::Forked);
-        }
-        let stable = self.stable_lamport();
-        if cut > stable {
-            return Err(CutError::NotStable { cut, stable });
-        }
+        self.check_cut(cut)?;
         let old = self.base.as_deref();
-        if let Some(b) = old
-            && cut < b.lamport
-        {
-            return Err(CutError::BelowBase {
-                cut,
-                base: b.lamport,
-            });
-        }
         let n = self.prefix_len(cut);
         let mut frontier = Frontier::default();
         let mut authors: BTreeMap<PeerId, (u64, u64)> = BTreeMap::new();
@@ -398,25 +391,7 @@ impl<P: Payload> Log<P> {
             };
             kinds.push((id, key.author, kind));
         }
-        let authors: Vec<BaseAuthor> = authors
-            .into_iter()
-            .map(|(author, (seq, lamport))| BaseAuthor {
-                author,
-                seq,
-                lamport,
-            })
-            .collect();
-        let mut ops: Vec<BaseOp> = kinds
-            .into_iter()
-            .map(|(id, author, kind)| BaseOp {
-                id,
-                author_idx: authors
-                    .binary_search_by(|a| a.author.cmp(&author))
-                    .map_or(u32::MAX, |i| i as u32),
-                kind,
-            })
-            .collect();
-        ops.sort_unstable_by_key(|o| o.id);
+        let (authors, ops) = base_ops(authors, kinds);
         let base = Base {
             lamport: cut,
             authors,
@@ -430,4 +405,59 @@ impl<P: Payload> Log<P> {
         };
         Ok((base, n))
     }
+
+    /// Whether this log may be cut at Lamport time `cut`: it holds no membership ops, binds
+    /// no authors and holds no fork, and the cut is stable and not below its base's.
+    fn check_cut(&self, cut: u64) -> Result<(), CutError> {
+        if self.has_membership_ops() {
+            return Err(CutError::Membership);
+        }
+        if self.binds_authors() {
+            return Err(CutError::Bound);
+        }
+        if !self.forks.is_empty() {
+            return Err(CutError::Forked);
+        }
+        let stable = self.stable_lamport();
+        if cut > stable {
+            return Err(CutError::NotStable { cut, stable });
+        }
+        if let Some(b) = self.base.as_deref()
+            && cut < b.lamport
+        {
+            return Err(CutError::BelowBase {
+                cut,
+                base: b.lamport,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// A base's authors (from each author's last seq and Lamport time at the cut) and its ops
+/// (from each op's id, author and kind), the ops sorted by id.
+fn base_ops(
+    authors: BTreeMap<PeerId, (u64, u64)>,
+    kinds: Vec<(OpId, PeerId, BaseKind)>,
+) -> (Vec<BaseAuthor>, Vec<BaseOp>) {
+    let authors: Vec<BaseAuthor> = authors
+        .into_iter()
+        .map(|(author, (seq, lamport))| BaseAuthor {
+            author,
+            seq,
+            lamport,
+        })
+        .collect();
+    let mut ops: Vec<BaseOp> = kinds
+        .into_iter()
+        .map(|(id, author, kind)| BaseOp {
+            id,
+            author_idx: authors
+                .binary_search_by(|a| a.author.cmp(&author))
+                .map_or(u32::MAX, |i| i as u32),
+            kind,
+        })
+        .collect();
+    ops.sort_unstable_by_key(|o| o.id);
+    (authors, ops)
 }

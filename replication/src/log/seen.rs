@@ -10,9 +10,9 @@ use std::collections::BTreeMap;
 
 use super::{Base, OrderKey};
 use crate::causal::Reach;
-use crate::identity::PeerId;
+use crate::identity::{OpId, PeerId};
 use crate::lease::{Lease, Mark, lease_step};
-use crate::op::{Op, OpId};
+use crate::op::Op;
 use crate::payload::{ObjectId, Payload};
 
 /// Most lease ops of an object, sorted before a lease op but missing from its causal past, that

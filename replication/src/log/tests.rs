@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::membership::{FounderCommitment, Membership};
+use crate::payload::LeaseAction;
 use crate::payload::test_payload::TestPayload;
 use proptest::prelude::*;
 use rand_chacha::ChaCha20Rng;
@@ -22,11 +23,11 @@ pub(crate) fn set(object: u64, value: &str) -> TestPayload {
 }
 
 pub(crate) fn weak(object: u64, ttl_micros: u64) -> TestPayload {
-    TestPayload::Acquire {
+    TestPayload::Lease(LeaseAction::Acquire {
         object,
         strong: false,
         ttl_micros,
-    }
+    })
 }
 
 /// The observable outcome of a log: linear order, marks and active flags.
@@ -134,12 +135,12 @@ fn workload_keys(
                 nonce: founder_nonce.unwrap_or_default(),
             }),
             0 => weak(object, 5000),
-            1 => TestPayload::Acquire {
+            1 => TestPayload::Lease(LeaseAction::Acquire {
                 object,
                 strong: true,
                 ttl_micros: 3000,
-            },
-            2 => TestPayload::Release { object },
+            }),
+            2 => TestPayload::Lease(LeaseAction::Release { object }),
             3 if !own_edits.is_empty() => TestPayload::Undo(pick(&mut rng)),
             4 if !own_edits.is_empty() => TestPayload::Redo(pick(&mut rng)),
             5 => TestPayload::Chat(format!("hi {step}")),
@@ -296,11 +297,11 @@ fn a_late_acquire_does_not_bind_edits_that_never_saw_it() {
 #[test]
 fn a_backdated_strong_acquire_binds_only_the_ops_that_saw_it() {
     let (a, c, mallory) = (key(0), key(2), key(9));
-    let hoard = TestPayload::Acquire {
+    let hoard = TestPayload::Lease(LeaseAction::Acquire {
         object: 1,
         strong: true,
         ttl_micros: u64::MAX,
-    };
+    });
     let mut log = TLog::default();
     let (made, _) = log.author(&a, Timestamp(500), set(1, "made")).unwrap();
     // A fresh key: Lamport 2, stamped as early as its past allows, depending on the object's
@@ -521,11 +522,11 @@ fn both_sides_of_a_fork_are_held_and_rejected_in_every_delivery_order() {
     let (x1, _) = left.author(&x, Timestamp(10), set(1, "base")).unwrap();
     let mut right = left.clone();
     // Side a: a strong lease on object 1, then an honest edit of it that the lease binds.
-    let strong = TestPayload::Acquire {
+    let strong = TestPayload::Lease(LeaseAction::Acquire {
         object: 1,
         strong: true,
         ttl_micros: 1_000_000,
-    };
+    });
     let (xa, _) = left.author(&x, Timestamp(20), strong).unwrap();
     let (ha, _) = left.author(&h1, Timestamp(30), set(1, "h1")).unwrap();
     assert!(matches!(left.mark(&ha.id()), Some(Mark::Rejected(_))));
@@ -873,7 +874,7 @@ pub(crate) fn signed(
 
 /// [`signed`] for `session`, with seq, Lamport time and timestamp.
 pub(crate) fn signed_in(
-    session: &crate::sync::message::SessionId,
+    session: &crate::identity::SessionId,
     key: &Keypair,
     (seq, lamport, timestamp): (u64, u64, u64),
     deps: Vec<OpId>,
@@ -893,11 +894,11 @@ pub(crate) fn signed_in(
 fn a_lease_asking_for_more_than_the_max_ttl_ends_at_the_max() {
     let (a, b) = (key(0), key(1));
     let mut log = TLog::default();
-    let strong_forever = TestPayload::Acquire {
+    let strong_forever = TestPayload::Lease(LeaseAction::Acquire {
         object: 1,
         strong: true,
         ttl_micros: u64::MAX,
-    };
+    });
     log.author(&b, Timestamp(500), set(1, "made")).unwrap();
     log.author(&a, Timestamp(1000), strong_forever).unwrap();
     let (held, _) = log.author(&b, Timestamp(2000), set(1, "x")).unwrap();
@@ -1180,11 +1181,11 @@ proptest! {
 fn the_founder_expels_a_member_whose_unseen_ops_turn_void_and_whose_leases_bind_nobody_who_saw_it()
 {
     let (founder, honest, mallory) = (key(0), key(1), key(9));
-    let hoard = TestPayload::Acquire {
+    let hoard = TestPayload::Lease(LeaseAction::Acquire {
         object: 2,
         strong: true,
         ttl_micros: u64::MAX,
-    };
+    });
     let mut log = founded_log();
     let (two, _) = log.author(&honest, Timestamp(500), set(2, "two")).unwrap();
     let (made, _) = log
@@ -1310,10 +1311,12 @@ fn the_founded_workload_voids_ops_and_readmits() {
 #[test]
 fn strong_acquires_of_a_victims_next_objects_do_not_reject_its_creations() {
     let (victim, mallory) = (key(0), key(9));
-    let hoard = |object| TestPayload::Acquire {
-        object,
-        strong: true,
-        ttl_micros: u64::MAX,
+    let hoard = |object| {
+        TestPayload::Lease(LeaseAction::Acquire {
+            object,
+            strong: true,
+            ttl_micros: u64::MAX,
+        })
     };
     let mut log = TLog::default();
     log.author(&victim, Timestamp(1_000), set(1, "first"))
@@ -1378,10 +1381,12 @@ fn one_member_leasing_every_object_holds_at_most_the_cap_and_the_rest_stay_free(
         log.author(&honest, Timestamp(1_000), set(object, "made"))
             .unwrap();
     }
-    let hoard = |object| TestPayload::Acquire {
-        object,
-        strong: true,
-        ttl_micros: u64::MAX,
+    let hoard = |object| {
+        TestPayload::Lease(LeaseAction::Acquire {
+            object,
+            strong: true,
+            ttl_micros: u64::MAX,
+        })
     };
     let marks: Vec<Mark> = (0..n_objects)
         .map(|object| {
@@ -1410,7 +1415,7 @@ fn one_member_leasing_every_object_holds_at_most_the_cap_and_the_rest_stay_free(
     log.author(
         &mallory,
         Timestamp(2_300),
-        TestPayload::Release { object: 0 },
+        TestPayload::Lease(LeaseAction::Release { object: 0 }),
     )
     .unwrap();
     let (next, _) = log

@@ -11,6 +11,7 @@ use crate::log::tests::{
     workload,
 };
 use crate::op::VerifiedOp;
+use crate::payload::LeaseAction;
 use crate::payload::test_payload::TestPayload;
 use crate::pending::Origin;
 use crate::time::Timestamp;
@@ -256,8 +257,8 @@ fn check_lease_rules(log: &TLog) {
         let object = match e.op.payload() {
             TestPayload::Set { object, .. }
             | TestPayload::Delete { object }
-            | TestPayload::Acquire { object, .. }
-            | TestPayload::Release { object } => *object,
+            | TestPayload::Lease(LeaseAction::Acquire { object, .. })
+            | TestPayload::Lease(LeaseAction::Release { object }) => *object,
             _ => continue,
         };
         // An acquire counts only once an effective creation of its object is in its past.
@@ -275,18 +276,18 @@ fn check_lease_rules(log: &TLog) {
             let (h_author, h_at) = (l.op.author(), l.op.timestamp().0);
             let blocked = held.filter(|(h, _, until)| *h != h_author && h_at < *until);
             match l.op.payload() {
-                TestPayload::Acquire {
+                TestPayload::Lease(LeaseAction::Acquire {
                     object: o,
                     strong,
                     ttl_micros,
-                } if *o == object
+                }) if *o == object
                     && blocked.is_none_or(|(_, s, _)| !*strong && !s)
                     && created(&l.op.id()) =>
                 {
                     let ttl = (*ttl_micros).min(crate::lease::MAX_LEASE_TTL_MICROS);
                     held = Some((h_author, *strong, h_at.saturating_add(ttl)));
                 }
-                TestPayload::Release { object: o }
+                TestPayload::Lease(LeaseAction::Release { object: o })
                     if *o == object
                         && held.is_some_and(|(h, _, until)| h == h_author && h_at < until) =>
                 {
@@ -304,15 +305,15 @@ fn check_lease_rules(log: &TLog) {
                 }
                 Mark::Rejected(other) => panic!("edit rejected for {other:?}"),
             },
-            TestPayload::Acquire { .. } if !created(&e.op.id()) => {
+            TestPayload::Lease(LeaseAction::Acquire { .. }) if !created(&e.op.id()) => {
                 let unknown = Mark::Rejected(RejectReason::UnknownObject);
                 assert_eq!(e.mark, unknown, "acquire of an object it never saw made");
             }
-            TestPayload::Acquire { strong, .. } => {
+            TestPayload::Lease(LeaseAction::Acquire { strong, .. }) => {
                 let ok = blocker.is_none_or(|(_, s, _)| !*strong && !s);
                 assert_eq!(e.mark == Mark::Effective, ok, "acquire verdict");
             }
-            TestPayload::Release { .. } => {
+            TestPayload::Lease(LeaseAction::Release { .. }) => {
                 let ok = held.is_some_and(|(h, _, until)| h == author && at < until);
                 assert_eq!(e.mark == Mark::Effective, ok, "release verdict");
             }

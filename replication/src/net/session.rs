@@ -15,9 +15,8 @@
 
 use std::fmt;
 
-use crate::identity::hex;
+use crate::identity::{SESSION_ID_BYTES, SessionId, hex};
 use crate::net::invite::Invite;
-use crate::sync::message::{SESSION_ID_BYTES, SessionId};
 
 /// Length of a [`DiscoveryId`].
 pub const DISCOVERY_ID_BYTES: usize = 16;

@@ -23,23 +23,22 @@
 //! by hash; the fold puts the change together when it reaches the `Assemble`.
 
 pub mod parts;
+mod wire;
 
-use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use fdsl::object::codec as object_codec;
 use fdsl::object::{CompiledEdit, Edit, Field, Object, ObjectData};
 use fdsl::scene::{self, Group, GroupId, Scene};
-use serde::{Deserialize, Deserializer, Serialize, Serializer};
+use serde::{Deserialize, Serialize};
 
 use crate::codec::DecodeError;
-use crate::identity::PeerId;
+use crate::identity::{OpId, PeerId};
 use crate::log::OrderKey;
 use crate::materialize::{FoldEntry, MAX_SCENE_SNAPSHOT_BYTES, Materialize, SceneHash};
 use crate::membership::{Admission, Membership};
-use crate::op::OpId;
-use crate::payload::{Effect, LeaseStrength, MAX_PAYLOAD_BYTES, ObjectId, Payload};
+use crate::payload::{Effect, LeaseAction, MAX_PAYLOAD_BYTES, ObjectId, Payload};
 
 /// Longest chat message, in bytes.
 pub const MAX_CHAT_BYTES: usize = 2048;
@@ -195,20 +194,9 @@ pub enum ShapePayload {
         /// The new group.
         group: Option<u64>,
     },
-    /// Takes the object's lease.
-    Acquire {
-        /// The object.
-        object: u64,
-        /// Strong (only when free, expired or own) or weak (takes over).
-        strong: bool,
-        /// Time to live in microseconds.
-        ttl_micros: u64,
-    },
-    /// Gives the lease back.
-    Release {
-        /// The object.
-        object: u64,
-    },
+    /// Takes or gives back the object's lease (a group's id loses its group bit: groups cannot
+    /// be leased).
+    Lease(LeaseAction),
     /// Undoes one of the author's earlier edits.
     Undo(OpId),
     /// Redoes an undone edit.
@@ -249,375 +237,6 @@ const _: () = assert!(std::mem::size_of::<ShapePayload>() <= 40);
 // And one op: the payload, counters, id and encoding (read in place for the rest).
 #[cfg(target_pointer_width = "64")]
 const _: () = assert!(std::mem::size_of::<crate::Op<ShapePayload>>() <= 120);
-
-/// [`ShapePayload`] as encoded: its variants in their order, `Create` in its layout from
-/// before ids were derived, and then `CreateOwned`, a `Create` with its counter, so ops signed
-/// before read as they did. Serializing borrows; deserializing moves.
-#[derive(Serialize, Deserialize)]
-enum Wire<'a> {
-    Create {
-        object: u64,
-        data: Cow<'a, Arc<ObjectData>>,
-        group: Option<u64>,
-    },
-    Delete {
-        object: u64,
-    },
-    Set {
-        object: u64,
-        field: Cow<'a, Box<Field>>,
-    },
-    Edit {
-        object: u64,
-        edit: Cow<'a, Arc<CompiledEdit>>,
-    },
-    SetGroup {
-        group: u64,
-        value: Cow<'a, Option<Box<Group>>>,
-    },
-    Move {
-        object: u64,
-        group: Option<u64>,
-    },
-    Acquire {
-        object: u64,
-        strong: bool,
-        ttl_micros: u64,
-    },
-    Release {
-        object: u64,
-    },
-    Undo(#[serde(with = "op_id")] OpId),
-    Redo(#[serde(with = "op_id")] OpId),
-    Chat(Cow<'a, str>),
-    Part {
-        object: u64,
-        bytes: Cow<'a, [u8]>,
-    },
-    Assemble {
-        object: u64,
-        parts: Cow<'a, [[u8; 32]]>,
-    },
-    CreateOwned {
-        object: u64,
-        counter: u32,
-        data: Cow<'a, Arc<ObjectData>>,
-        group: Option<u64>,
-    },
-    Member {
-        member: [u8; 32],
-        expel: bool,
-        nonce: [u8; 32],
-    },
-    Admit {
-        key: [u8; 32],
-        grant_bytes: u64,
-        nonce: Option<[u8; 32]>,
-    },
-}
-
-impl<'a> From<&'a ShapePayload> for Wire<'a> {
-    fn from(p: &'a ShapePayload) -> Wire<'a> {
-        match p {
-            ShapePayload::Create {
-                object,
-                counter: None,
-                data,
-                group,
-            } => Wire::Create {
-                object: *object,
-                data: Cow::Borrowed(data),
-                group: *group,
-            },
-            ShapePayload::Create {
-                object,
-                counter: Some(counter),
-                data,
-                group,
-            } => Wire::CreateOwned {
-                object: *object,
-                counter: *counter,
-                data: Cow::Borrowed(data),
-                group: *group,
-            },
-            ShapePayload::Delete { object } => Wire::Delete { object: *object },
-            ShapePayload::Set { object, field } => Wire::Set {
-                object: *object,
-                field: Cow::Borrowed(field),
-            },
-            ShapePayload::Edit { object, edit } => Wire::Edit {
-                object: *object,
-                edit: Cow::Borrowed(edit),
-            },
-            ShapePayload::SetGroup { group, value } => Wire::SetGroup {
-                group: *group,
-                value: Cow::Borrowed(value),
-            },
-            ShapePayload::Move { object, group } => Wire::Move {
-                object: *object,
-                group: *group,
-            },
-            ShapePayload::Acquire {
-                object,
-                strong,
-                ttl_micros,
-            } => Wire::Acquire {
-                object: *object,
-                strong: *strong,
-                ttl_micros: *ttl_micros,
-            },
-            ShapePayload::Release { object } => Wire::Release { object: *object },
-            ShapePayload::Undo(id) => Wire::Undo(*id),
-            ShapePayload::Redo(id) => Wire::Redo(*id),
-            ShapePayload::Chat(text) => Wire::Chat(Cow::Borrowed(text)),
-            ShapePayload::Part { object, bytes } => Wire::Part {
-                object: *object,
-                bytes: Cow::Borrowed(bytes),
-            },
-            ShapePayload::Assemble { object, parts } => Wire::Assemble {
-                object: *object,
-                parts: Cow::Borrowed(parts),
-            },
-            ShapePayload::Member(m) => Wire::Member {
-                member: m.member.0,
-                expel: m.expel,
-                nonce: m.nonce,
-            },
-            ShapePayload::Admit(a) => Wire::Admit {
-                key: a.key.0,
-                grant_bytes: a.grant_bytes,
-                nonce: a.nonce,
-            },
-        }
-    }
-}
-
-impl From<Wire<'_>> for ShapePayload {
-    fn from(w: Wire<'_>) -> ShapePayload {
-        match w {
-            Wire::Create {
-                object,
-                data,
-                group,
-            } => ShapePayload::Create {
-                object,
-                counter: None,
-                data: data.into_owned(),
-                group,
-            },
-            Wire::CreateOwned {
-                object,
-                counter,
-                data,
-                group,
-            } => ShapePayload::Create {
-                object,
-                counter: Some(counter),
-                data: data.into_owned(),
-                group,
-            },
-            Wire::Delete { object } => ShapePayload::Delete { object },
-            Wire::Set { object, field } => ShapePayload::Set {
-                object,
-                field: field.into_owned(),
-            },
-            Wire::Edit { object, edit } => ShapePayload::Edit {
-                object,
-                edit: edit.into_owned(),
-            },
-            Wire::SetGroup { group, value } => ShapePayload::SetGroup {
-                group,
-                value: value.into_owned(),
-            },
-            Wire::Move { object, group } => ShapePayload::Move { object, group },
-            Wire::Acquire {
-                object,
-                strong,
-                ttl_micros,
-            } => ShapePayload::Acquire {
-                object,
-                strong,
-                ttl_micros,
-            },
-            Wire::Release { object } => ShapePayload::Release { object },
-            Wire::Undo(id) => ShapePayload::Undo(id),
-            Wire::Redo(id) => ShapePayload::Redo(id),
-            Wire::Chat(text) => ShapePayload::Chat(text.into_owned()),
-            Wire::Part { object, bytes } => ShapePayload::Part {
-                object,
-                bytes: bytes.into_owned(),
-            },
-            Wire::Assemble { object, parts } => ShapePayload::Assemble {
-                object,
-                parts: parts.into_owned(),
-            },
-            Wire::Member {
-                member,
-                expel,
-                nonce,
-            } => ShapePayload::Member(Box::new(Membership {
-                member: PeerId(member),
-                expel,
-                nonce,
-            })),
-            Wire::Admit {
-                key,
-                grant_bytes,
-                nonce,
-            } => ShapePayload::Admit(Box::new(Admission {
-                key: PeerId(key),
-                grant_bytes,
-                nonce,
-            })),
-        }
-    }
-}
-
-impl Serialize for ShapePayload {
-    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        Wire::from(self).serialize(s)
-    }
-}
-
-impl<'de> Deserialize<'de> for ShapePayload {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<ShapePayload, D::Error> {
-        Wire::deserialize(d).map(ShapePayload::from)
-    }
-}
-
-/// [`ShapePayload`] as encoded in version 1 of the object encoding (before objects held
-/// grids): ops signed then are read into today's payloads, and checked canonical in that
-/// version.
-#[derive(Serialize, Deserialize)]
-enum ShapePayloadV1 {
-    Create {
-        object: u64,
-        data: Box<object_codec::v1::ObjectData>,
-        group: Option<u64>,
-    },
-    Delete {
-        object: u64,
-    },
-    Set {
-        object: u64,
-        field: Box<Field>,
-    },
-    Edit {
-        object: u64,
-        edit: Arc<CompiledEdit>,
-    },
-    SetGroup {
-        group: u64,
-        value: Option<Box<Group>>,
-    },
-    Move {
-        object: u64,
-        group: Option<u64>,
-    },
-    Acquire {
-        object: u64,
-        strong: bool,
-        ttl_micros: u64,
-    },
-    Release {
-        object: u64,
-    },
-    Undo(#[serde(with = "op_id")] OpId),
-    Redo(#[serde(with = "op_id")] OpId),
-    Chat(String),
-}
-
-impl ShapePayloadV1 {
-    /// `p` in version 1's layout; `None` when it holds what version 1 cannot say (grids).
-    fn of(p: &ShapePayload) -> Option<ShapePayloadV1> {
-        Some(match p.clone() {
-            ShapePayload::Create {
-                object,
-                counter: None,
-                data,
-                group,
-            } => ShapePayloadV1::Create {
-                object,
-                data: Box::new(object_codec::v1::ObjectData::of(ObjectData::clone(&data))?),
-                group,
-            },
-            ShapePayload::Create { .. } => return None,
-            ShapePayload::Delete { object } => ShapePayloadV1::Delete { object },
-            ShapePayload::Set { field, .. } if matches!(*field, Field::Grids(_)) => return None,
-            ShapePayload::Set { object, field } => ShapePayloadV1::Set { object, field },
-            ShapePayload::Edit { object, edit } => ShapePayloadV1::Edit { object, edit },
-            ShapePayload::SetGroup { group, value } => ShapePayloadV1::SetGroup { group, value },
-            ShapePayload::Move { object, group } => ShapePayloadV1::Move { object, group },
-            ShapePayload::Acquire {
-                object,
-                strong,
-                ttl_micros,
-            } => ShapePayloadV1::Acquire {
-                object,
-                strong,
-                ttl_micros,
-            },
-            ShapePayload::Release { object } => ShapePayloadV1::Release { object },
-            ShapePayload::Undo(id) => ShapePayloadV1::Undo(id),
-            ShapePayload::Redo(id) => ShapePayloadV1::Redo(id),
-            ShapePayload::Chat(text) => ShapePayloadV1::Chat(text),
-            ShapePayload::Part { .. }
-            | ShapePayload::Assemble { .. }
-            | ShapePayload::Member(_)
-            | ShapePayload::Admit(_) => {
-                return None;
-            }
-        })
-    }
-}
-
-impl From<ShapePayloadV1> for ShapePayload {
-    fn from(p: ShapePayloadV1) -> ShapePayload {
-        match p {
-            ShapePayloadV1::Create {
-                object,
-                data,
-                group,
-            } => ShapePayload::Create {
-                object,
-                counter: None,
-                data: Arc::new((*data).into()),
-                group,
-            },
-            ShapePayloadV1::Delete { object } => ShapePayload::Delete { object },
-            ShapePayloadV1::Set { object, field } => ShapePayload::Set { object, field },
-            ShapePayloadV1::Edit { object, edit } => ShapePayload::Edit { object, edit },
-            ShapePayloadV1::SetGroup { group, value } => ShapePayload::SetGroup { group, value },
-            ShapePayloadV1::Move { object, group } => ShapePayload::Move { object, group },
-            ShapePayloadV1::Acquire {
-                object,
-                strong,
-                ttl_micros,
-            } => ShapePayload::Acquire {
-                object,
-                strong,
-                ttl_micros,
-            },
-            ShapePayloadV1::Release { object } => ShapePayload::Release { object },
-            ShapePayloadV1::Undo(id) => ShapePayload::Undo(id),
-            ShapePayloadV1::Redo(id) => ShapePayload::Redo(id),
-            ShapePayloadV1::Chat(text) => ShapePayload::Chat(text),
-        }
-    }
-}
-
-mod op_id {
-    use super::OpId;
-    use serde::{Deserialize, Deserializer, Serialize, Serializer};
-
-    pub fn serialize<S: Serializer>(id: &OpId, s: S) -> Result<S::Ok, S::Error> {
-        id.0.serialize(s)
-    }
-
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<OpId, D::Error> {
-        <[u8; 32]>::deserialize(d).map(OpId)
-    }
-}
 
 impl ShapePayload {
     /// An [`ShapePayload::Edit`] of `object`: the edit compiled, or why it cannot be.
@@ -670,13 +289,10 @@ impl Payload for ShapePayload {
                 limit: MAX_PAYLOAD_BYTES as u64,
             });
         }
-        let payload: ShapePayload =
-            object_codec::decode_versioned::<_, ShapePayloadV1>("shape payload", bytes).map_err(
-                |_| DecodeError::Invalid {
-                    offset: 0,
-                    what: "shape payload encoding",
-                },
-            )?;
+        let payload = wire::decode("shape payload", bytes).map_err(|_| DecodeError::Invalid {
+            offset: 0,
+            what: "shape payload encoding",
+        })?;
         payload.validate().map_err(|_| DecodeError::Invalid {
             offset: 0,
             what: "shape payload contents (a formula, number or text is not valid)",
@@ -685,11 +301,7 @@ impl Payload for ShapePayload {
     }
 
     fn is_canonical(&self, bytes: &[u8]) -> bool {
-        if bytes.first() == Some(&object_codec::VERSION_1) {
-            return ShapePayloadV1::of(self)
-                .is_some_and(|v1| object_codec::encode_version_1(&v1) == bytes);
-        }
-        crate::payload::encodes_to(self, bytes)
+        wire::is_canonical(self, bytes)
     }
 
     fn effect(&self) -> Effect {
@@ -705,20 +317,7 @@ impl Payload for ShapePayload {
             ShapePayload::SetGroup { group, .. } => Effect::Edit {
                 object: ObjectId(group | GROUP_LEASE_BIT),
             },
-            ShapePayload::Acquire {
-                object: o,
-                strong,
-                ttl_micros,
-            } => Effect::Acquire {
-                object: object(o),
-                strength: if strong {
-                    LeaseStrength::Strong
-                } else {
-                    LeaseStrength::Weak
-                },
-                ttl_micros,
-            },
-            ShapePayload::Release { object: o } => Effect::Release { object: object(o) },
+            ShapePayload::Lease(lease) => lease.effect(object),
             ShapePayload::Undo(target) => Effect::Undo { target },
             ShapePayload::Redo(target) => Effect::Redo { target },
             ShapePayload::Chat(_) | ShapePayload::Member(_) | ShapePayload::Admit(_) => {
@@ -841,14 +440,8 @@ impl ShapeScene {
             } => {
                 // Only the author an id is derived from makes the object (a member cannot take
                 // an id another peer is about to use), and the first creation in the order.
-                let allowed = may_create(key.author, *object, *counter);
-                let object = scene::ObjectId(*object);
-                if allowed && self.scene.object(object).is_none() {
-                    // Valid by decode; a missing group puts the object at the top.
-                    let group = group
-                        .map(GroupId)
-                        .filter(|g| self.scene.group(*g).is_some());
-                    let _ = self.scene.create(object, Arc::clone(data), group);
+                if may_create(key.author, *object, *counter) {
+                    self.create(scene::ObjectId(*object), data, *group);
                 }
             }
             // A delete acts through the log: it hides the edits of its object that it saw
@@ -883,21 +476,8 @@ impl ShapeScene {
                     .scene
                     .set_object_group(scene::ObjectId(*object), group.map(GroupId));
             }
-            ShapePayload::Chat(text) => {
-                let line = ChatLine {
-                    lamport: key.lamport,
-                    author: key.author.0,
-                    seq: key.seq,
-                    text: text.clone(),
-                };
-                let order = |l: &ChatLine| (l.lamport, l.author, l.seq);
-                let at = self.chat.partition_point(|l| order(l) < order(&line));
-                if self.chat.get(at).is_none_or(|l| order(l) != order(&line)) {
-                    self.chat.insert(at, line);
-                }
-            }
-            ShapePayload::Acquire { .. }
-            | ShapePayload::Release { .. }
+            ShapePayload::Chat(text) => self.chat_line(key, text),
+            ShapePayload::Lease(_)
             | ShapePayload::Undo(_)
             | ShapePayload::Redo(_)
             | ShapePayload::Member(_)
@@ -911,6 +491,34 @@ impl ShapeScene {
                     self.apply_payload(key, id, &change);
                 }
             }
+        }
+    }
+}
+
+impl ShapeScene {
+    /// Makes `object`, unless an earlier creation in the order made it.
+    fn create(&mut self, object: scene::ObjectId, data: &Arc<ObjectData>, group: Option<u64>) {
+        if self.scene.object(object).is_none() {
+            // Valid by decode; a missing group puts the object at the top.
+            let group = group
+                .map(GroupId)
+                .filter(|g| self.scene.group(*g).is_some());
+            let _ = self.scene.create(object, Arc::clone(data), group);
+        }
+    }
+
+    /// Puts a chat line at its place in the order (once).
+    fn chat_line(&mut self, key: OrderKey, text: &str) {
+        let line = ChatLine {
+            lamport: key.lamport,
+            author: key.author.0,
+            seq: key.seq,
+            text: text.to_owned(),
+        };
+        let order = |l: &ChatLine| (l.lamport, l.author, l.seq);
+        let at = self.chat.partition_point(|l| order(l) < order(&line));
+        if self.chat.get(at).is_none_or(|l| order(l) != order(&line)) {
+            self.chat.insert(at, line);
         }
     }
 }

@@ -19,8 +19,8 @@ use std::sync::Arc;
 
 use fdsl::object::codec as object_codec;
 
-use super::{ShapePayload, ShapePayloadV1};
-use crate::op::OpId;
+use super::{ShapePayload, wire};
+use crate::identity::OpId;
 use crate::payload::{MAX_PAYLOAD_BYTES, Payload};
 
 /// Longest change authored in parts, in bytes of its encoding (a mesh of about 170 000
@@ -166,8 +166,7 @@ fn decode_change(object: u64, bytes: &[u8]) -> Option<ShapePayload> {
     if bytes.len() > MAX_ASSEMBLED_BYTES {
         return None;
     }
-    let change: ShapePayload =
-        object_codec::decode_versioned::<_, ShapePayloadV1>("assembled change", bytes).ok()?;
+    let change = wire::decode("assembled change", bytes).ok()?;
     let for_object = match &change {
         ShapePayload::Create { object: o, .. } | ShapePayload::Set { object: o, .. } => {
             *o == object

@@ -32,7 +32,7 @@ const RECORD_HEAD_BYTES: usize = 4 + CHECKSUM_BYTES;
 // Every op a log accepts fits in a store: a log's bytes and one record head per op.
 const _: () = assert!(
     crate::log::MAX_LOG_BYTES
-        + crate::log::MAX_LOG_OPS as u64 * RECORD_HEAD_BYTES as u64
+        + crate::op::MAX_LOG_OPS as u64 * RECORD_HEAD_BYTES as u64
         + HEADER_BYTES as u64
         <= MAX_STORE_BYTES
 );

@@ -2,8 +2,8 @@
 //! refused, and a writer child process killed with SIGKILL mid-write many times.
 
 use super::*;
-use crate::identity::Keypair;
-use crate::op::{OpFields, OpId, VerifiedOp};
+use crate::identity::{Keypair, OpId};
+use crate::op::{OpFields, VerifiedOp};
 use crate::payload::test_payload::TestPayload;
 use rand_chacha::ChaCha20Rng;
 use rand_core::{RngCore, SeedableRng};

@@ -12,8 +12,8 @@
 
 use crate::causal::{MAX_VV_AUTHORS, VersionVector};
 use crate::codec::{DecodeError, MAX_VARINT_BYTES, Reader, put_bytes, put_varint};
-use crate::identity::{PEER_ID_BYTES, PeerId};
-use crate::op::{MAX_OP_BYTES, OpId};
+use crate::identity::{OpId, PEER_ID_BYTES, PeerId, SESSION_ID_BYTES, SessionId};
+use crate::op::MAX_OP_BYTES;
 
 /// Version byte that opens every sync message.
 pub const SYNC_WIRE_VERSION: u8 = 1;
@@ -40,8 +40,6 @@ pub const SYNC_WIRE_VERSION: u8 = 1;
 pub const PROTOCOL_VERSION: u64 = 10;
 /// The last protocol whose hello ends after `hello_seen` (protocol 8 added the hello's have).
 const LAST_PROTOCOL_WITHOUT_HELLO_HAVE: u64 = 7;
-/// Length of a session id.
-pub const SESSION_ID_BYTES: usize = 16;
 /// Most ops in one [`Message::Ops`] batch.
 pub const MAX_BATCH_OPS: usize = 64;
 /// Largest encoded message in bytes.
@@ -84,9 +82,6 @@ pub fn tip(id: &OpId) -> u64 {
     head.copy_from_slice(&id.0[..TIP_BYTES]);
     u64::from_le_bytes(head).max(1)
 }
-
-/// A session's id (derived from its invite by the transport).
-pub type SessionId = [u8; SESSION_ID_BYTES];
 
 /// A hello's version vector: the sender's whole one, each entry with its tip as in a
 /// [`Message::Have`].
@@ -233,6 +228,7 @@ impl Message {
     }
 
     /// The encoded message.
+    // tidy:table: one arm per message kind.
     pub fn encode(&self) -> Vec<u8> {
         let mut out = vec![SYNC_WIRE_VERSION];
         match self {
@@ -244,17 +240,14 @@ impl Message {
                 have,
             } => {
                 out.push(TAG_HELLO);
-                put_varint(&mut out, *protocol_version);
-                out.extend_from_slice(session_id);
-                out.extend_from_slice(&peer.0);
-                out.push(u8::from(*hello_seen));
-                // A hello of a protocol before hellos named haves ends here (see `decode`).
-                if *protocol_version > LAST_PROTOCOL_WITHOUT_HELLO_HAVE || have.is_some() {
-                    out.push(u8::from(have.is_some()));
-                }
-                if let Some(have) = have {
-                    put_have(&mut out, &have.vv, &have.tips);
-                }
+                put_hello(
+                    &mut out,
+                    *protocol_version,
+                    session_id,
+                    peer,
+                    *hello_seen,
+                    have,
+                );
             }
             Self::Have { vv, tips } => {
                 out.push(TAG_HAVE);
@@ -314,6 +307,7 @@ impl Message {
 
     /// Decodes one message from untrusted bytes, never panicking and never allocating past
     /// the named limits.
+    // tidy:table: one arm per message tag.
     pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
         if bytes.len() > MAX_MESSAGE_BYTES {
             return Err(DecodeError::OverLimit {
@@ -330,62 +324,12 @@ impl Message {
         }
         let tag_offset = r.offset();
         let message = match r.u8()? {
-            TAG_HELLO => {
-                let protocol_version = r.varint()?;
-                let session_id = r.array()?;
-                let peer = PeerId(r.array()?);
-                let hello_seen = r.flag()?;
-                // A hello of protocol 7 or older ends here; its version is refused later, with
-                // a reason, rather than as a malformed message. Later hellos always carry the
-                // flag, older ones only to say that a have follows, so every message has one
-                // encoding.
-                let old = protocol_version <= LAST_PROTOCOL_WITHOUT_HELLO_HAVE;
-                let flag_offset = r.offset();
-                let has_have = if old && r.remaining() == 0 {
-                    false
-                } else {
-                    let flag = r.flag()?;
-                    if old && !flag {
-                        return Err(DecodeError::Invalid {
-                            offset: flag_offset,
-                            what: "an old hello's have flag that names no have",
-                        });
-                    }
-                    flag
-                };
-                let have = if has_have {
-                    let (vv, tips) = read_have(&mut r)?;
-                    Some(HelloHave { vv, tips })
-                } else {
-                    None
-                };
-                Self::Hello {
-                    protocol_version,
-                    session_id,
-                    peer,
-                    hello_seen,
-                    have,
-                }
-            }
+            TAG_HELLO => read_hello(&mut r)?,
             TAG_HAVE => {
                 let (vv, tips) = read_have(&mut r)?;
                 Self::Have { vv, tips }
             }
-            TAG_WANT => {
-                let vv = read_vv(&mut r)?;
-                let offset = r.offset();
-                let n = r.bounded("held count", MAX_VV_AUTHORS as u64)?;
-                if n != vv.len() {
-                    return Err(DecodeError::Invalid {
-                        offset,
-                        what: "held count differs from the version vector's",
-                    });
-                }
-                let held = (0..n)
-                    .map(|_| Ok((r.varint()?, u64::from_le_bytes(r.array()?))))
-                    .collect::<Result<_, DecodeError>>()?;
-                Self::Want { vv, held }
-            }
+            TAG_WANT => read_want(&mut r)?,
             TAG_OPS => {
                 let batch_no = r.varint()?;
                 let n_ops = r.bounded("batch op count", MAX_BATCH_OPS as u64)?;
@@ -440,6 +384,85 @@ impl Message {
         r.finish()?;
         Ok(message)
     }
+}
+
+/// Appends a hello's fields (after its tag).
+fn put_hello(
+    out: &mut Vec<u8>,
+    protocol_version: u64,
+    session_id: &SessionId,
+    peer: &PeerId,
+    hello_seen: bool,
+    have: &Option<HelloHave>,
+) {
+    put_varint(out, protocol_version);
+    out.extend_from_slice(session_id);
+    out.extend_from_slice(&peer.0);
+    out.push(u8::from(hello_seen));
+    // A hello of a protocol before hellos named haves ends here (see `read_hello`).
+    if protocol_version > LAST_PROTOCOL_WITHOUT_HELLO_HAVE || have.is_some() {
+        out.push(u8::from(have.is_some()));
+    }
+    if let Some(have) = have {
+        put_have(out, &have.vv, &have.tips);
+    }
+}
+
+/// Reads a hello's fields (after its tag).
+fn read_hello(r: &mut Reader<'_>) -> Result<Message, DecodeError> {
+    let protocol_version = r.varint()?;
+    let session_id = r.array()?;
+    let peer = PeerId(r.array()?);
+    let hello_seen = r.flag()?;
+    // A hello of protocol 7 or older ends here; its version is refused later, with
+    // a reason, rather than as a malformed message. Later hellos always carry the
+    // flag, older ones only to say that a have follows, so every message has one
+    // encoding.
+    let old = protocol_version <= LAST_PROTOCOL_WITHOUT_HELLO_HAVE;
+    let flag_offset = r.offset();
+    let has_have = if old && r.remaining() == 0 {
+        false
+    } else {
+        let flag = r.flag()?;
+        if old && !flag {
+            return Err(DecodeError::Invalid {
+                offset: flag_offset,
+                what: "an old hello's have flag that names no have",
+            });
+        }
+        flag
+    };
+    let have = if has_have {
+        let (vv, tips) = read_have(r)?;
+        Some(HelloHave { vv, tips })
+    } else {
+        None
+    };
+    Ok(Message::Hello {
+        protocol_version,
+        session_id,
+        peer,
+        hello_seen,
+        have,
+    })
+}
+
+/// Reads a want's fields (after its tag): a version vector, then the sender's held seq and
+/// tip for each of its entries.
+fn read_want(r: &mut Reader<'_>) -> Result<Message, DecodeError> {
+    let vv = read_vv(r)?;
+    let offset = r.offset();
+    let n = r.bounded("held count", MAX_VV_AUTHORS as u64)?;
+    if n != vv.len() {
+        return Err(DecodeError::Invalid {
+            offset,
+            what: "held count differs from the version vector's",
+        });
+    }
+    let held = (0..n)
+        .map(|_| Ok((r.varint()?, u64::from_le_bytes(r.array()?))))
+        .collect::<Result<_, DecodeError>>()?;
+    Ok(Message::Want { vv, held })
 }
 
 fn put_vv(out: &mut Vec<u8>, vv: &VersionVector) {

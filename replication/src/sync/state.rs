@@ -45,14 +45,14 @@ use std::marker::PhantomData;
 
 use crate::causal::{MAX_VV_AUTHORS, VersionVector};
 use crate::codec::DecodeError;
-use crate::identity::PeerId;
+use crate::identity::{OpId, PeerId, SessionId};
 use crate::log::{InsertError, Insertion, Log};
-use crate::op::{Envelope, MAX_OP_BYTES, Op, OpId, ReceiveError};
+use crate::op::{Envelope, MAX_OP_BYTES, Op, ReceiveError};
 use crate::payload::Payload;
 use crate::pending::{EvictReason, Origin};
 use crate::sync::message::{
     HelloHave, MAX_BATCH_OPS, MAX_EPHEMERAL_BYTES, MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION,
-    SessionId, tip,
+    tip,
 };
 use crate::time::Timestamp;
 
@@ -217,6 +217,17 @@ pub enum RejectKind {
     /// A [`Message::Forked`] whose two ops do not decode, or are not one author's with one seq
     /// and different ids.
     BadForkProof,
+}
+
+impl RejectKind {
+    /// The kind of a message that did not decode for `error`.
+    fn of_decode_error(error: &DecodeError) -> RejectKind {
+        match error {
+            DecodeError::UnknownVersion { .. } => RejectKind::UnknownVersion,
+            DecodeError::OverLimit { .. } => RejectKind::Oversized,
+            _ => RejectKind::Malformed,
+        }
+    }
 }
 
 /// Why the connection closed.
@@ -587,6 +598,7 @@ pub struct SyncState<P> {
 
 impl<P: Payload> SyncState<P> {
     /// Starts a connection: queues our hello.
+    // tidy:table: every field's starting value.
     pub fn new(now: Timestamp, config: SyncConfig) -> Self {
         let mut state = Self {
             config,
@@ -888,12 +900,7 @@ impl<P: Payload> SyncState<P> {
         let message = match Message::decode(bytes) {
             Ok(m) => m,
             Err(e) => {
-                let kind = match e {
-                    crate::codec::DecodeError::UnknownVersion { .. } => RejectKind::UnknownVersion,
-                    crate::codec::DecodeError::OverLimit { .. } => RejectKind::Oversized,
-                    _ => RejectKind::Malformed,
-                };
-                self.reject(kind, e.to_string());
+                self.reject(RejectKind::of_decode_error(&e), e.to_string());
                 return;
             }
         };
@@ -917,41 +924,54 @@ impl<P: Payload> SyncState<P> {
                 have,
             } => {
                 self.on_hello(now, protocol_version, session_id, peer, hello_seen, log);
-                // What the remote held when it said hello, learnt as from a have once the
-                // hello is accepted: our own ops and wants may go at once, not a round trip
-                // later when its answer to our hello comes. (It does not stop our hello: only
-                // a have says the remote saw that.)
-                if let Some(have) = have
-                    && !self.closed
-                    && self.remote == Some(peer)
-                {
-                    self.own_known = true;
-                    self.learn_remote(now, &have.vv, log);
-                    self.compare_tips(&have.vv, &have.tips, log);
-                }
-                while self.remote.is_some()
-                    && !self.closed
-                    && let Some((message, _)) = self.early.pop_front()
-                {
-                    self.on_message(now, 0, message, log);
-                }
+                self.after_hello(now, peer, have, log);
             }
-            message if self.remote.is_none() => {
-                // Held until the hello comes (a lost hello is sent again; data sent behind it
-                // need not be), within bounds; the rest is dropped.
-                let held: usize = self.early.iter().map(|(_, n)| n).sum();
-                if self.early.len() < MAX_EARLY_MESSAGES && held + bytes.len() <= MAX_EARLY_BYTES {
-                    self.early.push_back((message, bytes.len()));
-                } else {
-                    self.reject(RejectKind::BeforeHello, "data before hello".into());
-                }
-                // The remote answers a hello of ours whose own hello was lost, maybe during a
-                // partition: ours goes out again on the base interval (it answers with its
-                // own), not a backed-off one.
-                self.hello_resend_micros = self.base_resend_micros();
-            }
+            message if self.remote.is_none() => self.hold_early(message, bytes.len()),
             message => self.on_message(now, silence, message, log),
         }
+    }
+
+    /// After the remote's hello (from `peer`, with `have`) was handled: what it held then is
+    /// learnt as from a have once the hello is accepted, so our own ops and wants may go at
+    /// once, not a round trip later when its answer to our hello comes (it does not stop our
+    /// hello: only a have says the remote saw that); then the messages held for the hello.
+    fn after_hello(
+        &mut self,
+        now: Timestamp,
+        peer: PeerId,
+        have: Option<HelloHave>,
+        log: &mut Log<P>,
+    ) {
+        if let Some(have) = have
+            && !self.closed
+            && self.remote == Some(peer)
+        {
+            self.own_known = true;
+            self.learn_remote(now, &have.vv, log);
+            self.compare_tips(&have.vv, &have.tips, log);
+        }
+        while self.remote.is_some()
+            && !self.closed
+            && let Some((message, _)) = self.early.pop_front()
+        {
+            self.on_message(now, 0, message, log);
+        }
+    }
+
+    /// A message of `n_bytes` before the remote's hello: held until the hello comes (a lost
+    /// hello is sent again; data sent behind it need not be), within bounds; the rest is
+    /// dropped.
+    fn hold_early(&mut self, message: Message, n_bytes: usize) {
+        let held: usize = self.early.iter().map(|(_, n)| n).sum();
+        if self.early.len() < MAX_EARLY_MESSAGES && held + n_bytes <= MAX_EARLY_BYTES {
+            self.early.push_back((message, n_bytes));
+        } else {
+            self.reject(RejectKind::BeforeHello, "data before hello".into());
+        }
+        // The remote answers a hello of ours whose own hello was lost, maybe during a
+        // partition: ours goes out again on the base interval (it answers with its own), not
+        // a backed-off one.
+        self.hello_resend_micros = self.base_resend_micros();
     }
 
     /// A message other than a hello, once the remote's hello has arrived, after `silence`.
@@ -985,21 +1005,7 @@ impl<P: Payload> SyncState<P> {
         match message {
             // Hellos are handled by `handle_input` before the remote is known.
             Message::Hello { .. } => {}
-            Message::Have { vv, tips } => {
-                self.hello_confirmed = true;
-                self.have_learnt = true;
-                self.own_known = true;
-                // The first have answers our first hello, unless a timer sent that again:
-                // then which one it answers is unknown (Karn's rule), and nothing is measured.
-                if let Some(at) = self.hello_first_at.take() {
-                    self.hello_rtt_micros = Some(now.0.saturating_sub(at.0));
-                }
-                // Taken as the answer to a hello sent to relearn (a have crossing it on the
-                // way only delays the relearning until the remote's next full have).
-                self.relearn_asked = false;
-                self.learn_remote(now, &vv, log);
-                self.compare_tips(&vv, &tips, log);
-            }
+            Message::Have { vv, tips } => self.on_have(now, &vv, &tips, log),
             Message::Want { vv, held } => {
                 self.hello_confirmed = true;
                 self.on_want(now, &vv, &held, log);
@@ -1012,34 +1018,12 @@ impl<P: Payload> SyncState<P> {
                 self.hello_confirmed = true;
                 self.on_ops(now, batch_no, ops, log);
             }
-            Message::Ack { batch_no, have } => {
-                self.hello_confirmed = true;
-                self.own_known |= have.get(&self.config.local) > 0;
-                if let Some(sent_at) = self.in_flight.remove(&batch_no) {
-                    self.measure_rtt(now.0.saturating_sub(sent_at.0));
-                    self.resend_micros = self.base_resend_micros();
-                }
-                self.learn_remote(now, &have, log);
-            }
+            Message::Ack { batch_no, have } => self.on_ack(now, batch_no, &have, log),
             Message::Ephemeral {
                 channel,
                 seq,
                 value,
-            } => {
-                let last = self.eph_in.get(&channel).copied();
-                let fresh = last.is_none_or(|l| seq > l);
-                if fresh && (last.is_some() || self.eph_in.len() < MAX_EPHEMERAL_CHANNELS) {
-                    self.eph_in.insert(channel, seq);
-                    self.events.push_back(Event::Ephemeral { channel, value });
-                } else if !fresh {
-                    // An older or duplicated value: latest wins, so it is simply dropped.
-                } else {
-                    self.reject(
-                        RejectKind::EphemeralTooLarge,
-                        "too many ephemeral channels".into(),
-                    );
-                }
-            }
+            } => self.on_ephemeral(channel, seq, value),
             Message::Forked { ops, answer } => {
                 self.hello_confirmed = true;
                 self.on_forked(now, ops, answer, log);
@@ -1058,6 +1042,51 @@ impl<P: Payload> SyncState<P> {
                     }
                 }
             }
+        }
+    }
+
+    /// A have: the remote's version vector `vv` with its `tips`.
+    fn on_have(&mut self, now: Timestamp, vv: &VersionVector, tips: &[u64], log: &mut Log<P>) {
+        self.hello_confirmed = true;
+        self.have_learnt = true;
+        self.own_known = true;
+        // The first have answers our first hello, unless a timer sent that again: then which
+        // one it answers is unknown (Karn's rule), and nothing is measured.
+        if let Some(at) = self.hello_first_at.take() {
+            self.hello_rtt_micros = Some(now.0.saturating_sub(at.0));
+        }
+        // Taken as the answer to a hello sent to relearn (a have crossing it on the way only
+        // delays the relearning until the remote's next full have).
+        self.relearn_asked = false;
+        self.learn_remote(now, vv, log);
+        self.compare_tips(vv, tips, log);
+    }
+
+    /// An ack of our batch `batch_no`, with what the remote holds now.
+    fn on_ack(&mut self, now: Timestamp, batch_no: u64, have: &VersionVector, log: &mut Log<P>) {
+        self.hello_confirmed = true;
+        self.own_known |= have.get(&self.config.local) > 0;
+        if let Some(sent_at) = self.in_flight.remove(&batch_no) {
+            self.measure_rtt(now.0.saturating_sub(sent_at.0));
+            self.resend_micros = self.base_resend_micros();
+        }
+        self.learn_remote(now, have, log);
+    }
+
+    /// An ephemeral value: latest wins per channel, within [`MAX_EPHEMERAL_CHANNELS`].
+    fn on_ephemeral(&mut self, channel: u32, seq: u64, value: Vec<u8>) {
+        let last = self.eph_in.get(&channel).copied();
+        let fresh = last.is_none_or(|l| seq > l);
+        if fresh && (last.is_some() || self.eph_in.len() < MAX_EPHEMERAL_CHANNELS) {
+            self.eph_in.insert(channel, seq);
+            self.events.push_back(Event::Ephemeral { channel, value });
+        } else if !fresh {
+            // An older or duplicated value: latest wins, so it is simply dropped.
+        } else {
+            self.reject(
+                RejectKind::EphemeralTooLarge,
+                "too many ephemeral channels".into(),
+            );
         }
     }
 
@@ -1538,37 +1567,43 @@ impl<P: Payload> SyncState<P> {
             self.forks_epoch += 1;
         }
         if self.have_due(log).is_some_and(|d| d <= now) {
-            // Parts of an earlier have still queued: a full have replaces them, so the queue
-            // never holds more than one full have.
-            let full = !self.have_out.is_empty()
-                || self
-                    .full_have_at
-                    .saturating_add_micros(HAVE_FULL_EVERY_MICROS)
-                    <= now;
-            let mut have = VersionVector::new();
-            for (author, seq) in log.version_vector().iter() {
-                // The remote learns what it holds of its own from its acks.
-                if Some(*author) != self.remote && (full || self.have_sent_vv.get(author) < *seq) {
-                    have.raise(*author, *seq);
-                }
+            self.send_have(now, log);
+        }
+    }
+
+    /// Queues the have that is due: the entries that moved since the last one, or a full
+    /// one now and then.
+    fn send_have(&mut self, now: Timestamp, log: &Log<P>) {
+        // Parts of an earlier have still queued: a full have replaces them, so the queue
+        // never holds more than one full have.
+        let full = !self.have_out.is_empty()
+            || self
+                .full_have_at
+                .saturating_add_micros(HAVE_FULL_EVERY_MICROS)
+                <= now;
+        let mut have = VersionVector::new();
+        for (author, seq) in log.version_vector().iter() {
+            // The remote learns what it holds of its own from its acks.
+            if Some(*author) != self.remote && (full || self.have_sent_vv.get(author) < *seq) {
+                have.raise(*author, *seq);
             }
-            self.queue_have(&have, full, log);
-            self.have_sent_vv = log.version_vector().clone();
-            self.have_sent_len = log.len();
-            self.have_sent_at = now;
-            if full {
-                if self.full_have_len == log.len() {
-                    // A repeat while the remote seems to lack something (see `have_due`): if
-                    // it is our picture of the remote that is stale, its answer to a hello,
-                    // a full have, puts it right.
-                    self.queue_hello(now);
-                    self.repaired_at_messages_in = Some(self.stats.n_messages_in);
-                } else {
-                    self.repaired_at_messages_in = None;
-                }
-                self.full_have_len = log.len();
-                self.full_have_at = now;
+        }
+        self.queue_have(&have, full, log);
+        self.have_sent_vv = log.version_vector().clone();
+        self.have_sent_len = log.len();
+        self.have_sent_at = now;
+        if full {
+            if self.full_have_len == log.len() {
+                // A repeat while the remote seems to lack something (see `have_due`): if
+                // it is our picture of the remote that is stale, its answer to a hello,
+                // a full have, puts it right.
+                self.queue_hello(now);
+                self.repaired_at_messages_in = Some(self.stats.n_messages_in);
+            } else {
+                self.repaired_at_messages_in = None;
             }
+            self.full_have_len = log.len();
+            self.full_have_at = now;
         }
     }
 

@@ -13,6 +13,7 @@ use std::time::Duration;
 
 use replication::net::node::NodeEvent;
 use replication::net::{Invite, Node, NodeConfig, NodeHandle, SessionKeys};
+use replication::payload::LeaseAction;
 use replication::payload::test_payload::TestPayload;
 use replication::{Keypair, Log, OpId};
 
@@ -144,11 +145,11 @@ pub async fn author_some(handle: &THandle, object: u64, tag: &str) -> Vec<OpId> 
             object,
             value: format!("{tag} first"),
         },
-        TestPayload::Acquire {
+        TestPayload::Lease(LeaseAction::Acquire {
             object,
             strong: false,
             ttl_micros: 60_000_000,
-        },
+        }),
         TestPayload::Set {
             object,
             value: format!("{tag} second"),

@@ -12,13 +12,13 @@
 
 use fdsl::object::{Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
 use replication::Payload as _;
+use replication::identity::SessionId;
 use replication::op::OpFields;
+use replication::payload::LeaseAction;
 use replication::pending::MAX_PENDING_OPS;
 use replication::shape::ShapePayload;
 use replication::shape::parts::part_hash;
-use replication::sync::message::{
-    HelloHave, MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION, SessionId,
-};
+use replication::sync::message::{HelloHave, MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION};
 use replication::{ConnId, Event, Keypair, Log, Op, OpId, Peer, PeerId, Timestamp, VersionVector};
 
 const SESSION: SessionId = [7; 16];
@@ -211,12 +211,12 @@ impl World {
                 },
             )
             .expect("a valid edit"),
-            3 => ShapePayload::Acquire {
+            3 => ShapePayload::Lease(LeaseAction::Acquire {
                 object,
                 strong: bytes.u8().is_multiple_of(2),
                 ttl_micros: bytes.number(self.now),
-            },
-            4 => ShapePayload::Release { object },
+            }),
+            4 => ShapePayload::Lease(LeaseAction::Release { object }),
             5 => ShapePayload::Undo(known(bytes)),
             6 => ShapePayload::Redo(known(bytes)),
             7 => ShapePayload::Delete { object },

@@ -330,17 +330,7 @@ impl DiscoveryMessage {
         let message = match r.u8()? {
             TAG_REGISTER => {
                 check_register_length(bytes)?;
-                let (discovery_id, peer, port) = read_entry(&mut r)?;
-                let cookie = r.array()?;
-                let signature = Signature(r.array()?);
-                read_padding(&mut r)?;
-                Self::Register {
-                    discovery_id,
-                    peer,
-                    port,
-                    cookie,
-                    signature,
-                }
+                read_register(&mut r)?
             }
             TAG_PEERS => Self::Peers(read_peers(&mut r)?),
             TAG_ANNOUNCE => {
@@ -353,17 +343,7 @@ impl DiscoveryMessage {
             }
             TAG_REGISTER_MAPPED => {
                 check_register_length(bytes)?;
-                let discovery_id = r.array()?;
-                let peer = PeerId(r.array()?);
-                let cookie = r.array()?;
-                let signature = Signature(r.array()?);
-                read_padding(&mut r)?;
-                Self::RegisterMapped {
-                    discovery_id,
-                    peer,
-                    cookie,
-                    signature,
-                }
+                read_register_mapped(&mut r)?
             }
             TAG_INTRODUCE => {
                 let discovery_id = r.array()?;
@@ -381,6 +361,36 @@ impl DiscoveryMessage {
         r.finish()?;
         Ok(message)
     }
+}
+
+/// Reads a register's fields (after its tag), padding included.
+fn read_register(r: &mut Reader<'_>) -> Result<DiscoveryMessage, DecodeError> {
+    let (discovery_id, peer, port) = read_entry(r)?;
+    let cookie = r.array()?;
+    let signature = Signature(r.array()?);
+    read_padding(r)?;
+    Ok(DiscoveryMessage::Register {
+        discovery_id,
+        peer,
+        port,
+        cookie,
+        signature,
+    })
+}
+
+/// Reads a mapped register's fields (after its tag), padding included.
+fn read_register_mapped(r: &mut Reader<'_>) -> Result<DiscoveryMessage, DecodeError> {
+    let discovery_id = r.array()?;
+    let peer = PeerId(r.array()?);
+    let cookie = r.array()?;
+    let signature = Signature(r.array()?);
+    read_padding(r)?;
+    Ok(DiscoveryMessage::RegisterMapped {
+        discovery_id,
+        peer,
+        cookie,
+        signature,
+    })
 }
 
 fn check_register_length(bytes: &[u8]) -> Result<(), DecodeError> {

@@ -278,51 +278,11 @@ impl Registry {
         self.stats.n_bytes_received += bytes.len() as u64;
         self.stats.n_introductions_undrained += self.introductions.len() as u64;
         self.introductions.clear();
-        if bytes.len() > MAX_DATAGRAM_BYTES {
-            self.stats.n_oversized += 1;
-            return None;
-        }
         let source = AddressPrefix::of(from.ip());
-        if !self.admit_source(now, source) {
+        let message = self.accept(now, source, bytes)?;
+        let Some((discovery_id, peer, addr, mapped, cookie)) = registration(&message, from) else {
+            self.stats.n_unexpected += 1;
             return None;
-        }
-        let message = match DiscoveryMessage::decode(bytes) {
-            Ok(m) => m,
-            Err(DecodeError::UnknownVersion { .. }) => {
-                self.stats.n_unknown_version += 1;
-                return None;
-            }
-            Err(_) => {
-                self.stats.n_malformed += 1;
-                return None;
-            }
-        };
-        let (discovery_id, peer, addr, mapped, cookie) = match &message {
-            // The address is where the request came from: nobody can list a third party's IP.
-            DiscoveryMessage::Register {
-                discovery_id,
-                peer,
-                port,
-                cookie,
-                ..
-            } => (
-                *discovery_id,
-                *peer,
-                SocketAddr::new(from.ip(), *port),
-                false,
-                *cookie,
-            ),
-            // The whole source address: the NAT's mapping of the node's QUIC socket.
-            DiscoveryMessage::RegisterMapped {
-                discovery_id,
-                peer,
-                cookie,
-                ..
-            } => (*discovery_id, *peer, from, true, *cookie),
-            _ => {
-                self.stats.n_unexpected += 1;
-                return None;
-            }
         };
         // The source must show that it receives at its address before anything is listed;
         // the challenge is smaller than the request, so a spoofed one amplifies nothing.
@@ -355,6 +315,34 @@ impl Registry {
         self.stats.n_replies += 1;
         self.stats.n_bytes_sent += reply.len() as u64;
         Some(reply)
+    }
+
+    /// The message `bytes` from `source` decode to, unless they are over the size limit, the
+    /// source is over its rate, or they do not decode (each counted).
+    fn accept(
+        &mut self,
+        now: Timestamp,
+        source: AddressPrefix,
+        bytes: &[u8],
+    ) -> Option<DiscoveryMessage> {
+        if bytes.len() > MAX_DATAGRAM_BYTES {
+            self.stats.n_oversized += 1;
+            return None;
+        }
+        if !self.admit_source(now, source) {
+            return None;
+        }
+        match DiscoveryMessage::decode(bytes) {
+            Ok(m) => Some(m),
+            Err(DecodeError::UnknownVersion { .. }) => {
+                self.stats.n_unknown_version += 1;
+                None
+            }
+            Err(_) => {
+                self.stats.n_malformed += 1;
+                None
+            }
+        }
     }
 
     /// Queues introductions of `newcomer` to the peers of `others` that registered from their
@@ -539,6 +527,38 @@ impl Registry {
 /// Compares two cookies in time independent of where they differ.
 fn constant_time_eq(a: &Cookie, b: &Cookie) -> bool {
     a.iter().zip(b).fold(0, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+/// What a register from `from` asks to list: its discovery id, peer, address, whether the
+/// address is a NAT's mapping, and its cookie; `None` for any other message.
+fn registration(
+    message: &DiscoveryMessage,
+    from: SocketAddr,
+) -> Option<(DiscoveryId, PeerId, SocketAddr, bool, Cookie)> {
+    match message {
+        // The address is where the request came from: nobody can list a third party's IP.
+        DiscoveryMessage::Register {
+            discovery_id,
+            peer,
+            port,
+            cookie,
+            ..
+        } => Some((
+            *discovery_id,
+            *peer,
+            SocketAddr::new(from.ip(), *port),
+            false,
+            *cookie,
+        )),
+        // The whole source address: the NAT's mapping of the node's QUIC socket.
+        DiscoveryMessage::RegisterMapped {
+            discovery_id,
+            peer,
+            cookie,
+            ..
+        } => Some((*discovery_id, *peer, from, true, *cookie)),
+        _ => None,
+    }
 }
 
 #[cfg(test)]

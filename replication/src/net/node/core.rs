@@ -12,13 +12,12 @@ use super::{
     MAX_QUEUED_FRAMES_PER_CONN, MAX_REJECTIONS_PER_CONN, NodeAuthorError, NodeEvent, NodeStats,
     Observer, RefusalKind, Shared, conn,
 };
-use crate::identity::PeerId;
+use crate::identity::{OpId, PeerId};
 use crate::log::Log;
 use crate::membership::Admission;
 use crate::net::admission::{AdmissionError, Role};
 use crate::net::clock::{duration_until, wall_clock_now};
 use crate::net::prefix::AddressPrefix;
-use crate::op::OpId;
 use crate::payload::Payload;
 use crate::peer::{ConnId, ConnectError, Peer};
 use crate::store::OpStore;
@@ -309,45 +308,15 @@ impl<P: Payload + Send + 'static> Core<P> {
         send: quinn::SendStream,
     ) {
         let reply = self.dials.remove(&conn);
-        let me = self.peer.peer_id();
-        if peer == me {
-            let kind = RefusalKind::SelfConnection;
-            return self.refuse(&connection, reply, kind, DialError::SelfConnection);
+        if let Some((kind, error)) = self.refusal(peer) {
+            return self.refuse(&connection, reply, kind, error);
         }
-        // An expelled member holds the invite but syncs with nobody: refused here, before it
-        // costs a connection slot, a sync state and a connected-then-left pair of events.
-        if let Some(out) = [peer, me]
-            .into_iter()
-            .find(|p| self.peer.log().is_expelled(p))
-        {
-            return self.refuse(
-                &connection,
-                reply,
-                RefusalKind::Expelled,
-                DialError::Expelled(out),
-            );
-        }
-        // Two connections to one peer (both dialed at once, or a redial): both sides keep
-        // the one whose dialer has the smaller id, and the newer one when the dialer is the
-        // same (a redial means the dialer believes the old one is dead). A connection from
-        // another address of the peer (a restarted process on a new port, a NAT rebinding)
-        // replaces the old one: only the peer's key could open it, and the old path is most
-        // likely dead, while simultaneous dials always share both sockets' addresses.
-        let dialer = |role: Role| if role == Role::Dialer { me } else { peer };
-        let existing = self.conns.iter().find(|(_, l)| l.peer == peer);
-        if let Some((&old, live)) = existing {
-            let moved = live.connection.remote_address() != connection.remote_address();
-            if moved || dialer(role) <= dialer(live.role) {
-                self.stats.n_duplicates += 1;
-                self.drop_conn(old, CloseCode::Duplicate, Some(DisconnectReason::Duplicate));
-            } else {
-                self.stats.n_duplicates += 1;
-                connection.close(CloseCode::Duplicate.var_int(), b"duplicate");
-                if let Some(reply) = reply {
-                    let _ = reply.send(Ok(old));
-                }
-                return;
+        if let Err(old) = self.settle_duplicate(peer, role, &connection) {
+            connection.close(CloseCode::Duplicate.var_int(), b"duplicate");
+            if let Some(reply) = reply {
+                let _ = reply.send(Ok(old));
             }
+            return;
         }
         // A connection the remote dialed competes for slots with those of its address
         // prefix; when all are taken, the least useful accepted one makes room.
@@ -385,6 +354,50 @@ impl<P: Payload + Send + 'static> Core<P> {
         self.stats.n_admitted += 1;
         if let Some(reply) = reply {
             let _ = reply.send(Ok(conn));
+        }
+    }
+
+    /// Why an admitted connection to `peer` is refused at once, if it is: `peer` is this
+    /// node's own key, or an expelled member's, or this node is expelled. An expelled member
+    /// holds the invite but syncs with nobody: refused here, before it costs a connection
+    /// slot, a sync state and a connected-then-left pair of events.
+    fn refusal(&self, peer: PeerId) -> Option<(RefusalKind, DialError)> {
+        let me = self.peer.peer_id();
+        if peer == me {
+            return Some((RefusalKind::SelfConnection, DialError::SelfConnection));
+        }
+        let out = [peer, me]
+            .into_iter()
+            .find(|p| self.peer.log().is_expelled(p))?;
+        Some((RefusalKind::Expelled, DialError::Expelled(out)))
+    }
+
+    /// Settles two connections to one peer (both dialed at once, or a redial): both sides keep
+    /// the one whose dialer has the smaller id, and the newer one when the dialer is the same
+    /// (a redial means the dialer believes the old one is dead). A connection from another
+    /// address of the peer (a restarted process on a new port, a NAT rebinding) replaces the
+    /// old one: only the peer's key could open it, and the old path is most likely dead, while
+    /// simultaneous dials always share both sockets' addresses. Drops the old connection when
+    /// the new one, of `role` over `connection`, is kept; the old one's id when it stays.
+    fn settle_duplicate(
+        &mut self,
+        peer: PeerId,
+        role: Role,
+        connection: &quinn::Connection,
+    ) -> Result<(), ConnId> {
+        let me = self.peer.peer_id();
+        let dialer = |role: Role| if role == Role::Dialer { me } else { peer };
+        let existing = self.conns.iter().find(|(_, l)| l.peer == peer);
+        let Some((&old, live)) = existing else {
+            return Ok(());
+        };
+        let moved = live.connection.remote_address() != connection.remote_address();
+        self.stats.n_duplicates += 1;
+        if moved || dialer(role) <= dialer(live.role) {
+            self.drop_conn(old, CloseCode::Duplicate, Some(DisconnectReason::Duplicate));
+            Ok(())
+        } else {
+            Err(old)
         }
     }
 

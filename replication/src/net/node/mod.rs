@@ -35,7 +35,7 @@ use std::time::Duration;
 
 use tokio::sync::{mpsc, oneshot};
 
-use crate::identity::{Keypair, PeerId};
+use crate::identity::{Keypair, OpId, PeerId};
 use crate::log::{AuthorError, Insertion, Log};
 use crate::net::admission::{self, AdmissionError, Role};
 use crate::net::discovery::DiscoveredPeer;
@@ -43,7 +43,6 @@ use crate::net::discovery::rendezvous::{self, RegisterError, Rendezvous};
 use crate::net::session::{DiscoveryId, SessionKeys};
 use crate::net::socket::{DemuxSocket, DiscoveryPort, SocketCounters};
 use crate::net::tls::{self, TlsError};
-use crate::op::OpId;
 use crate::payload::Payload;
 use crate::peer::{ConnId, Peer};
 use crate::store::OpStore;

@@ -2,9 +2,9 @@
 //! link driven by a seeded RNG, and every kind of hostile input.
 
 use super::*;
-use crate::identity::Keypair;
+use crate::identity::{Keypair, OpId};
 use crate::log::LOCAL_ORIGIN;
-use crate::op::{OpFields, OpId, VerifiedOp};
+use crate::op::{OpFields, VerifiedOp};
 use crate::payload::test_payload::TestPayload;
 use crate::pending::PENDING_TTL_MICROS;
 use rand_chacha::ChaCha20Rng;
