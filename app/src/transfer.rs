@@ -2,12 +2,12 @@
 //! menu: [`import`] plans the ops that bring a file's objects into a session, [`export`]
 //! writes a scene (or one object) to a file.
 //!
-//! Formats, by extension (any case): `.wrl` FVRML (`fdsl::fvrml`), `.stl` (binary when
-//! written, binary or ASCII when read), `.obj` and `.glb` (`fdsl::mesh`).
+//! Formats, by extension (any case): `.wrl` FVRML (`formats::fvrml`), `.stl` (binary when
+//! written, binary or ASCII when read), `.obj` and `.glb` (`model::mesh`).
 //!
 //! Importing is planning, never authoring: [`import`] returns the payloads and the caller
 //! authors them in order. A file is read whole within a named limit before it is parsed
-//! ([`fdsl::fvrml::MAX_FILE_BYTES`], [`MAX_MESH_FILE_BYTES`]); its `Inline`s may read only
+//! ([`formats::fvrml::MAX_FILE_BYTES`], [`MAX_MESH_FILE_BYTES`]); its `Inline`s may read only
 //! files in its own folder, or under a root the user names ([`import_within`], checked by
 //! [`crate::files::InlineResolver`]); an object too large for one op
 //! ([`replication::payload::MAX_PAYLOAD_BYTES`]: a mesh of a few hundred triangles) is
@@ -23,7 +23,7 @@
 //! places it in scene coordinates (groups, transform and motion at t = 0; +y up, as in
 //! FVRML and glTF) and merges every object into one mesh. Colours, materials and physics
 //! are not written to mesh files. FVRML holds everything, the edit histories included
-//! (`FEdit` nodes, `fdsl::fvrml`). The file is written to a temporary file beside the target, synced, then
+//! (`FEdit` nodes, `formats::fvrml`). The file is written to a temporary file beside the target, synced, then
 //! renamed over it, so a failed export leaves no partial file.
 //!
 //! Guarantee: a mesh exported from a closed solid (an implicit solid inside its box, a
@@ -39,11 +39,12 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use fdsl::fvrml::{self, LoadOptions};
-use fdsl::mesh::{MeshFormat, TriMesh};
-use fdsl::object::{ColorDef, Domain, Geometry, Object, ObjectData, ParametricKind, Shape};
-use fdsl::scene::{GroupId, ObjectId, Scene};
+use formats::fvrml::{self, LoadOptions};
+use formats::mesh::MeshFormat;
 use glam::DVec3;
+use model::mesh::TriMesh;
+use model::object::{ColorDef, Domain, Geometry, Object, ObjectData, ParametricKind, Shape};
+use model::scene::{GroupId, ObjectId, Scene};
 use replication::shape::parts::{self, MAX_ASSEMBLED_BYTES, SplitError};
 use replication::shape::{IdSource, ShapePayload};
 
@@ -131,7 +132,7 @@ pub enum ImportError {
         path: PathBuf,
         /// The reader's error, with its byte offset, line and column, or JSON path (in the
         /// message, not as a source, so that it is printed once).
-        error: fdsl::mesh::ReadError,
+        error: formats::mesh::ReadError,
     },
     /// The mesh file holds no triangles.
     #[error("{}: the mesh has no triangles", .path.display())]
@@ -338,7 +339,7 @@ fn group_payloads(
         let Some(group) = scene.group(*g) else {
             continue;
         };
-        let value = fdsl::scene::Group {
+        let value = model::scene::Group {
             parent: group
                 .parent
                 .and_then(|p| group_ids.get(&p).copied())
@@ -364,7 +365,7 @@ fn groups_parents_first(scene: &Scene) -> Vec<GroupId> {
         while let Some(parent) = scene.group(g).and_then(|group| group.parent) {
             d += 1;
             g = parent;
-            if d > fdsl::limits::MAX_GROUP_DEPTH {
+            if d > model::limits::MAX_GROUP_DEPTH {
                 break;
             }
         }
@@ -498,7 +499,7 @@ fn import_mesh(path: &Path, format: MeshFormat, next: IdSource) -> Result<Import
     let data = ObjectData {
         name: name.clone(),
         geometry: Some(mesh_geometry(mesh.clone())),
-        appearance: fdsl::object::Appearance {
+        appearance: model::object::Appearance {
             diffuse: Some(ColorDef::Constant(crate::command::NEW_OBJECT_COLOUR)),
             ..Default::default()
         }
@@ -536,7 +537,7 @@ fn mesh_geometry(mesh: Arc<TriMesh>) -> Geometry {
             bounds.size() + DVec3::splat(2.0 * margin),
         )),
         shape: Shape::Mesh(mesh),
-        transform: fdsl::object::Transform::IDENTITY,
+        transform: model::object::Transform::IDENTITY,
     }
 }
 
@@ -545,7 +546,7 @@ fn mesh_name(path: &Path) -> String {
     let stem = path
         .file_stem()
         .map_or_else(|| "mesh".into(), |s| s.to_string_lossy().into_owned());
-    let mut end = stem.len().min(fdsl::object::MAX_NAME_BYTES);
+    let mut end = stem.len().min(model::object::MAX_NAME_BYTES);
     while !stem.is_char_boundary(end) {
         end -= 1;
     }
@@ -588,9 +589,9 @@ pub enum ExportError {
     /// The scene could not be meshed (bad settings).
     #[error(transparent)]
     Mesh(#[from] render::snapshot::SnapshotError),
-    /// The merged mesh is over `fdsl::mesh`'s limits.
+    /// The merged mesh is over `model::mesh`'s limits.
     #[error("the merged mesh cannot be written: {0}")]
-    TooLarge(fdsl::mesh::MeshError),
+    TooLarge(model::mesh::MeshError),
     /// The file could not be written.
     #[error("cannot write {}: {error}", .path.display())]
     Write {
@@ -752,7 +753,7 @@ fn one_object_scene(scene: &Scene, id: ObjectId) -> Option<Scene> {
         let group = scene.group(g)?;
         chain.push((g, group.clone()));
         up = group.parent;
-        if chain.len() > fdsl::limits::MAX_GROUP_DEPTH {
+        if chain.len() > model::limits::MAX_GROUP_DEPTH {
             return None;
         }
     }
@@ -889,7 +890,7 @@ fn object_mesh(
 /// mesh assembled from separately triangulated faces).
 fn placed(
     mesh: &render::mesh::Mesh,
-    transform: &fdsl::object::Transform,
+    transform: &model::object::Transform,
 ) -> Result<TriMesh, ExportError> {
     let positions = mesh
         .positions
@@ -920,15 +921,15 @@ fn append_mesh(
     mesh: &TriMesh,
 ) -> Result<(), ExportError> {
     let n_vertices = positions.len() + mesh.positions().len();
-    if n_vertices > fdsl::mesh::MAX_MESH_VERTICES {
+    if n_vertices > model::mesh::MAX_MESH_VERTICES {
         return Err(ExportError::TooLarge(
-            fdsl::mesh::MeshError::TooManyVertices { n_vertices },
+            model::mesh::MeshError::TooManyVertices { n_vertices },
         ));
     }
     let n_triangles = triangles.len() + mesh.triangles().len();
-    if n_triangles > fdsl::mesh::MAX_MESH_TRIANGLES {
+    if n_triangles > model::mesh::MAX_MESH_TRIANGLES {
         return Err(ExportError::TooLarge(
-            fdsl::mesh::MeshError::TooManyTriangles { n_triangles },
+            model::mesh::MeshError::TooManyTriangles { n_triangles },
         ));
     }
     // Below MAX_MESH_VERTICES, which fits in a u32.
@@ -977,8 +978,8 @@ fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), ExportError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fdsl::object::{Formula, Transform};
-    use fdsl::scene::Group;
+    use model::object::{Formula, Transform};
+    use model::scene::Group;
 
     /// Ids of one made-up author from `counter`.
     fn ids(counter: u32) -> IdSource {
@@ -1079,9 +1080,9 @@ mod tests {
     #[test]
     fn a_mesh_is_imported_in_a_domain_around_it_in_parts_when_large_and_refused_when_huge() {
         let dir = scratch("mesh");
-        let cube = fdsl::mesh::shapes::cube(DVec3::splat(-1.0), DVec3::new(1.0, 2.0, 3.0));
+        let cube = model::mesh::shapes::cube(DVec3::splat(-1.0), DVec3::new(1.0, 2.0, 3.0));
         let mut bytes = Vec::new();
-        fdsl::mesh::obj::write(&cube, &mut bytes);
+        formats::mesh::obj::write(&cube, &mut bytes);
         let path = dir.join("block.obj");
         std::fs::write(&path, &bytes).unwrap();
         let imported = import(&path, ids(7)).unwrap();
@@ -1119,9 +1120,9 @@ mod tests {
         }
 
         // Larger than one op: its parts, then the assembly that makes the object.
-        let big = fdsl::mesh::shapes::icosphere(1.0, 4);
+        let big = model::mesh::shapes::icosphere(1.0, 4);
         bytes.clear();
-        fdsl::mesh::glb::write(&big, &mut bytes);
+        formats::mesh::glb::write(&big, &mut bytes);
         let path = dir.join("big.glb");
         std::fs::write(&path, &bytes).unwrap();
         let imported = import(&path, ids(7)).unwrap();
@@ -1152,9 +1153,9 @@ mod tests {
         );
 
         // Larger than an object may be: refused with a hint.
-        let huge = fdsl::mesh::shapes::icosphere(1.0, 7);
+        let huge = model::mesh::shapes::icosphere(1.0, 7);
         bytes.clear();
-        fdsl::mesh::glb::write(&huge, &mut bytes);
+        formats::mesh::glb::write(&huge, &mut bytes);
         let path = dir.join("huge.glb");
         std::fs::write(&path, &bytes).unwrap();
         let e = import(&path, ids(7)).unwrap_err();
@@ -1188,7 +1189,7 @@ mod tests {
     fn a_mirrored_object_exports_outward_facing_and_closed() {
         let dir = scratch("mirror");
         let mut scene = Scene::new();
-        let cube = fdsl::mesh::shapes::cube(DVec3::ZERO, DVec3::ONE);
+        let cube = model::mesh::shapes::cube(DVec3::ZERO, DVec3::ONE);
         let mirror = Transform::from_trs(
             DVec3::new(5.0, 0.0, 0.0),
             glam::DQuat::IDENTITY,
@@ -1200,7 +1201,7 @@ mod tests {
         let path = dir.join("mirrored.obj");
         let report = export(&scene, None, &path, 4).unwrap();
         assert_eq!(report.closed, Some(true), "{report}");
-        let back = fdsl::mesh::obj::read(&std::fs::read(&path).unwrap()).unwrap();
+        let back = formats::mesh::obj::read(&std::fs::read(&path).unwrap()).unwrap();
         assert!(back.is_closed());
         assert!(
             (back.signed_volume() - 1.0).abs() < 1e-6,

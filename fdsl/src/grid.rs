@@ -168,7 +168,7 @@ pub fn is_usable_name(name: &str) -> bool {
         && (first.is_ascii_alphabetic() || first == '_')
         && chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
         && !RESERVED.contains(&name)
-        && !crate::compile::lower::is_builtin_function(name)
+        && !crate::builtins::is_builtin_function(name)
 }
 
 impl Grid {

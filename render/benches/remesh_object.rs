@@ -28,8 +28,8 @@
 //! the bytes each wrote.
 
 use divan::Bencher;
-use fdsl::object::{Domain, Edit, Formula, Geometry, Object, ObjectData};
 use glam::DVec3;
+use model::object::{Domain, Edit, Formula, Geometry, Object, ObjectData};
 use render::gpu::Renderer;
 use render::mesh::object_field::{Dirty, dirty_boxes};
 use render::mesh::octree::{MeshSettings, OctreeMesher, mesh};
@@ -49,9 +49,9 @@ fn main() {
     divan::main();
 }
 
-/// Edit `k` of the shared spiral workload ([`fdsl::models::spiral_edit`]).
+/// Edit `k` of the shared spiral workload ([`model::models::spiral_edit`]).
 fn edit(k: usize, n: usize, phase: f64) -> Edit {
-    fdsl::models::spiral_edit(k, n, phase, TOOL_RADIUS)
+    model::models::spiral_edit(k, n, phase, TOOL_RADIUS)
 }
 
 fn object() -> Object {

@@ -1,5 +1,5 @@
 //! Appearance on meshes: colour, transparency, shininess and geometric texture from an
-//! object's [`fdsl::object::Appearance`], evaluated in bulk at a mesh's vertices at time `t`.
+//! object's [`model::object::Appearance`], evaluated in bulk at a mesh's vertices at time `t`.
 //!
 //! - Diffuse colour becomes the vertex colour: a constant, a parametric RGB function (a
 //!   statement list with outputs `r`, `g`, `b`), or a scalar function through a
@@ -31,11 +31,11 @@
 use crate::mesh::Mesh;
 use crate::scene::Material;
 use fdsl::eval::BulkEval;
-use fdsl::object::{
+use glam::{DAffine3, DVec3};
+use model::object::{
     Appearance, ColorMap, ColorSlot, CompiledColor, DEFAULT_DIFFUSE, Object, ObjectData,
     ObjectError, Slot,
 };
-use glam::{DAffine3, DVec3};
 
 /// Shininess 1 maps to this Blinn-Phong exponent (VRML's `shininess` times 128).
 pub const SHININESS_EXPONENT_MAX: f32 = 128.0;
@@ -288,7 +288,7 @@ impl CompiledAppearance {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fdsl::object::{ColorDef, Formula, Transform};
+    use model::object::{ColorDef, Formula, Transform};
 
     fn formula(text: &str) -> Formula {
         Formula::new(text).unwrap()

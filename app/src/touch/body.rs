@@ -8,8 +8,8 @@
 //! sender's tool point, as an fdsl object: the ball `radius - |p|` with those properties and a
 //! surface zone of half the radius.
 
-use fdsl::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property, Transform};
 use glam::DVec3;
+use model::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property, Transform};
 
 /// Largest tool radius, scene units.
 pub const MAX_TOOL_RADIUS: f64 = 10.0;
@@ -234,6 +234,12 @@ mod tests {
         let mut s = object.sampler();
         assert!((s.value(at, 0.0) - 0.2).abs() < 1e-9);
         assert!(s.value(at + DVec3::new(0.3, 0.0, 0.0), 0.0) < 0.0);
-        assert!((s.scalar(fdsl::object::Paintable::Density, at, 0.0).unwrap() - 1.0).abs() < 1e-9);
+        assert!(
+            (s.scalar(model::object::Paintable::Density, at, 0.0)
+                .unwrap()
+                - 1.0)
+                .abs()
+                < 1e-9
+        );
     }
 }

@@ -27,10 +27,10 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use fdsl::object::{Object, Sampler, Transform};
-use fdsl::scene::ObjectId;
 use haptic::container::object::ObjectContainer;
 use haptic::handoff::Publisher;
+use model::object::{Object, Sampler, Transform};
+use model::scene::ObjectId;
 
 use crate::engine::{SharedView, lock};
 

@@ -24,10 +24,10 @@ use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::Instant;
 
-use fdsl::object::history::HistoryEntry;
-use fdsl::object::{CompiledEdit, EditOp, Object, Paintable, Shape, Transform};
-use fdsl::scene::ObjectId;
 use glam::{DMat4, DVec3, Mat4};
+use model::object::history::HistoryEntry;
+use model::object::{CompiledEdit, EditOp, Object, Paintable, Shape, Transform};
+use model::scene::ObjectId;
 use render::appearance::CompiledAppearance;
 use render::mesh::object_field::{Dirty, dirty_boxes, mesh_bounds, to_f32_box};
 use render::mesh::octree::{MeshPatch, MeshSettings, OCTREE_DEPTH_MAX, OctreeMesher};
@@ -578,8 +578,8 @@ fn mesh_whole(
     world_from_group: Transform,
     depth: u8,
 ) -> Result<(Incremental, MeshPatch), String> {
-    let bounds =
-        mesh_bounds(&object, depth).ok_or_else(|| fdsl::object::FitError::Unbounded.to_string())?;
+    let bounds = mesh_bounds(&object, depth)
+        .ok_or_else(|| model::object::FitError::Unbounded.to_string())?;
     let mut octree =
         OctreeMesher::new(&MeshSettings { bounds, depth }).map_err(|e| e.to_string())?;
     octree
@@ -619,7 +619,7 @@ fn snapshot(
     t_secs: f64,
     out: &mut Meshed,
 ) {
-    let mut scene = fdsl::scene::Scene::new();
+    let mut scene = model::scene::Scene::new();
     let settings = SnapshotSettings {
         depth,
         t_secs,
@@ -662,7 +662,7 @@ fn snapshot(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fdsl::object::{
+    use model::object::{
         ColorDef, ColorMap, Domain, Edit, Formula, Geometry, ObjectData, PaintValue, Pose,
         ToolShape,
     };
@@ -852,7 +852,7 @@ mod tests {
         let (done, state) = mesh(job(&object, 3, 6), state, &never);
         assert_eq!(done.unwrap().kind, MeshKind::Whole);
         object
-            .set(fdsl::object::Field::Diffuse(Some(ColorDef::Constant([
+            .set(model::object::Field::Diffuse(Some(ColorDef::Constant([
                 0.2, 0.4, 0.9,
             ]))))
             .unwrap();

@@ -12,6 +12,7 @@ use std::sync::Arc;
 
 use super::graph::{Context, GraphFull, Node};
 use super::ops::{BinaryOp, TernaryOp, UnaryOp};
+use crate::builtins::{FUNCTION_NAMES, arity};
 use crate::grid::{Grid, MAX_GRIDS};
 use crate::limits::{
     MAX_CALL_ARGS, MAX_LOOP_TRIPS, MAX_OUTPUTS, MAX_STATEMENT_DEPTH, MAX_STATEMENT_FUEL,
@@ -72,43 +73,6 @@ const INPUT_NAMES: [(&str, u8); 7] = [
     ("w", 2),
 ];
 
-/// Names of the built-in functions, for suggestions.
-const FUNCTION_NAMES: &[&str] = &[
-    "sin",
-    "cos",
-    "tan",
-    "asin",
-    "acos",
-    "atan",
-    "atan2",
-    "sinh",
-    "cosh",
-    "tanh",
-    "sqrt",
-    "abs",
-    "exp",
-    "log",
-    "ln",
-    "log10",
-    "pow",
-    "min",
-    "max",
-    "floor",
-    "ceil",
-    "round",
-    "mod",
-    "sign",
-    "clamp",
-    "sqr",
-    "r_and",
-    "r_or",
-    "r_sub",
-    "blend_and",
-    "blend_or",
-    "blend_sub",
-    "step",
-];
-
 /// Lowers a parsed program. Returns `None` when any error was reported.
 pub fn lower(program: &Program, options: Options) -> (Option<Lowered>, Vec<Diagnostic>) {
     let mut lowerer = Lowerer {
@@ -163,11 +127,6 @@ fn check_grids(grids: &[Arc<Grid>]) -> Result<(), Diagnostic> {
         }
     }
     Ok(())
-}
-
-/// Whether `name` is a function of the language (grids may not take such names).
-pub(crate) fn is_builtin_function(name: &str) -> bool {
-    arity(name).is_some()
 }
 
 /// A lowering step failed; its diagnostic is recorded (or it follows one already recorded).
@@ -1010,19 +969,6 @@ fn output_name(function: &str) -> String {
             .unwrap_or(function)
             .to_string(),
     }
-}
-
-fn arity(f: &str) -> Option<(usize, usize)> {
-    Some(match f {
-        "sin" | "cos" | "tan" | "asin" | "acos" | "atan" | "sinh" | "cosh" | "tanh" | "sqrt"
-        | "abs" | "exp" | "log" | "ln" | "log10" | "floor" | "ceil" | "round" | "sign" | "sqr" => {
-            (1, 1)
-        }
-        "atan2" | "pow" | "mod" | "r_and" | "r_or" | "r_sub" | "step" => (2, 2),
-        "clamp" | "blend_and" | "blend_or" | "blend_sub" => (3, 3),
-        "min" | "max" => (2, MAX_CALL_ARGS),
-        _ => return None,
-    })
 }
 
 /// The candidate closest to `name` by edit distance, when it is close enough to be a typo.

@@ -1,9 +1,9 @@
 //! [`ObjectContainer`]: a haptic container over an object of the shared object model
-//! ([`fdsl::object`]), so that what the app sculpts is what the hand feels: the container's
+//! ([`model::object`]), so that what the app sculpts is what the hand feels: the container's
 //! own geometry, or the object's geometry with its sculpting edits folded in, with painted
 //! properties overriding the object's formulas.
 //!
-//! Everything is evaluated by an [`fdsl::object::Sampler`] in object coordinates and scene
+//! Everything is evaluated by a [`model::object::Sampler`] in object coordinates and scene
 //! time; this module maps world points into the object. The placement is a general affine
 //! map `world_from_object` (group transforms, the object's transform and its motion): points
 //! go through its inverse, gradients through the inverse-transpose (`grad_world = A^T
@@ -18,7 +18,7 @@
 //! kept, so scaling an object does not weaken its field.
 //!
 //! Bounds: the world box of the container's domain (or of the object's domain and union
-//! edits, [`fdsl::object::Object::bounds`]). A solid without a domain or a moving object has
+//! edits, [`model::object::Object::bounds`]). A solid without a domain or a moving object has
 //! infinite bounds: it is correct, but evaluated on every tick instead of only when the tip
 //! is in its box.
 //!
@@ -30,8 +30,8 @@
 
 use glam::{DAffine3, DMat3, DVec3};
 
-use fdsl::object::{Object, Paintable, Sampler, Shape, Transform};
-use fdsl::scene::ObjectId;
+use model::object::{Object, Paintable, Sampler, Shape, Transform};
+use model::scene::ObjectId;
 
 use super::{Aabb, Container};
 
@@ -113,13 +113,13 @@ impl std::fmt::Debug for ObjectContainer {
 
 /// The box, in object space, outside which the container's value is negative; `None` when
 /// unbounded.
-fn container_bounds_object(object: &Object) -> Option<fdsl::bvh::Aabb> {
+fn container_bounds_object(object: &Object) -> Option<model::bvh::Aabb> {
     match &object.data().physics.container {
         Some(container) => {
-            let in_object = |b: &fdsl::bvh::Aabb| container.transform.aabb(b);
+            let in_object = |b: &model::bvh::Aabb| container.transform.aabb(b);
             match (&container.shape, &container.domain) {
                 // A parametric shape has no field: the sampler gives empty space everywhere.
-                (Shape::Parametric { .. }, _) => Some(fdsl::bvh::Aabb::EMPTY),
+                (Shape::Parametric { .. }, _) => Some(model::bvh::Aabb::EMPTY),
                 (_, Some(domain)) => Some(in_object(&domain.aabb())),
                 (Shape::Mesh(mesh), None) => Some(in_object(&mesh.bounds())),
                 (Shape::Implicit(_), None) => None,
@@ -200,7 +200,7 @@ impl ObjectContainer {
     /// whose placement is degenerate are left out and returned with their error. Allocates:
     /// call it off the servo thread.
     pub fn from_scene(
-        scene: &fdsl::scene::Scene,
+        scene: &model::scene::Scene,
     ) -> (Vec<ObjectContainer>, Vec<(ObjectId, ObjectContainerError)>) {
         let mut containers = Vec::with_capacity(scene.len());
         let mut refused = Vec::new();
