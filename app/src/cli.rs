@@ -747,7 +747,7 @@ pub fn export_command(args: &ExportArgs) -> anyhow::Result<()> {
             store::OPS_FILE
         );
     }
-    if transfer::FileFormat::of(&args.out).is_none() {
+    if formats::registry::FileFormat::of(&args.out).is_none() {
         bail!(
             "{}: unknown file type; export writes .stl, .obj, .glb and .wrl",
             args.out.display()

@@ -1512,11 +1512,11 @@ impl SculptApp {
         if self.export.is_some() {
             return Err("an export is still running".into());
         }
-        if ::app::transfer::FileFormat::of(&path).is_none() {
+        if formats::registry::FileFormat::of(&path).is_none() {
             return Err(format!(
                 "export to {}: give a file ending in {}",
                 path.display(),
-                ::app::transfer::EXTENSIONS.join(", ")
+                formats::registry::EXTENSIONS.join(", ")
             ));
         }
         let scene = lock(self.engine.view()).scene().clone();

@@ -42,5 +42,8 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod export;
 pub mod fvrml;
+pub mod import;
 pub mod mesh;
+pub mod registry;

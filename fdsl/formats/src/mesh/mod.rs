@@ -33,6 +33,12 @@ mod text;
 use model::mesh::TriMesh;
 use thiserror::Error;
 
+/// Largest mesh file read, in bytes. An imported object is at most
+/// `replication::shape::parts::MAX_ASSEMBLED_BYTES` as ops (a mesh of about 170 000
+/// triangles), so files this large are refused for their size long before; the limit only
+/// stops a huge file being read at all.
+pub const MAX_MESH_FILE_BYTES: u64 = 16 << 20;
+
 /// The mesh file formats.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MeshFormat {
