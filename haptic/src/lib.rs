@@ -18,7 +18,7 @@
 //!   `model::scene::Scene` into a servo snapshot), [`container::function::FunctionContainer`]
 //!   (fdsl geometry and properties: tension, friction, zone depth, density, force field) and
 //!   [`container::mesh::MeshContainer`] (closed triangle meshes located by multiple haptic
-//!   rays over fdsl's BVH), all built off the servo thread and sampled without allocating.
+//!   rays over the object model's BVH), all built off the servo thread and sampled without allocating.
 //!
 //! What it is not: it does not parse scene files or fold edits itself (it reads objects
 //! through `model::object::Sampler`), never sees the op log, draws nothing and reads no clock

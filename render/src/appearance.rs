@@ -25,7 +25,7 @@
 //!
 //! Nothing here compiles text: [`CompiledAppearance::of`] takes the tapes the
 //! [`Object`] compiled when its appearance was set, and [`CompiledAppearance::new`] builds
-//! an object from a bare [`Appearance`] (through fdsl's per-process cache of compiled
+//! an object from a bare [`Appearance`] (through model's per-process cache of compiled
 //! formulas, so a formula already seen is not compiled again).
 
 use crate::mesh::Mesh;
@@ -66,7 +66,7 @@ pub enum AppearanceError {
     #[error("the appearance transform is not invertible")]
     BadTransform,
     /// Another part of the appearance is not valid (a colour map, a colour, the domain, a
-    /// formula's length), as fdsl's object model checks it.
+    /// formula's length), as the object model checks it.
     #[error(transparent)]
     Invalid(ObjectError),
 }
@@ -189,7 +189,7 @@ impl CompiledAppearance {
     }
 
     /// A bare `appearance`, validated and compiled as an object holding only it (formulas
-    /// come from fdsl's per-process cache when already compiled). Prefer
+    /// come from model's per-process cache when already compiled). Prefer
     /// [`CompiledAppearance::of`] for an object's appearance.
     pub fn new(appearance: &Appearance) -> Result<CompiledAppearance, AppearanceError> {
         let object = Object::new(ObjectData {

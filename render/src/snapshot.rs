@@ -11,7 +11,7 @@
 //!   curves as tubes, solids as the six faces of their (u, v, w) box;
 //! - an imported mesh as it is (through the field instead when edits change its shape).
 //!
-//! Then the appearance is applied ([`CompiledAppearance`]; painted colours come from fdsl's
+//! Then the appearance is applied ([`CompiledAppearance`]; painted colours come from model's
 //! `Sampler`), and the object is placed by its groups' transforms, its own transform and its
 //! motion at `t`. Scenes are +y up (VRML); the renderer's world is +z up, so the whole scene
 //! is turned by [`render_from_scene`]. Force fields can be drawn as arrows sampled on a grid

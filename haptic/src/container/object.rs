@@ -26,7 +26,7 @@
 //! the sampler's scratch space); sampling allocates nothing afterwards, whatever the length
 //! of the edit history, with one exception the sampler documents: a point inside the boxes
 //! of more edits than it reserved room for (the history's length, at least 64 and at most
-//! `MAX_RESERVED_HITS`, 4096, in fdsl's sampler) grows its hit list, once.
+//! `MAX_RESERVED_HITS`, 4096, in model's sampler) grows its hit list, once.
 
 use glam::{DAffine3, DMat3, DVec3};
 

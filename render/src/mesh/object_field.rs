@@ -2,8 +2,8 @@
 //! as a [`Field`] for the octree mesher, and the boxes an edit dirties, for
 //! [`OctreeMesher::remesh`](super::octree::OctreeMesher::remesh).
 //!
-//! An object with edits goes through fdsl's [`Sampler`], restricted to each octree node the
-//! mesher visits: [`Field::simplify`] hands each node a field over fdsl's [`BoxSampler`] for
+//! An object with edits goes through model's [`Sampler`], restricted to each octree node the
+//! mesher visits: [`Field::simplify`] hands each node a field over model's [`BoxSampler`] for
 //! the node's box (the edits whose boxes overlap it, gathered once from the history's index or
 //! from the parent node's list; the geometry's tape simplified for the box where that is
 //! exact), whose `values` and `gradients` fold each edit over the whole batch of points and
@@ -32,7 +32,7 @@ pub struct ObjectField {
 }
 
 enum Inner {
-    /// Geometry and edits, through fdsl's sampler, one point at a time.
+    /// Geometry and edits, through model's sampler, one point at a time.
     Sampler { sampler: Box<Sampler>, t: f64 },
     /// Geometry and edits restricted to an octree node's box, in bulk.
     Region(Box<RegionField>),
@@ -45,7 +45,7 @@ impl ObjectField {
     ///
     /// An implicit geometry without active shape edits is evaluated in bulk (f32, fdsl's
     /// `BulkEval`, with tape simplification per box), like [`TapeField`],
-    /// through its transform and clipped by its domain as fdsl's `Sampler` does; anything
+    /// through its transform and clipped by its domain as model's `Sampler` does; anything
     /// else goes through the sampler (f64), restricted to each octree node's box by
     /// [`Field::simplify`] (see the module documentation). The two agree to f32 rounding, so
     /// keep one object on one path while remeshing it incrementally.
@@ -184,7 +184,7 @@ impl RegionField {
 
 /// An implicit geometry's tape in its own space, mapped from object space by the inverse of
 /// its transform and clipped by its domain: `min(f(q), domain distance(q))`, `q` the local
-/// point, as fdsl's sampler evaluates a shape.
+/// point, as model's sampler evaluates a shape.
 struct ShapeField {
     tape: TapeField,
     local_from_object: DAffine3,

@@ -16,8 +16,8 @@
 //! `load(save(scene))` gives back the scene, the objects' edit histories included, except
 //! that ids are those the loader assigns (see [`LoadOptions`]).
 //!
-//! The dialect (node and field names, our extensions, limits) is described in the `fdsl`
-//! section of `ARCHITECTURE.md` and on the items below. In short: the thesis's `FShape`,
+//! The dialect (node and field names, our extensions, limits) is described in
+//! `ARCHITECTURE.md` and on the items below. In short: the thesis's `FShape`,
 //! `FGeometry`, `FAppearance`, `FMaterial`, `FTexture3D`, `FPhysics`, `FSurface`,
 //! `FTension`, `FFriction`, `FDensity`, `FForce` and `FTransform`; our `FColorMap`,
 //! `FDepth` and `FEdit`; VRML97's `Shape`, `Appearance`, `Material`, `Box`, `Sphere`, `Cylinder`,

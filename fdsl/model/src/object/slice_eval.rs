@@ -3,7 +3,7 @@
 //! costs once per instruction and chunk, and each lane applies the very operation the point
 //! evaluator applies (`UnaryOp::apply`, `BinaryOp::apply`, `TernaryOp::apply`, in f64 with no
 //! contraction into fused operations): every value is bit for bit
-//! [`PointEval`](fdsl::eval::PointEval)'s at the same point. (fdsl's own bulk evaluator,
+//! [`PointEval`](fdsl::eval::PointEval)'s at the same point. (the language's own bulk evaluator,
 //! `BulkEval`, runs in f32 and cannot give the sampler's values.)
 
 use fdsl::compile::{BinaryOp, UnaryOp};

@@ -1,5 +1,5 @@
 //! Nearest-hit ray casting over a triangle set for the haptic rays: triangles prepared for
-//! Moeller-Trumbore intersection with their winding normals, indexed by fdsl's shared
+//! Moeller-Trumbore intersection with their winding normals, indexed by model's shared
 //! [`model::bvh::Bvh`] (the one the object model's edit history uses), whose traversal keeps
 //! its stack in a fixed array, so a query allocates nothing.
 //!
