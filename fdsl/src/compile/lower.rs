@@ -365,6 +365,18 @@ impl Lowerer {
         if self.diagnostics.iter().any(Diagnostic::is_error) {
             return None;
         }
+        self.list_outputs(statements, &env, order, value)
+    }
+
+    /// The outputs of `statements`, which ran in `env` without error: the assigned names in
+    /// `order`, after the value (`value`, or what every branch returns).
+    fn list_outputs(
+        &mut self,
+        statements: &[&Stmt],
+        env: &Env,
+        order: Vec<String>,
+        mut value: Option<Node>,
+    ) -> Option<Vec<(String, Node)>> {
         let mut outputs = Vec::new();
         for name in order {
             if let Some(Value::Defined(node)) = env.vars.get(&name) {
@@ -452,39 +464,9 @@ impl Lowerer {
             return;
         }
         match s {
-            Stmt::Assign { name, value } => {
-                let v = match self.expr(value, env) {
-                    Ok(node) => Value::Defined(node),
-                    Err(Failed) => Value::Poisoned,
-                };
-                if !env.vars.contains_key(&name.name) && env.vars.len() >= MAX_VARIABLES {
-                    self.report(Diagnostic::error(
-                        name.span,
-                        format!("more than {MAX_VARIABLES} variables"),
-                    ));
-                    return;
-                }
-                env.vars.insert(name.name.clone(), v);
-            }
+            Stmt::Assign { name, value } => self.assign(name, value, env),
             Stmt::Block(body, _) => self.block(body, env),
-            Stmt::Return(e, _) => {
-                let Ok(value) = self.expr(e, env) else {
-                    let one = self.constant(e.span, 1.0);
-                    if let Ok(one) = one {
-                        env.done = one;
-                    }
-                    return;
-                };
-                let ret = match env.ret {
-                    Some(prev) => self.ternary(e.span, TernaryOp::Select, env.done, prev, value),
-                    None => Ok(value),
-                };
-                let one = self.constant(e.span, 1.0);
-                if let (Ok(ret), Ok(one)) = (ret, one) {
-                    env.ret = Some(ret);
-                    env.done = one;
-                }
-            }
+            Stmt::Return(e, _) => self.return_statement(e, env),
             Stmt::If {
                 cond,
                 then,
@@ -511,6 +493,42 @@ impl Lowerer {
                         .with_hint("assign it (`g = ...;`) or return it (`return ...;`)"),
                 );
             }
+        }
+    }
+
+    /// `name = value;`
+    fn assign(&mut self, name: &ast::Ident, value: &Expr, env: &mut Env) {
+        let v = match self.expr(value, env) {
+            Ok(node) => Value::Defined(node),
+            Err(Failed) => Value::Poisoned,
+        };
+        if !env.vars.contains_key(&name.name) && env.vars.len() >= MAX_VARIABLES {
+            self.report(Diagnostic::error(
+                name.span,
+                format!("more than {MAX_VARIABLES} variables"),
+            ));
+            return;
+        }
+        env.vars.insert(name.name.clone(), v);
+    }
+
+    /// `return e;`: the value where nothing returned before, and done from here on.
+    fn return_statement(&mut self, e: &Expr, env: &mut Env) {
+        let Ok(value) = self.expr(e, env) else {
+            let one = self.constant(e.span, 1.0);
+            if let Ok(one) = one {
+                env.done = one;
+            }
+            return;
+        };
+        let ret = match env.ret {
+            Some(prev) => self.ternary(e.span, TernaryOp::Select, env.done, prev, value),
+            None => Ok(value),
+        };
+        let one = self.constant(e.span, 1.0);
+        if let (Ok(ret), Ok(one)) = (ret, one) {
+            env.ret = Some(ret);
+            env.done = one;
         }
     }
 

@@ -182,6 +182,7 @@ pub(super) fn unary(op: UnaryOp, a: Interval) -> Interval {
 }
 
 /// Bounds of a unary operation over an interval with numeric ends.
+// tidy:table: the interval bounds of every unary operation, one arm each.
 #[inline(always)]
 fn unary_finite(op: UnaryOp, a: Interval) -> Interval {
     match op {
@@ -401,6 +402,7 @@ pub(super) fn binary(op: BinaryOp, a: Interval, b: Interval) -> (Interval, Choic
 }
 
 /// Bounds and choice of a binary operation over intervals with numeric ends.
+// tidy:table: the interval bounds and choice of every binary operation, one arm each.
 #[inline(always)]
 fn binary_finite(op: BinaryOp, a: Interval, b: Interval) -> (Interval, Choice) {
     let value = match op {

@@ -58,20 +58,9 @@ impl<'d> Reader<'_, 'd> {
     /// The fields of one `FGrid`; `None` (reported) when they cannot make a grid.
     pub(super) fn grid(&mut self, node: &'d Node) -> Option<GridRead<'d>> {
         let mut fields = Fields::new(node);
-        let mut ok = true;
-        let name = match fields.get("name").map(|f| (f, self.strings(f))) {
-            Some((_, Some(v))) if v.len() == 1 => v[0].to_string(),
-            Some((f, _)) => {
-                self.error(f.value_pos, "the field `name` should be one string");
-                ok = false;
-                String::new()
-            }
-            None => {
-                self.error(node.pos, "`FGrid` needs a `name` (what formulas call it)");
-                ok = false;
-                String::new()
-            }
-        };
+        let name = self.grid_name(&mut fields, node);
+        let mut ok = name.is_some();
+        let name = name.unwrap_or_default();
         let mut three = |fields: &mut Fields<'d>, reader: &mut Self, what: &str| {
             let field = fields.get(what)?;
             let v = reader.fixed(field, 3);
@@ -108,19 +97,7 @@ impl<'d> Reader<'_, 'd> {
             None => [0.0, 1.0],
         };
         let samples = match fields.get("samples") {
-            Some(f) => {
-                let v = self.numbers_of(f)?;
-                if v.iter()
-                    .any(|b| b.fract() != 0.0 || !(0.0..=255.0).contains(b))
-                {
-                    self.error(
-                        f.value_pos,
-                        "`samples` should be whole numbers from 0 to 255",
-                    );
-                    return None;
-                }
-                Some(v.iter().map(|&b| b as u8).collect())
-            }
+            Some(f) => Some(self.grid_samples(f)?),
             None => None,
         };
         let url_field = fields.get("url");
@@ -137,6 +114,38 @@ impl<'d> Reader<'_, 'd> {
             urls,
             url_pos: url_field.map_or(node.pos, |f| f.value_pos),
         })
+    }
+}
+
+impl<'d> Reader<'_, 'd> {
+    /// An `FGrid`'s `name`; `None` (reported) when it has none or it is not one string.
+    fn grid_name(&mut self, fields: &mut Fields<'d>, node: &'d Node) -> Option<String> {
+        match fields.get("name").map(|f| (f, self.strings(f))) {
+            Some((_, Some(v))) if v.len() == 1 => Some(v[0].to_string()),
+            Some((f, _)) => {
+                self.error(f.value_pos, "the field `name` should be one string");
+                None
+            }
+            None => {
+                self.error(node.pos, "`FGrid` needs a `name` (what formulas call it)");
+                None
+            }
+        }
+    }
+
+    /// An `FGrid`'s inline `samples`; `None` (reported) unless they are all bytes.
+    fn grid_samples(&mut self, field: &'d Field) -> Option<Vec<u8>> {
+        let v = self.numbers_of(field)?;
+        if v.iter()
+            .any(|b| b.fract() != 0.0 || !(0.0..=255.0).contains(b))
+        {
+            self.error(
+                field.value_pos,
+                "`samples` should be whole numbers from 0 to 255",
+            );
+            return None;
+        }
+        Some(v.iter().map(|&b| b as u8).collect())
     }
 }
 

@@ -287,35 +287,8 @@ fn layout(gltf: &Gltf, bin: &[u8], idx: u64, element_bytes: u64) -> Result<Layou
     let view_idx = accessor
         .buffer_view
         .ok_or_else(|| invalid(&path, "the accessor has no buffer view".to_string()))?;
-    let view = item(&gltf.buffer_views, view_idx, "bufferViews")?;
+    let view = buffer_view(gltf, bin, view_idx)?;
     let view_path = format!("bufferViews[{view_idx}]");
-    let buffer = item(&gltf.buffers, view.buffer, "buffers")?;
-    if view.buffer != 0 || buffer.uri.is_some() {
-        return Err(invalid(
-            format!("{view_path}.buffer"),
-            "only the file's own binary chunk (buffer 0, without a uri) is read".to_string(),
-        ));
-    }
-    if buffer.byte_length > bin.len() as u64 {
-        return Err(invalid(
-            "buffers[0].byteLength",
-            format!(
-                "{} bytes, but the binary chunk has {}",
-                buffer.byte_length,
-                bin.len()
-            ),
-        ));
-    }
-    let view_end = view.byte_offset.checked_add(view.byte_length);
-    if view_end.is_none_or(|end| end > buffer.byte_length) {
-        return Err(invalid(
-            view_path,
-            format!(
-                "bytes {} + {} do not fit in the buffer's {}",
-                view.byte_offset, view.byte_length, buffer.byte_length
-            ),
-        ));
-    }
     let stride = view.byte_stride.unwrap_or(element_bytes);
     if stride < element_bytes || stride > MAX_STRIDE_BYTES {
         return Err(invalid(
@@ -347,6 +320,40 @@ fn layout(gltf: &Gltf, bin: &[u8], idx: u64, element_bytes: u64) -> Result<Layou
         stride: stride as usize,
         count: accessor.count as usize,
     })
+}
+
+/// Buffer view `view_idx`, checked to lie in the file's own binary chunk `bin`.
+fn buffer_view<'a>(gltf: &'a Gltf, bin: &[u8], view_idx: u64) -> Result<&'a BufferView, GlbError> {
+    let view = item(&gltf.buffer_views, view_idx, "bufferViews")?;
+    let view_path = format!("bufferViews[{view_idx}]");
+    let buffer = item(&gltf.buffers, view.buffer, "buffers")?;
+    if view.buffer != 0 || buffer.uri.is_some() {
+        return Err(invalid(
+            format!("{view_path}.buffer"),
+            "only the file's own binary chunk (buffer 0, without a uri) is read".to_string(),
+        ));
+    }
+    if buffer.byte_length > bin.len() as u64 {
+        return Err(invalid(
+            "buffers[0].byteLength",
+            format!(
+                "{} bytes, but the binary chunk has {}",
+                buffer.byte_length,
+                bin.len()
+            ),
+        ));
+    }
+    let view_end = view.byte_offset.checked_add(view.byte_length);
+    if view_end.is_none_or(|end| end > buffer.byte_length) {
+        return Err(invalid(
+            view_path,
+            format!(
+                "bytes {} + {} do not fit in the buffer's {}",
+                view.byte_offset, view.byte_length, buffer.byte_length
+            ),
+        ));
+    }
+    Ok(view)
 }
 
 fn item<'a, T>(items: &'a [T], idx: u64, name: &str) -> Result<&'a T, GlbError> {
@@ -501,8 +508,8 @@ fn non_indexed(
     Ok(())
 }
 
-/// Appends `mesh` as binary glTF 2.0: one scene, one node, one mesh, one indexed primitive.
-pub fn write(mesh: &TriMesh, out: &mut Vec<u8>) {
+/// The JSON chunk describing `mesh`, padded with spaces to a multiple of 4 bytes.
+fn json_chunk(mesh: &TriMesh) -> Vec<u8> {
     let n_vertices = mesh.positions().len();
     let n_triangles = mesh.triangles().len();
     let mut json = Vec::new();
@@ -552,6 +559,14 @@ pub fn write(mesh: &TriMesh, out: &mut Vec<u8>) {
     while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
+    json
+}
+
+/// Appends `mesh` as binary glTF 2.0: one scene, one node, one mesh, one indexed primitive.
+pub fn write(mesh: &TriMesh, out: &mut Vec<u8>) {
+    let n_vertices = mesh.positions().len();
+    let n_triangles = mesh.triangles().len();
+    let json = json_chunk(mesh);
     let bin_bytes = 12 * (n_vertices + n_triangles);
     let bin_chunk = if n_triangles == 0 {
         0

@@ -48,6 +48,27 @@ pub fn cube(lo: DVec3, hi: DVec3) -> TriMesh {
     }
 }
 
+/// Each of `triangles` split in four at its edges' midpoints, pushed out onto the unit sphere
+/// (added to `vertices`, once per edge).
+fn subdivided(vertices: &mut Vec<DVec3>, triangles: &[[u32; 3]]) -> Vec<[u32; 3]> {
+    let mut midpoints: BTreeMap<(u32, u32), u32> = BTreeMap::new();
+    let mut midpoint = |a: u32, b: u32, vertices: &mut Vec<DVec3>| -> u32 {
+        *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
+            let m = (vertices[a as usize] + vertices[b as usize]).normalize();
+            vertices.push(m);
+            vertices.len() as u32 - 1
+        })
+    };
+    let mut finer = Vec::with_capacity(4 * triangles.len());
+    for &[a, b, c] in triangles {
+        let ab = midpoint(a, b, vertices);
+        let bc = midpoint(b, c, vertices);
+        let ca = midpoint(c, a, vertices);
+        finer.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+    }
+    finer
+}
+
 /// The sphere of `radius` around the origin approximated by an icosahedron whose triangles are
 /// split in four `subdivisions` times, vertices pushed out onto the sphere: 20 * 4^n
 /// triangles facing outwards, closed. The faces are chords, so the mesh lies between the
@@ -101,22 +122,7 @@ pub fn icosphere(radius: f64, subdivisions: u32) -> TriMesh {
         [9, 8, 1],
     ];
     for _ in 0..subdivisions {
-        let mut midpoints: BTreeMap<(u32, u32), u32> = BTreeMap::new();
-        let mut midpoint = |a: u32, b: u32, vertices: &mut Vec<DVec3>| -> u32 {
-            *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                let m = (vertices[a as usize] + vertices[b as usize]).normalize();
-                vertices.push(m);
-                vertices.len() as u32 - 1
-            })
-        };
-        let mut finer = Vec::with_capacity(4 * triangles.len());
-        for [a, b, c] in triangles {
-            let ab = midpoint(a, b, &mut vertices);
-            let bc = midpoint(b, c, &mut vertices);
-            let ca = midpoint(c, a, &mut vertices);
-            finer.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-        }
-        triangles = finer;
+        triangles = subdivided(&mut vertices, &triangles);
     }
     let positions = vertices
         .iter()

@@ -154,8 +154,16 @@ impl Grid {
         if boxes.is_empty() {
             return (Grid::default(), EditArena::new(&edits, &[]));
         }
+        let mut grid = Grid::sized(boxes);
+        let arena = EditArena::new(&edits, &grid.arena_order(boxes, entries.len()));
+        grid.index(boxes);
+        (grid, arena)
+    }
+
+    /// An empty grid over the boxes' bounds (at least one box), with cells about the size of a
+    /// typical box, but no more cells than the memory bound.
+    fn sized(boxes: &[(Aabb, u32)]) -> Grid {
         let bounds = boxes.iter().fold(Aabb::EMPTY, |a, (b, _)| a.union(b));
-        // Cells about the size of a typical box, but no more cells than the memory bound.
         let mut extents: Vec<f64> = boxes.iter().map(|(b, _)| b.size().max_element()).collect();
         let mid = extents.len() / 2;
         let typical = *extents.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1;
@@ -169,22 +177,27 @@ impl Grid {
             .to_array()
             .map(|d| d as usize);
         let widest = (0..3).map(|k| dims[k] as f64 * cell).fold(0.0, f64::max);
-        let mut grid = Grid {
+        Grid {
             origin: bounds.lo,
             inv_cell: 1.0 / cell,
             inv_step: LATTICE_STEPS / widest,
             dims,
             ..Grid::default()
-        };
-        // Arena order: edits by the cell of their first box's low corner (large boxes last),
-        // so that a cell's items name nearby records.
+        }
+    }
+
+    /// The arena's order of the `n_entries` edits: by the cell of their first box's low corner
+    /// (large boxes last), so that a cell's items name nearby records; edits with no box are
+    /// left out.
+    fn arena_order(&self, boxes: &[(Aabb, u32)], n_entries: usize) -> Vec<u32> {
+        let dims = self.dims;
         let n_cells = dims[0] * dims[1] * dims[2];
-        let mut key = vec![usize::MAX; entries.len()];
+        let mut key = vec![usize::MAX; n_entries];
         for (b, e) in boxes {
             let k = &mut key[*e as usize];
             if *k == usize::MAX {
-                let [x, y, z] = grid.cell_of(b.lo);
-                let spans = (0..3).any(|a| grid.cell_of(b.hi)[a] - [x, y, z][a] > 1);
+                let [x, y, z] = self.cell_of(b.lo);
+                let spans = (0..3).any(|a| self.cell_of(b.hi)[a] - [x, y, z][a] > 1);
                 *k = if spans {
                     n_cells
                 } else {
@@ -192,21 +205,27 @@ impl Grid {
                 };
             }
         }
-        let mut order: Vec<u32> = (0..entries.len() as u32)
+        let mut order: Vec<u32> = (0..n_entries as u32)
             .filter(|&e| key[e as usize] != usize::MAX)
             .collect();
         order.sort_by_key(|&e| (key[e as usize], e));
-        let arena = EditArena::new(&edits, &order);
+        order
+    }
+
+    /// Fills the sized grid: each small box in every cell it meets, the large ones in the
+    /// tree.
+    fn index(&mut self, boxes: &[(Aabb, u32)]) {
+        let n_cells = self.dims[0] * self.dims[1] * self.dims[2];
         let mut large = Vec::new();
         let mut counts = vec![0u32; n_cells + 1];
         let mut small = Vec::with_capacity(boxes.len());
         for (b, e) in boxes {
-            let (lo, hi) = (grid.cell_of(b.lo), grid.cell_of(b.hi));
+            let (lo, hi) = (self.cell_of(b.lo), self.cell_of(b.hi));
             if (0..3).any(|k| hi[k] - lo[k] > 1) {
                 large.push((*b, *e));
                 continue;
             }
-            grid.for_cells(lo, hi, |c| counts[c] += 1);
+            self.for_cells(lo, hi, |c| counts[c] += 1);
             small.push((*b, *e, lo, hi));
         }
         let mut total = 0u32;
@@ -215,15 +234,44 @@ impl Grid {
             *c = total;
             total += n;
         }
-        let mut next = counts.clone();
+        let mut items = self.cell_items(&small, &counts, total as usize);
+        self.starts = Vec::with_capacity(counts.len());
+        for c in 0..n_cells {
+            let cell = &mut items[counts[c] as usize..counts[c + 1] as usize];
+            cell.sort_by_key(|item| match item.edit_first & FIRST_X {
+                0 => (false, u16::MAX - item.hi[0]),
+                _ => (true, item.lo[0]),
+            });
+            let n_before = cell
+                .iter()
+                .take_while(|i| i.edit_first & FIRST_X == 0)
+                .count();
+            self.starts.push([counts[c], counts[c] + n_before as u32]);
+        }
+        self.starts.push([total, total]);
+        self.items = items;
+        self.large = Level::from_boxes(&large);
+    }
+
+    /// The items of the `small` boxes (box, edit, first and last cell), `total` in all, each
+    /// cell's from `starts[cell]` on in the boxes' order, flagged on the axes where the cell
+    /// is the box's first.
+    fn cell_items(
+        &self,
+        small: &[(Aabb, u32, [usize; 3], [usize; 3])],
+        starts: &[u32],
+        total: usize,
+    ) -> Vec<GridItem> {
+        let dims = self.dims;
+        let mut next = starts.to_vec();
         let empty = GridItem {
             lo: [0; 3],
             hi: [0; 3],
             edit_first: 0,
         };
-        let mut items = vec![empty; total as usize];
-        for (b, e, lo, hi) in small {
-            let (qlo, qhi) = (grid.step_down(b.lo), grid.step_up(b.hi));
+        let mut items = vec![empty; total];
+        for &(b, e, lo, hi) in small {
+            let (qlo, qhi) = (self.step_down(b.lo), self.step_up(b.hi));
             for z in lo[2]..=hi[2] {
                 for y in lo[1]..=hi[1] {
                     for x in lo[0]..=hi[0] {
@@ -242,23 +290,7 @@ impl Grid {
                 }
             }
         }
-        grid.starts = Vec::with_capacity(counts.len());
-        for c in 0..n_cells {
-            let cell = &mut items[counts[c] as usize..counts[c + 1] as usize];
-            cell.sort_by_key(|item| match item.edit_first & FIRST_X {
-                0 => (false, u16::MAX - item.hi[0]),
-                _ => (true, item.lo[0]),
-            });
-            let n_before = cell
-                .iter()
-                .take_while(|i| i.edit_first & FIRST_X == 0)
-                .count();
-            grid.starts.push([counts[c], counts[c] + n_before as u32]);
-        }
-        grid.starts.push([total, total]);
-        grid.items = items;
-        grid.large = Level::from_boxes(&large);
-        (grid, arena)
+        items
     }
 
     /// The lattice step at or below `p`, clamped to the lattice (rounding is monotone: a

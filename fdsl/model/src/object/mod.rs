@@ -463,7 +463,7 @@ impl CompiledShape {
 }
 
 /// A colour definition ([`ColorDef`]) compiled: what [`Object::color`] hands to evaluators
-/// (fdsl's [`Sampler`], render's appearance) so that they do not compile its text again.
+/// ([`Sampler`], render's appearance) so that they do not compile its text again.
 #[derive(Clone, Debug)]
 pub enum CompiledColor {
     /// One colour everywhere.
@@ -538,20 +538,6 @@ impl CompiledParts {
         let (a, p) = (&data.appearance, &data.physics);
         a.validate()?;
         p.validate()?;
-        let color = |def: &Option<ColorDef>, slot| {
-            def.as_ref()
-                .map(|d| CompiledColor::new(d, slot, grids))
-                .transpose()
-        };
-        let scalar =
-            |f: &Option<Formula>, slot| f.as_ref().map(|f| f.tape(slot, &[], grids)).transpose();
-        // Disabled properties are compiled too (a broken one is an error now, not when it is
-        // enabled later) but not kept.
-        let feel = |prop: &Option<Property>, slot| -> Result<Option<Tape>, ObjectError> {
-            let Some(prop) = prop else { return Ok(None) };
-            let tape = prop.formula.tape(slot, &[], grids)?;
-            Ok(prop.enabled.then_some(tape))
-        };
         let force = match &p.force {
             Some(f) => {
                 let tape = f.formula.tape(Slot::Force, &["x", "y", "z"], grids)?;
@@ -559,63 +545,104 @@ impl CompiledParts {
             }
             None => None,
         };
-        let motion = match &data.motion {
-            Some(m) => {
-                m.timing.validate(Slot::Motion)?;
-                if m.angle.is_some() && !(m.axis.is_finite() && m.axis.length() > 1e-12) {
-                    return Err(ObjectError::BadTransform { slot: Slot::Motion });
-                }
-                Some([
-                    m.translation
-                        .as_ref()
-                        .map(|f| f.tape(Slot::Motion, &["x", "y", "z"], grids))
-                        .transpose()?,
-                    m.angle
-                        .as_ref()
-                        .map(|f| f.tape(Slot::Motion, &[], grids))
-                        .transpose()?,
-                ])
-            }
-            None => None,
-        };
+        let motion = data
+            .motion
+            .as_ref()
+            .map(|m| motion_tapes(m, grids))
+            .transpose()?;
         data.transform.validate(Slot::Transform)?;
+        let container = p
+            .container
+            .as_ref()
+            .map(|g| CompiledShape::new(g, Slot::Container, grids).map(Box::new))
+            .transpose()?;
+        let (colors, looks) = appearance_parts(a, grids)?;
+        let appearance_from_object =
+            SparseTransform::new(a.transform.inverse().ok_or(ObjectError::BadTransform {
+                slot: Slot::AppearanceSpace,
+            })?);
+        let feels = feel_tapes(p, grids)?;
+        let physics_from_object =
+            SparseTransform::new(p.transform.inverse().ok_or(ObjectError::BadTransform {
+                slot: Slot::PhysicsSpace,
+            })?);
         Ok(CompiledParts {
             geometry,
-            container: p
-                .container
-                .as_ref()
-                .map(|g| CompiledShape::new(g, Slot::Container, grids).map(Box::new))
-                .transpose()?,
-            colors: [
-                color(&a.diffuse, Slot::Diffuse)?,
-                color(&a.ambient, Slot::Ambient)?,
-                color(&a.specular, Slot::Specular)?,
-            ],
-            looks: [
-                scalar(&a.transparency, Slot::Transparency)?,
-                scalar(&a.shininess, Slot::Shininess)?,
-                scalar(&a.displacement, Slot::Displacement)?,
-            ],
-            appearance_from_object: SparseTransform::new(a.transform.inverse().ok_or(
-                ObjectError::BadTransform {
-                    slot: Slot::AppearanceSpace,
-                },
-            )?),
-            feels: [
-                feel(&p.tension, Slot::Tension)?,
-                feel(&p.friction, Slot::Friction)?,
-                feel(&p.zone_depth, Slot::ZoneDepth)?,
-                feel(&p.density, Slot::Density)?,
-            ],
-            physics_from_object: SparseTransform::new(p.transform.inverse().ok_or(
-                ObjectError::BadTransform {
-                    slot: Slot::PhysicsSpace,
-                },
-            )?),
+            container,
+            colors,
+            looks,
+            appearance_from_object,
+            feels,
+            physics_from_object,
             force,
             motion,
         })
     }
+}
+
+/// The colours (diffuse, ambient, specular) and looks (transparency, shininess, displacement)
+/// of an appearance, compiled in that order.
+#[expect(
+    clippy::type_complexity,
+    reason = "the two arrays of CompiledParts, as they are"
+)]
+fn appearance_parts(
+    a: &Appearance,
+    grids: &Grids,
+) -> Result<([Option<CompiledColor>; 3], [Option<Tape>; 3]), ObjectError> {
+    let color = |def: &Option<ColorDef>, slot| {
+        def.as_ref()
+            .map(|d| CompiledColor::new(d, slot, grids))
+            .transpose()
+    };
+    let scalar =
+        |f: &Option<Formula>, slot| f.as_ref().map(|f| f.tape(slot, &[], grids)).transpose();
+    let colors = [
+        color(&a.diffuse, Slot::Diffuse)?,
+        color(&a.ambient, Slot::Ambient)?,
+        color(&a.specular, Slot::Specular)?,
+    ];
+    let looks = [
+        scalar(&a.transparency, Slot::Transparency)?,
+        scalar(&a.shininess, Slot::Shininess)?,
+        scalar(&a.displacement, Slot::Displacement)?,
+    ];
+    Ok((colors, looks))
+}
+
+/// The tapes of the enabled surface and interior properties: tension, friction, zone depth,
+/// density. Disabled properties are compiled too (a broken one is an error now, not when it is
+/// enabled later) but not kept.
+fn feel_tapes(p: &Physics, grids: &Grids) -> Result<[Option<Tape>; 4], ObjectError> {
+    let feel = |prop: &Option<Property>, slot| -> Result<Option<Tape>, ObjectError> {
+        let Some(prop) = prop else { return Ok(None) };
+        let tape = prop.formula.tape(slot, &[], grids)?;
+        Ok(prop.enabled.then_some(tape))
+    };
+    Ok([
+        feel(&p.tension, Slot::Tension)?,
+        feel(&p.friction, Slot::Friction)?,
+        feel(&p.zone_depth, Slot::ZoneDepth)?,
+        feel(&p.density, Slot::Density)?,
+    ])
+}
+
+/// A motion's translation and angle tapes, once its timing and axis are checked.
+fn motion_tapes(m: &Motion, grids: &Grids) -> Result<[Option<Tape>; 2], ObjectError> {
+    m.timing.validate(Slot::Motion)?;
+    if m.angle.is_some() && !(m.axis.is_finite() && m.axis.length() > 1e-12) {
+        return Err(ObjectError::BadTransform { slot: Slot::Motion });
+    }
+    Ok([
+        m.translation
+            .as_ref()
+            .map(|f| f.tape(Slot::Motion, &["x", "y", "z"], grids))
+            .transpose()?,
+        m.angle
+            .as_ref()
+            .map(|f| f.tape(Slot::Motion, &[], grids))
+            .transpose()?,
+    ])
 }
 
 /// An object: its description, compiled, and its indexed edit history.
