@@ -29,7 +29,7 @@ use std::collections::BTreeMap;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-use formats::export::{EXPORT_T_SECS, ExportReport, ObjectMesh};
+use formats::export::{EXPORT_T_SECS, ExportReport, MeshParts, ObjectMesh};
 use formats::import::{Contents, Read};
 use model::mesh::TriMesh;
 use model::object::{ColorDef, ObjectData, ParametricKind, Shape};
@@ -169,7 +169,7 @@ pub fn import_within(
     let Read { contents, warnings } = formats::import::read(path, format, &bytes, &mut resolve)?;
     let mut imported = match contents {
         Contents::Scene(scene) => scene_payloads(path, &scene, next)?,
-        Contents::Mesh(data) => mesh_payloads(path, data, next)?,
+        Contents::Mesh(data) => mesh_payloads(path, *data, next)?,
     };
     let mut all = warnings;
     all.append(&mut imported.warnings);
@@ -485,9 +485,9 @@ fn mesh_object(
 ) -> Result<ObjectMesh, ExportError> {
     let built = render::snapshot::build(one, settings)?;
     let skipped = built.objects.first().and_then(|o| o.skipped.clone());
-    let mesh = built.scene.objects.first().map(|drawn| {
-        let triangles = drawn.mesh.triangles().collect();
-        (drawn.mesh.positions.clone(), triangles)
+    let mesh = built.scene.objects.first().map(|drawn| MeshParts {
+        positions: drawn.mesh.positions.clone(),
+        triangles: drawn.mesh.triangles().collect(),
     });
     Ok(ObjectMesh { mesh, skipped })
 }

@@ -55,11 +55,19 @@ pub enum ExportError {
 /// One object as a mesher meshed it, in the object's own coordinates.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ObjectMesh {
-    /// Vertex positions and triangles (counter-clockwise seen from outside); `None` when
-    /// nothing of the object was meshed.
-    pub mesh: Option<(Vec<[f32; 3]>, Vec<[u32; 3]>)>,
+    /// Its triangles; `None` when nothing of the object was meshed.
+    pub mesh: Option<MeshParts>,
     /// Why it (or part of it) was not meshed, if so.
     pub skipped: Option<String>,
+}
+
+/// A mesh as a mesher gives it, before it is placed and checked against the limits.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MeshParts {
+    /// Vertex positions.
+    pub positions: Vec<[f32; 3]>,
+    /// Triangles of vertex indices, counter-clockwise seen from outside.
+    pub triangles: Vec<[u32; 3]>,
 }
 
 /// What [`export`] wrote.
@@ -332,7 +340,11 @@ fn object_mesh<E: From<ExportError>>(
     };
     let meshed = mesh_one(&one)?;
     row.skipped = meshed.skipped;
-    let Some((positions, triangles)) = meshed.mesh else {
+    let Some(MeshParts {
+        positions,
+        triangles,
+    }) = meshed.mesh
+    else {
         return Ok((row, None));
     };
     let object = &entry.object;
@@ -412,14 +424,20 @@ mod tests {
     fn mesh_of(one: &Scene) -> Result<ObjectMesh, ExportError> {
         let (_, entry) = one.objects().next().expect("one object");
         let mesh = match entry.object.data().geometry.as_ref().map(|g| &g.shape) {
-            Some(Shape::Mesh(m)) => Some((m.positions().to_vec(), m.triangles().to_vec())),
+            Some(Shape::Mesh(m)) => Some(MeshParts {
+                positions: m.positions().to_vec(),
+                triangles: m.triangles().to_vec(),
+            }),
             _ => None,
         };
         let skipped = mesh.is_none().then(|| "not a mesh".to_string());
         Ok(ObjectMesh { mesh, skipped })
     }
 
-    fn mesher() -> Result<fn(&Scene) -> Result<ObjectMesh, ExportError>, ExportError> {
+    /// A mesher as [`export`] takes it, without state.
+    type Mesher = fn(&Scene) -> Result<ObjectMesh, ExportError>;
+
+    fn mesher() -> Result<Mesher, ExportError> {
         Ok(mesh_of)
     }
 
@@ -482,9 +500,8 @@ mod tests {
         scene
             .create(ObjectId(3), cube_object(Transform::IDENTITY), None)
             .unwrap();
-        let refuses = || -> Result<fn(&Scene) -> Result<ObjectMesh, ExportError>, ExportError> {
-            panic!("an FVRML export meshes nothing")
-        };
+        let refuses =
+            || -> Result<Mesher, ExportError> { panic!("an FVRML export meshes nothing") };
         let path = Path::new("one.wrl");
         let (bytes, report) = export(&scene, Some(ObjectId(2)), path, refuses).unwrap();
         assert_eq!(report.closed, None);

@@ -77,7 +77,7 @@ pub enum Contents {
     Scene(Scene),
     /// A mesh file's one object: named after the file, its geometry the mesh in a domain
     /// around it, everything else default.
-    Mesh(ObjectData),
+    Mesh(Box<ObjectData>),
 }
 
 /// A file read: what it holds and what was skipped or read leniently.
@@ -161,7 +161,7 @@ fn read_mesh(path: &Path, mesh: TriMesh) -> Result<Read, ImportError> {
         ..ObjectData::default()
     };
     Ok(Read {
-        contents: Contents::Mesh(data),
+        contents: Contents::Mesh(Box::new(data)),
         warnings,
     })
 }
@@ -221,7 +221,7 @@ mod tests {
             domain.hi.cmpgt(DVec3::new(1.0, 2.0, 3.0)).all(),
             "{domain:?}"
         );
-        let object = model::object::Object::new(data).unwrap();
+        let object = model::object::Object::new(*data).unwrap();
         let p = DVec3::new(0.9, 1.5, -0.5);
         assert_eq!(object.sampler().value(p, 0.0), cube.signed_distance(p));
     }
