@@ -26,11 +26,13 @@ pub struct Interval {
 
 impl Interval {
     /// `[lo, hi]`.
+    #[inline]
     pub const fn new(lo: f64, hi: f64) -> Interval {
         Interval { lo, hi, nan: false }
     }
 
     /// The single value `v`.
+    #[inline]
     pub fn point(v: f64) -> Interval {
         Interval {
             lo: v,
@@ -49,6 +51,7 @@ impl Interval {
     const BOOL: Interval = Interval::new(0.0, 1.0);
 
     /// Whether `v` lies inside; NaN lies inside when the interval may be NaN.
+    #[inline]
     pub fn contains(&self, v: f64) -> bool {
         if v.is_nan() {
             self.nan
@@ -58,6 +61,7 @@ impl Interval {
     }
 
     /// Whether the value may be NaN somewhere in the box.
+    #[inline]
     pub fn has_nan(&self) -> bool {
         self.nan || self.lo.is_nan() || self.hi.is_nan()
     }
