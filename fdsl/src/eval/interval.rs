@@ -137,6 +137,8 @@ impl IntervalEval {
     }
 
     /// Bounds of the first output over the box `p = [x, y, z, t]`.
+    // Inlined where the object model samples (another crate), as when they were one crate.
+    #[inline]
     pub fn eval(&mut self, p: [Interval; 4]) -> Interval {
         self.passes.load(0, &p);
         self.passes.run(1);
@@ -144,6 +146,7 @@ impl IntervalEval {
     }
 
     /// Bounds of output `idx` after the last [`IntervalEval::eval`].
+    #[inline]
     pub fn output(&self, idx: usize) -> Interval {
         self.passes.output(idx, 0)
     }
