@@ -22,7 +22,7 @@ fi
 
 # Property tests draw their cases from a fixed seed here, so a run is reproducible and a red CI
 # run means a regression, not a newly drawn case. Campaigns over fresh cases run them directly:
-# PROPTEST_CASES=20000 cargo nextest run -p fdsl -p replication
+# PROPTEST_CASES=20000 cargo nextest run -p fdsl -p model -p formats -p replication
 export PROPTEST_RNG_SEED="${PROPTEST_RNG_SEED:-20261122}"
 
 cargo fmt --all --check

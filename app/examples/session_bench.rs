@@ -37,7 +37,7 @@ use anyhow::{Context as _, bail, ensure};
 use app::clock;
 use app::command;
 use app::engine::{Engine, EngineConfig, Pending, RequestError, lock, store};
-use fdsl::scene::Scene;
+use model::scene::Scene;
 use replication::net::discovery::message::{DiscoveryMessage, NO_COOKIE};
 use replication::net::discovery::registry::{self, Registry};
 use replication::net::invite::Invite;

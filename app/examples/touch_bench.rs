@@ -21,8 +21,8 @@ use std::time::Duration;
 use anyhow::{Context as _, bail, ensure};
 use app::clock;
 use app::engine::{Engine, EngineConfig, lock};
-use fdsl::object::{Domain, Formula, Geometry, ObjectData, Physics, Property, Transform};
 use glam::DVec3;
+use model::object::{Domain, Formula, Geometry, ObjectData, Physics, Property, Transform};
 use rand_core::{RngCore, SeedableRng};
 use replication::shape::{IdSource, ShapePayload};
 
@@ -134,7 +134,7 @@ fn run(root: &Path, secs: u64) -> anyhow::Result<()> {
         let tension = 0.2 + 0.6 * (rng.next_u64() % 1000) as f64 / 1000.0;
         let payload = ShapePayload::Set {
             object,
-            field: Box::new(fdsl::object::Field::Tension(Some(Property::new(
+            field: Box::new(model::object::Field::Tension(Some(Property::new(
                 Formula::new(format!("{tension:.3}")).context("a tension")?,
             )))),
         };

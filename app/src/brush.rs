@@ -4,13 +4,13 @@
 //!
 //! Points arrive in scene coordinates (+y up) as the pointer moves over a surface; a stroke
 //! keeps them in the object's own coordinates, spaced at least [`STROKE_SPACING`] of the
-//! tool's size apart and at most [`fdsl::limits::MAX_STROKE_POSES`] of them, so a long drag
+//! tool's size apart and at most [`model::limits::MAX_STROKE_POSES`] of them, so a long drag
 //! stays one bounded op.
 
-use fdsl::limits::MAX_STROKE_POSES;
-use fdsl::object::{Axis, Edit, EditOp, PaintValue, Paintable, Pose, ToolShape, Transform};
-use fdsl::scene::ObjectId;
 use glam::DVec3;
+use model::limits::MAX_STROKE_POSES;
+use model::object::{Axis, Edit, EditOp, PaintValue, Paintable, Pose, ToolShape, Transform};
+use model::scene::ObjectId;
 use replication::shape::ShapePayload;
 
 use crate::command::Planned;

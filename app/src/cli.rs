@@ -594,8 +594,8 @@ pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
 fn load_scene(
     scene_path: &std::path::Path,
     inline_root: Option<&std::path::Path>,
-) -> anyhow::Result<fdsl::scene::Scene> {
-    use fdsl::fvrml::{self, LoadOptions};
+) -> anyhow::Result<model::scene::Scene> {
+    use formats::fvrml::{self, LoadOptions};
     use std::path::Path;
 
     let text = app::files::read_scene_text(scene_path).map_err(anyhow::Error::msg)?;
@@ -747,7 +747,7 @@ pub fn export_command(args: &ExportArgs) -> anyhow::Result<()> {
             store::OPS_FILE
         );
     }
-    if transfer::FileFormat::of(&args.out).is_none() {
+    if formats::registry::FileFormat::of(&args.out).is_none() {
         bail!(
             "{}: unknown file type; export writes .stl, .obj, .glb and .wrl",
             args.out.display()
@@ -770,8 +770,11 @@ pub fn export_command(args: &ExportArgs) -> anyhow::Result<()> {
 
 /// The object `id` names: its full id, or the number the window shows (`object N`: the id's
 /// low 32 bits, or the N of an object `new:` named `object N`) when exactly one object has it.
-fn object_by_number(scene: &fdsl::scene::Scene, id: u64) -> anyhow::Result<fdsl::scene::ObjectId> {
-    use fdsl::scene::ObjectId;
+fn object_by_number(
+    scene: &model::scene::Scene,
+    id: u64,
+) -> anyhow::Result<model::scene::ObjectId> {
+    use model::scene::ObjectId;
     if scene.object(ObjectId(id)).is_some() {
         return Ok(ObjectId(id));
     }

@@ -6,11 +6,11 @@
 //! culprit, is what the line gives, and nothing is authored.
 
 use fdsl::Function;
-use fdsl::object::{
+use glam::DVec3;
+use model::object::{
     ColorDef, Domain, Field, ForceField, Formula, Geometry, ObjectData, Property, Shape, Timing,
     Transform, fit_domain,
 };
-use glam::DVec3;
 use replication::membership::Membership;
 use replication::payload::LeaseAction;
 use replication::shape::ShapePayload;
@@ -200,7 +200,7 @@ pub fn plan(
         let id = selected.ok_or("select an object first (click it in the view or the list)")?;
         session
             .scene()
-            .object(fdsl::scene::ObjectId(id))
+            .object(model::scene::ObjectId(id))
             .map(|o| (id, o))
             .ok_or_else(|| format!("{} is not in the scene", session.object_label(id)))
     };
@@ -293,7 +293,7 @@ pub fn plan(
                     0.0,
                     0.0,
                 )),
-                appearance: fdsl::object::Appearance {
+                appearance: model::object::Appearance {
                     diffuse: Some(ColorDef::Constant(NEW_OBJECT_COLOUR)),
                     ..Default::default()
                 }
@@ -581,7 +581,7 @@ mod tests {
             data.transform,
             Transform::translate(DVec3::new(2.5, 0.0, 0.0))
         );
-        assert!(s.scene().object(fdsl::scene::ObjectId(*object)).is_none());
+        assert!(s.scene().object(model::scene::ObjectId(*object)).is_none());
     }
 
     #[test]
@@ -640,13 +640,13 @@ mod tests {
             other => panic!("{other:?}"),
         };
         let bits =
-            |d: fdsl::object::Domain| [d.center, d.size].map(|v| v.to_array().map(f64::to_bits));
+            |d: model::object::Domain| [d.center, d.size].map(|v| v.to_array().map(f64::to_bits));
         let from_new = domain_of(&plan(Command::New(formula), &s, None).unwrap().payload);
 
         let text = format!("FShape {{ geometry FGeometry {{ definition \"{formula}\" }} }}");
         let mut no_files = |path: &str| Err(format!("no file {path}"));
-        let options = fdsl::fvrml::LoadOptions::default();
-        let loaded = fdsl::fvrml::load(&text, &options, &mut no_files).unwrap();
+        let options = formats::fvrml::LoadOptions::default();
+        let loaded = formats::fvrml::load(&text, &options, &mut no_files).unwrap();
         assert!(loaded.warnings.is_empty(), "{:?}", loaded.warnings);
         let path = std::path::Path::new("ball.wrl");
         let imported = crate::transfer::scene_payloads(path, &loaded.scene, s.next_object())
@@ -685,11 +685,11 @@ mod tests {
 
         // Unbounded: `new:` refuses it, the file keeps it without a domain and says the same,
         // and the renderer says the same again.
-        let unbounded = fdsl::object::FitError::Unbounded.to_string();
+        let unbounded = model::object::FitError::Unbounded.to_string();
         let err = plan(Command::New("x"), &s, None).unwrap_err();
         assert_eq!(err, format!("new: {unbounded}"));
         let text = "FShape { geometry FGeometry { definition \"x\" } }";
-        let loaded = fdsl::fvrml::load(text, &options, &mut no_files).unwrap();
+        let loaded = formats::fvrml::load(text, &options, &mut no_files).unwrap();
         assert_eq!(loaded.warnings.len(), 1, "{:?}", loaded.warnings);
         assert!(
             loaded.warnings[0].message.ends_with(&unbounded),

@@ -10,7 +10,7 @@
 use std::io::Read;
 use std::path::{Component, Path, PathBuf};
 
-use fdsl::fvrml::MAX_FILE_BYTES;
+use formats::fvrml::MAX_FILE_BYTES;
 
 /// Reads a scene file as text, refusing one over [`MAX_FILE_BYTES`] before reading it.
 pub fn read_scene_text(path: &Path) -> Result<String, String> {

@@ -167,9 +167,10 @@ fn femur_one_peer_holds_the_bone_the_other_drills_through_a_takeover_and_exports
     // The drilled bone exported from A reads back closed, with the hole where B drilled.
     let out = dir_a.join("bone.stl");
     let scene = lock(a.view()).scene().clone();
-    let report = app::transfer::export(&scene, Some(fdsl::scene::ObjectId(bone)), &out, 6).unwrap();
+    let report =
+        app::transfer::export(&scene, Some(model::scene::ObjectId(bone)), &out, 6).unwrap();
     assert_eq!(report.closed, Some(true), "{:?}", report.notes);
-    let solid = fdsl::mesh::stl::read(&std::fs::read(&out).unwrap()).unwrap();
+    let solid = formats::mesh::stl::read(&std::fs::read(&out).unwrap()).unwrap();
     assert!(solid.is_closed());
     assert!(
         solid.signed_distance(DVec3::new(0.15, 0.0, 0.0)) < 0.0,
@@ -256,17 +257,21 @@ fn classroom_two_students_shape_colour_weigh_dig_and_paint_one_model_and_save_it
     app::transfer::export(&scene, None, &saved, 6).unwrap();
     let mut no_files = |path: &str| Err(format!("no file {path}"));
     let text = std::fs::read_to_string(&saved).unwrap();
-    let loaded = fdsl::fvrml::load(&text, &fdsl::fvrml::LoadOptions::default(), &mut no_files)
-        .unwrap()
-        .scene;
+    let loaded = formats::fvrml::load(
+        &text,
+        &formats::fvrml::LoadOptions::default(),
+        &mut no_files,
+    )
+    .unwrap()
+    .scene;
     assert_eq!(loaded.len(), 2);
     let part = loaded
         .objects()
         .find(|(_, o)| o.object.data().name == "Model")
         .map(|(_, o)| o.object.clone())
         .unwrap();
-    let mut sampler = fdsl::object::Sampler::new(std::sync::Arc::new(part));
-    let friction = fdsl::object::Paintable::Friction;
+    let mut sampler = model::object::Sampler::new(std::sync::Arc::new(part));
+    let friction = model::object::Paintable::Friction;
     // (The model's own coordinates: 0.3 below the scene's.)
     assert_eq!(
         sampler.scalar(friction, DVec3::new(0.55, 0.1, 0.0), 0.0),

@@ -113,12 +113,12 @@ fn the_whirlpool_pulls_round_and_down_as_the_haptic_crates_closed_form_does() {
 /// zone and crunchy density) at the origin, as an FVRML file.
 fn haptic_watermelon_file(dir: &Path) -> PathBuf {
     let object = haptic::shapes::object_watermelon(WATERMELON_FDSL, DVec3::ZERO, 1.0).unwrap();
-    let mut scene = fdsl::scene::Scene::new();
+    let mut scene = model::scene::Scene::new();
     scene
-        .insert_object(fdsl::scene::ObjectId(0), object, None)
+        .insert_object(model::scene::ObjectId(0), object, None)
         .unwrap();
     let path = dir.join("watermelon_haptic.wrl");
-    std::fs::write(&path, fdsl::fvrml::write(&fdsl::fvrml::save(&scene))).unwrap();
+    std::fs::write(&path, formats::fvrml::write(&formats::fvrml::save(&scene))).unwrap();
     path
 }
 
@@ -417,13 +417,13 @@ mod live {
 
     use app::engine::{Engine, EngineConfig, Network, lock};
     use app::touch::{DeviceModel, rig, zone_for};
-    use fdsl::object::{Domain, Edit, EditOp, Field, Formula, Geometry, ObjectData, Physics};
-    use fdsl::object::{Pose, Property, ToolShape};
     use glam::DVec3;
     use haptic::aabb::Aabb;
     use haptic::device::sim::{HandModel, SimDevice, Waypoint};
     use haptic::feed::Feed;
     use haptic::servo::{Servo, ServoConfig, ServoLink, StatsSnapshot};
+    use model::object::{Domain, Edit, EditOp, Field, Formula, Geometry, ObjectData, Physics};
+    use model::object::{Pose, Property, ToolShape};
     use replication::shape::ShapePayload;
 
     const T0: replication::Timestamp = replication::Timestamp(1_795_355_107_000_000);

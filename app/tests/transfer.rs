@@ -11,10 +11,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use app::engine::{Engine, EngineConfig, lock, store};
-use fdsl::mesh::{MeshFormat, TriMesh};
-use fdsl::object::{Domain, Edit, EditOp, Formula, Geometry, ObjectData, Pose, ToolShape};
-use fdsl::scene::{ObjectId, Scene};
+use formats::mesh::MeshFormat;
 use glam::DVec3;
+use model::mesh::TriMesh;
+use model::object::{Domain, Edit, EditOp, Formula, Geometry, ObjectData, Pose, ToolShape};
+use model::scene::{ObjectId, Scene};
 use replication::shape::ShapePayload;
 
 fn sculpt(args: &[&str]) -> Output {
@@ -124,7 +125,7 @@ fn each_mesh_file_becomes_an_object_with_the_files_signed_distance() {
     // 20,480 triangles: about 240 KB, authored in parts.
     let big = dir.join("big_ball.glb");
     let mut bytes = Vec::new();
-    fdsl::mesh::glb::write(&fdsl::mesh::shapes::icosphere(0.8, 5), &mut bytes);
+    formats::mesh::glb::write(&model::mesh::shapes::icosphere(0.8, 5), &mut bytes);
     assert!(bytes.len() > 10 * replication::payload::MAX_PAYLOAD_BYTES);
     std::fs::write(&big, &bytes).unwrap();
     files.push(big);
@@ -186,7 +187,7 @@ fn the_watermelon_scene_is_imported_as_its_object() {
     let id = object_named(&scene, "Watermelon");
     let text = std::fs::read_to_string(&file).unwrap();
     let mut no_files = |url: &str| Err(format!("no {url}"));
-    let loaded = fdsl::fvrml::load(&text, &Default::default(), &mut no_files).unwrap();
+    let loaded = formats::fvrml::load(&text, &Default::default(), &mut no_files).unwrap();
     let (_, expected) = loaded.scene.objects().next().unwrap();
     assert_eq!(scene.object(id).unwrap().data(), expected.object.data());
     // Importing again adds a second copy under new ids.
@@ -278,12 +279,12 @@ fn a_sculpted_ball_exports_as_closed_meshes_and_as_fvrml() {
     assert!(!stdout.contains("edit histories"), "{stdout}");
     let text = std::fs::read_to_string(&wrl).unwrap();
     let mut no_files = |url: &str| Err(format!("no {url}"));
-    let loaded = fdsl::fvrml::load(&text, &Default::default(), &mut no_files).unwrap();
+    let loaded = formats::fvrml::load(&text, &Default::default(), &mut no_files).unwrap();
     let (_, ball) = loaded.scene.objects().next().unwrap();
     assert_eq!(loaded.scene.len(), 1);
     assert_eq!(ball.object.data().name, "ball");
     // The carve is in the file: read back, (0.8, 0, 0) is outside the ball.
-    let mut sampler = fdsl::object::Sampler::new(std::sync::Arc::new(ball.object.clone()));
+    let mut sampler = model::object::Sampler::new(std::sync::Arc::new(ball.object.clone()));
     assert!(sampler.value(DVec3::new(0.8, 0.0, 0.0), 0.0) < 0.0);
     assert!(sampler.value(DVec3::new(-0.5, 0.0, 0.0), 0.0) > 0.0);
 

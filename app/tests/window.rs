@@ -441,7 +441,7 @@ fn time_runs_the_wind_demos_fan_and_pausing_holds_it() {
     // Where the object model puts the fan's blades at scene time t, in the renderer's world.
     let demo = app::demos::find("wind").unwrap();
     let scene = demo
-        .load(&fdsl::fvrml::LoadOptions::default())
+        .load(&formats::fvrml::LoadOptions::default())
         .unwrap()
         .scene;
     let (_, blades) = scene
@@ -1395,7 +1395,7 @@ fn the_file_menu_imports_a_mesh_and_exports_the_selection_closed() {
     // 20,480 triangles, larger than one op: the window authors its parts, then the object.
     let ball = dir.join("ball.glb");
     let mut bytes = Vec::new();
-    fdsl::mesh::glb::write(&fdsl::mesh::shapes::icosphere(0.3, 5), &mut bytes);
+    formats::mesh::glb::write(&model::mesh::shapes::icosphere(0.3, 5), &mut bytes);
     std::fs::write(&ball, &bytes).unwrap();
     let out = dir.join("melon.stl");
     let run = window_run(
@@ -1416,7 +1416,7 @@ fn the_file_menu_imports_a_mesh_and_exports_the_selection_closed() {
         run.state
     );
     assert!(objects.iter().any(|o| o["name"] == "ball"), "{}", run.state);
-    let mesh = fdsl::mesh::MeshFormat::StlBinary
+    let mesh = formats::mesh::MeshFormat::StlBinary
         .read(&std::fs::read(&out).unwrap())
         .unwrap();
     let n = mesh.triangles().len();

@@ -5,13 +5,12 @@
 //! - `bulk_values`: f32 values at 65,536 scattered points;
 //! - `bulk_gradients`: f32 values and gradients at 16,384 points;
 //! - `interval`: bounds over 4,096 small boxes;
-//! - `fit_domain`: the domain a formula's solid gets when a command makes an object of it
-//!   (an octree of interval bounds over ±64 to depth 11); fidget has no such search;
 //! - `pruned`: what a mesher does: an octree over [-1.2, 1.2]^3 to depth 5, interval
 //!   evaluation and tape simplification at each box, and 4^3 point values in each ambiguous
 //!   leaf. For the R-function models, compare `pruned` with their min/max twins.
 //!
-//! Run with `cargo bench -p fdsl --bench eval`.
+//! Run with `cargo bench -p fdsl --bench eval`. The domain fitting of a formula's solid, which
+//! was measured here, is the object model's: `cargo bench -p model --bench fit_domain`.
 
 use divan::Bencher;
 use divan::counter::ItemsCount;
@@ -345,15 +344,5 @@ mod pruned {
     #[divan::bench(args = models())]
     fn fidget_jit(bencher: Bencher, model: &str) {
         peer::<fidget::jit::JitFunction>(bencher, model);
-    }
-}
-
-mod fit_domain {
-    use super::*;
-
-    #[divan::bench(args = models(), sample_count = 10)]
-    fn fdsl(bencher: Bencher, model: &str) {
-        let tape = tape(model);
-        bencher.bench_local(|| divan::black_box(fdsl::object::fit_domain(&tape, 0.0)));
     }
 }

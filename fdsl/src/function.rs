@@ -1,5 +1,6 @@
 //! [`Function`]: a compiled function string with named outputs, the entry point of the crate.
 
+use std::cell::Cell;
 use std::fmt;
 use std::sync::Arc;
 
@@ -56,6 +57,19 @@ impl fmt::Display for CompileError {
 
 impl std::error::Error for CompileError {}
 
+thread_local! {
+    /// Texts compiled on this thread (every [`Function::compile_with`]).
+    static N_COMPILED: Cell<u64> = const { Cell::new(0) };
+}
+
+/// How many texts this thread has compiled: every [`Function::compile`], whether the object
+/// model's compile cache called it (a miss) or anything else did. What a test reads to show
+/// that a formula is compiled once, and that nothing downstream (render, haptic) compiles an
+/// object's text again.
+pub fn n_compiled_on_this_thread() -> u64 {
+    N_COMPILED.with(Cell::get)
+}
+
 /// A requested output does not exist.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("the definition has no output `{name}` (it defines {available})")]
@@ -74,7 +88,7 @@ impl Function {
 
     /// Compiles a source text.
     pub fn compile_with(source: &str, options: Options) -> Compiled {
-        crate::object::compiled::count_compilation();
+        N_COMPILED.with(|n| n.set(n.get() + 1));
         let (program, mut diagnostics) = parser::parse(source);
         if diagnostics.iter().any(Diagnostic::is_error) {
             return Compiled {

@@ -168,7 +168,7 @@ pub fn is_usable_name(name: &str) -> bool {
         && (first.is_ascii_alphabetic() || first == '_')
         && chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
         && !RESERVED.contains(&name)
-        && !crate::compile::lower::is_builtin_function(name)
+        && !crate::builtins::is_builtin_function(name)
 }
 
 impl Grid {
@@ -422,11 +422,21 @@ mod nrrd {
         Ok(out)
     }
 
+    /// What the header's fields have set so far.
+    struct Fields {
+        size: Option<[usize; 3]>,
+        spacing: [f64; 3],
+        origin: [f64; 3],
+        kind_ok: bool,
+    }
+
     pub(super) fn parse(bytes: &[u8]) -> Result<Header, GridError> {
-        let mut size = None;
-        let mut spacing = [1.0; 3];
-        let mut origin = [0.0; 3];
-        let mut kind_ok = false;
+        let mut fields = Fields {
+            size: None,
+            spacing: [1.0; 3],
+            origin: [0.0; 3],
+            kind_ok: false,
+        };
         let mut at = 0usize;
         let mut line = 0usize;
         loop {
@@ -460,58 +470,68 @@ mod nrrd {
             let Some((key, value)) = text.split_once(':') else {
                 return Err(error(line, format!("`{text}` is not `field: value`")));
             };
-            let value = value.trim();
-            match key.trim() {
-                "type" => {
-                    if !matches!(value, "uchar" | "unsigned char" | "uint8" | "uint8_t") {
-                        return Err(error(
-                            line,
-                            format!("type `{value}` is not read: only 8-bit unsigned samples"),
-                        ));
-                    }
-                    kind_ok = true;
-                }
-                "dimension" if value != "3" => {
-                    return Err(error(line, format!("dimension {value}: only 3 is read")));
-                }
-                "encoding" if value != "raw" => {
-                    return Err(error(line, format!("encoding `{value}`: only raw is read")));
-                }
-                "sizes" => {
-                    let [a, b, c] = numbers::<3>(line, value)?;
-                    let ok = |v: f64| v.fract() == 0.0 && (2.0..=65_535.0).contains(&v);
-                    if !(ok(a) && ok(b) && ok(c)) {
-                        return Err(error(line, format!("sizes `{value}` are not 2 to 65535")));
-                    }
-                    size = Some([a as usize, b as usize, c as usize]);
-                }
-                "spacings" => spacing = numbers::<3>(line, value)?,
-                "space origin" => origin = numbers::<3>(line, value)?,
-                "space directions" => {
-                    let v = numbers::<9>(line, value)?;
-                    let diagonal = [v[1], v[2], v[3], v[5], v[6], v[7]]
-                        .iter()
-                        .all(|&x| x == 0.0);
-                    if !diagonal {
-                        return Err(error(line, "only axis-aligned space directions are read"));
-                    }
-                    spacing = [v[0], v[4], v[8]];
-                }
-                _ => {}
-            }
+            read_field(&mut fields, line, key.trim(), value.trim())?;
         }
-        if !kind_ok {
+        if !fields.kind_ok {
             return Err(error(line, "the header has no `type: uchar`"));
         }
-        let Some(size) = size else {
+        let Some(size) = fields.size else {
             return Err(error(line, "the header has no `sizes`"));
         };
         Ok(Header {
             size,
-            spacing,
-            origin,
+            spacing: fields.spacing,
+            origin: fields.origin,
             data_at: at,
         })
+    }
+
+    /// Reads the field `key: value` of header line `line`; fields we do not read are skipped.
+    fn read_field(
+        fields: &mut Fields,
+        line: usize,
+        key: &str,
+        value: &str,
+    ) -> Result<(), GridError> {
+        match key {
+            "type" => {
+                if !matches!(value, "uchar" | "unsigned char" | "uint8" | "uint8_t") {
+                    return Err(error(
+                        line,
+                        format!("type `{value}` is not read: only 8-bit unsigned samples"),
+                    ));
+                }
+                fields.kind_ok = true;
+            }
+            "dimension" if value != "3" => {
+                return Err(error(line, format!("dimension {value}: only 3 is read")));
+            }
+            "encoding" if value != "raw" => {
+                return Err(error(line, format!("encoding `{value}`: only raw is read")));
+            }
+            "sizes" => {
+                let [a, b, c] = numbers::<3>(line, value)?;
+                let ok = |v: f64| v.fract() == 0.0 && (2.0..=65_535.0).contains(&v);
+                if !(ok(a) && ok(b) && ok(c)) {
+                    return Err(error(line, format!("sizes `{value}` are not 2 to 65535")));
+                }
+                fields.size = Some([a as usize, b as usize, c as usize]);
+            }
+            "spacings" => fields.spacing = numbers::<3>(line, value)?,
+            "space origin" => fields.origin = numbers::<3>(line, value)?,
+            "space directions" => {
+                let v = numbers::<9>(line, value)?;
+                let diagonal = [v[1], v[2], v[3], v[5], v[6], v[7]]
+                    .iter()
+                    .all(|&x| x == 0.0);
+                if !diagonal {
+                    return Err(error(line, "only axis-aligned space directions are read"));
+                }
+                fields.spacing = [v[0], v[4], v[8]];
+            }
+            _ => {}
+        }
+        Ok(())
     }
 }
 

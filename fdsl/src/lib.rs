@@ -15,6 +15,13 @@
 //! with a text is a [`Diagnostic`] with a span, a plain message and usually a hint, and every
 //! dimension of the work is bounded by the constants in [`limits`].
 //!
+//! What it is not: it knows nothing of objects, edits or scenes (the `model` crate builds
+//! them on this one and caches their compiled tapes) nor of files (the `formats` crate).
+//! Besides the pipeline it holds sampled volume data a formula may call by name
+//! ([`grid::Grid`]) and the reference formulas the checks and benchmarks share ([`models`]).
+//! [`n_compiled_on_this_thread`] counts compilations, so that a test can show that a formula
+//! is compiled once however many crates use it.
+//!
 //! ```
 //! use fdsl::{Function, eval::{BulkEval, Interval, IntervalEval}};
 //!
@@ -37,20 +44,19 @@
 //! ```
 #![warn(missing_docs)]
 
-pub mod bvh;
+mod builtins;
 pub mod compile;
 pub mod eval;
 mod function;
-pub mod fvrml;
 pub mod grid;
 pub mod limits;
-pub mod mesh;
 pub mod models;
-pub mod object;
-pub mod scene;
 pub mod syntax;
 pub mod tape;
 
-pub use function::{CompileError, Compiled, Function, Grids, MissingOutput, Options, SetOps};
+pub use function::{
+    CompileError, Compiled, Function, Grids, MissingOutput, Options, SetOps,
+    n_compiled_on_this_thread,
+};
 pub use syntax::{Diagnostic, Severity, Span};
 pub use tape::Tape;

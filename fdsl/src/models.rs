@@ -51,31 +51,3 @@ pub fn reference_model(name: &str) -> Option<&'static str> {
         .find(|(n, _)| *n == name)
         .map(|(_, source)| *source)
 }
-
-/// The benchmarks' sculpting history (render's `remesh_object` and `remesh_bench`):
-/// edit `k` of a golden-angle spiral of `n` over the unit sphere, turned by `phase` radians; a
-/// ball of `tool_radius` that carves, adding every fifth time, a single stamp every second
-/// time and a two-pose stroke otherwise.
-pub fn spiral_edit(k: usize, n: usize, phase: f64, tool_radius: f64) -> crate::object::Edit {
-    use crate::object::{Edit, EditOp, Pose, ToolShape};
-    use glam::DVec3;
-    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    let y = 1.0 - 2.0 * ((k % n) as f64 + 0.5) / n as f64;
-    let ring = (1.0 - y * y).max(0.0).sqrt();
-    let phi = golden * k as f64 + phase;
-    let at = DVec3::new(ring * phi.cos(), y, ring * phi.sin());
-    let op = if k % 5 == 4 {
-        EditOp::Union
-    } else {
-        EditOp::Subtract
-    };
-    let tool = ToolShape::Sphere {
-        radius: tool_radius,
-    };
-    if k.is_multiple_of(2) {
-        Edit::stamp(op, tool, Pose::at(at))
-    } else {
-        let side = at.any_orthonormal_vector() * 0.03;
-        Edit::stroke(op, tool, vec![Pose::at(at - side), Pose::at(at + side)])
-    }
-}

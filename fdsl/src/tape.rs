@@ -122,6 +122,73 @@ impl SsaOp {
     fn is_leaf(&self) -> bool {
         matches!(self, SsaOp::Input(_) | SsaOp::Const(_))
     }
+
+    /// The same operation over the arguments `f` maps its arguments to.
+    #[inline]
+    fn with_args(&self, f: impl Fn(u32) -> u32) -> SsaOp {
+        match *self {
+            SsaOp::Input(_) | SsaOp::Const(_) => *self,
+            SsaOp::Unary(o, a) => SsaOp::Unary(o, f(a)),
+            SsaOp::Binary(o, a, b) => SsaOp::Binary(o, f(a), f(b)),
+            SsaOp::Ternary(o, a, b, c) => SsaOp::Ternary(o, f(a), f(b), f(c)),
+            SsaOp::Sample(g, a, b, c) => SsaOp::Sample(g, f(a), f(b), f(c)),
+        }
+    }
+
+    /// The instruction code of an operation that is not a leaf.
+    fn code(&self) -> Code {
+        match *self {
+            SsaOp::Unary(op, _) => Code::Unary(op),
+            SsaOp::Binary(op, _, _) => Code::Binary(op),
+            SsaOp::Ternary(op, _, _, _) => Code::Ternary(op),
+            SsaOp::Sample(g, _, _, _) => Code::Sample(g),
+            SsaOp::Input(_) | SsaOp::Const(_) => unreachable!("leaves were skipped"),
+        }
+    }
+}
+
+/// The operations of `ops` that `outputs` still read, renumbered, and the outputs' new
+/// numbers: the backward pass of [`Tape::simplify`].
+fn live_only(ops: &[SsaOp], outputs: &[u32]) -> (Vec<SsaOp>, Vec<u32>) {
+    let mut live = vec![false; ops.len()];
+    for &o in outputs {
+        live[o as usize] = true;
+    }
+    for i in (0..ops.len()).rev() {
+        if live[i] {
+            let (args, k) = ops[i].args();
+            for &a in &args[..k] {
+                live[a as usize] = true;
+            }
+        }
+    }
+    let mut compact = vec![u32::MAX; ops.len()];
+    let mut kept = Vec::with_capacity(ops.len());
+    for (i, op) in ops.iter().enumerate() {
+        if !live[i] {
+            continue;
+        }
+        let new = op.with_args(|a| compact[a as usize]);
+        compact[i] = kept.len() as u32;
+        kept.push(new);
+    }
+    let outputs = outputs.iter().map(|&o| compact[o as usize]).collect();
+    (kept, outputs)
+}
+
+/// The last operation reading each value of `ssa`; outputs live to the end (`usize::MAX`).
+fn last_uses(ssa: &[SsaOp], ssa_outputs: &[u32]) -> Vec<usize> {
+    let mut last_use = vec![0usize; ssa.len()];
+    for (i, op) in ssa.iter().enumerate() {
+        let (args, k) = op.args();
+        for &a in &args[..k] {
+            last_use[a as usize] = i;
+        }
+    }
+    for &o in ssa_outputs {
+        last_use[o as usize] = usize::MAX;
+    }
+    last_use
 }
 
 /// A compiled straight-line program with one or more outputs. A handle: clones share one
@@ -169,17 +236,7 @@ impl Tape {
 
     fn from_ssa(ssa: Vec<SsaOp>, ssa_outputs: Vec<u32>, grids: Arc<[Arc<Grid>]>) -> Tape {
         let n = ssa.len();
-        // The last instruction reading each value; outputs live to the end.
-        let mut last_use = vec![0usize; n];
-        for (i, op) in ssa.iter().enumerate() {
-            let (args, k) = op.args();
-            for &a in &args[..k] {
-                last_use[a as usize] = i;
-            }
-        }
-        for &o in &ssa_outputs {
-            last_use[o as usize] = usize::MAX;
-        }
+        let last_use = last_uses(&ssa, &ssa_outputs);
         let mut reg_of = vec![u32::MAX; n];
         let mut inputs = [None; 4];
         let mut n_regs = 0u32;
@@ -218,15 +275,8 @@ impl Tape {
                     free.push(reg_of[a]);
                 }
             }
-            let code = match *op {
-                SsaOp::Unary(op, _) => Code::Unary(op),
-                SsaOp::Binary(op, _, _) => Code::Binary(op),
-                SsaOp::Ternary(op, _, _, _) => Code::Ternary(op),
-                SsaOp::Sample(g, _, _, _) => Code::Sample(g),
-                SsaOp::Input(_) | SsaOp::Const(_) => unreachable!("leaves were skipped"),
-            };
             instrs.push(Instr {
-                code,
+                code: op.code(),
                 out,
                 args: operands,
             });
@@ -349,13 +399,7 @@ impl Tape {
                 map[i] = m(a);
                 continue;
             }
-            let new = match *op {
-                SsaOp::Input(_) | SsaOp::Const(_) => *op,
-                SsaOp::Unary(o, a) => SsaOp::Unary(o, m(a)),
-                SsaOp::Binary(o, a, b) => SsaOp::Binary(o, m(a), m(b)),
-                SsaOp::Ternary(o, a, b, c) => SsaOp::Ternary(o, m(a), m(b), m(c)),
-                SsaOp::Sample(g, a, b, c) => SsaOp::Sample(g, m(a), m(b), m(c)),
-            };
+            let new = op.with_args(m);
             map[i] = ops.len() as u32;
             ops.push(new);
         }
@@ -365,37 +409,7 @@ impl Tape {
             .iter()
             .map(|&o| map[o as usize])
             .collect();
-        // Backward: keep only what the outputs still read.
-        let mut live = vec![false; ops.len()];
-        for &o in &outputs {
-            live[o as usize] = true;
-        }
-        for i in (0..ops.len()).rev() {
-            if live[i] {
-                let (args, k) = ops[i].args();
-                for &a in &args[..k] {
-                    live[a as usize] = true;
-                }
-            }
-        }
-        let mut compact = vec![u32::MAX; ops.len()];
-        let mut kept = Vec::with_capacity(ops.len());
-        for (i, op) in ops.iter().enumerate() {
-            if !live[i] {
-                continue;
-            }
-            let c = |a: u32| compact[a as usize];
-            let new = match *op {
-                SsaOp::Input(_) | SsaOp::Const(_) => *op,
-                SsaOp::Unary(o, a) => SsaOp::Unary(o, c(a)),
-                SsaOp::Binary(o, a, b) => SsaOp::Binary(o, c(a), c(b)),
-                SsaOp::Ternary(o, a, b, cc) => SsaOp::Ternary(o, c(a), c(b), c(cc)),
-                SsaOp::Sample(g, a, b, cc) => SsaOp::Sample(g, c(a), c(b), c(cc)),
-            };
-            compact[i] = kept.len() as u32;
-            kept.push(new);
-        }
-        let outputs = outputs.iter().map(|&o| compact[o as usize]).collect();
+        let (kept, outputs) = live_only(&ops, &outputs);
         Tape::from_ssa(kept, outputs, Arc::clone(&self.0.grids))
     }
 

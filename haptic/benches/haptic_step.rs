@@ -5,7 +5,7 @@
 //! container), the same watermelons as fdsl functions (`tests/data/models/watermelon.fdsl`
 //! geometry, tension, friction and crunchy density as fdsl functions), and icosphere meshes
 //! located by haptic rays (320 triangles each), and the fdsl watermelons as objects of the
-//! shared object model (`ObjectContainer` over `fdsl::object::Sampler`), plain and carved
+//! shared object model (`ObjectContainer` over `model::object::Sampler`), plain and carved
 //! with 10^4 small dents each (history-independent cost: a point visits only the edits
 //! whose box holds it). Budget: well under 1 ms per tick (the 1 kHz period); the goal for
 //! 64 fdsl objects is a p99.9 of 100 us or less (percentiles come from

@@ -98,8 +98,8 @@ fn scene(kind: &str, n_objects: usize) -> Vec<Box<dyn Container>> {
 
 /// `n` dents of radius 0.02 on the caps `|z| > 0.6` of the unit sphere, which the tip
 /// (circling in the plane `z = 0` through the watermelons' centres) never comes near.
-fn far_dents(n: usize) -> Vec<std::sync::Arc<fdsl::object::CompiledEdit>> {
-    use fdsl::object::{CompiledEdit, Edit, EditOp, Pose, ToolShape};
+fn far_dents(n: usize) -> Vec<std::sync::Arc<model::object::CompiledEdit>> {
+    use model::object::{CompiledEdit, Edit, EditOp, Pose, ToolShape};
     (0..n)
         .map(|k| {
             let z = if k % 2 == 0 { 1.0 } else { -1.0 } * (0.7 + 0.3 * (k as f64 / n as f64));

@@ -93,7 +93,7 @@ pub trait Container: Send {
     /// fraction of the device's maximum force (the renderer clamps its length to 1); `None`
     /// where no field acts. The default maps `p` and `t_secs` through
     /// [`Container::field_domain`] and evaluates [`Container::force_field`]; a container
-    /// whose field has its own mapping (an object of `fdsl::object`) answers here directly.
+    /// whose field has its own mapping (an object of `model::object`) answers here directly.
     fn field_at(&mut self, p: DVec3, t_secs: f64) -> Option<DVec3> {
         let domain = self.field_domain()?;
         let t_local = domain.local_time(t_secs)?;

@@ -32,8 +32,8 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use fdsl::object::Object;
-use fdsl::scene::{ObjectId, Scene};
+use model::object::Object;
+use model::scene::{ObjectId, Scene};
 
 use crate::container::object::{ObjectContainer, ObjectContainerError};
 use crate::handoff::Publisher;

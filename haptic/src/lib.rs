@@ -16,15 +16,15 @@
 //!   recorder and replayer, and HID drivers (3D mouse input, HID PID force output);
 //! - [`force::coupling`]: a shared tool held by several devices through spring-dampers;
 //! - haptic containers: [`container::object::ObjectContainer`] (an object of the shared
-//!   object model, `fdsl::object`, with its sculpting edits and painted properties, placed by
+//!   object model, `model::object`, with its sculpting edits and painted properties, placed by
 //!   a general affine transform; [`container::object::ObjectContainer::from_scene`] turns an
-//!   `fdsl::scene::Scene` into a servo snapshot), [`container::function::FunctionContainer`]
+//!   `model::scene::Scene` into a servo snapshot), [`container::function::FunctionContainer`]
 //!   (fdsl geometry and properties: tension, friction, zone depth, density, force field) and
 //!   [`container::mesh::MeshContainer`] (closed triangle meshes located by multiple haptic
 //!   rays over fdsl's BVH), all built off the servo thread and sampled without allocating.
 //!
 //! What it is not: it does not parse scene files or fold edits itself (it reads objects
-//! through `fdsl::object::Sampler`), never sees the op log or the network (the shared tool's
+//! through `model::object::Sampler`), never sees the op log or the network (the shared tool's
 //! packets and remote tools come in as values), draws nothing and reads the clock in one
 //! place (the servo's pacing, whose clock the feed's timing shares).
 //!

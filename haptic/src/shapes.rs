@@ -296,17 +296,17 @@ pub fn circle_waypoints(
 pub type TriangleMesh = (Vec<[f32; 3]>, Vec<[u32; 3]>);
 
 /// The closed cube `[center - half, center + half]`, 12 outward triangles
-/// (`fdsl::mesh::shapes::cube`).
+/// (`model::mesh::shapes::cube`).
 pub fn cube_mesh(center: DVec3, half: f64) -> TriangleMesh {
-    fdsl::mesh::shapes::cube(center - DVec3::splat(half), center + DVec3::splat(half)).into_parts()
+    model::mesh::shapes::cube(center - DVec3::splat(half), center + DVec3::splat(half)).into_parts()
 }
 
 /// A sphere of `radius` about `center`: an icosahedron subdivided `n_subdivisions` times
-/// (`20 * 4^n` outward triangles; `fdsl::mesh::shapes::icosphere`, at most
+/// (`20 * 4^n` outward triangles; `model::mesh::shapes::icosphere`, at most
 /// `MAX_ICOSPHERE_SUBDIVISIONS`), vertices on the sphere.
 pub fn icosphere(center: DVec3, radius: f64, n_subdivisions: u32) -> TriangleMesh {
     let (mut vertices, triangles) =
-        fdsl::mesh::shapes::icosphere(radius, n_subdivisions).into_parts();
+        model::mesh::shapes::icosphere(radius, n_subdivisions).into_parts();
     let offset = center.as_vec3();
     for v in &mut vertices {
         *v = (glam::Vec3::from_array(*v) + offset).to_array();
@@ -415,8 +415,8 @@ pub fn object_watermelon(
     geometry: &str,
     center: DVec3,
     radius: f64,
-) -> Result<fdsl::object::Object, fdsl::object::ObjectError> {
-    use fdsl::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property};
+) -> Result<model::object::Object, model::object::ObjectError> {
+    use model::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property};
     let property = |text: &str| Formula::new(text).map(|f| Some(Property::new(f)));
     Object::new(ObjectData {
         name: "watermelon".into(),
@@ -432,7 +432,7 @@ pub fn object_watermelon(
             ..Physics::default()
         }
         .into(),
-        transform: fdsl::object::Transform::from_trs(
+        transform: model::object::Transform::from_trs(
             center,
             glam::DQuat::IDENTITY,
             DVec3::splat(radius),
@@ -444,12 +444,12 @@ pub fn object_watermelon(
 /// `n_dents` small spherical dents of `radius` (object units) carved into the unit sphere's
 /// surface at points of a Fibonacci spiral (about evenly spread, deterministic): a long
 /// sculpting history whose edits each touch a small region. Compiled once, to share between
-/// objects with [`fdsl::object::Object::apply_compiled`].
+/// objects with [`model::object::Object::apply_compiled`].
 pub fn sphere_dents(
     n_dents: usize,
     radius: f64,
-) -> Result<Vec<std::sync::Arc<fdsl::object::CompiledEdit>>, fdsl::object::ObjectError> {
-    use fdsl::object::{CompiledEdit, Edit, EditOp, Pose, ToolShape};
+) -> Result<Vec<std::sync::Arc<model::object::CompiledEdit>>, model::object::ObjectError> {
+    use model::object::{CompiledEdit, Edit, EditOp, Pose, ToolShape};
     let golden_angle = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     (0..n_dents)
         .map(|k| {
@@ -468,15 +468,15 @@ pub fn sphere_dents(
 pub fn object_watermelon_scene(
     geometry: &str,
     n: usize,
-    dents: &[std::sync::Arc<fdsl::object::CompiledEdit>],
-) -> Result<fdsl::scene::Scene, fdsl::scene::SceneError> {
-    let mut scene = fdsl::scene::Scene::new();
+    dents: &[std::sync::Arc<model::object::CompiledEdit>],
+) -> Result<model::scene::Scene, model::scene::SceneError> {
+    let mut scene = model::scene::Scene::new();
     for (id, center, radius) in grid_placements(n) {
         let mut object = object_watermelon(geometry, center, radius)?;
         for dent in dents {
             object.apply_compiled(std::sync::Arc::clone(dent))?;
         }
-        scene.insert_object(fdsl::scene::ObjectId(id), object, None)?;
+        scene.insert_object(model::scene::ObjectId(id), object, None)?;
     }
     scene.prepare();
     Ok(scene)

@@ -189,7 +189,7 @@ fn servo_step_over_fdsl_and_mesh_containers_never_allocates() {
 
 /// A ball of radius 0.25 on the tip's circle, swaying along x, with a force field along +z.
 fn moving_field_ball() -> ObjectContainer {
-    use fdsl::object::{
+    use model::object::{
         Domain, ForceField, Formula, Geometry, Motion, Object, ObjectData, Physics, Timing,
         Transform,
     };
@@ -223,7 +223,7 @@ fn moving_field_ball() -> ObjectContainer {
 }
 
 /// The containers of an object-model scene, and the moving field ball.
-fn object_containers(scene: &fdsl::scene::Scene) -> Vec<ObjectContainer> {
+fn object_containers(scene: &model::scene::Scene) -> Vec<ObjectContainer> {
     let (mut containers, refused) = ObjectContainer::from_scene(scene);
     assert!(refused.is_empty());
     containers.push(moving_field_ball());
@@ -238,7 +238,7 @@ fn servo_step_over_object_containers_never_allocates() {
     let dented = object_watermelon_scene(geometry, 64, &dents).unwrap();
     assert_eq!(
         dented
-            .object(fdsl::scene::ObjectId(1))
+            .object(model::scene::ObjectId(1))
             .unwrap()
             .history()
             .len(),

@@ -393,8 +393,8 @@ fn object_model_watermelon_feels_like_its_function_container() {
 }
 
 /// A unit ball (`1 - |p|`) with a tense surface and some density, in a domain.
-fn ball_object() -> fdsl::object::Object {
-    use fdsl::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property};
+fn ball_object() -> model::object::Object {
+    use model::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property};
     let property = |text: &str| Some(Property::new(Formula::new(text).unwrap()));
     Object::new(ObjectData {
         geometry: Some(Geometry::implicit_in(
@@ -415,7 +415,7 @@ fn ball_object() -> fdsl::object::Object {
 
 #[test]
 fn carved_object_is_hollow_where_carved() {
-    use fdsl::object::{Edit, EditOp, Pose, ToolShape};
+    use model::object::{Edit, EditOp, Pose, ToolShape};
     let rig = rig(1.6);
     let solid = ball_object();
     let mut carved = solid.clone();
@@ -434,7 +434,7 @@ fn carved_object_is_hollow_where_carved() {
         (2.5, DVec3::new(0.6, 0.0, 0.0)),
         (3.5, DVec3::new(1.3, 0.0, 0.0)),
     ];
-    let scene = |object: &fdsl::object::Object| {
+    let scene = |object: &model::object::Object| {
         vec![ObjectContainer::from_object(3, object, Default::default()).unwrap()]
     };
     let solid_ticks = run_servo(scene(&solid), &rig, &path, 3600);
@@ -469,8 +469,8 @@ fn carved_object_is_hollow_where_carved() {
 
 #[test]
 fn painted_density_is_felt_inside_the_painted_region_only() {
-    use fdsl::object::{Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData};
-    use fdsl::object::{PaintValue, Paintable, Pose, ToolShape};
+    use model::object::{Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData};
+    use model::object::{PaintValue, Paintable, Pose, ToolShape};
     let rig = rig(1.6);
     // No density of its own: only the paint defines one.
     let mut object = Object::new(ObjectData {

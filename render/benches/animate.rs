@@ -22,7 +22,7 @@ fn main() {
     divan::main();
 }
 
-fn scene() -> fdsl::scene::Scene {
+fn scene() -> model::scene::Scene {
     let text = concat!(
         r#"
         DEF Pulse FShape { geometry FGeometry {
@@ -40,7 +40,7 @@ fn scene() -> fdsl::scene::Scene {
         "] }"
     );
     let mut no_files = |path: &str| Err(format!("no file {path}"));
-    fdsl::fvrml::load(text, &fdsl::fvrml::LoadOptions::default(), &mut no_files)
+    formats::fvrml::load(text, &formats::fvrml::LoadOptions::default(), &mut no_files)
         .expect("the scene loads")
         .scene
 }

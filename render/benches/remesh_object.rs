@@ -8,7 +8,7 @@
 //! The object is the unit ball (in a 2.2-unit domain) carved by 10^4 edits spread over its
 //! surface along a golden-angle spiral: ball tools of radius 0.04, every second edit a short
 //! stroke of two poses, every fifth edit adding instead of carving. Meshing is over
-//! [-1.25, 1.25]^3 through [`ObjectField`] (fdsl's `Sampler` restricted to each octree node's
+//! [-1.25, 1.25]^3 through [`ObjectField`] (model's `Sampler` restricted to each octree node's
 //! box, `BoxSampler`, which folds a block's edits over all its points at once).
 //!
 //! - `edit_to_mesh`: one more edit (at a new place each iteration): `Object::apply`,
@@ -28,8 +28,8 @@
 //! the bytes each wrote.
 
 use divan::Bencher;
-use fdsl::object::{Domain, Edit, Formula, Geometry, Object, ObjectData};
 use glam::DVec3;
+use model::object::{Domain, Edit, Formula, Geometry, Object, ObjectData};
 use render::gpu::Renderer;
 use render::mesh::object_field::{Dirty, dirty_boxes};
 use render::mesh::octree::{MeshSettings, OctreeMesher, mesh};
@@ -49,9 +49,9 @@ fn main() {
     divan::main();
 }
 
-/// Edit `k` of the shared spiral workload ([`fdsl::models::spiral_edit`]).
+/// Edit `k` of the shared spiral workload ([`model::models::spiral_edit`]).
 fn edit(k: usize, n: usize, phase: f64) -> Edit {
-    fdsl::models::spiral_edit(k, n, phase, TOOL_RADIUS)
+    model::models::spiral_edit(k, n, phase, TOOL_RADIUS)
 }
 
 fn object() -> Object {

@@ -25,10 +25,10 @@
 
 use std::time::{Duration, Instant};
 
-use fdsl::object::Transform;
-use fdsl::object::{Domain, Edit, Formula, Geometry, Object, ObjectData};
-use fdsl::scene::ObjectId;
 use glam::DVec3;
+use model::object::Transform;
+use model::object::{Domain, Edit, Formula, Geometry, Object, ObjectData};
+use model::scene::ObjectId;
 use render::camera::Camera;
 use render::gpu::offscreen::Headless;
 use render::mesher::{MeshJob, MeshKind, Meshed, Mesher};
@@ -140,7 +140,7 @@ fn main() -> Result<(), Error> {
         for _ in 0..n_whole {
             stroke(&mut object)?;
             let t0 = now();
-            let mut one = fdsl::scene::Scene::new();
+            let mut one = model::scene::Scene::new();
             let mut o = object.clone();
             o.prepare();
             one.insert_object(ObjectId(1), o, None)?;
@@ -220,9 +220,9 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 /// Edit `k` of the spiral render's `remesh_object` benchmark sculpts
-/// ([`fdsl::models::spiral_edit`]).
+/// ([`model::models::spiral_edit`]).
 fn spiral_edit(k: usize, n: usize, phase: f64) -> Edit {
-    fdsl::models::spiral_edit(k, n, phase, TOOL_RADIUS)
+    model::models::spiral_edit(k, n, phase, TOOL_RADIUS)
 }
 
 fn object(n_edits: usize) -> Result<Object, Error> {

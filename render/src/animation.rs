@@ -25,9 +25,9 @@
 use std::sync::Arc;
 
 use fdsl::Tape;
-use fdsl::object::{Object, Slot};
-use fdsl::scene::ObjectId;
 use glam::Mat4;
+use model::object::{Object, Slot};
+use model::scene::ObjectId;
 
 use crate::appearance::CompiledAppearance;
 use crate::mesh::object_field::mesh_bounds;
@@ -68,8 +68,8 @@ pub struct FrameStats {
 struct Animated {
     id: ObjectId,
     object: Object,
-    sampler: fdsl::object::Sampler,
-    world_from_group: fdsl::object::Transform,
+    sampler: model::object::Sampler,
+    world_from_group: model::object::Transform,
     appearance: CompiledAppearance,
     timed_shape: bool,
     timed_look: bool,
@@ -125,7 +125,7 @@ impl Animator {
     /// Meshes every object of `scene` at `settings.t_secs` and `settings.depth` (this first
     /// build is not bounded by a budget).
     pub fn new(
-        scene: &fdsl::scene::Scene,
+        scene: &model::scene::Scene,
         settings: &SnapshotSettings,
     ) -> Result<Animator, SnapshotError> {
         check(settings)?;
@@ -252,7 +252,7 @@ impl Animator {
     fn place(&mut self, i: usize, t: f64) {
         let o = &mut self.objects[i];
         let scene_from_object =
-            fdsl::scene::world_from_object(&o.world_from_group, &mut o.sampler, t);
+            model::scene::world_from_object(&o.world_from_group, &mut o.sampler, t);
         self.scene.objects[i].world_from_object =
             render_from_scene() * to_mat4(scene_from_object.parent_from_child);
     }
@@ -292,11 +292,11 @@ impl Animator {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fdsl::fvrml::{LoadOptions, load};
+    use formats::fvrml::{LoadOptions, load};
 
     /// A pulsing ball (a shape of time), a ball changing colour (a look of time), a box
     /// moving along x (a motion) and a still ball.
-    fn scene() -> fdsl::scene::Scene {
+    fn scene() -> model::scene::Scene {
         let text = r#"
             DEF Pulse FShape { geometry FGeometry {
                 definition "0.45+0.15*sin(t)-sqrt(x^2+y^2+z^2)" bboxSize 1.4 1.4 1.4 } }

@@ -1,5 +1,5 @@
 //! Appearance on meshes: colour, transparency, shininess and geometric texture from an
-//! object's [`fdsl::object::Appearance`], evaluated in bulk at a mesh's vertices at time `t`.
+//! object's [`model::object::Appearance`], evaluated in bulk at a mesh's vertices at time `t`.
 //!
 //! - Diffuse colour becomes the vertex colour: a constant, a parametric RGB function (a
 //!   statement list with outputs `r`, `g`, `b`), or a scalar function through a
@@ -25,17 +25,17 @@
 //!
 //! Nothing here compiles text: [`CompiledAppearance::of`] takes the tapes the
 //! [`Object`] compiled when its appearance was set, and [`CompiledAppearance::new`] builds
-//! an object from a bare [`Appearance`] (through fdsl's per-process cache of compiled
+//! an object from a bare [`Appearance`] (through model's per-process cache of compiled
 //! formulas, so a formula already seen is not compiled again).
 
 use crate::mesh::Mesh;
 use crate::scene::Material;
 use fdsl::eval::BulkEval;
-use fdsl::object::{
+use glam::{DAffine3, DVec3};
+use model::object::{
     Appearance, ColorMap, ColorSlot, CompiledColor, DEFAULT_DIFFUSE, Object, ObjectData,
     ObjectError, Slot,
 };
-use glam::{DAffine3, DVec3};
 
 /// Shininess 1 maps to this Blinn-Phong exponent (VRML's `shininess` times 128).
 pub const SHININESS_EXPONENT_MAX: f32 = 128.0;
@@ -66,7 +66,7 @@ pub enum AppearanceError {
     #[error("the appearance transform is not invertible")]
     BadTransform,
     /// Another part of the appearance is not valid (a colour map, a colour, the domain, a
-    /// formula's length), as fdsl's object model checks it.
+    /// formula's length), as the object model checks it.
     #[error(transparent)]
     Invalid(ObjectError),
 }
@@ -189,7 +189,7 @@ impl CompiledAppearance {
     }
 
     /// A bare `appearance`, validated and compiled as an object holding only it (formulas
-    /// come from fdsl's per-process cache when already compiled). Prefer
+    /// come from model's per-process cache when already compiled). Prefer
     /// [`CompiledAppearance::of`] for an object's appearance.
     pub fn new(appearance: &Appearance) -> Result<CompiledAppearance, AppearanceError> {
         let object = Object::new(ObjectData {
@@ -288,7 +288,7 @@ impl CompiledAppearance {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fdsl::object::{ColorDef, Formula, Transform};
+    use model::object::{ColorDef, Formula, Transform};
 
     fn formula(text: &str) -> Formula {
         Formula::new(text).unwrap()

@@ -6,7 +6,7 @@
 //!   watertight and edge-manifold output)
 //!   written against the [`Field`](mesh::Field) trait, and [`parametric`](mesh::parametric)
 //!   triangulation of surfaces p(u,v) (with `spade`) and tubes around curves p(u);
-//! - [`appearance`]: an `fdsl::object::Appearance` applied to a mesh at time t (vertex
+//! - [`appearance`]: a `model::object::Appearance` applied to a mesh at time t (vertex
 //!   colours from parametric RGB or a colour map, transparency as alpha, displacement along
 //!   normals, shininess into the [`Material`](scene::Material));
 //! - [`scene`] and [`camera`]: what to draw ([`Scene`](scene::Scene), objects with

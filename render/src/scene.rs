@@ -4,8 +4,8 @@
 
 use crate::camera::{Camera, Ray};
 use crate::mesh::{Aabb, Mesh};
-use fdsl::object::{Pose, ToolShape};
 use glam::{Mat4, Vec3};
+use model::object::{Pose, ToolShape};
 use std::sync::Arc;
 
 /// How a surface reflects light; multiplies the per-vertex colour.

@@ -1,5 +1,5 @@
-//! Pictures of a whole [`fdsl::scene::Scene`] (for example one read from an FVRML file by
-//! `fdsl::fvrml::load`): every object meshed, coloured and placed, drawn offscreen from a
+//! Pictures of a whole [`model::scene::Scene`] (for example one read from an FVRML file by
+//! `formats::fvrml::load`): every object meshed, coloured and placed, drawn offscreen from a
 //! camera that frames the scene, once per [`View`]. The `sculpt render` command is a thin
 //! wrapper around [`snapshot`].
 //!
@@ -13,7 +13,7 @@
 //!
 //! Then the appearance is applied ([`CompiledAppearance`]; painted colours come from fdsl's
 //! `Sampler`), and the object is placed by the object model's one rule,
-//! `fdsl::scene::world_from_object` (its own transform and motion at `t`, then its groups'
+//! `model::scene::world_from_object` (its own transform and motion at `t`, then its groups'
 //! transforms). Scenes are +y up (VRML); the renderer's world is +z up, so the whole scene
 //! is turned by [`render_from_scene`]. Force fields can be drawn as arrows sampled on a grid
 //! inside their container (see [`SnapshotSettings::force_arrows`]).
@@ -23,9 +23,9 @@
 
 use std::sync::Arc;
 
-use fdsl::object::{CompiledEdit, EditOp, Object, ParametricKind, Shape, Slot};
-use fdsl::scene::ObjectId;
 use glam::{DAffine3, DMat4, DVec3, Mat4, Vec3};
+use model::object::{CompiledEdit, EditOp, Object, ParametricKind, Shape, Slot};
+use model::scene::ObjectId;
 
 use crate::appearance::CompiledAppearance;
 use crate::camera::Camera;
@@ -203,7 +203,7 @@ pub(crate) fn check(settings: &SnapshotSettings) -> Result<(), SnapshotError> {
 
 /// Meshes, colours and places every object of `scene` (see the module documentation).
 pub fn build(
-    scene: &fdsl::scene::Scene,
+    scene: &model::scene::Scene,
     settings: &SnapshotSettings,
 ) -> Result<Built, SnapshotError> {
     check(settings)?;
@@ -217,7 +217,7 @@ pub fn build(
     for (id, entry) in scene.objects() {
         let object = &entry.object;
         let mut sampler = object.sampler();
-        let scene_from_object = fdsl::scene::world_from_object(
+        let scene_from_object = model::scene::world_from_object(
             &scene.world_from_group(entry.group),
             &mut sampler,
             settings.t_secs,
@@ -282,7 +282,7 @@ pub fn draw(
 /// Builds `scene` and draws every view on a fresh headless device: `(view name, image)`
 /// pairs, in the order of `settings.views`, and the report of each object.
 pub fn snapshot(
-    scene: &fdsl::scene::Scene,
+    scene: &model::scene::Scene,
     settings: &SnapshotSettings,
 ) -> Result<(Vec<ViewImage>, Vec<ObjectReport>), SnapshotError> {
     let built = build(scene, settings)?;
@@ -336,7 +336,7 @@ pub(crate) fn is_colour_paint(edit: &CompiledEdit) -> bool {
     matches!(
         edit.edit().op,
         EditOp::Paint {
-            property: fdsl::object::Paintable::Color,
+            property: model::object::Paintable::Color,
             ..
         }
     )
@@ -407,7 +407,7 @@ pub(crate) fn object_mesh(object: &Object, depth: u8, t_secs: f64) -> ObjectMesh
                     Err(e) => skipped = Some(e.to_string()),
                 }
             }
-            None => skipped = Some(fdsl::object::FitError::Unbounded.to_string()),
+            None => skipped = Some(model::object::FitError::Unbounded.to_string()),
         }
     }
     ObjectMesh {
@@ -435,7 +435,7 @@ fn append(out: &mut Mesh, m: &Mesh, skipped: &mut Option<String>) {
 /// An imported mesh's triangles with faceted normals: split at creases sharper than
 /// [`CREASE_DEGREES`] (a polygon model's box keeps its edges) unless a displacement will move
 /// its vertices, which would crack it there.
-fn tri_mesh(m: &fdsl::mesh::TriMesh, faceted: bool) -> Mesh {
+fn tri_mesh(m: &model::mesh::TriMesh, faceted: bool) -> Mesh {
     let mut out = Mesh {
         positions: m.positions().to_vec(),
         indices: m.triangles().iter().flatten().copied().collect(),
@@ -603,7 +603,7 @@ pub(crate) fn colour_vertices(
 /// container holds the point; mapped by `world_from_object`. The longest arrow is 0.8 cells
 /// long. Each arrow is five lines (see [`Scene::add_arrow`]).
 pub fn force_arrows(
-    sampler: &mut fdsl::object::Sampler,
+    sampler: &mut model::object::Sampler,
     per_axis: u32,
     t_secs: f64,
     world_from_object: Mat4,
@@ -702,9 +702,9 @@ pub(crate) fn world_bounds(scene: &Scene) -> Option<Aabb> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fdsl::fvrml::{LoadOptions, load};
+    use formats::fvrml::{LoadOptions, load};
 
-    fn load_text(text: &str) -> fdsl::scene::Scene {
+    fn load_text(text: &str) -> model::scene::Scene {
         let mut no_files = |path: &str| Err(format!("no file {path}"));
         load(text, &LoadOptions::default(), &mut no_files)
             .unwrap()
@@ -807,7 +807,7 @@ mod tests {
 
     #[test]
     fn bad_settings_are_errors() {
-        let scene = fdsl::scene::Scene::new();
+        let scene = model::scene::Scene::new();
         for s in [
             SnapshotSettings {
                 width: 0,

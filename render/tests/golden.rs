@@ -16,8 +16,8 @@
     reason = "scene builders outside #[test] fns unwrap fixed, known-good inputs"
 )]
 
-use fdsl::object::{Appearance, ColorDef, ColorMap, Formula};
 use glam::{Mat4, Vec3};
+use model::object::{Appearance, ColorDef, ColorMap, Formula};
 use render::appearance::CompiledAppearance;
 use render::camera::Camera;
 use render::gpu::offscreen::{Headless, OffscreenError};
@@ -592,7 +592,7 @@ const SCENE_SIZE: (u32, u32) = (240, 180);
 
 /// The FVRML scene `name`: a demo scene of `scenes/`, else a figure of `tests/data/scenes`,
 /// loaded as `sculpt render` loads it.
-fn scene_file(name: &str) -> fdsl::scene::Scene {
+fn scene_file(name: &str) -> model::scene::Scene {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let demo = root.join("scenes").join(format!("{name}.wrl"));
     let path = if demo.exists() {
@@ -604,7 +604,7 @@ fn scene_file(name: &str) -> fdsl::scene::Scene {
     // Files a scene names (the MRI demo's volume) sit beside it.
     let folder = path.parent().unwrap().to_path_buf();
     let mut beside = |url: &str| std::fs::read(folder.join(url)).map_err(|e| format!("{url}: {e}"));
-    fdsl::fvrml::load(&text, &fdsl::fvrml::LoadOptions::default(), &mut beside)
+    formats::fvrml::load(&text, &formats::fvrml::LoadOptions::default(), &mut beside)
         .unwrap()
         .scene
 }
@@ -851,8 +851,8 @@ fn lines_overlay() -> Scene {
     let turn = snapshot::render_from_scene();
     let zone = Aabb::new([-2.0, -2.0, -0.3], [2.0, 2.0, 1.6]);
     scene.add_box(zone, [1.0, 1.0, 1.0, 1.0]);
-    let pose = fdsl::object::Pose::at(glam::DVec3::new(0.6, 1.1, 0.5));
-    let tool = fdsl::object::ToolShape::Sphere { radius: 0.3 };
+    let pose = model::object::Pose::at(glam::DVec3::new(0.6, 1.1, 0.5));
+    let tool = model::object::ToolShape::Sphere { radius: 0.3 };
     scene.add_tool(
         &tool,
         turn * render::scene::pose_matrix(&pose),
@@ -905,7 +905,7 @@ fn parametric_helix_is_drawn_as_a_tube() {
           } }
         }"#;
     let mut no_files = |path: &str| Err(format!("no file {path}"));
-    let scene = fdsl::fvrml::load(text, &fdsl::fvrml::LoadOptions::default(), &mut no_files)
+    let scene = formats::fvrml::load(text, &formats::fvrml::LoadOptions::default(), &mut no_files)
         .unwrap()
         .scene;
     let settings = SnapshotSettings {

@@ -13,8 +13,8 @@
     reason = "the session and the device helpers unwrap fixed, known-good inputs"
 )]
 
-use fdsl::object::{Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData, Pose, ToolShape};
 use glam::{DVec3, Mat4};
+use model::object::{Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData, Pose, ToolShape};
 use render::camera::Camera;
 use render::gpu::offscreen::{Headless, OffscreenError};
 use render::mesh::object_field::{Dirty, dirty_boxes};

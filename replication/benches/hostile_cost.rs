@@ -19,8 +19,8 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use fdsl::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
 use glam::DVec3;
+use model::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
 use replication::materialize::Materialized;
 use replication::membership::{Admission, FounderCommitment};
 use replication::op::UNNAMED_SESSION;
@@ -49,7 +49,7 @@ fn main() {
     let n = if quick { 20 } else { 200 };
     let history = if quick { 200 } else { 2_000 };
     // Each run builds its workload afresh and starts with an empty compile cache
-    // (`fdsl::object::compiled`): every formula is new to the receiver, as from a member that
+    // (`model::object::compiled`): every formula is new to the receiver, as from a member that
     // never repeats itself, and the cache helps only where the receiver compiles one twice.
     let workloads: Vec<Box<dyn Fn() -> Workload>> = vec![
         Box::new(move || honest(n)),
@@ -108,7 +108,7 @@ fn measure(build: &dyn Fn() -> Workload) -> (Workload, usize, Duration, u64) {
         .map(|_| {
             let workload = last.insert(build());
             // Authoring compiled the member's formulas in this process; a receiver has not.
-            fdsl::object::compiled::clear();
+            model::object::compiled::clear();
             let (mut log, mut scene) = receiver_for(&workload.setup);
             for op in &workload.setup {
                 receive(&mut log, &mut scene, op, NOW);

@@ -6,7 +6,7 @@
 use std::sync::Arc;
 
 use fdsl::limits::{MAX_NESTING_DEPTH, MAX_STATEMENT_DEPTH};
-use fdsl::object::{ColorDef, Formula, Geometry, ObjectData, Physics, Property, compiled};
+use model::object::{ColorDef, Formula, Geometry, ObjectData, Physics, Property, compiled};
 use replication::materialize::{Materialize, Materialized};
 use replication::pending::Origin;
 use replication::shape::{ShapePayload, ShapeScene};
@@ -36,7 +36,7 @@ fn deepest_object() -> ObjectData {
     ObjectData {
         name: "deep".into(),
         geometry: Some(Geometry::implicit(deepest_formula("0.5"))),
-        appearance: fdsl::object::Appearance {
+        appearance: model::object::Appearance {
             diffuse: Some(ColorDef::Rgb(
                 Formula::new(format!(
                     "r = {}x{}; g = 0.5; b = y;",

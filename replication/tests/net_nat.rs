@@ -27,8 +27,10 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Duration;
 
-use fdsl::object::{ColorDef, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
 use glam::DVec3;
+use model::object::{
+    ColorDef, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape,
+};
 use net_support::{INVITE, PATIENCE, session_keys};
 use replication::net::discovery::message::REGISTER_BYTES;
 use replication::net::discovery::registry::RegistryStats;

@@ -6,12 +6,12 @@
 
 use std::sync::Arc;
 
-use fdsl::object::{
+use glam::DVec3;
+use model::object::{
     ColorDef, Domain, Edit, EditOp, Field, Formula, Geometry, ObjectData, PaintValue, Paintable,
     Pose, Shape, Shared, ToolShape,
 };
-use fdsl::scene::ObjectId as SceneObjectId;
-use glam::DVec3;
+use model::scene::ObjectId as SceneObjectId;
 use proptest::prelude::*;
 use replication::materialize::{Materialize, Materialized};
 use replication::payload::{LeaseAction, MAX_PAYLOAD_BYTES};
@@ -382,7 +382,7 @@ fn ops_signed_before_grids_still_verify_and_fold() {
     let encoded = create.encoded();
     let start = encoded.windows(4).position(|w| w == b"clay").unwrap() - 4;
     let payload = &encoded[start..encoded.len() - 64];
-    assert_eq!(payload[0], fdsl::object::codec::VERSION_1);
+    assert_eq!(payload[0], model::object::codec::VERSION_1);
     assert!(create.payload().is_canonical(payload));
     let mut today = Vec::new();
     create.payload().encode(&mut today);
@@ -397,7 +397,7 @@ fn ops_signed_before_grids_still_verify_and_fold() {
 
 /// A ball as an icosphere mesh of 5,120 triangles: about 60 KB, four ops' worth.
 fn mesh_ball(object: u64) -> ShapePayload {
-    let mesh = fdsl::mesh::shapes::icosphere(1.0, 4);
+    let mesh = model::mesh::shapes::icosphere(1.0, 4);
     ShapePayload::Create {
         object,
         counter: None,
@@ -837,7 +837,7 @@ fn the_next_ids_skip_every_id_the_author_used() {
 /// folding its object again after a backdated op lands before it, compiles nothing more.
 #[test]
 fn a_received_edit_is_compiled_once_from_its_bytes_to_the_scene() {
-    use fdsl::object::compiled::n_edits_compiled_on_this_thread;
+    use model::object::compiled::n_edits_compiled_on_this_thread;
     let (a, b) = (key(0), key(1));
     let mut author = SLog::default();
     let ids = IdSource::first(a.peer_id());

@@ -57,7 +57,7 @@
 //! [`crate::session::SESSION_CAP_BYTES`]), every fresh key above whose first op names no admission
 //! is refused by every peer.
 
-use fdsl::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
+use model::object::{Axis, Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
 use replication::causal::MAX_VV_AUTHORS;
 use replication::membership::{Admission, Membership};
 use replication::op::{MAX_DEPS, OpFields};

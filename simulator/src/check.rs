@@ -716,7 +716,7 @@ fn build_report(
 
 /// What the user did, from the payload.
 fn kind(p: &ShapePayload) -> &'static str {
-    use fdsl::object::{ColorDef, Field};
+    use model::object::{ColorDef, Field};
     match p {
         ShapePayload::Create { .. } => "create (geometry formula)",
         ShapePayload::Set { field, .. } => match **field {

@@ -597,7 +597,7 @@ mod tests {
         ShapePayload::Create {
             object: 1,
             counter: None,
-            data: std::sync::Arc::new(fdsl::object::ObjectData::default()),
+            data: std::sync::Arc::new(model::object::ObjectData::default()),
             group: None,
         }
     }

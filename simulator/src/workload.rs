@@ -8,7 +8,7 @@
 //! edits for undo), so any subset of the list is a valid workload: this is what the
 //! shrinker cuts down.
 
-use fdsl::object::{
+use model::object::{
     ColorDef, Edit, EditOp, Field, Formula, Geometry, ObjectData, PaintValue, Paintable, Pose,
     ToolShape,
 };

@@ -8,7 +8,7 @@
 //! [`ShapeScene`], exactly as a peer does. The folded object is meshed by render's octree mesher
 //! through [`object_field`] (render's `ObjectField` over the object's [`Sampler`]: base
 //! formula, domain, transforms and the whole edit history), and the mesh is written as binary
-//! STL and as GLB by `fdsl::mesh`.
+//! STL and as GLB by `model::mesh`.
 //! After each edit the mesher re-meshes only the edit's box ([`OctreeMesher::remesh`]); the
 //! triangles it adds and removes are the mesh delta a mesh-shipping system would have to send
 //! for that edit.
@@ -19,9 +19,9 @@
 
 use std::collections::BTreeMap;
 
-use fdsl::object::{Edit, EditOp, Object, ObjectData, Pose, Sampler, Shape, ToolShape};
-use fdsl::scene::ObjectId;
 use glam::{DQuat, DVec3};
+use model::object::{Edit, EditOp, Object, ObjectData, Pose, Sampler, Shape, ToolShape};
+use model::scene::ObjectId;
 use render::mesh::object_field::ObjectField;
 use render::mesh::octree::{MeshSettings, OctreeMeshError, OctreeMesher};
 use render::mesh::{Aabb, Mesh};
@@ -79,7 +79,7 @@ pub enum FootprintError {
         /// The scene's file name.
         scene: &'static str,
         /// What went wrong.
-        error: fdsl::fvrml::LoadError,
+        error: formats::fvrml::LoadError,
     },
     /// A model is not a valid object.
     #[error("{name}: {error}")]
@@ -87,7 +87,7 @@ pub enum FootprintError {
         /// The model.
         name: String,
         /// What went wrong.
-        error: fdsl::object::ObjectError,
+        error: model::object::ObjectError,
     },
     /// The empty log did not fold (it always does).
     #[error("folding the log: {0}")]
@@ -103,7 +103,7 @@ pub enum FootprintError {
     Mesh(#[from] OctreeMeshError),
     /// The mesh is not a valid `fdsl` triangle mesh (too large for the writers).
     #[error("writing the mesh: {0}")]
-    Write(#[from] fdsl::mesh::MeshError),
+    Write(#[from] model::mesh::MeshError),
 }
 
 /// One object to measure: its description and the box to mesh it in.
@@ -142,7 +142,7 @@ pub fn scene_subjects() -> Result<Vec<Subject>, FootprintError> {
     let mut out = Vec::new();
     for &(scene, text) in &SCENES {
         let mut no_files = |path: &str| Err(format!("{path}: no local files here"));
-        let loaded = fdsl::fvrml::load(text, &Default::default(), &mut no_files)
+        let loaded = formats::fvrml::load(text, &Default::default(), &mut no_files)
             .map_err(|error| FootprintError::Load { scene, error })?;
         for (id, entry) in loaded.scene.objects() {
             let object = &entry.object;
@@ -208,15 +208,18 @@ pub struct MeshBytes {
 }
 
 /// The `fdsl` triangle mesh of a render mesh (positions and triangles).
-pub fn tri_mesh(mesh: &Mesh) -> Result<fdsl::mesh::TriMesh, FootprintError> {
+pub fn tri_mesh(mesh: &Mesh) -> Result<model::mesh::TriMesh, FootprintError> {
     let triangles = mesh.triangles().collect();
-    Ok(fdsl::mesh::TriMesh::new(mesh.positions.clone(), triangles)?)
+    Ok(model::mesh::TriMesh::new(
+        mesh.positions.clone(),
+        triangles,
+    )?)
 }
 
 /// Binary STL of a render mesh.
 pub fn stl(mesh: &Mesh) -> Result<Vec<u8>, FootprintError> {
     let mut out = Vec::new();
-    fdsl::mesh::stl::write_binary(&tri_mesh(mesh)?, &mut out);
+    formats::mesh::stl::write_binary(&tri_mesh(mesh)?, &mut out);
     Ok(out)
 }
 
@@ -224,9 +227,9 @@ pub fn stl(mesh: &Mesh) -> Result<Vec<u8>, FootprintError> {
 pub fn mesh_bytes(mesh: &Mesh) -> Result<MeshBytes, FootprintError> {
     let tri = tri_mesh(mesh)?;
     let mut stl = Vec::new();
-    fdsl::mesh::stl::write_binary(&tri, &mut stl);
+    formats::mesh::stl::write_binary(&tri, &mut stl);
     let mut glb = Vec::new();
-    fdsl::mesh::glb::write(&tri, &mut glb);
+    formats::mesh::glb::write(&tri, &mut glb);
     Ok(MeshBytes {
         n_triangles: mesh.n_triangles(),
         n_vertices: mesh.n_vertices(),
@@ -357,7 +360,7 @@ pub fn measure(
             .history()
             .entries()
             .last()
-            .map_or(fdsl::bvh::Aabb::EMPTY, |e| e.edit.bounds());
+            .map_or(model::bvh::Aabb::EMPTY, |e| e.edit.bounds());
         let dirty = Aabb::new(dirty.lo.as_vec3().to_array(), dirty.hi.as_vec3().to_array());
         mesher.remesh(&mut object_field(&object, 0.0), dirty)?;
         mesh = mesher.mesh()?;

@@ -6,21 +6,22 @@
 //! sampled. Each distinct formula text must be compiled exactly once, when its object is
 //! built; a second scene with the same formulas compiles nothing.
 //!
-//! Compilations are counted by `fdsl::object::compiled::n_compiled_on_this_thread`, which
+//! Compilations are counted by `fdsl::n_compiled_on_this_thread`, which
 //! counts every `fdsl::Function::compile` on the calling thread. Everything here runs on the
 //! test's thread: render meshes and colours on the calling thread, and haptic containers are
 //! built where they are asked for (the servo thread only samples them, and is not started).
 
-use fdsl::object::compiled::{self, n_compiled_on_this_thread};
-use fdsl::object::{
+use fdsl::n_compiled_on_this_thread;
+use glam::DVec3;
+use haptic::container::Container;
+use haptic::container::object::ObjectContainer;
+use model::object::compiled;
+use model::object::{
     Appearance, ColorDef, ColorMap, ColorSlot, Domain, Edit, EditOp, ForceField, Formula, Geometry,
     Motion, ObjectData, Paintable, ParametricKind, Physics, Pose, Property, Shape, Timing,
     ToolShape, Transform,
 };
-use fdsl::scene::{ObjectId, Scene};
-use glam::DVec3;
-use haptic::container::Container;
-use haptic::container::object::ObjectContainer;
+use model::scene::{ObjectId, Scene};
 use render::animation::{Animator, FrameBudget};
 use render::appearance::CompiledAppearance;
 use render::mesh::Mesh;
@@ -161,7 +162,7 @@ fn scene() -> Scene {
     let paint = Edit::stamp(
         EditOp::Paint {
             property: Paintable::Density,
-            value: fdsl::object::PaintValue::Scalar(0.9),
+            value: model::object::PaintValue::Scalar(0.9),
         },
         ball,
         Pose::at(DVec3::ZERO),

@@ -210,7 +210,7 @@ fn the_object_field_meshes_models_like_render_tape_field() {
             depth: DEPTH,
         };
         let bare = render::mesh::octree::mesh(&mut TapeField::new(&tape, 0.0), &settings).unwrap();
-        let object = fdsl::object::Object::new(subject.data.clone()).unwrap();
+        let object = model::object::Object::new(subject.data.clone()).unwrap();
         let folded = mesh_object(&object, subject.bounds, DEPTH).unwrap();
         let (a, b) = (bare.n_triangles(), folded.n_triangles());
         assert!(

@@ -5,7 +5,7 @@
 //! into a new session (`EngineConfig::demo`), `sculpt render` pictures it, `sculpt touch`
 //! feels it, and peers that join the session get it like any other ops.
 
-use fdsl::fvrml::{LoadOptions, Loaded, load};
+use formats::fvrml::{LoadOptions, Loaded, load};
 
 pub mod mri;
 pub mod shark;

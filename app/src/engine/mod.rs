@@ -1076,7 +1076,7 @@ pub fn demo_payloads_from(
     demo: &crate::demos::Demo,
     first: replication::shape::IdSource,
 ) -> Result<Vec<ShapePayload>, String> {
-    let loaded = demo.load(&fdsl::fvrml::LoadOptions::default())?;
+    let loaded = demo.load(&formats::fvrml::LoadOptions::default())?;
     crate::transfer::scene_payloads(std::path::Path::new(demo.file), &loaded.scene, first)
         .map(|imported| imported.payloads)
         .map_err(|e| e.to_string())

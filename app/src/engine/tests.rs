@@ -5,7 +5,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use fdsl::object::{Field, Formula, Geometry, Shape};
+use model::object::{Field, Formula, Geometry, Shape};
 use rand_core::SeedableRng;
 use replication::Timestamp;
 use replication::sync::message::PROTOCOL_VERSION;
@@ -46,7 +46,7 @@ fn only_object(engine: &Engine) -> u64 {
 
 fn geometry_formula(engine: &Engine, object: u64) -> String {
     let view = lock(engine.view());
-    let o = view.scene().object(fdsl::scene::ObjectId(object)).unwrap();
+    let o = view.scene().object(model::scene::ObjectId(object)).unwrap();
     match &o.data().geometry.as_ref().unwrap().shape {
         Shape::Implicit(f) => f.as_str().to_string(),
         other => panic!("{other:?}"),
@@ -163,7 +163,7 @@ fn undo_and_redo_pick_this_peers_latest_edit_of_the_object() {
     assert_eq!(statuses[FOUNDED + 1], "effective");
     assert_eq!(statuses[FOUNDED + 2], "undone");
     let fresh = view.next_object().id();
-    assert!(fresh != melon && view.scene().object(fdsl::scene::ObjectId(fresh)).is_none());
+    assert!(fresh != melon && view.scene().object(model::scene::ObjectId(fresh)).is_none());
     drop(view);
     drop(s);
     let _ = fs::remove_dir_all(&dir);
@@ -442,7 +442,7 @@ fn an_edit_on_one_engine_reaches_the_other_as_a_change_of_that_object_with_prese
     let (changes, _) = lock(b.view()).changes_since(cursor);
     assert_eq!(
         changes,
-        Some([fdsl::scene::ObjectId(melon)].into_iter().collect()),
+        Some([model::scene::ObjectId(melon)].into_iter().collect()),
         "the change names the edited object only"
     );
     assert_eq!(geometry_formula(&b, melon), "0.5-x^2-y^2-z^2");
@@ -571,8 +571,8 @@ fn a_large_import_is_one_history_row_not_undone_and_its_id_not_reused() {
     wait_view(&s, "the demo", |v| v.n_ops() == FOUNDED + 1);
     let first = lock(s.view()).next_object();
     let first_id = first.id();
-    let mesh = fdsl::mesh::shapes::icosphere(1.0, 4);
-    let data = fdsl::object::ObjectData {
+    let mesh = model::mesh::shapes::icosphere(1.0, 4);
+    let data = model::object::ObjectData {
         name: "ball".into(),
         geometry: Some(Geometry {
             shape: Shape::Mesh(std::sync::Arc::new(mesh)),

@@ -9,8 +9,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use fdsl::object::{ColorDef, Field, Shape};
-use fdsl::scene::{ObjectId, Scene};
+use model::object::{ColorDef, Field, Shape};
+use model::scene::{ObjectId, Scene};
 use replication::log::{Drained, Insertion, Refold};
 use replication::materialize::Materialized;
 use replication::membership::FOUNDER_NONCE_BYTES;

@@ -11,9 +11,9 @@
 
 use std::collections::BTreeMap;
 
-use fdsl::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property, Transform};
 use glam::DVec3;
 use haptic::feed::RemoteTool;
+use model::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property, Transform};
 use replication::PeerId;
 
 use crate::engine::Presence;
@@ -318,6 +318,12 @@ mod tests {
         let mut s = object.sampler();
         assert!((s.value(at, 0.0) - 0.2).abs() < 1e-9);
         assert!(s.value(at + DVec3::new(0.3, 0.0, 0.0), 0.0) < 0.0);
-        assert!((s.scalar(fdsl::object::Paintable::Density, at, 0.0).unwrap() - 1.0).abs() < 1e-9);
+        assert!(
+            (s.scalar(model::object::Paintable::Density, at, 0.0)
+                .unwrap()
+                - 1.0)
+                .abs()
+                < 1e-9
+        );
     }
 }

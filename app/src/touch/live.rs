@@ -12,7 +12,6 @@
 
 use std::collections::BTreeSet;
 
-use fdsl::scene::{ObjectId, Scene};
 use glam::DVec3;
 use haptic::aabb::Aabb;
 use haptic::container::object::ObjectContainer;
@@ -21,6 +20,7 @@ use haptic::device::{Capabilities, DeviceError, DeviceSample, HapticDevice};
 use haptic::feed::{Feed, SceneSource, Snapshot};
 use haptic::force::zone::HapticZone;
 use haptic::servo::{Servo, ServoConfig, ServoHandle, ServoStats, StatsSnapshot, spawn};
+use model::scene::{ObjectId, Scene};
 
 use super::body::{PeerTool, peer_tools};
 use super::force_output::{self, ForceOutput, OutputSlot};

@@ -2,9 +2,9 @@
 //! the density under it, so that a user exploring a scan sees which tissue the hand is in as
 //! well as feeling it.
 
-use fdsl::object::Paintable;
-use fdsl::scene::{ObjectId, Scene};
 use glam::DVec3;
+use model::object::Paintable;
+use model::scene::{ObjectId, Scene};
 
 /// The sampling sphere's radius, as a fraction of the haptic zone's width.
 pub const SAMPLING_RADIUS_OF_ZONE: f64 = 0.02;
@@ -15,7 +15,7 @@ pub fn density_at(scene: &Scene, id: u64, at: DVec3, t: f64) -> Option<f64> {
     let entry = scene.scene_object(ObjectId(id))?;
     let mut sampler = entry.object.sampler();
     let scene_from_object =
-        fdsl::scene::world_from_object(&scene.world_from_group(entry.group), &mut sampler, t);
+        model::scene::world_from_object(&scene.world_from_group(entry.group), &mut sampler, t);
     let p = scene_from_object.inverse()?.point(at);
     if sampler.container_value(p, t) < 0.0 {
         return None;
@@ -58,14 +58,14 @@ pub fn sampling_colour(density: Option<f64>) -> [f32; 4] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fdsl::object::{Formula, Geometry, ObjectData, Property};
+    use model::object::{Formula, Geometry, ObjectData, Property};
 
     #[test]
     fn the_density_under_the_tool_is_the_objects_and_colours_ramp_with_it() {
         let mut scene = Scene::new();
         let mut data = ObjectData {
             geometry: Some(Geometry::implicit(Formula::new("1-x^2-y^2-z^2").unwrap())),
-            transform: fdsl::object::Transform::from_trs(
+            transform: model::object::Transform::from_trs(
                 DVec3::new(2.0, 0.0, 0.0),
                 glam::DQuat::IDENTITY,
                 DVec3::ONE,
@@ -74,7 +74,7 @@ mod tests {
         };
         data.physics.density = Some(Property::new(Formula::new("0.5 + 0.4*x").unwrap()));
         scene
-            .insert_object(ObjectId(3), fdsl::object::Object::new(data).unwrap(), None)
+            .insert_object(ObjectId(3), model::object::Object::new(data).unwrap(), None)
             .unwrap();
         // Scene (2.5, 0, 0) is the object's (0.5, 0, 0): density 0.7.
         let d = density_at(&scene, 3, DVec3::new(2.5, 0.0, 0.0), 0.0).unwrap();

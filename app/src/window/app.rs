@@ -8,8 +8,8 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use eframe::egui;
-use fdsl::scene::ObjectId;
 use glam::Vec3;
+use model::scene::ObjectId;
 use render::mesh::octree::MeshPatch;
 use render::mesh::{Aabb, Mesh};
 use render::mesher::{MeshJob, MeshKind, Mesher};
@@ -140,8 +140,8 @@ struct TimeJob {
 /// object as meshed) and its group's transform. Meshes are made at time 0; frames only move
 /// them (the renderer keeps the uploaded buffers).
 pub struct Moving {
-    sampler: fdsl::object::Sampler,
-    world_from_group: fdsl::object::Transform,
+    sampler: model::object::Sampler,
+    world_from_group: model::object::Transform,
     /// Renderer world from object at the time the drawn mesh was made (where the mesher
     /// placed it and its arrows).
     world_at_drawn: glam::Mat4,
@@ -150,7 +150,7 @@ pub struct Moving {
 }
 
 impl Moving {
-    fn new(object: &fdsl::object::Object, world_from_group: fdsl::object::Transform) -> Moving {
+    fn new(object: &model::object::Object, world_from_group: model::object::Transform) -> Moving {
         let mut moving = Moving {
             sampler: object.sampler(),
             world_from_group,
@@ -1512,11 +1512,11 @@ impl SculptApp {
         if self.export.is_some() {
             return Err("an export is still running".into());
         }
-        if ::app::transfer::FileFormat::of(&path).is_none() {
+        if formats::registry::FileFormat::of(&path).is_none() {
             return Err(format!(
                 "export to {}: give a file ending in {}",
                 path.display(),
-                ::app::transfer::EXTENSIONS.join(", ")
+                formats::registry::EXTENSIONS.join(", ")
             ));
         }
         let scene = lock(self.engine.view()).scene().clone();
@@ -1690,7 +1690,7 @@ impl SculptApp {
         // The sampling sphere, coloured by the density under the tool.
         let radius = f64::from(zone.hi[0] - zone.lo[0]) * probe::SAMPLING_RADIUS_OF_ZONE;
         scene.add_tool(
-            &fdsl::object::ToolShape::Sphere { radius },
+            &model::object::ToolShape::Sphere { radius },
             glam::Mat4::from_translation(hip),
             probe::sampling_colour(self.sampled_density()),
         );

@@ -602,12 +602,12 @@ impl SculptApp {
     /// The selected object's value and scalar properties at the last stroke's points (scene
     /// coordinates), for tests that check what a stroke did through the engine.
     fn probes(&self, view: &::app::engine::View) -> Value {
-        use fdsl::object::Paintable;
+        use model::object::Paintable;
         let (Some(points), Some(id)) = (&self.last_stroke, self.selected) else {
             return Value::Null;
         };
         let scene = view.scene();
-        let Some(entry) = scene.scene_object(fdsl::scene::ObjectId(id)) else {
+        let Some(entry) = scene.scene_object(model::scene::ObjectId(id)) else {
             return Value::Null;
         };
         let scene_from_object = scene

@@ -345,7 +345,7 @@ impl SculptApp {
     /// mirror plane.
     fn tool_ui(&mut self, ui: &mut egui::Ui) {
         use ::app::brush::{BrushOp, BrushShape};
-        use fdsl::object::{Axis, PaintValue, Paintable};
+        use model::object::{Axis, PaintValue, Paintable};
         ui.heading("Tool");
         ui.horizontal(|ui| {
             ui.selectable_value(&mut self.sculpting, false, "Navigate")
@@ -557,13 +557,13 @@ impl SculptApp {
                 .collect()
         };
         for (id, label, holder) in rows {
-            let detail =
-                self.objects
-                    .get(&fdsl::scene::ObjectId(id))
-                    .map_or_else(String::new, |t| match &t.skipped {
-                        Some(why) => format!(" (not drawn: {why})"),
-                        None => String::new(),
-                    });
+            let detail = self.objects.get(&model::scene::ObjectId(id)).map_or_else(
+                String::new,
+                |t| match &t.skipped {
+                    Some(why) => format!(" (not drawn: {why})"),
+                    None => String::new(),
+                },
+            );
             let held = holder.map_or_else(String::new, |h| format!(" · held by {h}"));
             let selected = self.selected == Some(id);
             ui.horizontal(|ui| {
@@ -769,7 +769,7 @@ impl SculptApp {
         );
         let selected_centre = self
             .selected
-            .and_then(|id| self.objects.get(&fdsl::scene::ObjectId(id)))
+            .and_then(|id| self.objects.get(&model::scene::ObjectId(id)))
             .and_then(|t| t.drawn_box)
             .map(|b| {
                 let mid = (glam::Vec3::from_array(b.lo) + glam::Vec3::from_array(b.hi)) * 0.5;

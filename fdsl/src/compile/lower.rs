@@ -12,6 +12,7 @@ use std::sync::Arc;
 
 use super::graph::{Context, GraphFull, Node};
 use super::ops::{BinaryOp, TernaryOp, UnaryOp};
+use crate::builtins::{FUNCTION_NAMES, arity};
 use crate::grid::{Grid, MAX_GRIDS};
 use crate::limits::{
     MAX_CALL_ARGS, MAX_LOOP_TRIPS, MAX_OUTPUTS, MAX_STATEMENT_DEPTH, MAX_STATEMENT_FUEL,
@@ -72,43 +73,6 @@ const INPUT_NAMES: [(&str, u8); 7] = [
     ("w", 2),
 ];
 
-/// Names of the built-in functions, for suggestions.
-const FUNCTION_NAMES: &[&str] = &[
-    "sin",
-    "cos",
-    "tan",
-    "asin",
-    "acos",
-    "atan",
-    "atan2",
-    "sinh",
-    "cosh",
-    "tanh",
-    "sqrt",
-    "abs",
-    "exp",
-    "log",
-    "ln",
-    "log10",
-    "pow",
-    "min",
-    "max",
-    "floor",
-    "ceil",
-    "round",
-    "mod",
-    "sign",
-    "clamp",
-    "sqr",
-    "r_and",
-    "r_or",
-    "r_sub",
-    "blend_and",
-    "blend_or",
-    "blend_sub",
-    "step",
-];
-
 /// Lowers a parsed program. Returns `None` when any error was reported.
 pub fn lower(program: &Program, options: Options) -> (Option<Lowered>, Vec<Diagnostic>) {
     let mut lowerer = Lowerer {
@@ -163,11 +127,6 @@ fn check_grids(grids: &[Arc<Grid>]) -> Result<(), Diagnostic> {
         }
     }
     Ok(())
-}
-
-/// Whether `name` is a function of the language (grids may not take such names).
-pub(crate) fn is_builtin_function(name: &str) -> bool {
-    arity(name).is_some()
 }
 
 /// A lowering step failed; its diagnostic is recorded (or it follows one already recorded).
@@ -406,6 +365,18 @@ impl Lowerer {
         if self.diagnostics.iter().any(Diagnostic::is_error) {
             return None;
         }
+        self.list_outputs(statements, &env, order, value)
+    }
+
+    /// The outputs of `statements`, which ran in `env` without error: the assigned names in
+    /// `order`, after the value (`value`, or what every branch returns).
+    fn list_outputs(
+        &mut self,
+        statements: &[&Stmt],
+        env: &Env,
+        order: Vec<String>,
+        mut value: Option<Node>,
+    ) -> Option<Vec<(String, Node)>> {
         let mut outputs = Vec::new();
         for name in order {
             if let Some(Value::Defined(node)) = env.vars.get(&name) {
@@ -493,39 +464,9 @@ impl Lowerer {
             return;
         }
         match s {
-            Stmt::Assign { name, value } => {
-                let v = match self.expr(value, env) {
-                    Ok(node) => Value::Defined(node),
-                    Err(Failed) => Value::Poisoned,
-                };
-                if !env.vars.contains_key(&name.name) && env.vars.len() >= MAX_VARIABLES {
-                    self.report(Diagnostic::error(
-                        name.span,
-                        format!("more than {MAX_VARIABLES} variables"),
-                    ));
-                    return;
-                }
-                env.vars.insert(name.name.clone(), v);
-            }
+            Stmt::Assign { name, value } => self.assign(name, value, env),
             Stmt::Block(body, _) => self.block(body, env),
-            Stmt::Return(e, _) => {
-                let Ok(value) = self.expr(e, env) else {
-                    let one = self.constant(e.span, 1.0);
-                    if let Ok(one) = one {
-                        env.done = one;
-                    }
-                    return;
-                };
-                let ret = match env.ret {
-                    Some(prev) => self.ternary(e.span, TernaryOp::Select, env.done, prev, value),
-                    None => Ok(value),
-                };
-                let one = self.constant(e.span, 1.0);
-                if let (Ok(ret), Ok(one)) = (ret, one) {
-                    env.ret = Some(ret);
-                    env.done = one;
-                }
-            }
+            Stmt::Return(e, _) => self.return_statement(e, env),
             Stmt::If {
                 cond,
                 then,
@@ -552,6 +493,42 @@ impl Lowerer {
                         .with_hint("assign it (`g = ...;`) or return it (`return ...;`)"),
                 );
             }
+        }
+    }
+
+    /// `name = value;`
+    fn assign(&mut self, name: &ast::Ident, value: &Expr, env: &mut Env) {
+        let v = match self.expr(value, env) {
+            Ok(node) => Value::Defined(node),
+            Err(Failed) => Value::Poisoned,
+        };
+        if !env.vars.contains_key(&name.name) && env.vars.len() >= MAX_VARIABLES {
+            self.report(Diagnostic::error(
+                name.span,
+                format!("more than {MAX_VARIABLES} variables"),
+            ));
+            return;
+        }
+        env.vars.insert(name.name.clone(), v);
+    }
+
+    /// `return e;`: the value where nothing returned before, and done from here on.
+    fn return_statement(&mut self, e: &Expr, env: &mut Env) {
+        let Ok(value) = self.expr(e, env) else {
+            let one = self.constant(e.span, 1.0);
+            if let Ok(one) = one {
+                env.done = one;
+            }
+            return;
+        };
+        let ret = match env.ret {
+            Some(prev) => self.ternary(e.span, TernaryOp::Select, env.done, prev, value),
+            None => Ok(value),
+        };
+        let one = self.constant(e.span, 1.0);
+        if let (Ok(ret), Ok(one)) = (ret, one) {
+            env.ret = Some(ret);
+            env.done = one;
         }
     }
 
@@ -1010,19 +987,6 @@ fn output_name(function: &str) -> String {
             .unwrap_or(function)
             .to_string(),
     }
-}
-
-fn arity(f: &str) -> Option<(usize, usize)> {
-    Some(match f {
-        "sin" | "cos" | "tan" | "asin" | "acos" | "atan" | "sinh" | "cosh" | "tanh" | "sqrt"
-        | "abs" | "exp" | "log" | "ln" | "log10" | "floor" | "ceil" | "round" | "sign" | "sqr" => {
-            (1, 1)
-        }
-        "atan2" | "pow" | "mod" | "r_and" | "r_or" | "r_sub" | "step" => (2, 2),
-        "clamp" | "blend_and" | "blend_or" | "blend_sub" => (3, 3),
-        "min" | "max" => (2, MAX_CALL_ARGS),
-        _ => return None,
-    })
 }
 
 /// The candidate closest to `name` by edit distance, when it is close enough to be a typo.

@@ -90,6 +90,10 @@ pub enum TernaryOp {
 
 impl UnaryOp {
     /// The reference value in f64.
+    ///
+    /// Inlined so that a caller's loop over one known operation is that operation's
+    /// arithmetic: the object model's slice evaluator is such a loop, in another crate.
+    #[inline]
     pub fn apply(self, a: f64) -> f64 {
         match self {
             UnaryOp::Neg => -a,
@@ -114,6 +118,10 @@ impl UnaryOp {
 
 impl BinaryOp {
     /// The reference value in f64.
+    ///
+    /// Inlined so that a caller's loop over one known operation is that operation's
+    /// arithmetic: the object model's slice evaluator is such a loop, in another crate.
+    #[inline]
     pub fn apply(self, a: f64, b: f64) -> f64 {
         match self {
             BinaryOp::Add => a + b,
@@ -154,6 +162,10 @@ impl BinaryOp {
 
 impl TernaryOp {
     /// The reference value in f64.
+    ///
+    /// Inlined so that a caller's loop over one known operation is that operation's
+    /// arithmetic: the object model's slice evaluator is such a loop, in another crate.
+    #[inline]
     pub fn apply(self, a: f64, b: f64, c: f64) -> f64 {
         match self {
             TernaryOp::Select => {

@@ -287,20 +287,60 @@ pub(super) fn plan(tape: &Tape) -> Plan {
 /// fused steps with.
 pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
     let instrs = tape.instrs();
-    let n = instrs.len();
     let code = |j: usize| instrs[j].code;
-    // The tape's register program back to values: what each register holds as it runs.
+    let (mut nodes, holds) = nodes_of(tape);
+    for i in (0..nodes.len()).filter(|_| fusing) {
+        fuse(&mut nodes, &code, i);
+    }
+    // Each remaining instruction becomes a step over values.
+    let steps: Vec<(u32, Kind, [Val; 4])> = (0..nodes.len())
+        .filter(|&i| !nodes[i].fused_away)
+        .map(|i| {
+            let (kind, args) = step_of(&nodes, &code, i);
+            (i as u32, kind, args)
+        })
+        .collect();
+    let (steps, n_regs) = allocate(&mut nodes, &steps);
+    Plan {
+        steps: steps.into(),
+        n_regs,
+        outputs: tape
+            .outputs()
+            .iter()
+            .map(|&o| arg(&nodes, operand(&holds, o)))
+            .collect(),
+        tape: tape.clone(),
+    }
+}
+
+/// The value operand `o` names, given what each register holds.
+fn operand(holds: &[Val], o: Operand) -> Val {
+    match o {
+        Operand::Reg(r) => holds[r as usize],
+        Operand::Const(c) => Val::Const(c as f32),
+    }
+}
+
+/// A step's argument for value `v`, once registers are allocated.
+fn arg(nodes: &[Node], v: Val) -> Arg {
+    match v {
+        Val::Input(slot) => Arg::Input(slot),
+        Val::Const(c) => Arg::Const(c),
+        Val::Instr(j) => Arg::Reg(nodes[j as usize].reg),
+    }
+}
+
+/// The tape's register program back to values: one node per instruction with its arguments
+/// and readers counted, and what each register holds at the end.
+fn nodes_of(tape: &Tape) -> (Vec<Node>, Vec<Val>) {
+    let instrs = tape.instrs();
     let mut holds = vec![Val::Const(0.0); tape.n_regs()];
     for (slot, reg) in tape.inputs().iter().enumerate() {
         if let Some(r) = reg {
             holds[*r as usize] = Val::Input(slot as u8);
         }
     }
-    let operand = |holds: &[Val], o: Operand| match o {
-        Operand::Reg(r) => holds[r as usize],
-        Operand::Const(c) => Val::Const(c as f32),
-    };
-    let mut nodes: Vec<Node> = Vec::with_capacity(n);
+    let mut nodes: Vec<Node> = Vec::with_capacity(instrs.len());
     for (i, instr) in instrs.iter().enumerate() {
         let mut args = [Val::Const(0.0); 3];
         for (k, slot) in args.iter_mut().enumerate().take(instr.code.n_args()) {
@@ -319,15 +359,107 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
             nodes[j as usize].last_read = u32::MAX;
         }
     }
+    (nodes, holds)
+}
 
-    // Pick pairs in order. `inner` is the instruction fused into a node; an instruction that
-    // took one in, or was taken in, takes part in no other pair, except that a pair of the two
-    // idioms of distance fields is taken into a third instruction (`deep`): a sum of squares
-    // `s + (y - c)^2`, and a union or intersection with a ball `max(m, r - sqrt(s))`.
-    //
-    // A cheap operation of coordinates and constants alone (`0.1 * y`) is computed again
-    // inside each reader that takes it in, rather than stored once for several: an operation
-    // costs less than a step. It stays a step of its own only for readers that did not.
+/// Picks what instruction `i` takes into its step; pairs are picked in tape order.
+///
+/// `inner` is the instruction fused into a node; an instruction that took one in, or was
+/// taken in, takes part in no other pair, except that a pair of the two idioms of distance
+/// fields is taken into a third instruction (`deep`): a sum of squares `s + (y - c)^2`, and a
+/// union or intersection with a ball `max(m, r - sqrt(s))`.
+///
+/// A cheap operation of coordinates and constants alone (`0.1 * y`) is computed again inside
+/// each reader that takes it in, rather than stored once for several: an operation costs less
+/// than a step. It stays a step of its own only for readers that did not.
+fn fuse(nodes: &mut [Node], code: &impl Fn(usize) -> Code, i: usize) {
+    if let Some((sum, absorbed)) = sum_of(nodes, code, i) {
+        nodes[i].sum = Some(sum);
+        for j in absorbed.into_iter().flatten() {
+            let node = &mut nodes[j];
+            node.taken += 1;
+            node.fused_away = node.taken == node.uses;
+        }
+        return;
+    }
+    if take_sum(nodes, code, i) {
+        return;
+    }
+    let (candidates, op): (&[usize], _) = match code(i) {
+        Code::Unary(op) if un(op).is_some() => (&[0], None),
+        Code::Binary(op) if bin(op).is_some() => (&[1, 0], Some(op)),
+        _ => return,
+    };
+    if !take_triple(nodes, code, i, candidates, op) {
+        take_pair(nodes, code, i, candidates);
+    }
+}
+
+/// Takes into operation `i` a sum that only it reads, to compute the sum in its loop.
+fn take_sum(nodes: &mut [Node], code: &impl Fn(usize) -> Code, i: usize) -> bool {
+    let Code::Binary(op) = code(i) else {
+        return false;
+    };
+    if outer(op, 0).is_none() {
+        return false;
+    }
+    let sum = [1, 0].into_iter().find_map(|at| match nodes[i].args[at] {
+        Val::Instr(j) => {
+            let node = &nodes[j as usize];
+            let alone = node.uses == 1 && !node.fused_away;
+            (node.sum.is_some() && alone).then_some(j)
+        }
+        _ => None,
+    });
+    let Some(j) = sum else {
+        return false;
+    };
+    nodes[i].inner = Some(j);
+    nodes[j as usize].fused_away = true;
+    true
+}
+
+/// Takes into `i` a pair of one of the two idioms of distance fields (a sum of squares, a
+/// union or intersection with a ball), and the ball's sum of squares too when it can.
+fn take_triple(
+    nodes: &mut [Node],
+    code: &impl Fn(usize) -> Code,
+    i: usize,
+    candidates: &[usize],
+    op: Option<BinaryOp>,
+) -> bool {
+    let (square, sqrt) = (Code::Unary(UnaryOp::Square), Code::Unary(UnaryOp::Sqrt));
+    let is_sum = |c: Code| matches!(c, Code::Binary(BinaryOp::Add | BinaryOp::Sub));
+    let triple = candidates.iter().find_map(|&at| {
+        let Val::Instr(j) = nodes[i].args[at] else {
+            return None;
+        };
+        let inner = &nodes[j as usize];
+        let k = inner.inner.filter(|_| inner.uses == 1 && !inner.deep)?;
+        let (cj, ck) = (code(j as usize), code(k as usize));
+        let fits = match op? {
+            BinaryOp::Add | BinaryOp::Sub => cj == square && is_sum(ck),
+            BinaryOp::Min | BinaryOp::Max => is_sum(cj) && ck == sqrt,
+            _ => false,
+        };
+        fits.then_some(j as usize)
+    });
+    let Some(j) = triple else {
+        return false;
+    };
+    nodes[i].inner = Some(j as u32);
+    nodes[i].deep = true;
+    nodes[j].fused_away = true;
+    if let Some((s, radius)) = ball_sum(nodes, code, j) {
+        nodes[i].ball_radius = Some(radius);
+        nodes[s].fused_away = true;
+    }
+    true
+}
+
+/// Takes into `i` the first of its arguments (in `candidates` order) that a simple pair can
+/// compute in one loop.
+fn take_pair(nodes: &mut [Node], code: &impl Fn(usize) -> Code, i: usize, candidates: &[usize]) {
     let leafy = |node: &Node, j: usize| {
         let k = code(j).n_args();
         node.args[..k].iter().all(|v| !matches!(v, Val::Instr(_)))
@@ -337,190 +469,142 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
         // the fused loops take neither.
         !a[..k].contains(&Val::Input(3)) && a[..k].iter().any(|v| !matches!(v, Val::Const(_)))
     };
-    let (square, sqrt) = (Code::Unary(UnaryOp::Square), Code::Unary(UnaryOp::Sqrt));
-    let is_sum = |c: Code| matches!(c, Code::Binary(BinaryOp::Add | BinaryOp::Sub));
-    for i in (0..n).filter(|_| fusing) {
-        if let Some((sum, absorbed)) = sum_of(&nodes, &code, i) {
-            nodes[i].sum = Some(sum);
-            for j in absorbed.into_iter().flatten() {
-                let node = &mut nodes[j];
-                node.taken += 1;
-                node.fused_away = node.taken == node.uses;
-            }
+    for &at in candidates {
+        let Val::Instr(j) = nodes[i].args[at] else {
             continue;
-        }
-        // A sum that only this operation reads is computed in its loop.
-        if let Code::Binary(op) = code(i)
-            && outer(op, 0).is_some()
-        {
-            let sum = [1, 0].into_iter().find_map(|at| match nodes[i].args[at] {
-                Val::Instr(j) => {
-                    let node = &nodes[j as usize];
-                    let alone = node.uses == 1 && !node.fused_away;
-                    (node.sum.is_some() && alone).then_some(j)
-                }
-                _ => None,
-            });
-            if let Some(j) = sum {
-                nodes[i].inner = Some(j);
-                nodes[j as usize].fused_away = true;
-                continue;
-            }
-        }
-        let (candidates, op): (&[usize], _) = match code(i) {
-            Code::Unary(op) if un(op).is_some() => (&[0], None),
-            Code::Binary(op) if bin(op).is_some() => (&[1, 0], Some(op)),
-            _ => continue,
         };
-        let triple = candidates.iter().find_map(|&at| {
-            let Val::Instr(j) = nodes[i].args[at] else {
-                return None;
-            };
-            let inner = &nodes[j as usize];
-            let k = inner.inner.filter(|_| inner.uses == 1 && !inner.deep)?;
-            let (cj, ck) = (code(j as usize), code(k as usize));
-            let fits = match op? {
-                BinaryOp::Add | BinaryOp::Sub => cj == square && is_sum(ck),
-                BinaryOp::Min | BinaryOp::Max => is_sum(cj) && ck == sqrt,
+        let j = j as usize;
+        let inner = &nodes[j];
+        let takes = inner.inner.is_none()
+            && inner.sum.is_none()
+            && !inner.fused_away
+            && (inner.uses == 1 || leafy(inner, j))
+            && match (code(i), code(j)) {
+                (Code::Unary(_), Code::Binary(b)) => bin(b).is_some(),
+                (Code::Binary(_), Code::Unary(u)) => un(u).is_some(),
+                (Code::Binary(_), Code::Binary(b)) => bin(b).is_some(),
                 _ => false,
-            };
-            fits.then_some(j as usize)
-        });
-        if let Some(j) = triple {
+            }
+            && simple_args(&inner.args, code(j).n_args());
+        if takes {
             nodes[i].inner = Some(j as u32);
-            nodes[i].deep = true;
-            nodes[j].fused_away = true;
-            if let Some((s, radius)) = ball_sum(&nodes, &code, j) {
-                nodes[i].ball_radius = Some(radius);
-                nodes[s].fused_away = true;
-            }
-            continue;
+            let inner = &mut nodes[j];
+            inner.taken += 1;
+            inner.fused_away = inner.taken == inner.uses;
+            break;
         }
-        for &at in candidates {
-            let Val::Instr(j) = nodes[i].args[at] else {
-                continue;
+    }
+}
+
+/// `[a, b, c]` as a step's four arguments, the fourth unused.
+fn three([a, b, c]: [Val; 3]) -> [Val; 4] {
+    [a, b, c, Val::Const(0.0)]
+}
+
+/// The step of instruction `i` (not fused away) over values: what it computes and its
+/// arguments.
+fn step_of(nodes: &[Node], code: &impl Fn(usize) -> Code, i: usize) -> (Kind, [Val; 4]) {
+    let node = &nodes[i];
+    let args = node.args;
+    if let Some(p) = node.sum {
+        let (sum, [u0, u1, u2]) = p.split();
+        return (Kind::Sum(sum), [u0, u1, u2, Val::Const(0.0)]);
+    }
+    match (code(i), node.inner) {
+        (code, None) => (Kind::Plain(code), three(args)),
+        (Code::Binary(op), Some(j)) if nodes[j as usize].sum.is_some() => {
+            let at = usize::from(args[1] == Val::Instr(j));
+            let then = outer(op, at).expect("only simple operations take a sum in");
+            let Some(p) = nodes[j as usize].sum else {
+                unreachable!("the guard found a sum")
             };
-            let j = j as usize;
-            let inner = &nodes[j];
-            let takes = inner.inner.is_none()
-                && inner.sum.is_none()
-                && !inner.fused_away
-                && (inner.uses == 1 || leafy(inner, j))
-                && match (code(i), code(j)) {
-                    (Code::Unary(_), Code::Binary(b)) => bin(b).is_some(),
-                    (Code::Binary(_), Code::Unary(u)) => un(u).is_some(),
-                    (Code::Binary(_), Code::Binary(b)) => bin(b).is_some(),
-                    _ => false,
+            let (sum, [u0, u1, u2]) = p.split();
+            (Kind::SumThen(sum, then), [u0, u1, u2, args[1 - at]])
+        }
+        (Code::Binary(op), Some(j)) if node.deep => deep_step(nodes, code, i, op, j as usize),
+        (Code::Unary(u), Some(j)) => {
+            let (Some(u), Code::Binary(b)) = (un(u), code(j as usize)) else {
+                unreachable!("only simple pairs were picked")
+            };
+            let b = bin(b).expect("only simple pairs were picked");
+            (Kind::UnBin(u, b), three(nodes[j as usize].args))
+        }
+        (Code::Binary(op), Some(j)) => {
+            let at = usize::from(args[1] == Val::Instr(j));
+            let other = args[1 - at];
+            let outer = then(bin(op).expect("only simple pairs were picked"), at);
+            let inner = nodes[j as usize].args;
+            match code(j as usize) {
+                Code::Unary(u) => {
+                    let u = un(u).expect("only simple pairs were picked");
+                    (
+                        Kind::BinUn(outer, u),
+                        three([inner[0], other, Val::Const(0.0)]),
+                    )
                 }
-                && simple_args(&inner.args, code(j).n_args());
-            if takes {
-                nodes[i].inner = Some(j as u32);
-                let inner = &mut nodes[j];
-                inner.taken += 1;
-                inner.fused_away = inner.taken == inner.uses;
-                break;
+                Code::Binary(b) => {
+                    let b = bin(b).expect("only simple pairs were picked");
+                    (Kind::BinBin(outer, b), three([inner[0], inner[1], other]))
+                }
+                _ => unreachable!("only simple pairs were picked"),
             }
         }
+        _ => unreachable!("only unary and binary instructions take a pair"),
     }
+}
 
-    // Each remaining instruction becomes a step over values.
-    let mut steps: Vec<(u32, Kind, [Val; 4])> = Vec::with_capacity(n);
-    for i in 0..n {
-        let node = &nodes[i];
-        if node.fused_away {
-            continue;
+/// The step of operation `i` (`op`), which took in the pair `j` of a distance-field idiom: a
+/// sum of squares, or a union or intersection with a ball (its sum of squares too, maybe).
+fn deep_step(
+    nodes: &[Node],
+    code: &impl Fn(usize) -> Code,
+    i: usize,
+    op: BinaryOp,
+    j: usize,
+) -> (Kind, [Val; 4]) {
+    let node = &nodes[i];
+    let at = usize::from(node.args[1] == Val::Instr(j as u32));
+    let other = node.args[1 - at];
+    let k = nodes[j].inner.expect("a triple takes in a pair") as usize;
+    let (middle, innermost) = (&nodes[j].args, &nodes[k].args);
+    match (code(j), code(k)) {
+        (Code::Unary(_), Code::Binary(b)) => {
+            let outer = lin(op, at).expect("a sum of squares adds");
+            let shift = match b {
+                BinaryOp::Add => Shift::Plus,
+                _ => Shift::Minus,
+            };
+            let args = [innermost[0], innermost[1], other];
+            (Kind::SumSq(outer, shift), three(args))
         }
-        let args = node.args;
-        if let Some(Planned { offset, terms, n }) = node.sum {
-            let (sum, [u0, u1, u2]) = Planned { offset, terms, n }.split();
-            steps.push((i as u32, Kind::Sum(sum), [u0, u1, u2, Val::Const(0.0)]));
-            continue;
-        }
-        let three = |[a, b, c]: [Val; 3]| [a, b, c, Val::Const(0.0)];
-        let step = match (code(i), node.inner) {
-            (code, None) => (Kind::Plain(code), three(args)),
-            (Code::Binary(op), Some(j)) if nodes[j as usize].sum.is_some() => {
-                let at = usize::from(args[1] == Val::Instr(j));
-                let then = outer(op, at).expect("only simple operations take a sum in");
-                let Some(p) = nodes[j as usize].sum else {
-                    unreachable!("the guard found a sum")
-                };
-                let (sum, [u0, u1, u2]) = p.split();
-                (Kind::SumThen(sum, then), [u0, u1, u2, args[1 - at]])
-            }
-            (Code::Binary(op), Some(j)) if node.deep => {
-                let j = j as usize;
-                let at = usize::from(args[1] == Val::Instr(j as u32));
-                let other = args[1 - at];
-                let k = nodes[j].inner.expect("a triple takes in a pair") as usize;
-                let (middle, innermost) = (&nodes[j].args, &nodes[k].args);
-                match (code(j), code(k)) {
-                    (Code::Unary(_), Code::Binary(b)) => {
-                        let outer = lin(op, at).expect("a sum of squares adds");
-                        let shift = match b {
-                            BinaryOp::Add => Shift::Plus,
-                            _ => Shift::Minus,
-                        };
-                        let args = [innermost[0], innermost[1], other];
-                        (Kind::SumSq(outer, shift), three(args))
-                    }
-                    (Code::Binary(m), _) => {
-                        let outer = pick(op, at).expect("a ball is picked by min or max");
-                        let at_root = usize::from(middle[1] == Val::Instr(k as u32));
-                        let m = lin(m, at_root).expect("a ball's radius is added");
-                        match (node.ball_radius, innermost[0]) {
-                            (Some(radius), Val::Instr(s)) => {
-                                let Some(p) = nodes[s as usize].sum else {
-                                    unreachable!("a ball's sum was planned as one")
-                                };
-                                let (sum, [u0, u1, u2]) = p.split();
-                                let kind = Kind::SumRootPick(sum, outer, m, radius);
-                                (kind, [u0, u1, u2, other])
-                            }
-                            (Some(_), _) => unreachable!("a ball's sum is an instruction"),
-                            (None, root) => {
-                                let args = [root, middle[1 - at_root], other];
-                                (Kind::RootPick(outer, m), three(args))
-                            }
-                        }
-                    }
-                    _ => unreachable!("only the two idioms were picked"),
+        (Code::Binary(m), _) => {
+            let outer = pick(op, at).expect("a ball is picked by min or max");
+            let at_root = usize::from(middle[1] == Val::Instr(k as u32));
+            let m = lin(m, at_root).expect("a ball's radius is added");
+            match (node.ball_radius, innermost[0]) {
+                (Some(radius), Val::Instr(s)) => {
+                    let Some(p) = nodes[s as usize].sum else {
+                        unreachable!("a ball's sum was planned as one")
+                    };
+                    let (sum, [u0, u1, u2]) = p.split();
+                    let kind = Kind::SumRootPick(sum, outer, m, radius);
+                    (kind, [u0, u1, u2, other])
+                }
+                (Some(_), _) => unreachable!("a ball's sum is an instruction"),
+                (None, root) => {
+                    let args = [root, middle[1 - at_root], other];
+                    (Kind::RootPick(outer, m), three(args))
                 }
             }
-            (Code::Unary(u), Some(j)) => {
-                let (Some(u), Code::Binary(b)) = (un(u), code(j as usize)) else {
-                    unreachable!("only simple pairs were picked")
-                };
-                let b = bin(b).expect("only simple pairs were picked");
-                (Kind::UnBin(u, b), three(nodes[j as usize].args))
-            }
-            (Code::Binary(op), Some(j)) => {
-                let at = usize::from(args[1] == Val::Instr(j));
-                let other = args[1 - at];
-                let outer = then(bin(op).expect("only simple pairs were picked"), at);
-                let inner = nodes[j as usize].args;
-                match code(j as usize) {
-                    Code::Unary(u) => {
-                        let u = un(u).expect("only simple pairs were picked");
-                        (
-                            Kind::BinUn(outer, u),
-                            three([inner[0], other, Val::Const(0.0)]),
-                        )
-                    }
-                    Code::Binary(b) => {
-                        let b = bin(b).expect("only simple pairs were picked");
-                        (Kind::BinBin(outer, b), three([inner[0], inner[1], other]))
-                    }
-                    _ => unreachable!("only simple pairs were picked"),
-                }
-            }
-            _ => unreachable!("only unary and binary instructions take a pair"),
-        };
-        steps.push((i as u32, step.0, step.1));
+        }
+        _ => unreachable!("only the two idioms were picked"),
     }
+}
 
-    // Registers, allocated as the tape does: a step's output before its arguments are freed,
-    // so that it never overwrites them.
+/// Registers for `steps` (instruction, kind, arguments), allocated as the tape does: a step's
+/// output before its arguments are freed, so that it never overwrites them. Returns the steps
+/// over registers and how many registers there are.
+fn allocate(nodes: &mut [Node], steps: &[(u32, Kind, [Val; 4])]) -> (Vec<Step>, usize) {
     for (s, (_, _, a)) in steps.iter().enumerate() {
         for v in a {
             if let Val::Instr(j) = *v
@@ -532,14 +616,9 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
     }
     let mut free: Vec<u32> = Vec::new();
     let mut n_regs = 0u32;
-    let arg = |nodes: &[Node], v: Val| match v {
-        Val::Input(slot) => Arg::Input(slot),
-        Val::Const(c) => Arg::Const(c),
-        Val::Instr(j) => Arg::Reg(nodes[j as usize].reg),
-    };
     let mut out_steps = Vec::with_capacity(steps.len());
     for (s, &(i, kind, a)) in steps.iter().enumerate() {
-        let args = a.map(|v| arg(&nodes, v));
+        let args = a.map(|v| arg(nodes, v));
         let out = free.pop().unwrap_or_else(|| {
             n_regs += 1;
             n_regs - 1
@@ -555,16 +634,7 @@ pub(super) fn plan_with(tape: &Tape, fusing: bool) -> Plan {
         }
         out_steps.push(Step { kind, out, args });
     }
-    Plan {
-        steps: out_steps.into(),
-        n_regs: n_regs as usize,
-        outputs: tape
-            .outputs()
-            .iter()
-            .map(|&o| arg(&nodes, operand(&holds, o)))
-            .collect(),
-        tape: tape.clone(),
-    }
+    (out_steps, n_regs as usize)
 }
 
 /// A [`Sum`] before registers: its terms' lanes are values.

@@ -319,6 +319,8 @@ impl GradEval {
     }
 
     /// Value and gradient of the first output at `p = [x, y, z, t]`.
+    // Inlined where the object model samples (another crate), as when they were one crate.
+    #[inline]
     pub fn eval(&mut self, p: [f64; 4]) -> Grad<f64> {
         run(&self.tape, &mut self.regs, p);
         output(&self.tape, &self.regs, 0)

@@ -26,11 +26,13 @@ pub struct Interval {
 
 impl Interval {
     /// `[lo, hi]`.
+    #[inline]
     pub const fn new(lo: f64, hi: f64) -> Interval {
         Interval { lo, hi, nan: false }
     }
 
     /// The single value `v`.
+    #[inline]
     pub fn point(v: f64) -> Interval {
         Interval {
             lo: v,
@@ -49,6 +51,7 @@ impl Interval {
     const BOOL: Interval = Interval::new(0.0, 1.0);
 
     /// Whether `v` lies inside; NaN lies inside when the interval may be NaN.
+    #[inline]
     pub fn contains(&self, v: f64) -> bool {
         if v.is_nan() {
             self.nan
@@ -58,6 +61,7 @@ impl Interval {
     }
 
     /// Whether the value may be NaN somewhere in the box.
+    #[inline]
     pub fn has_nan(&self) -> bool {
         self.nan || self.lo.is_nan() || self.hi.is_nan()
     }
@@ -133,6 +137,8 @@ impl IntervalEval {
     }
 
     /// Bounds of the first output over the box `p = [x, y, z, t]`.
+    // Inlined where the object model samples (another crate), as when they were one crate.
+    #[inline]
     pub fn eval(&mut self, p: [Interval; 4]) -> Interval {
         self.passes.load(0, &p);
         self.passes.run(1);
@@ -140,6 +146,7 @@ impl IntervalEval {
     }
 
     /// Bounds of output `idx` after the last [`IntervalEval::eval`].
+    #[inline]
     pub fn output(&self, idx: usize) -> Interval {
         self.passes.output(idx, 0)
     }
@@ -182,6 +189,7 @@ pub(super) fn unary(op: UnaryOp, a: Interval) -> Interval {
 }
 
 /// Bounds of a unary operation over an interval with numeric ends.
+// tidy:table: the interval bounds of every unary operation, one arm each.
 #[inline(always)]
 fn unary_finite(op: UnaryOp, a: Interval) -> Interval {
     match op {
@@ -401,6 +409,7 @@ pub(super) fn binary(op: BinaryOp, a: Interval, b: Interval) -> (Interval, Choic
 }
 
 /// Bounds and choice of a binary operation over intervals with numeric ends.
+// tidy:table: the interval bounds and choice of every binary operation, one arm each.
 #[inline(always)]
 fn binary_finite(op: BinaryOp, a: Interval, b: Interval) -> (Interval, Choice) {
     let value = match op {

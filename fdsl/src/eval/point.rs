@@ -23,6 +23,7 @@ impl PointEval {
         &self.tape
     }
 
+    #[inline]
     fn run(&mut self, p: [f64; 4]) {
         for (slot, reg) in self.tape.inputs().iter().enumerate() {
             if let Some(r) = reg {
@@ -47,6 +48,7 @@ impl PointEval {
         }
     }
 
+    #[inline]
     fn output(&self, o: Operand) -> f64 {
         match o {
             Operand::Reg(r) => self.regs[r as usize],
@@ -55,6 +57,8 @@ impl PointEval {
     }
 
     /// The first output at `p = [x, y, z, t]`.
+    // Inlined where the object model samples (another crate), as when they were one crate.
+    #[inline]
     pub fn eval(&mut self, p: [f64; 4]) -> f64 {
         self.run(p);
         self.output(self.tape.outputs()[0])

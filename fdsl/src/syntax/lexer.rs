@@ -123,35 +123,7 @@ pub fn tokenize(source: &str) -> Vec<Token> {
             }
             TokenKind::Ident
         } else if c.is_ascii() {
-            let next = bytes.get(i + 1).copied();
-            let (kind, len) = match (c, next) {
-                (b'&', Some(b'&')) => (TokenKind::AmpAmp, 2),
-                (b'|', Some(b'|')) => (TokenKind::PipePipe, 2),
-                (b'<', Some(b'=')) => (TokenKind::Le, 2),
-                (b'>', Some(b'=')) => (TokenKind::Ge, 2),
-                (b'=', Some(b'=')) => (TokenKind::EqEq, 2),
-                (b'!', Some(b'=')) => (TokenKind::Ne, 2),
-                (b'+', _) => (TokenKind::Plus, 1),
-                (b'-', _) => (TokenKind::Minus, 1),
-                (b'*', _) => (TokenKind::Star, 1),
-                (b'/', _) => (TokenKind::Slash, 1),
-                (b'%', _) => (TokenKind::Percent, 1),
-                (b'^', _) => (TokenKind::Caret, 1),
-                (b'&', _) => (TokenKind::Amp, 1),
-                (b'|', _) => (TokenKind::Pipe, 1),
-                (b'\\', _) => (TokenKind::Backslash, 1),
-                (b'!', _) => (TokenKind::Bang, 1),
-                (b'<', _) => (TokenKind::Lt, 1),
-                (b'>', _) => (TokenKind::Gt, 1),
-                (b'=', _) => (TokenKind::Assign, 1),
-                (b';', _) => (TokenKind::Semi, 1),
-                (b',', _) => (TokenKind::Comma, 1),
-                (b'(', _) => (TokenKind::LParen, 1),
-                (b')', _) => (TokenKind::RParen, 1),
-                (b'{', _) => (TokenKind::LBrace, 1),
-                (b'}', _) => (TokenKind::RBrace, 1),
-                _ => (TokenKind::Unknown(c as char), 1),
-            };
+            let (kind, len) = punctuation(c, bytes.get(i + 1).copied());
             i += len;
             kind
         } else {
@@ -175,6 +147,39 @@ pub fn tokenize(source: &str) -> Vec<Token> {
         span: Span::new(bytes.len(), bytes.len()),
     });
     tokens
+}
+
+/// The token an ASCII character `c` (not a letter, digit or white space) starts, followed by
+/// `next`, and its length in bytes.
+fn punctuation(c: u8, next: Option<u8>) -> (TokenKind, usize) {
+    match (c, next) {
+        (b'&', Some(b'&')) => (TokenKind::AmpAmp, 2),
+        (b'|', Some(b'|')) => (TokenKind::PipePipe, 2),
+        (b'<', Some(b'=')) => (TokenKind::Le, 2),
+        (b'>', Some(b'=')) => (TokenKind::Ge, 2),
+        (b'=', Some(b'=')) => (TokenKind::EqEq, 2),
+        (b'!', Some(b'=')) => (TokenKind::Ne, 2),
+        (b'+', _) => (TokenKind::Plus, 1),
+        (b'-', _) => (TokenKind::Minus, 1),
+        (b'*', _) => (TokenKind::Star, 1),
+        (b'/', _) => (TokenKind::Slash, 1),
+        (b'%', _) => (TokenKind::Percent, 1),
+        (b'^', _) => (TokenKind::Caret, 1),
+        (b'&', _) => (TokenKind::Amp, 1),
+        (b'|', _) => (TokenKind::Pipe, 1),
+        (b'\\', _) => (TokenKind::Backslash, 1),
+        (b'!', _) => (TokenKind::Bang, 1),
+        (b'<', _) => (TokenKind::Lt, 1),
+        (b'>', _) => (TokenKind::Gt, 1),
+        (b'=', _) => (TokenKind::Assign, 1),
+        (b';', _) => (TokenKind::Semi, 1),
+        (b',', _) => (TokenKind::Comma, 1),
+        (b'(', _) => (TokenKind::LParen, 1),
+        (b')', _) => (TokenKind::RParen, 1),
+        (b'{', _) => (TokenKind::LBrace, 1),
+        (b'}', _) => (TokenKind::RBrace, 1),
+        _ => (TokenKind::Unknown(c as char), 1),
+    }
 }
 
 fn number_end(bytes: &[u8], mut i: usize) -> usize {

@@ -351,41 +351,10 @@ impl<'a> Parser<'a> {
             return Ok(Stmt::Block(Vec::new(), token.span));
         }
         if self.is_word(token, "if") {
-            self.bump();
-            self.expect(TokenKind::LParen, "`(` after `if`")?;
-            let cond = self.condition()?;
-            self.expect(TokenKind::RParen, "`)` to close the condition")?;
-            let then = Box::new(self.statement()?);
-            let mut end = then.span();
-            let otherwise = if self.is_word(self.peek(), "else") {
-                self.bump();
-                let s = self.statement()?;
-                end = s.span();
-                Some(Box::new(s))
-            } else {
-                None
-            };
-            return Ok(Stmt::If {
-                cond,
-                then,
-                otherwise,
-                span: token.span.to(end),
-            });
+            return self.if_statement(token);
         }
         if self.is_word(token, "while") {
-            self.bump();
-            self.expect(TokenKind::LParen, "`(` after `while`")?;
-            let cond = self.condition()?;
-            self.expect(TokenKind::RParen, "`)` to close the condition")?;
-            let body = Box::new(self.statement()?);
-            let span = token.span.to(body.span());
-            return Ok(Stmt::Loop {
-                init: None,
-                cond: Some(cond),
-                step: None,
-                body,
-                span,
-            });
+            return self.while_loop(token);
         }
         if self.is_word(token, "for") {
             return self.for_loop(token);
@@ -415,6 +384,47 @@ impl<'a> Parser<'a> {
         };
         self.end_of_statement()?;
         Ok(stmt)
+    }
+
+    /// `if (cond) statement`, with an optional `else statement`; `token` is the `if`.
+    fn if_statement(&mut self, token: Token) -> PResult<Stmt> {
+        self.bump();
+        self.expect(TokenKind::LParen, "`(` after `if`")?;
+        let cond = self.condition()?;
+        self.expect(TokenKind::RParen, "`)` to close the condition")?;
+        let then = Box::new(self.statement()?);
+        let mut end = then.span();
+        let otherwise = if self.is_word(self.peek(), "else") {
+            self.bump();
+            let s = self.statement()?;
+            end = s.span();
+            Some(Box::new(s))
+        } else {
+            None
+        };
+        Ok(Stmt::If {
+            cond,
+            then,
+            otherwise,
+            span: token.span.to(end),
+        })
+    }
+
+    /// `while (cond) statement`; `token` is the `while`.
+    fn while_loop(&mut self, token: Token) -> PResult<Stmt> {
+        self.bump();
+        self.expect(TokenKind::LParen, "`(` after `while`")?;
+        let cond = self.condition()?;
+        self.expect(TokenKind::RParen, "`)` to close the condition")?;
+        let body = Box::new(self.statement()?);
+        let span = token.span.to(body.span());
+        Ok(Stmt::Loop {
+            init: None,
+            cond: Some(cond),
+            step: None,
+            body,
+            span,
+        })
     }
 
     /// An assignment or a bare expression (no terminator).

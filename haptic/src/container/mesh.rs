@@ -25,7 +25,7 @@
 //! the sign, which every single ray decides alone for a closed mesh).
 //!
 //! Nothing here allocates after [`MeshContainer::new`]: the triangles are indexed once by
-//! fdsl's shared [`fdsl::bvh::Bvh`] ([`ray::RayIndex`]), whose traversal uses a fixed stack. Crossings of the segment travelled in one tick are found by casting that
+//! model's shared [`model::bvh::Bvh`] ([`ray::RayIndex`]), whose traversal uses a fixed stack. Crossings of the segment travelled in one tick are found by casting that
 //! segment as one ray ([`Container::first_crossing`]) instead of bisecting.
 
 pub mod ray;

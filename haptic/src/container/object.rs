@@ -1,11 +1,11 @@
 //! [`ObjectContainer`]: a haptic container over an object of the shared object model
-//! ([`fdsl::object`]), so that what the app sculpts is what the hand feels: the container's
+//! ([`model::object`]), so that what the app sculpts is what the hand feels: the container's
 //! own geometry, or the object's geometry with its sculpting edits folded in, with painted
 //! properties overriding the object's formulas.
 //!
-//! Everything is evaluated by an [`fdsl::object::Sampler`] in object coordinates and scene
+//! Everything is evaluated by a [`model::object::Sampler`] in object coordinates and scene
 //! time; this module maps world points into the object. The placement is a general affine
-//! map `world_from_object` (the object model's one rule, `fdsl::scene::world_from_object`:
+//! map `world_from_object` (the object model's one rule, `model::scene::world_from_object`:
 //! group transforms, the object's transform and its motion): points
 //! go through its inverse, gradients through the inverse-transpose (`grad_world = A^T
 //! grad_object` for `object = A world + b`), so the metric depth `f / |grad f|` the renderer
@@ -19,7 +19,7 @@
 //! kept, so scaling an object does not weaken its field.
 //!
 //! Bounds: the world box of the container's domain (or of the object's domain and union
-//! edits, [`fdsl::object::Object::bounds`]). A solid without a domain or a moving object has
+//! edits, [`model::object::Object::bounds`]). A solid without a domain or a moving object has
 //! infinite bounds: it is correct, but evaluated on every tick instead of only when the tip
 //! is in its box.
 //!
@@ -27,12 +27,12 @@
 //! the sampler's scratch space); sampling allocates nothing afterwards, whatever the length
 //! of the edit history, with one exception the sampler documents: a point inside the boxes
 //! of more edits than it reserved room for (the history's length, at least 64 and at most
-//! `MAX_RESERVED_HITS`, 4096, in fdsl's sampler) grows its hit list, once.
+//! `MAX_RESERVED_HITS`, 4096, in model's sampler) grows its hit list, once.
 
 use glam::{DAffine3, DMat3, DVec3};
 
-use fdsl::object::{Object, Paintable, Sampler, Shape, Transform};
-use fdsl::scene::ObjectId;
+use model::object::{Object, Paintable, Sampler, Shape, Transform};
+use model::scene::ObjectId;
 
 use super::Container;
 use crate::aabb::Aabb;
@@ -115,13 +115,13 @@ impl std::fmt::Debug for ObjectContainer {
 
 /// The box, in object space, outside which the container's value is negative; `None` when
 /// unbounded.
-fn container_bounds_object(object: &Object) -> Option<fdsl::bvh::Aabb> {
+fn container_bounds_object(object: &Object) -> Option<model::bvh::Aabb> {
     match &object.data().physics.container {
         Some(container) => {
-            let in_object = |b: &fdsl::bvh::Aabb| container.transform.aabb(b);
+            let in_object = |b: &model::bvh::Aabb| container.transform.aabb(b);
             match (&container.shape, &container.domain) {
                 // A parametric shape has no field: the sampler gives empty space everywhere.
-                (Shape::Parametric { .. }, _) => Some(fdsl::bvh::Aabb::EMPTY),
+                (Shape::Parametric { .. }, _) => Some(model::bvh::Aabb::EMPTY),
                 (_, Some(domain)) => Some(in_object(&domain.aabb())),
                 (Shape::Mesh(mesh), None) => Some(in_object(&mesh.bounds())),
                 (Shape::Implicit(_), None) => None,
@@ -150,7 +150,7 @@ impl ObjectContainer {
             });
         }
         let world_from_object =
-            fdsl::scene::world_from_object(&world_from_parent, &mut sampler, 0.0);
+            model::scene::world_from_object(&world_from_parent, &mut sampler, 0.0);
         let frame =
             Frame::new(&world_from_object, 0.0).ok_or(ObjectContainerError::BadPlacement { id })?;
         let moving = sampler.object().data().motion.is_some();
@@ -203,7 +203,7 @@ impl ObjectContainer {
     /// whose placement is degenerate are left out and returned with their error. Allocates:
     /// call it off the servo thread.
     pub fn from_scene(
-        scene: &fdsl::scene::Scene,
+        scene: &model::scene::Scene,
     ) -> (Vec<ObjectContainer>, Vec<(ObjectId, ObjectContainerError)>) {
         let mut containers = Vec::with_capacity(scene.len());
         let mut refused = Vec::new();
@@ -234,7 +234,7 @@ impl ObjectContainer {
     fn frame(&mut self, t_secs: f64) -> Frame {
         if self.moving && self.frame.t_secs != t_secs {
             let world_from_object =
-                fdsl::scene::world_from_object(&self.world_from_parent, &mut self.sampler, t_secs);
+                model::scene::world_from_object(&self.world_from_parent, &mut self.sampler, t_secs);
             // A motion that degenerates keeps the last good placement.
             if let Some(frame) = Frame::new(&world_from_object, t_secs) {
                 self.frame = frame;

@@ -3,8 +3,8 @@
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 
-use fdsl::object::{Object, Sampler, Transform};
-use fdsl::scene::ObjectId;
+use model::object::{Object, Sampler, Transform};
+use model::scene::ObjectId;
 
 use super::{Built, MAX_REMOTE_TOOLS, REMOTE_TOOL_ID_BASE, RemoteTool, SceneSource, Snapshot};
 use crate::container::object::ObjectContainer;

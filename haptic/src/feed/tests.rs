@@ -8,8 +8,8 @@ use std::time::Duration;
 
 use glam::DVec3;
 
-use fdsl::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property, Transform};
-use fdsl::scene::{GroupId, ObjectId, Scene};
+use model::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property, Transform};
+use model::scene::{GroupId, ObjectId, Scene};
 
 use super::*;
 use crate::container::Container as _;

@@ -659,7 +659,7 @@ fn mesh_sphere_feels_like_the_closed_form_sphere() {
 /// Presses the tip `depth_world` into the top of a ball with tension 1 (and the given zone
 /// depth), kinematically through the force renderer, and returns the steady force.
 fn pressed_ball(zone_depth: Option<&str>, depth_world: f64) -> glam::DVec3 {
-    use fdsl::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property};
+    use model::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property};
 
     use crate::container::object::ObjectContainer;
 
@@ -680,7 +680,7 @@ fn pressed_ball(zone_depth: Option<&str>, depth_world: f64) -> glam::DVec3 {
     };
     let object = Object::new(data).unwrap();
     let mut scene =
-        vec![ObjectContainer::from_object(5, &object, fdsl::object::Transform::IDENTITY).unwrap()];
+        vec![ObjectContainer::from_object(5, &object, model::object::Transform::IDENTITY).unwrap()];
     let caps = Capabilities::falcon();
     let zone = HapticZone::fit(
         caps.workspace_metres,

@@ -1,9 +1,9 @@
-//! [`ObjectField`]: an [`fdsl::object::Object`] (its geometry folded with its edit history)
+//! [`ObjectField`]: a [`model::object::Object`] (its geometry folded with its edit history)
 //! as a [`Field`] for the octree mesher, and the boxes an edit dirties, for
 //! [`OctreeMesher::remesh`](super::octree::OctreeMesher::remesh).
 //!
-//! An object with edits goes through fdsl's [`Sampler`], restricted to each octree node the
-//! mesher visits: [`Field::simplify`] hands each node a field over fdsl's [`BoxSampler`] for
+//! An object with edits goes through model's [`Sampler`], restricted to each octree node the
+//! mesher visits: [`Field::simplify`] hands each node a field over model's [`BoxSampler`] for
 //! the node's box (the edits whose boxes overlap it, gathered once from the history's index or
 //! from the parent node's list; the geometry's tape simplified for the box where that is
 //! exact), whose `values` and `gradients` fold each edit over the whole batch of points and
@@ -19,8 +19,8 @@
 //! subtraction only the blocks those boxes touch are evaluated again
 //! ([`dirty_boxes`]); after an intersection, the whole object is.
 
-use fdsl::object::{BoxSampler, CompiledEdit, Domain, EditOp, Object, Sampler, Shape, Slot};
 use glam::{DAffine3, DVec3};
+use model::object::{BoxSampler, CompiledEdit, Domain, EditOp, Object, Sampler, Shape, Slot};
 
 use super::Aabb;
 use super::field::Field;
@@ -32,7 +32,7 @@ pub struct ObjectField {
 }
 
 enum Inner {
-    /// Geometry and edits, through fdsl's sampler, one point at a time.
+    /// Geometry and edits, through model's sampler, one point at a time.
     Sampler { sampler: Box<Sampler>, t: f64 },
     /// Geometry and edits restricted to an octree node's box, in bulk.
     Region(Box<RegionField>),
@@ -45,7 +45,7 @@ impl ObjectField {
     ///
     /// An implicit geometry without active shape edits is evaluated in bulk (f32, fdsl's
     /// `BulkEval`, with tape simplification per box), like [`TapeField`],
-    /// through its transform and clipped by its domain as fdsl's `Sampler` does; anything
+    /// through its transform and clipped by its domain as model's `Sampler` does; anything
     /// else goes through the sampler (f64), restricted to each octree node's box by
     /// [`Field::simplify`] (see the module documentation). The two agree to f32 rounding, so
     /// keep one object on one path while remeshing it incrementally.
@@ -133,8 +133,8 @@ impl Field for ObjectField {
 }
 
 /// The box `lo..=hi` in double precision (exactly).
-fn f64_box(lo: [f32; 3], hi: [f32; 3]) -> fdsl::bvh::Aabb {
-    fdsl::bvh::Aabb::new(point(lo[0], lo[1], lo[2]), point(hi[0], hi[1], hi[2]))
+fn f64_box(lo: [f32; 3], hi: [f32; 3]) -> model::bvh::Aabb {
+    model::bvh::Aabb::new(point(lo[0], lo[1], lo[2]), point(hi[0], hi[1], hi[2]))
 }
 
 /// The object restricted to an octree node's box, with scratch space for batches of points.
@@ -184,7 +184,7 @@ impl RegionField {
 
 /// An implicit geometry's tape in its own space, mapped from object space by the inverse of
 /// its transform and clipped by its domain: `min(f(q), domain distance(q))`, `q` the local
-/// point, as fdsl's sampler evaluates a shape.
+/// point, as model's sampler evaluates a shape.
 struct ShapeField {
     tape: TapeField,
     local_from_object: DAffine3,
@@ -245,8 +245,8 @@ impl ShapeField {
         if self.identity {
             return (lo, hi);
         }
-        let region = fdsl::bvh::Aabb::new(point(lo[0], lo[1], lo[2]), point(hi[0], hi[1], hi[2]));
-        let local = fdsl::object::Transform {
+        let region = model::bvh::Aabb::new(point(lo[0], lo[1], lo[2]), point(hi[0], hi[1], hi[2]));
+        let local = model::object::Transform {
             parent_from_child: self.local_from_object,
         }
         .aabb(&region);
@@ -331,7 +331,7 @@ impl ShapeField {
 }
 
 /// The box `b` in single precision, rounded outwards; `None` when empty or not finite.
-pub fn to_f32_box(b: &fdsl::bvh::Aabb) -> Option<Aabb> {
+pub fn to_f32_box(b: &model::bvh::Aabb) -> Option<Aabb> {
     if b.is_empty() || !(b.lo.is_finite() && b.hi.is_finite()) {
         return None;
     }
@@ -384,7 +384,7 @@ mod tests {
     use super::*;
     use crate::mesh::octree::{MeshSettings, OctreeMesher, mesh_with_stats};
     use crate::mesh::{Mesh, octree};
-    use fdsl::object::{Edit, Formula, Geometry, ObjectData, Pose, ToolShape};
+    use model::object::{Edit, Formula, Geometry, ObjectData, Pose, ToolShape};
     use std::sync::Arc;
 
     /// The unit ball clipped to a domain (so its bounds are finite).
@@ -538,7 +538,7 @@ mod tests {
 
     #[test]
     fn an_unedited_implicit_geometry_is_evaluated_in_bulk_like_the_sampler() {
-        use fdsl::object::Transform;
+        use model::object::Transform;
         // A squashed, turned and moved ball clipped by a domain that cuts it.
         let object = Object::new(ObjectData {
             geometry: Some(Geometry {
@@ -758,8 +758,8 @@ mod tests {
         let (op, what) = match roll {
             1 => (
                 EditOp::Paint {
-                    property: fdsl::object::Paintable::Color,
-                    value: fdsl::object::PaintValue::Color([1.0, 0.2, 0.1]),
+                    property: model::object::Paintable::Color,
+                    value: model::object::PaintValue::Color([1.0, 0.2, 0.1]),
                 },
                 "paint",
             ),
@@ -973,8 +973,8 @@ mod tests {
         assert!(b[0].contains([1.0, 0.0, 0.0]) && b[0].contains([1.09, 0.09, -0.09]));
         assert_eq!(dirty_boxes(&compiled(EditOp::Intersect)), Dirty::Everywhere);
         let paint = EditOp::Paint {
-            property: fdsl::object::Paintable::Color,
-            value: fdsl::object::PaintValue::Color([1.0, 0.0, 0.0]),
+            property: model::object::Paintable::Color,
+            value: model::object::PaintValue::Color([1.0, 0.0, 0.0]),
         };
         assert_eq!(dirty_boxes(&compiled(paint)), Dirty::Boxes(Vec::new()));
     }

@@ -4,9 +4,9 @@
 use std::ops::Range;
 use std::sync::Arc;
 
-use fdsl::object::history::HistoryEntry;
-use fdsl::object::{CompiledEdit, Object, Shape, Transform};
 use glam::{DMat4, Mat4};
+use model::object::history::HistoryEntry;
+use model::object::{CompiledEdit, Object, Shape, Transform};
 
 use super::{MAX_PATCH_EDITS, MeshJob, MeshKind, Meshed};
 use crate::appearance::CompiledAppearance;
@@ -298,8 +298,8 @@ fn mesh_whole(
     world_from_group: Transform,
     depth: u8,
 ) -> Result<(Incremental, MeshPatch), String> {
-    let bounds =
-        mesh_bounds(&object, depth).ok_or_else(|| fdsl::object::FitError::Unbounded.to_string())?;
+    let bounds = mesh_bounds(&object, depth)
+        .ok_or_else(|| model::object::FitError::Unbounded.to_string())?;
     let mut octree =
         OctreeMesher::new(&MeshSettings { bounds, depth }).map_err(|e| e.to_string())?;
     octree
@@ -333,7 +333,7 @@ fn mesh_whole(
 /// `snapshot` does everything it does for `sculpt render` (parametric shapes, imported meshes,
 /// textures, force arrows).
 fn snapshot(object: Object, world_from_group: Transform, depth: u8, out: &mut Meshed) {
-    let mut scene = fdsl::scene::Scene::new();
+    let mut scene = model::scene::Scene::new();
     let settings = SnapshotSettings {
         depth,
         t_secs: out.t_secs,

@@ -34,8 +34,8 @@ use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use fdsl::object::{Object, Transform};
-use fdsl::scene::ObjectId;
+use model::object::{Object, Transform};
+use model::scene::ObjectId;
 
 use crate::mesh::Mesh;
 use crate::mesh::octree::MeshPatch;

@@ -4,12 +4,12 @@
 use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
 
-use fdsl::object::{
+use glam::DVec3;
+use model::object::{
     ColorDef, ColorMap, Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData, PaintValue,
     Paintable, Pose, ToolShape, Transform,
 };
-use fdsl::scene::ObjectId;
-use glam::DVec3;
+use model::scene::ObjectId;
 
 use super::incremental::{merged, mesh, recolour};
 use super::{MIN_MESHER_THREADS, MeshJob, MeshKind, Mesher};
@@ -209,7 +209,7 @@ fn other_changes_mesh_whole_and_a_superseded_job_is_dropped_before_it_starts() {
     let (done, state) = mesh(job(&object, 3, 6), state, &never);
     assert_eq!(done.unwrap().kind, MeshKind::Whole);
     object
-        .set(fdsl::object::Field::Diffuse(Some(ColorDef::Constant([
+        .set(model::object::Field::Diffuse(Some(ColorDef::Constant([
             0.2, 0.4, 0.9,
         ]))))
         .unwrap();

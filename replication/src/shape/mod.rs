@@ -1,8 +1,8 @@
 //! The fdsl payload: ops over the shared object model ([`ShapePayload`]), and the scene they
-//! fold into ([`ShapeScene`], a [`Materialize`] over [`fdsl::scene::Scene`]).
+//! fold into ([`ShapeScene`], a [`Materialize`] over [`model::scene::Scene`]).
 //!
 //! Every op names the object it changes, so leases and per-object re-folds apply. Properties
-//! are written whole per [`fdsl::object::Slot`]: concurrent writes to one slot resolve by the
+//! are written whole per [`model::object::Slot`]: concurrent writes to one slot resolve by the
 //! linear order (the last writer wins); sculpting edits all apply, in the order. A payload is
 //! validated when decoded (formulas compiled, numbers checked), so an op that reaches the fold
 //! describes a valid change; a change to an object that does not exist (deleted, or created by
@@ -28,9 +28,9 @@ mod wire;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
-use fdsl::object::codec as object_codec;
-use fdsl::object::{CompiledEdit, Edit, Field, Object, ObjectData};
-use fdsl::scene::{self, Group, GroupId, Scene};
+use model::object::codec as object_codec;
+use model::object::{CompiledEdit, Edit, Field, Object, ObjectData};
+use model::scene::{self, Group, GroupId, Scene};
 use serde::{Deserialize, Serialize};
 
 use crate::codec::DecodeError;
@@ -243,7 +243,7 @@ impl ShapePayload {
     pub fn edit(
         object: u64,
         edit: impl Into<Arc<Edit>>,
-    ) -> Result<ShapePayload, fdsl::object::ObjectError> {
+    ) -> Result<ShapePayload, model::object::ObjectError> {
         let edit = Arc::new(CompiledEdit::new(edit)?);
         Ok(ShapePayload::Edit { object, edit })
     }
@@ -260,7 +260,7 @@ impl ShapePayload {
                 Object::new(data).map(|_| ()).map_err(|e| e.to_string())
             }
             ShapePayload::SetGroup { value: Some(g), .. } => {
-                if g.transform.inverse().is_none() || g.name.len() > fdsl::object::MAX_NAME_BYTES {
+                if g.transform.inverse().is_none() || g.name.len() > model::object::MAX_NAME_BYTES {
                     return Err("group transform not invertible or name too long".into());
                 }
                 Ok(())

@@ -17,7 +17,7 @@
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 
-use fdsl::object::codec as object_codec;
+use model::object::codec as object_codec;
 
 use super::{ShapePayload, wire};
 use crate::identity::OpId;

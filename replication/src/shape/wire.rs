@@ -9,9 +9,9 @@
 use std::borrow::Cow;
 use std::sync::Arc;
 
-use fdsl::object::codec::{self as object_codec, v1};
-use fdsl::object::{CompiledEdit, Field, ObjectData, ObjectError};
-use fdsl::scene::Group;
+use model::object::codec::{self as object_codec, v1};
+use model::object::{CompiledEdit, Field, ObjectData, ObjectError};
+use model::scene::Group;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use super::ShapePayload;

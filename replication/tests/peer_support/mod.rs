@@ -10,7 +10,7 @@
 //! Shared by the fuzz target (`fuzz/fuzz_targets/peer.rs`, which includes this file) and the
 //! property test in `tests/peer_script.rs`, so CI runs what the fuzzer explores.
 
-use fdsl::object::{Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
+use model::object::{Edit, EditOp, Field, Formula, Geometry, ObjectData, Pose, ToolShape};
 use replication::Payload as _;
 use replication::identity::SessionId;
 use replication::op::OpFields;

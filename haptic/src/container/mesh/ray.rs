@@ -1,6 +1,6 @@
 //! Nearest-hit ray casting over a triangle set for the haptic rays: triangles prepared for
-//! Moeller-Trumbore intersection with their winding normals, indexed by fdsl's shared
-//! [`fdsl::bvh::Bvh`] (the one the object model's edit history uses), whose traversal keeps
+//! Moeller-Trumbore intersection with their winding normals, indexed by model's shared
+//! [`model::bvh::Bvh`] (the one the object model's edit history uses), whose traversal keeps
 //! its stack in a fixed array, so a query allocates nothing.
 //!
 //! The shared hierarchy visits every leaf the ray passes through, in no particular order; the
@@ -9,7 +9,7 @@
 
 use glam::DVec3;
 
-use fdsl::bvh::{Aabb, Bvh};
+use model::bvh::{Aabb, Bvh};
 
 /// A triangle prepared for intersection: a corner, two edges and the unit normal given by the
 /// winding (`e1 x e2`, outward for a counter-clockwise closed mesh).

@@ -11,13 +11,13 @@ use crate::container::properties::Scalar;
 
 /// fdsl's reference cube `[center - half, center + half]`, 12 outward triangles.
 fn cube_mesh(center: DVec3, half: f64) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    fdsl::mesh::shapes::cube(center - DVec3::splat(half), center + DVec3::splat(half)).into_parts()
+    model::mesh::shapes::cube(center - DVec3::splat(half), center + DVec3::splat(half)).into_parts()
 }
 
 /// fdsl's reference icosphere of `radius` (`20 * 4^n` outward triangles) moved to `center`.
 fn icosphere(center: DVec3, radius: f64, n_subdivisions: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
     let (mut vertices, triangles) =
-        fdsl::mesh::shapes::icosphere(radius, n_subdivisions).into_parts();
+        model::mesh::shapes::icosphere(radius, n_subdivisions).into_parts();
     for v in &mut vertices {
         *v = (glam::Vec3::from_array(*v) + center.as_vec3()).to_array();
     }

@@ -6,11 +6,11 @@ use std::sync::Arc;
 
 use glam::{DQuat, DVec3};
 
-use fdsl::object::{
+use model::object::{
     Domain, Edit, EditOp, ForceField, Formula, Geometry, Motion, Object, ObjectData, PaintValue,
     Paintable, Physics, Pose, Property, Sampler, Timing, ToolShape, Transform,
 };
-use fdsl::scene::{Group, GroupId, ObjectId, Scene};
+use model::scene::{Group, GroupId, ObjectId, Scene};
 
 use super::{ObjectContainer, ObjectContainerError};
 use crate::container::Container;
@@ -217,10 +217,10 @@ fn scenes_become_containers_by_id_with_group_placements() {
     scene.create(ObjectId(3), skewed_data, None).unwrap();
     // Felt objects have physics; one without is seen, not felt, and left out.
     let felt = |id: u64, scene: &mut Scene| {
-        let tension = fdsl::object::Property::new(formula("1"));
+        let tension = model::object::Property::new(formula("1"));
         let object = scene.object_mut(ObjectId(id)).unwrap();
         object
-            .set(fdsl::object::Field::Tension(Some(tension)))
+            .set(model::object::Field::Tension(Some(tension)))
             .unwrap();
     };
     felt(7, &mut scene);
@@ -255,9 +255,9 @@ fn a_degenerate_placement_is_refused() {
 
 #[test]
 fn a_separate_container_is_felt_instead_of_the_geometry() {
-    use fdsl::object::Shape;
+    use model::object::Shape;
     // A small visible ball inside an invisible mesh cube: the hand feels the cube.
-    let cube = fdsl::mesh::shapes::cube(DVec3::splat(-1.0), DVec3::splat(1.0));
+    let cube = model::mesh::shapes::cube(DVec3::splat(-1.0), DVec3::splat(1.0));
     let mut data = ball_data(None);
     data.geometry = Some(Geometry::implicit(formula("0.2 - sqrt(x^2 + y^2 + z^2)")));
     data.physics.container = Some(Geometry {

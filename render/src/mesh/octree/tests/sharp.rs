@@ -305,7 +305,7 @@ impl Watermelon {
 fn watermelon_cut_vertices_lie_on_its_creases() {
     let text = include_str!("../../../../../scenes/watermelon.wrl");
     let mut no_files = |path: &str| Err(format!("no file {path}"));
-    let scene = fdsl::fvrml::load(text, &fdsl::fvrml::LoadOptions::default(), &mut no_files)
+    let scene = formats::fvrml::load(text, &formats::fvrml::LoadOptions::default(), &mut no_files)
         .unwrap()
         .scene;
     let (_, entry) = scene.objects().next().unwrap();
