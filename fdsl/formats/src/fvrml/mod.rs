@@ -16,8 +16,8 @@
 //! `load(save(scene))` gives back the scene, the objects' edit histories included, except
 //! that ids are those the loader assigns (see [`LoadOptions`]).
 //!
-//! The dialect (node and field names, our extensions, limits) is described in
-//! `ARCHITECTURE.md` and on the items below. In short: the thesis's `FShape`,
+//! The dialect (node and field names, our extensions, the thesis's spellings) is described in
+//! full below, after the examples, and on the items. In short: the thesis's `FShape`,
 //! `FGeometry`, `FAppearance`, `FMaterial`, `FTexture3D`, `FPhysics`, `FSurface`,
 //! `FTension`, `FFriction`, `FDensity`, `FForce` and `FTransform`; our `FColorMap`,
 //! `FDepth` and `FEdit`; VRML97's `Shape`, `Appearance`, `Material`, `Box`, `Sphere`, `Cylinder`,
@@ -72,6 +72,7 @@
 //! let again = fvrml::load(&text, &LoadOptions::default(), &mut no_files).unwrap();
 //! assert_eq!(again.scene, loaded.scene);
 //! ```
+#![doc = include_str!("dialect.md")]
 
 mod document;
 mod edit;
