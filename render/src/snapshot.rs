@@ -487,30 +487,8 @@ fn parametric_mesh(
         xyz.map(|c| if c.is_finite() { c as f32 } else { 0.0 })
     };
     let range = |i: usize| (parameters[i][0] as f32, parameters[i][1] as f32);
-    // The size of the shape, from a coarse sampling, sets tolerances and the tube radius.
-    let mut lo = [f32::INFINITY; 3];
-    let mut hi = [f32::NEG_INFINITY; 3];
-    let n = 8;
-    let dims = kind.dimensions();
-    for i in 0..(n + 1usize).pow(dims as u32) {
-        let mut uvw = [0.0f64; 3];
-        let mut rest = i;
-        for (a, c) in uvw.iter_mut().enumerate().take(dims) {
-            let s = (rest % (n + 1)) as f64 / n as f64;
-            rest /= n + 1;
-            *c = parameters[a][0] + s * (parameters[a][1] - parameters[a][0]);
-        }
-        let p = at(uvw);
-        for a in 0..3 {
-            lo[a] = lo[a].min(p[a]);
-            hi[a] = hi[a].max(p[a]);
-        }
-    }
-    let diagonal = (0..3)
-        .map(|a| (hi[a] - lo[a]).powi(2))
-        .sum::<f32>()
-        .sqrt()
-        .max(1e-3);
+    // The size of the shape sets tolerances and the tube radius.
+    let diagonal = sampled_diagonal(&mut at, kind.dimensions(), parameters);
     let white = |_: [f32; 2], _: [f32; 3]| [1.0f32; 4];
     let surface_settings = |u: (f32, f32), v: (f32, f32)| SurfaceSettings {
         domain: UvDomain { u, v },
@@ -563,6 +541,37 @@ fn parametric_mesh(
             Ok(out)
         }
     }
+}
+
+/// The diagonal of the box around `at` sampled on a coarse grid over the first `dims`
+/// parameter ranges (at least 1e-3, so that tolerances derived from it stay positive).
+fn sampled_diagonal(
+    at: &mut impl FnMut([f64; 3]) -> [f32; 3],
+    dims: usize,
+    parameters: &[[f64; 2]; 3],
+) -> f32 {
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    let n = 8;
+    for i in 0..(n + 1usize).pow(dims as u32) {
+        let mut uvw = [0.0f64; 3];
+        let mut rest = i;
+        for (a, c) in uvw.iter_mut().enumerate().take(dims) {
+            let s = (rest % (n + 1)) as f64 / n as f64;
+            rest /= n + 1;
+            *c = parameters[a][0] + s * (parameters[a][1] - parameters[a][0]);
+        }
+        let p = at(uvw);
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    (0..3)
+        .map(|a| (hi[a] - lo[a]).powi(2))
+        .sum::<f32>()
+        .sqrt()
+        .max(1e-3)
 }
 
 /// Applies the object's compiled appearance at time `t`: vertex colours (painted ones from

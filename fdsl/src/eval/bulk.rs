@@ -469,6 +469,8 @@ fn bool_f32(b: bool) -> f32 {
     if b { 1.0 } else { 0.0 }
 }
 
+/// Runs a plan's steps over `N` lanes, writing the last into `sink` when given.
+// tidy:table: one arm per fused step kind, kept in one match so the hot loop stays one function
 #[inline(always)]
 fn run_plan<const N: usize>(
     plan: &Plan,

@@ -122,6 +122,23 @@ struct ObjectUniform {
     opacity: [f32; 4],
 }
 
+impl ObjectUniform {
+    /// The uniform block of `o`: its placement, the matrix for its normals and its material.
+    fn of(o: &crate::scene::SceneObject) -> ObjectUniform {
+        ObjectUniform {
+            world_from_object: o.world_from_object.to_cols_array_2d(),
+            normal_matrix: o.world_from_object.inverse().transpose().to_cols_array_2d(),
+            material: [
+                o.material.ambient,
+                o.material.diffuse,
+                o.material.specular,
+                o.material.shininess,
+            ],
+            opacity: [o.material.opacity, 0.0, 0.0, 0.0],
+        }
+    }
+}
+
 /// GPU copies of one object's mesh and uniforms.
 struct GpuObject {
     mesh: Arc<Mesh>,
@@ -488,19 +505,7 @@ impl Renderer {
         if scene.lines.len() > LINES_MAX {
             return Err(PrepareError::TooManyLines(scene.lines.len()));
         }
-        // A mesh already uploaded was validated then: only new allocations are checked, so a
-        // frame that changes nothing does not scan every mesh again.
-        for (object_idx, o) in scene.objects.iter().enumerate() {
-            let uploaded = self
-                .objects
-                .get(object_idx)
-                .is_some_and(|g| Arc::ptr_eq(&g.mesh, &o.mesh));
-            if !uploaded {
-                o.mesh
-                    .validate()
-                    .map_err(|source| PrepareError::Mesh { object_idx, source })?;
-            }
-        }
+        self.validate_new_meshes(scene)?;
         let aspect = size_px[0].max(1) as f32 / size_px[1].max(1) as f32;
         let eye = scene.camera.eye();
         let g = Globals {
@@ -534,21 +539,28 @@ impl Renderer {
                     }
                 }
             }
-            let u = ObjectUniform {
-                world_from_object: o.world_from_object.to_cols_array_2d(),
-                normal_matrix: o.world_from_object.inverse().transpose().to_cols_array_2d(),
-                material: [
-                    o.material.ambient,
-                    o.material.diffuse,
-                    o.material.specular,
-                    o.material.shininess,
-                ],
-                opacity: [o.material.opacity, 0.0, 0.0, 0.0],
-            };
+            let u = ObjectUniform::of(o);
             queue.write_buffer(&self.objects[i].uniform, 0, bytemuck::bytes_of(&u));
         }
         self.sort_draws(scene, eye);
         self.upload_lines(device, scene);
+        Ok(())
+    }
+
+    /// Validates the meshes of `scene` not uploaded yet. One already uploaded was validated
+    /// then: a frame that changes nothing does not scan every mesh again.
+    fn validate_new_meshes(&self, scene: &Scene) -> Result<(), PrepareError> {
+        for (object_idx, o) in scene.objects.iter().enumerate() {
+            let uploaded = self
+                .objects
+                .get(object_idx)
+                .is_some_and(|g| Arc::ptr_eq(&g.mesh, &o.mesh));
+            if !uploaded {
+                o.mesh
+                    .validate()
+                    .map_err(|source| PrepareError::Mesh { object_idx, source })?;
+            }
+        }
         Ok(())
     }
 

@@ -625,6 +625,42 @@ impl Visit<'_> {
                 v
             }
         };
+        self.copy_lower_faces(key, from, &mut values);
+        // A block outside the dirty range sees the field as before; with the same lattice
+        // values its record would be built again bit for bit.
+        if kept && !self.range.contains(key) && self.holds_values(key, &values) {
+            self.stats.blocks_unchanged += 1;
+            return;
+        }
+        let origin = key.map(|k| k * bc);
+        let block = build_block(&grid, field, origin, values, self.stats);
+        let idx = self.mesher.block_idx(key);
+        if !self.range.contains(key) {
+            let n_total = self.mesher.reps.len();
+            self.mesher.changes.push(idx, n_total);
+        }
+        match block {
+            Ok(block) => {
+                self.mesher.blocks.insert(key, block);
+            }
+            // A kept record keeps its values: blocks above it read them.
+            Err(values) if kept => {
+                let block = Block::without_cells(origin, values);
+                self.mesher.blocks.insert(key, block);
+            }
+            Err(values) => {
+                self.mesher.blocks.remove(&key);
+                let sign = if inside(values[0]) { 1.0 } else { -1.0 };
+                self.mesher.reps[idx] = sign * grid.rep();
+            }
+        }
+    }
+
+    /// Copies into `values` the lattice points of block `key` on its lower faces, edges and
+    /// corner, which the blocks below it own.
+    fn copy_lower_faces(&self, key: [u32; 3], from: [u32; 3], values: &mut [f32]) {
+        let grid = self.mesher.grid;
+        let bc = grid.block;
         for mask in 1..8usize {
             let axes: [bool; 3] = std::array::from_fn(|a| mask >> a & 1 == 1);
             if (0..3).any(|a| axes[a] && key[a] == 0) {
@@ -650,43 +686,17 @@ impl Visit<'_> {
                 }
             }
         }
-        if kept && !self.range.contains(key) {
-            // A block outside the dirty range sees the field as before; with the same lattice
-            // values its record would be built again bit for bit.
-            let same = self.mesher.blocks.get(&key).is_some_and(|b| {
-                b.values.len() == values.len()
-                    && b.values
-                        .iter()
-                        .zip(&values)
-                        .all(|(a, v)| a.to_bits() == v.to_bits())
-            });
-            if same {
-                self.stats.blocks_unchanged += 1;
-                return;
-            }
-        }
-        let origin = key.map(|k| k * bc);
-        let block = build_block(&grid, field, origin, values, self.stats);
-        let idx = self.mesher.block_idx(key);
-        if !self.range.contains(key) {
-            let n_total = self.mesher.reps.len();
-            self.mesher.changes.push(idx, n_total);
-        }
-        match block {
-            Ok(block) => {
-                self.mesher.blocks.insert(key, block);
-            }
-            // A kept record keeps its values: blocks above it read them.
-            Err(values) if kept => {
-                let block = Block::without_cells(origin, values);
-                self.mesher.blocks.insert(key, block);
-            }
-            Err(values) => {
-                self.mesher.blocks.remove(&key);
-                let sign = if inside(values[0]) { 1.0 } else { -1.0 };
-                self.mesher.reps[idx] = sign * grid.rep();
-            }
-        }
+    }
+
+    /// Whether block `key`'s record holds exactly `values`, bit for bit.
+    fn holds_values(&self, key: [u32; 3], values: &[f32]) -> bool {
+        self.mesher.blocks.get(&key).is_some_and(|b| {
+            b.values.len() == values.len()
+                && b.values
+                    .iter()
+                    .zip(values)
+                    .all(|(a, v)| a.to_bits() == v.to_bits())
+        })
     }
 
     /// Copies the values block `key` owns (lattice indices `from..=block`) into `out`.
@@ -752,8 +762,53 @@ fn build_block<F: Field>(
     stats: &mut MeshStats,
 ) -> Result<Block, Vec<f32>> {
     let bc = grid.block;
+    let Scan {
+        crossed_cells,
+        mut brackets,
+        refs,
+    } = scan_cells(grid, origin, &values);
+    if crossed_cells.is_empty() {
+        return Err(values);
+    }
+    refine_crossings(field, &mut brackets);
+    let placement = Placement {
+        grid,
+        origin,
+        refs: &refs,
+        hermite: hermite_data(field, &brackets),
+    };
+    let mut block = Block::without_cells(origin, values);
+    // Per vertex, its normal when it lies on a sharp feature.
+    let mut features: Vec<Option<[f32; 3]>> = Vec::new();
+    block.cell_entry = vec![NONE; (bc * bc * bc) as usize];
+    block.cells.reserve(crossed_cells.len());
+    for c in &crossed_cells {
+        let (entry, split) = placement.place(c, &mut block, &mut features, stats);
+        let l = c.cell_local;
+        block.cell_entry[(l[0] + bc * (l[1] + bc * l[2])) as usize] = block.cells.len() as u32;
+        if split {
+            block.split_cells.push(block.cells.len() as u32);
+        }
+        block.cells.push(entry);
+        block.cell_local.push(l);
+    }
+    block.normals = vertex_normals(field, &block.positions, features);
+    Ok(block)
+}
+
+/// The crossed cells of a block's lattice, with the brackets of their crossed edges.
+struct Scan {
+    crossed_cells: Vec<Crossed>,
+    /// One bracket per crossed grid edge, shared by the up to four cells around it.
+    brackets: Vec<Bracket>,
+    /// Per crossed cell, patch by patch, the brackets of its crossings.
+    refs: Vec<u32>,
+}
+
+/// Finds the crossed cells of the block at `origin` from its complete lattice `values`.
+fn scan_cells(grid: &Grid, origin: [u32; 3], values: &[f32]) -> Scan {
+    let bc = grid.block;
     let mut crossed_cells = Vec::new();
-    // One bracket per crossed grid edge, shared by the up to four cells around it.
     let mut brackets: Vec<Bracket> = Vec::new();
     let mut bracket_of_edge = vec![NONE; 3 * values.len()];
     let mut refs: Vec<u32> = Vec::new();
@@ -801,48 +856,35 @@ fn build_block<F: Field>(
             }
         }
     }
-    if crossed_cells.is_empty() {
-        return Err(values);
+    Scan {
+        crossed_cells,
+        brackets,
+        refs,
     }
-    refine_crossings(field, &mut brackets);
-    let placement = Placement {
-        grid,
-        origin,
-        refs: &refs,
-        hermite: hermite_data(field, &brackets),
-    };
-    let mut block = Block::without_cells(origin, values);
-    // Per vertex, its normal when it lies on a sharp feature.
-    let mut features: Vec<Option<[f32; 3]>> = Vec::new();
-    block.cell_entry = vec![NONE; (bc * bc * bc) as usize];
-    block.cells.reserve(crossed_cells.len());
-    for c in &crossed_cells {
-        let (entry, split) = placement.place(c, &mut block, &mut features, stats);
-        let l = c.cell_local;
-        block.cell_entry[(l[0] + bc * (l[1] + bc * l[2])) as usize] = block.cells.len() as u32;
-        if split {
-            block.split_cells.push(block.cells.len() as u32);
-        }
-        block.cells.push(entry);
-        block.cell_local.push(l);
-    }
-    // Outward normals are minus the gradient, except on sharp features (whose vertices may
-    // lie outside the block's box, where a simplified field may differ).
-    let smooth: Vec<[f32; 3]> = (block.positions.iter().zip(&features))
+}
+
+/// The normals of a block's vertices: outward, minus the gradient, except on sharp features
+/// (`features` holds theirs; their vertices may lie outside the block's box, where a
+/// simplified field may differ).
+fn vertex_normals<F: Field>(
+    field: &mut F,
+    positions: &[[f32; 3]],
+    features: Vec<Option<[f32; 3]>>,
+) -> Vec<[f32; 3]> {
+    let smooth: Vec<[f32; 3]> = (positions.iter().zip(&features))
         .filter(|(_, feature)| feature.is_none())
         .map(|(p, _)| *p)
         .collect();
     let mut grads = vec![[0.0f32; 3]; smooth.len()];
     gradients_at(field, &smooth, &mut grads);
     let mut grads = grads.into_iter();
-    block.normals = features
+    features
         .into_iter()
         .map(|feature| match feature {
             Some(normal) => normal,
             None => normalise_or_up(grads.next().unwrap_or_default().map(|c| -c)),
         })
-        .collect();
-    Ok(block)
+        .collect()
 }
 
 /// The Hermite data of every bracketed crossing: its point, f there and the gradient there,

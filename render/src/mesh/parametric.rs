@@ -81,25 +81,8 @@ pub fn triangulate_surface(
     mut colour: impl FnMut([f32; 2], [f32; 3]) -> [f32; 4],
     settings: &SurfaceSettings,
 ) -> Result<Mesh, ParametricError> {
+    let vertices_max = checked_vertices_max(settings)?;
     let d = settings.domain;
-    let finite = [d.u.0, d.u.1, d.v.0, d.v.1].iter().all(|x| x.is_finite());
-    if !(finite && d.u.0 < d.u.1 && d.v.0 < d.v.1) {
-        return Err(ParametricError::BadSetting(
-            "domain must be a finite, non-empty rectangle",
-        ));
-    }
-    if settings.initial_divisions == 0 || settings.initial_divisions > INITIAL_DIVISIONS_MAX {
-        return Err(ParametricError::BadSetting(
-            "initial_divisions out of range",
-        ));
-    }
-    if settings.tolerance.is_nan() || settings.tolerance <= 0.0 {
-        return Err(ParametricError::BadSetting("tolerance must be positive"));
-    }
-    let vertices_max = settings
-        .vertices_max
-        .min(PARAMETRIC_VERTICES_MAX)
-        .min(MESH_VERTICES_MAX);
     let n = settings.initial_divisions;
     let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
     let mut positions: Vec<[f32; 3]> = Vec::new();
@@ -130,18 +113,7 @@ pub fn triangulate_surface(
         cdt.add_constraint(h, boundary[(k + 1) % boundary.len()]);
     }
     for _ in 0..REFINE_ROUNDS_MAX {
-        let mut splits: Vec<[f32; 2]> = Vec::new();
-        for e in cdt.undirected_edges() {
-            let [a, b] = e.vertices().map(|v| v.fix().index());
-            let m = [0.5 * (uvs[a][0] + uvs[b][0]), 0.5 * (uvs[a][1] + uvs[b][1])];
-            let chord: [f32; 3] =
-                std::array::from_fn(|k| 0.5 * (positions[a][k] + positions[b][k]));
-            let p = surface(m);
-            let err2: f32 = (0..3).map(|k| (p[k] - chord[k]).powi(2)).sum();
-            if err2 > settings.tolerance * settings.tolerance {
-                splits.push(m);
-            }
-        }
+        let splits = edges_to_split(&cdt, &positions, &uvs, &mut surface, settings.tolerance);
         if splits.is_empty() || positions.len() >= vertices_max {
             break;
         }
@@ -166,6 +138,52 @@ pub fn triangulate_surface(
     };
     mesh.recompute_normals();
     Ok(mesh)
+}
+
+/// The vertex budget of a surface's settings, or the setting that is out of range.
+fn checked_vertices_max(settings: &SurfaceSettings) -> Result<usize, ParametricError> {
+    let d = settings.domain;
+    let finite = [d.u.0, d.u.1, d.v.0, d.v.1].iter().all(|x| x.is_finite());
+    if !(finite && d.u.0 < d.u.1 && d.v.0 < d.v.1) {
+        return Err(ParametricError::BadSetting(
+            "domain must be a finite, non-empty rectangle",
+        ));
+    }
+    if settings.initial_divisions == 0 || settings.initial_divisions > INITIAL_DIVISIONS_MAX {
+        return Err(ParametricError::BadSetting(
+            "initial_divisions out of range",
+        ));
+    }
+    if settings.tolerance.is_nan() || settings.tolerance <= 0.0 {
+        return Err(ParametricError::BadSetting("tolerance must be positive"));
+    }
+    Ok(settings
+        .vertices_max
+        .min(PARAMETRIC_VERTICES_MAX)
+        .min(MESH_VERTICES_MAX))
+}
+
+/// The (u,v) midpoints of the edges whose chord strays from the surface by more than
+/// `tolerance`.
+fn edges_to_split(
+    cdt: &ConstrainedDelaunayTriangulation<Point2<f64>>,
+    positions: &[[f32; 3]],
+    uvs: &[[f32; 2]],
+    surface: &mut impl FnMut([f32; 2]) -> [f32; 3],
+    tolerance: f32,
+) -> Vec<[f32; 2]> {
+    let mut splits = Vec::new();
+    for e in cdt.undirected_edges() {
+        let [a, b] = e.vertices().map(|v| v.fix().index());
+        let m = [0.5 * (uvs[a][0] + uvs[b][0]), 0.5 * (uvs[a][1] + uvs[b][1])];
+        let chord: [f32; 3] = std::array::from_fn(|k| 0.5 * (positions[a][k] + positions[b][k]));
+        let p = surface(m);
+        let err2: f32 = (0..3).map(|k| (p[k] - chord[k]).powi(2)).sum();
+        if err2 > tolerance * tolerance {
+            splits.push(m);
+        }
+    }
+    splits
 }
 
 /// Inserts a (u,v) point, evaluating p there when the vertex is new.
@@ -305,7 +323,22 @@ fn sweep(
             mesh.indices.extend([a, b, c, a, c, d]);
         }
     }
-    for (end, sign) in [(0usize, -1.0f32), (n - 1, 1.0)] {
+    cap_ends(&mut mesh, us, ps, &tangents, colour, n_sides);
+    mesh
+}
+
+/// Closes both ends of a swept tube with a fan around the end sample, facing along the
+/// tangent outwards.
+fn cap_ends(
+    mesh: &mut Mesh,
+    us: &[f32],
+    ps: &[[f32; 3]],
+    tangents: &[[f32; 3]],
+    colour: &mut impl FnMut(f32, [f32; 3]) -> [f32; 4],
+    n_sides: usize,
+) {
+    let ring = |i: usize, j: usize| (i * n_sides + j % n_sides) as u32;
+    for (end, sign) in [(0usize, -1.0f32), (ps.len() - 1, 1.0)] {
         let centre = mesh.positions.len() as u32;
         mesh.positions.push(ps[end]);
         mesh.normals.push(tangents[end].map(|c| c * sign));
@@ -319,7 +352,6 @@ fn sweep(
             });
         }
     }
-    mesh
 }
 
 #[cfg(test)]
