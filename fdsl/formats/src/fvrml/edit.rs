@@ -15,7 +15,7 @@ use super::read::{Fields, Reader};
 use super::save::f32_value;
 use model::limits::MAX_EDITS_PER_OBJECT;
 use model::object::{
-    Axis, Edit, EditOp, Object, ObjectError, PaintValue, Paintable, Pose, ToolShape,
+    Axis, Edit, EditOp, Object, ObjectError, PaintValue, Paintable, Pose, ToolKind, ToolShape,
 };
 
 #[cfg(doc)]
@@ -50,19 +50,10 @@ const PROPERTIES: [(&str, Paintable); 7] = [
     ("density", Paintable::Density),
 ];
 
-#[derive(Clone, Copy, PartialEq)]
-enum ToolKind {
-    Sphere,
-    Box,
-    Cylinder,
+/// The values of `tool`: every kind's name.
+fn tools() -> [(&'static str, ToolKind); ToolKind::ALL.len()] {
+    ToolKind::ALL.map(|kind| (kind.name(), kind))
 }
-
-/// The values of `tool`.
-const TOOLS: [(&str, ToolKind); 3] = [
-    ("sphere", ToolKind::Sphere),
-    ("box", ToolKind::Box),
-    ("cylinder", ToolKind::Cylinder),
-];
 
 /// The fields that give a tool's sizes, and the tools that use each.
 const SIZE_FIELDS: [(&str, &[ToolKind]); 4] = [
@@ -219,15 +210,15 @@ impl<'d> Reader<'_, 'd> {
         let Some(field) = fields.get("tool") else {
             self.error(
                 node.pos,
-                format!("`FEdit` needs a `tool` ({})", one_of(&TOOLS)),
+                format!("`FEdit` needs a `tool` ({})", one_of(&tools())),
             );
             return (None, node.pos);
         };
         let pos = field.value_pos;
-        let Some(kind) = self.keyword(field, &TOOLS) else {
+        let Some(kind) = self.keyword(field, &tools()) else {
             return (None, pos);
         };
-        let tool = name_of(&TOOLS, kind);
+        let tool = kind.name();
         for (name, users) in SIZE_FIELDS {
             if !users.contains(&kind)
                 && let Some(f) = fields.get(name)
@@ -373,16 +364,13 @@ fn edit_node(edit: &Edit, active: bool) -> Node {
             fields.push(string("operation", name_of(&OPERATIONS, op)));
         }
     }
+    fields.push(string("tool", edit.tool.kind().name()));
     match edit.tool {
-        ToolShape::Sphere { radius } => {
-            fields.push(string("tool", "sphere"));
-            fields.push(numbers("radius", &[radius]));
-        }
+        ToolShape::Sphere { radius } => fields.push(numbers("radius", &[radius])),
         ToolShape::Box {
             half_extents,
             rounding,
         } => {
-            fields.push(string("tool", "box"));
             fields.push(numbers("halfExtents", &half_extents.to_array()));
             fields.push(numbers("rounding", &[rounding]));
         }
@@ -390,7 +378,6 @@ fn edit_node(edit: &Edit, active: bool) -> Node {
             radius,
             half_height,
         } => {
-            fields.push(string("tool", "cylinder"));
             fields.push(numbers("radius", &[radius]));
             fields.push(numbers("halfHeight", &[half_height]));
         }

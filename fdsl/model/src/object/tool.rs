@@ -43,7 +43,77 @@ pub enum ToolShape {
     },
 }
 
+/// The kinds of [`ToolShape`], and the names each is written and read by: the one definition
+/// that the app's brush line and tool panel, FVRML's `FEdit` and whatever else names a tool
+/// iterate ([`ToolKind::ALL`]) or match, so that a new kind is added here and in the code that
+/// evaluates, writes and draws its shape.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum ToolKind {
+    /// [`ToolShape::Sphere`].
+    Sphere,
+    /// [`ToolShape::Box`].
+    Box,
+    /// [`ToolShape::Cylinder`].
+    Cylinder,
+}
+
+impl ToolKind {
+    /// Every kind, in the order lists show them.
+    pub const ALL: [ToolKind; 3] = [ToolKind::Sphere, ToolKind::Box, ToolKind::Cylinder];
+
+    /// The name files write and read (FVRML's `tool "sphere"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ToolKind::Sphere => "sphere",
+            ToolKind::Box => "box",
+            ToolKind::Cylinder => "cylinder",
+        }
+    }
+
+    /// The word people read and type for it (a brush line, a tool panel): a sphere is a
+    /// "ball"; the other kinds are their [`ToolKind::name`].
+    pub fn label(self) -> &'static str {
+        match self {
+            ToolKind::Sphere => "ball",
+            other => other.name(),
+        }
+    }
+
+    /// The kind `text` names, by its [`ToolKind::name`] or its [`ToolKind::label`].
+    pub fn from_name(text: &str) -> Option<ToolKind> {
+        ToolKind::ALL
+            .into_iter()
+            .find(|k| k.name() == text || k.label() == text)
+    }
+}
+
 impl ToolShape {
+    /// The tool of `kind` that fits a box `2 * size` across, as a brush of that size makes
+    /// it: a ball of radius `size`, a cube of half edge `size` with edges rounded by a fifth
+    /// of it, a cylinder of radius `size` as tall as it is wide.
+    pub fn of_kind(kind: ToolKind, size: f64) -> ToolShape {
+        match kind {
+            ToolKind::Sphere => ToolShape::Sphere { radius: size },
+            ToolKind::Box => ToolShape::Box {
+                half_extents: DVec3::splat(size),
+                rounding: size * 0.2,
+            },
+            ToolKind::Cylinder => ToolShape::Cylinder {
+                radius: size,
+                half_height: size,
+            },
+        }
+    }
+
+    /// Its kind.
+    pub fn kind(&self) -> ToolKind {
+        match self {
+            ToolShape::Sphere { .. } => ToolKind::Sphere,
+            ToolShape::Box { .. } => ToolKind::Box,
+            ToolShape::Cylinder { .. } => ToolKind::Cylinder,
+        }
+    }
+
     /// Half the edge lengths of the box around the shape.
     pub fn half_extents(&self) -> DVec3 {
         match *self {
@@ -704,6 +774,26 @@ mod tests {
             tool.value(shape, p + DVec3::Y * h) - tool.value(shape, p - DVec3::Y * h),
             tool.value(shape, p + DVec3::Z * h) - tool.value(shape, p - DVec3::Z * h),
         ) / (2.0 * h)
+    }
+
+    /// Each kind is named once, read back by its name and its label, and makes a valid
+    /// tool of its own kind.
+    #[test]
+    fn tool_kinds_are_named_once_and_make_their_shapes() {
+        for kind in ToolKind::ALL {
+            assert_eq!(ToolKind::from_name(kind.name()), Some(kind));
+            assert_eq!(ToolKind::from_name(kind.label()), Some(kind));
+            let tool = ToolShape::of_kind(kind, 0.25);
+            assert_eq!(tool.kind(), kind);
+            assert!(tool.validate().is_ok(), "{tool:?}");
+            assert_eq!(tool.half_extents().max_element(), 0.25, "{tool:?}");
+            let others = ToolKind::ALL.into_iter().filter(|k| *k != kind);
+            for other in others {
+                assert!(other.name() != kind.name() && other.label() != kind.label());
+            }
+        }
+        assert_eq!(ToolKind::from_name("ball"), Some(ToolKind::Sphere));
+        assert_eq!(ToolKind::from_name("cone"), None);
     }
 
     #[test]
