@@ -333,7 +333,7 @@ mod tests {
         let mut log = replication::Log::default();
         let me = keypair.peer_id();
         let first = View::new(me, &log).unwrap().next_object();
-        for payload in crate::engine::demo_payloads_from(&crate::demos::DEMOS[0], first).unwrap() {
+        for payload in crate::demos::DEMOS[0].payloads(first).unwrap() {
             log.author(&keypair, replication::Timestamp(1), payload)
                 .unwrap();
         }

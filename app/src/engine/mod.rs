@@ -322,7 +322,7 @@ impl Engine {
         let demo = config
             .demo
             .filter(|_| new_session && log.is_empty())
-            .map(|demo| demo_payloads_from(demo, lock(&view).next_object()));
+            .map(|demo| demo.payloads(lock(&view).next_object()));
         {
             let mut view = lock(&view);
             view.authoring_demo = matches!(demo, Some(Ok(_)));
@@ -1068,18 +1068,6 @@ fn disconnect_text(reason: &DisconnectReason) -> String {
         DisconnectReason::Lost(why) => format!("connection lost ({why})"),
         other => format!("{other:?}"),
     }
-}
-
-/// A demo scene's ops, as an import of its file plans them: its groups (parents first), then
-/// its objects in their groups, with ids from `first` on.
-pub fn demo_payloads_from(
-    demo: &crate::demos::Demo,
-    first: replication::shape::IdSource,
-) -> Result<Vec<ShapePayload>, String> {
-    let loaded = demo.load(&formats::fvrml::LoadOptions::default())?;
-    crate::transfer::scene_payloads(std::path::Path::new(demo.file), &loaded.scene, first)
-        .map(|imported| imported.payloads)
-        .map_err(|e| e.to_string())
 }
 
 #[cfg(test)]
