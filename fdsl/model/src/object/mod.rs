@@ -48,7 +48,7 @@ pub use physics::{ForceField, Physics, Property};
 pub use sample::{ColorSlot, DEFAULT_DIFFUSE, MAX_RAY_PIECES, Sampler};
 pub use shared::Shared;
 pub use space::{Domain, Motion, Timing, Transform};
-pub use tool::{Axis, Pose, ToolKind, ToolShape};
+pub use tool::{Axis, Pose, ToolKind, ToolShape, ToolSize};
 
 use crate::bvh::Aabb;
 use fdsl::limits::MAX_SOURCE_BYTES;
