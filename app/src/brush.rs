@@ -16,7 +16,7 @@ use model::scene::ObjectId;
 use replication::shape::ShapePayload;
 
 use crate::command::Planned;
-use crate::engine::View;
+use crate::engine::{Validated, View};
 
 /// Points closer than this fraction of the tool's radius to the last kept one are skipped.
 pub const STROKE_SPACING: f64 = 0.25;
@@ -77,8 +77,8 @@ impl Brush {
     }
 
     /// Reads `tool: <add|carve|paint PROPERTY VALUE> [SHAPE] [radius R] [blend B]
-    /// [mirror x|y|z|off]`, starting from `self`, where SHAPE is a [`ToolKind`] by its label
-    /// or name (`ball` or `sphere`, `box`, `cylinder`). A colour is painted as
+    /// [mirror x|y|z|off]`, starting from `self`, where SHAPE is any [`ToolKind`] by its
+    /// label or name (`ball` or `sphere`, `box`, ...). A colour is painted as
     /// `paint colour R G B` (0 to 1).
     pub fn parse(&self, text: &str) -> Result<Brush, String> {
         let mut brush = *self;
@@ -276,6 +276,8 @@ impl Stroke {
     pub fn finish(&self, view: &View) -> Result<Planned, String> {
         let payload =
             ShapePayload::edit(self.object, self.edit()).map_err(|e| format!("stroke: {e}"))?;
+        // The edit was compiled just now: validating it builds nothing.
+        let payload = Validated::new(payload).map_err(|e| format!("stroke: {e}"))?;
         Ok(Planned {
             payload,
             summary: format!(
@@ -351,7 +353,7 @@ mod tests {
             "points closer than a quarter radius are skipped"
         );
         let planned = stroke.finish(&view).unwrap();
-        let ShapePayload::Edit { object, edit } = &planned.payload else {
+        let ShapePayload::Edit { object, edit } = &*planned.payload else {
             panic!("{planned:?}");
         };
         assert_eq!(*object, melon);
