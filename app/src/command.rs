@@ -15,7 +15,7 @@ use model::object::{
 use replication::payload::LeaseAction;
 use replication::shape::ShapePayload;
 
-use crate::engine::View;
+use crate::engine::{Validated, View};
 use crate::new_object::{NEW_OBJECT_COLOUR, NEW_OBJECT_SPACING, new_object_domain};
 
 /// How long a lease taken from the command line lasts (it is taken again by editing on).
@@ -175,8 +175,9 @@ pub fn parse(line: &str) -> Option<Command<'_>> {
 /// The op a command authors, and a line saying what it does.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Planned {
-    /// The op's payload.
-    pub payload: ShapePayload,
+    /// The op's payload, validated: the engine authors it without checking it again
+    /// ([`crate::engine::Engine::author_validated`]).
+    pub payload: Validated,
     /// What it does, for the status line.
     pub summary: String,
     /// The object it selects afterwards (a new object), if any.
@@ -192,8 +193,7 @@ pub fn plan(
 ) -> Result<Planned, String> {
     match command {
         Command::Chat(text) => {
-            let payload = ShapePayload::Chat(text.to_string());
-            payload.validate()?;
+            let payload = Validated::new(ShapePayload::Chat(text.to_string()))?;
             Ok(planned(payload, "sent".into()))
         }
         Command::Expel(who) => plan_membership(session, who, true),
@@ -208,7 +208,7 @@ pub fn plan(
                 object: id,
                 field: Box::new(Field::Name(text.to_string())),
             };
-            payload.validate().map_err(|e| format!("name: {e}"))?;
+            let payload = validated("name", payload)?;
             let summary = format!("named {} {text}", session.object_label(id));
             Ok(planned(payload, summary))
         }
@@ -222,8 +222,13 @@ pub fn plan(
     }
 }
 
+/// `payload` once it validates, as every peer checks it; else why not, after `what`.
+fn validated(what: &str, payload: ShapePayload) -> Result<Validated, String> {
+    Validated::new(payload).map_err(|e| format!("{what}: {e}"))
+}
+
 /// A plan that selects nothing new.
-fn planned(payload: ShapePayload, summary: String) -> Planned {
+fn planned(payload: Validated, summary: String) -> Planned {
     Planned {
         payload,
         summary,
@@ -254,7 +259,8 @@ fn plan_membership(session: &View, who: &str, expel: bool) -> Result<Planned, St
     } else {
         format!("readmitted {}", member.short())
     };
-    Ok(planned(ShapePayload::Member(Box::new(membership)), summary))
+    let payload = Validated::new(ShapePayload::Member(Box::new(membership)))?;
+    Ok(planned(payload, summary))
 }
 
 /// `shape:`: the selected object's implicit geometry, in a domain that fits it.
@@ -276,7 +282,7 @@ fn plan_shape(session: &View, selected: Option<u64>, text: &str) -> Result<Plann
         object: id,
         field: Box::new(Field::Geometry(Some(Box::new(geometry)))),
     };
-    payload.validate().map_err(|e| format!("shape: {e}"))?;
+    let payload = validated("shape", payload)?;
     let summary = format!("set the shape of {}", session.object_label(id));
     Ok(planned(payload, summary))
 }
@@ -289,7 +295,7 @@ fn plan_colour(session: &View, selected: Option<u64>, text: &str) -> Result<Plan
         object: id,
         field: Box::new(Field::Diffuse(Some(colour_def(text, current)?))),
     };
-    payload.validate().map_err(|e| format!("colour: {e}"))?;
+    let payload = validated("colour", payload)?;
     let summary = format!("set the colour of {}", session.object_label(id));
     Ok(planned(payload, summary))
 }
@@ -319,7 +325,7 @@ fn plan_new(session: &View, text: &str) -> Result<Planned, String> {
         ..ObjectData::default()
     };
     let payload = ids.create(data, None);
-    payload.validate().map_err(|e| format!("new: {e}"))?;
+    let payload = validated("new", payload)?;
     Ok(Planned {
         payload,
         summary: format!("created {name}"),
@@ -359,7 +365,7 @@ fn plan_property(
         object: id,
         field: Box::new(kind.field(formula)),
     };
-    payload.validate().map_err(|e| format!("{what}: {e}"))?;
+    let payload = validated(what, payload)?;
     let summary = format!("set the {what} of {}", session.object_label(id));
     Ok(planned(payload, summary))
 }
@@ -382,7 +388,7 @@ fn plan_lease(session: &View, selected: Option<u64>, kind: LeaseKind) -> Result<
             format!("took the lease of {label} for {LEASE_TTL_SECS} s"),
         ),
     };
-    Ok(planned(payload, summary))
+    Ok(planned(Validated::new(payload)?, summary))
 }
 
 /// `undo` this peer's latest effective edit of the selected object, or (`redo`) the edit its
@@ -395,13 +401,19 @@ fn plan_undo(session: &View, selected: Option<u64>, redo: bool) -> Result<Planne
             .redo_target(id)
             .ok_or_else(|| format!("nothing of yours to redo on {label}"))?;
         let summary = format!("redid your last undone edit of {label}");
-        return Ok(planned(ShapePayload::Redo(target), summary));
+        return Ok(planned(
+            Validated::new(ShapePayload::Redo(target))?,
+            summary,
+        ));
     }
     let target = session
         .undo_target(id)
         .ok_or_else(|| format!("nothing of yours to undo on {label}"))?;
     let summary = format!("undid your last edit of {label}");
-    Ok(planned(ShapePayload::Undo(target), summary))
+    Ok(planned(
+        Validated::new(ShapePayload::Undo(target))?,
+        summary,
+    ))
 }
 
 /// The formula a line gives for `what`, and its tape of `outputs` for `slot`: through the
@@ -594,11 +606,12 @@ mod tests {
     }
 
     /// Issue 52: a typed formula is compiled once, through the object model's cache, from
-    /// the line to the scene; and the op's object is built once on each step that must check
-    /// or fold it (the line's plan, the engine's check of what a face hands it, the signing,
-    /// which decodes the payload as every peer will, and the fold), never again to check the
-    /// formula. Counted on this thread, which plans, checks, signs and folds here as the face
-    /// and the engine thread do.
+    /// the line to the scene (the line's check of it once compiled the text outside the
+    /// cache, and the op's object compiled it again). The op's object is built once by the
+    /// plan, which checks it as every peer will; the engine authors the planned payload
+    /// without building it again ([`Validated`]); signing then decodes it as every peer
+    /// will, and the fold builds the scene's object. Counted on this thread, which plans,
+    /// signs and folds here as the face and the engine thread do.
     #[test]
     fn a_typed_formula_is_compiled_once_from_the_line_to_the_scene() {
         use model::object::compiled::{
@@ -629,18 +642,17 @@ mod tests {
             let before = counts();
             let planned = plan(parse(line).unwrap(), &view, Some(id)).unwrap();
             assert_eq!(since(before), [1, 1, 0], "planning `{line}`");
-            // What `Engine::author` checks on the face's thread.
-            planned.payload.validate().unwrap();
+            // What the engine thread does with a payload `Engine::author_validated` hands it.
             let now = Timestamp(2_000_000 + n as u64);
-            let (_, insertion) = log.author(&keypair, now, planned.payload).unwrap();
+            let payload = planned.payload.into_payload();
+            let (_, insertion) = log.author(&keypair, now, payload).unwrap();
             view.apply(&log, &insertion);
             view.refresh(&log);
-            // Nothing is compiled again; the op's object is built by each step that must check
-            // or fold it: the plan, the engine's check of what a face hands it, the signing
-            // (which decodes the payload as every peer will) and the fold.
+            // Nothing is compiled again; besides the plan's, the op's object is built by the
+            // signing (which decodes the payload as every peer will) and by the fold.
             assert_eq!(
                 since(before),
-                [1, 4, 0],
+                [1, 3, 0],
                 "`{line}` from the line to the scene"
             );
         }
@@ -674,7 +686,11 @@ mod tests {
     #[test]
     fn colours_take_numbers_formulas_or_a_scalar_through_the_map() {
         let (s, id) = session();
-        let colour = |text| match plan(Command::Colour(text), &s, Some(id)).unwrap().payload {
+        let colour = |text| match plan(Command::Colour(text), &s, Some(id))
+            .unwrap()
+            .payload
+            .into_payload()
+        {
             ShapePayload::Set { field, .. } => match *field {
                 Field::Diffuse(Some(def)) => def,
                 other => panic!("{other:?}"),
@@ -693,7 +709,7 @@ mod tests {
     fn new_objects_get_fresh_ids_beside_the_others() {
         let (s, _) = session();
         let planned = plan(Command::New("0.8-sqrt(x^2+y^2+z^2)"), &s, None).unwrap();
-        let ShapePayload::Create { object, data, .. } = &planned.payload else {
+        let ShapePayload::Create { object, data, .. } = &*planned.payload else {
             panic!("{planned:?}");
         };
         assert_eq!(planned.select, Some(*object));
@@ -714,7 +730,7 @@ mod tests {
                 "0.5+0.1*x"
             };
             let planned = plan(Command::Property(kind, text), &s, Some(id)).unwrap();
-            let ShapePayload::Set { object, field } = &planned.payload else {
+            let ShapePayload::Set { object, field } = &*planned.payload else {
                 panic!("{planned:?}");
             };
             assert_eq!(*object, id);
@@ -728,7 +744,7 @@ mod tests {
         assert!(err.contains("x = ..."), "{err}");
         let lease = plan(Command::Lease(LeaseKind::Weak), &s, Some(id)).unwrap();
         assert!(matches!(
-            lease.payload,
+            lease.payload.into_payload(),
             ShapePayload::Lease(LeaseAction::Acquire { strong: false, .. })
         ));
     }
@@ -737,7 +753,7 @@ mod tests {
     fn a_new_object_gets_a_domain_that_fits_and_an_unbounded_one_is_refused() {
         let (s, _) = session();
         let planned = plan(Command::New("0.3-sqrt((x-1)^2+y^2+z^2)"), &s, None).unwrap();
-        let ShapePayload::Create { data, .. } = &planned.payload else {
+        let ShapePayload::Create { data, .. } = &*planned.payload else {
             panic!("{planned:?}");
         };
         let b = data.geometry.as_ref().unwrap().domain.unwrap().aabb();

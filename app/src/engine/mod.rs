@@ -167,6 +167,32 @@ enum Request {
     Shutdown,
 }
 
+/// A payload that passed [`ShapePayload::validate`] (its formulas compile, its numbers are
+/// valid, its text is short), so that the engine authors it without building its object
+/// again to check it ([`Engine::author_validated`]). Made only by [`Validated::new`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Validated(ShapePayload);
+
+impl Validated {
+    /// The payload, once it validates; else why it does not.
+    pub fn new(payload: ShapePayload) -> Result<Validated, String> {
+        payload.validate()?;
+        Ok(Validated(payload))
+    }
+
+    /// The payload.
+    pub fn into_payload(self) -> ShapePayload {
+        self.0
+    }
+}
+
+impl std::ops::Deref for Validated {
+    type Target = ShapePayload;
+    fn deref(&self) -> &ShapePayload {
+        &self.0
+    }
+}
+
 /// The reply to an authoring request, read once it comes.
 pub struct Pending(std_mpsc::Receiver<Result<OpId, String>>);
 
@@ -371,16 +397,24 @@ impl Engine {
     /// [`Pending`]. The view shows the op once it is stored.
     /// A payload that does not validate is answered at once with the reason.
     pub fn author(&self, payload: ShapePayload) -> Result<Pending, RequestError> {
-        let (reply, answer) = std_mpsc::channel();
-        match payload.validate() {
-            Ok(()) => self.request(Request::Author {
-                payload: Box::new(payload),
-                reply,
-            })?,
+        match Validated::new(payload) {
+            Ok(payload) => self.author_validated(payload),
             Err(e) => {
+                let (reply, answer) = std_mpsc::channel();
                 let _ = reply.send(Err(e));
+                Ok(Pending(answer))
             }
         }
+    }
+
+    /// Authors an op already validated (a planned command's), without building its object
+    /// again to check it: see [`Engine::author`].
+    pub fn author_validated(&self, payload: Validated) -> Result<Pending, RequestError> {
+        let (reply, answer) = std_mpsc::channel();
+        self.request(Request::Author {
+            payload: Box::new(payload.0),
+            reply,
+        })?;
         Ok(Pending(answer))
     }
 
