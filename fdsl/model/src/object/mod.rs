@@ -11,6 +11,10 @@
 //!   when created. [`BoxSampler`] (from [`Sampler::restrict`]) is the same object restricted
 //!   to a box, evaluating many points at once with the sampler's values bit for bit.
 //! - [`codec`] is the canonical, versioned binary form of objects and edits.
+//! - An edit's tool is a [`ToolShape`]; [`ToolKind`] is the one list of its kinds, with the
+//!   names and the sizes ([`ToolSize`]) that brushes and files read and write them by.
+//! - A formula checked before its object is built ([`Formula::tape`]) is compiled through the
+//!   same per-process cache ([`compiled`]), so it is compiled once.
 //!
 //! Sign convention: `f >= 0` is inside (an imported mesh's value is its signed distance). An
 //! object with no geometry, or with parametric
