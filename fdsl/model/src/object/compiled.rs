@@ -225,6 +225,44 @@ mod tests {
         assert_eq!(n_compiled_on_this_thread(), before + 2);
     }
 
+    /// A caller that checks a formula before building its object (the app's command line)
+    /// compiles it once, whichever outputs it asks for, and the object built next compiles
+    /// nothing: a formula that lacks outputs is kept as such.
+    #[test]
+    fn a_formula_checked_for_several_outputs_then_built_compiles_once() {
+        use crate::object::{ColorDef, ColorMap, ObjectError, Slot};
+        let formula = Formula::new("0.5 + 0.2*y /* checked, then built */").unwrap();
+        let before = n_compiled_on_this_thread();
+        let rgb_or_scalar: [&[&str]; 2] = [&["r", "g", "b"], &[]];
+        let (choice_idx, _) = formula
+            .first_tape(Slot::Diffuse, &rgb_or_scalar, &Grids::default())
+            .unwrap();
+        assert_eq!(choice_idx, 1, "a scalar is its main value");
+        assert!(matches!(
+            formula.tape(Slot::Diffuse, &["r", "g", "b"], &Grids::default()),
+            Err(ObjectError::MissingOutput { .. })
+        ));
+        Object::new(ObjectData {
+            geometry: Some(Geometry::implicit(
+                Formula::new("1 - x^2 /* checked, then built: geometry */").unwrap(),
+            )),
+            appearance: crate::object::Appearance {
+                diffuse: Some(ColorDef::Map {
+                    formula,
+                    map: ColorMap {
+                        keys: vec![(0.0, [0.0; 3])],
+                    },
+                }),
+                ..Default::default()
+            }
+            .into(),
+            ..ObjectData::default()
+        })
+        .unwrap();
+        // The geometry's formula is the one other compile.
+        assert_eq!(n_compiled_on_this_thread(), before + 2);
+    }
+
     #[test]
     fn objects_hand_out_their_compiled_tapes_without_compiling_again() {
         use crate::object::{
