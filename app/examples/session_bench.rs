@@ -36,12 +36,11 @@ use std::time::{Duration, Instant};
 use anyhow::{Context as _, bail, ensure};
 use app::clock;
 use app::command;
-use app::engine::{Engine, EngineConfig, Pending, RequestError, lock, store};
+use app::engine::{Engine, EngineConfig, Pending, RequestError, Validated, lock, store};
 use model::scene::Scene;
 use replication::net::discovery::message::{DiscoveryMessage, NO_COOKIE};
 use replication::net::discovery::registry::{self, Registry};
 use replication::net::invite::Invite;
-use replication::shape::ShapePayload;
 use replication::{Keypair, Timestamp};
 use testkit::alloc::{CountingAlloc, live_bytes};
 
@@ -223,7 +222,7 @@ fn reply(pending: &Pending, deadline: Instant) -> anyhow::Result<()> {
 }
 
 /// Plans one command line against A's view, as `sculpt peer --command` does.
-fn plan(engine: &Engine, line: &str, selected: Option<u64>) -> anyhow::Result<ShapePayload> {
+fn plan(engine: &Engine, line: &str, selected: Option<u64>) -> anyhow::Result<Validated> {
     let parsed = command::parse(line).context("an empty line")?;
     let view = lock(engine.view());
     command::plan(parsed, &view, selected)
@@ -236,7 +235,10 @@ fn create_objects(a: &Engine) -> anyhow::Result<Vec<u64>> {
     for i in 0..N_OBJECTS {
         let line = format!("new: 0.{}-sqrt(x^2+y^2+z^2)", 5 + i);
         let payload = plan(a, &line, None)?;
-        reply(&a.author(payload)?, clock::now().instant + EDIT_PATIENCE)?;
+        reply(
+            &a.author_validated(payload)?,
+            clock::now().instant + EDIT_PATIENCE,
+        )?;
         wait_view(a, "A's new object", EDIT_PATIENCE, |v| v.n_ops() == i + 1)?;
     }
     let objects: Vec<u64> = lock(a.view())
@@ -342,14 +344,14 @@ fn one_edit(
     a: &Engine,
     b: &Engine,
     wakes: &Receiver<()>,
-    payload: ShapePayload,
+    payload: Validated,
     times: &mut EditTimes,
 ) -> anyhow::Result<()> {
     let (a_before, b_before) = (lock(a.view()).n_ops(), lock(b.view()).n_ops());
     while wakes.try_recv().is_ok() {}
     let t0 = clock::now().instant;
     let deadline = t0 + EDIT_PATIENCE;
-    let pending = a.author(payload)?;
+    let pending = a.author_validated(payload)?;
     let (mut on_a, mut on_b) = (None, None);
     loop {
         if on_a.is_none() && lock(a.view()).n_ops() > a_before {
@@ -399,7 +401,7 @@ fn fill_history(a: &Engine, objects: &[u64], n_total: usize) -> anyhow::Result<(
         {
             reply(&oldest, deadline)?;
         }
-        match a.author(payload) {
+        match a.author_validated(payload) {
             Ok(pending) => in_flight.push_back(pending),
             Err(RequestError::Busy) => bail!("the engine's queue is full"),
             Err(e) => bail!("{e}"),

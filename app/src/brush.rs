@@ -9,12 +9,14 @@
 
 use glam::DVec3;
 use model::limits::MAX_STROKE_POSES;
-use model::object::{Axis, Edit, EditOp, PaintValue, Paintable, Pose, ToolShape, Transform};
+use model::object::{
+    Axis, Edit, EditOp, PaintValue, Paintable, Pose, ToolKind, ToolShape, Transform,
+};
 use model::scene::ObjectId;
 use replication::shape::ShapePayload;
 
 use crate::command::Planned;
-use crate::engine::View;
+use crate::engine::{Validated, View};
 
 /// Points closer than this fraction of the tool's radius to the last kept one are skipped.
 pub const STROKE_SPACING: f64 = 0.25;
@@ -32,24 +34,13 @@ pub enum BrushOp {
     Paint(Paintable, PaintValue),
 }
 
-/// The tool's shape.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum BrushShape {
-    /// A ball.
-    Ball,
-    /// A box with rounded edges.
-    Box,
-    /// A cylinder along the object's y axis.
-    Cylinder,
-}
-
 /// A brush: what a drag on a surface does.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Brush {
     /// Add, carve or paint.
     pub op: BrushOp,
-    /// The tool's shape.
-    pub shape: BrushShape,
+    /// The kind of tool; its size is the radius ([`ToolShape::of_kind`]).
+    pub shape: ToolKind,
     /// Its radius (half its size), scene units.
     pub radius: f64,
     /// Smooth blending radius (0: sharp).
@@ -62,7 +53,7 @@ impl Default for Brush {
     fn default() -> Self {
         Self {
             op: BrushOp::Carve,
-            shape: BrushShape::Ball,
+            shape: ToolKind::Sphere,
             radius: 0.15,
             blend: 0.0,
             mirror: None,
@@ -73,18 +64,7 @@ impl Default for Brush {
 impl Brush {
     /// The tool's solid.
     pub fn tool(&self) -> ToolShape {
-        let r = self.radius;
-        match self.shape {
-            BrushShape::Ball => ToolShape::Sphere { radius: r },
-            BrushShape::Box => ToolShape::Box {
-                half_extents: DVec3::splat(r),
-                rounding: r * 0.2,
-            },
-            BrushShape::Cylinder => ToolShape::Cylinder {
-                radius: r,
-                half_height: r,
-            },
-        }
+        ToolShape::of_kind(self.shape, self.radius)
     }
 
     /// The edit operation.
@@ -96,51 +76,18 @@ impl Brush {
         }
     }
 
-    /// Reads `tool: <add|carve|paint PROPERTY VALUE> [ball|box|cylinder] [radius R]
-    /// [blend B] [mirror x|y|z|off]`, starting from `self`. A colour is painted as
+    /// Reads `tool: <add|carve|paint PROPERTY VALUE> [SHAPE] [radius R] [blend B]
+    /// [mirror x|y|z|off]`, starting from `self`, where SHAPE is any [`ToolKind`] by its
+    /// label or name (`ball` or `sphere`, `box`, ...). A colour is painted as
     /// `paint colour R G B` (0 to 1).
     pub fn parse(&self, text: &str) -> Result<Brush, String> {
         let mut brush = *self;
         let mut words = text.split_whitespace().map(str::to_ascii_lowercase);
-        let number = |w: Option<String>, what: &str| -> Result<f64, String> {
-            let w = w.ok_or(format!("tool: {what} needs a number"))?;
-            w.parse::<f64>()
-                .ok()
-                .filter(|v| v.is_finite())
-                .ok_or(format!("tool: `{w}` is not a number for {what}"))
-        };
         while let Some(word) = words.next() {
             match word.as_str() {
                 "add" => brush.op = BrushOp::Add,
                 "carve" => brush.op = BrushOp::Carve,
-                "paint" => {
-                    let name = words
-                        .next()
-                        .ok_or("tool: paint what? (colour, density, ...)")?;
-                    brush.op = match name.as_str() {
-                        "colour" | "color" => {
-                            let mut c = [0.0f32; 3];
-                            for v in &mut c {
-                                *v = number(words.next(), "a colour")? as f32;
-                            }
-                            if !c.iter().all(|v| (0.0..=1.0).contains(v)) {
-                                return Err("tool: colour components lie between 0 and 1".into());
-                            }
-                            BrushOp::Paint(Paintable::Color, PaintValue::Color(c))
-                        }
-                        other => {
-                            let property = paintable(other).ok_or(format!(
-                                "tool: cannot paint `{other}`: colour, density, tension, \
-                                 friction, depth, transparency or shininess"
-                            ))?;
-                            let value = number(words.next(), other)?;
-                            BrushOp::Paint(property, PaintValue::Scalar(value))
-                        }
-                    };
-                }
-                "ball" | "sphere" => brush.shape = BrushShape::Ball,
-                "box" => brush.shape = BrushShape::Box,
-                "cylinder" => brush.shape = BrushShape::Cylinder,
+                "paint" => brush.op = paint_op(&mut words)?,
                 "radius" | "size" => {
                     let r = number(words.next(), "radius")?;
                     if !(RADIUS_RANGE[0]..=RADIUS_RANGE[1]).contains(&r) {
@@ -167,12 +114,17 @@ impl Brush {
                         _ => return Err("tool: mirror x, y, z or off".into()),
                     };
                 }
-                other => {
-                    return Err(format!(
-                        "tool: `{other}` is not understood; say add, carve or paint PROPERTY \
-                         VALUE, a shape (ball, box, cylinder), radius R, blend B, mirror x|y|z"
-                    ));
-                }
+                other => match ToolKind::from_name(other) {
+                    Some(kind) => brush.shape = kind,
+                    None => {
+                        let shapes = ToolKind::ALL.map(ToolKind::label).join(", ");
+                        return Err(format!(
+                            "tool: `{other}` is not understood; say add, carve or paint \
+                             PROPERTY VALUE, a shape ({}), radius R, blend B, mirror x|y|z",
+                            shapes
+                        ));
+                    }
+                },
             }
         }
         Ok(brush)
@@ -188,11 +140,7 @@ impl Brush {
                 format!("paint {} {} {} {}", paint_name(p), c[0], c[1], c[2])
             }
         };
-        let shape = match self.shape {
-            BrushShape::Ball => "ball",
-            BrushShape::Box => "box",
-            BrushShape::Cylinder => "cylinder",
-        };
+        let shape = self.shape.label();
         let mirror = match self.mirror {
             None => "",
             Some(Axis::X) => " mirror x",
@@ -221,6 +169,38 @@ pub fn paint_name(p: Paintable) -> &'static str {
 
 fn paintable(word: &str) -> Option<Paintable> {
     Paintable::ALL.into_iter().find(|p| paint_name(*p) == word)
+}
+
+/// The number a `tool:` line gives for `what`.
+fn number(word: Option<String>, what: &str) -> Result<f64, String> {
+    let w = word.ok_or(format!("tool: {what} needs a number"))?;
+    w.parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite())
+        .ok_or(format!("tool: `{w}` is not a number for {what}"))
+}
+
+/// What follows `paint` in a `tool:` line: `PROPERTY VALUE`, or `colour R G B`.
+fn paint_op(words: &mut impl Iterator<Item = String>) -> Result<BrushOp, String> {
+    let name = words
+        .next()
+        .ok_or("tool: paint what? (colour, density, ...)")?;
+    if let "colour" | "color" = name.as_str() {
+        let mut c = [0.0f32; 3];
+        for v in &mut c {
+            *v = number(words.next(), "a colour")? as f32;
+        }
+        if !c.iter().all(|v| (0.0..=1.0).contains(v)) {
+            return Err("tool: colour components lie between 0 and 1".into());
+        }
+        return Ok(BrushOp::Paint(Paintable::Color, PaintValue::Color(c)));
+    }
+    let property = paintable(&name).ok_or(format!(
+        "tool: cannot paint `{name}`: colour, density, tension, friction, depth, \
+         transparency or shininess"
+    ))?;
+    let value = number(words.next(), &name)?;
+    Ok(BrushOp::Paint(property, PaintValue::Scalar(value)))
 }
 
 /// A stroke being drawn on one object.
@@ -296,6 +276,8 @@ impl Stroke {
     pub fn finish(&self, view: &View) -> Result<Planned, String> {
         let payload =
             ShapePayload::edit(self.object, self.edit()).map_err(|e| format!("stroke: {e}"))?;
+        // The edit was compiled just now: validating it builds nothing.
+        let payload = Validated::new(payload).map_err(|e| format!("stroke: {e}"))?;
         Ok(Planned {
             payload,
             summary: format!(
@@ -324,7 +306,7 @@ mod tests {
         );
         assert_eq!(
             (b.shape, b.radius, b.blend, b.mirror),
-            (BrushShape::Cylinder, 0.3, 0.05, Some(Axis::X))
+            (ToolKind::Cylinder, 0.3, 0.05, Some(Axis::X))
         );
         let c = b.parse("paint colour 1 0 0.5 ball").unwrap();
         assert_eq!(
@@ -353,7 +335,7 @@ mod tests {
         let mut log = replication::Log::default();
         let me = keypair.peer_id();
         let first = View::new(me, &log).unwrap().next_object();
-        for payload in crate::engine::demo_payloads_from(&crate::demos::DEMOS[0], first).unwrap() {
+        for payload in crate::demos::DEMOS[0].payloads(first).unwrap() {
             log.author(&keypair, replication::Timestamp(1), payload)
                 .unwrap();
         }
@@ -371,7 +353,7 @@ mod tests {
             "points closer than a quarter radius are skipped"
         );
         let planned = stroke.finish(&view).unwrap();
-        let ShapePayload::Edit { object, edit } = &planned.payload else {
+        let ShapePayload::Edit { object, edit } = &*planned.payload else {
             panic!("{planned:?}");
         };
         assert_eq!(*object, melon);

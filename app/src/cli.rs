@@ -430,7 +430,7 @@ fn run_commands(engine: &Engine, lines: &[String]) -> anyhow::Result<()> {
         let planned = app::command::plan(command, &lock(engine.view()), selected)
             .map_err(|e| anyhow::anyhow!("--command `{line}`: {e}"))?;
         engine
-            .author(planned.payload)?
+            .author_validated(planned.payload)?
             .wait()
             .map_err(|e| anyhow::anyhow!("--command `{line}`: {e}"))?;
         if planned.select.is_some() {

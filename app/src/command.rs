@@ -5,24 +5,18 @@
 //! when every formula in it compiles: otherwise the error, with fdsl's caret under the
 //! culprit, is what the line gives, and nothing is authored.
 
-use fdsl::Function;
+use fdsl::tape::Tape;
+use fdsl::{Diagnostic, Function, Grids};
 use glam::DVec3;
 use model::object::{
-    ColorDef, Domain, Field, ForceField, Formula, Geometry, ObjectData, Property, Shape, Timing,
-    Transform, fit_domain,
+    ColorDef, Field, ForceField, Formula, Geometry, Object, ObjectData, ObjectError, Property,
+    Shape, Slot, Timing, Transform, fit_domain,
 };
-use replication::membership::Membership;
 use replication::payload::LeaseAction;
 use replication::shape::ShapePayload;
 
-use crate::engine::View;
-
-/// Edge of the domain box of an object made with `new:` (scene units).
-pub const NEW_OBJECT_SIZE: f64 = 2.2;
-/// How far apart along x objects made with `new:` are placed (scene units).
-pub const NEW_OBJECT_SPACING: f64 = 2.5;
-/// The diffuse colour of an object made with `new:`.
-pub const NEW_OBJECT_COLOUR: [f32; 3] = [0.55, 0.7, 0.95];
+use crate::engine::{Validated, View};
+use crate::new_object::{NEW_OBJECT_COLOUR, NEW_OBJECT_SPACING, new_object_domain};
 
 /// How long a lease taken from the command line lasts (it is taken again by editing on).
 pub const LEASE_TTL_SECS: u64 = 300;
@@ -181,8 +175,9 @@ pub fn parse(line: &str) -> Option<Command<'_>> {
 /// The op a command authors, and a line saying what it does.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Planned {
-    /// The op's payload.
-    pub payload: ShapePayload,
+    /// The op's payload, validated: the engine authors it without checking it again
+    /// ([`crate::engine::Engine::author_validated`]).
+    pub payload: Validated,
     /// What it does, for the status line.
     pub summary: String,
     /// The object it selects afterwards (a new object), if any.
@@ -196,223 +191,281 @@ pub fn plan(
     session: &View,
     selected: Option<u64>,
 ) -> Result<Planned, String> {
-    let selected_object = || {
-        let id = selected.ok_or("select an object first (click it in the view or the list)")?;
-        session
-            .scene()
-            .object(model::scene::ObjectId(id))
-            .map(|o| (id, o))
-            .ok_or_else(|| format!("{} is not in the scene", session.object_label(id)))
-    };
-    let planned = |payload, summary: String| Planned {
-        payload,
-        summary,
-        select: None,
-    };
     match command {
         Command::Chat(text) => {
-            let payload = ShapePayload::Chat(text.to_string());
-            payload.validate()?;
+            let payload = Validated::new(ShapePayload::Chat(text.to_string()))?;
             Ok(planned(payload, "sent".into()))
         }
-        Command::Expel(who) | Command::Readmit(who) => {
-            let expel = matches!(command, Command::Expel(_));
-            let nonce = session.founder_nonce().ok_or(
-                "only the session's founder (the peer that made its invite) can expel or readmit",
-            )?;
-            let member = session.find_member(who)?;
-            if member == session.peer_id() {
-                return Err("the founder cannot expel itself".into());
-            }
-            if !expel && !session.expelled().contains(&member) {
-                return Err(format!("{} is not expelled", member.short()));
-            }
-            let payload = ShapePayload::Member(Box::new(Membership {
-                member,
-                expel,
-                nonce,
-            }));
-            let summary = if expel {
-                format!(
-                    "expelled {}: its ops from now on count for nothing, and every peer \
-                     closes its connections to it",
-                    member.short()
-                )
-            } else {
-                format!("readmitted {}", member.short())
-            };
-            Ok(planned(payload, summary))
-        }
-        Command::Shape(text) => {
-            let (id, object) = selected_object()?;
-            let function = check_formula("shape", text)?;
-            let formula = Formula::new(text).map_err(|e| format!("shape: {e}"))?;
-            let current = object.data().geometry.as_ref();
-            // A bounded solid gets a domain that fits it; an unbounded one (a half-space that
-            // carves) keeps the object's box, which clips it as before.
-            let fitted = fit_domain(&function.tape(), 0.0).ok();
-            let geometry = Geometry {
-                shape: Shape::Implicit(formula),
-                domain: fitted
-                    .or_else(|| current.and_then(|g| g.domain))
-                    .or(Some(new_object_domain())),
-                transform: current.map_or(Transform::IDENTITY, |g| g.transform),
-            };
-            let payload = ShapePayload::Set {
-                object: id,
-                field: Box::new(Field::Geometry(Some(Box::new(geometry)))),
-            };
-            payload.validate().map_err(|e| format!("shape: {e}"))?;
-            let summary = format!("set the shape of {}", session.object_label(id));
-            Ok(planned(payload, summary))
-        }
-        Command::Colour(text) => {
-            let (id, object) = selected_object()?;
-            let current = object.data().appearance.diffuse.as_ref();
-            let payload = ShapePayload::Set {
-                object: id,
-                field: Box::new(Field::Diffuse(Some(colour_def(text, current)?))),
-            };
-            payload.validate().map_err(|e| format!("colour: {e}"))?;
-            let summary = format!("set the colour of {}", session.object_label(id));
-            Ok(planned(payload, summary))
-        }
-        Command::New(text) => {
-            let function = check_formula("new", text)?;
-            let domain = fit_domain(&function.tape(), 0.0).map_err(|e| format!("new: {e}"))?;
-            let formula = Formula::new(text).map_err(|e| format!("new: {e}"))?;
-            let ids = session.next_object();
-            let object = ids.id();
-            let n_objects = session.scene().len();
-            let name = format!("object {}", ids.counter);
-            let data = ObjectData {
-                name: name.clone(),
-                geometry: Some(Geometry::implicit_in(formula, domain)),
-                transform: Transform::translate(DVec3::new(
-                    NEW_OBJECT_SPACING * n_objects as f64,
-                    0.0,
-                    0.0,
-                )),
-                appearance: model::object::Appearance {
-                    diffuse: Some(ColorDef::Constant(NEW_OBJECT_COLOUR)),
-                    ..Default::default()
-                }
-                .into(),
-                ..ObjectData::default()
-            };
-            let payload = ids.create(data, None);
-            payload.validate().map_err(|e| format!("new: {e}"))?;
-            Ok(Planned {
-                payload,
-                summary: format!("created {name}"),
-                select: Some(object),
-            })
-        }
-        Command::Property(kind, text) => {
-            let (id, _) = selected_object()?;
-            let what = kind.name();
-            let formula = if text.eq_ignore_ascii_case("off") {
-                None
-            } else {
-                let function = check_formula(what, text)?;
-                if kind == PropertyKind::Force
-                    && !["x", "y", "z"].iter().all(|o| function.has_output(o))
-                {
-                    return Err(
-                        "force: give x = ...; y = ...; z = ...; (functions of u, v, w, t)".into(),
-                    );
-                }
-                Some(Formula::new(text).map_err(|e| format!("{what}: {e}"))?)
-            };
-            let payload = ShapePayload::Set {
-                object: id,
-                field: Box::new(kind.field(formula)),
-            };
-            payload.validate().map_err(|e| format!("{what}: {e}"))?;
-            let summary = format!("set the {what} of {}", session.object_label(id));
-            Ok(planned(payload, summary))
-        }
+        Command::Expel(who) => plan_membership(session, who, true),
+        Command::Readmit(who) => plan_membership(session, who, false),
+        Command::Shape(text) => plan_shape(session, selected, text),
+        Command::Colour(text) => plan_colour(session, selected, text),
+        Command::New(text) => plan_new(session, text),
+        Command::Property(kind, text) => plan_property(session, selected, kind, text),
         Command::Name(text) => {
-            let (id, _) = selected_object()?;
+            let (id, _) = selected_object(session, selected)?;
             let payload = ShapePayload::Set {
                 object: id,
                 field: Box::new(Field::Name(text.to_string())),
             };
-            payload.validate().map_err(|e| format!("name: {e}"))?;
-            Ok(planned(
-                payload,
-                format!("named {} {text}", session.object_label(id)),
-            ))
-        }
-        Command::Lease(kind) => {
-            let (id, _) = selected_object()?;
-            let label = session.object_label(id);
-            let (payload, summary) = match kind {
-                LeaseKind::Release => (
-                    ShapePayload::Lease(LeaseAction::Release { object: id }),
-                    format!("released {label}"),
-                ),
-                strong => (
-                    ShapePayload::Lease(LeaseAction::Acquire {
-                        object: id,
-                        strong: strong == LeaseKind::Strong,
-                        ttl_micros: LEASE_TTL_SECS * 1_000_000,
-                    }),
-                    format!("took the lease of {label} for {LEASE_TTL_SECS} s"),
-                ),
-            };
+            let payload = validated("name", payload)?;
+            let summary = format!("named {} {text}", session.object_label(id));
             Ok(planned(payload, summary))
         }
+        Command::Lease(kind) => plan_lease(session, selected, kind),
         Command::Tool(_) => Err("tool: is a brush setting, not an op; the window sets it".into()),
         Command::Probe(_) => {
             Err("probe: is the touch tool's body, not an op; the window sets it".into())
         }
-        Command::Undo => {
-            let (id, _) = selected_object()?;
-            let target = session.undo_target(id).ok_or_else(|| {
-                format!("nothing of yours to undo on {}", session.object_label(id))
-            })?;
-            let summary = format!("undid your last edit of {}", session.object_label(id));
-            Ok(planned(ShapePayload::Undo(target), summary))
-        }
-        Command::Redo => {
-            let (id, _) = selected_object()?;
-            let target = session.redo_target(id).ok_or_else(|| {
-                format!("nothing of yours to redo on {}", session.object_label(id))
-            })?;
-            let summary = format!(
-                "redid your last undone edit of {}",
-                session.object_label(id)
-            );
-            Ok(planned(ShapePayload::Redo(target), summary))
-        }
+        Command::Undo => plan_undo(session, selected, false),
+        Command::Redo => plan_undo(session, selected, true),
     }
 }
 
-fn new_object_domain() -> Domain {
-    Domain::new(DVec3::ZERO, DVec3::splat(NEW_OBJECT_SIZE))
+/// `payload` once it validates, as every peer checks it; else why not, after `what`.
+fn validated(what: &str, payload: ShapePayload) -> Result<Validated, String> {
+    Validated::new(payload).map_err(|e| format!("{what}: {e}"))
 }
 
-/// Compiles `text`; the error is every error diagnostic rendered with its caret, under a line
-/// naming `what`.
-fn check_formula(what: &str, text: &str) -> Result<Function, String> {
+/// A plan that selects nothing new.
+fn planned(payload: Validated, summary: String) -> Planned {
+    Planned {
+        payload,
+        summary,
+        select: None,
+    }
+}
+
+/// The selected object, with its id, or why there is none to change.
+fn selected_object(session: &View, selected: Option<u64>) -> Result<(u64, &Object), String> {
+    let id = selected.ok_or("select an object first (click it in the view or the list)")?;
+    session
+        .scene()
+        .object(model::scene::ObjectId(id))
+        .map(|o| (id, o))
+        .ok_or_else(|| format!("{} is not in the scene", session.object_label(id)))
+}
+
+/// `expel:` or `readmit:`, as the view's membership rules allow.
+fn plan_membership(session: &View, who: &str, expel: bool) -> Result<Planned, String> {
+    let membership = session.membership_change(who, expel)?;
+    let member = membership.member;
+    let summary = if expel {
+        format!(
+            "expelled {}: its ops from now on count for nothing, and every peer closes its \
+             connections to it",
+            member.short()
+        )
+    } else {
+        format!("readmitted {}", member.short())
+    };
+    let payload = Validated::new(ShapePayload::Member(Box::new(membership)))?;
+    Ok(planned(payload, summary))
+}
+
+/// `shape:`: the selected object's implicit geometry, in a domain that fits it.
+fn plan_shape(session: &View, selected: Option<u64>, text: &str) -> Result<Planned, String> {
+    let (id, object) = selected_object(session, selected)?;
+    let (formula, tape) = checked("shape", text, Slot::Geometry, &[])?;
+    let current = object.data().geometry.as_ref();
+    // A bounded solid gets a domain that fits it; an unbounded one (a half-space that
+    // carves) keeps the object's box, which clips it as before.
+    let fitted = fit_domain(&tape, 0.0).ok();
+    let geometry = Geometry {
+        shape: Shape::Implicit(formula),
+        domain: fitted
+            .or_else(|| current.and_then(|g| g.domain))
+            .or(Some(new_object_domain())),
+        transform: current.map_or(Transform::IDENTITY, |g| g.transform),
+    };
+    let payload = ShapePayload::Set {
+        object: id,
+        field: Box::new(Field::Geometry(Some(Box::new(geometry)))),
+    };
+    let payload = validated("shape", payload)?;
+    let summary = format!("set the shape of {}", session.object_label(id));
+    Ok(planned(payload, summary))
+}
+
+/// `colour:`: the selected object's diffuse colour (see [`Command::Colour`]).
+fn plan_colour(session: &View, selected: Option<u64>, text: &str) -> Result<Planned, String> {
+    let (id, object) = selected_object(session, selected)?;
+    let current = object.data().appearance.diffuse.as_ref();
+    let payload = ShapePayload::Set {
+        object: id,
+        field: Box::new(Field::Diffuse(Some(colour_def(text, current)?))),
+    };
+    let payload = validated("colour", payload)?;
+    let summary = format!("set the colour of {}", session.object_label(id));
+    Ok(planned(payload, summary))
+}
+
+/// `new:`: an object whose solid is the formula, in a domain that fits it, placed beside the
+/// others.
+fn plan_new(session: &View, text: &str) -> Result<Planned, String> {
+    let (formula, tape) = checked("new", text, Slot::Geometry, &[])?;
+    let domain = fit_domain(&tape, 0.0).map_err(|e| format!("new: {e}"))?;
+    let ids = session.next_object();
+    let object = ids.id();
+    let n_objects = session.scene().len();
+    let name = format!("object {}", ids.counter);
+    let data = ObjectData {
+        name: name.clone(),
+        geometry: Some(Geometry::implicit_in(formula, domain)),
+        transform: Transform::translate(DVec3::new(
+            NEW_OBJECT_SPACING * n_objects as f64,
+            0.0,
+            0.0,
+        )),
+        appearance: model::object::Appearance {
+            diffuse: Some(ColorDef::Constant(NEW_OBJECT_COLOUR)),
+            ..Default::default()
+        }
+        .into(),
+        ..ObjectData::default()
+    };
+    let payload = ids.create(data, None);
+    let payload = validated("new", payload)?;
+    Ok(Planned {
+        payload,
+        summary: format!("created {name}"),
+        select: Some(object),
+    })
+}
+
+/// `density:`, `force:`, ...: one property of the selected object, or `off`.
+fn plan_property(
+    session: &View,
+    selected: Option<u64>,
+    kind: PropertyKind,
+    text: &str,
+) -> Result<Planned, String> {
+    let (id, _) = selected_object(session, selected)?;
+    let what = kind.name();
+    let formula = if text.eq_ignore_ascii_case("off") {
+        None
+    } else {
+        // A force field is the vector `x`, `y`, `z`; the other properties are one value.
+        let outputs: &[&str] = match kind {
+            PropertyKind::Force => &["x", "y", "z"],
+            _ => &[],
+        };
+        let formula = formula(what, text)?;
+        match formula.tape(kind.field(None).slot(), outputs, &Grids::default()) {
+            Ok(_) => Some(formula),
+            Err(ObjectError::MissingOutput { .. }) => {
+                return Err(
+                    "force: give x = ...; y = ...; z = ...; (functions of u, v, w, t)".into(),
+                );
+            }
+            Err(e) => return Err(refusal(what, e)),
+        }
+    };
+    let payload = ShapePayload::Set {
+        object: id,
+        field: Box::new(kind.field(formula)),
+    };
+    let payload = validated(what, payload)?;
+    let summary = format!("set the {what} of {}", session.object_label(id));
+    Ok(planned(payload, summary))
+}
+
+/// `lease`, `hold` or `release` the selected object.
+fn plan_lease(session: &View, selected: Option<u64>, kind: LeaseKind) -> Result<Planned, String> {
+    let (id, _) = selected_object(session, selected)?;
+    let label = session.object_label(id);
+    let (payload, summary) = match kind {
+        LeaseKind::Release => (
+            ShapePayload::Lease(LeaseAction::Release { object: id }),
+            format!("released {label}"),
+        ),
+        strong => (
+            ShapePayload::Lease(LeaseAction::Acquire {
+                object: id,
+                strong: strong == LeaseKind::Strong,
+                ttl_micros: LEASE_TTL_SECS * 1_000_000,
+            }),
+            format!("took the lease of {label} for {LEASE_TTL_SECS} s"),
+        ),
+    };
+    Ok(planned(Validated::new(payload)?, summary))
+}
+
+/// `undo` this peer's latest effective edit of the selected object, or (`redo`) the edit its
+/// latest undo of it took back.
+fn plan_undo(session: &View, selected: Option<u64>, redo: bool) -> Result<Planned, String> {
+    let (id, _) = selected_object(session, selected)?;
+    let label = session.object_label(id);
+    if redo {
+        let target = session
+            .redo_target(id)
+            .ok_or_else(|| format!("nothing of yours to redo on {label}"))?;
+        let summary = format!("redid your last undone edit of {label}");
+        return Ok(planned(
+            Validated::new(ShapePayload::Redo(target))?,
+            summary,
+        ));
+    }
+    let target = session
+        .undo_target(id)
+        .ok_or_else(|| format!("nothing of yours to undo on {label}"))?;
+    let summary = format!("undid your last edit of {label}");
+    Ok(planned(
+        Validated::new(ShapePayload::Undo(target))?,
+        summary,
+    ))
+}
+
+/// The formula a line gives for `what`, and its tape of `outputs` for `slot`: through the
+/// object model's compile cache ([`Formula::tape`]), so the op built from it next compiles
+/// nothing again. Refused, the error names `what` and, when the formula does not compile,
+/// renders every error diagnostic of fdsl with its caret under the culprit.
+fn checked(
+    what: &str,
+    text: &str,
+    slot: Slot,
+    outputs: &[&str],
+) -> Result<(Formula, Tape), String> {
+    let formula = formula(what, text)?;
+    let tape = formula
+        .tape(slot, outputs, &Grids::default())
+        .map_err(|e| refusal(what, e))?;
+    Ok((formula, tape))
+}
+
+/// The formula of a line's `text`, or why there is none: nothing after the colon, or a text
+/// longer than the language takes.
+fn formula(what: &str, text: &str) -> Result<Formula, String> {
     if text.trim().is_empty() {
         return Err(format!("{what}: give a formula after the colon"));
     }
-    let compiled = Function::compile(text);
-    let rendered: Vec<String> = compiled
-        .diagnostics
+    // Too long: fdsl's parser says so before it reads the text, with its caret under the
+    // excess, as a line has always shown it.
+    Formula::new(text)
+        .map_err(|_| does_not_compile(what, text, &Function::compile(text).diagnostics))
+}
+
+/// The object model's refusal of a line's formula, as the line shows it.
+fn refusal(what: &str, e: ObjectError) -> String {
+    match e {
+        ObjectError::Compile { error, .. } => {
+            does_not_compile(what, &error.source, &error.diagnostics)
+        }
+        other => format!("{what}: {other}"),
+    }
+}
+
+/// Every error diagnostic rendered with its caret, under a line naming `what`.
+fn does_not_compile(what: &str, source: &str, diagnostics: &[Diagnostic]) -> String {
+    let rendered: Vec<String> = diagnostics
         .iter()
         .filter(|d| d.is_error())
-        .map(|d| d.render(text))
+        .map(|d| d.render(source))
         .collect();
-    match compiled.function {
-        Some(f) if rendered.is_empty() => Ok(f),
-        _ => Err(format!(
-            "{what}: the formula does not compile\n{}",
-            rendered.join("\n")
-        )),
-    }
+    format!(
+        "{what}: the formula does not compile\n{}",
+        rendered.join("\n")
+    )
 }
 
 /// Splits at commas outside brackets, so `atan2(x, z)` stays one part.
@@ -446,17 +499,23 @@ fn colour_def(text: &str, current: Option<&ColorDef>) -> Result<ColorDef, String
                 }
                 return Ok(ColorDef::Constant([numbers[0], numbers[1], numbers[2]]));
             }
+            // Each part on its own first, so that an error points into the part typed.
             for (name, part) in [("r", r), ("g", g), ("b", b)] {
-                check_formula(&format!("colour ({name})"), part)?;
+                checked(&format!("colour ({name})"), part, Slot::Diffuse, &[])?;
             }
             let formula = Formula::new(format!("r = {r}; g = {g}; b = {b};"))
                 .map_err(|e| format!("colour: {e}"))?;
             Ok(ColorDef::Rgb(formula))
         }
         [one] => {
-            let function = check_formula("colour", one)?;
-            let formula = Formula::new(*one).map_err(|e| format!("colour: {e}"))?;
-            if ["r", "g", "b"].iter().all(|o| function.has_output(o)) {
+            let formula = formula("colour", one)?;
+            // An `r`, `g`, `b` formula, or else a scalar through the object's colour map:
+            // asked in one go, the text is compiled once whichever it is.
+            let rgb_or_scalar: [&[&str]; 2] = [&["r", "g", "b"], &[]];
+            let (choice_idx, _) = formula
+                .first_tape(Slot::Diffuse, &rgb_or_scalar, &Grids::default())
+                .map_err(|e| refusal("colour", e))?;
+            if choice_idx == 0 {
                 return Ok(ColorDef::Rgb(formula));
             }
             match current {
@@ -523,16 +582,80 @@ mod tests {
 
     /// A view of a log holding the demo scene, its one object, and nothing to clean up.
     fn session() -> (View, u64) {
+        let (_, _, s, id) = session_log();
+        (s, id)
+    }
+
+    /// [`session`] with the log and the key that authored it.
+    fn session_log() -> (
+        replication::Keypair,
+        replication::Log<ShapePayload>,
+        View,
+        u64,
+    ) {
         let keypair = replication::Keypair::from_seed([3; 32]);
         let mut log = replication::Log::default();
         let me = keypair.peer_id();
         let first = View::new(me, &log).unwrap().next_object();
-        for payload in crate::engine::demo_payloads_from(&crate::demos::DEMOS[0], first).unwrap() {
+        for payload in crate::demos::DEMOS[0].payloads(first).unwrap() {
             log.author(&keypair, Timestamp(1_000_000), payload).unwrap();
         }
         let s = View::new(me, &log).unwrap();
         let id = s.scene().objects().next().unwrap().0.0;
-        (s, id)
+        (keypair, log, s, id)
+    }
+
+    /// Issue 52: a typed formula is compiled once, through the object model's cache, from
+    /// the line to the scene (the line's check of it once compiled the text outside the
+    /// cache, and the op's object compiled it again). The op's object is built once by the
+    /// plan, which checks it as every peer will; the engine authors the planned payload
+    /// without building it again ([`Validated`]); signing then decodes it as every peer
+    /// will, and the fold builds the scene's object. Counted on this thread, which plans,
+    /// signs and folds here as the face and the engine thread do.
+    #[test]
+    fn a_typed_formula_is_compiled_once_from_the_line_to_the_scene() {
+        use model::object::compiled::{
+            n_edits_compiled_on_this_thread, n_objects_built_on_this_thread,
+        };
+        let (keypair, mut log, mut view, id) = session_log();
+        let counts = || {
+            [
+                fdsl::n_compiled_on_this_thread(),
+                n_objects_built_on_this_thread(),
+                n_edits_compiled_on_this_thread(),
+            ]
+        };
+        let since = |before: [u64; 3]| {
+            let now = counts();
+            [0, 1, 2].map(|i| now[i] - before[i])
+        };
+        let lines = [
+            "shape: 0.61 - sqrt(x^2 + y^2 + z^2) /* compiled once: shape */",
+            "new: 0.3 - sqrt((x-1)^2 + y^2 + z^2) /* compiled once: new */",
+            // The watermelon is coloured through a colour map: one scalar keeps the map.
+            "colour: 0.5 + 0.2*y /* compiled once: colour through the map */",
+            "colour: r = x; g = 0.5; b = abs(z); /* compiled once: colour */",
+            "density: 0.5 + 0.1*x /* compiled once: density */",
+            "force: x = -v; y = u; z = 0; /* compiled once: force */",
+        ];
+        for (n, line) in lines.into_iter().enumerate() {
+            let before = counts();
+            let planned = plan(parse(line).unwrap(), &view, Some(id)).unwrap();
+            assert_eq!(since(before), [1, 1, 0], "planning `{line}`");
+            // What the engine thread does with a payload `Engine::author_validated` hands it.
+            let now = Timestamp(2_000_000 + n as u64);
+            let payload = planned.payload.into_payload();
+            let (_, insertion) = log.author(&keypair, now, payload).unwrap();
+            view.apply(&log, &insertion);
+            view.refresh(&log);
+            // Nothing is compiled again; besides the plan's, the op's object is built by the
+            // signing (which decodes the payload as every peer will) and by the fold.
+            assert_eq!(
+                since(before),
+                [1, 3, 0],
+                "`{line}` from the line to the scene"
+            );
+        }
     }
 
     #[test]
@@ -552,9 +675,22 @@ mod tests {
     }
 
     #[test]
+    fn only_the_founder_plans_an_expel_or_a_readmit() {
+        let (s, _) = session();
+        for command in [Command::Expel("ada"), Command::Readmit("ada")] {
+            let err = plan(command, &s, None).unwrap_err();
+            assert!(err.contains("founder"), "{err}");
+        }
+    }
+
+    #[test]
     fn colours_take_numbers_formulas_or_a_scalar_through_the_map() {
         let (s, id) = session();
-        let colour = |text| match plan(Command::Colour(text), &s, Some(id)).unwrap().payload {
+        let colour = |text| match plan(Command::Colour(text), &s, Some(id))
+            .unwrap()
+            .payload
+            .into_payload()
+        {
             ShapePayload::Set { field, .. } => match *field {
                 Field::Diffuse(Some(def)) => def,
                 other => panic!("{other:?}"),
@@ -573,7 +709,7 @@ mod tests {
     fn new_objects_get_fresh_ids_beside_the_others() {
         let (s, _) = session();
         let planned = plan(Command::New("0.8-sqrt(x^2+y^2+z^2)"), &s, None).unwrap();
-        let ShapePayload::Create { object, data, .. } = &planned.payload else {
+        let ShapePayload::Create { object, data, .. } = &*planned.payload else {
             panic!("{planned:?}");
         };
         assert_eq!(planned.select, Some(*object));
@@ -594,7 +730,7 @@ mod tests {
                 "0.5+0.1*x"
             };
             let planned = plan(Command::Property(kind, text), &s, Some(id)).unwrap();
-            let ShapePayload::Set { object, field } = &planned.payload else {
+            let ShapePayload::Set { object, field } = &*planned.payload else {
                 panic!("{planned:?}");
             };
             assert_eq!(*object, id);
@@ -608,7 +744,7 @@ mod tests {
         assert!(err.contains("x = ..."), "{err}");
         let lease = plan(Command::Lease(LeaseKind::Weak), &s, Some(id)).unwrap();
         assert!(matches!(
-            lease.payload,
+            lease.payload.into_payload(),
             ShapePayload::Lease(LeaseAction::Acquire { strong: false, .. })
         ));
     }
@@ -617,7 +753,7 @@ mod tests {
     fn a_new_object_gets_a_domain_that_fits_and_an_unbounded_one_is_refused() {
         let (s, _) = session();
         let planned = plan(Command::New("0.3-sqrt((x-1)^2+y^2+z^2)"), &s, None).unwrap();
-        let ShapePayload::Create { data, .. } = &planned.payload else {
+        let ShapePayload::Create { data, .. } = &*planned.payload else {
             panic!("{planned:?}");
         };
         let b = data.geometry.as_ref().unwrap().domain.unwrap().aabb();

@@ -9,6 +9,7 @@
 //!   strokes a drag draws with them, one op each.
 //! - [`command`]: the command/chat language (`shape:`, `colour:`, `new:`, `undo`, ...),
 //!   planned into ops against a view.
+//! - [`new_object`]: how an object a user makes (`new:`, an imported mesh) starts out.
 //! - [`files`]: scene files a user opens, their `Inline` files confined to the scene's
 //!   folder.
 //! - [`transfer`]: files in and out of a session: FVRML scenes and STL, OBJ and glTF meshes
@@ -47,6 +48,7 @@ pub mod command;
 pub mod demos;
 pub mod engine;
 pub mod files;
+pub mod new_object;
 pub mod settings;
 pub mod touch;
 pub mod transfer;

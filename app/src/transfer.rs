@@ -399,7 +399,7 @@ fn mesh_payloads(
 ) -> Result<Imported, ImportError> {
     let ids = IdRange::new(path, next, 1)?;
     data.appearance = model::object::Appearance {
-        diffuse: Some(ColorDef::Constant(crate::command::NEW_OBJECT_COLOUR)),
+        diffuse: Some(ColorDef::Constant(crate::new_object::NEW_OBJECT_COLOUR)),
         ..Default::default()
     }
     .into();

@@ -50,7 +50,11 @@ fn object_named(engine: &Engine, name: &str) -> u64 {
 /// Plans `line` as the window's command line would with `object` selected, and authors it.
 fn command(engine: &Engine, object: u64, line: &str) {
     let planned = plan(parse(line).unwrap(), &lock(engine.view()), Some(object)).unwrap();
-    engine.author(planned.payload).unwrap().wait().unwrap();
+    engine
+        .author_validated(planned.payload)
+        .unwrap()
+        .wait()
+        .unwrap();
 }
 
 /// Drags `brush` (a `tool:` line) across `object` from `from` to `to` (scene coordinates),
@@ -65,7 +69,11 @@ fn stroke(engine: &Engine, object: u64, brush: &str, from: DVec3, to: DVec3) {
         }
         stroke.finish(&view).unwrap()
     };
-    engine.author(planned.payload).unwrap().wait().unwrap();
+    engine
+        .author_validated(planned.payload)
+        .unwrap()
+        .wait()
+        .unwrap();
 }
 
 /// The status of the latest history row whose text contains `what` (a stroke is

@@ -5,7 +5,10 @@
 //! into a new session (`EngineConfig::demo`), `sculpt render` pictures it, `sculpt touch`
 //! feels it, and peers that join the session get it like any other ops.
 
+use std::path::Path;
+
 use formats::fvrml::{LoadOptions, Loaded, load};
+use replication::shape::{IdSource, ShapePayload};
 
 pub mod mri;
 pub mod shark;
@@ -134,6 +137,15 @@ impl Demo {
         load(self.text, options, &mut built_in)
             .map_err(|e| format!("the demo scene `{}` does not load: {e}", self.name))
     }
+
+    /// The scene's ops, as an import of its file plans them: its groups (parents first),
+    /// then its objects in their groups, with ids from `first` on.
+    pub fn payloads(&self, first: IdSource) -> Result<Vec<ShapePayload>, String> {
+        let loaded = self.load(&LoadOptions::default())?;
+        crate::transfer::scene_payloads(Path::new(self.file), &loaded.scene, first)
+            .map(|imported| imported.payloads)
+            .map_err(|e| e.to_string())
+    }
 }
 
 impl Demo {
@@ -179,11 +191,9 @@ mod tests {
     #[test]
     fn every_demo_plans_as_ops_that_fit() {
         for demo in DEMOS {
-            let payloads = crate::engine::demo_payloads_from(
-                demo,
-                replication::shape::IdSource::first(replication::PeerId([1; 32])),
-            )
-            .unwrap_or_else(|e| panic!("{}: {e}", demo.name));
+            let payloads = demo
+                .payloads(IdSource::first(replication::PeerId([1; 32])))
+                .unwrap_or_else(|e| panic!("{}: {e}", demo.name));
             assert!(!payloads.is_empty(), "{}", demo.name);
         }
     }

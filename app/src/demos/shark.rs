@@ -63,7 +63,13 @@ fn thickness(s: f64) -> f64 {
 /// The shark: body and fins.
 pub fn shark() -> PolygonModel {
     let mut model = PolygonModel::default();
-    // The body: a point at the tail, rings, a point at the nose.
+    body(&mut model);
+    fins(&mut model);
+    model
+}
+
+/// The body: a point at the tail, rings, a point at the nose, and the triangles between them.
+fn body(model: &mut PolygonModel) {
     let tail = model.point(DVec3::new(TAIL_X, 0.0, 0.0));
     let mut rings = Vec::with_capacity(N_RINGS);
     for i in 1..=N_RINGS {
@@ -103,7 +109,10 @@ pub fn shark() -> PolygonModel {
             model.triangles.push([back[j], front[j], front[next]]);
         }
     }
-    // Fins, each rooted inside the body: dorsal, the tail's two lobes, two pectorals.
+}
+
+/// The fins, each rooted inside the body: dorsal, the tail's two lobes, two pectorals.
+fn fins(model: &mut PolygonModel) {
     let v = DVec3::new;
     model.fin(
         v(0.12, 0.1, 0.0),
@@ -131,7 +140,6 @@ pub fn shark() -> PolygonModel {
             0.01,
         );
     }
-    model
 }
 
 /// The line that starts the generated geometry in `scenes/shark.wrl`.

@@ -19,15 +19,17 @@ use std::sync::mpsc as std_mpsc;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use replication::membership::FOUNDER_NONCE_BYTES;
 use replication::net::admission::AdmissionError;
 use replication::net::discovery::dnssd::{self, Announcement, DnsSd, DnsSdConfig, LanSession};
 use replication::net::invite::Invite;
 use replication::net::node::{DialError, DisconnectReason, NodeConfig, NodeEvent, NodeHandle};
 use replication::net::{Node, SessionKeys};
 use replication::shape::ShapePayload;
+use replication::store::OpStore;
 use replication::sync::ephemeral::PRESENCE_CHANNEL;
 use replication::sync::state::CloseReason;
-use replication::{OpId, PeerId, Timestamp};
+use replication::{Keypair, Log, OpId, PeerId, Timestamp};
 
 pub use presence::{CameraPose, Presence};
 pub use view::{ChatRow, HistoryRow, PeerRow, Rejection, SharedView, View, lock};
@@ -165,6 +167,32 @@ enum Request {
     Shutdown,
 }
 
+/// A payload that passed [`ShapePayload::validate`] (its formulas compile, its numbers are
+/// valid, its text is short), so that the engine authors it without building its object
+/// again to check it ([`Engine::author_validated`]). Made only by [`Validated::new`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Validated(ShapePayload);
+
+impl Validated {
+    /// The payload, once it validates; else why it does not.
+    pub fn new(payload: ShapePayload) -> Result<Validated, String> {
+        payload.validate()?;
+        Ok(Validated(payload))
+    }
+
+    /// The payload.
+    pub fn into_payload(self) -> ShapePayload {
+        self.0
+    }
+}
+
+impl std::ops::Deref for Validated {
+    type Target = ShapePayload;
+    fn deref(&self) -> &ShapePayload {
+        &self.0
+    }
+}
+
 /// The reply to an authoring request, read once it comes.
 pub struct Pending(std_mpsc::Receiver<Result<OpId, String>>);
 
@@ -264,81 +292,33 @@ impl News {
 impl Engine {
     /// Opens the store, starts the node on the engine thread and waits until it listens.
     pub fn start(config: EngineConfig, now: Timestamp) -> Result<Engine, StartError> {
-        let (keypair, invite, new_session, store, log, founder_nonce, notices, store_error) =
-            match store::open(&config.store, config.invite.as_ref(), now) {
-                Ok(o) => (
-                    o.keypair,
-                    o.invite,
-                    o.new_session,
-                    Some(o.store),
-                    o.log,
-                    o.founder_nonce,
-                    o.notices,
-                    None,
-                ),
-                Err(e) if config.memory_fallback => {
-                    let keypair = store::memory_keypair(now);
-                    let (invite, founder_nonce) = match &config.invite {
-                        Some(i) => (i.clone(), None),
-                        None => {
-                            let nonce =
-                                store::entropy_seed().map_err(store::StoreError::Entropy)?;
-                            (Invite::for_founder(&keypair.peer_id(), &nonce), Some(nonce))
-                        }
-                    };
-                    let error = format!("{e}; nothing stored was changed, and edits are not saved");
-                    let log = store::founded_log(&invite);
-                    // A session joined by invite is the others': it gets no demo of ours.
-                    let new_session = config.invite.is_none();
-                    (
-                        keypair,
-                        invite,
-                        new_session,
-                        None,
-                        log,
-                        founder_nonce,
-                        Vec::new(),
-                        Some(error),
-                    )
-                }
-                Err(e) => return Err(e.into()),
-            };
-        let me = keypair.peer_id();
-        let mut view = View::new(me, &log).map_err(StartError::Thread)?;
-        view.notices = notices;
-        view.founder_nonce = founder_nonce;
-        view.store_error = store_error;
+        let opening = Opening::open(&config, now)?;
+        let me = opening.keypair.peer_id();
+        let mut view = View::new(me, &opening.log).map_err(StartError::Thread)?;
+        view.notices = opening.notices;
+        view.founder_nonce = opening.founder_nonce;
+        view.store_error = opening.store_error;
         let view: SharedView = Arc::new(Mutex::new(view));
-        let news = Arc::new(Mutex::new(News::default()));
-        let founding = founder_nonce
-            .filter(|_| log.binds_authors() && log.version_vector().get(&me) == 0)
-            .map(|nonce| {
-                ShapePayload::Admit(Box::new(replication::membership::Admission {
-                    key: me,
-                    grant_bytes: 0,
-                    nonce: Some(nonce),
-                }))
-            });
+        let founding = founding_payload(opening.founder_nonce, &opening.log, me);
         let demo = config
             .demo
-            .filter(|_| new_session && log.is_empty())
-            .map(|demo| demo_payloads_from(demo, lock(&view).next_object()));
+            .filter(|_| opening.new_session && opening.log.is_empty())
+            .map(|demo| demo.payloads(lock(&view).next_object()));
         {
             let mut view = lock(&view);
             view.authoring_demo = matches!(demo, Some(Ok(_)));
             view.joined = config.invite.is_some();
         }
         let (requests, inbox) = tokio::sync::mpsc::channel(MAX_QUEUED_REQUESTS);
-        let (ready_tx, ready_rx) = std_mpsc::channel();
         // The discovery id takes a slow derivation (argon2id): once per start.
-        let keys = SessionKeys::from_invite(&invite);
+        let keys = SessionKeys::from_invite(&opening.invite);
         let discovery_id = keys.discovery_id();
         let node_config = NodeConfig {
-            keypair,
+            keypair: opening.keypair,
             keys,
             listen: config.network.listen,
-            log,
-            store,
+            log: opening.log,
+            store: opening.store,
         };
         let local_presence = Arc::new(Mutex::new(Presence::named(
             config.name.clone().unwrap_or_else(|| me.short()),
@@ -350,7 +330,7 @@ impl Engine {
             listeners: listeners.clone(),
             presence_changed: presence_changed.clone(),
             view: view.clone(),
-            news: news.clone(),
+            news: Arc::new(Mutex::new(News::default())),
             network: config.network.clone(),
             discovery_id,
             presence: local_presence.clone(),
@@ -361,38 +341,19 @@ impl Engine {
                     || config.network.discovery.is_some(),
             )
             .0,
-            session_name: config.session_name.clone().unwrap_or_else(|| {
-                config.store.file_name().map_or_else(
-                    || "sculpt".to_string(),
-                    |n| n.to_string_lossy().into_owned(),
-                )
-            }),
+            session_name: session_name(&config),
             lan: Mutex::new(None),
             founding,
         };
-        let thread = std::thread::Builder::new()
-            .name("sculpt-engine".into())
-            .stack_size(ENGINE_STACK_BYTES)
-            .spawn(move || worker.run(node_config, demo, inbox, ready_tx))
-            .map_err(|e| StartError::Thread(e.to_string()))?;
-        match ready_rx.recv_timeout(Duration::from_secs(START_TIMEOUT_SECS)) {
-            Ok(Ok(addr)) => lock(&view).listen = Some(addr),
-            Ok(Err(e)) => {
-                let _ = thread.join();
-                return Err(e);
-            }
-            Err(_) => {
-                return Err(StartError::Thread(
-                    "no answer from the engine thread".into(),
-                ));
-            }
-        }
+        let news = worker.news.clone();
+        let (thread, listen) = worker.spawn(node_config, demo, inbox)?;
+        lock(&view).listen = Some(listen);
         Ok(Engine {
             requests,
             listeners,
             view,
             news,
-            invite,
+            invite: opening.invite,
             store_dir: config.store,
             local_presence,
             presence_changed,
@@ -436,16 +397,24 @@ impl Engine {
     /// [`Pending`]. The view shows the op once it is stored.
     /// A payload that does not validate is answered at once with the reason.
     pub fn author(&self, payload: ShapePayload) -> Result<Pending, RequestError> {
-        let (reply, answer) = std_mpsc::channel();
-        match payload.validate() {
-            Ok(()) => self.request(Request::Author {
-                payload: Box::new(payload),
-                reply,
-            })?,
+        match Validated::new(payload) {
+            Ok(payload) => self.author_validated(payload),
             Err(e) => {
+                let (reply, answer) = std_mpsc::channel();
                 let _ = reply.send(Err(e));
+                Ok(Pending(answer))
             }
         }
+    }
+
+    /// Authors an op already validated (a planned command's), without building its object
+    /// again to check it: see [`Engine::author`].
+    pub fn author_validated(&self, payload: Validated) -> Result<Pending, RequestError> {
+        let (reply, answer) = std_mpsc::channel();
+        self.request(Request::Author {
+            payload: Box::new(payload.0),
+            reply,
+        })?;
         Ok(Pending(answer))
     }
 
@@ -536,6 +505,107 @@ impl Drop for Engine {
     }
 }
 
+/// What a session starts from: its store, or (when that cannot be opened and the config
+/// allows it) memory, where nothing is stored.
+struct Opening {
+    keypair: Keypair,
+    invite: Invite,
+    /// True when this start made the session.
+    new_session: bool,
+    /// `None` in memory.
+    store: Option<OpStore<ShapePayload>>,
+    log: Log<ShapePayload>,
+    founder_nonce: Option<[u8; FOUNDER_NONCE_BYTES]>,
+    notices: Vec<String>,
+    /// Why the session is in memory.
+    store_error: Option<String>,
+}
+
+impl Opening {
+    /// The config's store, or memory when it cannot be opened and the config allows it.
+    fn open(config: &EngineConfig, now: Timestamp) -> Result<Opening, StartError> {
+        match store::open(&config.store, config.invite.as_ref(), now) {
+            Ok(o) => Ok(Opening {
+                keypair: o.keypair,
+                invite: o.invite,
+                new_session: o.new_session,
+                store: Some(o.store),
+                log: o.log,
+                founder_nonce: o.founder_nonce,
+                notices: o.notices,
+                store_error: None,
+            }),
+            Err(e) if config.memory_fallback => Opening::in_memory(config, now, &e),
+            Err(e) => Err(e.into()),
+        }
+    }
+
+    /// A session in memory, for a store that failed with `error`: the config's invite, or a
+    /// new session founded by a new key.
+    fn in_memory(
+        config: &EngineConfig,
+        now: Timestamp,
+        error: &store::StoreError,
+    ) -> Result<Opening, StartError> {
+        let keypair = store::memory_keypair(now);
+        let (invite, founder_nonce) = match &config.invite {
+            Some(i) => (i.clone(), None),
+            None => {
+                let nonce = store::entropy_seed().map_err(store::StoreError::Entropy)?;
+                (Invite::for_founder(&keypair.peer_id(), &nonce), Some(nonce))
+            }
+        };
+        let log = store::founded_log(&invite);
+        Ok(Opening {
+            keypair,
+            invite,
+            // A session joined by invite is the others': it gets no demo of ours.
+            new_session: config.invite.is_none(),
+            store: None,
+            log,
+            founder_nonce,
+            notices: Vec::new(),
+            store_error: Some(format!(
+                "{error}; nothing stored was changed, and edits are not saved"
+            )),
+        })
+    }
+}
+
+/// The founder's admission of itself (`me`), which a new session that binds its authors
+/// needs first: when this peer holds the founder's nonce and has authored nothing in `log`.
+fn founding_payload(
+    founder_nonce: Option<[u8; FOUNDER_NONCE_BYTES]>,
+    log: &Log<ShapePayload>,
+    me: PeerId,
+) -> Option<ShapePayload> {
+    founder_nonce
+        .filter(|_| log.binds_authors() && log.version_vector().get(&me) == 0)
+        .map(|nonce| {
+            ShapePayload::Admit(Box::new(replication::membership::Admission {
+                key: me,
+                grant_bytes: 0,
+                nonce: Some(nonce),
+            }))
+        })
+}
+
+/// The session's name on the LAN: the config's, else its store directory's.
+fn session_name(config: &EngineConfig) -> String {
+    config.session_name.clone().unwrap_or_else(|| {
+        config.store.file_name().map_or_else(
+            || "sculpt".to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        )
+    })
+}
+
+/// When this peer's presence was last sent, and whether it is due again before the repeat.
+struct PresenceSent {
+    due: bool,
+    at: tokio::time::Instant,
+}
+
 /// The engine thread's state.
 struct Worker {
     view: SharedView,
@@ -577,6 +647,32 @@ fn note_dialed(dialed: &Dialed, addr: SocketAddr, how: &'static str) {
 }
 
 impl Worker {
+    /// Runs the worker on the named engine thread, and waits until its node listens (the
+    /// address it listens on) or fails to.
+    fn spawn(
+        self,
+        node_config: NodeConfig<ShapePayload>,
+        demo: Option<Result<Vec<ShapePayload>, String>>,
+        inbox: tokio::sync::mpsc::Receiver<Request>,
+    ) -> Result<(std::thread::JoinHandle<()>, SocketAddr), StartError> {
+        let (ready_tx, ready_rx) = std_mpsc::channel();
+        let thread = std::thread::Builder::new()
+            .name("sculpt-engine".into())
+            .stack_size(ENGINE_STACK_BYTES)
+            .spawn(move || self.run(node_config, demo, inbox, ready_tx))
+            .map_err(|e| StartError::Thread(e.to_string()))?;
+        match ready_rx.recv_timeout(Duration::from_secs(START_TIMEOUT_SECS)) {
+            Ok(Ok(addr)) => Ok((thread, addr)),
+            Ok(Err(e)) => {
+                let _ = thread.join();
+                Err(e)
+            }
+            Err(_) => Err(StartError::Thread(
+                "no answer from the engine thread".into(),
+            )),
+        }
+    }
+
     fn run(
         self,
         node_config: NodeConfig<ShapePayload>,
@@ -616,16 +712,7 @@ impl Worker {
         let node = match Node::spawn_observed(node_config, Some(Box::new(folder))) {
             Ok(node) => node,
             Err(e) => {
-                let reason = match &e {
-                    replication::net::node::NodeError::Bind { source, .. }
-                        if source.kind() == std::io::ErrorKind::AddrInUse =>
-                    {
-                        "the port is in use (another sculpt peer?); give another --listen \
-                         address, or port 0 to pick a free one"
-                            .to_string()
-                    }
-                    other => other.to_string(),
-                };
+                let reason = listen_failure(&e);
                 let _ = ready.send(Err(StartError::Listen {
                     addr: listen,
                     reason,
@@ -640,6 +727,53 @@ impl Worker {
             handle.peer_id().short(),
             handle.local_addr()
         ));
+        self.author_opening(&handle, demo).await;
+        let news = NewsSink {
+            news: self.news.clone(),
+        };
+        self.start_finders(&handle, &news);
+        let mut refresh = tokio::time::interval(Duration::from_millis(PEER_REFRESH_MILLIS));
+        let mut presence_tick =
+            tokio::time::interval(Duration::from_millis(1_000 / presence::PRESENCE_RATE_HZ));
+        let mut presence_sent = PresenceSent {
+            due: true,
+            at: tokio::time::Instant::now(),
+        };
+        loop {
+            tokio::select! {
+                request = inbox.recv() => match request {
+                    Some(Request::Shutdown) | None => break,
+                    Some(request) => self.on_request(request, &handle, &news).await,
+                },
+                Some(event) = events.recv() => {
+                    // A new peer hears this peer's presence at once.
+                    presence_sent.due |= matches!(event, NodeEvent::Connected { .. });
+                    self.on_event(event);
+                }
+                _ = refresh.tick() => self.refresh_peers(&handle).await,
+                _ = presence_tick.tick() => self.send_presence(&handle, &mut presence_sent).await,
+            }
+        }
+        // Give connected peers what they lack first (bounded): closing a window right after
+        // an edit should not leave the edit behind until the next meeting.
+        let deadline = tokio::time::Instant::now() + Duration::from_millis(SHUTDOWN_FLUSH_MILLIS);
+        while lock(&self.view).progress().0 > 0 && tokio::time::Instant::now() < deadline {
+            tokio::select! {
+                Some(event) = events.recv() => self.on_event(event),
+                () = tokio::time::sleep(Duration::from_millis(20)) => {}
+            }
+        }
+        let _ = handle.shutdown().await;
+        self.say("stopped; every op is on disk".into());
+    }
+
+    /// Authors what a session starts with, before anything else: the founder's admission of
+    /// itself, then the demo scene.
+    async fn author_opening(
+        &self,
+        handle: &NodeHandle<ShapePayload>,
+        demo: Option<Result<Vec<ShapePayload>, String>>,
+    ) {
         if let Some(founding) = self.founding.clone()
             && let Err(e) = handle.author(founding).await
         {
@@ -658,75 +792,57 @@ impl Worker {
             Some(Err(e)) => self.say(format!("the demo scene could not be authored: {e}")),
             None => {}
         }
-        let news = NewsSink {
-            news: self.news.clone(),
-        };
-        self.start_finders(&handle, &news);
-        let mut refresh = tokio::time::interval(Duration::from_millis(PEER_REFRESH_MILLIS));
-        let mut presence_tick =
-            tokio::time::interval(Duration::from_millis(1_000 / presence::PRESENCE_RATE_HZ));
-        let (mut presence_due, mut presence_sent_at) = (true, tokio::time::Instant::now());
-        loop {
-            tokio::select! {
-                request = inbox.recv() => match request {
-                    Some(Request::Author { payload, reply }) => {
-                        let result = handle.author(*payload).await.map_err(|e| e.to_string());
-                        let _ = reply.send(result);
-                    }
-                    Some(Request::Ephemeral { channel, value }) => {
-                        let _ = handle.send_ephemeral(channel, value).await;
-                    }
-                    Some(Request::Share) => {
-                        self.shared.send_replace(true);
-                    }
-                    Some(Request::Dial(addr)) => {
-                        self.note_dialed(addr, "direct");
-                        let handle = handle.clone();
-                        let news = news.clone();
-                        tokio::spawn(async move {
-                            if let Err(e) = handle.dial(addr).await {
-                                news.say(dial_failure(addr, &e));
-                            }
-                        });
-                    }
-                    Some(Request::Shutdown) | None => break,
-                },
-                Some(event) = events.recv() => {
-                    // A new peer hears this peer's presence at once.
-                    presence_due |= matches!(event, NodeEvent::Connected { .. });
-                    self.on_event(event);
-                }
-                _ = refresh.tick() => self.refresh_peers(&handle).await,
-                _ = presence_tick.tick() => {
-                    let repeat = presence_sent_at.elapsed()
-                        >= Duration::from_millis(PRESENCE_REPEAT_MILLIS);
-                    presence_due |= self
-                        .presence_changed
-                        .swap(false, std::sync::atomic::Ordering::AcqRel);
-                    if presence_due || repeat {
-                        let value = self
-                            .presence
-                            .lock()
-                            .unwrap_or_else(std::sync::PoisonError::into_inner)
-                            .encode();
-                        let _ = handle.send_ephemeral(PRESENCE_CHANNEL, value).await;
-                        presence_due = false;
-                        presence_sent_at = tokio::time::Instant::now();
-                    }
-                }
+    }
+
+    /// Does what a face asked (the serving loop itself ends on [`Request::Shutdown`]).
+    async fn on_request(
+        &self,
+        request: Request,
+        handle: &NodeHandle<ShapePayload>,
+        news: &NewsSink,
+    ) {
+        match request {
+            Request::Author { payload, reply } => {
+                let result = handle.author(*payload).await.map_err(|e| e.to_string());
+                let _ = reply.send(result);
             }
-        }
-        // Give connected peers what they lack first (bounded): closing a window right after
-        // an edit should not leave the edit behind until the next meeting.
-        let deadline = tokio::time::Instant::now() + Duration::from_millis(SHUTDOWN_FLUSH_MILLIS);
-        while lock(&self.view).progress().0 > 0 && tokio::time::Instant::now() < deadline {
-            tokio::select! {
-                Some(event) = events.recv() => self.on_event(event),
-                () = tokio::time::sleep(Duration::from_millis(20)) => {}
+            Request::Ephemeral { channel, value } => {
+                let _ = handle.send_ephemeral(channel, value).await;
             }
+            Request::Share => {
+                self.shared.send_replace(true);
+            }
+            Request::Dial(addr) => {
+                self.note_dialed(addr, "direct");
+                let handle = handle.clone();
+                let news = news.clone();
+                tokio::spawn(async move {
+                    if let Err(e) = handle.dial(addr).await {
+                        news.say(dial_failure(addr, &e));
+                    }
+                });
+            }
+            Request::Shutdown => {}
         }
-        let _ = handle.shutdown().await;
-        self.say("stopped; every op is on disk".into());
+    }
+
+    /// Sends this peer's presence when it changed, a peer connected, or it was last sent
+    /// [`PRESENCE_REPEAT_MILLIS`] ago.
+    async fn send_presence(&self, handle: &NodeHandle<ShapePayload>, sent: &mut PresenceSent) {
+        let repeat = sent.at.elapsed() >= Duration::from_millis(PRESENCE_REPEAT_MILLIS);
+        sent.due |= self
+            .presence_changed
+            .swap(false, std::sync::atomic::Ordering::AcqRel);
+        if sent.due || repeat {
+            let value = self
+                .presence
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .encode();
+            let _ = handle.send_ephemeral(PRESENCE_CHANNEL, value).await;
+            sent.due = false;
+            sent.at = tokio::time::Instant::now();
+        }
     }
 
     /// Starts the tasks that find and dial peers: `--dial` addresses, a discovery node, the LAN.
@@ -783,46 +899,7 @@ impl Worker {
         match event {
             NodeEvent::Connected {
                 peer, addr, role, ..
-            } => {
-                let how = match role {
-                    replication::net::admission::Role::Dialer => self
-                        .dialed
-                        .lock()
-                        .unwrap_or_else(std::sync::PoisonError::into_inner)
-                        .get(&addr)
-                        .copied()
-                        .unwrap_or("LAN"),
-                    _ => "it dialed us",
-                };
-                self.say(format!("connected to {} at {addr} ({how})", peer.short()));
-                let mut view = lock(&self.view);
-                let row = PeerRow {
-                    peer,
-                    online: true,
-                    name: peer.short(),
-                    colour: presence::default_colour(&peer.0),
-                    addr: addr.to_string(),
-                    how,
-                    rtt_micros: None,
-                    to_send: 0,
-                    to_receive: 0,
-                };
-                match view.peers.iter_mut().find(|p| p.peer == peer) {
-                    Some(old) => {
-                        *old = PeerRow {
-                            name: old.name.clone(),
-                            colour: old.colour,
-                            ..row
-                        };
-                    }
-                    None => view.peers.push(row),
-                }
-                if view.peers.len() > MAX_PEER_ROWS
-                    && let Some(i) = view.peers.iter().position(|p| !p.online)
-                {
-                    view.peers.remove(i);
-                }
-            }
+            } => self.on_connected(peer, addr, role),
             NodeEvent::Disconnected { peer, reason, .. } => {
                 if reason == DisconnectReason::Duplicate {
                     return;
@@ -844,33 +921,8 @@ impl Worker {
                 channel,
                 value,
                 ..
-            } if channel == PRESENCE_CHANNEL => {
-                let mut view = lock(&self.view);
-                match Presence::decode(&value) {
-                    Ok(p) => view.note_presence(peer, p),
-                    Err(e) => {
-                        view.n_bad_presence += 1;
-                        log::debug!("bad presence from {}: {e}", peer.short());
-                    }
-                }
-            }
-            NodeEvent::Forked { author, seq, .. } => {
-                let mut view = lock(&self.view);
-                let who = if author == view.peer_id() {
-                    "this identity".to_string()
-                } else {
-                    view.peers
-                        .iter()
-                        .find(|p| p.peer == author)
-                        .map_or_else(|| author.short(), |p| p.name.clone())
-                };
-                view.forked.insert(author, seq);
-                drop(view);
-                self.say(format!(
-                    "{who} signed two different edits as #{seq} (a fork): its edits from \
-                     #{seq} on count for nothing"
-                ));
-            }
+            } => self.on_ephemeral(peer, channel, &value),
+            NodeEvent::Forked { author, seq, .. } => self.on_forked(author, seq),
             NodeEvent::AdmissionFailed { addr, error } => {
                 self.say(format!(
                     "a connection with {addr} was refused: {}",
@@ -885,22 +937,96 @@ impl Worker {
             NodeEvent::Rejected { peer, detail, .. } => {
                 log::debug!("dropped bad input from {}: {detail}", peer.short());
             }
-            NodeEvent::Ephemeral {
-                peer,
-                channel,
-                value,
-                ..
-            } => {
-                let listeners = self
-                    .listeners
-                    .lock()
-                    .unwrap_or_else(std::sync::PoisonError::into_inner);
-                if let Some(listener) = listeners.get(&channel) {
-                    listener(peer, &value);
-                }
-            }
             NodeEvent::Delivered { .. } | NodeEvent::UpToDate { .. } => {}
         }
+    }
+
+    /// A peer connected: its row in the view, online, saying how it was reached.
+    fn on_connected(
+        &self,
+        peer: PeerId,
+        addr: SocketAddr,
+        role: replication::net::admission::Role,
+    ) {
+        let how = match role {
+            replication::net::admission::Role::Dialer => self
+                .dialed
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .get(&addr)
+                .copied()
+                .unwrap_or("LAN"),
+            _ => "it dialed us",
+        };
+        self.say(format!("connected to {} at {addr} ({how})", peer.short()));
+        let mut view = lock(&self.view);
+        let row = PeerRow {
+            peer,
+            online: true,
+            name: peer.short(),
+            colour: presence::default_colour(&peer.0),
+            addr: addr.to_string(),
+            how,
+            rtt_micros: None,
+            to_send: 0,
+            to_receive: 0,
+        };
+        match view.peers.iter_mut().find(|p| p.peer == peer) {
+            Some(old) => {
+                *old = PeerRow {
+                    name: old.name.clone(),
+                    colour: old.colour,
+                    ..row
+                };
+            }
+            None => view.peers.push(row),
+        }
+        if view.peers.len() > MAX_PEER_ROWS
+            && let Some(i) = view.peers.iter().position(|p| !p.online)
+        {
+            view.peers.remove(i);
+        }
+    }
+
+    /// A value a peer sent on an ephemeral channel: its presence, or a face's channel.
+    fn on_ephemeral(&self, peer: PeerId, channel: u32, value: &[u8]) {
+        if channel == PRESENCE_CHANNEL {
+            let mut view = lock(&self.view);
+            match Presence::decode(value) {
+                Ok(p) => view.note_presence(peer, p),
+                Err(e) => {
+                    view.n_bad_presence += 1;
+                    log::debug!("bad presence from {}: {e}", peer.short());
+                }
+            }
+            return;
+        }
+        let listeners = self
+            .listeners
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(listener) = listeners.get(&channel) {
+            listener(peer, value);
+        }
+    }
+
+    /// `author` signed two different ops as its `seq`th: marked in the view, and said.
+    fn on_forked(&self, author: PeerId, seq: u64) {
+        let mut view = lock(&self.view);
+        let who = if author == view.peer_id() {
+            "this identity".to_string()
+        } else {
+            view.peers
+                .iter()
+                .find(|p| p.peer == author)
+                .map_or_else(|| author.short(), |p| p.name.clone())
+        };
+        view.forked.insert(author, seq);
+        drop(view);
+        self.say(format!(
+            "{who} signed two different edits as #{seq} (a fork): its edits from \
+             #{seq} on count for nothing"
+        ));
     }
 
     fn note_dialed(&self, addr: SocketAddr, how: &'static str) {
@@ -1054,6 +1180,20 @@ fn admission_text(e: &AdmissionError) -> String {
     }
 }
 
+/// Why the node could not listen, as a user reads it.
+fn listen_failure(e: &replication::net::node::NodeError) -> String {
+    match e {
+        replication::net::node::NodeError::Bind { source, .. }
+            if source.kind() == std::io::ErrorKind::AddrInUse =>
+        {
+            "the port is in use (another sculpt peer?); give another --listen address, or \
+             port 0 to pick a free one"
+                .to_string()
+        }
+        other => other.to_string(),
+    }
+}
+
 /// A disconnection reason in words.
 fn disconnect_text(reason: &DisconnectReason) -> String {
     match reason {
@@ -1068,18 +1208,6 @@ fn disconnect_text(reason: &DisconnectReason) -> String {
         DisconnectReason::Lost(why) => format!("connection lost ({why})"),
         other => format!("{other:?}"),
     }
-}
-
-/// A demo scene's ops, as an import of its file plans them: its groups (parents first), then
-/// its objects in their groups, with ids from `first` on.
-pub fn demo_payloads_from(
-    demo: &crate::demos::Demo,
-    first: replication::shape::IdSource,
-) -> Result<Vec<ShapePayload>, String> {
-    let loaded = demo.load(&formats::fvrml::LoadOptions::default())?;
-    crate::transfer::scene_payloads(std::path::Path::new(demo.file), &loaded.scene, first)
-        .map(|imported| imported.payloads)
-        .map_err(|e| e.to_string())
 }
 
 #[cfg(test)]

@@ -474,7 +474,6 @@ fn an_edit_on_one_engine_reaches_the_other_as_a_change_of_that_object_with_prese
 
 #[test]
 fn the_founder_expels_a_peer_over_quic_and_hears_from_it_no_more() {
-    use crate::command::{Command, plan};
     let (da, db) = (scratch("expel-a"), scratch("expel-b"));
     let a = Engine::start(config(&da), T0).unwrap();
     wait_view(&a, "the demo", |v| v.n_ops() == FOUNDED + 1);
@@ -487,15 +486,11 @@ fn the_founder_expels_a_peer_over_quic_and_hears_from_it_no_more() {
     });
     let (founder, member) = (lock(a.view()).peer_id(), lock(b.view()).peer_id());
     // B joined with A's invite: it is not the founder and cannot expel A.
-    let refused = plan(
-        Command::Expel(&founder.to_hex()[..8]),
-        &lock(b.view()),
-        None,
-    );
+    let refused = lock(b.view()).membership_change(&founder.to_hex()[..8], true);
     assert!(refused.unwrap_err().contains("founder"));
     // A, who made the session, expels B by its name.
-    let expel = plan(Command::Expel("bea"), &lock(a.view()), None).unwrap();
-    author(&a, expel.payload);
+    let expel = lock(a.view()).membership_change("bea", true).unwrap();
+    author(&a, ShapePayload::Member(Box::new(expel)));
     wait_view(&a, "b expelled and cut off", |v| {
         v.expelled().contains(&member) && v.n_online() == 0
     });

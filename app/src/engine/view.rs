@@ -13,7 +13,7 @@ use model::object::{ColorDef, Field, Shape};
 use model::scene::{ObjectId, Scene};
 use replication::log::{Drained, Insertion, Refold};
 use replication::materialize::Materialized;
-use replication::membership::FOUNDER_NONCE_BYTES;
+use replication::membership::{FOUNDER_NONCE_BYTES, Membership};
 use replication::net::node::Observer;
 use replication::payload::LeaseAction;
 use replication::shape::{IdSource, ShapePayload, ShapeScene};
@@ -301,6 +301,27 @@ impl View {
     /// twice or its store was restored from an older copy.
     pub fn forked(&self) -> &BTreeMap<PeerId, u64> {
         &self.forked
+    }
+
+    /// The expel (`expel`) or readmit of the member `who` names (see [`View::find_member`]),
+    /// when this peer may author it: only the session's founder may, never of itself, and it
+    /// readmits only an expelled member. The error says which rule refused it.
+    pub fn membership_change(&self, who: &str, expel: bool) -> Result<Membership, String> {
+        let nonce = self.founder_nonce.ok_or(
+            "only the session's founder (the peer that made its invite) can expel or readmit",
+        )?;
+        let member = self.find_member(who)?;
+        if member == self.me {
+            return Err("the founder cannot expel itself".into());
+        }
+        if !expel && !self.expelled.contains(&member) {
+            return Err(format!("{} is not expelled", member.short()));
+        }
+        Ok(Membership {
+            member,
+            expel,
+            nonce,
+        })
     }
 
     /// The member a person names: by the name its user chose (any case) or by the start of
@@ -871,7 +892,6 @@ mod tests {
 
     #[test]
     fn only_the_founder_plans_an_expel_of_a_member_named_by_name_or_id() {
-        use crate::command::{Command, plan};
         use replication::membership::FounderCommitment;
         let founder = replication::Keypair::from_seed([3; 32]);
         let member = replication::Keypair::from_seed([4; 32]).peer_id();
@@ -881,42 +901,40 @@ mod tests {
             .unwrap();
         let mut view = View::new(founder.peer_id(), &log).unwrap();
         view.note_presence(member, Presence::named("Ada".into(), [1, 2, 3]));
-        let err = plan(Command::Expel("Ada"), &view, None).unwrap_err();
+        let err = view.membership_change("Ada", true).unwrap_err();
         assert!(err.contains("founder"), "{err}");
         view.founder_nonce = Some(nonce);
         for who in ["ada", &member.to_hex()[..6]] {
-            let planned = plan(Command::Expel(who), &view, None).unwrap();
-            assert_eq!(
-                planned.payload.membership().map(|m| (m.member, m.expel)),
-                Some((member, true))
-            );
+            let planned = view.membership_change(who, true);
+            assert_eq!(planned.map(|m| (m.member, m.expel)), Ok((member, true)));
         }
         assert!(
-            plan(Command::Expel("Bob"), &view, None)
+            view.membership_change("Bob", true)
                 .unwrap_err()
                 .contains("no member")
         );
         assert!(
-            plan(
-                Command::Expel(&founder.peer_id().to_hex()[..8]),
-                &view,
-                None
-            )
-            .is_err()
+            view.membership_change(&founder.peer_id().to_hex()[..8], true)
+                .is_err()
         );
         assert!(
-            plan(Command::Readmit("Ada"), &view, None)
+            view.membership_change("Ada", false)
                 .unwrap_err()
                 .contains("not expelled")
         );
         // Authored, the expel counts: the view lists the member as expelled, and a readmit
         // is planned.
-        let expel = plan(Command::Expel("Ada"), &view, None).unwrap().payload;
-        log.author(&founder, Timestamp(1_000), expel).unwrap();
+        let expel = view.membership_change("Ada", true).unwrap();
+        log.author(
+            &founder,
+            Timestamp(1_000),
+            ShapePayload::Member(Box::new(expel)),
+        )
+        .unwrap();
         view.refresh(&log);
         assert!(view.expelled().contains(&member));
-        let readmit = plan(Command::Readmit("Ada"), &view, None).unwrap().payload;
-        assert_eq!(readmit.membership().map(|m| m.expel), Some(false));
+        let readmit = view.membership_change("Ada", false).unwrap();
+        assert!(!readmit.expel);
     }
 
     #[test]

@@ -22,7 +22,8 @@ use ::app::brush::{Brush, Stroke};
 use ::app::clock::{self, Now};
 use ::app::command::{self, Planned};
 use ::app::engine::{
-    CameraPose, ChatRow, Engine, EngineConfig, HistoryRow, PeerRow, Pending, Presence, lock,
+    CameraPose, ChatRow, Engine, EngineConfig, HistoryRow, PeerRow, Pending, Presence, Validated,
+    lock,
 };
 use ::app::touch::probe;
 use replication::PeerId;
@@ -622,7 +623,7 @@ impl SculptApp {
                 return;
             }
         };
-        match self.engine.author(planned.payload.clone()) {
+        match self.engine.author_validated(planned.payload.clone()) {
             Ok(pending) => self.pending = Some((pending, planned)),
             Err(e) => self.input_error = Some(e.to_string()),
         }
@@ -1030,7 +1031,7 @@ impl SculptApp {
         let planned = stroke.finish(&lock(self.engine.view()));
         self.last_stroke = Some(stroke.scene_points().to_vec());
         match planned {
-            Ok(planned) => match self.engine.author(planned.payload.clone()) {
+            Ok(planned) => match self.engine.author_validated(planned.payload.clone()) {
                 Ok(pending) => self.pending = Some((pending, planned)),
                 Err(e) => self.status = e.to_string(),
             },
@@ -1372,13 +1373,19 @@ impl SculptApp {
         if self.pending.is_some() {
             return;
         }
-        let payload = replication::shape::ShapePayload::Undo(op);
+        let payload = match Validated::new(replication::shape::ShapePayload::Undo(op)) {
+            Ok(payload) => payload,
+            Err(e) => {
+                self.status = e;
+                return;
+            }
+        };
         let planned = Planned {
             payload: payload.clone(),
             summary: "undid an edit chosen in the history".into(),
             select: None,
         };
-        match self.engine.author(payload) {
+        match self.engine.author_validated(payload) {
             Ok(pending) => self.pending = Some((pending, planned)),
             Err(e) => self.status = e.to_string(),
         }
@@ -1493,12 +1500,20 @@ impl SculptApp {
         let Some(payload) = self.import_queue.pop_front() else {
             return;
         };
+        // Refused as the engine's reply would refuse it: shown, and the next op goes on.
+        let payload = match Validated::new(payload) {
+            Ok(payload) => payload,
+            Err(e) => {
+                self.input_error = Some(e);
+                return;
+            }
+        };
         let planned = Planned {
             payload: payload.clone(),
             summary: format!("imported; {} ops to go", self.import_queue.len()),
             select: None,
         };
-        match self.engine.author(payload) {
+        match self.engine.author_validated(payload) {
             Ok(pending) => self.pending = Some((pending, planned)),
             Err(e) => {
                 self.status = format!("import stopped: {e}");

@@ -344,8 +344,8 @@ impl SculptApp {
     /// The tool panel: navigate or sculpt, what the brush does, its shape, size, blend and
     /// mirror plane.
     fn tool_ui(&mut self, ui: &mut egui::Ui) {
-        use ::app::brush::{BrushOp, BrushShape};
-        use model::object::{Axis, PaintValue, Paintable};
+        use ::app::brush::BrushOp;
+        use model::object::{Axis, PaintValue, Paintable, ToolKind};
         ui.heading("Tool");
         ui.horizontal(|ui| {
             ui.selectable_value(&mut self.sculpting, false, "Navigate")
@@ -387,9 +387,9 @@ impl SculptApp {
             });
         }
         ui.horizontal(|ui| {
-            ui.selectable_value(&mut b.shape, BrushShape::Ball, "ball");
-            ui.selectable_value(&mut b.shape, BrushShape::Box, "box");
-            ui.selectable_value(&mut b.shape, BrushShape::Cylinder, "cylinder");
+            for kind in ToolKind::ALL {
+                ui.selectable_value(&mut b.shape, kind, kind.label());
+            }
             ui.label("mirror");
             egui::ComboBox::from_id_salt("mirror")
                 .selected_text(match b.mirror {

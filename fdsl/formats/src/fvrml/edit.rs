@@ -15,7 +15,8 @@ use super::read::{Fields, Reader};
 use super::save::f32_value;
 use model::limits::MAX_EDITS_PER_OBJECT;
 use model::object::{
-    Axis, Edit, EditOp, Object, ObjectError, PaintValue, Paintable, Pose, ToolShape,
+    Axis, Edit, EditOp, Object, ObjectError, PaintValue, Paintable, Pose, ToolKind, ToolShape,
+    ToolSize,
 };
 
 #[cfg(doc)]
@@ -50,27 +51,10 @@ const PROPERTIES: [(&str, Paintable); 7] = [
     ("density", Paintable::Density),
 ];
 
-#[derive(Clone, Copy, PartialEq)]
-enum ToolKind {
-    Sphere,
-    Box,
-    Cylinder,
+/// The values of `tool`: every kind's name.
+fn tools() -> [(&'static str, ToolKind); ToolKind::ALL.len()] {
+    ToolKind::ALL.map(|kind| (kind.name(), kind))
 }
-
-/// The values of `tool`.
-const TOOLS: [(&str, ToolKind); 3] = [
-    ("sphere", ToolKind::Sphere),
-    ("box", ToolKind::Box),
-    ("cylinder", ToolKind::Cylinder),
-];
-
-/// The fields that give a tool's sizes, and the tools that use each.
-const SIZE_FIELDS: [(&str, &[ToolKind]); 4] = [
-    ("radius", &[ToolKind::Sphere, ToolKind::Cylinder]),
-    ("halfHeight", &[ToolKind::Cylinder]),
-    ("halfExtents", &[ToolKind::Box]),
-    ("rounding", &[ToolKind::Box]),
-];
 
 /// The values of `mirror`: the axis normal to the mirror plane.
 const AXES: [(&str, Axis); 3] = [("x", Axis::X), ("y", Axis::Y), ("z", Axis::Z)];
@@ -219,67 +203,49 @@ impl<'d> Reader<'_, 'd> {
         let Some(field) = fields.get("tool") else {
             self.error(
                 node.pos,
-                format!("`FEdit` needs a `tool` ({})", one_of(&TOOLS)),
+                format!("`FEdit` needs a `tool` ({})", one_of(&tools())),
             );
             return (None, node.pos);
         };
         let pos = field.value_pos;
-        let Some(kind) = self.keyword(field, &TOOLS) else {
+        let Some(kind) = self.keyword(field, &tools()) else {
             return (None, pos);
         };
-        let tool = name_of(&TOOLS, kind);
-        for (name, users) in SIZE_FIELDS {
-            if !users.contains(&kind)
-                && let Some(f) = fields.get(name)
+        let tool = kind.name();
+        for size in ToolSize::ALL {
+            if !kind.sizes().contains(&size)
+                && let Some(f) = fields.get(size.name)
             {
+                let name = size.name;
                 self.warning(f.pos, format!("`{name}` is ignored for a \"{tool}\" tool"));
             }
         }
-        let shape = match kind {
-            ToolKind::Sphere => self
-                .size(fields, "radius", tool)
-                .map(|radius| ToolShape::Sphere { radius }),
-            ToolKind::Box => {
-                let half_extents = match fields.get("halfExtents") {
-                    Some(f) => self.vec3(f),
-                    None => {
-                        self.error(node.pos, "a \"box\" tool needs `halfExtents`");
-                        None
-                    }
-                };
-                let rounding = match fields.get("rounding") {
-                    Some(f) => self.number(f),
-                    None => Some(0.0),
-                };
-                half_extents
-                    .zip(rounding)
-                    .map(|(half_extents, rounding)| ToolShape::Box {
-                        half_extents,
-                        rounding,
-                    })
-            }
-            ToolKind::Cylinder => {
-                let radius = self.size(fields, "radius", tool);
-                let half_height = self.size(fields, "halfHeight", tool);
-                radius
-                    .zip(half_height)
-                    .map(|(radius, half_height)| ToolShape::Cylinder {
-                        radius,
-                        half_height,
-                    })
-            }
-        };
+        // Every size is read, so that each missing or bad one is reported.
+        let values: Vec<Option<Vec<f64>>> = kind
+            .sizes()
+            .iter()
+            .map(|size| self.size(fields, *size, tool))
+            .collect();
+        let shape = values
+            .into_iter()
+            .collect::<Option<Vec<_>>>()
+            .map(|values| ToolShape::from_sizes(kind, &values));
         (shape, pos)
     }
 
-    /// The one number of a size field the tool needs.
-    fn size(&mut self, fields: &mut Fields<'d>, name: &str, tool: &str) -> Option<f64> {
-        match fields.get(name) {
-            Some(f) => self.number(f),
-            None => {
-                self.error(fields.node.pos, format!("a \"{tool}\" tool needs `{name}`"));
-                None
-            }
+    /// The numbers of a size the tool needs: its field's, or its default when left out.
+    fn size(&mut self, fields: &mut Fields<'d>, size: ToolSize, tool: &str) -> Option<Vec<f64>> {
+        match fields.get(size.name) {
+            Some(f) if size.n_numbers == 3 => self.vec3(f).map(|v| v.to_array().to_vec()),
+            Some(f) => self.number(f).map(|v| vec![v]),
+            None => match size.default {
+                Some(v) => Some(vec![v; size.n_numbers]),
+                None => {
+                    let name = size.name;
+                    self.error(fields.node.pos, format!("a \"{tool}\" tool needs `{name}`"));
+                    None
+                }
+            },
         }
     }
 
@@ -373,27 +339,10 @@ fn edit_node(edit: &Edit, active: bool) -> Node {
             fields.push(string("operation", name_of(&OPERATIONS, op)));
         }
     }
-    match edit.tool {
-        ToolShape::Sphere { radius } => {
-            fields.push(string("tool", "sphere"));
-            fields.push(numbers("radius", &[radius]));
-        }
-        ToolShape::Box {
-            half_extents,
-            rounding,
-        } => {
-            fields.push(string("tool", "box"));
-            fields.push(numbers("halfExtents", &half_extents.to_array()));
-            fields.push(numbers("rounding", &[rounding]));
-        }
-        ToolShape::Cylinder {
-            radius,
-            half_height,
-        } => {
-            fields.push(string("tool", "cylinder"));
-            fields.push(numbers("radius", &[radius]));
-            fields.push(numbers("halfHeight", &[half_height]));
-        }
+    let kind = edit.tool.kind();
+    fields.push(string("tool", kind.name()));
+    for (size, values) in kind.sizes().iter().zip(edit.tool.size_values()) {
+        fields.push(numbers(size.name, &values));
     }
     let path = edit
         .path

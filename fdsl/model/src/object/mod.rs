@@ -11,6 +11,10 @@
 //!   when created. [`BoxSampler`] (from [`Sampler::restrict`]) is the same object restricted
 //!   to a box, evaluating many points at once with the sampler's values bit for bit.
 //! - [`codec`] is the canonical, versioned binary form of objects and edits.
+//! - An edit's tool is a [`ToolShape`]; [`ToolKind`] is the one list of its kinds, with the
+//!   names and the sizes ([`ToolSize`]) that brushes and files read and write them by.
+//! - A formula checked before its object is built ([`Formula::tape`]) is compiled through the
+//!   same per-process cache ([`compiled`]), so it is compiled once.
 //!
 //! Sign convention: `f >= 0` is inside (an imported mesh's value is its signed distance). An
 //! object with no geometry, or with parametric
@@ -48,7 +52,7 @@ pub use physics::{ForceField, Physics, Property};
 pub use sample::{ColorSlot, DEFAULT_DIFFUSE, MAX_RAY_PIECES, Sampler};
 pub use shared::Shared;
 pub use space::{Domain, Motion, Timing, Transform};
-pub use tool::{Axis, Pose, ToolShape};
+pub use tool::{Axis, Pose, ToolKind, ToolShape, ToolSize};
 
 use crate::bvh::Aabb;
 use fdsl::limits::MAX_SOURCE_BYTES;
@@ -88,28 +92,39 @@ impl Formula {
         Ok(())
     }
 
-    /// Compiles the formula, which may call `grids`, and takes a tape of `outputs` (or the
-    /// main value when empty).
-    fn tape(&self, slot: Slot, outputs: &[&str], grids: &Grids) -> Result<Tape, ObjectError> {
+    /// The tape of `outputs` (the main value when empty) of the formula, which may call
+    /// `grids`, for `slot` (which errors name): from the process's compile cache
+    /// ([`compiled`]), or compiled once and kept there. What objects are built with, and what
+    /// a caller checking a formula before it builds an object takes, so that the text is
+    /// compiled once.
+    pub fn tape(&self, slot: Slot, outputs: &[&str], grids: &Grids) -> Result<Tape, ObjectError> {
+        self.first_tape(slot, &[outputs], grids)
+            .map(|(_, tape)| tape)
+    }
+
+    /// The first of `choices` (sets of outputs, as for [`Formula::tape`]) that the formula
+    /// defines, with its tape, compiling the text at most once whichever it is (a colour is
+    /// its `r`, `g`, `b`, or else a scalar through a colour map). Defining none of them is
+    /// [`ObjectError::MissingOutput`] for the last.
+    pub fn first_tape(
+        &self,
+        slot: Slot,
+        choices: &[&[&str]],
+        grids: &Grids,
+    ) -> Result<(usize, Tape), ObjectError> {
         self.check_len()?;
-        compiled::tape(&self.0, outputs, grids, || {
+        let answer = compiled::first_tape(&self.0, choices, grids, || {
             let options = fdsl::Options {
                 max_graph_nodes: Some(fdsl::limits::formula_node_budget(self.0.len())),
                 grids: grids.clone(),
                 ..fdsl::Options::default()
             };
-            let function =
-                Function::parse_with(&self.0, options).map_err(|error| ObjectError::Compile {
-                    slot,
-                    error: Box::new(error),
-                })?;
-            if outputs.is_empty() {
-                return Ok(function.tape());
-            }
-            function
-                .tape_for(outputs)
-                .map_err(|error| ObjectError::MissingOutput { slot, error })
-        })
+            Function::parse_with(&self.0, options).map_err(|error| ObjectError::Compile {
+                slot,
+                error: Box::new(error),
+            })
+        })?;
+        answer.map_err(|error| ObjectError::MissingOutput { slot, error })
     }
 }
 
@@ -523,6 +538,7 @@ impl SparseTransform {
 
 impl CompiledParts {
     fn new(data: &ObjectData) -> Result<CompiledParts, ObjectError> {
+        compiled::count_object_build();
         if data.name.len() > MAX_NAME_BYTES {
             return Err(ObjectError::NameTooLong {
                 len: data.name.len(),

@@ -43,7 +43,178 @@ pub enum ToolShape {
     },
 }
 
+/// The kinds of [`ToolShape`], the names each is written and read by, and the sizes each is
+/// given by ([`ToolSize`]): the one definition that the app's brush line and tool panel,
+/// FVRML's `FEdit` and whatever else names a tool iterate ([`ToolKind::ALL`]), so that a new
+/// kind is added in this file (its name, sizes and evaluation) and where render draws its
+/// outline, and nowhere else.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum ToolKind {
+    /// [`ToolShape::Sphere`].
+    Sphere,
+    /// [`ToolShape::Box`].
+    Box,
+    /// [`ToolShape::Cylinder`].
+    Cylinder,
+}
+
+impl ToolKind {
+    /// Every kind, in the order lists show them.
+    pub const ALL: [ToolKind; 3] = [ToolKind::Sphere, ToolKind::Box, ToolKind::Cylinder];
+
+    /// The name files write and read (FVRML's `tool "sphere"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ToolKind::Sphere => "sphere",
+            ToolKind::Box => "box",
+            ToolKind::Cylinder => "cylinder",
+        }
+    }
+
+    /// The word people read and type for it (a brush line, a tool panel): a sphere is a
+    /// "ball"; the other kinds are their [`ToolKind::name`].
+    pub fn label(self) -> &'static str {
+        match self {
+            ToolKind::Sphere => "ball",
+            other => other.name(),
+        }
+    }
+
+    /// The kind `text` names, by its [`ToolKind::name`] or its [`ToolKind::label`].
+    pub fn from_name(text: &str) -> Option<ToolKind> {
+        ToolKind::ALL
+            .into_iter()
+            .find(|k| k.name() == text || k.label() == text)
+    }
+
+    /// The sizes a tool of this kind is given by, in the order files write them.
+    pub fn sizes(self) -> &'static [ToolSize] {
+        match self {
+            ToolKind::Sphere => &[ToolSize::RADIUS],
+            ToolKind::Box => &[ToolSize::HALF_EXTENTS, ToolSize::ROUNDING],
+            ToolKind::Cylinder => &[ToolSize::RADIUS, ToolSize::HALF_HEIGHT],
+        }
+    }
+}
+
+/// One size a [`ToolKind`] is given by: what a file that writes a tool as its kind and named
+/// sizes (FVRML's `FEdit`) reads and writes without knowing any kind.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ToolSize {
+    /// The name files write and read (FVRML's `radius 0.1`).
+    pub name: &'static str,
+    /// How many numbers it holds: 1, or 3 for a vector.
+    pub n_numbers: usize,
+    /// Its value (each of its numbers) when left out; `None`: it must be given.
+    pub default: Option<f64>,
+}
+
+impl ToolSize {
+    /// A ball's or a cylinder's radius.
+    pub const RADIUS: ToolSize = ToolSize {
+        name: "radius",
+        n_numbers: 1,
+        default: None,
+    };
+    /// Half a cylinder's height.
+    pub const HALF_HEIGHT: ToolSize = ToolSize {
+        name: "halfHeight",
+        n_numbers: 1,
+        default: None,
+    };
+    /// Half a box's edge lengths.
+    pub const HALF_EXTENTS: ToolSize = ToolSize {
+        name: "halfExtents",
+        n_numbers: 3,
+        default: None,
+    };
+    /// A box's edge rounding radius (sharp edges when left out).
+    pub const ROUNDING: ToolSize = ToolSize {
+        name: "rounding",
+        n_numbers: 1,
+        default: Some(0.0),
+    };
+    /// Every size of every kind, each once, in the order files write them.
+    pub const ALL: [ToolSize; 4] = [
+        ToolSize::RADIUS,
+        ToolSize::HALF_HEIGHT,
+        ToolSize::HALF_EXTENTS,
+        ToolSize::ROUNDING,
+    ];
+}
+
 impl ToolShape {
+    /// The tool of `kind` that fits a box `2 * size` across, as a brush of that size makes
+    /// it: a ball of radius `size`, a cube of half edge `size` with edges rounded by a fifth
+    /// of it, a cylinder of radius `size` as tall as it is wide.
+    pub fn of_kind(kind: ToolKind, size: f64) -> ToolShape {
+        match kind {
+            ToolKind::Sphere => ToolShape::Sphere { radius: size },
+            ToolKind::Box => ToolShape::Box {
+                half_extents: DVec3::splat(size),
+                rounding: size * 0.2,
+            },
+            ToolKind::Cylinder => ToolShape::Cylinder {
+                radius: size,
+                half_height: size,
+            },
+        }
+    }
+
+    /// The tool of `kind` whose sizes ([`ToolKind::sizes`], in that order) hold `values`,
+    /// each with as many numbers as its size takes. Whether the tool is valid is left to
+    /// [`crate::object::CompiledEdit::new`], as for any edit.
+    pub fn from_sizes(kind: ToolKind, values: &[Vec<f64>]) -> ToolShape {
+        let sizes = kind.sizes();
+        assert!(
+            values.len() == sizes.len()
+                && sizes
+                    .iter()
+                    .zip(values)
+                    .all(|(s, v)| v.len() == s.n_numbers),
+            "a {} tool's sizes are {sizes:?}, not {values:?}",
+            kind.name()
+        );
+        match kind {
+            ToolKind::Sphere => ToolShape::Sphere {
+                radius: values[0][0],
+            },
+            ToolKind::Box => ToolShape::Box {
+                half_extents: DVec3::from_slice(&values[0]),
+                rounding: values[1][0],
+            },
+            ToolKind::Cylinder => ToolShape::Cylinder {
+                radius: values[0][0],
+                half_height: values[1][0],
+            },
+        }
+    }
+
+    /// The values of its kind's sizes ([`ToolKind::sizes`]), in that order: what
+    /// [`ToolShape::from_sizes`] takes back.
+    pub fn size_values(&self) -> Vec<Vec<f64>> {
+        match *self {
+            ToolShape::Sphere { radius } => vec![vec![radius]],
+            ToolShape::Box {
+                half_extents,
+                rounding,
+            } => vec![half_extents.to_array().to_vec(), vec![rounding]],
+            ToolShape::Cylinder {
+                radius,
+                half_height,
+            } => vec![vec![radius], vec![half_height]],
+        }
+    }
+
+    /// Its kind.
+    pub fn kind(&self) -> ToolKind {
+        match self {
+            ToolShape::Sphere { .. } => ToolKind::Sphere,
+            ToolShape::Box { .. } => ToolKind::Box,
+            ToolShape::Cylinder { .. } => ToolKind::Cylinder,
+        }
+    }
+
     /// Half the edge lengths of the box around the shape.
     pub fn half_extents(&self) -> DVec3 {
         match *self {
@@ -704,6 +875,28 @@ mod tests {
             tool.value(shape, p + DVec3::Y * h) - tool.value(shape, p - DVec3::Y * h),
             tool.value(shape, p + DVec3::Z * h) - tool.value(shape, p - DVec3::Z * h),
         ) / (2.0 * h)
+    }
+
+    /// Each kind is named once, read back by its name and its label, and makes a valid
+    /// tool of its own kind.
+    #[test]
+    fn tool_kinds_are_named_once_and_make_their_shapes() {
+        for kind in ToolKind::ALL {
+            assert_eq!(ToolKind::from_name(kind.name()), Some(kind));
+            assert_eq!(ToolKind::from_name(kind.label()), Some(kind));
+            let tool = ToolShape::of_kind(kind, 0.25);
+            assert_eq!(tool.kind(), kind);
+            assert_eq!(ToolShape::from_sizes(kind, &tool.size_values()), tool);
+            assert!(kind.sizes().iter().all(|s| ToolSize::ALL.contains(s)));
+            assert!(tool.validate().is_ok(), "{tool:?}");
+            assert_eq!(tool.half_extents().max_element(), 0.25, "{tool:?}");
+            let others = ToolKind::ALL.into_iter().filter(|k| *k != kind);
+            for other in others {
+                assert!(other.name() != kind.name() && other.label() != kind.label());
+            }
+        }
+        assert_eq!(ToolKind::from_name("ball"), Some(ToolKind::Sphere));
+        assert_eq!(ToolKind::from_name("cone"), None);
     }
 
     #[test]
