@@ -13,7 +13,7 @@ use std::sync::mpsc::{Receiver, channel};
 use std::sync::{Arc, Mutex};
 
 use eframe::egui;
-use render::image::RgbaImage;
+use plot::image::RgbaImage;
 use serde_json::{Value, json};
 
 use super::app::SculptApp;
