@@ -18,6 +18,7 @@
 //! - [`demos`]: the thesis's applications as scene files built into the program
 //!   (`sculpt demo NAME`).
 //! - [`settings`]: the name, colour and brush a user expects to find again.
+//! - [`dirs`]: the data directory and where session stores go in it.
 //! - [`clock`]: the program's one read of the clock.
 //!
 //! What it is not: the window (egui) and the argument parsing live in the binary; the
@@ -45,6 +46,7 @@ pub mod brush;
 pub mod clock;
 pub mod command;
 pub mod demos;
+pub mod dirs;
 pub mod engine;
 pub mod files;
 pub mod settings;

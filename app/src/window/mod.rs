@@ -47,7 +47,7 @@ pub struct WindowArgs {
     #[arg(long, value_name = "WxH", value_parser = parse_size_points)]
     pub size: Option<[f32; 2]>,
     #[command(flatten)]
-    pub net: crate::cli::NetArgs,
+    pub net: crate::net_args::NetArgs,
     /// Test hook: run LINE as if typed in the command line (repeatable).
     #[arg(long, value_name = "LINE")]
     pub command: Vec<String>,
@@ -102,15 +102,6 @@ fn parse_fractions(text: &str) -> Result<[f32; 2], String> {
         .ok_or_else(|| format!("`{text}` is not X,Y (fractions of the viewport, 0 to 1)"))
 }
 
-/// The program's data directory: `$XDG_DATA_HOME/sculpt`, else `~/.local/share/sculpt`.
-pub fn default_data_dir() -> Option<PathBuf> {
-    let non_empty = |name| std::env::var_os(name).filter(|v| !v.is_empty());
-    if let Some(data) = non_empty("XDG_DATA_HOME") {
-        return Some(PathBuf::from(data).join("sculpt"));
-    }
-    non_empty("HOME").map(|home| PathBuf::from(home).join(".local/share/sculpt"))
-}
-
 /// `sculpt demo`: a demo scene in the window, or the list of them.
 #[derive(clap::Args, Debug)]
 pub struct DemoArgs {
@@ -149,9 +140,9 @@ pub fn run(args: WindowArgs, demo: &'static ::app::demos::Demo) -> anyhow::Resul
     let store = match &args.store {
         Some(store) => store.clone(),
         None => {
-            let sessions = default_data_dir()
+            let sessions = ::app::dirs::data_dir()
                 .context("no store directory: set HOME or XDG_DATA_HOME, or give --store DIR")?
-                .join("sessions");
+                .join(::app::dirs::SESSIONS_DIR);
             match &args.net.invite {
                 Some(invite) => sessions.join(::app::engine::store::joined_dir_name(invite)),
                 None => sessions.join(demo.store_dir_name()),
@@ -160,7 +151,7 @@ pub fn run(args: WindowArgs, demo: &'static ::app::demos::Demo) -> anyhow::Resul
     };
     let depth = args.depth;
     // The settings are read before the window opens: it opens at the size it was left at.
-    let settings = default_data_dir().map(|dir| {
+    let settings = ::app::dirs::data_dir().map(|dir| {
         let path = dir.join(::app::settings::SETTINGS_FILE);
         let (settings, notice) = ::app::settings::Settings::load(&path);
         if let Some(notice) = notice {
