@@ -1,9 +1,10 @@
 //! Where the program keeps its files: the data directory, and the session stores in it.
 //!
-//! The window, the `sessions` subcommand and the settings all start from [`data_dir`].
+//! The window, the `sessions` subcommand and the settings all start from [`data_dir`]; a
+//! session the window switches to gets its store beside the current one ([`store_beside`]).
 
 use std::ffi::OsString;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// The folder of the data directory that holds one store directory per session.
 pub const SESSIONS_DIR: &str = "sessions";
@@ -24,6 +25,15 @@ pub fn data_dir_from(xdg_data_home: Option<OsString>, home: Option<OsString>) ->
     non_empty(home).map(|home| PathBuf::from(home).join(".local/share/sculpt"))
 }
 
+/// The store directory named `dir_name` beside `store` (in the same parent; in the current
+/// directory when `store` has no parent).
+pub fn store_beside(store: &Path, dir_name: &str) -> PathBuf {
+    store
+        .parent()
+        .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
+        .join(dir_name)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -42,5 +52,15 @@ mod tests {
         );
         assert_eq!(data_dir_from(None, some("")), None);
         assert_eq!(data_dir_from(None, None), None);
+    }
+
+    #[test]
+    fn a_store_beside_another_shares_its_parent() {
+        assert_eq!(
+            store_beside(Path::new("/data/sessions/demo"), "joined-1"),
+            PathBuf::from("/data/sessions/joined-1")
+        );
+        assert_eq!(store_beside(Path::new("demo"), "b"), PathBuf::from("b"));
+        assert_eq!(store_beside(Path::new("/"), "b"), PathBuf::from("./b"));
     }
 }
