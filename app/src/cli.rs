@@ -6,7 +6,7 @@ use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
-use app::engine::{Engine, EngineConfig, Network, lock, store};
+use app::engine::{Engine, EngineConfig, lock, store};
 use fdsl::Function;
 use fdsl::eval::{BulkEval, PointEval};
 use replication::net::invite::Invite;
@@ -15,48 +15,6 @@ use replication::shape::{IdSource, ShapePayload};
 /// How often a headless peer looks at its view to print what changed.
 const PEER_POLL_MILLIS: u64 = 100;
 
-/// The network flags the window and the headless peer share.
-#[derive(clap::Args, Clone, Debug)]
-pub struct NetArgs {
-    /// Join the session of this invite (from `sculpt invite` or a window's Share).
-    #[arg(long, value_name = "CODE", value_parser = parse_invite)]
-    pub invite: Option<Invite>,
-    /// The UDP address to listen on for peers (port 0 picks a free one).
-    #[arg(long, value_name = "ADDR", default_value = "0.0.0.0:0")]
-    pub listen: SocketAddr,
-    /// Dial this peer, and again whenever not connected (repeatable).
-    #[arg(long, value_name = "ADDR")]
-    pub dial: Vec<SocketAddr>,
-    /// Register with this discovery node to find the session's peers.
-    #[arg(long, value_name = "ADDR")]
-    pub discovery: Option<SocketAddr>,
-    /// Do not announce on or listen to the local network.
-    #[arg(long)]
-    pub no_lan: bool,
-    /// The name other peers see beside your pointer and edits (default: your short id).
-    #[arg(long, value_name = "NAME")]
-    pub name: Option<String>,
-    /// The session's name as the LAN lists it (default: the store directory's name).
-    #[arg(long, value_name = "NAME")]
-    pub session_name: Option<String>,
-}
-
-impl NetArgs {
-    /// The engine's network settings.
-    pub fn network(&self) -> Network {
-        Network {
-            listen: self.listen,
-            dial: self.dial.clone(),
-            discovery: self.discovery,
-            lan: !self.no_lan,
-        }
-    }
-}
-
-fn parse_invite(text: &str) -> Result<Invite, String> {
-    Invite::parse(text).map_err(|e| e.to_string())
-}
-
 /// `sculpt peer`.
 #[derive(clap::Args, Debug)]
 pub struct PeerArgs {
@@ -64,7 +22,7 @@ pub struct PeerArgs {
     #[arg(long, value_name = "DIR")]
     pub store: PathBuf,
     #[command(flatten)]
-    pub net: NetArgs,
+    pub net: crate::net_args::NetArgs,
     /// A line of the window's command language, run once at start (repeatable).
     #[arg(long, value_name = "LINE")]
     pub command: Vec<String>,
@@ -243,9 +201,9 @@ pub fn invite() -> anyhow::Result<()> {
 pub fn sessions(args: &SessionsArgs) -> anyhow::Result<()> {
     let root = match &args.root {
         Some(root) => root.clone(),
-        None => crate::window::default_data_dir()
-            .context("no data directory: set HOME or XDG_DATA_HOME, or give --root DIR")?
-            .join("sessions"),
+        None => app::dirs::data_dir()
+            .map(|dir| dir.join(app::dirs::SESSIONS_DIR))
+            .context("no data directory: set HOME or XDG_DATA_HOME, or give --root DIR")?,
     };
     let found = match store::list_sessions(&root) {
         Ok(found) => found,

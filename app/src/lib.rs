@@ -19,6 +19,8 @@
 //! - [`demos`]: the thesis's applications as scene files built into the program
 //!   (`sculpt demo NAME`).
 //! - [`settings`]: the name, colour and brush a user expects to find again.
+//! - [`dirs`]: the data directory and where session stores go in it.
+//! - [`samples`]: bounded series of timings and their summaries.
 //! - [`clock`]: the program's one read of the clock.
 //!
 //! What it is not: the window (egui) and the argument parsing live in the binary; the
@@ -46,9 +48,11 @@ pub mod brush;
 pub mod clock;
 pub mod command;
 pub mod demos;
+pub mod dirs;
 pub mod engine;
 pub mod files;
 pub mod new_object;
+pub mod samples;
 pub mod settings;
 pub mod touch;
 pub mod transfer;

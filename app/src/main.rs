@@ -3,6 +3,7 @@
 //! node, invites, pictures and checks of functions).
 
 mod cli;
+mod net_args;
 mod window;
 
 use std::process::ExitCode;

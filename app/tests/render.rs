@@ -53,7 +53,7 @@ fn render_writes_one_png_per_view_of_the_watermelon() {
             stdout.contains(&format!("wrote {}", path.display())),
             "{stdout}"
         );
-        let image = render::image::RgbaImage::from_png(&std::fs::read(&path).unwrap()).unwrap();
+        let image = plot::image::RgbaImage::from_png(&std::fs::read(&path).unwrap()).unwrap();
         assert_eq!((image.width, image.height), (64, 48));
         // The watermelon fills the middle; the corner is background.
         assert_ne!(image.pixel(32, 24), image.pixel(0, 0), "{view}");

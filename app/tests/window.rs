@@ -23,7 +23,7 @@ use std::time::Duration;
 
 mod touch_support;
 
-use render::image::RgbaImage;
+use plot::image::RgbaImage;
 use serde_json::Value;
 
 /// Longest one run of the binary may take before the test kills it.

@@ -20,8 +20,9 @@
 //!   pictured offscreen from cameras that frame it (the `sculpt render` command);
 //! - [`mesher`]: the [`Mesher`](mesher::Mesher), named worker threads that mesh objects as
 //!   they change, patching an implicit object's last mesh where only its edits changed;
-//! - [`plot`]: tiny-skia heat-map slices with legends and time-series line plots;
-//! - [`image`]: the [`RgbaImage`](image::RgbaImage) both produce, with PNG encode and decode.
+//! - pictures come out as the `plot` crate's `plot::image::RgbaImage` (with PNG encode and
+//!   decode); its users name `plot` themselves (it is not re-exported here), and it also
+//!   draws tiny-skia heat-map slices and time-series plots.
 //!
 //! What it is not: it knows nothing of egui or replication (the app wraps
 //! [`Renderer`](gpu::Renderer) in an `egui_wgpu` callback), and it does not parse or compile
@@ -62,6 +63,3 @@ pub mod mesh;
 pub mod mesher;
 pub mod scene;
 pub mod snapshot;
-
-pub use plot;
-pub use plot::image;

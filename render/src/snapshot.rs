@@ -30,7 +30,6 @@ use model::scene::ObjectId;
 use crate::appearance::CompiledAppearance;
 use crate::camera::Camera;
 use crate::gpu::offscreen::{Headless, OFFSCREEN_SIDE_MAX, OffscreenError};
-use crate::image::RgbaImage;
 use crate::mesh::object_field::mesh_bounds;
 use crate::mesh::octree::{MeshSettings, OCTREE_DEPTH_MAX, mesh_with_stats};
 use crate::mesh::parametric::{
@@ -38,6 +37,7 @@ use crate::mesh::parametric::{
 };
 use crate::mesh::{Aabb, Mesh, ObjectField};
 use crate::scene::{Line, Material, Scene};
+use plot::image::RgbaImage;
 
 /// Most views one snapshot may ask for.
 pub const VIEWS_MAX: usize = 16;

@@ -18,10 +18,10 @@
 
 use glam::{Mat4, Vec3};
 use model::object::{Appearance, ColorDef, ColorMap, Formula};
+use plot::image::RgbaImage;
 use render::appearance::CompiledAppearance;
 use render::camera::Camera;
 use render::gpu::offscreen::{Headless, OffscreenError};
-use render::image::RgbaImage;
 use render::mesh::octree::{MeshSettings, mesh};
 use render::mesh::parametric::{SurfaceSettings, UvDomain, triangulate_surface};
 use render::mesh::{Aabb, Field, Mesh, TapeField};

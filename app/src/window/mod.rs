@@ -1,9 +1,19 @@
 //! The desktop window (`sculpt`, `sculpt demo`): options, the display check and
-//! `eframe::run_native` with the wgpu renderer.
+//! `eframe::run_native` with the wgpu renderer. `SculptApp` (`app.rs`) coordinates each
+//! frame; the other modules each own one concern: its state, its logic and its panel.
 
 mod app;
+mod commands;
 mod hooks;
-mod panel;
+mod objects;
+mod peers;
+mod rows;
+mod sculpt;
+mod session;
+mod side;
+mod top;
+mod touch;
+mod transfer;
 mod viewport;
 
 use std::path::PathBuf;
@@ -14,17 +24,23 @@ use eframe::egui;
 use self::app::SculptApp;
 use ::app::clock;
 use ::app::engine::{Engine, EngineConfig, lock};
+use ::app::settings::Settings;
 use hooks::Hooks;
-use viewport::ViewportResources;
+use viewport::gpu::ViewportResources;
 
 /// Octree depth of implicit objects in the window unless `--depth` says otherwise.
 pub const DEFAULT_DEPTH: u8 = 6;
 /// Deepest octree `--depth` accepts (render's own limit may be lower).
-pub const DEPTH_MAX: u8 = 9;
+pub const MAX_DEPTH: u8 = 9;
 /// The window's inner size unless `--size` says otherwise, in points.
 pub const DEFAULT_SIZE_POINTS: [f32; 2] = [1280.0, 800.0];
 /// Largest window side `--size` accepts, in points.
-pub const SIZE_POINTS_MAX: f32 = 8192.0;
+pub const MAX_SIZE_POINTS: f32 = 8192.0;
+
+/// Colour of errors in the panels.
+const ERROR_COLOUR: egui::Color32 = egui::Color32::from_rgb(255, 110, 100);
+/// Colour of notices in the panels.
+const NOTICE_COLOUR: egui::Color32 = egui::Color32::from_rgb(240, 200, 90);
 
 /// What the user tells the headless subcommands apart by, for the no-display message.
 const HEADLESS_HINT: &str = "\
@@ -41,20 +57,20 @@ pub struct WindowArgs {
     #[arg(long, value_name = "DIR")]
     pub store: Option<PathBuf>,
     /// Octree depth for implicit objects.
-    #[arg(long, default_value_t = DEFAULT_DEPTH, value_parser = clap::value_parser!(u8).range(0..=i64::from(DEPTH_MAX)))]
+    #[arg(long, default_value_t = DEFAULT_DEPTH, value_parser = clap::value_parser!(u8).range(0..=i64::from(MAX_DEPTH)))]
     pub depth: u8,
     /// The window's inner size in points.
     #[arg(long, value_name = "WxH", value_parser = parse_size_points)]
     pub size: Option<[f32; 2]>,
     #[command(flatten)]
-    pub net: crate::cli::NetArgs,
+    pub net: crate::net_args::NetArgs,
     /// Test hook: run LINE as if typed in the command line (repeatable).
     #[arg(long, value_name = "LINE")]
     pub command: Vec<String>,
     /// Test hook: drag across the viewport with the current tool, from X0,Y0 to X1,Y1
     /// (fractions of its size), after the commands (repeatable). A command line
     /// `drag: X0,Y0:X1,Y1` does the same at its place in the script.
-    #[arg(long, value_name = "X0,Y0:X1,Y1", value_parser = hooks::parse_drag)]
+    #[arg(long, value_name = "X0,Y0:X1,Y1", value_parser = hooks::steps::parse_drag)]
     pub drag: Vec<[[f32; 2]; 2]>,
     /// Test hook: press a shortcut after the commands (repeatable): undo, redo, sculpt,
     /// navigate, play, pause, space; a command line `key: NAME` does the same at its place in
@@ -88,11 +104,11 @@ fn parse_size_points(text: &str) -> Result<[f32; 2], String> {
     let side = |s: &str| {
         s.parse::<f32>()
             .ok()
-            .filter(|x| (1.0..=SIZE_POINTS_MAX).contains(x))
+            .filter(|x| (1.0..=MAX_SIZE_POINTS).contains(x))
     };
     text.split_once('x')
         .and_then(|(w, h)| Some([side(w)?, side(h)?]))
-        .ok_or_else(|| format!("`{text}` is not WxH (each side 1 to {SIZE_POINTS_MAX})"))
+        .ok_or_else(|| format!("`{text}` is not WxH (each side 1 to {MAX_SIZE_POINTS})"))
 }
 
 fn parse_fractions(text: &str) -> Result<[f32; 2], String> {
@@ -100,15 +116,6 @@ fn parse_fractions(text: &str) -> Result<[f32; 2], String> {
     text.split_once(',')
         .and_then(|(x, y)| Some([fraction(x)?, fraction(y)?]))
         .ok_or_else(|| format!("`{text}` is not X,Y (fractions of the viewport, 0 to 1)"))
-}
-
-/// The program's data directory: `$XDG_DATA_HOME/sculpt`, else `~/.local/share/sculpt`.
-pub fn default_data_dir() -> Option<PathBuf> {
-    let non_empty = |name| std::env::var_os(name).filter(|v| !v.is_empty());
-    if let Some(data) = non_empty("XDG_DATA_HOME") {
-        return Some(PathBuf::from(data).join("sculpt"));
-    }
-    non_empty("HOME").map(|home| PathBuf::from(home).join(".local/share/sculpt"))
 }
 
 /// `sculpt demo`: a demo scene in the window, or the list of them.
@@ -145,50 +152,8 @@ pub fn run(args: WindowArgs, demo: &'static ::app::demos::Demo) -> anyhow::Resul
              are both unset).\n{HEADLESS_HINT}"
         );
     }
-    // Each session has its own store: the demo's, or one per joined session.
-    let store = match &args.store {
-        Some(store) => store.clone(),
-        None => {
-            let sessions = default_data_dir()
-                .context("no store directory: set HOME or XDG_DATA_HOME, or give --store DIR")?
-                .join("sessions");
-            match &args.net.invite {
-                Some(invite) => sessions.join(::app::engine::store::joined_dir_name(invite)),
-                None => sessions.join(demo.store_dir_name()),
-            }
-        }
-    };
-    let depth = args.depth;
-    // The settings are read before the window opens: it opens at the size it was left at.
-    let settings = default_data_dir().map(|dir| {
-        let path = dir.join(::app::settings::SETTINGS_FILE);
-        let (settings, notice) = ::app::settings::Settings::load(&path);
-        if let Some(notice) = notice {
-            eprintln!("sculpt: settings: {notice}");
-        }
-        (settings, path)
-    });
-    let size_points = args
-        .size
-        .or_else(|| settings.as_ref().and_then(|(s, _)| s.window_points))
-        .unwrap_or(DEFAULT_SIZE_POINTS);
-    let mut hooks = Hooks::default();
-    hooks.script = args.command.iter().cloned().collect();
-    for [[x0, y0], [x1, y1]] in &args.drag {
-        hooks.script.push_back(format!("drag: {x0},{y0}:{x1},{y1}"));
-    }
-    for key in &args.key {
-        hooks.script.push_back(format!("key: {key}"));
-    }
-    hooks.pick = args.pick;
-    hooks.screenshot.clone_from(&args.screenshot);
-    hooks.exit_when_idle = args.exit_when_idle;
-    hooks.exit_after_frames = args.exit_after_frames;
-    hooks.dump_state.clone_from(&args.dump_state);
-    hooks.wait_ops = args.wait_ops;
-    hooks.wait_presence = args.wait_presence;
     let engine_config = EngineConfig {
-        store,
+        store: store_dir(&args, demo)?,
         invite: args.net.invite.clone(),
         network: args.net.network(),
         demo: Some(demo),
@@ -196,6 +161,13 @@ pub fn run(args: WindowArgs, demo: &'static ::app::demos::Demo) -> anyhow::Resul
         name: args.net.name.clone(),
         session_name: args.net.session_name.clone(),
     };
+    // The settings are read before the window opens: it opens at the size it was left at.
+    let settings = load_settings();
+    let size_points = args
+        .size
+        .or_else(|| settings.as_ref().and_then(|(s, _)| s.window_points))
+        .unwrap_or(DEFAULT_SIZE_POINTS);
+    let hooks = Hooks::from_args(&args);
     let failure = std::sync::Arc::clone(&hooks.failure);
     let native = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
@@ -203,36 +175,12 @@ pub fn run(args: WindowArgs, demo: &'static ::app::demos::Demo) -> anyhow::Resul
             .with_inner_size(size_points),
         ..Default::default()
     };
+    let depth = args.depth;
     eframe::run_native(
         "sculpt",
         native,
         Box::new(move |cc| {
-            let state = cc
-                .wgpu_render_state
-                .as_ref()
-                .context("eframe started without its wgpu renderer")?;
-            state
-                .renderer
-                .write()
-                .callback_resources
-                .insert(ViewportResources::new(&state.device, &state.queue, state.target_format));
-            // The store is opened once the window is up, so that a failed start leaves none.
-            let engine = Engine::start(engine_config.clone(), clock::now().wall)?;
-            {
-                let view = lock(engine.view());
-                if let Some(error) = view.store_error() {
-                    eprintln!("sculpt: store error: {error}");
-                }
-                for notice in view.notices() {
-                    eprintln!("sculpt: {notice}");
-                }
-            }
-            let ctx = cc.egui_ctx.clone();
-            let wake = std::sync::Arc::new(move || ctx.request_repaint());
-            let mut app = SculptApp::new(engine, engine_config, depth, hooks, wake)?;
-            if let Some((settings, path)) = settings {
-                app.apply_settings(&settings, path);
-            }
+            let app = open(cc, engine_config, depth, hooks, settings)?;
             Ok(Box::new(app))
         }),
     )
@@ -247,4 +195,73 @@ pub fn run(args: WindowArgs, demo: &'static ::app::demos::Demo) -> anyhow::Resul
         bail!("{failure}");
     }
     Ok(())
+}
+
+/// The session's store: `--store`, else the joined session's or the demo's own under the
+/// data directory. Each session has its own store.
+fn store_dir(args: &WindowArgs, demo: &::app::demos::Demo) -> anyhow::Result<PathBuf> {
+    if let Some(store) = &args.store {
+        return Ok(store.clone());
+    }
+    let sessions = ::app::dirs::data_dir()
+        .context("no store directory: set HOME or XDG_DATA_HOME, or give --store DIR")?
+        .join(::app::dirs::SESSIONS_DIR);
+    Ok(match &args.net.invite {
+        Some(invite) => sessions.join(::app::engine::store::joined_dir_name(invite)),
+        None => sessions.join(demo.store_dir_name()),
+    })
+}
+
+/// The kept settings and their file, when there is a data directory (a notice on stderr
+/// when they could not be read).
+fn load_settings() -> Option<(Settings, PathBuf)> {
+    ::app::dirs::data_dir().map(|dir| {
+        let path = dir.join(::app::settings::SETTINGS_FILE);
+        let (settings, notice) = Settings::load(&path);
+        if let Some(notice) = notice {
+            eprintln!("sculpt: settings: {notice}");
+        }
+        (settings, path)
+    })
+}
+
+/// The window's app, once eframe is up: the viewport's GPU resources, then the session's
+/// engine (opened only now, so that a failed start leaves no store), then the settings.
+fn open(
+    cc: &eframe::CreationContext<'_>,
+    config: EngineConfig,
+    depth: u8,
+    hooks: Hooks,
+    settings: Option<(Settings, PathBuf)>,
+) -> anyhow::Result<SculptApp> {
+    let state = cc
+        .wgpu_render_state
+        .as_ref()
+        .context("eframe started without its wgpu renderer")?;
+    state
+        .renderer
+        .write()
+        .callback_resources
+        .insert(ViewportResources::new(
+            &state.device,
+            &state.queue,
+            state.target_format,
+        ));
+    let engine = Engine::start(config.clone(), clock::now().wall)?;
+    {
+        let view = lock(engine.view());
+        if let Some(error) = view.store_error() {
+            eprintln!("sculpt: store error: {error}");
+        }
+        for notice in view.notices() {
+            eprintln!("sculpt: {notice}");
+        }
+    }
+    let ctx = cc.egui_ctx.clone();
+    let wake = std::sync::Arc::new(move || ctx.request_repaint());
+    let mut app = SculptApp::new(engine, config, depth, hooks, wake)?;
+    if let Some((settings, path)) = settings {
+        app.apply_settings(&settings, path);
+    }
+    Ok(app)
 }

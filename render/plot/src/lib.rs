@@ -1,8 +1,8 @@
 //! 2D pictures with tiny-skia: heat-map slices of scalar functions and time-series plots.
 //!
 //! Both return an [`RgbaImage`](crate::image::RgbaImage) to save as PNG. Text uses the small
-//! built-in stroke font in [`font`]. This is its own crate (under `render/`, re-exported as
-//! `render::plot`) so that haptic's force traces and the simulator's reports draw with it
+//! built-in stroke font in [`font`]. This is its own crate (under `render/`, named directly by its
+//! users) so that haptic's force traces and the simulator's reports draw with it
 //! without depending on wgpu.
 #![warn(missing_docs)]
 

@@ -1,8 +1,8 @@
 //! Headless rendering: a private device draws a [`Scene`] into an RGBA image or a PNG file.
 
 use super::{PrepareError, Renderer};
-use crate::image::{PngError, RgbaImage};
 use crate::scene::Scene;
+use plot::image::{PngError, RgbaImage};
 use std::path::Path;
 
 /// Largest offscreen image side in pixels.

@@ -1,0 +1,521 @@
+//! The scene's objects as the window meshes and draws them: which ones the engine said
+//! changed, the jobs sent to render's `Mesher` (an edit re-meshes its own object only), the
+//! meshes that came back, and where moving objects are at the frame's scene time.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use model::object::{Object, Sampler, Transform};
+use model::scene::{ObjectId, Scene as ModelScene};
+use render::mesh::octree::MeshPatch;
+use render::mesh::{Aabb, Mesh};
+use render::mesher::{MeshJob, MeshKind, Meshed, Mesher};
+use render::scene::{Line, Scene, SceneObject};
+use render::snapshot::render_from_scene;
+
+use ::app::clock;
+use ::app::samples::Samples;
+
+/// Edit-to-mesh times kept.
+pub const MAX_EDIT_SAMPLES: usize = 100;
+/// Patches kept for the viewport between its draws.
+pub const MAX_PATCHES_KEPT: usize = 256;
+/// Meshing that has run this long shows in the title ("meshing N…").
+pub const MESHING_SHOWN_MILLIS: u64 = 200;
+/// While time runs, an object whose drawing reads `t` is meshed again at most this often.
+pub const ANIMATION_REMESH_MILLIS: u64 = 100;
+/// Colour of the selected object's box.
+const SELECTION_COLOUR: [f32; 4] = [1.0, 0.85, 0.2, 1.0];
+
+/// A patch for `Renderer::patch_object`: the object, the mesh it starts from, the mesh it
+/// makes, and the ranges written.
+pub type PatchForRenderer = (ObjectId, Arc<Mesh>, Arc<Mesh>, MeshPatch);
+
+/// One scene object as the window tracks it: what was sent to the mesher, what is drawn.
+#[derive(Default)]
+pub struct Tracked {
+    /// The engine said it changed since it was last sent to be meshed.
+    stale: bool,
+    /// Counts jobs for this object.
+    pub generation: u64,
+    /// The generation now drawn.
+    pub drawn_generation: u64,
+    /// A job the mesher's queue had no room for.
+    pending: Option<Box<MeshJob>>,
+    /// The drawable object, once meshed.
+    pub drawn: Option<SceneObject>,
+    /// Its box in the renderer's world, found once when its mesh arrives (frames read it to
+    /// frame the camera and box the selection without scanning the mesh).
+    pub drawn_box: Option<Aabb>,
+    /// Its force-field arrows.
+    pub lines: Vec<Line>,
+    /// Triangles in its mesh.
+    pub n_triangles: usize,
+    /// Why it is (partly) not drawn.
+    pub skipped: Option<String>,
+    /// Seconds its last mesh took on the worker.
+    pub mesh_secs: f64,
+    /// How its drawn mesh was made.
+    pub kind: Option<MeshKind>,
+    /// Since when it has waited for a mesh (none while drawn as the scene has it).
+    pub meshing_since: Option<Instant>,
+    /// Its motion, for an object that moves with the scene's time.
+    pub moving: Option<Box<Moving>>,
+    /// Something drawn of it reads `t` (shape, colours, field): meshed again as time runs.
+    pub timed: bool,
+    /// The scene time its drawn mesh was made at.
+    pub drawn_t_secs: f64,
+    /// When a mesh for a later time was last asked for, while none is in flight.
+    time_job: Option<TimeJob>,
+}
+
+impl Tracked {
+    /// Renderer world from object where it is drawn this frame (moved to the frame's time).
+    pub fn world_from_object_now(&self) -> Option<glam::Mat4> {
+        let drawn = self.drawn.as_ref()?.world_from_object;
+        Some(self.moving.as_ref().map_or(drawn, |m| m.world_now))
+    }
+
+    /// Whether it is drawn as the scene has it, with nothing waiting to be sent.
+    fn is_drawn_as_is(&self) -> bool {
+        self.pending.is_none() && self.drawn_generation == self.generation
+    }
+
+    /// Takes the mesher's `done` when it is newer than what is drawn (a later job, or the same
+    /// object meshed at a later scene time); returns whether it was.
+    fn take_meshed(&mut self, done: Meshed) -> bool {
+        let newer = done.generation > self.drawn_generation
+            || (done.generation == self.drawn_generation && done.t_secs > self.drawn_t_secs);
+        if !newer {
+            return false;
+        }
+        self.kind = Some(done.kind);
+        self.drawn_generation = done.generation;
+        self.drawn_t_secs = done.t_secs;
+        if let Some(job) = self.time_job.as_mut() {
+            job.done = true;
+        }
+        if self.drawn_generation == self.generation {
+            self.meshing_since = None;
+        }
+        self.drawn_box = done.object.as_ref().and_then(world_box);
+        self.drawn = done.object;
+        self.lines = done.lines;
+        self.n_triangles = done.n_triangles;
+        self.skipped = done.skipped;
+        self.mesh_secs = done.mesh_secs;
+        true
+    }
+}
+
+/// A mesh asked for because time ran (not because the object changed): it keeps the
+/// object's generation, so waiting for it is not "meshing" and does not hold up idleness.
+#[derive(Clone, Copy)]
+struct TimeJob {
+    asked_at: Instant,
+    done: bool,
+}
+
+/// What places a moving object at the scene's time: its motion (through a sampler of the
+/// object as meshed) and its group's transform. Meshes are made at time 0; frames only move
+/// them (the renderer keeps the uploaded buffers).
+pub struct Moving {
+    sampler: Sampler,
+    world_from_group: Transform,
+    /// Renderer world from object at the time the drawn mesh was made (where the mesher
+    /// placed it and its arrows).
+    world_at_drawn: glam::Mat4,
+    /// At the last frame's scene time.
+    pub world_now: glam::Mat4,
+}
+
+impl Moving {
+    fn new(object: &Object, world_from_group: Transform) -> Moving {
+        let mut moving = Moving {
+            sampler: object.sampler(),
+            world_from_group,
+            world_at_drawn: glam::Mat4::IDENTITY,
+            world_now: glam::Mat4::IDENTITY,
+        };
+        moving.world_at_drawn = moving.world_at(0.0);
+        moving.world_now = moving.world_at_drawn;
+        moving
+    }
+
+    /// Renderer world from object at scene time `t_secs`: the object model's one rule for
+    /// where an object is, as the mesher places it at 0.
+    fn world_at(&mut self, t_secs: f64) -> glam::Mat4 {
+        let scene_from_object =
+            model::scene::world_from_object(&self.world_from_group, &mut self.sampler, t_secs);
+        render_from_scene() * glam::DMat4::from(scene_from_object.parent_from_child).as_mat4()
+    }
+
+    /// Where what was drawn at the mesh's time is now (force arrows, the drawn box).
+    fn since_drawn(&self) -> glam::Mat4 {
+        self.world_now * self.world_at_drawn.inverse()
+    }
+}
+
+/// How the meshes were made and how long edits took to show.
+pub struct MeshStats {
+    /// Milliseconds from an edit being authored to its object's new mesh being drawn.
+    pub edit_to_mesh_ms: Samples,
+    /// Meshes drawn that patched the last one.
+    pub n_patched: u64,
+    /// Meshes drawn whole.
+    pub n_whole: u64,
+}
+
+/// The objects sent to the mesher and drawn.
+pub struct Objects {
+    mesher: Mesher,
+    /// Every object of the scene, by id.
+    pub tracked: BTreeMap<ObjectId, Tracked>,
+    /// Patches of meshes swapped in since the viewport last took them.
+    patches: Vec<PatchForRenderer>,
+    /// Octree depth of implicit objects.
+    pub depth: u8,
+    /// Where this window is in the engine's change stream.
+    changes_cursor: u64,
+    /// The scene changed since objects were last compared with what was sent.
+    pub dirty: bool,
+    /// When the last edit was authored (for edit-to-mesh times).
+    last_edit_at: Option<Instant>,
+    /// How meshes were made.
+    pub stats: MeshStats,
+}
+
+impl Objects {
+    /// None yet, with a mesher whose workers call `wake` when a mesh is ready.
+    pub fn start(depth: u8, wake: impl Fn() + Send + Sync + 'static) -> std::io::Result<Objects> {
+        Ok(Objects {
+            mesher: Mesher::start(|| clock::now().instant, wake)?,
+            tracked: BTreeMap::new(),
+            patches: Vec::new(),
+            depth,
+            changes_cursor: 0,
+            dirty: true,
+            last_edit_at: None,
+            stats: MeshStats {
+                edit_to_mesh_ms: Samples::new(MAX_EDIT_SAMPLES),
+                n_patched: 0,
+                n_whole: 0,
+            },
+        })
+    }
+
+    /// Forgets every object, for another session's scene.
+    pub fn reset(&mut self) {
+        self.tracked.clear();
+        self.changes_cursor = 0;
+        self.dirty = true;
+    }
+
+    /// An edit was authored at `now`: the scene is compared again, and its mesh is timed.
+    pub fn edited(&mut self, now: Instant) {
+        self.last_edit_at = Some(now);
+        self.dirty = true;
+    }
+
+    /// Marks the objects the engine says changed since the last call stale (all of them when
+    /// it cannot say); returns whether any may have changed.
+    pub fn take_changes(&mut self, view: &::app::engine::View) -> bool {
+        let (changes, cursor) = view.changes_since(self.changes_cursor);
+        self.changes_cursor = cursor;
+        let Some(changes) = changes else {
+            self.dirty = true;
+            for (id, _) in view.scene().objects() {
+                self.tracked.entry(id).or_default().stale = true;
+            }
+            return true;
+        };
+        self.dirty |= !changes.is_empty();
+        for id in &changes {
+            self.tracked.entry(*id).or_default().stale = true;
+        }
+        !changes.is_empty()
+    }
+
+    /// Forgets objects that are gone and makes jobs for the stale ones, once the scene
+    /// changed.
+    pub fn send_stale(&mut self, scene: &ModelScene, now: Instant, t_secs: f64) {
+        if !std::mem::take(&mut self.dirty) {
+            return;
+        }
+        let mesher = &self.mesher;
+        self.tracked.retain(|id, _| {
+            let kept = scene.object(*id).is_some();
+            if !kept {
+                mesher.forget(*id);
+            }
+            kept
+        });
+        for (id, tracked) in &mut self.tracked {
+            if !std::mem::take(&mut tracked.stale) {
+                continue;
+            }
+            let Some(entry) = scene.scene_object(*id) else {
+                continue;
+            };
+            tracked.generation += 1;
+            tracked.meshing_since.get_or_insert(now);
+            let world_from_group = scene.world_from_group(entry.group);
+            tracked.moving = entry
+                .object
+                .data()
+                .motion
+                .is_some()
+                .then(|| Box::new(Moving::new(&entry.object, world_from_group)));
+            tracked.timed = render::animation::object_reads_time(&entry.object);
+            tracked.time_job = None;
+            tracked.pending = Some(Box::new(MeshJob {
+                id: *id,
+                object: entry.object.clone(),
+                world_from_group,
+                generation: tracked.generation,
+                depth: self.depth,
+                requested_at: self.last_edit_at.unwrap_or(now),
+                t_secs,
+            }));
+        }
+    }
+
+    /// Time ran: what reads `t` is meshed again at the new time, one job at a time per
+    /// object and at most every [`ANIMATION_REMESH_MILLIS`].
+    pub fn ask_time_jobs(&mut self, scene: &ModelScene, now: Instant, t_secs: f64) {
+        let every = Duration::from_millis(ANIMATION_REMESH_MILLIS);
+        for (id, tracked) in &mut self.tracked {
+            let due = tracked.timed
+                && tracked.is_drawn_as_is()
+                && tracked
+                    .time_job
+                    .is_none_or(|j| j.done && now.duration_since(j.asked_at) >= every);
+            let Some(entry) = scene.scene_object(*id).filter(|_| due) else {
+                continue;
+            };
+            tracked.time_job = Some(TimeJob {
+                asked_at: now,
+                done: false,
+            });
+            tracked.pending = Some(Box::new(MeshJob {
+                id: *id,
+                object: entry.object.clone(),
+                world_from_group: scene.world_from_group(entry.group),
+                generation: tracked.generation,
+                depth: self.depth,
+                requested_at: now,
+                t_secs,
+            }));
+        }
+    }
+
+    /// A preview of object `id` as `object` (a stroke being drawn), placed by
+    /// `world_from_group` and meshed at `t_secs`.
+    pub fn preview(
+        &mut self,
+        id: ObjectId,
+        object: Object,
+        world_from_group: Transform,
+        now: Instant,
+        t_secs: f64,
+    ) {
+        let tracked = self.tracked.entry(id).or_default();
+        tracked.generation += 1;
+        tracked.meshing_since.get_or_insert(now);
+        tracked.pending = Some(Box::new(MeshJob {
+            id,
+            object,
+            world_from_group,
+            generation: tracked.generation,
+            depth: self.depth,
+            requested_at: now,
+            t_secs,
+        }));
+    }
+
+    /// Hands the waiting jobs to the mesher (those its queue has no room for wait on).
+    pub fn flush(&mut self) {
+        for tracked in self.tracked.values_mut() {
+            if let Some(job) = tracked.pending.take() {
+                tracked.pending = self.mesher.try_send(job).err();
+            }
+        }
+    }
+
+    /// Takes finished meshes. One of an older job than the latest is still drawn when newer
+    /// than what is drawn (the workers mesh each object's jobs in order and drop superseded
+    /// ones before they start), so each patch starts from the mesh drawn.
+    pub fn receive(&mut self, now: Instant) {
+        while let Some(mut done) = self.mesher.try_recv() {
+            let Some(tracked) = self.tracked.get_mut(&done.id) else {
+                continue;
+            };
+            let (id, kind, requested_at) = (done.id, done.kind, done.requested_at);
+            let patch = done.patch.take();
+            let mesh = done.object.as_ref().map(|o| Arc::clone(&o.mesh));
+            if !tracked.take_meshed(done) {
+                continue;
+            }
+            if let (Some((base, patch)), Some(mesh)) = (patch, mesh) {
+                if self.patches.len() >= MAX_PATCHES_KEPT {
+                    // The viewport has not drawn for a while: it uploads whole meshes then.
+                    self.patches.clear();
+                }
+                self.patches.push((id, base, mesh, patch));
+            }
+            match kind {
+                MeshKind::Patch => self.stats.n_patched += 1,
+                MeshKind::Whole => self.stats.n_whole += 1,
+                MeshKind::Unchanged => {}
+            }
+            if self.last_edit_at.is_some() {
+                let ms = now.duration_since(requested_at).as_secs_f64() * 1e3;
+                self.stats.edit_to_mesh_ms.push(ms);
+            }
+        }
+    }
+
+    /// The patches since the last call, each with its object's index in the drawn scene's
+    /// `ids` (those of objects not drawn are dropped).
+    pub fn take_patches(
+        &mut self,
+        ids: &[ObjectId],
+    ) -> Vec<(usize, Arc<Mesh>, Arc<Mesh>, MeshPatch)> {
+        std::mem::take(&mut self.patches)
+            .into_iter()
+            .filter_map(|(id, base, mesh, patch)| {
+                let idx = ids.iter().position(|i| *i == id)?;
+                Some((idx, base, mesh, patch))
+            })
+            .collect()
+    }
+
+    /// Whether every object is drawn as the scene has it.
+    pub fn is_idle(&self) -> bool {
+        !self.dirty && self.tracked.values().all(Tracked::is_drawn_as_is)
+    }
+
+    /// Objects that have waited for a mesh longer than [`MESHING_SHOWN_MILLIS`] (the title
+    /// shows them; a frame is asked for while any waits, so the title changes in time).
+    pub fn n_meshing_long(&self, now: Instant) -> usize {
+        let shown = Duration::from_millis(MESHING_SHOWN_MILLIS);
+        self.tracked
+            .values()
+            .filter(|t| {
+                t.meshing_since
+                    .is_some_and(|s| now.duration_since(s) >= shown)
+            })
+            .count()
+    }
+
+    /// Objects waiting for a mesh.
+    pub fn n_meshing(&self) -> usize {
+        self.tracked
+            .values()
+            .filter(|t| t.drawn_generation != t.generation)
+            .count()
+    }
+
+    /// Triangles drawn.
+    pub fn n_triangles(&self) -> usize {
+        self.tracked.values().map(|t| t.n_triangles).sum()
+    }
+
+    /// Object `id`'s box in the renderer's world, as drawn.
+    pub fn drawn_box(&self, id: u64) -> Option<Aabb> {
+        self.tracked.get(&ObjectId(id)).and_then(|t| t.drawn_box)
+    }
+
+    /// A sphere around the drawn objects (centre, radius), for framing the camera.
+    pub fn bounding_sphere(&self) -> Option<(Vec3, f32)> {
+        bounding_sphere(self.tracked.values().filter_map(|t| t.drawn_box))
+    }
+
+    /// Places the moving objects at scene time `t_secs`; returns whether any object moves
+    /// or changes with time (so that frames keep coming while time runs).
+    pub fn place(&mut self, t_secs: f64) -> bool {
+        let mut any = false;
+        for tracked in self.tracked.values_mut() {
+            any |= tracked.timed;
+            if let Some(moving) = tracked.moving.as_mut() {
+                moving.world_now = moving.world_at(t_secs);
+                moving.world_at_drawn = moving.world_at(tracked.drawn_t_secs);
+                any = true;
+            }
+        }
+        any
+    }
+
+    /// The drawn objects in id order (their ids alongside, for picking), their arrows, and
+    /// the `selected` one's box.
+    pub fn drawn_scene(&self, selected: Option<u64>) -> (Scene, Vec<ObjectId>) {
+        let mut scene = Scene::default();
+        let mut ids = Vec::new();
+        for (id, tracked) in &self.tracked {
+            let moved = tracked
+                .moving
+                .as_ref()
+                .map(|m| (m.world_now, m.since_drawn()));
+            if let Some(o) = &tracked.drawn {
+                let mut o = o.clone();
+                if let Some((world_now, _)) = moved {
+                    o.world_from_object = world_now;
+                }
+                scene.objects.push(o);
+                ids.push(*id);
+                if selected == Some(id.0)
+                    && let Some(b) = tracked.drawn_box
+                {
+                    scene.add_box(
+                        moved.map_or(b, |(_, m)| moved_box(&b, &m)),
+                        SELECTION_COLOUR,
+                    );
+                }
+            }
+            match moved {
+                None => scene.lines.extend_from_slice(&tracked.lines),
+                Some((_, m)) => scene.lines.extend(tracked.lines.iter().map(|l| Line {
+                    from: m.transform_point3(l.from),
+                    to: m.transform_point3(l.to),
+                    colour: l.colour,
+                })),
+            }
+        }
+        (scene, ids)
+    }
+}
+
+/// A box around an object's mesh in the renderer's world.
+fn world_box(o: &SceneObject) -> Option<Aabb> {
+    Some(moved_box(&o.mesh.bounds()?, &o.world_from_object))
+}
+
+/// The box around `b` moved by `m` (its eight corners').
+pub fn moved_box(b: &Aabb, m: &glam::Mat4) -> Aabb {
+    let corners = (0..8).map(|k| {
+        let pick = |axis: usize| {
+            if k & (1 << axis) == 0 {
+                b.lo[axis]
+            } else {
+                b.hi[axis]
+            }
+        };
+        m.transform_point3(Vec3::new(pick(0), pick(1), pick(2)))
+    });
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for c in corners {
+        lo = lo.min(c);
+        hi = hi.max(c);
+    }
+    Aabb::new(lo.to_array(), hi.to_array())
+}
+
+/// A sphere around the drawn objects' world `boxes` (centre, radius), for framing the camera.
+pub fn bounding_sphere(boxes: impl Iterator<Item = Aabb>) -> Option<(Vec3, f32)> {
+    let (lo, hi) = boxes
+        .map(|b| (Vec3::from_array(b.lo), Vec3::from_array(b.hi)))
+        .reduce(|(lo, hi), (l, h)| (lo.min(l), hi.max(h)))?;
+    Some((0.5 * (lo + hi), 0.5 * (hi - lo).length()))
+}
