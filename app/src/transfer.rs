@@ -432,7 +432,7 @@ pub enum ExportError {
     /// The octree depth is out of range.
     #[error(
         "depth {depth} is more than the mesher's maximum of {}",
-        render::mesh::octree::OCTREE_DEPTH_MAX
+        render::mesh::octree::MAX_OCTREE_DEPTH
     )]
     Depth {
         /// The depth asked for.
@@ -462,7 +462,7 @@ pub fn export(
     depth: u8,
 ) -> Result<ExportReport, ExportError> {
     let mesher = || {
-        if depth > render::mesh::octree::OCTREE_DEPTH_MAX {
+        if depth > render::mesh::octree::MAX_OCTREE_DEPTH {
             return Err(ExportError::Depth { depth });
         }
         let settings = render::snapshot::SnapshotSettings {
@@ -786,7 +786,7 @@ mod tests {
                 &scene,
                 None,
                 &target,
-                render::mesh::octree::OCTREE_DEPTH_MAX + 1
+                render::mesh::octree::MAX_OCTREE_DEPTH + 1
             ),
             Err(ExportError::Depth { .. })
         ));

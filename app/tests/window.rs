@@ -27,9 +27,9 @@ use plot::image::RgbaImage;
 use serde_json::Value;
 
 /// Longest one run of the binary may take before the test kills it.
-const RUN_SECS_MAX: u64 = 90;
+const MAX_RUN_SECS: u64 = 90;
 /// Frames after which a run gives up (its hooks then report an error).
-const FRAMES_MAX: &str = "3000";
+const MAX_FRAMES: &str = "3000";
 /// The window's size in points (the side panel is about 400 wide, the bars about 25 high).
 const WINDOW: &str = "900x600";
 
@@ -114,7 +114,7 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 /// Runs `sculpt` with `args` on `display` (`None`: no `DISPLAY` at all) and waits for it,
-/// killing it after [`RUN_SECS_MAX`].
+/// killing it after [`MAX_RUN_SECS`].
 fn sculpt(display: Option<&str>, args: &[&str]) -> Output {
     // Kept settings go to a data directory of this test process, never the user's.
     let data = Path::new(env!("CARGO_TARGET_TMPDIR"))
@@ -156,7 +156,7 @@ fn sculpt_under(
         None => command.env_remove("DISPLAY"),
     };
     let mut child = command.spawn().unwrap();
-    for _ in 0..RUN_SECS_MAX * 20 {
+    for _ in 0..MAX_RUN_SECS * 20 {
         if child.try_wait().unwrap().is_some() {
             return child.wait_with_output().unwrap();
         }
@@ -165,7 +165,7 @@ fn sculpt_under(
     let _ = child.kill();
     let output = child.wait_with_output().unwrap();
     panic!(
-        "sculpt {args:?} ran over {RUN_SECS_MAX} s\n{}\n{}",
+        "sculpt {args:?} ran over {MAX_RUN_SECS} s\n{}\n{}",
         text(&output.stdout),
         text(&output.stderr)
     );
@@ -228,7 +228,7 @@ fn window_under(
         "--dump-state",
         dump.to_str().unwrap(),
         "--exit-after-frames",
-        FRAMES_MAX,
+        MAX_FRAMES,
     ]);
     let data = Path::new(env!("CARGO_TARGET_TMPDIR"))
         .join("window")
@@ -776,7 +776,7 @@ fn a_click_picks_the_object_and_the_point() {
             "0.5,0.5",
             "--exit-when-idle",
             "--exit-after-frames",
-            FRAMES_MAX,
+            MAX_FRAMES,
             "--dump-state",
             dump.to_str().unwrap(),
         ],
@@ -814,7 +814,7 @@ fn a_corrupt_store_is_shown_as_an_error_and_left_as_it_was() {
             "shape: 0.5-x^2-y^2-z^2",
             "--exit-when-idle",
             "--exit-after-frames",
-            FRAMES_MAX,
+            MAX_FRAMES,
             "--dump-state",
             dump.to_str().unwrap(),
         ],
@@ -974,9 +974,9 @@ impl HeadlessPeer {
         }
     }
 
-    /// Waits until the latest state satisfies `done`, at most [`RUN_SECS_MAX`].
+    /// Waits until the latest state satisfies `done`, at most [`MAX_RUN_SECS`].
     fn wait_for(&mut self, what: &str, done: impl Fn(&Value) -> bool) {
-        let deadline = app::clock::now().instant + Duration::from_secs(RUN_SECS_MAX);
+        let deadline = app::clock::now().instant + Duration::from_secs(MAX_RUN_SECS);
         while !done(&self.last) {
             let left = deadline.saturating_duration_since(app::clock::now().instant);
             match self.lines.recv_timeout(left) {
@@ -1357,7 +1357,7 @@ fn the_brush_the_name_and_the_layout_are_kept_between_runs() {
             "--no-lan",
             "--exit-when-idle",
             "--exit-after-frames",
-            FRAMES_MAX,
+            MAX_FRAMES,
             "--dump-state",
             dump.to_str().unwrap(),
         ];

@@ -21,7 +21,7 @@ use crate::aabb::Aabb;
 
 /// Gradients shorter than this have no usable normal (e.g. the centre of a sphere): the
 /// metric depth `f / |grad f|` is not taken there.
-pub const GRADIENT_NORM_MIN: f64 = 1e-9;
+pub const MIN_GRADIENT_NORM: f64 = 1e-9;
 
 /// How a force field's domain and time are mapped (thesis 7.3, `FForce` `parameters`).
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -30,13 +30,13 @@ mod tests;
 
 use glam::DVec3;
 
-use crate::container::{Container, GRADIENT_NORM_MIN, Scene};
+use crate::container::{Container, MIN_GRADIENT_NORM, Scene};
 use crate::device::{Capabilities, DeviceSample};
 use stack::{ContainerStack, StackEntry};
 use zone::HapticZone;
 
 /// The most containers a scene may present to the renderer; further ones are not touched.
-pub const CONTAINERS_MAX: usize = 256;
+pub const MAX_CONTAINERS: usize = 256;
 /// Bisection steps to locate a crossing on the segment travelled in one tick.
 pub const ROOT_BISECTION_STEPS: usize = 30;
 /// Filtered velocity components below this are zero (see `render`; BENCHMARKS.md has the
@@ -44,7 +44,7 @@ pub const ROOT_BISECTION_STEPS: usize = 30;
 pub const VELOCITY_FLUSH_METRES_PER_SEC: f64 = 1e-12;
 /// Dissipated energy the passivity observer may bank, joules; a bounded reserve keeps old
 /// dissipation from hiding new injection.
-pub const ENERGY_RESERVE_JOULES_MAX: f64 = 0.01;
+pub const MAX_ENERGY_RESERVE_JOULES: f64 = 0.01;
 
 /// Tunable safety and filtering parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -157,7 +157,7 @@ pub struct ProxyState {
     fade_left_secs: f64,
     ramp: f64,
     energy_joules: f64,
-    crossings: [Crossing; CONTAINERS_MAX],
+    crossings: [Crossing; MAX_CONTAINERS],
 }
 
 impl Default for ProxyState {
@@ -180,7 +180,7 @@ impl ProxyState {
             fade_left_secs: 0.0,
             ramp: 0.0,
             energy_joules: 0.0,
-            crossings: [Crossing::default(); CONTAINERS_MAX],
+            crossings: [Crossing::default(); MAX_CONTAINERS],
         }
     }
 
@@ -300,7 +300,7 @@ fn follow<S: Scene + ?Sized>(
             // passive part of the force that was acting.
             let passive = state.force_out - state.field_out;
             state.energy_joules =
-                (state.energy_joules - passive.dot(step)).min(ENERGY_RESERVE_JOULES_MAX);
+                (state.energy_joules - passive.dot(step)).min(MAX_ENERGY_RESERVE_JOULES);
             update_stack(scene, state, prev.hip_world, hip_world, t_secs);
         }
         None => {
@@ -411,7 +411,7 @@ fn effect_force<S: Scene + ?Sized>(
     let container = scene.container_mut(top.idx as usize);
     let (f, grad) = container.value_grad(hip, t_secs);
     let grad_len = grad.length();
-    let usable = grad_len > GRADIENT_NORM_MIN && f.is_finite() && grad.is_finite();
+    let usable = grad_len > MIN_GRADIENT_NORM && f.is_finite() && grad.is_finite();
     let depth = if usable {
         f.max(0.0) / grad_len
     } else {
@@ -471,7 +471,7 @@ fn field_force(container: &mut dyn Container, rig: &Rig, hip: DVec3, t_secs: f64
 
 /// Re-resolves stack entries to indices of the current scene, dropping vanished containers.
 fn resolve_stack<S: Scene + ?Sized>(scene: &mut S, stack: &mut ContainerStack) {
-    let n = scene.n_containers().min(CONTAINERS_MAX);
+    let n = scene.n_containers().min(MAX_CONTAINERS);
     for entry in stack.entries_mut() {
         let idx = entry.idx as usize;
         if idx < n && scene.container_mut(idx).id() == entry.id {
@@ -504,7 +504,7 @@ fn update_stack<S: Scene + ?Sized>(
     t_secs: f64,
 ) {
     resolve_stack(scene, &mut state.stack);
-    let n = scene.n_containers().min(CONTAINERS_MAX);
+    let n = scene.n_containers().min(MAX_CONTAINERS);
     let mut n_crossings = 0;
     for idx in 0..n {
         let container = scene.container_mut(idx);
@@ -560,7 +560,7 @@ fn update_stack<S: Scene + ?Sized>(
 /// smallest metric depth (the innermost) on top, ties broken by id.
 fn init_stack<S: Scene + ?Sized>(scene: &mut S, state: &mut ProxyState, p: DVec3, t_secs: f64) {
     state.stack.clear();
-    let n = scene.n_containers().min(CONTAINERS_MAX);
+    let n = scene.n_containers().min(MAX_CONTAINERS);
     let mut n_inside = 0;
     for idx in 0..n {
         let container = scene.container_mut(idx);
@@ -572,7 +572,7 @@ fn init_stack<S: Scene + ?Sized>(scene: &mut S, state: &mut ProxyState, p: DVec3
             continue;
         }
         let grad_len = grad.length();
-        let depth = if grad_len > GRADIENT_NORM_MIN {
+        let depth = if grad_len > MIN_GRADIENT_NORM {
             f / grad_len
         } else {
             f64::INFINITY

@@ -3,7 +3,7 @@
 //!
 //! Each object is classified once, when the animator is made:
 //! - a shape of time (its formula reads `t`) is meshed again every frame, at the deepest
-//!   octree depth (at most [`SnapshotSettings::depth`], at least [`ANIMATED_DEPTH_MIN`])
+//!   octree depth (at most [`SnapshotSettings::depth`], at least [`MIN_ANIMATED_DEPTH`])
 //!   whose predicted cost fits its share of the frame's [`FrameBudget`];
 //! - an appearance of time (any colour, transparency, shininess or texture formula reads
 //!   `t`) is applied again to the kept mesh;
@@ -18,7 +18,7 @@
 //! (a surface's blocks grow four times per level), then checked before meshing with
 //! [`count_blocks`] (interval arithmetic only, which gives exactly the blocks meshing will
 //! evaluate) and lowered until it fits. So a frame never evaluates more blocks than its budget,
-//! unless even [`ANIMATED_DEPTH_MIN`] does not fit (the shape is then meshed at that depth
+//! unless even [`MIN_ANIMATED_DEPTH`] does not fit (the shape is then meshed at that depth
 //! anyway; [`FrameStats::over_budget`] says so). Parametric shapes of time cost no blocks and
 //! are sampled at their own tolerances.
 
@@ -35,12 +35,12 @@ use crate::mesh::octree::{MeshSettings, count_blocks};
 use crate::mesh::{Mesh, ObjectField};
 use crate::scene::{Material, Scene, SceneObject};
 use crate::snapshot::{
-    FORCE_CONTAINER_OPACITY_MAX, SnapshotError, SnapshotSettings, check, colour, force_arrows,
+    MAX_FORCE_CONTAINER_OPACITY, SnapshotError, SnapshotSettings, check, colour, force_arrows,
     object_mesh, render_from_scene, to_mat4,
 };
 
 /// The shallowest depth an animated shape is meshed at, whatever the budget.
-pub const ANIMATED_DEPTH_MIN: u8 = 3;
+pub const MIN_ANIMATED_DEPTH: u8 = 3;
 
 /// The work one frame may do.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -60,7 +60,7 @@ pub struct FrameStats {
     pub n_recoloured: usize,
     /// Objects placed again.
     pub n_moved: usize,
-    /// Whether a shape did not fit its share even at [`ANIMATED_DEPTH_MIN`].
+    /// Whether a shape did not fit its share even at [`MIN_ANIMATED_DEPTH`].
     pub over_budget: bool,
 }
 
@@ -220,8 +220,8 @@ impl Animator {
     /// counted and lowered until the count fits.
     fn depth_within(&self, i: usize, share: usize, t: f64) -> (u8, bool) {
         let o = &self.objects[i];
-        let deepest = self.settings.depth.max(ANIMATED_DEPTH_MIN);
-        let mut depth = ANIMATED_DEPTH_MIN;
+        let deepest = self.settings.depth.max(MIN_ANIMATED_DEPTH);
+        let mut depth = MIN_ANIMATED_DEPTH;
         while depth < deepest && depth < o.depth + 1 {
             let levels = i32::from(depth + 1) - i32::from(o.depth);
             if (o.blocks as f64) * 4f64.powi(levels) > share as f64 {
@@ -241,7 +241,7 @@ impl Animator {
             if blocks <= share {
                 return (depth, true);
             }
-            if depth == ANIMATED_DEPTH_MIN {
+            if depth == MIN_ANIMATED_DEPTH {
                 return (depth, false);
             }
             depth -= 1;
@@ -262,7 +262,7 @@ impl Animator {
         let o = &mut self.objects[i];
         let (mesh, mut material) = colour(&o.object, &mut o.appearance, (*o.base).clone(), t);
         if o.has_force && self.settings.force_arrows > 0 {
-            material.opacity = material.opacity.min(FORCE_CONTAINER_OPACITY_MAX);
+            material.opacity = material.opacity.min(MAX_FORCE_CONTAINER_OPACITY);
         }
         let drawn = &mut self.scene.objects[i];
         drawn.mesh = Arc::new(mesh);
@@ -386,7 +386,7 @@ mod tests {
         assert_eq!(stats.remeshed[0].1, 6);
         // No budget at all still meshes, at the shallowest depth, and says so.
         let stats = animator.frame(2.6, FrameBudget { blocks_max: 0 });
-        assert_eq!(stats.remeshed[0].1, ANIMATED_DEPTH_MIN);
+        assert_eq!(stats.remeshed[0].1, MIN_ANIMATED_DEPTH);
         assert!(stats.over_budget);
         assert!(animator.scene().objects[pulse].mesh.n_triangles() > 0);
     }

@@ -38,7 +38,7 @@ use model::object::{
 };
 
 /// Shininess 1 maps to this Blinn-Phong exponent (VRML's `shininess` times 128).
-pub const SHININESS_EXPONENT_MAX: f32 = 128.0;
+pub const MAX_SHININESS_EXPONENT: f32 = 128.0;
 /// The material's ambient weight for an object with an ambient colour (see the module
 /// documentation).
 pub const AMBIENT_WEIGHT_WITH_COLOUR: f32 = 1.0;
@@ -273,7 +273,7 @@ impl CompiledAppearance {
             let mut s = vec![0.0; n];
             eval.eval(&p.xs, &p.ys, &p.zs, t, &mut s);
             let mean = s.iter().map(|&v| clamp_unit(v)).sum::<f32>() / n as f32;
-            material.shininess = (mean * SHININESS_EXPONENT_MAX).max(1.0);
+            material.shininess = (mean * MAX_SHININESS_EXPONENT).max(1.0);
         }
         if let Some(c) = &mut self.specular {
             let mut rgb = vec![[0.0; 3]; n];

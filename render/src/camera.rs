@@ -5,11 +5,11 @@ use glam::{Mat4, Vec3, Vec4};
 /// Nearest allowed pitch from the poles, in radians, so the view never flips.
 pub const PITCH_MARGIN_RADIANS: f32 = 0.01;
 /// Narrowest field of view, and its distance from pi for the widest, in radians.
-pub const FOV_Y_MIN_RADIANS: f32 = 0.01;
+pub const MIN_FOV_Y_RADIANS: f32 = 0.01;
 /// Smallest near clipping distance in world units.
-pub const NEAR_MIN: f32 = 1e-4;
+pub const MIN_NEAR: f32 = 1e-4;
 /// Closest allowed orbit distance, in world units.
-pub const DISTANCE_MIN: f32 = 1e-3;
+pub const MIN_DISTANCE: f32 = 1e-3;
 
 /// A camera orbiting `target` at `distance`, turned by `yaw` about +z and tilted by `pitch`.
 ///
@@ -67,7 +67,7 @@ impl Camera {
     /// Multiplies the distance by `factor` (below 1 zooms in).
     pub fn zoom(&mut self, factor: f32) {
         if factor.is_finite() && factor > 0.0 {
-            self.distance = (self.distance * factor).max(DISTANCE_MIN);
+            self.distance = (self.distance * factor).max(MIN_DISTANCE);
         }
     }
 
@@ -88,8 +88,8 @@ impl Camera {
         // Clamp user-set fields so a bad camera gives a bad picture, never NaN or a panic.
         let fov_y = self
             .fov_y
-            .clamp(FOV_Y_MIN_RADIANS, std::f32::consts::PI - FOV_Y_MIN_RADIANS);
-        let near = self.near.max(NEAR_MIN);
+            .clamp(MIN_FOV_Y_RADIANS, std::f32::consts::PI - MIN_FOV_Y_RADIANS);
+        let near = self.near.max(MIN_NEAR);
         let far = self.far.max(2.0 * near);
         glam::camera::rh::proj::directx::perspective(fov_y, aspect.max(f32::EPSILON), near, far)
     }
@@ -161,7 +161,7 @@ mod tests {
         assert!(cam.view().is_finite());
         cam.zoom(0.0);
         cam.zoom(1e-9);
-        assert!(cam.distance >= DISTANCE_MIN);
+        assert!(cam.distance >= MIN_DISTANCE);
         let eye_dist = (cam.eye() - cam.target).length();
         assert!((eye_dist - cam.distance).abs() < 1e-5);
     }

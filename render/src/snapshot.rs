@@ -29,9 +29,9 @@ use model::scene::ObjectId;
 
 use crate::appearance::CompiledAppearance;
 use crate::camera::Camera;
-use crate::gpu::offscreen::{Headless, OFFSCREEN_SIDE_MAX, OffscreenError};
+use crate::gpu::offscreen::{Headless, MAX_OFFSCREEN_SIDE, OffscreenError};
 use crate::mesh::object_field::mesh_bounds;
-use crate::mesh::octree::{MeshSettings, OCTREE_DEPTH_MAX, mesh_with_stats};
+use crate::mesh::octree::{MAX_OCTREE_DEPTH, MeshSettings, mesh_with_stats};
 use crate::mesh::parametric::{
     self, SurfaceSettings, TubeSettings, UvDomain, triangulate_surface, tube,
 };
@@ -40,13 +40,13 @@ use crate::scene::{Line, Material, Scene};
 use plot::image::RgbaImage;
 
 /// Most views one snapshot may ask for.
-pub const VIEWS_MAX: usize = 16;
+pub const MAX_VIEWS: usize = 16;
 /// Most force-field arrows along each axis of a field's domain.
-pub const ARROWS_PER_AXIS_MAX: u32 = 32;
+pub const MAX_ARROWS_PER_AXIS: u32 = 32;
 /// Most vertices of one parametric surface or face.
-pub const PARAMETRIC_VERTICES_PER_OBJECT_MAX: usize = 200_000;
+pub const MAX_PARAMETRIC_VERTICES_PER_OBJECT: usize = 200_000;
 /// Opacity at most of an object whose force field is drawn, so the arrows inside show.
-pub const FORCE_CONTAINER_OPACITY_MAX: f32 = 0.35;
+pub const MAX_FORCE_CONTAINER_OPACITY: f32 = 0.35;
 /// Colour of force-field arrows.
 pub const FORCE_ARROW_COLOUR: [f32; 4] = [1.0, 0.75, 0.1, 1.0];
 /// Imported meshes are drawn flat across edges whose faces meet at more than this angle
@@ -98,7 +98,7 @@ pub struct SnapshotSettings {
     pub views: Vec<View>,
     /// Arrows per axis of each enabled force field's domain (0: no arrows). Only arrows
     /// inside the container are drawn, and the container is drawn at most
-    /// [`FORCE_CONTAINER_OPACITY_MAX`] opaque so that they show (as the thesis's Figure 7.3
+    /// [`MAX_FORCE_CONTAINER_OPACITY`] opaque so that they show (as the thesis's Figure 7.3
     /// shows its whirlpool field in a transparent cylinder).
     pub force_arrows: u32,
 }
@@ -166,18 +166,18 @@ pub fn render_from_scene() -> Mat4 {
 }
 
 pub(crate) fn check(settings: &SnapshotSettings) -> Result<(), SnapshotError> {
-    let side_ok = |s: u32| (1..=OFFSCREEN_SIDE_MAX).contains(&s);
+    let side_ok = |s: u32| (1..=MAX_OFFSCREEN_SIDE).contains(&s);
     if !(side_ok(settings.width) && side_ok(settings.height)) {
         return Err(SnapshotError::BadSetting("image size out of range"));
     }
-    if settings.depth > OCTREE_DEPTH_MAX {
+    if settings.depth > MAX_OCTREE_DEPTH {
         return Err(SnapshotError::BadSetting("octree depth above the maximum"));
     }
     if !settings.t_secs.is_finite() {
         return Err(SnapshotError::BadSetting("time is not finite"));
     }
-    if settings.views.is_empty() || settings.views.len() > VIEWS_MAX {
-        return Err(SnapshotError::BadSetting("1 to VIEWS_MAX views"));
+    if settings.views.is_empty() || settings.views.len() > MAX_VIEWS {
+        return Err(SnapshotError::BadSetting("1 to MAX_VIEWS views"));
     }
     let name_ok = |v: &View| {
         !v.name.is_empty()
@@ -193,7 +193,7 @@ pub(crate) fn check(settings: &SnapshotSettings) -> Result<(), SnapshotError> {
             "view names must be short, of letters, digits, - and _, with finite angles",
         ));
     }
-    if settings.force_arrows > ARROWS_PER_AXIS_MAX {
+    if settings.force_arrows > MAX_ARROWS_PER_AXIS {
         return Err(SnapshotError::BadSetting(
             "force arrows per axis above the maximum",
         ));
@@ -245,7 +245,7 @@ pub fn build(
             let mut appearance = CompiledAppearance::of(object);
             let (mesh, mut material) = colour(object, &mut appearance, mesh, settings.t_secs);
             if report.n_arrows > 0 {
-                material.opacity = material.opacity.min(FORCE_CONTAINER_OPACITY_MAX);
+                material.opacity = material.opacity.min(MAX_FORCE_CONTAINER_OPACITY);
             }
             built
                 .scene
@@ -494,7 +494,7 @@ fn parametric_mesh(
         domain: UvDomain { u, v },
         initial_divisions: 16,
         tolerance: 1e-3 * diagonal,
-        vertices_max: PARAMETRIC_VERTICES_PER_OBJECT_MAX / 6,
+        vertices_max: MAX_PARAMETRIC_VERTICES_PER_OBJECT / 6,
     };
     let err = |e: parametric::ParametricError| format!("parametric {kind:?}: {e}");
     match kind {
@@ -628,7 +628,7 @@ pub fn force_arrows(
         return Vec::new();
     }
     let t = t_secs;
-    let per_axis = per_axis.clamp(1, ARROWS_PER_AXIS_MAX);
+    let per_axis = per_axis.clamp(1, MAX_ARROWS_PER_AXIS);
     let (domain, object_from_field) = sampler.field_domain();
     // Cubic grid cells: `force_arrows` along the domain's longest side, fewer along the others.
     let step = domain.size.max_element() / f64::from(per_axis);
@@ -777,7 +777,7 @@ mod tests {
         // 5 x 1 x 5 cubic cells over the 3.2 x 0.7 x 3.2 box, of which those inside the
         // cylinder of radius 1.6: the four corners lie outside it.
         assert_eq!(o.n_arrows, 21, "{o:?}");
-        assert!(built.scene.objects[0].material.opacity <= FORCE_CONTAINER_OPACITY_MAX);
+        assert!(built.scene.objects[0].material.opacity <= MAX_FORCE_CONTAINER_OPACITY);
         // The field turns about the vertical axis: at scene (x, z) it points along about
         // (z, -x), whose world form is (z_scene, x_scene) turned; check one arrow's shaft
         // is horizontal-ish and perpendicular to its radius.

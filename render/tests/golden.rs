@@ -33,7 +33,7 @@ use std::sync::Arc;
 /// Largest per-channel difference (of 255) that still counts as the same pixel.
 const CHANNEL_TOLERANCE: u8 = 10;
 /// Largest fraction of pixels allowed to differ by more than the channel tolerance.
-const DIFFERING_FRACTION_MAX: f64 = 0.005;
+const MAX_DIFFERING_FRACTION: f64 = 0.005;
 const WIDTH: u32 = 160;
 const HEIGHT: u32 = 120;
 
@@ -209,7 +209,7 @@ fn compare(name: &str, actual: &RgbaImage, adapter: &str) -> Result<(), String> 
         });
     }
     let fraction = n_differing as f64 / (actual.width * actual.height) as f64;
-    if fraction <= DIFFERING_FRACTION_MAX {
+    if fraction <= MAX_DIFFERING_FRACTION {
         return Ok(());
     }
     let dir = diff_dir();
@@ -223,7 +223,7 @@ fn compare(name: &str, actual: &RgbaImage, adapter: &str) -> Result<(), String> 
     Err(format!(
         "{name}: {:.2}% of pixels differ by more than {CHANNEL_TOLERANCE} (allowed {:.2}%) on {adapter}; actual {}, diff {}",
         100.0 * fraction,
-        100.0 * DIFFERING_FRACTION_MAX,
+        100.0 * MAX_DIFFERING_FRACTION,
         actual_path.display(),
         diff_path.display()
     ))

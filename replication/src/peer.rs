@@ -679,8 +679,8 @@ mod tests {
     use crate::payload::test_payload::TestPayload;
     use crate::sync::message::Message;
     use crate::sync::state::{
-        CloseReason, EXPEL_NOTICE_MICROS, HAVE_EVERY_MICROS, PING_FOR_MICROS,
-        RESEND_AFTER_MIN_MICROS,
+        CloseReason, EXPEL_NOTICE_MICROS, HAVE_EVERY_MICROS, MIN_RESEND_AFTER_MICROS,
+        PING_FOR_MICROS,
     };
 
     type TPeer = Peer<TestPayload>;
@@ -939,7 +939,7 @@ mod tests {
         assert!(n_sent >= 10, "{n_sent}: no resends");
         // And pings of a few bytes on the base interval (the floor), for the first
         // `PING_FOR_MICROS` of silence only.
-        let most = PING_FOR_MICROS / RESEND_AFTER_MIN_MICROS;
+        let most = PING_FOR_MICROS / MIN_RESEND_AFTER_MICROS;
         assert!((most / 2..=most).contains(&n_pings), "{n_pings} pings");
         assert_eq!(peers[1].log().len(), 0);
         // Peer 1 speaks (its periodic have after authoring): peer 0 resends within the base
@@ -986,7 +986,7 @@ mod tests {
         let mut next = 0;
         while peers[2].wants[&author].n_asked < 2 {
             assert!(
-                t < asked_at + RESEND_AFTER_MIN_MICROS + 3 * WANT_CHECK_MICROS,
+                t < asked_at + MIN_RESEND_AFTER_MICROS + 3 * WANT_CHECK_MICROS,
                 "D still waits on B at {t} (asked at {asked_at})"
             );
             t += 10_000;
@@ -1037,7 +1037,7 @@ mod tests {
         assert_eq!(retry.len(), 2, "{wants:?}");
         assert_ne!(retry[0].1, retry[1].1, "{wants:?}");
         // So the ops came one timeout after the first ask, not two.
-        let timeout = RESEND_AFTER_MIN_MICROS + WANT_CHECK_MICROS;
+        let timeout = MIN_RESEND_AFTER_MICROS + WANT_CHECK_MICROS;
         assert!(
             t <= first + timeout,
             "D got A's ops at {t}, asked at {first}: {wants:?}"
@@ -1107,7 +1107,7 @@ mod tests {
         let timeouts: Vec<Option<u64>> = (peers[2].connections())
             .map(|(_, s)| s.resend_timeout())
             .collect();
-        assert_eq!(timeouts, [Some(RESEND_AFTER_MIN_MICROS); 2]);
+        assert_eq!(timeouts, [Some(MIN_RESEND_AFTER_MICROS); 2]);
         let (op, _) = peers[0]
             .author(Timestamp(0), TestPayload::Chat("to C by way of B".into()))
             .unwrap();
@@ -1125,7 +1125,7 @@ mod tests {
         }
         let learnt_at = learnt_at.expect("C asked for the op");
         assert!(
-            t - learnt_at <= RESEND_AFTER_MIN_MICROS + 2 * WANT_CHECK_MICROS,
+            t - learnt_at <= MIN_RESEND_AFTER_MICROS + 2 * WANT_CHECK_MICROS,
             "C learnt of the op at {learnt_at} and got it at {t}"
         );
     }

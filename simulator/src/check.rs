@@ -19,10 +19,10 @@ use crate::report::{Memory, OpKindBytes, Report, Sample, Stats, short_hash};
 
 /// Heap bytes a peer may hold besides its ops: twice the pending buffer's byte limit (its
 /// encoded ops plus their decoded form), plus room for connections and an empty scene.
-pub const MEMORY_FIXED_BYTES_MAX: i64 = 2 * replication::pending::MAX_PENDING_BYTES as i64;
+pub const MAX_MEMORY_FIXED_BYTES: i64 = 2 * replication::pending::MAX_PENDING_BYTES as i64;
 /// Heap bytes a peer may hold per op in its log (op, order, marks, indexes, its share of the
 /// scene), at its peak. Campaigns measure about 2.3 KiB; this leaves a factor of 7.
-pub const MEMORY_BYTES_PER_OP_MAX: i64 = 16 * 1024;
+pub const MAX_MEMORY_BYTES_PER_OP: i64 = 16 * 1024;
 
 /// How long after healing the network may take to go quiet before the run counts as stuck.
 pub const QUIESCENCE_LIMIT_MICROS: u64 = 600_000_000;
@@ -658,11 +658,11 @@ fn memory_figures(end: &Ended, failures: &mut Vec<String>) -> Option<Memory> {
         m.final_bytes_mean += last as f64 / n;
         m.peak_bytes_per_op_max = m.peak_bytes_per_op_max.max(peak as f64 / n_ops as f64);
         m.final_bytes_per_op_mean += last as f64 / n_ops as f64 / n;
-        let bound = MEMORY_FIXED_BYTES_MAX + MEMORY_BYTES_PER_OP_MAX * n_ops;
+        let bound = MAX_MEMORY_FIXED_BYTES + MAX_MEMORY_BYTES_PER_OP * n_ops;
         if peak > bound {
             failures.push(format!(
                 "peer {i}: held {peak} heap bytes at its peak, over the bound {bound} \
-                 ({MEMORY_FIXED_BYTES_MAX} + {MEMORY_BYTES_PER_OP_MAX} per op for {n_ops} ops)"
+                 ({MAX_MEMORY_FIXED_BYTES} + {MAX_MEMORY_BYTES_PER_OP} per op for {n_ops} ops)"
             ));
         }
     }

@@ -13,7 +13,7 @@ pub const PLOT_WIDTH_PX: u32 = 900;
 /// Picture height in pixels.
 pub const PLOT_HEIGHT_PX: u32 = 500;
 /// Peers drawn one line each; beyond this a plot shows the mean and the maximum.
-pub const PEER_LINES_MAX: usize = 12;
+pub const MAX_PEER_LINES: usize = 12;
 
 const PALETTE: [[f32; 4]; 12] = [
     [0.12, 0.47, 0.71, 1.0],
@@ -120,7 +120,7 @@ fn plot(
     let t = |at_micros: u64| at_micros as f64 / 1e6;
     let mut series = Vec::new();
     let mut y_max: f64 = 0.0;
-    if n_peers <= PEER_LINES_MAX {
+    if n_peers <= MAX_PEER_LINES {
         for p in 0..n_peers {
             let points: Vec<[f64; 2]> = report
                 .samples

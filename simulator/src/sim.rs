@@ -38,9 +38,9 @@ pub const PROBE_INTERVAL_MICROS: u64 = 50_000;
 /// A bandwidth-limited link drops a message that would wait longer than this to be sent.
 pub const MAX_LINK_QUEUE_MICROS: u64 = 2_000_000;
 /// Shortest simulated fsync.
-pub const FSYNC_MIN_MICROS: u64 = 200;
+pub const MIN_FSYNC_MICROS: u64 = 200;
 /// Longest simulated fsync.
-pub const FSYNC_MAX_MICROS: u64 = 3_000;
+pub const MAX_FSYNC_MICROS: u64 = 3_000;
 /// Most samples a run keeps for its plots (past it, every other one is dropped and the
 /// interval doubles).
 pub const MAX_SAMPLES: usize = 1024;
@@ -947,7 +947,7 @@ impl Simulation {
                 _ => break,
             }
         }
-        let delay = FSYNC_MIN_MICROS + self.net.below(FSYNC_MAX_MICROS - FSYNC_MIN_MICROS);
+        let delay = MIN_FSYNC_MICROS + self.net.below(MAX_FSYNC_MICROS - MIN_FSYNC_MICROS);
         let h = &mut self.honest[idx];
         if let Some(done) = h.disk.start_sync(now, delay) {
             let generation = h.disk.generation;
@@ -987,7 +987,7 @@ impl Simulation {
             let floor = if synced {
                 now + 1
             } else {
-                now + FSYNC_MAX_MICROS
+                now + MAX_FSYNC_MICROS
             };
             let at = t.0.max(floor);
             let h = &mut self.honest[idx];

@@ -62,7 +62,7 @@ pub const REMOVED_TRIANGLE_BYTES: usize = 4;
 /// The key that authors every measured session.
 const AUTHOR_SEED: [u8; 32] = [0x5c; 32];
 /// Tries to find the surface with a ray before a stroke starts at the object's centre.
-const SURFACE_TRIES_MAX: usize = 16;
+const MAX_SURFACE_TRIES: usize = 16;
 /// Steps of the march that finds a stroke's starting point on the surface.
 const MARCH_STEPS: usize = 256;
 /// Bisections of the step where the march crossed the surface.
@@ -497,7 +497,7 @@ fn stroke(
     let mut sampler = object.sampler();
     let mut start = centre;
     let mut normal = DVec3::Y;
-    for _ in 0..SURFACE_TRIES_MAX {
+    for _ in 0..MAX_SURFACE_TRIES {
         let d = rng.unit_vector();
         if let Some(p) = first_crossing(&mut sampler, centre + d * reach, centre - d * reach) {
             start = p;

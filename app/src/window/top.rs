@@ -10,7 +10,7 @@ use super::{ERROR_COLOUR, NOTICE_COLOUR};
 use ::app::engine::lock;
 
 /// Ops still to receive from which the catch-up bar shows.
-const CATCH_UP_SHOWN_MIN: u64 = 50;
+const MIN_CATCH_UP_SHOWN: u64 = 50;
 
 /// The brushes the Tool menu offers: its label, and the `tool:` line it runs.
 const TOOL_MENU: [(&str, &str); 5] = [
@@ -181,7 +181,7 @@ impl SculptApp {
     fn catch_up_ui(&mut self, ui: &mut egui::Ui) {
         let view = lock(self.engine.view());
         let (_, to_receive) = view.progress();
-        if to_receive < CATCH_UP_SHOWN_MIN {
+        if to_receive < MIN_CATCH_UP_SHOWN {
             return;
         }
         let have = view.n_ops() as u64;

@@ -27,7 +27,7 @@ use crate::registry::FileFormat;
 /// box's diagonal, so sculpting just outside the surface stays inside the domain.
 pub const MESH_DOMAIN_MARGIN: f64 = 0.05;
 /// The smallest margin of an imported mesh's domain (scene units), for flat meshes.
-pub const MESH_DOMAIN_MARGIN_MIN: f64 = 1e-3;
+pub const MIN_MESH_DOMAIN_MARGIN: f64 = 1e-3;
 
 /// Why a file's bytes could not be read into objects. Every variant names the file.
 #[derive(Debug, thiserror::Error)]
@@ -169,7 +169,7 @@ fn read_mesh(path: &Path, mesh: TriMesh) -> Result<Read, ImportError> {
 /// The mesh in a domain around it, in its own coordinates.
 pub fn mesh_geometry(mesh: Arc<TriMesh>) -> Geometry {
     let bounds = mesh.bounds();
-    let margin = (MESH_DOMAIN_MARGIN * bounds.size().length()).max(MESH_DOMAIN_MARGIN_MIN);
+    let margin = (MESH_DOMAIN_MARGIN * bounds.size().length()).max(MIN_MESH_DOMAIN_MARGIN);
     Geometry {
         domain: Some(Domain::new(
             bounds.center(),

@@ -970,7 +970,7 @@ proptest! {
 
 #[test]
 fn box_sampler_equals_the_point_path_on_a_long_history() {
-    // More edits than `SCAN_EDITS_MAX` overlap the large boxes, so restrictions and intervals
+    // More edits than `MAX_SCAN_EDITS` overlap the large boxes, so restrictions and intervals
     // go through the history's index there and through the parent's list below.
     let mut object = Object::new(ObjectData {
         geometry: Some(Geometry::implicit_in(
@@ -1017,7 +1017,7 @@ fn box_sampler_equals_the_point_path_on_a_long_history() {
         })
         .collect();
     let whole = Aabb::around(DVec3::ZERO, DVec3::splat(1.2));
-    assert!(object.sampler().restrict(&whole, 0.0).n_edits() > model::object::SCAN_EDITS_MAX);
+    assert!(object.sampler().restrict(&whole, 0.0).n_edits() > model::object::MAX_SCAN_EDITS);
     assert_bulk_equals_points(&object, &whole, &fractions, 0.0);
     for c in [DVec3::new(0.9, 0.3, 0.1), DVec3::new(-0.2, -0.95, 0.3)] {
         let region = Aabb::around(c, DVec3::splat(0.15));

@@ -171,7 +171,7 @@ impl Container for FunctionContainer {
         // d/dworld = d/dobject / scale, so metric depths come out in world units.
         let grad = DVec3::new(g.dx, g.dy, g.dz) / self.placement.scale;
         let grad_len = grad.length();
-        let metric = if grad_len > super::GRADIENT_NORM_MIN {
+        let metric = if grad_len > super::MIN_GRADIENT_NORM {
             g.v / grad_len
         } else if g.v >= 0.0 {
             f64::INFINITY

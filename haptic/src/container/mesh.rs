@@ -41,11 +41,11 @@ use crate::aabb::Aabb;
 use ray::{RayIndex, Triangle};
 
 /// The most triangles one mesh container may hold.
-pub const TRIANGLES_MAX: usize = 1 << 22;
+pub const MAX_TRIANGLES: usize = 1 << 22;
 /// The most vertices one mesh container may hold.
-pub const VERTICES_MAX: usize = 1 << 22;
+pub const MAX_VERTICES: usize = 1 << 22;
 /// The most rays in one set (coarse or refined).
-pub const RAYS_MAX: usize = 1024;
+pub const MAX_RAYS: usize = 1024;
 /// Rays cast toward the nearest plane found, to find a nearer one.
 pub const PROBE_RAYS: usize = 2;
 
@@ -82,11 +82,11 @@ pub enum MeshError {
     /// No non-degenerate triangle.
     #[error("the mesh has no non-degenerate triangle")]
     Empty,
-    /// More triangles than [`TRIANGLES_MAX`].
-    #[error("too many triangles: {0} (limit {TRIANGLES_MAX})")]
+    /// More triangles than [`MAX_TRIANGLES`].
+    #[error("too many triangles: {0} (limit {MAX_TRIANGLES})")]
     TooManyTriangles(usize),
-    /// More vertices than [`VERTICES_MAX`].
-    #[error("too many vertices: {0} (limit {VERTICES_MAX})")]
+    /// More vertices than [`MAX_VERTICES`].
+    #[error("too many vertices: {0} (limit {MAX_VERTICES})")]
     TooManyVertices(usize),
     /// A triangle names a vertex that does not exist.
     #[error("triangle {triangle} names vertex {vertex}, but there are {n_vertices}")]
@@ -101,7 +101,7 @@ pub enum MeshError {
     /// A vertex is not finite.
     #[error("vertex {0} is not finite")]
     NotFinite(usize),
-    /// A ray set is empty or larger than [`RAYS_MAX`], or the length is not positive.
+    /// A ray set is empty or larger than [`MAX_RAYS`], or the length is not positive.
     #[error("bad ray parameters: {0:?}")]
     BadRays(RayParams),
     /// A property could not be compiled.
@@ -176,10 +176,10 @@ impl MeshContainer {
         props: &PropertySpec,
         rays: RayParams,
     ) -> Result<Self, MeshError> {
-        if vertices.len() > VERTICES_MAX {
+        if vertices.len() > MAX_VERTICES {
             return Err(MeshError::TooManyVertices(vertices.len()));
         }
-        if triangles.len() > TRIANGLES_MAX {
+        if triangles.len() > MAX_TRIANGLES {
             return Err(MeshError::TooManyTriangles(triangles.len()));
         }
         let n_set = |a: u16, b: u16| usize::from(a) * usize::from(b);
@@ -187,8 +187,8 @@ impl MeshContainer {
             n_set(rays.n_u, rays.n_v),
             n_set(rays.n_u_refined, rays.n_v_refined),
         );
-        if !(1..=RAYS_MAX).contains(&coarse)
-            || !(1..=RAYS_MAX).contains(&refined)
+        if !(1..=MAX_RAYS).contains(&coarse)
+            || !(1..=MAX_RAYS).contains(&refined)
             || rays.length_max.is_nan()
             || rays.length_max <= 0.0
         {

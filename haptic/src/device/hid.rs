@@ -24,9 +24,9 @@ pub const AXIS_FULL_SCALE: f64 = 350.0;
 /// Largest rotation of the tip orientation at full deflection, radians.
 pub const ROTATION_FULL_SCALE_RADIANS: f64 = 0.5;
 /// At most this many pending reports are drained per sample.
-pub const REPORTS_PER_SAMPLE_MAX: usize = 32;
+pub const MAX_REPORTS_PER_SAMPLE: usize = 32;
 /// Longest input report accepted, bytes.
-pub const REPORT_BYTES_MAX: usize = 64;
+pub const MAX_REPORT_BYTES: usize = 64;
 /// Nominal sample period used for timestamps (the driver reads no clock), microseconds.
 const PERIOD_MICROS: u64 = 1_000;
 
@@ -169,7 +169,7 @@ impl SpaceMouse {
 
     /// Reads one report, waiting up to `timeout_millis`; returns whether one arrived.
     pub fn poll(&mut self, timeout_millis: i32) -> Result<bool, DeviceError> {
-        let mut buf = [0u8; REPORT_BYTES_MAX];
+        let mut buf = [0u8; MAX_REPORT_BYTES];
         let n = self
             .device
             .read_timeout(&mut buf, timeout_millis)
@@ -190,7 +190,7 @@ impl HapticDevice for SpaceMouse {
     }
 
     fn sample(&mut self) -> Result<DeviceSample, DeviceError> {
-        for _ in 0..REPORTS_PER_SAMPLE_MAX {
+        for _ in 0..MAX_REPORTS_PER_SAMPLE {
             if !self.poll(0)? {
                 break;
             }
@@ -230,7 +230,7 @@ const EFFECT_TYPE_CONSTANT: u8 = 1;
 /// PID block load status: success.
 const BLOCK_LOAD_SUCCESS: u8 = 1;
 /// Largest PID magnitude.
-pub const PID_MAGNITUDE_MAX: i16 = 10_000;
+pub const MAX_PID_MAGNITUDE: i16 = 10_000;
 
 /// The Create New Effect feature report for a constant force.
 pub fn create_constant_effect_report() -> [u8; 4] {
@@ -267,7 +267,7 @@ pub fn constant_force_report(block_idx: u8, force_newtons: f64, force_newtons_ma
     } else {
         0.0
     };
-    let magnitude = (unit * f64::from(PID_MAGNITUDE_MAX)).round() as i16;
+    let magnitude = (unit * f64::from(MAX_PID_MAGNITUDE)).round() as i16;
     let [lo, hi] = magnitude.to_le_bytes();
     [pid_report::SET_CONSTANT_FORCE, block_idx, lo, hi]
 }

@@ -10,7 +10,7 @@ use super::{Capabilities, DeviceError, DeviceSample, HapticDevice};
 /// Integration sub-steps per device period, for a stable stiff hand spring.
 const N_SUBSTEPS: usize = 8;
 /// The most waypoints one script may hold.
-pub const WAYPOINTS_MAX: usize = 100_000;
+pub const MAX_WAYPOINTS: usize = 100_000;
 
 /// A point the hand passes through at a time.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,8 +48,8 @@ pub enum SimError {
     /// No waypoints were given.
     #[error("a scripted trajectory needs at least one waypoint")]
     NoWaypoints,
-    /// More than [`WAYPOINTS_MAX`] waypoints.
-    #[error("too many waypoints: {0} (limit {WAYPOINTS_MAX})")]
+    /// More than [`MAX_WAYPOINTS`] waypoints.
+    #[error("too many waypoints: {0} (limit {MAX_WAYPOINTS})")]
     TooManyWaypoints(usize),
     /// Waypoint times go backwards or a value is not finite.
     #[error("waypoint {0} is not finite or goes back in time")]
@@ -82,7 +82,7 @@ impl SimDevice {
         period_secs: f64,
     ) -> Result<Self, SimError> {
         let first = waypoints.first().ok_or(SimError::NoWaypoints)?;
-        if waypoints.len() > WAYPOINTS_MAX {
+        if waypoints.len() > MAX_WAYPOINTS {
             return Err(SimError::TooManyWaypoints(waypoints.len()));
         }
         for (idx, w) in waypoints.iter().enumerate() {

@@ -20,9 +20,9 @@ use crate::aabb::Aabb;
 /// The first line of every trace.
 pub const TRACE_HEADER: &str = "sculpt-haptic-trace 1";
 /// The most lines a trace file may have.
-pub const TRACE_LINES_MAX: usize = 10_000_000;
+pub const MAX_TRACE_LINES: usize = 10_000_000;
 /// The longest line accepted, in bytes.
-pub const TRACE_LINE_BYTES_MAX: usize = 512;
+pub const MAX_TRACE_LINE_BYTES: usize = 512;
 
 /// One recorded event.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -73,7 +73,7 @@ pub enum TraceErrorKind {
     TimestampBackwards,
     /// A limit was exceeded.
     #[error(
-        "line longer than {TRACE_LINE_BYTES_MAX} bytes or file longer than {TRACE_LINES_MAX} lines"
+        "line longer than {MAX_TRACE_LINE_BYTES} bytes or file longer than {MAX_TRACE_LINES} lines"
     )]
     TooLarge,
 }
@@ -138,7 +138,7 @@ impl Trace {
         for (line_idx, raw) in text.lines().enumerate() {
             let line = line_idx + 1;
             let err = |kind| TraceError { line, kind };
-            if line > TRACE_LINES_MAX || raw.len() > TRACE_LINE_BYTES_MAX {
+            if line > MAX_TRACE_LINES || raw.len() > MAX_TRACE_LINE_BYTES {
                 return Err(err(TraceErrorKind::TooLarge));
             }
             let trimmed = raw.trim();
@@ -484,7 +484,7 @@ mod tests {
         assert_eq!((e.line, e.kind), (7, TraceErrorKind::BadCaps));
         let e = error_of(&with(1, "caps 3 3 1 1 1 0 0 0 -1 1 1 2"));
         assert_eq!(e.line, 2);
-        let long = "#".repeat(TRACE_LINE_BYTES_MAX + 1);
+        let long = "#".repeat(MAX_TRACE_LINE_BYTES + 1);
         assert_eq!(error_of(&with(3, &long)).kind, TraceErrorKind::TooLarge);
     }
 

@@ -2,7 +2,7 @@
 //! removes, the top rules. Fixed capacity, no allocation.
 
 /// The deepest nesting tracked; containers entered beyond it are counted and ignored.
-pub const STACK_DEPTH_MAX: usize = 64;
+pub const MAX_STACK_DEPTH: usize = 64;
 
 /// One container the HIP is inside.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -16,7 +16,7 @@ pub struct StackEntry {
 /// The containers the HIP is inside, in the order it entered them (last is top).
 #[derive(Clone, Debug)]
 pub struct ContainerStack {
-    entries: [StackEntry; STACK_DEPTH_MAX],
+    entries: [StackEntry; MAX_STACK_DEPTH],
     len: usize,
     n_overflows: u64,
 }
@@ -24,7 +24,7 @@ pub struct ContainerStack {
 impl Default for ContainerStack {
     fn default() -> Self {
         Self {
-            entries: [StackEntry { id: 0, idx: 0 }; STACK_DEPTH_MAX],
+            entries: [StackEntry { id: 0, idx: 0 }; MAX_STACK_DEPTH],
             len: 0,
             n_overflows: 0,
         }
@@ -57,7 +57,7 @@ impl ContainerStack {
         if self.contains(entry.id) {
             return;
         }
-        if self.len == STACK_DEPTH_MAX {
+        if self.len == MAX_STACK_DEPTH {
             self.n_overflows += 1;
             return;
         }

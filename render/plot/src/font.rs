@@ -10,7 +10,7 @@ const ADVANCE_UNITS: f32 = 6.0;
 /// Grid units of the cap height.
 const HEIGHT_UNITS: f32 = 6.0;
 /// Most characters drawn from one string; the rest are dropped.
-pub const TEXT_CHARS_MAX: usize = 256;
+pub const MAX_TEXT_CHARS: usize = 256;
 
 /// Strokes of a glyph: polylines separated by `|`, points as two digits `xy`.
 fn glyph(c: char) -> &'static str {
@@ -71,7 +71,7 @@ fn glyph(c: char) -> &'static str {
 
 /// Width in pixels of `text` drawn with cap height `size` (no trailing spacing).
 pub fn text_width(text: &str, size: f32) -> f32 {
-    let n = text.chars().take(TEXT_CHARS_MAX).count() as f32;
+    let n = text.chars().take(MAX_TEXT_CHARS).count() as f32;
     if n == 0.0 {
         0.0
     } else {
@@ -83,7 +83,7 @@ pub fn text_width(text: &str, size: f32) -> f32 {
 pub fn draw_text(pixmap: &mut Pixmap, text: &str, x: f32, y: f32, size: f32, colour: Color) {
     let unit = size / HEIGHT_UNITS;
     let mut pb = PathBuilder::new();
-    for (i, c) in text.chars().take(TEXT_CHARS_MAX).enumerate() {
+    for (i, c) in text.chars().take(MAX_TEXT_CHARS).enumerate() {
         let x0 = x + i as f32 * ADVANCE_UNITS * unit;
         for stroke in glyph(c).split('|').filter(|s| !s.is_empty()) {
             for (k, pt) in stroke.split(' ').enumerate() {

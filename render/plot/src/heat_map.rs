@@ -1,7 +1,7 @@
 //! Heat maps: a scalar function sampled over a rectangle, coloured, with a labelled legend.
 
 use super::font::draw_text;
-use super::{PICTURE_SIDE_MAX, PixelRect, PlotError, format_number};
+use super::{MAX_PICTURE_SIDE, PixelRect, PlotError, format_number};
 use crate::image::RgbaImage;
 use tiny_skia::{Color, Paint, Pixmap, PremultipliedColorU8, Rect, Transform};
 
@@ -12,7 +12,7 @@ const LEGEND_BAR_PX: f32 = 16.0;
 /// Room for the legend bar, its gap and its labels.
 const LEGEND_PX: f32 = 110.0;
 /// Smallest plotting area that still shows something.
-const PLOT_SIDE_MIN_PX: f32 = 8.0;
+const MIN_PLOT_SIDE_PX: f32 = 8.0;
 /// Colour of samples that are NaN or infinite.
 const NOT_FINITE_RGB: [f32; 3] = [1.0, 0.0, 1.0];
 /// Viridis, sampled at five points and interpolated linearly.
@@ -88,10 +88,10 @@ pub fn heat_map(
         w: s.width as f32 - 2.0 * MARGIN_PX - LEGEND_PX,
         h: s.height as f32 - 3.0 * MARGIN_PX - TITLE_PX,
     };
-    if s.width > PICTURE_SIDE_MAX
-        || s.height > PICTURE_SIDE_MAX
-        || map.w < PLOT_SIDE_MIN_PX
-        || map.h < PLOT_SIDE_MIN_PX
+    if s.width > MAX_PICTURE_SIDE
+        || s.height > MAX_PICTURE_SIDE
+        || map.w < MIN_PLOT_SIDE_PX
+        || map.h < MIN_PLOT_SIDE_PX
     {
         return Err(PlotError::BadSize(s.width, s.height));
     }

@@ -14,14 +14,14 @@ pub mod series;
 use tiny_skia::Color;
 
 /// Most decimals an axis or legend number gets.
-const NUMBER_DECIMALS_MAX: usize = 6;
+const MAX_NUMBER_DECIMALS: usize = 6;
 /// Largest picture side in pixels.
-pub const PICTURE_SIDE_MAX: u32 = 8192;
+pub const MAX_PICTURE_SIDE: u32 = 8192;
 
 /// Why a picture could not be drawn.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum PlotError {
-    /// Width or height is too small for the layout or above [`PICTURE_SIDE_MAX`].
+    /// Width or height is too small for the layout or above [`MAX_PICTURE_SIDE`].
     #[error("picture size {0}x{1} out of range")]
     BadSize(u32, u32),
     /// The sampled rectangle is empty or not finite.
@@ -65,12 +65,12 @@ pub fn format_number(v: f64, step: f64) -> String {
     }
     let decimals = if step > 0.0 && step.is_finite() {
         // The fewest decimals that write the step exactly (0.25 needs 2, 0.1 needs 1).
-        (0..=NUMBER_DECIMALS_MAX)
+        (0..=MAX_NUMBER_DECIMALS)
             .find(|&d| {
                 let scaled = step * 10f64.powi(d as i32);
                 (scaled - scaled.round()).abs() < 1e-6 * scaled
             })
-            .unwrap_or(NUMBER_DECIMALS_MAX)
+            .unwrap_or(MAX_NUMBER_DECIMALS)
     } else {
         3
     };

@@ -4,16 +4,16 @@
 
 use super::font::{draw_text, text_width};
 use super::heat_map::frame;
-use super::{PICTURE_SIDE_MAX, PixelRect, PlotError, colour, format_number};
+use super::{MAX_PICTURE_SIDE, PixelRect, PlotError, colour, format_number};
 use crate::image::RgbaImage;
 use tiny_skia::{
     Color, FillRule, LineCap, LineJoin, Mask, Paint, PathBuilder, Pixmap, Rect, Stroke, Transform,
 };
 
 /// Most series one plot draws; further series are ignored.
-pub const SERIES_MAX: usize = 16;
+pub const MAX_SERIES: usize = 16;
 /// Most points drawn per series; further points are ignored.
-pub const POINTS_MAX: usize = 1 << 20;
+pub const MAX_POINTS: usize = 1 << 20;
 /// Tick marks aimed for along each axis.
 const TICKS_TARGET: f64 = 5.0;
 const MARGIN_PX: f32 = 10.0;
@@ -22,7 +22,7 @@ const LABEL_PX: f32 = 9.0;
 const TICK_PX: f32 = 4.0;
 const LINE_WIDTH_PX: f32 = 2.0;
 /// Smallest plotting area that still shows something.
-const PLOT_SIDE_MIN_PX: f32 = 16.0;
+const MIN_PLOT_SIDE_PX: f32 = 16.0;
 
 /// One named curve.
 #[derive(Clone, Debug, PartialEq)]
@@ -194,14 +194,14 @@ fn paint(c: Color) -> Paint<'static> {
 
 impl LinePlot {
     fn series_drawn(&self) -> impl Iterator<Item = &Series> {
-        self.series.iter().take(SERIES_MAX)
+        self.series.iter().take(MAX_SERIES)
     }
 
     /// Draws the plot at `width` x `height` pixels.
     pub fn render(&self, width: u32, height: u32) -> Result<PlotPicture, PlotError> {
         let points = || {
             self.series_drawn()
-                .flat_map(|s| s.points.iter().take(POINTS_MAX))
+                .flat_map(|s| s.points.iter().take(MAX_POINTS))
         };
         let x_range = axis_range(self.x_range, points().map(|p| p[0]));
         let y_range = axis_range(self.y_range, points().map(|p| p[1]));
@@ -219,10 +219,10 @@ impl LinePlot {
             w: width as f32 - left - MARGIN_PX,
             h: height as f32 - top - (TICK_PX + 4.0 + LABEL_PX + 6.0 + LABEL_PX + MARGIN_PX),
         };
-        if width > PICTURE_SIDE_MAX
-            || height > PICTURE_SIDE_MAX
-            || area.w < PLOT_SIDE_MIN_PX
-            || area.h < PLOT_SIDE_MIN_PX
+        if width > MAX_PICTURE_SIDE
+            || height > MAX_PICTURE_SIDE
+            || area.w < MIN_PLOT_SIDE_PX
+            || area.h < MIN_PLOT_SIDE_PX
         {
             return Err(PlotError::BadSize(width, height));
         }
@@ -307,7 +307,7 @@ impl LinePlot {
         for s in self.series_drawn() {
             let mut pb = PathBuilder::new();
             let mut pen_down = false;
-            for p in s.points.iter().take(POINTS_MAX) {
+            for p in s.points.iter().take(MAX_POINTS) {
                 let [x, y] = to_px(*p);
                 // Far-off points would overflow the rasteriser; treat them like gaps.
                 if !(x.is_finite() && y.is_finite() && x.abs() < 1e6 && y.abs() < 1e6) {

@@ -24,22 +24,22 @@ use std::sync::Arc;
 use wgpu::util::DeviceExt;
 
 /// Most objects one frame may draw.
-pub const OBJECTS_MAX: usize = 1 << 16;
+pub const MAX_DRAWN_OBJECTS: usize = 1 << 16;
 /// Most line segments one frame may draw.
-pub const LINES_MAX: usize = 1 << 20;
+pub const MAX_LINES: usize = 1 << 20;
 
 /// Spare room a patched object's buffers get beyond its mesh, as a divisor of its length
 /// (a quarter more): patches that move grown blocks to the end of the mesh fit for a while
 /// before the buffers are allocated and uploaded again.
 pub const PATCH_SPARE_DIVISOR: usize = 4;
 /// Least spare room, in vertices and in triangles, a patched object's buffers get.
-pub const PATCH_SPARE_MIN: usize = 1024;
+pub const MIN_PATCH_SPARE: usize = 1024;
 
 /// Why [`Renderer::patch_object`] refused a patch.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
 pub enum PatchError {
-    /// The object index is not below [`OBJECTS_MAX`].
-    #[error("object {0} is beyond the limit {OBJECTS_MAX}")]
+    /// The object index is not below [`MAX_DRAWN_OBJECTS`].
+    #[error("object {0} is beyond the limit {MAX_DRAWN_OBJECTS}")]
     ObjectIndex(usize),
     /// The patch's lengths are not the mesh's.
     #[error(
@@ -80,11 +80,11 @@ pub enum PrepareError {
         /// What is wrong with its mesh.
         source: MeshError,
     },
-    /// More objects than [`OBJECTS_MAX`].
-    #[error("{0} objects exceed the limit {OBJECTS_MAX}")]
+    /// More objects than [`MAX_DRAWN_OBJECTS`].
+    #[error("{0} objects exceed the limit {MAX_DRAWN_OBJECTS}")]
     TooManyObjects(usize),
-    /// More lines than [`LINES_MAX`].
-    #[error("{0} lines exceed the limit {LINES_MAX}")]
+    /// More lines than [`MAX_LINES`].
+    #[error("{0} lines exceed the limit {MAX_LINES}")]
     TooManyLines(usize),
 }
 
@@ -442,7 +442,7 @@ impl Renderer {
         mesh: &Arc<Mesh>,
         patch: &MeshPatch,
     ) -> Result<(), PatchError> {
-        if object_idx >= OBJECTS_MAX {
+        if object_idx >= MAX_DRAWN_OBJECTS {
             return Err(PatchError::ObjectIndex(object_idx));
         }
         let (n_vertices, n_triangles) = (mesh.n_vertices(), mesh.n_triangles());
@@ -499,10 +499,10 @@ impl Renderer {
         scene: &Scene,
         size_px: [u32; 2],
     ) -> Result<(), PrepareError> {
-        if scene.objects.len() > OBJECTS_MAX {
+        if scene.objects.len() > MAX_DRAWN_OBJECTS {
             return Err(PrepareError::TooManyObjects(scene.objects.len()));
         }
-        if scene.lines.len() > LINES_MAX {
+        if scene.lines.len() > MAX_LINES {
             return Err(PrepareError::TooManyLines(scene.lines.len()));
         }
         self.validate_new_meshes(scene)?;
@@ -576,7 +576,7 @@ impl Renderer {
         let (n_vertices, n_triangles) = (mesh.n_vertices(), mesh.n_triangles());
         let room = |n: usize| {
             if spare {
-                n + (n / PATCH_SPARE_DIVISOR).max(PATCH_SPARE_MIN)
+                n + (n / PATCH_SPARE_DIVISOR).max(MIN_PATCH_SPARE)
             } else {
                 n
             }

@@ -6,7 +6,7 @@ use plot::image::{PngError, RgbaImage};
 use std::path::Path;
 
 /// Largest offscreen image side in pixels.
-pub const OFFSCREEN_SIDE_MAX: u32 = 8192;
+pub const MAX_OFFSCREEN_SIDE: u32 = 8192;
 const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
@@ -19,7 +19,7 @@ pub enum OffscreenError {
     /// The adapter refused to create a device.
     #[error("cannot create device: {0}")]
     Device(String),
-    /// Width or height is zero or above [`OFFSCREEN_SIDE_MAX`].
+    /// Width or height is zero or above [`MAX_OFFSCREEN_SIDE`].
     #[error("image size {0}x{1} out of range")]
     BadSize(u32, u32),
     /// The scene could not be prepared.
@@ -86,7 +86,7 @@ impl Headless {
         width: u32,
         height: u32,
     ) -> Result<RgbaImage, OffscreenError> {
-        if width == 0 || height == 0 || width > OFFSCREEN_SIDE_MAX || height > OFFSCREEN_SIDE_MAX {
+        if width == 0 || height == 0 || width > MAX_OFFSCREEN_SIDE || height > MAX_OFFSCREEN_SIDE {
             return Err(OffscreenError::BadSize(width, height));
         }
         self.renderer

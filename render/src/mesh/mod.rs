@@ -16,7 +16,7 @@ pub use object_field::ObjectField;
 pub use tape_field::TapeField;
 
 /// Largest number of vertices a [`Mesh`] may index (indices are `u32`).
-pub const MESH_VERTICES_MAX: usize = u32::MAX as usize;
+pub const MAX_INDEXED_VERTICES: usize = u32::MAX as usize;
 
 /// An axis-aligned box, `lo` to `hi` inclusive, in world units.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -74,7 +74,7 @@ pub enum MeshError {
         n_positions: usize,
     },
     /// More vertices than `u32` indices can address.
-    #[error("mesh has {0} vertices, more than {MESH_VERTICES_MAX}")]
+    #[error("mesh has {0} vertices, more than {MAX_INDEXED_VERTICES}")]
     TooManyVertices(usize),
 }
 
@@ -112,7 +112,7 @@ impl Mesh {
     /// Checks attribute counts and index ranges: use on meshes from files or peers.
     pub fn validate(&self) -> Result<(), MeshError> {
         let n_positions = self.positions.len();
-        if n_positions > MESH_VERTICES_MAX {
+        if n_positions > MAX_INDEXED_VERTICES {
             return Err(MeshError::TooManyVertices(n_positions));
         }
         for (n_other, what) in [

@@ -370,7 +370,7 @@ pub fn mesh_bounds(object: &Object, depth: u8) -> Option<Aabb> {
     if !(side.is_finite() && side > 0.0) {
         return None;
     }
-    let n_cells = (1u32 << depth.min(super::octree::OCTREE_DEPTH_MAX)) as f32;
+    let n_cells = (1u32 << depth.min(super::octree::MAX_OCTREE_DEPTH)) as f32;
     // Solving side + 2m = n * (m / 2.5) for the margin m keeps 2.5 cells of the grown box.
     let margin = 2.5 * side / (n_cells - 5.0).max(1.0);
     Some(Aabb::new(

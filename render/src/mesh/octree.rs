@@ -47,16 +47,16 @@ mod topology;
 pub use assembly::MeshPatch;
 
 use super::field::Field;
-use super::{Aabb, MESH_VERTICES_MAX, Mesh, normalise_or_up};
+use super::{Aabb, MAX_INDEXED_VERTICES, Mesh, normalise_or_up};
 use qef::{Bracket, FEATURE_REACH_CELLS, Hermite, feature, refine_crossings, solve_qef};
 use std::collections::BTreeMap;
 use topology::{
-    N_FACES, PATCH_EDGES_MAX, PATCHES_MAX, Patch, cell_patches, corner_offset, edge_across,
+    MAX_PATCH_EDGES, MAX_PATCHES, N_FACES, Patch, cell_patches, corner_offset, edge_across,
     edge_corners, edge_index, face_segments, inside, quad_cells, quad_runs_to, split_patch,
 };
 
 /// Deepest octree allowed: 2^10 = 1024 cells along each axis.
-pub const OCTREE_DEPTH_MAX: u8 = 10;
+pub const MAX_OCTREE_DEPTH: u8 = 10;
 /// Cells along each axis of a leaf block evaluated in one bulk call.
 pub const BLOCK_CELLS: u32 = 8;
 /// Marker for "no vertex" in cell tables.
@@ -74,14 +74,14 @@ pub struct MeshSettings {
 /// Why meshing could not run.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum OctreeMeshError {
-    /// The depth exceeds [`OCTREE_DEPTH_MAX`].
-    #[error("octree depth {0} exceeds the maximum {OCTREE_DEPTH_MAX}")]
+    /// The depth exceeds [`MAX_OCTREE_DEPTH`].
+    #[error("octree depth {0} exceeds the maximum {MAX_OCTREE_DEPTH}")]
     DepthTooLarge(u8),
     /// The box has no volume, or non-finite corners.
     #[error("bounds {0:?} are empty or not finite")]
     BadBounds(Aabb),
     /// The surface needs more vertices than a mesh can index.
-    #[error("mesh would exceed {MESH_VERTICES_MAX} vertices")]
+    #[error("mesh would exceed {MAX_INDEXED_VERTICES} vertices")]
     TooManyVertices,
 }
 
@@ -377,7 +377,7 @@ struct Grid {
 impl Grid {
     /// The lattice of `settings`, checked.
     fn new(settings: &MeshSettings) -> Result<Grid, OctreeMeshError> {
-        if settings.depth > OCTREE_DEPTH_MAX {
+        if settings.depth > MAX_OCTREE_DEPTH {
             return Err(OctreeMeshError::DepthTooLarge(settings.depth));
         }
         let b = settings.bounds;
@@ -723,7 +723,7 @@ impl Visit<'_> {
 struct Crossed {
     cell_local: [u32; 3],
     corner_values: [f32; 8],
-    patches: [Patch; PATCHES_MAX],
+    patches: [Patch; MAX_PATCHES],
     n_patches: usize,
     first_ref: usize,
 }
@@ -935,7 +935,7 @@ impl Placement<'_> {
         let mut entry = [NONE; 12];
         let mut split = false;
         let mut crossing = c.first_ref;
-        let mut group = [Hermite::default(); PATCH_EDGES_MAX];
+        let mut group = [Hermite::default(); MAX_PATCH_EDGES];
         for p in &c.patches[..c.n_patches] {
             let m = p.len as usize;
             let (groups, n_groups) = split_patch(p);

@@ -11,18 +11,18 @@
 //! patch is open along its domain boundary and is not welded where p is periodic (a sphere
 //! from one patch has a seam); the tolerance bounds chord error at edge midpoints only.
 
-use super::{MESH_VERTICES_MAX, Mesh, normalise_or_up};
+use super::{MAX_INDEXED_VERTICES, Mesh, normalise_or_up};
 use spade::handles::FixedVertexHandle;
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 
 /// Most vertices a parametric mesh may have.
-pub const PARAMETRIC_VERTICES_MAX: usize = 1 << 22;
+pub const MAX_PARAMETRIC_VERTICES: usize = 1 << 22;
 /// Most refinement rounds; each round can split every edge once.
-pub const REFINE_ROUNDS_MAX: usize = 24;
+pub const MAX_REFINE_ROUNDS: usize = 24;
 /// Most divisions of the initial grid along u or v, and of a tube's initial sampling.
-pub const INITIAL_DIVISIONS_MAX: u32 = 4096;
+pub const MAX_INITIAL_DIVISIONS: u32 = 4096;
 /// Most sides a tube's cross-section may have.
-pub const TUBE_SIDES_MAX: u32 = 1024;
+pub const MAX_TUBE_SIDES: u32 = 1024;
 
 /// A rectangle in (u,v) parameter space.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -43,7 +43,7 @@ pub struct SurfaceSettings {
     /// Largest allowed distance, in world units, between p at an edge's (u,v) midpoint and
     /// the midpoint of the edge's 3D chord.
     pub tolerance: f32,
-    /// Stop refining once the mesh has this many vertices (at most [`PARAMETRIC_VERTICES_MAX`]).
+    /// Stop refining once the mesh has this many vertices (at most [`MAX_PARAMETRIC_VERTICES`]).
     pub vertices_max: usize,
 }
 
@@ -112,7 +112,7 @@ pub fn triangulate_surface(
     for (k, &h) in boundary.iter().enumerate() {
         cdt.add_constraint(h, boundary[(k + 1) % boundary.len()]);
     }
-    for _ in 0..REFINE_ROUNDS_MAX {
+    for _ in 0..MAX_REFINE_ROUNDS {
         let splits = edges_to_split(&cdt, &positions, &uvs, &mut surface, settings.tolerance);
         if splits.is_empty() || positions.len() >= vertices_max {
             break;
@@ -149,7 +149,7 @@ fn checked_vertices_max(settings: &SurfaceSettings) -> Result<usize, ParametricE
             "domain must be a finite, non-empty rectangle",
         ));
     }
-    if settings.initial_divisions == 0 || settings.initial_divisions > INITIAL_DIVISIONS_MAX {
+    if settings.initial_divisions == 0 || settings.initial_divisions > MAX_INITIAL_DIVISIONS {
         return Err(ParametricError::BadSetting(
             "initial_divisions out of range",
         ));
@@ -159,8 +159,8 @@ fn checked_vertices_max(settings: &SurfaceSettings) -> Result<usize, ParametricE
     }
     Ok(settings
         .vertices_max
-        .min(PARAMETRIC_VERTICES_MAX)
-        .min(MESH_VERTICES_MAX))
+        .min(MAX_PARAMETRIC_VERTICES)
+        .min(MAX_INDEXED_VERTICES))
 }
 
 /// The (u,v) midpoints of the edges whose chord strays from the surface by more than
@@ -221,10 +221,10 @@ pub fn tube(
             "radius and tolerance must be positive",
         ));
     }
-    if !(3..=TUBE_SIDES_MAX).contains(&settings.n_sides) {
+    if !(3..=MAX_TUBE_SIDES).contains(&settings.n_sides) {
         return Err(ParametricError::BadSetting("n_sides out of range"));
     }
-    if settings.initial_divisions == 0 || settings.initial_divisions > INITIAL_DIVISIONS_MAX {
+    if settings.initial_divisions == 0 || settings.initial_divisions > MAX_INITIAL_DIVISIONS {
         return Err(ParametricError::BadSetting(
             "initial_divisions out of range",
         ));
@@ -232,14 +232,14 @@ pub fn tube(
     let n_sides = settings.n_sides as usize;
     let samples_max = settings
         .samples_max
-        .min((PARAMETRIC_VERTICES_MAX - 2) / n_sides)
+        .min((MAX_PARAMETRIC_VERTICES - 2) / n_sides)
         .max(2);
     let n0 = settings.initial_divisions;
     let mut us: Vec<f32> = (0..=n0)
         .map(|i| u0 + (u1 - u0) * i as f32 / n0 as f32)
         .collect();
     let mut ps: Vec<[f32; 3]> = us.iter().map(|&u| curve(u)).collect();
-    for _ in 0..REFINE_ROUNDS_MAX {
+    for _ in 0..MAX_REFINE_ROUNDS {
         let mut next_u = vec![us[0]];
         let mut next_p = vec![ps[0]];
         let mut split = false;

@@ -11,7 +11,7 @@ use model::object::{CompiledEdit, Object, Shape, Transform};
 use super::{MAX_PATCH_EDITS, MeshJob, MeshKind, Meshed};
 use crate::appearance::CompiledAppearance;
 use crate::mesh::object_field::{Dirty, dirty_boxes, mesh_bounds, to_f32_box};
-use crate::mesh::octree::{MeshPatch, MeshSettings, OCTREE_DEPTH_MAX, OctreeMesher};
+use crate::mesh::octree::{MAX_OCTREE_DEPTH, MeshPatch, MeshSettings, OctreeMesher};
 use crate::mesh::{Aabb, Mesh, ObjectField};
 use crate::scene::{Line, Material, SceneObject};
 use crate::snapshot::{
@@ -240,7 +240,7 @@ fn covers(grid: Aabb, depth: u8, object: &Object) -> bool {
         return false;
     };
     let side = grid.size().into_iter().fold(0.0f32, f32::max);
-    let margin = GRID_MARGIN_CELLS * side / (1u32 << depth.min(OCTREE_DEPTH_MAX)) as f32;
+    let margin = GRID_MARGIN_CELLS * side / (1u32 << depth.min(MAX_OCTREE_DEPTH)) as f32;
     (0..3).all(|a| grid.lo[a] + margin <= b.lo[a] && b.hi[a] <= grid.hi[a] - margin)
 }
 

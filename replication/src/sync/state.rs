@@ -9,8 +9,8 @@
 //! the remote holds), from the changes it announces at most every [`HAVE_EVERY_MICROS`], from
 //! acks and from what its wants say it holds, and anything not acknowledged is sent again after
 //! a timeout estimated from the round trips of the first hello and of acknowledged batches, or
-//! else from the peer's other connections (between [`RESEND_AFTER_MIN_MICROS`] and
-//! [`RESEND_AFTER_MICROS`]), backing off to [`RESEND_AFTER_MAX_MICROS`] while the remote stays
+//! else from the peer's other connections (between [`MIN_RESEND_AFTER_MICROS`] and
+//! [`RESEND_AFTER_MICROS`]), backing off to [`MAX_RESEND_AFTER_MICROS`] while the remote stays
 //! silent, so a lost or duplicated message can neither stall nor loop a sync. While the resends
 //! back off, a [`Message::Ping`] of a few bytes goes out a few times per base interval (for at
 //! most [`PING_FOR_MICROS`]); the remote answers it, and the first message after a silence
@@ -64,7 +64,7 @@ pub const MAX_BATCH_BYTES: usize = 64 * 1024;
 /// batches sooner once round trips have been measured.
 pub const RESEND_AFTER_MICROS: u64 = 1_000_000;
 /// The shortest batch resend timeout, however short the round trips (100 ms).
-pub const RESEND_AFTER_MIN_MICROS: u64 = 100_000;
+pub const MIN_RESEND_AFTER_MICROS: u64 = 100_000;
 /// A batch resend timeout is the smoothed round trip of acknowledged batches plus this many
 /// of their mean deviations (numerator, denominator: one and a half). RFC 6298 takes four,
 /// for TCP's per-segment samples; a sample here spans the sending of the whole batch and of
@@ -74,13 +74,13 @@ pub const RESEND_AFTER_MIN_MICROS: u64 = 100_000;
 pub const RESEND_DEVIATIONS: (u64, u64) = (3, 2);
 /// The resend interval doubles while the remote stays silent, up to this (32 s), so a dead or
 /// hostile remote that never answers costs a bounded trickle.
-pub const RESEND_AFTER_MAX_MICROS: u64 = 32_000_000;
+pub const MAX_RESEND_AFTER_MICROS: u64 = 32_000_000;
 /// A peer asks a third peer for a connected author's ops only after the author, asked first,
 /// sent none for the resend timeout of its connection, when it has one, and at most this long
 /// (500 ms): time for the author's own send (or its resend) to arrive.
 pub const RELAY_AFTER_MICROS: u64 = 500_000;
 /// A remote silent while batches to it wait is pinged ([`Message::Ping`]) this many times per
-/// base resend interval ([`PINGS_PER_RESEND`], at most every [`PING_AFTER_MIN_MICROS`]) for at
+/// base resend interval ([`PINGS_PER_RESEND`], at most every [`MIN_PING_AFTER_MICROS`]) for at
 /// most this long (10 s): a healed partition is found within about a quarter of a resend
 /// timeout and a one-way trip, a lost ping costs a quarter, not a whole timeout, and a dead
 /// remote costs at most this long's worth of pings of a few bytes (on the 25 ms floor, 400)
@@ -89,7 +89,7 @@ pub const PING_FOR_MICROS: u64 = 10_000_000;
 /// Pings per base resend interval while a remote stays silent (see [`PING_FOR_MICROS`]).
 pub const PINGS_PER_RESEND: u64 = 4;
 /// The shortest interval between pings (25 ms), however short the round trips.
-pub const PING_AFTER_MIN_MICROS: u64 = 25_000;
+pub const MIN_PING_AFTER_MICROS: u64 = 25_000;
 /// Most messages one connection holds that came before the remote's hello (data overtaking a
 /// lost or late hello), handled once the hello comes; more are dropped as
 /// [`RejectKind::BeforeHello`].
@@ -121,7 +121,7 @@ pub const MAX_HELLO_ANSWER_BURST: u64 = 4;
 /// Hellos a remote may send per second on average before they count against it: beyond this
 /// and [`MAX_HELLO_BURST`] they are dropped and counted ([`RejectKind::RepeatedHello`]). An
 /// honest remote sends one, then again only while no have answers it (at least
-/// [`RESEND_AFTER_MIN_MICROS`] apart), and one to relearn or repair now and then: even on a
+/// [`MIN_RESEND_AFTER_MICROS`] apart), and one to relearn or repair now and then: even on a
 /// link that loses and duplicates a quarter of its messages that stays well within.
 pub const MAX_HELLOS_PER_SEC: u64 = 4;
 /// The burst of [`MAX_HELLOS_PER_SEC`].
@@ -567,7 +567,7 @@ pub struct SyncState<P> {
     /// two ops, or lower ones). At most one entry per fork the log holds.
     forks_known: BTreeMap<PeerId, u64>,
     /// Per forked author, the seq of the fork last sent, when, and how long to wait for its
-    /// answer before sending it again (doubling up to [`RESEND_AFTER_MAX_MICROS`]).
+    /// answer before sending it again (doubling up to [`MAX_RESEND_AFTER_MICROS`]).
     forks_sent: BTreeMap<PeerId, (u64, Timestamp, u64)>,
     /// Forks whose answer did not come in time: to send again.
     forks_resend: BTreeSet<PeerId>,
@@ -716,7 +716,7 @@ impl<P: Payload> SyncState<P> {
     /// round trip was measured here: [`RESEND_DEVIATIONS`] above the smoothed round trip of
     /// acknowledged batches or, before the first, the same from the round trip of the first
     /// hello taken as RFC 6298's first sample (1.75 times it), between
-    /// [`RESEND_AFTER_MIN_MICROS`] and [`RESEND_AFTER_MICROS`]; `None` before.
+    /// [`MIN_RESEND_AFTER_MICROS`] and [`RESEND_AFTER_MICROS`]; `None` before.
     pub fn resend_timeout(&self) -> Option<u64> {
         // The smoothed round trip and twice its mean deviation; RFC 6298's first sample is
         // the round trip, and half of it as the deviation.
@@ -726,7 +726,7 @@ impl<P: Payload> SyncState<P> {
             .or_else(first)?;
         let (n, d) = RESEND_DEVIATIONS;
         let timeout = srtt.saturating_add(twice_var.saturating_mul(n) / (2 * d));
-        Some(timeout.clamp(RESEND_AFTER_MIN_MICROS, RESEND_AFTER_MICROS))
+        Some(timeout.clamp(MIN_RESEND_AFTER_MICROS, RESEND_AFTER_MICROS))
     }
 
     /// How long a batch or an unanswered hello waits before it goes again (before any
@@ -744,7 +744,7 @@ impl<P: Payload> SyncState<P> {
     /// its other connections measured, so a lost hello on a new connection costs about a
     /// round trip, not a second. A hello timeout that backed off keeps its backoff.
     pub fn assume_resend_timeout(&mut self, micros: u64) {
-        let micros = micros.clamp(RESEND_AFTER_MIN_MICROS, RESEND_AFTER_MICROS);
+        let micros = micros.clamp(MIN_RESEND_AFTER_MICROS, RESEND_AFTER_MICROS);
         if self.resend_timeout().is_some() {
             return;
         }
@@ -824,7 +824,7 @@ impl<P: Payload> SyncState<P> {
     /// News that the network carries ops again (the log grew through another connection, say
     /// after a partition healed): an unanswered hello that backed off while the remote was
     /// silent goes out again on the base interval instead of waiting up to
-    /// [`RESEND_AFTER_MAX_MICROS`]. Both ends of a connection whose hellos were lost back off
+    /// [`MAX_RESEND_AFTER_MICROS`]. Both ends of a connection whose hellos were lost back off
     /// alike, and nothing else would wake them. At most once per [`RESEND_AFTER_MICROS`], so a
     /// dead remote still costs a bounded trickle of hellos however busy the other connections
     /// are. (Batches are left to back off: the remote's next have resets them, and resending
@@ -1538,14 +1538,14 @@ impl<P: Payload> SyncState<P> {
         if self.hello_due().is_some_and(|d| d <= now) {
             self.hello_first_at = None;
             self.queue_hello(now);
-            self.hello_resend_micros = (self.hello_resend_micros * 2).min(RESEND_AFTER_MAX_MICROS);
+            self.hello_resend_micros = (self.hello_resend_micros * 2).min(MAX_RESEND_AFTER_MICROS);
         }
         if self.resend_due().is_some_and(|d| d <= now) {
             // Rewind to what the remote acknowledged; everything after it goes out again.
             self.in_flight.clear();
             self.sent_vv = self.remote_vv.clone();
             self.sendable_cache.set(None);
-            self.resend_micros = (self.resend_micros * 2).min(RESEND_AFTER_MAX_MICROS);
+            self.resend_micros = (self.resend_micros * 2).min(MAX_RESEND_AFTER_MICROS);
         }
         if self.ping_due().is_some_and(|d| d <= now) {
             self.pinged_at = Some(now);
@@ -1874,7 +1874,7 @@ impl<P: Payload> SyncState<P> {
             } else {
                 let wait = match self.forks_sent.get(&author) {
                     Some((seq, _, wait)) if *seq == fork.seq => {
-                        (wait * 2).min(RESEND_AFTER_MAX_MICROS)
+                        (wait * 2).min(MAX_RESEND_AFTER_MICROS)
                     }
                     _ => self.base_resend_micros(),
                 };
@@ -2000,7 +2000,7 @@ impl<P: Payload> SyncState<P> {
 
 /// How often a silent remote is pinged, given the base resend interval.
 fn ping_interval(base_resend_micros: u64) -> u64 {
-    (base_resend_micros / PINGS_PER_RESEND).max(PING_AFTER_MIN_MICROS)
+    (base_resend_micros / PINGS_PER_RESEND).max(MIN_PING_AFTER_MICROS)
 }
 
 /// The tip of `log`'s op of `author` at `seq`, or 0 where it holds none (inside a snapshot's

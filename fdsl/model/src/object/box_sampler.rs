@@ -46,7 +46,7 @@ use fdsl::tape::{Choice, Code, Fidelity, Tape};
 /// A restriction of a sampler holding more edits than this gathers its edits from the
 /// history's index rather than by scanning its own list; an interval over a sub-box of such a
 /// sampler goes through the point path's index likewise.
-pub const SCAN_EDITS_MAX: usize = 256;
+pub const MAX_SCAN_EDITS: usize = 256;
 
 /// An object restricted to a box at a fixed time, evaluated over many points at once.
 ///
@@ -162,7 +162,7 @@ impl BoxSampler {
     /// The object restricted to `sub`: from this sampler's edits when `sub` lies inside the
     /// box and they are few, else from the history.
     pub fn restrict(&self, sub: &Aabb) -> BoxSampler {
-        if !self.region.contains_box(sub) || self.edits.len() > SCAN_EDITS_MAX {
+        if !self.region.contains_box(sub) || self.edits.len() > MAX_SCAN_EDITS {
             return BoxSampler::new(self.object.clone(), sub, self.t);
         }
         let entries = self.object.history().entries();
@@ -291,7 +291,7 @@ impl BoxSampler {
     /// gives it.
     pub fn interval(&mut self, sub: &Aabb) -> Interval {
         let t = self.t;
-        if !self.region.contains_box(sub) || self.edits.len() > SCAN_EDITS_MAX {
+        if !self.region.contains_box(sub) || self.edits.len() > MAX_SCAN_EDITS {
             return self.fallback().interval(sub, t);
         }
         let from = self.first_over(sub);
@@ -311,9 +311,9 @@ impl BoxSampler {
 }
 
 /// Batches smaller than this are folded edit by edit over every point, without buckets.
-const BUCKETS_MIN_POINTS: usize = 64;
+const MIN_BUCKETS_POINTS: usize = 64;
 /// Most buckets along each axis.
-const BUCKETS_MAX_PER_AXIS: usize = 8;
+const MAX_BUCKETS_PER_AXIS: usize = 8;
 /// Points per bucket aimed at.
 const POINTS_PER_BUCKET: usize = 8;
 
@@ -344,7 +344,7 @@ impl Buckets {
     /// Sorts `points` (and their first edits) into buckets over `region`.
     fn sort(&mut self, region: &Aabb, points: &[DVec3], from: &[u32]) {
         let by_count = (points.len() / POINTS_PER_BUCKET) as f64;
-        self.n_axis = (by_count.cbrt() as usize).clamp(1, BUCKETS_MAX_PER_AXIS);
+        self.n_axis = (by_count.cbrt() as usize).clamp(1, MAX_BUCKETS_PER_AXIS);
         let n = self.n_axis;
         self.starts.clear();
         self.starts.resize(n * n * n + 1, 0);
@@ -396,7 +396,7 @@ impl Buckets {
         // covers the region touches every point of it.
         let from_all = from.first().copied().unwrap_or(0);
         let uniform = from.iter().all(|&f| f == from_all);
-        if points.len() < BUCKETS_MIN_POINTS {
+        if points.len() < MIN_BUCKETS_POINTS {
             for &j in edits {
                 let e = &entries[j as usize].edit;
                 if uniform && from_all <= j && e.covers(region) {

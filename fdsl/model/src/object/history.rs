@@ -6,7 +6,7 @@
 //! [`Bvh`] over recent edits, and a short unindexed tail. The large part answers points and
 //! boxes through a uniform grid (one cell lookup and a short contiguous list, whatever the
 //! history's length; edits much larger than a cell go to a small tree beside it, and boxes
-//! meeting more than `GRID_QUERY_CELLS_MAX` cells go to a [`Bvh`] over the whole part), and
+//! meeting more than `MAX_GRID_QUERY_CELLS` cells go to a [`Bvh`] over the whole part), and
 //! evaluates its edits from an `EditArena` built with the grid: copies of their evaluation
 //! data in cell order. Appending costs nothing until
 //! [`History::refresh`]: the tail then moves into the small tree, and the small tree into the
@@ -25,10 +25,10 @@ use crate::limits::MAX_EDITS_PER_OBJECT;
 use fdsl::eval::Interval;
 
 /// Longest unindexed tail left by [`History::refresh`].
-pub const TAIL_MAX: usize = 32;
+pub const MAX_TAIL: usize = 32;
 /// The small tree merges into the large one when it holds more than this many edits and more
 /// than an eighth of the large tree.
-const SMALL_MIN: usize = 256;
+const MIN_SMALL: usize = 256;
 
 /// One edit in the history.
 #[derive(Clone, Debug)]
@@ -117,12 +117,12 @@ impl GridItem {
 /// grid rounds to a step that fits.
 const LATTICE_STEPS: f64 = 65_000.0;
 /// The last lattice step.
-const STEP_MAX: f64 = u16::MAX as f64;
+const MAX_STEP: f64 = u16::MAX as f64;
 
 /// Most cells per indexed box in a grid (a bound on its memory).
 const GRID_CELLS_PER_BOX: usize = 8;
 /// Box queries meeting more grid cells than this go to the large tree instead.
-const GRID_QUERY_CELLS_MAX: usize = 64;
+const MAX_GRID_QUERY_CELLS: usize = 64;
 
 /// A uniform grid over small boxes for point and box queries; boxes spanning more than two
 /// cells on an axis go to `large` instead. Items hold their boxes rounded outwards to a
@@ -298,14 +298,14 @@ impl Grid {
     /// of a clamped, so non-negative, value (and needs no `floor` call).
     #[inline]
     fn step_down(&self, p: DVec3) -> [u16; 3] {
-        let q = ((p - self.origin) * self.inv_step).clamp(DVec3::ZERO, DVec3::splat(STEP_MAX));
+        let q = ((p - self.origin) * self.inv_step).clamp(DVec3::ZERO, DVec3::splat(MAX_STEP));
         [q.x as u16, q.y as u16, q.z as u16]
     }
 
     /// The lattice step at or above `p`, clamped to the lattice.
     #[inline]
     fn step_up(&self, p: DVec3) -> [u16; 3] {
-        let q = ((p - self.origin) * self.inv_step).clamp(DVec3::ZERO, DVec3::splat(STEP_MAX));
+        let q = ((p - self.origin) * self.inv_step).clamp(DVec3::ZERO, DVec3::splat(MAX_STEP));
         let up = |v: f64| {
             let s = v as u16;
             if f64::from(s) < v { s + 1 } else { s }
@@ -368,7 +368,7 @@ impl Grid {
 
     /// Calls `visit(edit)` for every box that may meet `region` (the caller confirms), and
     /// returns true; or returns false, visiting nothing, when the region is not an ordered box
-    /// or meets more than [`GRID_QUERY_CELLS_MAX`] cells (the tree answers it better).
+    /// or meets more than [`MAX_GRID_QUERY_CELLS`] cells (the tree answers it better).
     ///
     /// A box in several of the region's cells comes once, from the cell holding the low
     /// corner of its overlap with the region: along each axis, the region's first cell or
@@ -382,7 +382,7 @@ impl Grid {
         if !self.starts.is_empty() {
             let (lo, hi) = (self.cell_of(region.lo), self.cell_of(region.hi));
             let n_cells: usize = (0..3).map(|k| hi[k] - lo[k] + 1).product();
-            if n_cells > GRID_QUERY_CELLS_MAX {
+            if n_cells > MAX_GRID_QUERY_CELLS {
                 return false;
             }
             let (qlo, qhi) = (self.step_down(region.lo), self.step_up(region.hi));
@@ -547,11 +547,11 @@ impl History {
     /// Moves the tail into the trees (see the module documentation).
     pub fn refresh(&mut self) {
         let n = self.entries.len();
-        if n - self.indexed_end <= TAIL_MAX {
+        if n - self.indexed_end <= MAX_TAIL {
             return;
         }
         let small_len = n - self.big_end;
-        if small_len > SMALL_MIN && small_len > self.big_end / 8 {
+        if small_len > MIN_SMALL && small_len > self.big_end / 8 {
             let boxes = boxes_of(&self.entries, 0..n);
             let (grid, arena) = Grid::build(&boxes, &self.entries);
             self.large = Arc::new(Large {

@@ -43,7 +43,7 @@ use std::sync::Arc;
 use serde::{Deserialize, Serialize};
 
 pub use appearance::{Appearance, ColorDef, ColorMap, Rgb};
-pub use box_sampler::{BoxSampler, SCAN_EDITS_MAX};
+pub use box_sampler::{BoxSampler, MAX_SCAN_EDITS};
 pub use edit::{CompiledEdit, Edit, EditOp, PaintValue, Paintable};
 pub use fit::{FitError, fit_domain, fit_domain_within};
 pub use geometry::{Geometry, ParametricKind, Shape};

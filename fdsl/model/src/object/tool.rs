@@ -17,7 +17,7 @@ use crate::limits::{MAX_STROKE_POSES, MAX_STROKE_STAMPS, MAX_TOOL_SIZE};
 use fdsl::eval::Interval;
 
 /// Strokes with more stamps than this get their own index.
-const STAMP_INDEX_MIN: usize = 32;
+const MIN_STAMP_INDEX: usize = 32;
 
 /// The tool's solid, in its own coordinates (centred on the origin).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -569,7 +569,7 @@ impl CompiledTool {
             .map(|s| s.aabb(shape).expand(margin))
             .collect();
         let stamp_index =
-            (stamps.len() > STAMP_INDEX_MIN).then(|| Box::new(Bvh::build(&stamp_boxes)));
+            (stamps.len() > MIN_STAMP_INDEX).then(|| Box::new(Bvh::build(&stamp_boxes)));
         let lipschitz = stamps.iter().map(Stamp::lipschitz).fold(1.0, f64::max);
         let stamps = stamp_boxes.into_iter().zip(stamps).collect();
         Ok(CompiledTool {

@@ -107,7 +107,7 @@ const FEATURE_FIT_CELLS: f64 = 0.02;
 /// (|f| / |gradient|): the bisection leaves a crossing within 1/64 cell of the surface, so a
 /// larger one comes from a gradient too small to trust, and the plane then goes through the
 /// crossing's point.
-const PLANE_CORRECTION_MAX_CELLS: f32 = 1.0 / 16.0;
+const MAX_PLANE_CORRECTION_CELLS: f32 = 1.0 / 16.0;
 
 /// Places a vertex: the least-squares point of the planes of the crossings `data`, within
 /// `reach` when every plane passes within [`FEATURE_FIT_CELLS`] of it, else the point of the
@@ -161,7 +161,7 @@ struct Planes<'a> {
 }
 
 /// Most crossings of one patch: every edge of a cell.
-const PLANES_MAX: usize = 12;
+const MAX_PLANES: usize = 12;
 
 impl Planes<'_> {
     fn new(data: &[Hermite], h: f32) -> Planes<'_> {
@@ -188,7 +188,7 @@ impl Planes<'_> {
             let n = g.map(|x| x / len);
             // f(x) + g . (y - x) = 0, that is n . y = n . x - f(x) / |g|.
             let correction = f64::from(d.value) / len;
-            let correction = if correction.abs() <= f64::from(PLANE_CORRECTION_MAX_CELLS) * self.h {
+            let correction = if correction.abs() <= f64::from(MAX_PLANE_CORRECTION_CELLS) * self.h {
                 correction
             } else {
                 0.0
@@ -227,21 +227,21 @@ impl Planes<'_> {
 
 /// Smallest cosine between two crossing normals of one vertex that still counts as one
 /// smooth sheet: normals further apart than about 26 degrees meet at a crease or corner.
-const SMOOTH_NORMAL_COS_MIN: f32 = 0.9;
+const MIN_SMOOTH_NORMAL_COS: f32 = 0.9;
 
 /// Smallest cosine between the sheets of a feature whose vertex may leave its cell: faces
 /// whose normals are more than 120 degrees apart are rather the two sides of something
 /// thinner than a cell (a wall, a gap between two bodies), where the planes meet between
 /// the surfaces, not on them.
-const OPEN_FEATURE_COS_MIN: f32 = -0.5;
+const MIN_OPEN_FEATURE_COS: f32 = -0.5;
 
 /// A vertex on a sharp feature: where the gradients of its crossings fall into two or more
-/// sheets (each within [`SMOOTH_NORMAL_COS_MIN`] of its first gradient).
+/// sheets (each within [`MIN_SMOOTH_NORMAL_COS`] of its first gradient).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Feature {
     /// The unit outward normal: the mean of the sheets' directions.
     pub(super) normal: [f32; 3],
-    /// Whether every two sheets are within [`OPEN_FEATURE_COS_MIN`] of each other, so that
+    /// Whether every two sheets are within [`MIN_OPEN_FEATURE_COS`] of each other, so that
     /// the vertex may follow the feature out of its cell.
     pub(super) open: bool,
 }
@@ -257,7 +257,7 @@ pub(super) struct Feature {
 /// thinner than a cell) have no mean direction: that vertex too takes the gradient.
 pub(super) fn feature(data: &[Hermite]) -> Option<Feature> {
     // Per sheet: its first unit gradient and the sum of its unit gradients.
-    let mut sheets = [([0.0f32; 3], [0.0f32; 3]); PLANES_MAX];
+    let mut sheets = [([0.0f32; 3], [0.0f32; 3]); MAX_PLANES];
     let mut n_sheets = 0;
     for d in data {
         let Some(n) = unit(d.gradient) else {
@@ -265,10 +265,10 @@ pub(super) fn feature(data: &[Hermite]) -> Option<Feature> {
         };
         match sheets[..n_sheets]
             .iter_mut()
-            .find(|(first, _)| dot(*first, n) >= SMOOTH_NORMAL_COS_MIN)
+            .find(|(first, _)| dot(*first, n) >= MIN_SMOOTH_NORMAL_COS)
         {
             Some((_, sum)) => (0..3).for_each(|a| sum[a] += n[a]),
-            None if n_sheets < PLANES_MAX => {
+            None if n_sheets < MAX_PLANES => {
                 sheets[n_sheets] = (n, n);
                 n_sheets += 1;
             }
@@ -278,7 +278,7 @@ pub(super) fn feature(data: &[Hermite]) -> Option<Feature> {
     if n_sheets < 2 {
         return None;
     }
-    let mut directions = [[0.0f32; 3]; PLANES_MAX];
+    let mut directions = [[0.0f32; 3]; MAX_PLANES];
     let mut n_directions = 0;
     for (_, sum) in &sheets[..n_sheets] {
         if let Some(d) = unit(*sum) {
@@ -294,7 +294,7 @@ pub(super) fn feature(data: &[Hermite]) -> Option<Feature> {
     let open = directions.iter().enumerate().all(|(i, a)| {
         directions[i + 1..]
             .iter()
-            .all(|b| dot(*a, *b) >= OPEN_FEATURE_COS_MIN)
+            .all(|b| dot(*a, *b) >= MIN_OPEN_FEATURE_COS)
     });
     // Outward normals are minus the gradient.
     let normal = unit(mean)?.map(|c| -c);

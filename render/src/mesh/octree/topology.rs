@@ -114,16 +114,16 @@ pub(super) fn face_segments(v: &[f32; 8], face: usize) -> ([[usize; 2]; 2], usiz
 }
 
 /// Longest patch polygon: every edge of the cell crossed.
-pub(super) const PATCH_EDGES_MAX: usize = 12;
+pub(super) const MAX_PATCH_EDGES: usize = 12;
 /// Most patches in one cell (four separated corners).
-pub(super) const PATCHES_MAX: usize = 4;
+pub(super) const MAX_PATCHES: usize = 4;
 
 /// One surface patch of a cell: its crossed edges in order around it, and the face of each
 /// side (side k joins `edges[k]` and `edges[k + 1]`, cyclically).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(super) struct Patch {
-    pub(super) edges: [u8; PATCH_EDGES_MAX],
-    pub(super) side_faces: [u8; PATCH_EDGES_MAX],
+    pub(super) edges: [u8; MAX_PATCH_EDGES],
+    pub(super) side_faces: [u8; MAX_PATCH_EDGES],
     pub(super) len: u8,
 }
 
@@ -131,7 +131,7 @@ pub(super) struct Patch {
 ///
 /// Each crossed edge lies on two faces and belongs to exactly one segment on each, so the
 /// segments form disjoint cycles: one per patch.
-pub(super) fn cell_patches(v: &[f32; 8]) -> ([Patch; PATCHES_MAX], usize) {
+pub(super) fn cell_patches(v: &[f32; 8]) -> ([Patch; MAX_PATCHES], usize) {
     const UNSET: (u8, u8) = (u8::MAX, u8::MAX);
     // For each edge, its neighbours around the patch: (other edge, face of the segment).
     let mut next = [[UNSET; 2]; 12];
@@ -144,17 +144,17 @@ pub(super) fn cell_patches(v: &[f32; 8]) -> ([Patch; PATCHES_MAX], usize) {
             }
         }
     }
-    let mut patches = [Patch::default(); PATCHES_MAX];
+    let mut patches = [Patch::default(); MAX_PATCHES];
     let mut n_patches = 0;
     let mut visited = [false; 12];
     for start in 0..12 {
-        if visited[start] || next[start][0] == UNSET || n_patches == PATCHES_MAX {
+        if visited[start] || next[start][0] == UNSET || n_patches == MAX_PATCHES {
             continue;
         }
         let patch = &mut patches[n_patches];
         n_patches += 1;
         let (mut cur, mut came_from_face) = (start, u8::MAX);
-        for _ in 0..PATCH_EDGES_MAX {
+        for _ in 0..MAX_PATCH_EDGES {
             visited[cur] = true;
             patch.edges[patch.len as usize] = cur as u8;
             let (to, face) = if next[cur][0].1 == came_from_face {
@@ -192,10 +192,10 @@ fn distinct_faces(faces: impl Iterator<Item = u8>) -> Option<u8> {
 /// vertex may touch one face twice. One group when the polygon crosses each face once; else
 /// the first pair of cut sides that gives two valid arcs; else one vertex per corner (always
 /// valid: a corner's two sides lie on the two different faces that hold its edge).
-pub(super) fn split_patch(p: &Patch) -> ([u8; PATCH_EDGES_MAX], usize) {
+pub(super) fn split_patch(p: &Patch) -> ([u8; MAX_PATCH_EDGES], usize) {
     let m = p.len as usize;
     let sf = &p.side_faces[..m];
-    let mut groups = [0u8; PATCH_EDGES_MAX];
+    let mut groups = [0u8; MAX_PATCH_EDGES];
     if distinct_faces(sf.iter().copied()).is_some() {
         return (groups, 1);
     }

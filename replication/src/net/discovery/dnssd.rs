@@ -81,7 +81,7 @@ pub const MAX_DIALS_PER_ROUND: usize = 16;
 /// How many browse events one [`DnsSd::poll`] handles at most (the rest wait for the next).
 pub const MAX_EVENTS_PER_POLL: usize = 1_024;
 /// The shortest time between two announcements of a changed peer count.
-pub const PEER_COUNT_UPDATE_MIN_MICROS: u64 = 2_000_000;
+pub const MIN_PEER_COUNT_UPDATE_MICROS: u64 = 2_000_000;
 /// How often [`announce_and_dial`] drains browse events.
 pub const POLL_INTERVAL_MILLIS: u64 = 250;
 /// How often [`announce_and_dial`] updates the peer count and dials the session's peers.
@@ -295,7 +295,7 @@ impl DnsSd {
     }
 
     /// Sets the announced peer count. The TXT record is registered again at most once per
-    /// [`PEER_COUNT_UPDATE_MIN_MICROS`]: a change within that time waits for a later call
+    /// [`MIN_PEER_COUNT_UPDATE_MICROS`]: a change within that time waits for a later call
     /// (call this periodically, as [`announce_and_dial`] does). Returns whether it announced.
     pub fn update_n_peers(&mut self, n_peers: u16, now: Timestamp) -> Result<bool, DnsSdError> {
         let Some(announced) = &self.announced else {
@@ -639,10 +639,10 @@ pub async fn announce_and_dial<P: Payload + Send + 'static>(
     }
 }
 
-/// Whether a registration made at `at` may be replaced at `now` ([`PEER_COUNT_UPDATE_MIN_MICROS`];
+/// Whether a registration made at `at` may be replaced at `now` ([`MIN_PEER_COUNT_UPDATE_MICROS`];
 /// a clock that went back allows it, rather than freezing the count).
 fn update_allowed(at: Timestamp, now: Timestamp) -> bool {
-    now.0 < at.0 || now.0 - at.0 >= PEER_COUNT_UPDATE_MIN_MICROS
+    now.0 < at.0 || now.0 - at.0 >= MIN_PEER_COUNT_UPDATE_MICROS
 }
 
 /// Joins the group once on a throwaway socket that shares the port the daemon will bind: the
@@ -1159,11 +1159,11 @@ mod tests {
         assert!(!update_allowed(at, at));
         assert!(!update_allowed(
             at,
-            Timestamp(at.0 + PEER_COUNT_UPDATE_MIN_MICROS - 1)
+            Timestamp(at.0 + MIN_PEER_COUNT_UPDATE_MICROS - 1)
         ));
         assert!(update_allowed(
             at,
-            Timestamp(at.0 + PEER_COUNT_UPDATE_MIN_MICROS)
+            Timestamp(at.0 + MIN_PEER_COUNT_UPDATE_MICROS)
         ));
         assert!(update_allowed(at, Timestamp(at.0 - 1)));
     }

@@ -65,13 +65,13 @@ pub const MAX_PEERS_PER_REPLY: usize = 16;
 /// Header bytes: magic, version, tag.
 const HEADER_BYTES: usize = MAGIC.len() + 2;
 /// Bytes of one peer in a Peers list or an Introduce, at most: id, family, IPv6 address, port.
-const PEER_ENTRY_BYTES_MAX: usize = 32 + 1 + 16 + 2;
+const MAX_PEER_ENTRY_BYTES: usize = 32 + 1 + 16 + 2;
 /// Largest reply: header, count, and [`MAX_PEERS_PER_REPLY`] IPv6 entries.
-pub const MAX_REPLY_BYTES: usize = HEADER_BYTES + 1 + MAX_PEERS_PER_REPLY * PEER_ENTRY_BYTES_MAX;
+pub const MAX_REPLY_BYTES: usize = HEADER_BYTES + 1 + MAX_PEERS_PER_REPLY * MAX_PEER_ENTRY_BYTES;
 /// Exact size of a register request (padded), either kind.
 pub const REGISTER_BYTES: usize = 1024;
 /// Largest introduction: header, discovery id and one IPv6 peer entry.
-pub const INTRODUCE_BYTES: usize = HEADER_BYTES + 16 + PEER_ENTRY_BYTES_MAX;
+pub const INTRODUCE_BYTES: usize = HEADER_BYTES + 16 + MAX_PEER_ENTRY_BYTES;
 /// Exact size of a Challenge.
 pub const CHALLENGE_BYTES: usize = HEADER_BYTES + COOKIE_BYTES;
 

@@ -734,7 +734,7 @@ fn a_new_connection_assumes_the_peers_timeout_and_keeps_its_backoff() {
     c.sync.assume_resend_timeout(1);
     assert_eq!(
         c.sync.poll_timeout(&c.log),
-        Some(Timestamp(RESEND_AFTER_MIN_MICROS))
+        Some(Timestamp(MIN_RESEND_AFTER_MICROS))
     );
 }
 
@@ -1287,7 +1287,7 @@ fn a_remote_repeating_hellos_gets_a_full_have_a_second_and_is_counted() {
 #[test]
 fn hellos_resent_into_a_loss_are_all_answered_and_never_counted() {
     let mut a = Node::new(1, 2);
-    a.sync.assume_resend_timeout(RESEND_AFTER_MIN_MICROS);
+    a.sync.assume_resend_timeout(MIN_RESEND_AFTER_MICROS);
     let mut b = Node::new(2, 1);
     b.log = log_of_many_authors(300);
     let (mut n_hellos, mut n_full) = (0, 0);
