@@ -2,7 +2,7 @@
 
 use std::path::Path;
 use std::process::Command;
-use tests::tidy;
+use tests::tidy::{deps, files, functions, modules, names};
 
 fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -13,7 +13,7 @@ fn root() -> &'static Path {
 #[test]
 fn dependency_edges_follow_the_architecture_map() {
     let text = std::fs::read_to_string(root().join("ARCHITECTURE.md")).unwrap();
-    let allowed = tidy::parse_dependency_map(&text).unwrap();
+    let allowed = deps::parse_dependency_map(&text).unwrap();
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let output = Command::new(cargo)
         .args([
@@ -32,9 +32,9 @@ fn dependency_edges_follow_the_architecture_map() {
         String::from_utf8_lossy(&output.stderr)
     );
     let metadata: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
-    let actual = tidy::workspace_edges(&metadata).unwrap();
-    let mut problems = tidy::check_edges(&allowed, &actual);
-    problems.extend(tidy::non_dev_uses(&metadata, "testkit"));
+    let actual = deps::workspace_edges(&metadata).unwrap();
+    let mut problems = deps::check_edges(&allowed, &actual);
+    problems.extend(deps::non_dev_uses(&metadata, "testkit"));
     assert!(
         problems.is_empty(),
         "dependency map violations:\n{}",
@@ -42,27 +42,98 @@ fn dependency_edges_follow_the_architecture_map() {
     );
 }
 
-#[test]
-fn every_source_file_has_a_header() {
-    let members = [
-        "fdsl",
-        "replication",
-        "haptic",
-        "render",
-        "app",
-        "simulator",
-        "tests",
-        "testkit",
-    ];
+/// The source folders of the workspace's crates (the members of `Cargo.toml`).
+const CRATE_SOURCES: [&str; 9] = [
+    "fdsl/src",
+    "replication/src",
+    "haptic/src",
+    "render/src",
+    "render/plot/src",
+    "app/src",
+    "simulator/src",
+    "tests/src",
+    "testkit/src",
+];
+
+/// Every Rust file of the members, their tests, benches and examples included.
+fn all_rust_files() -> Vec<std::path::PathBuf> {
+    let members = CRATE_SOURCES.map(|s| s.trim_end_matches("/src"));
     let files: Vec<_> = members
         .iter()
-        .flat_map(|m| tidy::rust_files(&root().join(m)))
+        .flat_map(|m| files::rust_files(&root().join(m)))
         .collect();
     assert!(files.len() >= members.len(), "found only {files:?}");
-    let missing = tidy::files_without_header(&files);
+    files
+}
+
+/// The files under the members' `src` folders.
+fn source_files() -> Vec<std::path::PathBuf> {
+    CRATE_SOURCES
+        .iter()
+        .flat_map(|s| files::rust_files(&root().join(s)))
+        .collect()
+}
+
+#[test]
+fn every_source_file_has_a_header() {
+    let missing = files::files_without_header(&all_rust_files());
     assert!(
         missing.is_empty(),
         "files without a `//!` header: {missing:?}"
+    );
+}
+
+#[test]
+fn no_crate_has_an_import_circle_between_its_top_level_modules() {
+    let mut problems = Vec::new();
+    for src in CRATE_SOURCES {
+        let graph = modules::module_graph(&root().join(src));
+        assert!(
+            !graph.is_empty() || src == "testkit/src",
+            "no modules found in {src}"
+        );
+        for circle in modules::circles(&graph) {
+            let edges: Vec<String> = circle
+                .iter()
+                .map(|m| {
+                    format!(
+                        "{m} -> {:?}",
+                        graph[m]
+                            .intersection(&circle.iter().cloned().collect())
+                            .collect::<Vec<_>>()
+                    )
+                })
+                .collect();
+            problems.push(format!("{src}: {}", edges.join("; ")));
+        }
+    }
+    assert!(
+        problems.is_empty(),
+        "import circles:\n{}",
+        problems.join("\n")
+    );
+}
+
+#[test]
+fn functions_are_short_or_marked_tables() {
+    let problems = functions::too_long(&source_files());
+    assert!(
+        problems.is_empty(),
+        "functions over {} lines, or over {} without `{}`:\n{}",
+        functions::MAX_FUNCTION_LINES,
+        functions::MAX_PLAIN_FUNCTION_LINES,
+        functions::TABLE_MARK,
+        problems.join("\n")
+    );
+}
+
+#[test]
+fn limits_are_named_max_first() {
+    let problems = names::misnamed_limits(&all_rust_files());
+    assert!(
+        problems.is_empty(),
+        "limits named `*_MAX` (write `MAX_*`):\n{}",
+        problems.join("\n")
     );
 }
 
