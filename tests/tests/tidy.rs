@@ -146,6 +146,29 @@ fn limits_are_named_max_first() {
     );
 }
 
+/// The app is a face: meshing lives in `render::mesher` and the scene-to-servo feed in
+/// `haptic::feed`. The app drives them through those types and names none of the parts that do
+/// the work (incremental patches, dirty boxes, recolouring, servo snapshots).
+#[test]
+fn the_app_holds_no_meshing_or_servo_feed_code() {
+    const WORKS: [&str; 6] = [
+        "OctreeMesher",
+        "mesh_update",
+        "MeshPatch",
+        "dirty_boxes",
+        "colour_with",
+        "Snapshotter",
+    ];
+    let app: Vec<PathBuf> = files::rust_files(&root().join("app"));
+    assert!(app.len() > 10, "found only {app:?}");
+    let found = files::files_naming(&app, &WORKS);
+    assert!(
+        found.is_empty(),
+        "the app does render's or haptic's work:\n{}",
+        found.join("\n")
+    );
+}
+
 /// The sans-IO core builds without sockets or an async runtime: the simulator (which drives
 /// the core alone) has no tokio or quinn in its normal dependency tree, while the app (which
 /// enables `replication`'s `net` feature) does. The second half shows the check can fail.
