@@ -5,12 +5,12 @@
 //! [`footprint`] measures the thesis's central claim end to end: signed function-string ops
 //! (a model's create op, a sculpting session's edit ops) against the meshes they describe
 //! (binary STL and GLB from render's octree mesher, and the mesh delta of each edit).
-//! [`tidy`] reads the dependency map written in `ARCHITECTURE.md` and compares it with the real
-//! dependency edges reported by `cargo metadata`, and checks that every source file opens with a
-//! `//!` header.
+//! [`tidy`] holds the workspace rules: the dependency map written in `ARCHITECTURE.md` against
+//! the real edges reported by `cargo metadata`, a `//!` header on every source file, no import
+//! circle between a crate's top-level modules, short functions and one way to name limits.
 //!
 //! ```
-//! let map = tests::tidy::parse_dependency_map("```tidy-deps\nfdsl ->\nrender -> fdsl\n```")
+//! let map = tests::tidy::deps::parse_dependency_map("```tidy-deps\nfdsl ->\nrender -> fdsl\n```")
 //!     .unwrap();
 //! assert!(map["render"].contains("fdsl"));
 //! ```

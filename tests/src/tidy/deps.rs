@@ -1,7 +1,7 @@
-//! Workspace rules checked by a test: the dependency map and the `//!` file headers.
+//! The dependency map: which workspace crates may depend on which, as written in
+//! `ARCHITECTURE.md`, against the edges `cargo metadata` reports.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
 
 /// Allowed edges: crate name -> the workspace crates it may depend on.
 pub type DependencyMap = BTreeMap<String, BTreeSet<String>>;
@@ -105,45 +105,6 @@ pub fn check_edges(allowed: &DependencyMap, actual: &DependencyMap) -> Vec<Strin
     problems
 }
 
-/// Rust files under `root` (skipping `target` and hidden folders), sorted.
-pub fn rust_files(root: &Path) -> Vec<PathBuf> {
-    let mut files = Vec::new();
-    let mut stack = vec![root.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        let Ok(entries) = std::fs::read_dir(&dir) else {
-            continue;
-        };
-        for entry in entries.flatten() {
-            let path = entry.path();
-            let name = entry.file_name();
-            let name = name.to_string_lossy();
-            if path.is_dir() {
-                if name != "target" && !name.starts_with('.') && name != "out" {
-                    stack.push(path);
-                }
-            } else if name.ends_with(".rs") {
-                files.push(path);
-            }
-        }
-    }
-    files.sort();
-    files
-}
-
-/// Whether a source text opens with a `//!` module header.
-pub fn has_module_header(source: &str) -> bool {
-    source.trim_start().starts_with("//!")
-}
-
-/// Files among `files` whose text does not open with a `//!` header.
-pub fn files_without_header(files: &[PathBuf]) -> Vec<PathBuf> {
-    files
-        .iter()
-        .filter(|f| std::fs::read_to_string(f).map_or(true, |s| !has_module_header(&s)))
-        .cloned()
-        .collect()
-}
-
 /// The packages (from `cargo metadata --format-version 1` output) that depend on
 /// `dev_only` other than as a dev-dependency, with the kind they use.
 pub fn non_dev_uses(metadata: &serde_json::Value, dev_only: &str) -> Vec<String> {
@@ -225,12 +186,5 @@ mod tests {
         assert!(parse_dependency_map("```tidy-deps\nfdsl\n```").is_err());
         assert!(parse_dependency_map("```tidy-deps\nfdsl ->\n").is_err());
         assert!(parse_dependency_map("```tidy-deps\nfdsl ->\nfdsl ->\n```").is_err());
-    }
-
-    #[test]
-    fn headers() {
-        assert!(has_module_header("//! Text.\nfn f() {}"));
-        assert!(!has_module_header("// Text.\nfn f() {}"));
-        assert!(!has_module_header("fn f() {}"));
     }
 }
