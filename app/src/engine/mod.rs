@@ -218,7 +218,7 @@ impl Pending {
 
 /// What a face does with values another peer sends on an ephemeral channel: called on the
 /// engine thread with the sender and the value (at most
-/// [`replication::sync::state::MAX_EPHEMERAL_BYTES`]), so it must be quick and never block.
+/// [`replication::sync::message::MAX_EPHEMERAL_BYTES`]), so it must be quick and never block.
 pub type EphemeralListener = Box<dyn Fn(PeerId, &[u8]) + Send>;
 
 /// The listeners faces set, by channel.
