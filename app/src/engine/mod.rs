@@ -31,7 +31,7 @@ use replication::sync::ephemeral::PRESENCE_CHANNEL;
 use replication::sync::state::CloseReason;
 use replication::{Keypair, Log, OpId, PeerId, Timestamp};
 
-pub use presence::{CameraPose, Presence};
+use replication::sync::ephemeral::presence::Presence;
 pub use view::{ChatRow, HistoryRow, PeerRow, Rejection, SharedView, View, lock};
 
 /// Requests queued from faces to the engine thread before `try_*` calls report it busy.

@@ -19,8 +19,8 @@ use replication::payload::LeaseAction;
 use replication::shape::{IdSource, ShapePayload, ShapeScene};
 use replication::{Effect, Log, Mark, OpId, Payload as _, Peer, PeerId, Timestamp};
 
-use super::presence::Presence;
 use crate::clock::time_of_day_utc;
+use replication::sync::ephemeral::presence::Presence;
 
 /// Most history rows a view holds (the latest ones).
 pub const MAX_HISTORY_ROWS: usize = 500;

@@ -16,7 +16,7 @@ use haptic::feed::RemoteTool;
 use model::object::{Domain, Formula, Geometry, Object, ObjectData, Physics, Property, Transform};
 use replication::PeerId;
 
-use crate::engine::Presence;
+use replication::sync::ephemeral::presence::Presence;
 
 /// Largest tool radius, scene units.
 pub const MAX_TOOL_RADIUS: f64 = 10.0;

@@ -26,7 +26,8 @@ use replication::PeerId;
 use replication::sync::ephemeral::SHARED_TOOL_CHANNEL;
 use replication::sync::ephemeral::shared_tool::SharedToolPacket;
 
-use crate::engine::{Engine, EphemeralSender, Presence};
+use crate::engine::{Engine, EphemeralSender};
+use replication::sync::ephemeral::presence::Presence;
 
 /// How many packets a second the shared tool sends while coupled.
 pub const SHARED_TOOL_RATE_HZ: u64 = 250;

@@ -9,8 +9,9 @@ use render::scene::Scene;
 use render::snapshot::render_from_scene;
 
 use super::app::SculptApp;
-use ::app::engine::{CameraPose, PeerRow, Presence, lock};
+use ::app::engine::{PeerRow, lock};
 use replication::PeerId;
+use replication::sync::ephemeral::presence::{CameraPose, Presence};
 
 /// Half the size of another peer's pointer cross, in world units.
 const PRESENCE_CROSS_SIZE: f32 = 0.06;

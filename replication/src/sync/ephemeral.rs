@@ -6,7 +6,7 @@
 //! channel and a receiver keeps the newest it has heard. They come from peers, so every
 //! decoder refuses any length, version or number it does not expect.
 //!
-//! - [`PRESENCE_CHANNEL`]: [`presence::PresencePacket`], who a peer is and what it points at,
+//! - [`PRESENCE_CHANNEL`]: [`presence::Presence`], who a peer is and what it points at,
 //!   touches, selects and looks from.
 //! - [`SHARED_TOOL_CHANNEL`]: [`shared_tool::SharedToolPacket`], a shared tool's wave
 //!   variables with their energy account (the haptic crate's `WavePacket` as numbers).

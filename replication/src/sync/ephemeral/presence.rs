@@ -1,5 +1,5 @@
-//! [`PresencePacket`]: who a peer is and what it points at, on [`super::PRESENCE_CHANNEL`]
-//! (the app's presence as plain data: the app converts).
+//! [`Presence`]: who a peer is and what it points at, on [`super::PRESENCE_CHANNEL`]: the
+//! value the app sends, keeps per peer and draws, and its one encoding.
 //!
 //! `[3][name len][name][r g b][flags][pointer 3×f32][target 3×f32][orbit 3×f32][selected u64]
 //! [tool 3×f32][partner 32][body 4×f32]`, little-endian; the optional parts are present when
@@ -22,7 +22,7 @@ const _: () = assert!(MAX_PACKET_BYTES <= MAX_EPHEMERAL_BYTES);
 /// One peer's presence as plain data. Points are in the renderer's world (+z up), where the
 /// sender's window drew them.
 #[derive(Clone, Debug, PartialEq)]
-pub struct PresencePacket {
+pub struct Presence {
     /// The name the user chose (at most [`MAX_NAME_BYTES`]; encoding cuts a longer one at a
     /// character boundary).
     pub name: String,
@@ -34,14 +34,22 @@ pub struct PresencePacket {
     pub tool: Option<[f32; 3]>,
     /// The selected object's id.
     pub selected: Option<u64>,
-    /// The camera: the point looked at, then yaw and pitch in radians and the distance from
-    /// that point.
-    pub camera: Option<[[f32; 3]; 2]>,
+    /// The camera.
+    pub camera: Option<CameraPose>,
     /// The peer this one holds the touch tool with (its id).
     pub holds_tool_with: Option<[u8; 32]>,
     /// The touch tool's body, while tangible: radius, tension, friction, density (receivers
     /// check the ranges).
     pub tool_body: Option<[f32; 4]>,
+}
+
+/// An orbit camera in the renderer's world (+z up): what it looks at and from where.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraPose {
+    /// The point looked at.
+    pub target: [f32; 3],
+    /// Yaw and pitch in radians, and the distance from the target.
+    pub orbit: [f32; 3],
 }
 
 /// Why a presence value was refused.
@@ -67,7 +75,21 @@ pub enum PresenceError {
     Flags(u8),
 }
 
-impl PresencePacket {
+impl Presence {
+    /// A user's name and colour, with nothing pointed at, touched, selected or held.
+    pub fn named(name: String, colour: [u8; 3]) -> Self {
+        Self {
+            name,
+            colour,
+            pointer: None,
+            tool: None,
+            selected: None,
+            camera: None,
+            holds_tool_with: None,
+            tool_body: None,
+        }
+    }
+
     /// The value as bytes (see the module documentation).
     pub fn encode(&self) -> Vec<u8> {
         let name = truncate(&self.name, MAX_NAME_BYTES);
@@ -87,9 +109,9 @@ impl PresencePacket {
         if let Some(p) = &self.pointer {
             put(p);
         }
-        if let Some([target, orbit]) = &self.camera {
-            put(target);
-            put(orbit);
+        if let Some(c) = &self.camera {
+            put(&c.target);
+            put(&c.orbit);
         }
         if let Some(s) = self.selected {
             out.extend(s.to_le_bytes());
@@ -106,7 +128,7 @@ impl PresencePacket {
         out
     }
 
-    /// Reads what [`PresencePacket::encode`] wrote; anything else is an error.
+    /// Reads what [`Presence::encode`] wrote; anything else is an error.
     pub fn decode(bytes: &[u8]) -> Result<Self, PresenceError> {
         let mut r = Reader { bytes, at: 0 };
         let version = r.byte()?;
@@ -128,7 +150,10 @@ impl PresencePacket {
             None
         };
         let camera = if flags & 4 != 0 {
-            Some([r.vec3()?, r.vec3()?])
+            Some(CameraPose {
+                target: r.vec3()?,
+                orbit: r.vec3()?,
+            })
         } else {
             None
         };
@@ -228,21 +253,24 @@ impl<'a> Reader<'a> {
 mod tests {
     use super::*;
 
-    fn sample() -> PresencePacket {
-        PresencePacket {
+    fn sample() -> Presence {
+        Presence {
             name: "Ada".into(),
             colour: [10, 20, 30],
             pointer: Some([0.5, -1.0, 2.0]),
             tool: Some([0.25, 0.5, -0.75]),
             selected: Some(0x1234_5678_9abc),
-            camera: Some([[0.0, 0.0, 0.0], [0.7, 0.4, 5.0]]),
+            camera: Some(CameraPose {
+                target: [0.0, 0.0, 0.0],
+                orbit: [0.7, 0.4, 5.0],
+            }),
             holds_tool_with: Some([7; 32]),
             tool_body: Some([0.1, 0.8, 0.0, 2.0]),
         }
     }
 
-    fn bare() -> PresencePacket {
-        PresencePacket {
+    fn bare() -> Presence {
+        Presence {
             name: "Ada".into(),
             colour: [10, 20, 30],
             pointer: None,
@@ -264,8 +292,8 @@ mod tests {
     #[test]
     fn values_round_trip_with_and_without_their_optional_parts() {
         let full = sample();
-        assert_eq!(PresencePacket::decode(&full.encode()), Ok(full.clone()));
-        assert_eq!(PresencePacket::decode(&bare().encode()), Ok(bare()));
+        assert_eq!(Presence::decode(&full.encode()), Ok(full.clone()));
+        assert_eq!(Presence::decode(&bare().encode()), Ok(bare()));
     }
 
     #[test]
@@ -277,16 +305,16 @@ mod tests {
             "cdcccc3e0000a040bc9a7856341200000000803e0000003f000040bf07070707070707070707",
             "07070707070707070707070707070707070707070707cdcccc3dcdcc4c3f0000000000000040",
         ));
-        assert_eq!(PresencePacket::decode(&full), Ok(sample()));
+        assert_eq!(Presence::decode(&full), Ok(sample()));
         assert_eq!(sample().encode(), full);
         let bare_bytes = from_hex("03034164610a141e00");
-        assert_eq!(PresencePacket::decode(&bare_bytes), Ok(bare()));
+        assert_eq!(Presence::decode(&bare_bytes), Ok(bare()));
         assert_eq!(bare().encode(), bare_bytes);
     }
 
     #[test]
     fn the_longest_value_is_as_long_as_the_limit_says() {
-        let longest = PresencePacket {
+        let longest = Presence {
             name: "n".repeat(MAX_NAME_BYTES),
             ..sample()
         };
@@ -295,11 +323,11 @@ mod tests {
 
     #[test]
     fn long_names_are_cut_at_a_character_boundary() {
-        let long = PresencePacket {
+        let long = Presence {
             name: "é".repeat(40),
             ..sample()
         };
-        let back = PresencePacket::decode(&long.encode()).unwrap();
+        let back = Presence::decode(&long.encode()).unwrap();
         assert_eq!(back.name, "é".repeat(16));
     }
 
@@ -307,41 +335,32 @@ mod tests {
     fn every_truncation_and_bad_value_is_an_error() {
         let bytes = sample().encode();
         for n in 0..bytes.len() {
-            assert!(PresencePacket::decode(&bytes[..n]).is_err(), "cut at {n}");
+            assert!(Presence::decode(&bytes[..n]).is_err(), "cut at {n}");
         }
         let mut extra = bytes.clone();
         extra.push(0);
-        assert_eq!(
-            PresencePacket::decode(&extra),
-            Err(PresenceError::Trailing(1))
-        );
+        assert_eq!(Presence::decode(&extra), Err(PresenceError::Trailing(1)));
         let mut nan = bytes.clone();
         let at = 2 + 3 + 3 + 1;
         nan[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
-        assert_eq!(
-            PresencePacket::decode(&nan),
-            Err(PresenceError::NotFinite(at))
-        );
+        assert_eq!(Presence::decode(&nan), Err(PresenceError::NotFinite(at)));
         let mut version = bytes.clone();
         version[0] = 9;
-        assert_eq!(
-            PresencePacket::decode(&version),
-            Err(PresenceError::Version(9))
-        );
+        assert_eq!(Presence::decode(&version), Err(PresenceError::Version(9)));
         let mut long_name = bytes.clone();
         long_name[1] = 200;
-        assert!(PresencePacket::decode(&long_name).is_err());
+        assert!(Presence::decode(&long_name).is_err());
         let mut tool_nan = bytes.clone();
         let at = bytes.len() - 16 - 32 - 4;
         tool_nan[at..at + 4].copy_from_slice(&f32::INFINITY.to_le_bytes());
         assert_eq!(
-            PresencePacket::decode(&tool_nan),
+            Presence::decode(&tool_nan),
             Err(PresenceError::NotFinite(at))
         );
         let mut unknown = bytes;
         unknown[2 + 3 + 3] |= 0x40;
         assert_eq!(
-            PresencePacket::decode(&unknown),
+            Presence::decode(&unknown),
             Err(PresenceError::Flags(unknown[2 + 3 + 3]))
         );
     }
