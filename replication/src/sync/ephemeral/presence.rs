@@ -144,11 +144,7 @@ impl Presence {
             .to_string();
         let colour = [r.byte()?, r.byte()?, r.byte()?];
         let flags = r.byte()?;
-        let pointer = if flags & 1 != 0 {
-            Some(r.vec3()?)
-        } else {
-            None
-        };
+        let pointer = (flags & 1 != 0).then(|| r.vec3()).transpose()?;
         let camera = if flags & 4 != 0 {
             Some(CameraPose {
                 target: r.vec3()?,
@@ -164,11 +160,7 @@ impl Presence {
         } else {
             None
         };
-        let tool = if flags & 8 != 0 {
-            Some(r.vec3()?)
-        } else {
-            None
-        };
+        let tool = (flags & 8 != 0).then(|| r.vec3()).transpose()?;
         let holds_tool_with = if flags & 16 != 0 {
             let mut p = [0u8; 32];
             p.copy_from_slice(r.take(32)?);
