@@ -47,6 +47,29 @@ fn dependency_edges_follow_the_architecture_map() {
     );
 }
 
+/// ARCHITECTURE.md is a map, not a changelog: short enough to read in one sitting, one
+/// sentence a line. Figures go to BENCHMARKS.md and history to commit messages.
+#[test]
+fn the_architecture_map_stays_short() {
+    const MAX_MAP_LINES: usize = 250;
+    const MAX_MAP_LINE_CHARS: usize = 300;
+    let text = std::fs::read_to_string(root().join("ARCHITECTURE.md")).unwrap();
+    let n_lines = text.lines().count();
+    assert!(
+        n_lines <= MAX_MAP_LINES,
+        "ARCHITECTURE.md has {n_lines} lines, over {MAX_MAP_LINES}"
+    );
+    let long: Vec<String> = (text.lines().enumerate())
+        .filter(|(_, line)| line.chars().count() > MAX_MAP_LINE_CHARS)
+        .map(|(i, line)| format!("line {}: {} characters", i + 1, line.chars().count()))
+        .collect();
+    assert!(
+        long.is_empty(),
+        "ARCHITECTURE.md lines over {MAX_MAP_LINE_CHARS} characters:\n{}",
+        long.join("\n")
+    );
+}
+
 /// The folder of every workspace member (the `members` of `Cargo.toml`), from its manifest.
 fn member_dirs() -> Vec<PathBuf> {
     let metadata = metadata();
