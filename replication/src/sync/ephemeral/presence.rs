@@ -262,16 +262,7 @@ mod tests {
     }
 
     fn bare() -> Presence {
-        Presence {
-            name: "Ada".into(),
-            colour: [10, 20, 30],
-            pointer: None,
-            tool: None,
-            selected: None,
-            camera: None,
-            holds_tool_with: None,
-            tool_body: None,
-        }
+        Presence::named("Ada".into(), [10, 20, 30])
     }
 
     fn from_hex(hex: &str) -> Vec<u8> {
