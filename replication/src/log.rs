@@ -1327,7 +1327,7 @@ impl<P: Payload> Log<P> {
     /// (a fork's second side, whose first is `twin`, only in the fork's); returns its
     /// position in the order. Inlined, so that the op moves from its caller into its slot
     /// once, not through this call's argument as well.
-    #[inline]
+    #[inline(always)]
     fn hold(
         &mut self,
         op: Op<P>,
