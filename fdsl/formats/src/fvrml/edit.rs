@@ -226,10 +226,11 @@ impl<'d> Reader<'_, 'd> {
             .iter()
             .map(|size| self.size(fields, *size, tool))
             .collect();
+        // `size` gives each size its count of numbers, so the values always fit the kind.
         let shape = values
             .into_iter()
             .collect::<Option<Vec<_>>>()
-            .map(|values| ToolShape::from_sizes(kind, &values));
+            .and_then(|values| ToolShape::from_sizes(kind, &values));
         (shape, pos)
     }
 

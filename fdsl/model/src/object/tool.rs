@@ -162,20 +162,17 @@ impl ToolShape {
     }
 
     /// The tool of `kind` whose sizes ([`ToolKind::sizes`], in that order) hold `values`,
-    /// each with as many numbers as its size takes. Whether the tool is valid is left to
-    /// [`crate::object::CompiledEdit::new`], as for any edit.
-    pub fn from_sizes(kind: ToolKind, values: &[Vec<f64>]) -> ToolShape {
+    /// each with as many numbers as its size takes; `None` when `values` do not fit those
+    /// sizes. Whether the tool is valid is left to [`crate::object::CompiledEdit::new`], as
+    /// for any edit.
+    pub fn from_sizes(kind: ToolKind, values: &[Vec<f64>]) -> Option<ToolShape> {
         let sizes = kind.sizes();
-        assert!(
-            values.len() == sizes.len()
-                && sizes
-                    .iter()
-                    .zip(values)
-                    .all(|(s, v)| v.len() == s.n_numbers),
-            "a {} tool's sizes are {sizes:?}, not {values:?}",
-            kind.name()
-        );
-        match kind {
+        let fits = values.len() == sizes.len()
+            && (sizes.iter().zip(values)).all(|(s, v)| v.len() == s.n_numbers);
+        if !fits {
+            return None;
+        }
+        Some(match kind {
             ToolKind::Sphere => ToolShape::Sphere {
                 radius: values[0][0],
             },
@@ -187,7 +184,7 @@ impl ToolShape {
                 radius: values[0][0],
                 half_height: values[1][0],
             },
-        }
+        })
     }
 
     /// The values of its kind's sizes ([`ToolKind::sizes`]), in that order: what
@@ -886,7 +883,9 @@ mod tests {
             assert_eq!(ToolKind::from_name(kind.label()), Some(kind));
             let tool = ToolShape::of_kind(kind, 0.25);
             assert_eq!(tool.kind(), kind);
-            assert_eq!(ToolShape::from_sizes(kind, &tool.size_values()), tool);
+            assert_eq!(ToolShape::from_sizes(kind, &tool.size_values()), Some(tool));
+            assert_eq!(ToolShape::from_sizes(kind, &[]), None);
+            assert_eq!(ToolShape::from_sizes(kind, &vec![vec![1.0; 2]; 2]), None);
             assert!(kind.sizes().iter().all(|s| ToolSize::ALL.contains(s)));
             assert!(tool.validate().is_ok(), "{tool:?}");
             assert_eq!(tool.half_extents().max_element(), 0.25, "{tool:?}");
