@@ -154,7 +154,7 @@ fn fresh() -> u64 {
 
 fn receiver() -> (SLog, SScene) {
     let log = SLog::default();
-    let scene = SScene::fold(&log).expect("an empty scene folds");
+    let scene = SScene::fold(&log);
     (log, scene)
 }
 
@@ -176,7 +176,7 @@ fn receiver_for(setup: &[Vec<u8>]) -> (SLog, SScene) {
     log.set_founder(founder).expect("an empty log");
     log.bind_authors(replication::log::MAX_LOG_BYTES)
         .expect("an empty founded log");
-    let scene = SScene::fold(&log).expect("an empty scene folds");
+    let scene = SScene::fold(&log);
     (log, scene)
 }
 

@@ -18,7 +18,7 @@ use divan::counter::ItemsCount;
 use replication::materialize::test_scene::TestScene;
 use replication::payload::LeaseAction;
 use replication::payload::test_payload::TestPayload;
-use replication::pending::{Origin, PendingLimits};
+use replication::pending::Origin;
 use replication::snapshot::Snapshot;
 use replication::store::OpStore;
 use replication::{Keypair, Op, Timestamp, VerifiedOp};
@@ -40,10 +40,9 @@ static STORE: LazyLock<PathBuf> = LazyLock::new(|| {
     path
 });
 
-/// The full history's snapshot at its stable cut, encoded.
+/// The full history's snapshot, encoded.
 static SNAPSHOT: LazyLock<Vec<u8>> = LazyLock::new(|| {
-    let log = &FULL.0;
-    Snapshot::capture::<TestScene>(log, log.stable_lamport())
+    Snapshot::capture(&FULL.0, &FULL.1)
         .and_then(|s| s.encode())
         .expect("a snapshot")
 });
@@ -60,7 +59,7 @@ fn apply_in_order(bencher: Bencher, n: usize) {
         .with_inputs(|| HISTORY[..n].to_vec())
         .bench_values(|ops| {
             let mut log = TLog::default();
-            let mut scene = TScene::fold(&log).expect("empty");
+            let mut scene = TScene::fold(&log);
             for op in ops {
                 let ins = log.insert(NOW, op, Origin(1)).expect("in order");
                 scene.apply_insertion(&log, &ins);
@@ -122,7 +121,7 @@ fn load_store_100k(bencher: Bencher) {
     bencher.counter(ItemsCount::new(N_HISTORY)).bench(|| {
         let mut log = TLog::default();
         OpStore::open_into_trusted(path, Timestamp(0), &mut log).expect("loads");
-        let scene = TScene::fold(&log).expect("folds");
+        let scene = TScene::fold(&log);
         (log, scene)
     });
 }
@@ -134,7 +133,7 @@ fn load_store_verified_100k(bencher: Bencher) {
     bencher.counter(ItemsCount::new(N_HISTORY)).bench(|| {
         let mut log = TLog::default();
         OpStore::open_into(path, Timestamp(0), &mut log).expect("loads");
-        let scene = TScene::fold(&log).expect("folds");
+        let scene = TScene::fold(&log);
         (log, scene)
     });
 }
@@ -194,12 +193,7 @@ fn catch_up_bench(bencher: Bencher, n: usize) {
                 build(&HISTORY[..n])
             };
             let a = Side::new(log, scene, 11, 1);
-            let b = Side::new(
-                TLog::default(),
-                TScene::fold(&TLog::default()).expect("empty"),
-                12,
-                2,
-            );
+            let b = Side::new(TLog::default(), TScene::fold(&TLog::default()), 12, 2);
             (a, b)
         })
         .bench_values(|(mut a, mut b)| {
@@ -220,8 +214,8 @@ fn catch_up_100k(bencher: Bencher) {
     catch_up_bench(bencher, N_HISTORY);
 }
 
-/// A new peer joins a 10^5-op session from a snapshot at the stable cut (decode, check,
-/// build the log and scene), then syncs the ops after the cut.
+/// A new peer joins a 10^5-op session from a snapshot (decode, insert every op without its
+/// signature, check the cut, decode the scene), then syncs with its producer.
 #[divan::bench(sample_count = 5)]
 fn join_snapshot_100k(bencher: Bencher) {
     let bytes = &*SNAPSHOT;
@@ -231,7 +225,7 @@ fn join_snapshot_100k(bencher: Bencher) {
         .bench_values(|mut a| {
             let (log, scene) = Snapshot::<TestPayload>::decode(bytes)
                 .expect("decodes")
-                .join::<TestScene>(PendingLimits::default())
+                .join::<TestScene>(TLog::default(), NOW)
                 .expect("joins");
             let mut b = Side::new(log, scene, 12, 2);
             catch_up(&mut a, &mut b);

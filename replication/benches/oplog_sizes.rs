@@ -7,9 +7,9 @@ mod common;
 use testkit::alloc::{CountingAlloc, live_bytes};
 
 use common::{N_HISTORY, Side, TLog, TScene, build, catch_up, history};
+use replication::Timestamp;
 use replication::materialize::test_scene::TestScene;
 use replication::payload::test_payload::TestPayload;
-use replication::pending::PendingLimits;
 use replication::snapshot::Snapshot;
 use replication::store::OpStore;
 use replication::{Op, VerifiedOp};
@@ -64,12 +64,7 @@ fn main() {
 
     // Wire: a new peer catching up on everything.
     let mut a = Side::new(log.clone(), scene.clone(), 11, 1);
-    let mut b = Side::new(
-        TLog::default(),
-        TScene::fold(&TLog::default()).expect("empty"),
-        12,
-        2,
-    );
+    let mut b = Side::new(TLog::default(), TScene::fold(&TLog::default()), 12, 2);
     let wire = catch_up(&mut a, &mut b) as usize;
     assert_eq!(b.scene.scene_hash(), scene.scene_hash());
     println!(
@@ -78,30 +73,28 @@ fn main() {
     );
     drop((a, b));
 
-    // Snapshot at the stable cut, and the memory of a log joined from it.
-    let snapshot =
-        Snapshot::capture::<TestScene>(&log, log.stable_lamport()).expect("a stable cut");
+    // The snapshot, and the memory of a log joined from it.
+    let snapshot = Snapshot::capture(&log, &scene).expect("a snapshot");
     let bytes = snapshot.encode().expect("encodes");
     println!(
-        "| snapshot ({} ops before the cut, {} effective edits kept whole) | {:.1} |",
+        "| snapshot ({} ops, the scene) | {:.1} |",
         snapshot.n_ops(),
-        snapshot.n_edits(),
         per_op(bytes.len(), n)
     );
     drop(snapshot);
     let before = live();
     let joined = Snapshot::<TestPayload>::decode(&bytes)
         .expect("decodes")
-        .join::<TestScene>(PendingLimits::default())
+        .join::<TestScene>(TLog::default(), Timestamp(0))
         .expect("joins");
     println!(
         "| memory: joined log + scene, live | {:.1} |",
         per_op(live() - before, n)
     );
-    // The joined scene is at the cut; the few ops after it come by sync.
+    // The joined peer holds everything: sync only says so.
     let mut a = Side::new(log, scene.clone(), 11, 1);
     let mut b = Side::new(joined.0, joined.1, 12, 2);
     let wire = catch_up(&mut a, &mut b);
-    println!("| wire: joined peer syncing the ops after the cut (total bytes) | {wire} |");
+    println!("| wire: joined peer syncing with its producer (total bytes) | {wire} |");
     assert_eq!(b.scene.scene_hash(), scene.scene_hash());
 }

@@ -25,8 +25,8 @@
 //! - [`materialize::Materialize`] / [`materialize::Materialized`]: the payload's scene and the
 //!   driver that keeps it in step with the log, re-folding only the objects a late op
 //!   affects; [`materialize::SceneHash`] is equal on every peer with the same op set.
-//! - [`snapshot::Snapshot`]: the scene and lease state at a stable cut; a new peer joins from
-//!   one and syncs only the ops after the cut.
+//! - [`snapshot::Snapshot`]: every op and the scene folded from them; a new peer joins from
+//!   one without verifying or folding op by op, then checks it with [`snapshot::verify`].
 //! - [`SyncState`]: the sans-IO state machine for one connection (`handle_input`,
 //!   `handle_timeout`; drain `poll_transmit`, `poll_event`, `poll_timeout` after each).
 //! - [`store::OpStore`]: checksummed append-only file with fsync; torn tails are cut on open.
@@ -73,7 +73,7 @@
 //!   bytes][op bytes][answer]`, WantOps `[n ≤ 64][id 32]*`; a vv is `[n][author 32][seq]*`
 //!   sorted.
 //! - Store file: `SCULPTOPS` `[1]`, then records `[u32 LE len][blake3 of len+body, 16][body]`.
-//! - Snapshot: see [`snapshot`] (`SCULPTSNAP` `[1]` ... `[blake3 32]`).
+//! - Snapshot: see [`snapshot`] (`SCULPTSNAP` `[3]` ... `[blake3 32]`).
 //!
 //! # Example
 //!

@@ -18,13 +18,10 @@ use crate::payload::{Effect, ObjectId, Payload};
 use crate::pending::{DepKey, Evicted, Origin, Pending, PendingLimits};
 use crate::time::{HybridClock, MAX_CLOCK_SKEW_MICROS, Timestamp};
 
-mod base;
 mod marks;
 mod object_keys;
 mod seen;
 
-pub use base::CutError;
-pub(crate) use base::{Base, BaseAuthor, BaseKind, BaseOp};
 pub use object_keys::ObjectKeys;
 pub use seen::MAX_UNSEEN_LEASE_OPS;
 
@@ -39,8 +36,7 @@ pub const MAX_LOG_BYTES: u64 = 7 * 512 * 1024 * 1024;
 /// and one member cannot fill every peer's memory and store on its own.
 pub const MAX_AUTHOR_BYTES: u64 = 256 * 1024 * 1024;
 /// Most an op's Lamport time may exceed the highest of its dependencies' and its author's
-/// previous op's (2^32). Honest ops exceed it by one (a log joined from a snapshot takes a
-/// dependency inside its base to be at the cut), and `u64::MAX / MAX_LAMPORT_JUMP` is far above
+/// previous op's (2^32). Honest ops exceed it by one, and `u64::MAX / MAX_LAMPORT_JUMP` is far above
 /// [`MAX_LOG_OPS`], so no member can exhaust the Lamport clock before the log fills.
 pub const MAX_LAMPORT_JUMP: u64 = 1 << 32;
 /// Most entries a remote op's refold may re-evaluate without being charged for it: positions
@@ -111,14 +107,6 @@ pub enum FounderError {
 /// Why an op was refused outright (it is not stored, not even as rejected).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum InsertError {
-    /// The author already has a different op with this sequence number (a forked author).
-    #[error("author {author} equivocated at seq {seq}")]
-    Equivocation {
-        /// The author.
-        author: PeerId,
-        /// The sequence number used twice.
-        seq: u64,
-    },
     /// The Lamport time is not above every dependency's and the author's previous op's.
     #[error("lamport time {lamport} is not above its causal past ({floor})")]
     BadLamport {
@@ -172,16 +160,6 @@ pub enum InsertError {
     /// named their session ([`crate::op::OP_FORMAT_VERSION_1`]).
     #[error("an op signed without its session, refused in a session that binds its authors")]
     OldLayout,
-    /// The log was joined from a snapshot, and the op belongs before the snapshot's cut but
-    /// is not in it (an author the snapshot's producer did not know, working offline). This
-    /// log cannot place it: rebuild from full history (see [`crate::snapshot`]).
-    #[error("lamport time {lamport} is at or before the snapshot cut {cut_lamport}")]
-    BeforeBase {
-        /// The op's Lamport time.
-        lamport: u64,
-        /// The Lamport time of the cut.
-        cut_lamport: u64,
-    },
 }
 
 /// Why a local op could not be authored.
@@ -245,10 +223,6 @@ pub struct Refold {
     /// First position of the linear order whose op, mark or activity changed (an undo's
     /// target position counts too).
     pub from: usize,
-    /// Objects whose edits *inside the base* (the part of the order a log joined from a
-    /// snapshot holds no ops for) changed activity, through an undo or redo: their fold must be
-    /// redone from the object's start. Always empty for a log without a base.
-    pub base_objects: BTreeSet<ObjectId>,
     /// For each object touched, the first entry from which its own fold must be redone (an
     /// undo's target counts for the target's object), as an order key: positions shift when
     /// later ops land before them and keys do not, so a driver that applies an insertion after
@@ -269,7 +243,6 @@ impl Refold {
         for (object, key) in &later.object_keys {
             self.object_keys.lower(*object, *key);
         }
-        self.base_objects.extend(later.base_objects.iter().copied());
         self.from = self.from.min(later.from);
         for (author, seq) in &later.void_from {
             let earliest = self.void_from.entry(*author).or_insert(*seq);
@@ -305,7 +278,7 @@ impl Drained {
 /// What a log holds of one author.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Authored {
-    /// The author's held ops in seq order (after the base's, if any), as positions in the
+    /// The author's held ops in seq order, as positions in the
     /// slab: its chain, without the siblings of a fork.
     pub(crate) chain: Vec<u32>,
     /// Bytes of the author's encoded ops held, siblings included ([`MAX_AUTHOR_BYTES`]).
@@ -319,10 +292,9 @@ pub(crate) struct Authored {
 }
 
 impl Authored {
-    /// Where the chain's op with sequence number `seq` is held, when the base holds the
-    /// author's first `base_seq` ops (`None` inside the base or past the chain).
-    pub(crate) fn at_seq(&self, base_seq: u64, seq: u64) -> Option<u32> {
-        let i = usize::try_from(seq.checked_sub(1 + base_seq)?).ok()?;
+    /// Where the chain's op with sequence number `seq` is held (`None` past the chain).
+    pub(crate) fn at_seq(&self, seq: u64) -> Option<u32> {
+        let i = usize::try_from(seq.checked_sub(1)?).ok()?;
         self.chain.get(i).copied()
     }
 }
@@ -356,59 +328,43 @@ struct DepsSeen {
     timestamp: Timestamp,
     /// Every op held before this slab position is a dep or in a dep's causal past.
     horizon: u32,
-    /// True if every dep is delivered (held, or inside the base).
+    /// True if every dep is delivered.
     all_delivered: bool,
 }
 
 /// An author's chain of held ops, as delivery reads it: the slab, the author's record (none
-/// before its first op) and how many of its ops the base holds.
+/// before its first op).
 struct Chain<'a, P> {
     ops: &'a OpSlab<P>,
     authored: Option<&'a Authored>,
-    base_seq: u64,
 }
 
 impl<'a, P> Chain<'a, P> {
-    /// How many of the author's ops are held, the base's included.
+    /// How many of the author's ops are held.
     fn held(&self) -> u64 {
-        self.base_seq + self.authored.map_or(0, |a| a.chain.len() as u64)
+        self.authored.map_or(0, |a| a.chain.len() as u64)
     }
 
-    /// The op on the chain at `seq` (`None` inside the base or past the chain).
+    /// The op on the chain at `seq` (`None` past the chain).
     fn at_seq(&self, seq: u64) -> Option<&'a Op<P>> {
-        Some(self.ops.at(self.authored?.at_seq(self.base_seq, seq)?))
+        Some(self.ops.at(self.authored?.at_seq(seq)?))
     }
 
     /// The op held at `op`'s seq, if there is one (`op` is then a fork's second side); `op`
     /// extends the chain otherwise.
-    fn twin(&self, op: &Op<P>) -> Result<Option<OpId>, InsertError> {
+    fn twin(&self, op: &Op<P>) -> Option<OpId> {
         let held = self.held();
-        if held < op.seq() {
-            assert!(
-                held + 1 == op.seq(),
-                "delivery waits for the author's previous op"
-            );
-            return Ok(None);
-        }
-        // A twin inside a base cannot be told apart from this op's past: refused.
-        match self.at_seq(op.seq()) {
-            Some(twin) => Ok(Some(twin.id())),
-            None => Err(InsertError::Equivocation {
-                author: op.author(),
-                seq: op.seq(),
-            }),
-        }
+        assert!(
+            op.seq() <= held + 1,
+            "delivery waits for the author's previous op"
+        );
+        // The chain holds an op at every seq up to `held`.
+        self.at_seq(op.seq()).map(Op::id)
     }
 
     /// Checks that `op`'s Lamport time and timestamp clear what its causal past sets (its
     /// held deps, `deps`, and its author's previous op); returns its horizon.
-    fn check_floors(
-        &self,
-        base: Option<&Base<P>>,
-        forks: &Forks,
-        op: &Op<P>,
-        deps: DepsSeen,
-    ) -> Result<u32, InsertError> {
+    fn check_floors(&self, forks: &Forks, op: &Op<P>, deps: DepsSeen) -> Result<u32, InsertError> {
         // The author's previous op is part of the causal past only up to its first fork,
         // where there is one previous op whichever side an op is on.
         let past_fork = forks.covers(&op.author(), op.seq().saturating_sub(1));
@@ -423,9 +379,6 @@ impl<'a, P> Chain<'a, P> {
         } = deps;
         if let Some(p) = prev {
             (floor, floor_ts) = (floor.max(p.lamport()), floor_ts.max(p.timestamp()));
-        } else if !past_fork && op.seq() > 1 && op.seq() - 1 == self.base_seq {
-            // The previous op is the author's last inside the base, whose Lamport time is kept.
-            floor = floor.max(base.map_or(0, |b| b.lamport_of(&op.author())));
         }
         if op.lamport() <= floor {
             return Err(InsertError::BadLamport {
@@ -564,9 +517,7 @@ pub struct Log<P> {
     /// Each object's held ops that create it ([`Payload::creates`]) in linear order, as
     /// positions in `ops`: an acquire counts only once an effective one is in its past.
     creates: BTreeMap<ObjectId, Vec<u32>>,
-    /// The objects an effective edit inside the base creates (every held op is after them).
-    base_created: BTreeSet<ObjectId>,
-    /// Each object's deletes (held, and those inside the base) in linear order.
+    /// Each object's deletes in linear order.
     deletes: BTreeMap<ObjectId, Vec<(OrderKey, OpId)>>,
     /// For each held delete, the held edits of its object in its causal past.
     delete_hides: BTreeMap<OpId, Vec<OpId>>,
@@ -579,8 +530,6 @@ pub struct Log<P> {
     binding: Option<u64>,
     /// Per key, the held ops that admit it, in delivery order.
     admissions: BTreeMap<PeerId, Vec<OpId>>,
-    /// What a log joined from a snapshot knows of the ops before the cut.
-    base: Option<Box<Base<P>>>,
     frontier: Frontier,
     vv: VersionVector,
     max_lamport: u64,
@@ -644,14 +593,12 @@ impl<P: Payload> Log<P> {
             by_object: BTreeMap::new(),
             lease_ops: BTreeMap::new(),
             creates: BTreeMap::new(),
-            base_created: BTreeSet::new(),
             deletes: BTreeMap::new(),
             delete_hides: BTreeMap::new(),
             hidden: BTreeMap::new(),
             reach: Reach::default(),
             binding: None,
             admissions: BTreeMap::new(),
-            base: None,
             frontier: Frontier::default(),
             vv: VersionVector::new(),
             max_lamport: 0,
@@ -799,7 +746,7 @@ impl<P: Payload> Log<P> {
         self.authors.get(author).map_or(0, |a| a.bytes)
     }
 
-    /// The author's held ops on its chain in seq order (after the base's), as slab positions.
+    /// The author's held ops on its chain in seq order, as slab positions.
     fn chain(&self, author: &PeerId) -> &[u32] {
         self.authors.get(author).map_or(&[], |a| &a.chain)
     }
@@ -815,10 +762,6 @@ impl<P: Payload> Log<P> {
         let own_admissions = self.own_admissions(&me, &payload)?;
         let seq = self.vv.get(&me).checked_add(1).ok_or(InsertError::Full)?;
         let lamport = self.max_lamport.checked_add(1).ok_or(InsertError::Full)?;
-        if let Some(base) = &self.base {
-            // The heads inside the base are not held: stamp after everything in it.
-            self.clock.observe(base.max_timestamp, now);
-        }
         let timestamp = self.clock.tick(now);
         let mut deps = self.author_deps(timestamp);
         if let Some(admission) = own_admissions
@@ -947,15 +890,6 @@ impl<P: Payload> Log<P> {
             out.duplicate = true;
             self.deliver_queue(now, std::collections::VecDeque::new(), None, &mut out);
             return Ok(out);
-        }
-        if let Some(base) = &self.base
-            && op.lamport() <= base.lamport
-        {
-            self.stats.n_refused += 1;
-            return Err(InsertError::BeforeBase {
-                lamport: op.lamport(),
-                cut_lamport: base.lamport,
-            });
         }
         let deps = self.deps_seen(&op);
         let missing = self.missing(&op, now, &deps).and_then(|mut keys| {
@@ -1123,11 +1057,7 @@ impl<P: Payload> Log<P> {
         {
             return 0;
         }
-        let in_base = self
-            .base
-            .as_ref()
-            .and_then(|b| b.edits_by_object.get(&object));
-        held.len() + in_base.map_or(0, Vec::len)
+        held.len()
     }
 
     /// Charges `entries` re-evaluated by a refold remote ops caused to the refold budget.
@@ -1161,7 +1091,7 @@ impl<P: Payload> Log<P> {
             | Effect::Release { object } => Some((object, key)),
             Effect::Undo { target } | Effect::Redo { target } => self
                 .target_object(&target)
-                .map(|(object, at)| (object, at.map_or(key, |at| self.order_key(at).min(key)))),
+                .map(|(object, at)| (object, self.order_key(at).min(key))),
             Effect::Independent => None,
         };
         let scene = object.map_or(0, |(o, from)| self.scene_refold_entries(o, &from));
@@ -1206,11 +1136,7 @@ impl<P: Payload> Log<P> {
     }
 
     /// What `op`'s deps show of its causal past, looked up once for [`Log::missing`] and
-    /// [`Log::deliver`]. A dep inside a base has a Lamport time at or below its cut, which is
-    /// kept rather than each op's: the cut is its floor, so an op after a leap before the cut
-    /// is judged as a full log would judge it from the dep at the cut (one from a dep far
-    /// below the cut may leap up to [`MAX_LAMPORT_JUMP`] past the cut, a non-guarantee).
-    /// Timestamps inside a base are not kept per op: a joined log checks held ones only.
+    /// [`Log::deliver`].
     fn deps_seen(&self, op: &Op<P>) -> DepsSeen {
         let mut seen = DepsSeen {
             lamport: 0,
@@ -1220,10 +1146,7 @@ impl<P: Payload> Log<P> {
         };
         for d in op.deps() {
             let Some(d_at) = self.ops.position(d) else {
-                match self.base.as_ref().filter(|b| b.contains(d)) {
-                    Some(base) => seen.lamport = seen.lamport.max(base.lamport),
-                    None => seen.all_delivered = false,
-                }
+                seen.all_delivered = false;
                 continue;
             };
             let dep = self.ops.at(d_at);
@@ -1295,18 +1218,17 @@ impl<P: Payload> Log<P> {
         let chain = Chain {
             ops: &self.ops,
             authored: authored.as_deref(),
-            base_seq: self.base.as_ref().map_or(0, |b| b.seq(&author)),
         };
         debug_assert_eq!(
             chain.held(),
             self.vv.get(&author),
             "the chain is what is held"
         );
-        let twin = chain.twin(&op)?;
+        let twin = chain.twin(&op);
         if self.ops.len() >= MAX_LOG_OPS {
             return Err(InsertError::Full);
         }
-        let horizon = chain.check_floors(self.base.as_deref(), &self.forks, &op, deps)?;
+        let horizon = chain.check_floors(&self.forks, &op, deps)?;
         let charge = Charge::of(authored.as_deref(), self.author_quota, first_budget, &op)?;
         if self.n_bytes + charge.n_bytes > MAX_LOG_BYTES {
             return Err(InsertError::Full);
@@ -1445,14 +1367,13 @@ impl<P: Payload> Log<P> {
             horizons: &self.horizons,
             authors: &self.authors,
             forks: &self.forks,
-            base: self.base.as_deref(),
             members: &self.membership_ops,
             marks: &self.marks,
         }
     }
 
     /// True if an effective op creating `object` ([`Payload::creates`]) is in the causal past
-    /// of the op held at `at`, whose order key is `key`, or inside the base.
+    /// of the op held at `at`, whose order key is `key`.
     fn created_in_past(
         &self,
         reach: &mut Reach,
@@ -1460,9 +1381,6 @@ impl<P: Payload> Log<P> {
         key: &OrderKey,
         object: ObjectId,
     ) -> bool {
-        if self.base_created.contains(&object) {
-            return true;
-        }
         let Some(list) = self.creates.get(&object) else {
             return false;
         };
@@ -1519,11 +1437,10 @@ impl<P: Payload> Log<P> {
         let mut reach = std::mem::take(&mut self.reach);
         let dag = self.dag();
         let mut chain = self.chain(member);
-        let base_seq = self.base.as_ref().map_or(0, |b| b.seq(member));
         if let Some(fork) = self.forks.seq_of(member) {
             // Past its fork a member's ops are rejected anyway, and its chain is no longer one
             // history: the ops that count end before it.
-            let before = usize::try_from(fork.saturating_sub(base_seq + 1)).unwrap_or(usize::MAX);
+            let before = usize::try_from(fork.saturating_sub(1)).unwrap_or(usize::MAX);
             chain = &chain[..chain.len().min(before)];
         }
         let mut last: Option<u64> = None;
@@ -1534,7 +1451,7 @@ impl<P: Payload> Log<P> {
             if readmitted {
                 continue;
             }
-            let seen = base_seq + dag.seen_prefix(&mut reach, expel, chain) as u64;
+            let seen = dag.seen_prefix(&mut reach, expel, chain) as u64;
             last = Some(last.map_or(seen, |l| l.min(seen)));
         }
         self.reach = reach;
@@ -1553,8 +1470,7 @@ impl<P: Payload> Log<P> {
             let Some(seq) = self.forks.seq_of(&author) else {
                 continue;
             };
-            let base_seq = self.base.as_ref().map_or(0, |b| b.seq(&author));
-            let skip = usize::try_from(seq.saturating_sub(base_seq + 1)).unwrap_or(usize::MAX);
+            let skip = usize::try_from(seq.saturating_sub(1)).unwrap_or(usize::MAX);
             let chain = self.chain(&author);
             let chain = chain.iter().skip(skip).map(|&at| self.ops.at(at).id_ref());
             let siblings = self.siblings.get(&author).map_or(&[][..], Vec::as_slice);
@@ -1621,7 +1537,6 @@ impl<P: Payload> Log<P> {
         self.stats.n_refolded += (self.order.len() - start) as u64;
         let mut refold = Refold {
             from,
-            base_objects: BTreeSet::new(),
             object_keys: ObjectKeys::default(),
             void_from: std::mem::take(&mut self.void_changed),
         };
@@ -1675,15 +1590,9 @@ impl<P: Payload> Log<P> {
         refold
     }
 
-    /// Judges the op at `pos` against `state` (the fold of the positions before it) and
-    /// advances the state past it.
-    fn judge(&self, cx: &mut LeaseCx, state: &mut FoldState, pos: usize) -> Mark {
-        let op = self.op_at(pos);
-        let (key, effect) = (OrderKey::of(op), op.payload().effect());
-        self.judge_read(cx, state, pos, (op, key, effect))
-    }
+    /// Judges the op at `pos` (its order key and effect already read) against `state` (the
+    /// fold of the positions before it) and advances the state past it.
 
-    /// [`Log::judge`] for the op at `pos`, its order key and its effect, already read.
     fn judge_read(
         &self,
         cx: &mut LeaseCx,
@@ -1734,8 +1643,7 @@ impl<P: Payload> Log<P> {
         }
         for (member, from_seq) in refold.void_from.clone() {
             let member = &member;
-            let base_seq = self.base.as_ref().map_or(0, |b| b.seq(member));
-            let skip = usize::try_from(from_seq.saturating_sub(base_seq + 1)).unwrap_or(usize::MAX);
+            let skip = usize::try_from(from_seq.saturating_sub(1)).unwrap_or(usize::MAX);
             let chain = self.chain(member);
             for &at in chain.iter().skip(skip) {
                 let op = self.ops.at(at);
@@ -1776,11 +1684,7 @@ impl<P: Payload> Log<P> {
             | Effect::Release { object } => (object, pos),
             Effect::Undo { target } | Effect::Redo { target } => {
                 match self.target_object(&target) {
-                    Some((object, Some(target_pos))) => (object, target_pos.min(pos)),
-                    Some((object, None)) => {
-                        refold.base_objects.insert(object);
-                        (object, pos)
-                    }
+                    Some((object, target_pos)) => (object, target_pos.min(pos)),
                     None => return,
                 }
             }
@@ -1843,7 +1747,6 @@ impl<P: Payload> Log<P> {
         let objects: BTreeSet<ObjectId> = refold
             .object_keys
             .keys()
-            .chain(&refold.base_objects)
             .copied()
             .filter(|o| self.deletes.contains_key(o) || self.hidden.contains_key(o))
             .collect();
@@ -1851,58 +1754,38 @@ impl<P: Payload> Log<P> {
             let now = self.hidden_of(object);
             let old = self.hidden.remove(&object).unwrap_or_default();
             for changed in now.symmetric_difference(&old) {
-                match self.position(changed) {
-                    Some(pos) => {
-                        refold.from = refold.from.min(pos);
-                        refold.object_keys.lower(object, self.order_key(pos));
-                    }
-                    None => {
-                        refold.base_objects.insert(object);
-                    }
+                if let Some(pos) = self.position(changed) {
+                    refold.from = refold.from.min(pos);
+                    refold.object_keys.lower(object, self.order_key(pos));
                 }
             }
+
             if !now.is_empty() {
                 self.hidden.insert(object, now);
             }
         }
     }
 
-    /// The edits of `object` that an effective delete, not undone, saw. Inside a joined log's
-    /// base no deps are kept: a delete there or after the cut is taken to have seen every base
-    /// edit sorted before it (a documented non-guarantee).
+    /// The edits of `object` that an effective delete, not undone, saw.
     fn hidden_of(&self, object: ObjectId) -> BTreeSet<OpId> {
         let mut out = BTreeSet::new();
-        let base_edits = self
-            .base
-            .as_ref()
-            .and_then(|b| b.edits_by_object.get(&object))
-            .map_or(&[][..], Vec::as_slice);
-        for (key, d) in self.deletes.get(&object).into_iter().flatten() {
+        for (_, d) in self.deletes.get(&object).into_iter().flatten() {
             if !self.is_effective(d) || self.state.is_undone(d) || self.is_void(d) {
                 continue;
             }
             if let Some(hides) = self.delete_hides.get(d) {
                 out.extend(hides.iter().copied());
             }
-            out.extend(
-                base_edits
-                    .iter()
-                    .filter(|(k, e)| k < key && e != d)
-                    .map(|(_, e)| *e),
-            );
         }
         out
     }
 
-    /// True if `id` is held and effective, or an effective edit inside the base.
+    /// True if `id` is held and effective.
     fn is_effective(&self, id: &OpId) -> bool {
-        match self.mark(id) {
-            Some(mark) => mark == Mark::Effective,
-            None => self.base.as_ref().is_some_and(|b| b.edits.contains_key(id)),
-        }
+        self.mark(id) == Some(Mark::Effective)
     }
 
-    /// True if `object` has a delete (held, or inside the base), effective or not.
+    /// True if `object` has a delete, effective or not.
     pub fn has_deletes(&self, object: ObjectId) -> bool {
         self.deletes.contains_key(&object)
     }
@@ -1991,9 +1874,6 @@ impl<P: Payload> Log<P> {
         let (Effect::Undo { target } | Effect::Redo { target }) = effect else {
             return None;
         };
-        if let Some(info) = self.base.as_ref().and_then(|b| b.target_info(&target)) {
-            return Some(info);
-        }
         let target_pos = self.position(&target).filter(|p| *p < pos)?;
         let op = self.ops.get(&target)?;
         Some(TargetInfo {
@@ -2003,23 +1883,20 @@ impl<P: Payload> Log<P> {
         })
     }
 
-    /// The object of edit `target` and its position (`None` inside the base).
-    fn target_object(&self, target: &OpId) -> Option<(ObjectId, Option<usize>)> {
-        if let Some(object) = self.base.as_ref().and_then(|b| b.edit_object(target)) {
-            return Some((object, None));
-        }
+    /// The object of edit `target` and its position.
+    fn target_object(&self, target: &OpId) -> Option<(ObjectId, usize)> {
         let op = self.ops.get(target)?;
         match op.payload().effect() {
-            Effect::Edit { object } => Some((object, Some(self.position(target)?))),
+            Effect::Edit { object } => Some((object, self.position(target)?)),
             _ => None,
         }
     }
 }
 
 impl<P: Payload> Log<P> {
-    /// Number of delivered ops (those inside a snapshot's base included).
+    /// Number of delivered ops.
     pub fn len(&self) -> usize {
-        self.ops.len() + self.n_base()
+        self.ops.len()
     }
 
     /// True if no op is delivered.
@@ -2027,32 +1904,25 @@ impl<P: Payload> Log<P> {
         self.len() == 0
     }
 
-    /// A delivered op by id: any held op, or an effective edit inside the base.
+    /// A delivered op by id.
     pub fn get(&self, id: &OpId) -> Option<&Op<P>> {
-        self.ops
-            .get(id)
-            .or_else(|| self.base.as_ref().and_then(|b| b.edits.get(id)))
+        self.ops.get(id)
     }
 
-    /// True if `id` is delivered (held, or inside the base).
+    /// True if `id` is delivered.
     pub fn contains(&self, id: &OpId) -> bool {
-        self.ops.contains_key(id) || self.base.as_ref().is_some_and(|b| b.contains(id))
+        self.ops.contains_key(id)
     }
 
     /// [`Log::contains`] for an op arriving, which is usually new: the slab's table is probed
     /// without comparing the latest ops first.
     fn contains_arriving(&self, id: &OpId) -> bool {
         self.ops.indexed_position(id).is_some()
-            || self.base.as_ref().is_some_and(|b| b.contains(id))
     }
 
-    /// The author's held op with sequence number `seq` (`None` inside the base).
+    /// The author's held op with sequence number `seq`.
     pub fn by_seq(&self, author: &PeerId, seq: u64) -> Option<&Op<P>> {
-        let base_seq = self.base.as_ref().map_or(0, |b| b.seq(author));
-        Some(
-            self.ops
-                .at(self.authors.get(author)?.at_seq(base_seq, seq)?),
-        )
+        Some(self.ops.at(self.authors.get(author)?.at_seq(seq)?))
     }
 
     /// What this log holds, per author.
@@ -2165,8 +2035,8 @@ impl<P: Payload> Log<P> {
         self.ops.position(id).map(|at| self.marks.get(at))
     }
 
-    /// True if the op is effective, not undone and not hidden by a delete that saw it (inside
-    /// the base: an effective edit not undone and not hidden).
+    /// True if the op is effective, not undone and not hidden by a delete that saw it.
+
     pub fn is_active(&self, id: &OpId) -> bool {
         self.is_effective(id)
             && !self.state.is_undone(id)

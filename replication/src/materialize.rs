@@ -103,64 +103,43 @@ pub struct Materialized<P, M> {
 }
 
 impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
-    /// A driver around `scene`, which must already hold the fold of what the log holds (a
-    /// scene decoded from a snapshot, for a log joined from it).
-    pub(crate) fn from_scene(scene: M) -> Self {
-        Self {
+    /// A driver around `scene`, which must already hold the fold of everything `log` holds
+    /// (a scene decoded from a snapshot, for a log joined from it).
+    pub(crate) fn from_scene(log: &Log<P>, scene: M) -> Self {
+        let mut out = Self {
             scene,
             last_applied: BTreeMap::new(),
             stats: FoldStats::default(),
             payload: PhantomData,
+        };
+        // What folding the log would have noted of each object: its last active edit.
+        for entry in log.entries() {
+            if let Effect::Edit { object } = entry.op.payload().effect()
+                && log.is_active(&entry.op.id())
+            {
+                out.last_applied.insert(object, OrderKey::of(entry.op));
+            }
         }
-    }
-
-    /// Folds every active entry of `log` into `scene` (a new scene, or for a log joined from a
-    /// snapshot, the one its snapshot decodes to: see [`Materialized::fold`]).
-    fn fold_onto(log: &Log<P>, scene: M) -> Self {
-        let mut out = Self::from_scene(scene);
-        out.fold_prefix(log, log.n_held(), log.fold_state());
         out
     }
 
-    /// The scene of `log`, folded from scratch (for a log joined from a snapshot, from the
-    /// snapshot's scene).
-    pub fn fold(log: &Log<P>) -> Result<Self, DecodeError>
+    /// The scene of `log`, folded from scratch.
+    pub fn fold(log: &Log<P>) -> Self
     where
         M: Default,
     {
-        let scene = match log.base() {
-            Some(base) => M::decode_snapshot(&base.scene)?,
-            None => M::default(),
+        let mut out = Self {
+            scene: M::default(),
+            last_applied: BTreeMap::new(),
+            stats: FoldStats::default(),
+            payload: PhantomData,
         };
-        Ok(Self::fold_onto(log, scene))
+        out.fold_prefix(log, log.len(), log.fold_state());
+        out
     }
 
-    /// Applies the first `n` held entries as active under `state` onto a scene that holds the
-    /// base's scene at its cut (or nothing): objects whose base edits `state` toggled since
-    /// the cut are re-folded from their start first.
+    /// Applies the first `n` entries of the linear order that are active under `state`.
     pub(crate) fn fold_prefix(&mut self, log: &Log<P>, n: usize, state: &FoldState) {
-        if let Some(base) = log.base() {
-            for (object, edits) in &base.edits_by_object {
-                // Deletes hide edits without reaching the scene: an object with any is folded
-                // again from its active edits.
-                let toggled = log.has_deletes(*object)
-                    || edits
-                        .iter()
-                        .any(|(_, id)| base.state.is_undone(id) != state.is_undone(id));
-                if !toggled {
-                    continue;
-                }
-                self.scene.reset_object(*object);
-                self.stats.n_object_refolds += 1;
-                for (key, id) in edits {
-                    let active = !state.is_undone(id) && !log.is_hidden(id);
-                    if let Some(op) = base.edits.get(id).filter(|_| active) {
-                        self.scene.apply(FoldEntry { key: *key, op });
-                        self.stats.n_applied += 1;
-                    }
-                }
-            }
-        }
         for entry in log.entries().take(n) {
             let id = entry.op.id();
             if entry.mark != Mark::Effective
@@ -244,7 +223,7 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
             // Looked up once: to choose, then to note what an append applied.
             let last = self.last_applied.entry(*object);
             let applied_after = matches!(&last, Entry::Occupied(l) if *l.get() >= *from);
-            if refold.base_objects.contains(object) || applied_after {
+            if applied_after {
                 self.refold_object(log, *object);
                 continue;
             }
@@ -267,21 +246,11 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
         }
     }
 
-    /// Resets `object` and folds all of its active edits: the base's, then the held ones.
+    /// Resets `object` and folds all of its active edits.
     fn refold_object(&mut self, log: &Log<P>, object: ObjectId) {
         self.scene.reset_object(object);
         self.stats.n_object_refolds += 1;
         self.last_applied.remove(&object);
-        if let Some(base) = log.base()
-            && let Some(edits) = base.edits_by_object.get(&object)
-        {
-            for (key, id) in edits {
-                if let Some(op) = base.edits.get(id).filter(|_| log.is_active(id)) {
-                    self.scene.apply(FoldEntry { key: *key, op });
-                    self.stats.n_applied += 1;
-                }
-            }
-        }
         let (scene, stats) = (&mut self.scene, &mut self.stats);
         if let Some(key) = apply_held_edits(scene, stats, log, object, None) {
             self.last_applied.insert(object, key);

@@ -347,6 +347,12 @@ impl<P: Payload> Op<P> {
     /// [`Envelope::into_verified_all`]): the index of the first op whose signature does not
     /// verify, if any.
     pub fn first_unsigned(ops: &[Self], session: &SessionId) -> Option<usize> {
+        let refs: Vec<&Self> = ops.iter().collect();
+        Self::first_unsigned_of(&refs, session)
+    }
+
+    /// [`Op::first_unsigned`] over ops held elsewhere (a log's, checked in place).
+    pub fn first_unsigned_of(ops: &[&Self], session: &SessionId) -> Option<usize> {
         let bodies: Vec<(PeerId, &[u8], Signature)> = ops
             .iter()
             .map(|op| (op.author(), op.body(), op.signature()))

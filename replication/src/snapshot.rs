@@ -1,183 +1,246 @@
-//! Snapshots: the materialised scene and the lease/undo state at a stable cut of the linear
-//! order, so a new peer joins from a snapshot plus the ops after the cut instead of replaying
-//! (and verifying) all of history.
+//! Snapshots: a log's whole history in linear order with the scene folded from it, so a new
+//! peer joins by inserting ops whose signatures the producer checked and adopting the scene as
+//! folded, instead of verifying and folding op by op. The joined log holds every op, so it
+//! judges every later op exactly as a peer that synced op by op does: no verdict reads
+//! anything a snapshot leaves out.
 //!
-//! A cut at Lamport time `L` holds exactly the ops with Lamport time `L` or less; it must be
-//! at or below [`Log::stable_lamport`], so no op outside it can sort before it later (except
-//! from an author the producer never heard of: the joined log refuses such an op with
-//! [`crate::log::InsertError::BeforeBase`], and the peer must rebuild from full history).
+//! **Cut.** A snapshot names the ops it covers by its [`Cut`]: how many, and a digest of the
+//! heads of their DAG (an op's id hashes its deps, so the heads name every op below them). A
+//! join checks that the ops it inserted are exactly that cut and that the scene's bytes
+//! decode to the scene hash the snapshot names.
 //!
-//! What a snapshot keeps of the ops before the cut: every op id (later ops name them as
-//! dependencies), each op's author and whether it is an edit and effective (undo and redo
-//! rules read these), the effective edits whole (a later undo or redo may toggle them, and
-//! the scene must then re-fold their object), the DAG's heads, and the scene's own snapshot.
-//! Leases, chat, rejected edits and undo/redo ops are dropped. Full history stays in the
-//! producer's log and store, and any full peer serves it over sync.
+//! **Trust.** A join checks no signature and folds nothing, so a hostile producer could hand
+//! forged ops or a scene that is not their fold. [`verify`] checks both: every signature over
+//! the session (in batches), and the joined log folded from scratch against the adopted
+//! scene's hash. A peer runs it after joining, off the join's path, and drops the joined state
+//! if it fails. Until then the joined peer forwards nothing its remotes do not verify anyway.
 //!
-//! **Trust.** A snapshot's content cannot be checked against signatures (the ops are gone);
-//! its checksum only catches corruption. Join only from a snapshot you made yourself or got
-//! from a peer you trust; compare [`crate::materialize::SceneHash`]es with other peers later.
-//!
-//! Format (version 2), integers as varints: `SCULPTSNAP [1] [cut lamport] [max timestamp]`
-//! `[n ≤ MAX_SNAPSHOT_AUTHORS][author 32][seq][lamport]*` (sorted) `[n][id 32][author idx][kind 0/1/2]*`
-//! (sorted by id) `[n][head id 32]*` `[fold state]` `[n][len][op]*` (the effective edits in
-//! linear order) `[len][scene snapshot]` `[blake3 of everything before, 32]`. Version 1 is the
-//! same without the fold state's live leases per author ([`FoldState::encode`]); a log joined
-//! from it counts only the leases taken after its cut towards
-//! [`crate::lease::MAX_LIVE_LEASES_PER_AUTHOR`].
+//! Format (version 3), integers as varints: `SCULPTSNAP [3] [n ≤ MAX_LOG_OPS][len][op]*` (the
+//! linear order) `[n][head 32]*` (sorted) `[scene hash 32] [len][scene]`
+//! `[blake3 of everything before, 32]`. Versions 1 and 2 (a cut of ids without the ops, which
+//! could not judge every later op as a full peer does) are refused.
 
-use crate::causal::VersionVector;
 use crate::codec::{DecodeError, Reader, put_bytes, put_varint};
-use crate::identity::{OpId, PeerId};
-use crate::lease::FoldState;
-use crate::log::{Base, CutError, Log, OrderKey};
-use crate::log::{BaseAuthor, BaseKind, BaseOp};
-use crate::materialize::{MAX_SCENE_SNAPSHOT_BYTES, Materialize, Materialized};
-use crate::op::{MAX_LOG_OPS, MAX_OP_BYTES, Op};
-use crate::payload::{Effect, ObjectId, Payload};
-use crate::pending::PendingLimits;
+use crate::identity::{OpId, SessionId};
+use crate::log::LOCAL_ORIGIN;
+use crate::log::{InsertError, Log};
+use crate::materialize::{
+    MAX_SCENE_SNAPSHOT_BYTES, Materialize, Materialized, SCENE_HASH_BYTES, SceneHash,
+};
+use crate::op::{MAX_LOG_OPS, MAX_OP_BYTES, Op, VerifiedOp};
+use crate::payload::Payload;
 use crate::time::Timestamp;
-use std::collections::BTreeMap;
 
 /// Magic bytes that open an encoded snapshot.
 pub const SNAPSHOT_MAGIC: &[u8; 10] = b"SCULPTSNAP";
-/// The snapshot format version (2: the fold state names each author's live leases; version 1,
-/// without them, still decodes).
-pub const SNAPSHOT_FORMAT_VERSION: u8 = 2;
+/// The snapshot format version (3: the ops whole).
+pub const SNAPSHOT_FORMAT_VERSION: u8 = 3;
 /// Largest encoded snapshot accepted or produced, in bytes (256 MiB).
 pub const MAX_SNAPSHOT_BYTES: usize = 256 * 1024 * 1024;
 /// Bytes of checksum at the end of a snapshot.
 pub const SNAPSHOT_CHECKSUM_BYTES: usize = 32;
-/// Most authors a snapshot names: as many as a log can hold (every author has at least one op
-/// in it), so any log can be captured whatever its number of authors (within
-/// [`MAX_SNAPSHOT_BYTES`]).
-pub const MAX_SNAPSHOT_AUTHORS: usize = MAX_LOG_OPS;
-/// The fewest bytes an author entry takes: id, seq and Lamport time of one byte each.
-const MIN_AUTHOR_BYTES: usize = 32 + 1 + 1;
-// Ops name their author by a `u32` index.
-const _: () = assert!(MAX_SNAPSHOT_AUTHORS <= u32::MAX as usize);
+/// Ops whose signatures [`verify`] checks in one batch.
+pub const MAX_VERIFY_BATCH_OPS: usize = 1024;
+/// The fewest bytes an encoded op takes (a length prefix included): ids, seq, Lamport time,
+/// timestamp and signature.
+const MIN_OP_BYTES: usize = 64;
+
+/// The ops a snapshot (or a log) covers: how many, and a digest of their heads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Cut {
+    /// Number of ops.
+    pub n_ops: u64,
+    /// blake3 over the sorted heads.
+    pub heads_digest: [u8; 32],
+}
+
+impl Cut {
+    /// The cut of `log` as it stands.
+    pub fn of<P: Payload>(log: &Log<P>) -> Self {
+        let mut heads: Vec<OpId> = log.heads().copied().collect();
+        heads.sort_unstable();
+        Self::from_heads(log.len() as u64, &heads)
+    }
+
+    fn from_heads(n_ops: u64, sorted_heads: &[OpId]) -> Self {
+        let mut hasher = blake3::Hasher::new();
+        for head in sorted_heads {
+            hasher.update(&head.0);
+        }
+        Self {
+            n_ops,
+            heads_digest: *hasher.finalize().as_bytes(),
+        }
+    }
+}
+
+impl std::fmt::Display for Cut {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let digest: String = (self.heads_digest[..6].iter())
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        write!(f, "{} ops, heads {digest}", self.n_ops)
+    }
+}
 
 /// Why a snapshot could not be captured.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum CaptureError {
-    /// The cut is not usable.
-    #[error(transparent)]
-    Cut(#[from] CutError),
-    /// The log's own base scene did not decode.
-    #[error("base scene: {0}")]
-    Scene(DecodeError),
     /// The encoding would exceed [`MAX_SNAPSHOT_BYTES`] (or the scene
     /// [`MAX_SCENE_SNAPSHOT_BYTES`]).
     #[error("snapshot of {0} bytes is over its limit")]
     TooLarge(usize),
 }
 
-/// The state of a log at a stable cut, ready to encode or to join from.
+/// Why a decoded snapshot could not be joined.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum JoinError {
+    /// The log to join into already holds ops.
+    #[error("a snapshot joins an empty log only (this one holds {0} ops)")]
+    NotEmpty(usize),
+    /// The log refused an op.
+    #[error("op {index} of the snapshot: {error}")]
+    Refused {
+        /// Its index in the snapshot's order.
+        index: usize,
+        /// Why.
+        error: InsertError,
+    },
+    /// An op was not delivered when inserted: its deps or its author's previous op come
+    /// later in the snapshot, or not at all.
+    #[error("op {index} of the snapshot arrives before its causal past")]
+    OutOfOrder {
+        /// Its index in the snapshot's order.
+        index: usize,
+    },
+    /// The ops give another cut than the snapshot names.
+    #[error("the ops give the cut {got}, the snapshot names {named}")]
+    Cut {
+        /// What the snapshot says.
+        named: Cut,
+        /// What its ops give.
+        got: Cut,
+    },
+    /// The scene did not decode.
+    #[error("scene: {0}")]
+    Scene(DecodeError),
+    /// The decoded scene's hash is not the one the snapshot names.
+    #[error("the scene's hash is not the one the snapshot names")]
+    SceneHash,
+}
+
+/// Why [`verify`] found a joined state wrong.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum VerifyError {
+    /// An op's signature does not verify for the session.
+    #[error("op {0} is not signed by its author for this session")]
+    Unsigned(OpId),
+    /// The log folded from scratch gives another scene than the one adopted.
+    #[error("the scene folded from the ops is not the snapshot's scene")]
+    Scene,
+}
+
+/// The state of a log, ready to encode or to join from.
 #[derive(Debug, Clone)]
 pub struct Snapshot<P> {
-    base: Base<P>,
+    /// Every op, in the linear order.
+    ops: Vec<Op<P>>,
+    /// The DAG's heads, sorted.
+    heads: Vec<OpId>,
+    scene_hash: SceneHash,
+    /// The scene in its own snapshot encoding.
+    scene: Vec<u8>,
 }
 
 impl<P: Payload> Snapshot<P> {
-    /// Captures `log` at Lamport time `cut_lamport` (at most [`Log::stable_lamport`]), folding
-    /// the scene as of the cut with `M`.
-    pub fn capture<M: Materialize<P> + Default>(
+    /// Captures `log` and its scene as they stand.
+    pub fn capture<M: Materialize<P>>(
         log: &Log<P>,
-        cut_lamport: u64,
+        scene: &Materialized<P, M>,
     ) -> Result<Self, CaptureError> {
-        let (mut base, n) = log.base_at(cut_lamport)?;
-        let scene = match log.base() {
-            Some(b) => M::decode_snapshot(&b.scene).map_err(CaptureError::Scene)?,
-            None => M::default(),
-        };
-        let mut materialized = Materialized::from_scene(scene);
-        materialized.fold_prefix(log, n, &base.state);
-        materialized.scene().encode_snapshot(&mut base.scene);
-        if base.scene.len() > MAX_SCENE_SNAPSHOT_BYTES {
-            return Err(CaptureError::TooLarge(base.scene.len()));
+        let mut bytes = Vec::new();
+        scene.scene().encode_snapshot(&mut bytes);
+        if bytes.len() > MAX_SCENE_SNAPSHOT_BYTES {
+            return Err(CaptureError::TooLarge(bytes.len()));
         }
-        Ok(Self { base })
+        let mut heads: Vec<OpId> = log.heads().copied().collect();
+        heads.sort_unstable();
+        Ok(Self {
+            ops: log.entries().map(|e| e.op.clone()).collect(),
+            heads,
+            scene_hash: scene.scene_hash(),
+            scene: bytes,
+        })
     }
 
-    /// The Lamport time of the cut.
-    pub fn cut_lamport(&self) -> u64 {
-        self.base.lamport
+    /// The ops the snapshot covers.
+    pub fn cut(&self) -> Cut {
+        Cut::from_heads(self.ops.len() as u64, &self.heads)
     }
 
-    /// The ops the snapshot stands for.
-    pub fn version_vector(&self) -> VersionVector {
-        let mut vv = VersionVector::new();
-        for a in &self.base.authors {
-            vv.raise(a.author, a.seq);
-        }
-        vv
+    /// The scene hash the snapshot names.
+    pub fn scene_hash(&self) -> SceneHash {
+        self.scene_hash
     }
 
-    /// Number of ops before the cut.
+    /// Number of ops.
     pub fn n_ops(&self) -> usize {
-        self.base.ops.len()
+        self.ops.len()
     }
 
-    /// Number of effective edits kept whole.
-    pub fn n_edits(&self) -> usize {
-        self.base.edits.len()
-    }
-
-    /// The scene at the cut, in the scene's snapshot encoding.
+    /// The scene, in the scene's snapshot encoding.
     pub fn scene_bytes(&self) -> &[u8] {
-        &self.base.scene
+        &self.scene
     }
 
-    /// A log that starts at the cut; sync then brings the ops after it.
-    pub fn into_log(self, limits: PendingLimits) -> Log<P> {
-        Log::from_base(self.base, limits)
-    }
-
-    /// A log that starts at the cut and its scene, decoded from the snapshot (not re-folded).
+    /// Inserts every op into `log` (empty, and set up for the session: its id, founder and
+    /// binding) without checking signatures, and decodes the scene instead of folding it.
+    /// Checks the cut and the scene's hash; see [`verify`] for the rest.
     pub fn join<M: Materialize<P>>(
         self,
-        limits: PendingLimits,
-    ) -> Result<(Log<P>, Materialized<P, M>), DecodeError> {
-        let scene = M::decode_snapshot(&self.base.scene)?;
-        Ok((self.into_log(limits), Materialized::from_scene(scene)))
+        mut log: Log<P>,
+        now: Timestamp,
+    ) -> Result<(Log<P>, Materialized<P, M>), JoinError> {
+        if !log.is_empty() {
+            return Err(JoinError::NotEmpty(log.len()));
+        }
+        let named = self.cut();
+        for (index, op) in self.ops.into_iter().enumerate() {
+            let insertion = (log.insert(now, VerifiedOp::trusted(op), LOCAL_ORIGIN))
+                .map_err(|error| JoinError::Refused { index, error })?;
+            if insertion.delivered.is_empty() {
+                return Err(JoinError::OutOfOrder { index });
+            }
+        }
+        let got = Cut::of(&log);
+        if got != named {
+            return Err(JoinError::Cut { named, got });
+        }
+        let scene = M::decode_snapshot(&self.scene).map_err(JoinError::Scene)?;
+        if scene.scene_hash() != self.scene_hash {
+            return Err(JoinError::SceneHash);
+        }
+        let materialized = Materialized::from_scene(&log, scene);
+        Ok((log, materialized))
     }
 
     /// The encoded snapshot (see the module documentation for the format).
     pub fn encode(&self) -> Result<Vec<u8>, CaptureError> {
-        let b = &self.base;
         let mut out = SNAPSHOT_MAGIC.to_vec();
         out.push(SNAPSHOT_FORMAT_VERSION);
-        put_varint(&mut out, b.lamport);
-        put_varint(&mut out, b.max_timestamp.0);
-        put_varint(&mut out, b.authors.len() as u64);
-        for a in &b.authors {
-            out.extend_from_slice(&a.author.0);
-            put_varint(&mut out, a.seq);
-            put_varint(&mut out, a.lamport);
+        put_varint(&mut out, self.ops.len() as u64);
+        for op in &self.ops {
+            put_bytes(&mut out, op.encoded());
+            if out.len() > MAX_SNAPSHOT_BYTES {
+                return Err(CaptureError::TooLarge(out.len()));
+            }
         }
-        put_varint(&mut out, b.ops.len() as u64);
-        for op in &b.ops {
-            out.extend_from_slice(&op.id.0);
-            put_varint(&mut out, u64::from(op.author_idx));
-            out.push(match op.kind {
-                BaseKind::Other => 0,
-                BaseKind::RejectedEdit => 1,
-                BaseKind::EffectiveEdit => 2,
-            });
-        }
-        put_varint(&mut out, b.heads.len() as u64);
-        for head in &b.heads {
+        put_varint(&mut out, self.heads.len() as u64);
+        for head in &self.heads {
             out.extend_from_slice(&head.0);
         }
-        b.state.encode(&mut out);
-        let mut edits: Vec<(OrderKey, &Op<P>)> =
-            b.edits.values().map(|op| (OrderKey::of(op), op)).collect();
-        edits.sort_unstable_by_key(|(k, _)| *k);
-        put_varint(&mut out, edits.len() as u64);
-        for (_, op) in edits {
-            put_bytes(&mut out, op.encoded());
-        }
-        put_bytes(&mut out, &b.scene);
+        out.extend_from_slice(&self.scene_hash.0);
+        put_bytes(&mut out, &self.scene);
         let checksum = blake3::hash(&out);
         out.extend_from_slice(checksum.as_bytes());
         if out.len() > MAX_SNAPSHOT_BYTES {
@@ -186,9 +249,9 @@ impl<P: Payload> Snapshot<P> {
         Ok(out)
     }
 
-    /// Decodes a snapshot from untrusted bytes: checks size, checksum, format and internal
-    /// consistency, never panicking and allocating only within named limits. Signatures of
-    /// the kept edits are not checked (see the module's note on trust).
+    /// Decodes a snapshot from untrusted bytes: checks size, checksum, format and each op's
+    /// encoding, never panicking and allocating only within named limits. Signatures are not
+    /// checked (see [`verify`]).
     pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
         if bytes.len() > MAX_SNAPSHOT_BYTES {
             return Err(DecodeError::OverLimit {
@@ -212,7 +275,7 @@ impl<P: Payload> Snapshot<P> {
         }
         let version_offset = r.offset();
         let version = r.u8()?;
-        if version != SNAPSHOT_FORMAT_VERSION && version != 1 {
+        if version != SNAPSHOT_FORMAT_VERSION {
             return Err(DecodeError::UnknownVersion {
                 offset: version_offset,
                 version,
@@ -224,189 +287,73 @@ impl<P: Payload> Snapshot<P> {
                 what: "snapshot checksum",
             });
         }
-        let lamport = r.varint()?;
-        let max_timestamp = Timestamp(r.varint()?);
-        let authors = read_authors(&mut r, lamport)?;
-        let ops = read_ops(&mut r, &authors)?;
-        let heads = read_heads(&mut r, &ops)?;
-        let state = FoldState::decode(&mut r, version >= 2)?;
-        let (edits, edits_by_object) = read_edits::<P>(&mut r, lamport, &authors, &ops)?;
+        let ops = read_ops(&mut r)?;
+        let heads = read_heads(&mut r, ops.len())?;
+        let scene_hash = SceneHash(r.array::<SCENE_HASH_BYTES>()?);
         let scene = r
             .bytes("scene length", MAX_SCENE_SNAPSHOT_BYTES as u64)?
             .to_vec();
         r.finish()?;
         Ok(Self {
-            base: Base {
-                lamport,
-                authors,
-                ops,
-                edits,
-                edits_by_object,
-                heads,
-                max_timestamp,
-                state,
-                scene,
-            },
+            ops,
+            heads,
+            scene_hash,
+            scene,
         })
     }
 }
 
-impl<P: Payload> Log<P> {
-    /// A log that starts from a snapshot's cut (see [`Snapshot::into_log`]).
-    pub fn from_snapshot(snapshot: Snapshot<P>, limits: PendingLimits) -> Self {
-        snapshot.into_log(limits)
+/// Checks what a join took on trust: every op's signature for `session`, in batches of
+/// [`MAX_VERIFY_BATCH_OPS`], and the scene folded from `log` from scratch against `scene`'s
+/// hash. `progress` hears how many ops were checked so far.
+pub fn verify<P: Payload, M: Materialize<P> + Default>(
+    log: &Log<P>,
+    scene: &Materialized<P, M>,
+    session: &SessionId,
+    mut progress: impl FnMut(usize),
+) -> Result<(), VerifyError> {
+    let ops: Vec<&Op<P>> = log.entries().map(|e| e.op).collect();
+    for (i, batch) in ops.chunks(MAX_VERIFY_BATCH_OPS).enumerate() {
+        if let Some(bad) = Op::first_unsigned_of(batch, session) {
+            return Err(VerifyError::Unsigned(batch[bad].id()));
+        }
+        progress(i * MAX_VERIFY_BATCH_OPS + batch.len());
     }
+    if Materialized::<P, M>::fold(log).scene_hash() != scene.scene_hash() {
+        return Err(VerifyError::Scene);
+    }
+    Ok(())
 }
 
-fn read_authors(r: &mut Reader<'_>, cut: u64) -> Result<Vec<BaseAuthor>, DecodeError> {
+fn read_ops<P: Payload>(r: &mut Reader<'_>) -> Result<Vec<Op<P>>, DecodeError> {
     // Bounded by what is left as well, so a hostile count allocates nothing it cannot fill.
-    let limit = (r.remaining() / MIN_AUTHOR_BYTES).min(MAX_SNAPSHOT_AUTHORS) as u64;
-    let n = r.bounded("author count", limit)?;
-    let mut authors: Vec<BaseAuthor> = Vec::with_capacity(n);
-    for _ in 0..n {
-        let offset = r.offset();
-        let author = PeerId(r.array()?);
-        let seq = r.varint()?;
-        let lamport = r.varint()?;
-        let sorted = authors.last().is_none_or(|a| a.author < author);
-        if !sorted || seq == 0 || lamport == 0 || lamport > cut {
-            return Err(DecodeError::Invalid {
-                offset,
-                what: "snapshot author",
-            });
-        }
-        authors.push(BaseAuthor {
-            author,
-            seq,
-            lamport,
-        });
-    }
-    Ok(authors)
-}
-
-fn read_ops(r: &mut Reader<'_>, authors: &[BaseAuthor]) -> Result<Vec<BaseOp>, DecodeError> {
-    let n_expected = authors
-        .iter()
-        .fold(0u64, |acc, a| acc.saturating_add(a.seq));
-    let offset = r.offset();
-    // Each op takes at least 34 bytes: bound the count by what is left as well.
-    let limit = (r.remaining() / 34).min(MAX_LOG_OPS) as u64;
+    let limit = (r.remaining() / MIN_OP_BYTES).min(MAX_LOG_OPS) as u64;
     let n = r.bounded("snapshot op count", limit)?;
-    if n as u64 != n_expected {
-        return Err(DecodeError::Invalid {
-            offset,
-            what: "snapshot op count",
-        });
-    }
-    let mut ops: Vec<BaseOp> = Vec::with_capacity(n);
+    let mut ops = Vec::with_capacity(n);
     for _ in 0..n {
-        let offset = r.offset();
-        let id = OpId(r.array()?);
-        let author_idx = r.bounded("author index", authors.len().saturating_sub(1) as u64)?;
-        let kind = match r.u8()? {
-            0 => BaseKind::Other,
-            1 => BaseKind::RejectedEdit,
-            2 => BaseKind::EffectiveEdit,
-            _ => {
-                return Err(DecodeError::Invalid {
-                    offset,
-                    what: "snapshot op kind",
-                });
-            }
-        };
-        if authors.is_empty() || ops.last().is_some_and(|o| o.id >= id) {
-            return Err(DecodeError::Invalid {
-                offset,
-                what: "snapshot op",
-            });
-        }
-        ops.push(BaseOp {
-            id,
-            author_idx: author_idx as u32,
-            kind,
-        });
+        let bytes = r.bytes("op length", MAX_OP_BYTES as u64)?;
+        let op = Op::<P>::decode(bytes).map_err(|e| e.shifted(r.offset() - bytes.len()))?;
+        ops.push(op);
     }
     Ok(ops)
 }
 
-fn read_heads(r: &mut Reader<'_>, ops: &[BaseOp]) -> Result<Vec<OpId>, DecodeError> {
-    let limit = (r.remaining() / 32).min(ops.len()) as u64;
+fn read_heads(r: &mut Reader<'_>, n_ops: usize) -> Result<Vec<OpId>, DecodeError> {
+    let limit = (r.remaining() / 32).min(n_ops) as u64;
     let n = r.bounded("head count", limit)?;
     let mut heads: Vec<OpId> = Vec::with_capacity(n);
     for _ in 0..n {
         let offset = r.offset();
         let id = OpId(r.array()?);
-        let known = ops.binary_search_by(|o| o.id.cmp(&id)).is_ok();
-        if !known || heads.last().is_some_and(|h| *h >= id) {
+        if heads.last().is_some_and(|h| *h >= id) {
             return Err(DecodeError::Invalid {
                 offset,
-                what: "snapshot head",
+                what: "snapshot heads out of order",
             });
         }
         heads.push(id);
     }
     Ok(heads)
-}
-
-type Edits<P> = (
-    BTreeMap<OpId, Op<P>>,
-    BTreeMap<ObjectId, Vec<(OrderKey, OpId)>>,
-);
-
-fn read_edits<P: Payload>(
-    r: &mut Reader<'_>,
-    cut: u64,
-    authors: &[BaseAuthor],
-    ops: &[BaseOp],
-) -> Result<Edits<P>, DecodeError> {
-    let n_expected = ops
-        .iter()
-        .filter(|o| o.kind == BaseKind::EffectiveEdit)
-        .count();
-    let offset = r.offset();
-    let n = r.bounded("snapshot edit count", n_expected as u64)?;
-    if n != n_expected {
-        return Err(DecodeError::Invalid {
-            offset,
-            what: "snapshot edit count",
-        });
-    }
-    let mut edits = BTreeMap::new();
-    let mut by_object: BTreeMap<ObjectId, Vec<(OrderKey, OpId)>> = BTreeMap::new();
-    let mut last: Option<OrderKey> = None;
-    for _ in 0..n {
-        let offset = r.offset();
-        let bytes = r.bytes("op length", MAX_OP_BYTES as u64)?;
-        let op = Op::<P>::decode(bytes).map_err(|e| e.shifted(r.offset() - bytes.len()))?;
-        let key = OrderKey::of(&op);
-        let listed = ops
-            .binary_search_by(|o| o.id.cmp(&op.id()))
-            .ok()
-            .and_then(|i| ops.get(i))
-            .is_some_and(|o| {
-                o.kind == BaseKind::EffectiveEdit
-                    && authors.get(o.author_idx as usize).map(|a| a.author) == Some(op.author())
-            });
-        let in_vv = authors
-            .binary_search_by(|a| a.author.cmp(&op.author()))
-            .is_ok_and(|i| authors[i].seq >= op.seq());
-        let Effect::Edit { object } = op.payload().effect() else {
-            return Err(DecodeError::Invalid {
-                offset,
-                what: "snapshot edit is not an edit",
-            });
-        };
-        if !listed || !in_vv || op.lamport() > cut || last.is_some_and(|l| l >= key) {
-            return Err(DecodeError::Invalid {
-                offset,
-                what: "snapshot edit",
-            });
-        }
-        last = Some(key);
-        by_object.entry(object).or_default().push((key, op.id()));
-        edits.insert(op.id(), op);
-    }
-    Ok((edits, by_object))
 }
 
 #[cfg(test)]

@@ -84,7 +84,7 @@ fn the_deepest_formulas_decode_validate_and_fold_on_a_small_stack() {
             Op::<ShapePayload>::decode_verified(&bytes, &replication::op::UNNAMED_SESSION).unwrap();
         compiled::clear();
         let mut log = SLog::default();
-        let mut scene = SScene::fold(&log).unwrap();
+        let mut scene = SScene::fold(&log);
         let insertion = log.insert(Timestamp(2), op, Origin(1)).unwrap();
         scene.apply_insertion(&log, &insertion);
         // The snapshot of that scene decodes too (compiling the object again).

@@ -23,7 +23,7 @@ fn an_op_arriving_in_order_costs_the_log_few_allocator_calls() {
     let ops = history(4000);
     let n = ops.len() as f64;
     let mut log = TLog::default();
-    let mut scene = TScene::fold(&log).expect("an empty scene");
+    let mut scene = TScene::fold(&log);
     let (mut n_log, mut n_scene) = (0, 0);
     for op in ops {
         let mut insertion = None;

@@ -118,7 +118,7 @@ fn concurrent_workload(n_peers: u8, per_peer: usize) -> Vec<VerifiedOp<ShapePayl
 
 fn deliver(ops: &[VerifiedOp<ShapePayload>]) -> (SLog, SScene) {
     let mut log = SLog::default();
-    let mut scene = SScene::fold(&log).unwrap();
+    let mut scene = SScene::fold(&log);
     for op in ops {
         let ins = log.insert(Timestamp(0), op.clone(), Origin(1)).unwrap();
         scene.apply_insertion(&log, &ins);
@@ -146,7 +146,7 @@ proptest! {
         }
         let (log, scene) = deliver(&shuffled);
         prop_assert_eq!(scene.scene_hash(), reference.scene_hash());
-        let scratch = SScene::fold(&log).unwrap();
+        let scratch = SScene::fold(&log);
         prop_assert_eq!(scratch.scene_hash(), scene.scene_hash());
         prop_assert!(scratch.scene() == scene.scene());
     }
@@ -189,7 +189,7 @@ fn concurrent_writes_resolve_by_the_order_and_edits_all_apply() {
 fn undo_then_redo_restores_the_scene_and_snapshots_round_trip() {
     let a = key(0);
     let mut log = SLog::default();
-    let mut scene = SScene::fold(&log).unwrap();
+    let mut scene = SScene::fold(&log);
     let author = |log: &mut SLog, scene: &mut SScene, p: ShapePayload| {
         let (op, ins) = log.author(&a, Timestamp(10), p).unwrap();
         scene.apply_insertion(log, &ins);
@@ -279,7 +279,7 @@ fn a_weak_takeover_rejects_the_former_holders_edits() {
     assert!(!log.is_active(&late.id()), "A lost the object to B");
     let rejected = log.rejected_by(&a.peer_id());
     assert_eq!(rejected.len(), 1);
-    let scene = SScene::fold(&log).unwrap();
+    let scene = SScene::fold(&log);
     let object = scene.scene().scene().object(SceneObjectId(1)).unwrap();
     assert_eq!(
         object.history().len(),
@@ -374,7 +374,7 @@ fn ops_signed_before_grids_still_verify_and_fold() {
     let now = Timestamp(1_800_000_000_000_000);
     log.insert(now, create.clone(), Origin(1)).unwrap();
     log.insert(now, set, Origin(1)).unwrap();
-    let scene = SScene::fold(&log).unwrap();
+    let scene = SScene::fold(&log);
     let object = scene.scene().scene().object(SceneObjectId(7)).unwrap();
     assert_eq!(object.data().name, "pot");
     assert!(object.data().physics.density.is_some());
@@ -467,7 +467,7 @@ fn a_change_larger_than_an_op_is_authored_in_parts_and_folds_whole_in_any_order(
         sampler.value(DVec3::new(0.0, 0.95, 0.0), 0.0) < 0.0,
         "carved after assembly"
     );
-    let scratch = SScene::fold(&deliver(&signed).0).unwrap();
+    let scratch = SScene::fold(&deliver(&signed).0);
     assert_eq!(scratch.scene_hash(), reference.scene_hash());
 
     // Reversed and rotated deliveries wait for the causal past and end the same.
@@ -485,7 +485,7 @@ fn a_change_larger_than_an_op_is_authored_in_parts_and_folds_whole_in_any_order(
 
     // Parts held before their assembly survive a snapshot.
     let (half, _) = deliver(&signed[..3]);
-    let held = SScene::fold(&half).unwrap();
+    let held = SScene::fold(&half);
     assert!(
         object_data(&held, 1).is_none(),
         "not made before its assembly"
@@ -496,7 +496,7 @@ fn a_change_larger_than_an_op_is_authored_in_parts_and_folds_whole_in_any_order(
     assert!(back == *held.scene());
     assert_ne!(
         held.scene_hash(),
-        SScene::fold(&SLog::default()).unwrap().scene_hash(),
+        SScene::fold(&SLog::default()).scene_hash(),
         "held parts are part of the scene's state"
     );
 }
@@ -510,7 +510,7 @@ fn an_assembly_without_its_parts_or_of_something_else_changes_nothing() {
     };
     let scene_of = |payloads: Vec<ShapePayload>| {
         let mut log = SLog::default();
-        let mut scene = SScene::fold(&log).unwrap();
+        let mut scene = SScene::fold(&log);
         for p in payloads {
             let (_, ins) = log.author(&key(0), Timestamp(10), p).unwrap();
             scene.apply_insertion(&log, &ins);
@@ -736,7 +736,7 @@ fn strong_acquires_of_predicted_ids_do_not_reject_the_creations() {
         ids = ids.skip(1).unwrap();
     }
     assert!(honest_ops.iter().all(|op| log.is_active(&op.id())));
-    let scene = SScene::fold(&log).unwrap();
+    let scene = SScene::fold(&log);
     for object in predicted.iter().copied() {
         assert!(object_data(&scene, object).is_some(), "object {object}");
     }
@@ -875,7 +875,7 @@ fn a_received_edit_is_compiled_once_from_its_bytes_to_the_scene() {
     let (late, _) = other.author(&b, Timestamp(15), backdated).unwrap();
     let before = n_edits_compiled_on_this_thread();
     let mut log = SLog::default();
-    let mut scene = SScene::fold(&log).unwrap();
+    let mut scene = SScene::fold(&log);
     for bytes in &bytes {
         let op = replication::Op::<ShapePayload>::decode_verified(
             bytes,
@@ -911,7 +911,7 @@ fn a_created_object_shares_its_description_with_the_op() {
     let ids = IdSource::first(a.peer_id());
     let object = ids.id();
     let mut log = SLog::default();
-    let mut scene = SScene::fold(&log).unwrap();
+    let mut scene = SScene::fold(&log);
     let (create, ins) = log
         .author(&a, Timestamp(10), ids.create(sphere_data(), None))
         .unwrap();
@@ -934,7 +934,7 @@ fn a_created_object_shares_its_description_with_the_op() {
     scene.apply_insertion(&log, &ins);
     assert!(Arc::ptr_eq(&held(&scene), data), "after an edit");
     assert!(
-        Arc::ptr_eq(&held(&SScene::fold(&log).unwrap()), data),
+        Arc::ptr_eq(&held(&SScene::fold(&log)), data),
         "folded from scratch"
     );
     let colour = ShapePayload::Set {

@@ -50,8 +50,8 @@ pub(crate) struct Honest {
     pub(crate) peak_live_bytes: i64,
     pub(crate) n_messages_sent: u64,
     pub(crate) n_bytes_sent: u64,
-    /// The snapshot cut it joined at, if it joined from one.
-    pub(crate) snapshot_cut: Option<u64>,
+    /// Whether it joined from a snapshot.
+    pub(crate) joined_from_snapshot: bool,
     /// A crash waiting for the next write (its restart delay, and whether it waits for an
     /// op of the peer's own).
     pub(crate) crash_armed: Option<(u64, bool)>,
@@ -76,7 +76,7 @@ pub(crate) fn new_honest(
     log.set_refold_budget(budget);
     let slot_baseline = memory::live_bytes(slot);
     let (peer, scene) = memory::with_slot(slot, || {
-        let scene = Scene::fold(&log).ok()?;
+        let scene = Scene::fold(&log);
         Some((
             Peer::new(Keypair::from_seed(key_seed), SESSION_ID, log),
             scene,
@@ -103,37 +103,21 @@ pub(crate) fn new_honest(
         peak_live_bytes: 0,
         n_messages_sent: 0,
         n_bytes_sent: 0,
-        snapshot_cut: None,
+        joined_from_snapshot: false,
         crash_armed: None,
         catch_up: CatchUp::default(),
     })
 }
 
-/// Records ops as delivered at a peer, checking that each one's deps came first (deps
-/// inside a snapshot it joined from count as delivered).
+/// Records ops as delivered at a peer, checking that each one's deps came first.
 pub(crate) fn note_delivered(h: &mut Honest, delivered: &[OpId]) {
     for id in delivered {
         if let Some(op) = h.peer.log().get(id) {
-            let early = op
-                .deps()
-                .iter()
-                .filter(|d| !h.seen.contains(*d) && !inside_base(h, d))
-                .count();
+            let early = op.deps().iter().filter(|d| !h.seen.contains(*d)).count();
             h.n_causal_violations += early as u64;
         }
         h.seen.insert(*id);
     }
-}
-
-/// True if `d` lies inside the snapshot the peer joined from (delivered before every op
-/// after the cut).
-fn inside_base(h: &Honest, d: &OpId) -> bool {
-    let Some(cut) = h.snapshot_cut else {
-        return false;
-    };
-    let log = h.peer.log();
-    // Base ops are not held, except effective edits kept whole (at or below the cut).
-    log.contains(d) && log.get(d).is_none_or(|op| op.lamport() <= cut)
 }
 
 /// Calls into a peer unless it already panicked; a panic is recorded, never propagated.

@@ -715,18 +715,22 @@ impl Simulation {
         }
     }
 
-    /// A late peer starts: from a snapshot of peer 0's log when that is safe, else empty.
+    /// A late peer starts: from a snapshot of peer 0's log and scene when asked (and peer 0
+    /// has not panicked), else empty.
     fn join(&mut self, idx: usize, snapshot: bool) {
         let mut joined = false;
-        if snapshot && self.snapshot_safe(idx) {
+        if snapshot && self.honest[0].panicked.is_none() && idx != 0 {
             let budget = refold_budget(&self.faults);
-            match crate::join::from_snapshot(&self.honest[0], &self.honest[idx], budget) {
-                Ok((bytes, cut, peer, scene)) => {
+            let now = Timestamp(self.now);
+            match crate::join::from_snapshot(&self.honest[0], &self.honest[idx], budget, now) {
+                Ok((bytes, peer, scene)) => {
                     let h = &mut self.honest[idx];
                     h.peer = peer;
                     h.scene = scene;
                     h.disk.snapshot = Some(bytes);
-                    h.snapshot_cut = Some(cut);
+                    h.joined_from_snapshot = true;
+                    let held: Vec<OpId> = h.peer.log().entries().map(|e| e.op.id()).collect();
+                    crate::honest::note_delivered(h, &held);
                     self.stats.n_snapshot_joins += 1;
                     joined = true;
                 }
@@ -743,28 +747,6 @@ impl Simulation {
             self.connect_all(idx);
         }
         self.flush(idx);
-    }
-
-    /// A snapshot cut at the producer's stable Lamport time is safe only if no op can later
-    /// sort before it: every other peer that may author must already be a known author of
-    /// the producer (an author it never heard of could still write below the cut, and a log
-    /// joined from the snapshot would refuse that op forever). The hostile member authors at
-    /// Lamport times of its choosing, so with forgery on, joins are never from snapshots.
-    fn snapshot_safe(&self, joiner: usize) -> bool {
-        let producer = &self.honest[0];
-        if producer.panicked.is_some() || (self.hostile.is_some() && self.faults.forgery) {
-            return false;
-        }
-        // A snapshot keeps no membership nor admissions: such a log cannot be cut.
-        let log = producer.peer.log();
-        if log.has_membership_ops() || log.binds_authors() {
-            return false;
-        }
-        let vv = producer.peer.log().version_vector();
-        self.honest
-            .iter()
-            .enumerate()
-            .all(|(i, h)| i == joiner || (h.started && vv.get(&h.peer.peer_id()) > 0))
     }
 
     /// Restarts a crashed peer from what its store kept (see [`crate::store`]); pending ops,
@@ -803,12 +785,7 @@ impl Simulation {
         h.authored.retain(|id| !self.lost_own.contains(id));
         let mut log = recovered.log;
         log.set_refold_budget(refold_budget(&self.faults));
-        match memory::with_slot(h.slot, || Scene::fold(&log)) {
-            Ok(scene) => h.scene = scene,
-            Err(e) => self
-                .restart_failures
-                .push(format!("peer {idx}: reloaded log does not fold: {e}")),
-        }
+        h.scene = memory::with_slot(h.slot, || Scene::fold(&log));
         let key = Keypair::from_seed(h.key_seed);
         h.peer = memory::with_slot(h.slot, || Peer::new(key, SESSION_ID, log));
         h.wake_at = None;

@@ -20,8 +20,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use replication::identity::SessionId;
 use replication::log::Log;
 use replication::membership::FounderCommitment;
-use replication::pending::PendingLimits;
-use replication::shape::ShapePayload;
+use replication::shape::{ShapePayload, ShapeScene};
 use replication::snapshot::Snapshot;
 use replication::store::OpStore;
 use replication::store::record::CHECKSUM_BYTES;
@@ -192,12 +191,7 @@ fn write_and_recover(
         file.set_len(len - record + keep as u64)
             .map_err(|e| format!("store tear: {e}"))?;
     }
-    let mut log = match snapshot {
-        Some(bytes) => Snapshot::<ShapePayload>::decode(bytes)
-            .map_err(|e| format!("snapshot decode: {e}"))?
-            .into_log(PendingLimits::default()),
-        None => Log::default(),
-    };
+    let mut log = Log::default();
     if let Some(founder) = founder {
         log.set_founder(founder)
             .map_err(|e| format!("store recovery: {e}"))?;
@@ -207,6 +201,13 @@ fn write_and_recover(
             .map_err(|e| format!("store recovery: {e}"))?;
     }
     log.set_session_id(session_id);
+    if let Some(bytes) = snapshot {
+        // The snapshot was verified when the peer joined from it.
+        let snapshot = (Snapshot::<ShapePayload>::decode(bytes))
+            .map_err(|e| format!("snapshot decode: {e}"))?;
+        (log, _) =
+            (snapshot.join::<ShapeScene>(log, now)).map_err(|e| format!("snapshot join: {e}"))?;
+    }
     let (_store, recovery) =
         OpStore::open_into(path, now, &mut log).map_err(|e| format!("store recovery: {e}"))?;
     Ok((log, recovery.n_records, recovery.n_truncated_bytes))

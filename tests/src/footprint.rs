@@ -329,7 +329,7 @@ pub fn measure(
 ) -> Result<Footprint, FootprintError> {
     let author = Keypair::from_seed(AUTHOR_SEED);
     let mut log = Log::<ShapePayload>::default();
-    let mut scene = Materialized::<ShapePayload, ShapeScene>::fold(&log)?;
+    let mut scene = Materialized::<ShapePayload, ShapeScene>::fold(&log);
     let mut now = Timestamp(1_000_000);
     let create = IdSource::first(author.peer_id()).create(subject.data.clone(), None);
     let (op, insertion) = log.author(&author, now, create)?;

@@ -164,7 +164,7 @@ fn a_peer_with_only_the_ops_meshes_the_same_bytes() {
     let sent = measure(&subject, &SESSION, DEPTH).unwrap();
     // The receiver decodes and verifies each op from its bytes, then folds its own log.
     let mut log = Log::<ShapePayload>::default();
-    let mut scene = Materialized::<ShapePayload, ShapeScene>::fold(&log).unwrap();
+    let mut scene = Materialized::<ShapePayload, ShapeScene>::fold(&log);
     for bytes in &sent.ops {
         let op = Op::<ShapePayload>::decode(bytes).unwrap();
         let insertion = log

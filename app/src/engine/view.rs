@@ -151,10 +151,9 @@ pub struct View {
 }
 
 impl View {
-    /// The view of `log` for peer `me`. Fails when the log does not fold (only a log joined
-    /// from a snapshot can, and the engine never makes one).
+    /// The view of `log` for peer `me`.
     pub fn new(me: PeerId, log: &Log<ShapePayload>) -> Result<Self, String> {
-        let scene = Materialized::fold(log).map_err(|e| e.to_string())?;
+        let scene = Materialized::fold(log);
         let mut view = Self {
             me,
             scene,
@@ -201,7 +200,7 @@ impl View {
     pub fn apply_refold(&mut self, log: &Log<ShapePayload>, delivered: &[OpId], refold: &Refold) {
         self.scene.apply_refold(log, delivered, refold);
         {
-            for object in refold.object_keys.keys().chain(&refold.base_objects) {
+            for object in refold.object_keys.keys() {
                 self.changes.push(if object.0 & GROUP_BIT != 0 {
                     Change::All
                 } else {

@@ -64,7 +64,7 @@ pub fn history(n: usize) -> Vec<VerifiedOp<TestPayload>> {
 /// A log holding `ops`, delivered in order, and its scene.
 pub fn build(ops: &[VerifiedOp<TestPayload>]) -> (TLog, TScene) {
     let mut log = TLog::default();
-    let mut scene = TScene::fold(&log).expect("an empty scene");
+    let mut scene = TScene::fold(&log);
     for op in ops {
         let ins = log
             .insert(NOW, op.clone(), Origin(1))

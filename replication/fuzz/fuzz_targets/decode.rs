@@ -10,7 +10,8 @@ use replication::materialize::Materialize;
 use replication::materialize::test_scene::TestScene;
 use replication::payload::test_payload::TestPayload;
 use replication::pending::Origin;
-use replication::snapshot::Snapshot;
+use replication::op::UNNAMED_SESSION;
+use replication::snapshot::{Snapshot, verify};
 use replication::sync::message::{Message, PROTOCOL_VERSION};
 use replication::{Keypair, Log, Op, SyncConfig, SyncState, Timestamp};
 use testkit::stack::on_small_stack;
@@ -22,14 +23,17 @@ fuzz_target!(|data: &[u8]| on_small_stack(|| decode(data)));
 fn decode(data: &[u8]) {
     if let Ok(op) = Op::<TestPayload>::decode(data) {
         assert_eq!(op.encoded(), data, "a decoded op is canonical");
-        let _ = op.verify(&replication::op::UNNAMED_SESSION);
+        let _ = op.verify(&UNNAMED_SESSION);
     }
     if let Ok(message) = Message::decode(data) {
         assert_eq!(message.encode(), data, "a decoded message is canonical");
     }
     if let Ok(snapshot) = Snapshot::<TestPayload>::decode(data) {
         let _ = snapshot.encode();
-        let _ = snapshot.join::<TestScene>(Default::default());
+        let joined = snapshot.join::<TestScene>(Default::default(), Timestamp(0));
+        if let Ok((log, scene)) = joined {
+            let _ = verify(&log, &scene, &UNNAMED_SESSION, |_| {});
+        }
     }
     if let Ok(scene) = TestScene::decode_snapshot(data) {
         let mut out = Vec::new();

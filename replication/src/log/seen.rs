@@ -8,7 +8,7 @@
 
 use std::collections::BTreeMap;
 
-use super::{Base, OrderKey};
+use super::OrderKey;
 use crate::causal::Reach;
 use crate::identity::{OpId, PeerId};
 use crate::lease::{Lease, Mark, lease_step};
@@ -53,7 +53,6 @@ pub(crate) struct Dag<'a, P> {
     /// The forked authors: past its fork, an author's ops reach their past through their deps
     /// alone, and no memo or seq shortcut speaks for them.
     pub(crate) forks: &'a crate::fork::Forks,
-    pub(crate) base: Option<&'a Base<P>>,
     /// Per member, the membership ops that count, with whether each expels.
     pub(crate) members: &'a BTreeMap<PeerId, Vec<(OpId, bool)>>,
     /// The verdict on each held op, by slab position.
@@ -96,14 +95,13 @@ impl<P: Payload> Dag<'_, P> {
         self.forks.covers(&op.author(), op.seq())
     }
 
-    /// The author's previous held op (`None` for its first, one inside the base, or past the
+    /// The author's previous held op (`None` for its first, or past the
     /// author's fork, where the previous op depends on the side).
     fn prev(&self, op: &Op<P>) -> Option<&OpId> {
         if self.forks.covers(&op.author(), op.seq().saturating_sub(1)) {
             return None;
         }
-        let base_seq = self.base.map_or(0, |b| b.seq(&op.author()));
-        let at = (self.authors.get(&op.author())?).at_seq(base_seq, op.seq().checked_sub(1)?)?;
+        let at = (self.authors.get(&op.author())?).at_seq(op.seq().checked_sub(1)?)?;
         Some(self.ops.at(at).id_ref())
     }
 
@@ -112,7 +110,8 @@ impl<P: Payload> Dag<'_, P> {
         if id == target.id_ref() {
             return Some(true);
         }
-        // Ops inside a base have Lamport times at or below its cut, below every held op's.
+        // Every dep of a held op is held: an id that is not is in no held op's past.
+
         let Some(at) = self.ops.position(id) else {
             return Some(false);
         };
@@ -169,9 +168,8 @@ impl<P: Payload> Dag<'_, P> {
     pub(crate) fn sees(&self, memo: &mut Reach, from: &OpId, target_id: &OpId) -> bool {
         match self.ops.position(target_id) {
             Some(target_at) => self.sees_at(memo, from, target_at),
-            // A target inside the base: every held op is after the cut; treat it as seen
-            // (a joined log keeps no deps for its base: a documented non-guarantee).
-            None => true,
+            // Not held: in no held op's past.
+            None => false,
         }
     }
 
@@ -182,7 +180,6 @@ impl<P: Payload> Dag<'_, P> {
         }
         match self.ops.position(from) {
             Some(from_at) => self.held_sees_at(memo, from_at, target_at),
-            // Inside the base: before every held op.
             None => false,
         }
     }

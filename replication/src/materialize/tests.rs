@@ -20,7 +20,7 @@ use proptest::prelude::*;
 type TScene = Materialized<TestPayload, TestScene>;
 
 fn from_scratch(log: &TLog) -> TScene {
-    TScene::fold(log).unwrap()
+    TScene::fold(log)
 }
 
 /// Delivers `ops` one by one, keeping a scene in step with every insertion.

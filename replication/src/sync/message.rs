@@ -119,7 +119,7 @@ pub enum Message {
         /// The entries.
         vv: VersionVector,
         /// For each entry in order, the tip of the sender's op at that seq ([`tip`]), or 0
-        /// where it holds none (inside a snapshot's base); empty when not said. A receiver
+        /// where it holds none; empty when not said. A receiver
         /// holding another op there sends its own: the two are a fork ([`crate::fork`]).
         tips: Vec<u64>,
     },

@@ -2003,18 +2003,16 @@ fn ping_interval(base_resend_micros: u64) -> u64 {
     (base_resend_micros / PINGS_PER_RESEND).max(MIN_PING_AFTER_MICROS)
 }
 
-/// The tip of `log`'s op of `author` at `seq`, or 0 where it holds none (inside a snapshot's
-/// base): what a have or a want says of the op at a seq it announces.
+/// The tip of `log`'s op of `author` at `seq`, or 0 where it holds none: what a have or a
+/// want says of the op at a seq it announces.
 fn tip_at<P: Payload>(log: &Log<P>, author: &PeerId, seq: u64) -> u64 {
     log.by_seq(author, seq).map_or(0, |op| tip(&op.id()))
 }
 
 /// True if the log's refusal of an op counts against the remote that sent it: all do but a
-/// fork of an op inside the log's snapshot base (which it cannot tell apart), since an honest
-/// remote may hold the other side, and a full log (an honest relay's op is refused as much as
-/// any: the remote did nothing wrong).
+/// full log's (an honest relay's op is refused as much as any: the remote did nothing wrong).
 fn is_offence(e: &InsertError) -> bool {
-    !matches!(e, InsertError::Equivocation { .. } | InsertError::Full)
+    !matches!(e, InsertError::Full)
 }
 
 /// The rejection a received op's decode error counts as.
