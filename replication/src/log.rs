@@ -44,6 +44,10 @@ pub const MAX_LAMPORT_JUMP: u64 = 1 << 32;
 /// folds again from its start. An op landing near the end of a small object's history (an
 /// honest concurrent edit) is delivered at once, whatever the budget below.
 pub const MAX_FREE_REFOLD_ENTRIES: usize = 2 * CHECKPOINT_INTERVAL;
+/// Most ops a log keeps that were refused for sorting below their author's previous op as it
+/// holds it, while their own deps allowed them ([`Log::retry_fork_candidates`]); past this
+/// the oldest is dropped (a peer asks for it again, as for any op it lacks).
+pub const MAX_FORK_CANDIDATE_OPS: usize = 64;
 /// Most entries per second that refolds caused by remote ops may re-evaluate, on average,
 /// counting only refolds over [`MAX_FREE_REFOLD_ENTRIES`]. A remote op whose refold would be
 /// over that while the budget is spent waits in the pending buffer until it is earned back;
@@ -321,6 +325,7 @@ struct Learnt {
 }
 
 /// What an op's deps show of its causal past ([`Log::deps_seen`]).
+#[derive(Clone, Copy)]
 struct DepsSeen {
     /// The highest Lamport time among the held deps (0 when none is held).
     lamport: u64,
@@ -362,6 +367,17 @@ impl<'a, P> Chain<'a, P> {
         self.at_seq(op.seq()).map(Op::id)
     }
 
+    /// True if `op`, refused by [`Chain::check_floors`], clears what its deps set and sorts
+    /// below its author's previous op as held here only: where the author forked, that op may
+    /// be the other side's, and `op` fits once the fork is known.
+    fn below_previous_only(&self, forks: &Forks, op: &Op<P>, deps: DepsSeen) -> bool {
+        let past_fork = forks.covers(&op.author(), op.seq().saturating_sub(1));
+        let clears_deps = op.lamport() > deps.lamport
+            && op.lamport() - deps.lamport <= MAX_LAMPORT_JUMP
+            && op.timestamp() >= deps.timestamp;
+        !past_fork && op.seq() > 1 && clears_deps
+    }
+
     /// Checks that `op`'s Lamport time and timestamp clear what its causal past sets (its
     /// held deps, `deps`, and its author's previous op); returns its horizon.
     fn check_floors(&self, forks: &Forks, op: &Op<P>, deps: DepsSeen) -> Result<u32, InsertError> {
@@ -400,6 +416,22 @@ impl<'a, P> Chain<'a, P> {
         }
         Ok(horizon)
     }
+}
+
+/// Keeps `op` (from `origin`) among the fork candidates, once, dropping the oldest past
+/// [`MAX_FORK_CANDIDATE_OPS`].
+fn keep_fork_candidate<P>(
+    candidates: &mut std::collections::VecDeque<(Op<P>, Origin)>,
+    op: Op<P>,
+    origin: Origin,
+) {
+    if candidates.iter().any(|(c, _)| c.id_ref() == op.id_ref()) {
+        return;
+    }
+    if candidates.len() == MAX_FORK_CANDIDATE_OPS {
+        candidates.pop_front();
+    }
+    candidates.push_back((op, origin));
 }
 
 /// What holding an op charges its author: its bytes and grants, within the author's quota
@@ -535,6 +567,10 @@ pub struct Log<P> {
     max_lamport: u64,
     clock: HybridClock,
     pending: Pending<P>,
+    /// Ops refused only for sorting below their author's previous op held here, with their
+    /// origins, oldest first (at most [`MAX_FORK_CANDIDATE_OPS`]): if the author turns out to
+    /// have forked, that op was the other side's, and they are delivered at once.
+    fork_candidates: std::collections::VecDeque<(Op<P>, Origin)>,
     stats: LogStats,
     /// Bytes of encoded ops held, in all (per author in [`Authored::bytes`]).
     n_bytes: u64,
@@ -604,6 +640,7 @@ impl<P: Payload> Log<P> {
             max_lamport: 0,
             clock: HybridClock::default(),
             pending: Pending::with_limits(limits),
+            fork_candidates: std::collections::VecDeque::new(),
             stats: LogStats::default(),
             n_bytes: 0,
             author_quota: MAX_AUTHOR_BYTES,
@@ -913,7 +950,7 @@ impl<P: Payload> Log<P> {
         }
         let first_id = op.id();
         let first_pos = self
-            .deliver(op, now, deps)
+            .deliver(op, origin, now, deps)
             .inspect_err(|_| self.stats.n_refused += 1)?;
         let mut queue = std::collections::VecDeque::new();
         self.free_waiters(first_id, &mut queue);
@@ -951,7 +988,15 @@ impl<P: Payload> Log<P> {
         if !self.pending.is_empty() {
             queue.extend(self.pending.due(now));
         }
-        while let Some((ready, ready_origin)) = queue.pop_front() {
+        loop {
+            let Some((ready, ready_origin)) = queue.pop_front() else {
+                // A fork this insertion revealed may let a refused op in.
+                queue = self.retry_fork_candidates();
+                if queue.is_empty() {
+                    break;
+                }
+                continue;
+            };
             let id = ready.id();
             let deps = self.deps_seen(&ready);
             if let Some(missing) = self.missing(&ready, now, &deps) {
@@ -965,7 +1010,7 @@ impl<P: Payload> Log<P> {
                 self.hold_for_refold(now, ready, ready_origin, until, out);
                 continue;
             }
-            match self.deliver(ready, now, deps) {
+            match self.deliver(ready, ready_origin, now, deps) {
                 Ok(pos) => {
                     first_pos = Some(first_pos.map_or(pos, |f| f.min(pos)));
                     charged |= remote;
@@ -979,6 +1024,21 @@ impl<P: Payload> Log<P> {
             }
         }
         self.close_insertion(now, first_pos, charged, out);
+    }
+
+    /// The fork candidates whose author is now known to have forked before their seq: their
+    /// previous op is no longer read from the chain, so they may be delivered. Nothing unless
+    /// this insertion found a fork.
+    fn retry_fork_candidates(&mut self) -> std::collections::VecDeque<(Op<P>, Origin)> {
+        if self.forks_changed.is_empty() || self.fork_candidates.is_empty() {
+            return std::collections::VecDeque::new();
+        }
+        let forks = &self.forks;
+        let (retry, keep) = std::mem::take(&mut self.fork_candidates)
+            .into_iter()
+            .partition(|(op, _)| forks.covers(&op.author(), op.seq() - 1));
+        self.fork_candidates = keep;
+        retry
     }
 
     /// Ends an insertion that delivered from `first_pos` on (`None`: nothing moved): notes the
@@ -1202,7 +1262,13 @@ impl<P: Payload> Log<P> {
 
     /// Adds an op whose causal past is delivered; returns its position in the order. An op
     /// whose author's slot is taken is held beside the first as a sibling ([`crate::fork`]).
-    fn deliver(&mut self, op: Op<P>, now: Timestamp, deps: DepsSeen) -> Result<usize, InsertError> {
+    fn deliver(
+        &mut self,
+        op: Op<P>,
+        origin: Origin,
+        now: Timestamp,
+        deps: DepsSeen,
+    ) -> Result<usize, InsertError> {
         let author = op.author();
         if self.binding.is_some() && op.version() != crate::op::OP_FORMAT_VERSION {
             return Err(InsertError::OldLayout);
@@ -1228,7 +1294,16 @@ impl<P: Payload> Log<P> {
         if self.ops.len() >= MAX_LOG_OPS {
             return Err(InsertError::Full);
         }
-        let horizon = chain.check_floors(&self.forks, &op, deps)?;
+        let horizon = match chain.check_floors(&self.forks, &op, deps) {
+            Ok(horizon) => horizon,
+            Err(e) => {
+                if chain.below_previous_only(&self.forks, &op, deps) {
+                    keep_fork_candidate(&mut self.fork_candidates, op, origin);
+                }
+                return Err(e);
+            }
+        };
+
         let charge = Charge::of(authored.as_deref(), self.author_quota, first_budget, &op)?;
         if self.n_bytes + charge.n_bytes > MAX_LOG_BYTES {
             return Err(InsertError::Full);

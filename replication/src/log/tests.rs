@@ -601,6 +601,41 @@ fn a_lower_fork_rejects_from_the_lower_seq() {
     }
 }
 
+/// Issue 50: an op of a forker checked against the other side's previous op was refused, and
+/// stayed out until a peer asked for it again; learning the fork now delivers it at once.
+#[test]
+fn an_op_refused_against_the_other_side_is_delivered_when_the_fork_is_learnt() {
+    let x = key(0);
+    let chat = |text: &str| TestPayload::Chat(text.into());
+    let a1 = signed(&x, 1, 50, 5_000, vec![], chat("a1"));
+    let b1 = signed(&x, 1, 1, 1_000, vec![], chat("b1"));
+    // Its deps leave out its previous op, which a member signing its own ops may do.
+    let b2 = signed(&x, 2, 2, 1_100, vec![], chat("b2"));
+    let mut log = TLog::default();
+    log.insert(Timestamp(0), a1, Origin(1)).unwrap();
+    assert!(matches!(
+        log.insert(Timestamp(0), b2.clone(), Origin(1)),
+        Err(InsertError::BadLamport { .. })
+    ));
+    assert!(!log.contains(&b2.id()));
+    let ins = log.insert(Timestamp(0), b1.clone(), Origin(1)).unwrap();
+    assert_eq!(log.forks().seq_of(&x.peer_id()), Some(1));
+    assert!(ins.delivered.contains(&b2.id()), "{:?}", ins.delivered);
+    assert_eq!(
+        log.mark(&b2.id()),
+        Some(Mark::Rejected(RejectReason::Forked))
+    );
+    // A log that got the fork first holds the same.
+    let mut other = TLog::default();
+    for op in [&b2, &b1] {
+        let _ = other.insert(Timestamp(0), op.clone(), Origin(1));
+    }
+    let a1 = signed(&x, 1, 50, 5_000, vec![], chat("a1"));
+    other.insert(Timestamp(0), a1, Origin(1)).unwrap();
+    let ids = |l: &TLog| l.entries().map(|e| (e.op.id(), e.mark)).collect::<Vec<_>>();
+    assert_eq!(ids(&other), ids(&log));
+}
+
 /// Two copies of one identity sculpting side by side: every delivery order of the same ops
 /// gives one linear order, one set of verdicts and one activity, with the identity's ops
 /// rejected from its lowest fork on, and nothing left waiting.

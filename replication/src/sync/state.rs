@@ -854,7 +854,8 @@ impl<P: Payload> SyncState<P> {
                 self.events.push_back(Event::Forked { author, seq });
             }
             // An op refused before its author's fork was known (checked against the wrong
-            // side's previous op) may be delivered now: it can be asked for again.
+            // side's previous op) that the log no longer keeps may be delivered now: it can be
+            // asked for again.
             self.asked.clear();
         }
         self.close_if_expelled(now, log);
