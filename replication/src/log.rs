@@ -1667,7 +1667,6 @@ impl<P: Payload> Log<P> {
 
     /// Judges the op at `pos` (its order key and effect already read) against `state` (the
     /// fold of the positions before it) and advances the state past it.
-
     fn judge_read(
         &self,
         cx: &mut LeaseCx,
@@ -2111,7 +2110,6 @@ impl<P: Payload> Log<P> {
     }
 
     /// True if the op is effective, not undone and not hidden by a delete that saw it.
-
     pub fn is_active(&self, id: &OpId) -> bool {
         self.is_effective(id)
             && !self.state.is_undone(id)

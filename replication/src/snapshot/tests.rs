@@ -46,7 +46,8 @@ fn verdicts(log: &TLog) -> Vec<(OpId, Mark, bool)> {
 /// that received everything op by op.
 #[test]
 fn a_join_at_any_point_judges_every_later_op_as_a_full_peer_does() {
-    let runs: [(&str, Vec<_>, fn() -> TLog); 3] = [
+    type Run = (&'static str, Vec<VerifiedOp<TestPayload>>, fn() -> TLog);
+    let runs: [Run; 3] = [
         ("leases, deletes, undo", workload(3, 4, 150), TLog::default),
         ("forks", twin_workload(5, 4, 150), TLog::default),
         ("membership", founded_workload(7, 4, 150), founded_log),
