@@ -60,6 +60,12 @@ pub struct Faults {
     /// Whether peer 0 founded the session and expels the hostile member's key late in the
     /// run ([`replication::membership`]), while the member forges expels of honest peers.
     pub expel: bool,
+    /// Whether connections behave as the product's QUIC ones do (`crate::sim`'s stream
+    /// model): a loss is a retransmission after a loss detection time, not a lost message;
+    /// no duplicates; a connection delivers in order; a partition stalls it, closing it if it
+    /// outlasts the idle timeout. Off: every message is a datagram of its own, lost,
+    /// duplicated and reordered independently (the old model, kept as a stress case).
+    pub streams: bool,
 }
 
 /// One kind of fault, as `--without` names it.
@@ -192,6 +198,7 @@ const CHAOS: Faults = Faults {
     lease_attacks: false,
     forks: false,
     expel: false,
+    streams: false,
 };
 
 /// Chaos plus every hostile-member attack that replication is meant to withstand today
@@ -206,8 +213,9 @@ const BYZANTINE: Faults = Faults {
 
 impl Faults {
     /// Every preset, mildest first (`swarm` draws a mix per seed from `chaos`;
-    /// `byzantine-forks` is `byzantine` with equivocation).
-    pub const PRESETS: [Faults; 7] = [
+    /// `byzantine-forks` is `byzantine` with equivocation; `quic` is `chaos` over stream
+    /// connections).
+    pub const PRESETS: [Faults; 8] = [
         Faults {
             name: "none",
             latency_micros: 20_000,
@@ -225,6 +233,7 @@ impl Faults {
             lease_attacks: false,
             forks: false,
             expel: false,
+            streams: false,
         },
         Faults {
             name: "lan",
@@ -243,6 +252,7 @@ impl Faults {
             lease_attacks: false,
             forks: false,
             expel: false,
+            streams: false,
         },
         Faults {
             name: "wan",
@@ -261,6 +271,7 @@ impl Faults {
             lease_attacks: false,
             forks: false,
             expel: false,
+            streams: false,
         },
         CHAOS,
         // A mix of chaos's fault kinds drawn per seed (see `Config::effective_faults`).
@@ -273,6 +284,13 @@ impl Faults {
             name: "byzantine-forks",
             forks: true,
             ..BYZANTINE
+        },
+        // Chaos over connections as the product's transport gives them: its losses are
+        // delays.
+        Faults {
+            name: "quic",
+            streams: true,
+            ..CHAOS
         },
     ];
 

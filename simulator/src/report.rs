@@ -158,6 +158,10 @@ pub struct Stats {
     pub n_duplicated: u64,
     /// Messages dropped by a partition.
     pub n_partition_drops: u64,
+    /// Messages a partition stalled on a stream connection.
+    pub n_stalled: u64,
+    /// Losses on stream connections, each made good after a loss detection time.
+    pub n_retransmitted: u64,
     /// Messages dropped because their link's queue was full (bandwidth).
     pub n_queue_drops: u64,
     /// Messages that arrived after their connection was gone.
@@ -258,7 +262,8 @@ impl Report {
         writeln!(
             f,
             "  sent {} messages ({:.1}/op), {} bytes ({:.0} bytes/op); delivered {}, lost {}, \
-             duplicated {}, partitioned {}, queue-dropped {}, stale {}",
+             duplicated {}, partitioned {}, queue-dropped {}, stale {}; as streams: \
+             retransmitted {}, stalled {}",
             s.n_messages,
             self.messages_per_op(),
             s.n_bytes,
@@ -268,7 +273,9 @@ impl Report {
             s.n_duplicated,
             s.n_partition_drops,
             s.n_queue_drops,
-            s.n_stale_drops
+            s.n_stale_drops,
+            s.n_retransmitted,
+            s.n_stalled
         )?;
         self.fmt_slowest(f)?;
         let mut kinds: Vec<_> = s.bytes_by_kind.iter().collect();

@@ -27,6 +27,8 @@ use crate::session::{FOUNDER_NONCE, SESSION_CAP_BYTES, SESSION_ID};
 use crate::trace::TraceHash;
 use crate::workload::{self, Action, HOT_OBJECT};
 
+mod stream;
+
 /// The virtual clock's start (µs); op timestamps are virtual times.
 pub const START_MICROS: u64 = 1_000_000_000;
 /// Mean virtual time between two user ops (over all peers).
@@ -95,6 +97,12 @@ enum Ev {
         peer: usize,
         snapshot: bool,
     },
+    /// A stream connection stalled by a partition reaches its idle timeout.
+    IdleTimeout {
+        from: usize,
+        to: usize,
+        epoch: u64,
+    },
     /// The remote end of a connection to a crashed peer notices the crash and closes.
     Unlinger {
         to: usize,
@@ -145,6 +153,12 @@ pub struct Simulation {
     latency_micros: Vec<Vec<u64>>,
     /// When each directed link is free to send again (bandwidth).
     link_free_at: Vec<Vec<u64>>,
+    /// Per directed link, the connection epoch and delivery time of the last message sent
+    /// on it as a stream ([`Faults::streams`]): the next is delivered after it.
+    stream_tail: Vec<Vec<(u64, u64)>>,
+    /// Per directed link, when the first message stalled on it while a partition cuts it,
+    /// and the messages, with their connection epochs.
+    stalled: BTreeMap<(usize, usize), stream::Stalled>,
     /// Pair state, `[min][max]`.
     pairs: Vec<Vec<Pair>>,
     /// Connections whose other end crashed, still open at `to` (keyed `(to, from)`): messages
@@ -199,6 +213,8 @@ impl Simulation {
             actions,
             latency_micros,
             link_free_at: vec![vec![0; n_nodes]; n_nodes],
+            stream_tail: vec![vec![(0, 0); n_nodes]; n_nodes],
+            stalled: BTreeMap::new(),
             pairs: vec![vec![Pair::default(); n_nodes]; n_nodes],
             lingering: BTreeMap::new(),
             blocked: BTreeMap::new(),
@@ -504,11 +520,22 @@ impl Simulation {
             }
             Ev::PartitionStart { cut } => {
                 self.trace.u64(4);
+                if self.faults.streams {
+                    self.stream_partition_start(&cut);
+                }
                 self.partition(cut, true);
             }
             Ev::PartitionEnd { cut } => {
                 self.trace.u64(5);
+                let unblocked = self.faults.streams.then(|| cut.clone());
                 self.partition(cut, false);
+                if let Some(links) = unblocked {
+                    self.stream_unblocked(&links);
+                }
+            }
+            Ev::IdleTimeout { from, to, epoch } => {
+                self.trace.u64(20);
+                self.stream_idle_timeout(from, to, epoch);
             }
             Ev::Offline { peer } => {
                 self.trace.u64(6);
@@ -665,6 +692,8 @@ impl Simulation {
 
     fn heal(&mut self) {
         self.blocked.clear();
+        let stalled: Vec<(usize, usize)> = self.stalled.keys().copied().collect();
+        self.stream_unblocked(&stalled);
         for h in &mut self.honest {
             h.offline_depth = 0;
             h.crash_armed = None;
@@ -1098,6 +1127,9 @@ impl Simulation {
         let counted = self.stats.bytes_by_kind.entry(kind).or_default();
         counted.0 += 1;
         counted.1 += bytes.len() as u64;
+        if self.faults.streams {
+            return self.stream_send(from, to, bytes);
+        }
         if self.blocked.contains_key(&(from, to)) {
             self.stats.n_partition_drops += 1;
             return;

@@ -142,6 +142,25 @@ fn late_peers_join_from_snapshots_and_converge() {
     assert!(n_snapshot_joins > 0, "no run joined from a snapshot");
 }
 
+/// Issue 53: the product's sync runs over QUIC streams, which lose no message inside a
+/// connection. Under `quic`, a loss is a retransmission and a partition a stall: nothing is
+/// lost or duplicated, and the runs converge.
+#[test]
+fn the_quic_preset_turns_losses_into_delays_and_partitions_into_stalls() {
+    let reports = passing_runs(0, 6, Config::new(0, 5, 300, faults("quic")));
+    let sum = |f: fn(&Report) -> u64| reports.iter().map(f).sum::<u64>();
+    assert_eq!(sum(|r| r.stats.n_lost + r.stats.n_duplicated), 0);
+    assert_eq!(sum(|r| r.stats.n_partition_drops), 0);
+    assert!(
+        sum(|r| r.stats.n_retransmitted) > 0,
+        "no loss was made good"
+    );
+    assert!(
+        sum(|r| r.stats.n_stalled) > 0,
+        "no partition stalled a connection"
+    );
+}
+
 #[test]
 fn a_seed_replays_to_the_same_trace_and_another_seed_does_not() {
     let config = Config::new(21, 4, 80, faults("chaos"));
