@@ -111,6 +111,10 @@ fn args(cli: Cli) -> Result<Args, String> {
     })
 }
 
+/// Seeds from which a campaign with late joins must have joined from a snapshot at least
+/// once (about half of all late joins are from snapshots).
+const MIN_SEEDS_FOR_SNAPSHOT_JOINS: u64 = 20;
+
 /// Figures over a campaign.
 #[derive(Default)]
 struct Summary {
@@ -305,6 +309,13 @@ fn main() -> ExitCode {
     }
     if args.n_seeds > 1 {
         summary.print(started.elapsed().as_secs_f64());
+    }
+    // A campaign whose preset has late joins must show snapshot joins, or it did not test
+    // them (issue 50).
+    let late_joins = args.config.effective_faults().late_joins;
+    if args.n_seeds >= MIN_SEEDS_FOR_SNAPSHOT_JOINS && late_joins && summary.n_snapshot_joins == 0 {
+        eprintln!("no run of {} joined from a snapshot", args.n_seeds);
+        return ExitCode::FAILURE;
     }
     if n_failed > 0 {
         eprintln!("{n_failed} of {} runs failed", args.n_seeds);
