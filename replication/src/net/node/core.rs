@@ -213,7 +213,7 @@ impl<P: Payload + Send + 'static> Core<P> {
         // The author hears back only once the observer has seen its op settled (a face reads
         // its own edit in the view as soon as the reply comes).
         if let Some(observer) = &mut self.observer {
-            observer.settled(&self.peer, std::mem::take(&mut self.changed));
+            observer.settled(&mut self.peer, std::mem::take(&mut self.changed));
         }
         Ok(op.op().id())
     }
@@ -422,7 +422,8 @@ impl<P: Payload + Send + 'static> Core<P> {
         }
     }
 
-    /// After every step: events (and storage) first, then limits, then transmits.
+    /// After every step: events (and storage) first, then limits, then the observer (whose
+    /// scene check may queue messages), then transmits.
     fn settle(&mut self, now: Timestamp) {
         self.drain_events();
         if !self.running {
@@ -430,10 +431,10 @@ impl<P: Payload + Send + 'static> Core<P> {
         }
         self.enforce_rejection_limit();
         self.admit_newcomers(now);
-        self.drain_transmits(now);
         if let Some(observer) = &mut self.observer {
-            observer.settled(&self.peer, std::mem::take(&mut self.changed));
+            observer.settled(&mut self.peer, std::mem::take(&mut self.changed));
         }
+        self.drain_transmits(now);
     }
 
     /// In a session that binds its authors, admits the keys of connections up for
@@ -556,6 +557,9 @@ impl<P: Payload + Send + 'static> Core<P> {
                     value,
                 },
                 Event::UpToDate => NodeEvent::UpToDate { conn, peer },
+                // The peer hands the scene check's events to the observer's queue
+                // (`Peer::poll_scene_event`), never here.
+                Event::Scene(_) => continue,
                 Event::Forked { author, seq } => NodeEvent::Forked { conn, author, seq },
                 Event::Closed(reason) => {
                     if reason == CloseReason::Evicted {
