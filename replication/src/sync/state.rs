@@ -1935,6 +1935,12 @@ impl<P: Payload> SyncState<P> {
                 });
             }
         }
+        self.next_batch_or_scene_hash(now, log)
+    }
+
+    /// The next op batch within the flow-control window or, with nothing else to say at a
+    /// quiescent point, the scene hash if it changed.
+    fn next_batch_or_scene_hash(&mut self, now: Timestamp, log: &Log<P>) -> Option<Message> {
         if self.in_flight.len() >= MAX_IN_FLIGHT_BATCHES {
             return None;
         }
@@ -1943,7 +1949,6 @@ impl<P: Payload> SyncState<P> {
             ops = self.next_batch(log);
         }
         if ops.is_empty() {
-            // Nothing else to say: at a quiescent point, the scene hash if it changed.
             let hash = (self.scene.hash_unsent() && self.quiescent(log))
                 .then(|| self.scene.take_hash())
                 .flatten();

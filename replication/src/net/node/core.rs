@@ -500,6 +500,7 @@ impl<P: Payload + Send + 'static> Core<P> {
     /// Drains the core's events. Every op they deliver is appended to the store in one write
     /// and one fsync, before the observer or the app hears of any of them and before anything
     /// more is sent: a batch of 64 received ops costs one fsync, not 64.
+    // tidy:table: one arm per sync event.
     fn drain_events(&mut self) {
         let events: Vec<_> = std::iter::from_fn(|| self.peer.poll_event()).collect();
         let delivered: Vec<OpId> = events
@@ -557,8 +558,7 @@ impl<P: Payload + Send + 'static> Core<P> {
                     value,
                 },
                 Event::UpToDate => NodeEvent::UpToDate { conn, peer },
-                // The peer hands the scene check's events to the observer's queue
-                // (`Peer::poll_scene_event`), never here.
+                // On the observer's own queue (`Peer::poll_scene_event`), never here.
                 Event::Scene(_) => continue,
                 Event::Forked { author, seq } => NodeEvent::Forked { conn, author, seq },
                 Event::Closed(reason) => {
