@@ -709,8 +709,9 @@ impl Folder {
 
     /// Answers the scene check ([`replication::sync::scene`]): a mismatch is said and answered
     /// with this scene's per-object hashes, a resync refolds what differs, and the scene's
-    /// hash goes to the peer once the fold is at a new cut or changed, while every connection
-    /// is in step (a hash compared mid-sync would only be at another cut than the remote's).
+    /// hash goes to the peer once the fold is at a new cut or changed, while some connection
+    /// is in step (a hash computed mid-sync would only be at another cut than every remote's,
+    /// and a remote that stays out of step must not keep the others from comparing).
     fn check_scene(&mut self, view: &mut View, peer: &mut Peer<ShapePayload>) {
         let cut = SceneCut::of(peer.log());
         while let Some((conn, event)) = peer.poll_scene_event() {
@@ -737,9 +738,9 @@ impl Folder {
             }
         }
         let in_step = (peer.connections())
-            .all(|(_, sync)| sync.remote_version_vector() == peer.log().version_vector());
+            .any(|(_, sync)| sync.remote_version_vector() == peer.log().version_vector());
         let now = (view.generation, cut);
-        if in_step && peer.connections().next().is_some() && self.announced != Some(now) {
+        if in_step && self.announced != Some(now) {
             peer.set_scene_hash(cut, view.scene.scene_hash().0);
             self.announced = Some(now);
         }

@@ -148,6 +148,9 @@ impl SculptApp {
             ui.horizontal(|ui| {
                 self.peer_row_ui(ui, p, &membership, &mut clicks);
             });
+            if p.online {
+                scene_check_ui(ui, p);
+            }
         }
         if let Some(f) = clicks.follow {
             self.presence.following = f;
@@ -227,7 +230,6 @@ impl SculptApp {
             "{} · {} · rtt {rtt} · {} to send, {} to receive",
             p.how, p.addr, p.to_send, p.to_receive
         ));
-        scene_check_ui(ui, p);
         let following = self.presence.following == Some(p.peer);
         if ui.selectable_label(following, "follow").clicked() {
             clicks.follow = Some((!following).then_some(p.peer));
@@ -255,25 +257,21 @@ impl SculptApp {
     }
 }
 
-/// A peer's scene check: whether its scene agreed with ours when last compared, and the
+/// A peer's scene check, on a short line of its own under its row (the row alone sets how
+/// wide the panel grows): whether its scene agreed with ours when last compared, and the
 /// mismatches found with it (the last one on hover).
 fn scene_check_ui(ui: &mut egui::Ui, p: &PeerRow) {
     let (colour, word) = match (p.scene_agrees, p.scene_mismatches) {
         (Some(false), _) => (egui::Color32::LIGHT_RED, "scene differs".to_string()),
         (Some(true), 0) => (egui::Color32::LIGHT_GREEN, "same scene".to_string()),
-        (Some(true), n) => (
-            egui::Color32::YELLOW,
-            format!("same scene · {n} mismatch(es) repaired"),
-        ),
+        (Some(true), n) => (egui::Color32::YELLOW, format!("same scene · {n} repaired")),
         (None, 0) => return,
-        (None, n) => (
-            egui::Color32::YELLOW,
-            format!("{n} scene mismatch(es) seen"),
-        ),
+        (None, n) => (egui::Color32::YELLOW, format!("{n} scene mismatch(es)")),
     };
     let hover = match &p.last_mismatch {
         Some(last) => format!("{SCENE_CHECK_HOVER}\n\nlast: {last}"),
         None => SCENE_CHECK_HOVER.to_string(),
     };
-    ui.colored_label(colour, word).on_hover_text(hover);
+    ui.label(egui::RichText::new(word).small().color(colour))
+        .on_hover_text(hover);
 }
