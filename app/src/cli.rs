@@ -403,6 +403,7 @@ fn run_commands(engine: &Engine, lines: &[String]) -> anyhow::Result<()> {
 fn peer_state(engine: &Engine) -> serde_json::Value {
     let mut view = lock(engine.view());
     let (to_send, to_receive) = view.progress();
+    let check = view.scene_check().clone();
     serde_json::json!({
         "peer": view.peer_id().short(),
         "listen": view.listen_addr().map(|a| a.to_string()),
@@ -415,6 +416,12 @@ fn peer_state(engine: &Engine) -> serde_json::Value {
         "store_error": view.store_error(),
         "lan": view.lan_sessions().iter().map(|s| s.name.clone()).collect::<Vec<_>>(),
         "rejected": view.history().iter().filter(|h| h.status.starts_with("rejected")).count(),
+        "scene_check": {
+            "agrees": check.agrees,
+            "mismatches": check.n_mismatches,
+            "objects_refolded": check.n_objects_refolded,
+            "last_mismatch": check.last_mismatch,
+        },
     })
 }
 

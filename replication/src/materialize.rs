@@ -17,6 +17,7 @@ use crate::lease::{FoldState, Mark};
 use crate::log::{Drained, Insertion, Log, OrderKey, Refold};
 use crate::op::Op;
 use crate::payload::{Effect, ObjectId, Payload};
+use crate::sync::scene::ObjectHashes;
 
 /// Largest scene snapshot a [`Materialize::decode_snapshot`] is given, in bytes.
 pub const MAX_SCENE_SNAPSHOT_BYTES: usize = 64 * 1024 * 1024;
@@ -66,6 +67,11 @@ pub trait Materialize<P: Payload> {
 
     /// The blake3 hash of the scene's canonical encoding.
     fn scene_hash(&self) -> SceneHash;
+
+    /// The scene's hash split by object (each id that [`Materialize::reset_object`] takes),
+    /// and the rest: two scenes whose parts all hash equal have equal scene hashes, so peers
+    /// whose scene hashes differ find the objects to refold ([`crate::sync::scene`]).
+    fn object_hashes(&self) -> ObjectHashes;
 
     /// Appends the scene's snapshot encoding: a version byte first, canonical (equal scenes
     /// encode to equal bytes), at most [`MAX_SCENE_SNAPSHOT_BYTES`].
@@ -171,6 +177,42 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
     /// What the driver did so far.
     pub fn stats(&self) -> FoldStats {
         self.stats
+    }
+
+    /// The scene's per-object hashes ([`Materialize::object_hashes`]).
+    pub fn object_hashes(&self) -> ObjectHashes {
+        self.scene.object_hashes()
+    }
+
+    /// Refolds `objects` from their start in `log`, and with `rest` the independent entries
+    /// after the base: the repair when a peer's scene differs from another's at the same cut
+    /// ([`crate::sync::scene::Resync`]). A fold that was right is left as it was.
+    pub fn resync(&mut self, log: &Log<P>, objects: &[ObjectId], rest: bool) {
+        for object in objects {
+            self.refold_object(log, *object);
+        }
+        if rest {
+            let base = log.base().map(|b| b.authors.as_slice()).unwrap_or_default();
+            let void_from = (log.version_vector().iter())
+                .map(|(author, _)| {
+                    let in_base = base.iter().find(|a| a.author == *author);
+                    (*author, in_base.map_or(1, |a| a.seq + 1))
+                })
+                .collect();
+            let refold = Refold {
+                void_from,
+                ..Refold::default()
+            };
+            self.apply_refold(log, &[], &refold);
+        }
+    }
+
+    /// Changes the folded scene behind the log's back, to test that peers find and repair a
+    /// scene that no longer matches their log ([`crate::sync::scene`]). Never call it
+    /// otherwise.
+    #[doc(hidden)]
+    pub fn plant_difference(&mut self, plant: impl FnOnce(&mut M)) {
+        plant(&mut self.scene);
     }
 
     /// Brings the scene up to date with what `insertion` changed in `log`.
@@ -335,6 +377,19 @@ pub mod test_scene {
             let mut bytes = Vec::new();
             self.encode_snapshot(&mut bytes);
             SceneHash::of(&bytes)
+        }
+
+        fn object_hashes(&self) -> ObjectHashes {
+            let objects = (self.objects.iter())
+                .map(|(object, value)| (ObjectId(*object), SceneHash::of(value.as_bytes()).0));
+            let mut chat = Vec::new();
+            for (key, text) in &self.chat {
+                put_varint(&mut chat, key.lamport);
+                chat.extend_from_slice(&key.author.0);
+                put_varint(&mut chat, key.seq);
+                put_bytes(&mut chat, text.as_bytes());
+            }
+            ObjectHashes::new(objects, SceneHash::of(&chat).0)
         }
 
         fn encode_snapshot(&self, out: &mut Vec<u8>) {

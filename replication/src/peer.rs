@@ -25,6 +25,7 @@
 //! (a third peer is asked next, and the author again after it).
 
 use std::collections::{BTreeMap, VecDeque};
+use std::sync::Arc;
 
 use crate::causal::VersionVector;
 use crate::identity::{Keypair, PeerId, SessionId};
@@ -32,6 +33,8 @@ use crate::log::{AuthorError, Insertion, Log};
 use crate::op::VerifiedOp;
 use crate::payload::Payload;
 use crate::pending::Origin;
+use crate::sync::message::{DIGEST_BYTES, SceneAt};
+use crate::sync::scene::{ObjectHashes, SceneCut, SceneEvent};
 use crate::sync::state::{
     EphemeralError, Event, OpByteQuota, RELAY_AFTER_MICROS, RESEND_AFTER_MICROS, SyncConfig,
     SyncState,
@@ -51,6 +54,11 @@ pub const WANT_COALESCE_MICROS: u64 = 10_000;
 /// accepted) takes the slot of the least useful accepted connection (see [`Peer::accept`]),
 /// so remotes that dial in cannot lock out an honest accept or a dial.
 pub const MAX_CONNECTIONS: usize = 64;
+
+/// Most scene events ([`Peer::poll_scene_event`]) queued for the scene's owner; more are
+/// dropped (each connection's scene check makes a few a window, so only an owner that never
+/// polls sees this).
+pub const MAX_QUEUED_SCENE_EVENTS: usize = 4 * MAX_CONNECTIONS;
 
 /// A connection's id, chosen by the caller (the transport or the simulator).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -88,6 +96,12 @@ pub struct Peer<P> {
     wants_dirty: bool,
     wants_checked_at: Option<Timestamp>,
     want_check_at: Timestamp,
+    /// The owner's scene hash at the log's current cut, if it said one.
+    scene: Option<SceneAt>,
+    /// The owner's per-object hashes at a cut (for connections opened since).
+    object_hashes: Option<([u8; DIGEST_BYTES], Arc<ObjectHashes>)>,
+    /// What the connections' scene checks ask of the scene's owner.
+    scene_events: VecDeque<(ConnId, SceneEvent)>,
 }
 
 /// How a connection holds its slot: when it opened, and for one the remote dialed, the
@@ -312,6 +326,9 @@ impl<P: Payload> Peer<P> {
             wants_dirty: false,
             wants_checked_at: None,
             want_check_at: Timestamp(0),
+            scene: None,
+            object_hashes: None,
+            scene_events: VecDeque::new(),
         }
     }
 
@@ -392,6 +409,9 @@ impl<P: Payload> Peer<P> {
         let mut sync = SyncState::new(now, config);
         if let Some(micros) = self.typical_resend_timeout() {
             sync.assume_resend_timeout(micros);
+        }
+        if let Some(at) = self.scene {
+            sync.set_local_scene(at);
         }
         self.connections.insert(conn, sync);
         let slot = Slot {
@@ -474,7 +494,7 @@ impl<P: Payload> Peer<P> {
             let first = self.events.len();
             let len = self.log.len();
             sync.handle_input(now, bytes, &mut self.log);
-            drain(conn, sync, &mut self.events);
+            drain(conn, sync, (&mut self.events, &mut self.scene_events));
             self.charge_others(conn, first);
             if self.log.len() > len {
                 // Ops get through: connections stalled in backoff try again soon.
@@ -501,7 +521,7 @@ impl<P: Payload> Peer<P> {
         for insertion in &foreign {
             for (other, sync) in self.connections.iter_mut().filter(|(c, _)| **c != conn) {
                 sync.charge(insertion);
-                drain(*other, sync, &mut self.events);
+                drain(*other, sync, (&mut self.events, &mut self.scene_events));
             }
         }
     }
@@ -515,7 +535,7 @@ impl<P: Payload> Peer<P> {
         }
         for (conn, sync) in &mut self.connections {
             sync.close_if_expelled(now, &self.log);
-            drain(*conn, sync, &mut self.events);
+            drain(*conn, sync, (&mut self.events, &mut self.scene_events));
         }
     }
 
@@ -524,7 +544,7 @@ impl<P: Payload> Peer<P> {
         for (conn, sync) in &mut self.connections {
             if sync.poll_timeout(&self.log).is_some_and(|t| t <= now) {
                 sync.handle_timeout(now, &mut self.log);
-                drain(*conn, sync, &mut self.events);
+                drain(*conn, sync, (&mut self.events, &mut self.scene_events));
             }
         }
         if self.want_due().is_some_and(|t| t <= now) {
@@ -651,6 +671,56 @@ impl<P: Payload> Peer<P> {
         self.events.pop_front()
     }
 
+    /// The scene's owner folded the log to `cut` and its scene hashes to `hash`: every
+    /// connection compares it with its remote's ([`crate::sync::scene`]). Ignored (false) when
+    /// the log is no longer at `cut`. Call it after each fold, then drain the `poll_*`.
+    pub fn set_scene_hash(&mut self, cut: SceneCut, hash: [u8; DIGEST_BYTES]) -> bool {
+        if cut != SceneCut::of(&self.log) {
+            return false;
+        }
+        let at = cut.with_hash(hash);
+        if self.scene != Some(at) {
+            self.scene = Some(at);
+            for sync in self.connections.values_mut() {
+                sync.set_local_scene(at);
+            }
+        }
+        true
+    }
+
+    /// The owner's per-object hashes at `cut`, which a [`SceneEvent::Mismatch`] there asked
+    /// for: sent to the remotes whose scene differs, and compared with theirs. Ignored (false)
+    /// when the owner's scene hash is not at `cut`.
+    pub fn set_object_hashes(&mut self, cut: SceneCut, hashes: ObjectHashes) -> bool {
+        if self.scene.is_none_or(|at| at.cut != cut.digest) {
+            return false;
+        }
+        self.object_hashes = Some((cut.digest, Arc::new(hashes)));
+        self.reuse_object_hashes(cut)
+    }
+
+    /// Hands the per-object hashes the owner last set to the connections again, if they are
+    /// at `cut` (false if not): what answers a later [`SceneEvent::Mismatch`] at the same cut
+    /// without hashing the scene again.
+    pub fn reuse_object_hashes(&mut self, cut: SceneCut) -> bool {
+        let Some((digest, hashes)) = &self.object_hashes else {
+            return false;
+        };
+        if *digest != cut.digest || self.scene.is_none_or(|at| at.cut != cut.digest) {
+            return false;
+        }
+        for (conn, sync) in &mut self.connections {
+            sync.set_local_object_hashes(cut.digest, hashes);
+            drain(*conn, sync, (&mut self.events, &mut self.scene_events));
+        }
+        true
+    }
+
+    /// The next thing the scene check asks of the scene's owner, and the connection.
+    pub fn poll_scene_event(&mut self) -> Option<(ConnId, SceneEvent)> {
+        self.scene_events.pop_front()
+    }
+
     /// When [`Peer::handle_timeout`] should next be called.
     pub fn poll_timeout(&self) -> Option<Timestamp> {
         self.connections
@@ -662,21 +732,33 @@ impl<P: Payload> Peer<P> {
     }
 }
 
-fn drain<P: Payload>(
-    conn: ConnId,
-    sync: &mut SyncState<P>,
-    events: &mut VecDeque<(ConnId, Event)>,
-) {
+/// Moves `sync`'s events to the peer's queues: the scene check's to the scene's owner
+/// (within [`MAX_QUEUED_SCENE_EVENTS`]), the rest to the transport.
+fn drain<P: Payload>(conn: ConnId, sync: &mut SyncState<P>, queues: Queues<'_>) {
+    let (events, scene_events) = queues;
     while let Some(event) = sync.poll_event() {
-        events.push_back((conn, event));
+        match event {
+            Event::Scene(scene) if scene_events.len() < MAX_QUEUED_SCENE_EVENTS => {
+                scene_events.push_back((conn, scene));
+            }
+            Event::Scene(_) => {}
+            event => events.push_back((conn, event)),
+        }
     }
 }
+
+/// A peer's two event queues: the transport's and the scene owner's.
+type Queues<'a> = (
+    &'a mut VecDeque<(ConnId, Event)>,
+    &'a mut VecDeque<(ConnId, SceneEvent)>,
+);
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::payload::LeaseAction;
+    use crate::materialize::test_scene::TestScene;
     use crate::payload::test_payload::TestPayload;
+    use crate::payload::{LeaseAction, ObjectId};
     use crate::sync::message::Message;
     use crate::sync::state::{
         CloseReason, EXPEL_NOTICE_MICROS, HAVE_EVERY_MICROS, MIN_RESEND_AFTER_MICROS,
@@ -1932,5 +2014,139 @@ mod tests {
                 assert_eq!(e.mark, expected);
             }
         }
+    }
+
+    /// A scene kept beside a peer as the app's engine keeps one: folded from what the peer
+    /// delivers, its hash told to the peer, the scene check answered.
+    struct Owner {
+        scene: crate::materialize::Materialized<TestPayload, TestScene>,
+        resyncs: Vec<Vec<ObjectId>>,
+        n_mismatches: usize,
+    }
+
+    impl Owner {
+        fn new(peer: &TPeer) -> Self {
+            Self {
+                scene: crate::materialize::Materialized::fold(peer.log()).unwrap(),
+                resyncs: Vec::new(),
+                n_mismatches: 0,
+            }
+        }
+
+        fn answer(&mut self, peer: &mut TPeer) {
+            let cut = SceneCut::of(peer.log());
+            while let Some((_, event)) = peer.poll_scene_event() {
+                match event {
+                    SceneEvent::Mismatch(m) if m.ours.cut == cut.digest => {
+                        self.n_mismatches += 1;
+                        if !peer.reuse_object_hashes(cut) {
+                            assert!(peer.set_object_hashes(cut, self.scene.object_hashes()));
+                        }
+                    }
+                    SceneEvent::Resync(r) if r.cut == cut.digest => {
+                        self.scene.resync(peer.log(), &r.objects, r.rest);
+                        self.resyncs.push(r.objects);
+                    }
+                    _ => {}
+                }
+            }
+            assert!(peer.set_scene_hash(cut, self.scene.scene_hash().0));
+        }
+    }
+
+    /// Steps time by 10 ms from `t` until `done` (within 10 s): the owners answer, messages
+    /// are delivered and folded, timeouts run. Returns the time then.
+    fn run_scenes(
+        peers: &mut [TPeer],
+        owners: &mut [Owner],
+        links: &[(usize, ConnId, usize, ConnId)],
+        mut t: u64,
+        done: impl Fn(&[TPeer], &[Owner]) -> bool,
+    ) -> u64 {
+        let start = t;
+        loop {
+            for (peer, owner) in peers.iter_mut().zip(owners.iter_mut()) {
+                owner.answer(peer);
+            }
+            for (i, event) in pump(peers, links, Timestamp(t)) {
+                if let Event::Delivered(insertion) = event {
+                    owners[i].scene.apply_insertion(peers[i].log(), &insertion);
+                }
+            }
+            if done(peers, owners) {
+                return t;
+            }
+            assert!(t < start + 10_000_000, "not done by {t}");
+            t += 10_000;
+            for peer in peers.iter_mut() {
+                peer.handle_timeout(Timestamp(t));
+            }
+        }
+    }
+
+    fn scenes_agree(peers: &[TPeer], _: &[Owner]) -> bool {
+        (peers.iter().flat_map(|p| p.connections()))
+            .all(|(_, sync)| sync.stats().scene.agrees == Some(true))
+    }
+
+    #[test]
+    fn a_planted_scene_difference_is_found_and_refolded_and_equal_scenes_never_differ() {
+        let session = [3; 16];
+        let mut peers: Vec<TPeer> = (1..=2)
+            .map(|i| Peer::new(Keypair::from_seed([i; 32]), session, Log::default()))
+            .collect();
+        for (i, p) in (0u64..).zip(peers.iter_mut()) {
+            for object in 1..=3 {
+                let value = format!("v{object}");
+                let set = TestPayload::Set {
+                    object: object + 10 * i,
+                    value,
+                };
+                p.author(Timestamp(0), set).unwrap();
+            }
+            let chat = TestPayload::Chat(format!("hello from {i}"));
+            p.author(Timestamp(0), chat).unwrap();
+        }
+        let mut owners: Vec<Owner> = peers.iter().map(Owner::new).collect();
+        peers[0].connect(Timestamp(0), ConnId(1)).unwrap();
+        peers[1].accept(Timestamp(0), ConnId(1), 0).unwrap();
+        let links = [(0, ConnId(1), 1, ConnId(1))];
+        let t = run_scenes(&mut peers, &mut owners, &links, 0, scenes_agree);
+        assert_eq!(owners[0].scene.scene_hash(), owners[1].scene.scene_hash());
+        for (peer, owner) in peers.iter().zip(&owners) {
+            let (_, sync) = peer.connections().next().unwrap();
+            assert_eq!(sync.stats().scene.n_mismatches, 0);
+            assert_eq!(owner.n_mismatches, 0);
+        }
+        // B's fold of object 2 now says what its log does not: found, and refolded.
+        owners[1].scene.plant_difference(|scene| {
+            scene.objects.insert(2, "planted".into());
+        });
+        let planted_at = t;
+        let repaired = |peers: &[TPeer], owners: &[Owner]| {
+            owners[0].scene.scene_hash() == owners[1].scene.scene_hash()
+                && scenes_agree(peers, owners)
+        };
+        let t = run_scenes(&mut peers, &mut owners, &links, t + 10_000, repaired);
+        assert!(
+            t - planted_at <= 1_000_000,
+            "repaired in {} us",
+            t - planted_at
+        );
+        for (peer, owner) in peers.iter().zip(&owners) {
+            let (_, sync) = peer.connections().next().unwrap();
+            let stats = &sync.stats().scene;
+            assert_eq!((stats.n_mismatches, stats.n_resyncs), (1, 1), "{stats:?}");
+            let mismatch = stats.last_mismatch.unwrap();
+            assert_eq!(mismatch.ours.cut, mismatch.theirs.cut);
+            assert_ne!(mismatch.ours.hash, mismatch.theirs.hash);
+            assert_eq!(owner.n_mismatches, 1);
+            assert_eq!(
+                owner.resyncs,
+                [vec![ObjectId(2)]],
+                "only the differing object"
+            );
+        }
+        assert_eq!(owners[1].scene.scene().objects[&2], "v2");
     }
 }

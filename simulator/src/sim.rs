@@ -1092,6 +1092,9 @@ impl Simulation {
                 self.trace.u64(14);
                 self.stats.n_forks_learnt += 1;
             }
+            // The peer hands the scene check's events to its own queue, which the simulator
+            // does not drive (no honest peer here tells its peer a scene hash).
+            Event::Scene(_) => {}
         }
     }
 

@@ -32,7 +32,7 @@ use replication::sync::state::CloseReason;
 use replication::{Keypair, Log, OpId, PeerId, Timestamp};
 
 use replication::sync::ephemeral::presence::Presence;
-pub use view::{ChatRow, HistoryRow, PeerRow, Rejection, SharedView, View, lock};
+pub use view::{ChatRow, HistoryRow, PeerRow, Rejection, SceneCheckRow, SharedView, View, lock};
 
 /// Requests queued from faces to the engine thread before `try_*` calls report it busy.
 pub const MAX_QUEUED_REQUESTS: usize = 256;
@@ -708,7 +708,7 @@ impl Worker {
         ready: std_mpsc::Sender<Result<SocketAddr, StartError>>,
     ) {
         let listen = node_config.listen;
-        let folder = view::Folder::new(self.view.clone());
+        let folder = view::Folder::with_news(self.view.clone(), self.news.clone());
         let node = match Node::spawn_observed(node_config, Some(Box::new(folder))) {
             Ok(node) => node,
             Err(e) => {
@@ -970,12 +970,17 @@ impl Worker {
             rtt_micros: None,
             to_send: 0,
             to_receive: 0,
+            scene_agrees: None,
+            scene_mismatches: 0,
+            last_mismatch: None,
         };
         match view.peers.iter_mut().find(|p| p.peer == peer) {
             Some(old) => {
                 *old = PeerRow {
                     name: old.name.clone(),
                     colour: old.colour,
+                    scene_mismatches: old.scene_mismatches,
+                    last_mismatch: old.last_mismatch.take(),
                     ..row
                 };
             }

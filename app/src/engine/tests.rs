@@ -601,3 +601,60 @@ fn a_large_import_is_one_history_row_not_undone_and_its_id_not_reused() {
     drop(s);
     let _ = fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_planted_scene_difference_is_found_over_quic_shown_and_repaired() {
+    let (da, db) = (scratch("check-a"), scratch("check-b"));
+    let a = Engine::start(config(&da), T0).unwrap();
+    wait_view(&a, "the demo", |v| v.n_ops() == FOUNDED + 1);
+    let melon = only_object(&a);
+    let b = Engine::start(joiner(&a, &db, "Bea"), T0).unwrap();
+    let same_scene = |a: &Engine, b: &mut View| {
+        b.scene_hash_hex() == lock(a.view()).scene_hash_hex()
+            && b.scene_check().agrees == Some(true)
+            && lock(a.view()).scene_check().agrees == Some(true)
+    };
+    wait_view(&b, "the two scenes compared and equal", |v| {
+        v.n_ops() == FOUNDED + 2 && same_scene(&a, v)
+    });
+    for engine in [&a, &b] {
+        let view = lock(engine.view());
+        assert_eq!(
+            view.scene_check().n_mismatches,
+            0,
+            "equal scenes never differ"
+        );
+        assert_eq!(view.peers()[0].scene_agrees, Some(true));
+    }
+    // B's fold loses the melon behind its log's back: found, shown, refolded.
+    let planted_at = crate::clock::now().instant;
+    lock(b.view()).plant_scene_difference(melon);
+    assert_ne!(
+        lock(b.view()).scene_hash_hex(),
+        lock(a.view()).scene_hash_hex()
+    );
+    wait_view(&b, "the difference found and repaired", |v| {
+        v.scene_check().n_mismatches >= 1 && same_scene(&a, v)
+    });
+    let took = planted_at.elapsed();
+    assert!(took < Duration::from_secs(10), "repaired in {took:?}");
+    assert_eq!(geometry_formula(&b, melon), geometry_formula(&a, melon));
+    for engine in [&a, &b] {
+        let view = lock(engine.view());
+        let check = view.scene_check();
+        assert!(check.n_mismatches >= 1, "{check:?}");
+        let last = check.last_mismatch.as_deref().unwrap();
+        assert!(last.contains("ours") && last.contains("theirs") && last.contains("cut"));
+        let row = &view.peers()[0];
+        assert!(
+            row.scene_mismatches >= 1 && row.last_mismatch.is_some(),
+            "{row:?}"
+        );
+        assert_eq!(row.scene_agrees, Some(true));
+    }
+    assert!(lock(b.view()).scene_check().n_objects_refolded >= 1);
+    drop(b);
+    drop(a);
+    let _ = fs::remove_dir_all(&da);
+    let _ = fs::remove_dir_all(&db);
+}

@@ -12,11 +12,13 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use model::object::{ColorDef, Field, Shape};
 use model::scene::{ObjectId, Scene};
 use replication::log::{Drained, Insertion, Refold};
-use replication::materialize::Materialized;
+use replication::materialize::{Materialize as _, Materialized};
 use replication::membership::{FOUNDER_NONCE_BYTES, Membership};
 use replication::net::node::Observer;
 use replication::payload::LeaseAction;
 use replication::shape::{IdSource, ShapePayload, ShapeScene};
+use replication::sync::message::SceneAt;
+use replication::sync::scene::{SceneCut, SceneEvent, SceneMismatch};
 use replication::{Effect, Log, Mark, OpId, Payload as _, Peer, PeerId, Timestamp};
 
 use crate::clock::time_of_day_utc;
@@ -97,6 +99,27 @@ pub struct PeerRow {
     pub to_send: u64,
     /// Ops the remote holds that this peer lacks.
     pub to_receive: u64,
+    /// Whether its scene hash agreed with this peer's when last compared at one cut (`None`
+    /// before the first comparison on this connection).
+    pub scene_agrees: Option<bool>,
+    /// Scene mismatches with it that were acted on (refolds asked for), since start.
+    pub scene_mismatches: u64,
+    /// The last such mismatch, in words (both cuts and hashes).
+    pub last_mismatch: Option<String>,
+}
+
+/// The scene check across peers ([`replication::sync::scene`]), for the faces.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SceneCheckRow {
+    /// Mismatches acted on, with every peer, since start.
+    pub n_mismatches: u64,
+    /// Objects refolded to repair them (an object refolded for two peers counts twice).
+    pub n_objects_refolded: u64,
+    /// The last mismatch, in words.
+    pub last_mismatch: Option<String>,
+    /// True when every connected peer's last comparison agreed, false when one differed, and
+    /// `None` before any comparison.
+    pub agrees: Option<bool>,
 }
 
 /// A session announced on the LAN.
@@ -147,6 +170,8 @@ pub struct View {
     expelled: BTreeSet<PeerId>,
     /// Authors proven to have signed two ops with one seq, and that seq.
     pub(super) forked: BTreeMap<PeerId, u64>,
+    /// What the scene check found.
+    scene_check: SceneCheckRow,
     waker: Option<Box<dyn Fn() + Send>>,
 }
 
@@ -183,6 +208,7 @@ impl View {
             founder_nonce: None,
             expelled: BTreeSet::new(),
             forked: BTreeMap::new(),
+            scene_check: SceneCheckRow::default(),
             waker: None,
         };
         view.refresh(log);
@@ -209,6 +235,41 @@ impl View {
             }
         }
         self.generation += 1;
+    }
+
+    /// Refolds `objects` (and with `rest` the chat) from `log`: the repair of a scene found to
+    /// differ from a peer's at the same cut.
+    pub fn resync(
+        &mut self,
+        log: &Log<ShapePayload>,
+        objects: &[replication::ObjectId],
+        rest: bool,
+    ) {
+        self.scene.resync(log, objects, rest);
+        for object in objects {
+            self.changes.push(if object.0 & GROUP_BIT != 0 {
+                Change::All
+            } else {
+                Change::Object(ObjectId(object.0))
+            });
+        }
+        self.scene_check.n_objects_refolded += objects.len() as u64;
+        self.generation += 1;
+    }
+
+    /// Forgets `object`'s fold behind the log's back, so that tests can show that peers find
+    /// the difference and repair it. Never call it otherwise.
+    #[doc(hidden)]
+    pub fn plant_scene_difference(&mut self, object: u64) {
+        self.scene
+            .plant_difference(|scene| scene.reset_object(replication::ObjectId(object)));
+        self.changes.push(Change::Object(ObjectId(object)));
+        self.generation += 1;
+    }
+
+    /// What the scene check found, across peers.
+    pub fn scene_check(&self) -> &SceneCheckRow {
+        &self.scene_check
     }
 
     /// Recomputes the rows and targets that depend on the whole log.
@@ -620,6 +681,10 @@ pub struct Folder {
     pub(super) view: SharedView,
     /// The step's insertions, not folded yet.
     pub(super) pending: Drained,
+    /// Where mismatches of the scene check are said.
+    news: Option<Arc<Mutex<super::News>>>,
+    /// The view's generation and the cut whose scene hash the peer was last told.
+    announced: Option<(u64, SceneCut)>,
 }
 
 impl Folder {
@@ -628,8 +693,102 @@ impl Folder {
         Folder {
             view,
             pending: Drained::default(),
+            news: None,
+            announced: None,
         }
     }
+
+    /// A folder of `view` that says what the scene check finds in `news`.
+    pub fn with_news(view: SharedView, news: Arc<Mutex<super::News>>) -> Folder {
+        Folder {
+            news: Some(news),
+            ..Folder::new(view)
+        }
+    }
+
+    /// Answers the scene check ([`replication::sync::scene`]): a mismatch is said and answered
+    /// with this scene's per-object hashes, a resync refolds what differs, and the scene's
+    /// hash goes to the peer once the fold is at a new cut or changed, while some connection
+    /// is in step (a hash computed mid-sync would only be at another cut than every remote's,
+    /// and a remote that stays out of step must not keep the others from comparing).
+    fn check_scene(&mut self, view: &mut View, peer: &mut Peer<ShapePayload>) {
+        let cut = SceneCut::of(peer.log());
+        while let Some((conn, event)) = peer.poll_scene_event() {
+            let remote = (peer.connections())
+                .find(|(c, _)| **c == conn)
+                .and_then(|(_, sync)| sync.remote());
+            match event {
+                SceneEvent::Mismatch(mismatch) => {
+                    self.note_mismatch(view, remote, &mismatch);
+                    if mismatch.ours.cut == cut.digest && !peer.reuse_object_hashes(cut) {
+                        peer.set_object_hashes(cut, view.scene.object_hashes());
+                    }
+                }
+                SceneEvent::Resync(resync) if resync.cut == cut.digest => {
+                    view.resync(peer.log(), &resync.objects, resync.rest);
+                    let who = remote.map_or_else(|| "a peer".into(), |r| view.peer_label(r));
+                    self.say(format!(
+                        "refolded {} object(s){} whose state differed from {who}'s",
+                        resync.objects.len(),
+                        if resync.rest { " and the chat" } else { "" },
+                    ));
+                }
+                SceneEvent::Resync(_) => {}
+            }
+        }
+        let in_step = (peer.connections())
+            .any(|(_, sync)| sync.remote_version_vector() == peer.log().version_vector());
+        let now = (view.generation, cut);
+        if in_step && self.announced != Some(now) {
+            peer.set_scene_hash(cut, view.scene.scene_hash().0);
+            self.announced = Some(now);
+        }
+    }
+
+    /// A mismatch with `remote`: logged and said with both cuts, counted in its row.
+    fn note_mismatch(&self, view: &mut View, remote: Option<PeerId>, m: &SceneMismatch) {
+        let who = remote.map_or_else(|| "a peer".into(), |r| view.peer_label(r));
+        let line = format!(
+            "the scene differs from {who}'s: ours {}, theirs {}; refolding the objects that \
+             differ",
+            scene_at_text(&m.ours),
+            scene_at_text(&m.theirs)
+        );
+        log::warn!("{line}");
+        if let Some(news) = &self.news {
+            news.lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .push(line.clone());
+        }
+        view.scene_check.n_mismatches += 1;
+        view.scene_check.last_mismatch = Some(line.clone());
+        if let Some(row) = view.peers.iter_mut().find(|r| Some(r.peer) == remote) {
+            row.scene_mismatches += 1;
+            row.last_mismatch = Some(line);
+        }
+    }
+
+    fn say(&self, line: String) {
+        log::info!("{line}");
+        if let Some(news) = &self.news {
+            news.lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .push(line);
+        }
+    }
+}
+
+/// A scene hash at a cut in words: the hash, the cut's digest and its ops (first bytes in
+/// hex, as the peers panel shows hashes).
+fn scene_at_text(at: &SceneAt) -> String {
+    let hex =
+        |bytes: &[u8]| -> String { bytes.iter().take(8).map(|b| format!("{b:02x}")).collect() };
+    format!(
+        "{} at cut {} ({} ops)",
+        hex(&at.hash),
+        hex(&at.cut),
+        at.n_ops
+    )
 }
 
 impl Observer<ShapePayload> for Folder {
@@ -637,12 +796,14 @@ impl Observer<ShapePayload> for Folder {
         self.pending.add(insertion);
     }
 
-    fn settled(&mut self, peer: &Peer<ShapePayload>, changed: bool) {
-        let mut view = lock(&self.view);
+    fn settled(&mut self, peer: &mut Peer<ShapePayload>, changed: bool) {
+        let view_arc = Arc::clone(&self.view);
+        let mut view = lock(&view_arc);
         let drained = std::mem::take(&mut self.pending);
         if let Some(refold) = &drained.refold {
             view.apply_refold(peer.log(), &drained.delivered, refold);
         }
+        self.check_scene(&mut view, peer);
         if changed {
             view.refresh(peer.log());
             if let Some(wake) = &view.waker {
@@ -658,6 +819,7 @@ impl Observer<ShapePayload> for Folder {
                 continue;
             };
             let theirs = sync.remote_version_vector();
+            row.scene_agrees = sync.stats().scene.agrees;
             row.to_send = mine
                 .iter()
                 .map(|(a, seq)| seq.saturating_sub(theirs.get(a)))
@@ -667,6 +829,8 @@ impl Observer<ShapePayload> for Folder {
                 .map(|(a, seq)| seq.saturating_sub(mine.get(a)))
                 .sum();
         }
+        let agrees = (view.peers.iter().filter(|r| r.online)).filter_map(|r| r.scene_agrees);
+        view.scene_check.agrees = agrees.reduce(|a, b| a && b);
     }
 }
 

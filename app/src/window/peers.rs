@@ -24,6 +24,10 @@ const FORKED_HOVER: &str = "this identity signed two different edits with one nu
                             everywhere";
 /// News lines the peers panel shows (the latest).
 const MAX_NEWS_SHOWN: usize = 20;
+/// What the scene check's mark means.
+const SCENE_CHECK_HOVER: &str = "peers compare their scene hashes whenever both hold the same \
+                                 edits; where they differ, each refolds the objects that \
+                                 differ from its edit log";
 
 /// What this window told the other peers, and whose camera it follows.
 #[derive(Default)]
@@ -144,6 +148,9 @@ impl SculptApp {
             ui.horizontal(|ui| {
                 self.peer_row_ui(ui, p, &membership, &mut clicks);
             });
+            if p.online {
+                scene_check_ui(ui, p);
+            }
         }
         if let Some(f) = clicks.follow {
             self.presence.following = f;
@@ -248,4 +255,23 @@ impl SculptApp {
                 }
             });
     }
+}
+
+/// A peer's scene check, on a short line of its own under its row (the row alone sets how
+/// wide the panel grows): whether its scene agreed with ours when last compared, and the
+/// mismatches found with it (the last one on hover).
+fn scene_check_ui(ui: &mut egui::Ui, p: &PeerRow) {
+    let (colour, word) = match (p.scene_agrees, p.scene_mismatches) {
+        (Some(false), _) => (egui::Color32::LIGHT_RED, "scene differs".to_string()),
+        (Some(true), 0) => (egui::Color32::LIGHT_GREEN, "same scene".to_string()),
+        (Some(true), n) => (egui::Color32::YELLOW, format!("same scene · {n} repaired")),
+        (None, 0) => return,
+        (None, n) => (egui::Color32::YELLOW, format!("{n} scene mismatch(es)")),
+    };
+    let hover = match &p.last_mismatch {
+        Some(last) => format!("{SCENE_CHECK_HOVER}\n\nlast: {last}"),
+        None => SCENE_CHECK_HOVER.to_string(),
+    };
+    ui.label(egui::RichText::new(word).small().color(colour))
+        .on_hover_text(hover);
 }

@@ -39,6 +39,7 @@ use crate::log::OrderKey;
 use crate::materialize::{FoldEntry, MAX_SCENE_SNAPSHOT_BYTES, Materialize, SceneHash};
 use crate::membership::{Admission, Membership};
 use crate::payload::{Effect, LeaseAction, MAX_PAYLOAD_BYTES, ObjectId, Payload};
+use crate::sync::scene::ObjectHashes;
 
 /// Longest chat message, in bytes.
 pub const MAX_CHAT_BYTES: usize = 2048;
@@ -548,6 +549,31 @@ impl Materialize<ShapePayload> for ShapeScene {
 
     fn scene_hash(&self) -> SceneHash {
         SceneHash::of(&self.encode())
+    }
+
+    /// Per object: its place, its encoding, the ops of its edit history and its held parts;
+    /// per group (under its lease id): the group; the rest: the chat.
+    fn object_hashes(&self) -> ObjectHashes {
+        let mut ids: std::collections::BTreeSet<u64> =
+            self.scene.objects().map(|(id, _)| id.0).collect();
+        ids.extend(self.edit_ops.keys().copied());
+        ids.extend(self.parts.objects());
+        let objects = ids.into_iter().map(|id| {
+            let placed = (self.scene.scene_object(scene::ObjectId(id)))
+                .map(|o| (o.group, object_codec::encode_object(&o.object)));
+            let edit_ops: Vec<[u8; 32]> = self.edit_ops(id).iter().map(|op| op.0).collect();
+            let record = (placed, edit_ops, self.parts.of_object(id));
+            (
+                ObjectId(id),
+                SceneHash::of(&object_codec::encode(&record)).0,
+            )
+        });
+        let groups = self.scene.groups().map(|(id, group)| {
+            let hash = SceneHash::of(&object_codec::encode(group));
+            (ObjectId(id.0 | GROUP_LEASE_BIT), hash.0)
+        });
+        let rest = SceneHash::of(&object_codec::encode(&self.chat));
+        ObjectHashes::new(objects.chain(groups), rest.0)
     }
 
     fn encode_snapshot(&self, out: &mut Vec<u8>) {

@@ -205,6 +205,18 @@ impl HeldParts {
             .or_insert_with(|| bytes.into());
     }
 
+    /// The objects that hold parts.
+    pub(crate) fn objects(&self) -> impl Iterator<Item = u64> + '_ {
+        self.by_object.keys().copied()
+    }
+
+    /// The parts `object` holds, in hash order.
+    pub(crate) fn of_object(&self, object: u64) -> Vec<&[u8]> {
+        (self.by_object.get(&object).into_iter())
+            .flat_map(|parts| parts.values().map(|bytes| &bytes[..]))
+            .collect()
+    }
+
     /// Forgets the parts of `object` (its fold starts again).
     pub(crate) fn forget(&mut self, object: u64) {
         self.by_object.remove(&object);

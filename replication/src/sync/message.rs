@@ -37,7 +37,10 @@ pub const SYNC_WIRE_VERSION: u8 = 1;
 /// build speaking 8 refuses.
 /// 10: ops are signed for their session ([`crate::op::OP_FORMAT_VERSION`] 2), which a build
 /// speaking 9 cannot decode.
-pub const PROTOCOL_VERSION: u64 = 10;
+/// 11: peers compare scene hashes at quiescent points ([`Message::SceneHash`]) and, where they
+/// differ at one cut, per-object hashes ([`Message::ObjectHashes`]), which a build speaking 10
+/// refuses.
+pub const PROTOCOL_VERSION: u64 = 11;
 /// The last protocol whose hello ends after `hello_seen` (protocol 8 added the hello's have).
 const LAST_PROTOCOL_WITHOUT_HELLO_HAVE: u64 = 7;
 /// Most ops in one [`Message::Ops`] batch.
@@ -46,6 +49,11 @@ pub const MAX_BATCH_OPS: usize = 64;
 pub const MAX_MESSAGE_BYTES: usize = 256 * 1024;
 /// Largest ephemeral value in bytes (a pose or a presence record).
 pub const MAX_EPHEMERAL_BYTES: usize = 1024;
+/// Most objects one [`Message::ObjectHashes`] names (a scene with more sends several, each
+/// over its own range of ids).
+pub const MAX_OBJECT_HASHES: usize = 1024;
+/// Bytes of a scene cut's digest, a scene hash and an object's hash.
+pub const DIGEST_BYTES: usize = 32;
 
 /// The largest encoding of a version vector of [`MAX_VV_AUTHORS`] entries (count, then author
 /// and seq each).
@@ -75,6 +83,13 @@ const _: () = assert!(
 const _: () = assert!(MAX_BATCH_OPS <= MAX_VV_AUTHORS);
 // Two ops of the largest size offered as a fork fit in a message.
 const _: () = assert!(3 + 2 * (MAX_VARINT_BYTES + MAX_OP_BYTES) <= MAX_MESSAGE_BYTES);
+// The most object hashes, with their range, cut and rest, fit in a message.
+const _: () = assert!(
+    2 + 3 * MAX_VARINT_BYTES
+        + 2 * DIGEST_BYTES
+        + MAX_OBJECT_HASHES * (MAX_VARINT_BYTES + DIGEST_BYTES)
+        <= MAX_MESSAGE_BYTES
+);
 
 /// The tip of an op id: its first [`TIP_BYTES`] bytes, never 0 (which says "none").
 pub fn tip(id: &OpId) -> u64 {
@@ -91,6 +106,34 @@ pub struct HelloHave {
     pub vv: VersionVector,
     /// For each entry in order, the tip of the sender's op at that seq, or 0 for none.
     pub tips: Vec<u64>,
+}
+
+/// A scene hash at a cut: what a [`Message::SceneHash`] says.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct SceneAt {
+    /// The digest of the log's heads ([`crate::sync::scene::SceneCut`]): it names the op set.
+    pub cut: [u8; DIGEST_BYTES],
+    /// The ops the sender's version vector counts there (for people reading a report).
+    pub n_ops: u64,
+    /// The hash of the sender's scene folded from that op set.
+    pub hash: [u8; DIGEST_BYTES],
+}
+
+/// Per-object hashes of the sender's scene at a cut, for the objects whose ids lie in
+/// `from..=to`: what a [`Message::ObjectHashes`] says.
+#[derive(Clone, Debug, PartialEq, Eq, Default)]
+pub struct ObjectHashesPart {
+    /// The cut ([`SceneAt::cut`]).
+    pub cut: [u8; DIGEST_BYTES],
+    /// The first object id the part covers.
+    pub from: u64,
+    /// The last object id the part covers (at least `from`).
+    pub to: u64,
+    /// The hash of what belongs to no object (the chat).
+    pub rest: [u8; DIGEST_BYTES],
+    /// Each object in the range the sender's scene holds, in id order, with its hash (at most
+    /// [`MAX_OBJECT_HASHES`]).
+    pub objects: Vec<(u64, [u8; DIGEST_BYTES])>,
 }
 
 /// One sync message.
@@ -178,6 +221,13 @@ pub enum Message {
     /// Answers a [`Message::Ping`] that a full have does not (one went out less than a have
     /// interval ago): the link carries messages, so what waits for the remote goes again now.
     Pong,
+    /// The sender's scene hash, sent at a quiescent point of the connection (nothing to send,
+    /// nothing unacknowledged, both sides holding the same ops) once per change of it: a
+    /// receiver at the same cut compares ([`crate::sync::scene`]).
+    SceneHash(SceneAt),
+    /// Part of the sender's per-object hashes, sent after the two scene hashes differed at one
+    /// cut, so that each side finds and refolds the objects whose states differ.
+    ObjectHashes(ObjectHashesPart),
 }
 
 const TAG_HELLO: u8 = 1;
@@ -190,6 +240,8 @@ const TAG_FORKED: u8 = 7;
 const TAG_WANT_OPS: u8 = 8;
 const TAG_PING: u8 = 9;
 const TAG_PONG: u8 = 10;
+const TAG_SCENE_HASH: u8 = 11;
+const TAG_OBJECT_HASHES: u8 = 12;
 
 /// The kind of an encoded message, read from its version byte and tag alone (to count traffic
 /// without decoding it); `None` for another wire version or a tag no message has.
@@ -208,6 +260,8 @@ pub fn kind_of(bytes: &[u8]) -> Option<&'static str> {
         TAG_WANT_OPS => "want_ops",
         TAG_PING => "ping",
         TAG_PONG => "pong",
+        TAG_SCENE_HASH => "scene_hash",
+        TAG_OBJECT_HASHES => "object_hashes",
         _ => return None,
     })
 }
@@ -294,6 +348,16 @@ impl Message {
             }
             Self::Ping => out.push(TAG_PING),
             Self::Pong => out.push(TAG_PONG),
+            Self::SceneHash(at) => {
+                out.push(TAG_SCENE_HASH);
+                out.extend_from_slice(&at.cut);
+                put_varint(&mut out, at.n_ops);
+                out.extend_from_slice(&at.hash);
+            }
+            Self::ObjectHashes(part) => {
+                out.push(TAG_OBJECT_HASHES);
+                put_object_hashes(&mut out, part);
+            }
             Self::WantOps(ids) => {
                 out.push(TAG_WANT_OPS);
                 put_varint(&mut out, ids.len() as u64);
@@ -374,6 +438,12 @@ impl Message {
             }
             TAG_PING => Self::Ping,
             TAG_PONG => Self::Pong,
+            TAG_SCENE_HASH => Self::SceneHash(SceneAt {
+                cut: r.array()?,
+                n_ops: r.varint()?,
+                hash: r.array()?,
+            }),
+            TAG_OBJECT_HASHES => Self::ObjectHashes(read_object_hashes(&mut r)?),
             _ => {
                 return Err(DecodeError::Invalid {
                     offset: tag_offset,
@@ -463,6 +533,56 @@ fn read_want(r: &mut Reader<'_>) -> Result<Message, DecodeError> {
         .map(|_| Ok((r.varint()?, u64::from_le_bytes(r.array()?))))
         .collect::<Result<_, DecodeError>>()?;
     Ok(Message::Want { vv, held })
+}
+
+/// Appends an object-hashes part's fields (after its tag).
+fn put_object_hashes(out: &mut Vec<u8>, part: &ObjectHashesPart) {
+    out.extend_from_slice(&part.cut);
+    put_varint(out, part.from);
+    put_varint(out, part.to);
+    out.extend_from_slice(&part.rest);
+    put_varint(out, part.objects.len() as u64);
+    for (object, hash) in &part.objects {
+        put_varint(out, *object);
+        out.extend_from_slice(hash);
+    }
+}
+
+/// Reads an object-hashes part's fields (after its tag): a range, then objects inside it in
+/// strictly increasing id order.
+fn read_object_hashes(r: &mut Reader<'_>) -> Result<ObjectHashesPart, DecodeError> {
+    let cut = r.array()?;
+    let from = r.varint()?;
+    let to_offset = r.offset();
+    let to = r.varint()?;
+    if to < from {
+        return Err(DecodeError::Invalid {
+            offset: to_offset,
+            what: "object range ends before it starts",
+        });
+    }
+    let rest = r.array()?;
+    let n = r.bounded("object hash count", MAX_OBJECT_HASHES as u64)?;
+    let mut objects: Vec<(u64, [u8; DIGEST_BYTES])> = Vec::with_capacity(n);
+    for _ in 0..n {
+        let offset = r.offset();
+        let object = r.varint()?;
+        let after_last = objects.last().is_none_or(|(last, _)| object > *last);
+        if !after_last || !(from..=to).contains(&object) {
+            return Err(DecodeError::Invalid {
+                offset,
+                what: "object outside the range or out of order",
+            });
+        }
+        objects.push((object, r.array()?));
+    }
+    Ok(ObjectHashesPart {
+        cut,
+        from,
+        to,
+        rest,
+        objects,
+    })
 }
 
 fn put_vv(out: &mut Vec<u8>, vv: &VersionVector) {
@@ -632,6 +752,25 @@ mod tests {
                 .prop_map(|ids| Message::WantOps(ids.into_iter().map(OpId).collect())),
             Just(Message::Ping),
             Just(Message::Pong),
+            (any::<[u8; 32]>(), any::<u64>(), any::<[u8; 32]>()).prop_map(|(cut, n_ops, hash)| {
+                Message::SceneHash(SceneAt { cut, n_ops, hash })
+            }),
+            (
+                any::<[u8; 32]>(),
+                any::<u64>(),
+                proptest::collection::btree_map(any::<u64>(), any::<[u8; 32]>(), 0..5)
+            )
+                .prop_map(|(cut, from, hashes)| {
+                    let objects: Vec<_> = hashes.into_iter().filter(|(o, _)| *o >= from).collect();
+                    let to = objects.last().map_or(from, |(o, _)| *o);
+                    Message::ObjectHashes(ObjectHashesPart {
+                        cut,
+                        from,
+                        to,
+                        rest: cut,
+                        objects,
+                    })
+                }),
             (any::<u64>(), vv).prop_map(|(batch_no, have)| Message::Ack { batch_no, have }),
             (
                 any::<u32>(),
@@ -710,6 +849,79 @@ mod tests {
         ));
     }
 
+    /// A part of `n` object hashes over `from..=to`, ids from `first` up.
+    fn object_hashes(from: u64, to: u64, first: u64, n: usize) -> Message {
+        Message::ObjectHashes(ObjectHashesPart {
+            cut: [1; 32],
+            from,
+            to,
+            rest: [2; 32],
+            objects: (0..n as u64).map(|i| (first + i, [3; 32])).collect(),
+        })
+    }
+
+    #[test]
+    fn the_most_object_hashes_fit_in_a_message_and_bad_parts_are_refused() {
+        let full = object_hashes(
+            u64::MAX - MAX_OBJECT_HASHES as u64,
+            u64::MAX,
+            u64::MAX - MAX_OBJECT_HASHES as u64 + 1,
+            MAX_OBJECT_HASHES,
+        );
+        let bytes = full.encode();
+        assert!(bytes.len() <= MAX_MESSAGE_BYTES, "{} bytes", bytes.len());
+        assert_eq!(Message::decode(&bytes), Ok(full));
+        let too_many = object_hashes(0, u64::MAX, 0, MAX_OBJECT_HASHES + 1);
+        assert!(matches!(
+            Message::decode(&too_many.encode()),
+            Err(DecodeError::OverLimit {
+                what: "object hash count",
+                ..
+            })
+        ));
+        // A range that ends before it starts, an object outside the range, and objects out of
+        // order or repeated are refused, so every part that decodes has one meaning.
+        for bad in [
+            object_hashes(5, 4, 5, 0),
+            object_hashes(5, 9, 3, 1),
+            object_hashes(5, 9, 9, 2),
+        ] {
+            assert!(Message::decode(&bad.encode()).is_err(), "{bad:?}");
+        }
+        let Message::ObjectHashes(mut part) = object_hashes(0, 9, 1, 2) else {
+            unreachable!()
+        };
+        part.objects.swap(0, 1);
+        assert!(Message::decode(&Message::ObjectHashes(part.clone()).encode()).is_err());
+        part.objects[1].0 = part.objects[0].0;
+        assert!(Message::decode(&Message::ObjectHashes(part).encode()).is_err());
+        // Cut short anywhere, a scene hash or a part is refused, not read past its end.
+        let scene = Message::SceneHash(SceneAt {
+            cut: [4; 32],
+            n_ops: 300,
+            hash: [5; 32],
+        })
+        .encode();
+        let part = object_hashes(0, 99, 7, 3).encode();
+        for bytes in [scene, part] {
+            for len in 0..bytes.len() {
+                assert!(Message::decode(&bytes[..len]).is_err(), "{len} bytes");
+            }
+        }
+    }
+
+    #[test]
+    fn the_scene_messages_decode_on_a_small_stack() {
+        let largest = object_hashes(0, u64::MAX, 0, MAX_OBJECT_HASHES).encode();
+        let decoded = testkit::stack::on_small_stack(|| {
+            let mut junk = largest.clone();
+            junk[40] ^= 0xff;
+            let _ = Message::decode(&junk);
+            Message::decode(&largest)
+        });
+        assert_eq!(decoded.map(|m| m.encode()), Ok(largest));
+    }
+
     #[test]
     fn bytes_without_a_known_tag_have_no_kind() {
         assert_eq!(kind_of(&[]), None);
@@ -742,6 +954,8 @@ mod tests {
                 Message::WantOps(_) => "want_ops",
                 Message::Ping => "ping",
                 Message::Pong => "pong",
+                Message::SceneHash(_) => "scene_hash",
+                Message::ObjectHashes(_) => "object_hashes",
             };
             prop_assert_eq!(kind_of(&m.encode()), Some(kind));
         }

@@ -42,6 +42,7 @@
 use std::cell::Cell;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::marker::PhantomData;
+use std::sync::Arc;
 
 use crate::causal::{MAX_VV_AUTHORS, VersionVector};
 use crate::codec::DecodeError;
@@ -51,9 +52,10 @@ use crate::op::{Envelope, MAX_OP_BYTES, Op, ReceiveError};
 use crate::payload::Payload;
 use crate::pending::{EvictReason, Origin};
 use crate::sync::message::{
-    HelloHave, MAX_BATCH_OPS, MAX_EPHEMERAL_BYTES, MAX_MESSAGE_BYTES, Message, PROTOCOL_VERSION,
-    tip,
+    DIGEST_BYTES, HelloHave, MAX_BATCH_OPS, MAX_EPHEMERAL_BYTES, MAX_MESSAGE_BYTES, Message,
+    PROTOCOL_VERSION, SceneAt, tip,
 };
+use crate::sync::scene::{ObjectHashes, SceneCheck, SceneEvent, SceneStats};
 use crate::time::Timestamp;
 
 /// Most op batches sent and not yet acknowledged (flow control).
@@ -291,6 +293,10 @@ pub enum Event {
     },
     /// The remote has acknowledged everything this peer holds.
     UpToDate,
+    /// The scene check asks something of the scene's owner ([`crate::sync::scene`]);
+    /// [`Peer`](crate::peer::Peer) hands these out on their own queue
+    /// ([`Peer::poll_scene_event`](crate::peer::Peer::poll_scene_event)).
+    Scene(SceneEvent),
     /// The connection is over; drop this state.
     Closed(CloseReason),
 }
@@ -342,6 +348,8 @@ pub struct SyncStats {
     pub n_ops_over_quota: u64,
     /// Hellos dropped unanswered over [`MAX_HELLO_ANSWERS_PER_SEC`].
     pub n_hellos_unanswered: u64,
+    /// What the scene check found ([`crate::sync::scene`]).
+    pub scene: SceneStats,
 }
 
 impl SyncStats {
@@ -583,6 +591,8 @@ pub struct SyncState<P> {
     eph_out: BTreeMap<u32, Vec<u8>>,
     eph_out_seq: u64,
     eph_in: BTreeMap<u32, u64>,
+    /// Scene hashes compared with the remote's ([`crate::sync::scene`]).
+    scene: SceneCheck,
     /// Limits what the remote may send us.
     bucket: TokenBucket,
     /// Limits the remote's hellos, and the full haves they cost.
@@ -659,6 +669,7 @@ impl<P: Payload> SyncState<P> {
             eph_out: BTreeMap::new(),
             eph_out_seq: 0,
             eph_in: BTreeMap::new(),
+            scene: SceneCheck::default(),
             bucket: TokenBucket::new(now, MAX_MESSAGES_PER_SEC, MAX_MESSAGE_BURST),
             hello_bucket: TokenBucket::new(now, MAX_HELLOS_PER_SEC, MAX_HELLO_BURST),
             hello_answer_bucket: TokenBucket::new(
@@ -807,6 +818,20 @@ impl<P: Payload> SyncState<P> {
             };
             (self.control).extend(vv.split(MAX_VV_AUTHORS).into_iter().map(with_held));
         }
+    }
+
+    /// The scene's owner folded the log to the cut named `at` ([`crate::sync::scene`]): the
+    /// hash goes to the remote at the next quiescent point, and is compared with the remote's
+    /// at the next timeout.
+    pub fn set_local_scene(&mut self, at: SceneAt) {
+        self.scene.set_local(at);
+    }
+
+    /// The owner's per-object hashes at `cut`, after a mismatch there
+    /// ([`SceneEvent::Mismatch`]).
+    pub fn set_local_object_hashes(&mut self, cut: [u8; DIGEST_BYTES], hashes: &Arc<ObjectHashes>) {
+        self.scene.set_local_objects(cut, hashes, &mut self.events);
+        self.stats.scene.clone_from(&self.scene.stats);
     }
 
     /// Queues the latest value on an ephemeral channel, replacing any unsent older value.
@@ -1030,6 +1055,14 @@ impl<P: Payload> SyncState<P> {
                 self.on_forked(now, ops, answer, log);
             }
             Message::Ping | Message::Pong => self.hello_confirmed = true,
+            Message::SceneHash(at) => {
+                self.scene.on_remote_hash(now, at, &mut self.events);
+                self.stats.scene.clone_from(&self.scene.stats);
+            }
+            Message::ObjectHashes(part) => {
+                self.scene.on_part(now, part, &mut self.events);
+                self.stats.scene.clone_from(&self.scene.stats);
+            }
             Message::WantOps(ids) => {
                 self.hello_confirmed = true;
                 for id in ids {
@@ -1570,6 +1603,10 @@ impl<P: Payload> SyncState<P> {
         if self.have_due(log).is_some_and(|d| d <= now) {
             self.send_have(now, log);
         }
+        if self.scene.due().is_some_and(|d| d <= now) {
+            self.scene.timeout(now, &mut self.events);
+            self.stats.scene.clone_from(&self.scene.stats);
+        }
     }
 
     /// Queues the have that is due: the entries that moved since the last one, or a full
@@ -1761,6 +1798,7 @@ impl<P: Payload> SyncState<P> {
             self.expel_notice_until,
             pace,
             log.next_pending_expiry(),
+            self.scene.due(),
         ]
         .into_iter()
         .flatten()
@@ -1860,6 +1898,10 @@ impl<P: Payload> SyncState<P> {
             self.send_bucket.spend();
             return Some(have);
         }
+        if let Some(part) = self.scene.next_part() {
+            self.send_bucket.spend();
+            return Some(part);
+        }
         if let Some((channel, value)) = self.eph_out.pop_first() {
             self.send_bucket.spend();
             self.eph_out_seq += 1;
@@ -1894,6 +1936,12 @@ impl<P: Payload> SyncState<P> {
                 });
             }
         }
+        self.next_batch_or_scene_hash(now, log)
+    }
+
+    /// The next op batch within the flow-control window or, with nothing else to say at a
+    /// quiescent point, the scene hash if it changed.
+    fn next_batch_or_scene_hash(&mut self, now: Timestamp, log: &Log<P>) -> Option<Message> {
         if self.in_flight.len() >= MAX_IN_FLIGHT_BATCHES {
             return None;
         }
@@ -1902,7 +1950,13 @@ impl<P: Payload> SyncState<P> {
             ops = self.next_batch(log);
         }
         if ops.is_empty() {
-            return None;
+            let hash = (self.scene.hash_unsent() && self.quiescent(log))
+                .then(|| self.scene.take_hash())
+                .flatten();
+            if hash.is_some() {
+                self.send_bucket.spend();
+            }
+            return hash;
         }
         self.send_bucket.spend();
         let batch_no = self.next_batch_no;
@@ -1910,6 +1964,21 @@ impl<P: Payload> SyncState<P> {
         self.in_flight.insert(batch_no, now);
         self.stats.n_ops_out += ops.len() as u64;
         Some(Message::Ops { batch_no, ops })
+    }
+
+    /// True at a quiescent point of the connection: nothing waits to be sent or acknowledged,
+    /// and the remote holds what the log holds and no more, so the two scenes fold the same
+    /// ops.
+    fn quiescent(&self, log: &Log<P>) -> bool {
+        self.remote.is_some()
+            && self.have_learnt
+            && self.control.is_empty()
+            && self.have_out.is_empty()
+            && self.in_flight.is_empty()
+            && self.asked_out.is_empty()
+            && self.remote_vv == *log.version_vector()
+            && !self.sendable(log)
+            && self.next_fork(log).is_none()
     }
 
     /// How far `author`'s ops may go out on this connection: all of our own, a third peer's

@@ -213,7 +213,7 @@ impl<P: Payload + Send + 'static> Core<P> {
         // The author hears back only once the observer has seen its op settled (a face reads
         // its own edit in the view as soon as the reply comes).
         if let Some(observer) = &mut self.observer {
-            observer.settled(&self.peer, std::mem::take(&mut self.changed));
+            observer.settled(&mut self.peer, std::mem::take(&mut self.changed));
         }
         Ok(op.op().id())
     }
@@ -422,7 +422,8 @@ impl<P: Payload + Send + 'static> Core<P> {
         }
     }
 
-    /// After every step: events (and storage) first, then limits, then transmits.
+    /// After every step: events (and storage) first, then limits, then the observer (whose
+    /// scene check may queue messages), then transmits.
     fn settle(&mut self, now: Timestamp) {
         self.drain_events();
         if !self.running {
@@ -430,10 +431,10 @@ impl<P: Payload + Send + 'static> Core<P> {
         }
         self.enforce_rejection_limit();
         self.admit_newcomers(now);
-        self.drain_transmits(now);
         if let Some(observer) = &mut self.observer {
-            observer.settled(&self.peer, std::mem::take(&mut self.changed));
+            observer.settled(&mut self.peer, std::mem::take(&mut self.changed));
         }
+        self.drain_transmits(now);
     }
 
     /// In a session that binds its authors, admits the keys of connections up for
@@ -499,6 +500,7 @@ impl<P: Payload + Send + 'static> Core<P> {
     /// Drains the core's events. Every op they deliver is appended to the store in one write
     /// and one fsync, before the observer or the app hears of any of them and before anything
     /// more is sent: a batch of 64 received ops costs one fsync, not 64.
+    // tidy:table: one arm per sync event.
     fn drain_events(&mut self) {
         let events: Vec<_> = std::iter::from_fn(|| self.peer.poll_event()).collect();
         let delivered: Vec<OpId> = events
@@ -556,6 +558,8 @@ impl<P: Payload + Send + 'static> Core<P> {
                     value,
                 },
                 Event::UpToDate => NodeEvent::UpToDate { conn, peer },
+                // On the observer's own queue (`Peer::poll_scene_event`), never here.
+                Event::Scene(_) => continue,
                 Event::Forked { author, seq } => NodeEvent::Forked { conn, author, seq },
                 Event::Closed(reason) => {
                     if reason == CloseReason::Evicted {

@@ -508,11 +508,14 @@ pub trait Observer<P>: Send + 'static {
     /// [`Observer::settled`], not one by one against a log that already holds the later ones.
     fn inserted(&mut self, log: &Log<P>, insertion: &Insertion);
 
-    /// The node finished a step (inputs handled, events stored, transmits queued), or authored
-    /// an op (before the author hears back).
+    /// The node finished a step (inputs handled, events stored; transmits are drained right
+    /// after), or authored an op (before the author hears back).
     /// `changed` is true when [`Observer::inserted`] was called since the last settled step,
     /// and at the first step (so the observer sees the log it starts from).
-    fn settled(&mut self, peer: &Peer<P>, changed: bool);
+    /// The peer is mutable for the scene check only: an observer that folds tells it the
+    /// scene hash ([`Peer::set_scene_hash`]) and answers its events
+    /// ([`Peer::poll_scene_event`]).
+    fn settled(&mut self, peer: &mut Peer<P>, changed: bool);
 }
 
 /// A request from a handle to the core task.

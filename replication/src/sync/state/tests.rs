@@ -1455,3 +1455,102 @@ fn a_hello_naming_another_peer_than_the_admitted_one_closes_before_held_data_is_
     );
     assert!(c.log.contains(&ops[0].id()) && !c.sync.is_closed());
 }
+
+/// Ticks a millisecond at a time for `duration_micros` from `now`; returns the time then.
+fn run_for(nodes: &mut [Node; 2], link: &mut Link, mut now: u64, duration_micros: u64) -> u64 {
+    let end = now + duration_micros;
+    while now < end {
+        now += MILLI;
+        tick(now, nodes, link);
+    }
+    now
+}
+
+fn scene_events(node: &Node) -> Vec<SceneEvent> {
+    (node.events.iter())
+        .filter_map(|e| match e {
+            Event::Scene(scene) => Some(scene.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn scene_hashes_agree_at_quiescent_points_and_a_difference_names_its_objects() {
+    use crate::payload::ObjectId;
+    use crate::sync::scene::{ObjectHashes, SceneCut};
+    let mut nodes = [Node::new(1, 2), Node::new(2, 1)];
+    for i in 0..5 {
+        nodes[0].author(i, format!("a{i}"));
+    }
+    nodes[1].author(9, "b".into());
+    let mut link = Link {
+        rng: ChaCha20Rng::seed_from_u64(5),
+        loss_per_mille: 0,
+        dup_per_mille: 0,
+        in_transit: Vec::new(),
+    };
+    let mut now = run_for(&mut nodes, &mut link, 1_000_000, 2_000_000);
+    let cut = SceneCut::of(&nodes[0].log);
+    assert_eq!(cut, SceneCut::of(&nodes[1].log), "both hold the same ops");
+    // Identical scenes: compared, never a mismatch.
+    for node in &mut nodes {
+        node.sync.set_local_scene(cut.with_hash([1; 32]));
+    }
+    now = run_for(&mut nodes, &mut link, now, 2_000_000);
+    for node in &nodes {
+        let stats = &node.sync.stats().scene;
+        assert_eq!(stats.agrees, Some(true), "{stats:?}");
+        assert_eq!((stats.n_mismatches, stats.n_resyncs), (0, 0));
+        assert!(scene_events(node).is_empty());
+    }
+    // B's scene now hashes differently at the same cut: both see it, with both cuts.
+    nodes[1].sync.set_local_scene(cut.with_hash([2; 32]));
+    now = run_for(&mut nodes, &mut link, now, 500_000);
+    for (node, (ours, theirs)) in nodes.iter().zip([(1, 2), (2, 1)]) {
+        let mismatch = match scene_events(node).as_slice() {
+            [SceneEvent::Mismatch(m)] => *m,
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(mismatch.ours, cut.with_hash([ours; 32]));
+        assert_eq!(mismatch.theirs, cut.with_hash([theirs; 32]));
+        let stats = &node.sync.stats().scene;
+        assert_eq!(stats.last_mismatch, Some(mismatch));
+        assert_eq!(stats.agrees, Some(false));
+    }
+    // Their owners hand over per-object hashes: each finds objects 2 (changed) and 3 (held on
+    // one side only), and not 1.
+    let objects = [
+        ObjectHashes::new([(ObjectId(1), [1; 32]), (ObjectId(2), [2; 32])], [0; 32]),
+        ObjectHashes::new(
+            [
+                (ObjectId(1), [1; 32]),
+                (ObjectId(2), [9; 32]),
+                (ObjectId(3), [3; 32]),
+            ],
+            [0; 32],
+        ),
+    ];
+    for (node, hashes) in nodes.iter_mut().zip(objects) {
+        node.events.clear();
+        let hashes = Arc::new(hashes);
+        node.sync.set_local_object_hashes(cut.digest, &hashes);
+        node.drain_events();
+    }
+    now = run_for(&mut nodes, &mut link, now, 500_000);
+    for node in &nodes {
+        let resync = match scene_events(node).as_slice() {
+            [SceneEvent::Resync(r)] => r.clone(),
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(resync.cut, cut.digest);
+        assert_eq!(resync.objects, [ObjectId(2), ObjectId(3)]);
+        assert!(!resync.rest);
+    }
+    // B refolds them and hashes as A does: the new hash goes out, and both agree.
+    nodes[1].sync.set_local_scene(cut.with_hash([1; 32]));
+    run_for(&mut nodes, &mut link, now, 500_000);
+    for node in &nodes {
+        assert_eq!(node.sync.stats().scene.agrees, Some(true));
+    }
+}
