@@ -184,20 +184,16 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
         self.scene.object_hashes()
     }
 
-    /// Refolds `objects` from their start in `log`, and with `rest` the independent entries
-    /// after the base: the repair when a peer's scene differs from another's at the same cut
+    /// Refolds `objects` from their start in `log`, and with `rest` the independent entries:
+    /// the repair when a peer's scene differs from another's at the same cut
     /// ([`crate::sync::scene::Resync`]). A fold that was right is left as it was.
     pub fn resync(&mut self, log: &Log<P>, objects: &[ObjectId], rest: bool) {
         for object in objects {
             self.refold_object(log, *object);
         }
         if rest {
-            let base = log.base().map(|b| b.authors.as_slice()).unwrap_or_default();
             let void_from = (log.version_vector().iter())
-                .map(|(author, _)| {
-                    let in_base = base.iter().find(|a| a.author == *author);
-                    (*author, in_base.map_or(1, |a| a.seq + 1))
-                })
+                .map(|(author, _)| (*author, 1))
                 .collect();
             let refold = Refold {
                 void_from,

@@ -2027,7 +2027,7 @@ mod tests {
     impl Owner {
         fn new(peer: &TPeer) -> Self {
             Self {
-                scene: crate::materialize::Materialized::fold(peer.log()).unwrap(),
+                scene: crate::materialize::Materialized::fold(peer.log()),
                 resyncs: Vec::new(),
                 n_mismatches: 0,
             }

@@ -4,10 +4,10 @@
 //! judges every later op exactly as a peer that synced op by op does: no verdict reads
 //! anything a snapshot leaves out.
 //!
-//! **Cut.** A snapshot names the ops it covers by its [`Cut`]: how many, and a digest of the
-//! heads of their DAG (an op's id hashes its deps, so the heads name every op below them). A
-//! join checks that the ops it inserted are exactly that cut and that the scene's bytes
-//! decode to the scene hash the snapshot names.
+//! **Cut.** A snapshot names the ops it covers by their [`SceneCut`], the digest of the heads
+//! of their DAG (an op's id hashes its deps, so the heads name every op below them), as the
+//! scene check does. A join checks that the ops it inserted are exactly that cut and that the
+//! scene's bytes decode to the scene hash the snapshot names.
 //!
 //! **Trust.** A join checks no signature and folds nothing, so a hostile producer could hand
 //! forged ops or a scene that is not their fold. [`verify`] checks both: every signature over
@@ -29,6 +29,7 @@ use crate::materialize::{
 };
 use crate::op::{MAX_LOG_OPS, MAX_OP_BYTES, Op, VerifiedOp};
 use crate::payload::Payload;
+use crate::sync::scene::SceneCut;
 use crate::time::Timestamp;
 
 /// Magic bytes that open an encoded snapshot.
@@ -117,9 +118,9 @@ pub enum JoinError {
     #[error("the ops give the cut {got}, the snapshot names {named}")]
     Cut {
         /// What the snapshot says.
-        named: Cut,
+        named: SceneCut,
         /// What its ops give.
-        got: Cut,
+        got: SceneCut,
     },
     /// The scene did not decode.
     #[error("scene: {0}")]
@@ -174,8 +175,12 @@ impl<P: Payload> Snapshot<P> {
     }
 
     /// The ops the snapshot covers.
-    pub fn cut(&self) -> Cut {
-        Cut::from_heads(self.ops.len() as u64, &self.heads)
+    pub fn cut(&self) -> SceneCut {
+        let mut vv = crate::causal::VersionVector::new();
+        for op in &self.ops {
+            vv.raise(op.author(), op.seq());
+        }
+        SceneCut::of_heads(&self.heads, vv.n_ops())
     }
 
     /// The scene hash the snapshot names.
@@ -212,8 +217,8 @@ impl<P: Payload> Snapshot<P> {
                 return Err(JoinError::OutOfOrder { index });
             }
         }
-        let got = Cut::of(&log);
-        if got != named {
+        let got = SceneCut::of(&log);
+        if got.digest != named.digest {
             return Err(JoinError::Cut { named, got });
         }
         let scene = M::decode_snapshot(&self.scene).map_err(JoinError::Scene)?;

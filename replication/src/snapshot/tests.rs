@@ -179,7 +179,7 @@ fn a_joined_peer_syncs_undoes_old_edits_and_is_snapshotted_again() {
     let bytes = snapshot_bytes(&a_log);
     let decoded = TSnapshot::decode(&bytes).unwrap();
     assert_eq!(decoded.encode().unwrap(), bytes, "canonical encoding");
-    assert_eq!(decoded.cut(), Cut::of(&a_log));
+    assert_eq!(decoded.cut(), SceneCut::of(&a_log));
     let (b_log, b_scene) = decoded
         .join::<TestScene>(TLog::default(), Timestamp(0))
         .unwrap();

@@ -33,6 +33,7 @@
 use std::collections::VecDeque;
 use std::sync::Arc;
 
+use crate::identity::OpId;
 use crate::log::Log;
 use crate::payload::{ObjectId, Payload};
 use crate::sync::message::{DIGEST_BYTES, MAX_OBJECT_HASHES, Message, ObjectHashesPart, SceneAt};
@@ -58,18 +59,37 @@ pub struct SceneCut {
     pub n_ops: u64,
 }
 
+impl std::fmt::Display for SceneCut {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} ops, heads {}", self.n_ops, self.short())
+    }
+}
+
 impl SceneCut {
     /// The cut `log` is at.
     pub fn of<P: Payload>(log: &Log<P>) -> Self {
+        Self::of_heads(log.heads(), log.version_vector().n_ops())
+    }
+
+    /// The cut whose heads are `heads`, in id order, where a version vector counts `n_ops`
+    /// (a snapshot's, before it is joined).
+    pub fn of_heads<'a>(heads: impl IntoIterator<Item = &'a OpId>, n_ops: u64) -> Self {
         let mut hasher = blake3::Hasher::new();
         hasher.update(b"sculpt scene cut 1");
-        for head in log.heads() {
+        for head in heads {
             hasher.update(&head.0);
         }
         Self {
             digest: *hasher.finalize().as_bytes(),
-            n_ops: log.version_vector().n_ops(),
+            n_ops,
         }
+    }
+
+    /// The first bytes of the digest in hex, for people reading a report.
+    pub fn short(&self) -> String {
+        (self.digest[..6].iter())
+            .map(|b| format!("{b:02x}"))
+            .collect()
     }
 
     /// A scene hash at this cut.
