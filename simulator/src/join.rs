@@ -2,12 +2,14 @@
 //! [`Snapshot::capture`] and encodes them; the joiner decodes those bytes (so the codec is
 //! exercised too), joins with [`Snapshot::join`] into its empty, configured log, and runs the
 //! check a peer runs after joining ([`snapshot::verify`]: signatures and a fold from scratch).
-//! A snapshot that fails it is not adopted: the joiner starts empty and syncs op by op.
+//! A snapshot that fails it is not adopted: the joiner starts empty and syncs op by op. The
+//! hostile member hands some joiners a snapshot whose scene is not its ops' fold (an empty
+//! scene under its own hash): the check must refuse it.
 
 use replication::log::RefoldBudget;
 use replication::shape::{ShapePayload, ShapeScene};
 use replication::snapshot::{self, Snapshot};
-use replication::{Keypair, Peer, Timestamp};
+use replication::{Keypair, Log, Peer, Timestamp};
 
 use crate::honest::{Honest, Scene};
 use crate::memory;
@@ -17,29 +19,50 @@ use crate::session::SESSION_ID;
 /// peer and its scene.
 pub(crate) type Joined = (Vec<u8>, Peer<ShapePayload>, Scene);
 
-/// Joins `joiner` from a snapshot of `producer`'s log and scene; the joiner's log runs with
-/// the refold `budget`. An error (a snapshot that fails to join or to verify) leaves the
+/// Why a snapshot join did not happen.
+pub(crate) enum Failed {
+    /// The snapshot joined, and the check afterwards refused it.
+    Refused(String),
+    /// Anything else (an honest producer's snapshot should never get here).
+    Other(String),
+}
+
+/// Joins `joiner` from a snapshot of `producer`'s log and scene, or with `planted` of its log
+/// and an empty scene; the joiner's log runs with the refold `budget`. An error leaves the
 /// joiner to sync op by op.
 pub(crate) fn from_snapshot(
     producer: &Honest,
     joiner: &Honest,
     budget: RefoldBudget,
     now: Timestamp,
-) -> Result<Joined, String> {
-    let snapshot = Snapshot::capture(producer.peer.log(), &producer.scene)
-        .map_err(|e| format!("capture: {e}"))?;
-    let bytes = snapshot.encode().map_err(|e| format!("encode: {e}"))?;
+    planted: bool,
+) -> Result<Joined, Failed> {
+    let log = producer.peer.log();
+    let empty = planted.then(|| Scene::fold(&Log::default()));
+    let snapshot = Snapshot::capture(log, empty.as_ref().unwrap_or(&producer.scene))
+        .map_err(|e| Failed::Other(format!("capture: {e}")))?;
+    joined(&snapshot, joiner, budget, now)
+}
+
+fn joined(
+    snapshot: &Snapshot<ShapePayload>,
+    joiner: &Honest,
+    budget: RefoldBudget,
+    now: Timestamp,
+) -> Result<Joined, Failed> {
+    let other = |e: String| Failed::Other(e);
+    let bytes = (snapshot.encode()).map_err(|e| other(format!("encode: {e}")))?;
     let fresh = joiner.peer.log().clone();
     let (peer, scene) = memory::with_slot(joiner.slot, || {
-        let decoded =
-            Snapshot::<ShapePayload>::decode(&bytes).map_err(|e| format!("decode: {e}"))?;
-        let (mut log, scene) = decoded
-            .join::<ShapeScene>(fresh, now)
-            .map_err(|e| format!("join: {e}"))?;
-        snapshot::verify(&log, &scene, &SESSION_ID, |_| {}).map_err(|e| format!("verify: {e}"))?;
+        let decoded = (Snapshot::<ShapePayload>::decode(&bytes))
+            .map_err(|e| other(format!("decode: {e}")))?;
+        let (mut log, scene) =
+            (decoded.join::<ShapeScene>(fresh, now)).map_err(|e| other(format!("join: {e}")))?;
+        snapshot::verify(&log, &scene, &SESSION_ID, |_| {})
+            .map_err(|e| Failed::Refused(format!("verify: {e}")))?;
         log.set_refold_budget(budget);
         let key = Keypair::from_seed(joiner.key_seed);
-        Ok::<_, String>((Peer::new(key, SESSION_ID, log), scene))
+        Ok::<_, Failed>((Peer::new(key, SESSION_ID, log), scene))
     })?;
     Ok((bytes, peer, scene))
 }

@@ -131,6 +131,7 @@ struct Summary {
     n_lost_unsynced: u64,
     n_torn_tails: u64,
     n_snapshot_joins: u64,
+    n_snapshots_refused: u64,
     n_late_joins: u64,
     n_flood_accepted_max: u64,
     n_forged: u64,
@@ -156,6 +157,7 @@ impl Summary {
         self.n_lost_unsynced += s.n_lost_unsynced;
         self.n_torn_tails += s.n_torn_tails;
         self.n_snapshot_joins += s.n_snapshot_joins;
+        self.n_snapshots_refused += s.n_snapshots_refused;
         self.n_late_joins += s.n_late_joins;
         self.n_forged += s.n_forged_ops;
         self.n_author_errors += s.n_author_errors;
@@ -204,13 +206,14 @@ impl Summary {
         );
         println!(
             "  crashes {} (unsynced ops lost {}, torn tails cut {}), late joins {} + {} from \
-             snapshots, forged ops {}, most flood messages accepted {}, user ops the core \
-             refused {}",
+             snapshots ({} planted snapshots refused), forged ops {}, most flood messages \
+             accepted {}, user ops the core refused {}",
             self.n_crashes,
             self.n_lost_unsynced,
             self.n_torn_tails,
             self.n_late_joins,
             self.n_snapshot_joins,
+            self.n_snapshots_refused,
             self.n_forged,
             self.n_flood_accepted_max,
             self.n_author_errors

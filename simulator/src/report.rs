@@ -197,6 +197,8 @@ pub struct Stats {
     pub n_late_joins: u64,
     /// Peers that joined late from a snapshot.
     pub n_snapshot_joins: u64,
+    /// Planted snapshots the joiner's check refused (the joiner then synced op by op).
+    pub n_snapshots_refused: u64,
     /// The byzantine member's crafted attacks sent, by kind.
     pub byzantine: BTreeMap<&'static str, u64>,
     /// Expels of the hostile member the founder (peer 0) authored.
@@ -425,7 +427,7 @@ impl fmt::Display for Report {
         writeln!(
             f,
             "  crashes {} (lost unsynced ops {}, {} of them own, torn tails cut {}), fsyncs {}, \
-             durable ops {}, late joins {} + {} from snapshots",
+             durable ops {}, late joins {} + {} from snapshots ({} planted snapshots refused)",
             s.n_crashes,
             s.n_lost_unsynced,
             self.n_lost_own_ops,
@@ -433,7 +435,8 @@ impl fmt::Display for Report {
             s.n_fsyncs,
             self.n_durable_ops,
             s.n_late_joins,
-            s.n_snapshot_joins
+            s.n_snapshot_joins,
+            s.n_snapshots_refused
         )?;
         self.fmt_sizes(f)?;
         writeln!(

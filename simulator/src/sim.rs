@@ -20,6 +20,7 @@ use crate::check::{self, Ended, QUIESCENCE_LIMIT_MICROS};
 use crate::config::{Config, ConfigError, Faults};
 use crate::honest::{Honest, MAX_DRAIN, Scene, guarded, new_honest, note_delivered, panic_text};
 use crate::hostile::{self, FLOOD_MESSAGES, Hostile};
+use crate::join::Failed;
 use crate::memory;
 use crate::report::{CatchUp, PeerSample, Report, Sample, Stats};
 use crate::rng::SimRng;
@@ -751,7 +752,10 @@ impl Simulation {
         if snapshot && self.honest[0].panicked.is_none() && idx != 0 {
             let budget = refold_budget(&self.faults);
             let now = Timestamp(self.now);
-            match crate::join::from_snapshot(&self.honest[0], &self.honest[idx], budget, now) {
+            // The hostile member hands out a third of the snapshots, with a planted scene.
+            let planted = self.hostile.is_some() && self.faults.forgery && self.net.chance(333);
+            let (producer, joiner) = (&self.honest[0], &self.honest[idx]);
+            match crate::join::from_snapshot(producer, joiner, budget, now, planted) {
                 Ok((bytes, peer, scene)) => {
                     let h = &mut self.honest[idx];
                     h.peer = peer;
@@ -763,7 +767,8 @@ impl Simulation {
                     self.stats.n_snapshot_joins += 1;
                     joined = true;
                 }
-                Err(e) => self
+                Err(Failed::Refused(_)) if planted => self.stats.n_snapshots_refused += 1,
+                Err(Failed::Refused(e) | Failed::Other(e)) => self
                     .restart_failures
                     .push(format!("peer {idx}: snapshot join failed: {e}")),
             }

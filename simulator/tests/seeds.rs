@@ -140,6 +140,10 @@ fn late_peers_join_from_snapshots_and_converge() {
     let reports = passing_runs(16, 6, config);
     let n_snapshot_joins: u64 = reports.iter().map(|r| r.stats.n_snapshot_joins).sum();
     assert!(n_snapshot_joins > 0, "no run joined from a snapshot");
+    // The hostile member's snapshots (a scene that is not their ops' fold) were refused by
+    // the joiners' check, who then synced op by op and converged with the rest.
+    let n_refused: u64 = reports.iter().map(|r| r.stats.n_snapshots_refused).sum();
+    assert!(n_refused > 0, "no planted snapshot was handed out");
 }
 
 /// Issue 53: the product's sync runs over QUIC streams, which lose no message inside a
