@@ -36,8 +36,8 @@ pub const MAX_LOG_BYTES: u64 = 7 * 512 * 1024 * 1024;
 /// and one member cannot fill every peer's memory and store on its own.
 pub const MAX_AUTHOR_BYTES: u64 = 256 * 1024 * 1024;
 /// Most an op's Lamport time may exceed the highest of its dependencies' and its author's
-/// previous op's (2^32). Honest ops exceed it by one, and `u64::MAX / MAX_LAMPORT_JUMP` is far above
-/// [`MAX_LOG_OPS`], so no member can exhaust the Lamport clock before the log fills.
+/// previous op's (2^32). Honest ops exceed it by one, and `u64::MAX / MAX_LAMPORT_JUMP` is far
+/// above [`MAX_LOG_OPS`], so no member can exhaust the Lamport clock before the log fills.
 pub const MAX_LAMPORT_JUMP: u64 = 1 << 32;
 /// Most entries a remote op's refold may re-evaluate without being charged for it: positions
 /// of the linear order from the checkpoint before it, plus the edits of each object the scene
@@ -372,10 +372,7 @@ impl<'a, P> Chain<'a, P> {
     /// be the other side's, and `op` fits once the fork is known.
     fn below_previous_only(&self, forks: &Forks, op: &Op<P>, deps: DepsSeen) -> bool {
         let past_fork = forks.covers(&op.author(), op.seq().saturating_sub(1));
-        let clears_deps = op.lamport() > deps.lamport
-            && op.lamport() - deps.lamport <= MAX_LAMPORT_JUMP
-            && op.timestamp() >= deps.timestamp;
-        !past_fork && op.seq() > 1 && clears_deps
+        !past_fork && op.seq() > 1 && clears(op, deps.lamport, deps.timestamp).is_ok()
     }
 
     /// Checks that `op`'s Lamport time and timestamp clear what its causal past sets (its
@@ -396,26 +393,33 @@ impl<'a, P> Chain<'a, P> {
         if let Some(p) = prev {
             (floor, floor_ts) = (floor.max(p.lamport()), floor_ts.max(p.timestamp()));
         }
-        if op.lamport() <= floor {
-            return Err(InsertError::BadLamport {
-                lamport: op.lamport(),
-                floor,
-            });
-        }
-        if op.lamport() - floor > MAX_LAMPORT_JUMP {
-            return Err(InsertError::LamportJump {
-                lamport: op.lamport(),
-                floor,
-            });
-        }
-        if op.timestamp() < floor_ts {
-            return Err(InsertError::BadTimestamp {
-                timestamp: op.timestamp().0,
-                floor: floor_ts.0,
-            });
-        }
+        clears(op, floor, floor_ts)?;
         Ok(horizon)
     }
+}
+
+/// Checks that `op`'s Lamport time is above `floor`, by at most [`MAX_LAMPORT_JUMP`], and its
+/// timestamp at or above `floor_ts`.
+fn clears<P>(op: &Op<P>, floor: u64, floor_ts: Timestamp) -> Result<(), InsertError> {
+    if op.lamport() <= floor {
+        return Err(InsertError::BadLamport {
+            lamport: op.lamport(),
+            floor,
+        });
+    }
+    if op.lamport() - floor > MAX_LAMPORT_JUMP {
+        return Err(InsertError::LamportJump {
+            lamport: op.lamport(),
+            floor,
+        });
+    }
+    if op.timestamp() < floor_ts {
+        return Err(InsertError::BadTimestamp {
+            timestamp: op.timestamp().0,
+            floor: floor_ts.0,
+        });
+    }
+    Ok(())
 }
 
 /// Keeps `op` (from `origin`) among the fork candidates, once, dropping the oldest past
@@ -1303,7 +1307,6 @@ impl<P: Payload> Log<P> {
                 return Err(e);
             }
         };
-
         let charge = Charge::of(authored.as_deref(), self.author_quota, first_budget, &op)?;
         if self.n_bytes + charge.n_bytes > MAX_LOG_BYTES {
             return Err(InsertError::Full);
@@ -1833,7 +1836,6 @@ impl<P: Payload> Log<P> {
                     refold.object_keys.lower(object, self.order_key(pos));
                 }
             }
-
             if !now.is_empty() {
                 self.hidden.insert(object, now);
             }

@@ -111,7 +111,6 @@ impl<P: Payload> Dag<'_, P> {
             return Some(true);
         }
         // Every dep of a held op is held: an id that is not is in no held op's past.
-
         let Some(at) = self.ops.position(id) else {
             return Some(false);
         };
