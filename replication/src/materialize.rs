@@ -13,7 +13,7 @@ use std::marker::PhantomData;
 
 use crate::codec::DecodeError;
 use crate::identity::{OpId, PeerId};
-use crate::lease::{FoldState, Mark};
+
 use crate::log::{Drained, Insertion, Log, OrderKey, Refold};
 use crate::op::Op;
 use crate::payload::{Effect, ObjectId, Payload};
@@ -112,20 +112,8 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
     /// A driver around `scene`, which must already hold the fold of everything `log` holds
     /// (a scene decoded from a snapshot, for a log joined from it).
     pub(crate) fn from_scene(log: &Log<P>, scene: M) -> Self {
-        let mut out = Self {
-            scene,
-            last_applied: BTreeMap::new(),
-            stats: FoldStats::default(),
-            payload: PhantomData,
-        };
-        // What folding the log would have noted of each object: its last active edit.
-        for entry in log.entries() {
-            if let Effect::Edit { object } = entry.op.payload().effect()
-                && log.is_active(&entry.op.id())
-            {
-                out.last_applied.insert(object, OrderKey::of(entry.op));
-            }
-        }
+        let mut out = Self::around(scene);
+        out.fold_active(log, false);
         out
     }
 
@@ -134,33 +122,32 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
     where
         M: Default,
     {
-        let mut out = Self {
-            scene: M::default(),
-            last_applied: BTreeMap::new(),
-            stats: FoldStats::default(),
-            payload: PhantomData,
-        };
-        out.fold_prefix(log, log.len(), log.fold_state());
+        let mut out = Self::around(M::default());
+        out.fold_active(log, true);
         out
     }
 
-    /// Applies the first `n` entries of the linear order that are active under `state`.
-    pub(crate) fn fold_prefix(&mut self, log: &Log<P>, n: usize, state: &FoldState) {
-        for entry in log.entries().take(n) {
-            let id = entry.op.id();
-            if entry.mark != Mark::Effective
-                || state.is_undone(&id)
-                || log.is_hidden(&id)
-                || log.is_void(&id)
-            {
-                continue;
-            }
+    fn around(scene: M) -> Self {
+        Self {
+            scene,
+            last_applied: BTreeMap::new(),
+            stats: FoldStats::default(),
+            payload: PhantomData,
+        }
+    }
+
+    /// Notes each object's last active edit in `log`, and with `apply` applies every active
+    /// entry in linear order.
+    fn fold_active(&mut self, log: &Log<P>, apply: bool) {
+        for entry in log.entries().filter(|e| e.active) {
             let key = OrderKey::of(entry.op);
             if let Effect::Edit { object } = entry.op.payload().effect() {
                 self.last_applied.insert(object, key);
             }
-            self.scene.apply(FoldEntry { key, op: entry.op });
-            self.stats.n_applied += 1;
+            if apply {
+                self.scene.apply(FoldEntry { key, op: entry.op });
+                self.stats.n_applied += 1;
+            }
         }
     }
 

@@ -5,7 +5,7 @@
 use super::test_scene::TestScene;
 use super::*;
 use crate::identity::PeerId;
-use crate::lease::RejectReason;
+use crate::lease::{Mark, RejectReason};
 use crate::log::tests::{
     TLog, causal_past, deliver_all, founded_log, founded_workload, key, set, shuffled, weak,
     workload,
