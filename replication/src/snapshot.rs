@@ -164,11 +164,10 @@ impl<P: Payload> Snapshot<P> {
         if bytes.len() > MAX_SCENE_SNAPSHOT_BYTES {
             return Err(CaptureError::TooLarge(bytes.len()));
         }
-        let mut heads: Vec<OpId> = log.heads().copied().collect();
-        heads.sort_unstable();
         Ok(Self {
             ops: log.entries().map(|e| e.op.clone()).collect(),
-            heads,
+            // A log's heads come in id order.
+            heads: log.heads().copied().collect(),
             scene_hash: scene.scene_hash(),
             scene: bytes,
         })
@@ -181,11 +180,6 @@ impl<P: Payload> Snapshot<P> {
             vv.raise(op.author(), op.seq());
         }
         SceneCut::of_heads(&self.heads, vv.n_ops())
-    }
-
-    /// The scene hash the snapshot names.
-    pub fn scene_hash(&self) -> SceneHash {
-        self.scene_hash
     }
 
     /// Number of ops.
