@@ -50,8 +50,6 @@ pub(crate) struct Honest {
     pub(crate) peak_live_bytes: i64,
     pub(crate) n_messages_sent: u64,
     pub(crate) n_bytes_sent: u64,
-    /// Whether it joined from a snapshot.
-    pub(crate) joined_from_snapshot: bool,
     /// A crash waiting for the next write (its restart delay, and whether it waits for an
     /// op of the peer's own).
     pub(crate) crash_armed: Option<(u64, bool)>,
@@ -103,7 +101,6 @@ pub(crate) fn new_honest(
         peak_live_bytes: 0,
         n_messages_sent: 0,
         n_bytes_sent: 0,
-        joined_from_snapshot: false,
         crash_armed: None,
         catch_up: CatchUp::default(),
     })

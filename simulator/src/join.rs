@@ -39,25 +39,15 @@ pub(crate) fn from_snapshot(
 ) -> Result<Joined, Failed> {
     let log = producer.peer.log();
     let empty = planted.then(|| Scene::fold(&Log::default()));
-    let snapshot = Snapshot::capture(log, empty.as_ref().unwrap_or(&producer.scene))
+    let bytes = Snapshot::capture(log, empty.as_ref().unwrap_or(&producer.scene))
+        .and_then(|s| s.encode())
         .map_err(|e| Failed::Other(format!("capture: {e}")))?;
-    joined(&snapshot, joiner, budget, now)
-}
-
-fn joined(
-    snapshot: &Snapshot<ShapePayload>,
-    joiner: &Honest,
-    budget: RefoldBudget,
-    now: Timestamp,
-) -> Result<Joined, Failed> {
-    let other = |e: String| Failed::Other(e);
-    let bytes = (snapshot.encode()).map_err(|e| other(format!("encode: {e}")))?;
     let fresh = joiner.peer.log().clone();
     let (peer, scene) = memory::with_slot(joiner.slot, || {
         let decoded = (Snapshot::<ShapePayload>::decode(&bytes))
-            .map_err(|e| other(format!("decode: {e}")))?;
-        let (mut log, scene) =
-            (decoded.join::<ShapeScene>(fresh, now)).map_err(|e| other(format!("join: {e}")))?;
+            .map_err(|e| Failed::Other(format!("decode: {e}")))?;
+        let (mut log, scene) = (decoded.join::<ShapeScene>(fresh, now))
+            .map_err(|e| Failed::Other(format!("join: {e}")))?;
         snapshot::verify(&log, &scene, &SESSION_ID, |_| {})
             .map_err(|e| Failed::Refused(format!("verify: {e}")))?;
         log.set_refold_budget(budget);

@@ -761,7 +761,6 @@ impl Simulation {
                     h.peer = peer;
                     h.scene = scene;
                     h.disk.snapshot = Some(bytes);
-                    h.joined_from_snapshot = true;
                     let held: Vec<OpId> = h.peer.log().entries().map(|e| e.op.id()).collect();
                     crate::honest::note_delivered(h, &held);
                     self.stats.n_snapshot_joins += 1;

@@ -104,9 +104,8 @@ impl Simulation {
                     self.stats.n_stale_drops += 1;
                 }
             }
-            let open = |s: &Self, a: usize, b: usize| !s.blocked.contains_key(&(a, b));
             if !self.pair(from, to).connected
-                && open(self, to, from)
+                && !self.blocked.contains_key(&(to, from))
                 && self.online(from)
                 && self.online(to)
             {
