@@ -56,3 +56,4 @@ pub mod samples;
 pub mod settings;
 pub mod touch;
 pub mod transfer;
+pub mod workload;

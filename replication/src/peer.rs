@@ -342,6 +342,23 @@ impl<P: Payload> Peer<P> {
         &self.log
     }
 
+    /// Puts `log` in place of this peer's log, which it returns: how a node that joined from a
+    /// snapshot takes the joined log, and gives it up when the snapshot proves forged. Only
+    /// while no connection is open (each one's sync state reads the log); else nothing
+    /// changes and `None` comes back.
+    pub fn replace_log(&mut self, mut log: Log<P>) -> Option<Log<P>> {
+        if !self.connections.is_empty() {
+            return None;
+        }
+        log.set_session_id(self.session_id);
+        self.wants.clear();
+        self.wants_dirty = false;
+        self.scene = None;
+        self.object_hashes = None;
+        self.scene_events.clear();
+        Some(std::mem::replace(&mut self.log, log))
+    }
+
     /// Open connections, in id order.
     pub fn connections(&self) -> impl Iterator<Item = (&ConnId, &SyncState<P>)> {
         self.connections.iter()

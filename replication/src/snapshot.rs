@@ -139,7 +139,15 @@ pub enum VerifyError {
     /// The log folded from scratch gives another scene than the one adopted.
     #[error("the scene folded from the ops is not the snapshot's scene")]
     Scene,
+    /// The encoded snapshot did not decode or join again ([`verify_encoded`]).
+    #[error("the snapshot does not join: {0}")]
+    Join(String),
 }
+
+/// [`verify_encoded`] for one payload and scene type, as a plain function the QUIC node runs
+/// on a thread of its own without knowing the scene type.
+pub type Verifier<P> =
+    fn(&[u8], Log<P>, &SessionId, &mut dyn FnMut(usize)) -> Result<(), VerifyError>;
 
 /// The state of a log, ready to encode or to join from.
 #[derive(Debug, Clone)]
@@ -322,6 +330,21 @@ pub fn verify<P: Payload, M: Materialize<P> + Default>(
         return Err(VerifyError::Scene);
     }
     Ok(())
+}
+
+/// Decodes `bytes` and joins them into `log` (empty and set up for the session, as for
+/// [`Snapshot::join`]) again, then [`verify`]s the result: what a peer that joined from these
+/// bytes runs afterwards, off the join's path.
+pub fn verify_encoded<P: Payload, M: Materialize<P> + Default>(
+    bytes: &[u8],
+    log: Log<P>,
+    session: &SessionId,
+    progress: &mut dyn FnMut(usize),
+) -> Result<(), VerifyError> {
+    let snapshot = Snapshot::<P>::decode(bytes).map_err(|e| VerifyError::Join(e.to_string()))?;
+    let (log, scene) =
+        (snapshot.join::<M>(log, Timestamp(0))).map_err(|e| VerifyError::Join(e.to_string()))?;
+    verify(&log, &scene, session, progress)
 }
 
 fn read_ops<P: Payload>(r: &mut Reader<'_>) -> Result<Vec<Op<P>>, DecodeError> {

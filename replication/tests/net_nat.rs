@@ -310,6 +310,7 @@ async fn run_side(plan: Plan) -> Outcome {
         listen: SocketAddr::from((Ipv4Addr::UNSPECIFIED, 0)),
         log: Log::default(),
         store: None,
+        join_from_snapshot: false,
     })
     .unwrap();
     let handle = node.handle;

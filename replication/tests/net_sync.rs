@@ -294,6 +294,7 @@ fn node_with_store(seed: u8, path: &std::path::Path) -> TNode {
         listen: "127.0.0.1:0".parse().unwrap(),
         log: Log::default(),
         store: Some(store),
+        join_from_snapshot: false,
     })
     .unwrap()
 }

@@ -32,7 +32,9 @@ use replication::sync::state::CloseReason;
 use replication::{Keypair, Log, OpId, PeerId, Timestamp};
 
 use replication::sync::ephemeral::presence::Presence;
-pub use view::{ChatRow, HistoryRow, PeerRow, Rejection, SceneCheckRow, SharedView, View, lock};
+pub use view::{
+    ChatRow, HistoryRow, JoinRow, PeerRow, Rejection, SceneCheckRow, SharedView, View, lock,
+};
 
 /// Requests queued from faces to the engine thread before `try_*` calls report it busy.
 pub const MAX_QUEUED_REQUESTS: usize = 256;
@@ -313,12 +315,16 @@ impl Engine {
         // The discovery id takes a slow derivation (argon2id): once per start.
         let keys = SessionKeys::from_invite(&opening.invite);
         let discovery_id = keys.discovery_id();
+        // A peer joining by invite with nothing stored takes a snapshot from the first peer
+        // it meets, instead of every op one by one.
+        let join_from_snapshot = config.invite.is_some() && opening.log.is_empty();
         let node_config = NodeConfig {
             keypair: opening.keypair,
             keys,
             listen: config.network.listen,
             log: opening.log,
             store: opening.store,
+            join_from_snapshot,
         };
         let local_presence = Arc::new(Mutex::new(Presence::named(
             config.name.clone().unwrap_or_else(|| me.short()),
@@ -574,7 +580,7 @@ impl Opening {
 
 /// The founder's admission of itself (`me`), which a new session that binds its authors
 /// needs first: when this peer holds the founder's nonce and has authored nothing in `log`.
-fn founding_payload(
+pub(crate) fn founding_payload(
     founder_nonce: Option<[u8; FOUNDER_NONCE_BYTES]>,
     log: &Log<ShapePayload>,
     me: PeerId,
@@ -934,6 +940,7 @@ impl Worker {
                 log::error!("{line}");
                 lock(&self.view).store_error = Some(line);
             }
+            NodeEvent::Snapshot(news) => self.on_snapshot(&news),
             NodeEvent::Rejected { peer, detail, .. } => {
                 log::debug!("dropped bad input from {}: {detail}", peer.short());
             }
@@ -1012,6 +1019,30 @@ impl Worker {
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         if let Some(listener) = listeners.get(&channel) {
             listener(peer, value);
+        }
+    }
+
+    /// A step of this peer's join from a snapshot: in the view, and said when it ends.
+    fn on_snapshot(&self, news: &replication::net::node::SnapshotNews) {
+        use replication::net::node::SnapshotNews;
+        let mut view = lock(&self.view);
+        let label = |p: PeerId| view.peer_label(p);
+        let mut row = view.snapshot.clone().unwrap_or_default();
+        row.note(news, label);
+        let line = matches!(
+            news,
+            SnapshotNews::Joined { .. }
+                | SnapshotNews::Verified { .. }
+                | SnapshotNews::Refused { .. }
+        )
+        .then(|| row.text());
+        view.snapshot = Some(row);
+        if let Some(wake) = &view.waker {
+            wake();
+        }
+        drop(view);
+        if let Some(line) = line {
+            self.say(line);
         }
     }
 

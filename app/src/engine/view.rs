@@ -14,9 +14,10 @@ use model::scene::{ObjectId, Scene};
 use replication::log::{Drained, Insertion, Refold};
 use replication::materialize::{Materialize as _, Materialized};
 use replication::membership::{FOUNDER_NONCE_BYTES, Membership};
-use replication::net::node::Observer;
+use replication::net::node::{Observer, SnapshotNews};
 use replication::payload::LeaseAction;
 use replication::shape::{IdSource, ShapePayload, ShapeScene};
+use replication::snapshot::{CaptureError, JoinError, Snapshot, Verifier};
 use replication::sync::message::SceneAt;
 use replication::sync::scene::{SceneCut, SceneEvent, SceneMismatch};
 use replication::{Effect, Log, Mark, OpId, Payload as _, Peer, PeerId, Timestamp};
@@ -122,6 +123,105 @@ pub struct SceneCheckRow {
     pub agrees: Option<bool>,
 }
 
+/// How this peer's join from a snapshot went ([`replication::net::node::SnapshotNews`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct JoinRow {
+    /// The peer the snapshot came (or comes) from.
+    pub from: String,
+    /// Bytes received.
+    pub bytes: u64,
+    /// Ops it held, once joined.
+    pub n_ops: usize,
+    /// Time to decode and join it on the engine thread, once joined.
+    pub join_micros: Option<u64>,
+    /// Ops whose signatures the check verified so far.
+    pub checked: usize,
+    /// The check passed and the whole log is stored.
+    pub verified: bool,
+    /// The check found the snapshot's scene was not its ops' fold, and it was refolded.
+    pub refolded: bool,
+    /// Snapshots refused, with why (the latest [`MAX_REFUSALS_SHOWN`]).
+    pub refused: Vec<String>,
+    /// Still fetching or checking.
+    pub busy: bool,
+}
+
+/// Refused snapshots a [`JoinRow`] lists (the latest ones).
+pub const MAX_REFUSALS_SHOWN: usize = 8;
+
+impl JoinRow {
+    /// Takes a step of the join.
+    pub fn note(&mut self, news: &SnapshotNews, label: impl Fn(PeerId) -> String) {
+        match news {
+            SnapshotNews::Fetching { peer, bytes } => {
+                self.from = label(*peer);
+                self.bytes = *bytes;
+                self.busy = true;
+            }
+            SnapshotNews::Joined {
+                peer,
+                n_ops,
+                bytes,
+                join_micros,
+            } => {
+                self.from = label(*peer);
+                self.bytes = *bytes as u64;
+                self.n_ops = *n_ops;
+                self.join_micros = Some(*join_micros);
+                self.busy = true;
+            }
+            SnapshotNews::Verifying { checked, .. } => self.checked = *checked,
+            SnapshotNews::Verified { refolded } => {
+                self.checked = self.n_ops;
+                self.verified = true;
+                self.refolded = *refolded;
+                self.busy = false;
+            }
+            SnapshotNews::Refused { peer, why } => {
+                if self.refused.len() >= MAX_REFUSALS_SHOWN {
+                    self.refused.remove(0);
+                }
+                self.refused.push(format!("from {}: {why}", label(*peer)));
+                // A refused join starts over op by op; a refused fetch asks the next peer,
+                // whose news comes next.
+                self.join_micros = None;
+                self.busy = false;
+            }
+        }
+    }
+
+    /// The join in words, for a status line.
+    pub fn text(&self) -> String {
+        let mb = |b: u64| b as f64 / f64::from(1 << 20);
+        match (self.join_micros, self.busy) {
+            (None, true) => format!(
+                "joining from {}'s snapshot: {:.1} MB received",
+                self.from,
+                mb(self.bytes)
+            ),
+            (Some(_), true) => format!(
+                "joined {} ops from {}'s snapshot; checking it: {} of {} signatures",
+                self.n_ops, self.from, self.checked, self.n_ops
+            ),
+            (Some(us), false) if self.verified => format!(
+                "joined {} ops from {}'s snapshot in {} ms; checked{}",
+                self.n_ops,
+                self.from,
+                us / 1_000,
+                if self.refolded {
+                    ", and its scene, which was not its ops' fold, refolded"
+                } else {
+                    ""
+                }
+            ),
+            _ => match self.refused.last() {
+                Some(why) => format!("a snapshot was refused ({why}); syncing op by op"),
+                None => String::new(),
+            },
+        }
+    }
+}
+
 /// A session announced on the LAN.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct LanRow {
@@ -172,7 +272,9 @@ pub struct View {
     pub(super) forked: BTreeMap<PeerId, u64>,
     /// What the scene check found.
     scene_check: SceneCheckRow,
-    waker: Option<Box<dyn Fn() + Send>>,
+    /// How the join from a snapshot went, if this peer joined from one.
+    pub(super) snapshot: Option<JoinRow>,
+    pub(super) waker: Option<Box<dyn Fn() + Send>>,
 }
 
 impl View {
@@ -209,6 +311,7 @@ impl View {
             expelled: BTreeSet::new(),
             forked: BTreeMap::new(),
             scene_check: SceneCheckRow::default(),
+            snapshot: None,
             waker: None,
         };
         view.refresh(log);
@@ -270,6 +373,18 @@ impl View {
     /// What the scene check found, across peers.
     pub fn scene_check(&self) -> &SceneCheckRow {
         &self.scene_check
+    }
+
+    /// How the join from a snapshot went, if this peer joined (or tried to) from one.
+    pub fn snapshot(&self) -> Option<&JoinRow> {
+        self.snapshot.as_ref()
+    }
+
+    /// Puts a scene joined from a snapshot (or folded from scratch) in place of the view's.
+    fn adopt(&mut self, scene: Materialized<ShapePayload, ShapeScene>) {
+        self.scene = scene;
+        self.changes.push(Change::All);
+        self.generation += 1;
     }
 
     /// Recomputes the rows and targets that depend on the whole log.
@@ -794,6 +909,36 @@ fn scene_at_text(at: &SceneAt) -> String {
 impl Observer<ShapePayload> for Folder {
     fn inserted(&mut self, _log: &Log<ShapePayload>, insertion: &Insertion) {
         self.pending.add(insertion);
+    }
+
+    fn capture_snapshot(
+        &mut self,
+        log: &Log<ShapePayload>,
+    ) -> Option<Result<Vec<u8>, CaptureError>> {
+        let view = lock(&self.view);
+        Some(Snapshot::capture(log, &view.scene).and_then(|s| s.encode()))
+    }
+
+    fn join_snapshot(
+        &mut self,
+        snapshot: Snapshot<ShapePayload>,
+        log: Log<ShapePayload>,
+        now: Timestamp,
+    ) -> Option<Result<Log<ShapePayload>, JoinError>> {
+        Some(snapshot.join::<ShapeScene>(log, now).map(|(log, scene)| {
+            self.pending = Drained::default();
+            lock(&self.view).adopt(scene);
+            log
+        }))
+    }
+
+    fn snapshot_verifier(&self) -> Option<Verifier<ShapePayload>> {
+        Some(replication::snapshot::verify_encoded::<ShapePayload, ShapeScene>)
+    }
+
+    fn refold(&mut self, log: &Log<ShapePayload>) {
+        self.pending = Drained::default();
+        lock(&self.view).adopt(Materialized::fold(log));
     }
 
     fn settled(&mut self, peer: &mut Peer<ShapePayload>, changed: bool) {

@@ -27,8 +27,9 @@ pub const KEEP_ALIVE_MILLIS: u64 = 2_000;
 pub const IDLE_TIMEOUT_MILLIS: u64 = 10_000;
 /// Bytes of received datagrams buffered per connection before older ones are dropped.
 pub const DATAGRAM_RECEIVE_BUFFER_BYTES: usize = 256 * 1024;
-/// Bidirectional streams a remote may open: exactly the one sync stream.
-pub const MAX_REMOTE_BIDI_STREAMS: u32 = 1;
+/// Bidirectional streams a remote may have open at once: the sync stream and one snapshot
+/// request ([`crate::net::node::MAX_SNAPSHOTS_SERVED_PER_CONN`] bounds how many in all).
+pub const MAX_REMOTE_BIDI_STREAMS: u32 = 2;
 
 /// Why the TLS or QUIC configuration could not be built.
 #[derive(Debug, thiserror::Error)]
@@ -61,7 +62,7 @@ pub(crate) fn secure_random<const N: usize>() -> Result<[u8; N], rustls::Error> 
 }
 
 /// The QUIC transport settings shared by both sides of a connection: one bidirectional
-/// stream, no unidirectional streams, datagrams on, keep-alives and an idle timeout.
+/// stream and a snapshot request, no unidirectional streams, datagrams on, keep-alives and an idle timeout.
 pub fn transport_config() -> Arc<quinn::TransportConfig> {
     let mut config = quinn::TransportConfig::default();
     config

@@ -36,6 +36,7 @@ pub fn node_with(seed: u8, invite: &str, log: Log<TestPayload>) -> TNode {
         listen: "127.0.0.1:0".parse().expect("loopback address"),
         log,
         store: None,
+        join_from_snapshot: false,
     })
     .expect("node starts")
 }

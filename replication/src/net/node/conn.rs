@@ -276,7 +276,9 @@ pub(super) async fn dial(
     }
 }
 
-/// Hands an admitted connection to the core task, then reads its frames until it ends.
+/// Hands an admitted connection to the core task, answers its snapshot requests, and once
+/// the core starts it (at once, or after a join from a snapshot) reads its frames until it
+/// ends.
 async fn run_connection(
     shared: Arc<Shared>,
     conn: ConnId,
@@ -285,16 +287,36 @@ async fn run_connection(
     admitted: Admitted,
 ) {
     let Admitted { peer, send, recv } = admitted;
+    let (start, started) = tokio::sync::oneshot::channel();
     let admitted = Input::Admitted {
         conn,
         role,
         connection: connection.clone(),
         peer,
         send,
+        start,
     };
     // The core hears of the connection before any of its frames or datagrams (one sender,
-    // FIFO; the datagram task starts after this send).
+    // FIFO; the readers start after this send).
     if shared.inputs.send(admitted).await.is_err() {
+        return;
+    }
+    tokio::spawn(super::join::serve_requests(
+        shared.clone(),
+        conn,
+        connection.clone(),
+    ));
+    // Until started, the remote's frames wait in QUIC's flow-control window. A connection
+    // that is lost meanwhile is reported by its reader all the same.
+    let lost = tokio::select! {
+        started = started => started.is_err(),
+        reason = connection.closed() => {
+            let _ = shared.inputs.send(Input::Lost { conn, reason: reason.to_string() }).await;
+            return;
+        }
+    };
+    if lost {
+        // The core dropped the connection before starting it.
         return;
     }
     tokio::spawn(read_datagrams(shared.clone(), conn, connection.clone()));

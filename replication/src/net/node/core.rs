@@ -7,6 +7,7 @@ use std::sync::Arc;
 
 use tokio::sync::{mpsc, oneshot};
 
+use super::join::JoinState;
 use super::{
     CloseCode, Command, ConnStats, Counters, DialError, DisconnectReason, Input,
     MAX_QUEUED_FRAMES_PER_CONN, MAX_REJECTIONS_PER_CONN, NodeAuthorError, NodeEvent, NodeStats,
@@ -26,10 +27,12 @@ use crate::sync::state::{CloseReason, Event};
 use crate::time::Timestamp;
 
 /// One admitted connection.
-struct Live {
-    peer: PeerId,
+pub(super) struct Live {
+    pub(super) peer: PeerId,
     role: Role,
-    connection: quinn::Connection,
+    pub(super) connection: quinn::Connection,
+    /// Starts its readers once the peer takes it ([`Core::open_in_peer`]).
+    start: Option<oneshot::Sender<()>>,
     frames: mpsc::Sender<Vec<u8>>,
     /// When it was admitted (its key, unknown to a log that binds authors, is admitted
     /// [`super::ADMISSION_DELAY_MILLIS`] later).
@@ -37,17 +40,19 @@ struct Live {
 }
 
 pub(super) struct Core<P> {
-    peer: Peer<P>,
-    observer: Option<Box<dyn Observer<P>>>,
+    pub(super) peer: Peer<P>,
+    pub(super) observer: Option<Box<dyn Observer<P>>>,
     /// True when the log changed since the observer last saw a settled step.
-    changed: bool,
-    store: Option<OpStore<P>>,
+    pub(super) changed: bool,
+    pub(super) store: Option<OpStore<P>>,
     endpoint: quinn::Endpoint,
-    shared: Arc<Shared>,
-    conns: BTreeMap<ConnId, Live>,
+    pub(super) shared: Arc<Shared>,
+    pub(super) conns: BTreeMap<ConnId, Live>,
     dials: BTreeMap<ConnId, oneshot::Sender<Result<ConnId, DialError>>>,
     events: mpsc::Sender<NodeEvent>,
-    stats: NodeStats,
+    pub(super) stats: NodeStats,
+    /// Joining from a snapshot, and serving them.
+    pub(super) join: JoinState<P>,
     /// Counted outside this task (socket, rendezvous, punches); read into the stats.
     counters: Arc<Counters>,
     /// The first bytes of every encoded ephemeral message (version and tag).
@@ -71,7 +76,7 @@ fn ephemeral_prefix() -> [u8; 2] {
 }
 
 /// Appends the delivered ops to the store (fsync) before anything more is sent.
-fn persist<P: Payload>(
+pub(super) fn persist<P: Payload>(
     store: &mut Option<OpStore<P>>,
     log: &Log<P>,
     ids: &[OpId],
@@ -114,6 +119,7 @@ impl<P: Payload + Send + 'static> Core<P> {
             ephemeral_prefix: ephemeral_prefix(),
             admitted_from: BTreeMap::new(),
             running: true,
+            join: JoinState::default(),
         }
     }
 
@@ -149,7 +155,7 @@ impl<P: Payload + Send + 'static> Core<P> {
             .close(CloseCode::Shutdown.var_int(), b"shutdown");
     }
 
-    fn emit(&mut self, event: NodeEvent) {
+    pub(super) fn emit(&mut self, event: NodeEvent) {
         if self.events.try_send(event).is_err() {
             self.stats.n_events_dropped += 1;
         }
@@ -172,10 +178,7 @@ impl<P: Payload + Send + 'static> Core<P> {
                     handshake_timeout,
                 ));
             }
-            Command::Author { payload, reply } => {
-                let result = self.author(payload);
-                let _ = reply.send(result);
-            }
+            Command::Author { payload, reply } => self.author_or_hold(payload, reply),
             Command::Ephemeral {
                 channel,
                 value,
@@ -203,7 +206,7 @@ impl<P: Payload + Send + 'static> Core<P> {
         }
     }
 
-    fn author(&mut self, payload: P) -> Result<OpId, NodeAuthorError> {
+    pub(super) fn author(&mut self, payload: P) -> Result<OpId, NodeAuthorError> {
         let (op, insertion) = self.peer.author(wall_clock_now(), payload)?;
         if let Err(error) = persist(&mut self.store, self.peer.log(), &insertion.delivered) {
             self.stop(error.clone());
@@ -219,7 +222,7 @@ impl<P: Payload + Send + 'static> Core<P> {
     }
 
     /// Stops the node: an op that cannot be stored must never be sent.
-    fn stop(&mut self, error: String) {
+    pub(super) fn stop(&mut self, error: String) {
         self.running = false;
         self.emit(NodeEvent::Stopped { error });
     }
@@ -232,7 +235,13 @@ impl<P: Payload + Send + 'static> Core<P> {
                 connection,
                 peer,
                 send,
-            } => self.on_admitted(conn, role, connection, peer, send),
+                start,
+            } => self.on_admitted(conn, role, connection, peer, send, start),
+            Input::SnapshotRequest { conn, send } => self.on_snapshot_request(conn, send),
+            Input::SnapshotProgress { conn, bytes } => self.on_snapshot_progress(conn, bytes),
+            Input::SnapshotFetched { conn, result } => self.on_snapshot_fetched(conn, result),
+            Input::VerifyProgress { checked } => self.on_verify_progress(checked),
+            Input::Verified { result } => self.on_verified(result),
             Input::AdmissionFailed {
                 conn,
                 addr,
@@ -306,6 +315,7 @@ impl<P: Payload + Send + 'static> Core<P> {
         connection: quinn::Connection,
         peer: PeerId,
         send: quinn::SendStream,
+        start: oneshot::Sender<()>,
     ) {
         let reply = self.dials.remove(&conn);
         if let Some((kind, error)) = self.refusal(peer) {
@@ -318,27 +328,6 @@ impl<P: Payload + Send + 'static> Core<P> {
             }
             return;
         }
-        // A connection the remote dialed competes for slots with those of its address
-        // prefix; when all are taken, the least useful accepted one makes room.
-        let opened = match role {
-            Role::Dialer => self.peer.connect(wall_clock_now(), conn),
-            Role::Acceptor => {
-                let source = AddressPrefix::of(connection.remote_address().ip()).key();
-                self.peer.accept(wall_clock_now(), conn, source)
-            }
-        };
-        match opened {
-            // The sync hello must name the id admission proved, or nothing it sent counts.
-            Ok(()) => self.peer.set_admitted(conn, peer),
-            Err(ConnectError::TooMany) => {
-                let kind = RefusalKind::TooManyConnections;
-                return self.refuse(&connection, reply, kind, DialError::TooManyConnections);
-            }
-            Err(e @ (ConnectError::InUse(_) | ConnectError::OutOfRange(_))) => {
-                // Ids come from one counter that starts at 1: neither can happen.
-                unreachable!("connection id from the node's counter refused: {e}");
-            }
-        }
         let (frames, queue) = mpsc::channel(MAX_QUEUED_FRAMES_PER_CONN);
         tokio::spawn(conn::write_frames(send, queue));
         self.conns.insert(
@@ -347,6 +336,7 @@ impl<P: Payload + Send + 'static> Core<P> {
                 peer,
                 role,
                 connection,
+                start: Some(start),
                 frames,
                 since: wall_clock_now(),
             },
@@ -354,6 +344,47 @@ impl<P: Payload + Send + 'static> Core<P> {
         self.stats.n_admitted += 1;
         if let Some(reply) = reply {
             let _ = reply.send(Ok(conn));
+        }
+        if self.join.holds_connections() {
+            self.hold_back(conn);
+        } else {
+            self.open_in_peer(conn);
+        }
+    }
+
+    /// Hands an admitted connection to the peer, which syncs over it, and starts its readers.
+    pub(super) fn open_in_peer(&mut self, conn: ConnId) {
+        let Some(live) = self.conns.get_mut(&conn) else {
+            return;
+        };
+        // A connection the remote dialed competes for slots with those of its address
+        // prefix; when all are taken, the least useful accepted one makes room.
+        let opened = match live.role {
+            Role::Dialer => self.peer.connect(wall_clock_now(), conn),
+            Role::Acceptor => {
+                let source = AddressPrefix::of(live.connection.remote_address().ip()).key();
+                self.peer.accept(wall_clock_now(), conn, source)
+            }
+        };
+        match opened {
+            // The sync hello must name the id admission proved, or nothing it sent counts.
+            Ok(()) => {
+                self.peer.set_admitted(conn, live.peer);
+                if let Some(start) = live.start.take() {
+                    let _ = start.send(());
+                }
+            }
+            Err(ConnectError::TooMany) => {
+                *(self.stats.failed_admissions)
+                    .entry(RefusalKind::TooManyConnections)
+                    .or_insert(0) += 1;
+                let reason = DisconnectReason::Sync(CloseReason::Evicted);
+                self.drop_conn(conn, CloseCode::Refused, Some(reason));
+            }
+            Err(e @ (ConnectError::InUse(_) | ConnectError::OutOfRange(_))) => {
+                // Ids come from one counter that starts at 1: neither can happen.
+                unreachable!("connection id from the node's counter refused: {e}");
+            }
         }
     }
 
@@ -402,10 +433,16 @@ impl<P: Payload + Send + 'static> Core<P> {
     }
 
     /// Closes and forgets a connection; `reason` None means no event (shutdown).
-    fn drop_conn(&mut self, conn: ConnId, code: CloseCode, reason: Option<DisconnectReason>) {
+    pub(super) fn drop_conn(
+        &mut self,
+        conn: ConnId,
+        code: CloseCode,
+        reason: Option<DisconnectReason>,
+    ) {
         let Some(live) = self.conns.remove(&conn) else {
             return;
         };
+        self.forget_held(conn);
         let text = reason
             .as_ref()
             .map(|r| format!("{r:?}"))
@@ -444,7 +481,7 @@ impl<P: Payload + Send + 'static> Core<P> {
     fn admit_newcomers(&mut self, now: Timestamp) {
         let log = self.peer.log();
         let me = self.peer.peer_id();
-        if !log.binds_authors() || !log.is_admitted(&me) {
+        if !log.binds_authors() || !log.is_admitted(&me) || self.join.holds_authors() {
             return;
         }
         let delay = super::ADMISSION_DELAY_MILLIS * 1_000;
@@ -511,7 +548,9 @@ impl<P: Payload + Send + 'static> Core<P> {
             })
             .flatten()
             .collect();
-        if let Err(error) = persist(&mut self.store, self.peer.log(), &delivered) {
+        // A joined log is stored whole once its check passes ([`JoinState`]).
+        let unchecked = self.join.holds_authors();
+        if !unchecked && let Err(error) = persist(&mut self.store, self.peer.log(), &delivered) {
             return self.stop(error);
         }
         for (conn, event) in events {

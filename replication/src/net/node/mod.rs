@@ -13,6 +13,26 @@
 //! does not keep up, events are dropped and counted ([`NodeStats::n_events_dropped`]), and
 //! the log read through [`NodeHandle::with_peer`] stays the truth.
 //!
+//! # Joining from a snapshot
+//!
+//! A node started with [`NodeConfig::join_from_snapshot`] and an empty log holds its first
+//! admitted connections back from sync and asks one of them, on a QUIC stream of its own,
+//! for a [`Snapshot`] (at most [`crate::snapshot::MAX_SNAPSHOT_BYTES`], within
+//! [`SNAPSHOT_FETCH_TIMEOUT_MILLIS`]). Its [`Observer`] joins it and adopts the scene; then
+//! every connection syncs what the snapshot lacks, and a thread named `snapshot-verify`
+//! checks what the join took on trust ([`crate::snapshot::verify_encoded`]). Nothing of the
+//! joined log is stored and no op is authored (authoring waits, at most [`MAX_HELD_AUTHORS`])
+//! until that check passes: then the whole log is stored in one append. A scene that is not
+//! its ops' fold is refolded; a forged op drops the joined log and every connection, and the
+//! node syncs op by op from an empty log. A remote with nothing to give, a failed fetch or
+//! a snapshot that does not join is refused and the next held connection is asked, or,
+//! with none left, every held connection syncs op by op.
+//!
+//! A node serves a snapshot to each connection at most [`MAX_SNAPSHOTS_SERVED_PER_CONN`]
+//! times, and captures one at most every [`SNAPSHOT_CAPTURE_INTERVAL_MILLIS`] (a request in
+//! between gets the last capture, which the remote then completes by sync), so no remote
+//! makes it capture at will.
+//!
 //! The endpoint's UDP socket is a [`DemuxSocket`]: discovery replies are taken out of the
 //! QUIC traffic for the node's discovery client, so that [`NodeHandle::register_with`]
 //! registers from the socket peers must dial (behind a NAT, the server sees and lists that
@@ -21,8 +41,14 @@
 
 mod conn;
 mod core;
+mod join;
 mod punch;
 
+pub use join::{
+    MAX_HELD_AUTHORS, MAX_SNAPSHOT_REQUEST_BYTES, MAX_SNAPSHOTS_SERVED_PER_CONN,
+    SNAPSHOT_CAPTURE_INTERVAL_MILLIS, SNAPSHOT_FETCH_TIMEOUT_MILLIS, SNAPSHOT_PROGRESS_BYTES,
+    SnapshotNews,
+};
 pub use punch::{
     MAX_PUNCH_ATTEMPTS, PUNCH_HANDSHAKE_TIMEOUT_MILLIS, PunchError, Punched, Unreachable,
 };
@@ -45,8 +71,10 @@ use crate::net::socket::{DemuxSocket, DiscoveryPort, SocketCounters};
 use crate::net::tls::{self, TlsError};
 use crate::payload::Payload;
 use crate::peer::{ConnId, Peer};
+use crate::snapshot::{CaptureError, JoinError, Snapshot, Verifier, VerifyError};
 use crate::store::OpStore;
 use crate::sync::state::{CloseReason, EphemeralError, RejectKind, SyncStats};
+use crate::time::Timestamp;
 
 /// Commands queued from handles to the core task before `send` waits.
 pub const MAX_QUEUED_COMMANDS: usize = 64;
@@ -128,6 +156,9 @@ pub struct NodeConfig<P> {
     /// If set, every op the node authors or receives is appended (and fsynced) here before
     /// anything more is sent, as the crate's driving rules require.
     pub store: Option<OpStore<P>>,
+    /// Join from a snapshot when `log` is empty: the first admitted peer is asked for one
+    /// before any connection syncs op by op (see [the module](self#joining-from-a-snapshot)).
+    pub join_from_snapshot: bool,
 }
 
 /// Why the node could not start.
@@ -186,6 +217,9 @@ pub enum NodeAuthorError {
     /// The op could not be stored; the node stops.
     #[error("the op store failed: {0}")]
     Store(String),
+    /// More than [`MAX_HELD_AUTHORS`] edits wait for a join from a snapshot to be checked.
+    #[error("the session is being joined; edit again in a moment")]
+    Joining,
 }
 
 /// Why an ephemeral value was not sent.
@@ -224,6 +258,9 @@ pub enum DisconnectReason {
     SlowReader,
     /// The sync core ended the session.
     Sync(CloseReason),
+    /// A snapshot this node joined from held a forged op: every connection was closed and
+    /// the joined log dropped, and the node syncs op by op from an empty log.
+    SnapshotRefused,
 }
 
 /// Kinds of failed admission, counted in [`NodeStats::failed_admissions`].
@@ -353,6 +390,8 @@ pub enum NodeEvent {
         /// Why.
         error: AdmissionError,
     },
+    /// How a join from a snapshot goes ([`NodeConfig::join_from_snapshot`]).
+    Snapshot(SnapshotNews),
     /// The node stopped because its store failed.
     Stopped {
         /// The store error.
@@ -443,6 +482,16 @@ pub struct NodeStats {
     pub n_punches_skipped: u64,
     /// Rendezvous events dropped because the app did not read them in time.
     pub n_rendezvous_events_dropped: u64,
+    /// Snapshots sent to remotes that asked for one to join from.
+    pub n_snapshots_served: u64,
+    /// Snapshot requests answered with nothing (this node was joining, keeps no scene, or
+    /// the connection had asked [`MAX_SNAPSHOTS_SERVED_PER_CONN`] times).
+    pub n_snapshots_declined: u64,
+    /// Joins from a snapshot (at most one per node).
+    pub n_snapshot_joins: u64,
+    /// Snapshots this node fetched and did not keep: cut short, undecodable, not joining, or
+    /// found forged afterwards.
+    pub n_snapshots_refused: u64,
     /// Live connections, in id order.
     pub connections: Vec<ConnStats>,
 }
@@ -516,6 +565,38 @@ pub trait Observer<P>: Send + 'static {
     /// scene hash ([`Peer::set_scene_hash`]) and answers its events
     /// ([`Peer::poll_scene_event`]).
     fn settled(&mut self, peer: &mut Peer<P>, changed: bool);
+
+    /// This observer's scene with `log`, as an encoded [`Snapshot`] for a remote that joins
+    /// from one; `None` (the default) when it keeps no scene to give.
+    fn capture_snapshot(&mut self, log: &Log<P>) -> Option<Result<Vec<u8>, CaptureError>> {
+        let _ = log;
+        None
+    }
+
+    /// Joins `snapshot` into `log` (empty, set up for the session) and adopts its scene in
+    /// place of this observer's; the joined log, or why not. `None` (the default) when it
+    /// keeps no scene.
+    fn join_snapshot(
+        &mut self,
+        snapshot: Snapshot<P>,
+        log: Log<P>,
+        now: Timestamp,
+    ) -> Option<Result<Log<P>, JoinError>> {
+        let _ = (snapshot, log, now);
+        None
+    }
+
+    /// [`crate::snapshot::verify_encoded`] for this observer's scene type, which the node runs
+    /// on a thread of its own after a join; `None` (the default) when it keeps no scene.
+    fn snapshot_verifier(&self) -> Option<Verifier<P>> {
+        None
+    }
+
+    /// Forgets the scene and folds `log` from scratch: after a check finds a joined scene
+    /// that is not the fold of its ops, or when a joined log is dropped.
+    fn refold(&mut self, log: &Log<P>) {
+        let _ = log;
+    }
 }
 
 /// A request from a handle to the core task.
@@ -560,6 +641,33 @@ enum Input {
         connection: quinn::Connection,
         peer: PeerId,
         send: quinn::SendStream,
+        /// Starts the connection's readers: sent when the peer takes the connection (at
+        /// once, or after a join from a snapshot); dropped, the readers never start.
+        start: oneshot::Sender<()>,
+    },
+    /// The remote asks for a snapshot to join from, on a stream of its own.
+    SnapshotRequest {
+        conn: ConnId,
+        send: quinn::SendStream,
+    },
+    /// A snapshot being fetched from this connection has come this far, in bytes.
+    SnapshotProgress {
+        conn: ConnId,
+        bytes: u64,
+    },
+    /// A snapshot fetch from this connection ended: its bytes (empty when the remote had
+    /// none to give), or why it failed.
+    SnapshotFetched {
+        conn: ConnId,
+        result: Result<Vec<u8>, String>,
+    },
+    /// The check of a joined snapshot has verified this many of its ops' signatures.
+    VerifyProgress {
+        checked: usize,
+    },
+    /// The check of a joined snapshot ended.
+    Verified {
+        result: Result<(), VerifyError>,
     },
     AdmissionFailed {
         conn: Option<ConnId>,
@@ -629,6 +737,7 @@ impl<P: Payload + Send + 'static> Node<P> {
             listen,
             log,
             store,
+            join_from_snapshot,
         } = config;
         let counters = Arc::new(Counters::default());
         let (endpoint, discovery) = bind_endpoint(listen, counters.socket.clone())?;
@@ -649,9 +758,10 @@ impl<P: Payload + Send + 'static> Node<P> {
             accepting: Mutex::new(conn::AcceptLoad::default()),
             counters: counters.clone(),
         });
+        let joining = join_from_snapshot && log.is_empty();
         let peer = Peer::new(keypair, keys.session_id(), log);
         tokio::spawn(conn::accept_loop(endpoint.clone(), shared.clone()));
-        let core = core::Core::new(
+        let mut core = core::Core::new(
             peer,
             observer,
             store,
@@ -660,6 +770,9 @@ impl<P: Payload + Send + 'static> Node<P> {
             event_tx,
             counters.clone(),
         );
+        if joining {
+            core.start_joining();
+        }
         tokio::spawn(core.run(command_rx, input_rx));
         Ok(Self {
             handle: NodeHandle {
