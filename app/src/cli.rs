@@ -422,6 +422,24 @@ fn peer_state(engine: &Engine) -> serde_json::Value {
             "objects_refolded": check.n_objects_refolded,
             "last_mismatch": check.last_mismatch,
         },
+        "snapshot": join_json(view.snapshot()),
+    })
+}
+
+/// How the peer's join from a snapshot went, as JSON (`null` when it joined none).
+pub(crate) fn join_json(row: Option<&app::engine::JoinRow>) -> serde_json::Value {
+    row.map_or(serde_json::Value::Null, |r| {
+        serde_json::json!({
+            "from": r.from,
+            "bytes": r.bytes,
+            "ops": r.n_ops,
+            "join_ms": r.join_micros.map(|us| us as f64 / 1e3),
+            "checked": r.checked,
+            "verified": r.verified,
+            "refused": r.refused,
+            "busy": r.busy,
+            "text": r.text(),
+        })
     })
 }
 

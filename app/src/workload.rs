@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use model::object::{Edit, EditOp, Formula, Geometry, ObjectData, Pose, ToolShape};
-use replication::net::SessionKeys;
+use replication::net::{Invite, SessionKeys};
 use replication::shape::{IdSource, ShapePayload};
 use replication::{Log, Timestamp};
 
@@ -16,8 +16,12 @@ pub const MAX_WORKLOAD_EDITS: usize = 200_000;
 
 /// Founds a new session in `dir` (which must hold none) whose founder made one ball and
 /// carved it `n_edits` times, each a small sphere somewhere on its surface, all stored.
-/// Returns the number of ops stored.
-pub fn carved_session(dir: &Path, n_edits: usize, now: Timestamp) -> Result<usize, String> {
+/// Returns the number of ops stored and the session's invite.
+pub fn carved_session(
+    dir: &Path,
+    n_edits: usize,
+    now: Timestamp,
+) -> Result<(usize, Invite), String> {
     if n_edits > MAX_WORKLOAD_EDITS {
         return Err(format!("at most {MAX_WORKLOAD_EDITS} edits"));
     }
@@ -68,5 +72,5 @@ pub fn carved_session(dir: &Path, n_edits: usize, now: Timestamp) -> Result<usiz
     }
     let ops: Vec<_> = ids.iter().filter_map(|id| log.get(id)).collect();
     store.append(&ops).map_err(|e| e.to_string())?;
-    Ok(ops.len())
+    Ok((ops.len(), opened.invite))
 }

@@ -1502,3 +1502,92 @@ fn join_leaves_the_demo_for_another_session_found_through_a_discovery_node() {
     assert!(deep_blue(&picture) > 0.05);
     assert_eq!(peer.last_peer(), state["peers"][0]["peer"]);
 }
+
+/// Edits in the session [`a_window_joins_a_long_session_from_a_snapshot_and_refuses_a_planted_scene`]
+/// joins.
+const LONG_SESSION_EDITS: usize = 100_000;
+
+#[test]
+fn a_window_joins_a_long_session_from_a_snapshot_and_refuses_a_planted_scene() {
+    let display = display();
+    let dir = scratch("snapshot-join");
+    let peer_store = dir.join("peer");
+    let now = app::clock::now().wall;
+    let (n, invite) = app::workload::carved_session(&peer_store, LONG_SESSION_EDITS, now).unwrap();
+    let code = invite.to_string();
+    let mut peer = HeadlessPeer::spawn(&[
+        "--store",
+        peer_store.to_str().unwrap(),
+        "--no-lan",
+        "--listen",
+        "127.0.0.1:0",
+        "--json",
+    ]);
+    peer.wait_for("its stored session", |v| v["ops"] == n);
+    let addr = peer.last["listen"].as_str().unwrap().to_string();
+    let folded = peer.last["scene_hash"].as_str().unwrap().to_string();
+    let join = |name: &str, addr: &str, extra: &[&str]| {
+        let store = dir.join(name);
+        let n_ops = n.to_string();
+        let mut args = vec![
+            "--store",
+            store.to_str().unwrap(),
+            "--invite",
+            &code,
+            "--no-lan",
+            "--listen",
+            "127.0.0.1:0",
+            "--dial",
+            addr,
+            "--wait-ops",
+            &n_ops,
+        ];
+        args.extend(extra);
+        window_with(&display, &dir, name, &args).0
+    };
+
+    // The window joins from the headless peer's snapshot, checks it, and holds its scene.
+    let state = join("joined", &addr, &[]);
+    let (session, snapshot) = (&state, &state["snapshot"]);
+    assert_eq!(snapshot["ops"], n, "{snapshot}");
+    assert_eq!(snapshot["verified"], true, "{snapshot}");
+    // The peer admits the window's key once it is connected: one op more, no change of scene.
+    assert!(session["n_ops"].as_u64().unwrap() >= n as u64, "{session}");
+    assert_eq!(session["scene_hash"], folded.as_str(), "{session}");
+    let join_ms = snapshot["join_ms"].as_f64().unwrap();
+    println!("joined {n} ops from a snapshot in {join_ms} ms (this build)");
+    drop(peer);
+
+    // The same session served by a peer whose fold lost the ball behind its log's back: its
+    // snapshot names a scene that is not its ops' fold. The window refuses it and syncs op by
+    // op, and the scene check between the two repairs the server.
+    let server = app::engine::Engine::start(
+        app::engine::EngineConfig::on_loopback(&peer_store),
+        app::clock::now().wall,
+    )
+    .unwrap();
+    let ball = {
+        let mut view = app::engine::lock(server.view());
+        assert_eq!(view.scene_hash_hex(), folded);
+        let ball = view.scene().objects().next().unwrap().0.0;
+        view.plant_scene_difference(ball);
+        assert_ne!(view.scene_hash_hex(), folded);
+        ball
+    };
+    let addr = app::engine::lock(server.view())
+        .listen_addr()
+        .unwrap()
+        .to_string();
+    let state = join("refused", &addr, &["--command", "wait-secs: 5"]);
+    let (session, snapshot) = (&state, &state["snapshot"]);
+    assert_eq!(snapshot["verified"], false, "{snapshot}");
+    let refused = snapshot["refused"][0].as_str().unwrap();
+    assert!(refused.contains("not the scene"), "{snapshot}");
+    assert_eq!(session["scene_hash"], folded.as_str(), "{session}");
+    let mut view = app::engine::lock(server.view());
+    assert!(
+        view.scene_check().n_mismatches >= 1,
+        "the server found its difference"
+    );
+    assert_eq!(view.scene_hash_hex(), folded, "and refolded object {ball}");
+}

@@ -43,7 +43,7 @@ static STORE: LazyLock<PathBuf> = LazyLock::new(|| {
 /// The full history's snapshot, encoded.
 static SNAPSHOT: LazyLock<Vec<u8>> = LazyLock::new(|| {
     Snapshot::capture(&FULL.0, &FULL.1)
-        .and_then(|s| s.encode())
+        .encode()
         .expect("a snapshot")
 });
 

@@ -74,7 +74,7 @@ fn main() {
     drop((a, b));
 
     // The snapshot, and the memory of a log joined from it.
-    let snapshot = Snapshot::capture(&log, &scene).expect("a snapshot");
+    let snapshot = Snapshot::capture(&log, &scene);
     let bytes = snapshot.encode().expect("encodes");
     println!(
         "| snapshot ({} ops, the scene) | {:.1} |",

@@ -11,7 +11,6 @@ use std::collections::BTreeMap;
 use std::collections::btree_map::Entry;
 use std::marker::PhantomData;
 
-use crate::codec::DecodeError;
 use crate::identity::{OpId, PeerId};
 
 use crate::log::{Drained, Insertion, Log, OrderKey, Refold};
@@ -19,8 +18,6 @@ use crate::op::Op;
 use crate::payload::{Effect, ObjectId, Payload};
 use crate::sync::scene::ObjectHashes;
 
-/// Largest scene snapshot a [`Materialize::decode_snapshot`] is given, in bytes.
-pub const MAX_SCENE_SNAPSHOT_BYTES: usize = 64 * 1024 * 1024;
 /// Length of a [`SceneHash`].
 pub const SCENE_HASH_BYTES: usize = 32;
 
@@ -72,16 +69,6 @@ pub trait Materialize<P: Payload> {
     /// and the rest: two scenes whose parts all hash equal have equal scene hashes, so peers
     /// whose scene hashes differ find the objects to refold ([`crate::sync::scene`]).
     fn object_hashes(&self) -> ObjectHashes;
-
-    /// Appends the scene's snapshot encoding: a version byte first, canonical (equal scenes
-    /// encode to equal bytes), at most [`MAX_SCENE_SNAPSHOT_BYTES`].
-    fn encode_snapshot(&self, out: &mut Vec<u8>);
-
-    /// Decodes a snapshot from untrusted bytes (at most [`MAX_SCENE_SNAPSHOT_BYTES`]), never
-    /// panicking and allocating only within named limits.
-    fn decode_snapshot(bytes: &[u8]) -> Result<Self, DecodeError>
-    where
-        Self: Sized;
 }
 
 /// What a [`Materialized`] did, to measure how much a refold costs.
@@ -109,46 +96,26 @@ pub struct Materialized<P, M> {
 }
 
 impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
-    /// A driver around `scene`, which must already hold the fold of everything `log` holds
-    /// (a scene decoded from a snapshot, for a log joined from it).
-    pub(crate) fn from_scene(log: &Log<P>, scene: M) -> Self {
-        let mut out = Self::around(scene);
-        out.fold_active(log, false);
-        out
-    }
-
     /// The scene of `log`, folded from scratch.
     pub fn fold(log: &Log<P>) -> Self
     where
         M: Default,
     {
-        let mut out = Self::around(M::default());
-        out.fold_active(log, true);
-        out
-    }
-
-    fn around(scene: M) -> Self {
-        Self {
-            scene,
+        let mut out = Self {
+            scene: M::default(),
             last_applied: BTreeMap::new(),
             stats: FoldStats::default(),
             payload: PhantomData,
-        }
-    }
-
-    /// Notes each object's last active edit in `log`, and with `apply` applies every active
-    /// entry in linear order.
-    fn fold_active(&mut self, log: &Log<P>, apply: bool) {
+        };
         for entry in log.entries().filter(|e| e.active) {
             let key = OrderKey::of(entry.op);
             if let Effect::Edit { object } = entry.op.payload().effect() {
-                self.last_applied.insert(object, key);
+                out.last_applied.insert(object, key);
             }
-            if apply {
-                self.scene.apply(FoldEntry { key, op: entry.op });
-                self.stats.n_applied += 1;
-            }
+            out.scene.apply(FoldEntry { key, op: entry.op });
+            out.stats.n_applied += 1;
         }
+        out
     }
 
     /// The scene.
@@ -309,13 +276,11 @@ fn apply_held_edits<P: Payload, M: Materialize<P>>(
 /// last active `Set`) and the chat list in linear order.
 pub mod test_scene {
     use super::*;
-    use crate::codec::{Reader, put_bytes, put_varint};
-    use crate::payload::test_payload::{MAX_TEST_TEXT_BYTES, TestPayload};
+    use crate::codec::{put_bytes, put_varint};
+    use crate::payload::test_payload::TestPayload;
 
-    /// Version byte of the test scene's snapshot encoding.
+    /// Version byte of the test scene's canonical encoding.
     pub const TEST_SCENE_FORMAT_VERSION: u8 = 1;
-    /// Most objects or chat lines a decoded test scene may hold.
-    pub const MAX_TEST_SCENE_ITEMS: usize = 1 << 20;
 
     /// Object values and the chat list.
     #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -358,7 +323,7 @@ pub mod test_scene {
 
         fn scene_hash(&self) -> SceneHash {
             let mut bytes = Vec::new();
-            self.encode_snapshot(&mut bytes);
+            self.encode(&mut bytes);
             SceneHash::of(&bytes)
         }
 
@@ -374,8 +339,11 @@ pub mod test_scene {
             }
             ObjectHashes::new(objects, SceneHash::of(&chat).0)
         }
+    }
 
-        fn encode_snapshot(&self, out: &mut Vec<u8>) {
+    impl TestScene {
+        /// The scene's canonical encoding, which its hash hashes.
+        fn encode(&self, out: &mut Vec<u8>) {
             out.push(TEST_SCENE_FORMAT_VERSION);
             put_varint(out, self.objects.len() as u64);
             for (object, value) in &self.objects {
@@ -390,63 +358,6 @@ pub mod test_scene {
                 put_bytes(out, text.as_bytes());
             }
         }
-
-        fn decode_snapshot(bytes: &[u8]) -> Result<Self, DecodeError> {
-            if bytes.len() > MAX_SCENE_SNAPSHOT_BYTES {
-                return Err(DecodeError::OverLimit {
-                    offset: 0,
-                    what: "scene snapshot length",
-                    value: bytes.len() as u64,
-                    limit: MAX_SCENE_SNAPSHOT_BYTES as u64,
-                });
-            }
-            let mut r = Reader::new(bytes);
-            let version = r.u8()?;
-            if version != TEST_SCENE_FORMAT_VERSION {
-                return Err(DecodeError::UnknownVersion { offset: 0, version });
-            }
-            let n_objects = r.bounded("object count", MAX_TEST_SCENE_ITEMS as u64)?;
-            let mut objects = BTreeMap::new();
-            for _ in 0..n_objects {
-                let offset = r.offset();
-                let object = r.varint()?;
-                if objects.last_key_value().is_some_and(|(o, _)| *o >= object) {
-                    return Err(DecodeError::Invalid {
-                        offset,
-                        what: "unsorted objects",
-                    });
-                }
-                objects.insert(object, text(&mut r)?);
-            }
-            let n_chat = r.bounded("chat count", MAX_TEST_SCENE_ITEMS as u64)?;
-            let mut chat: Vec<(OrderKey, String)> = Vec::new();
-            for _ in 0..n_chat {
-                let offset = r.offset();
-                let key = OrderKey {
-                    lamport: r.varint()?,
-                    author: PeerId(r.array()?),
-                    seq: r.varint()?,
-                };
-                if chat.last().is_some_and(|(k, _)| *k >= key) {
-                    return Err(DecodeError::Invalid {
-                        offset,
-                        what: "unsorted chat",
-                    });
-                }
-                chat.push((key, text(&mut r)?));
-            }
-            r.finish()?;
-            Ok(Self { objects, chat })
-        }
-    }
-
-    fn text(r: &mut Reader<'_>) -> Result<String, DecodeError> {
-        let offset = r.offset();
-        let bytes = r.bytes("text length", MAX_TEST_TEXT_BYTES as u64)?;
-        String::from_utf8(bytes.to_vec()).map_err(|_| DecodeError::Invalid {
-            offset,
-            what: "utf-8",
-        })
     }
 }
 

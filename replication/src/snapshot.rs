@@ -1,32 +1,35 @@
-//! Snapshots: a log's whole history in linear order with the scene folded from it, so a new
-//! peer joins by inserting ops whose signatures the producer checked and adopting the scene as
-//! folded, instead of verifying and folding op by op. The joined log holds every op, so it
-//! judges every later op exactly as a peer that synced op by op does: no verdict reads
-//! anything a snapshot leaves out.
+//! Snapshots: a log's whole history in linear order with the hash of the scene folded from
+//! it, so a new peer joins by inserting ops whose signatures the producer checked, instead of
+//! verifying them one by one as sync does. The joined log holds every op, so it judges every
+//! later op exactly as a peer that synced op by op does: no verdict reads anything a snapshot
+//! leaves out.
 //!
 //! **Cut.** A snapshot names the ops it covers by their [`SceneCut`], the digest of the heads
 //! of their DAG (an op's id hashes its deps, so the heads name every op below them), as the
-//! scene check does. A join checks that the ops it inserted are exactly that cut and that the
-//! scene's bytes decode to the scene hash the snapshot names.
+//! scene check does. A join checks that the ops it inserted are exactly that cut, folds them,
+//! and checks the fold against the scene hash the snapshot names: a snapshot from a peer
+//! whose scene differs from its ops' fold is refused at once.
 //!
-//! **Trust.** A join checks no signature and folds nothing, so a hostile producer could hand
-//! forged ops or a scene that is not their fold. [`verify`] checks both: every signature over
-//! the session (in batches), and the joined log folded from scratch against the adopted
-//! scene's hash. A peer runs it after joining, off the join's path, and drops the joined state
-//! if it fails. Until then the joined peer forwards nothing its remotes do not verify anyway.
+//! **Why the fold, not the producer's scene.** Folding is the cheap part of a join: the
+//! object model compiles an op's formulas and edits when the op decodes, and its fold shares
+//! them. Decoding a scene would compile every edit a second time (about ten times a fold's
+//! cost at 10^5 edits) and carry every edit twice on the wire.
 //!
-//! Format (version 3), integers as varints: `SCULPTSNAP [3] [n ≤ MAX_LOG_OPS][len][op]*` (the
-//! linear order) `[n][head 32]*` (sorted) `[scene hash 32] [len][scene]`
-//! `[blake3 of everything before, 32]`. Versions 1 and 2 (a cut of ids without the ops, which
-//! could not judge every later op as a full peer does) are refused.
+//! **Trust.** A join checks no signature, so a hostile producer could hand forged ops.
+//! [`verify_encoded`] checks every signature over the session, in batches. A peer runs it
+//! after joining, off the join's path, and drops the joined state if it fails; until then
+//! it stores nothing of it, and forwards nothing its remotes do not verify anyway.
+//!
+//! Format (version 4), integers as varints: `SCULPTSNAP [4] [n ≤ MAX_LOG_OPS][len][op]*` (the
+//! linear order) `[n][head 32]*` (sorted) `[scene hash 32]` `[blake3 of everything before,
+//! 32]`. Versions 1 and 2 (a cut of ids without the ops, which could not judge every later
+//! op as a full peer does) and 3 (the producer's scene beside its hash) are refused.
 
 use crate::codec::{DecodeError, Reader, put_bytes, put_varint};
 use crate::identity::{OpId, SessionId};
 use crate::log::LOCAL_ORIGIN;
 use crate::log::{InsertError, Log};
-use crate::materialize::{
-    MAX_SCENE_SNAPSHOT_BYTES, Materialize, Materialized, SCENE_HASH_BYTES, SceneHash,
-};
+use crate::materialize::{Materialize, Materialized, SCENE_HASH_BYTES, SceneHash};
 use crate::op::{MAX_LOG_OPS, MAX_OP_BYTES, Op, VerifiedOp};
 use crate::payload::Payload;
 use crate::sync::scene::SceneCut;
@@ -34,8 +37,8 @@ use crate::time::Timestamp;
 
 /// Magic bytes that open an encoded snapshot.
 pub const SNAPSHOT_MAGIC: &[u8; 10] = b"SCULPTSNAP";
-/// The snapshot format version (3: the ops whole).
-pub const SNAPSHOT_FORMAT_VERSION: u8 = 3;
+/// The snapshot format version (4: the ops whole and the scene's hash).
+pub const SNAPSHOT_FORMAT_VERSION: u8 = 4;
 /// Largest encoded snapshot accepted or produced, in bytes (256 MiB).
 pub const MAX_SNAPSHOT_BYTES: usize = 256 * 1024 * 1024;
 /// Bytes of checksum at the end of a snapshot.
@@ -87,8 +90,7 @@ impl std::fmt::Display for Cut {
 /// Why a snapshot could not be captured.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum CaptureError {
-    /// The encoding would exceed [`MAX_SNAPSHOT_BYTES`] (or the scene
-    /// [`MAX_SCENE_SNAPSHOT_BYTES`]).
+    /// The encoding would exceed [`MAX_SNAPSHOT_BYTES`].
     #[error("snapshot of {0} bytes is over its limit")]
     TooLarge(usize),
 }
@@ -122,32 +124,22 @@ pub enum JoinError {
         /// What its ops give.
         got: SceneCut,
     },
-    /// The scene did not decode.
-    #[error("scene: {0}")]
-    Scene(DecodeError),
-    /// The decoded scene's hash is not the one the snapshot names.
-    #[error("the scene's hash is not the one the snapshot names")]
+    /// The ops' fold has another scene hash than the one the snapshot names: the producer's
+    /// scene is not its ops' fold.
+    #[error("the ops' fold is not the scene the snapshot names")]
     SceneHash,
 }
 
-/// Why [`verify`] found a joined state wrong.
+/// Why [`verify`] found a joined snapshot wrong.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum VerifyError {
     /// An op's signature does not verify for the session.
     #[error("op {0} is not signed by its author for this session")]
     Unsigned(OpId),
-    /// The log folded from scratch gives another scene than the one adopted.
-    #[error("the scene folded from the ops is not the snapshot's scene")]
-    Scene,
-    /// The encoded snapshot did not decode or join again ([`verify_encoded`]).
-    #[error("the snapshot does not join: {0}")]
-    Join(String),
+    /// The encoded snapshot did not decode again ([`verify_encoded`]).
+    #[error("the snapshot does not decode: {0}")]
+    Decode(DecodeError),
 }
-
-/// [`verify_encoded`] for one payload and scene type, as a plain function the QUIC node runs
-/// on a thread of its own without knowing the scene type.
-pub type Verifier<P> =
-    fn(&[u8], Log<P>, &SessionId, &mut dyn FnMut(usize)) -> Result<(), VerifyError>;
 
 /// The state of a log, ready to encode or to join from.
 #[derive(Debug, Clone)]
@@ -157,28 +149,17 @@ pub struct Snapshot<P> {
     /// The DAG's heads, sorted.
     heads: Vec<OpId>,
     scene_hash: SceneHash,
-    /// The scene in its own snapshot encoding.
-    scene: Vec<u8>,
 }
 
 impl<P: Payload> Snapshot<P> {
-    /// Captures `log` and its scene as they stand.
-    pub fn capture<M: Materialize<P>>(
-        log: &Log<P>,
-        scene: &Materialized<P, M>,
-    ) -> Result<Self, CaptureError> {
-        let mut bytes = Vec::new();
-        scene.scene().encode_snapshot(&mut bytes);
-        if bytes.len() > MAX_SCENE_SNAPSHOT_BYTES {
-            return Err(CaptureError::TooLarge(bytes.len()));
-        }
-        Ok(Self {
+    /// Captures `log` and the hash of its scene as they stand.
+    pub fn capture<M: Materialize<P>>(log: &Log<P>, scene: &Materialized<P, M>) -> Self {
+        Self {
             ops: log.entries().map(|e| e.op.clone()).collect(),
             // A log's heads come in id order.
             heads: log.heads().copied().collect(),
             scene_hash: scene.scene_hash(),
-            scene: bytes,
-        })
+        }
     }
 
     /// The ops the snapshot covers.
@@ -195,15 +176,15 @@ impl<P: Payload> Snapshot<P> {
         self.ops.len()
     }
 
-    /// The scene, in the scene's snapshot encoding.
-    pub fn scene_bytes(&self) -> &[u8] {
-        &self.scene
+    /// The hash of the producer's scene.
+    pub fn scene_hash(&self) -> SceneHash {
+        self.scene_hash
     }
 
     /// Inserts every op into `log` (empty, and set up for the session: its id, founder and
-    /// binding) without checking signatures, and decodes the scene instead of folding it.
-    /// Checks the cut and the scene's hash; see [`verify`] for the rest.
-    pub fn join<M: Materialize<P>>(
+    /// binding) without checking signatures, and folds them. Checks the cut and the fold's
+    /// hash; see [`verify`] for the signatures.
+    pub fn join<M: Materialize<P> + Default>(
         self,
         mut log: Log<P>,
         now: Timestamp,
@@ -223,12 +204,11 @@ impl<P: Payload> Snapshot<P> {
         if got.digest != named.digest {
             return Err(JoinError::Cut { named, got });
         }
-        let scene = M::decode_snapshot(&self.scene).map_err(JoinError::Scene)?;
+        let scene = Materialized::<P, M>::fold(&log);
         if scene.scene_hash() != self.scene_hash {
             return Err(JoinError::SceneHash);
         }
-        let materialized = Materialized::from_scene(&log, scene);
-        Ok((log, materialized))
+        Ok((log, scene))
     }
 
     /// The encoded snapshot (see the module documentation for the format).
@@ -247,7 +227,6 @@ impl<P: Payload> Snapshot<P> {
             out.extend_from_slice(&head.0);
         }
         out.extend_from_slice(&self.scene_hash.0);
-        put_bytes(&mut out, &self.scene);
         let checksum = blake3::hash(&out);
         out.extend_from_slice(checksum.as_bytes());
         if out.len() > MAX_SNAPSHOT_BYTES {
@@ -297,54 +276,50 @@ impl<P: Payload> Snapshot<P> {
         let ops = read_ops(&mut r)?;
         let heads = read_heads(&mut r, ops.len())?;
         let scene_hash = SceneHash(r.array::<SCENE_HASH_BYTES>()?);
-        let scene = r
-            .bytes("scene length", MAX_SCENE_SNAPSHOT_BYTES as u64)?
-            .to_vec();
         r.finish()?;
         Ok(Self {
             ops,
             heads,
             scene_hash,
-            scene,
         })
     }
 }
 
 /// Checks what a join took on trust: every op's signature for `session`, in batches of
-/// [`MAX_VERIFY_BATCH_OPS`], and the scene folded from `log` from scratch against `scene`'s
-/// hash. `progress` hears how many ops were checked so far.
-pub fn verify<P: Payload, M: Materialize<P> + Default>(
+/// [`MAX_VERIFY_BATCH_OPS`]. `progress` hears how many ops were checked so far.
+pub fn verify<P: Payload>(
     log: &Log<P>,
-    scene: &Materialized<P, M>,
+    session: &SessionId,
+    progress: impl FnMut(usize),
+) -> Result<(), VerifyError> {
+    let ops: Vec<&Op<P>> = log.entries().map(|e| e.op).collect();
+    verify_ops(&ops, session, progress)
+}
+
+/// [`verify`] for an encoded snapshot, before or after it is joined: what a peer that joined
+/// from these bytes runs afterwards, off the join's path.
+pub fn verify_encoded<P: Payload>(
+    bytes: &[u8],
+    session: &SessionId,
+    progress: impl FnMut(usize),
+) -> Result<(), VerifyError> {
+    let snapshot = Snapshot::<P>::decode(bytes).map_err(VerifyError::Decode)?;
+    let ops: Vec<&Op<P>> = snapshot.ops.iter().collect();
+    verify_ops(&ops, session, progress)
+}
+
+fn verify_ops<P: Payload>(
+    ops: &[&Op<P>],
     session: &SessionId,
     mut progress: impl FnMut(usize),
 ) -> Result<(), VerifyError> {
-    let ops: Vec<&Op<P>> = log.entries().map(|e| e.op).collect();
     for (i, batch) in ops.chunks(MAX_VERIFY_BATCH_OPS).enumerate() {
         if let Some(bad) = Op::first_unsigned_of(batch, session) {
             return Err(VerifyError::Unsigned(batch[bad].id()));
         }
         progress(i * MAX_VERIFY_BATCH_OPS + batch.len());
     }
-    if Materialized::<P, M>::fold(log).scene_hash() != scene.scene_hash() {
-        return Err(VerifyError::Scene);
-    }
     Ok(())
-}
-
-/// Decodes `bytes` and joins them into `log` (empty and set up for the session, as for
-/// [`Snapshot::join`]) again, then [`verify`]s the result: what a peer that joined from these
-/// bytes runs afterwards, off the join's path.
-pub fn verify_encoded<P: Payload, M: Materialize<P> + Default>(
-    bytes: &[u8],
-    log: Log<P>,
-    session: &SessionId,
-    progress: &mut dyn FnMut(usize),
-) -> Result<(), VerifyError> {
-    let snapshot = Snapshot::<P>::decode(bytes).map_err(|e| VerifyError::Join(e.to_string()))?;
-    let (log, scene) =
-        (snapshot.join::<M>(log, Timestamp(0))).map_err(|e| VerifyError::Join(e.to_string()))?;
-    verify(&log, &scene, session, progress)
 }
 
 fn read_ops<P: Payload>(r: &mut Reader<'_>) -> Result<Vec<Op<P>>, DecodeError> {

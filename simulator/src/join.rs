@@ -1,14 +1,15 @@
-//! Late joins from a snapshot: the producer captures its log and scene with the real
+//! Late joins from a snapshot: the producer captures its log and scene hash with the real
 //! [`Snapshot::capture`] and encodes them; the joiner decodes those bytes (so the codec is
-//! exercised too), joins with [`Snapshot::join`] into its empty, configured log, and runs the
-//! check a peer runs after joining ([`snapshot::verify`]: signatures and a fold from scratch).
-//! A snapshot that fails it is not adopted: the joiner starts empty and syncs op by op. The
-//! hostile member hands some joiners a snapshot whose scene is not its ops' fold (an empty
-//! scene under its own hash): the check must refuse it.
+//! exercised too), joins with [`Snapshot::join`] into its empty, configured log (which folds
+//! the ops and checks the fold against the named scene hash), and runs the check a peer runs
+//! after joining ([`snapshot::verify`]: the signatures). A snapshot that fails either is not
+//! adopted: the joiner starts empty and syncs op by op. The hostile member hands some joiners
+//! a snapshot whose scene is not its ops' fold (an empty scene's hash): the join must refuse
+//! it.
 
 use replication::log::RefoldBudget;
 use replication::shape::{ShapePayload, ShapeScene};
-use replication::snapshot::{self, Snapshot};
+use replication::snapshot::{self, JoinError, Snapshot};
 use replication::{Keypair, Log, Peer, Timestamp};
 
 use crate::honest::{Honest, Scene};
@@ -21,7 +22,7 @@ pub(crate) type Joined = (Vec<u8>, Peer<ShapePayload>, Scene);
 
 /// Why a snapshot join did not happen.
 pub(crate) enum Failed {
-    /// The snapshot joined, and the check afterwards refused it.
+    /// The join's fold or the check afterwards refused the snapshot.
     Refused(String),
     /// Anything else (an honest producer's snapshot should never get here).
     Other(String),
@@ -40,15 +41,17 @@ pub(crate) fn from_snapshot(
     let log = producer.peer.log();
     let empty = planted.then(|| Scene::fold(&Log::default()));
     let bytes = Snapshot::capture(log, empty.as_ref().unwrap_or(&producer.scene))
-        .and_then(|s| s.encode())
+        .encode()
         .map_err(|e| Failed::Other(format!("capture: {e}")))?;
     let fresh = joiner.peer.log().clone();
     let (peer, scene) = memory::with_slot(joiner.slot, || {
         let decoded = (Snapshot::<ShapePayload>::decode(&bytes))
             .map_err(|e| Failed::Other(format!("decode: {e}")))?;
-        let (mut log, scene) = (decoded.join::<ShapeScene>(fresh, now))
-            .map_err(|e| Failed::Other(format!("join: {e}")))?;
-        snapshot::verify(&log, &scene, &SESSION_ID, |_| {})
+        let (mut log, scene) = (decoded.join::<ShapeScene>(fresh, now)).map_err(|e| match e {
+            JoinError::SceneHash => Failed::Refused(format!("join: {e}")),
+            e => Failed::Other(format!("join: {e}")),
+        })?;
+        snapshot::verify(&log, &SESSION_ID, |_| {})
             .map_err(|e| Failed::Refused(format!("verify: {e}")))?;
         log.set_refold_budget(budget);
         let key = Keypair::from_seed(joiner.key_seed);

@@ -1032,7 +1032,7 @@ impl Worker {
         let line = matches!(
             news,
             SnapshotNews::Joined { .. }
-                | SnapshotNews::Verified { .. }
+                | SnapshotNews::Verified
                 | SnapshotNews::Refused { .. }
         )
         .then(|| row.text());

@@ -17,7 +17,7 @@ use replication::membership::{FOUNDER_NONCE_BYTES, Membership};
 use replication::net::node::{Observer, SnapshotNews};
 use replication::payload::LeaseAction;
 use replication::shape::{IdSource, ShapePayload, ShapeScene};
-use replication::snapshot::{CaptureError, JoinError, Snapshot, Verifier};
+use replication::snapshot::{CaptureError, JoinError, Snapshot};
 use replication::sync::message::SceneAt;
 use replication::sync::scene::{SceneCut, SceneEvent, SceneMismatch};
 use replication::{Effect, Log, Mark, OpId, Payload as _, Peer, PeerId, Timestamp};
@@ -138,8 +138,6 @@ pub struct JoinRow {
     pub checked: usize,
     /// The check passed and the whole log is stored.
     pub verified: bool,
-    /// The check found the snapshot's scene was not its ops' fold, and it was refolded.
-    pub refolded: bool,
     /// Snapshots refused, with why (the latest [`MAX_REFUSALS_SHOWN`]).
     pub refused: Vec<String>,
     /// Still fetching or checking.
@@ -171,10 +169,9 @@ impl JoinRow {
                 self.busy = true;
             }
             SnapshotNews::Verifying { checked, .. } => self.checked = *checked,
-            SnapshotNews::Verified { refolded } => {
+            SnapshotNews::Verified => {
                 self.checked = self.n_ops;
                 self.verified = true;
-                self.refolded = *refolded;
                 self.busy = false;
             }
             SnapshotNews::Refused { peer, why } => {
@@ -204,15 +201,10 @@ impl JoinRow {
                 self.n_ops, self.from, self.checked, self.n_ops
             ),
             (Some(us), false) if self.verified => format!(
-                "joined {} ops from {}'s snapshot in {} ms; checked{}",
+                "joined {} ops from {}'s snapshot in {} ms; checked",
                 self.n_ops,
                 self.from,
                 us / 1_000,
-                if self.refolded {
-                    ", and its scene, which was not its ops' fold, refolded"
-                } else {
-                    ""
-                }
             ),
             _ => match self.refused.last() {
                 Some(why) => format!("a snapshot was refused ({why}); syncing op by op"),
@@ -916,7 +908,7 @@ impl Observer<ShapePayload> for Folder {
         log: &Log<ShapePayload>,
     ) -> Option<Result<Vec<u8>, CaptureError>> {
         let view = lock(&self.view);
-        Some(Snapshot::capture(log, &view.scene).and_then(|s| s.encode()))
+        Some(Snapshot::capture(log, &view.scene).encode())
     }
 
     fn join_snapshot(
@@ -930,10 +922,6 @@ impl Observer<ShapePayload> for Folder {
             lock(&self.view).adopt(scene);
             log
         }))
-    }
-
-    fn snapshot_verifier(&self) -> Option<Verifier<ShapePayload>> {
-        Some(replication::snapshot::verify_encoded::<ShapePayload, ShapeScene>)
     }
 
     fn refold(&mut self, log: &Log<ShapePayload>) {

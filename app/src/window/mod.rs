@@ -89,7 +89,8 @@ pub struct WindowArgs {
     /// Test hook: close after N frames (an error if a hook is unfinished).
     #[arg(long, value_name = "N")]
     pub exit_after_frames: Option<u64>,
-    /// Test hook: before each scripted step, wait until the session holds at least N ops.
+    /// Test hook: before each scripted step, wait until the session holds at least N ops
+    /// (scripted steps also wait while a join from a snapshot is fetched or checked).
     #[arg(long, value_name = "N")]
     pub wait_ops: Option<usize>,
     /// Test hook: before each scripted step, wait until N other peers' presence is known.

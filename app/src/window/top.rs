@@ -232,6 +232,14 @@ impl SculptApp {
                 ui.label(format!("last edit drawn after {ms:.0} ms"));
                 ui.separator();
             }
+            let join = (lock(self.engine.view()).snapshot()).map(|s| (s.busy, s.text()));
+            if let Some((busy, text)) = join.filter(|(_, text)| !text.is_empty()) {
+                if busy {
+                    ui.spinner();
+                }
+                ui.label(text);
+                ui.separator();
+            }
             ui.label(&self.status);
         });
     }

@@ -4,11 +4,14 @@
 
 #![allow(dead_code, reason = "each bench binary uses part of this module")]
 
-use replication::materialize::Materialized;
+use model::object::{Edit, EditOp, Formula, Geometry, ObjectData, Pose, ToolShape};
+use replication::Payload;
 use replication::materialize::test_scene::TestScene;
+use replication::materialize::{Materialize, Materialized};
 use replication::payload::LeaseAction;
 use replication::payload::test_payload::TestPayload;
 use replication::pending::Origin;
+use replication::shape::{IdSource, ShapePayload};
 use replication::sync::state::Event;
 use replication::{Keypair, Log, SyncConfig, SyncState, Timestamp, VerifiedOp};
 
@@ -63,8 +66,50 @@ pub fn history(n: usize) -> Vec<VerifiedOp<TestPayload>> {
 
 /// A log holding `ops`, delivered in order, and its scene.
 pub fn build(ops: &[VerifiedOp<TestPayload>]) -> (TLog, TScene) {
-    let mut log = TLog::default();
-    let mut scene = TScene::fold(&log);
+    build_of(ops)
+}
+
+/// An in-order history of `n` sculpting edits by one author: a ball made, then carved with
+/// small spheres spread over its surface (the object model's payload, whose ops decode by
+/// compiling their edits).
+pub fn carved(n: usize) -> Vec<VerifiedOp<ShapePayload>> {
+    let key = Keypair::from_seed([1; 32]);
+    let mut log = Log::<ShapePayload>::default();
+    let ball = IdSource::first(key.peer_id());
+    let data = ObjectData {
+        name: "ball".into(),
+        geometry: Some(Geometry::implicit(
+            Formula::new("0.8 - sqrt(x^2 + y^2 + z^2)").expect("a formula"),
+        )),
+        ..ObjectData::default()
+    };
+    let mut payloads = vec![ball.create(data, None)];
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    for i in 1..n {
+        let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+        let (r, a) = ((1.0 - z * z).sqrt(), golden * i as f64);
+        let at = glam::DVec3::new(r * a.cos(), r * a.sin(), z) * 0.8;
+        let stamp = Edit::stamp(
+            EditOp::Subtract,
+            ToolShape::Sphere { radius: 0.03 },
+            Pose::at(at),
+        );
+        payloads.push(ShapePayload::edit(ball.id(), stamp).expect("a valid edit"));
+    }
+    (payloads.into_iter().enumerate())
+        .map(|(i, p)| {
+            let at = Timestamp(i as u64 * HISTORY_STEP_MICROS);
+            log.author(&key, at, p).expect("a valid op").0
+        })
+        .collect()
+}
+
+/// [`build`] for any payload and scene.
+pub fn build_of<P: Payload, M: Materialize<P> + Default>(
+    ops: &[VerifiedOp<P>],
+) -> (Log<P>, Materialized<P, M>) {
+    let mut log = Log::default();
+    let mut scene = Materialized::fold(&log);
     for op in ops {
         let ins = log
             .insert(NOW, op.clone(), Origin(1))
@@ -76,14 +121,14 @@ pub fn build(ops: &[VerifiedOp<TestPayload>]) -> (TLog, TScene) {
 }
 
 /// One end of an in-memory connection.
-pub struct Side {
-    pub log: TLog,
-    pub scene: TScene,
-    pub sync: SyncState<TestPayload>,
+pub struct Side<P: Payload = TestPayload, M = TestScene> {
+    pub log: Log<P>,
+    pub scene: Materialized<P, M>,
+    pub sync: SyncState<P>,
 }
 
-impl Side {
-    pub fn new(log: TLog, scene: TScene, seed: u8, origin: u64) -> Self {
+impl<P: Payload, M: Materialize<P>> Side<P, M> {
+    pub fn new(log: Log<P>, scene: Materialized<P, M>, seed: u8, origin: u64) -> Self {
         let config = SyncConfig {
             session_id: [1; 16],
             local: Keypair::from_seed([seed; 32]).peer_id(),
@@ -110,7 +155,7 @@ impl Side {
 
 /// Exchanges messages until `b` holds what `a` holds, advancing virtual time 1 ms a round
 /// (the send pacing allows 1,000 messages a second); returns the bytes sent both ways.
-pub fn catch_up(a: &mut Side, b: &mut Side) -> u64 {
+pub fn catch_up<P: Payload, M: Materialize<P>>(a: &mut Side<P, M>, b: &mut Side<P, M>) -> u64 {
     let mut now = NOW.0;
     // A lone connection asks for every author's ops it lacks, as `Peer` would of its only
     // holder.

@@ -31,14 +31,9 @@ fn decode(data: &[u8]) {
     if let Ok(snapshot) = Snapshot::<TestPayload>::decode(data) {
         let _ = snapshot.encode();
         let joined = snapshot.join::<TestScene>(Default::default(), Timestamp(0));
-        if let Ok((log, scene)) = joined {
-            let _ = verify(&log, &scene, &UNNAMED_SESSION, |_| {});
+        if let Ok((log, _)) = joined {
+            let _ = verify(&log, &UNNAMED_SESSION, |_| {});
         }
-    }
-    if let Ok(scene) = TestScene::decode_snapshot(data) {
-        let mut out = Vec::new();
-        scene.encode_snapshot(&mut out);
-        assert_eq!(out, data, "a decoded scene is canonical");
     }
     sync(data);
 }

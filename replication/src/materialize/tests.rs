@@ -66,26 +66,6 @@ fn naive_scene(log: &TLog) -> TestScene {
 }
 
 #[test]
-fn scene_snapshot_round_trips_and_rejects_garbage() {
-    let ops = workload(5, 3, 60);
-    let scene = from_scratch(&deliver_all(&ops));
-    let mut bytes = Vec::new();
-    scene.scene().encode_snapshot(&mut bytes);
-    let back = TestScene::decode_snapshot(&bytes).unwrap();
-    assert_eq!(&back, scene.scene());
-    assert_eq!(back.scene_hash(), scene.scene_hash());
-    let mut wrong_version = bytes.clone();
-    wrong_version[0] = 9;
-    assert!(matches!(
-        TestScene::decode_snapshot(&wrong_version),
-        Err(DecodeError::UnknownVersion { .. })
-    ));
-    for cut in 0..bytes.len() {
-        assert!(TestScene::decode_snapshot(&bytes[..cut]).is_err());
-    }
-}
-
-#[test]
 fn late_op_refolds_only_the_objects_it_affects() {
     let (a, b) = (key(0), key(1));
     // B, offline, takes object 1 at Lamport time 1.

@@ -36,7 +36,7 @@ use serde::{Deserialize, Serialize};
 use crate::codec::DecodeError;
 use crate::identity::{OpId, PeerId};
 use crate::log::OrderKey;
-use crate::materialize::{FoldEntry, MAX_SCENE_SNAPSHOT_BYTES, Materialize, SceneHash};
+use crate::materialize::{FoldEntry, Materialize, SceneHash};
 use crate::membership::{Admission, Membership};
 use crate::payload::{Effect, LeaseAction, MAX_PAYLOAD_BYTES, ObjectId, Payload};
 use crate::sync::scene::ObjectHashes;
@@ -574,50 +574,6 @@ impl Materialize<ShapePayload> for ShapeScene {
         });
         let rest = SceneHash::of(&object_codec::encode(&self.chat));
         ObjectHashes::new(objects.chain(groups), rest.0)
-    }
-
-    fn encode_snapshot(&self, out: &mut Vec<u8>) {
-        out.extend_from_slice(&self.encode());
-    }
-
-    fn decode_snapshot(bytes: &[u8]) -> Result<Self, DecodeError> {
-        if bytes.len() > MAX_SCENE_SNAPSHOT_BYTES {
-            return Err(DecodeError::OverLimit {
-                offset: 0,
-                what: "scene snapshot length",
-                value: bytes.len() as u64,
-                limit: MAX_SCENE_SNAPSHOT_BYTES as u64,
-            });
-        }
-        let invalid = |_| DecodeError::Invalid {
-            offset: 0,
-            what: "shape scene snapshot",
-        };
-        type Record = (
-            Vec<u8>,
-            Vec<ChatLine>,
-            Vec<(u64, Vec<[u8; 32]>)>,
-            parts::EncodedParts,
-        );
-        let (scene_bytes, chat, edit_ops, held): Record =
-            object_codec::decode("shape scene snapshot", bytes).map_err(invalid)?;
-        let parts = parts::HeldParts::decode(held).ok_or(DecodeError::Invalid {
-            offset: 0,
-            what: "shape scene snapshot's parts (one is empty or too long)",
-        })?;
-        let scene = Scene::decode(&scene_bytes).map_err(|_| DecodeError::Invalid {
-            offset: 0,
-            what: "shape scene snapshot's scene",
-        })?;
-        Ok(ShapeScene {
-            scene,
-            chat,
-            edit_ops: edit_ops
-                .into_iter()
-                .map(|(o, ids)| (o, ids.into_iter().map(OpId).collect()))
-                .collect(),
-            parts,
-        })
     }
 }
 

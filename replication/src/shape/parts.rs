@@ -265,23 +265,11 @@ impl HeldParts {
         change
     }
 
-    /// The snapshot form: canonical (equal holdings encode equal).
+    /// The canonical form the scene hash hashes (equal holdings encode equal).
     pub(crate) fn encode(&self) -> EncodedParts {
         self.by_object
             .iter()
             .map(|(object, parts)| (*object, parts.values().map(|b| b.to_vec()).collect()))
             .collect()
-    }
-
-    /// Holdings from their snapshot form; `None` when a part is empty or too long.
-    pub(crate) fn decode(encoded: EncodedParts) -> Option<HeldParts> {
-        let mut out = HeldParts::default();
-        for (object, parts) in encoded {
-            for bytes in parts {
-                check_part(&bytes).ok()?;
-                out.hold(object, &bytes);
-            }
-        }
-        Some(out)
     }
 }

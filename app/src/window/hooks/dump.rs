@@ -42,6 +42,11 @@ impl SculptApp {
             "n_ops": view.n_ops(),
             "n_loaded": view.n_loaded(),
             "scene_hash": view.scene_hash_hex(),
+            "scene_check": {
+                "mismatches": view.scene_check().n_mismatches,
+                "agrees": view.scene_check().agrees,
+            },
+            "snapshot": crate::cli::join_json(view.snapshot()),
             "name": self.engine.presence().name,
             "my_rejections": view.my_rejections().iter().map(|r| r.why.clone()).collect::<Vec<_>>(),
         })

@@ -240,6 +240,7 @@ impl SculptApp {
             self.hooks.wait_ops.is_none_or(|n| view.n_ops() >= n)
                 && self.hooks.step_ops.is_none_or(|n| view.n_ops() >= n)
                 && view.presence().len() >= self.hooks.wait_presence
+                && view.snapshot().is_none_or(|s| !s.busy)
                 && self
                     .hooks
                     .step_until

@@ -15,7 +15,9 @@ use crate::log::Log;
 use crate::net::clock::wall_clock_now;
 use crate::payload::Payload;
 use crate::peer::ConnId;
-use crate::snapshot::{MAX_SNAPSHOT_BYTES, SNAPSHOT_FORMAT_VERSION, Snapshot, VerifyError};
+use crate::snapshot::{
+    MAX_SNAPSHOT_BYTES, SNAPSHOT_FORMAT_VERSION, Snapshot, VerifyError, verify_encoded,
+};
 use crate::sync::scene::SceneCut;
 use crate::time::Timestamp;
 
@@ -36,7 +38,7 @@ pub const MAX_HELD_AUTHORS: usize = 256;
 const REQUEST_TIMEOUT_MILLIS: u64 = 5_000;
 
 /// What a joiner sends on the stream it opens: a snapshot of the format it reads, please.
-const SNAPSHOT_REQUEST: [u8; 11] = *b"SCULPTSNAP\x03";
+const SNAPSHOT_REQUEST: [u8; 11] = *b"SCULPTSNAP\x04";
 const _: () = assert!(SNAPSHOT_REQUEST[10] == SNAPSHOT_FORMAT_VERSION);
 const _: () = assert!(SNAPSHOT_REQUEST.len() <= MAX_SNAPSHOT_REQUEST_BYTES);
 
@@ -70,12 +72,10 @@ pub enum SnapshotNews {
         of: usize,
     },
     /// The check passed and the whole log is stored.
-    Verified {
-        /// The adopted scene was not its ops' fold, and was refolded from them.
-        refolded: bool,
-    },
-    /// A snapshot from `peer` was not kept: cut short, undecodable, not joining, none to
-    /// give, or a forged op found by the check. The node asks another held connection, or
+    Verified,
+    /// A snapshot from `peer` was not kept: cut short, undecodable, not joining (a scene
+    /// that is not its ops' fold among others), none to give, or a forged op found by the
+    /// check. The node asks another held connection, or
     /// syncs op by op.
     Refused {
         /// The remote it came from.
@@ -291,9 +291,6 @@ impl<P: Payload + Send + 'static> Core<P> {
         let n_ops = snapshot.n_ops();
         let empty = self.peer.log().clone();
         let observer = self.observer.as_mut().ok_or("this node keeps no scene")?;
-        let verifier = observer
-            .snapshot_verifier()
-            .ok_or("this node keeps no scene")?;
         let log = (observer.join_snapshot(snapshot, empty.clone(), wall_clock_now()))
             .ok_or("this node keeps no scene")?
             .map_err(|e| e.to_string())?;
@@ -304,7 +301,6 @@ impl<P: Payload + Send + 'static> Core<P> {
         let n_bytes = bytes.len();
         let inputs = self.shared.inputs.clone();
         let session = self.peer.log().session_id();
-        let for_check = empty.clone();
         let spawned = std::thread::Builder::new()
             .name("snapshot-verify".into())
             .spawn(move || {
@@ -315,7 +311,7 @@ impl<P: Payload + Send + 'static> Core<P> {
                         let _ = inputs.blocking_send(Input::VerifyProgress { checked });
                     }
                 };
-                let result = verifier(&bytes, for_check, &session, &mut progress);
+                let result = verify_encoded::<P>(&bytes, &session, &mut progress);
                 let _ = inputs.blocking_send(Input::Verified { result });
             });
         if let Err(e) = spawned {
@@ -357,21 +353,14 @@ impl<P: Payload + Send + 'static> Core<P> {
         }
     }
 
-    /// The check of the joined snapshot ended: the log is stored (its scene refolded first
-    /// if it was not the ops' fold), or, with a forged op, dropped with every connection.
+    /// The check of the joined snapshot ended: the log is stored, or, with a forged op,
+    /// dropped with every connection.
     pub(super) fn on_verified(&mut self, result: Result<(), VerifyError>) {
         let Some(unverified) = self.join.unverified.take() else {
             return;
         };
         match result {
-            Ok(()) | Err(VerifyError::Scene) => {
-                let refolded = result.is_err();
-                if refolded {
-                    if let Some(observer) = &mut self.observer {
-                        observer.refold(self.peer.log());
-                    }
-                    self.changed = true;
-                }
+            Ok(()) => {
                 let all: Vec<OpId> = self.peer.log().entries().map(|e| e.op.id()).collect();
                 if let Err(error) = super::core::persist(&mut self.store, self.peer.log(), &all) {
                     return self.stop(error);
@@ -381,7 +370,7 @@ impl<P: Payload + Send + 'static> Core<P> {
                     checked: of,
                     of,
                 }));
-                self.emit(NodeEvent::Snapshot(SnapshotNews::Verified { refolded }));
+                self.emit(NodeEvent::Snapshot(SnapshotNews::Verified));
             }
             Err(e) => {
                 let conns: Vec<ConnId> = self.conns.keys().copied().collect();

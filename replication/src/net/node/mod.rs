@@ -18,15 +18,16 @@
 //! A node started with [`NodeConfig::join_from_snapshot`] and an empty log holds its first
 //! admitted connections back from sync and asks one of them, on a QUIC stream of its own,
 //! for a [`Snapshot`] (at most [`crate::snapshot::MAX_SNAPSHOT_BYTES`], within
-//! [`SNAPSHOT_FETCH_TIMEOUT_MILLIS`]). Its [`Observer`] joins it and adopts the scene; then
-//! every connection syncs what the snapshot lacks, and a thread named `snapshot-verify`
-//! checks what the join took on trust ([`crate::snapshot::verify_encoded`]). Nothing of the
-//! joined log is stored and no op is authored (authoring waits, at most [`MAX_HELD_AUTHORS`])
-//! until that check passes: then the whole log is stored in one append. A scene that is not
-//! its ops' fold is refolded; a forged op drops the joined log and every connection, and the
-//! node syncs op by op from an empty log. A remote with nothing to give, a failed fetch or
-//! a snapshot that does not join is refused and the next held connection is asked, or,
-//! with none left, every held connection syncs op by op.
+//! [`SNAPSHOT_FETCH_TIMEOUT_MILLIS`]). Its [`Observer`] joins it (the ops inserted unverified,
+//! folded, and the fold checked against the snapshot's scene hash); then every connection
+//! syncs what the snapshot lacks, and a thread named `snapshot-verify` checks the signatures
+//! ([`crate::snapshot::verify_encoded`]). Nothing of the joined log is stored and no op is
+//! authored (authoring waits, at most [`MAX_HELD_AUTHORS`]) until that check passes: then
+//! the whole log is stored in one append. A forged op drops the joined log and every
+//! connection, and the node syncs op by op from an empty log. A remote with nothing to give,
+//! a failed fetch or a snapshot that does not join (a scene hash that is not its ops' fold
+//! among others) is refused and the next held connection is asked, or, with none left,
+//! every held connection syncs op by op.
 //!
 //! A node serves a snapshot to each connection at most [`MAX_SNAPSHOTS_SERVED_PER_CONN`]
 //! times, and captures one at most every [`SNAPSHOT_CAPTURE_INTERVAL_MILLIS`] (a request in
@@ -71,7 +72,7 @@ use crate::net::socket::{DemuxSocket, DiscoveryPort, SocketCounters};
 use crate::net::tls::{self, TlsError};
 use crate::payload::Payload;
 use crate::peer::{ConnId, Peer};
-use crate::snapshot::{CaptureError, JoinError, Snapshot, Verifier, VerifyError};
+use crate::snapshot::{CaptureError, JoinError, Snapshot, VerifyError};
 use crate::store::OpStore;
 use crate::sync::state::{CloseReason, EphemeralError, RejectKind, SyncStats};
 use crate::time::Timestamp;
@@ -586,14 +587,7 @@ pub trait Observer<P>: Send + 'static {
         None
     }
 
-    /// [`crate::snapshot::verify_encoded`] for this observer's scene type, which the node runs
-    /// on a thread of its own after a join; `None` (the default) when it keeps no scene.
-    fn snapshot_verifier(&self) -> Option<Verifier<P>> {
-        None
-    }
-
-    /// Forgets the scene and folds `log` from scratch: after a check finds a joined scene
-    /// that is not the fold of its ops, or when a joined log is dropped.
+    /// Forgets the scene and folds `log` from scratch: when a joined log is dropped.
     fn refold(&mut self, log: &Log<P>) {
         let _ = log;
     }
