@@ -44,7 +44,10 @@ pub fn carved_session(
     payloads.push(ball.create(
         ObjectData {
             name: "carved ball".into(),
-            geometry: Some(Geometry::implicit(formula)),
+            geometry: Some(Geometry {
+                domain: Some(crate::new_object::new_object_domain()),
+                ..Geometry::implicit(formula)
+            }),
             ..ObjectData::default()
         },
         None,

@@ -1031,9 +1031,7 @@ impl Worker {
         row.note(news, label);
         let line = matches!(
             news,
-            SnapshotNews::Joined { .. }
-                | SnapshotNews::Verified
-                | SnapshotNews::Refused { .. }
+            SnapshotNews::Joined { .. } | SnapshotNews::Verified | SnapshotNews::Refused { .. }
         )
         .then(|| row.text());
         view.snapshot = Some(row);
