@@ -386,3 +386,45 @@ async fn data_ahead_of_a_hello_naming_another_peer_is_never_handled() {
     assert_eq!(stats.n_identity_mismatches, 1, "{stats:?}");
     assert!(!op_ids(&a.handle).await.contains(&op.op().id()));
 }
+
+/// Asks `connection` for a snapshot with `request` on a stream of its own; the bytes that came
+/// back (none when refused or declined), or `None` when no answer came within a second.
+async fn ask_snapshot(connection: &quinn::Connection, request: &[u8]) -> Option<Vec<u8>> {
+    let asking = async {
+        let (mut send, mut recv) = connection.open_bi().await.unwrap();
+        send.write_all(request).await.unwrap();
+        let _ = send.finish();
+        recv.read_to_end(1 << 20).await.unwrap_or_default()
+    };
+    tokio::time::timeout(Duration::from_secs(1), asking)
+        .await
+        .ok()
+}
+
+#[tokio::test]
+async fn a_connection_gets_two_snapshot_requests_read_and_garbage_gets_nothing() {
+    use replication::net::node::MAX_SNAPSHOTS_SERVED_PER_CONN;
+    use replication::snapshot::{SNAPSHOT_FORMAT_VERSION, SNAPSHOT_MAGIC};
+    let a = node(1);
+    author_some(&a.handle, 1, "alice").await;
+    let addr = a.handle.local_addr();
+    let (asker, _sync) = admitted(addr, 71).await;
+    let request = [SNAPSHOT_MAGIC.as_slice(), &[SNAPSHOT_FORMAT_VERSION]].concat();
+    assert_eq!(MAX_SNAPSHOTS_SERVED_PER_CONN, 2);
+    // Not a request: answered with nothing, and counted against the connection's two.
+    assert_eq!(ask_snapshot(&asker, b"SCULPTSNAP?").await, Some(Vec::new()));
+    // A node without a scene declines a real one.
+    assert_eq!(ask_snapshot(&asker, &request).await, Some(Vec::new()));
+    // A third is never read.
+    assert_eq!(ask_snapshot(&asker, &request).await, None);
+    let stats = a.handle.stats().await.unwrap();
+    assert_eq!(
+        (stats.n_snapshots_declined, stats.n_snapshots_served),
+        (1, 0)
+    );
+    assert!(asker.close_reason().is_none(), "the connection stays up");
+    // An honest peer still syncs with the node.
+    let honest = node(2);
+    honest.handle.dial(addr).await.unwrap();
+    converge(&[&a.handle, &honest.handle], 4).await;
+}
