@@ -328,6 +328,13 @@ impl<P: Payload + Send + 'static> Core<P> {
             }
             return;
         }
+        let holding = self.join.holds_connections();
+        if !holding
+            && let Err(ConnectError::TooMany) = self.open_in_peer(conn, role, &connection, peer)
+        {
+            let kind = RefusalKind::TooManyConnections;
+            return self.refuse(&connection, reply, kind, DialError::TooManyConnections);
+        }
         let (frames, queue) = mpsc::channel(MAX_QUEUED_FRAMES_PER_CONN);
         tokio::spawn(conn::write_frames(send, queue));
         self.conns.insert(
@@ -345,42 +352,61 @@ impl<P: Payload + Send + 'static> Core<P> {
         if let Some(reply) = reply {
             let _ = reply.send(Ok(conn));
         }
-        if self.join.holds_connections() {
+        if holding {
             self.hold_back(conn);
         } else {
-            self.open_in_peer(conn);
+            self.start_readers(conn);
         }
     }
 
-    /// Hands an admitted connection to the peer, which syncs over it, and starts its readers.
-    pub(super) fn open_in_peer(&mut self, conn: ConnId) {
-        let Some(live) = self.conns.get_mut(&conn) else {
+    /// Opens a connection held back during a join in the peer and starts its readers, or
+    /// drops it when every slot is taken.
+    pub(super) fn release_conn(&mut self, conn: ConnId) {
+        let Some(live) = self.conns.get(&conn) else {
             return;
         };
+        let (role, connection, peer) = (live.role, live.connection.clone(), live.peer);
+        if self.open_in_peer(conn, role, &connection, peer).is_ok() {
+            return self.start_readers(conn);
+        }
+        *(self.stats.failed_admissions)
+            .entry(RefusalKind::TooManyConnections)
+            .or_insert(0) += 1;
+        let reason = DisconnectReason::Sync(CloseReason::Evicted);
+        self.drop_conn(conn, CloseCode::Refused, Some(reason));
+    }
+
+    /// Starts a connection's readers once the peer holds it.
+    fn start_readers(&mut self, conn: ConnId) {
+        if let Some(start) = self.conns.get_mut(&conn).and_then(|l| l.start.take()) {
+            let _ = start.send(());
+        }
+    }
+
+    /// Hands an admitted connection to `peer` to the sync core.
+    fn open_in_peer(
+        &mut self,
+        conn: ConnId,
+        role: Role,
+        connection: &quinn::Connection,
+        peer: PeerId,
+    ) -> Result<(), ConnectError> {
         // A connection the remote dialed competes for slots with those of its address
         // prefix; when all are taken, the least useful accepted one makes room.
-        let opened = match live.role {
+        let opened = match role {
             Role::Dialer => self.peer.connect(wall_clock_now(), conn),
             Role::Acceptor => {
-                let source = AddressPrefix::of(live.connection.remote_address().ip()).key();
+                let source = AddressPrefix::of(connection.remote_address().ip()).key();
                 self.peer.accept(wall_clock_now(), conn, source)
             }
         };
         match opened {
             // The sync hello must name the id admission proved, or nothing it sent counts.
             Ok(()) => {
-                self.peer.set_admitted(conn, live.peer);
-                if let Some(start) = live.start.take() {
-                    let _ = start.send(());
-                }
+                self.peer.set_admitted(conn, peer);
+                Ok(())
             }
-            Err(ConnectError::TooMany) => {
-                *(self.stats.failed_admissions)
-                    .entry(RefusalKind::TooManyConnections)
-                    .or_insert(0) += 1;
-                let reason = DisconnectReason::Sync(CloseReason::Evicted);
-                self.drop_conn(conn, CloseCode::Refused, Some(reason));
-            }
+            Err(ConnectError::TooMany) => Err(ConnectError::TooMany),
             Err(e @ (ConnectError::InUse(_) | ConnectError::OutOfRange(_))) => {
                 // Ids come from one counter that starts at 1: neither can happen.
                 unreachable!("connection id from the node's counter refused: {e}");

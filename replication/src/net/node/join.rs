@@ -238,7 +238,7 @@ impl<P: Payload + Send + 'static> Core<P> {
             return;
         };
         for conn in joining.held {
-            self.open_in_peer(conn);
+            self.release_conn(conn);
         }
         self.release_held();
     }
