@@ -409,7 +409,9 @@ fn peer_state(engine: &Engine) -> serde_json::Value {
         "listen": view.listen_addr().map(|a| a.to_string()),
         "ops": view.n_ops(),
         "objects": view.scene().len(),
-        "scene_hash": view.scene_hash_hex(),
+        // Polled every PEER_POLL_MILLIS: a large scene changing fast is hashed only as often as
+        // the view allows, so this line may name a hash of a slightly older scene.
+        "scene_hash": view.recent_scene_hash_hex(app::clock::now().instant),
         "peers": view.peers().len(),
         "to_send": to_send,
         "to_receive": to_receive,

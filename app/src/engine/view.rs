@@ -12,7 +12,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use model::object::{ColorDef, Field, Shape};
 use model::scene::{ObjectId, Scene};
 use replication::log::{Drained, Insertion, Refold};
-use replication::materialize::{Materialize as _, Materialized};
+use replication::materialize::{Materialize as _, Materialized, SceneHash};
 use replication::membership::{FOUNDER_NONCE_BYTES, Membership};
 use replication::net::node::{Observer, SnapshotNews};
 use replication::payload::LeaseAction;
@@ -214,6 +214,19 @@ impl JoinRow {
     }
 }
 
+/// Scene hashes take at most one part in this many of the time of the thread that asks for
+/// them while the scene keeps changing ([`View::scene_hash_if_due`]).
+pub const SCENE_HASH_TIME_SHARE: u32 = 10;
+/// Scene hashes of a changing scene are computed at most this often, in milliseconds.
+pub const MIN_SCENE_HASH_INTERVAL_MILLIS: u64 = 250;
+
+/// The last scene hash computed, and when the next may be.
+struct HashCache {
+    generation: u64,
+    hash: SceneHash,
+    due: std::time::Instant,
+}
+
 /// A session announced on the LAN.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct LanRow {
@@ -243,7 +256,7 @@ pub struct View {
     leases: BTreeMap<u64, replication::lease::Lease>,
     my_rejections: Vec<Rejection>,
     generation: u64,
-    hash: Option<(u64, String)>,
+    hash: Option<HashCache>,
     pub(super) peers: Vec<PeerRow>,
     pub(super) presence: BTreeMap<PeerId, Presence>,
     pub(super) lan_sessions: Vec<LanRow>,
@@ -576,23 +589,58 @@ impl View {
         self.changes.since(cursor)
     }
 
-    /// The scene hash in hex (equal on every peer with the same ops), computed at most once
-    /// per change of the scene.
-    pub fn scene_hash_hex(&mut self) -> String {
+    /// The scene hash (equal on every peer with the same ops), computed at most once per
+    /// change of the scene.
+    pub fn scene_hash(&mut self) -> SceneHash {
         match &self.hash {
-            Some((generation, hex)) if *generation == self.generation => hex.clone(),
-            _ => {
-                let hex: String = self
-                    .scene
-                    .scene_hash()
-                    .0
-                    .iter()
-                    .take(8)
-                    .map(|b| format!("{b:02x}"))
-                    .collect();
-                self.hash = Some((self.generation, hex.clone()));
-                hex
-            }
+            Some(h) if h.generation == self.generation => h.hash,
+            _ => self.hash_now(crate::clock::now().instant),
+        }
+    }
+
+    /// The scene hash when it is current or may be computed now: at most every
+    /// [`MIN_SCENE_HASH_INTERVAL_MILLIS`], and never more than one part in
+    /// [`SCENE_HASH_TIME_SHARE`] of the caller's time (a hash of a scene carved 10^5 times
+    /// takes about 0.1 s). `None` when it is not due; ask again later.
+    pub fn scene_hash_if_due(&mut self, now: std::time::Instant) -> Option<SceneHash> {
+        match &self.hash {
+            Some(h) if h.generation == self.generation => Some(h.hash),
+            Some(h) if now < h.due => None,
+            _ => Some(self.hash_now(now)),
+        }
+    }
+
+    fn hash_now(&mut self, now: std::time::Instant) -> SceneHash {
+        let hash = self.scene.scene_hash();
+        let cost = now.elapsed();
+        let pause = (cost * (SCENE_HASH_TIME_SHARE - 1)).max(std::time::Duration::from_millis(
+            MIN_SCENE_HASH_INTERVAL_MILLIS,
+        ));
+        self.hash = Some(HashCache {
+            generation: self.generation,
+            hash,
+            due: now + cost + pause,
+        });
+        hash
+    }
+
+    /// The first bytes of a scene hash in hex, as peers and dumps show it.
+    pub fn hash_hex(hash: &SceneHash) -> String {
+        hash.0.iter().take(8).map(|b| format!("{b:02x}")).collect()
+    }
+
+    /// [`View::scene_hash`] in hex.
+    pub fn scene_hash_hex(&mut self) -> String {
+        let hash = self.scene_hash();
+        Self::hash_hex(&hash)
+    }
+
+    /// The scene hash in hex when due ([`View::scene_hash_if_due`]), else the last one
+    /// computed (of an older scene), for a face that polls often.
+    pub fn recent_scene_hash_hex(&mut self, now: std::time::Instant) -> String {
+        match self.scene_hash_if_due(now) {
+            Some(hash) => Self::hash_hex(&hash),
+            None => (self.hash.as_ref()).map_or_else(String::new, |h| Self::hash_hex(&h.hash)),
         }
     }
 
@@ -817,7 +865,11 @@ impl Folder {
     /// with this scene's per-object hashes, a resync refolds what differs, and the scene's
     /// hash goes to the peer once the fold is at a new cut or changed, while some connection
     /// is in step (a hash computed mid-sync would only be at another cut than every remote's,
-    /// and a remote that stays out of step must not keep the others from comparing).
+    /// and a remote that stays out of step must not keep the others from comparing), at most
+    /// as often as [`View::scene_hash_if_due`] allows: a peer sculpting live on a large scene
+    /// costs this thread one hash per interval, not one per stroke. A hash not due yet goes
+    /// at a later step (the engine asks the node for its statistics every
+    /// [`super::PEER_REFRESH_MILLIS`], which is a step).
     fn check_scene(&mut self, view: &mut View, peer: &mut Peer<ShapePayload>) {
         let cut = SceneCut::of(peer.log());
         while let Some((conn, event)) = peer.poll_scene_event() {
@@ -846,8 +898,11 @@ impl Folder {
         let in_step = (peer.connections())
             .any(|(_, sync)| sync.remote_version_vector() == peer.log().version_vector());
         let now = (view.generation, cut);
-        if in_step && self.announced != Some(now) {
-            peer.set_scene_hash(cut, view.scene.scene_hash().0);
+        if in_step
+            && self.announced != Some(now)
+            && let Some(hash) = view.scene_hash_if_due(crate::clock::now().instant)
+        {
+            peer.set_scene_hash(cut, hash.0);
             self.announced = Some(now);
         }
     }
@@ -1156,6 +1211,36 @@ pub fn quote(text: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_changing_scene_is_hashed_at_most_as_often_as_its_interval_allows() {
+        let me = replication::Keypair::from_seed([3; 32]).peer_id();
+        let mut view = View::new(me, &Log::default()).unwrap();
+        let t0 = crate::clock::now().instant;
+        let first = view.scene_hash_if_due(t0).expect("never hashed: due");
+        assert_eq!(
+            view.scene_hash_if_due(t0),
+            Some(first),
+            "current: no new hash"
+        );
+        // The scene changes right after: not due until the interval has passed.
+        view.plant_scene_difference(1);
+        view.plant_scene_difference(2);
+        assert_eq!(view.scene_hash_if_due(t0), None);
+        let stale = view.recent_scene_hash_hex(t0);
+        assert_eq!(
+            stale,
+            View::hash_hex(&first),
+            "the last one, of an older scene"
+        );
+        let later = t0 + std::time::Duration::from_millis(MIN_SCENE_HASH_INTERVAL_MILLIS + 1);
+        let second = view.scene_hash_if_due(later).expect("due");
+        assert_eq!(second, view.scene_hash(), "due means current");
+        // What a test or a dump asks for is always current.
+        view.plant_scene_difference(3);
+        assert_eq!(view.scene_hash_if_due(later), None);
+        assert_eq!(view.scene_hash(), view.scene.scene_hash());
+    }
 
     #[test]
     fn each_consumer_reads_the_changes_since_its_own_cursor() {
