@@ -1504,8 +1504,39 @@ fn join_leaves_the_demo_for_another_session_found_through_a_discovery_node() {
 }
 
 /// Edits in the session [`a_window_joins_a_long_session_from_a_snapshot_and_refuses_a_planted_scene`]
-/// joins.
+/// joins from a snapshot.
 const LONG_SESSION_EDITS: usize = 100_000;
+/// Edits in the session whose server plants a scene difference (synced op by op once its
+/// snapshot is refused, so kept short).
+const PLANTED_SESSION_EDITS: usize = 2_000;
+
+/// Runs the window joining the session of `invite` by dialing `addr`, until it holds `n_ops`
+/// ops (and any join from a snapshot is checked), with `extra` arguments; its state.
+fn window_joining(
+    display: &Display,
+    dir: &Path,
+    name: &str,
+    (invite, addr, n_ops): (&str, &str, usize),
+    extra: &[&str],
+) -> Value {
+    let store = dir.join(name);
+    let n_ops = n_ops.to_string();
+    let mut args = vec![
+        "--store",
+        store.to_str().unwrap(),
+        "--invite",
+        invite,
+        "--no-lan",
+        "--listen",
+        "127.0.0.1:0",
+        "--dial",
+        addr,
+        "--wait-ops",
+        &n_ops,
+    ];
+    args.extend(extra);
+    window_with(display, dir, name, &args).0
+}
 
 #[test]
 fn a_window_joins_a_long_session_from_a_snapshot_and_refuses_a_planted_scene() {
@@ -1526,59 +1557,55 @@ fn a_window_joins_a_long_session_from_a_snapshot_and_refuses_a_planted_scene() {
     peer.wait_for("its stored session", |v| v["ops"] == n);
     let addr = peer.last["listen"].as_str().unwrap().to_string();
     let folded = peer.last["scene_hash"].as_str().unwrap().to_string();
-    let join = |name: &str, addr: &str, extra: &[&str]| {
-        let store = dir.join(name);
-        let n_ops = n.to_string();
-        let mut args = vec![
-            "--store",
-            store.to_str().unwrap(),
-            "--invite",
-            &code,
-            "--no-lan",
-            "--listen",
-            "127.0.0.1:0",
-            "--dial",
-            addr,
-            "--wait-ops",
-            &n_ops,
-        ];
-        args.extend(extra);
-        window_with(&display, &dir, name, &args).0
-    };
 
     // The window joins from the headless peer's snapshot, checks it, and holds its scene.
-    let state = join("joined", &addr, &[]);
+    let state = window_joining(&display, &dir, "joined", (&code, &addr, n), &[]);
     let (session, snapshot) = (&state, &state["snapshot"]);
     assert_eq!(snapshot["ops"], n, "{snapshot}");
     assert_eq!(snapshot["verified"], true, "{snapshot}");
     // The peer admits the window's key once it is connected: one op more, no change of scene.
     assert!(session["n_ops"].as_u64().unwrap() >= n as u64, "{session}");
     assert_eq!(session["scene_hash"], folded.as_str(), "{session}");
+    assert!(
+        state["objects"][0]["n_triangles"].as_u64().unwrap() > 0,
+        "drawn"
+    );
     let join_ms = snapshot["join_ms"].as_f64().unwrap();
     println!("joined {n} ops from a snapshot in {join_ms} ms (this build)");
     drop(peer);
 
-    // The same session served by a peer whose fold lost the ball behind its log's back: its
-    // snapshot names a scene that is not its ops' fold. The window refuses it and syncs op by
-    // op, and the scene check between the two repairs the server.
+    // A session served by a peer whose fold lost the ball behind its log's back: its snapshot
+    // names a scene that is not its ops' fold. The window refuses it and syncs op by op, and
+    // the scene check between the two repairs the server.
+    let server_store = dir.join("planted");
+    let (n, invite) =
+        app::workload::carved_session(&server_store, PLANTED_SESSION_EDITS, now).unwrap();
     let server = app::engine::Engine::start(
-        app::engine::EngineConfig::on_loopback(&peer_store),
+        app::engine::EngineConfig::on_loopback(&server_store),
         app::clock::now().wall,
     )
     .unwrap();
-    let ball = {
+    let (ball, folded) = {
         let mut view = app::engine::lock(server.view());
-        assert_eq!(view.scene_hash_hex(), folded);
+        let folded = view.scene_hash_hex();
         let ball = view.scene().objects().next().unwrap().0.0;
         view.plant_scene_difference(ball);
         assert_ne!(view.scene_hash_hex(), folded);
-        ball
+        (ball, folded)
     };
     let addr = app::engine::lock(server.view())
         .listen_addr()
         .unwrap()
         .to_string();
-    let state = join("refused", &addr, &["--command", "wait-secs: 5"]);
+    let target = (invite.to_string(), addr);
+    let target = (target.0.as_str(), target.1.as_str(), n);
+    let state = window_joining(
+        &display,
+        &dir,
+        "refused",
+        target,
+        &["--command", "wait-secs: 5"],
+    );
     let (session, snapshot) = (&state, &state["snapshot"]);
     assert_eq!(snapshot["verified"], false, "{snapshot}");
     let refused = snapshot["refused"][0].as_str().unwrap();
