@@ -1240,6 +1240,11 @@ fn disconnect_text(reason: &DisconnectReason) -> String {
             format!("the session's founder expelled {}", peer.short())
         }
         DisconnectReason::Lost(why) => format!("connection lost ({why})"),
+        DisconnectReason::SnapshotRefused => {
+            "a snapshot this peer joined from held a forged op: the joined session was dropped \
+             and is synced again op by op"
+                .into()
+        }
         other => format!("{other:?}"),
     }
 }
