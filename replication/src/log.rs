@@ -45,7 +45,7 @@ pub const MAX_LAMPORT_JUMP: u64 = 1 << 32;
 /// honest concurrent edit) is delivered at once, whatever the budget below.
 pub const MAX_FREE_REFOLD_ENTRIES: usize = 2 * CHECKPOINT_INTERVAL;
 /// Most ops a log keeps that were refused for sorting below their author's previous op as it
-/// holds it, while their own deps allowed them ([`Log::retry_fork_candidates`]); past this
+/// holds it, while their own deps allowed them (delivered when the fork is learnt); past this
 /// the oldest is dropped (a peer asks for it again, as for any op it lacks).
 pub const MAX_FORK_CANDIDATE_OPS: usize = 64;
 /// Most entries per second that refolds caused by remote ops may re-evaluate, on average,
@@ -754,12 +754,6 @@ impl<P: Payload> Log<P> {
     /// True if the founder expelled `member` (and has not readmitted it).
     pub fn is_expelled(&self, member: &PeerId) -> bool {
         self.expelled.contains_key(member)
-    }
-
-    /// True if the log holds a membership op that counts (such a log cannot be cut into a
-    /// snapshot: [`CutError::Membership`]).
-    pub fn has_membership_ops(&self) -> bool {
-        !self.membership_ops.is_empty()
     }
 
     /// Sets what refolds remote ops cause may cost ([`RefoldBudget`]).
