@@ -194,8 +194,12 @@ impl<P: Payload + Send + 'static> Core<P> {
             return;
         };
         joining.held.remove(&conn);
-        if joining.fetching.is_some_and(|(c, _)| c == conn) {
+        if let Some((_, peer)) = joining.fetching.filter(|(c, _)| *c == conn) {
             joining.fetching = None;
+            // Not refused for good: the remote may be asked again when it reconnects.
+            self.stats.n_snapshots_refused += 1;
+            let why = "the connection ended before the snapshot came".to_string();
+            self.emit(NodeEvent::Snapshot(SnapshotNews::Refused { peer, why }));
             self.fetch_next();
         }
     }
