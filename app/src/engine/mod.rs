@@ -88,7 +88,8 @@ impl Default for Network {
 pub struct EngineConfig {
     /// The session's store directory.
     pub store: PathBuf,
-    /// The session to join; `None` opens the store's own session (or makes a new one).
+    /// The session to join; `None` opens the store's own session (or makes a new one). A
+    /// store with nothing in it joins from a snapshot of the first peer it meets.
     pub invite: Option<Invite>,
     /// How to reach other peers.
     pub network: Network,
@@ -315,16 +316,13 @@ impl Engine {
         // The discovery id takes a slow derivation (argon2id): once per start.
         let keys = SessionKeys::from_invite(&opening.invite);
         let discovery_id = keys.discovery_id();
-        // A peer joining by invite with nothing stored takes a snapshot from the first peer
-        // it meets, instead of every op one by one.
-        let join_from_snapshot = config.invite.is_some() && opening.log.is_empty();
         let node_config = NodeConfig {
             keypair: opening.keypair,
             keys,
             listen: config.network.listen,
+            join_from_snapshot: config.invite.is_some() && opening.log.is_empty(),
             log: opening.log,
             store: opening.store,
-            join_from_snapshot,
         };
         let local_presence = Arc::new(Mutex::new(Presence::named(
             config.name.clone().unwrap_or_else(|| me.short()),
