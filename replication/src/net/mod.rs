@@ -51,6 +51,7 @@
 //!     listen: "127.0.0.1:0".parse().unwrap(),
 //!     log: Log::default(),
 //!     store: None,
+//!     join_from_snapshot: false,
 //! };
 //! let alice = Node::spawn(config(1))?;
 //! let bob = Node::spawn(config(2))?;
