@@ -49,44 +49,6 @@ pub const MAX_VERIFY_BATCH_OPS: usize = 1024;
 /// timestamp and signature.
 const MIN_OP_BYTES: usize = 64;
 
-/// The ops a snapshot (or a log) covers: how many, and a digest of their heads.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct Cut {
-    /// Number of ops.
-    pub n_ops: u64,
-    /// blake3 over the sorted heads.
-    pub heads_digest: [u8; 32],
-}
-
-impl Cut {
-    /// The cut of `log` as it stands.
-    pub fn of<P: Payload>(log: &Log<P>) -> Self {
-        let mut heads: Vec<OpId> = log.heads().copied().collect();
-        heads.sort_unstable();
-        Self::from_heads(log.len() as u64, &heads)
-    }
-
-    fn from_heads(n_ops: u64, sorted_heads: &[OpId]) -> Self {
-        let mut hasher = blake3::Hasher::new();
-        for head in sorted_heads {
-            hasher.update(&head.0);
-        }
-        Self {
-            n_ops,
-            heads_digest: *hasher.finalize().as_bytes(),
-        }
-    }
-}
-
-impl std::fmt::Display for Cut {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let digest: String = (self.heads_digest[..6].iter())
-            .map(|b| format!("{b:02x}"))
-            .collect();
-        write!(f, "{} ops, heads {digest}", self.n_ops)
-    }
-}
-
 /// Why a snapshot could not be captured.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum CaptureError {

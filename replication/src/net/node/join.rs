@@ -52,8 +52,8 @@ pub enum SnapshotNews {
         /// Bytes received.
         bytes: u64,
     },
-    /// Joined: the log holds the snapshot's ops and the scene is adopted, every connection
-    /// syncs the rest, and the check ([`SnapshotNews::Verifying`]) runs.
+    /// Joined: the log holds the snapshot's ops and their fold matched its scene hash, every
+    /// connection syncs the rest, and the check ([`SnapshotNews::Verifying`]) runs.
     Joined {
         /// The remote it came from.
         peer: PeerId,
@@ -75,8 +75,8 @@ pub enum SnapshotNews {
     Verified,
     /// A snapshot from `peer` was not kept: cut short, undecodable, not joining (a scene
     /// that is not its ops' fold among others), none to give, or a forged op found by the
-    /// check. The node asks another held connection, or
-    /// syncs op by op.
+    /// check, or a connection lost before it came. The node asks another held connection,
+    /// or syncs op by op.
     Refused {
         /// The remote it came from.
         peer: PeerId,
