@@ -626,7 +626,7 @@ impl View {
 
     /// The first bytes of a scene hash in hex, as peers and dumps show it.
     pub fn hash_hex(hash: &SceneHash) -> String {
-        hash.0.iter().take(8).map(|b| format!("{b:02x}")).collect()
+        short_hex(&hash.0)
     }
 
     /// [`View::scene_hash`] in hex.
@@ -943,14 +943,17 @@ impl Folder {
 /// A scene hash at a cut in words: the hash, the cut's digest and its ops (first bytes in
 /// hex, as the peers panel shows hashes).
 fn scene_at_text(at: &SceneAt) -> String {
-    let hex =
-        |bytes: &[u8]| -> String { bytes.iter().take(8).map(|b| format!("{b:02x}")).collect() };
     format!(
         "{} at cut {} ({} ops)",
-        hex(&at.hash),
-        hex(&at.cut),
+        short_hex(&at.hash),
+        short_hex(&at.cut),
         at.n_ops
     )
+}
+
+/// The first 8 bytes of a digest in hex, as the peers panel, dumps and news show digests.
+fn short_hex(bytes: &[u8]) -> String {
+    bytes.iter().take(8).map(|b| format!("{b:02x}")).collect()
 }
 
 impl Observer<ShapePayload> for Folder {
