@@ -90,6 +90,12 @@ pub const RELAY_AFTER_MICROS: u64 = 500_000;
 pub const PING_FOR_MICROS: u64 = 10_000_000;
 /// Pings per base resend interval while a remote stays silent (see [`PING_FOR_MICROS`]).
 pub const PINGS_PER_RESEND: u64 = 4;
+/// A remote silent for this many base resend intervals (and at least [`MIN_STALL_MICROS`])
+/// while batches to it wait has stalled the connection ([`Event::Stalled`]).
+pub const STALL_AFTER_RESENDS: u64 = 3;
+/// The shortest silence that stalls a connection (500 ms), however short the round trips:
+/// QUIC's own probes find a shorter outage about as soon as a new handshake would.
+pub const MIN_STALL_MICROS: u64 = 500_000;
 /// The shortest interval between pings (25 ms), however short the round trips.
 pub const MIN_PING_AFTER_MICROS: u64 = 25_000;
 /// Most messages one connection holds that came before the remote's hello (data overtaking a
@@ -293,6 +299,18 @@ pub enum Event {
     },
     /// The remote has acknowledged everything this peer holds.
     UpToDate,
+    /// Batches to the remote wait and it has said nothing for a few resend timeouts (at least
+    /// [`MIN_STALL_MICROS`]): the transport under the connection has stalled, as QUIC's backed-off
+    /// probes leave it after an outage, and a new connection to the same remote would resume
+    /// sync at its handshake. Said only by the end with the smaller peer id (a connection it
+    /// dials replaces the old one at both ends, [`crate::net`]'s rule for two connections to one
+    /// peer); again every base resend interval while the silence lasts, for at most
+    /// [`PING_FOR_MICROS`] of silence (the transport's idle timeout ends it by then).
+    Stalled {
+        /// How long until the next one, if the silence lasts: how long a new connection's
+        /// handshake may take before a fresh one is better.
+        retry_micros: u64,
+    },
     /// The scene check asks something of the scene's owner ([`crate::sync::scene`]);
     /// [`Peer`](crate::peer::Peer) hands these out on their own queue
     /// ([`Peer::poll_scene_event`](crate::peer::Peer::poll_scene_event)).
@@ -527,6 +545,8 @@ pub struct SyncState<P> {
     heard_at: Timestamp,
     /// When we last pinged the remote, while it stays silent ([`Message::Ping`]).
     pinged_at: Option<Timestamp>,
+    /// When the connection last said it stalled ([`Event::Stalled`]) in this silence.
+    stalled_at: Option<Timestamp>,
     /// Current batch resend interval (doubles on each resend without an ack in between).
     resend_micros: u64,
     /// Smoothed round trip and its mean deviation from acked batches (RFC 6298), if measured.
@@ -637,6 +657,7 @@ impl<P: Payload> SyncState<P> {
             in_flight: BTreeMap::new(),
             heard_at: now,
             pinged_at: None,
+            stalled_at: None,
             resend_micros: RESEND_AFTER_MICROS,
             rtt_micros: None,
             relay_vv: VersionVector::new(),
@@ -1585,6 +1606,11 @@ impl<P: Payload> SyncState<P> {
             self.pinged_at = Some(now);
             self.control.push_back(Message::Ping);
         }
+        if self.stall_due().is_some_and(|d| d <= now) {
+            self.stalled_at = Some(now);
+            let retry_micros = self.base_resend_micros();
+            self.events.push_back(Event::Stalled { retry_micros });
+        }
         if self.relearn_due().is_some_and(|d| d <= now) {
             self.relearn(now, log);
         }
@@ -1730,6 +1756,25 @@ impl<P: Payload> SyncState<P> {
         (due.0 <= self.heard_at.0.saturating_add(PING_FOR_MICROS)).then_some(due)
     }
 
+    /// When the connection next says it stalled ([`Event::Stalled`]): while batches wait for
+    /// acknowledgement and the remote, whose id is above ours, has been silent for
+    /// [`STALL_AFTER_RESENDS`] base resend intervals (at least [`MIN_STALL_MICROS`]); then
+    /// every base interval, for at most [`PING_FOR_MICROS`] of silence.
+    fn stall_due(&self) -> Option<Timestamp> {
+        let remote = self.remote?;
+        if self.in_flight.is_empty() || remote <= self.config.local {
+            return None;
+        }
+        let base = self.base_resend_micros();
+        let after = (STALL_AFTER_RESENDS * base).max(MIN_STALL_MICROS);
+        let first = self.heard_at.saturating_add_micros(after);
+        let due = match self.stalled_at {
+            Some(at) if at >= first => at.saturating_add_micros(base),
+            _ => first,
+        };
+        (due.0 <= self.heard_at.0.saturating_add(PING_FOR_MICROS)).then_some(due)
+    }
+
     fn resend_due(&self) -> Option<Timestamp> {
         self.in_flight
             .values()
@@ -1791,6 +1836,7 @@ impl<P: Payload> SyncState<P> {
             self.hello_due(),
             self.resend_due(),
             self.ping_due(),
+            self.stall_due(),
             self.have_due(log),
             self.relearn_due(),
             self.stuck_due(log),

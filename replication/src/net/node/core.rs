@@ -4,14 +4,15 @@
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
+use std::time::Duration;
 
 use tokio::sync::{mpsc, oneshot};
 
 use super::join::JoinState;
 use super::{
     CloseCode, Command, ConnStats, Counters, DialError, DisconnectReason, Input,
-    MAX_QUEUED_FRAMES_PER_CONN, MAX_REJECTIONS_PER_CONN, NodeAuthorError, NodeEvent, NodeStats,
-    Observer, RefusalKind, Shared, conn,
+    MAX_QUEUED_FRAMES_PER_CONN, MAX_REJECTIONS_PER_CONN, MIN_REDIAL_HANDSHAKE_MILLIS,
+    NodeAuthorError, NodeEvent, NodeStats, Observer, RefusalKind, Shared, conn,
 };
 use crate::identity::{OpId, PeerId};
 use crate::log::Log;
@@ -49,6 +50,8 @@ pub(super) struct Core<P> {
     pub(super) shared: Arc<Shared>,
     pub(super) conns: BTreeMap<ConnId, Live>,
     dials: BTreeMap<ConnId, oneshot::Sender<Result<ConnId, DialError>>>,
+    /// Dials under way to the remotes of stalled connections: the new id, the stalled one.
+    redials: BTreeMap<ConnId, ConnId>,
     events: mpsc::Sender<NodeEvent>,
     pub(super) stats: NodeStats,
     /// Joining from a snapshot, and serving them.
@@ -113,6 +116,7 @@ impl<P: Payload + Send + 'static> Core<P> {
             shared,
             conns: BTreeMap::new(),
             dials: BTreeMap::new(),
+            redials: BTreeMap::new(),
             events,
             stats: NodeStats::default(),
             counters,
@@ -248,6 +252,11 @@ impl<P: Payload + Send + 'static> Core<P> {
                 error,
                 kind,
             } => {
+                // A redial that found its remote still cut off is no news: the stalled
+                // connection goes on, and its next stall dials again.
+                if conn.and_then(|c| self.redials.remove(&c)).is_some() {
+                    return;
+                }
                 *self.stats.failed_admissions.entry(kind).or_insert(0) += 1;
                 if let Some(reply) = conn.and_then(|c| self.dials.remove(&c)) {
                     let _ = reply.send(Err(DialError::Admission(error.clone())));
@@ -256,6 +265,9 @@ impl<P: Payload + Send + 'static> Core<P> {
             }
             Input::Superseded { conn, addr } => {
                 self.stats.n_duplicates += 1;
+                if let Some(c) = conn {
+                    self.redials.remove(&c);
+                }
                 if let Some(reply) = conn.and_then(|c| self.dials.remove(&c)) {
                     // The dial's answer is the connection the remote kept, when it is here
                     // already (the usual order); otherwise the caller learns why, and the
@@ -318,6 +330,11 @@ impl<P: Payload + Send + 'static> Core<P> {
         start: oneshot::Sender<()>,
     ) {
         let reply = self.dials.remove(&conn);
+        if let Some(stalled) = self.redials.remove(&conn)
+            && self.conns.get(&stalled).is_some_and(|l| l.peer == peer)
+        {
+            self.stats.n_stalls_replaced += 1;
+        }
         if let Some((kind, error)) = self.refusal(peer) {
             return self.refuse(&connection, reply, kind, error);
         }
@@ -623,6 +640,12 @@ impl<P: Payload + Send + 'static> Core<P> {
                     value,
                 },
                 Event::UpToDate => NodeEvent::UpToDate { conn, peer },
+                Event::Stalled { retry_micros } => {
+                    let handshake = Duration::from_micros(retry_micros.saturating_mul(2))
+                        .max(Duration::from_millis(MIN_REDIAL_HANDSHAKE_MILLIS));
+                    self.redial(conn, handshake);
+                    continue;
+                }
                 // On the observer's own queue (`Peer::poll_scene_event`), never here.
                 Event::Scene(_) => continue,
                 Event::Forked { author, seq } => NodeEvent::Forked { conn, author, seq },
@@ -637,6 +660,32 @@ impl<P: Payload + Send + 'static> Core<P> {
             };
             self.emit(event);
         }
+    }
+
+    /// Dials the remote of the stalled connection `stalled` again, unless a dial to it is
+    /// under way: the handshake may take `handshake_timeout` (two of the connection's resend
+    /// intervals, at least [`MIN_REDIAL_HANDSHAKE_MILLIS`]), after which a fresh one (at the
+    /// next stall event) does better than QUIC's backed-off retries of a lost first packet. Admitted, the new
+    /// connection replaces the stalled one at both ends ([`Core::settle_duplicate`]: the sync
+    /// core says a stall only at the end with the smaller id).
+    fn redial(&mut self, stalled: ConnId, handshake_timeout: Duration) {
+        let Some(live) = self.conns.get(&stalled) else {
+            return;
+        };
+        if self.redials.values().any(|c| *c == stalled) {
+            return;
+        }
+        let addr = live.connection.remote_address();
+        let conn = self.shared.next_conn_id();
+        self.redials.insert(conn, stalled);
+        self.stats.n_stall_redials += 1;
+        tokio::spawn(conn::dial(
+            self.shared.clone(),
+            self.endpoint.clone(),
+            conn,
+            addr,
+            handshake_timeout,
+        ));
     }
 
     fn enforce_rejection_limit(&mut self) {

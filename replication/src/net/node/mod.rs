@@ -77,6 +77,12 @@ use crate::store::OpStore;
 use crate::sync::state::{CloseReason, EphemeralError, RejectKind, SyncStats};
 use crate::time::Timestamp;
 
+/// The shortest time a dial to the remote of a stalled connection waits for its QUIC
+/// handshake (250 ms) before a fresh dial replaces it: long enough for a handshake on a
+/// loaded machine, short enough that one begun during the outage, whose first packet was
+/// lost, gives way soon after the outage ends.
+pub const MIN_REDIAL_HANDSHAKE_MILLIS: u64 = 250;
+
 /// Commands queued from handles to the core task before `send` waits.
 pub const MAX_QUEUED_COMMANDS: usize = 64;
 /// Events queued for the app before new ones are dropped (and counted).
@@ -447,6 +453,12 @@ pub struct NodeStats {
     pub n_identity_mismatches: u64,
     /// Connections closed as duplicates of another connection to the same peer.
     pub n_duplicates: u64,
+    /// Dials to the remote of a stalled connection ([`crate::sync::Event::Stalled`]), each
+    /// given the handshake time the event allows.
+    pub n_stall_redials: u64,
+    /// Stalled connections replaced by such a dial (the rest timed out or were refused, and
+    /// the old connection went on).
+    pub n_stalls_replaced: u64,
     /// Accepted connections closed to make room for a newer one when every slot was taken
     /// ([`crate::peer::Peer::accept`]).
     pub n_evicted: u64,

@@ -1068,6 +1068,50 @@ fn a_silent_remote_is_pinged_and_the_answer_brings_the_batches_back() {
     assert_eq!(batched(&again), vec![(op.author(), op.seq())]);
 }
 
+/// Issue 53: after an outage QUIC's backed-off probes left a connection stalled for up to
+/// the outage's length again, unless what waited fitted its congestion window. A connection
+/// whose remote stays silent while batches wait says so ([`Event::Stalled`], and the node
+/// dials again), only at the end with the smaller id, every base resend interval from a few
+/// of them of silence, no longer than pings go, and not once the remote is heard again.
+#[test]
+fn a_silent_remote_stalls_the_connection_at_the_smaller_id_only() {
+    let [mut a, mut b] = connected();
+    let stalls = |n: &Node| -> Vec<u64> {
+        (n.events.iter())
+            .filter_map(|e| match e {
+                Event::Stalled { retry_micros } => Some(*retry_micros),
+                _ => None,
+            })
+            .collect()
+    };
+    for node in [&mut a, &mut b] {
+        node.author(200 * MILLI, "into the outage".into());
+        drain_checked(node, 200 * MILLI, 11_000_000);
+    }
+    let (lower, higher) = if a.key.peer_id() < b.key.peer_id() {
+        (&mut a, &mut b)
+    } else {
+        (&mut b, &mut a)
+    };
+    assert_eq!(stalls(higher), vec![], "the larger id never redials");
+    let said = stalls(lower);
+    let base = lower.sync.resend_timeout().unwrap();
+    let after = (STALL_AFTER_RESENDS * base).max(MIN_STALL_MICROS);
+    let expected = ((PING_FOR_MICROS - after) / base + 1) as usize;
+    assert!(
+        (expected - 1..=expected).contains(&said.len()),
+        "{} stalls, {expected} expected on a base of {base} µs",
+        said.len()
+    );
+    assert!(said.iter().all(|retry| *retry == base), "{said:?}");
+    // Heard again: the silence is over, and so are the stalls.
+    let now = 11_300_000;
+    lower.events.clear();
+    feed(lower, now, &Message::Ping.encode());
+    drain_checked(lower, now, after - MILLI);
+    assert_eq!(stalls(lower), vec![]);
+}
+
 /// Pings cannot make a remote send more than a trickle: one full have a second.
 #[test]
 fn pings_are_answered_at_most_once_a_second() {

@@ -1,0 +1,127 @@
+//! A connection stalled by an outage: two nodes talk through a UDP relay on 127.0.0.1 that
+//! can drop every datagram, as a Wi-Fi drop or an unplugged cable does. Once the outage ends,
+//! QUIC's own probes have backed off (each waits twice as long as the last), so the stalled
+//! connection would resume only at the next one; the end with the smaller id dials again
+//! instead, and the new connection replaces the stalled one at both ends.
+
+#![allow(clippy::unwrap_used, reason = "test helpers")]
+
+mod net_support;
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use net_support::*;
+use replication::payload::test_payload::TestPayload;
+use tokio::net::UdpSocket;
+
+/// Forwards datagrams between a node that sends to its front and the node at `target`
+/// (from its back), both ways, unless cut. Every flow between the two nodes' sockets, a new
+/// connection's included, goes through the same two sockets.
+struct Relay {
+    front: SocketAddr,
+    cut: Arc<AtomicBool>,
+}
+
+impl Relay {
+    async fn start(target: SocketAddr) -> Relay {
+        let front = Arc::new(UdpSocket::bind("127.0.0.1:0").await.unwrap());
+        let back = Arc::new(UdpSocket::bind("127.0.0.1:0").await.unwrap());
+        let cut = Arc::new(AtomicBool::new(false));
+        let relay = Relay {
+            front: front.local_addr().unwrap(),
+            cut: cut.clone(),
+        };
+        let (front_in, back_out, cut_in) = (front.clone(), back.clone(), cut.clone());
+        let (sender, client) = tokio::sync::watch::channel(None::<SocketAddr>);
+        tokio::spawn(async move {
+            let mut buf = vec![0u8; 65_536];
+            while let Ok((n, from)) = front_in.recv_from(&mut buf).await {
+                sender.send_replace(Some(from));
+                if !cut_in.load(Ordering::SeqCst) {
+                    let _ = back_out.send_to(&buf[..n], target).await;
+                }
+            }
+        });
+        tokio::spawn(async move {
+            let mut buf = vec![0u8; 65_536];
+            while let Ok((n, _)) = back.recv_from(&mut buf).await {
+                let to = *client.borrow();
+                if let Some(to) = to
+                    && !cut.load(Ordering::SeqCst)
+                {
+                    let _ = front.send_to(&buf[..n], to).await;
+                }
+            }
+        });
+        relay
+    }
+
+    fn set_cut(&self, cut: bool) {
+        self.cut.store(cut, Ordering::SeqCst);
+    }
+}
+
+/// Long enough that QUIC's probes, doubling from about 30 ms on loopback, leave seconds
+/// between the outage's end and their next try.
+const OUTAGE: Duration = Duration::from_millis(4_000);
+/// What a redial may take from the outage's end to both logs equal: a dial begun during the
+/// outage gives way within a quarter second, then a handshake, an admission and a hello on
+/// loopback (slack for a loaded machine).
+/// Ops each end authors three times during the outage, of about [`BULKY_BYTES`] each: more
+/// than QUIC's congestion window lets out unacknowledged, so what follows waits for a probe.
+const N_BULKY: usize = 60;
+const BULKY_BYTES: usize = 200;
+const MAX_RESUME: Duration = Duration::from_millis(1_500);
+
+#[tokio::test]
+async fn a_connection_stalled_by_an_outage_is_redialed_when_it_ends() {
+    let (a, b) = (node(1), node(2));
+    let relay = Relay::start(b.handle.local_addr()).await;
+    let first = a.handle.dial(relay.front).await.unwrap();
+    author_some(&a.handle, 1, "a").await;
+    author_some(&b.handle, 2, "b").await;
+    converge(&[&a.handle, &b.handle], 8).await;
+
+    relay.set_cut(true);
+    // Both ends edit during the outage, so batches wait at both.
+    for i in 0..3 {
+        for h in [&a.handle, &b.handle] {
+            for j in 0..N_BULKY {
+                let line = format!("offline {i} {j} {}", "x".repeat(BULKY_BYTES));
+                h.author(TestPayload::Chat(line)).await.unwrap();
+            }
+        }
+        tokio::time::sleep(OUTAGE / 3).await;
+    }
+    relay.set_cut(false);
+    let healed = Instant::now();
+    converge(&[&a.handle, &b.handle], 8 + 6 * N_BULKY).await;
+    let resumed = healed.elapsed();
+
+    let (lower, higher) = if a.handle.peer_id() < b.handle.peer_id() {
+        (&a.handle, &b.handle)
+    } else {
+        (&b.handle, &a.handle)
+    };
+    let (low, high) = (lower.stats().await.unwrap(), higher.stats().await.unwrap());
+    assert!(low.n_stall_redials >= 1, "the smaller id redials: {low:?}");
+    assert_eq!(low.n_stalls_replaced, 1, "{low:?}");
+    assert_eq!(high.n_stall_redials, 0, "only the smaller id redials");
+    assert_eq!(low.n_failed_admissions(), 0, "a failed redial is not news");
+    for h in [lower, higher] {
+        let peers = h.connected_peers().await.unwrap();
+        assert_eq!(peers.len(), 1, "one connection each, the new one");
+    }
+    let peers = a.handle.connected_peers().await.unwrap();
+    if a.handle.peer_id() < b.handle.peer_id() {
+        assert_ne!(peers[0].0, first, "the stalled connection was replaced");
+    }
+    assert!(
+        resumed < MAX_RESUME,
+        "took {resumed:?} after the outage to converge"
+    );
+    println!("converged {resumed:?} after a {OUTAGE:?} outage");
+}
