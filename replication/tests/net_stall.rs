@@ -11,7 +11,7 @@ mod net_support;
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use net_support::*;
 use replication::payload::test_payload::TestPayload;
@@ -97,7 +97,7 @@ async fn a_connection_stalled_by_an_outage_is_redialed_when_it_ends() {
         tokio::time::sleep(OUTAGE / 3).await;
     }
     relay.set_cut(false);
-    let healed = Instant::now();
+    let healed = tokio::time::Instant::now();
     converge(&[&a.handle, &b.handle], 8 + 6 * N_BULKY).await;
     let resumed = healed.elapsed();
 
