@@ -162,6 +162,10 @@ pub struct Stats {
     pub n_stalled: u64,
     /// Losses on stream connections, each made good after a loss detection time.
     pub n_retransmitted: u64,
+    /// Dials to replace a stalled stream connection ([`replication::sync::state::Event::Stalled`]).
+    pub n_stall_redials: u64,
+    /// Stalled stream connections such a dial replaced.
+    pub n_stalls_replaced: u64,
     /// Messages dropped because their link's queue was full (bandwidth).
     pub n_queue_drops: u64,
     /// Messages that arrived after their connection was gone.
@@ -265,7 +269,7 @@ impl Report {
             f,
             "  sent {} messages ({:.1}/op), {} bytes ({:.0} bytes/op); delivered {}, lost {}, \
              duplicated {}, partitioned {}, queue-dropped {}, stale {}; as streams: \
-             retransmitted {}, stalled {}",
+             retransmitted {}, stalled {}, stall redials {} ({} replaced)",
             s.n_messages,
             self.messages_per_op(),
             s.n_bytes,
@@ -277,7 +281,9 @@ impl Report {
             s.n_queue_drops,
             s.n_stale_drops,
             s.n_retransmitted,
-            s.n_stalled
+            s.n_stalled,
+            s.n_stall_redials,
+            s.n_stalls_replaced
         )?;
         self.fmt_slowest(f)?;
         let mut kinds: Vec<_> = s.bytes_by_kind.iter().collect();

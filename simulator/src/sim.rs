@@ -125,6 +125,19 @@ enum Ev {
     Redial {
         peer: usize,
     },
+    /// The sender on a stream link that a partition stalled probes: what still waits to
+    /// resume goes out.
+    StreamProbe {
+        from: usize,
+        to: usize,
+    },
+    /// A dial to replace the stalled stream connection of epoch `epoch` between `a` and `b`
+    /// is admitted.
+    Replace {
+        a: usize,
+        b: usize,
+        epoch: u64,
+    },
     /// After healing: stop once honest peers agree and nothing is in flight between them.
     Probe,
     /// Records a sample for the plots (not part of the trace).
@@ -137,6 +150,8 @@ struct Pair {
     connected: bool,
     /// Bumped on every connect and disconnect: messages of an older epoch are dropped.
     epoch: u64,
+    /// Until when a dial to replace the pair's stalled connection is under way (streams).
+    redial_until: u64,
 }
 
 /// A run in progress.
@@ -160,6 +175,10 @@ pub struct Simulation {
     /// Per directed link, when the first message stalled on it while a partition cuts it,
     /// and the messages, with their connection epochs.
     stalled: BTreeMap<(usize, usize), stream::Stalled>,
+    /// Per directed link no longer cut, what stalled on it while it was, if it fits QUIC's
+    /// congestion window, with when the sender probes: it goes again once the link's next
+    /// message is acknowledged, or at the probe ([`Ev::StreamProbe`]) if sooner.
+    resuming: BTreeMap<(usize, usize), (u64, stream::Stalled)>,
     /// Pair state, `[min][max]`.
     pairs: Vec<Vec<Pair>>,
     /// Connections whose other end crashed, still open at `to` (keyed `(to, from)`): messages
@@ -216,6 +235,7 @@ impl Simulation {
             link_free_at: vec![vec![0; n_nodes]; n_nodes],
             stream_tail: vec![vec![(0, 0); n_nodes]; n_nodes],
             stalled: BTreeMap::new(),
+            resuming: BTreeMap::new(),
             pairs: vec![vec![Pair::default(); n_nodes]; n_nodes],
             lingering: BTreeMap::new(),
             blocked: BTreeMap::new(),
@@ -574,6 +594,21 @@ impl Simulation {
                 self.expel_hostile(connection);
             }
             Ev::Redial { peer } => self.redial(peer),
+            Ev::StreamProbe { from, to } => {
+                self.trace.u64(23);
+                // A probe of what waits now, not of what an earlier partition left.
+                if self
+                    .resuming
+                    .get(&(from, to))
+                    .is_some_and(|r| r.0 == self.now)
+                {
+                    self.stream_resume(from, to, 0);
+                }
+            }
+            Ev::Replace { a, b, epoch } => {
+                self.trace.u64(21);
+                self.stream_replace(a, b, epoch);
+            }
             Ev::Probe => self.probe(),
             Ev::Sample => {
                 self.sample();
@@ -1095,6 +1130,15 @@ impl Simulation {
             Event::Forked { .. } => {
                 self.trace.u64(14);
                 self.stats.n_forks_learnt += 1;
+            }
+            // Over streams the peer dials again, as the node does; datagrams have no
+            // connection to replace.
+            Event::Stalled { handshake_micros } => {
+                let other = conn.0 as usize;
+                if self.faults.streams && other < self.n_nodes() {
+                    self.trace.u64(22);
+                    self.stream_redial(idx, other, handshake_micros);
+                }
             }
             // The peer hands the scene check's events to its own queue, which the simulator
             // does not drive (no honest peer here tells its peer a scene hash).

@@ -148,7 +148,7 @@ fn late_peers_join_from_snapshots_and_converge() {
 
 /// Issue 53: the product's sync runs over QUIC streams, which lose no message inside a
 /// connection. Under `quic`, a loss is a retransmission and a partition a stall: nothing is
-/// lost or duplicated, and the runs converge.
+/// lost or duplicated, stalled connections are replaced, and the runs converge.
 #[test]
 fn the_quic_preset_turns_losses_into_delays_and_partitions_into_stalls() {
     let reports = passing_runs(0, 6, Config::new(0, 5, 300, faults("quic")));
@@ -163,6 +163,10 @@ fn the_quic_preset_turns_losses_into_delays_and_partitions_into_stalls() {
         sum(|r| r.stats.n_stalled) > 0,
         "no partition stalled a connection"
     );
+    // The smaller id of a stalled connection dials again, as the node does, and the new
+    // connection replaces it once the partition is over.
+    assert!(sum(|r| r.stats.n_stalls_replaced) > 0, "no stall redialed");
+    assert!(sum(|r| r.stats.n_stall_redials) >= sum(|r| r.stats.n_stalls_replaced));
 }
 
 #[test]

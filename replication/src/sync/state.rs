@@ -96,6 +96,11 @@ pub const STALL_AFTER_RESENDS: u64 = 3;
 /// The shortest silence that stalls a connection (500 ms), however short the round trips:
 /// QUIC's own probes find a shorter outage about as soon as a new handshake would.
 pub const MIN_STALL_MICROS: u64 = 500_000;
+/// The shortest time a dial to the remote of a stalled connection waits for its handshake
+/// (250 ms) before a fresh dial replaces it: long enough for a handshake on a loaded machine,
+/// short enough that one begun during the outage, whose first packet was lost, gives way soon
+/// after the outage ends.
+pub const MIN_REDIAL_HANDSHAKE_MICROS: u64 = 250_000;
 /// The shortest interval between pings (25 ms), however short the round trips.
 pub const MIN_PING_AFTER_MICROS: u64 = 25_000;
 /// Most messages one connection holds that came before the remote's hello (data overtaking a
@@ -307,9 +312,10 @@ pub enum Event {
     /// peer); again every base resend interval while the silence lasts, for at most
     /// [`PING_FOR_MICROS`] of silence (the transport's idle timeout ends it by then).
     Stalled {
-        /// How long until the next one, if the silence lasts: how long a new connection's
-        /// handshake may take before a fresh one is better.
-        retry_micros: u64,
+        /// How long a new connection's handshake may take before a fresh one does better than
+        /// the transport's retries of a lost first packet: two base resend intervals, at least
+        /// [`MIN_REDIAL_HANDSHAKE_MICROS`].
+        handshake_micros: u64,
     },
     /// The scene check asks something of the scene's owner ([`crate::sync::scene`]);
     /// [`Peer`](crate::peer::Peer) hands these out on their own queue
@@ -1608,8 +1614,9 @@ impl<P: Payload> SyncState<P> {
         }
         if self.stall_due().is_some_and(|d| d <= now) {
             self.stalled_at = Some(now);
-            let retry_micros = self.base_resend_micros();
-            self.events.push_back(Event::Stalled { retry_micros });
+            let base = self.base_resend_micros();
+            let handshake_micros = (2 * base).max(MIN_REDIAL_HANDSHAKE_MICROS);
+            self.events.push_back(Event::Stalled { handshake_micros });
         }
         if self.relearn_due().is_some_and(|d| d <= now) {
             self.relearn(now, log);

@@ -1,7 +1,12 @@
 //! Connections as QUIC gives them ([`Faults::streams`]): a lost packet is sent again once its
 //! sender detects the loss, so loss is delay; a connection delivers its messages in order and
 //! never twice; a partition stalls a connection, which the idle timeout closes if the
-//! partition outlasts it, and the two ends dial again once it ends.
+//! partition outlasts it, and the two ends dial again once it ends. When a partition ends,
+//! what stalled goes again once the sender learns it was lost: from the acknowledgement of its
+//! next message when the stalled bytes left room in the congestion window, else at its next
+//! probe, backed off since the first stall; and the end of a stalled connection with the
+//! smaller id dials again ([`replication::sync::state::Event::Stalled`]), as the node does, which
+//! replaces the connection once both links are open.
 //!
 //! [`Faults::streams`]: crate::config::Faults::streams
 
@@ -9,6 +14,15 @@ use super::{Ev, Simulation, deliver};
 
 /// The product's QUIC idle timeout (`replication::net::tls::IDLE_TIMEOUT_MILLIS`).
 pub(crate) const STREAM_IDLE_TIMEOUT_MICROS: u64 = 10_000_000;
+/// QUIC's initial congestion window (quinn's default: 14,720 bytes clamped to ten 1,200-byte
+/// datagrams): a sender whose lost,
+/// unacknowledged bytes leave room in it sends new data at once, so when an outage ends the
+/// next message gets through without waiting for a probe; one whose window is full waits for
+/// the probe.
+const QUIC_WINDOW_BYTES: usize = 12_000;
+/// The round trips a dial takes to be admitted: QUIC's handshake, then the admission's
+/// proof and answer (`replication::net::admission`).
+const REDIAL_ROUND_TRIPS: u64 = 2;
 /// What a partition stalled on one directed link: when the first message stalled, and the
 /// messages with their connection epochs.
 pub(super) type Stalled = (u64, Vec<(u64, Vec<u8>)>);
@@ -40,7 +54,49 @@ impl Simulation {
             stalled.1.push((epoch, bytes));
             return;
         }
+        // This message's acknowledgement tells the sender the stalled ones were lost.
+        let detection = self.loss_detection_micros(from, to);
+        self.stream_resume(from, to, detection);
         self.stream_transmit(from, to, epoch, bytes, 0);
+    }
+
+    /// Sends what stalled on the link `from -> to` and waits to resume, `extra` microseconds
+    /// late or at the sender's probe if sooner (or stalls it again if a partition cuts the
+    /// link anew).
+    pub(super) fn stream_resume(&mut self, from: usize, to: usize, extra: u64) {
+        let Some((probe_at, (since, waiting))) = self.resuming.remove(&(from, to)) else {
+            return;
+        };
+        let extra = extra.min(probe_at.saturating_sub(self.now));
+        if self.blocked.contains_key(&(from, to)) {
+            let stalled = self
+                .stalled
+                .entry((from, to))
+                .or_insert((since, Vec::new()));
+            stalled.1.splice(0..0, waiting);
+            return;
+        }
+        self.stream_send_stalled(from, to, waiting, extra);
+    }
+
+    /// Sends messages that stalled on the link `from -> to`, `extra` microseconds late; those
+    /// of a connection since closed are stale.
+    fn stream_send_stalled(
+        &mut self,
+        from: usize,
+        to: usize,
+        stalled: Vec<(u64, Vec<u8>)>,
+        extra: u64,
+    ) {
+        let current = self.pair(from, to).epoch;
+        for (epoch, bytes) in stalled {
+            self.n_in_flight -= 1;
+            if epoch == current && self.pair(from, to).connected {
+                self.stream_transmit(from, to, epoch, bytes, extra);
+            } else {
+                self.stats.n_stale_drops += 1;
+            }
+        }
     }
 
     /// Sends `bytes` (of connection `epoch`) after `extra` microseconds of waiting.
@@ -87,22 +143,37 @@ impl Simulation {
 
     /// Links that are no longer cut: what stalled on them goes out at the sender's next probe
     /// (every loss detection time since the first stall, doubling each time, as QUIC backs
-    /// off), and a connection the idle timeout closed is dialed again.
+    /// off), or a loss detection time after the link's next message when it fits the
+    /// congestion window ([`QUIC_WINDOW_BYTES`]); a connection the idle timeout closed is
+    /// dialed again.
     pub(super) fn stream_unblocked(&mut self, links: &[(usize, usize)]) {
         for &(from, to) in links {
             if self.blocked.contains_key(&(from, to)) {
                 continue;
             }
-            let current = self.pair(from, to).epoch;
-            let (since, stalled) = self.stalled.remove(&(from, to)).unwrap_or_default();
-            let probe = next_probe(since, self.loss_detection_micros(from, to), self.now);
-            for (epoch, bytes) in stalled {
-                self.n_in_flight -= 1;
-                if epoch == current && self.pair(from, to).connected {
-                    self.stream_transmit(from, to, epoch, bytes, probe);
-                } else {
-                    self.stats.n_stale_drops += 1;
+            // What still waits from an earlier partition goes first, on its probe timer.
+            let (since, stalled) = match (
+                self.resuming.remove(&(from, to)),
+                self.stalled.remove(&(from, to)),
+            ) {
+                (Some((_, (since, mut waiting))), Some((_, stalled))) => {
+                    waiting.extend(stalled);
+                    (since, waiting)
                 }
+                (Some((_, waiting)), None) => waiting,
+                (None, stalled) => stalled.unwrap_or_default(),
+            };
+            let probe = next_probe(since, self.loss_detection_micros(from, to), self.now);
+            let n_bytes: usize = stalled.iter().map(|(_, b)| b.len()).sum();
+            if probe > 0 && n_bytes <= QUIC_WINDOW_BYTES && !stalled.is_empty() {
+                // The window has room: the link's next message goes at once and brings
+                // the stalled ones back, unless the probe comes first.
+                let probe_at = self.now + probe;
+                self.resuming
+                    .insert((from, to), (probe_at, (since, stalled)));
+                self.push(probe_at, Ev::StreamProbe { from, to });
+            } else {
+                self.stream_send_stalled(from, to, stalled, probe);
             }
             if !self.pair(from, to).connected
                 && !self.blocked.contains_key(&(to, from))
@@ -112,6 +183,53 @@ impl Simulation {
                 self.connect_pair(from, to);
             }
         }
+    }
+}
+
+impl Simulation {
+    /// Peer `from`'s connection to `to` stalled ([`replication::sync::state::Event::Stalled`]): it
+    /// dials `to` again, unless a dial is under way. One that finds both links open is
+    /// admitted [`REDIAL_ROUND_TRIPS`] later and replaces the connection at both ends; one
+    /// begun while a partition cuts either link loses its first packet and gives way after
+    /// `handshake_micros`, to the next stall's dial.
+    pub(super) fn stream_redial(&mut self, from: usize, to: usize, handshake_micros: u64) {
+        let now = self.now;
+        let pair = *self.pair(from, to);
+        if !pair.connected || pair.redial_until > now {
+            return;
+        }
+        self.stats.n_stall_redials += 1;
+        let open =
+            !self.blocked.contains_key(&(from, to)) && !self.blocked.contains_key(&(to, from));
+        let takes = if open && self.online(from) && self.online(to) {
+            let rtt = self.latency_micros[from][to] + self.latency_micros[to][from];
+            let at = now + REDIAL_ROUND_TRIPS * rtt;
+            let epoch = pair.epoch;
+            self.push(
+                at,
+                Ev::Replace {
+                    a: from,
+                    b: to,
+                    epoch,
+                },
+            );
+            REDIAL_ROUND_TRIPS * rtt
+        } else {
+            handshake_micros
+        };
+        self.pair(from, to).redial_until = now + takes;
+    }
+
+    /// A dial to replace the stalled connection of `epoch` between `a` and `b` is admitted:
+    /// both ends drop the old connection (what stalled on it is stale) and sync on the new.
+    pub(super) fn stream_replace(&mut self, a: usize, b: usize, epoch: u64) {
+        let pair = *self.pair(a, b);
+        if !pair.connected || pair.epoch != epoch {
+            return;
+        }
+        self.stats.n_stalls_replaced += 1;
+        self.disconnect_pair(a, b);
+        self.connect_pair(a, b);
     }
 }
 

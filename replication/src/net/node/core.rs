@@ -11,8 +11,8 @@ use tokio::sync::{mpsc, oneshot};
 use super::join::JoinState;
 use super::{
     CloseCode, Command, ConnStats, Counters, DialError, DisconnectReason, Input,
-    MAX_QUEUED_FRAMES_PER_CONN, MAX_REJECTIONS_PER_CONN, MIN_REDIAL_HANDSHAKE_MILLIS,
-    NodeAuthorError, NodeEvent, NodeStats, Observer, RefusalKind, Shared, conn,
+    MAX_QUEUED_FRAMES_PER_CONN, MAX_REJECTIONS_PER_CONN, NodeAuthorError, NodeEvent, NodeStats,
+    Observer, RefusalKind, Shared, conn,
 };
 use crate::identity::{OpId, PeerId};
 use crate::log::Log;
@@ -640,10 +640,8 @@ impl<P: Payload + Send + 'static> Core<P> {
                     value,
                 },
                 Event::UpToDate => NodeEvent::UpToDate { conn, peer },
-                Event::Stalled { retry_micros } => {
-                    let handshake = Duration::from_micros(retry_micros.saturating_mul(2))
-                        .max(Duration::from_millis(MIN_REDIAL_HANDSHAKE_MILLIS));
-                    self.redial(conn, handshake);
+                Event::Stalled { handshake_micros } => {
+                    self.redial(conn, Duration::from_micros(handshake_micros));
                     continue;
                 }
                 // On the observer's own queue (`Peer::poll_scene_event`), never here.
@@ -663,8 +661,7 @@ impl<P: Payload + Send + 'static> Core<P> {
     }
 
     /// Dials the remote of the stalled connection `stalled` again, unless a dial to it is
-    /// under way: the handshake may take `handshake_timeout` (two of the connection's resend
-    /// intervals, at least [`MIN_REDIAL_HANDSHAKE_MILLIS`]), after which a fresh one (at the
+    /// under way: the handshake may take `handshake_timeout`, after which a fresh one (at the
     /// next stall event) does better than QUIC's backed-off retries of a lost first packet. Admitted, the new
     /// connection replaces the stalled one at both ends ([`Core::settle_duplicate`]: the sync
     /// core says a stall only at the end with the smaller id).

@@ -13,6 +13,20 @@
 //! does not keep up, events are dropped and counted ([`NodeStats::n_events_dropped`]), and
 //! the log read through [`NodeHandle::with_peer`] stays the truth.
 //!
+//! # Stalled connections
+//!
+//! After an outage QUIC probes a connection at intervals it doubles while the outage lasts,
+//! so one whose unacknowledged data filled its congestion window would resume only at the
+//! next probe, up to the outage's length after it ended. When the sync core says a
+//! connection has stalled ([`crate::sync::state::Event::Stalled`]: batches wait and the remote has
+//! been silent a few resend timeouts, said at the end with the smaller id only), the node
+//! dials the remote's address again (one dial at a time per connection, each giving up on its
+//! handshake after the event's `handshake_micros`, quietly: no [`NodeEvent::AdmissionFailed`]).
+//! Admitted, the new connection replaces the stalled one at both ends, as any second
+//! connection to a peer does: both keep the one whose dialer has the smaller id, and the
+//! newer one from the same dialer ([`NodeStats::n_stall_redials`],
+//! [`NodeStats::n_stalls_replaced`]).
+//!
 //! # Joining from a snapshot
 //!
 //! A node started with [`NodeConfig::join_from_snapshot`] and an empty log holds its first
@@ -76,12 +90,6 @@ use crate::snapshot::{CaptureError, JoinError, Snapshot, VerifyError};
 use crate::store::OpStore;
 use crate::sync::state::{CloseReason, EphemeralError, RejectKind, SyncStats};
 use crate::time::Timestamp;
-
-/// The shortest time a dial to the remote of a stalled connection waits for its QUIC
-/// handshake (250 ms) before a fresh dial replaces it: long enough for a handshake on a
-/// loaded machine, short enough that one begun during the outage, whose first packet was
-/// lost, gives way soon after the outage ends.
-pub const MIN_REDIAL_HANDSHAKE_MILLIS: u64 = 250;
 
 /// Commands queued from handles to the core task before `send` waits.
 pub const MAX_QUEUED_COMMANDS: usize = 64;
@@ -453,7 +461,7 @@ pub struct NodeStats {
     pub n_identity_mismatches: u64,
     /// Connections closed as duplicates of another connection to the same peer.
     pub n_duplicates: u64,
-    /// Dials to the remote of a stalled connection ([`crate::sync::Event::Stalled`]), each
+    /// Dials to the remote of a stalled connection ([`crate::sync::state::Event::Stalled`]), each
     /// given the handshake time the event allows.
     pub n_stall_redials: u64,
     /// Stalled connections replaced by such a dial (the rest timed out or were refused, and
