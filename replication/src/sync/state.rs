@@ -305,12 +305,13 @@ pub enum Event {
     /// The remote has acknowledged everything this peer holds.
     UpToDate,
     /// Batches to the remote wait and it has said nothing for a few resend timeouts (at least
-    /// [`MIN_STALL_MICROS`]): the transport under the connection has stalled, as QUIC's backed-off
-    /// probes leave it after an outage, and a new connection to the same remote would resume
-    /// sync at its handshake. Said only by the end with the smaller peer id (a connection it
-    /// dials replaces the old one at both ends, [`crate::net`]'s rule for two connections to one
-    /// peer); again every base resend interval while the silence lasts, for at most
-    /// [`PING_FOR_MICROS`] of silence (the transport's idle timeout ends it by then).
+    /// [`MIN_STALL_MICROS`]): the transport under the connection has stalled, as QUIC's
+    /// backed-off probes leave it after an outage, and a new connection to the same remote
+    /// would resume sync at its handshake. Said only by the end with the smaller peer id (a
+    /// connection it dials replaces the old one at both ends, by the node's rule for two
+    /// connections to one peer); again every base resend interval while the silence lasts,
+    /// for at most [`PING_FOR_MICROS`] of silence (the transport's idle timeout ends it by
+    /// then).
     Stalled {
         /// How long a new connection's handshake may take before a fresh one does better than
         /// the transport's retries of a lost first packet: two base resend intervals, at least

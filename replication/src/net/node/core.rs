@@ -662,9 +662,10 @@ impl<P: Payload + Send + 'static> Core<P> {
 
     /// Dials the remote of the stalled connection `stalled` again, unless a dial to it is
     /// under way: the handshake may take `handshake_timeout`, after which a fresh one (at the
-    /// next stall event) does better than QUIC's backed-off retries of a lost first packet. Admitted, the new
-    /// connection replaces the stalled one at both ends ([`Core::settle_duplicate`]: the sync
-    /// core says a stall only at the end with the smaller id).
+    /// next stall event) does better than QUIC's backed-off retries of a lost first packet.
+    /// Admitted, the new connection replaces the stalled one at both ends
+    /// ([`Core::settle_duplicate`]: the sync core says a stall only at the end with the
+    /// smaller id).
     fn redial(&mut self, stalled: ConnId, handshake_timeout: Duration) {
         let Some(live) = self.conns.get(&stalled) else {
             return;
