@@ -5,8 +5,10 @@
 //! what stalled goes again once the sender learns it was lost: from the acknowledgement of its
 //! next message when the stalled bytes left room in the congestion window, else at its next
 //! probe, backed off since the first stall; and the end of a stalled connection with the
-//! smaller id dials again ([`replication::sync::state::Event::Stalled`]), as the node does, which
-//! replaces the connection once both links are open.
+//! smaller id dials again ([`Event::Stalled`]), as the node does, which replaces the
+//! connection once both links are open.
+//!
+//! [`Event::Stalled`]: replication::sync::state::Event::Stalled
 //!
 //! [`Faults::streams`]: crate::config::Faults::streams
 
@@ -15,13 +17,13 @@ use super::{Ev, Simulation, deliver};
 /// The product's QUIC idle timeout (`replication::net::tls::IDLE_TIMEOUT_MILLIS`).
 pub(crate) const STREAM_IDLE_TIMEOUT_MICROS: u64 = 10_000_000;
 /// QUIC's initial congestion window (quinn's default: 14,720 bytes clamped to ten 1,200-byte
-/// datagrams): a sender whose lost,
-/// unacknowledged bytes leave room in it sends new data at once, so when an outage ends the
-/// next message gets through without waiting for a probe; one whose window is full waits for
-/// the probe.
+/// datagrams): a sender whose lost, unacknowledged bytes leave room in it sends new data at
+/// once, so when an outage ends its next message gets through without waiting for a probe;
+/// one whose window is full waits for the probe.
 const QUIC_WINDOW_BYTES: usize = 12_000;
 /// The round trips a dial takes to be admitted: QUIC's handshake, then the admission's
-/// proof and answer (`replication::net::admission`).
+/// proof and answer (`replication::net::admission`); its packets are not lost (a
+/// simplification: the preset's loss would add a loss detection time now and then).
 const REDIAL_ROUND_TRIPS: u64 = 2;
 /// What a partition stalled on one directed link: when the first message stalled, and the
 /// messages with their connection epochs.
@@ -184,13 +186,11 @@ impl Simulation {
             }
         }
     }
-}
 
-impl Simulation {
-    /// Peer `from`'s connection to `to` stalled ([`replication::sync::state::Event::Stalled`]): it
-    /// dials `to` again, unless a dial is under way. One that finds both links open is
-    /// admitted [`REDIAL_ROUND_TRIPS`] later and replaces the connection at both ends; one
-    /// begun while a partition cuts either link loses its first packet and gives way after
+    /// Peer `from`'s connection to `to` stalled (`Event::Stalled`): it dials `to` again,
+    /// unless a dial is under way. One that finds both links open is admitted
+    /// [`REDIAL_ROUND_TRIPS`] later and replaces the connection at both ends; one begun while
+    /// a partition cuts either link loses its first packet and gives way after
     /// `handshake_micros`, to the next stall's dial.
     pub(super) fn stream_redial(&mut self, from: usize, to: usize, handshake_micros: u64) {
         let now = self.now;
