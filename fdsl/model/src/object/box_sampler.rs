@@ -315,7 +315,7 @@ const MIN_BUCKETS_POINTS: usize = 64;
 /// Most buckets along each axis.
 const MAX_BUCKETS_PER_AXIS: usize = 8;
 /// Points per bucket aimed at.
-const POINTS_PER_BUCKET: usize = 8;
+const POINTS_PER_BUCKET: usize = 2;
 
 /// A batch of points sorted into a grid of buckets over the box, so that each edit visits
 /// only the points of the buckets its bounds overlap (a point lies in one bucket, whose index
