@@ -1302,3 +1302,90 @@ fn moving_a_group_with_groups_below_it_counts_their_depth() {
     };
     assert!(scene.set_group(GroupId(300), deeper).is_err());
 }
+
+#[test]
+fn a_sampler_asked_again_at_one_point_answers_as_a_fresh_one() {
+    // The haptic loop asks the gradient twice and the painted properties at one point each
+    // tick, and the properties reuse the gradient's index lookup: every answer in any order
+    // of asking is what a fresh sampler gives, at other times too.
+    let mut object = Object::implicit("1 - x^2 - y^2 - z^2 + 0.1 * t").unwrap();
+    for k in 0..300 {
+        let a = k as f64;
+        let at = DVec3::new((a * 0.37).sin(), (a * 0.23).cos(), (a * 0.11).sin()) * 0.9;
+        let op = match k % 4 {
+            0 => EditOp::Union,
+            1 => EditOp::Subtract,
+            2 => EditOp::Paint {
+                property: Paintable::Tension,
+                value: PaintValue::Scalar(0.1 * (k % 7) as f64),
+            },
+            _ => EditOp::Paint {
+                property: Paintable::Friction,
+                value: PaintValue::Scalar(0.5),
+            },
+        };
+        // Small shape edits leave the time's effect seen; large paintings meet the points.
+        let radius = if k % 4 < 2 { 0.12 } else { 0.3 };
+        let tool = ToolShape::Sphere { radius };
+        object.apply(Edit::stamp(op, tool, Pose::at(at))).unwrap();
+    }
+    object.prepare();
+    let object = Arc::new(object);
+    let fresh = || model::object::Sampler::new(object.clone());
+    let mut sampler = fresh();
+    let bits = |(v, g): (f64, DVec3)| (v.to_bits(), g.to_array().map(f64::to_bits));
+    let properties = [Paintable::Tension, Paintable::Friction, Paintable::Density];
+    // Asks whose answer the time changes, and properties painted where they are asked: the
+    // test would see a stale answer.
+    let (mut n_timed, mut n_painted) = (0, 0);
+    for k in 0..240 {
+        let a = (k / 6) as f64;
+        // Each point is asked six times over: twice at another time, in turns of the asks.
+        let p = DVec3::new((a * 0.41).cos(), (a * 0.29).sin(), (a * 0.17).cos()) * 0.95;
+        let t = [0.0, 0.0, 0.0, 0.5, 0.5, 0.0][k % 6];
+        match (k + k / 6) % 4 {
+            0 => assert_eq!(bits(sampler.gradient(p, t)), bits(fresh().gradient(p, t))),
+            1 => {
+                let property = properties[k % 3];
+                let (x, y) = (
+                    sampler.scalar(property, p, t),
+                    fresh().scalar(property, p, t),
+                );
+                assert_eq!(
+                    x.map(f64::to_bits),
+                    y.map(f64::to_bits),
+                    "{property:?} at {p}"
+                );
+            }
+            2 => assert_eq!(sampler.value(p, t).to_bits(), fresh().value(p, t).to_bits()),
+            _ => {
+                let region = Aabb::around(p, DVec3::splat(0.01 + 0.001 * a));
+                let (x, y) = (sampler.interval(&region, t), fresh().interval(&region, t));
+                assert_eq!(
+                    (x.lo.to_bits(), x.hi.to_bits()),
+                    (y.lo.to_bits(), y.hi.to_bits())
+                );
+            }
+        }
+        // The haptic tick: the gradient twice, then the properties, at one point.
+        if k % 6 == 5 {
+            let once = bits(sampler.gradient(p, t));
+            assert_eq!(bits(sampler.gradient(p, t)), once);
+            assert_eq!(once, bits(fresh().gradient(p, t)));
+            n_timed += usize::from(once != bits(fresh().gradient(p, 0.5)));
+            for property in properties {
+                let (x, y) = (
+                    sampler.scalar(property, p, t),
+                    fresh().scalar(property, p, t),
+                );
+                assert_eq!(
+                    x.map(f64::to_bits),
+                    y.map(f64::to_bits),
+                    "{property:?} at {p}"
+                );
+                n_painted += usize::from(x.is_some());
+            }
+        }
+    }
+    assert!(n_timed > 10 && n_painted > 10, "{n_timed} {n_painted}");
+}

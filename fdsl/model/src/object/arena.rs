@@ -277,7 +277,7 @@ impl EditArena {
         // Bounds at least the tool's value bound and Lipschitz bound give a bound at least
         // `interval_max` (each operation is monotone).
         let g_max = interval_max(f64::from(h.keep_above), f64::from(h.lipschitz_up), region);
-        if keeps_interval(&c.op, f, g_max) {
+        if keeps_interval(&c.op, f, g_max, covered) {
             return fold_interval(&c.op, f, Interval::new(g_max, g_max), c.blend, covered);
         }
         let stamps = self.stamps_of(h);

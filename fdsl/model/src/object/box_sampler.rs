@@ -315,7 +315,7 @@ const MIN_BUCKETS_POINTS: usize = 64;
 /// Most buckets along each axis.
 const MAX_BUCKETS_PER_AXIS: usize = 8;
 /// Points per bucket aimed at.
-const POINTS_PER_BUCKET: usize = 8;
+const POINTS_PER_BUCKET: usize = 2;
 
 /// A batch of points sorted into a grid of buckets over the box, so that each edit visits
 /// only the points of the buckets its bounds overlap (a point lies in one bucket, whose index
@@ -325,6 +325,9 @@ const POINTS_PER_BUCKET: usize = 8;
 #[derive(Default)]
 struct Buckets {
     n_axis: usize,
+    /// The region's low corner, and buckets per unit length along each axis.
+    origin: DVec3,
+    per_unit: DVec3,
     /// Bucket of each point, then the points in bucket order.
     bucket_of: Vec<u32>,
     order: Vec<u32>,
@@ -335,10 +338,14 @@ struct Buckets {
 }
 
 impl Buckets {
-    fn cell(&self, region: &Aabb, p: DVec3) -> [usize; 3] {
-        let n = self.n_axis;
-        let q = (p - region.lo) / region.size().max(DVec3::splat(f64::MIN_POSITIVE)) * n as f64;
-        [0, 1, 2].map(|k| (q[k].max(0.0) as usize).min(n - 1))
+    /// The bucket holding `p` along each axis, clamped to the grid. Any function of `p` that
+    /// grows with each coordinate will do: an edit's points lie in the buckets between those
+    /// of its bounds' corners.
+    #[inline]
+    fn cell(&self, p: DVec3) -> [usize; 3] {
+        let q = ((p - self.origin) * self.per_unit).max(DVec3::ZERO);
+        let last = self.n_axis - 1;
+        [q.x as usize, q.y as usize, q.z as usize].map(|c| c.min(last))
     }
 
     /// Sorts `points` (and their first edits) into buckets over `region`.
@@ -346,11 +353,13 @@ impl Buckets {
         let by_count = (points.len() / POINTS_PER_BUCKET) as f64;
         self.n_axis = (by_count.cbrt() as usize).clamp(1, MAX_BUCKETS_PER_AXIS);
         let n = self.n_axis;
+        self.origin = region.lo;
+        self.per_unit = n as f64 / region.size().max(DVec3::splat(f64::MIN_POSITIVE));
         self.starts.clear();
         self.starts.resize(n * n * n + 1, 0);
         self.bucket_of.clear();
         for p in points {
-            let [x, y, z] = self.cell(region, *p);
+            let [x, y, z] = self.cell(*p);
             let b = x + n * (y + n * z);
             self.bucket_of.push(b as u32);
             self.starts[b + 1] += 1;
@@ -426,7 +435,7 @@ impl Buckets {
                 continue;
             }
             let bounds = e.bounds();
-            let (lo, hi) = (self.cell(region, bounds.lo), self.cell(region, bounds.hi));
+            let (lo, hi) = (self.cell(bounds.lo), self.cell(bounds.hi));
             for z in lo[2]..=hi[2] {
                 for y in lo[1]..=hi[1] {
                     let row = n * (y + n * z);

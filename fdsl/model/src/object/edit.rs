@@ -311,7 +311,7 @@ impl CompiledEdit {
         let (op, b) = (&self.edit.op, self.edit.blend_radius);
         let covered = self.covers(region);
         let g_max = self.tool.interval_max(region);
-        let g = match keeps_interval(op, f, g_max) {
+        let g = match keeps_interval(op, f, g_max, covered) {
             true => Interval::new(g_max, g_max),
             false => self.tool_interval(region),
         };
@@ -365,17 +365,29 @@ fn keeps_first(a: f64, g_max: f64, k: f64) -> bool {
 
 /// Whether [`fold_interval`] of an edit of `op` over `f` gives the same bits for every tool
 /// interval whose ends are at most `g_max` (then it may be given `[g_max, g_max]` instead of
-/// the tool's interval): a union whose tool stays below both ends of `f`, where each
-/// `max(f, g)` is `f`, or a subtraction whose negated tool stays above both, where each
-/// `min(f, -g)` is `f`. False for NaN ends.
+/// the tool's interval). False for NaN ends. That holds
+/// - for a union whose tool stays below both ends of `f`, where each `max(f, g)` is `f`, or a
+///   subtraction whose negated tool stays above both, where each `min(f, -g)` is `f`;
+/// - when no box of the edit holds the whole region (`covered` false, so the result spans `f`
+///   too), for a union whose tool stays below `f.hi`, or a subtraction whose negated tool
+///   stays above `f.lo`, if neither end of `f` is zero: then the union gives
+///   `[f.lo, f.hi + b / 4]` (its low end is `min(max(f.lo, g.lo), f.lo)`, which is `f.lo`
+///   whatever `g.lo`) and the subtraction `[f.lo - b / 4, f.hi]` likewise. Zero ends are left
+///   out because `max` and `min` may return either zero of a tie. This is what makes
+///   intervals over boxes much larger than the edits (a mesher's upper octree levels) cheap:
+///   most edits there are neither evaluated nor scanned.
 #[inline]
-pub(crate) fn keeps_interval(op: &EditOp, f: Interval, g_max: f64) -> bool {
-    match op {
-        EditOp::Union => g_max < f.lo && g_max < f.hi,
-        EditOp::Subtract => g_max < -f.hi && g_max < -f.lo,
-        EditOp::Intersect => false,
-        EditOp::Paint { .. } => true,
-    }
+pub(crate) fn keeps_interval(op: &EditOp, f: Interval, g_max: f64, covered: bool) -> bool {
+    // The subtraction is the union of the negated tool, mirrored.
+    let (lo, hi) = match op {
+        EditOp::Union => (f.lo, f.hi),
+        EditOp::Subtract => (-f.hi, -f.lo),
+        EditOp::Intersect => return false,
+        EditOp::Paint { .. } => return true,
+    };
+    // Nonzero and not NaN.
+    let nonzero = |x: f64| x.abs() > 0.0;
+    (g_max < lo && g_max < hi) || (!covered && g_max < hi && nonzero(lo) && nonzero(hi))
 }
 
 /// Value and gradient after an edit whose tool has the value and gradient `g`.
@@ -513,7 +525,7 @@ mod tests {
             f64::NAN,
         ];
         let ops = [EditOp::Union, EditOp::Subtract, EditOp::Intersect];
-        let (mut kept, mut n_intervals) = (0, 0);
+        let (mut kept, mut n_intervals, mut n_outside) = (0, 0, 0);
         for op in &ops {
             for b in [0.0, 0.001, 0.02] {
                 for g_max in [0.0, 0.01, 0.0100001] {
@@ -534,12 +546,14 @@ mod tests {
                                 hi: f,
                                 nan: false,
                             };
-                            if !keeps_interval(op, f, g_max) {
-                                continue;
-                            }
-                            for &glo in values.iter().filter(|&&g| g <= g_max) {
-                                for &ghi in values.iter().filter(|&&g| g <= g_max) {
-                                    for covered in [false, true] {
+                            for covered in [false, true] {
+                                if !keeps_interval(op, f, g_max, covered) {
+                                    continue;
+                                }
+                                // Kept only because the edit's boxes do not hold the region.
+                                n_outside += usize::from(!keeps_interval(op, f, g_max, true));
+                                for &glo in values.iter().filter(|&&g| g <= g_max) {
+                                    for &ghi in values.iter().filter(|&&g| g <= g_max) {
                                         n_intervals += 1;
                                         let full = fold_interval(
                                             op,
@@ -568,7 +582,10 @@ mod tests {
                 }
             }
         }
-        assert!(kept > 100 && n_intervals > 100, "{kept} {n_intervals}");
+        assert!(
+            kept > 100 && n_intervals > 100 && n_outside > 100,
+            "{kept} {n_intervals} {n_outside}"
+        );
     }
 
     #[test]

@@ -191,6 +191,10 @@ pub struct Sampler {
     force_space: (super::Domain, Transform, DMat3),
     motion: [Option<PointEval>; 2],
     hits: Vec<Hit>,
+    /// The point (its bits) whose edits `hits` holds, if it holds a point's: the haptic loop
+    /// asks the painted properties where it has just asked the gradient, and they share its
+    /// index lookup. The object cannot change under the sampler.
+    hits_at: Option<[u64; 3]>,
 }
 
 impl Sampler {
@@ -220,6 +224,7 @@ impl Sampler {
             // Room for every edit overlapping one point or box in practice, so the haptic
             // loop does not allocate; more overlap grows it once.
             hits: Vec::with_capacity(object.history().len().clamp(64, MAX_RESERVED_HITS)),
+            hits_at: None,
             object,
         }
     }
@@ -235,6 +240,13 @@ impl Sampler {
         BoxSampler::new(self.object.clone(), region, t)
     }
 
+    /// Gathers into `hits` the active edits whose support holds `p`.
+    #[inline]
+    fn gather_at_point(&mut self, p: DVec3) {
+        self.object.history().hits_at_point(p, &mut self.hits);
+        self.hits_at = Some(p.to_array().map(f64::to_bits));
+    }
+
     fn base_value(&mut self, p: DVec3, t: f64) -> f64 {
         self.geometry.as_mut().map_or(NOTHING, |g| g.value(p, t))
     }
@@ -243,8 +255,8 @@ impl Sampler {
     /// of the active edits whose support holds `p` over the geometry's value (each tool is
     /// empty space outside its stamps' grown boxes), so it visits only the edits near `p`.
     pub fn value(&mut self, p: DVec3, t: f64) -> f64 {
+        self.gather_at_point(p);
         let history = self.object.history();
-        history.hits_at_point(p, &mut self.hits);
         let start = history.last_intersect_where(|e| !e.touches(p));
         let (mut v, from) = match start {
             Some(k) => (history.entries()[k].edit.outside_value(), k + 1),
@@ -261,8 +273,8 @@ impl Sampler {
 
     /// Value and gradient at `p`.
     pub fn gradient(&mut self, p: DVec3, t: f64) -> (f64, DVec3) {
+        self.gather_at_point(p);
         let history = self.object.history();
-        history.hits_at_point(p, &mut self.hits);
         let start = history.last_intersect_where(|e| !e.touches(p));
         let (mut v, from) = match start {
             Some(k) => (
@@ -289,6 +301,7 @@ impl Sampler {
     pub fn interval(&mut self, region: &Aabb, t: f64) -> Interval {
         let history = self.object.history();
         history.hits_in_box(region, &mut self.hits);
+        self.hits_at = None;
         let start = history.last_intersect_where(|e| !e.boxes().iter().any(|b| b.overlaps(region)));
         let (mut v, from) = match start {
             Some(k) => (
@@ -363,8 +376,10 @@ impl Sampler {
 
     /// The newest painting of `property` that covers `p`.
     fn painted(&mut self, property: Paintable, p: DVec3) -> Option<PaintValue> {
+        if self.hits_at != Some(p.to_array().map(f64::to_bits)) {
+            self.gather_at_point(p);
+        }
         let history = self.object.history();
-        history.hits_at_point(p, &mut self.hits);
         let entries = history.entries();
         // The operation comes from the index: only paintings of `property` visit their edit.
         self.hits
