@@ -1334,6 +1334,19 @@ fn a_sampler_asked_again_at_one_point_answers_as_a_fresh_one() {
     let fresh = || model::object::Sampler::new(object.clone());
     let mut sampler = fresh();
     let bits = |(v, g): (f64, DVec3)| (v.to_bits(), g.to_array().map(f64::to_bits));
+    // The sampler's answer is a fresh sampler's, bit for bit; true if the point is painted.
+    let same_scalar = |sampler: &mut model::object::Sampler, property: Paintable, p, t| {
+        let (x, y) = (
+            sampler.scalar(property, p, t),
+            fresh().scalar(property, p, t),
+        );
+        assert_eq!(
+            x.map(f64::to_bits),
+            y.map(f64::to_bits),
+            "{property:?} at {p}"
+        );
+        x.is_some()
+    };
     let properties = [Paintable::Tension, Paintable::Friction, Paintable::Density];
     // Asks whose answer the time changes, and properties painted where they are asked: the
     // test would see a stale answer.
@@ -1346,16 +1359,7 @@ fn a_sampler_asked_again_at_one_point_answers_as_a_fresh_one() {
         match (k + k / 6) % 4 {
             0 => assert_eq!(bits(sampler.gradient(p, t)), bits(fresh().gradient(p, t))),
             1 => {
-                let property = properties[k % 3];
-                let (x, y) = (
-                    sampler.scalar(property, p, t),
-                    fresh().scalar(property, p, t),
-                );
-                assert_eq!(
-                    x.map(f64::to_bits),
-                    y.map(f64::to_bits),
-                    "{property:?} at {p}"
-                );
+                same_scalar(&mut sampler, properties[k % 3], p, t);
             }
             2 => assert_eq!(sampler.value(p, t).to_bits(), fresh().value(p, t).to_bits()),
             _ => {
@@ -1374,16 +1378,7 @@ fn a_sampler_asked_again_at_one_point_answers_as_a_fresh_one() {
             assert_eq!(once, bits(fresh().gradient(p, t)));
             n_timed += usize::from(once != bits(fresh().gradient(p, 0.5)));
             for property in properties {
-                let (x, y) = (
-                    sampler.scalar(property, p, t),
-                    fresh().scalar(property, p, t),
-                );
-                assert_eq!(
-                    x.map(f64::to_bits),
-                    y.map(f64::to_bits),
-                    "{property:?} at {p}"
-                );
-                n_painted += usize::from(x.is_some());
+                n_painted += usize::from(same_scalar(&mut sampler, property, p, t));
             }
         }
     }

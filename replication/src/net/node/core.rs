@@ -174,13 +174,7 @@ impl<P: Payload + Send + 'static> Core<P> {
             } => {
                 let conn = self.shared.next_conn_id();
                 self.dials.insert(conn, reply);
-                tokio::spawn(conn::dial(
-                    self.shared.clone(),
-                    self.endpoint.clone(),
-                    conn,
-                    addr,
-                    handshake_timeout,
-                ));
+                self.spawn_dial(conn, addr, handshake_timeout);
             }
             Command::Author { payload, reply } => self.author_or_hold(payload, reply),
             Command::Ephemeral {
@@ -677,13 +671,13 @@ impl<P: Payload + Send + 'static> Core<P> {
         let conn = self.shared.next_conn_id();
         self.redials.insert(conn, stalled);
         self.stats.n_stall_redials += 1;
-        tokio::spawn(conn::dial(
-            self.shared.clone(),
-            self.endpoint.clone(),
-            conn,
-            addr,
-            handshake_timeout,
-        ));
+        self.spawn_dial(conn, addr, handshake_timeout);
+    }
+
+    /// Dials `addr` as connection `conn` on a task of its own ([`conn::dial`]).
+    fn spawn_dial(&self, conn: ConnId, addr: std::net::SocketAddr, handshake_timeout: Duration) {
+        let (shared, endpoint) = (self.shared.clone(), self.endpoint.clone());
+        tokio::spawn(conn::dial(shared, endpoint, conn, addr, handshake_timeout));
     }
 
     fn enforce_rejection_limit(&mut self) {
