@@ -554,9 +554,8 @@ impl Simulation {
                     self.stream_unblocked(&links);
                 }
             }
-            Ev::IdleTimeout { from, to, epoch } => {
-                self.trace.u64(20);
-                self.stream_idle_timeout(from, to, epoch);
+            ev @ (Ev::IdleTimeout { .. } | Ev::StreamProbe { .. } | Ev::Replace { .. }) => {
+                self.handle_stream(ev);
             }
             Ev::Offline { peer } => {
                 self.trace.u64(6);
@@ -594,6 +593,21 @@ impl Simulation {
                 self.expel_hostile(connection);
             }
             Ev::Redial { peer } => self.redial(peer),
+            Ev::Probe => self.probe(),
+            Ev::Sample => {
+                self.sample();
+                self.push(self.now + self.sample_interval_micros, Ev::Sample);
+            }
+        }
+    }
+
+    /// The events of stream connections ([`Faults::streams`]).
+    fn handle_stream(&mut self, ev: Ev) {
+        match ev {
+            Ev::IdleTimeout { from, to, epoch } => {
+                self.trace.u64(20);
+                self.stream_idle_timeout(from, to, epoch);
+            }
             Ev::StreamProbe { from, to } => {
                 self.trace.u64(23);
                 // A probe of what waits now, not of what an earlier partition left.
@@ -609,11 +623,7 @@ impl Simulation {
                 self.trace.u64(21);
                 self.stream_replace(a, b, epoch);
             }
-            Ev::Probe => self.probe(),
-            Ev::Sample => {
-                self.sample();
-                self.push(self.now + self.sample_interval_micros, Ev::Sample);
-            }
+            _ => unreachable!("not a stream event: {ev:?}"),
         }
     }
 

@@ -92,7 +92,10 @@ fn the_founder_expels_the_member_and_forged_expels_count_for_nothing() {
     // peers agree on who is expelled (never one of them), the hoarder's ops its expel did not
     // see are void everywhere, verdicts match the reference's membership rules, and no honest
     // op is erased.
-    let reports = runs("byzantine", FaultSet::default(), 3..6);
+    // Whether the hoarder authors an op its expel does not see depends on the run's timing:
+    // about one seed in two, so six seeds (each seed's figures differ between versions of
+    // the sync's timers; the test asks for the case, not a seed's).
+    let reports = runs("byzantine", FaultSet::default(), 0..6);
     let (mut expels, mut closes, mut void) = (0, 0, 0);
     let mut forged = 0;
     for report in &reports {

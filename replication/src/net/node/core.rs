@@ -245,18 +245,7 @@ impl<P: Payload + Send + 'static> Core<P> {
                 addr,
                 error,
                 kind,
-            } => {
-                // A redial that found its remote still cut off is no news: the stalled
-                // connection goes on, and its next stall dials again.
-                if conn.and_then(|c| self.redials.remove(&c)).is_some() {
-                    return;
-                }
-                *self.stats.failed_admissions.entry(kind).or_insert(0) += 1;
-                if let Some(reply) = conn.and_then(|c| self.dials.remove(&c)) {
-                    let _ = reply.send(Err(DialError::Admission(error.clone())));
-                }
-                self.emit(NodeEvent::AdmissionFailed { addr, error });
-            }
+            } => self.on_admission_failed(conn, addr, error, kind),
             Input::Superseded { conn, addr } => {
                 self.stats.n_duplicates += 1;
                 if let Some(c) = conn {
@@ -298,6 +287,27 @@ impl<P: Payload + Send + 'static> Core<P> {
                 );
             }
         }
+    }
+
+    /// A dial or an accept failed before admission: counted, answered and told, unless it
+    /// was a redial of a stalled connection.
+    fn on_admission_failed(
+        &mut self,
+        conn: Option<ConnId>,
+        addr: std::net::SocketAddr,
+        error: AdmissionError,
+        kind: RefusalKind,
+    ) {
+        // A redial that found its remote still cut off is no news: the stalled connection
+        // goes on, and its next stall dials again.
+        if conn.and_then(|c| self.redials.remove(&c)).is_some() {
+            return;
+        }
+        *self.stats.failed_admissions.entry(kind).or_insert(0) += 1;
+        if let Some(reply) = conn.and_then(|c| self.dials.remove(&c)) {
+            let _ = reply.send(Err(DialError::Admission(error.clone())));
+        }
+        self.emit(NodeEvent::AdmissionFailed { addr, error });
     }
 
     fn refuse(
