@@ -5,9 +5,10 @@
 //! their ratio, and the bytes on the wire.
 //!
 //! The recorded figure (N = 10 000) comes from a release build:
-//! `cargo test --release -p replication --test net_catchup -- --nocapture`.
-//! A debug build runs the same path with N = 32, because unoptimised ed25519 verification
-//! manages only about 40 ops per second.
+//! `cargo test --release -p replication --test net_catchup -- --nocapture`; set
+//! `NET_CATCHUP_OPS` for another N (at most [`MAX_MEASURED_OPS`]). A debug build runs the
+//! same path with N = 32, because unoptimised ed25519 verification manages only about 40 ops
+//! per second.
 
 #![allow(clippy::unwrap_used, reason = "test helpers")]
 
@@ -138,9 +139,26 @@ async fn quic_catch_up(mut a: TNode, n_ops: usize) -> QuicFigures {
     }
 }
 
+/// The most ops `NET_CATCHUP_OPS` may ask for.
+const MAX_MEASURED_OPS: usize = 1_000_000;
+
+/// How many ops a release build measures: `NET_CATCHUP_OPS`, else 10 000.
+fn measured_ops() -> usize {
+    let asked = std::env::var("NET_CATCHUP_OPS").ok();
+    asked
+        .map_or(10_000, |n| {
+            n.parse::<usize>().expect("NET_CATCHUP_OPS is a count")
+        })
+        .clamp(1, MAX_MEASURED_OPS)
+}
+
 #[test]
 fn a_second_node_catches_up_over_loopback_quic() {
-    let n_ops = if cfg!(debug_assertions) { 32 } else { 10_000 };
+    let n_ops = if cfg!(debug_assertions) {
+        32
+    } else {
+        measured_ops()
+    };
     let log = authored_log(n_ops);
     let op_bytes: u64 = log.entries().map(|e| e.op.encoded().len() as u64).sum();
     let (baseline, baseline_bytes) = in_memory_catch_up(log.clone());
