@@ -122,6 +122,10 @@ struct Summary {
     n_failed: u64,
     round_trips: Vec<f64>,
     catch_up_round_trips: Vec<f64>,
+    /// Convergence over issue 53's goal (1.5 bandwidth bounds plus 3 round trips), per run.
+    over_goal: Vec<f64>,
+    /// The bandwidth bound in round trips, per run.
+    bound_round_trips: Vec<f64>,
     messages_per_op: Vec<f64>,
     bytes_per_op: Vec<f64>,
     peak_bytes_max: i64,
@@ -145,6 +149,12 @@ impl Summary {
         self.round_trips.push(r.convergence_round_trips());
         self.catch_up_round_trips
             .push(r.mean_catch_up_round_trips());
+        if let (Some(bound), Some(ratio)) = (r.bandwidth_bound_micros(), r.convergence_over_goal())
+        {
+            self.over_goal.push(ratio);
+            self.bound_round_trips
+                .push(bound as f64 / r.mean_rtt_micros.max(1) as f64);
+        }
         self.messages_per_op.push(r.messages_per_op());
         self.bytes_per_op.push(r.bytes_per_op());
         if let Some(m) = r.memory {
@@ -191,6 +201,16 @@ impl Summary {
             q(rt, 1.0),
             mean(&self.catch_up_round_trips)
         );
+        if !self.over_goal.is_empty() {
+            println!(
+                "  bandwidth bound after healing (round trips): mean {:.2}, max {:.2}; convergence \
+                 over 1.5 bounds plus 3 round trips: mean {:.2}, max {:.2}",
+                mean(&self.bound_round_trips),
+                q(&self.bound_round_trips, 1.0),
+                mean(&self.over_goal),
+                q(&self.over_goal, 1.0)
+            );
+        }
         println!(
             "  messages/op: mean {:.1}, max {:.1}; bytes/op: mean {:.0}, max {:.0}",
             mean(&self.messages_per_op),

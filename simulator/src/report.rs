@@ -117,6 +117,8 @@ pub struct Report {
 pub struct CatchUp {
     /// Ops in its log at healing.
     pub n_held_at_heal: usize,
+    /// Encoded bytes of the ops some honest peer held at healing and it lacked.
+    pub n_bytes_lacked: u64,
     /// Ops delivered to it after healing.
     pub n_delivered: usize,
     /// Insertions that delivered them; the fields below mean something only when some did.
@@ -254,6 +256,22 @@ impl Report {
         total / self.catch_up.len().max(1) as f64 / self.mean_rtt_micros.max(1) as f64
     }
 
+    /// The bandwidth bound after healing, as issue 53 states it: the most op bytes an honest
+    /// peer lacked, over one link's rate (what must cross the link it syncs them over); None
+    /// on links without a rate.
+    pub fn bandwidth_bound_micros(&self) -> Option<u64> {
+        let rate = self.config.effective_faults().bandwidth_bytes_per_sec;
+        let most = self.catch_up.iter().map(|c| c.n_bytes_lacked).max()?;
+        (rate > 0).then(|| most.saturating_mul(1_000_000) / rate)
+    }
+
+    /// Convergence after healing over issue 53's goal for it: 1.5 times the bandwidth bound
+    /// plus 3 round trips (at most 1 meets it).
+    pub fn convergence_over_goal(&self) -> Option<f64> {
+        let goal = 1.5 * self.bandwidth_bound_micros()? as f64 + 3.0 * self.mean_rtt_micros as f64;
+        Some(self.convergence_micros as f64 / goal.max(1.0))
+    }
+
     fn fmt_traffic(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let s = &self.stats;
         writeln!(
@@ -265,6 +283,22 @@ impl Report {
             self.mean_rtt_micros as f64 / 1e3,
             self.mean_catch_up_round_trips()
         )?;
+        if let (Some(bound), Some(ratio)) =
+            (self.bandwidth_bound_micros(), self.convergence_over_goal())
+        {
+            let most = self
+                .catch_up
+                .iter()
+                .map(|c| c.n_bytes_lacked)
+                .max()
+                .unwrap_or(0);
+            writeln!(
+                f,
+                "  bandwidth bound after healing: {:.1} virtual ms ({most} op bytes lacked by one \
+                 peer at most); convergence is {ratio:.2} of 1.5 bounds plus 3 round trips",
+                bound as f64 / 1e3,
+            )?;
+        }
         writeln!(
             f,
             "  sent {} messages ({:.1}/op), {} bytes ({:.0} bytes/op); delivered {}, lost {}, \

@@ -740,11 +740,22 @@ impl Simulation {
         self.blocked.clear();
         let stalled: Vec<(usize, usize)> = self.stalled.keys().copied().collect();
         self.stream_unblocked(&stalled);
+        // Every op some honest peer holds, with its encoded size: what each must end with.
+        let mut held = BTreeMap::new();
+        for h in &self.honest {
+            for e in h.peer.log().entries() {
+                held.entry(e.op.id()).or_insert(e.op.encoded().len() as u64);
+            }
+        }
+        let total: u64 = held.values().sum();
         for h in &mut self.honest {
             h.offline_depth = 0;
             h.crash_armed = None;
+            let log = h.peer.log();
+            let own: u64 = (log.entries()).filter_map(|e| held.get(&e.op.id())).sum();
             h.catch_up = CatchUp {
-                n_held_at_heal: h.peer.log().len(),
+                n_held_at_heal: log.len(),
+                n_bytes_lacked: total - own,
                 ..CatchUp::default()
             };
         }

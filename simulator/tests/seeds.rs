@@ -167,6 +167,20 @@ fn the_quic_preset_turns_losses_into_delays_and_partitions_into_stalls() {
     // connection replaces it once the partition is over.
     assert!(sum(|r| r.stats.n_stalls_replaced) > 0, "no stall redialed");
     assert!(sum(|r| r.stats.n_stall_redials) >= sum(|r| r.stats.n_stalls_replaced));
+    // Partitions left peers lacking ops at healing: the bandwidth bound counts them.
+    assert!(
+        (reports.iter()).all(|r| r.convergence_over_goal().is_some_and(f64::is_finite)),
+        "chaos's links have a rate"
+    );
+    assert!(
+        sum(|r| r
+            .catch_up
+            .iter()
+            .map(|c| c.n_bytes_lacked)
+            .max()
+            .unwrap_or(0))
+            > 0
+    );
 }
 
 #[test]
