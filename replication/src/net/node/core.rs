@@ -334,11 +334,9 @@ impl<P: Payload + Send + 'static> Core<P> {
         start: oneshot::Sender<()>,
     ) {
         let reply = self.dials.remove(&conn);
-        if let Some(stalled) = self.redials.remove(&conn)
-            && self.conns.get(&stalled).is_some_and(|l| l.peer == peer)
-        {
-            self.stats.n_stalls_replaced += 1;
-        }
+        // A redial of a connection still open to this peer, which the new one should replace.
+        let stalled = (self.redials.remove(&conn))
+            .filter(|s| self.conns.get(s).is_some_and(|l| l.peer == peer));
         if let Some((kind, error)) = self.refusal(peer) {
             return self.refuse(&connection, reply, kind, error);
         }
@@ -348,6 +346,9 @@ impl<P: Payload + Send + 'static> Core<P> {
                 let _ = reply.send(Ok(old));
             }
             return;
+        }
+        if stalled.is_some_and(|s| !self.conns.contains_key(&s)) {
+            self.stats.n_stalls_replaced += 1;
         }
         let holding = self.join.holds_connections();
         if !holding
