@@ -203,16 +203,8 @@ impl Simulation {
             !self.blocked.contains_key(&(from, to)) && !self.blocked.contains_key(&(to, from));
         let takes = if open && self.online(from) && self.online(to) {
             let rtt = self.latency_micros[from][to] + self.latency_micros[to][from];
-            let at = now + REDIAL_ROUND_TRIPS * rtt;
-            let epoch = pair.epoch;
-            self.push(
-                at,
-                Ev::Replace {
-                    a: from,
-                    b: to,
-                    epoch,
-                },
-            );
+            let (a, b, epoch) = (from, to, pair.epoch);
+            self.push(now + REDIAL_ROUND_TRIPS * rtt, Ev::Replace { a, b, epoch });
             REDIAL_ROUND_TRIPS * rtt
         } else {
             handshake_micros
