@@ -1152,11 +1152,15 @@ impl Simulation {
                 self.trace.u64(14);
                 self.stats.n_forks_learnt += 1;
             }
-            // Over streams the peer dials again, as the node does; datagrams have no
-            // connection to replace.
-            Event::Stalled { handshake_micros } => {
+            // Over streams the peer dials again, as the node does, from the second event of a
+            // silence (nothing reaches a peer through a partition, which the node checks);
+            // datagrams have no connection to replace.
+            Event::Stalled {
+                handshake_micros,
+                again,
+            } => {
                 let other = conn.0 as usize;
-                if self.faults.streams && other < self.n_nodes() {
+                if self.faults.streams && again && other < self.n_nodes() {
                     self.trace.u64(22);
                     self.stream_redial(idx, other, handshake_micros);
                 }

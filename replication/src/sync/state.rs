@@ -317,6 +317,10 @@ pub enum Event {
         /// the transport's retries of a lost first packet: two base resend intervals, at least
         /// [`MIN_REDIAL_HANDSHAKE_MICROS`].
         handshake_micros: u64,
+        /// True from the second of a silence on: the first is for the transport to note what
+        /// it has received, so that it dials only if nothing came since (a remote that is
+        /// busy, not cut off, still acknowledges packets below the sync).
+        again: bool,
     },
     /// The scene check asks something of the scene's owner ([`crate::sync::scene`]);
     /// [`Peer`](crate::peer::Peer) hands these out on their own queue
@@ -1614,10 +1618,15 @@ impl<P: Payload> SyncState<P> {
             self.control.push_back(Message::Ping);
         }
         if self.stall_due().is_some_and(|d| d <= now) {
+            let again = self.stalled_at.is_some_and(|at| at > self.heard_at);
             self.stalled_at = Some(now);
             let base = self.base_resend_micros();
             let handshake_micros = (2 * base).max(MIN_REDIAL_HANDSHAKE_MICROS);
-            self.events.push_back(Event::Stalled { handshake_micros });
+            let event = Event::Stalled {
+                handshake_micros,
+                again,
+            };
+            self.events.push_back(event);
         }
         if self.relearn_due().is_some_and(|d| d <= now) {
             self.relearn(now, log);

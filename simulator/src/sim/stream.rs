@@ -187,7 +187,8 @@ impl Simulation {
         }
     }
 
-    /// Peer `from`'s connection to `to` stalled (`Event::Stalled`): it dials `to` again,
+    /// Peer `from`'s connection to `to` stalled a second time in a silence (`Event::Stalled`,
+    /// and nothing reaches it through a partition, as the node checks): it dials `to` again,
     /// unless a dial is under way. One that finds both links open is admitted
     /// [`REDIAL_ROUND_TRIPS`] later and replaces the connection at both ends; one begun while
     /// a partition cuts either link loses its first packet and gives way after

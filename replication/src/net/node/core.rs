@@ -38,6 +38,8 @@ pub(super) struct Live {
     /// When it was admitted (its key, unknown to a log that binds authors, is admitted
     /// [`super::ADMISSION_DELAY_MILLIS`] later).
     since: Timestamp,
+    /// The UDP datagrams it had received at its last stall event ([`Core::on_stalled`]).
+    rx_at_stall: Option<u64>,
 }
 
 pub(super) struct Core<P> {
@@ -368,6 +370,7 @@ impl<P: Payload + Send + 'static> Core<P> {
                 start: Some(start),
                 frames,
                 since: wall_clock_now(),
+                rx_at_stall: None,
             },
         );
         self.stats.n_admitted += 1;
@@ -645,8 +648,11 @@ impl<P: Payload + Send + 'static> Core<P> {
                     value,
                 },
                 Event::UpToDate => NodeEvent::UpToDate { conn, peer },
-                Event::Stalled { handshake_micros } => {
-                    self.redial(conn, Duration::from_micros(handshake_micros));
+                Event::Stalled {
+                    handshake_micros,
+                    again,
+                } => {
+                    self.on_stalled(conn, Duration::from_micros(handshake_micros), again);
                     continue;
                 }
                 // On the observer's own queue (`Peer::poll_scene_event`), never here.
@@ -662,6 +668,21 @@ impl<P: Payload + Send + 'static> Core<P> {
                 }
             };
             self.emit(event);
+        }
+    }
+
+    /// The sync core says `conn` stalled: dials its remote again if this is not the first
+    /// stall event of the silence and the connection has received no UDP datagram since the
+    /// last one. A remote that is busy (a join, a long fold) but reachable still acknowledges
+    /// packets; only one cut off sends nothing at all.
+    fn on_stalled(&mut self, conn: ConnId, handshake_timeout: Duration, again: bool) {
+        let Some(live) = self.conns.get_mut(&conn) else {
+            return;
+        };
+        let received = live.connection.stats().udp_rx.datagrams;
+        let noted = live.rx_at_stall.replace(received);
+        if again && noted == Some(received) {
+            self.redial(conn, handshake_timeout);
         }
     }
 

@@ -1072,14 +1072,19 @@ fn a_silent_remote_is_pinged_and_the_answer_brings_the_batches_back() {
 /// the outage's length again, unless what waited fitted its congestion window. A connection
 /// whose remote stays silent while batches wait says so ([`Event::Stalled`], and the node
 /// dials again), only at the end with the smaller id, every base resend interval from a few
-/// of them of silence, no longer than pings go, and not once the remote is heard again.
+/// of them of silence, no longer than pings go, and not once the remote is heard again. The
+/// first of a silence says it is the first: the node dials only if the transport received
+/// nothing from then on (a busy remote still acknowledges packets).
 #[test]
 fn a_silent_remote_stalls_the_connection_at_the_smaller_id_only() {
     let [mut a, mut b] = connected();
-    let stalls = |n: &Node| -> Vec<u64> {
+    let stalls = |n: &Node| -> Vec<(u64, bool)> {
         (n.events.iter())
             .filter_map(|e| match e {
-                Event::Stalled { handshake_micros } => Some(*handshake_micros),
+                Event::Stalled {
+                    handshake_micros,
+                    again,
+                } => Some((*handshake_micros, *again)),
                 _ => None,
             })
             .collect()
@@ -1104,13 +1109,21 @@ fn a_silent_remote_stalls_the_connection_at_the_smaller_id_only() {
         said.len()
     );
     let handshake = (2 * base).max(MIN_REDIAL_HANDSHAKE_MICROS);
-    assert!(said.iter().all(|h| *h == handshake), "{said:?}");
-    // Heard again: the silence is over, and so are the stalls.
+    assert!(said.iter().all(|(h, _)| *h == handshake), "{said:?}");
+    // The first of the silence only asks the transport to take note.
+    let again: Vec<bool> = said.iter().map(|(_, again)| *again).collect();
+    assert!(!again[0]);
+    assert!(again[1..].iter().all(|a| *a), "{again:?}");
+    // Heard again: the silence is over, and so are the stalls; the next silence's first
+    // takes note again.
     let now = 11_300_000;
     lower.events.clear();
     feed(lower, now, &Message::Ping.encode());
     drain_checked(lower, now, after - MILLI);
     assert_eq!(stalls(lower), vec![]);
+    drain_checked(lower, now + after, base + MILLI);
+    let next: Vec<bool> = stalls(lower).iter().map(|(_, again)| *again).collect();
+    assert_eq!(next, vec![false, true]);
 }
 
 /// Pings cannot make a remote send more than a trickle: one full have a second.
