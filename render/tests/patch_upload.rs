@@ -8,6 +8,9 @@
 //! and `mesh_update` after each edit. Each renderer is a `Headless` of its own (Vulkan on
 //! llvmpipe in CI); they draw the same vertex and index data, so the pictures must be equal to
 //! the byte. With no adapter at all the test prints a note and passes, as the goldens do.
+//!
+//! A prepare also says whether it changed anything a draw shows (`Renderer::changed`), so that
+//! a window may show its last picture again: each thing drawn, changed alone, says so once.
 #![allow(
     clippy::unwrap_used,
     reason = "the session and the device helpers unwrap fixed, known-good inputs"
@@ -334,4 +337,73 @@ fn a_patch_from_another_mesh_or_with_wrong_lengths_is_refused_or_uploaded_whole(
     draw(&mut headless, &scene);
     let bytes = headless.renderer_mut().mesh_bytes_uploaded();
     assert!(bytes > 0 && 4 * bytes < whole_bytes(&last), "{bytes} bytes");
+}
+
+/// One change to a scene.
+type SceneEdit = Box<dyn Fn(&mut Scene)>;
+
+#[test]
+fn a_prepare_says_whether_it_changed_what_a_draw_shows() {
+    let Some(mut h) = headless() else {
+        return;
+    };
+    let mut object = ball();
+    object.prepare();
+    let mut mesher = OctreeMesher::new(&settings()).unwrap();
+    mesher
+        .remesh(&mut ObjectField::new(&object, 0.0), settings().bounds)
+        .unwrap();
+    let mut mesh = Mesh::default();
+    mesher.mesh_update(&mut mesh).unwrap();
+    let mesh = Arc::new(mesh);
+    let mut scene = Scene::default();
+    scene.add_object(Arc::clone(&mesh), Mat4::IDENTITY, Material::default());
+    let mut changed = |scene: &Scene| {
+        draw(&mut h, scene);
+        h.renderer_mut().changed()
+    };
+    assert!(changed(&scene), "the first prepare draws");
+    assert!(!changed(&scene), "the same scene again");
+    assert!(!changed(&scene.clone()), "a copy shares the mesh");
+
+    // Each thing a draw shows, changed alone, then asked again unchanged.
+    let edits: Vec<(&str, SceneEdit)> = vec![
+        ("the camera", Box::new(|s| s.camera.yaw += 0.1)),
+        ("the light", Box::new(|s| s.light_towards.x += 0.1)),
+        ("the background", Box::new(|s| s.background[0] += 0.1)),
+        (
+            "the object's place",
+            Box::new(|s| {
+                s.objects[0].world_from_object *= Mat4::from_scale(glam::Vec3::splat(0.9))
+            }),
+        ),
+        (
+            "the object's material",
+            Box::new(|s| s.objects[0].material.opacity = 0.5),
+        ),
+        (
+            "a line",
+            Box::new(|s| {
+                s.lines.push(render::scene::Line {
+                    from: glam::Vec3::ZERO,
+                    to: glam::Vec3::X,
+                    colour: [1.0; 4],
+                });
+            }),
+        ),
+        (
+            "the mesh, the same triangles in a new allocation",
+            Box::new(|s| s.objects[0].mesh = Arc::new((*s.objects[0].mesh).clone())),
+        ),
+        (
+            "one object more",
+            Box::new(|s| s.objects.push(s.objects[0].clone())),
+        ),
+        ("one object less", Box::new(|s| drop(s.objects.pop()))),
+    ];
+    for (what, edit) in &edits {
+        edit(&mut scene);
+        assert!(changed(&scene), "{what} changed");
+        assert!(!changed(&scene), "{what} unchanged the next time");
+    }
 }

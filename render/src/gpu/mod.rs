@@ -152,6 +152,8 @@ struct GpuObject {
     triangle_capacity: usize,
     n_indices: u32,
     uniform: wgpu::Buffer,
+    /// What `uniform` holds, once written.
+    uniform_value: Option<ObjectUniform>,
     bind_group: wgpu::BindGroup,
 }
 
@@ -201,6 +203,12 @@ pub struct Renderer {
     draw_order: Vec<usize>,
     n_opaque: usize,
     line_buffer: Option<(wgpu::Buffer, u32)>,
+    /// The vertices in `line_buffer`.
+    line_vertices: Vec<LineVertex>,
+    /// The globals and the background the last prepare wrote.
+    last_frame: Option<(Globals, [f32; 4])>,
+    /// Whether the last prepare changed anything its draw shows.
+    changed: bool,
     /// Per object index, the patches handed in since the last prepare.
     pending: BTreeMap<usize, PendingPatch>,
     /// Mesh bytes (vertices and indices) the last prepare wrote.
@@ -420,6 +428,9 @@ impl Renderer {
             draw_order: Vec::new(),
             n_opaque: 0,
             line_buffer: None,
+            line_vertices: Vec::new(),
+            last_frame: None,
+            changed: true,
             pending: BTreeMap::new(),
             mesh_bytes_uploaded: 0,
         }
@@ -487,11 +498,20 @@ impl Renderer {
         self.mesh_bytes_uploaded
     }
 
+    /// Whether the last [`Renderer::prepare`] changed anything its draw shows (the camera,
+    /// the light, the background, an object's mesh, place or material, the lines): a host
+    /// that keeps the last picture it drew may show it again instead of drawing (the window
+    /// does, so that frames for its panels alone cost a software rasteriser nothing).
+    pub fn changed(&self) -> bool {
+        self.changed
+    }
+
     /// Uploads what changed in `scene` for a target of `size_px` pixels and sorts the draws.
     ///
     /// Meshes are uploaded again only when an object's `Arc<Mesh>` is a different allocation,
     /// and then only the ranges of a patch handed to [`Renderer::patch_object`] where one
-    /// applies.
+    /// applies; uniforms and lines are written only when they differ from what the buffers
+    /// hold.
     pub fn prepare(
         &mut self,
         device: &wgpu::Device,
@@ -505,6 +525,8 @@ impl Renderer {
         if scene.lines.len() > MAX_LINES {
             return Err(PrepareError::TooManyLines(scene.lines.len()));
         }
+        // A prepare that fails leaves nothing to show again.
+        self.changed = true;
         self.validate_new_meshes(scene)?;
         let aspect = size_px[0].max(1) as f32 / size_px[1].max(1) as f32;
         let eye = scene.camera.eye();
@@ -513,7 +535,31 @@ impl Renderer {
             eye: eye.extend(1.0).to_array(),
             light_towards: scene.light_towards.extend(0.0).to_array(),
         };
-        queue.write_buffer(&self.globals, 0, bytemuck::bytes_of(&g));
+        let frame = (g, scene.background);
+        let mut changed = self.objects.len() != scene.objects.len()
+            || self.last_frame.is_none_or(|(last, background)| {
+                bytemuck::bytes_of(&last) != bytemuck::bytes_of(&g) || background != frame.1
+            });
+        if changed {
+            queue.write_buffer(&self.globals, 0, bytemuck::bytes_of(&g));
+            self.last_frame = Some(frame);
+        }
+        changed |= self.prepare_objects(device, queue, scene);
+        self.sort_draws(scene, eye);
+        changed |= self.upload_lines(device, scene);
+        self.changed = changed;
+        Ok(())
+    }
+
+    /// Uploads `scene`'s objects' meshes (or their patches) and uniforms where they differ
+    /// from what the buffers hold; returns whether any did.
+    fn prepare_objects(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        scene: &Scene,
+    ) -> bool {
+        let mut changed = false;
         self.objects.truncate(scene.objects.len());
         self.mesh_bytes_uploaded = 0;
         let mut pending = std::mem::take(&mut self.pending);
@@ -522,6 +568,7 @@ impl Renderer {
                 .objects
                 .get(i)
                 .is_none_or(|g| !Arc::ptr_eq(&g.mesh, &o.mesh));
+            changed |= fresh;
             if fresh {
                 let patch = pending.remove(&i).filter(|p| Arc::ptr_eq(&p.mesh, &o.mesh));
                 let patched = patch.as_ref().is_some_and(|p| {
@@ -540,11 +587,17 @@ impl Renderer {
                 }
             }
             let u = ObjectUniform::of(o);
-            queue.write_buffer(&self.objects[i].uniform, 0, bytemuck::bytes_of(&u));
+            let gpu = &mut self.objects[i];
+            if gpu
+                .uniform_value
+                .is_none_or(|w| bytemuck::bytes_of(&w) != bytemuck::bytes_of(&u))
+            {
+                queue.write_buffer(&gpu.uniform, 0, bytemuck::bytes_of(&u));
+                gpu.uniform_value = Some(u);
+                changed = true;
+            }
         }
-        self.sort_draws(scene, eye);
-        self.upload_lines(device, scene);
-        Ok(())
+        changed
     }
 
     /// Validates the meshes of `scene` not uploaded yet. One already uploaded was validated
@@ -630,6 +683,7 @@ impl Renderer {
             triangle_capacity,
             n_indices: mesh.indices.len() as u32,
             uniform,
+            uniform_value: None,
             bind_group,
         }
     }
@@ -653,7 +707,9 @@ impl Renderer {
         self.draw_order.extend(transparent);
     }
 
-    fn upload_lines(&mut self, device: &wgpu::Device, scene: &Scene) {
+    /// Uploads `scene`'s lines unless the buffer holds them already; returns whether it
+    /// did not.
+    fn upload_lines(&mut self, device: &wgpu::Device, scene: &Scene) -> bool {
         let vertices: Vec<LineVertex> = scene
             .lines
             .iter()
@@ -670,6 +726,13 @@ impl Renderer {
                 ]
             })
             .collect();
+        let (new, held): (&[u8], &[u8]) = (
+            bytemuck::cast_slice(&vertices),
+            bytemuck::cast_slice(&self.line_vertices),
+        );
+        if new == held {
+            return false;
+        }
         self.line_buffer = (!vertices.is_empty()).then(|| {
             let buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("render lines"),
@@ -678,6 +741,8 @@ impl Renderer {
             });
             (buf, vertices.len() as u32)
         });
+        self.line_vertices = vertices;
+        true
     }
 
     /// Records into `encoder` one pass that clears `colour` to `background` and `depth` to

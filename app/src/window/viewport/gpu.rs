@@ -6,6 +6,11 @@
 //! `prepare` renders the scene into the callback's own sRGB texture (with its own depth
 //! buffer), and `paint` copies that texture into egui's pass, reading the encoded bytes as
 //! they are. The picture in the window then matches `sculpt render`'s pictures.
+//!
+//! The picture texture outlives the frame: a frame whose scene changes nothing the renderer
+//! draws (`Renderer::changed`), as when only the panels or the status line change, copies the
+//! last picture again instead of drawing the scene. On a software rasteriser drawing a large
+//! mesh takes tens of milliseconds, and such frames would otherwise hold up the next one.
 
 use std::sync::{Arc, Mutex};
 
@@ -95,8 +100,11 @@ impl ViewportResources {
         }
     }
 
-    fn ensure_target(&mut self, device: &wgpu::Device, size_px: [u32; 2]) {
-        if self.target.as_ref().is_none_or(|t| t.size_px != size_px) {
+    /// Makes the picture texture `size_px` big; returns whether it made a new one (which
+    /// holds no picture yet).
+    fn ensure_target(&mut self, device: &wgpu::Device, size_px: [u32; 2]) -> bool {
+        let fresh = self.target.as_ref().is_none_or(|t| t.size_px != size_px);
+        if fresh {
             let size = wgpu::Extent3d {
                 width: size_px[0],
                 height: size_px[1],
@@ -151,6 +159,7 @@ impl ViewportResources {
                 bind_group,
             });
         }
+        fresh
     }
 }
 
@@ -228,7 +237,7 @@ fn blit_pipeline(
 pub struct ViewportReport {
     /// Why the last frame could not be prepared.
     pub error: Option<String>,
-    /// Milliseconds per frame, the latest [`MAX_PREPARE_SAMPLES`].
+    /// Milliseconds per frame that drew the scene, the latest [`MAX_PREPARE_SAMPLES`].
     pub prepare_ms: Samples,
     /// Mesh bytes the last prepare that uploaded any wrote (`Renderer::mesh_bytes_uploaded`).
     pub last_upload_bytes: u64,
@@ -236,6 +245,10 @@ pub struct ViewportReport {
     pub min_upload_bytes: Option<u64>,
     /// Patches the renderer refused (it uploads those meshes whole).
     pub n_patches_refused: u64,
+    /// Frames that drew the scene.
+    pub n_drawn: u64,
+    /// Frames that showed the last picture again, the scene unchanged.
+    pub n_reused: u64,
 }
 
 /// Frames whose prepare times are kept.
@@ -249,6 +262,8 @@ impl Default for ViewportReport {
             last_upload_bytes: 0,
             min_upload_bytes: None,
             n_patches_refused: 0,
+            n_drawn: 0,
+            n_reused: 0,
         }
     }
 }
@@ -305,10 +320,18 @@ impl CallbackTrait for ViewportCallback {
             res.target = None;
             return Vec::new();
         }
-        res.ensure_target(device, self.size_px);
+        let fresh = res.ensure_target(device, self.size_px);
         let Some(target) = &res.target else {
             return Vec::new();
         };
+        let drawn = fresh || res.renderer.changed();
+        if let Ok(mut report) = self.report.lock() {
+            report.n_drawn += u64::from(drawn);
+            report.n_reused += u64::from(!drawn);
+        }
+        if !drawn {
+            return Vec::new();
+        }
         res.renderer.draw_into(
             encoder,
             "sculpt viewport",
