@@ -86,6 +86,11 @@ impl FrameStats {
         self.n_frames += 1;
     }
 
+    /// When the current frame started.
+    pub fn frame_start(&self) -> Option<Instant> {
+        self.last_frame_start
+    }
+
     /// The frame that started at `start` is built at `end`.
     fn built(&mut self, start: Instant, end: Instant) {
         self.ui_ms
@@ -300,8 +305,9 @@ impl SculptApp {
         if animating {
             ctx.request_repaint_after(Duration::from_millis(ANIMATION_FRAME_MILLIS));
         }
-        // An edit made this frame is sent to the mesher at the start of the next one.
-        if self.objects.dirty {
+        // An edit made this frame is sent to the mesher at the start of the next one; the
+        // frame after one that draws an edit's mesh times it.
+        if self.objects.dirty || self.objects.draws_an_edit() {
             ctx.request_repaint();
         }
         if self.objects.n_meshing() > 0 {
@@ -320,8 +326,9 @@ impl eframe::App for SculptApp {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         let now = clock::now();
         self.stats.started(now.instant);
+        self.objects.presented(now.instant);
         self.objects.receive(now.instant);
-        self.receive_reply(now);
+        self.receive_reply();
         self.sync_objects(now);
         self.rows.refresh(&self.engine);
         self.follow();

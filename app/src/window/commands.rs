@@ -2,10 +2,12 @@
 //! handed to the engine, one op in flight at a time, its error shown inline; and the named
 //! shortcuts the keyboard, the menus and scripts share.
 
+use std::time::Instant;
+
 use eframe::egui;
 
 use super::app::SculptApp;
-use ::app::clock::{self, Now};
+use ::app::clock;
 use ::app::command::{self, Planned};
 use ::app::engine::{Pending, Validated, lock};
 
@@ -17,8 +19,9 @@ pub struct CommandLine {
     /// Why the last line was refused (shown under the input).
     pub error: Option<String>,
     /// An op on its way to the store (a command's, a stroke's, an import's or an undo's),
-    /// with what it does: the next waits until it is stored.
-    pending: Option<(Pending, Planned)>,
+    /// with what it does and the start of the frame that took its input: the next waits
+    /// until it is stored.
+    pending: Option<(Pending, Planned, Instant)>,
 }
 
 impl CommandLine {
@@ -82,21 +85,22 @@ impl SculptApp {
             .engine
             .author_validated(planned.payload.clone())
             .map_err(|e| e.to_string())?;
-        self.command.pending = Some((pending, planned));
+        let input_at = self.stats.frame_start().unwrap_or(clock::now().instant);
+        self.command.pending = Some((pending, planned, input_at));
         Ok(())
     }
 
     /// Takes the reply to the pending op, if it came.
-    pub(super) fn receive_reply(&mut self, now: Now) {
+    pub(super) fn receive_reply(&mut self) {
         let Some(reply) = self
             .command
             .pending
             .as_ref()
-            .and_then(|(p, _)| p.try_take())
+            .and_then(|(p, _, _)| p.try_take())
         else {
             return;
         };
-        let Some((_, planned)) = self.command.pending.take() else {
+        let Some((_, planned, input_at)) = self.command.pending.take() else {
             return;
         };
         match reply {
@@ -106,9 +110,13 @@ impl SculptApp {
                 if planned.select.is_some() {
                     self.selected = planned.select;
                 }
-                self.objects.edited(now.instant);
+                self.objects.remesh_previews(false);
+                self.objects.edited(input_at);
             }
-            Err(e) => self.command.error = Some(e),
+            Err(e) => {
+                self.command.error = Some(e);
+                self.objects.remesh_previews(true);
+            }
         }
     }
 

@@ -18,7 +18,7 @@ use render::snapshot::render_from_scene;
 use ::app::clock;
 use ::app::samples::Samples;
 
-/// Edit-to-mesh times kept.
+/// Edit-to-mesh and edit-to-pixels times kept.
 pub const MAX_EDIT_SAMPLES: usize = 100;
 /// Patches kept for the viewport between its draws.
 pub const MAX_PATCHES_KEPT: usize = 256;
@@ -69,6 +69,11 @@ pub struct Tracked {
     pub drawn_t_secs: f64,
     /// When a mesh for a later time was last asked for, while none is in flight.
     time_job: Option<TimeJob>,
+    /// An edit of this window's waiting to be drawn: the first generation that holds it, and
+    /// the start of the frame that took the input making it.
+    awaited_edit: Option<(u64, Instant)>,
+    /// Its last job was a preview, not the scene's object.
+    pub previewed: bool,
 }
 
 impl Tracked {
@@ -160,8 +165,12 @@ impl Moving {
 
 /// How the meshes were made and how long edits took to show.
 pub struct MeshStats {
-    /// Milliseconds from an edit being authored to its object's new mesh being drawn.
+    /// Milliseconds from the start of the frame that took an edit's input (the stroke's
+    /// release, the line's Enter) to its object's new mesh coming back from the mesher.
     pub edit_to_mesh_ms: Samples,
+    /// The same, to the start of the frame after the one that drew that mesh (so the drawn
+    /// frame was presented).
+    pub edit_to_pixels_ms: Samples,
     /// Meshes drawn that patched the last one.
     pub n_patched: u64,
     /// Meshes drawn whole.
@@ -181,8 +190,13 @@ pub struct Objects {
     changes_cursor: u64,
     /// The scene changed since objects were last compared with what was sent.
     pub dirty: bool,
-    /// When the last edit was authored (for edit-to-mesh times).
-    last_edit_at: Option<Instant>,
+    /// The input time of an edit of this window's whose object is not yet sent to the mesher.
+    edit_at: Option<Instant>,
+    /// The input time of the edit a stroke's last preview is timed as.
+    previewed_edit: Option<Instant>,
+    /// The input time of an edit whose mesh this frame draws: the next frame's start, after
+    /// this one is presented, ends its edit-to-pixels time.
+    drawing_edit: Option<Instant>,
     /// How meshes were made.
     pub stats: MeshStats,
 }
@@ -197,9 +211,12 @@ impl Objects {
             depth,
             changes_cursor: 0,
             dirty: true,
-            last_edit_at: None,
+            edit_at: None,
+            previewed_edit: None,
+            drawing_edit: None,
             stats: MeshStats {
                 edit_to_mesh_ms: Samples::new(MAX_EDIT_SAMPLES),
+                edit_to_pixels_ms: Samples::new(MAX_EDIT_SAMPLES),
                 n_patched: 0,
                 n_whole: 0,
             },
@@ -213,10 +230,30 @@ impl Objects {
         self.dirty = true;
     }
 
-    /// An edit was authored at `now`: the scene is compared again, and its mesh is timed.
-    pub fn edited(&mut self, now: Instant) {
-        self.last_edit_at = Some(now);
+    /// An edit of this window's, whose input the frame that started at `input_at` took, is
+    /// stored: the scene is compared again, and the objects it changed are timed from
+    /// `input_at` to their mesh and to the frame that draws it.
+    pub fn edited(&mut self, input_at: Instant) {
+        // A stroke's last preview timed it already.
+        if self.previewed_edit.take() != Some(input_at) {
+            self.edit_at = Some(input_at);
+        }
         self.dirty = true;
+    }
+
+    /// A frame starts at `now`, so the one before it was presented: an edit it drew has
+    /// reached the screen.
+    pub fn presented(&mut self, now: Instant) {
+        if let Some(at) = self.drawing_edit.take() {
+            let ms = now.duration_since(at).as_secs_f64() * 1e3;
+            self.stats.edit_to_pixels_ms.push(ms);
+        }
+    }
+
+    /// Whether this frame draws an edit's mesh (the next frame, which times it, is wanted
+    /// at once).
+    pub fn draws_an_edit(&self) -> bool {
+        self.drawing_edit.is_some()
     }
 
     /// Marks the objects the engine says changed since the last call stale (all of them when
@@ -245,6 +282,7 @@ impl Objects {
             return;
         }
         let mesher = &self.mesher;
+        let edit_at = self.edit_at.take();
         self.tracked.retain(|id, _| {
             let kept = scene.object(*id).is_some();
             if !kept {
@@ -261,6 +299,10 @@ impl Objects {
             };
             tracked.generation += 1;
             tracked.meshing_since.get_or_insert(now);
+            if let Some(at) = edit_at {
+                tracked.awaited_edit.get_or_insert((tracked.generation, at));
+            }
+            tracked.previewed = false;
             let world_from_group = scene.world_from_group(entry.group);
             tracked.moving = entry
                 .object
@@ -276,7 +318,7 @@ impl Objects {
                 world_from_group,
                 generation: tracked.generation,
                 depth: self.depth,
-                requested_at: self.last_edit_at.unwrap_or(now),
+                requested_at: edit_at.unwrap_or(now),
                 t_secs,
             }));
         }
@@ -311,8 +353,9 @@ impl Objects {
         }
     }
 
-    /// A preview of object `id` as `object` (a stroke being drawn), placed by
-    /// `world_from_group` and meshed at `t_secs`.
+    /// A preview of object `id` as `object` (a stroke being drawn, or finished and on its
+    /// way to the store), placed by `world_from_group` and meshed at `t_secs`; `edit_input_at`
+    /// times it as an edit whose input the frame that started then took.
     pub fn preview(
         &mut self,
         id: ObjectId,
@@ -320,10 +363,16 @@ impl Objects {
         world_from_group: Transform,
         now: Instant,
         t_secs: f64,
+        edit_input_at: Option<Instant>,
     ) {
         let tracked = self.tracked.entry(id).or_default();
         tracked.generation += 1;
         tracked.meshing_since.get_or_insert(now);
+        tracked.previewed = true;
+        if let Some(at) = edit_input_at {
+            tracked.awaited_edit = Some((tracked.generation, at));
+            self.previewed_edit = Some(at);
+        }
         tracked.pending = Some(Box::new(MeshJob {
             id,
             object,
@@ -333,6 +382,21 @@ impl Objects {
             requested_at: now,
             t_secs,
         }));
+    }
+
+    /// Objects last sent as a preview are meshed again as the scene has them: the stroke's
+    /// op was stored (the mesh is then usually the preview's, and nothing is drawn again, but
+    /// the fold may have rejected it) or `refused` (then no edit of theirs is timed).
+    pub fn remesh_previews(&mut self, refused: bool) {
+        for tracked in self.tracked.values_mut() {
+            if tracked.previewed {
+                tracked.stale = true;
+                self.dirty = true;
+                if refused {
+                    tracked.awaited_edit = None;
+                }
+            }
+        }
     }
 
     /// Hands the waiting jobs to the mesher (those its queue has no room for wait on).
@@ -352,7 +416,7 @@ impl Objects {
             let Some(tracked) = self.tracked.get_mut(&done.id) else {
                 continue;
             };
-            let (id, kind, requested_at) = (done.id, done.kind, done.requested_at);
+            let (id, kind, generation) = (done.id, done.kind, done.generation);
             let patch = done.patch.take();
             let mesh = done.object.as_ref().map(|o| Arc::clone(&o.mesh));
             if !tracked.take_meshed(done) {
@@ -370,9 +434,11 @@ impl Objects {
                 MeshKind::Whole => self.stats.n_whole += 1,
                 MeshKind::Unchanged => {}
             }
-            if self.last_edit_at.is_some() {
-                let ms = now.duration_since(requested_at).as_secs_f64() * 1e3;
+            if let Some((_, at)) = tracked.awaited_edit.filter(|(g, _)| generation >= *g) {
+                tracked.awaited_edit = None;
+                let ms = now.duration_since(at).as_secs_f64() * 1e3;
                 self.stats.edit_to_mesh_ms.push(ms);
+                self.drawing_edit = Some(self.drawing_edit.map_or(at, |d| d.min(at)));
             }
         }
     }

@@ -88,7 +88,10 @@ impl SculptApp {
         }
     }
 
-    /// Ends the stroke in progress at `at` (scene coordinates) and authors its one op.
+    /// Ends the stroke in progress at `at` (scene coordinates) and authors its one op. The
+    /// whole stroke is meshed at once, as a last preview timed from this frame's input, so it
+    /// is drawn while the engine stores the op; the scene's own mesh follows (usually the same,
+    /// so nothing is drawn again; without the stroke where the fold rejected it).
     fn finish_stroke(&mut self, at: Option<DVec3>) {
         let Some(mut stroke) = self.sculpt.stroke.take() else {
             return;
@@ -98,8 +101,15 @@ impl SculptApp {
         }
         let planned = stroke.finish(&lock(self.engine.view()));
         self.sculpt.last_stroke = Some(stroke.scene_points().to_vec());
-        if let Err(e) = planned.and_then(|planned| self.author(planned)) {
-            self.status = e;
+        match planned.and_then(|planned| self.author(planned)) {
+            Ok(()) => {
+                let input_at = self.stats.frame_start().unwrap_or(clock::now().instant);
+                self.send_preview(&stroke, Some(input_at));
+            }
+            Err(e) => {
+                self.status = e;
+                self.objects.remesh_previews(true);
+            }
         }
     }
 
@@ -113,9 +123,18 @@ impl SculptApp {
         {
             return;
         }
-        let Some(stroke) = &self.sculpt.stroke else {
+        let Some(stroke) = self.sculpt.stroke.take() else {
             return;
         };
+        self.send_preview(&stroke, None);
+        self.sculpt.stroke = Some(stroke);
+        self.sculpt.preview_at = Some(now);
+    }
+
+    /// Hands the mesher the stroked object with `stroke` applied, at once; `edit_input_at`
+    /// times it as the edit whose input that frame took.
+    fn send_preview(&mut self, stroke: &Stroke, edit_input_at: Option<Instant>) {
+        let now = clock::now().instant;
         let id = ObjectId(stroke.object);
         let (object, world_from_group) = {
             let view = lock(self.engine.view());
@@ -131,8 +150,8 @@ impl SculptApp {
         };
         let t_secs = self.scene_clock.secs(now);
         self.objects
-            .preview(id, object, world_from_group, now, t_secs);
-        self.sculpt.preview_at = Some(now);
+            .preview(id, object, world_from_group, now, t_secs, edit_input_at);
+        self.objects.flush();
     }
 
     /// The touch device's button: pressed on a touched object, the current brush starts a

@@ -228,8 +228,8 @@ impl SculptApp {
                 ui.label(format!("{n_triangles} triangles"));
             }
             ui.separator();
-            if let Some(ms) = self.objects.stats.edit_to_mesh_ms.last() {
-                ui.label(format!("last edit drawn after {ms:.0} ms"));
+            if let Some(ms) = self.objects.stats.edit_to_pixels_ms.last() {
+                ui.label(format!("last edit on screen after {ms:.0} ms"));
                 ui.separator();
             }
             let join = (lock(self.engine.view()).snapshot()).map(|s| (s.busy, s.text()));

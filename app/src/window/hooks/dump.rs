@@ -152,6 +152,7 @@ impl SculptApp {
                     "skipped": tracked.and_then(|t| t.skipped.clone()),
                     "mesh_secs": tracked.map(|t| t.mesh_secs),
                     "mesh_kind": tracked.and_then(|t| t.kind).map(|k| k.name()),
+                    "previewed": tracked.map(|t| t.previewed),
                     "mesh_t_secs": tracked.map(|t| t.drawn_t_secs),
                     "world_from_object": tracked
                         .and_then(|t| t.world_from_object_now())
@@ -215,6 +216,7 @@ impl SculptApp {
             "ui_ms": summary(&self.stats.ui_ms),
             "frame_interval_ms": summary(&self.stats.frame_interval_ms),
             "edit_to_mesh_ms": self.objects.stats.edit_to_mesh_ms.values(),
+            "edit_to_pixels_ms": self.objects.stats.edit_to_pixels_ms.values(),
             "meshes": json!({
                 "patched": self.objects.stats.n_patched,
                 "whole": self.objects.stats.n_whole,
@@ -222,6 +224,7 @@ impl SculptApp {
             "last_upload_bytes": report.map(|r| r.last_upload_bytes),
             "min_upload_bytes": report.and_then(|r| r.min_upload_bytes),
             "patches_refused": report.map(|r| r.n_patches_refused),
+            "viewport_frames": report.map(|r| json!({ "drawn": r.n_drawn, "reused": r.n_reused })),
         })
     }
 
