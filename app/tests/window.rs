@@ -1282,6 +1282,8 @@ fn strokes_on_a_long_history_are_timed_from_their_input_to_the_presented_frame()
             "{mesh} ms to the mesh, {pixels} ms to pixels"
         );
     }
+    // The carved ball's mesh is closed, so its back faces are not drawn.
+    assert_eq!(state["objects"][0]["closed"], true);
     // Frames that changed nothing drawn (waiting for the script's next step) showed the last
     // picture again.
     let frames = &state["viewport_frames"];

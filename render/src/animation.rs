@@ -157,6 +157,7 @@ impl Animator {
                 mesh: Arc::new(Mesh::default()),
                 world_from_object: Mat4::IDENTITY,
                 material: Material::default(),
+                closed: false,
             });
             animator.objects.push(animated);
         }

@@ -51,6 +51,11 @@ pub struct SceneObject {
     pub world_from_object: Mat4,
     /// Lighting parameters.
     pub material: Material,
+    /// The mesh encloses its solid and winds counter-clockwise seen from outside, so its back
+    /// faces are hidden from any eye outside it and are not drawn (a software rasteriser then
+    /// shades about half the triangles). False draws both sides (open surfaces, imported
+    /// meshes, and anything not proven closed).
+    pub closed: bool,
 }
 
 impl SceneObject {
@@ -112,7 +117,7 @@ pub struct PickHit {
 }
 
 impl Scene {
-    /// Adds an object and returns its index.
+    /// Adds an object, drawn two-sided, and returns its index.
     pub fn add_object(
         &mut self,
         mesh: Arc<Mesh>,
@@ -123,6 +128,7 @@ impl Scene {
             mesh,
             world_from_object,
             material,
+            closed: false,
         });
         self.objects.len() - 1
     }

@@ -11,12 +11,14 @@
 //!
 //! A prepare also says whether it changed anything a draw shows (`Renderer::changed`), so that
 //! a window may show its last picture again: each thing drawn, changed alone, says so once.
+//! A closed object (`SceneObject::closed`) is drawn without its back faces: the ball's picture
+//! is the two-sided one, and a triangle seen from behind is not drawn at all.
 #![allow(
     clippy::unwrap_used,
     reason = "the session and the device helpers unwrap fixed, known-good inputs"
 )]
 
-use glam::{DVec3, Mat4};
+use glam::{DVec3, Mat4, Vec3};
 use model::object::{Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData, Pose, ToolShape};
 use render::camera::Camera;
 use render::gpu::offscreen::{Headless, OffscreenError};
@@ -396,6 +398,10 @@ fn a_prepare_says_whether_it_changed_what_a_draw_shows() {
             Box::new(|s| s.objects[0].mesh = Arc::new((*s.objects[0].mesh).clone())),
         ),
         (
+            "the object's closedness",
+            Box::new(|s| s.objects[0].closed = !s.objects[0].closed),
+        ),
+        (
             "one object more",
             Box::new(|s| s.objects.push(s.objects[0].clone())),
         ),
@@ -406,4 +412,59 @@ fn a_prepare_says_whether_it_changed_what_a_draw_shows() {
         assert!(changed(&scene), "{what} changed");
         assert!(!changed(&scene), "{what} unchanged the next time");
     }
+}
+
+#[test]
+fn a_closed_object_draws_its_two_sided_picture_without_its_back_faces() {
+    let Some(mut h) = headless() else {
+        return;
+    };
+    let mut object = ball();
+    object.prepare();
+    let mut mesher = OctreeMesher::new(&settings()).unwrap();
+    mesher
+        .remesh(&mut ObjectField::new(&object, 0.0), settings().bounds)
+        .unwrap();
+    assert!(mesher.encloses());
+    let mut mesh = Mesh::default();
+    mesher.mesh_update(&mut mesh).unwrap();
+    let mut scene = Scene {
+        camera: Camera {
+            distance: 3.2,
+            ..Camera::default()
+        },
+        ..Scene::default()
+    };
+    scene.add_object(Arc::new(mesh), Mat4::IDENTITY, Material::default());
+    let two_sided = draw(&mut h, &scene);
+    scene.objects[0].closed = true;
+    let culled = draw(&mut h, &scene);
+    assert_eq!(n_differing_pixels(&two_sided, &culled), 0);
+
+    // One triangle facing the eye, wound so that its back is what the eye sees.
+    let eye = scene.camera.eye();
+    let side = eye.cross(Vec3::Z).normalize();
+    let corners = [-side - Vec3::Z, side - Vec3::Z, Vec3::Z].map(|c| 0.5 * c);
+    let towards_eye = (corners[1] - corners[0])
+        .cross(corners[2] - corners[0])
+        .dot(eye)
+        > 0.0;
+    scene.objects[0].mesh = Arc::new(Mesh {
+        positions: corners.map(|c| c.to_array()).to_vec(),
+        normals: vec![eye.normalize().to_array(); 3],
+        colours: vec![[0.9, 0.2, 0.2, 1.0]; 3],
+        ambient: Vec::new(),
+        indices: if towards_eye {
+            vec![0, 2, 1]
+        } else {
+            vec![0, 1, 2]
+        },
+    });
+    scene.objects[0].closed = false;
+    let shown = draw(&mut h, &scene);
+    scene.objects[0].closed = true;
+    let hidden = draw(&mut h, &scene);
+    let background = &hidden[..4];
+    assert!(hidden.chunks_exact(4).all(|p| p == background), "culled");
+    assert!(n_differing_pixels(&shown, &hidden) > 100, "drawn two-sided");
 }

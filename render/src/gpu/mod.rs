@@ -154,6 +154,8 @@ struct GpuObject {
     uniform: wgpu::Buffer,
     /// What `uniform` holds, once written.
     uniform_value: Option<ObjectUniform>,
+    /// Drawn with back faces culled (`SceneObject::closed`).
+    closed: bool,
     bind_group: wgpu::BindGroup,
 }
 
@@ -192,6 +194,8 @@ struct PendingPatch {
 /// Draws [`Scene`]s into a host's render pass.
 pub struct Renderer {
     opaque: wgpu::RenderPipeline,
+    /// Opaque and closed: back faces culled.
+    opaque_closed: wgpu::RenderPipeline,
     transparent_back: wgpu::RenderPipeline,
     transparent_front: wgpu::RenderPipeline,
     lines: wgpu::RenderPipeline,
@@ -303,14 +307,15 @@ fn pipeline(
     })
 }
 
-/// The three mesh pipelines: opaque, then a transparent object's far side and near side.
+/// The four mesh pipelines: opaque (both sides, and the front side of a closed mesh), then a
+/// transparent object's far side and near side.
 fn mesh_pipelines(
     device: &wgpu::Device,
     format: wgpu::TextureFormat,
     depth: Option<wgpu::TextureFormat>,
     globals_layout: &wgpu::BindGroupLayout,
     object_layout: &wgpu::BindGroupLayout,
-) -> [wgpu::RenderPipeline; 3] {
+) -> [wgpu::RenderPipeline; 4] {
     let module = device.create_shader_module(wgpu::include_wgsl!("shaders/mesh.wgsl"));
     let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some("render mesh"),
@@ -336,6 +341,7 @@ fn mesh_pipelines(
         depth_write,
     };
     let opaque = kind("render opaque", None, false, true);
+    let opaque_closed = kind("render opaque closed", Some(wgpu::Face::Back), false, true);
     // Transparent objects draw their far side first, then their near side.
     let back = kind(
         "render transparent back",
@@ -349,7 +355,7 @@ fn mesh_pipelines(
         true,
         false,
     );
-    [opaque, back, front].map(|k| pipeline(device, format, depth, k))
+    [opaque, opaque_closed, back, front].map(|k| pipeline(device, format, depth, k))
 }
 
 /// The pipeline of line lists (arrows, boxes, cursors).
@@ -399,7 +405,7 @@ impl Renderer {
     ) -> Self {
         let globals_layout = uniform_layout(device, "render globals");
         let object_layout = uniform_layout(device, "render object");
-        let [opaque, transparent_back, transparent_front] =
+        let [opaque, opaque_closed, transparent_back, transparent_front] =
             mesh_pipelines(device, format, depth, &globals_layout, &object_layout);
         let lines = line_pipeline(device, format, depth, &globals_layout);
         let globals = device.create_buffer(&wgpu::BufferDescriptor {
@@ -418,6 +424,7 @@ impl Renderer {
         });
         Self {
             opaque,
+            opaque_closed,
             transparent_back,
             transparent_front,
             lines,
@@ -596,6 +603,8 @@ impl Renderer {
                 gpu.uniform_value = Some(u);
                 changed = true;
             }
+            changed |= gpu.closed != o.closed;
+            gpu.closed = o.closed;
         }
         changed
     }
@@ -684,6 +693,7 @@ impl Renderer {
             n_indices: mesh.indices.len() as u32,
             uniform,
             uniform_value: None,
+            closed: false,
             bind_group,
         }
     }
@@ -795,9 +805,14 @@ impl Renderer {
             pass.set_index_buffer(o.indices.slice(..), wgpu::IndexFormat::Uint32);
             pass.draw_indexed(0..o.n_indices, 0, 0..1);
         };
-        pass.set_pipeline(&self.opaque);
         for &i in &self.draw_order[..self.n_opaque] {
-            draw(pass, &self.objects[i]);
+            let o = &self.objects[i];
+            pass.set_pipeline(if o.closed {
+                &self.opaque_closed
+            } else {
+                &self.opaque
+            });
+            draw(pass, o);
         }
         if let Some((buf, n)) = &self.line_buffer {
             pass.set_pipeline(&self.lines);

@@ -277,6 +277,45 @@ impl OctreeMesher {
         self.blocks.len()
     }
 
+    /// Whether no grid point on the box's faces is inside: then the surface lies strictly
+    /// inside the box, and the mesh is watertight and wound counter-clockwise seen from
+    /// outside (the guarantees above), so a renderer may cull its back faces. Reads only the
+    /// blocks along the box's faces (their records' values, or the sign a block's points
+    /// share).
+    pub fn encloses(&self) -> bool {
+        let (nb, n, bc) = (self.n_blocks, self.grid.n_cells, self.grid.block);
+        let on_face = |p: [u32; 3]| p.iter().any(|&c| c == 0 || c == n);
+        let lattice = 0..=bc;
+        for k2 in 0..nb {
+            for k1 in 0..nb {
+                for k0 in 0..nb {
+                    let key = [k0, k1, k2];
+                    if !key.iter().any(|&k| k == 0 || k == nb - 1) {
+                        continue;
+                    }
+                    let Some(block) = self.blocks.get(&key) else {
+                        if inside(self.reps[self.block_idx(key)]) {
+                            return false;
+                        }
+                        continue;
+                    };
+                    for l2 in lattice.clone() {
+                        for l1 in lattice.clone() {
+                            for l0 in lattice.clone() {
+                                let l = [l0, l1, l2];
+                                let p = std::array::from_fn(|a| block.origin[a] + l[a]);
+                                if on_face(p) && inside(block.values[self.grid.at(l)]) {
+                                    return false;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        true
+    }
+
     /// Assembles the mesh of all kept blocks.
     pub fn mesh(&self) -> Result<Mesh, OctreeMeshError> {
         let mut mesh = Mesh::default();

@@ -36,6 +36,9 @@ pub(super) struct Incremental {
     appearance: CompiledAppearance,
     world_from_object: Mat4,
     material: Material,
+    /// The surface stays strictly inside `bounds`, so the mesh is closed
+    /// ([`OctreeMesher::encloses`]).
+    closed: bool,
     /// Boxes a stopped patch may have remeshed with a newer field: the next job remeshes them.
     dirty: Vec<Aabb>,
 }
@@ -95,6 +98,7 @@ pub(super) fn mesh(
             mesh: Arc::clone(&state.mesh),
             world_from_object: state.world_from_object,
             material: state.material,
+            closed: state.closed,
         });
     }
     (Some(out), state)
@@ -209,6 +213,9 @@ fn patch(mut state: Incremental, object: &Object, superseded: &dyn Fn() -> bool)
             return Patched::Whole;
         }
     }
+    if !boxes.is_empty() {
+        state.closed = state.octree.encloses();
+    }
     let mut mesh = Mesh::clone(&state.mesh);
     let ambient = std::mem::take(&mut mesh.ambient);
     let Ok(mut patch) = state.octree.mesh_update(&mut mesh) else {
@@ -305,6 +312,7 @@ fn mesh_whole(
     octree
         .remesh(&mut ObjectField::new(&object, 0.0), bounds)
         .map_err(|e| e.to_string())?;
+    let closed = octree.encloses();
     let mut mesh = Mesh::default();
     let patch = octree.mesh_update(&mut mesh).map_err(|e| e.to_string())?;
     let mut appearance = CompiledAppearance::of(&object);
@@ -324,6 +332,7 @@ fn mesh_whole(
         appearance,
         world_from_object,
         material,
+        closed,
         dirty: Vec::new(),
     };
     Ok((state, patch))

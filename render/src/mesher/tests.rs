@@ -233,3 +233,51 @@ fn a_long_mesh_of_one_object_does_not_hold_up_another() {
     let second = mesher.recv_timeout(Duration::from_secs(600)).unwrap();
     assert_eq!(second.id, ObjectId(1));
 }
+
+/// Edges of `mesh` that do not join exactly two triangles.
+fn n_open_edges(mesh: &Mesh) -> usize {
+    let mut uses = std::collections::BTreeMap::new();
+    for t in mesh.indices.chunks_exact(3) {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *uses.entry((a.min(b), a.max(b))).or_insert(0u32) += 1;
+        }
+    }
+    uses.values().filter(|&&n| n != 2).count()
+}
+
+#[test]
+fn implicit_meshes_whole_and_patched_are_closed_and_say_so() {
+    let never = || false;
+    let mut object = ball();
+    let (done, state) = mesh(job(&object, 1, 5), None, &never);
+    let drawn = done.unwrap().object.unwrap();
+    assert!(drawn.closed);
+    assert_eq!(n_open_edges(&drawn.mesh), 0);
+    object
+        .apply(Edit::stamp(
+            EditOp::Subtract,
+            ball_tool(0.3),
+            Pose::at(DVec3::Z),
+        ))
+        .unwrap();
+    let (done, _) = mesh(job(&object, 2, 5), state, &never);
+    let done = done.unwrap();
+    assert_eq!(done.kind, MeshKind::Patch);
+    let drawn = done.object.unwrap();
+    assert!(drawn.closed);
+    assert_eq!(n_open_edges(&drawn.mesh), 0);
+    // A ball larger than its domain: the domain's faces close it.
+    let big = Object::new(ObjectData {
+        geometry: Some(Geometry::implicit_in(
+            Formula::new("1.5-sqrt(x^2+y^2+z^2)").unwrap(),
+            Domain::new(DVec3::ZERO, DVec3::splat(2.2)),
+        )),
+        ..ObjectData::default()
+    })
+    .unwrap();
+    let (done, _) = mesh(job(&big, 1, 5), None, &never);
+    let drawn = done.unwrap().object.unwrap();
+    assert!(drawn.closed);
+    assert_eq!(n_open_edges(&drawn.mesh), 0);
+}

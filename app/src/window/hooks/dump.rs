@@ -153,6 +153,7 @@ impl SculptApp {
                     "mesh_secs": tracked.map(|t| t.mesh_secs),
                     "mesh_kind": tracked.and_then(|t| t.kind).map(|k| k.name()),
                     "previewed": tracked.map(|t| t.previewed),
+                    "closed": tracked.and_then(|t| t.drawn.as_ref()).map(|d| d.closed),
                     "mesh_t_secs": tracked.map(|t| t.drawn_t_secs),
                     "world_from_object": tracked
                         .and_then(|t| t.world_from_object_now())

@@ -553,3 +553,45 @@ fn counting_blocks_by_intervals_gives_the_blocks_meshing_evaluates() {
         Err(OctreeMeshError::DepthTooLarge(11))
     );
 }
+
+#[test]
+fn the_mesher_says_whether_the_surface_stays_inside_its_box() {
+    let settings = MeshSettings {
+        bounds: unit_box(),
+        depth: 5,
+    };
+    let inside_box = Sphere {
+        centre: [0.1, -0.05, 0.0],
+        radius: 0.5,
+    };
+    let leaving = Sphere {
+        centre: [0.8, 0.0, 0.1],
+        radius: 0.4,
+    };
+    let n_open_edges = |m: &Mesh| {
+        let mut uses = BTreeMap::new();
+        for t in m.indices.chunks_exact(3) {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                *uses.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+            }
+        }
+        uses.values().filter(|&&n: &&u32| n != 2).count()
+    };
+    let mut mesher = OctreeMesher::new(&settings).unwrap();
+    mesher
+        .remesh(&mut inside_box.clone(), settings.bounds)
+        .unwrap();
+    assert!(mesher.encloses());
+    assert_eq!(n_open_edges(&mesher.mesh().unwrap()), 0);
+    // The same mesher remeshed over the whole box with a sphere that leaves it, then back.
+    mesher
+        .remesh(&mut leaving.clone(), settings.bounds)
+        .unwrap();
+    assert!(!mesher.encloses());
+    assert!(n_open_edges(&mesher.mesh().unwrap()) > 0);
+    mesher
+        .remesh(&mut inside_box.clone(), settings.bounds)
+        .unwrap();
+    assert!(mesher.encloses());
+}
