@@ -344,20 +344,26 @@ fn a_patch_from_another_mesh_or_with_wrong_lengths_is_refused_or_uploaded_whole(
 /// One change to a scene.
 type SceneEdit = Box<dyn Fn(&mut Scene)>;
 
-#[test]
-fn a_prepare_says_whether_it_changed_what_a_draw_shows() {
-    let Some(mut h) = headless() else {
-        return;
-    };
+/// The plain ball's mesh, which the octree proves closed.
+fn ball_mesh() -> Mesh {
     let mut object = ball();
     object.prepare();
     let mut mesher = OctreeMesher::new(&settings()).unwrap();
     mesher
         .remesh(&mut ObjectField::new(&object, 0.0), settings().bounds)
         .unwrap();
+    assert!(mesher.encloses());
     let mut mesh = Mesh::default();
     mesher.mesh_update(&mut mesh).unwrap();
-    let mesh = Arc::new(mesh);
+    mesh
+}
+
+#[test]
+fn a_prepare_says_whether_it_changed_what_a_draw_shows() {
+    let Some(mut h) = headless() else {
+        return;
+    };
+    let mesh = Arc::new(ball_mesh());
     let mut scene = Scene::default();
     scene.add_object(Arc::clone(&mesh), Mat4::IDENTITY, Material::default());
     let mut changed = |scene: &Scene| {
@@ -419,15 +425,7 @@ fn a_closed_object_draws_its_two_sided_picture_without_its_back_faces() {
     let Some(mut h) = headless() else {
         return;
     };
-    let mut object = ball();
-    object.prepare();
-    let mut mesher = OctreeMesher::new(&settings()).unwrap();
-    mesher
-        .remesh(&mut ObjectField::new(&object, 0.0), settings().bounds)
-        .unwrap();
-    assert!(mesher.encloses());
-    let mut mesh = Mesh::default();
-    mesher.mesh_update(&mut mesh).unwrap();
+    let mesh = ball_mesh();
     let mut scene = Scene {
         camera: Camera {
             distance: 3.2,

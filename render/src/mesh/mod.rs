@@ -402,6 +402,19 @@ pub(crate) fn normalise_or_up(v: [f32; 3]) -> [f32; 3] {
     }
 }
 
+/// Edges of `mesh` that do not join exactly two triangles (none in a closed mesh).
+#[cfg(test)]
+pub(crate) fn n_open_edges(mesh: &Mesh) -> usize {
+    let mut uses = std::collections::BTreeMap::new();
+    for t in mesh.indices.chunks_exact(3) {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *uses.entry((a.min(b), a.max(b))).or_insert(0u32) += 1;
+        }
+    }
+    uses.values().filter(|&&n| n != 2).count()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -14,7 +14,7 @@ use model::scene::ObjectId;
 use super::incremental::{merged, mesh, recolour};
 use super::{MIN_MESHER_THREADS, MeshJob, MeshKind, Mesher};
 use crate::appearance::CompiledAppearance;
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, n_open_edges};
 
 /// Reads the clock for jobs' `requested_at` and the pool's timing (the tests time nothing).
 #[expect(
@@ -53,6 +53,11 @@ fn job(object: &Object, generation: u64, depth: u8) -> Box<MeshJob> {
         requested_at: now(),
         t_secs: 0.0,
     })
+}
+
+/// A ball of radius 0.3 carved at the top of the unit ball.
+fn carve_at_the_top() -> Edit {
+    Edit::stamp(EditOp::Subtract, ball_tool(0.3), Pose::at(DVec3::Z))
 }
 
 fn ball_tool(radius: f64) -> ToolShape {
@@ -196,13 +201,7 @@ fn other_changes_mesh_whole_and_a_superseded_job_is_dropped_before_it_starts() {
     let mut object = ball();
     let (_, state) = mesh(job(&object, 1, 5), None, &never);
     // A newer job waits: this one is dropped, and the kept state is untouched.
-    object
-        .apply(Edit::stamp(
-            EditOp::Subtract,
-            ball_tool(0.3),
-            Pose::at(DVec3::Z),
-        ))
-        .unwrap();
+    object.apply(carve_at_the_top()).unwrap();
     let (none, state) = mesh(job(&object, 2, 5), state, &|| true);
     assert!(none.is_none() && state.is_some());
     // Another depth, then another appearance: whole.
@@ -234,18 +233,6 @@ fn a_long_mesh_of_one_object_does_not_hold_up_another() {
     assert_eq!(second.id, ObjectId(1));
 }
 
-/// Edges of `mesh` that do not join exactly two triangles.
-fn n_open_edges(mesh: &Mesh) -> usize {
-    let mut uses = std::collections::BTreeMap::new();
-    for t in mesh.indices.chunks_exact(3) {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            *uses.entry((a.min(b), a.max(b))).or_insert(0u32) += 1;
-        }
-    }
-    uses.values().filter(|&&n| n != 2).count()
-}
-
 #[test]
 fn implicit_meshes_whole_and_patched_are_closed_and_say_so() {
     let never = || false;
@@ -254,13 +241,7 @@ fn implicit_meshes_whole_and_patched_are_closed_and_say_so() {
     let drawn = done.unwrap().object.unwrap();
     assert!(drawn.closed);
     assert_eq!(n_open_edges(&drawn.mesh), 0);
-    object
-        .apply(Edit::stamp(
-            EditOp::Subtract,
-            ball_tool(0.3),
-            Pose::at(DVec3::Z),
-        ))
-        .unwrap();
+    object.apply(carve_at_the_top()).unwrap();
     let (done, _) = mesh(job(&object, 2, 5), state, &never);
     let done = done.unwrap();
     assert_eq!(done.kind, MeshKind::Patch);

@@ -556,6 +556,7 @@ fn counting_blocks_by_intervals_gives_the_blocks_meshing_evaluates() {
 
 #[test]
 fn the_mesher_says_whether_the_surface_stays_inside_its_box() {
+    use crate::mesh::n_open_edges;
     let settings = MeshSettings {
         bounds: unit_box(),
         depth: 5,
@@ -567,16 +568,6 @@ fn the_mesher_says_whether_the_surface_stays_inside_its_box() {
     let leaving = Sphere {
         centre: [0.8, 0.0, 0.1],
         radius: 0.4,
-    };
-    let n_open_edges = |m: &Mesh| {
-        let mut uses = BTreeMap::new();
-        for t in m.indices.chunks_exact(3) {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                *uses.entry((a.min(b), a.max(b))).or_insert(0) += 1;
-            }
-        }
-        uses.values().filter(|&&n: &&u32| n != 2).count()
     };
     let mut mesher = OctreeMesher::new(&settings).unwrap();
     mesher
