@@ -1306,6 +1306,79 @@ fn strokes_on_a_long_history_are_timed_from_their_input_to_the_presented_frame()
     );
 }
 
+/// A free UDP port on loopback, for a window that another must dial.
+fn free_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+#[test]
+fn a_peers_live_edit_is_timed_from_its_op_to_the_presented_frame() {
+    let display = display();
+    let dir = scratch("remote-timing");
+    let invite = text(&sculpt(None, &["invite"]).stdout).trim().to_string();
+    let listen = format!("127.0.0.1:{}", free_port());
+    let peer_store = dir.join("peer");
+    // The peer dials the window, waits for its ball, then colours it: a live remote edit.
+    let _peer = HeadlessPeer::spawn(&[
+        "--store",
+        peer_store.to_str().unwrap(),
+        "--invite",
+        &invite,
+        "--no-lan",
+        "--listen",
+        "127.0.0.1:0",
+        "--dial",
+        &listen,
+        "--json",
+        "--wait-ops",
+        "1",
+        "--command",
+        "colour: 0.2, 0.4, 0.9",
+    ]);
+    let store = dir.join("window");
+    let (state, _, _) = window_with(
+        &display,
+        &dir,
+        "remote",
+        &[
+            "--store",
+            store.to_str().unwrap(),
+            "--invite",
+            &invite,
+            "--no-lan",
+            "--listen",
+            &listen,
+            "--command",
+            "new: 0.8-sqrt(x^2+y^2+z^2)",
+            "--command",
+            "wait-ops: 2",
+        ],
+    );
+    assert!(
+        state["objects"][0]["diffuse"]
+            .as_str()
+            .unwrap()
+            .contains("0.2")
+    );
+    // The window timed its own ball and the peer's colour, each once.
+    let local = numbers(&state["edit_to_pixels_ms"], "edit_to_pixels_ms");
+    let remote = numbers(
+        &state["remote_edit_to_pixels_ms"],
+        "remote_edit_to_pixels_ms",
+    );
+    assert_eq!(local.len(), 1, "{local:?}");
+    assert_eq!(remote.len(), 1, "{remote:?}");
+    assert!(remote[0] > 0.0, "{remote:?}");
+    println!(
+        "the peer's colour on the window's screen after {:.1} ms",
+        remote[0]
+    );
+}
+
 #[test]
 fn a_paint_stroke_of_density_changes_the_density_where_it_went() {
     let display = display();

@@ -450,6 +450,19 @@ fn an_edit_on_one_engine_reaches_the_other_as_a_change_of_that_object_with_prese
         lock(a.view()).scene_hash_hex(),
         lock(b.view()).scene_hash_hex()
     );
+    // B names the newest stamp of A's ops that changed its scene (for timing them to the
+    // screen); a carve is newer, and A names none of its own.
+    let shaped = lock(b.view()).last_remote_edit();
+    assert!(shaped.is_some());
+    let carve = model::object::Edit::stamp(
+        model::object::EditOp::Subtract,
+        model::object::ToolShape::Sphere { radius: 0.1 },
+        model::object::Pose::at(glam::DVec3::Z),
+    );
+    author(&a, ShapePayload::edit(melon, carve).unwrap());
+    wait_view(&b, "a's carve", |v| v.n_ops() == FOUNDED + 4);
+    assert!(lock(b.view()).last_remote_edit() > shaped);
+    assert_eq!(lock(a.view()).last_remote_edit(), None);
     // B's presence (its name, then a pointer) reaches A.
     let mut presence = b.presence();
     presence.pointer = Some([0.1, 0.2, 0.3]);

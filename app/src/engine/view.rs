@@ -253,6 +253,8 @@ pub struct View {
     redo: BTreeMap<u64, OpId>,
     next_object: IdSource,
     changes: ChangeLog,
+    /// The newest timestamp of another peer's op that changed the scene.
+    last_remote_edit: Option<replication::Timestamp>,
     leases: BTreeMap<u64, replication::lease::Lease>,
     my_rejections: Vec<Rejection>,
     generation: u64,
@@ -297,6 +299,7 @@ impl View {
             redo: BTreeMap::new(),
             next_object: IdSource::first(me),
             changes: ChangeLog::default(),
+            last_remote_edit: None,
             leases: BTreeMap::new(),
             my_rejections: Vec::new(),
             generation: 0,
@@ -333,6 +336,15 @@ impl View {
     /// Folds what a (merged) refold names and notes the objects it changed.
     pub fn apply_refold(&mut self, log: &Log<ShapePayload>, delivered: &[OpId], refold: &Refold) {
         self.scene.apply_refold(log, delivered, refold);
+        if !refold.object_keys.is_empty() {
+            let remote = delivered
+                .iter()
+                .filter_map(|id| log.get(id))
+                .filter(|op| op.author() != self.me)
+                .map(|op| op.timestamp())
+                .max();
+            self.last_remote_edit = self.last_remote_edit.max(remote);
+        }
         {
             for object in refold.object_keys.keys() {
                 self.changes.push(if object.0 & GROUP_BIT != 0 {
@@ -587,6 +599,12 @@ impl View {
     /// a test) keeps its own cursor.
     pub fn changes_since(&self, cursor: u64) -> (Option<BTreeSet<ObjectId>>, u64) {
         self.changes.since(cursor)
+    }
+
+    /// The newest timestamp (its author's clock) of another peer's op that changed the scene
+    /// since this view was made, for timing remote edits to the screen.
+    pub fn last_remote_edit(&self) -> Option<replication::Timestamp> {
+        self.last_remote_edit
     }
 
     /// The scene hash (equal on every peer with the same ops), computed at most once per

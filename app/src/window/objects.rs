@@ -33,6 +33,30 @@ const SELECTION_COLOUR: [f32; 4] = [1.0, 0.85, 0.2, 1.0];
 /// makes, and the ranges written.
 pub type PatchForRenderer = (ObjectId, Arc<Mesh>, Arc<Mesh>, MeshPatch);
 
+/// An edit being timed to the screen.
+#[derive(Clone, Copy, Debug)]
+struct Timed {
+    /// The start of the frame that took this window's input, or another peer's op's
+    /// timestamp read on this clock.
+    at: Instant,
+    /// Another peer's.
+    remote: bool,
+}
+
+impl Timed {
+    fn local(at: Instant) -> Timed {
+        Timed { at, remote: false }
+    }
+
+    /// Another peer's op stamped `stamp` (micros of its wall clock), as an instant of ours.
+    fn remote(stamp: replication::Timestamp) -> Timed {
+        let now = clock::now();
+        let age = Duration::from_micros(now.wall.0.saturating_sub(stamp.0));
+        let at = now.instant.checked_sub(age).unwrap_or(now.instant);
+        Timed { at, remote: true }
+    }
+}
+
 /// One scene object as the window tracks it: what was sent to the mesher, what is drawn.
 #[derive(Default)]
 pub struct Tracked {
@@ -69,9 +93,8 @@ pub struct Tracked {
     pub drawn_t_secs: f64,
     /// When a mesh for a later time was last asked for, while none is in flight.
     time_job: Option<TimeJob>,
-    /// An edit of this window's waiting to be drawn: the first generation that holds it, and
-    /// the start of the frame that took the input making it.
-    awaited_edit: Option<(u64, Instant)>,
+    /// An edit waiting to be drawn: the first generation that holds it, and its timing.
+    awaited_edit: Option<(u64, Timed)>,
     /// Its last job was a preview, not the scene's object.
     pub previewed: bool,
 }
@@ -171,6 +194,10 @@ pub struct MeshStats {
     /// The same, to the start of the frame after the one that drew that mesh (so the drawn
     /// frame was presented).
     pub edit_to_pixels_ms: Samples,
+    /// From another peer's op's timestamp (its author's clock: meaningful where the clocks
+    /// agree, as on one machine) to the start of the frame after the one that drew it; ops
+    /// that arrive when catching up count from when they were made.
+    pub remote_edit_to_pixels_ms: Samples,
     /// Meshes drawn that patched the last one.
     pub n_patched: u64,
     /// Meshes drawn whole.
@@ -190,13 +217,15 @@ pub struct Objects {
     changes_cursor: u64,
     /// The scene changed since objects were last compared with what was sent.
     pub dirty: bool,
-    /// The input time of an edit of this window's whose object is not yet sent to the mesher.
-    edit_at: Option<Instant>,
+    /// An edit whose object is not yet sent to the mesher.
+    edit_at: Option<Timed>,
     /// The input time of the edit a stroke's last preview is timed as.
     previewed_edit: Option<Instant>,
-    /// The input time of an edit whose mesh this frame draws: the next frame's start, after
-    /// this one is presented, ends its edit-to-pixels time.
-    drawing_edit: Option<Instant>,
+    /// An edit whose mesh this frame draws: the next frame's start, after this one is
+    /// presented, ends its time to pixels.
+    drawing_edit: Option<Timed>,
+    /// The newest remote op timestamp already timed.
+    remote_seen: Option<replication::Timestamp>,
     /// How meshes were made.
     pub stats: MeshStats,
 }
@@ -214,9 +243,11 @@ impl Objects {
             edit_at: None,
             previewed_edit: None,
             drawing_edit: None,
+            remote_seen: None,
             stats: MeshStats {
                 edit_to_mesh_ms: Samples::new(MAX_EDIT_SAMPLES),
                 edit_to_pixels_ms: Samples::new(MAX_EDIT_SAMPLES),
+                remote_edit_to_pixels_ms: Samples::new(MAX_EDIT_SAMPLES),
                 n_patched: 0,
                 n_whole: 0,
             },
@@ -236,7 +267,7 @@ impl Objects {
     pub fn edited(&mut self, input_at: Instant) {
         // A stroke's last preview timed it already.
         if self.previewed_edit.take() != Some(input_at) {
-            self.edit_at = Some(input_at);
+            self.edit_at = Some(Timed::local(input_at));
         }
         self.dirty = true;
     }
@@ -244,9 +275,13 @@ impl Objects {
     /// A frame starts at `now`, so the one before it was presented: an edit it drew has
     /// reached the screen.
     pub fn presented(&mut self, now: Instant) {
-        if let Some(at) = self.drawing_edit.take() {
-            let ms = now.duration_since(at).as_secs_f64() * 1e3;
-            self.stats.edit_to_pixels_ms.push(ms);
+        if let Some(edit) = self.drawing_edit.take() {
+            let ms = now.duration_since(edit.at).as_secs_f64() * 1e3;
+            if edit.remote {
+                self.stats.remote_edit_to_pixels_ms.push(ms);
+            } else {
+                self.stats.edit_to_pixels_ms.push(ms);
+            }
         }
     }
 
@@ -269,6 +304,12 @@ impl Objects {
             return true;
         };
         self.dirty |= !changes.is_empty();
+        let remote = view.last_remote_edit();
+        if !changes.is_empty() && remote > self.remote_seen {
+            self.remote_seen = remote;
+            let edit = remote.map(Timed::remote);
+            self.edit_at = self.edit_at.or(edit);
+        }
         for id in &changes {
             self.tracked.entry(*id).or_default().stale = true;
         }
@@ -299,8 +340,10 @@ impl Objects {
             };
             tracked.generation += 1;
             tracked.meshing_since.get_or_insert(now);
-            if let Some(at) = edit_at {
-                tracked.awaited_edit.get_or_insert((tracked.generation, at));
+            if let Some(edit) = edit_at {
+                tracked
+                    .awaited_edit
+                    .get_or_insert((tracked.generation, edit));
             }
             tracked.previewed = false;
             let world_from_group = scene.world_from_group(entry.group);
@@ -318,7 +361,7 @@ impl Objects {
                 world_from_group,
                 generation: tracked.generation,
                 depth: self.depth,
-                requested_at: edit_at.unwrap_or(now),
+                requested_at: edit_at.map_or(now, |e| e.at),
                 t_secs,
             }));
         }
@@ -370,7 +413,7 @@ impl Objects {
         tracked.meshing_since.get_or_insert(now);
         tracked.previewed = true;
         if let Some(at) = edit_input_at {
-            tracked.awaited_edit = Some((tracked.generation, at));
+            tracked.awaited_edit = Some((tracked.generation, Timed::local(at)));
             self.previewed_edit = Some(at);
         }
         tracked.pending = Some(Box::new(MeshJob {
@@ -434,11 +477,17 @@ impl Objects {
                 MeshKind::Whole => self.stats.n_whole += 1,
                 MeshKind::Unchanged => {}
             }
-            if let Some((_, at)) = tracked.awaited_edit.filter(|(g, _)| generation >= *g) {
+            if let Some((_, edit)) = tracked.awaited_edit.filter(|(g, _)| generation >= *g) {
                 tracked.awaited_edit = None;
-                let ms = now.duration_since(at).as_secs_f64() * 1e3;
-                self.stats.edit_to_mesh_ms.push(ms);
-                self.drawing_edit = Some(self.drawing_edit.map_or(at, |d| d.min(at)));
+                if !edit.remote {
+                    let ms = now.duration_since(edit.at).as_secs_f64() * 1e3;
+                    self.stats.edit_to_mesh_ms.push(ms);
+                }
+                self.drawing_edit = Some(
+                    self.drawing_edit
+                        .filter(|d| d.at <= edit.at)
+                        .unwrap_or(edit),
+                );
             }
         }
     }
