@@ -33,28 +33,20 @@ const SELECTION_COLOUR: [f32; 4] = [1.0, 0.85, 0.2, 1.0];
 /// makes, and the ranges written.
 pub type PatchForRenderer = (ObjectId, Arc<Mesh>, Arc<Mesh>, MeshPatch);
 
-/// An edit being timed to the screen.
-#[derive(Clone, Copy, Debug)]
-struct Timed {
-    /// The start of the frame that took this window's input, or another peer's op's
-    /// timestamp read on this clock.
-    at: Instant,
-    /// Another peer's.
-    remote: bool,
-}
+/// Edits timed to the screen, by whose they are: this window's (from the start of the frame
+/// that took their input) and another peer's (from their op's timestamp); one of each may
+/// share a mesh, and each is timed.
+type BySource<T> = [Option<T>; 2];
+/// This window's edits in a [`BySource`].
+const LOCAL: usize = 0;
+/// Another peer's edits in a [`BySource`].
+const REMOTE: usize = 1;
 
-impl Timed {
-    fn local(at: Instant) -> Timed {
-        Timed { at, remote: false }
-    }
-
-    /// Another peer's op stamped `stamp` (micros of its wall clock), as an instant of ours.
-    fn remote(stamp: replication::Timestamp) -> Timed {
-        let now = clock::now();
-        let age = Duration::from_micros(now.wall.0.saturating_sub(stamp.0));
-        let at = now.instant.checked_sub(age).unwrap_or(now.instant);
-        Timed { at, remote: true }
-    }
+/// Another peer's op stamped `stamp` (micros of its wall clock), as an instant of ours.
+fn remote_instant(stamp: replication::Timestamp) -> Instant {
+    let now = clock::now();
+    let age = Duration::from_micros(now.wall.0.saturating_sub(stamp.0));
+    now.instant.checked_sub(age).unwrap_or(now.instant)
 }
 
 /// One scene object as the window tracks it: what was sent to the mesher, what is drawn.
@@ -94,7 +86,7 @@ pub struct Tracked {
     /// When a mesh for a later time was last asked for, while none is in flight.
     time_job: Option<TimeJob>,
     /// An edit waiting to be drawn: the first generation that holds it, and its timing.
-    awaited_edit: Option<(u64, Timed)>,
+    awaited_edit: BySource<(u64, Instant)>,
     /// Its last job was a preview, not the scene's object.
     pub previewed: bool,
 }
@@ -218,12 +210,12 @@ pub struct Objects {
     /// The scene changed since objects were last compared with what was sent.
     pub dirty: bool,
     /// An edit whose object is not yet sent to the mesher.
-    edit_at: Option<Timed>,
+    edit_at: BySource<Instant>,
     /// The input time of the edit a stroke's last preview is timed as.
     previewed_edit: Option<Instant>,
     /// An edit whose mesh this frame draws: the next frame's start, after this one is
     /// presented, ends its time to pixels.
-    drawing_edit: Option<Timed>,
+    drawing_edit: BySource<Instant>,
     /// The newest remote op timestamp already timed.
     remote_seen: Option<replication::Timestamp>,
     /// How meshes were made.
@@ -240,9 +232,9 @@ impl Objects {
             depth,
             changes_cursor: 0,
             dirty: true,
-            edit_at: None,
+            edit_at: [None; 2],
             previewed_edit: None,
-            drawing_edit: None,
+            drawing_edit: [None; 2],
             remote_seen: None,
             stats: MeshStats {
                 edit_to_mesh_ms: Samples::new(MAX_EDIT_SAMPLES),
@@ -267,7 +259,7 @@ impl Objects {
     pub fn edited(&mut self, input_at: Instant) {
         // A stroke's last preview timed it already.
         if self.previewed_edit.take() != Some(input_at) {
-            self.edit_at = Some(Timed::local(input_at));
+            self.edit_at[LOCAL] = Some(input_at);
         }
         self.dirty = true;
     }
@@ -275,12 +267,13 @@ impl Objects {
     /// A frame starts at `now`, so the one before it was presented: an edit it drew has
     /// reached the screen.
     pub fn presented(&mut self, now: Instant) {
-        if let Some(edit) = self.drawing_edit.take() {
-            let ms = now.duration_since(edit.at).as_secs_f64() * 1e3;
-            if edit.remote {
-                self.stats.remote_edit_to_pixels_ms.push(ms);
-            } else {
-                self.stats.edit_to_pixels_ms.push(ms);
+        let samples = [
+            &mut self.stats.edit_to_pixels_ms,
+            &mut self.stats.remote_edit_to_pixels_ms,
+        ];
+        for (drawing, samples) in self.drawing_edit.iter_mut().zip(samples) {
+            if let Some(at) = drawing.take() {
+                samples.push(now.duration_since(at).as_secs_f64() * 1e3);
             }
         }
     }
@@ -288,7 +281,7 @@ impl Objects {
     /// Whether this frame draws an edit's mesh (the next frame, which times it, is wanted
     /// at once).
     pub fn draws_an_edit(&self) -> bool {
-        self.drawing_edit.is_some()
+        self.drawing_edit.iter().any(Option::is_some)
     }
 
     /// Marks the objects the engine says changed since the last call stale (all of them when
@@ -307,8 +300,7 @@ impl Objects {
         let remote = view.last_remote_edit();
         if !changes.is_empty() && remote > self.remote_seen {
             self.remote_seen = remote;
-            let edit = remote.map(Timed::remote);
-            self.edit_at = self.edit_at.or(edit);
+            self.edit_at[REMOTE] = remote.map(remote_instant);
         }
         for id in &changes {
             self.tracked.entry(*id).or_default().stale = true;
@@ -323,7 +315,7 @@ impl Objects {
             return;
         }
         let mesher = &self.mesher;
-        let edit_at = self.edit_at.take();
+        let edit_at = std::mem::take(&mut self.edit_at);
         self.tracked.retain(|id, _| {
             let kept = scene.object(*id).is_some();
             if !kept {
@@ -340,10 +332,10 @@ impl Objects {
             };
             tracked.generation += 1;
             tracked.meshing_since.get_or_insert(now);
-            if let Some(edit) = edit_at {
-                tracked
-                    .awaited_edit
-                    .get_or_insert((tracked.generation, edit));
+            for (awaited, at) in tracked.awaited_edit.iter_mut().zip(edit_at) {
+                if let Some(at) = at {
+                    awaited.get_or_insert((tracked.generation, at));
+                }
             }
             tracked.previewed = false;
             let world_from_group = scene.world_from_group(entry.group);
@@ -361,7 +353,7 @@ impl Objects {
                 world_from_group,
                 generation: tracked.generation,
                 depth: self.depth,
-                requested_at: edit_at.map_or(now, |e| e.at),
+                requested_at: edit_at[LOCAL].or(edit_at[REMOTE]).unwrap_or(now),
                 t_secs,
             }));
         }
@@ -413,7 +405,7 @@ impl Objects {
         tracked.meshing_since.get_or_insert(now);
         tracked.previewed = true;
         if let Some(at) = edit_input_at {
-            tracked.awaited_edit = Some((tracked.generation, Timed::local(at)));
+            tracked.awaited_edit[LOCAL] = Some((tracked.generation, at));
             self.previewed_edit = Some(at);
         }
         tracked.pending = Some(Box::new(MeshJob {
@@ -436,7 +428,7 @@ impl Objects {
                 tracked.stale = true;
                 self.dirty = true;
                 if refused {
-                    tracked.awaited_edit = None;
+                    tracked.awaited_edit[LOCAL] = None;
                 }
             }
         }
@@ -477,17 +469,18 @@ impl Objects {
                 MeshKind::Whole => self.stats.n_whole += 1,
                 MeshKind::Unchanged => {}
             }
-            if let Some((_, edit)) = tracked.awaited_edit.filter(|(g, _)| generation >= *g) {
-                tracked.awaited_edit = None;
-                if !edit.remote {
-                    let ms = now.duration_since(edit.at).as_secs_f64() * 1e3;
+            for source in [LOCAL, REMOTE] {
+                let awaited = &mut tracked.awaited_edit[source];
+                let Some((_, at)) = awaited.filter(|(g, _)| generation >= *g) else {
+                    continue;
+                };
+                *awaited = None;
+                if source == LOCAL {
+                    let ms = now.duration_since(at).as_secs_f64() * 1e3;
                     self.stats.edit_to_mesh_ms.push(ms);
                 }
-                self.drawing_edit = Some(
-                    self.drawing_edit
-                        .filter(|d| d.at <= edit.at)
-                        .unwrap_or(edit),
-                );
+                let drawing = &mut self.drawing_edit[source];
+                *drawing = Some(drawing.map_or(at, |d| d.min(at)));
             }
         }
     }
