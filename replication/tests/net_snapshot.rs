@@ -1,7 +1,8 @@
 //! Joining from a snapshot over loopback QUIC: a joiner takes the first peer's snapshot,
 //! syncs the rest, and stores the whole log once its check passes; a snapshot holding ops
 //! signed for another session is dropped with every connection, and a remote with no
-//! snapshot or a broken one leaves the joiner syncing op by op.
+//! snapshot or a broken one leaves the joiner syncing op by op; two joiners that both start
+//! empty (two windows opening one new invite) sync both ways.
 
 mod net_support;
 
@@ -243,5 +244,28 @@ async fn no_snapshot_or_a_broken_one_leaves_the_joiner_syncing_op_by_op() {
         let sb = stats(&b.handle).await;
         assert_eq!((sb.n_snapshot_joins, sb.n_snapshots_refused), (0, 1));
         b.handle.shutdown().await.expect("stops");
+    }
+}
+
+#[tokio::test]
+async fn two_joiners_with_empty_logs_sync_both_ways() {
+    let a = spawn(1, Log::default(), None, true, None);
+    let b = spawn(2, Log::default(), None, true, None);
+    b.handle.dial(a.handle.local_addr()).await.expect("dials");
+    // B says something first, then A answers, as two windows joining one invite do.
+    b.handle
+        .author(TestPayload::Chat("hello from b".into()))
+        .await
+        .expect("authors");
+    eventually("a has b's op", || async { n_ops(&a.handle).await == 1 }).await;
+    for i in 0..3 {
+        a.handle
+            .author(TestPayload::Chat(format!("a says {i}")))
+            .await
+            .expect("authors");
+    }
+    converge(&[&a.handle, &b.handle], 4).await;
+    for node in [a, b] {
+        node.handle.shutdown().await.expect("stops");
     }
 }
