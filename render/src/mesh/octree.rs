@@ -283,37 +283,42 @@ impl OctreeMesher {
     /// blocks along the box's faces (their records' values, or the sign a block's points
     /// share).
     pub fn encloses(&self) -> bool {
-        let (nb, n, bc) = (self.n_blocks, self.grid.n_cells, self.grid.block);
-        let on_face = |p: [u32; 3]| p.iter().any(|&c| c == 0 || c == n);
-        let lattice = 0..=bc;
-        for k2 in 0..nb {
-            for k1 in 0..nb {
-                for k0 in 0..nb {
-                    let key = [k0, k1, k2];
-                    if !key.iter().any(|&k| k == 0 || k == nb - 1) {
-                        continue;
-                    }
-                    let Some(block) = self.blocks.get(&key) else {
-                        if inside(self.reps[self.block_idx(key)]) {
-                            return false;
-                        }
-                        continue;
-                    };
-                    for l2 in lattice.clone() {
-                        for l1 in lattice.clone() {
-                            for l0 in lattice.clone() {
-                                let l = [l0, l1, l2];
-                                let p = std::array::from_fn(|a| block.origin[a] + l[a]);
-                                if on_face(p) && inside(block.values[self.grid.at(l)]) {
-                                    return false;
-                                }
-                            }
-                        }
-                    }
-                }
-            }
-        }
-        true
+        let last = self.n_blocks - 1;
+        let at_side = |k: u32| k == 0 || k == last;
+        (0..=last).all(|k2| {
+            (0..=last).all(|k1| {
+                // Inside the box's side layers only the first and last block of a row.
+                let step = if at_side(k1) || at_side(k2) {
+                    1
+                } else {
+                    last.max(1)
+                };
+                (0..=last)
+                    .step_by(step as usize)
+                    .all(|k0| self.outside_on_the_faces([k0, k1, k2]))
+            })
+        })
+    }
+
+    /// Whether no grid point on the box's faces that block `key` holds is inside.
+    fn outside_on_the_faces(&self, key: [u32; 3]) -> bool {
+        let Some(block) = self.blocks.get(&key) else {
+            return !inside(self.reps[self.block_idx(key)]);
+        };
+        let (n, bc) = (self.grid.n_cells, self.grid.block);
+        let lattice = || 0..=bc;
+        lattice().all(|l2| {
+            lattice().all(|l1| {
+                lattice().all(|l0| {
+                    let l = [l0, l1, l2];
+                    let on_face = (0..3).any(|a| {
+                        let p = block.origin[a] + l[a];
+                        p == 0 || p == n
+                    });
+                    !on_face || !inside(block.values[self.grid.at(l)])
+                })
+            })
+        })
     }
 
     /// Assembles the mesh of all kept blocks.
