@@ -86,9 +86,11 @@ impl FrameStats {
         self.n_frames += 1;
     }
 
-    /// When the current frame started.
-    pub fn frame_start(&self) -> Option<Instant> {
+    /// When the current frame started (now, before the first frame), the time an edit's
+    /// input is timed from.
+    pub fn frame_start(&self) -> Instant {
         self.last_frame_start
+            .unwrap_or_else(|| clock::now().instant)
     }
 
     /// The frame that started at `start` is built at `end`.

@@ -85,7 +85,7 @@ impl SculptApp {
             .engine
             .author_validated(planned.payload.clone())
             .map_err(|e| e.to_string())?;
-        let input_at = self.stats.frame_start().unwrap_or(clock::now().instant);
+        let input_at = self.stats.frame_start();
         self.command.pending = Some((pending, planned, input_at));
         Ok(())
     }

@@ -15,7 +15,7 @@ use super::viewport::{StrokeEvent, StrokePhase};
 use ::app::brush::{Brush, BrushOp, Stroke};
 use ::app::clock;
 use ::app::engine::lock;
-use model::object::{Axis, PaintValue, Paintable, ToolKind};
+use model::object::{Axis, Edit, PaintValue, Paintable, ToolKind};
 
 /// Colour of the brush outline and the stroke being drawn.
 const BRUSH_COLOUR: [f32; 4] = [1.0, 1.0, 1.0, 1.0];
@@ -103,8 +103,8 @@ impl SculptApp {
         self.sculpt.last_stroke = Some(stroke.scene_points().to_vec());
         match planned.and_then(|planned| self.author(planned)) {
             Ok(()) => {
-                let input_at = self.stats.frame_start().unwrap_or(clock::now().instant);
-                self.send_preview(&stroke, Some(input_at));
+                let input_at = self.stats.frame_start();
+                self.send_preview(stroke.object, stroke.edit(), Some(input_at));
             }
             Err(e) => {
                 self.status = e;
@@ -123,19 +123,18 @@ impl SculptApp {
         {
             return;
         }
-        let Some(stroke) = self.sculpt.stroke.take() else {
+        let Some((object, edit)) = self.sculpt.stroke.as_ref().map(|s| (s.object, s.edit())) else {
             return;
         };
-        self.send_preview(&stroke, None);
-        self.sculpt.stroke = Some(stroke);
+        self.send_preview(object, edit, None);
         self.sculpt.preview_at = Some(now);
     }
 
-    /// Hands the mesher the stroked object with `stroke` applied, at once; `edit_input_at`
-    /// times it as the edit whose input that frame took.
-    fn send_preview(&mut self, stroke: &Stroke, edit_input_at: Option<Instant>) {
+    /// Hands the mesher `object` with a stroke's `edit` applied, at once; `edit_input_at`
+    /// times it as the edit whose input the frame that started then took.
+    fn send_preview(&mut self, object: u64, edit: Edit, edit_input_at: Option<Instant>) {
         let now = clock::now().instant;
-        let id = ObjectId(stroke.object);
+        let id = ObjectId(object);
         let (object, world_from_group) = {
             let view = lock(self.engine.view());
             let scene = view.scene();
@@ -143,7 +142,7 @@ impl SculptApp {
                 return;
             };
             let mut object = entry.object.clone();
-            if object.apply(stroke.edit()).is_err() {
+            if object.apply(edit).is_err() {
                 return;
             }
             (object, scene.world_from_group(entry.group))
