@@ -1419,12 +1419,7 @@ fn a_weak_takeover_by_another_peer_rejects_the_next_stroke_and_both_sides_say_so
     let dir = scratch("takeover");
     let invite = text(&sculpt(None, &["invite"]).stdout).trim().to_string();
     // The window listens on a port the test picks, so the headless peer can dial it.
-    let port = std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let listen = format!("127.0.0.1:{port}");
+    let listen = format!("127.0.0.1:{}", free_port());
     let peer_store = dir.join("peer");
     // The peer waits for the window's object and lease (2 ops), then takes it over.
     let mut peer = HeadlessPeer::spawn(&[
