@@ -64,6 +64,11 @@ pub struct FrameStats {
     /// Milliseconds between the starts of successive frames (includes painting).
     pub frame_interval_ms: Samples,
     last_frame_start: Option<Instant>,
+    /// When this pass's logic started (taken by the frame that follows it, if one does).
+    pass_start: Option<Now>,
+    /// Whether a frame ran since the last pass's logic (its picture is presented when the
+    /// next pass starts).
+    drew: bool,
 }
 
 impl FrameStats {
@@ -73,6 +78,8 @@ impl FrameStats {
             ui_ms: Samples::new(MAX_FRAME_SAMPLES),
             frame_interval_ms: Samples::new(MAX_FRAME_SAMPLES),
             last_frame_start: None,
+            pass_start: None,
+            drew: false,
         }
     }
 
@@ -258,10 +265,19 @@ impl SculptApp {
             live.wake();
         }
         self.objects.send_stale(view.scene(), now.instant, t_secs);
-        if self.scene_clock.playing() {
-            self.objects
-                .ask_time_jobs(view.scene(), now.instant, t_secs);
+        drop(view);
+        self.objects.flush();
+    }
+
+    /// Asks the mesher for what time changed while it runs (only for a shown window).
+    fn ask_time_jobs(&mut self, now: Now) {
+        if !self.scene_clock.playing() {
+            return;
         }
+        let t_secs = self.scene_clock.secs(now.instant);
+        let view = lock(self.engine.view());
+        self.objects
+            .ask_time_jobs(view.scene(), now.instant, t_secs);
         drop(view);
         self.objects.flush();
     }
@@ -325,18 +341,33 @@ impl eframe::App for SculptApp {
         let _ = self.set_touching(false);
     }
 
-    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+    /// Runs before every frame, and alone while the window is covered or minimized (eframe
+    /// then draws nothing): what the session sends keeps being taken and meshed, so a covered
+    /// window shows the scene at once when uncovered, its servo feels remote edits, and its
+    /// presence and replies are not held back.
+    fn logic(&mut self, _ctx: &egui::Context, _frame: &mut eframe::Frame) {
         let now = clock::now();
-        self.stats.started(now.instant);
-        self.objects.presented(now.instant);
+        if std::mem::take(&mut self.stats.drew) {
+            self.objects.presented(now.instant);
+        }
+        self.stats.pass_start = Some(now);
         self.objects.receive(now.instant);
         self.receive_reply();
         self.sync_objects(now);
+        self.publish_presence();
+    }
+
+    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        let now = self.stats.pass_start.take().unwrap_or_else(clock::now);
+        self.stats.started(now.instant);
+        self.stats.drew = true;
+        self.ask_time_jobs(now);
         self.rows.refresh(&self.engine);
         self.follow();
         self.shortcuts(ui.ctx());
         self.transfer_frame(ui.ctx());
         self.run_hooks(ui.ctx());
+        // The pointer and camera this frame moved go out now, not at the next pass.
         self.publish_presence();
         // Moving objects while time runs, and the touch tool while touching, draw every frame.
         let animating = (self.place_moving(now.instant) && self.scene_clock.playing())

@@ -190,6 +190,9 @@ pub struct MeshStats {
     /// agree, as on one machine) to the start of the frame after the one that drew it; ops
     /// that arrive when catching up count from when they were made.
     pub remote_edit_to_pixels_ms: Samples,
+    /// From another peer's op's timestamp to its object's new mesh coming back (also while
+    /// the window is covered and draws nothing).
+    pub remote_edit_to_mesh_ms: Samples,
     /// Meshes drawn that patched the last one.
     pub n_patched: u64,
     /// Meshes drawn whole.
@@ -240,6 +243,7 @@ impl Objects {
                 edit_to_mesh_ms: Samples::new(MAX_EDIT_SAMPLES),
                 edit_to_pixels_ms: Samples::new(MAX_EDIT_SAMPLES),
                 remote_edit_to_pixels_ms: Samples::new(MAX_EDIT_SAMPLES),
+                remote_edit_to_mesh_ms: Samples::new(MAX_EDIT_SAMPLES),
                 n_patched: 0,
                 n_whole: 0,
             },
@@ -475,10 +479,12 @@ impl Objects {
                     continue;
                 };
                 *awaited = None;
-                if source == LOCAL {
-                    let ms = now.duration_since(at).as_secs_f64() * 1e3;
-                    self.stats.edit_to_mesh_ms.push(ms);
-                }
+                let ms = now.duration_since(at).as_secs_f64() * 1e3;
+                let samples = [
+                    &mut self.stats.edit_to_mesh_ms,
+                    &mut self.stats.remote_edit_to_mesh_ms,
+                ];
+                samples[source].push(ms);
                 let drawing = &mut self.drawing_edit[source];
                 *drawing = Some(drawing.map_or(at, |d| d.min(at)));
             }
