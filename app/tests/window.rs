@@ -8,9 +8,10 @@
 //! Pictures are compared by coarse colour statistics, never byte for byte: the driver is a
 //! software rasteriser whose output may shift by a pixel between versions.
 //!
-//! When `DISPLAY` is set (scripts/test.sh starts Xvfb), the tests use it; otherwise each
-//! starts its own Xvfb on a free display number and fails with a clear message if Xvfb is not
-//! installed.
+//! Each test starts its own Xvfb on a free display number (and fails with a clear message if
+//! Xvfb is not installed), even when `DISPLAY` is set: windows of tests running in parallel
+//! on one display would cover each other, and eframe runs no frame, so no scripted step, for
+//! a covered window.
 #![allow(
     clippy::unwrap_used,
     reason = "helpers outside #[test] fns unwrap process output and files"
@@ -36,7 +37,7 @@ const WINDOW: &str = "900x600";
 /// The watermelon's geometry with its wedge, and the same sphere without it.
 const SPHERE: &str = "1-x^2-y^2-z^2";
 
-/// An X display for the binary: the one in `DISPLAY`, or an Xvfb this guard started.
+/// An X display for the binary: an Xvfb this guard started.
 struct Display {
     name: String,
     xvfb: Option<Child>,
@@ -55,9 +56,6 @@ impl Drop for Display {
 static NEXT_DISPLAY: AtomicU32 = AtomicU32::new(0);
 
 fn display() -> Display {
-    if let Some(name) = std::env::var("DISPLAY").ok().filter(|d| !d.is_empty()) {
-        return Display { name, xvfb: None };
-    }
     let base = 140 + (std::process::id() % 50) * 4;
     for _ in 0..40 {
         let n = base + NEXT_DISPLAY.fetch_add(1, Ordering::SeqCst) % 200;
@@ -128,13 +126,9 @@ fn sculpt_with_data(display: Option<&str>, args: &[&str], data: &Path) -> Output
     sculpt_under(display, args, data, None)
 }
 
-/// [`sculpt_with_data`], run as `WRAPPER sculpt ARGS...` when a wrapper is given.
-fn sculpt_under(
-    display: Option<&str>,
-    args: &[&str],
-    data: &Path,
-    wrapper: Option<&Path>,
-) -> Output {
+/// The binary (under `wrapper`, as `WRAPPER sculpt ARGS...`, when one is given) on `display`
+/// (`None`: no `DISPLAY` at all) with `data` as its data directory.
+fn sculpt_command(display: Option<&str>, data: &Path, wrapper: Option<&Path>) -> Command {
     let runtime = scratch("xdg-runtime");
     let mut command = match wrapper {
         Some(wrapper) => {
@@ -145,16 +139,28 @@ fn sculpt_under(
         None => Command::new(env!("CARGO_BIN_EXE_sculpt")),
     };
     command
-        .args(args)
         .env_remove("WAYLAND_DISPLAY")
         .env("XDG_RUNTIME_DIR", &runtime)
-        .env("XDG_DATA_HOME", data)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped());
+        .env("XDG_DATA_HOME", data);
     match display {
         Some(name) => command.env("DISPLAY", name),
         None => command.env_remove("DISPLAY"),
     };
+    command
+}
+
+/// [`sculpt_with_data`], run as `WRAPPER sculpt ARGS...` when a wrapper is given.
+fn sculpt_under(
+    display: Option<&str>,
+    args: &[&str],
+    data: &Path,
+    wrapper: Option<&Path>,
+) -> Output {
+    let mut command = sculpt_command(display, data, wrapper);
+    command
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
     let mut child = command.spawn().unwrap();
     for _ in 0..MAX_RUN_SECS * 20 {
         if child.try_wait().unwrap().is_some() {
@@ -215,31 +221,117 @@ fn window_under(
     args: &[&str],
     wrapper: Option<&Path>,
 ) -> (Value, RgbaImage, String) {
-    let (shot, dump) = (
-        dir.join(format!("{name}.png")),
-        dir.join(format!("{name}.json")),
-    );
-    let mut all: Vec<&str> = args.to_vec();
-    all.extend([
-        "--size",
-        WINDOW,
-        "--screenshot",
-        shot.to_str().unwrap(),
-        "--dump-state",
-        dump.to_str().unwrap(),
-        "--exit-after-frames",
-        MAX_FRAMES,
-    ]);
-    // Kept settings live in the test's own directory: a process id is reused over a run of
-    // the suite, and another test's saved layout (a wide side panel) would move the viewport.
-    let data = dir.join("xdg-data");
-    let run = sculpt_under(Some(&display.name), &all, &data, wrapper);
+    let all = with_hooks(dir, name, args);
+    let all: Vec<&str> = all.iter().map(String::as_str).collect();
+    let run = sculpt_under(Some(&display.name), &all, &window_data(dir), wrapper);
     let (stdout, stderr) = (text(&run.stdout), text(&run.stderr));
     assert!(run.status.success(), "{name}: {stdout}\n{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
-    let state = serde_json::from_str(&std::fs::read_to_string(&dump).unwrap()).unwrap();
-    let picture = RgbaImage::from_png(&std::fs::read(&shot).unwrap()).unwrap();
+    let (state, picture) = dumped(dir, name);
     (state, picture, stdout)
+}
+
+/// `args` and the hooks every window test asks for: its size, a screenshot and a state dump
+/// named `name` in `dir`, and the frame limit.
+fn with_hooks(dir: &Path, name: &str, args: &[&str]) -> Vec<String> {
+    let mut all: Vec<String> = args.iter().map(|a| a.to_string()).collect();
+    for (flag, value) in [
+        ("--size", WINDOW.to_string()),
+        (
+            "--screenshot",
+            format!("{}", dir.join(format!("{name}.png")).display()),
+        ),
+        (
+            "--dump-state",
+            format!("{}", dir.join(format!("{name}.json")).display()),
+        ),
+        ("--exit-after-frames", MAX_FRAMES.to_string()),
+    ] {
+        all.extend([flag.to_string(), value]);
+    }
+    all
+}
+
+/// Where a window test's window keeps its settings: the test's own directory, as a process
+/// id is reused over a run of the suite, and another test's saved layout (a wide side panel)
+/// would move the viewport.
+fn window_data(dir: &Path) -> PathBuf {
+    dir.join("xdg-data")
+}
+
+/// The state dump and the screenshot a window named `name` left in `dir`.
+fn dumped(dir: &Path, name: &str) -> (Value, RgbaImage) {
+    let dump = std::fs::read_to_string(dir.join(format!("{name}.json"))).unwrap();
+    let shot = std::fs::read(dir.join(format!("{name}.png"))).unwrap();
+    (
+        serde_json::from_str(&dump).unwrap(),
+        RgbaImage::from_png(&shot).unwrap(),
+    )
+}
+
+/// A window run in the background (as [`window_with`] runs one), its output going to a file.
+struct WindowProcess {
+    child: Child,
+    dir: PathBuf,
+    name: String,
+}
+
+impl WindowProcess {
+    fn spawn(display: &Display, dir: &Path, name: &str, args: &[&str]) -> WindowProcess {
+        let out = std::fs::File::create(dir.join(format!("{name}.out"))).unwrap();
+        let child = sculpt_command(Some(&display.name), &window_data(dir), None)
+            .args(with_hooks(dir, name, args))
+            .stdout(out.try_clone().unwrap())
+            .stderr(out)
+            .spawn()
+            .unwrap();
+        WindowProcess {
+            child,
+            dir: dir.to_path_buf(),
+            name: name.to_string(),
+        }
+    }
+
+    fn output(&self) -> String {
+        std::fs::read_to_string(self.dir.join(format!("{}.out", self.name))).unwrap_or_default()
+    }
+
+    /// Waits until the window has printed `line` (a scripted step prints when it runs, so
+    /// the window is shown then), at most [`MAX_RUN_SECS`].
+    fn wait_for_output(&self, line: &str) {
+        for _ in 0..MAX_RUN_SECS * 20 {
+            if self.output().contains(line) {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        panic!("{} never printed {line:?}:\n{}", self.name, self.output());
+    }
+
+    /// Waits for the window to close (killing it after [`MAX_RUN_SECS`]); its state dump.
+    fn finish(mut self) -> Value {
+        for _ in 0..MAX_RUN_SECS * 20 {
+            if let Some(status) = self.child.try_wait().unwrap() {
+                let output = self.output();
+                assert!(status.success(), "{}: {output}", self.name);
+                assert!(!output.contains("panicked"), "{output}");
+                return dumped(&self.dir, &self.name).0;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        panic!(
+            "{} ran over {MAX_RUN_SECS} s:\n{}",
+            self.name,
+            self.output()
+        );
+    }
+}
+
+impl Drop for WindowProcess {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
 }
 
 /// Fractions of the viewport's middle that are watermelon flesh (red), rind (green), and
@@ -1386,6 +1478,131 @@ fn a_peers_live_edit_is_timed_from_its_op_to_the_presented_frame() {
     println!(
         "the peer's colour on the window's screen after {:.1} ms",
         remote[0]
+    );
+}
+
+/// How long the window on top waits after its last stroke before it closes, seconds.
+const ON_TOP_SECS: u64 = 6;
+
+/// Two windows on one invite: `below` opens first (on `below_display`), says hello and waits
+/// for the other's ball and `n_strokes` carve strokes; `above` opens once `below` shows (on
+/// top of it when both share a display), dials it, waits for the hello, makes the ball and
+/// the strokes, waits [`ON_TOP_SECS`] and closes.
+/// The states of `below` and `above`.
+fn two_windows(
+    (below_display, above_display): (&Display, &Display),
+    dir: &Path,
+    n_strokes: usize,
+) -> (Value, Value) {
+    let invite = text(&sculpt(None, &["invite"]).stdout).trim().to_string();
+    let listen = format!("127.0.0.1:{}", free_port());
+    let (below_store, above_store) = (dir.join("below"), dir.join("above"));
+    // Its own chat line, the ball and the strokes.
+    let n_ops = format!("wait-ops: {}", n_strokes + 2);
+    let below = WindowProcess::spawn(
+        below_display,
+        dir,
+        "below",
+        &[
+            "--store",
+            below_store.to_str().unwrap(),
+            "--invite",
+            &invite,
+            "--no-lan",
+            "--listen",
+            &listen,
+            "--command",
+            "hello",
+            "--command",
+            &n_ops,
+        ],
+    );
+    // A step runs only in a shown window: `below` is up before `above` opens.
+    below.wait_for_output("scripted command: hello");
+    // The strokes start once the two are in sync (the chat line came).
+    let mut script = vec![
+        "wait-ops: 1".to_string(),
+        "new: 0.8-sqrt(x^2+y^2+z^2)".to_string(),
+        "tool: carve ball radius 0.08".to_string(),
+    ];
+    for i in 0..n_strokes {
+        let y = 0.4 + 0.2 * (i % 10) as f32 / 10.0;
+        script.push(format!("drag: 0.4,{y}:0.6,{}", y + 0.03));
+    }
+    script.push(format!("wait-secs: {ON_TOP_SECS}"));
+    let mut args = vec![
+        "--store",
+        above_store.to_str().unwrap(),
+        "--invite",
+        &invite,
+        "--no-lan",
+        "--listen",
+        "127.0.0.1:0",
+        "--dial",
+        &listen,
+    ];
+    for line in &script {
+        args.extend(["--command", line]);
+    }
+    let (above, _, _) = window_with(above_display, dir, "above", &args);
+    (below.finish(), above)
+}
+
+#[test]
+fn a_covered_window_keeps_meshing_another_peers_strokes_and_shows_them_when_uncovered() {
+    let display = display();
+    let dir = scratch("covered");
+    let (below, above) = two_windows((&display, &display), &dir, 3);
+    assert_eq!(above["objects"][0]["n_edits"], 3, "{above}");
+    assert_eq!(below["objects"][0]["n_edits"], 3, "{below}");
+    // Covered, the window drew nothing until the other closed...
+    let pixels = numbers(
+        &below["remote_edit_to_pixels_ms"],
+        "remote_edit_to_pixels_ms",
+    );
+    assert!(
+        !pixels.is_empty() && pixels.iter().all(|ms| *ms > (ON_TOP_SECS * 1000) as f64),
+        "the window below was not covered: {pixels:?}"
+    );
+    // ...but it took each op and meshed it as it came.
+    let meshed = numbers(&below["remote_edit_to_mesh_ms"], "remote_edit_to_mesh_ms");
+    assert!(meshed.len() >= 2, "{meshed:?}");
+    assert!(
+        meshed
+            .iter()
+            .all(|ms| *ms < (ON_TOP_SECS * 1000 / 2) as f64),
+        "{meshed:?}"
+    );
+}
+
+#[test]
+fn another_windows_strokes_reach_this_windows_screen_timed_from_their_ops() {
+    let (below_display, above_display) = (display(), display());
+    let dir = scratch("two-windows");
+    let n_strokes = env_or("SCULPT_REMOTE_STROKES", 3);
+    let (below, _) = two_windows((&below_display, &above_display), &dir, n_strokes);
+    assert_eq!(below["objects"][0]["n_edits"], n_strokes, "{below}");
+    let mut pixels = numbers(
+        &below["remote_edit_to_pixels_ms"],
+        "remote_edit_to_pixels_ms",
+    );
+    // Shown side by side, each stroke is drawn long before the other window closes.
+    assert!(pixels.len() >= 2, "{pixels:?}");
+    assert!(
+        pixels
+            .iter()
+            .all(|ms| *ms < (ON_TOP_SECS * 1000 / 2) as f64),
+        "{pixels:?}"
+    );
+    pixels.sort_by(f64::total_cmp);
+    let at = |q: f64| pixels[((pixels.len() - 1) as f64 * q).round() as usize];
+    println!(
+        "another window's edits on this window's screen after (ms): {} samples, median {:.1}, \
+         p99 {:.1}, max {:.1}",
+        pixels.len(),
+        at(0.5),
+        at(0.99),
+        at(1.0)
     );
 }
 
