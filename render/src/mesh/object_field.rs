@@ -435,16 +435,24 @@ mod tests {
         assert_eq!(m.misoriented_edges(), 0, "{what}: inconsistent winding");
     }
 
-    /// Remeshes the boxes `dirty` with `field`; returns the blocks evaluated again and those
-    /// kept unchanged next to them.
-    fn remesh(mesher: &mut OctreeMesher, field: &mut ObjectField, dirty: &Dirty) -> (usize, usize) {
+    /// Remeshes the boxes `dirty` with `field`; returns the blocks evaluated again, those
+    /// kept unchanged next to them, and the nodes whose intervals were not asked.
+    fn remesh(
+        mesher: &mut OctreeMesher,
+        field: &mut ObjectField,
+        dirty: &Dirty,
+    ) -> (usize, usize, usize) {
         let boxes = match dirty {
             Dirty::Boxes(boxes) => boxes.clone(),
             Dirty::Everywhere => vec![settings(6).bounds],
         };
-        boxes.iter().fold((0, 0), |(e, u), b| {
+        boxes.iter().fold((0, 0, 0), |(e, u, s), b| {
             let stats = mesher.remesh(field, *b).unwrap();
-            (e + stats.blocks_evaluated, u + stats.blocks_unchanged)
+            (
+                e + stats.blocks_evaluated,
+                u + stats.blocks_unchanged,
+                s + stats.intervals_skipped,
+            )
         })
     }
 
@@ -683,9 +691,12 @@ mod tests {
                 "a remesh of part of the edit's box must differ from the full mesh"
             );
 
-            let (n_evaluated, n_unchanged) = remesh(&mut mesher, &mut field, &dirty);
+            let (n_evaluated, n_unchanged, n_skipped) = remesh(&mut mesher, &mut field, &dirty);
             // Some blocks above the range read none of its changed values: kept as they were.
             assert!(n_unchanged > 0, "no block was kept");
+            // The nodes above the edit's blocks hold the rest of the ball's surface: none of
+            // their intervals is asked, and the mesh is still the full mesh (below).
+            assert!(n_skipped > 0, "every node's interval was asked");
             let remeshed = mesher.mesh().unwrap();
             assert_closed(&remeshed, "remeshed");
             assert!(

@@ -88,6 +88,9 @@ pub enum OctreeMeshError {
 /// Counters that show how much work pruning saved.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct MeshStats {
+    /// Octree nodes above the blocks whose interval was not asked: a block in them that the
+    /// remesh kept is crossed by the surface, so none could be discarded.
+    pub intervals_skipped: usize,
     /// Octree nodes (of any size) discarded by interval arithmetic.
     pub nodes_pruned: usize,
     /// Leaf blocks whose grid was evaluated.
@@ -555,12 +558,19 @@ impl Visit<'_> {
         }
         let lo = grid.point(origin);
         let hi = grid.point(origin.map(|o| o + size));
-        let (f_lo, f_hi) = field.interval(lo, hi);
-        if f_lo > 0.0 || f_hi < 0.0 {
-            self.stats.nodes_pruned += 1;
-            let rep = if f_lo > 0.0 { grid.rep() } else { -grid.rep() };
-            self.prune(field, first, last, rep);
-            return;
+        // A node holding a block this visit leaves as it was, crossed by the surface, holds
+        // values of both signs, so no interval can prune it: its interval is not asked (over
+        // a long history a large node's interval folds nearly every edit).
+        if size > bc && self.holds_kept_crossing(first, last) {
+            self.stats.intervals_skipped += 1;
+        } else {
+            let (f_lo, f_hi) = field.interval(lo, hi);
+            if f_lo > 0.0 || f_hi < 0.0 {
+                self.stats.nodes_pruned += 1;
+                let rep = if f_lo > 0.0 { grid.rep() } else { -grid.rep() };
+                self.prune(field, first, last, rep);
+                return;
+            }
         }
         let mut simplified = field.simplify(lo, hi);
         let field: &mut F = match simplified.as_mut() {
@@ -579,6 +589,23 @@ impl Visit<'_> {
             let child = std::array::from_fn(|a| origin[a] + corner_offset(k)[a] * half);
             self.node(field, child, half);
         }
+    }
+
+    /// Whether a block of `first..=last` outside the blocks this visit may change (`wide`)
+    /// has crossed cells: its lattice values, which the field still gives (it is unchanged
+    /// outside the dirty box), have both signs.
+    fn holds_kept_crossing(&self, first: [u32; 3], last: [u32; 3]) -> bool {
+        (first[0]..=last[0]).any(|x| {
+            self.mesher
+                .blocks
+                .range([x, first[1], first[2]]..=[x, last[1], last[2]])
+                .any(|(k, b)| {
+                    k[2] >= first[2]
+                        && k[2] <= last[2]
+                        && !b.cells.is_empty()
+                        && !self.wide.contains(*k)
+                })
+        })
     }
 
     /// Records a pruned node's blocks `first..=last`, then gives cells to those of its blocks
