@@ -958,22 +958,22 @@ fn vertex_normals<F: Field>(
         .collect()
 }
 
-/// The Hermite data of every bracketed crossing: its point, f there and the gradient there,
-/// in two bulk calls.
+/// The Hermite data of every bracketed crossing: its point (the bracket's end nearer the
+/// surface), f there (known from the narrowing) and the gradient there, in one bulk call.
 fn hermite_data<F: Field>(field: &mut F, brackets: &[Bracket]) -> Vec<Hermite> {
-    let points: Vec<[f32; 3]> = brackets.iter().map(Bracket::crossing).collect();
-    let xs: Vec<f32> = points.iter().map(|p| p[0]).collect();
-    let ys: Vec<f32> = points.iter().map(|p| p[1]).collect();
-    let zs: Vec<f32> = points.iter().map(|p| p[2]).collect();
-    let mut values = vec![0.0f32; points.len()];
-    field.values(&xs, &ys, &zs, &mut values);
-    let mut grads = vec![[0.0f32; 3]; points.len()];
+    let crossings: Vec<([f32; 3], f32)> = brackets.iter().map(Bracket::crossing).collect();
+    let xs: Vec<f32> = crossings.iter().map(|(p, _)| p[0]).collect();
+    let ys: Vec<f32> = crossings.iter().map(|(p, _)| p[1]).collect();
+    let zs: Vec<f32> = crossings.iter().map(|(p, _)| p[2]).collect();
+    let mut grads = vec![[0.0f32; 3]; crossings.len()];
     field.gradients(&xs, &ys, &zs, &mut grads);
-    (0..points.len())
-        .map(|i| Hermite {
-            point: points[i],
-            value: values[i],
-            gradient: grads[i],
+    crossings
+        .iter()
+        .zip(grads)
+        .map(|(&(point, value), gradient)| Hermite {
+            point,
+            value,
+            gradient,
         })
         .collect()
 }

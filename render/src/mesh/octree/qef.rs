@@ -24,13 +24,25 @@ const QEF_REGULARISATION: f64 = 0.02;
 /// Directions the planes leave free stay near the mass point.
 const QEF_STEPS: usize = 2;
 
-/// Bisection steps that locate each edge crossing before the final linear interpolation.
+/// Width, as a fraction of its grid edge, that each crossing's bracket is narrowed to: the
+/// crossing is then within 1/64 cell of a sign change of f.
 ///
 /// Linear interpolation alone misplaces crossings where f has a kink along the edge (near
-/// CSG edges); 6 steps bound the error by 1/64 cell. The plane of a crossing does not depend
-/// on where it lies on a flat face (its value corrects for that), but the crossings' mean
-/// does, and on curved faces the expansion is only good near the surface.
-const CROSSING_BISECTIONS: usize = 6;
+/// CSG edges). The plane of a crossing does not depend on where it lies on a flat face (its
+/// value corrects for that), but the crossings' mean does, and on curved faces the expansion
+/// is only good near the surface.
+const CROSSING_WIDTH: f32 = 1.0 / 64.0;
+
+/// Rounds that step by false position (Illinois: an end kept twice in a row counts half) or,
+/// where the line through the bracket's ends puts the sign change within half of
+/// [`CROSSING_WIDTH`] of the last point, try a point that far past it: where f is nearly
+/// linear along the edge the first step lands that close and the second closes the
+/// bracket there, two evaluations where bisection takes six.
+const SECANT_ROUNDS: usize = 6;
+
+/// Rounds in all: after the secant rounds, bisection narrows any bracket, even a whole edge,
+/// to [`CROSSING_WIDTH`] (six halvings).
+const MAX_CROSSING_ROUNDS: usize = SECANT_ROUNDS + 6;
 
 /// A sign change of f on the segment `pa..pb`, bracketed in `t.0..t.1` with values `f`.
 pub(super) struct Bracket {
@@ -45,36 +57,121 @@ impl Bracket {
         std::array::from_fn(|a| self.pa[a] + t * (self.pb[a] - self.pa[a]))
     }
 
-    /// The crossing by linear interpolation inside the bracket.
-    pub(super) fn crossing(&self) -> [f32; 3] {
-        let s = self.f.0 / (self.f.0 - self.f.1);
-        let s = if s.is_finite() {
-            s.clamp(0.0, 1.0)
-        } else {
-            0.5
+    fn width(&self) -> f32 {
+        self.t.1 - self.t.0
+    }
+
+    /// The crossing: of the bracket's ends that the narrowing evaluated (at least one), the
+    /// one nearer the surface (the smaller |f|), and f there. The edge's own ends are left
+    /// out: a block without a record lends its neighbours a stand-in of the right sign for
+    /// its values, not f.
+    pub(super) fn crossing(&self) -> ([f32; 3], f32) {
+        let magnitude = |t: f32, f: f32| {
+            if t == 0.0 || t == 1.0 || f.is_nan() {
+                f32::INFINITY
+            } else {
+                f.abs()
+            }
         };
-        self.at(self.t.0 + s * (self.t.1 - self.t.0))
+        if magnitude(self.t.1, self.f.1) < magnitude(self.t.0, self.f.0) {
+            (self.at(self.t.1), self.f.1)
+        } else {
+            (self.at(self.t.0), self.f.0)
+        }
     }
 }
 
-/// Narrows every bracket by bisection, evaluating all midpoints of a round in one bulk call.
+/// How a bracket is being narrowed: the end last replaced and how often the other was kept.
+#[derive(Clone, Copy, Default)]
+struct Narrowing {
+    /// The end (0 or 1) the last evaluation replaced, if any.
+    replaced: Option<usize>,
+    /// Weights of the ends' values in the false position (halved while an end is kept).
+    weight: [f32; 2],
+}
+
+impl Narrowing {
+    /// Where round `round` evaluates f in bracket `b`.
+    fn next(&self, b: &Bracket, round: usize) -> f32 {
+        let (t0, t1) = b.t;
+        if round >= SECANT_ROUNDS {
+            return 0.5 * (t0 + t1);
+        }
+        let (f0, f1) = b.f;
+        let step = 0.5 * CROSSING_WIDTH;
+        if let Some(end) = self.replaced {
+            // The line through the ends: how far from the last point its zero lies.
+            let last = if end == 0 { f0 } else { f1 };
+            let distance = (last / (f1 - f0)).abs() * b.width();
+            if distance < step {
+                return if end == 0 { t0 + step } else { t1 - step };
+            }
+        }
+        let (g0, g1) = (f0 * self.weight[0], f1 * self.weight[1]);
+        let s = g0 / (g0 - g1);
+        let s = if s.is_finite() {
+            s.clamp(1e-3, 1.0 - 1e-3)
+        } else {
+            0.5
+        };
+        t0 + s * (t1 - t0)
+    }
+
+    /// End `end` was replaced: the other end, kept twice in a row, counts half from now on.
+    fn replace(&mut self, end: usize) {
+        if self.replaced == Some(end) {
+            self.weight[1 - end] *= 0.5;
+        }
+        self.weight[end] = 1.0;
+        self.replaced = Some(end);
+    }
+}
+
+/// Narrows every bracket to [`CROSSING_WIDTH`] (false position and points just past it, then
+/// bisection), evaluating each round's points in one bulk call.
 pub(super) fn refine_crossings<F: Field>(field: &mut F, brackets: &mut [Bracket]) {
     let n = brackets.len();
-    let (mut xs, mut ys, mut zs) = (vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]);
+    let (mut xs, mut ys, mut zs) = (
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
     let mut out = vec![0.0f32; n];
-    for _ in 0..CROSSING_BISECTIONS {
-        for (i, b) in brackets.iter().enumerate() {
-            let p = b.at(0.5 * (b.t.0 + b.t.1));
-            (xs[i], ys[i], zs[i]) = (p[0], p[1], p[2]);
+    let mut narrowing = vec![
+        Narrowing {
+            replaced: None,
+            weight: [1.0; 2],
+        };
+        n
+    ];
+    let mut asked = vec![0.0f32; n];
+    let mut active: Vec<usize> = Vec::with_capacity(n);
+    for round in 0..MAX_CROSSING_ROUNDS {
+        active.clear();
+        active.extend((0..n).filter(|&i| brackets[i].width() > CROSSING_WIDTH));
+        if active.is_empty() {
+            return;
         }
-        field.values(&xs, &ys, &zs, &mut out);
-        for (b, &fm) in brackets.iter_mut().zip(&out) {
-            let tm = 0.5 * (b.t.0 + b.t.1);
-            if inside(fm) == inside(b.f.0) {
-                (b.t.0, b.f.0) = (tm, fm);
+        xs.clear();
+        ys.clear();
+        zs.clear();
+        for &i in &active {
+            asked[i] = narrowing[i].next(&brackets[i], round);
+            let p = brackets[i].at(asked[i]);
+            xs.push(p[0]);
+            ys.push(p[1]);
+            zs.push(p[2]);
+        }
+        field.values(&xs, &ys, &zs, &mut out[..active.len()]);
+        for (&i, &fm) in active.iter().zip(&out) {
+            let b = &mut brackets[i];
+            let end = if inside(fm) == inside(b.f.0) { 0 } else { 1 };
+            if end == 0 {
+                (b.t.0, b.f.0) = (asked[i], fm);
             } else {
-                (b.t.1, b.f.1) = (tm, fm);
+                (b.t.1, b.f.1) = (asked[i], fm);
             }
+            narrowing[i].replace(end);
         }
     }
 }
@@ -438,6 +535,96 @@ fn invert3(m: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// f along x only, `profile(x)`, counting the points it is asked for.
+    struct AlongX<P: Fn(f32) -> f32> {
+        profile: P,
+        n_values: usize,
+    }
+
+    impl<P: Fn(f32) -> f32> Field for AlongX<P> {
+        fn interval(&mut self, _: [f32; 3], _: [f32; 3]) -> (f32, f32) {
+            (f32::NAN, f32::NAN)
+        }
+
+        fn values(&mut self, xs: &[f32], _: &[f32], _: &[f32], out: &mut [f32]) {
+            self.n_values += xs.len();
+            for (o, &x) in out.iter_mut().zip(xs) {
+                *o = (self.profile)(x);
+            }
+        }
+    }
+
+    /// The bracket of `field`'s sign change on the unit edge along x, narrowed.
+    fn narrowed<P: Fn(f32) -> f32>(field: &mut AlongX<P>) -> Vec<Bracket> {
+        let mut brackets = vec![Bracket {
+            pa: [0.0; 3],
+            pb: [1.0, 0.0, 0.0],
+            t: (0.0, 1.0),
+            f: ((field.profile)(0.0), (field.profile)(1.0)),
+        }];
+        refine_crossings(field, &mut brackets);
+        brackets
+    }
+
+    /// Each bracket is at most the crossing width and still holds the sign change.
+    fn assert_narrowed(brackets: &[Bracket], what: &str) {
+        for b in brackets {
+            assert!(b.width() <= CROSSING_WIDTH, "{what}: width {}", b.width());
+            assert_ne!(inside(b.f.0), inside(b.f.1), "{what}: {:?}", b.f);
+        }
+    }
+
+    #[test]
+    fn where_f_is_linear_along_the_edge_two_values_narrow_a_crossing() {
+        for k in 1..100 {
+            let root = k as f32 / 100.0;
+            let mut field = AlongX {
+                profile: move |x: f32| 0.3 * (root - x),
+                n_values: 0,
+            };
+            let brackets = narrowed(&mut field);
+            assert_narrowed(&brackets, &format!("root {root}"));
+            assert!(
+                field.n_values <= 2,
+                "root {root}: {} values",
+                field.n_values
+            );
+        }
+    }
+
+    #[test]
+    fn a_kink_or_a_curve_along_the_edge_is_narrowed_within_the_rounds() {
+        // A crease (two planes meeting at 0.37), and a sphere two cells across the edge's
+        // line, one cell off it; each with its sign change at `root`.
+        let kinked =
+            |root: f32| move |x: f32| (root - x).min(4.0 * (0.37 - x) + (root - 0.37).max(0.0));
+        let curved =
+            |root: f32| move |x: f32| 2.0 - ((x - root + 3f32.sqrt()).powi(2) + 1.0).sqrt();
+        // Values per crossing on average, at most: bisection takes 6.
+        let n_kinked = mean_values(kinked);
+        let n_curved = mean_values(curved);
+        assert!(n_kinked < 5.5, "{n_kinked} values a crossing");
+        assert!(n_curved < 3.0, "{n_curved} values a crossing");
+    }
+
+    /// Narrows the crossings of `profile(root)` for roots along the edge, each within the
+    /// width and the rounds; the mean number of values asked per crossing.
+    fn mean_values<P: Fn(f32) -> f32>(profile: impl Fn(f32) -> P) -> f64 {
+        let mut n_values = 0;
+        for k in 1..100 {
+            let root = k as f32 / 100.0;
+            let mut field = AlongX {
+                profile: profile(root),
+                n_values: 0,
+            };
+            let brackets = narrowed(&mut field);
+            assert_narrowed(&brackets, &format!("root {root}"));
+            assert!(field.n_values <= MAX_CROSSING_ROUNDS, "root {root}");
+            n_values += field.n_values;
+        }
+        n_values as f64 / 99.0
+    }
 
     /// Hermite data on the plane through `point` with outward normal `outward`.
     fn on_plane(points: &[[f32; 3]], outward: [f32; 3]) -> Vec<Hermite> {
