@@ -1,10 +1,10 @@
-//! Vertex placement for dual contouring: edge crossings found by bisection, their Hermite data
-//! (point, value, gradient), the quadric error function (QEF) whose minimiser keeps sharp
-//! edges and corners, and the normals of vertices on those features.
+//! Vertex placement for dual contouring: edge crossings narrowed by false position, their
+//! Hermite data (point, value, gradient), the quadric error function (QEF) whose minimiser
+//! keeps sharp edges and corners, and the normals of vertices on those features.
 //!
 //! Each crossing stands for the plane where the first-order expansion of f about it vanishes,
 //! f(x) + g . (y - x) = 0: on a flat face that is the face itself, wherever along the edge the
-//! bisection stopped, so the planes of two faces meet exactly on their crease. The vertex of a
+//! narrowing stopped, so the planes of two faces meet exactly on their crease. The vertex of a
 //! patch is the least-squares point of its planes, found in f64 about the crossings' mean
 //! with a small Tikhonov term for the directions the planes leave free, and kept in its cell
 //! by minimising the quadric over the cell (or, for a feature just outside, over a slightly
@@ -201,7 +201,7 @@ pub(super) const FEATURE_REACH_CELLS: f32 = 0.5;
 const FEATURE_FIT_CELLS: f64 = 0.02;
 
 /// The largest correction, in cells, that a crossing's value may make to its plane
-/// (|f| / |gradient|): the bisection leaves a crossing within 1/64 cell of the surface, so a
+/// (|f| / |gradient|): the narrowing leaves a crossing within 1/64 cell of the surface, so a
 /// larger one comes from a gradient too small to trust, and the plane then goes through the
 /// crossing's point.
 const MAX_PLANE_CORRECTION_CELLS: f32 = 1.0 / 16.0;
