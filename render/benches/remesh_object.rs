@@ -28,8 +28,7 @@
 //! the bytes each wrote.
 
 use divan::Bencher;
-use glam::DVec3;
-use model::object::{Domain, Edit, Formula, Geometry, Object, ObjectData};
+use model::object::{Edit, Object};
 use render::gpu::Renderer;
 use render::mesh::object_field::{Dirty, dirty_boxes};
 use render::mesh::octree::{MeshSettings, OctreeMesher, mesh};
@@ -55,19 +54,7 @@ fn edit(k: usize, n: usize, phase: f64) -> Edit {
 }
 
 fn object() -> Object {
-    let mut object = Object::new(ObjectData {
-        geometry: Some(Geometry::implicit_in(
-            Formula::new("1-sqrt(x^2+y^2+z^2)").expect("short formula"),
-            Domain::new(DVec3::ZERO, DVec3::splat(2.2)),
-        )),
-        ..ObjectData::default()
-    })
-    .expect("the ball compiles");
-    for k in 0..N_EDITS {
-        object.apply(edit(k, N_EDITS, 0.0)).expect("valid edit");
-    }
-    object.prepare();
-    object
+    model::models::spiral_ball(N_EDITS, TOOL_RADIUS).expect("the workload compiles")
 }
 
 fn settings(depth: u8) -> MeshSettings {

@@ -25,9 +25,8 @@
 
 use std::time::{Duration, Instant};
 
-use glam::DVec3;
 use model::object::Transform;
-use model::object::{Domain, Edit, Formula, Geometry, Object, ObjectData};
+use model::object::{Edit, Object};
 use model::scene::ObjectId;
 use render::camera::Camera;
 use render::gpu::offscreen::Headless;
@@ -226,16 +225,5 @@ fn spiral_edit(k: usize, n: usize, phase: f64) -> Edit {
 }
 
 fn object(n_edits: usize) -> Result<Object, Error> {
-    let mut object = Object::new(ObjectData {
-        geometry: Some(Geometry::implicit_in(
-            Formula::new("1-sqrt(x^2+y^2+z^2)")?,
-            Domain::new(DVec3::ZERO, DVec3::splat(2.2)),
-        )),
-        ..ObjectData::default()
-    })?;
-    for k in 0..n_edits {
-        object.apply(spiral_edit(k, n_edits, 0.0))?;
-    }
-    object.prepare();
-    Ok(object)
+    Ok(model::models::spiral_ball(n_edits, TOOL_RADIUS)?)
 }

@@ -5,8 +5,6 @@
 //!
 //! `cargo run -p render --release --example remesh_history` (`-- N...` for other lengths).
 
-use glam::DVec3;
-use model::object::{Domain, Formula, Geometry, Object, ObjectData};
 use render::mesh::object_field::{Dirty, dirty_boxes};
 use render::mesh::octree::{MeshSettings, OctreeMesher};
 use render::mesh::{Aabb, ObjectField};
@@ -43,20 +41,7 @@ fn main() {
         depth: DEPTH,
     };
     for n in lengths {
-        let mut object = Object::new(ObjectData {
-            geometry: Some(Geometry::implicit_in(
-                Formula::new("1-sqrt(x^2+y^2+z^2)").expect("short formula"),
-                Domain::new(DVec3::ZERO, DVec3::splat(2.2)),
-            )),
-            ..ObjectData::default()
-        })
-        .expect("the ball compiles");
-        for k in 0..n {
-            object
-                .apply(model::models::spiral_edit(k, n, 0.0, TOOL_RADIUS))
-                .expect("valid edit");
-        }
-        object.prepare();
+        let mut object = model::models::spiral_ball(n, TOOL_RADIUS).expect("the workload compiles");
         let mut mesher = OctreeMesher::new(&settings).expect("valid settings");
         let started = now();
         mesher

@@ -4,7 +4,9 @@
 
 use glam::DVec3;
 
-use crate::object::{Edit, EditOp, Pose, ToolShape};
+use crate::object::{
+    Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData, ObjectError, Pose, ToolShape,
+};
 
 /// The benchmarks' sculpting history (render's `remesh_object` and `remesh_bench`):
 /// edit `k` of a golden-angle spiral of `n` over the unit sphere, turned by `phase` radians; a
@@ -30,4 +32,21 @@ pub fn spiral_edit(k: usize, n: usize, phase: f64, tool_radius: f64) -> Edit {
         let side = at.any_orthonormal_vector() * 0.03;
         Edit::stroke(op, tool, vec![Pose::at(at - side), Pose::at(at + side)])
     }
+}
+
+/// The unit ball (`1-sqrt(x^2+y^2+z^2)` in a 2.2-unit domain) carved by the first `n` edits
+/// of [`spiral_edit`] with tools of `tool_radius`, indexed: the object the benchmarks remesh.
+pub fn spiral_ball(n: usize, tool_radius: f64) -> Result<Object, ObjectError> {
+    let mut object = Object::new(ObjectData {
+        geometry: Some(Geometry::implicit_in(
+            Formula::new("1-sqrt(x^2+y^2+z^2)")?,
+            Domain::new(DVec3::ZERO, DVec3::splat(2.2)),
+        )),
+        ..ObjectData::default()
+    })?;
+    for k in 0..n {
+        object.apply(spiral_edit(k, n, 0.0, tool_radius))?;
+    }
+    object.prepare();
+    Ok(object)
 }
