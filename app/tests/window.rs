@@ -1417,6 +1417,28 @@ fn free_port() -> u16 {
         .port()
 }
 
+/// The flags that put a process on `store` in `invite`'s session over loopback only,
+/// listening on `listen` and dialing `dial` when given, with each of `commands` as a
+/// `--command`.
+fn on_loopback<'a>(
+    store: &'a Path,
+    invite: &'a str,
+    (listen, dial): (&'a str, Option<&'a str>),
+    commands: &[&'a str],
+) -> Vec<&'a str> {
+    let store = store.to_str().unwrap();
+    let mut args = vec![
+        "--store", store, "--invite", invite, "--no-lan", "--listen", listen,
+    ];
+    if let Some(dial) = dial {
+        args.extend(["--dial", dial]);
+    }
+    for command in commands {
+        args.extend(["--command", *command]);
+    }
+    args
+}
+
 #[test]
 fn a_peers_live_edit_is_timed_from_its_op_to_the_presented_frame() {
     let display = display();
@@ -1425,41 +1447,22 @@ fn a_peers_live_edit_is_timed_from_its_op_to_the_presented_frame() {
     let listen = format!("127.0.0.1:{}", free_port());
     let peer_store = dir.join("peer");
     // The peer dials the window, waits for its ball, then colours it: a live remote edit.
-    let _peer = HeadlessPeer::spawn(&[
-        "--store",
-        peer_store.to_str().unwrap(),
-        "--invite",
+    let mut peer_args = on_loopback(
+        &peer_store,
         &invite,
-        "--no-lan",
-        "--listen",
-        "127.0.0.1:0",
-        "--dial",
-        &listen,
-        "--json",
-        "--wait-ops",
-        "1",
-        "--command",
-        "colour: 0.2, 0.4, 0.9",
-    ]);
-    let store = dir.join("window");
-    let (state, _, _) = window_with(
-        &display,
-        &dir,
-        "remote",
-        &[
-            "--store",
-            store.to_str().unwrap(),
-            "--invite",
-            &invite,
-            "--no-lan",
-            "--listen",
-            &listen,
-            "--command",
-            "new: 0.8-sqrt(x^2+y^2+z^2)",
-            "--command",
-            "wait-ops: 2",
-        ],
+        ("127.0.0.1:0", Some(&listen)),
+        &["colour: 0.2, 0.4, 0.9"],
     );
+    peer_args.extend(["--json", "--wait-ops", "1"]);
+    let _peer = HeadlessPeer::spawn(&peer_args);
+    let store = dir.join("window");
+    let window_args = on_loopback(
+        &store,
+        &invite,
+        (&listen, None),
+        &["new: 0.8-sqrt(x^2+y^2+z^2)", "wait-ops: 2"],
+    );
+    let (state, _, _) = window_with(&display, &dir, "remote", &window_args);
     assert!(
         state["objects"][0]["diffuse"]
             .as_str()
@@ -1499,24 +1502,8 @@ fn two_windows(
     let (below_store, above_store) = (dir.join("below"), dir.join("above"));
     // Its own chat line, the ball and the strokes.
     let n_ops = format!("wait-ops: {}", n_strokes + 2);
-    let below = WindowProcess::spawn(
-        below_display,
-        dir,
-        "below",
-        &[
-            "--store",
-            below_store.to_str().unwrap(),
-            "--invite",
-            &invite,
-            "--no-lan",
-            "--listen",
-            &listen,
-            "--command",
-            "hello",
-            "--command",
-            &n_ops,
-        ],
-    );
+    let below_args = on_loopback(&below_store, &invite, (&listen, None), &["hello", &n_ops]);
+    let below = WindowProcess::spawn(below_display, dir, "below", &below_args);
     // A step runs only in a shown window: `below` is up before `above` opens.
     below.wait_for_output("scripted command: hello");
     // The strokes start once the two are in sync (the chat line came).
@@ -1530,21 +1517,14 @@ fn two_windows(
         script.push(format!("drag: 0.4,{y}:0.6,{}", y + 0.03));
     }
     script.push(format!("wait-secs: {ON_TOP_SECS}"));
-    let mut args = vec![
-        "--store",
-        above_store.to_str().unwrap(),
-        "--invite",
+    let script: Vec<&str> = script.iter().map(String::as_str).collect();
+    let above_args = on_loopback(
+        &above_store,
         &invite,
-        "--no-lan",
-        "--listen",
-        "127.0.0.1:0",
-        "--dial",
-        &listen,
-    ];
-    for line in &script {
-        args.extend(["--command", line]);
-    }
-    let (above, _, _) = window_with(above_display, dir, "above", &args);
+        ("127.0.0.1:0", Some(&listen)),
+        &script,
+    );
+    let (above, _, _) = window_with(above_display, dir, "above", &above_args);
     (below.finish(), above)
 }
 
@@ -1639,48 +1619,29 @@ fn a_weak_takeover_by_another_peer_rejects_the_next_stroke_and_both_sides_say_so
     let listen = format!("127.0.0.1:{}", free_port());
     let peer_store = dir.join("peer");
     // The peer waits for the window's object and lease (2 ops), then takes it over.
-    let mut peer = HeadlessPeer::spawn(&[
-        "--store",
-        peer_store.to_str().unwrap(),
-        "--invite",
+    let mut peer_args = on_loopback(
+        &peer_store,
         &invite,
-        "--no-lan",
-        "--listen",
-        "127.0.0.1:0",
-        "--dial",
-        &listen,
-        "--json",
-        "--wait-ops",
-        "2",
-        "--command",
-        "lease",
-    ]);
+        ("127.0.0.1:0", Some(&listen)),
+        &["lease"],
+    );
+    peer_args.extend(["--json", "--wait-ops", "2"]);
+    let mut peer = HeadlessPeer::spawn(&peer_args);
     let store = dir.join("window");
     let drag = "drag: 0.4,0.5:0.6,0.55";
-    let (state, _, _) = window_with(
-        &display,
-        &dir,
-        "takeover",
+    let window_args = on_loopback(
+        &store,
+        &invite,
+        (&listen, None),
         &[
-            "--store",
-            store.to_str().unwrap(),
-            "--invite",
-            &invite,
-            "--no-lan",
-            "--listen",
-            &listen,
-            "--command",
             "new: 0.8-sqrt(x^2+y^2+z^2)",
-            "--command",
             "lease",
-            "--command",
             "wait-ops: 3",
-            "--command",
             "tool: carve ball radius 0.12",
-            "--command",
             drag,
         ],
     );
+    let (state, _, _) = window_with(&display, &dir, "takeover", &window_args);
     // The window: the stroke is in the history, rejected because the peer holds the lease,
     // and the window names it.
     let last = state["history"].as_array().unwrap().last().unwrap().clone();
