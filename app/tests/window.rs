@@ -40,16 +40,44 @@ const SPHERE: &str = "1-x^2-y^2-z^2";
 /// An X display for the binary: an Xvfb this guard started.
 struct Display {
     name: String,
-    xvfb: Option<Child>,
+    xvfb: Child,
 }
 
 impl Drop for Display {
     fn drop(&mut self) {
-        if let Some(xvfb) = &mut self.xvfb {
-            let _ = xvfb.kill();
-            let _ = xvfb.wait();
+        // Terminated, Xvfb removes its lock file and socket; killed, it leaves them, and the
+        // display numbers run out over repeated runs.
+        let terminated = Command::new("kill")
+            .arg(self.xvfb.id().to_string())
+            .status()
+            .is_ok_and(|s| s.success());
+        for _ in 0..if terminated { 40 } else { 0 } {
+            if let Ok(Some(_)) = self.xvfb.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(50));
         }
+        let _ = self.xvfb.kill();
+        let _ = self.xvfb.wait();
     }
+}
+
+/// Whether X display `n` is taken: its lock file names a live process, or it has a socket
+/// without a lock. The files of a server that died without removing them are removed.
+fn display_taken(n: u32) -> bool {
+    let (lock, socket) = (format!("/tmp/.X{n}-lock"), format!("/tmp/.X11-unix/X{n}"));
+    let Ok(text) = std::fs::read_to_string(&lock) else {
+        return Path::new(&socket).exists();
+    };
+    let live = text
+        .trim()
+        .parse::<u32>()
+        .map_or(true, |pid| Path::new(&format!("/proc/{pid}")).exists());
+    if !live {
+        let _ = std::fs::remove_file(&lock);
+        let _ = std::fs::remove_file(&socket);
+    }
+    live
 }
 
 /// Display numbers handed out to this process's Xvfbs, so parallel tests take different ones.
@@ -59,9 +87,7 @@ fn display() -> Display {
     let base = 140 + (std::process::id() % 50) * 4;
     for _ in 0..40 {
         let n = base + NEXT_DISPLAY.fetch_add(1, Ordering::SeqCst) % 200;
-        if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists()
-            || Path::new(&format!("/tmp/.X{n}-lock")).exists()
-        {
+        if display_taken(n) {
             continue;
         }
         let spawned = Command::new("Xvfb")
@@ -88,7 +114,7 @@ fn display() -> Display {
             if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() {
                 return Display {
                     name: format!(":{n}"),
-                    xvfb: Some(xvfb),
+                    xvfb,
                 };
             }
             if xvfb.try_wait().unwrap().is_some() {
