@@ -82,7 +82,7 @@ impl Bracket {
 }
 
 /// How a bracket is being narrowed: the end last replaced and how often the other was kept.
-#[derive(Clone, Copy, Default)]
+#[derive(Clone, Copy)]
 struct Narrowing {
     /// The end (0 or 1) the last evaluation replaced, if any.
     replaced: Option<usize>,
@@ -91,6 +91,12 @@ struct Narrowing {
 }
 
 impl Narrowing {
+    /// A bracket not narrowed yet: both ends count whole.
+    const START: Narrowing = Narrowing {
+        replaced: None,
+        weight: [1.0; 2],
+    };
+
     /// Where round `round` evaluates f in bracket `b`.
     fn next(&self, b: &Bracket, round: usize) -> f32 {
         let (t0, t1) = b.t;
@@ -137,13 +143,7 @@ pub(super) fn refine_crossings<F: Field>(field: &mut F, brackets: &mut [Bracket]
         Vec::with_capacity(n),
     );
     let mut out = vec![0.0f32; n];
-    let mut narrowing = vec![
-        Narrowing {
-            replaced: None,
-            weight: [1.0; 2],
-        };
-        n
-    ];
+    let mut narrowing = vec![Narrowing::START; n];
     let mut asked = vec![0.0f32; n];
     let mut active: Vec<usize> = Vec::with_capacity(n);
     for round in 0..MAX_CROSSING_ROUNDS {
