@@ -1465,6 +1465,20 @@ fn on_loopback<'a>(
     args
 }
 
+/// A headless peer on `store` in `invite`'s session that dials the window listening on
+/// `listen`, waits until it holds `wait_ops` ops, then runs `command`.
+fn peer_dialing(
+    store: &Path,
+    invite: &str,
+    listen: &str,
+    wait_ops: &str,
+    command: &str,
+) -> HeadlessPeer {
+    let mut args = on_loopback(store, invite, ("127.0.0.1:0", Some(listen)), &[command]);
+    args.extend(["--json", "--wait-ops", wait_ops]);
+    HeadlessPeer::spawn(&args)
+}
+
 #[test]
 fn a_peers_live_edit_is_timed_from_its_op_to_the_presented_frame() {
     let display = display();
@@ -1473,14 +1487,7 @@ fn a_peers_live_edit_is_timed_from_its_op_to_the_presented_frame() {
     let listen = format!("127.0.0.1:{}", free_port());
     let peer_store = dir.join("peer");
     // The peer dials the window, waits for its ball, then colours it: a live remote edit.
-    let mut peer_args = on_loopback(
-        &peer_store,
-        &invite,
-        ("127.0.0.1:0", Some(&listen)),
-        &["colour: 0.2, 0.4, 0.9"],
-    );
-    peer_args.extend(["--json", "--wait-ops", "1"]);
-    let _peer = HeadlessPeer::spawn(&peer_args);
+    let _peer = peer_dialing(&peer_store, &invite, &listen, "1", "colour: 0.2, 0.4, 0.9");
     let store = dir.join("window");
     let window_args = on_loopback(
         &store,
@@ -1645,14 +1652,7 @@ fn a_weak_takeover_by_another_peer_rejects_the_next_stroke_and_both_sides_say_so
     let listen = format!("127.0.0.1:{}", free_port());
     let peer_store = dir.join("peer");
     // The peer waits for the window's object and lease (2 ops), then takes it over.
-    let mut peer_args = on_loopback(
-        &peer_store,
-        &invite,
-        ("127.0.0.1:0", Some(&listen)),
-        &["lease"],
-    );
-    peer_args.extend(["--json", "--wait-ops", "2"]);
-    let mut peer = HeadlessPeer::spawn(&peer_args);
+    let mut peer = peer_dialing(&peer_store, &invite, &listen, "2", "lease");
     let store = dir.join("window");
     let drag = "drag: 0.4,0.5:0.6,0.55";
     let window_args = on_loopback(
