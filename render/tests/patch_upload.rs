@@ -175,14 +175,7 @@ fn patched_uploads_draw_the_whole_upload_picture_after_each_edit() {
         .unwrap();
     let mut first = Mesh::default();
     assert!(mesher.mesh_update(&mut first).unwrap().full);
-    let mut scene = Scene {
-        camera: Camera {
-            distance: 3.2,
-            ..Camera::default()
-        },
-        ..Scene::default()
-    };
-    scene.add_object(Arc::new(first), Mat4::IDENTITY, Material::default());
+    let mut scene = one_object_scene(first);
     let towards_eye = scene.camera.eye().normalize().as_dvec3();
 
     // `patched` gets every patch, `skipping` every patch less its longest triangle range,
@@ -344,6 +337,19 @@ fn a_patch_from_another_mesh_or_with_wrong_lengths_is_refused_or_uploaded_whole(
 /// One change to a scene.
 type SceneEdit = Box<dyn Fn(&mut Scene)>;
 
+/// A scene of `mesh` alone, plain, seen from the default direction 3.2 units away.
+fn one_object_scene(mesh: Mesh) -> Scene {
+    let mut scene = Scene {
+        camera: Camera {
+            distance: 3.2,
+            ..Camera::default()
+        },
+        ..Scene::default()
+    };
+    scene.add_object(Arc::new(mesh), Mat4::IDENTITY, Material::default());
+    scene
+}
+
 /// The plain ball's mesh, which the octree proves closed.
 fn ball_mesh() -> Mesh {
     let mut object = ball();
@@ -426,14 +432,7 @@ fn a_closed_object_draws_its_two_sided_picture_without_its_back_faces() {
         return;
     };
     let mesh = ball_mesh();
-    let mut scene = Scene {
-        camera: Camera {
-            distance: 3.2,
-            ..Camera::default()
-        },
-        ..Scene::default()
-    };
-    scene.add_object(Arc::new(mesh), Mat4::IDENTITY, Material::default());
+    let mut scene = one_object_scene(mesh);
     let two_sided = draw(&mut h, &scene);
     scene.objects[0].closed = true;
     let culled = draw(&mut h, &scene);
