@@ -174,6 +174,12 @@ impl<P: Payload + Send + 'static> Core<P> {
                 handshake_timeout,
                 reply,
             } => {
+                // Already connected there (a connection held back for a join included): a
+                // second connection would only replace the first at both ends.
+                if let Some(open) = self.conn_to(addr) {
+                    let _ = reply.send(Ok(open));
+                    return;
+                }
                 let conn = self.shared.next_conn_id();
                 self.dials.insert(conn, reply);
                 self.spawn_dial(conn, addr, handshake_timeout);
@@ -452,6 +458,13 @@ impl<P: Payload + Send + 'static> Core<P> {
             .into_iter()
             .find(|p| self.peer.log().is_expelled(p))?;
         Some((RefusalKind::Expelled, DialError::Expelled(out)))
+    }
+
+    /// The open connection whose remote is at `addr`, admitted or held back for a join.
+    fn conn_to(&self, addr: std::net::SocketAddr) -> Option<ConnId> {
+        (self.conns.iter())
+            .find(|(_, l)| l.connection.remote_address() == addr)
+            .map(|(c, _)| *c)
     }
 
     /// Settles two connections to one peer (both dialed at once, or a redial): both sides keep

@@ -75,8 +75,9 @@ pub enum SnapshotNews {
     Verified,
     /// A snapshot from `peer` was not kept: cut short, undecodable, not joining (a scene
     /// that is not its ops' fold among others), none to give, or a forged op found by the
-    /// check, or a connection lost before it came. The node asks another held connection,
-    /// or syncs op by op.
+    /// check, or a connection lost before it came (not refused for good: that remote is
+    /// asked again on its next connection). The node asks another held connection, or syncs
+    /// op by op.
     Refused {
         /// The remote it came from.
         peer: PeerId,
@@ -266,21 +267,34 @@ impl<P: Payload + Send + 'static> Core<P> {
         }
     }
 
-    /// A fetch ended: joins the snapshot, or refuses it and asks the next connection.
-    pub(super) fn on_snapshot_fetched(&mut self, conn: ConnId, result: Result<Vec<u8>, String>) {
+    /// A fetch ended: joins the snapshot, or refuses it and asks the next connection. A fetch
+    /// whose connection ended refuses nothing: the remote is asked again on its next one.
+    pub(super) fn on_snapshot_fetched(
+        &mut self,
+        conn: ConnId,
+        result: Result<Vec<u8>, FetchFailure>,
+    ) {
         let Some(joining) = &mut self.join.joining else {
             return;
         };
         let Some((_, peer)) = joining.fetching.filter(|(c, _)| *c == conn) else {
             return;
         };
-        joining.fetching = None;
-        let joined = result.and_then(|bytes| {
-            if bytes.is_empty() {
-                return Err("it had no snapshot to give".into());
+        let bytes = match result {
+            Ok(bytes) => bytes,
+            Err(FetchFailure::Lost) => return self.forget_held(conn),
+            Err(FetchFailure::Refused(why)) => {
+                joining.fetching = None;
+                self.refuse_snapshot(peer, why);
+                return self.fetch_next();
             }
+        };
+        joining.fetching = None;
+        let joined = if bytes.is_empty() {
+            Err("it had no snapshot to give".into())
+        } else {
             self.join_bytes(bytes, peer)
-        });
+        };
         if let Err(why) = joined {
             self.refuse_snapshot(peer, why);
             return self.fetch_next();
@@ -440,22 +454,55 @@ impl<P: Payload + Send + 'static> Core<P> {
     }
 }
 
+/// Why a fetch gave no snapshot.
+#[derive(Debug, PartialEq, Eq)]
+pub(super) enum FetchFailure {
+    /// The connection ended (closed, replaced by another to the same remote, timed out): the
+    /// remote is not refused, and is asked again on its next connection.
+    Lost,
+    /// The remote's answer is not kept (too large, too slow, its stream reset), in words: the
+    /// remote is not asked again.
+    Refused(String),
+}
+
+impl From<quinn::ConnectionError> for FetchFailure {
+    fn from(_: quinn::ConnectionError) -> Self {
+        Self::Lost
+    }
+}
+
+impl From<quinn::WriteError> for FetchFailure {
+    fn from(e: quinn::WriteError) -> Self {
+        match e {
+            quinn::WriteError::ConnectionLost(_) => Self::Lost,
+            e => Self::Refused(e.to_string()),
+        }
+    }
+}
+
+impl From<quinn::ReadError> for FetchFailure {
+    fn from(e: quinn::ReadError) -> Self {
+        match e {
+            quinn::ReadError::ConnectionLost(_) => Self::Lost,
+            e => Self::Refused(e.to_string()),
+        }
+    }
+}
+
 /// Asks `connection` for a snapshot and reads it (at most [`MAX_SNAPSHOT_BYTES`], within
 /// [`SNAPSHOT_FETCH_TIMEOUT_MILLIS`]), reporting progress; the core hears how it ended.
 async fn fetch(shared: Arc<Shared>, conn: ConnId, connection: quinn::Connection) {
     let reading = async {
-        let (mut send, mut recv) = connection.open_bi().await.map_err(|e| e.to_string())?;
-        send.write_all(&SNAPSHOT_REQUEST)
-            .await
-            .map_err(|e| e.to_string())?;
+        let (mut send, mut recv) = connection.open_bi().await?;
+        send.write_all(&SNAPSHOT_REQUEST).await?;
         let _ = send.finish();
         let mut bytes = Vec::new();
         let mut reported = 0;
-        while let Some(chunk) =
-            (recv.read_chunk(MAX_SNAPSHOT_BYTES, true).await).map_err(|e| e.to_string())?
-        {
+        while let Some(chunk) = recv.read_chunk(MAX_SNAPSHOT_BYTES, true).await? {
             if bytes.len() + chunk.bytes.len() > MAX_SNAPSHOT_BYTES {
-                return Err(format!("over {MAX_SNAPSHOT_BYTES} bytes"));
+                return Err(FetchFailure::Refused(format!(
+                    "over {MAX_SNAPSHOT_BYTES} bytes"
+                )));
             }
             bytes.extend_from_slice(&chunk.bytes);
             let n = bytes.len() as u64;
@@ -468,8 +515,11 @@ async fn fetch(shared: Arc<Shared>, conn: ConnId, connection: quinn::Connection)
         Ok(bytes)
     };
     let deadline = Duration::from_millis(SNAPSHOT_FETCH_TIMEOUT_MILLIS);
-    let result = (tokio::time::timeout(deadline, reading).await)
-        .unwrap_or_else(|_| Err(format!("not in {SNAPSHOT_FETCH_TIMEOUT_MILLIS} ms")));
+    let result = (tokio::time::timeout(deadline, reading).await).unwrap_or_else(|_| {
+        Err(FetchFailure::Refused(format!(
+            "not in {SNAPSHOT_FETCH_TIMEOUT_MILLIS} ms"
+        )))
+    });
     let _ = (shared.inputs)
         .send(Input::SnapshotFetched { conn, result })
         .await;

@@ -43,7 +43,9 @@
 //! connection, and the node syncs op by op from an empty log. A remote with nothing to give,
 //! a failed fetch or a snapshot that does not join (a scene hash that is not its ops' fold
 //! among others) is refused and the next held connection is asked, or, with none left,
-//! every held connection syncs op by op.
+//! every held connection syncs op by op. A fetch whose connection ends refuses nobody: its
+//! remote is asked again on its next connection. A dial to an address this node holds a
+//! connection to returns that connection, so a dial loop cannot replace one under its fetch.
 //!
 //! A node serves a snapshot to each connection at most [`MAX_SNAPSHOTS_SERVED_PER_CONN`]
 //! times, and captures one at most every [`SNAPSHOT_CAPTURE_INTERVAL_MILLIS`] (a request in
@@ -677,7 +679,7 @@ enum Input {
     /// none to give), or why it failed.
     SnapshotFetched {
         conn: ConnId,
-        result: Result<Vec<u8>, String>,
+        result: Result<Vec<u8>, join::FetchFailure>,
     },
     /// The check of a joined snapshot has verified this many of its ops' signatures.
     VerifyProgress {
@@ -890,7 +892,9 @@ impl<P: Payload + Send + 'static> NodeHandle<P> {
     }
 
     /// Dials `addr` and waits for the handshake and admission. If a connection to the same
-    /// peer already exists and is kept instead, its id is returned.
+    /// peer already exists and is kept instead, its id is returned; so is that of an open
+    /// connection to `addr`, which is not dialed again (one held back while this node joins
+    /// from a snapshot included, which [`NodeStats::connections`] does not list yet).
     pub async fn dial(&self, addr: SocketAddr) -> Result<ConnId, DialError> {
         self.dial_within(addr, admission::admission_timeout()).await
     }
