@@ -431,6 +431,17 @@ fn the_window_shows_the_watermelon_and_an_edit_survives_a_restart() {
     assert_eq!(first.state["objects"].as_array().unwrap().len(), 1);
     assert!(first.state["objects"][0]["n_triangles"].as_u64().unwrap() > 1000);
     assert_eq!(first.state["viewport_error"], Value::Null);
+    // The panels paint no fill of their own; the frame is cleared to it. Their empty corners
+    // (the menu bar's right end, the side panel's foot, the status line's ends) show it.
+    let fill = eframe::egui::Visuals::dark().panel_fill.to_array();
+    let (w, h) = (first.picture.width, first.picture.height);
+    for (x, y) in [(w - 5, 5), (w - 5, h - 40), (w - 5, h - 5), (5, h - 5)] {
+        assert_eq!(
+            first.picture.pixel(x, y),
+            Some(fill),
+            "panel pixel {x}, {y}"
+        );
+    }
 
     // The wedge filled in: a whole sphere, green all round.
     let shape = format!("shape: {SPHERE}");
