@@ -270,6 +270,16 @@ async fn two_joiners_with_empty_logs_sync_both_ways() {
     }
 }
 
+/// The ops of the snapshot a joiner joins from, refusing none before it.
+async fn joined_without_refusal(events: &mut tokio::sync::mpsc::Receiver<NodeEvent>) -> usize {
+    next_event(events, "the join", |e| match e {
+        NodeEvent::Snapshot(SnapshotNews::Joined { n_ops, .. }) => Some(*n_ops),
+        NodeEvent::Snapshot(SnapshotNews::Refused { why, .. }) => panic!("refused: {why}"),
+        _ => None,
+    })
+    .await
+}
+
 #[tokio::test]
 async fn dialing_a_remote_again_while_its_snapshot_comes_keeps_the_one_connection() {
     let session = session_keys(INVITE).session_id();
@@ -286,12 +296,7 @@ async fn dialing_a_remote_again_while_its_snapshot_comes_keeps_the_one_connectio
     // connection would replace the first at both ends, and the fetch on it with it.
     let again = b.handle.dial(addr).await.expect("dials");
     assert_eq!(again, first);
-    let joined = next_event(&mut b.events, "the join", |e| match e {
-        NodeEvent::Snapshot(SnapshotNews::Joined { n_ops, .. }) => Some(*n_ops),
-        NodeEvent::Snapshot(SnapshotNews::Refused { why, .. }) => panic!("refused: {why}"),
-        _ => None,
-    })
-    .await;
+    let joined = joined_without_refusal(&mut b.events).await;
     assert_eq!(joined, 300);
     assert_eq!(b.handle.dial(addr).await, Ok(first), "and once joined");
     let (sa, sb) = (stats(&a.handle).await, stats(&b.handle).await);
@@ -334,12 +339,7 @@ async fn a_snapshot_fetch_cut_by_its_connection_asks_the_remote_again_when_it_re
         .dial(back.handle.local_addr())
         .await
         .expect("dials");
-    let joined = next_event(&mut b.events, "the join", |e| match e {
-        NodeEvent::Snapshot(SnapshotNews::Joined { n_ops, .. }) => Some(*n_ops),
-        NodeEvent::Snapshot(SnapshotNews::Refused { why, .. }) => panic!("refused: {why}"),
-        _ => None,
-    })
-    .await;
+    let joined = joined_without_refusal(&mut b.events).await;
     assert_eq!(joined, 30);
     converge(&[&back.handle, &b.handle], 30).await;
 }
