@@ -1421,6 +1421,13 @@ fn strokes_on_a_long_history_are_timed_from_their_input_to_the_presented_frame()
             "{mesh} ms to the mesh, {pixels} ms to pixels"
         );
     }
+    // Each stroke's last preview was drawn: the scene's mesh of the stored stroke waited for
+    // it rather than making the worker drop it half done.
+    assert_eq!(
+        state["meshes"]["edits_superseded"], 0,
+        "{}",
+        state["meshes"]
+    );
     // The carved ball's mesh is closed, so its back faces are not drawn.
     assert_eq!(state["objects"][0]["closed"], true);
     // Frames that changed nothing drawn (waiting for the script's next step) showed the last

@@ -89,6 +89,8 @@ pub struct Tracked {
     awaited_edit: BySource<(u64, Instant)>,
     /// Its last job was a preview, not the scene's object.
     pub previewed: bool,
+    /// The scene's object is to be meshed once the preview on the worker is drawn.
+    remesh_after_preview: bool,
 }
 
 impl Tracked {
@@ -96,6 +98,16 @@ impl Tracked {
     pub fn world_from_object_now(&self) -> Option<glam::Mat4> {
         let drawn = self.drawn.as_ref()?.world_from_object;
         Some(self.moving.as_ref().map_or(drawn, |m| m.world_now))
+    }
+
+    /// Marks it stale, or, while a preview of it is on the worker, once that is drawn
+    /// ([`Objects::remesh_previews`]).
+    fn remesh_when_drawn(&mut self) {
+        if self.previewed && !self.is_drawn_as_is() {
+            self.remesh_after_preview = true;
+        } else {
+            self.stale = true;
+        }
     }
 
     /// Whether it is drawn as the scene has it, with nothing waiting to be sent.
@@ -197,6 +209,9 @@ pub struct MeshStats {
     pub n_patched: u64,
     /// Meshes drawn whole.
     pub n_whole: u64,
+    /// This window's edits timed to a later job than the first that held them (a stroke's
+    /// last preview superseded on the worker before it was drawn).
+    pub n_edits_superseded: u64,
 }
 
 /// The objects sent to the mesher and drawn.
@@ -246,6 +261,7 @@ impl Objects {
                 remote_edit_to_mesh_ms: Samples::new(MAX_EDIT_SAMPLES),
                 n_patched: 0,
                 n_whole: 0,
+                n_edits_superseded: 0,
             },
         })
     }
@@ -289,7 +305,8 @@ impl Objects {
     }
 
     /// Marks the objects the engine says changed since the last call stale (all of them when
-    /// it cannot say); returns whether any may have changed.
+    /// it cannot say; one whose preview is on the worker once that is drawn); returns whether
+    /// any may have changed.
     pub fn take_changes(&mut self, view: &::app::engine::View) -> bool {
         let (changes, cursor) = view.changes_since(self.changes_cursor);
         self.changes_cursor = cursor;
@@ -307,7 +324,7 @@ impl Objects {
             self.edit_at[REMOTE] = remote.map(remote_instant);
         }
         for id in &changes {
-            self.tracked.entry(*id).or_default().stale = true;
+            self.tracked.entry(*id).or_default().remesh_when_drawn();
         }
         !changes.is_empty()
     }
@@ -342,6 +359,7 @@ impl Objects {
                 }
             }
             tracked.previewed = false;
+            tracked.remesh_after_preview = false;
             let world_from_group = scene.world_from_group(entry.group);
             tracked.moving = entry
                 .object
@@ -426,15 +444,25 @@ impl Objects {
     /// Objects last sent as a preview are meshed again as the scene has them: the stroke's
     /// op was stored (the mesh is then usually the preview's, and nothing is drawn again, but
     /// the fold may have rejected it) or `refused` (then no edit of theirs is timed).
+    ///
+    /// A stored stroke's preview still on the worker is finished and drawn first: a job sent
+    /// now would supersede it, and the worker drops a superseded job, even one half done, to
+    /// mesh the scene's object from the start, which is usually the preview's object again.
+    /// Once the preview is drawn, the scene's mesh of it is found unchanged in a few boxes.
     pub fn remesh_previews(&mut self, refused: bool) {
         for tracked in self.tracked.values_mut() {
-            if tracked.previewed {
-                tracked.stale = true;
-                self.dirty = true;
-                if refused {
-                    tracked.awaited_edit[LOCAL] = None;
-                }
+            if !tracked.previewed {
+                continue;
             }
+            if refused {
+                tracked.awaited_edit[LOCAL] = None;
+            }
+            if refused {
+                tracked.stale = true;
+            } else {
+                tracked.remesh_when_drawn();
+            }
+            self.dirty = true;
         }
     }
 
@@ -461,6 +489,11 @@ impl Objects {
             if !tracked.take_meshed(done) {
                 continue;
             }
+            if tracked.remesh_after_preview && tracked.is_drawn_as_is() {
+                tracked.remesh_after_preview = false;
+                tracked.stale = true;
+                self.dirty = true;
+            }
             if let (Some((base, patch)), Some(mesh)) = (patch, mesh) {
                 if self.patches.len() >= MAX_PATCHES_KEPT {
                     // The viewport has not drawn for a while: it uploads whole meshes then.
@@ -475,10 +508,11 @@ impl Objects {
             }
             for source in [LOCAL, REMOTE] {
                 let awaited = &mut tracked.awaited_edit[source];
-                let Some((_, at)) = awaited.filter(|(g, _)| generation >= *g) else {
+                let Some((first, at)) = awaited.filter(|(g, _)| generation >= *g) else {
                     continue;
                 };
                 *awaited = None;
+                self.stats.n_edits_superseded += u64::from(source == LOCAL && generation > first);
                 let ms = now.duration_since(at).as_secs_f64() * 1e3;
                 let samples = [
                     &mut self.stats.edit_to_mesh_ms,

@@ -223,6 +223,7 @@ impl SculptApp {
             "meshes": json!({
                 "patched": self.objects.stats.n_patched,
                 "whole": self.objects.stats.n_whole,
+                "edits_superseded": self.objects.stats.n_edits_superseded,
             }),
             "last_upload_bytes": report.map(|r| r.last_upload_bytes),
             "min_upload_bytes": report.and_then(|r| r.min_upload_bytes),
