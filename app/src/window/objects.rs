@@ -456,8 +456,6 @@ impl Objects {
             }
             if refused {
                 tracked.awaited_edit[LOCAL] = None;
-            }
-            if refused {
                 tracked.stale = true;
             } else {
                 tracked.remesh_when_drawn();

@@ -280,21 +280,18 @@ impl<P: Payload + Send + 'static> Core<P> {
         let Some((_, peer)) = joining.fetching.filter(|(c, _)| *c == conn) else {
             return;
         };
-        let bytes = match result {
-            Ok(bytes) => bytes,
+        let result = match result {
             Err(FetchFailure::Lost) => return self.forget_held(conn),
-            Err(FetchFailure::Refused(why)) => {
-                joining.fetching = None;
-                self.refuse_snapshot(peer, why);
-                return self.fetch_next();
-            }
+            Err(FetchFailure::Refused(why)) => Err(why),
+            Ok(bytes) => Ok(bytes),
         };
         joining.fetching = None;
-        let joined = if bytes.is_empty() {
-            Err("it had no snapshot to give".into())
-        } else {
+        let joined = result.and_then(|bytes| {
+            if bytes.is_empty() {
+                return Err("it had no snapshot to give".into());
+            }
             self.join_bytes(bytes, peer)
-        };
+        });
         if let Err(why) = joined {
             self.refuse_snapshot(peer, why);
             return self.fetch_next();
@@ -455,7 +452,7 @@ impl<P: Payload + Send + 'static> Core<P> {
 }
 
 /// Why a fetch gave no snapshot.
-#[derive(Debug, PartialEq, Eq)]
+#[derive(Debug)]
 pub(super) enum FetchFailure {
     /// The connection ended (closed, replaced by another to the same remote, timed out): the
     /// remote is not refused, and is asked again on its next connection.
