@@ -5,6 +5,7 @@ use std::ops::Range;
 use std::sync::Arc;
 
 use glam::{DMat4, Mat4};
+use model::bvh::Aabb as Aabb64;
 use model::object::history::HistoryEntry;
 use model::object::{CompiledEdit, Object, Shape, Transform};
 
@@ -154,28 +155,56 @@ enum Patched {
     Whole,
 }
 
+/// An edit whose activity differs between two objects, and where it can change the field:
+/// everywhere the edit acts, or only `grown`'s boxes for a stroke drawn further.
+struct Change<'a> {
+    edit: &'a CompiledEdit,
+    grown: Option<[Aabb64; 2]>,
+}
+
 /// The edits whose activity differs between `old` and `new` (changed in a common prefix of
-/// the same edits, or in the tails after it); `None` past [`MAX_PATCH_EDITS`].
-fn changed_edits<'a>(old: &'a Object, new: &'a Object) -> Option<Vec<&'a CompiledEdit>> {
+/// the same edits, or in the tails after it); `None` past [`MAX_PATCH_EDITS`]. Where the tails
+/// pair up as strokes drawn further (a stroke's previews), each pair is one change over the
+/// stamps the longer stroke adds ([`CompiledEdit::grown_from`]), not both strokes' boxes.
+fn changed_edits<'a>(old: &'a Object, new: &'a Object) -> Option<Vec<Change<'a>>> {
     let (a, b) = (old.history().entries(), new.history().entries());
     let same = |x: &HistoryEntry, y: &HistoryEntry| {
         Arc::ptr_eq(&x.edit, &y.edit) || x.edit.edit() == y.edit.edit()
     };
     let prefix = a.iter().zip(b).take_while(|(x, y)| same(x, y)).count();
+    let whole = |edit| Change { edit, grown: None };
     let mut changed = Vec::new();
     for (x, y) in a[..prefix].iter().zip(&b[..prefix]) {
         if x.active != y.active {
-            changed.push(&*y.edit);
+            changed.push(whole(&*y.edit));
         }
     }
-    let tails = a[prefix..].iter().chain(&b[prefix..]);
-    for e in tails.filter(|e| e.active) {
+    let (a, b) = (&a[prefix..], &b[prefix..]);
+    let tails = (a.len() == b.len()).then(|| grown_pairs(a, b)).flatten();
+    let tails = tails.unwrap_or_else(|| {
+        let active = a.iter().chain(b).filter(|e| e.active);
+        active.map(|e| whole(&*e.edit)).collect()
+    });
+    for change in tails {
         if changed.len() >= MAX_PATCH_EDITS {
             return None;
         }
-        changed.push(&*e.edit);
+        changed.push(change);
     }
     Some(changed)
+}
+
+/// `b`'s entries as `a`'s strokes drawn further, pair by pair, each a change over the stamps
+/// it adds; `None` unless every pair is active and such a continuation.
+fn grown_pairs<'a>(a: &[HistoryEntry], b: &'a [HistoryEntry]) -> Option<Vec<Change<'a>>> {
+    let grown = |x: &HistoryEntry, y: &'a HistoryEntry| {
+        let region = (x.active && y.active).then(|| y.edit.grown_from(&x.edit));
+        Some(Change {
+            edit: &y.edit,
+            grown: Some(region.flatten()?),
+        })
+    };
+    a.iter().zip(b).map(|(x, y)| grown(x, y)).collect()
 }
 
 /// Brings `state` up to `object` by remeshing the changed edits' boxes and patching the mesh.
@@ -188,14 +217,16 @@ fn patch(mut state: Incremental, object: &Object, superseded: &dyn Fn() -> bool)
     };
     let mut boxes = std::mem::take(&mut state.dirty);
     let mut colour_boxes = Vec::new();
-    for edit in changed {
+    for Change { edit, grown } in changed {
         if edit.is_geometric() {
-            match dirty_boxes(edit) {
-                Dirty::Boxes(b) => boxes.extend(b),
-                Dirty::Everywhere => return Patched::Whole,
+            match (grown, dirty_boxes(edit)) {
+                (Some(grown), _) => boxes.extend(grown.iter().filter_map(to_f32_box)),
+                (None, Dirty::Boxes(b)) => boxes.extend(b),
+                (None, Dirty::Everywhere) => return Patched::Whole,
             }
         } else if is_colour_paint(edit) {
-            colour_boxes.extend(edit.boxes().iter().filter_map(to_f32_box));
+            let region = grown.as_ref().unwrap_or(edit.boxes());
+            colour_boxes.extend(region.iter().filter_map(to_f32_box));
         }
     }
     if boxes.is_empty() && colour_boxes.is_empty() {

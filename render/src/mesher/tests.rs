@@ -86,6 +86,13 @@ fn triangles(mesh: &Mesh) -> Vec<[[i64; 10]; 3]> {
     out
 }
 
+/// [`triangles`] without the colours.
+fn white(mesh: &Mesh) -> Vec<[[i64; 10]; 3]> {
+    let mut m = mesh.clone();
+    m.colours.iter_mut().for_each(|c| *c = [1.0; 4]);
+    triangles(&m)
+}
+
 #[test]
 fn ranges_are_sorted_and_joined() {
     assert_eq!(
@@ -172,11 +179,6 @@ fn carves_and_colour_paintings_patch_to_the_whole_meshs_triangles_and_colours() 
         // Its triangles are those the mesher assembles whole (render's invariant), and
         // every vertex a triangle uses has the colour a whole colouring gives it.
         let own = next.as_ref().unwrap().octree.mesh().unwrap();
-        let white = |m: &Mesh| {
-            let mut m = m.clone();
-            m.colours.iter_mut().for_each(|c| *c = [1.0; 4]);
-            triangles(&m)
-        };
         assert!(white(&drawn) == white(&own), "edit {k}");
         assert_eq!(wrongly_coloured(&object, &drawn), 0, "edit {k}");
         state = next;
@@ -261,4 +263,66 @@ fn implicit_meshes_whole_and_patched_are_closed_and_say_so() {
     let drawn = done.unwrap().object.unwrap();
     assert!(drawn.closed);
     assert_eq!(n_open_edges(&drawn.mesh), 0);
+}
+
+/// A stroke's previews, each the stroke so far, patch only around the stamps each adds (past
+/// 32 stamps the tool is indexed), and every patch has the triangles and colours of the
+/// object meshed whole; the same strokes that are no continuation (their first pose moves)
+/// patch every block the strokes reach.
+#[test]
+fn a_stroke_drawn_further_patches_only_its_new_stamps_to_the_whole_meshs_triangles() {
+    let never = || false;
+    let depth = 6;
+    let ball = ball();
+    let pose = |k: usize| {
+        let t = k as f64 * 0.06;
+        Pose::at(DVec3::new(t.cos(), t.sin(), 0.3 * t) * 0.97)
+    };
+    let preview = |n: usize, nudge: f64| {
+        let mut path: Vec<Pose> = (0..n).map(pose).collect();
+        path[0].position.z += nudge;
+        let mut object = ball.clone();
+        object
+            .apply(Edit::stroke(EditOp::Subtract, ball_tool(0.1), path))
+            .unwrap();
+        object
+    };
+    let (_, mut grown) = mesh(job(&preview(1, 0.0), 1, depth), None, &never);
+    let (_, mut moved) = mesh(job(&preview(1, 0.0), 1, depth), None, &never);
+    let patched = |state, object: &Object, generation| {
+        let (done, state) = mesh(job(object, generation, depth), state, &never);
+        let done = done.unwrap();
+        assert_eq!(done.kind, MeshKind::Patch);
+        let changed = done.patch.as_ref().unwrap().1.blocks_changed;
+        (done.object.unwrap().mesh, changed, state)
+    };
+    let mut last = 1;
+    for (k, n) in [2, 6, 12, 20, 21, 30, 31, 38, 44, 45]
+        .into_iter()
+        .enumerate()
+    {
+        let generation = 2 + k as u64;
+        let object = preview(n, 0.0);
+        let (drawn, changed, state) = patched(grown, &object, generation);
+        grown = state;
+        let (whole, _) = mesh(job(&object, generation, depth), None, &never);
+        let whole = whole.unwrap();
+        assert_eq!(whole.kind, MeshKind::Whole);
+        assert!(
+            white(&drawn) == white(&whole.object.unwrap().mesh),
+            "{n} poses"
+        );
+        assert_eq!(wrongly_coloured(&object, &drawn), 0, "{n} poses");
+        let nudge = if k % 2 == 0 { 1e-3 } else { 0.0 };
+        let (_, all, state) = patched(moved, &preview(n, nudge), generation);
+        moved = state;
+        eprintln!("{last} to {n} poses: {changed} blocks changed against {all}");
+        if n == last + 1 && n > 20 {
+            assert!(
+                3 * changed < all,
+                "{n} poses: {changed} blocks against {all}"
+            );
+        }
+        last = n;
+    }
 }

@@ -195,6 +195,28 @@ impl CompiledEdit {
         &self.boxes
     }
 
+    /// Where `self` can differ from `earlier` when it is the same edit swept further (a stroke
+    /// being drawn: `earlier`'s poses are the first of `self`'s), as [`CompiledEdit::boxes`]
+    /// gives boxes: around the stamps the longer stroke adds. Outside them the two edits take
+    /// the same values, so a mesh of the one needs remeshing only there. `None` when `self` is
+    /// not such a continuation (another brush, other poses, or a larger pose that widens every
+    /// stamp's box).
+    pub fn grown_from(&self, earlier: &CompiledEdit) -> Option<[Aabb; 2]> {
+        let (a, b) = (&*earlier.edit, &*self.edit);
+        let same_brush = a.op == b.op
+            && a.tool == b.tool
+            && a.blend_radius == b.blend_radius
+            && a.mirror == b.mirror;
+        if !same_brush || !b.path.starts_with(&a.path) {
+            return None;
+        }
+        let region = self.tool.grown_from(&earlier.tool)?;
+        Some(match b.mirror {
+            Some(axis) => [region, axis.reflect_box(&region)],
+            None => [region, Aabb::EMPTY],
+        })
+    }
+
     /// The box around everything the edit can touch.
     pub fn bounds(&self) -> Aabb {
         self.boxes[0].union(&self.boxes[1])
@@ -489,6 +511,89 @@ fn smooth_min_grad(a: (f64, DVec3), b: (f64, DVec3), k: f64) -> (f64, DVec3) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A stroke drawn further takes the shorter stroke's values and gradients, bit for bit,
+    /// outside the boxes `grown_from` gives, whichever tool, mirror and stamp count (past 32
+    /// stamps a tool evaluates through its index); and only a continuation gets boxes.
+    #[test]
+    fn a_stroke_drawn_further_changes_only_where_grown_from_says() {
+        let tools = [
+            ToolShape::Sphere { radius: 0.05 },
+            ToolShape::Box {
+                half_extents: DVec3::new(0.04, 0.03, 0.05),
+                rounding: 0.01,
+            },
+        ];
+        let pose = |k: usize| {
+            let t = k as f64 * 0.09;
+            Pose::at(DVec3::new(t.cos() * 0.6, t.sin() * 0.6, 0.2 * t.sin()))
+        };
+        let compiled = |tool, mirror, n: usize, op| {
+            let mut edit = Edit::stroke(op, tool, (0..n).map(pose).collect());
+            edit.mirror = mirror;
+            edit.blend_radius = 0.02;
+            CompiledEdit::new(edit).unwrap()
+        };
+        let mut checked = 0;
+        for tool in tools {
+            for mirror in [None, Some(Axis::X)] {
+                for (short, long) in [(1, 2), (2, 5), (20, 24), (30, 40), (45, 46)] {
+                    let old = compiled(tool, mirror, short, EditOp::Subtract);
+                    let new = compiled(tool, mirror, long, EditOp::Subtract);
+                    let boxes = new.grown_from(&old).expect("a continuation");
+                    let volume = |b: &Aabb| b.size().x * b.size().y * b.size().z;
+                    if short >= 20 {
+                        let (part, whole) = (volume(&boxes[0]), volume(&new.boxes()[0]));
+                        assert!(part < 0.5 * whole, "{tool:?} {short}->{long}");
+                    }
+                    for i in 0..4000 {
+                        let a = i as f64;
+                        let p =
+                            DVec3::new((a * 0.37).sin(), (a * 0.23).cos(), (a * 0.11).sin()) * 0.7;
+                        // Stamp centres and their mirror images hit the ties.
+                        let p = if i % 5 == 0 {
+                            pose(i % long).position
+                        } else {
+                            p
+                        };
+                        let p = if i % 10 == 5 { Axis::X.reflect(p) } else { p };
+                        if boxes.iter().any(|b| b.contains(p)) {
+                            continue;
+                        }
+                        let (o, n) = (old.tool_eval(p), new.tool_eval(p));
+                        assert!(
+                            o.0.to_bits() == n.0.to_bits() && o.1 == n.1,
+                            "{tool:?} {mirror:?} {short}->{long} at {p}: {o:?} {n:?}"
+                        );
+                        checked += 1;
+                    }
+                }
+                let five = compiled(tool, mirror, 5, EditOp::Subtract);
+                let union = compiled(tool, mirror, 8, EditOp::Union);
+                assert!(union.grown_from(&five).is_none(), "another operation");
+                assert!(
+                    five.grown_from(&compiled(tool, mirror, 8, EditOp::Subtract))
+                        .is_none()
+                );
+                let mut larger = Edit::clone(five.edit());
+                larger.path.push(Pose {
+                    scale: 2.0,
+                    ..pose(5)
+                });
+                let larger = CompiledEdit::new(larger).unwrap();
+                assert!(
+                    larger.grown_from(&five).is_none(),
+                    "every stamp's box widens"
+                );
+                let mut moved = Edit::clone(union.edit());
+                moved.op = EditOp::Subtract;
+                moved.path[0].position.x += 1e-3;
+                let moved = CompiledEdit::new(moved).unwrap();
+                assert!(moved.grown_from(&five).is_none(), "another first pose");
+            }
+        }
+        assert!(checked > 50_000, "{checked} points outside the boxes");
+    }
 
     #[test]
     fn smooth_operations_stay_within_a_quarter_radius() {

@@ -277,7 +277,7 @@ impl Pose {
 }
 
 /// One primitive of a compiled tool.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum Stamp {
     /// Points within a linearly varying radius of the segment `a`-`b`.
     Capsule {
@@ -598,6 +598,25 @@ impl CompiledTool {
     /// [`interval_max`].
     pub(crate) fn interval_max(&self, region: &Aabb) -> f64 {
         interval_max(value_max(self.margin), self.lipschitz, region)
+    }
+
+    /// The box within which `self` can take other values than `earlier` when it is `earlier`
+    /// swept further: the same stamps first, grown by the same margin, with the same slope
+    /// bound. It holds the boxes of the stamps after the shared ones and of `earlier`'s last
+    /// (a one-pose stroke's capsule is the point's, which the next pose replaces); elsewhere
+    /// both are the best of the same stamps. `None` when `self` is not such a continuation.
+    pub(crate) fn grown_from(&self, earlier: &CompiledTool) -> Option<Aabb> {
+        let n = earlier.stamps.len();
+        let continues = self.margin == earlier.margin
+            && self.lipschitz == earlier.lipschitz
+            && n > 0
+            && self.stamps.len() >= n
+            && self.stamps[..n - 1] == earlier.stamps[..n - 1];
+        if !continues {
+            return None;
+        }
+        let fresh = self.stamps[n - 1..].iter().chain(&earlier.stamps[n - 1..]);
+        Some(fresh.fold(Aabb::EMPTY, |a, (b, _)| a.union(b)))
     }
 
     /// Number of primitive stamps.
