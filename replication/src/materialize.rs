@@ -62,6 +62,11 @@ pub trait Materialize<P: Payload> {
     /// member an expel voided, or a readmit brought back); the active ones are applied again.
     fn reset_independent(&mut self, author: PeerId, from_seq: u64);
 
+    /// Readies `object` for the queries that follow a batch of folds (an object model's index
+    /// of its recent edits); nothing by default. Folds never need it, and it changes nothing
+    /// the scene encodes, so a face that samples the scene calls it once per batch.
+    fn prepare(&mut self, _object: ObjectId) {}
+
     /// The blake3 hash of the scene's canonical encoding.
     fn scene_hash(&self) -> SceneHash;
 
@@ -163,6 +168,11 @@ impl<P: Payload, M: Materialize<P>> Materialized<P, M> {
     #[doc(hidden)]
     pub fn plant_difference(&mut self, plant: impl FnOnce(&mut M)) {
         plant(&mut self.scene);
+    }
+
+    /// Readies `objects` for queries after a batch of folds ([`Materialize::prepare`]).
+    pub fn prepare(&mut self, objects: impl IntoIterator<Item = ObjectId>) {
+        objects.into_iter().for_each(|o| self.scene.prepare(o));
     }
 
     /// Brings the scene up to date with what `insertion` changed in `log`.

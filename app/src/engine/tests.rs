@@ -135,6 +135,48 @@ fn a_new_store_gets_the_demo_once_and_a_reopened_one_shows_the_same_scene() {
     let _ = fs::remove_dir_all(&dir);
 }
 
+/// The view's objects hold their edits indexed after every batch it folds, on start and as
+/// ops arrive: the mesher's, the servo's and picking's copies share that index, where each
+/// would otherwise index the whole history again.
+#[test]
+fn the_views_objects_keep_their_edits_indexed() {
+    use model::object::history::MAX_TAIL;
+    use model::object::{Edit, EditOp, Pose, ToolShape};
+    let dir = scratch("indexed");
+    let tail = |s: &Engine, melon: u64| {
+        let view = lock(s.view());
+        let o = view.scene().object(model::scene::ObjectId(melon)).unwrap();
+        (o.history().len(), o.history().tail_len())
+    };
+    let n_edits = 2 * MAX_TAIL + 3;
+    let first = Engine::start(config(&dir), T0).unwrap();
+    wait_view(&first, "the demo", |v| v.n_ops() == FOUNDED + 1);
+    let melon = only_object(&first);
+    for k in 0..n_edits {
+        let at = glam::DVec3::new(0.01 * k as f64, 0.0, 1.0);
+        let carve = Edit::stamp(
+            EditOp::Subtract,
+            ToolShape::Sphere { radius: 0.1 },
+            Pose::at(at),
+        );
+        author(&first, ShapePayload::edit(melon, carve).unwrap());
+    }
+    let (len, unindexed) = tail(&first, melon);
+    assert!(
+        len >= n_edits && unindexed <= MAX_TAIL,
+        "{unindexed} of {len}"
+    );
+    first.shutdown();
+    let second = Engine::start(config(&dir), T0).unwrap();
+    let (len, unindexed) = tail(&second, melon);
+    assert!(
+        len >= n_edits && unindexed == 0,
+        "reopened: {unindexed} of {len}"
+    );
+    drop(second);
+    let _ = fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn undo_and_redo_pick_this_peers_latest_edit_of_the_object() {
     let dir = scratch("undo");

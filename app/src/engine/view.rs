@@ -287,7 +287,7 @@ pub struct View {
 impl View {
     /// The view of `log` for peer `me`.
     pub fn new(me: PeerId, log: &Log<ShapePayload>) -> Result<Self, String> {
-        let scene = Materialized::fold(log);
+        let scene = prepared(Materialized::fold(log));
         let mut view = Self {
             me,
             scene,
@@ -336,6 +336,7 @@ impl View {
     /// Folds what a (merged) refold names and notes the objects it changed.
     pub fn apply_refold(&mut self, log: &Log<ShapePayload>, delivered: &[OpId], refold: &Refold) {
         self.scene.apply_refold(log, delivered, refold);
+        self.scene.prepare(refold.object_keys.keys().copied());
         if !refold.object_keys.is_empty() {
             let remote = delivered
                 .iter()
@@ -366,6 +367,7 @@ impl View {
         rest: bool,
     ) {
         self.scene.resync(log, objects, rest);
+        self.scene.prepare(objects.iter().copied());
         for object in objects {
             self.changes.push(if object.0 & GROUP_BIT != 0 {
                 Change::All
@@ -399,7 +401,7 @@ impl View {
 
     /// Puts a scene joined from a snapshot (or folded from scratch) in place of the view's.
     fn adopt(&mut self, scene: Materialized<ShapePayload, ShapeScene>) {
-        self.scene = scene;
+        self.scene = prepared(scene);
         self.changes.push(Change::All);
         self.generation += 1;
     }
@@ -1044,6 +1046,19 @@ impl Observer<ShapePayload> for Folder {
 }
 
 /// The latest [`MAX_HISTORY_ROWS`] ops of `log`, oldest first.
+/// `scene` with every object's edits indexed: the view's objects are what the mesher, the
+/// servo and picking sample, each from its own copy, which shares the index only when the
+/// view's object holds it (otherwise every copy indexes the whole history again).
+fn prepared(
+    mut scene: Materialized<ShapePayload, ShapeScene>,
+) -> Materialized<ShapePayload, ShapeScene> {
+    let objects = scene.scene().scene().objects();
+    let ids: Vec<replication::ObjectId> =
+        objects.map(|(id, _)| replication::ObjectId(id.0)).collect();
+    scene.prepare(ids);
+    scene
+}
+
 fn history(log: &Log<ShapePayload>, me: PeerId, scene: &Scene) -> Vec<HistoryRow> {
     // Parts are how a large change travels; its `Assemble` is the row that says what it did.
     let mut last = std::collections::VecDeque::with_capacity(MAX_HISTORY_ROWS);

@@ -547,6 +547,16 @@ impl Materialize<ShapePayload> for ShapeScene {
         self.apply_payload(entry.key, entry.op.id(), entry.op.payload());
     }
 
+    /// Indexes the object's recent edits ([`model::object::Object::prepare`]); a group has
+    /// none.
+    fn prepare(&mut self, object: ObjectId) {
+        if object.0 & GROUP_LEASE_BIT == 0
+            && let Some(o) = self.scene.object_mut(scene::ObjectId(object.0))
+        {
+            o.prepare();
+        }
+    }
+
     fn scene_hash(&self) -> SceneHash {
         SceneHash::of(&self.encode())
     }
