@@ -219,10 +219,12 @@ fn patch(mut state: Incremental, object: &Object, superseded: &dyn Fn() -> bool)
     let mut colour_boxes = Vec::new();
     for Change { edit, grown } in changed {
         if edit.is_geometric() {
-            match (grown, dirty_boxes(edit)) {
-                (Some(grown), _) => boxes.extend(grown.iter().filter_map(to_f32_box)),
-                (None, Dirty::Boxes(b)) => boxes.extend(b),
-                (None, Dirty::Everywhere) => return Patched::Whole,
+            // An intersection drawn further is meshed whole, as when first drawn: outside
+            // its boxes it empties the object, which only a whole mesh has been shown to take.
+            match (dirty_boxes(edit), grown) {
+                (Dirty::Everywhere, _) => return Patched::Whole,
+                (Dirty::Boxes(_), Some(grown)) => boxes.extend(grown.iter().filter_map(to_f32_box)),
+                (Dirty::Boxes(b), None) => boxes.extend(b),
             }
         } else if is_colour_paint(edit) {
             let region = grown.as_ref().unwrap_or(edit.boxes());
