@@ -66,6 +66,11 @@ pub struct Faults {
     /// outlasts the idle timeout. Off: every message is a datagram of its own, lost,
     /// duplicated and reordered independently (the old model, kept as a stress case).
     pub streams: bool,
+    /// Whether the last third of the workload runs in one partition between the two halves
+    /// of the honest peers, lifted at healing: each half then lacks a third of the work's
+    /// ops from the other, a backlog of many round trips at the links' rate (issue 53's
+    /// bandwidth-bound goal). It stays when the random partitions are switched off.
+    pub backlog: bool,
 }
 
 /// One kind of fault, as `--without` names it.
@@ -199,6 +204,7 @@ const CHAOS: Faults = Faults {
     forks: false,
     expel: false,
     streams: false,
+    backlog: false,
 };
 
 /// Chaos plus every hostile-member attack that replication is meant to withstand today
@@ -214,8 +220,8 @@ const BYZANTINE: Faults = Faults {
 impl Faults {
     /// Every preset, mildest first (`swarm` draws a mix per seed from `chaos`;
     /// `byzantine-forks` is `byzantine` with equivocation; `quic` is `chaos` over stream
-    /// connections).
-    pub const PRESETS: [Faults; 8] = [
+    /// connections, and `quic-backlog` that with a long partition before healing).
+    pub const PRESETS: [Faults; 9] = [
         Faults {
             name: "none",
             latency_micros: 20_000,
@@ -234,6 +240,7 @@ impl Faults {
             forks: false,
             expel: false,
             streams: false,
+            backlog: false,
         },
         Faults {
             name: "lan",
@@ -253,6 +260,7 @@ impl Faults {
             forks: false,
             expel: false,
             streams: false,
+            backlog: false,
         },
         Faults {
             name: "wan",
@@ -272,6 +280,7 @@ impl Faults {
             forks: false,
             expel: false,
             streams: false,
+            backlog: false,
         },
         CHAOS,
         // A mix of chaos's fault kinds drawn per seed (see `Config::effective_faults`).
@@ -290,6 +299,13 @@ impl Faults {
         Faults {
             name: "quic",
             streams: true,
+            ..CHAOS
+        },
+        // `quic` with a large backlog at healing: the last third of the work split in two.
+        Faults {
+            name: "quic-backlog",
+            streams: true,
+            backlog: true,
             ..CHAOS
         },
     ];

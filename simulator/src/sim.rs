@@ -301,6 +301,13 @@ impl Simulation {
         }
         self.schedule_faults(&mut sched, span);
         self.schedule_expel(&mut sched, span);
+        if self.faults.backlog {
+            // The honest peers in two halves from two thirds of the work until healing.
+            let n = self.config.n_peers;
+            let halves = (0..n / 2).flat_map(|a| (n / 2..n).flat_map(move |b| [(a, b), (b, a)]));
+            let cut = halves.collect();
+            self.push(START_MICROS + span * 2 / 3, Ev::PartitionStart { cut });
+        }
         self.push(work_end + 1, Ev::Heal);
         self.sample_interval_micros = (span / 256).max(10_000);
         self.push(START_MICROS + self.sample_interval_micros, Ev::Sample);

@@ -5,7 +5,7 @@
 //! a debug build); the CLI runs larger ones and campaigns. The counting allocator is installed
 //! here, so memory per peer is measured and its bound checked.
 
-use simulator::config::{Config, Faults, Sabotage};
+use simulator::config::{Config, FaultKind, FaultSet, Faults, Sabotage};
 use simulator::memory::CountingAlloc;
 use simulator::report::Report;
 use simulator::shrink::{MAX_SHRINK_RUNS, shrink};
@@ -151,7 +151,7 @@ fn late_peers_join_from_snapshots_and_converge() {
 /// lost or duplicated, stalled connections are replaced, and the runs converge.
 #[test]
 fn the_quic_preset_turns_losses_into_delays_and_partitions_into_stalls() {
-    let reports = passing_runs(0, 6, Config::new(0, 5, 300, faults("quic")));
+    let reports = passing_runs(0, 6, Config::new(0, 5, 300, faults("quic-backlog")));
     let sum = |f: fn(&Report) -> u64| reports.iter().map(f).sum::<u64>();
     assert_eq!(sum(|r| r.stats.n_lost + r.stats.n_duplicated), 0);
     assert_eq!(sum(|r| r.stats.n_partition_drops), 0);
@@ -181,6 +181,42 @@ fn the_quic_preset_turns_losses_into_delays_and_partitions_into_stalls() {
             .unwrap_or(0))
             > 0
     );
+}
+
+/// Issue 53's bandwidth-bound goal needs a large backlog at healing, which no other preset
+/// leaves: under `quic-backlog` the two halves of the peers are apart for the last third of
+/// the work, so every honest peer lacks the other half's ops then, and the runs converge.
+/// Without the other faults that leave peers behind (random partitions, peers offline,
+/// crashes, late joins), `quic` leaves less than half as much lacked, so the backlog is the
+/// split's.
+#[test]
+fn the_backlog_preset_leaves_every_peer_lacking_the_other_halfs_work_at_healing() {
+    let quiet = [
+        FaultKind::Partitions,
+        FaultKind::Offline,
+        FaultKind::Crashes,
+        FaultKind::LateJoins,
+    ];
+    let without = quiet.into_iter().fold(FaultSet::default(), FaultSet::with);
+    let lacked = |name| {
+        let config = Config {
+            without,
+            ..Config::new(0, 6, 600, faults(name))
+        };
+        let reports = passing_runs(0, 3, config);
+        let lacked = |r: &Report| r.catch_up.iter().map(|c| c.n_bytes_lacked).collect();
+        reports.iter().map(lacked).collect::<Vec<Vec<u64>>>()
+    };
+    let (split, plain) = (lacked("quic-backlog"), lacked("quic"));
+    for (split, plain) in split.iter().zip(&plain) {
+        let (least, most) = (split.iter().min(), plain.iter().max());
+        assert!(
+            least
+                .zip(most)
+                .is_some_and(|(l, m)| *l >= 10_000 && *l > 2 * m),
+            "lacked at healing: {split:?} split, {plain:?} not"
+        );
+    }
 }
 
 #[test]
