@@ -1045,7 +1045,6 @@ impl Observer<ShapePayload> for Folder {
     }
 }
 
-/// The latest [`MAX_HISTORY_ROWS`] ops of `log`, oldest first.
 /// `scene` with every object's edits indexed: the view's objects are what the mesher, the
 /// servo and picking sample, each from its own copy, which shares the index only when the
 /// view's object holds it (otherwise every copy indexes the whole history again).
@@ -1059,6 +1058,7 @@ fn prepared(
     scene
 }
 
+/// The latest [`MAX_HISTORY_ROWS`] ops of `log`, oldest first.
 fn history(log: &Log<ShapePayload>, me: PeerId, scene: &Scene) -> Vec<HistoryRow> {
     // Parts are how a large change travels; its `Assemble` is the row that says what it did.
     let mut last = std::collections::VecDeque::with_capacity(MAX_HISTORY_ROWS);
