@@ -197,14 +197,15 @@ fn changed_edits<'a>(old: &'a Object, new: &'a Object) -> Option<Vec<Change<'a>>
 /// `b`'s entries as `a`'s strokes drawn further, pair by pair, each a change over the stamps
 /// it adds; `None` unless every pair is active and such a continuation.
 fn grown_pairs<'a>(a: &[HistoryEntry], b: &'a [HistoryEntry]) -> Option<Vec<Change<'a>>> {
-    let grown = |x: &HistoryEntry, y: &'a HistoryEntry| {
-        let region = (x.active && y.active).then(|| y.edit.grown_from(&x.edit));
+    let grown = |(x, y): (&HistoryEntry, &'a HistoryEntry)| {
+        let both = x.active && y.active;
+        let region = both.then(|| y.edit.grown_from(&x.edit)).flatten()?;
         Some(Change {
             edit: &y.edit,
-            grown: Some(region.flatten()?),
+            grown: Some(region),
         })
     };
-    a.iter().zip(b).map(|(x, y)| grown(x, y)).collect()
+    a.iter().zip(b).map(grown).collect()
 }
 
 /// Brings `state` up to `object` by remeshing the changed edits' boxes and patching the mesh.
