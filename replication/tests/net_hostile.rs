@@ -14,15 +14,17 @@ use std::time::Duration;
 use net_support::*;
 use replication::Keypair;
 use replication::net::admission::{self, ADMISSION_FRAME_BYTES, ADMISSION_TIMEOUT_MILLIS};
+use replication::net::frame::{self, MAX_FRAME_BYTES};
 use replication::net::node::{
     ACCEPT_TIMEOUT_MILLIS, CloseCode, MAX_ADMISSIONS_IN_PROGRESS,
     MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS, MAX_CONNECTIONS_PER_ADDRESS, MAX_REJECTIONS_PER_CONN,
     RefusalKind,
 };
-use replication::net::{frame, tls};
+use replication::net::tls;
 use replication::payload::test_payload::TestPayload;
 use replication::peer::MAX_CONNECTIONS;
 use replication::sync::message::{Message, PROTOCOL_VERSION};
+use replication::sync::state::MAX_EARLY_MESSAGES;
 
 /// Where attackers send from: another loopback address than the honest nodes' 127.0.0.1.
 const ATTACKER_IP: &str = "127.0.0.2";
@@ -125,25 +127,53 @@ async fn hostile_clients_are_cut_off_and_counted_while_honest_sync_continues() {
         .unwrap();
     assert_eq!(closed_code(&stranger).await, CloseCode::Refused as u64);
 
-    // 2. Admitted, then a datagram that is no ephemeral message and a stream of garbage.
+    // 2. Admitted, then a datagram that is no ephemeral message and frames of garbage: the
+    // first on the admission's stream, where the hello goes, the others on streams of their
+    // own.
     let (garbler, mut garbage) = admitted(addr, 66).await;
     garbler.send_datagram(vec![0xff; 40].into()).unwrap();
     eventually("the stray datagram is counted", || async {
         a.handle.stats().await.unwrap().n_bad_datagrams == 1
     })
     .await;
+    frame::write_frame(&mut garbage.send, &[0xee; 99])
+        .await
+        .unwrap();
     for i in 0..MAX_REJECTIONS_PER_CONN + 8 {
         let noise = vec![i as u8; 100 + i as usize];
-        if frame::write_frame(&mut garbage.send, &noise).await.is_err() {
+        if frame::write_one_frame(&garbler, &noise).await.is_err() {
             break; // Already cut off.
         }
     }
     assert_eq!(closed_code(&garbler).await, CloseCode::Protocol as u64);
 
-    // 3. Admitted, then a frame header announcing 4 GiB.
+    // 3. Admitted, then a frame header announcing 4 GiB, as the first frame and as a later
+    // one on a stream of its own.
     let (bloater, mut bloat) = admitted(addr, 67).await;
     bloat.send.write_all(&u32::MAX.to_be_bytes()).await.unwrap();
     assert_eq!(closed_code(&bloater).await, CloseCode::Protocol as u64);
+    let (bloater, mut bloat) = admitted(addr, 75).await;
+    frame::write_frame(&mut bloat.send, b"hi").await.unwrap();
+    let mut stream = bloater.open_uni().await.unwrap();
+    stream.write_all(&u32::MAX.to_be_bytes()).await.unwrap();
+    assert_eq!(closed_code(&bloater).await, CloseCode::Protocol as u64);
+
+    // 4. Admitted, then a second frame on the admission's stream, which carries only the
+    // first, and a frame followed by more bytes on one stream.
+    let (writer, mut admission) = admitted(addr, 72).await;
+    for body in [b"first", b"later"] {
+        frame::write_frame(&mut admission.send, body).await.unwrap();
+    }
+    assert_eq!(closed_code(&writer).await, CloseCode::Protocol as u64);
+    let (trailer, mut admission) = admitted(addr, 73).await;
+    frame::write_frame(&mut admission.send, b"first")
+        .await
+        .unwrap();
+    let mut stream = trailer.open_uni().await.unwrap();
+    let trailing = [frame::encode_frame(b"one").unwrap(), vec![0; 3]].concat();
+    stream.write_all(&trailing).await.unwrap();
+    let _ = stream.finish();
+    assert_eq!(closed_code(&trailer).await, CloseCode::Protocol as u64);
 
     // The honest connection survived all of it and still syncs both ways.
     let from_honest = honest
@@ -164,9 +194,9 @@ async fn hostile_clients_are_cut_off_and_counted_while_honest_sync_continues() {
         Some(&1)
     );
     assert_eq!(stats.n_cut_off, 1);
-    assert_eq!(stats.n_oversized_frames, 1);
+    assert_eq!(stats.n_oversized_frames, 2);
     assert_eq!(stats.n_bad_datagrams, 1);
-    assert_eq!(stats.n_admitted, 3);
+    assert_eq!(stats.n_admitted, 6);
     assert_eq!(stats.connections.len(), 1, "only the honest node is left");
     assert_eq!(stats.connections[0].peer, honest.handle.peer_id());
     assert_eq!(stats.connections[0].sync.n_rejected(), 0);
@@ -376,15 +406,113 @@ async fn data_ahead_of_a_hello_naming_another_peer_is_never_handled() {
         hello_seen: false,
         have: None,
     };
-    for message in [batch, hello] {
-        frame::write_frame(&mut stream.send, &message.encode())
-            .await
-            .unwrap();
-    }
+    // The batch first, where the hello goes, then the hello on a stream of its own.
+    frame::write_frame(&mut stream.send, &batch.encode())
+        .await
+        .unwrap();
+    frame::write_one_frame(&impostor, &hello.encode())
+        .await
+        .unwrap();
     assert_eq!(closed_code(&impostor).await, CloseCode::Protocol as u64);
     let stats = a.handle.stats().await.unwrap();
     assert_eq!(stats.n_identity_mismatches, 1, "{stats:?}");
     assert!(!op_ids(&a.handle).await.contains(&op.op().id()));
+}
+
+/// Each sync message travels on a stream of its own, so one whose bytes are late (a lost
+/// packet, here a remote that stops halfway) holds up none sent after it.
+#[tokio::test]
+async fn a_message_is_taken_while_an_earlier_one_waits_for_its_bytes() {
+    let a = node(1);
+    author_some(&a.handle, 1, "alice").await;
+    let (remote, mut admission) = admitted(a.handle.local_addr(), 74).await;
+    let keypair = Keypair::from_seed([74; 32]);
+    let header = u32::try_from(MAX_FRAME_BYTES).unwrap().to_be_bytes();
+    let mut log = replication::Log::<TestPayload>::default();
+    log.set_session_id(session_keys(INVITE).session_id());
+    let payload = TestPayload::Chat("after the late one".into());
+    let (op, _) = log
+        .author(&keypair, replication::Timestamp(1_000), payload)
+        .unwrap();
+    let hello = Message::Hello {
+        protocol_version: PROTOCOL_VERSION,
+        session_id: session_keys(INVITE).session_id(),
+        peer: keypair.peer_id(),
+        hello_seen: false,
+        have: None,
+    };
+    let batch = Message::Ops {
+        batch_no: 1,
+        ops: vec![op.encoded().to_vec()],
+    };
+    // The hello first, on the admission's stream, then a message whose bytes stop halfway,
+    // then the batch.
+    frame::write_frame(&mut admission.send, &hello.encode())
+        .await
+        .unwrap();
+    let mut late = remote.open_uni().await.unwrap();
+    late.write_all(&[header.as_slice(), &[0; 1000]].concat())
+        .await
+        .unwrap();
+    frame::write_one_frame(&remote, &batch.encode())
+        .await
+        .unwrap();
+    eventually("the op behind the late message is delivered", || async {
+        op_ids(&a.handle).await.contains(&op.op().id())
+    })
+    .await;
+    // The late message's stream is still open, and nothing was refused.
+    assert!(late.write_all(&[0; 10]).await.is_ok());
+    let stats = a.handle.stats().await.unwrap();
+    assert_eq!(stats.n_cut_off, 0, "{stats:?}");
+}
+
+/// The hello goes first, on the admission's stream, and the node reads no other stream before
+/// it: messages sent on their own streams ahead of a late hello wait in QUIC's buffers, where
+/// they would otherwise overflow the core's few early messages as rejections.
+#[tokio::test]
+async fn nothing_overtakes_the_hello() {
+    let a = node(1);
+    author_some(&a.handle, 1, "alice").await;
+    let (remote, mut admission) = admitted(a.handle.local_addr(), 76).await;
+    let keypair = Keypair::from_seed([76; 32]);
+    let mut log = replication::Log::<TestPayload>::default();
+    log.set_session_id(session_keys(INVITE).session_id());
+    let mut ids = Vec::new();
+    for i in 0..2 * MAX_EARLY_MESSAGES {
+        let payload = TestPayload::Chat(format!("early {i}"));
+        let at = replication::Timestamp(1_000 + i as u64);
+        let (op, _) = log.author(&keypair, at, payload).unwrap();
+        ids.push(op.op().id());
+        let batch = Message::Ops {
+            batch_no: i as u64 + 1,
+            ops: vec![op.encoded().to_vec()],
+        };
+        frame::write_one_frame(&remote, &batch.encode())
+            .await
+            .unwrap();
+    }
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let hello = Message::Hello {
+        protocol_version: PROTOCOL_VERSION,
+        session_id: session_keys(INVITE).session_id(),
+        peer: keypair.peer_id(),
+        hello_seen: false,
+        have: None,
+    };
+    frame::write_frame(&mut admission.send, &hello.encode())
+        .await
+        .unwrap();
+    eventually("every early batch is delivered", || async {
+        let held = op_ids(&a.handle).await;
+        ids.iter().all(|id| held.contains(id))
+    })
+    .await;
+    let stats = a.handle.stats().await.unwrap();
+    let conn = (stats.connections.iter())
+        .find(|c| c.peer == keypair.peer_id())
+        .expect("the remote is still connected");
+    assert_eq!(conn.sync.n_rejected(), 0, "{:?}", conn.sync);
 }
 
 /// Asks `connection` for a snapshot with `request` on a stream of its own; the bytes that came

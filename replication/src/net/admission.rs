@@ -1,4 +1,4 @@
-//! Admission: after the QUIC handshake, each side proves on the sync stream that it knows the
+//! Admission: after the QUIC handshake, each side proves on the admission stream that it knows the
 //! session's invite and owns the ed25519 peer id it claims, both bound to this very connection.
 //!
 //! Both sides compute the same 32-byte TLS exporter value (RFC 5705/8446) from the
@@ -219,14 +219,15 @@ pub fn exporter(connection: &quinn::Connection) -> Result<[u8; EXPORTER_BYTES], 
     Ok(out)
 }
 
-/// The sync stream of an admitted connection and the remote's proven peer id.
+/// The admission stream of an admitted connection and the remote's proven peer id. The
+/// stream carries nothing after the proofs; either side finishing it ends the connection.
 #[derive(Debug)]
 pub struct Admitted {
     /// The remote's peer id, proven by its signature.
     pub peer: PeerId,
-    /// Where this side writes frames.
+    /// This side's half of the admission stream.
     pub send: quinn::SendStream,
-    /// Where this side reads frames.
+    /// The remote's half of the admission stream.
     pub recv: quinn::RecvStream,
 }
 
@@ -269,7 +270,7 @@ async fn read_admission(recv: &mut quinn::RecvStream) -> Result<AdmissionFrame, 
     AdmissionFrame::decode(&bytes)
 }
 
-/// The dialer's half: opens the sync stream, sends its proof, checks the acceptor's.
+/// The dialer's half: opens the admission stream, sends its proof, checks the acceptor's.
 /// The caller applies [`ADMISSION_TIMEOUT_MILLIS`] and closes the connection on error.
 pub async fn admit_dialer(
     connection: &quinn::Connection,
@@ -289,7 +290,7 @@ pub async fn admit_dialer(
     Ok(Admitted { peer, send, recv })
 }
 
-/// The acceptor's half: accepts the sync stream, checks the dialer's proof, then answers.
+/// The acceptor's half: accepts the admission stream, checks the dialer's proof, then answers.
 /// The caller applies [`ADMISSION_TIMEOUT_MILLIS`] and closes the connection on error.
 pub async fn admit_acceptor(
     connection: &quinn::Connection,

@@ -1,5 +1,5 @@
 //! Length-prefixed frames on a QUIC stream: `[u32 big-endian length][body]`, each body one
-//! sync message. The length is checked against [`MAX_FRAME_BYTES`] before anything is
+//! sync message, and one frame a stream. The length is checked against [`MAX_FRAME_BYTES`] before anything is
 //! allocated, so a hostile peer cannot make a node reserve more than one frame's worth.
 
 use crate::sync::message::MAX_MESSAGE_BYTES;
@@ -18,6 +18,9 @@ pub enum FrameError {
     /// The stream ended in the middle of a frame.
     #[error("stream ended inside a frame")]
     Truncated,
+    /// The stream went on after its one frame.
+    #[error("more bytes after the stream's frame")]
+    Trailing,
     /// The stream or its connection failed while reading.
     #[error(transparent)]
     Read(#[from] quinn::ReadError),
@@ -64,6 +67,35 @@ pub async fn read_frame(stream: &mut quinn::RecvStream) -> Result<Option<Vec<u8>
         Err(quinn::ReadExactError::FinishedEarly(_)) => Err(FrameError::Truncated),
         Err(quinn::ReadExactError::ReadError(e)) => Err(e.into()),
     }
+}
+
+/// Reads a stream that carries one frame, whole: its frame, or an error if it ends before
+/// one or goes on after it.
+pub async fn read_one_frame(mut stream: quinn::RecvStream) -> Result<Vec<u8>, FrameError> {
+    let body = read_frame(&mut stream)
+        .await?
+        .ok_or(FrameError::Truncated)?;
+    let mut rest = [0; 1];
+    match stream.read(&mut rest).await? {
+        None => Ok(body),
+        Some(_) => Err(FrameError::Trailing),
+    }
+}
+
+/// Writes `body` as the one frame of a new unidirectional stream of `connection`, and
+/// finishes the stream.
+pub async fn write_one_frame(
+    connection: &quinn::Connection,
+    body: &[u8],
+) -> Result<(), FrameError> {
+    let mut stream = connection
+        .open_uni()
+        .await
+        .map_err(|e| FrameError::Write(e.into()))?;
+    write_frame(&mut stream, body).await?;
+    // Only a stream already reset or stopped cannot finish; its connection says why.
+    let _ = stream.finish();
+    Ok(())
 }
 
 #[cfg(test)]

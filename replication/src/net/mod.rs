@@ -15,8 +15,9 @@
 //! - [`Node`] / [`NodeHandle`] / [`NodeEvent`]: one QUIC endpoint (quinn, rustls with *ring*)
 //!   that accepts and dials, admits peers that prove the invite and their ed25519 id, and runs
 //!   the peer's sans-IO core on one tokio task, the only place that reads the wall clock.
-//!   Reliable sync messages go as length-prefixed [`frame`]s on one bidirectional stream per
-//!   connection; ephemeral values go as unreliable datagrams.
+//!   Reliable sync messages go as length-prefixed [`frame`]s, each on a unidirectional stream
+//!   of its own, so a lost packet holds up only its own message (the sync core takes messages
+//!   in any order); ephemeral values go as unreliable datagrams.
 //! - [`discovery`]: a tiny UDP discovery server ([`discovery::serve`]), its client, and LAN
 //!   multicast announcements.
 //!

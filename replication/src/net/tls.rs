@@ -17,8 +17,9 @@ use rustls::crypto::CryptoProvider;
 use rustls::pki_types::{CertificateDer, PrivateKeyDer, PrivatePkcs8KeyDer, ServerName, UnixTime};
 use rustls::{DigitallySignedStruct, SignatureScheme};
 
-/// The ALPN protocol id of sculpt sync connections.
-pub const ALPN: &[u8] = b"sculpt-sync/1";
+/// The ALPN protocol id of sculpt sync connections: 2 since each sync message travels on a
+/// unidirectional stream of its own, which a build speaking 1 (one stream for all) refuses.
+pub const ALPN: &[u8] = b"sculpt-sync/2";
 /// The TLS server name dialers send (certificates are not checked against it).
 pub const SERVER_NAME: &str = "sculpt";
 /// Keep-alive period: a silent connection still proves it is alive this often.
@@ -27,9 +28,16 @@ pub const KEEP_ALIVE_MILLIS: u64 = 2_000;
 pub const IDLE_TIMEOUT_MILLIS: u64 = 10_000;
 /// Bytes of received datagrams buffered per connection before older ones are dropped.
 pub const DATAGRAM_RECEIVE_BUFFER_BYTES: usize = 256 * 1024;
-/// Bidirectional streams a remote may have open at once: the sync stream and one snapshot
+/// Bidirectional streams a remote may have open at once: the admission stream and one snapshot
 /// request ([`crate::net::node::MAX_SNAPSHOTS_SERVED_PER_CONN`] bounds how many in all).
 pub const MAX_REMOTE_BIDI_STREAMS: u32 = 2;
+/// Unidirectional streams a remote may have open at once, one per sync message not yet read
+/// whole: enough for the messages of several round trips on a busy link, so a few lost
+/// packets do not hold up the rest.
+pub const MAX_REMOTE_UNI_STREAMS: u32 = 512;
+/// Bytes a remote may have sent on all of a connection's streams that this side has not read
+/// (4 MiB): what QUIC buffers for one connection, however many streams it opens.
+pub const MAX_RECEIVE_WINDOW_BYTES: u32 = 4 << 20;
 
 /// Why the TLS or QUIC configuration could not be built.
 #[derive(Debug, thiserror::Error)]
@@ -61,13 +69,17 @@ pub(crate) fn secure_random<const N: usize>() -> Result<[u8; N], rustls::Error> 
     Ok(out)
 }
 
-/// The QUIC transport settings shared by both sides of a connection: one bidirectional
-/// stream and a snapshot request, no unidirectional streams, datagrams on, keep-alives and an idle timeout.
+/// The QUIC transport settings shared by both sides of a connection: the admission's
+/// bidirectional stream and a snapshot request, a unidirectional stream per sync message,
+/// sent in the order they were written (no round robin between them), datagrams on,
+/// keep-alives and an idle timeout.
 pub fn transport_config() -> Arc<quinn::TransportConfig> {
     let mut config = quinn::TransportConfig::default();
     config
         .max_concurrent_bidi_streams(MAX_REMOTE_BIDI_STREAMS.into())
-        .max_concurrent_uni_streams(0u32.into())
+        .max_concurrent_uni_streams(MAX_REMOTE_UNI_STREAMS.into())
+        .receive_window(MAX_RECEIVE_WINDOW_BYTES.into())
+        .send_fairness(false)
         .keep_alive_interval(Some(Duration::from_millis(KEEP_ALIVE_MILLIS)))
         .max_idle_timeout(Some(quinn::IdleTimeout::from(quinn::VarInt::from_u32(
             IDLE_TIMEOUT_MILLIS as u32,

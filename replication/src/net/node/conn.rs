@@ -12,7 +12,8 @@ use tokio::sync::mpsc;
 
 use super::{
     ACCEPT_TIMEOUT_MILLIS, CloseCode, Counters, Input, MAX_ADMISSIONS_IN_PROGRESS,
-    MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS, MAX_CONNECTIONS_PER_ADDRESS, RefusalKind, Shared,
+    MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS, MAX_CONNECTIONS_PER_ADDRESS, MAX_FRAMES_READ_AT_ONCE,
+    RefusalKind, Shared,
 };
 use crate::net::admission::{self, AdmissionError, Admitted, Role};
 use crate::net::frame::{self, FrameError};
@@ -323,43 +324,124 @@ async fn run_connection(
     read_frames(shared, conn, connection, recv).await;
 }
 
+/// Reads the remote's sync frames: the first (its hello) on the admission's stream
+/// (`lifeline`), so that nothing overtakes it, then each on a unidirectional stream of its
+/// own, up to [`MAX_FRAMES_READ_AT_ONCE`] streams at a time, each handed to the core task as
+/// soon as it is whole: a stream waiting for a lost packet holds up no other. The admission's
+/// stream carries nothing more; the remote finishing it ends the connection.
 async fn read_frames(
     shared: Arc<Shared>,
     conn: ConnId,
     connection: quinn::Connection,
-    mut recv: quinn::RecvStream,
+    mut lifeline: quinn::RecvStream,
 ) {
-    let end = loop {
-        match frame::read_frame(&mut recv).await {
-            Ok(Some(bytes)) => {
+    let end = match frame::read_frame(&mut lifeline).await {
+        Ok(Some(bytes)) => {
+            if shared
+                .inputs
+                .send(Input::Frame { conn, bytes })
+                .await
+                .is_err()
+            {
+                return;
+            }
+            read_streams(&shared, conn, &connection, lifeline).await
+        }
+        Ok(None) => Input::Lost {
+            conn,
+            reason: "the remote finished the admission stream".into(),
+        },
+        Err(e) => frame_error(conn, &connection, e),
+    };
+    let _ = shared.inputs.send(end).await;
+}
+
+/// The frames after the first, each on a stream of its own, until the connection ends: what
+/// ended it.
+async fn read_streams(
+    shared: &Shared,
+    conn: ConnId,
+    connection: &quinn::Connection,
+    mut lifeline: quinn::RecvStream,
+) -> Input {
+    let mut reads = tokio::task::JoinSet::new();
+    let mut byte = [0; 1];
+    let ended = lifeline.read(&mut byte);
+    tokio::pin!(ended);
+    loop {
+        let read = tokio::select! {
+            stream = connection.accept_uni(), if reads.len() < MAX_FRAMES_READ_AT_ONCE => {
+                match stream {
+                    Ok(stream) => {
+                        reads.spawn(frame::read_one_frame(stream));
+                        continue;
+                    }
+                    Err(e) => return Input::Lost { conn, reason: e.to_string() },
+                }
+            }
+            Some(read) = reads.join_next() => read,
+            ended = &mut ended => {
+                let reason = match ended {
+                    Ok(None) => "the remote finished the admission stream".into(),
+                    Ok(Some(_)) => {
+                        connection.close(CloseCode::Protocol.var_int(), b"bytes after the hello");
+                        "the remote wrote on the admission stream after its hello".into()
+                    }
+                    Err(e) => e.to_string(),
+                };
+                return Input::Lost { conn, reason };
+            }
+        };
+        match read {
+            Ok(Ok(bytes)) => {
                 if shared
                     .inputs
                     .send(Input::Frame { conn, bytes })
                     .await
                     .is_err()
                 {
-                    return;
+                    return Input::Lost {
+                        conn,
+                        reason: "the node stopped".into(),
+                    };
                 }
             }
-            Ok(None) => {
-                break Input::Lost {
-                    conn,
-                    reason: "the remote finished the sync stream".into(),
-                };
+            Ok(Err(e @ (FrameError::TooLarge(_) | FrameError::Trailing))) => {
+                return frame_error(conn, connection, e);
             }
-            Err(FrameError::TooLarge(len)) => {
-                connection.close(CloseCode::Protocol.var_int(), b"frame too large");
-                break Input::OversizedFrame { conn, len };
-            }
+            // A stream reset or cut short: the connection's end, if that is what it was,
+            // shows at the next accept.
+            Ok(Err(_)) => {}
+            // The read panicked (it does not) or was cancelled (the loop owns the set).
             Err(e) => {
-                break Input::Lost {
+                return Input::Lost {
                     conn,
                     reason: e.to_string(),
                 };
             }
         }
-    };
-    let _ = shared.inputs.send(end).await;
+    }
+}
+
+/// What ends a connection whose remote sent a bad frame, or whose stream failed.
+fn frame_error(conn: ConnId, connection: &quinn::Connection, error: FrameError) -> Input {
+    match error {
+        FrameError::TooLarge(len) => {
+            connection.close(CloseCode::Protocol.var_int(), b"frame too large");
+            Input::OversizedFrame { conn, len }
+        }
+        FrameError::Trailing => {
+            connection.close(CloseCode::Protocol.var_int(), b"bytes after a frame");
+            Input::Lost {
+                conn,
+                reason: error.to_string(),
+            }
+        }
+        e => Input::Lost {
+            conn,
+            reason: e.to_string(),
+        },
+    }
 }
 
 async fn read_datagrams(shared: Arc<Shared>, conn: ConnId, connection: quinn::Connection) {
@@ -375,14 +457,27 @@ async fn read_datagrams(shared: Arc<Shared>, conn: ConnId, connection: quinn::Co
     }
 }
 
-/// Writes the frames the core task queues for one connection, in order, until the core
-/// drops the queue (the connection is over) or the stream fails.
-pub(super) async fn write_frames(mut send: quinn::SendStream, mut frames: mpsc::Receiver<Vec<u8>>) {
+/// Writes the frames the core task queues for one connection, in order: the first (the hello)
+/// on the admission's stream `lifeline`, each later one on a new unidirectional stream, until
+/// the core drops the queue (the connection is over: `lifeline` is finished) or the
+/// connection fails.
+pub(super) async fn write_frames(
+    connection: quinn::Connection,
+    mut lifeline: quinn::SendStream,
+    mut frames: mpsc::Receiver<Vec<u8>>,
+) {
+    let mut first = true;
     while let Some(body) = frames.recv().await {
-        if frame::write_frame(&mut send, &body).await.is_err() {
+        let written = if first {
+            frame::write_frame(&mut lifeline, &body).await
+        } else {
+            frame::write_one_frame(&connection, &body).await
+        };
+        if written.is_err() {
             return;
         }
+        first = false;
     }
     // Already finished or reset when the connection is gone: nothing more to do.
-    let _ = send.finish();
+    let _ = lifeline.finish();
 }

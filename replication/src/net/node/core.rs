@@ -366,7 +366,7 @@ impl<P: Payload + Send + 'static> Core<P> {
             return self.refuse(&connection, reply, kind, DialError::TooManyConnections);
         }
         let (frames, queue) = mpsc::channel(MAX_QUEUED_FRAMES_PER_CONN);
-        tokio::spawn(conn::write_frames(send, queue));
+        tokio::spawn(conn::write_frames(connection.clone(), send, queue));
         self.conns.insert(
             conn,
             Live {

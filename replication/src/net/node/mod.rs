@@ -4,8 +4,11 @@
 //! [`Node::spawn`] binds the endpoint and starts three kinds of task on the caller's tokio
 //! runtime: the core task (owns the [`Peer`], the optional [`OpStore`], and the only reads
 //! of the wall clock), an accept loop, and per connection a reader and a writer. Reliable
-//! sync messages travel as length-prefixed frames ([`super::frame`]) on the connection's one
-//! bidirectional stream; ephemeral messages travel as QUIC datagrams (a datagram that does
+//! sync messages travel as length-prefixed frames ([`super::frame`]), each on a unidirectional
+//! stream of its own, sent in order and read as they come (at most
+//! [`MAX_FRAMES_READ_AT_ONCE`] at a time), so a lost packet delays only its own message;
+//! the admission's bidirectional stream stays open while the connection lives. Ephemeral
+//! messages travel as QUIC datagrams (a datagram that does
 //! not fit the path is dropped: ephemeral values are latest-value-wins and unreliable).
 //!
 //! The app talks to the node through a cloneable [`NodeHandle`] (commands with replies) and
@@ -102,6 +105,10 @@ pub const MAX_QUEUED_EVENTS: usize = 4096;
 /// Inputs (frames, datagrams, connection news) queued from connection tasks to the core
 /// task before readers wait, which pushes back on the remote through QUIC flow control.
 pub const MAX_QUEUED_INPUTS: usize = 64;
+/// Sync frames of one connection read at once, each from a stream of its own (at most
+/// [`super::frame::MAX_FRAME_BYTES`] each, 8 MiB in all); the remote's other streams wait in
+/// QUIC's buffers, within [`super::tls::MAX_RECEIVE_WINDOW_BYTES`].
+pub const MAX_FRAMES_READ_AT_ONCE: usize = 32;
 /// Frames queued for one connection's writer; a connection that falls this far behind is
 /// closed as a slow reader.
 pub const MAX_QUEUED_FRAMES_PER_CONN: usize = 256;
