@@ -62,8 +62,8 @@ pub struct Faults {
     pub expel: bool,
     /// Whether connections behave as the product's QUIC ones do (`crate::sim`'s stream
     /// model): a loss is a retransmission after a loss detection time, not a lost message;
-    /// no duplicates; a connection delivers in order; a partition stalls it, closing it if it
-    /// outlasts the idle timeout. Off: every message is a datagram of its own, lost,
+    /// no duplicates; each message on a stream of its own, so a loss delays only its message;
+    /// a partition stalls the connection, closing it if it outlasts the idle timeout. Off: every message is a datagram of its own, lost,
     /// duplicated and reordered independently (the old model, kept as a stress case).
     pub streams: bool,
     /// Whether the last third of the workload runs in one partition between the two halves

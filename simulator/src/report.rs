@@ -164,6 +164,9 @@ pub struct Stats {
     pub n_stalled: u64,
     /// Losses on stream connections, each made good after a loss detection time.
     pub n_retransmitted: u64,
+    /// Messages on a stream connection delivered before one sent earlier on it, which a loss
+    /// held up (each message is a stream of its own).
+    pub n_overtaking: u64,
     /// Dials to replace a stalled stream connection ([`replication::sync::state::Event::Stalled`]).
     pub n_stall_redials: u64,
     /// Stalled stream connections such a dial replaced.
@@ -303,7 +306,7 @@ impl Report {
             f,
             "  sent {} messages ({:.1}/op), {} bytes ({:.0} bytes/op); delivered {}, lost {}, \
              duplicated {}, partitioned {}, queue-dropped {}, stale {}; as streams: \
-             retransmitted {}, stalled {}, stall redials {} ({} replaced)",
+             retransmitted {} (overtaken {}), stalled {}, stall redials {} ({} replaced)",
             s.n_messages,
             self.messages_per_op(),
             s.n_bytes,
@@ -315,6 +318,7 @@ impl Report {
             s.n_queue_drops,
             s.n_stale_drops,
             s.n_retransmitted,
+            s.n_overtaking,
             s.n_stalled,
             s.n_stall_redials,
             s.n_stalls_replaced

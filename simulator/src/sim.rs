@@ -169,9 +169,8 @@ pub struct Simulation {
     latency_micros: Vec<Vec<u64>>,
     /// When each directed link is free to send again (bandwidth).
     link_free_at: Vec<Vec<u64>>,
-    /// Per directed link, the connection epoch and delivery time of the last message sent
-    /// on it as a stream ([`Faults::streams`]): the next is delivered after it.
-    stream_tail: Vec<Vec<(u64, u64)>>,
+    /// Per directed link, its connection's deliveries as a stream ([`Faults::streams`]).
+    stream_links: Vec<Vec<stream::StreamLink>>,
     /// Per directed link, when the first message stalled on it while a partition cuts it,
     /// and the messages, with their connection epochs.
     stalled: BTreeMap<(usize, usize), stream::Stalled>,
@@ -233,7 +232,7 @@ impl Simulation {
             actions,
             latency_micros,
             link_free_at: vec![vec![0; n_nodes]; n_nodes],
-            stream_tail: vec![vec![(0, 0); n_nodes]; n_nodes],
+            stream_links: vec![vec![stream::StreamLink::default(); n_nodes]; n_nodes],
             stalled: BTreeMap::new(),
             resuming: BTreeMap::new(),
             pairs: vec![vec![Pair::default(); n_nodes]; n_nodes],
@@ -800,9 +799,14 @@ impl Simulation {
         }
     }
 
+    /// Connects `peer` to every peer online. Over streams a dial across a partition never
+    /// completes: such a pair connects when the partition ends ([`Simulation::stream_unblocked`]).
     fn connect_all(&mut self, peer: usize) {
         for other in 0..self.n_nodes() {
-            if other != peer && self.online(other) {
+            let cut = self.faults.streams
+                && (self.blocked.contains_key(&(peer, other))
+                    || self.blocked.contains_key(&(other, peer)));
+            if other != peer && self.online(other) && !cut {
                 self.connect_pair(peer, other);
             }
         }

@@ -1,12 +1,15 @@
 //! Connections as QUIC gives them ([`Faults::streams`]): a lost packet is sent again once its
-//! sender detects the loss, so loss is delay; a connection delivers its messages in order and
-//! never twice; a partition stalls a connection, which the idle timeout closes if the
-//! partition outlasts it, and the two ends dial again once it ends. When a partition ends,
-//! what stalled goes again once the sender learns it was lost: from the acknowledgement of its
-//! next message when the stalled bytes left room in the congestion window, else at its next
-//! probe, backed off since the first stall; and the end of a stalled connection with the
-//! smaller id dials again ([`Event::Stalled`]), as the node does, which replaces the
-//! connection once both links are open.
+//! sender detects the loss, so loss is delay; a connection delivers each message once, the
+//! first (the hello) before any other and each later one on a stream of its own, as the node
+//! sends them, so a loss delays its message and no other (the node reads at most
+//! `replication::net::node::MAX_FRAMES_READ_AT_ONCE` streams at a time, a limit not modelled
+//! here); a partition stalls a connection, which the idle timeout closes if the partition
+//! outlasts it, and the two ends dial again once it ends. When a partition ends, what stalled
+//! goes again once the sender learns it was lost: from the acknowledgement of its next
+//! message when the stalled bytes left room in the congestion window, else at its next probe,
+//! backed off since the first stall; and the end of a stalled connection with the smaller id
+//! dials again ([`Event::Stalled`]), as the node does, which replaces the connection once
+//! both links are open.
 //!
 //! [`Event::Stalled`]: replication::sync::state::Event::Stalled
 //!
@@ -28,6 +31,17 @@ const REDIAL_ROUND_TRIPS: u64 = 2;
 /// What a partition stalled on one directed link: when the first message stalled, and the
 /// messages with their connection epochs.
 pub(super) type Stalled = (u64, Vec<(u64, Vec<u8>)>);
+
+/// What one directed link's connection has delivered, as a stream connection.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct StreamLink {
+    /// The connection's epoch.
+    epoch: u64,
+    /// When its first message, the hello, is delivered: the node reads no other before it.
+    hello_at: u64,
+    /// The latest delivery of any of its messages.
+    latest_at: u64,
+}
 
 /// Most times one message is lost in a row before it gets through (a longer run is one the
 /// idle timeout would end).
@@ -101,7 +115,8 @@ impl Simulation {
         }
     }
 
-    /// Sends `bytes` (of connection `epoch`) after `extra` microseconds of waiting.
+    /// Sends `bytes` (of connection `epoch`) after `extra` microseconds of waiting, on a stream
+    /// of its own.
     fn stream_transmit(&mut self, from: usize, to: usize, epoch: u64, bytes: Vec<u8>, extra: u64) {
         let Some(departs) = self.transmit_slot(from, to, bytes.len()) else {
             self.stats.n_queue_drops += 1;
@@ -115,12 +130,22 @@ impl Simulation {
             n_lost += 1;
         }
         self.stats.n_retransmitted += u64::from(n_lost);
-        // In order within the connection: after the last message it carries.
-        let tail = &mut self.stream_tail[from][to];
-        if tail.0 == epoch {
-            at = at.max(tail.1);
+        let link = &mut self.stream_links[from][to];
+        if link.epoch != epoch {
+            // The connection's first message, its hello, on the admission's stream.
+            *link = StreamLink {
+                epoch,
+                hello_at: at,
+                latest_at: at,
+            };
         }
-        *tail = (epoch, at);
+        // After the hello, not held behind the connection's other messages: one a loss
+        // delays is overtaken.
+        at = at.max(link.hello_at);
+        if at < link.latest_at {
+            self.stats.n_overtaking += 1;
+        }
+        link.latest_at = link.latest_at.max(at);
         self.n_in_flight += 1;
         self.push(at, deliver(from, to, epoch, bytes, None));
     }
@@ -213,11 +238,13 @@ impl Simulation {
         self.pair(from, to).redial_until = now + takes;
     }
 
-    /// A dial to replace the stalled connection of `epoch` between `a` and `b` is admitted:
-    /// both ends drop the old connection (what stalled on it is stale) and sync on the new.
+    /// A dial to replace the stalled connection of `epoch` between `a` and `b` is admitted,
+    /// unless a partition began during its handshake: both ends drop the old connection
+    /// (what stalled on it is stale) and sync on the new.
     pub(super) fn stream_replace(&mut self, a: usize, b: usize, epoch: u64) {
         let pair = *self.pair(a, b);
-        if !pair.connected || pair.epoch != epoch {
+        let cut = self.blocked.contains_key(&(a, b)) || self.blocked.contains_key(&(b, a));
+        if !pair.connected || pair.epoch != epoch || cut {
             return;
         }
         self.stats.n_stalls_replaced += 1;
