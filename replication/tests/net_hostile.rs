@@ -12,7 +12,6 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use net_support::*;
-use replication::Keypair;
 use replication::net::admission::{self, ADMISSION_FRAME_BYTES, ADMISSION_TIMEOUT_MILLIS};
 use replication::net::frame::{self, MAX_FRAME_BYTES};
 use replication::net::node::{
@@ -25,6 +24,7 @@ use replication::payload::test_payload::TestPayload;
 use replication::peer::MAX_CONNECTIONS;
 use replication::sync::message::{Message, PROTOCOL_VERSION};
 use replication::sync::state::MAX_EARLY_MESSAGES;
+use replication::{Keypair, OpId};
 
 /// Where attackers send from: another loopback address than the honest nodes' 127.0.0.1.
 const ATTACKER_IP: &str = "127.0.0.2";
@@ -387,36 +387,54 @@ async fn data_ahead_of_a_hello_naming_another_peer_is_never_handled() {
     author_some(&a.handle, 1, "alice").await;
     let (impostor, mut stream) = admitted(a.handle.local_addr(), 68).await;
     let victim = Keypair::from_seed([69; 32]);
-    let mut log = replication::Log::<TestPayload>::default();
-    let (op, _) = log
-        .author(
-            &victim,
-            replication::Timestamp(1_000),
-            TestPayload::Chat("early".into()),
-        )
-        .unwrap();
-    let batch = Message::Ops {
-        batch_no: 1,
-        ops: vec![op.encoded().to_vec()],
-    };
-    let hello = Message::Hello {
-        protocol_version: PROTOCOL_VERSION,
-        session_id: session_keys(INVITE).session_id(),
-        peer: victim.peer_id(),
-        hello_seen: false,
-        have: None,
-    };
+    let (id, batch) = chat_batch(&mut session_log(), &victim, "early");
     // The batch first, where the hello goes, then the hello on a stream of its own.
     frame::write_frame(&mut stream.send, &batch.encode())
         .await
         .unwrap();
-    frame::write_one_frame(&impostor, &hello.encode())
+    frame::write_one_frame(&impostor, &hello_from(&victim).encode())
         .await
         .unwrap();
     assert_eq!(closed_code(&impostor).await, CloseCode::Protocol as u64);
     let stats = a.handle.stats().await.unwrap();
     assert_eq!(stats.n_identity_mismatches, 1, "{stats:?}");
-    assert!(!op_ids(&a.handle).await.contains(&op.op().id()));
+    assert!(!op_ids(&a.handle).await.contains(&id));
+}
+
+/// A log in the test session.
+fn session_log() -> replication::Log<TestPayload> {
+    let mut log = replication::Log::default();
+    log.set_session_id(session_keys(INVITE).session_id());
+    log
+}
+
+/// `keypair`'s next op in `log` (a chat saying `text`), and a batch that carries it alone.
+fn chat_batch(
+    log: &mut replication::Log<TestPayload>,
+    keypair: &Keypair,
+    text: &str,
+) -> (OpId, Message) {
+    let n = log.len() as u64;
+    let at = replication::Timestamp(1_000 + n);
+    let (op, _) = log
+        .author(keypair, at, TestPayload::Chat(text.into()))
+        .unwrap();
+    let batch = Message::Ops {
+        batch_no: n + 1,
+        ops: vec![op.encoded().to_vec()],
+    };
+    (op.op().id(), batch)
+}
+
+/// `keypair`'s hello in the test session, naming no holdings.
+fn hello_from(keypair: &Keypair) -> Message {
+    Message::Hello {
+        protocol_version: PROTOCOL_VERSION,
+        session_id: session_keys(INVITE).session_id(),
+        peer: keypair.peer_id(),
+        hello_seen: false,
+        have: None,
+    }
 }
 
 /// Each sync message travels on a stream of its own, so one whose bytes are late (a lost
@@ -427,30 +445,14 @@ async fn a_message_is_taken_while_an_earlier_one_waits_for_its_bytes() {
     author_some(&a.handle, 1, "alice").await;
     let (remote, mut admission) = admitted(a.handle.local_addr(), 74).await;
     let keypair = Keypair::from_seed([74; 32]);
-    let header = u32::try_from(MAX_FRAME_BYTES).unwrap().to_be_bytes();
-    let mut log = replication::Log::<TestPayload>::default();
-    log.set_session_id(session_keys(INVITE).session_id());
-    let payload = TestPayload::Chat("after the late one".into());
-    let (op, _) = log
-        .author(&keypair, replication::Timestamp(1_000), payload)
-        .unwrap();
-    let hello = Message::Hello {
-        protocol_version: PROTOCOL_VERSION,
-        session_id: session_keys(INVITE).session_id(),
-        peer: keypair.peer_id(),
-        hello_seen: false,
-        have: None,
-    };
-    let batch = Message::Ops {
-        batch_no: 1,
-        ops: vec![op.encoded().to_vec()],
-    };
+    let (id, batch) = chat_batch(&mut session_log(), &keypair, "after the late one");
     // The hello first, on the admission's stream, then a message whose bytes stop halfway,
     // then the batch.
-    frame::write_frame(&mut admission.send, &hello.encode())
+    frame::write_frame(&mut admission.send, &hello_from(&keypair).encode())
         .await
         .unwrap();
     let mut late = remote.open_uni().await.unwrap();
+    let header = u32::try_from(MAX_FRAME_BYTES).unwrap().to_be_bytes();
     late.write_all(&[header.as_slice(), &[0; 1000]].concat())
         .await
         .unwrap();
@@ -458,7 +460,7 @@ async fn a_message_is_taken_while_an_earlier_one_waits_for_its_bytes() {
         .await
         .unwrap();
     eventually("the op behind the late message is delivered", || async {
-        op_ids(&a.handle).await.contains(&op.op().id())
+        op_ids(&a.handle).await.contains(&id)
     })
     .await;
     // The late message's stream is still open, and nothing was refused.
@@ -476,31 +478,17 @@ async fn nothing_overtakes_the_hello() {
     author_some(&a.handle, 1, "alice").await;
     let (remote, mut admission) = admitted(a.handle.local_addr(), 76).await;
     let keypair = Keypair::from_seed([76; 32]);
-    let mut log = replication::Log::<TestPayload>::default();
-    log.set_session_id(session_keys(INVITE).session_id());
+    let mut log = session_log();
     let mut ids = Vec::new();
     for i in 0..2 * MAX_EARLY_MESSAGES {
-        let payload = TestPayload::Chat(format!("early {i}"));
-        let at = replication::Timestamp(1_000 + i as u64);
-        let (op, _) = log.author(&keypair, at, payload).unwrap();
-        ids.push(op.op().id());
-        let batch = Message::Ops {
-            batch_no: i as u64 + 1,
-            ops: vec![op.encoded().to_vec()],
-        };
+        let (id, batch) = chat_batch(&mut log, &keypair, &format!("early {i}"));
+        ids.push(id);
         frame::write_one_frame(&remote, &batch.encode())
             .await
             .unwrap();
     }
     tokio::time::sleep(Duration::from_millis(200)).await;
-    let hello = Message::Hello {
-        protocol_version: PROTOCOL_VERSION,
-        session_id: session_keys(INVITE).session_id(),
-        peer: keypair.peer_id(),
-        hello_seen: false,
-        have: None,
-    };
-    frame::write_frame(&mut admission.send, &hello.encode())
+    frame::write_frame(&mut admission.send, &hello_from(&keypair).encode())
         .await
         .unwrap();
     eventually("every early batch is delivered", || async {
