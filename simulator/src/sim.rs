@@ -1164,14 +1164,17 @@ impl Simulation {
                 self.stats.n_forks_learnt += 1;
             }
             // Over streams the peer dials again, as the node does, from the second event of a
-            // silence (nothing reaches a peer through a partition, which the node checks);
-            // datagrams have no connection to replace.
+            // silence (nothing reaches a peer through a partition, which the node checks; once
+            // it ends the remote's acknowledgements do, which this does not model), or when
+            // the remote shows it hears nothing of ours. Datagrams have no connection to
+            // replace.
             Event::Stalled {
                 handshake_micros,
                 again,
+                unheard,
             } => {
                 let other = conn.0 as usize;
-                if self.faults.streams && again && other < self.n_nodes() {
+                if self.faults.streams && (again || unheard) && other < self.n_nodes() {
                     self.trace.u64(22);
                     self.stream_redial(idx, other, handshake_micros);
                 }

@@ -305,9 +305,10 @@ pub enum Event {
     /// The remote has acknowledged everything this peer holds.
     UpToDate,
     /// Batches to the remote wait and it has said nothing for a few resend timeouts (at least
-    /// [`MIN_STALL_MICROS`]): the transport under the connection has stalled, as QUIC's
-    /// backed-off probes leave it after an outage, and a new connection to the same remote
-    /// would resume sync at its handshake. Said only by the end with the smaller peer id (a
+    /// [`MIN_STALL_MICROS`]), or it has shown for as long that it hears nothing of ours
+    /// (`unheard`): the transport under the connection has stalled, as QUIC's backed-off
+    /// probes leave it after an outage, and a new connection to the same remote would resume
+    /// sync at its handshake. Said only by the end with the smaller peer id (a
     /// connection it dials replaces the old one at both ends, by the node's rule for two
     /// connections to one peer); again every base resend interval while the silence lasts,
     /// for at most [`PING_FOR_MICROS`] of silence (the transport's idle timeout ends it by
@@ -321,6 +322,11 @@ pub enum Event {
         /// it has received, so that it dials only if nothing came since (a remote that is
         /// busy, not cut off, still acknowledges packets below the sync).
         again: bool,
+        /// True when the remote is heard but shows it hears nothing of ours: its pings keep
+        /// coming (it pings only while it hears nothing from us and batches to us wait), or
+        /// its hellos say it never saw ours. Our sends wait in the transport (after an outage,
+        /// on a backed-off probe) while packets still come in, so the transport dials at once.
+        unheard: bool,
     },
     /// The scene check asks something of the scene's owner ([`crate::sync::scene`]);
     /// [`Peer`](crate::peer::Peer) hands these out on their own queue
@@ -558,6 +564,11 @@ pub struct SyncState<P> {
     pinged_at: Option<Timestamp>,
     /// When the connection last said it stalled ([`Event::Stalled`]) in this silence.
     stalled_at: Option<Timestamp>,
+    /// Since when, and until when last, the remote has shown it hears nothing of ours
+    /// ([`SyncState::note_unheard`]).
+    unheard: Option<(Timestamp, Timestamp)>,
+    /// When this connection opened, and our first hello went out.
+    opened_at: Timestamp,
     /// Current batch resend interval (doubles on each resend without an ack in between).
     resend_micros: u64,
     /// Smoothed round trip and its mean deviation from acked batches (RFC 6298), if measured.
@@ -669,6 +680,8 @@ impl<P: Payload> SyncState<P> {
             heard_at: now,
             pinged_at: None,
             stalled_at: None,
+            unheard: None,
+            opened_at: now,
             resend_micros: RESEND_AFTER_MICROS,
             rtt_micros: None,
             relay_vv: VersionVector::new(),
@@ -1034,6 +1047,12 @@ impl<P: Payload> SyncState<P> {
 
     /// A message other than a hello, once the remote's hello has arrived, after `silence`.
     fn on_message(&mut self, now: Timestamp, silence: u64, message: Message, log: &mut Log<P>) {
+        match message {
+            Message::Ping => self.note_unheard(now),
+            // Answers to what we sent: the remote hears us.
+            Message::Ack { .. } | Message::Pong | Message::Want { .. } => self.unheard = None,
+            _ => {}
+        }
         // A ping, or the first word after a silence while we pinged: the link carries
         // messages again, and what each end holds may have moved on while it did not
         // (a partition). At most one full have per `HAVE_EVERY_MICROS`, and none for a
@@ -1247,6 +1266,12 @@ impl<P: Payload> SyncState<P> {
         // cannot loop, and the full haves hellos cost are limited (`MAX_HELLO_ANSWERS_PER_SEC`).
         self.send_full_have(now, log);
         self.hello_confirmed |= hello_seen;
+        let answerable = (self.opened_at).saturating_add_micros(2 * self.base_resend_micros());
+        if hello_seen {
+            self.unheard = None;
+        } else if now >= answerable {
+            self.note_unheard(now);
+        }
         let hello_queued = (self.control.iter()).any(|m| matches!(m, Message::Hello { .. }));
         if !hello_seen && !hello_queued {
             // The remote has not seen our hello yet: answer once (its resend timer repeats).
@@ -1625,6 +1650,7 @@ impl<P: Payload> SyncState<P> {
             let event = Event::Stalled {
                 handshake_micros,
                 again,
+                unheard: self.unheard_at(now),
             };
             self.events.push_back(event);
         }
@@ -1773,23 +1799,59 @@ impl<P: Payload> SyncState<P> {
         (due.0 <= self.heard_at.0.saturating_add(PING_FOR_MICROS)).then_some(due)
     }
 
-    /// When the connection next says it stalled ([`Event::Stalled`]): while batches wait for
-    /// acknowledgement and the remote, whose id is above ours, has been silent for
-    /// [`STALL_AFTER_RESENDS`] base resend intervals (at least [`MIN_STALL_MICROS`]); then
-    /// every base interval, for at most [`PING_FOR_MICROS`] of silence.
+    /// The remote showed it hears nothing of ours: it pinged, or its hello says it never saw
+    /// ours though ours went out two base intervals ago. Evidence more than a stall's wait
+    /// after the last starts a new run.
+    fn note_unheard(&mut self, now: Timestamp) {
+        let after = self.stall_after_micros();
+        self.unheard = match self.unheard {
+            Some((since, last)) if now <= last.saturating_add_micros(after) => Some((since, now)),
+            _ => Some((now, now)),
+        };
+    }
+
+    /// How long a silence, or evidence that the remote hears nothing of ours, lasts before
+    /// the connection stalls: [`STALL_AFTER_RESENDS`] base intervals, at least
+    /// [`MIN_STALL_MICROS`].
+    fn stall_after_micros(&self) -> u64 {
+        (STALL_AFTER_RESENDS * self.base_resend_micros()).max(MIN_STALL_MICROS)
+    }
+
+    /// Whether the remote has shown for a stall's wait, and within a base interval of `now`,
+    /// that it hears nothing of ours.
+    fn unheard_at(&self, now: Timestamp) -> bool {
+        let (after, base) = (self.stall_after_micros(), self.base_resend_micros());
+        self.unheard.is_some_and(|(since, last)| {
+            last >= since.saturating_add_micros(after) && now <= last.saturating_add_micros(base)
+        })
+    }
+
+    /// When the connection next says it stalled ([`Event::Stalled`]), if the remote's id is
+    /// above ours: while batches wait for acknowledgement and the remote has been silent for
+    /// a stall's wait ([`SyncState::stall_after_micros`]), then every base interval, for at
+    /// most [`PING_FOR_MICROS`] of silence; or once the remote's evidence that it hears nothing
+    /// of ours ([`SyncState::note_unheard`]) spans a stall's wait, then every base interval
+    /// while it goes on.
     fn stall_due(&self) -> Option<Timestamp> {
         let remote = self.remote?;
-        if self.in_flight.is_empty() || remote <= self.config.local {
+        if remote <= self.config.local {
             return None;
         }
         let base = self.base_resend_micros();
-        let after = (STALL_AFTER_RESENDS * base).max(MIN_STALL_MICROS);
-        let first = self.heard_at.saturating_add_micros(after);
-        let due = match self.stalled_at {
+        let after = self.stall_after_micros();
+        let next = |first: Timestamp| match self.stalled_at {
             Some(at) if at >= first => at.saturating_add_micros(base),
             _ => first,
         };
-        (due.0 <= self.heard_at.0.saturating_add(PING_FOR_MICROS)).then_some(due)
+        let silent = (!self.in_flight.is_empty())
+            .then(|| next(self.heard_at.saturating_add_micros(after)))
+            .filter(|due| due.0 <= self.heard_at.0.saturating_add(PING_FOR_MICROS));
+        let unheard = (self.unheard)
+            .filter(|(since, last)| *last >= since.saturating_add_micros(after))
+            .map(|(since, last)| (next(since.saturating_add_micros(after)), last))
+            .filter(|(due, last)| *due <= last.saturating_add_micros(base))
+            .map(|(due, _)| due);
+        silent.into_iter().chain(unheard).min()
     }
 
     fn resend_due(&self) -> Option<Timestamp> {

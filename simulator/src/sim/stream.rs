@@ -8,8 +8,8 @@
 //! goes again once the sender learns it was lost: from the acknowledgement of its next
 //! message when the stalled bytes left room in the congestion window, else at its next probe,
 //! backed off since the first stall; and the end of a stalled connection with the smaller id
-//! dials again ([`Event::Stalled`]), as the node does, which replaces the connection once
-//! both links are open.
+//! dials again ([`Event::Stalled`], after a silence or when the remote shows it hears nothing
+//! of ours), as the node does, which replaces the connection once both links are open.
 //!
 //! [`Event::Stalled`]: replication::sync::state::Event::Stalled
 //!

@@ -664,8 +664,10 @@ impl<P: Payload + Send + 'static> Core<P> {
                 Event::Stalled {
                     handshake_micros,
                     again,
+                    unheard,
                 } => {
-                    self.on_stalled(conn, Duration::from_micros(handshake_micros), again);
+                    let handshake = Duration::from_micros(handshake_micros);
+                    self.on_stalled(conn, handshake, again, unheard);
                     continue;
                 }
                 // On the observer's own queue (`Peer::poll_scene_event`), never here.
@@ -684,17 +686,24 @@ impl<P: Payload + Send + 'static> Core<P> {
         }
     }
 
-    /// The sync core says `conn` stalled: dials its remote again if this is not the first
-    /// stall event of the silence and the connection has received no UDP datagram since the
-    /// last one. A remote that is busy (a join, a long fold) but reachable still acknowledges
-    /// packets; only one cut off sends nothing at all.
-    fn on_stalled(&mut self, conn: ConnId, handshake_timeout: Duration, again: bool) {
+    /// The sync core says `conn` stalled: dials its remote again if the remote shows it
+    /// hears nothing of ours (`unheard`: our sends wait in QUIC, whatever comes in), or if
+    /// this is not the first stall event of a silence and the connection has received no UDP
+    /// datagram since the last one. A remote that is busy (a join, a long fold) but reachable
+    /// still acknowledges packets; only one cut off sends nothing at all.
+    fn on_stalled(
+        &mut self,
+        conn: ConnId,
+        handshake_timeout: Duration,
+        again: bool,
+        unheard: bool,
+    ) {
         let Some(live) = self.conns.get_mut(&conn) else {
             return;
         };
         let received = live.connection.stats().udp_rx.datagrams;
         let noted = live.rx_at_stall.replace(received);
-        if again && noted == Some(received) {
+        if unheard || (again && noted == Some(received)) {
             self.redial(conn, handshake_timeout);
         }
     }

@@ -22,10 +22,12 @@
 //! so one whose unacknowledged data filled its congestion window would resume only at the
 //! next probe, up to the outage's length after it ended. The sync core says when a
 //! connection has stalled ([`crate::sync::state::Event::Stalled`]: batches wait and the
-//! remote has been silent a few resend timeouts; said at the end with the smaller id only).
-//! At the second such event of a silence, if the connection received no UDP datagram since
-//! the first (a remote that is busy but reachable still acknowledges packets), the node dials
-//! the remote's address again: one dial at a time per connection, each giving up on its
+//! remote has been silent a few resend timeouts, or the remote is heard but has shown for as
+//! long that it hears nothing of ours; said at the end with the smaller id only). At the
+//! second such event of a silence, if the connection received no UDP datagram since the first
+//! (a remote that is busy but reachable still acknowledges packets), or at once when the
+//! remote hears nothing of ours (its acknowledgements come in while our data waits on a
+//! probe: half open), the node dials the remote's address again: one dial at a time per connection, each giving up on its
 //! handshake after the event's `handshake_micros`, quietly (no
 //! [`NodeEvent::AdmissionFailed`]). Admitted, the new connection replaces the stalled one at
 //! both ends, as any second connection to a peer does: both keep the one whose dialer has

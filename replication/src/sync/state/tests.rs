@@ -1084,7 +1084,9 @@ fn a_silent_remote_stalls_the_connection_at_the_smaller_id_only() {
                 Event::Stalled {
                     handshake_micros,
                     again,
+                    unheard: false,
                 } => Some((*handshake_micros, *again)),
+                Event::Stalled { unheard: true, .. } => panic!("the remote is silent, not deaf"),
                 _ => None,
             })
             .collect()
@@ -1124,6 +1126,77 @@ fn a_silent_remote_stalls_the_connection_at_the_smaller_id_only() {
     drain_checked(lower, now + after, base + MILLI);
     let next: Vec<bool> = stalls(lower).iter().map(|(_, again)| *again).collect();
     assert_eq!(next, vec![false, true]);
+}
+
+/// Issue 53: after an outage a connection can be half open: our sends wait in the transport
+/// for a backed-off probe while the remote's still come in. The remote, hearing nothing, pings
+/// (or, never having had our hello, sends its own again); that shows it hears nothing of ours,
+/// and after a stall's wait of it the end with the smaller id says the connection stalled,
+/// `unheard`, so that the node dials at once whatever the transport received. An answer to
+/// something of ours ends the evidence, and the larger id never says it.
+#[test]
+fn a_remote_that_hears_nothing_of_ours_stalls_the_connection_though_it_is_heard() {
+    let [mut a, mut b] = connected();
+    let (lower, higher) = if a.key.peer_id() < b.key.peer_id() {
+        (&mut a, &mut b)
+    } else {
+        (&mut b, &mut a)
+    };
+    let unheard = |n: &Node| -> usize {
+        (n.events.iter())
+            .filter(|e| matches!(e, Event::Stalled { unheard: true, .. }))
+            .count()
+    };
+    let base = lower.sync.resend_timeout().unwrap();
+    let after = (STALL_AFTER_RESENDS * base).max(MIN_STALL_MICROS);
+    // Pings every 25 ms, everything the two ends send lost: the lower end hears the remote.
+    let pings_for = |node: &mut Node, start: u64, micros: u64| {
+        let mut now = start;
+        while now < start + micros {
+            feed(node, now, &Message::Ping.encode());
+            drain_checked(node, now, 25 * MILLI - 1);
+            now += 25 * MILLI;
+        }
+        now
+    };
+    let start = 200 * MILLI;
+    let now = pings_for(lower, start, after - 50 * MILLI);
+    assert_eq!(unheard(lower), 0, "too soon");
+    let now = pings_for(lower, now, 100 * MILLI);
+    assert_eq!(unheard(lower), 1);
+    let now = pings_for(lower, now, base + 30 * MILLI);
+    assert_eq!(
+        unheard(lower),
+        2,
+        "again every base interval while it lasts"
+    );
+    // A pong answers our ping: the remote hears us, and the evidence starts again.
+    feed(lower, now, &Message::Pong.encode());
+    lower.events.clear();
+    let now = pings_for(lower, now, after - 50 * MILLI);
+    assert_eq!(unheard(lower), 0);
+    // The pings stop: no more stalls.
+    drain_checked(lower, now, 2 * after);
+    assert_eq!(unheard(lower), 0);
+    pings_for(higher, start, 2 * after);
+    assert_eq!(unheard(higher), 0, "the larger id never redials");
+    // A hello saying it never saw ours, two base intervals after ours went out, is the same
+    // evidence (a remote that lacks our hello sends its own again, and does not ping).
+    let unseen = Message::Hello {
+        protocol_version: PROTOCOL_VERSION,
+        session_id: SESSION,
+        peer: higher.key.peer_id(),
+        hello_seen: false,
+        have: None,
+    };
+    let (start, mut now) = (4_000 * MILLI, 4_000 * MILLI);
+    lower.events.clear();
+    while now < start + 2 * after + base {
+        feed(lower, now, &unseen.encode());
+        drain_checked(lower, now, 300 * MILLI - 1);
+        now += 300 * MILLI;
+    }
+    assert!(unheard(lower) > 0);
 }
 
 /// Pings cannot make a remote send more than a trickle: one full have a second.
