@@ -159,7 +159,8 @@ async fn hostile_clients_are_cut_off_and_counted_while_honest_sync_continues() {
     assert_eq!(closed_code(&bloater).await, CloseCode::Protocol as u64);
 
     // 4. Admitted, then a second frame on the admission's stream, which carries only the
-    // first, and a frame followed by more bytes on one stream.
+    // first, a frame followed by more bytes on one stream, and a frame cut short by the end
+    // of its stream.
     let (writer, mut admission) = admitted(addr, 72).await;
     for body in [b"first", b"later"] {
         frame::write_frame(&mut admission.send, body).await.unwrap();
@@ -174,6 +175,15 @@ async fn hostile_clients_are_cut_off_and_counted_while_honest_sync_continues() {
     stream.write_all(&trailing).await.unwrap();
     let _ = stream.finish();
     assert_eq!(closed_code(&trailer).await, CloseCode::Protocol as u64);
+    let (cutter, mut admission) = admitted(addr, 77).await;
+    frame::write_frame(&mut admission.send, b"first")
+        .await
+        .unwrap();
+    let mut stream = cutter.open_uni().await.unwrap();
+    let cut_short = &frame::encode_frame(b"ten bytes!").unwrap()[..7];
+    stream.write_all(cut_short).await.unwrap();
+    let _ = stream.finish();
+    assert_eq!(closed_code(&cutter).await, CloseCode::Protocol as u64);
 
     // The honest connection survived all of it and still syncs both ways.
     let from_honest = honest
@@ -196,7 +206,7 @@ async fn hostile_clients_are_cut_off_and_counted_while_honest_sync_continues() {
     assert_eq!(stats.n_cut_off, 1);
     assert_eq!(stats.n_oversized_frames, 2);
     assert_eq!(stats.n_bad_datagrams, 1);
-    assert_eq!(stats.n_admitted, 6);
+    assert_eq!(stats.n_admitted, 7);
     assert_eq!(stats.connections.len(), 1, "only the honest node is left");
     assert_eq!(stats.connections[0].peer, honest.handle.peer_id());
     assert_eq!(stats.connections[0].sync.n_rejected(), 0);

@@ -406,11 +406,13 @@ async fn read_streams(
                     };
                 }
             }
-            Ok(Err(e @ (FrameError::TooLarge(_) | FrameError::Trailing))) => {
+            Ok(Err(
+                e @ (FrameError::TooLarge(_) | FrameError::Trailing | FrameError::Truncated),
+            )) => {
                 return frame_error(conn, connection, e);
             }
-            // A stream reset or cut short: the connection's end, if that is what it was,
-            // shows at the next accept.
+            // A stream that failed: the connection's end, if that is what it was, shows at
+            // the next accept.
             Ok(Err(_)) => {}
             // The read panicked (it does not) or was cancelled (the loop owns the set).
             Err(e) => {
@@ -423,15 +425,19 @@ async fn read_streams(
     }
 }
 
-/// What ends a connection whose remote sent a bad frame, or whose stream failed.
+/// What ends a connection whose remote sent a bad frame (too large, cut short by the end of
+/// its stream, or followed by more bytes), or whose stream failed.
 fn frame_error(conn: ConnId, connection: &quinn::Connection, error: FrameError) -> Input {
     match error {
         FrameError::TooLarge(len) => {
             connection.close(CloseCode::Protocol.var_int(), b"frame too large");
             Input::OversizedFrame { conn, len }
         }
-        FrameError::Trailing => {
-            connection.close(CloseCode::Protocol.var_int(), b"bytes after a frame");
+        FrameError::Trailing | FrameError::Truncated => {
+            connection.close(
+                CloseCode::Protocol.var_int(),
+                b"a stream that is not one frame",
+            );
             Input::Lost {
                 conn,
                 reason: error.to_string(),
