@@ -1847,10 +1847,8 @@ impl<P: Payload> SyncState<P> {
             .then(|| next(self.heard_at.saturating_add_micros(after)))
             .filter(|due| due.0 <= self.heard_at.0.saturating_add(PING_FOR_MICROS));
         let unheard = (self.unheard)
-            .filter(|(since, last)| *last >= since.saturating_add_micros(after))
-            .map(|(since, last)| (next(since.saturating_add_micros(after)), last))
-            .filter(|(due, last)| *due <= last.saturating_add_micros(base))
-            .map(|(due, _)| due);
+            .map(|(since, _)| next(since.saturating_add_micros(after)))
+            .filter(|due| self.unheard_at(*due));
         silent.into_iter().chain(unheard).min()
     }
 
