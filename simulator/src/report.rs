@@ -171,6 +171,9 @@ pub struct Stats {
     pub n_stall_redials: u64,
     /// Stalled stream connections such a dial replaced.
     pub n_stalls_replaced: u64,
+    /// Dials of a pair whose stream connection was closed (or never opened) that found both
+    /// links open, each admitted two round trips later.
+    pub n_dials: u64,
     /// Messages dropped because their link's queue was full (bandwidth).
     pub n_queue_drops: u64,
     /// Messages that arrived after their connection was gone.
@@ -306,7 +309,8 @@ impl Report {
             f,
             "  sent {} messages ({:.1}/op), {} bytes ({:.0} bytes/op); delivered {}, lost {}, \
              duplicated {}, partitioned {}, queue-dropped {}, stale {}; as streams: \
-             retransmitted {} (overtaken {}), stalled {}, stall redials {} ({} replaced)",
+             retransmitted {} (overtaken {}), stalled {}, stall redials {} ({} replaced), \
+             dials {}",
             s.n_messages,
             self.messages_per_op(),
             s.n_bytes,
@@ -321,7 +325,8 @@ impl Report {
             s.n_overtaking,
             s.n_stalled,
             s.n_stall_redials,
-            s.n_stalls_replaced
+            s.n_stalls_replaced,
+            s.n_dials
         )?;
         self.fmt_slowest(f)?;
         let mut kinds: Vec<_> = s.bytes_by_kind.iter().collect();

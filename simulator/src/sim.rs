@@ -53,6 +53,7 @@ const SCHEDULE_STREAM: u64 = 3;
 const NET_STREAM: u64 = 4;
 const HOT_STREAM: u64 = 5;
 const BYZANTINE_STREAM: u64 = 6;
+const DIAL_STREAM: u64 = 7;
 
 /// What can happen at a virtual instant.
 #[derive(Debug)]
@@ -131,6 +132,17 @@ enum Ev {
         from: usize,
         to: usize,
     },
+    /// A round of dials by the LAN finder of `a` or `b` comes while their stream connection
+    /// is down.
+    Dial {
+        a: usize,
+        b: usize,
+    },
+    /// A dial between `a` and `b` that found both links open is admitted.
+    Dialed {
+        a: usize,
+        b: usize,
+    },
     /// A dial to replace the stalled stream connection of epoch `epoch` between `a` and `b`
     /// is admitted.
     Replace {
@@ -152,6 +164,8 @@ struct Pair {
     epoch: u64,
     /// Until when a dial to replace the pair's stalled connection is under way (streams).
     redial_until: u64,
+    /// A dial of the pair's closed stream connection waits for a round or a handshake.
+    dialing: bool,
 }
 
 /// A run in progress.
@@ -171,6 +185,8 @@ pub struct Simulation {
     link_free_at: Vec<Vec<u64>>,
     /// Per directed link, its connection's deliveries as a stream ([`Faults::streams`]).
     stream_links: Vec<Vec<stream::StreamLink>>,
+    /// Per node, when in each second its LAN finder's rounds of dials come (streams).
+    dial_phase_micros: Vec<u64>,
     /// Per directed link, when the first message stalled on it while a partition cuts it,
     /// and the messages, with their connection epochs.
     stalled: BTreeMap<(usize, usize), stream::Stalled>,
@@ -233,6 +249,7 @@ impl Simulation {
             latency_micros,
             link_free_at: vec![vec![0; n_nodes]; n_nodes],
             stream_links: vec![vec![stream::StreamLink::default(); n_nodes]; n_nodes],
+            dial_phase_micros: stream::dial_phases(config.seed, DIAL_STREAM, n_nodes),
             stalled: BTreeMap::new(),
             resuming: BTreeMap::new(),
             pairs: vec![vec![Pair::default(); n_nodes]; n_nodes],
@@ -560,7 +577,11 @@ impl Simulation {
                     self.stream_unblocked(&links);
                 }
             }
-            ev @ (Ev::IdleTimeout { .. } | Ev::StreamProbe { .. } | Ev::Replace { .. }) => {
+            ev @ (Ev::IdleTimeout { .. }
+            | Ev::StreamProbe { .. }
+            | Ev::Replace { .. }
+            | Ev::Dial { .. }
+            | Ev::Dialed { .. }) => {
                 self.handle_stream(ev);
             }
             Ev::Offline { peer } => {
@@ -628,6 +649,14 @@ impl Simulation {
             Ev::Replace { a, b, epoch } => {
                 self.trace.u64(21);
                 self.stream_replace(a, b, epoch);
+            }
+            Ev::Dial { a, b } => {
+                self.trace.u64(24);
+                self.stream_dial_round(a, b);
+            }
+            Ev::Dialed { a, b } => {
+                self.trace.u64(25);
+                self.stream_dialed(a, b);
             }
             _ => unreachable!("not a stream event: {ev:?}"),
         }
@@ -768,7 +797,7 @@ impl Simulation {
         for a in 0..self.n_nodes() {
             for b in a + 1..self.n_nodes() {
                 if self.online(a) && self.online(b) {
-                    self.connect_pair(a, b);
+                    self.reconnect_pair(a, b);
                 }
             }
         }
@@ -803,12 +832,20 @@ impl Simulation {
     /// completes: such a pair connects when the partition ends ([`Simulation::stream_unblocked`]).
     fn connect_all(&mut self, peer: usize) {
         for other in 0..self.n_nodes() {
-            let cut = self.faults.streams
-                && (self.blocked.contains_key(&(peer, other))
-                    || self.blocked.contains_key(&(other, peer)));
-            if other != peer && self.online(other) && !cut {
-                self.connect_pair(peer, other);
+            if other != peer && self.online(other) {
+                self.reconnect_pair(peer, other);
             }
+        }
+    }
+
+    /// Connects `a` and `b` again after a connection between them closed (or one of them
+    /// started): at once over datagrams, and over stream connections through a dial
+    /// ([`Simulation::stream_dial`]).
+    fn reconnect_pair(&mut self, a: usize, b: usize) {
+        if self.faults.streams {
+            self.stream_dial(a, b);
+        } else {
+            self.connect_pair(a, b);
         }
     }
 

@@ -148,8 +148,8 @@ fn late_peers_join_from_snapshots_and_converge() {
 
 /// Issue 53: the product's sync runs over QUIC streams, which lose no message inside a
 /// connection. Under `quic`, a loss is a retransmission of that message alone and a partition
-/// a stall: nothing is lost or duplicated, stalled connections are replaced, and the runs
-/// converge.
+/// a stall: nothing is lost or duplicated, stalled connections are replaced, closed ones are
+/// dialed again, and the runs converge.
 #[test]
 fn the_quic_preset_turns_losses_into_delays_and_partitions_into_stalls() {
     let reports = passing_runs(0, 6, Config::new(0, 5, 300, faults("quic-backlog")));
@@ -174,6 +174,13 @@ fn the_quic_preset_turns_losses_into_delays_and_partitions_into_stalls() {
     // connection replaces it once the partition is over.
     assert!(sum(|r| r.stats.n_stalls_replaced) > 0, "no stall redialed");
     assert!(sum(|r| r.stats.n_stall_redials) >= sum(|r| r.stats.n_stalls_replaced));
+    // A closed connection (an outage, a restart, a late join, the long partition past the
+    // idle timeout) comes back only through a dial on a LAN finder's round, admitted two
+    // round trips later.
+    assert!(
+        sum(|r| r.stats.n_dials) > 0,
+        "no closed connection was dialed"
+    );
     // Partitions left peers lacking ops at healing: the bandwidth bound counts them.
     assert!(
         (reports.iter()).all(|r| r.convergence_over_goal().is_some_and(f64::is_finite)),

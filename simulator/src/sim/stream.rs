@@ -4,7 +4,9 @@
 //! sends them, so a loss delays its message and no other (the node reads at most
 //! `replication::net::node::MAX_FRAMES_READ_AT_ONCE` streams at a time, a limit not modelled
 //! here); a partition stalls a connection, which the idle timeout closes if the partition
-//! outlasts it, and the two ends dial again once it ends. When a partition ends, what stalled
+//! outlasts it. A closed connection (that timeout, an outage, a crash) and a late joiner's
+//! come up only through a dial: at a round of either end's LAN finder that finds both links
+//! open, two round trips later (QUIC's handshake, then admission). When a partition ends, what stalled
 //! goes again once the sender learns it was lost: from the acknowledgement of its next
 //! message when the stalled bytes left room in the congestion window, else at its next probe,
 //! backed off since the first stall; and the end of a stalled connection with the smaller id
@@ -16,6 +18,7 @@
 //! [`Faults::streams`]: crate::config::Faults::streams
 
 use super::{Ev, Simulation, deliver};
+use crate::rng::SimRng;
 
 /// The product's QUIC idle timeout (`replication::net::tls::IDLE_TIMEOUT_MILLIS`).
 pub(crate) const STREAM_IDLE_TIMEOUT_MICROS: u64 = 10_000_000;
@@ -28,6 +31,13 @@ const QUIC_WINDOW_BYTES: usize = 12_000;
 /// proof and answer (`replication::net::admission`); its packets are not lost (a
 /// simplification: the preset's loss would add a loss detection time now and then).
 const REDIAL_ROUND_TRIPS: u64 = 2;
+/// How often a node's LAN finder dials the session's peers it has no connection to
+/// (`replication::net::discovery::dnssd::DIAL_INTERVAL_MILLIS`): a connection closed by the
+/// idle timeout, a peer back from an outage or a restart, and a late joiner connect at the
+/// first round of either end that finds both links open, [`REDIAL_ROUND_TRIPS`] later.
+/// (The finder's rounds are modelled as never held up by a dial still waiting for its
+/// handshake, which the product's are: an optimistic simplification.)
+pub(super) const DIAL_ROUND_MICROS: u64 = 1_000_000;
 /// What a partition stalled on one directed link: when the first message stalled, and the
 /// messages with their connection epochs.
 pub(super) type Stalled = (u64, Vec<(u64, Vec<u8>)>);
@@ -165,6 +175,7 @@ impl Simulation {
         let pair = *self.pair(from, to);
         if pair.connected && pair.epoch == epoch && self.blocked.contains_key(&(from, to)) {
             self.disconnect_pair(from, to);
+            self.stream_dial(from, to);
         }
     }
 
@@ -202,12 +213,8 @@ impl Simulation {
             } else {
                 self.stream_send_stalled(from, to, stalled, probe);
             }
-            if !self.pair(from, to).connected
-                && !self.blocked.contains_key(&(to, from))
-                && self.online(from)
-                && self.online(to)
-            {
-                self.connect_pair(from, to);
+            if self.online(from) && self.online(to) {
+                self.stream_dial(from, to);
             }
         }
     }
@@ -238,6 +245,61 @@ impl Simulation {
         self.pair(from, to).redial_until = now + takes;
     }
 
+    /// `a` and `b` have no stream connection: the next round of dials of either end's LAN
+    /// finder ([`DIAL_ROUND_MICROS`]) dials the other (at once for the hostile member, whose
+    /// connections are modelled apart).
+    pub(super) fn stream_dial(&mut self, a: usize, b: usize) {
+        let pair = *self.pair(a, b);
+        if pair.connected || pair.dialing {
+            return;
+        }
+        if a.max(b) >= self.honest.len() {
+            return self.connect_pair(a, b);
+        }
+        self.pair(a, b).dialing = true;
+        let at = self.next_dial_round(a, b);
+        self.push(at, Ev::Dial { a, b });
+    }
+
+    /// The first round of dials of `a`'s or `b`'s LAN finder after now.
+    fn next_dial_round(&self, a: usize, b: usize) -> u64 {
+        let next = |x: usize| {
+            let phase = self.dial_phase_micros[x];
+            phase + ((self.now - phase) / DIAL_ROUND_MICROS + 1) * DIAL_ROUND_MICROS
+        };
+        next(a).min(next(b))
+    }
+
+    /// A round of dials between `a` and `b`: one that finds both links open is admitted
+    /// [`REDIAL_ROUND_TRIPS`] later; across a partition it fails, and the next round tries.
+    pub(super) fn stream_dial_round(&mut self, a: usize, b: usize) {
+        if self.pair(a, b).connected || !(self.online(a) && self.online(b)) {
+            self.pair(a, b).dialing = false;
+            return;
+        }
+        if self.blocked.contains_key(&(a, b)) || self.blocked.contains_key(&(b, a)) {
+            let at = self.next_dial_round(a, b);
+            self.push(at, Ev::Dial { a, b });
+            return;
+        }
+        self.stats.n_dials += 1;
+        let rtt = self.latency_micros[a][b] + self.latency_micros[b][a];
+        self.push(self.now + REDIAL_ROUND_TRIPS * rtt, Ev::Dialed { a, b });
+    }
+
+    /// A dial between `a` and `b` is admitted, unless one of them went offline or a partition
+    /// began during its handshake (then the next round dials again).
+    pub(super) fn stream_dialed(&mut self, a: usize, b: usize) {
+        self.pair(a, b).dialing = false;
+        if self.pair(a, b).connected || !(self.online(a) && self.online(b)) {
+            return;
+        }
+        if self.blocked.contains_key(&(a, b)) || self.blocked.contains_key(&(b, a)) {
+            return self.stream_dial(a, b);
+        }
+        self.connect_pair(a, b);
+    }
+
     /// A dial to replace the stalled connection of `epoch` between `a` and `b` is admitted,
     /// unless a partition began during its handshake: both ends drop the old connection
     /// (what stalled on it is stale) and sync on the new.
@@ -251,6 +313,12 @@ impl Simulation {
         self.disconnect_pair(a, b);
         self.connect_pair(a, b);
     }
+}
+
+/// Each node's LAN finder's phase within its rounds of dials, drawn from `stream` of `seed`.
+pub(super) fn dial_phases(seed: u64, stream: u64, n_nodes: usize) -> Vec<u64> {
+    let mut rng = SimRng::stream(seed, stream);
+    (0..n_nodes).map(|_| rng.below(DIAL_ROUND_MICROS)).collect()
 }
 
 /// How long after `now` a sender that first failed to reach its peer at `since` probes again:
