@@ -766,6 +766,13 @@ impl Simulation {
                 },
             );
         }
+        if self.faults.streams {
+            // Its connection to the hostile member dies with it too (going offline over
+            // streams only stalls connections).
+            for other in self.honest.len()..self.n_nodes() {
+                self.disconnect_pair(peer, other);
+            }
+        }
         self.go_offline(peer);
         self.restart(peer);
         self.push(self.now + restart_micros, Ev::Online { peer });
@@ -806,9 +813,18 @@ impl Simulation {
         self.push(self.now + PROBE_INTERVAL_MICROS, Ev::Probe);
     }
 
+    /// The peer's network goes: its connections close at once over datagrams; over stream
+    /// connections they stall, as in a partition, and the idle timeout closes those the
+    /// outage outlasts.
     fn go_offline(&mut self, peer: usize) {
         self.honest[peer].offline_depth += 1;
         if self.honest[peer].offline_depth == 1 {
+            if self.faults.streams {
+                let links = self.links_of(peer);
+                self.stream_partition_start(&links);
+                self.partition(links, true);
+                return;
+            }
             for other in 0..self.n_nodes() {
                 if other != peer {
                     self.disconnect_pair(peer, other);
@@ -823,13 +839,30 @@ impl Simulation {
             return;
         }
         h.offline_depth -= 1;
-        if h.offline_depth == 0 && h.started {
+        if h.offline_depth > 0 {
+            return;
+        }
+        let started = h.started;
+        if self.faults.streams {
+            let links = self.links_of(peer);
+            self.partition(links.clone(), false);
+            self.stream_unblocked(&links);
+        }
+        if started {
             self.connect_all(peer);
         }
     }
 
-    /// Connects `peer` to every peer online. Over streams a dial across a partition never
-    /// completes: such a pair connects when the partition ends ([`Simulation::stream_unblocked`]).
+    /// Both directed links between `peer` and every other node.
+    fn links_of(&self, peer: usize) -> Vec<(usize, usize)> {
+        (0..self.n_nodes())
+            .filter(|&other| other != peer)
+            .flat_map(|other| [(peer, other), (other, peer)])
+            .collect()
+    }
+
+    /// Connects `peer` to every peer online (over streams through dials, which fail across a
+    /// partition until it ends).
     fn connect_all(&mut self, peer: usize) {
         for other in 0..self.n_nodes() {
             if other != peer && self.online(other) {

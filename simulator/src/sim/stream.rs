@@ -3,9 +3,9 @@
 //! first (the hello) before any other and each later one on a stream of its own, as the node
 //! sends them, so a loss delays its message and no other (the node reads at most
 //! `replication::net::node::MAX_FRAMES_READ_AT_ONCE` streams at a time, a limit not modelled
-//! here); a partition stalls a connection, which the idle timeout closes if the partition
-//! outlasts it. A closed connection (that timeout, an outage, a crash) and a late joiner's
-//! come up only through a dial: at a round of either end's LAN finder that finds both links
+//! here); a partition, or an outage of one peer's network, stalls a connection, which the
+//! idle timeout closes if it outlasts it. A closed connection (that timeout, a crash) and a
+//! late joiner's come up only through a dial: at a round of either end's LAN finder that finds both links
 //! open, two round trips later (QUIC's handshake, then admission). When a partition ends, what stalled
 //! goes again once the sender learns it was lost: from the acknowledgement of its next
 //! message when the stalled bytes left room in the congestion window, else at its next probe,
