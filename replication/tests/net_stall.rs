@@ -2,7 +2,9 @@
 //! can drop every datagram, as a Wi-Fi drop or an unplugged cable does. Once the outage ends,
 //! QUIC's own probes have backed off (each waits twice as long as the last), so the stalled
 //! connection would resume only at the next one; the end with the smaller id dials again
-//! instead, and the new connection replaces the stalled one at both ends.
+//! instead, and the new connection replaces the stalled one at both ends. An outage longer
+//! than the idle timeout closes the connection: the smaller id then dials the remote again
+//! until it answers, whatever finds peers.
 
 #![allow(clippy::unwrap_used, reason = "test helpers")]
 
@@ -124,4 +126,64 @@ async fn a_connection_stalled_by_an_outage_is_redialed_when_it_ends() {
         "took {resumed:?} after the outage to converge"
     );
     println!("converged {resumed:?} after a {OUTAGE:?} outage");
+}
+
+/// Longer than QUIC's idle timeout, which then closes the connection at both ends.
+const LONG_OUTAGE: Duration =
+    Duration::from_millis(replication::net::tls::IDLE_TIMEOUT_MILLIS + 1_000);
+/// What a dial again may take from the long outage's end to both logs equal: the next dial
+/// within a quarter second, then a handshake, an admission and a hello on loopback (slack for
+/// a loaded machine).
+const MAX_RECONNECT: Duration = Duration::from_millis(2_000);
+
+#[tokio::test]
+async fn a_connection_the_idle_timeout_closed_is_dialed_again_when_the_outage_ends() {
+    let (a, b) = (node(1), node(2));
+    let relay = Relay::start(b.handle.local_addr()).await;
+    a.handle.dial(relay.front).await.unwrap();
+    author_some(&a.handle, 1, "a").await;
+    author_some(&b.handle, 2, "b").await;
+    converge(&[&a.handle, &b.handle], 8).await;
+
+    relay.set_cut(true);
+    for h in [&a.handle, &b.handle] {
+        h.author(TestPayload::Chat("away".into())).await.unwrap();
+    }
+    // Nobody finds peers here (no finder, no dial of the app's): only the node's own dials
+    // can bring the two together again once the idle timeout has closed their connection.
+    let closed = tokio::time::Instant::now();
+    tokio::time::sleep(LONG_OUTAGE).await;
+    for h in [&a.handle, &b.handle] {
+        let peers = h.connected_peers().await.unwrap();
+        assert!(peers.is_empty(), "the idle timeout closed it: {peers:?}");
+    }
+    relay.set_cut(false);
+    let healed = tokio::time::Instant::now();
+    converge(&[&a.handle, &b.handle], 10).await;
+    let back = healed.elapsed();
+
+    let (lower, higher) = if a.handle.peer_id() < b.handle.peer_id() {
+        (&a.handle, &b.handle)
+    } else {
+        (&b.handle, &a.handle)
+    };
+    let (low, high) = (lower.stats().await.unwrap(), higher.stats().await.unwrap());
+    // It dialed while the outage lasted (those failed quietly), then once it was over.
+    assert!(
+        low.n_lost_redials >= 2,
+        "the smaller id dials again: {low:?}"
+    );
+    assert_eq!(low.n_lost_reconnected, 1, "{low:?}");
+    assert_eq!(high.n_lost_redials, 0, "only the smaller id dials again");
+    assert_eq!(
+        low.n_failed_admissions(),
+        0,
+        "a failed dial again is not news"
+    );
+    assert!(
+        back < MAX_RECONNECT,
+        "took {back:?} after a {:?} outage to converge",
+        closed.elapsed() - back
+    );
+    println!("converged {back:?} after a {LONG_OUTAGE:?} outage");
 }

@@ -2,17 +2,20 @@
 //! sans-IO core with frames, datagrams, commands and timeouts, and after every step drains
 //! its events (storing delivered ops first) and then its transmits.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
+use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
 use tokio::sync::{mpsc, oneshot};
+use tokio::time::Instant;
 
 use super::join::JoinState;
 use super::{
     CloseCode, Command, ConnStats, Counters, DialError, DisconnectReason, Input,
-    MAX_QUEUED_FRAMES_PER_CONN, MAX_REJECTIONS_PER_CONN, NodeAuthorError, NodeEvent, NodeStats,
-    Observer, RefusalKind, Shared, conn,
+    MAX_LOST_DIALS_PER_PEER, MAX_LOST_PEERS, MAX_QUEUED_FRAMES_PER_CONN, MAX_REJECTIONS_PER_CONN,
+    NodeAuthorError, NodeEvent, NodeStats, Observer, REDIAL_LOST_EVERY_MILLIS,
+    REDIAL_LOST_FOR_MILLIS, RefusalKind, Shared, conn,
 };
 use crate::identity::{OpId, PeerId};
 use crate::log::Log;
@@ -24,7 +27,7 @@ use crate::payload::Payload;
 use crate::peer::{ConnId, ConnectError, Peer};
 use crate::store::OpStore;
 use crate::sync::message::Message;
-use crate::sync::state::{CloseReason, Event};
+use crate::sync::state::{CloseReason, Event, MIN_REDIAL_HANDSHAKE_MICROS};
 use crate::time::Timestamp;
 
 /// One admitted connection.
@@ -42,6 +45,18 @@ pub(super) struct Live {
     rx_at_stall: Option<u64>,
 }
 
+/// A peer whose connection the idle timeout closed, dialed again for a while
+/// ([`super::REDIAL_LOST_EVERY_MILLIS`]).
+struct Lost {
+    addr: SocketAddr,
+    /// When the next dial is due.
+    next: Instant,
+    /// When to stop.
+    until: Instant,
+    /// What each dial's handshake may take: as a stall's redial, twice the round trip.
+    handshake: Duration,
+}
+
 pub(super) struct Core<P> {
     pub(super) peer: Peer<P>,
     pub(super) observer: Option<Box<dyn Observer<P>>>,
@@ -54,6 +69,10 @@ pub(super) struct Core<P> {
     dials: BTreeMap<ConnId, oneshot::Sender<Result<ConnId, DialError>>>,
     /// Dials under way to the remotes of stalled connections: the new id, the stalled one.
     redials: BTreeMap<ConnId, ConnId>,
+    /// Peers lost to the idle timeout that this node dials again (at most [`MAX_LOST_PEERS`]).
+    lost: BTreeMap<PeerId, Lost>,
+    /// Dials under way to lost peers: the new id, the peer.
+    lost_dials: BTreeMap<ConnId, PeerId>,
     events: mpsc::Sender<NodeEvent>,
     pub(super) stats: NodeStats,
     /// Joining from a snapshot, and serving them.
@@ -119,6 +138,8 @@ impl<P: Payload + Send + 'static> Core<P> {
             conns: BTreeMap::new(),
             dials: BTreeMap::new(),
             redials: BTreeMap::new(),
+            lost: BTreeMap::new(),
+            lost_dials: BTreeMap::new(),
             events,
             stats: NodeStats::default(),
             counters,
@@ -137,6 +158,7 @@ impl<P: Payload + Send + 'static> Core<P> {
         while self.running {
             let now = wall_clock_now();
             let wait = self.peer.poll_timeout().map(|t| duration_until(now, t));
+            let lost_due = self.next_lost_dial();
             tokio::select! {
                 // The app's commands first, then due timers, then the network: a busy network
                 // neither delays a local edit nor starves the resend and pacing timers.
@@ -149,6 +171,8 @@ impl<P: Payload + Send + 'static> Core<P> {
                 () = tokio::time::sleep(wait.unwrap_or_default()), if wait.is_some() => {
                     self.peer.handle_timeout(wall_clock_now());
                 }
+                () = tokio::time::sleep_until(lost_due.unwrap_or_else(Instant::now)),
+                    if lost_due.is_some() => self.redial_lost(),
                 Some(input) = inputs.recv() => self.on_input(input),
             }
             self.settle(wall_clock_now());
@@ -258,6 +282,7 @@ impl<P: Payload + Send + 'static> Core<P> {
                 self.stats.n_duplicates += 1;
                 if let Some(c) = conn {
                     self.redials.remove(&c);
+                    self.lost_dials.remove(&c);
                 }
                 if let Some(reply) = conn.and_then(|c| self.dials.remove(&c)) {
                     // The dial's answer is the connection the remote kept, when it is here
@@ -288,6 +313,7 @@ impl<P: Payload + Send + 'static> Core<P> {
                 self.drop_conn(conn, CloseCode::Protocol, Some(reason));
             }
             Input::Lost { conn, reason } => {
+                self.note_lost(conn);
                 self.drop_conn(
                     conn,
                     CloseCode::Closed,
@@ -309,6 +335,10 @@ impl<P: Payload + Send + 'static> Core<P> {
         // A redial that found its remote still cut off is no news: the stalled connection
         // goes on, and its next stall dials again.
         if conn.and_then(|c| self.redials.remove(&c)).is_some() {
+            return;
+        }
+        // So is a dial to a lost peer that is still away: the next one is due soon.
+        if conn.and_then(|c| self.lost_dials.remove(&c)).is_some() {
             return;
         }
         *self.stats.failed_admissions.entry(kind).or_insert(0) += 1;
@@ -342,6 +372,7 @@ impl<P: Payload + Send + 'static> Core<P> {
         start: oneshot::Sender<()>,
     ) {
         let reply = self.dials.remove(&conn);
+        let lost_dial = self.lost_dials.remove(&conn);
         // A redial of a connection still open to this peer, which the new one should replace.
         let stalled = (self.redials.remove(&conn))
             .filter(|s| self.conns.get(s).is_some_and(|l| l.peer == peer));
@@ -380,6 +411,9 @@ impl<P: Payload + Send + 'static> Core<P> {
             },
         );
         self.stats.n_admitted += 1;
+        if self.lost.remove(&peer).is_some() && lost_dial.is_some() {
+            self.stats.n_lost_reconnected += 1;
+        }
         if let Some(reply) = reply {
             let _ = reply.send(Ok(conn));
         }
@@ -728,8 +762,72 @@ impl<P: Payload + Send + 'static> Core<P> {
         self.spawn_dial(conn, addr, handshake_timeout);
     }
 
+    /// Notes the peer of connection `conn`, which is being lost, for dials again when the idle
+    /// timeout closed it and this end has the smaller id (as for a stalled connection, so the
+    /// two ends do not both dial); a remote that closed it, and a full list, are left to the
+    /// finders.
+    fn note_lost(&mut self, conn: ConnId) {
+        let Some(live) = self.conns.get(&conn) else {
+            return;
+        };
+        let timed_out = matches!(
+            live.connection.close_reason(),
+            Some(quinn::ConnectionError::TimedOut)
+        );
+        let full = self.lost.len() >= MAX_LOST_PEERS && !self.lost.contains_key(&live.peer);
+        if !timed_out || self.peer.peer_id() > live.peer || full {
+            return;
+        }
+        let floor = Duration::from_micros(MIN_REDIAL_HANDSHAKE_MICROS);
+        let now = Instant::now();
+        let lost = Lost {
+            addr: live.connection.remote_address(),
+            next: now,
+            until: now + Duration::from_millis(REDIAL_LOST_FOR_MILLIS),
+            handshake: (2 * live.connection.rtt())
+                .clamp(floor, crate::net::admission::admission_timeout()),
+        };
+        self.lost.insert(live.peer, lost);
+    }
+
+    /// When the next dial to a lost peer is due (or one of them is to be forgotten).
+    fn next_lost_dial(&self) -> Option<Instant> {
+        self.lost.values().map(|l| l.next.min(l.until)).min()
+    }
+
+    /// Dials the lost peers that are due, at most [`MAX_LOST_DIALS_PER_PEER`] at a time each,
+    /// and forgets those connected again, refused, or lost [`REDIAL_LOST_FOR_MILLIS`] ago.
+    fn redial_lost(&mut self) {
+        let now = Instant::now();
+        let connected: BTreeSet<PeerId> = self.conns.values().map(|l| l.peer).collect();
+        let refused: BTreeSet<PeerId> = (self.lost.keys())
+            .filter(|p| self.refusal(**p).is_some())
+            .copied()
+            .collect();
+        self.lost
+            .retain(|p, l| now < l.until && !connected.contains(p) && !refused.contains(p));
+        let every = Duration::from_millis(REDIAL_LOST_EVERY_MILLIS);
+        let mut due = Vec::new();
+        for (peer, lost) in &mut self.lost {
+            if lost.next <= now {
+                lost.next = now + every;
+                due.push((*peer, lost.addr, lost.handshake));
+            }
+        }
+        for (peer, addr, handshake) in due {
+            let under_way = self.lost_dials.values().filter(|p| **p == peer).count();
+            if under_way >= MAX_LOST_DIALS_PER_PEER {
+                continue;
+            }
+            let conn = self.shared.next_conn_id();
+            self.lost_dials.insert(conn, peer);
+            self.stats.n_lost_redials += 1;
+            self.spawn_dial(conn, addr, handshake);
+        }
+    }
+
     /// Dials `addr` as connection `conn` on a task of its own ([`conn::dial`]).
-    fn spawn_dial(&self, conn: ConnId, addr: std::net::SocketAddr, handshake_timeout: Duration) {
+    fn spawn_dial(&self, conn: ConnId, addr: SocketAddr, handshake_timeout: Duration) {
         let (shared, endpoint) = (self.shared.clone(), self.endpoint.clone());
         tokio::spawn(conn::dial(shared, endpoint, conn, addr, handshake_timeout));
     }

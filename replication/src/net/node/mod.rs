@@ -129,6 +129,18 @@ pub const MAX_ADMISSIONS_IN_PROGRESS_PER_ADDRESS: usize = 4;
 /// a newcomer takes one from the address holding the most ([`crate::peer::Peer::accept`]).
 /// Connections this node dialed are not counted.
 pub const MAX_CONNECTIONS_PER_ADDRESS: usize = 8;
+/// A peer whose connection the idle timeout closed (an outage or a partition outlasted it) is
+/// dialed again by the end with the smaller id at once and then this often (250 ms), whatever
+/// finds peers, for [`REDIAL_LOST_FOR_MILLIS`]: the two meet again within about this long of
+/// the network's return plus a handshake, where a finder's rounds take a second or more.
+pub const REDIAL_LOST_EVERY_MILLIS: u64 = 250;
+/// How long a lost peer is dialed again (60 s); a finder's rounds go on after that.
+pub const REDIAL_LOST_FOR_MILLIS: u64 = 60_000;
+/// Most lost peers dialed again at once (the connection slots' number).
+pub const MAX_LOST_PEERS: usize = crate::peer::MAX_CONNECTIONS;
+/// Most dials under way to one lost peer: each may take the handshake time a stall's redial
+/// has, which can be longer than [`REDIAL_LOST_EVERY_MILLIS`].
+pub const MAX_LOST_DIALS_PER_PEER: usize = 2;
 /// How long an accepted connection may take, from its validated first packet, to finish the
 /// QUIC handshake and send a valid admission frame (a few round trips and one lost packet's
 /// resend). Shorter than the dialer's [`admission::ADMISSION_TIMEOUT_MILLIS`], so that a
@@ -480,6 +492,10 @@ pub struct NodeStats {
     /// Stalled connections replaced by such a dial (the rest timed out or were refused, and
     /// the old connection went on).
     pub n_stalls_replaced: u64,
+    /// Dials to a peer whose connection the idle timeout closed ([`REDIAL_LOST_EVERY_MILLIS`]).
+    pub n_lost_redials: u64,
+    /// Peers connected again by such a dial.
+    pub n_lost_reconnected: u64,
     /// Accepted connections closed to make room for a newer one when every slot was taken
     /// ([`crate::peer::Peer::accept`]).
     pub n_evicted: u64,
