@@ -166,6 +166,10 @@ struct Pair {
     redial_until: u64,
     /// A dial of the pair's closed stream connection waits for a round or a handshake.
     dialing: bool,
+    /// When the idle timeout closed the pair's stream connection, and until when the end
+    /// with the smaller id dials the other again for it.
+    lost_at: u64,
+    lost_until: u64,
 }
 
 /// A run in progress.
@@ -768,9 +772,15 @@ impl Simulation {
         }
         if self.faults.streams {
             // Its connection to the hostile member dies with it too (going offline over
-            // streams only stalls connections).
+            // streams only stalls connections), and so do the dials again it was making.
             for other in self.honest.len()..self.n_nodes() {
                 self.disconnect_pair(peer, other);
+            }
+            for other in 0..self.honest.len() {
+                let me = self.honest[peer].peer.peer_id();
+                if other != peer && me < self.honest[other].peer.peer_id() {
+                    self.pair(peer, other).lost_until = 0;
+                }
             }
         }
         self.go_offline(peer);
@@ -1010,6 +1020,8 @@ impl Simulation {
         let pair = self.pair(a, b);
         pair.connected = true;
         pair.epoch += 1;
+        // The node forgets a lost peer once connected to it again.
+        pair.lost_until = 0;
         if let Some(other) = self.other_than_hostile(a, b) {
             self.byzantine_link(other, true);
         }

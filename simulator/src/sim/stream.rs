@@ -38,6 +38,11 @@ const REDIAL_ROUND_TRIPS: u64 = 2;
 /// (The finder's rounds are modelled as never held up by a dial still waiting for its
 /// handshake, which the product's are: an optimistic simplification.)
 pub(super) const DIAL_ROUND_MICROS: u64 = 1_000_000;
+/// How often the end with the smaller id dials a peer whose connection the idle timeout
+/// closed (`replication::net::node::REDIAL_LOST_EVERY_MILLIS`), from the close on ...
+const REDIAL_LOST_EVERY_MICROS: u64 = 250_000;
+/// ... for this long (`replication::net::node::REDIAL_LOST_FOR_MILLIS`).
+const REDIAL_LOST_FOR_MICROS: u64 = 60_000_000;
 /// What a partition stalled on one directed link: when the first message stalled, and the
 /// messages with their connection epochs.
 pub(super) type Stalled = (u64, Vec<(u64, Vec<u8>)>);
@@ -175,6 +180,9 @@ impl Simulation {
         let pair = *self.pair(from, to);
         if pair.connected && pair.epoch == epoch && self.blocked.contains_key(&(from, to)) {
             self.disconnect_pair(from, to);
+            let now = self.now;
+            let pair = self.pair(from, to);
+            (pair.lost_at, pair.lost_until) = (now, now + REDIAL_LOST_FOR_MICROS);
             self.stream_dial(from, to);
         }
     }
@@ -261,13 +269,18 @@ impl Simulation {
         self.push(at, Ev::Dial { a, b });
     }
 
-    /// The first round of dials of `a`'s or `b`'s LAN finder after now.
+    /// The first dial after now between `a` and `b`: a round of either's LAN finder, or a
+    /// dial again of the smaller id after the idle timeout closed their connection.
     fn next_dial_round(&self, a: usize, b: usize) -> u64 {
-        let next = |x: usize| {
-            let phase = self.dial_phase_micros[x];
-            phase + ((self.now - phase) / DIAL_ROUND_MICROS + 1) * DIAL_ROUND_MICROS
+        let after = |start: u64, every: u64| start + ((self.now - start) / every + 1) * every;
+        let round = |x: usize| after(self.dial_phase_micros[x], DIAL_ROUND_MICROS);
+        let pair = &self.pairs[a.min(b)][a.max(b)];
+        let again = if self.now < pair.lost_until {
+            after(pair.lost_at, REDIAL_LOST_EVERY_MICROS)
+        } else {
+            u64::MAX
         };
-        next(a).min(next(b))
+        round(a).min(round(b)).min(again)
     }
 
     /// A round of dials between `a` and `b`: one that finds both links open is admitted
