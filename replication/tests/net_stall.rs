@@ -66,6 +66,18 @@ impl Relay {
     }
 }
 
+/// The two nodes with their stats, the one with the smaller id first (the one that dials).
+async fn smaller_id_first(
+    mut handles: [&THandle; 2],
+) -> [(&THandle, replication::net::node::NodeStats); 2] {
+    handles.sort_by_key(|h| h.peer_id());
+    let [lower, higher] = handles;
+    [
+        (lower, lower.stats().await.unwrap()),
+        (higher, higher.stats().await.unwrap()),
+    ]
+}
+
 /// Long enough that QUIC's probes, doubling from about 30 ms on loopback, leave seconds
 /// between the outage's end and their next try.
 const OUTAGE: Duration = Duration::from_millis(4_000);
@@ -103,12 +115,7 @@ async fn a_connection_stalled_by_an_outage_is_redialed_when_it_ends() {
     converge(&[&a.handle, &b.handle], 8 + 6 * N_BULKY).await;
     let resumed = healed.elapsed();
 
-    let (lower, higher) = if a.handle.peer_id() < b.handle.peer_id() {
-        (&a.handle, &b.handle)
-    } else {
-        (&b.handle, &a.handle)
-    };
-    let (low, high) = (lower.stats().await.unwrap(), higher.stats().await.unwrap());
+    let [(lower, low), (higher, high)] = smaller_id_first([&a.handle, &b.handle]).await;
     assert!(low.n_stall_redials >= 1, "the smaller id redials: {low:?}");
     assert_eq!(low.n_stalls_replaced, 1, "{low:?}");
     assert_eq!(high.n_stall_redials, 0, "only the smaller id redials");
@@ -162,12 +169,7 @@ async fn a_connection_the_idle_timeout_closed_is_dialed_again_when_the_outage_en
     converge(&[&a.handle, &b.handle], 10).await;
     let back = healed.elapsed();
 
-    let (lower, higher) = if a.handle.peer_id() < b.handle.peer_id() {
-        (&a.handle, &b.handle)
-    } else {
-        (&b.handle, &a.handle)
-    };
-    let (low, high) = (lower.stats().await.unwrap(), higher.stats().await.unwrap());
+    let [(_, low), (_, high)] = smaller_id_first([&a.handle, &b.handle]).await;
     // It dialed while the outage lasted (those failed quietly), then once it was over.
     assert!(
         low.n_lost_redials >= 2,
