@@ -19,7 +19,7 @@
 //! TXT values from the network are untrusted: every length is bounded, malformed entries are
 //! counted and dropped, and nothing here panics on them.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
 use std::io;
 use std::net::{Ipv4Addr, SocketAddr, SocketAddrV6};
@@ -372,16 +372,20 @@ impl DnsSd {
     /// The other peers of session `discovery_id` that speak this build's sync protocol, with
     /// one address each of `local`'s family (rotating through an instance's addresses from one
     /// call to the next, so an unreachable first address does not hide the others), at most
-    /// [`MAX_DIALS_PER_ROUND`]. This peer's own announcement is skipped.
+    /// [`MAX_DIALS_PER_ROUND`], none of them in `skip` (the peers connected or being dialed,
+    /// so that a round's places go to peers that need a dial, however many the session has).
+    /// This peer's own announcement is skipped.
     pub fn peers_to_dial(
         &mut self,
         discovery_id: DiscoveryId,
         local: SocketAddr,
+        skip: &BTreeSet<PeerId>,
     ) -> Vec<DiscoveredPeer> {
         let own = self.announced.as_ref().map(|a| a.announcement.peer);
         let round = self.dial_round;
         self.dial_round = self.dial_round.wrapping_add(1);
-        self.table.peers_to_dial(discovery_id, own, local, round)
+        self.table
+            .peers_to_dial(discovery_id, own, local, round, skip)
     }
 
     fn handle_event(&mut self, event: ServiceEvent) -> bool {
@@ -526,12 +530,14 @@ impl SessionTable {
         own: Option<PeerId>,
         local: SocketAddr,
         round: u64,
+        skip: &BTreeSet<PeerId>,
     ) -> Vec<DiscoveredPeer> {
         let mut found: Vec<DiscoveredPeer> = Vec::new();
         for session in self.by_instance.values().map(|held| &held.session) {
             if session.discovery_id != discovery_id
                 || session.protocol_version != PROTOCOL_VERSION
                 || Some(session.peer) == own
+                || skip.contains(&session.peer)
                 || found.iter().any(|d| d.peer == session.peer)
             {
                 continue;
@@ -585,7 +591,7 @@ pub async fn announce_and_dial<P: Payload + Send + 'static>(
     let mut announcement = Some(announcement);
     let mut poll_tick = tokio::time::interval(Duration::from_millis(POLL_INTERVAL_MILLIS));
     let mut dial_tick = tokio::time::interval(Duration::from_millis(DIAL_INTERVAL_MILLIS));
-    let mut dialing: Option<tokio::task::JoinHandle<Vec<DiscoveredPeer>>> = None;
+    let mut dialing = DialsUnderWay::new();
     loop {
         tokio::select! {
             _ = poll_tick.tick() => {
@@ -605,37 +611,50 @@ pub async fn announce_and_dial<P: Payload + Send + 'static>(
                 if announcement.is_some() {
                     continue;
                 }
-                let mut peers: Vec<PeerId> = connected.into_iter().map(|(_, p)| p).collect();
-                peers.sort_unstable();
-                peers.dedup();
+                let peers: BTreeSet<PeerId> = connected.into_iter().map(|(_, p)| p).collect();
                 let n_peers = u16::try_from(peers.len()).unwrap_or(u16::MAX);
                 dnssd.update_n_peers(n_peers, wall_clock_now())?;
-                // One round of dials at a time, on a task of its own, so that a dial that
-                // times out (an instance gone without a goodbye) does not hold up the list.
-                if dialing.as_ref().is_some_and(|d| !d.is_finished()) {
-                    continue;
-                }
-                // The instances whose address admitted a dial of the last round are proven.
-                if let Some(done) = dialing.take() {
-                    for dialed in done.await.unwrap_or_default() {
-                        dnssd.note_admitted(&dialed);
-                    }
-                }
-                let found = dnssd.peers_to_dial(discovery_id, node.local_addr());
-                if !found.is_empty() {
-                    // Failures are the node's to count (admission refusals, timeouts); the
-                    // next round dials again, at the instance's next address.
-                    let node = node.clone();
-                    dialing = Some(tokio::spawn(async move {
-                        let outcomes = node.dial_discovered(&found).await;
-                        (outcomes.into_iter())
-                            .filter(|(_, outcome)| outcome.is_ok())
-                            .map(|(dialed, _)| dialed)
-                            .collect()
-                    }));
-                }
+                dial_round(&mut dnssd, &node, discovery_id, &peers, &mut dialing).await;
             }
         }
+    }
+}
+
+/// The finder's dials under way, one task per peer, each answering with the address that
+/// admitted it.
+type DialsUnderWay = BTreeMap<PeerId, tokio::task::JoinHandle<Option<DiscoveredPeer>>>;
+
+/// A round of dials: the instances whose address admitted a finished dial are proven, and
+/// every peer of the session neither `connected` nor being dialed is dialed on a task of its
+/// own, so a dial waiting out its handshake (an instance gone without a goodbye) holds up no
+/// other. Failures are the node's to count (admission refusals, timeouts); a later round
+/// dials again, at the instance's next address.
+async fn dial_round<P: Payload + Send + 'static>(
+    dnssd: &mut DnsSd,
+    node: &NodeHandle<P>,
+    discovery_id: DiscoveryId,
+    connected: &BTreeSet<PeerId>,
+    dialing: &mut DialsUnderWay,
+) {
+    let finished: Vec<PeerId> = (dialing.iter())
+        .filter(|(_, dial)| dial.is_finished())
+        .map(|(peer, _)| *peer)
+        .collect();
+    for peer in finished {
+        if let Some(dial) = dialing.remove(&peer)
+            && let Ok(Some(dialed)) = dial.await
+        {
+            dnssd.note_admitted(&dialed);
+        }
+    }
+    let busy: BTreeSet<PeerId> = connected.iter().chain(dialing.keys()).copied().collect();
+    for found in dnssd.peers_to_dial(discovery_id, node.local_addr(), &busy) {
+        let node = node.clone();
+        let dial = tokio::spawn(async move {
+            let outcomes = node.dial_discovered(&[found]).await;
+            (outcomes.into_iter()).find_map(|(dialed, outcome)| outcome.is_ok().then_some(dialed))
+        });
+        dialing.insert(found.peer, dial);
     }
 }
 
@@ -1091,7 +1110,8 @@ mod tests {
         assert!(table.by_instance.contains_key(&real.instance));
         assert_eq!(stats.n_displaced, 1);
         // It is dialed and admits; made-up instances keep coming, and it stays.
-        let dialed = table.peers_to_dial(ID, None, "0.0.0.0:1".parse().unwrap(), 0);
+        let dialed =
+            table.peers_to_dial(ID, None, "0.0.0.0:1".parse().unwrap(), 0, &BTreeSet::new());
         let real_dialed = dialed.iter().find(|d| d.peer == real.peer).unwrap();
         table.note_admitted(real_dialed, &mut stats);
         assert_eq!(stats.n_proven, 1);
@@ -1138,8 +1158,9 @@ mod tests {
         }
         let local: SocketAddr = "0.0.0.0:1".parse().unwrap();
         let own = Some(PeerId([0xab; PEER_ID_BYTES]));
-        let first = table.peers_to_dial(ID, own, local, 0);
-        let second = table.peers_to_dial(ID, own, local, 1);
+        let none = BTreeSet::new();
+        let first = table.peers_to_dial(ID, own, local, 0, &none);
+        let second = table.peers_to_dial(ID, own, local, 1, &none);
         let peer_1 = PeerId([1; PEER_ID_BYTES]);
         assert_eq!(
             first,
@@ -1149,8 +1170,32 @@ mod tests {
             }]
         );
         assert_eq!(second[0].addr, "10.0.1.1:4433".parse().unwrap());
-        let v6 = table.peers_to_dial(ID, own, "[::]:1".parse().unwrap(), 0);
+        let v6 = table.peers_to_dial(ID, own, "[::]:1".parse().unwrap(), 0, &none);
         assert_eq!(v6[0].addr, "[fe80::1%2]:4433".parse().unwrap());
+    }
+
+    /// A round dials at most `MAX_DIALS_PER_ROUND` peers. It used to pick them among every
+    /// peer of the session, connected or not, always in the table's order, so in a session of
+    /// more than that many other peers the ones after them were never dialed by anyone whose
+    /// table put them there. The peers connected or being dialed are now skipped.
+    #[test]
+    fn rounds_reach_every_peer_of_a_large_session() {
+        let (mut table, mut stats) = (SessionTable::default(), DnsSdStats::default());
+        let n = 2 * MAX_DIALS_PER_ROUND + 3;
+        for idx in 0..n {
+            let peer = u8::try_from(idx + 1).unwrap();
+            assert!(table.insert(lan_session_at(idx, ID, peer), Some(ID), &mut stats));
+        }
+        let local: SocketAddr = "0.0.0.0:1".parse().unwrap();
+        let mut busy = BTreeSet::new();
+        for round in 0..3 {
+            let found = table.peers_to_dial(ID, None, local, round, &busy);
+            assert!(!found.is_empty() && found.len() <= MAX_DIALS_PER_ROUND);
+            assert!(found.iter().all(|d| !busy.contains(&d.peer)), "{found:?}");
+            // Each round's dials are under way (or admitted) at the next.
+            busy.extend(found.iter().map(|d| d.peer));
+        }
+        assert_eq!(busy.len(), n, "every peer of the session was dialed");
     }
 
     #[test]
