@@ -35,8 +35,10 @@ const REDIAL_ROUND_TRIPS: u64 = 2;
 /// (`replication::net::discovery::dnssd::DIAL_INTERVAL_MILLIS`): a connection closed by the
 /// idle timeout, a peer back from an outage or a restart, and a late joiner connect at the
 /// first round of either end that finds both links open, [`REDIAL_ROUND_TRIPS`] later.
-/// (The finder's rounds are modelled as never held up by a dial still waiting for its
-/// handshake, which the product's are: an optimistic simplification.)
+/// (Each peer's dial is a task of its own in the product too, so a slow one holds up no
+/// other; but there a dial that met a partition waits for QUIC to send its first packet
+/// again, or for the admission timeout, before that peer is dialed anew, where here the next
+/// round dials it: an optimistic simplification.)
 pub(super) const DIAL_ROUND_MICROS: u64 = 1_000_000;
 /// How often the end with the smaller id dials a peer whose connection the idle timeout
 /// closed (`replication::net::node::REDIAL_LOST_EVERY_MILLIS`), from the close on ...
