@@ -10,9 +10,9 @@ use glam::{DQuat, DVec3};
 use model::bvh::Aabb;
 use model::object::codec;
 use model::object::{
-    Appearance, Axis, ColorDef, ColorMap, Domain, Edit, EditOp, Field, Formula, Geometry, Motion,
-    Object, ObjectData, PaintValue, Paintable, Physics, Pose, Property, Timing, ToolShape,
-    Transform,
+    Appearance, Axis, BoxSampler, ColorDef, ColorMap, Domain, Edit, EditOp, Field, Formula,
+    Geometry, Motion, Object, ObjectData, PaintValue, Paintable, Physics, Pose, Property, Sampler,
+    Timing, ToolShape, Transform,
 };
 use model::scene::{Group, GroupId, ObjectId, Scene};
 use proptest::prelude::*;
@@ -870,11 +870,59 @@ fn region_points(object: &Object, region: &Aabb, fractions: &[DVec3]) -> Vec<DVe
     points
 }
 
+/// A lattice over `region`, x fastest (what a mesher's block asks), whose axes hold the
+/// region's faces, a plane just outside, and the faces of the first edits' boxes that reach
+/// into the region, where the lattice's search for an edit's points must agree with the box.
+fn region_lattice(object: &Object, region: &Aabb) -> Vec<DVec3> {
+    let size = region.size();
+    let mut axes: [Vec<f64>; 3] = std::array::from_fn(|a| {
+        let mut axis: Vec<f64> = (0..=4)
+            .map(|i| region.lo[a] + size[a] * f64::from(i) / 4.0)
+            .collect();
+        axis.push(region.hi[a] + 0.01);
+        axis
+    });
+    let boxes = object
+        .history()
+        .entries()
+        .iter()
+        .flat_map(|e| *e.edit.boxes());
+    for b in boxes.filter(|b| b.overlaps(region)).take(4) {
+        for (a, axis) in axes.iter_mut().enumerate() {
+            axis.extend(
+                [b.lo[a], b.hi[a]]
+                    .into_iter()
+                    .filter(|c| region.lo[a] <= *c),
+            );
+        }
+    }
+    for axis in &mut axes {
+        axis.sort_by(f64::total_cmp);
+        axis.dedup();
+    }
+    let [xs, ys, zs] = &axes;
+    let row = |&z: &f64| {
+        ys.iter()
+            .flat_map(move |&y| xs.iter().map(move |&x| (x, y, z)))
+    };
+    zs.iter()
+        .flat_map(row)
+        .map(|(x, y, z)| DVec3::new(x, y, z))
+        .collect()
+}
+
 /// The box sampler's values, gradients and intervals equal the point path's bit for bit.
 fn assert_bulk_equals_points(object: &Object, region: &Aabb, fractions: &[DVec3], t: f64) {
     let mut point = object.sampler();
     let mut bulk = point.restrict(region, t);
-    let points = region_points(object, region, fractions);
+    let mut points = region_points(object, region, fractions);
+    // Then a lattice, which the sampler folds without buckets; its first point repeated
+    // (not a lattice), which it folds with them.
+    let lattice = region_lattice(object, region);
+    for batch in [lattice.clone(), [&lattice[..], &lattice[..1]].concat()] {
+        assert_batch_equals_points(&mut bulk, &mut point, &batch, t);
+    }
+    points.extend(lattice.iter().step_by(7));
     let mut values = vec![0.0; points.len()];
     bulk.values(&points, &mut values);
     let mut grads = vec![(0.0, DVec3::ZERO); points.len()];
@@ -930,6 +978,21 @@ fn assert_bulk_equals_points(object: &Object, region: &Aabb, fractions: &[DVec3]
             point.value(*p, t).to_bits(),
             "inner value at {p}"
         );
+    }
+}
+
+/// One batch of the box sampler's values and gradients against the point path's.
+fn assert_batch_equals_points(bulk: &mut BoxSampler, point: &mut Sampler, batch: &[DVec3], t: f64) {
+    let mut values = vec![0.0; batch.len()];
+    bulk.values(batch, &mut values);
+    let mut grads = vec![(0.0, DVec3::ZERO); batch.len()];
+    bulk.gradients(batch, &mut grads);
+    for ((p, v), (gv, g)) in batch.iter().zip(&values).zip(&grads) {
+        assert_eq!(v.to_bits(), point.value(*p, t).to_bits(), "value at {p}");
+        let (pv, pg) = point.gradient(*p, t);
+        assert_eq!(gv.to_bits(), pv.to_bits(), "gradient's value at {p}");
+        let bits = |v: DVec3| v.to_array().map(f64::to_bits);
+        assert_eq!(bits(*g), bits(pg), "gradient at {p}");
     }
 }
 

@@ -335,6 +335,8 @@ struct Buckets {
     starts: Vec<u32>,
     points: Vec<DVec3>,
     from: Vec<u32>,
+    /// The batch's axes when it is a lattice, which needs no buckets.
+    lattice: Lattice,
 }
 
 impl Buckets {
@@ -401,6 +403,9 @@ impl Buckets {
         sorted: &mut Vec<T>,
         apply: impl Fn(&CompiledEdit, T, DVec3) -> T,
     ) {
+        if edits.is_empty() {
+            return;
+        }
         // Where every point's fold starts at the same edit, an edit from there on whose box
         // covers the region touches every point of it.
         let from_all = from.first().copied().unwrap_or(0);
@@ -420,6 +425,12 @@ impl Buckets {
                     }
                 }
             }
+            return;
+        }
+        if self.lattice.read(points) {
+            let lattice = std::mem::take(&mut self.lattice);
+            lattice.fold(edits, entries, region, points, from, out, &apply);
+            self.lattice = lattice;
             return;
         }
         self.sort(region, points, from);
@@ -452,6 +463,107 @@ impl Buckets {
         }
         for (k, &i) in self.order.iter().enumerate() {
             out[i as usize] = sorted[k];
+        }
+    }
+}
+
+/// A batch of points that is a lattice, x fastest (a mesher's block): point
+/// `x + nx * (y + ny * z)` is `(xs[x], ys[y], zs[z])`, each axis strictly increasing. The
+/// points an edit's box holds are then a sub-lattice, found by searching each axis, so a fold
+/// visits exactly those points and neither sorts nor tests them against the box.
+#[derive(Default)]
+struct Lattice {
+    axes: [Vec<f64>; 3],
+}
+
+impl Lattice {
+    /// Whether `points` are a lattice; its axes are read into `self` when they are.
+    fn read(&mut self, points: &[DVec3]) -> bool {
+        let Some(&p0) = points.first() else {
+            return false;
+        };
+        for axis in &mut self.axes {
+            axis.clear();
+        }
+        let nx = points
+            .iter()
+            .take_while(|p| p.y == p0.y && p.z == p0.z)
+            .count();
+        let ny = points
+            .iter()
+            .step_by(nx)
+            .take_while(|p| p.z == p0.z)
+            .count();
+        if !points.len().is_multiple_of(nx * ny) {
+            return false;
+        }
+        let nz = points.len() / (nx * ny);
+        let [xs, ys, zs] = &mut self.axes;
+        xs.extend(points[..nx].iter().map(|p| p.x));
+        ys.extend(points[..nx * ny].iter().step_by(nx).map(|p| p.y));
+        zs.extend(points.iter().step_by(nx * ny).map(|p| p.z));
+        let increasing = |a: &[f64]| a.windows(2).all(|w| w[0] < w[1]);
+        if !(increasing(xs) && increasing(ys) && increasing(zs)) {
+            return false;
+        }
+        (0..nz).all(|z| {
+            (0..ny).all(|y| {
+                let row = &points[nx * (y + ny * z)..][..nx];
+                (row.iter().zip(&*xs)).all(|(p, &x)| p.x == x && p.y == ys[y] && p.z == zs[z])
+            })
+        })
+    }
+
+    /// The points along axis `a` with `lo <= c <= hi`, as [`Aabb::contains`] tests them.
+    fn span(&self, a: usize, lo: f64, hi: f64) -> std::ops::Range<usize> {
+        let axis = &self.axes[a];
+        axis.partition_point(|&c| c < lo)..axis.partition_point(|&c| c <= hi)
+    }
+
+    /// [`Buckets::fold`] over the lattice's points.
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "the fold's inputs, as Buckets::fold takes them"
+    )]
+    fn fold<T: Copy>(
+        &self,
+        edits: &[u32],
+        entries: &[super::history::HistoryEntry],
+        region: &Aabb,
+        points: &[DVec3],
+        from: &[u32],
+        out: &mut [T],
+        apply: &impl Fn(&CompiledEdit, T, DVec3) -> T,
+    ) {
+        let from_all = from[0];
+        let uniform = from.iter().all(|&f| f == from_all);
+        let (nx, ny) = (self.axes[0].len(), self.axes[1].len());
+        for &j in edits {
+            let e = &entries[j as usize].edit;
+            if uniform && from_all <= j && e.covers(region) {
+                for (o, p) in out.iter_mut().zip(points) {
+                    *o = apply(e, *o, *p);
+                }
+                continue;
+            }
+            // A mirrored edit's two boxes may share points: those of their union are tested.
+            let [b0, b1] = e.boxes();
+            let (b, test) = match b1.is_empty() {
+                true => (*b0, false),
+                false => (e.bounds(), true),
+            };
+            let [xr, yr, zr] = [0, 1, 2].map(|a| self.span(a, b.lo[a], b.hi[a]));
+            for z in zr {
+                for y in yr.clone() {
+                    let row = nx * (y + ny * z);
+                    for k in row + xr.start..row + xr.end {
+                        let p = points[k];
+                        if from[k] <= j && (!test || e.touches(p)) {
+                            out[k] = apply(e, out[k], p);
+                        }
+                    }
+                }
+            }
         }
     }
 }
