@@ -615,15 +615,17 @@ impl BoxShape {
     /// The shape's value at each point, as the point path computes it.
     fn values(&mut self, points: &[DVec3], t: f64, out: &mut [f64], local: &mut [Vec<f64>; 3]) {
         let compiled = &self.shape.compiled;
-        for (k, coords) in local.iter_mut().enumerate() {
-            coords.clear();
-            coords.extend(
-                points
-                    .iter()
-                    .map(|p| compiled.local_from_object.point(*p)[k]),
-            );
+        let [xs, ys, zs] = local;
+        let n = points.len();
+        for coords in [&mut *xs, &mut *ys, &mut *zs] {
+            coords.resize(n, 0.0);
         }
-        let [xs, ys, zs] = &*local;
+        let (x, y, z) = (&mut xs[..n], &mut ys[..n], &mut zs[..n]);
+        for (i, p) in points.iter().enumerate() {
+            let q = compiled.local_from_object.point(*p);
+            (x[i], y[i], z[i]) = (q.x, q.y, q.z);
+        }
+        let (xs, ys, zs) = (&*xs, &*ys, &*zs);
         match (&mut self.slices, &compiled.mesh) {
             (Some(e), _) => e.eval(xs, ys, zs, t, out),
             (None, Some(m)) => {
