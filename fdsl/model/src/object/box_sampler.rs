@@ -34,6 +34,7 @@ use std::sync::Arc;
 use glam::DVec3;
 
 use super::edit::{CompiledEdit, EditOp};
+use super::history::HistoryEntry;
 use super::sample::Shape;
 use super::slice_eval::SliceEval;
 use super::space::Transform;
@@ -229,18 +230,15 @@ impl BoxSampler {
                 *o = NOTHING;
             }
         }
-        let entries = self.object.history().entries();
-        let mut sorted = std::mem::take(&mut self.sorted_values);
-        self.buckets.fold(
-            &self.edits,
-            entries,
-            &self.region,
+        let batch = Batch {
+            edits: &self.edits,
+            entries: self.object.history().entries(),
+            region: &self.region,
             points,
-            &self.from,
-            out,
-            &mut sorted,
-            |e, v, p| e.apply_value(v, p),
-        );
+            from: &self.from,
+        };
+        let mut sorted = std::mem::take(&mut self.sorted_values);
+        (self.buckets).fold(batch, out, &mut sorted, |e, v, p| e.apply_value(v, p));
         self.sorted_values = sorted;
         if !self.outside.is_empty() {
             let t = self.t;
@@ -264,18 +262,15 @@ impl BoxSampler {
                 _ => (NOTHING, DVec3::ZERO),
             };
         }
-        let entries = self.object.history().entries();
-        let mut sorted = std::mem::take(&mut self.sorted_gradients);
-        self.buckets.fold(
-            &self.edits,
-            entries,
-            &self.region,
+        let batch = Batch {
+            edits: &self.edits,
+            entries: self.object.history().entries(),
+            region: &self.region,
             points,
-            &self.from,
-            out,
-            &mut sorted,
-            |e, v, p| e.apply_grad(v, p),
-        );
+            from: &self.from,
+        };
+        let mut sorted = std::mem::take(&mut self.sorted_gradients);
+        (self.buckets).fold(batch, out, &mut sorted, |e, v, p| e.apply_grad(v, p));
         self.sorted_gradients = sorted;
         if !self.outside.is_empty() {
             let outside = std::mem::take(&mut self.outside);
@@ -386,41 +381,26 @@ impl Buckets {
         self.from = next;
     }
 
-    /// Folds `edits` (ascending) into `out`, each over the points it touches from their first
+    /// Folds the batch's edits into `out`, each over the points it touches from their first
     /// edits on, with `apply`; `sorted` is scratch.
-    #[allow(
-        clippy::too_many_arguments,
-        reason = "the fold's inputs and its scratch"
-    )]
     fn fold<T: Copy>(
         &mut self,
-        edits: &[u32],
-        entries: &[super::history::HistoryEntry],
-        region: &Aabb,
-        points: &[DVec3],
-        from: &[u32],
+        batch: Batch<'_>,
         out: &mut [T],
         sorted: &mut Vec<T>,
         apply: impl Fn(&CompiledEdit, T, DVec3) -> T,
     ) {
+        let (edits, entries, points, from) = (batch.edits, batch.entries, batch.points, batch.from);
         if edits.is_empty() {
             return;
         }
-        // Where every point's fold starts at the same edit, an edit from there on whose box
-        // covers the region touches every point of it.
-        let from_all = from.first().copied().unwrap_or(0);
-        let uniform = from.iter().all(|&f| f == from_all);
+        let covers_all = batch.covers_all();
         if points.len() < MIN_BUCKETS_POINTS {
             for &j in edits {
                 let e = &entries[j as usize].edit;
-                if uniform && from_all <= j && e.covers(region) {
-                    for (o, p) in out.iter_mut().zip(points) {
-                        *o = apply(e, *o, *p);
-                    }
-                    continue;
-                }
+                let all = covers_all(j, e);
                 for ((o, p), &f) in out.iter_mut().zip(points).zip(from) {
-                    if f <= j && e.touches(*p) {
+                    if all || (f <= j && e.touches(*p)) {
                         *o = apply(e, *o, *p);
                     }
                 }
@@ -428,18 +408,16 @@ impl Buckets {
             return;
         }
         if self.lattice.read(points) {
-            let lattice = std::mem::take(&mut self.lattice);
-            lattice.fold(edits, entries, region, points, from, out, &apply);
-            self.lattice = lattice;
+            self.lattice.fold(batch, out, &apply);
             return;
         }
-        self.sort(region, points, from);
+        self.sort(batch.region, points, from);
         sorted.clear();
         sorted.extend(self.order.iter().map(|&i| out[i as usize]));
         let n = self.n_axis;
         for &j in edits {
             let e = &entries[j as usize].edit;
-            if uniform && from_all <= j && e.covers(region) {
+            if covers_all(j, e) {
                 for (v, p) in sorted.iter_mut().zip(&self.points) {
                     *v = apply(e, *v, *p);
                 }
@@ -464,6 +442,27 @@ impl Buckets {
         for (k, &i) in self.order.iter().enumerate() {
             out[i as usize] = sorted[k];
         }
+    }
+}
+
+/// What a fold reads: the edits to fold (ascending), the history's entries, the region, the
+/// points and each point's first edit.
+#[derive(Clone, Copy)]
+struct Batch<'a> {
+    edits: &'a [u32],
+    entries: &'a [HistoryEntry],
+    region: &'a Aabb,
+    points: &'a [DVec3],
+    from: &'a [u32],
+}
+
+impl Batch<'_> {
+    /// Whether edit `j` touches every point: where every point's fold starts at the same edit,
+    /// an edit from there on one of whose boxes covers the region.
+    fn covers_all(&self) -> impl Fn(u32, &CompiledEdit) -> bool + use<'_> {
+        let from_all = self.from.first().copied().unwrap_or(0);
+        let uniform = self.from.iter().all(|&f| f == from_all);
+        move |j, e| uniform && from_all <= j && e.covers(self.region)
     }
 }
 
@@ -521,26 +520,18 @@ impl Lattice {
     }
 
     /// [`Buckets::fold`] over the lattice's points.
-    #[allow(
-        clippy::too_many_arguments,
-        reason = "the fold's inputs, as Buckets::fold takes them"
-    )]
     fn fold<T: Copy>(
         &self,
-        edits: &[u32],
-        entries: &[super::history::HistoryEntry],
-        region: &Aabb,
-        points: &[DVec3],
-        from: &[u32],
+        batch: Batch<'_>,
         out: &mut [T],
         apply: &impl Fn(&CompiledEdit, T, DVec3) -> T,
     ) {
-        let from_all = from[0];
-        let uniform = from.iter().all(|&f| f == from_all);
+        let (edits, entries, points, from) = (batch.edits, batch.entries, batch.points, batch.from);
+        let covers_all = batch.covers_all();
         let (nx, ny) = (self.axes[0].len(), self.axes[1].len());
         for &j in edits {
             let e = &entries[j as usize].edit;
-            if uniform && from_all <= j && e.covers(region) {
+            if covers_all(j, e) {
                 for (o, p) in out.iter_mut().zip(points) {
                     *o = apply(e, *o, *p);
                 }
