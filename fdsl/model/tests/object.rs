@@ -1369,7 +1369,7 @@ fn moving_a_group_with_groups_below_it_counts_their_depth() {
 #[test]
 fn a_sampler_asked_again_at_one_point_answers_as_a_fresh_one() {
     // The haptic loop asks the gradient twice and the painted properties at one point each
-    // tick, and the properties reuse the gradient's index lookup: every answer in any order
+    // tick, and they reuse the first gradient's index lookup: every answer in any order
     // of asking is what a fresh sampler gives, at other times too.
     let mut object = Object::implicit("1 - x^2 - y^2 - z^2 + 0.1 * t").unwrap();
     for k in 0..300 {
@@ -1439,6 +1439,9 @@ fn a_sampler_asked_again_at_one_point_answers_as_a_fresh_one() {
             let once = bits(sampler.gradient(p, t));
             assert_eq!(bits(sampler.gradient(p, t)), once);
             assert_eq!(once, bits(fresh().gradient(p, t)));
+            // A box elsewhere between two asks at the point: the second reads the point's edits.
+            sampler.interval(&Aabb::around(-p, DVec3::splat(0.05)), t);
+            assert_eq!(bits(sampler.gradient(p, t)), once);
             n_timed += usize::from(once != bits(fresh().gradient(p, 0.5)));
             for property in properties {
                 n_painted += usize::from(same_scalar(&mut sampler, property, p, t));

@@ -192,8 +192,8 @@ pub struct Sampler {
     motion: [Option<PointEval>; 2],
     hits: Vec<Hit>,
     /// The point (its bits) whose edits `hits` holds, if it holds a point's: the haptic loop
-    /// asks the painted properties where it has just asked the gradient, and they share its
-    /// index lookup. The object cannot change under the sampler.
+    /// asks the gradient twice and the painted properties at one point each tick, and they
+    /// share one index lookup. The object cannot change under the sampler.
     hits_at: Option<[u64; 3]>,
 }
 
@@ -240,11 +240,15 @@ impl Sampler {
         BoxSampler::new(self.object.clone(), region, t)
     }
 
-    /// Gathers into `hits` the active edits whose support holds `p`.
+    /// Gathers into `hits` the active edits whose support holds `p`, unless they are there
+    /// already (the servo asks a tick's tip twice).
     #[inline]
     fn gather_at_point(&mut self, p: DVec3) {
-        self.object.history().hits_at_point(p, &mut self.hits);
-        self.hits_at = Some(p.to_array().map(f64::to_bits));
+        let at = Some(p.to_array().map(f64::to_bits));
+        if self.hits_at != at {
+            self.object.history().hits_at_point(p, &mut self.hits);
+            self.hits_at = at;
+        }
     }
 
     fn base_value(&mut self, p: DVec3, t: f64) -> f64 {
@@ -376,9 +380,7 @@ impl Sampler {
 
     /// The newest painting of `property` that covers `p`.
     fn painted(&mut self, property: Paintable, p: DVec3) -> Option<PaintValue> {
-        if self.hits_at != Some(p.to_array().map(f64::to_bits)) {
-            self.gather_at_point(p);
-        }
+        self.gather_at_point(p);
         let history = self.object.history();
         let entries = history.entries();
         // The operation comes from the index: only paintings of `property` visit their edit.
