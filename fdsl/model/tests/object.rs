@@ -1109,6 +1109,33 @@ fn box_sampler_equals_the_point_path_on_a_long_history() {
 }
 
 #[test]
+fn a_box_sampler_takes_batches_with_nan_points() {
+    // A NaN coordinate matches nothing, not even itself: a batch that opens with one is no
+    // lattice, and its other points are answered as the point path answers them.
+    let mut object = Object::implicit(SPHERE).unwrap();
+    let tool = ToolShape::Sphere { radius: 0.2 };
+    for at in [DVec3::ZERO, DVec3::splat(0.3)] {
+        (object.apply(Edit::stamp(EditOp::Subtract, tool, Pose::at(at)))).unwrap();
+    }
+    let region = Aabb::around(DVec3::ZERO, DVec3::splat(0.5));
+    let lattice = region_lattice(&object, &region);
+    let mut point = object.sampler();
+    let mut bulk = point.restrict(&region, 0.0);
+    for nan in [
+        DVec3::new(0.0, f64::NAN, 0.0),
+        DVec3::new(0.0, 0.0, f64::NAN),
+        DVec3::NAN,
+    ] {
+        let batch = [&[nan][..], &lattice[..]].concat();
+        let mut values = vec![0.0; batch.len()];
+        bulk.values(&batch, &mut values);
+        let mut grads = vec![(0.0, DVec3::ZERO); batch.len()];
+        bulk.gradients(&batch, &mut grads);
+        assert_batch_equals_points(&mut bulk, &mut point, &batch[1..], 0.0);
+    }
+}
+
+#[test]
 fn box_samplers_simplify_selects_and_blends_but_not_min_and_max() {
     let select =
         "function frep(x,y,z,t){ if (x > 0.2) g = 0.8 - x^2; else g = 1 - x^2; return g; }";

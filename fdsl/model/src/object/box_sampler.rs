@@ -488,6 +488,10 @@ impl Lattice {
             .iter()
             .take_while(|p| p.y == p0.y && p.z == p0.z)
             .count();
+        if nx == 0 {
+            // The first point's y or z is NaN.
+            return false;
+        }
         let ny = points
             .iter()
             .step_by(nx)
