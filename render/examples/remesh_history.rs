@@ -3,6 +3,9 @@
 //! the root), on render's `remesh_object` workload (the unit ball carved along a golden-angle
 //! spiral, ball tools of radius 0.04) with 10^3, 10^4 and 10^5 edits at depth 7.
 //!
+//! Each length's whole mesh is also timed on every core (`OctreeMesher::remesh_parallel`), in
+//! the same run, and checked to be the same mesh.
+//!
 //! `cargo run -p render --release --example remesh_history` (`-- N...` for other lengths).
 
 use render::mesh::object_field::{Dirty, dirty_boxes};
@@ -48,6 +51,19 @@ fn main() {
             .remesh(&mut ObjectField::new(&object, 0.0), settings.bounds)
             .expect("meshes");
         let full = started.elapsed();
+        // The same whole mesh on every core, in the same run.
+        let n_threads = std::thread::available_parallelism().map_or(1, usize::from);
+        let mut parallel = OctreeMesher::new(&settings).expect("valid settings");
+        let started = now();
+        parallel
+            .remesh_parallel(
+                &mut ObjectField::new(&object, 0.0),
+                settings.bounds,
+                n_threads,
+            )
+            .expect("meshes");
+        let full_parallel = started.elapsed();
+        let same = parallel.mesh().ok() == mesher.mesh().ok();
         let mut times = Vec::new();
         let mut blocks = Vec::new();
         for k in 1..=N_EDITS_TIMED {
@@ -72,9 +88,17 @@ fn main() {
         times.sort_by(f64::total_cmp);
         blocks.sort_unstable();
         println!(
-            "{n} edits, depth {DEPTH}: full mesh {:.2} s; one edit's remesh median {:.2} ms \
+            "{n} edits, depth {DEPTH}: full mesh {:.2} s, on {n_threads} threads {:.2} s \
+             ({:.2} times as fast, {}); one edit's remesh median {:.2} ms \
              (fastest {:.2}, slowest {:.2}), {} blocks evaluated (median)",
             full.as_secs_f64(),
+            full_parallel.as_secs_f64(),
+            full.as_secs_f64() / full_parallel.as_secs_f64(),
+            if same {
+                "the same mesh"
+            } else {
+                "ANOTHER MESH"
+            },
             times[times.len() / 2],
             times[0],
             times[times.len() - 1],

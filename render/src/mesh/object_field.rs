@@ -1002,4 +1002,63 @@ mod tests {
         let unbounded = Object::implicit("1-x^2-y^2-z^2").unwrap();
         assert_eq!(mesh_bounds(&unbounded, 6), None);
     }
+
+    /// A mesh's numbers as bits, to compare two meshes exactly.
+    fn bits(m: &Mesh) -> (Vec<[u32; 3]>, Vec<[u32; 3]>, Vec<u32>) {
+        let b = |v: &Vec<[f32; 3]>| v.iter().map(|p| p.map(f32::to_bits)).collect();
+        (b(&m.positions), b(&m.normals), m.indices.clone())
+    }
+
+    #[test]
+    fn a_remesh_on_several_threads_equals_one_on_one_bit_for_bit() {
+        // A carved ball (every octree node simplified) meshed whole, then remeshed over a
+        // large box after more edits, on one thread and on several: the same records (the
+        // assembled mesh, bit for bit) and the same counts.
+        let n = 240;
+        let mut object = ball();
+        for k in 0..n {
+            object.apply(edit(k, n)).unwrap();
+        }
+        object.prepare();
+        let mut edited = object.clone();
+        for k in 0..40 {
+            edited.apply(edit(k, 40)).unwrap();
+        }
+        edited.prepare();
+        let dirty = Aabb::new([-1.25, -1.25, -0.3], [1.25, 0.4, 1.25]);
+        for depth in [5, 6] {
+            let run = |threads| {
+                let mut m = OctreeMesher::new(&settings(depth)).unwrap();
+                let whole = (m.remesh_parallel(
+                    &mut ObjectField::new(&object, 0.0),
+                    settings(depth).bounds,
+                    threads,
+                ))
+                .unwrap();
+                let first = bits(&m.mesh().unwrap());
+                let part = (m.remesh_parallel(&mut ObjectField::new(&edited, 0.0), dirty, threads))
+                    .unwrap();
+                (whole, first, part, bits(&m.mesh().unwrap()))
+            };
+            let one = run(1);
+            // Enough blocks that the threads take them (the part only at depth 6).
+            let n_blocks = |d: u8| (1usize << (d - 3)).pow(3);
+            assert!(n_blocks(depth) >= octree::MIN_PARALLEL_BLOCKS);
+            assert!(depth < 6 || one.2.blocks_evaluated >= octree::MIN_PARALLEL_BLOCKS);
+            assert_ne!(one.1, one.3, "the edits change the mesh");
+            for threads in [2, 3, 8] {
+                let many = run(threads);
+                assert_eq!(many.0, one.0, "depth {depth}, {threads} threads: whole");
+                assert!(
+                    many.1 == one.1,
+                    "depth {depth}, {threads} threads: whole mesh"
+                );
+                assert_eq!(many.2, one.2, "depth {depth}, {threads} threads: part");
+                assert!(
+                    many.3 == one.3,
+                    "depth {depth}, {threads} threads: remeshed"
+                );
+            }
+        }
+    }
 }

@@ -41,10 +41,12 @@
 //! mesh is open along the box, which is what stitching a remeshed region needs.
 
 mod assembly;
+mod parallel;
 mod qef;
 mod topology;
 
 pub use assembly::MeshPatch;
+pub use parallel::{MIN_PARALLEL_BLOCKS, PARALLEL_LEVELS};
 
 use super::field::Field;
 use super::{Aabb, MAX_INDEXED_VERTICES, Mesh, normalise_or_up};
@@ -102,6 +104,17 @@ pub struct MeshStats {
     /// Blocks next to a remeshed range whose lattice values did not change, so their cells
     /// were kept rather than built again.
     pub blocks_unchanged: usize,
+}
+
+impl std::ops::AddAssign for MeshStats {
+    fn add_assign(&mut self, o: MeshStats) {
+        self.intervals_skipped += o.intervals_skipped;
+        self.nodes_pruned += o.nodes_pruned;
+        self.blocks_evaluated += o.blocks_evaluated;
+        self.fields_simplified += o.fields_simplified;
+        self.patches_split += o.patches_split;
+        self.blocks_unchanged += o.blocks_unchanged;
+    }
 }
 
 /// Meshes the surface f = 0 of `field` inside `settings.bounds`.
@@ -232,10 +245,22 @@ impl OctreeMesher {
         field: &mut F,
         dirty: Aabb,
     ) -> Result<MeshStats, OctreeMeshError> {
-        let mut stats = MeshStats::default();
-        let Some(range) = self.grid.blocks_touching(dirty) else {
-            return Ok(stats);
+        let Some((range, wide)) = self.begin(dirty) else {
+            return Ok(MeshStats::default());
         };
+        let local = self.take_local(wide);
+        let mut visit = Visit::new(self, local, range, wide);
+        visit.node(field, [0; 3], self.grid.n_cells);
+        let Visit { local, stats, .. } = visit;
+        self.put_local(local);
+        Ok(stats)
+    }
+
+    /// The blocks `dirty` touches (`range`) and those a remesh of them may change (`wide`:
+    /// the range and the blocks just above it, which read its values); forgets the range's
+    /// records and notes its blocks as changed. `None` when `dirty` touches no block.
+    fn begin(&mut self, dirty: Aabb) -> Option<(BlockRange, BlockRange)> {
+        let range = self.grid.blocks_touching(dirty)?;
         let last = self.n_blocks - 1;
         let wide = BlockRange {
             lo: range.lo,
@@ -243,15 +268,63 @@ impl OctreeMesher {
         };
         self.blocks.retain(|k, _| !range.contains(*k));
         self.note_changed(range);
-        let mut visit = Visit {
-            mesher: self,
-            range,
-            wide,
-            stats: &mut stats,
-        };
-        let n_cells = visit.mesher.grid.n_cells;
-        visit.node(field, [0; 3], n_cells);
-        Ok(stats)
+        Some((range, wide))
+    }
+
+    /// Takes the records and representatives of the blocks of `keys` out, for one traversal
+    /// to change ([`OctreeMesher::put_local`] puts them back).
+    fn take_local(&mut self, keys: BlockRange) -> Local {
+        let (lo, hi) = (keys.lo, keys.hi);
+        let mut blocks = BTreeMap::new();
+        for x in lo[0]..=hi[0] {
+            let row: Vec<[u32; 3]> = (self.blocks.range([x, lo[1], lo[2]]..=[x, hi[1], hi[2]]))
+                .map(|(k, _)| *k)
+                .filter(|k| keys.contains(*k))
+                .collect();
+            for k in row {
+                if let Some(b) = self.blocks.remove(&k) {
+                    blocks.insert(k, b);
+                }
+            }
+        }
+        let mut reps = Vec::with_capacity(keys.n_blocks());
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    reps.push(self.reps[self.block_idx([x, y, z])]);
+                }
+            }
+        }
+        Local {
+            keys,
+            blocks,
+            reps,
+            changes: Vec::new(),
+        }
+    }
+
+    /// Puts back what a traversal changed (see [`OctreeMesher::take_local`]).
+    fn put_local(&mut self, local: Local) {
+        let Local {
+            keys,
+            blocks,
+            reps,
+            changes,
+        } = local;
+        self.blocks.extend(blocks);
+        let mut next = reps.into_iter();
+        for z in keys.lo[2]..=keys.hi[2] {
+            for y in keys.lo[1]..=keys.hi[1] {
+                for x in keys.lo[0]..=keys.hi[0] {
+                    let idx = self.block_idx([x, y, z]);
+                    self.reps[idx] = next.next().unwrap_or(self.reps[idx]);
+                }
+            }
+        }
+        let n_total = self.reps.len();
+        for idx in changes {
+            self.changes.push(idx as usize, n_total);
+        }
     }
 
     /// Notes every block of `range` as changed (blocks just above it are noted by
@@ -410,6 +483,46 @@ impl BlockRange {
     fn contains(&self, k: [u32; 3]) -> bool {
         (0..3).all(|a| self.lo[a] <= k[a] && k[a] <= self.hi[a])
     }
+
+    fn n_blocks(&self) -> usize {
+        (0..3)
+            .map(|a| (self.hi[a] - self.lo[a] + 1) as usize)
+            .product()
+    }
+
+    /// The index of block `k` (inside) among the range's, x fastest.
+    fn index(&self, k: [u32; 3]) -> usize {
+        let n: [usize; 3] = std::array::from_fn(|a| (self.hi[a] - self.lo[a] + 1) as usize);
+        let l: [usize; 3] = std::array::from_fn(|a| (k[a] - self.lo[a]) as usize);
+        l[0] + n[0] * (l[1] + n[1] * l[2])
+    }
+}
+
+impl Local {
+    /// Nothing: a traversal that only reads (the plan of a parallel remesh).
+    fn none() -> Local {
+        Local {
+            keys: BlockRange {
+                lo: [1; 3],
+                hi: [0; 3],
+            },
+            blocks: BTreeMap::new(),
+            reps: Vec::new(),
+            changes: Vec::new(),
+        }
+    }
+}
+
+/// What one traversal may change, taken out of the mesher: the records and representatives
+/// of the blocks of `keys`, and the blocks outside the remeshed range whose cells changed.
+/// Everything else the traversal reads from the mesher, which it does not change.
+struct Local {
+    keys: BlockRange,
+    blocks: BTreeMap<[u32; 3], Block>,
+    /// Per block of `keys` ([`BlockRange::index`]), as [`OctreeMesher::reps`].
+    reps: Vec<f32>,
+    /// Mesher block indices, as [`Changes::blocks`].
+    changes: Vec<u32>,
 }
 
 /// The sampling lattice: grid point i along axis a sits at `lo[a] + i * step[a]`.
@@ -529,6 +642,20 @@ struct Block {
     normals: Vec<[f32; 3]>,
 }
 
+/// What a visit does with an octree node (see `Visit::step`).
+enum Step {
+    Skip,
+    Prune {
+        first: [u32; 3],
+        last: [u32; 3],
+        rep: f32,
+    },
+    Open {
+        lo: [f32; 3],
+        hi: [f32; 3],
+    },
+}
+
 /// Where the values a block owns come from.
 enum Owned<'a> {
     /// A record's lattice values.
@@ -540,21 +667,85 @@ enum Owned<'a> {
 /// One octree traversal: blocks in `range` are evaluated again; blocks in `wide` (the range
 /// and the blocks just above it, which read its values) get their cells recomputed.
 struct Visit<'a> {
-    mesher: &'a mut OctreeMesher,
+    /// The blocks outside `local`, read only.
+    mesher: &'a OctreeMesher,
+    local: Local,
     range: BlockRange,
     wide: BlockRange,
-    stats: &'a mut MeshStats,
+    stats: MeshStats,
 }
 
-impl Visit<'_> {
+impl<'a> Visit<'a> {
+    fn new(mesher: &'a OctreeMesher, local: Local, range: BlockRange, wide: BlockRange) -> Self {
+        Visit {
+            mesher,
+            local,
+            range,
+            wide,
+            stats: MeshStats::default(),
+        }
+    }
+
+    /// Block `key`'s record, if it has one.
+    fn record(&self, key: [u32; 3]) -> Option<&Block> {
+        if self.local.keys.contains(key) {
+            self.local.blocks.get(&key)
+        } else {
+            self.mesher.blocks.get(&key)
+        }
+    }
+
+    /// Block `key`'s representative.
+    fn rep(&self, key: [u32; 3]) -> f32 {
+        if self.local.keys.contains(key) {
+            self.local.reps[self.local.keys.index(key)]
+        } else {
+            self.mesher.reps[self.mesher.block_idx(key)]
+        }
+    }
+
+    /// Sets block `key`'s representative (`key` is in `local`).
+    fn set_rep(&mut self, key: [u32; 3], rep: f32) {
+        let i = self.local.keys.index(key);
+        self.local.reps[i] = rep;
+    }
+
     /// Visits the octree node of `size` cells at `origin`, pruning or evaluating it.
     fn node<F: Field>(&mut self, field: &mut F, origin: [u32; 3], size: u32) {
+        let (lo, hi) = match self.step(field, origin, size) {
+            Step::Skip => return,
+            Step::Prune { first, last, rep } => return self.prune(field, first, last, rep),
+            Step::Open { lo, hi } => (lo, hi),
+        };
+        let mut simplified = field.simplify(lo, hi);
+        let field: &mut F = match simplified.as_mut() {
+            Some(s) => {
+                self.stats.fields_simplified += 1;
+                s
+            }
+            None => field,
+        };
+        if size <= self.mesher.grid.block {
+            self.leaf(field, origin.map(|o| o / self.mesher.grid.block));
+            return;
+        }
+        let half = size / 2;
+        for k in 0..8 {
+            let child = std::array::from_fn(|a| origin[a] + corner_offset(k)[a] * half);
+            self.node(field, child, half);
+        }
+    }
+
+    /// What the visit does with the octree node of `size` cells at `origin`: nothing (it
+    /// holds no block the visit may change), prune it (its interval proved one sign), or
+    /// open it (simplify the field over `lo..hi` and evaluate or descend).
+    fn step<F: Field>(&mut self, field: &mut F, origin: [u32; 3], size: u32) -> Step {
         let grid = self.mesher.grid;
         let bc = grid.block;
         let first = origin.map(|o| o / bc);
         let last = origin.map(|o| (o + size) / bc - 1);
         if (0..3).any(|a| last[a] < self.wide.lo[a] || first[a] > self.wide.hi[a]) {
-            return;
+            return Step::Skip;
         }
         let lo = grid.point(origin);
         let hi = grid.point(origin.map(|o| o + size));
@@ -568,27 +759,10 @@ impl Visit<'_> {
             if f_lo > 0.0 || f_hi < 0.0 {
                 self.stats.nodes_pruned += 1;
                 let rep = if f_lo > 0.0 { grid.rep() } else { -grid.rep() };
-                self.prune(field, first, last, rep);
-                return;
+                return Step::Prune { first, last, rep };
             }
         }
-        let mut simplified = field.simplify(lo, hi);
-        let field: &mut F = match simplified.as_mut() {
-            Some(s) => {
-                self.stats.fields_simplified += 1;
-                s
-            }
-            None => field,
-        };
-        if size <= bc {
-            self.leaf(field, first);
-            return;
-        }
-        let half = size / 2;
-        for k in 0..8 {
-            let child = std::array::from_fn(|a| origin[a] + corner_offset(k)[a] * half);
-            self.node(field, child, half);
-        }
+        Step::Open { lo, hi }
     }
 
     /// Whether a block of `first..=last` outside the blocks this visit may change (`wide`)
@@ -611,8 +785,9 @@ impl Visit<'_> {
     /// Records a pruned node's blocks `first..=last`, then gives cells to those of its blocks
     /// that a neighbour's disagreeing values or a kept record may have left crossed.
     fn prune<F: Field>(&mut self, field: &mut F, first: [u32; 3], last: [u32; 3], rep: f32) {
-        let lo: [u32; 3] = std::array::from_fn(|a| first[a].max(self.wide.lo[a]));
-        let hi: [u32; 3] = std::array::from_fn(|a| last[a].min(self.wide.hi[a]));
+        let keys = self.local.keys;
+        let lo: [u32; 3] = std::array::from_fn(|a| first[a].max(keys.lo[a]));
+        let hi: [u32; 3] = std::array::from_fn(|a| last[a].min(keys.hi[a]));
         let keys = || {
             (lo[2]..=hi[2]).flat_map(move |z| {
                 (lo[1]..=hi[1]).flat_map(move |y| (lo[0]..=hi[0]).map(move |x| [x, y, z]))
@@ -620,8 +795,7 @@ impl Visit<'_> {
         };
         for k in keys() {
             if self.range.contains(k) {
-                let idx = self.mesher.block_idx(k);
-                self.mesher.reps[idx] = rep;
+                self.set_rep(k, rep);
             }
         }
         for k in keys() {
@@ -675,9 +849,9 @@ impl Visit<'_> {
 
     /// The values block `key` owns: its record's, or its representative.
     fn owned(&self, key: [u32; 3]) -> Owned<'_> {
-        match self.mesher.blocks.get(&key) {
+        match self.record(key) {
             Some(b) => Owned::Values(&b.values),
-            None => Owned::Rep(self.mesher.reps[self.mesher.block_idx(key)]),
+            None => Owned::Rep(self.rep(key)),
         }
     }
 
@@ -687,7 +861,7 @@ impl Visit<'_> {
         let grid = self.mesher.grid;
         let (bc, np) = (grid.block, grid.lattice());
         let from = grid.owned_from(key);
-        let kept = fresh.is_none() && self.mesher.blocks.contains_key(&key);
+        let kept = fresh.is_none() && self.record(key).is_some();
         let mut values = match fresh {
             Some(v) => v,
             None => {
@@ -704,25 +878,24 @@ impl Visit<'_> {
             return;
         }
         let origin = key.map(|k| k * bc);
-        let block = build_block(&grid, field, origin, values, self.stats);
-        let idx = self.mesher.block_idx(key);
+        let block = build_block(&grid, field, origin, values, &mut self.stats);
         if !self.range.contains(key) {
-            let n_total = self.mesher.reps.len();
-            self.mesher.changes.push(idx, n_total);
+            let idx = self.mesher.block_idx(key);
+            self.local.changes.push(idx as u32);
         }
         match block {
             Ok(block) => {
-                self.mesher.blocks.insert(key, block);
+                self.local.blocks.insert(key, block);
             }
             // A kept record keeps its values: blocks above it read them.
             Err(values) if kept => {
                 let block = Block::without_cells(origin, values);
-                self.mesher.blocks.insert(key, block);
+                self.local.blocks.insert(key, block);
             }
             Err(values) => {
-                self.mesher.blocks.remove(&key);
+                self.local.blocks.remove(&key);
                 let sign = if inside(values[0]) { 1.0 } else { -1.0 };
-                self.mesher.reps[idx] = sign * grid.rep();
+                self.set_rep(key, sign * grid.rep());
             }
         }
     }
@@ -761,7 +934,7 @@ impl Visit<'_> {
 
     /// Whether block `key`'s record holds exactly `values`, bit for bit.
     fn holds_values(&self, key: [u32; 3], values: &[f32]) -> bool {
-        self.mesher.blocks.get(&key).is_some_and(|b| {
+        self.record(key).is_some_and(|b| {
             b.values.len() == values.len()
                 && b.values
                     .iter()

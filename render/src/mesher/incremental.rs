@@ -243,7 +243,10 @@ fn patch(mut state: Incremental, object: &Object, superseded: &dyn Fn() -> bool)
             state.dirty = boxes;
             return Patched::Stopped(state);
         }
-        if state.octree.remesh(&mut field, *b).is_err() {
+        if (state.octree)
+            .remesh_parallel(&mut field, *b, super::remesh_threads())
+            .is_err()
+        {
             return Patched::Whole;
         }
     }
@@ -343,8 +346,8 @@ fn mesh_whole(
         .ok_or_else(|| model::object::FitError::Unbounded.to_string())?;
     let mut octree =
         OctreeMesher::new(&MeshSettings { bounds, depth }).map_err(|e| e.to_string())?;
-    octree
-        .remesh(&mut ObjectField::new(&object, 0.0), bounds)
+    let mut field = ObjectField::new(&object, 0.0);
+    (octree.remesh_parallel(&mut field, bounds, super::remesh_threads()))
         .map_err(|e| e.to_string())?;
     let closed = octree.encloses();
     let mut mesh = Mesh::default();

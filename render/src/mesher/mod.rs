@@ -52,6 +52,18 @@ pub const MIN_MESHER_THREADS: usize = 2;
 pub const MAX_MESHER_THREADS: usize = 4;
 /// Most changed edits one job patches; more mesh the object whole.
 pub const MAX_PATCH_EDITS: usize = 256;
+/// Most threads one job's remesh runs on (see
+/// [`OctreeMesher::remesh_parallel`](crate::mesh::octree::OctreeMesher::remesh_parallel)):
+/// a large remesh of one object (a whole mesh, a long stroke from a peer) uses the cores
+/// that the other workers leave idle.
+pub const MAX_REMESH_THREADS: usize = 8;
+
+/// Threads for one job's remesh: one per core, at most [`MAX_REMESH_THREADS`].
+fn remesh_threads() -> usize {
+    std::thread::available_parallelism()
+        .map_or(1, usize::from)
+        .min(MAX_REMESH_THREADS)
+}
 
 /// One object to mesh.
 pub struct MeshJob {
