@@ -62,6 +62,16 @@ pub trait Field {
         let _ = (lo, hi);
         None
     }
+
+    /// A field that evaluates as `self` does, bit for bit, for another thread to use (a
+    /// parallel remesh's subtree whose field did not simplify); `None` where none can be made:
+    /// that remesh then runs on one thread.
+    fn fork(&self) -> Option<Self>
+    where
+        Self: Sized,
+    {
+        None
+    }
 }
 
 /// Finite-difference step of the default [`Field::gradients`], relative to |coordinate|.

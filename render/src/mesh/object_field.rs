@@ -118,6 +118,20 @@ impl Field for ObjectField {
         }
     }
 
+    fn fork(&self) -> Option<Self> {
+        match &self.inner {
+            Inner::Shape(s) => Some(ObjectField {
+                inner: Inner::Shape(s.clone()),
+            }),
+            Inner::Sampler { sampler, t } => Some(ObjectField::from_sampler(
+                Sampler::new(sampler.object().clone()),
+                *t,
+            )),
+            // Never asked: a region's field always simplifies.
+            Inner::Region(_) => None,
+        }
+    }
+
     fn simplify(&mut self, lo: [f32; 3], hi: [f32; 3]) -> Option<Self> {
         match &mut self.inner {
             Inner::Shape(s) => s.simplify(lo, hi).map(|s| ObjectField {
@@ -185,6 +199,7 @@ impl RegionField {
 /// An implicit geometry's tape in its own space, mapped from object space by the inverse of
 /// its transform and clipped by its domain: `min(f(q), domain distance(q))`, `q` the local
 /// point, as model's sampler evaluates a shape.
+#[derive(Clone)]
 struct ShapeField {
     tape: TapeField,
     local_from_object: DAffine3,
@@ -1026,6 +1041,22 @@ mod tests {
         }
         edited.prepare();
         let dirty = Aabb::new([-1.25, -1.25, -0.3], [1.25, 0.4, 1.25]);
+        // The ball alone goes through fdsl's bulk evaluators, whose tape does not simplify
+        // at the root: the subtrees take forks of it.
+        let plain = ball();
+        assert!(ObjectField::new(&plain, 0.0).is_bulk());
+        let whole = |threads| {
+            let mut m = OctreeMesher::new(&settings(6)).unwrap();
+            let field = &mut ObjectField::new(&plain, 0.0);
+            let stats = m
+                .remesh_parallel(field, settings(6).bounds, threads)
+                .unwrap();
+            (stats, bits(&m.mesh().unwrap()))
+        };
+        let one = whole(1);
+        for threads in [2, 3] {
+            assert!(whole(threads) == one, "the ball on {threads} threads");
+        }
         for depth in [5, 6] {
             let run = |threads| {
                 let mut m = OctreeMesher::new(&settings(depth)).unwrap();

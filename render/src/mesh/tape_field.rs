@@ -77,6 +77,10 @@ impl Field for TapeField {
         }
     }
 
+    fn fork(&self) -> Option<Self> {
+        Some(self.clone())
+    }
+
     fn simplify(&mut self, lo: [f32; 3], hi: [f32; 3]) -> Option<Self> {
         self.bounds(lo, hi);
         let tape = self
@@ -131,6 +135,17 @@ mod tests {
         let mut field = TapeField::new(&tape, 0.0);
         let (mesh, stats) = mesh_with_stats(&mut field, &settings(depth)).unwrap();
         assert!(!mesh.indices.is_empty(), "{name}: empty mesh");
+        // The same on several threads, bit for bit (each subtree's tape simplified again, or
+        // forked where it does not simplify).
+        let mut parallel = OctreeMesher::new(&settings(depth)).unwrap();
+        let bounds = settings(depth).bounds;
+        let on_threads =
+            (parallel.remesh_parallel(&mut TapeField::new(&tape, 0.0), bounds, 3)).unwrap();
+        assert_eq!(on_threads, stats, "{name} at depth {depth} on threads");
+        assert!(
+            parallel.mesh().unwrap() == mesh,
+            "{name} at depth {depth} on threads"
+        );
         assert_eq!(mesh.validate(), Ok(()));
         assert_eq!(mesh.open_edges(), 0, "{name} at depth {depth}: open edges");
         assert_eq!(

@@ -3,7 +3,8 @@
 //! The caller's thread visits the octree's top [`PARALLEL_LEVELS`] as a one-thread visit
 //! would (intervals, pruning, simplified fields) and stops at the subtrees below them (64 at
 //! two levels), each a task with its own copy of the field its root receives: the copy is
-//! made by asking the same simplification again, so it is the same field. A block reads only
+//! made by asking the same simplification again, so it is the same field (or, where the field
+//! did not simplify, by [`Field::fork`]). A block reads only
 //! the values of the blocks below it (lower along each axis), and a one-thread visit builds
 //! blocks in Morton order, in which those come first. So subtrees run in waves by the sum of
 //! their coordinates: every subtree a block reads from is in an earlier wave or its own, and
@@ -55,7 +56,7 @@ impl OctreeMesher {
     /// [`OctreeMesher::remesh`] on up to `n_threads` threads, with the same mesh, stats and
     /// records as a result. It runs on one thread when `dirty` touches fewer than
     /// [`MIN_PARALLEL_BLOCKS`] blocks, when the grid is too small to split, and when the
-    /// field does not simplify over the top levels' nodes (their copies could not be made).
+    /// field neither simplifies nor forks over the top levels' nodes (no copies).
     pub fn remesh_parallel<F: Field + Send>(
         &mut self,
         field: &mut F,
@@ -161,6 +162,15 @@ fn run_wave<F: Field + Send>(
     done.into_inner().unwrap_or_else(PoisonError::into_inner)
 }
 
+/// A copy of the field the children of a node over `lo..hi` receive from `field`, the node's:
+/// `field` simplified there (then true), else `field` itself, forked.
+fn child_field<F: Field>(field: &mut F, lo: [f32; 3], hi: [f32; 3]) -> Option<(F, bool)> {
+    match field.simplify(lo, hi) {
+        Some(simplified) => Some((simplified, true)),
+        None => field.fork().map(|f| (f, false)),
+    }
+}
+
 /// Locks `m`; a thread that panicked holding it left nothing half written that matters here
 /// (the scope passes its panic on).
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -168,18 +178,17 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 impl Visit<'_> {
-    /// Visits the top two levels of the octree as [`Visit::node`] would, and gives the
-    /// root's simplified field and the tasks below. `None` when a node there is not opened
-    /// with a simplified field of its own (a pruned root, a field that does not simplify):
-    /// its children would share a field no copy can be made of.
+    /// Visits the top two levels of the octree as [`Visit::node`] would, and gives the field
+    /// the root's children receive and the tasks below. `None` for a pruned root, or a field
+    /// that neither simplifies nor forks (no copies of it can be made).
     fn plan<F: Field>(&mut self, field: &mut F) -> Option<(F, Vec<Task<F>>)> {
         const _: () = assert!(PARALLEL_LEVELS == 2, "the plan visits two levels");
         let n = self.mesher.grid.n_cells;
         let Step::Open { lo, hi } = self.step(field, [0; 3], n) else {
             return None;
         };
-        let mut top = field.simplify(lo, hi)?;
-        self.stats.fields_simplified += 1;
+        let (mut top, simplified) = child_field(field, lo, hi)?;
+        self.stats.fields_simplified += usize::from(simplified);
         let (half, quarter) = (n / 2, n / 4);
         let mut tasks = Vec::new();
         for k in 0..8 {
@@ -199,10 +208,17 @@ impl Visit<'_> {
                     }
                 }
                 Step::Open { lo, hi } => {
-                    // Counted as the one-thread visit counts its one call.
-                    self.stats.fields_simplified += 1;
-                    for child in children.filter(|c| self.meets_wide(*c, quarter)) {
-                        let field = top.simplify(lo, hi)?;
+                    // Counted as the one-thread visit counts its one call (one child at
+                    // least meets `wide`, as the node does).
+                    let children: Vec<[u32; 3]> =
+                        children.filter(|c| self.meets_wide(*c, quarter)).collect();
+                    let mut counted = false;
+                    for child in children {
+                        let (field, simplified) = child_field(&mut top, lo, hi)?;
+                        if simplified && !counted {
+                            self.stats.fields_simplified += 1;
+                            counted = true;
+                        }
                         push(
                             child,
                             Work::Visit {
