@@ -526,7 +526,11 @@ fn slice(function: &Function, z: f64, t: f64, width: usize, height: usize) -> St
 pub fn render_command(args: &RenderArgs) -> anyhow::Result<()> {
     use render::snapshot::{SnapshotSettings, snapshot};
 
-    let mut settings = SnapshotSettings::default();
+    let mut settings = SnapshotSettings {
+        // Nothing else runs beside a command's meshing.
+        mesh_threads: render::mesher::remesh_threads(0),
+        ..SnapshotSettings::default()
+    };
     if let Some((w, h)) = args.size {
         settings.width = w;
         settings.height = h;

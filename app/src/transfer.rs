@@ -469,6 +469,8 @@ pub fn export(
             depth,
             t_secs: EXPORT_T_SECS,
             force_arrows: 0,
+            // The window exports too: a core is left to it.
+            mesh_threads: render::mesher::remesh_threads(render::mesher::WINDOW_CORES),
             ..Default::default()
         };
         Ok(move |one: &Scene| mesh_object(one, &settings))

@@ -138,7 +138,12 @@ impl Animator {
             let object = entry.object.clone();
             let data = object.data();
             let timed_shape = shape_reads_time(&object);
-            let built = object_mesh(&object, settings.depth, settings.t_secs);
+            let built = object_mesh(
+                &object,
+                settings.depth,
+                settings.t_secs,
+                settings.mesh_threads,
+            );
             let animated = Animated {
                 id,
                 sampler: object.sampler(),
@@ -196,7 +201,7 @@ impl Animator {
                 let (depth, fits) = self.depth_within(i, share, t);
                 stats.over_budget |= !fits;
                 let o = &mut self.objects[i];
-                let built = object_mesh(&o.object, depth, t);
+                let built = object_mesh(&o.object, depth, t, self.settings.mesh_threads);
                 o.base = Arc::new(built.mesh);
                 (o.depth, o.blocks) = (depth, built.blocks_evaluated);
                 stats.blocks_evaluated += built.blocks_evaluated;

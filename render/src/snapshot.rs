@@ -31,7 +31,7 @@ use crate::appearance::CompiledAppearance;
 use crate::camera::Camera;
 use crate::gpu::offscreen::{Headless, MAX_OFFSCREEN_SIDE, OffscreenError};
 use crate::mesh::object_field::mesh_bounds;
-use crate::mesh::octree::{MAX_OCTREE_DEPTH, MeshSettings, mesh_with_stats};
+use crate::mesh::octree::{MAX_OCTREE_DEPTH, MeshSettings, mesh_on_threads};
 use crate::mesh::parametric::{
     self, SurfaceSettings, TubeSettings, UvDomain, triangulate_surface, tube,
 };
@@ -101,6 +101,11 @@ pub struct SnapshotSettings {
     /// [`MAX_FORCE_CONTAINER_OPACITY`] opaque so that they show (as the thesis's Figure 7.3
     /// shows its whirlpool field in a transparent cylinder).
     pub force_arrows: u32,
+    /// Threads one object's mesh may run on (see
+    /// [`OctreeMesher::remesh_parallel`](crate::mesh::octree::OctreeMesher::remesh_parallel));
+    /// one by default, [`crate::mesher::remesh_threads`] for a command line's or a window's
+    /// share of the cores.
+    pub mesh_threads: usize,
 }
 
 impl Default for SnapshotSettings {
@@ -112,6 +117,7 @@ impl Default for SnapshotSettings {
             t_secs: 0.0,
             views: View::defaults(),
             force_arrows: 7,
+            mesh_threads: 1,
         }
     }
 }
@@ -223,7 +229,12 @@ pub fn build(
             settings.t_secs,
         );
         let world_from_object = turn * to_mat4(scene_from_object.parent_from_child);
-        let ObjectMesh { mesh, skipped, .. } = object_mesh(object, settings.depth, settings.t_secs);
+        let ObjectMesh { mesh, skipped, .. } = object_mesh(
+            object,
+            settings.depth,
+            settings.t_secs,
+            settings.mesh_threads,
+        );
         let mut report = ObjectReport {
             id,
             name: object.data().name.clone(),
@@ -361,7 +372,7 @@ pub(crate) struct ObjectMesh {
 }
 
 /// The object's triangles in object space at `depth` and time `t_secs`.
-pub(crate) fn object_mesh(object: &Object, depth: u8, t_secs: f64) -> ObjectMesh {
+pub(crate) fn object_mesh(object: &Object, depth: u8, t_secs: f64, threads: usize) -> ObjectMesh {
     let geometry = object.data().geometry.as_ref();
     let mut out = Mesh::default();
     let mut skipped = None;
@@ -395,9 +406,10 @@ pub(crate) fn object_mesh(object: &Object, depth: u8, t_secs: f64) -> ObjectMesh
     if field_part {
         match mesh_bounds(object, depth) {
             Some(bounds) => {
-                let meshed = mesh_with_stats(
+                let meshed = mesh_on_threads(
                     &mut ObjectField::new(object, t_secs),
                     &MeshSettings { bounds, depth },
+                    threads,
                 );
                 match meshed {
                     Ok((m, stats)) => {

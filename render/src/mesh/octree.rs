@@ -132,6 +132,18 @@ pub fn mesh_with_stats<F: Field>(
     Ok((mesher.mesh()?, stats))
 }
 
+/// Like [`mesh_with_stats`], on up to `n_threads` threads, with the same result (see
+/// [`OctreeMesher::remesh_parallel`]).
+pub fn mesh_on_threads<F: Field + Send>(
+    field: &mut F,
+    settings: &MeshSettings,
+    n_threads: usize,
+) -> Result<(Mesh, MeshStats), OctreeMeshError> {
+    let mut mesher = OctreeMesher::new(settings)?;
+    let stats = mesher.remesh_parallel(field, settings.bounds, n_threads)?;
+    Ok((mesher.mesh()?, stats))
+}
+
 /// The number of leaf blocks [`mesh`] evaluates for `field` and `settings`
 /// ([`MeshStats::blocks_evaluated`]), found by interval arithmetic alone: the same octree
 /// descent, pruning and [`Field::simplify`] calls as meshing, without evaluating any block.

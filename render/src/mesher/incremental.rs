@@ -244,7 +244,7 @@ fn patch(mut state: Incremental, object: &Object, superseded: &dyn Fn() -> bool)
             return Patched::Stopped(state);
         }
         if (state.octree)
-            .remesh_parallel(&mut field, *b, super::remesh_threads())
+            .remesh_parallel(&mut field, *b, super::remesh_threads(super::WINDOW_CORES))
             .is_err()
         {
             return Patched::Whole;
@@ -347,8 +347,12 @@ fn mesh_whole(
     let mut octree =
         OctreeMesher::new(&MeshSettings { bounds, depth }).map_err(|e| e.to_string())?;
     let mut field = ObjectField::new(&object, 0.0);
-    (octree.remesh_parallel(&mut field, bounds, super::remesh_threads()))
-        .map_err(|e| e.to_string())?;
+    (octree.remesh_parallel(
+        &mut field,
+        bounds,
+        super::remesh_threads(super::WINDOW_CORES),
+    ))
+    .map_err(|e| e.to_string())?;
     let closed = octree.encloses();
     let mut mesh = Mesh::default();
     let patch = octree.mesh_update(&mut mesh).map_err(|e| e.to_string())?;
@@ -383,6 +387,7 @@ fn snapshot(object: Object, world_from_group: Transform, depth: u8, out: &mut Me
     let settings = SnapshotSettings {
         depth,
         t_secs: out.t_secs,
+        mesh_threads: super::remesh_threads(super::WINDOW_CORES),
         ..SnapshotSettings::default()
     };
     let built = scene

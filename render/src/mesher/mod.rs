@@ -58,14 +58,19 @@ pub const MAX_PATCH_EDITS: usize = 256;
 /// that the other workers leave idle.
 pub const MAX_REMESH_THREADS: usize = 8;
 
-/// Threads for one job's remesh: one per core but one, which the window that shows the mesh
-/// needs to draw it, at most [`MAX_REMESH_THREADS`]. On two cores a job meshes on one
-/// thread: two windows on one such machine, each meshing a peer's new object on both
-/// cores, drew it about 15 ms later than with one thread each.
-fn remesh_threads() -> usize {
+/// Threads one object's remesh may run on when `reserved` cores are left to other work: one
+/// per core but those, at least one, at most [`MAX_REMESH_THREADS`]. A command line
+/// reserves none; the mesher's jobs reserve one, which the window that shows their meshes
+/// needs to draw them (on two cores a job then meshes on one thread: two windows on one such
+/// machine, each meshing a peer's new object on both cores, drew it about 15 ms later than
+/// with one thread each).
+pub fn remesh_threads(reserved: usize) -> usize {
     let cores = std::thread::available_parallelism().map_or(1, usize::from);
-    (cores - 1).clamp(1, MAX_REMESH_THREADS)
+    cores.saturating_sub(reserved).clamp(1, MAX_REMESH_THREADS)
 }
+
+/// Cores meshing beside a window leaves to it (see [`remesh_threads`]).
+pub const WINDOW_CORES: usize = 1;
 
 /// One object to mesh.
 pub struct MeshJob {

@@ -154,8 +154,11 @@ fn run_wave<F: Field + Send>(
         }
     };
     std::thread::scope(|scope| {
-        for _ in 0..n_helpers {
-            scope.spawn(work);
+        for k in 0..n_helpers {
+            // A helper that cannot start leaves its share to the others and this thread.
+            let _ = std::thread::Builder::new()
+                .name(format!("sculpt-remesh-{k}"))
+                .spawn_scoped(scope, work);
         }
         work();
     });
