@@ -5,7 +5,10 @@
 //! comparison with fidget. Before the benchmarks it prints, per model and depth, the
 //! triangle counts and the open and non-manifold edges of both meshers' output.
 //!
-//! Both meshers run on one thread over [-1.2, 1.2]^3 with 2^depth cells along each axis:
+//! `-- reference_models_on_every_core` meshes the same models at depth 7 on every core (ours
+//! through `mesh_on_threads`, fidget's on rayon's global pool).
+//!
+//! Otherwise both meshers run on one thread over [-1.2, 1.2]^3 with 2^depth cells along each axis:
 //! ours as [`TapeField`] over an fdsl tape, fidget's `Octree::build` + `walk_dual` on the same
 //! function converted by `fdsl/benches/fidget_peer.rs` (negated: fidget's inside is negative)
 //! and scaled by 1.2, since fidget meshes [-1, 1]^3.
@@ -13,7 +16,7 @@
 use divan::Bencher;
 use fidget::context::Tree;
 use fidget::shape::Shape;
-use render::mesh::octree::{MeshSettings, OctreeMesher, mesh};
+use render::mesh::octree::{MeshSettings, OctreeMesher, mesh, mesh_on_threads};
 use render::mesh::{Aabb, Field, Mesh, TapeField};
 
 #[path = "../../fdsl/benches/fidget_peer.rs"]
@@ -129,10 +132,22 @@ fn peer<F>(shape: &Shape<F>, depth: u8) -> fidget::mesh::Mesh
 where
     F: fidget::eval::Function + fidget::eval::MathFunction + fidget::render::RenderHints + Clone,
 {
+    peer_on(shape, depth, None)
+}
+
+/// [`peer`] on `threads` (`None`: this thread).
+fn peer_on<F>(
+    shape: &Shape<F>,
+    depth: u8,
+    threads: Option<&fidget::render::ThreadPool>,
+) -> fidget::mesh::Mesh
+where
+    F: fidget::eval::Function + fidget::eval::MathFunction + fidget::render::RenderHints + Clone,
+{
     let bound = shape.clone().try_into().expect("no variables but x, y, z");
     let settings = fidget::mesh::Settings {
         depth,
-        threads: None,
+        threads,
         ..Default::default()
     };
     fidget::mesh::Octree::build(&bound, &settings)
@@ -216,4 +231,41 @@ mod reference_models {
     // fidget's JIT is left out: its mesher compiles every simplified tape, which took 10.9 to
     // 17.1 s for gyroid_sphere at depth 6 (5 samples), about 100 times its VM; the VM is the
     // fairer peer for meshing, as for fdsl's pruned-octree benchmark.
+}
+
+/// The same models meshed on every core: ours through `mesh_on_threads` (subtrees in waves,
+/// the same mesh as on one thread), fidget's VM on rayon's global pool (a thread per core).
+mod reference_models_on_every_core {
+    use super::*;
+
+    fn args() -> impl Iterator<Item = (&'static str, u8)> {
+        fdsl::models::surface_models().map(|(name, _)| (name, 7))
+    }
+
+    fn cores() -> usize {
+        std::thread::available_parallelism().map_or(1, usize::from)
+    }
+
+    #[divan::bench(args = args(), sample_count = 5, sample_size = 1)]
+    fn render(bencher: Bencher, arg: (&str, u8)) {
+        let (name, depth) = arg;
+        let tape = tape(name);
+        let settings = MeshSettings {
+            bounds: Aabb::new([-HALF_SIDE; 3], [HALF_SIDE; 3]),
+            depth,
+        };
+        bencher.bench_local(|| {
+            let field = &mut TapeField::new(&tape, 0.0);
+            let (m, _) = mesh_on_threads(field, &settings, cores()).expect("meshes");
+            m.n_triangles()
+        });
+    }
+
+    #[divan::bench(args = args(), sample_count = 5, sample_size = 1)]
+    fn fidget_vm(bencher: Bencher, arg: (&str, u8)) {
+        let (name, depth) = arg;
+        let shape = peer_shape::<fidget::vm::VmFunction>(name);
+        let pool = fidget::render::ThreadPool::Global;
+        bencher.bench_local(|| peer_on(&shape, depth, Some(&pool)).triangles.len());
+    }
 }
