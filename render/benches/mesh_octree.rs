@@ -155,6 +155,20 @@ where
         .walk_dual()
 }
 
+/// Times our mesh of model `name` at `depth` on `threads` (one: [`mesh`]'s own path).
+fn bench_ours(bencher: Bencher, (name, depth): (&str, u8), threads: usize) {
+    let tape = tape(name);
+    let settings = MeshSettings {
+        bounds: Aabb::new([-HALF_SIDE; 3], [HALF_SIDE; 3]),
+        depth,
+    };
+    bencher.bench_local(|| {
+        let field = &mut TapeField::new(&tape, 0.0);
+        let (m, _) = mesh_on_threads(field, &settings, threads).expect("meshes");
+        m.n_triangles()
+    });
+}
+
 /// fidget's mesh in our type (scaled back to [-1.2, 1.2]^3), for the edge checks.
 fn to_mesh(m: &fidget::mesh::Mesh) -> Mesh {
     Mesh {
@@ -209,16 +223,7 @@ mod reference_models {
 
     #[divan::bench(args = args(), sample_count = 5, sample_size = 1)]
     fn render(bencher: Bencher, arg: (&str, u8)) {
-        let (name, depth) = arg;
-        let tape = tape(name);
-        let settings = MeshSettings {
-            bounds: Aabb::new([-HALF_SIDE; 3], [HALF_SIDE; 3]),
-            depth,
-        };
-        bencher.bench_local(|| {
-            let m = mesh(&mut TapeField::new(&tape, 0.0), &settings).expect("meshes");
-            m.n_triangles()
-        });
+        bench_ours(bencher, arg, 1);
     }
 
     #[divan::bench(args = args(), sample_count = 5, sample_size = 1)]
@@ -248,17 +253,7 @@ mod reference_models_on_every_core {
 
     #[divan::bench(args = args(), sample_count = 5, sample_size = 1)]
     fn render(bencher: Bencher, arg: (&str, u8)) {
-        let (name, depth) = arg;
-        let tape = tape(name);
-        let settings = MeshSettings {
-            bounds: Aabb::new([-HALF_SIDE; 3], [HALF_SIDE; 3]),
-            depth,
-        };
-        bencher.bench_local(|| {
-            let field = &mut TapeField::new(&tape, 0.0);
-            let (m, _) = mesh_on_threads(field, &settings, cores()).expect("meshes");
-            m.n_triangles()
-        });
+        bench_ours(bencher, arg, cores());
     }
 
     #[divan::bench(args = args(), sample_count = 5, sample_size = 1)]
