@@ -260,12 +260,23 @@ impl OctreeMesher {
         let Some((range, wide)) = self.begin(dirty) else {
             return Ok(MeshStats::default());
         };
+        Ok(self.visit_whole(field, range, wide))
+    }
+
+    /// One visit from the root on this thread, over the blocks `wide` holds (see
+    /// [`OctreeMesher::begin`]).
+    fn visit_whole<F: Field>(
+        &mut self,
+        field: &mut F,
+        range: BlockRange,
+        wide: BlockRange,
+    ) -> MeshStats {
         let local = self.take_local(wide);
         let mut visit = Visit::new(self, local, range, wide);
         visit.node(field, [0; 3], self.grid.n_cells);
         let Visit { local, stats, .. } = visit;
         self.put_local(local);
-        Ok(stats)
+        stats
     }
 
     /// The blocks `dirty` touches (`range`) and those a remesh of them may change (`wide`:
@@ -797,9 +808,9 @@ impl<'a> Visit<'a> {
     /// Records a pruned node's blocks `first..=last`, then gives cells to those of its blocks
     /// that a neighbour's disagreeing values or a kept record may have left crossed.
     fn prune<F: Field>(&mut self, field: &mut F, first: [u32; 3], last: [u32; 3], rep: f32) {
-        let keys = self.local.keys;
-        let lo: [u32; 3] = std::array::from_fn(|a| first[a].max(keys.lo[a]));
-        let hi: [u32; 3] = std::array::from_fn(|a| last[a].min(keys.hi[a]));
+        let local = self.local.keys;
+        let lo: [u32; 3] = std::array::from_fn(|a| first[a].max(local.lo[a]));
+        let hi: [u32; 3] = std::array::from_fn(|a| last[a].min(local.hi[a]));
         let keys = || {
             (lo[2]..=hi[2]).flat_map(move |z| {
                 (lo[1]..=hi[1]).flat_map(move |y| (lo[0]..=hi[0]).map(move |x| [x, y, z]))

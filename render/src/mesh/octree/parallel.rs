@@ -74,12 +74,7 @@ impl OctreeMesher {
         let mut planner = Visit::new(self, Local::none(), range, wide);
         let Some((mut top, tasks)) = planner.plan(field) else {
             // Only the planner's counts are dropped: it changed nothing.
-            let local = self.take_local(wide);
-            let mut visit = Visit::new(self, local, range, wide);
-            visit.node(field, [0; 3], self.grid.n_cells);
-            let Visit { local, stats, .. } = visit;
-            self.put_local(local);
-            return Ok(stats);
+            return Ok(self.visit_whole(field, range, wide));
         };
         let mut stats = planner.stats;
         let cell_blocks = self.n_blocks >> PARALLEL_LEVELS;
