@@ -52,10 +52,10 @@ pub const MIN_MESHER_THREADS: usize = 2;
 pub const MAX_MESHER_THREADS: usize = 4;
 /// Most changed edits one job patches; more mesh the object whole.
 pub const MAX_PATCH_EDITS: usize = 256;
-/// Most threads one job's remesh runs on (see
+/// Most threads one object's remesh runs on (see
 /// [`OctreeMesher::remesh_parallel`](crate::mesh::octree::OctreeMesher::remesh_parallel)):
-/// a large remesh of one object (a whole mesh, a long stroke from a peer) uses the cores
-/// that the other workers leave idle.
+/// a large remesh of one object (a whole mesh, a long stroke from a peer) need not wait on
+/// one core.
 pub const MAX_REMESH_THREADS: usize = 8;
 
 /// Threads one object's remesh may run on when `reserved` cores are left to other work: one
@@ -65,7 +65,10 @@ pub const MAX_REMESH_THREADS: usize = 8;
 /// machine, each meshing a peer's new object on both cores, drew it about 15 ms later than
 /// with one thread each).
 pub fn remesh_threads(reserved: usize) -> usize {
-    let cores = std::thread::available_parallelism().map_or(1, usize::from);
+    // Asked once per process: on Linux the answer reads the cgroup files, and every mesh
+    // job asks.
+    static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+    let cores = *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, usize::from));
     cores.saturating_sub(reserved).clamp(1, MAX_REMESH_THREADS)
 }
 
