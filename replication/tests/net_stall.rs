@@ -78,6 +78,18 @@ async fn smaller_id_first(
     ]
 }
 
+/// Two nodes whose connection goes through a relay, dialed by the first, each with four ops
+/// of its own, synced; and the connection's id at the first.
+async fn synced_through_relay() -> (TNode, TNode, Relay, replication::ConnId) {
+    let (a, b) = (node(1), node(2));
+    let relay = Relay::start(b.handle.local_addr()).await;
+    let first = a.handle.dial(relay.front).await.unwrap();
+    author_some(&a.handle, 1, "a").await;
+    author_some(&b.handle, 2, "b").await;
+    converge(&[&a.handle, &b.handle], 8).await;
+    (a, b, relay, first)
+}
+
 /// Long enough that QUIC's probes, doubling from about 30 ms on loopback, leave seconds
 /// between the outage's end and their next try.
 const OUTAGE: Duration = Duration::from_millis(4_000);
@@ -92,12 +104,7 @@ const MAX_RESUME: Duration = Duration::from_millis(1_500);
 
 #[tokio::test]
 async fn a_connection_stalled_by_an_outage_is_redialed_when_it_ends() {
-    let (a, b) = (node(1), node(2));
-    let relay = Relay::start(b.handle.local_addr()).await;
-    let first = a.handle.dial(relay.front).await.unwrap();
-    author_some(&a.handle, 1, "a").await;
-    author_some(&b.handle, 2, "b").await;
-    converge(&[&a.handle, &b.handle], 8).await;
+    let (a, b, relay, first) = synced_through_relay().await;
 
     relay.set_cut(true);
     // Both ends edit during the outage, so batches wait at both.
@@ -145,12 +152,7 @@ const MAX_RECONNECT: Duration = Duration::from_millis(2_000);
 
 #[tokio::test]
 async fn a_connection_the_idle_timeout_closed_is_dialed_again_when_the_outage_ends() {
-    let (a, b) = (node(1), node(2));
-    let relay = Relay::start(b.handle.local_addr()).await;
-    a.handle.dial(relay.front).await.unwrap();
-    author_some(&a.handle, 1, "a").await;
-    author_some(&b.handle, 2, "b").await;
-    converge(&[&a.handle, &b.handle], 8).await;
+    let (a, b, relay, _) = synced_through_relay().await;
 
     relay.set_cut(true);
     for h in [&a.handle, &b.handle] {
@@ -188,4 +190,45 @@ async fn a_connection_the_idle_timeout_closed_is_dialed_again_when_the_outage_en
         closed.elapsed() - back
     );
     println!("converged {back:?} after a {LONG_OUTAGE:?} outage");
+}
+
+/// Short enough that QUIC's probes still find the path soon after: the stalled connection
+/// resumes by itself, and its first message is the first sign that the network is back.
+const SHORT_OUTAGE: Duration = Duration::from_millis(1_500);
+
+/// The first word from a remote after a silence tells whatever finds peers that the network
+/// may be back ([`NodeHandle::resumed`](replication::net::node::NodeHandle::resumed)), and
+/// so does a dial that replaced a stalled connection: the end with the smaller id, which
+/// either hears the stalled connection again or replaces it, always learns it once the outage
+/// ends; it is counted at most once per
+/// [`replication::net::node::RESUMED_DIALS_EVERY_MILLIS`].
+#[tokio::test]
+async fn a_remote_heard_after_an_outage_brings_the_dials_forward() {
+    let (a, b, relay, _) = synced_through_relay().await;
+
+    relay.set_cut(true);
+    let [(lower, low), (higher, _)] = smaller_id_first([&a.handle, &b.handle]).await;
+    let mut resumed = lower.resumed();
+    // A few bytes at each end: batches wait at both.
+    for h in [lower, higher] {
+        h.author(TestPayload::Chat("away".into())).await.unwrap();
+    }
+    tokio::time::sleep(SHORT_OUTAGE).await;
+    assert!(
+        !resumed.has_changed().unwrap(),
+        "nothing came during the outage"
+    );
+    assert_eq!(
+        lower.stats().await.unwrap().n_resumed_rounds,
+        low.n_resumed_rounds
+    );
+    relay.set_cut(false);
+    converge(&[lower, higher], 10).await;
+    let after = lower.stats().await.unwrap();
+    assert!(
+        after.n_resumed_rounds > low.n_resumed_rounds,
+        "the network's return was noted: {after:?}"
+    );
+    assert!(resumed.has_changed().unwrap(), "the finders hear of it");
+    resumed.mark_unchanged();
 }

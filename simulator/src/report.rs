@@ -174,6 +174,9 @@ pub struct Stats {
     /// Dials of a pair whose stream connection was closed (or never opened) that found both
     /// links open, each admitted two round trips later.
     pub n_dials: u64,
+    /// Rounds of dials a peer made at once on hearing a remote after a silence
+    /// ([`replication::sync::state::Event::Resumed`]).
+    pub n_resumed_rounds: u64,
     /// Messages dropped because their link's queue was full (bandwidth).
     pub n_queue_drops: u64,
     /// Messages that arrived after their connection was gone.
@@ -310,7 +313,7 @@ impl Report {
             "  sent {} messages ({:.1}/op), {} bytes ({:.0} bytes/op); delivered {}, lost {}, \
              duplicated {}, partitioned {}, queue-dropped {}, stale {}; as streams: \
              retransmitted {} (overtaken {}), stalled {}, stall redials {} ({} replaced), \
-             dials {}",
+             dials {} ({} rounds on a sign of the network's return)",
             s.n_messages,
             self.messages_per_op(),
             s.n_bytes,
@@ -326,7 +329,8 @@ impl Report {
             s.n_stalled,
             s.n_stall_redials,
             s.n_stalls_replaced,
-            s.n_dials
+            s.n_dials,
+            s.n_resumed_rounds
         )?;
         self.fmt_slowest(f)?;
         let mut kinds: Vec<_> = s.bytes_by_kind.iter().collect();

@@ -166,6 +166,10 @@ struct Pair {
     redial_until: u64,
     /// A dial of the pair's closed stream connection waits for a round or a handshake.
     dialing: bool,
+    /// When the round that dials the pair next comes ([`Ev::Dial`]; none while a handshake
+    /// is under way): a round at any other time is one a sign of the network's return
+    /// brought forward, and does nothing.
+    round_at: Option<u64>,
     /// When the idle timeout closed the pair's stream connection, and until when the end
     /// with the smaller id dials the other again for it.
     lost_at: u64,
@@ -191,6 +195,9 @@ pub struct Simulation {
     stream_links: Vec<Vec<stream::StreamLink>>,
     /// Per node, when in each second its LAN finder's rounds of dials come (streams).
     dial_phase_micros: Vec<u64>,
+    /// Per node, when a sign of the network's return last brought its dials forward
+    /// ([`stream::RESUMED_DIALS_EVERY_MICROS`]).
+    resumed_dials_at: Vec<Option<u64>>,
     /// Per directed link, when the first message stalled on it while a partition cuts it,
     /// and the messages, with their connection epochs.
     stalled: BTreeMap<(usize, usize), stream::Stalled>,
@@ -254,6 +261,7 @@ impl Simulation {
             link_free_at: vec![vec![0; n_nodes]; n_nodes],
             stream_links: vec![vec![stream::StreamLink::default(); n_nodes]; n_nodes],
             dial_phase_micros: stream::dial_phases(config.seed, DIAL_STREAM, n_nodes),
+            resumed_dials_at: vec![None; n_nodes],
             stalled: BTreeMap::new(),
             resuming: BTreeMap::new(),
             pairs: vec![vec![Pair::default(); n_nodes]; n_nodes],
@@ -655,8 +663,11 @@ impl Simulation {
                 self.stream_replace(a, b, epoch);
             }
             Ev::Dial { a, b } => {
-                self.trace.u64(24);
-                self.stream_dial_round(a, b);
+                let now = self.now;
+                if self.pair(a, b).round_at == Some(now) {
+                    self.trace.u64(24);
+                    self.stream_dial_round(a, b);
+                }
             }
             Ev::Dialed { a, b } => {
                 self.trace.u64(25);
@@ -1259,6 +1270,14 @@ impl Simulation {
                 if self.faults.streams && (again || unheard) && other < self.n_nodes() {
                     self.trace.u64(22);
                     self.stream_redial(idx, other, handshake_micros);
+                }
+            }
+            // Over streams the peer's finders and its own dials of lost peers dial at once
+            // every peer it has no connection to, as the node does.
+            Event::Resumed { .. } => {
+                let other = conn.0 as usize;
+                if self.faults.streams && other < self.n_nodes() {
+                    self.stream_resumed(idx);
                 }
             }
             // The peer hands the scene check's events to its own queue, which the simulator

@@ -74,6 +74,10 @@ fn a_fixed_seed_converges_under_chaos_with_crashes() {
     let report = converges(13, "chaos");
     let s = &report.stats;
     assert!(s.n_crashes > 0 && s.n_stale_drops > 0, "{report}");
+    assert_eq!(
+        s.n_resumed_rounds, 0,
+        "datagrams have no connection to dial"
+    );
     // The catch-up accounting: every op a peer lacked at healing is delivered after it, and
     // the slowest peer's last delivery is the convergence time.
     let first = report.catch_up[0];
@@ -180,6 +184,12 @@ fn the_quic_preset_turns_losses_into_delays_and_partitions_into_stalls() {
     assert!(
         sum(|r| r.stats.n_dials) > 0,
         "no closed connection was dialed"
+    );
+    // A peer that hears a remote after a silence, or whose dial waited out a stall, dials at
+    // once the peers it has no connection to, as the node tells its finders.
+    assert!(
+        sum(|r| r.stats.n_resumed_rounds) > 0,
+        "no sign of the network's return brought dials forward"
     );
     // Partitions left peers lacking ops at healing: the bandwidth bound counts them.
     assert!(

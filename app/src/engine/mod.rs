@@ -1114,16 +1114,23 @@ impl NewsSink {
     }
 }
 
-/// Dials `addr` whenever no connection to it is open, every [`DIAL_RETRY_MILLIS`], until the
-/// node stops; says so when the outcome changes.
+/// Dials `addr` whenever no connection to it is open, every [`DIAL_RETRY_MILLIS`] and at once
+/// when the node hears a remote after a silence ([`NodeHandle::resumed`]: the network may be
+/// back, and a dial still waiting for its handshake is begun afresh), until the node stops;
+/// says so when the outcome changes.
 async fn keep_dialing(handle: NodeHandle<ShapePayload>, addr: SocketAddr, news: NewsSink) {
     let mut last_failure = None;
+    let mut resumed = handle.resumed();
     loop {
         let Ok(stats) = handle.stats().await else {
             return;
         };
         if !stats.connections.iter().any(|c| c.addr == addr) {
-            match handle.dial(addr).await {
+            let outcome = tokio::select! {
+                outcome = handle.dial(addr) => outcome,
+                Ok(()) = resumed.changed() => continue,
+            };
+            match outcome {
                 Ok(_) => last_failure = None,
                 Err(DialError::Gone) => return,
                 Err(e) => {
@@ -1135,7 +1142,10 @@ async fn keep_dialing(handle: NodeHandle<ShapePayload>, addr: SocketAddr, news: 
                 }
             }
         }
-        tokio::time::sleep(Duration::from_millis(DIAL_RETRY_MILLIS)).await;
+        tokio::select! {
+            () = tokio::time::sleep(Duration::from_millis(DIAL_RETRY_MILLIS)) => {}
+            Ok(()) = resumed.changed() => {}
+        }
     }
 }
 

@@ -328,6 +328,14 @@ pub enum Event {
         /// on a backed-off probe) while packets still come in, so the transport dials at once.
         unheard: bool,
     },
+    /// The remote spoke after a silence of at least [`MIN_STALL_MICROS`]: the network
+    /// between us may be back after an outage or a partition, so the node dials at once the
+    /// peers it has no connection to (its lost peers and its finders' rounds), rather than at
+    /// its next rounds. Said by both ends, at most once a silence.
+    Resumed {
+        /// How long the remote was silent.
+        silence_micros: u64,
+    },
     /// The scene check asks something of the scene's owner ([`crate::sync::scene`]);
     /// [`Peer`](crate::peer::Peer) hands these out on their own queue
     /// ([`Peer::poll_scene_event`](crate::peer::Peer::poll_scene_event)).
@@ -967,6 +975,10 @@ impl<P: Payload> SyncState<P> {
                 format!("{} bytes dropped", bytes.len()),
             );
             return;
+        }
+        if silence >= MIN_STALL_MICROS {
+            let silence_micros = silence;
+            self.events.push_back(Event::Resumed { silence_micros });
         }
         let message = match Message::decode(bytes) {
             Ok(m) => m,

@@ -11,7 +11,10 @@
 //! message when the stalled bytes left room in the congestion window, else at its next probe,
 //! backed off since the first stall; and the end of a stalled connection with the smaller id
 //! dials again ([`Event::Stalled`], after a silence or when the remote shows it hears nothing
-//! of ours), as the node does, which replaces the connection once both links are open.
+//! of ours), as the node does, which replaces the connection once both links are open. A
+//! peer that hears a remote after a silence (`Event::Resumed`), or whose dial replaced a
+//! stalled connection or reached a lost peer, dials at once every peer it has no connection
+//! to, as the node's finders do when it tells them.
 //!
 //! [`Event::Stalled`]: replication::sync::state::Event::Stalled
 //!
@@ -45,6 +48,9 @@ pub(super) const DIAL_ROUND_MICROS: u64 = 1_000_000;
 const REDIAL_LOST_EVERY_MICROS: u64 = 250_000;
 /// ... for this long (`replication::net::node::REDIAL_LOST_FOR_MILLIS`).
 const REDIAL_LOST_FOR_MICROS: u64 = 60_000_000;
+/// The shortest time between two rounds of dials a node makes on hearing a remote after a
+/// silence (`replication::net::node::RESUMED_DIALS_EVERY_MILLIS`).
+pub(super) const RESUMED_DIALS_EVERY_MICROS: u64 = 250_000;
 /// What a partition stalled on one directed link: when the first message stalled, and the
 /// messages with their connection epochs.
 pub(super) type Stalled = (u64, Vec<(u64, Vec<u8>)>);
@@ -268,7 +274,39 @@ impl Simulation {
         }
         self.pair(a, b).dialing = true;
         let at = self.next_dial_round(a, b);
+        self.round_at(a, b, at);
+    }
+
+    /// The next round of dials between `a` and `b` comes at `at` (an earlier one scheduled
+    /// does nothing when it comes).
+    fn round_at(&mut self, a: usize, b: usize, at: u64) {
+        self.pair(a, b).round_at = Some(at);
         self.push(at, Ev::Dial { a, b });
+    }
+
+    /// Peer `peer` heard a remote after a silence (`Event::Resumed`), or its dial replaced a
+    /// stalled connection or reached a lost peer: unless that happened less
+    /// than [`RESUMED_DIALS_EVERY_MICROS`] ago, its finders and its dials of lost peers dial
+    /// now every honest peer it has no connection to and is not already handshaking with.
+    pub(super) fn stream_resumed(&mut self, peer: usize) {
+        let now = self.now;
+        if (self.resumed_dials_at[peer]).is_some_and(|at| now < at + RESUMED_DIALS_EVERY_MICROS) {
+            return;
+        }
+        self.resumed_dials_at[peer] = Some(now);
+        self.stats.n_resumed_rounds += 1;
+        for other in 0..self.honest.len() {
+            let pair = *self.pair(peer, other);
+            if other == peer || pair.connected || pair.round_at.is_some_and(|at| at <= now) {
+                continue;
+            }
+            if pair.dialing && pair.round_at.is_none() {
+                continue;
+            }
+            self.trace.u64(26);
+            self.pair(peer, other).dialing = true;
+            self.round_at(peer, other, now);
+        }
     }
 
     /// The first dial after now between `a` and `b`: a round of either's LAN finder, or a
@@ -289,14 +327,15 @@ impl Simulation {
     /// [`REDIAL_ROUND_TRIPS`] later; across a partition it fails, and the next round tries.
     pub(super) fn stream_dial_round(&mut self, a: usize, b: usize) {
         if self.pair(a, b).connected || !(self.online(a) && self.online(b)) {
-            self.pair(a, b).dialing = false;
+            let pair = self.pair(a, b);
+            (pair.dialing, pair.round_at) = (false, None);
             return;
         }
         if self.blocked.contains_key(&(a, b)) || self.blocked.contains_key(&(b, a)) {
             let at = self.next_dial_round(a, b);
-            self.push(at, Ev::Dial { a, b });
-            return;
+            return self.round_at(a, b, at);
         }
+        self.pair(a, b).round_at = None;
         self.stats.n_dials += 1;
         let rtt = self.latency_micros[a][b] + self.latency_micros[b][a];
         self.push(self.now + REDIAL_ROUND_TRIPS * rtt, Ev::Dialed { a, b });
@@ -312,7 +351,18 @@ impl Simulation {
         if self.blocked.contains_key(&(a, b)) || self.blocked.contains_key(&(b, a)) {
             return self.stream_dial(a, b);
         }
+        let lost = self.now < self.pair(a, b).lost_until;
         self.connect_pair(a, b);
+        // The smaller id dials a peer the idle timeout lost: reaching it is a sign that the
+        // network is back.
+        if lost {
+            let smaller = if self.honest[a].peer.peer_id() < self.honest[b].peer.peer_id() {
+                a
+            } else {
+                b
+            };
+            self.stream_resumed(smaller);
+        }
     }
 
     /// A dial to replace the stalled connection of `epoch` between `a` and `b` is admitted,
@@ -327,6 +377,8 @@ impl Simulation {
         self.stats.n_stalls_replaced += 1;
         self.disconnect_pair(a, b);
         self.connect_pair(a, b);
+        // A dial that waited out a stall got through: the network may be back.
+        self.stream_resumed(a);
     }
 }
 

@@ -31,6 +31,7 @@ use mdns_sd::{
 };
 use socket2::{Domain, InterfaceIndexOrAddress, Protocol, Socket, Type};
 use tokio::sync::watch;
+use tokio::time::Instant;
 
 use crate::identity::{PEER_ID_BYTES, PeerId, hex};
 use crate::net::clock::wall_clock_now;
@@ -39,6 +40,7 @@ use crate::net::node::NodeHandle;
 use crate::net::session::{DISCOVERY_ID_BYTES, DiscoveryId};
 use crate::payload::Payload;
 use crate::sync::message::PROTOCOL_VERSION;
+use crate::sync::state::MIN_REDIAL_HANDSHAKE_MICROS;
 use crate::time::Timestamp;
 
 /// The DNS-SD service type of sculpt sessions (QUIC runs over UDP).
@@ -574,8 +576,9 @@ impl Drop for DnsSd {
 }
 
 /// Lists the LAN's sessions while `node` runs, and once `shared` says so, announces
-/// `announcement` and keeps it true: every [`DIAL_INTERVAL_MILLIS`] it announces the node's
-/// peer count (rate-limited) and dials the peers of its session that it found; every
+/// `announcement` and keeps it true: every [`DIAL_INTERVAL_MILLIS`], and at once when the node
+/// hears a remote after a silence ([`NodeHandle::resumed`]), it announces the node's peer
+/// count (rate-limited) and dials the peers of its session that it found; every
 /// [`POLL_INTERVAL_MILLIS`] it reads the LAN and publishes every announced instance on
 /// `sessions` when that changed. A session not shared yet (a solo window) browses only: it
 /// is neither announced nor does it dial. Returns the counters when the node stops, and
@@ -592,69 +595,100 @@ pub async fn announce_and_dial<P: Payload + Send + 'static>(
     let mut poll_tick = tokio::time::interval(Duration::from_millis(POLL_INTERVAL_MILLIS));
     let mut dial_tick = tokio::time::interval(Duration::from_millis(DIAL_INTERVAL_MILLIS));
     let mut dialing = DialsUnderWay::new();
+    let mut resumed = node.resumed();
     loop {
-        tokio::select! {
+        let fresh = tokio::select! {
             _ = poll_tick.tick() => {
                 if dnssd.poll()? {
                     sessions.send_replace(dnssd.sessions().cloned().collect());
                 }
+                continue;
             }
-            _ = dial_tick.tick() => {
-                let Ok(connected) = node.connected_peers().await else {
-                    return Ok(dnssd.stats().clone());
-                };
-                if *shared.borrow()
-                    && let Some(a) = announcement.take()
-                {
-                    dnssd.announce(a, wall_clock_now())?;
-                }
-                if announcement.is_some() {
-                    continue;
-                }
-                let peers: BTreeSet<PeerId> = connected.into_iter().map(|(_, p)| p).collect();
-                let n_peers = u16::try_from(peers.len()).unwrap_or(u16::MAX);
-                dnssd.update_n_peers(n_peers, wall_clock_now())?;
-                dial_round(&mut dnssd, &node, discovery_id, &peers, &mut dialing).await;
-            }
+            _ = dial_tick.tick() => false,
+            Ok(()) = resumed.changed() => true,
+        };
+        let Ok(connected) = node.connected_peers().await else {
+            return Ok(dnssd.stats().clone());
+        };
+        if *shared.borrow()
+            && let Some(a) = announcement.take()
+        {
+            dnssd.announce(a, wall_clock_now())?;
         }
+        if announcement.is_some() {
+            continue;
+        }
+        let peers: BTreeSet<PeerId> = connected.into_iter().map(|(_, p)| p).collect();
+        let n_peers = u16::try_from(peers.len()).unwrap_or(u16::MAX);
+        dnssd.update_n_peers(n_peers, wall_clock_now())?;
+        let round = Round {
+            discovery_id,
+            connected: &peers,
+            fresh,
+        };
+        dial_round(&mut dnssd, &node, round, &mut dialing).await;
     }
 }
 
-/// The finder's dials under way, one task per peer, each answering with the address that
-/// admitted it.
-type DialsUnderWay = BTreeMap<PeerId, tokio::task::JoinHandle<Option<DiscoveredPeer>>>;
+/// The finder's dials under way, one task per peer, each with when it began and answering
+/// with the address that admitted it.
+type DialsUnderWay = BTreeMap<PeerId, (Instant, tokio::task::JoinHandle<Option<DiscoveredPeer>>)>;
+
+/// What a round of dials works from.
+struct Round<'a> {
+    discovery_id: DiscoveryId,
+    /// The peers connected now.
+    connected: &'a BTreeSet<PeerId>,
+    /// The node heard a remote after a silence ([`NodeHandle::resumed`]): dials begun at
+    /// least [`MIN_REDIAL_HANDSHAKE_MICROS`] ago and still waiting for their handshake are
+    /// replaced by fresh ones.
+    fresh: bool,
+}
 
 /// A round of dials: the instances whose address admitted a finished dial are proven, and
 /// every peer of the session neither `connected` nor being dialed is dialed on a task of its
 /// own, so a dial waiting out its handshake (an instance gone without a goodbye) holds up no
 /// other. Failures are the node's to count (admission refusals, timeouts); a later round
-/// dials again, at the instance's next address.
+/// dials again, at the instance's next address. A round the node's [`NodeHandle::resumed`]
+/// brought (`fresh`) replaces the dials still waiting for their handshake.
 async fn dial_round<P: Payload + Send + 'static>(
     dnssd: &mut DnsSd,
     node: &NodeHandle<P>,
-    discovery_id: DiscoveryId,
-    connected: &BTreeSet<PeerId>,
+    round: Round<'_>,
     dialing: &mut DialsUnderWay,
 ) {
     let finished: Vec<PeerId> = (dialing.iter())
-        .filter(|(_, dial)| dial.is_finished())
+        .filter(|(_, (_, dial))| dial.is_finished())
         .map(|(peer, _)| *peer)
         .collect();
     for peer in finished {
-        if let Some(dial) = dialing.remove(&peer)
+        if let Some((_, dial)) = dialing.remove(&peer)
             && let Ok(Some(dialed)) = dial.await
         {
             dnssd.note_admitted(&dialed);
         }
     }
-    let busy: BTreeSet<PeerId> = connected.iter().chain(dialing.keys()).copied().collect();
-    for found in dnssd.peers_to_dial(discovery_id, node.local_addr(), &busy) {
+    if round.fresh {
+        let old = Duration::from_micros(MIN_REDIAL_HANDSHAKE_MICROS);
+        dialing.retain(|_, (began, dial)| {
+            let replace = began.elapsed() >= old;
+            if replace {
+                dial.abort();
+            }
+            !replace
+        });
+    }
+    let busy: BTreeSet<PeerId> = (round.connected.iter())
+        .chain(dialing.keys())
+        .copied()
+        .collect();
+    for found in dnssd.peers_to_dial(round.discovery_id, node.local_addr(), &busy) {
         let node = node.clone();
         let dial = tokio::spawn(async move {
             let outcomes = node.dial_discovered(&[found]).await;
             (outcomes.into_iter()).find_map(|(dialed, outcome)| outcome.is_ok().then_some(dialed))
         });
-        dialing.insert(found.peer, dial);
+        dialing.insert(found.peer, (Instant::now(), dial));
     }
 }
 

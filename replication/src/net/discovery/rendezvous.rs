@@ -178,6 +178,19 @@ enum Heard {
     Other,
 }
 
+/// When the next registration round is due: at the refresh (true), or at once when the node
+/// hears a remote after a silence (false: the network may be back, and the server's answer
+/// names the peers to punch; the introductions' allowance is not renewed by it).
+async fn next_round(
+    refresh: &mut tokio::time::Interval,
+    resumed: &mut tokio::sync::watch::Receiver<u64>,
+) -> bool {
+    tokio::select! {
+        _ = refresh.tick() => true,
+        Ok(()) = resumed.changed() => false,
+    }
+}
+
 fn sleep_millis(millis: u64) -> Pin<Box<tokio::time::Sleep>> {
     Box::pin(tokio::time::sleep(Duration::from_millis(millis)))
 }
@@ -191,11 +204,14 @@ impl<P: Payload + Send + 'static> Task<P> {
         // Challenges answered in the current round.
         let mut n_challenges = 0;
         let mut reply_timer = sleep_millis(0);
+        let mut resumed = self.node.resumed();
         loop {
             tokio::select! {
                 () = self.node.stopped() => return,
-                _ = refresh.tick(), if n_sent.is_none() => {
-                    self.n_introduced = 0;
+                refreshed = next_round(&mut refresh, &mut resumed), if n_sent.is_none() => {
+                    if refreshed {
+                        self.n_introduced = 0;
+                    }
                     self.send_register().await;
                     n_sent = Some(1);
                     n_challenges = 0;

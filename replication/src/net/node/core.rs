@@ -73,6 +73,9 @@ pub(super) struct Core<P> {
     lost: BTreeMap<PeerId, Lost>,
     /// Dials under way to lost peers: the new id, the peer.
     lost_dials: BTreeMap<ConnId, PeerId>,
+    /// When a remote heard after a silence last brought the dials forward
+    /// ([`super::RESUMED_DIALS_EVERY_MILLIS`]).
+    resumed_at: Option<Instant>,
     events: mpsc::Sender<NodeEvent>,
     pub(super) stats: NodeStats,
     /// Joining from a snapshot, and serving them.
@@ -140,6 +143,7 @@ impl<P: Payload + Send + 'static> Core<P> {
             redials: BTreeMap::new(),
             lost: BTreeMap::new(),
             lost_dials: BTreeMap::new(),
+            resumed_at: None,
             events,
             stats: NodeStats::default(),
             counters,
@@ -386,7 +390,8 @@ impl<P: Payload + Send + 'static> Core<P> {
             }
             return;
         }
-        if stalled.is_some_and(|s| !self.conns.contains_key(&s)) {
+        let replaced = stalled.is_some_and(|s| !self.conns.contains_key(&s));
+        if replaced {
             self.stats.n_stalls_replaced += 1;
         }
         let holding = self.join.holds_connections();
@@ -411,8 +416,14 @@ impl<P: Payload + Send + 'static> Core<P> {
             },
         );
         self.stats.n_admitted += 1;
-        if self.lost.remove(&peer).is_some() && lost_dial.is_some() {
+        let reconnected = self.lost.remove(&peer).is_some() && lost_dial.is_some();
+        if reconnected {
             self.stats.n_lost_reconnected += 1;
+        }
+        // A dial that waited out a stall or an outage got through: as good a sign that the
+        // network is back as a silent remote heard again.
+        if replaced || reconnected {
+            self.on_resumed();
         }
         if let Some(reply) = reply {
             let _ = reply.send(Ok(conn));
@@ -704,6 +715,10 @@ impl<P: Payload + Send + 'static> Core<P> {
                     self.on_stalled(conn, handshake, again, unheard);
                     continue;
                 }
+                Event::Resumed { .. } => {
+                    self.on_resumed();
+                    continue;
+                }
                 // On the observer's own queue (`Peer::poll_scene_event`), never here.
                 Event::Scene(_) => continue,
                 Event::Forked { author, seq } => NodeEvent::Forked { conn, author, seq },
@@ -740,6 +755,24 @@ impl<P: Payload + Send + 'static> Core<P> {
         if unheard || (again && noted == Some(received)) {
             self.redial(conn, handshake_timeout);
         }
+    }
+
+    /// A remote spoke after a silence, or a dial replaced a stalled connection or reached a
+    /// lost peer: the network may be back. Unless that happened less
+    /// than [`super::RESUMED_DIALS_EVERY_MILLIS`] ago, the lost peers are due at once and
+    /// the finders hear of it ([`super::NodeHandle::resumed`]).
+    fn on_resumed(&mut self) {
+        let now = Instant::now();
+        let every = Duration::from_millis(super::RESUMED_DIALS_EVERY_MILLIS);
+        if self.resumed_at.is_some_and(|at| now < at + every) {
+            return;
+        }
+        self.resumed_at = Some(now);
+        self.stats.n_resumed_rounds += 1;
+        for lost in self.lost.values_mut() {
+            lost.next = lost.next.min(now);
+        }
+        self.shared.resumed.send_modify(|n| *n += 1);
     }
 
     /// Dials the remote of the stalled connection `stalled` again, unless a dial to it is

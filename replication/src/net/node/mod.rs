@@ -83,7 +83,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::{mpsc, oneshot, watch};
 
 use crate::identity::{Keypair, OpId, PeerId};
 use crate::log::{AuthorError, Insertion, Log};
@@ -134,6 +134,14 @@ pub const MAX_CONNECTIONS_PER_ADDRESS: usize = 8;
 /// finds peers, for [`REDIAL_LOST_FOR_MILLIS`]: the two meet again within about this long of
 /// the network's return plus a handshake, where a finder's rounds take a second or more.
 pub const REDIAL_LOST_EVERY_MILLIS: u64 = 250;
+/// A node that hears a remote after a silence of at least
+/// [`crate::sync::state::MIN_STALL_MICROS`] ([`crate::sync::state::Event::Resumed`]), or
+/// whose dial replaces a stalled connection or reaches a lost peer (the network may be back
+/// after an outage or a partition), dials its lost peers at once and
+/// tells its finders ([`NodeHandle::resumed`]), which dial the peers they know and have no
+/// connection to: at most once this often (250 ms), so a remote that speaks in bursts, or
+/// many remotes speaking again at once, cost at most four rounds of dials a second.
+pub const RESUMED_DIALS_EVERY_MILLIS: u64 = 250;
 /// How long a lost peer is dialed again (60 s); a finder's rounds go on after that.
 pub const REDIAL_LOST_FOR_MILLIS: u64 = 60_000;
 /// Most lost peers dialed again at once (the connection slots' number).
@@ -496,6 +504,9 @@ pub struct NodeStats {
     pub n_lost_redials: u64,
     /// Peers connected again by such a dial.
     pub n_lost_reconnected: u64,
+    /// Times a remote heard after a silence brought this node's dials forward
+    /// ([`RESUMED_DIALS_EVERY_MILLIS`]).
+    pub n_resumed_rounds: u64,
     /// Accepted connections closed to make room for a newer one when every slot was taken
     /// ([`crate::peer::Peer::accept`]).
     pub n_evicted: u64,
@@ -753,6 +764,9 @@ struct Shared {
     /// Accepted connections in admission and admitted, in all and by source address.
     accepting: Mutex<conn::AcceptLoad>,
     counters: Arc<Counters>,
+    /// Counts the times a remote heard after a silence brought the dials forward
+    /// ([`NodeHandle::resumed`]).
+    resumed: watch::Sender<u64>,
 }
 
 /// A running node: its handle and its event stream.
@@ -795,6 +809,7 @@ impl<P: Payload + Send + 'static> Node<P> {
         let (input_tx, input_rx) = mpsc::channel(MAX_QUEUED_INPUTS);
         let (command_tx, command_rx) = mpsc::channel(MAX_QUEUED_COMMANDS);
         let (event_tx, event_rx) = mpsc::channel(MAX_QUEUED_EVENTS);
+        let (resumed, resumed_rx) = watch::channel(0);
         let shared = Arc::new(Shared {
             keypair: Keypair::from_seed(keypair.seed()),
             keys: keys.clone(),
@@ -802,6 +817,7 @@ impl<P: Payload + Send + 'static> Node<P> {
             next_conn: AtomicU64::new(1),
             accepting: Mutex::new(conn::AcceptLoad::default()),
             counters: counters.clone(),
+            resumed,
         });
         let joining = join_from_snapshot && log.is_empty();
         let peer = Peer::new(keypair, keys.session_id(), log);
@@ -829,6 +845,7 @@ impl<P: Payload + Send + 'static> Node<P> {
                     runtime,
                     counters,
                     keypair: Keypair::from_seed(keypair_seed),
+                    resumed: resumed_rx,
                 }),
             },
             events: event_rx,
@@ -871,6 +888,8 @@ struct HandleShared {
     counters: Arc<Counters>,
     /// A copy of the node's key pair, which signs its discovery registrations.
     keypair: Keypair,
+    /// See [`NodeHandle::resumed`].
+    resumed: watch::Receiver<u64>,
 }
 
 /// Commands to a running node; cheap to clone.
@@ -897,6 +916,19 @@ impl<P: Payload + Send + 'static> NodeHandle<P> {
     /// The address the endpoint is bound to.
     pub fn local_addr(&self) -> SocketAddr {
         self.local_addr
+    }
+
+    /// Changes when the node hears a remote after a silence, or its dial replaces a stalled
+    /// connection or reaches a peer the idle timeout lost, at most every
+    /// [`RESUMED_DIALS_EVERY_MILLIS`]: the network may be back after an outage or a
+    /// partition, so whatever finds peers should dial, at once, the ones it knows and has no
+    /// connection to, and replace its dials still waiting for a handshake (their first
+    /// packets were most likely lost, and QUIC sends them again only after a backed-off
+    /// wait). Starts unchanged.
+    pub fn resumed(&self) -> watch::Receiver<u64> {
+        let mut resumed = self.shared.resumed.clone();
+        resumed.mark_unchanged();
+        resumed
     }
 
     /// This node's peer id.

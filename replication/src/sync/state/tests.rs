@@ -1685,3 +1685,41 @@ fn scene_hashes_agree_at_quiescent_points_and_a_difference_names_its_objects() {
         assert_eq!(node.sync.stats().scene.agrees, Some(true));
     }
 }
+
+/// Issue 53: after a partition or an outage, the first word from a remote is the first sign
+/// that the network is back, and the node dials at once the peers it has no connection to
+/// ([`Event::Resumed`]). Said at both ends when a message comes after a silence of at least
+/// [`MIN_STALL_MICROS`], once a silence, with its length; never while messages come closer
+/// together than that.
+#[test]
+fn a_remote_heard_after_a_silence_says_the_network_may_be_back() {
+    let [mut a, mut b] = connected();
+    let resumed = |node: &mut Node| -> Vec<u64> {
+        node.drain_events();
+        let said = (node.events.iter())
+            .filter_map(|e| match e {
+                Event::Resumed { silence_micros } => Some(*silence_micros),
+                _ => None,
+            })
+            .collect();
+        node.events.clear();
+        said
+    };
+    let ping = Message::Ping.encode();
+    // Each end last heard the other when `connected` carried its last message.
+    for (node, heard) in [(&mut a, 80 * MILLI), (&mut b, 120 * MILLI)] {
+        assert_eq!(resumed(node), vec![], "the handshake is no silence");
+        let mut now = heard;
+        for _ in 0..4 {
+            now += MIN_STALL_MICROS - MILLI;
+            node.sync.handle_input(Timestamp(now), &ping, &mut node.log);
+        }
+        assert_eq!(resumed(node), vec![], "the link never went quiet for long");
+        let silence = MIN_STALL_MICROS + 7 * MILLI;
+        now += silence;
+        for at in [now, now + MILLI] {
+            node.sync.handle_input(Timestamp(at), &ping, &mut node.log);
+        }
+        assert_eq!(resumed(node), vec![silence], "once a silence");
+    }
+}
