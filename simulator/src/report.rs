@@ -172,7 +172,7 @@ pub struct Stats {
     /// Stalled stream connections such a dial replaced.
     pub n_stalls_replaced: u64,
     /// Dials of a pair whose stream connection was closed (or never opened) that found both
-    /// links open, each admitted two round trips later.
+    /// links open, each admitted 1.5 round trips later at the acceptor and 2 at the dialer.
     pub n_dials: u64,
     /// Rounds of dials a peer made at once on hearing a remote after a silence
     /// ([`replication::sync::state::Event::Resumed`]).

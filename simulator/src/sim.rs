@@ -170,6 +170,11 @@ struct Pair {
     /// is under way): a round at any other time is one a sign of the network's return
     /// brought forward, and does nothing.
     round_at: Option<u64>,
+    /// Who dials in that round (or the dial under way).
+    dialer: usize,
+    /// The dialer of the pair's stream connection, and when its own admission lets its
+    /// messages out (the acceptor's went out at once).
+    dialer_sends_from: Option<(usize, u64)>,
     /// When the idle timeout closed the pair's stream connection, and until when the end
     /// with the smaller id dials the other again for it.
     lost_at: u64,

@@ -6,7 +6,8 @@
 //! here); a partition, or an outage of one peer's network, stalls a connection, which the
 //! idle timeout closes if it outlasts it. A closed connection (that timeout, a crash) and a
 //! late joiner's come up only through a dial: at a round of either end's LAN finder that finds both links
-//! open, two round trips later (QUIC's handshake, then admission). When a partition ends, what stalled
+//! open: the acceptor admits it a handshake and one way later and speaks at once, the dialer once
+//! the answer reaches it, two round trips after the dial. When a partition ends, what stalled
 //! goes again once the sender learns it was lost: from the acknowledgement of its next
 //! message when the stalled bytes left room in the congestion window, else at its next probe,
 //! backed off since the first stall; and the end of a stalled connection with the smaller id
@@ -32,7 +33,9 @@ pub(crate) const STREAM_IDLE_TIMEOUT_MICROS: u64 = 10_000_000;
 const QUIC_WINDOW_BYTES: usize = 12_000;
 /// The round trips a dial takes to be admitted: QUIC's handshake, then the admission's
 /// proof and answer (`replication::net::admission`); its packets are not lost (a
-/// simplification: the preset's loss would add a loss detection time now and then).
+/// simplification: the preset's loss would add a loss detection time now and then). The
+/// acceptor is admitted half a round trip sooner, once the dialer's proof comes, and its
+/// hello goes out with its answer ([`Simulation::stream_admit`]).
 const REDIAL_ROUND_TRIPS: u64 = 2;
 /// How often a node's LAN finder dials the session's peers it has no connection to
 /// (`replication::net::discovery::dnssd::DIAL_INTERVAL_MILLIS`): a connection closed by the
@@ -153,6 +156,7 @@ impl Simulation {
             n_lost += 1;
         }
         self.stats.n_retransmitted += u64::from(n_lost);
+        at = at.max(self.stream_held_until(from, to) + self.latency_micros[from][to]);
         let link = &mut self.stream_links[from][to];
         if link.epoch != epoch {
             // The connection's first message, its hello, on the admission's stream.
@@ -253,7 +257,10 @@ impl Simulation {
         let takes = if open && self.online(from) && self.online(to) {
             let rtt = self.latency_micros[from][to] + self.latency_micros[to][from];
             let (a, b, epoch) = (from, to, pair.epoch);
-            self.push(now + REDIAL_ROUND_TRIPS * rtt, Ev::Replace { a, b, epoch });
+            self.push(
+                now + self.accepted_after(from, to),
+                Ev::Replace { a, b, epoch },
+            );
             REDIAL_ROUND_TRIPS * rtt
         } else {
             handshake_micros
@@ -273,14 +280,15 @@ impl Simulation {
             return self.connect_pair(a, b);
         }
         self.pair(a, b).dialing = true;
-        let at = self.next_dial_round(a, b);
-        self.round_at(a, b, at);
+        let (at, dialer) = self.next_dial_round(a, b);
+        self.round_at(a, b, at, dialer);
     }
 
-    /// The next round of dials between `a` and `b` comes at `at` (an earlier one scheduled
-    /// does nothing when it comes).
-    fn round_at(&mut self, a: usize, b: usize, at: u64) {
-        self.pair(a, b).round_at = Some(at);
+    /// The next round of dials between `a` and `b` comes at `at`, by `dialer` (an earlier one
+    /// scheduled does nothing when it comes).
+    fn round_at(&mut self, a: usize, b: usize, at: u64, dialer: usize) {
+        let pair = self.pair(a, b);
+        (pair.round_at, pair.dialer) = (Some(at), dialer);
         self.push(at, Ev::Dial { a, b });
     }
 
@@ -305,20 +313,24 @@ impl Simulation {
             }
             self.trace.u64(26);
             self.pair(peer, other).dialing = true;
-            self.round_at(peer, other, now);
+            self.round_at(peer, other, now, peer);
         }
     }
 
-    /// The first dial after now between `a` and `b`: a round of either's LAN finder, or a
-    /// dial again of the smaller id after the idle timeout closed their connection.
-    fn next_dial_round(&self, a: usize, b: usize) -> u64 {
+    /// The first dial after now between `a` and `b`, and who dials: a round of either's LAN
+    /// finder, or a dial again of the smaller id after the idle timeout closed their
+    /// connection.
+    fn next_dial_round(&self, a: usize, b: usize) -> (u64, usize) {
         let after = |start: u64, every: u64| start + ((self.now - start) / every + 1) * every;
-        let round = |x: usize| after(self.dial_phase_micros[x], DIAL_ROUND_MICROS);
+        let round = |x: usize| (after(self.dial_phase_micros[x], DIAL_ROUND_MICROS), x);
         let pair = &self.pairs[a.min(b)][a.max(b)];
         let again = if self.now < pair.lost_until {
-            after(pair.lost_at, REDIAL_LOST_EVERY_MICROS)
+            (
+                after(pair.lost_at, REDIAL_LOST_EVERY_MICROS),
+                self.smaller_id(a, b),
+            )
         } else {
-            u64::MAX
+            (u64::MAX, a)
         };
         round(a).min(round(b)).min(again)
     }
@@ -332,13 +344,57 @@ impl Simulation {
             return;
         }
         if self.blocked.contains_key(&(a, b)) || self.blocked.contains_key(&(b, a)) {
-            let at = self.next_dial_round(a, b);
-            return self.round_at(a, b, at);
+            let (at, dialer) = self.next_dial_round(a, b);
+            return self.round_at(a, b, at, dialer);
         }
         self.pair(a, b).round_at = None;
         self.stats.n_dials += 1;
-        let rtt = self.latency_micros[a][b] + self.latency_micros[b][a];
-        self.push(self.now + REDIAL_ROUND_TRIPS * rtt, Ev::Dialed { a, b });
+        let (dialer, acceptor) = if self.pair(a, b).dialer == a {
+            (a, b)
+        } else {
+            (b, a)
+        };
+        let at = self.now + self.accepted_after(dialer, acceptor);
+        self.push(at, Ev::Dialed { a, b });
+    }
+
+    /// Of honest peers `a` and `b`, the one with the smaller peer id.
+    fn smaller_id(&self, a: usize, b: usize) -> usize {
+        if self.honest[a].peer.peer_id() < self.honest[b].peer.peer_id() {
+            a
+        } else {
+            b
+        }
+    }
+
+    /// How long after `dialer` dials `acceptor` the acceptor admits the connection: QUIC's
+    /// handshake, then the dialer's proof one way.
+    fn accepted_after(&self, dialer: usize, acceptor: usize) -> u64 {
+        let (there, back) = (
+            self.latency_micros[dialer][acceptor],
+            self.latency_micros[acceptor][dialer],
+        );
+        there + back + there
+    }
+
+    /// Connects `a` and `b`, the acceptor of a dial by `dialer` admitting it: its answer (and
+    /// its hello behind it) goes out now, and what the dialer sends goes out only once that
+    /// answer has reached it, one way later (`replication::net::node`: the dialer's sync
+    /// starts once it is admitted).
+    fn stream_admit(&mut self, a: usize, b: usize, dialer: usize) {
+        let acceptor = if dialer == a { b } else { a };
+        let until = self.now + self.latency_micros[acceptor][dialer];
+        // Before the connection's first messages, which go out as it is made.
+        self.pair(a, b).dialer_sends_from = Some((dialer, until));
+        self.connect_pair(a, b);
+    }
+
+    /// When `from`'s messages to `to` may leave: a dialer waits for the acceptor's answer.
+    pub(super) fn stream_held_until(&self, from: usize, to: usize) -> u64 {
+        match self.pairs[from.min(to)][from.max(to)].dialer_sends_from {
+            Some((dialer, until)) if dialer == from => until,
+            _ => 0,
+        }
     }
 
     /// A dial between `a` and `b` is admitted, unless one of them went offline or a partition
@@ -352,16 +408,12 @@ impl Simulation {
             return self.stream_dial(a, b);
         }
         let lost = self.now < self.pair(a, b).lost_until;
-        self.connect_pair(a, b);
+        let dialer = self.pair(a, b).dialer;
+        self.stream_admit(a, b, dialer);
         // The smaller id dials a peer the idle timeout lost: reaching it is a sign that the
         // network is back.
         if lost {
-            let smaller = if self.honest[a].peer.peer_id() < self.honest[b].peer.peer_id() {
-                a
-            } else {
-                b
-            };
-            self.stream_resumed(smaller);
+            self.stream_resumed(self.smaller_id(a, b));
         }
     }
 
@@ -376,7 +428,7 @@ impl Simulation {
         }
         self.stats.n_stalls_replaced += 1;
         self.disconnect_pair(a, b);
-        self.connect_pair(a, b);
+        self.stream_admit(a, b, a);
         // A dial that waited out a stall got through: the network may be back.
         self.stream_resumed(a);
     }
@@ -401,7 +453,73 @@ fn next_probe(since: u64, pto: u64, now: u64) -> u64 {
 
 #[cfg(test)]
 mod tests {
+    use super::super::{Ev, Simulation};
     use super::next_probe;
+    use crate::config::{Config, FaultKind, Faults};
+
+    /// A dial's acceptor is admitted once the dialer's proof comes (a handshake and one way),
+    /// and its hello goes out with its answer; the dialer's messages leave only once that
+    /// answer has reached it, as the node's sync starts at admission on each side.
+    #[test]
+    fn a_dials_acceptor_speaks_first_and_its_dialer_after_the_answer() {
+        let mut faults = Faults::named("quic").unwrap();
+        let steady = [
+            "loss",
+            "jitter",
+            "bandwidth",
+            "late-joins",
+            "offline",
+            "crashes",
+        ];
+        for kind in steady.into_iter().chain(["partitions"]) {
+            faults = faults.without(FaultKind::named(kind).unwrap());
+        }
+        let mut config = Config::new(5, 2, 10, faults);
+        config.hostile = false;
+        let mut sim = Simulation::new(config).unwrap();
+        let (dialer, acceptor) = (1, 0);
+        let (there, back) = (
+            sim.latency_micros[dialer][acceptor],
+            sim.latency_micros[acceptor][dialer],
+        );
+        assert_eq!(sim.accepted_after(dialer, acceptor), 2 * there + back);
+        // Both disks finish their first syncs: a peer sends nothing it has not stored.
+        while sim.honest.iter().any(|h| h.disk.n_unsynced() > 0) {
+            let ((at, _), ev) = sim.queue.pop_first().unwrap();
+            if matches!(ev, Ev::FsyncDone { .. }) {
+                sim.now = at;
+                sim.handle(ev);
+            }
+        }
+        sim.disconnect_pair(0, 1);
+        sim.queue.clear();
+        let admitted = sim.now;
+        sim.stream_admit(0, 1, dialer);
+        let arrivals: Vec<(usize, u64)> = (sim.queue.iter())
+            .filter_map(|((at, _), ev)| match ev {
+                Ev::Deliver { from, .. } => Some((*from, *at)),
+                _ => None,
+            })
+            .collect();
+        let first = |peer: usize| {
+            let at = arrivals
+                .iter()
+                .filter(|(from, _)| *from == peer)
+                .map(|a| a.1);
+            at.min()
+                .unwrap_or_else(|| panic!("{peer} sends its hello: {arrivals:?}"))
+        };
+        assert_eq!(
+            first(acceptor),
+            admitted + back,
+            "the acceptor's hello, at once"
+        );
+        assert_eq!(
+            first(dialer),
+            admitted + back + there,
+            "the dialer's, once the answer came"
+        );
+    }
 
     #[test]
     fn probes_back_off_from_the_first_stall() {
