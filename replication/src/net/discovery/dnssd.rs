@@ -669,14 +669,7 @@ async fn dial_round<P: Payload + Send + 'static>(
         }
     }
     if round.fresh {
-        let old = Duration::from_micros(MIN_REDIAL_HANDSHAKE_MICROS);
-        dialing.retain(|_, (began, dial)| {
-            let replace = began.elapsed() >= old;
-            if replace {
-                dial.abort();
-            }
-            !replace
-        });
+        drop_waiting_dials(dialing, Instant::now());
     }
     let busy: BTreeSet<PeerId> = (round.connected.iter())
         .chain(dialing.keys())
@@ -690,6 +683,20 @@ async fn dial_round<P: Payload + Send + 'static>(
         });
         dialing.insert(found.peer, (Instant::now(), dial));
     }
+}
+
+/// Aborts and forgets the dials begun at least [`MIN_REDIAL_HANDSHAKE_MICROS`] before `now`
+/// (the dial under way in the node goes on until its own timeout; one admitted late only
+/// duplicates the connection a fresh dial made, which the node settles).
+fn drop_waiting_dials(dialing: &mut DialsUnderWay, now: Instant) {
+    let waited = Duration::from_micros(MIN_REDIAL_HANDSHAKE_MICROS);
+    dialing.retain(|_, (began, dial)| {
+        let replace = now.saturating_duration_since(*began) >= waited;
+        if replace {
+            dial.abort();
+        }
+        !replace
+    });
 }
 
 /// Whether a registration made at `at` may be replaced at `now` ([`MIN_PEER_COUNT_UPDATE_MICROS`];
@@ -1245,6 +1252,33 @@ mod tests {
             Timestamp(at.0 + MIN_PEER_COUNT_UPDATE_MICROS)
         ));
         assert!(update_allowed(at, Timestamp(at.0 - 1)));
+    }
+
+    /// A round the node's sign of the network's return brought replaces the finder's dials
+    /// that have waited for a handshake since before the shortest handshake allowance, and
+    /// leaves younger ones, which may still be getting through, to finish.
+    #[test]
+    fn a_fresh_round_replaces_only_the_dials_that_waited() {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_time()
+            .build()
+            .unwrap();
+        runtime.block_on(async {
+            let now = Instant::now();
+            let waited = Duration::from_micros(MIN_REDIAL_HANDSHAKE_MICROS);
+            let mut dialing = DialsUnderWay::new();
+            for (seed, began) in [(1, now - waited), (2, now - waited / 2), (3, now)] {
+                let dial = tokio::spawn(std::future::pending::<Option<DiscoveredPeer>>());
+                dialing.insert(PeerId([seed; PEER_ID_BYTES]), (began, dial));
+            }
+            let old = dialing[&PeerId([1; PEER_ID_BYTES])].1.abort_handle();
+            drop_waiting_dials(&mut dialing, now);
+            let kept: Vec<u8> = dialing.keys().map(|p| p.0[0]).collect();
+            assert_eq!(kept, vec![2, 3]);
+            tokio::task::yield_now().await;
+            assert!(old.is_finished(), "the replaced dial's task is aborted");
+            assert!(dialing.values().all(|(_, d)| !d.is_finished()));
+        });
     }
 
     #[test]
