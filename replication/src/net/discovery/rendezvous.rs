@@ -27,6 +27,7 @@ use std::time::Duration;
 
 use tokio::sync::mpsc;
 use tokio::task::JoinSet;
+use tokio::time::Instant;
 
 use crate::identity::PeerId;
 use crate::net::discovery::client::{
@@ -49,6 +50,12 @@ pub const MAX_QUEUED_RENDEZVOUS_EVENTS: usize = 256;
 /// spoof the server's address (and knows the discovery id) could otherwise make a node send
 /// punches anywhere: this bounds each node to a few hundred KB per refresh interval.
 pub const MAX_INTRODUCTIONS_PER_REFRESH: usize = 16;
+/// The shortest time between two registrations a sign of the network's return brings
+/// ([`NodeHandle::resumed`], up to four a second): the server allows a source address
+/// [`crate::net::discovery::registry::REQUESTS_PER_SEC_PER_SOURCE`] requests a second,
+/// shared by every node behind one NAT, and the refresh's own registrations come every
+/// [`REFRESH_INTERVAL_MILLIS`].
+pub const RESUMED_REGISTER_EVERY_MILLIS: u64 = 5_000;
 /// Unreachable peers remembered so that each is reported once (until it connects); past
 /// this many the memory is cleared and they may be reported again.
 pub const MAX_REMEMBERED_UNREACHABLE: usize = 64;
@@ -180,14 +187,25 @@ enum Heard {
 
 /// When the next registration round is due: at the refresh (true), or at once when the node
 /// hears a remote after a silence (false: the network may be back, and the server's answer
-/// names the peers to punch; the introductions' allowance is not renewed by it).
+/// names the peers to punch; the introductions' allowance is not renewed by it), at most
+/// once every [`RESUMED_REGISTER_EVERY_MILLIS`] since `resumed_at`, the last such round.
 async fn next_round(
     refresh: &mut tokio::time::Interval,
     resumed: &mut tokio::sync::watch::Receiver<u64>,
+    resumed_at: &mut Option<Instant>,
 ) -> bool {
-    tokio::select! {
-        _ = refresh.tick() => true,
-        Ok(()) = resumed.changed() => false,
+    let every = Duration::from_millis(RESUMED_REGISTER_EVERY_MILLIS);
+    loop {
+        tokio::select! {
+            _ = refresh.tick() => return true,
+            Ok(()) = resumed.changed() => {
+                let now = Instant::now();
+                if resumed_at.is_none_or(|at| now >= at + every) {
+                    *resumed_at = Some(now);
+                    return false;
+                }
+            }
+        }
     }
 }
 
@@ -205,10 +223,13 @@ impl<P: Payload + Send + 'static> Task<P> {
         let mut n_challenges = 0;
         let mut reply_timer = sleep_millis(0);
         let mut resumed = self.node.resumed();
+        let mut resumed_at = None;
         loop {
             tokio::select! {
                 () = self.node.stopped() => return,
-                refreshed = next_round(&mut refresh, &mut resumed), if n_sent.is_none() => {
+                refreshed = next_round(&mut refresh, &mut resumed, &mut resumed_at),
+                    if n_sent.is_none() =>
+                {
                     if refreshed {
                         self.n_introduced = 0;
                     }
@@ -353,5 +374,38 @@ impl<P: Payload + Send + 'static> Task<P> {
                 self.emit(RendezvousEvent::DialFailed { peer, error });
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sign of the network's return brings a registration at once, but a second sign within
+    /// [`RESUMED_REGISTER_EVERY_MILLIS`] brings none (the server's allowance is per source
+    /// address, shared behind a NAT); after it, one does again.
+    #[test]
+    fn signs_bring_a_registration_at_most_every_few_seconds() {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_time()
+            .build()
+            .unwrap();
+        runtime.block_on(async {
+            let mut refresh = tokio::time::interval(Duration::from_millis(REFRESH_INTERVAL_MILLIS));
+            // The first tick, at once, is the first registration's.
+            refresh.tick().await;
+            let (sign, mut resumed) = tokio::sync::watch::channel(0u64);
+            let mut at = None;
+            let wait = Duration::from_millis(100);
+            let mut next = async |at: &mut Option<Instant>| {
+                sign.send_modify(|n| *n += 1);
+                let round = next_round(&mut refresh, &mut resumed, at);
+                tokio::time::timeout(wait, round).await.ok()
+            };
+            assert_eq!(next(&mut at).await, Some(false), "a sign registers at once");
+            assert_eq!(next(&mut at).await, None, "not twice within the floor");
+            at = at.map(|t| t - Duration::from_millis(RESUMED_REGISTER_EVERY_MILLIS));
+            assert_eq!(next(&mut at).await, Some(false), "and again after it");
+        });
     }
 }
