@@ -42,6 +42,12 @@ pub const MAX_QUEUED_REQUESTS: usize = 256;
 pub const MAX_NEWS_LINES: usize = 200;
 /// How often a `--dial` address that is not connected is dialed again.
 pub const DIAL_RETRY_MILLIS: u64 = 2_000;
+/// A `--dial` dial still waiting for its handshake after this long (1 s) is begun afresh when
+/// the network seems back ([`NodeHandle::resumed`]): QUIC sends a lost first packet again
+/// only after about a second (three times its first round-trip guess of 333 ms), then two,
+/// four..., while a handshake and admission over a path of round trips under half a second
+/// are done by then, so a younger dial is left to finish.
+pub const DIAL_AFRESH_AFTER_MILLIS: u64 = 1_000;
 /// How often peers' round-trip times and addresses are refreshed in the view.
 pub const PEER_REFRESH_MILLIS: u64 = 500;
 /// Peers kept in the view after they left (the oldest offline ones are forgotten first).
@@ -1116,19 +1122,31 @@ impl NewsSink {
 
 /// Dials `addr` whenever no connection to it is open, every [`DIAL_RETRY_MILLIS`] and at once
 /// when the node hears a remote after a silence ([`NodeHandle::resumed`]: the network may be
-/// back, and a dial still waiting for its handshake is begun afresh), until the node stops;
-/// says so when the outcome changes.
+/// back, and a dial that has waited [`DIAL_AFRESH_AFTER_MILLIS`] for its handshake is begun
+/// afresh), until the node stops; says so when the outcome changes.
 async fn keep_dialing(handle: NodeHandle<ShapePayload>, addr: SocketAddr, news: NewsSink) {
     let mut last_failure = None;
     let mut resumed = handle.resumed();
+    let afresh = Duration::from_millis(DIAL_AFRESH_AFTER_MILLIS);
     loop {
         let Ok(stats) = handle.stats().await else {
             return;
         };
         if !stats.connections.iter().any(|c| c.addr == addr) {
-            let outcome = tokio::select! {
-                outcome = handle.dial(addr) => outcome,
-                Ok(()) = resumed.changed() => continue,
+            let began = tokio::time::Instant::now();
+            let dial = handle.dial(addr);
+            tokio::pin!(dial);
+            let outcome = loop {
+                tokio::select! {
+                    outcome = &mut dial => break Some(outcome),
+                    // A younger dial is left alone: its path may be slow, not cut.
+                    Ok(()) = resumed.changed() => if began.elapsed() >= afresh {
+                        break None;
+                    }
+                }
+            };
+            let Some(outcome) = outcome else {
+                continue;
             };
             match outcome {
                 Ok(_) => last_failure = None,
