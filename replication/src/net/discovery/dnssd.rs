@@ -621,12 +621,10 @@ pub async fn announce_and_dial<P: Payload + Send + 'static>(
         let peers: BTreeSet<PeerId> = connected.into_iter().map(|(_, p)| p).collect();
         let n_peers = u16::try_from(peers.len()).unwrap_or(u16::MAX);
         dnssd.update_n_peers(n_peers, wall_clock_now())?;
-        let round = Round {
-            discovery_id,
-            connected: &peers,
-            fresh,
-        };
-        dial_round(&mut dnssd, &node, round, &mut dialing).await;
+        if fresh {
+            drop_waiting_dials(&mut dialing, Instant::now());
+        }
+        dial_round(&mut dnssd, &node, discovery_id, &peers, &mut dialing).await;
     }
 }
 
@@ -634,27 +632,16 @@ pub async fn announce_and_dial<P: Payload + Send + 'static>(
 /// with the address that admitted it.
 type DialsUnderWay = BTreeMap<PeerId, (Instant, tokio::task::JoinHandle<Option<DiscoveredPeer>>)>;
 
-/// What a round of dials works from.
-struct Round<'a> {
-    discovery_id: DiscoveryId,
-    /// The peers connected now.
-    connected: &'a BTreeSet<PeerId>,
-    /// The node heard a remote after a silence ([`NodeHandle::resumed`]): dials begun at
-    /// least [`MIN_REDIAL_HANDSHAKE_MICROS`] ago and still waiting for their handshake are
-    /// replaced by fresh ones.
-    fresh: bool,
-}
-
 /// A round of dials: the instances whose address admitted a finished dial are proven, and
 /// every peer of the session neither `connected` nor being dialed is dialed on a task of its
 /// own, so a dial waiting out its handshake (an instance gone without a goodbye) holds up no
 /// other. Failures are the node's to count (admission refusals, timeouts); a later round
-/// dials again, at the instance's next address. A round the node's [`NodeHandle::resumed`]
-/// brought (`fresh`) replaces the dials still waiting for their handshake.
+/// dials again, at the instance's next address.
 async fn dial_round<P: Payload + Send + 'static>(
     dnssd: &mut DnsSd,
     node: &NodeHandle<P>,
-    round: Round<'_>,
+    discovery_id: DiscoveryId,
+    connected: &BTreeSet<PeerId>,
     dialing: &mut DialsUnderWay,
 ) {
     let finished: Vec<PeerId> = (dialing.iter())
@@ -668,14 +655,8 @@ async fn dial_round<P: Payload + Send + 'static>(
             dnssd.note_admitted(&dialed);
         }
     }
-    if round.fresh {
-        drop_waiting_dials(dialing, Instant::now());
-    }
-    let busy: BTreeSet<PeerId> = (round.connected.iter())
-        .chain(dialing.keys())
-        .copied()
-        .collect();
-    for found in dnssd.peers_to_dial(round.discovery_id, node.local_addr(), &busy) {
+    let busy: BTreeSet<PeerId> = connected.iter().chain(dialing.keys()).copied().collect();
+    for found in dnssd.peers_to_dial(discovery_id, node.local_addr(), &busy) {
         let node = node.clone();
         let dial = tokio::spawn(async move {
             let outcomes = node.dial_discovered(&[found]).await;
@@ -685,13 +666,15 @@ async fn dial_round<P: Payload + Send + 'static>(
     }
 }
 
-/// Aborts and forgets the dials begun at least [`MIN_REDIAL_HANDSHAKE_MICROS`] before `now`
-/// (the dial under way in the node goes on until its own timeout; one admitted late only
-/// duplicates the connection a fresh dial made, which the node settles).
+/// On a sign that the network is back ([`NodeHandle::resumed`]): aborts and forgets the dials
+/// begun at least [`MIN_REDIAL_HANDSHAKE_MICROS`] before `now` and still waiting, so that the
+/// next round dials those peers afresh (the dial under way in the node goes on until its own
+/// timeout; one admitted late only duplicates the connection a fresh dial made, which the
+/// node settles). Finished dials stay for the round to read their outcome.
 fn drop_waiting_dials(dialing: &mut DialsUnderWay, now: Instant) {
     let waited = Duration::from_micros(MIN_REDIAL_HANDSHAKE_MICROS);
     dialing.retain(|_, (began, dial)| {
-        let replace = now.saturating_duration_since(*began) >= waited;
+        let replace = now.saturating_duration_since(*began) >= waited && !dial.is_finished();
         if replace {
             dial.abort();
         }
@@ -1271,13 +1254,19 @@ mod tests {
                 let dial = tokio::spawn(std::future::pending::<Option<DiscoveredPeer>>());
                 dialing.insert(PeerId([seed; PEER_ID_BYTES]), (began, dial));
             }
+            // An old dial that has finished keeps its outcome for the round to read.
+            let done = tokio::spawn(async { None::<DiscoveredPeer> });
+            tokio::task::yield_now().await;
+            assert!(done.is_finished());
+            dialing.insert(PeerId([4; PEER_ID_BYTES]), (now - waited, done));
             let old = dialing[&PeerId([1; PEER_ID_BYTES])].1.abort_handle();
             drop_waiting_dials(&mut dialing, now);
             let kept: Vec<u8> = dialing.keys().map(|p| p.0[0]).collect();
-            assert_eq!(kept, vec![2, 3]);
+            assert_eq!(kept, vec![2, 3, 4]);
             tokio::task::yield_now().await;
             assert!(old.is_finished(), "the replaced dial's task is aborted");
-            assert!(dialing.values().all(|(_, d)| !d.is_finished()));
+            let waiting = |p: u8| !dialing[&PeerId([p; PEER_ID_BYTES])].1.is_finished();
+            assert!(waiting(2) && waiting(3));
         });
     }
 
