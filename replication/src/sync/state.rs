@@ -977,8 +977,10 @@ impl<P: Payload> SyncState<P> {
             return;
         }
         if silence >= MIN_STALL_MICROS {
-            let silence_micros = silence;
-            self.events.push_back(Event::Resumed { silence_micros });
+            let event = Event::Resumed {
+                silence_micros: silence,
+            };
+            self.events.push_back(event);
         }
         let message = match Message::decode(bytes) {
             Ok(m) => m,

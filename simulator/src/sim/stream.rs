@@ -305,10 +305,9 @@ impl Simulation {
         self.stats.n_resumed_rounds += 1;
         for other in 0..self.honest.len() {
             let pair = *self.pair(peer, other);
-            if other == peer || pair.connected || pair.round_at.is_some_and(|at| at <= now) {
-                continue;
-            }
-            if pair.dialing && pair.round_at.is_none() {
+            let handshaking = pair.dialing && pair.round_at.is_none();
+            let due = pair.round_at.is_some_and(|at| at <= now);
+            if other == peer || pair.connected || handshaking || due {
                 continue;
             }
             self.trace.u64(26);

@@ -504,8 +504,9 @@ pub struct NodeStats {
     pub n_lost_redials: u64,
     /// Peers connected again by such a dial.
     pub n_lost_reconnected: u64,
-    /// Times a remote heard after a silence brought this node's dials forward
-    /// ([`RESUMED_DIALS_EVERY_MILLIS`]).
+    /// Times a sign that the network is back (a remote heard after a silence, a dial that
+    /// replaced a stalled connection or reached a lost peer) brought this node's dials
+    /// forward ([`RESUMED_DIALS_EVERY_MILLIS`]).
     pub n_resumed_rounds: u64,
     /// Accepted connections closed to make room for a newer one when every slot was taken
     /// ([`crate::peer::Peer::accept`]).
@@ -764,7 +765,7 @@ struct Shared {
     /// Accepted connections in admission and admitted, in all and by source address.
     accepting: Mutex<conn::AcceptLoad>,
     counters: Arc<Counters>,
-    /// Counts the times a remote heard after a silence brought the dials forward
+    /// Counts the times a sign that the network is back brought the dials forward
     /// ([`NodeHandle::resumed`]).
     resumed: watch::Sender<u64>,
 }
