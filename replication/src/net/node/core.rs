@@ -67,8 +67,9 @@ pub(super) struct Core<P> {
     pub(super) shared: Arc<Shared>,
     pub(super) conns: BTreeMap<ConnId, Live>,
     dials: BTreeMap<ConnId, oneshot::Sender<Result<ConnId, DialError>>>,
-    /// Dials under way to the remotes of stalled connections: the new id, the stalled one.
-    redials: BTreeMap<ConnId, ConnId>,
+    /// Dials under way to the remotes of stalled connections: the new id, the stalled one
+    /// and its peer.
+    redials: BTreeMap<ConnId, (ConnId, PeerId)>,
     /// Peers lost to the idle timeout that this node dials again (at most [`MAX_LOST_PEERS`]).
     lost: BTreeMap<PeerId, Lost>,
     /// Dials under way to lost peers: the new id, the peer.
@@ -377,9 +378,11 @@ impl<P: Payload + Send + 'static> Core<P> {
     ) {
         let reply = self.dials.remove(&conn);
         let lost_dial = self.lost_dials.remove(&conn);
-        // A redial of a connection still open to this peer, which the new one should replace.
+        // A redial that reached the stalled connection's peer, which the new one replaces: the
+        // remote may have closed the old one already, having admitted the new one first.
         let stalled = (self.redials.remove(&conn))
-            .filter(|s| self.conns.get(s).is_some_and(|l| l.peer == peer));
+            .filter(|&(_, p)| p == peer)
+            .map(|(s, _)| s);
         if let Some((kind, error)) = self.refusal(peer) {
             return self.refuse(&connection, reply, kind, error);
         }
@@ -785,12 +788,12 @@ impl<P: Payload + Send + 'static> Core<P> {
         let Some(live) = self.conns.get(&stalled) else {
             return;
         };
-        if self.redials.values().any(|c| *c == stalled) {
+        if self.redials.values().any(|&(c, _)| c == stalled) {
             return;
         }
         let addr = live.connection.remote_address();
         let conn = self.shared.next_conn_id();
-        self.redials.insert(conn, stalled);
+        self.redials.insert(conn, (stalled, live.peer));
         self.stats.n_stall_redials += 1;
         self.spawn_dial(conn, addr, handshake_timeout);
     }
