@@ -242,13 +242,27 @@ impl Sampler {
 
     /// Gathers into `hits` the active edits whose support holds `p`, unless they are there
     /// already (the servo asks a tick's tip twice).
-    #[inline]
+    ///
+    /// The check compares each coordinate on its own: one comparison of the three as a
+    /// block of memory read a point its caller had just stored coordinate by coordinate,
+    /// which the processor cannot forward from its stores, and stalled every query.
+    #[inline(always)]
     fn gather_at_point(&mut self, p: DVec3) {
-        let at = Some(p.to_array().map(f64::to_bits));
-        if self.hits_at != at {
-            self.object.history().hits_at_point(p, &mut self.hits);
-            self.hits_at = at;
+        let same = self.hits_at.is_some_and(|[x, y, z]| {
+            x == p.x.to_bits() && y == p.y.to_bits() && z == p.z.to_bits()
+        });
+        if !same {
+            self.gather_anew(p.x, p.y, p.z);
         }
+    }
+
+    /// The lookup of [`Sampler::gather_at_point`], given the point's coordinates one by one
+    /// (in registers: a point passed by reference is stored and read back).
+    #[inline(never)]
+    fn gather_anew(&mut self, x: f64, y: f64, z: f64) {
+        let p = DVec3::new(x, y, z);
+        self.object.history().hits_at_point(p, &mut self.hits);
+        self.hits_at = Some([p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]);
     }
 
     fn base_value(&mut self, p: DVec3, t: f64) -> f64 {

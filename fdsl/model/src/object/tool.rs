@@ -466,6 +466,10 @@ fn local_distance(shape: ToolShape, q: DVec3) -> f64 {
 }
 
 /// Signed distance (negative inside) and its gradient, for boxes and cylinders.
+///
+/// Always inlined: called, it returned the four numbers through memory, and its caller read
+/// them back in pieces that straddled its stores, a stall on every posed stamp.
+#[inline(always)]
 fn local_sdf(shape: ToolShape, q: DVec3) -> (f64, DVec3) {
     match shape {
         ToolShape::Box {
