@@ -772,6 +772,12 @@ fn a_recorded_touch_path_replays_headless_to_the_force_the_window_showed() {
     assert!(touch["recording"].is_null(), "{touch}");
     let window_force = touch["steady_force"][1].as_f64().unwrap();
     assert!(window_force > 1.0, "{touch}");
+    // The tool moved over a scene that stood still: those frames drew only its lines again,
+    // over the kept picture of the melon.
+    let frames = &run.state["viewport_frames"];
+    let interval = &run.state["frame_interval_ms"];
+    println!("viewport frames {frames}; frame interval {interval}");
+    assert!(frames["lines_only"].as_u64() > Some(0), "{frames}");
     // The file is a touch path; `sculpt touch` replays it over the same scene.
     let csv = std::fs::read_to_string(&recorded).unwrap();
     let path = app::touch::path::TouchPath::parse(&csv).unwrap();
@@ -1625,16 +1631,21 @@ fn another_windows_strokes_reach_this_windows_screen_timed_from_their_ops() {
             .all(|ms| *ms < (ON_TOP_SECS * 1000 / 2) as f64),
         "{pixels:?}"
     );
+    let frames = &below["viewport_frames"];
     pixels.sort_by(f64::total_cmp);
     let at = |q: f64| pixels[((pixels.len() - 1) as f64 * q).round() as usize];
     println!(
         "another window's edits on this window's screen after (ms): {} samples, median {:.1}, \
-         p99 {:.1}, max {:.1}",
+         p99 {:.1}, max {:.1}; viewport frames {frames}; frame interval {}",
         pixels.len(),
         at(0.5),
         at(0.99),
-        at(1.0)
+        at(1.0),
+        below["frame_interval_ms"],
     );
+    // The other window's pointer moves between its strokes' meshes: those frames drew only
+    // the lines again, over the kept picture of the objects.
+    assert!(frames["lines_only"].as_u64() > Some(0), "{frames}");
 }
 
 #[test]

@@ -7,6 +7,11 @@
 //! the picture back and waits for it, so it is the whole cost of one offscreen frame. The
 //! meshes are uploaded once, before the first timed frame. Prints the median, fastest and
 //! slowest frame and the adapter.
+//!
+//! Then the same number of frames into one picture kept between frames, as the window keeps
+//! it (`Headless::render_kept`), in turns: one with the camera turned (everything drawn) and
+//! one with only the crosshair moved, as when a peer's tool moves (the lines drawn over the
+//! kept objects).
 
 use glam::{Mat4, Vec3};
 use render::camera::Camera;
@@ -96,10 +101,46 @@ fn main() {
         }
         times.push(t0.elapsed());
     }
+    report(&format!("{frames} frames at {width}x{height}"), times);
+    kept_frames(&mut gpu, &mut scene, frames, [width, height]);
+}
+
+/// Times `frames` pairs of frames into a kept picture: the camera turned, then the crosshair
+/// alone moved.
+fn kept_frames(gpu: &mut Headless, scene: &mut Scene, frames: u32, [width, height]: [u32; 2]) {
+    let mut picture = match gpu.kept_picture(width, height) {
+        Ok(p) => p,
+        Err(e) => return println!("no kept picture: {e}"),
+    };
+    let mut times = [Vec::new(), Vec::new()];
+    for k in 0..frames {
+        for (moved, times) in times.iter_mut().enumerate() {
+            if moved == 0 {
+                scene.camera.yaw = 0.6 + 0.05 * k as f32;
+            } else {
+                scene.lines.truncate(scene.lines.len().saturating_sub(3));
+                let at = Vec3::new(0.1 * (k as f32).sin(), 0.1 * (k as f32).cos(), 0.0);
+                scene.add_crosshair(at, 0.2, [1.0, 1.0, 0.0, 1.0]);
+            }
+            let t0 = now();
+            match gpu.render_kept(scene, &mut picture) {
+                Ok((_, below)) if below == (moved == 0) => times.push(t0.elapsed()),
+                Ok((_, below)) => return println!("kept frame drew below the lines: {below}"),
+                Err(e) => return println!("render failed: {e}"),
+            }
+        }
+    }
+    let [turned, moved] = times;
+    report("kept picture, camera turned", turned);
+    report("kept picture, crosshair moved", moved);
+}
+
+/// Prints the median, fastest and slowest of `times`.
+fn report(what: &str, mut times: Vec<Duration>) {
     times.sort_unstable();
     if let (Some(fastest), Some(slowest)) = (times.first(), times.last()) {
         println!(
-            "{frames} frames at {width}x{height}: median {:.1?}, fastest {fastest:.1?}, slowest {slowest:.1?}",
+            "{what}: median {:.1?}, fastest {fastest:.1?}, slowest {slowest:.1?}",
             times[times.len() / 2]
         );
     }

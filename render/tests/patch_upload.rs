@@ -11,6 +11,8 @@
 //!
 //! A prepare also says whether it changed anything a draw shows (`Renderer::changed`), so that
 //! a window may show its last picture again: each thing drawn, changed alone, says so once.
+//! A kept picture (`KeptPicture`) whose scene changed only its lines draws only the lines and
+//! the transparent objects over its kept layer of the others, and shows the one-pass picture.
 //! A closed object (`SceneObject::closed`) is drawn without its back faces: the ball's picture
 //! is the two-sided one, and a triangle seen from behind is not drawn at all.
 #![allow(
@@ -423,6 +425,79 @@ fn a_prepare_says_whether_it_changed_what_a_draw_shows() {
         edit(&mut scene);
         assert!(changed(&scene), "{what} changed");
         assert!(!changed(&scene), "{what} unchanged the next time");
+    }
+}
+
+#[test]
+fn a_kept_picture_draws_only_moved_lines_again_and_shows_the_one_pass_picture() {
+    let (Some(mut kept), Some(mut one_pass)) = (headless(), headless()) else {
+        return;
+    };
+    let mesh = Arc::new(ball_mesh());
+    let mut scene = one_object_scene((*mesh).clone());
+    let glass = Material {
+        opacity: 0.5,
+        ..Material::default()
+    };
+    let beside =
+        Mat4::from_translation(Vec3::new(0.6, 0.3, 0.5)) * Mat4::from_scale(Vec3::splat(0.5));
+    scene.add_object(Arc::clone(&mesh), beside, glass);
+    // A peer's tool: a cross partly inside the ball, partly behind the glass.
+    let tool = |scene: &mut Scene, at: Vec3| {
+        scene.lines.clear();
+        scene.add_crosshair(at, 0.8, [1.0, 0.2, 0.1, 1.0]);
+    };
+    let mut picture = kept.kept_picture(WIDTH, HEIGHT).unwrap();
+    let mut frame = |scene: &Scene| {
+        let (image, below) = kept.render_kept(scene, &mut picture).unwrap();
+        let expected = one_pass.render(scene, WIDTH, HEIGHT).unwrap();
+        let n = n_differing_pixels(&image.pixels, &expected.pixels);
+        (image.pixels, below, n)
+    };
+    tool(&mut scene, Vec3::new(0.9, 0.0, 0.3));
+    let (first, below, n) = frame(&scene);
+    assert!(below, "a new picture draws everything");
+    assert_eq!(n, 0, "the first frame is the one-pass picture");
+
+    tool(&mut scene, Vec3::new(0.5, 0.4, 0.6));
+    let (moved, below, n) = frame(&scene);
+    assert!(
+        !below,
+        "only the lines changed: the objects are not drawn again"
+    );
+    assert_eq!(
+        n, 0,
+        "moved lines over the kept objects are the one-pass picture"
+    );
+    assert!(
+        n_differing_pixels(&first, &moved) > 50,
+        "the lines moved in the picture"
+    );
+    let (_, below, n) = frame(&scene);
+    assert!(!below && n == 0, "nothing changed: the kept layer again");
+
+    let changes: Vec<(&str, SceneEdit)> = vec![
+        ("the camera", Box::new(|s| s.camera.yaw += 0.2)),
+        (
+            "the glass",
+            Box::new(|s| s.objects[1].material.opacity = 0.7),
+        ),
+        (
+            "the ball and the lines together",
+            Box::new(move |s| {
+                s.objects[0].mesh = Arc::new((*s.objects[0].mesh).clone());
+                tool(s, Vec3::new(-0.4, 0.2, 0.9));
+            }),
+        ),
+    ];
+    for (what, change) in &changes {
+        change(&mut scene);
+        let (_, below, n) = frame(&scene);
+        assert!(below, "{what} changed: everything is drawn");
+        assert_eq!(n, 0, "{what}: the one-pass picture");
+        tool(&mut scene, Vec3::new(0.2, -0.3, 0.7));
+        let (_, below, n) = frame(&scene);
+        assert!(!below && n == 0, "then the lines alone over {what}");
     }
 }
 

@@ -9,8 +9,15 @@
 //! [`Renderer::patch_object`] the [`MeshPatch`] that turned the uploaded mesh into the new
 //! one: then [`Renderer::prepare`] writes only the patch's vertex and triangle ranges into the
 //! object's buffers, which patched objects get with spare room.
+//!
+//! A host that keeps its picture between frames draws through a [`KeptPicture`]: a prepare
+//! that changed only the lines (a peer's pointer, a touch tool) then costs a copy of the kept
+//! objects and the lines, not the objects' draw.
 
+mod kept;
 pub mod offscreen;
+
+pub use kept::KeptPicture;
 
 use crate::mesh::Mesh;
 use crate::mesh::MeshError;
@@ -213,6 +220,9 @@ pub struct Renderer {
     last_frame: Option<(Globals, [f32; 4])>,
     /// Whether the last prepare changed anything its draw shows.
     changed: bool,
+    /// Whether a prepare changed anything below the lines (the globals, the background, an
+    /// object) since a [`KeptPicture`] last drew it.
+    below_changed: bool,
     /// Per object index, the patches handed in since the last prepare.
     pending: BTreeMap<usize, PendingPatch>,
     /// Mesh bytes (vertices and indices) the last prepare wrote.
@@ -438,6 +448,7 @@ impl Renderer {
             line_vertices: Vec::new(),
             last_frame: None,
             changed: true,
+            below_changed: true,
             pending: BTreeMap::new(),
             mesh_bytes_uploaded: 0,
         }
@@ -534,6 +545,7 @@ impl Renderer {
         }
         // A prepare that fails leaves nothing to show again.
         self.changed = true;
+        let below_changed = std::mem::replace(&mut self.below_changed, true);
         self.validate_new_meshes(scene)?;
         let aspect = size_px[0].max(1) as f32 / size_px[1].max(1) as f32;
         let eye = scene.camera.eye();
@@ -553,6 +565,8 @@ impl Renderer {
         }
         changed |= self.prepare_objects(device, queue, scene);
         self.sort_draws(scene, eye);
+        // Kept until a kept picture draws below the lines again.
+        self.below_changed = below_changed || changed;
         changed |= self.upload_lines(device, scene);
         self.changed = changed;
         Ok(())
@@ -795,16 +809,13 @@ impl Renderer {
 
     /// Records the draws of the last prepared scene into `pass`.
     pub fn paint(&self, pass: &mut wgpu::RenderPass<'_>) {
+        self.paint_below(pass);
+        self.paint_above(pass);
+    }
+
+    /// Records the draws below the lines: the opaque objects.
+    fn paint_below(&self, pass: &mut wgpu::RenderPass<'_>) {
         pass.set_bind_group(0, &self.globals_bind_group, &[]);
-        let draw = |pass: &mut wgpu::RenderPass<'_>, o: &GpuObject| {
-            if o.n_indices == 0 {
-                return;
-            }
-            pass.set_bind_group(1, &o.bind_group, &[]);
-            pass.set_vertex_buffer(0, o.vertices.slice(..));
-            pass.set_index_buffer(o.indices.slice(..), wgpu::IndexFormat::Uint32);
-            pass.draw_indexed(0..o.n_indices, 0, 0..1);
-        };
         for &i in &self.draw_order[..self.n_opaque] {
             let o = &self.objects[i];
             pass.set_pipeline(if o.closed {
@@ -812,8 +823,14 @@ impl Renderer {
             } else {
                 &self.opaque
             });
-            draw(pass, o);
+            draw_object(pass, o);
         }
+    }
+
+    /// Records the draws from the lines up: the lines, then the transparent objects far to
+    /// near.
+    fn paint_above(&self, pass: &mut wgpu::RenderPass<'_>) {
+        pass.set_bind_group(0, &self.globals_bind_group, &[]);
         if let Some((buf, n)) = &self.line_buffer {
             pass.set_pipeline(&self.lines);
             pass.set_vertex_buffer(0, buf.slice(..));
@@ -821,9 +838,9 @@ impl Renderer {
         }
         for &i in &self.draw_order[self.n_opaque..] {
             pass.set_pipeline(&self.transparent_back);
-            draw(pass, &self.objects[i]);
+            draw_object(pass, &self.objects[i]);
             pass.set_pipeline(&self.transparent_front);
-            draw(pass, &self.objects[i]);
+            draw_object(pass, &self.objects[i]);
         }
     }
 
@@ -831,6 +848,17 @@ impl Renderer {
     pub fn draw_order(&self) -> &[usize] {
         &self.draw_order
     }
+}
+
+/// Records the draw of object `o` with the pipeline set.
+fn draw_object(pass: &mut wgpu::RenderPass<'_>, o: &GpuObject) {
+    if o.n_indices == 0 {
+        return;
+    }
+    pass.set_bind_group(1, &o.bind_group, &[]);
+    pass.set_vertex_buffer(0, o.vertices.slice(..));
+    pass.set_index_buffer(o.indices.slice(..), wgpu::IndexFormat::Uint32);
+    pass.draw_indexed(0..o.n_indices, 0, 0..1);
 }
 
 /// Bytes of one triangle in an index buffer.

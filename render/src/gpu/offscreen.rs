@@ -1,6 +1,6 @@
 //! Headless rendering: a private device draws a [`Scene`] into an RGBA image or a PNG file.
 
-use super::{PrepareError, Renderer};
+use super::{KeptPicture, PrepareError, Renderer};
 use crate::scene::Scene;
 use plot::image::{PngError, RgbaImage};
 use std::path::Path;
@@ -86,9 +86,7 @@ impl Headless {
         width: u32,
         height: u32,
     ) -> Result<RgbaImage, OffscreenError> {
-        if width == 0 || height == 0 || width > MAX_OFFSCREEN_SIDE || height > MAX_OFFSCREEN_SIDE {
-            return Err(OffscreenError::BadSize(width, height));
-        }
+        check_size(width, height)?;
         self.renderer
             .prepare(&self.device, &self.queue, scene, [width, height])?;
         let size = wgpu::Extent3d {
@@ -99,14 +97,6 @@ impl Headless {
         let [colour, depth] = self.targets(size);
         let colour_view = colour.create_view(&Default::default());
         let depth_view = depth.create_view(&Default::default());
-        let padded_row = (4 * width).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
-            * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-        let readback = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("offscreen readback"),
-            size: u64::from(padded_row) * u64::from(height),
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
         let mut encoder = self.device.create_command_encoder(&Default::default());
         self.renderer.draw_into(
             &mut encoder,
@@ -115,13 +105,59 @@ impl Headless {
             &depth_view,
             scene.background,
         );
+        self.finish(encoder, &colour)
+    }
+
+    /// A picture of `width` x `height` for [`Headless::render_kept`].
+    pub fn kept_picture(&self, width: u32, height: u32) -> Result<KeptPicture, OffscreenError> {
+        check_size(width, height)?;
+        Ok(KeptPicture::new(
+            &self.device,
+            [width, height],
+            [COLOUR_FORMAT, DEPTH_FORMAT],
+            wgpu::TextureUsages::empty(),
+            &[],
+        ))
+    }
+
+    /// Renders `scene` into `picture` as a window keeps it between frames
+    /// ([`KeptPicture::draw`]); also returns whether the objects below the lines were drawn
+    /// (not when only the lines changed since the picture's last frame).
+    pub fn render_kept(
+        &mut self,
+        scene: &Scene,
+        picture: &mut KeptPicture,
+    ) -> Result<(RgbaImage, bool), OffscreenError> {
+        self.renderer
+            .prepare(&self.device, &self.queue, scene, picture.size_px())?;
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        let below = picture.draw(
+            &mut self.renderer,
+            &mut encoder,
+            "offscreen kept",
+            scene.background,
+        );
+        Ok((self.finish(encoder, picture.colour())?, below))
+    }
+
+    /// Copies `colour` out after what `encoder` recorded, submits, and reads it back.
+    fn finish(
+        &self,
+        mut encoder: wgpu::CommandEncoder,
+        colour: &wgpu::Texture,
+    ) -> Result<RgbaImage, OffscreenError> {
+        let size = colour.size();
+        let (width, height) = (size.width, size.height);
+        let padded_row = (4 * width).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
+            * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+        let readback = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("offscreen readback"),
+            size: u64::from(padded_row) * u64::from(height),
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
         encoder.copy_texture_to_buffer(
-            wgpu::TexelCopyTextureInfo {
-                texture: &colour,
-                mip_level: 0,
-                origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::All,
-            },
+            colour.as_image_copy(),
             wgpu::TexelCopyBufferInfo {
                 buffer: &readback,
                 layout: wgpu::TexelCopyBufferLayout {
@@ -201,6 +237,14 @@ impl Headless {
             pixels,
         })
     }
+}
+
+/// Refuses an image side of zero or above [`MAX_OFFSCREEN_SIDE`].
+fn check_size(width: u32, height: u32) -> Result<(), OffscreenError> {
+    if width == 0 || height == 0 || width > MAX_OFFSCREEN_SIDE || height > MAX_OFFSCREEN_SIDE {
+        return Err(OffscreenError::BadSize(width, height));
+    }
+    Ok(())
 }
 
 /// Renders `scene` on a fresh headless device.

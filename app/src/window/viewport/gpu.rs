@@ -9,14 +9,16 @@
 //!
 //! The picture texture outlives the frame: a frame whose scene changes nothing the renderer
 //! draws (`Renderer::changed`), as when only the panels or the status line change, copies the
-//! last picture again instead of drawing the scene. On a software rasteriser drawing a large
-//! mesh takes tens of milliseconds, and such frames would otherwise hold up the next one.
+//! last picture again instead of drawing the scene; one whose scene changed only its lines (a
+//! peer's pointer or tool moved) draws them over a kept copy of the objects (`KeptPicture`).
+//! On a software rasteriser drawing a large mesh takes tens of milliseconds, and such frames
+//! would otherwise hold up the next one.
 
 use std::sync::{Arc, Mutex};
 
 use eframe::egui;
 use eframe::egui_wgpu::{CallbackResources, CallbackTrait, ScreenDescriptor};
-use render::gpu::Renderer;
+use render::gpu::{KeptPicture, Renderer};
 use render::mesh::Mesh;
 use render::mesh::octree::MeshPatch;
 use render::scene::Scene;
@@ -55,11 +57,9 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
 }
 ";
 
-/// The picture texture at the viewport's size.
+/// The picture at the viewport's size, kept between frames, and its bindings for the blit.
 struct Target {
-    size_px: [u32; 2],
-    render_view: wgpu::TextureView,
-    depth_view: wgpu::TextureView,
+    picture: KeptPicture,
     bind_group: wgpu::BindGroup,
 }
 
@@ -100,41 +100,19 @@ impl ViewportResources {
         }
     }
 
-    /// Makes the picture texture `size_px` big; returns whether it made a new one (which
-    /// holds no picture yet).
+    /// Makes the picture `size_px` big; returns whether it made a new one (which holds no
+    /// picture yet).
     fn ensure_target(&mut self, device: &wgpu::Device, size_px: [u32; 2]) -> bool {
-        let fresh = self.target.as_ref().is_none_or(|t| t.size_px != size_px);
+        let fresh = (self.target.as_ref()).is_none_or(|t| t.picture.size_px() != size_px);
         if fresh {
-            let size = wgpu::Extent3d {
-                width: size_px[0],
-                height: size_px[1],
-                depth_or_array_layers: 1,
-            };
-            let texture = |label, format, usage, view_formats: &[wgpu::TextureFormat]| {
-                device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size,
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format,
-                    usage,
-                    view_formats,
-                })
-            };
-            let colour = texture(
-                "sculpt viewport colour",
-                COLOUR_FORMAT,
-                wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            let picture = KeptPicture::new(
+                device,
+                size_px,
+                [COLOUR_FORMAT, DEPTH_FORMAT],
+                wgpu::TextureUsages::TEXTURE_BINDING,
                 &[COLOUR_BYTES_FORMAT],
             );
-            let depth = texture(
-                "sculpt viewport depth",
-                DEPTH_FORMAT,
-                wgpu::TextureUsages::RENDER_ATTACHMENT,
-                &[],
-            );
-            let read_view = colour.create_view(&wgpu::TextureViewDescriptor {
+            let read_view = picture.colour().create_view(&wgpu::TextureViewDescriptor {
                 format: Some(self.read_format),
                 ..Default::default()
             });
@@ -153,9 +131,7 @@ impl ViewportResources {
                 ],
             });
             self.target = Some(Target {
-                size_px,
-                render_view: colour.create_view(&Default::default()),
-                depth_view: depth.create_view(&Default::default()),
+                picture,
                 bind_group,
             });
         }
@@ -247,6 +223,9 @@ pub struct ViewportReport {
     pub n_patches_refused: u64,
     /// Frames that drew the scene.
     pub n_drawn: u64,
+    /// Frames that drew only the lines (and the transparent objects) again, over the kept
+    /// picture of the rest: another peer's pointer or tool moved.
+    pub n_lines_only: u64,
     /// Frames that showed the last picture again, the scene unchanged.
     pub n_reused: u64,
 }
@@ -263,6 +242,7 @@ impl Default for ViewportReport {
             min_upload_bytes: None,
             n_patches_refused: 0,
             n_drawn: 0,
+            n_lines_only: 0,
             n_reused: 0,
         }
     }
@@ -321,24 +301,26 @@ impl CallbackTrait for ViewportCallback {
             return Vec::new();
         }
         let fresh = res.ensure_target(device, self.size_px);
-        let Some(target) = &res.target else {
+        let Some(target) = &mut res.target else {
             return Vec::new();
         };
         let drawn = fresh || res.renderer.changed();
-        if let Ok(mut report) = self.report.lock() {
-            report.n_drawn += u64::from(drawn);
-            report.n_reused += u64::from(!drawn);
-        }
         if !drawn {
+            if let Ok(mut report) = self.report.lock() {
+                report.n_reused += 1;
+            }
             return Vec::new();
         }
-        res.renderer.draw_into(
+        let below = (target.picture).draw(
+            &mut res.renderer,
             encoder,
             "sculpt viewport",
-            &target.render_view,
-            &target.depth_view,
             self.scene.background,
         );
+        if let Ok(mut report) = self.report.lock() {
+            report.n_drawn += u64::from(below);
+            report.n_lines_only += u64::from(!below);
+        }
         let ms = clock::now().instant.duration_since(start).as_secs_f64() * 1e3;
         if let Ok(mut report) = self.report.lock() {
             report.prepare_ms.push(ms);
@@ -355,7 +337,8 @@ impl CallbackTrait for ViewportCallback {
         let Some(res) = resources.get::<ViewportResources>() else {
             return;
         };
-        let Some(target) = res.target.as_ref().filter(|t| t.size_px == self.size_px) else {
+        let Some(target) = (res.target.as_ref()).filter(|t| t.picture.size_px() == self.size_px)
+        else {
             return;
         };
         pass.set_pipeline(&res.blit);
