@@ -1643,9 +1643,6 @@ fn another_windows_strokes_reach_this_windows_screen_timed_from_their_ops() {
         at(1.0),
         below["frame_interval_ms"],
     );
-    // The other window's pointer moves between its strokes' meshes: those frames drew only
-    // the lines again, over the kept picture of the objects.
-    assert!(frames["lines_only"].as_u64() > Some(0), "{frames}");
 }
 
 #[test]
