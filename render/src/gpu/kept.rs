@@ -8,6 +8,9 @@
 //! lines, it copies them back and draws the lines and the transparent objects over them.
 //! The pixels are those of one pass drawing everything ([`Renderer::draw_into`]): the same
 //! draws in the same order, the later ones depth-tested against the same depths.
+//!
+//! The cost: a second colour and depth texture at the picture's size (8 bytes a pixel, about
+//! 4 MB at 900x600), and their copies on a frame that draws everything.
 
 use super::Renderer;
 
