@@ -15,6 +15,7 @@
 
 use glam::{Mat4, Vec3};
 use render::camera::Camera;
+use render::gpu::KeptFrame;
 use render::gpu::offscreen::Headless;
 use render::mesh::octree::{MeshSettings, mesh};
 use render::mesh::{Aabb, TapeField};
@@ -123,9 +124,10 @@ fn kept_frames(gpu: &mut Headless, scene: &mut Scene, frames: u32, [width, heigh
                 scene.add_crosshair(at, 0.2, [1.0, 1.0, 0.0, 1.0]);
             }
             let t0 = now();
+            let expected = [KeptFrame::Whole, KeptFrame::LinesOnly][moved];
             match gpu.render_kept(scene, &mut picture) {
-                Ok((_, below)) if below == (moved == 0) => times.push(t0.elapsed()),
-                Ok((_, below)) => return println!("kept frame drew below the lines: {below}"),
+                Ok((_, kept)) if kept == expected => times.push(t0.elapsed()),
+                Ok((_, kept)) => return println!("kept frame {kept:?}, not {expected:?}"),
                 Err(e) => return println!("render failed: {e}"),
             }
         }

@@ -12,7 +12,8 @@
 //! A prepare also says whether it changed anything a draw shows (`Renderer::changed`), so that
 //! a window may show its last picture again: each thing drawn, changed alone, says so once.
 //! A kept picture (`KeptPicture`) whose scene changed only its lines draws only the lines and
-//! the transparent objects over its kept layer of the others, and shows the one-pass picture.
+//! the transparent objects over its kept layer of the others, and one handed each patch draws
+//! the objects again only in the patch's region; both show the one-pass picture.
 //! A closed object (`SceneObject::closed`) is drawn without its back faces: the ball's picture
 //! is the two-sided one, and a triangle seen from behind is not drawn at all.
 #![allow(
@@ -23,6 +24,7 @@
 use glam::{DVec3, Mat4, Vec3};
 use model::object::{Domain, Edit, EditOp, Formula, Geometry, Object, ObjectData, Pose, ToolShape};
 use render::camera::Camera;
+use render::gpu::KeptFrame;
 use render::gpu::offscreen::{Headless, OffscreenError};
 use render::mesh::object_field::{Dirty, dirty_boxes};
 use render::mesh::octree::{MeshPatch, MeshSettings, OctreeMesher};
@@ -160,8 +162,8 @@ fn whole_bytes(m: &Mesh) -> u64 {
 
 #[test]
 fn patched_uploads_draw_the_whole_upload_picture_after_each_edit() {
-    let (Some(mut patched), Some(mut skipping), Some(mut whole)) =
-        (headless(), headless(), headless())
+    let (Some(mut patched), Some(mut skipping), Some(mut whole), Some(mut kept)) =
+        (headless(), headless(), headless(), headless())
     else {
         return;
     };
@@ -185,6 +187,13 @@ fn patched_uploads_draw_the_whole_upload_picture_after_each_edit() {
     let before = draw(&mut patched, &scene);
     assert_eq!(before, draw(&mut skipping, &scene));
     assert_eq!(before, draw(&mut whole, &scene));
+    // `kept` draws into a kept picture, each patch only where it reaches.
+    let mut picture = kept.kept_picture(WIDTH, HEIGHT).unwrap();
+    assert_eq!(
+        before,
+        kept.render_kept(&scene, &mut picture).unwrap().0.pixels
+    );
+    let mut n_regions = 0;
     let background = &before[..4];
     let n_object_pixels = before.chunks_exact(4).filter(|p| p != &background).count();
     assert!(
@@ -204,6 +213,9 @@ fn patched_uploads_draw_the_whole_upload_picture_after_each_edit() {
         let next = Arc::new(next);
         patched
             .renderer_mut()
+            .patch_object(0, &base, &next, &patch)
+            .unwrap();
+        (kept.renderer_mut())
             .patch_object(0, &base, &next, &patch)
             .unwrap();
         let skipped = without_longest_range(&patch).unwrap_or_else(|| patch.clone());
@@ -238,10 +250,24 @@ fn patched_uploads_draw_the_whole_upload_picture_after_each_edit() {
                 whole_bytes(&next)
             );
         }
+        let (in_region, frame) = kept.render_kept(&scene, &mut picture).unwrap();
+        let wrong = n_differing_pixels(&in_region.pixels, &expected);
+        assert_eq!(
+            wrong, 0,
+            "edit {k}, kept picture drawing {frame:?}: {wrong} pixels"
+        );
+        if let KeptFrame::Region([x0, y0, x1, y1]) = frame {
+            n_regions += 1;
+            assert!(
+                4 * (x1 - x0) * (y1 - y0) < WIDTH * HEIGHT,
+                "edit {k}: {frame:?} is most of the picture"
+            );
+        }
         let drawn_skipping = draw(&mut skipping, &scene);
         n_skipping_wrong += usize::from(n_differing_pixels(&drawn_skipping, &expected) > 0);
     }
     assert!(n_patched >= 5, "{n_patched} edits uploaded as patches");
+    assert_eq!(n_regions, n_patched, "each patch drawn in its region");
     assert!(
         2 * n_skipping_wrong >= n_patched,
         "leaving a patch range out showed in only {n_skipping_wrong} of {n_patched} pictures"
@@ -449,20 +475,21 @@ fn a_kept_picture_draws_only_moved_lines_again_and_shows_the_one_pass_picture() 
     };
     let mut picture = kept.kept_picture(WIDTH, HEIGHT).unwrap();
     let mut frame = |scene: &Scene| {
-        let (image, below) = kept.render_kept(scene, &mut picture).unwrap();
+        let (image, kept) = kept.render_kept(scene, &mut picture).unwrap();
         let expected = one_pass.render(scene, WIDTH, HEIGHT).unwrap();
         let n = n_differing_pixels(&image.pixels, &expected.pixels);
-        (image.pixels, below, n)
+        (image.pixels, kept, n)
     };
     tool(&mut scene, Vec3::new(0.9, 0.0, 0.3));
-    let (first, below, n) = frame(&scene);
-    assert!(below, "a new picture draws everything");
+    let (first, kept, n) = frame(&scene);
+    assert_eq!(kept, KeptFrame::Whole, "a new picture draws everything");
     assert_eq!(n, 0, "the first frame is the one-pass picture");
 
     tool(&mut scene, Vec3::new(0.5, 0.4, 0.6));
-    let (moved, below, n) = frame(&scene);
-    assert!(
-        !below,
+    let (moved, kept, n) = frame(&scene);
+    assert_eq!(
+        kept,
+        KeptFrame::LinesOnly,
         "only the lines changed: the objects are not drawn again"
     );
     assert_eq!(
@@ -473,8 +500,11 @@ fn a_kept_picture_draws_only_moved_lines_again_and_shows_the_one_pass_picture() 
         n_differing_pixels(&first, &moved) > 50,
         "the lines moved in the picture"
     );
-    let (_, below, n) = frame(&scene);
-    assert!(!below && n == 0, "nothing changed: the kept layer again");
+    let (_, kept, n) = frame(&scene);
+    assert!(
+        kept == KeptFrame::LinesOnly && n == 0,
+        "nothing changed: the kept layer again"
+    );
 
     let changes: Vec<(&str, SceneEdit)> = vec![
         ("the camera", Box::new(|s| s.camera.yaw += 0.2)),
@@ -492,12 +522,19 @@ fn a_kept_picture_draws_only_moved_lines_again_and_shows_the_one_pass_picture() 
     ];
     for (what, change) in &changes {
         change(&mut scene);
-        let (_, below, n) = frame(&scene);
-        assert!(below, "{what} changed: everything is drawn");
+        let (_, kept, n) = frame(&scene);
+        assert_eq!(
+            kept,
+            KeptFrame::Whole,
+            "{what} changed: everything is drawn"
+        );
         assert_eq!(n, 0, "{what}: the one-pass picture");
         tool(&mut scene, Vec3::new(0.2, -0.3, 0.7));
-        let (_, below, n) = frame(&scene);
-        assert!(!below && n == 0, "then the lines alone over {what}");
+        let (_, kept, n) = frame(&scene);
+        assert!(
+            kept == KeptFrame::LinesOnly && n == 0,
+            "then the lines alone over {what}"
+        );
     }
 }
 

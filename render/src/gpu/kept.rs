@@ -1,11 +1,15 @@
 //! A picture kept between frames in two layers, so that a frame whose only change is the
-//! lines draws only the lines.
+//! lines draws only the lines, and one whose only change is a mesh patch draws the objects
+//! again only where the patch reaches.
 //!
 //! A peer's pointer and tool are lines, and move many times a second while the scene stands
 //! still: on a software rasteriser drawing the objects again costs tens of milliseconds a
 //! frame, copying a kept picture of them one or two. [`KeptPicture::draw`] keeps the objects
 //! below the lines (the opaque ones, colour and depth) aside; when a prepare changed only the
 //! lines, it copies them back and draws the lines and the transparent objects over them.
+//! When it patched opaque meshes and nothing else, the rectangle of pixels the patches may
+//! change (`super::region`) is cleared (colour copied from a picture of the background alone,
+//! depth reset by one triangle) and the objects drawn again under a scissor there.
 //! The pixels are those of one pass drawing everything ([`Renderer::draw_into`]): the same
 //! draws in the same order, the later ones depth-tested against the same depths.
 //!
@@ -13,6 +17,39 @@
 //! 4 MB at 900x600), and their copies on a frame that draws everything.
 
 use super::Renderer;
+use super::region::Below;
+
+/// Resets the depth under the scissor to the far plane, colour untouched: one triangle
+/// over the picture.
+const DEPTH_RESET_SHADER: &str = r"
+@vertex
+fn vs_main(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
+    let uv = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u));
+    return vec4<f32>(uv.x * 2.0 - 1.0, uv.y * 2.0 - 1.0, 0.5, 1.0);
+}
+
+struct Out {
+    @location(0) colour: vec4<f32>,
+    @builtin(frag_depth) depth: f32,
+};
+
+@fragment
+fn fs_main() -> Out {
+    return Out(vec4<f32>(0.0), 1.0);
+}
+";
+
+/// What [`KeptPicture::draw`] drew.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KeptFrame {
+    /// Everything.
+    Whole,
+    /// The objects within `[x0, x1) x [y0, y1)` pixels (a mesh patch changed only those),
+    /// then the lines and the transparent objects.
+    Region([u32; 4]),
+    /// The lines and the transparent objects over the kept objects.
+    LinesOnly,
+}
 
 /// The picture a host shows, and the layer below its lines kept aside, at one size.
 pub struct KeptPicture {
@@ -25,6 +62,11 @@ pub struct KeptPicture {
     below_depth: wgpu::Texture,
     /// Whether the layer below holds a drawing (a new picture holds none).
     holds_below: bool,
+    /// A picture of the background alone, and the background it holds, if any: a region is
+    /// cleared by copying from it, bytes as a clear writes them.
+    blank: wgpu::Texture,
+    blank_of: Option<[f32; 4]>,
+    depth_reset: wgpu::RenderPipeline,
 }
 
 impl KeptPicture {
@@ -68,6 +110,9 @@ impl KeptPicture {
             below_colour: texture("kept picture below the lines", colour, copied, &[]),
             below_depth: texture("kept picture depth below the lines", depth, copied, &[]),
             holds_below: false,
+            blank: texture("kept picture background", colour, drawn, &[]),
+            blank_of: None,
+            depth_reset: depth_reset_pipeline(device, colour, depth),
         }
     }
 
@@ -83,8 +128,9 @@ impl KeptPicture {
 
     /// Records into `encoder` the last scene `renderer` prepared, over a clear of
     /// `background`: all of it when anything below the lines changed since this picture
-    /// last drew it (or it holds none yet), else the kept layer below with the lines and the
-    /// transparent objects drawn again over it. Returns whether it drew the layer below.
+    /// last drew it (or it holds none yet); the objects within a region when only patches of
+    /// opaque objects changed there; else the kept layer below alone. The lines and the
+    /// transparent objects are drawn again over it in every case.
     ///
     /// One renderer draws into one kept picture: what changed is the renderer's.
     pub fn draw(
@@ -93,31 +139,101 @@ impl KeptPicture {
         encoder: &mut wgpu::CommandEncoder,
         label: &str,
         background: [f32; 4],
-    ) -> bool {
-        let below = renderer.below_changed || !self.holds_below;
-        if below {
-            let [r, g, b, a] = background.map(f64::from);
-            let clear = wgpu::LoadOp::Clear(wgpu::Color { r, g, b, a });
-            let mut pass = self.pass(encoder, label, clear, wgpu::LoadOp::Clear(1.0));
-            renderer.paint_below(&mut pass);
-            drop(pass);
-            self.copy(
-                encoder,
-                [&self.colour, &self.depth],
-                [&self.below_colour, &self.below_depth],
-            );
-            renderer.below_changed = false;
-            self.holds_below = true;
+    ) -> KeptFrame {
+        let below = if self.holds_below {
+            renderer.below
         } else {
-            self.copy(
-                encoder,
-                [&self.below_colour, &self.below_depth],
-                [&self.colour, &self.depth],
-            );
-        }
+            Below::All
+        };
+        let frame = match below {
+            Below::All => {
+                let [r, g, b, a] = background.map(f64::from);
+                let clear = wgpu::LoadOp::Clear(wgpu::Color { r, g, b, a });
+                let mut pass = self.pass(encoder, label, clear, wgpu::LoadOp::Clear(1.0));
+                renderer.paint_below(&mut pass);
+                drop(pass);
+                self.keep(encoder);
+                KeptFrame::Whole
+            }
+            Below::Region(region) => {
+                self.restore(encoder);
+                self.redraw_region(renderer, encoder, label, background, region);
+                self.keep(encoder);
+                KeptFrame::Region(region)
+            }
+            Below::Same => {
+                self.restore(encoder);
+                KeptFrame::LinesOnly
+            }
+        };
+        renderer.below = Below::Same;
+        self.holds_below = true;
         let mut pass = self.pass(encoder, label, wgpu::LoadOp::Load, wgpu::LoadOp::Load);
         renderer.paint_above(&mut pass);
-        below
+        frame
+    }
+
+    /// Clears `[x0, y0, x1, y1]` of the picture to `background` and the far plane and draws
+    /// the objects below the lines there.
+    fn redraw_region(
+        &mut self,
+        renderer: &Renderer,
+        encoder: &mut wgpu::CommandEncoder,
+        label: &str,
+        background: [f32; 4],
+        [x0, y0, x1, y1]: [u32; 4],
+    ) {
+        if self.blank_of != Some(background) {
+            let [r, g, b, a] = background.map(f64::from);
+            let view = self.blank.create_view(&Default::default());
+            encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some(label),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color { r, g, b, a }),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: None,
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            self.blank_of = Some(background);
+        }
+        let origin = wgpu::Origin3d { x: x0, y: y0, z: 0 };
+        let at = |texture| wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin,
+            aspect: wgpu::TextureAspect::All,
+        };
+        let extent = wgpu::Extent3d {
+            width: x1 - x0,
+            height: y1 - y0,
+            depth_or_array_layers: 1,
+        };
+        encoder.copy_texture_to_texture(at(&self.blank), at(&self.colour), extent);
+        let mut pass = self.pass(encoder, label, wgpu::LoadOp::Load, wgpu::LoadOp::Load);
+        pass.set_scissor_rect(x0, y0, x1 - x0, y1 - y0);
+        pass.set_pipeline(&self.depth_reset);
+        pass.draw(0..3, 0..1);
+        renderer.paint_below(&mut pass);
+    }
+
+    /// Copies the picture into the layer kept below the lines.
+    fn keep(&self, encoder: &mut wgpu::CommandEncoder) {
+        let below = [&self.below_colour, &self.below_depth];
+        copy(encoder, [&self.colour, &self.depth], below);
+    }
+
+    /// Copies the layer kept below the lines into the picture.
+    fn restore(&self, encoder: &mut wgpu::CommandEncoder) {
+        let below = [&self.below_colour, &self.below_depth];
+        copy(encoder, below, [&self.colour, &self.depth]);
     }
 
     /// A pass over the picture that loads its colour and depth as told and stores both.
@@ -152,16 +268,59 @@ impl KeptPicture {
             multiview_mask: None,
         })
     }
+}
 
-    /// Copies each of `from` whole into the same-sized texture of `to`.
-    fn copy(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        from: [&wgpu::Texture; 2],
-        to: [&wgpu::Texture; 2],
-    ) {
-        for (from, to) in from.into_iter().zip(to) {
-            encoder.copy_texture_to_texture(from.as_image_copy(), to.as_image_copy(), from.size());
-        }
+/// Copies each of `from` whole into the same-sized texture of `to`.
+fn copy(encoder: &mut wgpu::CommandEncoder, from: [&wgpu::Texture; 2], to: [&wgpu::Texture; 2]) {
+    for (from, to) in from.into_iter().zip(to) {
+        encoder.copy_texture_to_texture(from.as_image_copy(), to.as_image_copy(), from.size());
     }
+}
+
+/// The pipeline that resets depth to the far plane under the scissor, writing no colour.
+fn depth_reset_pipeline(
+    device: &wgpu::Device,
+    colour: wgpu::TextureFormat,
+    depth: wgpu::TextureFormat,
+) -> wgpu::RenderPipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("kept picture depth reset"),
+        source: wgpu::ShaderSource::Wgsl(DEPTH_RESET_SHADER.into()),
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("kept picture depth reset"),
+        bind_group_layouts: &[],
+        immediate_size: 0,
+    });
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("kept picture depth reset"),
+        layout: Some(&layout),
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState::default(),
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: depth,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Always),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: wgpu::MultisampleState::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some("fs_main"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format: colour,
+                blend: None,
+                write_mask: wgpu::ColorWrites::empty(),
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
 }

@@ -12,12 +12,14 @@
 //!
 //! A host that keeps its picture between frames draws through a [`KeptPicture`]: a prepare
 //! that changed only the lines (a peer's pointer, a touch tool) then costs a copy of the kept
-//! objects and the lines, not the objects' draw.
+//! objects and the lines, not the objects' draw, and one that only patched opaque meshes
+//! draws the objects again only within the pixels the patches reach (`region`).
 
 mod kept;
 pub mod offscreen;
+mod region;
 
-pub use kept::KeptPicture;
+pub use kept::{KeptFrame, KeptPicture};
 
 use crate::mesh::Mesh;
 use crate::mesh::MeshError;
@@ -25,6 +27,7 @@ use crate::mesh::octree::MeshPatch;
 use crate::scene::Scene;
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
+use region::{Below, Screen};
 use std::collections::BTreeMap;
 use std::ops::Range;
 use std::sync::Arc;
@@ -220,9 +223,9 @@ pub struct Renderer {
     last_frame: Option<(Globals, [f32; 4])>,
     /// Whether the last prepare changed anything its draw shows.
     changed: bool,
-    /// Whether a prepare changed anything below the lines (the globals, the background, an
-    /// object) since a [`KeptPicture`] last drew it.
-    below_changed: bool,
+    /// What prepares changed below the lines (the globals, the background, the objects)
+    /// since a [`KeptPicture`] last drew it.
+    below: Below,
     /// Per object index, the patches handed in since the last prepare.
     pending: BTreeMap<usize, PendingPatch>,
     /// Mesh bytes (vertices and indices) the last prepare wrote.
@@ -448,7 +451,7 @@ impl Renderer {
             line_vertices: Vec::new(),
             last_frame: None,
             changed: true,
-            below_changed: true,
+            below: Below::All,
             pending: BTreeMap::new(),
             mesh_bytes_uploaded: 0,
         }
@@ -545,7 +548,7 @@ impl Renderer {
         }
         // A prepare that fails leaves nothing to show again.
         self.changed = true;
-        let below_changed = std::mem::replace(&mut self.below_changed, true);
+        let below_before = std::mem::replace(&mut self.below, Below::All);
         self.validate_new_meshes(scene)?;
         let aspect = size_px[0].max(1) as f32 / size_px[1].max(1) as f32;
         let eye = scene.camera.eye();
@@ -555,32 +558,40 @@ impl Renderer {
             light_towards: scene.light_towards.extend(0.0).to_array(),
         };
         let frame = (g, scene.background);
-        let mut changed = self.objects.len() != scene.objects.len()
+        let frame_changed = self.objects.len() != scene.objects.len()
             || self.last_frame.is_none_or(|(last, background)| {
                 bytemuck::bytes_of(&last) != bytemuck::bytes_of(&g) || background != frame.1
             });
-        if changed {
+        if frame_changed {
             queue.write_buffer(&self.globals, 0, bytemuck::bytes_of(&g));
             self.last_frame = Some(frame);
         }
-        changed |= self.prepare_objects(device, queue, scene);
+        let screen = Screen {
+            view_proj: glam::Mat4::from_cols_array_2d(&g.view_proj),
+            size_px,
+        };
+        let below = self.prepare_objects(device, queue, scene, &screen);
+        let mut changed = frame_changed || below != Below::Same;
         self.sort_draws(scene, eye);
         // Kept until a kept picture draws below the lines again.
-        self.below_changed = below_changed || changed;
+        let below = if frame_changed { Below::All } else { below };
+        self.below = below_before.join(below);
         changed |= self.upload_lines(device, scene);
         self.changed = changed;
         Ok(())
     }
 
     /// Uploads `scene`'s objects' meshes (or their patches) and uniforms where they differ
-    /// from what the buffers hold; returns whether any did.
+    /// from what the buffers hold; returns what that changed below the lines on `screen`
+    /// (within a region where the only changes are patches of opaque objects).
     fn prepare_objects(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         scene: &Scene,
-    ) -> bool {
-        let mut changed = false;
+        screen: &Screen,
+    ) -> Below {
+        let mut below = Below::Same;
         self.objects.truncate(scene.objects.len());
         self.mesh_bytes_uploaded = 0;
         let mut pending = std::mem::take(&mut self.pending);
@@ -589,15 +600,14 @@ impl Renderer {
                 .objects
                 .get(i)
                 .is_none_or(|g| !Arc::ptr_eq(&g.mesh, &o.mesh));
-            changed |= fresh;
             if fresh {
                 let patch = pending.remove(&i).filter(|p| Arc::ptr_eq(&p.mesh, &o.mesh));
-                let patched = patch.as_ref().is_some_and(|p| {
-                    self.objects.get_mut(i).is_some_and(|gpu| {
-                        write_patch(queue, gpu, p, &mut self.mesh_bytes_uploaded)
-                    })
+                let patched = patch.as_ref().and_then(|p| self.write_patch(queue, i, p));
+                below = below.join(match (patched, &patch) {
+                    (Some(true), Some(p)) => patch_region(p, o, screen),
+                    _ => Below::All,
                 });
-                if !patched {
+                if patched.is_none() {
                     let spare = patch.is_some();
                     let gpu = self.upload(device, queue, &o.mesh, spare);
                     if i < self.objects.len() {
@@ -615,12 +625,23 @@ impl Renderer {
             {
                 queue.write_buffer(&gpu.uniform, 0, bytemuck::bytes_of(&u));
                 gpu.uniform_value = Some(u);
-                changed = true;
+                below = Below::All;
             }
-            changed |= gpu.closed != o.closed;
+            if gpu.closed != o.closed {
+                below = Below::All;
+            }
             gpu.closed = o.closed;
         }
-        changed
+        below
+    }
+
+    /// Writes `patch` into object `i`'s buffers if they hold its base and have room: then
+    /// whether the object is opaque before and after it (Some), else None (nothing written).
+    fn write_patch(&mut self, queue: &wgpu::Queue, i: usize, patch: &PendingPatch) -> Option<bool> {
+        let gpu = self.objects.get_mut(i)?;
+        let was_opaque = !gpu.layout.translucent_vertices;
+        write_patch(queue, gpu, patch, &mut self.mesh_bytes_uploaded)
+            .then_some(was_opaque && !gpu.layout.translucent_vertices)
     }
 
     /// Validates the meshes of `scene` not uploaded yet. One already uploaded was validated
@@ -847,6 +868,17 @@ impl Renderer {
     /// The object indexes in the order the last [`Renderer::paint`] draws them.
     pub fn draw_order(&self) -> &[usize] {
         &self.draw_order
+    }
+}
+
+/// The pixels a patch of the opaque object `o` may change on `screen`.
+fn patch_region(p: &PendingPatch, o: &crate::scene::SceneObject, screen: &Screen) -> Below {
+    if o.material.is_transparent() {
+        return Below::All;
+    }
+    match region::patch_bounds(&p.base, &p.mesh, &p.vertex_ranges, &p.triangle_ranges) {
+        Some(bounds) => screen.region(o.world_from_object, bounds),
+        None => Below::Same,
     }
 }
 

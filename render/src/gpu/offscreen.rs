@@ -1,6 +1,6 @@
 //! Headless rendering: a private device draws a [`Scene`] into an RGBA image or a PNG file.
 
-use super::{KeptPicture, PrepareError, Renderer};
+use super::{KeptFrame, KeptPicture, PrepareError, Renderer};
 use crate::scene::Scene;
 use plot::image::{PngError, RgbaImage};
 use std::path::Path;
@@ -121,13 +121,12 @@ impl Headless {
     }
 
     /// Renders `scene` into `picture` as a window keeps it between frames
-    /// ([`KeptPicture::draw`]); also returns whether the objects below the lines were drawn
-    /// (not when only the lines changed since the picture's last frame).
+    /// ([`KeptPicture::draw`]); also returns what was drawn.
     pub fn render_kept(
         &mut self,
         scene: &Scene,
         picture: &mut KeptPicture,
-    ) -> Result<(RgbaImage, bool), OffscreenError> {
+    ) -> Result<(RgbaImage, KeptFrame), OffscreenError> {
         self.renderer
             .prepare(&self.device, &self.queue, scene, picture.size_px())?;
         let mut encoder = self.device.create_command_encoder(&Default::default());

@@ -228,7 +228,7 @@ impl SculptApp {
             "last_upload_bytes": report.map(|r| r.last_upload_bytes),
             "min_upload_bytes": report.and_then(|r| r.min_upload_bytes),
             "patches_refused": report.map(|r| r.n_patches_refused),
-            "viewport_frames": report.map(|r| json!({ "drawn": r.n_drawn, "lines_only": r.n_lines_only, "reused": r.n_reused })),
+            "viewport_frames": report.map(|r| json!({ "drawn": r.n_drawn, "regions": r.n_regions, "lines_only": r.n_lines_only, "reused": r.n_reused })),
         })
     }
 

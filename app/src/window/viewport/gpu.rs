@@ -10,7 +10,8 @@
 //! The picture texture outlives the frame: a frame whose scene changes nothing the renderer
 //! draws (`Renderer::changed`), as when only the panels or the status line change, copies the
 //! last picture again instead of drawing the scene; one whose scene changed only its lines (a
-//! peer's pointer or tool moved) draws them over a kept copy of the objects (`KeptPicture`).
+//! peer's pointer or tool moved) draws them over a kept copy of the objects (`KeptPicture`),
+//! and one that patched a mesh draws the objects again only where the patch reaches.
 //! On a software rasteriser drawing a large mesh takes tens of milliseconds, and such frames
 //! would otherwise hold up the next one.
 
@@ -18,7 +19,7 @@ use std::sync::{Arc, Mutex};
 
 use eframe::egui;
 use eframe::egui_wgpu::{CallbackResources, CallbackTrait, ScreenDescriptor};
-use render::gpu::{KeptPicture, Renderer};
+use render::gpu::{KeptFrame, KeptPicture, Renderer};
 use render::mesh::Mesh;
 use render::mesh::octree::MeshPatch;
 use render::scene::Scene;
@@ -223,6 +224,9 @@ pub struct ViewportReport {
     pub n_patches_refused: u64,
     /// Frames that drew the scene.
     pub n_drawn: u64,
+    /// Frames that drew the objects again only where mesh patches changed them, over the
+    /// kept picture of the rest.
+    pub n_regions: u64,
     /// Frames that drew only the lines (and the transparent objects) again, over the kept
     /// picture of the rest: another peer's pointer or tool moved.
     pub n_lines_only: u64,
@@ -242,6 +246,7 @@ impl Default for ViewportReport {
             min_upload_bytes: None,
             n_patches_refused: 0,
             n_drawn: 0,
+            n_regions: 0,
             n_lines_only: 0,
             n_reused: 0,
         }
@@ -311,15 +316,19 @@ impl CallbackTrait for ViewportCallback {
             }
             return Vec::new();
         }
-        let below = (target.picture).draw(
+        let kept = (target.picture).draw(
             &mut res.renderer,
             encoder,
             "sculpt viewport",
             self.scene.background,
         );
         if let Ok(mut report) = self.report.lock() {
-            report.n_drawn += u64::from(below);
-            report.n_lines_only += u64::from(!below);
+            let n = match kept {
+                KeptFrame::Whole => &mut report.n_drawn,
+                KeptFrame::Region(_) => &mut report.n_regions,
+                KeptFrame::LinesOnly => &mut report.n_lines_only,
+            };
+            *n += 1;
         }
         let ms = clock::now().instant.duration_since(start).as_secs_f64() * 1e3;
         if let Ok(mut report) = self.report.lock() {
