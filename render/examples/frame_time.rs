@@ -11,7 +11,8 @@
 //! Then the same number of frames into one picture kept between frames, as the window keeps
 //! it (`Headless::render_kept`), in turns: one with the camera turned (everything drawn) and
 //! one with only the crosshair moved, as when a peer's tool moves (the lines drawn over the
-//! kept objects).
+//! kept objects). Last, the time of a pick (`Scene::pick`, what every drag and hover frame
+//! of the window asks) along a row of pixels across the picture.
 
 use glam::{Mat4, Vec3};
 use render::camera::Camera;
@@ -104,6 +105,38 @@ fn main() {
     }
     report(&format!("{frames} frames at {width}x{height}"), times);
     kept_frames(&mut gpu, &mut scene, frames, [width, height]);
+    picks(&scene, [width, height]);
+    // Fifteen copies more, out of the rays' way above the picture: a pick meets their boxes.
+    let ball = scene.objects[0].clone();
+    for k in 0..15 {
+        let mut copy = ball.clone();
+        copy.world_from_object = Mat4::from_translation(Vec3::new(3.0 * k as f32 - 21.0, 0.0, 6.0));
+        scene.objects.push(copy);
+    }
+    print!("16 objects, 1 under the rays: ");
+    picks(&scene, [width, height]);
+}
+
+/// Times picks through 40 pixels along the middle row of a `size` picture.
+fn picks(scene: &Scene, size: [u32; 2]) {
+    const N_PICKS: u32 = 40;
+    let mut n_hits = 0;
+    let t0 = now();
+    for i in 0..N_PICKS {
+        let px = [
+            size[0] as f32 * (0.2 + 0.6 * i as f32 / N_PICKS as f32),
+            size[1] as f32 / 2.0,
+        ];
+        n_hits += u32::from(
+            scene
+                .pick(&scene.camera.ray_through_pixel(px, size))
+                .is_some(),
+        );
+    }
+    println!(
+        "a pick: {:.2?} ({n_hits} of {N_PICKS} rays hit)",
+        t0.elapsed() / N_PICKS
+    );
 }
 
 /// Times `frames` pairs of frames into a kept picture: the camera turned, then the crosshair

@@ -237,19 +237,32 @@ impl Scene {
     }
 
     /// The nearest triangle the ray hits, over all objects.
+    ///
+    /// Each object's triangles are met in its own space, by the ray carried there once (an
+    /// affine map keeps the parameter along a line, so distances compare across objects): a
+    /// pick runs on every drag and hover frame, over meshes of a million triangles.
     pub fn pick(&self, ray: &Ray) -> Option<PickHit> {
         let mut best: Option<PickHit> = None;
         for (object_idx, o) in self.objects.iter().enumerate() {
-            let m = &o.mesh;
-            let p = |i: u32| {
-                o.world_from_object
-                    .transform_point3(Vec3::from_array(m.positions[i as usize]))
+            let object_from_world = o.world_from_object.inverse();
+            let local = Ray {
+                origin: object_from_world.transform_point3(ray.origin),
+                direction: object_from_world.transform_vector3(ray.direction),
             };
+            if !(local.origin.is_finite() && local.direction.is_finite()) {
+                continue;
+            }
+            let m = &o.mesh;
+            // A pass over the positions is a small part of one over the triangles.
+            if m.bounds().is_none_or(|b| !ray_meets_box(&local, b)) {
+                continue;
+            }
+            let p = |i: u32| Vec3::from_array(m.positions[i as usize]);
             for (triangle_idx, [a, b, c]) in m.triangles().enumerate() {
                 if [a, b, c].iter().any(|&i| i as usize >= m.positions.len()) {
                     continue;
                 }
-                let Some(t) = ray_triangle(ray, p(a), p(b), p(c)) else {
+                let Some(t) = ray_triangle(&local, p(a), p(b), p(c)) else {
                     continue;
                 };
                 if best.is_none_or(|h| t < h.distance) {
@@ -280,7 +293,30 @@ pub fn pose_matrix(pose: &Pose) -> Mat4 {
     )
 }
 
+/// Whether the ray meets box `b` (its faces included, grown by a ten-thousandth of its size
+/// against rounding) at a distance of zero or more.
+fn ray_meets_box(ray: &Ray, b: Aabb) -> bool {
+    let (lo, hi) = (Vec3::from_array(b.lo), Vec3::from_array(b.hi));
+    let pad = 1e-4 * (hi - lo).max_element() + 1e-6;
+    let (lo, hi) = (lo - pad, hi + pad);
+    let (mut near, mut far) = (0.0f32, f32::INFINITY);
+    for a in 0..3 {
+        let (o, d) = (ray.origin[a], ray.direction[a]);
+        if d == 0.0 {
+            if o < lo[a] || o > hi[a] {
+                return false;
+            }
+            continue;
+        }
+        let (t0, t1) = ((lo[a] - o) / d, (hi[a] - o) / d);
+        near = near.max(t0.min(t1));
+        far = far.min(t0.max(t1));
+    }
+    near <= far
+}
+
 /// Möller-Trumbore: the distance along the ray to triangle (a, b, c), either side facing.
+#[inline]
 pub fn ray_triangle(ray: &Ray, a: Vec3, b: Vec3, c: Vec3) -> Option<f32> {
     let (e1, e2) = (b - a, c - a);
     let p = ray.direction.cross(e2);
@@ -343,6 +379,60 @@ mod tests {
             direction: Vec3::NEG_Z,
         };
         assert_eq!(scene.pick(&miss), None);
+    }
+
+    #[test]
+    fn pick_compares_world_distances_across_scaled_and_turned_objects() {
+        let mut scene = Scene::default();
+        // A square three times larger, turned about z and raised to z = 1, and a plain one
+        // at z = 0.5 behind it; a collapsed one (no inverse) is never hit.
+        let big = Mat4::from_translation(Vec3::Z)
+            * Mat4::from_rotation_z(0.6)
+            * Mat4::from_scale(Vec3::splat(3.0));
+        scene.add_object(square(0.0), big, Material::default());
+        let plain = Mat4::from_translation(Vec3::new(0.0, 0.0, 0.5));
+        scene.add_object(square(0.0), plain, Material::default());
+        let flat = Mat4::from_translation(Vec3::new(0.0, 0.0, 2.0)) * Mat4::from_scale(Vec3::ZERO);
+        scene.add_object(square(0.0), flat, Material::default());
+        let ray = Ray {
+            origin: Vec3::new(0.2, 0.1, 5.0),
+            direction: Vec3::NEG_Z,
+        };
+        let hit = scene.pick(&ray).unwrap();
+        assert_eq!(hit.object_idx, 0, "{hit:?}");
+        assert!((hit.distance - 4.0).abs() < 1e-5, "{hit:?}");
+        assert!((hit.point_in_world - Vec3::new(0.2, 0.1, 1.0)).length() < 1e-5);
+        // Beside the big square's reach only the plain one lies below the ray.
+        scene.objects[0].world_from_object = Mat4::from_translation(Vec3::new(9.0, 0.0, 1.0));
+        let hit = scene.pick(&ray).unwrap();
+        assert_eq!(hit.object_idx, 1, "{hit:?}");
+        assert!((hit.distance - 4.5).abs() < 1e-5, "{hit:?}");
+    }
+
+    #[test]
+    fn a_ray_meets_a_box_ahead_from_outside_inside_and_along_a_flat_face() {
+        let b = Aabb::new([0.0; 3], [1.0, 1.0, 0.0]);
+        let ray = |o: [f32; 3], d: Vec3| Ray {
+            origin: Vec3::from_array(o),
+            direction: d,
+        };
+        assert!(ray_meets_box(&ray([0.5, 0.5, 3.0], Vec3::NEG_Z), b));
+        assert!(!ray_meets_box(&ray([0.5, 0.5, 3.0], Vec3::Z), b), "behind");
+        assert!(
+            !ray_meets_box(&ray([1.5, 0.5, 3.0], Vec3::NEG_Z), b),
+            "beside"
+        );
+        assert!(
+            ray_meets_box(&ray([0.5, 0.5, 0.0], Vec3::X), b),
+            "from inside"
+        );
+        assert!(
+            ray_meets_box(&ray([1.0, 1.0, 1.0], Vec3::NEG_Z), b),
+            "at a corner"
+        );
+        let slanted = Vec3::new(1.0, 0.0, -1.0).normalize();
+        assert!(ray_meets_box(&ray([-0.5, 0.5, 0.5], slanted), b));
+        assert!(!ray_meets_box(&ray([-0.6, 0.5, 0.5], -slanted), b));
     }
 
     #[test]
