@@ -13,9 +13,9 @@
 //! The pixels are those of one pass drawing everything ([`Renderer::draw_into`]): the same
 //! draws in the same order, the later ones depth-tested against the same depths.
 //!
-//! The cost: a second colour and depth texture and a picture of the background at the
-//! picture's size (12 bytes a pixel: about 6.5 MB at 900x600, 100 MB at 3840x2160), and the
-//! copies of the kept layer on every frame that draws.
+//! The cost: a second colour and depth texture at the picture's size (8 bytes a pixel: about
+//! 4.3 MB at 900x600, 66 MB at 3840x2160), a picture of the background as large as the
+//! largest region drawn, and the copies of the kept layer on every frame that draws.
 
 use super::Renderer;
 use super::region::Below;
@@ -63,12 +63,23 @@ pub struct KeptPicture {
     below_depth: wgpu::Texture,
     /// Whether the layer below holds a drawing (a new picture holds none).
     holds_below: bool,
-    /// A picture of the background alone, and the background it holds, if any: a region is
-    /// cleared by copying from it, bytes as a clear writes them.
-    blank: wgpu::Texture,
-    blank_of: Option<[f32; 4]>,
+    /// A picture of the background alone, as large as the largest region drawn so far: a
+    /// region is cleared by copying from it, bytes as a clear writes them.
+    blank: Option<Blank>,
+    colour_format: wgpu::TextureFormat,
     depth_reset: wgpu::RenderPipeline,
 }
+
+/// A picture of one background, `size_px` large.
+struct Blank {
+    texture: wgpu::Texture,
+    size_px: [u32; 2],
+    background: [f32; 4],
+}
+
+/// Blank pictures are made in steps of this many pixels a side, so that a stroke's growing
+/// regions make few of them.
+const BLANK_STEP_PX: u32 = 128;
 
 impl KeptPicture {
     /// Textures for pictures of `size_px` pixels in the renderer's `colour` and `depth`
@@ -111,8 +122,8 @@ impl KeptPicture {
             below_colour: texture("kept picture below the lines", colour, copied, &[]),
             below_depth: texture("kept picture depth below the lines", depth, copied, &[]),
             holds_below: false,
-            blank: texture("kept picture background", colour, drawn, &[]),
-            blank_of: None,
+            blank: None,
+            colour_format: colour,
             depth_reset: depth_reset_pipeline(device, colour, depth),
         }
     }
@@ -133,10 +144,12 @@ impl KeptPicture {
     /// opaque objects changed there; else the kept layer below alone. The lines and the
     /// transparent objects are drawn again over it in every case.
     ///
-    /// One renderer draws into one kept picture: what changed is the renderer's.
+    /// One renderer draws into one kept picture: what changed is the renderer's. `device`
+    /// is the picture's, for a picture of the background as large as a region.
     pub fn draw(
         &mut self,
         renderer: &mut Renderer,
+        device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         label: &str,
         background: [f32; 4],
@@ -158,7 +171,8 @@ impl KeptPicture {
             }
             Below::Region(region) => {
                 self.restore(encoder);
-                self.redraw_region(renderer, encoder, label, background, region);
+                self.clear_region(device, encoder, label, background, region);
+                self.redraw_region(renderer, encoder, label, region);
                 self.keep(encoder);
                 KeptFrame::Region(region)
             }
@@ -174,19 +188,41 @@ impl KeptPicture {
         frame
     }
 
-    /// Clears `[x0, y0, x1, y1]` of the picture to `background` and the far plane and draws
-    /// the objects below the lines there.
-    fn redraw_region(
+    /// Copies `background` into `[x0, y0, x1, y1]` of the picture, from a blank picture made
+    /// (and cleared) when the one held is smaller or of another background.
+    fn clear_region(
         &mut self,
-        renderer: &Renderer,
+        device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         label: &str,
         background: [f32; 4],
         [x0, y0, x1, y1]: [u32; 4],
     ) {
-        if self.blank_of != Some(background) {
+        let need = [x1 - x0, y1 - y0];
+        let fits = (self.blank.as_ref())
+            .is_some_and(|b| b.background == background && (0..2).all(|a| b.size_px[a] >= need[a]));
+        if !fits {
+            let size_px = [0, 1].map(|a| {
+                let held = self.blank.as_ref().map_or(0, |b| b.size_px[a]);
+                let step = need[a].max(held).div_ceil(BLANK_STEP_PX) * BLANK_STEP_PX;
+                step.min(self.size_px[a]).max(need[a]).max(1)
+            });
+            let texture = device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("kept picture background"),
+                size: wgpu::Extent3d {
+                    width: size_px[0],
+                    height: size_px[1],
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: self.colour_format,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+                view_formats: &[],
+            });
             let [r, g, b, a] = background.map(f64::from);
-            let view = self.blank.create_view(&Default::default());
+            let view = texture.create_view(&Default::default());
             encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some(label),
                 color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -203,21 +239,40 @@ impl KeptPicture {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            self.blank_of = Some(background);
+            self.blank = Some(Blank {
+                texture,
+                size_px,
+                background,
+            });
         }
-        let origin = wgpu::Origin3d { x: x0, y: y0, z: 0 };
-        let at = |texture| wgpu::TexelCopyTextureInfo {
-            texture,
-            mip_level: 0,
-            origin,
-            aspect: wgpu::TextureAspect::All,
+        let Some(blank) = &self.blank else {
+            return;
         };
-        let extent = wgpu::Extent3d {
-            width: x1 - x0,
-            height: y1 - y0,
-            depth_or_array_layers: 1,
-        };
-        encoder.copy_texture_to_texture(at(&self.blank), at(&self.colour), extent);
+        encoder.copy_texture_to_texture(
+            blank.texture.as_image_copy(),
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.colour,
+                mip_level: 0,
+                origin: wgpu::Origin3d { x: x0, y: y0, z: 0 },
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::Extent3d {
+                width: need[0],
+                height: need[1],
+                depth_or_array_layers: 1,
+            },
+        );
+    }
+
+    /// Resets `[x0, y0, x1, y1]` of the picture's depth to the far plane and draws the
+    /// objects below the lines there.
+    fn redraw_region(
+        &self,
+        renderer: &Renderer,
+        encoder: &mut wgpu::CommandEncoder,
+        label: &str,
+        [x0, y0, x1, y1]: [u32; 4],
+    ) {
         let mut pass = self.pass(encoder, label, wgpu::LoadOp::Load, wgpu::LoadOp::Load);
         pass.set_scissor_rect(x0, y0, x1 - x0, y1 - y0);
         pass.set_pipeline(&self.depth_reset);

@@ -130,13 +130,14 @@ impl Headless {
         self.renderer
             .prepare(&self.device, &self.queue, scene, picture.size_px())?;
         let mut encoder = self.device.create_command_encoder(&Default::default());
-        let below = picture.draw(
+        let kept = picture.draw(
             &mut self.renderer,
+            &self.device,
             &mut encoder,
             "offscreen kept",
             scene.background,
         );
-        Ok((self.finish(encoder, picture.colour())?, below))
+        Ok((self.finish(encoder, picture.colour())?, kept))
     }
 
     /// Copies `colour` out after what `encoder` recorded, submits, and reads it back.

@@ -318,6 +318,7 @@ impl CallbackTrait for ViewportCallback {
         }
         let kept = (target.picture).draw(
             &mut res.renderer,
+            device,
             encoder,
             "sculpt viewport",
             self.scene.background,
