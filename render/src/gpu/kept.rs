@@ -171,7 +171,7 @@ impl KeptPicture {
             }
             Below::Region(region) => {
                 self.restore(encoder);
-                self.clear_region(device, encoder, label, background, region);
+                self.clear_region(device, encoder, background, region);
                 self.redraw_region(renderer, encoder, label, region);
                 self.keep(encoder);
                 KeptFrame::Region(region)
@@ -194,7 +194,6 @@ impl KeptPicture {
         &mut self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
-        label: &str,
         background: [f32; 4],
         [x0, y0, x1, y1]: [u32; 4],
     ) {
@@ -207,38 +206,7 @@ impl KeptPicture {
                 let step = need[a].max(held).div_ceil(BLANK_STEP_PX) * BLANK_STEP_PX;
                 step.min(self.size_px[a]).max(need[a]).max(1)
             });
-            let texture = device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("kept picture background"),
-                size: wgpu::Extent3d {
-                    width: size_px[0],
-                    height: size_px[1],
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: self.colour_format,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-                view_formats: &[],
-            });
-            let [r, g, b, a] = background.map(f64::from);
-            let view = texture.create_view(&Default::default());
-            encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some(label),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color { r, g, b, a }),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: None,
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let texture = blank_picture(device, encoder, self.colour_format, size_px, background);
             self.blank = Some(Blank {
                 texture,
                 size_px,
@@ -324,6 +292,49 @@ impl KeptPicture {
             multiview_mask: None,
         })
     }
+}
+
+/// A picture of `size_px` pixels in `format`, cleared to `background` by `encoder`.
+fn blank_picture(
+    device: &wgpu::Device,
+    encoder: &mut wgpu::CommandEncoder,
+    format: wgpu::TextureFormat,
+    size_px: [u32; 2],
+    background: [f32; 4],
+) -> wgpu::Texture {
+    let texture = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("kept picture background"),
+        size: wgpu::Extent3d {
+            width: size_px[0],
+            height: size_px[1],
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    });
+    let [r, g, b, a] = background.map(f64::from);
+    let view = texture.create_view(&Default::default());
+    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some("kept picture background"),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view: &view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations {
+                load: wgpu::LoadOp::Clear(wgpu::Color { r, g, b, a }),
+                store: wgpu::StoreOp::Store,
+            },
+        })],
+        depth_stencil_attachment: None,
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    });
+    texture
 }
 
 /// Copies each of `from` whole into the same-sized texture of `to`.
