@@ -92,22 +92,8 @@ impl KeptPicture {
         usage: wgpu::TextureUsages,
         view_formats: &[wgpu::TextureFormat],
     ) -> KeptPicture {
-        let size = wgpu::Extent3d {
-            width: size_px[0].max(1),
-            height: size_px[1].max(1),
-            depth_or_array_layers: 1,
-        };
         let texture = |label, format, usage, view_formats| {
-            device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size,
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats,
-            })
+            picture_texture(device, label, size_px, format, usage, view_formats)
         };
         let copied = wgpu::TextureUsages::COPY_SRC | wgpu::TextureUsages::COPY_DST;
         let drawn = wgpu::TextureUsages::RENDER_ATTACHMENT | copied;
@@ -294,6 +280,31 @@ impl KeptPicture {
     }
 }
 
+/// A two-dimensional texture of `size_px` pixels (at least one a side), one sample, one level.
+pub(super) fn picture_texture(
+    device: &wgpu::Device,
+    label: &str,
+    size_px: [u32; 2],
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+    view_formats: &[wgpu::TextureFormat],
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width: size_px[0].max(1),
+            height: size_px[1].max(1),
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats,
+    })
+}
+
 /// A picture of `size_px` pixels in `format`, cleared to `background` by `encoder`.
 fn blank_picture(
     device: &wgpu::Device,
@@ -302,20 +313,15 @@ fn blank_picture(
     size_px: [u32; 2],
     background: [f32; 4],
 ) -> wgpu::Texture {
-    let texture = device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("kept picture background"),
-        size: wgpu::Extent3d {
-            width: size_px[0],
-            height: size_px[1],
-            depth_or_array_layers: 1,
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
+    let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
+    let texture = picture_texture(
+        device,
+        "kept picture background",
+        size_px,
         format,
-        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-        view_formats: &[],
-    });
+        usage,
+        &[],
+    );
     let [r, g, b, a] = background.map(f64::from);
     let view = texture.create_view(&Default::default());
     encoder.begin_render_pass(&wgpu::RenderPassDescriptor {

@@ -1,5 +1,6 @@
 //! Headless rendering: a private device draws a [`Scene`] into an RGBA image or a PNG file.
 
+use super::kept::picture_texture;
 use super::{KeptFrame, KeptPicture, PrepareError, Renderer};
 use crate::scene::Scene;
 use plot::image::{PngError, RgbaImage};
@@ -89,12 +90,7 @@ impl Headless {
         check_size(width, height)?;
         self.renderer
             .prepare(&self.device, &self.queue, scene, [width, height])?;
-        let size = wgpu::Extent3d {
-            width,
-            height,
-            depth_or_array_layers: 1,
-        };
-        let [colour, depth] = self.targets(size);
+        let [colour, depth] = self.targets([width, height]);
         let colour_view = colour.create_view(&Default::default());
         let depth_view = depth.create_view(&Default::default());
         let mut encoder = self.device.create_command_encoder(&Default::default());
@@ -172,19 +168,10 @@ impl Headless {
         self.read_back(&readback, width, height, padded_row)
     }
 
-    /// The colour and depth textures of a frame of `size`.
-    fn targets(&self, size: wgpu::Extent3d) -> [wgpu::Texture; 2] {
+    /// The colour and depth textures of a frame of `size_px`.
+    fn targets(&self, size_px: [u32; 2]) -> [wgpu::Texture; 2] {
         let target = |format, usage, label| {
-            self.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size,
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
+            picture_texture(&self.device, label, size_px, format, usage, &[])
         };
         let colour = target(
             COLOUR_FORMAT,
