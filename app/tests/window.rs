@@ -1434,6 +1434,13 @@ fn strokes_on_a_long_history_are_timed_from_their_input_to_the_presented_frame()
         "{}",
         state["meshes"]
     );
+    // Each release's frame waited for the stroke's mesh (and drew it when it came within the
+    // wait: in a release build, most do; a debug build under load may spend the wait before
+    // the release is taken).
+    let meshes = &state["meshes"];
+    let awaited = meshes["edits_awaited"].as_u64().unwrap();
+    let waits = awaited + meshes["edit_waits_expired"].as_u64().unwrap();
+    assert_eq!(waits, TIMED_STROKES.len() as u64, "{meshes}");
     // The carved ball's mesh is closed, so its back faces are not drawn.
     assert_eq!(state["objects"][0]["closed"], true);
     // Frames that changed nothing drawn (waiting for the script's next step) showed the last
@@ -1449,12 +1456,13 @@ fn strokes_on_a_long_history_are_timed_from_their_input_to_the_presented_frame()
     println!(
         "{n_edits} edits, depth {depth}, {} triangles: stroke to mesh {to_mesh:.1?} ms (median \
          {:.1}), to the presented frame {to_pixels:.1?} ms (median {:.1}); frame interval {}; \
-         viewport frames {}",
+         viewport frames {}; meshes {}",
         state["objects"][0]["n_triangles"],
         median(&to_mesh),
         median(&to_pixels),
         state["frame_interval_ms"],
         state["viewport_frames"],
+        state["meshes"],
     );
 }
 
@@ -1631,6 +1639,12 @@ fn another_windows_strokes_reach_this_windows_screen_timed_from_their_ops() {
             .all(|ms| *ms < (ON_TOP_SECS * 1000 / 2) as f64),
         "{pixels:?}"
     );
+    // The frames that sent another peer's op to the mesher waited for its mesh (the user
+    // was not dragging in this window).
+    let meshes = &below["meshes"];
+    let waits =
+        meshes["edits_awaited"].as_u64().unwrap() + meshes["edit_waits_expired"].as_u64().unwrap();
+    assert!(waits >= 1, "{meshes}");
     let frames = &below["viewport_frames"];
     pixels.sort_by(f64::total_cmp);
     let at = |q: f64| pixels[((pixels.len() - 1) as f64 * q).round() as usize];

@@ -14,7 +14,7 @@ use eframe::egui;
 
 use super::commands::CommandLine;
 use super::hooks::Hooks;
-use super::objects::{MESHING_SHOWN_MILLIS, Objects};
+use super::objects::{MAX_EDIT_WAIT_MILLIS, MESHING_SHOWN_MILLIS, Objects};
 use super::peers::PresenceState;
 use super::rows::Rows;
 use super::sculpt::Sculpt;
@@ -361,7 +361,7 @@ impl eframe::App for SculptApp {
     /// then draws nothing): what the session sends keeps being taken and meshed, so a covered
     /// window shows the scene at once when uncovered, its servo feels remote edits, and its
     /// presence and replies are not held back.
-    fn logic(&mut self, _ctx: &egui::Context, _frame: &mut eframe::Frame) {
+    fn logic(&mut self, ctx: &egui::Context, _frame: &mut eframe::Frame) {
         let now = clock::now();
         if std::mem::take(&mut self.stats.drew) {
             self.objects.presented(now.instant);
@@ -370,6 +370,13 @@ impl eframe::App for SculptApp {
         self.objects.receive(now.instant);
         self.receive_reply();
         self.sync_objects(now);
+        // Another peer's edit is drawn by this pass's frame when its mesh comes soon, unless
+        // the user is dragging (the frame then answers the pointer without waiting).
+        let wait = match ctx.input(|i| i.pointer.any_down()) {
+            true => Duration::ZERO,
+            false => Duration::from_millis(MAX_EDIT_WAIT_MILLIS),
+        };
+        (self.objects).await_sent_edits(clock::now().instant, now.instant + wait);
         self.publish_presence();
     }
 

@@ -26,6 +26,10 @@ pub const MAX_PATCHES_KEPT: usize = 256;
 pub const MESHING_SHOWN_MILLIS: u64 = 200;
 /// While time runs, an object whose drawing reads `t` is meshed again at most this often.
 pub const ANIMATION_REMESH_MILLIS: u64 = 100;
+/// A frame that sent the mesher an edit (this window's stroke released, another peer's op)
+/// waits for its mesh until this long after the frame began, so that the frame which took the
+/// edit draws it; a mesh that takes longer is drawn by a later frame.
+pub const MAX_EDIT_WAIT_MILLIS: u64 = 25;
 /// Colour of the selected object's box.
 const SELECTION_COLOUR: [f32; 4] = [1.0, 0.85, 0.2, 1.0];
 
@@ -212,6 +216,10 @@ pub struct MeshStats {
     /// This window's edits timed to a later job than the first that held them (a stroke's
     /// last preview superseded on the worker before it was drawn).
     pub n_edits_superseded: u64,
+    /// Edits whose mesh the frame that sent them waited for and drew.
+    pub n_edits_awaited: u64,
+    /// Edits whose frame waited for their mesh until [`MAX_EDIT_WAIT_MILLIS`] in vain.
+    pub n_edit_waits_expired: u64,
 }
 
 /// The objects sent to the mesher and drawn.
@@ -236,6 +244,9 @@ pub struct Objects {
     drawing_edit: BySource<Instant>,
     /// The newest remote op timestamp already timed.
     remote_seen: Option<replication::Timestamp>,
+    /// An edit, this window's or another peer's, went to the mesher since the last
+    /// [`Objects::await_sent_edits`].
+    edit_sent: [bool; 2],
     /// How meshes were made.
     pub stats: MeshStats,
 }
@@ -254,6 +265,7 @@ impl Objects {
             previewed_edit: None,
             drawing_edit: [None; 2],
             remote_seen: None,
+            edit_sent: [false; 2],
             stats: MeshStats {
                 edit_to_mesh_ms: Samples::new(MAX_EDIT_SAMPLES),
                 edit_to_pixels_ms: Samples::new(MAX_EDIT_SAMPLES),
@@ -262,6 +274,8 @@ impl Objects {
                 n_patched: 0,
                 n_whole: 0,
                 n_edits_superseded: 0,
+                n_edits_awaited: 0,
+                n_edit_waits_expired: 0,
             },
         })
     }
@@ -369,6 +383,7 @@ impl Objects {
                 .then(|| Box::new(Moving::new(&entry.object, world_from_group)));
             tracked.timed = render::animation::object_reads_time(&entry.object);
             tracked.time_job = None;
+            self.edit_sent[REMOTE] |= edit_at[REMOTE].is_some();
             tracked.pending = Some(Box::new(MeshJob {
                 id: *id,
                 object: entry.object.clone(),
@@ -429,6 +444,7 @@ impl Objects {
         if let Some(at) = edit_input_at {
             tracked.awaited_edit[LOCAL] = Some((tracked.generation, at));
             self.previewed_edit = Some(at);
+            self.edit_sent[LOCAL] = true;
         }
         tracked.pending = Some(Box::new(MeshJob {
             id,
@@ -477,49 +493,85 @@ impl Objects {
     /// than what is drawn (the workers mesh each object's jobs in order and drop superseded
     /// ones before they start), so each patch starts from the mesh drawn.
     pub fn receive(&mut self, now: Instant) {
-        while let Some(mut done) = self.mesher.try_recv() {
-            let Some(tracked) = self.tracked.get_mut(&done.id) else {
+        while let Some(done) = self.mesher.try_recv() {
+            self.take(done, now);
+        }
+    }
+
+    /// Waits until `deadline` at most for the meshes of the edits sent to the mesher since the
+    /// last call (a stroke's release, another peer's op), taking every mesh that comes
+    /// meanwhile; returns at once when none was sent. The frame that sent an edit then draws
+    /// its mesh, one frame sooner than when the next frame takes it; while it waits, the
+    /// mesher has the cores.
+    pub fn await_sent_edits(&mut self, mut now: Instant, deadline: Instant) {
+        let sent = std::mem::take(&mut self.edit_sent);
+        let waiting = |objects: &Objects, source: usize| {
+            sent[source]
+                && objects.drawing_edit[source].is_none()
+                && objects
+                    .tracked
+                    .values()
+                    .any(|t| t.awaited_edit[source].is_some())
+        };
+        while [LOCAL, REMOTE].into_iter().any(|s| waiting(self, s)) {
+            let left = deadline.saturating_duration_since(now);
+            let Some(done) = self.mesher.recv_timeout(left) else {
+                break;
+            };
+            now = clock::now().instant;
+            self.take(done, now);
+        }
+        for source in [LOCAL, REMOTE].into_iter().filter(|s| sent[*s]) {
+            match waiting(self, source) {
+                true => self.stats.n_edit_waits_expired += 1,
+                false => self.stats.n_edits_awaited += 1,
+            }
+        }
+    }
+
+    /// Takes one finished mesh, taken from the mesher at `now`.
+    fn take(&mut self, mut done: Meshed, now: Instant) {
+        let Some(tracked) = self.tracked.get_mut(&done.id) else {
+            return;
+        };
+        let (id, kind, generation) = (done.id, done.kind, done.generation);
+        let patch = done.patch.take();
+        let mesh = done.object.as_ref().map(|o| Arc::clone(&o.mesh));
+        if !tracked.take_meshed(done) {
+            return;
+        }
+        if tracked.remesh_after_preview && tracked.is_drawn_as_is() {
+            tracked.remesh_after_preview = false;
+            tracked.stale = true;
+            self.dirty = true;
+        }
+        if let (Some((base, patch)), Some(mesh)) = (patch, mesh) {
+            if self.patches.len() >= MAX_PATCHES_KEPT {
+                // The viewport has not drawn for a while: it uploads whole meshes then.
+                self.patches.clear();
+            }
+            self.patches.push((id, base, mesh, patch));
+        }
+        match kind {
+            MeshKind::Patch => self.stats.n_patched += 1,
+            MeshKind::Whole => self.stats.n_whole += 1,
+            MeshKind::Unchanged => {}
+        }
+        for source in [LOCAL, REMOTE] {
+            let awaited = &mut tracked.awaited_edit[source];
+            let Some((first, at)) = awaited.filter(|(g, _)| generation >= *g) else {
                 continue;
             };
-            let (id, kind, generation) = (done.id, done.kind, done.generation);
-            let patch = done.patch.take();
-            let mesh = done.object.as_ref().map(|o| Arc::clone(&o.mesh));
-            if !tracked.take_meshed(done) {
-                continue;
-            }
-            if tracked.remesh_after_preview && tracked.is_drawn_as_is() {
-                tracked.remesh_after_preview = false;
-                tracked.stale = true;
-                self.dirty = true;
-            }
-            if let (Some((base, patch)), Some(mesh)) = (patch, mesh) {
-                if self.patches.len() >= MAX_PATCHES_KEPT {
-                    // The viewport has not drawn for a while: it uploads whole meshes then.
-                    self.patches.clear();
-                }
-                self.patches.push((id, base, mesh, patch));
-            }
-            match kind {
-                MeshKind::Patch => self.stats.n_patched += 1,
-                MeshKind::Whole => self.stats.n_whole += 1,
-                MeshKind::Unchanged => {}
-            }
-            for source in [LOCAL, REMOTE] {
-                let awaited = &mut tracked.awaited_edit[source];
-                let Some((first, at)) = awaited.filter(|(g, _)| generation >= *g) else {
-                    continue;
-                };
-                *awaited = None;
-                self.stats.n_edits_superseded += u64::from(source == LOCAL && generation > first);
-                let ms = now.duration_since(at).as_secs_f64() * 1e3;
-                let samples = [
-                    &mut self.stats.edit_to_mesh_ms,
-                    &mut self.stats.remote_edit_to_mesh_ms,
-                ];
-                samples[source].push(ms);
-                let drawing = &mut self.drawing_edit[source];
-                *drawing = Some(drawing.map_or(at, |d| d.min(at)));
-            }
+            *awaited = None;
+            self.stats.n_edits_superseded += u64::from(source == LOCAL && generation > first);
+            let ms = now.duration_since(at).as_secs_f64() * 1e3;
+            let samples = [
+                &mut self.stats.edit_to_mesh_ms,
+                &mut self.stats.remote_edit_to_mesh_ms,
+            ];
+            samples[source].push(ms);
+            let drawing = &mut self.drawing_edit[source];
+            *drawing = Some(drawing.map_or(at, |d| d.min(at)));
         }
     }
 
@@ -664,4 +716,49 @@ pub fn bounding_sphere(boxes: impl Iterator<Item = Aabb>) -> Option<(Vec3, f32)>
         .map(|b| (Vec3::from_array(b.lo), Vec3::from_array(b.hi)))
         .reduce(|(lo, hi), (l, h)| (lo.min(l), hi.max(h)))?;
     Some((0.5 * (lo + hi), 0.5 * (hi - lo).length()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ball(radius: f64) -> Object {
+        Object::implicit(&format!("{radius} - sqrt(x^2 + y^2 + z^2)")).unwrap()
+    }
+
+    /// Sends a preview of object 1 as `object`, timed as an edit of this frame's when `input`.
+    fn send(objects: &mut Objects, object: Object, input: bool) -> Instant {
+        let now = clock::now().instant;
+        let input_at = input.then_some(now);
+        objects.preview(ObjectId(1), object, Transform::IDENTITY, now, 0.0, input_at);
+        objects.flush();
+        now
+    }
+
+    #[test]
+    fn a_frame_waits_for_the_mesh_of_the_edit_it_sent_and_only_then() {
+        let mut objects = Objects::start(5, || {}).unwrap();
+        let far = Duration::from_secs(600);
+        // The edit's mesh is taken by the wait, and this frame draws it.
+        let at = send(&mut objects, ball(0.5), true);
+        objects.await_sent_edits(at, at + far);
+        assert!(objects.draws_an_edit());
+        assert_eq!(objects.tracked[&ObjectId(1)].drawn_generation, 1);
+        assert_eq!(objects.stats.n_edits_awaited, 1);
+        assert_eq!(objects.stats.edit_to_mesh_ms.values().len(), 1);
+        objects.presented(clock::now().instant);
+        // A preview that is no edit of this frame's is left to a later frame.
+        let at = send(&mut objects, ball(0.4), false);
+        objects.await_sent_edits(at, at + far);
+        assert_eq!(objects.tracked[&ObjectId(1)].drawn_generation, 1);
+        assert_eq!(objects.stats.n_edits_awaited, 1);
+        // A deadline already past: the wait gives up and says so (a whole ball at depth 5
+        // takes the worker far longer than the call).
+        objects.receive(clock::now().instant);
+        let at = send(&mut objects, ball(0.3), true);
+        objects.await_sent_edits(at, at);
+        assert_eq!(objects.stats.n_edit_waits_expired, 1);
+        assert_eq!(objects.stats.n_edits_awaited, 1);
+        assert!(!objects.draws_an_edit());
+    }
 }

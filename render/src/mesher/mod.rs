@@ -304,7 +304,7 @@ impl Mesher {
         self.results.try_recv().ok()
     }
 
-    /// Waits up to `timeout` for a finished result (for benchmarks and tests).
+    /// Waits up to `timeout` for a finished result.
     pub fn recv_timeout(&self, timeout: Duration) -> Option<Meshed> {
         self.results.recv_timeout(timeout).ok()
     }

@@ -224,6 +224,8 @@ impl SculptApp {
                 "patched": self.objects.stats.n_patched,
                 "whole": self.objects.stats.n_whole,
                 "edits_superseded": self.objects.stats.n_edits_superseded,
+                "edits_awaited": self.objects.stats.n_edits_awaited,
+                "edit_waits_expired": self.objects.stats.n_edit_waits_expired,
             }),
             "last_upload_bytes": report.map(|r| r.last_upload_bytes),
             "min_upload_bytes": report.and_then(|r| r.min_upload_bytes),

@@ -6,6 +6,7 @@
 pub(super) mod gpu;
 
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use eframe::egui;
 use eframe::egui_wgpu;
@@ -18,6 +19,8 @@ use render::scene::{PickHit, Scene};
 use render::snapshot::{View, frame, render_from_scene};
 
 use super::app::SculptApp;
+use super::objects::MAX_EDIT_WAIT_MILLIS;
+use ::app::clock;
 use gpu::{ViewportCallback, ViewportReport};
 
 /// Largest viewport side in pixels (the texture is this big at most).
@@ -104,18 +107,18 @@ pub enum StrokePhase {
     End,
 }
 
-/// Draws the viewport over the rest of `ui` and handles orbit (drag), zoom (scroll), reset
-/// (double-click or `F`) and picking (click); while touching, Shift+scroll moves the touch
-/// tool in depth instead of zooming.
-pub fn viewport_ui(
+/// Takes the rest of `ui` for the viewport and handles orbit (drag), zoom (scroll), reset
+/// (double-click or `F`) and picking (click, on `scene`: what the last frame drew); while
+/// touching, Shift+scroll moves the touch tool in depth instead of zooming. Returns the
+/// input and the viewport's rectangle, which [`viewport_paint`] draws once the input has
+/// been acted on.
+pub fn viewport_input(
     ui: &mut egui::Ui,
     modes: Modes,
     view: &mut ViewState,
     scene: &Scene,
-    patches: Vec<(usize, Arc<Mesh>, Arc<Mesh>, MeshPatch)>,
     sphere: Option<(Vec3, f32)>,
-    report: &Arc<Mutex<ViewportReport>>,
-) -> ViewportInput {
+) -> (ViewportInput, egui::Rect) {
     let (rect, response) =
         ui.allocate_exact_size(ui.available_size(), egui::Sense::click_and_drag());
     let ppp = ui.ctx().pixels_per_point();
@@ -149,18 +152,29 @@ pub fn viewport_ui(
         input.picked = scene.pick(&ray);
         input.missed = input.picked.is_none();
     }
-    let mut drawn = scene.clone();
-    drawn.camera = view.camera;
+    (input, rect)
+}
+
+/// Draws `scene` (its camera set from `view`) with `patches` applied in the viewport's
+/// `rect`, `size_px` pixels.
+pub fn viewport_paint(
+    ui: &egui::Ui,
+    (rect, size_px): (egui::Rect, [u32; 2]),
+    view: &ViewState,
+    mut scene: Scene,
+    patches: Vec<(usize, Arc<Mesh>, Arc<Mesh>, MeshPatch)>,
+    report: &Arc<Mutex<ViewportReport>>,
+) {
+    scene.camera = view.camera;
     ui.painter().add(egui_wgpu::Callback::new_paint_callback(
         rect,
         ViewportCallback {
-            scene: drawn,
+            scene,
             patches,
             size_px,
             report: Arc::clone(report),
         },
     ));
-    input
 }
 
 /// The primary button: a sculpting drag's phases, or (while touching) the touch device's
@@ -248,30 +262,38 @@ fn scroll_and_hover(
 
 impl SculptApp {
     /// The viewport's frame: the scene drawn, then what the user (or a script) did there.
+    /// The viewport's frame: its input is acted on first (picks and strokes on what the last
+    /// frame drew), then what that changed is drawn, so that a stroke's lines, the pointer
+    /// and a released stroke's mesh show in the frame that took their input.
     pub(super) fn central_ui(&mut self, ui: &mut egui::Ui) {
-        let (scene, ids) = self.drawn_scene();
+        let (scene, ids) = self.objects.drawn_scene(self.selected);
         let sphere = self.objects.bounding_sphere();
         let modes = Modes {
             sculpting: self.sculpt.active,
             touching: self.touch.live.is_some(),
         };
+        let (input, rect) = viewport_input(ui, modes, &mut self.view, &scene, sphere);
+        self.viewport_acts(input, &scene, &ids);
+        let deadline = self.stats.frame_start() + Duration::from_millis(MAX_EDIT_WAIT_MILLIS);
+        self.objects
+            .await_sent_edits(clock::now().instant, deadline);
+        let (scene, ids) = self.drawn_scene();
         let patches = self.objects.take_patches(&ids);
-        let mut input = viewport_ui(
-            ui,
-            modes,
-            &mut self.view,
-            &scene,
-            patches,
-            sphere,
-            &self.viewport,
-        );
+        let at = (rect, input.size_px);
+        viewport_paint(ui, at, &self.view, scene, patches, &self.viewport);
+    }
+
+    /// Acts on the viewport's `input`: a stroke, a pick, the pointer and the touch tool, on
+    /// `scene` as the last frame drew it (its objects' ids in `ids`).
+    fn viewport_acts(&mut self, mut input: ViewportInput, scene: &Scene, ids: &[ObjectId]) {
+        let sphere = self.objects.bounding_sphere();
         if let Some(event) = self.hooks.scripted_stroke(input.size_px) {
             input.stroke = Some(event);
         }
         if let Some(event) = input.stroke {
-            self.stroke_event(event, input.size_px, &scene, &ids);
+            self.stroke_event(event, input.size_px, scene, ids);
         } else if input.picked.is_some() || input.missed {
-            self.picked(input.picked, &ids);
+            self.picked(input.picked, ids);
         }
         if input.moved {
             self.presence.following = None;
@@ -291,7 +313,7 @@ impl SculptApp {
             let px = [at[0] * size_px[0] as f32, at[1] * size_px[1] as f32];
             let ray = self.view.camera.ray_through_pixel(px, size_px);
             let hit = scene.pick(&ray);
-            self.picked(hit, &ids);
+            self.picked(hit, ids);
         }
     }
 
