@@ -163,6 +163,7 @@ impl Animator {
                 world_from_object: Mat4::IDENTITY,
                 material: Material::default(),
                 closed: false,
+                pick_runs: Default::default(),
             });
             animator.objects.push(animated);
         }

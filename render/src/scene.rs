@@ -6,7 +6,7 @@ use crate::camera::{Camera, Ray};
 use crate::mesh::{Aabb, Mesh};
 use glam::{Mat4, Vec3};
 use model::object::{Pose, ToolShape};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 /// How a surface reflects light; multiplies the per-vertex colour.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -56,6 +56,78 @@ pub struct SceneObject {
     /// shades about half the triangles). False draws both sides (open surfaces, imported
     /// meshes, and anything not proven closed).
     pub closed: bool,
+    /// Where a pick looks among the mesh's triangles, made by the first pick and shared by
+    /// the object's clones.
+    pub pick_runs: PickRuns,
+}
+
+/// Triangles a pick takes together: a ray tests a run's triangles only when it meets the
+/// box around them (an octree's mesh keeps each block's triangles together).
+pub const PICK_RUN_TRIANGLES: usize = 64;
+
+/// Boxes around a mesh's runs of [`PICK_RUN_TRIANGLES`] triangles (in index order) and
+/// around all of them, made once per mesh; clones share them. They hold the mesh they were
+/// made for, so an object given another mesh never reads the boxes of the old one.
+#[derive(Clone, Default)]
+pub struct PickRuns(Arc<OnceLock<RunBoxes>>);
+
+/// Says how many runs were made, not the mesh they hold.
+impl std::fmt::Debug for PickRuns {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let n_runs = self.0.get().map(|b| b.runs.len());
+        f.debug_struct("PickRuns").field("n_runs", &n_runs).finish()
+    }
+}
+
+struct RunBoxes {
+    mesh: Arc<Mesh>,
+    /// Around every valid triangle.
+    all: Option<Aabb>,
+    /// One per run; `None` for a run without a valid triangle.
+    runs: Vec<Option<Aabb>>,
+}
+
+impl RunBoxes {
+    fn of(mesh: &Arc<Mesh>) -> RunBoxes {
+        let n = mesh.positions.len();
+        let runs: Vec<Option<Aabb>> = (mesh.indices)
+            .chunks(3 * PICK_RUN_TRIANGLES)
+            .map(|run| {
+                let valid = run
+                    .chunks_exact(3)
+                    .filter(|t| t.iter().all(|&i| (i as usize) < n));
+                let corners = valid.flatten().map(|&i| mesh.positions[i as usize]);
+                corners.fold(None, |b: Option<Aabb>, p| {
+                    Some(b.map_or(Aabb::new(p, p), |b| b.union(&Aabb::new(p, p))))
+                })
+            })
+            .collect();
+        let all = runs.iter().flatten().copied().reduce(|a, b| a.union(&b));
+        RunBoxes {
+            mesh: Arc::clone(mesh),
+            all,
+            runs,
+        }
+    }
+}
+
+impl PickRuns {
+    /// Makes the run boxes of `mesh` now, unless some were made: a mesher's worker calls it
+    /// after handing a mesh out, so that the window's first pick of it finds them.
+    pub fn prepare(&self, mesh: &Arc<Mesh>) {
+        self.0.get_or_init(|| RunBoxes::of(mesh));
+    }
+
+    /// Calls `f` with the run boxes of `mesh`: those kept when they were made for it, else
+    /// made now (and kept when none were).
+    fn with<R>(&self, mesh: &Arc<Mesh>, f: impl FnOnce(&RunBoxes) -> R) -> R {
+        let kept = self.0.get_or_init(|| RunBoxes::of(mesh));
+        if Arc::ptr_eq(&kept.mesh, mesh) {
+            f(kept)
+        } else {
+            f(&RunBoxes::of(mesh))
+        }
+    }
 }
 
 impl SceneObject {
@@ -129,6 +201,7 @@ impl Scene {
             world_from_object,
             material,
             closed: false,
+            pick_runs: PickRuns::default(),
         });
         self.objects.len() - 1
     }
@@ -240,7 +313,9 @@ impl Scene {
     ///
     /// Each object's triangles are met in its own space, by the ray carried there once (an
     /// affine map keeps the parameter along a line, so distances compare across objects): a
-    /// pick runs on every drag and hover frame, over meshes of a million triangles.
+    /// pick runs on every drag and hover frame, over meshes of a million triangles. Within an
+    /// object, only the runs of triangles whose box the ray meets are tested
+    /// ([`PickRuns`]); the hit is the one testing every triangle finds.
     pub fn pick(&self, ray: &Ray) -> Option<PickHit> {
         let mut best: Option<PickHit> = None;
         for (object_idx, o) in self.objects.iter().enumerate() {
@@ -253,28 +328,18 @@ impl Scene {
                 continue;
             }
             let m = &o.mesh;
-            // A pass over the positions is a small part of one over the triangles.
-            if m.bounds().is_none_or(|b| !ray_meets_box(&local, b)) {
-                continue;
-            }
-            let p = |i: u32| Vec3::from_array(m.positions[i as usize]);
-            for (triangle_idx, [a, b, c]) in m.triangles().enumerate() {
-                if [a, b, c].iter().any(|&i| i as usize >= m.positions.len()) {
-                    continue;
-                }
-                let Some(t) = ray_triangle(&local, p(a), p(b), p(c)) else {
-                    continue;
-                };
+            let mut take = |triangle_idx: usize, t: f32| {
                 if best.is_none_or(|h| t < h.distance) {
-                    let point_in_world = ray.origin + t * ray.direction;
                     best = Some(PickHit {
                         object_idx,
                         triangle_idx,
-                        point_in_world,
+                        point_in_world: ray.origin + t * ray.direction,
                         distance: t,
                     });
                 }
-            }
+            };
+            o.pick_runs
+                .with(m, |boxes| pick_runs(m, boxes, &local, &mut take));
         }
         best
     }
@@ -293,11 +358,38 @@ pub fn pose_matrix(pose: &Pose) -> Mat4 {
     )
 }
 
-/// Whether the ray meets box `b` (its faces included, grown by a ten-thousandth of its size
-/// against rounding) at a distance of zero or more.
+/// Calls `take` with the index and distance of every triangle of `m` that `ray` (in the
+/// mesh's space) hits, testing only the runs whose box in `boxes` it meets.
+fn pick_runs(m: &Mesh, boxes: &RunBoxes, ray: &Ray, take: &mut impl FnMut(usize, f32)) {
+    if boxes.all.is_none_or(|b| !ray_meets_box(ray, b)) {
+        return;
+    }
+    let p = |i: u32| Vec3::from_array(m.positions[i as usize]);
+    for (run, b) in boxes.runs.iter().enumerate() {
+        if b.is_none_or(|b| !ray_meets_box(ray, b)) {
+            continue;
+        }
+        let first = run * PICK_RUN_TRIANGLES;
+        let end = (3 * (first + PICK_RUN_TRIANGLES)).min(m.indices.len());
+        for (k, t) in m.indices[3 * first..end].chunks_exact(3).enumerate() {
+            let [a, b, c] = [t[0], t[1], t[2]];
+            if [a, b, c].iter().any(|&i| i as usize >= m.positions.len()) {
+                continue;
+            }
+            if let Some(t) = ray_triangle(ray, p(a), p(b), p(c)) {
+                take(first + k, t);
+            }
+        }
+    }
+}
+
+/// Whether the ray meets box `b` (its faces included, grown against rounding by a
+/// ten-thousandth of its size and a few ulps of the coordinates involved) at a distance of
+/// zero or more.
 fn ray_meets_box(ray: &Ray, b: Aabb) -> bool {
     let (lo, hi) = (Vec3::from_array(b.lo), Vec3::from_array(b.hi));
-    let pad = 1e-4 * (hi - lo).max_element() + 1e-6;
+    let magnitude = lo.abs().max(hi.abs()).max(ray.origin.abs()).max_element();
+    let pad = 1e-4 * (hi - lo).max_element() + 16.0 * f32::EPSILON * magnitude + 1e-6;
     let (lo, hi) = (lo - pad, hi + pad);
     let (mut near, mut far) = (0.0f32, f32::INFINITY);
     for a in 0..3 {
@@ -407,6 +499,107 @@ mod tests {
         let hit = scene.pick(&ray).unwrap();
         assert_eq!(hit.object_idx, 1, "{hit:?}");
         assert!((hit.distance - 4.5).abs() < 1e-5, "{hit:?}");
+    }
+
+    /// A wavy sheet of `n` by `n` quads far from the origin (where rounding is coarse), its
+    /// triangles in row order, then a few that name missing vertices.
+    fn wavy_sheet(n: u32, offset: f32) -> Mesh {
+        let mut m = Mesh::default();
+        for j in 0..=n {
+            for i in 0..=n {
+                let (x, y) = (i as f32 / n as f32, j as f32 / n as f32);
+                let z = 0.2 * (7.0 * x).sin() * (5.0 * y).cos();
+                m.positions.push([offset + x, offset + y, offset + z]);
+                m.normals.push([0.0, 0.0, 1.0]);
+                m.colours.push([1.0; 4]);
+            }
+        }
+        let at = |i: u32, j: u32| j * (n + 1) + i;
+        for j in 0..n {
+            for i in 0..n {
+                let quad = [at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)];
+                m.indices
+                    .extend([quad[0], quad[1], quad[2], quad[0], quad[2], quad[3]]);
+            }
+        }
+        let missing = m.positions.len() as u32;
+        m.indices.extend([0, 1, missing, missing, 2, 3]);
+        m
+    }
+
+    /// The nearest hit testing every triangle of every object, as picks did before runs.
+    fn pick_every_triangle(scene: &Scene, ray: &Ray) -> Option<(usize, usize, f32)> {
+        let mut best: Option<(usize, usize, f32)> = None;
+        for (object_idx, o) in scene.objects.iter().enumerate() {
+            let object_from_world = o.world_from_object.inverse();
+            let local = Ray {
+                origin: object_from_world.transform_point3(ray.origin),
+                direction: object_from_world.transform_vector3(ray.direction),
+            };
+            let m = &o.mesh;
+            let p = |i: u32| Vec3::from_array(m.positions[i as usize]);
+            for (k, [a, b, c]) in m.triangles().enumerate() {
+                if [a, b, c].iter().any(|&i| i as usize >= m.positions.len()) {
+                    continue;
+                }
+                if let Some(t) = ray_triangle(&local, p(a), p(b), p(c))
+                    && best.is_none_or(|h| t < h.2)
+                {
+                    best = Some((object_idx, k, t));
+                }
+            }
+        }
+        best
+    }
+
+    #[test]
+    fn a_pick_through_the_runs_finds_what_testing_every_triangle_finds() {
+        let mut scene = Scene::default();
+        for (offset, turn) in [(0.0, 0.0), (100.0, 0.7)] {
+            let to_world =
+                Mat4::from_rotation_x(turn) * Mat4::from_translation(Vec3::splat(-offset));
+            let sheet = Arc::new(wavy_sheet(60, offset));
+            scene.add_object(sheet, to_world, Material::default());
+        }
+        assert!(scene.objects[0].mesh.n_triangles() > 50 * PICK_RUN_TRIANGLES);
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut random = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut n_hits = 0;
+        for _ in 0..2000 {
+            let origin = Vec3::new(random() * 3.0 - 1.0, random() * 3.0 - 1.0, 2.0 + random());
+            let target = Vec3::new(random() * 1.2 - 0.1, random() * 1.2 - 0.1, random() - 0.5);
+            let ray = Ray {
+                origin,
+                direction: (target - origin).normalize(),
+            };
+            let hit = scene
+                .pick(&ray)
+                .map(|h| (h.object_idx, h.triangle_idx, h.distance));
+            assert_eq!(hit, pick_every_triangle(&scene, &ray), "{ray:?}");
+            n_hits += usize::from(hit.is_some());
+        }
+        assert!(n_hits > 500, "{n_hits}");
+        // An object given another mesh does not read the runs kept for its first.
+        let mut moved = scene.objects[0].clone();
+        moved.mesh = Arc::new(wavy_sheet(60, 0.5));
+        let ray = Ray {
+            origin: Vec3::new(0.75, 0.75, 3.0),
+            direction: Vec3::NEG_Z,
+        };
+        let mut alone = Scene::default();
+        alone.objects.push(moved);
+        assert_eq!(
+            alone
+                .pick(&ray)
+                .map(|h| (h.object_idx, h.triangle_idx, h.distance)),
+            pick_every_triangle(&alone, &ray)
+        );
+        assert!(alone.pick(&ray).is_some());
     }
 
     #[test]

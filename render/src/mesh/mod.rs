@@ -47,6 +47,14 @@ impl Aabb {
     pub fn contains(&self, p: [f32; 3]) -> bool {
         (0..3).all(|a| self.lo[a] <= p[a] && p[a] <= self.hi[a])
     }
+
+    /// The smallest box holding both.
+    pub fn union(&self, other: &Aabb) -> Aabb {
+        Aabb {
+            lo: std::array::from_fn(|a| self.lo[a].min(other.lo[a])),
+            hi: std::array::from_fn(|a| self.hi[a].max(other.hi[a])),
+        }
+    }
 }
 
 /// Why a mesh is not well formed.
@@ -156,12 +164,8 @@ impl Mesh {
     /// The bounding box of the positions, `None` for an empty mesh.
     pub fn bounds(&self) -> Option<Aabb> {
         let first = *self.positions.first()?;
-        let mut b = Aabb::new(first, first);
-        for p in &self.positions {
-            b.lo = std::array::from_fn(|a| b.lo[a].min(p[a]));
-            b.hi = std::array::from_fn(|a| b.hi[a].max(p[a]));
-        }
-        Some(b)
+        let b = Aabb::new(first, first);
+        Some((self.positions.iter()).fold(b, |b, &p| b.union(&Aabb::new(p, p))))
     }
 
     /// Undirected edges with how many triangles use each, sorted by edge.

@@ -100,6 +100,7 @@ pub(super) fn mesh(
             world_from_object: state.world_from_object,
             material: state.material,
             closed: state.closed,
+            pick_runs: Default::default(),
         });
     }
     (Some(out), state)

@@ -325,10 +325,14 @@ fn work(
         shared.done(id, state);
         if let Some(mut out) = out {
             out.mesh_secs = mesh_secs;
+            let picked = (out.object.as_ref()).map(|o| (o.pick_runs.clone(), Arc::clone(&o.mesh)));
             if results.send(out).is_err() {
                 return;
             }
             wake();
+            if let Some((runs, mesh)) = picked {
+                runs.prepare(&mesh);
+            }
         }
     }
 }
