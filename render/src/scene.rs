@@ -112,6 +112,12 @@ impl RunBoxes {
 }
 
 impl PickRuns {
+    /// The boxes of the runs of `mesh`'s triangles, when they were made for it.
+    pub(crate) fn runs_made_for(&self, mesh: &Arc<Mesh>) -> Option<&[Option<Aabb>]> {
+        let made = self.0.get().filter(|b| Arc::ptr_eq(&b.mesh, mesh))?;
+        Some(&made.runs)
+    }
+
     /// Makes the run boxes of `mesh` now, unless some were made: a mesher's worker calls it
     /// after handing a mesh out, so that the window's first pick of it finds them.
     pub fn prepare(&self, mesh: &Arc<Mesh>) {

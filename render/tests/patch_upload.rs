@@ -224,6 +224,10 @@ fn patched_uploads_draw_the_whole_upload_picture_after_each_edit() {
             .patch_object(0, &base, &next, &skipped)
             .unwrap();
         scene.objects[0].mesh = Arc::clone(&next);
+        // The mesher's worker boxes each new mesh's runs of triangles: a region is drawn
+        // from the runs that reach it.
+        scene.objects[0].pick_runs = Default::default();
+        scene.objects[0].pick_runs.prepare(&next);
         // A new background halfway: everything is drawn again, and the regions after it are
         // cleared to the new one.
         let new_background = k == 4;
@@ -267,6 +271,11 @@ fn patched_uploads_draw_the_whole_upload_picture_after_each_edit() {
             assert!(
                 4 * (x1 - x0) * (y1 - y0) < WIDTH * HEIGHT,
                 "edit {k}: {frame:?} is most of the picture"
+            );
+            let [drawn, held] = kept.renderer_mut().region_indices();
+            assert!(
+                0 < drawn && drawn < held,
+                "edit {k}: {drawn} of {held} indices drawn in {frame:?}"
             );
         } else {
             assert!(

@@ -231,7 +231,7 @@ impl KeptPicture {
         pass.set_scissor_rect(x0, y0, x1 - x0, y1 - y0);
         pass.set_pipeline(&self.depth_reset);
         pass.draw(0..3, 0..1);
-        renderer.paint_below(&mut pass);
+        renderer.paint_below_within(&mut pass, [x0, y0, x1, y1]);
     }
 
     /// Copies the picture into the layer kept below the lines.

@@ -21,10 +21,10 @@ mod region;
 
 pub use kept::{KeptFrame, KeptPicture};
 
-use crate::mesh::Mesh;
 use crate::mesh::MeshError;
 use crate::mesh::octree::MeshPatch;
-use crate::scene::Scene;
+use crate::mesh::{Aabb, Mesh};
+use crate::scene::{PICK_RUN_TRIANGLES, PickRuns, Scene};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use region::{Below, Screen};
@@ -166,6 +166,8 @@ struct GpuObject {
     uniform_value: Option<ObjectUniform>,
     /// Drawn with back faces culled (`SceneObject::closed`).
     closed: bool,
+    /// The scene object's boxes around runs of triangles, for a draw within a region.
+    pick_runs: PickRuns,
     bind_group: wgpu::BindGroup,
 }
 
@@ -230,6 +232,10 @@ pub struct Renderer {
     pending: BTreeMap<usize, PendingPatch>,
     /// Mesh bytes (vertices and indices) the last prepare wrote.
     mesh_bytes_uploaded: u64,
+    /// The camera's projection and the picture's size of the last prepare.
+    screen: Option<Screen>,
+    /// Indices the last draw within a region drew, of how many its opaque objects hold.
+    region_indices: [std::sync::atomic::AtomicU64; 2],
 }
 
 fn uniform_layout(device: &wgpu::Device, label: &str) -> wgpu::BindGroupLayout {
@@ -453,6 +459,8 @@ impl Renderer {
             changed: true,
             below: Below::All,
             pending: BTreeMap::new(),
+            screen: None,
+            region_indices: Default::default(),
             mesh_bytes_uploaded: 0,
         }
     }
@@ -571,6 +579,7 @@ impl Renderer {
             size_px,
         };
         let below = self.prepare_objects(device, queue, scene, &screen);
+        self.screen = Some(screen);
         let mut changed = frame_changed || below != Below::Same;
         self.sort_draws(scene, eye);
         // Kept until a kept picture draws below the lines again.
@@ -631,6 +640,7 @@ impl Renderer {
                 below = Below::All;
             }
             gpu.closed = o.closed;
+            gpu.pick_runs.clone_from(&o.pick_runs);
         }
         below
     }
@@ -729,6 +739,7 @@ impl Renderer {
             uniform,
             uniform_value: None,
             closed: false,
+            pick_runs: PickRuns::default(),
             bind_group,
         }
     }
@@ -848,6 +859,48 @@ impl Renderer {
         }
     }
 
+    /// Records the draws of the opaque objects as [`Renderer::paint_below`] does, for a pass
+    /// that draws only within `region` (`[x0, y0, x1, y1]` pixels, under a scissor): of an
+    /// object whose runs of triangles are boxed ([`PickRuns`]), only the runs whose box may
+    /// reach the region. The others make no pixel there, so the pixels are the same.
+    pub(super) fn paint_below_within(&self, pass: &mut wgpu::RenderPass<'_>, region: [u32; 4]) {
+        pass.set_bind_group(0, &self.globals_bind_group, &[]);
+        let mut ranges = Vec::new();
+        let (mut drawn, mut held) = (0, 0);
+        for &i in &self.draw_order[..self.n_opaque] {
+            let o = &self.objects[i];
+            pass.set_pipeline(if o.closed {
+                &self.opaque_closed
+            } else {
+                &self.opaque
+            });
+            ranges.clear();
+            match (
+                self.screen,
+                o.pick_runs.runs_made_for(&o.mesh),
+                o.uniform_value,
+            ) {
+                (Some(screen), Some(runs), Some(u)) => {
+                    let world_from_object = glam::Mat4::from_cols_array_2d(&u.world_from_object);
+                    runs_within(runs, &screen, world_from_object, region, &mut ranges);
+                }
+                _ => ranges.push(0..o.n_indices),
+            }
+            drawn += draw_ranges(pass, o, &ranges);
+            held += u64::from(o.n_indices);
+        }
+        let relaxed = std::sync::atomic::Ordering::Relaxed;
+        self.region_indices[0].store(drawn, relaxed);
+        self.region_indices[1].store(held, relaxed);
+    }
+
+    /// Of the last draw within a region: the indices drawn, and those its opaque objects hold.
+    pub fn region_indices(&self) -> [u64; 2] {
+        self.region_indices
+            .each_ref()
+            .map(|n| n.load(std::sync::atomic::Ordering::Relaxed))
+    }
+
     /// Records the draws from the lines up: the lines, then the transparent objects far to
     /// near.
     fn paint_above(&self, pass: &mut wgpu::RenderPass<'_>) {
@@ -883,6 +936,55 @@ fn patch_region(p: &PendingPatch, o: &crate::scene::SceneObject, screen: &Screen
 }
 
 /// Records the draw of object `o` with the pipeline set.
+/// Appends to `ranges` the index ranges of the `runs` (of [`PICK_RUN_TRIANGLES`]) whose box,
+/// placed by `world_from_object`, may reach `region` on `screen`; adjacent runs join.
+fn runs_within(
+    runs: &[Option<Aabb>],
+    screen: &Screen,
+    world_from_object: glam::Mat4,
+    [x0, y0, x1, y1]: [u32; 4],
+    ranges: &mut Vec<Range<u32>>,
+) {
+    let run_indices = (3 * PICK_RUN_TRIANGLES) as u32;
+    for (k, b) in runs.iter().enumerate() {
+        let reaches = b.is_none_or(|b| {
+            let bounds = [glam::Vec3::from_array(b.lo), glam::Vec3::from_array(b.hi)];
+            match screen.region(world_from_object, bounds) {
+                Below::Same => false,
+                Below::All => true,
+                Below::Region([a0, b0, a1, b1]) => a0 < x1 && x0 < a1 && b0 < y1 && y0 < b1,
+            }
+        });
+        if !reaches {
+            continue;
+        }
+        let start = k as u32 * run_indices;
+        match ranges.last_mut() {
+            Some(last) if last.end == start => last.end = start + run_indices,
+            _ => ranges.push(start..start + run_indices),
+        }
+    }
+}
+
+/// Draws `ranges` of `o`'s indices (clipped to what it holds); returns how many.
+fn draw_ranges(pass: &mut wgpu::RenderPass<'_>, o: &GpuObject, ranges: &[Range<u32>]) -> u64 {
+    if o.n_indices == 0 || ranges.is_empty() {
+        return 0;
+    }
+    pass.set_bind_group(1, &o.bind_group, &[]);
+    pass.set_vertex_buffer(0, o.vertices.slice(..));
+    pass.set_index_buffer(o.indices.slice(..), wgpu::IndexFormat::Uint32);
+    let mut drawn = 0;
+    for r in ranges {
+        let end = r.end.min(o.n_indices);
+        if r.start < end {
+            pass.draw_indexed(r.start..end, 0, 0..1);
+            drawn += u64::from(end - r.start);
+        }
+    }
+    drawn
+}
+
 fn draw_object(pass: &mut wgpu::RenderPass<'_>, o: &GpuObject) {
     if o.n_indices == 0 {
         return;
