@@ -144,15 +144,18 @@ impl SculptApp {
         });
     }
 
-    /// Who did what and whether it counted; this user's own edits can be undone here.
+    /// Who did what and whether it counted; this user's own edits can be undone here. Only
+    /// the rows in view are laid out (up to `MAX_HISTORY_ROWS` are listed, every frame).
     fn history_ui(&mut self, ui: &mut egui::Ui) {
         ui.heading("History");
+        let row_height = ui.spacing().interact_size.y;
+        let n_rows = self.rows.history.len();
         egui::ScrollArea::vertical()
             .id_salt("history")
             .stick_to_bottom(true)
-            .show(ui, |ui| {
+            .show_rows(ui, row_height, n_rows, |ui, in_view| {
                 let mut undo = None;
-                for row in &self.rows.history {
+                for row in &self.rows.history[in_view] {
                     let text = format!(
                         "[{}] {}: {} — {}",
                         row.time,
@@ -161,6 +164,7 @@ impl SculptApp {
                         row.status
                     );
                     ui.horizontal(|ui| {
+                        ui.set_min_height(row_height);
                         if row.status.starts_with("rejected") {
                             ui.colored_label(ERROR_COLOUR, text);
                         } else if row.status == "undone" {
