@@ -371,8 +371,9 @@ impl eframe::App for SculptApp {
         self.receive_reply();
         self.sync_objects(now);
         // Another peer's edit is drawn by this pass's frame when its mesh comes soon, unless
-        // the user is dragging (the frame then answers the pointer without waiting).
-        let wait = match ctx.input(|i| i.pointer.any_down()) {
+        // the user is dragging or drawing a stroke (the frame then answers at once).
+        let busy = self.sculpt.stroke.is_some() || ctx.input(|i| i.pointer.any_down());
+        let wait = match busy {
             true => Duration::ZERO,
             false => Duration::from_millis(MAX_EDIT_WAIT_MILLIS),
         };
