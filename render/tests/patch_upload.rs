@@ -94,10 +94,16 @@ fn spiral_edit(k: usize, n: usize) -> Edit {
 }
 
 /// Edit `k` of the session: on the side of the ball facing the camera at `towards_eye`
-/// (unit), carves, a blob and a stroke, each a little further round.
+/// (unit), carves, a blob and a stroke, each a little further round; the eighth carves a
+/// notch in the outline, where the background shows through afterwards.
 fn visible_edit(k: usize, towards_eye: DVec3) -> Edit {
     let u = towards_eye.any_orthonormal_vector();
     let v = towards_eye.cross(u);
+    if k == 7 {
+        let notch = ToolShape::Sphere { radius: 0.25 };
+        let at = (u + 0.2 * towards_eye).normalize();
+        return Edit::stamp(EditOp::Subtract, notch, Pose::at(at));
+    }
     let angle = 1.3 * k as f64;
     let at = (towards_eye + 0.35 * (angle.cos() * u + angle.sin() * v)).normalize();
     let tool = ToolShape::Sphere {

@@ -4,18 +4,20 @@
 //!
 //! A peer's pointer and tool are lines, and move many times a second while the scene stands
 //! still: on a software rasteriser drawing the objects again costs tens of milliseconds a
-//! frame, copying a kept picture of them one or two. [`KeptPicture::draw`] keeps the objects
-//! below the lines (the opaque ones, colour and depth) aside; when a prepare changed only the
-//! lines, it copies them back and draws the lines and the transparent objects over them.
-//! When it patched opaque meshes and nothing else, the rectangle of pixels the patches may
-//! change (`super::region`) is cleared (colour copied from a picture of the background alone,
-//! depth reset by one triangle) and the objects drawn again under a scissor there.
+//! frame, copying a kept picture of them one or two. [`KeptPicture::draw`] draws the objects
+//! below the lines (the opaque ones, colour and depth) into a layer kept aside and copies it
+//! into the picture, then draws the lines and the transparent objects over them; when a
+//! prepare changed only the lines, the kept layer is copied as it is. When it patched opaque
+//! meshes and nothing else, the rectangle of pixels the patches may change
+//! (`super::region`) is cleared in the kept layer (colour copied from a picture of the
+//! background alone, depth reset by one triangle) and the objects drawn again under a
+//! scissor there.
 //! The pixels are those of one pass drawing everything ([`Renderer::draw_into`]): the same
 //! draws in the same order, the later ones depth-tested against the same depths.
 //!
 //! The cost: a second colour and depth texture at the picture's size (8 bytes a pixel: about
 //! 4.3 MB at 900x600, 66 MB at 3840x2160), a picture of the background as large as the
-//! largest region drawn, and the copies of the kept layer on every frame that draws.
+//! largest region drawn, and the copy of the kept layer on every frame that draws.
 
 use super::Renderer;
 use super::region::Below;
@@ -60,7 +62,9 @@ pub struct KeptPicture {
     depth: wgpu::Texture,
     depth_view: wgpu::TextureView,
     below_colour: wgpu::Texture,
+    below_colour_view: wgpu::TextureView,
     below_depth: wgpu::Texture,
+    below_depth_view: wgpu::TextureView,
     /// Whether the layer below holds a drawing (a new picture holds none).
     holds_below: bool,
     /// A picture of the background alone, as large as the largest region drawn so far: a
@@ -99,14 +103,18 @@ impl KeptPicture {
         let drawn = wgpu::TextureUsages::RENDER_ATTACHMENT | copied;
         let colour_texture = texture("kept picture colour", colour, drawn | usage, view_formats);
         let depth_texture = texture("kept picture depth", depth, drawn, &[]);
+        let below_colour = texture("kept picture below the lines", colour, drawn, &[]);
+        let below_depth = texture("kept picture depth below the lines", depth, drawn, &[]);
         KeptPicture {
             size_px,
             colour_view: colour_texture.create_view(&Default::default()),
             depth_view: depth_texture.create_view(&Default::default()),
             colour: colour_texture,
             depth: depth_texture,
-            below_colour: texture("kept picture below the lines", colour, copied, &[]),
-            below_depth: texture("kept picture depth below the lines", depth, copied, &[]),
+            below_colour_view: below_colour.create_view(&Default::default()),
+            below_depth_view: below_depth.create_view(&Default::default()),
+            below_colour,
+            below_depth,
             holds_below: false,
             blank: None,
             colour_format: colour,
@@ -145,28 +153,23 @@ impl KeptPicture {
         } else {
             Below::All
         };
+        // The layer below is drawn in place, then copied into the picture.
         let frame = match below {
             Below::All => {
                 let [r, g, b, a] = background.map(f64::from);
                 let clear = wgpu::LoadOp::Clear(wgpu::Color { r, g, b, a });
-                let mut pass = self.pass(encoder, label, clear, wgpu::LoadOp::Clear(1.0));
+                let mut pass = self.below_pass(encoder, label, clear, wgpu::LoadOp::Clear(1.0));
                 renderer.paint_below(&mut pass);
-                drop(pass);
-                self.keep(encoder);
                 KeptFrame::Whole
             }
             Below::Region(region) => {
-                self.restore(encoder);
                 self.clear_region(device, encoder, background, region);
                 self.redraw_region(renderer, encoder, label, region);
-                self.keep(encoder);
                 KeptFrame::Region(region)
             }
-            Below::Same => {
-                self.restore(encoder);
-                KeptFrame::LinesOnly
-            }
+            Below::Same => KeptFrame::LinesOnly,
         };
+        self.restore(encoder);
         renderer.below = Below::Same;
         self.holds_below = true;
         let mut pass = self.pass(encoder, label, wgpu::LoadOp::Load, wgpu::LoadOp::Load);
@@ -205,7 +208,7 @@ impl KeptPicture {
         encoder.copy_texture_to_texture(
             blank.texture.as_image_copy(),
             wgpu::TexelCopyTextureInfo {
-                texture: &self.colour,
+                texture: &self.below_colour,
                 mip_level: 0,
                 origin: wgpu::Origin3d { x: x0, y: y0, z: 0 },
                 aspect: wgpu::TextureAspect::All,
@@ -227,17 +230,11 @@ impl KeptPicture {
         label: &str,
         [x0, y0, x1, y1]: [u32; 4],
     ) {
-        let mut pass = self.pass(encoder, label, wgpu::LoadOp::Load, wgpu::LoadOp::Load);
+        let mut pass = self.below_pass(encoder, label, wgpu::LoadOp::Load, wgpu::LoadOp::Load);
         pass.set_scissor_rect(x0, y0, x1 - x0, y1 - y0);
         pass.set_pipeline(&self.depth_reset);
         pass.draw(0..3, 0..1);
         renderer.paint_below_within(&mut pass, [x0, y0, x1, y1]);
-    }
-
-    /// Copies the picture into the layer kept below the lines.
-    fn keep(&self, encoder: &mut wgpu::CommandEncoder) {
-        let below = [&self.below_colour, &self.below_depth];
-        copy(encoder, [&self.colour, &self.depth], below);
     }
 
     /// Copies the layer kept below the lines into the picture.
@@ -254,30 +251,53 @@ impl KeptPicture {
         colour: wgpu::LoadOp<wgpu::Color>,
         depth: wgpu::LoadOp<f32>,
     ) -> wgpu::RenderPass<'e> {
-        encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some(label),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &self.colour_view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: colour,
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &self.depth_view,
-                depth_ops: Some(wgpu::Operations {
-                    load: depth,
-                    store: wgpu::StoreOp::Store,
-                }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        })
+        let views = [&self.colour_view, &self.depth_view];
+        render_pass(encoder, label, views, (colour, depth))
     }
+
+    /// The same over the layer kept below the lines.
+    fn below_pass<'e>(
+        &self,
+        encoder: &'e mut wgpu::CommandEncoder,
+        label: &str,
+        colour: wgpu::LoadOp<wgpu::Color>,
+        depth: wgpu::LoadOp<f32>,
+    ) -> wgpu::RenderPass<'e> {
+        let views = [&self.below_colour_view, &self.below_depth_view];
+        render_pass(encoder, label, views, (colour, depth))
+    }
+}
+
+/// A pass over a colour and a depth view that loads each as told and stores both.
+fn render_pass<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    [colour_view, depth_view]: [&wgpu::TextureView; 2],
+    (colour, depth): (wgpu::LoadOp<wgpu::Color>, wgpu::LoadOp<f32>),
+) -> wgpu::RenderPass<'e> {
+    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view: colour_view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations {
+                load: colour,
+                store: wgpu::StoreOp::Store,
+            },
+        })],
+        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+            view: depth_view,
+            depth_ops: Some(wgpu::Operations {
+                load: depth,
+                store: wgpu::StoreOp::Store,
+            }),
+            stencil_ops: None,
+        }),
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
 }
 
 /// A two-dimensional texture of `size_px` pixels (at least one a side), one sample, one level.
