@@ -373,11 +373,12 @@ impl eframe::App for SculptApp {
         // Another peer's edit is drawn by this pass's frame when its mesh comes soon, unless
         // the user is dragging or drawing a stroke (the frame then answers at once).
         let busy = self.sculpt.stroke.is_some() || ctx.input(|i| i.pointer.any_down());
-        let wait = match busy {
-            true => Duration::ZERO,
-            false => Duration::from_millis(MAX_EDIT_WAIT_MILLIS),
-        };
-        (self.objects).await_sent_edits(clock::now().instant, now.instant + wait);
+        if busy {
+            self.objects.forget_sent_edits();
+        } else {
+            let deadline = now.instant + Duration::from_millis(MAX_EDIT_WAIT_MILLIS);
+            (self.objects).await_sent_edits(clock::now().instant, deadline);
+        }
         self.publish_presence();
     }
 

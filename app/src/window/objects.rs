@@ -529,6 +529,11 @@ impl Objects {
         }
     }
 
+    /// Leaves the edits sent since the last [`Objects::await_sent_edits`] to later frames.
+    pub fn forget_sent_edits(&mut self) {
+        self.edit_sent = [false; 2];
+    }
+
     /// Takes one finished mesh, taken from the mesher at `now`.
     fn take(&mut self, mut done: Meshed, now: Instant) {
         let Some(tracked) = self.tracked.get_mut(&done.id) else {
