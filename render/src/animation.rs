@@ -273,6 +273,7 @@ impl Animator {
         }
         let drawn = &mut self.scene.objects[i];
         drawn.mesh = Arc::new(mesh);
+        drawn.pick_runs = Default::default();
         drawn.material = material;
     }
 

@@ -6,7 +6,7 @@ use crate::camera::{Camera, Ray};
 use crate::mesh::{Aabb, Mesh};
 use glam::{Mat4, Vec3};
 use model::object::{Pose, ToolShape};
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, OnceLock, Weak};
 
 /// How a surface reflects light; multiplies the per-vertex colour.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -66,8 +66,9 @@ pub struct SceneObject {
 pub const PICK_RUN_TRIANGLES: usize = 64;
 
 /// Boxes around a mesh's runs of [`PICK_RUN_TRIANGLES`] triangles (in index order) and
-/// around all of them, made once per mesh; clones share them. They hold the mesh they were
-/// made for, so an object given another mesh never reads the boxes of the old one.
+/// around all of them, made once per mesh; clones share them. They name the mesh they were
+/// made for (a weak reference: its allocation, so its address, outlives it, but not its
+/// buffers), so an object given another mesh never reads the boxes of the old one.
 #[derive(Clone, Default)]
 pub struct PickRuns(Arc<OnceLock<RunBoxes>>);
 
@@ -80,7 +81,7 @@ impl std::fmt::Debug for PickRuns {
 }
 
 struct RunBoxes {
-    mesh: Arc<Mesh>,
+    mesh: Weak<Mesh>,
     /// Around every valid triangle.
     all: Option<Aabb>,
     /// One per run; `None` for a run without a valid triangle.
@@ -88,6 +89,10 @@ struct RunBoxes {
 }
 
 impl RunBoxes {
+    fn made_for(&self, mesh: &Arc<Mesh>) -> bool {
+        std::ptr::eq(self.mesh.as_ptr(), Arc::as_ptr(mesh))
+    }
+
     fn of(mesh: &Arc<Mesh>) -> RunBoxes {
         let n = mesh.positions.len();
         let runs: Vec<Option<Aabb>> = (mesh.indices)
@@ -104,7 +109,7 @@ impl RunBoxes {
             .collect();
         let all = runs.iter().flatten().copied().reduce(|a, b| a.union(&b));
         RunBoxes {
-            mesh: Arc::clone(mesh),
+            mesh: Arc::downgrade(mesh),
             all,
             runs,
         }
@@ -114,7 +119,7 @@ impl RunBoxes {
 impl PickRuns {
     /// The boxes of the runs of `mesh`'s triangles, when they were made for it.
     pub(crate) fn runs_made_for(&self, mesh: &Arc<Mesh>) -> Option<&[Option<Aabb>]> {
-        let made = self.0.get().filter(|b| Arc::ptr_eq(&b.mesh, mesh))?;
+        let made = self.0.get().filter(|b| b.made_for(mesh))?;
         Some(&made.runs)
     }
 
@@ -128,7 +133,7 @@ impl PickRuns {
     /// made now (and kept when none were).
     fn with<R>(&self, mesh: &Arc<Mesh>, f: impl FnOnce(&RunBoxes) -> R) -> R {
         let kept = self.0.get_or_init(|| RunBoxes::of(mesh));
-        if Arc::ptr_eq(&kept.mesh, mesh) {
+        if kept.made_for(mesh) {
             f(kept)
         } else {
             f(&RunBoxes::of(mesh))
@@ -606,6 +611,18 @@ mod tests {
             pick_every_triangle(&alone, &ray)
         );
         assert!(alone.pick(&ray).is_some());
+        // Meshes dropped and made again, which the allocator may place where the dropped ones
+        // were, are never taken for them.
+        alone.objects[0].pick_runs = PickRuns::default();
+        alone.pick(&ray);
+        for k in 1..6 {
+            let next = wavy_sheet(60, 0.5 - 0.05 * k as f32);
+            alone.objects[0].mesh = Arc::new(Mesh::default());
+            alone.objects[0].mesh = Arc::new(next);
+            let hit = alone.pick(&ray);
+            let hit = hit.map(|h| (h.object_idx, h.triangle_idx, h.distance));
+            assert_eq!(hit, pick_every_triangle(&alone, &ray), "mesh {k}");
+        }
     }
 
     #[test]
