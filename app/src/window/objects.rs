@@ -731,12 +731,15 @@ mod tests {
         Object::implicit(&format!("{radius} - sqrt(x^2 + y^2 + z^2)")).unwrap()
     }
 
-    /// Sends a preview of object 1 as `object`, timed as an edit of this frame's when `input`.
-    fn send(objects: &mut Objects, object: Object, input: bool) -> Instant {
+    /// Previews object 1 as `object`, timed as an edit of this frame's when `input`; the job
+    /// goes to the mesher when `sent`, else it is held back (as when the queue is full).
+    fn send(objects: &mut Objects, object: Object, input: bool, sent: bool) -> Instant {
         let now = clock::now().instant;
         let input_at = input.then_some(now);
         objects.preview(ObjectId(1), object, Transform::IDENTITY, now, 0.0, input_at);
-        objects.flush();
+        if sent {
+            objects.flush();
+        }
         now
     }
 
@@ -745,7 +748,7 @@ mod tests {
         let mut objects = Objects::start(5, || {}).unwrap();
         let far = Duration::from_secs(600);
         // The edit's mesh is taken by the wait, and this frame draws it.
-        let at = send(&mut objects, ball(0.5), true);
+        let at = send(&mut objects, ball(0.5), true, true);
         objects.await_sent_edits(at, at + far);
         assert!(objects.draws_an_edit());
         assert_eq!(objects.tracked[&ObjectId(1)].drawn_generation, 1);
@@ -753,15 +756,14 @@ mod tests {
         assert_eq!(objects.stats.edit_to_mesh_ms.values().len(), 1);
         objects.presented(clock::now().instant);
         // A preview that is no edit of this frame's is left to a later frame.
-        let at = send(&mut objects, ball(0.4), false);
+        let at = send(&mut objects, ball(0.4), false, true);
         objects.await_sent_edits(at, at + far);
         assert_eq!(objects.tracked[&ObjectId(1)].drawn_generation, 1);
         assert_eq!(objects.stats.n_edits_awaited, 1);
-        // A deadline already past: the wait gives up and says so (a whole ball at depth 5
-        // takes the worker far longer than the call).
-        objects.receive(clock::now().instant);
-        let at = send(&mut objects, ball(0.3), true);
-        objects.await_sent_edits(at, at);
+        // An edit whose mesh does not come by the deadline (its job held back): the wait gives
+        // up then, and says so.
+        let at = send(&mut objects, ball(0.3), true, false);
+        objects.await_sent_edits(at, at + Duration::from_millis(50));
         assert_eq!(objects.stats.n_edit_waits_expired, 1);
         assert_eq!(objects.stats.n_edits_awaited, 1);
         assert!(!objects.draws_an_edit());
