@@ -26,7 +26,8 @@ pub const MAX_PATCHES_KEPT: usize = 256;
 pub const MESHING_SHOWN_MILLIS: u64 = 200;
 /// While time runs, an object whose drawing reads `t` is meshed again at most this often.
 pub const ANIMATION_REMESH_MILLIS: u64 = 100;
-/// A frame that sent the mesher an edit (this window's stroke released, another peer's op)
+/// A frame that sent the mesher an edit (this window's stroke released or command taken,
+/// another peer's op)
 /// waits for its mesh until this long after the frame began, so that the frame which took the
 /// edit draws it; a mesh that takes longer is drawn by a later frame.
 pub const MAX_EDIT_WAIT_MILLIS: u64 = 25;
@@ -383,7 +384,9 @@ impl Objects {
                 .then(|| Box::new(Moving::new(&entry.object, world_from_group)));
             tracked.timed = render::animation::object_reads_time(&entry.object);
             tracked.time_job = None;
-            self.edit_sent[REMOTE] |= edit_at[REMOTE].is_some();
+            for (sent, at) in self.edit_sent.iter_mut().zip(edit_at) {
+                *sent |= at.is_some();
+            }
             tracked.pending = Some(Box::new(MeshJob {
                 id: *id,
                 object: entry.object.clone(),
