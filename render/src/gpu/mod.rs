@@ -847,16 +847,7 @@ impl Renderer {
 
     /// Records the draws below the lines: the opaque objects.
     fn paint_below(&self, pass: &mut wgpu::RenderPass<'_>) {
-        pass.set_bind_group(0, &self.globals_bind_group, &[]);
-        for &i in &self.draw_order[..self.n_opaque] {
-            let o = &self.objects[i];
-            pass.set_pipeline(if o.closed {
-                &self.opaque_closed
-            } else {
-                &self.opaque
-            });
-            draw_object(pass, o);
-        }
+        self.paint_opaque(pass, None);
     }
 
     /// Records the draws of the opaque objects as [`Renderer::paint_below`] does, for a pass
@@ -864,6 +855,15 @@ impl Renderer {
     /// object whose runs of triangles are boxed ([`PickRuns`]), only the runs whose box may
     /// reach the region. The others make no pixel there, so the pixels are the same.
     pub(super) fn paint_below_within(&self, pass: &mut wgpu::RenderPass<'_>, region: [u32; 4]) {
+        let [drawn, held] = self.paint_opaque(pass, Some(region));
+        let relaxed = std::sync::atomic::Ordering::Relaxed;
+        self.region_indices[0].store(drawn, relaxed);
+        self.region_indices[1].store(held, relaxed);
+    }
+
+    /// Records the opaque objects' draws, within `region` when one is given; returns the
+    /// indices drawn and those the objects hold.
+    fn paint_opaque(&self, pass: &mut wgpu::RenderPass<'_>, region: Option<[u32; 4]>) -> [u64; 2] {
         pass.set_bind_group(0, &self.globals_bind_group, &[]);
         let mut ranges = Vec::new();
         let (mut drawn, mut held) = (0, 0);
@@ -875,12 +875,9 @@ impl Renderer {
                 &self.opaque
             });
             ranges.clear();
-            match (
-                self.screen,
-                o.pick_runs.runs_made_for(&o.mesh),
-                o.uniform_value,
-            ) {
-                (Some(screen), Some(runs), Some(u)) => {
+            let runs = o.pick_runs.runs_made_for(&o.mesh);
+            match (region, self.screen, runs, o.uniform_value) {
+                (Some(region), Some(screen), Some(runs), Some(u)) => {
                     let world_from_object = glam::Mat4::from_cols_array_2d(&u.world_from_object);
                     runs_within(runs, &screen, world_from_object, region, &mut ranges);
                 }
@@ -889,9 +886,7 @@ impl Renderer {
             drawn += draw_ranges(pass, o, &ranges);
             held += u64::from(o.n_indices);
         }
-        let relaxed = std::sync::atomic::Ordering::Relaxed;
-        self.region_indices[0].store(drawn, relaxed);
-        self.region_indices[1].store(held, relaxed);
+        [drawn, held]
     }
 
     /// Of the last draw within a region: the indices drawn, and those its opaque objects hold.
@@ -985,14 +980,9 @@ fn draw_ranges(pass: &mut wgpu::RenderPass<'_>, o: &GpuObject, ranges: &[Range<u
     drawn
 }
 
+/// Draws all of `o`'s indices.
 fn draw_object(pass: &mut wgpu::RenderPass<'_>, o: &GpuObject) {
-    if o.n_indices == 0 {
-        return;
-    }
-    pass.set_bind_group(1, &o.bind_group, &[]);
-    pass.set_vertex_buffer(0, o.vertices.slice(..));
-    pass.set_index_buffer(o.indices.slice(..), wgpu::IndexFormat::Uint32);
-    pass.draw_indexed(0..o.n_indices, 0, 0..1);
+    draw_ranges(pass, o, std::slice::from_ref(&(0..o.n_indices)));
 }
 
 /// Bytes of one triangle in an index buffer.
