@@ -58,13 +58,12 @@ pub enum KeptFrame {
 pub struct KeptPicture {
     size_px: [u32; 2],
     colour: wgpu::Texture,
-    colour_view: wgpu::TextureView,
     depth: wgpu::Texture,
-    depth_view: wgpu::TextureView,
     below_colour: wgpu::Texture,
-    below_colour_view: wgpu::TextureView,
     below_depth: wgpu::Texture,
-    below_depth_view: wgpu::TextureView,
+    /// Views of the picture's colour and depth, then of the layer below's.
+    views: [wgpu::TextureView; 2],
+    below_views: [wgpu::TextureView; 2],
     /// Whether the layer below holds a drawing (a new picture holds none).
     holds_below: bool,
     /// A picture of the background alone, as large as the largest region drawn so far: a
@@ -107,12 +106,10 @@ impl KeptPicture {
         let below_depth = texture("kept picture depth below the lines", depth, drawn, &[]);
         KeptPicture {
             size_px,
-            colour_view: colour_texture.create_view(&Default::default()),
-            depth_view: depth_texture.create_view(&Default::default()),
+            views: [&colour_texture, &depth_texture].map(|t| t.create_view(&Default::default())),
             colour: colour_texture,
             depth: depth_texture,
-            below_colour_view: below_colour.create_view(&Default::default()),
-            below_depth_view: below_depth.create_view(&Default::default()),
+            below_views: [&below_colour, &below_depth].map(|t| t.create_view(&Default::default())),
             below_colour,
             below_depth,
             holds_below: false,
@@ -158,7 +155,12 @@ impl KeptPicture {
             Below::All => {
                 let [r, g, b, a] = background.map(f64::from);
                 let clear = wgpu::LoadOp::Clear(wgpu::Color { r, g, b, a });
-                let mut pass = self.below_pass(encoder, label, clear, wgpu::LoadOp::Clear(1.0));
+                let mut pass = render_pass(
+                    encoder,
+                    label,
+                    &self.below_views,
+                    (clear, wgpu::LoadOp::Clear(1.0)),
+                );
                 renderer.paint_below(&mut pass);
                 KeptFrame::Whole
             }
@@ -172,7 +174,7 @@ impl KeptPicture {
         self.restore(encoder);
         renderer.below = Below::Same;
         self.holds_below = true;
-        let mut pass = self.pass(encoder, label, wgpu::LoadOp::Load, wgpu::LoadOp::Load);
+        let mut pass = render_pass(encoder, label, &self.views, LOAD_BOTH);
         renderer.paint_above(&mut pass);
         frame
     }
@@ -230,7 +232,7 @@ impl KeptPicture {
         label: &str,
         [x0, y0, x1, y1]: [u32; 4],
     ) {
-        let mut pass = self.below_pass(encoder, label, wgpu::LoadOp::Load, wgpu::LoadOp::Load);
+        let mut pass = render_pass(encoder, label, &self.below_views, LOAD_BOTH);
         pass.set_scissor_rect(x0, y0, x1 - x0, y1 - y0);
         pass.set_pipeline(&self.depth_reset);
         pass.draw(0..3, 0..1);
@@ -242,37 +244,17 @@ impl KeptPicture {
         let below = [&self.below_colour, &self.below_depth];
         copy(encoder, below, [&self.colour, &self.depth]);
     }
-
-    /// A pass over the picture that loads its colour and depth as told and stores both.
-    fn pass<'e>(
-        &self,
-        encoder: &'e mut wgpu::CommandEncoder,
-        label: &str,
-        colour: wgpu::LoadOp<wgpu::Color>,
-        depth: wgpu::LoadOp<f32>,
-    ) -> wgpu::RenderPass<'e> {
-        let views = [&self.colour_view, &self.depth_view];
-        render_pass(encoder, label, views, (colour, depth))
-    }
-
-    /// The same over the layer kept below the lines.
-    fn below_pass<'e>(
-        &self,
-        encoder: &'e mut wgpu::CommandEncoder,
-        label: &str,
-        colour: wgpu::LoadOp<wgpu::Color>,
-        depth: wgpu::LoadOp<f32>,
-    ) -> wgpu::RenderPass<'e> {
-        let views = [&self.below_colour_view, &self.below_depth_view];
-        render_pass(encoder, label, views, (colour, depth))
-    }
 }
+
+/// Loads colour and depth as they are.
+const LOAD_BOTH: (wgpu::LoadOp<wgpu::Color>, wgpu::LoadOp<f32>) =
+    (wgpu::LoadOp::Load, wgpu::LoadOp::Load);
 
 /// A pass over a colour and a depth view that loads each as told and stores both.
 fn render_pass<'e>(
     encoder: &'e mut wgpu::CommandEncoder,
     label: &str,
-    [colour_view, depth_view]: [&wgpu::TextureView; 2],
+    [colour_view, depth_view]: &[wgpu::TextureView; 2],
     (colour, depth): (wgpu::LoadOp<wgpu::Color>, wgpu::LoadOp<f32>),
 ) -> wgpu::RenderPass<'e> {
     encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
