@@ -573,13 +573,8 @@ mod tests {
             scene.add_object(sheet, to_world, Material::default());
         }
         assert!(scene.objects[0].mesh.n_triangles() > 50 * PICK_RUN_TRIANGLES);
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
-        let mut random = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rng = testkit::rng::XorShift64(0x2545_f491_4f6c_dd1d);
+        let mut random = move || rng.unit_f32();
         let mut n_hits = 0;
         for _ in 0..2000 {
             let origin = Vec3::new(random() * 3.0 - 1.0, random() * 3.0 - 1.0, 2.0 + random());

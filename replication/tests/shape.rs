@@ -137,12 +137,9 @@ proptest! {
         let (_, reference) = deliver(&ops);
         let mut shuffled = ops.clone();
         // A deterministic shuffle from the seed.
-        let mut s = seed | 1;
+        let mut rng = testkit::rng::XorShift64(seed | 1);
         for i in (1..shuffled.len()).rev() {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            shuffled.swap(i, (s % (i as u64 + 1)) as usize);
+            shuffled.swap(i, (rng.next_u64() % (i as u64 + 1)) as usize);
         }
         let (log, scene) = deliver(&shuffled);
         prop_assert_eq!(scene.scene_hash(), reference.scene_hash());

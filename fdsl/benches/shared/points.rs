@@ -3,13 +3,8 @@
 
 /// Deterministic scattered points in [-1.2, 1.2]^3.
 pub fn points(n: usize) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.4 - 1.2
-    };
+    let mut rng = testkit::rng::XorShift64(0x2545_f491_4f6c_dd1d);
+    let mut next = || rng.unit_f32() * 2.4 - 1.2;
     let mut xs = Vec::with_capacity(n);
     let mut ys = Vec::with_capacity(n);
     let mut zs = Vec::with_capacity(n);

@@ -32,13 +32,8 @@ fn main() {
 
 /// Deterministic scattered points in [-1.2, 1.2]^3 (xorshift).
 fn points(n: usize) -> Vec<DVec3> {
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64 * 2.4 - 1.2
-    };
+    let mut rng = testkit::rng::XorShift64(0x2545_f491_4f6c_dd1d);
+    let mut next = || rng.unit_f64() * 2.4 - 1.2;
     (0..n).map(|_| DVec3::new(next(), next(), next())).collect()
 }
 

@@ -63,13 +63,9 @@ fn torus(major: f64, minor: f64, n_major: u32, n_minor: u32) -> TriMesh {
 }
 
 /// Deterministic points in the box of half-size `h` (xorshift).
-fn scattered_points(n: usize, h: f64, mut state: u64) -> Vec<DVec3> {
-    let mut next = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 * h - h
-    };
+fn scattered_points(n: usize, h: f64, seed: u64) -> Vec<DVec3> {
+    let mut rng = testkit::rng::XorShift64(seed);
+    let mut next = || rng.unit_f64() * 2.0 * h - h;
     (0..n).map(|_| DVec3::new(next(), next(), next())).collect()
 }
 

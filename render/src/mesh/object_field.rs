@@ -736,39 +736,24 @@ mod tests {
         assert!(same_surface(&mesher.mesh().unwrap(), &full, 1e-6));
     }
 
-    /// A small seeded generator (xorshift64) for random edit sequences.
-    struct Rng(u64);
+    use testkit::rng::XorShift64 as Rng;
 
-    impl Rng {
-        fn next(&mut self) -> u64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            self.0
-        }
-
-        /// Uniform in 0..1.
-        fn unit(&mut self) -> f64 {
-            (self.next() >> 11) as f64 / (1u64 << 53) as f64
-        }
-
-        /// A point on the sphere of radius `r`.
-        fn on_sphere(&mut self, r: f64) -> DVec3 {
-            let y = 2.0 * self.unit() - 1.0;
-            let phi = std::f64::consts::TAU * self.unit();
-            let ring = (1.0 - y * y).max(0.0).sqrt();
-            r * DVec3::new(ring * phi.cos(), y, ring * phi.sin())
-        }
+    /// A point on the sphere of radius `r`, drawn from `rng`.
+    fn on_sphere(rng: &mut Rng, r: f64) -> DVec3 {
+        let y = 2.0 * rng.unit_f64() - 1.0;
+        let phi = std::f64::consts::TAU * rng.unit_f64();
+        let ring = (1.0 - y * y).max(0.0).sqrt();
+        r * DVec3::new(ring * phi.cos(), y, ring * phi.sin())
     }
 
     /// One random step of a sculpting session on `object`: mostly carves and added blobs
     /// (stamps and strokes, balls and boxes), sometimes a painting, an undo or a redo of an
     /// earlier edit. Returns what to remesh and what the step was.
     fn random_step(object: &mut Object, rng: &mut Rng) -> (Dirty, &'static str) {
-        let roll = rng.next() % 10;
+        let roll = rng.next_u64() % 10;
         let n = object.history().len();
         if roll == 0 {
-            let idx = (rng.next() % n as u64) as usize;
+            let idx = (rng.next_u64() % n as u64) as usize;
             let entry = &object.history().entries()[idx];
             let (dirty, active) = (dirty_boxes(&entry.edit), entry.active);
             if active {
@@ -779,8 +764,8 @@ mod tests {
             object.prepare();
             return (dirty, if active { "undo" } else { "redo" });
         }
-        let r = 0.9 + 0.15 * rng.unit();
-        let at = rng.on_sphere(r);
+        let r = 0.9 + 0.15 * rng.unit_f64();
+        let at = on_sphere(rng, r);
         let (op, what) = match roll {
             1 => (
                 EditOp::Paint {
@@ -792,20 +777,20 @@ mod tests {
             2 | 3 => (EditOp::Union, "union"),
             _ => (EditOp::Subtract, "carve"),
         };
-        let tool = if rng.next().is_multiple_of(3) {
+        let tool = if rng.next_u64().is_multiple_of(3) {
             ToolShape::Box {
-                half_extents: DVec3::new(0.08, 0.06, 0.1) * (0.5 + rng.unit()),
+                half_extents: DVec3::new(0.08, 0.06, 0.1) * (0.5 + rng.unit_f64()),
                 rounding: 0.02,
             }
         } else {
             ToolShape::Sphere {
-                radius: 0.04 + 0.12 * rng.unit(),
+                radius: 0.04 + 0.12 * rng.unit_f64(),
             }
         };
-        let e = if rng.next().is_multiple_of(2) {
+        let e = if rng.next_u64().is_multiple_of(2) {
             Edit::stamp(op, tool, Pose::at(at))
         } else {
-            let side = at.any_orthonormal_vector() * (0.2 * rng.unit());
+            let side = at.any_orthonormal_vector() * (0.2 * rng.unit_f64());
             Edit::stroke(op, tool, vec![Pose::at(at - side), Pose::at(at + side)])
         };
         let idx = object.apply(e).unwrap();

@@ -861,13 +861,8 @@ mod tests {
     fn indexed_evaluation_is_the_fold_by_definition_bit_for_bit() {
         use crate::object::Object;
         use crate::object::tool::Axis;
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = testkit::rng::XorShift64(0x2545_f491_4f6c_dd1d);
+        let mut next = move || rng.unit_f64();
         let mut object = Object::implicit("1 - x^2 - y^2 - z^2").unwrap();
         let mut centres = Vec::new();
         for i in 0..1500 {

@@ -648,13 +648,8 @@ mod tests {
     fn a_vertex_stays_within_its_reach_whatever_its_data() {
         // Pseudo-random crossings on the unit cell's edges, with random gradients and values,
         // some of them zero, huge or not finite: the vertex is finite and within its box.
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u32 << 24) as f32
-        };
+        let mut rng = testkit::rng::XorShift64(0x2545_f491_4f6c_dd1d);
+        let mut next = || rng.unit_f32();
         let odd = [0.0, 1e30, -1e-30, f32::NAN, f32::INFINITY];
         for round in 0..2000 {
             let n = 1 + (next() * 12.0) as usize;
@@ -691,13 +686,8 @@ mod tests {
     #[test]
     fn the_box_minimiser_is_the_least_energy_in_the_box() {
         // Pseudo-random positive definite quadrics whose free minimiser leaves the box.
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let mut rng = testkit::rng::XorShift64(0x9e37_79b9_7f4a_7c15);
+        let mut next = || rng.unit_f64() * 2.0 - 1.0;
         for _ in 0..200 {
             let a: [[f64; 3]; 3] = std::array::from_fn(|_| std::array::from_fn(|_| next()));
             let mut q = Quadric::default();
