@@ -216,6 +216,11 @@ pub struct Simulation {
     /// the crashed peer sent before the crash, of epoch `.0`, are still delivered until `.1`.
     lingering: BTreeMap<(usize, usize), (u64, u64)>,
     blocked: BTreeMap<(usize, usize), u32>,
+    /// When a packet last came over each directed link between honest peers, as far as a
+    /// stream connection's idle timer knows (a message, or a keep-alive), and since when each
+    /// link that is not cut has been open (streams only).
+    last_heard: BTreeMap<(usize, usize), u64>,
+    opened_at: BTreeMap<(usize, usize), u64>,
     objects: Vec<u64>,
     stats: Stats,
     trace: TraceHash,
@@ -272,6 +277,8 @@ impl Simulation {
             pairs: vec![vec![Pair::default(); n_nodes]; n_nodes],
             lingering: BTreeMap::new(),
             blocked: BTreeMap::new(),
+            last_heard: BTreeMap::new(),
+            opened_at: BTreeMap::new(),
             objects: vec![HOT_OBJECT],
             stats: Stats::default(),
             trace: TraceHash::default(),
@@ -697,11 +704,18 @@ impl Simulation {
     fn partition(&mut self, cut: Vec<(usize, usize)>, start: bool) {
         for link in cut {
             if start {
-                *self.blocked.entry(link).or_default() += 1;
+                let count = self.blocked.entry(link).or_default();
+                *count += 1;
+                if *count == 1 && self.faults.streams {
+                    self.stream_keep_alives(link);
+                }
             } else if let Some(c) = self.blocked.get_mut(&link) {
                 *c -= 1;
                 if *c == 0 {
                     self.blocked.remove(&link);
+                    if self.faults.streams {
+                        self.opened_at.insert(link, self.now);
+                    }
                 }
             }
         }
@@ -1387,6 +1401,9 @@ impl Simulation {
         self.trace.u64(to as u64);
         self.trace.bytes(bytes);
         self.stats.n_delivered += 1;
+        if self.faults.streams {
+            self.last_heard.insert((from, to), self.now);
+        }
         let rate_limited_before = self.stats.hostile_rejects.get("RateLimited").copied();
         let now = Timestamp(self.now);
         guarded(&mut self.honest[to], |p| {
