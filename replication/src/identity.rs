@@ -200,6 +200,13 @@ impl fmt::Debug for Signature {
 /// Most signatures [`verify_batch`] checks in one equation; a longer slice is checked in
 /// runs of this many (one sync batch of ops).
 pub const MAX_BATCH_SIGNATURES: usize = 64;
+/// Fewest signatures each thread of [`verify_batch`] takes (a batch of fewer is checked on
+/// the caller's thread): starting a thread costs about what checking a few signatures does.
+pub const MIN_SIGNATURES_PER_THREAD: usize = 16;
+/// Most threads one [`verify_batch`] call uses, the caller's included.
+pub const MAX_VERIFY_THREADS: usize = 8;
+/// The stack of a thread that checks signatures (the batch equation needs little).
+const VERIFY_STACK_BYTES: usize = 256 * 1024;
 
 /// Checks many signatures at once: true if every one of them verifies, by the same rules as
 /// [`PeerId::verify`] (ZIP 215), so a false answer means at least one would fail alone and the
@@ -209,7 +216,57 @@ pub const MAX_BATCH_SIGNATURES: usize = 64;
 /// The equation's random coefficients are drawn from a hash of everything in the batch (keys,
 /// signatures and messages), never from the system: the core takes no randomness it is not
 /// given, and an author cannot choose a signature knowing the coefficients it will meet.
+///
+/// A batch of at least twice [`MIN_SIGNATURES_PER_THREAD`] is split over up to
+/// [`MAX_VERIFY_THREADS`] threads (the machine's cores), each checking its part as above: a
+/// sync batch of ops, or a snapshot's every op, costs its checks' time divided by the cores,
+/// and the verdict is the same (an honest part passes whatever its coefficients). A thread
+/// the system refuses is done on the caller's.
 pub fn verify_batch(items: &[(PeerId, &[u8], Signature)]) -> bool {
+    verify_split(items, verify_threads())
+}
+
+/// [`verify_batch`] on at most `max_threads` threads.
+fn verify_split(items: &[(PeerId, &[u8], Signature)], max_threads: usize) -> bool {
+    let n_threads = max_threads.min(items.len() / MIN_SIGNATURES_PER_THREAD);
+    if n_threads < 2 {
+        return verify_runs(items);
+    }
+    let part = items.len().div_ceil(n_threads);
+    let (own, others) = items.split_at(part);
+    std::thread::scope(|scope| {
+        let helpers: Vec<_> = others
+            .chunks(part)
+            .map(|items| {
+                let helper = std::thread::Builder::new()
+                    .name("verify".into())
+                    .stack_size(VERIFY_STACK_BYTES)
+                    .spawn_scoped(scope, move || verify_runs(items));
+                helper.map_err(|_| items)
+            })
+            .collect();
+        let mut all = verify_runs(own);
+        for helper in helpers {
+            all &= match helper {
+                Ok(thread) => thread.join().unwrap_or(false),
+                Err(items) => verify_runs(items),
+            };
+        }
+        all
+    })
+}
+
+/// How many threads [`verify_batch`] may use: the machine's cores, at most
+/// [`MAX_VERIFY_THREADS`] (looked up once).
+fn verify_threads() -> usize {
+    static THREADS: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+    *THREADS.get_or_init(|| {
+        std::thread::available_parallelism().map_or(1, |n| n.get().min(MAX_VERIFY_THREADS))
+    })
+}
+
+/// [`verify_batch`] on the caller's thread, in runs of [`MAX_BATCH_SIGNATURES`].
+fn verify_runs(items: &[(PeerId, &[u8], Signature)]) -> bool {
     items.chunks(MAX_BATCH_SIGNATURES).all(|run| {
         let mut transcript =
             blake3::Hasher::new_derive_key("sculpt/identity/batch-coefficients/v1");
@@ -369,16 +426,21 @@ mod tests {
                 (k.peer_id(), m.as_slice(), k.sign(m))
             })
             .collect();
-        assert!(verify_batch(&items));
-        assert!(verify_batch(&[]));
-        for at in [0, 63, 64, 100, 149] {
-            let mut forged = items.clone();
-            forged[at].2.0[40] ^= 1;
-            assert!(!verify_batch(&forged), "{at}");
-            let mut swapped = items.clone();
-            swapped[at].0 = keys[(at + 1) % keys.len()].peer_id();
-            assert!(!verify_batch(&swapped), "{at}");
+        // Every split the machine's cores can give: the caller's thread alone, and parts
+        // of 75, 50, 38 and 19 signatures (a forgery in each part, on each side of a cut).
+        for threads in [1, 2, 3, 4, MAX_VERIFY_THREADS] {
+            assert!(verify_split(&items, threads));
+            assert!(verify_split(&[], threads));
+            for at in [0, 18, 19, 37, 38, 63, 64, 74, 75, 100, 149] {
+                let mut forged = items.clone();
+                forged[at].2.0[40] ^= 1;
+                assert!(!verify_split(&forged, threads), "{at} of {threads}");
+                let mut swapped = items.clone();
+                swapped[at].0 = keys[(at + 1) % keys.len()].peer_id();
+                assert!(!verify_split(&swapped, threads), "{at} of {threads}");
+            }
         }
+        assert!(verify_batch(&items));
     }
 
     proptest! {
