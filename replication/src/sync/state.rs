@@ -122,6 +122,16 @@ pub const HAVE_FULL_EVERY_MICROS: u64 = 10_000_000;
 pub const MAX_MESSAGES_PER_SEC: u64 = 2_000;
 /// Messages a remote may send in a burst.
 pub const MAX_MESSAGE_BURST: u64 = 512;
+/// Messages this peer sends one remote per second on average, control included: nine tenths
+/// of the remote's [`MAX_MESSAGES_PER_SEC`], the rest headroom for control sent on top (a
+/// message that must answer goes out at once and is paid back by the data after it). Data
+/// takes what control leaves, so a one-way catch-up sends its batches at this rate, and two
+/// ways each side's batches and its acks of the other's share it.
+pub const MAX_SENT_MESSAGES_PER_SEC: u64 = MAX_MESSAGES_PER_SEC * 9 / 10;
+/// The burst of [`MAX_SENT_MESSAGES_PER_SEC`]: half the remote's [`MAX_MESSAGE_BURST`], so
+/// that when both sides open with a burst of batches, each side's batches and its acks of
+/// the other's (which go out at once) fit in the remote's burst together.
+pub const MAX_SENT_MESSAGE_BURST: u64 = MAX_MESSAGE_BURST / 2;
 /// Full haves a remote's hellos may cost this peer per second on average: every hello asks
 /// for one (it tells the remote what this peer holds, and confirms the hello), so this
 /// bounds what hellos make this peer announce, as pings are (a full have a second). A hello
@@ -403,10 +413,12 @@ impl SyncStats {
 }
 
 /// A token bucket measured in messages, refilled from the `now` passed in. Tokens are kept in
-/// millionths so that refill is exact integer arithmetic.
+/// millionths so that refill is exact integer arithmetic. What [`TokenBucket::charge`] takes
+/// beyond the tokens is owed (at most a full bucket) and paid from the next refills.
 #[derive(Clone, Debug)]
 struct TokenBucket {
     tokens_micros: u64,
+    debt_micros: u64,
     last: Timestamp,
     rate_per_sec: u64,
     capacity: u64,
@@ -417,6 +429,7 @@ impl TokenBucket {
         let capacity = burst * MICROS_PER_SEC;
         Self {
             tokens_micros: capacity,
+            debt_micros: 0,
             last: now,
             rate_per_sec,
             capacity,
@@ -427,7 +440,25 @@ impl TokenBucket {
         let elapsed = now.0.saturating_sub(self.last.0);
         self.last = self.last.max(now);
         let refill = elapsed.saturating_mul(self.rate_per_sec);
-        self.tokens_micros = self.tokens_micros.saturating_add(refill).min(self.capacity);
+        let paid = refill.min(self.debt_micros);
+        self.debt_micros -= paid;
+        self.tokens_micros = (self.tokens_micros)
+            .saturating_add(refill - paid)
+            .min(self.capacity);
+    }
+
+    /// Refills and takes one token, owing it when there is none (a message that goes out
+    /// whatever the budget: the messages after it wait until it is paid).
+    fn charge(&mut self, now: Timestamp) {
+        self.refill(now);
+        match self.tokens_micros.checked_sub(MICROS_PER_SEC) {
+            Some(left) => self.tokens_micros = left,
+            None => {
+                let owed = MICROS_PER_SEC - self.tokens_micros;
+                self.tokens_micros = 0;
+                self.debt_micros = (self.debt_micros + owed).min(self.capacity);
+            }
+        }
     }
 
     fn has_token(&self) -> bool {
@@ -461,7 +492,7 @@ impl TokenBucket {
 
     /// When the next token is available.
     fn ready_at(&self) -> Timestamp {
-        let missing = MICROS_PER_SEC.saturating_sub(self.tokens_micros);
+        let missing = MICROS_PER_SEC.saturating_sub(self.tokens_micros) + self.debt_micros;
         self.last
             .saturating_add_micros(missing.div_ceil(self.rate_per_sec.max(1)))
     }
@@ -650,7 +681,8 @@ pub struct SyncState<P> {
     hello_answer_bucket: TokenBucket,
     /// Limits the bytes of new ops the remote makes us take.
     op_bytes_bucket: TokenBucket,
-    /// Paces what we send, at half the remote's limit, leaving room for its acks.
+    /// Paces what we send, control included, within the remote's limit
+    /// ([`MAX_SENT_MESSAGES_PER_SEC`]).
     send_bucket: TokenBucket,
     stats: SyncStats,
     payload: PhantomData<P>,
@@ -735,7 +767,7 @@ impl<P: Payload> SyncState<P> {
                 MAX_RECEIVED_OP_BYTES_PER_SEC,
                 MAX_RECEIVED_OP_BYTES_BURST,
             ),
-            send_bucket: TokenBucket::new(now, MAX_MESSAGES_PER_SEC / 2, MAX_MESSAGE_BURST / 2),
+            send_bucket: TokenBucket::new(now, MAX_SENT_MESSAGES_PER_SEC, MAX_SENT_MESSAGE_BURST),
             stats: SyncStats::default(),
             payload: PhantomData,
         };
@@ -2022,11 +2054,14 @@ impl<P: Payload> SyncState<P> {
             if let Message::Hello { have, .. } = &mut m {
                 *have = hello_have(log);
             }
+            // Control goes out at once, and the data after it pays for it.
+            self.send_bucket.charge(now);
             return Some(m);
         }
         // Nothing but control messages goes out before the remote's hello.
         self.remote?;
-        // Data is paced so an honest peer stays within the remote's rate limit.
+        // Data is paced so an honest peer stays within the remote's rate limit, control
+        // included ([`MAX_SENT_MESSAGES_PER_SEC`]).
         self.send_bucket.refill(now);
         if !self.send_bucket.has_token() {
             return None;

@@ -1723,3 +1723,35 @@ fn a_remote_heard_after_a_silence_says_the_network_may_be_back() {
         assert_eq!(resumed(node), vec![silence], "once a silence");
     }
 }
+
+/// A peer paced only its data, at half the remote's budget, so that its acks of the remote's
+/// data fitted in the other half: a one-way catch-up went at half the rate the remote takes
+/// (10^5 ops in 1.31 s, whatever the CPU). Control now goes out at once and is charged to the
+/// same budget ([`MAX_SENT_MESSAGES_PER_SEC`]); the data after it waits until it is paid for.
+#[test]
+fn control_goes_out_at_once_and_the_data_after_it_pays_for_it() {
+    let [mut a, mut b] = connected();
+    let now = 200 * MILLI;
+    a.author(now, "a1".into());
+    // A's budget spent, and two messages more owed.
+    for _ in 0..MAX_SENT_MESSAGE_BURST + 2 {
+        a.sync.send_bucket.charge(Timestamp(now));
+    }
+    // B's op comes: A acknowledges it at once, in debt, and holds its own op back.
+    b.author(now, "b1".into());
+    carry(&mut b, &mut a, now, now);
+    let sent = outbox(&mut a, now);
+    assert!(
+        sent.iter().any(|m| matches!(m, Message::Ack { .. })),
+        "{sent:?}"
+    );
+    assert_eq!(batched(&sent), vec![]);
+    // Three messages owed and one to send: four at 1,800 a second, 2,222.2 us.
+    let paid = now + 4 * MICROS_PER_SEC / MAX_SENT_MESSAGES_PER_SEC;
+    assert_eq!(a.sync.poll_timeout(&a.log), Some(Timestamp(paid + 1)));
+    assert_eq!(batched(&outbox(&mut a, paid)), vec![]);
+    assert_eq!(
+        batched(&outbox(&mut a, paid + 1)),
+        vec![(a.key.peer_id(), 1)]
+    );
+}
