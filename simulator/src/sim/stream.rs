@@ -191,8 +191,9 @@ impl Simulation {
         }
     }
 
-    /// A cut begins on `link`: if it was open for a keep-alive interval, a keep-alive (or a
-    /// message) came over it at the end of the last whole interval at the latest.
+    /// A cut begins on `link`: if the link was open for at least a keep-alive interval, a
+    /// keep-alive (if no message) came over it at the end of each whole interval, so it was
+    /// heard at the end of the last one.
     pub(super) fn stream_keep_alives(&mut self, link: (usize, usize)) {
         let opened = self
             .opened_at
@@ -481,9 +482,6 @@ mod tests {
     use super::{KEEP_ALIVE_MICROS, STREAM_IDLE_TIMEOUT_MICROS, next_probe};
     use crate::config::{Config, FaultKind, Faults};
 
-    /// A dial's acceptor is admitted once the dialer's proof comes (a handshake and one way),
-    /// and its hello goes out with its answer; the dialer's messages leave only once that
-    /// answer has reached it, as the node's sync starts at admission on each side.
     /// Two honest peers over `quic` links that neither lose, delay unevenly nor cut anything
     /// unless a test says so.
     fn steady_pair() -> Simulation {
@@ -505,6 +503,9 @@ mod tests {
         Simulation::new(config).unwrap()
     }
 
+    /// A dial's acceptor is admitted once the dialer's proof comes (a handshake and one way),
+    /// and its hello goes out with its answer; the dialer's messages leave only once that
+    /// answer has reached it, as the node's sync starts at admission on each side.
     #[test]
     fn a_dials_acceptor_speaks_first_and_its_dialer_after_the_answer() {
         let mut sim = steady_pair();
