@@ -2,7 +2,9 @@
 //!
 //! Limits are named constants; when one is exceeded an op is evicted and reported, never
 //! silently dropped. Eviction picks the source holding the most pending ops, so a peer flooding
-//! the buffer with ops whose dependencies never come evicts its own ops first.
+//! the buffer with ops whose dependencies never come evicts its own ops first; of that source's
+//! ops by the author it sent last, the one furthest along the author's chain goes, so a buffer
+//! full of one author's later ops keeps room for the ops that come next in that chain.
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -91,6 +93,8 @@ pub struct Pending<P> {
     entries: BTreeMap<OpId, Entry<P>>,
     waiters: BTreeMap<DepKey, BTreeSet<OpId>>,
     per_origin: BTreeMap<Origin, BTreeSet<(u64, OpId)>>,
+    /// Entries by origin and author, in their author's order (seq, then id).
+    per_author: BTreeMap<(Origin, PeerId), BTreeSet<(u64, OpId)>>,
     /// Entries by arrival time, so expiry is found and done without a scan (every connection
     /// asks on every poll).
     by_arrival: BTreeSet<(Timestamp, u64, OpId)>,
@@ -105,6 +109,7 @@ impl<P> Default for Pending<P> {
             entries: BTreeMap::new(),
             waiters: BTreeMap::new(),
             per_origin: BTreeMap::new(),
+            per_author: BTreeMap::new(),
             by_arrival: BTreeSet::new(),
             n_bytes: 0,
             next_arrival_no: 0,
@@ -203,6 +208,10 @@ impl<P: Clone> Pending<P> {
             .entry(origin)
             .or_default()
             .insert((arrival_no, id));
+        self.per_author
+            .entry((origin, op.author()))
+            .or_default()
+            .insert((op.seq(), id));
         self.by_arrival.insert((now, arrival_no, id));
         self.n_bytes += op.encoded().len();
         self.entries.insert(
@@ -225,13 +234,20 @@ impl<P: Clone> Pending<P> {
         evicted
     }
 
-    /// Evicts the newest op of the origin holding the most pending ops.
+    /// Evicts an op of the origin holding the most pending ops: of its ops by the author of
+    /// the one it sent last, the furthest along that author's chain (the highest seq). A
+    /// sender streams an author's ops in order and sends again what was dropped, so a buffer
+    /// full of ops far ahead of what the log holds drops those, not the next op in line
+    /// (evicting the newest instead let a backlog's far end hold the buffer while every op
+    /// that could be delivered was dropped on arrival).
     fn evict_one(&mut self) -> Option<Evicted> {
-        let (&origin, _) = self
+        let (&origin, ids) = self
             .per_origin
             .iter()
             .max_by_key(|(o, ids)| (ids.len(), *o))?;
-        let &(_, id) = self.per_origin.get(&origin)?.iter().next_back()?;
+        let &(_, newest) = ids.iter().next_back()?;
+        let author = self.entries.get(&newest)?.op.author();
+        let &(_, id) = self.per_author.get(&(origin, author))?.iter().next_back()?;
         self.remove(&id).map(|entry| Evicted {
             id,
             origin: entry.origin,
@@ -253,6 +269,13 @@ impl<P: Clone> Pending<P> {
             set.remove(&(entry.arrival_no, *id));
             if set.is_empty() {
                 self.per_origin.remove(&entry.origin);
+            }
+        }
+        let key = (entry.origin, entry.op.author());
+        if let Some(set) = self.per_author.get_mut(&key) {
+            set.remove(&(entry.op.seq(), *id));
+            if set.is_empty() {
+                self.per_author.remove(&key);
             }
         }
         self.by_arrival
@@ -405,6 +428,42 @@ mod tests {
                 .all(|e| e.origin == Origin(2) && e.reason == EvictReason::Full)
         );
         assert!(p.contains(&honest.id()));
+        assert_eq!(p.len(), limits.max_ops);
+    }
+
+    /// A buffer full of an author's ops far ahead of the log keeps the ops that come next in
+    /// that chain as they arrive, dropping the far end, from whichever source: each would
+    /// otherwise be dropped on arrival until the far ones expired.
+    #[test]
+    fn a_full_buffer_drops_the_far_end_of_an_authors_chain() {
+        let limits = PendingLimits {
+            max_ops: 8,
+            ..PendingLimits::default()
+        };
+        let mut p = Pending::with_limits(limits);
+        let waits =
+            |seq: u64| BTreeSet::from([DepKey::Seq(Keypair::from_seed([1; 32]).peer_id(), seq)]);
+        for seq in 101..=108 {
+            assert!(
+                p.insert(Timestamp(0), op(1, seq), Origin(1), waits(seq - 1))
+                    .is_empty()
+            );
+        }
+        // Another author's op, from the same source, goes itself (the far end of its chain).
+        let other = p.insert(Timestamp(1), op(2, 5), Origin(1), waits(1));
+        assert_eq!(
+            other.iter().map(|e| e.id).collect::<Vec<_>>(),
+            [op(2, 5).id()]
+        );
+        // Ops 2 to 9 come again, from this source and another.
+        for seq in 2..=9 {
+            let origin = Origin(1 + seq % 2);
+            let evicted = p.insert(Timestamp(2), op(1, seq), origin, waits(seq - 1));
+            assert_eq!(evicted.len(), 1);
+            assert_eq!(evicted[0].id, op(1, 110 - seq).id(), "{seq}");
+            assert_eq!(evicted[0].origin, Origin(1));
+        }
+        assert!((2..=9).all(|seq| p.contains(&op(1, seq).id())));
         assert_eq!(p.len(), limits.max_ops);
     }
 
