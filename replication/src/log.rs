@@ -1172,6 +1172,15 @@ impl<P: Payload> Log<P> {
             .extend(self.pending.insert(now, op, origin, wait));
     }
 
+    /// True if the op `id` of `author` at `seq` from `origin` would wait for its author's
+    /// previous op and be dropped at once by the full pending buffer
+    /// ([`Pending::drops_on_arrival`]): a receiver skips it unread, since checking its
+    /// signature would buy nothing.
+    pub fn pending_drops(&self, origin: Origin, author: &PeerId, seq: u64, id: OpId) -> bool {
+        let held = self.version_vector().get(author);
+        seq > held.saturating_add(1) && self.pending.drops_on_arrival(origin, author, seq, id)
+    }
+
     /// Drops pending ops that waited too long; their senders offer them again on next sync.
     pub fn expire_pending(&mut self, now: Timestamp) -> Vec<Evicted> {
         let evicted = self.pending.expire(now);

@@ -182,6 +182,27 @@ impl<P: Clone> Pending<P> {
         stuck.into_iter().collect()
     }
 
+    /// True if the op `id` of `author` at `seq` from `origin`, parked now, would be the op its
+    /// own insertion evicts ([`Pending::insert`]): the buffer holds its most ops, `origin`
+    /// would then hold more than any other source, and every op of `author` from it waits at
+    /// a lower seq (or at `seq` with a lower id, a fork). A receiver skips such an op before
+    /// checking its signature.
+    pub fn drops_on_arrival(&self, origin: Origin, author: &PeerId, seq: u64, id: OpId) -> bool {
+        if self.entries.len() < self.limits.max_ops {
+            return false;
+        }
+        let this = (self.n_from(origin) + 1, origin);
+        let others = (self.per_origin.iter())
+            .filter(|(o, _)| **o != origin)
+            .map(|(o, ids)| (ids.len(), *o));
+        if others.max().is_some_and(|most| most > this) {
+            return false;
+        }
+        (self.per_author.get(&(origin, *author)))
+            .and_then(BTreeSet::last)
+            .is_none_or(|&top| top < (seq, id))
+    }
+
     /// Parks `op` until every key in `missing` is satisfied; returns what had to be evicted
     /// to stay within limits (possibly `op` itself).
     pub fn insert(
@@ -385,6 +406,19 @@ mod tests {
         .into_op()
     }
 
+    /// The other side of a fork of [`op`]: the same author and seq, another id.
+    fn forked(seed: u8, seq: u64) -> Op<TestPayload> {
+        let fields = OpFields {
+            seq,
+            lamport: seq,
+            timestamp: Timestamp(1),
+            deps: vec![],
+            payload: TestPayload::Chat(format!("{seq}, forked")),
+        };
+        let key = Keypair::from_seed([seed; 32]);
+        (Op::sign(&key, &crate::op::UNNAMED_SESSION, fields).unwrap()).into_op()
+    }
+
     #[test]
     fn satisfied_ops_come_out_once_all_keys_arrive() {
         let mut p = Pending::default();
@@ -465,6 +499,47 @@ mod tests {
         }
         assert!((2..=9).all(|seq| p.contains(&op(1, seq).id())));
         assert_eq!(p.len(), limits.max_ops);
+    }
+
+    /// `drops_on_arrival` says exactly when an insertion evicts the op it parks, over random
+    /// arrivals from three sources of two authors' ops, forks among them, into a small full
+    /// buffer.
+    #[test]
+    fn drops_on_arrival_foretells_the_eviction() {
+        let limits = PendingLimits {
+            max_ops: 6,
+            ..PendingLimits::default()
+        };
+        let mut p = Pending::with_limits(limits);
+        let missing: BTreeSet<DepKey> = [DepKey::Op(OpId([9; 32]))].into_iter().collect();
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let (mut n_dropped, mut n_kept) = (0, 0);
+        for _ in 0..2_000 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let (origin, seed, seq) = (
+                Origin(state % 3),
+                1 + (state >> 8) % 2,
+                1 + (state >> 16) % 24,
+            );
+            // A third of the ops fork their author's chain.
+            let op = if (state >> 32).is_multiple_of(3) {
+                forked(seed as u8, seq)
+            } else {
+                op(seed as u8, seq)
+            };
+            if p.contains(&op.id()) {
+                continue;
+            }
+            let foretold = p.drops_on_arrival(origin, &op.author(), seq, op.id());
+            let evicted = p.insert(Timestamp(0), op.clone(), origin, missing.clone());
+            let dropped = evicted.iter().any(|e| e.id == op.id());
+            assert_eq!(foretold, dropped, "{origin:?} {seed} {seq}");
+            n_dropped += usize::from(dropped);
+            n_kept += usize::from(!dropped && !evicted.is_empty());
+        }
+        assert!(n_dropped > 100 && n_kept > 10, "{n_dropped} {n_kept}");
     }
 
     #[test]

@@ -384,6 +384,9 @@ pub struct SyncStats {
     pub n_ops_in: u64,
     /// Ops delivered to the log by this connection's input (including pending ops it freed).
     pub n_ops_delivered: u64,
+    /// New ops skipped unread, their signatures unchecked, because the full pending buffer
+    /// would have dropped them at once ([`Log::pending_drops`]).
+    pub n_ops_unread: u64,
     /// Version-vector entries from the remote that were not kept: claims on authors the local
     /// log does not hold beyond [`MAX_REMOTE_UNKNOWN_AUTHORS`], and wants for authors it does
     /// not hold (an honest remote wants only what this peer's haves named).
@@ -1563,6 +1566,7 @@ impl<P: Payload> SyncState<P> {
         // then the signatures of the rest in one batch, and only a signed op's payload is
         // decoded and validated (which may compile formulas). A forged or replayed op never
         // costs a compile.
+        let origin = self.config.origin;
         let mut fresh: Vec<Envelope<'_>> = Vec::with_capacity(ops.len());
         let mut fresh_bytes: Vec<usize> = Vec::with_capacity(ops.len());
         for bytes in ops {
@@ -1578,6 +1582,12 @@ impl<P: Payload> SyncState<P> {
                 if !authors.contains(&envelope.author()) {
                     authors.push(envelope.author());
                 }
+            } else if log.pending_drops(origin, &envelope.author(), envelope.seq(), envelope.id()) {
+                // The full pending buffer would drop it once its signature was checked: it is
+                // skipped unread and comes again, as after any eviction.
+                self.stats.n_ops_unread += 1;
+                let detail = format!("op {} dropped unread: pending buffer full", envelope.id());
+                self.reject(RejectKind::PendingFull, detail);
             } else if fresh.iter().all(|other| other.id() != envelope.id()) {
                 fresh.push(envelope);
                 fresh_bytes.push(bytes.len());
