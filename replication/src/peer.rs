@@ -988,7 +988,7 @@ mod tests {
     /// again what was dropped. When the buffer dropped its newest op, the backlog's far end
     /// held it and every op that could be delivered was dropped on arrival: one side crawled
     /// at about 13 ops a second. An op the full buffer would drop at once is now skipped before
-    /// its signature is checked.
+    /// its signature is checked, and a drop is no offence (a node cut such a remote off).
     #[test]
     fn concurrent_backlogs_past_the_pending_buffer_converge() {
         let n = 4 * crate::pending::MAX_PENDING_OPS;
@@ -1025,7 +1025,9 @@ mod tests {
             );
             tick_losing(&mut peers, &links, Timestamp(t), |_, _, _| false);
             for p in peers.iter_mut() {
-                while p.poll_event().is_some() {}
+                while let Some((_, event)) = p.poll_event() {
+                    assert!(!matches!(event, Event::Rejected { .. }), "{event:?}");
+                }
             }
             t += 1_000;
         }
@@ -1041,6 +1043,10 @@ mod tests {
                 unread > evicted,
                 "{unread} dropped unread, {evicted} after a check"
             );
+            // Drops are no offence, and raise no event.
+            let stats = sync.stats();
+            assert_eq!(stats.n_rejected(), unread + evicted, "{:?}", stats.rejected);
+            assert_eq!(stats.n_offences(), 0);
         }
     }
 

@@ -243,6 +243,15 @@ pub enum RejectKind {
 }
 
 impl RejectKind {
+    /// False for what an honest remote meets too: [`RejectKind::PendingFull`], ops dropped
+    /// because this peer's pending buffer was full, which any sender streaming a backlog
+    /// larger than the buffer causes. What such ops cost is bounded by the op-byte quota
+    /// ([`MAX_RECEIVED_OP_BYTES_PER_SEC`]), and most are dropped before their signatures are
+    /// checked ([`Log::pending_drops`]).
+    pub fn is_offence(self) -> bool {
+        self != RejectKind::PendingFull
+    }
+
     /// The kind of a message that did not decode for `error`.
     fn of_decode_error(error: &DecodeError) -> RejectKind {
         match error {
@@ -412,6 +421,15 @@ impl SyncStats {
     /// Total rejections of every kind.
     pub fn n_rejected(&self) -> u64 {
         self.rejected.values().sum()
+    }
+
+    /// Rejections that are offences ([`RejectKind::is_offence`]): what a node cuts a
+    /// connection off for.
+    pub fn n_offences(&self) -> u64 {
+        (self.rejected.iter())
+            .filter(|(kind, _)| kind.is_offence())
+            .map(|(_, n)| n)
+            .sum()
     }
 }
 
@@ -866,6 +884,17 @@ impl<P: Payload> SyncState<P> {
             have: None,
         });
         self.hello_sent_at = Some(now);
+    }
+
+    /// Counts an op of the remote's dropped because the pending buffer was full: no offence
+    /// ([`RejectKind::is_offence`]), so no event either, which a backlog's stream would raise
+    /// by the thousand.
+    fn count_dropped_full(&mut self) {
+        *self
+            .stats
+            .rejected
+            .entry(RejectKind::PendingFull)
+            .or_insert(0) += 1;
     }
 
     fn reject(&mut self, kind: RejectKind, detail: String) {
@@ -1586,8 +1615,7 @@ impl<P: Payload> SyncState<P> {
                 // The full pending buffer would drop it once its signature was checked: it is
                 // skipped unread and comes again, as after any eviction.
                 self.stats.n_ops_unread += 1;
-                let detail = format!("op {} dropped unread: pending buffer full", envelope.id());
-                self.reject(RejectKind::PendingFull, detail);
+                self.count_dropped_full();
             } else if fresh.iter().all(|other| other.id() != envelope.id()) {
                 fresh.push(envelope);
                 fresh_bytes.push(bytes.len());
@@ -1649,11 +1677,13 @@ impl<P: Payload> SyncState<P> {
     pub fn charge(&mut self, insertion: &Insertion) {
         for evicted in &insertion.evicted {
             if evicted.origin == self.config.origin {
-                let kind = match evicted.reason {
-                    EvictReason::Full => RejectKind::PendingFull,
-                    EvictReason::Expired => RejectKind::PendingExpired,
-                };
-                self.reject(kind, format!("pending op {} evicted", evicted.id));
+                match evicted.reason {
+                    EvictReason::Full => self.count_dropped_full(),
+                    EvictReason::Expired => self.reject(
+                        RejectKind::PendingExpired,
+                        format!("pending op {} evicted", evicted.id),
+                    ),
+                }
             }
         }
         for (id, origin, e) in &insertion.refused {

@@ -872,12 +872,12 @@ impl<P: Payload + Send + 'static> Core<P> {
         let over: Vec<(ConnId, u64)> = self
             .peer
             .connections()
-            .map(|(conn, sync)| (*conn, sync.stats().n_rejected()))
+            .map(|(conn, sync)| (*conn, sync.stats().n_offences()))
             .filter(|(_, n)| *n > MAX_REJECTIONS_PER_CONN)
             .collect();
-        for (conn, n_rejected) in over {
+        for (conn, n_offences) in over {
             self.stats.n_cut_off += 1;
-            let reason = DisconnectReason::CutOff { n_rejected };
+            let reason = DisconnectReason::CutOff { n_offences };
             self.drop_conn(conn, CloseCode::Protocol, Some(reason));
         }
     }

@@ -114,8 +114,9 @@ pub const MAX_FRAMES_READ_AT_ONCE: usize = 32;
 /// Frames queued for one connection's writer; a connection that falls this far behind is
 /// closed as a slow reader.
 pub const MAX_QUEUED_FRAMES_PER_CONN: usize = 256;
-/// Sync rejections (malformed, forged, rate-limited, ...) one connection may cause before it
-/// is cut off.
+/// Sync rejections that are offences (malformed, forged, rate-limited, ...; not ops dropped
+/// because the pending buffer was full, [`crate::sync::state::RejectKind::is_offence`]) one
+/// connection may cause before it is cut off.
 pub const MAX_REJECTIONS_PER_CONN: u64 = 32;
 /// Incoming connections in handshake or admission at once; more are refused.
 pub const MAX_ADMISSIONS_IN_PROGRESS: usize = 64;
@@ -288,10 +289,11 @@ pub enum DisconnectReason {
     Closed,
     /// The transport lost it, or the remote closed it.
     Lost(String),
-    /// The remote caused more than [`MAX_REJECTIONS_PER_CONN`] sync rejections.
+    /// The remote caused more than [`MAX_REJECTIONS_PER_CONN`] sync rejections that are
+    /// offences.
     CutOff {
-        /// Rejections counted on this connection.
-        n_rejected: u64,
+        /// Offences counted on this connection.
+        n_offences: u64,
     },
     /// The remote announced a frame over [`super::frame::MAX_FRAME_BYTES`].
     OversizedFrame {
