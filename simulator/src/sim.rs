@@ -210,6 +210,9 @@ pub struct Simulation {
     /// congestion window, with when the sender probes: it goes again once the link's next
     /// message is acknowledged, or at the probe ([`Ev::StreamProbe`]) if sooner.
     resuming: BTreeMap<(usize, usize), (u64, stream::Stalled)>,
+    /// Per directed link, messages of a stream connection that came before its hello, with
+    /// their epochs: read once the hello is (the node reads a connection's hello first).
+    behind_hello: BTreeMap<(usize, usize), stream::EpochMessages>,
     /// Pair state, `[min][max]`.
     pairs: Vec<Vec<Pair>>,
     /// Connections whose other end crashed, still open at `to` (keyed `(to, from)`): messages
@@ -274,6 +277,7 @@ impl Simulation {
             resumed_dials_at: vec![None; n_nodes],
             stalled: BTreeMap::new(),
             resuming: BTreeMap::new(),
+            behind_hello: BTreeMap::new(),
             pairs: vec![vec![Pair::default(); n_nodes]; n_nodes],
             lingering: BTreeMap::new(),
             blocked: BTreeMap::new(),
@@ -1393,6 +1397,12 @@ impl Simulation {
             .lingering
             .get(&(to, from))
             .is_some_and(|l| l.0 == epoch && self.now <= l.1);
+        if self.faults.streams
+            && (current || lingering)
+            && self.stream_holds(from, to, epoch, bytes)
+        {
+            return;
+        }
         if !(current || lingering) || !self.online(to) || to >= self.honest.len() {
             self.stats.n_stale_drops += 1;
             return;
@@ -1409,6 +1419,9 @@ impl Simulation {
         guarded(&mut self.honest[to], |p| {
             p.handle_input(now, ConnId(from as u64), bytes);
         });
+        if self.faults.streams {
+            self.stream_read_behind_hello(from, to, epoch);
+        }
         self.flush(to);
         if let Some(f) = flood {
             let limited =

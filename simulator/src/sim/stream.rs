@@ -3,9 +3,10 @@
 //! first (the hello) before any other and each later one on a stream of its own, as the node
 //! sends them, so a loss delays its message and no other (the node reads at most
 //! `replication::net::node::MAX_FRAMES_READ_AT_ONCE` streams at a time, a limit not modelled
-//! here); a partition, or an outage of one peer's network, stalls a connection, which the
-//! idle timeout closes if nothing came over a cut link for that long (a message, or a
-//! keep-alive on a link open between two cuts). A closed connection (that timeout, a crash) and a
+//! here), and the receiver reads nothing of a connection before a hello; a partition, or an
+//! outage of one peer's network (which stalls what was on its way to the peer too), stalls a
+//! connection, which the idle timeout closes if nothing came over a cut link for that long (a
+//! message, or a keep-alive on a link open between two cuts). A closed connection (that timeout, a crash) and a
 //! late joiner's come up only through a dial: at a round of either end's LAN finder that finds both links
 //! open: the acceptor admits it a handshake and one way later and speaks at once, the dialer once
 //! the answer reaches it, two round trips after the dial. When a partition ends, what stalled
@@ -58,9 +59,11 @@ const REDIAL_LOST_FOR_MICROS: u64 = 60_000_000;
 /// The shortest time between two rounds of dials a node makes on hearing a remote after a
 /// silence (`replication::net::node::RESUMED_DIALS_EVERY_MILLIS`).
 pub(super) const RESUMED_DIALS_EVERY_MICROS: u64 = 250_000;
+/// Messages with their connection epochs.
+pub(super) type EpochMessages = Vec<(u64, Vec<u8>)>;
 /// What a partition stalled on one directed link: when the first message stalled, and the
-/// messages with their connection epochs.
-pub(super) type Stalled = (u64, Vec<(u64, Vec<u8>)>);
+/// messages.
+pub(super) type Stalled = (u64, EpochMessages);
 
 /// What one directed link's connection has delivered, as a stream connection.
 #[derive(Clone, Copy, Debug, Default)]
@@ -71,6 +74,8 @@ pub(super) struct StreamLink {
     hello_at: u64,
     /// The latest delivery of any of its messages.
     latest_at: u64,
+    /// Whether the receiver has read one of its messages (the first read is a hello).
+    read_any: bool,
 }
 
 /// Most times one message is lost in a row before it gets through (a longer run is one the
@@ -127,13 +132,7 @@ impl Simulation {
 
     /// Sends messages that stalled on the link `from -> to`, `extra` microseconds late; those
     /// of a connection since closed are stale.
-    fn stream_send_stalled(
-        &mut self,
-        from: usize,
-        to: usize,
-        stalled: Vec<(u64, Vec<u8>)>,
-        extra: u64,
-    ) {
+    fn stream_send_stalled(&mut self, from: usize, to: usize, stalled: EpochMessages, extra: u64) {
         let current = self.pair(from, to).epoch;
         for (epoch, bytes) in stalled {
             self.n_in_flight -= 1;
@@ -168,6 +167,7 @@ impl Simulation {
                 epoch,
                 hello_at: at,
                 latest_at: at,
+                read_any: false,
             };
         }
         // After the hello, not held behind the connection's other messages: one a loss
@@ -179,6 +179,58 @@ impl Simulation {
         link.latest_at = link.latest_at.max(at);
         self.n_in_flight += 1;
         self.push(at, deliver(from, to, epoch, bytes, None));
+    }
+
+    /// Whether a message of the honest connection `epoch` reaching `to` waits instead of
+    /// being read: if `to`'s network is out, its packets were lost, and it stalls as what
+    /// the sender sends during the outage, to go again when the sender learns; if the
+    /// connection's first message has not been read, anything but a hello waits for it (the
+    /// node reads the hello first, on the admission's stream; the rest waits in QUIC's
+    /// buffers).
+    pub(super) fn stream_holds(
+        &mut self,
+        from: usize,
+        to: usize,
+        epoch: u64,
+        bytes: &[u8],
+    ) -> bool {
+        let Some(h) = self.honest.get(to) else {
+            return false;
+        };
+        if from >= self.honest.len() || !h.started {
+            return false;
+        }
+        if !self.online(to) {
+            self.n_in_flight += 1;
+            let now = self.now;
+            let stalled = self.stalled.entry((from, to)).or_insert((now, Vec::new()));
+            stalled.1.push((epoch, bytes.to_vec()));
+            return true;
+        }
+        let hello = replication::sync::message::kind_of(bytes) == Some("hello");
+        let link = self.stream_links[from][to];
+        if hello || (link.epoch == epoch && link.read_any) {
+            return false;
+        }
+        let held = self.behind_hello.entry((from, to)).or_default();
+        held.push((epoch, bytes.to_vec()));
+        true
+    }
+
+    /// After a message of connection `epoch` was read: if it was the first (a hello), what
+    /// waited behind it is read next (and what waited for an older connection goes).
+    pub(super) fn stream_read_behind_hello(&mut self, from: usize, to: usize, epoch: u64) {
+        let link = &mut self.stream_links[from][to];
+        if link.epoch != epoch || link.read_any {
+            return;
+        }
+        link.read_any = true;
+        for (held_epoch, bytes) in self.behind_hello.remove(&(from, to)).unwrap_or_default() {
+            if held_epoch == epoch {
+                self.n_in_flight += 1;
+                self.push(self.now, deliver(from, to, held_epoch, bytes, None));
+            }
+        }
     }
 
     /// A partition cut the links `cut`: each connection it stalls closes at the idle timeout
@@ -572,16 +624,6 @@ mod tests {
             };
             sim.push(t0 + at, ev);
         }
-        let run_until = |sim: &mut Simulation, until: u64| {
-            while let Some(entry) = sim.queue.first_entry() {
-                if entry.key().0 > until {
-                    break;
-                }
-                let ((at, _), ev) = entry.remove_entry();
-                sim.now = at;
-                sim.handle(ev);
-            }
-        };
         run_until(&mut sim, t0 + 1_000_000 + STREAM_IDLE_TIMEOUT_MICROS);
         assert!(sim.blocked.contains_key(&(0, 1)), "the second cut holds");
         assert!(
@@ -592,6 +634,59 @@ mod tests {
         assert!(
             !sim.pair(0, 1).connected,
             "ten seconds of silence left it open"
+        );
+    }
+
+    /// Handles the queued events up to `until`.
+    fn run_until(sim: &mut Simulation, until: u64) {
+        while let Some(entry) = sim.queue.first_entry() {
+            if entry.key().0 > until {
+                break;
+            }
+            let ((at, _), ev) = entry.remove_entry();
+            sim.now = at;
+            sim.handle(ev);
+        }
+    }
+
+    /// A peer whose network goes while a connection's hello is on its way gets it once the
+    /// network is back, and reads nothing of that connection before it: a stream loses
+    /// nothing, and the node reads a connection's hello first. (The model dropped what
+    /// reached an offline peer, as over datagrams, so the hello vanished and what came after
+    /// it was refused as coming before any hello; 2 to 3 seeds in 100 of the 6-peer `quic`
+    /// campaigns showed such refusals between honest peers.)
+    #[test]
+    fn a_hello_on_its_way_when_the_network_goes_comes_after_it_and_first() {
+        let mut sim = steady_pair();
+        // The outage is the test's own (healing would end it).
+        sim.queue.retain(|_, ev| !matches!(ev, Ev::Heal));
+        let on_its_way = |sim: &Simulation| {
+            (sim.queue.values()).any(|ev| matches!(ev, Ev::Deliver { from: 0, to: 1, .. }))
+        };
+        while !on_its_way(&sim) {
+            let ((at, _), ev) = sim.queue.pop_first().unwrap();
+            sim.now = at;
+            sim.handle(ev);
+        }
+        let back = sim.now + 500_000;
+        sim.push(sim.now + 1, Ev::Offline { peer: 1 });
+        sim.push(back, Ev::Online { peer: 1 });
+        let heard = |sim: &Simulation, at: usize| {
+            let (_, sync) = sim.honest[at].peer.connections().next().unwrap();
+            (sync.remote(), sync.stats().n_rejected())
+        };
+        run_until(&mut sim, back - 1);
+        assert_eq!(
+            heard(&sim, 1),
+            (None, 0),
+            "nothing is read during the outage"
+        );
+        run_until(&mut sim, back + 3_000_000);
+        assert_eq!(heard(&sim, 1), (Some(sim.honest[0].peer.peer_id()), 0));
+        assert_eq!(heard(&sim, 0), (Some(sim.honest[1].peer.peer_id()), 0));
+        assert_eq!(
+            sim.stats.n_stale_drops, 0,
+            "nothing of a live connection is lost"
         );
     }
 
