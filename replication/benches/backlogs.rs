@@ -31,19 +31,11 @@ fn main() {
     }
 }
 
-/// A peer holding `n` ops of its own: a third chat lines, the rest sets of 16 objects.
+/// A peer holding `n` ops of its own ([`TestPayload::backlog`]).
 fn peer_with_backlog(seed: u8, n: usize) -> Peer<TestPayload> {
     let mut peer = Peer::new(Keypair::from_seed([seed; 32]), [5; 16], Default::default());
     for k in 0..n {
-        let payload = if k % 3 == 0 {
-            TestPayload::Chat(format!("{k}"))
-        } else {
-            let object = u64::from(seed) * 100 + (k % 16) as u64;
-            TestPayload::Set {
-                object,
-                value: format!("x - {k}"),
-            }
-        };
+        let payload = TestPayload::backlog(seed, k);
         peer.author(Timestamp(k as u64 * 50), payload)
             .expect("a valid op");
     }

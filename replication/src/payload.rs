@@ -218,6 +218,21 @@ pub mod test_payload {
         Admit(Admission),
     }
 
+    impl TestPayload {
+        /// The `k`th op of a backlog the peer of key `seed` authored while apart: a third chat
+        /// lines, the rest sets of 16 objects of its own (the backlog tests and bench).
+        pub fn backlog(seed: u8, k: usize) -> Self {
+            if k.is_multiple_of(3) {
+                Self::Chat(format!("{k}"))
+            } else {
+                Self::Set {
+                    object: u64::from(seed) * 100 + (k % 16) as u64,
+                    value: format!("x - {k}"),
+                }
+            }
+        }
+    }
+
     impl Payload for TestPayload {
         fn encode(&self, out: &mut Vec<u8>) {
             match self {

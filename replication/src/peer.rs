@@ -995,17 +995,9 @@ mod tests {
         let mut peers: Vec<TPeer> = (1..=2)
             .map(|i| Peer::new(Keypair::from_seed([i; 32]), [5; 16], Log::default()))
             .collect();
-        for (i, p) in peers.iter_mut().enumerate() {
+        for (seed, p) in (1..).zip(peers.iter_mut()) {
             for k in 0..n {
-                let payload = if k % 3 == 0 {
-                    TestPayload::Chat(format!("{k}"))
-                } else {
-                    let object = (i * 100 + k % 16) as u64;
-                    TestPayload::Set {
-                        object,
-                        value: format!("x - {k}"),
-                    }
-                };
+                let payload = TestPayload::backlog(seed, k);
                 p.author(Timestamp(k as u64 * 50), payload).unwrap();
             }
         }

@@ -426,8 +426,8 @@ async fn a_node_admits_a_fresh_key_and_every_node_refuses_a_key_nobody_admitted(
     assert_eq!(a.handle.stats().await.unwrap().n_keys_admitted, 1);
 }
 
-/// `n` ops authored by the node of key `seed` while apart (a third chat lines, the rest sets
-/// of 16 objects of its own), in a log whose pending buffer holds `pending` ops.
+/// `n` ops authored by the node of key `seed` while apart ([`TestPayload::backlog`]), in a
+/// log whose pending buffer holds `pending` ops.
 fn backlog(seed: u8, n: usize, pending: usize) -> Log<TestPayload> {
     let key = Keypair::from_seed([seed; 32]);
     let mut log = Log::with_pending_limits(PendingLimits {
@@ -436,15 +436,7 @@ fn backlog(seed: u8, n: usize, pending: usize) -> Log<TestPayload> {
     });
     log.set_session_id(session_keys(INVITE).session_id());
     for k in 0..n {
-        let payload = if k % 3 == 0 {
-            TestPayload::Chat(format!("{k}"))
-        } else {
-            let object = u64::from(seed) * 100 + (k % 16) as u64;
-            TestPayload::Set {
-                object,
-                value: format!("x - {k}"),
-            }
-        };
+        let payload = TestPayload::backlog(seed, k);
         log.author(&key, Timestamp(1_000 + k as u64 * 50), payload)
             .unwrap();
     }
