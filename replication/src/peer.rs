@@ -98,8 +98,9 @@ pub struct Peer<P> {
     want_check_at: Timestamp,
     /// The owner's scene hash at the log's current cut, if it said one.
     scene: Option<SceneAt>,
-    /// The owner's per-object hashes at a cut (for connections opened since).
-    object_hashes: Option<([u8; DIGEST_BYTES], Arc<ObjectHashes>)>,
+    /// The owner's per-object hashes and the scene hash they were taken at (for connections
+    /// opened since, and later mismatches while the scene hash stays the same).
+    object_hashes: Option<(SceneAt, Arc<ObjectHashes>)>,
     /// What the connections' scene checks ask of the scene's owner.
     scene_events: VecDeque<(ConnId, SceneEvent)>,
 }
@@ -707,23 +708,25 @@ impl<P: Payload> Peer<P> {
 
     /// The owner's per-object hashes at `cut`, which a [`SceneEvent::Mismatch`] there asked
     /// for: sent to the remotes whose scene differs, and compared with theirs. Ignored (false)
-    /// when the owner's scene hash is not at `cut`.
+    /// when the owner's scene hash is not at `cut`. They belong to the scene hash last set.
     pub fn set_object_hashes(&mut self, cut: SceneCut, hashes: ObjectHashes) -> bool {
-        if self.scene.is_none_or(|at| at.cut != cut.digest) {
+        let Some(at) = self.scene.filter(|at| at.cut == cut.digest) else {
             return false;
-        }
-        self.object_hashes = Some((cut.digest, Arc::new(hashes)));
+        };
+        self.object_hashes = Some((at, Arc::new(hashes)));
         self.reuse_object_hashes(cut)
     }
 
-    /// Hands the per-object hashes the owner last set to the connections again, if they are
-    /// at `cut` (false if not): what answers a later [`SceneEvent::Mismatch`] at the same cut
-    /// without hashing the scene again.
+    /// Hands the per-object hashes the owner last set to the connections again, if they were
+    /// taken at `cut` and the scene hash has not changed since (false if not): what answers a
+    /// later [`SceneEvent::Mismatch`] at the same scene without hashing it again. A scene that
+    /// changed at the same cut (a refold, or a fold gone wrong again) needs fresh ones: the
+    /// old ones would name what differed then, not now.
     pub fn reuse_object_hashes(&mut self, cut: SceneCut) -> bool {
-        let Some((digest, hashes)) = &self.object_hashes else {
+        let Some((at, hashes)) = &self.object_hashes else {
             return false;
         };
-        if *digest != cut.digest || self.scene.is_none_or(|at| at.cut != cut.digest) {
+        if at.cut != cut.digest || self.scene != Some(*at) {
             return false;
         }
         for (conn, sync) in &mut self.connections {
@@ -2166,17 +2169,26 @@ mod tests {
             .all(|(_, sync)| sync.stats().scene.agrees == Some(true))
     }
 
-    #[test]
-    fn a_planted_scene_difference_is_found_and_refolded_and_equal_scenes_never_differ() {
+    /// Two peers, their owners and their link.
+    type Scenes = (
+        Vec<TPeer>,
+        Vec<Owner>,
+        [(usize, ConnId, usize, ConnId); 1],
+        u64,
+    );
+
+    /// Two connected peers, each authoring `n_objects` objects and a chat line, run until
+    /// their scenes agree; the time then.
+    fn two_scenes(n_objects: u64) -> Scenes {
         let session = [3; 16];
         let mut peers: Vec<TPeer> = (1..=2)
             .map(|i| Peer::new(Keypair::from_seed([i; 32]), session, Log::default()))
             .collect();
         for (i, p) in (0u64..).zip(peers.iter_mut()) {
-            for object in 1..=3 {
+            for object in 1..=n_objects {
                 let value = format!("v{object}");
                 let set = TestPayload::Set {
-                    object: object + 10 * i,
+                    object: object + 1_000 * i,
                     value,
                 };
                 p.author(Timestamp(0), set).unwrap();
@@ -2189,6 +2201,16 @@ mod tests {
         peers[1].accept(Timestamp(0), ConnId(1), 0).unwrap();
         let links = [(0, ConnId(1), 1, ConnId(1))];
         let t = run_scenes(&mut peers, &mut owners, &links, 0, scenes_agree);
+        (peers, owners, links, t)
+    }
+
+    fn repaired(peers: &[TPeer], owners: &[Owner]) -> bool {
+        owners[0].scene.scene_hash() == owners[1].scene.scene_hash() && scenes_agree(peers, owners)
+    }
+
+    #[test]
+    fn a_planted_scene_difference_is_found_and_refolded_and_equal_scenes_never_differ() {
+        let (mut peers, mut owners, links, t) = two_scenes(3);
         assert_eq!(owners[0].scene.scene_hash(), owners[1].scene.scene_hash());
         for (peer, owner) in peers.iter().zip(&owners) {
             let (_, sync) = peer.connections().next().unwrap();
@@ -2200,10 +2222,6 @@ mod tests {
             scene.objects.insert(2, "planted".into());
         });
         let planted_at = t;
-        let repaired = |peers: &[TPeer], owners: &[Owner]| {
-            owners[0].scene.scene_hash() == owners[1].scene.scene_hash()
-                && scenes_agree(peers, owners)
-        };
         let t = run_scenes(&mut peers, &mut owners, &links, t + 10_000, repaired);
         assert!(
             t - planted_at <= 1_000_000,
@@ -2225,5 +2243,58 @@ mod tests {
             );
         }
         assert_eq!(owners[1].scene.scene().objects[&2], "v2");
+    }
+
+    #[test]
+    fn a_second_difference_at_the_same_cut_is_found_with_fresh_object_hashes() {
+        let (mut peers, mut owners, links, t) = two_scenes(3);
+        owners[1].scene.plant_difference(|scene| {
+            scene.objects.insert(2, "planted".into());
+        });
+        let t = run_scenes(&mut peers, &mut owners, &links, t + 10_000, repaired);
+        // The log has not moved: the same cut, whose object hashes were taken with object 2
+        // wrong. Object 3 goes wrong now; hashes reused from then would name object 2 again.
+        owners[1].scene.plant_difference(|scene| {
+            scene.objects.insert(3, "planted".into());
+        });
+        let planted_at = t;
+        let t = run_scenes(&mut peers, &mut owners, &links, t + 10_000, repaired);
+        // The mismatch comes while the first plant's window is open on both sides, out of
+        // step: it is repaired at the first retry, a window (1 s) after the first plant.
+        assert!(
+            t - planted_at <= 1_500_000,
+            "repaired in {} us",
+            t - planted_at
+        );
+        assert_eq!(owners[1].scene.scene().objects[&3], "v3");
+        assert!(owners[1].resyncs.iter().any(|r| r.contains(&ObjectId(3))));
+    }
+
+    #[test]
+    fn more_differing_objects_than_a_window_refolds_are_all_repaired() {
+        let n = 2 * crate::sync::scene::MAX_RESYNC_OBJECTS as u64 + 10;
+        let (mut peers, mut owners, links, t) = two_scenes(n);
+        owners[1].scene.plant_difference(|scene| {
+            for object in 1..=n {
+                scene.objects.insert(object, "planted".into());
+            }
+        });
+        let planted_at = t;
+        let t = run_scenes(&mut peers, &mut owners, &links, t + 10_000, repaired);
+        // A window refolds at most MAX_RESYNC_OBJECTS: three windows, starting 1 and 2 s
+        // apart.
+        assert!(
+            t - planted_at <= 3_500_000,
+            "repaired in {} us",
+            t - planted_at
+        );
+        for object in 1..=n {
+            assert_eq!(
+                owners[1].scene.scene().objects[&object],
+                format!("v{object}")
+            );
+        }
+        let refolded: usize = owners[1].resyncs.iter().map(Vec::len).sum();
+        assert!(refolded >= n as usize, "{refolded}");
     }
 }

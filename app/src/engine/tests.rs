@@ -692,7 +692,17 @@ fn a_planted_scene_difference_is_found_over_quic_shown_and_repaired() {
         v.scene_check().n_mismatches >= 1 && same_scene(&a, v)
     });
     let took = planted_at.elapsed();
-    assert!(took < Duration::from_secs(10), "repaired in {took:?}");
+    // A slow repair says what each side's check did, so that a rare one can be read.
+    let checks = |e: &Engine| {
+        let view = lock(e.view());
+        format!("{:?}; {:?}", view.scene_check(), view.peers())
+    };
+    assert!(
+        took < Duration::from_secs(10),
+        "repaired in {took:?}; A: {}; B: {}",
+        checks(&a),
+        checks(&b)
+    );
     assert_eq!(geometry_formula(&b, melon), geometry_formula(&a, melon));
     for engine in [&a, &b] {
         let view = lock(engine.view());

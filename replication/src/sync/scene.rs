@@ -24,7 +24,11 @@
 //! the owner's own hashes. So a remote that claims mismatches without end costs this peer at
 //! most one per-object hashing of its scene and [`MAX_RESYNC_OBJECTS`] object refolds a
 //! minute, whatever it sends. A mismatch that a resync did not settle is tried again when
-//! the window ends, so a lost message delays a repair and never prevents it.
+//! the window ends, so a lost message delays a repair and never prevents it; a try that
+//! comes while this side's window is still open (the two windows out of step) has this
+//! side's object hashes sent once more in it, so a repair never waits for windows that
+//! double. Object hashes belong to one scene hash: a scene refolded or gone wrong again at
+//! the same cut is hashed afresh, since the old ones would name what differed before.
 //!
 //! Non-guarantee: a refold repairs a fold that went wrong (a scene state that no longer
 //! matches the log); two logs that judge the same ops differently fold to different scenes
@@ -259,6 +263,8 @@ struct Window {
     objects_left: usize,
     rest_done: bool,
     sent: bool,
+    /// The parts went again on the remote's new try ([`SceneCheck::resend_parts`]).
+    resent: bool,
 }
 
 /// The scene check of one connection (kept by its [`crate::SyncState`]).
@@ -286,13 +292,14 @@ pub(crate) struct SceneCheck {
 }
 
 impl SceneCheck {
-    /// The owner's scene hash at the log's current cut.
+    /// The owner's scene hash at the log's current cut. Object hashes taken at another hash
+    /// are forgotten, even at the same cut: they would name what differed then.
     pub(crate) fn set_local(&mut self, at: SceneAt) {
         if self.local == Some(at) {
             return;
         }
+        self.local_objects = None;
         if self.local.is_none_or(|l| l.cut != at.cut) {
-            self.local_objects = None;
             self.held.retain(|part| part.cut == at.cut);
             if self.window.is_some_and(|w| w.cut != at.cut) {
                 self.window = None;
@@ -429,7 +436,7 @@ impl SceneCheck {
         let mismatch = SceneMismatch { ours, theirs };
         self.stats.last_mismatch = Some(mismatch);
         if !self.open_window(now, ours.cut) {
-            self.stats.n_dropped += 1;
+            self.resend_parts(now, mismatch, events);
             return;
         }
         self.stats.n_resyncs += 1;
@@ -453,9 +460,37 @@ impl SceneCheck {
             objects_left: MAX_RESYNC_OBJECTS,
             rest_done: false,
             sent: false,
+            resent: false,
         });
         self.wait_micros = (self.wait_micros * 2).min(MAX_RESYNC_WAIT_MICROS);
         true
+    }
+
+    /// A mismatch that came while a window at its cut is still open: the remote tried again
+    /// (its own window ended first, and what this side sent reached it outside its next one),
+    /// so this peer's object hashes go once more, once a window; else it is dropped. Without
+    /// this, two sides whose windows are out of step each drop the other's try, and a repair
+    /// waits for windows that double.
+    fn resend_parts(
+        &mut self,
+        now: Timestamp,
+        mismatch: SceneMismatch,
+        events: &mut VecDeque<Event>,
+    ) {
+        let Some(window) = &mut self.window else {
+            self.stats.n_dropped += 1;
+            return;
+        };
+        if window.cut != mismatch.ours.cut || now >= window.until || window.resent {
+            self.stats.n_dropped += 1;
+            return;
+        }
+        window.resent = true;
+        window.sent = false;
+        if self.local_objects.is_none() {
+            events.push_back(Event::Scene(SceneEvent::Mismatch(mismatch)));
+        }
+        self.queue_parts();
     }
 
     /// Queues this peer's object hashes once per window, once the owner handed them over.

@@ -168,6 +168,7 @@ fn a_remote_claiming_mismatches_without_end_costs_a_bounded_refold_budget() {
     let duration_micros = 600 * 1_000_000;
     let mut now = 0;
     let mut n_messages = 0u64;
+    let mut n_parts_sent = 0;
     while now < duration_micros {
         // A claim every 50 ms: a new hash at our cut, and all the parts.
         let claim = CUT.with_hash([(now % 251) as u8 + 2; DIGEST_BYTES]);
@@ -181,6 +182,9 @@ fn a_remote_claiming_mismatches_without_end_costs_a_bounded_refold_budget() {
         ours.events = events;
         n_messages += 1 + parts.len() as u64;
         ours.step(Timestamp(now));
+        while ours.check.next_part().is_some() {
+            n_parts_sent += 1;
+        }
         now += 50_000;
     }
     // Windows of 1, 2, 4, ... then 60 s: 7 to reach the longest, one a minute after.
@@ -191,6 +195,10 @@ fn a_remote_claiming_mismatches_without_end_costs_a_bounded_refold_budget() {
         ours.n_mismatches
     );
     assert!(ours.n_refolded <= max_windows * MAX_RESYNC_OBJECTS);
+    // Our hashes (one part) go out once a window, and once more on a try of the remote's
+    // within it.
+    assert!(n_parts_sent <= 2 * max_windows, "{n_parts_sent} parts sent");
+    assert!(n_parts_sent > ours.n_mismatches, "the tries are answered");
     assert!(ours.n_rest_refolds <= max_windows);
     assert!(
         ours.n_mismatches >= 2,
