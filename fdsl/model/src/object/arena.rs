@@ -86,6 +86,8 @@ struct Cold {
     shape: ToolShape,
     blend: f64,
     lipschitz: f64,
+    /// The tool's [`value_max`](super::tool::value_max), which caps its intervals.
+    value_max: f64,
     op: EditOp,
     mirror: Option<Axis>,
 }
@@ -127,6 +129,7 @@ impl EditArena {
                 shape: e.edit().tool,
                 blend: e.edit().blend_radius,
                 lipschitz: copied_stamps(e).1,
+                value_max: e.tool().value_max(),
                 op: e.edit().op,
                 mirror: e.edit().mirror,
             });
@@ -281,10 +284,11 @@ impl EditArena {
             return fold_interval(&c.op, f, Interval::new(g_max, g_max), c.blend, covered);
         }
         let stamps = self.stamps_of(h);
-        let direct = scan_interval(stamps, c.shape, c.lipschitz, region);
+        let direct = scan_interval(stamps, c.shape, c.lipschitz, c.value_max, region);
         let g = match c.mirror {
             Some(axis) => {
-                let m = scan_interval(stamps, c.shape, c.lipschitz, &axis.reflect_box(region));
+                let reflected = axis.reflect_box(region);
+                let m = scan_interval(stamps, c.shape, c.lipschitz, c.value_max, &reflected);
                 Interval::new(direct.lo.max(m.lo), direct.hi.max(m.hi))
             }
             None => direct,
@@ -294,7 +298,7 @@ impl EditArena {
 }
 
 /// The least single-precision number at least `v`.
-fn f32_up(v: f64) -> f32 {
+pub(crate) fn f32_up(v: f64) -> f32 {
     let w = v as f32;
     if f64::from(w) < v { w.next_up() } else { w }
 }

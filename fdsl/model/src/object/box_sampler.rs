@@ -294,6 +294,9 @@ impl BoxSampler {
             (Some(g), 0) => g.shape.interval(sub, t),
             _ => Interval::point(NOTHING),
         };
+        if self.object.history().leaves_interval(v, sub) {
+            return v;
+        }
         let entries = self.object.history().entries();
         for &j in &self.edits {
             let e = &entries[j as usize].edit;

@@ -18,7 +18,7 @@ use std::sync::Arc;
 use glam::DVec3;
 
 use super::ObjectError;
-use super::arena::EditArena;
+use super::arena::{EditArena, f32_up};
 use super::edit::{CompiledEdit, EditOp};
 use crate::bvh::{Aabb, Bvh};
 use crate::limits::MAX_EDITS_PER_OBJECT;
@@ -481,6 +481,55 @@ pub struct History {
     indexed_end: usize,
     /// Indices of intersections, ascending (they act outside their boxes too).
     intersects: Vec<u32>,
+    /// Bounds over every edit pushed, for [`History::leaves_interval`].
+    reach: Reach,
+}
+
+/// Bounds over a history's unions and subtractions (undone ones and, after a truncation,
+/// removed ones included: each only makes [`History::leaves_interval`] answer false more
+/// often), rounded up to single precision (12 bytes: every object holds one).
+#[derive(Clone, Copy, Debug)]
+struct Reach {
+    /// At least the largest [`value_max`](super::tool::value_max) of a union's tool, and of
+    /// a subtraction's: no end of their tools' intervals exceeds it. Infinite once one
+    /// blends (its interval then grows whatever its tool's).
+    union_max: f32,
+    subtract_max: f32,
+    /// At least the largest size of an edit's box along any axis: a region larger along some
+    /// axis lies inside no box.
+    box_size: f32,
+}
+
+impl Default for Reach {
+    fn default() -> Self {
+        Reach {
+            union_max: f32::NEG_INFINITY,
+            subtract_max: f32::NEG_INFINITY,
+            box_size: 0.0,
+        }
+    }
+}
+
+impl Reach {
+    fn add(&mut self, edit: &CompiledEdit) {
+        let max = match edit.edit().op {
+            EditOp::Union => &mut self.union_max,
+            EditOp::Subtract => &mut self.subtract_max,
+            EditOp::Intersect | EditOp::Paint { .. } => return,
+        };
+        let value_max = if edit.edit().blend_radius == 0.0 {
+            f32_up(edit.tool().value_max())
+        } else {
+            f32::INFINITY
+        };
+        // NaN compares below no end: once there, the test always fails, as it should.
+        if value_max > *max || value_max.is_nan() {
+            *max = value_max;
+        }
+        for b in edit.boxes().iter().filter(|b| !b.is_empty()) {
+            self.box_size = self.box_size.max(f32_up(b.size().max_element()));
+        }
+    }
 }
 
 impl History {
@@ -508,6 +557,7 @@ impl History {
         if matches!(edit.edit().op, EditOp::Intersect) {
             self.intersects.push(idx as u32);
         }
+        self.reach.add(&edit);
         self.entries.push(HistoryEntry { edit, active: true });
         self.active.push(true);
         Ok(idx)
@@ -565,6 +615,26 @@ impl History {
             self.small = Level::build(&self.entries, self.big_end..n);
         }
         self.indexed_end = n;
+    }
+
+    /// Whether folding every edit over `f`, an interval of the geometry over `region`, gives
+    /// `f` bit for bit, so that no edit need be visited. It does when there is no
+    /// intersection and no blend, no edit's box holds the whole region, neither end of `f` is
+    /// zero or NaN, and every union's tool stays below `f.hi` and every subtraction's negated
+    /// tool above `f.lo`: then each edit either is kept by
+    /// [`keeps_interval`](super::edit::keeps_interval)'s second case or, evaluated, folds to
+    /// `f` for the same reason (its tool's interval ends at most its `value_max`). A mesher's
+    /// large boxes, where the geometry's interval spans far past zero both ways, are answered
+    /// so whatever the history's length.
+    pub(crate) fn leaves_interval(&self, f: Interval, region: &Aabb) -> bool {
+        let r = &self.reach;
+        let nonzero = |x: f64| x.abs() > 0.0;
+        self.intersects.is_empty()
+            && nonzero(f.lo)
+            && nonzero(f.hi)
+            && f64::from(r.union_max) < f.hi
+            && f64::from(r.subtract_max) < -f.lo
+            && region.size().max_element() > f64::from(r.box_size)
     }
 
     /// Number of edits not yet in a tree.
@@ -857,8 +927,11 @@ mod tests {
         }
     }
 
-    #[test]
-    fn indexed_evaluation_is_the_fold_by_definition_bit_for_bit() {
+    /// The unit sphere sculpted by 1,500 strokes of every tool, on and off its surface, short
+    /// (copied into the arena) and long (their own index), some mirrored, every eleventh
+    /// undone; with `every_kind`, some intersections and blends too. The stamps' centres and
+    /// sizes come back beside it.
+    fn sculpted(every_kind: bool) -> (crate::object::Object, Vec<(DVec3, f64)>) {
         use crate::object::Object;
         use crate::object::tool::Axis;
         let mut rng = testkit::rng::XorShift64(0x2545_f491_4f6c_dd1d);
@@ -886,7 +959,6 @@ mod tests {
                     half_height: size * 1.5,
                 },
             };
-            // Mostly short strokes (copied into the arena), a few long ones (their own index).
             let n_poses = if i % 97 == 0 { 40 } else { 1 + i % 4 };
             let step = DVec3::new(next(), next(), next()) * size;
             let path = (0..n_poses)
@@ -897,13 +969,14 @@ mod tests {
                 })
                 .collect();
             let op = match i % 41 {
-                40 => EditOp::Intersect,
+                40 if every_kind => EditOp::Intersect,
                 k if k % 2 == 0 => EditOp::Union,
                 _ => EditOp::Subtract,
             };
             let mut edit = Edit::stroke(op, tool, path);
-            if i % 5 == 0 {
-                edit.blend_radius = 0.02 * next();
+            let blend = 0.02 * next();
+            if i % 5 == 0 && every_kind {
+                edit.blend_radius = blend;
             }
             edit.mirror = [None, None, None, Some(Axis::X), Some(Axis::Z)][i % 5];
             object.apply(edit).unwrap();
@@ -915,14 +988,29 @@ mod tests {
         let history = object.history();
         assert_eq!(history.tail_len(), 0);
         assert!(history.big_end > 0, "the arena is in use");
+        (object, centres)
+    }
+
+    /// Checks the sampler against the fold by definition at 6,000 points and boxes of the
+    /// half sizes `halves` around them (half anywhere, half in or near a stamp, where its
+    /// tool's values are highest and the inert-edit test is closest to its bound); returns
+    /// how many boxes [`History::leaves_interval`] answered.
+    fn check_against_the_definition(
+        object: &crate::object::Object,
+        centres: &[(DVec3, f64)],
+        halves: &[f64],
+    ) -> usize {
+        use crate::object::Object;
+        let mut rng = testkit::rng::XorShift64(0x9e37_79b9_7f4a_7c15);
+        let mut next = move || rng.unit_f64();
+        let history = object.history();
         let mut reference = Reference {
             history,
             base: Object::implicit("1 - x^2 - y^2 - z^2").unwrap().sampler(),
         };
         let mut sampler = object.sampler();
+        let mut n_left = 0;
         for k in 0..6000 {
-            // Half the points anywhere, half in or near an edit's first stamp, where its
-            // tool's values are highest (and the inert-edit test is closest to its bound).
             let p = match k % 2 {
                 0 => DVec3::new(next(), next(), next()) * 2.4 - DVec3::splat(1.2),
                 _ => {
@@ -938,7 +1026,7 @@ mod tests {
                 a.1.to_array().map(f64::to_bits),
                 b.1.to_array().map(f64::to_bits)
             );
-            let half = [0.001, 0.01, 1.0 / 64.0, 0.05, 0.3][k % 5];
+            let half = halves[k % halves.len()];
             let region = Aabb::around(p, DVec3::splat(half));
             let (a, b) = (sampler.interval(&region, 0.0), reference.interval(&region));
             assert_eq!(
@@ -946,7 +1034,60 @@ mod tests {
                 (b.lo.to_bits(), b.hi.to_bits(), b.nan),
                 "interval around {p} of half size {half}"
             );
+            n_left += usize::from(
+                history.leaves_interval(reference.base.interval(&region, 0.0), &region),
+            );
         }
+        n_left
+    }
+
+    #[test]
+    fn indexed_evaluation_is_the_fold_by_definition_bit_for_bit() {
+        let (object, centres) = sculpted(true);
+        let n_left =
+            check_against_the_definition(&object, &centres, &[0.001, 0.01, 1.0 / 64.0, 0.05, 0.3]);
+        assert_eq!(n_left, 0, "intersections and blends are visited");
+    }
+
+    #[test]
+    fn a_history_that_cannot_change_a_large_box_is_not_visited_and_gives_its_fold() {
+        // No intersection and no blend: over boxes larger than every edit's (its longest
+        // stroke's is about 2 across), where the sphere's interval spans zero by more than
+        // any tool reaches, the fold is the sphere's interval bit for bit, and the sampler
+        // answers without visiting an edit.
+        let (object, centres) = sculpted(false);
+        let halves = [0.001, 0.01, 0.05, 0.3, 0.6, 1.2];
+        let n_left = check_against_the_definition(&object, &centres, &halves);
+        assert!(
+            n_left >= 6000 / halves.len(),
+            "{n_left} of 6000 boxes left as they were"
+        );
+        assert!(
+            n_left < 6000 / 2,
+            "{n_left}: boxes inside a stroke's are folded"
+        );
+        let root = Aabb::around(DVec3::ZERO, DVec3::splat(1.2));
+        let f = Interval::new(-2.0, 1.0);
+        assert!(object.history().leaves_interval(f, &root));
+        // Not where an end is zero, or where a tool reaches past it.
+        assert!(
+            !object
+                .history()
+                .leaves_interval(Interval::new(-0.0, 1.0), &root)
+        );
+        assert!(
+            !object
+                .history()
+                .leaves_interval(Interval::new(-2.0, 0.01), &root)
+        );
+        assert!(
+            !object
+                .history()
+                .leaves_interval(Interval::new(-0.01, 1.0), &root)
+        );
+        // Nor with an intersection or a blend anywhere in the history.
+        let (object, _) = sculpted(true);
+        assert!(!object.history().leaves_interval(f, &root));
     }
 
     #[test]

@@ -671,8 +671,9 @@ pub struct Object {
     history: History,
 }
 
-// A scene holds its objects inline and their descriptions behind a pointer.
-const _: () = assert!(size_of::<Object>() <= 192);
+// A scene holds its objects inline and their descriptions behind a pointer (192 bytes until
+// the history's bounds for its intervals, 12 more, and their padding).
+const _: () = assert!(size_of::<Object>() <= 200);
 
 impl Object {
     /// Validates and compiles `data` (an `ObjectData`, or an `Arc<ObjectData>` to share);

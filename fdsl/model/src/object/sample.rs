@@ -318,7 +318,6 @@ impl Sampler {
     /// An interval holding the value at every point of `region` (object space).
     pub fn interval(&mut self, region: &Aabb, t: f64) -> Interval {
         let history = self.object.history();
-        history.hits_in_box(region, &mut self.hits);
         self.hits_at = None;
         let start = history.last_intersect_where(|e| !e.boxes().iter().any(|b| b.overlaps(region)));
         let (mut v, from) = match start {
@@ -334,6 +333,10 @@ impl Sampler {
             ),
         };
         let history = self.object.history();
+        if history.leaves_interval(v, region) {
+            return v;
+        }
+        history.hits_in_box(region, &mut self.hits);
         for &hit in &self.hits {
             if hit.edit() >= from {
                 v = history.apply_interval(hit, v, region);

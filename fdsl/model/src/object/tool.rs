@@ -688,9 +688,15 @@ impl CompiledTool {
     /// An interval holding every value over `region`.
     pub(crate) fn interval(&self, shape: ToolShape, region: &Aabb) -> Interval {
         let Some(bvh) = &self.stamp_index else {
-            return scan_interval(&self.stamps, shape, self.lipschitz, region);
+            return scan_interval(
+                &self.stamps,
+                shape,
+                self.lipschitz,
+                self.value_max(),
+                region,
+            );
         };
-        let mut bounds = StampBounds::new(shape, self.lipschitz, region);
+        let mut bounds = StampBounds::new(shape, self.lipschitz, self.value_max(), region);
         bvh.visit_box(region, |i| bounds.add(&self.stamps[i as usize]));
         bounds.interval()
     }
@@ -712,11 +718,19 @@ pub(crate) fn value_max(margin: f64) -> f64 {
 /// [`CompiledTool::interval`], mirror included) given the tool's [`value_max`] and Lipschitz
 /// bound: every end is `NOTHING` or a stamp's value at the centre plus or minus the same
 /// `spread`, computed here as they compute it (rounding is monotone, so `v <= value_max`
-/// gives `v + spread <= value_max + spread` in floating point too). NaN when the region's
-/// size is NaN (then no comparison with it holds).
+/// gives `v + spread <= value_max + spread` in floating point too), the upper one capped at
+/// `value_max`. So the bound is `value_max` over any region whose size is a number: whether
+/// an edit's interval can change a fold does not depend on how large the region is. NaN when
+/// the region's size is NaN (then no comparison with it holds).
 #[inline]
 pub(crate) fn interval_max(value_max: f64, lipschitz: f64, region: &Aabb) -> f64 {
-    value_max + spread(lipschitz, region)
+    capped(value_max + spread(lipschitz, region), value_max)
+}
+
+/// `v`, or `cap` where `v` exceeds it; NaN stays NaN (unlike `f64::min`).
+#[inline]
+fn capped(v: f64, cap: f64) -> f64 {
+    if v > cap { cap } else { v }
 }
 
 /// How far a tool's value can move from the region's centre within the region.
@@ -764,37 +778,43 @@ pub(crate) fn scan_value<'a>(
     best
 }
 
-/// A tool's interval over `region` from its stamps in order, without an index.
+/// A tool's interval over `region` from its stamps in order, without an index; `value_max`
+/// is the tool's [`value_max`].
 pub(crate) fn scan_interval<'a>(
     stamps: impl IntoIterator<Item = &'a (Aabb, Stamp)>,
     shape: ToolShape,
     lipschitz: f64,
+    value_max: f64,
     region: &Aabb,
 ) -> Interval {
-    let mut bounds = StampBounds::new(shape, lipschitz, region);
+    let mut bounds = StampBounds::new(shape, lipschitz, value_max, region);
     stamps.into_iter().for_each(|stamp| bounds.add(stamp));
     bounds.interval()
 }
 
 /// A tool's interval over a region, gathered stamp by stamp in any order. Over the region
-/// each stamp whose box meets it is within `spread` of its value at the centre; where no
-/// stamp box holds a point the tool is empty space.
+/// each stamp whose box meets it is within `spread` of its value at the centre, and no value
+/// of the tool exceeds its [`value_max`] (over a region much larger than the stamp, the
+/// first bound alone would be loose by about the region's size); where no stamp box holds a
+/// point the tool is empty space.
 struct StampBounds<'r> {
     shape: ToolShape,
     region: &'r Aabb,
     center: DVec3,
     spread: f64,
+    value_max: f64,
     lo: f64,
     hi: f64,
 }
 
 impl<'r> StampBounds<'r> {
-    fn new(shape: ToolShape, lipschitz: f64, region: &'r Aabb) -> Self {
+    fn new(shape: ToolShape, lipschitz: f64, value_max: f64, region: &'r Aabb) -> Self {
         StampBounds {
             shape,
             region,
             center: region.center(),
             spread: spread(lipschitz, region),
+            value_max,
             lo: NOTHING,
             hi: NOTHING,
         }
@@ -803,7 +823,7 @@ impl<'r> StampBounds<'r> {
     fn add(&mut self, (bounds, stamp): &(Aabb, Stamp)) {
         if bounds.overlaps(self.region) {
             let v = stamp.value(self.shape, self.center);
-            self.hi = self.hi.max(v + self.spread);
+            self.hi = self.hi.max(capped(v + self.spread, self.value_max));
             if bounds.contains_box(self.region) {
                 self.lo = self.lo.max(v - self.spread);
             }
@@ -1073,6 +1093,50 @@ mod tests {
             let s = i as f64 / 10.0;
             let p = region.lo.lerp(region.hi, s);
             assert!(iv.contains(tool.value(shape, p)), "{iv:?} at {p}");
+        }
+    }
+
+    #[test]
+    fn intervals_over_regions_larger_than_the_tool_stay_within_its_value_bound() {
+        // Over a region much larger than a stamp, a stamp's value at the centre plus the
+        // region's spread is loose by about the region's size; no value exceeds the tool's
+        // `value_max`, so the interval's upper end is capped there, and still holds every
+        // value. Short strokes scan their stamps, long ones go through their own index.
+        let shapes = [
+            ToolShape::Sphere { radius: 0.05 },
+            ToolShape::Box {
+                half_extents: DVec3::new(0.04, 0.02, 0.05),
+                rounding: 0.01,
+            },
+            ToolShape::Cylinder {
+                radius: 0.03,
+                half_height: 0.06,
+            },
+        ];
+        let mut rng = testkit::rng::XorShift64(0x51ed_270b_27c5_3a41);
+        let mut next = move || rng.unit_f64();
+        for shape in shapes {
+            for n_poses in [2, MIN_STAMP_INDEX + 20] {
+                let poses: Vec<Pose> = (0..n_poses)
+                    .map(|k| Pose::at(DVec3::new(0.01 * k as f64, 0.2, -0.1)))
+                    .collect();
+                let tool = CompiledTool::new(shape, &poses, 0.0).unwrap();
+                assert_eq!(tool.stamp_index.is_some(), n_poses > 2);
+                let value_max = tool.value_max();
+                for half in [0.01, 0.1, 0.5, 2.0] {
+                    let region = Aabb::around(poses[0].position, DVec3::splat(half));
+                    let iv = tool.interval(shape, &region);
+                    assert!(iv.hi <= value_max, "{iv:?} over a box of half size {half}");
+                    if half >= 0.5 {
+                        assert_eq!(iv.hi, value_max, "the cap bites over large boxes");
+                    }
+                    for _ in 0..500 {
+                        let s = DVec3::new(next(), next(), next());
+                        let p = region.lo + (region.hi - region.lo) * s;
+                        assert!(iv.contains(tool.value(shape, p)), "{iv:?} at {p}");
+                    }
+                }
+            }
         }
     }
 
