@@ -197,6 +197,7 @@ fn mesh_with(
         depth,
         requested_at: now(),
         t_secs: 0.0,
+        coarse_first: false,
     });
     if mesher.try_send(job).is_err() {
         return Err("the mesher's queue is full".into());

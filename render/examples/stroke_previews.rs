@@ -66,6 +66,7 @@ fn meshed(mesher: &Mesher, object: Object, generation: u64) -> (f64, MeshKind) {
         depth: DEPTH,
         requested_at: now(),
         t_secs: 0.0,
+        coarse_first: false,
     });
     assert!(mesher.try_send(job).is_ok(), "the pool takes the job");
     let done = mesher

@@ -88,6 +88,9 @@ pub struct Tracked {
     pub timed: bool,
     /// The scene time its drawn mesh was made at.
     pub drawn_t_secs: f64,
+    /// What is drawn is a first look at a shallower depth ([`Meshed::coarse`]): its mesh at
+    /// the window's depth follows.
+    pub drawn_coarse: bool,
     /// When a mesh for a later time was last asked for, while none is in flight.
     time_job: Option<TimeJob>,
     /// An edit waiting to be drawn: the first generation that holds it, and its timing.
@@ -117,24 +120,27 @@ impl Tracked {
 
     /// Whether it is drawn as the scene has it, with nothing waiting to be sent.
     fn is_drawn_as_is(&self) -> bool {
-        self.pending.is_none() && self.drawn_generation == self.generation
+        self.pending.is_none() && self.drawn_generation == self.generation && !self.drawn_coarse
     }
 
     /// Takes the mesher's `done` when it is newer than what is drawn (a later job, or the same
     /// object meshed at a later scene time); returns whether it was.
     fn take_meshed(&mut self, done: Meshed) -> bool {
+        let same = done.generation == self.drawn_generation;
         let newer = done.generation > self.drawn_generation
-            || (done.generation == self.drawn_generation && done.t_secs > self.drawn_t_secs);
+            || (same && done.t_secs > self.drawn_t_secs)
+            || (same && self.drawn_coarse && !done.coarse);
         if !newer {
             return false;
         }
         self.kind = Some(done.kind);
         self.drawn_generation = done.generation;
         self.drawn_t_secs = done.t_secs;
+        self.drawn_coarse = done.coarse;
         if let Some(job) = self.time_job.as_mut() {
             job.done = true;
         }
-        if self.drawn_generation == self.generation {
+        if self.drawn_generation == self.generation && !self.drawn_coarse {
             self.meshing_since = None;
         }
         self.drawn_box = done.object.as_ref().and_then(world_box);
@@ -214,6 +220,9 @@ pub struct MeshStats {
     pub n_patched: u64,
     /// Meshes drawn whole.
     pub n_whole: u64,
+    /// First looks drawn ([`Meshed::coarse`]), before new objects' meshes at full depth
+    /// (not counted in `n_whole`).
+    pub n_coarse: u64,
     /// This window's edits timed to a later job than the first that held them (a stroke's
     /// last preview superseded on the worker before it was drawn).
     pub n_edits_superseded: u64,
@@ -274,6 +283,7 @@ impl Objects {
                 remote_edit_to_mesh_ms: Samples::new(MAX_EDIT_SAMPLES),
                 n_patched: 0,
                 n_whole: 0,
+                n_coarse: 0,
                 n_edits_superseded: 0,
                 n_edits_awaited: 0,
                 n_edit_waits_expired: 0,
@@ -395,6 +405,7 @@ impl Objects {
                 depth: self.depth,
                 requested_at: edit_at[LOCAL].or(edit_at[REMOTE]).unwrap_or(now),
                 t_secs,
+                coarse_first: true,
             }));
         }
     }
@@ -424,6 +435,7 @@ impl Objects {
                 depth: self.depth,
                 requested_at: now,
                 t_secs,
+                coarse_first: false,
             }));
         }
     }
@@ -457,6 +469,7 @@ impl Objects {
             depth: self.depth,
             requested_at: now,
             t_secs,
+            coarse_first: true,
         }));
     }
 
@@ -542,7 +555,7 @@ impl Objects {
         let Some(tracked) = self.tracked.get_mut(&done.id) else {
             return;
         };
-        let (id, kind, generation) = (done.id, done.kind, done.generation);
+        let (id, kind, generation, coarse) = (done.id, done.kind, done.generation, done.coarse);
         let patch = done.patch.take();
         let mesh = done.object.as_ref().map(|o| Arc::clone(&o.mesh));
         if !tracked.take_meshed(done) {
@@ -561,6 +574,7 @@ impl Objects {
             self.patches.push((id, base, mesh, patch));
         }
         match kind {
+            _ if coarse => self.stats.n_coarse += 1,
             MeshKind::Patch => self.stats.n_patched += 1,
             MeshKind::Whole => self.stats.n_whole += 1,
             MeshKind::Unchanged => {}
@@ -620,7 +634,7 @@ impl Objects {
     pub fn n_meshing(&self) -> usize {
         self.tracked
             .values()
-            .filter(|t| t.drawn_generation != t.generation)
+            .filter(|t| t.drawn_generation != t.generation || t.drawn_coarse)
             .count()
     }
 
@@ -770,5 +784,52 @@ mod tests {
         assert_eq!(objects.stats.n_edit_waits_expired, 1);
         assert_eq!(objects.stats.n_edits_awaited, 1);
         assert!(!objects.draws_an_edit());
+    }
+
+    /// A ball of `radius` in a domain (a shape the mesher meshes).
+    fn bounded_ball(radius: f64) -> Object {
+        use model::object::{Domain, Formula, Geometry, ObjectData};
+        let formula = Formula::new(format!("{radius} - sqrt(x^2 + y^2 + z^2)")).unwrap();
+        let domain = Domain::new(glam::DVec3::ZERO, glam::DVec3::splat(2.4 * radius));
+        Object::new(ObjectData {
+            geometry: Some(Geometry::implicit_in(formula, domain)),
+            ..ObjectData::default()
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn a_new_objects_first_look_is_drawn_and_its_mesh_follows() {
+        let depth = render::mesher::MIN_COARSE_FIRST_DEPTH;
+        let mut objects = Objects::start(depth, || {}).unwrap();
+        let far = Duration::from_secs(600);
+        // The frame that sent a new object's edit waits for its first look and draws it.
+        let at = send(&mut objects, bounded_ball(0.5), true, true);
+        objects.await_sent_edits(at, at + far);
+        assert!(objects.draws_an_edit());
+        assert_eq!(objects.stats.n_edits_awaited, 1);
+        let tracked = &objects.tracked[&ObjectId(1)];
+        assert!(tracked.drawn_coarse && tracked.drawn_generation == 1);
+        let coarse_triangles = tracked.n_triangles;
+        assert!(coarse_triangles > 0);
+        // Not drawn as the scene has it yet: its mesh at the window's depth is on its way.
+        assert!(!tracked.is_drawn_as_is());
+        assert_eq!(objects.n_meshing(), 1);
+        let deadline = clock::now().instant + far;
+        while objects.n_meshing() > 0 {
+            assert!(clock::now().instant < deadline, "the mesh came");
+            std::thread::sleep(Duration::from_millis(5));
+            objects.receive(clock::now().instant);
+        }
+        let tracked = &objects.tracked[&ObjectId(1)];
+        assert!(!tracked.drawn_coarse && tracked.drawn_generation == 1);
+        assert!(tracked.is_drawn_as_is());
+        assert!(
+            tracked.n_triangles > 4 * coarse_triangles,
+            "{} and {coarse_triangles}",
+            tracked.n_triangles
+        );
+        assert_eq!((objects.stats.n_coarse, objects.stats.n_whole), (1, 1));
+        assert_eq!(objects.n_meshing(), 0);
     }
 }

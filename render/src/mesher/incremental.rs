@@ -62,6 +62,7 @@ pub(super) fn mesh(
         depth,
         requested_at,
         t_secs,
+        coarse_first: _,
     } = *job;
     object.prepare();
     let mut out = Meshed {
@@ -76,6 +77,7 @@ pub(super) fn mesh(
         t_secs,
         kind: MeshKind::Whole,
         patch: None,
+        coarse: false,
     };
     let previous = state.as_ref().map(|s| Arc::clone(&s.mesh));
     let kept = state.filter(|s| s.depth == depth && s.world_from_group == world_from_group);
@@ -135,7 +137,7 @@ fn whole(
 /// Whether an object can take the incremental path: an implicit shape (what the octree meshes
 /// alone), without a geometric texture (a patch reads the mesh's positions, which that moves)
 /// and without force arrows (which edits move).
-fn patchable(object: &Object) -> bool {
+pub(super) fn patchable(object: &Object) -> bool {
     let data = object.data();
     let implicit = data
         .geometry

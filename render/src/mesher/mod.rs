@@ -92,7 +92,17 @@ pub struct MeshJob {
     pub requested_at: Instant,
     /// The scene time to mesh at (shapes, colours and fields that read `t`).
     pub t_secs: f64,
+    /// When the object has no mesh kept (its first job, on the incremental path), hand out
+    /// a first look [`COARSE_DEPTH_STEP`] levels shallower before the mesh at `depth`: a new
+    /// object shows in a small part of its whole mesh's time, then sharpens.
+    pub coarse_first: bool,
 }
+
+/// Levels a first look ([`MeshJob::coarse_first`]) is shallower than its job: a sixteenth of
+/// the surface's cells, so about that part of the time.
+pub const COARSE_DEPTH_STEP: u8 = 2;
+/// Jobs shallower than this mesh no first look (their whole mesh is quick already).
+pub const MIN_COARSE_FIRST_DEPTH: u8 = 6;
 
 /// How a result was made.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -143,6 +153,9 @@ pub struct Meshed {
     /// object's previous result carried, and the patch from it to this one's (whole for a
     /// first mesh, so that the renderer gives the buffers room for later patches).
     pub patch: Option<(Arc<Mesh>, MeshPatch)>,
+    /// A first look at a shallower depth ([`MeshJob::coarse_first`]): the job's own result
+    /// follows, with the same generation, unless a newer job supersedes it.
+    pub coarse: bool,
 }
 
 /// Jobs waiting, and the per-object state of objects not being meshed.
@@ -317,22 +330,61 @@ fn work(
     now: fn() -> Instant,
     wake: &(dyn Fn() + Send + Sync),
 ) {
-    while let Some((job, state)) = shared.next_job() {
+    // Hands a result out; false once nobody takes them.
+    let deliver = |mut out: Meshed, start: Instant| {
+        out.mesh_secs = now().duration_since(start).as_secs_f64();
+        let picked = (out.object.as_ref()).map(|o| (o.pick_runs.clone(), Arc::clone(&o.mesh)));
+        if results.send(out).is_err() {
+            return false;
+        }
+        wake();
+        if let Some((runs, mesh)) = picked {
+            runs.prepare(&mesh);
+        }
+        true
+    };
+    while let Some((job, mut state)) = shared.next_job() {
         let id = job.id;
-        let start = now();
-        let (out, state) = incremental::mesh(job, state, &|| shared.superseded(id));
-        let mesh_secs = now().duration_since(start).as_secs_f64();
-        shared.done(id, state);
-        if let Some(mut out) = out {
-            out.mesh_secs = mesh_secs;
-            let picked = (out.object.as_ref()).map(|o| (o.pick_runs.clone(), Arc::clone(&o.mesh)));
-            if results.send(out).is_err() {
-                return;
-            }
-            wake();
-            if let Some((runs, mesh)) = picked {
-                runs.prepare(&mesh);
+        let superseded = || shared.superseded(id);
+        if state.is_none() && wants_a_first_look(&job) {
+            let start = now();
+            let (out, coarse) = incremental::mesh(first_look(&job), None, &superseded);
+            state = coarse;
+            if let Some(mut out) = out {
+                out.coarse = true;
+                if !deliver(out, start) {
+                    shared.done(id, state);
+                    return;
+                }
             }
         }
+        let start = now();
+        let (out, state) = incremental::mesh(job, state, &superseded);
+        shared.done(id, state);
+        if let Some(out) = out
+            && !deliver(out, start)
+        {
+            return;
+        }
     }
+}
+
+/// Whether `job` meshes a first look before its own mesh (asked, deep enough, and on the
+/// incremental path, whose kept state the first look starts).
+fn wants_a_first_look(job: &MeshJob) -> bool {
+    job.coarse_first && job.depth >= MIN_COARSE_FIRST_DEPTH && incremental::patchable(&job.object)
+}
+
+/// The job of `job`'s first look: the same object, [`COARSE_DEPTH_STEP`] levels shallower.
+fn first_look(job: &MeshJob) -> Box<MeshJob> {
+    Box::new(MeshJob {
+        id: job.id,
+        object: job.object.clone(),
+        world_from_group: job.world_from_group,
+        generation: job.generation,
+        depth: job.depth - COARSE_DEPTH_STEP,
+        requested_at: job.requested_at,
+        t_secs: job.t_secs,
+        coarse_first: false,
+    })
 }

@@ -12,7 +12,9 @@ use model::object::{
 use model::scene::ObjectId;
 
 use super::incremental::{merged, mesh, recolour};
-use super::{MIN_MESHER_THREADS, MeshJob, MeshKind, Mesher};
+use super::{
+    COARSE_DEPTH_STEP, MIN_COARSE_FIRST_DEPTH, MIN_MESHER_THREADS, MeshJob, MeshKind, Mesher,
+};
 use crate::appearance::CompiledAppearance;
 use crate::mesh::{Mesh, n_open_edges};
 
@@ -52,6 +54,7 @@ fn job(object: &Object, generation: u64, depth: u8) -> Box<MeshJob> {
         depth,
         requested_at: now(),
         t_secs: 0.0,
+        coarse_first: false,
     })
 }
 
@@ -233,6 +236,54 @@ fn a_long_mesh_of_one_object_does_not_hold_up_another() {
     assert_eq!(first.id, ObjectId(2), "the short job came first");
     let second = mesher.recv_timeout(Duration::from_secs(600)).unwrap();
     assert_eq!(second.id, ObjectId(1));
+}
+
+#[test]
+fn a_new_object_shows_a_first_look_then_its_mesh_and_later_jobs_patch() {
+    let mesher = Mesher::with_threads(MIN_MESHER_THREADS, now, || {}).unwrap();
+    let wait = || mesher.recv_timeout(Duration::from_secs(600)).unwrap();
+    let depth = MIN_COARSE_FIRST_DEPTH;
+    let mut object = ball();
+    let mut first = job(&object, 1, depth);
+    first.coarse_first = true;
+    assert!(mesher.try_send(first).is_ok());
+    let (look, whole) = (wait(), wait());
+    assert!(look.coarse && !whole.coarse);
+    assert_eq!((look.generation, whole.generation), (1, 1));
+    assert_eq!((look.kind, whole.kind), (MeshKind::Whole, MeshKind::Whole));
+    let (look_mesh, whole_mesh) = (look.object.unwrap().mesh, whole.object.unwrap().mesh);
+    // The first look is the object meshed shallower: what a job at that depth gives.
+    let (shallow, _) = mesh(job(&object, 1, depth - COARSE_DEPTH_STEP), None, &|| false);
+    assert!(triangles(&look_mesh) == triangles(&shallow.unwrap().object.unwrap().mesh));
+    assert!(
+        look.n_triangles * 4 < whole.n_triangles,
+        "{} and {}",
+        look.n_triangles,
+        whole.n_triangles
+    );
+    // The mesh is what a job without a first look gives, and its patch starts from the look.
+    let (direct, _) = mesh(job(&object, 1, depth), None, &|| false);
+    assert!(triangles(&whole_mesh) == triangles(&direct.unwrap().object.unwrap().mesh));
+    let (base, patch) = whole.patch.unwrap();
+    assert!(std::sync::Arc::ptr_eq(&base, &look_mesh) && patch.full);
+    // The next job patches the kept mesh, with no first look though it asks for one.
+    object.apply(carve_at_the_top()).unwrap();
+    let mut next = job(&object, 2, depth);
+    next.coarse_first = true;
+    assert!(mesher.try_send(next).is_ok());
+    let patched = wait();
+    assert_eq!(
+        (patched.kind, patched.coarse, patched.generation),
+        (MeshKind::Patch, false, 2)
+    );
+    assert!(mesher.recv_timeout(Duration::from_millis(200)).is_none());
+    // Shallow jobs take none.
+    let mut shallow = job(&object, 1, MIN_COARSE_FIRST_DEPTH - 1);
+    shallow.id = ObjectId(7);
+    shallow.coarse_first = true;
+    assert!(mesher.try_send(shallow).is_ok());
+    assert!(!wait().coarse);
+    assert!(mesher.recv_timeout(Duration::from_millis(200)).is_none());
 }
 
 #[test]

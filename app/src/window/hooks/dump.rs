@@ -223,6 +223,7 @@ impl SculptApp {
             "meshes": json!({
                 "patched": self.objects.stats.n_patched,
                 "whole": self.objects.stats.n_whole,
+                "coarse": self.objects.stats.n_coarse,
                 "edits_superseded": self.objects.stats.n_edits_superseded,
                 "edits_awaited": self.objects.stats.n_edits_awaited,
                 "edit_waits_expired": self.objects.stats.n_edit_waits_expired,
