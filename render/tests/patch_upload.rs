@@ -606,3 +606,74 @@ fn a_closed_object_draws_its_two_sided_picture_without_its_back_faces() {
     assert!(hidden.chunks_exact(4).all(|p| p == background), "culled");
     assert!(n_differing_pixels(&shown, &hidden) > 100, "drawn two-sided");
 }
+
+#[test]
+fn objects_keep_their_buffers_when_others_come_or_go_before_them() {
+    // The renderer holds buffers by the scene's order; a window orders objects by id, so a
+    // new object, or one deleted, moves the others. Each keeps its buffers (nothing but the
+    // new mesh goes up), a patch finds its base where it moved, and the picture is a fresh
+    // renderer's.
+    let (Some(mut h), Some(mut fresh)) = (headless(), headless()) else {
+        return;
+    };
+    let mut object = ball();
+    object.prepare();
+    let mut mesher = OctreeMesher::new(&settings()).unwrap();
+    mesher
+        .remesh(&mut ObjectField::new(&object, 0.0), settings().bounds)
+        .unwrap();
+    let mut first = Mesh::default();
+    mesher.mesh_update(&mut first).unwrap();
+    let small = |x: f32, y: f32| {
+        Mat4::from_translation(Vec3::new(x, y, 0.0)) * Mat4::from_scale(Vec3::splat(0.3))
+    };
+    let mut scene = Scene {
+        camera: Camera {
+            distance: 3.2,
+            ..Camera::default()
+        },
+        ..Scene::default()
+    };
+    for x in [-1.0, 0.0, 1.0] {
+        scene.add_object(Arc::new(first.clone()), small(x, 0.0), Material::default());
+    }
+    let mut same_as_fresh = |h: &mut Headless, scene: &Scene| {
+        let picture = draw(h, scene);
+        let bytes = h.renderer_mut().mesh_bytes_uploaded();
+        assert_eq!(n_differing_pixels(&picture, &draw(&mut fresh, scene)), 0);
+        bytes
+    };
+    same_as_fresh(&mut h, &scene);
+    // The last object patched in place: its first patch outgrows the exact buffers of its
+    // first upload, which it replaces with room to spare.
+    let mut patch_last = |scene: &mut Scene, h: &mut Headless, k: usize| {
+        let last = scene.objects.len() - 1;
+        let base = Arc::clone(&scene.objects[last].mesh);
+        let (next, patch) =
+            edit_and_patch(&mut object, &mut mesher, &base, visible_edit(k, DVec3::Z));
+        let next = Arc::new(next);
+        h.renderer_mut()
+            .patch_object(last, &base, &next, &patch)
+            .unwrap();
+        scene.objects[last].mesh = Arc::clone(&next);
+        scene.objects[last].pick_runs = Default::default();
+        scene.objects[last].pick_runs.prepare(&next);
+        next
+    };
+    let next = patch_last(&mut scene, &mut h, 0);
+    assert_eq!(same_as_fresh(&mut h, &scene), whole_bytes(&next));
+    // A new object first in the order: only its mesh goes up.
+    let newcomer = Arc::new(ball_mesh());
+    let mut with_new = scene.clone();
+    with_new.add_object(Arc::clone(&newcomer), small(0.0, 0.9), Material::default());
+    with_new.objects.rotate_right(1);
+    assert_eq!(same_as_fresh(&mut h, &with_new), whole_bytes(&newcomer));
+    // The last object's next patch, handed in at its new place, finds its base there: the
+    // patch alone goes up.
+    let next = patch_last(&mut with_new, &mut h, 2);
+    let bytes = same_as_fresh(&mut h, &with_new);
+    assert!(bytes > 0 && bytes < whole_bytes(&next), "{bytes}");
+    // The newcomer goes again: nothing goes up.
+    with_new.objects.remove(0);
+    assert_eq!(same_as_fresh(&mut h, &with_new), 0);
+}

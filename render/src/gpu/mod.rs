@@ -24,11 +24,11 @@ pub use kept::{KeptFrame, KeptPicture};
 use crate::mesh::MeshError;
 use crate::mesh::octree::MeshPatch;
 use crate::mesh::{Aabb, Mesh};
-use crate::scene::{PICK_RUN_TRIANGLES, PickRuns, Scene};
+use crate::scene::{PICK_RUN_TRIANGLES, PickRuns, Scene, SceneObject};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use region::{Below, Screen};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
 use std::sync::Arc;
 use wgpu::util::DeviceExt;
@@ -601,31 +601,28 @@ impl Renderer {
         screen: &Screen,
     ) -> Below {
         let mut below = Below::Same;
-        self.objects.truncate(scene.objects.len());
         self.mesh_bytes_uploaded = 0;
         let mut pending = std::mem::take(&mut self.pending);
+        let mut kept = Kept::new(std::mem::take(&mut self.objects));
         for (i, o) in scene.objects.iter().enumerate() {
-            let fresh = self
-                .objects
-                .get(i)
-                .is_none_or(|g| !Arc::ptr_eq(&g.mesh, &o.mesh));
-            if fresh {
-                let patch = pending.remove(&i).filter(|p| Arc::ptr_eq(&p.mesh, &o.mesh));
-                let patched = patch.as_ref().and_then(|p| self.write_patch(queue, i, p));
-                below = below.join(match (patched, &patch) {
-                    (Some(true), Some(p)) => patch_region(p, o, screen),
-                    _ => Below::All,
-                });
-                if patched.is_none() {
-                    let spare = patch.is_some();
-                    let gpu = self.upload(device, queue, &o.mesh, spare);
-                    if i < self.objects.len() {
-                        self.objects[i] = gpu;
-                    } else {
-                        self.objects.push(gpu);
+            let gpu = match kept.take(i, &o.mesh) {
+                Some((gpu, moved)) => {
+                    // Another object came or went before it: the same buffers, drawn in
+                    // another place in the order.
+                    if moved {
+                        below = Below::All;
                     }
+                    gpu
                 }
-            }
+                None => {
+                    let patch = pending.remove(&i).filter(|p| Arc::ptr_eq(&p.mesh, &o.mesh));
+                    let base = patch.as_ref().and_then(|p| kept.take_mesh(&p.base));
+                    let (gpu, drawn) = self.patch_or_upload(device, queue, o, base, patch, screen);
+                    below = below.join(drawn);
+                    gpu
+                }
+            };
+            self.objects.push(gpu);
             let u = ObjectUniform::of(o);
             let gpu = &mut self.objects[i];
             if gpu
@@ -645,23 +642,40 @@ impl Renderer {
         below
     }
 
-    /// Writes `patch` into object `i`'s buffers if they hold its base and have room: then
-    /// whether the object is opaque before and after it (Some), else None (nothing written).
-    fn write_patch(&mut self, queue: &wgpu::Queue, i: usize, patch: &PendingPatch) -> Option<bool> {
-        let gpu = self.objects.get_mut(i)?;
-        let was_opaque = !gpu.layout.translucent_vertices;
-        write_patch(queue, gpu, patch, &mut self.mesh_bytes_uploaded)
-            .then_some(was_opaque && !gpu.layout.translucent_vertices)
+    /// The buffers of scene object `o`, whose mesh is new to them: `base`'s (the buffers that
+    /// held `patch`'s base) with the patch written in where it fits, else new ones with the
+    /// whole mesh. Returns them and what that changed below the lines.
+    fn patch_or_upload(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        o: &SceneObject,
+        base: Option<GpuObject>,
+        patch: Option<PendingPatch>,
+        screen: &Screen,
+    ) -> (GpuObject, Below) {
+        if let (Some(mut gpu), Some(p)) = (base, &patch) {
+            let was_opaque = !gpu.layout.translucent_vertices;
+            if write_patch(queue, &mut gpu, p, &mut self.mesh_bytes_uploaded) {
+                let drawn = match was_opaque && !gpu.layout.translucent_vertices {
+                    true => patch_region(p, o, screen),
+                    false => Below::All,
+                };
+                return (gpu, drawn);
+            }
+        }
+        let gpu = self.upload(device, queue, &o.mesh, patch.is_some());
+        (gpu, Below::All)
     }
-
     /// Validates the meshes of `scene` not uploaded yet. One already uploaded was validated
     /// then: a frame that changes nothing does not scan every mesh again.
     fn validate_new_meshes(&self, scene: &Scene) -> Result<(), PrepareError> {
+        let held: BTreeSet<*const Mesh> =
+            self.objects.iter().map(|g| Arc::as_ptr(&g.mesh)).collect();
         for (object_idx, o) in scene.objects.iter().enumerate() {
-            let uploaded = self
-                .objects
-                .get(object_idx)
-                .is_some_and(|g| Arc::ptr_eq(&g.mesh, &o.mesh));
+            let uploaded = (self.objects.get(object_idx))
+                .is_some_and(|g| Arc::ptr_eq(&g.mesh, &o.mesh))
+                || held.contains(&Arc::as_ptr(&o.mesh));
             if !uploaded {
                 o.mesh
                     .validate()
@@ -1006,9 +1020,52 @@ fn mesh_vertices(mesh: &Mesh, range: Range<usize>) -> Vec<MeshVertex> {
         .collect()
 }
 
-/// Writes `patch`'s ranges of its mesh into `gpu`'s buffers and counts the bytes into
-/// `uploaded`; returns false, writing nothing, when the patch does not apply (it is whole,
-/// the buffers hold another mesh than its base, or the new lengths exceed their room).
+/// The buffers a renderer held before a prepare, found again by mesh: an object keeps its
+/// buffers when others come or go before it in the scene's order (its place moved), so only
+/// new meshes are uploaded.
+struct Kept {
+    objects: Vec<Option<GpuObject>>,
+    /// Each held mesh's places, by the mesh's address: made on the first search (a frame
+    /// whose objects all stay in place makes none).
+    by_mesh: Option<BTreeMap<*const Mesh, Vec<usize>>>,
+}
+
+impl Kept {
+    fn new(objects: Vec<GpuObject>) -> Kept {
+        Kept {
+            objects: objects.into_iter().map(Some).collect(),
+            by_mesh: None,
+        }
+    }
+
+    /// The buffers that hold `mesh`, those at place `i` first; and whether they were at
+    /// another place.
+    fn take(&mut self, i: usize, mesh: &Arc<Mesh>) -> Option<(GpuObject, bool)> {
+        let here = (self.objects.get(i).and_then(Option::as_ref))
+            .is_some_and(|g| Arc::ptr_eq(&g.mesh, mesh));
+        if here {
+            return self.objects[i].take().map(|g| (g, false));
+        }
+        self.take_mesh(mesh).map(|g| (g, true))
+    }
+
+    /// Buffers that hold `mesh`, wherever they were.
+    fn take_mesh(&mut self, mesh: &Arc<Mesh>) -> Option<GpuObject> {
+        let objects = &mut self.objects;
+        let by_mesh = self.by_mesh.get_or_insert_with(|| {
+            let mut by_mesh: BTreeMap<*const Mesh, Vec<usize>> = BTreeMap::new();
+            for (k, g) in objects.iter().enumerate() {
+                if let Some(g) = g {
+                    by_mesh.entry(Arc::as_ptr(&g.mesh)).or_default().push(k);
+                }
+            }
+            by_mesh
+        });
+        let places = by_mesh.get(&Arc::as_ptr(mesh))?;
+        places.iter().find_map(|&k| objects[k].take())
+    }
+}
+
 fn write_patch(
     queue: &wgpu::Queue,
     gpu: &mut GpuObject,
