@@ -16,7 +16,9 @@
 //! as `sculpt render` draws them.
 //!
 //! Scheduling: at least [`MIN_MESHER_THREADS`] workers, so one object's long mesh never holds
-//! up the others; one object is meshed by one worker at a time (its state is checked out). A
+//! up the others; a new object's first look ([`MeshJob::coarse_first`]) goes out at once and
+//! its own mesh waits at the queue's end, so a session's new objects all show before any is
+//! meshed whole; one object is meshed by one worker at a time (its state is checked out). A
 //! newer job for an object replaces its queued one; a worker drops a job that a newer one
 //! superseded before it starts, and stops a patch between its boxes when a newer job comes
 //! (the octree's remesh has no cancel hook inside a box). So an object's results come in the
@@ -218,6 +220,21 @@ impl Shared {
         }
     }
 
+    /// Checks an object's state back in with its job queued again at the end, unless a
+    /// newer job replaced it meanwhile (or the object was forgotten). Only a worker's job
+    /// comes back so, so the queue holds at most [`MAX_JOBS_QUEUED`] and one a worker.
+    fn requeue(&self, job: Box<MeshJob>, state: Option<Incremental>) {
+        let id = job.id;
+        {
+            let mut queue = self.lock();
+            if !queue.jobs.contains_key(&id) && !queue.gone.contains(&id) {
+                queue.order.push_back(id);
+                queue.jobs.insert(id, job);
+            }
+        }
+        self.done(id, state);
+    }
+
     /// Checks an object's state back in (dropped if the object was forgotten meanwhile).
     fn done(&self, id: ObjectId, state: Option<Incremental>) {
         {
@@ -343,19 +360,29 @@ fn work(
         }
         true
     };
-    while let Some((job, mut state)) = shared.next_job() {
+    while let Some((job, state)) = shared.next_job() {
         let id = job.id;
         let superseded = || shared.superseded(id);
         if state.is_none() && wants_a_first_look(&job) {
             let start = now();
             let (out, coarse) = incremental::mesh(first_look(&job), None, &superseded);
-            state = coarse;
-            if let Some(mut out) = out {
+            let delivered = out.is_none_or(|mut out| {
                 out.coarse = true;
-                if !deliver(out, start) {
-                    shared.done(id, state);
+                deliver(out, start)
+            });
+            // The job's own mesh waits behind the jobs queued meanwhile, from the first
+            // look's state: a session's new objects all show a first look before any is
+            // meshed whole. Without a state (the first look could not be meshed) it goes now.
+            if coarse.is_some() {
+                shared.requeue(job, coarse);
+                if !delivered {
                     return;
                 }
+                continue;
+            }
+            if !delivered {
+                shared.done(id, None);
+                return;
             }
         }
         let start = now();

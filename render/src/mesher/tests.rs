@@ -287,6 +287,54 @@ fn a_new_object_shows_a_first_look_then_its_mesh_and_later_jobs_patch() {
 }
 
 #[test]
+fn new_objects_all_show_their_first_looks_before_any_is_meshed_whole() {
+    // One worker, three new objects (a session opening): their first looks come first, in
+    // the jobs' order, then their meshes.
+    let mesher = Mesher::with_threads(1, now, || {}).unwrap();
+    for id in 1..=3 {
+        let mut job = job(&ball(), 1, MIN_COARSE_FIRST_DEPTH);
+        job.id = ObjectId(id);
+        job.coarse_first = true;
+        assert!(mesher.try_send(job).is_ok());
+    }
+    let order: Vec<(u64, bool)> = (0..6)
+        .map(|_| {
+            let done = mesher.recv_timeout(Duration::from_secs(600)).unwrap();
+            (done.id.0, done.coarse)
+        })
+        .collect();
+    assert_eq!(
+        order,
+        [
+            (1, true),
+            (2, true),
+            (3, true),
+            (1, false),
+            (2, false),
+            (3, false)
+        ]
+    );
+    // A newer job of an object whose first look was handed out replaces its requeued one.
+    let mut first = job(&ball(), 1, MIN_COARSE_FIRST_DEPTH);
+    first.id = ObjectId(9);
+    first.coarse_first = true;
+    let mut newer = job(&ball(), 2, MIN_COARSE_FIRST_DEPTH);
+    newer.id = ObjectId(9);
+    assert!(mesher.try_send(first).is_ok());
+    let look = mesher.recv_timeout(Duration::from_secs(600)).unwrap();
+    assert!(look.coarse && look.generation == 1);
+    assert!(mesher.try_send(newer).is_ok());
+    let rest: Vec<(bool, u64)> = std::iter::from_fn(|| {
+        mesher
+            .recv_timeout(Duration::from_millis(2_000))
+            .map(|d| (d.coarse, d.generation))
+    })
+    .collect();
+    assert_eq!(rest.last(), Some(&(false, 2)), "{rest:?}");
+    assert!(rest.len() <= 2, "{rest:?}");
+}
+
+#[test]
 fn implicit_meshes_whole_and_patched_are_closed_and_say_so() {
     let never = || false;
     let mut object = ball();
