@@ -215,6 +215,9 @@ pub struct Renderer {
     globals_bind_group: wgpu::BindGroup,
     object_layout: wgpu::BindGroupLayout,
     objects: Vec<GpuObject>,
+    /// The last prepare's buffers while a prepare finds them again ([`Kept`]); empty
+    /// between prepares, kept for its capacity, so that a frame allocates nothing for it.
+    held: Vec<Option<GpuObject>>,
     /// Opaque object indexes first, then transparent ones far to near.
     draw_order: Vec<usize>,
     n_opaque: usize,
@@ -451,6 +454,7 @@ impl Renderer {
             globals_bind_group,
             object_layout,
             objects: Vec::new(),
+            held: Vec::new(),
             draw_order: Vec::new(),
             n_opaque: 0,
             line_buffer: None,
@@ -603,7 +607,9 @@ impl Renderer {
         let mut below = Below::Same;
         self.mesh_bytes_uploaded = 0;
         let mut pending = std::mem::take(&mut self.pending);
-        let mut kept = Kept::new(std::mem::take(&mut self.objects));
+        let mut held = std::mem::take(&mut self.held);
+        held.extend(self.objects.drain(..).map(Some));
+        let mut kept = Kept::new(held);
         for (i, o) in scene.objects.iter().enumerate() {
             let gpu = match kept.take(i, &o.mesh) {
                 Some((gpu, moved)) => {
@@ -639,6 +645,7 @@ impl Renderer {
             gpu.closed = o.closed;
             gpu.pick_runs.clone_from(&o.pick_runs);
         }
+        self.held = kept.into_spare();
         below
     }
 
@@ -670,12 +677,17 @@ impl Renderer {
     /// Validates the meshes of `scene` not uploaded yet. One already uploaded was validated
     /// then: a frame that changes nothing does not scan every mesh again.
     fn validate_new_meshes(&self, scene: &Scene) -> Result<(), PrepareError> {
-        let held: BTreeSet<*const Mesh> =
-            self.objects.iter().map(|g| Arc::as_ptr(&g.mesh)).collect();
+        // The meshes held anywhere, gathered only once an object is not at its place.
+        let mut held: Option<BTreeSet<*const Mesh>> = None;
         for (object_idx, o) in scene.objects.iter().enumerate() {
-            let uploaded = (self.objects.get(object_idx))
-                .is_some_and(|g| Arc::ptr_eq(&g.mesh, &o.mesh))
-                || held.contains(&Arc::as_ptr(&o.mesh));
+            let here =
+                (self.objects.get(object_idx)).is_some_and(|g| Arc::ptr_eq(&g.mesh, &o.mesh));
+            let uploaded = here
+                || held
+                    .get_or_insert_with(|| {
+                        self.objects.iter().map(|g| Arc::as_ptr(&g.mesh)).collect()
+                    })
+                    .contains(&Arc::as_ptr(&o.mesh));
             if !uploaded {
                 o.mesh
                     .validate()
@@ -1031,11 +1043,18 @@ struct Kept {
 }
 
 impl Kept {
-    fn new(objects: Vec<GpuObject>) -> Kept {
+    fn new(objects: Vec<Option<GpuObject>>) -> Kept {
         Kept {
-            objects: objects.into_iter().map(Some).collect(),
+            objects,
             by_mesh: None,
         }
+    }
+
+    /// The buffers no object took, dropped, and the emptied list for the next prepare.
+    fn into_spare(self) -> Vec<Option<GpuObject>> {
+        let mut objects = self.objects;
+        objects.clear();
+        objects
     }
 
     /// The buffers that hold `mesh`, those at place `i` first; and whether they were at
