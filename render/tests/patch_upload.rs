@@ -120,6 +120,19 @@ fn visible_edit(k: usize, towards_eye: DVec3) -> Edit {
     }
 }
 
+/// `object` meshed whole at [`DEPTH`]: the mesher (for later patches), the mesh and the
+/// patch that made it.
+fn meshed(object: &mut Object) -> (OctreeMesher, Mesh, MeshPatch) {
+    object.prepare();
+    let mut mesher = OctreeMesher::new(&settings()).unwrap();
+    mesher
+        .remesh(&mut ObjectField::new(object, 0.0), settings().bounds)
+        .unwrap();
+    let mut mesh = Mesh::default();
+    let patch = mesher.mesh_update(&mut mesh).unwrap();
+    (mesher, mesh, patch)
+}
+
 /// Applies `edit`, remeshes its boxes and patches a copy of `base`; returns the new mesh and
 /// its patch.
 fn edit_and_patch(
@@ -178,13 +191,8 @@ fn patched_uploads_draw_the_whole_upload_picture_after_each_edit() {
     for k in 0..n {
         object.apply(spiral_edit(k, n)).unwrap();
     }
-    object.prepare();
-    let mut mesher = OctreeMesher::new(&settings()).unwrap();
-    mesher
-        .remesh(&mut ObjectField::new(&object, 0.0), settings().bounds)
-        .unwrap();
-    let mut first = Mesh::default();
-    assert!(mesher.mesh_update(&mut first).unwrap().full);
+    let (mut mesher, first, patch) = meshed(&mut object);
+    assert!(patch.full);
     let mut scene = one_object_scene(first);
     let towards_eye = scene.camera.eye().normalize().as_dvec3();
 
@@ -310,13 +318,7 @@ fn a_patch_from_another_mesh_or_with_wrong_lengths_is_refused_or_uploaded_whole(
     };
     let mut object = ball();
     object.apply(spiral_edit(0, 1)).unwrap();
-    object.prepare();
-    let mut mesher = OctreeMesher::new(&settings()).unwrap();
-    mesher
-        .remesh(&mut ObjectField::new(&object, 0.0), settings().bounds)
-        .unwrap();
-    let mut first = Mesh::default();
-    let whole_patch = mesher.mesh_update(&mut first).unwrap();
+    let (mut mesher, first, whole_patch) = meshed(&mut object);
     let first = Arc::new(first);
     let mut scene = Scene::default();
     scene.add_object(Arc::clone(&first), Mat4::IDENTITY, Material::default());
@@ -409,15 +411,8 @@ fn one_object_scene(mesh: Mesh) -> Scene {
 
 /// The plain ball's mesh, which the octree proves closed.
 fn ball_mesh() -> Mesh {
-    let mut object = ball();
-    object.prepare();
-    let mut mesher = OctreeMesher::new(&settings()).unwrap();
-    mesher
-        .remesh(&mut ObjectField::new(&object, 0.0), settings().bounds)
-        .unwrap();
+    let (mesher, mesh, _) = meshed(&mut ball());
     assert!(mesher.encloses());
-    let mut mesh = Mesh::default();
-    mesher.mesh_update(&mut mesh).unwrap();
     mesh
 }
 
@@ -617,13 +612,7 @@ fn objects_keep_their_buffers_when_others_come_or_go_before_them() {
         return;
     };
     let mut object = ball();
-    object.prepare();
-    let mut mesher = OctreeMesher::new(&settings()).unwrap();
-    mesher
-        .remesh(&mut ObjectField::new(&object, 0.0), settings().bounds)
-        .unwrap();
-    let mut first = Mesh::default();
-    mesher.mesh_update(&mut first).unwrap();
+    let (mut mesher, first, _) = meshed(&mut object);
     let small = |x: f32, y: f32| {
         Mat4::from_translation(Vec3::new(x, y, 0.0)) * Mat4::from_scale(Vec3::splat(0.3))
     };
