@@ -100,8 +100,8 @@ pub trait Container: Send {
         Some(self.force_field(domain.uvw_from_world(p), t_local))
     }
     /// Where the segment `p0 -> p1` first crosses the surface, as a fraction of its length,
-    /// when the container can tell faster than by bisecting `value_grad` (a mesh casts the
-    /// segment as one ray). `None` means "bisect".
+    /// when the container can tell faster than by narrowing a bracket with `value_grad` (a
+    /// mesh casts the segment as one ray). `None` means "narrow" ([`model::root::crossing`]).
     fn first_crossing(&mut self, p0: DVec3, p1: DVec3, t_secs: f64) -> Option<f64> {
         let _ = (p0, p1, t_secs);
         None

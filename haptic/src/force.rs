@@ -5,8 +5,9 @@
 //! Per tick, [`render`]:
 //! 1. maps the device tip through the [`HapticZone`] to the haptic interface point (HIP);
 //! 2. updates the [`ContainerStack`]: containers whose sign changed along the segment
-//!    travelled are ordered by the root of `f` on that segment (bisection), entering pushes,
-//!    leaving removes; a HIP with no history gets a deterministic stack, innermost on top;
+//!    travelled are ordered by the root of `f` on that segment ([`model::root::crossing`]),
+//!    entering pushes, leaving removes; a HIP with no history gets a deterministic stack,
+//!    innermost on top;
 //! 3. renders the top container: within its surface zone (metric depth `f/|grad f|` below the
 //!    zone depth) surface tension along the outward normal plus friction against tangential
 //!    motion; deeper (the membrane popped), density as viscosity on filtered velocity; a force
@@ -37,8 +38,6 @@ use zone::HapticZone;
 
 /// The most containers a scene may present to the renderer; further ones are not touched.
 pub const MAX_CONTAINERS: usize = 256;
-/// Bisection steps to locate a crossing on the segment travelled in one tick.
-pub const ROOT_BISECTION_STEPS: usize = 30;
 /// Filtered velocity components below this are zero (see `render`; BENCHMARKS.md has the
 /// measurement), metres per second.
 pub const VELOCITY_FLUSH_METRES_PER_SEC: f64 = 1e-12;
@@ -513,27 +512,17 @@ fn update_stack<S: Scene + ?Sized>(
         if !was_inside && !container.bounds().contains(p1) {
             continue;
         }
-        let inside = container.value_grad(p1, t_secs).0 >= 0.0;
+        let f1 = container.value_grad(p1, t_secs).0;
+        let inside = f1 >= 0.0;
         if inside == was_inside {
             continue;
         }
-        let s = if let Some(s) = container.first_crossing(p0, p1, t_secs) {
-            s.clamp(0.0, 1.0)
-        } else if (container.value_grad(p0, t_secs).0 >= 0.0) == inside {
-            // No sign change along the segment: the shape moved under the HIP.
-            1.0
-        } else {
-            let (mut lo, mut hi) = (0.0, 1.0);
-            for _ in 0..ROOT_BISECTION_STEPS {
-                let mid = 0.5 * (lo + hi);
-                let f_mid = container.value_grad(p0.lerp(p1, mid), t_secs).0;
-                if (f_mid >= 0.0) == inside {
-                    hi = mid;
-                } else {
-                    lo = mid;
-                }
-            }
-            hi
+        let s = match container.first_crossing(p0, p1, t_secs) {
+            Some(s) => s.clamp(0.0, 1.0),
+            // No sign change along the segment (the shape moved under the HIP) gives 1.
+            None => model::root::crossing(0.0, container.value_grad(p0, t_secs).0, 1.0, f1, |s| {
+                container.value_grad(p0.lerp(p1, s), t_secs).0
+            }),
         };
         state.crossings[n_crossings] = Crossing {
             s,

@@ -66,4 +66,5 @@ pub mod limits;
 pub mod mesh;
 pub mod models;
 pub mod object;
+pub mod root;
 pub mod scene;

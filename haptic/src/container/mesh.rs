@@ -26,7 +26,7 @@
 //!
 //! Nothing here allocates after [`MeshContainer::new`]: the triangles are indexed once by
 //! model's shared [`model::bvh::Bvh`] ([`ray::RayIndex`]), whose traversal uses a fixed stack. Crossings of the segment travelled in one tick are found by casting that
-//! segment as one ray ([`Container::first_crossing`]) instead of bisecting.
+//! segment as one ray ([`Container::first_crossing`]) instead of narrowing a bracket.
 
 pub mod ray;
 #[cfg(test)]

@@ -63,7 +63,7 @@ pub enum ObjectContainerError {
 }
 
 /// Most tape instructions one sample of a container may run (`Object::touch_instructions`):
-/// a tick samples a touched container up to about 36 times (a gradient, the bisection of a
+/// a tick samples a touched container up to about 36 times (a gradient, the search for a
 /// crossing, the properties, the field), and the point evaluator runs an instruction in a
 /// few nanoseconds, so this keeps one container well under the 1 ms tick. A formula a peer
 /// may send can unroll to `fdsl::limits::MAX_GRAPH_NODES`, 25 times more.

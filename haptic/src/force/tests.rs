@@ -211,6 +211,72 @@ fn crossings_within_one_tick_are_ordered_along_the_segment() {
     assert_eq!(drive_kinematic(&mut scene, &rig, &back).stacks[6], [1]);
 }
 
+/// A sphere that counts the samples taken of it.
+struct Counted {
+    inner: Analytic,
+    n_samples: usize,
+}
+
+impl Container for Counted {
+    fn id(&self) -> u64 {
+        self.inner.id()
+    }
+    fn bounds(&self) -> Aabb {
+        self.inner.bounds()
+    }
+    fn value_grad(&mut self, p: DVec3, t: f64) -> (f64, DVec3) {
+        self.n_samples += 1;
+        self.inner.value_grad(p, t)
+    }
+    fn tension(&mut self, _p: DVec3, _t: f64) -> Option<f64> {
+        None
+    }
+    fn friction(&mut self, _p: DVec3, _t: f64) -> Option<f64> {
+        None
+    }
+    fn density(&mut self, _p: DVec3, _t: f64) -> Option<f64> {
+        None
+    }
+    fn zone_depth(&mut self, _p: DVec3, _t: f64) -> Option<f64> {
+        None
+    }
+    fn field_domain(&self) -> Option<FieldDomain> {
+        None
+    }
+    fn force_field(&mut self, _uvw: DVec3, _t: f64) -> DVec3 {
+        DVec3::ZERO
+    }
+}
+
+#[test]
+fn a_crossing_takes_a_few_samples_and_lies_on_the_surface() {
+    let sphere = Analytic::new(
+        7,
+        Solid::Sphere {
+            center: DVec3::ZERO,
+            radius: 1.0,
+        },
+    );
+    let mut scene = vec![Counted {
+        inner: sphere,
+        n_samples: 0,
+    }];
+    let mut state = ProxyState::new();
+    // One tick's travel at 2 m/s through the surface, entering at x = sqrt(1 - 0.3^2).
+    let x = (1.0f64 - 0.09).sqrt();
+    let (p0, p1) = (
+        DVec3::new(x + 0.0013, 0.3, 0.0),
+        DVec3::new(x - 0.0007, 0.3, 0.0),
+    );
+    update_stack(&mut scene, &mut state, p0, p1, 0.0);
+    assert_eq!(state.stack().entries().len(), 1);
+    // The tip, the last tip and the search: with 30 bisections, 32 samples.
+    assert!(scene[0].n_samples <= 8, "{} samples", scene[0].n_samples);
+    let crossing = state.crossings[0].s;
+    assert!((crossing - 0.65).abs() < 1e-8, "{crossing}");
+    assert!(scene[0].inner.value_grad(p0.lerp(p1, crossing), 0.0).0 >= 0.0);
+}
+
 #[test]
 fn hip_starting_inside_gets_innermost_on_top_and_forces_ramp_in() {
     let rig = rig(1.6);

@@ -5,9 +5,9 @@
 //! Each tick the servo
 //! - asks the value and gradient at the tip (`update_stack`, `Sampler::container_gradient`,
 //!   which is [`Sampler::gradient`] for an object without its own container);
-//! - when the sign changed since the last tick, asks the value at the last tip and bisects
-//!   the segment between them ([`ROOT_BISECTION_STEPS`] values and gradients: an object
-//!   container gives no first crossing of its own);
+//! - when the sign changed since the last tick, asks the value at the last tip and narrows
+//!   the segment between them to the crossing ([`model::root::crossing`], a gradient at each
+//!   step: an object container gives no first crossing of its own);
 //! - inside the solid, asks the value and gradient again (`effect_force`), then the zone
 //!   depth, and within the zone the tension, else (or where no tension is defined) the
 //!   density: painted scalars, each a lookup of the paintings at the tip
@@ -35,8 +35,6 @@ const SPEED_PER_SEC: f64 = 2.0;
 const DEPTH_SWING: f64 = 0.02;
 /// The surface zone's depth (the device's, as no property sets it), object units.
 const ZONE_DEPTH: f64 = 0.03;
-/// haptic's `ROOT_BISECTION_STEPS`.
-const ROOT_BISECTION_STEPS: usize = 30;
 
 /// The tip at every tick of one pass.
 pub fn tool_path() -> Vec<DVec3> {
@@ -65,7 +63,7 @@ pub fn run(sampler: &mut Sampler, path: &[DVec3]) -> f64 {
         let (f, _) = sampler.gradient(tip, 0.0);
         if (f >= 0.0) != inside {
             inside = f >= 0.0;
-            sum += crossing(sampler, last, tip, inside);
+            sum += crossing(sampler, last, tip, f);
         }
         if inside {
             sum += effect(sampler, tip);
@@ -77,20 +75,11 @@ pub fn run(sampler: &mut Sampler, path: &[DVec3]) -> f64 {
 
 /// The crossing of the surface between the last tip `p0` and `p1`, as `update_stack`
 /// finds it.
-fn crossing(sampler: &mut Sampler, p0: DVec3, p1: DVec3, inside: bool) -> f64 {
-    if (sampler.gradient(p0, 0.0).0 >= 0.0) == inside {
-        return 1.0;
-    }
-    let (mut lo, mut hi) = (0.0, 1.0);
-    for _ in 0..ROOT_BISECTION_STEPS {
-        let mid = 0.5 * (lo + hi);
-        if (sampler.gradient(p0.lerp(p1, mid), 0.0).0 >= 0.0) == inside {
-            hi = mid;
-        } else {
-            lo = mid;
-        }
-    }
-    hi
+fn crossing(sampler: &mut Sampler, p0: DVec3, p1: DVec3, f1: f64) -> f64 {
+    let f0 = sampler.gradient(p0, 0.0).0;
+    model::root::crossing(0.0, f0, 1.0, f1, |s| {
+        sampler.gradient(p0.lerp(p1, s), 0.0).0
+    })
 }
 
 /// What `effect_force` asks of the ruling container at the tip.
