@@ -1649,13 +1649,19 @@ fn another_windows_strokes_reach_this_windows_screen_timed_from_their_ops() {
     let creation = pixels[0];
     let to_mesh = numbers(&below["remote_edit_to_mesh_ms"], "remote_edit_to_mesh_ms");
     let creation_mesh = to_mesh.first().copied().unwrap_or(f64::NAN);
+    let mut strokes_to_mesh = to_mesh.get(1..).unwrap_or_default().to_vec();
+    strokes_to_mesh.sort_by(f64::total_cmp);
+    let stroke_mesh = strokes_to_mesh
+        .get(strokes_to_mesh.len() / 2)
+        .copied()
+        .unwrap_or(f64::NAN);
     pixels.sort_by(f64::total_cmp);
     let at = |q: f64| pixels[((pixels.len() - 1) as f64 * q).round() as usize];
     println!(
         "another window's edits on this window's screen after (ms): {} samples, median {:.1}, \
          p99 {:.1}, max {:.1}, the ball's creation {creation:.1} (its mesh taken after \
-         {creation_mesh:.1}); viewport frames {frames}; \
-         frame interval {}; meshes {meshes}",
+         {creation_mesh:.1}), the strokes' meshes taken after {stroke_mesh:.1} (median); \
+         viewport frames {frames}; frame interval {}; meshes {meshes}",
         pixels.len(),
         at(0.5),
         at(0.99),
