@@ -91,7 +91,7 @@ pub enum MeshError {
 /// Triangles wind counter-clockwise seen from outside, so normals point out of the solid.
 /// Guarantees depend on the mesher; check them with [`Mesh::open_edges`] and
 /// [`Mesh::non_manifold_edges`].
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Debug, Default, PartialEq)]
 pub struct Mesh {
     /// Vertex positions.
     pub positions: Vec<[f32; 3]>,
@@ -104,6 +104,36 @@ pub struct Mesh {
     pub ambient: Vec<[f32; 3]>,
     /// Three indices per triangle.
     pub indices: Vec<u32>,
+}
+
+/// Copies field by field; `clone_from` keeps the buffers' allocations (a patched mesh is
+/// written over one handed out earlier).
+impl Clone for Mesh {
+    fn clone(&self) -> Mesh {
+        Mesh {
+            positions: self.positions.clone(),
+            normals: self.normals.clone(),
+            colours: self.colours.clone(),
+            ambient: self.ambient.clone(),
+            indices: self.indices.clone(),
+        }
+    }
+
+    fn clone_from(&mut self, source: &Mesh) {
+        // Every field named, so that a new one cannot be left out.
+        let Mesh {
+            positions,
+            normals,
+            colours,
+            ambient,
+            indices,
+        } = source;
+        self.positions.clone_from(positions);
+        self.normals.clone_from(normals);
+        self.colours.clone_from(colours);
+        self.ambient.clone_from(ambient);
+        self.indices.clone_from(indices);
+    }
 }
 
 impl Mesh {

@@ -9,7 +9,7 @@ use model::bvh::Aabb as Aabb64;
 use model::object::history::HistoryEntry;
 use model::object::{CompiledEdit, Object, Shape, Transform};
 
-use super::{MAX_PATCH_EDITS, MeshJob, MeshKind, Meshed};
+use super::{MAX_PATCH_EDITS, MeshJob, MeshKind, Meshed, Spares};
 use crate::appearance::CompiledAppearance;
 use crate::mesh::object_field::{Dirty, dirty_boxes, mesh_bounds, to_f32_box};
 use crate::mesh::octree::{MAX_OCTREE_DEPTH, MeshPatch, MeshSettings, OctreeMesher};
@@ -45,11 +45,13 @@ pub(super) struct Incremental {
 }
 
 /// Meshes one job: patched from `state` when only edits changed, otherwise whole. `None` when
-/// a newer job superseded it (`superseded` is asked before the work and between boxes).
+/// a newer job superseded it (`superseded` is asked before the work and between boxes). A
+/// patch is written into a mesh from `spares` when one is free, and leaves its base there.
 pub(super) fn mesh(
     job: Box<MeshJob>,
     state: Option<Incremental>,
     superseded: &dyn Fn() -> bool,
+    spares: &Spares,
 ) -> (Option<Meshed>, Option<Incremental>) {
     if superseded() {
         return (None, state);
@@ -81,7 +83,7 @@ pub(super) fn mesh(
     };
     let previous = state.as_ref().map(|s| Arc::clone(&s.mesh));
     let kept = state.filter(|s| s.depth == depth && s.world_from_group == world_from_group);
-    let patched = match kept.map(|state| patch(state, &object, superseded)) {
+    let patched = match kept.map(|state| patch(state, &object, superseded, spares)) {
         Some(Patched::Done(state, patch, kind)) => {
             out.kind = kind;
             out.patch = patch;
@@ -212,7 +214,12 @@ fn grown_pairs<'a>(a: &[HistoryEntry], b: &'a [HistoryEntry]) -> Option<Vec<Chan
 }
 
 /// Brings `state` up to `object` by remeshing the changed edits' boxes and patching the mesh.
-fn patch(mut state: Incremental, object: &Object, superseded: &dyn Fn() -> bool) -> Patched {
+fn patch(
+    mut state: Incremental,
+    object: &Object,
+    superseded: &dyn Fn() -> bool,
+    spares: &Spares,
+) -> Patched {
     if state.object.data() != object.data() || !covers(state.bounds, state.depth, object) {
         return Patched::Whole;
     }
@@ -256,7 +263,13 @@ fn patch(mut state: Incremental, object: &Object, superseded: &dyn Fn() -> bool)
     if !boxes.is_empty() {
         state.closed = state.octree.encloses();
     }
-    let mut mesh = Mesh::clone(&state.mesh);
+    let mut mesh = match spares.take() {
+        Some(mut spare) => {
+            spare.clone_from(&state.mesh);
+            spare
+        }
+        None => Mesh::clone(&state.mesh),
+    };
     let ambient = std::mem::take(&mut mesh.ambient);
     let Ok(mut patch) = state.octree.mesh_update(&mut mesh) else {
         return Patched::Whole;
@@ -275,6 +288,7 @@ fn patch(mut state: Incremental, object: &Object, superseded: &dyn Fn() -> bool)
     recolour(object, &mut state.appearance, &mut mesh, &ranges, ambient);
     patch.vertex_ranges = ranges;
     let base = std::mem::replace(&mut state.mesh, Arc::new(mesh));
+    spares.give(Arc::clone(&base));
     state.object = object.clone();
     Patched::Done(state, Some((base, patch)), MeshKind::Patch)
 }

@@ -178,6 +178,47 @@ struct Queue {
 struct Shared {
     queue: Mutex<Queue>,
     ready: Condvar,
+    spares: Spares,
+}
+
+/// Most meshes kept to write patches into ([`Spares`]): about one out and one drawn for each
+/// of two objects patched in turn.
+pub const MAX_SPARE_MESHES: usize = 4;
+
+/// Meshes handed out before the last of their objects, which a later patch of any object is
+/// written into once nobody else holds them (the window has drawn their successors): writing
+/// into fresh buffers made the kernel map and zero them page by page, more than half of a
+/// small stroke's patch.
+#[derive(Default)]
+pub(super) struct Spares(Mutex<VecDeque<Arc<Mesh>>>);
+
+impl Spares {
+    fn lock(&self) -> MutexGuard<'_, VecDeque<Arc<Mesh>>> {
+        self.0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// A kept mesh nobody else holds, to overwrite.
+    pub(super) fn take(&self) -> Option<Mesh> {
+        let mut spares = self.lock();
+        for _ in 0..spares.len() {
+            match Arc::try_unwrap(spares.pop_front()?) {
+                Ok(mesh) => return Some(mesh),
+                Err(held) => spares.push_back(held),
+            }
+        }
+        None
+    }
+
+    /// Keeps `mesh` (a patch's base), dropping the oldest beyond [`MAX_SPARE_MESHES`].
+    pub(super) fn give(&self, mesh: Arc<Mesh>) {
+        let mut spares = self.lock();
+        spares.push_back(mesh);
+        while spares.len() > MAX_SPARE_MESHES {
+            spares.pop_front();
+        }
+    }
 }
 
 impl Shared {
@@ -288,6 +329,7 @@ impl Mesher {
         let shared = Arc::new(Shared {
             queue: Mutex::new(Queue::default()),
             ready: Condvar::new(),
+            spares: Spares::default(),
         });
         let (result_tx, results) = sync_channel::<Meshed>(MAX_RESULTS_QUEUED);
         let wake: Arc<dyn Fn() + Send + Sync> = Arc::new(wake);
@@ -365,7 +407,8 @@ fn work(
         let superseded = || shared.superseded(id);
         if state.is_none() && wants_a_first_look(&job) {
             let start = now();
-            let (out, coarse) = incremental::mesh(first_look(&job), None, &superseded);
+            let (out, coarse) =
+                incremental::mesh(first_look(&job), None, &superseded, &shared.spares);
             let delivered = out.is_none_or(|mut out| {
                 out.coarse = true;
                 deliver(out, start)
@@ -386,7 +429,7 @@ fn work(
             }
         }
         let start = now();
-        let (out, state) = incremental::mesh(job, state, &superseded);
+        let (out, state) = incremental::mesh(job, state, &superseded, &shared.spares);
         shared.done(id, state);
         if let Some(out) = out
             && !deliver(out, start)

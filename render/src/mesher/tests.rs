@@ -11,9 +11,10 @@ use model::object::{
 };
 use model::scene::ObjectId;
 
-use super::incremental::{merged, mesh, recolour};
+use super::incremental::{Incremental, merged, recolour};
 use super::{
-    COARSE_DEPTH_STEP, MIN_COARSE_FIRST_DEPTH, MIN_MESHER_THREADS, MeshJob, MeshKind, Mesher,
+    COARSE_DEPTH_STEP, MIN_COARSE_FIRST_DEPTH, MIN_MESHER_THREADS, MeshJob, MeshKind, Meshed,
+    Mesher, Spares,
 };
 use crate::appearance::CompiledAppearance;
 use crate::mesh::{Mesh, n_open_edges};
@@ -25,6 +26,17 @@ use crate::mesh::{Mesh, n_open_edges};
 )]
 fn now() -> Instant {
     Instant::now()
+}
+
+/// One job as a worker meshes it. The tests share their spare meshes (of every size), so
+/// patches are written over meshes of other objects and tests.
+fn mesh(
+    job: Box<MeshJob>,
+    state: Option<Incremental>,
+    superseded: &dyn Fn() -> bool,
+) -> (Option<Meshed>, Option<Incremental>) {
+    static SPARES: std::sync::LazyLock<Spares> = std::sync::LazyLock::new(Spares::default);
+    super::incremental::mesh(job, state, superseded, &SPARES)
 }
 
 /// The unit ball in a domain, coloured by a colour map of its height.
@@ -424,4 +436,39 @@ fn a_stroke_drawn_further_patches_only_its_new_stamps_to_the_whole_meshs_triangl
         }
         last = n;
     }
+}
+
+#[test]
+fn a_spare_mesh_is_taken_only_once_nobody_holds_it_and_few_are_kept() {
+    let spares = Spares::default();
+    let triangle = |x: f32| Mesh {
+        positions: vec![[x, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        normals: vec![[1.0, 0.0, 0.0]; 3],
+        colours: vec![[1.0; 4]; 3],
+        ambient: Vec::new(),
+        indices: vec![0, 1, 2],
+    };
+    let drawn = std::sync::Arc::new(triangle(1.0));
+    spares.give(std::sync::Arc::clone(&drawn));
+    assert!(spares.take().is_none(), "the window still draws it");
+    drop(drawn);
+    assert_eq!(spares.take(), Some(triangle(1.0)));
+    assert!(spares.take().is_none(), "taken once");
+    for k in 0..super::MAX_SPARE_MESHES + 2 {
+        spares.give(std::sync::Arc::new(triangle(k as f32)));
+    }
+    // The oldest went: the newest are kept, oldest first.
+    for k in 2..super::MAX_SPARE_MESHES + 2 {
+        assert_eq!(spares.take(), Some(triangle(k as f32)));
+    }
+    assert!(spares.take().is_none());
+    // Written over, a spare holds exactly the mesh copied into it.
+    let mut spare = triangle(5.0);
+    let mut larger = triangle(2.0);
+    larger.positions.push([3.0; 3]);
+    larger.ambient = vec![[0.5; 3]; 4];
+    spare.clone_from(&larger);
+    assert_eq!(spare, larger);
+    spare.clone_from(&triangle(7.0));
+    assert_eq!(spare, triangle(7.0));
 }
