@@ -1453,13 +1453,16 @@ fn strokes_on_a_long_history_are_timed_from_their_input_to_the_presented_frame()
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
     };
+    let patches = numbers(&state["patch_ms"], "patch_ms");
     println!(
         "{n_edits} edits, depth {depth}, {} triangles: stroke to mesh {to_mesh:.1?} ms (median \
-         {:.1}), to the presented frame {to_pixels:.1?} ms (median {:.1}); frame interval {}; \
-         viewport frames {}; meshes {}",
+         {:.1}), to the presented frame {to_pixels:.1?} ms (median {:.1}); the worker's \
+         patches {:.1} ms (median of {}); frame interval {}; viewport frames {}; meshes {}",
         state["objects"][0]["n_triangles"],
         median(&to_mesh),
         median(&to_pixels),
+        median(&patches),
+        patches.len(),
         state["frame_interval_ms"],
         state["viewport_frames"],
         state["meshes"],
@@ -1655,13 +1658,17 @@ fn another_windows_strokes_reach_this_windows_screen_timed_from_their_ops() {
         .get(strokes_to_mesh.len() / 2)
         .copied()
         .unwrap_or(f64::NAN);
+    let mut patches = numbers(&below["patch_ms"], "patch_ms");
+    patches.sort_by(f64::total_cmp);
+    let patch = patches.get(patches.len() / 2).copied().unwrap_or(f64::NAN);
     pixels.sort_by(f64::total_cmp);
     let at = |q: f64| pixels[((pixels.len() - 1) as f64 * q).round() as usize];
     println!(
         "another window's edits on this window's screen after (ms): {} samples, median {:.1}, \
          p99 {:.1}, max {:.1}, the ball's creation {creation:.1} (its mesh taken after \
-         {creation_mesh:.1}), the strokes' meshes taken after {stroke_mesh:.1} (median); \
-         viewport frames {frames}; frame interval {}; meshes {meshes}",
+         {creation_mesh:.1}), the strokes' meshes taken after {stroke_mesh:.1} (median; the \
+         worker's patch {patch:.1}); viewport frames {frames}; frame interval {}; meshes \
+         {meshes}",
         pixels.len(),
         at(0.5),
         at(0.99),

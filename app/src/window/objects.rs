@@ -216,6 +216,8 @@ pub struct MeshStats {
     /// From another peer's op's timestamp to its object's new mesh coming back (also while
     /// the window is covered and draws nothing).
     pub remote_edit_to_mesh_ms: Samples,
+    /// The worker's milliseconds for each patch drawn ([`Meshed::mesh_secs`]).
+    pub patch_ms: Samples,
     /// Meshes drawn that patched the last one.
     pub n_patched: u64,
     /// Meshes drawn whole.
@@ -281,6 +283,7 @@ impl Objects {
                 edit_to_pixels_ms: Samples::new(MAX_EDIT_SAMPLES),
                 remote_edit_to_pixels_ms: Samples::new(MAX_EDIT_SAMPLES),
                 remote_edit_to_mesh_ms: Samples::new(MAX_EDIT_SAMPLES),
+                patch_ms: Samples::new(MAX_EDIT_SAMPLES),
                 n_patched: 0,
                 n_whole: 0,
                 n_coarse: 0,
@@ -558,6 +561,7 @@ impl Objects {
         let (id, kind, generation, coarse) = (done.id, done.kind, done.generation, done.coarse);
         let patch = done.patch.take();
         let mesh = done.object.as_ref().map(|o| Arc::clone(&o.mesh));
+        let mesh_ms = done.mesh_secs * 1e3;
         if !tracked.take_meshed(done) {
             return;
         }
@@ -575,7 +579,10 @@ impl Objects {
         }
         match kind {
             _ if coarse => self.stats.n_coarse += 1,
-            MeshKind::Patch => self.stats.n_patched += 1,
+            MeshKind::Patch => {
+                self.stats.n_patched += 1;
+                self.stats.patch_ms.push(mesh_ms);
+            }
             MeshKind::Whole => self.stats.n_whole += 1,
             MeshKind::Unchanged => {}
         }

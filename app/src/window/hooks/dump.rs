@@ -220,6 +220,7 @@ impl SculptApp {
             "edit_to_pixels_ms": self.objects.stats.edit_to_pixels_ms.values(),
             "remote_edit_to_pixels_ms": self.objects.stats.remote_edit_to_pixels_ms.values(),
             "remote_edit_to_mesh_ms": self.objects.stats.remote_edit_to_mesh_ms.values(),
+            "patch_ms": self.objects.stats.patch_ms.values(),
             "meshes": json!({
                 "patched": self.objects.stats.n_patched,
                 "whole": self.objects.stats.n_whole,
