@@ -263,6 +263,24 @@ fn patch(
     if !boxes.is_empty() {
         state.closed = state.octree.encloses();
     }
+    let Some(patch) = patch_mesh(&mut state, object, &colour_boxes, spares) else {
+        return Patched::Whole;
+    };
+    let base = std::mem::replace(&mut state.mesh, Arc::new(patch.1));
+    spares.give(Arc::clone(&base));
+    state.object = object.clone();
+    Patched::Done(state, Some((base, patch.0)), MeshKind::Patch)
+}
+
+/// The mesh `state`'s remeshed octree gives, patched from its last one (in a spare's buffers
+/// when one is free) and recoloured where the patch wrote or a colour painting's box reaches;
+/// `None` when the octree cannot assemble it.
+fn patch_mesh(
+    state: &mut Incremental,
+    object: &Object,
+    colour_boxes: &[Aabb],
+    spares: &Spares,
+) -> Option<(MeshPatch, Mesh)> {
     let mut mesh = match spares.take() {
         Some(mut spare) => {
             spare.clone_from(&state.mesh);
@@ -271,9 +289,7 @@ fn patch(
         None => Mesh::clone(&state.mesh),
     };
     let ambient = std::mem::take(&mut mesh.ambient);
-    let Ok(mut patch) = state.octree.mesh_update(&mut mesh) else {
-        return Patched::Whole;
-    };
+    let mut patch = state.octree.mesh_update(&mut mesh).ok()?;
     let mut ranges = patch.vertex_ranges.clone();
     if !colour_boxes.is_empty() {
         let inside = |p: &[f32; 3]| {
@@ -287,10 +303,7 @@ fn patch(
     }
     recolour(object, &mut state.appearance, &mut mesh, &ranges, ambient);
     patch.vertex_ranges = ranges;
-    let base = std::mem::replace(&mut state.mesh, Arc::new(mesh));
-    spares.give(Arc::clone(&base));
-    state.object = object.clone();
-    Patched::Done(state, Some((base, patch)), MeshKind::Patch)
+    Some((patch, mesh))
 }
 
 /// Whether the octree over `grid` at `depth` still holds `object`'s bounds with
