@@ -3,6 +3,7 @@
 //! and light.
 
 use crate::camera::{Camera, Ray};
+use crate::mesh::octree::MeshPatch;
 use crate::mesh::{Aabb, Mesh};
 use glam::{Mat4, Vec3};
 use model::object::{Pose, ToolShape};
@@ -94,19 +95,11 @@ impl RunBoxes {
     }
 
     fn of(mesh: &Arc<Mesh>) -> RunBoxes {
-        let n = mesh.positions.len();
-        let runs: Vec<Option<Aabb>> = (mesh.indices)
-            .chunks(3 * PICK_RUN_TRIANGLES)
-            .map(|run| {
-                let valid = run
-                    .chunks_exact(3)
-                    .filter(|t| t.iter().all(|&i| (i as usize) < n));
-                let corners = valid.flatten().map(|&i| mesh.positions[i as usize]);
-                corners.fold(None, |b: Option<Aabb>, p| {
-                    Some(b.map_or(Aabb::new(p, p), |b| b.union(&Aabb::new(p, p))))
-                })
-            })
-            .collect();
+        let n_runs = mesh.n_triangles().div_ceil(PICK_RUN_TRIANGLES);
+        RunBoxes::from_runs(mesh, (0..n_runs).map(|k| run_box(mesh, k)).collect())
+    }
+
+    fn from_runs(mesh: &Arc<Mesh>, runs: Vec<Option<Aabb>>) -> RunBoxes {
         let all = runs.iter().flatten().copied().reduce(|a, b| a.union(&b));
         RunBoxes {
             mesh: Arc::downgrade(mesh),
@@ -116,11 +109,70 @@ impl RunBoxes {
     }
 }
 
+/// The box around run `k`'s valid triangles (those whose corners are all vertices), `None`
+/// when it has none.
+fn run_box(mesh: &Mesh, k: usize) -> Option<Aabb> {
+    let n = mesh.positions.len();
+    let start = (3 * PICK_RUN_TRIANGLES * k).min(mesh.indices.len());
+    let end = (start + 3 * PICK_RUN_TRIANGLES).min(mesh.indices.len());
+    let valid = mesh.indices[start..end]
+        .chunks_exact(3)
+        .filter(|t| t.iter().all(|&i| (i as usize) < n));
+    let corners = valid.flatten().map(|&i| mesh.positions[i as usize]);
+    corners.fold(None, |b: Option<Aabb>, p| {
+        Some(b.map_or(Aabb::new(p, p), |b| b.union(&Aabb::new(p, p))))
+    })
+}
+
+/// Which of `mesh`'s runs a patch from `base` changed: those holding a triangle the patch
+/// wrote, and the last of either mesh when their triangle counts differ. Triangles that use
+/// a vertex the patch wrote are among those it wrote (the assembly emits a changed block's
+/// neighbours again), which [`PickRuns::patched`] checks in debug builds.
+fn runs_changed(base: &Mesh, mesh: &Mesh, patch: &MeshPatch) -> Vec<bool> {
+    let n_triangles = mesh.n_triangles();
+    let mut changed = vec![false; n_triangles.div_ceil(PICK_RUN_TRIANGLES)];
+    let mut mark = |triangles: std::ops::Range<usize>| {
+        let last = triangles.end.min(n_triangles);
+        if triangles.start < last {
+            let runs = triangles.start / PICK_RUN_TRIANGLES..=(last - 1) / PICK_RUN_TRIANGLES;
+            runs.for_each(|k| changed[k] = true);
+        }
+    };
+    patch.triangle_ranges.iter().cloned().for_each(&mut mark);
+    let old = base.n_triangles();
+    if old != n_triangles {
+        mark(old.min(n_triangles).saturating_sub(1)..old.max(n_triangles));
+    }
+    changed
+}
+
 impl PickRuns {
     /// The boxes of the runs of `mesh`'s triangles, when they were made for it.
     pub(crate) fn runs_made_for(&self, mesh: &Arc<Mesh>) -> Option<&[Option<Aabb>]> {
         let made = self.0.get().filter(|b| b.made_for(mesh))?;
         Some(&made.runs)
+    }
+
+    /// The run boxes of `mesh`, which `patch` made from `base`: those of `base` kept here
+    /// where the patch wrote no triangle of a run, the others boxed again, so a small patch
+    /// of a large mesh boxes few runs. Empty (made on first use) when these were not made
+    /// for `base`, or the patch wrote everything.
+    pub fn patched(&self, base: &Arc<Mesh>, mesh: &Arc<Mesh>, patch: &MeshPatch) -> PickRuns {
+        let Some(kept) = self.0.get().filter(|b| b.made_for(base) && !patch.full) else {
+            return PickRuns::default();
+        };
+        let changed = runs_changed(base, mesh, patch);
+        let runs: Vec<Option<Aabb>> = (changed.iter().enumerate())
+            .map(|(k, &changed)| match kept.runs.get(k) {
+                Some(&b) if !changed => b,
+                _ => run_box(mesh, k),
+            })
+            .collect();
+        debug_assert!(
+            runs == RunBoxes::of(mesh).runs,
+            "a patch moved a triangle it did not write"
+        );
+        PickRuns(Arc::new(OnceLock::from(RunBoxes::from_runs(mesh, runs))))
     }
 
     /// Makes the run boxes of `mesh` now, unless some were made: a mesher's worker calls it

@@ -14,7 +14,7 @@ use crate::appearance::CompiledAppearance;
 use crate::mesh::object_field::{Dirty, dirty_boxes, mesh_bounds, to_f32_box};
 use crate::mesh::octree::{MAX_OCTREE_DEPTH, MeshPatch, MeshSettings, OctreeMesher};
 use crate::mesh::{Aabb, Mesh, ObjectField};
-use crate::scene::{Line, Material, SceneObject};
+use crate::scene::{Line, Material, PickRuns, SceneObject};
 use crate::snapshot::{
     SnapshotSettings, build, colour_vertices, is_colour_paint, render_from_scene,
 };
@@ -42,6 +42,9 @@ pub(super) struct Incremental {
     closed: bool,
     /// Boxes a stopped patch may have remeshed with a newer field: the next job remeshes them.
     dirty: Vec<Aabb>,
+    /// The run boxes of `mesh` (shared with the object handed out, whose worker makes them
+    /// once it is out): a patch's are made from them.
+    runs: PickRuns,
 }
 
 /// Meshes one job: patched from `state` when only edits changed, otherwise whole. `None` when
@@ -92,11 +95,17 @@ pub(super) fn mesh(
         Some(Patched::Stopped(state)) => return (None, Some(state)),
         Some(Patched::Whole) | None => None,
     };
-    let state = match patched {
+    let mut state = match patched {
         Some(state) => Some(state),
         None => whole(object, world_from_group, depth, previous, &mut out),
     };
-    if let Some(state) = &state {
+    if let Some(state) = &mut state {
+        // A patch's run boxes come from its base's; an unchanged mesh keeps its own.
+        state.runs = match (&out.patch, out.kind) {
+            (Some((base, patch)), MeshKind::Patch) => state.runs.patched(base, &state.mesh, patch),
+            (_, MeshKind::Unchanged) => state.runs.clone(),
+            _ => PickRuns::default(),
+        };
         out.t_secs = 0.0;
         out.n_triangles = state.mesh.n_triangles();
         out.object = (out.n_triangles > 0).then(|| SceneObject {
@@ -104,7 +113,7 @@ pub(super) fn mesh(
             world_from_object: state.world_from_object,
             material: state.material,
             closed: state.closed,
-            pick_runs: Default::default(),
+            pick_runs: state.runs.clone(),
         });
     }
     (Some(out), state)
@@ -405,6 +414,7 @@ fn mesh_whole(
         material,
         closed,
         dirty: Vec::new(),
+        runs: PickRuns::default(),
     };
     Ok((state, patch))
 }

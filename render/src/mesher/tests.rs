@@ -39,6 +39,19 @@ fn mesh(
     super::incremental::mesh(job, state, superseded, &SPARES)
 }
 
+/// Whether `object`'s run boxes were made (as a patch's are, from its base's) and are those
+/// made afresh for its mesh; then makes them, as a worker does once it hands an object out.
+fn runs_made_and_fresh(object: &crate::scene::SceneObject) -> bool {
+    let fresh = crate::scene::PickRuns::default();
+    fresh.prepare(&object.mesh);
+    let made = object
+        .pick_runs
+        .runs_made_for(&object.mesh)
+        .map(<[_]>::to_vec);
+    object.pick_runs.prepare(&object.mesh);
+    made.is_some() && made.as_deref() == fresh.runs_made_for(&object.mesh)
+}
+
 /// The unit ball in a domain, coloured by a colour map of its height.
 fn ball() -> Object {
     let mut data = ObjectData {
@@ -137,6 +150,8 @@ fn carves_and_colour_paintings_patch_to_the_whole_meshs_triangles_and_colours() 
     let (first, state) = mesh(job(&object, 1, 5), None, &never);
     let first = first.unwrap();
     assert_eq!(first.kind, MeshKind::Whole);
+    // A whole mesh's run boxes are made once it is out.
+    assert!(!runs_made_and_fresh(first.object.as_ref().unwrap()));
     assert!(first.patch.as_ref().is_some_and(|(_, p)| p.full));
     let mut state = state;
     let edits = [
@@ -168,7 +183,9 @@ fn carves_and_colour_paintings_patch_to_the_whole_meshs_triangles_and_colours() 
         assert_eq!(done.kind, MeshKind::Patch, "edit {k}");
         let (base, patch) = done.patch.unwrap();
         assert!(!patch.full, "edit {k}");
-        let drawn = done.object.unwrap().mesh;
+        let drawn = done.object.unwrap();
+        assert!(runs_made_and_fresh(&drawn), "edit {k}");
+        let drawn = drawn.mesh;
         // Copying the patch's ranges into the base gives the new mesh (what the renderer
         // uploads), and it has the whole mesh's triangles and colours.
         let mut copied = Mesh::clone(&base);
@@ -405,7 +422,13 @@ fn a_stroke_drawn_further_patches_only_its_new_stamps_to_the_whole_meshs_triangl
         let done = done.unwrap();
         assert_eq!(done.kind, MeshKind::Patch);
         let changed = done.patch.as_ref().unwrap().1.blocks_changed;
-        (done.object.unwrap().mesh, changed, state)
+        let drawn = done.object.unwrap();
+        // The first patch's base was never handed out: its runs were not made.
+        assert!(
+            runs_made_and_fresh(&drawn) || generation == 2,
+            "{generation}"
+        );
+        (drawn.mesh, changed, state)
     };
     let mut last = 1;
     for (k, n) in [2, 6, 12, 20, 21, 30, 31, 38, 44, 45]
